@@ -1,0 +1,509 @@
+"""Loading and validating a survey folder (format v1, see ``docs/survey-format.md``)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+from types import MappingProxyType
+from typing import Any, Literal, Protocol
+
+import numpy as np
+import yaml
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera import CalibrationError, CameraModel, Mount
+from predisat.survey.format import (
+    DIRECTIONS,
+    FORMAT,
+    MANIFEST_COLUMNS,
+    OTHER_SIDE,
+    REQUIRED_COLUMNS,
+    SIDES,
+    VERSION,
+    Frames,
+    SurveyCamera,
+    SurveyError,
+    SurveyProblem,
+    empty_frames,
+)
+
+__all__ = ["Survey"]
+
+
+class _Projects(Protocol):
+    """What the loader needs from a track map (``predisat.track.TrackMap``)."""
+
+    @property
+    def length_m(self) -> float: ...
+
+    def project(
+        self, lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike | None = None
+    ) -> Any: ...
+
+
+@dataclass(frozen=True, eq=False)  # numpy columns: compare explicitly
+class Survey:
+    """A validated survey folder; build with :meth:`load`.
+
+    Attributes
+    ----------
+    root : Path
+        The survey folder.
+    direction_of_travel : {"increasing", "decreasing"}
+        Chainage direction the vehicle drove.
+    antenna_height_m : float
+        GNSS antenna above the track axis.
+    cameras : Mapping[str, SurveyCamera]
+        Per vehicle side.
+    frames : Frames
+        The valid frames, in manifest order.
+    problems : tuple of SurveyProblem
+        Problems found (frames skipped in ``on_error="skip"`` mode); empty otherwise.
+    track : TrackMap or None
+        The track the frames were checked and mapped against (given or named in survey.yaml).
+    """
+
+    root: Path
+    direction_of_travel: Literal["increasing", "decreasing"]
+    antenna_height_m: float
+    cameras: Mapping[str, SurveyCamera]
+    frames: Frames
+    track_name: str | None = None
+    track_path: Path | None = None
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+    problems: tuple[SurveyProblem, ...] = ()
+    version: int = VERSION
+    track: _Projects | None = field(default=None, repr=False)
+
+    @property
+    def reverse(self) -> bool:
+        """True when the vehicle drove toward decreasing chainage."""
+        return self.direction_of_travel == "decreasing"
+
+    @property
+    def chainage_m(self) -> NDArray:
+        """Chainage of every frame, shape (n,)."""
+        return self.frames.chainage_m
+
+    def camera(self, side: str) -> SurveyCamera:
+        """The camera on a vehicle side."""
+        if side not in self.cameras:
+            raise KeyError(
+                f"survey {self.root} has no {side!r} camera; it has {sorted(self.cameras)}"
+            )
+        return self.cameras[side]
+
+    def image_path(self, frame: int | str) -> Path:
+        """Absolute path of a frame's image, by table index or frame_id."""
+        i = self.frames.index_of(frame) if isinstance(frame, str) else int(frame)
+        return self.root / str(self.frames.image[i])
+
+    def read_image(self, frame: int | str) -> NDArray:
+        """A frame's image as a BGR uint8 array (H, W, 3)."""
+        import cv2
+
+        path = self.image_path(frame)
+        img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if img is None:
+            raise OSError(f"{path}: cannot decode image (re-export it as JPEG or PNG)")
+        return img
+
+    @classmethod
+    def load(
+        cls,
+        path: str | os.PathLike[str],
+        track: _Projects | None = None,
+        check_images: bool = True,
+        max_offset_m: float = 10.0,
+        on_error: Literal["raise", "skip"] = "raise",
+    ) -> Survey:
+        """Read and validate a survey folder.
+
+        Parameters
+        ----------
+        path : path-like
+            The survey folder (or its ``survey.yaml``).
+        track : TrackMap, optional
+            Track to map positions on and to check them against; by default the track file
+            named in ``survey.yaml`` when there is one.
+        check_images : bool
+            Check that every image exists and has its camera's size (reads headers only).
+        max_offset_m : float
+            Largest accepted distance from the track axis (GNSS positions) or beyond its ends.
+        on_error : {"raise", "skip"}
+            ``"raise"``: any problem raises :class:`SurveyError` listing all of them.
+            ``"skip"``: bad frames are dropped and listed in :attr:`problems`; survey-level
+            problems (survey.yaml, calibrations, manifest columns) still raise.
+
+        Raises
+        ------
+        SurveyError
+        """
+        if on_error not in ("raise", "skip"):
+            raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
+        root = Path(path)
+        if root.name == "survey.yaml":
+            root = root.parent
+        header = _read_header(root)
+        if track is None and header["track_path"] is not None:
+            track = _load_track(root, header["track_path"], header["track_name"])
+        rows, frame_problems = _read_manifest(root, header, track, check_images, max_offset_m)
+        if frame_problems and on_error == "raise":
+            raise SurveyError(root, frame_problems)
+        return cls(
+            root=root,
+            direction_of_travel=header["direction"],
+            antenna_height_m=header["antenna_height_m"],
+            cameras=MappingProxyType(header["cameras"]),
+            frames=rows,
+            track_name=header["track_name"],
+            track_path=header["track_path"],
+            metadata=MappingProxyType(header["metadata"]),
+            problems=tuple(frame_problems),
+            version=header["version"],
+            track=track,
+        )
+
+
+def _read_header(root: Path) -> dict[str, Any]:
+    """Parse survey.yaml and the calibrations; raise SurveyError listing every problem."""
+    yaml_path = root / "survey.yaml"
+    if not root.is_dir():
+        raise SurveyError(root, [SurveyProblem("not a folder; give the survey folder")])
+    if not yaml_path.is_file():
+        raise SurveyError(
+            root, [SurveyProblem("survey.yaml is missing; see docs/survey-format.md")]
+        )
+    try:
+        doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise SurveyError(root, [SurveyProblem(f"survey.yaml cannot be parsed: {exc}")]) from None
+    if not isinstance(doc, dict):
+        raise SurveyError(root, [SurveyProblem("survey.yaml must be a mapping of fields")])
+    probs: list[SurveyProblem] = []
+
+    def bad(msg: str) -> None:
+        probs.append(SurveyProblem(f"survey.yaml: {msg}"))
+
+    if doc.get("format") != FORMAT:
+        bad(f"format must be {FORMAT!r}, got {doc.get('format')!r}")
+    version = doc.get("version")
+    if version != VERSION:
+        bad(
+            f"version {version!r} is not supported (this PREDISAT reads version {VERSION}); "
+            "upgrade predisat or convert the survey"
+        )
+    direction = doc.get("direction_of_travel")
+    if direction not in DIRECTIONS:
+        bad(f"direction_of_travel must be 'increasing' or 'decreasing' chainage, got {direction!r}")
+    antenna_height_m = math.nan
+    try:
+        antenna_height_m = float(doc.get("antenna_height_m"))  # type: ignore[arg-type]
+        if not math.isfinite(antenna_height_m):
+            raise ValueError
+    except (TypeError, ValueError):
+        bad(
+            "antenna_height_m must be a number (metres above the track axis), "
+            f"got {doc.get('antenna_height_m')!r}"
+        )
+    track_doc = doc.get("track") or {}
+    if not isinstance(track_doc, dict):
+        bad("track must be a mapping with 'name' and optional 'path'")
+        track_doc = {}
+    track_name = track_doc.get("name")
+    track_path = root / str(track_doc["path"]) if track_doc.get("path") else None
+    cameras: dict[str, SurveyCamera] = {}
+    cams = doc.get("cameras")
+    if not isinstance(cams, dict) or not cams:
+        bad("cameras must map 'left' and/or 'right' to {calibration: <yaml path>, mount: {...}}")
+        cams = {}
+    for side, spec in cams.items():
+        if side not in SIDES:
+            bad(f"camera side {side!r} is unknown; use 'left' or 'right'")
+            continue
+        if not isinstance(spec, dict) or "calibration" not in spec:
+            bad(f"cameras.{side} needs a 'calibration' path (e.g. calib/{side}.yaml)")
+            continue
+        calib_path = root / str(spec["calibration"])
+        try:
+            model = CameraModel.from_yaml(calib_path)
+        except CalibrationError as exc:
+            bad(f"cameras.{side}.calibration: {exc}")
+            continue
+        try:
+            mount = Mount.from_dict(side, spec.get("mount") or {})
+        except (TypeError, ValueError) as exc:
+            bad(f"cameras.{side}.mount: {exc}")
+            continue
+        cameras[side] = SurveyCamera(side, model, mount, calib_path)
+    if probs:
+        raise SurveyError(root, probs)
+    known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras"}
+    return {
+        "version": version,
+        "direction": direction,
+        "antenna_height_m": antenna_height_m,
+        "track_name": None if track_name is None else str(track_name),
+        "track_path": track_path,
+        "cameras": cameras,
+        "metadata": {k: v for k, v in doc.items() if k not in known},
+    }
+
+
+def _load_track(root: Path, path: Path, name: str | None) -> _Projects:
+    from predisat.track import TrackMap
+
+    try:
+        if path.suffix.lower() in (".geojson", ".json"):
+            return TrackMap.from_geojson(path, track=name)
+        return TrackMap.from_csv(path)
+    except (OSError, ValueError) as exc:
+        raise SurveyError(
+            root,
+            [
+                SurveyProblem(
+                    f"survey.yaml: track.path {path} cannot be loaded ({exc}); fix the "
+                    "path or pass track= to Survey.load"
+                )
+            ],
+        ) from None
+
+
+def _parse_float(text: str, column: str, fid: str, row: int, probs: list[SurveyProblem]) -> float:
+    """Float of a manifest cell; NaN when empty; a problem when not a finite number."""
+    text = text.strip()
+    if text == "":
+        return math.nan
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        probs.append(
+            SurveyProblem(
+                f"{column} {text!r} is not a finite number; write a decimal number", fid, row
+            )
+        )
+    return value
+
+
+@dataclass
+class _Row:
+    row: int
+    frame_id: str
+    image: str
+    side: str
+    gps_s: float = math.nan
+    chainage_m: float = math.nan
+    lat_deg: float = math.nan
+    lon_deg: float = math.nan
+    h_m: float = math.nan
+    offset_m: float = math.nan
+    probs: list[SurveyProblem] = field(default_factory=list)
+
+    def bad(self, message: str) -> None:
+        self.probs.append(SurveyProblem(message, self.frame_id or None, self.row))
+
+
+def _check_image(root: Path, rel: str, cam: CameraModel) -> str | None:
+    from PIL import Image, UnidentifiedImageError
+
+    path = root / rel
+    if not path.is_file():
+        return f"image {rel} is missing; copy it into the survey folder or remove the row"
+    try:
+        with Image.open(path) as im:  # lazy: reads the header only
+            w, h = im.size
+    except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError) as exc:
+        return f"image {rel} cannot be read ({exc}); re-export it as JPEG or PNG"
+    if (w, h) != (cam.width_px, cam.height_px):
+        return (
+            f"image {rel} is {w}x{h} px but calibration {cam.name!r} is "
+            f"{cam.width_px}x{cam.height_px}; use the calibration of the camera that took it"
+        )
+    return None
+
+
+def _parse_rows(root: Path, header: dict[str, Any], check_images: bool) -> list[_Row]:
+    path = root / "manifest.csv"
+    if not path.is_file():
+        raise SurveyError(
+            root, [SurveyProblem("manifest.csv is missing; see docs/survey-format.md")]
+        )
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SurveyError(
+            root, [SurveyProblem(f"manifest.csv cannot be read ({exc}); save it as UTF-8 CSV")]
+        ) from None
+    reader = csv.reader(io.StringIO(text))
+    columns = [c.strip() for c in next(reader, [])]
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    if "chainage_m" not in columns and not {"lat_deg", "lon_deg"} <= set(columns):
+        missing.append("chainage_m (or lat_deg and lon_deg)")
+    doubled = sorted({c for c in columns if columns.count(c) > 1})
+    if missing or doubled:
+        msg = f"manifest.csv: missing column(s) {missing}" if missing else ""
+        msg += (
+            f"{'; ' if msg else 'manifest.csv: '}duplicate column(s) {doubled}" if doubled else ""
+        )
+        raise SurveyError(
+            root, [SurveyProblem(f"{msg}; the header must name {list(MANIFEST_COLUMNS)}")]
+        )
+    cameras: Mapping[str, SurveyCamera] = header["cameras"]
+    rows: list[_Row] = []
+    for fields in reader:
+        line = reader.line_num
+        if not any(f.strip() for f in fields):
+            continue
+        cells = dict(zip(columns, (f.strip() for f in fields), strict=False))
+        r = _Row(line, cells.get("frame_id", ""), cells.get("image", ""), cells.get("side", ""))
+        rows.append(r)
+        if len(fields) != len(columns):
+            r.bad(
+                f"has {len(fields)} fields but the header has {len(columns)}; fix the row's commas"
+            )
+            continue
+        if not r.frame_id:
+            r.bad("frame_id is empty; give every frame a unique id")
+        if r.side not in SIDES:
+            r.bad(f"side {r.side!r} is unknown; use 'left' or 'right' (vehicle side)")
+        elif r.side not in cameras:
+            r.bad(
+                f"side {r.side!r} has no camera in survey.yaml; "
+                f"add cameras.{r.side} or fix the side"
+            )
+        if cells["gps_s"] == "":
+            r.bad("gps_s is empty; give the GPS time in seconds since 1980-01-06")
+        r.gps_s = _parse_float(cells["gps_s"], "gps_s", r.frame_id, line, r.probs)
+        for col in ("chainage_m", "lat_deg", "lon_deg", "h_m"):
+            setattr(r, col, _parse_float(cells.get(col, ""), col, r.frame_id, line, r.probs))
+        has_lat, has_lon = cells.get("lat_deg", "") != "", cells.get("lon_deg", "") != ""
+        if has_lat != has_lon:
+            r.bad("lat_deg and lon_deg must be given together")
+        elif cells.get("chainage_m", "") == "" and not has_lat:
+            r.bad("no position: give chainage_m or lat_deg and lon_deg (GNSS antenna)")
+        if abs(r.lat_deg) > 90 or abs(r.lon_deg) > 180:
+            r.bad(f"lat_deg/lon_deg ({r.lat_deg}, {r.lon_deg}) out of range; use WGS84 degrees")
+        image = PurePosixPath(r.image)
+        if not r.image:
+            r.bad("image is empty; give the image path relative to the survey folder")
+        elif image.is_absolute() or ".." in image.parts or "\\" in r.image:
+            r.bad(f"image {r.image!r} must be a relative path inside the survey folder, with '/'")
+        elif check_images and r.side in cameras:
+            image_problem = _check_image(root, r.image, cameras[r.side].camera)
+            if image_problem:
+                r.bad(image_problem)
+    return rows
+
+
+def _check_track(rows: list[_Row], track: _Projects, max_offset_m: float) -> None:
+    with_pos = [r for r in rows if abs(r.lat_deg) <= 90 and abs(r.lon_deg) <= 180]  # NaN: False
+    name = getattr(track, "name", "track")
+    if with_pos:
+        proj = track.project(
+            np.array([r.lat_deg for r in with_pos]), np.array([r.lon_deg for r in with_pos])
+        )
+        offset = np.asarray(proj.offset_m, float)
+        along = np.asarray(getattr(proj, "along_m", np.zeros_like(offset)), float)
+        chain = np.asarray(proj.chainage_m, float)
+        for r, off, alo, ch in zip(with_pos, offset, along, chain, strict=True):
+            r.offset_m = float(off)
+            if not math.isfinite(r.chainage_m):
+                r.chainage_m = float(ch)
+            dist = math.hypot(off, alo)
+            if not dist <= max_offset_m:
+                r.bad(
+                    f"position is {dist:.1f} m from track {name!r} (limit max_offset_m="
+                    f"{max_offset_m:g}); check the GNSS fix, the track map or the survey's track"
+                )
+    length = float(track.length_m)
+    for r in rows:
+        if (
+            math.isfinite(r.chainage_m)
+            and not -max_offset_m <= r.chainage_m <= length + max_offset_m
+        ):
+            r.bad(
+                f"chainage_m {r.chainage_m:.1f} is outside track {name!r} (0 to {length:.1f} m); "
+                "check the chainage or the track map"
+            )
+
+
+def _read_manifest(
+    root: Path,
+    header: dict[str, Any],
+    track: _Projects | None,
+    check_images: bool,
+    max_offset_m: float,
+) -> tuple[Frames, list[SurveyProblem]]:
+    rows = _parse_rows(root, header, check_images)
+    if not rows:
+        raise SurveyError(root, [SurveyProblem("manifest.csv has no frames")])
+    if track is not None:
+        _check_track(rows, track, max_offset_m)
+    first_id: dict[str, int] = {}
+    first_image: dict[str, int] = {}
+    seen_time: dict[tuple[str, float], _Row] = {}
+    last: dict[str, _Row] = {}
+    accepted: list[_Row] = []
+    for r in rows:
+        if r.frame_id in first_id:
+            r.bad(
+                f"duplicate frame_id (first at manifest line {first_id[r.frame_id]}); "
+                "make ids unique"
+            )
+        first_id.setdefault(r.frame_id, r.row)
+        key = str(PurePosixPath(r.image))
+        if r.image and key in first_image:
+            r.bad(
+                f"image {r.image} is also listed at manifest line {first_image[key]}; "
+                "remove the duplicate"
+            )
+        first_image.setdefault(key, r.row)
+        if r.probs:
+            continue
+        twin = seen_time.get((r.side, r.gps_s))
+        prev = last.get(r.side)
+        if twin is not None:
+            r.bad(
+                f"same side and gps_s as frame {twin.frame_id!r} (line {twin.row}): "
+                "a duplicate frame; remove one"
+            )
+        elif prev is not None and r.gps_s < prev.gps_s:
+            r.bad(
+                f"gps_s {r.gps_s!r} goes back in time on the {r.side} side (frame "
+                f"{prev.frame_id!r} at line {prev.row} has {prev.gps_s!r}); order the manifest "
+                "by time or fix the time"
+            )
+        if r.probs:
+            continue
+        seen_time[(r.side, r.gps_s)] = r
+        last[r.side] = r
+        accepted.append(r)
+    problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)
+    reverse = header["direction"] == "decreasing"
+    if not accepted:
+        return empty_frames(), problems
+
+    def col(name: str) -> list[Any]:
+        return [getattr(r, name) for r in accepted]
+
+    frames = Frames(
+        frame_id=np.array(col("frame_id"), str),
+        image=np.array(col("image"), str),
+        side=np.array(col("side"), str),
+        track_side=np.array([OTHER_SIDE[r.side] if reverse else r.side for r in accepted], str),
+        gps_s=np.array(col("gps_s"), float),
+        chainage_m=np.array(col("chainage_m"), float),
+        lat_deg=np.array(col("lat_deg"), float),
+        lon_deg=np.array(col("lon_deg"), float),
+        h_m=np.array(col("h_m"), float),
+        offset_m=np.array(col("offset_m"), float),
+        row=np.array(col("row"), np.int64),
+    )
+    return frames, problems
