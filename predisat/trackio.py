@@ -1,0 +1,655 @@
+"""Track map files: GeoJSON (LineString / MultiLineString, WGS84) and CSV of lat/lon[/h].
+
+GeoJSON lines are chained end to start (parts reversed where needed) into one polyline; a file
+holding several tracks needs a selector (``track=`` or ``where=``). Kilometre posts (Point
+features with a ``km_m`` property, or OpenStreetMap ``railway=milestone`` nodes) and tunnel
+tags (OpenStreetMap ``tunnel=*``) are kept as metadata on the :class:`~predisat.track.TrackMap`.
+See ``docs/track-map.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.geodesy import WGS84, LocalFrame
+from predisat.track import KilometrePost, TrackMap, TrackMapError
+
+__all__ = [
+    "NAME_KEYS",
+    "kilometre_posts_from_sections",
+    "read_csv_track",
+    "read_geojson_track",
+    "write_geojson",
+]
+
+NAME_KEYS = ("trackname", "trackcode", "name", "ref", "id", "@id")
+"""Feature properties that ``track=`` is matched against (Infrabel, OpenStreetMap, generic)."""
+
+_OSM_ATTRIBUTION = (
+    "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
+)
+
+
+@dataclass(frozen=True)
+class _Part:
+    label: str  # "feature 0 (trackname=A) part 2", for error messages
+    feature: int
+    coords: NDArray  # (k, 2) lon, lat or (k, 3) lon, lat, h
+    tunnel: bool
+
+
+# ---------------------------------------------------------------------- GeoJSON
+
+
+def _load_json(path: Path) -> Any:
+    if not path.is_file():
+        raise TrackMapError(f"{path}: no such file")
+    text = path.read_text(encoding="utf-8-sig")
+    if not text.strip():
+        raise TrackMapError(f"{path}: the file is empty; expected a GeoJSON FeatureCollection")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TrackMapError(
+            f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); "
+            "expected a GeoJSON FeatureCollection"
+        ) from None
+
+
+def _features(doc: Any, path: Path) -> list[dict[str, Any]]:
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise TrackMapError(f"{path}: not a GeoJSON object (no 'type' member)")
+    kind = doc["type"]
+    if kind == "FeatureCollection":
+        feats = doc.get("features")
+        if not isinstance(feats, list):
+            raise TrackMapError(f"{path}: FeatureCollection without a 'features' list")
+        return [f for f in feats if isinstance(f, dict)]
+    if kind == "Feature":
+        return [doc]
+    if kind in ("LineString", "MultiLineString", "Point", "GeometryCollection"):
+        return [{"type": "Feature", "properties": {}, "geometry": doc}]
+    raise TrackMapError(f"{path}: unsupported GeoJSON type {kind!r}")
+
+
+def _feature_label(i: int, props: Mapping[str, Any]) -> str:
+    names = [f"{k}={props[k]}" for k in NAME_KEYS if k in props]
+    return f"feature {i}" + (f" ({', '.join(names[:2])})" if names else "")
+
+
+def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float] | None) -> None:
+    if coords.ndim != 2 or coords.shape[1] < 2 or not np.all(np.isfinite(coords)):
+        raise TrackMapError(
+            f"{path}: {where} has malformed coordinates; expected [[lon, lat(, h)], ...]"
+        )
+    lon, lat = coords[:, 0], coords[:, 1]
+    if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0):
+        k = int(np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))[0])
+        raise TrackMapError(
+            f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} is not a valid "
+            "[lon, lat]; GeoJSON coordinates are [lon, lat] (longitude first): swap them"
+        )
+    if bbox is not None:
+        lon0, lat0, lon1, lat1 = bbox
+        inside = (lon >= lon0) & (lon <= lon1) & (lat >= lat0) & (lat <= lat1)
+        if not np.all(inside):
+            swapped = (lat >= lon0) & (lat <= lon1) & (lon >= lat0) & (lon <= lat1)
+            k = int(np.flatnonzero(~inside)[0])
+            hint = (
+                "the coordinates look swapped: GeoJSON coordinates are [lon, lat]"
+                if np.all(swapped)
+                else "check the file or the expected_bbox"
+            )
+            raise TrackMapError(
+                f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} lies outside the "
+                f"expected bbox {list(bbox)} (lon_min, lat_min, lon_max, lat_max); {hint}"
+            )
+
+
+def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, Any] | None) -> bool:
+    if track is not None and not any(str(props.get(k)) == track for k in NAME_KEYS):
+        return False
+    for key, want in (where or {}).items():
+        if want is None:
+            if key in props:
+                return False
+        elif str(props.get(key)) != str(want):
+            return False
+    return True
+
+
+def read_geojson_track(
+    path: str | Path,
+    track: str | None = None,
+    h_m: float = 0.0,
+    *,
+    where: Mapping[str, Any] | None = None,
+    chain: Literal["all", "longest"] = "all",
+    max_gap_m: float = 2.0,
+    max_turn_deg: float = 30.0,
+    reverse: bool = False,
+    expected_bbox: Sequence[float] | None = None,
+    tolerance_m: float = 1.0,
+    max_post_offset_m: float = 50.0,
+    name: str | None = None,
+    source: str | None = None,
+    attribution: str | None = None,
+) -> TrackMap:
+    """Read a track axis from a GeoJSON file (WGS84 ``[lon, lat(, h)]``).
+
+    Parameters
+    ----------
+    path : str or Path
+    track : str, optional
+        Select the features whose ``trackname``, ``trackcode``, ``name``, ``ref`` or ``id``
+        equals this (e.g. ``"A"`` or ``"L 144_1"``). Needed when the file holds several named
+        tracks.
+    h_m : float
+        Ellipsoidal height used when the coordinates carry none (default 0).
+    where : mapping, optional
+        Further property filters, ``{key: value}``; a value of None requires the key to be
+        absent (e.g. ``{"usage": "main", "service": None}`` for OpenStreetMap main lines).
+    chain : {"all", "longest"}
+        ``"all"``: every selected part must join into one line (gaps above ``max_gap_m`` are
+        errors). ``"longest"``: keep the longest drivable chain (joints within ``max_gap_m``,
+        turning at most ``max_turn_deg``) through a network of ways, as in OpenStreetMap.
+    max_gap_m : float
+        Largest gap allowed between the end of one part and the start of the next.
+    max_turn_deg : float
+        Largest change of direction at a joint for ``chain="longest"``.
+    reverse : bool
+        Reverse the direction of chainage. By default chainage increases with the kilometre
+        posts when the file has at least two, else along the first selected part.
+    expected_bbox : (lon_min, lat_min, lon_max, lat_max), optional
+        Reject vertices outside it (catches swapped coordinates that are still valid).
+    tolerance_m : float
+        Source tolerance for the smooth fit (see :class:`~predisat.track.TrackMap`).
+    max_post_offset_m : float
+        Kilometre-post points farther than this from the track are ignored.
+    name, source, attribution : str, optional
+        Override what the file says (``name``/``source``/``attribution`` members written by
+        :func:`write_geojson`; OpenStreetMap's copyright notice).
+
+    Raises
+    ------
+    TrackMapError
+        Naming the file, the feature/part and the fix.
+    """
+    path = Path(path)
+    doc = _load_json(path)
+    feats = _features(doc, path)
+    lines: list[tuple[int, dict[str, Any], dict[str, Any]]] = []
+    points: list[tuple[dict[str, Any], NDArray]] = []
+    for i, f in enumerate(feats):
+        geom = f.get("geometry") or {}
+        props = f.get("properties") or {}
+        if geom.get("type") in ("LineString", "MultiLineString"):
+            lines.append((i, props, geom))
+        elif geom.get("type") == "Point":
+            points.append((props, np.asarray(geom.get("coordinates", []), float)))
+    if not lines:
+        raise TrackMapError(
+            f"{path}: no LineString or MultiLineString feature; a track map needs the track "
+            "axis as a line"
+        )
+    selected = [x for x in lines if _matches(x[1], track, where)]
+    if not selected:
+        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in NAME_KEYS[:4] if k in p})
+        raise TrackMapError(
+            f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
+            f"available: {', '.join(avail[:20]) or '(no names)'}"
+        )
+    if track is None and chain == "all":
+        for key in ("trackname", "name"):
+            names = sorted({str(p[key]) for _, p, _ in selected if key in p})
+            if len(names) > 1:
+                raise TrackMapError(
+                    f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
+                    "choose one with track=..."
+                )
+
+    parts: list[_Part] = []
+    for i, props, geom in selected:
+        label = _feature_label(i, props)
+        raw = geom.get("coordinates") or []
+        seqs = [raw] if geom["type"] == "LineString" else list(raw)
+        tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
+        for j, seq in enumerate(seqs):
+            where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
+            try:
+                coords = np.asarray(seq, float)
+            except (TypeError, ValueError):
+                raise TrackMapError(
+                    f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...]"
+                ) from None
+            if coords.size == 0:
+                continue
+            _check_lonlat(coords, where_s, path, expected_bbox)
+            if len(coords) >= 2:
+                parts.append(_Part(where_s, i, coords, tunnel))
+    if not parts:
+        raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
+
+    first = parts[0].coords[0]
+    frame = LocalFrame(float(first[1]), float(first[0]))
+    if chain == "all":
+        order = _chain_all(parts, frame, max_gap_m, path)
+    elif chain == "longest":
+        order = _chain_longest(parts, frame, max_gap_m, max_turn_deg, path)
+    else:
+        raise TrackMapError(f"chain must be 'all' or 'longest', got {chain!r}")
+
+    coords, tunnel_spans = _concatenate(parts, order)
+    has_h = all(parts[k].coords.shape[1] >= 3 for k, _ in order)
+    lon, lat = coords[:, 0], coords[:, 1]
+    h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
+
+    posts_raw = _points_as_posts(points)
+    members = doc if isinstance(doc, dict) else {}
+    if attribution is None:
+        attribution = str(members.get("attribution", ""))
+        if not attribution and "openstreetmap" in str(members.get("copyright", "")).lower():
+            attribution = _OSM_ATTRIBUTION
+    tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
+    name = name or str(members.get("name") or track or path.stem)
+    try:
+        tm = TrackMap.from_latlon(
+            lat,
+            lon,
+            h,
+            name=name,
+            tolerance_m=tol,
+            source=source or str(members.get("source") or path.name),
+            attribution=attribution,
+        )
+    except TrackMapError as exc:
+        raise TrackMapError(f"{path}: {exc}") from None
+    posts = _project_posts(tm, posts_raw, max_post_offset_m)
+    flip = reverse
+    if not reverse and len(posts) >= 2:
+        by_s = sorted(posts, key=lambda p: p.chainage_m)
+        flip = by_s[-1].km_m < by_s[0].km_m
+    if flip:
+        tm = TrackMap.from_latlon(
+            lat[::-1],
+            lon[::-1],
+            h[::-1],
+            name=tm.name,
+            tolerance_m=tol,
+            source=tm.source,
+            attribution=tm.attribution,
+        )
+        posts = _project_posts(tm, posts_raw, max_post_offset_m)
+        n = len(coords)
+        tunnel_spans = [(n - 1 - b, n - 1 - a) for a, b in tunnel_spans]
+    tunnels = _tunnel_intervals(tm, tunnel_spans)
+    return tm.with_metadata(kilometre_posts=posts, tunnels_m=tunnels)
+
+
+def _endpoints_enu(parts: Sequence[_Part], frame: LocalFrame) -> tuple[NDArray, NDArray]:
+    heads = np.array([p.coords[0, :2] for p in parts])
+    tails = np.array([p.coords[-1, :2] for p in parts])
+    return (
+        frame.to_enu(heads[:, 1], heads[:, 0])[:, :2],
+        frame.to_enu(tails[:, 1], tails[:, 0])[:, :2],
+    )
+
+
+def _chain_all(
+    parts: Sequence[_Part], frame: LocalFrame, max_gap_m: float, path: Path
+) -> list[tuple[int, bool]]:
+    """Order every part end to start; returns (part index, reversed) in chain order."""
+    n = len(parts)
+    heads, tails = _endpoints_enu(parts, frame)
+    ends = np.concatenate([heads, tails])  # endpoint e: part e % n, tail if e >= n
+    dist = np.linalg.norm(ends[:, None] - ends[None], axis=-1)
+    same = np.arange(2 * n)[:, None] % n == np.arange(2 * n)[None] % n
+    dist[same] = np.inf
+    # Start at the most isolated endpoint: the free end of the line.
+    start = int(np.argmax(dist.min(axis=1))) if n > 1 else 0
+    first = start % n
+    order = [(first, start >= n)]  # starting at a tail means the part runs reversed
+    used = {first}
+    cur = heads[first] if start >= n else tails[first]
+    while len(used) < n:
+        d_head = np.linalg.norm(heads - cur, axis=1)
+        d_tail = np.linalg.norm(tails - cur, axis=1)
+        d_head[list(used)] = np.inf
+        d_tail[list(used)] = np.inf
+        k_h, k_t = int(np.argmin(d_head)), int(np.argmin(d_tail))
+        k, rev, gap = (
+            (k_h, False, d_head[k_h]) if d_head[k_h] <= d_tail[k_t] else (k_t, True, d_tail[k_t])
+        )
+        if gap > max_gap_m:
+            last = parts[order[-1][0]].label
+            raise TrackMapError(
+                f"{path}: cannot chain {parts[k].label}: its nearest end is {gap:.1f} m from the "
+                f"end of {last} (max_gap_m={max_gap_m}); select one track (track=..., where=...), "
+                "use chain='longest' for a network of ways, or raise max_gap_m"
+            )
+        order.append((k, rev))
+        used.add(k)
+        cur = heads[k] if rev else tails[k]
+    # Keep the file's direction: the first part in file order should run forward.
+    if dict(order)[0]:
+        order = [(k, not r) for k, r in reversed(order)]
+    return order
+
+
+def _chain_longest(
+    parts: Sequence[_Part], frame: LocalFrame, max_gap_m: float, max_turn_deg: float, path: Path
+) -> list[tuple[int, bool]]:
+    """Longest drivable chain through a network of ways (no reversal at joints)."""
+    n = len(parts)
+    enu = [frame.to_enu(p.coords[:, 1], p.coords[:, 0])[:, :2] for p in parts]
+    length = np.array([np.sum(np.linalg.norm(np.diff(e, axis=0), axis=1)) for e in enu])
+    # State 2k: part k forward, 2k+1: reversed. Exit point and direction of each state.
+    start_pt = np.array([e[0] if r == 0 else e[-1] for e in enu for r in (0, 1)])
+    end_pt = np.array([e[-1] if r == 0 else e[0] for e in enu for r in (0, 1)])
+
+    def unit(v: NDArray) -> NDArray:
+        return v / max(float(np.linalg.norm(v)), 1e-9)
+
+    start_dir = np.array(
+        [unit(e[1] - e[0]) if r == 0 else unit(e[-2] - e[-1]) for e in enu for r in (0, 1)]
+    )
+    end_dir = np.array(
+        [unit(e[-1] - e[-2]) if r == 0 else unit(e[0] - e[1]) for e in enu for r in (0, 1)]
+    )
+    cos_max = np.cos(np.radians(max_turn_deg))
+    gap = np.linalg.norm(end_pt[:, None] - start_pt[None], axis=-1)
+    turn_ok = end_dir @ start_dir.T >= cos_max
+    succ = (gap <= max_gap_m) & turn_ok
+    st = np.arange(2 * n)
+    succ[st[:, None] // 2 == st[None] // 2] = False
+    nexts = [[int(m) for m in np.flatnonzero(row)] for row in succ]
+    has_pred = succ.any(axis=0)
+    starts = [int(s) for s in np.flatnonzero(~has_pred)] or list(range(2 * n))
+
+    best: tuple[float, list[int]] = (-1.0, [])
+    budget = [200_000]
+
+    def dfs(s: int, used: set[int], acc: float, trail: list[int]) -> None:
+        nonlocal best
+        budget[0] -= 1
+        if budget[0] < 0:
+            raise TrackMapError(
+                f"{path}: too many branches to search for the longest chain; narrow the "
+                "selection with where=... (e.g. {'usage': 'main', 'service': None})"
+            )
+        ext = [m for m in nexts[s] if m // 2 not in used]
+        if not ext and acc > best[0]:
+            best = (acc, list(trail))
+        for m in ext:
+            used.add(m // 2)
+            trail.append(m)
+            dfs(m, used, acc + length[m // 2], trail)
+            trail.pop()
+            used.discard(m // 2)
+
+    import sys
+
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 4 * n + 100))
+    try:
+        for s in starts:
+            dfs(s, {s // 2}, float(length[s // 2]), [s])
+    finally:
+        sys.setrecursionlimit(limit)
+    order = [(s // 2, bool(s % 2)) for s in best[1]]
+    if sum(r for _, r in order) > len(order) / 2:  # prefer the file's way direction
+        order = [(k, not r) for k, r in reversed(order)]
+    return order
+
+
+def _concatenate(
+    parts: Sequence[_Part], order: Sequence[tuple[int, bool]]
+) -> tuple[NDArray, list[tuple[int, int]]]:
+    """Join ordered parts; returns vertices and tunnel vertex spans (first, last index)."""
+    chunks: list[NDArray] = []
+    spans: list[tuple[int, int]] = []
+    n = 0
+    width = min(parts[k].coords.shape[1] for k, _ in order)
+    for idx, (k, rev) in enumerate(order):
+        c = parts[k].coords[::-1] if rev else parts[k].coords
+        c = c[:, :width]
+        if idx > 0 and np.allclose(c[0, :2], chunks[-1][-1, :2], atol=1e-9, rtol=0.0):
+            c = c[1:]  # shared joint vertex
+            first = n - 1
+        else:
+            first = n
+        chunks.append(c)
+        n += len(c)
+        if parts[k].tunnel:
+            spans.append((first, n - 1))
+    return np.concatenate(chunks), spans
+
+
+def _points_as_posts(
+    points: Sequence[tuple[dict[str, Any], NDArray]],
+) -> list[tuple[float, str, NDArray]]:
+    out = []
+    for props, xy in points:
+        km: float | None = None
+        if "km_m" in props:
+            km = float(props["km_m"])
+        elif props.get("railway") == "milestone" and "railway:position" in props:
+            txt = str(props["railway:position"]).replace(",", ".").split(";")[0]
+            try:
+                km = 1000.0 * float(txt.strip().lower().removeprefix("km").strip())
+            except ValueError:
+                km = None
+        if km is None or xy.shape not in ((2,), (3,)):
+            continue
+        label = str(props.get("label") or props.get("name") or f"km {km / 1000.0:.3f}")
+        out.append((km, label, xy))
+    return out
+
+
+def _project_posts(
+    tm: TrackMap, posts: Sequence[tuple[float, str, NDArray]], max_offset_m: float
+) -> list[KilometrePost]:
+    if not posts:
+        return []
+    xy = np.array([p[2][:2] for p in posts])
+    pr = tm.project(xy[:, 1], xy[:, 0])
+    keep = (~pr.clamped) & (np.abs(pr.offset_m) <= max_offset_m)
+    out = [
+        KilometrePost(float(s), km, label)
+        for (km, label, _), s, k in zip(posts, pr.chainage_m, keep, strict=True)
+        if k
+    ]
+    return sorted(out, key=lambda p: p.chainage_m)
+
+
+def _tunnel_intervals(tm: TrackMap, spans: Sequence[tuple[int, int]]) -> list[tuple[float, float]]:
+    if not spans:
+        return []
+    idx = np.array(spans)
+    enu = tm.polyline_enu_m
+    s = tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2)
+    s.sort(axis=1)
+    merged: list[list[float]] = []
+    for a, b in sorted(s.tolist()):
+        if merged and a <= merged[-1][1] + 1.0:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
+def kilometre_posts_from_sections(
+    track: TrackMap,
+    path: str | Path,
+    *,
+    step_m: float = 1000.0,
+    max_offset_m: float = 50.0,
+) -> list[KilometrePost]:
+    """Kilometre posts on ``track`` from Infrabel-style line sections.
+
+    Each section is a LineString with ``mfrom`` / ``mto`` kilometre references (metres) and
+    ``ptcarfromname`` / ``ptcartoname`` place names. The kilometre reference runs linearly along
+    the section's geodesic length; posts are placed at every multiple of ``step_m`` and at the
+    section ends, and projected onto ``track`` (points off the track's ends are dropped).
+    """
+    doc = _load_json(Path(path))
+    raw: list[tuple[float, str, NDArray]] = []
+    for i, f in enumerate(_features(doc, Path(path))):
+        props, geom = f.get("properties") or {}, f.get("geometry") or {}
+        if geom.get("type") != "LineString" or "mfrom" not in props or "mto" not in props:
+            continue
+        c = np.asarray(geom["coordinates"], float)
+        _check_lonlat(c, _feature_label(i, props), Path(path), None)
+        _, _, seg = WGS84.inv(c[:-1, 0], c[:-1, 1], c[1:, 0], c[1:, 1])
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        m0, m1 = float(props["mfrom"]), float(props["mto"])
+        km_vertex = m0 + (m1 - m0) * cum / cum[-1]
+        wanted = np.arange(np.ceil(min(m0, m1) / step_m), np.floor(max(m0, m1) / step_m) + 1)
+        kms = np.concatenate([[m0, m1], wanted * step_m])
+        names = [str(props.get("ptcarfromname", "")), str(props.get("ptcartoname", ""))]
+        order = np.argsort(km_vertex) if m1 < m0 else np.arange(len(km_vertex))
+        lon = np.interp(kms, km_vertex[order], c[order, 0])
+        lat = np.interp(kms, km_vertex[order], c[order, 1])
+        for j, km in enumerate(kms):
+            label = names[j] if j < 2 and names[j] else f"km {km / 1000.0:.3f}"
+            raw.append((float(km), label, np.array([lon[j], lat[j]])))
+    posts = _project_posts(track, raw, max_offset_m)
+    unique: dict[float, KilometrePost] = {}
+    for p in posts:  # a section end is also the next section's start
+        if p.km_m not in unique or (unique[p.km_m].label.startswith("km ") and p.label):
+            unique[p.km_m] = p
+    return sorted(unique.values(), key=lambda p: p.chainage_m)
+
+
+def write_geojson(track: TrackMap, path: str | Path) -> None:
+    """Write a track map as GeoJSON that :func:`read_geojson_track` reads back identically.
+
+    The source vertices go in one LineString feature (with heights when any is non-zero),
+    kilometre posts as Point features with ``km_m`` and ``label``; ``name``, ``source``,
+    ``attribution`` and ``tolerance_m`` as members of the FeatureCollection.
+    """
+    with_h = bool(np.any(track.h_m != 0.0))
+    cols = [track.lon_deg, track.lat_deg] + ([track.h_m] if with_h else [])
+    coords = [[round(float(v), 9) for v in row] for row in np.column_stack(cols)]
+    feats: list[dict[str, Any]] = [
+        {
+            "type": "Feature",
+            "properties": {"name": track.name, "length_m": round(track.length_m, 3)},
+            "geometry": {"type": "LineString", "coordinates": coords},
+        }
+    ]
+    if track.kilometre_posts:
+        s = np.array([p.chainage_m for p in track.kilometre_posts])
+        lat, lon, _ = track.position_at(s)
+        for p, la, lo in zip(track.kilometre_posts, lat, lon, strict=True):
+            feats.append(
+                {
+                    "type": "Feature",
+                    "properties": {"km_m": p.km_m, "label": p.label},
+                    "geometry": {
+                        "type": "Point",
+                        "coordinates": [round(float(lo), 9), round(float(la), 9)],
+                    },
+                }
+            )
+    doc = {
+        "type": "FeatureCollection",
+        "name": track.name,
+        "source": track.source,
+        "attribution": track.attribution,
+        "tolerance_m": track.tolerance_m,
+        "features": feats,
+    }
+    Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+
+
+# ---------------------------------------------------------------------- CSV
+
+_LAT = ("lat_deg", "lat", "latitude")
+_LON = ("lon_deg", "lon", "lng", "long", "longitude")
+_H = ("h_m", "h", "height", "height_m", "alt", "altitude", "ele", "elevation")
+
+
+def read_csv_track(
+    path: str | Path,
+    *,
+    name: str | None = None,
+    h_m: float = 0.0,
+    tolerance_m: float = 1.0,
+    vertical_tolerance_m: float | None = None,
+    source: str | None = None,
+    attribution: str = "",
+) -> TrackMap:
+    """Read a track axis from a CSV with a header: ``lat_deg, lon_deg[, h_m]`` (vertex order).
+
+    Accepted header names: latitude ``lat_deg|lat|latitude``, longitude
+    ``lon_deg|lon|lng|long|longitude``, height ``h_m|h|height|alt|altitude|ele|elevation``
+    (ellipsoidal metres; ``h_m`` is used when the column is absent). Lines starting with ``#``
+    are comments.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise TrackMapError(f"{path}: no such file")
+    lines = [
+        ln
+        for ln in path.read_text(encoding="utf-8-sig").splitlines()
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise TrackMapError(f"{path}: the file is empty; expected a header lat_deg,lon_deg[,h_m]")
+    rows = list(csv.reader(lines))
+    header = [c.strip().lower() for c in rows[0]]
+
+    def col(names: Sequence[str]) -> int | None:
+        for nm in names:
+            if nm in header:
+                return header.index(nm)
+        return None
+
+    i_lat, i_lon, i_h = col(_LAT), col(_LON), col(_H)
+    if i_lat is None or i_lon is None:
+        raise TrackMapError(
+            f"{path}: header {rows[0]} lacks a latitude and a longitude column; name them "
+            "lat_deg and lon_deg (h_m optional)"
+        )
+    vals = []
+    for r, row in enumerate(rows[1:], start=2):
+        try:
+            lat = float(row[i_lat])
+            lon = float(row[i_lon])
+            h = float(row[i_h]) if i_h is not None and row[i_h].strip() else h_m
+        except (ValueError, IndexError):
+            raise TrackMapError(
+                f"{path}: data line {r} {row} is not numeric lat/lon/h; fix or remove it"
+            ) from None
+        vals.append((lat, lon, h))
+    if len(vals) < 2:
+        raise TrackMapError(f"{path}: needs at least 2 vertices, found {len(vals)}")
+    arr = np.array(vals)
+    if np.any(np.abs(arr[:, 0]) > 90.0):
+        k = int(np.flatnonzero(np.abs(arr[:, 0]) > 90.0)[0])
+        raise TrackMapError(
+            f"{path}: data line {k + 2} has latitude {arr[k, 0]} outside [-90, 90]; are the "
+            "latitude and longitude columns swapped?"
+        )
+    try:
+        return TrackMap.from_latlon(
+            arr[:, 0],
+            arr[:, 1],
+            arr[:, 2],
+            name=name or path.stem,
+            tolerance_m=tolerance_m,
+            vertical_tolerance_m=vertical_tolerance_m,
+            source=source or path.name,
+            attribution=attribution,
+        )
+    except TrackMapError as exc:
+        raise TrackMapError(f"{path}: {exc}") from None
