@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -21,6 +20,7 @@ from numpy.typing import NDArray
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.track import KilometrePost, TrackMap, TrackMapError
+from predisat.trackchain import Part, chain_all, chain_longest, concatenate_parts
 
 __all__ = [
     "NAME_KEYS",
@@ -36,14 +36,6 @@ NAME_KEYS = ("trackname", "trackcode", "name", "ref", "id", "@id")
 _OSM_ATTRIBUTION = (
     "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
 )
-
-
-@dataclass(frozen=True)
-class _Part:
-    label: str  # "feature 0 (trackname=A) part 2", for error messages
-    feature: int
-    coords: NDArray  # (k, 2) lon, lat or (k, 3) lon, lat, h
-    tunnel: bool
 
 
 # ---------------------------------------------------------------------- GeoJSON
@@ -216,7 +208,7 @@ def read_geojson_track(
                     "choose one with track=..."
                 )
 
-    parts: list[_Part] = []
+    parts: list[Part] = []
     for i, props, geom in selected:
         label = _feature_label(i, props)
         raw = geom.get("coordinates") or []
@@ -234,20 +226,20 @@ def read_geojson_track(
                 continue
             _check_lonlat(coords, where_s, path, expected_bbox)
             if len(coords) >= 2:
-                parts.append(_Part(where_s, i, coords, tunnel))
+                parts.append(Part(where_s, i, coords, tunnel))
     if not parts:
         raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
 
     first = parts[0].coords[0]
     frame = LocalFrame(float(first[1]), float(first[0]))
     if chain == "all":
-        order = _chain_all(parts, frame, max_gap_m, path)
+        order = chain_all(parts, frame, max_gap_m, path)
     elif chain == "longest":
-        order = _chain_longest(parts, frame, max_gap_m, max_turn_deg, path)
+        order = chain_longest(parts, frame, max_gap_m, max_turn_deg, path)
     else:
         raise TrackMapError(f"chain must be 'all' or 'longest', got {chain!r}")
 
-    coords, tunnel_spans = _concatenate(parts, order)
+    coords, tunnel_spans = concatenate_parts(parts, order)
     has_h = all(parts[k].coords.shape[1] >= 3 for k, _ in order)
     lon, lat = coords[:, 0], coords[:, 1]
     h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
@@ -292,145 +284,6 @@ def read_geojson_track(
         tunnel_spans = [(n - 1 - b, n - 1 - a) for a, b in tunnel_spans]
     tunnels = _tunnel_intervals(tm, tunnel_spans)
     return tm.with_metadata(kilometre_posts=posts, tunnels_m=tunnels)
-
-
-def _endpoints_enu(parts: Sequence[_Part], frame: LocalFrame) -> tuple[NDArray, NDArray]:
-    heads = np.array([p.coords[0, :2] for p in parts])
-    tails = np.array([p.coords[-1, :2] for p in parts])
-    return (
-        frame.to_enu(heads[:, 1], heads[:, 0])[:, :2],
-        frame.to_enu(tails[:, 1], tails[:, 0])[:, :2],
-    )
-
-
-def _chain_all(
-    parts: Sequence[_Part], frame: LocalFrame, max_gap_m: float, path: Path
-) -> list[tuple[int, bool]]:
-    """Order every part end to start; returns (part index, reversed) in chain order."""
-    n = len(parts)
-    heads, tails = _endpoints_enu(parts, frame)
-    ends = np.concatenate([heads, tails])  # endpoint e: part e % n, tail if e >= n
-    dist = np.linalg.norm(ends[:, None] - ends[None], axis=-1)
-    same = np.arange(2 * n)[:, None] % n == np.arange(2 * n)[None] % n
-    dist[same] = np.inf
-    # Start at the most isolated endpoint: the free end of the line.
-    start = int(np.argmax(dist.min(axis=1))) if n > 1 else 0
-    first = start % n
-    order = [(first, start >= n)]  # starting at a tail means the part runs reversed
-    used = {first}
-    cur = heads[first] if start >= n else tails[first]
-    while len(used) < n:
-        d_head = np.linalg.norm(heads - cur, axis=1)
-        d_tail = np.linalg.norm(tails - cur, axis=1)
-        d_head[list(used)] = np.inf
-        d_tail[list(used)] = np.inf
-        k_h, k_t = int(np.argmin(d_head)), int(np.argmin(d_tail))
-        k, rev, gap = (
-            (k_h, False, d_head[k_h]) if d_head[k_h] <= d_tail[k_t] else (k_t, True, d_tail[k_t])
-        )
-        if gap > max_gap_m:
-            last = parts[order[-1][0]].label
-            raise TrackMapError(
-                f"{path}: cannot chain {parts[k].label}: its nearest end is {gap:.1f} m from the "
-                f"end of {last} (max_gap_m={max_gap_m}); select one track (track=..., where=...), "
-                "use chain='longest' for a network of ways, or raise max_gap_m"
-            )
-        order.append((k, rev))
-        used.add(k)
-        cur = heads[k] if rev else tails[k]
-    # Keep the file's direction: the first part in file order should run forward.
-    if dict(order)[0]:
-        order = [(k, not r) for k, r in reversed(order)]
-    return order
-
-
-def _chain_longest(
-    parts: Sequence[_Part], frame: LocalFrame, max_gap_m: float, max_turn_deg: float, path: Path
-) -> list[tuple[int, bool]]:
-    """Longest drivable chain through a network of ways (no reversal at joints)."""
-    n = len(parts)
-    enu = [frame.to_enu(p.coords[:, 1], p.coords[:, 0])[:, :2] for p in parts]
-    length = np.array([np.sum(np.linalg.norm(np.diff(e, axis=0), axis=1)) for e in enu])
-    # State 2k: part k forward, 2k+1: reversed. Exit point and direction of each state.
-    start_pt = np.array([e[0] if r == 0 else e[-1] for e in enu for r in (0, 1)])
-    end_pt = np.array([e[-1] if r == 0 else e[0] for e in enu for r in (0, 1)])
-
-    def unit(v: NDArray) -> NDArray:
-        return v / max(float(np.linalg.norm(v)), 1e-9)
-
-    start_dir = np.array(
-        [unit(e[1] - e[0]) if r == 0 else unit(e[-2] - e[-1]) for e in enu for r in (0, 1)]
-    )
-    end_dir = np.array(
-        [unit(e[-1] - e[-2]) if r == 0 else unit(e[0] - e[1]) for e in enu for r in (0, 1)]
-    )
-    cos_max = np.cos(np.radians(max_turn_deg))
-    gap = np.linalg.norm(end_pt[:, None] - start_pt[None], axis=-1)
-    turn_ok = end_dir @ start_dir.T >= cos_max
-    succ = (gap <= max_gap_m) & turn_ok
-    st = np.arange(2 * n)
-    succ[st[:, None] // 2 == st[None] // 2] = False
-    nexts = [[int(m) for m in np.flatnonzero(row)] for row in succ]
-    has_pred = succ.any(axis=0)
-    starts = [int(s) for s in np.flatnonzero(~has_pred)] or list(range(2 * n))
-
-    best: tuple[float, list[int]] = (-1.0, [])
-    budget = [200_000]
-
-    def dfs(s: int, used: set[int], acc: float, trail: list[int]) -> None:
-        nonlocal best
-        budget[0] -= 1
-        if budget[0] < 0:
-            raise TrackMapError(
-                f"{path}: too many branches to search for the longest chain; narrow the "
-                "selection with where=... (e.g. {'usage': 'main', 'service': None})"
-            )
-        ext = [m for m in nexts[s] if m // 2 not in used]
-        if not ext and acc > best[0]:
-            best = (acc, list(trail))
-        for m in ext:
-            used.add(m // 2)
-            trail.append(m)
-            dfs(m, used, acc + length[m // 2], trail)
-            trail.pop()
-            used.discard(m // 2)
-
-    import sys
-
-    limit = sys.getrecursionlimit()
-    sys.setrecursionlimit(max(limit, 4 * n + 100))
-    try:
-        for s in starts:
-            dfs(s, {s // 2}, float(length[s // 2]), [s])
-    finally:
-        sys.setrecursionlimit(limit)
-    order = [(s // 2, bool(s % 2)) for s in best[1]]
-    if sum(r for _, r in order) > len(order) / 2:  # prefer the file's way direction
-        order = [(k, not r) for k, r in reversed(order)]
-    return order
-
-
-def _concatenate(
-    parts: Sequence[_Part], order: Sequence[tuple[int, bool]]
-) -> tuple[NDArray, list[tuple[int, int]]]:
-    """Join ordered parts; returns vertices and tunnel vertex spans (first, last index)."""
-    chunks: list[NDArray] = []
-    spans: list[tuple[int, int]] = []
-    n = 0
-    width = min(parts[k].coords.shape[1] for k, _ in order)
-    for idx, (k, rev) in enumerate(order):
-        c = parts[k].coords[::-1] if rev else parts[k].coords
-        c = c[:, :width]
-        if idx > 0 and np.allclose(c[0, :2], chunks[-1][-1, :2], atol=1e-9, rtol=0.0):
-            c = c[1:]  # shared joint vertex
-            first = n - 1
-        else:
-            first = n
-        chunks.append(c)
-        n += len(c)
-        if parts[k].tunnel:
-            spans.append((first, n - 1))
-    return np.concatenate(chunks), spans
 
 
 def _points_as_posts(

@@ -1,4 +1,4 @@
-"""Tests for predisat.track and predisat.trackio.
+"""Tests for predisat.track and predisat.trackio (and, through them, trackfit and trackchain).
 
 Ground truth comes from pyproj (geodesic lengths, azimuths, forward problems, an azimuthal
 equidistant projection) and from analytic geometry, never from the code under test.
