@@ -1,0 +1,423 @@
+"""Ground truth from a synthetic world: 360 deg elevation masks, obstacle descriptors, blockage.
+
+* :func:`true_masks`: for antenna positions along the track (every 10 m by default), the highest
+  L-band-blocking elevation in every azimuth bin, exact to well under 0.1 deg.
+* :func:`obstacle_descriptors`: distance and height of the nearest blocking obstacle on each
+  side of the track (the reflection-risk descriptors of a segment map).
+* :func:`is_blocked`: whether given satellite directions are blocked (a direct ray cast).
+
+Elevations are relative to the ellipsoid normal at each antenna, azimuths clockwise from true
+north; the method and its limits are in ``docs/synthetic-world.md``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.geodesy import azel_to_enu
+from predisat.synth.raycast import Caster, make_caster
+
+__all__ = [
+    "SIDES",
+    "TrueMasks",
+    "is_blocked",
+    "obstacle_descriptors",
+    "scan_levels_deg",
+    "true_masks",
+]
+
+TRUTH_FORMAT = "predisat.synth.truemasks/1"
+SIDES = ("left", "right")
+
+
+def scan_levels_deg(rel_step: float = 0.1, min_step_deg: float = 0.05) -> NDArray:
+    """Elevations (ascending, from 0 to below 90 deg) of the coarse scan before bisection.
+
+    The step is ``rel_step`` times the elevation (at least ``min_step_deg``, at most 2 deg):
+    a slab of thickness ``t`` whose top is ``dh`` above the antenna subtends about
+    ``(t / dh) * el`` near elevation ``el``, so a relative step catches bridge decks and canopy
+    roofs (``t / dh`` >= 0.25) at any distance.
+    """
+    out = [0.0]
+    while True:
+        nxt = out[-1] + min(max(min_step_deg, rel_step * out[-1]), 2.0)
+        if nxt >= 90.0:
+            return np.array(out)
+        out.append(nxt)
+
+
+_LEVELS = scan_levels_deg()
+
+
+@dataclass(frozen=True)
+class TrueMasks:
+    """True elevation masks and obstacle descriptors at antenna positions along a track.
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (n,)
+    lat_deg, lon_deg, h_m : ndarray, shape (n,)
+        Geodetic antenna positions.
+    heading_deg : ndarray, shape (n,)
+        Track heading (azimuth of increasing chainage) at each position.
+    az_deg : ndarray, shape (n_az,)
+        Bin centres ``k * az_step_deg``; bin ``k`` covers ``+- az_step_deg / 2``.
+    mask_el_deg : ndarray, shape (n, n_az)
+        Highest blocking elevation over the bin, degrees in [0, 90] (90 when the zenith is
+        blocked: tunnel, under a deck).
+    mask_min_el_deg : ndarray, shape (n, n_az)
+        Lowest of the per-azimuth masks sampled in the bin (equals ``mask_el_deg`` where the
+        mask is flat across the bin; lower at building edges and masts).
+    covered : ndarray of bool, shape (n,)
+        The zenith is blocked.
+    obstacle_distance_m, obstacle_height_m : ndarray, shape (n, 2)
+        Per side (:data:`SIDES`), see :func:`obstacle_descriptors`; NaN when none.
+    antenna_height_m, az_step_deg : float
+    backend : str
+        Ray-casting backend used.
+    """
+
+    chainage_m: NDArray
+    lat_deg: NDArray
+    lon_deg: NDArray
+    h_m: NDArray
+    heading_deg: NDArray
+    az_deg: NDArray
+    mask_el_deg: NDArray
+    mask_min_el_deg: NDArray
+    covered: NDArray
+    obstacle_distance_m: NDArray
+    obstacle_height_m: NDArray
+    antenna_height_m: float = 4.0
+    az_step_deg: float = 0.5
+    backend: str = "open3d"
+
+    def bin_index(self, az_deg: ArrayLike) -> NDArray:
+        """Index of the azimuth bin containing each azimuth (degrees), same shape."""
+        n = self.az_deg.size
+        return np.mod(np.floor(np.asarray(az_deg, float) / self.az_step_deg + 0.5), n).astype(int)
+
+    def mask_at(self, az_deg: ArrayLike) -> NDArray:
+        """Mask elevation of the bins containing ``az_deg`` at every position, (n, *az.shape)."""
+        return self.mask_el_deg[:, self.bin_index(az_deg)]
+
+    def save(self, path: str | Path) -> None:
+        """Write to a compressed ``.npz`` (arrays by field name plus a JSON ``meta``)."""
+        arrays: dict[str, Any] = {}
+        meta: dict[str, Any] = {"format": TRUTH_FORMAT, "sides": list(SIDES)}
+        for f in fields(self):
+            val = getattr(self, f.name)
+            if isinstance(val, np.ndarray):
+                arrays[f.name] = val
+            else:
+                meta[f.name] = val
+        with open(path, "wb") as fh:
+            np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **arrays)
+
+    @classmethod
+    def load(cls, path: str | Path) -> TrueMasks:
+        """Read a file written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.pop("format", None) != TRUTH_FORMAT:
+                raise ValueError(f"{path}: not a true-mask file ({TRUTH_FORMAT})")
+            meta.pop("sides", None)
+            names = [f.name for f in fields(cls)]
+            missing = [n for n in names if n not in z.files and n not in meta]
+            if missing:
+                raise ValueError(f"{path}: missing fields {missing}; rewrite it with save()")
+            return cls(**{n: (z[n] if n in z.files else meta[n]) for n in names})
+
+
+def _local_rotations(world: Any, enu_m: NDArray) -> NDArray:
+    """Rotations (..., 3, 3) from the local ENU at points (frame ENU) into the frame."""
+    lat, lon, _ = world.frame.to_geodetic(enu_m)
+    return world.frame.rotation_from(lat, lon)
+
+
+def _caster(world: Any, backend: str, caster: Caster | None) -> Caster:
+    return caster if caster is not None else make_caster(world, backend, lband_only=True)
+
+
+def _triangle_spheres(world: Any) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Blocking faces (m, 3), their centroids (m, 3), the largest horizontal (frame) and 3-D
+    distances from the centroid to a vertex (m,) each."""
+    faces = np.asarray(world.faces)[world.blocking_faces]
+    tri = np.asarray(world.vertices_m)[faces]
+    centre = tri.mean(1)
+    off = tri - centre[:, None]
+    return (
+        faces,
+        centre,
+        np.hypot(off[..., 0], off[..., 1]).max(1),
+        np.linalg.norm(off, axis=-1).max(1),
+    )
+
+
+def _sector_bounds(
+    world: Any, ant: NDArray, rot: NDArray, spheres: tuple[NDArray, ...], n_sector: int
+) -> NDArray:
+    """Upper bound (n_sector,) of the blocking elevation in equal azimuth sectors.
+
+    Per triangle: its highest vertex above the antenna over the smallest horizontal distance to
+    a circle around it, spread over the azimuths the circle covers. Scanning starts below it.
+    """
+    faces, centre, r_h, r_3d = spheres
+    dz = ((np.asarray(world.vertices_m) - ant) @ rot[:, 2])[faces].max(1)
+    keep = dz > 0
+    # horizontal radius in the local frame: the frame's, plus what the tilt between the two
+    # verticals (1 mrad per 6.4 km from the origin) can add
+    tilt = np.sqrt(max(1.0 - rot[2, 2] ** 2, 0.0))
+    dz, r = dz[keep], r_h[keep] + r_3d[keep] * tilt + 1e-6
+    c = (centre[keep] - ant) @ rot[:, :2]  # horizontal, local ENU at the antenna
+    dist = np.hypot(c[:, 0], c[:, 1])
+    ub = np.degrees(np.arctan2(dz, np.maximum(dist - r, 0.0)))
+    half = np.degrees(np.arcsin(np.clip(r / np.maximum(dist, 1e-9), 0.0, 1.0)))
+    half = np.where(r >= dist, 180.0, half)
+    caz = np.degrees(np.arctan2(c[:, 0], c[:, 1]))
+    width = 360.0 / n_sector
+    first = np.floor((caz - half) / width).astype(int)
+    count = np.minimum(np.floor((caz + half) / width).astype(int) - first + 1, n_sector)
+    rep = np.repeat(np.arange(first.size), count)
+    offs = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+    out = np.zeros(n_sector)
+    np.maximum.at(out, np.mod(first[rep] + offs, n_sector), ub[rep])
+    return out
+
+
+def _scan(
+    caster: Caster, ant: NDArray, rot: NDArray, az: NDArray, ub: NDArray, n_bisect: int = 12
+) -> NDArray:
+    """Transition elevation (m,) for rays from antennas ``ant`` (m, 3) with local rotations
+    ``rot`` (m, 3, 3) at azimuths ``az`` (m,), scanning down from the bound ``ub`` (m,)."""
+    levels = _LEVELS
+    n = az.size
+    top = np.searchsorted(levels, np.minimum(ub, 90.0), side="left")  # levels[:top] < ub
+    cur = top - 1
+    lo = np.full(n, np.nan)
+    hi = np.zeros(n)
+    done = cur < 0
+    az_rad = np.radians(az)
+    sin_az, cos_az = np.sin(az_rad), np.cos(az_rad)
+
+    def occluded(idx: NDArray, el_deg: NDArray) -> NDArray:
+        e = np.radians(el_deg)
+        d_loc = np.stack([np.cos(e) * sin_az[idx], np.cos(e) * cos_az[idx], np.sin(e)], -1)
+        d = np.einsum("nij,nj->ni", rot[idx], d_loc)
+        return caster.occluded(ant[idx], d)
+
+    block = 4
+    while not np.all(done):
+        act = np.flatnonzero(~done)
+        k = cur[act][:, None] - np.arange(block)[None, :]  # descending level indices
+        valid = k >= 0
+        idx = np.broadcast_to(act[:, None], k.shape)[valid]
+        blocked = np.zeros(k.shape, bool)
+        blocked[valid] = occluded(idx, levels[k[valid]])
+        any_b = blocked.any(1)
+        first = np.argmax(blocked, axis=1)
+        kb = k[np.arange(act.size), first]
+        res = act[any_b]
+        kb = kb[any_b]
+        lo[res] = levels[kb]
+        hi[res] = np.where(kb + 1 < top[res], levels[np.minimum(kb + 1, levels.size - 1)], ub[res])
+        done[res] = True
+        cur[act] -= block
+        exhausted = act[~any_b & (cur[act] < 0)]
+        done[exhausted] = True  # never blocked at or above 0 deg: mask 0 (hi stays 0)
+    sel = np.flatnonzero(np.isfinite(lo))
+    hi_s, lo_s = np.minimum(hi[sel], 90.0), lo[sel]
+    for _ in range(n_bisect):
+        mid = 0.5 * (lo_s + hi_s)
+        b = occluded(sel, mid)
+        lo_s, hi_s = np.where(b, mid, lo_s), np.where(b, hi_s, mid)
+    out = np.zeros(n)
+    out[sel] = hi_s
+    return out
+
+
+def true_masks(
+    world: Any,
+    chainage_m: ArrayLike | None = None,
+    antenna_height_m: float = 4.0,
+    az_step_deg: float = 0.5,
+    backend: str = "open3d",
+    *,
+    n_sub: int = 4,
+    caster: Caster | None = None,
+    progress: bool = False,
+) -> TrueMasks:
+    """True 360 deg elevation masks of the L-band-blocking scene at antenna positions.
+
+    Parameters
+    ----------
+    world : World
+    chainage_m : array_like, shape (n,), optional
+        Positions; default every 10 m over the world's extent.
+    antenna_height_m : float
+        Antenna height above the rail along the local vertical.
+    az_step_deg : float
+        Bin width; must divide 360.
+    backend : {"open3d", "trimesh"}
+        Ray caster (ignored when ``caster`` is given).
+    n_sub : int
+        Azimuth samples per bin (edges shared with the neighbours); the bin's mask is their
+        maximum, so masts narrower than ``az_step_deg / n_sub`` can be missed.
+    caster : Caster, optional
+        A prebuilt ``make_caster(world, backend, lband_only=True)``.
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    TrueMasks
+    """
+    n_az = round(360.0 / az_step_deg)
+    if n_az < 1 or abs(n_az * az_step_deg - 360.0) > 1e-9 or n_sub < 1:
+        raise ValueError(f"az_step_deg must divide 360 (got {az_step_deg}) and n_sub >= 1")
+    if chainage_m is None:
+        lo, hi = world.extent_m
+        chainage_m = np.arange(np.ceil(lo / 10.0) * 10.0, hi + 1e-9, 10.0)
+    s = np.atleast_1d(np.asarray(chainage_m, float))
+    cst = _caster(world, backend, caster)
+    ant = world.antenna_enu(s, antenna_height_m)
+    rot = _local_rotations(world, ant)
+    spheres = _triangle_spheres(world)
+    covered = cst.occluded(ant, rot[:, :, 2])
+    az_sub = np.mod(np.arange(n_az * n_sub) * (az_step_deg / n_sub) - az_step_deg / 2, 360.0)
+    n_sector = 720
+    sector = np.floor(az_sub / (360.0 / n_sector)).astype(int) % n_sector
+    mask = np.full((s.size, n_az), 90.0)
+    mask_min = np.full((s.size, n_az), 90.0)
+    todo = np.flatnonzero(~covered)
+    it: Any = todo
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(todo, desc="true masks", unit="pos")
+    chunk: list[int] = []
+    for j, p in enumerate(it):
+        chunk.append(int(p))
+        if len(chunk) < 8 and j < todo.size - 1:
+            continue
+        idx = np.array(chunk)
+        ub = np.stack([_sector_bounds(world, ant[q], rot[q], spheres, n_sector) for q in idx])
+        pos = np.repeat(idx, az_sub.size)
+        el = _scan(cst, ant[pos], rot[pos], np.tile(az_sub, idx.size), ub[:, sector].ravel())
+        v = np.clip(el, 0.0, 90.0).reshape(idx.size, n_az, n_sub)
+        right_edge = np.roll(v[:, :, 0], -1, axis=1)
+        mask[idx] = np.maximum(v.max(2), right_edge)
+        mask_min[idx] = np.minimum(v.min(2), right_edge)
+        chunk = []
+    dist, height = obstacle_descriptors(world, s, antenna_height_m, caster=cst)
+    lat, lon, h = world.frame.to_geodetic(ant)
+    return TrueMasks(
+        chainage_m=s,
+        lat_deg=np.asarray(lat),
+        lon_deg=np.asarray(lon),
+        h_m=np.asarray(h),
+        heading_deg=np.asarray(world.track.heading_at(s), float),
+        az_deg=np.arange(n_az) * az_step_deg,
+        mask_el_deg=mask,
+        mask_min_el_deg=mask_min,
+        covered=covered,
+        obstacle_distance_m=dist,
+        obstacle_height_m=height,
+        antenna_height_m=float(antenna_height_m),
+        az_step_deg=float(az_step_deg),
+        backend=getattr(cst, "backend", backend),
+    )
+
+
+def obstacle_descriptors(
+    world: Any,
+    chainage_m: ArrayLike,
+    antenna_height_m: float = 4.0,
+    backend: str = "open3d",
+    *,
+    caster: Caster | None = None,
+    max_range_m: float = 100.0,
+    depth_m: float = 30.0,
+) -> tuple[NDArray, NDArray]:
+    """Distance and height of the nearest L-band-blocking obstacle on each side of the track.
+
+    Both are measured in the vertical plane through the track axis point, perpendicular to the
+    track (local horizontal azimuth ``heading - 90`` for left, ``heading + 90`` for right):
+
+    * distance: horizontal distance from the axis to the first blocking surface met by
+      horizontal rays at 1 m, 2 m, ... up to the antenna height above the rail, within
+      ``max_range_m``;
+    * height: height above the rail of the highest blocking surface in that plane between the
+      distance and ``depth_m`` beyond it (vertical rays cast down every 0.25 m), i.e. the top
+      of a facade or rock wall, or the crest of a cutting.
+
+    Returns
+    -------
+    distance_m, height_m : ndarray, shape (n, 2)
+        Columns in :data:`SIDES` order; NaN where no obstacle lies within range.
+    """
+    s = np.atleast_1d(np.asarray(chainage_m, float))
+    cst = _caster(world, backend, caster)
+    axis = np.asarray(world.track.enu_at(s), float)
+    rot = _local_rotations(world, axis)
+    hd = np.radians(np.asarray(world.track.heading_at(s), float))
+    up = rot[:, :, 2]
+    heights = np.arange(1.0, antenna_height_m + 1e-9, 1.0)
+    behind = np.arange(0.0, depth_m + 1e-9, 0.25) + 0.01
+    dist = np.full((s.size, 2), np.nan)
+    top = np.full((s.size, 2), np.nan)
+    z0 = 500.0  # start of the downward rays above the rail
+    for k, sign in enumerate((-1.0, 1.0)):  # left = heading - 90
+        a = hd + sign * np.pi / 2
+        d = np.einsum("nij,nj->ni", rot, np.stack([np.sin(a), np.cos(a), 0 * a], -1))
+        o = axis[:, None] + heights[None, :, None] * up[:, None]
+        t = cst.cast(o.reshape(-1, 3), np.repeat(d, heights.size, 0)).distance_m
+        t = t.reshape(s.size, heights.size).min(1)
+        ok = t <= max_range_m
+        dist[ok, k] = t[ok]
+        t = np.where(ok, t, 0.0)
+        src = axis[:, None] + (t[:, None] + behind)[..., None] * d[:, None] + z0 * up[:, None]
+        down = np.repeat(-up, behind.size, 0)
+        tt = cst.cast(src.reshape(-1, 3), down).distance_m.reshape(s.size, behind.size)
+        best = z0 - np.min(tt, axis=1)  # nearest hit from above = highest surface
+        top[ok, k] = best[ok]
+    return dist, top
+
+
+def is_blocked(
+    world: Any,
+    antenna_enu: ArrayLike,
+    az_deg: ArrayLike,
+    el_deg: ArrayLike,
+    backend: str = "open3d",
+    *,
+    caster: Caster | None = None,
+) -> NDArray:
+    """Whether satellite directions are blocked by L-band-blocking geometry (direct ray cast).
+
+    Parameters
+    ----------
+    antenna_enu : array_like, shape (*P, 3)
+        Antenna positions in the world frame.
+    az_deg, el_deg : array_like, shape (*P, ...) broadcastable
+        Directions in the local ENU at each antenna (positions first, e.g. (n_pos, n_sat)).
+
+    Returns
+    -------
+    ndarray of bool, shape of the broadcast directions
+    """
+    ant = np.asarray(antenna_enu, float)
+    az, el = np.broadcast_arrays(np.asarray(az_deg, float), np.asarray(el_deg, float))
+    pshape = ant.shape[:-1]
+    extra = max(az.ndim - len(pshape), 0)  # positions first: align antennas on the left
+    rot = _local_rotations(world, ant).reshape((*pshape, *(1,) * extra, 3, 3))
+    d = np.einsum("...ij,...j->...i", rot, azel_to_enu(az, el))
+    o = np.broadcast_to(ant.reshape((*pshape, *(1,) * extra, 3)), d.shape)
+    out = _caster(world, backend, caster).occluded(o.reshape(-1, 3), d.reshape(-1, 3))
+    return out.reshape(d.shape[:-1])

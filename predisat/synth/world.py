@@ -1,0 +1,493 @@
+"""The synthetic corridor world: a seeded procedural 3-D scene built along a track map.
+
+A :class:`WorldSpec` is a recipe: a sequence of :class:`Stretch` es (open country, stations,
+towns, tree rows, cuttings, rock walls, overbridges, tunnels), catenary on or off, distant hills
+on or off. :meth:`World.build` turns it into one triangle mesh in the track's local ENU frame,
+with a :class:`Material` per face. The same track, recipe and seed always give the same mesh.
+
+L-band policy: a structure blocks GNSS signals (``blocks_lband=True``) unless it is much thinner
+than the L1 wavelength (19 cm) and its first Fresnel zone (about 1.5 m across at 10 m), such as
+contact and messenger wires and cantilever tubes (``thin=True``): those are visible to a camera
+but do not block or reflect a signal significantly. Masts, buildings, canopies, trees (foliage
+attenuates L-band by 10-20 dB), rock, earth, bridges and tunnels block. See
+``docs/synthetic-world.md``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from predisat.geodesy import LocalFrame
+from predisat.synth.scenery import Context, Corridor, MeshBuilder, build_catenary, build_stretch
+
+__all__ = [
+    "MATERIALS",
+    "STRETCH_KINDS",
+    "Material",
+    "Stretch",
+    "World",
+    "WorldSpec",
+    "material_id",
+]
+
+WORLD_FORMAT = "predisat.synth.world/1"
+
+
+@dataclass(frozen=True)
+class Material:
+    """Appearance and radio behaviour of a surface.
+
+    Attributes
+    ----------
+    name : str
+    albedo_rgb : tuple of float, shape (3,)
+        Diffuse reflectance in linear RGB, 0-1.
+    texture : str
+        Hint for the renderer (``"grass"``, ``"brick"``, ``"foliage"``, ...).
+    blocks_lband : bool
+        True when the surface blocks GNSS L-band signals.
+    thin : bool
+        True for structures much thinner than the L1 wavelength (wires, thin tubes); such
+        surfaces never block L-band and are labelled separately by the renderer.
+    """
+
+    name: str
+    albedo_rgb: tuple[float, float, float]
+    texture: str
+    blocks_lband: bool = True
+    thin: bool = False
+
+
+MATERIALS: tuple[Material, ...] = (
+    Material("grass", (0.10, 0.17, 0.05), "grass"),
+    Material("ballast", (0.22, 0.20, 0.18), "gravel"),
+    Material("platform", (0.40, 0.38, 0.35), "concrete"),
+    Material("brick", (0.35, 0.14, 0.08), "brick"),
+    Material("plaster", (0.60, 0.55, 0.45), "plaster"),
+    Material("roof_tiles", (0.30, 0.10, 0.06), "tiles"),
+    Material("canopy", (0.45, 0.47, 0.50), "metal"),
+    Material("steel", (0.25, 0.27, 0.28), "metal"),
+    Material("wire", (0.12, 0.10, 0.08), "wire", blocks_lband=False, thin=True),
+    Material("cantilever", (0.30, 0.30, 0.30), "metal", blocks_lband=False, thin=True),
+    Material("foliage", (0.05, 0.12, 0.03), "foliage"),
+    Material("bark", (0.12, 0.09, 0.06), "bark"),
+    Material("rock", (0.38, 0.34, 0.28), "rock"),
+    Material("concrete", (0.45, 0.44, 0.42), "concrete"),
+    Material("hills", (0.09, 0.15, 0.05), "grass"),
+)
+"""Materials of the synthetic world; a face's material id indexes this tuple."""
+
+_MAT = {m.name: i for i, m in enumerate(MATERIALS)}
+
+STRETCH_KINDS = (
+    "open",
+    "station",
+    "town",
+    "trees",
+    "cutting",
+    "rock_walls",
+    "overbridge",
+    "tunnel",
+)
+_SPANNING = ("overbridge", "tunnel")  # always cross the whole corridor
+
+
+def material_id(name: str) -> int:
+    """Index in :data:`MATERIALS` of the material called ``name``."""
+    if name not in _MAT:
+        raise KeyError(f"unknown material {name!r}; known: {sorted(_MAT)}")
+    return _MAT[name]
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """A chainage interval of one kind of scenery.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`STRETCH_KINDS`.
+    start_m, end_m : float
+        Chainage interval, metres, ``0 <= start_m < end_m``. For an overbridge the interval is
+        the deck's width along the track (8-15 m is realistic).
+    side : {"both", "left", "right"}
+        Which side(s) of the track carry the scenery; overbridges and tunnels span both.
+    params : mapping of str to float
+        Optional fixed values instead of random draws (e.g. ``{"height_m": 30,
+        "distance_m": 8, "roughness_m": 0}`` for rock walls); see ``docs/synthetic-world.md``.
+    """
+
+    kind: str
+    start_m: float
+    end_m: float
+    side: str = "both"
+    params: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.kind not in STRETCH_KINDS:
+            raise ValueError(f"stretch kind {self.kind!r} is unknown; use one of {STRETCH_KINDS}")
+        if self.side not in ("both", "left", "right"):
+            raise ValueError(f"stretch side {self.side!r} must be 'both', 'left' or 'right'")
+        if self.kind in _SPANNING and self.side != "both":
+            raise ValueError(f"a {self.kind} spans the track: give side='both', not {self.side!r}")
+        if not 0.0 <= self.start_m < self.end_m:
+            raise ValueError(
+                f"{self.kind} stretch [{self.start_m}, {self.end_m}] m: need "
+                "0 <= start_m < end_m (chainages in metres along the track)"
+            )
+        object.__setattr__(self, "start_m", float(self.start_m))
+        object.__setattr__(self, "end_m", float(self.end_m))
+        object.__setattr__(self, "params", {k: float(v) for k, v in dict(self.params).items()})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (YAML/JSON-ready)."""
+        out: dict[str, Any] = {"kind": self.kind, "start_m": self.start_m, "end_m": self.end_m}
+        out["side"] = self.side
+        if self.params:
+            out["params"] = dict(self.params)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Stretch:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        extra = set(d) - {"kind", "start_m", "end_m", "side", "params"}
+        if extra:
+            raise ValueError(f"stretch {dict(d)!r} has unknown keys {sorted(extra)}")
+        return cls(d["kind"], d["start_m"], d["end_m"], d.get("side", "both"), d.get("params", {}))
+
+
+_MIXED_LENGTHS_M = {
+    "open": (120.0, 300.0),
+    "station": (200.0, 300.0),
+    "town": (200.0, 400.0),
+    "trees": (120.0, 250.0),
+    "cutting": (150.0, 300.0),
+    "rock_walls": (150.0, 300.0),
+    "tunnel": (150.0, 300.0),
+}
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """Recipe of a synthetic world.
+
+    Attributes
+    ----------
+    stretches : tuple of Stretch
+        May overlap (e.g. an overbridge inside a town); geometry is simply combined.
+    catenary : bool
+        Masts, cantilevers and wires over the whole extent (line 144 is electrified).
+    hills : bool
+        Gentle distant terrain giving a horizon of a few degrees; False for flat ground.
+    hill_height_m : float
+        Typical height of the distant hills above the track.
+    terrain_margin_m : float
+        How far the ground extends beyond the track, metres.
+    """
+
+    stretches: tuple[Stretch, ...]
+    catenary: bool = True
+    hills: bool = True
+    hill_height_m: float = 70.0
+    terrain_margin_m: float = 1500.0
+
+    def __post_init__(self) -> None:
+        if not self.stretches:
+            raise ValueError(
+                "a WorldSpec needs at least one stretch (e.g. Stretch('open', 0, 500))"
+            )
+        object.__setattr__(self, "stretches", tuple(self.stretches))
+
+    @property
+    def extent_m(self) -> tuple[float, float]:
+        """Chainage interval covered by the stretches."""
+        return min(s.start_m for s in self.stretches), max(s.end_m for s in self.stretches)
+
+    @property
+    def kinds(self) -> set[str]:
+        return {s.kind for s in self.stretches}
+
+    @classmethod
+    def from_stretches(
+        cls, items: Iterable[Stretch | Mapping[str, Any] | Sequence[Any]], **kw: Any
+    ):
+        """Spec from :class:`Stretch` es, dicts or ``(kind, start_m, end_m[, side])`` tuples."""
+        out = []
+        for it in items:
+            if isinstance(it, Stretch):
+                out.append(it)
+            elif isinstance(it, Mapping):
+                out.append(Stretch.from_dict(it))
+            else:
+                out.append(Stretch(*it))
+        return cls(tuple(out), **kw)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (YAML/JSON-ready); :meth:`from_dict` reads it back."""
+        return {
+            "stretches": [s.to_dict() for s in self.stretches],
+            "catenary": self.catenary,
+            "hills": self.hills,
+            "hill_height_m": self.hill_height_m,
+            "terrain_margin_m": self.terrain_margin_m,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> WorldSpec:
+        """Spec from a dict such as a YAML scenery recipe (see ``docs/synthetic-world.md``)."""
+        if "stretches" not in d:
+            raise ValueError("scenery recipe needs a 'stretches' list of {kind, start_m, end_m}")
+        kw = {k: d[k] for k in ("catenary", "hills", "hill_height_m", "terrain_margin_m") if k in d}
+        return cls.from_stretches(d["stretches"], **kw)
+
+    @classmethod
+    def mixed(cls, start_m: float, end_m: float, seed: int = 0, **kw: Any) -> WorldSpec:
+        """A varied run with every stretch kind (in a random order) over ``[start_m, end_m]``.
+
+        Lengths are scaled to fill the interval; 2 km gives realistic sizes. A tunnel is never
+        first or last, and one overbridge crosses an open or town stretch.
+        """
+        if end_m - start_m < 800.0:
+            raise ValueError(
+                f"mixed() needs at least 800 m to fit every kind, got {end_m - start_m}"
+            )
+        rng = np.random.default_rng([int(seed), 7])
+        kinds = [k for k in _MIXED_LENGTHS_M if k != "tunnel"] + ["open"]
+        kinds = [kinds[i] for i in rng.permutation(len(kinds))]
+        kinds.insert(int(rng.integers(1, len(kinds))), "tunnel")
+        lengths = np.array([rng.uniform(*_MIXED_LENGTHS_M[k]) for k in kinds])
+        edges = start_m + np.concatenate([[0.0], np.cumsum(lengths)]) * (
+            (end_m - start_m) / lengths.sum()
+        )
+        out: list[Stretch] = []
+        for k, a, b in zip(kinds, edges[:-1], edges[1:], strict=True):
+            side = "both"
+            if k in ("station", "trees", "cutting", "rock_walls", "town"):
+                p_both = {"rock_walls": 0.6, "town": 0.8}.get(k, 0.4)
+                side = "both" if rng.uniform() < p_both else ("left", "right")[rng.integers(0, 2)]
+            out.append(Stretch(k, float(a), float(b), side))
+        hosts = [s for s in out if s.kind in ("open", "town") and s.end_m - s.start_m > 60]
+        host = hosts[int(rng.integers(0, len(hosts)))]
+        width = rng.uniform(8.0, 15.0)
+        centre = rng.uniform(host.start_m + 25, host.end_m - 25)
+        out.append(Stretch("overbridge", centre - width / 2, centre + width / 2))
+        return cls(tuple(out), **kw)
+
+    def with_tunnels(self, tunnels_m: Sequence[tuple[float, float]]) -> WorldSpec:
+        """This spec with tunnels at the given chainages, other stretches cut around them."""
+        lo, hi = self.extent_m
+        tun = [(max(a, lo), min(b, hi)) for a, b in tunnels_m if b > lo and a < hi]
+        if not tun:
+            return self
+        out: list[Stretch] = []
+        for st in self.stretches:
+            if st.kind == "tunnel" or (st.kind == "overbridge" and _overlaps(st, tun)):
+                continue
+            pieces = [(st.start_m, st.end_m)]
+            for a, b in tun:
+                pieces = [q for p in pieces for q in ((p[0], min(p[1], a)), (max(p[0], b), p[1]))]
+            out += [replace(st, start_m=a, end_m=b) for a, b in pieces if b - a >= 1.0]
+        out += [Stretch("tunnel", a, b) for a, b in tun]
+        return replace(self, stretches=tuple(sorted(out, key=lambda s: s.start_m)))
+
+
+def _overlaps(st: Stretch, intervals: Sequence[tuple[float, float]]) -> bool:
+    return any(st.start_m < b and st.end_m > a for a, b in intervals)
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A built synthetic world: one triangle mesh in the track's local ENU frame.
+
+    Attributes
+    ----------
+    track : TrackMap
+    frame : LocalFrame
+        ``track.frame``; vertices are ENU metres in it.
+    spec : WorldSpec
+    seed : int
+    vertices_m : ndarray, shape (n, 3), float64
+    faces : ndarray, shape (m, 3), int32
+    face_material : ndarray, shape (m,), int16
+        Index into :data:`MATERIALS`.
+    """
+
+    track: Any
+    frame: LocalFrame
+    spec: WorldSpec
+    seed: int
+    vertices_m: NDArray
+    faces: NDArray
+    face_material: NDArray
+
+    def __post_init__(self) -> None:
+        for arr in (self.vertices_m, self.faces, self.face_material):
+            arr.setflags(write=False)
+
+    @classmethod
+    def build(cls, track: Any, spec: WorldSpec, seed: int = 0) -> World:
+        """Build the scene of ``spec`` along ``track`` (a TrackMap), deterministically.
+
+        Tunnels tagged on the track (``track.tunnels_m``, e.g. from OpenStreetMap) are added to
+        the recipe. Each stretch draws from its own generator seeded by ``(seed, stretch)``, so
+        editing one stretch leaves the others unchanged.
+        """
+        spec = spec.with_tunnels(getattr(track, "tunnels_m", ()))
+        lo, hi = spec.extent_m
+        if hi > track.length_m + 1e-6:
+            raise ValueError(
+                f"the recipe reaches chainage {hi:.1f} m but the track is {track.length_m:.1f} m "
+                "long; shorten the last stretch"
+            )
+        corridor = Corridor.from_track(track, lo - 100.0, hi + 100.0)
+        mb = MeshBuilder()
+        rng = np.random.default_rng([int(seed), 3])
+        _add_terrain(mb, corridor, track.frame, spec, rng)
+        ctx = Context(corridor, rng, _MAT, mb)
+        ss = np.arange(corridor.s_m[0], corridor.s_m[-1] + 5.0, 5.0)
+        bed = [[-3.0, -0.55], [3.0, -0.55], [1.7, -0.2], [-1.7, -0.2]]
+        ctx.sweep(ss, bed, "ballast")
+        for st in spec.stretches:
+            ent = [int(seed), 1, STRETCH_KINDS.index(st.kind), round(st.start_m * 1e3)]
+            build_stretch(replace(ctx, rng=np.random.default_rng(ent)), st)
+        if spec.catenary:
+            spans = [(s.start_m, s.end_m) for s in spec.stretches if s.kind in _SPANNING]
+            build_catenary(replace(ctx, rng=np.random.default_rng([int(seed), 2])), lo, hi, spans)
+        v, f, m = mb.result()
+        return cls(track, track.frame, spec, int(seed), v, f, m)
+
+    @property
+    def extent_m(self) -> tuple[float, float]:
+        """Chainage interval of the scenery."""
+        return self.spec.extent_m
+
+    @property
+    def blocking_faces(self) -> NDArray:
+        """Boolean (m,) mask of faces that block L-band signals."""
+        return np.array([m.blocks_lband for m in MATERIALS])[self.face_material]
+
+    def mesh(self) -> trimesh.Trimesh:
+        """The scene as a ``trimesh.Trimesh`` (vertices in frame ENU, not merged)."""
+        return trimesh.Trimesh(self.vertices_m, self.faces, process=False)
+
+    def antenna_enu(self, chainage_m: ArrayLike, antenna_height_m: float = 4.0) -> NDArray:
+        """Antenna positions ``antenna_height_m`` above the rail along the local vertical, in
+        frame ENU, shape ``chainage_m.shape + (3,)``, metres."""
+        s = np.asarray(chainage_m, float)
+        lat, lon, _ = self.track.position_at(s)
+        up = self.frame.rotation_from(lat, lon)[..., :, 2]
+        return np.asarray(self.track.enu_at(s)) + antenna_height_m * up
+
+    def save(self, path: str | Path) -> None:
+        """Write the world (mesh, recipe, seed, track vertices) to a compressed ``.npz``."""
+        tr = self.track
+        meta = {
+            "format": WORLD_FORMAT,
+            "spec": self.spec.to_dict(),
+            "seed": self.seed,
+            "track_name": getattr(tr, "name", "track"),
+            "track_tolerance_m": float(getattr(tr, "tolerance_m", 1.0)),
+            "track_tunnels_m": [list(t) for t in getattr(tr, "tunnels_m", ())],
+            "frame": [self.frame.lat_deg, self.frame.lon_deg, self.frame.h_m],
+        }
+        with open(path, "wb") as fh:
+            np.savez_compressed(
+                fh,
+                meta=np.array(json.dumps(meta)),
+                vertices_m=self.vertices_m,
+                faces=self.faces,
+                face_material=self.face_material,
+                track_lat_deg=np.asarray(getattr(tr, "lat_deg", [])),
+                track_lon_deg=np.asarray(getattr(tr, "lon_deg", [])),
+                track_h_m=np.asarray(getattr(tr, "h_m", [])),
+            )
+
+    @classmethod
+    def load(cls, path: str | Path, track: Any = None) -> World:
+        """Read a world written by :meth:`save`.
+
+        Without ``track`` the track map is rebuilt from the stored vertices with
+        ``TrackMap.from_latlon``; pass the original one to keep its metadata.
+        """
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("format") != WORLD_FORMAT:
+                raise ValueError(
+                    f"{path}: not a synthetic world file (format {meta.get('format')})"
+                )
+            arrays = {k: z[k] for k in z.files if k != "meta"}
+        if track is None:
+            if arrays["track_lat_deg"].size < 2:
+                raise ValueError(f"{path}: the track was not stored; pass track= to World.load")
+            from predisat.track import TrackMap
+
+            track = TrackMap.from_latlon(
+                arrays["track_lat_deg"], arrays["track_lon_deg"], arrays["track_h_m"],
+                name=meta["track_name"], tolerance_m=meta["track_tolerance_m"],
+                tunnels_m=[tuple(t) for t in meta["track_tunnels_m"]],
+            )  # fmt: skip
+        f = track.frame
+        if not np.allclose([f.lat_deg, f.lon_deg, f.h_m], meta["frame"], rtol=0, atol=1e-9):
+            raise ValueError(f"{path}: the given track's frame differs from the world's frame")
+        return cls(
+            track, f, WorldSpec.from_dict(meta["spec"]), int(meta["seed"]),
+            arrays["vertices_m"], arrays["faces"], arrays["face_material"],
+        )  # fmt: skip
+
+
+def _axis_nodes(lo: float, hi: float, margin: float, step: float) -> NDArray:
+    """1-D grid: ``step`` over ``[lo, hi]``, then widening by 25 % per cell out to ``margin``."""
+    core = np.arange(lo, hi + step, step)
+    out, d, x = [], step, 0.0
+    while x < margin:
+        d = min(d * 1.25, 250.0)
+        x += d
+        out.append(x)
+    outer = np.array(out)
+    return np.concatenate([core[0] - outer[::-1], core, core[-1] + outer])
+
+
+def _add_terrain(
+    mb: MeshBuilder,
+    corridor: Corridor,
+    frame: LocalFrame,
+    spec: WorldSpec,
+    rng: np.random.Generator,
+) -> None:
+    """Ground height field: flat 0.5 m below the rail near the track, rising to distant hills.
+
+    Heights are ellipsoidal (each vertex goes through geodetic coordinates), so the ground
+    follows the Earth's curvature away from the frame origin.
+    """
+    xy = corridor.point_m[:, :2]
+    pad = 200.0
+    xs = _axis_nodes(xy[:, 0].min() - pad, xy[:, 0].max() + pad, spec.terrain_margin_m, 20.0)
+    ys = _axis_nodes(xy[:, 1].min() - pad, xy[:, 1].max() + pad, spec.terrain_margin_m, 20.0)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    lat, lon, _ = frame.to_geodetic(np.stack([gx, gy, np.zeros_like(gx)], -1))
+    dist, idx = cKDTree(xy).query(np.stack([gx.ravel(), gy.ravel()], -1))
+    h = corridor.h_m[idx].reshape(gx.shape) - 0.5
+    if spec.hills:
+        ramp = np.clip((dist.reshape(gx.shape) - 150.0) / 1000.0, 0.0, 1.0)
+        noise = np.zeros_like(gx)
+        for _ in range(5):  # a few long random ripples
+            wl, ang, ph = rng.uniform(300, 1500), rng.uniform(0, np.pi), rng.uniform(0, 2 * np.pi)
+            noise += np.cos(2 * np.pi * (gx * np.cos(ang) + gy * np.sin(ang)) / wl + ph)
+        noise = (noise - noise.min()) / max(np.ptp(noise), 1e-9)
+        h = h + spec.hill_height_m * ramp**2 * (3 - 2 * ramp) * (0.5 + 0.5 * noise)
+    verts = frame.to_enu(lat, lon, h).reshape(-1, 3)
+    nx, ny = gx.shape
+    i = (np.arange(nx - 1)[:, None] * ny + np.arange(ny - 1)[None, :]).ravel()
+    faces = np.concatenate(
+        [np.stack([i, i + ny, i + ny + 1], -1), np.stack([i, i + ny + 1, i + 1], -1)]
+    )
+    mb.add(verts, faces, np.where(dist[faces].max(1) > 300.0, _MAT["hills"], _MAT["grass"]))
