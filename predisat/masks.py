@@ -80,7 +80,8 @@ class BinSource(IntEnum):
 
 
 class _Track(Protocol):  # the part of predisat.track.TrackMap used here
-    name: str
+    @property
+    def name(self) -> str: ...
 
     def position_at(self, chainage_m: ArrayLike) -> tuple[NDArray, NDArray, NDArray]: ...
 

@@ -1,0 +1,126 @@
+"""Benchmark the availability engine on the whole demo line for the embedded day.
+
+Line 144 (demo track, a position every 10 m) x 24 h at 30 s x all constellations, with a
+synthetic but plausible mask set (10-20 deg cut with higher sectors), timed with peak RSS; a
+straightforward per-position float64 reference on a subset in the same run gives the speed
+ratio; then the line's figures with masks, with no mask and with a 15 deg cut-off, next to
+LOCOPROL's line-144 figures (>= 4 satellites 95 % of the time, >= 6 satellites 60 %).
+
+    .venv/bin/python scripts/bench_availability.py --out bench_availability.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+
+import numpy as np
+
+from predisat.availability import compute_availability, reference_counts
+from predisat.masks import MaskSet
+from predisat.satellites import (
+    LinePositions,
+    SatellitePositions,
+    TrustRule,
+    default_ephemeris,
+    default_window,
+)
+from predisat.track import demo_track
+
+
+def synthetic_masks(spacing_m: float = 10.0, seed: int = 0) -> MaskSet:
+    """A plausible mask set: 10-20 deg everywhere, 25-40 deg sectors beside the track."""
+    track = demo_track()
+    s = np.arange(0.0, track.length_m, spacing_m)
+    rng = np.random.default_rng(seed)
+    az = np.arange(360.0)
+    heading = track.heading_at(s)
+    rel = np.mod(az[None, :] - heading[:, None], 360.0)
+    side = np.minimum(np.abs(rel - 90.0), np.abs(rel - 270.0))  # distance from broadside
+    base = 10.0 + 10.0 * (0.5 + 0.5 * np.sin(s / 700.0))[:, None]
+    walls = np.where(side < 60.0, 15.0 + 10.0 * np.sin(s / 300.0)[:, None] ** 2, 0.0)
+    mask = base + walls * (np.sin(s / 1500.0)[:, None] > 0.3) + rng.uniform(0, 2, (len(s), 360))
+    lat, lon, h = track.position_at(s)
+    return MaskSet.from_arrays(s, lat, lon, h, heading, np.clip(mask, 0, 90), margin_deg=1.0)
+
+
+def rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="bench_availability.json")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--interval-every", type=int, default=10)
+    ap.add_argument("--ref-positions", type=int, default=20)
+    args = ap.parse_args()
+
+    res: dict = {}
+    t = time.perf_counter()
+    masks = synthetic_masks()
+    eph = default_ephemeris()
+    gps_s = default_window(30.0)
+    sats = SatellitePositions.from_ephemeris(eph, gps_s, "all")
+    res["setup_s"] = time.perf_counter() - t
+    pos = LinePositions.from_masks(masks)
+    rule = TrustRule.mask(masks)
+    res["shape"] = [pos.n_pos, len(gps_s), len(sats.sats)]
+    print(f"line {pos.n_pos} positions x {len(gps_s)} epochs x {len(sats.sats)} satellites")
+
+    t = time.perf_counter()
+    counts_only = compute_availability(sats, pos, rule, with_interval=False, workers=args.workers)
+    res["counts_s"] = time.perf_counter() - t
+    res["rss_after_counts_mb"] = rss_mb()
+    t = time.perf_counter()
+    full = compute_availability(
+        sats, pos, rule, interval_every=args.interval_every, workers=args.workers
+    )
+    res["counts_and_interval_s"] = time.perf_counter() - t
+    res["interval_every"] = args.interval_every
+    res["peak_rss_mb"] = rss_mb()
+    assert np.array_equal(counts_only.count, full.count)
+
+    sub = np.linspace(0, pos.n_pos - 1, args.ref_positions).astype(int)
+    t = time.perf_counter()
+    ref = reference_counts(sats, pos.take(sub), rule)
+    res["reference_s_per_position"] = (time.perf_counter() - t) / len(sub)
+    res["engine_counts_s_per_position"] = res["counts_s"] / pos.n_pos
+    res["speed_ratio"] = res["reference_s_per_position"] / res["engine_counts_s_per_position"]
+    res["reference_mismatch_cells"] = int(np.sum(ref != full.count[sub]))
+    res["reference_cells"] = int(ref.size)
+
+    figures = {}
+    gps = SatellitePositions.from_ephemeris(eph, gps_s, "gps")
+    for cons, sp in (("all", sats), ("gps", gps)):
+        for r in (rule, TrustRule.none(), TrustRule.cutoff(15.0)):
+            a = compute_availability(
+                sp, pos, r, interval_every=args.interval_every, workers=args.workers
+            )
+            sm = a.summary()
+            keys = ("share", "longest", "mean", "interval", "opening")
+            figures[f"{cons}, {r.label}"] = {k: sm[k] for k in sm if k.startswith(keys)}
+    res["figures"] = figures
+    res["locoprol_line144"] = {"share_ge4": 0.95, "share_ge6": 0.60}
+    for k in ("counts_s", "counts_and_interval_s", "peak_rss_mb", "speed_ratio"):
+        print(f"{k:>24}: {res[k]:.2f}")
+    print(f"reference mismatches: {res['reference_mismatch_cells']} of {res['reference_cells']}")
+    print(
+        "constellation, rule   share>=2 share>=4 share>=6  longest<4 (m / s)  interval med/p95 (m)"
+    )
+    for name, f in figures.items():
+        print(
+            f"{name:<22} {f['share_ge2']:8.3f} {f['share_ge4']:8.3f} {f['share_ge6']:8.3f}"
+            f"  {f['longest_below4_m']:8.0f} / {f['longest_below4_s']:6.0f}"
+            f"  {f.get('interval_median_m', float('nan')):6.1f} / "
+            f"{f.get('interval_p95_m', float('nan')):6.1f}"
+        )
+    print("LOCOPROL line 144 (2000s, GPS only, real masks): share>=4 0.95, share>=6 0.60")
+    with open(args.out, "w") as fh:
+        json.dump(res, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()
