@@ -216,7 +216,7 @@ class Availability:
     def to_csv(self, path: str | Path) -> Path:
         """Write :meth:`position_table` as CSV (``.csv``); returns the path."""
         path = Path(path)
-        self.position_table().to_csv(path, index=False, float_format="%.6g")
+        self.position_table().to_csv(path, index=False, float_format="%.12g")
         return path
 
     def to_parquet(self, path: str | Path, counts: bool = False) -> Path:
