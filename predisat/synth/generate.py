@@ -1,0 +1,443 @@
+"""Synthetic surveys: a corridor world rendered into a survey folder with exact ground truth.
+
+:func:`generate_survey` builds a :class:`~predisat.synth.world.World` along a track, renders the
+left and right 45 deg side cameras at every position (antenna every ``spacing_m``), writes them
+with :class:`~predisat.survey.SurveyWriter` and writes the ground truth beside them::
+
+    out_dir/
+      survey/                the survey (format v1): survey.yaml, manifest.csv, images/, calib/,
+                             track.geojson
+      truth/
+        README.txt           what is here
+        labels/<frame_id>.png  per-frame sky label: 255 sky, 128 thin L-band-transparent
+                             structure against the sky, 0 obstacle
+        frames.csv           per frame: side, chainage, time, sky condition, sun position
+        true_masks.npz       per-position true 360 deg masks (predisat.synth.truth.TrueMasks)
+        world.npz            the world mesh and recipe (World.load)
+
+:func:`contact_sheet` tiles sample frames of a survey into one captioned PNG.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera import CameraModel, Mount, default_camera
+from predisat.geodesy import enu_to_azel
+from predisat.gnss_time import calendar_to_gps_s, gps_minus_utc_s
+from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
+from predisat.synth.sky import SKY_CONDITIONS, SkyModel, sun_azel, sun_direction_enu
+from predisat.synth.truth import true_masks
+from predisat.synth.world import Stretch, World, WorldSpec
+
+__all__ = [
+    "SKY_CHOICES",
+    "SynthResult",
+    "contact_sheet",
+    "daytime_gps_s",
+    "generate_survey",
+    "sky_schedule",
+]
+
+SKY_CHOICES = (*SKY_CONDITIONS, "mixed")
+_MARGIN_M = 150.0
+_SHORT_KINDS = ("open", "station", "town", "trees", "cutting", "rock_walls")
+
+
+@dataclass(frozen=True)
+class SynthResult:
+    """Where :func:`generate_survey` wrote its output (``str()`` gives ``out_dir``)."""
+
+    out_dir: Path
+    survey_dir: Path
+    truth_dir: Path
+    n_positions: int
+    n_frames: int
+
+    def __str__(self) -> str:
+        return str(self.out_dir)
+
+
+def _atomic_bytes(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _atomic_with(path: Path, write: Callable[[Path], Any]) -> None:
+    """Let ``write`` fill a temporary file beside ``path``, then rename it into place."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def daytime_gps_s(lon_deg: float, date: str = "2024-06-21", solar_hour: float = 10.0) -> float:
+    """``gps_s`` of a local mean solar time on a date at a longitude (default mid-morning).
+
+    Parameters
+    ----------
+    lon_deg : float
+        Longitude, east positive.
+    date : str
+        ISO date ``YYYY-MM-DD`` (UTC day).
+    solar_hour : float
+        Local mean solar time in hours (UTC + longitude / 15).
+    """
+    y, m, d = (int(x) for x in date.split("-"))
+    utc_s = float(calendar_to_gps_s(y, m, d)) + (solar_hour - lon_deg / 15.0) * 3600.0
+    return utc_s + float(gps_minus_utc_s(utc_s))
+
+
+def sky_schedule(sky: str, chainage_m: ArrayLike, seed: int = 0) -> tuple[NDArray, NDArray]:
+    """Sky condition and sky-pattern id per position.
+
+    ``"mixed"`` changes the condition every 150-400 m of chainage (each stretch keeps its own
+    clouds); a single condition keeps one sky for the whole run.
+
+    Parameters
+    ----------
+    sky : {"clear", "cloudy", "overcast", "mixed"}
+    chainage_m : array_like, shape (n,)
+        Positions, increasing.
+    seed : int
+
+    Returns
+    -------
+    condition : ndarray of str, shape (n,)
+    sky_id : ndarray of int, shape (n,)
+        Index of the stretch sharing one :class:`SkyModel` seed.
+    """
+    if sky not in SKY_CHOICES:
+        raise ValueError(f"sky must be one of {SKY_CHOICES}, got {sky!r}")
+    s = np.atleast_1d(np.asarray(chainage_m, float))
+    if sky != "mixed" or s.size == 0:
+        return np.full(s.size, sky, dtype=object), np.zeros(s.size, int)
+    rng = np.random.default_rng([seed, 17])
+    edges, conds = [float(s[0])], []
+    prev = ""
+    while edges[-1] <= s[-1]:
+        prev = str(rng.choice([c for c in SKY_CONDITIONS if c != prev]))
+        conds.append(prev)
+        edges.append(edges[-1] + float(rng.uniform(150.0, 400.0)))
+    ids = np.clip(np.searchsorted(np.asarray(edges), s, side="right") - 1, 0, len(conds) - 1)
+    return np.asarray(conds, dtype=object)[ids], ids
+
+
+def _short_spec(lo_m: float, hi_m: float, seed: int) -> WorldSpec:
+    """A varied recipe for runs too short for ``WorldSpec.mixed`` (under 800 m)."""
+    rng = np.random.default_rng([seed, 23])
+    out, a = [], lo_m
+    while a < hi_m - 1e-6:
+        b = min(hi_m, a + float(rng.uniform(60.0, 160.0)))
+        if hi_m - b < 40.0:
+            b = hi_m
+        kind = str(rng.choice(_SHORT_KINDS))
+        side = "both" if rng.uniform() < 0.5 else ("left", "right")[int(rng.integers(0, 2))]
+        out.append(Stretch(kind, a, b, side))
+        a = b
+    return WorldSpec(tuple(out))
+
+
+def generate_survey(
+    track: Any,
+    from_m: float,
+    to_m: float,
+    sky: str = "mixed",
+    seed: int = 0,
+    out_dir: str | os.PathLike[str] = "synth_out",
+    spacing_m: float = 10.0,
+    camera: CameraModel | None = None,
+    pitch_deg: float = 45.0,
+    antenna_height_m: float = 4.0,
+    speed_mps: float = 12.0,
+    start_gps_s: float | None = None,
+    spec: WorldSpec | None = None,
+    progress: bool = True,
+    backend: str = "open3d",
+    options: RenderOptions | None = None,
+    overwrite: bool = False,
+) -> SynthResult:
+    """Render a synthetic survey of a track stretch and write it with its ground truth.
+
+    Parameters
+    ----------
+    track : TrackMap
+    from_m, to_m : float
+        Chainage interval of the antenna positions, metres (``0 <= from_m < to_m <= length``).
+    sky : {"clear", "cloudy", "overcast", "mixed"}
+        Sky condition; ``"mixed"`` varies it along the run.
+    seed : int
+        Fixes scenery, skies and camera noise: the same inputs give the same survey.
+    out_dir : path-like
+        Output folder (``survey/`` and ``truth/`` are created in it).
+    spacing_m : float
+        Distance between antenna positions.
+    camera : CameraModel, optional
+        Both cameras' calibration (default: :func:`predisat.camera.default_camera`).
+    pitch_deg : float
+        Camera pitch above the horizontal.
+    antenna_height_m, speed_mps : float
+        Antenna above the rail; train speed (sets frame times).
+    start_gps_s : float, optional
+        Time of the first position; default 10:00 local solar time on 2024-06-21.
+    spec : WorldSpec, optional
+        Scenery recipe; default ``WorldSpec.mixed`` over the run plus 150 m each side (a
+        shorter random recipe when that is under 800 m).
+    progress : bool
+        Show a tqdm progress bar.
+    backend : {"open3d", "trimesh"}
+        Ray caster.
+    options : RenderOptions, optional
+    overwrite : bool
+        Allow writing into a folder that already holds a survey.
+
+    Returns
+    -------
+    SynthResult
+    """
+    length = float(track.length_m)
+    if not (0.0 <= from_m < to_m <= length + 1e-6):
+        raise ValueError(
+            f"chainage interval [{from_m}, {to_m}] m must satisfy 0 <= from_m < to_m <= "
+            f"{length:.1f} (the track length); choose a stretch inside the track"
+        )
+    if spacing_m <= 0 or speed_mps <= 0:
+        raise ValueError(f"spacing_m and speed_mps must be positive, got {spacing_m}, {speed_mps}")
+    out = Path(out_dir)
+    survey_dir, truth_dir = out / "survey", out / "truth"
+    (truth_dir / "labels").mkdir(parents=True, exist_ok=True)
+    survey_dir.mkdir(parents=True, exist_ok=True)
+    cam = camera if camera is not None else default_camera("pinhole")
+    opt = options or RenderOptions()
+
+    lo, hi = max(0.0, from_m - _MARGIN_M), min(length, to_m + _MARGIN_M)
+    if spec is None:
+        spec = WorldSpec.mixed(lo, hi, seed) if hi - lo >= 800.0 else _short_spec(lo, hi, seed)
+    world = World.build(track, spec, seed)
+    _atomic_with(truth_dir / "world.npz", world.save)
+    casters = Casters.for_world(world, backend)
+
+    s = np.arange(from_m, to_m + 1e-9, spacing_m)
+    truth = true_masks(world, s, antenna_height_m, backend=backend, caster=casters.lband)
+    _atomic_with(truth_dir / "true_masks.npz", truth.save)
+
+    ant = world.antenna_enu(s, antenna_height_m)
+    lat, lon, h = world.frame.to_geodetic(ant)
+    if start_gps_s is None:
+        start_gps_s = daytime_gps_s(float(np.mean(lon)))
+    gps = start_gps_s + (s - from_m) / speed_mps
+    sun_az, sun_el = sun_azel(gps, lat, lon)
+    rot = world.frame.rotation_from(lat, lon)
+    sun_frame = np.einsum(
+        "nij,nj->ni",
+        rot,
+        np.stack([sun_direction_enu(a, e) for a, e in zip(sun_az, sun_el, strict=True)]),
+    )
+    f_az, f_el, _ = enu_to_azel(sun_frame)
+    cond, sky_id = sky_schedule(sky, s, seed)
+
+    from predisat.trackio import write_geojson
+
+    _atomic_with(survey_dir / "track.geojson", lambda p: write_geojson(track, p))
+    mounts: dict[str, Mount] = {
+        side: Mount(
+            side, 90.0 if side == "left" else -90.0, pitch_deg, 0.0, Mount.default(side).lever_arm_m
+        )
+        for side in ("left", "right")
+    }
+    rows: list[dict[str, Any]] = []
+    it: Any = range(s.size)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="rendering", unit="pos", total=s.size)
+    from predisat.survey import SurveyWriter
+
+    with SurveyWriter(
+        survey_dir,
+        {side: (cam, m) for side, m in mounts.items()},
+        antenna_height_m=antenna_height_m,
+        track_name=getattr(track, "name", None),
+        track_path="track.geojson",
+        metadata={
+            "description": f"synthetic survey, seed {seed}, sky {sky}",
+            "generator": "predisat.synth.generate",
+        },
+        overwrite=overwrite,
+    ) as writer:
+        for i in it:
+            model = SkyModel.of(
+                str(cond[i]), float(f_az[i]), float(f_el[i]), seed=seed * 1000 + int(sky_id[i])
+            )
+            for j, side in enumerate(("left", "right")):
+                rng = np.random.default_rng([seed, i, j])
+                pose = camera_pose(world, float(s[i]), mounts[side], antenna_height_m)
+                img, label = render_frame(
+                    world,
+                    casters,
+                    cam,
+                    pose,
+                    model,
+                    rng,
+                    opt,
+                    elapsed_s=float(gps[i] - start_gps_s),
+                )
+                fid = writer.add_frame(
+                    img,
+                    side,
+                    float(gps[i]),
+                    chainage_m=float(s[i]),
+                    lat_deg=float(lat[i]),
+                    lon_deg=float(lon[i]),
+                    h_m=float(h[i]),
+                    jpeg_quality=int(rng.integers(85, 93)),
+                )
+                ok, buf = cv2.imencode(".png", label)
+                if not ok:
+                    raise OSError(f"PNG encoding of the label of frame {fid} failed")
+                _atomic_bytes(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
+                rows.append({
+                    "frame_id": fid, "side": side, "chainage_m": repr(float(s[i])),
+                    "gps_s": repr(float(gps[i])), "sky": model.condition,
+                    "cloud_cover": f"{model.cloud_cover:.3f}",
+                    "sun_az_deg": f"{sun_az[i]:.4f}", "sun_el_deg": f"{sun_el[i]:.4f}",
+                    "sky_fraction": f"{float(np.mean(label == 255)):.4f}",
+                })  # fmt: skip
+    buf_csv = io.StringIO()
+    wr = csv.DictWriter(buf_csv, fieldnames=list(rows[0]), lineterminator="\n")
+    wr.writeheader()
+    wr.writerows(rows)
+    _atomic_bytes(truth_dir / "frames.csv", buf_csv.getvalue().encode())
+    _atomic_bytes(
+        truth_dir / "README.txt",
+        _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
+    )
+    return SynthResult(out, survey_dir, truth_dir, int(s.size), len(rows))
+
+
+def _readme(
+    track: Any,
+    from_m: float,
+    to_m: float,
+    sky: str,
+    seed: int,
+    spec: WorldSpec,
+    n_pos: int,
+    n_frames: int,
+) -> str:
+    kinds = ", ".join(
+        f"{st.kind} {st.start_m:.0f}-{st.end_m:.0f} m ({st.side})" for st in spec.stretches
+    )
+    return f"""Ground truth of a synthetic PREDISAT survey (predisat.synth.generate)
+
+track: {getattr(track, "name", "track")}; chainage {from_m:.1f}-{to_m:.1f} m; {n_pos} positions,
+{n_frames} frames; sky: {sky}; seed: {seed}
+scenery: {kinds}
+
+labels/<frame_id>.png  8-bit sky label of each survey frame (same size as the image):
+                       255 sky, 128 thin L-band-transparent structure (wire, cantilever tube)
+                       with sky behind it, 0 obstacle (or outside a fisheye's image circle);
+                       from the ray through each pixel centre.
+frames.csv             per frame: frame_id, side, chainage_m, gps_s, sky condition, cloud cover,
+                       sun azimuth/elevation (deg, local ENU at the antenna), sky fraction.
+true_masks.npz         predisat.synth.truth.TrueMasks.load(): per position, the highest
+                       L-band-blocking elevation in every azimuth bin, and obstacle descriptors.
+world.npz              predisat.synth.world.World.load(): the scene mesh and recipe.
+
+The survey itself is in ../survey (predisat.survey.Survey.load). Frames are JPEG (quality
+85-92); labels are lossless PNG.
+"""
+
+
+def contact_sheet(
+    survey_dir: str | os.PathLike[str],
+    out_png: str | os.PathLike[str],
+    n_frames: int = 12,
+    columns: int = 4,
+    tile_width_px: int = 320,
+    frames: list[str] | None = None,
+) -> Path:
+    """Tile sample frames of a survey into one PNG with captions (frame, side, km, sky).
+
+    Parameters
+    ----------
+    survey_dir : path-like
+        A survey folder; the sky condition is read from ``../truth/frames.csv`` when present.
+    out_png : path-like
+    n_frames : int
+        Frames spread evenly over the survey (ignored when ``frames`` is given).
+    columns, tile_width_px : int
+        Grid layout and tile width.
+    frames : list of str, optional
+        Frame ids to show.
+
+    Returns
+    -------
+    Path
+        ``out_png``.
+    """
+    from predisat.survey import Survey
+
+    survey = Survey.load(survey_dir, check_images=False)
+    ids = [str(x) for x in survey.frames.frame_id]
+    if not ids:
+        raise ValueError(f"{survey_dir}: the survey has no frames")
+    if frames is None:
+        pick = np.unique(np.linspace(0, len(ids) - 1, max(1, n_frames)).round().astype(int))
+        chosen = [ids[k] for k in pick]
+    else:
+        unknown = [f for f in frames if f not in ids]
+        if unknown:
+            raise KeyError(f"frames {unknown} are not in {survey_dir}")
+        chosen = list(frames)
+    sky_of: dict[str, str] = {}
+    truth_csv = Path(survey_dir).parent / "truth" / "frames.csv"
+    if truth_csv.exists():
+        with open(truth_csv, newline="") as fh:
+            sky_of = {r["frame_id"]: r["sky"] for r in csv.DictReader(fh)}
+    tiles = []
+    for fid in chosen:
+        k = survey.frames.index_of(fid)
+        img = survey.read_image(k)
+        th = round(img.shape[0] * tile_width_px / img.shape[1])
+        img = cv2.resize(img, (tile_width_px, th), interpolation=cv2.INTER_AREA)
+        side = str(survey.frames.side[k])
+        km = float(survey.frames.chainage_m[k]) / 1000.0
+        text = f"{fid} {side} km {km:.3f} {sky_of.get(fid, '')}".strip()
+        cv2.rectangle(img, (0, th - 18), (tile_width_px, th), (0, 0, 0), -1)
+        cv2.putText(
+            img, text, (4, th - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1, cv2.LINE_AA
+        )
+        tiles.append(img)
+    cols = max(1, min(columns, len(tiles)))
+    blank = np.zeros_like(tiles[0])
+    tiles += [blank] * (-len(tiles) % cols)
+    sheet = np.vstack([np.hstack(tiles[r : r + cols]) for r in range(0, len(tiles), cols)])
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    ok, buf = cv2.imencode(".png", sheet)
+    if not ok:
+        raise OSError(f"PNG encoding of the contact sheet {out} failed")
+    _atomic_bytes(out, buf.tobytes())
+    return out
