@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.fileerror import FileLineError
 from predisat.gnss_time import (
     BDT_MINUS_GPST_S,
     SECONDS_PER_WEEK,
@@ -77,14 +78,8 @@ _EXPONENT = re.compile(r"[dD]")
 _FORTRAN_3DIGIT = re.compile(r"^([+-]?\d*\.\d*)([+-]\d{3})$")
 
 
-class RinexError(ValueError):
+class RinexError(FileLineError):
     """A RINEX file that cannot be read; the message names the file, the line and the fix."""
-
-    def __init__(self, path: str | Path, line: int | None, what: str) -> None:
-        where = f"{path}" if line is None else f"{path}, line {line}"
-        super().__init__(f"{where}: {what}")
-        self.path = str(path)
-        self.line = line
 
 
 @dataclass(frozen=True)

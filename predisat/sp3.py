@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.fileerror import FileLineError
 from predisat.gnss_time import calendar_to_gps_s, gps_minus_utc_s
 
 __all__ = ["Sp3", "Sp3Error", "read_sp3"]
@@ -27,14 +28,8 @@ __all__ = ["Sp3", "Sp3Error", "read_sp3"]
 _BAD_CLOCK_US = 999999.0
 
 
-class Sp3Error(ValueError):
+class Sp3Error(FileLineError):
     """An SP3 file that cannot be read; the message names the file, the line and the fix."""
-
-    def __init__(self, path: str | Path, line: int | None, what: str) -> None:
-        where = f"{path}" if line is None else f"{path}, line {line}"
-        super().__init__(f"{where}: {what}")
-        self.path = str(path)
-        self.line = line
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sgp4.api import Satrec, SatrecArray
 
+from predisat.fileerror import FileLineError
 from predisat.gnss_time import gps_minus_utc_s, gps_s_to_utc_datetime64
 
 __all__ = ["TleError", "TleSet", "read_tle", "satellite_id_from_name", "teme_to_ecef"]
@@ -36,12 +37,8 @@ _NAME_SYSTEM = (
 )
 
 
-class TleError(ValueError):
+class TleError(FileLineError):
     """A TLE file that cannot be read; the message names the file, the line and the fix."""
-
-    def __init__(self, path: str | Path, line: int | None, what: str) -> None:
-        where = f"{path}" if line is None else f"{path}, line {line}"
-        super().__init__(f"{where}: {what}")
 
 
 def satellite_id_from_name(name: str) -> str | None:
