@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
@@ -207,6 +207,26 @@ class CameraModel:
             return cls(**fields)
         except ValueError as exc:
             raise CalibrationError(f"{p}: {exc}") from None
+
+    def resized(self, width_px: int, height_px: int) -> CameraModel:
+        """The same lens and field of view on a sensor of another resolution.
+
+        Focal lengths and principal point scale with the image (pixel centres at integer
+        coordinates, so ``c' = (c + 0.5) * scale - 0.5``); distortion acts on normalised
+        coordinates and is unchanged.
+        """
+        if width_px < 2 or height_px < 2:
+            raise ValueError(f"width_px and height_px must be >= 2, got {width_px}x{height_px}")
+        sx, sy = width_px / self.width_px, height_px / self.height_px
+        return replace(
+            self,
+            width_px=int(width_px),
+            height_px=int(height_px),
+            fx=self.fx * sx,
+            fy=self.fy * sy,
+            cx=(self.cx + 0.5) * sx - 0.5,
+            cy=(self.cy + 0.5) * sy - 0.5,
+        )
 
     def to_yaml(self, path: str | os.PathLike[str]) -> Path:
         """Write the canonical calibration file with ``cv2.FileStorage`` (atomically)."""

@@ -8,24 +8,35 @@ message (exit code 2), never as a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from predisat import __version__
+
+if TYPE_CHECKING:
+    from predisat.camera import CameraModel
+    from predisat.track import TrackMap
 
 __all__ = ["main"]
 
 DEMO_FROM_KM = 4.0
 DEMO_TO_KM = 6.0
+DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side pinhole, resampled: keeps the demo quick
+
+
+def _default_workers() -> int:
+    return max(1, min(2, os.cpu_count() or 1))
 
 
 class CliError(Exception):
     """A user-facing error: printed without a traceback."""
 
 
-def _load_track(path: str | None, name: str | None):  # noqa: ANN202 - TrackMap, imported lazily
+def _load_track(path: str | None, name: str | None) -> TrackMap:
     from predisat import track
 
     if path is None:
@@ -38,7 +49,9 @@ def _load_track(path: str | None, name: str | None):  # noqa: ANN202 - TrackMap,
     return track.TrackMap.from_geojson(p, track=name)
 
 
-def _km_range(track, from_km: float | None, to_km: float | None) -> tuple[float, float]:  # noqa: ANN001
+def _km_range(
+    track: TrackMap, from_km: float | None, to_km: float | None
+) -> tuple[float, float]:
     from_m = 0.0 if from_km is None else from_km * 1000.0
     to_m = track.length_m if to_km is None else to_km * 1000.0
     if not 0.0 <= from_m < to_m <= track.length_m + 1e-6:
@@ -50,20 +63,21 @@ def _km_range(track, from_km: float | None, to_km: float | None) -> tuple[float,
     return from_m, to_m
 
 
-def _camera(kind: str, calibration: str | None):  # noqa: ANN202
+def _camera(kind: str, calibration: str | None) -> CameraModel:
     from predisat import camera
 
     if calibration is not None:
         return camera.CameraModel.from_yaml(calibration)
-    return camera.default_camera(kind)
+    return camera.default_camera("fisheye" if kind == "fisheye" else "pinhole")
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    from predisat.synth.generate import generate_survey
-
     track = _load_track(args.track, args.track_name)
     from_m, to_m = _km_range(track, args.from_km, args.to_km)
     cam = _camera(args.camera, args.calibration)
+
+    from predisat.synth.generate import generate_survey
+
     t0 = time.perf_counter()
     result = generate_survey(
         track,
@@ -76,14 +90,20 @@ def cmd_synth(args: argparse.Namespace) -> int:
         camera=cam,
         pitch_deg=args.pitch_deg,
         progress=not args.quiet,
+        workers=args.workers,
     )
     dt = time.perf_counter() - t0
-    print(f"synth: wrote {result} in {dt:.1f} s")
+    print(
+        f"synth: {result.n_frames} frames at {result.n_positions} positions in {dt:.1f} s "
+        f"({result.n_frames / dt:.2f} frames/s); survey {result.survey_dir}, "
+        f"ground truth {result.truth_dir}"
+    )
     return 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     from predisat import track as trackmod
+    from predisat.camera import default_camera
     from predisat.synth.generate import contact_sheet, generate_survey
 
     out = Path(args.out)
@@ -101,11 +121,29 @@ def cmd_demo(args: argparse.Namespace) -> int:
         sky="mixed",
         seed=args.seed,
         out_dir=out,
+        camera=default_camera("pinhole").resized(*DEMO_IMAGE_SIZE_PX),
         progress=not args.quiet,
+        workers=args.workers,
+        overwrite=True,
     )
-    sheet = contact_sheet(out / "survey", out / "contact_sheet.png")
     dt = time.perf_counter() - t0
-    print(f"demo: survey and ground truth in {out} ({dt:.1f} s); contact sheet: {sheet}")
+    sheet = contact_sheet(result.survey_dir, out / "contact_sheet.png")
+    print(
+        f"demo: {result.n_frames} frames at {result.n_positions} positions rendered in {dt:.1f} s "
+        f"({result.n_frames / dt:.2f} frames/s)\n"
+        f"  survey:        {result.survey_dir}\n"
+        f"  ground truth:  {result.truth_dir}\n"
+        f"  contact sheet: {sheet}"
+    )
+    return 0
+
+
+def cmd_availability(args: argparse.Namespace) -> int:
+    from predisat.availability_run import run_from_args
+
+    run = run_from_args(args)
+    print(run.summary.to_string(index=False))
+    print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s)")
     return 0
 
 
@@ -141,8 +179,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
     p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
     p.add_argument("--pitch-deg", type=float, default=45.0, help="camera pitch above horizontal")
+    p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
+
+    from predisat.availability_run import add_arguments as add_availability_arguments
+
+    p = sub.add_parser(
+        "availability",
+        help="mask-aware satellite availability report along a line",
+        description=(
+            "Which satellites a train may trust along the line over a time window, under the "
+            "survey masks, with no mask and with flat cut-offs: an HTML report with plots, "
+            "CSV/Parquet tables and a GeoJSON layer for QGIS."
+        ),
+    )
+    add_availability_arguments(p)
+    p.set_defaults(func=cmd_availability)
 
     p = sub.add_parser(
         "demo",
@@ -151,6 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="demo_out", metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=1, help="random seed")
+    p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
     return parser

@@ -24,7 +24,7 @@ import csv
 import io
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -177,6 +177,7 @@ def generate_survey(
     backend: str = "open3d",
     options: RenderOptions | None = None,
     overwrite: bool = False,
+    workers: int = 1,
 ) -> SynthResult:
     """Render a synthetic survey of a track stretch and write it with its ground truth.
 
@@ -211,6 +212,9 @@ def generate_survey(
     options : RenderOptions, optional
     overwrite : bool
         Allow writing into a folder that already holds a survey.
+    workers : int
+        Rendering processes (frames are written in order whatever the count; the output does
+        not depend on it).
 
     Returns
     -------
@@ -222,6 +226,8 @@ def generate_survey(
             f"chainage interval [{from_m}, {to_m}] m must satisfy 0 <= from_m < to_m <= "
             f"{length:.1f} (the track length); choose a stretch inside the track"
         )
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     if spacing_m <= 0 or speed_mps <= 0:
         raise ValueError(f"spacing_m and speed_mps must be positive, got {spacing_m}, {speed_mps}")
     out = Path(out_dir)
@@ -266,12 +272,19 @@ def generate_survey(
         )
         for side in ("left", "right")
     }
+    jobs = [
+        _PositionJob(
+            index=i,
+            chainage_m=float(s[i]),
+            elapsed_s=float(gps[i] - start_gps_s),
+            sky=SkyModel.of(
+                str(cond[i]), float(f_az[i]), float(f_el[i]), seed=seed * 1000 + int(sky_id[i])
+            ),
+        )
+        for i in range(s.size)
+    ]
+    context = _RenderContext(world, backend, cam, opt, mounts, antenna_height_m, seed)
     rows: list[dict[str, Any]] = []
-    it: Any = range(s.size)
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc="rendering", unit="pos", total=s.size)
     from predisat.survey import SurveyWriter
 
     with SurveyWriter(
@@ -286,41 +299,27 @@ def generate_survey(
         },
         overwrite=overwrite,
     ) as writer:
-        for i in it:
-            model = SkyModel.of(
-                str(cond[i]), float(f_az[i]), float(f_el[i]), seed=seed * 1000 + int(sky_id[i])
-            )
-            for j, side in enumerate(("left", "right")):
-                rng = np.random.default_rng([seed, i, j])
-                pose = camera_pose(world, float(s[i]), mounts[side], antenna_height_m)
-                img, label = render_frame(
-                    world,
-                    casters,
-                    cam,
-                    pose,
-                    model,
-                    rng,
-                    opt,
-                    elapsed_s=float(gps[i] - start_gps_s),
-                )
+        for job, frames in _render_all(context, jobs, workers, casters, progress):
+            i = job.index
+            for side, img, label, quality in frames:
                 fid = writer.add_frame(
                     img,
                     side,
                     float(gps[i]),
-                    chainage_m=float(s[i]),
+                    chainage_m=job.chainage_m,
                     lat_deg=float(lat[i]),
                     lon_deg=float(lon[i]),
                     h_m=float(h[i]),
-                    jpeg_quality=int(rng.integers(85, 93)),
+                    jpeg_quality=quality,
                 )
                 ok, buf = cv2.imencode(".png", label)
                 if not ok:
                     raise OSError(f"PNG encoding of the label of frame {fid} failed")
                 _atomic_bytes(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
                 rows.append({
-                    "frame_id": fid, "side": side, "chainage_m": repr(float(s[i])),
-                    "gps_s": repr(float(gps[i])), "sky": model.condition,
-                    "cloud_cover": f"{model.cloud_cover:.3f}",
+                    "frame_id": fid, "side": side, "chainage_m": repr(job.chainage_m),
+                    "gps_s": repr(float(gps[i])), "sky": job.sky.condition,
+                    "cloud_cover": f"{job.sky.cloud_cover:.3f}",
                     "sun_az_deg": f"{sun_az[i]:.4f}", "sun_el_deg": f"{sun_el[i]:.4f}",
                     "sky_fraction": f"{float(np.mean(label == 255)):.4f}",
                 })  # fmt: skip
@@ -334,6 +333,100 @@ def generate_survey(
         _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
     )
     return SynthResult(out, survey_dir, truth_dir, int(s.size), len(rows))
+
+
+@dataclass(frozen=True)
+class _PositionJob:
+    """One antenna position to render: both side frames share its sky and time."""
+
+    index: int
+    chainage_m: float
+    elapsed_s: float
+    sky: SkyModel
+
+
+@dataclass(frozen=True)
+class _RenderContext:
+    """Everything a rendering process needs besides the job (sent once per process)."""
+
+    world: World
+    backend: str
+    camera: CameraModel
+    options: RenderOptions
+    mounts: dict[str, Mount]
+    antenna_height_m: float
+    seed: int
+
+
+_Frame = tuple[str, NDArray, NDArray, int]  # side, image BGR, label, JPEG quality
+
+
+def _render_position(context: _RenderContext, casters: Casters, job: _PositionJob) -> list[_Frame]:
+    frames = []
+    for j, side in enumerate(("left", "right")):
+        # One generator per frame, keyed on (seed, position, side): the output does not depend
+        # on the order or the process a frame is rendered in.
+        rng = np.random.default_rng([context.seed, job.index, j])
+        pose = camera_pose(
+            context.world, job.chainage_m, context.mounts[side], context.antenna_height_m
+        )
+        img, label = render_frame(
+            context.world, casters, context.camera, pose, job.sky, rng, context.options,
+            elapsed_s=job.elapsed_s,
+        )  # fmt: skip
+        frames.append((side, img, label, int(rng.integers(85, 93))))
+    return frames
+
+
+# Per-process state of the rendering pool: the context and the casters built from it once per
+# worker (open3d scenes cannot be pickled, and rebuilding them per job would dominate).
+_POOL_STATE: dict[str, Any] = {}
+
+
+def _pool_init(context: _RenderContext) -> None:
+    _POOL_STATE["context"] = context
+    _POOL_STATE["casters"] = Casters.for_world(context.world, context.backend)
+
+
+def _pool_render(job: _PositionJob) -> list[_Frame]:
+    return _render_position(_POOL_STATE["context"], _POOL_STATE["casters"], job)
+
+
+def _render_all(
+    context: _RenderContext,
+    jobs: list[_PositionJob],
+    workers: int,
+    casters: Casters,
+    progress: bool,
+) -> Iterator[tuple[_PositionJob, list[_Frame]]]:
+    """Render every job, in order, serially or in a pool of ``workers`` processes."""
+    bar: Any = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs), desc="rendering", unit="pos")
+    try:
+        if workers == 1:
+            for job in jobs:
+                yield job, _render_position(context, casters, job)
+                if bar is not None:
+                    bar.update()
+            return
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn, not fork: open3d's thread pool does not survive a fork.
+        with ProcessPoolExecutor(
+            workers, mp_context=mp.get_context("spawn"), initializer=_pool_init,
+            initargs=(context,),
+        ) as pool:  # fmt: skip
+            for job, frames in zip(jobs, pool.map(_pool_render, jobs), strict=True):
+                yield job, frames
+                if bar is not None:
+                    bar.update()
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def _readme(

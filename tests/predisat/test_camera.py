@@ -456,3 +456,20 @@ def test_mount_from_dict() -> None:
         Mount.from_dict("left", {"tilt_deg": 3})
     with pytest.raises(ValueError, match="side"):
         Mount("up", 0.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("kind", ["pinhole", "fisheye"])
+def test_resized_keeps_the_rays_of_the_same_image_points(kind: str) -> None:
+    cam = default_camera(kind)  # type: ignore[arg-type]
+    small = cam.resized(640, 480)
+    assert (small.width_px, small.height_px) == (640, 480)
+    # the same point of the image (corners and centre of the frame, in relative coordinates)
+    rel_u = np.array([0.0, 0.5, 1.0, 0.25])
+    rel_v = np.array([0.0, 0.5, 1.0, 0.75])
+    u_big, v_big = rel_u * cam.width_px - 0.5, rel_v * cam.height_px - 0.5
+    u_small, v_small = rel_u * small.width_px - 0.5, rel_v * small.height_px - 0.5
+    np.testing.assert_allclose(
+        small.pixel_to_ray(u_small, v_small), cam.pixel_to_ray(u_big, v_big), atol=1e-9
+    )
+    with pytest.raises(ValueError, match="width_px"):
+        cam.resized(1, 480)

@@ -132,3 +132,27 @@ def test_sky_schedule() -> None:
 def test_rejects_range_outside_track(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="track length"):
         generate_survey(demo_track(), 100.0, 1e7, out_dir=tmp_path, progress=False)
+
+
+def test_output_does_not_depend_on_worker_count(tiny, tmp_path: Path) -> None:
+    track, res = tiny
+    par = generate_survey(
+        track,
+        2000.0,
+        2060.0,
+        sky="cloudy",
+        seed=3,
+        out_dir=tmp_path,
+        camera=CAM,
+        progress=False,
+        options=RenderOptions(supersample=2, ambient_rays=1),
+        workers=2,
+    )
+    serial_images = sorted((res.survey_dir / "images").glob("*.jpg"))
+    assert [p.name for p in serial_images] == sorted(
+        p.name for p in (par.survey_dir / "images").glob("*.jpg")
+    )
+    for p in serial_images:
+        assert p.read_bytes() == (par.survey_dir / "images" / p.name).read_bytes(), p.name
+    for p in sorted((res.truth_dir / "labels").glob("*.png")):
+        assert p.read_bytes() == (par.truth_dir / "labels" / p.name).read_bytes(), p.name

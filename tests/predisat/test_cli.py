@@ -1,0 +1,52 @@
+"""Command-line behaviour: help, clear errors on bad arguments (exit code 2, no traceback)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from locator import cli as locator_cli
+from predisat import cli
+
+
+def test_help_lists_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("synth", "demo"):
+        assert command in out
+
+
+def test_locator_help(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        locator_cli.main(["--help"])
+    assert exc.value.code == 0
+    assert "SATHIA" in capsys.readouterr().out
+
+
+def test_synth_rejects_range_outside_track(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = cli.main(["synth", "--from-km", "3", "--to-km", "99", "--out", str(tmp_path / "o")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "--from-km/--to-km" in err and "99" in err
+
+
+def test_synth_rejects_missing_track_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "nope.geojson"
+    code = cli.main(["synth", "--track", str(missing), "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert str(missing) in capsys.readouterr().err
+
+
+def test_console_scripts_installed() -> None:
+    # The entry points are what a user types; check they resolve to our main functions.
+    for name in ("predisat", "locator"):
+        res = subprocess.run(
+            [sys.executable, "-c", f"from importlib.metadata import entry_points as e; "
+             f"print([x.value for x in e(group='console_scripts') if x.name == '{name}'])"],
+            capture_output=True, text=True, check=True,
+        )
+        assert f"{name}.cli:main" in res.stdout
