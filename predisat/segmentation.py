@@ -1,0 +1,573 @@
+"""Sky segmentation of camera frames with OpenCV: a sky mask, the skyline per column, confidence.
+
+The method is classical and runs per image, without a learned model:
+
+1. **Features** at a working resolution (longest side ``work_size_px``): CIELAB lightness and
+   blue-yellow axis, and a texture energy (box-filtered gradient magnitude of the lightness).
+2. **Seeds**: connected regions that are smooth and bright or blue. For a side (or any upright
+   perspective) camera a seed must touch the top of the image, and every pixel above the first
+   strong edge of a seeded column is a probable-sky seed too. For an upward fisheye every large
+   smooth bright region inside the lens circle is a seed.
+3. **GrabCut** (:func:`cv2.grabCut`) on a feature image (lightness, blueness, log-texture)
+   rather than on BGR: facades that are as white as an overcast sky still differ in texture.
+4. **Sky gaps** (optional): pixels outside the GrabCut sky that match the sky colour model
+   and are brighter than their surroundings (a white top-hat): sky seen through foliage.
+5. **Thin-structure policy** (:func:`remove_thin_obstacles`): obstacle features narrower than
+   ``thin_px`` pixels in the vertical *or* the horizontal direction, between sky on both sides,
+   are catenary and power wires, cables and twigs, which do not block an L-band signal. They
+   are counted as sky. Masts, poles and posts wider than ``thin_px`` stay obstacles. The
+   test uses morphological openings with line elements, which remove thin features but leave
+   the corners of large obstacles intact (a square element would shave them).
+6. **Skyline** (:func:`skyline_from_mask`): per column, the boundary above the highest
+   obstacle pixel (see below), and a **confidence** (:func:`skyline_confidence`) from the
+   colour contrast across it and the share of sky gaps just below it.
+
+Skyline convention (side cameras)
+---------------------------------
+Rows grow downward and pixel ``r`` covers ``[r - 0.5, r + 0.5]``. For a camera pitched up with
+no large roll, elevation increases upward along every image column. The mask must give the
+highest obstructed elevation, so ``skyline_row[c]`` is the *upper edge of the highest obstacle
+pixel* of column ``c``: ``min{r : obstacle} - 0.5``. Everything above it is sky; sky holes
+below it (gaps in trees, the sky under a bridge deck) are conservatively treated as blocked
+(:func:`mask_above_skyline`), and obstacles floating above sky (canopies, overhangs, bridge
+decks) pull the skyline up to themselves. Special values: a column with no obstacle has
+``skyline_row = H - 0.5`` (the bottom edge: nothing seen blocks it; what lies below the image is
+unseen and is the caller's business), a column that is obstacle up to the top has ``-0.5``.
+Pixels outside the valid region (the fisheye circle) are neither sky nor obstacle for the
+skyline: a column with no valid pixel has ``nan``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "SkyOptions",
+    "SkySegmentation",
+    "fisheye_valid_mask",
+    "mask_above_skyline",
+    "remove_thin_obstacles",
+    "segment_sky",
+    "skyline_confidence",
+    "skyline_from_mask",
+]
+
+# Lab values in OpenCV's 8-bit encoding: 128 is neutral on a and b; b < 128 is blue.
+_NEUTRAL_B = 128.0
+# Gap (working-resolution pixels) across which smooth candidate regions are joined.
+_BRIDGE_PX = 15
+
+
+@dataclass(frozen=True)
+class SkyOptions:
+    """Parameters of :func:`segment_sky` (defaults suit 45 deg side cameras and street photos).
+
+    Attributes
+    ----------
+    fisheye : bool
+        Upward-looking fisheye: only pixels inside the lens circle are segmented, seeds may lie
+        anywhere inside it (not only at the top), and sky gaps are searched by default.
+    circle_px : tuple of float, optional
+        Lens circle ``(cx, cy, radius)`` in full-resolution pixels; default: the inscribed
+        circle of the image shrunk by ``circle_margin``.
+    circle_margin : float
+        Fraction of the default radius trimmed off (the dark vignetted rim of the lens).
+    work_size_px : int
+        Longest side of the working image for seeds and GrabCut; the mask is upsampled.
+    texture_quantile : float
+        Quantile of the texture energy below which a pixel is "smooth" (clipped to
+        ``texture_min``..``texture_max``, in Lab lightness units per pixel).
+    texture_min, texture_max : float
+    texture_weight : float
+        Scale of the log-texture channel of the GrabCut feature image (higher: texture counts
+        more against colour).
+    grabcut_iterations : int
+    min_seed_fraction : float
+        Smallest seed region, as a fraction of the valid area (unless it is at least 30 % of the
+        largest candidate).
+    detect_gaps : bool, optional
+        Search sky gaps in obstacles (foliage). Default: True for fisheye, False otherwise (in
+        side-camera use gaps below the skyline are blocked anyway, and on street photos the
+        search confuses white window frames with sky).
+    gap_max_mahalanobis : float
+        Colour distance (Mahalanobis, Lab) to the sky model below which a gap pixel may be sky.
+    gap_min_tophat : float
+        How much brighter (Lab lightness) than its surroundings a gap pixel must be.
+    thin_px : int
+        Thin-structure width in full-resolution pixels: obstacle features at most this wide,
+        against the sky, are L-band transparent and counted as sky (0 disables the policy).
+    refine_band_px : int
+        Half-width of the band around the boundary re-decided at full resolution by a colour
+        GrabCut (0 disables the refinement).
+    min_sky_lightness : float
+        Darkest (OpenCV 8-bit Lab lightness, 0-255) non-blue region taken as a sky seed: a dark
+        tunnel or wall filling the frame yields no seed, hence no sky.
+    """
+
+    fisheye: bool = False
+    circle_px: tuple[float, float, float] | None = None
+    circle_margin: float = 0.04
+    work_size_px: int = 400
+    texture_quantile: float = 0.4
+    texture_min: float = 4.0
+    texture_max: float = 20.0
+    texture_weight: float = 25.0
+    grabcut_iterations: int = 3
+    min_seed_fraction: float = 0.01
+    detect_gaps: bool | None = None
+    gap_max_mahalanobis: float = 2.5
+    gap_min_tophat: float = 20.0
+    thin_px: int = 3
+    refine_band_px: int = 6
+    min_sky_lightness: float = 100.0
+
+    def __post_init__(self) -> None:
+        if self.work_size_px < 32:
+            raise ValueError(f"work_size_px must be >= 32, got {self.work_size_px}")
+        if not 0.0 < self.texture_quantile < 1.0:
+            raise ValueError(f"texture_quantile must lie in (0, 1), got {self.texture_quantile}")
+        if not 0.0 < self.texture_min <= self.texture_max:
+            raise ValueError("need 0 < texture_min <= texture_max")
+        if self.grabcut_iterations < 1:
+            raise ValueError(f"grabcut_iterations must be >= 1, got {self.grabcut_iterations}")
+        if self.thin_px < 0:
+            raise ValueError(f"thin_px must be >= 0 (0 disables the policy), got {self.thin_px}")
+        if not 0.0 <= self.circle_margin < 1.0:
+            raise ValueError(f"circle_margin must lie in [0, 1), got {self.circle_margin}")
+        if self.circle_px is not None and (len(self.circle_px) != 3 or self.circle_px[2] <= 0):
+            raise ValueError("circle_px must be (cx, cy, radius) with radius > 0")
+
+    @property
+    def gaps(self) -> bool:
+        """Whether sky gaps are searched (``detect_gaps`` resolved against ``fisheye``)."""
+        return self.fisheye if self.detect_gaps is None else bool(self.detect_gaps)
+
+
+@dataclass(frozen=True)
+class SkySegmentation:
+    """Result of :func:`segment_sky` for one image of ``H x W`` pixels.
+
+    Attributes
+    ----------
+    sky_mask : ndarray of bool, shape (H, W)
+        Pixel-level sky (True), thin L-band-transparent structures included, sky gaps included.
+    skyline_row : ndarray of float, shape (W,)
+        Per column, the upper edge of the highest obstacle pixel (module docstring): ``H - 0.5``
+        when the column has no obstacle, ``-0.5`` when the obstacle reaches the top, ``nan``
+        when the column has no valid pixel.
+    confidence : ndarray of float, shape (W,)
+        0-1 per column: contrast across the skyline, lowered by sky gaps just below it.
+    valid_mask : ndarray of bool, shape (H, W)
+        Pixels that were segmented (all of them, except outside a fisheye circle).
+    """
+
+    sky_mask: NDArray[np.bool_]
+    skyline_row: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+    valid_mask: NDArray[np.bool_]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` in pixels."""
+        return (int(self.sky_mask.shape[0]), int(self.sky_mask.shape[1]))
+
+    @property
+    def sky_fraction(self) -> float:
+        """Share of valid pixels that are sky."""
+        n = int(self.valid_mask.sum())
+        return float((self.sky_mask & self.valid_mask).sum() / n) if n else 0.0
+
+    def conservative_mask(self) -> NDArray[np.bool_]:
+        """Sky only above the skyline (gaps below it blocked): what a GNSS mask may trust."""
+        return mask_above_skyline(self.skyline_row, self.shape[0]) & self.valid_mask
+
+
+def fisheye_valid_mask(
+    shape: tuple[int, int],
+    circle_px: tuple[float, float, float] | None = None,
+    margin: float = 0.04,
+) -> NDArray[np.bool_]:
+    """Pixels inside a fisheye lens circle.
+
+    Parameters
+    ----------
+    shape : (H, W)
+    circle_px : (cx, cy, radius), optional
+        Circle in pixels; default the inscribed circle centred on the image, radius
+        ``min(H, W) / 2 * (1 - margin)``.
+    margin : float
+        Fraction of the default radius trimmed off (ignored when ``circle_px`` is given).
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+    """
+    h, w = int(shape[0]), int(shape[1])
+    if circle_px is None:
+        cx, cy, r = (w - 1) / 2.0, (h - 1) / 2.0, min(h, w) / 2.0 * (1.0 - margin)
+    else:
+        cx, cy, r = (float(v) for v in circle_px)
+    yy, xx = np.ogrid[:h, :w]
+    return np.asarray((xx - cx) ** 2 + (yy - cy) ** 2 < r * r)
+
+
+def remove_thin_obstacles(sky_mask: ArrayLike, thin_px: int) -> NDArray[np.bool_]:
+    """Apply the thin-structure policy: obstacle features at most ``thin_px`` wide become sky.
+
+    An obstacle pixel is kept only if it belongs to a vertical run *and* to a horizontal run of
+    at least ``thin_px + 1`` obstacle pixels (morphological openings with line elements).
+    Wires and cables (thin across, whatever their direction), thin twigs and thin fringes are
+    removed; masts, poles and buildings wider than ``thin_px`` and the corners of every large
+    obstacle are kept.
+
+    Parameters
+    ----------
+    sky_mask : array_like of bool, shape (H, W)
+    thin_px : int
+        Largest width, in pixels, of a structure counted as L-band transparent (0: no change).
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        A new mask (the input is not modified).
+    """
+    sky = np.asarray(sky_mask, bool)
+    if sky.ndim != 2:
+        raise ValueError(f"sky_mask must be 2-D (H, W), got shape {sky.shape}")
+    if thin_px < 0:
+        raise ValueError(f"thin_px must be >= 0, got {thin_px}")
+    if thin_px == 0:
+        return sky.copy()
+    obstacle = (~sky).astype(np.uint8)
+    k = int(thin_px) + 1
+    # Pad with obstacle so that features touching the border are judged on their visible part
+    # as if they continued (a wall cut by the image edge is not thin).
+    pad = k
+    ob = cv2.copyMakeBorder(obstacle, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
+    vert = _line_opening(ob, k, vertical=True)
+    horz = _line_opening(ob, k, vertical=False)
+    kept = (vert & horz)[pad:-pad, pad:-pad].astype(bool)
+    return np.asarray(sky | (obstacle.astype(bool) & ~kept))
+
+
+def _line_opening(binary: NDArray, length: int, vertical: bool) -> NDArray:
+    """Opening with a line of ``length`` pixels: keeps pixels in runs of at least ``length``.
+
+    Explicit anchors (first pixel for the erosion, last for the dilation) make it exact for
+    even lengths too, where ``cv2.morphologyEx`` would shift the result by one pixel.
+    """
+    kernel = np.ones((length, 1) if vertical else (1, length), np.uint8)
+    first, last = (0, 0), ((0, length - 1) if vertical else (length - 1, 0))
+    eroded = cv2.erode(binary, kernel, anchor=first, borderType=cv2.BORDER_REPLICATE)
+    return np.asarray(cv2.dilate(eroded, kernel, anchor=last, borderType=cv2.BORDER_CONSTANT,
+                                 borderValue=0))
+
+
+def skyline_from_mask(
+    sky_mask: ArrayLike, valid_mask: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """Per-column skyline row of a sky mask (convention in the module docstring).
+
+    Parameters
+    ----------
+    sky_mask : array_like of bool, shape (H, W)
+    valid_mask : array_like of bool, shape (H, W), optional
+        Pixels that count; invalid pixels are ignored (neither sky nor obstacle).
+
+    Returns
+    -------
+    ndarray of float, shape (W,)
+        ``min{r : valid obstacle} - 0.5``; ``H - 0.5`` for columns without obstacle, ``nan``
+        for columns without a valid pixel.
+    """
+    sky = np.asarray(sky_mask, bool)
+    if sky.ndim != 2:
+        raise ValueError(f"sky_mask must be 2-D (H, W), got shape {sky.shape}")
+    h = sky.shape[0]
+    valid = np.ones_like(sky) if valid_mask is None else np.asarray(valid_mask, bool)
+    if valid.shape != sky.shape:
+        raise ValueError(f"valid_mask shape {valid.shape} differs from sky_mask {sky.shape}")
+    obstacle = valid & ~sky
+    first = np.where(obstacle.any(axis=0), obstacle.argmax(axis=0), h).astype(float) - 0.5
+    first[~valid.any(axis=0)] = np.nan
+    return first
+
+
+def mask_above_skyline(skyline_row: ArrayLike, height_px: int) -> NDArray[np.bool_]:
+    """The conservative sky mask: True above the skyline of each column, False below.
+
+    Parameters
+    ----------
+    skyline_row : array_like, shape (W,)
+        As returned by :func:`skyline_from_mask` (``nan`` columns give no sky).
+    height_px : int
+
+    Returns
+    -------
+    ndarray of bool, shape (height_px, W)
+    """
+    s = np.asarray(skyline_row, float)
+    rows = np.arange(int(height_px), dtype=float)[:, None]
+    with np.errstate(invalid="ignore"):
+        return np.asarray(rows < s[None, :])
+
+
+def skyline_confidence(
+    image_bgr: ArrayLike,
+    sky_mask: ArrayLike,
+    skyline_row: ArrayLike,
+    valid_mask: ArrayLike | None = None,
+    band_px: int | None = None,
+    contrast_scale: float = 12.0,
+) -> NDArray[np.float64]:
+    """Per-column confidence of a skyline, in [0, 1].
+
+    For a column with a boundary, the Lab colour difference ``dE`` between the ``band_px``
+    pixels just above and just below it gives ``1 - exp(-(dE / contrast_scale)^2)`` (a sharp,
+    contrasted skyline is trusted; a grey facade against a grey sky is not), multiplied by the
+    share of obstacle in the band below (sky gaps just under the skyline mean a ragged,
+    uncertain boundary such as foliage). A column that is all sky compares its lowest band with
+    the image's mean sky colour (``exp(-(dE / contrast_scale)^2)``: a sky-coloured bottom means
+    open sky); a column that is all obstacle compares its top band with the mean sky colour
+    (``1 - exp(...)``), or gets 0.5 when the image has no sky. Columns with no valid pixel get 0.
+
+    Parameters
+    ----------
+    image_bgr : array_like, shape (H, W, 3), uint8
+    sky_mask : array_like of bool, shape (H, W)
+    skyline_row : array_like, shape (W,)
+    valid_mask : array_like of bool, shape (H, W), optional
+    band_px : int, optional
+        Band height; default ``max(3, H // 60)``.
+    contrast_scale : float
+        Lab difference giving a confidence of ``1 - 1/e``.
+
+    Returns
+    -------
+    ndarray of float, shape (W,)
+    """
+    img = np.asarray(image_bgr)
+    sky = np.asarray(sky_mask, bool)
+    s = np.asarray(skyline_row, float)
+    h, w = sky.shape
+    if img.shape[:2] != (h, w) or s.shape != (w,):
+        raise ValueError("image_bgr (H, W, 3), sky_mask (H, W) and skyline_row (W,) must agree")
+    valid = np.ones_like(sky) if valid_mask is None else np.asarray(valid_mask, bool)
+    band = max(3, h // 60) if band_px is None else int(band_px)
+    lab = cv2.cvtColor(np.ascontiguousarray(img, np.uint8), cv2.COLOR_BGR2LAB).astype(float)
+    # Column-wise cumulative sums give every band mean in O(H W).
+    cum = np.concatenate([np.zeros((1, w, 3)), np.cumsum(lab * valid[..., None], axis=0)])
+    cnt = np.concatenate([np.zeros((1, w)), np.cumsum(valid, axis=0)])
+    obst = np.concatenate([np.zeros((1, w)), np.cumsum(valid & ~sky, axis=0)])
+    cols = np.arange(w)
+
+    def band_mean(a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
+        n = cnt[b, cols] - cnt[a, cols]
+        m = (cum[b, cols] - cum[a, cols]) / np.maximum(n, 1)[:, None]
+        return m, n
+
+    b0 = np.where(np.isfinite(s), s + 0.5, 0).astype(int)  # first obstacle row (or H)
+    above_a, above_b = np.clip(b0 - band, 0, h), np.clip(b0, 0, h)
+    below_a, below_b = np.clip(b0, 0, h), np.clip(b0 + band, 0, h)
+    m_above, n_above = band_mean(above_a, above_b)
+    m_below, n_below = band_mean(below_a, below_b)
+    sky_px = sky & valid
+    sky_mean = lab[sky_px].mean(axis=0) if sky_px.any() else None
+
+    conf = np.zeros(w)
+    both = (n_above > 0) & (n_below > 0)
+    de = np.linalg.norm(m_above - m_below, axis=-1)
+    solid = (obst[below_b, cols] - obst[below_a, cols]) / np.maximum(n_below, 1)
+    conf[both] = (1.0 - np.exp(-((de / contrast_scale) ** 2)) * 1.0)[both] * solid[both]
+
+    all_sky = (n_above > 0) & (n_below == 0)
+    all_obst = (n_above == 0) & (n_below > 0)
+    if sky_mean is not None:
+        de_sky = np.linalg.norm(m_above - sky_mean, axis=-1)
+        conf[all_sky] = np.exp(-((de_sky / contrast_scale) ** 2))[all_sky] * 0.5 + 0.5
+        de_obst = np.linalg.norm(m_below - sky_mean, axis=-1)
+        conf[all_obst] = (1.0 - np.exp(-((de_obst / contrast_scale) ** 2)))[all_obst]
+    else:
+        conf[all_obst] = 0.5
+    conf[~np.isfinite(s)] = 0.0
+    return np.clip(conf, 0.0, 1.0)
+
+
+def _working_image(image: NDArray, work_size_px: int) -> tuple[NDArray, float]:
+    h, w = image.shape[:2]
+    scale = min(1.0, work_size_px / max(h, w))
+    if scale >= 1.0:
+        return image.copy(), 1.0
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), scale
+
+
+def _texture(lightness: NDArray) -> NDArray:
+    g = cv2.GaussianBlur(lightness, (0, 0), 0.8)
+    grad = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+    return np.asarray(cv2.blur(grad, (5, 5)))
+
+
+def _seeds(
+    lab: NDArray, tex: NDArray, valid: NDArray, opt: SkyOptions
+) -> tuple[NDArray, float]:
+    """Smooth, bright-or-blue regions that may be sky, and the smoothness threshold."""
+    h = lab.shape[0]
+    lightness, blueness = lab[..., 0].astype(np.float32), lab[..., 2].astype(np.float32)
+    t_tex = float(
+        np.clip(np.quantile(tex[valid], opt.texture_quantile), opt.texture_min, opt.texture_max)
+    )
+    smooth = (tex < t_tex) & valid
+    bright = (lightness > np.median(lightness[valid])) & (lightness >= opt.min_sky_lightness)
+    blue = blueness < _NEUTRAL_B - 4.0
+    cand = smooth & (bright | blue)
+    # Wires cut the sky into strips (their texture footprint is ~11 px wide after filtering):
+    # components are found on the candidates with thin gaps bridged, so that the sky below a
+    # catenary wire is as much a seed as the sky above it.
+    bridged = remove_thin_obstacles(cand, _BRIDGE_PX).astype(np.uint8)
+    n, lbl, stats, _ = cv2.connectedComponentsWithStats(bridged, connectivity=4)
+    if n <= 1:
+        return np.zeros(valid.shape, bool), t_tex
+    area = stats[1:, cv2.CC_STAT_AREA]
+    big = (area >= opt.min_seed_fraction * valid.sum()) | (area >= 0.3 * area.max())
+    if not opt.fisheye:
+        big &= stats[1:, cv2.CC_STAT_TOP] <= 0.02 * h
+    keep = np.concatenate([[False], big])
+    return keep[lbl] & cand, t_tex
+
+
+def _grabcut_sky(small: NDArray, valid: NDArray, opt: SkyOptions) -> NDArray:
+    """Sky at working resolution (bool), or all False when no seed is found."""
+    h, w = small.shape[:2]
+    lab = cv2.cvtColor(small, cv2.COLOR_BGR2LAB)
+    tex = _texture(lab[..., 0].astype(np.float32))
+    seeds, t_tex = _seeds(lab, tex, valid, opt)
+    if seeds.sum() < 20:
+        return np.zeros((h, w), bool)
+    ltex = np.clip(np.log1p(tex) * opt.texture_weight, 0, 255).astype(np.uint8)
+    feat = np.ascontiguousarray(np.dstack([lab[..., 0], lab[..., 2], ltex]), np.uint8)
+    gc = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
+    if not opt.fisheye:
+        # In an upright frame whatever lies above a seeded column's first strong edge is
+        # probably sky too (clouds have soft edges, buildings sharp ones).
+        strong = tex > 3.0 * t_tex
+        first = np.where(strong.any(axis=0), strong.argmax(axis=0), h)
+        rows = np.arange(h)[:, None]
+        above = (rows < first[None, :]) & np.asarray(seeds.any(axis=0))[None, :]
+        gc[above] = cv2.GC_PR_FGD
+    gc[seeds] = cv2.GC_PR_FGD
+    core = cv2.erode(seeds.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    gc[core] = cv2.GC_FGD
+    gc[~valid] = cv2.GC_BGD
+    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    try:
+        cv2.grabCut(feat, gc, (0, 0, 0, 0), bgd, fgd, opt.grabcut_iterations, cv2.GC_INIT_WITH_MASK)
+    except cv2.error:
+        # GrabCut refuses masks with no possible background (an all-sky frame): keep the seeds.
+        return np.asarray(gc != cv2.GC_BGD) & (gc != cv2.GC_PR_BGD)
+    return np.asarray((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD))
+
+
+def _refine_boundary(image: NDArray, sky: NDArray, valid: NDArray, band_px: int) -> NDArray:
+    """Re-decide a band around the sky boundary at full resolution, on colour alone.
+
+    The working-resolution cut is biased toward the obstacle by the texture filter's support
+    (a few pixels of "texture" leak into the sky beside every edge); a colour GrabCut with
+    everything outside the band fixed removes that bias.
+    """
+    k = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
+    sure_sky = cv2.erode(sky.astype(np.uint8), k).astype(bool)
+    sure_obst = cv2.erode((~sky & valid).astype(np.uint8), k).astype(bool) | ~valid
+    if not sure_sky.any() or not sure_obst.any():
+        return sky
+    gc = np.where(sky, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
+    gc[sure_sky] = cv2.GC_FGD
+    gc[sure_obst] = cv2.GC_BGD
+    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    try:
+        cv2.grabCut(image, gc, (0, 0, 0, 0), bgd, fgd, 2, cv2.GC_INIT_WITH_MASK)
+    except cv2.error:
+        return sky
+    return np.asarray((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)) & valid
+
+
+def _sky_gaps(image: NDArray, sky: NDArray, valid: NDArray, opt: SkyOptions) -> NDArray:
+    """Pixels outside ``sky`` with the sky's colour, brighter than their surroundings."""
+    h, w = sky.shape
+    core = cv2.erode(sky.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    if core.sum() < 50:
+        return np.zeros_like(sky)
+    lab = cv2.cvtColor(image, cv2.COLOR_BGR2LAB).astype(np.float32)
+    px = lab[core]
+    mu = px.mean(axis=0)
+    icov = np.linalg.inv(np.cov(px.T) + 4.0 * np.eye(3))  # floor: JPEG noise on a flat sky
+    d = lab - mu
+    md2 = np.einsum("...i,ij,...j->...", d, icov, d)
+    k = max(3, round(max(h, w) / 60) | 1)
+    tophat = cv2.morphologyEx(
+        lab[..., 0], cv2.MORPH_TOPHAT, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    )
+    return np.asarray(
+        (md2 < opt.gap_max_mahalanobis**2) & (tophat > opt.gap_min_tophat) & ~sky & valid
+    )
+
+
+def segment_sky(image_bgr: ArrayLike, options: SkyOptions | None = None) -> SkySegmentation:
+    """Segment the sky of one frame: pixel mask, skyline per column, per-column confidence.
+
+    Parameters
+    ----------
+    image_bgr : array_like, shape (H, W, 3) uint8 (BGR, as ``cv2.imread`` gives), or (H, W)
+        A grey image is accepted (colour cues are then absent).
+    options : SkyOptions, optional
+        Defaults to ``SkyOptions()`` (side camera / upright perspective photo). Use
+        ``SkyOptions(fisheye=True)`` for upward fisheye photos.
+
+    Returns
+    -------
+    SkySegmentation
+        Thin L-band-transparent structures (``thin_px``) are sky in ``sky_mask``; the skyline
+        follows the convention of the module docstring.
+    """
+    opt = options or SkyOptions()
+    img = np.asarray(image_bgr)
+    if img.ndim == 2:
+        img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_GRAY2BGR)
+    if img.ndim != 3 or img.shape[2] != 3 or img.shape[0] < 8 or img.shape[1] < 8:
+        raise ValueError(
+            f"image_bgr must be an (H, W, 3) BGR image of at least 8x8 pixels, got {img.shape}"
+        )
+    if img.dtype != np.uint8:
+        raise ValueError(f"image_bgr must be uint8 (as cv2.imread gives), got {img.dtype}")
+    img = np.ascontiguousarray(img)
+    h, w = img.shape[:2]
+    if opt.fisheye:
+        valid = fisheye_valid_mask((h, w), opt.circle_px, opt.circle_margin)
+    else:
+        valid = np.ones((h, w), bool)
+
+    small, scale = _working_image(img, opt.work_size_px)
+    sh, sw = small.shape[:2]
+    valid_small = (
+        cv2.resize(valid.astype(np.uint8), (sw, sh), interpolation=cv2.INTER_NEAREST) > 0
+    )
+    sky_small = _grabcut_sky(small, valid_small, opt)
+    if scale < 1.0:
+        # Linear interpolation of the 0/1 mask then 0.5 cut: a smooth boundary, not blocks.
+        up = cv2.resize(sky_small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+        sky = np.asarray(up >= 0.5)
+    else:
+        sky = sky_small.copy()
+    sky &= valid
+    if opt.refine_band_px > 0 and sky.any() and (valid & ~sky).any():
+        sky = _refine_boundary(img, sky, valid, opt.refine_band_px)
+    if opt.gaps and sky.any():
+        sky |= _sky_gaps(img, sky, valid, opt)
+    sky = remove_thin_obstacles(sky, opt.thin_px) & valid
+    skyline = skyline_from_mask(sky, valid)
+    conf = skyline_confidence(img, sky, skyline, valid)
+    return SkySegmentation(sky_mask=sky, skyline_row=skyline, confidence=conf, valid_mask=valid)
