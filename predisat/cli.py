@@ -147,6 +147,22 @@ def cmd_availability(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate_sky(args: argparse.Namespace) -> int:
+    from predisat.skyeval import evaluate_folder
+
+    for data in args.data:
+        if not Path(data).is_dir():
+            raise CliError(f"--data {data}: no such folder (give a folder of photos and masks)")
+    for data in args.data:
+        out = None if args.out is None else Path(args.out) / Path(data).name
+        result = evaluate_folder(data, out, progress=not args.quiet)
+        print(f"{data} ({result.layout}):")
+        print(result.summary.to_string(index=False))
+        if out is not None:
+            print(f"  per-image table and worst cases in {out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="predisat",
@@ -196,6 +212,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_availability_arguments(p)
     p.set_defaults(func=cmd_availability)
+
+    p = sub.add_parser(
+        "evaluate-sky",
+        help="score sky segmentation on a folder of photos with ground-truth sky masks",
+        description=(
+            "Segment every photo of a folder and compare with its sky mask: IoU per image and "
+            "per set (layouts: ADE20K original/+mask/, fisheye_hk raw_images/+mask_images/, "
+            "images/+masks/, or a predisat synth output folder)."
+        ),
+    )
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR", help="photo folder(s)")
+    p.add_argument("--out", metavar="DIR", help="write per-image tables and worst-case sheets")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_evaluate_sky)
 
     p = sub.add_parser(
         "demo",

@@ -471,7 +471,9 @@ def contact_sheet(
     tile_width_px: int = 320,
     frames: list[str] | None = None,
 ) -> Path:
-    """Tile sample frames of a survey into one PNG with captions (frame, side, km, sky).
+    """Tile sample frames of a survey into one image with captions (frame, side, km, sky).
+
+    The image format follows the suffix of ``out_png`` (``.png``, or ``.jpg`` for a small file).
 
     Parameters
     ----------
@@ -529,8 +531,9 @@ def contact_sheet(
     sheet = np.vstack([np.hstack(tiles[r : r + cols]) for r in range(0, len(tiles), cols)])
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
-    ok, buf = cv2.imencode(".png", sheet)
+    suffix = out.suffix.lower() if out.suffix.lower() in (".png", ".jpg", ".jpeg") else ".png"
+    ok, buf = cv2.imencode(suffix, sheet, [cv2.IMWRITE_JPEG_QUALITY, 88])
     if not ok:
-        raise OSError(f"PNG encoding of the contact sheet {out} failed")
+        raise OSError(f"encoding of the contact sheet {out} failed")
     _atomic_bytes(out, buf.tobytes())
     return out

@@ -16,7 +16,7 @@ def test_help_lists_commands(capsys: pytest.CaptureFixture[str]) -> None:
         cli.main(["--help"])
     assert exc.value.code == 0
     out = capsys.readouterr().out
-    for command in ("synth", "demo"):
+    for command in ("synth", "demo", "availability", "evaluate-sky"):
         assert command in out
 
 
@@ -50,3 +50,10 @@ def test_console_scripts_installed() -> None:
             capture_output=True, text=True, check=True,
         )
         assert f"{name}.cli:main" in res.stdout
+
+
+def test_evaluate_sky_rejects_missing_folder(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "no_photos"
+    code = cli.main(["evaluate-sky", "--data", str(missing)])
+    assert code == 2
+    assert str(missing) in capsys.readouterr().err
