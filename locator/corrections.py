@@ -1,0 +1,686 @@
+"""The standard single-frequency pseudorange model, from broadcast data only.
+
+For one epoch and any satellites, :meth:`RangeModel.correct` returns the satellite positions at
+transmission time expressed in the Earth-fixed frame of reception, and the pseudoranges
+corrected term by term::
+
+    corrected_m = pseudorange_m + sat_clock_m + relativity_m - group_delay_m - iono_m - tropo_m
+                = geometric range + c * receiver clock offset + noise
+
+* ``sat_clock_m`` - c (af0 + af1 dt + af2 dt^2), the broadcast polynomial (GLONASS:
+  c (-TauN + GammaN dt));
+* ``relativity_m`` - the periodic relativistic clock term, c * (-2 r.v / c^2) (equal to the
+  ICD's F e sqrt(A) sin E for a Keplerian orbit; 0 for GLONASS, whose broadcast clock needs none
+  by convention, as in RTKLIB). :class:`predisat.ephemeris.Ephemeris` already includes this term
+  in its ``clock_s``; here it is split out for reporting, ``sat_clock_m + relativity_m`` is
+  exactly ``c * clock_s``;
+* ``group_delay_m`` - c times the broadcast group delay of the signal used, which the broadcast
+  clock (referred to an ionosphere-free pair) omits: GPS/QZSS TGD (gamma TGD on L2), Galileo BGD
+  E1/E5b for I/NAV and BGD E1/E5a for F/NAV clocks (0 on E5a/E5b with the matching message),
+  BeiDou TGD1 on B1I and TGD2 on B2I (B3I is the reference), NavIC TGD on L5, GLONASS 0;
+* ``iono_m`` - Klobuchar (IS-GPS-200 20.3.3.5.2.5) with the GPS coefficients of the
+  navigation header, scaled by (f_L1 / f)^2 to the signal's carrier; BeiDou satellites use the
+  BeiDou coefficients (BDSA/BDSB) with the same algorithm when the header has them; Galileo
+  uses the GPS coefficients (NeQuick-G is out of scope); 0 when no coefficients are known;
+* ``tropo_m`` - Saastamoinen zenith delays (hydrostatic and wet) in a standard atmosphere
+  (1013.25 hPa, 15 deg C and a relative humidity at sea level, lapse rates as RTKLIB), mapped
+  with the Niell (1996) mapping functions.
+
+The transmission time comes from the pseudorange itself (t_rx - P / c is the satellite clock's
+reading at transmission, whatever the receiver clock), minus the satellite clock. The Earth
+rotation during the signal travel (Sagnac) rotates the satellite by omega_e tau about the z axis,
+tau being the geometric travel time to the approximate receiver position, iterated.
+"""
+
+from __future__ import annotations
+
+import gzip
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.ephemeris import Ephemeris, Reason, ValidityPolicy
+from predisat.fileerror import FileLineError
+from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.gnss_time import gps_s_to_datetime64
+from predisat.orbits import C_MPS
+
+__all__ = [
+    "OMEGA_E_RADPS",
+    "BroadcastIono",
+    "CorrectedRanges",
+    "RangeModel",
+    "SatelliteStates",
+    "carrier_frequency_hz",
+    "group_delay_s",
+    "klobuchar_delay_m",
+    "niell_mapping",
+    "saastamoinen_zenith_m",
+    "troposphere_delay_m",
+]
+
+OMEGA_E_RADPS = 7.2921151467e-5
+"""Earth rotation rate (WGS84, IS-GPS-200), rad/s."""
+
+F_L1_HZ = 1575.42e6
+# carrier per (system, band digit); GLONASS FDMA bands are computed from the channel number
+_FREQ_HZ: dict[tuple[str, str], float] = {
+    ("G", "1"): 1575.42e6,
+    ("G", "2"): 1227.60e6,
+    ("G", "5"): 1176.45e6,
+    ("J", "1"): 1575.42e6,
+    ("J", "2"): 1227.60e6,
+    ("J", "5"): 1176.45e6,
+    ("J", "6"): 1278.75e6,
+    ("E", "1"): 1575.42e6,
+    ("E", "5"): 1176.45e6,
+    ("E", "7"): 1207.14e6,
+    ("E", "8"): 1191.795e6,
+    ("E", "6"): 1278.75e6,
+    ("C", "2"): 1561.098e6,
+    ("C", "1"): 1575.42e6,
+    ("C", "5"): 1176.45e6,
+    ("C", "7"): 1207.14e6,
+    ("C", "6"): 1268.52e6,
+    ("C", "8"): 1191.795e6,
+    ("I", "5"): 1176.45e6,
+    ("I", "9"): 2492.028e6,
+    ("R", "3"): 1202.025e6,
+    ("R", "4"): 1600.995e6,
+    ("R", "6"): 1248.06e6,
+}
+
+
+def carrier_frequency_hz(sat: str, code: str, glonass_k: int | None = None) -> float:
+    """Carrier frequency of an observation code (RINEX 2 or 3) of a satellite; NaN if unknown.
+
+    BeiDou ``C1I``/``C1Q`` (RINEX 3.00-3.01 naming of B1I) map to B1I; other band-1 BeiDou
+    codes to B1C. GLONASS G1/G2 need the frequency channel ``glonass_k``.
+    """
+    system = sat[0]
+    band = code[1:2]
+    if system == "R" and band in "12" and band:
+        if glonass_k is None:
+            return float("nan")
+        return (
+            (1602.0e6 + 0.5625e6 * glonass_k) if band == "1" else (1246.0e6 + 0.4375e6 * glonass_k)
+        )
+    if system == "C" and band == "1" and code[2:3] in ("I", "Q"):
+        return 1561.098e6
+    return _FREQ_HZ.get((system, band), float("nan"))
+
+
+def group_delay_s(sat: str, code: str, tgd_s: float, aux26: float, data_source: float) -> float:
+    """Broadcast group delay to subtract from the satellite clock for one signal, seconds.
+
+    Parameters
+    ----------
+    sat, code : str
+        Satellite id and observation code.
+    tgd_s, aux26, data_source : float
+        Columns ``tgd_s``, ``aux26`` and ``aux20`` of the Keplerian record in use (see
+        :data:`predisat.rinex_nav.KEPLER_FIELDS`).
+
+    Returns
+    -------
+    float
+        NaN when the signal has no defined broadcast group delay (the caller should not use it).
+    """
+    system, band = sat[0], code[1:2]
+    if system in "GJ":
+        gamma = (77.0 / 60.0) ** 2
+        return {"1": tgd_s, "2": gamma * tgd_s}.get(band, float("nan"))
+    if system == "I":
+        return tgd_s if band == "5" else float("nan")
+    if system == "E":
+        fnav = (int(np.nan_to_num(data_source)) & 0b010) != 0 and not (
+            int(np.nan_to_num(data_source)) & 0b101
+        )
+        bgd = tgd_s if fnav else aux26  # E1/E5a (F/NAV clock) or E1/E5b (I/NAV clock)
+        f1, f2 = 1575.42, (1176.45 if fnav else 1207.14)
+        if band == "1":
+            return bgd
+        if (band == "5" and fnav) or (band == "7" and not fnav):
+            return (f1 / f2) ** 2 * bgd
+        return float("nan")
+    if system == "C":
+        b1i = band == "2" or (band == "1" and code[2:3] in ("I", "Q"))
+        if b1i:
+            return tgd_s
+        return {"7": aux26, "6": 0.0}.get(band, float("nan"))
+    if system == "R":
+        return 0.0
+    return float("nan")
+
+
+# ------------------------------------------------------------------------- ionosphere
+@dataclass(frozen=True)
+class BroadcastIono:
+    """Ionospheric coefficients of navigation headers.
+
+    Attributes
+    ----------
+    gps_alpha, gps_beta : ndarray, shape (4,) or None
+        Klobuchar coefficients (s, s/sc, s/sc^2, s/sc^3 and s, ...), RINEX 2 ``ION ALPHA`` /
+        ``ION BETA`` or RINEX 3 ``GPSA``/``GPSB``.
+    bds_alpha, bds_beta : ndarray, shape (4,) or None
+        BeiDou Klobuchar coefficients (``BDSA``/``BDSB``).
+    gal_ai : ndarray, shape (3,) or None
+        Galileo NeQuick-G effective ionisation coefficients (``GAL``); read, not used.
+    source : str
+        ``"file:line"`` of the GPS coefficients.
+    """
+
+    gps_alpha: NDArray | None = None
+    gps_beta: NDArray | None = None
+    bds_alpha: NDArray | None = None
+    bds_beta: NDArray | None = None
+    gal_ai: NDArray | None = None
+    source: str = ""
+
+    @classmethod
+    def from_rinex_nav(cls, paths: str | Path | Sequence[str | Path]) -> BroadcastIono:
+        """Coefficients from the headers of RINEX 2/3 navigation files (first file wins)."""
+        if isinstance(paths, (str, Path)):
+            paths = [paths]
+        found: dict[str, tuple[NDArray, str]] = {}
+        for p in paths:
+            for key, (val, where) in _read_iono_header(Path(p)).items():
+                found.setdefault(key, (val, where))
+        get = {k: v[0] for k, v in found.items()}
+        return cls(
+            get.get("GPSA"),
+            get.get("GPSB"),
+            get.get("BDSA"),
+            get.get("BDSB"),
+            get.get("GAL"),
+            found.get("GPSA", (None, ""))[1],
+        )
+
+    def coefficients(self, system: str) -> tuple[NDArray, NDArray] | None:
+        """Klobuchar (alpha, beta) used for a system letter, or None."""
+        if system == "C" and self.bds_alpha is not None and self.bds_beta is not None:
+            return self.bds_alpha, self.bds_beta
+        if self.gps_alpha is not None and self.gps_beta is not None:
+            return self.gps_alpha, self.gps_beta
+        return None
+
+
+def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
+    if not path.is_file():
+        raise FileLineError(path, None, "no such navigation file; check the path")
+    raw = path.read_bytes()
+    if raw[:2] == b"\x1f\x8b":
+        raw = gzip.decompress(raw)
+    out: dict[str, tuple[NDArray, str]] = {}
+    for i, line in enumerate(raw.decode("ascii", errors="replace").splitlines()):
+        label = line[60:].strip()
+        try:
+            if label in ("ION ALPHA", "ION BETA"):
+                key = "GPSA" if label == "ION ALPHA" else "GPSB"
+                vals = [line[2 + 12 * k : 14 + 12 * k] for k in range(4)]
+            elif label == "IONOSPHERIC CORR":
+                key = line[:4].strip()
+                vals = [line[5 + 12 * k : 17 + 12 * k] for k in range(4 if key != "GAL" else 3)]
+            elif label == "END OF HEADER":
+                break
+            else:
+                continue
+            arr = np.array([float(v.strip().replace("D", "E").replace("d", "E")) for v in vals])
+        except ValueError:
+            raise FileLineError(path, i + 1, f"unreadable {label!r} coefficients") from None
+        out.setdefault(key, (arr, f"{path.name}:{i + 1}"))
+    return out
+
+
+def klobuchar_delay_m(
+    gps_s: ArrayLike,
+    lat_deg: ArrayLike,
+    lon_deg: ArrayLike,
+    az_deg: ArrayLike,
+    el_deg: ArrayLike,
+    alpha: ArrayLike,
+    beta: ArrayLike,
+) -> NDArray:
+    """Slant ionospheric group delay on L1 (1575.42 MHz), Klobuchar model (IS-GPS-200).
+
+    Parameters
+    ----------
+    gps_s : array_like, shape (...)
+        GPS time (the local time of the pierce point derives from the GPS time of day).
+    lat_deg, lon_deg : array_like, shape (...)
+        Receiver geodetic position.
+    az_deg, el_deg : array_like, shape (...)
+        Satellite direction.
+    alpha, beta : array_like, shape (4,)
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Delay in metres (positive: the code is late); 0 where ``el_deg <= 0``.
+    """
+    a = np.asarray(alpha, float)
+    b = np.asarray(beta, float)
+    el_sc = np.asarray(el_deg, float) / 180.0
+    az = np.radians(np.asarray(az_deg, float))
+    psi = 0.0137 / (el_sc + 0.11) - 0.022  # Earth-centred angle, semicircles
+    phi_i = np.clip(np.asarray(lat_deg, float) / 180.0 + psi * np.cos(az), -0.416, 0.416)
+    lam_i = np.asarray(lon_deg, float) / 180.0 + psi * np.sin(az) / np.cos(phi_i * np.pi)
+    phi_m = phi_i + 0.064 * np.cos((lam_i - 1.617) * np.pi)  # geomagnetic latitude
+    t = np.mod(43200.0 * lam_i + np.asarray(gps_s, float), 86400.0)
+    f = 1.0 + 16.0 * (0.53 - el_sc) ** 3  # obliquity
+    amp = np.maximum(a[0] + phi_m * (a[1] + phi_m * (a[2] + phi_m * a[3])), 0.0)
+    per = np.maximum(b[0] + phi_m * (b[1] + phi_m * (b[2] + phi_m * b[3])), 72000.0)
+    x = 2.0 * np.pi * (t - 50400.0) / per
+    day = np.where(np.abs(x) < 1.57, amp * (1.0 - x**2 / 2.0 + x**4 / 24.0), 0.0)
+    return np.where(el_sc > 0, C_MPS * f * (5e-9 + day), 0.0)
+
+
+# ------------------------------------------------------------------------- troposphere
+def saastamoinen_zenith_m(
+    lat_deg: ArrayLike, h_m: ArrayLike, humidity: float = 0.7
+) -> tuple[NDArray, NDArray]:
+    """Zenith hydrostatic and wet delays, Saastamoinen model in a standard atmosphere.
+
+    Pressure 1013.25 hPa (1 - 2.2557e-5 h)^5.2568, temperature 15 deg C - 6.5 K/km, water
+    vapour from ``humidity`` (relative, 0-1) - the same standard atmosphere as RTKLIB's
+    ``tropmodel``. Heights below 0 are taken as 0.
+
+    Returns
+    -------
+    zhd_m, zwd_m : ndarray, shape (...)
+    """
+    lat = np.radians(np.asarray(lat_deg, float))
+    h = np.maximum(np.asarray(h_m, float), 0.0)
+    pres = 1013.25 * np.power(1.0 - 2.2557e-5 * h, 5.2568)
+    temp = 15.0 - 6.5e-3 * h + 273.16
+    e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
+    zhd = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * h / 1e3)
+    zwd = 0.002277 * (1255.0 / temp + 0.05) * e
+    return zhd, zwd
+
+
+# Niell (1996), table 3: hydrostatic average and amplitude, wet; rows lat 15, 30, 45, 60, 75
+_NMF_LAT = np.array([15.0, 30.0, 45.0, 60.0, 75.0])
+_NMF_H_AVG = np.array(
+    [
+        [1.2769934e-3, 2.9153695e-3, 62.610505e-3],
+        [1.2683230e-3, 2.9152299e-3, 62.837393e-3],
+        [1.2465397e-3, 2.9288445e-3, 63.721774e-3],
+        [1.2196049e-3, 2.9022565e-3, 63.824265e-3],
+        [1.2045996e-3, 2.9024912e-3, 64.258455e-3],
+    ]
+)
+_NMF_H_AMP = np.array(
+    [
+        [0.0, 0.0, 0.0],
+        [1.2709626e-5, 2.1414979e-5, 9.0128400e-5],
+        [2.6523662e-5, 3.0160779e-5, 4.3497037e-5],
+        [3.4000452e-5, 7.2562722e-5, 84.795348e-5],
+        [4.1202191e-5, 11.723375e-5, 170.37206e-5],
+    ]
+)
+_NMF_WET = np.array(
+    [
+        [5.8021897e-4, 1.4275268e-3, 4.3472961e-2],
+        [5.6794847e-4, 1.5138625e-3, 4.6729510e-2],
+        [5.8118019e-4, 1.4572752e-3, 4.3908931e-2],
+        [5.9727542e-4, 1.5007428e-3, 4.4626982e-2],
+        [6.1641693e-4, 1.7599082e-3, 5.4736038e-2],
+    ]
+)
+_NMF_HEIGHT = (2.53e-5, 5.49e-3, 1.14e-3)
+
+
+def _marini(sin_el: NDArray, a: ArrayLike, b: ArrayLike, c: ArrayLike) -> NDArray:
+    a, b, c = (np.asarray(v, float) for v in (a, b, c))
+    return (1.0 + a / (1.0 + b / (1.0 + c))) / (sin_el + a / (sin_el + b / (sin_el + c)))
+
+
+def niell_mapping(
+    gps_s: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, el_deg: ArrayLike
+) -> tuple[NDArray, NDArray]:
+    """Niell (1996) hydrostatic and wet mapping functions.
+
+    Parameters
+    ----------
+    gps_s : array_like, shape (...)
+        Time (for the seasonal term; day of year counted on the GPS calendar).
+    lat_deg, h_m, el_deg : array_like, shape (...)
+
+    Returns
+    -------
+    m_dry, m_wet : ndarray, shape (...)
+        NaN where ``el_deg <= 0``.
+    """
+    t = np.asarray(gps_s, float)
+    lat = np.asarray(lat_deg, float)
+    el = np.radians(np.asarray(el_deg, float))
+    dt = gps_s_to_datetime64(t)
+    jan1 = dt.astype("datetime64[Y]").astype("datetime64[ns]")
+    doy = (dt - jan1) / np.timedelta64(1, "D") + 1.0
+    season = np.cos(2.0 * np.pi * (doy - 28.0) / 365.25 + np.where(lat < 0, np.pi, 0.0))
+    alat = np.abs(lat)
+
+    def interp(table: NDArray, k: int) -> NDArray:
+        return np.interp(alat, _NMF_LAT, table[:, k])
+
+    ah, bh, ch = (interp(_NMF_H_AVG, k) - interp(_NMF_H_AMP, k) * season for k in range(3))
+    aw, bw, cw = (interp(_NMF_WET, k) for k in range(3))
+    s = np.sin(el)
+    a_ht, b_ht, c_ht = (np.float64(v) for v in _NMF_HEIGHT)
+    dm = (1.0 / s - _marini(s, a_ht, b_ht, c_ht)) * np.asarray(h_m, float) / 1e3
+    m_dry = _marini(s, ah, bh, ch) + dm
+    m_wet = _marini(s, aw, bw, cw)
+    bad = el <= 0
+    return np.where(bad, np.nan, m_dry), np.where(bad, np.nan, m_wet)
+
+
+def troposphere_delay_m(
+    gps_s: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, el_deg: ArrayLike, humidity: float = 0.7
+) -> NDArray:
+    """Slant tropospheric delay: Saastamoinen zenith delays times Niell mapping, metres."""
+    zhd, zwd = saastamoinen_zenith_m(lat_deg, h_m, humidity)
+    m_dry, m_wet = niell_mapping(gps_s, lat_deg, h_m, el_deg)
+    return zhd * m_dry + zwd * m_wet
+
+
+# ------------------------------------------------------------------------- the range model
+@dataclass(frozen=True)
+class SatelliteStates:
+    """Satellite states at transmission time for one reception epoch (receiver-independent).
+
+    Attributes
+    ----------
+    gps_s : float
+        Reception epoch (receiver time tag).
+    sats : tuple of str
+    code : ndarray of str, shape (n_sat,)
+    pseudorange_m : ndarray, shape (n_sat,)
+    transmit_gps_s : ndarray, shape (n_sat,)
+    pos_ecef_m : ndarray, shape (n_sat, 3)
+        At transmission, in the Earth-fixed frame of the transmission instant.
+    sat_clock_m, relativity_m, group_delay_m : ndarray, shape (n_sat,)
+    freq_hz : ndarray, shape (n_sat,)
+    reason : ndarray of str, shape (n_sat,)
+        ``""`` when usable, otherwise why not (``"no pseudorange"``, an ephemeris
+        :class:`~predisat.ephemeris.Reason` name, ``"no group delay for C5X"``, ...).
+    """
+
+    gps_s: float
+    sats: tuple[str, ...]
+    code: NDArray
+    pseudorange_m: NDArray
+    transmit_gps_s: NDArray
+    pos_ecef_m: NDArray
+    sat_clock_m: NDArray
+    relativity_m: NDArray
+    group_delay_m: NDArray
+    freq_hz: NDArray
+    reason: NDArray
+
+
+@dataclass(frozen=True)
+class CorrectedRanges:
+    """Corrected pseudoranges of one epoch seen from an approximate receiver position.
+
+    Attributes
+    ----------
+    states : SatelliteStates
+    rx_ecef_m : ndarray, shape (3,)
+    sat_ecef_m : ndarray, shape (n_sat, 3)
+        Satellite at transmission, rotated into the Earth-fixed frame of reception.
+    range_m : ndarray, shape (n_sat,)
+        Geometric range from ``rx_ecef_m`` to ``sat_ecef_m``.
+    earth_rotation_m : ndarray, shape (n_sat,)
+        Change of the geometric range due to the rotation (Sagnac), for reports.
+    iono_m, tropo_m : ndarray, shape (n_sat,)
+        Slant delays (0 when the atmosphere is not applied).
+    az_deg, el_deg : ndarray, shape (n_sat,)
+    usable : ndarray of bool, shape (n_sat,)
+    reason : ndarray of str, shape (n_sat,)
+    """
+
+    states: SatelliteStates
+    rx_ecef_m: NDArray
+    sat_ecef_m: NDArray
+    range_m: NDArray
+    earth_rotation_m: NDArray
+    iono_m: NDArray
+    tropo_m: NDArray
+    az_deg: NDArray
+    el_deg: NDArray
+    usable: NDArray
+    reason: NDArray
+
+    @property
+    def corrected_m(self) -> NDArray:
+        """Pseudorange with every modelled term removed, shape (n_sat,)."""
+        s = self.states
+        return (
+            s.pseudorange_m
+            + s.sat_clock_m
+            + s.relativity_m
+            - s.group_delay_m
+            - self.iono_m
+            - self.tropo_m
+        )
+
+    def breakdown(self) -> dict[str, NDArray]:
+        """Every term in metres by name, for tables and plots."""
+        s = self.states
+        return {
+            "pseudorange_m": s.pseudorange_m,
+            "sat_clock_m": s.sat_clock_m,
+            "relativity_m": s.relativity_m,
+            "group_delay_m": s.group_delay_m,
+            "iono_m": self.iono_m,
+            "tropo_m": self.tropo_m,
+            "earth_rotation_m": self.earth_rotation_m,
+            "range_m": self.range_m,
+            "corrected_m": self.corrected_m,
+        }
+
+
+def _rotate_z(pos: NDArray, theta: NDArray) -> NDArray:
+    c, s = np.cos(theta), np.sin(theta)
+    x, y = pos[..., 0], pos[..., 1]
+    return np.stack([c * x + s * y, -s * x + c * y, pos[..., 2]], axis=-1)
+
+
+@dataclass(frozen=True)
+class RangeModel:
+    """Broadcast ephemeris, ionospheric coefficients and model settings.
+
+    Build with :meth:`from_rinex_nav`. ``glonass_k`` maps GLONASS ids to frequency channels
+    (from the navigation records; an observation header's slots may be merged in with
+    :meth:`with_glonass_slots`).
+    """
+
+    ephemeris: Ephemeris
+    iono: BroadcastIono = field(default_factory=BroadcastIono)
+    humidity: float = 0.7
+    glonass_k: Mapping[str, int] = field(default_factory=dict)
+    record_row: Mapping[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def from_rinex_nav(
+        cls,
+        paths: str | Path | Sequence[str | Path],
+        policy: ValidityPolicy | None = None,
+        humidity: float = 0.7,
+    ) -> RangeModel:
+        """Model from RINEX 2/3 navigation files (records merged, header coefficients)."""
+        eph = Ephemeris.from_rinex(paths, policy)
+        return cls.from_ephemeris(eph, BroadcastIono.from_rinex_nav(eph.sources), humidity)
+
+    @classmethod
+    def from_ephemeris(
+        cls, eph: Ephemeris, iono: BroadcastIono | None = None, humidity: float = 0.7
+    ) -> RangeModel:
+        """Model from an existing broadcast :class:`Ephemeris`."""
+        if eph.kind != "broadcast":
+            raise ValueError(
+                f"RangeModel needs a broadcast ephemeris (group delays), got {eph.kind}"
+            )
+        rows = {} if eph.kepler is None else {s: i for i, s in enumerate(eph.kepler.source)}
+        k: dict[str, int] = {}
+        if eph.glonass is not None and len(eph.glonass):
+            fn = eph.glonass.col("freq_num")
+            for s, v in zip(eph.glonass.sat, fn, strict=True):
+                if np.isfinite(v):
+                    k[str(s)] = int(v)
+        return cls(eph, iono or BroadcastIono(), humidity, k, rows)
+
+    def with_glonass_slots(self, slots: Mapping[str, int]) -> RangeModel:
+        """A copy whose GLONASS channels include ``slots`` (e.g. an observation header's)."""
+        return RangeModel(
+            self.ephemeris, self.iono, self.humidity, {**self.glonass_k, **slots}, self.record_row
+        )
+
+    def states(
+        self,
+        gps_s: float,
+        sats: Sequence[str],
+        pseudorange_m: ArrayLike,
+        codes: str | Sequence[str] = "C1C",
+    ) -> SatelliteStates:
+        """Satellite positions, clocks and group delays at transmission (no receiver needed).
+
+        Parameters
+        ----------
+        gps_s : float
+            Reception epoch as tagged by the receiver.
+        sats : sequence of str, length n_sat
+        pseudorange_m : array_like, shape (n_sat,)
+            NaN where absent.
+        codes : str or sequence of str
+            Observation code of each pseudorange (selects carrier and group delay).
+        """
+        sats = tuple(sats)
+        n = len(sats)
+        pr = np.asarray(pseudorange_m, float).reshape(n)
+        code = np.array([codes] * n if isinstance(codes, str) else list(codes), "<U3")
+        if code.shape != (n,):
+            raise ValueError(f"codes must be one code or one per satellite ({n}), got {codes!r}")
+        t_tx = gps_s - np.where(np.isfinite(pr), pr, 0.0) / C_MPS
+        # the clock varies by < 1e-11 s over the few ms of the first guess: one pass suffices
+        _, clk0, _ = self.ephemeris.evaluate(t_tx, sats)
+        clk0 = np.diagonal(clk0).copy()
+        t_tx = t_tx - np.nan_to_num(clk0)
+        pos3, clk3, st3 = self.ephemeris.evaluate(
+            np.concatenate([t_tx, t_tx - 0.5, t_tx + 0.5]), sats
+        )
+        idx = np.arange(n)
+        pos, clk = pos3[idx, idx], clk3[idx, idx]
+        vel = pos3[idx + 2 * n, idx] - pos3[idx + n, idx]  # central difference over 1 s
+        rel = np.where(
+            [s[0] == "R" for s in sats], 0.0, -2.0 * np.sum(pos * vel, axis=-1) / C_MPS**2
+        )
+        reason = np.array([Reason(int(r)).name for r in st3.reason[idx, idx]], object)
+        reason[reason == "OK"] = ""
+        freq = np.full(n, np.nan)
+        tgd = np.full(n, np.nan)
+        kep = self.ephemeris.kepler
+        for j, s in enumerate(sats):
+            freq[j] = carrier_frequency_hz(s, code[j], self.glonass_k.get(s))
+            if reason[j]:
+                continue
+            if s[0] == "R":
+                tgd[j] = 0.0
+            elif kep is not None and st3.record[j, j] in self.record_row:
+                row = self.record_row[st3.record[j, j]]
+                tgd[j] = group_delay_s(
+                    s, code[j], kep.col("tgd_s")[row], kep.col("aux26")[row], kep.col("aux20")[row]
+                )
+            if not np.isfinite(tgd[j]):
+                reason[j] = f"no broadcast group delay for {code[j] or 'this signal'}"
+            elif not np.isfinite(freq[j]):
+                reason[j] = f"unknown carrier of {code[j]}"
+        reason[~np.isfinite(pr)] = "no pseudorange"
+        return SatelliteStates(
+            gps_s,
+            sats,
+            code,
+            pr,
+            t_tx,
+            pos,
+            C_MPS * (clk - rel),
+            C_MPS * rel,
+            C_MPS * tgd,
+            freq,
+            reason.astype(str),
+        )
+
+    def correct(
+        self,
+        gps_s: float,
+        sats: Sequence[str],
+        pseudorange_m: ArrayLike,
+        rx_ecef_m: ArrayLike,
+        codes: str | Sequence[str] = "C1C",
+        states: SatelliteStates | None = None,
+        atmosphere: bool = True,
+    ) -> CorrectedRanges:
+        """Corrected pseudoranges and rotated satellite positions for one epoch.
+
+        Parameters
+        ----------
+        gps_s : float
+            Reception epoch (receiver time tag).
+        sats : sequence of str, length n_sat
+        pseudorange_m : array_like, shape (n_sat,)
+        rx_ecef_m : array_like, shape (3,)
+            Approximate receiver position (a few km is enough for the rotation; the
+            atmosphere and elevations need it within ~100 m).
+        codes : str or sequence of str
+            Observation code of each pseudorange.
+        states : SatelliteStates, optional
+            From :meth:`states` for the same epoch, to reuse across iterations.
+        atmosphere : bool
+            Apply ionosphere and troposphere (switch off while the position is unknown).
+
+        Returns
+        -------
+        CorrectedRanges
+        """
+        st = states if states is not None else self.states(gps_s, sats, pseudorange_m, codes)
+        rx = np.asarray(rx_ecef_m, float).reshape(3)
+        pos = st.pos_ecef_m
+        rng0 = np.linalg.norm(pos - rx, axis=-1)
+        rot, rng = pos, rng0
+        for _ in range(3):  # tau from the geometric range; converges to < 1 um in 2 passes
+            rot = _rotate_z(pos, OMEGA_E_RADPS * rng / C_MPS)
+            rng = np.linalg.norm(rot - rx, axis=-1)
+        n = len(st.sats)
+        reason = st.reason.astype(object).copy()
+        az = el = np.full(n, np.nan)
+        iono = tropo = np.zeros(n)
+        if np.linalg.norm(rx) > 6.0e6:
+            lat, lon, h = (float(v) for v in ecef_to_geodetic(rx))
+            enu = (rot - rx) @ enu_rotation(lat, lon).T
+            az, el, _ = enu_to_azel(enu)
+            if atmosphere:
+                tropo = troposphere_delay_m(gps_s, lat, h, el, self.humidity)
+                iono = np.zeros(n)
+                for letter in {s[0] for s in st.sats}:
+                    sel = np.array([s[0] == letter for s in st.sats])
+                    coef = self.iono.coefficients(letter)
+                    if coef is not None:
+                        d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef)
+                        iono[sel] = d * (F_L1_HZ / st.freq_hz[sel]) ** 2
+                below = el <= 0
+                reason[below & (reason == "")] = "below the horizon"
+                tropo = np.where(below, np.nan, tropo)
+        elif atmosphere:
+            raise ValueError(
+                "rx_ecef_m is not near the Earth's surface; pass atmosphere=False"
+                " until a first position is known"
+            )
+        usable = reason == ""
+        return CorrectedRanges(
+            st, rx, rot, rng, rng - rng0, iono, tropo, az, el, usable, reason.astype(str)
+        )

@@ -1,0 +1,756 @@
+"""RINEX 2.10-2.11 and 3.00-3.05 observation files: pseudoranges and the other observables.
+
+A small hand-written reader (the same choice as :mod:`predisat.rinex_nav`): every observable
+becomes one ``(n_epoch, n_sat)`` float array with NaN where absent, epochs become ``gps_s``, and
+nothing is dropped silently. Anomalies the reader can live with - an unknown observation code,
+an unreadable value, an epoch cut short by the end of the file, a satellite of a system without
+observation types - are listed in :attr:`Observations.problems` with the file, the line and the
+epoch; ``strict=True`` turns the first of them into a :class:`RinexObsError`.
+
+Supported: RINEX 2.10/2.11 (multi-line ``# / TYPES OF OBSERV``, satellite-list continuation
+lines for more than 12 satellites, event flags 1-6), RINEX 3.00-3.05 (``SYS / # / OBS TYPES``,
+``>`` epoch lines), plain or gzip-compressed. Event records (flags 2-5) are kept in
+:attr:`Observations.events`; header records following flag 4 may redefine the observation types,
+and the new types apply to the epochs that follow. Cycle-slip records (flag 6) are skipped and
+reported as events.
+
+The pseudorange used for single-frequency ranging is chosen per system from
+:data:`DEFAULT_PSEUDORANGE_PRIORITY` (see ``docs/observations.md``).
+"""
+
+from __future__ import annotations
+
+import gzip
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.fileerror import FileLineError
+from predisat.gnss_time import (
+    BDT_MINUS_GPST_S,
+    calendar_to_gps_s,
+    gps_minus_utc_s,
+    gps_s_to_datetime64,
+)
+
+__all__ = [
+    "DEFAULT_PSEUDORANGE_PRIORITY",
+    "ObsEvent",
+    "ObsHeader",
+    "ObsProblem",
+    "Observations",
+    "PseudorangeSelection",
+    "RinexObsError",
+    "read_rinex_obs",
+]
+
+DEFAULT_PSEUDORANGE_PRIORITY: Mapping[str, tuple[str, ...]] = {
+    "G": ("C1C", "C1", "C1W", "P1"),  # L1 C/A first; P(Y) on L1 shares the TGD reference
+    "J": ("C1C", "C1", "C1X"),  # QZSS L1 C/A
+    "E": ("C1C", "C1X", "C1B", "C1"),  # E1 (pilot, pilot+data, data; RINEX 2.11 "C1")
+    "C": ("C2I", "C2X", "C1I"),  # B1I (RINEX 3.02+ band 2; 3.00-3.01 wrote it as band 1)
+    "R": ("C1C", "C1"),  # G1 C/A
+    "I": ("C5A", "C5X"),  # NavIC L5 SPS
+}
+"""Pseudorange codes tried, in order, for single-frequency ranging, per system letter."""
+
+_SYSTEMS = "GRECJSI"
+# bands defined per system by RINEX 3.05 (table 4); attributes of the same table
+_BANDS = {"G": "125", "R": "12346", "E": "15678", "C": "125678", "J": "1256", "S": "15", "I": "59"}
+_ATTRIBUTES = set("ABCDEILMNPQSWXYZ")
+_V2_TYPES = re.compile(r"^[CPLDS][125678]$")
+# date (or blanks, allowed on event lines), two blanks, the flag, the satellite/record count
+_V2_EPOCH = re.compile(
+    r"^(?: [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d[ \d.]{11}| {26})  [0-6][ \d]{3}"
+)
+_FIELD = 16  # F14.3 value, I1 loss-of-lock indicator, I1 signal strength
+_GOOD_TAIL = {0, 14, 15}  # where a stripped line may end inside its last 16-character field
+
+
+class RinexObsError(FileLineError):
+    """A RINEX observation file that cannot be read; names the file, the line and the epoch."""
+
+
+@dataclass(frozen=True)
+class ObsProblem:
+    """An anomaly tolerated by the reader (strict mode raises it instead).
+
+    Attributes
+    ----------
+    path : str
+    line : int or None
+        1-based line number.
+    epoch_gps_s : float or None
+        The epoch concerned, when there is one.
+    what : str
+    """
+
+    path: str
+    line: int | None
+    epoch_gps_s: float | None
+    what: str
+
+    @property
+    def where(self) -> str:
+        """``"file, line N, epoch YYYY-MM-DDThh:mm:ss.sss GPST"``."""
+        where = self.path if self.line is None else f"{self.path}, line {self.line}"
+        return where + _epoch_text(self.epoch_gps_s)
+
+    def __str__(self) -> str:
+        return f"{self.where}: {self.what}"
+
+
+def _epoch_text(epoch_gps_s: float | None) -> str:
+    if epoch_gps_s is None or not np.isfinite(epoch_gps_s):
+        return ""
+    return f", epoch {str(gps_s_to_datetime64(epoch_gps_s))[:23]} GPST"
+
+
+@dataclass(frozen=True)
+class ObsEvent:
+    """An event record (epoch flags 2-6): moving, new site, header data, external event, slips.
+
+    Attributes
+    ----------
+    line : int
+    epoch_gps_s : float
+        NaN when the event line carries no date (allowed for flags 2-5).
+    flag : int
+    records : tuple of str
+        The special records that follow the event line, verbatim.
+    """
+
+    line: int
+    epoch_gps_s: float
+    flag: int
+    records: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ObsHeader:
+    """What the header says about the station, receiver and observables.
+
+    Attributes
+    ----------
+    version : float
+    file_system : str
+        ``"G"``, ``"R"``, ``"E"``, ``"C"``, ``"J"``, ``"S"``, ``"I"`` or ``"M"`` (mixed).
+    marker_name, receiver_type, receiver_version, antenna_type, program : str
+    approx_position_ecef_m : ndarray, shape (3,)
+        NaN when absent; all zeros in many smartphone files, meaning "unknown".
+    antenna_delta_hen_m : ndarray, shape (3,)
+        Antenna reference point above the marker: height, east, north.
+    obs_types : mapping of system letter to tuple of str
+        Observation codes per system, as declared (RINEX 2: the same list for every system).
+    interval_s : float
+        NaN when absent.
+    time_system : str
+        ``"GPS"``, ``"GLO"`` (UTC), ``"GAL"``, ``"BDT"``, ``"QZS"`` or ``"IRN"``.
+    glonass_slots : mapping of satellite id to frequency number
+    """
+
+    version: float
+    file_system: str
+    marker_name: str = ""
+    receiver_type: str = ""
+    receiver_version: str = ""
+    antenna_type: str = ""
+    program: str = ""
+    approx_position_ecef_m: NDArray = field(default_factory=lambda: np.full(3, np.nan))
+    antenna_delta_hen_m: NDArray = field(default_factory=lambda: np.zeros(3))
+    obs_types: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    interval_s: float = float("nan")
+    time_system: str = "GPS"
+    glonass_slots: Mapping[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PseudorangeSelection:
+    """One pseudorange per (epoch, satellite), chosen by a per-system priority list.
+
+    Attributes
+    ----------
+    pseudorange_m : ndarray, shape (n_epoch, n_sat)
+        NaN where none of the system's codes has a value.
+    code : ndarray of str, shape (n_epoch, n_sat)
+        The code used (``""`` where none).
+    """
+
+    pseudorange_m: NDArray
+    code: NDArray
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Contents of one RINEX observation file.
+
+    Attributes
+    ----------
+    path : str
+    header : ObsHeader
+    gps_s : ndarray, shape (n_epoch,)
+        Receiver-clock epochs converted to ``gps_s``.
+    sats : tuple of str
+        Satellites with at least one observation, sorted (``"G05"``, ``"R07"``, ...).
+    values : mapping of code to ndarray, shape (n_epoch, n_sat)
+        Observables in the file's units (m, cycles, Hz, dB-Hz), NaN where absent.
+    lli, snr : mapping of code to ndarray of int8, shape (n_epoch, n_sat)
+        Loss-of-lock indicator and signal-strength digit, 0 where blank.
+    epoch_flag : ndarray of int8, shape (n_epoch,)
+        0 OK, 1 power failure since the previous epoch.
+    rx_clock_offset_s : ndarray, shape (n_epoch,)
+        Receiver clock offset written on the epoch line, NaN where absent.
+    epoch_line : ndarray of int, shape (n_epoch,)
+        Line of each epoch record, for reports.
+    events : tuple of ObsEvent
+    problems : tuple of ObsProblem
+    """
+
+    path: str
+    header: ObsHeader
+    gps_s: NDArray
+    sats: tuple[str, ...]
+    values: Mapping[str, NDArray]
+    lli: Mapping[str, NDArray]
+    snr: Mapping[str, NDArray]
+    epoch_flag: NDArray
+    rx_clock_offset_s: NDArray
+    epoch_line: NDArray
+    events: tuple[ObsEvent, ...] = ()
+    problems: tuple[ObsProblem, ...] = ()
+
+    @classmethod
+    def from_rinex(
+        cls, path: str | Path, codes: Sequence[str] | None = None, strict: bool = False
+    ) -> Observations:
+        """Read a RINEX 2 or 3 observation file; see :func:`read_rinex_obs`."""
+        return read_rinex_obs(path, codes, strict)
+
+    @property
+    def codes(self) -> tuple[str, ...]:
+        """Observation codes held, in file order."""
+        return tuple(self.values)
+
+    def obs(self, code: str) -> NDArray:
+        """Values of one observation code, shape (n_epoch, n_sat); KeyError names the codes."""
+        if code not in self.values:
+            raise KeyError(f"{self.path}: no observation code {code!r}; it has {self.codes}")
+        return self.values[code]
+
+    def where(self, i_epoch: int) -> str:
+        """``"file, line N, epoch ... GPST"`` of epoch ``i_epoch``, for messages."""
+        return ObsProblem(self.path, int(self.epoch_line[i_epoch]), self.gps_s[i_epoch], "").where
+
+    def pseudorange(
+        self, priority: Mapping[str, Sequence[str]] | None = None
+    ) -> PseudorangeSelection:
+        """The single-frequency pseudorange of each (epoch, satellite).
+
+        Parameters
+        ----------
+        priority : mapping of system letter to codes, optional
+            Codes tried in order (default :data:`DEFAULT_PSEUDORANGE_PRIORITY`); systems absent
+            from the mapping get no pseudorange.
+        """
+        prio = DEFAULT_PSEUDORANGE_PRIORITY if priority is None else priority
+        n_t, n_s = len(self.gps_s), len(self.sats)
+        out = np.full((n_t, n_s), np.nan)
+        code = np.full((n_t, n_s), "", "<U3")
+        system = np.array([s[0] for s in self.sats])
+        for letter, wanted in prio.items():
+            cols = np.nonzero(system == letter)[0]
+            for c in wanted:
+                if c not in self.values or len(cols) == 0:
+                    continue
+                v = self.values[c][:, cols]
+                take = np.isnan(out[:, cols]) & np.isfinite(v)
+                out[:, cols] = np.where(take, v, out[:, cols])
+                code[:, cols] = np.where(take, c, code[:, cols])
+        return PseudorangeSelection(out, code)
+
+
+def _open_lines(path: Path) -> list[str]:
+    if not path.is_file():
+        raise RinexObsError(path, None, "no such file; check the path")
+    raw = path.read_bytes()
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise RinexObsError(
+                path, None, f"corrupt gzip data ({exc}); get the file again"
+            ) from exc
+    elif raw[:2] == b"\x1f\x9d":
+        raise RinexObsError(path, None, "Unix-compressed (.Z) file; decompress it first")
+    if raw[:5] in (b"1.0  ", b"3.0  ") and b"COMPACT RINEX" in raw[:200]:
+        raise RinexObsError(path, 1, "Hatanaka-compressed (CRINEX); expand it with crx2rnx")
+    return raw.decode("ascii", errors="replace").splitlines()
+
+
+def _float(text: str) -> float:
+    s = text.strip()
+    return float(s.replace("D", "E").replace("d", "E")) if s else float("nan")
+
+
+def _known_code(system: str, code: str, v3: bool) -> bool:
+    if not v3:
+        return bool(_V2_TYPES.match(code))
+    if len(code) != 3 or code[0] not in "CLDSX":
+        return False
+    if code[0] == "X":  # receiver channel numbers (RINEX 3.02+)
+        return code[1:] == "1 " or code[1] == "1"
+    return code[1] in _BANDS.get(system, "") and code[2] in _ATTRIBUTES
+
+
+class _Reader:
+    """State of one pass over a file (problems are collected or raised)."""
+
+    def __init__(self, path: Path, lines: list[str], codes: Sequence[str] | None, strict: bool):
+        self.path, self.lines, self.strict = path, lines, strict
+        self.codes = None if codes is None else set(codes)
+        self.problems: list[ObsProblem] = []
+        self.events: list[ObsEvent] = []
+
+    def problem(self, line: int | None, epoch: float | None, what: str) -> None:
+        if self.strict:
+            raise RinexObsError(
+                self.path,
+                line,
+                what
+                + _epoch_text(epoch).replace(",", " (at", 1)
+                + (")" if _epoch_text(epoch) else ""),
+            )
+        self.problems.append(ObsProblem(str(self.path), line, epoch, what))
+
+    # --------------------------------------------------------------------- header
+    def header(self) -> tuple[ObsHeader, int, dict[str, int]]:
+        lines, path = self.lines, self.path
+        if not lines or "RINEX VERSION / TYPE" not in lines[0]:
+            raise RinexObsError(path, 1, "first line is not a 'RINEX VERSION / TYPE' header line")
+        try:
+            version = float(lines[0][:9])
+        except ValueError:
+            raise RinexObsError(path, 1, f"unreadable RINEX version {lines[0][:9]!r}") from None
+        if lines[0][20:21].upper() != "O":
+            raise RinexObsError(path, 1, "not an observation file (file type is not 'O')")
+        if not 2.0 <= version < 4.0:
+            raise RinexObsError(path, 1, f"RINEX {version} observation files are not supported")
+        file_system = lines[0][40:41].upper().strip() or "G"
+        kw: dict = {}
+        types: dict[str, list[str]] = {}
+        type_line: dict[str, int] = {}
+        slots: dict[str, int] = {}
+        v2_types: list[str] = []
+        last_sys = ""
+        time_sys = ""
+        for i, line in enumerate(lines):
+            label = line[60:].strip()
+            if label == "END OF HEADER":
+                first = i + 1
+                break
+            try:
+                if label == "MARKER NAME":
+                    kw["marker_name"] = line[:60].strip()
+                elif label == "REC # / TYPE / VERS":
+                    kw["receiver_type"] = line[20:40].strip()
+                    kw["receiver_version"] = line[40:60].strip()
+                elif label == "ANT # / TYPE":
+                    kw["antenna_type"] = line[20:40].strip()
+                elif label == "PGM / RUN BY / DATE":
+                    kw["program"] = line[:20].strip()
+                elif label == "APPROX POSITION XYZ":
+                    kw["approx_position_ecef_m"] = np.array(
+                        [_float(line[k : k + 14]) for k in (0, 14, 28)]
+                    )
+                elif label == "ANTENNA: DELTA H/E/N":
+                    kw["antenna_delta_hen_m"] = np.array(
+                        [_float(line[k : k + 14]) for k in (0, 14, 28)]
+                    )
+                elif label == "INTERVAL":
+                    kw["interval_s"] = _float(line[:10])
+                elif label == "TIME OF FIRST OBS":
+                    time_sys = line[48:51].strip()
+                elif label == "# / TYPES OF OBSERV":
+                    v2_types += [line[k : k + 6].strip() for k in range(6, 60, 6)]
+                    v2_types = [t for t in v2_types if t]
+                    type_line.setdefault("*", i + 1)
+                elif label == "SYS / # / OBS TYPES":
+                    if line[0].strip():
+                        last_sys = line[0].upper()
+                        types[last_sys] = []
+                        type_line[last_sys] = i + 1
+                    if not last_sys:
+                        raise ValueError("continuation line before any system")
+                    types[last_sys] += [line[k : k + 3].strip() for k in range(7, 59, 4)]
+                    types[last_sys] = [t for t in types[last_sys] if t]
+                elif label == "GLONASS SLOT / FRQ #":
+                    for k in range(4, 60, 7):
+                        sat = line[k : k + 3].strip()
+                        if sat:
+                            slots[f"R{int(sat[1:]):02d}"] = int(line[k + 3 : k + 6])
+            except ValueError as exc:
+                raise RinexObsError(path, i + 1, f"unreadable {label!r} record ({exc})") from None
+        else:
+            raise RinexObsError(path, len(lines), "no 'END OF HEADER' line: the file is truncated")
+        v3 = version >= 3.0
+        if not v3:
+            if not v2_types:
+                raise RinexObsError(path, first, "no '# / TYPES OF OBSERV' record in the header")
+            letters = _SYSTEMS if file_system == "M" else file_system
+            types = {s: list(v2_types) for s in letters}
+            type_line = {s: type_line["*"] for s in letters}
+        elif not types:
+            raise RinexObsError(path, first, "no 'SYS / # / OBS TYPES' record in the header")
+        default_ts = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS", "I": "IRN"}
+        kw["time_system"] = time_sys or default_ts.get(file_system, "GPS")
+        head = ObsHeader(
+            version,
+            file_system,
+            obs_types={s: tuple(t) for s, t in types.items()},
+            glonass_slots=slots,
+            **kw,
+        )
+        self.check_codes(head.obs_types, type_line, v3)
+        return head, first, type_line
+
+    def check_codes(self, obs_types: Mapping[str, tuple[str, ...]], where: dict, v3: bool) -> None:
+        for s, tt in obs_types.items():
+            if s not in _SYSTEMS:
+                self.problem(where.get(s), None, f"unknown satellite system {s!r} in the header")
+            bad = [t for t in tt if not _known_code(s, t, v3)]
+            if bad and (v3 or s == next(iter(obs_types))):
+                self.problem(
+                    where.get(s),
+                    None,
+                    f"unknown observation code(s) {', '.join(bad)} for system {s}: kept as"
+                    " columns, never used for ranging; check the producer's RINEX version",
+                )
+
+    # --------------------------------------------------------------------- body
+    def to_gps_s(self, cal: tuple[int, int, int, int, int, float], ts: str) -> float:
+        t = float(calendar_to_gps_s(*cal))
+        if ts == "GLO":
+            return t + float(gps_minus_utc_s(t))
+        if ts == "BDT":
+            return t - BDT_MINUS_GPST_S
+        return t
+
+    def parse_epoch(self, line: str, v3: bool) -> tuple[tuple | None, int, int, float]:
+        """(calendar or None, flag, count, clock offset); ValueError when malformed."""
+        if v3:
+            if not line.startswith(">"):
+                raise ValueError("epoch line does not start with '>'")
+            date, flag, count = line[2:29], int(line[31:32]), int(line[32:35] or 0)
+            clock = _float(line[41:56]) if len(line) > 41 else float("nan")
+        else:
+            if not _V2_EPOCH.match(line):
+                raise ValueError("not an epoch line")
+            date, flag, count = line[1:26], int(line[28]), int(line[29:32] or 0)
+            clock = _float(line[68:80]) if len(line) > 68 else float("nan")
+        if not date.strip():
+            if flag < 2:
+                raise ValueError("epoch line without a date")
+            return None, flag, count, clock
+        parts = date.split()
+        y, mo, d, h, mi = (int(p) for p in parts[:5])
+        s = float(parts[5])
+        if not v3:
+            y += 1900 if y >= 80 else 2000
+        if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and s < 61):
+            raise ValueError("date out of range")
+        return (y, mo, d, h, mi, s), flag, count, clock
+
+    def body(self, head: ObsHeader, first: int) -> dict:
+        lines, n = self.lines, len(self.lines)
+        v3 = head.version >= 3.0
+        types = {s: list(t) for s, t in head.obs_types.items()}
+        ts = head.time_system
+        default_sys = "G" if head.file_system == "M" else head.file_system
+        rows: list[tuple[int, str, str, str, int]] = []  # epoch index, sat, system, text, line
+        epochs: list[tuple[float, int, float, int]] = []  # gps_s, flag, clock, line
+        types_at: list[dict[str, list[str]]] = []
+        i = first
+        while i < n:
+            line = lines[i]
+            if not line.strip():
+                i += 1
+                continue
+            try:
+                cal, flag, count, clock = self.parse_epoch(line, v3)
+            except (ValueError, IndexError):
+                self.problem(
+                    i + 1,
+                    None,
+                    f"expected an epoch line, found {line[:40]!r}; skipped"
+                    " up to the next epoch line",
+                )
+                i += 1
+                while i < n and not self._looks_like_epoch(lines[i], v3):
+                    i += 1
+                continue
+            t = float("nan") if cal is None else self.to_gps_s(cal, ts)
+            if 2 <= flag <= 5:
+                recs = tuple(lines[i + 1 : i + 1 + count])
+                if len(recs) < count:
+                    self.problem(
+                        i + 1,
+                        t,
+                        f"event record announces {count} lines, the file"
+                        f" ends after {len(recs)}: the file is truncated",
+                    )
+                self.events.append(ObsEvent(i + 1, t, flag, recs))
+                if flag == 4:
+                    types = self._redefine(types, recs, i + 2, v3, default_sys)
+                i += 1 + count
+                continue
+            sats, j = self._sat_list(line, count, i, v3, default_sys, t)
+            if sats is None:
+                break  # truncated satellite list: reported, nothing more to read
+            per_sat = (
+                [1] * count if v3 else [max(1, -(-len(types.get(s[0], [])) // 5)) for s in sats]
+            )
+            need = sum(per_sat)
+            if j + need > n or (v3 and any(lines[k].startswith(">") for k in range(j, j + need))):
+                got = sum(1 for k in range(j, min(n, j + need)) if not lines[k].startswith(">"))
+                self.problem(
+                    i + 1,
+                    t,
+                    f"epoch record has {got} of {need} observation lines:"
+                    " the file is truncated or a line is missing; epoch dropped",
+                )
+                i = j + got
+                continue
+            if flag == 6:
+                self.events.append(ObsEvent(i + 1, t, 6, tuple(lines[j : j + need])))
+                i = j + need
+                continue
+            e = len(epochs)
+            epochs.append((t, flag, clock, i + 1))
+            types_at.append(types)
+            k = j
+            for s, m in zip(sats if not v3 else [None] * count, per_sat, strict=True):
+                if v3:
+                    s = self._sat_id(lines[k][:3], default_sys)
+                    text = lines[k][3:]
+                else:
+                    text = "".join(lines[k + q][:80].ljust(80) for q in range(m))
+                    for q in range(m):
+                        if len(lines[k + q].rstrip()) % _FIELD not in _GOOD_TAIL:
+                            self.problem(
+                                k + q + 1,
+                                t,
+                                f"observation line of {s} ends inside a"
+                                " 16-character field: cut short or misaligned",
+                            )
+                assert s is not None
+                rows.append((e, s, s[0] if s else "", text, k + 1))
+                k += m
+            i = k
+        return {"rows": rows, "epochs": epochs, "types_at": types_at}
+
+    def _looks_like_epoch(self, line: str, v3: bool) -> bool:
+        return line.startswith(">") if v3 else bool(_V2_EPOCH.match(line))
+
+    def _sat_id(self, text: str, default_sys: str) -> str | None:
+        letter = text[0].upper() if text[:1].strip() else default_sys
+        try:
+            return f"{letter}{int(text[1:3]):02d}"
+        except ValueError:
+            return None
+
+    def _sat_list(self, line, count, i, v3, default_sys, t) -> tuple[list | None, int]:
+        if v3:
+            return [], i + 1
+        lines, n = self.lines, len(self.lines)
+        text = line[32:68]
+        j = i + 1
+        while len(text) < 3 * count:
+            if j >= n:
+                self.problem(
+                    i + 1,
+                    t,
+                    "satellite list continues past the end of the file: the file is truncated",
+                )
+                return None, j
+            text = text.ljust(36 * ((len(text) + 35) // 36)) + lines[j][32:68]
+            j += 1
+        sats = []
+        for k in range(count):
+            s = self._sat_id(text[3 * k : 3 * k + 3], default_sys)
+            if s is None:
+                self.problem(i + 1, t, f"unreadable satellite {text[3 * k : 3 * k + 3]!r}")
+                s = "?00"
+            sats.append(s)
+        return sats, j
+
+    def _redefine(self, types, recs, line0, v3, default_sys):
+        """Observation types after a flag-4 event whose header records redefine them."""
+        found: dict[str, list[str]] = {}
+        last = ""
+        for r in recs:
+            label = r[60:].strip()
+            if label == "# / TYPES OF OBSERV":
+                found.setdefault("*", [])
+                found["*"] += [x for x in (r[q : q + 6].strip() for q in range(6, 60, 6)) if x]
+            elif label == "SYS / # / OBS TYPES":
+                if r[0].strip():
+                    last = r[0].upper()
+                    found[last] = []
+                found.setdefault(last, [])
+                found[last] += [x for x in (r[q : q + 3].strip() for q in range(7, 59, 4)) if x]
+        if not found:
+            return types
+        new = {s: list(t) for s, t in types.items()}
+        if "*" in found:
+            new = {s: list(found["*"]) for s in (new or {default_sys: []})}
+        new.update({s: v for s, v in found.items() if s != "*"})
+        self.check_codes({s: tuple(v) for s, v in new.items()}, dict.fromkeys(new, line0), v3)
+        return new
+
+
+def _assemble(reader: _Reader, head: ObsHeader, parsed: dict) -> Observations:
+    rows, epochs, types_at = parsed["rows"], parsed["epochs"], parsed["types_at"]
+    n_t = len(epochs)
+    gps_s = np.array([e[0] for e in epochs], float)
+    sats = tuple(sorted({r[1] for r in rows if r[1] and r[1][0] in _SYSTEMS}))
+    col = {s: k for k, s in enumerate(sats)}
+    v3 = head.version >= 3.0
+    start_code_order: list[str] = []
+    for tt in [head.obs_types, *types_at]:
+        for lst in tt.values():
+            for c in lst:
+                if c not in start_code_order and (reader.codes is None or c in reader.codes):
+                    start_code_order.append(c)
+    values = {c: np.full((n_t, len(sats)), np.nan) for c in start_code_order}
+    lli = {c: np.zeros((n_t, len(sats)), np.int8) for c in start_code_order}
+    snr = {c: np.zeros((n_t, len(sats)), np.int8) for c in start_code_order}
+    reported_sys: set[str] = set()
+    for e, sat, system, text, lineno in rows:
+        t = gps_s[e]
+        if sat not in col:
+            if system not in reported_sys:
+                reported_sys.add(system)
+                reader.problem(
+                    lineno,
+                    t,
+                    f"satellite {sat!r} of an unknown system; its observations are ignored",
+                )
+            continue
+        tt = types_at[e].get(system)
+        if tt is None:
+            if system not in reported_sys:
+                reported_sys.add(system)
+                reader.problem(
+                    lineno,
+                    t,
+                    f"satellite {sat} of system {system}, which has no"
+                    " observation types in the header; its observations are ignored",
+                )
+            continue
+        stripped = text.rstrip() if v3 else text
+        if v3:
+            tail = len(stripped) % _FIELD
+            if tail not in _GOOD_TAIL or len(stripped) > _FIELD * len(tt):
+                reader.problem(
+                    lineno,
+                    t,
+                    f"observation line of {sat} ends inside a 16-character"
+                    " field or is too long: cut short or misaligned; kept the"
+                    " complete fields",
+                )
+        j = col[sat]
+        for k, c in enumerate(tt):
+            if c not in values:
+                continue
+            if v3:
+                f = stripped[_FIELD * k : _FIELD * (k + 1)]
+            else:
+                q, r = divmod(k, 5)
+                f = text[80 * q + _FIELD * r : 80 * q + _FIELD * (r + 1)]
+            if not f.strip():
+                continue
+            if v3 and len(f) < 14 and k == len(stripped) // _FIELD:
+                continue  # the cut field reported above
+            try:
+                if f[:14].strip():
+                    values[c][e, j] = float(f[:14])
+                if f[14:15].strip():
+                    lli[c][e, j] = int(f[14])
+                if f[15:16].strip():
+                    snr[c][e, j] = int(f[15])
+            except ValueError:
+                reader.problem(lineno, t, f"{sat} {c}: unreadable field {f!r}; left empty")
+    bad = np.nonzero(np.diff(gps_s) <= 0)[0] + 1
+    for b in bad:
+        reader.problem(epochs[b][3], gps_s[b], "epoch not after the previous one; kept")
+    _report_unknown_values(reader, head, values, gps_s, epochs, v3)
+    return Observations(
+        str(reader.path),
+        head,
+        gps_s,
+        sats,
+        values,
+        lli,
+        snr,
+        np.array([e[1] for e in epochs], np.int8),
+        np.array([e[2] for e in epochs], float),
+        np.array([e[3] for e in epochs], np.int64),
+        tuple(reader.events),
+        tuple(reader.problems),
+    )
+
+
+def _report_unknown_values(reader, head, values, gps_s, epochs, v3) -> None:
+    for s, tt in head.obs_types.items():
+        for c in tt:
+            if _known_code(s, c, v3) or c not in values:
+                continue
+            has = np.nonzero(np.any(np.isfinite(values[c]), axis=1))[0]
+            if len(has):
+                reader.problems.append(
+                    ObsProblem(
+                        str(reader.path),
+                        int(epochs[has[0]][3]),
+                        float(gps_s[has[0]]),
+                        f"unknown code {c} ({s}) has values in {len(has)}"
+                        " epoch(s), first here; not used for ranging",
+                    )
+                )
+
+
+def read_rinex_obs(
+    path: str | Path, codes: Sequence[str] | None = None, strict: bool = False
+) -> Observations:
+    """Read a RINEX 2 or 3 observation file.
+
+    Parameters
+    ----------
+    path : str or Path
+        Plain or gzip-compressed RINEX 2.10/2.11/3.0x observation file.
+    codes : sequence of str, optional
+        Observation codes to keep (default: all); keeps memory small for long files.
+    strict : bool
+        Raise :class:`RinexObsError` at the first anomaly instead of listing it in
+        :attr:`Observations.problems`.
+
+    Returns
+    -------
+    Observations
+
+    Raises
+    ------
+    RinexObsError
+        If the file is missing, not an observation file, has an unreadable header, or (strict)
+        any anomaly: truncated epoch, unknown code, unreadable value, stray line.
+    """
+    path = Path(path)
+    reader = _Reader(path, _open_lines(path), codes, strict)
+    head, first, _ = reader.header()
+    parsed = reader.body(head, first)
+    if not parsed["epochs"]:
+        reader.problem(first + 1, None, "no observation epoch in the file")
+    return _assemble(reader, head, parsed)

@@ -1,0 +1,239 @@
+"""Single-frequency model: every term against published values or an independent computation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from locator.corrections import (
+    OMEGA_E_RADPS,
+    BroadcastIono,
+    RangeModel,
+    carrier_frequency_hz,
+    group_delay_s,
+    klobuchar_delay_m,
+    niell_mapping,
+    saastamoinen_zenith_m,
+    troposphere_delay_m,
+)
+from locator.observations import read_rinex_obs
+from predisat.gnss_time import calendar_to_gps_s
+from predisat.rinex_nav import read_rinex_nav
+
+C = 299792458.0
+NAV = "gnss_obs/07590920_0000_0200.05n"
+OBS = "gnss_obs/07590920_10ep.05o"
+STATION = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759, SOURCE.md
+
+# RTKLIB test/utest/t_atmos.c (v2.4.2): ionmodel(), tropmodel(), tropmapf() reference values
+RTK_ION = ([0.2e-7, -0.8e-8, -0.5e-7, 0.1e-6], [0.2e6, 0.2e6, -0.1e6, -0.1e7])
+RTK_IONO_CASES = [
+    # (hour of 2007-01-16, lat, lon, az, el, delay m)
+    (1, 35, 140, 60, 75, 6.73590532099438),
+    (1, -80, -170, 60, 75, 3.56895382197387),
+    (1, 10, 30, 60, 75, 3.80716435655161),
+    (13, 35, 140, 60, 75, 5.21796954585452),
+    (22, 35, 140, 60, 75, 5.90190539264777),
+    (1, 35, 140, 190, 3, 21.6345415123632),
+    (1, 35, 140, 350, 60, 7.33844278822561),
+    (1, 35, 140, 0, 90, 6.58339711400694),
+]
+
+
+@pytest.fixture(scope="module")
+def model(test_data: Path) -> RangeModel:
+    return RangeModel.from_rinex_nav(test_data / NAV)
+
+
+@pytest.mark.parametrize(("hour", "lat", "lon", "az", "el", "expected"), RTK_IONO_CASES)
+def test_klobuchar_matches_rtklib(hour, lat, lon, az, el, expected) -> None:
+    t = calendar_to_gps_s(2007, 1, 16, hour)
+    got = klobuchar_delay_m(t, lat, lon, az, el, *RTK_ION)
+    assert got == pytest.approx(expected, abs=1e-8)
+
+
+def test_klobuchar_vectorised_and_zero_below_horizon() -> None:
+    t = calendar_to_gps_s(2007, 1, 16, 1)
+    cases = np.array([c[1:5] for c in RTK_IONO_CASES if c[0] == 1], float)
+    got = klobuchar_delay_m(t, cases[:, 0], cases[:, 1], cases[:, 2], cases[:, 3], *RTK_ION)
+    want = [c[5] for c in RTK_IONO_CASES if c[0] == 1]
+    np.testing.assert_allclose(got, want, atol=1e-8)
+    assert klobuchar_delay_m(t, 35, 140, 60, -5, *RTK_ION) == 0.0
+
+
+def test_saastamoinen_matches_rtklib_and_zenith_magnitude() -> None:
+    # RTKLIB tropmodel maps with 1/sin(el): 2.44799870144088 m at el 75, lat 35, h 100, 50 %
+    zhd, zwd = saastamoinen_zenith_m(35.0, 100.0, humidity=0.5)
+    assert (zhd + zwd) / np.sin(np.radians(75.0)) == pytest.approx(2.44799870144088, abs=1e-8)
+    zhd, zwd = saastamoinen_zenith_m(-80.0, 1000.0, humidity=0.5)
+    assert (zhd + zwd) / np.sin(np.radians(75.0)) == pytest.approx(2.17295817298152, abs=1e-8)
+    # standard atmosphere at sea level: about 2.3 m hydrostatic plus 0.1-0.2 m wet
+    zhd, zwd = saastamoinen_zenith_m(45.0, 0.0)
+    assert 2.25 < zhd < 2.35 and 0.05 < zwd < 0.25 and 2.3 < zhd + zwd < 2.5
+
+
+@pytest.mark.parametrize(
+    ("date", "lat", "h", "el", "dry", "wet"),
+    [
+        ((2007, 1, 16, 6), 35, 100, 75, 1.035184526466435, 1.035233787448654),
+        ((2007, 1, 16, 6), 35, 100, 3, 14.643271711748200, 16.455045694559484),
+        ((2007, 1, 16, 6), 35, 100, 60, 1.154226397147367, 1.154481126139610),
+        ((2007, 1, 16, 6), 35, 100, 90, 1.0, 1.0),
+        ((2030, 12, 31, 23, 59, 59), 35, 100, 75, 1.035184415128022, 1.035233787448654),
+        ((2007, 1, 16, 6), -80, 1000, 75, 1.035186155749051, 1.035230548304367),
+        ((2007, 1, 16, 6), 10, 0, 75, 1.035181919429758, 1.035233200318210),
+    ],
+)
+def test_niell_matches_rtklib(date, lat, h, el, dry, wet) -> None:
+    m_dry, m_wet = niell_mapping(calendar_to_gps_s(*date), lat, h, el)
+    assert m_dry == pytest.approx(dry, abs=1e-8) and m_wet == pytest.approx(wet, abs=1e-8)
+
+
+def test_troposphere_slant_grows_and_is_nan_below_horizon() -> None:
+    t = calendar_to_gps_s(2020, 6, 1)
+    d = troposphere_delay_m(t, 50.0, 200.0, np.array([90.0, 30.0, 10.0, 5.0, -1.0]))
+    assert np.all(np.diff(d[:4]) > 0) and np.isnan(d[4])
+    assert d[1] == pytest.approx(d[0] / np.sin(np.radians(30.0)), rel=0.01)
+
+
+def test_iono_coefficients_from_rinex2_and_rinex3_headers(test_data: Path) -> None:
+    r2 = BroadcastIono.from_rinex_nav(test_data / NAV)
+    # lines 8-9: "1.1180D-08  1.4900D-08 -5.9600D-08 -5.9600D-08" and "8.8060D+04 ..."
+    np.testing.assert_array_equal(r2.gps_alpha, [1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8])
+    np.testing.assert_array_equal(r2.gps_beta, [8.806e4, 1.638e4, -1.966e5, -1.311e5])
+    assert r2.source.endswith(":8") and r2.bds_alpha is None
+    r3 = BroadcastIono.from_rinex_nav(
+        test_data / "gnss/rinex_nav_BRDM00DLR_S_20230730000_01D_MN.rnx"
+    )
+    np.testing.assert_array_equal(r3.gps_alpha, [2.6077e-08, 7.4506e-09, -1.1921e-07, 0.0])
+    np.testing.assert_array_equal(r3.bds_beta, [1.1878e05, 3.2768e04, 7.8643e05, -7.8643e05])
+    np.testing.assert_array_equal(r3.gal_ai, [1.3875e02, 1.2891e-01, 1.8494e-02])
+    coef_c = r3.coefficients("C")
+    coef_e = r3.coefficients("E")
+    assert coef_c is not None and coef_e is not None
+    assert coef_c[0] is r3.bds_alpha and coef_e[0] is r3.gps_alpha
+    assert BroadcastIono().coefficients("G") is None
+
+
+def test_carrier_frequencies() -> None:
+    assert carrier_frequency_hz("G05", "C1C") == 1575.42e6
+    assert carrier_frequency_hz("G05", "P2") == 1227.60e6
+    assert carrier_frequency_hz("C11", "C2I") == 1561.098e6
+    assert carrier_frequency_hz("C11", "C1I") == 1561.098e6  # RINEX 3.01 name of B1I
+    assert carrier_frequency_hz("R02", "C1C", glonass_k=-4) == 1602e6 - 4 * 0.5625e6
+    assert np.isnan(carrier_frequency_hz("R02", "C1C"))
+    assert np.isnan(carrier_frequency_hz("G05", "C7Q"))
+
+
+def test_group_delay_rules() -> None:
+    tgd, aux26 = 2e-9, 3e-9
+    assert group_delay_s("G01", "C1C", tgd, np.nan, np.nan) == tgd
+    assert group_delay_s("G01", "C2W", tgd, np.nan, np.nan) == pytest.approx(
+        (1575.42 / 1227.60) ** 2 * tgd
+    )
+    inav, fnav = 517.0, 258.0  # data-source words: I/NAV E1-B (bits 0, 9) / F/NAV (bits 1, 8)
+    assert group_delay_s("E11", "C1C", tgd, aux26, inav) == aux26  # BGD E1/E5b
+    assert group_delay_s("E11", "C1C", tgd, aux26, fnav) == tgd  # BGD E1/E5a
+    assert group_delay_s("E11", "C5Q", tgd, aux26, fnav) == pytest.approx(
+        (1575.42 / 1176.45) ** 2 * tgd
+    )
+    assert np.isnan(group_delay_s("E11", "C5Q", tgd, aux26, inav))
+    assert group_delay_s("C11", "C2I", tgd, aux26, np.nan) == tgd  # TGD1 on B1I
+    assert group_delay_s("C11", "C7I", tgd, aux26, np.nan) == aux26  # TGD2 on B2I
+    assert group_delay_s("C11", "C6I", tgd, aux26, np.nan) == 0.0  # B3I is the reference
+    assert group_delay_s("R01", "C1C", np.nan, np.nan, np.nan) == 0.0
+
+
+def _first_epoch(test_data: Path):
+    obs = read_rinex_obs(test_data / OBS)
+    sel = obs.pseudorange()
+    have = np.isfinite(sel.pseudorange_m[0])
+    sats = [s for s, h in zip(obs.sats, have, strict=True) if h]
+    return float(obs.gps_s[0]), sats, sel.pseudorange_m[0, have], list(sel.code[0, have])
+
+
+def test_clock_split_relativity_and_tgd(model: RangeModel, test_data: Path) -> None:
+    t, sats, pr, codes = _first_epoch(test_data)
+    st = model.states(t, sats, pr, codes)
+    assert np.all(st.reason == "")
+    # the split is exact: clock polynomial + relativity = the ephemeris clock
+    _, clk, _ = model.ephemeris.evaluate(st.transmit_gps_s, sats)
+    np.testing.assert_allclose(st.sat_clock_m + st.relativity_m, C * np.diagonal(clk), atol=1e-6)
+    # transmission time: receiver tag minus the travel time read by the satellite clock
+    np.testing.assert_allclose(st.transmit_gps_s, t - pr / C - np.diagonal(clk), atol=1e-12)
+    # relativity against the ICD formula F e sqrt(A) sin(E), Kepler solved here by bisection
+    nav = read_rinex_nav(test_data / NAV).kepler
+    mu, f_rel = 3.986005e14, -4.442807633e-10
+    for j, s in enumerate(sats):
+        rows = np.nonzero(nav.sat == s)[0]
+        r = rows[np.argmin(np.abs(nav.ref_gps_s[rows] - st.transmit_gps_s[j]))]
+        e, sqrt_a = nav.col("e")[r], nav.col("sqrt_a_sqrtm")[r]
+        n = np.sqrt(mu / sqrt_a**6) + nav.col("delta_n_radps")[r]
+        m = nav.col("m0_rad")[r] + n * (st.transmit_gps_s[j] - nav.ref_gps_s[r])
+        lo, hi = m - 1.0, m + 1.0
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if mid - e * np.sin(mid) < m else (lo, mid)
+        icd = C * f_rel * e * sqrt_a * np.sin(0.5 * (lo + hi))
+        assert st.relativity_m[j] == pytest.approx(icd, abs=0.02), s
+    assert np.max(np.abs(st.relativity_m)) > 1.0  # metres, eccentricities ~0.01
+    # G07: TGD -2.328306436540D-09 s on line 51 of the excerpt
+    g07 = sats.index("G07")
+    assert st.group_delay_m[g07] == pytest.approx(C * -2.328306436540e-09, abs=1e-9)
+
+
+def test_earth_rotation_matches_first_order_sagnac(model: RangeModel, test_data: Path) -> None:
+    t, sats, pr, codes = _first_epoch(test_data)
+    cr = model.correct(t, sats, pr, STATION, codes)
+    pos = cr.states.pos_ecef_m
+    sagnac = OMEGA_E_RADPS * (pos[:, 0] * STATION[1] - pos[:, 1] * STATION[0]) / C
+    np.testing.assert_allclose(cr.earth_rotation_m, sagnac, atol=0.01)
+    assert 10.0 < np.max(np.abs(cr.earth_rotation_m)) < 40.0
+    # the rotated position is the satellite at transmission seen in the reception frame
+    np.testing.assert_allclose(np.linalg.norm(cr.sat_ecef_m, axis=1), np.linalg.norm(pos, axis=1))
+    np.testing.assert_allclose(cr.sat_ecef_m[:, 2], pos[:, 2])
+
+
+def test_corrected_ranges_close_the_budget(model: RangeModel, test_data: Path) -> None:
+    t, sats, pr, codes = _first_epoch(test_data)
+    cr = model.correct(t, sats, pr, STATION, codes)
+    assert np.all(cr.iono_m > 0.5) and np.all(cr.iono_m < 30.0)
+    assert np.all(cr.tropo_m > 2.3) and np.all(cr.tropo_m < 30.0)
+    b = cr.breakdown()
+    total = b["pseudorange_m"] + b["sat_clock_m"] + b["relativity_m"] - b["group_delay_m"]
+    np.testing.assert_allclose(total - b["iono_m"] - b["tropo_m"], cr.corrected_m)
+    # at the known station every satellite above 10 deg shows the same receiver clock
+    res = cr.corrected_m - cr.range_m
+    high = cr.el_deg > 10.0
+    assert np.ptp(res[high]) < 3.0
+    # without atmosphere the spread is larger (the terms point the right way)
+    raw = model.correct(t, sats, pr, STATION, codes, atmosphere=False)
+    assert np.ptp((raw.corrected_m - raw.range_m)[high]) > np.ptp(res[high]) + 2.0
+
+
+def test_iono_and_group_delay_scale_with_the_signal(model: RangeModel, test_data: Path) -> None:
+    t, sats, pr, _ = _first_epoch(test_data)
+    l1 = model.correct(t, sats, pr, STATION, "C1C")
+    l2 = model.correct(t, sats, pr, STATION, "C2W")
+    gamma = (1575.42 / 1227.60) ** 2
+    np.testing.assert_allclose(l2.iono_m, gamma * l1.iono_m, rtol=1e-12)
+    np.testing.assert_allclose(l2.states.group_delay_m, gamma * l1.states.group_delay_m)
+
+
+def test_missing_navigation_and_unknown_signal_are_flagged(
+    model: RangeModel, test_data: Path
+) -> None:
+    t, sats, pr, codes = _first_epoch(test_data)
+    cr = model.correct(
+        t, [*sats, "G31", "E11"], [*pr, pr[0], pr[1]], STATION, [*codes, "C1", "C1C"]
+    )
+    assert cr.reason[-2] == "NO_DATA" and cr.reason[-1] == "NO_DATA"
+    assert not cr.usable[-2:].any() and cr.usable[:-2].sum() == len(sats)
+    odd = model.states(t, sats[:1], pr[:1], "C7Q")
+    assert "group delay" in odd.reason[0]
+    gone = model.states(t + 86400.0 * 3, sats[:1], pr[:1], "C1")
+    assert gone.reason[0] == "OUTSIDE_VALIDITY"
+    with pytest.raises(ValueError, match="atmosphere=False"):
+        model.correct(t, sats, pr, np.zeros(3), codes)

@@ -1,0 +1,259 @@
+"""RINEX observation reader: values against hand-read lines, events, and error reporting."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from locator.observations import RinexObsError, read_rinex_obs
+from predisat.gnss_time import calendar_to_gps_s
+
+OBS2 = "gnss_obs/07590920_10ep.05o"
+SEPT = "gnss_obs/rinex_obs_z_tracking.rnx"
+PIXEL = "gnss_obs/android_rinex_obs_pixel6_6ep.23o"
+MIXED = "gnss_obs/rinex_obs_rinex_obs_mixed_types.20o"
+
+
+def _lines(path: Path) -> list[str]:
+    return path.read_text().splitlines(keepends=True)
+
+
+def _write(path: Path, lines: list[str]) -> Path:
+    path.write_text("".join(lines))
+    return path
+
+
+def test_rinex2_values_match_hand_read_lines(test_data: Path) -> None:
+    obs = read_rinex_obs(test_data / OBS2)
+    h = obs.header
+    assert h.version == pytest.approx(2.10) and h.marker_name == "0759"
+    assert h.receiver_type == "TRIMBLE 5700" and h.interval_s == 30.0
+    assert h.obs_types["G"] == ("L1", "C1", "L2", "P2")
+    np.testing.assert_allclose(
+        h.approx_position_ecef_m, [-3976219.5082, 3382372.5671, 3652512.9849]
+    )
+    assert obs.problems == () and len(obs.gps_s) == 10
+    # line 18: " 05  4  2  0  0  0.0000000  0  8G 3G ..." on the GPS scale, then 30 s steps
+    t0 = calendar_to_gps_s(2005, 4, 2)
+    np.testing.assert_allclose(obs.gps_s, t0 + 30.0 * np.arange(10))
+    j = obs.sats.index("G03")
+    # line 19: "  55923622.160    24767686.375    43647388.2424   24767684.8224"
+    assert obs.obs("L1")[0, j] == 55923622.160
+    assert obs.obs("C1")[0, j] == 24767686.375
+    # the "4" after P2 and L2 sits in column 15: loss-of-lock bit 2, "under anti-spoofing"
+    assert obs.obs("P2")[0, j] == 24767684.822 and obs.lli["P2"][0, j] == 4
+    assert obs.lli["L2"][0, j] == 4 and obs.snr["P2"][0, j] == 0 and obs.lli["L1"][0, j] == 0
+    # the first epoch's list on line 18 (8 satellites)
+    seen = {s for s, v in zip(obs.sats, obs.obs("C1")[0], strict=True) if np.isfinite(v)}
+    assert seen == {"G03", "G07", "G08", "G11", "G19", "G20", "G24", "G28"}
+    assert obs.where(0).endswith("line 18, epoch 2005-04-02T00:00:00.000 GPST")
+
+
+def test_pseudorange_priority(test_data: Path) -> None:
+    sept = read_rinex_obs(test_data / SEPT)
+    sel = sept.pseudorange()
+    c01, g04 = sept.sats.index("C01"), sept.sats.index("G04")
+    # line 49: "C01  36675141.169 7 ..." is the C2I column, the first BeiDou code
+    assert sel.code[0, c01] == "C2I" and sel.pseudorange_m[0, c01] == 36675141.169
+    assert sel.code[0, g04] == "C1C" and sel.pseudorange_m[0, g04] == 24546598.364
+    # SBAS has no priority: no pseudorange
+    s_cols = [k for k, s in enumerate(sept.sats) if s[0] == "S"]
+    assert s_cols and np.all(np.isnan(sel.pseudorange_m[:, s_cols]))
+    custom = sept.pseudorange({"G": ("C2W",)})
+    assert custom.code[0, g04] == "C2W" and custom.pseudorange_m[0, g04] == 24546602.458
+    assert np.all(np.isnan(custom.pseudorange_m[:, c01]))
+
+
+def test_rinex3_septentrio_header_and_values(test_data: Path) -> None:
+    obs = read_rinex_obs(test_data / SEPT)
+    h = obs.header
+    assert h.version == pytest.approx(3.04) and h.file_system == "M"
+    assert len(h.obs_types["G"]) == 18 and h.obs_types["C"][:2] == ("C2I", "L2I")
+    assert h.glonass_slots["R02"] == -4 and h.glonass_slots["R24"] == 2
+    assert obs.problems == ()
+    # "> 2023 09 06 00 00  0.0000000  0 45"
+    assert obs.gps_s[0] == calendar_to_gps_s(2023, 9, 6)
+    assert np.isfinite(np.vstack([obs.obs(c)[0] for c in obs.codes])).any(axis=0).sum() == 45
+    c01 = obs.sats.index("C01")
+    assert obs.obs("L2I")[0, c01] == 190977074.183 and obs.lli["L2I"][0, c01] == 0
+    assert obs.snr["L2I"][0, c01] == 7 and obs.obs("S2I")[0, c01] == 45.5
+
+
+def test_smartphone_lli_snr_and_fractional_epoch(test_data: Path) -> None:
+    obs = read_rinex_obs(test_data / PIXEL)
+    assert obs.problems == () and len(obs.gps_s) == 6
+    # "> 2023 11 07 23 43 15.0002755  0 19"
+    assert obs.gps_s[0] == pytest.approx(calendar_to_gps_s(2023, 11, 7, 23, 43, 15.0002755))
+    g04 = obs.sats.index("G04")
+    # "G04  23440243.75725 ..." value 23440243.757, LLI 2, strength 5
+    assert obs.obs("C1C")[0, g04] == 23440243.757
+    assert obs.lli["C1C"][0, g04] == 2 and obs.snr["C1C"][0, g04] == 5
+    assert obs.sats[0].startswith("E") and "R21" in obs.sats
+
+
+def test_mixed_types_file_parses(test_data: Path) -> None:
+    obs = read_rinex_obs(test_data / MIXED)
+    assert obs.problems == () and len(obs.gps_s) == 5
+    assert set(obs.header.obs_types) == {"G", "R", "E"}
+    assert np.isfinite(obs.pseudorange().pseudorange_m).sum() > 50
+
+
+def test_codes_subset_and_gzip(test_data: Path, tmp_path: Path) -> None:
+    gz = tmp_path / "x.05o.gz"
+    gz.write_bytes(gzip.compress((test_data / OBS2).read_bytes()))
+    obs = read_rinex_obs(gz, codes=["C1"])
+    assert obs.codes == ("C1",)
+    ref = read_rinex_obs(test_data / OBS2)
+    np.testing.assert_array_equal(obs.obs("C1"), ref.obs("C1"))
+    with pytest.raises(KeyError, match="no observation code 'L1'"):
+        obs.obs("L1")
+
+
+def test_truncated_file_lenient_and_strict(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / OBS2)
+    # the 10th epoch starts on line 18 + 9 * 9 = 99; keep it and two of its satellites
+    assert lines[98].startswith(" 05  4  2  0  4 30.0")
+    cut = _write(tmp_path / "cut.05o", lines[:101])
+    obs = read_rinex_obs(cut)
+    assert len(obs.gps_s) == 9
+    (p,) = obs.problems
+    assert p.line == 99 and "truncated" in p.what
+    assert p.epoch_gps_s == calendar_to_gps_s(2005, 4, 2, 0, 4, 30.0)
+    assert "cut.05o, line 99, epoch 2005-04-02T00:04:30.000 GPST" in str(p)
+    with pytest.raises(RinexObsError, match=r"cut\.05o, line 99: .*truncated.*00:04:30"):
+        read_rinex_obs(cut, strict=True)
+
+
+def test_line_cut_inside_a_field(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / OBS2)
+    lines[-1] = lines[-1][:40] + "\n"  # "...    43647..." ends inside the third field
+    obs = read_rinex_obs(_write(tmp_path / "cut.05o", lines))
+    assert any(
+        p.line == len(lines) and "inside a 16-character field" in p.what for p in obs.problems
+    )
+    with pytest.raises(RinexObsError, match=f"line {len(lines)}"):
+        read_rinex_obs(tmp_path / "cut.05o", strict=True)
+
+
+def test_rinex3_truncated_epoch(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / PIXEL)
+    starts = [i for i, s in enumerate(lines) if s.startswith(">")]
+    cut = _write(tmp_path / "cut.23o", lines[: starts[-1] + 5])  # last epoch: 4 of 20 lines
+    obs = read_rinex_obs(cut)
+    assert len(obs.gps_s) == 5
+    (p,) = obs.problems
+    assert p.line == starts[-1] + 1 and "4 of 20" in p.what
+
+
+def test_unknown_code_reported_by_header_line_and_epoch(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / OBS2)
+    k = next(i for i, s in enumerate(lines) if "TYPES OF OBSERV" in s)
+    lines[k] = lines[k].replace("P2", "Q2")
+    obs = read_rinex_obs(_write(tmp_path / "q.05o", lines))
+    head, first = obs.problems
+    assert head.line == k + 1 and "Q2" in head.what and head.epoch_gps_s is None
+    assert first.line == 18 and first.epoch_gps_s == calendar_to_gps_s(2005, 4, 2)
+    assert "10 epoch(s)" in first.what
+    assert obs.obs("Q2")[0, obs.sats.index("G03")] == 24767684.822  # kept, not dropped
+    with pytest.raises(RinexObsError, match=f"line {k + 1}: .*Q2"):
+        read_rinex_obs(tmp_path / "q.05o", strict=True)
+
+
+def test_unknown_rinex3_code_and_unknown_system(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / MIXED)
+    k = next(i for i, s in enumerate(lines) if s.startswith("E    8"))
+    lines[k] = lines[k].replace("C5X", "C9X")  # Galileo has no band 9
+    obs = read_rinex_obs(_write(tmp_path / "u.20o", lines))
+    assert any(p.line == k + 1 and "C9X" in p.what for p in obs.problems)
+    assert "C9X" in obs.codes
+
+
+def test_event_flags_and_type_redefinition(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / OBS2)
+    ep2 = 18 + 9 * 2 - 1  # index of the third epoch line
+    event = [
+        "                            4  2\n",
+        "     2    C1    L1                                          # / TYPES OF OBSERV\n",
+        "site visit                                                  COMMENT\n",
+    ]
+    third = lines[ep2 : ep2 + 9]
+    # the third epoch rewritten with the new types: C1 then L1 on one line per satellite
+    new = [third[0].replace("  0  8G", "  1  8G")]
+    for s in third[1:]:
+        new.append(s[16:32] + s[:16].rstrip() + "\n")
+    moved = lines[:ep2] + event + new
+    obs = read_rinex_obs(_write(tmp_path / "ev.05o", moved))
+    assert obs.problems == ()
+    assert len(obs.gps_s) == 3 and obs.epoch_flag.tolist() == [0, 0, 1]
+    (ev,) = obs.events
+    assert ev.flag == 4 and ev.line == ep2 + 1 and np.isnan(ev.epoch_gps_s)
+    j = obs.sats.index("G03")
+    ref = read_rinex_obs(test_data / OBS2)
+    assert obs.obs("C1")[2, j] == ref.obs("C1")[2, j]
+    assert obs.obs("L1")[2, j] == ref.obs("L1")[2, j]
+    assert np.isnan(obs.obs("P2")[2, j]) and obs.obs("P2")[1, j] == ref.obs("P2")[1, j]
+
+
+def test_more_than_twelve_satellites_continuation(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / OBS2)
+    head = lines[:17]
+    sats = [f"G{p:2d}" for p in range(1, 15)]
+    epoch = [
+        " 05  4  2  0  0  0.0000000  0 14" + "".join(sats[:12]) + "\n",
+        " " * 32 + "".join(sats[12:]) + "\n",
+    ]
+    body = []
+    for p in range(1, 15):
+        v = 20000000.0 + 1000.0 * p
+        body.append(f"{v + 0.125:14.3f}  {v:14.3f}  {v + 0.5:14.3f}  {v + 0.25:14.3f}  \n")
+    obs = read_rinex_obs(_write(tmp_path / "many.05o", head + epoch + body))
+    assert obs.problems == ()
+    assert obs.sats == tuple(f"G{p:02d}" for p in range(1, 15))
+    np.testing.assert_array_equal(obs.obs("C1")[0], 20000000.0 + 1000.0 * np.arange(1, 15))
+    np.testing.assert_array_equal(obs.obs("P2")[0], 20000000.25 + 1000.0 * np.arange(1, 15))
+
+
+def test_time_system_glonass_is_utc(test_data: Path, tmp_path: Path) -> None:
+    lines = _lines(test_data / MIXED)
+    k = next(i for i, s in enumerate(lines) if "TIME OF FIRST OBS" in s)
+    lines[k] = lines[k][:48] + "GLO" + lines[k][51:]
+    glo = read_rinex_obs(_write(tmp_path / "g.20o", lines))
+    gps = read_rinex_obs(test_data / MIXED)
+    np.testing.assert_allclose(glo.gps_s - gps.gps_s, 18.0)  # GPST - UTC in 2020
+
+
+def test_errors_name_the_file(test_data: Path, tmp_path: Path) -> None:
+    with pytest.raises(RinexObsError, match="no such file"):
+        read_rinex_obs(tmp_path / "missing.05o")
+    with pytest.raises(RinexObsError, match="line 1: not an observation file"):
+        read_rinex_obs(test_data / "gnss_obs/07590920_0000_0200.05n")
+    lines = _lines(test_data / OBS2)
+    with pytest.raises(RinexObsError, match="END OF HEADER"):
+        read_rinex_obs(_write(tmp_path / "h.05o", lines[:10]))
+    lines[19] = "  garbage line that is not data\n"
+    obs = read_rinex_obs(_write(tmp_path / "g.05o", lines))
+    assert any(p.line == 20 for p in obs.problems)
+
+
+@pytest.mark.shared
+def test_every_shared_observation_file_parses(shared_data: Path) -> None:
+    d = shared_data / "gnss"
+    expect = {
+        "rtklib/07590920.05o": 120,
+        "rtklib/30400920.05o": 120,
+        "gnss_lib_py/rinex_obs_z_tracking.rnx": 2,
+        "gnss_lib_py/rinex_obs_rinex_obs_mixed_types.20o": 5,
+        "gnss_lib_py/android_rinex_obs_pixel6.23o": 48,
+    }
+    for name, n in expect.items():
+        obs = read_rinex_obs(d / name, strict=True)
+        assert len(obs.gps_s) == n, name
+        assert np.all(np.diff(obs.gps_s) > 0), name
+        assert np.isfinite(obs.pseudorange().pseudorange_m).any(axis=1).all(), name
+    # teqc splice markers: flag-4 events without a date, not mistaken for data
+    full = read_rinex_obs(d / "rtklib/07590920.05o")
+    assert [e.line for e in full.events] == [855, 1058, 1090]
+    assert all(e.flag == 4 and "SPLICE" in e.records[0] for e in full.events)
