@@ -19,13 +19,13 @@ from predisat.synth.generate import contact_sheet
 from predisat.synth.world import World
 
 
-def pick_frames(synth_dir: Path, per_kind: int = 2) -> list[str]:
-    """Frame ids covering every scenery kind, alternating sides and sky conditions."""
+def pick_frames(synth_dir: Path, per_kind: int = 2) -> dict[str, str]:
+    """Frame ids covering every scenery kind (with the kind), alternating sides and skies."""
     world = World.load(synth_dir / "truth" / "world.npz")
     with open(synth_dir / "truth" / "frames.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     chainage = np.array([float(r["chainage_m"]) for r in rows])
-    chosen: list[str] = []
+    chosen: dict[str, str] = {}
     conditions = ("clear", "cloudy", "overcast")
     n_pick = 0
     for st in sorted(world.spec.stretches, key=lambda s: s.start_m):
@@ -43,7 +43,7 @@ def pick_frames(synth_dir: Path, per_kind: int = 2) -> list[str]:
             pool = best or [i for i in inside if rows[i]["side"] == side] or inside
             i = pool[len(pool) // 2]
             inside.remove(i)
-            chosen.append(rows[i]["frame_id"])
+            chosen[rows[i]["frame_id"]] = st.kind.replace("_", " ")
             n_pick += 1
             if not inside:
                 break
@@ -59,8 +59,8 @@ def main() -> None:
     args = ap.parse_args()
     frames = pick_frames(args.synth_dir, args.per_kind)
     out = contact_sheet(
-        args.synth_dir / "survey", args.out, frames=frames, columns=4,
-        tile_width_px=args.tile_width,
+        args.synth_dir / "survey", args.out, frames=list(frames), columns=4,
+        tile_width_px=args.tile_width, notes=frames,
     )
     print(f"{out}: {len(frames)} frames, {out.stat().st_size / 1024:.0f} kB")
 

@@ -470,6 +470,7 @@ def contact_sheet(
     columns: int = 4,
     tile_width_px: int = 320,
     frames: list[str] | None = None,
+    notes: dict[str, str] | None = None,
 ) -> Path:
     """Tile sample frames of a survey into one image with captions (frame, side, km, sky).
 
@@ -486,6 +487,8 @@ def contact_sheet(
         Grid layout and tile width.
     frames : list of str, optional
         Frame ids to show.
+    notes : dict, optional
+        Extra caption text per frame id (e.g. the scenery).
 
     Returns
     -------
@@ -519,7 +522,8 @@ def contact_sheet(
         img = cv2.resize(img, (tile_width_px, th), interpolation=cv2.INTER_AREA)
         side = str(survey.frames.side[k])
         km = float(survey.frames.chainage_m[k]) / 1000.0
-        text = f"{fid} {side} km {km:.3f} {sky_of.get(fid, '')}".strip()
+        note = (notes or {}).get(fid, "")
+        text = f"{fid} {side} km {km:.3f} {sky_of.get(fid, '')} {note}".strip()
         cv2.rectangle(img, (0, th - 18), (tile_width_px, th), (0, 0, 0), -1)
         cv2.putText(
             img, text, (4, th - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1, cv2.LINE_AA
