@@ -1,0 +1,282 @@
+"""Passive and active integrity: one epoch of the 1-D locator, with fault detection and exclusion.
+
+:func:`locate` turns one epoch of trusted measurements into a fix: a chainage, a confidence
+interval and flags.
+
+* **Passive integrity** (``integrity="passive"``): every measurement is used and nothing is
+  excluded; with 4 or more satellites the interval is the union of *all* pair intervals
+  (scheme ``"all"``), so poor measurements and blunt pairs only lengthen it. Faults are
+  flagged, not acted on.
+* **Active integrity / FDE** (``integrity="active"``):
+
+  1. *detection*: the 1-D weighted least squares (:func:`locator.wls.solve_wls`) gives
+     ``chi2`` with ``n - 2`` degrees of freedom; a fault is declared when its p-value is below
+     ``p_false_alarm``, or when the SATHIA pair intervals have no common point, or a pair
+     contradicts the whole search window (``PairStatus.EMPTY``);
+  2. *exclusion*: the satellite with the largest normalised residual (w-test) is removed and
+     the epoch is solved again, up to ``max_exclusions`` times and only while at least 3
+     satellites remain after the exclusion (so that the remaining set can still be tested);
+     a fault that cannot be isolated is flagged ``FAULT_DETECTED`` and the fix makes no safety
+     claim;
+  3. *geometry*: pairs whose intersection with the track is blunt (``|g_i - g_j| <
+     min_slope``, the along-track sensitivity at the prior) are dropped in the all-pairs mode;
+     in the other modes a blunt chosen pair is flagged;
+  4. the interval is formed by the count rule of :mod:`locator.intervals` (three independent
+     pairs for >= 6 satellites, all pairs for 4-5, best pair without safety claim for 2-3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import IntFlag
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from locator.intervals import along_track_g, plan_pairs, union_interval
+from locator.sathia import AntennaPath, PairSolution, PairStatus, solve_pairs
+from locator.wls import WlsSolution, solve_wls
+from predisat.interval import IntervalMode, IntervalModel
+
+__all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
+
+INTEGRITY_MODES = ("passive", "active")
+
+
+class FixFlag(IntFlag):
+    """Flags of a :class:`Fix` (0: a clean fix with a safety claim)."""
+
+    NONE = 0
+    NO_SAFETY_CLAIM = 1  # 2-3 satellites, or any condition below that voids the claim
+    TOO_FEW = 2  # fewer than 2 satellites: no fix
+    EXCLUDED = 4  # FDE excluded at least one satellite
+    FAULT_DETECTED = 8  # an inconsistency remains (not isolated, or passive)
+    BLUNT = 16  # blunt pairs dropped (active, all-pairs) or a blunt pair used
+    AMBIGUOUS = 32  # a pair cut the track more than once in the window
+    NO_ROOT = 64  # a pair did not cut the track in the window
+    UNBOUNDED = 128  # the interval reaches the search window's end
+    INCONSISTENT_PAIRS = 256  # the pair intervals have no common point
+    EMPTY_PAIR = 512  # a pair contradicts the whole search window (PairStatus.EMPTY)
+
+
+@dataclass(frozen=True)
+class LocatorConfig:
+    """Parameters of :func:`locate`.
+
+    Attributes
+    ----------
+    model : IntervalModel
+        Error model and ``k_sigma`` (width of each pair interval).
+    window_m, step_m : float
+        SATHIA search window half width and grid step, metres.
+    min_slope : float
+        Pairs with ``|g_i - g_j|`` below this are blunt (metres of range difference per metre
+        of chainage); 0.2 keeps every pair's half length under ``5 k sigma_K``.
+    p_false_alarm : float
+        Chi-square test level of the detection.
+    max_exclusions : int
+    """
+
+    model: IntervalModel = field(default_factory=IntervalModel)
+    window_m: float = 1000.0
+    step_m: float = 5.0
+    min_slope: float = 0.2
+    p_false_alarm: float = 1e-3
+    max_exclusions: int = 2
+
+    def __post_init__(self) -> None:
+        if not (self.window_m > 0 and self.step_m > 0):
+            raise ValueError(f"window_m and step_m must be positive: {self}")
+        if not 0 <= self.min_slope < 2:
+            raise ValueError(f"min_slope must be in [0, 2), got {self.min_slope}")
+        if not 0 < self.p_false_alarm < 1:
+            raise ValueError(f"p_false_alarm must be in (0, 1), got {self.p_false_alarm}")
+        if self.max_exclusions < 0:
+            raise ValueError(f"max_exclusions must be >= 0, got {self.max_exclusions}")
+
+
+@dataclass(frozen=True)
+class Fix:
+    """One epoch's location.
+
+    Attributes
+    ----------
+    chainage_m : float
+        SATHIA estimate (weighted mean of the pair roots); NaN without a fix.
+    lo_m, hi_m : float
+        Confidence interval (union of the pair intervals of the mode).
+    mode : IntervalMode
+    integrity : str
+        ``"passive"`` or ``"active"``.
+    flags : FixFlag
+    used : ndarray of bool, shape (n_sat,)
+        Satellites in the final solution.
+    excluded : tuple of int
+        Satellites excluded by FDE, in order.
+    pairs : PairSolution
+        The pairs united, with indices into the epoch's satellites.
+    wls : WlsSolution or None
+        The reference estimator on the used satellites.
+    sats : tuple of str
+    """
+
+    chainage_m: float
+    lo_m: float
+    hi_m: float
+    mode: IntervalMode
+    integrity: str
+    flags: FixFlag
+    used: NDArray
+    excluded: tuple[int, ...]
+    pairs: PairSolution | None
+    wls: WlsSolution | None
+    sats: tuple[str, ...] = ()
+
+    @property
+    def safety_claim(self) -> bool:
+        return not (self.flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW))
+
+    @property
+    def length_m(self) -> float:
+        return self.hi_m - self.lo_m
+
+    def contains(self, chainage_m: float) -> bool:
+        return bool(self.lo_m <= chainage_m <= self.hi_m)
+
+    @property
+    def excluded_sats(self) -> tuple[str, ...]:
+        return tuple(self.sats[k] if self.sats else str(k) for k in self.excluded)
+
+
+def locate(
+    path: AntennaPath,
+    sat_ecef_m: ArrayLike,
+    pseudorange_m: ArrayLike,
+    el_deg: ArrayLike,
+    *,
+    prior_m: float,
+    integrity: str = "active",
+    config: LocatorConfig | None = None,
+    sigma_m: ArrayLike | None = None,
+    sats: Sequence[str] = (),
+) -> Fix:
+    """Locate the train along the track at one epoch.
+
+    Parameters
+    ----------
+    path : AntennaPath
+    sat_ecef_m : array_like, shape (n_sat, 3)
+        Positions of the *trusted* satellites (:mod:`locator.selection`), metres.
+    pseudorange_m : array_like, shape (n_sat,)
+        Corrected pseudoranges, metres.
+    el_deg : array_like, shape (n_sat,)
+        Elevations for the error model, degrees.
+    prior_m : float
+        Centre of the search window (previous fix + odometry), chainage metres.
+    integrity : {"active", "passive"}
+    config : LocatorConfig, optional
+    sigma_m : array_like, shape (n_sat,), optional
+        Overrides ``config.model.error.sigma_m(el_deg)``.
+    sats : sequence of str
+        Satellite ids, for the report.
+
+    Returns
+    -------
+    Fix
+    """
+    if integrity not in INTEGRITY_MODES:
+        raise ValueError(f"integrity must be one of {INTEGRITY_MODES}, got {integrity!r}")
+    cfg = config or LocatorConfig()
+    sat = np.asarray(sat_ecef_m, float)
+    rho = np.asarray(pseudorange_m, float)
+    el = np.asarray(el_deg, float)
+    n = len(rho)
+    sig = cfg.model.error.sigma_m(el) if sigma_m is None else np.asarray(sigma_m, float)
+    if sat.shape != (n, 3) or el.shape != (n,) or sig.shape != (n,):
+        raise ValueError(
+            f"sat_ecef_m must be ({n}, 3) and el_deg, sigma_m ({n},) like pseudorange_m: got "
+            f"{sat.shape}, {el.shape}, {sig.shape}"
+        )
+    if sats and len(sats) != n:
+        raise ValueError(f"sats has {len(sats)} names for {n} satellites")
+    used = np.ones(n, bool)
+    excluded: list[int] = []
+    active = integrity == "active"
+    while True:
+        fix, fault, worst = _solve(path, sat, rho, sig, used, prior_m, cfg, active)
+        can_exclude = active and len(excluded) < cfg.max_exclusions and used.sum() - 1 >= 3
+        if fault and can_exclude and worst >= 0:
+            used = used.copy()
+            used[worst] = False
+            excluded.append(worst)
+            continue
+        flags = fix.flags
+        if excluded:
+            flags |= FixFlag.EXCLUDED
+        if fault:
+            flags |= FixFlag.FAULT_DETECTED | FixFlag.NO_SAFETY_CLAIM
+        return dataclasses.replace(
+            fix, flags=flags, used=used, excluded=tuple(excluded), integrity=integrity,
+            sats=tuple(sats),
+        )  # fmt: skip
+
+
+def _solve(
+    path: AntennaPath,
+    sat: NDArray,
+    rho: NDArray,
+    sig: NDArray,
+    used: NDArray,
+    prior_m: float,
+    cfg: LocatorConfig,
+    active: bool,
+) -> tuple[Fix, bool, int]:
+    """Fix on the used satellites; whether a fault shows; the worst satellite (global index)."""
+    idx = np.flatnonzero(used)
+    m = len(idx)
+    k_sigma = cfg.model.k_sigma
+    if m < 2:
+        empty = Fix(np.nan, np.nan, np.nan, IntervalMode.NONE, "", FixFlag.TOO_FEW
+                    | FixFlag.NO_SAFETY_CLAIM, used, (), None, None)  # fmt: skip
+        return empty, False, -1
+    s_u, r_u, g_sig = sat[idx], rho[idx], sig[idx]
+    wls = solve_wls(path, s_u, r_u, g_sig, prior_m=prior_m)
+    nres = np.abs(wls.normalised_residual)
+    worst = int(idx[np.nanargmax(nres)]) if np.isfinite(nres).any() else -1
+    fault = wls.dof >= 1 and wls.p_value() < cfg.p_false_alarm
+
+    flags = FixFlag.NONE
+    centre = wls.chainage_m if wls.converged else prior_m
+    g = along_track_g(path, centre, s_u)
+    pairs, mode = plan_pairs(g, g_sig, k_sigma, scheme="auto" if active else "all")
+    blunt = np.abs(g[pairs[:, 0]] - g[pairs[:, 1]]) < cfg.min_slope
+    if blunt.any():
+        flags |= FixFlag.BLUNT
+        if active and mode == IntervalMode.ALL_PAIRS:
+            pairs = pairs[~blunt]
+    # window on the WLS fix: a prior further off than the window would void every pair
+    sol = solve_pairs(path, s_u, r_u, g_sig, pairs, prior_m=centre, window_m=cfg.window_m,
+                      k_sigma=k_sigma, step_m=cfg.step_m)  # fmt: skip
+    sol = dataclasses.replace(sol, i=idx[sol.i], j=idx[sol.j])
+    uni = union_interval(sol, mode if sol.n_pairs else IntervalMode.NONE)
+    st = np.bitwise_or.reduce(sol.status) if sol.n_pairs else 0
+    if st & PairStatus.MULTIPLE_ROOTS:
+        flags |= FixFlag.AMBIGUOUS
+    if st & PairStatus.NO_ROOT:
+        flags |= FixFlag.NO_ROOT
+    if st & PairStatus.EMPTY:
+        flags |= FixFlag.EMPTY_PAIR
+        fault = True
+    if st & (PairStatus.UNBOUNDED_LOW | PairStatus.UNBOUNDED_HIGH):
+        flags |= FixFlag.UNBOUNDED
+    if sol.n_pairs and not (st & PairStatus.EMPTY) and not uni.consistent:
+        flags |= FixFlag.INCONSISTENT_PAIRS
+        fault = True
+    if not uni.safety_claim:
+        flags |= FixFlag.NO_SAFETY_CLAIM
+    if sol.n_pairs == 0:
+        flags |= FixFlag.NO_SAFETY_CLAIM
+    fix = Fix(uni.estimate_m, uni.lo_m, uni.hi_m, uni.mode, "", flags, used, (), sol, wls)
+    return fix, bool(fault), worst

@@ -1,0 +1,181 @@
+"""Heading check of an estimated location against a virtual beacon (2024 patent, digest 002).
+
+A database stores virtual beacons (position) and the heading of the track segment each lies on.
+Given a location estimate naming beacon ``B1``, the delay of each satellite's signal relative to
+the signal expected at ``B1`` is::
+
+    c dtau_k = rho_k - |B1 - S_k| = b - cos(el_k) cos(az_k - hdg) Rx + eps_k
+
+(``b`` the receiver clock, which the patent's formula leaves implicit; ``el, az`` seen from
+``B1``; ``Rx`` the offset of the antenna from ``B1`` along the direction ``hdg``). The patent
+writes ``+ (1/c) cos(el) cos(az - hdg) Rx`` with the offset counted from the antenna to ``B1``;
+the content is the same.
+
+Solution. ``cos(el) cos(az - hdg) Rx = e_k dE + n_k dN`` with ``(e_k, n_k) = cos(el_k)
+(sin az_k, cos az_k)`` and ``(dE, dN) = Rx (sin hdg, cos hdg)``, so the nonlinear problem in
+``(hdg, Rx)`` is a *linear* weighted least squares in ``(b, dE, dN)``: exact, no search over
+``hdg``, and its covariance gives the uncertainty of ``hdg = atan2(dE, dN)``:
+``sigma_hdg = sigma_perp / |d|`` (``sigma_perp`` the standard deviation of the displacement across
+its own direction). A known height of the antenna above ``B1`` (antenna height, grade) is
+removed first (``sin(el) dU``).
+
+Ambiguity and comparison. ``(hdg, Rx)`` and ``(hdg + 180, -Rx)`` give the same delays; we report
+``Rx >= 0`` (``hdg`` points from ``B1`` to the antenna) and compare headings **modulo 180 deg**:
+the antenna may be either side of the beacon, so only the axis is tested. The difference
+``delta`` is folded into [-90, 90) deg.
+
+Decision. The location is *unreliable* when ``|delta| > k sigma_hdg + tolerance_deg``
+(``tolerance_deg`` covers the stored heading's own error and the segment's curvature between
+``B1`` and the antenna). Near the beacon the heading is unobservable (``|d|`` of the order of
+the noise): when ``sigma_hdg > max_sigma_deg`` the check is ``UNOBSERVABLE`` and passes nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+
+__all__ = ["HeadingCheck", "HeadingStatus", "check_heading", "delay_model_m"]
+
+
+class HeadingStatus(IntEnum):
+    PASS = 0  # heading agrees with the beacon's segment
+    FAIL = 1  # disagrees: wrong track or wrong beacon; location unreliable
+    UNOBSERVABLE = 2  # too close to the beacon (or too few satellites) to tell
+
+
+@dataclass(frozen=True)
+class HeadingCheck:
+    """Result of :func:`check_heading`.
+
+    Attributes
+    ----------
+    heading_deg : float
+        Estimated direction from the beacon to the antenna, degrees in [0, 360).
+    offset_m : float
+        ``Rx``, horizontal distance from the beacon, metres (>= 0).
+    along_m : float
+        Signed offset along the stored heading, ``Rx cos(hdg - hdg_stored)``, metres.
+    sigma_heading_deg : float
+    difference_deg : float
+        Estimated minus stored heading, modulo 180, in [-90, 90).
+    threshold_deg : float
+        ``k sigma_heading + tolerance``.
+    clock_m : float
+        Receiver clock estimate, metres.
+    chi2 : float
+        Weighted residual sum of squares (``n - 3`` degrees of freedom).
+    status : HeadingStatus
+    """
+
+    heading_deg: float
+    offset_m: float
+    along_m: float
+    sigma_heading_deg: float
+    difference_deg: float
+    threshold_deg: float
+    clock_m: float
+    chi2: float
+    status: HeadingStatus
+
+    @property
+    def reliable(self) -> bool:
+        """Only a passed check vouches for the location."""
+        return self.status == HeadingStatus.PASS
+
+
+def delay_model_m(
+    az_deg: ArrayLike, el_deg: ArrayLike, heading_deg: float, offset_m: float, clock_m: float = 0.0
+) -> NDArray:
+    """Delays ``c dtau_k = b - cos(el) cos(az - hdg) Rx`` of the model, metres, shape of ``az``."""
+    az = np.radians(np.asarray(az_deg, float))
+    el = np.radians(np.asarray(el_deg, float))
+    return clock_m - np.cos(el) * np.cos(az - np.radians(heading_deg)) * offset_m
+
+
+def check_heading(
+    beacon_ecef_m: ArrayLike,
+    beacon_heading_deg: float,
+    sat_ecef_m: ArrayLike,
+    pseudorange_m: ArrayLike,
+    sigma_m: ArrayLike,
+    *,
+    up_m: float = 0.0,
+    k_sigma: float = 3.0,
+    tolerance_deg: float = 1.0,
+    max_sigma_deg: float = 10.0,
+) -> HeadingCheck:
+    """Estimate heading and offset from a virtual beacon and compare with its stored heading.
+
+    Parameters
+    ----------
+    beacon_ecef_m : array_like, shape (3,)
+        Beacon ``B1`` position (the point whose expected signals are the reference), metres.
+    beacon_heading_deg : float
+        Stored heading of B1's track segment, degrees.
+    sat_ecef_m : array_like, shape (n_sat, 3)
+    pseudorange_m, sigma_m : array_like, shape (n_sat,)
+        Corrected pseudoranges and sigmas, metres; ``n_sat >= 4`` for any redundancy.
+    up_m : float
+        Known height of the antenna above B1 along the vertical, metres.
+    k_sigma, tolerance_deg, max_sigma_deg : float
+        Decision parameters (module docstring).
+
+    Returns
+    -------
+    HeadingCheck
+    """
+    b1 = np.asarray(beacon_ecef_m, float).reshape(3)
+    sat = np.asarray(sat_ecef_m, float)
+    rho = np.asarray(pseudorange_m, float)
+    sig = np.asarray(sigma_m, float)
+    if sat.ndim != 2 or sat.shape[1] != 3 or rho.shape != (len(sat),) or sig.shape != rho.shape:
+        raise ValueError(
+            "sat_ecef_m must be (n_sat, 3) and pseudorange_m, sigma_m (n_sat,): got "
+            f"{sat.shape}, {rho.shape}, {sig.shape}"
+        )
+    if not (np.isfinite(sat).all() and np.isfinite(rho).all() and np.all(sig > 0)):
+        raise ValueError("sat_ecef_m / pseudorange_m must be finite and sigma_m positive")
+    if len(rho) < 3:
+        raise ValueError(f"check_heading needs at least 3 satellites, got {len(rho)}")
+    lat, lon, _ = ecef_to_geodetic(b1)
+    rot = enu_rotation(lat, lon)
+    enu = (sat - b1) @ rot.T
+    az, el, rng = enu_to_azel(enu)
+    delay = rho - rng
+    ce = np.cos(np.radians(el))
+    a_mat = np.stack(
+        [np.ones_like(ce), -ce * np.sin(np.radians(az)), -ce * np.cos(np.radians(az))], axis=-1
+    )
+    y = delay + np.sin(np.radians(el)) * up_m  # a higher antenna is closer to every satellite
+    w = 1.0 / sig**2
+    normal = a_mat.T @ (w[:, None] * a_mat)
+    cov = np.linalg.pinv(normal)
+    x = cov @ (a_mat.T @ (w * y))
+    clock, de, dn = (float(v) for v in x)
+    res = y - a_mat @ x
+    chi2 = float(np.sum(w * res**2))
+    rx = float(np.hypot(de, dn))
+    hdg = float(np.mod(np.degrees(np.arctan2(de, dn)), 360.0))
+    # variance across the displacement direction -> heading variance
+    perp = np.array([np.cos(np.radians(hdg)), -np.sin(np.radians(hdg))])
+    var_perp = float(perp @ cov[1:, 1:] @ perp)
+    rank_ok = np.linalg.matrix_rank(normal) == 3
+    sigma_hdg = (
+        float(np.degrees(np.sqrt(max(var_perp, 0.0)) / rx)) if rx > 0 and rank_ok else np.inf
+    )
+    diff = float(np.mod(hdg - beacon_heading_deg + 90.0, 180.0) - 90.0)
+    thr = k_sigma * sigma_hdg + tolerance_deg
+    if not sigma_hdg <= max_sigma_deg:
+        status = HeadingStatus.UNOBSERVABLE
+    elif abs(diff) > thr:
+        status = HeadingStatus.FAIL
+    else:
+        status = HeadingStatus.PASS
+    along = rx * float(np.cos(np.radians(hdg - beacon_heading_deg)))
+    return HeadingCheck(hdg, rx, along, sigma_hdg, diff, thr, clock, chi2, status)

@@ -1,0 +1,298 @@
+"""Per-pair confidence intervals, the integrity modes and their union; the error-model fit.
+
+Each SATHIA pair gives an interval from ``K +- k sigma_K`` (:func:`locator.sathia.solve_pairs`).
+How the pairs are combined depends on how many satellites are trusted
+(:class:`predisat.interval.IntervalMode`, the same rule as the availability prediction):
+
+* >= 6 satellites, ``THREE_PAIRS``: three *independent* pairs (six distinct satellites) and the
+  union (outermost bounds) of their intervals. The pairs are chosen from the geometry at the
+  prior position (never from the measurements, so the choice cannot favour a fault) to make
+  that union short: each satellite is ranked by the interval it would give with an ideal
+  partner, a pool of the 4 best "low" (``g = u . t`` small) and 4 best "high" satellites is
+  searched exhaustively (420 sets of three disjoint pairs). This is the heuristic of
+  :mod:`predisat.interval`, so predicted and actual intervals use the same pairs.
+* 4-5, ``ALL_PAIRS``: every pair combination and their union.
+* 2-3, ``BEST_PAIR``: the pair with the shortest interval; a position with **no safety claim**.
+* < 2, ``NONE``: no interval.
+
+The scheme ``"all"`` unites every pair instead (passive integrity: every measurement is used and
+poor ones only lengthen the interval).
+
+The error model ``sigma(el)**2 = a**2 + (b / sin el)**2`` is
+:class:`predisat.interval.ErrorModel`; :func:`fit_error_model` learns ``a`` and ``b`` from
+pseudorange residuals at known positions (``locator calibrate``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from locator.sathia import AntennaPath, PairSolution
+from predisat.interval import (
+    ErrorModel,
+    IntervalMode,
+    interval_mode,
+    pair_half_length_m,
+)
+
+__all__ = [
+    "PAIR_SCHEMES",
+    "UnionInterval",
+    "along_track_g",
+    "best_pair",
+    "fit_error_model",
+    "plan_pairs",
+    "three_independent_pairs",
+    "union_interval",
+]
+
+PAIR_SCHEMES = ("auto", "all")
+_POOL = 8
+
+
+@dataclass(frozen=True)
+class UnionInterval:
+    """The interval of one epoch: union of the pair intervals of its mode.
+
+    Attributes
+    ----------
+    lo_m, hi_m : float
+        Interval bounds, chainage metres (NaN when no pair has a root; ``-inf``/``+inf`` when
+        a pair is unbounded in the search window).
+    estimate_m : float
+        Inverse-variance weighted mean of the pair roots (variance
+        ``(sigma_K / slope)**2``), metres.
+    mode : IntervalMode
+    safety_claim : bool
+        True only in ``THREE_PAIRS`` and ``ALL_PAIRS`` modes with every pair bounded.
+    consistent : bool
+        The pair intervals have a common point (``max lo <= min hi``).
+    pairs : PairSolution
+        The pairs united.
+    """
+
+    lo_m: float
+    hi_m: float
+    estimate_m: float
+    mode: IntervalMode
+    safety_claim: bool
+    consistent: bool
+    pairs: PairSolution
+
+    @property
+    def length_m(self) -> float:
+        return self.hi_m - self.lo_m
+
+    def contains(self, chainage_m: float) -> bool:
+        return bool(self.lo_m <= chainage_m <= self.hi_m)
+
+
+def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -> NDArray:
+    """``g = u . t`` of each satellite at a chainage, shape (n_sat,).
+
+    ``u`` is the unit vector antenna -> satellite and ``t`` the path's unit tangent; a pair's
+    sensitivity is ``|g_i - g_j|`` metres of range difference per metre of chainage.
+    """
+    sat = np.asarray(sat_ecef_m, float)
+    x = path.ecef_at(float(chainage_m))
+    t = path.tangent_ecef_at(float(chainage_m))
+    d = sat - x
+    return (d @ t) / np.linalg.norm(d, axis=-1)
+
+
+def best_pair(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
+    """The pair with the shortest predicted interval, indices shape (1, 2)."""
+    ga, sa = np.asarray(g, float), np.asarray(sigma_m, float)
+    if ga.size < 2:
+        raise ValueError(f"best_pair needs at least 2 satellites, got {ga.size}")
+    i, j = np.triu_indices(ga.size, 1)
+    h = pair_half_length_m(ga[i], ga[j], sa[i], sa[j], k_sigma)
+    k = int(np.argmin(h))
+    return np.array([[i[k], j[k]]])
+
+
+@lru_cache(maxsize=8)
+def _matchings(p: int) -> tuple[NDArray, NDArray, NDArray]:
+    """Pairs of a pool of ``p`` satellites and every set of three disjoint pairs."""
+    i, j = np.triu_indices(p, 1)
+    index = {(int(a), int(b)): k for k, (a, b) in enumerate(zip(i, j, strict=True))}
+    sets = []
+    for six in itertools.combinations(range(p), 6):
+        a = six[0]
+        for x in range(1, 6):
+            rest = [c for c in six[1:] if c != six[x]]
+            b = rest[0]
+            for y in range(1, 4):
+                r2 = [c for c in rest[1:] if c != rest[y]]
+                sets.append([index[(a, six[x])], index[(b, rest[y])], index[(r2[0], r2[1])]])
+    return i, j, np.array(sets, np.intp)
+
+
+def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
+    """Three disjoint pairs making the union of their intervals short, indices shape (3, 2).
+
+    Parameters
+    ----------
+    g : array_like, shape (n_sat,)
+        Along-track components (:func:`along_track_g`), ``n_sat >= 6``.
+    sigma_m : array_like, shape (n_sat,)
+    k_sigma : float
+
+    Notes
+    -----
+    The pool heuristic of :mod:`predisat.interval` (module docstring); exact for up to 8
+    satellites.
+    """
+    ga, sa = np.asarray(g, float), np.asarray(sigma_m, float)
+    n = ga.size
+    if n < 6:
+        raise ValueError(f"three independent pairs need at least 6 satellites, got {n}")
+    p = min(_POOL, n)
+    if n > p:
+        s0 = sa.min()
+        spread = np.sqrt(sa**2 + s0**2)
+        with np.errstate(divide="ignore"):
+            rank_lo = spread / (1.0 - ga)
+            rank_hi = spread / (1.0 + ga)
+        lo = np.argsort(rank_lo, kind="stable")[: p // 2]
+        rank_hi[lo] = np.inf
+        hi = np.argsort(rank_hi, kind="stable")[: p - p // 2]
+        pool = np.concatenate([lo, hi])
+    else:
+        pool = np.arange(n)
+    i, j, sets = _matchings(p)
+    gp, sp = ga[pool], sa[pool]
+    h = pair_half_length_m(gp[i], gp[j], sp[i], sp[j], k_sigma)
+    best = sets[int(np.argmin(h[sets].max(-1)))]
+    return np.stack([pool[i[best]], pool[j[best]]], axis=-1)
+
+
+def plan_pairs(
+    g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0, scheme: str = "auto"
+) -> tuple[NDArray, IntervalMode]:
+    """Pairs to solve for the trusted satellites of an epoch, and the mode.
+
+    Parameters
+    ----------
+    g, sigma_m : array_like, shape (n_sat,)
+        Along-track components and sigmas of the satellites kept.
+    k_sigma : float
+    scheme : {"auto", "all"}
+        ``"auto"``: by count (module docstring); ``"all"``: every pair when ``n_sat >= 4``
+        (passive integrity), best pair for 2-3.
+
+    Returns
+    -------
+    pairs : ndarray of int, shape (p, 2)
+    mode : IntervalMode
+    """
+    if scheme not in PAIR_SCHEMES:
+        raise ValueError(f"scheme must be one of {PAIR_SCHEMES}, got {scheme!r}")
+    ga = np.asarray(g, float)
+    n = ga.size
+    mode = IntervalMode(int(interval_mode(n)))
+    if mode == IntervalMode.NONE:
+        return np.zeros((0, 2), np.intp), mode
+    if mode == IntervalMode.BEST_PAIR:
+        return best_pair(ga, sigma_m, k_sigma), mode
+    if mode == IntervalMode.THREE_PAIRS and scheme == "auto":
+        return three_independent_pairs(ga, sigma_m, k_sigma), mode
+    i, j = np.triu_indices(n, 1)
+    return np.stack([i, j], axis=-1), (IntervalMode.ALL_PAIRS if scheme == "all" else mode)
+
+
+def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
+    """Union (outermost bounds) of the pair intervals, with the weighted-mean estimate.
+
+    A pair whose interval is empty (``PairStatus.EMPTY``: no point of the window within
+    ``k sigma_K``) makes the whole union NaN: the measurements contradict the search window and
+    nothing may be claimed (active integrity excludes the cause first). Pairs without a root
+    but with a non-empty set count with their hull and do not enter the estimate.
+    """
+    if pairs.n_pairs == 0:
+        return UnionInterval(np.nan, np.nan, np.nan, IntervalMode.NONE, False, False, pairs)
+    if np.isnan(pairs.lo_m).any():
+        return UnionInterval(np.nan, np.nan, np.nan, mode, False, False, pairs)
+    lo = float(np.min(pairs.lo_m))
+    hi = float(np.max(pairs.hi_m))
+    root = np.isfinite(pairs.root_m)
+    w = np.where(root, (np.nan_to_num(pairs.slope) / pairs.sigma_k_m) ** 2, 0.0)
+    est = float(np.sum(w * np.nan_to_num(pairs.root_m)) / np.sum(w)) if np.sum(w) > 0 else np.nan
+    consistent = bool(np.max(pairs.lo_m) <= np.min(pairs.hi_m))
+    claim = (
+        mode in (IntervalMode.THREE_PAIRS, IntervalMode.ALL_PAIRS)
+        and bool(np.isfinite(lo) and np.isfinite(hi))
+        and consistent
+    )
+    return UnionInterval(lo, hi, est, mode, claim, consistent, pairs)
+
+
+def fit_error_model(
+    el_deg: ArrayLike, residual_m: ArrayLike, *, min_el_deg: float = 1.0, n_bins: int = 16
+) -> ErrorModel:
+    """Learn ``a`` and ``b`` of ``sigma(el)**2 = a**2 + (b / sin el)**2`` from residuals.
+
+    Parameters
+    ----------
+    el_deg : array_like, shape (n_epoch, n_sat)
+        Satellite elevations, degrees; NaN where the satellite was not observed.
+    residual_m : array_like, shape (n_epoch, n_sat)
+        ``pseudorange - |x_true - S|`` at known antenna positions, metres; they still hold the
+        receiver clock, which is removed per epoch (weighted mean) here.
+    min_el_deg : float
+        Passed to the model.
+    n_bins : int
+        Elevation bins (equal counts) whose variances are fitted.
+
+    Returns
+    -------
+    ErrorModel
+
+    Notes
+    -----
+    Per epoch the clock is estimated as the mean of the residuals weighted by a first
+    ``1/sigma**2`` guess (``a = b``); removing it leaves ``e_k - mean``, whose variance is
+    ``sigma_k**2 (1 - 2 w_k) + sum(w**2 sigma**2)`` with normalised weights ``w``; the fit is
+    a non-negative least squares of the binned squared residuals on that linear form in
+    ``(a**2, b**2)``, iterated twice (weights from the previous fit).
+    """
+    from scipy.optimize import nnls
+
+    el = np.asarray(el_deg, float)
+    r = np.asarray(residual_m, float)
+    if el.shape != r.shape or el.ndim != 2:
+        raise ValueError(
+            f"el_deg and residual_m must share a shape (n_epoch, n_sat): {el.shape}, {r.shape}"
+        )
+    ok = np.isfinite(el) & np.isfinite(r)
+    ok &= ok.sum(axis=1, keepdims=True) >= 3  # clock removal needs redundancy
+    if ok.sum() < 2 * n_bins:
+        raise ValueError(
+            f"fit_error_model needs at least {2 * n_bins} residuals in epochs with >= 3 "
+            f"satellites, got {int(ok.sum())}; give more epochs or fewer n_bins"
+        )
+    q = 1.0 / np.sin(np.radians(np.maximum(np.where(ok, el, 90.0), min_el_deg))) ** 2
+    a2, b2 = 1.0, 1.0
+    for _ in range(3):
+        var = a2 + b2 * q
+        w = np.where(ok, 1.0 / var, 0.0)
+        w /= w.sum(axis=1, keepdims=True)
+        clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
+        e2 = (r - clock) ** 2
+        # E[e2] = (a2 + b2 q)(1 - 2w) + sum(w^2 (a2 + b2 q)) : linear in (a2, b2)
+        ca = (1.0 - 2.0 * w) + np.sum(w**2, axis=1, keepdims=True)
+        cb = q * (1.0 - 2.0 * w) + np.sum(w**2 * np.where(ok, q, 0.0), axis=1, keepdims=True)
+        order = np.argsort(el[ok])
+        chunks = np.array_split(order, n_bins)
+        design = np.array([[ca[ok][c].mean(), cb[ok][c].mean()] for c in chunks])
+        target = np.array([e2[ok][c].mean() for c in chunks])
+        # weight bins by their expected spread so the low elevations do not dominate
+        scale = 1.0 / np.maximum(target, 1e-12)
+        sol, _ = nnls(design * scale[:, None], target * scale)
+        a2, b2 = max(float(sol[0]), 1e-12), max(float(sol[1]), 1e-12)
+    return ErrorModel(a_m=float(np.sqrt(a2)), b_m=float(np.sqrt(b2)), min_el_deg=min_el_deg)

@@ -1,0 +1,411 @@
+"""SATHIA: satellite-pair hyperboloid / track intersection (the LOCOPROL 1-D algorithm).
+
+Differencing two pseudoranges removes the receiver clock, ``K_ij = rho_i - rho_j``. Every
+point whose distances to the two satellites differ by ``K_ij`` lies on one sheet of a
+hyperboloid of revolution with the satellites as foci; its intersections with the antenna's
+path along the track are where the train may be. Along the path ``x(s)``::
+
+    f_ij(s) = |x(s) - S_i| - |x(s) - S_j| - K_ij,     df_ij/ds = (u_j - u_i) . t
+
+(``u`` unit vectors antenna -> satellite, ``t`` the unit tangent). The roots of ``f_ij`` in a
+search window ``[prior - W, prior + W]`` are found together for every pair: ``f`` is
+evaluated on a grid of the window (one track evaluation for all pairs), sign changes bracket
+the roots and an Illinois (modified regula falsi) iteration refines every bracket at once.
+
+The pair's confidence interval is the connected part of ``{s : |f_ij(s)| <= k sigma_K}`` that
+holds the chosen root, bounded by the nearest roots of ``f_ij = +- k sigma_K``
+(``sigma_K**2 = sigma_i**2 + sigma_j**2``). A bound that would lie beyond the window is
+``-inf``/``+inf`` (the pair does not bound the train there) unless the window ends at a track
+end, which then bounds it.
+
+A pair may cut the path several times in the window (a curved track, a blunt pair) or not at
+all (a faulty range, a prior far off). Several roots: pairs with a single root give a
+consensus chainage (their median), and every ambiguous pair takes the root closest to it
+(closest to the prior when no pair is unambiguous); the pair is flagged ``MULTIPLE_ROOTS``.
+No root: ``root_m`` is NaN and the pair is flagged ``NO_ROOT``. Its interval is the hull of
+``{s : |f_ij(s)| <= k sigma_K}`` within the window (a blunt pair whose root lies beyond the
+window still bounds, or fails to bound, the train); when that set is empty the pair
+contradicts the window (a faulty range, a prior far off): the bounds are NaN, the pair is
+flagged ``EMPTY`` and ``misfit_m`` gives the smallest ``|f|`` over the window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntFlag
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.track import TrackMap
+
+__all__ = [
+    "AntennaPath",
+    "PairSolution",
+    "PairStatus",
+    "all_pairs",
+    "range_difference_m",
+    "solve_pairs",
+]
+
+
+_WGS84_A_M = 6378137.0
+_WGS84_B_M = _WGS84_A_M * (1.0 - 1.0 / 298.257223563)
+_INV_AXES2 = np.array([_WGS84_A_M**-2, _WGS84_A_M**-2, _WGS84_B_M**-2])
+
+
+class PairStatus(IntFlag):
+    """Per-pair outcome flags of :func:`solve_pairs` (0 = a single root, bounded interval)."""
+
+    OK = 0
+    NO_ROOT = 1  # no intersection in the window
+    MULTIPLE_ROOTS = 2  # several intersections; the consistent one was chosen
+    UNBOUNDED_LOW = 4  # the interval reaches the window's lower end inside the track
+    UNBOUNDED_HIGH = 8  # the interval reaches the window's upper end inside the track
+    EMPTY = 16  # no point of the window is within k sigma_K: the pair contradicts the window
+
+
+@dataclass(frozen=True)
+class AntennaPath:
+    """The antenna's path along a track: the track axis raised by the antenna height.
+
+    Attributes
+    ----------
+    track : TrackMap
+    antenna_height_m : float
+        Height of the antenna phase centre above the track axis along the local vertical.
+        Lateral lever arms and cant are neglected (they move the antenna across the track, not
+        along it).
+    """
+
+    track: TrackMap
+    antenna_height_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.antenna_height_m):
+            raise ValueError(f"antenna_height_m must be finite, got {self.antenna_height_m}")
+
+    @property
+    def length_m(self) -> float:
+        """Chainage range of the path, ``[0, length_m]``."""
+        return self.track.length_m
+
+    def ecef_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Antenna position in ECEF at chainages, shape ``chainage_m.shape + (3,)``, metres."""
+        axis = self.track.enu_at(chainage_m) @ self._rotation + self._origin_ecef_m
+        if self.antenna_height_m == 0.0:
+            return axis
+        # gradient of x^2/a^2 + y^2/a^2 + z^2/b^2 at the axis point: the ellipsoid normal to
+        # within h e^2 / a (2e-9 rad at h = 2 km), far cheaper than a geodetic round trip
+        n = axis * _INV_AXES2
+        return axis + self.antenna_height_m * n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def tangent_ecef_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Unit tangent (increasing chainage) in ECEF, shape ``chainage_m.shape + (3,)``."""
+        # ecef = enu @ R + origin, so directions map as v_ecef = v_enu @ R
+        return self.track.tangent_at(chainage_m) @ self._rotation
+
+    # the frame's rotation and origin, computed once (LocalFrame recomputes them per call)
+    @cached_property
+    def _rotation(self) -> NDArray:
+        return self.track.frame.rotation
+
+    @cached_property
+    def _origin_ecef_m(self) -> NDArray:
+        return self.track.frame.origin_ecef_m
+
+
+@dataclass(frozen=True)
+class PairSolution:
+    """Intersections of satellite pairs with the antenna path, one entry per pair.
+
+    Attributes
+    ----------
+    i, j : ndarray of int, shape (p,)
+        Satellite indices of each pair (``K = rho_i - rho_j``).
+    k_m : ndarray, shape (p,)
+        Measured range difference ``K``, metres.
+    sigma_k_m : ndarray, shape (p,)
+        ``sqrt(sigma_i**2 + sigma_j**2)``, metres.
+    k_sigma : float
+        Interval half width in sigmas of ``K``.
+    root_m : ndarray, shape (p,)
+        Chosen intersection chainage, metres (NaN: no root).
+    lo_m, hi_m : ndarray, shape (p,)
+        Pair confidence interval, metres (NaN: empty, see ``EMPTY``; ``-inf``/``+inf``:
+        unbounded).
+    slope : ndarray, shape (p,)
+        ``df/ds = (u_j - u_i) . t`` at the root: metres of range difference per metre of
+        chainage; small means a blunt intersection.
+    n_roots : ndarray of int, shape (p,)
+        Number of intersections in the window.
+    misfit_m : ndarray, shape (p,)
+        Smallest ``|f|`` on the search grid (0 when a root exists).
+    status : ndarray of uint8, shape (p,)
+        :class:`PairStatus` flags.
+    """
+
+    i: NDArray
+    j: NDArray
+    k_m: NDArray
+    sigma_k_m: NDArray
+    k_sigma: float
+    root_m: NDArray
+    lo_m: NDArray
+    hi_m: NDArray
+    slope: NDArray
+    n_roots: NDArray
+    misfit_m: NDArray
+    status: NDArray
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.i.size)
+
+    @property
+    def length_m(self) -> NDArray:
+        """Interval lengths ``hi - lo``, shape (p,)."""
+        return self.hi_m - self.lo_m
+
+    @property
+    def valid(self) -> NDArray:
+        """Pairs with a root and a bounded interval, bool (p,)."""
+        return np.isfinite(self.root_m) & np.isfinite(self.lo_m) & np.isfinite(self.hi_m)
+
+    def contains(self, chainage_m: ArrayLike) -> NDArray:
+        """Whether each pair interval holds ``chainage_m`` (broadcast against (p,))."""
+        s = np.asarray(chainage_m, float)
+        return (self.lo_m <= s) & (s <= self.hi_m)
+
+    def take(self, index: ArrayLike) -> PairSolution:
+        """The pairs at ``index`` (int or bool array)."""
+        k = np.asarray(index)
+        return PairSolution(
+            self.i[k], self.j[k], self.k_m[k], self.sigma_k_m[k], self.k_sigma, self.root_m[k],
+            self.lo_m[k], self.hi_m[k], self.slope[k], self.n_roots[k], self.misfit_m[k],
+            self.status[k],
+        )  # fmt: skip
+
+
+def all_pairs(n_sat: int) -> NDArray:
+    """Every pair ``(i, j)``, ``i < j``, of ``n_sat`` satellites, shape (n_sat*(n_sat-1)/2, 2)."""
+    i, j = np.triu_indices(int(n_sat), 1)
+    return np.stack([i, j], axis=-1)
+
+
+def range_difference_m(x_ecef_m: ArrayLike, sat_i_m: ArrayLike, sat_j_m: ArrayLike) -> NDArray:
+    """``|x - S_i| - |x - S_j|``, broadcasting ``(..., 3)`` inputs, metres."""
+    x = np.asarray(x_ecef_m, float)
+    return np.linalg.norm(x - np.asarray(sat_i_m), axis=-1) - np.linalg.norm(
+        x - np.asarray(sat_j_m), axis=-1
+    )
+
+
+def solve_pairs(
+    path: AntennaPath,
+    sat_ecef_m: ArrayLike,
+    pseudorange_m: ArrayLike,
+    sigma_m: ArrayLike,
+    pairs: ArrayLike | None = None,
+    *,
+    prior_m: float,
+    window_m: float = 1000.0,
+    k_sigma: float = 2.0,
+    step_m: float = 5.0,
+) -> PairSolution:
+    """Intersect satellite-pair hyperboloids with the antenna path (one epoch).
+
+    Parameters
+    ----------
+    path : AntennaPath
+    sat_ecef_m : array_like, shape (n_sat, 3)
+        Satellite positions at transmission, expressed in ECEF at reception, metres.
+    pseudorange_m : array_like, shape (n_sat,)
+        Corrected pseudoranges, metres (the receiver clock is common to all).
+    sigma_m : array_like, shape (n_sat,)
+        Pseudorange sigmas, metres (e.g. :meth:`predisat.interval.ErrorModel.sigma_m`).
+    pairs : array_like of int, shape (p, 2), optional
+        Pairs to solve; default every pair.
+    prior_m : float
+        Centre of the search window (previous estimate, odometry, ...), chainage in metres.
+    window_m : float
+        Half width ``W`` of the search window; clipped to the track.
+    k_sigma : float
+        Interval half width in sigmas of ``K``.
+    step_m : float
+        Grid step of the root bracketing. Two roots closer than this may be missed (only at a
+        near-tangent, where the pair is blunt anyway).
+
+    Returns
+    -------
+    PairSolution
+    """
+    sat = np.asarray(sat_ecef_m, float)
+    rho = np.asarray(pseudorange_m, float)
+    sig = np.asarray(sigma_m, float)
+    n = _check_inputs(sat, rho, sig)
+    pr = all_pairs(n) if pairs is None else np.asarray(pairs, np.intp).reshape(-1, 2)
+    if pr.size and (pr.min() < 0 or pr.max() >= n or np.any(pr[:, 0] == pr[:, 1])):
+        raise ValueError(f"pairs must hold two distinct satellite indices in [0, {n}); got {pr}")
+    if not (window_m > 0 and step_m > 0 and k_sigma > 0):
+        raise ValueError(
+            f"window_m, step_m and k_sigma must be positive: {window_m}, {step_m}, {k_sigma}"
+        )
+    if not np.isfinite(prior_m):
+        raise ValueError(f"prior_m must be finite, got {prior_m}")
+    i, j = pr[:, 0], pr[:, 1]
+    p = len(i)
+    length = path.length_m
+    a = float(np.clip(prior_m - window_m, 0.0, length))
+    b = float(np.clip(prior_m + window_m, 0.0, length))
+    n_step = max(int(np.ceil((b - a) / step_m)), 1)
+    grid = np.linspace(a, b, n_step + 1)
+
+    k = rho[i] - rho[j]
+    sk = np.sqrt(sig[i] ** 2 + sig[j] ** 2)
+    # three level sets per pair: the root and the two interval bounds
+    level = np.stack([np.zeros(p), k_sigma * sk, -k_sigma * sk], axis=-1)  # (p, 3)
+    target = k[:, None] + level  # (p, 3)
+
+    rng = np.linalg.norm(path.ecef_at(grid)[:, None, :] - sat[None], axis=-1)  # (g, n)
+    diff = rng[:, i] - rng[:, j]  # (g, p)
+    f = diff[:, :, None] - target[None]  # (g, p, 3)
+    misfit = np.abs(f[:, :, 0]).min(axis=0) if p else np.zeros(0)
+
+    neg = f < 0
+    g_idx, p_idx, l_idx = np.nonzero(neg[:-1] != neg[1:])
+    roots = _refine(path, sat, i[p_idx], j[p_idx], target[p_idx, l_idx],
+                    grid[g_idx], grid[g_idx + 1], f[g_idx, p_idx, l_idx],
+                    f[g_idx + 1, p_idx, l_idx])  # fmt: skip
+
+    centre = l_idx == 0
+    n_roots = np.bincount(p_idx[centre], minlength=p)
+    chosen = _choose_roots(p_idx[centre], roots[centre], n_roots, prior_m, p)
+
+    # interval: nearest bound-level root on each side of the chosen root
+    bound = ~centre
+    bp, bs = p_idx[bound], roots[bound]
+    below = np.full(p, -np.inf)
+    above = np.full(p, np.inf)
+    if bound.any():
+        c = chosen[bp]
+        np.maximum.at(below, bp[bs < c], bs[bs < c])
+        np.minimum.at(above, bp[bs > c], bs[bs > c])
+    has = np.isfinite(chosen)
+    # no root: the pair's set {|f| <= k sigma_K} may still meet the window (a blunt pair whose
+    # root lies outside it); keep the hull of that set, NaN when it is empty
+    none = ~has
+    band = np.abs(f[:, :, 0]) <= k_sigma * sk  # (g, p)
+    hull_lo = np.full(p, np.inf)
+    hull_hi = np.full(p, -np.inf)
+    np.minimum.at(hull_lo, bp, bs)
+    np.maximum.at(hull_hi, bp, bs)
+    if p:
+        hull_lo = np.where(band[0], -np.inf, hull_lo)
+        hull_hi = np.where(band[-1], np.inf, hull_hi)
+    empty = none & ~(hull_lo <= hull_hi)
+    below = np.where(none, hull_lo, below)
+    above = np.where(none, hull_hi, above)
+    # the track ends bound the train; window ends inside the track do not
+    lo = np.where(np.isneginf(below) & (a <= 0.0), 0.0, below)
+    hi = np.where(np.isposinf(above) & (b >= length), length, above)
+    lo = np.where(empty, np.nan, lo)
+    hi = np.where(empty, np.nan, hi)
+
+    status = np.zeros(p, np.uint8)
+    status |= np.where(n_roots == 0, PairStatus.NO_ROOT, 0).astype(np.uint8)
+    status |= np.where(empty, PairStatus.EMPTY, 0).astype(np.uint8)
+    status |= np.where(n_roots > 1, PairStatus.MULTIPLE_ROOTS, 0).astype(np.uint8)
+    status |= np.where(np.isneginf(lo), PairStatus.UNBOUNDED_LOW, 0).astype(np.uint8)
+    status |= np.where(np.isposinf(hi), PairStatus.UNBOUNDED_HIGH, 0).astype(np.uint8)
+
+    slope = np.full(p, np.nan)
+    if has.any():
+        s_ok = chosen[has]
+        x = path.ecef_at(s_ok)
+        t = path.tangent_ecef_at(s_ok)
+        u_i = _unit(sat[i[has]] - x)
+        u_j = _unit(sat[j[has]] - x)
+        slope[has] = np.sum((u_j - u_i) * t, axis=-1)
+    return PairSolution(
+        i=i, j=j, k_m=k, sigma_k_m=sk, k_sigma=float(k_sigma), root_m=chosen, lo_m=lo, hi_m=hi,
+        slope=slope, n_roots=n_roots, misfit_m=np.where(n_roots > 0, 0.0, misfit),
+        status=status,
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------- helpers
+
+
+def _check_inputs(sat: NDArray, rho: NDArray, sig: NDArray) -> int:
+    if sat.ndim != 2 or sat.shape[-1] != 3:
+        raise ValueError(f"sat_ecef_m must have shape (n_sat, 3), got {sat.shape}")
+    n = sat.shape[0]
+    if rho.shape != (n,) or sig.shape != (n,):
+        raise ValueError(
+            f"pseudorange_m and sigma_m must have shape ({n},) like sat_ecef_m; got "
+            f"{rho.shape} and {sig.shape}"
+        )
+    bad = ~(np.isfinite(sat).all(-1) & np.isfinite(rho) & np.isfinite(sig) & (sig > 0))
+    if bad.any():
+        raise ValueError(
+            f"satellite {int(np.flatnonzero(bad)[0])} has a NaN position, pseudorange or a "
+            "non-positive sigma; drop it before solving (see locator.selection)"
+        )
+    return n
+
+
+def _unit(v: NDArray) -> NDArray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _refine(
+    path: AntennaPath,
+    sat: NDArray,
+    i: NDArray,
+    j: NDArray,
+    target: NDArray,
+    a: NDArray,
+    b: NDArray,
+    fa: NDArray,
+    fb: NDArray,
+    *,
+    tol_m: float = 1e-4,
+    max_iter: int = 30,
+) -> NDArray:
+    """Roots of ``range_diff(s) - target`` in brackets ``[a, b]``, all at once (Illinois)."""
+    a, b, fa, fb = a.copy(), b.copy(), fa.copy(), fb.copy()
+    if a.size == 0:
+        return a
+    s = a
+    side = np.zeros(a.shape, np.int8)
+    for _ in range(max_iter):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(fb != fa, (a * fb - b * fa) / (fb - fa), 0.5 * (a + b))
+        fs = range_difference_m(path.ecef_at(s), sat[i], sat[j]) - target
+        if np.all(np.abs(fs) < tol_m):
+            break
+        left = (fs < 0) == (fa < 0)  # root in [s, b]
+        # Illinois: halve the stale end's value when the same end is kept twice
+        fb = np.where(left & (side == 1), 0.5 * fb, fb)
+        fa = np.where(~left & (side == -1), 0.5 * fa, fa)
+        a, fa = np.where(left, s, a), np.where(left, fs, fa)
+        b, fb = np.where(left, b, s), np.where(left, fb, fs)
+        side = np.where(left, 1, -1).astype(np.int8)
+    return s
+
+
+def _choose_roots(
+    pair: NDArray, root: NDArray, n_roots: NDArray, prior_m: float, p: int
+) -> NDArray:
+    """One root per pair: the one closest to the consensus of the unambiguous pairs."""
+    single = n_roots[pair] == 1
+    ref = float(np.median(root[single])) if single.any() else float(prior_m)
+    dist = np.abs(root - ref)
+    best = np.full(p, np.inf)
+    np.minimum.at(best, pair, dist)
+    pick = dist == best[pair]
+    chosen = np.full(p, np.nan)
+    chosen[pair[pick]] = root[pick]
+    return chosen

@@ -1,0 +1,73 @@
+"""Small synthetic scenes for the locator tests: tracks, skies and pseudoranges.
+
+Ground truth comes from geometry: satellites are placed at chosen azimuth/elevation seen from
+the true antenna position (local ENU of PROJ's ellipsoid normal), ranges are Euclidean
+distances plus a known clock and Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from locator.sathia import AntennaPath
+from predisat.geodesy import LocalFrame, azel_to_enu, ecef_to_geodetic, enu_rotation
+from predisat.track import TrackMap
+
+FRAME = LocalFrame(50.45, 4.45, 150.0)
+SAT_DISTANCE_M = 2.2e7
+CLOCK_M = 12345.0
+
+
+def track_from_enu(enu: NDArray, name: str = "t") -> TrackMap:
+    lat, lon, h = FRAME.to_geodetic(np.asarray(enu, float))
+    return TrackMap.from_latlon(lat, lon, h, name=name, tolerance_m=0.05)
+
+
+def straight_path(heading_deg: float = 60.0, length_m: float = 4000.0, height_m: float = 4.0):
+    hd = np.radians(heading_deg)
+    d = np.linspace(0.0, length_m, 9)
+    enu = np.stack([d * np.sin(hd), d * np.cos(hd), np.zeros_like(d)], axis=-1)
+    return AntennaPath(track_from_enu(enu, "straight"), height_m)
+
+
+def arc_path(
+    radius_m: float,
+    turn_deg: float,
+    heading_deg: float = 90.0,
+    lead_m: float = 0.0,
+    height_m: float = 4.0,
+    step_m: float = 5.0,
+):
+    """A straight lead, then a left-turning arc of ``turn_deg`` from ``heading_deg``."""
+    hd = np.radians(heading_deg)
+    t0 = np.array([np.sin(hd), np.cos(hd), 0.0])
+    left = np.array([-np.cos(hd), np.sin(hd), 0.0])
+    lead = np.arange(0.0, lead_m, step_m)[:, None] * t0
+    start = lead_m * t0
+    centre = start + radius_m * left
+    a = np.arange(0.0, np.radians(turn_deg) + 1e-9, step_m / radius_m)
+    arc = centre - radius_m * (np.cos(a)[:, None] * left) + radius_m * (np.sin(a)[:, None] * t0)
+    enu = np.concatenate([lead, arc]) if lead_m > 0 else arc
+    return AntennaPath(track_from_enu(enu, "arc"), height_m)
+
+
+def sky(x_ecef: NDArray, az_deg, el_deg) -> NDArray:
+    """Satellites at ``SAT_DISTANCE_M`` seen at (az, el) from ``x_ecef``, shape (n, 3)."""
+    lat, lon, _ = ecef_to_geodetic(np.asarray(x_ecef, float))
+    rot = enu_rotation(lat, lon)  # ECEF -> ENU rows
+    d = azel_to_enu(np.asarray(az_deg, float), np.asarray(el_deg, float)) @ rot
+    return np.asarray(x_ecef, float) + SAT_DISTANCE_M * d
+
+
+def random_sky(rng: np.random.Generator, n: int, min_el_deg: float = 15.0):
+    az = rng.uniform(0.0, 360.0, n)
+    el = np.degrees(np.arcsin(rng.uniform(np.sin(np.radians(min_el_deg)), 1.0, n)))
+    return az, el
+
+
+def ranges(sat: NDArray, x_ecef: NDArray, sigma_m=0.0, rng=None, clock_m: float = CLOCK_M):
+    r = np.linalg.norm(sat - np.asarray(x_ecef, float), axis=-1) + clock_m
+    if rng is not None:
+        r = r + rng.normal(0.0, 1.0, r.shape) * sigma_m
+    return r

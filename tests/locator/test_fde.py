@@ -1,0 +1,127 @@
+"""Passive and active integrity with fault detection and exclusion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.fde import FixFlag, LocatorConfig, locate
+from locator.sathia import AntennaPath
+from locator.selection import direction_at
+from predisat.interval import ErrorModel, IntervalMode, IntervalModel
+from tests.locator._scene import random_sky, ranges, sky, straight_path
+
+CFG = LocatorConfig(model=IntervalModel(ErrorModel(1.0, 1.0), k_sigma=2.0), window_m=500.0)
+
+
+@pytest.fixture(scope="module")
+def path() -> AntennaPath:
+    return straight_path(45.0, 4000.0)
+
+
+def _epoch(path, s_true, n, seed, bias=None):
+    rng = np.random.default_rng(seed)
+    x = path.ecef_at(s_true)
+    az, el = random_sky(rng, n, 20.0)
+    sat = sky(x, az, el)
+    sig = CFG.model.error.sigma_m(el)
+    rho = ranges(sat, x, sig, rng)
+    if bias is not None:
+        rho[bias[0]] += bias[1]
+    return sat, rho, el
+
+
+def test_clean_epoch_three_pairs_with_claim(path):
+    s_true = 1800.0
+    sat, rho, el = _epoch(path, s_true, 8, 1)
+    fix = locate(path, sat, rho, el, prior_m=s_true + 120.0, config=CFG)
+    assert fix.flags == FixFlag.NONE and fix.safety_claim
+    assert fix.mode == IntervalMode.THREE_PAIRS and fix.pairs is not None
+    assert fix.pairs.n_pairs == 3 and len(set(np.r_[fix.pairs.i, fix.pairs.j])) == 6
+    assert fix.contains(s_true)
+    assert fix.wls is not None and abs(fix.wls.chainage_m - fix.chainage_m) < 5.0
+
+
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_active_excludes_a_100_m_bias(path, seed):
+    s_true = 2500.0
+    sat, rho, el = _epoch(path, s_true, 8, seed, bias=(2, 100.0))
+    fix = locate(
+        path, sat, rho, el, prior_m=s_true - 80.0, config=CFG, sats=[f"G{k:02d}" for k in range(8)]
+    )
+    assert fix.excluded == (2,) and fix.excluded_sats == ("G02",)
+    assert fix.flags & FixFlag.EXCLUDED and not fix.flags & FixFlag.FAULT_DETECTED
+    assert not fix.used[2] and fix.used.sum() == 7
+    assert fix.contains(s_true) and fix.safety_claim
+    passive = locate(path, sat, rho, el, prior_m=s_true - 80.0, config=CFG, integrity="passive")
+    assert passive.excluded == () and passive.flags & FixFlag.FAULT_DETECTED
+    assert not passive.safety_claim
+
+
+def test_few_satellites_no_claim_and_too_few(path):
+    s_true = 1000.0
+    sat, rho, el = _epoch(path, s_true, 3, 7)
+    fix = locate(path, sat, rho, el, prior_m=s_true, config=CFG)
+    assert fix.mode == IntervalMode.BEST_PAIR
+    assert fix.flags & FixFlag.NO_SAFETY_CLAIM and not fix.safety_claim
+    assert fix.contains(s_true) or fix.flags & FixFlag.BLUNT
+    one = locate(path, sat[:1], rho[:1], el[:1], prior_m=s_true, config=CFG)
+    assert one.flags & FixFlag.TOO_FEW and np.isnan(one.chainage_m)
+
+
+def test_blunt_pairs_dropped_in_all_pairs_mode(path):
+    s_true = 1500.0
+    x = path.ecef_at(s_true)
+    # satellites 0 and 1 nearly at the same along-track component: a blunt pair
+    sat = sky(x, [45.0, 48.0, 225.0, 135.0], [40.0, 41.0, 35.0, 60.0])
+    el = np.array([40.0, 41.0, 35.0, 60.0])
+    rho = ranges(sat, x)
+    active = locate(path, sat, rho, el, prior_m=s_true, config=CFG)
+    assert active.mode == IntervalMode.ALL_PAIRS and active.flags & FixFlag.BLUNT
+    assert active.pairs is not None
+    used_pairs = set(zip(active.pairs.i.tolist(), active.pairs.j.tolist(), strict=True))
+    assert (0, 1) not in used_pairs and len(used_pairs) == 5
+    passive = locate(path, sat, rho, el, prior_m=s_true, config=CFG, integrity="passive")
+    assert passive.pairs is not None and passive.pairs.n_pairs == 6
+    assert passive.length_m > active.length_m  # the blunt pair only lengthens it
+    assert active.contains(s_true) and passive.contains(s_true)
+
+
+def test_passive_uses_all_pairs_and_is_wider(path):
+    s_true = 3000.0
+    sat, rho, el = _epoch(path, s_true, 7, 21)
+    act = locate(path, sat, rho, el, prior_m=s_true, config=CFG)
+    pas = locate(path, sat, rho, el, prior_m=s_true, config=CFG, integrity="passive")
+    assert pas.pairs is not None and act.pairs is not None
+    assert pas.pairs.n_pairs == 21 and act.pairs.n_pairs == 3
+    assert pas.lo_m <= act.lo_m and pas.hi_m >= act.hi_m
+
+
+def test_real_constellation_from_embedded_day(path):
+    from predisat.satellites import default_ephemeris, default_window
+
+    eph = default_ephemeris()
+    t = default_window(3600.0)[[5, 17]]
+    pos, _, status = eph.evaluate(t, [s for s in eph.satellites if s[0] == "G"])
+    s_true = 2000.0
+    rng = np.random.default_rng(0)
+    for k in range(len(t)):
+        ok = status.valid[k]
+        _, el = direction_at(path, s_true, pos[k, ok])
+        up = el > 10.0
+        sat = pos[k, ok][up]
+        sig = CFG.model.error.sigma_m(el[up])
+        rho = ranges(sat, path.ecef_at(s_true), sig, rng)
+        fix = locate(path, sat, rho, el[up], prior_m=s_true + 200.0, config=CFG)
+        assert len(sat) >= 6 and fix.mode == IntervalMode.THREE_PAIRS
+        assert fix.contains(s_true) and fix.length_m < 150.0
+
+
+def test_validation(path):
+    sat, rho, el = _epoch(path, 100.0, 4, 0)
+    with pytest.raises(ValueError, match="integrity"):
+        locate(path, sat, rho, el, prior_m=100.0, integrity="none")
+    with pytest.raises(ValueError, match="el_deg"):
+        locate(path, sat, rho, el[:2], prior_m=100.0)
+    with pytest.raises(ValueError, match="min_slope"):
+        LocatorConfig(min_slope=3.0)

@@ -1,0 +1,182 @@
+"""SATHIA pair intersections: roots, intervals, ambiguous and empty cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.sathia import AntennaPath, PairStatus, all_pairs, range_difference_m, solve_pairs
+from tests.locator._scene import arc_path, random_sky, ranges, sky, straight_path
+
+
+@pytest.fixture(scope="module")
+def straight() -> AntennaPath:
+    return straight_path(60.0, 4000.0)
+
+
+def _scene(path, s_true, seed=0, n=8):
+    rng = np.random.default_rng(seed)
+    x = path.ecef_at(s_true)
+    sat = sky(x, *random_sky(rng, n))
+    return x, sat
+
+
+def test_clean_roots_hit_truth(straight):
+    s_true = 1733.3
+    x, sat = _scene(straight, s_true)
+    sol = solve_pairs(straight, sat, ranges(sat, x), np.full(8, 3.0), prior_m=1500.0)
+    assert sol.n_pairs == 28
+    np.testing.assert_allclose(sol.root_m, s_true, atol=1e-3)
+    assert np.all(sol.status == PairStatus.OK)
+    assert np.all(sol.n_roots == 1)
+    # slope against a central finite difference of the exact range difference
+    h = 0.5
+    d_plus = range_difference_m(straight.ecef_at(s_true + h), sat[sol.i], sat[sol.j])
+    d_minus = range_difference_m(straight.ecef_at(s_true - h), sat[sol.i], sat[sol.j])
+    np.testing.assert_allclose(sol.slope, (d_plus - d_minus) / (2 * h), atol=1e-6)
+
+
+def test_interval_half_length_is_linearised_bound(straight):
+    s_true = 900.0
+    x, sat = _scene(straight, s_true, seed=3)
+    sig = np.linspace(2.0, 6.0, 8)
+    sol = solve_pairs(straight, sat, ranges(sat, x), sig, prior_m=800.0, k_sigma=2.5)
+    ok = np.abs(sol.slope) > 0.1
+    expected = 2.5 * np.hypot(sig[sol.i], sig[sol.j]) / np.abs(sol.slope)
+    np.testing.assert_allclose((sol.hi_m - s_true)[ok], expected[ok], rtol=1e-3)
+    np.testing.assert_allclose((s_true - sol.lo_m)[ok], expected[ok], rtol=1e-3)
+
+
+def test_pair_coverage_matches_k_sigma(straight):
+    """k = 2: a pair interval holds the truth 95.45 % of the time (Gaussian errors)."""
+    rng = np.random.default_rng(42)
+    s_true = 2000.0
+    x = straight.ecef_at(s_true)
+    hits, total = 0, 0
+    for _ in range(150):
+        sat = sky(x, *random_sky(rng, 7))
+        sig = rng.uniform(1.0, 5.0, 7)
+        rho = ranges(sat, x, sig, rng)
+        sol = solve_pairs(
+            straight,
+            sat,
+            rho,
+            sig,
+            prior_m=s_true + rng.normal(0, 50),
+            window_m=1500.0,
+            k_sigma=2.0,
+        )
+        ok = sol.valid
+        hits += int(sol.contains(s_true)[ok].sum())
+        total += int(ok.sum())
+    rate = hits / total
+    assert total > 2500
+    assert abs(rate - 0.9545) < 0.02, rate
+
+
+def test_curved_track_recovers_truth():
+    path = arc_path(400.0, 120.0, heading_deg=30.0, lead_m=200.0)
+    rng = np.random.default_rng(7)
+    for s_true in (150.0, 420.0, 700.0):
+        x = path.ecef_at(s_true)
+        sat = sky(x, *random_sky(rng, 6))
+        sol = solve_pairs(
+            path, sat, ranges(sat, x, 1.0, rng), np.ones(6), prior_m=s_true + 60.0, window_m=300.0
+        )
+        good = sol.valid & (np.abs(sol.slope) > 0.3)
+        assert good.sum() >= 5
+        err = np.abs(sol.root_m[good] - s_true)
+        bound = 4.0 * np.sqrt(2.0) / np.abs(sol.slope[good])  # 4 sigma of K along the track
+        assert np.all(err < bound)
+
+
+@pytest.fixture(scope="module")
+def u_turn() -> AntennaPath:
+    # semicircle, radius 300 m, starting east-bound and turning left through north
+    return arc_path(300.0, 180.0, heading_deg=90.0, height_m=0.0)
+
+
+def test_two_roots_on_a_u_turn(u_turn):
+    quarter = np.pi * 300.0 / 2.0  # easternmost point
+    s_true = quarter - 100.0
+    x = u_turn.ecef_at(s_true)
+    # pair 0-1: east-west, its range difference peaks at the easternmost point -> two roots;
+    # satellites 2, 3: north/south-ish, monotonic along the semicircle
+    sat = sky(x, [270.0, 90.0, 0.0, 180.0], [30.0, 30.0, 20.0, 60.0])
+    rho = ranges(sat, x)
+    sol = solve_pairs(u_turn, sat, rho, np.ones(4), prior_m=quarter + 60.0, window_m=470.0)
+    ew = int(np.flatnonzero((sol.i == 0) & (sol.j == 1))[0])
+    assert sol.n_roots[ew] == 2
+    assert sol.status[ew] & PairStatus.MULTIPLE_ROOTS
+    # the prior is nearer the wrong root (quarter + 100), the unambiguous pairs decide
+    assert abs(sol.root_m[ew] - s_true) < 1e-3
+    # the interval is the component around the chosen root: it stops short of the peak
+    assert sol.lo_m[ew] < s_true < sol.hi_m[ew] < quarter
+
+
+def test_ambiguous_pair_alone_takes_root_nearest_prior(u_turn):
+    quarter = np.pi * 300.0 / 2.0
+    x = u_turn.ecef_at(quarter - 100.0)
+    sat = sky(x, [270.0, 90.0], [30.0, 30.0])
+    rho = ranges(sat, x)
+    sol = solve_pairs(u_turn, sat, rho, np.ones(2), prior_m=quarter + 80.0, window_m=470.0)
+    assert sol.n_roots[0] == 2
+    assert abs(sol.root_m[0] - (quarter + 100.0)) < 0.5  # the mirror root (symmetry)
+
+
+def test_no_root_when_range_is_faulty(straight):
+    s_true = 1000.0
+    x, sat = _scene(straight, s_true, seed=5, n=5)
+    rho = ranges(sat, x)
+    rho[2] += 5000.0  # no point of a 2 x 300 m window explains this difference
+    sol = solve_pairs(straight, sat, rho, np.full(5, 3.0), prior_m=s_true, window_m=300.0)
+    bad = (sol.i == 2) | (sol.j == 2)
+    assert np.all(sol.status[bad] & PairStatus.NO_ROOT)
+    assert np.all(sol.status[bad] & PairStatus.EMPTY)
+    assert np.all(np.isnan(sol.root_m[bad])) and np.all(np.isnan(sol.lo_m[bad]))
+    assert np.all(sol.misfit_m[bad] > 3000.0)
+    np.testing.assert_allclose(sol.root_m[~bad], s_true, atol=1e-3)
+
+
+def test_unbounded_inside_track_and_bounded_at_track_end(straight):
+    x, sat = _scene(straight, 20.0, seed=1, n=4)
+    sig = np.full(4, 50.0)  # wide intervals
+    sol = solve_pairs(straight, sat, ranges(sat, x), sig, prior_m=40.0, window_m=60.0)
+    # lower side: the window reaches chainage 0, the track end bounds the interval
+    assert np.all(sol.lo_m >= 0.0)
+    assert np.all(sol.status & PairStatus.UNBOUNDED_HIGH)
+    assert np.all(np.isposinf(sol.hi_m))
+
+
+def test_pairs_argument_and_validation(straight):
+    x, sat = _scene(straight, 500.0, n=4)
+    rho = ranges(sat, x)
+    sol = solve_pairs(straight, sat, rho, np.ones(4), [[0, 3], [1, 2]], prior_m=500.0)
+    assert sol.i.tolist() == [0, 1] and sol.j.tolist() == [3, 2]
+    assert all_pairs(4).shape == (6, 2)
+    with pytest.raises(ValueError, match="distinct"):
+        solve_pairs(straight, sat, rho, np.ones(4), [[1, 1]], prior_m=500.0)
+    with pytest.raises(ValueError, match="satellite 2"):
+        solve_pairs(
+            straight, sat, np.where(np.arange(4) == 2, np.nan, rho), np.ones(4), prior_m=500.0
+        )
+    with pytest.raises(ValueError, match="shape"):
+        solve_pairs(straight, sat[:, :2], rho, np.ones(4), prior_m=500.0)
+
+
+def test_no_root_but_band_meets_window(straight):
+    """A root beyond the window: the pair still bounds the train by its k-sigma band."""
+    s_true = 1000.0
+    x, sat = _scene(straight, s_true, seed=8, n=6)
+    rho = ranges(sat, x)
+    sig = np.full(6, 50.0)
+    ref = solve_pairs(straight, sat, rho, sig, prior_m=s_true, window_m=2000.0)
+    sol = solve_pairs(straight, sat, rho, sig, prior_m=1200.0, window_m=100.0)
+    reach = s_true + 2.0 * ref.sigma_k_m / np.abs(ref.slope)  # upper band edge, linearised
+    pick = (reach > 1110.0) & (reach < 1290.0)
+    assert pick.sum() >= 2
+    assert np.all(sol.status[pick] & PairStatus.NO_ROOT)
+    assert not np.any(sol.status[pick] & PairStatus.EMPTY)
+    assert np.all(np.isneginf(sol.lo_m[pick]))
+    np.testing.assert_allclose(sol.hi_m[pick], reach[pick], atol=0.05)
+    assert not np.any(sol.valid[pick])
