@@ -9,7 +9,7 @@ above the WGS84 ellipsoid, ECEF in metres, azimuth in degrees clockwise from tru
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -144,14 +144,21 @@ class LocalFrame:
     lon_deg: float
     h_m: float = 0.0
 
-    @property
+    # Cached: every conversion needs them and pyproj calls are not free. cached_property stores
+    # in the instance __dict__, which a frozen dataclass allows; the arrays are made read-only.
+    @cached_property
     def origin_ecef_m(self) -> NDArray:
-        return geodetic_to_ecef(self.lat_deg, self.lon_deg, self.h_m)
+        """ECEF position of the origin, shape (3,), metres."""
+        out = geodetic_to_ecef(self.lat_deg, self.lon_deg, self.h_m)
+        out.setflags(write=False)
+        return out
 
-    @property
+    @cached_property
     def rotation(self) -> NDArray:
         """ECEF-to-ENU rotation at the origin, shape (3, 3)."""
-        return enu_rotation(self.lat_deg, self.lon_deg)
+        out = enu_rotation(self.lat_deg, self.lon_deg)
+        out.setflags(write=False)
+        return out
 
     def ecef_to_enu(self, xyz_m: ArrayLike) -> NDArray:
         """ECEF points (..., 3) to this frame's ENU (..., 3), metres."""
