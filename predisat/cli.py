@@ -19,6 +19,7 @@ from predisat import __version__
 
 if TYPE_CHECKING:
     from predisat.camera import CameraModel
+    from predisat.synth.world import WorldSpec
     from predisat.track import TrackMap
 
 __all__ = ["main"]
@@ -71,10 +72,30 @@ def _camera(kind: str, calibration: str | None) -> CameraModel:
     return camera.default_camera("fisheye" if kind == "fisheye" else "pinhole")
 
 
+def _scenery(path: str | None) -> WorldSpec | None:
+    if path is None:
+        return None
+    import yaml
+
+    from predisat.synth.world import WorldSpec
+
+    p = Path(path)
+    if not p.is_file():
+        raise CliError(f"--scenery {path}: no such file (give a YAML scenery recipe)")
+    try:
+        recipe = yaml.safe_load(p.read_text())
+        return WorldSpec.from_dict(recipe if isinstance(recipe, dict) else {})
+    except (yaml.YAMLError, ValueError, TypeError, KeyError) as exc:
+        raise CliError(
+            f"--scenery {path}: not a valid scenery recipe ({exc}); see docs/synthetic-world.md"
+        ) from None
+
+
 def cmd_synth(args: argparse.Namespace) -> int:
     track = _load_track(args.track, args.track_name)
     from_m, to_m = _km_range(track, args.from_km, args.to_km)
     cam = _camera(args.camera, args.calibration)
+    spec = _scenery(args.scenery)
 
     from predisat.synth.generate import generate_survey
 
@@ -89,6 +110,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         spacing_m=args.spacing_m,
         camera=cam,
         pitch_deg=args.pitch_deg,
+        spec=spec,
         progress=not args.quiet,
         workers=args.workers,
     )
@@ -195,6 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
     p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
     p.add_argument("--pitch-deg", type=float, default=45.0, help="camera pitch above horizontal")
+    p.add_argument(
+        "--scenery", metavar="YAML", help="scenery recipe (default: mixed, every kind of stretch)"
+    )
     p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)

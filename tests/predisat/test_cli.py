@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -57,3 +58,21 @@ def test_evaluate_sky_rejects_missing_folder(tmp_path, capsys: pytest.CaptureFix
     code = cli.main(["evaluate-sky", "--data", str(missing)])
     assert code == 2
     assert str(missing) in capsys.readouterr().err
+
+
+def test_shipped_scenery_recipe_is_valid() -> None:
+    import yaml
+
+    from predisat.synth.world import WorldSpec
+
+    recipe = Path(__file__).resolve().parents[2] / "surveys" / "nice_digne_canyon.yaml"
+    spec = WorldSpec.from_dict(yaml.safe_load(recipe.read_text()))
+    assert {"rock_walls", "tunnel", "cutting"} <= spec.kinds
+
+
+def test_synth_rejects_bad_scenery_recipe(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("stretches: [{kind: volcano, start_m: 0, end_m: 100}]\n")
+    code = cli.main(["synth", "--to-km", "0.2", "--scenery", str(bad), "--out", str(tmp_path)])
+    assert code == 2
+    assert "--scenery" in capsys.readouterr().err
