@@ -1,6 +1,23 @@
-"""Sky segmentation of camera frames with OpenCV: a sky mask, the skyline per column, confidence.
+"""Sky segmentation of camera frames: a sky mask, the skyline per column, confidence.
 
-The method is classical and runs per image, without a learned model:
+Two methods (``SkyOptions.method``); the default was chosen by measurement
+(``docs/segmentation.md``).
+
+**learned** (default): a per-pixel classifier (:mod:`predisat.skymodel`, features of
+:mod:`predisat.skyfeatures`) trained by ``scripts/train_sky.py`` on synthetic frames only.
+
+1. Sky probability at a working resolution (longest side 160 px); upsampled and sharpened on
+   the frame's edges by a guided filter. An upward fisheye photo is unwrapped to polar
+   coordinates first (zenith on top), classified, and wrapped back.
+2. ``p >= 0.5``, then connected-component rules: in an upright frame sky must touch the top
+   edge (and not be a speck) or be a large region (sky under a bridge deck); obstacle specks
+   enclosed by sky, and small hanging regions the classifier hesitated on (dark cloud bases),
+   become sky. Fisheye photos: sky gaps in foliage (step 4 below).
+3. Thin-structure policy and skyline as below; the per-column confidence comes from the
+   probability margins on either side of the skyline (:func:`probability_confidence`).
+
+**grabcut** (classical, about 1 s per frame, no model; internals in
+:mod:`predisat.skygrabcut`):
 
 1. **Features** at a working resolution (longest side ``work_size_px``): CIELAB lightness and
    blue-yellow axis, and a texture energy (box-filtered gradient magnitude of the lightness).
@@ -40,6 +57,7 @@ skyline: a column with no valid pixel has ``nan``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -50,16 +68,13 @@ __all__ = [
     "SkySegmentation",
     "fisheye_valid_mask",
     "mask_above_skyline",
+    "probability_confidence",
     "remove_thin_obstacles",
     "segment_sky",
     "skyline_confidence",
     "skyline_from_mask",
 ]
 
-# Lab values in OpenCV's 8-bit encoding: 128 is neutral on a and b; b < 128 is blue.
-_NEUTRAL_B = 128.0
-# Gap (working-resolution pixels) across which smooth candidate regions are joined.
-_BRIDGE_PX = 15
 
 
 @dataclass(frozen=True)
@@ -106,6 +121,27 @@ class SkyOptions:
     min_sky_lightness : float
         Darkest (OpenCV 8-bit Lab lightness, 0-255) non-blue region taken as a sky seed: a dark
         tunnel or wall filling the frame yields no seed, hence no sky.
+    method : {"learned", "grabcut"}
+        ``"learned"`` (default, chosen by measurement, see ``docs/segmentation.md``): the
+        per-pixel classifier of :mod:`predisat.skymodel`; ``"grabcut"``: the classical
+        seeds + GrabCut method. The GrabCut parameters above apply to ``"grabcut"`` only
+        (``thin_px``, ``circle_*``, ``fisheye`` to both).
+    refine_guided : bool
+        Learned method: sharpen the upsampled probability on the image edges (guided filter).
+    min_island_fraction : float
+        Learned method: a sky region that does not touch the top of an upright frame is kept
+        only if it covers this share of the valid area (sky under a bridge deck); in a fisheye
+        photo every sky region is kept (sky gaps in foliage).
+    min_sky_fraction : float
+        Learned method, upright frames: sky specks touching the top smaller than this share of
+        the valid area are dropped (noise on a dark tunnel wall).
+    max_hole_fraction : float
+        Learned method: obstacle specks enclosed by sky and smaller than this share of the
+        valid area are classifier noise and become sky.
+    uncertain_hole_fraction, uncertain_hole_probability : float
+        Learned method: obstacle regions not reaching the bottom edge (hanging in the sky),
+        smaller than this share of the valid area, whose mean sky probability is at least
+        ``uncertain_hole_probability``, become sky (dark cloud bases).
     """
 
     fisheye: bool = False
@@ -124,8 +160,24 @@ class SkyOptions:
     thin_px: int = 3
     refine_band_px: int = 6
     min_sky_lightness: float = 100.0
+    method: str = "learned"
+    refine_guided: bool = True
+    min_island_fraction: float = 0.01
+    min_sky_fraction: float = 0.002
+    max_hole_fraction: float = 0.0005
+    uncertain_hole_fraction: float = 0.05
+    uncertain_hole_probability: float = 0.25
 
     def __post_init__(self) -> None:
+        if self.method not in ("learned", "grabcut"):
+            raise ValueError(f"method must be 'learned' or 'grabcut', got {self.method!r}")
+        fractions = (self.min_island_fraction, self.min_sky_fraction, self.max_hole_fraction,
+                     self.uncertain_hole_fraction, self.uncertain_hole_probability)
+        if not all(0.0 <= f <= 1.0 for f in fractions):
+            raise ValueError(
+                "min_island_fraction, min_sky_fraction, max_hole_fraction, "
+                "uncertain_hole_fraction and uncertain_hole_probability must lie in [0, 1]"
+            )
         if self.work_size_px < 32:
             raise ValueError(f"work_size_px must be >= 32, got {self.work_size_px}")
         if not 0.0 < self.texture_quantile < 1.0:
@@ -397,126 +449,9 @@ def skyline_confidence(
     return np.clip(conf, 0.0, 1.0)
 
 
-def _working_image(image: NDArray, work_size_px: int) -> tuple[NDArray, float]:
-    h, w = image.shape[:2]
-    scale = min(1.0, work_size_px / max(h, w))
-    if scale >= 1.0:
-        return image.copy(), 1.0
-    size = (max(1, round(w * scale)), max(1, round(h * scale)))
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), scale
-
-
-def _texture(lightness: NDArray) -> NDArray:
-    g = cv2.GaussianBlur(lightness, (0, 0), 0.8)
-    grad = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
-    return np.asarray(cv2.blur(grad, (5, 5)))
-
-
-def _seeds(
-    lab: NDArray, tex: NDArray, valid: NDArray, opt: SkyOptions
-) -> tuple[NDArray, float]:
-    """Smooth, bright-or-blue regions that may be sky, and the smoothness threshold."""
-    h = lab.shape[0]
-    lightness, blueness = lab[..., 0].astype(np.float32), lab[..., 2].astype(np.float32)
-    t_tex = float(
-        np.clip(np.quantile(tex[valid], opt.texture_quantile), opt.texture_min, opt.texture_max)
-    )
-    smooth = (tex < t_tex) & valid
-    bright = (lightness > np.median(lightness[valid])) & (lightness >= opt.min_sky_lightness)
-    blue = blueness < _NEUTRAL_B - 4.0
-    cand = smooth & (bright | blue)
-    # Wires cut the sky into strips (their texture footprint is ~11 px wide after filtering):
-    # components are found on the candidates with thin gaps bridged, so that the sky below a
-    # catenary wire is as much a seed as the sky above it.
-    bridged = remove_thin_obstacles(cand, _BRIDGE_PX).astype(np.uint8)
-    n, lbl, stats, _ = cv2.connectedComponentsWithStats(bridged, connectivity=4)
-    if n <= 1:
-        return np.zeros(valid.shape, bool), t_tex
-    area = stats[1:, cv2.CC_STAT_AREA]
-    big = (area >= opt.min_seed_fraction * valid.sum()) | (area >= 0.3 * area.max())
-    if not opt.fisheye:
-        big &= stats[1:, cv2.CC_STAT_TOP] <= 0.02 * h
-    keep = np.concatenate([[False], big])
-    return keep[lbl] & cand, t_tex
-
-
-def _grabcut_sky(small: NDArray, valid: NDArray, opt: SkyOptions) -> NDArray:
-    """Sky at working resolution (bool), or all False when no seed is found."""
-    h, w = small.shape[:2]
-    lab = cv2.cvtColor(small, cv2.COLOR_BGR2LAB)
-    tex = _texture(lab[..., 0].astype(np.float32))
-    seeds, t_tex = _seeds(lab, tex, valid, opt)
-    if seeds.sum() < 20:
-        return np.zeros((h, w), bool)
-    ltex = np.clip(np.log1p(tex) * opt.texture_weight, 0, 255).astype(np.uint8)
-    feat = np.ascontiguousarray(np.dstack([lab[..., 0], lab[..., 2], ltex]), np.uint8)
-    gc = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
-    if not opt.fisheye:
-        # In an upright frame whatever lies above a seeded column's first strong edge is
-        # probably sky too (clouds have soft edges, buildings sharp ones).
-        strong = tex > 3.0 * t_tex
-        first = np.where(strong.any(axis=0), strong.argmax(axis=0), h)
-        rows = np.arange(h)[:, None]
-        above = (rows < first[None, :]) & np.asarray(seeds.any(axis=0))[None, :]
-        gc[above] = cv2.GC_PR_FGD
-    gc[seeds] = cv2.GC_PR_FGD
-    core = cv2.erode(seeds.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
-    gc[core] = cv2.GC_FGD
-    gc[~valid] = cv2.GC_BGD
-    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
-    try:
-        cv2.grabCut(feat, gc, (0, 0, 0, 0), bgd, fgd, opt.grabcut_iterations, cv2.GC_INIT_WITH_MASK)
-    except cv2.error:
-        # GrabCut refuses masks with no possible background (an all-sky frame): keep the seeds.
-        return np.asarray(gc != cv2.GC_BGD) & (gc != cv2.GC_PR_BGD)
-    return np.asarray((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD))
-
-
-def _refine_boundary(image: NDArray, sky: NDArray, valid: NDArray, band_px: int) -> NDArray:
-    """Re-decide a band around the sky boundary at full resolution, on colour alone.
-
-    The working-resolution cut is biased toward the obstacle by the texture filter's support
-    (a few pixels of "texture" leak into the sky beside every edge); a colour GrabCut with
-    everything outside the band fixed removes that bias.
-    """
-    k = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
-    sure_sky = cv2.erode(sky.astype(np.uint8), k).astype(bool)
-    sure_obst = cv2.erode((~sky & valid).astype(np.uint8), k).astype(bool) | ~valid
-    if not sure_sky.any() or not sure_obst.any():
-        return sky
-    gc = np.where(sky, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
-    gc[sure_sky] = cv2.GC_FGD
-    gc[sure_obst] = cv2.GC_BGD
-    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
-    try:
-        cv2.grabCut(image, gc, (0, 0, 0, 0), bgd, fgd, 2, cv2.GC_INIT_WITH_MASK)
-    except cv2.error:
-        return sky
-    return np.asarray((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)) & valid
-
-
-def _sky_gaps(image: NDArray, sky: NDArray, valid: NDArray, opt: SkyOptions) -> NDArray:
-    """Pixels outside ``sky`` with the sky's colour, brighter than their surroundings."""
-    h, w = sky.shape
-    core = cv2.erode(sky.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    if core.sum() < 50:
-        return np.zeros_like(sky)
-    lab = cv2.cvtColor(image, cv2.COLOR_BGR2LAB).astype(np.float32)
-    px = lab[core]
-    mu = px.mean(axis=0)
-    icov = np.linalg.inv(np.cov(px.T) + 4.0 * np.eye(3))  # floor: JPEG noise on a flat sky
-    d = lab - mu
-    md2 = np.einsum("...i,ij,...j->...", d, icov, d)
-    k = max(3, round(max(h, w) / 60) | 1)
-    tophat = cv2.morphologyEx(
-        lab[..., 0], cv2.MORPH_TOPHAT, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
-    )
-    return np.asarray(
-        (md2 < opt.gap_max_mahalanobis**2) & (tophat > opt.gap_min_tophat) & ~sky & valid
-    )
-
-
-def segment_sky(image_bgr: ArrayLike, options: SkyOptions | None = None) -> SkySegmentation:
+def segment_sky(
+    image_bgr: ArrayLike, options: SkyOptions | None = None, classifier: Any = None
+) -> SkySegmentation:
     """Segment the sky of one frame: pixel mask, skyline per column, per-column confidence.
 
     Parameters
@@ -526,6 +461,8 @@ def segment_sky(image_bgr: ArrayLike, options: SkyOptions | None = None) -> SkyS
     options : SkyOptions, optional
         Defaults to ``SkyOptions()`` (side camera / upright perspective photo). Use
         ``SkyOptions(fisheye=True)`` for upward fisheye photos.
+    classifier : predisat.skymodel.SkyClassifier, optional
+        Model of the learned method; default the shipped one.
 
     Returns
     -------
@@ -550,12 +487,21 @@ def segment_sky(image_bgr: ArrayLike, options: SkyOptions | None = None) -> SkyS
     else:
         valid = np.ones((h, w), bool)
 
-    small, scale = _working_image(img, opt.work_size_px)
+    from predisat import skygrabcut as gc
+
+    if opt.method == "learned":
+        sky, conf = _learned_sky(img, valid, opt, classifier)
+        skyline = skyline_from_mask(sky, valid)
+        return SkySegmentation(
+            sky_mask=sky, skyline_row=skyline,
+            confidence=probability_confidence(conf, skyline, valid), valid_mask=valid,
+        )
+    small, scale = gc.working_image(img, opt.work_size_px)
     sh, sw = small.shape[:2]
     valid_small = (
         cv2.resize(valid.astype(np.uint8), (sw, sh), interpolation=cv2.INTER_NEAREST) > 0
     )
-    sky_small = _grabcut_sky(small, valid_small, opt)
+    sky_small = gc.grabcut_sky(small, valid_small, opt)
     if scale < 1.0:
         # Linear interpolation of the 0/1 mask then 0.5 cut: a smooth boundary, not blocks.
         up = cv2.resize(sky_small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
@@ -564,10 +510,124 @@ def segment_sky(image_bgr: ArrayLike, options: SkyOptions | None = None) -> SkyS
         sky = sky_small.copy()
     sky &= valid
     if opt.refine_band_px > 0 and sky.any() and (valid & ~sky).any():
-        sky = _refine_boundary(img, sky, valid, opt.refine_band_px)
+        sky = gc.refine_boundary(img, sky, valid, opt.refine_band_px)
     if opt.gaps and sky.any():
-        sky |= _sky_gaps(img, sky, valid, opt)
+        sky |= gc.sky_gaps(img, sky, valid, opt)
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
     skyline = skyline_from_mask(sky, valid)
     conf = skyline_confidence(img, sky, skyline, valid)
     return SkySegmentation(sky_mask=sky, skyline_row=skyline, confidence=conf, valid_mask=valid)
+
+
+def _learned_sky(
+    img: NDArray, valid: NDArray, opt: SkyOptions, classifier: Any
+) -> tuple[NDArray, NDArray]:
+    """Sky mask and probability map of the learned method (see ``docs/segmentation.md``)."""
+    from predisat.skygrabcut import sky_gaps
+    from predisat.skymodel import sky_probability
+
+    h, w = img.shape[:2]
+    circle = None
+    if opt.fisheye:
+        circle = opt.circle_px or (
+            (w - 1) / 2.0, (h - 1) / 2.0, min(h, w) / 2.0 * (1.0 - opt.circle_margin)
+        )
+    prob = sky_probability(img, classifier, circle, refine=opt.refine_guided)
+    prob = np.where(valid, prob, 0.0).astype(np.float32)
+    sky = (prob >= 0.5) & valid
+    n_valid = max(int(valid.sum()), 1)
+    if sky.any() and not opt.fisheye:
+        # Sky must be reachable from the top edge, or be a large region (sky under a deck).
+        n, lbl, stats, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
+        area = stats[:, cv2.CC_STAT_AREA]
+        keep = ((stats[:, cv2.CC_STAT_TOP] == 0) & (area >= opt.min_sky_fraction * n_valid)) | (
+            area >= opt.min_island_fraction * n_valid
+        )
+        keep[0] = False
+        sky = keep[lbl]
+    if opt.max_hole_fraction > 0 and (~sky & valid).any():
+        ob = (~sky & valid).astype(np.uint8)
+        n, lbl, stats, _ = cv2.connectedComponentsWithStats(ob, connectivity=4)
+        x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+        x1 = x0 + stats[:, cv2.CC_STAT_WIDTH]
+        y1 = y0 + stats[:, cv2.CC_STAT_HEIGHT]
+        inner = (x0 > 0) & (y0 > 0) & (x1 < w) & (y1 < h)
+        # Obstacles stand on the ground: in an upright frame a region that does not reach the
+        # bottom edge hangs in the sky (a fisheye's rim is no edge: every region may be a hole).
+        floating = np.ones_like(inner) if opt.fisheye else y1 < h
+        if opt.fisheye:
+            inner[:] = True
+        area = stats[:, cv2.CC_STAT_AREA]
+        mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)
+        # Enclosed specks are noise; larger hanging regions the classifier hesitated on are
+        # dark cloud bases (a real bridge deck or canopy scores near 0).
+        small_hole = (inner & (area < opt.max_hole_fraction * n_valid)) | (
+            floating
+            & (area < opt.uncertain_hole_fraction * n_valid)
+            & (mean_p >= opt.uncertain_hole_probability)
+        )
+        small_hole[0] = False
+        sky |= small_hole[lbl]
+    if opt.gaps and sky.any():
+        sky |= sky_gaps(img, sky, valid, opt)
+    sky = remove_thin_obstacles(sky, opt.thin_px) & valid
+    return sky, prob
+
+
+def probability_confidence(
+    prob: ArrayLike,
+    skyline_row: ArrayLike,
+    valid_mask: ArrayLike | None = None,
+    band_px: int | None = None,
+    gap_px: int | None = None,
+) -> NDArray[np.float64]:
+    """Per-column confidence of a skyline from the classifier's probability margins, in [0, 1].
+
+    For a column with a boundary: the smaller of the mean margins ``2 p - 1`` over the band
+    just above the skyline (sky side) and ``1 - 2 p`` over the band just below it (obstacle
+    side), skipping ``gap_px`` pixels next to the boundary where ``p`` crosses 0.5 anyway.
+    An all-sky column uses its lowest band, an all-obstacle column its top band. A column
+    without valid pixels gets 0.
+
+    Parameters
+    ----------
+    prob : array_like, shape (H, W)
+        Sky probability.
+    skyline_row : array_like, shape (W,)
+    valid_mask : array_like of bool, shape (H, W), optional
+    band_px, gap_px : int, optional
+        Band height (default ``max(3, H // 30)``) and skipped margin (default ``max(1, H //
+        120)``).
+
+    Returns
+    -------
+    ndarray of float, shape (W,)
+    """
+    p = np.asarray(prob, float)
+    s = np.asarray(skyline_row, float)
+    h, w = p.shape
+    if s.shape != (w,):
+        raise ValueError(f"skyline_row must have shape ({w},), got {s.shape}")
+    valid = np.ones((h, w), bool) if valid_mask is None else np.asarray(valid_mask, bool)
+    band = max(3, h // 30) if band_px is None else int(band_px)
+    gap = max(1, h // 120) if gap_px is None else int(gap_px)
+    margin = np.where(valid, 2.0 * p - 1.0, 0.0)
+    cum = np.concatenate([np.zeros((1, w)), np.cumsum(margin, axis=0)])
+    cnt = np.concatenate([np.zeros((1, w)), np.cumsum(valid, axis=0)])
+    cols = np.arange(w)
+
+    def mean(a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
+        a, b = np.clip(a, 0, h), np.clip(b, 0, h)
+        n = cnt[b, cols] - cnt[a, cols]
+        return (cum[b, cols] - cum[a, cols]) / np.maximum(n, 1), n
+
+    b0 = np.where(np.isfinite(s), s + 0.5, 0).astype(int)
+    up, n_up = mean(b0 - gap - band, b0 - gap)
+    dn, n_dn = mean(b0 + gap, b0 + gap + band)
+    conf = np.zeros(w)
+    both = (n_up > 0) & (n_dn > 0)
+    conf[both] = np.minimum(up, -dn)[both]
+    only_up, only_dn = (n_up > 0) & (n_dn == 0), (n_up == 0) & (n_dn > 0)
+    conf[only_up], conf[only_dn] = up[only_up], -dn[only_dn]
+    conf[~np.isfinite(s)] = 0.0
+    return np.clip(conf, 0.0, 1.0)

@@ -158,3 +158,132 @@ def test_all_obstacle_frame() -> None:
     seg = segment_sky(img)
     assert seg.sky_fraction < 0.05
     assert np.mean(seg.skyline_row == -0.5) > 0.9
+
+
+# ------------------------------------------------------------------ learned method (default)
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+@pytest.mark.parametrize("stem", ["cloudy_right_000006", "cloudy_right_000012"])
+def test_learned_on_held_out_synthetic_frames(test_data, stem: str) -> None:
+    """Rendered frames (not in the training set) against the renderer's own labels."""
+    import cv2
+
+    img = cv2.imread(str(test_data / "sky_synth" / f"{stem}.jpg"), cv2.IMREAD_COLOR)
+    label = cv2.imread(str(test_data / "sky_synth" / f"{stem}_label.png"), cv2.IMREAD_GRAYSCALE)
+    truth = label >= 128  # thin structures count as sky
+    seg = segment_sky(img)
+    assert _iou(seg.sky_mask, truth) > 0.97
+    err = np.abs(seg.skyline_row - skyline_from_mask(truth))
+    assert np.median(err) <= 1.0
+    assert np.all((seg.confidence >= 0) & (seg.confidence <= 1))
+
+
+def test_grabcut_method_still_available() -> None:
+    img, truth = _scene(5)
+    seg = segment_sky(img, SkyOptions(method="grabcut"))
+    assert _iou(seg.sky_mask, truth) > 0.98
+    with pytest.raises(ValueError, match="method"):
+        SkyOptions(method="magic")
+
+
+def test_sky_island_rules() -> None:
+    """Sky under a deck is kept when large; a small sky island below an obstacle is not."""
+    rng = np.random.default_rng(6)
+    img = _sky_gradient(rng)
+    obstacle = np.zeros((H, W), bool)
+    obstacle[60:100, :] = True  # a bridge deck across the frame
+    obstacle[200:, :] = True  # ground
+    obstacle[100:200, :150] = True  # wall below the deck on the left
+    tex = 50 + 40 * rng.random((H, W, 3))
+    img[obstacle] = tex[obstacle]
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    seg = segment_sky(img)
+    truth = ~obstacle
+    assert _iou(seg.sky_mask, truth) > 0.95
+    assert seg.sky_mask[120:180, 180:300].mean() > 0.95  # sky under the deck: large island
+    small = segment_sky(img, SkyOptions(min_island_fraction=0.5))
+    assert small.sky_mask[120:180, 180:300].mean() < 0.05  # islands refused when "small"
+    # the conservative skyline sits on top of the deck either way
+    assert np.median(seg.skyline_row) == pytest.approx(59.5, abs=1.0)
+
+
+def test_probability_confidence_from_margins() -> None:
+    from predisat.segmentation import probability_confidence
+
+    h, w = 60, 4
+    prob = np.zeros((h, w))
+    prob[:30, 0], prob[30:, 0] = 1.0, 0.0  # certain boundary
+    prob[:30, 1], prob[30:, 1] = 0.6, 0.4  # hesitant boundary: margin 0.2
+    prob[:, 2] = 1.0  # all sky, certain
+    prob[:, 3] = 0.5  # undecided
+    skyline = np.array([29.5, 29.5, h - 0.5, 29.5])
+    conf = probability_confidence(prob, skyline)
+    np.testing.assert_allclose(conf, [1.0, 0.2, 1.0, 0.0], atol=1e-9)
+    assert probability_confidence(prob, np.full(w, np.nan))[0] == 0.0
+
+
+def test_guided_filter_sharpens_a_blurred_step() -> None:
+    import cv2
+
+    from predisat.skymodel import guided_filter
+
+    guide = np.zeros((40, 80), np.float32)
+    guide[:, 40:] = 1.0
+    blurred = cv2.GaussianBlur(guide, (0, 0), 6.0)
+    out = guided_filter(guide, blurred, 4, 1e-4)
+    # away from the step the output is flat; across it, steeper than the blurred input
+    assert abs(out[20, 40] - out[20, 39]) > max(0.2, 3 * abs(blurred[20, 40] - blurred[20, 39]))
+    const = guided_filter(np.full((20, 20), 0.5, np.float32), blurred[:20, 30:50], 3, 1e-3)
+    # a flat guide explains nothing: a = 0, b = box mean, output = box mean of b (He et al.)
+    def box(a: np.ndarray) -> np.ndarray:
+        return np.asarray(cv2.blur(a, (7, 7), borderType=cv2.BORDER_REFLECT))
+
+    np.testing.assert_allclose(const, box(box(blurred[:20, 30:50])), atol=1e-4)
+
+
+def test_training_path_beats_chance_and_round_trips(tmp_path) -> None:
+    from predisat.skymodel import SkyClassifier, sample_pixels, train_sky_model
+
+    rng = np.random.default_rng(7)
+    xs, ys = [], []
+    for seed in (10, 11, 12):
+        img, truth = _scene(seed)
+        x, y = sample_pixels(img, truth, 600, rng)
+        xs.append(x)
+        ys.append(y)
+    clf = train_sky_model(np.concatenate(xs), np.concatenate(ys), hidden=(16,), epochs=30,
+                          batch=256)
+    img, truth = _scene(13)
+    small = cv2_resize_mask(truth, clf.predict_image(img).shape)
+    pred = clf.predict_image(img) >= 0.5
+    acc = float(np.mean(pred == small))
+    majority = max(small.mean(), 1 - small.mean())
+    assert acc > 0.95 and acc > majority + 0.1
+    path = clf.save(tmp_path / "m.json")
+    again = SkyClassifier.load(path)
+    np.testing.assert_allclose(again.predict_image(img), clf.predict_image(img), atol=1e-5)
+    with pytest.raises(ValueError, match="features"):
+        clf.predict(np.zeros((3, 2)))
+
+
+def cv2_resize_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    return np.asarray(
+        cv2.resize(mask.astype(np.float32), shape[::-1], interpolation=cv2.INTER_AREA) >= 0.5
+    )
+
+
+def test_shipped_model_loads_with_its_card() -> None:
+    from predisat.skyfeatures import FEATURE_NAMES
+    from predisat.skymodel import SkyClassifier
+
+    clf = SkyClassifier.default()
+    assert clf.feature_names == FEATURE_NAMES
+    assert clf.card["training_runs"] and "validation" in clf.card
+    p = clf.predict(np.zeros((5, len(FEATURE_NAMES)), np.float32))
+    assert p.shape == (5,) and np.all((p >= 0) & (p <= 1))

@@ -1,0 +1,222 @@
+"""Train the learned sky classifier shipped in ``predisat/data/models`` (reproducibly).
+
+Usage::
+
+    python scripts/train_sky.py --work /tmp/predisat_sky_train            # generate + train
+    python scripts/train_sky.py --work /tmp/predisat_sky_train --holdout   # + held-out sets
+
+1. **Data**: synthetic surveys rendered by :func:`predisat.synth.generate.generate_survey` on the
+   demo track (line 144) with the fixed seeds, stretches, skies and cameras of ``TRAIN_RUNS``
+   (small 320x240 cameras, pinhole and fisheye). Nothing else: no photo of a third party is
+   used, so the model may ship with the project. Surveys already present in ``--work`` are
+   reused (delete them to regenerate).
+2. **Samples**: per frame, ``--pixels`` pixels drawn at random (seeded) from the
+   working-resolution feature image (:mod:`predisat.skyfeatures`), half of them within a few
+   pixels of the sky boundary where the decision is hard. Labels: 255 sky and 128 thin
+   L-band-transparent structure are sky, 0 is obstacle.
+3. **Model**: :func:`predisat.skymodel.train_sky_model` (a small numpy perceptron). The runs in
+   ``VALIDATION_RUNS`` are held out for the accuracy written to the model card.
+4. **Output**: the model ``sky_mlp.json`` (weights and card: data, seeds, features, held-out
+   accuracy) in ``--out``.
+
+``--holdout`` also renders the evaluation surveys of ``HOLDOUT_RUNS`` (other seeds and
+stretches than the training runs) into ``--work/holdout_*`` for ``scripts/eval_sky.py``.
+Training and evaluation never touch the research-only photos.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from predisat.camera import default_camera
+from predisat.skymodel import (
+    DEFAULT_MODEL,
+    SkyClassifier,
+    label_to_sky,
+    sample_pixels,
+    train_sky_model,
+)
+
+
+@dataclass(frozen=True)
+class Run:
+    """One synthetic survey: chainage interval (m), sky condition, seed, camera kind."""
+
+    name: str
+    from_m: float
+    to_m: float
+    sky: str
+    seed: int
+    camera: str
+    spacing_m: float = 50.0
+
+
+# Stretches away from the held-out ones (1.0-1.2, 2.5-2.7, 4.0-4.2 km and HOLDOUT_RUNS).
+TRAIN_RUNS = (
+    Run("train_a", 5200.0, 5800.0, "clear", 101, "pinhole"),
+    Run("train_b", 6200.0, 6800.0, "cloudy", 102, "pinhole"),
+    Run("train_c", 7200.0, 7800.0, "overcast", 103, "pinhole"),
+    Run("train_d", 8200.0, 8800.0, "mixed", 104, "fisheye"),
+    Run("train_e", 9200.0, 9800.0, "cloudy", 105, "fisheye"),
+    Run("train_f", 10200.0, 10800.0, "clear", 106, "fisheye"),
+    Run("train_g", 11200.0, 11800.0, "overcast", 107, "pinhole"),
+    Run("train_h", 12200.0, 12800.0, "cloudy", 108, "pinhole"),
+    Run("train_i", 500.0, 900.0, "cloudy", 110, "pinhole", 40.0),
+    Run("train_j", 5900.0, 6100.0, "cloudy", 111, "fisheye", 20.0),
+    Run("train_k", 13800.0, 14100.0, "mixed", 112, "pinhole", 25.0),
+    Run("train_l", 2000.0, 2400.0, "clear", 113, "pinhole", 40.0),
+)
+VALIDATION_RUNS = (
+    Run("val_a", 13000.0, 13600.0, "mixed", 109, "pinhole"),
+)
+HOLDOUT_RUNS = (
+    Run("holdout_clear", 3000.0, 3300.0, "clear", 201, "pinhole", 20.0),
+    Run("holdout_cloudy", 3400.0, 3700.0, "cloudy", 202, "pinhole", 20.0),
+    Run("holdout_overcast", 1500.0, 1800.0, "overcast", 203, "pinhole", 20.0),
+    Run("holdout_fisheye_mixed", 4500.0, 4900.0, "mixed", 204, "fisheye", 20.0),
+)
+CAMERA_SIZE_PX = (320, 240)
+HOLDOUT_SIZE_PX = (480, 360)
+
+
+def generate(run: Run, work: Path, size_px: tuple[int, int], progress: bool = True) -> Path:
+    """Render ``run`` into ``work/run.name`` unless a complete survey is already there."""
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    out = work / run.name
+    if (out / "truth" / "frames.csv").is_file():
+        return out
+    cam = default_camera(run.camera).resized(*size_px)  # type: ignore[arg-type]
+    t0 = time.perf_counter()
+    generate_survey(demo_track(), run.from_m, run.to_m, sky=run.sky, seed=run.seed, out_dir=out,
+                    spacing_m=run.spacing_m, camera=cam, progress=progress, overwrite=True)
+    print(f"generated {run.name} in {time.perf_counter() - t0:.0f} s", flush=True)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path,
+                        default=Path(tempfile.gettempdir()) / "predisat_sky_train",
+                        help="folder for the rendered surveys (outside the repository)")
+    parser.add_argument("--out", type=Path,
+                        default=Path(__file__).resolve().parents[1] / "predisat/data/models",
+                        help="where the model and its card are written")
+    parser.add_argument("--pixels", type=int, default=1500, help="sampled pixels per frame")
+    parser.add_argument("--hidden", default="48,24", help="hidden layer widths")
+    parser.add_argument("--epochs", type=int, default=15, help="training epochs")
+    parser.add_argument("--generate-only", action="store_true", help="render, do not train")
+    parser.add_argument("--holdout", action="store_true", help="also render HOLDOUT_RUNS")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    args = parser.parse_args(argv)
+    args.work.mkdir(parents=True, exist_ok=True)
+    for run in (*TRAIN_RUNS, *VALIDATION_RUNS):
+        generate(run, args.work, CAMERA_SIZE_PX, not args.quiet)
+    if args.holdout:
+        for run in HOLDOUT_RUNS:
+            generate(run, args.work, HOLDOUT_SIZE_PX, not args.quiet)
+    if args.generate_only:
+        return 0
+    return train(args)
+
+
+def read(path: Path, flags: int) -> np.ndarray:
+    """``cv2.imread`` that fails loudly."""
+    img = cv2.imread(str(path), flags)
+    if img is None:
+        raise OSError(f"cannot read {path}; delete its survey folder to regenerate it")
+    return np.asarray(img)
+
+
+def frames(folder: Path) -> list[tuple[str, Path, Path]]:
+    """``(frame_id, image, label)`` of every frame of a rendered survey folder."""
+    out = []
+    for img in sorted((folder / "survey" / "images").glob("*.jpg")):
+        label = folder / "truth" / "labels" / f"{img.stem}.png"
+        if label.is_file():
+            out.append((img.stem, img, label))
+    return out
+
+
+def samples(
+    runs: tuple[Run, ...], work: Path, n_pixels: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Features and targets sampled from every frame of ``runs``; also the frame count."""
+    xs, ys, n_frames = [], [], 0
+    for i, run in enumerate(runs):
+        rng = np.random.default_rng([seed, i])
+        for _, img_path, label_path in frames(work / run.name):
+            img = read(img_path, cv2.IMREAD_COLOR)
+            label = read(label_path, cv2.IMREAD_GRAYSCALE)
+            x, y = sample_pixels(img, label_to_sky(label), n_pixels, rng)
+            xs.append(x)
+            ys.append(y)
+            n_frames += 1
+    return np.concatenate(xs), np.concatenate(ys), n_frames
+
+
+def validate(clf: SkyClassifier, runs: tuple[Run, ...], work: Path) -> dict[str, float]:
+    """Full-resolution pixel accuracy and pooled sky IoU of the model alone and of segment_sky."""
+    from predisat.segmentation import SkyOptions, segment_sky
+
+    acc_raw, inter, union, inter_seg, union_seg = [], 0, 0, 0, 0
+    for run in runs:
+        for _, img_path, label_path in frames(work / run.name):
+            img = read(img_path, cv2.IMREAD_COLOR)
+            truth = label_to_sky(read(label_path, cv2.IMREAD_GRAYSCALE))
+            prob = clf.predict_image(img)
+            up = cv2.resize(prob, truth.shape[::-1], interpolation=cv2.INTER_LINEAR) >= 0.5
+            acc_raw.append(float(np.mean(up == truth)))
+            inter += int(np.count_nonzero(up & truth))
+            union += int(np.count_nonzero(up | truth))
+            seg = segment_sky(img, SkyOptions(method="learned"), classifier=clf).sky_mask
+            inter_seg += int(np.count_nonzero(seg & truth))
+            union_seg += int(np.count_nonzero(seg | truth))
+    return {
+        "pixel_accuracy_raw": float(np.mean(acc_raw)),
+        "pooled_sky_iou_raw": inter / max(union, 1),
+        "pooled_sky_iou_segment_sky": inter_seg / max(union_seg, 1),
+        "n_frames": len(acc_raw),
+    }
+
+
+def train(args: argparse.Namespace) -> int:
+    t0 = time.perf_counter()
+    x, y, n_frames = samples(TRAIN_RUNS, args.work, args.pixels, seed=0)
+    print(f"{x.shape[0]} samples from {n_frames} frames in {time.perf_counter() - t0:.0f} s",
+          flush=True)
+    card = {
+        "description": "PREDISAT sky classifier: multilayer perceptron on per-pixel "
+                       "features (predisat.skyfeatures), trained by scripts/train_sky.py on "
+                       "synthetic frames only (predisat.synth.generate on the demo track).",
+        "training_runs": [asdict(r) for r in TRAIN_RUNS],
+        "validation_runs": [asdict(r) for r in VALIDATION_RUNS],
+        "camera_size_px": list(CAMERA_SIZE_PX),
+        "pixels_per_frame": args.pixels,
+        "n_training_frames": n_frames,
+        "licence": "trained only on synthetic data generated by PREDISAT (project licence)",
+    }
+    t0 = time.perf_counter()
+    hidden = tuple(int(v) for v in args.hidden.split(","))
+    clf = train_sky_model(x, y, hidden=hidden, epochs=args.epochs, seed=0, card=card)
+    print(f"trained in {time.perf_counter() - t0:.0f} s", flush=True)
+    card = {**clf.card, "validation": validate(clf, VALIDATION_RUNS, args.work)}
+    print(json.dumps(card["validation"], indent=1), flush=True)
+    clf = replace(clf, card=card)
+    path = clf.save(args.out / DEFAULT_MODEL)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
