@@ -106,6 +106,34 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
             )
 
 
+_LENGTH_KEYS = ("length_m", "length")
+
+
+def _check_declared_length(
+    props: Mapping[str, Any], parts: Sequence[NDArray], where: str, path: Path
+) -> None:
+    """Catch [lat, lon] files that are still valid numbers, from a declared feature length.
+
+    Infrabel and other infrastructure managers publish each track's length; swapping latitude
+    and longitude changes the geodesic length by a few per cent (the degree of longitude
+    shrinks with latitude) while a faithful file agrees to well under 1 %.
+    """
+    declared = next((props[k] for k in _LENGTH_KEYS if k in props), None)
+    if not parts or not isinstance(declared, int | float) or not declared > 0:
+        return
+    direct = sum(float(WGS84.line_length(c[:, 0], c[:, 1])) for c in parts)
+    swapped = sum(
+        float(WGS84.line_length(c[:, 1], c[:, 0])) for c in parts if np.all(np.abs(c[:, 0]) <= 90)
+    )
+    rel_direct = abs(direct - declared) / declared
+    if rel_direct > 0.01 and abs(swapped - declared) / declared < rel_direct / 4:
+        raise TrackMapError(
+            f"{path}: {where}: the coordinates give {direct:.0f} m but the feature declares a "
+            f"length of {declared:.0f} m, which they give when read as [lat, lon]: the "
+            "coordinates look swapped; GeoJSON coordinates are [lon, lat] (longitude first)"
+        )
+
+
 def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, Any] | None) -> bool:
     if track is not None and not any(str(props.get(k)) == track for k in NAME_KEYS):
         return False
@@ -214,6 +242,7 @@ def read_geojson_track(
         raw = geom.get("coordinates") or []
         seqs = [raw] if geom["type"] == "LineString" else list(raw)
         tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
+        n_before = len(parts)
         for j, seq in enumerate(seqs):
             where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
             try:
@@ -227,6 +256,7 @@ def read_geojson_track(
             _check_lonlat(coords, where_s, path, expected_bbox)
             if len(coords) >= 2:
                 parts.append(Part(where_s, i, coords, tunnel))
+        _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
     if not parts:
         raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
 

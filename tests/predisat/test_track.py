@@ -451,3 +451,21 @@ def test_full_riviera_file(shared_data):
     assert tm.length_m == pytest.approx(geodesic, rel=1e-4)
     assert len(tm.tunnels_m) >= 10
     assert tm.max_deviation_m <= 1.05
+
+
+def test_swapped_coordinates_caught_by_the_declared_length(tmp_path):
+    # In Belgium a [lat, lon] file is still valid numbers; its declared track length (as
+    # Infrabel publishes) is what the [lon, lat] reading fails to match.
+    from importlib import resources
+
+    from predisat.track import DEMO_TRACK_FILE
+
+    doc = json.loads((resources.files("predisat") / "data" / DEMO_TRACK_FILE).read_text())
+    lines = [f for f in doc["features"] if f["geometry"]["type"] == "LineString"]
+    assert lines and any(k in lines[0]["properties"] for k in ("length", "length_m"))
+    for f in lines:
+        f["geometry"]["coordinates"] = [[c[1], c[0]] for c in f["geometry"]["coordinates"]]
+    path = tmp_path / "swapped.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"declares a length.*swapped.*\[lon, lat\]"):
+        TrackMap.from_geojson(path)
