@@ -484,6 +484,10 @@ def run_availability(
         step_s, interval_every, __version__,
     )  # fmt: skip
     files, summary = write_tables(out, results, track, info, counts_table)
+    # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+    # its validity window, inconsistent, no data): such satellites count for no rule.
+    files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
+    sats.status.report().to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
     bar.update(1)
 
     stage("figures")

@@ -327,3 +327,18 @@ def test_cli_arguments_round_trip(tmp_path: Path, masks: MaskSet, track: TrackMa
     assert r.report_html.is_file() and (tmp_path / "cli" / "availability.geojson").is_file()
     # a higher cut-off can only remove satellites
     assert np.all(r.results[3].count <= r.results[2].count)
+
+
+def test_untrusted_satellites_are_reported(run) -> None:
+    # Every (epoch, satellite) the ephemeris refuses (NaN position) must appear in the status
+    # table, with its reason: such satellites are never trusted and must not vanish silently.
+    t = np.arange(_gps_s(datetime(2020, 6, 25, 6)), _gps_s(datetime(2020, 6, 25, 8)), STEP_S)
+    eph = default_ephemeris()
+    gps = [s for s in eph.satellites if s.startswith("G")]
+    refused = ~np.all(np.isfinite(eph.position_ecef(t, gps)), axis=-1)
+    status = pd.read_csv(run.files["ephemeris_status_csv"])
+    assert set(status.columns) >= {"sat", "reason", "first_gps_s", "last_gps_s", "n_epochs"}
+    assert int(status["n_epochs"].sum()) == int(refused.sum())
+    for j, sat in enumerate(gps):
+        assert int(status.loc[status["sat"] == sat, "n_epochs"].sum()) == int(refused[:, j].sum())
+    assert (status["reason"] != "OK").all()
