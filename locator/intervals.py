@@ -25,20 +25,14 @@ pseudorange residuals at known positions (``locator calibrate``).
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from locator.sathia import AntennaPath, PairSolution
-from predisat.interval import (
-    ErrorModel,
-    IntervalMode,
-    interval_mode,
-    pair_half_length_m,
-)
+from predisat import interval as _interval
+from predisat.interval import ErrorModel, IntervalMode, interval_mode
 
 __all__ = [
     "PAIR_SCHEMES",
@@ -52,7 +46,6 @@ __all__ = [
 ]
 
 PAIR_SCHEMES = ("auto", "all")
-_POOL = 8
 
 
 @dataclass(frozen=True)
@@ -106,31 +99,15 @@ def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -
 
 
 def best_pair(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
-    """The pair with the shortest predicted interval, indices shape (1, 2)."""
-    ga, sa = np.asarray(g, float), np.asarray(sigma_m, float)
+    """The pair with the shortest predicted interval, indices shape (1, 2).
+
+    :func:`predisat.interval.best_pair` (the rule of the availability prediction).
+    """
+    ga = np.asarray(g, float)
     if ga.size < 2:
         raise ValueError(f"best_pair needs at least 2 satellites, got {ga.size}")
-    i, j = np.triu_indices(ga.size, 1)
-    h = pair_half_length_m(ga[i], ga[j], sa[i], sa[j], k_sigma)
-    k = int(np.argmin(h))
-    return np.array([[i[k], j[k]]])
-
-
-@lru_cache(maxsize=8)
-def _matchings(p: int) -> tuple[NDArray, NDArray, NDArray]:
-    """Pairs of a pool of ``p`` satellites and every set of three disjoint pairs."""
-    i, j = np.triu_indices(p, 1)
-    index = {(int(a), int(b)): k for k, (a, b) in enumerate(zip(i, j, strict=True))}
-    sets = []
-    for six in itertools.combinations(range(p), 6):
-        a = six[0]
-        for x in range(1, 6):
-            rest = [c for c in six[1:] if c != six[x]]
-            b = rest[0]
-            for y in range(1, 4):
-                r2 = [c for c in rest[1:] if c != rest[y]]
-                sets.append([index[(a, six[x])], index[(b, rest[y])], index[(r2[0], r2[1])]])
-    return i, j, np.array(sets, np.intp)
+    pair, _ = _interval.best_pair(ga, np.asarray(sigma_m, float), None, k_sigma)
+    return pair[None, :]
 
 
 def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
@@ -145,31 +122,16 @@ def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2
 
     Notes
     -----
-    The pool heuristic of :mod:`predisat.interval` (module docstring); exact for up to 8
+    :func:`predisat.interval.three_independent_pairs`, the pool heuristic of the availability
+    prediction (so predicted and actual intervals use the same pairs); exact for up to 8
     satellites.
     """
-    ga, sa = np.asarray(g, float), np.asarray(sigma_m, float)
+    ga = np.asarray(g, float)
     n = ga.size
     if n < 6:
         raise ValueError(f"three independent pairs need at least 6 satellites, got {n}")
-    p = min(_POOL, n)
-    if n > p:
-        s0 = sa.min()
-        spread = np.sqrt(sa**2 + s0**2)
-        with np.errstate(divide="ignore"):
-            rank_lo = spread / (1.0 - ga)
-            rank_hi = spread / (1.0 + ga)
-        lo = np.argsort(rank_lo, kind="stable")[: p // 2]
-        rank_hi[lo] = np.inf
-        hi = np.argsort(rank_hi, kind="stable")[: p - p // 2]
-        pool = np.concatenate([lo, hi])
-    else:
-        pool = np.arange(n)
-    i, j, sets = _matchings(p)
-    gp, sp = ga[pool], sa[pool]
-    h = pair_half_length_m(gp[i], gp[j], sp[i], sp[j], k_sigma)
-    best = sets[int(np.argmin(h[sets].max(-1)))]
-    return np.stack([pool[i[best]], pool[j[best]]], axis=-1)
+    pairs, _ = _interval.three_independent_pairs(ga, np.asarray(sigma_m, float), None, k_sigma)
+    return pairs
 
 
 def plan_pairs(

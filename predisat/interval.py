@@ -29,6 +29,12 @@ The interval of an epoch depends on how many satellites are trusted (:class:`Int
 * 2 or 3: the best single pair, ``2 * min(h)``: a position, but **no safety claim**;
 * < 2: no interval (NaN).
 
+The pair choice is public and vectorised over epochs (:func:`pair_pool`,
+:func:`three_independent_pairs` returning the pairs' indices, :func:`best_pair`), so that the
+locator (``locator.intervals``) solves the very pairs that were predicted.
+:func:`predicted_interval` gets the same lengths without the indices by a faster, exact subset
+recursion (``docs/availability.md``, Engine).
+
 The pseudorange error model (:class:`ErrorModel`) is a placeholder with stated defaults, to be
 learned from data by ``locator calibrate``.
 """
@@ -49,9 +55,12 @@ __all__ = [
     "IntervalMode",
     "IntervalModel",
     "along_track_components",
+    "best_pair",
     "interval_mode",
     "pair_half_length_m",
+    "pair_pool",
     "predicted_interval",
+    "three_independent_pairs",
 ]
 
 
@@ -177,35 +186,129 @@ def predicted_interval(
         Full interval length (twice the half length); NaN with fewer than two satellites.
     mode : ndarray of uint8, shape (...)
         :class:`IntervalMode`.
-    """
-    g_a = np.asarray(g)
-    dtype = np.float32 if g_a.dtype == np.float32 else np.float64
-    g_a = g_a.astype(dtype, copy=False)
-    sig = np.asarray(sigma_m).astype(dtype, copy=False)
-    ok = np.asarray(trusted, bool)
-    if not g_a.shape == sig.shape == ok.shape:
-        raise ValueError(
-            f"g, sigma_m and trusted must share one shape (..., m): {g_a.shape}, {sig.shape}, "
-            f"{ok.shape}"
-        )
-    lead = g_a.shape[:-1]
-    m = g_a.shape[-1]
-    g2, s2, ok2 = g_a.reshape(-1, m), sig.reshape(-1, m), ok.reshape(-1, m)
-    count = ok2.sum(-1)
-    out = np.full(len(count), np.nan, dtype)
-    mode = interval_mode(count)
 
-    six = np.nonzero(count >= 6)[0]
-    if len(six):
-        out[six] = _three_pairs(g2[six], s2[six], ok2[six], k_sigma)
-    few = np.nonzero((count >= 2) & (count < 6))[0]
-    if len(few):
-        out[few] = _few(g2[few], s2[few], ok2[few], count[few], k_sigma)
+    Notes
+    -----
+    With >= 6 satellites the length is that of :func:`three_independent_pairs` (the same
+    pool, the same matchings), computed without the indices by a subset recursion.
+    """
+    g_a, sig, ok = _prepare(g, sigma_m, trusted)
+    lead, m = g_a.shape[:-1], g_a.shape[-1]
+    g2, s2, ok2 = g_a.reshape(-1, m), sig.reshape(-1, m), ok.reshape(-1, m)
+    if not (np.isfinite(g2).all() and np.isfinite(s2).all()):
+        # untrusted entries may be anything; the fast path needs them finite
+        g2, s2 = np.where(ok2, g2, 0.0), np.where(ok2, s2, 1.0)
+    out = np.empty(len(g2), g_a.dtype)
+    mode = np.empty(len(g2), np.uint8)
+    for a in range(0, len(g2), _BLOCK_ROWS):  # blocks that stay in the CPU cache
+        b = slice(a, a + _BLOCK_ROWS)
+        out[b], mode[b] = _interval_rows(g2[b], s2[b], ok2[b], k_sigma)
     return out.reshape(lead).astype(np.float32), mode.reshape(lead)
 
 
 POOL_SIZE = 8
 """Satellites kept per epoch for the exhaustive three-pair search (see the module docstring)."""
+
+_BLOCK_ROWS = 4096
+
+
+def _interval_rows(g: NDArray, s: NDArray, ok: NDArray, k: float) -> tuple[NDArray, NDArray]:
+    """Full length and mode of rows (n, m) with finite ``g`` and ``s``."""
+    count = ok.sum(-1)
+    out = np.full(len(count), np.nan, g.dtype)
+    mode = interval_mode(count)
+    six = count >= 6
+    if six.all():
+        out[:] = 2.0 * _three_pairs_half(g, s, ok, k)
+    elif six.any():
+        out[six] = 2.0 * _three_pairs_half(g[six], s[six], ok[six], k)
+    few = np.nonzero((count >= 2) & (count < 6))[0]
+    if len(few):
+        out[few] = _few(g[few], s[few], ok[few], count[few], k)
+    return out, mode
+
+
+def _prepare(
+    g: ArrayLike, sigma_m: ArrayLike, trusted: ArrayLike | None
+) -> tuple[NDArray, NDArray, NDArray]:
+    """``g``, ``sigma_m``, ``trusted`` as arrays of one shape (float32 kept, else float64)."""
+    g_a = np.asarray(g)
+    dtype = np.float32 if g_a.dtype == np.float32 else np.float64
+    g_a = g_a.astype(dtype, copy=False)
+    sig = np.asarray(sigma_m).astype(dtype, copy=False)
+    ok = np.ones(g_a.shape, bool) if trusted is None else np.asarray(trusted, bool)
+    if not g_a.shape == sig.shape == ok.shape or g_a.ndim < 1:
+        raise ValueError(
+            f"g, sigma_m and trusted must share one shape (..., m): {g_a.shape}, {sig.shape}, "
+            f"{ok.shape}"
+        )
+    return g_a, sig, ok
+
+
+def pair_pool(
+    g: ArrayLike, sigma_m: ArrayLike, trusted: ArrayLike | None = None, pool_size: int = POOL_SIZE
+) -> NDArray:
+    """Satellites searched for three independent pairs: the best "low" and "high" halves.
+
+    Each trusted satellite is ranked by the interval it would give with an ideal partner on
+    the other side (``g = -1`` or ``+1``, the epoch's smallest trusted sigma); the
+    ``pool_size // 2`` best "low" ones and then the best "high" ones among the rest are kept.
+
+    Parameters
+    ----------
+    g, sigma_m : array_like, shape (..., m)
+        Along-track components and pseudorange sigmas (metres), finite where trusted.
+    trusted : array_like of bool, shape (..., m), optional
+        Default: all trusted. Untrusted satellites enter the pool only to fill it when fewer
+        than ``pool_size`` are trusted.
+    pool_size : int
+        At most ``m`` are kept.
+
+    Returns
+    -------
+    ndarray of intp, shape (..., min(pool_size, m))
+        Satellite indices, ascending (the pool is a set; sorting fixes the pair order of
+        :func:`three_independent_pairs`). With ``m <= pool_size``: every satellite.
+    """
+    g_a, s, ok = _prepare(g, sigma_m, trusted)
+    if pool_size < 2:
+        raise ValueError(f"pool_size must be >= 2, got {pool_size}")
+    lead, m = g_a.shape[:-1], g_a.shape[-1]
+    p = min(pool_size, m)
+    if m <= p:
+        return np.broadcast_to(np.arange(m), (*lead, m)).copy()
+    g2, s2, ok2 = g_a.reshape(-1, m), s.reshape(-1, m), ok.reshape(-1, m)
+    g2, s2 = np.where(ok2, g2, 0.0), np.where(ok2, s2, 1.0)
+    return np.sort(_pool(g2, s2, ok2, p), axis=-1).reshape(*lead, p)
+
+
+def _pool(g: NDArray, s: NDArray, ok: NDArray, p: int) -> NDArray:
+    """Pool indices (n, p), unsorted, of rows (n, m) with m > p and finite ``g``, ``s``.
+
+    Untrusted satellites get ranks of at least 1e30 (an addition: 0 leaves the trusted exact,
+    and is cheaper than ``np.where``), picked satellites ``inf``, so no pick is repeated.
+    """
+    pen = (~ok) * np.asarray(1e30, g.dtype)
+    s0 = (s + pen).min(axis=-1, keepdims=True)  # smallest trusted sigma
+    spread = np.sqrt(s * s + s0 * s0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        rank_lo = spread / (1.0 - g)
+        rank_lo += pen
+        rank_hi = spread / (1.0 + g)
+        rank_hi += pen
+    # repeated argmin, not argpartition: several times faster on rows of a few tens
+    n, m = g.shape
+    flat = np.arange(n) * m
+    lo_flat, hi_flat = rank_lo.reshape(-1), rank_hi.reshape(-1)
+    out = np.empty((n, p), np.intp)
+    n_lo = p // 2
+    for c in range(p):
+        k = np.argmin(rank_lo if c < n_lo else rank_hi, axis=-1)
+        out[:, c] = k
+        hi_flat[flat + k] = np.inf
+        if c < n_lo:
+            lo_flat[flat + k] = np.inf
+    return out
 
 
 @lru_cache(maxsize=8)
@@ -229,30 +332,159 @@ def _matching_table(p: int) -> tuple[NDArray, NDArray, NDArray]:
     return i, j, np.array(sets, np.intp)
 
 
-def _three_pairs(g: NDArray, s: NDArray, ok: NDArray, k: float) -> NDArray:
-    rows = np.arange(len(g))[:, None]
-    p = min(POOL_SIZE, g.shape[-1])
-    # rank each satellite by its interval with an ideal partner (g = -+1, the smallest sigma
-    # of the epoch); keep the best half of the pool as "low" and the rest as "high"
-    s0 = np.where(ok, s, np.inf).min(axis=-1, keepdims=True)
-    spread = np.sqrt(s * s + s0 * s0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # untrusted: large but finite, so that the "low" picks (inf) are never taken twice
-        rank_lo = np.where(ok, spread / (1.0 - g), 1e30)
-        rank_hi = np.where(ok, spread / (1.0 + g), 1e30)
-    n_lo = p // 2
-    lo = np.argpartition(rank_lo, n_lo - 1, axis=-1)[:, :n_lo]
-    np.put_along_axis(rank_hi, lo, np.inf, axis=-1)
-    hi = np.argpartition(rank_hi, p - n_lo - 1, axis=-1)[:, : p - n_lo]
-    pool = np.concatenate([lo, hi], axis=1)
-    gp, sp, okp = g[rows, pool], s[rows, pool], ok[rows, pool]
-    i, j, sets = _matching_table(p)
+@lru_cache(maxsize=8)
+def _bottleneck_program(p: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Index tables of the subset recursion of :func:`_three_pairs_half`.
+
+    ``f4[T] = min over the 3 perfect matchings {e1, e2} of T of max(h[e1], h[e2])`` for the
+    4-sets ``T`` needed below, and ``f6[S] = min over x in S - {a} of max(h[a, x],
+    f4[S - {a, x}])`` with ``a = min(S)``, for every 6-set ``S``; the answer is ``min f6``.
+    Returns ``(e1, e2)`` of shape (n4, 3) and ``(ax, t)`` of shape (n6, 5).
+    """
+    i, j = np.triu_indices(p, 1)
+    pair = {(int(a), int(b)): k for k, (a, b) in enumerate(zip(i, j, strict=True))}
+    fours: dict[tuple[int, ...], int] = {}
+    ax, t = [], []
+    for six in itertools.combinations(range(p), 6):
+        a = six[0]
+        row_ax, row_t = [], []
+        for x in six[1:]:
+            rest = tuple(c for c in six[1:] if c != x)
+            row_ax.append(pair[(a, x)])
+            row_t.append(fours.setdefault(rest, len(fours)))
+        ax.append(row_ax)
+        t.append(row_t)
+    e1, e2 = [], []
+    for q in fours:  # insertion order = index
+        e1.append([pair[(q[0], q[1])], pair[(q[0], q[2])], pair[(q[0], q[3])]])
+        e2.append([pair[(q[2], q[3])], pair[(q[1], q[3])], pair[(q[1], q[2])]])
+    arr = [np.array(x, np.intp) for x in (e1, e2, ax, t)]
+    return arr[0], arr[1], arr[2], arr[3]
+
+
+def _pool_half_lengths(
+    g: NDArray, s: NDArray, ok: NDArray, pool: NDArray, k: float, pairs_first: bool
+) -> NDArray:
+    """Half lengths of every pair of the pool, inf unless both are trusted.
+
+    ``pairs_first``: shape (n_pairs, n) (contiguous rows for the recursion), else (n, n_pairs).
+    """
+    n, m = g.shape
+    i, j, _ = _matching_table(pool.shape[-1])
+    if pairs_first:
+        idx = np.arange(n) * m + pool.T  # (p, n) flat indices
+        gp, sp, okp = (x.reshape(-1)[idx] for x in (g, s, ok))
+        h = pair_half_length_m(gp[i], gp[j], sp[i], sp[j], k)
+        return np.where(okp[i] & okp[j], h, np.inf)
+    gp, sp, okp = (np.take_along_axis(x, pool, axis=-1) for x in (g, s, ok))
     h = pair_half_length_m(gp[:, i], gp[:, j], sp[:, i], sp[:, j], k)
-    h = np.where(okp[:, i] & okp[:, j], h, np.inf)
-    return 2.0 * h[:, sets].max(-1).min(-1)
+    return np.where(okp[:, i] & okp[:, j], h, np.inf)
+
+
+def three_independent_pairs(
+    g: ArrayLike, sigma_m: ArrayLike, trusted: ArrayLike | None = None, k_sigma: float = 2.0
+) -> tuple[NDArray, NDArray]:
+    """Three disjoint pairs making the union of their intervals short (module docstring).
+
+    Parameters
+    ----------
+    g, sigma_m : array_like, shape (..., m)
+        Along-track components and pseudorange sigmas (metres), finite where trusted.
+    trusted : array_like of bool, shape (..., m), optional
+        Default: all trusted.
+    k_sigma : float
+
+    Returns
+    -------
+    pairs : ndarray of intp, shape (..., 3, 2)
+        Satellite indices (``i < j`` in each pair), -1 with fewer than 6 trusted satellites.
+        Among sets of equal union length (the longest pair decides it, so ties are common),
+        the one with the smallest sum of the three half lengths.
+    half_length_m : ndarray, shape (...)
+        Largest half length of the three pairs (the union's half length when predicting);
+        NaN with fewer than 6 trusted.
+
+    Notes
+    -----
+    Memory ``~ 420 * 4 * n_epoch`` floats; :func:`predicted_interval` computes the same length
+    without the indices, faster.
+    """
+    g_a, s, ok = _prepare(g, sigma_m, trusted)
+    lead, m = g_a.shape[:-1], g_a.shape[-1]
+    g2, s2, ok2 = g_a.reshape(-1, m), s.reshape(-1, m), ok.reshape(-1, m)
+    pairs = np.full((len(g2), 3, 2), -1, np.intp)
+    half = np.full(len(g2), np.nan, g_a.dtype)
+    rows = np.nonzero(ok2.sum(-1) >= 6)[0]
+    if len(rows):
+        g2, s2, ok2 = g2[rows], s2[rows], ok2[rows]
+        g2, s2 = np.where(ok2, g2, 0.0), np.where(ok2, s2, 1.0)
+        pool = pair_pool(g2, s2, ok2)
+        h = _pool_half_lengths(g2, s2, ok2, pool, k_sigma, False)
+        i, j, sets = _matching_table(pool.shape[-1])
+        hs = h[:, sets]  # (n, n_sets, 3)
+        worst = hs.max(-1)
+        # among sets of the shortest union, the shortest sum: the other pairs tight too
+        tie = worst == worst.min(axis=-1, keepdims=True)
+        best = np.argmin(np.where(tie, hs.sum(-1), np.inf), axis=-1)
+        chosen = sets[best]  # (n, 3) pair indices
+        pairs[rows, :, 0] = np.take_along_axis(pool, i[chosen], axis=-1)
+        pairs[rows, :, 1] = np.take_along_axis(pool, j[chosen], axis=-1)
+        half[rows] = np.take_along_axis(worst, best[:, None], axis=-1)[:, 0]
+    return pairs.reshape(*lead, 3, 2), half.reshape(lead)
+
+
+def best_pair(
+    g: ArrayLike, sigma_m: ArrayLike, trusted: ArrayLike | None = None, k_sigma: float = 2.0
+) -> tuple[NDArray, NDArray]:
+    """The trusted pair with the shortest interval.
+
+    Parameters
+    ----------
+    g, sigma_m : array_like, shape (..., m)
+    trusted : array_like of bool, shape (..., m), optional
+        Default: all trusted.
+    k_sigma : float
+
+    Returns
+    -------
+    pair : ndarray of intp, shape (..., 2)
+        Satellite indices ``i < j`` (the first in ``np.triu_indices`` order among equal
+        lengths), -1 with fewer than 2 trusted satellites.
+    half_length_m : ndarray, shape (...)
+        Its half length; NaN with fewer than 2 trusted.
+    """
+    g_a, s, ok = _prepare(g, sigma_m, trusted)
+    lead, m = g_a.shape[:-1], g_a.shape[-1]
+    if m < 2:
+        return np.full((*lead, 2), -1, np.intp), np.full(lead, np.nan, g_a.dtype)
+    i, j = np.triu_indices(m, 1)
+    h = pair_half_length_m(g_a[..., i], g_a[..., j], s[..., i], s[..., j], k_sigma)
+    h = np.where(ok[..., i] & ok[..., j], h, np.inf)
+    has = ok.sum(-1) >= 2
+    k = np.argmin(h, axis=-1)
+    pair = np.where(has[..., None], np.stack([i[k], j[k]], axis=-1), -1)
+    half = np.where(has, np.take_along_axis(h, k[..., None], axis=-1)[..., 0], np.nan)
+    return pair, half.astype(g_a.dtype, copy=False)
+
+
+def _three_pairs_half(g: NDArray, s: NDArray, ok: NDArray, k: float) -> NDArray:
+    """Half length of :func:`three_independent_pairs` of rows (n, m) with >= 6 trusted.
+
+    Bit-identical to the minimum over the matching table (min and max are exact) in about a
+    third of the operations and on contiguous rows (no (n, 420, 3) gather).
+    """
+    n, m = g.shape
+    p = min(POOL_SIZE, m)
+    pool = _pool(g, s, ok, p) if m > p else np.broadcast_to(np.arange(p), (n, p))
+    h = _pool_half_lengths(g, s, ok, pool, k, True)  # (n_pairs, n)
+    e1, e2, ax, t = _bottleneck_program(p)
+    f4 = np.maximum(h[e1], h[e2]).min(axis=1)  # (n4, n)
+    f6 = np.maximum(h[ax], f4[t]).min(axis=1)  # (n6, n)
+    return f6.min(axis=0)
 
 
 def _few(g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: float) -> NDArray:
+    """Full length of rows with 2-5 trusted: best pair (2-3) or union of all pairs (4-5)."""
     w = min(5, g.shape[-1])
     order = np.argsort(~ok, axis=-1, kind="stable")[:, :w]  # trusted first
     rows = np.arange(len(g))[:, None]
@@ -260,7 +492,6 @@ def _few(g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: float) -> NDArr
     valid = np.arange(w)[None, :] < count[:, None]
     i, j = np.triu_indices(w, 1)
     h = pair_half_length_m(gg[:, i], gg[:, j], ss[:, i], ss[:, j], k)
-    pair_ok = valid[:, i] & valid[:, j]
-    worst = np.where(pair_ok, h, -np.inf).max(-1)
-    best = np.where(pair_ok, h, np.inf).min(-1)
+    worst = np.where(valid[:, i] & valid[:, j], h, -np.inf).max(-1)
+    best = best_pair(gg, ss, valid, k)[1]
     return 2.0 * np.where(count >= 4, worst, best)

@@ -1,10 +1,14 @@
 """Benchmark the availability engine on the whole demo line for the embedded day.
 
 Line 144 (demo track, a position every 10 m) x 24 h at 30 s x all constellations, with a
-synthetic but plausible mask set (10-20 deg cut with higher sectors), timed with peak RSS; a
-straightforward per-position float64 reference on a subset in the same run gives the speed
-ratio; then the line's figures with masks, with no mask and with a 15 deg cut-off, next to
-LOCOPROL's line-144 figures (>= 4 satellites 95 % of the time, >= 6 satellites 60 %).
+synthetic but plausible mask set (10-20 deg cut with higher sectors), timed (wall and CPU) with
+peak RSS: counts only, then counts + interval at every ``--interval-every``-th epoch (default 1,
+the target of issue #4: <= 10 s, <= 2 GB on 2 cores). Straightforward per-position float64
+references on a subset in the same run give the speed ratios and the agreement (counts:
+``reference_counts``; interval: float64 az/el and the public pair functions of
+``predisat.interval``, one epoch at a time). Then the line's figures with masks, with no mask
+and with a 15 deg cut-off (interval every ``--figures-every``-th epoch), next to LOCOPROL's
+line-144 figures (>= 4 satellites 95 % of the time, >= 6 satellites 60 %).
 
     .venv/bin/python scripts/bench_availability.py --out bench_availability.json
 """
@@ -15,15 +19,23 @@ import argparse
 import json
 import resource
 import time
+from typing import Any
 
 import numpy as np
 
 from predisat.availability import compute_availability, reference_counts
+from predisat.interval import (
+    IntervalModel,
+    best_pair,
+    pair_half_length_m,
+    three_independent_pairs,
+)
 from predisat.masks import MaskSet
 from predisat.satellites import (
     LinePositions,
     SatellitePositions,
     TrustRule,
+    azel,
     default_ephemeris,
     default_window,
 )
@@ -50,12 +62,46 @@ def rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def reference_interval(
+    sats: SatellitePositions, pos: LinePositions, rule: TrustRule, model: IntervalModel
+) -> np.ndarray:
+    """Per position and epoch: float64 az/el, the trusted satellites, the public pair rules."""
+    out = np.full((pos.n_pos, len(sats.gps_s)), np.nan)
+    rot, rx, t_enu = pos.enu_rotation, pos.ecef_m, pos.tangent_enu
+    for i in range(pos.n_pos):
+        az, el = azel(rx[i], rot[i], sats.pos_ecef_m)
+        ok = rule.trusted(pos.chainage_m[i], az, el)
+        a, e = np.radians(az), np.radians(el)
+        g = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], -1) @ t_enu[i]
+        for t in range(len(sats.gps_s)):
+            k = np.nonzero(ok[t])[0]
+            gt, st = g[t, k], model.error.sigma_m(el[t, k])
+            if len(k) >= 6:
+                out[i, t] = 2 * three_independent_pairs(gt, st, k_sigma=model.k_sigma)[1]
+            elif len(k) >= 4:
+                p, q = np.triu_indices(len(k), 1)
+                out[i, t] = 2 * pair_half_length_m(gt[p], gt[q], st[p], st[q], model.k_sigma).max()
+            elif len(k) >= 2:
+                out[i, t] = 2 * best_pair(gt, st, k_sigma=model.k_sigma)[1]
+    return out
+
+
+def timed(fn: Any, *args: Any, **kw: Any) -> tuple[Any, float, float]:
+    """``fn(*args, **kw)``, its wall time and the process CPU time (all threads), seconds."""
+    t, c = time.perf_counter(), time.process_time()
+    out = fn(*args, **kw)
+    return out, time.perf_counter() - t, time.process_time() - c
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="bench_availability.json")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--interval-every", type=int, default=10)
+    ap.add_argument("--interval-every", type=int, default=1)
+    ap.add_argument("--figures-every", type=int, default=10)
+    ap.add_argument("--chunk-positions", type=int, default=2)
     ap.add_argument("--ref-positions", type=int, default=20)
+    ap.add_argument("--ref-interval-positions", type=int, default=4)
     args = ap.parse_args()
 
     res: dict = {}
@@ -69,16 +115,15 @@ def main() -> None:
     rule = TrustRule.mask(masks)
     res["shape"] = [pos.n_pos, len(gps_s), len(sats.sats)]
     print(f"line {pos.n_pos} positions x {len(gps_s)} epochs x {len(sats.sats)} satellites")
+    kw = {"workers": args.workers, "chunk_positions": args.chunk_positions}
 
-    t = time.perf_counter()
-    counts_only = compute_availability(sats, pos, rule, with_interval=False, workers=args.workers)
-    res["counts_s"] = time.perf_counter() - t
-    res["rss_after_counts_mb"] = rss_mb()
-    t = time.perf_counter()
-    full = compute_availability(
-        sats, pos, rule, interval_every=args.interval_every, workers=args.workers
+    counts_only, res["counts_s"], res["counts_cpu_s"] = timed(
+        compute_availability, sats, pos, rule, with_interval=False, **kw
     )
-    res["counts_and_interval_s"] = time.perf_counter() - t
+    res["rss_after_counts_mb"] = rss_mb()
+    full, res["counts_and_interval_s"], res["counts_and_interval_cpu_s"] = timed(
+        compute_availability, sats, pos, rule, interval_every=args.interval_every, **kw
+    )
     res["interval_every"] = args.interval_every
     res["peak_rss_mb"] = rss_mb()
     assert np.array_equal(counts_only.count, full.count)
@@ -92,21 +137,52 @@ def main() -> None:
     res["reference_mismatch_cells"] = int(np.sum(ref != full.count[sub]))
     res["reference_cells"] = int(ref.size)
 
+    # the interval against its straightforward reference (slow: a few positions)
+    sub = np.linspace(0, pos.n_pos - 1, args.ref_interval_positions).astype(int)
+    t = time.perf_counter()
+    ref_iv = reference_interval(sats, pos.take(sub), rule, IntervalModel())
+    res["interval_reference_s_per_position"] = (time.perf_counter() - t) / len(sub)
+    engine_iv_s = max(res["counts_and_interval_s"] - res["counts_s"], 1e-9) / pos.n_pos
+    res["interval_speed_ratio"] = res["interval_reference_s_per_position"] / (
+        engine_iv_s * args.interval_every
+    )
+    every = slice(None, None, args.interval_every)
+    same = (full.count[sub] == reference_counts(sats, pos.take(sub), rule))[:, every]
+    want = ref_iv[:, every]
+    fin = same & np.isfinite(want)
+    got = full.interval_m[sub][:, every].astype(float)[fin]
+    rel = np.abs(got - want[fin]) / want[fin]
+    res["interval_reference_cells"] = int(fin.sum())
+    res["interval_reference_share_within_1e-5"] = float(np.mean(rel < 1e-5))
+    res["interval_reference_max_rel"] = float(rel.max()) if len(rel) else float("nan")
+
     figures = {}
     gps = SatellitePositions.from_ephemeris(eph, gps_s, "gps")
     for cons, sp in (("all", sats), ("gps", gps)):
         for r in (rule, TrustRule.none(), TrustRule.cutoff(15.0)):
-            a = compute_availability(
-                sp, pos, r, interval_every=args.interval_every, workers=args.workers
-            )
+            a = compute_availability(sp, pos, r, interval_every=args.figures_every, **kw)
             sm = a.summary()
             keys = ("share", "longest", "mean", "interval", "opening")
             figures[f"{cons}, {r.label}"] = {k: sm[k] for k in sm if k.startswith(keys)}
     res["figures"] = figures
     res["locoprol_line144"] = {"share_ge4": 0.95, "share_ge6": 0.60}
-    for k in ("counts_s", "counts_and_interval_s", "peak_rss_mb", "speed_ratio"):
-        print(f"{k:>24}: {res[k]:.2f}")
+    for k in (
+        "counts_s",
+        "counts_cpu_s",
+        "counts_and_interval_s",
+        "counts_and_interval_cpu_s",
+        "peak_rss_mb",
+        "speed_ratio",
+        "interval_speed_ratio",
+    ):
+        print(f"{k:>26}: {res[k]:.2f}")
+    print(f"(interval every {args.interval_every} epoch(s), {args.workers} threads)")
     print(f"reference mismatches: {res['reference_mismatch_cells']} of {res['reference_cells']}")
+    print(
+        f"interval vs reference: {res['interval_reference_share_within_1e-5']:.4f} of "
+        f"{res['interval_reference_cells']} cells within 1e-5 relative, "
+        f"max {res['interval_reference_max_rel']:.1e}"
+    )
     print(
         "constellation, rule   share>=2 share>=4 share>=6  longest<4 (m / s)  interval med/p95 (m)"
     )

@@ -1,4 +1,5 @@
-"""SATHIA interval: pair formula vs numeric hyperboloid intersection, pair selection vs search."""
+"""SATHIA interval: pair formula vs numeric hyperboloid intersection, pair selection vs search,
+fast path vs the straightforward table implementation."""
 
 from __future__ import annotations
 
@@ -13,8 +14,12 @@ from predisat.interval import (
     IntervalMode,
     IntervalModel,
     along_track_components,
+    best_pair,
+    interval_mode,
     pair_half_length_m,
+    pair_pool,
     predicted_interval,
+    three_independent_pairs,
 )
 
 
@@ -136,3 +141,163 @@ def test_error_model_and_risk() -> None:
     assert IntervalModel.for_risk(1e-4).k_sigma == pytest.approx(3.8906, abs=1e-3)
     with pytest.raises(ValueError, match="k_sigma"):
         IntervalModel(k_sigma=0.0)
+
+
+# --------------------------------------------------------------------------- pair choice
+def _table_reference(g, s, ok, k):
+    """The pre-0.2 implementation, kept as a reference: argpartition pool + 420-set table.
+
+    Straightforward and independent of the fast path (subset recursion, repeated argmin).
+    """
+    n, m = g.shape
+    length = np.full(n, np.nan, g.dtype)
+    count = ok.sum(-1)
+    for r in range(n):
+        gr, sr, okr = g[r], s[r], ok[r]
+        if count[r] >= 6:
+            p = min(8, m)
+            s0 = sr[okr].min()
+            spread = np.sqrt(sr * sr + s0 * s0)
+            with np.errstate(divide="ignore"):
+                rank_lo = np.where(okr, spread / (1.0 - gr), 1e30)
+                rank_hi = np.where(okr, spread / (1.0 + gr), 1e30)
+            lo = np.argpartition(rank_lo, p // 2 - 1)[: p // 2]
+            rank_hi[lo] = np.inf
+            hi = np.argpartition(rank_hi, p - p // 2 - 1)[: p - p // 2]
+            pool = np.concatenate([lo, hi])
+            best = np.inf
+            for six in itertools.combinations(pool, 6):
+                for a, b, c in _perfect(list(six)):
+                    hs = [
+                        pair_half_length_m(gr[x], gr[y], sr[x], sr[y], k)
+                        if okr[x] and okr[y]
+                        else np.inf
+                        for x, y in (a, b, c)
+                    ]
+                    best = min(best, max(hs))
+            length[r] = 2.0 * best
+        elif count[r] >= 2:
+            t = np.nonzero(okr)[0]
+            hs = [pair_half_length_m(gr[x], gr[y], sr[x], sr[y], k)
+                  for x, y in itertools.combinations(t, 2)]  # fmt: skip
+            length[r] = 2.0 * (max(hs) if count[r] >= 4 else min(hs))
+    return length.astype(np.float32)
+
+
+def _perfect(rest):
+    if not rest:
+        yield []
+        return
+    for x in range(1, len(rest)):
+        for m in _perfect(rest[1:x] + rest[x + 1 :]):
+            yield [(rest[0], rest[x]), *m]
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("m", [6, 7, 9, 20])
+def test_fast_path_identical_to_table_reference(dtype, m) -> None:
+    rng = np.random.default_rng(m)
+    n = 60
+    g = rng.uniform(-1, 1, (n, m)).astype(dtype)
+    s = rng.uniform(2.0, 12.0, (n, m)).astype(dtype)
+    ok = rng.random((n, m)) < rng.uniform(0.2, 1.0, (n, 1))
+    length, mode = predicted_interval(g, s, ok, 2.0)
+    want = _table_reference(g, s, ok, 2.0)
+    np.testing.assert_array_equal(length, want)  # bit for bit, NaN where < 2
+    np.testing.assert_array_equal(mode, interval_mode(ok.sum(-1)))
+    # NaN/inf in untrusted entries change nothing
+    g_bad = np.where(ok, g, np.nan).astype(dtype)
+    s_bad = np.where(ok, s, np.inf).astype(dtype)
+    np.testing.assert_array_equal(predicted_interval(g_bad, s_bad, ok, 2.0)[0], want)
+
+
+def test_three_independent_pairs_vectorised() -> None:
+    rng = np.random.default_rng(4)
+    em = ErrorModel()
+    n, m = 40, 12
+    g, el = _random_sky(rng, n * m)
+    g, s = g.reshape(n, m), em.sigma_m(el).reshape(n, m)
+    ok = rng.random((n, m)) < 0.75
+    ok[0] = [True] * 5 + [False] * 7  # too few
+    ok[1] = [True] * 7 + [False] * 5  # the pool holds every trusted satellite: exact
+    pairs, half = three_independent_pairs(g, s, ok, 2.0)
+    assert pairs.shape == (n, 3, 2) and half.shape == (n,)
+    length, _ = predicted_interval(g, s, ok, 2.0)
+    for r in range(n):
+        if ok[r].sum() < 6:
+            assert np.all(pairs[r] == -1) and np.isnan(half[r])
+            continue
+        pr = pairs[r]
+        assert len(set(pr.ravel().tolist())) == 6 and np.all(ok[r][pr])
+        assert np.all(pr[:, 0] < pr[:, 1])
+        hs = [2.0 * np.hypot(s[r, a], s[r, b]) / abs(g[r, a] - g[r, b]) for a, b in pr]
+        assert half[r] == pytest.approx(max(hs), rel=1e-12)
+        assert 2 * half[r] == pytest.approx(length[r], rel=1e-6)
+        if ok[r].sum() <= 8:
+            t = np.nonzero(ok[r])[0]
+            assert 2 * half[r] == pytest.approx(_best_three_pairs(g[r, t], s[r, t], 2.0), rel=1e-12)
+    assert np.all(pairs[0] == -1) and np.isnan(half[0])
+
+
+def test_three_pairs_tie_break_prefers_tight_pairs() -> None:
+    """The longest pair decides the union, so equal unions are common: the tighter sum wins."""
+    rng = np.random.default_rng(8)
+    differs = 0
+    for _ in range(30):
+        n = int(rng.integers(6, 9))
+        g = rng.uniform(-0.9, 0.9, n)
+        s = np.full(n, 3.0)
+        pairs, half = three_independent_pairs(g, s)
+
+        def h(a, b, g=g, s=s):
+            return 2.0 * np.hypot(s[a], s[b]) / abs(g[a] - g[b])
+
+        sets = [m for six in itertools.combinations(range(n), 6) for m in _perfect(list(six))]
+        key = [(max(h(*p) for p in m), sum(h(*p) for p in m)) for m in sets]
+        want = sets[min(range(len(sets)), key=key.__getitem__)]
+        first = sets[min(range(len(sets)), key=lambda q: key[q][0])]
+        assert {tuple(p) for p in pairs.tolist()} == set(want)
+        assert half == pytest.approx(key[sets.index(want)][0], rel=1e-12)
+        differs += set(first) != set(want)
+    assert differs > 0  # the tie-break did matter in some skies
+
+
+def test_best_pair_vectorised() -> None:
+    rng = np.random.default_rng(9)
+    n, m = 50, 7
+    g = rng.uniform(-1, 1, (n, m))
+    s = rng.uniform(2, 9, (n, m))
+    ok = rng.random((n, m)) < 0.5
+    pair, half = best_pair(g, s, ok, 2.0)
+    for r in range(n):
+        t = np.nonzero(ok[r])[0]
+        if len(t) < 2:
+            assert np.all(pair[r] == -1) and np.isnan(half[r])
+            continue
+        want = min(
+            (2.0 * np.hypot(s[r, a], s[r, b]) / abs(g[r, a] - g[r, b]), a, b)
+            for a, b in itertools.combinations(t, 2)
+        )
+        assert half[r] == pytest.approx(want[0], rel=1e-12)
+        assert tuple(pair[r]) == (want[1], want[2])
+
+
+def test_pair_pool_ranks() -> None:
+    rng = np.random.default_rng(2)
+    g = rng.uniform(-1, 1, (30, 15))
+    s = rng.uniform(2, 9, (30, 15))
+    ok = rng.random((30, 15)) < 0.8
+    pool = pair_pool(g, s, ok)
+    assert pool.shape == (30, 8) and np.all(np.diff(pool, axis=-1) > 0)
+    for r in range(30):
+        t = np.nonzero(ok[r])[0]
+        s0 = s[r, t].min()
+        spread = {i: np.hypot(s[r, i], s0) for i in t}
+        lo = sorted(t, key=lambda i: spread[i] / (1 - g[r, i]))[:4]
+        rest = [i for i in t if i not in lo]
+        hi = sorted(rest, key=lambda i: spread[i] / (1 + g[r, i]))[:4]
+        if len(t) >= 8:
+            assert set(pool[r].tolist()) == set(lo) | set(hi)
+        else:
+            assert set(t.tolist()) <= set(pool[r].tolist())
+    np.testing.assert_array_equal(pair_pool(g[:, :6], s[:, :6]), np.tile(np.arange(6), (30, 1)))
