@@ -53,7 +53,7 @@ class _Loader(yaml.SafeLoader):
     """SafeLoader that understands OpenCV's ``!!opencv-matrix`` tags."""
 
 
-def _construct_opencv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> np.ndarray:
+def _construct_opencv_matrix(loader: yaml.SafeLoader, node: yaml.MappingNode) -> np.ndarray:
     m = loader.construct_mapping(node, deep=True)
     return np.asarray(m["data"], float).reshape(int(m["rows"]), int(m["cols"]))
 
