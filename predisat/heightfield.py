@@ -1,0 +1,331 @@
+"""A conservative 2.5-D corridor height field carved free by sky rays.
+
+The corridor around the track is a raster of square cells in the track frame's horizontal
+plane (cell edges at multiples of ``cell_m`` in frame east/north, the same for every chunk, so
+chunks agree exactly). Each cell holds an *upper bound* of the height (frame ``z``, metres) of
+anything standing in it; ``+inf`` means nothing is known. Under the 2.5-D model every obstacle is
+a column standing on the ground, so a sky ray that passes over a point proves that the column
+there is lower than the ray. Each frame contributes, for each cell, the *highest* skyline-ray
+height over the whole cell (so thin obstacles are never carved away between rays), and the cell
+keeps the lowest contribution of all frames.
+
+Overhangs (bridge decks, canopies, crowns) become solid columns: safe, since sky seen under an
+overhang is never used (see :mod:`predisat.skyline`). The space between the two cameras is never
+seen by a side camera; a prior fills it (see :func:`apply_clearance_prior`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.skyline import SkyProfile
+
+__all__ = [
+    "HeightField",
+    "RangeMax1D",
+    "apply_clearance_prior",
+    "carve_profile",
+    "corridor_grid",
+]
+
+
+class RangeMax1D:
+    """Maximum over index ranges ``[lo, hi]`` of a 1-D array, O(1) per query (sparse table).
+
+    NaN entries propagate (``np.fmax`` is *not* used) so that a range touching an unknown
+    entry is unknown.
+    """
+
+    def __init__(self, values: NDArray) -> None:
+        v = np.asarray(values, float)
+        levels = [v]
+        k = 1
+        while 2 * k <= v.size:
+            prev = levels[-1]
+            levels.append(np.maximum(prev[: prev.size - k], prev[k:]))
+            k *= 2
+        self._levels = levels
+        self.size = v.size
+
+    def query(self, lo: NDArray, hi: NDArray) -> NDArray:
+        """Maximum over ``values[lo:hi + 1]`` (``lo <= hi``, both within the array)."""
+        lo = np.asarray(lo, np.int64)
+        hi = np.asarray(hi, np.int64)
+        n = hi - lo + 1
+        k = np.floor(np.log2(np.maximum(n, 1))).astype(np.int64)
+        out = np.empty(lo.shape, float)
+        for level in np.unique(k):
+            sel = k == level
+            tab = self._levels[int(level)]
+            out[sel] = np.maximum(tab[lo[sel]], tab[hi[sel] - (1 << int(level)) + 1])
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class HeightField:
+    """Upper bounds of obstacle height over a corridor raster.
+
+    Attributes
+    ----------
+    cell_m : float
+        Cell size; cell ``(row, col)`` covers frame ``x`` in ``[(ix0 + col) * cell_m, +cell_m)``
+        and ``y`` in ``[(iy0 + row) * cell_m, +cell_m)``.
+    ix0, iy0 : int
+        Global index of the raster's first column and row.
+    bound_m : ndarray of float32, shape (ny, nx)
+        Upper bound of the obstacle top, frame ``z`` metres; ``+inf`` unknown.
+    region : ndarray of bool, shape (ny, nx)
+        Cells within ``half_width_m`` of the track axis in the modelled chainage range.
+    chainage_m, offset_m : ndarray of float32, shape (ny, nx)
+        Track chainage and left offset of each cell centre (NaN outside the region).
+    rail_z_m : ndarray of float32, shape (ny, nx)
+        Frame ``z`` of the rail at the cell's chainage.
+    overhead_m : ndarray of float, shape (k, 2)
+        Chainage intervals where an overhead structure was detected.
+    """
+
+    cell_m: float
+    ix0: int
+    iy0: int
+    bound_m: NDArray = field(repr=False)
+    region: NDArray = field(repr=False)
+    chainage_m: NDArray = field(repr=False)
+    offset_m: NDArray = field(repr=False)
+    rail_z_m: NDArray = field(repr=False)
+    overhead_m: NDArray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        ny, nx = self.bound_m.shape
+        return int(ny), int(nx)
+
+    def index(self, x_m: NDArray, y_m: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Row, column and in-raster flag of frame points ``(x_m, y_m)``."""
+        col = np.floor(np.asarray(x_m) / self.cell_m).astype(np.int64) - self.ix0
+        row = np.floor(np.asarray(y_m) / self.cell_m).astype(np.int64) - self.iy0
+        ny, nx = self.shape
+        ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        return np.where(ok, row, 0), np.where(ok, col, 0), ok
+
+
+def corridor_grid(
+    track: Any, lo_m: float, hi_m: float, half_width_m: float, cell_m: float, seg_m: float = 2.0
+) -> HeightField:
+    """An empty (all unknown) height field over the corridor ``[lo_m, hi_m]`` x ``+-half_width``.
+
+    The track axis is cut in ``seg_m`` pieces; each piece's quadrilateral is rasterised with its
+    index, which gives every cell its chainage and offset by a local projection.
+    """
+    lo, hi = max(0.0, float(lo_m)), min(float(track.length_m), float(hi_m))
+    if not hi > lo:
+        raise ValueError(f"corridor [{lo_m}, {hi_m}] m does not overlap the track")
+    s = np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / seg_m)) + 1))
+    p = np.asarray(track.enu_at(s), float)
+    t = np.asarray(track.tangent_at(s), float)[:, :2]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    w = float(half_width_m)
+    # extend the ends a little so that end cells are covered
+    ends = np.concatenate([p[:, :2] + w * left, p[:, :2] - w * left])
+    ix0 = int(np.floor(ends[:, 0].min() / cell_m)) - 2
+    iy0 = int(np.floor(ends[:, 1].min() / cell_m)) - 2
+    nx = int(np.ceil(ends[:, 0].max() / cell_m)) + 2 - ix0
+    ny = int(np.ceil(ends[:, 1].max() / cell_m)) + 2 - iy0
+    label = np.full((ny, nx), -1, np.int32)
+    shift = 4
+    scale = float(1 << shift)
+
+    def px(xy: NDArray) -> NDArray:  # frame metres -> cv2 fixed-point pixel coordinates
+        return np.round(
+            (np.stack([xy[..., 0] / cell_m - ix0 - 0.5, xy[..., 1] / cell_m - iy0 - 0.5], -1))
+            * scale
+        ).astype(np.int32)
+
+    quads = np.stack(
+        [
+            p[:-1, :2] + w * left[:-1],
+            p[1:, :2] + w * left[1:],
+            p[1:, :2] - w * left[1:],
+            p[:-1, :2] - w * left[:-1],
+        ],
+        axis=1,
+    )
+    q_px = px(quads)
+    for k in range(q_px.shape[0]):
+        cv2.fillConvexPoly(label, q_px[k], int(k), lineType=cv2.LINE_8, shift=shift)
+    region = label >= 0
+    rows, cols = np.nonzero(region)
+    seg = label[rows, cols]
+    cx = (ix0 + cols + 0.5) * cell_m
+    cy = (iy0 + rows + 0.5) * cell_m
+    d = np.stack([cx - p[seg, 0], cy - p[seg, 1]], axis=1)
+    ch = s[seg] + np.sum(d * t[seg], axis=1)
+    off = np.sum(d * left[seg], axis=1)
+    keep = (np.abs(off) <= w) & (ch >= lo) & (ch <= hi)
+    region[rows[~keep], cols[~keep]] = False
+    chain = np.full((ny, nx), np.nan, np.float32)
+    offset = np.full((ny, nx), np.nan, np.float32)
+    chain[rows, cols] = ch
+    offset[rows, cols] = off
+    rail = np.full((ny, nx), np.nan, np.float32)
+    rail[rows, cols] = np.interp(ch, s, p[:, 2])
+    chain[~region] = np.nan
+    offset[~region] = np.nan
+    bound = np.full((ny, nx), np.inf, np.float32)
+    return HeightField(float(cell_m), ix0, iy0, bound, region, chain, offset, rail)
+
+
+def carve_profile(
+    hf: HeightField,
+    bound: NDArray,
+    profile: SkyProfile,
+    camera_m: NDArray,
+    local_to_frame: NDArray,
+    range_m: float,
+) -> int:
+    """Lower the bounds of ``bound`` (``hf``'s raster, updated in place) with one frame.
+
+    Parameters
+    ----------
+    hf : HeightField
+        Geometry of the raster (``bound`` is its working copy).
+    bound : ndarray of float32, shape ``hf.shape``
+        Working bounds, lowered in place.
+    profile : SkyProfile
+        The frame's sky profile.
+    camera_m : ndarray, shape (3,)
+        Camera centre in the track frame.
+    local_to_frame : ndarray, shape (3, 3)
+        Rotation from the local ENU at the frame into the track frame.
+    range_m : float
+        Cells beyond this horizontal distance from the camera are left alone.
+
+    Returns
+    -------
+    int
+        Number of cells the frame bounded.
+    """
+    c = hf.cell_m
+    ny, nx = hf.shape
+    cx, cy, cz = (float(v) for v in camera_m)
+    c0 = max(int(np.floor((cx - range_m) / c)) - hf.ix0, 0)
+    c1 = min(int(np.ceil((cx + range_m) / c)) - hf.ix0, nx)
+    r0 = max(int(np.floor((cy - range_m) / c)) - hf.iy0, 0)
+    r1 = min(int(np.ceil((cy + range_m) / c)) - hf.iy0, ny)
+    if c1 <= c0 or r1 <= r0:
+        return 0
+    rot = np.asarray(local_to_frame, float)
+    xl = (hf.ix0 + np.arange(c0, c1 + 1)) * c - cx  # lattice (cell corners)
+    yl = (hf.iy0 + np.arange(r0, r1 + 1)) * c - cy
+    dx, dy = np.meshgrid(xl, yl)
+    e = rot[0, 0] * dx + rot[1, 0] * dy  # local east / north of the corners
+    n = rot[0, 1] * dx + rot[1, 1] * dy
+    beta = np.mod(np.degrees(np.arctan2(e, n)) - profile.look_az_deg + 180.0, 360.0) - 180.0
+    rho = np.hypot(e, n)
+    corners = (beta[:-1, :-1], beta[:-1, 1:], beta[1:, :-1], beta[1:, 1:])
+    bmin = np.minimum.reduce(corners)
+    bmax = np.maximum.reduce(corners)
+    rho_far = np.maximum.reduce((rho[:-1, :-1], rho[:-1, 1:], rho[1:, :-1], rho[1:, 1:]))
+    b_axis = profile.rel_az_deg
+    step = float(b_axis[1] - b_axis[0])
+    i_lo = np.floor((bmin - b_axis[0]) / step).astype(np.int64)
+    i_hi = np.ceil((bmax - b_axis[0]) / step).astype(np.int64)
+    ok = (
+        hf.region[r0:r1, c0:c1]
+        & (bmax - bmin < 90.0)
+        & (i_lo >= 0)
+        & (i_hi <= b_axis.size - 1)
+        & (rho_far <= range_m)
+    )
+    if not ok.any():
+        return 0
+    tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
+    tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
+    rows, cols = np.nonzero(ok)
+    t_max = RangeMax1D(tan_sky).query(i_lo[rows, cols], i_hi[rows, cols])
+    fin = np.isfinite(t_max)
+    rows, cols, t_max = rows[fin], cols[fin], t_max[fin]
+    # nearest point of each cell to the camera (for downward-looking bounds)
+    x_a, y_a = xl[cols], yl[rows]
+    near = np.hypot(np.maximum.reduce([x_a, 0.0 * x_a, -(x_a + c)]),
+                    np.maximum.reduce([y_a, 0.0 * y_a, -(y_a + c)]))  # fmt: skip
+    h = np.where(t_max >= 0.0, rho_far[rows, cols] * t_max, near * t_max)
+    up = rot[:, 2]
+    # local height -> frame z: the local horizontal plane is tilted in the frame
+    tilt = -(up[0] * (x_a + c / 2) + up[1] * (y_a + c / 2)) / up[2]
+    z = (cz + tilt + h / up[2]).astype(np.float32)
+    sub = bound[r0:r1, c0:c1]
+    np.minimum.at(sub, (rows, cols), z)
+    return int(rows.size)
+
+
+def apply_clearance_prior(
+    hf: HeightField,
+    bound: NDArray,
+    clearance_half_width_m: float,
+    clearance_floor_m: float,
+    band_m: tuple[float, float],
+    overhead_height_m: float,
+    bin_m: float = 1.0,
+    spread_m: float = 2.0,
+    extra_overhead_m: NDArray | None = None,
+) -> NDArray:
+    """Fill the space between the cameras, where side cameras never look (in place).
+
+    Cells within ``clearance_half_width_m`` of the axis are free (bounded at
+    ``clearance_floor_m`` above the rail) unless something may hang over the track there:
+
+    * chainages where *every* cell of the lateral bands ``band_m`` on *both* sides is bounded
+      above ``overhead_height_m`` above the rail (a deck or a tunnel spans the track; open track
+      always has some low-bounded band cell);
+    * the intervals ``extra_overhead_m`` (k, 2), e.g. where a camera saw an obstacle near its
+      zenith (a crown or a canopy reaching over the track from one side).
+
+    There, the clearance cells keep their carved bound (usually unknown, i.e. blocked).
+
+    Returns
+    -------
+    ndarray of float, shape (k, 2)
+        The overhead chainage intervals.
+    """
+    reg = hf.region
+    ch = hf.chainage_m
+    off = hf.offset_m
+    # bins aligned on multiples of bin_m, so that overlapping windows agree
+    lo = float(np.floor(np.nanmin(ch) / bin_m) * bin_m)
+    n_bins = int(np.ceil((float(np.nanmax(ch)) - lo) / bin_m)) + 1
+    above = bound - hf.rail_z_m
+    b0, b1 = band_m
+    tall_both: NDArray = np.ones(n_bins, bool)
+    for sign in (1.0, -1.0):
+        sel = reg & (sign * off >= b0) & (sign * off <= b1)
+        k = np.floor((ch[sel] - lo) / bin_m).astype(np.int64)
+        low = np.full(n_bins, np.inf)
+        np.minimum.at(low, k, above[sel])
+        tall_both &= low > overhead_height_m
+    radius = round(spread_m / bin_m)
+    if radius > 0:
+        padded = np.pad(tall_both, radius, constant_values=False)
+        win = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1)
+        tall_both = np.asarray(win.any(axis=1))
+    centres = lo + (np.arange(n_bins) + 0.5) * bin_m
+    for a, b in np.asarray(extra_overhead_m, float).reshape(-1, 2):
+        tall_both |= (centres >= a) & (centres <= b)
+    tall_any = tall_both
+    sel = reg & (np.abs(off) < clearance_half_width_m)
+    k = np.floor((ch[sel] - lo) / bin_m).astype(np.int64)
+    free = ~tall_any[k]
+    rows, cols = np.nonzero(sel)
+    rows, cols = rows[free], cols[free]
+    floor = (hf.rail_z_m[rows, cols] + clearance_floor_m).astype(np.float32)
+    bound[rows, cols] = np.minimum(bound[rows, cols], floor)
+    # overhead intervals, for the record
+    edges = np.diff(np.concatenate([[0], tall_any.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1)
+    return np.stack([lo + starts * bin_m, lo + stops * bin_m], axis=1).astype(float)

@@ -1,0 +1,616 @@
+"""Full 360 deg masks from side-camera frames by free-space carving (issue 3, item 4).
+
+Method (``docs/reconstruction.md``):
+
+1. each frame's sky mask becomes a :class:`~predisat.skyline.SkyProfile` (lowest elevation of
+   the top sky run per relative azimuth);
+2. the profiles carve a conservative 2.5-D corridor :class:`~predisat.heightfield.HeightField`
+   (upper bound of obstacle height per cell, ``+inf`` where unknown), and a clearance prior fills
+   the space between the cameras unless an overhead structure is detected;
+3. from each antenna position the height field is ray cast in every azimuth bin (horizon: the
+   steepest cell top along the ray, using each cell's nearest point, so the result is never
+   below what the bounds allow); where a ray leaves the modelled corridor, the far field is
+   bounded by what the position's own cameras saw as sky in that direction (with an azimuth
+   allowance for the camera-antenna parallax), or by a stated default where they saw nothing;
+4. each bin gets a source flag: ASSUMED when the value rests on an unknown cell or on the
+   far-field default (no camera at the position saw that azimuth's far field, e.g. straight
+   along the track), else OBSERVED when the direction at the mask elevation lies in the view of
+   a camera at the position, else RECONSTRUCTED.
+
+The pipeline runs :meth:`Reconstructor.run` on chainage windows; a position's result depends on
+the frames within :attr:`ReconstructionParams.overlap_m` of it only, so a window needs the frames
+of its positions' range extended by ``overlap_m`` on both sides.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera import CameraModel, Mount, vehicle_to_enu
+from predisat.heightfield import (
+    HeightField,
+    RangeMax1D,
+    apply_clearance_prior,
+    carve_profile,
+    corridor_grid,
+)
+from predisat.masks import BinSource, MaskSet
+from predisat.skyline import Rectifier, SkyProfile
+
+__all__ = [
+    "FrameView",
+    "Reconstruction",
+    "ReconstructionParams",
+    "Reconstructor",
+    "reconstruct_masks",
+]
+
+
+_DESCRIPTOR_TOL_DEG = 3.0
+_WINDOW_MARGIN_M = 5.0  # corridor beyond the rays' reach, so that the prior's bins are whole
+
+
+@dataclass(frozen=True)
+class ReconstructionParams:
+    """Settings of the reconstruction (metres and degrees).
+
+    Attributes
+    ----------
+    cell_m : float
+        Height-field cell size. Near obstacles are over-estimated by up to about one cell in
+        distance (0.5 m at 10 m: ~1 deg on a tall wall).
+    half_width_m : float
+        Modelled corridor half-width either side of the axis; beyond it the far-field rule
+        applies.
+    reach_m : float
+        How far antenna rays are followed in the height field.
+    carve_range_m : float
+        Horizontal range from a camera within which its sky rays carve cells.
+    clearance_half_width_m : float
+        Half-width of the free space above the track between the cameras (structure gauge),
+        free unless an overhead structure is detected.
+    clearance_floor_m : float
+        Height above the rail assumed for the clearance cells (platforms are lower).
+    overhead_band_m : (float, float)
+        Lateral band (both sides) examined for structures spanning the track.
+    overhead_height_m : float
+        Bands on both sides entirely bounded above this height above the rail mean a deck or a
+        tunnel.
+    zenith_el_deg, zenith_rel_az_deg : float
+        A camera whose sky run starts above ``zenith_el_deg`` over at least half of the
+        relative azimuths within ``zenith_rel_az_deg`` of its look direction has something
+        wide over it (crown, canopy): the clearance is blocked within ``zenith_spread_m`` of
+        that frame.
+    zenith_spread_m : float
+    antenna_height_m : float
+        Antenna above the rail at the mask positions.
+    az_step_deg : float
+        Mask bin width.
+    n_sub : int
+        Rays per bin (bin edges shared with the neighbours).
+    far_default_deg : float
+        Far-field elevation assumed in directions no camera at the position saw (ASSUMED).
+    position_tol_m : float
+        Frames within this chainage distance of a position are "at" the position.
+    min_confidence : float
+        Image columns with a lower segmentation confidence clear nothing.
+    rectify_az_step_deg, rectify_el_step_deg : float
+        Sky-profile sampling.
+    descriptor_min_el_deg : float
+        A side whose perpendicular horizon is lower has no obstacle descriptor.
+    """
+
+    cell_m: float = 0.5
+    half_width_m: float = 40.0
+    reach_m: float = 250.0
+    carve_range_m: float = 60.0
+    clearance_half_width_m: float = 2.0
+    clearance_floor_m: float = 1.0
+    overhead_band_m: tuple[float, float] = (3.0, 9.0)
+    overhead_height_m: float = 6.0
+    zenith_el_deg: float = 75.0
+    zenith_rel_az_deg: float = 30.0
+    zenith_spread_m: float = 7.0
+    antenna_height_m: float = 4.0
+    az_step_deg: float = 0.5
+    n_sub: int = 4
+    far_default_deg: float = 5.0
+    position_tol_m: float = 5.0
+    min_confidence: float = 0.5
+    rectify_az_step_deg: float = 0.25
+    rectify_el_step_deg: float = 0.125
+    descriptor_min_el_deg: float = 10.0
+
+    def __post_init__(self) -> None:
+        n_az = round(360.0 / self.az_step_deg)
+        if abs(n_az * self.az_step_deg - 360.0) > 1e-9:
+            raise ValueError(f"az_step_deg = {self.az_step_deg} must divide 360")
+        for name in ("cell_m", "half_width_m", "reach_m", "carve_range_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ReconstructionParams.{name} must be > 0")
+        if self.n_sub < 1:
+            raise ValueError("ReconstructionParams.n_sub must be >= 1")
+
+    @property
+    def overlap_m(self) -> float:
+        """Chainage margin of frames (and corridor) needed beyond a window's positions."""
+        return self.reach_m + self.carve_range_m + _WINDOW_MARGIN_M
+
+    @property
+    def n_az(self) -> int:
+        return round(360.0 / self.az_step_deg)
+
+
+@dataclass(frozen=True, eq=False)
+class FrameView:
+    """One frame as the reconstruction needs it.
+
+    Attributes
+    ----------
+    chainage_m : float
+    sky_mask : ndarray of bool, shape ``camera.shape``
+        True for sky and for thin L-band-transparent structure (wires).
+    camera : CameraModel
+    mount : Mount
+    antenna_enu_m : ndarray, shape (3,)
+        Antenna position at the frame in the track frame (``track.frame``) ENU.
+    heading_deg : float
+        Track heading at the frame.
+    reverse : bool
+        Train driving toward decreasing chainage.
+    confidence : ndarray, shape (width_px,), optional
+        Per-column segmentation confidence.
+    frame_id : str
+    """
+
+    chainage_m: float
+    sky_mask: NDArray = field(repr=False)
+    camera: CameraModel
+    mount: Mount
+    antenna_enu_m: NDArray
+    heading_deg: float
+    reverse: bool = False
+    confidence: NDArray | None = field(default=None, repr=False)
+    frame_id: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """Masks of one chainage window, ready for :class:`~predisat.masks.MaskSet`.
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (n_pos,)
+    az_deg : ndarray, shape (n_az,)
+        Bin centres.
+    mask_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Final mask, degrees in [0, 90].
+    source : ndarray of uint8, shape (n_pos, n_az)
+        :class:`~predisat.masks.BinSource` codes.
+    grid_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Horizon of the height field alone (before the far-field rule; may be negative).
+    far_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Far-field bound used beyond the corridor.
+    descriptors : dict of str to ndarray, shape (n_pos,)
+        ``left/right_obstacle_distance_m`` and ``left/right_obstacle_height_m`` (NaN: none or
+        unknown height).
+    overhead_m : ndarray, shape (k, 2)
+        Chainage intervals detected as overhead structures.
+    params : ReconstructionParams
+    """
+
+    chainage_m: NDArray
+    az_deg: NDArray
+    mask_el_deg: NDArray
+    source: NDArray
+    grid_el_deg: NDArray
+    far_el_deg: NDArray
+    descriptors: dict[str, NDArray]
+    overhead_m: NDArray
+    params: ReconstructionParams
+
+    def to_maskset(self, track: Any, **kwargs: Any) -> MaskSet:
+        """A :class:`~predisat.masks.MaskSet` of these masks along ``track``."""
+        prov = dict(kwargs.pop("provenance", None) or {})
+        prov.setdefault("reconstruction", _params_dict(self.params))
+        return MaskSet.from_track(
+            track,
+            self.chainage_m,
+            self.mask_el_deg,
+            az_step_deg=self.params.az_step_deg,
+            source=self.source,
+            descriptors=self.descriptors,
+            provenance=prov,
+            **kwargs,
+        )
+
+
+def _params_dict(p: ReconstructionParams) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.__dict__.items()}
+
+
+class Reconstructor:
+    """Runs the reconstruction on chainage windows, keeping the per-camera rectifiers.
+
+    Parameters
+    ----------
+    params : ReconstructionParams, optional
+    """
+
+    def __init__(self, params: ReconstructionParams | None = None) -> None:
+        self.params = params or ReconstructionParams()
+        self._rectifiers: dict[tuple[CameraModel, Mount], Rectifier] = {}
+
+    def rectifier(self, camera: CameraModel, mount: Mount) -> Rectifier:
+        """The (cached) :class:`~predisat.skyline.Rectifier` of a camera and mount."""
+        key = (camera, mount)
+        if key not in self._rectifiers:
+            p = self.params
+            self._rectifiers[key] = Rectifier.build(
+                camera, mount, p.rectify_az_step_deg, p.rectify_el_step_deg
+            )
+        return self._rectifiers[key]
+
+    def profiles(self, frames: Sequence[FrameView]) -> list[SkyProfile]:
+        """Sky profile of every frame."""
+        out = []
+        for f in frames:
+            rect = self.rectifier(f.camera, f.mount)
+            try:
+                out.append(
+                    rect.profile(
+                        f.sky_mask, f.heading_deg, f.reverse, f.confidence,
+                        self.params.min_confidence,
+                    )
+                )  # fmt: skip
+            except ValueError as exc:
+                raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
+        return out
+
+    def height_field(
+        self,
+        frames: Sequence[FrameView],
+        track: Any,
+        lo_m: float,
+        hi_m: float,
+        profiles: Sequence[SkyProfile] | None = None,
+    ) -> HeightField:
+        """Carve the corridor ``[lo_m, hi_m]`` with ``frames``."""
+        p = self.params
+        hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
+        profs = list(profiles) if profiles is not None else self.profiles(frames)
+        bound = hf.bound_m.copy()
+        if frames:
+            cams, rots = _camera_geometry(frames, track)
+            for prof, cam, rot in zip(profs, cams, rots, strict=True):
+                carve_profile(hf, bound, prof, cam, rot, p.carve_range_m)
+        over = [
+            (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
+            for f, prof in zip(frames, profs, strict=True)
+            if _zenith_blocked(prof, p)
+        ]
+        overhead = apply_clearance_prior(
+            hf, bound, p.clearance_half_width_m, p.clearance_floor_m,
+            p.overhead_band_m, p.overhead_height_m, extra_overhead_m=np.array(over, float),
+        )  # fmt: skip
+        bound.setflags(write=False)
+        return HeightField(
+            hf.cell_m, hf.ix0, hf.iy0, bound, hf.region, hf.chainage_m, hf.offset_m,
+            hf.rail_z_m, overhead,
+        )  # fmt: skip
+
+    def run(self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: Any) -> Reconstruction:
+        """Masks at ``chainage_m`` (one window) from ``frames``.
+
+        ``frames`` should hold every frame within :attr:`ReconstructionParams.overlap_m` of the
+        positions; frames farther away are ignored.
+        """
+        p = self.params
+        s = np.atleast_1d(np.asarray(chainage_m, float))
+        if s.ndim != 1 or s.size == 0 or not np.all(np.isfinite(s)):
+            raise ValueError("chainage_m must be a non-empty 1-D array of finite chainages")
+        lo, hi = float(s.min()), float(s.max())
+        keep = [f for f in frames if lo - p.overlap_m <= f.chainage_m <= hi + p.overlap_m]
+        profs = self.profiles(keep)
+        margin = p.reach_m + _WINDOW_MARGIN_M
+        hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
+        ant, rot = _antennas(track, s, p.antenna_height_m)
+        grid_el, unknown = horizon(hf, ant, rot, p)
+        far_el, far_seen, seen = _far_field(keep, profs, s, ant, track, p)
+        grid_bin = _bins(grid_el, p.n_sub)
+        unknown_bin = _bins(unknown.astype(float), p.n_sub) > 0
+        mask = np.clip(np.maximum(grid_bin, far_el), 0.0, 90.0)
+        observed = _observed(seen, mask, p)
+        src = np.full(mask.shape, int(BinSource.RECONSTRUCTED), np.uint8)
+        src[observed] = int(BinSource.OBSERVED)
+        # the value rests on an unknown cell, or on the stated far-field default (no camera at
+        # this position saw the far field in that azimuth)
+        assumed = unknown_bin | ~far_seen
+        src[assumed] = int(BinSource.ASSUMED)
+        desc = _descriptors(hf, track, s, ant, p)
+        return Reconstruction(
+            chainage_m=s,
+            az_deg=np.arange(p.n_az) * p.az_step_deg,
+            mask_el_deg=mask.astype(np.float32),
+            source=src,
+            grid_el_deg=grid_bin.astype(np.float32),
+            far_el_deg=far_el.astype(np.float32),
+            descriptors=desc,
+            overhead_m=hf.overhead_m,
+            params=p,
+        )
+
+
+def reconstruct_masks(
+    frames: Sequence[FrameView],
+    chainage_m: ArrayLike,
+    track: Any,
+    params: ReconstructionParams | None = None,
+) -> Reconstruction:
+    """Masks at ``chainage_m`` from ``frames`` (see :class:`Reconstructor`)."""
+    return Reconstructor(params).run(frames, chainage_m, track)
+
+
+# ---------------------------------------------------------------------- geometry helpers
+
+
+def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:
+    """Whether the camera saw an obstacle near its zenith, close to its look direction."""
+    near = np.abs(prof.rel_az_deg) <= p.zenith_rel_az_deg
+    seen = near & (prof.seen_hi_deg >= p.zenith_el_deg)
+    if not seen.any():
+        return False
+    # a wide obstacle (crown, canopy, close wall), not a mast beside the camera
+    return bool(np.mean(prof.sky_el_deg[seen] > p.zenith_el_deg) >= 0.5)
+
+
+def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:
+    lat, lon, _ = track.frame.to_geodetic(enu_m)
+    return np.asarray(track.frame.rotation_from(lat, lon))
+
+
+def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, NDArray]:
+    """Camera centres (n, 3) and local-to-frame rotations (n, 3, 3) of frames."""
+    ant = np.stack([np.asarray(f.antenna_enu_m, float) for f in frames])
+    rot = _local_rotations(track, ant)
+    cams = np.empty_like(ant)
+    for i, f in enumerate(frames):
+        arm_local = vehicle_to_enu(f.heading_deg, f.reverse) @ np.asarray(f.mount.lever_arm_m)
+        cams[i] = ant[i] + rot[i] @ arm_local
+    return cams, rot
+
+
+def _antennas(track: Any, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
+    axis = np.asarray(track.enu_at(s), float)
+    rot = _local_rotations(track, axis)
+    ant = axis + height_m * rot[:, :, 2]
+    return ant, rot
+
+
+def _sub_azimuths(p: ReconstructionParams) -> NDArray:
+    """Ray azimuths: ``n_sub`` per bin starting at each bin's left edge."""
+    n = p.n_az * p.n_sub
+    return np.mod(np.arange(n) * (p.az_step_deg / p.n_sub) - p.az_step_deg / 2.0, 360.0)
+
+
+def _bins(per_ray: NDArray, n_sub: int) -> NDArray:
+    """Bin maximum of per-ray values (..., n_az * n_sub), the right edge included."""
+    v = per_ray.reshape(*per_ray.shape[:-1], -1, n_sub)
+    right = np.roll(v[..., 0], -1, axis=-1)
+    return np.maximum(v.max(axis=-1), right)
+
+
+def _ray_distances(p: ReconstructionParams) -> NDArray:
+    c = p.cell_m
+    near = np.arange(c / 2.0, min(30.0, p.reach_m), c / 2.0)
+    far = np.arange(near[-1] + c, p.reach_m + 1e-9, c)
+    return np.concatenate([near, far])
+
+
+def horizon(
+    hf: HeightField, antenna_m: NDArray, local_to_frame: NDArray, p: ReconstructionParams
+) -> tuple[NDArray, NDArray]:
+    """Horizon of the height field from antennas, per ray.
+
+    Each ray is sampled every half cell up to 30 m and every cell beyond, up to ``reach_m`` or
+    until it leaves the corridor. A sample's cell counts with its top bound seen from the
+    cell's *nearest* point, so no cell the ray crosses can look lower than its bound allows.
+
+    Parameters
+    ----------
+    hf : HeightField
+    antenna_m : ndarray, shape (n, 3)
+        Antenna positions in the track frame.
+    local_to_frame : ndarray, shape (n, 3, 3)
+        Rotations from each antenna's local ENU into the track frame.
+    p : ReconstructionParams
+
+    Returns
+    -------
+    el_deg : ndarray, shape (n, n_az * n_sub)
+        Steepest elevation of a cell top along each ray (``-90`` when it meets no cell); 90
+        where it meets an unknown cell.
+    unknown : ndarray of bool, shape (n, n_az * n_sub)
+        The ray met an unknown cell.
+    """
+    az = np.radians(_sub_azimuths(p))
+    dist = _ray_distances(p).astype(np.float32)
+    blocks = np.array_split(np.arange(dist.size), max(1, dist.size // 64))
+    c = hf.cell_m
+    ny, nx = hf.shape
+    bound = hf.bound_m.ravel()
+    region = hf.region.ravel()
+    n = antenna_m.shape[0]
+    el = np.empty((n, az.size))
+    unknown = np.empty((n, az.size), bool)
+    d_loc = np.stack([np.sin(az), np.cos(az), np.zeros_like(az)], axis=-1)
+    for i in range(n):
+        a = antenna_m[i]
+        rot = local_to_frame[i]
+        up = rot[:, 2]
+        d = d_loc @ rot.T
+        d = (d[:, :2] / np.linalg.norm(d[:, :2], axis=1, keepdims=True)).astype(np.float32)
+        # antenna position in cells: integer part (global, exact) and fraction (float32), so
+        # that every window computes bit-identical samples
+        gx, gy = np.floor(a[0] / c), np.floor(a[1] / c)
+        ax = np.float32(a[0] / c - gx)
+        ay = np.float32(a[1] / c - gy)
+        ox, oy = int(gx) - hf.ix0, int(gy) - hf.iy0
+        best = np.full(az.size, -np.inf, np.float32)
+        alive = np.arange(az.size)
+        for blk in blocks:
+            if alive.size == 0:
+                break
+            dd = dist[blk] / np.float32(c)
+            fx = ax + d[alive, :1] * dd[None, :]
+            fy = ay + d[alive, 1:] * dd[None, :]
+            col = np.floor(fx).astype(np.int32) + ox
+            row = np.floor(fy).astype(np.int32) + oy
+            inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+            flat = np.where(inside, row * nx + col, 0)
+            inside &= region[flat]
+            valid = np.logical_and.accumulate(inside, axis=1)
+            h = bound[flat]
+            # nearest point of the cell to the antenna, in cells
+            cl, rl = (col - ox).astype(np.float32), (row - oy).astype(np.float32)
+            ex = np.maximum(np.maximum(cl - ax, 0.0), ax - cl - 1.0)
+            ey = np.maximum(np.maximum(rl - ay, 0.0), ay - rl - 1.0)
+            near = np.maximum(np.hypot(ex, ey) * np.float32(c), np.float32(1e-3))
+            with np.errstate(invalid="ignore"):
+                rel = (h - np.float32(a[2])) * np.float32(up[2])
+                rel += (fx - ax) * np.float32(up[0] * c) + (fy - ay) * np.float32(up[1] * c)
+                ratio = np.where(valid, rel / near, np.float32(-np.inf))
+            best[alive] = np.maximum(best[alive], ratio.max(axis=1))
+            alive = alive[valid[:, -1]]
+        unknown[i] = np.isposinf(best)
+        with np.errstate(invalid="ignore"):
+            el[i] = np.degrees(np.arctan(best.astype(float)))
+    return el, unknown
+
+
+# ---------------------------------------------------------------------- far field and flags
+
+
+def _far_field(
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    s: NDArray,
+    ant: NDArray,
+    track: Any,
+    p: ReconstructionParams,
+) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]]]:
+    """Far-field elevation bound per bin, whether a camera saw it, and the profiles per position.
+
+    A frame at the position bounds the far field at an azimuth by the highest skyline it saw
+    within the parallax allowance ``asin(baseline / half_width)`` around it (far objects are seen
+    higher from the camera, which is nearer and lower on its own side). The bound of a bin is the
+    lowest over the frames that saw the whole bin; bins no frame saw get ``far_default_deg``.
+    """
+    n_az = p.n_az
+    far = np.full((s.size, n_az), np.inf)
+    seen_any = np.zeros((s.size, n_az), bool)
+    per_pos: list[list[tuple[SkyProfile, float]]] = [[] for _ in range(s.size)]
+    if frames:
+        ch = np.array([f.chainage_m for f in frames])
+        cams, _ = _camera_geometry(frames, track)
+        az_sub = _sub_azimuths(p)
+        for i in range(s.size):
+            for j in np.flatnonzero(np.abs(ch - s[i]) <= p.position_tol_m):
+                prof = profiles[int(j)]
+                base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
+                allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
+                per_pos[i].append((prof, allow))
+                vals, ok = _profile_max(prof, az_sub, allow)
+                fb = _bins(np.where(ok, vals, np.nan), p.n_sub)
+                covered = ~np.isnan(fb)
+                far[i] = np.where(covered, np.fmin(far[i], fb), far[i])
+                seen_any[i] |= covered
+    far_el = np.where(seen_any, far, p.far_default_deg)
+    far_el = np.where(np.isinf(far_el), 90.0, far_el)
+    return far_el, seen_any, per_pos
+
+
+def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[NDArray, NDArray]:
+    """Highest skyline of a profile within ``+-allow_deg`` of each azimuth, and whether every
+    profile column in that range was seen (values there are +inf when a column had no sky)."""
+    b = prof.rel_az_deg
+    step = float(b[1] - b[0])
+    rel = np.mod(az_deg - prof.look_az_deg + 180.0, 360.0) - 180.0
+    i_lo = np.floor((rel - allow_deg - b[0]) / step).astype(np.int64)
+    i_hi = np.ceil((rel + allow_deg - b[0]) / step).astype(np.int64)
+    inside = (i_lo >= 0) & (i_hi <= b.size - 1)
+    lo, hi = np.clip(i_lo, 0, b.size - 1), np.clip(i_hi, 0, b.size - 1)
+    seen_col = np.isfinite(prof.seen_lo_deg).astype(float)
+    all_seen = -RangeMax1D(-seen_col).query(lo, hi) > 0.5  # range minimum
+    vals = RangeMax1D(prof.sky_el_deg).query(lo, hi)
+    return vals, inside & all_seen
+
+
+def _observed(
+    seen: list[list[tuple[SkyProfile, float]]], mask: NDArray, p: ReconstructionParams
+) -> NDArray:
+    """Bins whose direction at the mask elevation lies in the view of a camera at the position."""
+    out = np.zeros(mask.shape, bool)
+    az = np.arange(p.n_az) * p.az_step_deg
+    for i, items in enumerate(seen):
+        for prof, _ in items:
+            b = prof.rel_az_deg
+            step = float(b[1] - b[0])
+            rel = np.mod(az - prof.look_az_deg + 180.0, 360.0) - 180.0
+            k = np.floor((rel - b[0]) / step + 0.5).astype(np.int64)
+            inside = (k >= 0) & (k < b.size)
+            k = np.clip(k, 0, b.size - 1)
+            with np.errstate(invalid="ignore"):
+                ok = inside & (mask[i] >= prof.seen_lo_deg[k] - 1e-6)
+                ok &= mask[i] <= prof.seen_hi_deg[k] + 1e-6
+            out[i] |= ok
+    return out
+
+
+def _descriptors(
+    hf: HeightField, track: Any, s: NDArray, ant: NDArray, p: ReconstructionParams
+) -> dict[str, NDArray]:
+    """Reflection-risk descriptors from the height field, per side.
+
+    Along the horizontal perpendicular through each antenna (left: ``heading - 90``), the cell
+    that sets the horizon there is the obstacle: its nearest distance from the track axis and
+    its bound above the rail. NaN when that horizon is below ``descriptor_min_el_deg`` (open
+    side) and, for the height, when the cell is unknown. A monocular visual hull over-estimates
+    heights behind tall obstacles and cannot range a uniform edge running along the track, so
+    the distance is that of the horizon-setting cell, not of the obstacle's foot.
+    """
+    axis = np.asarray(track.enu_at(s), float)
+    t = np.asarray(track.tangent_at(s), float)[:, :2]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    y = _ray_distances(p)
+    c = hf.cell_m
+    out: dict[str, NDArray] = {}
+    for name, sign in (("left", 1.0), ("right", -1.0)):
+        pts = ant[:, None, :2] + sign * y[None, :, None] * left[:, None, :]
+        row, col, ok = hf.index(pts[..., 0], pts[..., 1])
+        ok &= hf.region[row, col]
+        valid = np.logical_and.accumulate(ok, axis=1)
+        h = hf.bound_m[row, col].astype(float)
+        x0 = (hf.ix0 + col) * c - ant[:, 0:1]
+        y0 = (hf.iy0 + row) * c - ant[:, 1:2]
+        near = np.hypot(np.maximum(np.maximum(x0, 0.0), -(x0 + c)),
+                        np.maximum(np.maximum(y0, 0.0), -(y0 + c)))  # fmt: skip
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(valid, (h - ant[:, 2:3]) / np.maximum(near, 1e-3), -np.inf)
+        rows = np.arange(s.size)
+        el_all = np.degrees(np.arctan(ratio))
+        el = el_all.max(axis=1)
+        # the first cell within a few degrees of the horizon: the obstacle's top edge rather
+        # than the (higher-bounded) hull behind it
+        k = np.argmax(el_all >= el[:, None] - _DESCRIPTOR_TOL_DEG, axis=1)
+        has = el >= p.descriptor_min_el_deg
+        top = h[rows, k] - axis[:, 2]
+        out[f"{name}_obstacle_distance_m"] = np.where(has, near[rows, k], np.nan)
+        out[f"{name}_obstacle_height_m"] = np.where(has & np.isfinite(top), top, np.nan)
+    return out

@@ -1,0 +1,312 @@
+"""From a frame's sky mask to skyline directions in the local frame (issue 3, item 3).
+
+Two views of the same information:
+
+* :func:`skyline_directions`: per *image column*, the direction (azimuth, elevation) of the
+  boundary between the column's top sky run and the highest obstacle pixel below it, using the
+  camera model, the mount, the track heading and the direction of travel;
+* :class:`Rectifier` / :class:`SkyProfile`: the sky mask resampled on a regular grid of
+  *relative azimuth* (from the camera's horizontal look direction) and elevation, and per
+  azimuth the lowest elevation of the top sky run. A tilted camera's image columns are not
+  vertical planes (the edge columns of a 45 deg pinhole sweep 40 deg of azimuth from bottom to
+  top), so the reconstruction works on the rectified profile, whose columns are.
+
+Policy (conservative): only the sky *above the highest obstacle* of a column counts, so sky seen
+below an overhang (a bridge deck, a canopy, foliage) never clears anything; obstacle pixels are
+grown by a pixel or two before resampling so that thin obstacles are not lost between samples.
+Pixels labelled as thin L-band-transparent structure (wires) must be passed as sky.
+
+Elevations are above the local horizontal at the frame, azimuths clockwise from true north;
+the vehicle's z is taken as the local vertical (grade and cant neglected, as in
+:func:`predisat.camera.vehicle_to_enu`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera import CameraModel, Mount
+from predisat.geodesy import enu_to_azel
+
+__all__ = [
+    "ColumnSkyline",
+    "Rectifier",
+    "SkyProfile",
+    "leading_sky_rows",
+    "skyline_directions",
+]
+
+_SKY, _UNSEEN, _OBSTACLE = 255, 128, 0
+
+
+def _as_sky_mask(sky: ArrayLike, camera: CameraModel, name: str = "sky_mask") -> NDArray:
+    m = np.asarray(sky)
+    if m.shape != camera.shape:
+        raise ValueError(
+            f"{name} has shape {m.shape}, expected the camera image shape {camera.shape} "
+            f"(height_px, width_px) of camera {camera.name!r}"
+        )
+    return m.astype(bool) if m.dtype != bool else m
+
+
+def leading_sky_rows(sky_mask: ArrayLike) -> NDArray:
+    """Number of sky pixels above the highest obstacle pixel of each column.
+
+    Parameters
+    ----------
+    sky_mask : array_like of bool, shape (H, W)
+        True for sky (and for thin L-band-transparent structure).
+
+    Returns
+    -------
+    ndarray of int, shape (W,)
+        ``n`` such that rows ``0 .. n-1`` are sky and row ``n`` is not (``H`` for an all-sky
+        column, 0 when the top pixel is already an obstacle).
+    """
+    m = np.asarray(sky_mask, bool)
+    if m.ndim != 2:
+        raise ValueError(f"sky_mask must be 2-D (H, W), got shape {m.shape}")
+    obstacle = ~m
+    first = np.argmax(obstacle, axis=0)
+    return np.where(obstacle.any(axis=0), first, m.shape[0]).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class ColumnSkyline:
+    """Skyline direction of every image column of one frame.
+
+    Attributes
+    ----------
+    sky_rows : ndarray of int, shape (W,)
+        Leading sky rows per column (see :func:`leading_sky_rows`).
+    ray_enu : ndarray, shape (W, 3)
+        Unit direction in the local ENU at the frame of the boundary between the last sky pixel
+        and the first obstacle pixel (the top edge of the obstacle pixel, ``v = n - 0.5``); the
+        bottom edge of the image for an all-sky column; NaN for a column without sky.
+    az_deg, el_deg : ndarray, shape (W,)
+        Azimuth and elevation of ``ray_enu`` (NaN for a column without sky).
+    """
+
+    sky_rows: NDArray
+    ray_enu: NDArray
+    az_deg: NDArray
+    el_deg: NDArray
+
+    @property
+    def valid(self) -> NDArray:
+        """Columns with a sky run (finite direction), shape (W,)."""
+        return np.isfinite(self.el_deg)
+
+
+def skyline_directions(
+    sky: ArrayLike,
+    camera: CameraModel,
+    mount: Mount,
+    heading_deg: float,
+    reverse: bool = False,
+) -> ColumnSkyline:
+    """Skyline direction of each image column in the local ENU frame.
+
+    Parameters
+    ----------
+    sky : array_like
+        Either the sky mask (bool, ``camera.shape``) or the leading sky rows per column
+        (int, shape ``(width_px,)``), e.g. from a segmentation's skyline.
+    camera : CameraModel
+    mount : Mount
+    heading_deg : float
+        Track heading at the frame (azimuth of increasing chainage), degrees.
+    reverse : bool
+        True when the train drives toward decreasing chainage.
+
+    Returns
+    -------
+    ColumnSkyline
+    """
+    s = np.asarray(sky)
+    if s.ndim == 2:
+        rows = leading_sky_rows(_as_sky_mask(s, camera))
+    elif s.shape == (camera.width_px,):
+        rows = s.astype(np.int64)
+        if rows.min() < 0 or rows.max() > camera.height_px:
+            raise ValueError(f"sky rows must lie in [0, {camera.height_px}] (camera height_px)")
+    else:
+        raise ValueError(
+            f"sky must be a ({camera.height_px}, {camera.width_px}) mask or ({camera.width_px},) "
+            f"sky rows for camera {camera.name!r}, got shape {s.shape}"
+        )
+    u = np.arange(camera.width_px, dtype=float)
+    v = rows.astype(float) - 0.5
+    ray_cam = camera.pixel_to_ray(u, v)
+    ray = ray_cam @ mount.camera_to_enu(heading_deg, reverse).T
+    ray = np.where((rows > 0)[:, None], ray, np.nan)
+    az, el, _ = enu_to_azel(ray)
+    return ColumnSkyline(rows, ray, az, el)
+
+
+@dataclass(frozen=True)
+class SkyProfile:
+    """One frame's sky on a regular grid of relative azimuth.
+
+    Attributes
+    ----------
+    rel_az_deg : ndarray, shape (n_b,)
+        Azimuth relative to the camera's horizontal look direction, clockwise, ascending,
+        within [-90, 90] (the camera's own half-space; a fisheye's view past the zenith is left
+        to the camera on the other side).
+    sky_el_deg : ndarray, shape (n_b,)
+        Lowest elevation of the top sky run: every observed direction above it is sky. ``+inf``
+        where the top of the observed column is not sky or nothing is observed.
+    seen_lo_deg, seen_hi_deg : ndarray, shape (n_b,)
+        Elevation range the image covers at that azimuth; NaN where it covers none.
+    look_az_deg : float
+        Azimuth of the camera's horizontal look direction (local ENU at the frame).
+    """
+
+    rel_az_deg: NDArray
+    sky_el_deg: NDArray
+    seen_lo_deg: NDArray
+    seen_hi_deg: NDArray
+    look_az_deg: float
+
+    @property
+    def az_deg(self) -> NDArray:
+        """Absolute azimuths of the profile columns, degrees in [0, 360)."""
+        return np.mod(self.look_az_deg + self.rel_az_deg, 360.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Rectifier:
+    """Resamples a camera's sky masks on a (relative azimuth, elevation) grid.
+
+    Build once per camera and mount with :meth:`build`; the map does not depend on the heading
+    (relative azimuths are taken from the camera's horizontal look direction).
+
+    Attributes
+    ----------
+    camera : CameraModel
+    mount : Mount
+    rel_az_deg : ndarray, shape (n_b,)
+    el_deg : ndarray, shape (n_e,)
+        Descending (row 0 is the highest elevation).
+    map_u, map_v : ndarray of float32, shape (n_e, n_b)
+        Pixel coordinates of each grid direction; -10 where the camera does not see it.
+    grow_px : tuple of int
+        Obstacle growth (horizontal, vertical) in pixels before resampling.
+    """
+
+    camera: CameraModel
+    mount: Mount
+    rel_az_deg: NDArray
+    el_deg: NDArray
+    map_u: NDArray = field(repr=False)
+    map_v: NDArray = field(repr=False)
+    grow_px: tuple[int, int] = (2, 1)
+
+    @classmethod
+    def build(
+        cls,
+        camera: CameraModel,
+        mount: Mount,
+        az_step_deg: float = 0.25,
+        el_step_deg: float = 0.125,
+        el_min_deg: float = -20.0,
+    ) -> Rectifier:
+        """Precompute the resampling map.
+
+        The obstacle growth is chosen from the sampling steps so that an obstacle one pixel
+        wide always reaches a sample (the image scale is measured over the map).
+        """
+        if not (0 < az_step_deg <= 2 and 0 < el_step_deg <= 2):
+            raise ValueError("az_step_deg and el_step_deg must be in (0, 2] degrees")
+        n_b = round(180.0 / az_step_deg)
+        beta = -90.0 + az_step_deg * (np.arange(n_b) + 0.5)
+        el = np.arange(90.0 - el_step_deg / 2, el_min_deg, -el_step_deg)
+        b, e = np.meshgrid(np.radians(beta), np.radians(el))
+        # vehicle frame (x forward, y left, z up); compass angle from forward is beta - yaw
+        gam = b - np.radians(mount.yaw_deg)
+        d_veh = np.stack([np.cos(e) * np.cos(gam), -np.cos(e) * np.sin(gam), np.sin(e)], -1)
+        d_cam = d_veh @ mount.camera_to_vehicle()  # (R^T d) row-wise
+        u, v = camera.ray_to_pixel(d_cam)
+        inside = camera.contains(u, v)
+        u = np.where(inside, u, -10.0)
+        v = np.where(inside, v, -10.0)
+        # pixels between neighbouring samples, to size the obstacle growth
+        du = np.abs(np.diff(u, axis=1))
+        dv = np.abs(np.diff(v, axis=0))
+        ok_u = inside[:, 1:] & inside[:, :-1]
+        ok_v = inside[1:] & inside[:-1]
+        gap_u = float(np.nanmax(np.where(ok_u, du, 0.0))) if ok_u.any() else 1.0
+        gap_v = float(np.nanmax(np.where(ok_v, dv, 0.0))) if ok_v.any() else 1.0
+        grow = (int(np.ceil(gap_u / 2.0)), int(np.ceil(gap_v / 2.0)))
+        return cls(
+            camera, mount, beta, el,
+            u.astype(np.float32), v.astype(np.float32), grow,
+        )  # fmt: skip
+
+    @property
+    def look_offset_deg(self) -> float:
+        """Azimuth of the look direction relative to the direction of travel (clockwise)."""
+        return -self.mount.yaw_deg
+
+    def rectify(self, sky_mask: ArrayLike) -> NDArray:
+        """Grid labels (n_e, n_b) uint8: 255 sky, 0 obstacle, 128 not seen by the camera."""
+        m = _as_sky_mask(sky_mask, self.camera)
+        img = np.where(m, _SKY, _OBSTACLE).astype(np.uint8)
+        gx, gy = self.grow_px
+        grown = cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        return cv2.remap(
+            grown, self.map_u, self.map_v, cv2.INTER_NEAREST,
+            borderMode=cv2.BORDER_CONSTANT, borderValue=_UNSEEN,
+        )  # fmt: skip
+
+    def profile(
+        self,
+        sky_mask: ArrayLike,
+        heading_deg: float,
+        reverse: bool = False,
+        confidence: ArrayLike | None = None,
+        min_confidence: float = 0.5,
+    ) -> SkyProfile:
+        """The frame's :class:`SkyProfile`.
+
+        Parameters
+        ----------
+        sky_mask : array_like of bool, shape ``camera.shape``
+        heading_deg : float
+            Track heading at the frame, degrees.
+        reverse : bool
+            Train driving toward decreasing chainage.
+        confidence : array_like, shape (width_px,), optional
+            Per image column confidence of the segmentation; columns below ``min_confidence``
+            are treated as obstacle from top to bottom (they clear nothing).
+        """
+        m = _as_sky_mask(sky_mask, self.camera)
+        if confidence is not None:
+            c = np.asarray(confidence, float)
+            if c.shape != (self.camera.width_px,):
+                raise ValueError(
+                    f"confidence must have shape ({self.camera.width_px},) (one per column)"
+                )
+            m = m & (c >= min_confidence)[None, :]
+        lab = self.rectify(m)
+        seen = lab != _UNSEEN
+        any_seen = seen.any(axis=0)
+        top = np.argmax(seen, axis=0)  # first seen row (highest elevation)
+        n_e = lab.shape[0]
+        rows = np.arange(n_e)[:, None]
+        # end of the top sky run: first non-sky row at or below the first seen row
+        not_sky_below = (lab != _SKY) & (rows >= top[None, :])
+        end = np.where(not_sky_below.any(axis=0), np.argmax(not_sky_below, axis=0), n_e)
+        has_sky = any_seen & (end > top)
+        sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
+        last_seen = n_e - 1 - np.argmax(seen[::-1], axis=0)
+        lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
+        hi = np.where(any_seen, self.el_deg[top], np.nan)
+        fwd = float(heading_deg) + (180.0 if reverse else 0.0)
+        look = float(np.mod(fwd + self.look_offset_deg, 360.0))
+        return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)

@@ -1,0 +1,101 @@
+"""Tests of skyline directions and sky profiles against analytic camera geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predisat.camera import CameraModel, Mount
+from predisat.skyline import Rectifier, leading_sky_rows, skyline_directions
+
+PITCH = 45.0
+VFOV = 74.0
+
+
+@pytest.fixture(scope="module")
+def pinhole() -> CameraModel:
+    """Undistorted 400x300 pinhole with a 74 deg vertical field of view."""
+    return CameraModel.pinhole_from_fov(400, 300, VFOV)
+
+
+def elevation_sky(camera: CameraModel, mount: Mount, heading_deg: float, el_deg: float):
+    """Sky mask of a world whose skyline is the elevation ``el_deg`` at every azimuth,
+    built from the camera model's own rays (not from the module under test)."""
+    u, v = camera.pixel_grid()
+    ray = camera.pixel_to_ray(u, v) @ mount.camera_to_enu(heading_deg).T
+    el = np.degrees(np.arcsin(np.clip(ray[..., 2], -1, 1)))
+    return el > el_deg
+
+
+def test_leading_sky_rows_counts_sky_above_the_highest_obstacle() -> None:
+    m = np.ones((6, 4), bool)
+    m[3:, 0] = False  # obstacle from row 3
+    m[0, 1] = False  # obstacle in the top row
+    m[2, 2] = False
+    m[4:, 2] = False  # sky below an overhang does not count
+    np.testing.assert_array_equal(leading_sky_rows(m), [3, 0, 2, 6])
+
+
+def test_centre_column_direction_matches_pinhole_geometry(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    heading = 30.0
+    rows = np.full(pinhole.width_px, 100)
+    sk = skyline_directions(rows, pinhole, mount, heading)
+    c = pinhole.width_px // 2
+    # boundary at v = 99.5: angle above the optical axis is atan((cy - v) / f)
+    expected_el = PITCH + np.degrees(np.arctan((pinhole.cy - 99.5) / pinhole.fy))
+    u_off = np.degrees(np.arctan((c - pinhole.cx) / pinhole.fx))
+    assert sk.el_deg[c] == pytest.approx(expected_el, abs=0.05)
+    # the left camera looks at heading - 90; a column right of centre is further clockwise
+    assert np.mod(sk.az_deg[c] - (heading - 90.0) + 180, 360) - 180 == pytest.approx(u_off, abs=0.3)
+    assert not sk.valid[rows == 0].any()
+
+
+def test_profile_recovers_an_elevation_skyline(pinhole: CameraModel) -> None:
+    mount = Mount.default("right")
+    rect = Rectifier.build(pinhole, mount)
+    prof = rect.profile(elevation_sky(pinhole, mount, 200.0, 20.0), heading_deg=200.0)
+    seen = np.isfinite(prof.seen_lo_deg) & (prof.seen_lo_deg < 19.0)
+    assert seen.sum() > 100
+    err = prof.sky_el_deg[seen] - 20.0
+    # conservative: never below the skyline, by at most a sample and the obstacle growth
+    assert err.min() >= -1e-9 and err.max() <= 0.6
+    assert prof.look_az_deg == pytest.approx(np.mod(200.0 + 90.0, 360.0))
+
+
+def test_profile_field_of_view_matches_analytic_pinhole(pinhole: CameraModel) -> None:
+    rect = Rectifier.build(pinhole, Mount.default("left"))
+    prof = rect.profile(np.ones(pinhole.shape, bool), heading_deg=0.0)
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    # straight out, the image spans pitch -+ half the vertical field of view
+    assert prof.seen_lo_deg[j] == pytest.approx(PITCH - VFOV / 2, abs=0.2)
+    assert prof.seen_hi_deg[j] == pytest.approx(PITCH + VFOV / 2, abs=0.2)
+    # all sky: the skyline is the bottom of the view
+    assert prof.sky_el_deg[j] == pytest.approx(prof.seen_lo_deg[j])
+    # nothing is seen along the track
+    assert np.isnan(prof.seen_lo_deg[np.abs(prof.rel_az_deg) > 85]).all()
+
+
+def test_sky_under_an_overhang_is_ignored(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    sky = elevation_sky(pinhole, mount, 0.0, 15.0)
+    band = ~elevation_sky(pinhole, mount, 0.0, 40.0) & elevation_sky(pinhole, mount, 0.0, 30.0)
+    prof = Rectifier.build(pinhole, mount).profile(sky & ~band, 0.0)
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    assert prof.sky_el_deg[j] >= 40.0 - 1e-9
+    assert prof.sky_el_deg[j] <= 40.6
+
+
+def test_low_confidence_columns_clear_nothing(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    rect = Rectifier.build(pinhole, mount)
+    conf = np.zeros(pinhole.width_px)
+    prof = rect.profile(np.ones(pinhole.shape, bool), 0.0, confidence=conf)
+    assert np.isinf(prof.sky_el_deg).all()
+    with pytest.raises(ValueError, match="confidence"):
+        rect.profile(np.ones(pinhole.shape, bool), 0.0, confidence=np.ones(3))
+
+
+def test_wrong_mask_shape_is_rejected(pinhole: CameraModel) -> None:
+    with pytest.raises(ValueError, match="camera image shape"):
+        Rectifier.build(pinhole, Mount.default("left")).profile(np.ones((10, 10), bool), 0.0)
