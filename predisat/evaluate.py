@@ -1,0 +1,444 @@
+"""``predisat evaluate``: masks against synthetic ground truth, and margin calibration.
+
+Issue 3, item 5: a satellite is trusted when its elevation exceeds the mask of its azimuth bin
+plus a margin. :func:`calibrate_margin` finds, per group of bins (azimuth sector relative to the
+track, bin source), the smallest margin such that the share of *trusted directions* that are
+truly in line of sight reaches a target (0.999). A direction is a triple (position, azimuth
+bin, elevation) with the elevation on a regular grid (``el_step_deg``, cell centres from 0 to
+90 deg); it is trusted when ``el > mask + margin`` and truly in line of sight when
+``el > truth`` (the true mask of the bin, :mod:`predisat.synth.truth`). Counting is analytic
+per bin (number of grid elevations above a threshold), so no grid is materialised.
+
+:func:`evaluate_masks` reports, per sector and source: median and 95th percentile of the
+elevation error ``mask - truth`` (signed and absolute), the unsafe share of bins (``mask <
+truth - 0.1 deg``), and with a margin table the false-trust rate (trusted but truly blocked,
+among trusted directions) and the sky lost (truly visible directions not trusted, among truly
+visible ones). Calibrate on one synthetic survey and evaluate on another made with a different
+seed (``docs/pipeline.md``).
+
+Sectors: ``cross`` when the azimuth is within 45 deg of ``heading +- 90`` (the cameras' look
+directions), else ``along``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.masks import BinSource, MaskSet
+
+__all__ = [
+    "EL_STEP_DEG",
+    "SECTORS",
+    "UNSAFE_TOL_DEG",
+    "Comparison",
+    "MarginTable",
+    "add_evaluate_arguments",
+    "calibrate_margin",
+    "compare",
+    "count_above",
+    "evaluate_from_args",
+    "evaluate_masks",
+    "load_truth",
+    "sector_of",
+    "trust_counts",
+]
+
+EL_STEP_DEG = 0.1
+"""Elevation grid step of the direction counts (cell centres ``(k + 0.5) * step``)."""
+UNSAFE_TOL_DEG = 0.1
+"""A bin is unsafe when its mask is more than this below the truth."""
+SECTORS = ("cross", "along")
+_SOURCE_NAMES = {int(s): s.name.lower() for s in BinSource}
+
+
+def sector_of(az_deg: ArrayLike, heading_deg: ArrayLike) -> NDArray:
+    """``"cross"`` within 45 deg of ``heading +- 90``, else ``"along"`` (broadcast shapes)."""
+    rel = np.mod(np.asarray(az_deg, float) - np.asarray(heading_deg, float), 180.0)
+    return np.where(np.abs(rel - 90.0) <= 45.0, "cross", "along")
+
+
+def count_above(threshold_deg: ArrayLike, el_step_deg: float = EL_STEP_DEG) -> NDArray:
+    """Number of grid elevations ``(k + 0.5) * step`` in (0, 90) strictly above a threshold."""
+    n = round(90.0 / el_step_deg)
+    grid = (np.arange(n) + 0.5) * el_step_deg
+    # searchsorted on the grid itself: exact at thresholds equal to a grid elevation
+    return (n - np.searchsorted(grid, np.asarray(threshold_deg, float), side="right")).astype(
+        np.int64
+    )
+
+
+def trust_counts(
+    mask_el_deg: ArrayLike,
+    truth_el_deg: ArrayLike,
+    margin_deg: ArrayLike = 0.0,
+    el_step_deg: float = EL_STEP_DEG,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Per bin: trusted directions, trusted and truly visible, truly visible.
+
+    Returns
+    -------
+    trusted, trusted_los, los : ndarray of int64, broadcast shape of the inputs
+    """
+    m = np.asarray(mask_el_deg, float) + np.asarray(margin_deg, float)
+    t = np.asarray(truth_el_deg, float)
+    return (
+        count_above(m, el_step_deg),
+        count_above(np.maximum(m, t), el_step_deg),
+        count_above(t, el_step_deg) + np.zeros(np.broadcast(m, t).shape, np.int64),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Masks and truth on common positions and bins, flattened to one row per bin.
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (n_pos,)
+        The matched positions.
+    mask_el_deg, truth_el_deg : ndarray, shape (n_pos, n_az)
+        The mask (without margin) and the true mask, on the truth's azimuth bins.
+    source : ndarray of uint8, shape (n_pos, n_az)
+    sector : ndarray of str, shape (n_pos, n_az)
+    az_deg : ndarray, shape (n_az,)
+    unmatched : int
+        Mask positions with no truth position within the tolerance (left out).
+    """
+
+    chainage_m: NDArray
+    mask_el_deg: NDArray
+    truth_el_deg: NDArray
+    source: NDArray
+    sector: NDArray
+    az_deg: NDArray
+    unmatched: int = 0
+
+    @property
+    def error_deg(self) -> NDArray:
+        """``mask - truth`` per bin, degrees."""
+        return self.mask_el_deg - self.truth_el_deg
+
+
+def load_truth(path: str | os.PathLike[str]) -> Any:
+    """:class:`~predisat.synth.truth.TrueMasks` from a generator output folder, its ``truth/``
+    folder or the ``true_masks.npz`` file itself."""
+    from predisat.synth.truth import TrueMasks
+
+    p = Path(path)
+    for cand in (p, p / "true_masks.npz", p / "truth" / "true_masks.npz"):
+        if cand.is_file():
+            return TrueMasks.load(cand)
+    raise FileNotFoundError(
+        f"{p}: no true_masks.npz there (give the generator's output folder, its truth/ "
+        "folder or the .npz file)"
+    )
+
+
+def compare(masks: MaskSet, truth: Any, tol_m: float = 0.5) -> Comparison:
+    """Pair each mask position with the truth position at the same chainage.
+
+    Parameters
+    ----------
+    masks : MaskSet
+    truth : TrueMasks
+        ``chainage_m`` (n,), ``az_deg`` (n_az,), ``mask_el_deg`` (n, n_az).
+    tol_m : float
+        Largest chainage difference of a pair.
+
+    Raises
+    ------
+    ValueError
+        When no position pairs up (wrong truth folder or track).
+    """
+    ts = np.asarray(truth.chainage_m, float)
+    order = np.argsort(ts)
+    ts_sorted = ts[order]
+    j = np.clip(np.searchsorted(ts_sorted, masks.chainage_m), 1, max(ts.size - 1, 1))
+    cand = np.stack([j - 1, np.minimum(j, ts.size - 1)])
+    dist = np.abs(ts_sorted[cand] - masks.chainage_m)
+    best = cand[np.argmin(dist, axis=0), np.arange(masks.n_pos)]
+    ok = np.abs(ts_sorted[best] - masks.chainage_m) <= tol_m
+    if not ok.any():
+        raise ValueError(
+            f"no mask position (chainage {masks.chainage_m[0]:.1f}..{masks.chainage_m[-1]:.1f} "
+            f"m) has a truth position within {tol_m} m (truth covers {ts.min():.1f}.."
+            f"{ts.max():.1f} m); evaluate masks against the truth of the same survey"
+        )
+    ti = order[best[ok]]
+    az = np.asarray(truth.az_deg, float)
+    k = masks.bin_index(az)
+    mi = np.flatnonzero(ok)
+    mask = masks.mask_el_deg[mi][:, k].astype(float)
+    heading = masks.heading_deg[mi]
+    return Comparison(
+        chainage_m=masks.chainage_m[mi],
+        mask_el_deg=mask,
+        truth_el_deg=np.asarray(truth.mask_el_deg, float)[ti],
+        source=masks.source[mi][:, k],
+        sector=sector_of(az[None, :], heading[:, None]),
+        az_deg=az,
+        unmatched=int((~ok).sum()),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class MarginTable:
+    """Margins per (sector, source) group, from :func:`calibrate_margin`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        Columns ``sector``, ``source`` (name), ``margin_deg``, ``n_bins``, ``reached``
+        (target met), ``los_share`` (trusted directions truly in line of sight, achieved),
+        ``sky_lost`` (truly visible directions not trusted); plus ``sector="*"`` /
+        ``source="*"`` wildcard rows for unseen groups.
+    target : float
+    el_step_deg : float
+    """
+
+    table: pd.DataFrame
+    target: float
+    el_step_deg: float = EL_STEP_DEG
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def margin_for(self, sector: NDArray, source: NDArray) -> NDArray:
+        """Margin of every bin given its sector (str) and source code, degrees."""
+        lut = {
+            (str(sec), str(src)): float(m)
+            for sec, src, m in zip(
+                self.table["sector"], self.table["source"], self.table["margin_deg"], strict=True
+            )
+        }
+        fallback = max(lut.values()) if lut else 0.0
+        out = np.full(np.shape(sector), fallback, float)
+        for (sec, src), m in lut.items():
+            code = next((c for c, n in _SOURCE_NAMES.items() if n == src), None)
+            if code is None:
+                continue
+            out[(sector == sec) & (source == code)] = m
+        return out
+
+    def apply(self, masks: MaskSet) -> MaskSet:
+        """Copy of ``masks`` with these margins (:meth:`MaskSet.with_margin`)."""
+        sec = sector_of(masks.az_deg[None, :], masks.heading_deg[:, None])
+        return masks.with_margin(self.margin_for(sec, masks.source))
+
+    def to_json(self, path: str | os.PathLike[str]) -> None:
+        doc = {
+            "target": self.target,
+            "el_step_deg": self.el_step_deg,
+            "meta": self.meta,
+            "margins": self.table.to_dict(orient="records"),
+        }
+        Path(path).write_text(json.dumps(doc, indent=1))
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike[str]) -> MarginTable:
+        doc = json.loads(Path(path).read_text())
+        for key in ("target", "margins"):
+            if key not in doc:
+                raise ValueError(f"{path}: no {key!r}; write it with MarginTable.to_json")
+        return cls(
+            pd.DataFrame(doc["margins"]), float(doc["target"]),
+            float(doc.get("el_step_deg", EL_STEP_DEG)), dict(doc.get("meta", {})),
+        )  # fmt: skip
+
+
+def calibrate_margin(
+    comparison: Comparison,
+    target: float = 0.999,
+    by: Sequence[str] = ("sector", "source"),
+    candidates_deg: ArrayLike | None = None,
+    el_step_deg: float = EL_STEP_DEG,
+) -> MarginTable:
+    """Smallest margin per group making trusted directions truly in line of sight >= target.
+
+    Parameters
+    ----------
+    comparison : Comparison
+    target : float
+        Required share of trusted directions that are truly in line of sight.
+    by : sequence of {"sector", "source"}
+        Grouping; an empty sequence gives one margin for every bin.
+    candidates_deg : array_like, optional
+        Margins tried in increasing order (default 0 to 30 deg by 0.1 deg). A group whose
+        target is not met at the last one gets 90 deg (nothing trusted) and ``reached=False``.
+    el_step_deg : float
+
+    Returns
+    -------
+    MarginTable
+    """
+    if not 0.0 < target <= 1.0:
+        raise ValueError(f"target must be in (0, 1], got {target}")
+    bad = set(by) - {"sector", "source"}
+    if bad:
+        raise ValueError(f"by may hold 'sector' and 'source' only, got {sorted(bad)}")
+    cands = (
+        np.round(np.arange(0.0, 30.0 + 1e-9, 0.1), 6)
+        if candidates_deg is None
+        else np.sort(np.asarray(candidates_deg, float))
+    )
+    m = comparison.mask_el_deg.ravel()
+    t = comparison.truth_el_deg.ravel()
+    sec = comparison.sector.ravel() if "sector" in by else np.full(m.size, "*")
+    src_names = np.array([_SOURCE_NAMES[int(c)] for c in range(3)])[comparison.source.ravel()]
+    src = src_names if "source" in by else np.full(m.size, "*")
+    rows = []
+    los_all = count_above(t, el_step_deg)
+    for s_name in ("cross", "along") if "sector" in by else ("*",):
+        for c_name in tuple(_SOURCE_NAMES.values()) if "source" in by else ("*",):
+            sel = (sec == s_name) & (src == c_name)
+            margin, reached, share = 90.0, False, float("nan")
+            if sel.any():
+                mm, tt = m[sel][None, :], t[sel][None, :]
+                trusted, good, _ = trust_counts(mm, tt, cands[:, None], el_step_deg)
+                n_tr, n_good = trusted.sum(axis=1), good.sum(axis=1)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    ratio = np.where(n_tr > 0, n_good / np.maximum(n_tr, 1), 1.0)
+                ok = np.flatnonzero(ratio >= target)
+                if ok.size:
+                    margin, reached, share = float(cands[ok[0]]), True, float(ratio[ok[0]])
+            if sel.any():
+                _, good1, los1 = trust_counts(m[sel], t[sel], margin, el_step_deg)
+                lost = 1.0 - good1.sum() / max(int(los1.sum()), 1)
+            else:
+                lost = float("nan")
+            rows.append({
+                "sector": s_name, "source": c_name, "margin_deg": margin,
+                "n_bins": int(sel.sum()), "reached": reached, "los_share": share,
+                "sky_lost": float(lost),
+            })  # fmt: skip
+    table = pd.DataFrame(rows)
+    meta = {"n_positions": int(comparison.chainage_m.size), "by": list(by),
+            "truly_visible_directions": int(los_all.sum())}  # fmt: skip
+    return MarginTable(_expand(table, by), float(target), el_step_deg, meta)
+
+
+def _expand(table: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+    """Spell out wildcard groups so that ``margin_for`` looks up (sector, source) pairs."""
+    rows = []
+    for r in table.to_dict(orient="records"):
+        secs = SECTORS if r["sector"] == "*" else (r["sector"],)
+        srcs = tuple(_SOURCE_NAMES.values()) if r["source"] == "*" else (r["source"],)
+        for s in secs:
+            for c in srcs:
+                rows.append({**r, "sector": s, "source": c})
+    return pd.DataFrame(rows)
+
+
+def evaluate_masks(
+    comparison: Comparison, margins: MarginTable | None = None, el_step_deg: float = EL_STEP_DEG
+) -> pd.DataFrame:
+    """Accuracy table per sector and source (plus ``all`` rows).
+
+    Columns: ``sector``, ``source``, ``n_bins``, ``median_error_deg``, ``p95_error_deg``
+    (signed ``mask - truth``), ``median_abs_error_deg``, ``p95_abs_error_deg``,
+    ``unsafe_share`` (bins with ``mask < truth - 0.1``), and for margin 0 and for ``margins``
+    (when given): ``false_trust[_margin]`` (trusted directions truly blocked / trusted),
+    ``sky_lost[_margin]`` (truly visible directions not trusted / truly visible).
+    """
+    err = comparison.error_deg.ravel()
+    m = comparison.mask_el_deg.ravel()
+    t = comparison.truth_el_deg.ravel()
+    sec = comparison.sector.ravel()
+    src = np.array([_SOURCE_NAMES[int(c)] for c in range(3)])[comparison.source.ravel()]
+    marg = (
+        margins.margin_for(comparison.sector, comparison.source).ravel()
+        if margins is not None
+        else None
+    )
+    rows = []
+    groups = [(s, c) for s in (*SECTORS, "all") for c in (*_SOURCE_NAMES.values(), "all")]
+    for s_name, c_name in groups:
+        sel = np.ones(m.size, bool)
+        if s_name != "all":
+            sel &= sec == s_name
+        if c_name != "all":
+            sel &= src == c_name
+        n = int(sel.sum())
+        row: dict[str, Any] = {"sector": s_name, "source": c_name, "n_bins": n}
+        if n:
+            e = err[sel]
+            row |= {
+                "median_error_deg": float(np.median(e)),
+                "p95_error_deg": float(np.percentile(e, 95)),
+                "median_abs_error_deg": float(np.median(np.abs(e))),
+                "p95_abs_error_deg": float(np.percentile(np.abs(e), 95)),
+                "unsafe_share": float(np.mean(e < -UNSAFE_TOL_DEG)),
+            }
+            for suffix, mg in (("", 0.0), ("_margin", marg)):
+                if mg is None:
+                    continue
+                mg_sel = mg if np.isscalar(mg) else np.asarray(mg)[sel]
+                tr, good, los = trust_counts(m[sel], t[sel], mg_sel, el_step_deg)
+                row[f"false_trust{suffix}"] = (
+                    float(1.0 - good.sum() / tr.sum()) if tr.sum() else 0.0
+                )
+                row[f"sky_lost{suffix}"] = float(1.0 - good.sum() / los.sum()) if los.sum() else 0.0
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------- command line
+def add_evaluate_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``predisat evaluate``."""
+    parser.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
+    parser.add_argument(
+        "--truth", type=Path, required=True,
+        help="synthetic ground truth: generator output folder, its truth/ or true_masks.npz",
+    )  # fmt: skip
+    parser.add_argument("--out", type=Path, help="folder for evaluation.csv/json (default: none)")
+    parser.add_argument(
+        "--calibrate", action="store_true",
+        help="calibrate margins on this truth and write margins.json (in --out)",
+    )  # fmt: skip
+    parser.add_argument("--margins", type=Path, help="margin table (margins.json) to evaluate")
+    parser.add_argument("--target", type=float, default=0.999, help="LOS share target (0.999)")
+
+
+def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
+    """Run ``predisat evaluate`` from parsed arguments; prints and returns the table."""
+    from predisat.maskio import read_masks
+
+    path = Path(args.masks)
+    if path.is_dir():
+        path = path / "masks.parquet"
+    masks = read_masks(path)
+    comp = compare(masks, load_truth(args.truth))
+    margins = MarginTable.from_json(args.margins) if args.margins is not None else None
+    out = Path(args.out) if args.out is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    if args.calibrate:
+        margins = calibrate_margin(comp, target=args.target)
+        print(margins.table.to_string(index=False))
+        if out is not None:
+            margins.to_json(out / "margins.json")
+            margins.table.to_csv(out / "margins.csv", index=False)
+    table = evaluate_masks(comp, margins)
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        print(table.round(4).to_string(index=False))
+    if comp.unmatched:
+        print(f"{comp.unmatched} mask position(s) without truth were left out")
+    if out is not None:
+        table.to_csv(out / "evaluation.csv", index=False)
+        doc = {
+            "masks": str(path),
+            "truth": str(args.truth),
+            "margins": None if margins is None else margins.table.to_dict(orient="records"),
+            "n_positions": int(comp.chainage_m.size),
+            "rows": json.loads(table.to_json(orient="records")),
+        }
+        (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+    return table

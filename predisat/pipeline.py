@@ -1,0 +1,807 @@
+"""The ``predisat process`` batch pipeline: survey folder -> mask file, chunked and resumable.
+
+:func:`process_survey` turns a survey folder (``docs/survey-format.md``) into a mask file
+(``docs/mask-format.md``) in two stages (``docs/pipeline.md``):
+
+1. **Segmentation** of every frame a pending chunk needs (:func:`predisat.segmentation.
+   segment_sky` by default), each result cached on disk under ``out/cache/`` (packed sky mask
+   plus per-column confidence), so overlapping chunks and resumed runs never segment a frame
+   twice. A frame whose image is missing, undecodable, of the wrong size or fails to segment is
+   a *bad frame*: reported, listed in ``bad_frames.csv`` and skipped (``strict=True`` stops at
+   the first instead). Frames the survey loader rejects are bad frames too.
+2. **Reconstruction** (:class:`predisat.reconstruct.Reconstructor`) per chainage chunk
+   ``[k * chunk_m, (k + 1) * chunk_m)`` from the frames within
+   :attr:`~predisat.reconstruct.ReconstructionParams.overlap_m` of it. Each finished chunk is
+   written atomically as ``out/chunks/<lo>_<hi>.parquet`` (a mask file) and then
+   ``<lo>_<hi>.json`` (its provenance, the completion marker). On start, a chunk whose JSON
+   carries the same run key (survey hash, parameters, software version) is skipped: an
+   interrupted run resumes without redoing finished chunks.
+
+At the end the chunks are merged into ``out/masks.parquet`` with the run's provenance
+(``out/provenance.json`` too). Positions are the survey's distinct antenna chainages.
+
+:func:`add_process_arguments` / :func:`process_from_args` give the command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import io
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.camera import CameraModel, Mount
+from predisat.maskio import read_masks, write_masks
+from predisat.masks import MaskError, MaskSet
+from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
+
+__all__ = [
+    "BadFrame",
+    "BadFrameError",
+    "PipelineParams",
+    "ProcessResult",
+    "RunStopped",
+    "add_process_arguments",
+    "concat_masksets",
+    "default_segmenter",
+    "process_from_args",
+    "process_survey",
+    "survey_hash",
+]
+
+Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
+"""Image (H, W, 3) BGR uint8 -> (sky mask (H, W) bool, per-column confidence (W,) or None)."""
+
+CACHE_VERSION = 1
+_CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
+
+
+class BadFrameError(RuntimeError):
+    """A bad frame met with ``strict=True``; the message names the frame and the fix."""
+
+
+@dataclass(frozen=True)
+class BadFrame:
+    """A frame skipped by the pipeline.
+
+    Attributes
+    ----------
+    frame_id : str
+    message : str
+        What is wrong (and how to fix it).
+    stage : str
+        ``"load"`` (rejected by the survey loader) or ``"segment"`` (image unreadable or
+        segmentation failed).
+    """
+
+    frame_id: str
+    message: str
+    stage: str = "segment"
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Settings of :func:`process_survey`.
+
+    Attributes
+    ----------
+    chunk_m : float
+        Chainage length of a chunk; chunk ``k`` holds the positions in
+        ``[k * chunk_m, (k + 1) * chunk_m)``.
+    reconstruction : ReconstructionParams
+    segmenter : str
+        Name recorded in the provenance and the cache key (``"learned"`` for the default
+        :func:`default_segmenter`; pass your own name with a custom segmenter).
+    """
+
+    chunk_m: float = 200.0
+    reconstruction: ReconstructionParams = field(default_factory=ReconstructionParams)
+    segmenter: str = "learned"
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
+            raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable form (recorded in every chunk's provenance)."""
+        rec = {
+            k: (list(v) if isinstance(v, tuple) else v)
+            for k, v in asdict(self.reconstruction).items()
+        }
+        return {"chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec}
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    """What :func:`process_survey` did.
+
+    Attributes
+    ----------
+    out_dir, masks_path : Path
+    masks : MaskSet
+        The merged masks (as written to ``masks_path``).
+    n_frames : int
+        Frames in the survey (valid at load).
+    chunks_done, chunks_skipped : int
+        Chunks computed in this run / found finished from an earlier run.
+    frames_segmented : int
+        Frames segmented in this run (the others came from the cache).
+    bad_frames : tuple of BadFrame
+    elapsed_s : float
+    timings_s : dict of str to float
+        Wall time per stage (``"load"``, ``"segment"``, ``"reconstruct"``, ``"merge"``).
+    """
+
+    out_dir: Path
+    masks_path: Path
+    masks: MaskSet
+    n_frames: int
+    chunks_done: int
+    chunks_skipped: int
+    frames_segmented: int
+    bad_frames: tuple[BadFrame, ...]
+    elapsed_s: float
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        return (
+            f"{self.masks.n_pos} positions from {self.n_frames} frames -> {self.masks_path} "
+            f"({self.chunks_done} chunks computed, {self.chunks_skipped} resumed, "
+            f"{self.frames_segmented} frames segmented, {len(self.bad_frames)} bad frames, "
+            f"{self.elapsed_s:.1f} s)"
+        )
+
+
+# ---------------------------------------------------------------------- segmentation + cache
+def default_segmenter(image_bgr: NDArray) -> tuple[NDArray, NDArray | None]:
+    """:func:`predisat.segmentation.segment_sky` (learned method): sky mask and confidence."""
+    from predisat.segmentation import segment_sky
+
+    seg = segment_sky(image_bgr)
+    return seg.sky_mask, seg.confidence
+
+
+@dataclass(frozen=True)
+class _FrameJob:
+    frame_id: str
+    image_path: str
+    width_px: int
+    height_px: int
+    cache_path: str
+
+
+def _stat_key(path: str) -> list[int]:
+    st = os.stat(path)
+    return [int(st.st_size), int(st.st_mtime_ns)]
+
+
+def _atomic_bytes(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
+    """Cached result of a frame (None when absent or stale: the image changed)."""
+    path = Path(job.cache_path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("version") != CACHE_VERSION:
+                return None
+            if os.path.exists(job.image_path):
+                if meta.get("image_stat") != _stat_key(job.image_path):
+                    return None
+            elif meta.get("image_stat") is not None:
+                return None
+            if meta.get("bad"):
+                return BadFrame(job.frame_id, str(meta["bad"]))
+            h, w = meta["shape"]
+            sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).astype(bool)
+            conf = z["confidence"] if "confidence" in z.files else None
+            return sky, conf
+    except (OSError, ValueError, KeyError):
+        return None  # a damaged cache entry is recomputed
+
+
+def _write_cache(
+    job: _FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
+) -> None:
+    stat = _stat_key(job.image_path) if os.path.exists(job.image_path) else None
+    meta: dict[str, Any] = {"version": CACHE_VERSION, "image_stat": stat, "bad": bad}
+    arrays: dict[str, Any] = {}
+    if result is not None:
+        sky, conf = result
+        meta["shape"] = list(sky.shape)
+        arrays["sky"] = np.packbits(sky.ravel())
+        if conf is not None:
+            arrays["confidence"] = np.asarray(conf, np.float32)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, meta=np.array(json.dumps(meta)), **arrays)
+    _atomic_bytes(Path(job.cache_path), buf.getvalue())
+
+
+def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
+    """Segment one frame into the cache; returns (frame_id, problem or None)."""
+    import cv2
+
+    problem: str | None = None
+    result = None
+    img = cv2.imread(job.image_path, cv2.IMREAD_COLOR) if os.path.exists(job.image_path) else None
+    if not os.path.exists(job.image_path):
+        problem = f"image {job.image_path} is missing; restore it or drop the frame"
+    elif img is None:
+        problem = f"image {job.image_path} cannot be decoded; re-export it as JPEG or PNG"
+    elif img.shape[:2] != (job.height_px, job.width_px):
+        problem = (
+            f"image {job.image_path} is {img.shape[1]}x{img.shape[0]} px, the calibration "
+            f"says {job.width_px}x{job.height_px}; fix the calibration or the image"
+        )
+    else:
+        try:
+            sky, conf = segmenter(img)
+            sky = np.asarray(sky, bool)
+            if sky.shape != img.shape[:2]:
+                raise ValueError(f"segmenter returned a {sky.shape} mask for a {img.shape} image")
+            result = (sky, None if conf is None else np.asarray(conf, np.float32))
+        except Exception as exc:  # any failure of one frame must not stop a long run
+            problem = f"segmentation failed ({type(exc).__name__}: {exc})"
+    _write_cache(job, result, problem)
+    return job.frame_id, problem
+
+
+_WORKER: dict[str, Any] = {}  # per-process segmenter set by the pool initialiser
+
+
+def _pool_init(segmenter: Segmenter) -> None:
+    _WORKER["segmenter"] = segmenter
+
+
+def _pool_segment(jobs: Sequence[_FrameJob]) -> list[tuple[str, str | None]]:
+    return [_segment_frame(j, _WORKER["segmenter"]) for j in jobs]
+
+
+def _pool_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
+    return _run_chunk(job)
+
+
+# ---------------------------------------------------------------------- chunks
+@dataclass(frozen=True)
+class _ChunkFrame:
+    frame_id: str
+    side: str
+    chainage_m: float
+    cache_path: str
+
+
+@dataclass(frozen=True)
+class _ChunkJob:
+    name: str
+    lo_m: float
+    hi_m: float
+    positions_m: NDArray
+    frames: tuple[_ChunkFrame, ...]
+    cameras: dict[str, tuple[CameraModel, Mount]]
+    reverse: bool
+    antenna_height_m: float
+    track: Any
+    params: PipelineParams
+    provenance: dict[str, Any]
+    chunk_dir: str
+
+
+def _fmt_m(x: float) -> str:
+    text = f"{x:.3f}".rstrip("0").rstrip(".")
+    return text if text != "-0" else "0"
+
+
+def _run_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
+    """Reconstruct one chunk from cached segmentations and write it atomically."""
+    track = job.track
+    bad: list[BadFrame] = []
+    views: list[FrameView] = []
+    ok_frames = []
+    for f in job.frames:
+        cached = _load_cached(f)
+        if isinstance(cached, BadFrame):
+            bad.append(cached)
+            continue
+        ok_frames.append((f, cached))
+    if ok_frames:
+        s = np.array([f.chainage_m for f, _ in ok_frames])
+        axis = np.asarray(track.enu_at(s), float)
+        ant = axis + job.antenna_height_m * np.asarray(track.up_at(s), float)
+        heading = np.asarray(track.heading_at(s), float)
+        for k, (f, (sky, conf)) in enumerate(ok_frames):
+            cam, mount = job.cameras[f.side]
+            views.append(
+                FrameView(
+                    chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
+                    antenna_enu_m=ant[k], heading_deg=float(heading[k]), reverse=job.reverse,
+                    confidence=conf, frame_id=f.frame_id,
+                )
+            )  # fmt: skip
+    rec = Reconstructor(job.params.reconstruction).run(views, job.positions_m, track)
+    prov = dict(job.provenance)
+    prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
+    masks = rec.to_maskset(track, provenance=prov)
+    chunk_dir = Path(job.chunk_dir)
+    write_masks(masks, chunk_dir / f"{job.name}.parquet")
+    marker = {
+        **prov,
+        "n_positions": int(masks.n_pos),
+        "n_frames": len(views),
+        "bad_frames": [asdict(b) for b in bad],
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    # the JSON is the completion marker: written last, so a half-done chunk is redone
+    _atomic_bytes(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())
+    return job.name, bad
+
+
+def _load_cached(f: _ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
+    path = Path(f.cache_path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("bad"):
+                return BadFrame(f.frame_id, str(meta["bad"]))
+            h, w = meta["shape"]
+            sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).astype(bool)
+            conf = z["confidence"] if "confidence" in z.files else None
+            return sky, conf
+    except (OSError, ValueError, KeyError) as exc:
+        return BadFrame(f.frame_id, f"segmentation cache {path} unreadable ({exc}); rerun")
+
+
+# ---------------------------------------------------------------------- merging
+def concat_masksets(parts: Sequence[MaskSet], provenance: dict[str, Any] | None = None) -> MaskSet:
+    """One mask set from parts covering disjoint, increasing chainage ranges.
+
+    Parameters
+    ----------
+    parts : sequence of MaskSet
+        Same ``az_step_deg``; positions strictly increasing across the parts.
+    provenance : dict, optional
+        Provenance of the result (default: that of the first part).
+
+    Raises
+    ------
+    MaskError
+        When the parts differ in azimuth step or overlap in chainage.
+    """
+    if not parts:
+        raise MaskError("concat_masksets: no parts given; process at least one chunk")
+    step = parts[0].az_step_deg
+    for k, p in enumerate(parts):
+        if p.az_step_deg != step:
+            raise MaskError(
+                f"concat_masksets: part {k} has az_step_deg {p.az_step_deg}, part 0 has {step}; "
+                "reprocess with one azimuth step"
+            )
+    names = sorted({n for p in parts for n in p.descriptors})
+
+    def cat(attr: str) -> NDArray:
+        return np.concatenate([getattr(p, attr) for p in parts])
+
+    desc = {
+        n: np.concatenate([p.descriptors.get(n, np.full(p.n_pos, np.nan)) for p in parts])
+        for n in names
+    }
+    return MaskSet.from_arrays(
+        cat("chainage_m"), cat("lat_deg"), cat("lon_deg"), cat("h_m"), cat("heading_deg"),
+        cat("mask_el_deg"), az_step_deg=step, source=cat("source"),
+        margin_deg=cat("margin_deg"), descriptors=desc,
+        provenance=dict(parts[0].provenance if provenance is None else provenance),
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------- the run
+def survey_hash(survey: Any) -> str:
+    """SHA-256 of the survey's description: ``survey.yaml``, ``manifest.csv``, calibrations.
+
+    Image content is not hashed (too slow for a resume check); the segmentation cache checks
+    each image's size and modification time instead.
+    """
+    root = Path(survey.root)
+    h = hashlib.sha256()
+    files = [root / "survey.yaml", root / "manifest.csv"]
+    files += sorted({Path(c.calibration_path) for c in survey.cameras.values()})
+    for p in files:
+        h.update(str(p.name).encode() + b"\0")
+        h.update(p.read_bytes() if p.is_file() else b"<missing>")
+    return h.hexdigest()
+
+
+def _run_key(provenance: dict[str, Any]) -> str:
+    keep = {k: provenance[k] for k in ("survey_hash", "params", "software_version", "track")}
+    return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _report(msg: str, quiet: bool) -> None:
+    if not quiet:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def process_survey(
+    survey: Any,
+    out_dir: str | os.PathLike[str],
+    params: PipelineParams | None = None,
+    *,
+    track: Any = None,
+    workers: int = 1,
+    strict: bool = False,
+    progress: bool = True,
+    segmenter: Segmenter | None = None,
+    max_chunks: int | None = None,
+) -> ProcessResult:
+    """Process a survey folder into masks, in resumable chainage chunks.
+
+    Parameters
+    ----------
+    survey : path-like or predisat.survey.Survey
+        The survey folder (loaded with ``on_error="skip"``; rejected frames are bad frames).
+    out_dir : path-like
+        Output folder: ``masks.parquet``, ``provenance.json``, ``bad_frames.csv``,
+        ``chunks/``, ``cache/``. Reusing it resumes an interrupted run.
+    params : PipelineParams, optional
+    track : TrackMap, optional
+        Track to use instead of the one named in ``survey.yaml``.
+    workers : int
+        Processes (spawned) for segmentation and chunks; 1 runs everything in this process.
+    strict : bool
+        Stop with :class:`BadFrameError` at the first bad frame instead of skipping it.
+    progress : bool
+        tqdm progress bars and console messages on stderr.
+    segmenter : callable, optional
+        Image -> (sky mask, confidence); default :func:`default_segmenter`. Must be a
+        module-level function when ``workers > 1``. Give it a distinct ``params.segmenter``
+        name, which keys the cache.
+    max_chunks : int, optional
+        Compute at most this many pending chunks; when chunks remain, stop without merging by
+        raising :class:`RunStopped` (simulates an interrupted run). ``None``: all.
+
+    Returns
+    -------
+    ProcessResult
+
+    Raises
+    ------
+    BadFrameError
+        With ``strict=True``, naming the first bad frame.
+    predisat.survey.SurveyError
+        When the survey itself (survey.yaml, calibrations, manifest) is unusable.
+    """
+    from predisat.survey import Survey
+
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    p = params or PipelineParams()
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    seg_fn = segmenter or default_segmenter
+    quiet = not progress
+    if not isinstance(survey, Survey):
+        survey = Survey.load(survey, track=track, check_images=False, on_error="skip")
+    trk = track if track is not None else survey.track
+    if trk is None:
+        raise ValueError(
+            f"survey {survey.root} names no track file; pass track= (CLI: --track FILE)"
+        )
+    out = Path(out_dir)
+    chunk_dir, cache_dir = out / "chunks", out / "cache" / f"seg-{p.segmenter}"
+    chunk_dir.mkdir(parents=True, exist_ok=True)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+
+    bad: dict[str, BadFrame] = {}
+    for prob in survey.problems:
+        fid = prob.frame_id or f"manifest line {prob.row}"
+        bad.setdefault(fid, BadFrame(fid, str(prob), "load"))
+    if bad and strict:
+        first = next(iter(bad.values()))
+        raise BadFrameError(f"survey {survey.root}: bad frame {first.frame_id}: {first.message}")
+
+    fr = survey.frames
+    ch = np.round(np.asarray(fr.chainage_m, float), _CHAINAGE_DECIMALS)
+    finite = np.isfinite(ch)
+    for i in np.flatnonzero(~finite):
+        fid = str(fr.frame_id[i])
+        bad.setdefault(fid, BadFrame(fid, "no chainage (not on the track)", "load"))
+    if not finite.any():
+        raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
+    positions = np.unique(ch[finite])
+    prov: dict[str, Any] = {
+        "software": "predisat",
+        "software_version": _version(),
+        "survey": str(survey.root),
+        "survey_hash": survey_hash(survey),
+        "track": str(getattr(trk, "name", "")),
+        "params": p.to_dict(),
+        "reverse": bool(survey.reverse),
+        "antenna_height_m": float(survey.antenna_height_m),
+    }
+    run_key = _run_key(prov)
+    prov["run_key"] = run_key
+    timings["load"] = time.perf_counter() - t0
+
+    # chunks and their frame needs
+    k = np.floor(positions / p.chunk_m).astype(np.int64)
+    overlap = p.reconstruction.overlap_m
+    chunks: list[tuple[str, float, float, NDArray]] = []
+    for kk in np.unique(k):
+        lo, hi = float(kk * p.chunk_m), float((kk + 1) * p.chunk_m)
+        chunks.append((f"{_fmt_m(lo)}_{_fmt_m(hi)}", lo, hi, positions[k == kk]))
+    pending, skipped = [], 0
+    for c in chunks:
+        if _chunk_finished(chunk_dir, c[0], run_key):
+            skipped += 1
+        else:
+            pending.append(c)
+    if max_chunks is not None:
+        pending = pending[:max_chunks]
+    _report(
+        f"{survey.root}: {int(finite.sum())} frames, {positions.size} positions, "
+        f"{len(chunks)} chunks ({skipped} already done)",
+        quiet,
+    )
+
+    def frames_of(s: NDArray) -> NDArray:
+        lo, hi = float(s.min()) - overlap, float(s.max()) + overlap
+        return np.flatnonzero(finite & (ch >= lo) & (ch <= hi))
+
+    need = (
+        np.unique(np.concatenate([frames_of(c[3]) for c in pending]))
+        if pending
+        else np.array([], int)
+    )
+    cams = {side: (sc.camera, sc.mount) for side, sc in survey.cameras.items()}
+    jobs = []
+    for i in need:
+        fid = str(fr.frame_id[i])
+        cam = cams[str(fr.side[i])][0]
+        job = _FrameJob(
+            fid, str(survey.root / str(fr.image[i])), int(cam.width_px), int(cam.height_px),
+            str(cache_dir / f"{fid}.npz"),
+        )  # fmt: skip
+        cached = _read_cache(job)
+        if cached is None:
+            jobs.append(job)
+        elif isinstance(cached, BadFrame):
+            if strict:
+                raise BadFrameError(f"bad frame {fid}: {cached.message}")
+            bad.setdefault(fid, cached)
+
+    # stage 1: segmentation
+    t1 = time.perf_counter()
+    n_seg = 0
+    for fid, problem in _run_segmentation(jobs, seg_fn, workers, progress):
+        n_seg += 1
+        if problem is not None:
+            if strict:
+                raise BadFrameError(f"bad frame {fid}: {problem} (run without --strict to skip it)")
+            _report(f"bad frame {fid}: {problem} - skipped", quiet)
+            bad.setdefault(fid, BadFrame(fid, problem))
+    timings["segment"] = time.perf_counter() - t1
+
+    # stage 2: reconstruction per chunk
+    t2 = time.perf_counter()
+    cjobs = []
+    for name, lo, hi, s in pending:
+        idx = frames_of(s)
+        frames = tuple(
+            _ChunkFrame(
+                str(fr.frame_id[i]),
+                str(fr.side[i]),
+                float(ch[i]),
+                str(cache_dir / f"{fr.frame_id[i]}.npz"),
+            )
+            for i in idx
+            if str(fr.frame_id[i]) not in bad
+        )
+        cjobs.append(
+            _ChunkJob(
+                name,
+                lo,
+                hi,
+                s,
+                frames,
+                cams,
+                bool(survey.reverse),
+                float(survey.antenna_height_m),
+                trk,
+                p,
+                prov,
+                str(chunk_dir),
+            )
+        )
+    _run_chunks(cjobs, workers, progress)
+    timings["reconstruct"] = time.perf_counter() - t2
+
+    if max_chunks is not None and skipped + len(pending) < len(chunks):
+        raise RunStopped(f"stopped after {len(pending)} chunk(s) (max_chunks)")
+
+    # merge
+    t3 = time.perf_counter()
+    parts = []
+    for name, *_ in chunks:
+        parts.append(read_masks(chunk_dir / f"{name}.parquet"))
+        marker = json.loads((chunk_dir / f"{name}.json").read_text())
+        for b in marker.get("bad_frames", []):
+            bad.setdefault(b["frame_id"], BadFrame(**b))
+    bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
+    final_prov = {
+        **prov,
+        "chunks": [c[0] for c in chunks],
+        "n_frames": int(finite.sum()),
+        "bad_frames": len(bad_list),
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    merged = concat_masksets(parts, final_prov)
+    masks_path = write_masks(merged, out / "masks.parquet")
+    _write_bad_frames(out / "bad_frames.csv", bad_list)
+    timings["merge"] = time.perf_counter() - t3
+    elapsed = time.perf_counter() - t0
+    final_prov["bad_frame_list"] = [asdict(b) for b in bad_list]
+    final_prov["timings_s"] = timings
+    _atomic_bytes(out / "provenance.json", json.dumps(final_prov, indent=1).encode())
+    result = ProcessResult(
+        out, masks_path, merged, int(finite.sum()), len(pending), skipped, n_seg, bad_list,
+        elapsed, timings,
+    )  # fmt: skip
+    _report(str(result), quiet)
+    return result
+
+
+class RunStopped(RuntimeError):
+    """``max_chunks`` reached before every chunk was done; rerun to resume."""
+
+
+def _version() -> str:
+    from predisat import __version__
+
+    return str(__version__)
+
+
+def _chunk_finished(chunk_dir: Path, name: str, run_key: str) -> bool:
+    marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
+    if not (marker.is_file() and data.is_file()):
+        return False
+    try:
+        return bool(json.loads(marker.read_text()).get("run_key") == run_key)
+    except (OSError, ValueError):
+        return False
+
+
+def _write_bad_frames(path: Path, bad: Iterable[BadFrame]) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame_id", "stage", "message"])
+    for b in bad:
+        w.writerow([b.frame_id, b.stage, b.message])
+    _atomic_bytes(path, buf.getvalue().encode())
+
+
+def _progress(total: int, desc: str, enabled: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="frame" if "segment" in desc else "chunk",
+                disable=not enabled or total == 0, file=sys.stderr)  # fmt: skip
+
+
+def _run_segmentation(
+    jobs: Sequence[_FrameJob], segmenter: Segmenter, workers: int, progress: bool
+) -> Iterable[tuple[str, str | None]]:
+    bar = _progress(len(jobs), "segmenting frames", progress)
+    try:
+        if workers == 1 or len(jobs) < 4:
+            for j in jobs:
+                yield _segment_frame(j, segmenter)
+                bar.update(1)
+            return
+        batch = max(1, min(16, len(jobs) // (4 * workers)))
+        batches = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
+        with ProcessPoolExecutor(
+            workers, mp_context=get_context("spawn"), initializer=_pool_init,
+            initargs=(segmenter,),
+        ) as pool:  # fmt: skip
+            futures = {pool.submit(_pool_segment, b) for b in batches}
+            try:
+                while futures:
+                    done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        res = fut.result()
+                        bar.update(len(res))
+                        yield from res
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
+    finally:
+        bar.close()
+
+
+def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None:
+    bar = _progress(len(jobs), "reconstructing chunks", progress)
+    try:
+        if workers == 1 or len(jobs) < 2:
+            for j in jobs:
+                _run_chunk(j)
+                bar.update(1)
+            return
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            futures: set[Future[Any]] = {pool.submit(_pool_chunk, j) for j in jobs}
+            try:
+                while futures:
+                    done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        fut.result()
+                        bar.update(1)
+            except BaseException:
+                # Ctrl-C: finished chunks are on disk; queued ones are dropped
+                for fut in futures:
+                    fut.cancel()
+                raise
+    finally:
+        bar.close()
+
+
+# ---------------------------------------------------------------------- command line
+def add_process_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``predisat process``."""
+    parser.add_argument("survey", type=Path, help="survey folder (with survey.yaml)")
+    parser.add_argument(
+        "--out", type=Path, required=True,
+        help="output folder (masks.parquet, chunks/, cache/, bad_frames.csv); "
+        "rerun with the same folder to resume",
+    )  # fmt: skip
+    parser.add_argument("--track", type=Path, help="track file instead of the survey's own")
+    parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    parser.add_argument(
+        "--chunk-m", type=float, default=200.0, help="chainage per chunk, metres (default 200)"
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="stop at the first bad frame instead of skipping"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def process_from_args(args: argparse.Namespace) -> ProcessResult:
+    """Run ``predisat process`` from parsed arguments."""
+    track = None
+    if args.track is not None:
+        from predisat.track import TrackMap
+
+        suffix = args.track.suffix.lower()
+        track = (
+            TrackMap.from_csv(args.track) if suffix == ".csv" else TrackMap.from_geojson(args.track)
+        )
+    return process_survey(
+        args.survey,
+        args.out,
+        PipelineParams(chunk_m=args.chunk_m),
+        track=track,
+        workers=args.workers,
+        strict=args.strict,
+        progress=not args.quiet,
+    )

@@ -1,0 +1,178 @@
+"""Tests of predisat.evaluate: counts against an explicit elevation grid, calibration, and an
+evaluation of masks processed from a tiny synthetic survey."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from predisat.camera import CameraModel
+from predisat.evaluate import (
+    Comparison,
+    MarginTable,
+    add_evaluate_arguments,
+    calibrate_margin,
+    compare,
+    count_above,
+    evaluate_from_args,
+    evaluate_masks,
+    load_truth,
+    sector_of,
+    trust_counts,
+)
+
+GRID = (np.arange(900) + 0.5) * 0.1  # the 0.1 deg elevation grid, explicitly
+
+
+def test_count_above_matches_an_explicit_grid() -> None:
+    rng = np.random.default_rng(0)
+    t = np.concatenate([rng.uniform(-5, 95, 500), GRID[:50], [0.0, 90.0, 0.05, 89.95]])
+    want = (GRID[None, :] > t[:, None]).sum(axis=1)
+    np.testing.assert_array_equal(count_above(t), want)
+
+
+def test_trust_counts_match_an_explicit_grid() -> None:
+    rng = np.random.default_rng(1)
+    m, t, mg = rng.uniform(0, 90, 300), rng.uniform(0, 90, 300), rng.uniform(0, 5, 300)
+    trusted, good, los = trust_counts(m, t, mg)
+    g = GRID[None, :]
+    np.testing.assert_array_equal(trusted, (g > (m + mg)[:, None]).sum(1))
+    np.testing.assert_array_equal(good, ((g > (m + mg)[:, None]) & (g > t[:, None])).sum(1))
+    np.testing.assert_array_equal(los, (g > t[:, None]).sum(1))
+
+
+def test_sector_of() -> None:
+    az = np.array([0.0, 45.0, 46.0, 90.0, 134.0, 136.0, 180.0, 270.0, 314.0, 316.0])
+    got = sector_of(az, 0.0)
+    assert list(got) == ["along", "cross", "cross", "cross", "cross", "along", "along",
+                         "cross", "cross", "along"]  # fmt: skip
+    # heading 90: the cross-track directions are north and south
+    assert list(sector_of([0.0, 90.0, 180.0, 270.0], 90.0)) == ["cross", "along", "cross", "along"]
+
+
+def _synthetic_comparison(seed: int = 2) -> Comparison:
+    rng = np.random.default_rng(seed)
+    n_pos, n_az = 40, 72
+    truth = rng.uniform(0, 40, (n_pos, n_az))
+    err = rng.normal(0.0, 1.0, (n_pos, n_az))
+    err[:, :36] *= 3.0  # the first half of the bins (cross-track below) is worse
+    mask = np.clip(truth + err, 0, 90)
+    az = np.arange(n_az) * 5.0
+    sector = np.where(np.abs(np.mod(az - 0.0, 180.0) - 90.0) <= 45.0, "cross", "along")
+    return Comparison(
+        chainage_m=np.arange(n_pos) * 10.0, mask_el_deg=mask, truth_el_deg=truth,
+        source=np.zeros((n_pos, n_az), np.uint8), sector=np.broadcast_to(sector, mask.shape),
+        az_deg=az,
+    )  # fmt: skip
+
+
+def _los_share(mask: np.ndarray, truth: np.ndarray, margin: float) -> float:
+    g = GRID[None, None, :]
+    trusted = g > (mask + margin)[..., None]
+    return float((trusted & (g > truth[..., None])).sum() / trusted.sum())
+
+
+def test_calibrated_margin_is_the_smallest_reaching_the_target() -> None:
+    comp = _synthetic_comparison()
+    table = calibrate_margin(comp, target=0.999)
+    assert set(table.table["sector"]) == {"cross", "along"}
+    for sec in ("cross", "along"):
+        row = table.table[(table.table.sector == sec) & (table.table.source == "observed")]
+        margin = float(row.margin_deg.iloc[0])
+        sel = comp.sector[0] == sec
+        m, t = comp.mask_el_deg[:, sel], comp.truth_el_deg[:, sel]
+        assert margin > 0
+        assert _los_share(m, t, margin) >= 0.999
+        assert _los_share(m, t, margin - 0.1) < 0.999
+        assert float(row.los_share.iloc[0]) == pytest.approx(_los_share(m, t, margin))
+    cross = table.table[(table.table.sector == "cross") & (table.table.source == "observed")]
+    along = table.table[(table.table.sector == "along") & (table.table.source == "observed")]
+    # cross-track bins are 0..45 and 135..180 of a 5 deg ring: a mix, but noisier on average
+    assert float(cross.margin_deg.iloc[0]) != float(along.margin_deg.iloc[0])
+
+
+def test_evaluate_with_margin_meets_target_on_the_calibration_set(tmp_path: Path) -> None:
+    comp = _synthetic_comparison()
+    table = calibrate_margin(comp, target=0.999, by=())
+    assert table.table.margin_deg.nunique() == 1
+    res = evaluate_masks(comp, table)
+    row = res[(res.sector == "all") & (res.source == "all")].iloc[0]
+    margin = float(table.table.margin_deg.iloc[0])
+    assert row.false_trust_margin == pytest.approx(
+        1.0 - _los_share(comp.mask_el_deg, comp.truth_el_deg, margin)
+    )
+    assert row.false_trust_margin <= 0.001 < row.false_trust
+    g = GRID[None, None, :]
+    vis = g > comp.truth_el_deg[..., None]
+    lost = vis & ~(g > (comp.mask_el_deg + margin)[..., None])
+    assert row.sky_lost_margin == pytest.approx(lost.sum() / vis.sum())
+    err = comp.mask_el_deg - comp.truth_el_deg
+    assert row.unsafe_share == pytest.approx(np.mean(err < -0.1))
+    assert row.median_error_deg == pytest.approx(np.median(err))
+    table.to_json(tmp_path / "m.json")
+    back = MarginTable.from_json(tmp_path / "m.json")
+    np.testing.assert_array_equal(back.table.margin_deg, table.table.margin_deg)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    from predisat.pipeline import PipelineParams, process_survey
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    out = tmp_path_factory.mktemp("synth")
+    generate_survey(
+        demo_track(), 4000.0, 4040.0, sky="clear", seed=5, out_dir=out,
+        camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False,
+    )  # fmt: skip
+    masks_dir = out / "processed"
+    process_survey(out / "survey", masks_dir, PipelineParams(chunk_m=500.0), progress=False)
+    return out, masks_dir
+
+
+def test_evaluate_tiny_survey(tiny: tuple[Path, Path]) -> None:
+    from predisat.maskio import read_masks
+
+    synth, masks_dir = tiny
+    masks = read_masks(masks_dir / "masks.parquet")
+    truth = load_truth(synth)
+    comp = compare(masks, truth)
+    assert comp.chainage_m.size == 5 and comp.unmatched == 0
+    res = evaluate_masks(comp)
+    num = res[res.n_bins > 0].drop(columns=["sector", "source"]).to_numpy(float)
+    assert np.isfinite(num).all()
+    # unsafe share computed independently: nearest truth row by chainage, same 0.5 deg bins
+    rows = [int(np.argmin(np.abs(truth.chainage_m - s))) for s in masks.chainage_m]
+    assert truth.az_deg.size == masks.n_az
+    diff = masks.mask_el_deg.astype(float) - truth.mask_el_deg[rows]
+    all_row = res[(res.sector == "all") & (res.source == "all")].iloc[0]
+    assert all_row.unsafe_share == pytest.approx(np.mean(diff < -0.1))
+    assert all_row.n_bins == diff.size
+
+
+def test_evaluate_cli(tiny: tuple[Path, Path], tmp_path: Path, capsys) -> None:
+    synth, masks_dir = tiny
+    parser = argparse.ArgumentParser()
+    add_evaluate_arguments(parser)
+    args = parser.parse_args(
+        [str(masks_dir), "--truth", str(synth / "truth"), "--calibrate", "--out", str(tmp_path)]
+    )
+    table = evaluate_from_args(args)
+    assert "false_trust_margin" in table.columns
+    doc = json.loads((tmp_path / "evaluation.json").read_text())
+    assert doc["n_positions"] == 5
+    assert (tmp_path / "margins.json").is_file() and (tmp_path / "evaluation.csv").is_file()
+    args2 = parser.parse_args(
+        [str(masks_dir / "masks.parquet"), "--truth", str(synth),
+         "--margins", str(tmp_path / "margins.json")]
+    )  # fmt: skip
+    again = evaluate_from_args(args2)
+    np.testing.assert_allclose(
+        again.false_trust_margin.to_numpy(float), table.false_trust_margin.to_numpy(float),
+        equal_nan=True,
+    )  # fmt: skip
+    assert "observed" in capsys.readouterr().out

@@ -1,0 +1,162 @@
+"""Tests of predisat.pipeline on a tiny synthetic survey (160x120 pinhole, 60 m)."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from predisat.camera import CameraModel
+from predisat.maskio import read_masks
+from predisat.masks import MaskError, MaskSet
+from predisat.pipeline import (
+    BadFrameError,
+    PipelineParams,
+    RunStopped,
+    concat_masksets,
+    default_segmenter,
+    process_survey,
+)
+
+CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
+PARAMS = PipelineParams(chunk_m=30.0)  # 3 chunks over 3000..3060 m
+
+
+class CountingSegmenter:
+    """The default segmenter, counting its calls (in-process runs only)."""
+
+    def __init__(self) -> None:
+        self.calls: list[int] = []
+
+    def __call__(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        self.calls.append(image.shape[1])
+        return default_segmenter(image)
+
+
+def blue_sky(image: np.ndarray) -> tuple[np.ndarray, None]:
+    """A cheap module-level segmenter (picklable for worker processes)."""
+    b, g, r = (image[..., k].astype(int) for k in range(3))
+    return (b > r + 10) | ((b + g + r) > 600), None
+
+
+@pytest.fixture(scope="module")
+def survey_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    out = tmp_path_factory.mktemp("synth")
+    generate_survey(
+        demo_track(), 3000.0, 3060.0, sky="clear", seed=3, out_dir=out, camera=CAM,
+        progress=False,
+    )  # fmt: skip
+    return out / "survey"
+
+
+@pytest.fixture(scope="module")
+def first_run(survey_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    out = tmp_path_factory.mktemp("run") / "masks"
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    return out, (res, seg)
+
+
+def _manifest(survey_dir: Path) -> list[dict[str, str]]:
+    with open(survey_dir / "manifest.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_positions_are_the_distinct_frame_chainages(survey_dir: Path, first_run) -> None:
+    out, (res, seg) = first_run
+    rows = _manifest(survey_dir)
+    want = np.unique([float(r["chainage_m"]) for r in rows])
+    masks = read_masks(out / "masks.parquet")
+    np.testing.assert_allclose(masks.chainage_m, want, atol=1e-3)
+    assert masks.n_pos == 7 and res.masks.n_pos == 7
+    # every frame segmented exactly once although the chunks' frame windows overlap
+    assert len(seg.calls) == len(rows) == res.frames_segmented
+    assert res.chunks_done == 3 and res.chunks_skipped == 0
+    assert sorted(p.name for p in (out / "chunks").glob("*.parquet")) == [
+        "3000_3030.parquet", "3030_3060.parquet", "3060_3090.parquet",
+    ]  # fmt: skip
+    assert masks.provenance["run_key"] and masks.provenance["survey_hash"]
+    assert np.all((masks.mask_el_deg >= 0) & (masks.mask_el_deg <= 90))
+    assert res.bad_frames == ()
+
+
+def test_resume_redoes_only_the_missing_chunk(first_run, survey_dir: Path, tmp_path) -> None:
+    out0, (res0, _) = first_run
+    out = tmp_path / "copy"
+    shutil.copytree(out0, out)
+    kept = {p.name: p.stat().st_mtime_ns for p in (out / "chunks").iterdir()}
+    for suffix in (".json", ".parquet"):
+        (out / "chunks" / f"3030_3060{suffix}").unlink()
+        kept.pop(f"3030_3060{suffix}")
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    assert (res.chunks_done, res.chunks_skipped) == (1, 2)
+    assert seg.calls == []  # segmentation came from the cache
+    for name, mtime in kept.items():
+        assert (out / "chunks" / name).stat().st_mtime_ns == mtime, name
+    assert (out / "chunks" / "3030_3060.json").is_file()
+    np.testing.assert_array_equal(res.masks.mask_el_deg, res0.masks.mask_el_deg)
+    np.testing.assert_array_equal(res.masks.source, res0.masks.source)
+
+
+def test_interrupted_run_resumes(survey_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "masks"
+    with pytest.raises(RunStopped):
+        process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky,
+                       max_chunks=1)  # fmt: skip
+    assert len(list((out / "chunks").glob("*.json"))) == 1
+    assert not (out / "masks.parquet").exists()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert (res.chunks_done, res.chunks_skipped) == (2, 1)
+    assert res.frames_segmented == 0
+    # changed parameters invalidate the finished chunks
+    other = PipelineParams(chunk_m=30.0, segmenter="blue")
+    res2 = process_survey(survey_dir, out, other, progress=False, segmenter=blue_sky)
+    assert (res2.chunks_done, res2.chunks_skipped) == (3, 0)
+
+
+def test_workers_pool_gives_the_same_masks(survey_dir: Path, tmp_path: Path) -> None:
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    one = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky)
+    two = process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
+                         workers=2)  # fmt: skip
+    np.testing.assert_array_equal(one.masks.mask_el_deg, two.masks.mask_el_deg)
+    np.testing.assert_array_equal(one.masks.chainage_m, two.masks.chainage_m)
+
+
+def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)
+    victim = rows[4]
+    (src / victim["image"]).write_bytes(b"not a jpeg at all")
+    out = tmp_path / "masks"
+    res = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    with open(out / "bad_frames.csv", newline="") as fh:
+        listed = list(csv.DictReader(fh))
+    assert [r["frame_id"] for r in listed] == [victim["frame_id"]]
+    assert "decode" in listed[0]["message"]
+    assert res.masks.n_pos == 7  # the position keeps its other frame
+    with pytest.raises(BadFrameError, match=victim["frame_id"]):
+        process_survey(src, tmp_path / "strict", PARAMS, progress=False, segmenter=blue_sky,
+                       strict=True)  # fmt: skip
+
+
+def test_concat_masksets_round_trip(first_run) -> None:
+    _, (res, _) = first_run
+    m: MaskSet = res.masks
+    parts = [m.subset(m.chainage_m[0], m.chainage_m[2]), m.subset(m.chainage_m[3], 1e9)]
+    back = concat_masksets(parts, provenance=m.provenance)
+    assert back.equals(m)
+    with pytest.raises(MaskError, match="strictly increasing"):
+        concat_masksets(parts[::-1])
+    coarse = MaskSet.from_arrays([0.0], [50.0], [4.0], [0.0], [0.0], np.zeros((1, 4)))
+    with pytest.raises(MaskError, match="az_step_deg"):
+        concat_masksets([parts[0], coarse])
