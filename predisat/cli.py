@@ -125,7 +125,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     from predisat import track as trackmod
+    from predisat.availability_run import run_availability
     from predisat.camera import default_camera
+    from predisat.evaluate import compare, evaluate_masks, load_truth
+    from predisat.pipeline import process_survey
     from predisat.synth.generate import contact_sheet, generate_survey
 
     out = Path(args.out)
@@ -136,7 +139,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"skies, seed {args.seed} -> {out}"
     )
     t0 = time.perf_counter()
-    result = generate_survey(
+    print("demo 1/4: rendering the synthetic survey and its ground truth")
+    synth = generate_survey(
         track,
         from_m,
         to_m,
@@ -148,14 +152,39 @@ def cmd_demo(args: argparse.Namespace) -> int:
         workers=args.workers,
         overwrite=True,
     )
+    t_synth = time.perf_counter() - t0
+    sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
+
+    print("demo 2/4: processing the frames into elevation masks")
+    t1 = time.perf_counter()
+    processed = process_survey(
+        synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
+    )
+    t_process = time.perf_counter() - t1
+
+    print("demo 3/4: masks against the synthetic ground truth")
+    table = evaluate_masks(compare(processed.masks, load_truth(synth.truth_dir)))
+    overall = table[table["source"] == "all"]
+    with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
+    print(overall[with_cols].round(4).to_string(index=False))
+
+    print("demo 4/4: availability report (embedded navigation day, GPS)")
+    run = run_availability(
+        processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
+    )
+    cols = ["rule", "share_ge2", "share_ge4", "share_ge6", "interval_median_m", "interval_p95_m"]
+    print(run.summary[cols].round(3).to_string(index=False))
+    print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
     dt = time.perf_counter() - t0
-    sheet = contact_sheet(result.survey_dir, out / "contact_sheet.png")
     print(
-        f"demo: {result.n_frames} frames at {result.n_positions} positions rendered in {dt:.1f} s "
-        f"({result.n_frames / dt:.2f} frames/s)\n"
-        f"  survey:        {result.survey_dir}\n"
-        f"  ground truth:  {result.truth_dir}\n"
-        f"  contact sheet: {sheet}"
+        f"demo: done in {dt:.0f} s; {synth.n_frames} frames at {synth.n_positions} positions "
+        f"(rendering {synth.n_frames / t_synth:.2f} frames/s, processing "
+        f"{synth.n_frames / t_process:.2f} frames/s)\n"
+        f"  survey:        {synth.survey_dir}\n"
+        f"  ground truth:  {synth.truth_dir}\n"
+        f"  contact sheet: {sheet}\n"
+        f"  masks:         {processed.masks_path}\n"
+        f"  report:        {run.report_html}"
     )
     return 0
 
@@ -182,6 +211,21 @@ def cmd_evaluate_sky(args: argparse.Namespace) -> int:
         print(result.summary.to_string(index=False))
         if out is not None:
             print(f"  per-image table and worst cases in {out}")
+    return 0
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    from predisat.pipeline import process_from_args
+
+    result = process_from_args(args)
+    print(f"process: {result}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from predisat.evaluate import evaluate_from_args
+
+    evaluate_from_args(args)
     return 0
 
 
@@ -238,6 +282,33 @@ def build_parser() -> argparse.ArgumentParser:
     add_availability_arguments(p)
     p.set_defaults(func=cmd_availability)
 
+    from predisat.evaluate import add_evaluate_arguments
+    from predisat.pipeline import add_process_arguments
+
+    p = sub.add_parser(
+        "process",
+        help="turn a survey's side-camera frames into elevation masks (resumable)",
+        description=(
+            "Segment the sky in every frame, reconstruct full 360 deg masks along the line in "
+            "chainage chunks written atomically (an interrupted run resumes), and write the "
+            "mask file. Bad frames are reported and skipped (--strict: stop)."
+        ),
+    )
+    add_process_arguments(p)
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser(
+        "evaluate",
+        help="compare masks with synthetic ground truth; calibrate the trust margin",
+        description=(
+            "Mask error by sector and source against the true masks of a synthetic survey, "
+            "false-trust rate and visible sky lost; --calibrate finds the margin meeting the "
+            "target share of truly line-of-sight trusted directions."
+        ),
+    )
+    add_evaluate_arguments(p)
+    p.set_defaults(func=cmd_evaluate)
+
     p = sub.add_parser(
         "evaluate-sky",
         help="score sky segmentation on a folder of photos with ground-truth sky masks",
@@ -255,7 +326,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo",
         help="run the pipeline on the embedded demo (2 km of line 144)",
-        description="Build the demo survey on line 144 and write a contact sheet of frames.",
+        description=(
+            "Render a synthetic survey of 2 km of line 144 with ground truth, process it into "
+            "masks, compare them with the truth and write the availability report."
+        ),
     )
     p.add_argument("--out", default="demo_out", metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=1, help="random seed")
