@@ -37,7 +37,25 @@ class CliError(Exception):
     """A user-facing error: printed without a traceback."""
 
 
-def _load_track(path: str | None, name: str | None) -> TrackMap:
+def _parse_where(items: Sequence[str] | None) -> dict[str, str | None] | None:
+    """``KEY=VALUE`` property filters; ``KEY=`` selects features without that property."""
+    if not items:
+        return None
+    where: dict[str, str | None] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CliError(f"--where {item}: expected KEY=VALUE (or KEY= for 'property absent')")
+        where[key] = value or None
+    return where
+
+
+def _load_track(
+    path: str | None,
+    name: str | None,
+    chain: str = "all",
+    where: Sequence[str] | None = None,
+) -> TrackMap:
     from predisat import track
 
     if path is None:
@@ -47,7 +65,7 @@ def _load_track(path: str | None, name: str | None) -> TrackMap:
         raise CliError(f"--track {path}: no such file (give a GeoJSON or lat/lon/h CSV track map)")
     if p.suffix.lower() in {".csv", ".txt"}:
         return track.TrackMap.from_csv(p)
-    return track.TrackMap.from_geojson(p, track=name)
+    return track.TrackMap.from_geojson(p, track=name, chain=chain, where=_parse_where(where))
 
 
 def _km_range(
@@ -92,7 +110,7 @@ def _scenery(path: str | None) -> WorldSpec | None:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    track = _load_track(args.track, args.track_name)
+    track = _load_track(args.track, args.track_name, args.chain, args.where)
     from_m, to_m = _km_range(track, args.from_km, args.to_km)
     cam = _camera(args.camera, args.calibration)
     spec = _scenery(args.scenery)
@@ -250,6 +268,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
     p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
+    p.add_argument(
+        "--chain",
+        choices=["all", "longest"],
+        default="all",
+        help="chain every selected way (all) or the longest connected chain of a network",
+    )
+    p.add_argument(
+        "--where",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
+    )
     p.add_argument("--from-km", type=float, metavar="A", help="start chainage in km (default 0)")
     p.add_argument("--to-km", type=float, metavar="B", help="end chainage in km (default: end)")
     p.add_argument(

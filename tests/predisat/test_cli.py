@@ -76,3 +76,10 @@ def test_synth_rejects_bad_scenery_recipe(tmp_path, capsys: pytest.CaptureFixtur
     code = cli.main(["synth", "--to-km", "0.2", "--scenery", str(bad), "--out", str(tmp_path)])
     assert code == 2
     assert "--scenery" in capsys.readouterr().err
+
+
+def test_where_filters_parse_and_reject_bad_items() -> None:
+    assert cli._parse_where(["usage=main", "service="]) == {"usage": "main", "service": None}
+    assert cli._parse_where(None) is None
+    with pytest.raises(cli.CliError, match="KEY=VALUE"):
+        cli._parse_where(["usage"])
