@@ -536,7 +536,8 @@ def contact_sheet(
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     suffix = out.suffix.lower() if out.suffix.lower() in (".png", ".jpg", ".jpeg") else ".png"
-    ok, buf = cv2.imencode(suffix, sheet, [cv2.IMWRITE_JPEG_QUALITY, 88])
+    params = [cv2.IMWRITE_JPEG_QUALITY, 88] if suffix != ".png" else []
+    ok, buf = cv2.imencode(suffix, sheet, params)
     if not ok:
         raise OSError(f"encoding of the contact sheet {out} failed")
     _atomic_bytes(out, buf.tobytes())
