@@ -20,7 +20,6 @@ The pseudorange used for single-frequency ranging is chosen per system from
 
 from __future__ import annotations
 
-import gzip
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from predisat.fileerror import FileLineError
+from predisat.fileerror import FileLineError, read_text_lines
 from predisat.gnss_time import (
     BDT_MINUS_GPST_S,
     calendar_to_gps_s,
@@ -274,21 +273,10 @@ class Observations:
 
 
 def _open_lines(path: Path) -> list[str]:
-    if not path.is_file():
-        raise RinexObsError(path, None, "no such file; check the path")
-    raw = path.read_bytes()
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise RinexObsError(
-                path, None, f"corrupt gzip data ({exc}); get the file again"
-            ) from exc
-    elif raw[:2] == b"\x1f\x9d":
-        raise RinexObsError(path, None, "Unix-compressed (.Z) file; decompress it first")
-    if raw[:5] in (b"1.0  ", b"3.0  ") and b"COMPACT RINEX" in raw[:200]:
+    lines = read_text_lines(path, RinexObsError)
+    if lines and lines[0][:5] in ("1.0  ", "3.0  ") and "COMPACT RINEX" in lines[0]:
         raise RinexObsError(path, 1, "Hatanaka-compressed (CRINEX); expand it with crx2rnx")
-    return raw.decode("ascii", errors="replace").splitlines()
+    return lines
 
 
 def _float(text: str) -> float:

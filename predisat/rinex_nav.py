@@ -14,7 +14,6 @@ Raw values keep the units of the file (RINEX: s, m, rad, rad/s; GLONASS: km, km/
 
 from __future__ import annotations
 
-import gzip
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from predisat.fileerror import FileLineError
+from predisat.fileerror import FileLineError, read_text_lines
 from predisat.gnss_time import (
     BDT_MINUS_GPST_S,
     SECONDS_PER_WEEK,
@@ -203,17 +202,7 @@ class RinexNav:
 
 
 def _open_lines(path: Path) -> list[str]:
-    if not path.is_file():
-        raise RinexError(path, None, "no such file; check the path")
-    raw = path.read_bytes()
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise RinexError(path, None, f"corrupt gzip data ({exc}); download it again") from exc
-    elif raw[:2] == b"\x1f\x9d":
-        raise RinexError(path, None, "Unix-compressed (.Z) file; decompress it first (gunzip)")
-    return raw.decode("ascii", errors="replace").splitlines()
+    return read_text_lines(path, RinexError)
 
 
 def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None, int]:

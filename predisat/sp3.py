@@ -12,7 +12,6 @@ antenna phase centre; the difference is 0.5-2.5 m for GPS and GLONASS, mostly ra
 
 from __future__ import annotations
 
-import gzip
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.fileerror import FileLineError
+from predisat.fileerror import FileLineError, read_text_lines
 from predisat.gnss_time import calendar_to_gps_s, gps_minus_utc_s
 
 __all__ = ["Sp3", "Sp3Error", "read_sp3"]
@@ -151,17 +150,7 @@ class Sp3:
 
 
 def _read_text(path: Path) -> list[str]:
-    if not path.is_file():
-        raise Sp3Error(path, None, "no such file; check the path")
-    raw = path.read_bytes()
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise Sp3Error(path, None, f"corrupt gzip data ({exc}); download it again") from exc
-    elif raw[:2] == b"\x1f\x9d":
-        raise Sp3Error(path, None, "Unix-compressed (.Z) file; decompress it first (gunzip)")
-    return raw.decode("ascii", errors="replace").splitlines()
+    return read_text_lines(path, Sp3Error)
 
 
 def _sat_id(text: str) -> str:

@@ -257,3 +257,14 @@ def test_every_shared_observation_file_parses(shared_data: Path) -> None:
     full = read_rinex_obs(d / "rtklib/07590920.05o")
     assert [e.line for e in full.events] == [855, 1058, 1090]
     assert all(e.flag == 4 and "SPLICE" in e.records[0] for e in full.events)
+
+
+def test_hatanaka_file_is_refused_with_the_fix(tmp_path) -> None:
+    from locator.observations import RinexObsError, read_rinex_obs
+
+    path = tmp_path / "site.crx"
+    path.write_text(
+        "1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE\n"
+    )
+    with pytest.raises(RinexObsError, match="crx2rnx"):
+        read_rinex_obs(path)
