@@ -16,7 +16,6 @@ downwards, so the image covers ``[-0.5, width - 0.5] x [-0.5, height - 0.5]``.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
@@ -26,6 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.atomic import atomic_path
 from predisat.calibration import (
     CANONICAL_FORMAT,
     CANONICAL_VERSION,
@@ -236,10 +236,8 @@ class CameraModel:
         if p.suffix.lower() not in (".yaml", ".yml"):
             raise ValueError(f"{p}: calibration files must end in .yaml or .yml")
         p.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix, dir=p.parent)
-        os.close(fd)
-        try:
-            fs = cv2.FileStorage(tmp_name, cv2.FILE_STORAGE_WRITE)
+        with atomic_path(p) as tmp:
+            fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
             fs.writeComment("PREDISAT camera calibration (see docs/camera-model.md)")
             fs.write("format", CANONICAL_FORMAT)
             fs.write("version", CANONICAL_VERSION)
@@ -250,10 +248,6 @@ class CameraModel:
             fs.write("camera_matrix", self.camera_matrix)
             fs.write("distortion_coefficients", np.asarray(self.dist, float).reshape(1, -1))
             fs.release()
-            os.replace(tmp_name, p)
-        finally:
-            if os.path.exists(tmp_name):
-                os.unlink(tmp_name)
         return p
 
     # ------------------------------------------------------------------ properties

@@ -32,6 +32,7 @@ import pyarrow.parquet as pq
 import shapely
 from numpy.typing import NDArray
 
+from predisat.atomic import atomic_path
 from predisat.maskops import conservative_resample
 from predisat.masks import REQUIRED_DESCRIPTORS, BinSource, MaskError, MaskSet
 
@@ -517,12 +518,8 @@ def _atomic(path: Path, binary: bool = False) -> Iterator[IO[Any]]:
     """Write to a temporary file beside ``path`` and move it into place on success."""
     if not path.parent.is_dir():
         raise MaskFileError(f"{path}: the folder {path.parent} does not exist; create it first")
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     f: IO[Any]
-    try:
-        with open(tmp, "wb") if binary else open(tmp, "w", newline="\n") as f:
-            yield f
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(path) as tmp, (
+        open(tmp, "wb") if binary else open(tmp, "w", newline="\n")
+    ) as f:
+        yield f

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
 from predisat.maskio import read_masks, write_masks
 from predisat.masks import MaskError, MaskSet
@@ -190,16 +191,6 @@ def _stat_key(path: str) -> list[int]:
     return [int(st.st_size), int(st.st_mtime_ns)]
 
 
-def _atomic_bytes(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
     """Cached result of a frame (None when absent or stale: the image changed)."""
     path = Path(job.cache_path)
@@ -239,7 +230,7 @@ def _write_cache(
             arrays["confidence"] = np.asarray(conf, np.float32)
     buf = io.BytesIO()
     np.savez_compressed(buf, meta=np.array(json.dumps(meta)), **arrays)
-    _atomic_bytes(Path(job.cache_path), buf.getvalue())
+    write_bytes_atomic(Path(job.cache_path), buf.getvalue())
 
 
 def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
@@ -356,7 +347,7 @@ def _run_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
         "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     # the JSON is the completion marker: written last, so a half-done chunk is redone
-    _atomic_bytes(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())
+    write_bytes_atomic(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())
     return job.name, bad
 
 
@@ -664,7 +655,7 @@ def process_survey(
     elapsed = time.perf_counter() - t0
     final_prov["bad_frame_list"] = [asdict(b) for b in bad_list]
     final_prov["timings_s"] = timings
-    _atomic_bytes(out / "provenance.json", json.dumps(final_prov, indent=1).encode())
+    write_bytes_atomic(out / "provenance.json", json.dumps(final_prov, indent=1).encode())
     result = ProcessResult(
         out, masks_path, merged, int(finite.sum()), len(pending), skipped, n_seg, bad_list,
         elapsed, timings,
@@ -699,7 +690,7 @@ def _write_bad_frames(path: Path, bad: Iterable[BadFrame]) -> None:
     w.writerow(["frame_id", "stage", "message"])
     for b in bad:
         w.writerow([b.frame_id, b.stage, b.message])
-    _atomic_bytes(path, buf.getvalue().encode())
+    write_bytes_atomic(path, buf.getvalue().encode())
 
 
 def _progress(total: int, desc: str, enabled: bool) -> Any:

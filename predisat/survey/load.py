@@ -10,11 +10,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from types import MappingProxyType
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 import numpy as np
 import yaml
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from predisat.camera import CalibrationError, CameraModel, Mount
 from predisat.survey.format import (
@@ -29,21 +29,11 @@ from predisat.survey.format import (
     SurveyCamera,
     SurveyError,
     SurveyProblem,
+    _Projects,
     empty_frames,
 )
 
 __all__ = ["Survey"]
-
-
-class _Projects(Protocol):
-    """What the loader needs from a track map (``predisat.track.TrackMap``)."""
-
-    @property
-    def length_m(self) -> float: ...
-
-    def project(
-        self, lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike | None = None
-    ) -> Any: ...
 
 
 @dataclass(frozen=True, eq=False)  # numpy columns: compare explicitly

@@ -6,7 +6,6 @@ import csv
 import io
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -15,22 +14,11 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
 from predisat.survey.format import DIRECTIONS, FORMAT, FRAME_ID_RE, MANIFEST_COLUMNS, SIDES, VERSION
 
 __all__ = ["SurveyWriter"]
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write a file so that readers see either the old or the new content, never a part."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _fmt(value: float | None) -> str:
@@ -182,7 +170,7 @@ class SurveyWriter:
         if not ok:
             raise OSError(f"JPEG encoding failed for frame {fid!r}")
         rel = f"images/{fid}.jpg"
-        _atomic_write(self.root / rel, buf.tobytes())
+        write_bytes_atomic(self.root / rel, buf.tobytes())
         self._rows.append({
             "frame_id": fid, "image": rel, "side": side, "gps_s": _fmt(gps),
             "chainage_m": _fmt(chainage_m), "lat_deg": _fmt(lat_deg),
@@ -201,7 +189,7 @@ class SurveyWriter:
         writer = csv.DictWriter(out, fieldnames=MANIFEST_COLUMNS, lineterminator="\n")
         writer.writeheader()
         writer.writerows(self._rows)
-        _atomic_write(self.root / "manifest.csv", out.getvalue().encode("utf-8"))
+        write_bytes_atomic(self.root / "manifest.csv", out.getvalue().encode("utf-8"))
         doc: dict[str, Any] = {
             "format": FORMAT,
             "version": VERSION,
@@ -217,7 +205,7 @@ class SurveyWriter:
         }
         doc.update(self.metadata)
         text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
-        _atomic_write(self.root / "survey.yaml", text.encode("utf-8"))
+        write_bytes_atomic(self.root / "survey.yaml", text.encode("utf-8"))
 
     def close(self) -> None:
         """Write manifest.csv and survey.yaml; further frames are refused."""

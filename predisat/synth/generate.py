@@ -23,8 +23,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.atomic import atomic_path, write_bytes_atomic
 from predisat.camera import CameraModel, Mount, default_camera
 from predisat.geodesy import enu_to_azel
 from predisat.gnss_time import calendar_to_gps_s, gps_minus_utc_s
@@ -67,29 +67,6 @@ class SynthResult:
 
     def __str__(self) -> str:
         return str(self.out_dir)
-
-
-def _atomic_bytes(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def _atomic_with(path: Path, write: Callable[[Path], Any]) -> None:
-    """Let ``write`` fill a temporary file beside ``path``, then rename it into place."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def daytime_gps_s(lon_deg: float, date: str = "2024-06-21", solar_hour: float = 10.0) -> float:
@@ -241,12 +218,14 @@ def generate_survey(
     if spec is None:
         spec = WorldSpec.mixed(lo, hi, seed) if hi - lo >= 800.0 else _short_spec(lo, hi, seed)
     world = World.build(track, spec, seed)
-    _atomic_with(truth_dir / "world.npz", world.save)
+    with atomic_path(truth_dir / "world.npz") as tmp:
+        world.save(tmp)
     casters = Casters.for_world(world, backend)
 
     s = np.arange(from_m, to_m + 1e-9, spacing_m)
     truth = true_masks(world, s, antenna_height_m, backend=backend, caster=casters.lband)
-    _atomic_with(truth_dir / "true_masks.npz", truth.save)
+    with atomic_path(truth_dir / "true_masks.npz") as tmp:
+        truth.save(tmp)
 
     ant = world.antenna_enu(s, antenna_height_m)
     lat, lon, h = world.frame.to_geodetic(ant)
@@ -265,7 +244,8 @@ def generate_survey(
 
     from predisat.trackio import write_geojson
 
-    _atomic_with(survey_dir / "track.geojson", lambda p: write_geojson(track, p))
+    with atomic_path(survey_dir / "track.geojson") as tmp:
+        write_geojson(track, tmp)
     mounts: dict[str, Mount] = {
         side: Mount(
             side, 90.0 if side == "left" else -90.0, pitch_deg, 0.0, Mount.default(side).lever_arm_m
@@ -315,7 +295,7 @@ def generate_survey(
                 ok, buf = cv2.imencode(".png", label)
                 if not ok:
                     raise OSError(f"PNG encoding of the label of frame {fid} failed")
-                _atomic_bytes(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
+                write_bytes_atomic(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
                 rows.append({
                     "frame_id": fid, "side": side, "chainage_m": repr(job.chainage_m),
                     "gps_s": repr(float(gps[i])), "sky": job.sky.condition,
@@ -327,8 +307,8 @@ def generate_survey(
     wr = csv.DictWriter(buf_csv, fieldnames=list(rows[0]), lineterminator="\n")
     wr.writeheader()
     wr.writerows(rows)
-    _atomic_bytes(truth_dir / "frames.csv", buf_csv.getvalue().encode())
-    _atomic_bytes(
+    write_bytes_atomic(truth_dir / "frames.csv", buf_csv.getvalue().encode())
+    write_bytes_atomic(
         truth_dir / "README.txt",
         _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
     )
@@ -540,5 +520,5 @@ def contact_sheet(
     ok, buf = cv2.imencode(suffix, sheet, params)
     if not ok:
         raise OSError(f"encoding of the contact sheet {out} failed")
-    _atomic_bytes(out, buf.tobytes())
+    write_bytes_atomic(out, buf.tobytes())
     return out
