@@ -59,6 +59,7 @@ class FixFlag(IntFlag):
     UNBOUNDED = 128  # the interval reaches the search window's end
     INCONSISTENT_PAIRS = 256  # the pair intervals have no common point
     EMPTY_PAIR = 512  # a pair contradicts the whole search window (PairStatus.EMPTY)
+    HEADING_FAIL = 1024  # the virtual-beacon heading check failed (locator.run)
 
 
 @dataclass(frozen=True)

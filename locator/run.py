@@ -1,0 +1,330 @@
+"""The locator's epoch loop: predicted interval, trust decision, fix, heading and odometry checks.
+
+Per epoch ``k`` (see ``docs/locator.md``, "A run"):
+
+1. **Predicted interval.** The last interval that carried a safety claim, moved by the odometer
+   distance since then and widened by the odometer's confidence ``abs + rel * |d|`` (ETCS
+   SUBSET-041 style, default 5 m + 5 %). Without an odometer the motion is bounded by
+   ``max_speed_mps`` times the elapsed time. At the start: ``start_chainage_m +-
+   start_uncertainty_m`` (a balise, a stop at a known platform).
+2. **Trust decision** (``trust``): ``"masks"`` keeps a satellite only above the worst case of
+   the masks (mask + margin) over the whole predicted interval
+   (:func:`locator.selection.select_satellites`); ``"cutoff"`` keeps those above a flat
+   elevation; ``"none"`` keeps every received signal above the horizon. Directions are
+   computed at the centre of the predicted interval.
+3. **Fix**: :func:`locator.fde.locate` on the trusted satellites (SATHIA pairs, integrity mode
+   by count, FDE when ``integrity="active"``).
+4. **Heading check** (2024 patent): the virtual beacon is the multiple of ``beacon_spacing_m``
+   at least half a spacing behind the estimate; the heading estimated from the delays must agree
+   with the chord from the beacon to the estimate's track point. A failure voids the claim.
+5. **Odometry check**: a claimed interval that does not meet the predicted one contradicts the
+   odometer: the claim is voided (``ODOMETRY_CONFLICT``).
+
+A fix with a safety claim becomes the next anchor; otherwise the prediction keeps growing from
+the last anchor, so a wrong claim cannot be "forgotten" silently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import IntFlag
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate
+from locator.heading_check import HeadingStatus, check_heading
+from locator.sathia import AntennaPath
+from locator.selection import Exclusion, direction_at, select_satellites
+from locator.sources import EpochSource
+from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.interval import IntervalMode
+from predisat.masks import MaskSet
+
+__all__ = ["TRUST_MODES", "Odometer", "RunConfig", "RunFlag", "flag_names", "run_locator"]
+
+TRUST_MODES = ("masks", "cutoff", "none")
+
+
+class RunFlag(IntFlag):
+    """Flags of the run loop, above :class:`locator.fde.FixFlag`'s bits."""
+
+    ODOMETRY_CONFLICT = 1 << 16  # the claimed interval misses the odometry prediction
+
+
+def flag_names(flags: int) -> str:
+    """``"NO_SAFETY_CLAIM|BLUNT"`` for a flags value ("" for 0)."""
+    names = [f.name for f in FixFlag if f.value and flags & f.value]
+    names += [f.name for f in RunFlag if flags & f.value]
+    return "|".join(n for n in names if n)
+
+
+@dataclass(frozen=True)
+class Odometer:
+    """Odometer confidence, and the motion bound without one.
+
+    Attributes
+    ----------
+    abs_error_m : float
+        Fixed part of the confidence interval since the last reference, metres.
+    rel_error : float
+        Part proportional to the distance travelled since the reference.
+    max_speed_mps : float
+        Used when the source has no odometer: the train moved at most this fast either way.
+    """
+
+    abs_error_m: float = 5.0
+    rel_error: float = 0.05
+    max_speed_mps: float = 45.0
+
+    def __post_init__(self) -> None:
+        if self.abs_error_m < 0 or not 0 <= self.rel_error < 1 or self.max_speed_mps < 0:
+            raise ValueError(f"Odometer needs abs_error_m >= 0, 0 <= rel_error < 1: {self}")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Parameters of :func:`run_locator`.
+
+    Attributes
+    ----------
+    locator : LocatorConfig
+        Error model, ``k_sigma``, window, FDE.
+    integrity : {"active", "passive"}
+    trust : {"masks", "cutoff", "none"}
+    cutoff_deg : float
+        Flat elevation cut-off of ``trust="cutoff"``.
+    extra_margin_deg : float
+        Added to the masks' own margins.
+    odometer : Odometer
+    start_uncertainty_m : float
+        Half width of the first predicted interval around ``start_chainage_m``.
+    heading_check : bool
+    beacon_spacing_m, heading_tolerance_deg : float
+    odometry_check : bool
+    """
+
+    locator: LocatorConfig = field(default_factory=LocatorConfig)
+    integrity: str = "active"
+    trust: str = "masks"
+    cutoff_deg: float = 15.0
+    extra_margin_deg: float = 0.0
+    odometer: Odometer = field(default_factory=Odometer)
+    start_uncertainty_m: float = 50.0
+    heading_check: bool = True
+    beacon_spacing_m: float = 100.0
+    heading_tolerance_deg: float = 2.0
+    odometry_check: bool = True
+
+    def __post_init__(self) -> None:
+        if self.integrity not in INTEGRITY_MODES:
+            raise ValueError(f"integrity must be one of {INTEGRITY_MODES}, got {self.integrity!r}")
+        if self.trust not in TRUST_MODES:
+            raise ValueError(f"trust must be one of {TRUST_MODES}, got {self.trust!r}")
+        if not 0 <= self.cutoff_deg < 90:
+            raise ValueError(f"cutoff_deg must be in [0, 90), got {self.cutoff_deg}")
+        if self.extra_margin_deg < 0 or self.start_uncertainty_m < 0:
+            raise ValueError("extra_margin_deg and start_uncertainty_m must be >= 0")
+        if not self.beacon_spacing_m > 0:
+            raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["locator"]["model"]["error"] = dataclasses.asdict(self.locator.model.error)
+        return d
+
+
+_EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
+
+
+def run_locator(
+    path: AntennaPath,
+    source: EpochSource,
+    *,
+    start_chainage_m: float,
+    config: RunConfig | None = None,
+    masks: MaskSet | None = None,
+    progress: Callable[[int], Any] | None = None,
+) -> pd.DataFrame:
+    """Locate the train at every epoch of a source.
+
+    Parameters
+    ----------
+    path : AntennaPath
+        Track and antenna height.
+    source : EpochSource
+        :class:`locator.sources.SimSource` or :class:`locator.sources.RinexSource`.
+    start_chainage_m : float
+        Where the run starts (within ``config.start_uncertainty_m``).
+    config : RunConfig, optional
+    masks : MaskSet, optional
+        Required with ``trust="masks"``.
+    progress : callable, optional
+        Called with the number of epochs done (e.g. ``tqdm.update``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per epoch: ``epoch``, ``gps_s``, ``pred_lo_m``, ``pred_hi_m`` (odometry
+        prediction used for the trust decision), ``n_received``, ``n_trusted``, ``n_used``,
+        ``chainage_m``, ``lo_m``, ``hi_m``, ``length_m``, ``mode``, ``integrity``, ``flags``,
+        ``flag_names``, ``claim`` (safety claim after every check), ``claim_fix`` (the fix's own
+        claim, before the heading and odometry checks), ``wls_chainage_m``, ``wls_sigma_m``,
+        ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
+        ``excluded`` (``sat:reason`` items), ``solve_ms``.
+    """
+    cfg = config or RunConfig()
+    if cfg.trust == "masks" and masks is None:
+        raise ValueError("trust='masks' needs masks: pass a MaskSet or choose trust='cutoff'")
+    if not 0.0 <= start_chainage_m <= path.length_m:
+        raise ValueError(
+            f"start_chainage_m {start_chainage_m:.1f} is off the track (0-{path.length_m:.1f} m)"
+        )
+    gps = np.asarray(source.gps_s, float)
+    odo = source.odometer_m
+    length = path.length_m
+    u0 = cfg.start_uncertainty_m
+    anchor = (start_chainage_m - u0, start_chainage_m + u0, 0.0 if odo is None else odo[0], gps[0])
+    rows: list[dict[str, Any]] = []
+    for k in range(len(gps)):
+        t0 = time.perf_counter()
+        lo_a, hi_a, odo_a, t_a = anchor
+        if odo is not None:
+            d = float(odo[k] - odo_a)
+            grow = cfg.odometer.abs_error_m + cfg.odometer.rel_error * abs(d)
+        else:
+            d, grow = 0.0, cfg.odometer.abs_error_m + cfg.odometer.max_speed_mps * (gps[k] - t_a)
+        p_lo = float(np.clip(lo_a + d - grow, 0.0, length))
+        p_hi = float(np.clip(hi_a + d + grow, 0.0, length))
+        centre = 0.5 * (p_lo + p_hi)
+        data = source.observe(k, path.ecef_at(centre))
+        excluded = dict(data.rejected)
+        n_rx = len(data.sats)
+        if n_rx:
+            az, el = direction_at(path, centre, data.sat_ecef_m)
+        else:
+            az = el = np.zeros(0)
+        trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
+        idx = np.flatnonzero(trusted)
+        fix: Fix | None = None
+        if len(idx) >= 2:
+            fix = locate(
+                path, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], prior_m=centre,
+                integrity=cfg.integrity, config=cfg.locator,
+                sats=[data.sats[i] for i in idx],
+            )  # fmt: skip
+        row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
+        if fix is not None:
+            for s in fix.excluded_sats:
+                excluded[s] = "fde"
+            hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
+            flags = int(fix.flags)
+            if hc is not None:
+                row["heading_status"] = hc.status.name.lower()
+                row["heading_diff_deg"] = hc.difference_deg
+                if hc.status == HeadingStatus.FAIL:
+                    flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
+            claim = row["claim_fix"]
+            if claim and cfg.odometry_check and (fix.hi_m < p_lo or fix.lo_m > p_hi):
+                flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
+            claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+            row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
+            if claim:
+                anchor = (fix.lo_m, fix.hi_m, 0.0 if odo is None else odo[k], gps[k])
+        row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())
+        row["solve_ms"] = 1e3 * (time.perf_counter() - t0)
+        rows.append(row)
+        if progress is not None:
+            progress(1)
+    return pd.DataFrame(rows)
+
+
+def _trust(
+    cfg: RunConfig,
+    masks: MaskSet | None,
+    lo_m: float,
+    hi_m: float,
+    az: NDArray,
+    el: NDArray,
+    sats: tuple[str, ...],
+    excluded: dict[str, str],
+) -> NDArray:
+    """Trusted satellites of the epoch; records the reason of every other one in ``excluded``."""
+    if len(sats) == 0:
+        return np.zeros(0, bool)
+    if cfg.trust == "masks":
+        assert masks is not None
+        sel = select_satellites(masks, lo_m, hi_m, az, el, extra_margin_deg=cfg.extra_margin_deg)
+        for s, r in zip(sats, sel.reason, strict=True):
+            if r:
+                excluded[s] = _EXCLUSION_NAMES[int(r)]
+        return np.asarray(sel.trusted, bool)
+    floor = cfg.cutoff_deg if cfg.trust == "cutoff" else 0.0
+    ok = el > floor
+    for s, good in zip(sats, ok, strict=True):
+        if not good:
+            excluded[s] = "below_cutoff" if cfg.trust == "cutoff" else "below_horizon"
+    return ok
+
+
+def _row(
+    k: int,
+    gps_s: float,
+    p_lo: float,
+    p_hi: float,
+    n_rx: int,
+    n_trusted: int,
+    fix: Fix | None,
+    integrity: str,
+) -> dict[str, Any]:
+    row: dict[str, Any] = {
+        "epoch": k, "gps_s": gps_s, "pred_lo_m": p_lo, "pred_hi_m": p_hi,
+        "n_received": n_rx, "n_trusted": n_trusted, "n_used": 0,
+        "chainage_m": np.nan, "lo_m": np.nan, "hi_m": np.nan, "length_m": np.nan,
+        "mode": IntervalMode.NONE.name.lower(), "integrity": integrity,
+        "flags": int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM), "flag_names": "",
+        "claim": False, "claim_fix": False, "wls_chainage_m": np.nan, "wls_sigma_m": np.nan,
+        "heading_status": "", "heading_diff_deg": np.nan, "used": "",
+    }  # fmt: skip
+    row["flag_names"] = flag_names(row["flags"])
+    if fix is None:
+        return row
+    wls = fix.wls
+    row.update(
+        n_used=int(fix.used.sum()), chainage_m=fix.chainage_m, lo_m=fix.lo_m, hi_m=fix.hi_m,
+        length_m=fix.length_m, mode=fix.mode.name.lower(), flags=int(fix.flags),
+        flag_names=flag_names(int(fix.flags)), claim_fix=bool(fix.safety_claim),
+        claim=bool(fix.safety_claim),
+        wls_chainage_m=wls.chainage_m if wls is not None else np.nan,
+        wls_sigma_m=wls.sigma_chainage_m if wls is not None else np.nan,
+        used=" ".join(s for s, u in zip(fix.sats, fix.used, strict=True) if u),
+    )  # fmt: skip
+    return row
+
+
+def _heading(
+    path: AntennaPath, cfg: RunConfig, fix: Fix, sat: NDArray, rho: NDArray, el: NDArray
+) -> Any:
+    """Heading check of the fix against its virtual beacon, or None when not applicable."""
+    if not cfg.heading_check or fix.used.sum() < 4 or not np.isfinite(fix.chainage_m):
+        return None
+    s, sp = fix.chainage_m, cfg.beacon_spacing_m
+    b = np.floor((s - 0.5 * sp) / sp) * sp
+    if b < 0.0:  # no beacon behind: take the one ahead
+        b = np.ceil((s + 0.5 * sp) / sp) * sp
+    if not 0.0 <= b <= path.length_m:
+        return None
+    beacon = path.ecef_at(b)
+    lat, lon, _ = ecef_to_geodetic(beacon)
+    chord = (path.ecef_at(s) - beacon) @ enu_rotation(lat, lon).T
+    az, _, _ = enu_to_azel(chord)
+    u = fix.used
+    sigma = cfg.locator.model.error.sigma_m(el[u])
+    return check_heading(
+        beacon, float(az), sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg
+    )

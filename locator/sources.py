@@ -1,0 +1,233 @@
+"""Epoch sources of the locator: simulated runs and real RINEX observations.
+
+The epoch loop (:func:`locator.run.run_locator`) asks a source, epoch by epoch, for the
+corrected pseudoranges of the signals the receiver tracks, given an approximate antenna position
+(the centre of the predicted interval; the corrections need it to ~100 m). Two sources:
+
+* :class:`SimSource` - a :class:`locator.simfile.SimRun` of the synthetic world: every received
+  signal (LOS and NLOS alike: a receiver cannot tell them apart), with the truth kept for
+  :mod:`locator.evaluate`, and an odometer with a scale error;
+* :class:`RinexSource` - a RINEX 2/3 observation file and broadcast navigation
+  (:class:`locator.corrections.RangeModel`): single-frequency pseudoranges corrected for the
+  satellite clock, relativity, group delay, Earth rotation, Klobuchar ionosphere and troposphere.
+  Satellites without usable navigation data are reported per epoch with the reason.
+
+Pairs of pseudoranges are differenced, so every satellite of an epoch must share one receiver
+clock: the simulator has a single clock; on real data mixing systems needs inter-system biases,
+which the 1-D locator does not estimate, so :class:`RinexSource` takes one system unless told
+otherwise (``constellation``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from locator.corrections import RangeModel
+from locator.observations import Observations, PseudorangeSelection
+from locator.simfile import SignalState, SimRun
+from predisat.satellites import select_satellites
+
+__all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource"]
+
+
+class EpochData(NamedTuple):
+    """The usable signals of one epoch.
+
+    Attributes
+    ----------
+    sats : tuple of str, length n
+    sat_ecef_m : ndarray, shape (n, 3)
+        Satellite positions at transmission, in the Earth-fixed frame of reception, metres.
+    pseudorange_m : ndarray, shape (n,)
+        Corrected pseudoranges (one receiver clock left in them), metres.
+    rejected : mapping of str to str
+        Satellites observed but not usable, with the reason.
+    """
+
+    sats: tuple[str, ...]
+    sat_ecef_m: NDArray
+    pseudorange_m: NDArray
+    rejected: Mapping[str, str]
+
+
+class EpochSource(Protocol):
+    """What :func:`locator.run.run_locator` needs from a source of epochs."""
+
+    @property
+    def gps_s(self) -> NDArray: ...
+
+    @property
+    def odometer_m(self) -> NDArray | None:
+        """Odometer distance per epoch, signed toward increasing chainage (None: no odometer)."""
+        ...
+
+    def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData: ...
+
+    def describe(self) -> dict[str, Any]: ...
+
+
+@dataclass(frozen=True, eq=False)
+class SimSource:
+    """Epochs of a simulated run.
+
+    Attributes
+    ----------
+    sim : SimRun
+    odometer_scale_error : float
+        Relative scale error of the simulated odometer (wheel wear, slip): the odometer reads
+        ``(1 + e)`` times the true distance. ETCS allows 5 % (SUBSET-041).
+    include_nlos : bool
+        Give NLOS signals to the locator (a real receiver does); False shows the ideal.
+    constellation : str
+        Systems used (``"all"``, ``"G"``, ``"GE"``, ...).
+    """
+
+    sim: SimRun
+    odometer_scale_error: float = 0.02
+    include_nlos: bool = True
+    constellation: str = "all"
+
+    def __post_init__(self) -> None:
+        if not abs(self.odometer_scale_error) < 0.5:
+            raise ValueError(
+                f"odometer_scale_error must be within +-0.5, got {self.odometer_scale_error}"
+            )
+
+    @property
+    def gps_s(self) -> NDArray:
+        return self.sim.gps_s
+
+    @property
+    def truth_chainage_m(self) -> NDArray:
+        return self.sim.chainage_m
+
+    @property
+    def odometer_m(self) -> NDArray:
+        c = self.sim.chainage_m
+        return (c - c[0]) * (1.0 + self.odometer_scale_error)
+
+    @cached_property
+    def _columns(self) -> NDArray:
+        keep = set(select_satellites(self.sim.sats, self.constellation))
+        return np.array([s in keep for s in self.sim.sats], bool)
+
+    def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData:
+        state = self.sim.state[epoch]
+        take = state == SignalState.LOS
+        if self.include_nlos:
+            take = take | (state == SignalState.NLOS)
+        take &= self._columns
+        j = np.flatnonzero(take)
+        return EpochData(
+            tuple(self.sim.sats[k] for k in j),
+            np.array(self.sim.sat_ecef_m[epoch, j]),
+            np.array(self.sim.corrected_m[epoch, j]),
+            {},
+        )
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "source": "simulation",
+            "odometer_scale_error": self.odometer_scale_error,
+            "include_nlos": self.include_nlos,
+            "constellation": self.constellation,
+            "sim": {k: self.sim.meta.get(k) for k in ("seed", "world_seed", "t0_gps_s",
+                                                       "duration_s", "rate_hz", "track")},
+        }  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class RinexSource:
+    """Epochs of a RINEX observation file with broadcast navigation.
+
+    Attributes
+    ----------
+    model : RangeModel
+        Broadcast ephemeris and ionosphere (:meth:`RangeModel.from_rinex_nav`).
+    obs : Observations
+    constellation : str
+        Systems used; one system by default (module docstring).
+    priority : mapping of system letter to codes, optional
+        Pseudorange code priority (:meth:`Observations.pseudorange`).
+    odometer : ndarray, shape (n_epoch,), optional
+        Odometer distance per epoch, metres; None when the receiver has none (the run then
+        bounds the motion by a maximum speed).
+    """
+
+    model: RangeModel
+    obs: Observations
+    constellation: str = "G"
+    priority: Mapping[str, Sequence[str]] | None = None
+    odometer: NDArray | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        if self.odometer is not None and np.shape(self.odometer) != self.obs.gps_s.shape:
+            raise ValueError(
+                f"odometer must have one value per epoch ({self.obs.gps_s.shape}), got "
+                f"{np.shape(self.odometer)}"
+            )
+        if not self._columns.any():
+            raise ValueError(
+                f"{self.obs.path}: no satellite of constellation {self.constellation!r}; it has "
+                f"{sorted({s[0] for s in self.obs.sats})}"
+            )
+
+    @property
+    def gps_s(self) -> NDArray:
+        return self.obs.gps_s
+
+    @property
+    def odometer_m(self) -> NDArray | None:
+        return None if self.odometer is None else np.asarray(self.odometer, float)
+
+    @cached_property
+    def _selection(self) -> PseudorangeSelection:
+        return self.obs.pseudorange(self.priority)
+
+    @cached_property
+    def _model(self) -> RangeModel:
+        return self.model.with_glonass_slots(self.obs.header.glonass_slots)
+
+    @cached_property
+    def _columns(self) -> NDArray:
+        keep = set(select_satellites(self.obs.sats, self.constellation))
+        return np.array([s in keep for s in self.obs.sats], bool)
+
+    def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData:
+        pr = self._selection.pseudorange_m[epoch]
+        have = np.isfinite(pr) & self._columns
+        j = np.flatnonzero(have)
+        sats = tuple(self.obs.sats[k] for k in j)
+        if not sats:
+            return EpochData((), np.zeros((0, 3)), np.zeros(0), {})
+        codes = list(self._selection.code[epoch, j])
+        cr = self._model.correct(float(self.obs.gps_s[epoch]), sats, pr[j], rx_ecef_m, codes)
+        ok = cr.usable & np.isfinite(cr.corrected_m)
+        rejected = {s: str(r) or "not usable" for s, r, u in zip(sats, cr.reason, ok, strict=True)
+                    if not u}  # fmt: skip
+        return EpochData(
+            tuple(s for s, u in zip(sats, ok, strict=True) if u),
+            cr.sat_ecef_m[ok],
+            cr.corrected_m[ok],
+            rejected,
+        )
+
+    def where(self, epoch: int) -> str:
+        """File, line and epoch of ``epoch``, for messages."""
+        return self.obs.where(epoch)
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "source": "rinex",
+            "obs": str(self.obs.path),
+            "nav": [str(p) for p in getattr(self.model.ephemeris, "sources", ())],
+            "constellation": self.constellation,
+            "odometer": self.odometer is not None,
+            "marker": self.obs.header.marker_name,
+        }

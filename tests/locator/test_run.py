@@ -1,0 +1,165 @@
+"""Tests of the epoch loop (locator.run) on synthetic geometry with known truth.
+
+Pseudoranges are Euclidean distances from the true antenna position to satellites at chosen
+directions plus a clock and Gaussian noise (tests/locator/_scene.py); the truth is the chainage
+the ranges were made at.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.fde import FixFlag, LocatorConfig
+from locator.run import RunConfig, RunFlag, flag_names, run_locator
+from locator.sources import EpochData
+from predisat.interval import ErrorModel, IntervalModel
+from predisat.masks import MaskSet
+from tests.locator._scene import ranges, sky, straight_path
+
+SIGMA_M = 1.0
+MODEL = LocatorConfig(model=IntervalModel(ErrorModel(a_m=0.7, b_m=0.7), k_sigma=3.0))
+# az, el of 8 satellites seen from the start; the track runs toward azimuth 60 deg
+AZ = np.array([10.0, 60.0, 100.0, 150.0, 200.0, 240.0, 300.0, 340.0])
+EL = np.array([70.0, 25.0, 40.0, 55.0, 30.0, 20.0, 45.0, 35.0])
+
+
+class FakeSource:
+    """Ranges at known chainages; optional bias per (epoch, satellite) and odometer."""
+
+    def __init__(self, path, truth_m, bias_m=None, odometer_m=None, seed=0):
+        self.path = path
+        self.truth_m = np.asarray(truth_m, float)
+        x0 = path.ecef_at(self.truth_m[0])
+        self.sat = sky(x0, AZ, EL)
+        self.names = tuple(f"G{k + 1:02d}" for k in range(len(AZ)))
+        self.bias = np.zeros((len(self.truth_m), len(AZ))) if bias_m is None else bias_m
+        self.odo = self.truth_m - self.truth_m[0] if odometer_m is None else odometer_m
+        self.rng = np.random.default_rng(seed)
+        self.gps_s = np.arange(len(self.truth_m), dtype=float)
+
+    @property
+    def odometer_m(self):
+        return self.odo
+
+    def observe(self, k, rx_ecef_m):
+        x = self.path.ecef_at(self.truth_m[k])
+        rho = ranges(self.sat, x, SIGMA_M * 0.5, self.rng) + self.bias[k]
+        return EpochData(self.names, self.sat, rho, {})
+
+    def describe(self):
+        return {"source": "fake"}
+
+
+@pytest.fixture(scope="module")
+def path():
+    return straight_path(heading_deg=60.0, length_m=4000.0)
+
+
+def truth_run(n=40, start=1000.0, speed=15.0):
+    return start + speed * np.arange(n)
+
+
+def test_clean_run_claims_and_contains_the_truth(path):
+    truth = truth_run()
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    assert len(ep) == len(truth)
+    assert ep["claim"].all()
+    assert (ep["mode"] == "three_pairs").all()
+    assert ((ep["lo_m"] <= truth) & (truth <= ep["hi_m"])).all()
+    assert np.abs(ep["chainage_m"] - truth).max() < 10.0
+    # the odometry prediction (last interval moved by the odometer) holds the truth too
+    assert ((ep["pred_lo_m"] <= truth) & (truth <= ep["pred_hi_m"])).all()
+    assert (ep["n_used"] == len(AZ)).all() and (ep["excluded"] == "").all()
+
+
+def test_mask_keeps_out_satellites_in_a_blocked_sector(path):
+    truth = truth_run()
+    c = np.arange(0.0, 4001.0, 10.0)
+    az_bins = np.arange(0.0, 360.0, 1.0)
+    # a 60 deg wall over azimuths 90-260 (satellites G03, G04, G05 and G06)
+    mask = np.where((az_bins >= 90) & (az_bins <= 260), 60.0, 0.0)
+    masks = MaskSet.from_track(path.track, c, np.tile(mask, (len(c), 1)))
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="masks"), masks=masks)  # fmt: skip
+    blocked = {"G03", "G04", "G05", "G06"}
+    for used, excl in zip(ep["used"], ep["excluded"], strict=True):
+        assert blocked.isdisjoint(used.split())
+        assert {item.split(":")[0] for item in excl.split()} == blocked
+        assert all(item.endswith(":below_mask") for item in excl.split())
+    assert (ep["n_trusted"] == 4).all() and (ep["mode"] == "all_pairs").all()
+
+
+def test_cutoff_excludes_low_satellites(path):
+    truth = truth_run(n=5)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="cutoff", cutoff_deg=26.0))  # fmt: skip
+    low = {f"G{k + 1:02d}" for k in np.flatnonzero(EL < 26.0)}
+    for excl in ep["excluded"]:
+        assert {i.split(":")[0] for i in excl.split()} == low
+        assert all(i.endswith(":below_cutoff") for i in excl.split())
+
+
+def test_fde_excludes_a_biased_satellite(path):
+    truth = truth_run(n=10)
+    bias = np.zeros((len(truth), len(AZ)))
+    bias[5:, 1] = 60.0  # G02 turns NLOS-like from epoch 5
+    ep = run_locator(path, FakeSource(path, truth, bias_m=bias), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    assert all("G02:fde" in e for e in ep["excluded"][5:])
+    assert not any("G02" in e for e in ep["excluded"][:5])
+    ok = ep["claim"].to_numpy()
+    assert ((ep["lo_m"] <= truth) & (truth <= ep["hi_m"]))[ok].all()
+
+
+def test_odometry_conflict_voids_the_claim(path):
+    truth = truth_run(n=12)
+    odo = truth - truth[0]
+    odo[6:] += 400.0  # the odometer jumps 400 m ahead (slip, wrong reading)
+    ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    assert ep["claim"][:6].all()
+    assert (ep["flags"][6] & RunFlag.ODOMETRY_CONFLICT) and not ep["claim"][6]
+    assert "ODOMETRY_CONFLICT" in ep["flag_names"][6]
+    assert ep["claim_fix"][6]  # the GNSS fix itself claimed: only the cross-check caught it
+    # without the check the same epoch is claimed
+    off = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                      config=RunConfig(MODEL, trust="none", odometry_check=False))  # fmt: skip
+    assert off["claim"][6]
+
+
+def test_no_odometer_bounds_motion_by_max_speed(path):
+    truth = np.full(6, 2000.0)
+    src = FakeSource(path, truth)
+    src.odo = None
+    ep = run_locator(path, src, start_chainage_m=2000.0, config=RunConfig(MODEL, trust="none"))
+    width = ep["pred_hi_m"] - ep["pred_lo_m"]
+    # after a claimed epoch the prediction is that interval +- (5 m + 45 m/s * 1 s)
+    assert np.allclose(width[1:], (ep["hi_m"] - ep["lo_m"])[:-1] + 2 * 50.0)
+
+
+def test_too_few_satellites_make_no_claim(path):
+    truth = truth_run(n=3)
+    src = FakeSource(path, truth)
+    src.sat, src.names = src.sat[:3], src.names[:3]
+    src.bias = src.bias[:, :3]
+    ep = run_locator(path, src, start_chainage_m=truth[0], config=RunConfig(MODEL, trust="none"))
+    assert (ep["mode"] == "best_pair").all() and not ep["claim"].any()
+    assert all("NO_SAFETY_CLAIM" in f for f in ep["flag_names"])
+
+
+def test_guards(path):
+    src = FakeSource(path, truth_run(n=2))
+    with pytest.raises(ValueError, match="needs masks"):
+        run_locator(path, src, start_chainage_m=1000.0, config=RunConfig(trust="masks"))
+    with pytest.raises(ValueError, match="off the track"):
+        run_locator(path, src, start_chainage_m=-5.0, config=RunConfig(trust="none"))
+    with pytest.raises(ValueError, match="trust must be"):
+        RunConfig(trust="maybe")
+
+
+def test_flag_names():
+    assert flag_names(0) == ""
+    f = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.HEADING_FAIL | RunFlag.ODOMETRY_CONFLICT)
+    assert flag_names(f) == "NO_SAFETY_CLAIM|HEADING_FAIL|ODOMETRY_CONFLICT"
