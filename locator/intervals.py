@@ -243,7 +243,7 @@ def fit_error_model(
     for _ in range(3):
         var = a2 + b2 * q
         w = np.where(ok, 1.0 / var, 0.0)
-        w /= w.sum(axis=1, keepdims=True)
+        w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rows without data stay 0
         clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
         e2 = (r - clock) ** 2
         # E[e2] = (a2 + b2 q)(1 - 2w) + sum(w^2 (a2 + b2 q)) : linear in (a2, b2)

@@ -1,0 +1,110 @@
+"""Scoring a locator run against the true chainage.
+
+An epoch's outcome, with ``truth`` the true antenna chainage:
+
+* **inside**: ``lo <= truth <= hi``;
+* **HMI** (hazardously misleading information): a safety claim (``claim``) and truth outside
+  the interval, with no alarm - the event the masks exist to prevent;
+* **MI** (misleading, alarmed): truth outside an interval that carries no claim (the flags
+  warned the user);
+* **fix-level HMI** (``hmi_fix``): truth outside an interval the fix itself claimed, before the
+  heading and odometry checks of :mod:`locator.run` - what SATHIA and FDE alone would have
+  let through.
+
+:func:`score_run` adds these columns to the epoch table; :func:`summarise` reduces a table to
+the figures of the issue: shares of epochs per integrity mode and with a claim, interval length
+percentiles (claimed epochs), absolute error percentiles and the HMI counts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike
+
+from predisat.interval import IntervalMode
+
+__all__ = ["score_run", "summarise"]
+
+
+def score_run(epochs: pd.DataFrame, truth_chainage_m: ArrayLike) -> pd.DataFrame:
+    """The epoch table with truth, errors and outcome columns added (a new frame).
+
+    Parameters
+    ----------
+    epochs : pandas.DataFrame
+        :func:`locator.run.run_locator` output (``chainage_m``, ``lo_m``, ``hi_m``,
+        ``wls_chainage_m``, ``claim``, ``claim_fix``).
+    truth_chainage_m : array_like, shape (n_epoch,)
+        True antenna chainage per row, metres.
+
+    Returns
+    -------
+    pandas.DataFrame
+        With ``truth_m``, ``error_m`` (estimate - truth), ``wls_error_m``, ``inside``,
+        ``hmi``, ``hmi_fix``, ``mi``.
+    """
+    truth = np.asarray(truth_chainage_m, float)
+    if truth.shape != (len(epochs),):
+        raise ValueError(
+            f"truth_chainage_m has shape {truth.shape} for {len(epochs)} epochs; give one true "
+            "chainage per epoch (same order)"
+        )
+    out = epochs.copy()
+    lo = out["lo_m"].to_numpy(float)
+    hi = out["hi_m"].to_numpy(float)
+    has = np.isfinite(lo) & np.isfinite(hi)
+    inside = has & (lo <= truth) & (truth <= hi)
+    claim = out["claim"].to_numpy(bool)
+    out["truth_m"] = truth
+    out["error_m"] = out["chainage_m"].to_numpy(float) - truth
+    out["wls_error_m"] = out["wls_chainage_m"].to_numpy(float) - truth
+    out["inside"] = inside
+    out["hmi"] = claim & ~inside
+    out["hmi_fix"] = out["claim_fix"].to_numpy(bool) & has & ~inside
+    out["mi"] = has & ~claim & ~inside
+    return out
+
+
+def summarise(scored: pd.DataFrame) -> Mapping[str, float]:
+    """Figures of a scored table (:func:`score_run`).
+
+    Returns
+    -------
+    dict
+        ``epochs``; ``claim_share``; ``mode_<name>_share`` per :class:`IntervalMode`;
+        ``length_median_m`` / ``length_p95_m`` / ``length_max_m`` over claimed epochs;
+        ``abs_error_median_m`` / ``abs_error_p95_m`` over epochs with an estimate (and the same
+        for the WLS reference); ``hmi``, ``hmi_fix``, ``mi`` counts; ``inside_share`` of
+        claimed epochs.
+    """
+    n = len(scored)
+    den = max(n, 1)
+    claim = scored["claim"].to_numpy(bool)
+    out: dict[str, float] = {"epochs": float(n), "claim_share": float(claim.sum() / den)}
+    mode = scored["mode"].to_numpy(str)
+    for m in IntervalMode:
+        out[f"mode_{m.name.lower()}_share"] = float((mode == m.name.lower()).sum() / den)
+    length = scored["length_m"].to_numpy(float)[claim]
+    length = length[np.isfinite(length)]
+    q = np.percentile(length, [50, 95]) if len(length) else [np.nan, np.nan]
+    out.update(
+        length_median_m=float(q[0]),
+        length_p95_m=float(q[1]),
+        length_max_m=float(length.max()) if len(length) else np.nan,
+    )
+    for col, name in (("error_m", "abs_error"), ("wls_error_m", "wls_abs_error")):
+        if col in scored:
+            e = np.abs(scored[col].to_numpy(float))
+            e = e[np.isfinite(e)]
+            p = np.percentile(e, [50, 95]) if len(e) else [np.nan, np.nan]
+            out[f"{name}_median_m"], out[f"{name}_p95_m"] = float(p[0]), float(p[1])
+    for col in ("hmi", "hmi_fix", "mi"):
+        if col in scored:
+            out[col] = float(scored[col].to_numpy(bool).sum())
+    if "inside" in scored:
+        inside = scored["inside"].to_numpy(bool)
+        out["inside_share"] = float(inside[claim].mean()) if claim.any() else np.nan
+    return out

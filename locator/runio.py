@@ -1,0 +1,186 @@
+"""Files of a locator run: the epoch table, its metadata, figures, and error-model files.
+
+A run folder (``locator run --out DIR``) holds::
+
+    epochs.parquet | epochs.csv   one row per epoch (columns: locator.run.run_locator)
+    run.json                      format, software version, configuration, source, summary
+    interval_time.png             interval and estimate against time, trusted counts
+    interval_chainage.png         the same along the line
+    interval_lengths.png          histogram of claimed interval lengths per mode
+
+``locator evaluate`` adds ``scored.parquet|csv`` (truth, error, HMI columns),
+``evaluation.json`` and redraws the figures relative to the truth.
+
+An error-model file (``locator calibrate --out FILE.json``) is a JSON object with ``format``,
+``a_m``, ``b_m``, ``min_el_deg``, ``k_sigma`` and how it was fitted.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from locator import plots
+from predisat import __version__
+from predisat.atomic import write_bytes_atomic
+from predisat.interval import ErrorModel, IntervalModel
+
+__all__ = [
+    "ERROR_MODEL_FORMAT",
+    "RUN_FORMAT",
+    "RunFileError",
+    "read_error_model",
+    "read_run",
+    "write_error_model",
+    "write_figures",
+    "write_run",
+]
+
+RUN_FORMAT = "locator-run/1"
+ERROR_MODEL_FORMAT = "locator-error-model/1"
+FORMATS = ("parquet", "csv")
+
+
+class RunFileError(ValueError):
+    """A run folder or error-model file that cannot be read; the message names the fix."""
+
+
+def _json(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (tuple, set)):
+        return list(obj)
+    return str(obj)
+
+
+def _write_json(path: Path, data: Mapping[str, Any]) -> None:
+    text = json.dumps(data, indent=2, default=_json, allow_nan=True) + "\n"
+    write_bytes_atomic(path, text.encode())
+
+
+def write_table(df: pd.DataFrame, folder: Path, name: str, fmt: str) -> Path:
+    """Write ``name.parquet`` or ``name.csv`` atomically (removing the other format)."""
+    if fmt not in FORMATS:
+        raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
+    for ext in FORMATS:
+        (folder / f"{name}.{ext}").unlink(missing_ok=True)
+    path = folder / f"{name}.{fmt}"
+    if fmt == "parquet":
+        import io
+
+        buf = io.BytesIO()
+        df.to_parquet(buf, index=False)
+        write_bytes_atomic(path, buf.getvalue())
+    else:
+        write_bytes_atomic(path, df.to_csv(index=False, float_format="%.10g").encode())
+    return path
+
+
+def read_table(folder: Path, name: str) -> pd.DataFrame:
+    """``name.parquet`` or ``name.csv`` from ``folder``."""
+    for ext in FORMATS:
+        p = folder / f"{name}.{ext}"
+        if p.is_file():
+            if ext == "parquet":
+                return pd.read_parquet(p)
+            return pd.read_csv(p, keep_default_na=False, na_values=[""])
+    raise RunFileError(
+        f"{folder}: no {name}.parquet or {name}.csv; give a `locator run --out` folder"
+    )
+
+
+def write_run(
+    epochs: pd.DataFrame, folder: str | Path, meta: Mapping[str, Any], fmt: str = "parquet"
+) -> Path:
+    """Write a run folder (table and ``run.json``); returns the folder."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    write_table(epochs, out, "epochs", fmt)
+    _write_json(out / "run.json", {"format": RUN_FORMAT, "software_version": __version__, **meta})
+    return out
+
+
+def read_run(folder: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """The epoch table and metadata of a run folder."""
+    f = Path(folder)
+    meta_path = f / "run.json"
+    if not meta_path.is_file():
+        raise RunFileError(f"{f}: no run.json; give the folder written by `locator run --out`")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise RunFileError(f"{meta_path}: not valid JSON ({exc}); rerun `locator run`") from exc
+    if meta.get("format") != RUN_FORMAT:
+        raise RunFileError(f"{meta_path}: format {meta.get('format')!r} is not {RUN_FORMAT!r}")
+    epochs = read_table(f, "epochs")
+    if "claim" in epochs and epochs["claim"].dtype != bool:
+        for col in ("claim", "claim_fix"):
+            epochs[col] = epochs[col].astype(str).str.lower().isin(("true", "1"))
+    return epochs, meta
+
+
+def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> list[Path]:
+    """The three PNG figures of a run (relative to the truth when ``truth_m`` is present)."""
+    out = Path(folder)
+    figs = {
+        "interval_time.png": plots.interval_vs_time(epochs, title),
+        "interval_chainage.png": plots.interval_vs_chainage(epochs, title),
+        "interval_lengths.png": plots.length_histogram(epochs),
+    }
+    paths = []
+    for name, fig in figs.items():
+        import io
+
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100)
+        write_bytes_atomic(out / name, buf.getvalue())
+        paths.append(out / name)
+    return paths
+
+
+def write_error_model(
+    path: str | Path, model: IntervalModel, fitted: Mapping[str, Any] | None = None
+) -> Path:
+    """Write an error-model JSON file."""
+    e = model.error
+    data = {
+        "format": ERROR_MODEL_FORMAT,
+        "a_m": e.a_m,
+        "b_m": e.b_m,
+        "min_el_deg": e.min_el_deg,
+        "k_sigma": model.k_sigma,
+        "fitted": dict(fitted or {}),
+        "software_version": __version__,
+    }
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    _write_json(p, data)
+    return p
+
+
+def read_error_model(path: str | Path) -> IntervalModel:
+    """Read an error-model JSON file (:func:`write_error_model`)."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text())
+    except FileNotFoundError as exc:
+        raise RunFileError(f"{p}: no such file; make one with `locator calibrate`") from exc
+    except json.JSONDecodeError as exc:
+        raise RunFileError(f"{p}: not valid JSON ({exc})") from exc
+    if not isinstance(d, dict) or d.get("format") != ERROR_MODEL_FORMAT:
+        raise RunFileError(
+            f"{p}: not an error-model file ({ERROR_MODEL_FORMAT}); "
+            "make one with `locator calibrate`"
+        )
+    try:
+        err = ErrorModel(float(d["a_m"]), float(d["b_m"]), float(d.get("min_el_deg", 1.0)))
+        return IntervalModel(err, float(d.get("k_sigma", 2.0)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RunFileError(f"{p}: bad error model ({exc}); expected a_m, b_m, k_sigma") from exc
