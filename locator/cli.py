@@ -1,13 +1,297 @@
-"""Command line of the 1-D locator (``locator``)."""
+"""Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo.
+
+Errors from bad input are printed as one message naming the file and the fix (exit code 2).
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 from predisat import __version__
 
 __all__ = ["main"]
+
+
+class CliError(Exception):
+    """A user-facing error: printed without a traceback."""
+
+
+def _track(path: str | None, name: str | None) -> Any:
+    from predisat.cli import CliError as PredisatCliError
+    from predisat.cli import _load_track
+
+    try:
+        return _load_track(path, name)
+    except PredisatCliError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def _masks(args: argparse.Namespace) -> Any:
+    if args.masks is None:
+        return None
+    from predisat.maskio import read_masks
+
+    return read_masks(args.masks)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    from locator.fde import LocatorConfig
+    from locator.run import RunConfig
+    from locator.runio import read_error_model
+    from predisat.interval import IntervalModel
+
+    model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    if args.k_sigma is not None:
+        model = IntervalModel(model.error, args.k_sigma)
+    trust = "masks" if args.masks else ("cutoff" if args.cutoff is not None else "none")
+    return RunConfig(
+        LocatorConfig(model=model),
+        integrity=args.integrity,
+        trust=trust,
+        cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
+        extra_margin_deg=args.extra_margin,
+        start_uncertainty_m=args.start_uncertainty,
+        heading_check=not args.no_heading_check,
+    )
+
+
+def _progress(total: int, quiet: bool, desc: str) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="epoch", disable=quiet, mininterval=0.5)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from locator.workflow import simulate_to_folder, stop_and_go
+    from predisat.availability_run import load_navigation, parse_time
+    from predisat.satellites import default_window
+    from predisat.synth.world import World, WorldSpec
+
+    if args.world:
+        world = World.load(args.world, _track(args.track, args.track_name) if args.track else None)
+    else:
+        track = _track(args.track, args.track_name)
+        if args.scenery:
+            import yaml
+
+            spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()))
+        else:
+            spec = WorldSpec.mixed(args.from_km * 1e3, args.to_km * 1e3, seed=args.world_seed)
+        print(f"building the world ({spec.extent_m[0]:.0f}-{spec.extent_m[1]:.0f} m)")
+        world = World.build(track, spec, args.world_seed)
+    eph = load_navigation(args.nav)
+    t0 = parse_time(args.start, "--start")
+    if t0 is None:
+        t0 = float(default_window()[0] + 8 * 3600.0)
+    sim, folder = simulate_to_folder(
+        world, eph, args.out, t0_gps_s=t0, start_chainage_m=args.start_chainage,
+        direction=args.direction, profile=stop_and_go(cruise_mps=args.speed),
+        duration_s=args.duration, rate_hz=args.rate, seed=args.seed,
+        constellation=args.constellation, fmt=args.format, masks_out=not args.no_true_masks,
+    )  # fmt: skip
+    world.save(folder / "world.npz")
+    c = sim.counts().mean()
+    print(
+        f"simulated {sim.n_epoch} epochs, chainage {sim.chainage_m[0]:.0f} -> "
+        f"{sim.chainage_m[-1]:.0f} m; per epoch: {c['los']:.1f} LOS, {c['nlos']:.1f} NLOS, "
+        f"{c['lost']:.1f} lost -> {folder}"
+    )
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from locator.sathia import AntennaPath
+    from locator.sources import RinexSource, SimSource
+    from locator.workflow import _track_check, run_to_folder, static_truth
+
+    if bool(args.sim) == bool(args.obs):
+        raise CliError("give either --sim DIR (a simulated run) or --obs FILE with --nav FILES")
+    if args.masks and args.cutoff is not None:
+        raise CliError("--masks and --cutoff exclude each other; choose one trust rule")
+    source: Any
+    if args.sim:
+        from locator.simfile import SimRun
+
+        sim = SimRun.read(args.sim)
+        stored = Path(args.sim) / "world.npz"
+        if args.track is None and stored.is_file():  # the simulation's own track
+            from predisat.synth.world import World
+
+            track = World.load(stored).track
+        else:
+            track = _track(args.track, args.track_name)
+        path = AntennaPath(track, args.antenna_height)
+        _track_check(path, sim.antenna_ecef_m, args.sim)
+        source = SimSource(sim, constellation=args.constellation or "all")
+        start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
+    else:
+        if not args.nav:
+            raise CliError("--obs needs --nav FILES (RINEX navigation with the same day)")
+        from locator.corrections import RangeModel
+        from locator.observations import Observations
+
+        path = AntennaPath(_track(args.track, args.track_name), args.antenna_height)
+        obs = Observations.from_rinex(args.obs)
+        source = RinexSource(RangeModel.from_rinex_nav(args.nav), obs, args.constellation or "G")
+        start = args.start_chainage
+        if start is None:
+            hx = obs.header.approx_position_ecef_m
+            if not (hx == hx).all() or abs(hx).sum() == 0:
+                raise CliError(
+                    f"{args.obs}: no approximate position in the header; pass --start-chainage"
+                )
+            start = static_truth(hx, path)
+    if not (args.masks or args.cutoff is not None or args.no_masks):
+        raise CliError("no trust rule: pass --masks FILE, --cutoff DEG or --no-masks")
+    cfg = _config(args)
+    with _progress(len(source.gps_s), args.quiet, "locating") as bar:
+        epochs, folder = run_to_folder(
+            path, source, args.out, start_chainage_m=float(start), config=cfg,
+            masks=_masks(args), fmt=args.format, progress=bar.update,
+        )  # fmt: skip
+    claim = epochs["claim"].mean()
+    length = epochs.loc[epochs["claim"], "length_m"]
+    print(
+        f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, interval median "
+        f"{length.median():.1f} m, p95 {length.quantile(0.95):.1f} m -> {folder}"
+    )
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from locator.runio import read_run
+    from locator.workflow import evaluate_folder, truth_for
+
+    epochs, _ = read_run(args.run)
+    sim = None
+    if args.sim:
+        from locator.simfile import SimRun
+
+        sim = SimRun.read(args.sim)
+    truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv, chainage_m=args.truth_chainage)
+    s = evaluate_folder(args.run, truth)
+    print(_summary_text(s))
+    print(f"-> {Path(args.run) / 'evaluation.json'}, scored table and figures")
+    return 0
+
+
+def _summary_text(s: dict[str, float]) -> str:
+    return (
+        f"epochs {s['epochs']:.0f}; modes: three pairs {100 * s['mode_three_pairs_share']:.1f} %, "
+        f"all pairs {100 * s['mode_all_pairs_share']:.1f} %, best pair (no claim) "
+        f"{100 * s['mode_best_pair_share']:.1f} %, none {100 * s['mode_none_share']:.1f} %\n"
+        f"safety claim {100 * s['claim_share']:.1f} % of epochs; interval median "
+        f"{s['length_median_m']:.1f} m, p95 {s['length_p95_m']:.1f} m, "
+        f"max {s['length_max_m']:.1f} m\n"
+        f"|error| median {s['abs_error_median_m']:.2f} m, p95 {s['abs_error_p95_m']:.2f} m; "
+        f"HMI {s['hmi']:.0f} (before heading/odometry checks {s['hmi_fix']:.0f}); "
+        f"alarmed misleading {s['mi']:.0f}"
+    )
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from locator.calibrate import sim_residuals, static_residuals
+    from locator.workflow import calibrate_to_file
+
+    if bool(args.sim) == bool(args.obs):
+        raise CliError("give either --sim DIR [DIR ...] or --obs FILE --nav FILES")
+    if args.sim:
+        from locator.simfile import SimRun
+
+        states = [s.strip() for s in args.states.split(",")]
+        parts = [sim_residuals(SimRun.read(d), states) for d in args.sim]
+        n = max(p[0].shape[1] for p in parts)
+        el = np.concatenate(
+            [np.pad(p[0], ((0, 0), (0, n - p[0].shape[1])), constant_values=np.nan) for p in parts]
+        )
+        res = np.concatenate(
+            [np.pad(p[1], ((0, 0), (0, n - p[1].shape[1])), constant_values=np.nan) for p in parts]
+        )
+        fitted = {"simulations": list(args.sim), "states": states}
+    else:
+        if not args.nav:
+            raise CliError("--obs needs --nav FILES")
+        from locator.corrections import RangeModel
+        from locator.observations import Observations
+        from locator.sources import RinexSource
+
+        obs = Observations.from_rinex(args.obs)
+        x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
+        if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
+            raise CliError(f"{args.obs}: no station position in the header; pass --station X Y Z")
+        src = RinexSource(RangeModel.from_rinex_nav(args.nav), obs, args.constellation)
+        el, res = static_residuals(src, x)
+        fitted = {"obs": args.obs, "nav": list(args.nav), "station_ecef_m": x.tolist()}
+    model = calibrate_to_file(el, res, args.out, k_sigma=args.k_sigma, fitted=fitted)
+    e = model.error
+    print(
+        f"sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / sin el)^2 m^2 from "
+        f"{int(np.isfinite(res).sum())} residuals; k_sigma {model.k_sigma} -> {args.out} "
+        f"(figure {Path(args.out).with_suffix('.png')})"
+    )
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from locator.workflow import demo
+
+    t0 = time.perf_counter()
+    world = pipeline = None
+    if args.from_predisat_demo:
+        from predisat.maskio import read_masks
+        from predisat.synth.world import World
+        from predisat.track import demo_track
+
+        d = Path(args.from_predisat_demo)
+        world = World.load(d / "truth" / "world.npz", demo_track())
+        pipeline = read_masks(d / "masks" / "masks.parquet")
+    table = demo(args.out, world=world, pipeline_masks=pipeline, seed=args.seed)
+    print(format_demo_table(table))
+    print(f"locator demo: done in {time.perf_counter() - t0:.0f} s -> {args.out}")
+    return 0
+
+
+def format_demo_table(table: Any) -> str:
+    cols = {
+        "rule": "rule",
+        "claim_share": "claim %",
+        "mode_three_pairs_share": ">=6 sats %",
+        "length_median_m": "interval med m",
+        "length_p95_m": "p95 m",
+        "abs_error_median_m": "|err| med m",
+        "hmi": "HMI",
+        "hmi_fix": "HMI before checks",
+    }
+    t = table[list(cols)].rename(columns=cols).copy()
+    for c in ("claim %", ">=6 sats %"):
+        t[c] = 100 * t[c]
+    return str(t.round(1).to_string(index=False)) + (
+        "\n  (LOCOPROL on line 144: six satellites 60 % of the time; intervals about 70 m, up "
+        "to 600 m)"
+    )
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--masks", help="mask file (predisat process output or true_masks.parquet)")
+    p.add_argument("--cutoff", type=float, metavar="DEG", help="flat elevation cut-off instead")
+    p.add_argument("--no-masks", action="store_true", help="trust every received signal")
+    p.add_argument("--integrity", choices=("active", "passive"), default="active")
+    p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
+    p.add_argument("--k-sigma", type=float, help="pair interval half width in sigmas")
+    p.add_argument("--extra-margin", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--start-chainage", type=float, metavar="M",
+                   help="default: the simulation's, or the RINEX header position")  # fmt: skip
+    p.add_argument("--start-uncertainty", type=float, default=50.0, metavar="M")
+    p.add_argument("--antenna-height", type=float, default=4.0, metavar="M")
+    p.add_argument("--constellation", help="systems used (default: all for --sim, G for --obs)")
+    p.add_argument("--no-heading-check", action="store_true")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -15,16 +299,86 @@ def build_parser() -> argparse.ArgumentParser:
         prog="locator",
         description=(
             "1-D track-constrained GNSS locator (satellite-pair hyperbolic intersection with "
-            "the track, SATHIA) with mask-aware satellite selection. Subcommands arrive with "
-            "issue #5 (run, simulate, calibrate, evaluate)."
+            "the track, SATHIA) with mask-aware satellite selection and integrity checks."
         ),
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="simulate a train run's pseudoranges in a synthetic world")
+    p.add_argument("--world", help="world.npz (from `predisat synth` truth/ or a simulation)")
+    p.add_argument("--track", help="track GeoJSON/CSV (default: the demo line 144)")
+    p.add_argument("--track-name")
+    p.add_argument("--from-km", type=float, default=4.0)
+    p.add_argument("--to-km", type=float, default=6.3)
+    p.add_argument("--scenery", help="scenery recipe YAML (surveys/*.yaml)")
+    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--nav", nargs="+", help="RINEX nav / SP3 / TLE (default: embedded day)")
+    p.add_argument("--start", help="UTC start, ISO 8601 (default 08:00 of the embedded day)")
+    p.add_argument("--start-chainage", type=float, metavar="M")
+    p.add_argument("--direction", type=int, choices=(1, -1), default=1)
+    p.add_argument("--speed", type=float, default=20.0, metavar="MPS", help="cruise speed")
+    p.add_argument("--duration", type=float, metavar="S", help="default: to the world's end")
+    p.add_argument("--rate", type=float, default=1.0, metavar="HZ")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--constellation", default="all")
+    p.add_argument("--format", choices=("parquet", "csv"), default="parquet")
+    p.add_argument("--no-true-masks", action="store_true", help="skip true_masks.parquet")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("run", help="locate the train at every epoch (simulated or RINEX)")
+    p.add_argument("--track", help="track GeoJSON/CSV (default: the simulation's, or line 144)")
+    p.add_argument("--track-name")
+    p.add_argument("--sim", metavar="DIR", help="a `locator simulate` folder")
+    p.add_argument("--obs", metavar="FILE", help="RINEX 2/3 observation file")
+    p.add_argument("--nav", nargs="+", metavar="FILE", help="RINEX navigation files")
+    _run_arguments(p)
+    p.add_argument("--format", choices=("parquet", "csv"), default="parquet")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("evaluate", help="score a run against the true chainage")
+    p.add_argument("run", metavar="RUN_DIR")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--sim", metavar="DIR", help="the simulation the run was made from")
+    g.add_argument("--truth-csv", metavar="CSV", help="columns gps_s, chainage_m")
+    g.add_argument("--truth-chainage", type=float, metavar="M", help="a static antenna")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("calibrate", help="learn sigma(el) from data with known truth")
+    p.add_argument("--sim", nargs="+", metavar="DIR", help="simulated runs")
+    p.add_argument("--states", default="los", help="signal states to learn from (los,nlos)")
+    p.add_argument("--obs", metavar="FILE", help="static station RINEX observations")
+    p.add_argument("--nav", nargs="+", metavar="FILE")
+    p.add_argument("--station", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="station ECEF (default: the RINEX header position)")  # fmt: skip
+    p.add_argument("--constellation", default="G")
+    p.add_argument("--k-sigma", type=float, default=2.0)
+    p.add_argument("--out", required=True, metavar="JSON")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("demo", help="a simulated run on the demo line under several trust rules")
+    p.add_argument("--out", default="locator_demo", metavar="DIR")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--from-predisat-demo", metavar="DIR",
+                   help="reuse a `predisat demo` folder: its world and pipeline masks")  # fmt: skip
+    p.set_defaults(func=cmd_demo)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    parser.parse_args(argv)
-    parser.print_help()
-    return 0
+    args = parser.parse_args(argv)
+    if getattr(args, "func", None) is None:
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        print(f"locator: error: {exc}", file=sys.stderr)
+        return 2
+    except (ValueError, OSError, KeyError) as exc:
+        print(f"locator: error: {exc}", file=sys.stderr)
+        return 2

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from locator.sathia import AntennaPath
 from predisat.geodesy import LocalFrame, azel_to_enu, ecef_to_geodetic, enu_rotation
+from predisat.synth.world import Stretch, World, WorldSpec, material_id
 from predisat.track import TrackMap
 
 FRAME = LocalFrame(50.45, 4.45, 150.0)
@@ -71,3 +72,32 @@ def ranges(sat: NDArray, x_ecef: NDArray, sigma_m=0.0, rng=None, clock_m: float 
     if rng is not None:
         r = r + rng.normal(0.0, 1.0, r.shape) * sigma_m
     return r
+
+
+CANYON_FRAME = LocalFrame(44.0, 6.2, 600.0)
+LEFT_X_M, LEFT_TOP_M = -10.0, 30.0  # wall west of a north-bound track: on its left
+RIGHT_X_M, RIGHT_TOP_M = 10.0, 15.0
+
+
+def canyon_track(length_m: float = 600.0) -> TrackMap:
+    """A straight north-bound track from the canyon frame's origin."""
+    y = np.linspace(0.0, length_m, 7)
+    enu = np.stack([np.zeros_like(y), y, np.zeros_like(y)], -1)
+    lat, lon, h = CANYON_FRAME.to_geodetic(enu)
+    return TrackMap.from_latlon(lat, lon, h, name="straight", tolerance_m=0.01)
+
+
+def _wall(x_m: float, top_m: float, y0: float = -100.0, y1: float = 700.0):
+    v = np.array([[x_m, y0, -1.0], [x_m, y1, -1.0], [x_m, y1, top_m], [x_m, y0, top_m]])
+    return v, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def canyon_world() -> World:
+    """Two smooth vertical rock walls, 10 m left (30 m high) and 10 m right (15 m high)."""
+    track = canyon_track()
+    (vl, fl), (vr, fr) = _wall(LEFT_X_M, LEFT_TOP_M), _wall(RIGHT_X_M, RIGHT_TOP_M)
+    verts = np.concatenate([vl, vr])
+    faces = np.concatenate([fl, fr + 4]).astype(np.int32)
+    mat = np.full(len(faces), material_id("rock"), np.int16)
+    spec = WorldSpec((Stretch("rock_walls", 0.0, 600.0),), catenary=False, hills=False)
+    return World(track, track.frame, spec, 0, verts, faces, mat)

@@ -17,41 +17,28 @@ from locator.corrections import OMEGA_E_RADPS, RangeModel
 from locator.multipath import ReflectorIndex, SignalModel, dll_error_m
 from locator.simfile import SignalState, SimRun
 from locator.simulate import ClockModel, simulate_run, transmit_positions
-from predisat.geodesy import LocalFrame, azel_to_enu, enu_rotation
+from predisat.geodesy import azel_to_enu, enu_rotation
 from predisat.interval import ErrorModel
 from predisat.orbits import C_MPS
-from predisat.synth.world import MATERIALS, Stretch, World, WorldSpec, material_id
-from predisat.track import TrackMap
+from predisat.synth.world import MATERIALS, Stretch, World, WorldSpec
 from predisat.trainrun import SpeedProfile
+from tests.locator._scene import (
+    CANYON_FRAME as FRAME,
+)
+from tests.locator._scene import (
+    LEFT_X_M,
+    canyon_track,
+    canyon_world,
+)
 
-FRAME = LocalFrame(44.0, 6.2, 600.0)
 T0 = 1.277e9
-LEFT_X_M, LEFT_TOP_M = -10.0, 30.0  # wall west of a north-bound track: on its left
-RIGHT_X_M, RIGHT_TOP_M = 10.0, 15.0
 H_ANT_M = 4.0
-
-
-def straight_track(length_m: float = 600.0) -> TrackMap:
-    y = np.linspace(0.0, length_m, 7)
-    lat, lon, h = FRAME.to_geodetic(np.stack([np.zeros_like(y), y, np.zeros_like(y)], -1))
-    return TrackMap.from_latlon(lat, lon, h, name="straight", tolerance_m=0.01)
-
-
-def wall(x_m: float, top_m: float, y0: float = -100.0, y1: float = 700.0):
-    v = np.array([[x_m, y0, -1.0], [x_m, y1, -1.0], [x_m, y1, top_m], [x_m, y0, top_m]])
-    return v, np.array([[0, 1, 2], [0, 2, 3]])
 
 
 @pytest.fixture(scope="module")
 def canyon() -> World:
     """Two smooth vertical rock walls, 10 m left (30 m high) and 10 m right (15 m high)."""
-    track = straight_track()
-    (vl, fl), (vr, fr) = wall(LEFT_X_M, LEFT_TOP_M), wall(RIGHT_X_M, RIGHT_TOP_M)
-    verts = np.concatenate([vl, vr])
-    faces = np.concatenate([fl, fr + 4]).astype(np.int32)
-    mat = np.full(len(faces), material_id("rock"), np.int16)
-    spec = WorldSpec((Stretch("rock_walls", 0.0, 600.0),), catenary=False, hills=False)
-    return World(track, track.frame, spec, 0, verts, faces, mat)
+    return canyon_world()
 
 
 @pytest.fixture(scope="module")
@@ -225,7 +212,7 @@ def test_dll_error_matches_brute_force(spacing):
 
 
 def test_tunnel_loses_everything():
-    track = straight_track()
+    track = canyon_track()
     spec = WorldSpec((Stretch("open", 0, 600), Stretch("tunnel", 250, 450)),
                      catenary=False, hills=False, terrain_margin_m=200.0)  # fmt: skip
     world = World.build(track, spec, seed=1)
@@ -363,7 +350,7 @@ def test_open_world_real_sky_feeds_the_locator(real_eph):
     from predisat.interval import IntervalModel
     from predisat.satellites import default_window
 
-    track = straight_track(900.0)
+    track = canyon_track(900.0)
     spec = WorldSpec((Stretch("open", 0, 880),), catenary=False, hills=False,
                      terrain_margin_m=300.0)  # fmt: skip
     world = World.build(track, spec, seed=2)
@@ -396,7 +383,7 @@ def test_simulated_run_file_round_trip(canyon, canyon_index, tmp_path):
 
 def test_recipe_rock_wall_reflection():
     """A smooth rock wall of a World.build recipe: image-method delay, lost behind it."""
-    track = straight_track()
+    track = canyon_track()
     wall_m = {"height_m": 40, "distance_m": 8, "roughness_m": 0, "batter": 0}
     spec = WorldSpec((Stretch("open", 0, 590), Stretch("rock_walls", 100, 500, "left", wall_m)),
                      catenary=False, hills=False, terrain_margin_m=200.0)  # fmt: skip

@@ -1,0 +1,301 @@
+"""The jobs behind the ``locator`` command line: simulate, run, evaluate, calibrate, demo.
+
+Each function reads its inputs, calls the library and writes a folder or file; the command
+line (:mod:`locator.cli`) only parses arguments. Errors in the inputs raise ``ValueError``
+subclasses whose message names the file and the fix.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike
+
+from locator.evaluate import score_run, summarise
+from locator.fde import LocatorConfig
+from locator.run import RunConfig, run_locator
+from locator.runio import read_run, write_figures, write_run, write_table
+from locator.sathia import AntennaPath
+from locator.simfile import SimRun
+from locator.simulate import simulate_run
+from locator.sources import EpochSource, SimSource
+from predisat.interval import IntervalModel
+from predisat.masks import MaskSet
+from predisat.trainrun import SpeedProfile
+
+__all__ = [
+    "DEMO_RANGE_M",
+    "calibrate_to_file",
+    "demo",
+    "evaluate_folder",
+    "run_to_folder",
+    "simulate_to_folder",
+    "static_truth",
+    "stop_and_go",
+    "truth_for",
+    "with_model",
+]
+
+DEMO_RANGE_M = (4000.0, 6300.0)  # line 144 km 4.0-6.3, the stretch of `predisat demo`
+MAX_TRACK_OFFSET_M = 5.0
+
+
+def stop_and_go(
+    cruise_mps: float = 20.0,
+    accel_s: float = 40.0,
+    cruise_s: float = 30.0,
+    brake_s: float = 30.0,
+    dwell_s: float = 60.0,
+) -> SpeedProfile:
+    """Start from rest, cruise, stop at a station, dwell, and leave again at cruise speed."""
+    if not cruise_mps > 0 or min(accel_s, cruise_s, brake_s, dwell_s) <= 0:
+        raise ValueError("stop_and_go needs a positive cruise speed and positive durations")
+    t = np.cumsum([0.0, accel_s, cruise_s, brake_s, dwell_s, accel_s])
+    v = [0.0, cruise_mps, cruise_mps, 0.0, 0.0, cruise_mps]
+    return SpeedProfile.from_time_table(t, v)
+
+
+def _track_check(path: AntennaPath, ecef_m: np.ndarray, label: str) -> None:
+    """The antenna positions of a run must lie on the given track."""
+    from predisat.geodesy import ecef_to_geodetic
+
+    lat, lon, h = ecef_to_geodetic(np.asarray(ecef_m, float)[[0, -1]])
+    pr = path.track.project(lat, lon, h)
+    off = float(np.max(np.hypot(pr.offset_m, pr.along_m)))
+    if off > MAX_TRACK_OFFSET_M:
+        raise ValueError(
+            f"{label}: the antenna is {off:.0f} m away from track {path.track.name!r}; pass the "
+            "--track the run was made on"
+        )
+
+
+def simulate_to_folder(
+    world: Any,
+    ephemeris: Any,
+    out: str | Path,
+    *,
+    t0_gps_s: float,
+    start_chainage_m: float | None = None,
+    direction: int = +1,
+    profile: SpeedProfile | None = None,
+    duration_s: float | None = None,
+    rate_hz: float = 1.0,
+    seed: int = 0,
+    constellation: str = "all",
+    fmt: str = "parquet",
+    masks_out: bool = True,
+) -> tuple[SimRun, Path]:
+    """Simulate a run and write it (and the world's true masks, for ``--masks``) to ``out``.
+
+    The run starts 15 m inside the world's scenery at the end chosen by ``direction`` unless
+    ``start_chainage_m`` is given, and lasts until 15 m before the other end by default.
+    """
+    profile = profile or stop_and_go()
+    lo, hi = world.extent_m
+    start = (
+        (lo + 15.0 if direction > 0 else hi - 15.0)
+        if start_chainage_m is None
+        else start_chainage_m
+    )
+    if duration_s is None:
+        span = (hi - start - 15.0) if direction > 0 else (start - lo - 15.0)
+        grid = np.arange(0.0, 3600.0, 0.5)
+        duration_s = float(np.floor(np.interp(span, profile.distance_at(grid), grid)))
+    sim = simulate_run(
+        world, ephemeris, start, t0_gps_s, profile, duration_s, rate_hz,
+        direction=direction, seed=seed, constellation=constellation,
+    )  # fmt: skip
+    folder = sim.write(out, fmt)
+    if masks_out:
+        from predisat.maskio import write_masks
+        from predisat.synth.truth import true_masks
+
+        tm = true_masks(world)
+        ms = MaskSet.from_arrays(
+            tm.chainage_m, tm.lat_deg, tm.lon_deg, tm.h_m, tm.heading_deg, tm.mask_el_deg,
+            margin_deg=1.0, provenance={"source": "true masks of the simulated world",
+                                        "margin": "1 deg"},
+        )  # fmt: skip
+        write_masks(ms, folder / "true_masks.parquet")
+    return sim, folder
+
+
+def run_to_folder(
+    path: AntennaPath,
+    source: EpochSource,
+    out: str | Path,
+    *,
+    start_chainage_m: float,
+    config: RunConfig,
+    masks: MaskSet | None = None,
+    fmt: str = "parquet",
+    meta: Mapping[str, Any] | None = None,
+    progress: Callable[[int], Any] | None = None,
+) -> tuple[pd.DataFrame, Path]:
+    """Run the locator over a source and write the run folder with its figures."""
+    epochs = run_locator(
+        path, source, start_chainage_m=start_chainage_m, config=config, masks=masks,
+        progress=progress,
+    )  # fmt: skip
+    info = {
+        "track": path.track.name,
+        "antenna_height_m": path.antenna_height_m,
+        "start_chainage_m": start_chainage_m,
+        "config": config.to_dict(),
+        "source": source.describe(),
+        "masks": None if masks is None else dict(masks.provenance),
+        "summary": dict(summarise(epochs)),
+        **dict(meta or {}),
+    }
+    folder = write_run(epochs, out, info, fmt)
+    write_figures(epochs, folder, title=f"{path.track.name}: trust {config.trust}")
+    return epochs, folder
+
+
+def truth_for(
+    epochs: pd.DataFrame,
+    *,
+    sim: SimRun | None = None,
+    truth_csv: str | Path | None = None,
+    chainage_m: float | None = None,
+) -> np.ndarray:
+    """True chainage per epoch from a simulation, a ``gps_s,chainage_m`` CSV or a constant."""
+    t = epochs["gps_s"].to_numpy(float)
+    if sum(x is not None for x in (sim, truth_csv, chainage_m)) != 1:
+        raise ValueError("give exactly one truth: a simulation, a truth CSV or a chainage")
+    if chainage_m is not None:
+        return np.full(len(t), float(chainage_m))
+    if sim is not None:
+        ts, cs = sim.gps_s, sim.chainage_m
+        label = "the simulation"
+    else:
+        df = pd.read_csv(truth_csv)  # type: ignore[arg-type]
+        missing = {"gps_s", "chainage_m"} - set(df.columns)
+        if missing:
+            raise ValueError(
+                f"{truth_csv}: missing columns {sorted(missing)}; need gps_s,chainage_m"
+            )
+        ts, cs = df["gps_s"].to_numpy(float), df["chainage_m"].to_numpy(float)
+        label = str(truth_csv)
+    if len(ts) == 0 or t.min() < ts.min() - 1e-6 or t.max() > ts.max() + 1e-6:
+        raise ValueError(
+            f"{label} does not cover the run's epochs ({t.min():.0f}-{t.max():.0f} gps_s)"
+        )
+    return np.interp(t, ts, cs)
+
+
+def evaluate_folder(
+    run_dir: str | Path, truth: np.ndarray, fmt: str | None = None
+) -> dict[str, float]:
+    """Score a run folder against the truth; writes ``scored``, ``evaluation.json``, figures."""
+    folder = Path(run_dir)
+    epochs, meta = read_run(folder)
+    scored = score_run(epochs, truth)
+    fmt = fmt or ("csv" if (folder / "epochs.csv").is_file() else "parquet")
+    write_table(scored, folder, "scored", fmt)
+    summary = dict(summarise(scored))
+    (folder / "evaluation.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth")
+    return summary
+
+
+def calibrate_to_file(
+    el_deg: np.ndarray,
+    residual_m: np.ndarray,
+    out: str | Path,
+    *,
+    k_sigma: float = 2.0,
+    fitted: Mapping[str, Any] | None = None,
+) -> IntervalModel:
+    """Fit the error model, write it (JSON) and its figure (``.png`` beside it)."""
+    from locator.calibrate import binned_sigma, calibration_figure
+    from locator.intervals import fit_error_model
+    from locator.runio import write_error_model
+
+    model = IntervalModel(fit_error_model(el_deg, residual_m), k_sigma=k_sigma)
+    table = binned_sigma(el_deg, residual_m)
+    info = {**dict(fitted or {}), "residuals": int(np.isfinite(residual_m).sum()),
+            "binned_sigma": table.to_dict(orient="records")}  # fmt: skip
+    p = write_error_model(out, model, info)
+    calibration_figure(table, model.error).savefig(p.with_suffix(".png"), dpi=100)
+    return model
+
+
+def demo(
+    out: str | Path,
+    *,
+    world: Any = None,
+    pipeline_masks: MaskSet | None = None,
+    seed: int = 1,
+    hour_utc: float = 8.0,
+    log: Callable[[str], Any] = print,
+) -> pd.DataFrame:
+    """A simulated run on the demo line located under several trust rules, scored.
+
+    Builds (or takes) the demo world of line 144 km 4.0-6.3, simulates a stop-and-go run on
+    the embedded navigation day, and locates it with the world's true masks, with the pipeline
+    masks when given, with no masks, and with a 15 deg cut-off.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per rule with :func:`locator.evaluate.summarise` figures.
+    """
+    from predisat.satellites import default_ephemeris, default_window
+    from predisat.synth.world import World, WorldSpec
+    from predisat.track import demo_track
+
+    root = Path(out)
+    if world is None:
+        log("locator demo 1/3: building the synthetic world (line 144, km 4.0-6.3)")
+        world = World.build(demo_track(), WorldSpec.mixed(*DEMO_RANGE_M, seed=0), 0)
+    eph = default_ephemeris()
+    t0 = float(default_window()[0] + hour_utc * 3600.0)
+    log("locator demo 2/3: simulating the train run (LOS, multipath, NLOS, loss) and true masks")
+    sim, sim_dir = simulate_to_folder(world, eph, root / "simulation", t0_gps_s=t0, seed=seed)
+    from predisat.maskio import read_masks
+
+    truth_masks = read_masks(sim_dir / "true_masks.parquet")
+    path = AntennaPath(world.track, float(sim.meta["antenna_height_m"]))
+    rules: dict[str, tuple[str, MaskSet | None, float]] = {
+        "true masks": ("masks", truth_masks, 0.0),
+        "no masks": ("none", None, 0.0),
+        "15 deg cut-off": ("cutoff", None, 15.0),
+    }
+    if pipeline_masks is not None:
+        rules = {"pipeline masks": ("masks", pipeline_masks, 0.0), **rules}
+    log(f"locator demo 3/3: locating {sim.n_epoch} epochs under {len(rules)} trust rules")
+    rows = []
+    for label, (trust, masks, cut) in rules.items():
+        cfg = RunConfig(LocatorConfig(), trust=trust, cutoff_deg=cut or 15.0)
+        name = label.replace(" ", "_").replace("-", "")
+        _, folder = run_to_folder(
+            path, SimSource(sim), root / name, start_chainage_m=float(sim.chainage_m[0]),
+            config=cfg, masks=masks, meta={"rule": label},
+        )  # fmt: skip
+        summary = evaluate_folder(folder, sim.chainage_m)
+        rows.append({"rule": label, **summary})
+    table = pd.DataFrame(rows)
+    table.to_csv(root / "summary.csv", index=False)
+    return table
+
+
+def with_model(config: RunConfig, model: IntervalModel | None) -> RunConfig:
+    """``config`` with its locator's error model replaced (when given)."""
+    if model is None:
+        return config
+    return replace(config, locator=replace(config.locator, model=model))
+
+
+def static_truth(obs_header_ecef_m: ArrayLike, path: AntennaPath) -> float:
+    """Chainage of a static antenna on ``path`` (its projection)."""
+    from predisat.geodesy import ecef_to_geodetic
+
+    lat, lon, h = ecef_to_geodetic(np.asarray(obs_header_ecef_m, float))
+    return float(path.track.project(lat, lon, h).chainage_m)

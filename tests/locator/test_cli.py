@@ -1,0 +1,106 @@
+"""End-to-end tests of the ``locator`` command line in a small synthetic canyon.
+
+The world is two vertical rock walls beside a straight 600 m track (tests/locator/_scene.py);
+the satellites are the real orbits of the embedded navigation day. Ground truth comes from the
+simulator's ray casting: a signal is NLOS when the direct ray is blocked and a reflection is
+tracked.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from locator.cli import main
+from locator.runio import read_error_model, read_run
+from locator.sathia import AntennaPath
+from locator.simfile import SignalState, SimRun
+from locator.workflow import _track_check
+from predisat.track import demo_track
+from tests.locator._scene import canyon_world
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cli")
+    world = canyon_world()
+    world.save(root / "world.npz")
+    rc = main(["-q", "simulate", "--world", str(root / "world.npz"), "--duration", "40",
+               "--speed", "10", "--seed", "3", "--out", str(root / "sim")])  # fmt: skip
+    assert rc == 0
+    return root / "sim"
+
+
+def _nlos_used(epochs: pd.DataFrame, sim: SimRun) -> int:
+    col = {s: k for k, s in enumerate(sim.sats)}
+    return sum(
+        sim.state[k, col[s]] == SignalState.NLOS
+        for k, used in enumerate(epochs["used"])
+        for s in str(used).split()
+    )
+
+
+def test_simulate_writes_a_run_with_truth_and_masks(sim_dir):
+    sim = SimRun.read(sim_dir)
+    assert sim.n_epoch == 41
+    assert (sim_dir / "true_masks.parquet").is_file() and (sim_dir / "world.npz").is_file()
+    # the canyon walls block and reflect: NLOS signals must be there for the next tests to bite
+    assert (sim.state == SignalState.NLOS).sum() > 20
+
+
+def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path):
+    sim = SimRun.read(sim_dir)
+    assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out",
+                 str(tmp_path / "none")]) == 0  # fmt: skip
+    none, meta = read_run(tmp_path / "none")
+    assert len(none) == sim.n_epoch and meta["config"]["trust"] == "none"
+    assert _nlos_used(none, sim) > 0  # without masks the receiver's NLOS signals get in
+    masks = str(sim_dir / "true_masks.parquet")
+    assert main(["-q", "run", "--sim", str(sim_dir), "--masks", masks, "--out",
+                 str(tmp_path / "masks"), "--format", "csv"]) == 0  # fmt: skip
+    masked, _ = read_run(tmp_path / "masks")
+    assert _nlos_used(masked, sim) == 0
+    assert (tmp_path / "masks" / "epochs.csv").is_file()
+    for name in ("interval_time.png", "interval_chainage.png", "interval_lengths.png"):
+        assert (tmp_path / "masks" / name).stat().st_size > 5000
+
+    assert main(["evaluate", str(tmp_path / "masks"), "--sim", str(sim_dir)]) == 0
+    ev = json.loads((tmp_path / "masks" / "evaluation.json").read_text())
+    scored = pd.read_csv(tmp_path / "masks" / "scored.csv")
+    assert ev["epochs"] == sim.n_epoch
+    assert np.allclose(scored["truth_m"], sim.chainage_m)
+    assert ev["hmi"] == int(((scored["claim"]) & ~scored["inside"]).sum())
+
+
+def test_calibrate_learns_the_simulated_noise(sim_dir, tmp_path):
+    out = tmp_path / "model.json"
+    assert main(["calibrate", "--sim", str(sim_dir), "--out", str(out)]) == 0
+    model = read_error_model(out)
+    # the simulator draws direct-signal noise from ErrorModel() (a = b = 2 m: 3.46 m at 45 deg)
+    # plus code multipath off the walls
+    s45 = float(model.error.sigma_m(45.0))
+    assert 2.5 < s45 < 6.0
+    assert out.with_suffix(".png").is_file()
+    assert main(["-q", "run", "--sim", str(sim_dir), "--cutoff", "15", "--error-model", str(out),
+                 "--out", str(tmp_path / "cut")]) == 0  # fmt: skip
+    _, meta = read_run(tmp_path / "cut")
+    assert meta["config"]["locator"]["model"]["error"]["a_m"] == pytest.approx(model.error.a_m)
+
+
+def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
+    assert main(["run", "--sim", str(sim_dir), "--out", str(tmp_path / "x")]) == 2
+    assert "no trust rule" in capsys.readouterr().err
+    assert main(["run", "--sim", str(sim_dir), "--no-masks", "--error-model",
+                 str(tmp_path / "missing.json"), "--out", str(tmp_path / "x")]) == 2  # fmt: skip
+    assert "locator calibrate" in capsys.readouterr().err
+    assert main(["run", "--no-masks", "--out", str(tmp_path / "x")]) == 2
+    assert "--sim DIR" in capsys.readouterr().err
+
+
+def test_a_run_on_another_track_is_refused(sim_dir):
+    sim = SimRun.read(sim_dir)
+    with pytest.raises(ValueError, match="away from track"):
+        _track_check(AntennaPath(demo_track(), 4.0), sim.antenna_ecef_m, "sim")
