@@ -42,7 +42,7 @@ __all__ = [
     "with_model",
 ]
 
-DEMO_RANGE_M = (4000.0, 6300.0)  # line 144 km 4.0-6.3, the stretch of `predisat demo`
+DEMO_RANGE_M = (4000.0, 6300.0)  # line 144 km 4.0-6.3 (`predisat demo` renders km 4-6)
 MAX_TRACK_OFFSET_M = 5.0
 
 

@@ -157,7 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"skies, seed {args.seed} -> {out}"
     )
     t0 = time.perf_counter()
-    print("demo 1/4: rendering the synthetic survey and its ground truth")
+    print("demo 1/5: rendering the synthetic survey and its ground truth")
     synth = generate_survey(
         track,
         from_m,
@@ -173,26 +173,37 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t_synth = time.perf_counter() - t0
     sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
 
-    print("demo 2/4: processing the frames into elevation masks")
+    print("demo 2/5: processing the frames into elevation masks")
     t1 = time.perf_counter()
     processed = process_survey(
         synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
     )
     t_process = time.perf_counter() - t1
 
-    print("demo 3/4: masks against the synthetic ground truth")
+    print("demo 3/5: masks against the synthetic ground truth")
     table = evaluate_masks(compare(processed.masks, load_truth(synth.truth_dir)))
     overall = table[table["source"] == "all"]
     with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
     print(overall[with_cols].round(4).to_string(index=False))
 
-    print("demo 4/4: availability report (embedded navigation day, GPS)")
+    print("demo 4/5: availability report (embedded navigation day, GPS)")
     run = run_availability(
         processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
     )
     cols = ["rule", "share_ge2", "share_ge4", "share_ge6", "interval_median_m", "interval_p95_m"]
     print(run.summary[cols].round(3).to_string(index=False))
     print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
+
+    print("demo 5/5: a simulated train run located with the 1-D locator under each trust rule")
+    from locator.cli import format_demo_table
+    from locator.workflow import demo as locator_demo
+    from predisat.synth.world import World
+
+    world = World.load(synth.truth_dir / "world.npz", track)
+    loc = locator_demo(
+        out / "locator", world=world, pipeline_masks=processed.masks, log=lambda s: None
+    )
+    print(format_demo_table(loc))
     dt = time.perf_counter() - t0
     print(
         f"demo: done in {dt:.0f} s; {synth.n_frames} frames at {synth.n_positions} positions "
@@ -202,7 +213,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"  ground truth:  {synth.truth_dir}\n"
         f"  contact sheet: {sheet}\n"
         f"  masks:         {processed.masks_path}\n"
-        f"  report:        {run.report_html}"
+        f"  report:        {run.report_html}\n"
+        f"  locator runs:  {out / 'locator'}"
     )
     return 0
 
