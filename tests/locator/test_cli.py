@@ -104,3 +104,32 @@ def test_a_run_on_another_track_is_refused(sim_dir):
     sim = SimRun.read(sim_dir)
     with pytest.raises(ValueError, match="away from track"):
         _track_check(AntennaPath(demo_track(), 4.0), sim.antenna_ecef_m, "sim")
+
+
+def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
+    """GEONET 0759 (10 epochs, GPS C1) on a straight track through its known position."""
+    from predisat.geodesy import LocalFrame, ecef_to_geodetic
+
+    station = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759
+    lat, lon, h = (float(v) for v in ecef_to_geodetic(station))
+    d = np.linspace(-1000.0, 1000.0, 21)
+    la, lo, hh = LocalFrame(lat, lon, h).to_geodetic(
+        np.stack([d * np.sin(0.7), d * np.cos(0.7), np.zeros_like(d)], -1)
+    )
+    track = tmp_path / "virtual.csv"
+    pd.DataFrame({"lat_deg": la, "lon_deg": lo, "h_m": hh}).to_csv(track, index=False)
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    args = ["-q", "run", "--track", str(track), "--obs", str(obs), "--nav", str(nav),
+            "--no-masks", "--antenna-height", "0", "--out", str(tmp_path / "real")]  # fmt: skip
+    assert main(args) == 0
+    ep, meta = read_run(tmp_path / "real")
+    assert len(ep) == 10 and meta["source"]["source"] == "rinex"
+    # the start came from the header position projected on the track: the middle, 1000 m
+    assert meta["start_chainage_m"] == pytest.approx(1000.0, abs=20.0)
+    assert (ep["n_used"] >= 6).all() and ep["claim"].all()
+    # SATHIA on real single-frequency ranges: within a few metres of the station
+    assert np.abs(ep["chainage_m"] - 1000.0).max() < 5.0
+    assert ((ep["lo_m"] <= 1000.0) & (1000.0 <= ep["hi_m"])).all()
+    assert main(["evaluate", str(tmp_path / "real"), "--truth-chainage", "1000"]) == 0
+    assert "epochs 10" in capsys.readouterr().out
