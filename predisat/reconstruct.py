@@ -485,8 +485,10 @@ def horizon(
                 rel = (h - np.float32(a[2])) * np.float32(up[2])
                 rel += (fx - ax) * np.float32(up[0] * c) + (fy - ay) * np.float32(up[1] * c)
                 ratio = np.where(valid, rel / near, np.float32(-np.inf))
-            best[alive] = np.maximum(best[alive], ratio.max(axis=1))
-            alive = alive[valid[:, -1]]
+            b = np.maximum(best[alive], ratio.max(axis=1))
+            best[alive] = b
+            # a ray that met an unknown cell is blocked whatever lies farther
+            alive = alive[valid[:, -1] & (b < np.inf)]
         unknown[i] = np.isposinf(best)
         with np.errstate(invalid="ignore"):
             el[i] = np.degrees(np.arctan(best.astype(float)))

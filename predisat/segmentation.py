@@ -533,8 +533,12 @@ def _learned_sky(
             (w - 1) / 2.0, (h - 1) / 2.0, min(h, w) / 2.0 * (1.0 - opt.circle_margin)
         )
     prob = sky_probability(img, classifier, circle, refine=opt.refine_guided)
-    prob = np.where(valid, prob, 0.0).astype(np.float32)
-    sky = (prob >= 0.5) & valid
+    all_valid = bool(valid.all())
+    if not all_valid:
+        prob = np.where(valid, prob, 0.0).astype(np.float32)
+    sky = prob >= 0.5
+    if not all_valid:
+        sky &= valid
     n_valid = max(int(valid.sum()), 1)
     if sky.any() and not opt.fisheye:
         # Sky must be reachable from the top edge, or be a large region (sky under a deck).
@@ -544,7 +548,8 @@ def _learned_sky(
             area >= opt.min_island_fraction * n_valid
         )
         keep[0] = False
-        sky = keep[lbl]
+        if not keep[1:].all():
+            sky = keep[lbl]
     if opt.max_hole_fraction > 0 and (~sky & valid).any():
         ob = (~sky & valid).astype(np.uint8)
         n, lbl, stats, _ = cv2.connectedComponentsWithStats(ob, connectivity=4)
@@ -558,16 +563,17 @@ def _learned_sky(
         if opt.fisheye:
             inner[:] = True
         area = stats[:, cv2.CC_STAT_AREA]
-        mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)
         # Enclosed specks are noise; larger hanging regions the classifier hesitated on are
         # dark cloud bases (a real bridge deck or canopy scores near 0).
-        small_hole = (inner & (area < opt.max_hole_fraction * n_valid)) | (
-            floating
-            & (area < opt.uncertain_hole_fraction * n_valid)
-            & (mean_p >= opt.uncertain_hole_probability)
-        )
+        small_hole = inner & (area < opt.max_hole_fraction * n_valid)
+        uncertain = floating & (area < opt.uncertain_hole_fraction * n_valid)
+        uncertain[0] = False
+        if uncertain.any():  # the mean probability per region only when it can matter
+            mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)
+            small_hole |= uncertain & (mean_p >= opt.uncertain_hole_probability)
         small_hole[0] = False
-        sky |= small_hole[lbl]
+        if small_hole.any():
+            sky |= small_hole[lbl]
     if opt.gaps and sky.any():
         sky |= sky_gaps(img, sky, valid, opt)
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
@@ -603,7 +609,7 @@ def probability_confidence(
     -------
     ndarray of float, shape (W,)
     """
-    p = np.asarray(prob, float)
+    p = np.asarray(prob)  # read only in the bands, in float64 there
     s = np.asarray(skyline_row, float)
     h, w = p.shape
     if s.shape != (w,):
@@ -611,15 +617,17 @@ def probability_confidence(
     valid = np.ones((h, w), bool) if valid_mask is None else np.asarray(valid_mask, bool)
     band = max(3, h // 30) if band_px is None else int(band_px)
     gap = max(1, h // 120) if gap_px is None else int(gap_px)
-    margin = np.where(valid, 2.0 * p - 1.0, 0.0)
-    cum = np.concatenate([np.zeros((1, w)), np.cumsum(margin, axis=0)])
-    cnt = np.concatenate([np.zeros((1, w)), np.cumsum(valid, axis=0)])
     cols = np.arange(w)
+    steps = np.arange(band)[:, None]
 
     def mean(a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
-        a, b = np.clip(a, 0, h), np.clip(b, 0, h)
-        n = cnt[b, cols] - cnt[a, cols]
-        return (cum[b, cols] - cum[a, cols]) / np.maximum(n, 1), n
+        # only the two bands are read (band x W pixels), not the whole frame
+        rows = a[None, :] + steps
+        rc = np.clip(rows, 0, h - 1)
+        ok = (rows >= 0) & (rows < b[None, :]) & (rows < h) & valid[rc, cols]
+        total = np.where(ok, 2.0 * p[rc, cols].astype(float) - 1.0, 0.0).sum(axis=0)
+        n = ok.sum(axis=0)
+        return total / np.maximum(n, 1), n
 
     b0 = np.where(np.isfinite(s), s + 0.5, 0).astype(int)
     up, n_up = mean(b0 - gap - band, b0 - gap)

@@ -17,7 +17,7 @@ import itertools
 import json
 import os
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -157,10 +157,24 @@ class SkyClassifier:
         x = np.asarray(features, np.float32)
         if x.ndim != 2 or x.shape[1] != len(FEATURE_NAMES):
             raise ValueError(f"features must have shape (n, {len(FEATURE_NAMES)}), got {x.shape}")
-        a = (x - self.mean) / self.scale
-        for w, b in zip(self.weights[:-1], self.biases[:-1], strict=True):
-            a = np.maximum(a @ w + b, 0.0)
-        return np.asarray((a @ self.weights[-1] + self.biases[-1])[:, 0], np.float32)
+        ws, bs = self._folded
+        a = x
+        for w, b in zip(ws[:-1], bs[:-1], strict=True):
+            a = a @ w  # a new array: the in-place steps below never touch ``features``
+            a += b
+            np.maximum(a, 0.0, out=a)
+        return np.asarray(a @ ws[-1][:, 0] + bs[-1][0], np.float32)
+
+    @cached_property
+    def _folded(self) -> tuple[tuple[NDArray[np.float32], ...], tuple[NDArray[np.float32], ...]]:
+        """Layers with the standardisation folded into the first (one pass less per pixel)."""
+        w0 = np.asarray(self.weights[0], np.float64)
+        scale = np.asarray(self.scale, np.float64)
+        first_w = (w0 / scale[:, None]).astype(np.float32)
+        first_b = (self.biases[0] - (np.asarray(self.mean, np.float64) / scale) @ w0).astype(
+            np.float32
+        )
+        return (first_w, *self.weights[1:]), (first_b, *self.biases[1:])
 
     def predict(self, features: ArrayLike) -> NDArray[np.float32]:
         """Sky probability of feature rows.

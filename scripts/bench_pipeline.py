@@ -2,7 +2,7 @@
 
 Usage::
 
-    python scripts/bench_pipeline.py SURVEY_DIR [--workers 1] [--chunk-m 200] [--json out.json]
+    python scripts/bench_pipeline.py SURVEY_DIR [--workers 1] [--chunk-m 1000] [--json out.json]
 
 Decodes every frame of the survey once (``cv2.imread``, the floor), then runs the whole
 pipeline (segmentation, reconstruction, chunk files, merge) from scratch in a temporary folder,
@@ -28,7 +28,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("survey", type=Path)
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--chunk-m", type=float, default=200.0)
+    ap.add_argument("--chunk-m", type=float, default=1000.0)
     ap.add_argument("--json", type=Path, default=Path("bench_pipeline.json"))
     args = ap.parse_args()
 

@@ -160,3 +160,32 @@ def test_concat_masksets_round_trip(first_run) -> None:
     coarse = MaskSet.from_arrays([0.0], [50.0], [4.0], [0.0], [0.0], np.zeros((1, 4)))
     with pytest.raises(MaskError, match="az_step_deg"):
         concat_masksets([parts[0], coarse])
+
+
+def test_changed_code_redoes_chunks_and_segmentation(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import predisat.pipeline as pl
+
+    out = tmp_path / "masks"
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    first = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    again = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    assert (again.chunks_done, again.frames_segmented) == (0, 0)
+    # a development install edits code without bumping the version: nothing stale is reused
+    real = pl.code_fingerprint
+    monkeypatch.setattr(pl, "code_fingerprint", lambda parts=None: "f" * 16 + real(parts))
+    edited = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    assert edited.chunks_done == 3 and edited.chunks_skipped == 0
+    assert edited.frames_segmented == first.frames_segmented > 0
+    assert len(list((out / "cache").iterdir())) == 2
+
+
+def test_code_fingerprint_covers_the_named_files() -> None:
+    from predisat.pipeline import SEGMENTATION_CODE, code_fingerprint
+
+    seg = code_fingerprint(SEGMENTATION_CODE)
+    assert seg == code_fingerprint(SEGMENTATION_CODE)  # deterministic
+    assert seg != code_fingerprint(["reconstruct.py"]) != code_fingerprint()
+    with pytest.raises(OSError):
+        code_fingerprint(["no_such_module.py"])
