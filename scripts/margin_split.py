@@ -35,7 +35,7 @@ import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,11 +65,14 @@ __all__ = [
 _SECTOR_ROWS = (*SECTORS, "all")
 
 
-def render(seed: int, out_dir: Path, workers: int = 1) -> Path:
+def render(
+    seed: int, out_dir: Path, workers: int = 1, camera: Literal["pinhole", "fisheye"] = "pinhole"
+) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
     Same call as ``predisat.cli.cmd_demo``: demo track, chainage ``DEMO_FROM_KM`` to
-    ``DEMO_TO_KM``, mixed sky, the default pinhole resized to ``DEMO_IMAGE_SIZE_PX``.
+    ``DEMO_TO_KM``, mixed sky, the default ``camera`` (``"pinhole"`` as the demo, or
+    ``"fisheye"``) resized to ``DEMO_IMAGE_SIZE_PX``.
 
     Returns
     -------
@@ -88,14 +91,14 @@ def render(seed: int, out_dir: Path, workers: int = 1) -> Path:
         sky="mixed",
         seed=seed,
         out_dir=out_dir,
-        camera=default_camera("pinhole").resized(*DEMO_IMAGE_SIZE_PX),
+        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),
         progress=False,
         workers=workers,
         overwrite=True,
     )
     print(
-        f"render: seed {seed}, {synth.n_frames} frames at {synth.n_positions} positions -> "
-        f"{synth.survey_dir} (truth {synth.truth_dir})"
+        f"render: seed {seed}, {camera}, {synth.n_frames} frames at {synth.n_positions} "
+        f"positions -> {synth.survey_dir} (truth {synth.truth_dir})"
     )
     return Path(synth.survey_dir)
 
@@ -289,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, required=True, help="random seed of scenery and sky")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=1, help="rendering processes (default 1)")
+    p.add_argument("--camera", choices=("pinhole", "fisheye"), default="pinhole",
+                   help="camera model (default pinhole, as the demo)")  # fmt: skip
     p = sub.add_parser("split", help="calibrate on A, test on B, and the reverse")
     p.add_argument("a", type=Path, help="survey A folder (truth/, masks/)")
     p.add_argument("b", type=Path, help="survey B folder, rendered with another seed")
@@ -296,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="JSON output file")
     args = parser.parse_args(argv)
     if args.command == "render":
-        render(args.seed, args.out, args.workers)
+        render(args.seed, args.out, args.workers, args.camera)
         return 0
 
     a, b = load_split_survey(args.a), load_split_survey(args.b)
