@@ -16,13 +16,14 @@ counted analytically per bin).
 
 Usage::
 
-    # survey B: the demo's recipe (line 144, km 4-6, 640x480 pinhole, mixed) with seed 2
-    nice -n 15 .venv/bin/python scripts/margin_split.py render --seed 2 --out /tmp/margin_seed2
-    nice -n 15 .venv/bin/predisat process /tmp/margin_seed2/survey \\
-        --out /tmp/margin_seed2/masks --workers 1
-    # the split (A = `predisat demo --out /tmp/demo1`, seed 1)
-    .venv/bin/python scripts/margin_split.py split /tmp/demo1 /tmp/margin_seed2 \\
-        --out /tmp/margin_split.json
+    # surveys A and B: the demo's recipe (line 144, km 4-6, 640x480 fisheye, mixed), seeds 1, 2
+    for s in 1 2; do
+      .venv/bin/python scripts/margin_split.py render --seed $s --out /tmp/fe_seed$s
+      .venv/bin/predisat process /tmp/fe_seed$s/survey --out /tmp/fe_seed$s/masks --workers 1
+    done
+    .venv/bin/python scripts/margin_split.py split /tmp/fe_seed1 /tmp/fe_seed2 \\
+        --out /tmp/fe_split.json
+    # add --camera pinhole to render for the pinhole figures
 
 Each survey folder holds ``survey/``, ``truth/`` and ``masks/`` (``masks.parquet``).
 """
@@ -33,7 +34,7 @@ import argparse
 import json
 import re
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -66,13 +67,13 @@ _SECTOR_ROWS = (*SECTORS, "all")
 
 
 def render(
-    seed: int, out_dir: Path, workers: int = 1, camera: Literal["pinhole", "fisheye"] = "pinhole"
+    seed: int, out_dir: Path, workers: int = 1, camera: Literal["pinhole", "fisheye"] = "fisheye"
 ) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
     Same call as ``predisat.cli.cmd_demo``: demo track, chainage ``DEMO_FROM_KM`` to
-    ``DEMO_TO_KM``, mixed sky, the default ``camera`` (``"pinhole"`` as the demo, or
-    ``"fisheye"``) resized to ``DEMO_IMAGE_SIZE_PX``.
+    ``DEMO_TO_KM``, mixed sky, the default ``camera`` (``"fisheye"`` as the demo, or
+    ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``.
 
     Returns
     -------
@@ -211,8 +212,18 @@ def sector_rows(
     return rows
 
 
-def split_report(calib: SplitSurvey, test: SplitSurvey, target: float = 0.999) -> dict[str, Any]:
+def split_report(
+    calib: SplitSurvey,
+    test: SplitSurvey,
+    target: float = 0.999,
+    confidence: float | None = 0.99,
+    offset_deg: float = 0.0,
+) -> dict[str, Any]:
     """Calibrate on ``calib`` (by sector and source), evaluate on ``test``.
+
+    ``confidence`` is that of :func:`predisat.evaluate.calibrate_margin` (None: in-sample
+    point estimate). ``offset_deg`` lowers every mask of both surveys by that much before
+    calibrating (a stress test: masks that need a margin).
 
     Returns
     -------
@@ -222,7 +233,11 @@ def split_report(calib: SplitSurvey, test: SplitSurvey, target: float = 0.999) -
         ``"as processed"``, plus the calibrated margins on ``calib`` itself
         (``"calibrated, in-sample"``).
     """
-    table: MarginTable = calibrate_margin(calib.comparison, target=target, by=("sector", "source"))
+    if offset_deg:
+        calib, test = _lowered(calib, offset_deg), _lowered(test, offset_deg)
+    table: MarginTable = calibrate_margin(
+        calib.comparison, target=target, by=("sector", "source"), confidence=confidence
+    )
     rows = []
     cases = (
         ("as processed", test, test.processed_margin_deg),
@@ -236,9 +251,19 @@ def split_report(calib: SplitSurvey, test: SplitSurvey, target: float = 0.999) -
         "calibrated_on": calib.name,
         "tested_on": test.name,
         "target": target,
+        "confidence": confidence,
+        "offset_deg": offset_deg,
         "margins": json.loads(table.table.to_json(orient="records")),
         "rows": rows,
     }
+
+
+def _lowered(survey: SplitSurvey, offset_deg: float) -> SplitSurvey:
+    comp = replace(
+        survey.comparison,
+        mask_el_deg=np.clip(survey.comparison.mask_el_deg - offset_deg, 0.0, 90.0),
+    )
+    return replace(survey, name=f"{survey.name} - {offset_deg:g} deg", comparison=comp)
 
 
 def _margins_on(table: MarginTable, comparison: Comparison) -> NDArray:
@@ -256,7 +281,7 @@ def markdown(reports: list[dict[str, Any]]) -> str:
     for rep in reports:
         lines += [
             f"### calibrated on {rep['calibrated_on']}, tested on {rep['tested_on']} "
-            f"(target {rep['target']})",
+            f"(target {rep['target']}, confidence {rep['confidence']})",
             "",
             "| sector | source | margin (deg) | bins | reached | LOS share | sky lost |",
             "|---|---|---|---|---|---|---|",
@@ -292,12 +317,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, required=True, help="random seed of scenery and sky")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=1, help="rendering processes (default 1)")
-    p.add_argument("--camera", choices=("pinhole", "fisheye"), default="pinhole",
-                   help="camera model (default pinhole, as the demo)")  # fmt: skip
+    p.add_argument("--camera", choices=("fisheye", "pinhole"), default="fisheye",
+                   help="camera model (default fisheye, as the demo)")  # fmt: skip
     p = sub.add_parser("split", help="calibrate on A, test on B, and the reverse")
     p.add_argument("a", type=Path, help="survey A folder (truth/, masks/)")
     p.add_argument("b", type=Path, help="survey B folder, rendered with another seed")
     p.add_argument("--target", type=float, default=0.999, help="LOS share target (0.999)")
+    p.add_argument(
+        "--confidence",
+        type=float,
+        default=0.99,
+        help="block-resampling confidence of the margins (0.99; 0: in-sample)",
+    )
+    p.add_argument(
+        "--offset",
+        type=float,
+        action="append",
+        default=None,
+        metavar="DEG",
+        help="also run with every mask lowered by DEG (stress test; repeatable)",
+    )
     p.add_argument("--out", type=Path, help="JSON output file")
     args = parser.parse_args(argv)
     if args.command == "render":
@@ -310,7 +349,12 @@ def main(argv: list[str] | None = None) -> int:
             f"{args.a} and {args.b} were both rendered with seed {a.seed}; validation needs "
             "a survey made with another seed"
         )
-    reports = [split_report(a, b, args.target), split_report(b, a, args.target)]
+    conf = args.confidence if args.confidence > 0 else None
+    reports = [
+        split_report(x, y, args.target, conf, off)
+        for off in [0.0, *(args.offset or [])]
+        for x, y in ((a, b), (b, a))
+    ]
     print(markdown(reports))
     if args.out is not None:
         doc = {

@@ -176,3 +176,51 @@ def test_evaluate_cli(tiny: tuple[Path, Path], tmp_path: Path, capsys) -> None:
         equal_nan=True,
     )  # fmt: skip
     assert "observed" in capsys.readouterr().out
+
+
+def test_confident_margin_holds_on_other_surveys_more_often() -> None:
+    # held-out surveys from the same generator: the in-sample point estimate meets the target
+    # on about half of them; the block-bootstrap margin on most
+    def coverage(confidence: float | None) -> float:
+        hits = []
+        for s in range(12):
+            table = calibrate_margin(
+                _synthetic_comparison(100 + s), target=0.999, by=(), confidence=confidence
+            )
+            margin = float(table.table.margin_deg.iloc[0])
+            for k in range(8):
+                other = _synthetic_comparison(1000 + 10 * s + k)
+                hits.append(_los_share(other.mask_el_deg, other.truth_el_deg, margin) >= 0.999)
+        return float(np.mean(hits))
+
+    point, confident = coverage(None), coverage(0.95)
+    assert point < 0.7
+    assert confident >= 0.75 and confident > point + 0.2
+
+
+def test_confident_margin_is_never_below_the_point_estimate() -> None:
+    comp = _synthetic_comparison()
+    point = calibrate_margin(comp, target=0.999)
+    conf = calibrate_margin(comp, target=0.999, confidence=0.9, block_m=50.0)
+    merged = point.table.merge(conf.table, on=["sector", "source"], suffixes=("_p", "_c"))
+    assert (merged.margin_deg_c >= merged.margin_deg_p).all()
+    assert (merged.margin_deg_c > merged.margin_deg_p).any()
+    assert conf.meta["confidence"] == 0.9 and conf.meta["block_m"] == 50.0
+    with pytest.raises(ValueError, match="confidence"):
+        calibrate_margin(comp, confidence=1.5)
+    with pytest.raises(ValueError, match="block_m"):
+        calibrate_margin(comp, confidence=0.9, block_m=0.0)
+
+
+def test_block_weights_are_whole_blocks_of_the_line() -> None:
+    from predisat.evaluate import _block_weights
+
+    s = np.arange(45) * 10.0
+    w = _block_weights(s, 100.0, 50, seed=3)
+    assert w.shape == (50, 45)
+    assert (w.sum(axis=1) == 45).all()  # every resample as long as the line
+    # a resample is a union of 10-position runs: its support has few starts (wrapped runs)
+    for row in w:
+        on = row > 0
+        starts = np.flatnonzero(on & ~np.roll(on, 1))
+        assert 1 <= starts.size <= 5
