@@ -26,7 +26,10 @@ __all__ = ["main"]
 
 DEMO_FROM_KM = 4.0
 DEMO_TO_KM = 6.0
-DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side pinhole, resampled: keeps the demo quick
+DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the demo quick
+# The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
+# the pinhole the masks lose ~70 % of the visible sky instead of ~40 % (docs/pipeline.md).
+DEMO_CAMERA = "fisheye"
 
 
 def _default_workers() -> int:
@@ -154,7 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from_m, to_m = DEMO_FROM_KM * 1000.0, DEMO_TO_KM * 1000.0
     print(
         f"demo: {track.name}, chainage {DEMO_FROM_KM:.1f}-{DEMO_TO_KM:.1f} km, mixed scenery and "
-        f"skies, seed {args.seed} -> {out}"
+        f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
     )
     t0 = time.perf_counter()
     print("demo 1/5: rendering the synthetic survey and its ground truth")
@@ -165,7 +168,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         sky="mixed",
         seed=args.seed,
         out_dir=out,
-        camera=default_camera("pinhole").resized(*DEMO_IMAGE_SIZE_PX),
+        camera=default_camera(args.camera).resized(*DEMO_IMAGE_SIZE_PX),
         progress=not args.quiet,
         workers=args.workers,
         overwrite=True,
@@ -375,6 +378,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="demo_out", metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=1, help="random seed")
+    p.add_argument(
+        "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
+        help=f"side camera model (default {DEMO_CAMERA})",
+    )  # fmt: skip
     p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
