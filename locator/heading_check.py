@@ -38,6 +38,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from locator.wls import as_observations
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
 
 __all__ = ["HeadingCheck", "HeadingStatus", "check_heading", "delay_model_m"]
@@ -131,14 +132,7 @@ def check_heading(
     HeadingCheck
     """
     b1 = np.asarray(beacon_ecef_m, float).reshape(3)
-    sat = np.asarray(sat_ecef_m, float)
-    rho = np.asarray(pseudorange_m, float)
-    sig = np.asarray(sigma_m, float)
-    if sat.ndim != 2 or sat.shape[1] != 3 or rho.shape != (len(sat),) or sig.shape != rho.shape:
-        raise ValueError(
-            "sat_ecef_m must be (n_sat, 3) and pseudorange_m, sigma_m (n_sat,): got "
-            f"{sat.shape}, {rho.shape}, {sig.shape}"
-        )
+    sat, rho, sig = as_observations(sat_ecef_m, pseudorange_m, sigma_m)
     if not (np.isfinite(sat).all() and np.isfinite(rho).all() and np.all(sig > 0)):
         raise ValueError("sat_ecef_m / pseudorange_m must be finite and sigma_m positive")
     if len(rho) < 3:

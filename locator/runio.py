@@ -22,10 +22,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from locator import plots
+from locator.simfile import json_default
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
 from predisat.interval import ErrorModel, IntervalModel
@@ -51,13 +51,10 @@ class RunFileError(ValueError):
 
 
 def _json(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (tuple, set)):
-        return list(obj)
-    return str(obj)
+    try:
+        return json_default(obj)
+    except TypeError:
+        return str(obj)  # run descriptions may hold paths and enums
 
 
 def _write_json(path: Path, data: Mapping[str, Any]) -> None:

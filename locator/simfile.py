@@ -30,7 +30,14 @@ from numpy.typing import NDArray
 from predisat.geodesy import ecef_to_geodetic
 from predisat.synth.world import MATERIALS
 
-__all__ = ["SIMRUN_FORMAT", "EpochObservations", "SignalState", "SimRun", "SimRunError"]
+__all__ = [
+    "SIMRUN_FORMAT",
+    "EpochObservations",
+    "SignalState",
+    "SimRun",
+    "SimRunError",
+    "json_default",
+]
 
 SIMRUN_FORMAT = "locator.simrun/1"
 
@@ -263,7 +270,7 @@ class SimRun:
             epochs.to_csv(out / "epochs.csv", index=False, float_format="%.17g")
             signals.to_csv(out / "signals.csv", index=False, float_format="%.17g")
         meta = {"format": SIMRUN_FORMAT, "sats": list(self.sats), **dict(self.meta)}
-        (out / "meta.json").write_text(json.dumps(meta, indent=2, default=_json_default) + "\n")
+        (out / "meta.json").write_text(json.dumps(meta, indent=2, default=json_default) + "\n")
         return out
 
     @classmethod
@@ -292,14 +299,15 @@ class SimRun:
         return _from_frames(folder, epochs, signals, sats, meta)
 
 
-def _json_default(obj: Any) -> Any:
+def json_default(obj: Any) -> Any:
+    """``json.dumps`` ``default`` for numpy scalars and arrays, tuples and sets."""
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, (tuple, set)):
         return list(obj)
-    raise TypeError(f"cannot write {type(obj).__name__} to meta.json")
+    raise TypeError(f"cannot write {type(obj).__name__} as JSON")
 
 
 def _read_table(folder: Path, name: str) -> pd.DataFrame:

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from locator.sathia import AntennaPath
 
-__all__ = ["WlsSolution", "solve_wls"]
+__all__ = ["WlsSolution", "as_observations", "solve_wls"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,27 @@ class WlsSolution:
         return float(chdtrc(self.dof, self.chi2)) if self.dof >= 1 else float("nan")
 
 
+def as_observations(
+    sat_ecef_m: ArrayLike, pseudorange_m: ArrayLike, sigma_m: ArrayLike
+) -> tuple[NDArray, NDArray, NDArray]:
+    """One epoch's satellites (n_sat, 3), pseudoranges and sigmas (n_sat,) as float arrays.
+
+    Raises
+    ------
+    ValueError
+        When the shapes disagree; the message gives them.
+    """
+    sat = np.asarray(sat_ecef_m, float)
+    rho = np.asarray(pseudorange_m, float)
+    sig = np.asarray(sigma_m, float)
+    if sat.ndim != 2 or sat.shape[1] != 3 or rho.shape != (len(sat),) or sig.shape != rho.shape:
+        raise ValueError(
+            "sat_ecef_m must be (n_sat, 3) and pseudorange_m, sigma_m (n_sat,): got "
+            f"{sat.shape}, {rho.shape}, {sig.shape}"
+        )
+    return sat, rho, sig
+
+
 def solve_wls(
     path: AntennaPath,
     sat_ecef_m: ArrayLike,
@@ -104,14 +125,7 @@ def solve_wls(
     -------
     WlsSolution
     """
-    sat = np.asarray(sat_ecef_m, float)
-    rho = np.asarray(pseudorange_m, float)
-    sig = np.asarray(sigma_m, float)
-    if sat.ndim != 2 or sat.shape[1] != 3 or rho.shape != (len(sat),) or sig.shape != rho.shape:
-        raise ValueError(
-            "sat_ecef_m must be (n_sat, 3) and pseudorange_m, sigma_m (n_sat,): got "
-            f"{sat.shape}, {rho.shape}, {sig.shape}"
-        )
+    sat, rho, sig = as_observations(sat_ecef_m, pseudorange_m, sigma_m)
     n = len(rho)
     if n < 2:
         raise ValueError(f"solve_wls needs at least 2 satellites, got {n}")
