@@ -198,8 +198,9 @@ class MarginTable:
     Attributes
     ----------
     table : pandas.DataFrame
-        Columns ``sector``, ``source`` (name), ``margin_deg``, ``n_bins``, ``reached``
-        (target met), ``los_share`` (trusted directions truly in line of sight, achieved),
+        Columns ``sector``, ``source`` (name), ``margin_deg``, ``n_bins``, ``n_positions``,
+        ``sampled`` (enough positions to calibrate alone), ``reached`` (target met),
+        ``los_share`` (trusted directions truly in line of sight, achieved),
         ``sky_lost`` (truly visible directions not trusted); plus ``sector="*"`` /
         ``source="*"`` wildcard rows for unseen groups.
     target : float
@@ -264,6 +265,7 @@ def calibrate_margin(
     n_boot: int = 400,
     seed: int = 0,
     block_m: float = 200.0,
+    min_positions: int = 10,
 ) -> MarginTable:
     """Smallest margin per group making trusted directions truly in line of sight >= target.
 
@@ -290,6 +292,10 @@ def calibrate_margin(
         Resamples and their generator seed (``confidence`` only).
     block_m : float
         Block length of the resampling, metres of chainage (``confidence`` only).
+    min_positions : int
+        A group whose bins come from fewer positions is too small to calibrate on its own
+        (``sampled = False``): it gets the largest margin of its own estimate and of the
+        sampled groups of its sector (90 deg when there is none).
 
     Returns
     -------
@@ -321,7 +327,8 @@ def calibrate_margin(
         if confidence is not None
         else None
     )
-    rows = []
+    rows: list[dict[str, Any]] = []
+    sels: list[NDArray] = []
     los_all = count_above(t, el_step_deg)
     for s_name in ("cross", "along") if "sector" in by else ("*",):
         for c_name in tuple(_SOURCE_NAMES.values()) if "source" in by else ("*",):
@@ -340,21 +347,30 @@ def calibrate_margin(
                     ok = np.arange(first, cands.size)
                 if ok.size:
                     margin, reached, share = float(cands[ok[0]]), True, float(ratio[ok[0]])
-            if sel.any():
-                _, good1, los1 = trust_counts(m[sel], t[sel], margin, el_step_deg)
-                lost = 1.0 - good1.sum() / max(int(los1.sum()), 1)
-            else:
-                lost = float("nan")
+            n_group_pos = int(np.unique(pos[sel]).size)
+            sels.append(sel)
             rows.append({
                 "sector": s_name, "source": c_name, "margin_deg": margin,
-                "n_bins": int(sel.sum()), "reached": reached, "los_share": share,
-                "sky_lost": float(lost),
+                "n_bins": int(sel.sum()), "n_positions": n_group_pos,
+                "sampled": n_group_pos >= min_positions, "reached": reached,
+                "los_share": share,
             })  # fmt: skip
+    for r, sel in zip(rows, sels, strict=True):
+        if not r["sampled"]:
+            peers = [q["margin_deg"] for q in rows if q["sampled"] and q["sector"] == r["sector"]]
+            r["margin_deg"] = max([r["margin_deg"], *peers]) if peers else 90.0
+        if sel.any():
+            tr1, good1, los1 = trust_counts(m[sel], t[sel], r["margin_deg"], el_step_deg)
+            r["sky_lost"] = float(1.0 - good1.sum() / max(int(los1.sum()), 1))
+            if not r["sampled"] and tr1.sum() > 0:
+                r["los_share"] = float(good1.sum() / tr1.sum())
+        else:
+            r["sky_lost"] = float("nan")
     table = pd.DataFrame(rows)
     meta = {"n_positions": int(comparison.chainage_m.size), "by": list(by),
             "truly_visible_directions": int(los_all.sum()), "confidence": confidence,
             "n_boot": n_boot if confidence is not None else 0, "seed": seed,
-            "block_m": block_m}  # fmt: skip
+            "block_m": block_m, "min_positions": min_positions}  # fmt: skip
     return MarginTable(_expand(table, by), float(target), el_step_deg, meta)
 
 

@@ -224,3 +224,20 @@ def test_block_weights_are_whole_blocks_of_the_line() -> None:
         on = row > 0
         starts = np.flatnonzero(on & ~np.roll(on, 1))
         assert 1 <= starts.size <= 5
+
+
+def test_a_group_from_few_positions_takes_its_sectors_margin() -> None:
+    comp = _synthetic_comparison()
+    source = comp.source.copy()
+    source[:3, :36] = 1  # a few RECONSTRUCTED bins, at 3 positions only
+    small = Comparison(comp.chainage_m, comp.mask_el_deg, comp.truth_el_deg, source,
+                       comp.sector, comp.az_deg)  # fmt: skip
+    table = calibrate_margin(small, target=0.999, min_positions=10).table
+    rec = table[(table.source == "reconstructed") & (table.n_bins > 0)]
+    assert len(rec) > 0 and not rec.sampled.any()
+    for _, row in rec.iterrows():
+        peers = table[(table.sector == row.sector) & table.sampled]
+        assert row.margin_deg >= peers.margin_deg.max()
+    # with the threshold lowered the same group is calibrated on its own
+    alone = calibrate_margin(small, target=0.999, min_positions=1).table
+    assert alone[(alone.source == "reconstructed") & (alone.n_bins > 0)].sampled.all()
