@@ -488,7 +488,9 @@ def add_evaluate_arguments(parser: argparse.ArgumentParser) -> None:
         "--truth", type=Path, required=True,
         help="synthetic ground truth: generator output folder, its truth/ or true_masks.npz",
     )  # fmt: skip
-    parser.add_argument("--out", type=Path, help="folder for evaluation.csv/json (default: none)")
+    parser.add_argument(
+        "--out", type=Path, help="folder for evaluation.csv/json/png (default: none)"
+    )
     parser.add_argument(
         "--calibrate", action="store_true",
         help="calibrate margins on this truth and write margins.json (in --out)",
@@ -537,4 +539,13 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
             "rows": json.loads(table.to_json(orient="records")),
         }
         (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+        from predisat.evalfigures import evaluation_figure
+
+        rows = np.searchsorted(masks.chainage_m, comp.chainage_m)  # matched mask rows, in order
+        margin = 0.0 if margins is None else margins.margin_for(comp.sector, comp.source)
+        fig = evaluation_figure(
+            comp, masks.heading_deg[rows], margin, title=f"{path.name} against {args.truth}"
+        )
+        fig.savefig(out / "evaluation.png", dpi=100)
+        print(f"written {out / 'evaluation.csv'}, evaluation.json, evaluation.png")
     return table

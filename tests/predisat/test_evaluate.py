@@ -166,6 +166,7 @@ def test_evaluate_cli(tiny: tuple[Path, Path], tmp_path: Path, capsys) -> None:
     doc = json.loads((tmp_path / "evaluation.json").read_text())
     assert doc["n_positions"] == 5
     assert (tmp_path / "margins.json").is_file() and (tmp_path / "evaluation.csv").is_file()
+    assert (tmp_path / "evaluation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     args2 = parser.parse_args(
         [str(masks_dir / "masks.parquet"), "--truth", str(synth),
          "--margins", str(tmp_path / "margins.json")]
