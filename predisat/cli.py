@@ -148,6 +148,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from predisat import track as trackmod
     from predisat.availability_run import run_availability
     from predisat.camera import default_camera
+    from predisat.evalfigures import evaluation_figure
     from predisat.evaluate import compare, evaluate_masks, load_truth
     from predisat.pipeline import process_survey
     from predisat.synth.generate import contact_sheet, generate_survey
@@ -184,10 +185,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t_process = time.perf_counter() - t1
 
     print("demo 3/5: masks against the synthetic ground truth")
-    table = evaluate_masks(compare(processed.masks, load_truth(synth.truth_dir)))
+    comp = compare(processed.masks, load_truth(synth.truth_dir))
+    table = evaluate_masks(comp)
     overall = table[table["source"] == "all"]
     with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
     print(overall[with_cols].round(4).to_string(index=False))
+    eval_png = out / "evaluation.png"
+    evaluation_figure(comp, title="Demo masks against the ground truth").savefig(eval_png, dpi=100)
 
     print("demo 4/5: availability report (embedded navigation day, GPS)")
     run = run_availability(
@@ -216,6 +220,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"  ground truth:  {synth.truth_dir}\n"
         f"  contact sheet: {sheet}\n"
         f"  masks:         {processed.masks_path}\n"
+        f"  evaluation:    {eval_png}\n"
         f"  report:        {run.report_html}\n"
         f"  locator runs:  {out / 'locator'}"
     )

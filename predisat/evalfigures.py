@@ -61,9 +61,9 @@ def per_position_shares(
 
 def evaluation_figure(
     comparison: Comparison,
-    heading_deg: ArrayLike,
     margin_deg: ArrayLike = 0.0,
     title: str = "",
+    heading_deg: ArrayLike | None = None,
 ) -> Figure:
     """Error map and per-position shares of one evaluation.
 
@@ -71,16 +71,21 @@ def evaluation_figure(
     ----------
     comparison : Comparison
         Mask and truth, shape (n_pos, n_az).
-    heading_deg : array_like, shape (n_pos,)
-        Track heading at the compared positions (direction of increasing chainage), degrees.
     margin_deg : float or array_like, shape (n_pos, n_az)
         Margin of every bin (for the shares), degrees.
     title : str
+    heading_deg : array_like, shape (n_pos,), optional
+        Track heading at the compared positions (direction of increasing chainage), degrees;
+        default ``comparison.heading_deg`` (set by :func:`predisat.evaluate.compare`).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
+    if heading_deg is None:
+        heading_deg = comparison.heading_deg
+    if heading_deg is None:
+        raise ValueError("heading_deg is required when the comparison carries no heading")
     hd = np.asarray(heading_deg, float)
     s = np.asarray(comparison.chainage_m, float)
     if hd.shape != s.shape:

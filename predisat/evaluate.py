@@ -113,6 +113,8 @@ class Comparison:
     az_deg : ndarray, shape (n_az,)
     unmatched : int
         Mask positions with no truth position within the tolerance (left out).
+    heading_deg : ndarray, shape (n_pos,), optional
+        Track heading at the positions (direction of increasing chainage), degrees.
     """
 
     chainage_m: NDArray
@@ -122,6 +124,7 @@ class Comparison:
     sector: NDArray
     az_deg: NDArray
     unmatched: int = 0
+    heading_deg: NDArray | None = None
 
     @property
     def error_deg(self) -> NDArray:
@@ -188,6 +191,7 @@ def compare(masks: MaskSet, truth: Any, tol_m: float = 0.5) -> Comparison:
         sector=sector_of(az[None, :], heading[:, None]),
         az_deg=az,
         unmatched=int((~ok).sum()),
+        heading_deg=np.asarray(heading, float),
     )
 
 
@@ -541,11 +545,8 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
         (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
         from predisat.evalfigures import evaluation_figure
 
-        rows = np.searchsorted(masks.chainage_m, comp.chainage_m)  # matched mask rows, in order
         margin = 0.0 if margins is None else margins.margin_for(comp.sector, comp.source)
-        fig = evaluation_figure(
-            comp, masks.heading_deg[rows], margin, title=f"{path.name} against {args.truth}"
-        )
+        fig = evaluation_figure(comp, margin, title=f"{path.name} against {args.truth}")
         fig.savefig(out / "evaluation.png", dpi=100)
         print(f"written {out / 'evaluation.csv'}, evaluation.json, evaluation.png")
     return table

@@ -46,7 +46,9 @@ def test_per_position_shares_match_an_explicit_grid() -> None:
 
 def test_figure_draws_and_checks_headings() -> None:
     comp, heading = _comparison()
-    fig = evaluation_figure(comp, heading, 0.5, title="t")
+    fig = evaluation_figure(comp, 0.5, title="t", heading_deg=heading)
     assert isinstance(fig, Figure) and len(fig.axes) >= 3
     with pytest.raises(ValueError, match="heading_deg"):
-        evaluation_figure(comp, heading[:-1])
+        evaluation_figure(comp, heading_deg=heading[:-1])
+    with pytest.raises(ValueError, match="heading_deg"):
+        evaluation_figure(comp)  # built by hand, without headings
