@@ -25,7 +25,7 @@ Jobs are written one Parquet file each under ``--out``; a rerun skips finished j
 
 Usage::
 
-    .venv/bin/python scripts/locator_campaign.py --out campaign [--runs-per-world 90]
+    .venv/bin/python scripts/locator_campaign.py --out campaign [--runs-per-world 88]
         [--workers 2] [--demo demo_out]
 """
 
@@ -231,12 +231,19 @@ def _do(args: tuple[Job, str]) -> tuple[str, int, float]:
     return out, len(df), time.perf_counter() - t
 
 
+_GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+
+
 def jobs_for(worlds: list[str], runs_per_world: int) -> list[Job]:
+    """Run ``r`` of world ``w`` starts at the fraction ``frac(offset_w + r * golden ratio)`` of
+    the day: spread evenly for any number of runs, and independent of that number and of the
+    other worlds, so that adding runs keeps the finished ones and a subset reproduces them."""
     day = default_window()[0]
     jobs = []
     for w in worlds:
+        offset = (zlib.crc32(w.encode()) % 1000) / 1000.0
         for r in range(runs_per_world):
-            t0 = day + (r + 0.37 * worlds.index(w)) * 86400.0 / runs_per_world
+            t0 = day + np.mod(offset + r * _GOLDEN, 1.0) * 86400.0
             jobs.append(Job(w, r, float(t0), +1 if r % 2 == 0 else -1))
     return jobs
 
@@ -301,7 +308,7 @@ def figure(frames: pd.DataFrame, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--runs-per-world", type=int, default=90)
+    ap.add_argument("--runs-per-world", type=int, default=88)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--worlds", nargs="*", default=[w[0] for w in WORLDS])
     ap.add_argument("--demo", type=Path, help="a `predisat demo --out` folder (pipeline masks)")
@@ -312,8 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     (out / "cache").mkdir(exist_ok=True)
     worlds = list(args.worlds) + (["demo"] if args.demo else [])
     jobs = jobs_for(worlds, args.runs_per_world)
-    todo = [(j, str(out / "jobs" / f"{j.world}_{j.run:04d}.parquet")) for j in jobs]
-    todo = [t for t in todo if not Path(t[1]).exists()]
+    # the start time is in the name: a job file of another time grid is never taken for this one
+    paths = [str(out / "jobs" / f"{j.world}_{j.run:04d}_{j.t0_gps_s:.0f}.parquet") for j in jobs]
+    todo = [(j, p) for j, p in zip(jobs, paths, strict=True) if not Path(p).exists()]
     print(f"{len(jobs)} jobs, {len(todo)} to do", flush=True)
     # learn the error model, build worlds and truth once, serially, before the pool starts
     model = calibrate(out / "cache")
@@ -333,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
             el = time.perf_counter() - t0
             print(f"[{done}/{len(todo)}] {Path(path).name}: {n} rows, {dt:.1f} s "
                   f"(elapsed {el:.0f} s)", flush=True)  # fmt: skip
-    frames = pd.concat([pd.read_parquet(p) for p in sorted((out / "jobs").glob("*.parquet"))])
+    frames = pd.concat([pd.read_parquet(p) for p in paths])
     table = report(frames)
     per_world = {
         w: report(g).to_dict(orient="index") for w, g in frames.groupby("world", sort=False)
