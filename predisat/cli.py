@@ -19,6 +19,7 @@ from predisat import __version__
 
 if TYPE_CHECKING:
     from predisat.camera import CameraModel
+    from predisat.synth.generate import SynthResult
     from predisat.synth.world import WorldSpec
     from predisat.track import TrackMap
 
@@ -30,6 +31,34 @@ DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the
 # The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
 # the pinhole the masks lose ~70 % of the visible sky instead of ~40 % (docs/pipeline.md).
 DEMO_CAMERA = "fisheye"
+
+
+def render_demo_survey(
+    out_dir: str | os.PathLike[str],
+    seed: int = 1,
+    camera: str = DEMO_CAMERA,
+    workers: int = 1,
+    progress: bool = True,
+) -> SynthResult:
+    """The demo's synthetic survey: line 144 km ``DEMO_FROM_KM``-``DEMO_TO_KM``, mixed scenery
+    and skies, the default ``camera`` (``"fisheye"`` or ``"pinhole"``) resized to
+    ``DEMO_IMAGE_SIZE_PX`` (:func:`predisat.synth.generate.generate_survey`)."""
+    from predisat import track as trackmod
+    from predisat.camera import default_camera
+    from predisat.synth.generate import generate_survey
+
+    return generate_survey(
+        trackmod.demo_track(),
+        DEMO_FROM_KM * 1000.0,
+        DEMO_TO_KM * 1000.0,
+        sky="mixed",
+        seed=seed,
+        out_dir=out_dir,
+        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),  # type: ignore[arg-type]
+        progress=progress,
+        workers=workers,
+        overwrite=True,
+    )
 
 
 def _default_workers() -> int:
@@ -147,32 +176,21 @@ def cmd_synth(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     from predisat import track as trackmod
     from predisat.availability_run import run_availability
-    from predisat.camera import default_camera
     from predisat.evalfigures import evaluation_figure
     from predisat.evaluate import compare, evaluate_masks, load_truth
     from predisat.pipeline import process_survey
-    from predisat.synth.generate import contact_sheet, generate_survey
+    from predisat.synth.generate import contact_sheet
 
     out = Path(args.out)
     track = trackmod.demo_track()
-    from_m, to_m = DEMO_FROM_KM * 1000.0, DEMO_TO_KM * 1000.0
     print(
         f"demo: {track.name}, chainage {DEMO_FROM_KM:.1f}-{DEMO_TO_KM:.1f} km, mixed scenery and "
         f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
     )
     t0 = time.perf_counter()
     print("demo 1/5: rendering the synthetic survey and its ground truth")
-    synth = generate_survey(
-        track,
-        from_m,
-        to_m,
-        sky="mixed",
-        seed=args.seed,
-        out_dir=out,
-        camera=default_camera(args.camera).resized(*DEMO_IMAGE_SIZE_PX),
-        progress=not args.quiet,
-        workers=args.workers,
-        overwrite=True,
+    synth = render_demo_survey(
+        out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet
     )
     t_synth = time.perf_counter() - t0
     sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")

@@ -257,8 +257,9 @@ def report(frames: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("config")
 
 
-def figure(frames: pd.DataFrame, path: Path) -> None:
-    """Interval length distributions (claimed epochs) and outcome shares per configuration."""
+def figure(frames: pd.DataFrame, table: pd.DataFrame, paths: list[Path]) -> None:
+    """Interval length distributions (claimed epochs) and the outcome shares of ``table``
+    (:func:`report`) per configuration, written to every path of ``paths``."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 4.2), layout="constrained")
@@ -278,20 +279,13 @@ def figure(frames: pd.DataFrame, path: Path) -> None:
     ax.set_xlabel("interval length, claimed epochs (m)")
     ax.set_ylabel("epochs")
     ax.legend(fontsize=8)
-    names = list(frames["config"].unique())
+    names = list(table.index)
     x = np.arange(len(names))
-    claim = [frames.loc[frames["config"] == c, "claim"].mean() for c in names]
-    six = [(frames.loc[frames["config"] == c, "mode"] == "three_pairs").mean() for c in names]
-    hmi = [int(frames.loc[frames["config"] == c, "hmi"].sum()) for c in names]
-    bx.bar(
-        x - 0.2,
-        np.array(six) * 100,
-        0.4,
-        color="#9ecae1",
-        label="three-pair mode (>= 6 satellites)",
-    )
-    bx.bar(x + 0.2, np.array(claim) * 100, 0.4, color="#3182bd", label="safety claim")
-    for k, h in enumerate(hmi):
+    six = table["mode_three_pairs_share"].to_numpy(float) * 100
+    bx.bar(x - 0.2, six, 0.4, color="#9ecae1", label="three-pair mode (>= 6 satellites)")
+    bx.bar(x + 0.2, table["claim_share"].to_numpy(float) * 100, 0.4, color="#3182bd",
+           label="safety claim")  # fmt: skip
+    for k, h in enumerate(table["hmi"].astype(int)):
         bx.text(k, 102, f"HMI {h}", ha="center", fontsize=9, color="#b2182b" if h else "k")
     bx.axhline(60.0, color="k", ls="--", lw=0.8)
     bx.text(len(names) - 0.5, 61.0, "LOCOPROL: 6 sats 60 %", ha="right", fontsize=8)
@@ -299,10 +293,10 @@ def figure(frames: pd.DataFrame, path: Path) -> None:
     bx.set_ylim(0, 112)
     bx.set_ylabel("% of epochs")
     bx.legend(fontsize=8, loc="lower right")
-    counts = frames.groupby("config", sort=False).size()
     fig.suptitle("Locator campaign, epochs per rule: "
-                 + ", ".join(f"{c} {n:,}" for c, n in counts.items()))  # fmt: skip
-    fig.savefig(path, dpi=110)
+                 + ", ".join(f"{c} {int(n):,}" for c, n in table["epochs"].items()))  # fmt: skip
+    for path in paths:
+        fig.savefig(path, dpi=110)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -352,9 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         json.dumps({"all": table.to_dict(orient="index"), "per_world": per_world}, indent=1)
     )
     table.to_csv(out / "summary.csv")
-    figure(frames, out / "campaign.png")
-    if args.figure:
-        figure(frames, args.figure)
+    figure(frames, table, [out / "campaign.png", *([args.figure] if args.figure else [])])
     return 0
 
 

@@ -71,32 +71,16 @@ def render(
 ) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
-    Same call as ``predisat.cli.cmd_demo``: demo track, chainage ``DEMO_FROM_KM`` to
-    ``DEMO_TO_KM``, mixed sky, the default ``camera`` (``"fisheye"`` as the demo, or
-    ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``.
+    :func:`predisat.cli.render_demo_survey`, as ``predisat demo --camera CAMERA --seed SEED``.
 
     Returns
     -------
     Path
         The survey folder (``out_dir / "survey"``).
     """
-    from predisat import track as trackmod
-    from predisat.camera import default_camera
-    from predisat.cli import DEMO_FROM_KM, DEMO_IMAGE_SIZE_PX, DEMO_TO_KM
-    from predisat.synth.generate import generate_survey
+    from predisat.cli import render_demo_survey
 
-    synth = generate_survey(
-        trackmod.demo_track(),
-        DEMO_FROM_KM * 1000.0,
-        DEMO_TO_KM * 1000.0,
-        sky="mixed",
-        seed=seed,
-        out_dir=out_dir,
-        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),
-        progress=False,
-        workers=workers,
-        overwrite=True,
-    )
+    synth = render_demo_survey(out_dir, seed=seed, camera=camera, workers=workers, progress=False)
     print(
         f"render: seed {seed}, {camera}, {synth.n_frames} frames at {synth.n_positions} "
         f"positions -> {synth.survey_dir} (truth {synth.truth_dir})"
@@ -241,8 +225,12 @@ def split_report(
     rows = []
     cases = (
         ("as processed", test, test.processed_margin_deg),
-        ("calibrated", test, _margins_on(table, test.comparison)),
-        ("calibrated, in-sample", calib, _margins_on(table, calib.comparison)),
+        ("calibrated", test, table.margin_for(test.comparison.sector, test.comparison.source)),
+        (
+            "calibrated, in-sample",
+            calib,
+            table.margin_for(calib.comparison.sector, calib.comparison.source),
+        ),
     )
     for label, surv, margin in cases:
         for r in sector_rows(surv.comparison, margin, table.el_step_deg):
@@ -264,11 +252,6 @@ def _lowered(survey: SplitSurvey, offset_deg: float) -> SplitSurvey:
         mask_el_deg=np.clip(survey.comparison.mask_el_deg - offset_deg, 0.0, 90.0),
     )
     return replace(survey, name=f"{survey.name} - {offset_deg:g} deg", comparison=comp)
-
-
-def _margins_on(table: MarginTable, comparison: Comparison) -> NDArray:
-    """The table's margin for every bin of a comparison, shape (n_pos, n_az), degrees."""
-    return table.margin_for(comparison.sector, comparison.source)
 
 
 def _fmt_pct(x: float) -> str:
