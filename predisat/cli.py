@@ -39,10 +39,12 @@ def render_demo_survey(
     camera: str = DEMO_CAMERA,
     workers: int = 1,
     progress: bool = True,
+    spacing_m: float = 10.0,
 ) -> SynthResult:
     """The demo's synthetic survey: line 144 km ``DEMO_FROM_KM``-``DEMO_TO_KM``, mixed scenery
     and skies, the default ``camera`` (``"fisheye"`` or ``"pinhole"``) resized to
-    ``DEMO_IMAGE_SIZE_PX`` (:func:`predisat.synth.generate.generate_survey`)."""
+    ``DEMO_IMAGE_SIZE_PX``, a position every ``spacing_m``
+    (:func:`predisat.synth.generate.generate_survey`)."""
     from predisat import track as trackmod
     from predisat.camera import default_camera
     from predisat.synth.generate import generate_survey
@@ -58,6 +60,7 @@ def render_demo_survey(
         progress=progress,
         workers=workers,
         overwrite=True,
+        spacing_m=spacing_m,
     )
 
 

@@ -67,7 +67,11 @@ _SECTOR_ROWS = (*SECTORS, "all")
 
 
 def render(
-    seed: int, out_dir: Path, workers: int = 1, camera: Literal["pinhole", "fisheye"] = "fisheye"
+    seed: int,
+    out_dir: Path,
+    workers: int = 1,
+    camera: Literal["pinhole", "fisheye"] = "fisheye",
+    spacing_m: float = 10.0,
 ) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
@@ -80,7 +84,9 @@ def render(
     """
     from predisat.cli import render_demo_survey
 
-    synth = render_demo_survey(out_dir, seed=seed, camera=camera, workers=workers, progress=False)
+    synth = render_demo_survey(
+        out_dir, seed=seed, camera=camera, workers=workers, progress=False, spacing_m=spacing_m
+    )
     print(
         f"render: seed {seed}, {camera}, {synth.n_frames} frames at {synth.n_positions} "
         f"positions -> {synth.survey_dir} (truth {synth.truth_dir})"
@@ -302,6 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=1, help="rendering processes (default 1)")
     p.add_argument("--camera", choices=("fisheye", "pinhole"), default="fisheye",
                    help="camera model (default fisheye, as the demo)")  # fmt: skip
+    p.add_argument("--spacing-m", type=float, default=10.0, help="position spacing (10 m)")
     p = sub.add_parser("split", help="calibrate on A, test on B, and the reverse")
     p.add_argument("a", type=Path, help="survey A folder (truth/, masks/)")
     p.add_argument("b", type=Path, help="survey B folder, rendered with another seed")
@@ -323,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="JSON output file")
     args = parser.parse_args(argv)
     if args.command == "render":
-        render(args.seed, args.out, args.workers, args.camera)
+        render(args.seed, args.out, args.workers, args.camera, args.spacing_m)
         return 0
 
     a, b = load_split_survey(args.a), load_split_survey(args.b)
