@@ -333,7 +333,11 @@ def main(argv: list[str] | None = None) -> int:
         render(args.seed, args.out, args.workers, args.camera, args.spacing_m)
         return 0
 
-    a, b = load_split_survey(args.a), load_split_survey(args.b)
+    try:
+        a, b = load_split_survey(args.a), load_split_survey(args.b)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"margin_split: error: {exc}", file=sys.stderr)
+        return 2
     if a.seed is not None and a.seed == b.seed:
         parser.error(
             f"{args.a} and {args.b} were both rendered with seed {a.seed}; validation needs "
