@@ -253,7 +253,10 @@ def sample_pixels(
     small = working_image(img, max_side_px)
     h, w = small.shape[:2]
     feats = image_features(small).reshape(h * w, -1)
-    target = cv2.resize(s.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA).ravel()
+    # area averaging may overshoot 1 by a rounding ulp
+    target = np.clip(
+        cv2.resize(s.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA).ravel(), 0.0, 1.0
+    )
     hard = target >= 0.5
     k = np.ones((2 * boundary_px + 1,) * 2, np.uint8)
     hm = hard.reshape(h, w).astype(np.uint8)
