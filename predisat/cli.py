@@ -265,7 +265,7 @@ def cmd_evaluate_sky(args: argparse.Namespace) -> int:
             raise CliError(f"--data {data}: no such folder (give a folder of photos and masks)")
     for data in args.data:
         out = None if args.out is None else Path(args.out) / Path(data).name
-        result = evaluate_folder(data, out, progress=not args.quiet)
+        result = evaluate_folder(data, out, progress=not args.quiet, method=args.method)
         print(f"{data} ({result.layout}):")
         print(result.summary.to_string(index=False))
         if out is not None:
@@ -289,6 +289,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from predisat.segmentation import METHODS
+
     parser = argparse.ArgumentParser(
         prog="predisat",
         description=(
@@ -391,6 +393,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--data", required=True, nargs="+", metavar="DIR", help="photo folder(s)")
     p.add_argument("--out", metavar="DIR", help="write per-image tables and worst-case sheets")
+    p.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
+                   "library's default, see docs/segmentation.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate_sky)
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import hashlib
 import io
 import json
@@ -70,6 +71,8 @@ Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
 """Image (H, W, 3) BGR uint8 -> (sky mask (H, W) bool, per-column confidence (W,) or None)."""
 
 CACHE_VERSION = 1
+# chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
+DEFAULT_SEGMENTER = "learned"
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
 
 
@@ -109,13 +112,14 @@ class PipelineParams:
         over (200 m: ~4x); 1000 m (~1.6x) keeps a resumed run's loss under a minute.
     reconstruction : ReconstructionParams
     segmenter : str
-        Name recorded in the provenance and the cache key (``"learned"`` for the default
-        :func:`default_segmenter`; pass your own name with a custom segmenter).
+        Segmentation method of :func:`default_segmenter` (one of
+        :data:`predisat.segmentation.METHODS`), recorded in the provenance and the cache key;
+        with a custom segmenter function, its own distinct name.
     """
 
     chunk_m: float = 1000.0
     reconstruction: ReconstructionParams = field(default_factory=ReconstructionParams)
-    segmenter: str = "learned"
+    segmenter: str = DEFAULT_SEGMENTER
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
@@ -172,11 +176,16 @@ class ProcessResult:
 
 
 # ---------------------------------------------------------------------- segmentation + cache
-def default_segmenter(image_bgr: NDArray) -> tuple[NDArray, NDArray | None]:
-    """:func:`predisat.segmentation.segment_sky` (learned method): sky mask and confidence."""
-    from predisat.segmentation import segment_sky
+def default_segmenter(
+    image_bgr: NDArray, method: str | None = None
+) -> tuple[NDArray, NDArray | None]:
+    """:func:`predisat.segmentation.segment_sky`: sky mask and per-column confidence.
 
-    seg = segment_sky(image_bgr)
+    ``method`` is one of :data:`predisat.segmentation.METHODS` (default: ``SkyOptions``'s).
+    """
+    from predisat.segmentation import SkyOptions, segment_sky
+
+    seg = segment_sky(image_bgr, SkyOptions() if method is None else SkyOptions(method=method))
     return seg.sky_mask, seg.confidence
 
 
@@ -534,7 +543,17 @@ def process_survey(
     p = params or PipelineParams()
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    seg_fn = segmenter or default_segmenter
+    if segmenter is None:
+        from predisat.segmentation import METHODS
+
+        if p.segmenter not in METHODS:
+            raise ValueError(
+                f"params.segmenter {p.segmenter!r} is not a segmentation method {METHODS}; "
+                "pass segmenter= with your own function for another name"
+            )
+        seg_fn: Segmenter = functools.partial(default_segmenter, method=p.segmenter)
+    else:
+        seg_fn = segmenter
     quiet = not progress
     if not isinstance(survey, Survey):
         survey = Survey.load(survey, track=track, check_images=False, on_error="skip")
@@ -819,6 +838,11 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--strict", action="store_true", help="stop at the first bad frame instead of skipping"
     )
+    parser.add_argument(
+        "--segmenter", choices=("ensemble", "cnn", "learned", "grabcut"),
+        default=DEFAULT_SEGMENTER,
+        help=f"sky segmentation method (default {DEFAULT_SEGMENTER}; docs/segmentation.md)",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -835,7 +859,7 @@ def process_from_args(args: argparse.Namespace) -> ProcessResult:
     return process_survey(
         args.survey,
         args.out,
-        PipelineParams(chunk_m=args.chunk_m),
+        PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter),
         track=track,
         workers=args.workers,
         strict=args.strict,

@@ -64,6 +64,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "METHODS",
     "SkyOptions",
     "SkySegmentation",
     "fisheye_valid_mask",
@@ -75,6 +76,7 @@ __all__ = [
     "skyline_from_mask",
 ]
 
+METHODS = ("ensemble", "cnn", "learned", "grabcut")
 
 
 @dataclass(frozen=True)
@@ -169,8 +171,8 @@ class SkyOptions:
     uncertain_hole_probability: float = 0.25
 
     def __post_init__(self) -> None:
-        if self.method not in ("learned", "grabcut"):
-            raise ValueError(f"method must be 'learned' or 'grabcut', got {self.method!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         fractions = (self.min_island_fraction, self.min_sky_fraction, self.max_hole_fraction,
                      self.uncertain_hole_fraction, self.uncertain_hole_probability)
         if not all(0.0 <= f <= 1.0 for f in fractions):
@@ -489,7 +491,11 @@ def segment_sky(
 
     from predisat import skygrabcut as gc
 
-    if opt.method == "learned":
+    if opt.method in ("learned", "cnn", "ensemble"):
+        if classifier is None and opt.method != "learned":
+            from predisat.skycnn import SkyEnsemble, SkyNet
+
+            classifier = SkyNet.default() if opt.method == "cnn" else SkyEnsemble.default()
         sky, conf = _learned_sky(img, valid, opt, classifier)
         skyline = skyline_from_mask(sky, valid)
         return SkySegmentation(

@@ -295,6 +295,7 @@ def evaluate_folder(
     options: SkyOptions | None = None,
     limit: int | None = None,
     n_worst: int = 8,
+    method: str | None = None,
 ) -> SkyEvaluation:
     """Segment every image of a folder with reference masks and score it.
 
@@ -315,6 +316,9 @@ def evaluate_folder(
         Score only the first ``limit`` pairs (quick runs).
     n_worst : int
         Cases in the contact sheet.
+    method : str, optional
+        Segmentation method (:data:`predisat.segmentation.METHODS`) when ``options`` is not
+        given; default that of ``SkyOptions``.
 
     Returns
     -------
@@ -327,7 +331,12 @@ def evaluate_folder(
     if limit is not None:
         pairs = pairs[: max(0, int(limit))]
     fisheye = layout == "fisheye_hk"
-    opt = options or SkyOptions(fisheye=fisheye)
+    if options is not None:
+        opt = options
+    elif method is not None:
+        opt = SkyOptions(fisheye=fisheye, method=method)
+    else:
+        opt = SkyOptions(fisheye=fisheye)
     cams = _cameras(data) if layout == "synthetic" else {}
     rows: list[dict[str, Any]] = []
     worst: list[tuple[float, SkyPair, NDArray, NDArray]] = []

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from predisat.segmentation import METHODS
 from predisat.skyeval import evaluate_folder
 
 
@@ -31,12 +32,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--limit", type=int, help="score only the first N images of each folder")
     parser.add_argument("--worst", type=int, default=8, help="cases in the contact sheet")
+    parser.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
+                        "library's default)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     summaries = []
     for data in args.data:
         ev = evaluate_folder(data, out_dir=args.out, progress=not args.quiet, limit=args.limit,
-                             n_worst=args.worst)
+                             n_worst=args.worst, method=args.method)
         s = ev.summary.assign(data=Path(data).name, layout=ev.layout)
         summaries.append(s)
         print(f"{data} ({ev.layout}):")

@@ -87,37 +87,49 @@ def _colour(rng: np.random.Generator, base: tuple[float, float, float], jitter: 
     return np.clip(np.asarray(base) * (1 + rng.normal(0, jitter, 3)), 0, 1).astype(np.float32)
 
 
+def _hsv(hue_deg: float, sat: float, val: float) -> NDArray:
+    """RGB (3,) of a hue (deg), saturation and value in 0-1."""
+    px = np.array([[[hue_deg / 2.0, sat * 255.0, val * 255.0]]], np.float32)
+    rgb = cv2.cvtColor(px.astype(np.uint8), cv2.COLOR_HSV2RGB)[0, 0] / 255.0
+    return np.asarray(rgb, np.float32)
+
+
 def _sky(c: _Canvas) -> NDArray:
     """Sky background (H, W, 3) and returns the horizon colour."""
     rng = c.rng
-    kind = rng.choice(["clear", "clear", "hazy", "overcast", "overcast", "dusk", "cloudy",
-                       "cloudy"])
+    kind = rng.choice(["clear", "clear", "clear", "hazy", "overcast", "overcast", "dusk", "storm",
+                       "cloudy", "cloudy", "cloudy"])
     horizon_y = c.h * rng.uniform(0.3, 1.6)
     if kind in ("clear", "cloudy"):
-        zen = _colour(rng, (0.18, 0.42, 0.85), 0.25)
-        hor = _colour(rng, (0.72, 0.82, 0.93), 0.08)
+        # from pale to deep navy: the zenith of real clear skies spans a wide range
+        zen = _hsv(rng.uniform(195, 235), rng.uniform(0.25, 0.9), rng.uniform(0.3, 0.98))
+        hor = np.clip(zen + (1 - zen) * rng.uniform(0.35, 0.9), 0, 1).astype(np.float32)
     elif kind == "hazy":
-        zen = _colour(rng, (0.55, 0.68, 0.85), 0.12)
+        zen = _hsv(rng.uniform(190, 230), rng.uniform(0.1, 0.35), rng.uniform(0.6, 0.95))
         hor = _colour(rng, (0.85, 0.87, 0.88), 0.05)
     elif kind == "overcast":
-        g = rng.uniform(0.45, 1.0)
+        g = rng.uniform(0.35, 1.0)
         zen = _colour(rng, (g, g, g * rng.uniform(0.97, 1.1)), 0.03)
         hor = np.clip(zen * rng.uniform(0.8, 1.15), 0, 1).astype(np.float32)
+    elif kind == "storm":
+        zen = _hsv(rng.uniform(200, 290), rng.uniform(0.1, 0.6), rng.uniform(0.12, 0.5))
+        hor = np.clip(zen * rng.uniform(1.1, 2.0), 0, 1).astype(np.float32)
     else:
         zen = _colour(rng, (0.25, 0.35, 0.65), 0.2)
-        hor = _colour(rng, (0.95, 0.65, 0.4), 0.15)
+        hor = _hsv(rng.uniform(10, 45), rng.uniform(0.3, 0.8), rng.uniform(0.7, 1.0))
     t = np.clip(1.0 - (horizon_y - c.yy) / (horizon_y + 1e-6), 0.0, 1.0) ** rng.uniform(0.5, 2.5)
     tilt = rng.normal(0, 0.15) * (c.xx / c.w - 0.5)
     t = np.clip(t + tilt, 0, 1)[..., None]
     sky = zen * (1 - t) + hor * t
-    if kind in ("cloudy", "overcast") or rng.random() < 0.25:
+    if kind in ("cloudy", "overcast", "storm") or rng.random() < 0.25:
         scale = rng.uniform(0.1, 0.5) * c.w
-        dens = c.noise(scale, 6)
+        dens = c.noise(scale, 5)
         cover = rng.uniform(0.3, 0.75)
         alpha = np.clip((dens - (1 - cover) * 0.9 - 0.1) * rng.uniform(3, 8), 0, 1)
-        # cloud bases darker than their tops (self-shadowing): light varies with the density
-        # gradient along the rows
-        shade = np.clip(1.0 - rng.uniform(0, 3.0) * np.gradient(dens, axis=0) * scale, 0.3, 1.2)
+        # cloud bases darker than their tops (self-shadowing): the light follows the smoothed
+        # density gradient along the rows
+        grad = np.gradient(cv2.GaussianBlur(dens, (0, 0), max(1.0, scale * 0.05)), axis=0)
+        shade = np.clip(1.0 - rng.uniform(0, 1.5) * grad * scale, 0.55, 1.1)
         white = rng.uniform(0.75, 1.0)
         if rng.random() < 0.35:
             white *= rng.uniform(0.45, 0.8)  # dark rain clouds
@@ -297,14 +309,19 @@ def _ground(c: _Canvas, sky_img: NDArray) -> None:
     rng = c.rng
     y = c.h * rng.uniform(0.6, 1.1) + (c.xx[0] / c.w - 0.5) * rng.normal(0, 0.1) * c.h
     mask = c.yy >= y[None, :]
-    kind = rng.choice(["road", "grass", "snow", "water", "sand"])
+    kind = rng.choice(["road", "grass", "snow", "water", "sand", "desert", "dry"])
     tex = c.noise(c.w * 0.02, 4)[..., None]
     if kind == "water":
         col = np.flipud(sky_img) * rng.uniform(0.4, 0.9) * (0.9 + 0.2 * tex)
     else:
         base = {"road": (0.4, 0.4, 0.42), "grass": (0.25, 0.35, 0.15), "snow": (0.93, 0.95, 1.0),
-                "sand": (0.75, 0.68, 0.5)}[str(kind)]
+                "sand": (0.75, 0.68, 0.5), "desert": (0.82, 0.74, 0.6),
+                "dry": (0.62, 0.55, 0.3)}[str(kind)]
         col = _colour(rng, base, 0.1) * (0.75 + 0.5 * tex)
+        if kind in ("desert", "dry", "grass"):
+            # shrubs and stones: dark specks whose size shrinks toward the horizon
+            specks = c.noise(c.w * rng.uniform(0.01, 0.03), 3) > rng.uniform(0.62, 0.75)
+            col = np.where(specks[..., None], col * rng.uniform(0.2, 0.5), col)
     c.paint(mask, col)
 
 
@@ -315,6 +332,11 @@ def _camera(c: _Canvas) -> NDArray[np.uint8]:
     r = np.hypot(c.xx / c.w - 0.5, c.yy / c.h - 0.5)
     img = img * (1 - rng.uniform(0, 0.35) * r[..., None] ** 2)
     img = np.clip(img, 0, 1) ** rng.uniform(0.8, 1.25)
+    if rng.random() < 0.3:
+        hsv = cv2.cvtColor(img.astype(np.float32), cv2.COLOR_RGB2HSV)  # hue in degrees
+        hsv[..., 0] = np.mod(hsv[..., 0] + rng.normal(0, 8.0), 360.0)
+        hsv[..., 1] = np.clip(hsv[..., 1] * rng.uniform(0.6, 1.4), 0, 1)
+        img = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
     sigma = rng.uniform(0, 1.0)
     if sigma > 0.3:
         img = cv2.GaussianBlur(img, (0, 0), sigma)

@@ -189,3 +189,28 @@ def test_code_fingerprint_covers_the_named_files() -> None:
     assert seg != code_fingerprint(["reconstruct.py"]) != code_fingerprint()
     with pytest.raises(OSError):
         code_fingerprint(["no_such_module.py"])
+
+
+def test_segmenter_name_must_be_a_method_unless_a_function_is_given(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(ValueError, match="segmenter"):
+        process_survey(survey_dir, tmp_path / "a", PipelineParams(segmenter="magic"),
+                       progress=False)
+    res = process_survey(survey_dir, tmp_path / "b", PipelineParams(chunk_m=30.0,
+                         segmenter="magic"), progress=False, segmenter=blue_sky)
+    assert res.masks.n_pos > 0
+
+
+def test_segmenter_method_selects_the_segmentation(survey_dir: Path, tmp_path: Path) -> None:
+    """Two methods give two caches and two provenance records; both give masks."""
+    import json
+
+    for method in ("learned", "ensemble"):
+        res = process_survey(survey_dir, tmp_path / method,
+                             PipelineParams(chunk_m=30.0, segmenter=method), progress=False)
+        assert res.masks.n_pos > 0
+        assert any(p.name.startswith(f"seg-{method}-")
+                   for p in (tmp_path / method / "cache").iterdir())
+        prov = json.loads((tmp_path / method / "provenance.json").read_text())
+        assert method in json.dumps(prov)

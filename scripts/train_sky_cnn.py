@@ -1,0 +1,319 @@
+"""Train the sky segmentation network shipped as ``predisat/data/models/sky_unet.onnx``.
+
+Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.0``)::
+
+    python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn            # data + training
+    python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn --epochs 2  # a quick try
+
+1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
+   photos of :func:`predisat.synth.photos.random_photo` (seeds from 200000) and the rendered
+   survey frames of ``scripts/train_sky.py``'s ``TRAIN_RUNS`` (rendered there if missing,
+   repeated ``--survey-repeat`` times: they are the pipeline's own kind of input), all resized
+   to ``--input-px`` squares with soft labels (share of sky per pixel; thin structures are sky).
+   ``VALIDATION_RUNS`` and 200 photos of other seeds (from 900000) are held out for the card.
+   Nothing else is used: no third-party photo, so the network may ship with the project.
+2. **Model**: a U-Net (:class:`UNet`, channels ``--channels``, two 3x3 convolutions with batch
+   normalisation per level, bilinear upsampling) on 4 input channels (B, G, R and the row
+   position, :func:`predisat.skycnn.network_input`). Loss: binary cross-entropy plus half a
+   soft-IoU term; AdamW with a one-cycle schedule; augmentation: flips, gain and white-balance
+   jitter, grey images, random crops. Every random draw is seeded; on one machine two runs give
+   the same weights (PyTorch's deterministic algorithms).
+3. **Output**: ``sky_unet.onnx`` (opset 13, read by ``cv2.dnn``) and ``sky_unet.json`` (the
+   card: data, seeds, parameters, loss per epoch, held-out IoU through ``cv2.dnn``) in
+   ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import train_sky  # the survey recipes are shared with the perceptron's script
+
+PHOTO_SEED0 = 200_000
+HOLDOUT_PHOTO_SEED0 = 900_000
+N_HOLDOUT_PHOTOS = 200
+
+
+def _square(image: np.ndarray, label: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Image and soft sky label (0-255, share of sky) resized to ``size`` squares."""
+    im = cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)
+    sky = (label >= 128).astype(np.float32)
+    lb = np.clip(cv2.resize(sky, (size, size), interpolation=cv2.INTER_AREA), 0.0, 1.0)
+    return im, (lb * 255.0 + 0.5).astype(np.uint8)
+
+
+def _photo(args: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    from predisat.synth.photos import random_photo
+
+    seed, size = args
+    p = random_photo(seed)
+    return _square(p.image_bgr, p.label, size)
+
+
+def photo_set(work: Path, first_seed: int, n: int, size: int, workers: int) -> dict[str, Any]:
+    """Procedural photos ``first_seed .. first_seed + n - 1`` (cached in ``work``)."""
+    path = work / f"photos_{first_seed}_{n}_{size}.npz"
+    if not path.is_file():
+        t0 = time.perf_counter()
+        jobs = [(s, size) for s in range(first_seed, first_seed + n)]
+        with multiprocessing.get_context("spawn").Pool(workers) as pool:
+            res = pool.map(_photo, jobs, chunksize=16)
+        np.savez(path, x=np.stack([r[0] for r in res]), y=np.stack([r[1] for r in res]))
+        print(f"{n} photos in {time.perf_counter() - t0:.0f} s -> {path}", flush=True)
+    with np.load(path) as z:
+        return {"x": z["x"], "y": z["y"]}
+
+
+def survey_set(work: Path, runs: tuple[train_sky.Run, ...], size: int) -> dict[str, Any]:
+    """Frames of rendered surveys (rendered into ``work`` when missing)."""
+    xs, ys = [], []
+    for run in runs:
+        train_sky.generate(run, work, train_sky.CAMERA_SIZE_PX, progress=False)
+        for _, img_path, label_path in train_sky.frames(work / run.name):
+            im, lb = _square(train_sky.read(img_path, cv2.IMREAD_COLOR),
+                             train_sky.read(label_path, cv2.IMREAD_GRAYSCALE), size)
+            xs.append(im)
+            ys.append(lb)
+    return {"x": np.stack(xs), "y": np.stack(ys)}
+
+
+def build_unet(channels: tuple[int, ...]) -> Any:
+    """The U-Net (a ``torch.nn.Module``; PyTorch is imported here, for training only)."""
+    import torch
+    from torch import nn
+    from torch.nn import functional as F
+
+    def block(a: int, b: int) -> nn.Module:
+        return nn.Sequential(
+            nn.Conv2d(a, b, 3, padding=1, bias=False), nn.BatchNorm2d(b), nn.ReLU(inplace=True),
+            nn.Conv2d(b, b, 3, padding=1, bias=False), nn.BatchNorm2d(b), nn.ReLU(inplace=True),
+        )  # fmt: skip
+
+    class UNet(nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.enc = nn.ModuleList()
+            c0 = 4
+            for c in channels:
+                self.enc.append(block(c0, c))
+                c0 = c
+            self.dec = nn.ModuleList(
+                block(channels[i] + channels[i - 1], channels[i - 1])
+                for i in range(len(channels) - 1, 0, -1)
+            )
+            self.head = nn.Conv2d(channels[0], 1, 1)
+
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            skips = []
+            for i, enc in enumerate(self.enc):
+                if i:
+                    x = F.max_pool2d(x, 2)
+                x = enc(x)
+                skips.append(x)
+            for dec, skip in zip(self.dec, skips[-2::-1], strict=True):
+                x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
+                x = dec(torch.cat([x, skip], 1))
+            return self.head(x)
+
+    return UNet()
+
+
+def _blob(xb: np.ndarray) -> Any:
+    """``predisat.skycnn.network_input`` for a batch already at the network's size."""
+    import torch
+
+    x = torch.from_numpy(xb).permute(0, 3, 1, 2).float() / 255.0 - 0.5
+    n, _, h, w = x.shape
+    row = torch.linspace(0.0, 1.0, h).view(1, 1, h, 1).expand(n, 1, h, w)
+    return torch.cat([x, row], 1)
+
+
+def augment(
+    x: np.ndarray, y: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Flips, gain / white balance / offset jitter, grey images, random crops (new arrays)."""
+    xf = x.astype(np.float32)
+    yo = y.copy()
+    n = len(xf)
+    flip = rng.random(n) < 0.5
+    xf[flip] = xf[flip, :, ::-1]
+    yo[flip] = yo[flip, :, ::-1]
+    gain = rng.uniform(0.7, 1.3, (n, 1, 1, 1)) * rng.uniform(0.9, 1.1, (n, 1, 1, 3))
+    xf = xf * gain + rng.uniform(-20, 20, (n, 1, 1, 1))
+    grey = rng.random(n) < 0.1
+    xf[grey] = xf[grey].mean(-1, keepdims=True)
+    hh, ww = xf.shape[1:3]
+    for i in np.flatnonzero(rng.random(n) < 0.5):
+        ch, cw = int(hh * rng.uniform(0.55, 1.0)), int(ww * rng.uniform(0.55, 1.0))
+        y0, x0 = int(rng.integers(0, hh - ch + 1)), int(rng.integers(0, ww - cw + 1))
+        xf[i] = cv2.resize(xf[i, y0:y0 + ch, x0:x0 + cw], (ww, hh), interpolation=cv2.INTER_LINEAR)
+        yo[i] = cv2.resize(yo[i, y0:y0 + ch, x0:x0 + cw], (ww, hh), interpolation=cv2.INTER_LINEAR)
+    return np.clip(xf, 0, 255).astype(np.uint8), yo
+
+
+def train(
+    x: np.ndarray, y: np.ndarray, channels: tuple[int, ...], epochs: int, batch: int,
+    seed: int, threads: int,
+) -> tuple[Any, list[float]]:
+    """Train the U-Net; returns it (in eval mode) and the mean loss per epoch."""
+    import torch
+    from torch.nn import functional as F
+
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True)
+    net = build_unet(channels)
+    steps = epochs * (len(x) // batch)
+    opt = torch.optim.AdamW(net.parameters(), 2e-3, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, 3e-3, total_steps=steps)
+    rng = np.random.default_rng(seed)
+    losses = []
+    t0 = time.perf_counter()
+    for epoch in range(epochs):
+        order = rng.permutation(len(x))
+        total = 0.0
+        for i in range(0, len(x) - batch + 1, batch):
+            xb, yb = augment(x[order[i:i + batch]], y[order[i:i + batch]], rng)
+            target = torch.from_numpy(yb).float().unsqueeze(1) / 255.0
+            logit = net(_blob(xb))
+            prob = torch.sigmoid(logit)
+            inter = (prob * target).sum((1, 2, 3))
+            union = (prob + target - prob * target).sum((1, 2, 3))
+            soft_iou = ((inter + 1.0) / (union + 1.0)).mean()
+            loss = F.binary_cross_entropy_with_logits(logit, target) + 0.5 * (1.0 - soft_iou)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.item())
+        losses.append(total / max(len(x) // batch, 1))
+        print(f"epoch {epoch + 1}/{epochs}: loss {losses[-1]:.4f} "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    return net.eval(), losses
+
+
+def export(net: Any, path: Path, input_px: int) -> None:
+    """Write the network as ONNX (opset 13, the TorchScript exporter: read by cv2.dnn)."""
+    import torch
+
+    dummy = _blob(np.zeros((1, input_px, input_px, 3), np.uint8))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        torch.onnx.export(net, dummy, str(path), input_names=["x"], output_names=["logit"],
+                          opset_version=13, dynamo=False)
+
+
+def export_agreement(net: Any, net_path: Path, data: dict[str, Any], n: int = 16) -> float:
+    """Largest |logit| difference between PyTorch and the exported file run by cv2.dnn."""
+    import torch
+
+    from predisat.skycnn import SkyNet
+
+    onnx = SkyNet(net_path, data["x"].shape[1])
+    with torch.no_grad():
+        ref = net(_blob(data["x"][:n])).numpy()[:, 0]
+    return float(max(np.abs(onnx.logit_tile(im) - r).max() for im, r in zip(data["x"][:n], ref,
+                                                                             strict=True)))
+
+
+def pooled_iou(net_path: Path, input_px: int, data: dict[str, Any]) -> float:
+    """Pooled sky IoU of the exported network (through cv2.dnn) on squares with soft labels."""
+    from predisat.skycnn import SkyNet
+
+    net = SkyNet(net_path, input_px)
+    inter = union = 0
+    for im, lb in zip(data["x"], data["y"], strict=True):
+        pred = net.logit_tile(im) >= 0.0
+        truth = lb >= 128
+        inter += int(np.count_nonzero(pred & truth))
+        union += int(np.count_nonzero(pred | truth))
+    return inter / max(union, 1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path,
+                        default=Path(tempfile.gettempdir()) / "predisat_sky_cnn",
+                        help="folder for the generated data (outside the repository)")
+    parser.add_argument("--out", type=Path,
+                        default=Path(__file__).resolve().parents[1] / "predisat/data/models",
+                        help="where sky_unet.onnx and its card are written")
+    parser.add_argument("--photos", type=int, default=4000, help="procedural training photos")
+    parser.add_argument("--survey-repeat", type=int, default=3,
+                        help="times each rendered survey frame appears per epoch")
+    parser.add_argument("--input-px", type=int, default=128, help="network input side")
+    parser.add_argument("--channels", default="8,16,32,48,64", help="U-Net widths per level")
+    parser.add_argument("--epochs", type=int, default=14)
+    parser.add_argument("--batch", type=int, default=16)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=2, help="PyTorch threads")
+    parser.add_argument("--workers", type=int, default=2, help="photo generation processes")
+    args = parser.parse_args(argv)
+    try:
+        import torch
+    except ImportError:
+        parser.error("training needs PyTorch: .venv/bin/pip install torch==2.13.0")
+    args.work.mkdir(parents=True, exist_ok=True)
+    size = args.input_px
+    channels = tuple(int(v) for v in args.channels.split(","))
+
+    photos = photo_set(args.work, PHOTO_SEED0, args.photos, size, args.workers)
+    surveys = survey_set(args.work, train_sky.TRAIN_RUNS, size)
+    x = np.concatenate([photos["x"], np.repeat(surveys["x"], args.survey_repeat, 0)])
+    y = np.concatenate([photos["y"], np.repeat(surveys["y"], args.survey_repeat, 0)])
+    print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
+          f"{len(surveys['x'])} survey frames x {args.survey_repeat})", flush=True)
+    net, losses = train(x, y, channels, args.epochs, args.batch, args.seed, args.threads)
+
+    onnx_path = args.out / "sky_unet.onnx"
+    export(net, onnx_path, size)
+    held_photos = photo_set(args.work, HOLDOUT_PHOTO_SEED0, N_HOLDOUT_PHOTOS, size, args.workers)
+    held_survey = survey_set(args.work, train_sky.VALIDATION_RUNS, size)
+    card = {
+        "format": "predisat-sky-unet",
+        "version": 1,
+        "input_px": size,
+        "input": "BGR / 255 - 0.5 and the row position 0-1 (predisat.skycnn.network_input)",
+        "output": "sky logit, input_px x input_px",
+        "description": "PREDISAT sky segmentation U-Net, trained by scripts/train_sky_cnn.py on "
+                       "procedural photos (predisat.synth.photos) and rendered survey frames "
+                       "(predisat.synth.generate) only.",
+        "channels": list(channels),
+        "epochs": args.epochs,
+        "batch": args.batch,
+        "seed": args.seed,
+        "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
+        "survey_runs": [r.name for r in train_sky.TRAIN_RUNS],
+        "survey_repeat": args.survey_repeat,
+        "loss_per_epoch": [round(v, 5) for v in losses],
+        "torch": torch.__version__,
+        "validation": {
+            "photos": {"first_seed": HOLDOUT_PHOTO_SEED0, "n": N_HOLDOUT_PHOTOS,
+                       "pooled_iou": pooled_iou(onnx_path, size, held_photos)},
+            "surveys": {"runs": [r.name for r in train_sky.VALIDATION_RUNS],
+                        "pooled_iou": pooled_iou(onnx_path, size, held_survey)},
+        },
+        "export_max_logit_difference": export_agreement(net, onnx_path, held_photos),
+        "licence": "trained only on data generated by PREDISAT (project licence)",
+    }
+    onnx_path.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n",
+                                              encoding="utf-8")
+    print(json.dumps(card["validation"], indent=1))
+    print(f"wrote {onnx_path} ({onnx_path.stat().st_size / 1e6:.2f} MB) and its card")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
