@@ -2,7 +2,8 @@
 
 Usage::
 
-    python scripts/bench_pipeline.py SURVEY_DIR [--workers 1] [--chunk-m 1000] [--json out.json]
+    python scripts/bench_pipeline.py SURVEY_DIR [--workers 1] [--chunk-m 1000] [--segmenter M]
+        [--json out.json]
 
 Decodes every frame of the survey once (``cv2.imread``, the floor), then runs the whole
 pipeline (segmentation, reconstruction, chunk files, merge) from scratch in a temporary folder,
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import cv2
 
-from predisat.pipeline import PipelineParams, process_survey
+from predisat.pipeline import DEFAULT_SEGMENTER, PipelineParams, process_survey
 from predisat.survey import Survey
 
 
@@ -29,6 +30,8 @@ def main() -> None:
     ap.add_argument("survey", type=Path)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--chunk-m", type=float, default=1000.0)
+    ap.add_argument("--segmenter", default=DEFAULT_SEGMENTER,
+                    help=f"segmentation method (default {DEFAULT_SEGMENTER})")
     ap.add_argument("--json", type=Path, default=Path("bench_pipeline.json"))
     args = ap.parse_args()
 
@@ -42,7 +45,8 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         res = process_survey(
-            args.survey, Path(tmp) / "out", PipelineParams(chunk_m=args.chunk_m),
+            args.survey, Path(tmp) / "out",
+            PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter),
             workers=args.workers, progress=False,
         )  # fmt: skip
     cores = args.workers
@@ -52,6 +56,7 @@ def main() -> None:
         "positions": res.masks.n_pos,
         "image_px": [int(c.camera.width_px * c.camera.height_px) for c in survey.cameras.values()],
         "workers": cores,
+        "segmenter": args.segmenter,
         "decode_s": decode_s,
         "pipeline_s": res.elapsed_s,
         "stage_s": res.timings_s,
