@@ -1,10 +1,13 @@
 """Sky segmentation of camera frames: a sky mask, the skyline per column, confidence.
 
-Two methods (``SkyOptions.method``); the default was chosen by measurement
+Four methods (``SkyOptions.method``, :data:`METHODS`); the default was chosen by measurement
 (``docs/segmentation.md``).
 
 **learned** (default): a per-pixel classifier (:mod:`predisat.skymodel`, features of
 :mod:`predisat.skyfeatures`) trained by ``scripts/train_sky.py`` on synthetic frames only.
+**cnn** and **ensemble** run the same steps on the probability of the U-Net of
+:mod:`predisat.skycnn` (trained on procedural photos and rendered frames), or on the mean of
+both models' probabilities (the best on real photos).
 
 1. Sky probability at a working resolution (longest side 160 px); upsampled and sharpened on
    the frame's edges by a guided filter. An upward fisheye photo is unwrapped to polar
@@ -123,11 +126,13 @@ class SkyOptions:
     min_sky_lightness : float
         Darkest (OpenCV 8-bit Lab lightness, 0-255) non-blue region taken as a sky seed: a dark
         tunnel or wall filling the frame yields no seed, hence no sky.
-    method : {"learned", "grabcut"}
+    method : {"learned", "ensemble", "cnn", "grabcut"}
         ``"learned"`` (default, chosen by measurement, see ``docs/segmentation.md``): the
-        per-pixel classifier of :mod:`predisat.skymodel`; ``"grabcut"``: the classical
-        seeds + GrabCut method. The GrabCut parameters above apply to ``"grabcut"`` only
-        (``thin_px``, ``circle_*``, ``fisheye`` to both).
+        per-pixel classifier of :mod:`predisat.skymodel`; ``"cnn"``: the network of
+        :mod:`predisat.skycnn`; ``"ensemble"``: the mean of both probabilities (best on real
+        photos); ``"grabcut"``: the classical seeds + GrabCut method. The GrabCut parameters
+        above apply to ``"grabcut"`` only (``thin_px``, ``circle_*``, ``fisheye`` to all);
+        the "Learned method" ones below to the three learned methods.
     refine_guided : bool
         Learned method: sharpen the upsampled probability on the image edges (guided filter).
     min_island_fraction : float
@@ -463,8 +468,10 @@ def segment_sky(
     options : SkyOptions, optional
         Defaults to ``SkyOptions()`` (side camera / upright perspective photo). Use
         ``SkyOptions(fisheye=True)`` for upward fisheye photos.
-    classifier : predisat.skymodel.SkyClassifier, optional
-        Model of the learned method; default the shipped one.
+    classifier : object, optional
+        Probability model of the learned methods (``predict_image`` and ``max_side_px``: a
+        :class:`predisat.skymodel.SkyClassifier`, :class:`predisat.skycnn.SkyNet` or
+        :class:`predisat.skycnn.SkyEnsemble`); default the shipped one of ``method``.
 
     Returns
     -------
