@@ -824,6 +824,8 @@ def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None
 # ---------------------------------------------------------------------- command line
 def add_process_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``predisat process``."""
+    from predisat.segmentation import METHODS
+
     parser.add_argument("survey", type=Path, help="survey folder (with survey.yaml)")
     parser.add_argument(
         "--out", type=Path, required=True,
@@ -839,7 +841,7 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
         "--strict", action="store_true", help="stop at the first bad frame instead of skipping"
     )
     parser.add_argument(
-        "--segmenter", choices=("ensemble", "cnn", "learned", "grabcut"),
+        "--segmenter", choices=METHODS,
         default=DEFAULT_SEGMENTER,
         help=f"sky segmentation method (default {DEFAULT_SEGMENTER}; docs/segmentation.md)",
     )  # fmt: skip

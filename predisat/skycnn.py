@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.skyfeatures import working_size
+from predisat.skymodel import SkyClassifier, _sigmoid
 
 __all__ = ["DEFAULT_NET", "SkyEnsemble", "SkyNet", "network_input"]
 
@@ -146,8 +147,8 @@ class SkyNet:
         n_tiles = max(1, round(w / h)) if w > 1.5 * h else 1
         edges = np.linspace(0, w, n_tiles + 1).round().astype(int)
         logits = [self.logit_tile(img[:, a:b]) for a, b in itertools.pairwise(edges)]
-        prob = 0.5 * (1.0 + np.tanh(0.5 * np.hstack(logits)))  # overflow-free logistic
-        size = working_size(img.shape, self.input_px * n_tiles if n_tiles > 1 else self.input_px)
+        prob = _sigmoid(np.hstack(logits))
+        size = working_size(img.shape, self.input_px * n_tiles)
         return np.asarray(cv2.resize(prob, size, interpolation=cv2.INTER_LINEAR), np.float32)
 
 
@@ -179,8 +180,6 @@ class SkyEnsemble:
     @classmethod
     def default(cls) -> SkyEnsemble:
         """The shipped perceptron and network, weighted equally."""
-        from predisat.skymodel import SkyClassifier
-
         return cls((SkyClassifier.default(), SkyNet.default()), (0.5, 0.5))
 
     @property
