@@ -69,7 +69,13 @@ def network_input(image_bgr: ArrayLike, input_px: int) -> NDArray[np.float32]:
 @lru_cache(maxsize=4)
 def _load_net(path: str) -> Any:
     # one network object per process and file (cv2.dnn.Net cannot be pickled or shared)
-    return cv2.dnn.readNetFromONNX(path)
+    try:
+        return cv2.dnn.readNetFromONNX(path)
+    except cv2.error as exc:
+        raise ValueError(
+            f"sky network {path} is not a readable ONNX file ({str(exc).strip()[:200]}); "
+            "reinstall the package or retrain it with scripts/train_sky_cnn.py"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -108,6 +114,11 @@ class SkyNet:
         if card.get("format") != _FORMAT:
             raise ValueError(
                 f"{card_path} is not a PREDISAT sky network card (format {card.get('format')!r})"
+            )
+        if not isinstance(card.get("input_px"), int):
+            raise ValueError(
+                f"{card_path} has no integer 'input_px' (the network's input side); "
+                "retrain with scripts/train_sky_cnn.py"
             )
         return cls(p, int(card["input_px"]), card)
 

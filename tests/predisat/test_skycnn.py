@@ -92,6 +92,14 @@ def test_load_errors_name_the_file_and_the_fix(tmp_path) -> None:
     (tmp_path / "net.json").write_text(json.dumps({"format": "other"}))
     with pytest.raises(ValueError, match=r"net\.json"):
         SkyNet.load(tmp_path / "net.onnx")
+    (tmp_path / "net.json").write_text(json.dumps({"format": "predisat-sky-unet"}))
+    with pytest.raises(ValueError, match="input_px"):
+        SkyNet.load(tmp_path / "net.onnx")
+    (tmp_path / "bad.onnx").write_bytes(b"not an onnx file")
+    (tmp_path / "bad.json").write_text(json.dumps({"format": "predisat-sky-unet",
+                                                   "input_px": 32}))
+    with pytest.raises(ValueError, match=r"bad\.onnx.*train_sky_cnn"):
+        SkyNet.load(tmp_path / "bad.onnx").predict_image(np.zeros((32, 32, 3), np.uint8))
     with pytest.raises(ValueError, match="multiple of 16"):
         SkyNet(tmp_path / "net.onnx", 100)
 
