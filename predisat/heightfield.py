@@ -21,6 +21,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from predisat.skyline import SkyProfile
@@ -227,41 +228,70 @@ def carve_profile(
     n = rot[0, 1] * dx + rot[1, 1] * dy
     beta = np.mod(np.degrees(np.arctan2(e, n)) - profile.look_az_deg + 180.0, 360.0) - 180.0
     rho = np.hypot(e, n)
-    corners = (beta[:-1, :-1], beta[:-1, 1:], beta[1:, :-1], beta[1:, 1:])
-    bmin = np.minimum.reduce(corners)
-    bmax = np.maximum.reduce(corners)
-    rho_far = np.maximum.reduce((rho[:-1, :-1], rho[:-1, 1:], rho[1:, :-1], rho[1:, 1:]))
     b_axis = profile.rel_az_deg
-    step = float(b_axis[1] - b_axis[0])
-    i_lo = np.floor((bmin - b_axis[0]) / step).astype(np.int64)
-    i_hi = np.ceil((bmax - b_axis[0]) / step).astype(np.int64)
-    ok = (
-        hf.region[r0:r1, c0:c1]
-        & (bmax - bmin < 90.0)
-        & (i_lo >= 0)
-        & (i_hi <= b_axis.size - 1)
-        & (rho_far <= range_m)
-    )
-    if not ok.any():
-        return 0
     tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
     tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
-    rows, cols = np.nonzero(ok)
-    t_max = RangeMax1D(tan_sky).query(i_lo[rows, cols], i_hi[rows, cols])
-    fin = np.isfinite(t_max)
-    rows, cols, t_max = rows[fin], cols[fin], t_max[fin]
-    # nearest point of each cell to the camera (for downward-looking bounds)
-    x_a, y_a = xl[cols], yl[rows]
-    near = np.hypot(np.maximum.reduce([x_a, 0.0 * x_a, -(x_a + c)]),
-                    np.maximum.reduce([y_a, 0.0 * y_a, -(y_a + c)]))  # fmt: skip
-    h = np.where(t_max >= 0.0, rho_far[rows, cols] * t_max, near * t_max)
     up = rot[:, 2]
-    # local height -> frame z: the local horizontal plane is tilted in the frame
-    tilt = -(up[0] * (x_a + c / 2) + up[1] * (y_a + c / 2)) / up[2]
-    z = (cz + tilt + h / up[2]).astype(np.float32)
-    sub = bound[r0:r1, c0:c1]
-    np.minimum.at(sub, (rows, cols), z)
-    return int(rows.size)
+    return int(_carve_cells(
+        np.ascontiguousarray(beta), np.ascontiguousarray(rho), hf.region[r0:r1, c0:c1],
+        bound[r0:r1, c0:c1], float(b_axis[0]), float(b_axis[1] - b_axis[0]), float(range_m),
+        np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
+        float(up[0]), float(up[1]), float(up[2]),
+    ))  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _carve_cells(
+    beta: NDArray, rho: NDArray, region: NDArray, bound: NDArray, b0: float, step: float,
+    range_m: float, tan_sky: NDArray, xl: NDArray, yl: NDArray, c: float, cz: float,
+    up_x: float, up_y: float, up_z: float,
+) -> int:  # fmt: skip
+    """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded.
+
+    ``beta`` and ``rho`` (n_r + 1, n_c + 1) are the relative azimuth (deg) and horizontal range
+    of the cell corners, ``tan_sky`` the tangent of the profile's skyline (``+inf`` where the
+    column saw no sky). A cell takes the highest skyline ray over the azimuth span of its
+    corners, at its farthest corner (at its nearest point for a downward ray).
+    """
+    n_r, n_c = region.shape
+    n_b = tan_sky.size
+    count = 0
+    for r in range(n_r):
+        y_a = yl[r]
+        ny_ = max(max(y_a, 0.0), -(y_a + c))
+        for q in range(n_c):
+            if not region[r, q]:
+                continue
+            b1, b2, b3, b4 = beta[r, q], beta[r, q + 1], beta[r + 1, q], beta[r + 1, q + 1]
+            bmin = min(min(b1, b2), min(b3, b4))
+            bmax = max(max(b1, b2), max(b3, b4))
+            if not bmax - bmin < 90.0:
+                continue
+            i_lo = np.int64(np.floor((bmin - b0) / step))
+            i_hi = np.int64(np.ceil((bmax - b0) / step))
+            if i_lo < 0 or i_hi > n_b - 1:
+                continue
+            rho_far = max(max(rho[r, q], rho[r, q + 1]), max(rho[r + 1, q], rho[r + 1, q + 1]))
+            if not rho_far <= range_m:
+                continue
+            t_max = tan_sky[i_lo]
+            for i in range(i_lo + 1, i_hi + 1):
+                if tan_sky[i] > t_max:
+                    t_max = tan_sky[i]
+            if not np.isfinite(t_max):
+                continue
+            x_a = xl[q]
+            if t_max >= 0.0:
+                h = rho_far * t_max
+            else:  # nearest point of the cell to the camera (for downward-looking bounds)
+                h = np.hypot(max(max(x_a, 0.0), -(x_a + c)), ny_) * t_max
+            # local height -> frame z: the local horizontal plane is tilted in the frame
+            tilt = -(up_x * (x_a + c / 2) + up_y * (y_a + c / 2)) / up_z
+            z = np.float32(cz + tilt + h / up_z)
+            if z < bound[r, q]:
+                bound[r, q] = z
+            count += 1
+    return count
 
 
 def apply_clearance_prior(

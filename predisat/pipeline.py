@@ -286,7 +286,11 @@ def _pool_segment(jobs: Sequence[_FrameJob]) -> list[tuple[str, str | None]]:
 
 
 def _pool_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
-    return _run_chunk(job)
+    # one Reconstructor per worker process: its camera rectifiers are reused across chunks
+    rec = _WORKER.get("reconstructor")
+    if rec is None or rec.params != job.params.reconstruction:
+        rec = _WORKER["reconstructor"] = Reconstructor(job.params.reconstruction)
+    return _run_chunk(job, rec)
 
 
 # ---------------------------------------------------------------------- chunks
@@ -319,8 +323,14 @@ def _fmt_m(x: float) -> str:
     return text if text != "-0" else "0"
 
 
-def _run_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
-    """Reconstruct one chunk from cached segmentations and write it atomically."""
+def _run_chunk(
+    job: _ChunkJob, reconstructor: Reconstructor | None = None
+) -> tuple[str, list[BadFrame]]:
+    """Reconstruct one chunk from cached segmentations and write it atomically.
+
+    ``reconstructor`` (with ``job.params.reconstruction``) may be shared by the chunks of a run,
+    so that its per-camera rectifiers are built once.
+    """
     track = job.track
     bad: list[BadFrame] = []
     views: list[FrameView] = []
@@ -345,7 +355,9 @@ def _run_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
                     confidence=conf, frame_id=f.frame_id,
                 )
             )  # fmt: skip
-    rec = Reconstructor(job.params.reconstruction).run(views, job.positions_m, track)
+    if reconstructor is None:
+        reconstructor = Reconstructor(job.params.reconstruction)
+    rec = reconstructor.run(views, job.positions_m, track)
     prov = dict(job.provenance)
     prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
     masks = rec.to_maskset(track, provenance=prov)
@@ -800,8 +812,12 @@ def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None
     bar = _progress(len(jobs), "reconstructing chunks", progress)
     try:
         if workers == 1 or len(jobs) < 2:
+            recs: dict[ReconstructionParams, Reconstructor] = {}
             for j in jobs:
-                _run_chunk(j)
+                p = j.params.reconstruction
+                if p not in recs:
+                    recs[p] = Reconstructor(p)
+                _run_chunk(j, recs[p])
                 bar.update(1)
             return
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera import CameraModel, Mount, vehicle_to_enu
@@ -439,12 +440,11 @@ def horizon(
         The ray met an unknown cell.
     """
     az = np.radians(_sub_azimuths(p))
-    dist = _ray_distances(p).astype(np.float32)
-    blocks = np.array_split(np.arange(dist.size), max(1, dist.size // 64))
+    dist_cells = _ray_distances(p).astype(np.float32) / np.float32(hf.cell_m)
     c = hf.cell_m
     ny, nx = hf.shape
-    bound = hf.bound_m.ravel()
-    region = hf.region.ravel()
+    bound = np.ascontiguousarray(hf.bound_m, np.float32).ravel()
+    region = np.ascontiguousarray(hf.region, np.bool_).ravel()
     n = antenna_m.shape[0]
     el = np.empty((n, az.size))
     unknown = np.empty((n, az.size), bool)
@@ -454,45 +454,71 @@ def horizon(
         rot = local_to_frame[i]
         up = rot[:, 2]
         d = d_loc @ rot.T
-        d = (d[:, :2] / np.linalg.norm(d[:, :2], axis=1, keepdims=True)).astype(np.float32)
+        d = np.ascontiguousarray(
+            d[:, :2] / np.linalg.norm(d[:, :2], axis=1, keepdims=True), np.float32
+        )
         # antenna position in cells: integer part (global, exact) and fraction (float32), so
         # that every window computes bit-identical samples
         gx, gy = np.floor(a[0] / c), np.floor(a[1] / c)
-        ax = np.float32(a[0] / c - gx)
-        ay = np.float32(a[1] / c - gy)
-        ox, oy = int(gx) - hf.ix0, int(gy) - hf.iy0
-        best = np.full(az.size, -np.inf, np.float32)
-        alive = np.arange(az.size)
-        for blk in blocks:
-            if alive.size == 0:
-                break
-            dd = dist[blk] / np.float32(c)
-            fx = ax + d[alive, :1] * dd[None, :]
-            fy = ay + d[alive, 1:] * dd[None, :]
-            col = np.floor(fx).astype(np.int32) + ox
-            row = np.floor(fy).astype(np.int32) + oy
-            inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-            flat = np.where(inside, row * nx + col, 0)
-            inside &= region[flat]
-            valid = np.logical_and.accumulate(inside, axis=1)
-            h = bound[flat]
-            # nearest point of the cell to the antenna, in cells
-            cl, rl = (col - ox).astype(np.float32), (row - oy).astype(np.float32)
-            ex = np.maximum(np.maximum(cl - ax, 0.0), ax - cl - 1.0)
-            ey = np.maximum(np.maximum(rl - ay, 0.0), ay - rl - 1.0)
-            near = np.maximum(np.hypot(ex, ey) * np.float32(c), np.float32(1e-3))
-            with np.errstate(invalid="ignore"):
-                rel = (h - np.float32(a[2])) * np.float32(up[2])
-                rel += (fx - ax) * np.float32(up[0] * c) + (fy - ay) * np.float32(up[1] * c)
-                ratio = np.where(valid, rel / near, np.float32(-np.inf))
-            b = np.maximum(best[alive], ratio.max(axis=1))
-            best[alive] = b
-            # a ray that met an unknown cell is blocked whatever lies farther
-            alive = alive[valid[:, -1] & (b < np.inf)]
+        best = _march_rays(
+            d, dist_cells, bound, region, nx, ny,
+            np.float32(a[0] / c - gx), np.float32(a[1] / c - gy),
+            int(gx) - hf.ix0, int(gy) - hf.iy0, np.float32(c), np.float32(a[2]),
+            np.float32(up[2]), np.float32(up[0] * c), np.float32(up[1] * c),
+        )  # fmt: skip
         unknown[i] = np.isposinf(best)
         with np.errstate(invalid="ignore"):
             el[i] = np.degrees(np.arctan(best.astype(float)))
     return el, unknown
+
+
+@njit(cache=True, nogil=True)
+def _march_rays(
+    d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
+    ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
+    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32,
+) -> NDArray:  # fmt: skip
+    """Steepest bound tangent along each ray (float32; ``+inf`` once a ray meets an unknown cell).
+
+    A ray stops at its first sample outside the modelled region. All arithmetic is float32 in
+    a fixed order, so that overlapping windows give bit-identical results.
+    """
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    tiny = np.float32(1e-3)
+    n_rays = d.shape[0]
+    best = np.full(n_rays, -np.inf, np.float32)
+    for j in range(n_rays):
+        dx, dy = d[j, 0], d[j, 1]
+        b = np.float32(-np.inf)
+        for k in range(dist_cells.size):
+            fx = ax + dx * dist_cells[k]
+            fy = ay + dy * dist_cells[k]
+            col = np.int32(np.floor(fx)) + ox
+            row = np.int32(np.floor(fy)) + oy
+            if col < 0 or col >= nx or row < 0 or row >= ny:
+                break
+            flat = row * nx + col
+            if not region[flat]:
+                break
+            # nearest point of the cell to the antenna, in cells
+            cl = np.float32(col - ox)
+            rl = np.float32(row - oy)
+            ex = max(max(cl - ax, zero), ax - cl - one)
+            ey = max(max(rl - ay, zero), ay - rl - one)
+            near = max(np.float32(np.hypot(ex, ey)) * c, tiny)
+            rel = (bound[flat] - a_z) * up_z
+            rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
+            r = rel / near
+            if r != r:  # NaN propagates, as np.maximum does
+                b = r
+                break
+            if r > b:
+                b = r
+            if b == np.inf:  # a ray that met an unknown cell is blocked whatever lies farther
+                break
+        best[j] = b
+    return best
 
 
 # ---------------------------------------------------------------------- far field and flags

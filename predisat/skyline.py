@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera import CameraModel, Mount
@@ -195,6 +196,12 @@ class Rectifier:
         Descending (row 0 is the highest elevation).
     map_u, map_v : ndarray of float32, shape (n_e, n_b)
         Pixel coordinates of each grid direction; -10 where the camera does not see it.
+    pixel_index : ndarray of int32, shape (n_e, n_b)
+        Flat index (``row * width_px + col``) of the pixel that ``cv2.remap`` (nearest) reads
+        for each grid direction; -1 where the camera does not see it.
+    first_seen_row, last_seen_row : ndarray of int64, shape (n_b,)
+        Highest and lowest grid row the camera sees per column (0 and ``n_e - 1`` in a column
+        it does not see at all).
     grow_px : tuple of int
         Obstacle growth (horizontal, vertical) in pixels before resampling.
     """
@@ -205,6 +212,9 @@ class Rectifier:
     el_deg: NDArray
     map_u: NDArray = field(repr=False)
     map_v: NDArray = field(repr=False)
+    pixel_index: NDArray = field(repr=False)
+    first_seen_row: NDArray = field(repr=False)
+    last_seen_row: NDArray = field(repr=False)
     grow_px: tuple[int, int] = (2, 1)
 
     @classmethod
@@ -243,9 +253,15 @@ class Rectifier:
         gap_u = float(np.nanmax(np.where(ok_u, du, 0.0))) if ok_u.any() else 1.0
         gap_v = float(np.nanmax(np.where(ok_v, dv, 0.0))) if ok_v.any() else 1.0
         grow = (int(np.ceil(gap_u / 2.0)), int(np.ceil(gap_v / 2.0)))
+        map_u, map_v = u.astype(np.float32), v.astype(np.float32)
+        index = _remap_index(camera.shape, map_u, map_v)
+        seen = index >= 0
+        first = np.argmax(seen, axis=0)
+        last = seen.shape[0] - 1 - np.argmax(seen[::-1], axis=0)
+        for a in (index, first, last):
+            a.setflags(write=False)
         return cls(
-            camera, mount, beta, el,
-            u.astype(np.float32), v.astype(np.float32), grow,
+            camera, mount, beta, el, map_u, map_v, index, first, last, grow,
         )  # fmt: skip
 
     @property
@@ -293,20 +309,53 @@ class Rectifier:
                     f"confidence must have shape ({self.camera.width_px},) (one per column)"
                 )
             m = m & (c >= min_confidence)[None, :]
-        lab = self.rectify(m)
-        seen = lab != _UNSEEN
-        any_seen = seen.any(axis=0)
-        top = np.argmax(seen, axis=0)  # first seen row (highest elevation)
-        n_e = lab.shape[0]
-        rows = np.arange(n_e)[:, None]
-        # end of the top sky run: first non-sky row at or below the first seen row
-        not_sky_below = (lab != _SKY) & (rows >= top[None, :])
-        end = np.where(not_sky_below.any(axis=0), np.argmax(not_sky_below, axis=0), n_e)
+        img = np.where(m, _SKY, _OBSTACLE).astype(np.uint8)
+        gx, gy = self.grow_px
+        grown = cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        # The top sky run, read through the remap's own pixel choice (the same grid labels as
+        # :meth:`rectify`) down to its end only, instead of resampling the whole grid.
+        top, last_seen = self.first_seen_row, self.last_seen_row
+        any_seen = self.pixel_index[top, np.arange(top.size)] >= 0
+        n_e = self.el_deg.size
+        end = _top_sky_run_end(np.ascontiguousarray(grown).ravel(), self.pixel_index, top)
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
-        last_seen = n_e - 1 - np.argmax(seen[::-1], axis=0)
         lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
         hi = np.where(any_seen, self.el_deg[top], np.nan)
         fwd = float(heading_deg) + (180.0 if reverse else 0.0)
         look = float(np.mod(fwd + self.look_offset_deg, 360.0))
         return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)
+
+
+def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDArray:
+    """Flat pixel index ``cv2.remap`` (nearest) reads at each map entry; -1 outside the image."""
+    h, w = shape
+    cols, rows = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    # float32 holds pixel coordinates exactly (below 2**24)
+    src = np.ascontiguousarray(np.stack([cols, rows], axis=-1))
+    got = cv2.remap(
+        src, map_u, map_v, cv2.INTER_NEAREST,
+        borderMode=cv2.BORDER_CONSTANT, borderValue=(-1.0, -1.0, 0.0, 0.0),
+    )  # fmt: skip
+    idx = got[..., 1].astype(np.int64) * w + got[..., 0].astype(np.int64)
+    return np.where(got[..., 0] >= 0, idx, -1).astype(np.int32)
+
+
+@njit(cache=True, nogil=True)
+def _top_sky_run_end(grown: NDArray, pixel_index: NDArray, top: NDArray) -> NDArray:
+    """First row at or below ``top`` (per column) whose label is not sky; ``n_e`` if none.
+
+    ``grown`` is the flattened label image (sky 255), ``pixel_index`` (n_e, n_b) the pixel each
+    grid sample reads (-1: unseen, which is not sky).
+    """
+    n_e, n_b = pixel_index.shape
+    end = np.empty(n_b, np.int64)
+    for b in range(n_b):
+        r = top[b]
+        while r < n_e:
+            k = pixel_index[r, b]
+            if k < 0 or grown[k] != 255:
+                break
+            r += 1
+        end[b] = r
+    return end

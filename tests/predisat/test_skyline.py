@@ -99,3 +99,29 @@ def test_low_confidence_columns_clear_nothing(pinhole: CameraModel) -> None:
 def test_wrong_mask_shape_is_rejected(pinhole: CameraModel) -> None:
     with pytest.raises(ValueError, match="camera image shape"):
         Rectifier.build(pinhole, Mount.default("left")).profile(np.ones((10, 10), bool), 0.0)
+
+
+def test_profile_equals_the_top_sky_run_of_the_full_rectified_grid(pinhole: CameraModel) -> None:
+    """The profile walks each column only down to its sky run's end; the whole grid resampled
+    by ``cv2.remap`` (:meth:`Rectifier.rectify`) must give the same run ends."""
+    mount = Mount.default("right")
+    rect = Rectifier.build(pinhole, mount)
+    rng = np.random.default_rng(3)
+    sky = elevation_sky(pinhole, mount, 10.0, 25.0)
+    sky[rng.random(sky.shape) < 0.002] = False  # specks: runs end at varied rows
+    sky[:, 150:170] = False  # a mast from top to bottom
+    prof = rect.profile(sky, heading_deg=10.0)
+    lab = rect.rectify(sky)
+    n_e = lab.shape[0]
+    for j in range(lab.shape[1]):
+        seen = np.flatnonzero(lab[:, j] != 128)
+        if seen.size == 0:
+            assert np.isnan(prof.seen_lo_deg[j]) and np.isinf(prof.sky_el_deg[j])
+            continue
+        top = seen[0]
+        not_sky = np.flatnonzero(lab[top:, j] != 255)
+        end = top + (not_sky[0] if not_sky.size else n_e - top)
+        expected = rect.el_deg[end - 1] if end > top else np.inf
+        assert prof.sky_el_deg[j] == expected
+        assert prof.seen_hi_deg[j] == rect.el_deg[top]
+        assert prof.seen_lo_deg[j] == rect.el_deg[seen[-1]]
