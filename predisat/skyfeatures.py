@@ -90,9 +90,13 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
     hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV).astype(np.float32)
     bgr = img.astype(np.float32)
     lum = lab[..., 0]
-    total = bgr.sum(axis=2) + 1.0
+    # channel sums and minima of integers: exact in any order; per-channel ops avoid numpy's
+    # slow reductions over a length-3 axis
+    chan = cv2.split(img)
+    total = bgr[..., 0] + bgr[..., 1] + bgr[..., 2] + 1.0
     blueness = (bgr[..., 0] - bgr[..., 2]) / total
-    dark = cv2.erode(bgr.min(axis=2), np.ones((3, 3), np.uint8)) / 255.0
+    darkest = cv2.min(cv2.min(chan[0], chan[1]), chan[2])
+    dark = cv2.erode(darkest, np.ones((3, 3), np.uint8)).astype(np.float32) / 255.0
 
     p99 = float(np.percentile(lum, 99)) + 1.0
     gx = cv2.Sobel(lum, cv2.CV_32F, 1, 0, ksize=3)
@@ -113,7 +117,8 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
     bright = cand_l >= np.quantile(cand_l[smooth], 0.5) if smooth.any() else smooth
     pick = smooth & bright
     ref = np.median(lab[:top][pick], axis=0) if pick.any() else lab[:top].reshape(-1, 3).mean(0)
-    de_ref = np.linalg.norm(lab - ref, axis=2) / 100.0
+    dlab = lab - ref
+    de_ref = np.sqrt(dlab[..., 0] ** 2 + dlab[..., 1] ** 2 + dlab[..., 2] ** 2) / 100.0
 
     lb8 = cv2.GaussianBlur(lum, (0, 0), 8.0)
     bb8 = cv2.GaussianBlur(lab[..., 2], (0, 0), 8.0)
@@ -132,5 +137,5 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
         g1, g2, g4, stds[0], stds[1], lap,
         lb8 / 255.0, (bb8 - 128.0) / 64.0, dl_dy / 255.0 * 8.0, rows, above_mean, above_max,
     ]  # fmt: skip
-    out = np.stack([np.asarray(f, np.float32) for f in feats], axis=2)
+    out = cv2.merge([np.asarray(f, np.float32) for f in feats])  # interleaves in one pass
     return np.ascontiguousarray(out, np.float32)
