@@ -362,7 +362,7 @@ def train_sky_model(
 
 
 def guided_filter(
-    guide: ArrayLike, src: ArrayLike, radius_px: int, eps: float = 1e-3
+    guide: ArrayLike, src: ArrayLike, radius_px: int, eps: float = 1e-3, subsample: int = 1
 ) -> NDArray[np.float32]:
     """Edge-preserving smoothing of ``src`` steered by a grey ``guide`` (He et al. 2013).
 
@@ -373,12 +373,17 @@ def guided_filter(
     ----------
     guide : array_like, shape (H, W)
         Grey image scaled to 0-1.
-    src : array_like, shape (H, W)
+    src : array_like, shape (H, W), or any 2-D shape when ``subsample > 1``
         Map to filter (a probability).
     radius_px : int
-        Box radius.
+        Box radius, pixels of the guide.
     eps : float
         Regularisation: edges with a guide variance below ``eps`` are smoothed away.
+    subsample : int
+        With ``s > 1``, the fast guided filter (He and Sun 2015, arXiv:1505.00996): the affine
+        coefficients are computed at ``1/s`` resolution (box radius ``radius_px / s``) and
+        upsampled bilinearly, ``s**2`` times fewer box sums; ``src`` is resampled to that grid,
+        so it may be given at its own (working) resolution.
 
     Returns
     -------
@@ -386,17 +391,33 @@ def guided_filter(
     """
     i = np.asarray(guide, np.float32)
     p = np.asarray(src, np.float32)
-    if i.shape != p.shape or i.ndim != 2:
+    s = int(subsample)
+    if s < 1:
+        raise ValueError(f"subsample must be >= 1, got {subsample}")
+    if i.ndim != 2 or p.ndim != 2 or (s == 1 and i.shape != p.shape):
         raise ValueError(f"guide {i.shape} and src {p.shape} must be equal 2-D shapes")
-    k = (2 * int(radius_px) + 1,) * 2
+    h, w = i.shape
+    if s > 1:
+        size = (max(1, round(w / s)), max(1, round(h / s)))
+        i_low = cv2.resize(i, size, interpolation=cv2.INTER_AREA)
+        p_low = cv2.resize(p, size, interpolation=cv2.INTER_AREA if p.shape[1] > size[0]
+                           else cv2.INTER_LINEAR)  # fmt: skip
+        r = max(1, round(radius_px / s))
+    else:
+        i_low, p_low, r = i, p, int(radius_px)
+    k = (2 * r + 1,) * 2
 
     def box(a: NDArray) -> NDArray:
         return np.asarray(cv2.boxFilter(a, cv2.CV_32F, k, borderType=cv2.BORDER_REFLECT))
 
-    mi, mp = box(i), box(p)
-    a = (box(i * p) - mi * mp) / (box(i * i) - mi * mi + eps)
+    mi, mp = box(i_low), box(p_low)
+    a = (box(i_low * p_low) - mi * mp) / (box(i_low * i_low) - mi * mi + eps)
     b = mp - a * mi
-    return np.asarray(box(a) * i + box(b), np.float32)
+    ma, mb = box(a), box(b)
+    if s > 1:
+        ma = cv2.resize(ma, (w, h), interpolation=cv2.INTER_LINEAR)
+        mb = cv2.resize(mb, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.asarray(ma * i + mb, np.float32)
 
 
 def sky_probability(
@@ -408,7 +429,8 @@ def sky_probability(
     """Full-resolution sky probability of a frame.
 
     The classifier runs at working resolution; the map is upsampled bilinearly and, with
-    ``refine``, sharpened on the frame's edges by a :func:`guided_filter`.
+    ``refine``, sharpened on the frame's edges by a :func:`guided_filter` (its fast variant,
+    coefficients at half resolution, on frames at least twice the working size).
 
     Parameters
     ----------
@@ -430,10 +452,19 @@ def sky_probability(
     clf = classifier or SkyClassifier.default()
     img = np.ascontiguousarray(np.asarray(image_bgr, np.uint8))
     h, w = img.shape[:2]
+    scale = max(h, w) / clf.max_side_px
+    refine = refine and scale > 1.0
+    # Fast guided filter on frames at least twice the working size: the coefficients at half
+    # resolution cost a quarter of the box sums and keep the guide's full-resolution edges.
+    sub = 2 if scale >= 2.0 else 1
     if circle_px is None:
-        prob = np.asarray(
-            cv2.resize(clf.predict_image(img), (w, h), interpolation=cv2.INTER_LINEAR), np.float32
-        )
+        p_small = clf.predict_image(img)
+        if refine and sub > 1:  # the filter resamples the working map itself
+            prob = np.asarray(p_small, np.float32)
+        else:
+            prob = np.asarray(
+                cv2.resize(p_small, (w, h), interpolation=cv2.INTER_LINEAR), np.float32
+            )
     else:
         cx, cy, r = (float(v) for v in circle_px)
         n_r, n_a = max(16, round(r)), max(32, round(np.pi * r))
@@ -449,10 +480,7 @@ def sky_probability(
         yy, xx = np.ogrid[:h, :w]
         # Outside the circle warpPolar may leave memory unset: no sky there.
         prob = np.where((xx - cx) ** 2 + (yy - cy) ** 2 < r * r, prob, 0.0).astype(np.float32)
-    prob = np.asarray(prob, np.float32)
     if refine:
-        scale = max(h, w) / clf.max_side_px
-        if scale > 1.0:
-            grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
-            prob = guided_filter(grey, prob, max(2, round(1.5 * scale)), 1e-3)
+        grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
+        prob = guided_filter(grey, prob, max(2, round(1.5 * scale)), 1e-3, subsample=sub)
     return np.clip(prob, 0.0, 1.0)

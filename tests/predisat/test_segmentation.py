@@ -245,6 +245,34 @@ def test_guided_filter_sharpens_a_blurred_step() -> None:
     np.testing.assert_allclose(const, box(box(blurred[:20, 30:50])), atol=1e-4)
 
 
+def test_fast_guided_filter_keeps_a_full_resolution_edge_from_a_working_map() -> None:
+    import cv2
+
+    from predisat.skymodel import guided_filter
+
+    # a jagged skyline (tree tops): the guide has it at full resolution, the map only as a
+    # blurred quarter-resolution version (the classifier's working map), which rounds it off
+    h, w = 120, 160
+    yy, xx = np.mgrid[:h, :w]
+    edge = 50.3 + 8.0 * np.sin(xx / 6.0)
+    truth = (yy < edge).astype(np.float32)
+    guide = np.where(truth > 0, 0.8, 0.3).astype(np.float32)
+    small = cv2.GaussianBlur(cv2.resize(truth, (w // 4, h // 4), interpolation=cv2.INTER_AREA),
+                             (0, 0), 1.0)
+    coarse = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    fast = guided_filter(guide, small, 6, 1e-3, subsample=2)
+    full = guided_filter(guide, coarse, 6, 1e-3)
+    assert fast.shape == (h, w)
+    err_coarse = np.mean((coarse >= 0.5) != (truth > 0))
+    for out in (fast, full):
+        assert np.mean((out >= 0.5) != (truth > 0)) < 0.25 * err_coarse
+    assert np.abs(fast - full).max() < 0.1
+    with pytest.raises(ValueError, match="equal 2-D shapes"):
+        guided_filter(guide, small, 6)
+    with pytest.raises(ValueError, match="subsample"):
+        guided_filter(guide, coarse, 6, subsample=0)
+
+
 def test_training_path_beats_chance_and_round_trips(tmp_path) -> None:
     from predisat.skymodel import SkyClassifier, sample_pixels, train_sky_model
 
