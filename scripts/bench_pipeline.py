@@ -9,20 +9,28 @@ Decodes every frame of the survey once (``cv2.imread``, the floor), then runs th
 pipeline (segmentation, reconstruction, chunk files, merge) from scratch in a temporary folder,
 and prints frames per second per core for both, the time per frame of each stage and the ratio
 pipeline / decode (issue 3 target: within 3x).
+
+Per core means one thread: OpenCV, BLAS and OpenMP are pinned to one thread each (before numpy
+loads), so that the figure does not borrow the second core of the machine.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import tempfile
-import time
-from pathlib import Path
+import os
 
-import cv2
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from predisat.pipeline import DEFAULT_SEGMENTER, PipelineParams, process_survey
-from predisat.survey import Survey
+import argparse  # noqa: E402
+import json  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+
+from predisat.pipeline import DEFAULT_SEGMENTER, PipelineParams, process_survey  # noqa: E402
+from predisat.survey import Survey  # noqa: E402
 
 
 def main() -> None:
@@ -34,6 +42,7 @@ def main() -> None:
                     help=f"segmentation method (default {DEFAULT_SEGMENTER})")
     ap.add_argument("--json", type=Path, default=Path("bench_pipeline.json"))
     args = ap.parse_args()
+    cv2.setNumThreads(1)
 
     survey = Survey.load(args.survey, check_images=False, on_error="skip")
     n = len(survey.frames)
