@@ -240,3 +240,42 @@ def test_frames_farther_than_the_overlap_do_not_matter(mixed) -> None:
     np.testing.assert_array_equal(
         rec.run(frames, s, world.track).mask_el_deg, rec.run(near, s, world.track).mask_el_deg
     )
+
+
+def test_horizon_rays_against_analytic_cells() -> None:
+    """The ray march on a hand-made height field: a tall cell, an unknown cell and a gap in the
+    modelled region, each on one compass ray, against elevations computed by hand."""
+    from predisat.heightfield import HeightField
+    from predisat.reconstruct import horizon
+
+    c = 0.5
+    n = 200  # cells from -50 m to +50 m in x and y
+    bound = np.zeros((n, n), np.float32)  # flat ground at z = 0
+    region = np.ones((n, n), bool)
+
+    def cell(x_m: float, y_m: float) -> tuple[int, int]:
+        return int(np.floor(y_m / c)) + n // 2, int(np.floor(x_m / c)) + n // 2
+
+    bound[cell(0.2, 20.2)] = 10.0  # north: a 10 m column in [0, 0.5) x [20, 20.5)
+    bound[cell(-9.8, 0.2)] = np.inf  # west: an unknown cell
+    region[cell(5.2, 0.2)] = False  # east: the ray leaves the model here...
+    bound[cell(10.2, 0.2)] = 20.0  # ...so this column beyond it must not count
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+    ant = np.array([[0.1, 0.1, 4.0]])
+    p = ReconstructionParams()
+    el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+    step = p.az_step_deg / p.n_sub
+
+    def ray(az_deg: float) -> int:
+        return round((az_deg + p.az_step_deg / 2) / step)
+
+    # nearest point of the north column to the antenna: (0.1, 20.0)
+    assert el[0, ray(0.0)] == pytest.approx(np.degrees(np.arctan(6.0 / 19.9)), abs=1e-4)
+    assert el[0, ray(270.0)] == 90.0 and unknown[0, ray(270.0)]
+    assert not unknown[0, ray(0.0)] and not unknown[0, ray(90.0)]
+    # east: only ground before x = 5 m; its steepest top is that of the last cell seen,
+    # [4.5, 5.0), from its nearest point x = 4.5
+    assert el[0, ray(90.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 4.4)), abs=1e-4)
+    # south: flat ground to the edge of the field (cell nearest point at y = -49.5 m)
+    assert el[0, ray(180.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 49.6)), abs=1e-4)
