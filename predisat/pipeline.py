@@ -812,12 +812,11 @@ def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None
     bar = _progress(len(jobs), "reconstructing chunks", progress)
     try:
         if workers == 1 or len(jobs) < 2:
-            recs: dict[ReconstructionParams, Reconstructor] = {}
+            rec: Reconstructor | None = None
             for j in jobs:
-                p = j.params.reconstruction
-                if p not in recs:
-                    recs[p] = Reconstructor(p)
-                _run_chunk(j, recs[p])
+                if rec is None or rec.params != j.params.reconstruction:
+                    rec = Reconstructor(j.params.reconstruction)
+                _run_chunk(j, rec)
                 bar.update(1)
             return
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:

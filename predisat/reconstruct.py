@@ -480,8 +480,10 @@ def _march_rays(
 ) -> NDArray:  # fmt: skip
     """Steepest bound tangent along each ray (float32; ``+inf`` once a ray meets an unknown cell).
 
-    A ray stops at its first sample outside the modelled region. All arithmetic is float32 in
-    a fixed order, so that overlapping windows give bit-identical results.
+    A ray stops at its first sample outside the modelled region, at its first unknown cell
+    (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). All
+    arithmetic is float32 in a fixed order, so that overlapping windows give bit-identical
+    results.
     """
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -510,7 +512,7 @@ def _march_rays(
             rel = (bound[flat] - a_z) * up_z
             rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
             r = rel / near
-            if r != r:  # NaN propagates, as np.maximum does
+            if r != r:  # a NaN bound makes the ray's value NaN
                 b = r
                 break
             if r > b:

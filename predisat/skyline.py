@@ -198,7 +198,8 @@ class Rectifier:
         Pixel coordinates of each grid direction; -10 where the camera does not see it.
     pixel_index : ndarray of int32, shape (n_e, n_b)
         Flat index (``row * width_px + col``) of the pixel that ``cv2.remap`` (nearest) reads
-        for each grid direction; -1 where the camera does not see it.
+        for each grid direction; -1 where the camera does not see it or the remap rounds the
+        map off the image (the samples :meth:`rectify` labels unseen).
     first_seen_row, last_seen_row : ndarray of int64, shape (n_b,)
         Highest and lowest grid row the camera sees per column (0 and ``n_e - 1`` in a column
         it does not see at all).
@@ -354,7 +355,7 @@ def _top_sky_run_end(grown: NDArray, pixel_index: NDArray, top: NDArray) -> NDAr
         r = top[b]
         while r < n_e:
             k = pixel_index[r, b]
-            if k < 0 or grown[k] != 255:
+            if k < 0 or grown[k] != _SKY:
                 break
             r += 1
         end[b] = r

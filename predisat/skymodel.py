@@ -376,7 +376,7 @@ def guided_filter(
     src : array_like, shape (H, W), or any 2-D shape when ``subsample > 1``
         Map to filter (a probability).
     radius_px : int
-        Box radius, pixels of the guide.
+        Box radius, pixels of the guide (at least 1 at the coefficient resolution).
     eps : float
         Regularisation: edges with a guide variance below ``eps`` are smoothed away.
     subsample : int
@@ -397,6 +397,12 @@ def guided_filter(
     if i.ndim != 2 or p.ndim != 2 or (s == 1 and i.shape != p.shape):
         raise ValueError(f"guide {i.shape} and src {p.shape} must be equal 2-D shapes")
     h, w = i.shape
+    # a resampled src must show the same frame: same aspect ratio within a pixel of rounding
+    if s > 1 and abs(p.shape[0] * w - p.shape[1] * h) > max(h, w):
+        raise ValueError(
+            f"src {p.shape} must have the aspect ratio of guide {i.shape} (the same frame at "
+            "another resolution)"
+        )
     if s > 1:
         size = (max(1, round(w / s)), max(1, round(h / s)))
         i_low = cv2.resize(i, size, interpolation=cv2.INTER_AREA)

@@ -18,7 +18,10 @@ from __future__ import annotations
 
 import os
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+# OPENCV_FOR_THREADS_NUM reaches the spawned workers of --workers N, where the parent's
+# cv2.setNumThreads does not
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS",
+             "OPENCV_FOR_THREADS_NUM"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402

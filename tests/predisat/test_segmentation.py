@@ -271,6 +271,14 @@ def test_fast_guided_filter_keeps_a_full_resolution_edge_from_a_working_map() ->
         guided_filter(guide, small, 6)
     with pytest.raises(ValueError, match="subsample"):
         guided_filter(guide, coarse, 6, subsample=0)
+    with pytest.raises(ValueError, match="aspect ratio"):
+        guided_filter(guide, small.T, 6, subsample=2)
+    # frames smaller than the subsampling still give a full-resolution, finite output
+    for shape in [(1, 5), (3, 2), (7, 5)]:
+        out = guided_filter(np.full(shape, 0.5, np.float32), np.full(shape, 0.3, np.float32), 2,
+                            subsample=3)  # fmt: skip
+        assert out.shape == shape
+        np.testing.assert_allclose(out, 0.3, atol=1e-5)  # a flat map stays flat
 
 
 def test_training_path_beats_chance_and_round_trips(tmp_path) -> None:

@@ -1,0 +1,73 @@
+"""Tests of the corridor height field's carving against bounds computed by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predisat.heightfield import HeightField, RangeMax1D, carve_profile
+from predisat.skyline import SkyProfile
+
+C = 0.5
+N = 200  # cells from -50 m to +50 m in x and y
+
+
+def field() -> tuple[HeightField, np.ndarray]:
+    z = np.zeros((N, N), np.float32)
+    hf = HeightField(C, -N // 2, -N // 2, np.full((N, N), np.inf, np.float32),
+                     np.ones((N, N), bool), z, z, z)  # fmt: skip
+    return hf, hf.bound_m.copy()
+
+
+def cell(x_m: float, y_m: float) -> tuple[int, int]:
+    return int(np.floor(y_m / C)) + N // 2, int(np.floor(x_m / C)) + N // 2
+
+
+def profile(sky_el_deg: np.ndarray, look_az_deg: float = 90.0) -> SkyProfile:
+    b = -90.0 + 0.25 * (np.arange(720) + 0.5)
+    lo = np.full(b.size, -30.0)
+    return SkyProfile(b, np.asarray(sky_el_deg, float), lo, np.full(b.size, 89.0), look_az_deg)
+
+
+CAM = np.array([0.1, 0.1, 3.0])
+
+
+def test_a_cell_takes_the_sky_ray_over_its_farthest_corner() -> None:
+    hf, bound = field()
+    n = carve_profile(hf, bound, profile(np.full(720, 30.0)), CAM, np.eye(3), 60.0)
+    assert n > 0
+    # cell [10, 10.5) x [0, 0.5) east of the camera: farthest corner (10.4, 0.4) from it
+    far = np.hypot(10.4, 0.4)
+    assert bound[cell(10.2, 0.2)] == pytest.approx(3.0 + far * np.tan(np.radians(30.0)), abs=1e-4)
+    # behind the camera (west), beyond the range, or outside the profile: not carved
+    assert np.isinf(bound[cell(-10.2, 0.2)])
+    assert np.isinf(bound[cell(45.2, 40.2)])  # 60.3 m away
+    # a second, lower skyline only lowers the bounds
+    before = bound.copy()
+    carve_profile(hf, bound, profile(np.full(720, 10.0)), CAM, np.eye(3), 60.0)
+    assert np.all(bound <= before)
+    assert bound[cell(10.2, 0.2)] == pytest.approx(3.0 + far * np.tan(np.radians(10.0)), abs=1e-4)
+
+
+def test_unseen_columns_clear_nothing_and_downward_rays_use_the_nearest_point() -> None:
+    hf, bound = field()
+    el = np.full(720, -10.0)
+    b = -90.0 + 0.25 * (np.arange(720) + 0.5)
+    el[np.abs(b) < 5.0] = np.inf  # no sky seen within 5 deg of the look direction
+    carve_profile(hf, bound, profile(el), CAM, np.eye(3), 60.0)
+    assert np.isinf(bound[cell(20.2, 0.2)])  # straight east: that column saw no sky
+    # north-east, 45 deg off the look direction: the downward ray bounds the cell at its
+    # nearest point (15, 15) from the camera at (0.1, 0.1)
+    near = np.hypot(14.9, 14.9)
+    got = bound[cell(15.2, 15.2)]
+    assert got == pytest.approx(3.0 - near * np.tan(np.radians(10.0)), abs=1e-4)
+
+
+def test_range_max_matches_a_direct_maximum() -> None:
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=257)
+    v[[5, 100]] = np.inf
+    lo = rng.integers(0, 257, 500)
+    hi = np.minimum(lo + rng.integers(0, 60, 500), 256)
+    got = RangeMax1D(v).query(lo, hi)
+    np.testing.assert_array_equal(got, [v[a : b + 1].max() for a, b in zip(lo, hi, strict=True)])
