@@ -75,6 +75,16 @@ TRAIN_RUNS = (
     Run("train_k", 13800.0, 14100.0, "mixed", 112, "pinhole", 25.0),
     Run("train_l", 2000.0, 2400.0, "clear", 113, "pinhole", 40.0),
 )
+# ``--extra rock-wall-fisheye`` (an experiment, not in the shipped model; docs/segmentation.md):
+# side fisheye frames in cuttings and between rock walls, where the wall across the track is
+# seen past the zenith along the upper rim. The runs above have no such frame (their rock-wall
+# stretches fall outside the rendered intervals). Seeds chosen for rock walls on both sides.
+EXTRA_RUNS = {
+    "rock-wall-fisheye": (
+        Run("train_m", 6850.0, 7150.0, "mixed", 395, "fisheye", 15.0),
+        Run("train_n", 10850.0, 11150.0, "mixed", 317, "fisheye", 15.0),
+    ),
+}
 VALIDATION_RUNS = (
     Run("val_a", 13000.0, 13600.0, "mixed", 109, "pinhole"),
 )
@@ -118,9 +128,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--generate-only", action="store_true", help="render, do not train")
     parser.add_argument("--holdout", action="store_true", help="also render HOLDOUT_RUNS")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--extra", action="append", default=[], choices=sorted(EXTRA_RUNS),
+                        help="add these EXTRA_RUNS to the training runs (experiments)")
     args = parser.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
-    for run in (*TRAIN_RUNS, *VALIDATION_RUNS):
+    args.train_runs = TRAIN_RUNS + tuple(r for name in args.extra for r in EXTRA_RUNS[name])
+    for run in (*args.train_runs, *VALIDATION_RUNS):
         generate(run, args.work, CAMERA_SIZE_PX, not args.quiet)
     if args.holdout:
         for run in HOLDOUT_RUNS:
@@ -192,14 +205,14 @@ def validate(clf: SkyClassifier, runs: tuple[Run, ...], work: Path) -> dict[str,
 
 def train(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    x, y, n_frames = samples(TRAIN_RUNS, args.work, args.pixels, seed=0)
+    x, y, n_frames = samples(args.train_runs, args.work, args.pixels, seed=0)
     print(f"{x.shape[0]} samples from {n_frames} frames in {time.perf_counter() - t0:.0f} s",
           flush=True)
     card = {
         "description": "PREDISAT sky classifier: multilayer perceptron on per-pixel "
                        "features (predisat.skyfeatures), trained by scripts/train_sky.py on "
                        "synthetic frames only (predisat.synth.generate on the demo track).",
-        "training_runs": [asdict(r) for r in TRAIN_RUNS],
+        "training_runs": [asdict(r) for r in args.train_runs],
         "validation_runs": [asdict(r) for r in VALIDATION_RUNS],
         "camera_size_px": list(CAMERA_SIZE_PX),
         "pixels_per_frame": args.pixels,
