@@ -5,6 +5,10 @@ Usage::
     python scripts/eval_sky.py --data ../shared/data/sky/ade20k \
         --data ../shared/data/sky/fisheye_hk --out eval_sky_out
     python scripts/eval_sky.py --data /tmp/seg_synth_clear --out eval_sky_out   # synthetic
+    # the committed sheet of docs/segmentation.md: the four worst of each real set
+    python scripts/eval_sky.py --method ensemble --data ../shared/data/sky/ade20k \
+        --data ../shared/data/sky/fisheye_hk --out /tmp/eval_sky_out \
+        --sheet docs/figures/sky_worst_cases.png
 
 Each folder is one of the layouts of :mod:`predisat.skyeval` (ADE20K, fisheye_hk, generic
 images/ + masks/, or a ``predisat synth`` output folder). For each it writes
@@ -19,10 +23,33 @@ import argparse
 import sys
 from pathlib import Path
 
+import cv2
 import pandas as pd
 
-from predisat.segmentation import METHODS
-from predisat.skyeval import evaluate_folder
+from predisat.segmentation import METHODS, SkyOptions, segment_sky
+from predisat.skyeval import (
+    confusion_overlay,
+    evaluate_folder,
+    find_pairs,
+    sky_iou,
+    worst_cases_sheet,
+)
+
+
+def worst_items(data: str, table: pd.DataFrame, n: int, options: SkyOptions) -> list:
+    """(name, iou, image, overlay) of the ``n`` lowest-IoU images of ``data``, re-segmented."""
+    _, pairs = find_pairs(data)
+    by_name = {p.name: p for p in pairs}
+    items = []
+    for name in table.nsmallest(n, "iou")["name"]:
+        pair = by_name[name]
+        img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
+        truth = cv2.imread(str(pair.mask_path), cv2.IMREAD_GRAYSCALE) >= 128
+        seg = segment_sky(img, options)
+        truth_v = truth & seg.valid_mask
+        items.append((name, sky_iou(seg.sky_mask, truth_v), img,
+                      confusion_overlay(seg.sky_mask, truth_v)))  # fmt: skip
+    return items
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -35,8 +62,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
                         "library's default)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--sheet", type=Path, metavar="PNG",
+                        help="also write one contact sheet of the --sheet-per-set worst cases "
+                             "of every folder")
+    parser.add_argument("--sheet-per-set", type=int, default=4, metavar="N")
     args = parser.parse_args(argv)
     summaries = []
+    sheet: list = []
     for data in args.data:
         ev = evaluate_folder(data, out_dir=args.out, progress=not args.quiet, limit=args.limit,
                              n_worst=args.worst, method=args.method)
@@ -46,6 +78,12 @@ def main(argv: list[str] | None = None) -> int:
         print(ev.summary.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
         for kind, path in ev.files.items():
             print(f"  wrote {kind}: {path}")
+        if args.sheet is not None:
+            fisheye = ev.layout == "fisheye_hk"
+            opt = SkyOptions(fisheye=fisheye, **({"method": args.method} if args.method else {}))
+            sheet += worst_items(data, ev.table, args.sheet_per_set, opt)
+    if sheet:
+        print(f"wrote {worst_cases_sheet(sheet, args.sheet, thumb_w_px=150)}")
     pd.concat(summaries).to_csv(Path(args.out) / "summary_all.csv", index=False,
                                 float_format="%.5g")
     return 0
