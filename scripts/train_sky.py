@@ -77,8 +77,8 @@ TRAIN_RUNS = (
 )
 # ``--extra rock-wall-fisheye`` (an experiment, not in the shipped model; docs/segmentation.md):
 # side fisheye frames in cuttings and between rock walls, where the wall across the track is
-# seen past the zenith along the upper rim. The runs above have no such frame (their rock-wall
-# stretches fall outside the rendered intervals). Seeds chosen for rock walls on both sides.
+# seen past the zenith along the upper rim. The runs above have none (their rock-wall
+# stretches fall outside the rendered intervals). Seeds chosen for walls on both sides.
 EXTRA_RUNS = {
     "rock-wall-fisheye": (
         Run("train_m", 6850.0, 7150.0, "mixed", 395, "fisheye", 15.0),
@@ -87,6 +87,8 @@ EXTRA_RUNS = {
 }
 VALIDATION_RUNS = (
     Run("val_a", 13000.0, 13600.0, "mixed", 109, "pinhole"),
+    # rock walls seen by a side fisheye, as in EXTRA_RUNS (other stretch and seed)
+    Run("val_b", 11850.0, 12150.0, "mixed", 374, "fisheye", 15.0),
 )
 HOLDOUT_RUNS = (
     Run("holdout_clear", 3000.0, 3300.0, "clear", 201, "pinhole", 20.0),
