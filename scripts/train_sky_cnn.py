@@ -267,6 +267,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2, help="PyTorch threads")
     parser.add_argument("--workers", type=int, default=2, help="photo generation processes")
+    parser.add_argument("--extra", action="append", default=[],
+                        choices=sorted(train_sky.EXTRA_RUNS),
+                        help="add these EXTRA_RUNS of scripts/train_sky.py (experiments)")
     args = parser.parse_args(argv)
     try:
         import torch
@@ -277,7 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     channels = tuple(int(v) for v in args.channels.split(","))
 
     photos = photo_set(args.work, PHOTO_SEED0, args.photos, size, args.workers)
-    surveys = survey_set(args.work, CNN_RUNS, size)
+    runs = CNN_RUNS + tuple(r for name in args.extra for r in train_sky.EXTRA_RUNS[name])
+    surveys = survey_set(args.work, runs, size)
     x = np.concatenate([photos["x"], np.repeat(surveys["x"], args.survey_repeat, 0)])
     y = np.concatenate([photos["y"], np.repeat(surveys["y"], args.survey_repeat, 0)])
     print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
@@ -302,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
         "batch": args.batch,
         "seed": args.seed,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
-        "survey_runs": [r.name for r in CNN_RUNS],
+        "survey_runs": [r.name for r in runs],
         "survey_repeat": args.survey_repeat,
         "loss_per_epoch": [round(v, 5) for v in losses],
         "torch": torch.__version__,
