@@ -7,8 +7,8 @@ Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
    photos of :func:`predisat.synth.photos.random_photo` (seeds from 200000) and the rendered
-   survey frames of ``CNN_RUNS`` (``scripts/train_sky.py``'s ``TRAIN_RUNS``, rendered there if
-   missing,
+   survey frames of ``CNN_RUNS`` (``scripts/train_sky.py``'s ``TRAIN_RUNS`` and its rock-wall
+   ``EXTRA_RUNS``, rendered there if missing,
    repeated ``--survey-repeat`` times: they are the pipeline's own kind of input), all resized
    to ``--input-px`` squares with soft labels (share of sky per pixel; thin structures are sky).
    ``CNN_VALIDATION_RUNS`` (``val_a``) and 200 photos of other seeds (from 900000) are held out
@@ -43,9 +43,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import train_sky  # the survey recipes are shared with the perceptron's script
 
-# The shipped network was checked on val_a only; val_b (rock walls seen by a side fisheye)
-# came later. Named here so that a rerun reproduces the shipped network's card.
-CNN_RUNS = train_sky.TRAIN_RUNS
+# The network also sees the rock-wall fisheye frames that the perceptron does not ship with
+# (chosen on validation, docs/segmentation.md); its card's survey validation is val_a.
+CNN_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"]
 CNN_VALIDATION_RUNS = train_sky.VALIDATION_RUNS[:1]
 
 PHOTO_SEED0 = 200_000
@@ -267,9 +267,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2, help="PyTorch threads")
     parser.add_argument("--workers", type=int, default=2, help="photo generation processes")
-    parser.add_argument("--extra", action="append", default=[],
-                        choices=sorted(train_sky.EXTRA_RUNS),
-                        help="add these EXTRA_RUNS of scripts/train_sky.py (experiments)")
     args = parser.parse_args(argv)
     try:
         import torch
@@ -280,8 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     channels = tuple(int(v) for v in args.channels.split(","))
 
     photos = photo_set(args.work, PHOTO_SEED0, args.photos, size, args.workers)
-    runs = CNN_RUNS + tuple(r for name in args.extra for r in train_sky.EXTRA_RUNS[name])
-    surveys = survey_set(args.work, runs, size)
+    surveys = survey_set(args.work, CNN_RUNS, size)
     x = np.concatenate([photos["x"], np.repeat(surveys["x"], args.survey_repeat, 0)])
     y = np.concatenate([photos["y"], np.repeat(surveys["y"], args.survey_repeat, 0)])
     print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
@@ -306,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         "batch": args.batch,
         "seed": args.seed,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
-        "survey_runs": [r.name for r in runs],
+        "survey_runs": [r.name for r in CNN_RUNS],
         "survey_repeat": args.survey_repeat,
         "loss_per_epoch": [round(v, 5) for v in losses],
         "torch": torch.__version__,
