@@ -287,10 +287,14 @@ def _pool_segment(jobs: Sequence[_FrameJob]) -> list[tuple[str, str | None]]:
 
 def _pool_chunk(job: _ChunkJob) -> tuple[str, list[BadFrame]]:
     # one Reconstructor per worker process: its camera rectifiers are reused across chunks
-    rec = _WORKER.get("reconstructor")
-    if rec is None or rec.params != job.params.reconstruction:
-        rec = _WORKER["reconstructor"] = Reconstructor(job.params.reconstruction)
+    rec = _WORKER["reconstructor"] = _reconstructor_for(job, _WORKER.get("reconstructor"))
     return _run_chunk(job, rec)
+
+
+def _reconstructor_for(job: _ChunkJob, previous: Reconstructor | None) -> Reconstructor:
+    """``previous`` when it has the job's parameters, else a new one."""
+    p = job.params.reconstruction
+    return previous if previous is not None and previous.params == p else Reconstructor(p)
 
 
 # ---------------------------------------------------------------------- chunks
@@ -814,8 +818,7 @@ def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None
         if workers == 1 or len(jobs) < 2:
             rec: Reconstructor | None = None
             for j in jobs:
-                if rec is None or rec.params != j.params.reconstruction:
-                    rec = Reconstructor(j.params.reconstruction)
+                rec = _reconstructor_for(j, rec)
                 _run_chunk(j, rec)
                 bar.update(1)
             return

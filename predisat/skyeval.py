@@ -78,12 +78,16 @@ class SkyEvaluation:
         One row per group (data set, or sky condition for synthetic surveys) and ``all``.
     files : dict
         What was written (``table``, ``summary``, ``sheet``) when ``out_dir`` was given.
+    worst_cases : list of (name, iou, image_bgr, overlay_bgr)
+        The ``n_worst`` lowest-IoU cases, lowest first, as :func:`worst_cases_sheet` takes them
+        (overlays from :func:`confusion_overlay`).
     """
 
     layout: str
     table: pd.DataFrame
     summary: pd.DataFrame
     files: dict[str, Path] = field(default_factory=dict)
+    worst_cases: list[tuple[str, float, NDArray, NDArray]] = field(default_factory=list)
 
 
 def sky_iou(pred: ArrayLike, truth: ArrayLike, valid: ArrayLike | None = None) -> float:
@@ -385,6 +389,10 @@ def evaluate_folder(
         worst = sorted(worst, key=lambda w: w[0])[:n_worst]  # keep only the few worst in memory
     table = pd.DataFrame(rows)
     summary = _summarise(table, skyline_err)
+    items: list[tuple[str, float, NDArray, NDArray]] = []
+    for iou, pair, pred, truth_v in worst:
+        img = np.asarray(cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR))
+        items.append((pair.name, iou, img, confusion_overlay(pred, truth_v)))
     files: dict[str, Path] = {}
     if out_dir is not None:
         out = Path(out_dir)
@@ -398,13 +406,10 @@ def evaluate_folder(
             + _markdown(summary) + "\n",
             encoding="utf-8",
         )
-        if worst:
-            items: list[tuple[str, float, NDArray, NDArray]] = []
-            for iou, pair, pred, truth_v in worst:
-                img = np.asarray(cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR))
-                items.append((pair.name, iou, img, confusion_overlay(pred, truth_v)))
+        if items:
             files["sheet"] = worst_cases_sheet(items, out / f"{stem}_worst.png")
-    return SkyEvaluation(layout=layout, table=table, summary=summary, files=files)
+    return SkyEvaluation(layout=layout, table=table, summary=summary, files=files,
+                         worst_cases=items)  # fmt: skip
 
 
 def _markdown(df: pd.DataFrame) -> str:

@@ -270,12 +270,15 @@ class Rectifier:
         """Azimuth of the look direction relative to the direction of travel (clockwise)."""
         return -self.mount.yaw_deg
 
+    def _grown_labels(self, sky: NDArray) -> NDArray:
+        """uint8 labels of a boolean sky mask (sky / obstacle), obstacles grown by ``grow_px``."""
+        img = np.where(sky, _SKY, _OBSTACLE).astype(np.uint8)
+        gx, gy = self.grow_px
+        return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+
     def rectify(self, sky_mask: ArrayLike) -> NDArray:
         """Grid labels (n_e, n_b) uint8: 255 sky, 0 obstacle, 128 not seen by the camera."""
-        m = _as_sky_mask(sky_mask, self.camera)
-        img = np.where(m, _SKY, _OBSTACLE).astype(np.uint8)
-        gx, gy = self.grow_px
-        grown = cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        grown = self._grown_labels(_as_sky_mask(sky_mask, self.camera))
         return cv2.remap(
             grown, self.map_u, self.map_v, cv2.INTER_NEAREST,
             borderMode=cv2.BORDER_CONSTANT, borderValue=_UNSEEN,
@@ -310,9 +313,7 @@ class Rectifier:
                     f"confidence must have shape ({self.camera.width_px},) (one per column)"
                 )
             m = m & (c >= min_confidence)[None, :]
-        img = np.where(m, _SKY, _OBSTACLE).astype(np.uint8)
-        gx, gy = self.grow_px
-        grown = cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
         # :meth:`rectify`) down to its end only, instead of resampling the whole grid.
         top, last_seen = self.first_seen_row, self.last_seen_row

@@ -23,33 +23,10 @@ import argparse
 import sys
 from pathlib import Path
 
-import cv2
 import pandas as pd
 
-from predisat.segmentation import METHODS, SkyOptions, segment_sky
-from predisat.skyeval import (
-    confusion_overlay,
-    evaluate_folder,
-    find_pairs,
-    sky_iou,
-    worst_cases_sheet,
-)
-
-
-def worst_items(data: str, table: pd.DataFrame, n: int, options: SkyOptions) -> list:
-    """(name, iou, image, overlay) of the ``n`` lowest-IoU images of ``data``, re-segmented."""
-    _, pairs = find_pairs(data)
-    by_name = {p.name: p for p in pairs}
-    items = []
-    for name in table.nsmallest(n, "iou")["name"]:
-        pair = by_name[name]
-        img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
-        truth = cv2.imread(str(pair.mask_path), cv2.IMREAD_GRAYSCALE) >= 128
-        seg = segment_sky(img, options)
-        truth_v = truth & seg.valid_mask
-        items.append((name, sky_iou(seg.sky_mask, truth_v), img,
-                      confusion_overlay(seg.sky_mask, truth_v)))  # fmt: skip
-    return items
+from predisat.segmentation import METHODS
+from predisat.skyeval import evaluate_folder, worst_cases_sheet
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sheet", type=Path, metavar="PNG",
                         help="also write one contact sheet of the --sheet-per-set worst cases "
                              "of every folder")
-    parser.add_argument("--sheet-per-set", type=int, default=4, metavar="N")
+    parser.add_argument("--sheet-per-set", type=int, default=4, metavar="N",
+                        help="cases per folder in --sheet (at most --worst)")
     args = parser.parse_args(argv)
     summaries = []
     sheet: list = []
@@ -78,11 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         print(ev.summary.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
         for kind, path in ev.files.items():
             print(f"  wrote {kind}: {path}")
-        if args.sheet is not None:
-            fisheye = ev.layout == "fisheye_hk"
-            opt = SkyOptions(fisheye=fisheye, **({"method": args.method} if args.method else {}))
-            sheet += worst_items(data, ev.table, args.sheet_per_set, opt)
-    if sheet:
+        sheet += ev.worst_cases[: args.sheet_per_set]
+    if args.sheet is not None and sheet:
         print(f"wrote {worst_cases_sheet(sheet, args.sheet, thumb_w_px=150)}")
     pd.concat(summaries).to_csv(Path(args.out) / "summary_all.csv", index=False,
                                 float_format="%.5g")
