@@ -99,7 +99,11 @@ class ReconstructionParams:
     position_tol_m : float
         Frames within this chainage distance of a position are "at" the position.
     min_confidence : float
-        Image columns with a lower segmentation confidence clear nothing.
+        Image columns with a lower segmentation confidence have their skyline raised (their
+        sky above still clears).
+    low_confidence_windows : float
+        By how many confidence windows (the rows either side of a skyline its confidence
+        speaks for); ``inf``: such columns clear nothing.
     rectify_az_step_deg, rectify_el_step_deg : float
         Sky-profile sampling.
     descriptor_min_el_deg : float
@@ -123,6 +127,7 @@ class ReconstructionParams:
     far_default_deg: float = 5.0
     position_tol_m: float = 5.0
     min_confidence: float = 0.5
+    low_confidence_windows: float = 2.0
     rectify_az_step_deg: float = 0.25
     rectify_el_step_deg: float = 0.125
     descriptor_min_el_deg: float = 10.0
@@ -136,6 +141,11 @@ class ReconstructionParams:
                 raise ValueError(f"ReconstructionParams.{name} must be > 0")
         if self.n_sub < 1:
             raise ValueError("ReconstructionParams.n_sub must be >= 1")
+        if not self.low_confidence_windows >= 0:
+            raise ValueError(
+                "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
+                "columns clear nothing)"
+            )
 
     @property
     def overlap_m(self) -> float:
@@ -266,7 +276,7 @@ class Reconstructor:
                 out.append(
                     rect.profile(
                         f.sky_mask, f.heading_deg, f.reverse, f.confidence,
-                        self.params.min_confidence,
+                        self.params.min_confidence, self.params.low_confidence_windows,
                     )
                 )  # fmt: skip
             except ValueError as exc:

@@ -70,6 +70,7 @@ __all__ = [
     "METHODS",
     "SkyOptions",
     "SkySegmentation",
+    "confidence_window_px",
     "fisheye_valid_mask",
     "mask_above_skyline",
     "probability_confidence",
@@ -593,6 +594,16 @@ def _learned_sky(
     return sky, prob
 
 
+def confidence_window_px(height_px: int) -> tuple[int, int]:
+    """Default band height and skipped margin of :func:`probability_confidence`, pixels.
+
+    The confidence of a column speaks for the ``gap + band`` rows on either side of its
+    skyline: ``(max(3, H // 30), max(1, H // 120))`` for a frame ``H`` pixels high.
+    """
+    h = int(height_px)
+    return max(3, h // 30), max(1, h // 120)
+
+
 def probability_confidence(
     prob: ArrayLike,
     skyline_row: ArrayLike,
@@ -615,8 +626,7 @@ def probability_confidence(
     skyline_row : array_like, shape (W,)
     valid_mask : array_like of bool, shape (H, W), optional
     band_px, gap_px : int, optional
-        Band height (default ``max(3, H // 30)``) and skipped margin (default ``max(1, H //
-        120)``).
+        Band height and skipped margin (default :func:`confidence_window_px`).
 
     Returns
     -------
@@ -628,8 +638,9 @@ def probability_confidence(
     if s.shape != (w,):
         raise ValueError(f"skyline_row must have shape ({w},), got {s.shape}")
     valid = np.ones((h, w), bool) if valid_mask is None else np.asarray(valid_mask, bool)
-    band = max(3, h // 30) if band_px is None else int(band_px)
-    gap = max(1, h // 120) if gap_px is None else int(gap_px)
+    band_default, gap_default = confidence_window_px(h)
+    band = band_default if band_px is None else int(band_px)
+    gap = gap_default if gap_px is None else int(gap_px)
     cols = np.arange(w)
     steps = np.arange(band)[:, None]
 

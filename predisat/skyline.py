@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera import CameraModel, Mount
 from predisat.geodesy import enu_to_azel
+from predisat.segmentation import confidence_window_px
 
 __all__ = [
     "ColumnSkyline",
@@ -291,6 +292,7 @@ class Rectifier:
         reverse: bool = False,
         confidence: ArrayLike | None = None,
         min_confidence: float = 0.5,
+        low_confidence_windows: float = 2.0,
     ) -> SkyProfile:
         """The frame's :class:`SkyProfile`.
 
@@ -302,8 +304,16 @@ class Rectifier:
         reverse : bool
             Train driving toward decreasing chainage.
         confidence : array_like, shape (width_px,), optional
-            Per image column confidence of the segmentation; columns below ``min_confidence``
-            are treated as obstacle from top to bottom (they clear nothing).
+            Per image column confidence of the segmentation (of its skyline).
+        min_confidence : float
+            Columns below it have their skyline raised: the lowest ``low_confidence_windows``
+            confidence windows (:func:`predisat.segmentation.confidence_window_px`, the rows
+            either side of the skyline the confidence speaks for) of their top sky run become
+            obstacle, with everything below. The sky above still clears: a fuzzy tree top on
+            the horizon must not void a fisheye column through the zenith, which every
+            azimuth's top sky run starts from.
+        low_confidence_windows : float
+            ``inf`` voids low-confidence columns from top to bottom (they clear nothing).
         """
         m = _as_sky_mask(sky_mask, self.camera)
         if confidence is not None:
@@ -312,7 +322,17 @@ class Rectifier:
                 raise ValueError(
                     f"confidence must have shape ({self.camera.width_px},) (one per column)"
                 )
-            m = m & (c >= min_confidence)[None, :]
+            if not low_confidence_windows >= 0:
+                raise ValueError(
+                    f"low_confidence_windows must be >= 0 (inf voids the column), got "
+                    f"{low_confidence_windows}"
+                )
+            low = np.flatnonzero(~(c >= min_confidence))
+            if low.size:
+                band, gap = confidence_window_px(self.camera.height_px)
+                raise_px = low_confidence_windows * (band + gap)
+                m = _raise_skyline(m, low, self.camera.height_px if np.isinf(raise_px)
+                                   else round(raise_px))  # fmt: skip
         grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
         # :meth:`rectify`) down to its end only, instead of resampling the whole grid.
@@ -327,6 +347,19 @@ class Rectifier:
         fwd = float(heading_deg) + (180.0 if reverse else 0.0)
         look = float(np.mod(fwd + self.look_offset_deg, 360.0))
         return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)
+
+
+def _raise_skyline(sky: NDArray, cols: NDArray, raise_px: int) -> NDArray:
+    """Copy of ``sky`` whose columns ``cols`` lose the lowest ``raise_px`` rows of their top
+    sky run, and every sky pixel below it."""
+    sub = sky[:, cols]
+    rows = np.arange(sub.shape[0])[:, None]
+    start = np.argmax(sub, axis=0)  # first sky row (0 in a column without sky: no run)
+    after = ~sub & (rows >= start)
+    end = np.where(after.any(axis=0), np.argmax(after, axis=0), sub.shape[0])
+    out = sky.copy()
+    out[:, cols] = sub & (rows < np.maximum(end - int(raise_px), start))
+    return out
 
 
 def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDArray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predisat.camera import CameraModel, Mount
+from predisat.camera import CameraModel, Mount, default_camera
 from predisat.skyline import Rectifier, leading_sky_rows, skyline_directions
 
 PITCH = 45.0
@@ -86,14 +86,60 @@ def test_sky_under_an_overhang_is_ignored(pinhole: CameraModel) -> None:
     assert prof.sky_el_deg[j] <= 40.6
 
 
-def test_low_confidence_columns_clear_nothing(pinhole: CameraModel) -> None:
+def test_low_confidence_columns_have_their_skyline_raised(pinhole: CameraModel) -> None:
     mount = Mount.default("left")
     rect = Rectifier.build(pinhole, mount)
-    conf = np.zeros(pinhole.width_px)
-    prof = rect.profile(np.ones(pinhole.shape, bool), 0.0, confidence=conf)
-    assert np.isinf(prof.sky_el_deg).all()
+    sky = elevation_sky(pinhole, mount, 0.0, 20.0)
+    w, h = pinhole.width_px, pinhole.height_px
+    low = np.zeros(w, bool)
+    low[180:220] = True  # the centre columns
+    conf = np.where(low, 0.0, 1.0)
+    prof = rect.profile(sky, 0.0, confidence=conf)
+    ref = rect.profile(sky, 0.0)
+    # expected: the centre column's boundary moves up by two windows of 300 // 30 + 300 // 120
+    # rows, at the elevation the camera model gives that pixel edge
+    c = w // 2
+    row = int(np.argmin(sky[:, c])) - 2 * (h // 30 + h // 120)
+    ray = pinhole.pixel_to_ray(np.array([float(c)]), np.array([row - 0.5]))
+    enu = ray @ mount.camera_to_enu(0.0).T
+    expected = np.degrees(np.arcsin(enu[0, 2]))
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    assert expected > ref.sky_el_deg[j] + 3.0
+    assert prof.sky_el_deg[j] == pytest.approx(expected, abs=0.6)
+    # bins that read no low-confidence column are untouched
+    read = rect.pixel_index
+    for k in range(prof.rel_az_deg.size):
+        cols = read[read[:, k] >= 0, k] % w
+        if cols.size and not low[cols].any():
+            assert prof.sky_el_deg[k] == ref.sky_el_deg[k]
+    # windows = inf: low-confidence columns clear nothing
+    void = rect.profile(sky, 0.0, confidence=np.zeros(w), low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg).all()
     with pytest.raises(ValueError, match="confidence"):
-        rect.profile(np.ones(pinhole.shape, bool), 0.0, confidence=np.ones(3))
+        rect.profile(sky, 0.0, confidence=np.ones(3))
+    with pytest.raises(ValueError, match="low_confidence_windows"):
+        rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=-1.0)
+
+
+def test_a_fuzzy_horizon_does_not_void_a_fisheye_zenith() -> None:
+    """Every azimuth's top sky run starts at the zenith, which a side fisheye sees in its
+    centre column: a fuzzy tree top on the horizon there must not void them all."""
+    cam = default_camera("fisheye")
+    mount = Mount.default("left")
+    rect = Rectifier.build(cam, mount)
+    sky = elevation_sky(cam, mount, 0.0, 5.0)
+    w = cam.width_px
+    conf = np.ones(w)
+    conf[w // 2 - 3 : w // 2 + 3] = 0.0
+    ref = rect.profile(sky, 0.0)
+    seen = np.isfinite(ref.sky_el_deg)
+    assert seen.mean() > 0.5
+    void = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg[seen]).mean() > 0.9  # the whole-column gate voids them
+    prof = rect.profile(sky, 0.0, confidence=conf)
+    assert np.isfinite(prof.sky_el_deg[seen]).all()
+    assert (prof.sky_el_deg[seen] >= ref.sky_el_deg[seen]).all()
+    assert (prof.sky_el_deg[seen] != ref.sky_el_deg[seen]).mean() < 0.1
 
 
 def test_wrong_mask_shape_is_rejected(pinhole: CameraModel) -> None:
