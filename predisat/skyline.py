@@ -308,10 +308,10 @@ class Rectifier:
         min_confidence : float
             Columns below it have their skyline raised: the lowest ``low_confidence_windows``
             confidence windows (:func:`predisat.segmentation.confidence_window_px`, the rows
-            either side of the skyline the confidence speaks for) of their top sky run become
-            obstacle, with everything below. The sky above still clears: a fuzzy tree top on
-            the horizon must not void a fisheye column through the zenith, which every
-            azimuth's top sky run starts from.
+            either side of the skyline that the learned methods' confidence speaks for) of
+            their top sky run become obstacle, with everything below. The sky above still
+            clears: a fuzzy tree top on the horizon must not void a fisheye column through the
+            zenith, which every azimuth's top sky run starts from.
         low_confidence_windows : float
             ``inf`` voids low-confidence columns from top to bottom (they clear nothing).
         """
@@ -327,12 +327,11 @@ class Rectifier:
                     f"low_confidence_windows must be >= 0 (inf voids the column), got "
                     f"{low_confidence_windows}"
                 )
-            low = np.flatnonzero(~(c >= min_confidence))
+            low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
             if low.size:
                 band, gap = confidence_window_px(self.camera.height_px)
-                raise_px = low_confidence_windows * (band + gap)
-                m = _raise_skyline(m, low, self.camera.height_px if np.isinf(raise_px)
-                                   else round(raise_px))  # fmt: skip
+                h = self.camera.height_px
+                m = _raise_skyline(m, low, round(min(low_confidence_windows * (band + gap), h)))
         grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
         # :meth:`rectify`) down to its end only, instead of resampling the whole grid.

@@ -279,3 +279,9 @@ def test_horizon_rays_against_analytic_cells() -> None:
     assert el[0, ray(90.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 4.4)), abs=1e-4)
     # south: flat ground to the edge of the field (cell nearest point at y = -49.5 m)
     assert el[0, ray(180.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 49.6)), abs=1e-4)
+
+
+@pytest.mark.parametrize("windows", [-1.0, float("nan")])
+def test_params_reject_a_bad_low_confidence_window(windows: float) -> None:
+    with pytest.raises(ValueError, match="low_confidence_windows"):
+        ReconstructionParams(low_confidence_windows=windows)

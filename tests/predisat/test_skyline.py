@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from predisat.camera import CameraModel, Mount, default_camera
-from predisat.skyline import Rectifier, leading_sky_rows, skyline_directions
+from predisat.segmentation import fisheye_valid_mask
+from predisat.skyline import Rectifier, _raise_skyline, leading_sky_rows, skyline_directions
 
 PITCH = 45.0
 VFOV = 74.0
@@ -117,8 +118,34 @@ def test_low_confidence_columns_have_their_skyline_raised(pinhole: CameraModel) 
     assert np.isinf(void.sky_el_deg).all()
     with pytest.raises(ValueError, match="confidence"):
         rect.profile(sky, 0.0, confidence=np.ones(3))
-    with pytest.raises(ValueError, match="low_confidence_windows"):
-        rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=-1.0)
+    for bad in (-1.0, np.nan):
+        with pytest.raises(ValueError, match="low_confidence_windows"):
+            rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=bad)
+    # NaN confidence counts as low; a huge window voids the column like inf
+    nan_conf = np.where(low, np.nan, 1.0)
+    assert np.array_equal(rect.profile(sky, 0.0, confidence=nan_conf).sky_el_deg, prof.sky_el_deg)
+    huge = rect.profile(sky, 0.0, confidence=np.zeros(w), low_confidence_windows=1e20)
+    assert np.isinf(huge.sky_el_deg).all()
+
+
+@pytest.mark.parametrize(
+    ("column", "raise_px", "expected"),
+    [
+        ("0110110", 1, "0100000"),  # the top run loses its last row, the lower run goes
+        ("0011100", 1, "0011000"),
+        ("0011100", 5, "0000000"),  # a run shorter than the raise goes entirely
+        ("1111111", 2, "1111100"),  # all sky: raised from the bottom edge
+        ("0000000", 3, "0000000"),
+        ("0110110", 0, "0110000"),  # no raise: still no sky below the top run
+    ],
+)
+def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expected: str) -> None:
+    sky = np.array([[c == "1", True] for c in column])  # column 1 is confident: untouched
+    before = sky.copy()
+    out = _raise_skyline(sky, np.array([0]), raise_px)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == expected
+    assert out[:, 1].all()
+    assert np.array_equal(sky, before)  # the input is not modified
 
 
 def test_a_fuzzy_horizon_does_not_void_a_fisheye_zenith() -> None:
@@ -127,7 +154,8 @@ def test_a_fuzzy_horizon_does_not_void_a_fisheye_zenith() -> None:
     cam = default_camera("fisheye")
     mount = Mount.default("left")
     rect = Rectifier.build(cam, mount)
-    sky = elevation_sky(cam, mount, 0.0, 5.0)
+    # the corners outside the lens circle are no sky: runs start below them
+    sky = elevation_sky(cam, mount, 0.0, 5.0) & fisheye_valid_mask(cam.shape, None, 0.04)
     w = cam.width_px
     conf = np.ones(w)
     conf[w // 2 - 3 : w // 2 + 3] = 0.0
