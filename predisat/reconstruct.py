@@ -445,7 +445,7 @@ def horizon(
     -------
     el_deg : ndarray, shape (n, n_az * n_sub)
         Steepest elevation of a cell top along each ray (``-90`` when it meets no cell); 90
-        where it meets an unknown cell.
+        where it meets an unknown cell or where the antenna's own cell stands above it.
     unknown : ndarray of bool, shape (n, n_az * n_sub)
         The ray met an unknown cell.
     """
@@ -498,11 +498,28 @@ def _march_rays(
     zero = np.float32(0.0)
     one = np.float32(1.0)
     tiny = np.float32(1e-3)
+    overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
     best = np.full(n_rays, -np.inf, np.float32)
+    # The antenna's own cell, which rays leaving it early may never sample: standing above the
+    # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
+    # would leave); unknown, it blocks them as unknown.
+    start = np.float32(-np.inf)
+    col0 = np.int32(np.floor(ax)) + ox
+    row0 = np.int32(np.floor(ay)) + oy
+    if 0 <= col0 < nx and 0 <= row0 < ny and region[row0 * nx + col0]:
+        top = bound[row0 * nx + col0]
+        rel0 = (top - a_z) * up_z
+        if rel0 != rel0:
+            start = rel0
+        elif rel0 > zero:
+            start = top if top == np.inf else overhead
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
-        b = np.float32(-np.inf)
+        b = start
+        if b == np.inf or b != b:
+            best[j] = b
+            continue
         for k in range(dist_cells.size):
             fx = ax + dx * dist_cells[k]
             fy = ay + dy * dist_cells[k]

@@ -281,6 +281,31 @@ def test_horizon_rays_against_analytic_cells() -> None:
     assert el[0, ray(180.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 49.6)), abs=1e-4)
 
 
+def test_a_column_over_the_antenna_blocks_up_to_the_zenith() -> None:
+    """A finite bound above the antenna in its own cell (e.g. under a deck) must give 90 deg
+    on every ray, not the 89.9 deg a sub-millimetre distance floor would leave; a bound below
+    it (the free clearance) must not."""
+    from predisat.heightfield import HeightField
+    from predisat.reconstruct import horizon
+
+    c, n = 0.5, 40
+    region = np.ones((n, n), bool)
+    z = np.zeros((n, n), np.float32)
+    ant = np.array([[0.1, 0.1, 4.0]])  # in cell (n // 2, n // 2)
+    p = ReconstructionParams()
+    for top, blocked in ((4.5, True), (3.9, False)):
+        bound = np.zeros((n, n), np.float32)
+        bound[n // 2, n // 2] = top
+        hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+        el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+        assert not unknown.any()
+        if blocked:
+            assert (el == 90.0).all()
+        else:
+            # every ray's steepest top: the flat ground of the next cells, below the antenna
+            assert (el < 0.0).all()
+
+
 @pytest.mark.parametrize("windows", [-1.0, float("nan")])
 def test_params_reject_a_bad_low_confidence_window(windows: float) -> None:
     with pytest.raises(ValueError, match="low_confidence_windows"):
