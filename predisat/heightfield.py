@@ -316,7 +316,10 @@ def apply_clearance_prior(
     * the intervals ``extra_overhead_m`` (k, 2), e.g. where a camera saw an obstacle near its
       zenith (a crown or a canopy reaching over the track from one side).
 
-    There, the clearance cells keep their carved bound (usually unknown, i.e. blocked).
+    There, a clearance cell is bounded by the highest bound of the band cells of its chainage
+    (both sides, within ``spread_m``): whatever spans the track also stands over the bands
+    beside it, and is no taller over the track than the sky rays passing over those bands
+    prove. A band cell still unknown leaves the clearance unknown (blocked).
 
     Returns
     -------
@@ -332,28 +335,39 @@ def apply_clearance_prior(
     above = bound - hf.rail_z_m
     b0, b1 = band_m
     tall_both: NDArray = np.ones(n_bins, bool)
+    # highest band bound per bin, both sides (-inf: no band cell in the bin)
+    band_top = np.full(n_bins, -np.inf)
     for sign in (1.0, -1.0):
         sel = reg & (sign * off >= b0) & (sign * off <= b1)
         k = np.floor((ch[sel] - lo) / bin_m).astype(np.int64)
         low = np.full(n_bins, np.inf)
         np.minimum.at(low, k, above[sel])
+        np.maximum.at(band_top, k, above[sel])
         tall_both &= low > overhead_height_m
     radius = round(spread_m / bin_m)
     if radius > 0:
         padded = np.pad(tall_both, radius, constant_values=False)
         win = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1)
         tall_both = np.asarray(win.any(axis=1))
+        padded_top = np.pad(band_top, radius, constant_values=-np.inf)
+        band_top = np.asarray(
+            np.lib.stride_tricks.sliding_window_view(padded_top, 2 * radius + 1).max(axis=1)
+        )
+    # a bin without band cells proves nothing
+    band_top = np.where(np.isfinite(band_top), band_top, np.inf)
     centres = lo + (np.arange(n_bins) + 0.5) * bin_m
-    for a, b in np.asarray(extra_overhead_m, float).reshape(-1, 2):
+    extra = np.zeros((0, 2)) if extra_overhead_m is None else extra_overhead_m
+    for a, b in np.asarray(extra, float).reshape(-1, 2):
         tall_both |= (centres >= a) & (centres <= b)
     tall_any = tall_both
     sel = reg & (np.abs(off) < clearance_half_width_m)
     k = np.floor((ch[sel] - lo) / bin_m).astype(np.int64)
     free = ~tall_any[k]
     rows, cols = np.nonzero(sel)
-    rows, cols = rows[free], cols[free]
-    floor = (hf.rail_z_m[rows, cols] + clearance_floor_m).astype(np.float32)
-    bound[rows, cols] = np.minimum(bound[rows, cols], floor)
+    # free clearance: the floor; under an overhead structure: the highest band bound beside it
+    above_rail = np.where(free, clearance_floor_m, band_top[k])
+    ceiling = (hf.rail_z_m[rows, cols] + above_rail).astype(np.float32)
+    bound[rows, cols] = np.minimum(bound[rows, cols], ceiling)
     # overhead intervals, for the record
     edges = np.diff(np.concatenate([[0], tall_any.astype(np.int8), [0]]))
     starts = np.flatnonzero(edges == 1)

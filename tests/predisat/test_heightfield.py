@@ -71,3 +71,36 @@ def test_range_max_matches_a_direct_maximum() -> None:
     hi = np.minimum(lo + rng.integers(0, 60, 500), 256)
     got = RangeMax1D(v).query(lo, hi)
     np.testing.assert_array_equal(got, [v[a : b + 1].max() for a, b in zip(lo, hi, strict=True)])
+
+
+def test_clearance_under_an_overhead_structure_takes_the_highest_band_bound() -> None:
+    """Bands 3-9 m either side bounded above 6 m mark an overhead structure; there the
+    clearance (|offset| < 2 m) takes the highest band bound within the 2 m spread, and stays
+    unknown where a band cell is unknown. Elsewhere it is the 1 m floor."""
+    from predisat.heightfield import apply_clearance_prior
+
+    xs = (np.arange(N) - N // 2 + 0.5) * C  # cell centres, m
+    ch, off = np.meshgrid(xs, xs)  # chainage along x (columns), offset along y (rows)
+    z = np.zeros((N, N), np.float32)
+    hf = HeightField(C, -N // 2, -N // 2, z, np.ones((N, N), bool), ch, off, z)
+    bound = np.full((N, N), 0.5, np.float32)  # open ground, carved low
+    bands = (np.abs(off) >= 3.0) & (np.abs(off) <= 9.0)
+    strip = np.abs(off) < 2.0
+    bound[strip] = np.inf  # never seen by a side camera
+    for a, b in ((10.0, 14.0), (30.0, 34.0)):
+        bound[bands & (ch >= a) & (ch < b)] = 8.0  # walls or a deck on both sides
+    bound[cell(11.2, 5.2)] = 12.0  # one taller band cell
+    bound[cell(31.2, -6.2)] = np.inf  # one band cell nobody saw
+    over = apply_clearance_prior(hf, bound, 2.0, 1.0, (3.0, 9.0), 6.0)
+    # tall bins 10-13 and 30-33 (1 m bins), widened by the 2 m spread; the bin past the last
+    # cell (50-51 m) holds no band cell and counts as tall, the conservative side
+    np.testing.assert_allclose(over, [[8.0, 16.0], [28.0, 36.0], [48.0, 51.0]])
+
+    def at(x_m: float) -> float:
+        return float(bound[cell(x_m, 0.2)])
+
+    assert at(20.2) == 1.0 and at(-5.2) == 1.0  # free clearance: the floor
+    assert at(9.2) == 12.0 and at(12.2) == 12.0 and at(13.2) == 12.0  # bins 9-13 see 11.2
+    assert at(8.2) == 8.0 and at(14.2) == 8.0 and at(15.2) == 8.0
+    assert np.isinf(at(29.2)) and np.isinf(at(31.2)) and np.isinf(at(33.2))  # near 31.2
+    assert at(34.2) == 8.0 and at(28.2) == 8.0
