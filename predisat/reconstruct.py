@@ -331,10 +331,19 @@ class Reconstructor:
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
-        grid_el, unknown = horizon(hf, ant, rot, p)
+        near_el, near_unknown, far_grid_el, far_unknown = _horizon_parts(hf, ant, rot, p)
         far_el, far_seen, seen = _far_field(keep, profs, s, ant, track, p)
-        grid_bin = _bins(grid_el, p.n_sub)
-        unknown_bin = _bins(unknown.astype(float), p.n_sub) > 0
+        # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
+        # by that camera's sky: it proves nothing farther stands higher (the parallax
+        # allowance of the far field assumes that distance). Loosely carved far cells (a hill
+        # over a tunnel, bounded only by steep rays) no longer close the sky it saw.
+        far_grid = _bins(far_grid_el, p.n_sub)
+        grid_bin = np.maximum(
+            _bins(near_el, p.n_sub), np.where(far_seen, np.minimum(far_grid, far_el), far_grid)
+        )
+        unknown_bin = (_bins(near_unknown.astype(float), p.n_sub) > 0) | (
+            (_bins(far_unknown.astype(float), p.n_sub) > 0) & ~far_seen
+        )
         mask = np.clip(np.maximum(grid_bin, far_el), 0.0, 90.0)
         observed = _observed(seen, mask, p)
         src = np.full(mask.shape, int(BinSource.RECONSTRUCTED), np.uint8)
@@ -449,6 +458,15 @@ def horizon(
     unknown : ndarray of bool, shape (n, n_az * n_sub)
         The ray met an unknown cell.
     """
+    near, near_unknown, far, far_unknown = _horizon_parts(hf, antenna_m, local_to_frame, p)
+    return np.maximum(near, far), near_unknown | far_unknown
+
+
+def _horizon_parts(
+    hf: HeightField, antenna_m: NDArray, local_to_frame: NDArray, p: ReconstructionParams
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """:func:`horizon` split at ``p.half_width_m``: elevation and unknown flag over the cells
+    whose nearest point is nearer, then over the others (``-90``: no such cell)."""
     az = np.radians(_sub_azimuths(p))
     dist_cells = _ray_distances(p).astype(np.float32) / np.float32(hf.cell_m)
     c = hf.cell_m
@@ -457,7 +475,9 @@ def horizon(
     region = np.ascontiguousarray(hf.region, np.bool_).ravel()
     n = antenna_m.shape[0]
     el = np.empty((n, az.size))
+    el_far = np.empty((n, az.size))
     unknown = np.empty((n, az.size), bool)
+    unknown_far = np.empty((n, az.size), bool)
     d_loc = np.stack([np.sin(az), np.cos(az), np.zeros_like(az)], axis=-1)
     for i in range(n):
         a = antenna_m[i]
@@ -470,30 +490,34 @@ def horizon(
         # antenna position in cells: integer part (global, exact) and fraction (float32), so
         # that every window computes bit-identical samples
         gx, gy = np.floor(a[0] / c), np.floor(a[1] / c)
-        best = _march_rays(
+        best, best_far = _march_rays(
             d, dist_cells, bound, region, nx, ny,
             np.float32(a[0] / c - gx), np.float32(a[1] / c - gy),
             int(gx) - hf.ix0, int(gy) - hf.iy0, np.float32(c), np.float32(a[2]),
             np.float32(up[2]), np.float32(up[0] * c), np.float32(up[1] * c),
+            np.float32(p.half_width_m),
         )  # fmt: skip
         unknown[i] = np.isposinf(best)
+        unknown_far[i] = np.isposinf(best_far)
         with np.errstate(invalid="ignore"):
             el[i] = np.degrees(np.arctan(best.astype(float)))
-    return el, unknown
+            el_far[i] = np.degrees(np.arctan(best_far.astype(float)))
+    return el, unknown, el_far, unknown_far
 
 
 @njit(cache=True, nogil=True)
 def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
     ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
-    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32,
-) -> NDArray:  # fmt: skip
-    """Steepest bound tangent along each ray (float32; ``+inf`` once a ray meets an unknown cell).
+    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """Steepest bound tangent along each ray, over the cells nearer than ``far_m`` and over the
+    others (float32; ``+inf`` once a ray meets an unknown cell there).
 
     A ray stops at its first sample outside the modelled region, at its first unknown cell
-    (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). All
-    arithmetic is float32 in a fixed order, so that overlapping windows give bit-identical
-    results.
+    (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). A
+    cell is far when its nearest point is at least ``far_m`` away. All arithmetic is float32
+    in a fixed order, so that overlapping windows give bit-identical results.
     """
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -501,6 +525,7 @@ def _march_rays(
     overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
     best = np.full(n_rays, -np.inf, np.float32)
+    best_far = np.full(n_rays, -np.inf, np.float32)
     # The antenna's own cell, which rays leaving it early may never sample: standing above the
     # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
     # would leave); unknown, it blocks them as unknown.
@@ -517,6 +542,7 @@ def _march_rays(
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
         b = start
+        bf = np.float32(-np.inf)
         if b == np.inf or b != b:
             best[j] = b
             continue
@@ -539,15 +565,25 @@ def _march_rays(
             rel = (bound[flat] - a_z) * up_z
             rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
             r = rel / near
-            if r != r:  # a NaN bound makes the ray's value NaN
-                b = r
-                break
-            if r > b:
-                b = r
-            if b == np.inf:  # a ray that met an unknown cell is blocked whatever lies farther
-                break
+            if near >= far_m:
+                if r != r:
+                    bf = r
+                    break
+                if r > bf:
+                    bf = r
+                if bf == np.inf:  # what lies farther is hidden behind the unknown cell
+                    break
+            else:
+                if r != r:  # a NaN bound makes the ray's value NaN
+                    b = r
+                    break
+                if r > b:
+                    b = r
+                if b == np.inf:  # a ray that met an unknown cell is blocked whatever lies farther
+                    break
         best[j] = b
-    return best
+        best_far[j] = bf
+    return best, best_far
 
 
 # ---------------------------------------------------------------------- far field and flags

@@ -281,6 +281,41 @@ def test_horizon_rays_against_analytic_cells() -> None:
     assert el[0, ray(180.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 49.6)), abs=1e-4)
 
 
+def test_horizon_parts_split_the_cells_at_the_corridor_half_width() -> None:
+    """Cells whose nearest point is at least ``half_width_m`` (40 m) away go to the far part
+    (which the position's own camera may cap), the others to the near part; ``horizon`` is
+    the maximum of both."""
+    from predisat.heightfield import HeightField
+    from predisat.reconstruct import _horizon_parts, horizon
+
+    c, n = 0.5, 200  # cells from -50 m to +50 m
+    bound = np.zeros((n, n), np.float32)
+    region = np.ones((n, n), bool)
+
+    def cell(x_m: float, y_m: float) -> tuple[int, int]:
+        return int(np.floor(y_m / c)) + n // 2, int(np.floor(x_m / c)) + n // 2
+
+    bound[cell(0.2, 20.2)] = 10.0  # north, near: nearest point (0.1, 20.0)
+    bound[cell(0.2, 45.2)] = 40.0  # north, far: nearest point (0.1, 45.0)
+    bound[cell(42.2, 0.2)] = np.inf  # east, far and unknown
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+    ant = np.array([[0.1, 0.1, 4.0]])
+    p = ReconstructionParams()
+    near, near_unk, far, far_unk = _horizon_parts(hf, ant, np.eye(3)[None], p)
+    step = p.az_step_deg / p.n_sub
+    north, east = round(p.az_step_deg / 2 / step), round((90.0 + p.az_step_deg / 2) / step)
+    assert near[0, north] == pytest.approx(np.degrees(np.arctan(6.0 / 19.9)), abs=1e-4)
+    assert far[0, north] == pytest.approx(np.degrees(np.arctan(36.0 / 44.9)), abs=1e-4)
+    assert far_unk[0, east] and not near_unk[0, east] and far[0, east] == 90.0
+    # the near part of the east ray: flat ground, steepest at the last near cell, [40, 40.5)
+    # seen from its nearest point x = 40.0 (39.9 m away); the next one is 40.4 m away: far
+    assert near[0, east] == pytest.approx(np.degrees(np.arctan(-4.0 / 39.9)), abs=1e-4)
+    el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+    np.testing.assert_array_equal(el, np.maximum(near, far))
+    np.testing.assert_array_equal(unknown, near_unk | far_unk)
+
+
 def test_a_column_over_the_antenna_blocks_up_to_the_zenith() -> None:
     """A finite bound above the antenna in its own cell (e.g. under a deck) must give 90 deg
     on every ray, not the 89.9 deg a sub-millimetre distance floor would leave; a bound below
