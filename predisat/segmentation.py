@@ -149,7 +149,9 @@ class SkyOptions:
     uncertain_hole_fraction, uncertain_hole_probability : float
         Learned method: obstacle regions not reaching the bottom edge (hanging in the sky),
         smaller than this share of the valid area, whose mean sky probability is at least
-        ``uncertain_hole_probability``, become sky (dark cloud bases).
+        ``uncertain_hole_probability``, become sky (dark cloud bases); not when they touch the
+        side or top edge and are elongated (bounding box side squared over 4 x area: a mast
+        or cantilever whose foot is out of the picture).
     """
 
     fisheye: bool = False
@@ -580,7 +582,12 @@ def _learned_sky(
         # Enclosed specks are noise; larger hanging regions the classifier hesitated on are
         # dark cloud bases (a real bridge deck or canopy scores near 0).
         small_hole = inner & (area < opt.max_hole_fraction * n_valid)
-        uncertain = floating & (area < opt.uncertain_hole_fraction * n_valid)
+        # ...but a long thin region cut by the image edge is a mast or a cantilever whose foot
+        # is out of the picture (side fisheye frames), not a cloud
+        bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+        elongated = np.maximum(bw, bh).astype(float) ** 2 > 4.0 * np.maximum(area, 1)
+        uncertain = floating & (inner | ~elongated)
+        uncertain &= area < opt.uncertain_hole_fraction * n_valid
         uncertain[0] = False
         if uncertain.any():  # the mean probability per region only when it can matter
             mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)

@@ -323,3 +323,35 @@ def test_shipped_model_loads_with_its_card() -> None:
     assert clf.card["training_runs"] and "validation" in clf.card
     p = clf.predict(np.zeros((5, len(FEATURE_NAMES)), np.float32))
     assert p.shape == (5,) and np.all((p >= 0) & (p <= 1))
+
+
+class _MapClassifier:
+    """A stand-in probability model: returns a fixed working-resolution sky probability."""
+
+    def __init__(self, prob: np.ndarray) -> None:
+        self.prob = prob.astype(np.float32)
+        self.max_side_px = max(prob.shape)
+
+    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
+        return self.prob
+
+
+def test_a_hesitant_mast_at_the_image_edge_stays_an_obstacle() -> None:
+    """Hanging regions the classifier hesitated on become sky when compact (a dark cloud
+    base), not when elongated and cut by the image edge (a mast or cantilever of a fisheye
+    frame, whose foot is out of the picture)."""
+    h, w = 120, 160
+    p = np.full((h, w), 0.95)
+    p[100:, :] = 0.02  # the ground
+    p[40:55, 70:90] = 0.3  # a compact blob in the sky: a cloud base
+    rows = np.arange(10, 80)
+    for r in rows:  # a band 6 px wide from (10, 40) down-left to the left edge
+        c = 40 - (r - 10) * 40 // 70
+        p[r, max(c - 3, 0) : c + 3] = 0.3
+    img = np.full((h, w, 3), 128, np.uint8)  # the probability alone decides (no refinement)
+    seg = segment_sky(img, SkyOptions(refine_guided=False, thin_px=0), _MapClassifier(p))
+    assert seg.sky_mask[45:50, 75:85].all()  # the cloud base is sky
+    band = p == 0.3
+    band[40:55, 70:90] = False
+    assert not seg.sky_mask[band].any()  # the mast stays an obstacle
+    assert not seg.sky_mask[100:].any()
