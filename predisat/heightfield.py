@@ -294,6 +294,12 @@ def _carve_cells(
     return count
 
 
+def _window_max(values: NDArray, radius: int, fill: Any) -> NDArray:
+    """Maximum of ``values`` (1-D) over ``+-radius`` neighbours, ``fill`` beyond the ends."""
+    padded = np.pad(values, radius, constant_values=fill)
+    return np.asarray(np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1).max(axis=1))
+
+
 def apply_clearance_prior(
     hf: HeightField,
     bound: NDArray,
@@ -346,13 +352,8 @@ def apply_clearance_prior(
         tall_both &= low > overhead_height_m
     radius = round(spread_m / bin_m)
     if radius > 0:
-        padded = np.pad(tall_both, radius, constant_values=False)
-        win = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1)
-        tall_both = np.asarray(win.any(axis=1))
-        padded_top = np.pad(band_top, radius, constant_values=-np.inf)
-        band_top = np.asarray(
-            np.lib.stride_tricks.sliding_window_view(padded_top, 2 * radius + 1).max(axis=1)
-        )
+        tall_both = _window_max(tall_both, radius, False)
+        band_top = _window_max(band_top, radius, -np.inf)
     # a bin without band cells proves nothing
     band_top = np.where(np.isfinite(band_top), band_top, np.inf)
     centres = lo + (np.arange(n_bins) + 0.5) * bin_m

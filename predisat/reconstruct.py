@@ -524,8 +524,7 @@ def _march_rays(
     tiny = np.float32(1e-3)
     overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
-    best = np.full(n_rays, -np.inf, np.float32)
-    best_far = np.full(n_rays, -np.inf, np.float32)
+    best = np.full((2, n_rays), -np.inf, np.float32)  # near part, far part
     # The antenna's own cell, which rays leaving it early may never sample: standing above the
     # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
     # would leave); unknown, it blocks them as unknown.
@@ -541,10 +540,8 @@ def _march_rays(
             start = top if top == np.inf else overhead
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
-        b = start
-        bf = np.float32(-np.inf)
-        if b == np.inf or b != b:
-            best[j] = b
+        best[0, j] = start
+        if start == np.inf or start != start:
             continue
         for k in range(dist_cells.size):
             fx = ax + dx * dist_cells[k]
@@ -565,25 +562,15 @@ def _march_rays(
             rel = (bound[flat] - a_z) * up_z
             rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
             r = rel / near
-            if near >= far_m:
-                if r != r:
-                    bf = r
-                    break
-                if r > bf:
-                    bf = r
-                if bf == np.inf:  # what lies farther is hidden behind the unknown cell
-                    break
-            else:
-                if r != r:  # a NaN bound makes the ray's value NaN
-                    b = r
-                    break
-                if r > b:
-                    b = r
-                if b == np.inf:  # a ray that met an unknown cell is blocked whatever lies farther
-                    break
-        best[j] = b
-        best_far[j] = bf
-    return best, best_far
+            part = 1 if near >= far_m else 0
+            if r != r:  # a NaN bound makes the ray's value NaN
+                best[part, j] = r
+                break
+            if r > best[part, j]:
+                best[part, j] = r
+            if best[part, j] == np.inf:  # an unknown cell hides whatever lies farther
+                break
+    return best[0], best[1]
 
 
 # ---------------------------------------------------------------------- far field and flags

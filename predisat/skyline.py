@@ -329,8 +329,8 @@ class Rectifier:
                 )
             low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
             if low.size:
-                band, gap = confidence_window_px(self.camera.height_px)
                 h = self.camera.height_px
+                band, gap = confidence_window_px(h)
                 m = _raise_skyline(m, low, round(min(low_confidence_windows * (band + gap), h)))
         grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
