@@ -72,7 +72,7 @@ Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
 
 CACHE_VERSION = 1
 # chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
-DEFAULT_SEGMENTER = "learned"
+DEFAULT_SEGMENTER = "ensemble"
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
 
 

@@ -3,11 +3,11 @@
 Four methods (``SkyOptions.method``, :data:`METHODS`); the default was chosen by measurement
 (``docs/segmentation.md``).
 
-**learned** (default): a per-pixel classifier (:mod:`predisat.skymodel`, features of
-:mod:`predisat.skyfeatures`) trained by ``scripts/train_sky.py`` on synthetic frames only.
-**cnn** and **ensemble** run the same steps on the probability of the U-Net of
-:mod:`predisat.skycnn` (trained on procedural photos and rendered frames), or on the mean of
-both models' probabilities (the best on real photos).
+**ensemble** (default): the mean of two models' sky probabilities, the per-pixel classifier
+of :mod:`predisat.skymodel` (features of :mod:`predisat.skyfeatures`, trained by
+``scripts/train_sky.py`` on synthetic frames only) and the U-Net of :mod:`predisat.skycnn`
+(trained on procedural photos and rendered frames). **learned** and **cnn** run the same steps
+on one model's probability.
 
 1. Sky probability at a working resolution (longest side 160 px); upsampled and sharpened on
    the frame's edges by a guided filter. An upward fisheye photo is unwrapped to polar
@@ -128,12 +128,13 @@ class SkyOptions:
         Darkest (OpenCV 8-bit Lab lightness, 0-255) non-blue region taken as a sky seed: a dark
         tunnel or wall filling the frame yields no seed, hence no sky.
     method : {"learned", "ensemble", "cnn", "grabcut"}
-        ``"learned"`` (default, chosen by measurement, see ``docs/segmentation.md``): the
-        per-pixel classifier of :mod:`predisat.skymodel`; ``"cnn"``: the network of
-        :mod:`predisat.skycnn`; ``"ensemble"``: the mean of both probabilities (best on real
-        photos); ``"grabcut"``: the classical seeds + GrabCut method. The GrabCut parameters
-        above apply to ``"grabcut"`` only (``thin_px``, ``circle_*``, ``fisheye`` to all);
-        the "Learned method" ones below to the three learned methods.
+        ``"ensemble"`` (default, chosen by measurement, see ``docs/segmentation.md``): the
+        mean of both probabilities below (the safest masks, the best on real photos);
+        ``"learned"``: the per-pixel classifier of :mod:`predisat.skymodel`; ``"cnn"``: the
+        network of :mod:`predisat.skycnn`; ``"grabcut"``: the classical seeds + GrabCut
+        method. The GrabCut parameters above apply to ``"grabcut"`` only (``thin_px``,
+        ``circle_*``, ``fisheye`` to all); the "Learned method" ones below to the three
+        learned methods.
     refine_guided : bool
         Learned method: sharpen the upsampled probability on the image edges (guided filter).
     min_island_fraction : float
@@ -170,7 +171,7 @@ class SkyOptions:
     thin_px: int = 3
     refine_band_px: int = 6
     min_sky_lightness: float = 100.0
-    method: str = "learned"
+    method: str = "ensemble"
     refine_guided: bool = True
     min_island_fraction: float = 0.01
     min_sky_fraction: float = 0.002
