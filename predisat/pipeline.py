@@ -218,14 +218,21 @@ def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | N
                     return None
             elif meta.get("image_stat") is not None:
                 return None
-            if meta.get("bad"):
-                return BadFrame(job.frame_id, str(meta["bad"]))
-            h, w = meta["shape"]
-            sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).astype(bool)
-            conf = z["confidence"] if "confidence" in z.files else None
-            return sky, conf
+            return _decode_cache(z, meta, job.frame_id)
     except (OSError, ValueError, KeyError):
         return None  # a damaged cache entry is recomputed
+
+
+def _decode_cache(
+    z: Any, meta: dict[str, Any], frame_id: str
+) -> tuple[NDArray, NDArray | None] | BadFrame:
+    """The segmentation (or the recorded failure) of an opened cache entry."""
+    if meta.get("bad"):
+        return BadFrame(frame_id, str(meta["bad"]))
+    h, w = meta["shape"]
+    sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).astype(bool)
+    conf = z["confidence"] if "confidence" in z.files else None
+    return sky, conf
 
 
 def _write_cache(
@@ -383,13 +390,7 @@ def _load_cached(f: _ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
     path = Path(f.cache_path)
     try:
         with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("bad"):
-                return BadFrame(f.frame_id, str(meta["bad"]))
-            h, w = meta["shape"]
-            sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).astype(bool)
-            conf = z["confidence"] if "confidence" in z.files else None
-            return sky, conf
+            return _decode_cache(z, json.loads(str(z["meta"])), f.frame_id)
     except (OSError, ValueError, KeyError) as exc:
         return BadFrame(f.frame_id, f"segmentation cache {path} unreadable ({exc}); rerun")
 
@@ -455,7 +456,7 @@ def survey_hash(survey: Any) -> str:
 
 # The files the segmentation depends on (its cache is kept while they do not change).
 SEGMENTATION_CODE = ("segmentation.py", "skymodel.py", "skyfeatures.py", "skygrabcut.py",
-                     "data/models")  # fmt: skip
+                     "skycnn.py", "data/models")  # fmt: skip
 
 
 def code_fingerprint(parts: Sequence[str] | None = None) -> str:

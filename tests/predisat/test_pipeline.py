@@ -191,6 +191,29 @@ def test_code_fingerprint_covers_the_named_files() -> None:
         code_fingerprint(["no_such_module.py"])
 
 
+def test_segmentation_fingerprint_covers_every_module_the_segmenters_import() -> None:
+    """A module the segmentation runs but the fingerprint omits would let a stale cache stand
+    after an edit (the network's module was missing until the ensemble became the default)."""
+    import subprocess
+    import sys
+
+    from predisat.pipeline import SEGMENTATION_CODE
+
+    code = (
+        "import sys, numpy as np\n"
+        "from predisat.segmentation import METHODS, SkyOptions, segment_sky\n"
+        "img = (np.random.default_rng(0).random((60, 80, 3)) * 255).astype(np.uint8)\n"
+        "for m in METHODS:\n"
+        "    segment_sky(img, SkyOptions(method=m))\n"
+        "print(' '.join(k for k in sys.modules if k.startswith('predisat.')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()  # fmt: skip
+    modules = {m.split(".", 1)[1] for m in out}
+    assert "skycnn" in modules  # the ensemble ran
+    assert {m.replace(".", "/") + ".py" for m in modules} <= set(SEGMENTATION_CODE)
+
+
 def test_segmenter_name_must_be_a_method_unless_a_function_is_given(
     survey_dir: Path, tmp_path: Path
 ) -> None:
