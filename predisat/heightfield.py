@@ -310,6 +310,7 @@ def apply_clearance_prior(
     bin_m: float = 1.0,
     spread_m: float = 2.0,
     extra_overhead_m: NDArray | None = None,
+    camera_ceilings: NDArray | None = None,
 ) -> NDArray:
     """Fill the space between the cameras, where side cameras never look (in place).
 
@@ -325,7 +326,18 @@ def apply_clearance_prior(
     There, a clearance cell is bounded by the highest bound of the band cells of its chainage
     (both sides, within ``spread_m``): whatever spans the track also stands over the bands
     beside it, and is no taller over the track than the sky rays passing over those bands
-    prove. A band cell still unknown leaves the clearance unknown (blocked).
+    prove. A band cell still unknown leaves the clearance unknown (blocked), unless the
+    cameras bound it (below).
+
+    ``camera_ceilings`` (m, 4), rows ``(chainage_m, z_m, tan_ahead, tan_behind)``: a position
+    whose left *and* right cameras, at height at most ``z_m``, saw sky straight along the track
+    down to the elevation of tangent ``tan_ahead`` (towards increasing chainage) and
+    ``tan_behind``. Anything spanning the track spans the lines of both cameras too, so over
+    the track it stands at most at ``z_m + d * tan`` at a chainage distance ``d``; an overhead
+    clearance cell takes the lowest of these ceilings when it is lower than the band bound (a
+    street between facades, a slot between rock walls: the band cells are bounded by the walls,
+    the sky along the track is open). ``inf`` tangents bound nothing (a camera saw no sky
+    there: a deck, a tunnel).
 
     Returns
     -------
@@ -365,12 +377,33 @@ def apply_clearance_prior(
     k = np.floor((ch[sel] - lo) / bin_m).astype(np.int64)
     free = ~tall_any[k]
     rows, cols = np.nonzero(sel)
-    # free clearance: the floor; under an overhead structure: the highest band bound beside it
-    above_rail = np.where(free, clearance_floor_m, band_top[k])
-    ceiling = (hf.rail_z_m[rows, cols] + above_rail).astype(np.float32)
+    rail = hf.rail_z_m[rows, cols]
+    over_top = band_top[k]
+    if camera_ceilings is not None and len(camera_ceilings):
+        cam_top = _camera_ceiling(camera_ceilings, lo, n_bins, bin_m)
+        over_top = np.minimum(over_top, cam_top[k] - rail)
+    # free clearance: the floor; under an overhead structure: the highest band bound beside it,
+    # or the cameras' ceiling when lower
+    above_rail = np.where(free, clearance_floor_m, over_top)
+    ceiling = (rail + above_rail).astype(np.float32)
     bound[rows, cols] = np.minimum(bound[rows, cols], ceiling)
     # overhead intervals, for the record
     edges = np.diff(np.concatenate([[0], tall_any.astype(np.int8), [0]]))
     starts = np.flatnonzero(edges == 1)
     stops = np.flatnonzero(edges == -1)
     return np.stack([lo + starts * bin_m, lo + stops * bin_m], axis=1).astype(float)
+
+
+def _camera_ceiling(ceilings: NDArray, lo: float, n_bins: int, bin_m: float) -> NDArray:
+    """Lowest camera ceiling (absolute z) over each chainage bin ``[lo + k bin_m, + bin_m]``,
+    taken at the bin's far end from each position (``+inf`` where none bounds it)."""
+    c = np.asarray(ceilings, float).reshape(-1, 4)
+    ch, z, t_ahead, t_behind = (c[:, i][None, :] for i in range(4))
+    start = (lo + np.arange(n_bins) * bin_m)[:, None]
+    end = start + bin_m
+    ahead, behind = start >= ch, end <= ch
+    d = np.where(ahead, end - ch, np.where(behind, ch - start, np.maximum(end - ch, ch - start)))
+    tan = np.where(ahead, t_ahead, np.where(behind, t_behind, np.maximum(t_ahead, t_behind)))
+    with np.errstate(invalid="ignore"):
+        top = np.where(np.isfinite(tan), z + d * tan, np.inf)
+    return np.asarray(top.min(axis=1) if top.shape[1] else np.full(n_bins, np.inf))

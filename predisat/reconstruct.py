@@ -88,6 +88,10 @@ class ReconstructionParams:
         wide over it (crown, canopy): the clearance is blocked within ``zenith_spread_m`` of
         that frame.
     zenith_spread_m : float
+    along_view_half_deg : float or None
+        Half-width of the azimuth window straight along the track in which a position's left
+        and right cameras bound what may span the track (``docs/reconstruction.md``, section 2:
+        a street between facades, a slot between rock walls); ``None`` disables it.
     antenna_height_m : float
         Antenna above the rail at the mask positions.
     az_step_deg : float
@@ -121,6 +125,7 @@ class ReconstructionParams:
     zenith_el_deg: float = 75.0
     zenith_rel_az_deg: float = 30.0
     zenith_spread_m: float = 7.0
+    along_view_half_deg: float | None = 1.0
     antenna_height_m: float = 4.0
     az_step_deg: float = 0.5
     n_sub: int = 4
@@ -145,6 +150,11 @@ class ReconstructionParams:
             raise ValueError(
                 "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
                 "columns clear nothing)"
+            )
+        if self.along_view_half_deg is not None and not 0.0 < self.along_view_half_deg <= 45.0:
+            raise ValueError(
+                "ReconstructionParams.along_view_half_deg must lie in (0, 45] degrees, or be "
+                "None to disable the cameras' ceiling over the track"
             )
 
     @property
@@ -305,9 +315,13 @@ class Reconstructor:
             for f, prof in zip(frames, profs, strict=True)
             if _zenith_blocked(prof, p)
         ]
+        ceilings = None
+        if frames and p.along_view_half_deg is not None:
+            ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg)
         overhead = apply_clearance_prior(
             hf, bound, p.clearance_half_width_m, p.clearance_floor_m,
             p.overhead_band_m, p.overhead_height_m, extra_overhead_m=np.array(over, float),
+            camera_ceilings=ceilings,
         )  # fmt: skip
         bound.setflags(write=False)
         return HeightField(
@@ -387,6 +401,35 @@ def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:
         return False
     # a wide obstacle (crown, canopy, close wall), not a mast beside the camera
     return bool(np.mean(prof.sky_el_deg[seen] > p.zenith_el_deg) >= 0.5)
+
+
+def _camera_ceilings(
+    frames: Sequence[FrameView], profiles: Sequence[SkyProfile], cams: NDArray, half_deg: float
+) -> NDArray:
+    """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
+    :func:`~predisat.heightfield.apply_clearance_prior`: per position seen by a left and a
+    right camera, the highest camera and the tangent of the highest elevation from which
+    either camera saw sky straight along the track (within ``half_deg``), towards increasing
+    and decreasing chainage (``inf`` when a camera did not see sky there)."""
+    at: dict[float, list[int]] = {}
+    for i, f in enumerate(frames):
+        at.setdefault(round(f.chainage_m, 3), []).append(i)
+    rows = []
+    for ch, idx in at.items():
+        if {frames[i].mount.side for i in idx} != {"left", "right"}:
+            continue  # one camera proves nothing about the other side of the track
+        tans = np.full((len(idx), 2), np.inf)
+        for n, i in enumerate(idx):
+            prof = profiles[i]
+            for m, back in enumerate((0.0, 180.0)):
+                rel = prof.az_deg - frames[i].heading_deg - back
+                cols = np.abs(np.mod(rel + 180.0, 360.0) - 180.0) <= half_deg
+                el = prof.sky_el_deg[cols]
+                # +inf skylines (no sky at the top) and unseen columns bound nothing
+                if cols.any() and np.isfinite(prof.seen_lo_deg[cols]).all() and el.max() < 90.0:
+                    tans[n, m] = np.tan(np.radians(el.max()))
+        rows.append((ch, float(cams[idx, 2].max()), *tans.max(axis=0)))
+    return np.asarray(rows, float).reshape(-1, 4)
 
 
 def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:

@@ -190,6 +190,40 @@ def test_tunnel_and_bridge_are_detected_overhead() -> None:
     assert (rec.mask_el_deg - tm.mask_el_deg)[supported].min() >= -0.1
 
 
+def test_a_street_between_facades_is_open_overhead_but_a_deck_is_not() -> None:
+    """Facades 15 m high 5 m from the axis on both sides fire the overhead rule along the whole
+    street; the cameras' view straight along the track bounds the clearance there, so the
+    street is no longer closed to the zenith, while under the deck it still is. Ideal labels:
+    never below the ray-cast truth."""
+    from dataclasses import replace
+
+    track = straight_track(900.0, AZIMUTH)
+    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
+    spec = WorldSpec(
+        (
+            Stretch("town", 100.0, 800.0, "both", street),
+            Stretch("overbridge", 400.0, 412.0, "both"),
+        ),
+        catenary=False,
+        hills=False,
+    )
+    world = World.build(track, spec, seed=3)
+    fr = frames_for(world, np.arange(200.0, 701.0, 10.0), FISHEYE)
+    s = np.array([300.0, 350.0, 406.0, 500.0])
+    tm = true_masks(world, s)
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    closed = Reconstructor(replace(PARAMS, along_view_half_deg=None)).run(fr, s, track)
+    street_pos = [0, 1, 3]
+    assert (closed.mask_el_deg[street_pos] == 90.0).all()  # the old rule: walls read as a deck
+    assert (rec.mask_el_deg[street_pos] < 89.9).mean() > 0.95
+    assert np.median(rec.mask_el_deg[street_pos] - tm.mask_el_deg[street_pos]) < 15.0
+    assert (rec.mask_el_deg[2] == 90.0).all()  # under the deck
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    with pytest.raises(ValueError, match="along_view_half_deg"):
+        ReconstructionParams(along_view_half_deg=0.0)
+
+
 @pytest.fixture(scope="module")
 def mixed():
     track = straight_track(1300.0, AZIMUTH)
