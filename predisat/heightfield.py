@@ -333,7 +333,8 @@ def apply_clearance_prior(
     whose left *and* right cameras, at height at most ``z_m``, saw sky straight along the track
     down to the elevation of tangent ``tan_ahead`` (towards increasing chainage) and
     ``tan_behind``. Anything spanning the track spans the lines of both cameras too, so over
-    the track it stands at most at ``z_m + d * tan`` at a chainage distance ``d``; an overhead
+    the track it stands at most at ``z_m + d * tan`` at a chainage distance ``d`` (to the far
+    end of each cell, half its diagonal beyond its centre); an overhead
     clearance cell takes the lowest of these ceilings when it is lower than the band bound (a
     street between facades, a slot between rock walls: the band cells are bounded by the walls,
     the sky along the track is open). ``inf`` tangents bound nothing (a camera saw no sky
@@ -380,8 +381,9 @@ def apply_clearance_prior(
     rail = hf.rail_z_m[rows, cols]
     over_top = band_top[k]
     if camera_ceilings is not None and len(camera_ceilings):
-        cam_top = _camera_ceiling(camera_ceilings, lo, n_bins, bin_m)
-        over_top = np.minimum(over_top, cam_top[k] - rail)
+        # a cell spans at most half its diagonal either side of its centre's chainage
+        cam_top = _camera_ceiling(camera_ceilings, ch[sel], hf.cell_m * np.sqrt(0.5))
+        over_top = np.minimum(over_top, cam_top - rail)
     # free clearance: the floor; under an overhead structure: the highest band bound beside it,
     # or the cameras' ceiling when lower
     above_rail = np.where(free, clearance_floor_m, over_top)
@@ -394,16 +396,21 @@ def apply_clearance_prior(
     return np.stack([lo + starts * bin_m, lo + stops * bin_m], axis=1).astype(float)
 
 
-def _camera_ceiling(ceilings: NDArray, lo: float, n_bins: int, bin_m: float) -> NDArray:
-    """Lowest camera ceiling (absolute z) over each chainage bin ``[lo + k bin_m, + bin_m]``,
-    taken at the bin's far end from each position (``+inf`` where none bounds it)."""
+def _camera_ceiling(ceilings: NDArray, chainage_m: NDArray, half_extent_m: float) -> NDArray:
+    """Lowest camera ceiling (absolute z) over cells centred at ``chainage_m`` that reach
+    ``half_extent_m`` either side, taken at each cell's far end from each position (``+inf``
+    where none bounds it). Memory: cells x positions, in blocks of positions."""
     c = np.asarray(ceilings, float).reshape(-1, 4)
-    ch, z, t_ahead, t_behind = (c[:, i][None, :] for i in range(4))
-    start = (lo + np.arange(n_bins) * bin_m)[:, None]
-    end = start + bin_m
-    ahead, behind = start >= ch, end <= ch
-    d = np.where(ahead, end - ch, np.where(behind, ch - start, np.maximum(end - ch, ch - start)))
-    tan = np.where(ahead, t_ahead, np.where(behind, t_behind, np.maximum(t_ahead, t_behind)))
-    with np.errstate(invalid="ignore"):
-        top = np.where(np.isfinite(tan), z + d * tan, np.inf)
-    return np.asarray(top.min(axis=1) if top.shape[1] else np.full(n_bins, np.inf))
+    s = np.asarray(chainage_m, float)[:, None]
+    out = np.full(s.shape[0], np.inf)
+    for b in range(0, c.shape[0], 64):
+        ch, z, t_ahead, t_behind = (c[b : b + 64, i][None, :] for i in range(4))
+        rel = s - ch
+        d = np.abs(rel) + half_extent_m
+        straddles = np.abs(rel) < half_extent_m
+        tan = np.where(rel > 0, t_ahead, t_behind)
+        tan = np.where(straddles, np.maximum(t_ahead, t_behind), tan)
+        with np.errstate(invalid="ignore"):
+            top = np.where(np.isfinite(tan), z + d * tan, np.inf)
+        out = np.minimum(out, top.min(axis=1))
+    return out

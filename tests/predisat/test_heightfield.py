@@ -108,9 +108,10 @@ def test_clearance_under_an_overhead_structure_takes_the_highest_band_bound() ->
 
 def test_cameras_bound_the_clearance_between_facades() -> None:
     """Where the overhead rule fires, a position whose cameras saw sky straight along the track
-    caps the clearance at ``z + d * tan`` (d to the far end of each 1 m bin), ahead and behind;
-    an ``inf`` tangent (no sky seen: a deck) bounds nothing, and the band bound stays where it
-    is lower."""
+    caps the clearance at ``z + d * tan``, d to the far end of the cell (its centre's distance
+    plus half a cell diagonal), ahead and behind; a cell straddling the position takes the
+    steeper side; an ``inf`` tangent (no sky seen: a deck) bounds nothing, and the band bound
+    stays where it is lower."""
     from predisat.heightfield import apply_clearance_prior
 
     xs = (np.arange(N) - N // 2 + 0.5) * C
@@ -123,18 +124,20 @@ def test_cameras_bound_the_clearance_between_facades() -> None:
     bound[bands & (ch >= 10.0) & (ch < 40.0)] = 20.0  # facades 20 m high on both sides
     bound[bands & (ch >= -30.0) & (ch < -20.0)] = 7.0  # and a low deck
     t30, t45 = np.tan(np.radians(30.0)), np.tan(np.radians(45.0))
-    rows = np.array([[20.0, 3.0, t30, t45], [30.0, 3.0, np.inf, np.inf], [-10.0, 3.0, 10.0, 10.0]])
+    rows = np.array([[20.1, 3.0, t30, t45], [30.0, 3.0, np.inf, np.inf], [-10.0, 3.0, 10.0, 10.0]])
     apply_clearance_prior(hf, bound, 2.0, 1.0, (3.0, 9.0), 6.0, camera_ceilings=rows)
+    half = C * np.sqrt(0.5)  # half a cell diagonal
 
     def at(x_m: float) -> float:
         return float(bound[cell(x_m, 0.7)])
 
-    assert at(22.2) == pytest.approx(3.0 + 3.0 * t30, abs=1e-4)  # bin 22-23, 3 m ahead
-    assert at(20.2) == pytest.approx(3.0 + 1.0 * t30, abs=1e-4)
-    assert at(19.7) == pytest.approx(3.0 + 1.0 * t45, abs=1e-4)  # bin 19-20, behind
-    assert at(17.2) == pytest.approx(3.0 + 3.0 * t45, abs=1e-4)
-    # the position at 30 m saw no sky along the track: 36 m keeps the bound from 20 m
-    assert at(36.2) == pytest.approx(3.0 + 17.0 * t30, abs=1e-4)
+    # cell centres 22.25 (ahead), 19.25 and 17.25 (behind), 20.25 (straddles 20.1)
+    assert at(22.2) == pytest.approx(3.0 + (2.15 + half) * t30, abs=1e-4)
+    assert at(19.2) == pytest.approx(3.0 + (0.85 + half) * t45, abs=1e-4)
+    assert at(17.2) == pytest.approx(3.0 + (2.85 + half) * t45, abs=1e-4)
+    assert at(20.2) == pytest.approx(3.0 + (0.15 + half) * t45, abs=1e-4)
+    # the position at 30 m saw no sky along the track: 36 m keeps the bound from 20.1 m
+    assert at(36.2) == pytest.approx(3.0 + (16.15 + half) * t30, abs=1e-4)
     # the deck's band bound (7 m) is lower than the steep ceiling from -10 m: it stays
     assert at(-25.2) == 7.0
     assert at(45.2) == 1.0 and at(0.2) == 1.0  # no overhead structure: the floor
