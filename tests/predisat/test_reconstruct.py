@@ -224,6 +224,32 @@ def test_a_street_between_facades_is_open_overhead_but_a_deck_is_not() -> None:
         ReconstructionParams(along_view_half_deg=0.0)
 
 
+def test_narrow_decks_between_frames_stay_blocked_in_a_street() -> None:
+    """The ceiling's risky case: footbridges 4 and 6 m wide between two frames 10 m apart, in
+    a street whose facades fire the overhead rule. Masks every 2 m around them (between the
+    frames too) against the ray-cast truth: no supported bin below it."""
+    track = straight_track(900.0, AZIMUTH)
+    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
+    spec = WorldSpec(
+        (
+            Stretch("town", 100.0, 800.0, "both", street),
+            Stretch("overbridge", 302.0, 308.0, "both"),
+            Stretch("overbridge", 453.0, 457.0, "both"),
+        ),
+        catenary=True,
+        hills=False,
+    )
+    world = World.build(track, spec, seed=5)
+    fr = frames_for(world, np.arange(150.0, 611.0, 10.0), FISHEYE)
+    s = np.concatenate([np.arange(296.0, 315.0, 2.0), np.arange(446.0, 465.0, 2.0)])
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    tm = true_masks(world, s)
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    under = (s > 302.5) & (s < 307.5) | (s > 453.5) & (s < 456.5)
+    assert (rec.mask_el_deg[under].min(axis=1) > 40.0).all()  # under a deck: closed above
+
+
 @pytest.fixture(scope="module")
 def mixed():
     track = straight_track(1300.0, AZIMUTH)
