@@ -380,10 +380,12 @@ def apply_clearance_prior(
     rows, cols = np.nonzero(sel)
     rail = hf.rail_z_m[rows, cols]
     over_top = band_top[k]
-    if camera_ceilings is not None and len(camera_ceilings):
-        # a cell spans at most half its diagonal either side of its centre's chainage
-        cam_top = _camera_ceiling(camera_ceilings, ch[sel], hf.cell_m * np.sqrt(0.5))
-        over_top = np.minimum(over_top, cam_top - rail)
+    if camera_ceilings is not None and len(camera_ceilings) and not free.all():
+        # only overhead cells use it; a cell spans at most half its diagonal either side of
+        # its centre's chainage
+        over = ~free
+        cam_top = _camera_ceiling(camera_ceilings, ch[sel][over], hf.cell_m * np.sqrt(0.5))
+        over_top[over] = np.minimum(over_top[over], cam_top - rail[over])
     # free clearance: the floor; under an overhead structure: the highest band bound beside it,
     # or the cameras' ceiling when lower
     above_rail = np.where(free, clearance_floor_m, over_top)
