@@ -148,11 +148,11 @@ class SkyOptions:
         Learned method: obstacle specks enclosed by sky and smaller than this share of the
         valid area are classifier noise and become sky.
     uncertain_hole_fraction, uncertain_hole_probability : float
-        Learned method: obstacle regions not reaching the bottom edge (hanging in the sky),
-        smaller than this share of the valid area, whose mean sky probability is at least
-        ``uncertain_hole_probability``, become sky (dark cloud bases); not when they touch the
-        side or top edge and are elongated (bounding box side squared over 4 x area: a mast
-        or cantilever whose foot is out of the picture).
+        Learned method: obstacle regions enclosed by sky (touching no frame edge; in a fisheye
+        photo any region), smaller than this share of the valid area, whose mean sky
+        probability is at least ``uncertain_hole_probability``, become sky (dark cloud
+        bases). A region cut by the frame edge stays an obstacle: it may be a mast, a wall or
+        the opposite rock face whose rest is out of the picture.
     """
 
     fisheye: bool = False
@@ -573,22 +573,17 @@ def _learned_sky(
         x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
         x1 = x0 + stats[:, cv2.CC_STAT_WIDTH]
         y1 = y0 + stats[:, cv2.CC_STAT_HEIGHT]
+        # A region enclosed by sky is a hole; one cut by the frame edge may be a mast, a wall
+        # or the opposite rock face whose rest is out of the picture, so it stays an obstacle
+        # (a fisheye's rim is no edge: every region may be a hole).
         inner = (x0 > 0) & (y0 > 0) & (x1 < w) & (y1 < h)
-        # Obstacles stand on the ground: in an upright frame a region that does not reach the
-        # bottom edge hangs in the sky (a fisheye's rim is no edge: every region may be a hole).
-        floating = np.ones_like(inner) if opt.fisheye else y1 < h
         if opt.fisheye:
             inner[:] = True
         area = stats[:, cv2.CC_STAT_AREA]
-        # Enclosed specks are noise; larger hanging regions the classifier hesitated on are
-        # dark cloud bases (a real bridge deck or canopy scores near 0).
+        # Enclosed specks are noise; larger holes the classifier hesitated on are dark cloud
+        # bases (a real bridge deck or canopy scores near 0).
         small_hole = inner & (area < opt.max_hole_fraction * n_valid)
-        # ...but a long thin region cut by the image edge is a mast or a cantilever whose foot
-        # is out of the picture (side fisheye frames), not a cloud
-        bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
-        elongated = np.maximum(bw, bh).astype(float) ** 2 > 4.0 * np.maximum(area, 1)
-        uncertain = floating & (inner | ~elongated)
-        uncertain &= area < opt.uncertain_hole_fraction * n_valid
+        uncertain = inner & (area < opt.uncertain_hole_fraction * n_valid)
         uncertain[0] = False
         if uncertain.any():  # the mean probability per region only when it can matter
             mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)

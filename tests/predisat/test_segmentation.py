@@ -359,22 +359,25 @@ class _MapClassifier:
         return self.prob
 
 
-def test_a_hesitant_mast_at_the_image_edge_stays_an_obstacle() -> None:
-    """Hanging regions the classifier hesitated on become sky when compact (a dark cloud
-    base), not when elongated and cut by the image edge (a mast or cantilever of a fisheye
-    frame, whose foot is out of the picture)."""
+def test_only_hesitant_regions_enclosed_by_sky_become_sky() -> None:
+    """Hanging regions the classifier hesitated on become sky when enclosed by sky (a dark
+    cloud base), not when cut by the frame edge: a thin mast, a fat mast end or the opposite
+    rock face whose rest is out of the picture."""
     h, w = 120, 160
     p = np.full((h, w), 0.95)
     p[100:, :] = 0.02  # the ground
     p[40:55, 70:90] = 0.3  # a compact blob in the sky: a cloud base
-    rows = np.arange(10, 80)
+    p[:25, 130:] = 0.3  # a compact region in the top-right corner
+    p[50:80, :30] = 0.3  # a fat mast end, cut by the left edge
+    rows = np.arange(10, 45)
     for r in rows:  # a band 6 px wide from (10, 40) down-left to the left edge
-        c = 40 - (r - 10) * 40 // 70
+        c = 40 - (r - 10) * 40 // 35
         p[r, max(c - 3, 0) : c + 3] = 0.3
     img = np.full((h, w, 3), 128, np.uint8)  # the probability alone decides (no refinement)
     seg = segment_sky(img, SkyOptions(refine_guided=False, thin_px=0), _MapClassifier(p))
     assert seg.sky_mask[45:50, 75:85].all()  # the cloud base is sky
-    band = p == 0.3
-    band[40:55, 70:90] = False
-    assert not seg.sky_mask[band].any()  # the mast stays an obstacle
+    cut = p == 0.3
+    cut[40:55, 70:90] = False
+    assert cut[:25, 130:].all() and cut[50:80, :30].all()
+    assert not seg.sky_mask[cut].any()  # the mast, the mast end and the corner stay obstacles
     assert not seg.sky_mask[100:].any()
