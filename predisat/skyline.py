@@ -206,6 +206,10 @@ class Rectifier:
         it does not see at all).
     grow_px : tuple of int
         Obstacle growth (horizontal, vertical) in pixels before resampling.
+    first_read_px_row : ndarray of int64, shape (width_px,)
+        Topmost image row the grid reads per image column (``height_px`` in a column it never
+        reads). A side fisheye sees past the zenith, into the other camera's half-space, above
+        it.
     """
 
     camera: CameraModel
@@ -218,6 +222,16 @@ class Rectifier:
     first_seen_row: NDArray = field(repr=False)
     last_seen_row: NDArray = field(repr=False)
     grow_px: tuple[int, int] = (2, 1)
+    first_read_px_row: NDArray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.first_read_px_row is None:
+            h, w = self.camera.height_px, self.camera.width_px
+            idx = self.pixel_index[self.pixel_index >= 0].astype(np.int64)
+            first = np.full(w, h, np.int64)
+            np.minimum.at(first, idx % w, idx // w)
+            first.setflags(write=False)
+            object.__setattr__(self, "first_read_px_row", first)
 
     @classmethod
     def build(
@@ -331,7 +345,10 @@ class Rectifier:
             if low.size:
                 h = self.camera.height_px
                 band, gap = confidence_window_px(h)
-                m = _raise_skyline(m, low, round(min(low_confidence_windows * (band + gap), h)))
+                m = _raise_skyline(
+                    m, low, round(min(low_confidence_windows * (band + gap), h)),
+                    self.first_read_px_row,
+                )  # fmt: skip
         grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
         # :meth:`rectify`) down to its end only, instead of resampling the whole grid.
@@ -348,16 +365,28 @@ class Rectifier:
         return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)
 
 
-def _raise_skyline(sky: NDArray, cols: NDArray, raise_px: int) -> NDArray:
+def _raise_skyline(
+    sky: NDArray, cols: NDArray, raise_px: int, from_row: NDArray | None = None
+) -> NDArray:
     """Copy of ``sky`` whose columns ``cols`` lose the lowest ``raise_px`` rows of their top
-    sky run, and every sky pixel below it."""
+    sky run, and every sky pixel below it.
+
+    The run is searched from ``from_row`` (per image column, default 0) down: the rows above
+    it, which the rectification grid never reads (a side fisheye's view past the zenith), are
+    left as they are. Otherwise a sliver of sky above an obstacle seen past the zenith would
+    be "the top run", and the whole sky below it in the camera's own half-space would go.
+    """
     sub = sky[:, cols]
-    rows = np.arange(sub.shape[0])[:, None]
-    start = np.argmax(sub, axis=0)  # first sky row (0 in a column without sky: no run)
+    n = sub.shape[0]
+    rows = np.arange(n)[:, None]
+    top = np.zeros(len(cols), np.int64) if from_row is None else np.asarray(from_row)[cols]
+    reach = rows >= top
+    cand = sub & reach
+    start = np.where(cand.any(axis=0), np.argmax(cand, axis=0), n)  # first sky row read
     after = ~sub & (rows >= start)
-    end = np.where(after.any(axis=0), np.argmax(after, axis=0), sub.shape[0])
+    end = np.where(after.any(axis=0), np.argmax(after, axis=0), n)
     out = sky.copy()
-    out[:, cols] = sub & (rows < np.maximum(end - int(raise_px), start))
+    out[:, cols] = sub & (~reach | (rows < np.maximum(end - int(raise_px), start)))
     return out
 
 

@@ -148,6 +148,42 @@ def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expec
     assert np.array_equal(sky, before)  # the input is not modified
 
 
+def test_raise_skyline_leaves_the_rows_above_the_grid_alone() -> None:
+    """Rows above ``from_row`` are never read by the grid (a side fisheye's view past the
+    zenith): the run is searched below them and they are left as they are."""
+    col = "1100111"
+    sky = np.array([[c == "1"] for c in col])
+    out = _raise_skyline(sky, np.array([0]), 1, np.array([3]))
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "1100110"
+    assert "".join("1" if v else "0" for v in _raise_skyline(sky, np.array([0]), 1)[:, 0]) == (
+        "1000000"  # searched from the top, the sliver is the run and the sky below goes
+    )
+
+
+def test_an_obstacle_past_the_zenith_does_not_void_the_own_half_space() -> None:
+    """A side fisheye sees the far side of the track above its zenith line. A wall there,
+    under a sliver of sky at the top edge, in low-confidence columns, must not take the sky
+    of the camera's own half-space below it: the profile is the one without that wall."""
+    cam = default_camera("fisheye")
+    mount = Mount.default("left")
+    rect = Rectifier.build(cam, mount)
+    first = rect.first_read_px_row
+    w = cam.width_px
+    cols = np.flatnonzero((first >= 20) & (first < cam.height_px))
+    assert cols.size > 10  # columns with pixels past the zenith at their top
+    sky = np.ones(cam.shape, bool)
+    sky[int(0.8 * cam.height_px) :] = False  # the ground
+    wall = sky.copy()
+    for c in cols:  # sky on the top rows, then the far wall, ending 6 rows above the grid
+        wall[3 : first[c] - 6, c] = False
+    conf = np.ones(w)
+    conf[cols] = 0.0
+    ref = rect.profile(sky, 0.0, confidence=conf)
+    got = rect.profile(wall, 0.0, confidence=conf)
+    assert np.isfinite(ref.sky_el_deg).mean() > 0.9
+    assert np.array_equal(got.sky_el_deg, ref.sky_el_deg)
+
+
 def test_a_fuzzy_horizon_does_not_void_a_fisheye_zenith() -> None:
     """Every azimuth's top sky run starts at the zenith, which a side fisheye sees in its
     centre column: a fuzzy tree top on the horizon there must not void them all."""
