@@ -88,6 +88,8 @@ class HeightField:
         Frame ``z`` of the rail at the cell's chainage.
     overhead_m : ndarray of float, shape (k, 2)
         Chainage intervals where an overhead structure was detected.
+    camera_ceilings : ndarray of float, shape (m, 4)
+        The ``camera_ceilings`` rows :func:`apply_clearance_prior` was given (none: empty).
     """
 
     cell_m: float
@@ -99,6 +101,7 @@ class HeightField:
     offset_m: NDArray = field(repr=False)
     rail_z_m: NDArray = field(repr=False)
     overhead_m: NDArray = field(default_factory=lambda: np.zeros((0, 2)))
+    camera_ceilings: NDArray = field(default_factory=lambda: np.zeros((0, 4)))
 
     @property
     def shape(self) -> tuple[int, int]:

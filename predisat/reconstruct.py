@@ -54,6 +54,9 @@ __all__ = [
 
 _DESCRIPTOR_TOL_DEG = 3.0
 _WINDOW_MARGIN_M = 5.0  # corridor beyond the rays' reach, so that the prior's bins are whole
+# The cameras' ceiling caps the clearance cells this near an antenna at their exact bound;
+# farther, the rasterised bound is within a few tenths of a degree of it anyway.
+_CEILING_CAP_M = 5.0
 
 
 @dataclass(frozen=True)
@@ -326,7 +329,7 @@ class Reconstructor:
         bound.setflags(write=False)
         return HeightField(
             hf.cell_m, hf.ix0, hf.iy0, bound, hf.region, hf.chainage_m, hf.offset_m,
-            hf.rail_z_m, overhead,
+            hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings,
         )  # fmt: skip
 
     def run(self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: Any) -> Reconstruction:
@@ -345,7 +348,10 @@ class Reconstructor:
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
-        near_el, near_unknown, far_grid_el, far_unknown = _horizon_parts(hf, ant, rot, p)
+        caps = _ceiling_caps(hf.camera_ceilings, s, ant)
+        near_el, near_unknown, far_grid_el, far_unknown = _horizon_parts(
+            hf, ant, rot, p, caps
+        )
         far_el, far_seen, seen = _far_field(keep, profs, s, ant, track, p)
         # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
         # by that camera's sky: it proves nothing farther stands higher (the parallax
@@ -419,6 +425,9 @@ def _camera_ceilings(
         if {frames[i].mount.side for i in idx} != {"left", "right"}:
             continue  # one camera proves nothing about the other side of the track
         tans = np.full((len(idx), 2), np.inf)
+        # cameras ahead of or behind the antenna: their ceilings, measured from the antenna's
+        # chainage, start that much higher
+        slack_m = max(abs(float(frames[i].mount.lever_arm_m[0])) for i in idx)
         for n, i in enumerate(idx):
             prof = profiles[i]
             for m, back in enumerate((0.0, 180.0)):
@@ -428,8 +437,42 @@ def _camera_ceilings(
                 # +inf skylines (no sky at the top) and unseen columns bound nothing
                 if cols.any() and np.isfinite(prof.seen_lo_deg[cols]).all() and el.max() < 90.0:
                     tans[n, m] = np.tan(np.radians(el.max()))
-        rows.append((ch, float(cams[idx, 2].max()), *tans.max(axis=0)))
+        tan = tans.max(axis=0)
+        z = float(cams[idx, 2].max())
+        if slack_m > 0.0:
+            # between the antenna and a camera the camera's other direction bounds: both must
+            if not np.isfinite(tan).all():
+                tan = np.full(2, np.inf)
+            else:
+                z += slack_m * float(tan.max())
+        rows.append((ch, z, *tan))
     return np.asarray(rows, float).reshape(-1, 4)
+
+
+def _ceiling_caps(ceilings: NDArray, s: NDArray, antenna_m: NDArray) -> NDArray:
+    """Per antenna ``(tan_cap, dz_m)`` (n, 2): at a position with a ceiling row whose cameras
+    stand below the antenna, ``tan_cap`` bounds the elevation tangent at which the antenna
+    sees anything in the clearance over the track, and ``dz_m`` is the antenna's height above
+    them (``(inf, 0)`` elsewhere).
+
+    A point there at chainage distance ``d`` from the position stands at most at
+    ``z + d * tan`` (the ceiling, pointwise, before any rasterisation), and its horizontal
+    distance ``r`` from the antenna is at least ``d``: seen from the antenna at height
+    ``z + dz`` its tangent is at most ``tan - dz / r``. 1 % is added to ``tan`` for the
+    track's curvature (a chord is shorter than its arc).
+    """
+    out = np.tile(np.array([np.inf, 0.0]), (s.size, 1))
+    c = np.asarray(ceilings, float).reshape(-1, 4)
+    if not c.size:
+        return out
+    j = np.abs(c[None, :, 0] - s[:, None]).argmin(axis=1)
+    at = np.abs(c[j, 0] - s) <= 1e-3
+    tan = np.maximum(c[j, 2], c[j, 3]) * 1.01
+    dz = antenna_m[:, 2] - c[j, 1]
+    ok = at & np.isfinite(tan) & (dz >= 0.0)
+    out[ok, 0] = tan[ok]
+    out[ok, 1] = dz[ok]
+    return out
 
 
 def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:
@@ -506,17 +549,32 @@ def horizon(
 
 
 def _horizon_parts(
-    hf: HeightField, antenna_m: NDArray, local_to_frame: NDArray, p: ReconstructionParams
+    hf: HeightField,
+    antenna_m: NDArray,
+    local_to_frame: NDArray,
+    p: ReconstructionParams,
+    caps: NDArray | None = None,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """:func:`horizon` split at ``p.half_width_m``: elevation and unknown flag over the cells
-    whose nearest point is nearer, then over the others (``-90``: no such cell)."""
+    whose nearest point is nearer, then over the others (``-90``: no such cell).
+
+    ``caps`` (n, 2), from :func:`_ceiling_caps`: the clearance cells within
+    ``_CEILING_CAP_M`` of each antenna count at most with ``tan_cap - dz_m / r``, ``r`` the
+    distance of the cell's farthest point (the cameras' ceiling is exact pointwise, its
+    rasterised bound is not: the cell straddling a position holds the bound of its far end).
+    """
     az = np.radians(_sub_azimuths(p))
     dist_cells = _ray_distances(p).astype(np.float32) / np.float32(hf.cell_m)
     c = hf.cell_m
     ny, nx = hf.shape
     bound = np.ascontiguousarray(hf.bound_m, np.float32).ravel()
     region = np.ascontiguousarray(hf.region, np.bool_).ravel()
+    with np.errstate(invalid="ignore"):
+        clear = hf.region & (np.abs(hf.offset_m) < p.clearance_half_width_m)
+    clear = np.ascontiguousarray(clear, np.bool_).ravel()
     n = antenna_m.shape[0]
+    if caps is None:
+        caps = np.tile(np.array([np.inf, 0.0]), (n, 1))
     el = np.empty((n, az.size))
     el_far = np.empty((n, az.size))
     unknown = np.empty((n, az.size), bool)
@@ -538,7 +596,8 @@ def _horizon_parts(
             np.float32(a[0] / c - gx), np.float32(a[1] / c - gy),
             int(gx) - hf.ix0, int(gy) - hf.iy0, np.float32(c), np.float32(a[2]),
             np.float32(up[2]), np.float32(up[0] * c), np.float32(up[1] * c),
-            np.float32(p.half_width_m),
+            np.float32(p.half_width_m), clear, np.float32(caps[i, 0]), np.float32(caps[i, 1]),
+            np.float32(_CEILING_CAP_M),
         )  # fmt: skip
         unknown[i] = np.isposinf(best)
         unknown_far[i] = np.isposinf(best_far)
@@ -553,14 +612,17 @@ def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
     ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
     up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
+    clear: NDArray, cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32,
 ) -> tuple[NDArray, NDArray]:  # fmt: skip
     """Steepest bound tangent along each ray, over the cells nearer than ``far_m`` and over the
     others (float32; ``+inf`` once a ray meets an unknown cell there).
 
     A ray stops at its first sample outside the modelled region, at its first unknown cell
     (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). A
-    cell is far when its nearest point is at least ``far_m`` away. All arithmetic is float32
-    in a fixed order, so that overlapping windows give bit-identical results.
+    cell is far when its nearest point is at least ``far_m`` away. A ``clear`` cell (over the
+    track) nearer than ``cap_m`` counts at most with ``cap_t - cap_dz / r``, ``r`` the distance
+    of its farthest point (metres). All arithmetic is float32 in a fixed order, so that
+    overlapping windows give bit-identical results.
     """
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -581,6 +643,12 @@ def _march_rays(
             start = rel0
         elif rel0 > zero:
             start = top if top == np.inf else overhead
+            if start != np.inf and clear[row0 * nx + col0] and cap_t < np.inf:
+                # the ceiling over the track: nothing in the cell above the cap, seen from its
+                # farthest corner (the worst point)
+                fx0 = max(ax - np.floor(ax), np.floor(ax) + one - ax)
+                fy0 = max(ay - np.floor(ay), np.floor(ay) + one - ay)
+                start = min(start, cap_t - cap_dz / (np.float32(np.hypot(fx0, fy0)) * c))
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
         best[0, j] = start
@@ -605,6 +673,10 @@ def _march_rays(
             rel = (bound[flat] - a_z) * up_z
             rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
             r = rel / near
+            if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
+                gx = max(abs(cl - ax), abs(cl + one - ax))
+                gy = max(abs(rl - ay), abs(rl + one - ay))
+                r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
             part = 1 if near >= far_m else 0
             if r != r:  # a NaN bound makes the ray's value NaN
                 best[part, j] = r

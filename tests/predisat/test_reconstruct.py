@@ -250,6 +250,78 @@ def test_narrow_decks_between_frames_stay_blocked_in_a_street() -> None:
     assert (rec.mask_el_deg[under].min(axis=1) > 40.0).all()  # under a deck: closed above
 
 
+def test_the_ceiling_cap_opens_frame_positions_in_a_street_with_masts() -> None:
+    """Masts, cantilevers and footbridges in a street: at the frame positions the cameras'
+    ceiling also caps the clearance cells near the antenna at their exact (pointwise) bound,
+    instead of the rasterised one. Never below the ray-cast truth, and lower masks than
+    without the cap."""
+    import predisat.reconstruct as rc
+
+    track = straight_track(900.0, AZIMUTH)
+    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
+    spec = WorldSpec(
+        (
+            Stretch("town", 100.0, 800.0, "both", street),
+            Stretch("overbridge", 302.0, 308.0, "both"),
+        ),
+        catenary=True,
+        hills=False,
+    )
+    world = World.build(track, spec, seed=5)
+    fr = frames_for(world, np.arange(200.0, 411.0, 10.0), FISHEYE)
+    s = np.arange(250.0, 361.0, 10.0)
+    tm = true_masks(world, s)
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    under = (s > 302.5) & (s < 307.5)
+    assert (rec.mask_el_deg[under].min(axis=1) > 40.0).all()
+    saved = rc._CEILING_CAP_M
+    try:
+        rc._CEILING_CAP_M = 0.0
+        uncapped = Reconstructor(PARAMS).run(fr, s, track)
+    finally:
+        rc._CEILING_CAP_M = saved
+    assert (rec.mask_el_deg <= uncapped.mask_el_deg).all()
+    assert rec.mask_el_deg.mean() < uncapped.mask_el_deg.mean() - 0.5
+
+
+def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
+    """A rasterised ceiling over the track (each cell at the bound of its far end) stands
+    above the antenna in the antenna's own cell and closes every ray; the cap opens them,
+    yet no ray reads lower than the exact ceiling ``z + |x| tan e`` seen along it."""
+    from predisat.heightfield import HeightField
+    from predisat.reconstruct import _horizon_parts
+
+    c, n = 0.5, 81
+    e_deg, z_cam, dz = 55.0, 2.0, 0.5
+    t = np.tan(np.radians(e_deg))
+    centres = (np.arange(n) - n // 2 + 0.5) * c
+    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
+    clear = np.abs(y) < 2.0
+    bound = np.where(clear, z_cam + (np.abs(x) + c * np.sqrt(0.5)) * t, 0.0).astype(np.float32)
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(
+        c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
+        y.astype(np.float32), z,
+    )  # fmt: skip
+    p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
+    ant = np.array([[0.1, 0.1, z_cam + dz]])
+    closed = _horizon_parts(hf, ant, np.eye(3)[None], p)[0]
+    assert (closed == 90.0).all()
+    caps = np.array([[t * 1.01, dz]])
+    el = _horizon_parts(hf, ant, np.eye(3)[None], p, caps)[0]
+    assert (el < 89.0).mean() > 0.9
+    # the exact ceiling along each ray, sampled finely inside the clearance
+    az = np.radians(np.arange(el.size) * p.az_step_deg / p.n_sub)
+    r = np.arange(0.01, 17.0, 0.01)
+    px = ant[0, 0] + np.sin(az)[:, None] * r
+    py = ant[0, 1] + np.cos(az)[:, None] * r
+    inside = np.abs(py) < 2.0
+    tan_exact = np.where(inside, (z_cam + np.abs(px) * t - ant[0, 2]) / r, -np.inf).max(axis=1)
+    assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
+
+
 @pytest.fixture(scope="module")
 def mixed():
     track = straight_track(1300.0, AZIMUTH)
@@ -405,3 +477,32 @@ def test_a_column_over_the_antenna_blocks_up_to_the_zenith() -> None:
 def test_params_reject_a_bad_low_confidence_window(windows: float) -> None:
     with pytest.raises(ValueError, match="low_confidence_windows"):
         ReconstructionParams(low_confidence_windows=windows)
+
+
+def test_camera_ceiling_rows_and_caps_by_hand() -> None:
+    """Ceiling rows from hand-made profiles (one camera a side, sky straight along the track
+    from 30 deg ahead and 45 deg behind), a forward lever arm raising the row by its length
+    times the steeper tangent; caps only at a row's own chainage, under the antenna."""
+    from predisat.reconstruct import _camera_ceilings, _ceiling_caps
+    from predisat.skyline import SkyProfile
+
+    rel = np.arange(-90.0, 90.01, 0.5)
+    frames, profs = [], []
+    for side, look in (("left", -90.0), ("right", 90.0)):
+        # rel az from the look direction: straight ahead (heading 0) is -look
+        ahead, behind = np.abs(rel + look) < 2.0, np.abs(rel - look) < 2.0
+        el = np.where(ahead, 30.0, np.where(behind, 45.0, 10.0))
+        profs.append(SkyProfile(rel, el, np.full(rel.size, 5.0), np.full(rel.size, 90.0), look))
+        m = Mount(side, -look, 45.0, 0.0, (0.8, 0.0, -0.5))
+        frames.append(FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0))
+    cams = np.array([[0.0, 1.5, 3.5], [0.0, -1.5, 3.4]])
+    rows = _camera_ceilings(frames, profs, cams, 1.0)
+    t30, t45 = np.tan(np.radians(30.0)), np.tan(np.radians(45.0))
+    np.testing.assert_allclose(rows, [[100.0, 3.5 + 0.8 * t45, t30, t45]])
+    # one camera only: no row
+    assert _camera_ceilings(frames[:1], profs[:1], cams[:1], 1.0).shape == (0, 4)
+    s = np.array([100.0, 100.0, 105.0])
+    ant = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 3.0], [5.0, 0.0, 5.0]])
+    caps = _ceiling_caps(rows, s, ant)
+    np.testing.assert_allclose(caps[0], [t45 * 1.01, 5.0 - rows[0, 1]])
+    assert np.isinf(caps[1:, 0]).all()  # antenna below the cameras; no row at 105 m
