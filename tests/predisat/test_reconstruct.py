@@ -190,6 +190,16 @@ def test_tunnel_and_bridge_are_detected_overhead() -> None:
     assert (rec.mask_el_deg - tm.mask_el_deg)[supported].min() >= -0.1
 
 
+def street_world(decks_m: list[tuple[float, float]], catenary: bool, seed: int) -> World:
+    """A straight street, facades 15 m high 5 m from the axis on both sides from 100 to 800 m
+    (they fire the overhead rule), with footbridges or overbridges over ``decks_m``."""
+    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
+    stretches = [Stretch("town", 100.0, 800.0, "both", street)]
+    stretches += [Stretch("overbridge", a, b, "both") for a, b in decks_m]
+    spec = WorldSpec(tuple(stretches), catenary=catenary, hills=False)
+    return World.build(straight_track(900.0, AZIMUTH), spec, seed=seed)
+
+
 def test_a_street_between_facades_is_open_overhead_but_a_deck_is_not() -> None:
     """Facades 15 m high 5 m from the axis on both sides fire the overhead rule along the whole
     street; the cameras' view straight along the track bounds the clearance there, so the
@@ -197,17 +207,8 @@ def test_a_street_between_facades_is_open_overhead_but_a_deck_is_not() -> None:
     never below the ray-cast truth."""
     from dataclasses import replace
 
-    track = straight_track(900.0, AZIMUTH)
-    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
-    spec = WorldSpec(
-        (
-            Stretch("town", 100.0, 800.0, "both", street),
-            Stretch("overbridge", 400.0, 412.0, "both"),
-        ),
-        catenary=False,
-        hills=False,
-    )
-    world = World.build(track, spec, seed=3)
+    world = street_world([(400.0, 412.0)], catenary=False, seed=3)
+    track = world.track
     fr = frames_for(world, np.arange(200.0, 701.0, 10.0), FISHEYE)
     s = np.array([300.0, 350.0, 406.0, 500.0])
     tm = true_masks(world, s)
@@ -228,18 +229,8 @@ def test_narrow_decks_between_frames_stay_blocked_in_a_street() -> None:
     """The ceiling's risky case: footbridges 4 and 6 m wide between two frames 10 m apart, in
     a street whose facades fire the overhead rule. Masks every 2 m around them (between the
     frames too) against the ray-cast truth: no supported bin below it."""
-    track = straight_track(900.0, AZIMUTH)
-    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
-    spec = WorldSpec(
-        (
-            Stretch("town", 100.0, 800.0, "both", street),
-            Stretch("overbridge", 302.0, 308.0, "both"),
-            Stretch("overbridge", 453.0, 457.0, "both"),
-        ),
-        catenary=True,
-        hills=False,
-    )
-    world = World.build(track, spec, seed=5)
+    world = street_world([(302.0, 308.0), (453.0, 457.0)], catenary=True, seed=5)
+    track = world.track
     fr = frames_for(world, np.arange(150.0, 611.0, 10.0), FISHEYE)
     s = np.concatenate([np.arange(296.0, 315.0, 2.0), np.arange(446.0, 465.0, 2.0)])
     rec = Reconstructor(PARAMS).run(fr, s, track)
@@ -257,17 +248,8 @@ def test_the_ceiling_cap_opens_frame_positions_in_a_street_with_masts() -> None:
     without the cap."""
     import predisat.reconstruct as rc
 
-    track = straight_track(900.0, AZIMUTH)
-    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
-    spec = WorldSpec(
-        (
-            Stretch("town", 100.0, 800.0, "both", street),
-            Stretch("overbridge", 302.0, 308.0, "both"),
-        ),
-        catenary=True,
-        hills=False,
-    )
-    world = World.build(track, spec, seed=5)
+    world = street_world([(302.0, 308.0)], catenary=True, seed=5)
+    track = world.track
     fr = frames_for(world, np.arange(200.0, 411.0, 10.0), FISHEYE)
     s = np.arange(250.0, 361.0, 10.0)
     tm = true_masks(world, s)
