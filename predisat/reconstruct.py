@@ -57,6 +57,9 @@ _WINDOW_MARGIN_M = 5.0  # corridor beyond the rays' reach, so that the prior's b
 # The cameras' ceiling caps the clearance cells this near an antenna at their exact bound;
 # farther, the rasterised bound is within a few tenths of a degree of it anyway.
 _CEILING_CAP_M = 5.0
+# A camera's view along the track bounds what spans it only if seen up to this near the zenith
+# (the default rectification grid's top row is at 89.94 deg).
+_ZENITH_SEEN_DEG = 1.0
 
 
 @dataclass(frozen=True)
@@ -414,9 +417,12 @@ def _camera_ceilings(
 ) -> NDArray:
     """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
     :func:`~predisat.heightfield.apply_clearance_prior`: per position seen by a left and a
-    right camera, the highest camera and the tangent of the highest elevation from which
-    either camera saw sky straight along the track (within ``half_deg``), towards increasing
-    and decreasing chainage (``inf`` when a camera did not see sky there)."""
+    right camera, the tangent of the highest elevation from which either camera saw sky
+    straight along the track (within ``half_deg``) up to the zenith, towards increasing and
+    decreasing chainage (``inf`` when a camera did not see sky there, or did not see that
+    direction up to within ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height
+    of the highest camera, raised by its along-track lever arm times the steeper tangent
+    (with a lever arm, an ``inf`` tangent makes the whole row bound nothing)."""
     at: dict[float, list[int]] = {}
     for i, f in enumerate(frames):
         at.setdefault(round(f.chainage_m, 3), []).append(i)
@@ -434,9 +440,14 @@ def _camera_ceilings(
                 rel = prof.az_deg - frames[i].heading_deg - back
                 cols = np.abs(np.mod(rel + 180.0, 360.0) - 180.0) <= half_deg
                 el = prof.sky_el_deg[cols]
-                # +inf skylines (no sky at the top) and unseen columns bound nothing
-                if cols.any() and np.isfinite(prof.seen_lo_deg[cols]).all() and el.max() < 90.0:
-                    tans[n, m] = np.tan(np.radians(el.max()))
+                # +inf skylines (no sky at the top), unseen columns and columns not seen up to
+                # the zenith (a deck above them would go unseen) bound nothing
+                seen = np.isfinite(prof.seen_lo_deg[cols]).all() and bool(
+                    (prof.seen_hi_deg[cols] >= 90.0 - _ZENITH_SEEN_DEG).all()
+                )
+                if cols.any() and seen and el.max() < 90.0:
+                    # sky seen below the horizon proves no less than sky from the horizon up
+                    tans[n, m] = np.tan(np.radians(max(float(el.max()), 0.0)))
         tan = tans.max(axis=0)
         z = float(cams[idx, 2].max())
         if slack_m > 0.0:
@@ -525,7 +536,10 @@ def horizon(
 
     Each ray is sampled every half cell up to 30 m and every cell beyond, up to ``reach_m`` or
     until it leaves the corridor. A sample's cell counts with its top bound seen from the
-    cell's *nearest* point, so no cell the ray crosses can look lower than its bound allows.
+    cell's *nearest* point. Known limit: a ray can cut the corner of a cell between two
+    samples without counting it (an independent check against an exact ceiling on a rotated
+    grid found bins up to about 3 deg low where the truth is 2-7 deg); an exact grid
+    traversal would close it.
 
     Parameters
     ----------
@@ -560,8 +574,9 @@ def _horizon_parts(
 
     ``caps`` (n, 2), from :func:`_ceiling_caps`: the clearance cells within
     ``_CEILING_CAP_M`` of each antenna count at most with ``tan_cap - dz_m / r``, ``r`` the
-    distance of the cell's farthest point (the cameras' ceiling is exact pointwise, its
-    rasterised bound is not: the cell straddling a position holds the bound of its far end).
+    distance of the farthest point of the cell and its neighbours (the cameras' ceiling is
+    exact pointwise, its rasterised bound is not: the cell straddling a position holds the
+    bound of its far end). ``_CEILING_CAP_M = 0`` disables the cap.
     """
     az = np.radians(_sub_azimuths(p))
     dist_cells = _ray_distances(p).astype(np.float32) / np.float32(hf.cell_m)
@@ -620,9 +635,11 @@ def _march_rays(
     A ray stops at its first sample outside the modelled region, at its first unknown cell
     (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). A
     cell is far when its nearest point is at least ``far_m`` away. A ``clear`` cell (over the
-    track) nearer than ``cap_m`` counts at most with ``cap_t - cap_dz / r``, ``r`` the distance
-    of its farthest point (metres). All arithmetic is float32 in a fixed order, so that
-    overlapping windows give bit-identical results.
+    track) nearer than ``cap_m`` (the antenna's own cell too, when ``cap_m > 0``) counts at most
+    with ``cap_t - cap_dz / r``, ``r`` the distance of the farthest point of the cell and its
+    8 neighbours (metres; a ray sampled every half cell may cross a neighbour's corner
+    unsampled, and the cap must not hide what that neighbour may hold). All arithmetic is
+    float32 in a fixed order, so that overlapping windows give bit-identical results.
     """
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -643,11 +660,12 @@ def _march_rays(
             start = rel0
         elif rel0 > zero:
             start = top if top == np.inf else overhead
-            if start != np.inf and clear[row0 * nx + col0] and cap_t < np.inf:
-                # the ceiling over the track: nothing in the cell above the cap, seen from its
-                # farthest corner (the worst point)
-                fx0 = max(ax - np.floor(ax), np.floor(ax) + one - ax)
-                fy0 = max(ay - np.floor(ay), np.floor(ay) + one - ay)
+            if start != np.inf and clear[row0 * nx + col0] and cap_t < np.inf and cap_m > zero:
+                # the ceiling over the track: nothing in the cell above the cap, seen from the
+                # farthest corner of the cell and its neighbours (the worst point; rays sampled
+                # every half cell may cut a neighbour's corner unsampled)
+                fx0 = max(ax, one - ax) + one
+                fy0 = max(ay, one - ay) + one
                 start = min(start, cap_t - cap_dz / (np.float32(np.hypot(fx0, fy0)) * c))
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
@@ -674,8 +692,9 @@ def _march_rays(
             rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
             r = rel / near
             if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
-                gx = max(abs(cl - ax), abs(cl + one - ax))
-                gy = max(abs(rl - ay), abs(rl + one - ay))
+                # farthest point of the cell and its 8 neighbours (see the own cell above)
+                gx = max(abs(cl - one - ax), abs(cl + np.float32(2.0) - ax))
+                gy = max(abs(rl - one - ay), abs(rl + np.float32(2.0) - ay))
                 r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
             part = 1 if near >= far_m else 0
             if r != r:  # a NaN bound makes the ray's value NaN

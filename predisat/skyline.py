@@ -207,9 +207,10 @@ class Rectifier:
     grow_px : tuple of int
         Obstacle growth (horizontal, vertical) in pixels before resampling.
     first_read_px_row : ndarray of int64, shape (width_px,)
-        Topmost image row the grid reads per image column (``height_px`` in a column it never
-        reads). A side fisheye sees past the zenith, into the other camera's half-space, above
-        it.
+        Topmost image row per image column that can change what the grid reads: the rows it
+        reads, widened by the obstacle growth ``grow_px`` (``height_px`` in a column that never
+        matters). A side fisheye sees past the zenith, into the other camera's half-space,
+        above it.
     """
 
     camera: CameraModel
@@ -228,8 +229,13 @@ class Rectifier:
         if self.first_read_px_row is None:
             h, w = self.camera.height_px, self.camera.width_px
             idx = self.pixel_index[self.pixel_index >= 0].astype(np.int64)
-            first = np.full(w, h, np.int64)
-            np.minimum.at(first, idx % w, idx // w)
+            read = np.full(w, h, np.int64)
+            np.minimum.at(read, idx % w, idx // w)
+            # an obstacle pixel reaches a read one through the erosion by grow_px
+            gx, gy = self.grow_px
+            pad = np.concatenate([np.full(gx, h), read, np.full(gx, h)])
+            near = np.min([pad[k : k + w] for k in range(2 * gx + 1)], axis=0)
+            first = np.where(near < h, np.maximum(near - gy, 0), h).astype(np.int64)
             first.setflags(write=False)
             object.__setattr__(self, "first_read_px_row", first)
 

@@ -264,7 +264,7 @@ def test_the_ceiling_cap_opens_frame_positions_in_a_street_with_masts() -> None:
         uncapped = Reconstructor(PARAMS).run(fr, s, track)
     finally:
         rc._CEILING_CAP_M = saved
-    assert (rec.mask_el_deg <= uncapped.mask_el_deg).all()
+    assert (rec.mask_el_deg <= uncapped.mask_el_deg).all()  # _CEILING_CAP_M = 0: no cap at all
     assert rec.mask_el_deg.mean() < uncapped.mask_el_deg.mean() - 0.5
 
 
@@ -281,14 +281,16 @@ def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
     centres = (np.arange(n) - n // 2 + 0.5) * c
     x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
     clear = np.abs(y) < 2.0
-    bound = np.where(clear, z_cam + (np.abs(x) + c * np.sqrt(0.5)) * t, 0.0).astype(np.float32)
+    s0 = 0.1  # the position's chainage (frame x), where the antenna stands
+    bound = np.where(clear, z_cam + (np.abs(x - s0) + c * np.sqrt(0.5)) * t, 0.0)
+    bound = bound.astype(np.float32)
     z = np.zeros((n, n), np.float32)
     hf = HeightField(
         c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
         y.astype(np.float32), z,
     )  # fmt: skip
     p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
-    ant = np.array([[0.1, 0.1, z_cam + dz]])
+    ant = np.array([[s0, 0.1, z_cam + dz]])
     closed = _horizon_parts(hf, ant, np.eye(3)[None], p)[0]
     assert (closed == 90.0).all()
     caps = np.array([[t * 1.01, dz]])
@@ -300,7 +302,8 @@ def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
     px = ant[0, 0] + np.sin(az)[:, None] * r
     py = ant[0, 1] + np.cos(az)[:, None] * r
     inside = np.abs(py) < 2.0
-    tan_exact = np.where(inside, (z_cam + np.abs(px) * t - ant[0, 2]) / r, -np.inf).max(axis=1)
+    tan_exact = np.where(inside, (z_cam + np.abs(px - s0) * t - ant[0, 2]) / r, -np.inf)
+    tan_exact = tan_exact.max(axis=1)
     assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
 
 
@@ -488,3 +491,29 @@ def test_camera_ceiling_rows_and_caps_by_hand() -> None:
     caps = _ceiling_caps(rows, s, ant)
     np.testing.assert_allclose(caps[0], [t45 * 1.01, 5.0 - rows[0, 1]])
     assert np.isinf(caps[1:, 0]).all()  # antenna below the cameras; no row at 105 m
+
+
+def test_camera_ceiling_needs_the_view_up_to_the_zenith_and_clamps_at_the_horizon() -> None:
+    """A camera that saw the track direction only up to 64 deg (pitched lower) proves nothing
+    about a deck above that: no bound. Sky seen from below the horizon bounds like sky from
+    the horizon up (tangent 0, not negative)."""
+    from predisat.reconstruct import _camera_ceilings
+    from predisat.skyline import SkyProfile
+
+    rel = np.arange(-90.0, 90.01, 0.5)
+
+    def rows(seen_hi_deg: float, sky_el_deg: float) -> np.ndarray:
+        frames, profs = [], []
+        for side, look in (("left", -90.0), ("right", 90.0)):
+            el = np.full(rel.size, sky_el_deg)
+            hi = np.full(rel.size, seen_hi_deg)
+            profs.append(SkyProfile(rel, el, np.full(rel.size, -10.0), hi, look))
+            m = Mount(side, -look, 45.0, 0.0, (0.0, 0.0, -0.5))
+            frames.append(
+                FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0)
+            )
+        return _camera_ceilings(frames, profs, np.array([[0.0, 1.5, 3.5], [0.0, -1.5, 3.5]]), 1.0)
+
+    assert np.isinf(rows(64.0, 25.0)[0, 2:]).all()
+    np.testing.assert_allclose(rows(89.94, 25.0)[0, 2:], np.tan(np.radians(25.0)))
+    np.testing.assert_allclose(rows(89.94, -5.0)[0, 2:], 0.0)
