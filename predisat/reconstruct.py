@@ -536,10 +536,10 @@ def horizon(
 
     Each ray is sampled every half cell up to 30 m and every cell beyond, up to ``reach_m`` or
     until it leaves the corridor. A sample's cell counts with its top bound seen from the
-    cell's *nearest* point. Known limit: a ray can cut the corner of a cell between two
-    samples without counting it (an independent check against an exact ceiling on a rotated
-    grid found bins up to about 3 deg low where the truth is 2-7 deg); an exact grid
-    traversal would close it.
+    cell's *nearest* point. Where the ray crosses a cell corner between two samples (both
+    indices change), both cells at that corner count too, so every cell the ray passes
+    through is counted (before 2026-12-02 such cells were skipped: bins up to 3.6 deg low in
+    a check against an exact ceiling on rotated grids).
 
     Parameters
     ----------
@@ -643,7 +643,6 @@ def _march_rays(
     """
     zero = np.float32(0.0)
     one = np.float32(1.0)
-    tiny = np.float32(1e-3)
     overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
     best = np.full((2, n_rays), -np.inf, np.float32)  # near part, far part
@@ -672,6 +671,8 @@ def _march_rays(
         best[0, j] = start
         if start == np.inf or start != start:
             continue
+        pcol, prow = col0, row0
+        stop = False
         for k in range(dist_cells.size):
             fx = ax + dx * dist_cells[k]
             fy = ay + dy * dist_cells[k]
@@ -679,32 +680,66 @@ def _march_rays(
             row = np.int32(np.floor(fy)) + oy
             if col < 0 or col >= nx or row < 0 or row >= ny:
                 break
-            flat = row * nx + col
-            if not region[flat]:
+            if not region[row * nx + col]:
                 break
-            # nearest point of the cell to the antenna, in cells
-            cl = np.float32(col - ox)
-            rl = np.float32(row - oy)
-            ex = max(max(cl - ax, zero), ax - cl - one)
-            ey = max(max(rl - ay, zero), ay - rl - one)
-            near = max(np.float32(np.hypot(ex, ey)) * c, tiny)
-            rel = (bound[flat] - a_z) * up_z
-            rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
-            r = rel / near
-            if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
-                # farthest point of the cell and its 8 neighbours (see the own cell above)
-                gx = max(abs(cl - one - ax), abs(cl + np.float32(2.0) - ax))
-                gy = max(abs(rl - one - ay), abs(rl + np.float32(2.0) - ay))
-                r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
-            part = 1 if near >= far_m else 0
-            if r != r:  # a NaN bound makes the ray's value NaN
-                best[part, j] = r
+            # Samples at most a cell apart change each index by at most one; when both change,
+            # the ray crossed one of the two cells at that corner unsampled: count both.
+            n_cells = 3 if (col != pcol and row != prow) else 1
+            for m in range(n_cells):
+                cc, rr = (col, row) if m == 0 else ((col, prow) if m == 1 else (pcol, row))
+                if cc < 0 or cc >= nx or rr < 0 or rr >= ny:
+                    continue
+                flat = rr * nx + cc
+                if not region[flat]:
+                    continue
+                r, part = _cell_tangent(
+                    flat, cc - ox, rr - oy, fx, fy, bound, clear, ax, ay, c, a_z, up_z,
+                    up_x_c, up_y_c, far_m, cap_t, cap_dz, cap_m,
+                )  # fmt: skip
+                if r != r:  # a NaN bound makes the ray's value NaN
+                    best[part, j] = r
+                    stop = True
+                    break
+                if r > best[part, j]:
+                    best[part, j] = r
+                if best[part, j] == np.inf:  # an unknown cell hides whatever lies farther
+                    stop = True
+                    break
+            if stop:
                 break
-            if r > best[part, j]:
-                best[part, j] = r
-            if best[part, j] == np.inf:  # an unknown cell hides whatever lies farther
-                break
+            pcol, prow = col, row
     return best[0], best[1]
+
+
+@njit(cache=True, nogil=True)
+def _cell_tangent(
+    flat: np.integer, col_rel: np.integer, row_rel: np.integer, fx: np.float32, fy: np.float32,
+    bound: NDArray,
+    clear: NDArray, ax: np.float32, ay: np.float32, c: np.float32, a_z: np.float32,
+    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
+    cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32,
+) -> tuple[np.float32, int]:  # fmt: skip
+    """Bound tangent of one cell seen from its nearest point, capped over the track (see
+    :func:`_march_rays`), and whether the cell is far (1) or near (0)."""
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    tiny = np.float32(1e-3)
+    # nearest point of the cell to the antenna, in cells
+    cl = np.float32(col_rel)
+    rl = np.float32(row_rel)
+    ex = max(max(cl - ax, zero), ax - cl - one)
+    ey = max(max(rl - ay, zero), ay - rl - one)
+    near = max(np.float32(np.hypot(ex, ey)) * c, tiny)
+    rel = (bound[flat] - a_z) * up_z
+    rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
+    r = rel / near
+    if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
+        # farthest point of the cell and its 8 neighbours (see the own cell in _march_rays)
+        gx = max(abs(cl - one - ax), abs(cl + np.float32(2.0) - ax))
+        gy = max(abs(rl - one - ay), abs(rl + np.float32(2.0) - ay))
+        r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
+    part = 1 if near >= far_m else 0
+    return np.float32(r), part
 
 
 # ---------------------------------------------------------------------- far field and flags
