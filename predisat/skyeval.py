@@ -300,6 +300,7 @@ def evaluate_folder(
     limit: int | None = None,
     n_worst: int = 8,
     method: str | None = None,
+    classifier: Any = None,
 ) -> SkyEvaluation:
     """Segment every image of a folder with reference masks and score it.
 
@@ -323,6 +324,9 @@ def evaluate_folder(
     method : str, optional
         Segmentation method (:data:`predisat.segmentation.METHODS`) when ``options`` is not
         given; default that of ``SkyOptions``.
+    classifier : object, optional
+        Probability model passed to :func:`predisat.segmentation.segment_sky` (a candidate
+        network or ensemble); default the shipped one of the method.
 
     Returns
     -------
@@ -351,7 +355,7 @@ def evaluate_folder(
             raise OSError(f"cannot read image {pair.image_path}")
         truth = _read_mask(pair.mask_path, img.shape[:2])
         t0 = time.perf_counter()
-        seg = segment_sky(img, opt)
+        seg = segment_sky(img, opt, classifier=classifier)
         dt = time.perf_counter() - t0
         pred, valid = seg.sky_mask, seg.valid_mask
         truth_v = truth & valid

@@ -26,7 +26,9 @@ from pathlib import Path
 import pandas as pd
 
 from predisat.segmentation import METHODS
+from predisat.skycnn import SkyEnsemble, SkyNet
 from predisat.skyeval import evaluate_folder, worst_cases_sheet
+from predisat.skymodel import SkyClassifier
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worst", type=int, default=8, help="cases in the contact sheet")
     parser.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
                         "library's default)")
+    parser.add_argument("--net", type=Path, metavar="ONNX",
+                        help="a candidate sky network (with its .json card) instead of the "
+                             "shipped one, for --method cnn or ensemble")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--sheet", type=Path, metavar="PNG",
                         help="also write one contact sheet of the --sheet-per-set worst cases "
@@ -45,11 +50,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sheet-per-set", type=int, default=4, metavar="N",
                         help="cases per folder in --sheet (at most --worst)")
     args = parser.parse_args(argv)
+    classifier = None
+    if args.net is not None:
+        if args.method not in ("cnn", "ensemble"):
+            parser.error("--net needs --method cnn or --method ensemble")
+        net = SkyNet.load(args.net)
+        classifier = net if args.method == "cnn" else SkyEnsemble(
+            (SkyClassifier.default(), net), SkyEnsemble.default().weights)
     summaries = []
     sheet: list = []
     for data in args.data:
         ev = evaluate_folder(data, out_dir=args.out, progress=not args.quiet, limit=args.limit,
-                             n_worst=args.worst, method=args.method)
+                             n_worst=args.worst, method=args.method, classifier=classifier)
         s = ev.summary.assign(data=Path(data).name, layout=ev.layout)
         summaries.append(s)
         print(f"{data} ({ev.layout}):")

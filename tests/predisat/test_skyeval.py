@@ -79,6 +79,25 @@ def test_evaluate_generic_folder(tmp_path: Path) -> None:
     assert cv2.imread(str(ev.files["sheet"])) is not None
 
 
+class _AllSky:
+    """A stand-in probability model that calls every pixel sky."""
+
+    max_side_px = 32
+
+    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
+        h, w = image_bgr.shape[:2]
+        return np.ones((max(1, h * 32 // max(h, w)), max(1, w * 32 // max(h, w))), np.float32)
+
+
+def test_evaluate_folder_uses_the_given_classifier(tmp_path: Path) -> None:
+    data = tmp_path / "toy"
+    _write_folder(data, "images", "masks", 2)
+    ev = evaluate_folder(data, progress=False, method="learned", classifier=_AllSky())
+    # all predicted sky: IoU = true sky share (rows 0..top of 90)
+    assert np.allclose(ev.table["iou"], [40 / 90, 45 / 90], atol=1e-9)
+    assert np.allclose(ev.table["pred_sky_fraction"], 1.0)
+
+
 def test_find_pairs_layouts_and_errors(tmp_path: Path) -> None:
     _write_folder(tmp_path / "a", "original", "mask", 1)
     _write_folder(tmp_path / "b", "raw_images", "mask_images", 2)
