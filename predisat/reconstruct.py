@@ -622,7 +622,7 @@ def _horizon_parts(
     return el, unknown, el_far, unknown_far
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
     ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
@@ -639,13 +639,40 @@ def _march_rays(
     with ``cap_t - cap_dz / r``, ``r`` the distance of the farthest point of the cell and its
     8 neighbours (metres; a ray sampled every half cell may cross a neighbour's corner
     unsampled, and the cap must not hide what that neighbour may hold). All arithmetic is
-    float32 in a fixed order, so that overlapping windows give bit-identical results.
+    float32 in a fixed order (distances: :func:`_hypot32`), so that overlapping windows give
+    bit-identical results.
+
+    ``d`` (n_rays, 2): unit ray directions in the frame's horizontal plane; ``dist_cells``:
+    increasing sample distances (cells); ``bound``, ``region``, ``clear``: the raster
+    (``ny * nx``, row-major); ``ax, ay``: antenna position within its cell (cells, in
+    ``[0, 1)``), whose raster index is ``(ox, oy)``; ``c``: cell size; ``a_z``: antenna height;
+    ``up_z``, ``up_x_c / c``, ``up_y_c / c``: its local vertical in the frame (the x and y
+    terms tilt each sample point's height); ``far_m``, ``cap_m``: metres.
     """
+    # Until 2026-12-02 each cell called libm's hypotf and a non-inlined helper that recomputed
+    # the sample's tilt, with the maxima in an array: 3.8-4.0x slower on the demo surveys, for
+    # bit for bit the same values (scripts/bench_march.py). The numpy error model only drops
+    # the checks for division by zero: every divisor is at least 1e-3 m.
     zero = np.float32(0.0)
     one = np.float32(1.0)
+    two = np.float32(2.0)
+    tiny = np.float32(1e-3)
     overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
-    best = np.full((2, n_rays), -np.inf, np.float32)  # near part, far part
+    best = np.empty((2, n_rays), np.float32)  # near part, far part
+    # squared offsets of each column's and row's nearest edge from the antenna (cells, exact in
+    # float64): a cell's distance is then one addition and one square root
+    ex2 = np.empty(nx)
+    for i in range(nx):
+        cl = np.float32(i - ox)
+        ex = max(max(cl - ax, zero), ax - cl - one)
+        ex2[i] = np.float64(ex) * np.float64(ex)
+    ey2 = np.empty(ny)
+    for i in range(ny):
+        rl = np.float32(i - oy)
+        ey = max(max(rl - ay, zero), ay - rl - one)
+        ey2[i] = np.float64(ey) * np.float64(ey)
+    capped = cap_t < np.inf
     # The antenna's own cell, which rays leaving it early may never sample: standing above the
     # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
     # would leave); unknown, it blocks them as unknown.
@@ -659,16 +686,19 @@ def _march_rays(
             start = rel0
         elif rel0 > zero:
             start = top if top == np.inf else overhead
-            if start != np.inf and clear[row0 * nx + col0] and cap_t < np.inf and cap_m > zero:
+            if start != np.inf and clear[row0 * nx + col0] and capped and cap_m > zero:
                 # the ceiling over the track: nothing in the cell above the cap, seen from the
                 # farthest corner of the cell and its neighbours (the worst point; rays sampled
                 # every half cell may cut a neighbour's corner unsampled)
                 fx0 = max(ax, one - ax) + one
                 fy0 = max(ay, one - ay) + one
-                start = min(start, cap_t - cap_dz / (np.float32(np.hypot(fx0, fy0)) * c))
+                start = min(start, cap_t - cap_dz / (_hypot32(fx0, fy0) * c))
     for j in range(n_rays):
         dx, dy = d[j, 0], d[j, 1]
+        b_near = start
+        b_far = np.float32(-np.inf)
         best[0, j] = start
+        best[1, j] = b_far
         if start == np.inf or start != start:
             continue
         pcol, prow = col0, row0
@@ -682,64 +712,60 @@ def _march_rays(
                 break
             if not region[row * nx + col]:
                 break
+            # the tilt of the sample point, the same for every cell it counts
+            tilt = (fx - ax) * up_x_c + (fy - ay) * up_y_c
             # Samples at most a cell apart change each index by at most one; when both change,
             # the ray crossed one of the two cells at that corner unsampled: count both.
             n_cells = 3 if (col != pcol and row != prow) else 1
             for m in range(n_cells):
-                cc, rr = (col, row) if m == 0 else ((col, prow) if m == 1 else (pcol, row))
-                if cc < 0 or cc >= nx or rr < 0 or rr >= ny:
-                    continue
+                if m == 0:
+                    cc, rr = col, row  # in the region: checked above
+                else:
+                    cc, rr = (col, prow) if m == 1 else (pcol, row)
+                    if cc < 0 or cc >= nx or rr < 0 or rr >= ny or not region[rr * nx + cc]:
+                        continue
                 flat = rr * nx + cc
-                if not region[flat]:
-                    continue
-                r, part = _cell_tangent(
-                    flat, cc - ox, rr - oy, fx, fy, bound, clear, ax, ay, c, a_z, up_z,
-                    up_x_c, up_y_c, far_m, cap_t, cap_dz, cap_m,
-                )  # fmt: skip
-                if r != r:  # a NaN bound makes the ray's value NaN
-                    best[part, j] = r
-                    stop = True
-                    break
-                if r > best[part, j]:
-                    best[part, j] = r
-                if best[part, j] == np.inf:  # an unknown cell hides whatever lies farther
-                    stop = True
+                # bound tangent of the cell seen from its nearest point (the square root is
+                # _hypot32 of that point's offsets)
+                near = max(np.float32(np.sqrt(ex2[cc] + ey2[rr])) * c, tiny)
+                rel = (bound[flat] - a_z) * up_z
+                r = (rel + tilt) / near
+                if capped and near < cap_m and clear[flat] and r < np.inf:
+                    # farthest point of the cell and its 8 neighbours (see the own cell above)
+                    cl = np.float32(cc - ox)
+                    rl = np.float32(rr - oy)
+                    gx = max(abs(cl - one - ax), abs(cl + two - ax))
+                    gy = max(abs(rl - one - ay), abs(rl + two - ay))
+                    r = min(r, cap_t - cap_dz / (_hypot32(gx, gy) * c))
+                # a NaN bound makes the ray's value NaN; an unknown cell hides whatever lies
+                # farther: both stop the ray
+                if near >= far_m:
+                    if r > b_far or r != r:
+                        b_far = r
+                        stop = r == np.inf or r != r
+                elif r > b_near or r != r:
+                    b_near = r
+                    stop = r == np.inf or r != r
+                if stop:
                     break
             if stop:
                 break
             pcol, prow = col, row
+        best[0, j] = b_near
+        best[1, j] = b_far
     return best[0], best[1]
 
 
-@njit(cache=True, nogil=True)
-def _cell_tangent(
-    flat: np.integer, col_rel: np.integer, row_rel: np.integer, fx: np.float32, fy: np.float32,
-    bound: NDArray,
-    clear: NDArray, ax: np.float32, ay: np.float32, c: np.float32, a_z: np.float32,
-    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
-    cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32,
-) -> tuple[np.float32, int]:  # fmt: skip
-    """Bound tangent of one cell seen from its nearest point, capped over the track (see
-    :func:`_march_rays`), and whether the cell is far (1) or near (0)."""
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
-    tiny = np.float32(1e-3)
-    # nearest point of the cell to the antenna, in cells
-    cl = np.float32(col_rel)
-    rl = np.float32(row_rel)
-    ex = max(max(cl - ax, zero), ax - cl - one)
-    ey = max(max(rl - ay, zero), ay - rl - one)
-    near = max(np.float32(np.hypot(ex, ey)) * c, tiny)
-    rel = (bound[flat] - a_z) * up_z
-    rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
-    r = rel / near
-    if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
-        # farthest point of the cell and its 8 neighbours (see the own cell in _march_rays)
-        gx = max(abs(cl - one - ax), abs(cl + np.float32(2.0) - ax))
-        gy = max(abs(rl - one - ay), abs(rl + np.float32(2.0) - ay))
-        r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
-    part = 1 if near >= far_m else 0
-    return np.float32(r), part
+@njit(cache=True, nogil=True, inline="always")
+def _hypot32(x: np.float32, y: np.float32) -> np.float32:
+    """``hypot`` of two float32 values, rounded to float32 from float64.
+
+    Their squares are exact in float64, so this is what glibc's ``hypotf`` returns, bit for
+    bit, without the call (which cost more than the rest of the ray march).
+    """
+    xd = np.float64(x)
+    yd = np.float64(y)
+    return np.float32(np.sqrt(xd * xd + yd * yd))
 
 
 # ---------------------------------------------------------------------- far field and flags
