@@ -1,0 +1,251 @@
+"""Benchmark: the horizon ray march (``predisat.reconstruct._march_rays``) against its baseline.
+
+Usage::
+
+    python scripts/bench_march.py SURVEY PROCESSED [--from-m 4000] [--to-m 5000] [--repeat 7]
+        [--json bench_march.json]
+
+``PROCESSED`` is a ``predisat process SURVEY --out PROCESSED`` folder: its segmentation cache
+(``cache/seg-*/``) gives the sky masks, so no frame is segmented here. The positions of the
+survey within ``[from_m, to_m)`` are reconstructed once (one window, as one pipeline chunk)
+while the inputs of every ``_march_rays`` call are recorded: the real height field, antennas
+and caps. Both kernels then march the same inputs, ``--repeat`` times, interleaved (the
+machine is shared: the best time of each counts), and must agree bit for bit on every ray.
+
+Baseline: the kernel as it was until 2026-12-02 (commit 3645ffc), copied below verbatim.
+One thread: BLAS, OpenMP and numba are pinned before numpy loads.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from numba import njit  # noqa: E402
+
+import predisat.reconstruct as rc  # noqa: E402
+from predisat.pipeline import _decode_cache  # noqa: E402
+from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
+from predisat.survey import Survey  # noqa: E402
+
+
+# ---------------------------------------------------------------------- baseline (verbatim)
+@njit(nogil=True)
+def baseline_march(
+    d, dist_cells, bound, region, nx, ny, ax, ay, ox, oy, c, a_z, up_z, up_x_c, up_y_c, far_m,
+    clear, cap_t, cap_dz, cap_m,
+):  # fmt: skip
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    overhead = np.float32(3.4028235e38)
+    n_rays = d.shape[0]
+    best = np.full((2, n_rays), -np.inf, np.float32)
+    start = np.float32(-np.inf)
+    col0 = np.int32(np.floor(ax)) + ox
+    row0 = np.int32(np.floor(ay)) + oy
+    if 0 <= col0 < nx and 0 <= row0 < ny and region[row0 * nx + col0]:
+        top = bound[row0 * nx + col0]
+        rel0 = (top - a_z) * up_z
+        if rel0 != rel0:
+            start = rel0
+        elif rel0 > zero:
+            start = top if top == np.inf else overhead
+            if start != np.inf and clear[row0 * nx + col0] and cap_t < np.inf and cap_m > zero:
+                fx0 = max(ax, one - ax) + one
+                fy0 = max(ay, one - ay) + one
+                start = min(start, cap_t - cap_dz / (np.float32(np.hypot(fx0, fy0)) * c))
+    for j in range(n_rays):
+        dx, dy = d[j, 0], d[j, 1]
+        best[0, j] = start
+        if start == np.inf or start != start:
+            continue
+        pcol, prow = col0, row0
+        stop = False
+        for k in range(dist_cells.size):
+            fx = ax + dx * dist_cells[k]
+            fy = ay + dy * dist_cells[k]
+            col = np.int32(np.floor(fx)) + ox
+            row = np.int32(np.floor(fy)) + oy
+            if col < 0 or col >= nx or row < 0 or row >= ny:
+                break
+            if not region[row * nx + col]:
+                break
+            n_cells = 3 if (col != pcol and row != prow) else 1
+            for m in range(n_cells):
+                cc, rr = (col, row) if m == 0 else ((col, prow) if m == 1 else (pcol, row))
+                if cc < 0 or cc >= nx or rr < 0 or rr >= ny:
+                    continue
+                flat = rr * nx + cc
+                if not region[flat]:
+                    continue
+                r, part = baseline_cell_tangent(
+                    flat, cc - ox, rr - oy, fx, fy, bound, clear, ax, ay, c, a_z, up_z,
+                    up_x_c, up_y_c, far_m, cap_t, cap_dz, cap_m,
+                )  # fmt: skip
+                if r != r:
+                    best[part, j] = r
+                    stop = True
+                    break
+                if r > best[part, j]:
+                    best[part, j] = r
+                if best[part, j] == np.inf:
+                    stop = True
+                    break
+            if stop:
+                break
+            pcol, prow = col, row
+    return best[0], best[1]
+
+
+@njit(nogil=True)
+def baseline_cell_tangent(
+    flat, col_rel, row_rel, fx, fy, bound, clear, ax, ay, c, a_z, up_z, up_x_c, up_y_c, far_m,
+    cap_t, cap_dz, cap_m,
+):  # fmt: skip
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    tiny = np.float32(1e-3)
+    cl = np.float32(col_rel)
+    rl = np.float32(row_rel)
+    ex = max(max(cl - ax, zero), ax - cl - one)
+    ey = max(max(rl - ay, zero), ay - rl - one)
+    near = max(np.float32(np.hypot(ex, ey)) * c, tiny)
+    rel = (bound[flat] - a_z) * up_z
+    rel = rel + ((fx - ax) * up_x_c + (fy - ay) * up_y_c)
+    r = rel / near
+    if cap_t < np.inf and near < cap_m and clear[flat] and r < np.inf:
+        gx = max(abs(cl - one - ax), abs(cl + np.float32(2.0) - ax))
+        gy = max(abs(rl - one - ay), abs(rl + np.float32(2.0) - ay))
+        r = min(r, cap_t - cap_dz / (np.float32(np.hypot(gx, gy)) * c))
+    part = 1 if near >= far_m else 0
+    return np.float32(r), part
+
+
+# ---------------------------------------------------------------------- inputs
+def _cache_dir(processed: Path, frame_ids: list[str]) -> Path:
+    """The newest segmentation cache of ``processed`` holding every frame."""
+    dirs = sorted((processed / "cache").glob("seg-*"), key=lambda p: p.stat().st_mtime)
+    for d in reversed(dirs):
+        if all((d / f"{fid}.npz").is_file() for fid in frame_ids):
+            return d
+    raise SystemExit(f"{processed}/cache holds no segmentation of all frames: run predisat process")
+
+
+def record_inputs(
+    survey_dir: Path, processed: Path, lo_m: float, hi_m: float
+) -> list[tuple[Any, ...]]:
+    """Arguments of every ``_march_rays`` call of one window over ``[lo_m, hi_m)``."""
+    sv = Survey.load(survey_dir, check_images=False, on_error="skip")
+    if sv.track is None:
+        raise SystemExit(f"survey {survey_dir} names no track file")
+    p = ReconstructionParams()
+    fr = sv.frames
+    ch = np.round(np.asarray(fr.chainage_m, float), 3)
+    pos = np.unique(ch[np.isfinite(ch) & (ch >= lo_m) & (ch < hi_m)])
+    if not pos.size:
+        raise SystemExit(f"no position of {survey_dir} in [{lo_m}, {hi_m}) m")
+    idx = np.flatnonzero((ch >= pos.min() - p.overlap_m) & (ch <= pos.max() + p.overlap_m))
+    cache = _cache_dir(processed, [str(fr.frame_id[i]) for i in idx])
+    s = ch[idx]
+    track: Any = sv.track
+    ant = np.asarray(track.enu_at(s), float)
+    ant += float(sv.antenna_height_m) * np.asarray(track.up_at(s), float)
+    heading = np.asarray(track.heading_at(s), float)
+    views = []
+    for k, i in enumerate(idx):
+        fid = str(fr.frame_id[i])
+        with np.load(cache / f"{fid}.npz", allow_pickle=False) as z:
+            seg = _decode_cache(z, json.loads(str(z["meta"])), fid)
+        if isinstance(seg, tuple):
+            cam = sv.cameras[str(fr.side[i])]
+            views.append(
+                FrameView(float(ch[i]), seg[0], cam.camera, cam.mount, ant[k],
+                          float(heading[k]), bool(sv.reverse), seg[1], fid)
+            )  # fmt: skip
+    calls: list[tuple[Any, ...]] = []
+    kernel: Any = rc._march_rays
+
+    def recorder(*args: Any) -> tuple[Any, Any]:
+        calls.append(args)
+        return kernel(*args)
+
+    # _horizon_parts looks the kernel up at call time
+    rc._march_rays = recorder  # type: ignore[assignment]
+    try:
+        Reconstructor(p).run(views, pos, track)
+    finally:
+        rc._march_rays = kernel
+    return calls
+
+
+# ---------------------------------------------------------------------- timing
+def _run(fn: Callable[..., tuple[Any, Any]], calls: list[tuple[Any, ...]]) -> tuple[float, list]:
+    t0 = time.perf_counter()
+    out = [fn(*a) for a in calls]
+    return time.perf_counter() - t0, out
+
+
+def _identical(a: list, b: list) -> bool:
+    """Bit-for-bit equality of every ray's near and far values (NaN payloads included)."""
+    return all(
+        np.array_equal(x.view(np.int32), y.view(np.int32))
+        for pa, pb in zip(a, b, strict=True)
+        for x, y in zip(pa, pb, strict=True)
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("survey", type=Path)
+    ap.add_argument("processed", type=Path, help="predisat process output (segmentation cache)")
+    ap.add_argument("--from-m", type=float, default=4000.0, help="first position chainage (m)")
+    ap.add_argument("--to-m", type=float, default=5000.0, help="positions below this (m)")
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+
+    t0 = time.perf_counter()
+    calls = record_inputs(args.survey, args.processed, args.from_m, args.to_m)
+    n_pos, n_rays = len(calls), int(calls[0][0].shape[0])
+    ny, nx = int(calls[0][5]), int(calls[0][4])
+    print(f"{n_pos} positions x {n_rays} rays, height field {ny} x {nx} cells "
+          f"(inputs recorded in {time.perf_counter() - t0:.1f} s)")  # fmt: skip
+    kernels = {"baseline": baseline_march, "current": rc._march_rays}
+    for fn in kernels.values():
+        fn(*calls[0])  # compile or load from the numba cache
+    best = dict.fromkeys(kernels, np.inf)
+    outs: dict[str, list] = {}
+    for _ in range(args.repeat):
+        for name, fn in kernels.items():
+            dt, outs[name] = _run(fn, calls)
+            best[name] = min(best[name], dt)
+    same = _identical(outs["baseline"], outs["current"])
+    speedup = best["baseline"] / best["current"]
+    for name, dt in best.items():
+        print(f"{name:<9s}: {1e3 * dt / n_pos:7.2f} ms/position "
+              f"({n_pos * n_rays / dt / 1e6:.2f} M rays/s), best of {args.repeat}")  # fmt: skip
+    print(f"speed-up: {speedup:.2f}x; bit-identical on every ray: {'yes' if same else 'NO'}")
+    if args.json is not None:
+        args.json.write_text(json.dumps({
+            "survey": str(args.survey), "from_m": args.from_m, "to_m": args.to_m,
+            "positions": n_pos, "rays_per_position": n_rays, "grid_cells": [ny, nx],
+            "repeat": args.repeat,
+            "ms_per_position": {k: 1e3 * v / n_pos for k, v in best.items()},
+            "speedup": speedup, "bit_identical": same,
+        }, indent=1))  # fmt: skip
+    if not same:
+        raise SystemExit("the current kernel differs from the baseline")
+
+
+if __name__ == "__main__":
+    main()
