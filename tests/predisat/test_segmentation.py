@@ -381,3 +381,194 @@ def test_only_hesitant_regions_enclosed_by_sky_become_sky() -> None:
     assert cut[:25, 130:].all() and cut[50:80, :30].all()
     assert not seg.sky_mask[cut].any()  # the mast, the mast end and the corner stay obstacles
     assert not seg.sky_mask[100:].any()
+
+
+# ---------------------------------------------------------------------- kernels vs references
+def _blobs(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """A probability map of random blobs (smoothed noise), many regions and holes."""
+    import cv2
+
+    noise = rng.random((h, w)).astype(np.float32)
+    sigma = float(rng.uniform(0.7, 3.0))
+    p = cv2.GaussianBlur(noise, (0, 0), sigma)
+    p = (p - p.min()) / max(float(p.max() - p.min()), 1e-6)
+    return np.asarray(p + np.linspace(0.25, -0.25, h, dtype=np.float32)[:, None], np.float32)
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_run_components_match_opencv_regions_areas_and_boxes(connectivity: int) -> None:
+    import cv2
+
+    from predisat.segmentation import _Components
+
+    rng = np.random.default_rng(connectivity)
+    for k in range(300):
+        h, w = (int(v) for v in rng.integers(1, 40, 2))
+        m = rng.random((h, w)) < rng.random() if k % 2 else _blobs(rng, h, w) > 0.5
+        cc = _Components.of(m, connectivity)
+        n, lbl, st, _ = cv2.connectedComponentsWithStats(m.view(np.uint8),
+                                                         connectivity=connectivity)  # fmt: skip
+        assert cc.n == n - 1
+        # OpenCV may number the regions otherwise: match them by each run's pixels
+        first = np.array([lbl[cc.row[np.argmax(cc.label == q)], cc.start[np.argmax(cc.label == q)]]
+                          for q in range(cc.n)], int)  # fmt: skip
+        assert np.unique(first).size == cc.n and (first > 0).all()
+        painted = np.zeros((h, w), int)
+        for r, a, b, q in zip(cc.row, cc.start, cc.stop, cc.label, strict=True):
+            assert m[r, a:b].all() and (a == 0 or not m[r, a - 1]) and (b == w or not m[r, b])
+            painted[r, a:b] = first[q]
+        np.testing.assert_array_equal(painted, lbl)
+        s = st[first]
+        np.testing.assert_array_equal(cc.area, s[:, cv2.CC_STAT_AREA])
+        np.testing.assert_array_equal(cc.left, s[:, cv2.CC_STAT_LEFT])
+        np.testing.assert_array_equal(cc.top, s[:, cv2.CC_STAT_TOP])
+        np.testing.assert_array_equal(cc.right, s[:, cv2.CC_STAT_LEFT] + s[:, cv2.CC_STAT_WIDTH])
+        np.testing.assert_array_equal(cc.bottom, s[:, cv2.CC_STAT_TOP] + s[:, cv2.CC_STAT_HEIGHT])
+        # painting and summing selected regions: what the label image gives
+        sel = rng.random(cc.n) < 0.5
+        got = m.copy()
+        cc.paint(got, sel, False)
+        keep = np.ones(n, bool)
+        keep[first[sel]] = False
+        np.testing.assert_array_equal(got, m & keep[lbl])
+        # float64 values with full mantissas: a sum in another order would differ
+        values = rng.random((h, w)).astype(np.float32 if k % 3 == 0 else np.float64)
+        sums = cc.sums(values, sel)
+        ref = np.bincount(lbl.ravel(), values.ravel(), n)[first]
+        assert np.array_equal(sums[sel], ref[sel]) and not sums[~sel].any()  # bit for bit
+
+
+def _reference_learned_rules(
+    prob: np.ndarray, valid: np.ndarray, opt: SkyOptions
+) -> np.ndarray:
+    """The region rules of the learned methods as written with OpenCV's component statistics
+    (the code before 2026-12-03), before the sky gaps and the thin-structure policy."""
+    import cv2
+
+    h, w = prob.shape
+    sky = prob >= 0.5
+    sky &= valid
+    n_valid = max(int(valid.sum()), 1)
+    if sky.any() and not opt.fisheye:
+        n, lbl, stats, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
+        area = stats[:, cv2.CC_STAT_AREA]
+        keep = ((stats[:, cv2.CC_STAT_TOP] == 0) & (area >= opt.min_sky_fraction * n_valid)) | (
+            area >= opt.min_island_fraction * n_valid
+        )
+        keep[0] = False
+        if not keep[1:].all():
+            sky = keep[lbl]
+    if opt.max_hole_fraction > 0 and (~sky & valid).any():
+        n, lbl, stats, _ = cv2.connectedComponentsWithStats(
+            (~sky & valid).astype(np.uint8), connectivity=4
+        )
+        x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+        x1, y1 = x0 + stats[:, cv2.CC_STAT_WIDTH], y0 + stats[:, cv2.CC_STAT_HEIGHT]
+        inner = (x0 > 0) & (y0 > 0) & (x1 < w) & (y1 < h)
+        if opt.fisheye:
+            inner[:] = True
+        area = stats[:, cv2.CC_STAT_AREA]
+        small_hole = inner & (area < opt.max_hole_fraction * n_valid)
+        uncertain = inner & (area < opt.uncertain_hole_fraction * n_valid)
+        uncertain[0] = False
+        if uncertain.any():
+            mean_p = np.bincount(lbl.ravel(), prob.ravel(), n) / np.maximum(area, 1)
+            small_hole |= uncertain & (mean_p >= opt.uncertain_hole_probability)
+        small_hole[0] = False
+        if small_hole.any():
+            sky |= small_hole[lbl]
+    return sky
+
+
+@pytest.mark.parametrize("fisheye", [False, True])
+def test_learned_region_rules_match_the_opencv_reference(
+    fisheye: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import predisat.skymodel
+
+    rng = np.random.default_rng(7 + fisheye)
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(24, 90, 2))
+        p = _blobs(rng, h, w)
+        # the full-resolution probability is given: the rules alone are compared
+        monkeypatch.setattr(predisat.skymodel, "sky_probability", lambda *a, _p=p, **k: _p.copy())
+        # loose fractions so that every rule fires somewhere
+        opt = SkyOptions(
+            fisheye=fisheye, thin_px=0, detect_gaps=False,
+            min_island_fraction=float(rng.uniform(0.0, 0.05)),
+            min_sky_fraction=float(rng.uniform(0.0, 0.01)),
+            max_hole_fraction=float(rng.uniform(0.0, 0.01)),
+            uncertain_hole_fraction=float(rng.uniform(0.0, 0.1)),
+            uncertain_hole_probability=float(rng.uniform(0.2, 0.45)),
+        )  # fmt: skip
+        seg = segment_sky(np.full((h, w, 3), 128, np.uint8), opt, _MapClassifier(p))
+        valid = seg.valid_mask
+        prob = np.where(valid, p, 0.0).astype(np.float32) if fisheye else p
+        np.testing.assert_array_equal(seg.sky_mask, _reference_learned_rules(prob, valid, opt))
+
+
+def _reference_skyline(sky: np.ndarray, valid: np.ndarray | None) -> np.ndarray:
+    valid = np.ones_like(sky) if valid is None else valid
+    obstacle = valid & ~sky
+    first = np.where(obstacle.any(axis=0), obstacle.argmax(axis=0), sky.shape[0]).astype(float)
+    first -= 0.5
+    first[~valid.any(axis=0)] = np.nan
+    return first
+
+
+def test_skyline_from_mask_matches_a_whole_frame_argmax() -> None:
+    rng = np.random.default_rng(11)
+    for k in range(200):
+        h, w = (int(v) for v in rng.integers(1, 30, 2))
+        sky = rng.random((h, w)) < rng.uniform(0.5, 1.0)
+        valid = None if k % 3 == 0 else rng.random((h, w)) < rng.uniform(0.0, 1.0)
+        got = skyline_from_mask(sky, valid)
+        ref = _reference_skyline(sky, valid)
+        assert got.dtype == ref.dtype and np.array_equal(got, ref, equal_nan=True)
+
+
+def _reference_probability_confidence(
+    prob: np.ndarray, skyline_row: np.ndarray, valid: np.ndarray | None, band: int, gap: int
+) -> np.ndarray:
+    """:func:`probability_confidence` as written with numpy gathers (before 2026-12-03)."""
+    p, s = np.asarray(prob), np.asarray(skyline_row, float)
+    h, w = p.shape
+    valid = np.ones((h, w), bool) if valid is None else valid
+    cols = np.arange(w)
+    steps = np.arange(band)[:, None]
+
+    def mean(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rows = a[None, :] + steps
+        rc = np.clip(rows, 0, h - 1)
+        ok = (rows >= 0) & (rows < b[None, :]) & (rows < h) & valid[rc, cols]
+        total = np.where(ok, 2.0 * p[rc, cols].astype(float) - 1.0, 0.0).sum(axis=0)
+        n = ok.sum(axis=0)
+        return total / np.maximum(n, 1), n
+
+    b0 = np.where(np.isfinite(s), s + 0.5, 0).astype(int)
+    up, n_up = mean(b0 - gap - band, b0 - gap)
+    dn, n_dn = mean(b0 + gap, b0 + gap + band)
+    conf = np.zeros(w)
+    both = (n_up > 0) & (n_dn > 0)
+    conf[both] = np.minimum(up, -dn)[both]
+    only_up, only_dn = (n_up > 0) & (n_dn == 0), (n_up == 0) & (n_dn > 0)
+    conf[only_up], conf[only_dn] = up[only_up], -dn[only_dn]
+    conf[~np.isfinite(s)] = 0.0
+    return np.clip(conf, 0.0, 1.0)
+
+
+def test_probability_confidence_matches_the_numpy_gathers_bit_for_bit() -> None:
+    from predisat.segmentation import probability_confidence
+
+    rng = np.random.default_rng(5)
+    for k in range(200):
+        h, w = (int(v) for v in rng.integers(2, 80, 2))
+        dtype = np.float32 if k % 2 else np.float64
+        prob = rng.random((h, w)).astype(dtype)
+        s = rng.integers(-3, h + 3, w) - 0.5
+        s[rng.random(w) < 0.1] = np.nan
+        valid = None if k % 3 == 0 else rng.random((h, w)) < 0.8
+        band, gap = int(rng.integers(1, 40)), int(rng.integers(0, 5))
+        got = probability_confidence(prob, s, valid, band, gap)
+        ref = _reference_probability_confidence(prob, s, valid, band, gap)
+        assert np.array_equal(got, ref), k
