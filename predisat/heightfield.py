@@ -226,21 +226,116 @@ def carve_profile(
     rot = np.asarray(local_to_frame, float)
     xl = (hf.ix0 + np.arange(c0, c1 + 1)) * c - cx  # lattice (cell corners)
     yl = (hf.iy0 + np.arange(r0, r1 + 1)) * c - cy
-    dx, dy = np.meshgrid(xl, yl)
-    e = rot[0, 0] * dx + rot[1, 0] * dy  # local east / north of the corners
-    n = rot[0, 1] * dx + rot[1, 1] * dy
-    beta = np.mod(np.degrees(np.arctan2(e, n)) - profile.look_az_deg + 180.0, 360.0) - 180.0
-    rho = np.hypot(e, n)
+    region = hf.region[r0:r1, c0:c1]
     b_axis = profile.rel_az_deg
+    # Azimuth and range only of the corners that can matter: those of modelled cells, neither
+    # clearly beyond range_m nor clearly outside the profile's azimuths (1 deg and a column
+    # of margin), typically a quarter of the lattice. Every other corner of a modelled cell
+    # makes the kernel skip that cell whatever its azimuth; it gets an infinite range, which
+    # makes the kernel skip it too. The azimuths and ranges computed are the same numpy
+    # operations on the same values, element for element.
+    half_deg = max(abs(float(b_axis[0])), abs(float(b_axis[-1]))) + abs(
+        float(b_axis[1] - b_axis[0])
+    ) + 1.0
+    look = np.radians(profile.look_az_deg)
+    idx, e, n = _carve_corners(
+        xl, yl, np.ascontiguousarray(region), float(rot[0, 0]), float(rot[1, 0]),
+        float(rot[0, 1]), float(rot[1, 1]), float(np.sin(look)), float(np.cos(look)),
+        float(np.cos(np.radians(half_deg))) if half_deg < 180.0 else -2.0, float(range_m),
+    )  # fmt: skip
+    # arctan2 and hypot stay numpy's (its vectorised arctan2 differs from libm's in the last
+    # bit); degrees, offset and modulo are exact arithmetic, done where the corners land
+    beta, rho = _corner_lattice(
+        idx, np.arctan2(e, n), np.hypot(e, n), float(profile.look_az_deg), yl.size, xl.size
+    )
     tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
     tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
     up = rot[:, 2]
     return int(_carve_cells(
-        np.ascontiguousarray(beta), np.ascontiguousarray(rho), hf.region[r0:r1, c0:c1],
+        beta, rho, region,
         bound[r0:r1, c0:c1], float(b_axis[0]), float(b_axis[1] - b_axis[0]), float(range_m),
         np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
         float(up[0]), float(up[1]), float(up[2]),
     ))  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _carve_corners(
+    xl: NDArray, yl: NDArray, region: NDArray, r00: float, r10: float, r01: float, r11: float,
+    sin_look: float, cos_look: float, cos_half: float, range_m: float,
+) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
+    """Lattice corners whose azimuth and range :func:`_carve_cells` may need: flat indices
+    into the ``(yl.size, xl.size)`` lattice and the corners' local east and north.
+
+    A corner is needed when it is a corner of a ``region`` cell, not beyond ``range_m`` (by
+    more than a rounding margin) and not at more than the angle of cosine ``cos_half`` from
+    the look direction ``(sin_look, cos_look)``. ``e`` and ``n`` are computed as numpy
+    computes ``r00 * dx + r10 * dy`` and ``r01 * dx + r11 * dy`` on the meshgrid.
+    """
+    n_r, n_c = region.shape
+    used = np.zeros((n_r + 1, n_c + 1), np.bool_)
+    for i in range(n_r):
+        for j in range(n_c):
+            if region[i, j]:
+                used[i, j] = True
+                used[i, j + 1] = True
+                used[i + 1, j] = True
+                used[i + 1, j + 1] = True
+    size = (n_r + 1) * (n_c + 1)
+    idx = np.empty(size, np.int64)
+    e_out = np.empty(size)
+    n_out = np.empty(size)
+    far2 = (range_m * (1.0 + 1e-9)) ** 2
+    k = 0
+    for i in range(n_r + 1):
+        y = yl[i]
+        for j in range(n_c + 1):
+            if not used[i, j]:
+                continue
+            x = xl[j]
+            e = r00 * x + r10 * y
+            n = r01 * x + r11 * y
+            d2 = e * e + n * n
+            if d2 > far2:
+                continue
+            f = e * sin_look + n * cos_look  # along the look direction
+            if (f < 0.0 or cos_half > 0.0) and f < cos_half * np.sqrt(d2):
+                continue
+            idx[k] = i * (n_c + 1) + j
+            e_out[k] = e
+            n_out[k] = n
+            k += 1
+    return idx[:k], e_out[:k], n_out[:k]
+
+
+@njit(cache=True, nogil=True)
+def _corner_lattice(
+    idx: NDArray, atan: NDArray, dist: NDArray, look_deg: float, n_rows: int, n_cols: int
+) -> tuple[NDArray, NDArray]:
+    """Relative azimuth (deg) and range lattices of :func:`_carve_cells` from the needed
+    corners (flat ``idx``, ``arctan2(e, n)`` and ``hypot(e, n)``); the other corners get
+    azimuth 0 and an infinite range.
+
+    The azimuth is numpy's ``np.mod(np.degrees(atan) - look_deg + 180.0, 360.0) - 180.0``, bit
+    for bit: ``degrees`` multiplies by ``180 / pi`` and ``mod`` is the C ``fmod`` moved into
+    the divisor's sign (Python's convention), as numpy's float loops do.
+    """
+    beta = np.zeros((n_rows, n_cols))
+    rho = np.full((n_rows, n_cols), np.inf)
+    b = beta.ravel()
+    d = rho.ravel()
+    to_deg = 180.0 / np.pi
+    for k in range(idx.size):
+        x = atan[k] * to_deg - look_deg + 180.0
+        m = np.fmod(x, 360.0)
+        if m != 0.0:
+            if m < 0.0:  # the divisor is positive
+                m += 360.0
+        else:
+            m = 0.0  # +0.0, numpy's sign for a zero remainder
+        b[idx[k]] = m - 180.0
+        d[idx[k]] = dist[k]
+    return beta, rho
 
 
 @njit(cache=True, nogil=True)
@@ -265,6 +360,10 @@ def _carve_cells(
         for q in range(n_c):
             if not region[r, q]:
                 continue
+            # the range test first: it skips most cells (every test only skips)
+            rho_far = max(max(rho[r, q], rho[r, q + 1]), max(rho[r + 1, q], rho[r + 1, q + 1]))
+            if not rho_far <= range_m:
+                continue
             b1, b2, b3, b4 = beta[r, q], beta[r, q + 1], beta[r + 1, q], beta[r + 1, q + 1]
             bmin = min(min(b1, b2), min(b3, b4))
             bmax = max(max(b1, b2), max(b3, b4))
@@ -273,9 +372,6 @@ def _carve_cells(
             i_lo = np.int64(np.floor((bmin - b0) / step))
             i_hi = np.int64(np.ceil((bmax - b0) / step))
             if i_lo < 0 or i_hi > n_b - 1:
-                continue
-            rho_far = max(max(rho[r, q], rho[r, q + 1]), max(rho[r + 1, q], rho[r + 1, q + 1]))
-            if not rho_far <= range_m:
                 continue
             t_max = tan_sky[i_lo]
             for i in range(i_lo + 1, i_hi + 1):

@@ -297,6 +297,13 @@ class Rectifier:
         gx, gy = self.grow_px
         return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
 
+    def _grown_sky(self, sky: NDArray) -> NDArray:
+        """:meth:`_grown_labels` as uint8 1 (sky) / 0, C-contiguous: the erosion of the mask
+        itself, without the 255 / 0 label image."""
+        img = np.ascontiguousarray(sky, np.bool_).view(np.uint8)
+        gx, gy = self.grow_px
+        return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+
     def rectify(self, sky_mask: ArrayLike) -> NDArray:
         """Grid labels (n_e, n_b) uint8: 255 sky, 0 obstacle, 128 not seen by the camera."""
         grown = self._grown_labels(_as_sky_mask(sky_mask, self.camera))
@@ -355,13 +362,14 @@ class Rectifier:
                     m, low, round(min(low_confidence_windows * (band + gap), h)),
                     self.first_read_px_row,
                 )  # fmt: skip
-        grown = self._grown_labels(m)
         # The top sky run, read through the remap's own pixel choice (the same grid labels as
-        # :meth:`rectify`) down to its end only, instead of resampling the whole grid.
+        # :meth:`rectify`, as 1 sky / 0 obstacle) down to its end only, instead of resampling
+        # the whole grid.
+        grown = self._grown_sky(m)
         top, last_seen = self.first_seen_row, self.last_seen_row
         any_seen = self.pixel_index[top, np.arange(top.size)] >= 0
         n_e = self.el_deg.size
-        end = _top_sky_run_end(np.ascontiguousarray(grown).ravel(), self.pixel_index, top)
+        end = _top_sky_run_end(grown.ravel(), self.pixel_index, top, 1)
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
         lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
@@ -382,18 +390,28 @@ def _raise_skyline(
     left as they are. Otherwise a sliver of sky above an obstacle seen past the zenith would
     be "the top run", and the whole sky below it in the camera's own half-space would go.
     """
-    sub = sky[:, cols]
-    n = sub.shape[0]
-    rows = np.arange(n)[:, None]
-    top = np.zeros(len(cols), np.int64) if from_row is None else np.asarray(from_row)[cols]
-    reach = rows >= top
-    cand = sub & reach
-    start = np.where(cand.any(axis=0), np.argmax(cand, axis=0), n)  # first sky row read
-    after = ~sub & (rows >= start)
-    end = np.where(after.any(axis=0), np.argmax(after, axis=0), n)
-    out = sky.copy()
-    out[:, cols] = sub & (~reach | (rows < np.maximum(end - int(raise_px), start)))
+    out = np.array(sky, np.bool_)  # a C-contiguous copy
+    c = np.unique(np.asarray(cols, np.int64))
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
+    _raise_columns(out, c, top, int(raise_px))
     return out
+
+
+@njit(cache=True, nogil=True)
+def _raise_columns(sky: NDArray, cols: NDArray, top: NDArray, raise_px: int) -> None:
+    """:func:`_raise_skyline` in place: in each column ``cols[k]``, the top sky run searched
+    from row ``top[k]`` loses its lowest ``raise_px`` rows, and every row below it its sky."""
+    n = sky.shape[0]
+    for k in range(cols.size):
+        c = cols[k]
+        start = max(top[k], 0)  # first sky row read
+        while start < n and not sky[start, c]:
+            start += 1
+        end = start  # first obstacle row after it
+        while end < n and sky[end, c]:
+            end += 1
+        for r in range(max(end - raise_px, start), n):
+            sky[r, c] = False
 
 
 def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDArray:
@@ -411,11 +429,13 @@ def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDAr
 
 
 @njit(cache=True, nogil=True)
-def _top_sky_run_end(grown: NDArray, pixel_index: NDArray, top: NDArray) -> NDArray:
+def _top_sky_run_end(
+    grown: NDArray, pixel_index: NDArray, top: NDArray, sky_label: int = _SKY
+) -> NDArray:
     """First row at or below ``top`` (per column) whose label is not sky; ``n_e`` if none.
 
-    ``grown`` is the flattened label image (sky 255), ``pixel_index`` (n_e, n_b) the pixel each
-    grid sample reads (-1: unseen, which is not sky).
+    ``grown`` is the flattened label image (sky ``sky_label``), ``pixel_index`` (n_e, n_b) the
+    pixel each grid sample reads (-1: unseen, which is not sky).
     """
     n_e, n_b = pixel_index.shape
     end = np.empty(n_b, np.int64)
@@ -423,7 +443,7 @@ def _top_sky_run_end(grown: NDArray, pixel_index: NDArray, top: NDArray) -> NDAr
         r = top[b]
         while r < n_e:
             k = pixel_index[r, b]
-            if k < 0 or grown[k] != _SKY:
+            if k < 0 or grown[k] != sky_label:
                 break
             r += 1
         end[b] = r

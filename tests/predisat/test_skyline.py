@@ -160,6 +160,39 @@ def test_raise_skyline_leaves_the_rows_above_the_grid_alone() -> None:
     )
 
 
+def _reference_raise(
+    sky: np.ndarray, cols: np.ndarray, raise_px: int, from_row: np.ndarray | None
+) -> np.ndarray:
+    """:func:`_raise_skyline` as written with numpy column gathers (before 2026-12-03)."""
+    sub = sky[:, cols]
+    n = sub.shape[0]
+    rows = np.arange(n)[:, None]
+    top = np.zeros(len(cols), np.int64) if from_row is None else np.asarray(from_row)[cols]
+    reach = rows >= top
+    cand = sub & reach
+    start = np.where(cand.any(axis=0), np.argmax(cand, axis=0), n)
+    after = ~sub & (rows >= start)
+    end = np.where(after.any(axis=0), np.argmax(after, axis=0), n)
+    out = sky.copy()
+    out[:, cols] = sub & (~reach | (rows < np.maximum(end - int(raise_px), start)))
+    return out
+
+
+def test_raise_skyline_matches_the_column_gathers_on_random_masks() -> None:
+    rng = np.random.default_rng(9)
+    for k in range(300):
+        h, w = (int(v) for v in rng.integers(1, 30, 2))
+        sky = rng.random((h, w)) < rng.uniform(0.2, 0.95)
+        sky[: int(rng.integers(0, h + 1))] |= k % 2 == 0  # often a long top run
+        cols = rng.choice(w, int(rng.integers(0, w + 1)), replace=True)  # repeats too
+        from_row = None if k % 3 == 0 else rng.integers(0, h + 2, w)
+        raise_px = int(rng.integers(0, h + 3))
+        before = sky.copy()
+        got = _raise_skyline(sky, cols, raise_px, from_row)
+        np.testing.assert_array_equal(got, _reference_raise(sky, cols, raise_px, from_row))
+        np.testing.assert_array_equal(sky, before)
+
+
 def test_an_obstacle_past_the_zenith_does_not_void_the_own_half_space() -> None:
     """A side fisheye sees the far side of the track above its zenith line. A wall there,
     under a sliver of sky at the top edge, in low-confidence columns, must not take the sky
