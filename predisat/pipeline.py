@@ -664,51 +664,58 @@ def process_survey(
                 raise BadFrameError(f"bad frame {fid}: {cached.message}")
             bad.setdefault(fid, cached)
 
-    # stage 1: segmentation
-    t1 = time.perf_counter()
-    n_seg = 0
-    for fid, problem in _run_segmentation(jobs, seg_fn, workers, progress):
-        n_seg += 1
-        if problem is not None:
-            if strict:
-                raise BadFrameError(f"bad frame {fid}: {problem} (run without --strict to skip it)")
-            _report(f"bad frame {fid}: {problem} - skipped", quiet)
-            bad.setdefault(fid, BadFrame(fid, problem))
-    timings["segment"] = time.perf_counter() - t1
+    # one pool of worker processes for both stages (with workers > 1, started when needed)
+    pool = _Pool(workers, seg_fn)
+    try:
+        # stage 1: segmentation
+        t1 = time.perf_counter()
+        n_seg = 0
+        for fid, problem in _run_segmentation(jobs, seg_fn, workers, progress, pool):
+            n_seg += 1
+            if problem is not None:
+                if strict:
+                    raise BadFrameError(
+                        f"bad frame {fid}: {problem} (run without --strict to skip it)"
+                    )
+                _report(f"bad frame {fid}: {problem} - skipped", quiet)
+                bad.setdefault(fid, BadFrame(fid, problem))
+        timings["segment"] = time.perf_counter() - t1
 
-    # stage 2: reconstruction per chunk
-    t2 = time.perf_counter()
-    cjobs = []
-    for name, lo, hi, s in pending:
-        idx = frames_of(s)
-        frames = tuple(
-            _ChunkFrame(
-                str(fr.frame_id[i]),
-                str(fr.side[i]),
-                float(ch[i]),
-                str(cache_dir / f"{fr.frame_id[i]}.npz"),
+        # stage 2: reconstruction per chunk
+        t2 = time.perf_counter()
+        cjobs = []
+        for name, lo, hi, s in pending:
+            idx = frames_of(s)
+            frames = tuple(
+                _ChunkFrame(
+                    str(fr.frame_id[i]),
+                    str(fr.side[i]),
+                    float(ch[i]),
+                    str(cache_dir / f"{fr.frame_id[i]}.npz"),
+                )
+                for i in idx
+                if str(fr.frame_id[i]) not in bad
             )
-            for i in idx
-            if str(fr.frame_id[i]) not in bad
-        )
-        cjobs.append(
-            _ChunkJob(
-                name,
-                lo,
-                hi,
-                s,
-                frames,
-                cams,
-                bool(survey.reverse),
-                float(survey.antenna_height_m),
-                trk,
-                p,
-                prov,
-                str(chunk_dir),
+            cjobs.append(
+                _ChunkJob(
+                    name,
+                    lo,
+                    hi,
+                    s,
+                    frames,
+                    cams,
+                    bool(survey.reverse),
+                    float(survey.antenna_height_m),
+                    trk,
+                    p,
+                    prov,
+                    str(chunk_dir),
+                )
             )
-        )
-    _run_chunks(cjobs, workers, progress)
-    timings["reconstruct"] = time.perf_counter() - t2
+        _run_chunks(cjobs, workers, progress, pool)
+        timings["reconstruct"] = time.perf_counter() - t2
+    finally:
+        pool.close()
 
     if max_chunks is not None and skipped + len(pending) < len(chunks):
         raise RunStopped(f"stopped after {len(pending)} chunk(s) (max_chunks)")
@@ -781,10 +788,38 @@ def _progress(total: int, desc: str, enabled: bool) -> Any:
                 disable=not enabled or total == 0, file=sys.stderr)  # fmt: skip
 
 
+class _Pool:
+    """The worker processes of a run, started on first use and shared by both stages.
+
+    Before 2026-12-03 each stage started its own pool, so every worker imported the package,
+    loaded the models and the numba caches twice (about a second per worker and stage).
+    """
+
+    def __init__(self, workers: int, segmenter: Segmenter) -> None:
+        self.workers = workers
+        self.segmenter = segmenter
+        self._pool: ProcessPoolExecutor | None = None
+
+    def get(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(
+                self.workers, mp_context=get_context("spawn"), initializer=_pool_init,
+                initargs=(self.segmenter,),
+            )  # fmt: skip
+        return self._pool
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
 def _run_segmentation(
-    jobs: Sequence[_FrameJob], segmenter: Segmenter, workers: int, progress: bool
-) -> Iterable[tuple[str, str | None]]:
+    jobs: Sequence[_FrameJob], segmenter: Segmenter, workers: int, progress: bool,
+    pool: _Pool | None = None,
+) -> Iterable[tuple[str, str | None]]:  # fmt: skip
     bar = _progress(len(jobs), "segmenting frames", progress)
+    own = pool is None
     try:
         if workers == 1 or len(jobs) < 4:
             for j in jobs:
@@ -793,28 +828,32 @@ def _run_segmentation(
             return
         batch = max(1, min(16, len(jobs) // (4 * workers)))
         batches = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
-        with ProcessPoolExecutor(
-            workers, mp_context=get_context("spawn"), initializer=_pool_init,
-            initargs=(segmenter,),
-        ) as pool:  # fmt: skip
-            futures = {pool.submit(_pool_segment, b) for b in batches}
-            try:
-                while futures:
-                    done, futures = wait(futures, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        res = fut.result()
-                        bar.update(len(res))
-                        yield from res
-            except BaseException:
-                for fut in futures:
-                    fut.cancel()
-                raise
+        if pool is None:
+            pool = _Pool(workers, segmenter)
+        executor = pool.get()
+        futures = {executor.submit(_pool_segment, b) for b in batches}
+        try:
+            while futures:
+                done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    res = fut.result()
+                    bar.update(len(res))
+                    yield from res
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
     finally:
+        if own and pool is not None:
+            pool.close()
         bar.close()
 
 
-def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None:
+def _run_chunks(
+    jobs: Sequence[_ChunkJob], workers: int, progress: bool, pool: _Pool | None = None
+) -> None:
     bar = _progress(len(jobs), "reconstructing chunks", progress)
+    own = pool is None
     try:
         if workers == 1 or len(jobs) < 2:
             rec: Reconstructor | None = None
@@ -823,20 +862,24 @@ def _run_chunks(jobs: Sequence[_ChunkJob], workers: int, progress: bool) -> None
                 _run_chunk(j, rec)
                 bar.update(1)
             return
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            futures: set[Future[Any]] = {pool.submit(_pool_chunk, j) for j in jobs}
-            try:
-                while futures:
-                    done, futures = wait(futures, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        fut.result()
-                        bar.update(1)
-            except BaseException:
-                # Ctrl-C: finished chunks are on disk; queued ones are dropped
-                for fut in futures:
-                    fut.cancel()
-                raise
+        if pool is None:
+            pool = _Pool(workers, default_segmenter)
+        executor = pool.get()
+        futures: set[Future[Any]] = {executor.submit(_pool_chunk, j) for j in jobs}
+        try:
+            while futures:
+                done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    fut.result()
+                    bar.update(1)
+        except BaseException:
+            # Ctrl-C: finished chunks are on disk; queued ones are dropped
+            for fut in futures:
+                fut.cancel()
+            raise
     finally:
+        if own and pool is not None:
+            pool.close()
         bar.close()
 
 

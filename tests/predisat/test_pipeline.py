@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -130,6 +131,39 @@ def test_workers_pool_gives_the_same_masks(survey_dir: Path, tmp_path: Path) -> 
     np.testing.assert_array_equal(one.masks.chainage_m, two.masks.chainage_m)
 
 
+def test_one_worker_pool_serves_both_stages(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The workers start once per run (imports, models and numba caches load once), for the
+    segmentation and the chunks, and are shut down when a strict run stops at a bad frame."""
+    import predisat.pipeline as pl
+
+    made: list[Any] = []
+    get = pl._Pool.get
+
+    def counting_get(self: Any) -> Any:
+        executor = get(self)
+        if all(executor is not m for m in made):
+            made.append(executor)
+        return executor
+
+    monkeypatch.setattr(pl._Pool, "get", counting_get)
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    res = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky,
+                         workers=2)  # fmt: skip
+    assert res.frames_segmented >= 4 and res.chunks_done >= 2 and len(made) == 1
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    (src / _manifest(src)[4]["image"]).write_bytes(b"not a jpeg at all")
+    with pytest.raises(BadFrameError):
+        process_survey(src, tmp_path / "b", p, progress=False, segmenter=blue_sky, workers=2,
+                       strict=True)  # fmt: skip
+    assert len(made) == 2
+    for executor in made:  # shut down
+        with pytest.raises(RuntimeError):
+            executor.submit(print)
+
+
 def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:
     src = tmp_path / "survey"
     shutil.copytree(survey_dir, src)
@@ -237,3 +271,4 @@ def test_segmenter_method_selects_the_segmentation(survey_dir: Path, tmp_path: P
                    for p in (tmp_path / method / "cache").iterdir())
         prov = json.loads((tmp_path / method / "provenance.json").read_text())
         assert method in json.dumps(prov)
+
