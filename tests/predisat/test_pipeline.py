@@ -272,3 +272,33 @@ def test_segmenter_method_selects_the_segmentation(survey_dir: Path, tmp_path: P
         prov = json.loads((tmp_path / method / "provenance.json").read_text())
         assert method in json.dumps(prov)
 
+
+def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> None:
+    """Entries are deflated at level 1 since 2026-12-03 (np.savez_compressed before): the
+    reader gets the same arrays from both."""
+    import io
+    import json
+
+    from predisat.pipeline import CACHE_VERSION, _FrameJob, _read_cache, _write_cache
+
+    image = tmp_path / "f.jpg"
+    image.write_bytes(b"an image")
+    job = _FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
+    rng = np.random.default_rng(0)
+    sky = rng.random((5, 37)) < 0.5
+    conf = rng.random(37).astype(np.float32)
+    _write_cache(job, (sky, conf), None)
+    got = _read_cache(job)
+    assert isinstance(got, tuple) and got[0].dtype == bool and got[1] is not None
+    assert np.array_equal(got[0], sky) and np.array_equal(got[1], conf)
+    with np.load(job.cache_path) as z:
+        assert sorted(z.files) == ["confidence", "meta", "sky"]
+        meta = json.loads(str(z["meta"]))
+    old = io.BytesIO()
+    np.savez_compressed(old, meta=np.array(json.dumps(meta)), sky=np.packbits(sky.ravel()),
+                        confidence=conf)  # fmt: skip
+    Path(job.cache_path).write_bytes(old.getvalue())
+    again = _read_cache(job)
+    assert meta["version"] == CACHE_VERSION and isinstance(again, tuple)
+    assert np.array_equal(again[0], sky) and again[1] is not None
+    assert np.array_equal(again[1], conf)
