@@ -87,14 +87,15 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
         )
     h, w = img.shape[:2]
     lab = cv2.cvtColor(img, cv2.COLOR_BGR2LAB).astype(np.float32)
-    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV).astype(np.float32)
-    bgr = img.astype(np.float32)
-    lum = lab[..., 0]
-    # channel sums and minima of integers: exact in any order; per-channel ops avoid numpy's
-    # slow reductions over a length-3 axis
+    # Every channel as its own contiguous array: OpenCV copies a strided channel view at each
+    # call, numpy loops over it slower; the values are the same.
+    lum, lab_a, lab_b = cv2.split(lab)
+    _, sat, val = cv2.split(cv2.cvtColor(img, cv2.COLOR_BGR2HSV))
+    # channel sums and minima of integers: exact in any order
     chan = cv2.split(img)
-    total = bgr[..., 0] + bgr[..., 1] + bgr[..., 2] + 1.0
-    blueness = (bgr[..., 0] - bgr[..., 2]) / total
+    blue, green, red = (c.astype(np.float32) for c in chan)
+    total = blue + green + red + 1.0
+    blueness = (blue - red) / total
     darkest = cv2.min(cv2.min(chan[0], chan[1]), chan[2])
     dark = cv2.erode(darkest, np.ones((3, 3), np.uint8)).astype(np.float32) / 255.0
 
@@ -117,11 +118,10 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
     bright = cand_l >= np.quantile(cand_l[smooth], 0.5) if smooth.any() else smooth
     pick = smooth & bright
     ref = np.median(lab[:top][pick], axis=0) if pick.any() else lab[:top].reshape(-1, 3).mean(0)
-    dlab = lab - ref
-    de_ref = np.sqrt(dlab[..., 0] ** 2 + dlab[..., 1] ** 2 + dlab[..., 2] ** 2) / 100.0
+    de_ref = np.sqrt((lum - ref[0]) ** 2 + (lab_a - ref[1]) ** 2 + (lab_b - ref[2]) ** 2) / 100.0
 
     lb8 = cv2.GaussianBlur(lum, (0, 0), 8.0)
-    bb8 = cv2.GaussianBlur(lab[..., 2], (0, 0), 8.0)
+    bb8 = cv2.GaussianBlur(lab_b, (0, 0), 8.0)
     dl_dy = cv2.Sobel(cv2.GaussianBlur(lum, (0, 0), 4.0), cv2.CV_32F, 0, 1, ksize=3) / 8.0
     rows = np.broadcast_to(np.linspace(0.0, 1.0, h, dtype=np.float32)[:, None], (h, w))
     # Texture above each pixel in its column (exclusive of the pixel's own neighbourhood).
@@ -131,8 +131,8 @@ def image_features(small_bgr: ArrayLike) -> NDArray[np.float32]:
     above_max = np.maximum.accumulate(cv2.GaussianBlur(shifted, (0, 0), 1.0), axis=0)
 
     feats = [
-        lum / 255.0, (lab[..., 1] - 128.0) / 64.0, (lab[..., 2] - 128.0) / 64.0,
-        hsv[..., 1] / 255.0, hsv[..., 2] / 255.0, blueness, dark,
+        lum / 255.0, (lab_a - 128.0) / 64.0, (lab_b - 128.0) / 64.0,
+        sat.astype(np.float32) / 255.0, val.astype(np.float32) / 255.0, blueness, dark,
         lum / p99, de_ref,
         g1, g2, g4, stds[0], stds[1], lap,
         lb8 / 255.0, (bb8 - 128.0) / 64.0, dl_dy / 255.0 * 8.0, rows, above_mean, above_max,

@@ -423,7 +423,10 @@ def guided_filter(
     if s > 1:
         ma = cv2.resize(ma, (w, h), interpolation=cv2.INTER_LINEAR)
         mb = cv2.resize(mb, (w, h), interpolation=cv2.INTER_LINEAR)
-    return np.asarray(ma * i + mb, np.float32)
+    # ma * i + mb in place: the same float32 product and sum, no full-frame temporaries
+    np.multiply(ma, i, out=ma)
+    ma += mb
+    return ma
 
 
 def sky_probability(
@@ -487,6 +490,9 @@ def sky_probability(
         # Outside the circle warpPolar may leave memory unset: no sky there.
         prob = np.where((xx - cx) ** 2 + (yy - cy) ** 2 < r * r, prob, 0.0).astype(np.float32)
     if refine:
-        grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
+        # float32(grey) / float32(255) in one pass (the same quotient as astype, then divide)
+        grey = np.divide(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), np.float32(255.0),
+                         dtype=np.float32)  # fmt: skip
         prob = guided_filter(grey, prob, max(2, round(1.5 * scale)), 1e-3, subsample=sub)
-    return np.clip(prob, 0.0, 1.0)
+    # every branch above made prob a new array: clipped in place
+    return np.clip(prob, 0.0, 1.0, out=prob)

@@ -572,3 +572,65 @@ def test_probability_confidence_matches_the_numpy_gathers_bit_for_bit() -> None:
         got = probability_confidence(prob, s, valid, band, gap)
         ref = _reference_probability_confidence(prob, s, valid, band, gap)
         assert np.array_equal(got, ref), k
+
+
+def _reference_guided(guide: np.ndarray, src: np.ndarray, radius_px: int, eps: float,
+                      s: int) -> np.ndarray:  # fmt: skip
+    """The guided filter as written before 2026-12-03 (``ma * i + mb`` into a new array)."""
+    import cv2
+
+    i, p = np.asarray(guide, np.float32), np.asarray(src, np.float32)
+    h, w = i.shape
+    if s > 1:
+        size = (max(1, round(w / s)), max(1, round(h / s)))
+        i_low = cv2.resize(i, size, interpolation=cv2.INTER_AREA)
+        p_low = cv2.resize(p, size, interpolation=cv2.INTER_AREA if p.shape[1] > size[0]
+                           else cv2.INTER_LINEAR)  # fmt: skip
+        r = max(1, round(radius_px / s))
+    else:
+        i_low, p_low, r = i, p, int(radius_px)
+    k = (2 * r + 1,) * 2
+
+    def box(a: np.ndarray) -> np.ndarray:
+        return np.asarray(cv2.boxFilter(a, cv2.CV_32F, k, borderType=cv2.BORDER_REFLECT))
+
+    mi, mp = box(i_low), box(p_low)
+    a = (box(i_low * p_low) - mi * mp) / (box(i_low * i_low) - mi * mi + eps)
+    b = mp - a * mi
+    ma, mb = box(a), box(b)
+    if s > 1:
+        ma = cv2.resize(ma, (w, h), interpolation=cv2.INTER_LINEAR)
+        mb = cv2.resize(mb, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.asarray(ma * i + mb, np.float32)
+
+
+def test_sky_probability_is_the_reference_arithmetic_and_leaves_the_model_map_alone() -> None:
+    """In-place products and clipping since 2026-12-03: the same probabilities, bit for bit,
+    and the classifier's own map is not written to."""
+    import cv2
+
+    from predisat.skyfeatures import working_size
+    from predisat.skymodel import sky_probability
+
+    rng = np.random.default_rng(8)
+    for k in range(24):
+        side = int(rng.choice([40, 90, 200, 330]))  # working size 40: scale 1, < 2 and >= 2
+        h, w = side, int(side * rng.uniform(1.0, 1.5))
+        img = cv2.GaussianBlur(rng.integers(0, 256, (h, w, 3), dtype=np.uint8), (0, 0), 2.0)
+        ww, hh = working_size((h, w), 40)
+        p = _blobs(rng, hh, ww)
+        clf = _MapClassifier(p)
+        clf.max_side_px = 40
+        before = clf.prob.copy()
+        refine = k % 4 != 0
+        got = sky_probability(img, clf, refine=refine)
+        assert np.array_equal(clf.prob, before)
+        scale = max(h, w) / 40
+        if refine and scale > 1.0:
+            sub = 2 if scale >= 2.0 else 1
+            grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
+            src = clf.prob if sub > 1 else cv2.resize(clf.prob, (w, h))
+            ref = _reference_guided(grey, src, max(2, round(1.5 * scale)), 1e-3, sub)
+        else:
+            ref = cv2.resize(clf.prob, (w, h), interpolation=cv2.INTER_LINEAR)
+        assert np.array_equal(got, np.clip(ref, 0.0, 1.0)), k

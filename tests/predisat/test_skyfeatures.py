@@ -81,3 +81,63 @@ def test_rejects_bad_input_and_does_not_mutate() -> None:
     image_features(img)
     working_image(img, 16)
     np.testing.assert_array_equal(img, before)
+
+
+def _reference_features(img: np.ndarray) -> np.ndarray:
+    """:func:`image_features` as written before 2026-12-03 (strided channel views)."""
+    import cv2
+
+    h, w = img.shape[:2]
+    lab = cv2.cvtColor(img, cv2.COLOR_BGR2LAB).astype(np.float32)
+    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV).astype(np.float32)
+    bgr = img.astype(np.float32)
+    lum = lab[..., 0]
+    chan = cv2.split(img)
+    total = bgr[..., 0] + bgr[..., 1] + bgr[..., 2] + 1.0
+    blueness = (bgr[..., 0] - bgr[..., 2]) / total
+    darkest = cv2.min(cv2.min(chan[0], chan[1]), chan[2])
+    dark = cv2.erode(darkest, np.ones((3, 3), np.uint8)).astype(np.float32) / 255.0
+    p99 = float(np.percentile(lum, 99)) + 1.0
+    grad = np.hypot(cv2.Sobel(lum, cv2.CV_32F, 1, 0, ksize=3),
+                    cv2.Sobel(lum, cv2.CV_32F, 0, 1, ksize=3))  # fmt: skip
+    g1, g2, g4 = (np.log1p(cv2.GaussianBlur(grad, (0, 0), s)) for s in (1.0, 2.0, 4.0))
+    stds = []
+    for k in (5, 11):
+        m, m2 = cv2.blur(lum, (k, k)), cv2.blur(lum * lum, (k, k))
+        stds.append(np.log1p(np.sqrt(np.maximum(m2 - m * m, 0.0))))
+    lap = np.log1p(cv2.GaussianBlur(np.abs(cv2.Laplacian(lum, cv2.CV_32F, ksize=3)), (0, 0), 1.0))
+    top = max(1, h // 4)
+    cand_l, cand_g = lum[:top], g2[:top]
+    smooth = cand_g <= np.quantile(cand_g, 0.3)
+    bright = cand_l >= np.quantile(cand_l[smooth], 0.5) if smooth.any() else smooth
+    pick = smooth & bright
+    ref = np.median(lab[:top][pick], axis=0) if pick.any() else lab[:top].reshape(-1, 3).mean(0)
+    dlab = lab - ref
+    de_ref = np.sqrt(dlab[..., 0] ** 2 + dlab[..., 1] ** 2 + dlab[..., 2] ** 2) / 100.0
+    lb8 = cv2.GaussianBlur(lum, (0, 0), 8.0)
+    bb8 = cv2.GaussianBlur(lab[..., 2], (0, 0), 8.0)
+    dl_dy = cv2.Sobel(cv2.GaussianBlur(lum, (0, 0), 4.0), cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    rows = np.broadcast_to(np.linspace(0.0, 1.0, h, dtype=np.float32)[:, None], (h, w))
+    shifted = np.vstack([np.zeros((3, w), np.float32), g1[:-3]]) if h > 3 else g1 * 0
+    above_mean = np.cumsum(shifted, axis=0) / np.arange(1, h + 1, dtype=np.float32)[:, None]
+    above_max = np.maximum.accumulate(cv2.GaussianBlur(shifted, (0, 0), 1.0), axis=0)
+    feats = [
+        lum / 255.0, (lab[..., 1] - 128.0) / 64.0, (lab[..., 2] - 128.0) / 64.0,
+        hsv[..., 1] / 255.0, hsv[..., 2] / 255.0, blueness, dark, lum / p99, de_ref,
+        g1, g2, g4, stds[0], stds[1], lap,
+        lb8 / 255.0, (bb8 - 128.0) / 64.0, dl_dy / 255.0 * 8.0, rows, above_mean, above_max,
+    ]  # fmt: skip
+    return np.asarray(cv2.merge([np.asarray(f, np.float32) for f in feats]), np.float32)
+
+
+def test_features_are_those_of_the_strided_channel_code_bit_for_bit() -> None:
+    """Contiguous channels since 2026-12-03: the same values as the strided views gave."""
+    import cv2
+
+    rng = np.random.default_rng(12)
+    for k in range(30):
+        h, w = (int(v) for v in rng.integers(2, 90, 2))
+        img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        if k % 2:  # smooth regions and edges, as in a photo
+            img = cv2.GaussianBlur(img, (0, 0), float(rng.uniform(1.0, 6.0)))
+        np.testing.assert_array_equal(image_features(img), _reference_features(img))
