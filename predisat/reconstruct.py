@@ -35,7 +35,6 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.camera import CameraModel, Mount, vehicle_to_enu
 from predisat.heightfield import (
     HeightField,
-    RangeMax1D,
     apply_clearance_prior,
     carve_profile,
     corridor_grid,
@@ -820,10 +819,38 @@ def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[N
     i_hi = np.ceil((rel + allow_deg - b[0]) / step).astype(np.int64)
     inside = (i_lo >= 0) & (i_hi <= b.size - 1)
     lo, hi = np.clip(i_lo, 0, b.size - 1), np.clip(i_hi, 0, b.size - 1)
-    seen_col = np.isfinite(prof.seen_lo_deg).astype(float)
-    all_seen = -RangeMax1D(-seen_col).query(lo, hi) > 0.5  # range minimum
-    vals = RangeMax1D(prof.sky_el_deg).query(lo, hi)
+    vals, all_seen = _range_max_seen(
+        np.asarray(prof.sky_el_deg, float), np.isfinite(prof.seen_lo_deg), lo, hi
+    )
     return vals, inside & all_seen
+
+
+@njit(cache=True, nogil=True)
+def _range_max_seen(
+    values: NDArray, seen: NDArray, lo: NDArray, hi: NDArray
+) -> tuple[NDArray, NDArray]:
+    """Per query ``k``, the maximum of ``values[lo[k]:hi[k] + 1]`` and whether ``seen`` holds
+    over that range (``lo <= hi``).
+
+    The element :class:`~predisat.heightfield.RangeMax1D` returns, bit for bit: both give the
+    range's last maximal element (``np.maximum`` keeps its second operand on ties, so its
+    sparse table does too), NaN when the range holds one. The ranges here span a few columns
+    (the parallax allowance), so a scan beats building two sparse tables per frame.
+    """
+    n = lo.size
+    out = np.empty(n)
+    ok = np.empty(n, np.bool_)
+    for k in range(n):
+        m = values[lo[k]]
+        all_seen = seen[lo[k]]
+        for i in range(lo[k] + 1, hi[k] + 1):
+            v = values[i]
+            if not (m > v or m != m):  # np.maximum(m, v)
+                m = v
+            all_seen = all_seen and seen[i]
+        out[k] = m
+        ok[k] = all_seen
+    return out, ok
 
 
 def _observed(

@@ -713,3 +713,25 @@ def test_hypot32_is_the_float32_hypot() -> None:
     gx, gy = (v.ravel() for v in np.meshgrid(edge, edge[::3]))
     for u, v in ((x, y), (gx, gy)):
         np.testing.assert_array_equal(many(u, v).view(np.int32), np.hypot(u, v).view(np.int32))
+
+
+def test_range_scan_returns_the_sparse_table_element_bit_for_bit() -> None:
+    """The far field's range maxima by a scan (since 2026-12-03) are the elements
+    RangeMax1D gives: ties of -0.0 and +0.0, infinities and NaN included."""
+    from predisat.heightfield import RangeMax1D
+    from predisat.reconstruct import _range_max_seen
+
+    rng = np.random.default_rng(2)
+    pool = np.array([-0.0, 0.0, 1.5, -2.0, np.inf, -np.inf, 3.0, np.nan])
+    for k in range(300):
+        n = int(rng.integers(1, 60))
+        values = rng.choice(pool[:7] if k % 3 else pool, n)
+        seen = rng.random(n) < 0.9
+        lo = rng.integers(0, n, 50)
+        hi = np.minimum(lo + rng.integers(0, 12, 50), n - 1)
+        got, ok = _range_max_seen(values, seen, lo, hi)
+        ref = RangeMax1D(values).query(lo, hi)
+        assert np.array_equal(got, ref, equal_nan=True)
+        assert np.array_equal(np.signbit(got), np.signbit(ref))
+        ref_seen = -RangeMax1D(-seen.astype(float)).query(lo, hi) > 0.5
+        np.testing.assert_array_equal(ok, ref_seen)

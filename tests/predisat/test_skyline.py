@@ -279,3 +279,27 @@ def test_profile_equals_the_top_sky_run_of_the_full_rectified_grid(
         assert prof.sky_el_deg[j] == expected
         assert prof.seen_hi_deg[j] == rect.el_deg[top]
         assert prof.seen_lo_deg[j] == rect.el_deg[seen[-1]]
+
+
+def test_sky_run_end_by_pixel_runs_matches_a_walk_down_the_grid() -> None:
+    """The top sky run's end, searched run of equal pixels by run (since 2026-12-03): the
+    first grid row at or below ``top`` whose pixel is unseen or not sky, as a row walk."""
+    from predisat.skyline import _index_runs, _top_sky_run_end
+
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        n_e, n_b, n_px = (int(v) for v in rng.integers(1, 40, 3))
+        # columns that read each pixel over a few rows, with unseen (-1) stretches
+        base = rng.integers(-1, n_px, (n_e, n_b))
+        rows = np.sort(rng.integers(0, n_e, (n_e, n_b)), axis=0)
+        pix = np.take_along_axis(base, rows, axis=0).astype(np.int32)
+        top = rng.integers(0, n_e, n_b)
+        grown = np.where(rng.random(n_px) < 0.85, 1, 0).astype(np.uint8)
+        got = _top_sky_run_end(grown, *_index_runs(pix, top), top, n_e, 1)
+        ref = np.empty(n_b, np.int64)
+        for b in range(n_b):
+            r = top[b]
+            while r < n_e and pix[r, b] >= 0 and grown[pix[r, b]] == 1:
+                r += 1
+            ref[b] = r
+        np.testing.assert_array_equal(got, ref)
