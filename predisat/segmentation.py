@@ -623,9 +623,9 @@ def _learned_sky(
 class _Components:
     """Connected components of a boolean mask, as horizontal runs of True pixels.
 
-    The same regions, areas and bounding boxes as ``cv2.connectedComponentsWithStats``
-    (components numbered in raster order of their first pixel, without the background
-    label), but no label image: the masks here are a few large regions, a few hundred runs
+    The same regions, areas and bounding boxes as ``cv2.connectedComponentsWithStats`` (here
+    numbered from 0 in the raster order of their first pixel; there is no background
+    label), but no label image: the masks here hold a few large regions, a few hundred runs
     per frame, so the union-find works on runs and the rules paint or sum only the runs of
     the components they select.
 

@@ -128,7 +128,8 @@ def main() -> None:
     ap.add_argument("--baseline", type=Path, required=True,
                     help="folder holding the baseline's predisat/ (a git worktree)")
     ap.add_argument("--repeat", type=int, default=5, help="rounds for segment and reconstruct")
-    ap.add_argument("--pipeline-repeat", type=int, default=3, help="rounds of process_survey")
+    ap.add_argument("--pipeline-repeat", type=int, default=3,
+                    help="rounds of process_survey (0: skip it)")
     ap.add_argument("--frames", type=int, default=None, help="segment only the first N frames")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
@@ -255,8 +256,9 @@ def main() -> None:
                     arrays[v.label] = [m.chainage_m, m.mask_el_deg, m.source, m.margin_deg,
                                        m.lat_deg, m.lon_deg, m.h_m, m.heading_deg,
                                        *(m.descriptors[d] for d in sorted(m.descriptors))]
-    same_pipe = len(arrays["baseline"]) == len(arrays["current"]) and all(
-        _same(a, b) for a, b in zip(arrays["baseline"], arrays["current"], strict=True)
+    same_pipe = not arrays or (
+        len(arrays["baseline"]) == len(arrays["current"])
+        and all(_same(a, b) for a, b in zip(arrays["baseline"], arrays["current"], strict=True))
     )
     identical &= same_pipe
     results["pipeline_ms"] = {k: {s: 1e3 * t / n for s, t in v.items()}
@@ -279,8 +281,9 @@ def main() -> None:
              stage_best["current"][stage] * 1e3 / n,
              same_pipe if stage == "total" else None)  # fmt: skip
     for v in versions:
-        ratio = stage_best[v.label]["total"] / decode_s
-        print(f"{v.label}: pipeline / decode = {ratio:.1f}x")
+        if stage_best[v.label]:
+            ratio = stage_best[v.label]["total"] / decode_s
+            print(f"{v.label}: pipeline / decode = {ratio:.1f}x")
     results["baseline"] = str(versions[0].root)
     results["survey"] = str(args.survey)
     results["frames"] = n
