@@ -3,13 +3,20 @@
 Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.0``)::
 
     python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn            # data + training
-    # (the shipped network: about 20 min of data and 1.8 h of training on two cores)
     python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn --epochs 2  # a quick try
+    python scripts/train_sky_cnn.py --recipe e1 --out /tmp/e1  # a candidate (docs/segmentation.md)
+
+``--recipe`` names the training data and schedule of a network (``RECIPES``): ``v2``, the
+default, reproduces the shipped one (about 7 min of data and 26 min of training on two cores);
+``e1`` and ``e2`` are the larger candidates of 2026-12-02 (10000 photos and ``SCENERY_RUNS``;
+about 20 min of data and 1.3-1.8 h of training). ``--photos``, ``--survey-repeat``,
+``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
    photos of :func:`predisat.synth.photos.random_photo` (seeds from 200000) and the rendered
-   survey frames of ``CNN_RUNS`` (``scripts/train_sky.py``'s ``TRAIN_RUNS``, its rock-wall
-   ``EXTRA_RUNS`` and this script's ``SCENERY_RUNS``, rendered there if missing,
+   survey frames of the recipe's runs (``scripts/train_sky.py``'s ``TRAIN_RUNS`` and its
+   rock-wall ``EXTRA_RUNS``, plus this script's ``SCENERY_RUNS`` for the candidates; rendered
+   there if missing),
    repeated ``--survey-repeat`` times: they are the pipeline's own kind of input), all resized
    to ``--input-px`` squares with soft labels (share of sky per pixel; thin structures are sky).
    ``CNN_VALIDATION_RUNS`` (``val_a``) and 200 photos of other seeds (from 900000) are held out
@@ -34,6 +41,7 @@ import multiprocessing
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,13 +52,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import train_sky  # the survey recipes are shared with the perceptron's script
 
-# The network also sees the rock-wall fisheye frames that the perceptron does not ship with
-# (chosen on validation, docs/segmentation.md); its card's survey validation is val_a.
-# Since 2026-12-02 it also sees SCENERY_RUNS: one scenery kind per run (rock walls, town,
-# trees, station, cutting) and whole mixed recipes, under every sky, by both cameras, 15-20 m
-# apart, on stretches and seeds away from the held-out and validation surveys (1.0-1.8,
-# 2.5-3.7, 4.0-6.0, 11.85-12.15 and 13.0-13.6 km). The kinds were chosen from the failure
-# classes of the held-out fisheye frames and of the real photos (docs/segmentation.md).
+# SCENERY_RUNS (2026-12-02): one scenery kind per run (rock walls, town, trees, station,
+# cutting) and whole mixed recipes, under every sky, by both cameras, 15-20 m apart, on
+# stretches and seeds away from the held-out and validation surveys (1.0-1.8, 2.5-3.7, 4.0-6.0,
+# 11.85-12.15 and 13.0-13.6 km). The kinds were chosen from the failure classes of the
+# held-out fisheye frames and of the real photos (docs/segmentation.md).
 _R = train_sky.Run
 SCENERY_RUNS = (
     _R("cnn_01", 6100.0, 6400.0, "clear", 601, "fisheye", 15.0, "rock_walls"),
@@ -77,8 +83,40 @@ SCENERY_RUNS = (
     _R("cnn_22", 9000.0, 9800.0, "clear", 622, "fisheye", 20.0),
     _R("cnn_23", 10000.0, 10800.0, "clear", 623, "pinhole", 20.0),
     _R("cnn_24", 11000.0, 11800.0, "overcast", 624, "fisheye", 20.0),
+    # cloud against facades, canopies and crowns: the held-out cloudy survey's worst columns
+    # were of that kind (docs/segmentation.md)
+    _R("cnn_25", 6100.0, 6400.0, "cloudy", 625, "fisheye", 15.0, "town"),
+    _R("cnn_26", 7300.0, 7600.0, "cloudy", 626, "pinhole", 15.0, "town"),
+    _R("cnn_27", 8500.0, 8800.0, "cloudy", 627, "pinhole", 15.0, "station"),
+    _R("cnn_28", 9700.0, 10000.0, "cloudy", 628, "fisheye", 15.0, "station"),
+    _R("cnn_29", 12200.0, 12700.0, "cloudy", 629, "pinhole", 20.0),
+    _R("cnn_30", 13700.0, 14000.0, "cloudy", 630, "fisheye", 15.0, "trees"),
 )
-CNN_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"] + SCENERY_RUNS
+# The perceptron's runs and the rock-wall fisheye frames that it does not ship with (chosen
+# on validation, docs/segmentation.md).
+BASE_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """Training data and schedule of one network (``--recipe``; options override its values)."""
+
+    runs: tuple[train_sky.Run, ...]
+    photos: int
+    survey_repeat: int
+    epochs: int
+    bf16: bool
+
+
+RECIPES = {
+    # shipped since 2026-12-01
+    "v2": Recipe(BASE_RUNS, photos=4000, survey_repeat=3, epochs=14, bf16=False),
+    # candidates of 2026-12-02, docs/segmentation.md
+    "e1": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
+                 bf16=True),
+    "e2": Recipe(BASE_RUNS + SCENERY_RUNS, photos=10000, survey_repeat=3, epochs=25, bf16=True),
+}
+DEFAULT_RECIPE = "v2"
 CNN_VALIDATION_RUNS = train_sky.VALIDATION_RUNS[:1]
 
 PHOTO_SEED0 = 200_000
@@ -295,20 +333,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).resolve().parents[1] / "predisat/data/models",
                         help="where sky_unet.onnx and its card are written")
-    parser.add_argument("--photos", type=int, default=10000, help="procedural training photos")
-    parser.add_argument("--survey-repeat", type=int, default=2,
-                        help="times each rendered survey frame appears per epoch")
+    parser.add_argument("--recipe", choices=sorted(RECIPES), default=DEFAULT_RECIPE,
+                        help="training runs, photos, repeats, epochs and bf16 of a named "
+                        f"network (default {DEFAULT_RECIPE}: the shipped one)")
+    parser.add_argument("--photos", type=int, help="procedural training photos (recipe's)")
+    parser.add_argument("--survey-repeat", type=int,
+                        help="times each rendered survey frame appears per epoch (recipe's)")
     parser.add_argument("--input-px", type=int, default=128, help="network input side")
     parser.add_argument("--channels", default="8,16,32,48,64", help="U-Net widths per level")
-    parser.add_argument("--epochs", type=int, default=20)
+    parser.add_argument("--epochs", type=int, help="(recipe's)")
     parser.add_argument("--batch", type=int, default=16)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2, help="PyTorch threads")
-    parser.add_argument("--bf16", action=argparse.BooleanOptionalAction, default=True,
-                        help="bfloat16 autocast in training (faster on CPUs with AVX512-BF16; "
-                        "the shipped network was trained with it)")
+    parser.add_argument("--bf16", action=argparse.BooleanOptionalAction,
+                        help="bfloat16 autocast in training, faster on CPUs with AVX512-BF16 "
+                        "(recipe's)")
     parser.add_argument("--workers", type=int, default=2, help="photo generation processes")
     args = parser.parse_args(argv)
+    recipe = RECIPES[args.recipe]
+    for name in ("photos", "survey_repeat", "epochs", "bf16"):
+        if getattr(args, name) is None:
+            setattr(args, name, getattr(recipe, name))
     try:
         import torch
     except ImportError:
@@ -318,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     channels = tuple(int(v) for v in args.channels.split(","))
 
     photos = photo_set(args.work, PHOTO_SEED0, args.photos, size, args.workers)
-    surveys = survey_set(args.work, CNN_RUNS, size)
+    surveys = survey_set(args.work, recipe.runs, size)
     x = np.concatenate([photos["x"], np.repeat(surveys["x"], args.survey_repeat, 0)])
     y = np.concatenate([photos["y"], np.repeat(surveys["y"], args.survey_repeat, 0)])
     print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
@@ -345,7 +390,8 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed,
         "bf16": args.bf16,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
-        "survey_runs": [r.name for r in CNN_RUNS],
+        "recipe": args.recipe,
+        "survey_runs": [r.name for r in recipe.runs],
         "survey_repeat": args.survey_repeat,
         "loss_per_epoch": [round(v, 5) for v in losses],
         "torch": torch.__version__,
