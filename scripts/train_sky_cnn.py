@@ -9,8 +9,8 @@ Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.
 ``--recipe`` names the training data and schedule of a network (``RECIPES``): ``v2``, the
 default, reproduces the shipped one (about 7 min of data and 26 min of training on two cores);
 ``e1`` and ``e2`` are the larger candidates of 2026-12-02 (10000 photos and ``SCENERY_RUNS``;
-about 20 min of data and 1.3-1.8 h of training). ``--photos``, ``--survey-repeat``,
-``--epochs`` and ``--bf16`` override the recipe's values.
+about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segmentation test.
+``--photos``, ``--survey-repeat``, ``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
    photos of :func:`predisat.synth.photos.random_photo` (seeds from 200000) and the rendered
@@ -111,7 +111,7 @@ class Recipe:
 RECIPES = {
     # shipped since 2026-12-01
     "v2": Recipe(BASE_RUNS, photos=4000, survey_repeat=3, epochs=14, bf16=False),
-    # candidates of 2026-12-02, docs/segmentation.md
+    # candidates of 2026-12-02, not shipped (each fails a test; docs/segmentation.md)
     "e1": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
                  bf16=True),
     "e2": Recipe(BASE_RUNS + SCENERY_RUNS, photos=10000, survey_repeat=3, epochs=25, bf16=True),
