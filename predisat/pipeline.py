@@ -685,7 +685,7 @@ def process_survey(
         # stage 1: segmentation
         t1 = time.perf_counter()
         n_seg = 0
-        for fid, problem in _run_segmentation(jobs, seg_fn, workers, progress, pool):
+        for fid, problem in _run_segmentation(jobs, pool, progress):
             n_seg += 1
             if problem is not None:
                 if strict:
@@ -727,7 +727,7 @@ def process_survey(
                     str(chunk_dir),
                 )
             )
-        _run_chunks(cjobs, workers, progress, pool)
+        _run_chunks(cjobs, pool, progress)
         timings["reconstruct"] = time.perf_counter() - t2
     finally:
         pool.close()
@@ -823,6 +823,20 @@ class _Pool:
             )  # fmt: skip
         return self._pool
 
+    def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterable[Any]:
+        """``fn`` of every item in the workers, results as they finish; on an error or Ctrl-C
+        the queued items are dropped (finished chunks are already on disk)."""
+        futures: set[Future[Any]] = {self.get().submit(fn, it) for it in items}
+        try:
+            while futures:
+                done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield fut.result()
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+
     def close(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
@@ -830,71 +844,37 @@ class _Pool:
 
 
 def _run_segmentation(
-    jobs: Sequence[_FrameJob], segmenter: Segmenter, workers: int, progress: bool,
-    pool: _Pool | None = None,
-) -> Iterable[tuple[str, str | None]]:  # fmt: skip
+    jobs: Sequence[_FrameJob], pool: _Pool, progress: bool
+) -> Iterable[tuple[str, str | None]]:
     bar = _progress(len(jobs), "segmenting frames", progress)
-    own = pool is None
     try:
-        if workers == 1 or len(jobs) < 4:
+        if pool.workers == 1 or len(jobs) < 4:
             for j in jobs:
-                yield _segment_frame(j, segmenter)
+                yield _segment_frame(j, pool.segmenter)
                 bar.update(1)
             return
-        batch = max(1, min(16, len(jobs) // (4 * workers)))
+        batch = max(1, min(16, len(jobs) // (4 * pool.workers)))
         batches = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
-        if pool is None:
-            pool = _Pool(workers, segmenter)
-        executor = pool.get()
-        futures = {executor.submit(_pool_segment, b) for b in batches}
-        try:
-            while futures:
-                done, futures = wait(futures, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    res = fut.result()
-                    bar.update(len(res))
-                    yield from res
-        except BaseException:
-            for fut in futures:
-                fut.cancel()
-            raise
+        for res in pool.map_unordered(_pool_segment, batches):
+            bar.update(len(res))
+            yield from res
     finally:
-        if own and pool is not None:
-            pool.close()
         bar.close()
 
 
-def _run_chunks(
-    jobs: Sequence[_ChunkJob], workers: int, progress: bool, pool: _Pool | None = None
-) -> None:
+def _run_chunks(jobs: Sequence[_ChunkJob], pool: _Pool, progress: bool) -> None:
     bar = _progress(len(jobs), "reconstructing chunks", progress)
-    own = pool is None
     try:
-        if workers == 1 or len(jobs) < 2:
+        if pool.workers == 1 or len(jobs) < 2:
             rec: Reconstructor | None = None
             for j in jobs:
                 rec = _reconstructor_for(j, rec)
                 _run_chunk(j, rec)
                 bar.update(1)
             return
-        if pool is None:
-            pool = _Pool(workers, default_segmenter)
-        executor = pool.get()
-        futures: set[Future[Any]] = {executor.submit(_pool_chunk, j) for j in jobs}
-        try:
-            while futures:
-                done, futures = wait(futures, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    fut.result()
-                    bar.update(1)
-        except BaseException:
-            # Ctrl-C: finished chunks are on disk; queued ones are dropped
-            for fut in futures:
-                fut.cancel()
-            raise
+        for _ in pool.map_unordered(_pool_chunk, jobs):
+            bar.update(1)
     finally:
-        if own and pool is not None:
-            pool.close()
         bar.close()
 
 
