@@ -43,7 +43,7 @@ __all__ = [
     "skyline_directions",
 ]
 
-_SKY, _UNSEEN, _OBSTACLE = 255, 128, 0
+_SKY, _UNSEEN = 255, 128  # grid labels; obstacle 0
 
 
 def _as_sky_mask(sky: ArrayLike, camera: CameraModel, name: str = "sky_mask") -> NDArray:
@@ -294,9 +294,8 @@ class Rectifier:
 
     def _grown_labels(self, sky: NDArray) -> NDArray:
         """uint8 labels of a boolean sky mask (sky / obstacle), obstacles grown by ``grow_px``."""
-        img = np.where(sky, _SKY, _OBSTACLE).astype(np.uint8)
-        gx, gy = self.grow_px
-        return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        # the erosion is a minimum filter: eroding 0 / 1 and scaling gives the 0 / 255 erosion
+        return self._grown_sky(sky) * np.uint8(_SKY)
 
     @cached_property
     def _pixel_runs(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
@@ -310,8 +309,8 @@ class Rectifier:
         return _index_runs(self.pixel_index, self.first_seen_row)
 
     def _grown_sky(self, sky: NDArray) -> NDArray:
-        """:meth:`_grown_labels` as uint8 1 (sky) / 0, C-contiguous: the erosion of the mask
-        itself, without the 255 / 0 label image."""
+        """A boolean sky mask as uint8 1 (sky) / 0, C-contiguous, obstacles grown by
+        ``grow_px`` (a view of ``sky`` when nothing grows)."""
         img = np.ascontiguousarray(sky, np.bool_).view(np.uint8)
         gx, gy = self.grow_px
         return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
