@@ -11,7 +11,9 @@
 * ``synthetic``: a folder written by :func:`predisat.synth.generate.generate_survey`
   (``survey/images`` + ``truth/labels/<frame_id>.png``, labels 255 sky, 128 thin
   L-band-transparent structure, 0 obstacle: sky where >= 128, per the thin-structure policy),
-  scored per sky condition and also by skyline elevation error through the survey's cameras.
+  scored per sky condition and also by skyline elevation error through the survey's cameras,
+  with the columns whose skyline is read more than :data:`UNSAFE_LOW_DEG` too low (the unsafe
+  side: a mask built from them would trust satellites behind the obstacle).
 
 The sky IoU of one image is ``|pred & true| / |pred | true|`` over sky pixels (1 when both are
 empty). Summaries give the mean over images and the pooled IoU (sums over all pixels).
@@ -35,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.segmentation import SkyOptions, segment_sky, skyline_from_mask
 
 __all__ = [
+    "UNSAFE_LOW_DEG",
     "SkyEvaluation",
     "SkyPair",
     "confusion_overlay",
@@ -44,6 +47,9 @@ __all__ = [
     "skyline_elevation_deg",
     "worst_cases_sheet",
 ]
+
+#: A column's skyline more than this below the truth counts as unsafe (``skyline_low_1deg_*``).
+UNSAFE_LOW_DEG = 1.0
 
 _IMAGE_EXT = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 _LAYOUTS = (
@@ -288,6 +294,9 @@ def _summarise(table: pd.DataFrame, skyline_err: dict[str, list[NDArray]]) -> pd
             row["skyline_el_err_median_deg"] = float(np.median(err)) if err.size else np.nan
             row["skyline_el_err_p95_deg"] = float(np.percentile(err, 95)) if err.size else np.nan
             row["n_skyline_columns"] = int(err.size)
+            low = int(t["skyline_low_1deg_columns"].sum())
+            row["skyline_low_1deg_columns"] = low
+            row["skyline_low_1deg_share"] = low / err.size if err.size else np.nan
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -388,6 +397,8 @@ def evaluate_folder(
             skyline_err.setdefault(pair.group, []).append(err)
             row["skyline_el_err_median_deg"] = float(np.median(np.abs(err))) if err.size else 0.0
             row["skyline_el_err_max_deg"] = float(np.max(np.abs(err))) if err.size else 0.0
+            # the unsafe side: a skyline read too low would let a blocked satellite be trusted
+            row["skyline_low_1deg_columns"] = int(np.count_nonzero(err < -UNSAFE_LOW_DEG))
         rows.append(row)
         worst.append((row["iou"], pair, pred, truth_v))
         worst = sorted(worst, key=lambda w: w[0])[:n_worst]  # keep only the few worst in memory

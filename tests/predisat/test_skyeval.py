@@ -116,3 +116,63 @@ def test_ade20k_excerpt_reaches_reasonable_iou(shared_data: Path) -> None:
     ev = evaluate_folder(shared_data / "sky" / "ade20k", progress=False, limit=5)
     assert len(ev.table) == 5
     assert ev.table["iou"].median() > 0.8
+
+
+class _NoSky:
+    """A stand-in probability model that calls every pixel obstacle."""
+
+    max_side_px = 32
+
+    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
+        return np.zeros_like(_AllSky().predict_image(image_bgr))
+
+
+@pytest.fixture(scope="module")
+def synth_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    out = tmp_path_factory.mktemp("synth")
+    generate_survey(demo_track(), 3000.0, 3020.0, sky="clear", seed=5, out_dir=out,
+                    progress=False)
+    return out
+
+
+def _true_elevations_deg(root: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per column: the true skyline's elevation and that of the frame's bottom edge (deg).
+
+    Written out from the label image, the camera's rays and the mount's rotation, without
+    ``skyline_from_mask`` or ``skyline_elevation_deg``.
+    """
+    from predisat.survey import Survey
+
+    label = cv2.imread(str(root / "truth" / "labels" / f"{name}.png"), cv2.IMREAD_GRAYSCALE)
+    h, w = label.shape
+    obstacle = label < 128
+    first = np.where(obstacle.any(0), obstacle.argmax(0), h).astype(float)
+    side = Survey.load(root / "survey", check_images=False).cameras[name.split("_")[0]]
+    r = side.mount.camera_to_vehicle()
+
+    def elev(v: np.ndarray) -> np.ndarray:
+        ray = side.camera.pixel_to_ray(np.arange(w, dtype=float), v) @ r.T
+        return np.degrees(np.arcsin(ray[:, 2] / np.linalg.norm(ray, axis=1)))
+
+    return elev(first - 0.5), elev(np.full(w, h - 0.5))
+
+
+def test_synthetic_unsafe_columns(synth_dir: Path) -> None:
+    all_sky = evaluate_folder(synth_dir, progress=False, method="learned", classifier=_AllSky())
+    no_sky = evaluate_folder(synth_dir, progress=False, method="learned", classifier=_NoSky())
+    assert all_sky.layout == "synthetic" and len(all_sky.table) >= 4
+    # every skyline read at the bottom edge is too low wherever the true one is 1 deg higher
+    for row in all_sky.table.itertuples():
+        true_deg, bottom_deg = _true_elevations_deg(synth_dir, row.name)
+        assert row.skyline_low_1deg_columns == np.count_nonzero(bottom_deg - true_deg < -1.0)
+    total = all_sky.summary.set_index("group").loc["all"]
+    assert total["skyline_low_1deg_columns"] == all_sky.table["skyline_low_1deg_columns"].sum()
+    assert total["skyline_low_1deg_columns"] > 0
+    assert total["skyline_low_1deg_share"] == pytest.approx(
+        total["skyline_low_1deg_columns"] / total["n_skyline_columns"])
+    # a skyline at the top edge is never too low
+    assert (no_sky.table["skyline_low_1deg_columns"] == 0).all()
+    assert no_sky.summary.set_index("group").loc["all"]["n_skyline_columns"] > 0
