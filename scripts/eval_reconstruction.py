@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.camera import CameraModel, Mount, default_camera, vehicle_to_enu
+from predisat.camera import CameraModel, Mount, default_camera
 from predisat.masks import BinSource
 from predisat.reconstruct import FrameView, Reconstruction, ReconstructionParams, Reconstructor
 from predisat.synth.raycast import make_caster
-from predisat.synth.truth import true_masks
+from predisat.synth.truth import ideal_sky_mask, true_masks
 from predisat.synth.world import World, WorldSpec
 from predisat.track import demo_track
 
@@ -47,24 +47,14 @@ def ideal_frames(
     reverse: bool = False,
 ) -> list[FrameView]:
     """Left and right frames with ideal sky masks (no L-band-blocking hit) at chainages."""
-    track = world.track
     s = np.asarray(chainage_m, float)
     ant = world.antenna_enu(s, antenna_height_m)
-    lat, lon, _ = track.frame.to_geodetic(ant)
-    rot = track.frame.rotation_from(lat, lon)
-    hd = np.asarray(track.heading_at(s), float)
-    u, v = camera.pixel_grid()
-    rays = camera.pixel_to_ray(u, v)
-    good = np.all(np.isfinite(rays), axis=-1)
+    hd = np.asarray(world.track.heading_at(s), float)
     out = []
     for i in range(s.size):
         for side in ("left", "right"):
             m = Mount.default(side)  # type: ignore[arg-type]
-            arm = vehicle_to_enu(hd[i], reverse) @ np.asarray(m.lever_arm_m)
-            cam = ant[i] + rot[i] @ arm
-            d = rays[good] @ (rot[i] @ m.camera_to_enu(hd[i], reverse)).T
-            sky = np.zeros(camera.shape, bool)
-            sky[good] = ~caster.occluded(np.broadcast_to(cam, d.shape), d)
+            sky = ideal_sky_mask(world, s[i], camera, m, antenna_height_m, reverse, caster=caster)
             out.append(
                 FrameView(float(s[i]), sky, camera, m, ant[i], float(hd[i]), reverse,
                           frame_id=f"{s[i]:.0f}{side[0]}")

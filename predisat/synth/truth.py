@@ -5,6 +5,8 @@
 * :func:`obstacle_descriptors`: distance and height of the nearest blocking obstacle on each
   side of the track (the reflection-risk descriptors of a segment map).
 * :func:`is_blocked`: whether given satellite directions are blocked (a direct ray cast).
+* :func:`ideal_sky_mask`: a camera frame's sky mask without segmentation error (each pixel's
+  centre ray cast against the L-band-blocking scene), to test reconstruction alone.
 
 Elevations are relative to the ellipsoid normal at each antenna, azimuths clockwise from true
 north; the method and its limits are in ``docs/synthetic-world.md``.
@@ -26,6 +28,7 @@ from predisat.synth.raycast import Caster, make_caster
 __all__ = [
     "SIDES",
     "TrueMasks",
+    "ideal_sky_mask",
     "is_blocked",
     "obstacle_descriptors",
     "scan_levels_deg",
@@ -421,3 +424,49 @@ def is_blocked(
     o = np.broadcast_to(ant.reshape((*pshape, *(1,) * extra, 3)), d.shape)
     out = _caster(world, backend, caster).occluded(o.reshape(-1, 3), d.reshape(-1, 3))
     return out.reshape(d.shape[:-1])
+
+
+def ideal_sky_mask(
+    world: Any,
+    chainage_m: float,
+    camera: Any,
+    mount: Any,
+    antenna_height_m: float = 4.0,
+    reverse: bool = False,
+    backend: str = "open3d",
+    *,
+    caster: Caster | None = None,
+) -> NDArray:
+    """Sky mask of a frame with no segmentation error: no L-band-blocking hit on its centre ray.
+
+    Thin L-band-transparent structures (wires, masts) are sky, as the thin-structure policy
+    wants; pixels outside a fisheye's image circle are not sky.
+
+    Parameters
+    ----------
+    world : World
+    chainage_m : float
+        Frame position along the track, metres.
+    camera : CameraModel
+    mount : Mount
+        The camera's mount on the vehicle (lever arm from the antenna included).
+    antenna_height_m : float
+        Antenna height above the rail, metres.
+    reverse : bool
+        The vehicle runs towards decreasing chainage.
+    caster : Caster, optional
+        A ready L-band-only caster of the world (saves building one per call).
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+    """
+    from predisat.synth.render import camera_pose
+
+    pos, rot = camera_pose(world, chainage_m, mount, antenna_height_m, reverse)
+    rays = camera.pixel_to_ray(*camera.pixel_grid())
+    good = np.all(np.isfinite(rays), axis=-1)
+    d = rays[good] @ rot.T
+    sky = np.zeros(camera.shape, bool)
+    sky[good] = ~_caster(world, backend, caster).occluded(np.broadcast_to(pos, d.shape), d)
+    return sky

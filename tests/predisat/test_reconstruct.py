@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from numba import njit
 
-from predisat.camera import CameraModel, Mount, vehicle_to_enu
+from predisat.camera import CameraModel, Mount
 from predisat.masks import BinSource, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor, _ray_distances
 from predisat.synth.raycast import make_caster
-from predisat.synth.truth import true_masks
+from predisat.synth.truth import ideal_sky_mask, true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 
 from .reference_march import reference_march
@@ -36,25 +36,16 @@ def frames_for(
 ) -> list[FrameView]:
     """Left and right frames with ideal sky masks (ray cast, L-band blocking faces only)."""
     caster = make_caster(world, "open3d", lband_only=True)
-    track = world.track
     s = np.asarray(chainage_m, float)
     ant = world.antenna_enu(s)
-    lat, lon, _ = track.frame.to_geodetic(ant)
-    rot = track.frame.rotation_from(lat, lon)
-    hd = np.asarray(track.heading_at(s), float)
-    u, v = camera.pixel_grid()
-    rays = camera.pixel_to_ray(u, v)
-    good = np.all(np.isfinite(rays), axis=-1)
+    hd = np.asarray(world.track.heading_at(s), float)
     out = []
     for i in range(s.size):
         for side in ("left", "right"):
             m = Mount.default(side)
             if not lever_arm:
                 m = Mount(side, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
-            cam = ant[i] + rot[i] @ (vehicle_to_enu(hd[i], reverse) @ np.array(m.lever_arm_m))
-            d = rays[good] @ (rot[i] @ m.camera_to_enu(hd[i], reverse)).T
-            sky = np.zeros(camera.shape, bool)
-            sky[good] = ~caster.occluded(np.broadcast_to(cam, d.shape), d)
+            sky = ideal_sky_mask(world, s[i], camera, m, reverse=reverse, caster=caster)
             out.append(FrameView(float(s[i]), sky, camera, m, ant[i], float(hd[i]), reverse))
     return out
 

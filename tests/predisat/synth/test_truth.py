@@ -8,7 +8,13 @@ import pytest
 
 from predisat.geodesy import WGS84
 from predisat.synth.raycast import make_caster
-from predisat.synth.truth import TrueMasks, is_blocked, obstacle_descriptors, true_masks
+from predisat.synth.truth import (
+    TrueMasks,
+    ideal_sky_mask,
+    is_blocked,
+    obstacle_descriptors,
+    true_masks,
+)
 from predisat.synth.world import Stretch, World, WorldSpec
 
 from .test_world import LAT0, LON0, straight_track
@@ -196,3 +202,29 @@ def test_default_positions_every_10_m(small_mixed: World) -> None:
     tm = true_masks(small_mixed, None, az_step_deg=10.0, n_sub=1)
     assert tm.chainage_m[0] == 100.0 and tm.chainage_m[-1] == 1250.0
     assert np.allclose(np.diff(tm.chainage_m), 10.0)
+
+
+def test_ideal_sky_mask_is_the_rendered_label(small_mixed: World) -> None:
+    # the renderer labels frames through its own casters (thin structures are sky); the ideal
+    # mask must agree pixel for pixel, for both sides and both directions of travel
+    from predisat.camera import CameraModel, Mount
+    from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
+    from predisat.synth.sky import SkyModel
+
+    casters = Casters.for_world(small_mixed, "open3d")
+    sky = SkyModel.cloudy(120.0, 50.0, seed=3)
+    opt = RenderOptions(supersample=1, ambient_rays=1)
+    seen_sky = seen_obstacle = 0
+    for cam in (CameraModel.pinhole_from_fov(120, 90, 74.0),
+                CameraModel.fisheye_from_fov(120, 90, 110.0)):
+        for s, side, reverse in ((400.0, "left", False), (700.0, "right", True)):
+            mount = Mount.default(side)  # type: ignore[arg-type]
+            pose = camera_pose(small_mixed, s, mount, reverse=reverse)
+            _, label = render_frame(small_mixed, casters, cam, pose, sky,
+                                    np.random.default_rng(0), opt)
+            ideal = ideal_sky_mask(small_mixed, s, cam, mount, reverse=reverse)
+            assert ideal.shape == label.shape
+            np.testing.assert_array_equal(ideal, label >= 128)
+            seen_sky += int(ideal.sum())
+            seen_obstacle += int((~ideal).sum())
+    assert seen_sky > 1000 and seen_obstacle > 1000
