@@ -106,6 +106,9 @@ class Recipe:
     survey_repeat: int
     epochs: int
     bf16: bool
+    #: weight of the loss on obstacle pixels: above 1 a sky call on an obstacle costs more than
+    #: the reverse, as a false sky claim costs more than lost sky (false trust against availability)
+    obstacle_weight: float = 1.0
 
 
 RECIPES = {
@@ -115,6 +118,9 @@ RECIPES = {
     "e1": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
                  bf16=True),
     "e2": Recipe(BASE_RUNS + SCENERY_RUNS, photos=10000, survey_repeat=3, epochs=25, bf16=True),
+    # e1 with the loss weighted three times on obstacle pixels (2026-12-02, later)
+    "e3": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
+                 bf16=True, obstacle_weight=3.0),
 }
 DEFAULT_RECIPE = "v2"
 CNN_VALIDATION_RUNS = train_sky.VALIDATION_RUNS[:1]
@@ -243,9 +249,12 @@ def augment(
 
 def train(
     x: np.ndarray, y: np.ndarray, channels: tuple[int, ...], epochs: int, batch: int,
-    seed: int, threads: int, bf16: bool = False,
+    seed: int, threads: int, bf16: bool = False, obstacle_weight: float = 1.0,
 ) -> tuple[Any, list[float]]:
     """Train the U-Net; returns it (in eval mode) and the mean loss per epoch.
+
+    ``obstacle_weight``: weight of the cross-entropy on the obstacle share of each pixel (the
+    sky share keeps weight 1).
 
     ``bf16``: forward pass under bfloat16 autocast (about 1.5 times faster on CPUs with
     AVX512-BF16; the weights, the loss and the exported network stay float32).
@@ -275,7 +284,10 @@ def train(
             inter = (prob * target).sum((1, 2, 3))
             union = (prob + target - prob * target).sum((1, 2, 3))
             soft_iou = ((inter + 1.0) / (union + 1.0)).mean()
-            loss = F.binary_cross_entropy_with_logits(logit, target) + 0.5 * (1.0 - soft_iou)
+            weight = (None if obstacle_weight == 1.0
+                      else 1.0 + (obstacle_weight - 1.0) * (1.0 - target))
+            loss = (F.binary_cross_entropy_with_logits(logit, target, weight=weight)
+                    + 0.5 * (1.0 - soft_iou))
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -369,7 +381,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
           f"{len(surveys['x'])} survey frames x {args.survey_repeat})", flush=True)
     net, losses = train(x, y, channels, args.epochs, args.batch, args.seed, args.threads,
-                        args.bf16)
+                        args.bf16, recipe.obstacle_weight)
 
     onnx_path = args.out / "sky_unet.onnx"
     export(net, onnx_path, size)
@@ -389,6 +401,7 @@ def main(argv: list[str] | None = None) -> int:
         "batch": args.batch,
         "seed": args.seed,
         "bf16": args.bf16,
+        "obstacle_weight": recipe.obstacle_weight,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
         "recipe": args.recipe,
         "survey_runs": [r.name for r in recipe.runs],
