@@ -148,18 +148,7 @@ class CameraModel:
         """
         if not 0.0 < vfov_deg < 180.0:
             raise ValueError(f"vfov_deg must be in (0, 180), got {vfov_deg}")
-        probe = cls(name, "pinhole", width_px, height_px, 1.0, 1.0, 0.0, 0.0, tuple(dist))
-        r = np.tan(np.radians(vfov_deg) / 2.0)
-        if r > probe._max_radius:
-            raise ValueError(
-                f"vfov_deg={vfov_deg} reaches beyond the radius where distortion {dist} folds "
-                "back; use a smaller field of view or milder distortion"
-            )
-        f = (height_px / 2.0) / float(probe._radial(np.asarray(r)))
-        return cls(
-            name, "pinhole", width_px, height_px, f, f,
-            (width_px - 1) / 2.0, (height_px - 1) / 2.0, tuple(dist),
-        )  # fmt: skip
+        return cls._centred(name, "pinhole", width_px, height_px, vfov_deg, dist)
 
     @classmethod
     def fisheye_from_fov(
@@ -177,16 +166,27 @@ class CameraModel:
         """
         if not 0.0 < vfov_deg < 360.0:
             raise ValueError(f"vfov_deg must be in (0, 360), got {vfov_deg}")
-        probe = cls(name, "fisheye", width_px, height_px, 1.0, 1.0, 0.0, 0.0, tuple(dist))
-        theta = np.radians(vfov_deg) / 2.0
-        if theta > probe._max_radius:
+        return cls._centred(name, "fisheye", width_px, height_px, vfov_deg, dist)
+
+    @classmethod
+    def _centred(
+        cls, name: str, model: Literal["pinhole", "fisheye"], width_px: int, height_px: int,
+        vfov_deg: float, dist: tuple[float, ...],
+    ) -> CameraModel:
+        """The ``*_from_fov`` camera: centred principal point, focal length from the fov."""
+        probe = cls(name, model, width_px, height_px, 1.0, 1.0, 0.0, 0.0, tuple(dist))
+        # undistorted radius of the edge ray: tan(theta) on the pinhole plane, theta for fisheye
+        half = np.radians(vfov_deg) / 2.0
+        r = np.tan(half) if model == "pinhole" else half
+        if r > probe._max_radius:
             raise ValueError(
-                f"vfov_deg={vfov_deg} reaches beyond the angle where distortion {dist} folds "
-                "back; use a smaller field of view or other coefficients"
+                f"vfov_deg={vfov_deg} reaches beyond the "
+                f"{'radius' if model == 'pinhole' else 'angle'} where distortion {dist} folds "
+                "back; use a smaller field of view or milder distortion"
             )
-        f = (height_px / 2.0) / float(probe._radial(np.asarray(theta)))
+        f = (height_px / 2.0) / float(probe._radial(np.asarray(r)))
         return cls(
-            name, "fisheye", width_px, height_px, f, f,
+            name, model, width_px, height_px, f, f,
             (width_px - 1) / 2.0, (height_px - 1) / 2.0, tuple(dist),
         )  # fmt: skip
 
