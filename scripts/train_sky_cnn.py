@@ -9,7 +9,8 @@ Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.
 ``--recipe`` names the training data and schedule of a network (``RECIPES``): ``v2``, the
 default, reproduces the shipped one (about 7 min of data and 26 min of training on two cores);
 ``e1`` and ``e2`` are the larger candidates of 2026-12-02 (10000 photos and ``SCENERY_RUNS``;
-about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segmentation test.
+about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segmentation test;
+``e3`` is ``e1`` with the loss weighted three times on obstacle pixels (``Recipe.obstacle_weight``).
 ``--photos``, ``--survey-repeat``, ``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
@@ -24,9 +25,10 @@ about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segme
    Nothing else is used: no third-party photo, so the network may ship with the project.
 2. **Model**: a U-Net (:class:`UNet`, channels ``--channels``, two 3x3 convolutions with batch
    normalisation per level, bilinear upsampling) on 4 input channels (B, G, R and the row
-   position, :func:`predisat.skycnn.network_input`). Loss: binary cross-entropy plus half a
-   soft-IoU term; AdamW with a one-cycle schedule; augmentation: flips, gain and white-balance
-   jitter, grey images, random crops. Every random draw is seeded; on one machine two runs give
+   position, :func:`predisat.skycnn.network_input`). Loss: binary cross-entropy (weighted
+   ``obstacle_weight`` times on the obstacle share of each pixel) plus half a soft-IoU term;
+   AdamW with a one-cycle schedule; augmentation: flips, gain and white-balance jitter, grey
+   images, random crops. Every random draw is seeded; on one machine two runs give
    the same weights (PyTorch's deterministic algorithms).
 3. **Output**: ``sky_unet.onnx`` (opset 13, read by ``cv2.dnn``) and ``sky_unet.json`` (the
    card: data, seeds, parameters, loss per epoch, held-out IoU through ``cv2.dnn``) in
