@@ -10,7 +10,8 @@ Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.
 default, reproduces the shipped one (about 7 min of data and 26 min of training on two cores);
 ``e1`` and ``e2`` are the larger candidates of 2026-12-02 (10000 photos and ``SCENERY_RUNS``;
 about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segmentation test;
-``e3`` is ``e1`` with the loss weighted three times on obstacle pixels (``Recipe.obstacle_weight``).
+``e3`` is ``e1`` with the loss weighted three times on obstacle pixels (``Recipe.obstacle_weight``);
+``e4`` carries ``e3``'s network to a 192 px input (``--init`` its ONNX; 10 min).
 ``--photos``, ``--survey-repeat``, ``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
@@ -38,6 +39,7 @@ about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segme
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import multiprocessing
 import sys
@@ -111,6 +113,12 @@ class Recipe:
     #: weight of the loss on obstacle pixels: above 1 a sky call on an obstacle costs more than
     #: the reverse, as a false sky claim costs more than lost sky (false trust against availability)
     obstacle_weight: float = 1.0
+    #: network input side, pixels
+    input_px: int = 128
+    #: recipe of the network this one starts from (``--init``); None: from scratch
+    init: str | None = None
+    #: peak learning rate of the one-cycle schedule
+    lr_max: float = 3e-3
 
 
 RECIPES = {
@@ -123,6 +131,9 @@ RECIPES = {
     # e1 with the loss weighted three times on obstacle pixels (2026-12-02, later)
     "e3": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
                  bf16=True, obstacle_weight=3.0),
+    # e3 carried to a 192 px input: a few epochs from its weights (batch normalisation folded)
+    "e4": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=3000, survey_repeat=2, epochs=4,
+                 bf16=True, obstacle_weight=3.0, input_px=192, init="e3", lr_max=5e-4),
 }
 DEFAULT_RECIPE = "v2"
 CNN_VALIDATION_RUNS = train_sky.VALIDATION_RUNS[:1]
@@ -175,17 +186,24 @@ def survey_set(work: Path, runs: tuple[train_sky.Run, ...], size: int) -> dict[s
     return {"x": np.stack(xs), "y": np.stack(ys)}
 
 
-def build_unet(channels: tuple[int, ...]) -> Any:
-    """The U-Net (a ``torch.nn.Module``; PyTorch is imported here, for training only)."""
+def build_unet(channels: tuple[int, ...], batchnorm: bool = True) -> Any:
+    """The U-Net (a ``torch.nn.Module``; PyTorch is imported here, for training only).
+
+    ``batchnorm=False``: convolutions with a bias instead of batch normalisation, the form
+    of an exported network (the exporter folds the normalisation into the convolutions), to
+    go on training from one (:func:`load_onnx_weights`).
+    """
     import torch
     from torch import nn
     from torch.nn import functional as F
 
+    def conv_bn(a: int, b: int) -> list[nn.Module]:
+        if not batchnorm:
+            return [nn.Conv2d(a, b, 3, padding=1), nn.ReLU(inplace=True)]
+        return [nn.Conv2d(a, b, 3, padding=1, bias=False), nn.BatchNorm2d(b), nn.ReLU(inplace=True)]
+
     def block(a: int, b: int) -> nn.Module:
-        return nn.Sequential(
-            nn.Conv2d(a, b, 3, padding=1, bias=False), nn.BatchNorm2d(b), nn.ReLU(inplace=True),
-            nn.Conv2d(b, b, 3, padding=1, bias=False), nn.BatchNorm2d(b), nn.ReLU(inplace=True),
-        )  # fmt: skip
+        return nn.Sequential(*conv_bn(a, b), *conv_bn(b, b))
 
     class UNet(nn.Module):
         def __init__(self) -> None:
@@ -214,6 +232,33 @@ def build_unet(channels: tuple[int, ...]) -> Any:
             return self.head(x)
 
     return UNet()
+
+
+def load_onnx_weights(net: Any, path: Path) -> None:
+    """Copy an exported network's convolutions into ``build_unet(..., batchnorm=False)``.
+
+    The exporter writes the convolutions in the order of the forward pass, which is the order
+    of the modules; shapes are checked one by one.
+    """
+    import onnx
+    import torch
+    from onnx import numpy_helper
+
+    graph = onnx.load(str(path)).graph
+    init = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+    convs = [n for n in graph.node if n.op_type == "Conv"]
+    mods = [m for m in net.modules() if isinstance(m, torch.nn.Conv2d)]
+    if len(convs) != len(mods):
+        raise ValueError(f"{path}: {len(convs)} convolutions, the network has {len(mods)}; "
+                         "give --channels of the network it was trained with")
+    with torch.no_grad():
+        for node, mod in zip(convs, mods, strict=True):
+            w, b = init[node.input[1]], init[node.input[2]]
+            if w.shape != tuple(mod.weight.shape):
+                raise ValueError(f"{path}: convolution {node.name} is {w.shape}, the network's "
+                                 f"is {tuple(mod.weight.shape)}; give the matching --channels")
+            mod.weight.copy_(torch.from_numpy(np.array(w)))
+            mod.bias.copy_(torch.from_numpy(np.array(b)))
 
 
 def _blob(xb: np.ndarray) -> Any:
@@ -252,11 +297,14 @@ def augment(
 def train(
     x: np.ndarray, y: np.ndarray, channels: tuple[int, ...], epochs: int, batch: int,
     seed: int, threads: int, bf16: bool = False, obstacle_weight: float = 1.0,
+    init: Path | None = None, lr_max: float = 3e-3,
 ) -> tuple[Any, list[float]]:
     """Train the U-Net; returns it (in eval mode) and the mean loss per epoch.
 
     ``obstacle_weight``: weight of the cross-entropy on the obstacle share of each pixel (the
-    sky share keeps weight 1).
+    sky share keeps weight 1). ``init``: an exported network to start from (the U-Net is then
+    built without batch normalisation, :func:`load_onnx_weights`). ``lr_max``: peak learning
+    rate of the one-cycle schedule.
 
     ``bf16``: forward pass under bfloat16 autocast (about 1.5 times faster on CPUs with
     AVX512-BF16; the weights, the loss and the exported network stay float32).
@@ -267,10 +315,12 @@ def train(
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
     torch.use_deterministic_algorithms(True)
-    net = build_unet(channels)
+    net = build_unet(channels, batchnorm=init is None)
+    if init is not None:
+        load_onnx_weights(net, init)
     steps = epochs * (len(x) // batch)
     opt = torch.optim.AdamW(net.parameters(), 2e-3, weight_decay=1e-4)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, 3e-3, total_steps=steps)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, lr_max, total_steps=steps)
     rng = np.random.default_rng(seed)
     losses = []
     t0 = time.perf_counter()
@@ -353,7 +403,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--photos", type=int, help="procedural training photos (recipe's)")
     parser.add_argument("--survey-repeat", type=int,
                         help="times each rendered survey frame appears per epoch (recipe's)")
-    parser.add_argument("--input-px", type=int, default=128, help="network input side")
+    parser.add_argument("--input-px", type=int, help="network input side (recipe's)")
+    parser.add_argument("--init", type=Path, metavar="ONNX",
+                        help="the network to start from, for a recipe that names one (e4: the "
+                        "sky_unet.onnx written by --recipe e3)")
     parser.add_argument("--channels", default="8,16,32,48,64", help="U-Net widths per level")
     parser.add_argument("--epochs", type=int, help="(recipe's)")
     parser.add_argument("--batch", type=int, default=16)
@@ -365,9 +418,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="photo generation processes")
     args = parser.parse_args(argv)
     recipe = RECIPES[args.recipe]
-    for name in ("photos", "survey_repeat", "epochs", "bf16"):
+    for name in ("photos", "survey_repeat", "epochs", "bf16", "input_px"):
         if getattr(args, name) is None:
             setattr(args, name, getattr(recipe, name))
+    if (recipe.init is None) != (args.init is None):
+        parser.error(f"--recipe {args.recipe} " + (
+            f"starts from a network of --recipe {recipe.init}: give its ONNX file with --init"
+            if recipe.init else "trains from scratch: drop --init"))
+    if args.init is not None:
+        card = json.loads(args.init.with_suffix(".json").read_text(encoding="utf-8"))
+        if card.get("recipe") != recipe.init:
+            parser.error(f"--init {args.init}: its card names recipe {card.get('recipe')!r}, "
+                         f"--recipe {args.recipe} starts from {recipe.init!r}")
     try:
         import torch
     except ImportError:
@@ -383,7 +445,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"training on {len(x)} squares of {size} px ({len(photos['x'])} photos, "
           f"{len(surveys['x'])} survey frames x {args.survey_repeat})", flush=True)
     net, losses = train(x, y, channels, args.epochs, args.batch, args.seed, args.threads,
-                        args.bf16, recipe.obstacle_weight)
+                        args.bf16, recipe.obstacle_weight, args.init, recipe.lr_max)
 
     onnx_path = args.out / "sky_unet.onnx"
     export(net, onnx_path, size)
@@ -404,6 +466,10 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed,
         "bf16": args.bf16,
         "obstacle_weight": recipe.obstacle_weight,
+        "init": None if args.init is None else {
+            "recipe": recipe.init,
+            "sha256": hashlib.sha256(args.init.read_bytes()).hexdigest()},
+        "lr_max": recipe.lr_max,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
         "recipe": args.recipe,
         "survey_runs": [r.name for r in recipe.runs],
