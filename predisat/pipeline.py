@@ -65,6 +65,7 @@ __all__ = [
     "default_segmenter",
     "process_from_args",
     "process_survey",
+    "sky_net_sha256",
     "survey_hash",
 ]
 
@@ -116,15 +117,27 @@ class PipelineParams:
         Segmentation method of :func:`default_segmenter` (one of
         :data:`predisat.segmentation.METHODS`), recorded in the provenance and the cache key;
         with a custom segmenter function, its own distinct name.
+    sky_net : str, optional
+        A sky network file (ONNX, with its ``.json`` card beside it, as written by
+        ``scripts/train_sky_cnn.py``) used instead of the shipped one by the ``cnn`` and
+        ``ensemble`` methods, to try a candidate. Its files' SHA-256 goes into the provenance,
+        the resume key and the segmentation cache key, so no result of another network is
+        reused.
     """
 
     chunk_m: float = 1000.0
     reconstruction: ReconstructionParams = field(default_factory=ReconstructionParams)
     segmenter: str = DEFAULT_SEGMENTER
+    sky_net: str | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
+        if self.sky_net is not None and self.segmenter not in _NET_METHODS:
+            raise ValueError(
+                f"sky_net {self.sky_net} is used by the segmenters {_NET_METHODS}, not by "
+                f"{self.segmenter!r}; choose one of them (CLI: --segmenter ensemble)"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form (recorded in every chunk's provenance)."""
@@ -132,7 +145,33 @@ class PipelineParams:
             k: (list(v) if isinstance(v, tuple) else v)
             for k, v in asdict(self.reconstruction).items()
         }
-        return {"chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec}
+        out: dict[str, Any] = {
+            "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
+        }  # fmt: skip
+        if self.sky_net is not None:
+            # absent for the shipped network, so the run keys of earlier runs stay valid
+            out["sky_net"] = {"path": str(self.sky_net), "sha256": sky_net_sha256(self.sky_net)}
+        return out
+
+
+_NET_METHODS = ("cnn", "ensemble")
+
+
+def sky_net_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a sky network: its ONNX file and its card (the card sets the input size).
+
+    Raises
+    ------
+    FileNotFoundError
+        Naming the missing file.
+    """
+    from predisat.skycnn import SkyNet
+
+    net = SkyNet.load(path)  # checks both files and the card
+    h = hashlib.sha256()
+    for f in (net.path, net.path.with_suffix(".json")):
+        h.update(f.read_bytes())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -178,16 +217,28 @@ class ProcessResult:
 
 # ---------------------------------------------------------------------- segmentation + cache
 def default_segmenter(
-    image_bgr: NDArray, method: str | None = None
+    image_bgr: NDArray, method: str | None = None, sky_net: str | None = None
 ) -> tuple[NDArray, NDArray | None]:
     """:func:`predisat.segmentation.segment_sky`: sky mask and per-column confidence.
 
-    ``method`` is one of :data:`predisat.segmentation.METHODS` (default: ``SkyOptions``'s).
+    ``method`` is one of :data:`predisat.segmentation.METHODS` (default: ``SkyOptions``'s);
+    ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``).
     """
     from predisat.segmentation import SkyOptions, segment_sky
 
-    seg = segment_sky(image_bgr, SkyOptions() if method is None else SkyOptions(method=method))
+    opt = SkyOptions() if method is None else SkyOptions(method=method)
+    classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
+    seg = segment_sky(image_bgr, opt, classifier=classifier)
     return seg.sky_mask, seg.confidence
+
+
+@functools.lru_cache(maxsize=4)
+def _candidate_classifier(method: str, sky_net: str) -> Any:
+    # read once per process and file, not once per frame
+    from predisat.skycnn import SkyEnsemble, SkyNet
+
+    net = SkyNet.load(sky_net)
+    return net if method == "cnn" else SkyEnsemble.with_net(net)
 
 
 @dataclass(frozen=True)
@@ -583,7 +634,8 @@ def process_survey(
                 f"params.segmenter {p.segmenter!r} is not a segmentation method {METHODS}; "
                 "pass segmenter= with your own function for another name"
             )
-        seg_fn: Segmenter = functools.partial(default_segmenter, method=p.segmenter)
+        seg_fn: Segmenter = functools.partial(default_segmenter, method=p.segmenter,
+                                              sky_net=p.sky_net)
     else:
         seg_fn = segmenter
     quiet = not progress
@@ -596,6 +648,8 @@ def process_survey(
         )
     out = Path(out_dir)
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
+    if p.sky_net is not None:
+        seg_code += "-net" + sky_net_sha256(p.sky_net)[:12]
     chunk_dir, cache_dir = out / "chunks", out / "cache" / f"seg-{p.segmenter}-{seg_code}"
     chunk_dir.mkdir(parents=True, exist_ok=True)
     cache_dir.mkdir(parents=True, exist_ok=True)
@@ -902,6 +956,11 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
         default=DEFAULT_SEGMENTER,
         help=f"sky segmentation method (default {DEFAULT_SEGMENTER}; docs/segmentation.md)",
     )  # fmt: skip
+    parser.add_argument(
+        "--sky-net", metavar="ONNX",
+        help="a candidate sky network (with its .json card) instead of the shipped one, for "
+        "--segmenter cnn or ensemble; recorded in the provenance",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -918,7 +977,7 @@ def process_from_args(args: argparse.Namespace) -> ProcessResult:
     return process_survey(
         args.survey,
         args.out,
-        PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter),
+        PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net),
         track=track,
         workers=args.workers,
         strict=args.strict,

@@ -191,7 +191,12 @@ class SkyEnsemble:
     @classmethod
     def default(cls) -> SkyEnsemble:
         """The shipped perceptron and network, weighted equally."""
-        return cls((SkyClassifier.default(), SkyNet.default()), (0.5, 0.5))
+        return cls.with_net(SkyNet.default())
+
+    @classmethod
+    def with_net(cls, net: SkyNet) -> SkyEnsemble:
+        """The shipped perceptron and another network (a candidate), weighted equally."""
+        return cls((SkyClassifier.default(), net), (0.5, 0.5))
 
     @property
     def max_side_px(self) -> int:

@@ -28,7 +28,6 @@ import pandas as pd
 from predisat.segmentation import METHODS
 from predisat.skycnn import SkyEnsemble, SkyNet
 from predisat.skyeval import evaluate_folder, worst_cases_sheet
-from predisat.skymodel import SkyClassifier
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,8 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.method not in ("cnn", "ensemble"):
             parser.error("--net needs --method cnn or --method ensemble")
         net = SkyNet.load(args.net)
-        classifier = net if args.method == "cnn" else SkyEnsemble(
-            (SkyClassifier.default(), net), SkyEnsemble.default().weights)
+        classifier = net if args.method == "cnn" else SkyEnsemble.with_net(net)
     summaries = []
     sheet: list = []
     for data in args.data:

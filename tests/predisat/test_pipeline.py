@@ -302,3 +302,59 @@ def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> N
     assert meta["version"] == CACHE_VERSION and isinstance(again, tuple)
     assert np.array_equal(again[0], sky) and again[1] is not None
     assert np.array_equal(again[1], conf)
+
+
+def _net_copy(folder: Path, input_px: int | None = None) -> Path:
+    """The shipped sky network copied to ``folder`` (its card's input size changed if given)."""
+    import json
+    from importlib import resources
+
+    folder.mkdir(parents=True)
+    src = resources.files("predisat") / "data" / "models"
+    (folder / "net.onnx").write_bytes((src / "sky_unet.onnx").read_bytes())
+    card = json.loads((src / "sky_unet.json").read_text())
+    if input_px is not None:
+        card["input_px"] = input_px
+    (folder / "net.json").write_text(json.dumps(card))
+    return folder / "net.onnx"
+
+
+def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) -> None:
+    import json
+
+    from predisat.pipeline import sky_net_sha256
+
+    base = process_survey(survey_dir, tmp_path / "base", PipelineParams(chunk_m=30.0),
+                          progress=False)
+    same = _net_copy(tmp_path / "same")
+    out = tmp_path / "cand"
+    res = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(same)),
+                         progress=False)
+    # the shipped network from another file: the same masks, the file in the provenance
+    np.testing.assert_array_equal(res.masks.mask_el_deg, base.masks.mask_el_deg)
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["params"]["sky_net"]["sha256"] == sky_net_sha256(same)
+    assert "sky_net" not in json.loads((tmp_path / "base" / "provenance.json").read_text())[
+        "params"]
+    # another network into the same folder: nothing of the first is reused
+    other = _net_copy(tmp_path / "other", input_px=96)
+    assert sky_net_sha256(other) != sky_net_sha256(same)
+    again = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(other)),
+                           progress=False)
+    assert again.chunks_skipped == 0 and again.frames_segmented == res.frames_segmented > 0
+    # and it is the network that runs: at another input size the masks change
+    assert not np.array_equal(again.masks.mask_el_deg, res.masks.mask_el_deg)
+    assert len([p for p in (out / "cache").iterdir() if p.name.startswith("seg-ensemble-")]) == 2
+
+
+def test_sky_net_errors_name_the_file_and_the_fix(survey_dir: Path, tmp_path: Path) -> None:
+    from predisat.cli import main
+
+    with pytest.raises(ValueError, match="--segmenter ensemble"):
+        PipelineParams(segmenter="learned", sky_net="x.onnx")
+    missing = tmp_path / "missing.onnx"
+    with pytest.raises(FileNotFoundError, match=r"missing\.onnx"):
+        process_survey(survey_dir, tmp_path / "o", PipelineParams(sky_net=str(missing)),
+                       progress=False)
+    assert main(["process", str(survey_dir), "--out", str(tmp_path / "c"), "--quiet",
+                 "--sky-net", str(missing)]) == 2
