@@ -263,9 +263,17 @@ def cmd_evaluate_sky(args: argparse.Namespace) -> int:
     for data in args.data:
         if not Path(data).is_dir():
             raise CliError(f"--data {data}: no such folder (give a folder of photos and masks)")
+    classifier = None
+    if args.sky_net is not None:
+        from predisat.segmentation import SkyOptions
+        from predisat.skycnn import SkyNet, classifier_with_net
+
+        method = args.method or SkyOptions().method
+        classifier = classifier_with_net(method, SkyNet.load(args.sky_net))
     for data in args.data:
         out = None if args.out is None else Path(args.out) / Path(data).name
-        result = evaluate_folder(data, out, progress=not args.quiet, method=args.method)
+        result = evaluate_folder(data, out, progress=not args.quiet, method=args.method,
+                                 classifier=classifier)
         print(f"{data} ({result.layout}):")
         print(result.summary.to_string(index=False))
         if out is not None:
@@ -395,6 +403,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="write per-image tables and worst-case sheets")
     p.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
                    "library's default, see docs/segmentation.md)")
+    p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
+                   "card) instead of the shipped one, for --method cnn or ensemble")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate_sky)
 

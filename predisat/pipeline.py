@@ -133,11 +133,14 @@ class PipelineParams:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
-        if self.sky_net is not None and self.segmenter not in _NET_METHODS:
-            raise ValueError(
-                f"sky_net {self.sky_net} is used by the segmenters {_NET_METHODS}, not by "
-                f"{self.segmenter!r}; choose one of them (CLI: --segmenter ensemble)"
-            )
+        if self.sky_net is not None:
+            from predisat.skycnn import NET_METHODS
+
+            if self.segmenter not in NET_METHODS:
+                raise ValueError(
+                    f"sky_net {self.sky_net} is used by the segmenters {NET_METHODS}, not by "
+                    f"{self.segmenter!r}; choose one of them (CLI: --segmenter ensemble)"
+                )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form (recorded in every chunk's provenance)."""
@@ -153,8 +156,6 @@ class PipelineParams:
             out["sky_net"] = {"path": str(self.sky_net), "sha256": sky_net_sha256(self.sky_net)}
         return out
 
-
-_NET_METHODS = ("cnn", "ensemble")
 
 
 def sky_net_sha256(path: str | os.PathLike[str]) -> str:
@@ -235,10 +236,9 @@ def default_segmenter(
 @functools.lru_cache(maxsize=4)
 def _candidate_classifier(method: str, sky_net: str) -> Any:
     # read once per process and file, not once per frame
-    from predisat.skycnn import SkyEnsemble, SkyNet
+    from predisat.skycnn import SkyNet, classifier_with_net
 
-    net = SkyNet.load(sky_net)
-    return net if method == "cnn" else SkyEnsemble.with_net(net)
+    return classifier_with_net(method, SkyNet.load(sky_net))
 
 
 @dataclass(frozen=True)

@@ -36,9 +36,12 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.skyfeatures import working_size
 from predisat.skymodel import SkyClassifier, _sigmoid
 
-__all__ = ["DEFAULT_NET", "SkyEnsemble", "SkyNet", "network_input"]
+__all__ = ["DEFAULT_NET", "NET_METHODS", "SkyEnsemble", "SkyNet", "classifier_with_net",
+           "network_input"]
 
 DEFAULT_NET = "sky_unet.onnx"
+#: The segmentation methods that run a network (and can run a candidate instead of the shipped one).
+NET_METHODS = ("cnn", "ensemble")
 _FORMAT = "predisat-sky-unet"
 
 
@@ -214,6 +217,29 @@ class SkyEnsemble:
                 p = np.asarray(cv2.resize(p, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
             out += np.float32(wt / total) * p
         return out
+
+
+def classifier_with_net(method: str, net: SkyNet) -> SkyNet | SkyEnsemble:
+    """The probability model of a segmentation method with ``net`` as its network.
+
+    Parameters
+    ----------
+    method : {"cnn", "ensemble"}
+        ``"cnn"``: the network alone; ``"ensemble"``: :meth:`SkyEnsemble.with_net`.
+    net : SkyNet
+        A candidate network (:meth:`SkyNet.load`).
+
+    Returns
+    -------
+    SkyNet or SkyEnsemble
+        For ``predisat.segmentation.segment_sky(..., classifier=)``.
+    """
+    if method not in NET_METHODS:
+        raise ValueError(
+            f"method {method!r} runs no network, so a sky network {net.path} has no use there; "
+            f"choose one of {NET_METHODS} (CLI: --method / --segmenter ensemble)"
+        )
+    return net if method == "cnn" else SkyEnsemble.with_net(net)
 
 
 @lru_cache(maxsize=1)

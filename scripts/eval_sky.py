@@ -26,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from predisat.segmentation import METHODS
-from predisat.skycnn import SkyEnsemble, SkyNet
+from predisat.skycnn import SkyNet, classifier_with_net
 from predisat.skyeval import evaluate_folder, worst_cases_sheet
 
 
@@ -53,8 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.net is not None:
         if args.method not in ("cnn", "ensemble"):
             parser.error("--net needs --method cnn or --method ensemble")
-        net = SkyNet.load(args.net)
-        classifier = net if args.method == "cnn" else SkyEnsemble.with_net(net)
+        classifier = classifier_with_net(args.method, SkyNet.load(args.net))
     summaries = []
     sheet: list = []
     for data in args.data:

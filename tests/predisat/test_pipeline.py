@@ -22,6 +22,8 @@ from predisat.pipeline import (
     process_survey,
 )
 
+from .candidate_net import net_copy
+
 CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
 PARAMS = PipelineParams(chunk_m=30.0)  # 3 chunks over 3000..3060 m
 
@@ -304,21 +306,6 @@ def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> N
     assert np.array_equal(again[1], conf)
 
 
-def _net_copy(folder: Path, input_px: int | None = None) -> Path:
-    """The shipped sky network copied to ``folder`` (its card's input size changed if given)."""
-    import json
-    from importlib import resources
-
-    folder.mkdir(parents=True)
-    src = resources.files("predisat") / "data" / "models"
-    (folder / "net.onnx").write_bytes((src / "sky_unet.onnx").read_bytes())
-    card = json.loads((src / "sky_unet.json").read_text())
-    if input_px is not None:
-        card["input_px"] = input_px
-    (folder / "net.json").write_text(json.dumps(card))
-    return folder / "net.onnx"
-
-
 def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) -> None:
     import json
 
@@ -326,7 +313,7 @@ def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) ->
 
     base = process_survey(survey_dir, tmp_path / "base", PipelineParams(chunk_m=30.0),
                           progress=False)
-    same = _net_copy(tmp_path / "same")
+    same = net_copy(tmp_path / "same")
     out = tmp_path / "cand"
     res = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(same)),
                          progress=False)
@@ -337,7 +324,7 @@ def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) ->
     assert "sky_net" not in json.loads((tmp_path / "base" / "provenance.json").read_text())[
         "params"]
     # another network into the same folder: nothing of the first is reused
-    other = _net_copy(tmp_path / "other", input_px=96)
+    other = net_copy(tmp_path / "other", input_px=96)
     assert sky_net_sha256(other) != sky_net_sha256(same)
     again = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(other)),
                            progress=False)
