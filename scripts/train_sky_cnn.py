@@ -11,7 +11,8 @@ default, reproduces the shipped one (about 7 min of data and 26 min of training 
 ``e1`` and ``e2`` are the larger candidates of 2026-12-02 (10000 photos and ``SCENERY_RUNS``;
 about 20 min of data and 1.3-1.8 h of training), not shipped: each fails a segmentation test;
 ``e3`` is ``e1`` with the loss weighted three times on obstacle pixels (``Recipe.obstacle_weight``);
-``e4`` carries ``e3``'s network to a 192 px input (``--init`` its ONNX; 10 min).
+``e4`` carries ``e3``'s network to a 192 px input (``--init`` its ONNX; 10 min), ``e5`` the same
+for ten epochs instead of four.
 ``--photos``, ``--survey-repeat``, ``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
@@ -133,6 +134,9 @@ RECIPES = {
                  bf16=True, obstacle_weight=3.0),
     # e3 carried to a 192 px input: a few epochs from its weights (batch normalisation folded)
     "e4": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=3000, survey_repeat=2, epochs=4,
+                 bf16=True, obstacle_weight=3.0, input_px=192, init="e3", lr_max=5e-4),
+    # e4 with ten epochs instead of four
+    "e5": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=3000, survey_repeat=2, epochs=10,
                  bf16=True, obstacle_weight=3.0, input_px=192, init="e3", lr_max=5e-4),
 }
 DEFAULT_RECIPE = "v2"
