@@ -157,7 +157,6 @@ class PipelineParams:
         return out
 
 
-
 def sky_net_sha256(path: str | os.PathLike[str]) -> str:
     """SHA-256 of a sky network: its ONNX file and its card (the card sets the input size).
 
