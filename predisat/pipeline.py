@@ -646,9 +646,10 @@ def process_survey(
             f"survey {survey.root} names no track file; pass track= (CLI: --track FILE)"
         )
     out = Path(out_dir)
+    params_dict = p.to_dict()  # hashes a candidate network's files once, for both keys
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
     if p.sky_net is not None:
-        seg_code += "-net" + sky_net_sha256(p.sky_net)[:12]
+        seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
     chunk_dir, cache_dir = out / "chunks", out / "cache" / f"seg-{p.segmenter}-{seg_code}"
     chunk_dir.mkdir(parents=True, exist_ok=True)
     cache_dir.mkdir(parents=True, exist_ok=True)
@@ -677,7 +678,7 @@ def process_survey(
         "survey": str(survey.root),
         "survey_hash": survey_hash(survey),
         "track": str(getattr(trk, "name", "")),
-        "params": p.to_dict(),
+        "params": params_dict,
         "reverse": bool(survey.reverse),
         "antenna_height_m": float(survey.antenna_height_m),
     }
