@@ -50,16 +50,14 @@ def ideal_frames(
     s = np.asarray(chainage_m, float)
     ant = world.antenna_enu(s, antenna_height_m)
     hd = np.asarray(world.track.heading_at(s), float)
-    out = []
-    for i in range(s.size):
-        for side in ("left", "right"):
-            m = Mount.default(side)  # type: ignore[arg-type]
-            sky = ideal_sky_mask(world, s[i], camera, m, antenna_height_m, reverse, caster=caster)
-            out.append(
-                FrameView(float(s[i]), sky, camera, m, ant[i], float(hd[i]), reverse,
-                          frame_id=f"{s[i]:.0f}{side[0]}")
-            )  # fmt: skip
-    return out
+    mounts = {side: Mount.default(side) for side in ("left", "right")}  # type: ignore[arg-type]
+    sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=caster)
+           for k, m in mounts.items()}
+    return [
+        FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,
+                  frame_id=f"{s[i]:.0f}{k[0]}")
+        for i in range(s.size) for k, m in mounts.items()
+    ]  # fmt: skip
 
 
 def sectors(heading_deg: np.ndarray, az_deg: np.ndarray) -> np.ndarray:

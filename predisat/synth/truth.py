@@ -428,7 +428,7 @@ def is_blocked(
 
 def ideal_sky_mask(
     world: Any,
-    chainage_m: float,
+    chainage_m: ArrayLike,
     camera: Any,
     mount: Any,
     antenna_height_m: float = 4.0,
@@ -437,7 +437,8 @@ def ideal_sky_mask(
     *,
     caster: Caster | None = None,
 ) -> NDArray:
-    """Sky mask of a frame with no segmentation error: no L-band-blocking hit on its centre ray.
+    """Sky masks of frames with no segmentation error: no L-band-blocking hit on each pixel's
+    centre ray.
 
     Thin L-band-transparent structures (wires, masts) are sky, as the thin-structure policy
     wants; pixels outside a fisheye's image circle are not sky.
@@ -445,8 +446,8 @@ def ideal_sky_mask(
     Parameters
     ----------
     world : World
-    chainage_m : float
-        Frame position along the track, metres.
+    chainage_m : array_like, shape (*S)
+        Frame positions along the track, metres.
     camera : CameraModel
     mount : Mount
         The camera's mount on the vehicle (lever arm from the antenna included).
@@ -459,14 +460,17 @@ def ideal_sky_mask(
 
     Returns
     -------
-    ndarray of bool, shape (H, W)
+    ndarray of bool, shape (*S, H, W)
     """
     from predisat.synth.render import camera_pose
 
-    pos, rot = camera_pose(world, chainage_m, mount, antenna_height_m, reverse)
-    rays = camera.pixel_to_ray(*camera.pixel_grid())
+    s = np.asarray(chainage_m, float)
+    cast = _caster(world, backend, caster)
+    rays = camera.pixel_to_ray(*camera.pixel_grid())  # once for every frame
     good = np.all(np.isfinite(rays), axis=-1)
-    d = rays[good] @ rot.T
-    sky = np.zeros(camera.shape, bool)
-    sky[good] = ~_caster(world, backend, caster).occluded(np.broadcast_to(pos, d.shape), d)
-    return sky
+    sky = np.zeros((s.size, *camera.shape), bool)
+    for k, sk in enumerate(s.ravel()):
+        pos, rot = camera_pose(world, float(sk), mount, antenna_height_m, reverse)
+        d = rays[good] @ rot.T
+        sky[k][good] = ~cast.occluded(np.broadcast_to(pos, d.shape), d)
+    return sky.reshape(*s.shape, *camera.shape)

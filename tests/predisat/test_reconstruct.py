@@ -39,15 +39,14 @@ def frames_for(
     s = np.asarray(chainage_m, float)
     ant = world.antenna_enu(s)
     hd = np.asarray(world.track.heading_at(s), float)
-    out = []
-    for i in range(s.size):
-        for side in ("left", "right"):
-            m = Mount.default(side)
-            if not lever_arm:
-                m = Mount(side, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
-            sky = ideal_sky_mask(world, s[i], camera, m, reverse=reverse, caster=caster)
-            out.append(FrameView(float(s[i]), sky, camera, m, ant[i], float(hd[i]), reverse))
-    return out
+    mounts = {side: Mount.default(side) for side in ("left", "right")}
+    if not lever_arm:
+        mounts = {k: Mount(k, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
+                  for k, m in mounts.items()}
+    sky = {k: ideal_sky_mask(world, s, camera, m, reverse=reverse, caster=caster)
+           for k, m in mounts.items()}
+    return [FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse)
+            for i in range(s.size) for k, m in mounts.items()]
 
 
 def rel_bins(heading_deg: float, az_deg: np.ndarray, rel_deg: float) -> int:
