@@ -26,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from predisat.segmentation import METHODS
-from predisat.skycnn import SkyNet, classifier_with_net
+from predisat.skycnn import NET_METHODS, SkyNet, classifier_with_net
 from predisat.skyeval import evaluate_folder, worst_cases_sheet
 
 
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     classifier = None
     if args.net is not None:
-        if args.method not in ("cnn", "ensemble"):
+        if args.method not in NET_METHODS:
             parser.error("--net needs --method cnn or --method ensemble")
         classifier = classifier_with_net(args.method, SkyNet.load(args.net))
     summaries = []

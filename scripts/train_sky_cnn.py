@@ -46,7 +46,7 @@ import multiprocessing
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -122,22 +122,20 @@ class Recipe:
     lr_max: float = 3e-3
 
 
+# candidates of 2026-12-02, not shipped (each fails a test; docs/segmentation.md)
+_E1 = Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20, bf16=True)
+# e1 with the loss weighted three times on obstacle pixels
+_E3 = replace(_E1, obstacle_weight=3.0)
+# e3 carried to a 192 px input: a few epochs from its weights (batch normalisation folded)
+_E4 = replace(_E3, photos=3000, epochs=4, input_px=192, init="e3", lr_max=5e-4)
 RECIPES = {
     # shipped since 2026-12-01
     "v2": Recipe(BASE_RUNS, photos=4000, survey_repeat=3, epochs=14, bf16=False),
-    # candidates of 2026-12-02, not shipped (each fails a test; docs/segmentation.md)
-    "e1": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
-                 bf16=True),
-    "e2": Recipe(BASE_RUNS + SCENERY_RUNS, photos=10000, survey_repeat=3, epochs=25, bf16=True),
-    # e1 with the loss weighted three times on obstacle pixels (2026-12-02, later)
-    "e3": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20,
-                 bf16=True, obstacle_weight=3.0),
-    # e3 carried to a 192 px input: a few epochs from its weights (batch normalisation folded)
-    "e4": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=3000, survey_repeat=2, epochs=4,
-                 bf16=True, obstacle_weight=3.0, input_px=192, init="e3", lr_max=5e-4),
-    # e4 with ten epochs instead of four
-    "e5": Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=3000, survey_repeat=2, epochs=10,
-                 bf16=True, obstacle_weight=3.0, input_px=192, init="e3", lr_max=5e-4),
+    "e1": _E1,
+    "e2": replace(_E1, runs=BASE_RUNS + SCENERY_RUNS, survey_repeat=3, epochs=25),
+    "e3": _E3,
+    "e4": _E4,
+    "e5": replace(_E4, epochs=10),  # e4 with ten epochs instead of four
 }
 DEFAULT_RECIPE = "v2"
 CNN_VALIDATION_RUNS = train_sky.VALIDATION_RUNS[:1]
