@@ -428,7 +428,11 @@ def main(argv: list[str] | None = None) -> int:
             f"starts from a network of --recipe {recipe.init}: give its ONNX file with --init"
             if recipe.init else "trains from scratch: drop --init"))
     if args.init is not None:
-        card = json.loads(args.init.with_suffix(".json").read_text(encoding="utf-8"))
+        card_path = args.init.with_suffix(".json")
+        if not (args.init.is_file() and card_path.is_file()):
+            parser.error(f"--init {args.init}: it or its card {card_path.name} is missing; give "
+                         f"the sky_unet.onnx that --recipe {recipe.init} wrote (card beside it)")
+        card = json.loads(card_path.read_text(encoding="utf-8"))
         if card.get("recipe") != recipe.init:
             parser.error(f"--init {args.init}: its card names recipe {card.get('recipe')!r}, "
                          f"--recipe {args.recipe} starts from {recipe.init!r}")
