@@ -2,8 +2,8 @@
 
 Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.0``)::
 
-    python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn            # data + training
-    python scripts/train_sky_cnn.py --work /tmp/predisat_sky_cnn --epochs 2  # a quick try
+    python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2 --work /tmp/predisat_sky_cnn
+    python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2 --epochs 2  # a quick try
     python scripts/train_sky_cnn.py --recipe e1 --out /tmp/e1  # a candidate (docs/segmentation.md)
 
 ``--recipe`` names the training data and schedule of a network (``RECIPES``). The shipped
@@ -11,6 +11,9 @@ network is ``e8`` (the default), made in two steps::
 
     python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2   # 7 min data, 26 min training
     python scripts/train_sky_cnn.py --recipe e8 --init /tmp/v2/sky_unet.onnx   # 35 min
+
+(the second step writes ``predisat/data/models``, the shipped network; give ``--out`` to
+keep it elsewhere).
 
 ``v2`` is the network shipped from 2026-12-01 (128 px input); ``e8`` carries it to a 192 px
 input for ten epochs, on 3000 procedural photos and ``e1``'s rendered surveys. The ``v2``
@@ -148,7 +151,7 @@ RECIPES = {
     "e5": replace(_E4, epochs=10),  # e4 with ten epochs instead of four
     # e4 with the six cloud-against-facade runs (SCENERY_RUNS[24:]) that e1, e3 and e4 leave out
     "e6": replace(_E4, runs=BASE_RUNS + SCENERY_RUNS),
-    # e4's data and schedule from the shipped network's weights instead of e3's
+    # e4's data and schedule from v2's weights instead of e3's
     "e7": replace(_E4, init="v2"),
     # shipped since 2026-12-02: e7 with ten epochs instead of four
     "e8": replace(_E4, init="v2", epochs=10),
@@ -427,8 +430,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="times each rendered survey frame appears per epoch (recipe's)")
     parser.add_argument("--input-px", type=int, help="network input side (recipe's)")
     parser.add_argument("--init", type=Path, metavar="ONNX",
-                        help="the network to start from, for a recipe that names one (e4: the "
-                        "sky_unet.onnx written by --recipe e3)")
+                        help="the network to start from, for a recipe that names one (e4-e6: the "
+                        "sky_unet.onnx written by --recipe e3; e7, e8: the one of --recipe v2, "
+                        "or the v2 file of commit 2e40b4d)")
     parser.add_argument("--channels", default="8,16,32,48,64", help="U-Net widths per level")
     parser.add_argument("--epochs", type=int, help="(recipe's)")
     parser.add_argument("--batch", type=int, default=16)
