@@ -29,35 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.camera import CameraModel, Mount, default_camera
+from predisat.camera import default_camera
 from predisat.masks import BinSource
-from predisat.reconstruct import FrameView, Reconstruction, ReconstructionParams, Reconstructor
+from predisat.reconstruct import Reconstruction, ReconstructionParams, Reconstructor
 from predisat.synth.raycast import make_caster
-from predisat.synth.truth import ideal_sky_mask, true_masks
+from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import World, WorldSpec
 from predisat.track import demo_track
-
-
-def ideal_frames(
-    world: World,
-    caster,
-    chainage_m: np.ndarray,
-    camera: CameraModel,
-    antenna_height_m: float = 4.0,
-    reverse: bool = False,
-) -> list[FrameView]:
-    """Left and right frames with ideal sky masks (no L-band-blocking hit) at chainages."""
-    s = np.asarray(chainage_m, float)
-    ant = world.antenna_enu(s, antenna_height_m)
-    hd = np.asarray(world.track.heading_at(s), float)
-    mounts = {side: Mount.default(side) for side in ("left", "right")}  # type: ignore[arg-type]
-    sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=caster)
-           for k, m in mounts.items()}
-    return [
-        FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,
-                  frame_id=f"{s[i]:.0f}{k[0]}")
-        for i in range(s.size) for k, m in mounts.items()
-    ]  # fmt: skip
 
 
 def sectors(heading_deg: np.ndarray, az_deg: np.ndarray) -> np.ndarray:
@@ -101,7 +79,7 @@ def run_camera(
     ov = params.overlap_m
     f_s = np.arange(max(world.extent_m[0], lo - ov), min(world.extent_m[1], hi + ov) + 1e-9, 10.0)
     t0 = time.perf_counter()
-    frames = ideal_frames(world, caster, f_s, camera)
+    frames = ideal_frames(world, f_s, camera, caster=caster)
     t_frames = time.perf_counter() - t0
     rec = Reconstructor(params)
     parts = []

@@ -461,8 +461,8 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--init {args.init}: it or its card {card_path.name} is missing; give "
                          f"the sky_unet.onnx that --recipe {recipe.init} wrote (card beside it)")
         card = json.loads(card_path.read_text(encoding="utf-8"))
-        if (card.get("recipe") is None
-                and hashlib.sha256(args.init.read_bytes()).hexdigest() == V2_ONNX_SHA256):
+        init_sha256 = hashlib.sha256(args.init.read_bytes()).hexdigest()
+        if card.get("recipe") is None and init_sha256 == V2_ONNX_SHA256:
             card["recipe"] = "v2"
         if card.get("recipe") != recipe.init:
             parser.error(f"--init {args.init}: its card names recipe {card.get('recipe')!r}, "
@@ -505,7 +505,7 @@ def main(argv: list[str] | None = None) -> int:
         "obstacle_weight": recipe.obstacle_weight,
         "init": None if args.init is None else {
             "recipe": recipe.init,
-            "sha256": hashlib.sha256(args.init.read_bytes()).hexdigest()},
+            "sha256": init_sha256},
         "lr_max": recipe.lr_max,
         "photos": {"first_seed": PHOTO_SEED0, "n": args.photos},
         "recipe": args.recipe,

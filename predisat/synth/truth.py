@@ -28,6 +28,7 @@ from predisat.synth.raycast import Caster, make_caster
 __all__ = [
     "SIDES",
     "TrueMasks",
+    "ideal_frames",
     "ideal_sky_mask",
     "is_blocked",
     "obstacle_descriptors",
@@ -474,3 +475,51 @@ def ideal_sky_mask(
         d = rays[good] @ rot.T
         sky[k][good] = ~cast.occluded(np.broadcast_to(pos, d.shape), d)
     return sky.reshape(*s.shape, *camera.shape)
+
+
+def ideal_frames(
+    world: Any,
+    chainage_m: ArrayLike,
+    camera: Any,
+    mounts: dict[str, Any] | None = None,
+    antenna_height_m: float = 4.0,
+    reverse: bool = False,
+    backend: str = "open3d",
+    *,
+    caster: Caster | None = None,
+) -> list[Any]:
+    """Frames with ideal sky masks (:func:`ideal_sky_mask`) at chainages, for the reconstruction.
+
+    Parameters
+    ----------
+    world : World
+    chainage_m : array_like, shape (n,)
+        Frame positions along the track, metres.
+    camera : CameraModel
+    mounts : dict of str to Mount, optional
+        Cameras by side; default ``Mount.default`` for ``"left"`` and ``"right"``.
+    antenna_height_m, reverse, backend, caster
+        As for :func:`ideal_sky_mask`.
+
+    Returns
+    -------
+    list of predisat.reconstruct.FrameView
+        ``n * len(mounts)`` frames, position by position, in the order of ``mounts``; frame id
+        chainage and side initial (``"3000l"``).
+    """
+    from predisat.camera import Mount
+    from predisat.reconstruct import FrameView
+
+    if mounts is None:
+        mounts = {side: Mount.default(side) for side in ("left", "right")}
+    s = np.asarray(chainage_m, float).ravel()
+    cast = _caster(world, backend, caster)
+    ant = world.antenna_enu(s, antenna_height_m)
+    hd = np.asarray(world.track.heading_at(s), float)
+    sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=cast)
+           for k, m in mounts.items()}
+    return [
+        FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,
+                  frame_id=f"{s[i]:.0f}{k[0]}")
+        for i in range(s.size) for k, m in mounts.items()
+    ]  # fmt: skip

@@ -14,7 +14,7 @@ from predisat.camera import CameraModel, Mount
 from predisat.masks import BinSource, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor, _ray_distances
 from predisat.synth.raycast import make_caster
-from predisat.synth.truth import ideal_sky_mask, true_masks
+from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 
 from .reference_march import reference_march
@@ -36,17 +36,11 @@ def frames_for(
 ) -> list[FrameView]:
     """Left and right frames with ideal sky masks (ray cast, L-band blocking faces only)."""
     caster = make_caster(world, "open3d", lband_only=True)
-    s = np.asarray(chainage_m, float)
-    ant = world.antenna_enu(s)
-    hd = np.asarray(world.track.heading_at(s), float)
     mounts = {side: Mount.default(side) for side in ("left", "right")}
     if not lever_arm:
         mounts = {k: Mount(k, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
                   for k, m in mounts.items()}
-    sky = {k: ideal_sky_mask(world, s, camera, m, reverse=reverse, caster=caster)
-           for k, m in mounts.items()}
-    return [FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse)
-            for i in range(s.size) for k, m in mounts.items()]
+    return ideal_frames(world, chainage_m, camera, mounts, reverse=reverse, caster=caster)
 
 
 def rel_bins(heading_deg: float, az_deg: np.ndarray, rel_deg: float) -> int:
