@@ -56,7 +56,7 @@ def main() -> None:
     n = args.frames
     chain = np.linspace(lo, hi, n // 2 + n % 2 + 2)[1:-1]
     jobs = [(float(c), side) for c in chain for side in ("left", "right")][:n]
-    mounts = {side: Mount.default(side) for side in ("left", "right")}  # type: ignore[arg-type]
+    mounts = {side: Mount.default(side) for side in ("left", "right")}
 
     results: dict[str, dict] = {}
     labels: dict[str, list[np.ndarray]] = {}

@@ -26,6 +26,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -161,7 +162,7 @@ def main() -> None:
     print(f"world + truth: {time.perf_counter() - t0:.1f} s, {s_pos.size} positions")
     params = ReconstructionParams(cell_m=args.cell, reach_m=args.reach)
     kinds = ("pinhole", "fisheye") if args.camera == "both" else (args.camera,)
-    report = {
+    report: dict[str, Any] = {
         "world": {"track": track.name, "from_m": args.lo, "to_m": args.hi, "seed": args.seed,
                   "stretches": [s.to_dict() for s in spec.stretches]},
         "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in params.__dict__.items()},

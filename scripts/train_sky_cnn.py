@@ -286,6 +286,7 @@ def load_onnx_weights(net: Any, path: Path) -> None:
             if w.shape != tuple(mod.weight.shape):
                 raise ValueError(f"{path}: convolution {node.name} is {w.shape}, the network's "
                                  f"is {tuple(mod.weight.shape)}; give the matching --channels")
+            assert mod.bias is not None  # UNet's convolutions all have a bias
             mod.weight.copy_(torch.from_numpy(np.array(w)))
             mod.bias.copy_(torch.from_numpy(np.array(b)))
 
@@ -304,7 +305,7 @@ def augment(
     x: np.ndarray, y: np.ndarray, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
     """Flips, gain / white balance / offset jitter, grey images, random crops (new arrays)."""
-    xf = x.astype(np.float32)
+    xf: np.ndarray = x.astype(np.float32)  # float64 after the gain below, as trained
     yo = y.copy()
     n = len(xf)
     flip = rng.random(n) < 0.5
