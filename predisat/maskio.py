@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import textwrap
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -480,6 +481,10 @@ def _single_position(masks: MaskSet, chainage_m: float) -> int:
     return int(idx)
 
 
+_COMMENT_WIDTH = 120
+"""Longest comment line of the text exports, characters (RTKLIB reads at most 255)."""
+
+
 def _comment_block(prefix: str, masks: MaskSet, i: int, include_margin: bool) -> str:
     src = masks.source[i]
     lines = [
@@ -494,7 +499,14 @@ def _comment_block(prefix: str, masks: MaskSet, i: int, include_margin: bool) ->
         f"provenance: {json.dumps(masks.provenance, sort_keys=True)}",
     ]
     lead = f"{prefix} " if prefix else ""
-    return "".join(f"{lead}{line}\n" for line in lines)
+    # RTKLIB's readelmask reads 255-byte chunks (fgets into char[256]): the rest of a longer
+    # comment line would be parsed as "AZ EL" data, so every line is wrapped well below that.
+    wrapped = (
+        part
+        for line in lines
+        for part in textwrap.wrap(line, _COMMENT_WIDTH - len(lead), break_on_hyphens=False)
+    )
+    return "".join(f"{lead}{part}\n" for part in wrapped)
 
 
 def _rtklib_value(el_deg: float) -> str:

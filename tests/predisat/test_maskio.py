@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 
 import numpy as np
@@ -294,16 +295,25 @@ def test_urbannav_header_option(tmp_path):
 
 
 def read_rtklib_elmask(path):
-    """RTKLIB readelmask as documented: 'AZ EL' lines, text after % or # ignored; EL_i holds
-    for AZ_i <= az < AZ_{i+1}; stored as int16 tenths of a degree, truncated."""
+    """RTKLIB readelmask (rtkcmn.c, 2.4.3), transcribed: fgets into char[256] (chunks of at
+    most 255 bytes, so a longer line goes on as a new "line"), text after % or # ignored, a
+    chunk counts when it starts with two numbers, at most 360 of them; EL_i holds for
+    AZ_i <= az < AZ_{i+1}, stored as int16 tenths of a degree, truncated."""
+    chunks = []
+    for line in path.read_bytes().decode("ascii").splitlines(keepends=True):
+        chunks += [line[k:k + 255] for k in range(0, len(line), 255)]
     az, el = [], []
-    for line in path.read_text().splitlines():
-        line = line.split("%")[0].split("#")[0]
-        parts = line.split()
-        if len(parts) >= 2:
-            az.append(float(parts[0]))
-            el.append(float(parts[1]))
-    assert len(az) <= 360
+    for chunk in chunks:
+        if len(az) >= 360:
+            break
+        text = chunk.split("%")[0].split("#")[0]
+        m = re.match(r"\s*([-+.\deE]+)\s+([-+.\deE]+)", text)  # sscanf("%lf %lf") == 2
+        if m:
+            try:
+                az.append(float(m.group(1)))
+                el.append(float(m.group(2)))
+            except ValueError:
+                continue
     elmask = np.zeros(360, int)
     j, mask = 0, 0.0
     for i in range(360):
@@ -330,6 +340,27 @@ def test_rtklib_mask_is_conservative_after_rtklib_truncation(tmp_path):
     # RTKLIB testelmask: masked when el < elmask[floor(az)] * 0.1
     assert (elmask[np.floor(az).astype(int)] * 0.1 >= m.mask_at(ch, az) - 1e-5).all()
     assert path.read_text().startswith("% PREDISAT mask at chainage")
+
+
+def test_rtklib_mask_ignores_long_provenance(tmp_path):
+    # A provenance longer than RTKLIB's 255-byte line buffer, whose continuation would parse as
+    # an "AZ EL" pair (and push the last azimuth out of RTKLIB's 360 slots) unless wrapped.
+    base = make_set(step=0.5)
+    ch = float(base.chainage_m[4])
+    ref, _ = read_rtklib_elmask(to_rtklib_mask(base, ch, tmp_path / "ref.txt"))
+    long = MaskSet.from_arrays(
+        base.chainage_m, base.lat_deg, base.lon_deg, base.h_m, base.heading_deg,
+        base.mask_el_deg, az_step_deg=0.5, source=base.source, margin_deg=base.margin_deg,
+        provenance={"survey": "x" * 236 + " 45 80 " + "y" * 300, "note": "10 5 " * 80},
+    )  # fmt: skip
+    path = to_rtklib_mask(long, ch, tmp_path / "long.txt")
+    lines = path.read_text().splitlines()
+    assert max(len(line) for line in lines) < 255
+    assert sum(line.startswith("%") for line in lines) > 5  # the provenance was wrapped, kept
+    assert "x" * 100 in path.read_text().replace("\n% ", "")
+    elmask, el = read_rtklib_elmask(path)
+    assert el.size == 360
+    np.testing.assert_array_equal(elmask, ref)
 
 
 def test_rtklib_values_survive_truncation_for_awkward_tenths(tmp_path):
