@@ -289,6 +289,39 @@ def cmd_process(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from predisat import maskio
+
+    path = Path(args.masks)
+    if path.is_dir():
+        path = path / "masks.parquet"
+    chainage_m: float | None = args.chainage
+    if args.format == "urbannav":
+        if chainage_m is not None:
+            raise CliError("--chainage: urbannav exports every position; drop it, or choose "
+                           "--format rtklib or pvgis for one position")
+    elif chainage_m is None:
+        raise CliError(f"--format {args.format} exports one position: give --chainage M")
+    masks = maskio.read_masks(path)
+    include = not args.bare
+    if args.format == "urbannav":
+        out = maskio.to_urbannav_csv(masks, args.out, include_margin=include, header=args.header)
+        what = f"{masks.n_pos} positions"
+    else:
+        assert chainage_m is not None  # checked above
+        ch_m = float(chainage_m)
+        i, _ = masks.position_index(ch_m)
+        what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
+        if args.format == "rtklib":
+            out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)
+        else:
+            out = maskio.to_pvgis_horizon(masks, ch_m, args.out, layout=args.pvgis_layout,
+                                          include_margin=include)  # fmt: skip
+    kind = "bare mask" if args.bare else "mask + margin"
+    print(f"export: {args.format} ({kind}, {what}) -> {out}")
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from predisat.evaluate import evaluate_from_args
 
@@ -389,6 +422,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_evaluate_arguments(p)
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        "export",
+        help="write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
+        description=(
+            "Convert a mask file (or a `predisat process` output folder) for other tools: "
+            "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
+            "position: 'AZ EL' lines for RTKLIB's elevation-mask option) or pvgis (one "
+            "position: horizon table). Values are the mask plus its margin, never below the "
+            "mask at any azimuth the reader may look up (docs/mask-format.md)."
+        ),
+    )
+    p.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
+    p.add_argument("--format", required=True, choices=("urbannav", "rtklib", "pvgis"))
+    p.add_argument("--out", required=True, type=Path, metavar="FILE", help="output file")
+    p.add_argument("--chainage", type=float, metavar="M",
+                   help="rtklib and pvgis: the position (nearest surveyed position), metres")
+    p.add_argument("--bare", action="store_true", help="the mask without its margin")
+    p.add_argument("--header", action="store_true", help="urbannav: a header row")
+    p.add_argument("--pvgis-layout", choices=("table", "userhorizon"), default="table",
+                   help="pvgis: the horizon-profile table (default) or PVGIS's upload file")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser(
         "evaluate-sky",

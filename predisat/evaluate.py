@@ -115,6 +115,8 @@ class Comparison:
         Mask positions with no truth position within the tolerance (left out).
     heading_deg : ndarray, shape (n_pos,), optional
         Track heading at the positions (direction of increasing chainage), degrees.
+    margin_deg : ndarray, shape (n_pos, n_az), optional
+        The mask file's own margins on the same bins, degrees (None: no margin).
     """
 
     chainage_m: NDArray
@@ -125,6 +127,7 @@ class Comparison:
     az_deg: NDArray
     unmatched: int = 0
     heading_deg: NDArray | None = None
+    margin_deg: NDArray | None = None
 
     @property
     def error_deg(self) -> NDArray:
@@ -192,6 +195,9 @@ def compare(masks: MaskSet, truth: Any, tol_m: float = 0.5) -> Comparison:
         az_deg=az,
         unmatched=int((~ok).sum()),
         heading_deg=np.asarray(heading, float),
+        margin_deg=np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape)[mi][:, k].astype(
+            float
+        ),
     )
 
 
@@ -439,7 +445,8 @@ def evaluate_masks(
     Columns: ``sector``, ``source``, ``n_bins``, ``median_error_deg``, ``p95_error_deg``
     (signed ``mask - truth``), ``median_abs_error_deg``, ``p95_abs_error_deg``,
     ``unsafe_share`` (bins with ``mask < truth - 0.1``), and for margin 0 and for ``margins``
-    (when given): ``false_trust[_margin]`` (trusted directions truly blocked / trusted),
+    (when given; else the mask file's own margins, when any is above 0):
+    ``false_trust[_margin]`` (trusted directions truly blocked / trusted),
     ``sky_lost[_margin]`` (truly visible directions not trusted / truly visible).
     """
     err = comparison.error_deg.ravel()
@@ -447,11 +454,11 @@ def evaluate_masks(
     t = comparison.truth_el_deg.ravel()
     sec = comparison.sector.ravel()
     src = np.array([_SOURCE_NAMES[int(c)] for c in range(3)])[comparison.source.ravel()]
-    marg = (
-        margins.margin_for(comparison.sector, comparison.source).ravel()
-        if margins is not None
-        else None
-    )
+    marg = None
+    if margins is not None:
+        marg = margins.margin_for(comparison.sector, comparison.source).ravel()
+    elif comparison.margin_deg is not None and (comparison.margin_deg > 0).any():
+        marg = np.asarray(comparison.margin_deg, float).ravel()
     rows = []
     groups = [(s, c) for s in (*SECTORS, "all") for c in (*_SOURCE_NAMES.values(), "all")]
     for s_name, c_name in groups:
@@ -529,6 +536,9 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
             margins.to_json(out / "margins.json")
             margins.table.to_csv(out / "margins.csv", index=False)
     table = evaluate_masks(comp, margins)
+    file_margins = margins is None and comp.margin_deg is not None and (comp.margin_deg > 0).any()
+    if file_margins:
+        print("the *_margin columns use the mask file's own margins (margin_deg)")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(4).to_string(index=False))
     if comp.unmatched:
@@ -538,14 +548,21 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
         doc = {
             "masks": str(path),
             "truth": str(args.truth),
-            "margins": None if margins is None else margins.table.to_dict(orient="records"),
+            "margins": (
+                margins.table.to_dict(orient="records") if margins is not None
+                else "mask file" if file_margins else None
+            ),
             "n_positions": int(comp.chainage_m.size),
             "rows": json.loads(table.to_json(orient="records")),
         }
         (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
         from predisat.evalfigures import evaluation_figure
 
-        margin = 0.0 if margins is None else margins.margin_for(comp.sector, comp.source)
+        margin: Any = 0.0
+        if margins is not None:
+            margin = margins.margin_for(comp.sector, comp.source)
+        elif file_margins:
+            margin = comp.margin_deg
         fig = evaluation_figure(comp, margin, title=f"{path.name} against {args.truth}")
         fig.savefig(out / "evaluation.png", dpi=100)
         print(f"written {out / 'evaluation.csv'}, evaluation.json, evaluation.png")

@@ -76,7 +76,9 @@ class BinSource(IntEnum):
     RECONSTRUCTED = 1
     """Not seen here; filled from the 3-D reconstruction of neighbouring frames."""
     ASSUMED = 2
-    """Neither seen nor reconstructed: set to a conservative default (treated as blocked)."""
+    """Neither seen nor reconstructed: the value rests on an unknown cell (an obstacle up to its
+    bound) or on the stated far-field default (``ReconstructionParams.far_default_deg``), and
+    is flagged so that a margin, or the user, can treat it apart."""
 
 
 class _Track(Protocol):  # the part of predisat.track.TrackMap used here

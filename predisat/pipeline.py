@@ -78,7 +78,7 @@ DEFAULT_SEGMENTER = "ensemble"
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
 
 
-class BadFrameError(RuntimeError):
+class BadFrameError(ValueError):
     """A bad frame met with ``strict=True``; the message names the frame and the fix."""
 
 
@@ -270,8 +270,8 @@ def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | N
             elif meta.get("image_stat") is not None:
                 return None
             return _decode_cache(z, meta, job.frame_id)
-    except (OSError, ValueError, KeyError):
-        return None  # a damaged cache entry is recomputed
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None  # a damaged cache entry (e.g. emptied by a power cut) is recomputed
 
 
 def _decode_cache(
@@ -564,6 +564,42 @@ def _run_key(provenance: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
+    """(MarginTable or None, its provenance record) from a table, a path or None."""
+    from predisat.evaluate import MarginTable
+
+    if margins is None:
+        return None, {}
+    record: dict[str, Any]
+    if isinstance(margins, MarginTable):
+        table, record = margins, {"file": None}
+    else:
+        path = Path(margins)
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"margins: {path} does not exist; write it with `predisat evaluate MASKS "
+                "--truth DIR --calibrate --out DIR` (margins.json)"
+            )
+        try:
+            table = MarginTable.from_json(path)
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(
+                f"margins: {path} is not a margin table (JSON from `predisat evaluate "
+                f"--calibrate`): {exc}"
+            ) from exc
+        record = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    bad = ~np.isfinite(table.table["margin_deg"].to_numpy(float)) | (
+        table.table["margin_deg"].to_numpy(float) < 0
+    )
+    if bad.any():
+        raise ValueError(
+            f"margins {record['file']}: margin_deg must be finite and >= 0 (row "
+            f"{int(np.flatnonzero(bad)[0])}); recalibrate with `predisat evaluate --calibrate`"
+        )
+    record |= {"target": table.target, "table": table.table.to_dict(orient="records")}
+    return table, record
+
+
 def _report(msg: str, quiet: bool) -> None:
     if not quiet:
         print(msg, file=sys.stderr, flush=True)
@@ -580,6 +616,7 @@ def process_survey(
     progress: bool = True,
     segmenter: Segmenter | None = None,
     max_chunks: int | None = None,
+    margins: Any = None,
 ) -> ProcessResult:
     """Process a survey folder into masks, in resumable chainage chunks.
 
@@ -606,6 +643,10 @@ def process_survey(
     max_chunks : int, optional
         Compute at most this many pending chunks; when chunks remain, stop without merging by
         raising :class:`RunStopped` (simulates an interrupted run). ``None``: all.
+    margins : predisat.evaluate.MarginTable or path-like, optional
+        Calibrated trust margins (``predisat evaluate --calibrate`` writes ``margins.json``),
+        written per bin into the mask file's ``margin_deg`` and recorded in its provenance.
+        They are applied at the merge, so changing them redoes no chunk. Default: 0 deg.
 
     Returns
     -------
@@ -625,6 +666,7 @@ def process_survey(
     p = params or PipelineParams()
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    margin_table, margin_prov = _load_margins(margins)  # before hours of work, not after
     if segmenter is None:
         from predisat.segmentation import METHODS
 
@@ -658,16 +700,21 @@ def process_survey(
     for prob in survey.problems:
         fid = prob.frame_id or f"manifest line {prob.row}"
         bad.setdefault(fid, BadFrame(fid, str(prob), "load"))
-    if bad and strict:
-        first = next(iter(bad.values()))
-        raise BadFrameError(f"survey {survey.root}: bad frame {first.frame_id}: {first.message}")
-
     fr = survey.frames
     ch = np.round(np.asarray(fr.chainage_m, float), _CHAINAGE_DECIMALS)
     finite = np.isfinite(ch)
     for i in np.flatnonzero(~finite):
         fid = str(fr.frame_id[i])
-        bad.setdefault(fid, BadFrame(fid, "no chainage (not on the track)", "load"))
+        bad.setdefault(fid, BadFrame(
+            fid, "no chainage (not on the track): give chainage_m in the manifest, or a "
+            "position near the survey's track", "load",
+        ))  # fmt: skip
+    if bad and strict:
+        first = next(iter(bad.values()))
+        raise BadFrameError(
+            f"survey {survey.root}: bad frame {first.frame_id}: {first.message} "
+            "(run without --strict to skip it)"
+        )
     if not finite.any():
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
     positions = np.unique(ch[finite])
@@ -730,7 +777,9 @@ def process_survey(
             jobs.append(job)
         elif isinstance(cached, BadFrame):
             if strict:
-                raise BadFrameError(f"bad frame {fid}: {cached.message}")
+                raise BadFrameError(
+                    f"bad frame {fid}: {cached.message} (run without --strict to skip it)"
+                )
             bad.setdefault(fid, cached)
 
     # one pool of worker processes for both stages (with workers > 1, started when needed)
@@ -805,7 +854,11 @@ def process_survey(
         "bad_frames": len(bad_list),
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
     }
+    if margin_table is not None:
+        final_prov["margins"] = margin_prov
     merged = concat_masksets(parts, final_prov)
+    if margin_table is not None:
+        merged = margin_table.apply(merged)
     masks_path = write_masks(merged, out / "masks.parquet")
     _write_bad_frames(out / "bad_frames.csv", bad_list)
     timings["merge"] = time.perf_counter() - t3
@@ -832,12 +885,18 @@ def _version() -> str:
 
 
 def _chunk_finished(chunk_dir: Path, name: str, run_key: str) -> bool:
+    import pyarrow.parquet as pq
+
     marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
     if not (marker.is_file() and data.is_file()):
         return False
     try:
-        return bool(json.loads(marker.read_text()).get("run_key") == run_key)
-    except (OSError, ValueError):
+        if json.loads(marker.read_text()).get("run_key") != run_key:
+            return False
+        # A power cut after the rename may leave an empty or torn file (no fsync, for speed):
+        # a chunk whose Parquet footer does not read, or holds no row, is redone.
+        return bool(pq.read_metadata(data).num_rows > 0)
+    except (OSError, ValueError, AttributeError):
         return False
 
 
@@ -961,6 +1020,11 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
         help="a candidate sky network (with its .json card) instead of the shipped one, for "
         "--segmenter cnn or ensemble; recorded in the provenance",
     )  # fmt: skip
+    parser.add_argument(
+        "--margins", type=Path, metavar="FILE",
+        help="calibrated trust margins (margins.json of `predisat evaluate --calibrate`) "
+        "written into the mask file; default 0 deg",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -982,4 +1046,5 @@ def process_from_args(args: argparse.Namespace) -> ProcessResult:
         workers=args.workers,
         strict=args.strict,
         progress=not args.quiet,
+        margins=args.margins,
     )

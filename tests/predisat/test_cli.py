@@ -116,3 +116,70 @@ def test_evaluate_sky_with_a_candidate_network(
     code = cli.main(["evaluate-sky", "--data", str(data), "--method", "learned",
                      "--sky-net", str(tmp_path / "same" / "net.onnx")])
     assert code == 2 and "runs no network" in capsys.readouterr().err
+
+
+def test_process_strict_and_bad_margins_fail_cleanly(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import csv
+
+    from predisat.camera import CameraModel
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    generate_survey(
+        demo_track(), 4000.0, 4020.0, sky="clear", seed=4, out_dir=tmp_path,
+        camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False,
+    )  # fmt: skip
+    survey = tmp_path / "survey"
+    with open(survey / "manifest.csv", newline="") as fh:
+        victim = list(csv.DictReader(fh))[2]
+    (survey / victim["image"]).write_bytes(b"not a jpeg")
+    base = ["process", str(survey), "--quiet", "--chunk-m", "100"]
+
+    capsys.readouterr()
+    assert cli.main([*base, "--out", str(tmp_path / "a"), "--margins", "nope.json"]) == 2
+    err = capsys.readouterr().err
+    assert "nope.json" in err and "--calibrate" in err and "Traceback" not in err
+
+    assert cli.main([*base, "--out", str(tmp_path / "b"), "--strict"]) == 2
+    err = capsys.readouterr().err
+    assert victim["frame_id"] in err and "without --strict" in err and "Traceback" not in err
+    assert not (tmp_path / "b" / "masks.parquet").exists()
+
+    assert cli.main([*base, "--out", str(tmp_path / "c")]) == 0  # skipped, listed
+    with open(tmp_path / "c" / "bad_frames.csv", newline="") as fh:
+        assert [r["frame_id"] for r in csv.DictReader(fh)] == [victim["frame_id"]]
+
+
+def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from predisat import maskio
+
+    from .test_maskio import make_set
+
+    masks = make_set(step=0.5)
+    src = maskio.write_masks(masks, tmp_path / "masks.parquet")
+    ch = float(masks.chainage_m[3]) + 1.0
+    want = {
+        "urbannav": maskio.to_urbannav_csv(masks, tmp_path / "u.csv"),
+        "rtklib": maskio.to_rtklib_mask(masks, ch, tmp_path / "r.txt"),
+        "pvgis": maskio.to_pvgis_horizon(masks, ch, tmp_path / "p.txt"),
+    }
+    for fmt, ref in want.items():
+        out = tmp_path / f"cli_{fmt}"
+        extra = [] if fmt == "urbannav" else ["--chainage", str(ch)]
+        assert cli.main(["export", str(src), "--format", fmt, "--out", str(out), *extra]) == 0
+        assert out.read_bytes() == ref.read_bytes()
+    bare = tmp_path / "bare.txt"
+    assert cli.main(["export", str(tmp_path), "--format", "rtklib", "--out", str(bare),
+                     "--chainage", str(ch), "--bare"]) == 0  # fmt: skip
+    assert bare.read_bytes() == maskio.to_rtklib_mask(
+        masks, ch, tmp_path / "rb.txt", include_margin=False
+    ).read_bytes()
+    capsys.readouterr()
+    assert cli.main(["export", str(src), "--format", "rtklib", "--out", str(bare)]) == 2
+    assert "--chainage" in capsys.readouterr().err
+    assert cli.main(["export", str(src), "--format", "pvgis", "--out", str(bare),
+                     "--chainage", "1e7"]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "outside" in err and "Traceback" not in err

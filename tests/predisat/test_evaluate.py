@@ -242,3 +242,59 @@ def test_a_group_from_few_positions_takes_its_sectors_margin() -> None:
     # with the threshold lowered the same group is calibrated on its own
     alone = calibrate_margin(small, target=0.999, min_positions=1).table
     assert alone[(alone.source == "reconstructed") & (alone.n_bins > 0)].sampled.all()
+
+
+def test_process_writes_margins_and_evaluate_uses_them(
+    tiny: tuple[Path, Path], tmp_path: Path
+) -> None:
+    import dataclasses
+    import hashlib
+    import shutil
+
+    import pandas as pd
+
+    from predisat.maskio import read_masks, write_masks
+    from predisat.pipeline import PipelineParams, process_survey
+
+    synth, masks_dir = tiny
+    lut = {("cross", "observed"): 1.0, ("cross", "reconstructed"): 2.0,
+           ("cross", "assumed"): 3.0, ("along", "observed"): 4.0,
+           ("along", "reconstructed"): 5.0, ("along", "assumed"): 6.0}  # fmt: skip
+    rows = [{"sector": k[0], "source": k[1], "margin_deg": v} for k, v in lut.items()]
+    MarginTable(pd.DataFrame(rows), 0.999).to_json(tmp_path / "margins.json")
+    with pytest.raises(FileNotFoundError, match=r"nope\.json"):
+        process_survey(synth / "survey", tmp_path / "x", margins=tmp_path / "nope.json")
+    assert not (tmp_path / "x" / "chunks").exists()  # refused before any work
+
+    out = tmp_path / "resumed"
+    shutil.copytree(masks_dir, out)
+    res = process_survey(synth / "survey", out, PipelineParams(chunk_m=500.0), progress=False,
+                         margins=tmp_path / "margins.json")  # fmt: skip
+    assert res.chunks_done == 0 and res.chunks_skipped >= 1  # margins redo no chunk
+    bare, got = read_masks(masks_dir / "masks.parquet"), read_masks(out / "masks.parquet")
+    np.testing.assert_array_equal(got.mask_el_deg, bare.mask_el_deg)
+    # the expected margin per bin, from the sector rule written out here
+    rel = np.mod(got.az_deg[None, :] - got.heading_deg[:, None], 180.0)
+    cross = np.abs(rel - 90.0) <= 45.0
+    names = np.array(["observed", "reconstructed", "assumed"])[got.source]
+    want = np.vectorize(lambda c, n: lut[("cross" if c else "along", n)])(cross, names)
+    np.testing.assert_array_equal(np.broadcast_to(got.margin_deg, want.shape), want)
+    sha = hashlib.sha256((tmp_path / "margins.json").read_bytes()).hexdigest()
+    assert got.provenance["margins"]["sha256"] == sha
+
+    # evaluate reads a file's margins: false trust counted on the explicit elevation grid.
+    # This tiny survey's masks are closed (90 deg), so the masks are the truth plus noise here.
+    truth = load_truth(synth)
+    rows_t = [int(np.argmin(np.abs(truth.chainage_m - s))) for s in got.chainage_m]
+    noisy = truth.mask_el_deg[rows_t] + np.random.default_rng(1).normal(0.0, 3.0, want.shape)
+    masks = dataclasses.replace(got, mask_el_deg=np.clip(noisy, 0.0, 90.0).astype(np.float32))
+    path = write_masks(masks, tmp_path / "noisy.parquet")
+    res_table = evaluate_masks(compare(read_masks(path), truth))
+    g = GRID[None, None, :]
+    trusted = g > (masks.mask_el_deg.astype(float) + want)[..., None]
+    vis = g > truth.mask_el_deg[rows_t][..., None]
+    assert 0 < (trusted & ~vis).sum() < trusted.sum()
+    all_row = res_table[(res_table.sector == "all") & (res_table.source == "all")].iloc[0]
+    assert all_row.false_trust_margin == pytest.approx(1.0 - (trusted & vis).sum() / trusted.sum())
+    assert all_row.sky_lost_margin == pytest.approx(1.0 - (trusted & vis).sum() / vis.sum())
+    assert all_row.sky_lost_margin > all_row.sky_lost  # the margins cost sky

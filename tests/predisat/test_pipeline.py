@@ -108,6 +108,21 @@ def test_resume_redoes_only_the_missing_chunk(first_run, survey_dir: Path, tmp_p
     np.testing.assert_array_equal(res.masks.source, res0.masks.source)
 
 
+def test_resume_redoes_files_emptied_by_a_power_cut(first_run, survey_dir: Path, tmp_path) -> None:
+    out0, (res0, _) = first_run
+    out = tmp_path / "copy"
+    shutil.copytree(out0, out)
+    (out / "chunks" / "3060_3090.parquet").write_bytes(b"")  # renamed, data never flushed
+    cache = sorted((out / "cache").rglob("*.npz"))
+    cache[0].write_bytes(b"")
+    cache[1].write_bytes(cache[1].read_bytes()[:100])  # torn zip
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    assert (res.chunks_done, res.chunks_skipped) == (1, 2)
+    assert len(seg.calls) == 2  # the two damaged cache entries, recomputed
+    np.testing.assert_array_equal(res.masks.mask_el_deg, res0.masks.mask_el_deg)
+
+
 def test_interrupted_run_resumes(survey_dir: Path, tmp_path: Path) -> None:
     out = tmp_path / "masks"
     with pytest.raises(RunStopped):
