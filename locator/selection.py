@@ -3,7 +3,8 @@
 The locator picks satellites before it knows exactly where it is: a satellite is trusted only
 if it is above the effective mask (mask + margin, plus an optional extra margin) in its azimuth
 bin at *every* position of the current interval ``[lo, hi]``, i.e. above
-:meth:`predisat.masks.MaskSet.worst_case` of that stretch (DESIGN.md, "The trust decision").
+:meth:`predisat.masks.MaskSet.worst_case` of that stretch (`../shared/docs/DESIGN.md`, "The
+trust decision").
 
 Approximation: the satellite's azimuth and elevation are taken at one point of the interval
 (its centre, or wherever the caller computed them). Seen from two points ``d`` apart, a

@@ -29,7 +29,7 @@ DEMO_FROM_KM = 4.0
 DEMO_TO_KM = 6.0
 DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the demo quick
 # The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
-# the pinhole the masks lose ~70 % of the visible sky instead of ~40 % (docs/pipeline.md).
+# the pinhole the masks lose 63-65 % of the visible sky instead of 14-16 % (docs/pipeline.md).
 DEMO_CAMERA = "fisheye"
 
 

@@ -306,7 +306,7 @@ def _npz_bytes(arrays: dict[str, Any]) -> bytes:
     """An ``.npz`` archive of ``arrays`` (what ``np.load`` reads), deflated at level 1.
 
     ``np.savez_compressed`` deflates at level 6: 0.32 ms per 640x480 frame's entry against
-    0.19 ms here, for 4.0 instead of 3.7 kB (2026-12-03).
+    0.19 ms here, for 4.0 instead of 3.7 kB (2026-12-02).
     """
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
@@ -919,7 +919,7 @@ def _progress(total: int, desc: str, enabled: bool) -> Any:
 class _Pool:
     """The worker processes of a run, started on first use and shared by both stages.
 
-    Before 2026-12-03 each stage started its own pool, so every worker imported the package,
+    Before 2026-12-02 each stage started its own pool, so every worker imported the package,
     loaded the models and the numba caches twice (about a second per worker and stage).
     """
 
