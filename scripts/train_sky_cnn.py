@@ -514,6 +514,11 @@ def main(argv: list[str] | None = None) -> int:
         "survey_repeat": args.survey_repeat,
         "loss_per_epoch": [round(v, 5) for v in losses],
         "torch": torch.__version__,
+        # what a retrain must match to give the same bytes: the training arrays themselves and
+        # the CPU (oneDNN picks its kernels, hence its rounding, by instruction set)
+        "data_sha256": {"x": hashlib.sha256(x.tobytes()).hexdigest(),
+                        "y": hashlib.sha256(y.tobytes()).hexdigest()},
+        "cpu": _cpu_name(),
         "validation": {
             "photos": {"first_seed": HOLDOUT_PHOTO_SEED0, "n": N_HOLDOUT_PHOTOS,
                        "pooled_iou": pooled_iou(onnx_path, size, held_photos)},
@@ -528,6 +533,22 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(card["validation"], indent=1))
     print(f"wrote {onnx_path} ({onnx_path.stat().st_size / 1e6:.2f} MB) and its card")
     return 0
+
+
+def _cpu_name() -> str:
+    """The CPU model and its widest vector extension, as Linux reports them."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        import platform
+
+        return platform.processor() or platform.machine()
+    model = next((ln.split(":", 1)[1].strip() for ln in info.splitlines()
+                  if ln.startswith("model name")), "unknown")  # fmt: skip
+    flags = next((ln.split(":", 1)[1].split() for ln in info.splitlines()
+                  if ln.startswith("flags")), [])  # fmt: skip
+    widest = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "none")
+    return f"{model} ({widest})"
 
 
 if __name__ == "__main__":
