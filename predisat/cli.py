@@ -40,19 +40,21 @@ def render_demo_survey(
     workers: int = 1,
     progress: bool = True,
     spacing_m: float = 10.0,
+    from_km: float = DEMO_FROM_KM,
+    to_km: float = DEMO_TO_KM,
 ) -> SynthResult:
-    """The demo's synthetic survey: line 144 km ``DEMO_FROM_KM``-``DEMO_TO_KM``, mixed scenery
-    and skies, the default ``camera`` (``"fisheye"`` or ``"pinhole"``) resized to
-    ``DEMO_IMAGE_SIZE_PX``, a position every ``spacing_m``
-    (:func:`predisat.synth.generate.generate_survey`)."""
+    """The demo's synthetic survey: line 144 km ``from_km``-``to_km`` (default
+    ``DEMO_FROM_KM``-``DEMO_TO_KM``), mixed scenery and skies, the default ``camera``
+    (``"fisheye"`` or ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``, a position every
+    ``spacing_m`` (:func:`predisat.synth.generate.generate_survey`)."""
     from predisat import track as trackmod
     from predisat.camera import default_camera
     from predisat.synth.generate import generate_survey
 
     return generate_survey(
         trackmod.demo_track(),
-        DEMO_FROM_KM * 1000.0,
-        DEMO_TO_KM * 1000.0,
+        from_km * 1000.0,
+        to_km * 1000.0,
         sky="mixed",
         seed=seed,
         out_dir=out_dir,
@@ -186,15 +188,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     track = trackmod.demo_track()
+    lo_km, hi_km = args.from_km, args.to_km
+    top_km = float(track.length_m) / 1000.0
+    if not 0.0 <= lo_km < hi_km <= top_km:
+        raise CliError(f"--from-km {lo_km} --to-km {hi_km}: need 0 <= from < to <= {top_km:.2f} "
+                       f"(the demo track's length)")
     print(
-        f"demo: {track.name}, chainage {DEMO_FROM_KM:.1f}-{DEMO_TO_KM:.1f} km, mixed scenery and "
+        f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
         f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
     )
     t0 = time.perf_counter()
     print("demo 1/5: rendering the synthetic survey and its ground truth")
     synth = render_demo_survey(
-        out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet
-    )
+        out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet,
+        from_km=lo_km, to_km=hi_km,
+    )  # fmt: skip
     t_synth = time.perf_counter() - t0
     sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
 
@@ -477,6 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
         help=f"side camera model (default {DEMO_CAMERA})",
     )  # fmt: skip
+    p.add_argument("--from-km", type=float, default=DEMO_FROM_KM, metavar="KM",
+                   help=f"start of the stretch (default {DEMO_FROM_KM})")
+    p.add_argument("--to-km", type=float, default=DEMO_TO_KM, metavar="KM",
+                   help=f"end of the stretch (default {DEMO_TO_KM}; a shorter one is quicker)")
     p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)

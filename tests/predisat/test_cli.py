@@ -183,3 +183,34 @@ def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture
                      "--chainage", "1e7"]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert "outside" in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_demo_end_to_end_on_a_short_stretch(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from predisat.maskio import read_masks
+    from predisat.synth.truth import TrueMasks
+
+    out = tmp_path / "demo"
+    assert cli.main(["demo", "--out", str(out), "--from-km", "4.0", "--to-km", "4.1",
+                     "--workers", "1", "--quiet"]) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert "demo 5/5" in printed and "demo: done" in printed
+    masks = read_masks(out / "masks" / "masks.parquet")
+    np.testing.assert_allclose(masks.chainage_m, np.arange(4000.0, 4100.1, 10.0), atol=1e-3)
+    for name in ("evaluation.png", "contact_sheet.png", "availability/report.html",
+                 "locator/summary.csv"):  # fmt: skip
+        assert (out / name).stat().st_size > 0, name
+    # the masks' safety, counted here on a 0.1 deg elevation grid against the rendered truth
+    truth = TrueMasks.load(out / "truth" / "true_masks.npz")
+    rows = [int(np.argmin(np.abs(truth.chainage_m - s))) for s in masks.chainage_m]
+    assert truth.az_deg.size == masks.n_az
+    grid = (np.arange(900) + 0.5) * 0.1
+    trusted = grid[None, None, :] > masks.effective_mask_deg.astype(float)[..., None]
+    visible = grid[None, None, :] > truth.mask_el_deg[rows][..., None]
+    assert trusted.sum() > 0.2 * visible.sum()  # the masks open a real share of the sky
+    assert (trusted & ~visible).sum() <= 0.001 * trusted.sum()  # the 99.9 % target
+    capsys.readouterr()
+    assert cli.main(["demo", "--out", str(out), "--from-km", "5", "--to-km", "4"]) == 2
+    assert "--from-km" in capsys.readouterr().err
