@@ -18,8 +18,11 @@ keep it elsewhere).
 ``v2`` is the network shipped from 2026-12-01 (128 px input); ``e8`` carries it to a 192 px
 input for ten epochs, on 3000 procedural photos and ``e1``'s rendered surveys. The ``v2``
 file itself is in the history (``git show 2e40b4d:predisat/data/models/sky_unet.onnx`` and
-``.json``): ``--init`` on it is how the shipped ``e8`` was made (a retrained ``v2`` was not
-checked to be byte-identical).
+``.json``): ``--init`` on it is how the shipped ``e8`` was made. Checked on 2026-12-02: the
+second step on that file gives the shipped ``sky_unet.onnx`` byte for byte; a ``v2`` retrained
+from scratch does not give the ``v2`` file (trained the day before, perhaps on another
+machine: the losses agree to 2-3 decimals, the card's validation IoU is 0.901 / 0.977 against
+0.907 / 0.981), so start from the file in the history to get the shipped network.
 Candidates of 2026-12-02, not shipped (docs/segmentation.md): ``e1`` and ``e2`` (10000 photos
 and ``SCENERY_RUNS``; about 20 min of data and 1.3-1.8 h of training) each fail a
 segmentation test; ``e3`` is ``e1`` with the loss weighted three times on obstacle pixels
