@@ -488,7 +488,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from-km", type=float, default=DEMO_FROM_KM, metavar="KM",
                    help=f"start of the stretch (default {DEMO_FROM_KM})")
     p.add_argument("--to-km", type=float, default=DEMO_TO_KM, metavar="KM",
-                   help=f"end of the stretch (default {DEMO_TO_KM}; a shorter one is quicker)")
+                   help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
+                   "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
+                   "cut out of the default demo's")
     p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)

@@ -536,9 +536,12 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
             margins.to_json(out / "margins.json")
             margins.table.to_csv(out / "margins.csv", index=False)
     table = evaluate_masks(comp, margins)
-    file_margins = margins is None and comp.margin_deg is not None and (comp.margin_deg > 0).any()
+    own = comp.margin_deg is not None and bool((comp.margin_deg > 0).any())
+    file_margins = margins is None and own
     if file_margins:
         print("the *_margin columns use the mask file's own margins (margin_deg)")
+    elif own:
+        print("the *_margin columns use the margin table, not the mask file's own margins")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(4).to_string(index=False))
     if comp.unmatched:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import textwrap
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -465,7 +464,8 @@ def to_pvgis_horizon(
         for k in range(n_directions + 1):
             f.write(f"{-180.0 + k * step:.1f}\t\t{h[k % n_directions]:.2f}\n")
         f.write("\nA: azimuth (deg, 0 = south, 90 = west, -90 = east)\n")
-        f.write("H_hor: horizon height (deg) = PREDISAT effective mask, conservative\n")
+        what = "effective mask (mask + margin)" if include_margin else "mask without margin"
+        f.write(f"H_hor: horizon height (deg) = PREDISAT {what}, conservative\n")
         f.write(_comment_block("", masks, i, include_margin))
     return path
 
@@ -500,13 +500,16 @@ def _comment_block(prefix: str, masks: MaskSet, i: int, include_margin: bool) ->
     ]
     lead = f"{prefix} " if prefix else ""
     # RTKLIB's readelmask reads 255-byte chunks (fgets into char[256]): the rest of a longer
-    # comment line would be parsed as "AZ EL" data, so every line is wrapped well below that.
-    wrapped = (
-        part
-        for line in lines
-        for part in textwrap.wrap(line, _COMMENT_WIDTH - len(lead), break_on_hyphens=False)
-    )
-    return "".join(f"{lead}{part}\n" for part in wrapped)
+    # comment line would be parsed as "AZ EL" data, so every line is cut well below that.
+    # Continuation lines start with "+ " (never a number, even without a comment prefix);
+    # dropping the lead and the "+ " and joining gives the line back exactly.
+    width = _COMMENT_WIDTH - len(lead) - 2
+    out = []
+    for line in lines:
+        parts = [line[k : k + width] for k in range(0, max(len(line), 1), width)]
+        out.append(f"{lead}{parts[0]}\n")
+        out.extend(f"{lead}+ {part}\n" for part in parts[1:])
+    return "".join(out)
 
 
 def _rtklib_value(el_deg: float) -> str:

@@ -36,6 +36,7 @@ import os
 import sys
 import time
 import zipfile
+import zlib
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
@@ -50,7 +51,7 @@ from numpy.typing import NDArray
 from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
 from predisat.maskio import read_masks, write_masks
-from predisat.masks import MaskError, MaskSet
+from predisat.masks import BinSource, MaskError, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
 
 __all__ = [
@@ -270,7 +271,7 @@ def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | N
             elif meta.get("image_stat") is not None:
                 return None
             return _decode_cache(z, meta, job.frame_id)
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
         return None  # a damaged cache entry (e.g. emptied by a power cut) is recomputed
 
 
@@ -565,8 +566,11 @@ def _run_key(provenance: dict[str, Any]) -> str:
 
 
 def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
-    """(MarginTable or None, its provenance record) from a table, a path or None."""
-    from predisat.evaluate import MarginTable
+    """(MarginTable or None, its provenance record) from a table, a path or None; every check
+    is made here, before any work, so that a bad table never stops a run at its merge."""
+    import pandas as pd
+
+    from predisat.evaluate import SECTORS, MarginTable
 
     if margins is None:
         return None, {}
@@ -582,21 +586,38 @@ def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
             )
         try:
             table = MarginTable.from_json(path)
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        except (json.JSONDecodeError, UnicodeDecodeError, TypeError, KeyError) as exc:
             raise ValueError(
                 f"margins: {path} is not a margin table (JSON from `predisat evaluate "
                 f"--calibrate`): {exc}"
             ) from exc
         record = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
-    bad = ~np.isfinite(table.table["margin_deg"].to_numpy(float)) | (
-        table.table["margin_deg"].to_numpy(float) < 0
-    )
+    sources = tuple(c.name.lower() for c in BinSource)
+    where = f"margins {record['file']}"
+    fix = "write it with `predisat evaluate MASKS --truth DIR --calibrate`"
+    t = table.table
+    missing = {"sector", "source", "margin_deg"} - set(t.columns)
+    if missing:
+        raise ValueError(f"{where}: no column(s) {sorted(missing)}; {fix}")
+    margin = pd.to_numeric(t["margin_deg"], errors="coerce").to_numpy(float)
+    bad = ~np.isfinite(margin) | (margin < 0)
     if bad.any():
-        raise ValueError(
-            f"margins {record['file']}: margin_deg must be finite and >= 0 (row "
-            f"{int(np.flatnonzero(bad)[0])}); recalibrate with `predisat evaluate --calibrate`"
-        )
-    record |= {"target": table.target, "table": table.table.to_dict(orient="records")}
+        raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
+                         f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
+    # every group must be spelled out: a missing or misspelt one would take the table's largest
+    # margin silently (MarginTable.margin_for), which may be 0 where calibration says 90
+    pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
+    want = {(s, c) for s in SECTORS for c in sources}
+    if not want <= pairs:
+        raise ValueError(f"{where}: no margin for (sector, source) {sorted(want - pairs)}; "
+                         f"a table needs all of {sorted(want)}; {fix}")  # fmt: skip
+    odd = {p for p in pairs - want if "*" not in p}
+    if odd:
+        raise ValueError(f"{where}: unknown (sector, source) {sorted(odd)}; sectors are "
+                         f"{list(SECTORS)}, sources {list(sources)}; {fix}")  # fmt: skip
+    # NaN (los_share of an empty group) becomes null: the provenance is strict JSON
+    record |= {"target": table.target, "table": json.loads(t.to_json(orient="records"))}
+    json.dumps(record, allow_nan=False)
     return table, record
 
 
@@ -891,11 +912,13 @@ def _chunk_finished(chunk_dir: Path, name: str, run_key: str) -> bool:
     if not (marker.is_file() and data.is_file()):
         return False
     try:
-        if json.loads(marker.read_text()).get("run_key") != run_key:
+        done = json.loads(marker.read_text())
+        if done.get("run_key") != run_key:
             return False
         # A power cut after the rename may leave an empty or torn file (no fsync, for speed):
-        # a chunk whose Parquet footer does not read, or holds no row, is redone.
-        return bool(pq.read_metadata(data).num_rows > 0)
+        # a chunk whose Parquet footer does not read, or holds other than its rows, is redone.
+        rows = pq.read_metadata(data).num_rows
+        return bool(rows > 0 and rows == done.get("n_positions", rows))
     except (OSError, ValueError, AttributeError):
         return False
 

@@ -298,3 +298,42 @@ def test_process_writes_margins_and_evaluate_uses_them(
     assert all_row.false_trust_margin == pytest.approx(1.0 - (trusted & vis).sum() / trusted.sum())
     assert all_row.sky_lost_margin == pytest.approx(1.0 - (trusted & vis).sum() / vis.sum())
     assert all_row.sky_lost_margin > all_row.sky_lost  # the margins cost sky
+
+
+def test_process_checks_margin_tables_before_any_work(
+    tiny: tuple[Path, Path], tmp_path: Path
+) -> None:
+    import shutil
+
+    import pandas as pd
+
+    from predisat.pipeline import PipelineParams, process_survey
+
+    synth, masks_dir = tiny
+    # a real calibration: groups without bins get 90 deg and NaN shares (null in JSON)
+    real = calibrate_margin(_synthetic_comparison())
+    assert real.table.los_share.isna().any()
+    real.to_json(tmp_path / "real.json")
+    out = tmp_path / "resumed"
+    shutil.copytree(masks_dir, out)
+    res = process_survey(synth / "survey", out, PipelineParams(chunk_m=500.0), progress=False,
+                         margins=tmp_path / "real.json")  # fmt: skip
+    rec = res.masks.provenance["margins"]["table"]
+    assert len(rec) == 6 and any(r["los_share"] is None for r in rec)
+
+    good = [{"sector": s, "source": c, "margin_deg": 1.0}
+            for s in ("cross", "along") for c in ("observed", "reconstructed", "assumed")]
+    cases = {
+        "no margin for": good[:-1],  # one group missing: it would take the largest silently
+        "unknown": [*good, {"sector": "Cross", "source": "observed", "margin_deg": 0.0}],
+        "finite and >= 0": [*good[:-1], {**good[-1], "margin_deg": -1.0}],
+        "no column": [{k: v for k, v in r.items() if k != "source"} for r in good],
+    }
+    for i, (message, rows) in enumerate(cases.items()):
+        MarginTable(pd.DataFrame(rows), 0.999).to_json(tmp_path / f"bad{i}.json")
+        with pytest.raises(ValueError, match=message):
+            process_survey(synth / "survey", tmp_path / f"x{i}", margins=tmp_path / f"bad{i}.json")
+        assert not (tmp_path / f"x{i}" / "chunks").exists()
+    (tmp_path / "junk.json").write_text("[1, 2]")
+    with pytest.raises(ValueError, match=r"not a margin table|no 'target'"):
+        process_survey(synth / "survey", tmp_path / "y", margins=tmp_path / "junk.json")

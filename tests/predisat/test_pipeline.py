@@ -113,12 +113,15 @@ def test_resume_redoes_files_emptied_by_a_power_cut(first_run, survey_dir: Path,
     out = tmp_path / "copy"
     shutil.copytree(out0, out)
     (out / "chunks" / "3060_3090.parquet").write_bytes(b"")  # renamed, data never flushed
+    # a readable Parquet file holding other rows than its marker says (1 position, not 3)
+    shutil.copy(out0 / "chunks" / "3060_3090.parquet", out / "chunks" / "3030_3060.parquet")
+    # every chunk needs every frame of this 60 m survey, so any two cache entries are read
     cache = sorted((out / "cache").rglob("*.npz"))
     cache[0].write_bytes(b"")
     cache[1].write_bytes(cache[1].read_bytes()[:100])  # torn zip
     seg = CountingSegmenter()
     res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
-    assert (res.chunks_done, res.chunks_skipped) == (1, 2)
+    assert (res.chunks_done, res.chunks_skipped) == (2, 1)
     assert len(seg.calls) == 2  # the two damaged cache entries, recomputed
     np.testing.assert_array_equal(res.masks.mask_el_deg, res0.masks.mask_el_deg)
 
