@@ -258,6 +258,14 @@ class CameraModel:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @property
+    def centre_pixel_deg(self) -> float:
+        """Angle subtended by one pixel at the principal point (horizontally), degrees."""
+        cx, cy = self.cx, self.cy  # the principal point
+        rays = np.asarray(self.pixel_to_ray(np.array([cx - 0.5, cx + 0.5]), np.array([cy, cy])))
+        a, b = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+        return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+
+    @property
     def shape(self) -> tuple[int, int]:
         """Image shape ``(height_px, width_px)`` as numpy orders it."""
         return (self.height_px, self.width_px)

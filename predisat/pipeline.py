@@ -39,7 +39,7 @@ import zipfile
 import zlib
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from multiprocessing import get_context
 from pathlib import Path
@@ -77,6 +77,7 @@ CACHE_VERSION = 1
 # chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
 DEFAULT_SEGMENTER = "ensemble"
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
+THIN_DEG = 0.7  # docs/segmentation.md, "Thin-structure policy": wires and cables, not masts
 
 
 class BadFrameError(ValueError):
@@ -124,16 +125,25 @@ class PipelineParams:
         ``ensemble`` methods, to try a candidate. Its files' SHA-256 goes into the provenance,
         the resume key and the segmentation cache key, so no result of another network is
         reused.
+    thin_deg : float
+        The thin-structure policy of the default segmenter in angle: obstacle features at most
+        this wide are L-band transparent (``docs/segmentation.md``). Each camera gets
+        ``SkyOptions.thin_px = max(1, round(thin_deg / camera.centre_pixel_deg))`` (3 px on the
+        demo's 640x480 fisheye); 0 disables the policy. Custom segmenters apply their own.
     """
 
     chunk_m: float = 1000.0
     reconstruction: ReconstructionParams = field(default_factory=ReconstructionParams)
     segmenter: str = DEFAULT_SEGMENTER
     sky_net: str | None = None
+    thin_deg: float = THIN_DEG
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
+        if not (math.isfinite(self.thin_deg) and 0.0 <= self.thin_deg < 10.0):
+            raise ValueError(f"thin_deg must lie in [0, 10) degrees (0 disables the "
+                             f"thin-structure policy), got {self.thin_deg}")  # fmt: skip
         if self.sky_net is not None:
             from predisat.skycnn import NET_METHODS
 
@@ -143,6 +153,12 @@ class PipelineParams:
                     f"{self.segmenter!r}; choose one of them (CLI: --segmenter ensemble)"
                 )
 
+    def thin_px(self, camera: CameraModel) -> int:
+        """``SkyOptions.thin_px`` for frames of ``camera`` (see ``thin_deg``)."""
+        if self.thin_deg == 0.0:
+            return 0
+        return max(1, round(self.thin_deg / camera.centre_pixel_deg))
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form (recorded in every chunk's provenance)."""
         rec = {
@@ -151,6 +167,7 @@ class PipelineParams:
         }
         out: dict[str, Any] = {
             "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
+            "thin_deg": self.thin_deg,
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid
@@ -218,16 +235,23 @@ class ProcessResult:
 
 # ---------------------------------------------------------------------- segmentation + cache
 def default_segmenter(
-    image_bgr: NDArray, method: str | None = None, sky_net: str | None = None
+    image_bgr: NDArray,
+    method: str | None = None,
+    sky_net: str | None = None,
+    thin_px: int | None = None,
 ) -> tuple[NDArray, NDArray | None]:
     """:func:`predisat.segmentation.segment_sky`: sky mask and per-column confidence.
 
     ``method`` is one of :data:`predisat.segmentation.METHODS` (default: ``SkyOptions``'s);
-    ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``).
+    ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``);
+    ``thin_px`` the thin-structure width (default ``SkyOptions``'s; the pipeline gives each
+    camera's, ``PipelineParams.thin_px``).
     """
     from predisat.segmentation import SkyOptions, segment_sky
 
     opt = SkyOptions() if method is None else SkyOptions(method=method)
+    if thin_px is not None:
+        opt = replace(opt, thin_px=int(thin_px))
     classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
     seg = segment_sky(image_bgr, opt, classifier=classifier)
     return seg.sky_mask, seg.confidence
@@ -248,6 +272,7 @@ class _FrameJob:
     width_px: int
     height_px: int
     cache_path: str
+    thin_px: int | None = None  # given to the default segmenter only
 
 
 def _stat_key(path: str) -> list[int]:
@@ -263,7 +288,7 @@ def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | N
     try:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-            if meta.get("version") != CACHE_VERSION:
+            if meta.get("version") != CACHE_VERSION or meta.get("thin_px") != job.thin_px:
                 return None
             if os.path.exists(job.image_path):
                 if meta.get("image_stat") != _stat_key(job.image_path):
@@ -291,7 +316,9 @@ def _write_cache(
     job: _FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
 ) -> None:
     stat = _stat_key(job.image_path) if os.path.exists(job.image_path) else None
-    meta: dict[str, Any] = {"version": CACHE_VERSION, "image_stat": stat, "bad": bad}
+    meta: dict[str, Any] = {
+        "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
+    }  # fmt: skip
     arrays: dict[str, Any] = {}
     if result is not None:
         sky, conf = result
@@ -336,7 +363,10 @@ def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | Non
         )
     else:
         try:
-            sky, conf = segmenter(img)
+            if job.thin_px is None:
+                sky, conf = segmenter(img)
+            else:
+                sky, conf = segmenter(img, thin_px=job.thin_px)  # type: ignore[call-arg]
             sky = np.asarray(sky, bool)
             if sky.shape != img.shape[:2]:
                 raise ValueError(f"segmenter returned a {sky.shape} mask for a {img.shape} image")
@@ -785,13 +815,15 @@ def process_survey(
         else np.array([], int)
     )
     cams = {side: (sc.camera, sc.mount) for side, sc in survey.cameras.items()}
+    # the angular thin-structure policy reaches the default segmenter only
+    thin = {side: (p.thin_px(c) if segmenter is None else None) for side, (c, _) in cams.items()}
     jobs = []
     for i in need:
         fid = str(fr.frame_id[i])
         cam = cams[str(fr.side[i])][0]
         job = _FrameJob(
             fid, str(survey.root / str(fr.image[i])), int(cam.width_px), int(cam.height_px),
-            str(cache_dir / f"{fid}.npz"),
+            str(cache_dir / f"{fid}.npz"), thin[str(fr.side[i])],
         )  # fmt: skip
         cached = _read_cache(job)
         if cached is None:
@@ -1044,6 +1076,11 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
         "--segmenter cnn or ensemble; recorded in the provenance",
     )  # fmt: skip
     parser.add_argument(
+        "--thin-deg", type=float, default=THIN_DEG, metavar="DEG",
+        help=f"thin-structure width, degrees: narrower obstacle features (wires, cables) are "
+        f"L-band transparent (default {THIN_DEG}; 0 disables; docs/segmentation.md)",
+    )  # fmt: skip
+    parser.add_argument(
         "--margins", type=Path, metavar="FILE",
         help="calibrated trust margins (margins.json of `predisat evaluate --calibrate`) "
         "written into the mask file; default 0 deg",
@@ -1064,7 +1101,8 @@ def process_from_args(args: argparse.Namespace) -> ProcessResult:
     return process_survey(
         args.survey,
         args.out,
-        PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net),
+        PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
+                       thin_deg=args.thin_deg),
         track=track,
         workers=args.workers,
         strict=args.strict,

@@ -473,3 +473,11 @@ def test_resized_keeps_the_rays_of_the_same_image_points(kind: str) -> None:
     )
     with pytest.raises(ValueError, match="width_px"):
         cam.resized(1, 480)
+
+
+def test_centre_pixel_angle_of_an_ideal_pinhole() -> None:
+    cam = CameraModel.pinhole_from_fov(640, 480, 74.0)
+    # one pixel centred on the principal point of an undistorted pinhole: 2 atan(0.5 / fx)
+    want = np.degrees(2.0 * np.arctan(0.5 / cam.fx))
+    assert cam.centre_pixel_deg == pytest.approx(want, rel=1e-9)
+    assert cam.resized(320, 240).centre_pixel_deg == pytest.approx(2 * want, rel=1e-3)

@@ -363,3 +363,29 @@ def test_sky_net_errors_name_the_file_and_the_fix(survey_dir: Path, tmp_path: Pa
                        progress=False)
     assert main(["process", str(survey_dir), "--out", str(tmp_path / "c"), "--quiet",
                  "--sky-net", str(missing)]) == 2
+
+
+def test_thin_structure_policy_is_an_angle_per_camera(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import predisat.pipeline as pl
+
+    seen: list[int | None] = []
+
+    def recording(image: np.ndarray, method=None, sky_net=None, thin_px=None):
+        seen.append(thin_px)
+        return blue_sky(image)
+
+    monkeypatch.setattr(pl, "default_segmenter", recording)
+    px_deg = np.degrees(2.0 * np.arctan(0.5 / CAM.fx))  # the test camera's centre pixel
+    for thin_deg in (0.7, 2.0 * px_deg, 0.0):
+        seen.clear()
+        p = PipelineParams(chunk_m=30.0, thin_deg=thin_deg)
+        res = process_survey(survey_dir, tmp_path / "out", p, progress=False)
+        # every frame segmented again with the new width: the cache does not mix widths
+        assert len(seen) == res.frames_segmented == len(_manifest(survey_dir))
+        want = 0 if thin_deg == 0 else max(1, round(thin_deg / px_deg))
+        assert set(seen) == {want}
+    assert want == 0 and PipelineParams(thin_deg=2.0 * px_deg).thin_px(CAM) == 2
+    with pytest.raises(ValueError, match="thin_deg"):
+        PipelineParams(thin_deg=-1.0)
