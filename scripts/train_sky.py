@@ -53,6 +53,9 @@ class Run:
 
     ``scenery``: one stretch kind (``predisat.synth.world.STRETCH_KINDS``) on both sides over
     the run and the renderer's margin around it, instead of the default varied recipe.
+    ``recipe_m``: draw the default ``WorldSpec.mixed`` recipe (with the run's seed) over this
+    chainage interval instead of around the run, so that a short run sees the scenery of a
+    long one (an overbridge that recipe places there).
     """
 
     name: str
@@ -63,6 +66,7 @@ class Run:
     camera: str
     spacing_m: float = 50.0
     scenery: str | None = None
+    recipe_m: tuple[float, float] | None = None
 
 
 # Stretches away from the held-out ones (1.0-1.2, 2.5-2.7, 4.0-4.2 km and HOLDOUT_RUNS).
@@ -126,6 +130,8 @@ def generate(run: Run, work: Path, size_px: tuple[int, int], progress: bool = Tr
         margin = 150.0  # what the renderer's default recipe covers around the run
         spec = WorldSpec.from_stretches([(run.scenery, max(0.0, run.from_m - margin),
                                           min(track.length_m, run.to_m + margin), "both")])
+    elif run.recipe_m is not None:
+        spec = WorldSpec.mixed(*run.recipe_m, seed=run.seed)
     t0 = time.perf_counter()
     generate_survey(track, run.from_m, run.to_m, sky=run.sky, seed=run.seed, out_dir=out,
                     spacing_m=run.spacing_m, camera=cam, spec=spec, progress=progress,

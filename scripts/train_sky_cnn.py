@@ -116,6 +116,15 @@ SCENERY_RUNS = (
 )
 # The perceptron's runs and the rock-wall fisheye frames that it does not ship with (chosen
 # on validation, docs/segmentation.md).
+# OVERBRIDGE_RUNS (2026-12-02): 80 m around an overbridge of the mixed recipe (its deck at the
+# middle), 5 m apart: the held-out fisheye frames under a deck (holdout2_fisheye_clear) read a
+# band along the deck's edge as sky, and no training run passes under a deck that closely.
+OVERBRIDGE_RUNS = (
+    _R("ob_01", 5330.0, 5410.0, "clear", 700, "fisheye", 5.0, None, (4850.0, 6650.0)),
+    _R("ob_02", 7127.0, 7207.0, "cloudy", 701, "fisheye", 5.0, None, (6850.0, 8650.0)),
+    _R("ob_03", 8326.0, 8406.0, "overcast", 703, "fisheye", 5.0, None, (6850.0, 8650.0)),
+    _R("ob_04", 10190.0, 10270.0, "clear", 708, "pinhole", 5.0, None, (8850.0, 10650.0)),
+)
 BASE_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"]
 
 
@@ -162,6 +171,8 @@ RECIPES = {
     "e8": replace(_E4, init="v2", epochs=10),
     # e8 with the six cloud-against-facade runs too (SCENERY_RUNS[24:], as e6 for e4)
     "e9": replace(_E4, runs=BASE_RUNS + SCENERY_RUNS, init="v2", epochs=10),
+    # e8 (--init its file) four more epochs at half the rate, with the overbridge runs
+    "e10": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS, init="e8", epochs=4, lr_max=2.5e-4),
 }
 DEFAULT_RECIPE = "e8"
 # The v2 network as shipped from 2026-12-01 (``git show 2e40b4d:predisat/data/models/
