@@ -119,12 +119,7 @@ SCENERY_RUNS = (
 # OVERBRIDGE_RUNS (2026-12-02): 80 m around an overbridge of the mixed recipe (its deck at the
 # middle), 5 m apart: the held-out fisheye frames under a deck (holdout2_fisheye_clear) read a
 # band along the deck's edge as sky, and no training run passes under a deck that closely.
-OVERBRIDGE_RUNS = (
-    _R("ob_01", 5330.0, 5410.0, "clear", 700, "fisheye", 5.0, None, (4850.0, 6650.0)),
-    _R("ob_02", 7127.0, 7207.0, "cloudy", 701, "fisheye", 5.0, None, (6850.0, 8650.0)),
-    _R("ob_03", 8326.0, 8406.0, "overcast", 703, "fisheye", 5.0, None, (6850.0, 8650.0)),
-    _R("ob_04", 10190.0, 10270.0, "clear", 708, "pinhole", 5.0, None, (8850.0, 10650.0)),
-)
+OVERBRIDGE_RUNS = train_sky.EXTRA_RUNS["overbridge"]
 BASE_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"]
 
 
@@ -532,7 +527,7 @@ def main(argv: list[str] | None = None) -> int:
         # the CPU (oneDNN picks its kernels, hence its rounding, by instruction set)
         "data_sha256": {"x": hashlib.sha256(x.tobytes()).hexdigest(),
                         "y": hashlib.sha256(y.tobytes()).hexdigest()},
-        "cpu": _cpu_name(),
+        "cpu": train_sky.cpu_name(),
         "validation": {
             "photos": {"first_seed": HOLDOUT_PHOTO_SEED0, "n": N_HOLDOUT_PHOTOS,
                        "pooled_iou": pooled_iou(onnx_path, size, held_photos)},
@@ -548,21 +543,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {onnx_path} ({onnx_path.stat().st_size / 1e6:.2f} MB) and its card")
     return 0
 
-
-def _cpu_name() -> str:
-    """The CPU model and its widest vector extension, as Linux reports them."""
-    try:
-        info = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        import platform
-
-        return platform.processor() or platform.machine()
-    model = next((ln.split(":", 1)[1].strip() for ln in info.splitlines()
-                  if ln.startswith("model name")), "unknown")  # fmt: skip
-    flags = next((ln.split(":", 1)[1].split() for ln in info.splitlines()
-                  if ln.startswith("flags")), [])  # fmt: skip
-    widest = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "none")
-    return f"{model} ({widest})"
 
 
 if __name__ == "__main__":
