@@ -223,20 +223,33 @@ class MarginTable:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def margin_for(self, sector: NDArray, source: NDArray) -> NDArray:
-        """Margin of every bin given its sector (str) and source code, degrees."""
+        """Margin of every bin given its sector (str) and source code, degrees.
+
+        Raises
+        ------
+        ValueError
+            When a bin's (sector, source) group has no row in the table (a guess, even the
+            table's largest margin, could be below what calibration would give it).
+        """
         lut = {
             (str(sec), str(src)): float(m)
             for sec, src, m in zip(
                 self.table["sector"], self.table["source"], self.table["margin_deg"], strict=True
             )
         }
-        fallback = max(lut.values()) if lut else 0.0
-        out = np.full(np.shape(sector), fallback, float)
+        out = np.full(np.shape(sector), np.nan, float)
         for (sec, src), m in lut.items():
             code = next((c for c, n in _SOURCE_NAMES.items() if n == src), None)
             if code is None:
                 continue
             out[(sector == sec) & (source == code)] = m
+        if np.isnan(out).any():
+            k = np.flatnonzero(np.isnan(out).ravel())[0]
+            group = (str(np.ravel(sector)[k]), _SOURCE_NAMES.get(int(np.ravel(source)[k]), "?"))
+            raise ValueError(
+                f"margin table has no row for (sector, source) {group}; calibrate with "
+                "calibrate_margin (it writes every group) or add the row"
+            )
         return out
 
     def apply(self, masks: MaskSet) -> MaskSet:

@@ -634,8 +634,8 @@ def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
     if bad.any():
         raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
                          f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
-    # every group must be spelled out: a missing or misspelt one would take the table's largest
-    # margin silently (MarginTable.margin_for), which may be 0 where calibration says 90
+    # every group must be spelled out: a missing or misspelt one would stop the run at its
+    # merge, after hours of work (MarginTable.margin_for refuses bins it has no margin for)
     pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
     want = {(s, c) for s in SECTORS for c in sources}
     if not want <= pairs:

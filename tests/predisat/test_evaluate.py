@@ -337,3 +337,15 @@ def test_process_checks_margin_tables_before_any_work(
     (tmp_path / "junk.json").write_text("[1, 2]")
     with pytest.raises(ValueError, match=r"not a margin table|no 'target'"):
         process_survey(synth / "survey", tmp_path / "y", margins=tmp_path / "junk.json")
+
+
+def test_margin_table_refuses_bins_of_a_missing_group() -> None:
+    import pandas as pd
+
+    rows = [{"sector": "cross", "source": "observed", "margin_deg": 0.0},
+            {"sector": "along", "source": "observed", "margin_deg": 3.0}]  # fmt: skip
+    table = MarginTable(pd.DataFrame(rows), 0.999)
+    sector = np.array([["cross", "along"]])
+    np.testing.assert_array_equal(table.margin_for(sector, np.zeros((1, 2), np.uint8)), [[0, 3]])
+    with pytest.raises(ValueError, match="'cross', 'assumed'"):
+        table.margin_for(sector, np.array([[2, 0]], np.uint8))
