@@ -310,6 +310,10 @@ def cmd_export(args: argparse.Namespace) -> int:
                            "--format rtklib or pvgis for one position")
     elif chainage_m is None:
         raise CliError(f"--format {args.format} exports one position: give --chainage M")
+    if args.header and args.format != "urbannav":
+        raise CliError(f"--header is for --format urbannav, not {args.format}; drop it")
+    if args.pvgis_layout != "table" and args.format != "pvgis":
+        raise CliError(f"--pvgis-layout is for --format pvgis, not {args.format}; drop it")
     masks = maskio.read_masks(path)
     include = not args.bare
     if args.format == "urbannav":

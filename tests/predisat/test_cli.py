@@ -183,6 +183,12 @@ def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture
                      "--chainage", "1e7"]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert "outside" in err and "Traceback" not in err
+    assert cli.main(["export", str(src), "--format", "rtklib", "--out", str(bare),
+                     "--chainage", str(ch), "--header"]) == 2  # fmt: skip
+    assert "--header" in capsys.readouterr().err
+    assert cli.main(["export", str(src), "--format", "urbannav", "--out", str(bare),
+                     "--pvgis-layout", "userhorizon"]) == 2  # fmt: skip
+    assert "--pvgis-layout" in capsys.readouterr().err
 
 
 @pytest.mark.slow
