@@ -300,9 +300,7 @@ def cmd_process(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat import maskio
 
-    path = Path(args.masks)
-    if path.is_dir():
-        path = path / "masks.parquet"
+    path = maskio.mask_file_path(args.masks)
     chainage_m: float | None = args.chainage
     if args.format == "urbannav":
         if chainage_m is not None:

@@ -43,6 +43,7 @@ __all__ = [
     "Comparison",
     "MarginTable",
     "add_evaluate_arguments",
+    "applied_margins",
     "calibrate_margin",
     "compare",
     "count_above",
@@ -252,6 +253,31 @@ class MarginTable:
             )
         return out
 
+    def check(self, where: str = "margin table") -> None:
+        """Raise ValueError, naming ``where`` and the fix, unless the table has the columns
+        ``sector``, ``source`` and ``margin_deg``, a finite margin >= 0 in every row and a row
+        for each (sector, source) group by its name (wildcard ``*`` rows allowed)."""
+        fix = "write it with `predisat evaluate MASKS --truth DIR --calibrate`"
+        t = self.table
+        missing = {"sector", "source", "margin_deg"} - set(t.columns)
+        if missing:
+            raise ValueError(f"{where}: no column(s) {sorted(missing)}; {fix}")
+        margin = pd.to_numeric(t["margin_deg"], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(margin) | (margin < 0)
+        if bad.any():
+            raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
+                             f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
+        sources = tuple(_SOURCE_NAMES.values())
+        pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
+        want = {(s, c) for s in SECTORS for c in sources}
+        if not want <= pairs:
+            raise ValueError(f"{where}: no margin for (sector, source) {sorted(want - pairs)}; "
+                             f"a table needs all of {sorted(want)}; {fix}")  # fmt: skip
+        odd = {p for p in pairs - want if "*" not in p}
+        if odd:
+            raise ValueError(f"{where}: unknown (sector, source) {sorted(odd)}; sectors are "
+                             f"{list(SECTORS)}, sources {list(sources)}; {fix}")  # fmt: skip
+
     def apply(self, masks: MaskSet) -> MaskSet:
         """Copy of ``masks`` with these margins (:meth:`MaskSet.with_margin`)."""
         sec = sector_of(masks.az_deg[None, :], masks.heading_deg[:, None])
@@ -450,6 +476,17 @@ def _expand(table: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def applied_margins(comparison: Comparison, margins: MarginTable | None) -> NDArray | None:
+    """The margin of every bin that an evaluation scores, shape (n_pos, n_az), degrees:
+    ``margins``' when given, else the mask file's own when any is above 0, else None."""
+    if margins is not None:
+        return margins.margin_for(comparison.sector, comparison.source)
+    own = comparison.margin_deg
+    if own is not None and bool((own > 0).any()):
+        return np.asarray(own, float)
+    return None
+
+
 def evaluate_masks(
     comparison: Comparison, margins: MarginTable | None = None, el_step_deg: float = EL_STEP_DEG
 ) -> pd.DataFrame:
@@ -467,11 +504,8 @@ def evaluate_masks(
     t = comparison.truth_el_deg.ravel()
     sec = comparison.sector.ravel()
     src = np.array([_SOURCE_NAMES[int(c)] for c in range(3)])[comparison.source.ravel()]
-    marg = None
-    if margins is not None:
-        marg = margins.margin_for(comparison.sector, comparison.source).ravel()
-    elif comparison.margin_deg is not None and (comparison.margin_deg > 0).any():
-        marg = np.asarray(comparison.margin_deg, float).ravel()
+    applied = applied_margins(comparison, margins)
+    marg = None if applied is None else applied.ravel()
     rows = []
     groups = [(s, c) for s in (*SECTORS, "all") for c in (*_SOURCE_NAMES.values(), "all")]
     for s_name, c_name in groups:
@@ -530,11 +564,9 @@ def add_evaluate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
     """Run ``predisat evaluate`` from parsed arguments; prints and returns the table."""
-    from predisat.maskio import read_masks
+    from predisat.maskio import mask_file_path, read_masks
 
-    path = Path(args.masks)
-    if path.is_dir():
-        path = path / "masks.parquet"
+    path = mask_file_path(args.masks)
     masks = read_masks(path)
     comp = compare(masks, load_truth(args.truth))
     margins = MarginTable.from_json(args.margins) if args.margins is not None else None
@@ -549,11 +581,11 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
             margins.to_json(out / "margins.json")
             margins.table.to_csv(out / "margins.csv", index=False)
     table = evaluate_masks(comp, margins)
-    own = comp.margin_deg is not None and bool((comp.margin_deg > 0).any())
-    file_margins = margins is None and own
+    applied = applied_margins(comp, margins)
+    file_margins = margins is None and applied is not None
     if file_margins:
         print("the *_margin columns use the mask file's own margins (margin_deg)")
-    elif own:
+    elif margins is not None and applied_margins(comp, None) is not None:
         print("the *_margin columns use the margin table, not the mask file's own margins")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(4).to_string(index=False))
@@ -574,12 +606,8 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
         (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
         from predisat.evalfigures import evaluation_figure
 
-        margin: Any = 0.0
-        if margins is not None:
-            margin = margins.margin_for(comp.sector, comp.source)
-        elif file_margins:
-            margin = comp.margin_deg
-        fig = evaluation_figure(comp, margin, title=f"{path.name} against {args.truth}")
+        fig = evaluation_figure(comp, 0.0 if applied is None else applied,
+                                title=f"{path.name} against {args.truth}")
         fig.savefig(out / "evaluation.png", dpi=100)
         print(f"written {out / 'evaluation.csv'}, evaluation.json, evaluation.png")
     return table

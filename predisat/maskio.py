@@ -41,6 +41,7 @@ __all__ = [
     "FORMAT_VERSION",
     "METADATA_KEY",
     "MaskFileError",
+    "mask_file_path",
     "read_masks",
     "to_pvgis_horizon",
     "to_rtklib_mask",
@@ -157,6 +158,13 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
     with _atomic(path, binary=True) as tmp:
         pq.write_table(table, tmp, compression="zstd")
     return path
+
+
+def mask_file_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` itself, or ``path / "masks.parquet"`` when it is a folder (the output folder of
+    ``predisat process``)."""
+    p = Path(path)
+    return p / "masks.parquet" if p.is_dir() else p
 
 
 def read_masks(path: str | os.PathLike[str]) -> MaskSet:

@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
 from predisat.maskio import read_masks, write_masks
-from predisat.masks import BinSource, MaskError, MaskSet
+from predisat.masks import MaskError, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
 
 __all__ = [
@@ -598,9 +598,7 @@ def _run_key(provenance: dict[str, Any]) -> str:
 def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
     """(MarginTable or None, its provenance record) from a table, a path or None; every check
     is made here, before any work, so that a bad table never stops a run at its merge."""
-    import pandas as pd
-
-    from predisat.evaluate import SECTORS, MarginTable
+    from predisat.evaluate import MarginTable
 
     if margins is None:
         return None, {}
@@ -622,31 +620,12 @@ def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
                 f"--calibrate`): {exc}"
             ) from exc
         record = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
-    sources = tuple(c.name.lower() for c in BinSource)
-    where = f"margins {record['file']}"
-    fix = "write it with `predisat evaluate MASKS --truth DIR --calibrate`"
-    t = table.table
-    missing = {"sector", "source", "margin_deg"} - set(t.columns)
-    if missing:
-        raise ValueError(f"{where}: no column(s) {sorted(missing)}; {fix}")
-    margin = pd.to_numeric(t["margin_deg"], errors="coerce").to_numpy(float)
-    bad = ~np.isfinite(margin) | (margin < 0)
-    if bad.any():
-        raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
-                         f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
-    # every group must be spelled out: a missing or misspelt one would stop the run at its
+    # every check before any work: a missing or misspelt group would stop the run at its
     # merge, after hours of work (MarginTable.margin_for refuses bins it has no margin for)
-    pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
-    want = {(s, c) for s in SECTORS for c in sources}
-    if not want <= pairs:
-        raise ValueError(f"{where}: no margin for (sector, source) {sorted(want - pairs)}; "
-                         f"a table needs all of {sorted(want)}; {fix}")  # fmt: skip
-    odd = {p for p in pairs - want if "*" not in p}
-    if odd:
-        raise ValueError(f"{where}: unknown (sector, source) {sorted(odd)}; sectors are "
-                         f"{list(SECTORS)}, sources {list(sources)}; {fix}")  # fmt: skip
+    table.check(f"margins {record['file']}")
     # NaN (los_share of an empty group) becomes null: the provenance is strict JSON
-    record |= {"target": table.target, "table": json.loads(t.to_json(orient="records"))}
+    record |= {"target": table.target,
+               "table": json.loads(table.table.to_json(orient="records"))}
     json.dumps(record, allow_nan=False)
     return table, record
 
