@@ -7,9 +7,10 @@ Usage::
 
 1. **Data**: synthetic surveys rendered by :func:`predisat.synth.generate.generate_survey` on the
    demo track (line 144) with the fixed seeds, stretches, skies and cameras of ``TRAIN_RUNS``
-   (small 320x240 cameras, pinhole and fisheye). Nothing else: no photo of a third party is
-   used, so the model may ship with the project. Surveys already present in ``--work`` are
-   reused (delete them to regenerate).
+   and of the ``EXTRA_RUNS`` named by ``--extra`` (default ``SHIPPED_EXTRA``, the shipped
+   model's; small 320x240 cameras, pinhole and fisheye). Nothing else: no photo of a third
+   party is used, so the model may ship with the project. Surveys already present in
+   ``--work`` are reused (delete them to regenerate).
 2. **Samples**: per frame, ``--pixels`` pixels drawn at random (seeded) from the
    working-resolution feature image (:mod:`predisat.skyfeatures`), half of them within a few
    pixels of the sky boundary where the decision is hard. Labels: 255 sky and 128 thin
@@ -89,9 +90,10 @@ TRAIN_RUNS = (
 # side fisheye frames in cuttings and between rock walls, where the wall across the track is
 # seen past the zenith along the upper rim. The runs above have none (their rock-wall
 # stretches fall outside the rendered intervals). Seeds chosen for walls on both sides.
-# ``--extra overbridge`` (2026-12-02, an experiment): 80 m around an overbridge of the mixed
-# recipe (its deck at the middle), 5 m apart; the held-out fisheye frames under a deck show a
-# band along the deck's edge read as sky by this perceptron (docs/segmentation.md, e10).
+# ``overbridge``: 80 m around an overbridge of the mixed recipe (its deck at the middle), 5 m
+# apart; the held-out fisheye frames under a deck show a band along the deck's edge read as sky
+# by the perceptron trained without them (docs/segmentation.md, e10). In the shipped model
+# since 2026-12-02 (stop 19): SHIPPED_EXTRA, the default of ``--extra``.
 EXTRA_RUNS = {
     "rock-wall-fisheye": (
         Run("train_m", 6850.0, 7150.0, "mixed", 395, "fisheye", 15.0),
@@ -104,6 +106,7 @@ EXTRA_RUNS = {
         Run("ob_04", 10190.0, 10270.0, "clear", 708, "pinhole", 5.0, None, (8850.0, 10650.0)),
     ),
 }
+SHIPPED_EXTRA = ("overbridge",)
 VALIDATION_RUNS = (
     Run("val_a", 13000.0, 13600.0, "mixed", 109, "pinhole"),
     # rock walls seen by a side fisheye, as in EXTRA_RUNS (other stretch and seed)
@@ -164,11 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--generate-only", action="store_true", help="render, do not train")
     parser.add_argument("--holdout", action="store_true", help="also render HOLDOUT_RUNS")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    parser.add_argument("--extra", action="append", default=[], choices=sorted(EXTRA_RUNS),
-                        help="add these EXTRA_RUNS to the training runs (experiments)")
+    parser.add_argument("--extra", action="append", choices=[*sorted(EXTRA_RUNS), "none"],
+                        help="add these EXTRA_RUNS to the training runs; default: "
+                        f"{', '.join(SHIPPED_EXTRA)} (the shipped model's); "
+                        "'none': TRAIN_RUNS only")
     args = parser.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
-    args.train_runs = TRAIN_RUNS + tuple(r for name in args.extra for r in EXTRA_RUNS[name])
+    extra = SHIPPED_EXTRA if args.extra is None else tuple(e for e in args.extra if e != "none")
+    args.train_runs = TRAIN_RUNS + tuple(r for name in extra for r in EXTRA_RUNS[name])
     for run in (*args.train_runs, *VALIDATION_RUNS):
         generate(run, args.work, CAMERA_SIZE_PX, not args.quiet)
     if args.holdout:

@@ -7,19 +7,22 @@ Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.
     python scripts/train_sky_cnn.py --recipe e1 --out /tmp/e1  # a candidate (docs/segmentation.md)
 
 ``--recipe`` names the training data and schedule of a network (``RECIPES``). The shipped
-network is ``e8`` (the default), made in two steps::
+network is ``e10`` (the default), made in three steps::
 
     python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2   # 7 min data, 26 min training
-    python scripts/train_sky_cnn.py --recipe e8 --init /tmp/v2/sky_unet.onnx   # 35 min
+    python scripts/train_sky_cnn.py --recipe e8 --init /tmp/v2/sky_unet.onnx --out /tmp/e8
+    python scripts/train_sky_cnn.py --recipe e10 --init /tmp/e8/sky_unet.onnx   # 10 min
 
-(the second step writes ``predisat/data/models``, the shipped network; give ``--out`` to
+(the last step writes ``predisat/data/models``, the shipped network; give ``--out`` to
 keep it elsewhere).
 
-``v2`` is the network shipped from 2026-12-01 (128 px input); ``e8`` carries it to a 192 px
-input for ten epochs, on 3000 procedural photos and ``e1``'s rendered surveys. The ``v2``
-file itself is in the history (``git show 2e40b4d:predisat/data/models/sky_unet.onnx`` and
-``.json``): ``--init`` on it is how the shipped ``e8`` was made. Checked on 2026-12-02: the
-second step on that file gives the shipped ``sky_unet.onnx`` byte for byte; a ``v2`` retrained
+``v2`` is the network shipped from 2026-12-01 (128 px input); ``e8`` (shipped from
+2026-12-02 to that evening) carries it to a 192 px input for ten epochs, on 3000 procedural
+photos and ``e1``'s rendered surveys; ``e10`` trains ``e8`` four more epochs at half the
+rate with the overbridge runs too. The earlier files are in the history (``git show
+2e40b4d:predisat/data/models/sky_unet.onnx`` for ``v2``, ``4e5b18b:`` for ``e8``, and their
+``.json``): ``--init`` on them is how the shipped networks were made. Checked on 2026-12-02:
+``e8`` on the ``v2`` file gives the ``e8`` file byte for byte; a ``v2`` retrained
 from scratch does not give the ``v2`` file (trained the day before, perhaps on another
 machine: the losses agree to 2-3 decimals, the card's validation IoU is 0.901 / 0.977 against
 0.907 / 0.981), so start from the file in the history to get the shipped network.
@@ -143,8 +146,8 @@ class Recipe:
     lr_max: float = 3e-3
 
 
-# candidates of 2026-12-02 (docs/segmentation.md): e1-e6 fail a test, e7 passes, e8 is shipped,
-# e9 loses to e8 by the rule
+# candidates of 2026-12-02 (docs/segmentation.md): e1-e6 fail a test, e7 passes, e8 was shipped,
+# e9 loses to e8 by the rule, e10 is shipped
 _E1 = Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epochs=20, bf16=True)
 # e1 with the loss weighted three times on obstacle pixels
 _E3 = replace(_E1, obstacle_weight=3.0)
@@ -162,14 +165,15 @@ RECIPES = {
     "e6": replace(_E4, runs=BASE_RUNS + SCENERY_RUNS),
     # e4's data and schedule from v2's weights instead of e3's
     "e7": replace(_E4, init="v2"),
-    # shipped since 2026-12-02: e7 with ten epochs instead of four
+    # shipped from 2026-12-02 to that evening: e7 with ten epochs instead of four
     "e8": replace(_E4, init="v2", epochs=10),
     # e8 with the six cloud-against-facade runs too (SCENERY_RUNS[24:], as e6 for e4)
     "e9": replace(_E4, runs=BASE_RUNS + SCENERY_RUNS, init="v2", epochs=10),
-    # e8 (--init its file) four more epochs at half the rate, with the overbridge runs
+    # shipped since 2026-12-02, evening: e8 (--init its file) four more epochs at half the
+    # rate, with the overbridge runs
     "e10": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS, init="e8", epochs=4, lr_max=2.5e-4),
 }
-DEFAULT_RECIPE = "e8"
+DEFAULT_RECIPE = "e10"
 # The v2 network as shipped from 2026-12-01 (``git show 2e40b4d:predisat/data/models/
 # sky_unet.onnx``, and its ``.json``): its card predates the recipe field, so --init
 # recognises it by its SHA-256.
@@ -446,7 +450,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--init", type=Path, metavar="ONNX",
                         help="the network to start from, for a recipe that names one (e4-e6: the "
                         "sky_unet.onnx written by --recipe e3; e7, e8: the one of --recipe v2, "
-                        "or the v2 file of commit 2e40b4d)")
+                        "or the v2 file of commit 2e40b4d; e10: the one of --recipe e8, or the "
+                        "e8 file of commit 4e5b18b)")
     parser.add_argument("--channels", default="8,16,32,48,64", help="U-Net widths per level")
     parser.add_argument("--epochs", type=int, help="(recipe's)")
     parser.add_argument("--batch", type=int, default=16)
