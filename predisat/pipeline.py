@@ -128,8 +128,10 @@ class PipelineParams:
     thin_deg : float
         The thin-structure policy of the default segmenter in angle: obstacle features at most
         this wide are L-band transparent (``docs/segmentation.md``). Each camera gets
-        ``SkyOptions.thin_px = max(1, round(thin_deg / camera.centre_pixel_deg))`` (3 px on the
-        demo's 640x480 fisheye); 0 disables the policy. Custom segmenters apply their own.
+        ``SkyOptions.thin_px = max(1, round(thin_deg / camera.widest_pixel_deg))`` (3 px on the
+        demo's 640x480 fisheye): the widest pixel of the frame, so that no feature much wider
+        than ``thin_deg`` anywhere in it is made transparent; 0 disables the policy. Custom
+        segmenters apply their own.
     """
 
     chunk_m: float = 1000.0
@@ -157,7 +159,7 @@ class PipelineParams:
         """``SkyOptions.thin_px`` for frames of ``camera`` (see ``thin_deg``)."""
         if self.thin_deg == 0.0:
             return 0
-        return max(1, round(self.thin_deg / camera.centre_pixel_deg))
+        return max(1, round(self.thin_deg / camera.widest_pixel_deg))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form (recorded in every chunk's provenance)."""

@@ -481,3 +481,50 @@ def test_centre_pixel_angle_of_an_ideal_pinhole() -> None:
     want = np.degrees(2.0 * np.arctan(0.5 / cam.fx))
     assert cam.centre_pixel_deg == pytest.approx(want, rel=1e-9)
     assert cam.resized(320, 240).centre_pixel_deg == pytest.approx(2 * want, rel=1e-3)
+
+
+def _unit_rays_independent(cam: CameraModel, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Unit rays of pixels without CameraModel: cv2.undistortPoints for a pinhole; for a
+    fisheye its polynomial solved by numpy.roots (cv2.fisheye.undistortPoints returns pinhole
+    coordinates, which fold past 90 deg off-axis)."""
+    k = cam.camera_matrix
+    if cam.model == "pinhole":
+        pts = np.stack([u, v], -1)[:, None, :].astype(np.float64)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+        xy = cv2.undistortPoints(pts, k, np.asarray(cam.dist), criteria=crit)[:, 0]
+        rays = np.column_stack([xy, np.ones(len(xy))])
+    else:
+        xd, yd = (u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1]
+        k1, k2, k3, k4 = cam.dist
+        theta = np.array([
+            np.min([r.real for r in np.roots([k4, 0, k3, 0, k2, 0, k1, 0, 1.0, -td])
+                    if abs(r.imag) < 1e-9 and r.real >= 0])
+            for td in np.hypot(xd, yd)
+        ])  # fmt: skip
+        phi = np.arctan2(yd, xd)
+        rays = np.column_stack(
+            [np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+        )
+    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("cam", ALL, ids=lambda c: c.name)
+def test_widest_pixel_angle_matches_an_independent_inversion(cam: CameraModel) -> None:
+    u, v = np.linspace(0, cam.width_px - 2, 41), np.linspace(0, cam.height_px - 2, 31)
+    uu, vv = (a.ravel() for a in np.meshgrid(u, v))
+    r0 = _unit_rays_independent(cam, uu, vv)
+    cos = np.concatenate([np.sum(r0 * _unit_rays_independent(cam, uu + 1.0, vv), axis=1),
+                          np.sum(r0 * _unit_rays_independent(cam, uu, vv + 1.0), axis=1)])
+    want = np.degrees(np.arccos(np.clip(np.nanmin(cos), -1.0, 1.0)))
+    # a coarser grid than the property's: it may miss the widest pixel by a little
+    assert cam.widest_pixel_deg == pytest.approx(want, rel=0.025)
+    assert cam.widest_pixel_deg >= 0.99 * want
+
+
+def test_widest_pixel_of_a_barrel_pinhole_is_off_centre() -> None:
+    cam = CameraModel.pinhole_from_fov(640, 480, 74.0, dist=(-0.4, 0.12, 0.0, 0.0, 0.0))
+    # barrel distortion outweighs the pinhole's shrinking pixels towards the sides
+    side = _unit_rays_independent(cam, np.array([55.0, 56.0]), np.array([239.0, 239.0]))
+    side_deg = np.degrees(np.arccos(side[0] @ side[1]))
+    assert side_deg > 1.2 * cam.centre_pixel_deg
+    assert cam.widest_pixel_deg >= side_deg

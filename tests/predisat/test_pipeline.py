@@ -387,5 +387,11 @@ def test_thin_structure_policy_is_an_angle_per_camera(
         want = 0 if thin_deg == 0 else max(1, round(thin_deg / px_deg))
         assert set(seen) == {want}
     assert want == 0 and PipelineParams(thin_deg=2.0 * px_deg).thin_px(CAM) == 2
+    # a barrel pinhole's pixels near its sides are 31 % wider than its centre's: the width follows
+    # the widest, so no feature much wider than thin_deg is transparent anywhere in the frame
+    barrel = CameraModel.pinhole_from_fov(640, 480, 74.0, dist=(-0.4, 0.12, 0.0, 0.0, 0.0))
+    n_px = PipelineParams(thin_deg=0.7).thin_px(barrel)
+    assert round(0.7 / barrel.centre_pixel_deg) == 5 and n_px == 4
+    assert n_px * barrel.widest_pixel_deg <= 0.7 + barrel.widest_pixel_deg / 2
     with pytest.raises(ValueError, match="thin_deg"):
         PipelineParams(thin_deg=-1.0)
