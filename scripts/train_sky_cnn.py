@@ -1,6 +1,7 @@
 """Train the sky segmentation network shipped as ``predisat/data/models/sky_unet.onnx``.
 
-Usage (PyTorch is needed for training only: ``.venv/bin/pip install torch==2.13.0``)::
+Usage (PyTorch and onnx are needed for training only: ``.venv/bin/pip install torch==2.13.0
+onnx``; onnx reads the ``--init`` file)::
 
     python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2 --work /tmp/predisat_sky_cnn
     python scripts/train_sky_cnn.py --recipe v2 --out /tmp/v2 --epochs 2  # a quick try
@@ -32,7 +33,9 @@ segmentation test; ``e3`` is ``e1`` with the loss weighted three times on obstac
 (``Recipe.obstacle_weight``); ``e4`` carries ``e3``'s network to a 192 px input (``--init`` its
 ONNX; 10 min), ``e5`` the same for ten epochs instead of four, ``e6`` with the six
 cloud-against-facade runs too; ``e7`` is ``e8`` for four epochs, ``e9`` ``e8`` with the
-cloud-against-facade runs (fails the rule against ``e8`` by three unsafe columns).
+cloud-against-facade runs (fails the rule against ``e8`` by three unsafe columns);
+``e11`` (2026-12-03) is ``e10`` with open country under cloud (``OPEN_CLOUD_RUNS``; fails
+the rule against ``e10`` by four unsafe columns).
 ``--photos``, ``--survey-repeat``, ``--epochs`` and ``--bf16`` override the recipe's values.
 
 1. **Data** (cached in ``--work``; delete a file to regenerate it): ``--photos`` procedural
@@ -123,6 +126,16 @@ SCENERY_RUNS = (
 # middle), 5 m apart: the held-out fisheye frames under a deck (holdout2_fisheye_clear) read a
 # band along the deck's edge as sky, and no training run passes under a deck that closely.
 OVERBRIDGE_RUNS = train_sky.EXTRA_RUNS["overbridge"]
+# OPEN_CLOUD_RUNS (2026-12-02, evening): open country under cloud, 15 m apart. In the all-sky
+# pinhole frames of holdout_cloudy the network reads the dense low clouds along the bottom
+# edge as obstacle (mean probability 0.01-0.04, the perceptron 0.91-0.98); no training run is
+# open country under cloud at close spacing. Chosen from that held-out set (not blind for e11).
+OPEN_CLOUD_RUNS = (
+    _R("oc_01", 5200.0, 5500.0, "cloudy", 801, "pinhole", 15.0, "open"),
+    _R("oc_02", 7300.0, 7600.0, "cloudy", 802, "pinhole", 15.0, "open"),
+    _R("oc_03", 9300.0, 9600.0, "cloudy", 803, "fisheye", 15.0, "open"),
+    _R("oc_04", 12200.0, 12500.0, "cloudy", 804, "pinhole", 15.0, "open"),
+)
 BASE_RUNS = train_sky.TRAIN_RUNS + train_sky.EXTRA_RUNS["rock-wall-fisheye"]
 
 
@@ -172,6 +185,10 @@ RECIPES = {
     # shipped since 2026-12-02, evening: e8 (--init its file) four more epochs at half the
     # rate, with the overbridge runs
     "e10": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS, init="e8", epochs=4, lr_max=2.5e-4),
+    # e10 (--init its file) four more epochs at the same rate, with open country under cloud;
+    # 2026-12-03: fails the rule by four validation unsafe columns (296 against 292), not shipped
+    "e11": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS + OPEN_CLOUD_RUNS, init="e10",
+                   epochs=4, lr_max=2.5e-4),
 }
 DEFAULT_RECIPE = "e10"
 # The v2 network as shipped from 2026-12-01 (``git show 2e40b4d:predisat/data/models/
@@ -486,6 +503,11 @@ def main(argv: list[str] | None = None) -> int:
         import torch
     except ImportError:
         parser.error("training needs PyTorch: .venv/bin/pip install torch==2.13.0")
+    if args.init is not None:
+        try:
+            import onnx  # noqa: F401  (read by load_onnx_weights, long after the data)
+        except ImportError:
+            parser.error("--init reads the ONNX file with onnx: .venv/bin/pip install onnx")
     args.work.mkdir(parents=True, exist_ok=True)
     size = args.input_px
     channels = tuple(int(v) for v in args.channels.split(","))
