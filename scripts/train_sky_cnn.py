@@ -166,6 +166,8 @@ _E1 = Recipe(BASE_RUNS + SCENERY_RUNS[:24], photos=10000, survey_repeat=2, epoch
 _E3 = replace(_E1, obstacle_weight=3.0)
 # e3 carried to a 192 px input: a few epochs from its weights (batch normalisation folded)
 _E4 = replace(_E3, photos=3000, epochs=4, input_px=192, init="e3", lr_max=5e-4)
+# e8 (--init its file) four more epochs at half the rate, with the overbridge runs
+_E10 = replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS, init="e8", epochs=4, lr_max=2.5e-4)
 RECIPES = {
     # shipped from 2026-12-01 to 2026-12-02, the start of e7 and e8
     "v2": Recipe(BASE_RUNS, photos=4000, survey_repeat=3, epochs=14, bf16=False),
@@ -184,11 +186,10 @@ RECIPES = {
     "e9": replace(_E4, runs=BASE_RUNS + SCENERY_RUNS, init="v2", epochs=10),
     # shipped since 2026-12-02, evening: e8 (--init its file) four more epochs at half the
     # rate, with the overbridge runs
-    "e10": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS, init="e8", epochs=4, lr_max=2.5e-4),
+    "e10": _E10,
     # e10 (--init its file) four more epochs at the same rate, with open country under cloud;
     # 2026-12-03: fails the rule by four validation unsafe columns (296 against 292), not shipped
-    "e11": replace(_E4, runs=_E4.runs + OVERBRIDGE_RUNS + OPEN_CLOUD_RUNS, init="e10",
-                   epochs=4, lr_max=2.5e-4),
+    "e11": replace(_E10, runs=_E10.runs + OPEN_CLOUD_RUNS, init="e10"),
 }
 DEFAULT_RECIPE = "e10"
 # The v2 network as shipped from 2026-12-01 (``git show 2e40b4d:predisat/data/models/
