@@ -232,7 +232,7 @@ class ProcessResult:
             f"({self.chunks_done} chunks computed, {self.chunks_skipped} resumed, "
             f"{self.frames_segmented} frames segmented, {len(self.bad_frames)} bad frames, "
             f"{self.elapsed_s:.1f} s)"
-        )
+        ) + (f"; bad frames listed in {self.out_dir / 'bad_frames.csv'}" if self.bad_frames else "")
 
 
 # ---------------------------------------------------------------------- segmentation + cache
@@ -347,17 +347,34 @@ def _npz_bytes(arrays: dict[str, Any]) -> bytes:
     return buf.getvalue()
 
 
-def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
-    """Segment one frame into the cache; returns (frame_id, problem or None)."""
+def _read_image(path: str) -> tuple[NDArray | None, str | None]:
+    """The BGR image at ``path``, or None and the problem with the file and its fix."""
     import cv2
 
-    problem: str | None = None
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        return None, f"image {path} is missing; restore it or drop the frame"
+    except OSError as exc:
+        return None, f"image {path} cannot be read ({exc.strerror}); check the file"
+    cut = _truncation(data)
+    if cut is not None:
+        return None, (
+            f"image {path} is truncated ({cut}): the file was cut short, "
+            "copy it again from the camera or drop the frame"
+        )
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        return None, f"image {path} cannot be decoded; re-export it as JPEG or PNG"
+    return img, None
+
+
+def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
+    """Segment one frame into the cache; returns (frame_id, problem or None)."""
     result = None
-    img = cv2.imread(job.image_path, cv2.IMREAD_COLOR) if os.path.exists(job.image_path) else None
-    if not os.path.exists(job.image_path):
-        problem = f"image {job.image_path} is missing; restore it or drop the frame"
-    elif img is None:
-        problem = f"image {job.image_path} cannot be decoded; re-export it as JPEG or PNG"
+    img, problem = _read_image(job.image_path)
+    if img is None:
+        pass  # the problem says why
     elif img.shape[:2] != (job.height_px, job.width_px):
         problem = (
             f"image {job.image_path} is {img.shape[1]}x{img.shape[0]} px, the calibration "
@@ -377,6 +394,41 @@ def _segment_frame(job: _FrameJob, segmenter: Segmenter) -> tuple[str, str | Non
             problem = f"segmentation failed ({type(exc).__name__}: {exc})"
     _write_cache(job, result, problem)
     return job.frame_id, problem
+
+
+_JPEG_STANDALONE = frozenset({0x01, *range(0xD0, 0xD8)})  # markers without a length field
+
+
+def _truncation(data: bytes) -> str | None:
+    """Why the image file ``data`` is cut short, or None when it is whole (or not JPEG / PNG).
+
+    libjpeg decodes a truncated JPEG with a warning only and fills the missing rows with grey,
+    which ``cv2.imread`` (OpenCV 5.1) returns as a good image: such a frame would be segmented
+    with a flat grey band. ``cv2.imdecode`` refuses it, but says only that it cannot decode.
+    A whole JPEG has its end-of-image marker after the scan data, where byte stuffing keeps
+    the two bytes from occurring by chance; the header segments are skipped by their
+    lengths, so an EXIF thumbnail's own marker does not count.
+    """
+    if data[:2] == b"\xff\xd8":
+        i, n = 2, len(data)
+        while i + 4 <= n:
+            if data[i] != 0xFF:
+                return f"no JPEG marker at byte {i} of the header"
+            marker = data[i + 1]
+            if marker == 0xFF:  # fill byte
+                i += 1
+            elif marker == 0xDA:  # start of scan: the compressed pixels follow
+                if data.rfind(b"\xff\xd9") < i:
+                    return f"no JPEG end-of-image marker after the scan data, {n} bytes"
+                return None
+            elif marker in _JPEG_STANDALONE:
+                i += 2
+            else:
+                i += 2 + int.from_bytes(data[i + 2 : i + 4], "big")
+        return f"the JPEG header ends at byte {n} before the scan data"
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and b"IEND" not in data[-12:]:
+        return f"no PNG IEND chunk at the end, {len(data)} bytes"
+    return None
 
 
 _WORKER: dict[str, Any] = {}  # per-process segmenter set by the pool initialiser
@@ -425,6 +477,9 @@ class _ChunkJob:
     params: PipelineParams
     provenance: dict[str, Any]
     chunk_dir: str
+    # the chunk's frames found bad before it ran: recorded in its marker, so that a resumed
+    # run that skips the chunk still lists them
+    known_bad: tuple[BadFrame, ...] = ()
 
 
 def _fmt_m(x: float) -> str:
@@ -441,7 +496,7 @@ def _run_chunk(
     so that its per-camera rectifiers are built once.
     """
     track = job.track
-    bad: list[BadFrame] = []
+    bad: list[BadFrame] = list(job.known_bad)
     views: list[FrameView] = []
     ok_frames = []
     for f in job.frames:
@@ -747,6 +802,8 @@ def process_survey(
             f"survey {survey.root}: bad frame {first.frame_id}: {first.message} "
             "(run without --strict to skip it)"
         )
+    for b in bad.values():
+        _report(f"bad frame {b.frame_id}: {b.message} - skipped", quiet)
     if not finite.any():
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
     positions = np.unique(ch[finite])
@@ -814,6 +871,7 @@ def process_survey(
                 raise BadFrameError(
                     f"bad frame {fid}: {cached.message} (run without --strict to skip it)"
                 )
+            _report(f"bad frame {fid}: {cached.message} - skipped (as in a run before)", quiet)
             bad.setdefault(fid, cached)
 
     # one pool of worker processes for both stages (with workers > 1, started when needed)
@@ -838,6 +896,9 @@ def process_survey(
         cjobs = []
         for name, lo, hi, s in pending:
             idx = frames_of(s)
+            known_bad = tuple(
+                bad[f] for f in dict.fromkeys(str(fr.frame_id[i]) for i in idx) if f in bad
+            )
             frames = tuple(
                 _ChunkFrame(
                     str(fr.frame_id[i]),
@@ -862,6 +923,7 @@ def process_survey(
                     p,
                     prov,
                     str(chunk_dir),
+                    known_bad,
                 )
             )
         _run_chunks(cjobs, pool, progress)
@@ -875,11 +937,15 @@ def process_survey(
     # merge
     t3 = time.perf_counter()
     parts = []
+    ran = {c[0] for c in pending}
     for name, *_ in chunks:
         parts.append(read_masks(chunk_dir / f"{name}.parquet"))
         marker = json.loads((chunk_dir / f"{name}.json").read_text())
         for b in marker.get("bad_frames", []):
-            bad.setdefault(b["frame_id"], BadFrame(**b))
+            if b["frame_id"] not in bad:  # not reported yet: met by a chunk, or a run before
+                bad[b["frame_id"]] = BadFrame(**b)
+                when = "" if name in ran else " (as in a run before)"
+                _report(f"bad frame {b['frame_id']}: {b['message']} - skipped{when}", quiet)
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     final_prov = {
         **prov,

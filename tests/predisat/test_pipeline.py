@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import shutil
 from pathlib import Path
 from typing import Any
@@ -201,6 +202,97 @@ def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path)
     with pytest.raises(BadFrameError, match=victim["frame_id"]):
         process_survey(src, tmp_path / "strict", PARAMS, progress=False, segmenter=blue_sky,
                        strict=True)  # fmt: skip
+
+
+def _jpeg(shape: tuple[int, int], seed: int, **save: Any) -> bytes:
+    from PIL import Image
+
+    rng = np.random.default_rng(seed)
+    pixels = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(pixels).save(buf, "JPEG", **save)
+    return buf.getvalue()
+
+
+def _pillow_decodes(data: bytes) -> bool:
+    """Pillow, unlike libjpeg through OpenCV, refuses a truncated file: the independent check."""
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            im.load()
+    except OSError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("progressive", [False, True])
+def test_truncated_jpeg_is_told_from_a_whole_one(progressive: bool, tmp_path: Path) -> None:
+    import cv2
+
+    from predisat.pipeline import _truncation
+
+    whole = _jpeg((120, 160), 3, quality=90, progressive=progressive)
+    assert _pillow_decodes(whole) and _truncation(whole) is None
+    assert _truncation(whole + bytes(500)) is None  # padding after the end marker
+    sos = whole.index(b"\xff\xda")
+    passed_by_opencv = 0
+    for cut in np.linspace(sos + 20, len(whole) - 2, 7).astype(int):
+        part = whole[:cut]
+        assert not _pillow_decodes(part)
+        assert _truncation(part) is not None
+        (tmp_path / "cut.jpg").write_bytes(part)
+        passed_by_opencv += cv2.imread(str(tmp_path / "cut.jpg")) is not None
+    assert passed_by_opencv > 0  # cv2.imread hands such files back, grey-filled: the reason
+    assert "header" in str(_truncation(whole[: sos - 4]))
+
+
+def test_thumbnail_end_marker_does_not_hide_truncation() -> None:
+    """An EXIF-style APP1 segment carrying a whole thumbnail JPEG (with its own end marker)
+    before the frame's scan data."""
+    whole = _jpeg((120, 160), 4, quality=90)
+    thumb = _jpeg((16, 16), 5)
+    body = b"Exif\x00\x00" + thumb
+    app1 = b"\xff\xe1" + (len(body) + 2).to_bytes(2, "big") + body
+    framed = whole[:2] + app1 + whole[2:]
+    assert _pillow_decodes(framed)
+    from predisat.pipeline import _truncation
+
+    assert _truncation(framed) is None
+    part = framed[: framed.index(b"\xff\xda") + 200]
+    assert not _pillow_decodes(part) and _truncation(part) is not None
+
+
+def test_truncated_png_is_reported() -> None:
+    import cv2
+
+    from predisat.pipeline import _truncation
+
+    ok, enc = cv2.imencode(".png", np.random.default_rng(6).integers(0, 256, (60, 80, 3), np.uint8))
+    data = enc.tobytes()
+    assert ok and _pillow_decodes(data) and _truncation(data) is None
+    assert not _pillow_decodes(data[:-30]) and "IEND" in str(_truncation(data[:-30]))
+
+
+def test_truncated_frame_is_reported_and_skipped(
+    survey_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[5]
+    path = src / victim["image"]
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])  # a copy cut short
+    out = tmp_path / "masks"
+    res = process_survey(src, out, PARAMS, progress=True, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    assert "truncated" in res.bad_frames[0].message
+    assert f"bad frame {victim['frame_id']}" in capsys.readouterr().err
+    # the resumed run still names it, from the cache, without segmenting anything
+    again = process_survey(src, out, PARAMS, progress=True, segmenter=blue_sky)
+    assert again.frames_segmented == 0 and len(again.bad_frames) == 1
+    assert f"bad frame {victim['frame_id']}" in (err := capsys.readouterr().err)
+    assert "as in a run before" in err
 
 
 def test_concat_masksets_round_trip(first_run) -> None:
