@@ -55,7 +55,16 @@ class _Loader(yaml.SafeLoader):
 
 def _construct_opencv_matrix(loader: yaml.SafeLoader, node: yaml.MappingNode) -> np.ndarray:
     m = loader.construct_mapping(node, deep=True)
-    return np.asarray(m["data"], float).reshape(int(m["rows"]), int(m["cols"]))
+    try:
+        return np.asarray(m["data"], float).reshape(int(m["rows"]), int(m["cols"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        # a YAMLError, so that the message names the file and the matrix's line
+        what = f"no {exc} field" if isinstance(exc, KeyError) else str(exc)
+        raise yaml.constructor.ConstructorError(
+            None, None,
+            f"opencv-matrix: {what}; give rows, cols and rows x cols numbers in data",
+            node.start_mark,
+        ) from None
 
 
 for _tag in ("opencv-matrix", "opencv-nd-matrix"):

@@ -337,6 +337,9 @@ def test_tolerant_readers(filename: str, tmp_path: Path) -> None:
         ("model_type: PINHOLE\nimage_width: 10\nimage_height: 10\nprojection_parameters:\n"
          "  fx: abc\n", "'fx' must be a number"),
         ("[1, 2", "not valid"),
+        ("image_width: 2\nimage_height: 2\ncamera_matrix: !!opencv-matrix\n  rows: 2\n  cols: 3\n"
+         "  dt: d\n  data: [1, 0, 1, 0, 1, 1, 0, 0, 1]\n", r"(?s)matrix: cannot reshape.*line 3"),
+        ("camera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n", r"no 'data' field"),
     ],
 )  # fmt: skip
 def test_rejected_calibrations_name_the_file(text: str, match: str, tmp_path: Path) -> None:
