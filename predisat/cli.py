@@ -514,6 +514,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Library errors are written to be read by a person: show them without a traceback.
         print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        kept = (
+            "; finished chunks and segmented frames are kept: rerun the same command to resume"
+            if args.command == "process"
+            else ""
+        )
+        print(f"\npredisat {args.command}: interrupted{kept}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -220,3 +220,33 @@ def test_demo_end_to_end_on_a_short_stretch(tmp_path, capsys: pytest.CaptureFixt
     capsys.readouterr()
     assert cli.main(["demo", "--out", str(out), "--from-km", "5", "--to-km", "4"]) == 2
     assert "--from-km" in capsys.readouterr().err
+
+
+def test_interrupted_process_keeps_its_work(
+    tmp_path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C during the chunks: one line, exit code 130, and the rerun segments nothing again."""
+    import predisat.pipeline as pl
+    from predisat.camera import CameraModel
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    generate_survey(
+        demo_track(), 4000.0, 4020.0, sky="clear", seed=5, out_dir=tmp_path,
+        camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False,
+    )  # fmt: skip
+    args = ["process", str(tmp_path / "survey"), "--quiet", "--out", str(tmp_path / "m")]
+
+    def ctrl_c(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(pl, "_run_chunks", ctrl_c)
+        capsys.readouterr()
+        assert cli.main(args) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "rerun the same command" in err and "Traceback" not in err
+    assert not (tmp_path / "m" / "masks.parquet").exists()
+    assert cli.main(args) == 0
+    done = capsys.readouterr()
+    assert ", 0 frames segmented" in done.out + done.err  # the cache of the first run
