@@ -555,6 +555,14 @@ class Mount:
         angles = (self.yaw_deg, self.pitch_deg, self.roll_deg)
         if not all(np.isfinite(float(a)) for a in (*angles, *arm)):
             raise ValueError("Mount angles and lever arm must be finite numbers")
+        if not -90.0 <= float(self.pitch_deg) <= 90.0:
+            # 135 deg up is a camera turned backwards and upside down, which yaw and roll
+            # must say; accepted, a typo (145 for 45) would silently swap the sides
+            raise ValueError(
+                f"Mount pitch_deg must be within [-90, 90] (the optical axis above the "
+                f"horizontal), got {self.pitch_deg}; the same rotation is yaw_deg + 180, "
+                f"pitch_deg = 180 - pitch, roll_deg + 180"
+            )
         object.__setattr__(self, "lever_arm_m", arm)
         for name in ("yaw_deg", "pitch_deg", "roll_deg"):
             object.__setattr__(self, name, float(getattr(self, name)))

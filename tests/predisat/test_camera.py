@@ -461,6 +461,26 @@ def test_mount_from_dict() -> None:
         Mount("up", 0.0)  # type: ignore[arg-type]
 
 
+def test_mount_pitch_beyond_the_vertical_is_refused_with_its_equivalent() -> None:
+    with pytest.raises(ValueError, match=r"pitch_deg must be within \[-90, 90\].*145"):
+        Mount.from_dict("left", {"pitch_deg": 145})
+    # the equivalent the message names is the same rotation (checked on matrices built by hand)
+    def rot(yaw: float, pitch: float, roll: float) -> np.ndarray:
+        y, p, r = np.radians([yaw, -pitch, roll])
+        rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
+        ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+        rx = np.array([[1, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+        return rz @ ry @ rx
+
+    assert np.allclose(rot(90.0, 145.0, 0.0), rot(270.0, 35.0, 180.0))
+    assert np.allclose(
+        Mount("left", 270.0, 35.0, 180.0).camera_to_vehicle()
+        @ Mount("left", 0.0, 0.0, 0.0).camera_to_vehicle().T,
+        rot(270.0, 35.0, 180.0),
+    )
+    Mount("left", 90.0, 90.0)  # straight up is a valid mount
+
+
 @pytest.mark.parametrize("kind", ["pinhole", "fisheye"])
 def test_resized_keeps_the_rays_of_the_same_image_points(kind: str) -> None:
     cam = default_camera(kind)  # type: ignore[arg-type]
