@@ -688,6 +688,7 @@ def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
 
 
 def _report(msg: str, quiet: bool) -> None:
+    # progress lines follow --quiet; bad frames are passed with quiet=False (always told)
     if not quiet:
         print(msg, file=sys.stderr, flush=True)
 
@@ -803,7 +804,7 @@ def process_survey(
             "(run without --strict to skip it)"
         )
     for b in bad.values():
-        _report(f"bad frame {b.frame_id}: {b.message} - skipped", quiet)
+        _report(f"bad frame {b.frame_id}: {b.message} - skipped", quiet=False)
     if not finite.any():
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
     positions = np.unique(ch[finite])
@@ -871,7 +872,9 @@ def process_survey(
                 raise BadFrameError(
                     f"bad frame {fid}: {cached.message} (run without --strict to skip it)"
                 )
-            _report(f"bad frame {fid}: {cached.message} - skipped (as in a run before)", quiet)
+            _report(
+                f"bad frame {fid}: {cached.message} - skipped (as in a run before)", quiet=False
+            )
             bad.setdefault(fid, cached)
 
     # one pool of worker processes for both stages (with workers > 1, started when needed)
@@ -887,7 +890,7 @@ def process_survey(
                     raise BadFrameError(
                         f"bad frame {fid}: {problem} (run without --strict to skip it)"
                     )
-                _report(f"bad frame {fid}: {problem} - skipped", quiet)
+                _report(f"bad frame {fid}: {problem} - skipped", quiet=False)
                 bad.setdefault(fid, BadFrame(fid, problem))
         timings["segment"] = time.perf_counter() - t1
 
@@ -945,7 +948,7 @@ def process_survey(
             if b["frame_id"] not in bad:  # not reported yet: met by a chunk, or a run before
                 bad[b["frame_id"]] = BadFrame(**b)
                 when = "" if name in ran else " (as in a run before)"
-                _report(f"bad frame {b['frame_id']}: {b['message']} - skipped{when}", quiet)
+                _report(f"bad frame {b['frame_id']}: {b['message']} - skipped{when}", quiet=False)
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     final_prov = {
         **prov,
