@@ -132,8 +132,9 @@ def test_file_is_geoparquet_readable_by_pyarrow_alone(tmp_path):
     assert (df["assumed_bins"] == (m.source == 2).sum(axis=1)).all()
 
 
-def test_geopandas_reads_points_if_available(tmp_path):
-    gpd = pytest.importorskip("geopandas")  # optional independent reader, not a dependency
+def test_geopandas_reads_points_and_crs(tmp_path):
+    # an independent reader (GeoParquet "geo" metadata, WKB, CRS); a dev dependency only
+    gpd = pytest.importorskip("geopandas")
     m = make_set()
     path = write_masks(m, tmp_path / "m.parquet")
     gdf = gpd.read_parquet(path)
