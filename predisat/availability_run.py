@@ -279,15 +279,9 @@ def _iso(gps_s: float) -> str:
 def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
     if isinstance(masks, MaskSet):
         return masks, "in memory"
-    from predisat.maskio import read_masks
+    from predisat.maskio import mask_file_path, read_masks
 
-    path = Path(masks)
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"--masks {path}: no such mask file; give a mask file v1 (*.masks.parquet, written "
-            "by predisat.maskio.write_masks)"
-        )
-    return read_masks(path), str(path)
+    return read_masks(masks), str(mask_file_path(masks))
 
 
 def _load_track(track: Any) -> Any:
@@ -549,7 +543,8 @@ def _run_info(
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the ``predisat availability`` options to a (sub)parser; returns it."""
     p = parser
-    p.add_argument("--masks", required=True, metavar="FILE", help="mask file (*.masks.parquet)")
+    p.add_argument("--masks", required=True, metavar="FILE",
+                   help="mask file, or the output folder of predisat process")
     p.add_argument("--track", metavar="FILE", help="track map the masks were made on (GeoJSON/CSV)")
     p.add_argument(
         "--nav", nargs="+", metavar="FILE",

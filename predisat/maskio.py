@@ -174,14 +174,28 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
     nulls, value ranges, monotonic chainage, and that the geometry points agree with
     ``lat_deg`` / ``lon_deg``.
 
+    Parameters
+    ----------
+    path : path-like
+        The mask file, or the output folder of ``predisat process`` (its ``masks.parquet``).
+
     Raises
     ------
     MaskFileError
         Naming the file, the column and the first bad row, and what would fix it.
     """
-    path = Path(path)
+    given = Path(path)
+    path = mask_file_path(given)
+    if given.is_dir() and not path.is_file():
+        raise MaskFileError(
+            f"{given}: a folder without masks.parquet; give a mask file v1 or the output "
+            "folder of a finished `predisat process` run"
+        )
     if not path.is_file():
-        raise MaskFileError(f"{path}: no such mask file")
+        raise MaskFileError(
+            f"{path}: no such mask file; give a mask file v1 (written by `predisat process` "
+            "or predisat.maskio.write_masks) or the output folder of `predisat process`"
+        )
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:

@@ -22,7 +22,7 @@ from predisat.availability_run import (
     run_availability,
     run_from_args,
 )
-from predisat.maskio import write_masks
+from predisat.maskio import MaskFileError, write_masks
 from predisat.masks import MaskSet
 from predisat.satellites import default_ephemeris
 from predisat.track import TrackMap, demo_track
@@ -214,7 +214,7 @@ def test_geojson_follows_the_track(run, track: TrackMap, masks: MaskSet) -> None
 # ----------------------------------------------------------------------------- errors
 def test_missing_masks_file_names_it(tmp_path: Path) -> None:
     missing = tmp_path / "nope.masks.parquet"
-    with pytest.raises(FileNotFoundError, match=r"nope\.masks\.parquet.*mask file"):
+    with pytest.raises(MaskFileError, match=r"nope\.masks\.parquet: no such mask file"):
         run_availability(missing, None, None, out_dir=tmp_path / "o", progress=False)
 
 

@@ -261,6 +261,17 @@ def test_not_a_parquet_file(tmp_path):
         read_masks(tmp_path / "missing.parquet")
 
 
+def test_reads_the_output_folder_of_process(tmp_path):
+    m = make_set()
+    (tmp_path / "run").mkdir()
+    write_masks(m, tmp_path / "run" / "masks.parquet")
+    got = read_masks(tmp_path / "run")
+    np.testing.assert_array_equal(got.mask_el_deg, m.mask_el_deg)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(MaskFileError, match=r"empty: a folder without masks\.parquet"):
+        read_masks(tmp_path / "empty")
+
+
 # ---------------------------------------------------------------- exporters
 def test_urbannav_csv_rows_and_conservative_samples(tmp_path):
     m = make_set(step=0.5)
