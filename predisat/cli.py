@@ -182,7 +182,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from predisat import track as trackmod
     from predisat.availability_run import run_availability
     from predisat.evalfigures import evaluation_figure
-    from predisat.evaluate import compare, evaluate_masks, load_truth
+    from predisat.evaluate import compare, evaluate_masks, format_table, load_truth
     from predisat.pipeline import process_survey
     from predisat.synth.generate import contact_sheet
 
@@ -212,13 +212,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
         synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
     )
     t_process = time.perf_counter() - t1
+    print(f"  {processed}")
 
     print("demo 3/5: masks against the synthetic ground truth")
     comp = compare(processed.masks, load_truth(synth.truth_dir))
     table = evaluate_masks(comp)
     overall = table[table["source"] == "all"]
     with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
-    print(overall[with_cols].round(4).to_string(index=False))
+    print(format_table(overall[with_cols]))
     eval_png = out / "evaluation.png"
     evaluation_figure(comp, title="Demo masks against the ground truth").savefig(eval_png, dpi=100)
 

@@ -49,6 +49,7 @@ __all__ = [
     "count_above",
     "evaluate_from_args",
     "evaluate_masks",
+    "format_table",
     "load_truth",
     "sector_of",
     "trust_counts",
@@ -562,6 +563,17 @@ def add_evaluate_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
+def format_table(table: pd.DataFrame) -> str:
+    """Text of an :func:`evaluate_masks` table: 4 decimals, but the rare-event shares
+    (``unsafe_share``, ``false_trust`` and their ``_margin`` columns) in scientific notation,
+    which 4 decimals would print as 0 (the target is 1e-3, the pipeline reaches ~1e-6)."""
+    rare = [c for c in table.columns if c.startswith(("unsafe_share", "false_trust"))]
+    formatters = {c: "{:.2e}".format for c in rare}
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        shown = table.round({c: 4 for c in table.columns if c not in rare})
+        return str(shown.to_string(index=False, formatters=formatters))
+
+
 def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
     """Run ``predisat evaluate`` from parsed arguments; prints and returns the table."""
     from predisat.maskio import mask_file_path, read_masks
@@ -587,8 +599,7 @@ def evaluate_from_args(args: argparse.Namespace) -> pd.DataFrame:
         print("the *_margin columns use the mask file's own margins (margin_deg)")
     elif margins is not None and applied_margins(comp, None) is not None:
         print("the *_margin columns use the margin table, not the mask file's own margins")
-    with pd.option_context("display.width", 200, "display.max_columns", 30):
-        print(table.round(4).to_string(index=False))
+    print(format_table(table))
     if comp.unmatched:
         print(f"{comp.unmatched} mask position(s) without truth were left out")
     if out is not None:

@@ -14,8 +14,9 @@
    :attr:`~predisat.reconstruct.ReconstructionParams.overlap_m` of it. Each finished chunk is
    written atomically as ``out/chunks/<lo>_<hi>.parquet`` (a mask file) and then
    ``<lo>_<hi>.json`` (its provenance, the completion marker). On start, a chunk whose JSON
-   carries the same run key (survey hash, parameters, software version) is skipped: an
-   interrupted run resumes without redoing finished chunks.
+   carries the same run key (survey hash, parameters, software version) and frames key (its
+   images' sizes and modification times) is skipped: an interrupted run resumes without
+   redoing finished chunks, and a replaced image redoes the chunks that read it.
 
 At the end the chunks are merged into ``out/masks.parquet`` with the run's provenance
 (``out/provenance.json`` too). Positions are the survey's distinct antenna chainages.
@@ -282,6 +283,16 @@ def _stat_key(path: str) -> list[int]:
     return [int(st.st_size), int(st.st_mtime_ns)]
 
 
+def _frames_key(frame_ids: Iterable[str], image_paths: Iterable[str]) -> str:
+    """Hash of a chunk's frames and their images' size and modification time (None when
+    missing), so that a finished chunk is redone once one of its images is replaced."""
+    stamps = [
+        [fid, _stat_key(path) if os.path.exists(path) else None]
+        for fid, path in zip(frame_ids, image_paths, strict=True)
+    ]
+    return hashlib.sha256(json.dumps(stamps).encode()).hexdigest()[:16]
+
+
 def _read_cache(job: _FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
     """Cached result of a frame (None when absent or stale: the image changed)."""
     path = Path(job.cache_path)
@@ -357,13 +368,20 @@ def _read_image(path: str) -> tuple[NDArray | None, str | None]:
         return None, f"image {path} is missing; restore it or drop the frame"
     except OSError as exc:
         return None, f"image {path} cannot be read ({exc.strerror}); check the file"
+    if not data:
+        return None, (
+            f"image {path} is empty (0 bytes): copy it again from the camera or drop the frame"
+        )
     cut = _truncation(data)
     if cut is not None:
         return None, (
             f"image {path} is truncated ({cut}): the file was cut short, "
             "copy it again from the camera or drop the frame"
         )
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    try:
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        img = None
     if img is None:
         return None, f"image {path} cannot be decoded; re-export it as JPEG or PNG"
     return img, None
@@ -480,6 +498,7 @@ class _ChunkJob:
     # the chunk's frames found bad before it ran: recorded in its marker, so that a resumed
     # run that skips the chunk still lists them
     known_bad: tuple[BadFrame, ...] = ()
+    frames_key: str = ""  # _frames_key of every frame the chunk may use, bad ones included
 
 
 def _fmt_m(x: float) -> str:
@@ -529,6 +548,7 @@ def _run_chunk(
     write_masks(masks, chunk_dir / f"{job.name}.parquet")
     marker = {
         **prov,
+        "frames_key": job.frames_key,
         "n_positions": int(masks.n_pos),
         "n_frames": len(views),
         "bad_frames": [asdict(b) for b in bad],
@@ -830,12 +850,31 @@ def process_survey(
     for kk in np.unique(k):
         lo, hi = float(kk * p.chunk_m), float((kk + 1) * p.chunk_m)
         chunks.append((f"{_fmt_m(lo)}_{_fmt_m(hi)}", lo, hi, positions[k == kk]))
+    def frames_of(s: NDArray) -> NDArray:
+        lo, hi = float(s.min()) - overlap, float(s.max()) + overlap
+        return np.flatnonzero(finite & (ch >= lo) & (ch <= hi))
+
+    frames_key = {}
+    for name, _, _, s in chunks:
+        idx = frames_of(s)
+        frames_key[name] = _frames_key(
+            (str(fr.frame_id[i]) for i in idx), (str(survey.root / str(fr.image[i])) for i in idx)
+        )
     pending, skipped = [], 0
     for c in chunks:
-        if _chunk_finished(chunk_dir, c[0], run_key):
-            skipped += 1
-        else:
+        marker = _chunk_finished(chunk_dir, c[0], run_key, frames_key[c[0]])
+        if marker is None:
             pending.append(c)
+            continue
+        skipped += 1
+        if strict and marker.get("bad_frames"):
+            # a finished folder must not pass a --strict check on frames a run before skipped
+            first = marker["bad_frames"][0]
+            raise BadFrameError(
+                f"bad frame {first['frame_id']}: {first['message']} (skipped by a run before in "
+                f"chunk {c[0]}; fix the image and rerun: the chunk is redone; or run without "
+                "--strict to skip it)"
+            )
     if max_chunks is not None:
         pending = pending[:max_chunks]
     _report(
@@ -843,10 +882,6 @@ def process_survey(
         f"{len(chunks)} chunks ({skipped} already done)",
         quiet,
     )
-
-    def frames_of(s: NDArray) -> NDArray:
-        lo, hi = float(s.min()) - overlap, float(s.max()) + overlap
-        return np.flatnonzero(finite & (ch >= lo) & (ch <= hi))
 
     need = (
         np.unique(np.concatenate([frames_of(c[3]) for c in pending]))
@@ -927,6 +962,7 @@ def process_survey(
                     prov,
                     str(chunk_dir),
                     known_bad,
+                    frames_key[name],
                 )
             )
         _run_chunks(cjobs, pool, progress)
@@ -973,7 +1009,6 @@ def process_survey(
         out, masks_path, merged, int(finite.sum()), len(pending), skipped, n_seg, bad_list,
         elapsed, timings,
     )  # fmt: skip
-    _report(str(result), quiet)
     return result
 
 
@@ -987,22 +1022,26 @@ def _version() -> str:
     return str(__version__)
 
 
-def _chunk_finished(chunk_dir: Path, name: str, run_key: str) -> bool:
+def _chunk_finished(
+    chunk_dir: Path, name: str, run_key: str, frames_key: str
+) -> dict[str, Any] | None:
+    """The completion marker of a chunk that need not be redone, else None."""
     import pyarrow.parquet as pq
 
     marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
     if not (marker.is_file() and data.is_file()):
-        return False
+        return None
     try:
         done = json.loads(marker.read_text())
-        if done.get("run_key") != run_key:
-            return False
+        if done.get("run_key") != run_key or done.get("frames_key") != frames_key:
+            return None
         # A power cut after the rename may leave an empty or torn file (no fsync, for speed):
         # a chunk whose Parquet footer does not read, or holds other than its rows, is redone.
         rows = pq.read_metadata(data).num_rows
-        return bool(rows > 0 and rows == done.get("n_positions", rows))
+        ok = rows > 0 and rows == done.get("n_positions", rows)
+        return done if ok and isinstance(done, dict) else None
     except (OSError, ValueError, AttributeError):
-        return False
+        return None
 
 
 def _write_bad_frames(path: Path, bad: Iterable[BadFrame]) -> None:

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from predisat.camera import CameraModel
@@ -20,6 +21,7 @@ from predisat.evaluate import (
     count_above,
     evaluate_from_args,
     evaluate_masks,
+    format_table,
     load_truth,
     sector_of,
     trust_counts,
@@ -251,8 +253,6 @@ def test_process_writes_margins_and_evaluate_uses_them(
     import hashlib
     import shutil
 
-    import pandas as pd
-
     from predisat.maskio import read_masks, write_masks
     from predisat.pipeline import PipelineParams, process_survey
 
@@ -305,8 +305,6 @@ def test_process_checks_margin_tables_before_any_work(
 ) -> None:
     import shutil
 
-    import pandas as pd
-
     from predisat.pipeline import PipelineParams, process_survey
 
     synth, masks_dir = tiny
@@ -340,7 +338,6 @@ def test_process_checks_margin_tables_before_any_work(
 
 
 def test_margin_table_refuses_bins_of_a_missing_group() -> None:
-    import pandas as pd
 
     rows = [{"sector": "cross", "source": "observed", "margin_deg": 0.0},
             {"sector": "along", "source": "observed", "margin_deg": 3.0}]  # fmt: skip
@@ -349,3 +346,15 @@ def test_margin_table_refuses_bins_of_a_missing_group() -> None:
     np.testing.assert_array_equal(table.margin_for(sector, np.zeros((1, 2), np.uint8)), [[0, 3]])
     with pytest.raises(ValueError, match="'cross', 'assumed'"):
         table.margin_for(sector, np.array([[2, 0]], np.uint8))
+
+
+def test_format_table_keeps_rare_shares_visible() -> None:
+    table = pd.DataFrame({
+        "sector": ["all"], "p95_error_deg": [34.99987], "unsafe_share": [6.5e-4],
+        "false_trust": [5.37e-6], "false_trust_margin": [0.0], "sky_lost": [0.153912],
+    })  # fmt: skip
+    header, row = format_table(table).splitlines()
+    cells = dict(zip(header.split(), row.split(), strict=True))
+    assert cells["false_trust"] == "5.37e-06" and cells["unsafe_share"] == "6.50e-04"
+    assert float(cells["false_trust_margin"]) == 0.0
+    assert cells["p95_error_deg"] == "34.9999" and cells["sky_lost"] == "0.1539"

@@ -296,6 +296,45 @@ def test_truncated_frame_is_reported_and_skipped(
     assert "as in a run before" in err
 
 
+def test_empty_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[3]
+    (src / victim["image"]).write_bytes(b"")  # what a failed copy leaves
+    res = process_survey(src, tmp_path / "masks", PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    assert "empty (0 bytes)" in res.bad_frames[0].message
+
+
+def test_fixed_frame_redoes_its_chunks_and_strict_checks_a_finished_folder(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    clean = process_survey(survey_dir, tmp_path / "clean", PARAMS, progress=False,
+                           segmenter=blue_sky)  # fmt: skip
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[5]
+    path = src / victim["image"]
+    good = path.read_bytes()
+    path.write_bytes(good[: len(good) // 2])
+    out = tmp_path / "masks"
+    first = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in first.bad_frames] == [victim["frame_id"]]
+    # a --strict rerun on the finished folder must not pass over the frame skipped before
+    with pytest.raises(BadFrameError, match=f"bad frame {victim['frame_id']}.*run before"):
+        process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky, strict=True)
+    path.write_bytes(good)  # the frame copied again from the camera
+    fixed = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert fixed.bad_frames == () and fixed.frames_segmented == 1
+    # each chunk reads the frames within overlap_m (315 m) of it: here every chunk reads them all
+    assert PARAMS.reconstruction.overlap_m > 60.0
+    assert fixed.chunks_done == first.chunks_done and fixed.chunks_skipped == 0
+    np.testing.assert_array_equal(fixed.masks.mask_el_deg, clean.masks.mask_el_deg)
+    np.testing.assert_array_equal(fixed.masks.source, clean.masks.source)
+    again = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky, strict=True)
+    assert again.chunks_done == 0 and again.bad_frames == ()
+
+
 def test_concat_masksets_round_trip(first_run) -> None:
     _, (res, _) = first_run
     m: MaskSet = res.masks
