@@ -143,8 +143,8 @@ class MaskSet:
         if bad.size:
             i = int(bad[0]) + 1
             raise MaskError(
-                f"chainage_m must be strictly increasing: row {i} ({ch[i]!r} m) follows row "
-                f"{i - 1} ({ch[i - 1]!r} m); sort the positions and drop duplicates"
+                f"chainage_m must be strictly increasing: row {i} ({_num(ch[i])} m) follows row "
+                f"{i - 1} ({_num(ch[i - 1])} m); sort the positions and drop duplicates"
             )
         lat = _vector(self.lat_deg, "lat_deg", n)
         lon = _vector(self.lon_deg, "lon_deg", n)
@@ -550,7 +550,7 @@ def _vector(values: ArrayLike, name: str, n: int | None, allow_nan: bool = False
     bad = np.isinf(arr) if allow_nan else ~np.isfinite(arr)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise MaskError(f"{name}[{i}] = {arr[i]!r} is not finite; fix or drop that row")
+        raise MaskError(f"{name}[{i}] = {_num(arr[i])} is not finite; fix or drop that row")
     return arr
 
 
@@ -560,10 +560,21 @@ def _check_range(arr: NDArray, name: str, lo: float, hi: float) -> None:
         idx = np.unravel_index(int(np.flatnonzero(bad)[0]), arr.shape)
         where = ", ".join(str(int(k)) for k in idx)
         what = "row, bin" if arr.ndim == 2 else "row"
+        value = arr[idx]
+        if np.isnan(value):
+            raise MaskError(
+                f"{name}[{where}] ({what}) is NaN; every bin needs a value in "
+                f"[{lo:g}, {hi:g}] (90 for a direction that is never open)"
+            )
         raise MaskError(
-            f"{name}[{where}] ({what}) = {arr[idx]!r} is outside [{lo:g}, {hi:g}]; "
+            f"{name}[{where}] ({what}) = {_num(value)} is outside [{lo:g}, {hi:g}]; "
             "clip or fix the value"
         )
+
+
+def _num(x: Any) -> str:
+    """A number for a message: ``123.5``, not ``np.float32(123.5)``."""
+    return f"{float(x):.10g}"
 
 
 def _first_bad(bad: NDArray) -> str:

@@ -93,10 +93,11 @@ def test_arrays_are_read_only_copies():
 @pytest.mark.parametrize(
     ("change", "words"),
     [
-        ({"chainage_m": [0.0, 10.0, 10.0, 30.0]}, ["chainage_m", "row 2", "increasing"]),
+        ({"chainage_m": [0.0, 10.0, 10.0, 30.0]}, ["chainage_m", "row 2 (10 m)", "increasing"]),
         ({"chainage_m": [0.0, np.nan, 20.0, 30.0]}, ["chainage_m[1]", "not finite"]),
         ({"lat_deg": [50.0, 95.0, 50.0, 50.0]}, ["lat_deg[1]", "[-90, 90]"]),
-        ({"mask_el_deg": "high"}, ["mask_el_deg[2, 7]", "[0, 90]"]),
+        ({"mask_el_deg": "high"}, ["mask_el_deg[2, 7]", "= 90.5 is outside [0, 90]"]),
+        ({"mask_el_deg": "nan"}, ["mask_el_deg[0, 9]", "is NaN"]),
         ({"mask_el_deg": "neg"}, ["mask_el_deg[1, 3]", "[0, 90]"]),
         ({"mask_el_deg": np.zeros((3, 360))}, ["mask_el_deg", "shape", "(4, 360)"]),
         ({"az_step_deg": 0.7}, ["az_step_deg", "whole number"]),
@@ -124,6 +125,8 @@ def test_validation_errors_name_field_and_row(change, words):
             mask = np.full((4, 360), 10.0)
             if value == "high":
                 mask[2, 7] = 90.5
+            elif value == "nan":
+                mask[0, 9] = np.nan
             else:
                 mask[1, 3] = -0.1
             args[key] = mask
