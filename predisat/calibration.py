@@ -75,7 +75,14 @@ def _load_yaml(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise CalibrationError(f"{path}: cannot read calibration file ({exc.strerror})") from None
+        fix = (
+            "check the path (a survey.yaml's are relative to its folder) or put the file there"
+            if isinstance(exc, FileNotFoundError)
+            else "check the file's permissions"
+        )
+        raise CalibrationError(
+            f"{path}: cannot read calibration file ({exc.strerror}); {fix}"
+        ) from None
     # OpenCV writes a "%YAML:1.0" directive that is not valid YAML; drop any directive line.
     lines = [ln for ln in text.splitlines() if not ln.startswith("%YAML")]
     try:
