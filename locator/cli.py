@@ -279,19 +279,28 @@ def format_demo_table(table: Any) -> str:
 
 
 def _run_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--masks", help="mask file (predisat process output or true_masks.parquet)")
+    p.add_argument("--masks", metavar="MASKS",
+                   help="mask file, or a predisat process output folder, or true_masks.parquet")
     p.add_argument("--cutoff", type=float, metavar="DEG", help="flat elevation cut-off instead")
     p.add_argument("--no-masks", action="store_true", help="trust every received signal")
-    p.add_argument("--integrity", choices=("active", "passive"), default="active")
+    p.add_argument("--integrity", choices=("active", "passive"), default="active",
+                   help="active: fault detection and exclusion (default); passive: every "
+                   "measurement kept, faults only flagged")
     p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
-    p.add_argument("--k-sigma", type=float, help="pair interval half width in sigmas")
-    p.add_argument("--extra-margin", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--k-sigma", type=float, metavar="K",
+                   help="pair interval half width in sigmas (default: the error model's; "
+                   "without one 2, the source's; 3.89 gives 1e-4 per pair, docs/locator.md)")
+    p.add_argument("--extra-margin", type=float, default=0.0, metavar="DEG",
+                   help="added to the mask file's margins before trusting a satellite (0)")
     p.add_argument("--start-chainage", type=float, metavar="M",
                    help="default: the simulation's, or the RINEX header position")  # fmt: skip
-    p.add_argument("--start-uncertainty", type=float, default=50.0, metavar="M")
-    p.add_argument("--antenna-height", type=float, default=4.0, metavar="M")
+    p.add_argument("--start-uncertainty", type=float, default=50.0, metavar="M",
+                   help="half width of the first predicted interval around the start (50)")
+    p.add_argument("--antenna-height", type=float, default=4.0, metavar="M",
+                   help="antenna above the rail, for --obs runs (4)")
     p.add_argument("--constellation", help="systems used (default: all for --sim, G for --obs)")
-    p.add_argument("--no-heading-check", action="store_true")
+    p.add_argument("--no-heading-check", action="store_true",
+                   help="skip the heading-based integrity check")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -309,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate a train run's pseudoranges in a synthetic world")
     p.add_argument("--world", help="world.npz (from `predisat synth` truth/ or a simulation)")
     p.add_argument("--track", help="track GeoJSON/CSV (default: the demo line 144)")
-    p.add_argument("--track-name")
+    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
     p.add_argument("--from-km", type=float, default=4.0)
     p.add_argument("--to-km", type=float, default=6.3)
     p.add_argument("--scenery", help="scenery recipe YAML (surveys/*.yaml)")
@@ -323,19 +332,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=1.0, metavar="HZ")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--constellation", default="all")
-    p.add_argument("--format", choices=("parquet", "csv"), default="parquet")
+    p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
+                   help="per-epoch table format (parquet)")
     p.add_argument("--no-true-masks", action="store_true", help="skip true_masks.parquet")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("run", help="locate the train at every epoch (simulated or RINEX)")
     p.add_argument("--track", help="track GeoJSON/CSV (default: the simulation's, or line 144)")
-    p.add_argument("--track-name")
+    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
     p.add_argument("--sim", metavar="DIR", help="a `locator simulate` folder")
     p.add_argument("--obs", metavar="FILE", help="RINEX 2/3 observation file")
     p.add_argument("--nav", nargs="+", metavar="FILE", help="RINEX navigation files")
     _run_arguments(p)
-    p.add_argument("--format", choices=("parquet", "csv"), default="parquet")
+    p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
+                   help="per-epoch table format (parquet)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_run)
 
