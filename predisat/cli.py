@@ -440,9 +440,10 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Convert a mask file (or a `predisat process` output folder) for other tools: "
             "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
-            "position: 'AZ EL' lines for RTKLIB's elevation-mask option) or pvgis (one "
-            "position: horizon table). Values are the mask plus its margin, never below the "
-            "mask at any azimuth the reader may look up (docs/mask-format.md)."
+            "position: 'AZ EL' lines for the file-elmaskfile option of the MALIB / MRTKLIB "
+            "RTKLIB forks, RTKPLOT and simobs) or pvgis (one position: horizon table). Values "
+            "are the mask plus its margin, never below the mask at any azimuth the reader may "
+            "look up (docs/mask-format.md)."
         ),
     )
     p.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")

@@ -388,7 +388,9 @@ def to_urbannav_csv(
     include_margin : bool, optional
         Export ``mask + margin`` (default) or the bare mask.
     header : bool, optional
-        Write a header row ``lat_deg,lon_deg,h_m,az_0,...,az_360`` (UrbanNav files have none).
+        Write a header row ``lat_deg,lon_deg,h_m,az_0,...,az_360``. UrbanNav's published
+        sky-mask tables start with one header line (``Latitude(deg)``, ``Longitude(deg)``,
+        ``Altitude(m)``, ``Skymask(1*361 deg)``), so a reader written for them skips one line.
     """
     path = Path(path)
     mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
@@ -411,14 +413,19 @@ def to_rtklib_mask(
     *,
     include_margin: bool = True,
 ) -> Path:
-    """Export the mask at one position as an RTKLIB elevation mask file.
+    """Export the mask at one position as an RTKLIB-style ``AZ EL`` elevation mask file.
 
-    RTKLIB's ``readelmask`` reads ``AZ EL`` lines (degrees; ``%`` and ``#`` start comments):
-    ``EL_i`` holds for ``AZ_i <= az < AZ_{i+1}`` at 1-deg resolution, and ``testelmask`` looks
-    up ``floor(az)``. The file has 360 lines ``a EL`` for a = 0..359 where ``EL`` is the
-    maximum of the effective mask over every bin touching ``[a, a + 1]``, rounded up to RTKLIB's
-    0.1-deg storage and written so that RTKLIB's truncation keeps it (e.g. ``12.35`` is stored
-    as 12.3), capped at 90.
+    Three readers of this format are known, and the file is conservative for each:
+    ``readelmask`` / ``testelmask`` of the RTKLIB forks that take an azimuth-dependent mask
+    (MALIB, MRTKLIB: option ``file-elmaskfile``; mainline RTKLIB 2.4.3 b34 and demo5 have no
+    such option) keep the first 360 lines, ``EL_i`` for ``AZ_i <= az < AZ_{i+1}`` stored in
+    truncated tenths of a degree and looked up at ``floor(az)``; RTKPLOT's elevation-mask
+    overlay and ``simobs -m`` fill 361 slots and look up ``int(az + 0.5)``. The file has 361
+    lines ``a EL`` for a = 0..360 where ``EL`` is the maximum of the effective mask over every
+    bin touching ``[a - 0.5, a + 1]`` (both lookups; line 360 closes the circle for the
+    rounding readers, which otherwise leave ``[359.5, 360)`` at 0), rounded up to the 0.1-deg
+    storage and written so that truncation keeps it (e.g. ``12.35`` is stored as 12.3),
+    capped at 90.
 
     Parameters
     ----------
@@ -431,7 +438,7 @@ def to_rtklib_mask(
     path = Path(path)
     i = _single_position(masks, chainage_m)
     mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
-    el = conservative_resample(mask[i], masks.az_step_deg, np.arange(360) + 0.5, 0.5)
+    el = conservative_resample(mask[i], masks.az_step_deg, np.arange(361) + 0.25, 0.75)
     with _atomic(path) as f:
         f.write(_comment_block("%", masks, i, include_margin))
         f.write("% AZ(deg) EL(deg): EL applies for AZ <= az < next AZ\n")
@@ -547,7 +554,7 @@ def _ceil_to(values: NDArray, step: float) -> NDArray:
     """Round up to a multiple of ``step`` (within ``_ROUND_TOL_DEG``), cap at 90."""
     v = np.asarray(values, float)
     out = np.round(np.ceil((v - _ROUND_TOL_DEG) / step) * step, 6)
-    return np.minimum(out, 90.0)
+    return np.minimum(out, 90.0) + 0.0  # + 0.0: an exact 0 came out as -0.0, printed "-0.00"
 
 
 @contextmanager

@@ -300,6 +300,21 @@ def test_urbannav_csv_rows_and_conservative_samples(tmp_path):
         assert (np.interp(az, np.arange(361.0), row) >= true - 1e-5).all()
 
 
+def test_exports_never_write_negative_zero(tmp_path):
+    n = 2
+    m = MaskSet.from_arrays(
+        [0.0, 10.0], np.full(n, 50.0), np.full(n, 4.0), 0.0, np.zeros(n), np.zeros((n, 360)),
+        margin_deg=np.float32(0.0),
+    )  # fmt: skip
+    texts = [
+        to_urbannav_csv(m, tmp_path / "u.csv").read_text(),
+        to_pvgis_horizon(m, 0.0, tmp_path / "p.txt").read_text(),
+        to_pvgis_horizon(m, 0.0, tmp_path / "h.txt", layout="userhorizon").read_text(),
+    ]
+    for text in texts:
+        assert "-0.00" not in text and "0.00" in text
+
+
 def test_urbannav_header_option(tmp_path):
     path = to_urbannav_csv(make_set(n_pos=3), tmp_path / "h.csv", header=True)
     first = path.read_text().splitlines()[0].split(",")
@@ -307,7 +322,8 @@ def test_urbannav_header_option(tmp_path):
 
 
 def read_rtklib_elmask(path):
-    """RTKLIB readelmask (rtkcmn.c, 2.4.3), transcribed: fgets into char[256] (chunks of at
+    """readelmask of the RTKLIB forks with ``file-elmaskfile`` (MALIB / MRTKLIB rtkcmn.c),
+    transcribed: fgets into char[256] (chunks of at
     most 255 bytes, so a longer line goes on as a new "line"), text after % or # ignored, a
     chunk counts when it starts with two numbers, at most 360 of them; EL_i holds for
     AZ_i <= az < AZ_{i+1}, stored as int16 tenths of a degree, truncated."""
@@ -336,6 +352,32 @@ def read_rtklib_elmask(path):
     return elmask, np.array(el)
 
 
+def read_rtkplot_elmask(path, variant):
+    """The 361-slot readers, transcribed: RTKPLOT's ReadElMaskData (Qt app, "rtkplot") and
+    simobs's readelmask (util/simobs/simobs.c, "simobs"). Slots 0..360 start at 0; a line
+    ``az1 el1`` (not starting with %) with ``az0 < az1 <= 360`` and ``0 <= el1 <= 90`` sets
+    slots ``int(az0) <= j < int(az1)`` to ``el0`` and then slot ``int(az1)`` to ``el1``
+    (rtkplot) or slots ``int(az0) <= j <= int(az1)`` to ``el0`` (simobs); then ``az0, el0 =
+    az1, el1``. Both look up ``slot[int(az + 0.5)]``."""
+    slots = np.zeros(361)
+    az0 = el0 = 0.0
+    for line in path.read_text().splitlines():
+        if line.startswith("%"):
+            continue
+        parts = line.split()
+        if len(parts) < 2:
+            continue
+        az1, el1 = float(parts[0]), float(parts[1])
+        if az0 < az1 <= 360.0 and 0.0 <= el1 <= 90.0:
+            if variant == "rtkplot":
+                slots[int(az0):int(az1)] = el0
+                slots[int(az1)] = el1
+            else:
+                slots[int(az0):int(az1) + 1] = el0
+        az0, el0 = az1, el1
+    return slots
+
+
 def test_rtklib_mask_is_conservative_after_rtklib_truncation(tmp_path):
     m = make_set(step=0.5)
     ch = float(m.chainage_m[4])
@@ -344,7 +386,8 @@ def test_rtklib_mask_is_conservative_after_rtklib_truncation(tmp_path):
     assert el.size == 360 and (el <= 90.0).all()
     eff = m.mask_el_deg[4].astype(float) + m.margin_deg[4]
     for a in range(360):
-        want = brute_window_max(eff, 0.5, a + 0.5, 0.5)  # bins touching [a, a + 1]
+        # bins touching [a - 0.5, a + 1]: floor lookups need [a, a + 1], rounding [a - 0.5, a + 0.5]
+        want = brute_window_max(eff, 0.5, a + 0.25, 0.75)
         assert elmask[a] * 0.1 >= want - 1e-5
         assert elmask[a] * 0.1 < want + 0.1 + 1e-9
     rng = np.random.default_rng(10)
@@ -352,6 +395,20 @@ def test_rtklib_mask_is_conservative_after_rtklib_truncation(tmp_path):
     # RTKLIB testelmask: masked when el < elmask[floor(az)] * 0.1
     assert (elmask[np.floor(az).astype(int)] * 0.1 >= m.mask_at(ch, az) - 1e-5).all()
     assert path.read_text().startswith("% PREDISAT mask at chainage")
+
+
+@pytest.mark.parametrize("variant", ["rtkplot", "simobs"])
+def test_rtklib_mask_is_conservative_for_the_rounding_readers(tmp_path, variant):
+    m = make_set(step=0.5)
+    ch = float(m.chainage_m[4])
+    mask = m.effective_mask_deg.copy()
+    mask[4, -1] = 89.0  # a wall just west of north: the slot the rounding readers left at 0
+    m = MaskSet.from_arrays(
+        m.chainage_m, m.lat_deg, m.lon_deg, m.h_m, m.heading_deg, mask, az_step_deg=0.5,
+    )  # fmt: skip
+    slots = read_rtkplot_elmask(to_rtklib_mask(m, ch, tmp_path / "e.txt"), variant)
+    az = np.concatenate([np.linspace(0.0, 360.0, 36000, endpoint=False), [359.6, 359.99]])
+    assert (slots[(az + 0.5).astype(int)] >= m.mask_at(ch, az) - 1e-5).all()
 
 
 def test_rtklib_mask_ignores_long_provenance(tmp_path):
