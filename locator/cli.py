@@ -137,6 +137,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         path = AntennaPath(_track(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
+        _report_problems(args.obs, obs.problems)
         source = RinexSource(RangeModel.from_rinex_nav(args.nav), obs, args.constellation or "G")
         start = args.start_chainage
         if start is None:
@@ -145,14 +146,20 @@ def cmd_run(args: argparse.Namespace) -> int:
                 raise CliError(
                     f"{args.obs}: no approximate position in the header; pass --start-chainage"
                 )
+            _header_on_track(hx, path, args.obs)
             start = static_truth(hx, path)
     if not (args.masks or args.cutoff is not None or args.no_masks):
         raise CliError("no trust rule: pass --masks FILE, --cutoff DEG or --no-masks")
     cfg = _config(args)
+    masks = _masks(args)
+    if masks is not None:
+        from predisat.availability_run import check_masks_on_track
+
+        check_masks_on_track(masks, path.track, str(args.masks))
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
-            masks=_masks(args), fmt=args.format, progress=bar.update,
+            masks=masks, fmt=args.format, progress=bar.update,
         )  # fmt: skip
     claim = epochs["claim"].mean()
     length = epochs.loc[epochs["claim"], "length_m"]
@@ -161,6 +168,39 @@ def cmd_run(args: argparse.Namespace) -> int:
         f"{length.median():.1f} m, p95 {length.quantile(0.95):.1f} m -> {folder}"
     )
     return 0
+
+
+# The header's approximate position is a rough fix (tens of metres), so the bound is looser
+# than the 5 m of simulated antennas; a receiver on another line is kilometres away.
+_MAX_HEADER_OFFSET_M = 200.0
+
+
+def _header_on_track(ecef_m: Any, path: Any, label: str) -> None:
+    import numpy as np
+
+    from predisat.geodesy import ecef_to_geodetic
+
+    lat, lon, h = ecef_to_geodetic(ecef_m)
+    pr = path.track.project(lat, lon, h)
+    off = float(np.hypot(pr.offset_m, pr.along_m))
+    if off > _MAX_HEADER_OFFSET_M:
+        raise CliError(
+            f"{label}: the header's approximate position is {off:.0f} m away from track "
+            f"{path.track.name!r}; pass the --track the receiver ran on (or --start-chainage "
+            "when the header position is wrong)"
+        )
+
+
+def _report_problems(label: str, problems: Sequence[Any]) -> None:
+    """Epochs or records the reader skipped are told, never dropped silently."""
+    if problems:
+        first = problems[0]
+        where = f", line {first.line}" if first.line is not None else ""
+        print(
+            f"{label}: {len(problems)} record(s) skipped by the reader; first{where}: "
+            f"{first.what}",
+            file=sys.stderr,
+        )
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:

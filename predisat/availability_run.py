@@ -57,6 +57,7 @@ from predisat.satellites import (
 __all__ = [
     "AvailabilityRun",
     "add_arguments",
+    "check_masks_on_track",
     "load_navigation",
     "nav_span_gps_s",
     "parse_time",
@@ -297,8 +298,22 @@ def _load_track(track: Any) -> Any:
     return TrackMap.from_geojson(p)
 
 
-def _check_track(masks: MaskSet, track: Any, masks_label: str) -> None:
-    """The mask positions must lie on the track at their chainage (same map, same origin)."""
+def check_masks_on_track(masks: MaskSet, track: Any, masks_label: str) -> None:
+    """Refuse masks made on another track map: every mask position must lie on ``track``
+    within 25 m, at its own chainage (same map, same chainage origin).
+
+    Parameters
+    ----------
+    masks : MaskSet
+    track : TrackMap
+    masks_label : str
+        How the error names the masks (usually their file).
+
+    Raises
+    ------
+    ValueError
+        Naming the worst position and the fix.
+    """
     proj = track.project(masks.lat_deg, masks.lon_deg)
     off = np.abs(np.asarray(proj.offset_m, float))
     dch = np.abs(np.asarray(proj.chainage_m, float) - masks.chainage_m)
@@ -439,7 +454,7 @@ def run_availability(
             -np.inf if from_m is None else from_m, np.inf if to_m is None else to_m
         )
     if track is not None:
-        _check_track(mask_set, track, masks_label)
+        check_masks_on_track(mask_set, track, masks_label)
     sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
     if interval_every < 1:
         raise ValueError(f"interval_every must be >= 1, got {interval_every}")

@@ -106,8 +106,8 @@ def test_a_run_on_another_track_is_refused(sim_dir):
         _track_check(AntennaPath(demo_track(), 4.0), sim.antenna_ecef_m, "sim")
 
 
-def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
-    """GEONET 0759 (10 epochs, GPS C1) on a straight track through its known position."""
+def _virtual_track(path):
+    """A straight 2 km track through GEONET 0759's known position (chainage 1000 m there)."""
     from predisat.geodesy import LocalFrame, ecef_to_geodetic
 
     station = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759
@@ -116,8 +116,48 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     la, lo, hh = LocalFrame(lat, lon, h).to_geodetic(
         np.stack([d * np.sin(0.7), d * np.cos(0.7), np.zeros_like(d)], -1)
     )
-    track = tmp_path / "virtual.csv"
-    pd.DataFrame({"lat_deg": la, "lon_deg": lo, "h_m": hh}).to_csv(track, index=False)
+    pd.DataFrame({"lat_deg": la, "lon_deg": lo, "h_m": hh}).to_csv(path, index=False)
+    return path
+
+
+def test_rinex_run_refuses_a_wrong_track_or_masks_and_tells_skipped_epochs(
+    test_data, tmp_path, capsys
+):
+    from predisat.maskio import write_masks
+    from predisat.masks import MaskSet
+
+    track = _virtual_track(tmp_path / "virtual.csv")
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    run = ["run", "--obs", str(obs), "--nav", str(nav), "--antenna-height", "0"]
+    # no --track: the default line 144, about 9000 km from a Japanese station
+    assert main([*run, "--no-masks", "--out", str(tmp_path / "a")]) == 2
+    assert "away from track" in capsys.readouterr().err
+    # masks of line 144 on the station's track
+    line = demo_track()
+    ch = np.array([4000.0, 4010.0])
+    lat, lon, _ = line.position_at(ch)
+    m = MaskSet.from_arrays(ch, lat, lon, 0.0, line.heading_at(ch), np.zeros((2, 360)))
+    masks = write_masks(m, tmp_path / "l144.masks.parquet")
+    out = ["--out", str(tmp_path / "b")]
+    assert main([*run, "--track", str(track), "--masks", str(masks), *out]) == 2
+    assert "do not fit track" in capsys.readouterr().err
+    # a file cut inside its last epoch record: the dropped epoch is told
+    lines = obs.read_text().splitlines(keepends=True)
+    cut = tmp_path / "cut.05o"
+    cut.write_text("".join(lines[:-3]))
+    assert main(["-q", *run, "--track", str(track), "--no-masks", *out]) == 0
+    run_cut = ["run", "--obs", str(cut), "--nav", str(nav), "--antenna-height", "0"]
+    assert main(["-q", *run_cut, "--track", str(track), "--no-masks",
+                 "--out", str(tmp_path / "c")]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "cut.05o: 1 record(s) skipped" in err and "epoch dropped" in err
+    assert len(read_run(tmp_path / "c")[0]) == len(read_run(tmp_path / "b")[0]) - 1
+
+
+def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
+    """GEONET 0759 (10 epochs, GPS C1) on a straight track through its known position."""
+    track = _virtual_track(tmp_path / "virtual.csv")
     obs = test_data / "gnss_obs" / "07590920_10ep.05o"
     nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
     args = ["-q", "run", "--track", str(track), "--obs", str(obs), "--nav", str(nav),
