@@ -138,7 +138,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         path = AntennaPath(_track(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
         _report_problems(args.obs, obs.problems)
-        source = RinexSource(RangeModel.from_rinex_nav(args.nav), obs, args.constellation or "G")
+        model = RangeModel.from_rinex_nav(args.nav)
+        _nav_covers(model.ephemeris, obs, args.nav)
+        source = RinexSource(model, obs, args.constellation or "G")
         start = args.start_chainage
         if start is None:
             hx = obs.header.approx_position_ecef_m
@@ -188,6 +190,28 @@ def _header_on_track(ecef_m: Any, path: Any, label: str) -> None:
             f"{label}: the header's approximate position is {off:.0f} m away from track "
             f"{path.track.name!r}; pass the --track the receiver ran on (or --start-chainage "
             "when the header position is wrong)"
+        )
+
+
+# Broadcast records are used up to 2 h from their reference epoch (ValidityPolicy).
+_NAV_REACH_S = 7200.0
+
+
+def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
+    """Observations outside the navigation data's span cannot be positioned at all."""
+    from predisat.availability_run import nav_span_gps_s
+    from predisat.gnss_time import gps_s_to_datetime64
+
+    lo, hi = nav_span_gps_s(ephemeris)
+    t0, t1 = float(obs.gps_s.min()), float(obs.gps_s.max())
+    if t1 < lo - _NAV_REACH_S or t0 > hi + _NAV_REACH_S:
+        def day(t: float) -> str:
+            return str(gps_s_to_datetime64(t).astype("M8[s]")).replace("T", " ")
+
+        raise CliError(
+            f"{obs.path}: its epochs ({day(t0)} - {day(t1)} GPS) lie outside the navigation "
+            f"data of {', '.join(map(str, nav))} ({day(lo)} - {day(hi)}); give the broadcast "
+            "navigation files of the observation day"
         )
 
 
@@ -266,7 +290,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
         if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
             raise CliError(f"{args.obs}: no station position in the header; pass --station X Y Z")
-        src = RinexSource(RangeModel.from_rinex_nav(args.nav), obs, args.constellation)
+        _report_problems(args.obs, obs.problems)
+        ranges = RangeModel.from_rinex_nav(args.nav)
+        _nav_covers(ranges.ephemeris, obs, args.nav)
+        src = RinexSource(ranges, obs, args.constellation)
         el, res = static_residuals(src, x)
         fitted = {"obs": args.obs, "nav": list(args.nav), "station_ecef_m": x.tolist()}
     model = calibrate_to_file(el, res, args.out, k_sigma=args.k_sigma, fitted=fitted)

@@ -153,6 +153,14 @@ def test_rinex_run_refuses_a_wrong_track_or_masks_and_tells_skipped_epochs(
     err = capsys.readouterr().err
     assert "cut.05o: 1 record(s) skipped" in err and "epoch dropped" in err
     assert len(read_run(tmp_path / "c")[0]) == len(read_run(tmp_path / "b")[0]) - 1
+    # navigation data of another day (2010 records for a 2005 station file): nothing to do
+    other_day = test_data / "gnss" / "brdc1820_G01G02G05.10n"
+    bad_nav = ["--obs", str(obs), "--nav", str(other_day), "--out", str(tmp_path / "e.json")]
+    for argv in (["run", *bad_nav[:4], "--track", str(track), "--no-masks", "--out",
+                  str(tmp_path / "d")], ["calibrate", *bad_nav]):  # fmt: skip
+        assert main(argv) == 2
+        msg = capsys.readouterr().err
+        assert "lie outside the navigation data" in msg and "2010-07-01" in msg
 
 
 def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
