@@ -32,6 +32,7 @@ __all__ = [
 
 NAME_KEYS = ("trackname", "trackcode", "name", "ref", "id", "@id")
 """Feature properties that ``track=`` is matched against (Infrabel, OpenStreetMap, generic)."""
+_ID_KEYS = ("id", "@id")  # feature numbers: a match on them alone may be another line's number
 
 _OSM_ATTRIBUTION = (
     "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
@@ -146,6 +147,26 @@ def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, An
     return True
 
 
+def _refuse_id_only_match(
+    selected: Sequence[tuple[int, dict[str, Any], dict[str, Any]]], track: str | None, path: Path
+) -> None:
+    """``track="144"`` must not pick, without a word, the feature numbered 144 of another line:
+    a feature matched only by its number while it has a name is refused."""
+    if track is None:
+        return
+    names = [k for k in NAME_KEYS if k not in _ID_KEYS]
+    for i, props, _ in selected:
+        if any(str(props.get(k)) == track for k in names):
+            continue
+        if any(k in props for k in names):
+            key = next(k for k in _ID_KEYS if str(props.get(k)) == track)
+            raise TrackMapError(
+                f"{path}: track={track!r} matches only the {key} of {_feature_label(i, props)}, "
+                f"another name; give the track's name as track=, or "
+                f"where={{{key!r}: {props[key]!r}}} to select that feature by its number"
+            )
+
+
 def read_geojson_track(
     path: str | Path,
     track: str | None = None,
@@ -221,6 +242,7 @@ def read_geojson_track(
             "axis as a line"
         )
     selected = [x for x in lines if _matches(x[1], track, where)]
+    _refuse_id_only_match(selected, track, path)
     if not selected:
         avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in NAME_KEYS[:4] if k in p})
         raise TrackMapError(

@@ -264,6 +264,27 @@ def test_geojson_selects_a_named_track_and_reads_kilometre_posts(tmp_path):
     assert tm.kilometre_at(1000.0) == pytest.approx(6500.0)
 
 
+def test_geojson_track_number_never_picks_another_lines_feature(tmp_path):
+    # Infrabel's network file: feature id 144 belongs to line 39, line 144 is "L 144_1"
+    lat, lon = straight_latlon(2000.0, 0.0, 100.0)
+    lat_b, lon_b = straight_latlon(1500.0, 0.0, 100.0, start=(50.5, 4.71))
+    doc = feature_collection([
+        line_feature(np.column_stack([lon, lat]).tolist(), trackcode="L 144_1", id=7),
+        line_feature(np.column_stack([lon_b, lat_b]).tolist(), trackcode="L 39_3", id=144),
+    ])
+    path = tmp_path / "net.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"track='144' matches only the id .*L 39_3.*where="):
+        TrackMap.from_geojson(path, track="144")
+    assert TrackMap.from_geojson(path, track="L 144_1").length_m == pytest.approx(2000.0, 1e-3)
+    by_id = TrackMap.from_geojson(path, where={"id": 144})
+    assert by_id.length_m == pytest.approx(1500.0, rel=1e-3)
+    # a feature with no name at all may still be selected by its number
+    bare = feature_collection([line_feature(np.column_stack([lon, lat]).tolist(), id=5)])
+    path.write_text(json.dumps(bare))
+    assert TrackMap.from_geojson(path, track="5").length_m == pytest.approx(2000.0, rel=1e-3)
+
+
 def test_geojson_heights_from_coordinates(tmp_path):
     lat, lon = straight_latlon(1000.0, 45.0, 50.0)
     h = np.linspace(80.0, 90.0, lat.size)
