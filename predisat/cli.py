@@ -105,6 +105,23 @@ def _load_track(
     return track.TrackMap.from_geojson(p, track=name, chain=chain, where=_parse_where(where))
 
 
+def _add_track_selection(p: argparse.ArgumentParser) -> None:
+    """Which line of a GeoJSON holding several (Infrabel files, OpenStreetMap extracts)."""
+    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
+    p.add_argument(
+        "--chain",
+        choices=["all", "longest"],
+        default="all",
+        help="chain every selected way (all) or the longest connected chain of a network",
+    )
+    p.add_argument(
+        "--where",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
+    )
+
+
 def _km_range(
     track: TrackMap, from_km: float | None, to_km: float | None
 ) -> tuple[float, float]:
@@ -260,7 +277,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_availability(args: argparse.Namespace) -> int:
     from predisat.availability_run import run_from_args
 
-    run = run_from_args(args)
+    track = None
+    if args.track is not None:
+        track = _load_track(args.track, args.track_name, args.chain, args.where)
+    run = run_from_args(args, track=track)
     print(run.summary.to_string(index=False))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s)")
     return 0
@@ -362,19 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
-    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
-    p.add_argument(
-        "--chain",
-        choices=["all", "longest"],
-        default="all",
-        help="chain every selected way (all) or the longest connected chain of a network",
-    )
-    p.add_argument(
-        "--where",
-        nargs="+",
-        metavar="KEY=VALUE",
-        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
-    )
+    _add_track_selection(p)
     p.add_argument("--from-km", type=float, metavar="A", help="start chainage in km (default 0)")
     p.add_argument("--to-km", type=float, metavar="B", help="end chainage in km (default: end)")
     p.add_argument(
@@ -405,6 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     add_availability_arguments(p)
+    _add_track_selection(p)
     p.set_defaults(func=cmd_availability)
 
     from predisat.evaluate import add_evaluate_arguments

@@ -516,7 +516,7 @@ def _check_simple(enu: NDArray, where: str, frame: LocalFrame) -> None:
                 raise TrackMapError(
                     f"{where}: the chained line crosses itself between segments {i} and {j} "
                     f"near lat {float(lat):.6f}, lon {float(lon):.6f}; select a single track "
-                    "(track=...) or fix the part order in the file"
+                    "(track=..., --track-name) or fix the part order in the file"
                 )
     raise TrackMapError(f"{where}: the chained line overlaps itself; select a single track")
 

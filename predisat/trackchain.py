@@ -105,8 +105,9 @@ def chain_all(
             last = parts[order[-1][0]].label
             raise TrackMapError(
                 f"{path}: cannot chain {parts[k].label}: its nearest end is {gap:.1f} m from the "
-                f"end of {last} (max_gap_m={max_gap_m}); select one track (track=..., where=...), "
-                "use chain='longest' for a network of ways, or raise max_gap_m"
+                f"end of {last} (max_gap_m={max_gap_m}); select one track (track=..., where=...; "
+                "command line: --track-name, --where), use chain='longest' (--chain longest) for "
+                "a network of ways, or raise max_gap_m"
             )
         order.append((k, rev))
         used.add(k)
@@ -170,7 +171,8 @@ def chain_longest(
         if budget[0] < 0:
             raise TrackMapError(
                 f"{path}: too many branches to search for the longest chain; narrow the "
-                "selection with where=... (e.g. {'usage': 'main', 'service': None})"
+                "selection with where=... (e.g. {'usage': 'main', 'service': None}; command "
+                "line: --where usage=main service=)"
             )
         ext = [m for m in nexts[s] if m // 2 not in used]
         if not ext and acc > best[0]:

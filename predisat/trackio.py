@@ -255,7 +255,7 @@ def read_geojson_track(
             if len(names) > 1:
                 raise TrackMapError(
                     f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
-                    "choose one with track=..."
+                    "choose one with track=... (command line: --track-name)"
                 )
 
     parts: list[Part] = []

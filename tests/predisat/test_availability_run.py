@@ -342,3 +342,32 @@ def test_untrusted_satellites_are_reported(run) -> None:
     for j, sat in enumerate(gps):
         assert int(status.loc[status["sat"] == sat, "n_epochs"].sum()) == int(refused[:, j].sum())
     assert (status["reason"] != "OK").all()
+
+
+def test_command_line_selects_one_track_of_a_file(
+    tmp_path: Path, masks: MaskSet, track: TrackMap, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.cli import main
+    from predisat.trackio import write_geojson
+
+    write_geojson(track, tmp_path / "a.geojson")
+    doc = json.loads((tmp_path / "a.geojson").read_text())
+    line_a = next(f for f in doc["features"] if f["geometry"]["type"] == "LineString")
+    line_a["properties"]["trackname"] = "A"
+    line_b = json.loads(json.dumps(line_a))  # a parallel track 30 m east
+    line_b["properties"]["trackname"] = "B"
+    line_b["geometry"]["coordinates"] = [[x + 4.2e-4, y, *h] for x, y, *h in
+                                         line_a["geometry"]["coordinates"]]  # fmt: skip
+    doc["features"] = [line_a, line_b]
+    both = tmp_path / "ab.geojson"
+    both.write_text(json.dumps(doc))
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    argv = ["availability", "--masks", str(path), "--track", str(both), "--start", START,
+            "--end", "2020-06-25T06:30", "--step", "900", "--quiet"]  # fmt: skip
+    assert main([*argv, "--out", str(tmp_path / "x")]) == 2
+    assert "several tracks (trackname: A, B)" in (err := capsys.readouterr().err)
+    assert "--track-name" in err
+    assert main([*argv, "--track-name", "A", "--out", str(tmp_path / "a")]) == 0
+    assert (tmp_path / "a" / "report.html").is_file()
+    assert main([*argv, "--track-name", "B", "--out", str(tmp_path / "b")]) == 2  # 30 m off
+    assert "do not fit track" in capsys.readouterr().err
