@@ -326,7 +326,10 @@ class _Reader:
         if lines[0][20:21].upper() != "O":
             raise RinexObsError(path, 1, "not an observation file (file type is not 'O')")
         if not 2.0 <= version < 4.0:
-            raise RinexObsError(path, 1, f"RINEX {version} observation files are not supported")
+            raise RinexObsError(
+                path, 1, f"RINEX {version} observation files are not supported; convert the "
+                "file to RINEX 3 (e.g. gfzrnx -vo 3)"
+            )
         file_system = lines[0][40:41].upper().strip() or "G"
         kw: dict = {}
         types: dict[str, list[str]] = {}

@@ -583,5 +583,7 @@ _FILE_DOC = {
     "epochs_parquet": "the same, Parquet",
     "counts_parquet": "every trusted-satellite count (rule, chainage, time)",
     "geojson": "the line coloured by availability (QGIS: style on share_ge4 or stroke)",
+    "ephemeris_status_csv": "each run of epochs in which the ephemeris did not trust a "
+    "satellite (unhealthy, outside its validity, inconsistent, no data)",
     "report": "this report",
 }

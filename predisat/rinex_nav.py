@@ -241,7 +241,9 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None,
                 raise RinexError(path, i + 1, "unreadable LEAP SECONDS value") from None
         elif label == "END OF HEADER":
             return version, default, leap, i + 1
-    raise RinexError(path, len(lines), "no 'END OF HEADER' line: the file is truncated")
+    raise RinexError(
+        path, len(lines), "no 'END OF HEADER' line: the file is truncated; copy or download it"
+    )
 
 
 def _fields(path: Path, lineno: int, text: str, start: int, n: int) -> list[float]:
@@ -251,7 +253,7 @@ def _fields(path: Path, lineno: int, text: str, start: int, n: int) -> list[floa
             path,
             lineno,
             f"line ends inside a 19-character data field (length {len(stripped)}): the line is"
-            " cut short or misaligned",
+            " cut short or misaligned; copy or download the file again",
         )
     out = []
     for k in range(n):
@@ -355,7 +357,7 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
                 path,
                 lineno,
                 f"record of {sys_letter}{prn:02d} has {got} of {n_lines} lines (ends at {where}):"
-                " the file is truncated or a line is missing",
+                " the file is truncated or a line is missing; copy or download it again",
             )
         if got > n_lines:
             raise RinexError(

@@ -230,6 +230,10 @@ def test_errors_name_the_file(test_data: Path, tmp_path: Path) -> None:
         read_rinex_obs(tmp_path / "missing.05o")
     with pytest.raises(RinexObsError, match="line 1: not an observation file"):
         read_rinex_obs(test_data / "gnss_obs/07590920_0000_0200.05n")
+    v4 = _lines(test_data / OBS2)
+    v4[0] = "     4.00" + v4[0][9:]
+    with pytest.raises(RinexObsError, match=r"line 1: RINEX 4.0 .* convert the file to RINEX 3"):
+        read_rinex_obs(_write(tmp_path / "v4.rnx", v4))
     lines = _lines(test_data / OBS2)
     with pytest.raises(RinexObsError, match="END OF HEADER"):
         read_rinex_obs(_write(tmp_path / "h.05o", lines[:10]))

@@ -111,6 +111,12 @@ def _independent_azel(lat: float, lon: float, h: float, sat_ecef: np.ndarray):
 
 
 # ----------------------------------------------------------------------------- outputs
+def test_every_listed_file_is_described(run) -> None:
+    html = run.report_html.read_text()
+    assert "ephemeris_status.csv</code> – each run of epochs" in html
+    assert not any(f"– {key}" in html for key in ("ephemeris_status_csv", "summary_csv"))
+
+
 def test_html_is_self_contained_with_table_and_images(run) -> None:
     text = run.report_html.read_text(encoding="utf-8")
     p = _Collect()
