@@ -18,6 +18,7 @@ An error-model file (``locator calibrate --out FILE.json``) is a JSON object wit
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -57,8 +58,21 @@ def _json(obj: Any) -> Any:
         return str(obj)  # run descriptions may hold paths and enums
 
 
+def _null_non_finite(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _null_non_finite(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_null_non_finite(v) for v in obj]
+    return obj
+
+
 def _write_json(path: Path, data: Mapping[str, Any]) -> None:
-    text = json.dumps(data, indent=2, default=_json, allow_nan=True) + "\n"
+    # NaN (e.g. the interval median of a run without a claim) becomes null: strict JSON,
+    # which other tools (jq, browsers, JSON schema validators) read
+    plain = json.loads(json.dumps(data, default=_json, allow_nan=True))
+    text = json.dumps(_null_non_finite(plain), indent=2, allow_nan=False) + "\n"
     write_bytes_atomic(path, text.encode())
 
 

@@ -51,6 +51,18 @@ def test_run_round_trip(tmp_path, fmt):
     assert not (tmp_path / "r" / f"epochs.{fmt}").exists()
 
 
+def test_run_json_is_strict_json(tmp_path):
+    meta = {"summary": {"length_median_m": np.float64("nan"), "n": np.int64(3),
+                        "bounds": [1.0, float("inf")]}}  # fmt: skip
+    write_run(epochs(), tmp_path / "r", meta)
+
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    doc = json.loads((tmp_path / "r" / "run.json").read_text(), parse_constant=refuse)
+    assert doc["summary"] == {"length_median_m": None, "n": 3, "bounds": [1.0, None]}
+
+
 def test_read_errors_name_the_fix(tmp_path):
     with pytest.raises(RunFileError, match="locator run --out"):
         read_run(tmp_path)
