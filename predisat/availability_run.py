@@ -442,77 +442,83 @@ def run_availability(
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
     stages = 4 + len(cutoffs) + 2
     bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
+    try:
 
-    def stage(text: str) -> None:
-        bar.set_postfix_str(text)
+        def stage(text: str) -> None:
+            bar.set_postfix_str(text)
 
-    stage("masks")
-    mask_set, masks_label = _load_masks(masks)
-    track = _load_track(track)
-    if from_m is not None or to_m is not None:
-        mask_set = mask_set.subset(
-            -np.inf if from_m is None else from_m, np.inf if to_m is None else to_m
-        )
-    if track is not None:
-        check_masks_on_track(mask_set, track, masks_label)
-    sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
-    if interval_every < 1:
-        raise ValueError(f"interval_every must be >= 1, got {interval_every}")
-    bar.update(1)
-
-    stage("navigation")
-    ephemeris = load_navigation(nav)
-    nav_label = f"embedded {DEFAULT_NAV_FILE}" if not nav else ", ".join(Path(p).name for p in nav)
-    t = _window(ephemeris, not nav, parse_time(start, "--start"), parse_time(end, "--end"), step_s)
-    if not select_satellites(ephemeris.satellites, constellation):
-        raise ValueError(
-            f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
-            "--constellation or give navigation data for it"
-        )
-    sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
-    _check_window(sats, ephemeris, nav_label)
-    positions = LinePositions.from_masks(mask_set)
-    bar.update(1)
-
-    rules = [TrustRule.mask(mask_set), TrustRule.none(), *(TrustRule.cutoff(c) for c in cutoffs)]
-    results = []
-    for rule in rules:
-        stage(rule.label)
-        results.append(
-            compute_availability(
-                sats, positions, rule, interval_every=interval_every, workers=workers
+        stage("masks")
+        mask_set, masks_label = _load_masks(masks)
+        track = _load_track(track)
+        if from_m is not None or to_m is not None:
+            mask_set = mask_set.subset(
+                -np.inf if from_m is None else from_m, np.inf if to_m is None else to_m
             )
-        )
+        if track is not None:
+            check_masks_on_track(mask_set, track, masks_label)
+        sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
+        if interval_every < 1:
+            raise ValueError(f"interval_every must be >= 1, got {interval_every}")
         bar.update(1)
 
-    stage("tables")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    info = _run_info(
-        mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
-        step_s, interval_every, __version__,
-    )  # fmt: skip
-    files, summary = write_tables(out, results, track, info, counts_table)
-    # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
-    # its validity window, inconsistent, no data): such satellites count for no rule.
-    files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
-    sats.status.report().to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
-    bar.update(1)
+        stage("navigation")
+        ephemeris = load_navigation(nav)
+        names = ", ".join(Path(p).name for p in nav) if nav else ""
+        nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
+        t0_gps, t1_gps = parse_time(start, "--start"), parse_time(end, "--end")
+        t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
+        if not select_satellites(ephemeris.satellites, constellation):
+            raise ValueError(
+                f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
+                "--constellation or give navigation data for it"
+            )
+        sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
+        _check_window(sats, ephemeris, nav_label)
+        positions = LinePositions.from_masks(mask_set)
+        bar.update(1)
 
-    stage("figures")
-    inputs = ReportInputs(
-        results=tuple(results), masks=mask_set, satellites=sats, track=track, info=info,
-        sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
-    )  # fmt: skip
-    html = build_report(inputs)
-    bar.update(1)
+        rules = [TrustRule.mask(mask_set), TrustRule.none()]
+        rules += [TrustRule.cutoff(c) for c in cutoffs]
+        results = []
+        for rule in rules:
+            stage(rule.label)
+            results.append(
+                compute_availability(
+                    sats, positions, rule, interval_every=interval_every, workers=workers
+                )
+            )
+            bar.update(1)
 
-    stage("report")
-    report = out / "report.html"
-    report.write_text(html, encoding="utf-8")
-    files["report"] = report
-    bar.update(1)
-    bar.close()
+        stage("tables")
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        info = _run_info(
+            mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
+            step_s, interval_every, __version__,
+        )  # fmt: skip
+        files, summary = write_tables(out, results, track, info, counts_table)
+        # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+        # its validity window, inconsistent, no data): such satellites count for no rule.
+        files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
+        status = sats.status.report()
+        status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
+        bar.update(1)
+
+        stage("figures")
+        inputs = ReportInputs(
+            results=tuple(results), masks=mask_set, satellites=sats, track=track, info=info,
+            sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+        )  # fmt: skip
+        html = build_report(inputs)
+        bar.update(1)
+
+        stage("report")
+        report = out / "report.html"
+        report.write_text(html, encoding="utf-8")
+        files["report"] = report
+        bar.update(1)
+    finally:
+        bar.close()  # also on an error: its message then starts on a line of its own
     return AvailabilityRun(
         out, report, files, summary, tuple(results), time.perf_counter() - t0, info
     )

@@ -377,3 +377,17 @@ def test_command_line_selects_one_track_of_a_file(
     assert (tmp_path / "a" / "report.html").is_file()
     assert main([*argv, "--track-name", "B", "--out", str(tmp_path / "b")]) == 2  # 30 m off
     assert "do not fit track" in capsys.readouterr().err
+
+
+def test_an_error_starts_on_its_own_line_after_the_progress_bar(
+    tmp_path: Path, masks: MaskSet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.cli import main
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    argv = ["availability", "--masks", str(path), "--start", START, "--end", START,
+            "--out", str(tmp_path / "x")]  # fmt: skip
+    assert main(argv) == 2  # an empty window, refused after the bar has started
+    err = capsys.readouterr().err
+    assert "availability" in err.split("predisat availability: error")[0]  # the bar was drawn
+    assert "\npredisat availability: error: " in err
