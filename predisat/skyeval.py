@@ -250,11 +250,35 @@ def worst_cases_sheet(
     while len(tiles) % per_row:
         tiles.append(blank)
     sheet = np.vstack([np.hstack(tiles[i:i + per_row]) for i in range(0, len(tiles), per_row)])
+    sheet = np.vstack([sheet, _legend(sheet.shape[1])])
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
         raise OSError(f"could not write contact sheet {out}")
     return out
+
+
+_LEGEND = (
+    ((255, 255, 255), "sky, right"),
+    ((0, 0, 255), "false sky (unsafe)"),
+    ((255, 0, 0), "missed sky (lost)"),
+    ((0, 0, 0), "obstacle, right"),
+)
+
+
+def _legend(width_px: int) -> NDArray:
+    """A strip naming the colours of :func:`confusion_overlay`."""
+    strip = np.full((18, width_px, 3), 32, np.uint8)
+    x = 4
+    for colour, text in _LEGEND:
+        if x + 140 > width_px:
+            break
+        cv2.rectangle(strip, (x, 4), (x + 10, 14), colour, -1)
+        cv2.rectangle(strip, (x, 4), (x + 10, 14), (160, 160, 160), 1)
+        cv2.putText(strip, text, (x + 14, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                    (255, 255, 255), 1, cv2.LINE_AA)  # fmt: skip
+        x += 140
+    return strip
 
 
 def _read_mask(path: Path, shape: tuple[int, int]) -> NDArray:

@@ -76,7 +76,12 @@ def test_evaluate_generic_folder(tmp_path: Path) -> None:
     assert ev.summary.iloc[-1]["n_images"] == 3
     for key in ("table", "summary", "sheet"):
         assert ev.files[key].is_file()
-    assert cv2.imread(str(ev.files["sheet"])) is not None
+    sheet = cv2.imread(str(ev.files["sheet"]))
+    assert sheet is not None
+    # the legend strip under the cases shows the overlay's false-sky and missed-sky colours
+    legend = sheet[-18:].reshape(-1, 3)
+    for bgr in ((0, 0, 255), (255, 0, 0)):
+        assert (legend == bgr).all(axis=1).sum() >= 50
 
 
 class _AllSky:
