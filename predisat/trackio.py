@@ -147,6 +147,12 @@ def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, An
     return True
 
 
+def _numbers(vertex: Any) -> bool:
+    return isinstance(vertex, list) and all(
+        isinstance(c, (int, float)) and not isinstance(c, bool) for c in vertex
+    )
+
+
 def _refuse_id_only_match(
     selected: Sequence[tuple[int, dict[str, Any], dict[str, Any]]], track: str | None, path: Path
 ) -> None:
@@ -268,10 +274,13 @@ def read_geojson_track(
         for j, seq in enumerate(seqs):
             where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
             try:
+                if not all(_numbers(v) for v in seq):  # "4.6" would pass np.asarray(float)
+                    raise ValueError
                 coords = np.asarray(seq, float)
             except (TypeError, ValueError):
                 raise TrackMapError(
-                    f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...]"
+                    f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...] "
+                    "of numbers (JSON numbers, not strings)"
                 ) from None
             if coords.size == 0:
                 continue

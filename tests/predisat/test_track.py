@@ -385,6 +385,15 @@ def test_swapped_coordinates_are_detected(tmp_path):
         TrackMap.from_geojson(path, expected_bbox=(2.5, 49.4, 6.5, 51.6))
 
 
+def test_coordinates_given_as_strings_are_refused(tmp_path):
+    lat, lon = straight_latlon(1000.0, 0.0, 100.0)
+    coords = [[lo, la] for lo, la in zip(lon, lat, strict=True)]
+    coords[3] = [str(coords[3][0]), str(coords[3][1])]  # one vertex quoted by an exporter
+    path = write(tmp_path, "str.geojson", json.dumps(line_feature(coords, name="x")))
+    with pytest.raises(TrackMapError, match=r"feature 0 \(name=x\) has malformed .*not strings"):
+        TrackMap.from_geojson(path)
+
+
 def test_self_crossing_chain_is_rejected(tmp_path):
     # North 1 km, east 500 m, then back south-west across the first leg.
     lon, lat = [4.7], [50.5]
