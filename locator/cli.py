@@ -148,7 +148,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 raise CliError(
                     f"{args.obs}: no approximate position in the header; pass --start-chainage"
                 )
-            _header_on_track(hx, path, args.obs)
+            _track_check(path, hx, f"{args.obs} (its header's approximate position)",
+                         _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(hx, path)
     if not (args.masks or args.cutoff is not None or args.no_masks):
         raise CliError("no trust rule: pass --masks FILE, --cutoff DEG or --no-masks")
@@ -177,22 +178,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 _MAX_HEADER_OFFSET_M = 200.0
 
 
-def _header_on_track(ecef_m: Any, path: Any, label: str) -> None:
-    import numpy as np
-
-    from predisat.geodesy import ecef_to_geodetic
-
-    lat, lon, h = ecef_to_geodetic(ecef_m)
-    pr = path.track.project(lat, lon, h)
-    off = float(np.hypot(pr.offset_m, pr.along_m))
-    if off > _MAX_HEADER_OFFSET_M:
-        raise CliError(
-            f"{label}: the header's approximate position is {off:.0f} m away from track "
-            f"{path.track.name!r}; pass the --track the receiver ran on (or --start-chainage "
-            "when the header position is wrong)"
-        )
-
-
 # Broadcast records are used up to 2 h from their reference epoch (ValidityPolicy).
 _NAV_REACH_S = 7200.0
 
@@ -200,14 +185,11 @@ _NAV_REACH_S = 7200.0
 def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
     """Observations outside the navigation data's span cannot be positioned at all."""
     from predisat.availability_run import nav_span_gps_s
-    from predisat.gnss_time import gps_s_to_datetime64
+    from predisat.gnss_time import gps_s_to_text as day
 
     lo, hi = nav_span_gps_s(ephemeris)
     t0, t1 = float(obs.gps_s.min()), float(obs.gps_s.max())
     if t1 < lo - _NAV_REACH_S or t0 > hi + _NAV_REACH_S:
-        def day(t: float) -> str:
-            return str(gps_s_to_datetime64(t).astype("M8[s]")).replace("T", " ")
-
         raise CliError(
             f"{obs.path}: its epochs ({day(t0)} - {day(t1)} GPS) lie outside the navigation "
             f"data of {', '.join(map(str, nav))} ({day(lo)} - {day(hi)}); give the broadcast "

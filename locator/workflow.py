@@ -61,17 +61,24 @@ def stop_and_go(
     return SpeedProfile.from_time_table(t, v)
 
 
-def _track_check(path: AntennaPath, ecef_m: np.ndarray, label: str) -> None:
-    """The antenna positions of a run must lie on the given track."""
+def _track_check(
+    path: AntennaPath,
+    ecef_m: np.ndarray,
+    label: str,
+    max_offset_m: float = MAX_TRACK_OFFSET_M,
+    hint: str = "",
+) -> None:
+    """The antenna positions of a run (first and last rows of ``ecef_m``) must lie on the
+    given track within ``max_offset_m``."""
     from predisat.geodesy import ecef_to_geodetic
 
-    lat, lon, h = ecef_to_geodetic(np.asarray(ecef_m, float)[[0, -1]])
+    lat, lon, h = ecef_to_geodetic(np.asarray(ecef_m, float).reshape(-1, 3)[[0, -1]])
     pr = path.track.project(lat, lon, h)
     off = float(np.max(np.hypot(pr.offset_m, pr.along_m)))
-    if off > MAX_TRACK_OFFSET_M:
+    if off > max_offset_m:
         raise ValueError(
             f"{label}: the antenna is {off:.0f} m away from track {path.track.name!r}; pass the "
-            "--track the run was made on"
+            f"--track the run was made on{hint}"
         )
 
 

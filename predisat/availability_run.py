@@ -37,11 +37,8 @@ from numpy.typing import NDArray
 
 from predisat.availability import Availability, compute_availability
 from predisat.ephemeris import Ephemeris
-from predisat.gnss_time import (
-    datetime64_to_gps_s,
-    gps_s_to_datetime64,
-    utc_datetime64_to_gps_s,
-)
+from predisat.gnss_time import datetime64_to_gps_s, utc_datetime64_to_gps_s
+from predisat.gnss_time import gps_s_to_text as _iso
 from predisat.masks import MaskSet
 from predisat.satellites import (
     DEFAULT_NAV_FILE,
@@ -270,11 +267,6 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
         f"span {_iso(lo)} - {_iso(hi)} GPST); choose --start/--end inside it or give --nav files "
         "covering the window"
     )
-
-
-def _iso(gps_s: float) -> str:
-    """GPS-time calendar text of ``gps_s``."""
-    return str(gps_s_to_datetime64(float(gps_s)).astype("M8[s]")).replace("T", " ")
 
 
 def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:

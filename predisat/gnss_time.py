@@ -27,6 +27,7 @@ __all__ = [
     "datetime64_to_gps_s",
     "gps_minus_utc_s",
     "gps_s_to_datetime64",
+    "gps_s_to_text",
     "gps_s_to_utc_datetime64",
     "utc_datetime64_to_gps_s",
     "week_seconds_to_gps_s",
@@ -148,6 +149,11 @@ def gps_s_to_datetime64(gps_s: ArrayLike) -> NDArray:
     """GPS-scale calendar dates (``datetime64[ns]``) of ``gps_s`` values (no leap seconds)."""
     ns = np.round(np.asarray(gps_s, float) * 1e9).astype(np.int64)
     return GPS_EPOCH + ns.astype("timedelta64[ns]")
+
+
+def gps_s_to_text(gps_s: float) -> str:
+    """GPS-scale calendar text of one ``gps_s`` for messages: ``2020-06-25 06:00:00``."""
+    return str(gps_s_to_datetime64(float(gps_s)).astype("M8[s]")).replace("T", " ")
 
 
 def gps_s_to_utc_datetime64(gps_s: ArrayLike) -> NDArray:

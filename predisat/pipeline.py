@@ -850,16 +850,17 @@ def process_survey(
     for kk in np.unique(k):
         lo, hi = float(kk * p.chunk_m), float((kk + 1) * p.chunk_m)
         chunks.append((f"{_fmt_m(lo)}_{_fmt_m(hi)}", lo, hi, positions[k == kk]))
-    def frames_of(s: NDArray) -> NDArray:
-        lo, hi = float(s.min()) - overlap, float(s.max()) + overlap
-        return np.flatnonzero(finite & (ch >= lo) & (ch <= hi))
-
-    frames_key = {}
-    for name, _, _, s in chunks:
-        idx = frames_of(s)
-        frames_key[name] = _frames_key(
+    # the frames each chunk reads: within overlap_m of its positions
+    frames_of = {
+        name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
+        for name, _, _, s in chunks
+    }
+    frames_key = {
+        name: _frames_key(
             (str(fr.frame_id[i]) for i in idx), (str(survey.root / str(fr.image[i])) for i in idx)
         )
+        for name, idx in frames_of.items()
+    }
     pending, skipped = [], 0
     for c in chunks:
         marker = _chunk_finished(chunk_dir, c[0], run_key, frames_key[c[0]])
@@ -884,7 +885,7 @@ def process_survey(
     )
 
     need = (
-        np.unique(np.concatenate([frames_of(c[3]) for c in pending]))
+        np.unique(np.concatenate([frames_of[c[0]] for c in pending]))
         if pending
         else np.array([], int)
     )
@@ -933,7 +934,7 @@ def process_survey(
         t2 = time.perf_counter()
         cjobs = []
         for name, lo, hi, s in pending:
-            idx = frames_of(s)
+            idx = frames_of[name]
             known_bad = tuple(
                 bad[f] for f in dict.fromkeys(str(fr.frame_id[i]) for i in idx) if f in bad
             )

@@ -33,6 +33,7 @@ __all__ = [
 NAME_KEYS = ("trackname", "trackcode", "name", "ref", "id", "@id")
 """Feature properties that ``track=`` is matched against (Infrabel, OpenStreetMap, generic)."""
 _ID_KEYS = ("id", "@id")  # feature numbers: a match on them alone may be another line's number
+_LABEL_KEYS = tuple(k for k in NAME_KEYS if k not in _ID_KEYS)  # the names proper
 
 _OSM_ATTRIBUTION = (
     "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
@@ -160,11 +161,10 @@ def _refuse_id_only_match(
     a feature matched only by its number while it has a name is refused."""
     if track is None:
         return
-    names = [k for k in NAME_KEYS if k not in _ID_KEYS]
     for i, props, _ in selected:
-        if any(str(props.get(k)) == track for k in names):
+        if any(str(props.get(k)) == track for k in _LABEL_KEYS):
             continue
-        if any(k in props for k in names):
+        if any(k in props for k in _LABEL_KEYS):
             key = next(k for k in _ID_KEYS if str(props.get(k)) == track)
             raise TrackMapError(
                 f"{path}: track={track!r} matches only the {key} of {_feature_label(i, props)}, "
@@ -250,7 +250,7 @@ def read_geojson_track(
     selected = [x for x in lines if _matches(x[1], track, where)]
     _refuse_id_only_match(selected, track, path)
     if not selected:
-        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in NAME_KEYS[:4] if k in p})
+        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in _LABEL_KEYS if k in p})
         raise TrackMapError(
             f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
             f"available: {', '.join(avail[:20]) or '(no names)'}"
