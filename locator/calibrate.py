@@ -123,14 +123,20 @@ def binned_sigma(
     return pd.DataFrame(rows, columns=["el_lo_deg", "el_hi_deg", "el_mid_deg", "n", "sigma_m"])
 
 
-def calibration_figure(table: pd.DataFrame, model: ErrorModel, title: str = "") -> Figure:
-    """Binned empirical sigma against the fitted ``sigma(el)``."""
+def calibration_figure(
+    table: pd.DataFrame, model: ErrorModel, title: str = "", estimate: ErrorModel | None = None
+) -> Figure:
+    """Binned empirical sigma against the model's ``sigma(el)`` (and the estimate it bounds)."""
     fig = Figure(figsize=(6, 4), layout="constrained")
     ax = fig.subplots()
     ax.plot(table["el_mid_deg"], table["sigma_m"], "o", label="residual RMS per 5 deg bin")
     el = np.linspace(max(model.min_el_deg, 2.0), 90.0, 200)
+    name = "model" if estimate is None else "overbound"
     ax.plot(el, model.sigma_m(el), "-",
-            label=f"fit: a = {model.a_m:.2f} m, b = {model.b_m:.2f} m")  # fmt: skip
+            label=f"{name}: a = {model.a_m:.2f} m, b = {model.b_m:.2f} m")  # fmt: skip
+    if estimate is not None:
+        ax.plot(el, estimate.sigma_m(el), "--", color="0.5",
+                label=f"fit: a = {estimate.a_m:.2f} m, b = {estimate.b_m:.2f} m")  # fmt: skip
     ax.set_xlabel("elevation (deg)")
     ax.set_ylabel("pseudorange sigma (m)")
     ax.set_ylim(bottom=0)

@@ -278,10 +278,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         src = RinexSource(ranges, obs, args.constellation)
         el, res = static_residuals(src, x)
         fitted = {"obs": args.obs, "nav": list(args.nav), "station_ecef_m": x.tolist()}
-    model = calibrate_to_file(el, res, args.out, k_sigma=args.k_sigma, fitted=fitted)
+    model = calibrate_to_file(
+        el, res, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted
+    )
     e = model.error
+    what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     print(
-        f"sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / sin el)^2 m^2 from "
+        f"sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / sin el)^2 m^2 ({what}) from "
         f"{int(np.isfinite(res).sum())} residuals; k_sigma {model.k_sigma} -> {args.out} "
         f"(figure {Path(args.out).with_suffix('.png')})"
     )
@@ -416,6 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="station ECEF (default: the RINEX header position)")  # fmt: skip
     p.add_argument("--constellation", default="G")
     p.add_argument("--k-sigma", type=float, default=2.0)
+    p.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
+                   help="overbound (default): the fit inflated until it bounds the residual "
+                   "tails in every elevation bin; estimate: the least-squares fit")  # fmt: skip
     p.add_argument("--out", required=True, metavar="JSON")
     p.set_defaults(func=cmd_calibrate)
 

@@ -218,19 +218,43 @@ def calibrate_to_file(
     out: str | Path,
     *,
     k_sigma: float = 2.0,
+    bound: str = "overbound",
     fitted: Mapping[str, Any] | None = None,
 ) -> IntervalModel:
-    """Fit the error model, write it (JSON) and its figure (``.png`` beside it)."""
+    """Fit the error model, write it (JSON) and its figure (``.png`` beside it).
+
+    ``bound="overbound"`` (default) writes the fit inflated until it bounds the residuals in
+    every elevation bin (:func:`locator.intervals.overbound_error_model`), ``"estimate"`` the
+    least-squares fit itself.
+    """
     from locator.calibrate import binned_sigma, calibration_figure
-    from locator.intervals import fit_error_model
+    from locator.intervals import fit_error_model, overbound_error_model
     from locator.runio import write_error_model
 
-    model = IntervalModel(fit_error_model(el_deg, residual_m), k_sigma=k_sigma)
+    if bound not in ("overbound", "estimate"):
+        raise ValueError(f"bound must be 'overbound' or 'estimate', got {bound!r}")
+    estimate = fit_error_model(el_deg, residual_m)
+    info: dict[str, Any] = {**dict(fitted or {}), "bound": bound,
+                            "estimate": {"a_m": estimate.a_m, "b_m": estimate.b_m}}  # fmt: skip
+    error = estimate
+    if bound == "overbound":
+        ob = overbound_error_model(el_deg, residual_m, estimate)
+        error = ob.model
+        info["overbound_factor"] = ob.factor
+        info["overbound_bins"] = [
+            {"el_lo_deg": lo, "el_hi_deg": hi, "n": int(n), "factor": f}
+            for lo, hi, n, f in zip(
+                ob.bin_el_lo_deg.tolist(), ob.bin_el_hi_deg.tolist(), ob.bin_n.tolist(),
+                ob.bin_factor.tolist(), strict=True,
+            )
+        ]  # fmt: skip
+    model = IntervalModel(error, k_sigma=k_sigma)
     table = binned_sigma(el_deg, residual_m)
-    info = {**dict(fitted or {}), "residuals": int(np.isfinite(residual_m).sum()),
-            "binned_sigma": table.to_dict(orient="records")}  # fmt: skip
+    info["residuals"] = int(np.isfinite(residual_m).sum())
+    info["binned_sigma"] = table.to_dict(orient="records")
     p = write_error_model(out, model, info)
-    calibration_figure(table, model.error).savefig(p.with_suffix(".png"), dpi=100)
+    fig = calibration_figure(table, model.error, estimate=None if bound == "estimate" else estimate)
+    fig.savefig(p.with_suffix(".png"), dpi=100)
     return model
 
 

@@ -5,8 +5,9 @@ GEONET stations 0759 and 3040 (RTKLIB test data, 2005-04-02 00:00-00:59:30, 120 
 through each station's known antenna position (0759: GEONET coordinates; 3040: its header
 position) at several headings; the station's chainage is the truth (2000 m). The error model
 is learned on the *other* station (``locator.calibrate.static_residuals``), so no figure uses
-the data it was fitted on. Every received GPS signal above the horizon is used (open sky: no
-mask), active integrity, the odometer reads zero (the train stands still).
+the data it was fitted on; ``--bound`` chooses the overbound (default, as ``locator
+calibrate``) or the least-squares estimate. Every received GPS signal above the horizon is
+used (open sky: no mask), active integrity, the odometer reads zero (the train stands still).
 
 Prints per station and heading: epochs, share of epochs per mode, share with a claim,
 along-track error (median, 95th percentile of |error|) of SATHIA and of the 1-D WLS, interval
@@ -15,6 +16,7 @@ length (median, 95th percentile), HMI.
 Usage::
 
     .venv/bin/python scripts/locator_static.py [--data ../shared/data/gnss/rtklib] [--out DIR]
+        [--k-sigma K] [--bound overbound|estimate]
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from locator.calibrate import static_residuals
 from locator.corrections import RangeModel
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
-from locator.intervals import fit_error_model
+from locator.intervals import fit_error_model, overbound_error_model
 from locator.observations import Observations
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
@@ -72,14 +74,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--out", type=Path, help="write each run's scored table here")
     ap.add_argument("--k-sigma", type=float, default=2.0, help="pair half width (source: 2)")
+    ap.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
+                    help="as `locator calibrate --bound` (default: overbound)")  # fmt: skip
     args = ap.parse_args(argv)
     stations = {n: station(args.data, n) for n in ("0759", "3040")}
     models = {}
     for name, (src, x) in stations.items():
         el, res = static_residuals(src, x)
-        models[name] = IntervalModel(fit_error_model(el, res), k_sigma=args.k_sigma)
-        e = models[name].error
-        print(f"error model learned on {name}: a = {e.a_m:.2f} m, b = {e.b_m:.2f} m")
+        fit = fit_error_model(el, res)
+        error = overbound_error_model(el, res, fit).model if args.bound == "overbound" else fit
+        models[name] = IntervalModel(error, k_sigma=args.k_sigma)
+        print(f"error model ({args.bound}) learned on {name}: a = {error.a_m:.2f} m, "
+              f"b = {error.b_m:.2f} m (estimate {fit.a_m:.2f}, {fit.b_m:.2f})")  # fmt: skip
     rows = []
     for name, (src, x) in stations.items():
         other = "3040" if name == "0759" else "0759"

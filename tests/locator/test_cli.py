@@ -88,6 +88,14 @@ def test_calibrate_learns_the_simulated_noise(sim_dir, tmp_path):
                  "--out", str(tmp_path / "cut")]) == 0  # fmt: skip
     _, meta = read_run(tmp_path / "cut")
     assert meta["config"]["locator"]["model"]["error"]["a_m"] == pytest.approx(model.error.a_m)
+    # the default is the overbound of the least-squares estimate, which --bound estimate writes
+    fitted = json.loads(out.read_text())["fitted"]
+    assert fitted["bound"] == "overbound" and fitted["overbound_factor"] >= 1.0
+    est = tmp_path / "estimate.json"
+    assert main(["calibrate", "--sim", str(sim_dir), "--bound", "estimate", "--out", str(est)]) == 0
+    estimate = read_error_model(est).error
+    assert estimate.a_m == pytest.approx(fitted["estimate"]["a_m"])
+    assert model.error.b_m == pytest.approx(estimate.b_m * fitted["overbound_factor"])
 
 
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
