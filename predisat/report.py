@@ -328,11 +328,17 @@ def _verdict(results: Sequence[Availability], track: Any) -> str:
         parts.append("Ignoring the survey, " + "; ".join(others) + ".")
     share4 = m.share_at_least(4)
     i = int(np.argmin(share4))
+    when = f" ({sm['longest_below4_m_at_utc']})" if sm["longest_below4_m"] > 0 else ""
+    where = (
+        f" ({_km_label(track, float(sm['longest_below4_s_at_chainage_m']))})"
+        if sm["longest_below4_s"] > 0
+        else ""
+    )
     parts.append(
         f"The worst place is {_km_label(track, float(m.chainage_m[i]))} "
         f"({_pct(float(share4[i]))} of the time with ≥ 4); the longest stretch below 4 at one "
-        f"instant is {_num(sm['longest_below4_m'], 'm')}, the longest time below 4 at one place "
-        f"{_duration(sm['longest_below4_s'])}."
+        f"instant is {_num(sm['longest_below4_m'], 'm')}{when}, the longest time below 4 at one "
+        f"place {_duration(sm['longest_below4_s'])}{where}."
     )
     return "<p class=verdict>" + " ".join(parts) + "</p>"
 

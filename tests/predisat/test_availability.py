@@ -4,6 +4,7 @@ reference, shares, stretches, writers."""
 from __future__ import annotations
 
 import json
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -154,6 +155,9 @@ def test_shares_and_longest_stretches_on_hand_built_counts() -> None:
     summary = a.summary()
     assert summary["longest_below4_m"] == 30.0 and summary["longest_below4_s"] == 90.0
     assert summary["longest_below4_s_at_chainage_m"] == 0.0
+    # epoch 2 is GPS 1e9 + 60 s; GPS - UTC was 15 s from 2009 to mid-2012 (IERS Bulletin C)
+    utc = datetime(1980, 1, 6) + timedelta(seconds=1e9 + 60.0 - 15.0)
+    assert summary["longest_below4_m_at_utc"] == utc.strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def test_longest_run_uses_cell_bounds() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import re
+from datetime import datetime, timedelta
 from html.parser import HTMLParser
 from typing import Any
 
@@ -29,6 +30,7 @@ from predisat.track import demo_track
 
 STEP_S = 600.0
 T0 = 1277078400.0  # 2020-06-25 00:00 GPST
+LEAP_S = 18.0  # GPS - UTC since 2017 (IERS Bulletin C)
 CH = 4000.0 + 10.0 * np.arange(10)
 
 
@@ -131,6 +133,10 @@ def test_report_table_values_and_no_external_resources(results, masks, satellite
     assert rows["masks"][1:4] == ["100.0 %", "75.0 %", "25.0 %"]
     # the 5 first positions are below 4 together at epochs 2-3: 50 m, 2 epochs = 20 min
     assert rows["masks"][5:7] == ["50 m", "20 min"]
+    # the verdict says when (epoch 2, UTC) and where (position 0) those stretches are
+    utc = datetime(1980, 1, 6) + timedelta(seconds=T0 + 2 * STEP_S - LEAP_S)
+    assert f"50 m ({utc:%Y-%m-%d %H:%M:%S} UTC)" in text
+    assert re.search(r"20 min \((line )?km [0-9.]+", text)
     assert rows["no mask"][2] == "100.0 %" and rows["cutoff 15 deg"][3] == "100.0 %"
     assert any(k.startswith("LOCOPROL") for k in rows)
     assert "test line" in text
