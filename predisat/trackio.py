@@ -265,6 +265,7 @@ def read_geojson_track(
                 )
 
     parts: list[Part] = []
+    single: list[str] = []  # lines of one vertex, named if nothing else is left
     for i, props, geom in selected:
         label = _feature_label(i, props)
         raw = geom.get("coordinates") or []
@@ -287,8 +288,15 @@ def read_geojson_track(
             _check_lonlat(coords, where_s, path, expected_bbox)
             if len(coords) >= 2:
                 parts.append(Part(where_s, i, coords, tunnel))
+            else:
+                single.append(where_s)
         _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
     if not parts:
+        if single:
+            raise TrackMapError(
+                f"{path}: {', '.join(single[:5])} has a single vertex; a track line needs at "
+                "least two [lon, lat] points"
+            )
         raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
 
     first = parts[0].coords[0]

@@ -394,6 +394,12 @@ def test_coordinates_given_as_strings_are_refused(tmp_path):
         TrackMap.from_geojson(path)
 
 
+def test_a_line_of_one_vertex_is_named(tmp_path):
+    path = write(tmp_path, "one.geojson", json.dumps(line_feature([[4.0, 50.0]], name="x")))
+    with pytest.raises(TrackMapError, match=r"feature 0 \(name=x\) has a single vertex"):
+        TrackMap.from_geojson(path)
+
+
 def test_self_crossing_chain_is_rejected(tmp_path):
     # North 1 km, east 500 m, then back south-west across the first leg.
     lon, lat = [4.7], [50.5]
