@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -53,6 +54,20 @@ def test_wide_images_are_cut_into_tiles_classified_alone(test_data) -> None:
     n = alone.shape[1]
     np.testing.assert_allclose(whole[:, :n], alone, atol=0.02)
     np.testing.assert_allclose(whole[:, 2 * n:], alone, atol=0.02)
+
+
+def test_mirror_averages_the_image_and_its_mirror(test_data) -> None:
+    net = SkyNet.default()
+    assert net.mirror  # the shipped setting
+    plain = dataclasses.replace(net, mirror=False)
+    img, _ = _frame(test_data, "cloudy_right_000012")
+    flipped = np.ascontiguousarray(img[:, ::-1])
+    want = 0.5 * (plain.predict_image(img) + plain.predict_image(flipped)[:, ::-1])
+    np.testing.assert_allclose(net.predict_image(img), want, atol=1e-5)
+    # so the averaged map is mirror-symmetric, and the plain one is not exactly
+    np.testing.assert_allclose(net.predict_image(flipped)[:, ::-1], net.predict_image(img),
+                               atol=1e-5)  # fmt: skip
+    assert np.abs(plain.predict_image(flipped)[:, ::-1] - plain.predict_image(img)).max() > 1e-3
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
