@@ -235,6 +235,15 @@ def _clock_removed(
     return r - clock, ca, cb
 
 
+def _clock_free(r: NDArray, ok: NDArray, var: NDArray) -> tuple[NDArray, NDArray]:
+    """Residuals minus the weighted-mean clock (weights ``1 / var``) and their variance."""
+    w = np.where(ok, 1.0 / var, 0.0)
+    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
+    ev = var * (1.0 - 2.0 * w) + np.sum(w**2 * np.where(ok, var, 0.0), axis=1, keepdims=True)
+    return r - clock, ev
+
+
 def fit_error_model(
     el_deg: ArrayLike, residual_m: ArrayLike, *, min_el_deg: float = 1.0, n_bins: int = 16
 ) -> ErrorModel:
@@ -349,60 +358,78 @@ def overbound_error_model(
 
     Notes
     -----
-    The residuals are made clock-free with ``fitted``'s weights and normalised by their exact
-    variance under ``fitted`` (:func:`fit_error_model`'s Notes), ``z = e / sqrt(var)``; in each
-    bin, for every sorted ``|z|_i`` with a tail share ``p_i = (n - i) / n`` in
-    ``[min_tail / n, max_tail_share]``, the Gaussian ``N(0, f**2)`` bounds the point when
-    ``2 Q(|z|_i / f) >= p_i``, i.e. ``f >= |z|_i / Q^-1(p_i / 2)``. The factor is the largest
-    over points and bins, never below 1. The per-epoch clock absorbs part of each satellite's
-    own error (the ``1 - 2 w`` term), so where the real errors do not have the fitted shape the
-    bound is slightly optimistic (the test: 4.3-5.6 % of fresh errors beyond ``2 sigma`` in the
-    bin with the excess, against 4.55 %, and 20 % for the fit). Residuals of one satellite
-    pass are correlated in time, so an hour of data checks far fewer independent errors than
-    it has residuals, and tails beyond ``min_tail / n`` (for ``k = 3.89``: 1e-4) are
-    extrapolated, not measured: calibrate on as many days and sites as the line will see.
+    The residuals are made clock-free (per-epoch weighted mean, weights ``1 / var``) and
+    normalised by their exact variance after that removal, ``z = e / sqrt(var_e)`` (as in
+    :func:`fit_error_model`'s Notes). In each bin, for every sorted ``|z|_i`` with ``c_i``
+    residuals at or beyond it, ``min_tail <= c_i <= max_tail_share * n``, the Gaussian
+    ``N(0, f**2)`` bounds the point when ``2 Q(|z|_i / f) >= c_i / n``, i.e.
+    ``f >= |z|_i / Q^-1(c_i / 2n)``: an empirical two-sided tail bound over those shares (not
+    a full CDF overbound). A bin whose errors exceed the fit gets too much weight in the clock,
+    which then absorbs part of its excess, so the bin factors are iterated: the variances
+    inflated by them, the clock removed again, until every bin is bounded at factor 1. The
+    model's factor is the largest bin factor, never below 1. An excess on part of a bin is
+    bounded on the bin's average only, and residuals of one satellite pass are correlated in
+    time, so an hour of data checks far fewer independent errors than it has residuals; tails
+    beyond ``min_tail / n`` (for ``k = 3.89``: 1e-4) are extrapolated, not measured:
+    calibrate on as many days and sites as the line will see.
     """
-    from scipy.stats import norm
-
     if n_bins < 1:
         raise ValueError(f"n_bins must be >= 1, got {n_bins}")
     if min_tail < 1:
         raise ValueError(f"min_tail must be >= 1, got {min_tail}")
     if not 0.0 < max_tail_share <= 0.5:
         raise ValueError(f"max_tail_share must be in (0, 0.5], got {max_tail_share}")
+    min_el = 1.0 if fitted is None else fitted.min_el_deg
+    el, r, ok, q = _error_inputs(el_deg, residual_m, min_el, n_bins, "overbound_error_model")
     fit = fit_error_model(el_deg, residual_m) if fitted is None else fitted
-    el, r, ok, q = _error_inputs(
-        el_deg, residual_m, fit.min_el_deg, n_bins, "overbound_error_model"
-    )
-    a2, b2 = fit.a_m**2, fit.b_m**2
-    e, ca, cb = _clock_removed(r, ok, q, a2, b2)
-    z = np.abs(e[ok]) / np.sqrt(np.maximum(a2 * ca[ok] + b2 * cb[ok], 1e-300))
     order = np.argsort(el[ok], kind="stable")
-    lo, hi, counts, factors = [], [], [], []
-    for chunk in np.array_split(order, n_bins):
-        zs = np.sort(z[chunk])
-        n = len(zs)
-        tail = (n - np.arange(n)) / n  # share of the bin at or beyond zs[i]
-        use = (tail * n >= min_tail) & (tail <= max_tail_share)
-        f = float(np.max(zs[use] / norm.isf(tail[use] / 2.0))) if use.any() else np.nan
-        lo.append(float(el[ok][chunk].min()))
-        hi.append(float(el[ok][chunk].max()))
-        counts.append(n)
-        factors.append(f)
-    bin_factor = np.array(factors)
-    if not np.isfinite(bin_factor).any():
+    chunks = np.array_split(order, n_bins)
+    bin_of = np.empty(len(order), int)
+    for b, c in enumerate(chunks):
+        bin_of[c] = b
+    counts = np.array([len(c) for c in chunks])
+    if counts.min() * max_tail_share < min_tail:
         raise ValueError(
-            f"overbound_error_model: no bin has {min_tail} residuals in its tail "
-            f"(largest bin {max(counts)} residuals); give more epochs or fewer n_bins"
+            f"overbound_error_model: a bin of {counts.min()} residuals has fewer than "
+            f"min_tail={min_tail} in its checked tail (max_tail_share={max_tail_share}); "
+            "give more epochs or fewer n_bins"
         )
-    factor = max(1.0, float(np.nanmax(bin_factor)))
+    sigma2 = np.where(ok, fit.a_m**2 + fit.b_m**2 * q, 1.0)
+    factor_b = np.ones(n_bins)
+    # a bin whose errors exceed the fit also pulls the clock estimate (its weight is too
+    # high), which hides part of its excess: iterate with the inflated variances until the
+    # clock-free residuals are bounded at factor 1 in every bin
+    for _ in range(30):
+        var = sigma2.copy()
+        var[ok] *= factor_b[bin_of] ** 2
+        e, ev = _clock_free(r, ok, var)
+        z = np.abs(e[ok]) / np.sqrt(np.maximum(ev[ok], 1e-300))
+        g = np.array([_tail_factor(z[c], min_tail, max_tail_share) for c in chunks])
+        factor_b *= g
+        if np.max(np.abs(g - 1.0)) < 1e-4:
+            break
+    lo = np.array([float(el[ok][c].min()) for c in chunks])
+    hi = np.array([float(el[ok][c].max()) for c in chunks])
+    bin_factor = factor_b
+    factor = max(1.0, float(bin_factor.max()))
     model = ErrorModel(a_m=fit.a_m * factor, b_m=fit.b_m * factor, min_el_deg=fit.min_el_deg)
     return Overbound(
         model=model,
         fitted=fit,
         factor=factor,
-        bin_el_lo_deg=np.array(lo),
-        bin_el_hi_deg=np.array(hi),
-        bin_n=np.array(counts),
+        bin_el_lo_deg=lo,
+        bin_el_hi_deg=hi,
+        bin_n=counts,
         bin_factor=bin_factor,
     )
+
+
+def _tail_factor(z: NDArray, min_tail: int, max_tail_share: float) -> float:
+    """Smallest ``f`` with ``P(|N(0, f**2)| >= |z|_i)`` >= the share at or beyond ``|z|_i``."""
+    from scipy.stats import norm
+
+    zs = np.sort(z)
+    n = len(zs)
+    count = n - np.arange(n)  # residuals at or beyond zs[i]
+    use = (count >= min_tail) & (count <= max_tail_share * n)
+    return float(np.max(zs[use] / norm.isf(count[use] / (2.0 * n))))

@@ -34,7 +34,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from predisat.geodesy import enu_rotation
-from predisat.gnss_time import gps_s_to_utc_datetime64
+from predisat.gnss_time import gps_s_to_utc_text
 from predisat.interval import IntervalModel, predicted_interval
 from predisat.satellites import LinePositions, SatellitePositions, TrustRule, azel
 
@@ -171,7 +171,7 @@ class Availability:
         out["mean_count"] = float(self.count.mean())
         out["longest_below4_m"] = float(by_epoch[e])
         out["longest_below4_m_at_gps_s"] = float(self.gps_s[e])
-        out["longest_below4_m_at_utc"] = _utc_text(float(self.gps_s[e]))
+        out["longest_below4_m_at_utc"] = gps_s_to_utc_text(float(self.gps_s[e]))
         out["longest_below4_s"] = float(by_pos[p])
         out["longest_below4_s_at_chainage_m"] = float(self.chainage_m[p])
         out["opening_angle_median_deg"] = float(np.median(self.opening_angle_deg))
@@ -579,8 +579,3 @@ def reference_counts(
         ok = rule.trusted(positions.chainage_m[i], az, el)
         out[i] = ok.sum(axis=-1)
     return out
-
-
-def _utc_text(gps_s: float) -> str:
-    """``2011-09-14 01:46:25 UTC`` for a ``gps_s`` (leap seconds removed)."""
-    return str(gps_s_to_utc_datetime64(gps_s).astype("M8[s]")).replace("T", " ") + " UTC"

@@ -29,6 +29,7 @@ __all__ = [
     "gps_s_to_datetime64",
     "gps_s_to_text",
     "gps_s_to_utc_datetime64",
+    "gps_s_to_utc_text",
     "utc_datetime64_to_gps_s",
     "week_seconds_to_gps_s",
 ]
@@ -154,6 +155,11 @@ def gps_s_to_datetime64(gps_s: ArrayLike) -> NDArray:
 def gps_s_to_text(gps_s: float) -> str:
     """GPS-scale calendar text of one ``gps_s`` for messages: ``2020-06-25 06:00:00``."""
     return str(gps_s_to_datetime64(float(gps_s)).astype("M8[s]")).replace("T", " ")
+
+
+def gps_s_to_utc_text(gps_s: float) -> str:
+    """UTC calendar text of one ``gps_s``, leap seconds removed: ``2011-09-14 01:46:25 UTC``."""
+    return str(gps_s_to_utc_datetime64(float(gps_s)).astype("M8[s]")).replace("T", " ") + " UTC"
 
 
 def gps_s_to_utc_datetime64(gps_s: ArrayLike) -> NDArray:

@@ -294,8 +294,8 @@ def read_geojson_track(
     if not parts:
         if single:
             raise TrackMapError(
-                f"{path}: {', '.join(single[:5])} has a single vertex; a track line needs at "
-                "least two [lon, lat] points"
+                f"{path}: {_first(single)} {'has' if len(single) == 1 else 'have'} a single "
+                "vertex; a track line needs at least two [lon, lat] points"
             )
         raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
 
@@ -575,3 +575,9 @@ def read_csv_track(
         )
     except TrackMapError as exc:
         raise TrackMapError(f"{path}: {exc}") from None
+
+
+def _first(names: list[str], n: int = 5) -> str:
+    """``a, b, c`` or ``a, b, c and 4 more``."""
+    more = f" and {len(names) - n} more" if len(names) > n else ""
+    return ", ".join(names[:n]) + more

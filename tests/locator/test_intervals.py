@@ -191,7 +191,6 @@ def test_overbound_of_a_true_model_stays_close():
     ob = overbound_error_model(el, res)
     # sampling noise only: the bound is the fit, inflated by little, never deflated
     assert 1.0 <= ob.factor < 1.2
-    assert ob.model.b_m == pytest.approx(ob.fitted.b_m * ob.factor)
     assert ob.bin_n.sum() == np.isfinite(res).sum() and len(ob.bin_factor) == 6
     assert (np.diff(ob.bin_el_lo_deg) > 0).all()
 
@@ -218,10 +217,11 @@ def test_overbound_covers_every_bin_where_the_fit_does_not():
     # bounded per bin of the overbound (an excess on part of a bin is bounded on its average)
     for lo, hi in zip(ob.bin_el_lo_deg, ob.bin_el_hi_deg, strict=True):
         sel = (el2 >= lo) & (el2 <= hi)
-        outside = np.mean(err[sel] > k * ob.model.sigma_m(el2[sel]))
-        # nominal 4.55 %; sampling and the clock's share of each error (see the Notes of
-        # overbound_error_model) leave about a point: 4.3-5.6 % over seeds 0-3 in the top bin
-        assert outside < 0.06, (lo, hi, outside)
+        bound = ob.model.sigma_m(el2[sel])
+        # 2 sigma: 4.55 % for a Gaussian, 3.0-4.9 % in the top bin over seeds 0-5
+        assert np.mean(err[sel] > 2.0 * bound) < 0.055, (lo, hi)
+        # 3 sigma: 0.27 %; about 16 errors expected in the top bin, so a factor 2 of room
+        assert np.mean(err[sel] > 3.0 * bound) < 2 * 0.0027, (lo, hi)
 
 
 def test_overbound_guards():
