@@ -247,40 +247,47 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from locator.workflow import calibrate_to_file
 
     if bool(args.sim) == bool(args.obs):
-        raise CliError("give either --sim DIR [DIR ...] or --obs FILE --nav FILES")
+        raise CliError("give either --sim DIR [DIR ...] or --obs FILE [FILE ...] --nav FILES")
     if args.sim:
         from locator.simfile import SimRun
 
         states = [s.strip() for s in args.states.split(",")]
-        parts = [sim_residuals(SimRun.read(d), states) for d in args.sim]
-        n = max(p[0].shape[1] for p in parts)
-        el = np.concatenate(
-            [np.pad(p[0], ((0, 0), (0, n - p[0].shape[1])), constant_values=np.nan) for p in parts]
-        )
-        res = np.concatenate(
-            [np.pad(p[1], ((0, 0), (0, n - p[1].shape[1])), constant_values=np.nan) for p in parts]
-        )
-        fitted = {"simulations": list(args.sim), "states": states}
+        el, res = _stack([sim_residuals(SimRun.read(d), states) for d in args.sim])
+        fitted: dict[str, Any] = {"simulations": list(args.sim), "states": states}
     else:
         if not args.nav:
-            raise CliError("--obs needs --nav FILES")
+            raise CliError("--obs needs --nav FILES (covering every observation file's day)")
+        if args.station and len(args.obs) > 1:
+            raise CliError(
+                "--station gives one position; with several --obs files each file's header "
+                "position is used (calibrate one file at a time to give its position)"
+            )
         from locator.corrections import RangeModel
         from locator.observations import Observations
         from locator.sources import RinexSource
 
-        obs = Observations.from_rinex(args.obs)
-        x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
-        if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
-            raise CliError(f"{args.obs}: no station position in the header; pass --station X Y Z")
-        _report_problems(args.obs, obs.problems)
         ranges = RangeModel.from_rinex_nav(args.nav)
-        _nav_covers(ranges.ephemeris, obs, args.nav)
-        src = RinexSource(ranges, obs, args.constellation)
-        el, res = static_residuals(src, x)
-        fitted = {"obs": args.obs, "nav": list(args.nav), "station_ecef_m": x.tolist()}
-    model = calibrate_to_file(
-        el, res, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted
-    )
+        parts, stations = [], []
+        for path in args.obs:
+            obs = Observations.from_rinex(path)
+            x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
+            if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
+                raise CliError(f"{path}: no station position in the header; pass --station X Y Z")
+            _report_problems(path, obs.problems)
+            _nav_covers(ranges.ephemeris, obs, args.nav)
+            parts.append(static_residuals(RinexSource(ranges, obs, args.constellation), x))
+            stations.append(x.tolist())
+        el, res = _stack(parts)
+        fitted = {"obs": list(args.obs), "nav": list(args.nav), "station_ecef_m": stations}
+    try:
+        model = calibrate_to_file(
+            el, res, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted
+        )
+    except ValueError as exc:
+        raise CliError(
+            f"{exc} (command line: give more or longer --obs / --sim inputs, a few hundred "
+            "residuals at least, or --bound estimate for the fit alone)"
+        ) from None
     e = model.error
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     print(
@@ -289,6 +296,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"(figure {Path(args.out).with_suffix('.png')})"
     )
     return 0
+
+
+def _stack(parts: Sequence[tuple[Any, Any]]) -> tuple[Any, Any]:
+    """Epoch rows of several ``(el_deg, residual_m)`` pairs, padded with NaN to one width."""
+    import numpy as np
+
+    n = max(p[0].shape[1] for p in parts)
+
+    def wide(a: Any) -> Any:
+        return np.pad(a, ((0, 0), (0, n - a.shape[1])), constant_values=np.nan)
+
+    return (
+        np.concatenate([wide(p[0]) for p in parts]),
+        np.concatenate([wide(p[1]) for p in parts]),
+    )
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -413,8 +435,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="learn sigma(el) from data with known truth")
     p.add_argument("--sim", nargs="+", metavar="DIR", help="simulated runs")
     p.add_argument("--states", default="los", help="signal states to learn from (los,nlos)")
-    p.add_argument("--obs", metavar="FILE", help="static station RINEX observations")
-    p.add_argument("--nav", nargs="+", metavar="FILE")
+    p.add_argument("--obs", nargs="+", metavar="FILE",
+                   help="static station RINEX observations (several files: several days or "
+                   "sites, each at its header position)")  # fmt: skip
+    p.add_argument("--nav", nargs="+", metavar="FILE",
+                   help="broadcast navigation files covering every --obs file")  # fmt: skip
     p.add_argument("--station", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="station ECEF (default: the RINEX header position)")  # fmt: skip
     p.add_argument("--constellation", default="G")

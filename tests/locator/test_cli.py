@@ -98,6 +98,25 @@ def test_calibrate_learns_the_simulated_noise(sim_dir, tmp_path):
     assert model.error.b_m == pytest.approx(estimate.b_m * fitted["overbound_factor"])
 
 
+def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
+    obs = str(test_data / "gnss_obs" / "07590920_10ep.05o")
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    out = tmp_path / "m.json"
+    # ten epochs are too few to check six bins' tails: the message says what to do
+    assert main(["calibrate", "--obs", obs, "--nav", nav, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--bound estimate" in err and "--obs" in err
+    assert main(["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate",
+                 "--out", str(out)]) == 0  # fmt: skip
+    one = json.loads(out.read_text())["fitted"]["residuals"]
+    assert main(["calibrate", "--obs", obs, obs, obs, "--nav", nav, "--out", str(out)]) == 0
+    fitted = json.loads(out.read_text())["fitted"]
+    assert fitted["residuals"] == 3 * one and len(fitted["station_ecef_m"]) == 3
+    assert main(["calibrate", "--obs", obs, obs, "--nav", nav, "--station", "1", "2", "3",
+                 "--out", str(out)]) == 2  # fmt: skip
+    assert "one position" in capsys.readouterr().err
+
+
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
     assert main(["run", "--sim", str(sim_dir), "--out", str(tmp_path / "x")]) == 2
     assert "no trust rule" in capsys.readouterr().err
