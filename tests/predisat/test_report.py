@@ -136,7 +136,8 @@ def test_report_table_values_and_no_external_resources(results, masks, satellite
     # the verdict says when (epoch 2, UTC) and where (position 0) those stretches are
     utc = datetime(1980, 1, 6) + timedelta(seconds=T0 + 2 * STEP_S - LEAP_S)
     assert f"50 m ({utc:%Y-%m-%d %H:%M:%S} UTC)" in text
-    assert re.search(r"20 min \((line )?km [0-9.]+", text)
+    km = float(track.kilometre_at(CH[0])) / 1000.0  # position 0, from the track's km posts
+    assert f"20 min (km {km:.3f})" in text
     assert rows["no mask"][2] == "100.0 %" and rows["cutoff 15 deg"][3] == "100.0 %"
     assert any(k.startswith("LOCOPROL") for k in rows)
     assert "test line" in text
