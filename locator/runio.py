@@ -183,8 +183,10 @@ def read_error_model(path: str | Path) -> IntervalModel:
         d = json.loads(p.read_text())
     except FileNotFoundError as exc:
         raise RunFileError(f"{p}: no such file; make one with `locator calibrate`") from exc
-    except json.JSONDecodeError as exc:
-        raise RunFileError(f"{p}: not valid JSON ({exc})") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise RunFileError(
+            f"{p}: not a JSON text file ({exc}); give the file `locator calibrate` wrote"
+        ) from exc
     if not isinstance(d, dict) or d.get("format") != ERROR_MODEL_FORMAT:
         raise RunFileError(
             f"{p}: not an error-model file ({ERROR_MODEL_FORMAT}); "

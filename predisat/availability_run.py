@@ -39,6 +39,7 @@ from predisat.availability import Availability, compute_availability
 from predisat.ephemeris import Ephemeris
 from predisat.gnss_time import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss_time import gps_s_to_text as _iso
+from predisat.interval import IntervalModel
 from predisat.masks import MaskSet
 from predisat.satellites import (
     DEFAULT_NAV_FILE,
@@ -370,6 +371,7 @@ def run_availability(
     sky_km: Sequence[float] | None = None,
     n_sky: int = 4,
     interval_every: int = 10,
+    interval_model: IntervalModel | None = None,
     workers: int = 1,
     counts_table: bool = False,
     progress: bool = True,
@@ -407,6 +409,10 @@ def run_availability(
         Number of sky plots when ``sky_km`` is not given.
     interval_every : int
         Predict the interval at every n-th epoch (the costly part).
+    interval_model : IntervalModel, optional
+        Pseudorange error model and pair half width of the predicted intervals (for example
+        from ``locator calibrate``, read with ``locator.runio.read_error_model``); default
+        ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
     workers : int
         Threads of the availability engine.
     counts_table : bool
@@ -451,6 +457,7 @@ def run_availability(
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
+        model = interval_model or IntervalModel()
         bar.update(1)
 
         stage("navigation")
@@ -476,7 +483,12 @@ def run_availability(
             stage(rule.label)
             results.append(
                 compute_availability(
-                    sats, positions, rule, interval_every=interval_every, workers=workers
+                    sats,
+                    positions,
+                    rule,
+                    interval_every=interval_every,
+                    interval_model=model,
+                    workers=workers,
                 )
             )
             bar.update(1)
@@ -486,7 +498,7 @@ def run_availability(
         out.mkdir(parents=True, exist_ok=True)
         info = _run_info(
             mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
-            step_s, interval_every, __version__,
+            step_s, interval_every, __version__, model,
         )  # fmt: skip
         files, summary = write_tables(out, results, track, info, counts_table)
         # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
@@ -519,7 +531,7 @@ def run_availability(
 def _run_info(
     masks: MaskSet, masks_label: str, track: Any, ephemeris: Ephemeris, nav_label: str,
     sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
-    interval_every: int, version: str,
+    interval_every: int, version: str, model: IntervalModel,
 ) -> dict[str, Any]:  # fmt: skip
     systems = sorted({s[0] for s in sats.sats})
     line = track.name if track is not None else str(masks.provenance.get("track", "line"))
@@ -545,6 +557,10 @@ def _run_info(
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
+        "interval_model": (
+            f"sigma(el)² = {model.error.a_m:.2f}² + ({model.error.b_m:.2f} / sin el)² m², "
+            f"pair intervals ± {model.k_sigma:g} sigma"
+        ),
         "software": f"predisat {version}",
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "track_attribution": getattr(track, "attribution", "") if track is not None else "",
@@ -588,6 +604,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--interval-every", type=int, default=10, metavar="N",
         help="predict the interval at every N-th epoch (default 10; 1 is slow)",
     )  # fmt: skip
+    p.add_argument(
+        "--error-model", metavar="JSON",
+        help="pseudorange error model of the predicted intervals, from `locator calibrate` "
+        "(default a = b = 2 m, k = 2)",
+    )  # fmt: skip
+    p.add_argument(
+        "--k-sigma", type=float, metavar="K",
+        help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
+        "per pair)",
+    )  # fmt: skip
     p.add_argument("--workers", type=int, default=1, help="threads")
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -610,7 +636,26 @@ def run_from_args(args: argparse.Namespace, track: Any = None) -> AvailabilityRu
         to_m=None if args.to_km is None else args.to_km * 1000.0,
         sky_km=args.sky_km,
         interval_every=args.interval_every,
+        interval_model=_interval_model(args.error_model, args.k_sigma),
         workers=args.workers,
         counts_table=args.counts,
         progress=not args.quiet,
     )
+
+
+def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
+    """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
+    if error_model is not None:
+        from locator.runio import RunFileError, read_error_model
+
+        try:
+            model = read_error_model(error_model)
+        except RunFileError as exc:
+            raise ValueError(f"--error-model: {exc}") from None
+    else:
+        model = IntervalModel()
+    if k_sigma is not None:
+        if not k_sigma > 0:
+            raise ValueError(f"--k-sigma must be > 0, got {k_sigma}")
+        model = IntervalModel(model.error, k_sigma)
+    return model

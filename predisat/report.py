@@ -362,6 +362,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Rules compared", ", ".join(info.get("rules", []))),
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
         ("Mask provenance", prov_text),
+        ("Interval model", info.get("interval_model", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),
     ]
     body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)

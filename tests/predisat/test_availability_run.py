@@ -335,6 +335,36 @@ def test_cli_arguments_round_trip(tmp_path: Path, masks: MaskSet, track: TrackMa
     assert np.all(r.results[3].count <= r.results[2].count)
 
 
+def test_interval_model_from_a_locator_error_model_file(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    from locator.runio import write_error_model
+    from predisat.interval import ErrorModel, IntervalModel
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
+            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet"]  # fmt: skip
+    default = run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track)
+    # sigma doubled everywhere (a = b = 4 m instead of 2 m): every interval exactly doubles
+    model = write_error_model(tmp_path / "e.json", IntervalModel(ErrorModel(4.0, 4.0), 2.0))
+    wide = run_from_args(
+        parser.parse_args([*base, "--error-model", str(model), "--out", str(tmp_path / "w")]),
+        track,
+    )
+    k389 = run_from_args(
+        parser.parse_args([*base, "--k-sigma", "3.89", "--out", str(tmp_path / "k")]), track
+    )
+    d, w, k = (r.results[0].interval_m for r in (default, wide, k389))
+    assert np.isfinite(d).sum() > 10
+    np.testing.assert_allclose(w, 2.0 * d, rtol=1e-5)
+    np.testing.assert_allclose(k, 3.89 / 2.0 * d, rtol=1e-5)
+    assert "± 3.89 sigma" in k389.report_html.read_text(encoding="utf-8")
+    with pytest.raises(ValueError, match="--error-model"):
+        run_from_args(parser.parse_args([*base, "--error-model", str(path), "--out",
+                                         str(tmp_path / "x")]), track)  # fmt: skip
+
+
 def test_untrusted_satellites_are_reported(run) -> None:
     # Every (epoch, satellite) the ephemeris refuses (NaN position) must appear in the status
     # table, with its reason: such satellites are never trusted and must not vanish silently.
