@@ -248,6 +248,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     if bool(args.sim) == bool(args.obs):
         raise CliError("give either --sim DIR [DIR ...] or --obs FILE [FILE ...] --nav FILES")
+    if not (args.k_sigma > 0 and np.isfinite(args.k_sigma)):
+        raise CliError(
+            f"--k-sigma must be positive and finite, got {args.k_sigma} (the source's 2; 3.89 "
+            "gives 1e-4 per pair)"
+        )
     if args.sim:
         from locator.simfile import SimRun
 
@@ -257,6 +262,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     else:
         if not args.nav:
             raise CliError("--obs needs --nav FILES (covering every observation file's day)")
+        seen = [Path(f).resolve() for f in args.obs]
+        if len(set(seen)) < len(seen):
+            raise CliError(
+                "an --obs file is given twice; each file counts once (its residuals would weigh "
+                "double in the tail check)"
+            )
         if args.station and len(args.obs) > 1:
             raise CliError(
                 "--station gives one position; with several --obs files each file's header "
@@ -272,7 +283,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             obs = Observations.from_rinex(path)
             x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
             if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
-                raise CliError(f"{path}: no station position in the header; pass --station X Y Z")
+                fix = (
+                    "pass --station X Y Z"
+                    if len(args.obs) == 1
+                    else "calibrate it alone with --station X Y Z, or leave it out"
+                )
+                raise CliError(f"{path}: no station position in the header; {fix}")
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
             parts.append(static_residuals(RinexSource(ranges, obs, args.constellation), x))

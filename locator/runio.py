@@ -183,6 +183,10 @@ def read_error_model(path: str | Path) -> IntervalModel:
         d = json.loads(p.read_text())
     except FileNotFoundError as exc:
         raise RunFileError(f"{p}: no such file; make one with `locator calibrate`") from exc
+    except IsADirectoryError as exc:
+        raise RunFileError(
+            f"{p}: is a folder; give the JSON file `locator calibrate` wrote"
+        ) from exc
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise RunFileError(
             f"{p}: not a JSON text file ({exc}); give the file `locator calibrate` wrote"

@@ -457,7 +457,7 @@ def run_availability(
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
-        model = interval_model or IntervalModel()
+        model = IntervalModel() if interval_model is None else interval_model
         bar.update(1)
 
         stage("navigation")
@@ -558,9 +558,14 @@ def _run_info(
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
         "interval_model": (
-            f"sigma(el)² = {model.error.a_m:.2f}² + ({model.error.b_m:.2f} / sin el)² m², "
+            f"sigma(el)² = {model.error.a_m:.3f}² + ({model.error.b_m:.3f} / sin el)² m² "
+            f"(elevations below {model.error.min_el_deg:g}° as {model.error.min_el_deg:g}°), "
             f"pair intervals ± {model.k_sigma:g} sigma"
         ),
+        "interval_model_params": {
+            "a_m": model.error.a_m, "b_m": model.error.b_m,
+            "min_el_deg": model.error.min_el_deg, "k_sigma": model.k_sigma,
+        },
         "software": f"predisat {version}",
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "track_attribution": getattr(track, "attribution", "") if track is not None else "",
@@ -655,7 +660,10 @@ def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalM
     else:
         model = IntervalModel()
     if k_sigma is not None:
-        if not k_sigma > 0:
-            raise ValueError(f"--k-sigma must be > 0, got {k_sigma}")
+        if not (k_sigma > 0 and np.isfinite(k_sigma)):
+            raise ValueError(
+                f"--k-sigma must be positive and finite, got {k_sigma} (the source's 2; 3.89 "
+                "gives 1e-4 per pair)"
+            )
         model = IntervalModel(model.error, k_sigma)
     return model

@@ -95,6 +95,8 @@ class ErrorModel:
     min_el_deg: float = 1.0
 
     def __post_init__(self) -> None:
+        if not (np.isfinite(self.a_m) and np.isfinite(self.b_m)):
+            raise ValueError(f"ErrorModel a_m, b_m must be finite metres: {self}")
         if self.a_m < 0 or self.b_m < 0 or self.a_m + self.b_m <= 0:
             raise ValueError(f"ErrorModel a_m, b_m must be >= 0, not both 0: {self}")
         if not 0 < self.min_el_deg < 90:
@@ -130,8 +132,11 @@ class IntervalModel:
     k_sigma: float = 2.0
 
     def __post_init__(self) -> None:
-        if not self.k_sigma > 0:
-            raise ValueError(f"IntervalModel.k_sigma must be positive, got {self.k_sigma}")
+        if not (self.k_sigma > 0 and np.isfinite(self.k_sigma)):
+            raise ValueError(
+                f"IntervalModel.k_sigma must be positive and finite, got {self.k_sigma} "
+                "(the source's 2; 3.89 gives 1e-4 per pair)"
+            )
 
     @classmethod
     def for_risk(cls, risk_per_pair: float, error: ErrorModel | None = None) -> IntervalModel:

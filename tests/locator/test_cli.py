@@ -9,6 +9,7 @@ tracked.
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -109,11 +110,20 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     assert main(["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate",
                  "--out", str(out)]) == 0  # fmt: skip
     one = json.loads(out.read_text())["fitted"]["residuals"]
-    assert main(["calibrate", "--obs", obs, obs, obs, "--nav", nav, "--out", str(out)]) == 0
+    copies = []
+    for i in range(3):  # three files (as three days of one station would be)
+        copies.append(tmp_path / f"day{i}.05o")
+        shutil.copy(obs, copies[-1])
+    assert main(["calibrate", "--obs", *map(str, copies), "--nav", nav, "--out", str(out)]) == 0
     fitted = json.loads(out.read_text())["fitted"]
     assert fitted["residuals"] == 3 * one and len(fitted["station_ecef_m"]) == 3
-    assert main(["calibrate", "--obs", obs, obs, "--nav", nav, "--station", "1", "2", "3",
-                 "--out", str(out)]) == 2  # fmt: skip
+    # one file given twice would weigh double: refused
+    assert main(["calibrate", "--obs", obs, obs, "--nav", nav, "--out", str(out)]) == 2
+    assert "given twice" in capsys.readouterr().err
+    assert main(["calibrate", "--sim", "x", "--k-sigma", "0", "--out", str(out)]) == 2
+    assert "--k-sigma" in capsys.readouterr().err
+    assert main(["calibrate", "--obs", str(copies[0]), str(copies[1]), "--nav", nav,
+                 "--station", "1", "2", "3", "--out", str(out)]) == 2  # fmt: skip
     assert "one position" in capsys.readouterr().err
 
 

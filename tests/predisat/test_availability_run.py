@@ -360,9 +360,18 @@ def test_interval_model_from_a_locator_error_model_file(
     np.testing.assert_allclose(w, 2.0 * d, rtol=1e-5)
     np.testing.assert_allclose(k, 3.89 / 2.0 * d, rtol=1e-5)
     assert "± 3.89 sigma" in k389.report_html.read_text(encoding="utf-8")
-    with pytest.raises(ValueError, match="--error-model"):
-        run_from_args(parser.parse_args([*base, "--error-model", str(path), "--out",
-                                         str(tmp_path / "x")]), track)  # fmt: skip
+    # the run records the model's numbers, so a report can be made again
+    run = json.loads((tmp_path / "w" / "summary.json").read_text())["run"]
+    assert run["interval_model_params"] == {"a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0,
+                                            "k_sigma": 2.0}  # fmt: skip
+    for bad in (path, tmp_path):  # a Parquet file, a folder
+        with pytest.raises(ValueError, match="--error-model"):
+            run_from_args(parser.parse_args([*base, "--error-model", str(bad), "--out",
+                                             str(tmp_path / "x")]), track)  # fmt: skip
+    for k in ("0", "inf"):
+        with pytest.raises(ValueError, match="--k-sigma"):
+            run_from_args(parser.parse_args([*base, "--k-sigma", k, "--out",
+                                             str(tmp_path / "x")]), track)  # fmt: skip
 
 
 def test_untrusted_satellites_are_reported(run) -> None:

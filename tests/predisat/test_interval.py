@@ -139,8 +139,12 @@ def test_error_model_and_risk() -> None:
     np.testing.assert_allclose(em.sigma_m([90.0, 30.0]), [np.hypot(1, 3), np.hypot(1, 6)])
     assert em.sigma_m(-5.0) == em.sigma_m(em.min_el_deg)
     assert IntervalModel.for_risk(1e-4).k_sigma == pytest.approx(3.8906, abs=1e-3)
-    with pytest.raises(ValueError, match="k_sigma"):
-        IntervalModel(k_sigma=0.0)
+    for k in (0.0, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="k_sigma"):
+            IntervalModel(k_sigma=k)
+    for a, b in ((float("nan"), 1.0), (1.0, float("inf")), (-1.0, 1.0)):
+        with pytest.raises(ValueError, match="a_m, b_m"):
+            ErrorModel(a_m=a, b_m=b)
 
 
 # --------------------------------------------------------------------------- pair choice
