@@ -218,30 +218,30 @@ def _error_inputs(
     return el, r, ok, q
 
 
+def _clock_free(r: NDArray, ok: NDArray, var: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Residuals minus the per-epoch clock (mean weighted by ``1 / var``), weights, variance.
+
+    ``e_k = r_k - sum(w r)`` has variance ``var_k (1 - 2 w_k) + sum(w**2 var)`` when ``var``
+    is the truth.
+    """
+    w = np.where(ok, 1.0 / var, 0.0)
+    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rows without data stay 0
+    clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
+    ev = var * (1.0 - 2.0 * w) + np.sum(w**2 * np.where(ok, var, 0.0), axis=1, keepdims=True)
+    return r - clock, w, ev
+
+
 def _clock_removed(
     r: NDArray, ok: NDArray, q: NDArray, a2: float, b2: float
 ) -> tuple[NDArray, NDArray, NDArray]:
-    """Residuals minus the per-epoch weighted-mean clock, and their variance's coefficients.
+    """:func:`_clock_free` under ``var = a2 + b2 q``, its variance as coefficients of ``(a2, b2)``.
 
-    With weights ``w ~ 1 / (a2 + b2 q)`` normalised per epoch, ``e_k = r_k - sum(w r)`` has
-    variance ``a2 ca_k + b2 cb_k`` when ``(a2, b2)`` is the truth.
+    The variance of ``e_k`` is ``a2 ca_k + b2 cb_k``: linear in ``(a2, b2)``.
     """
-    w = np.where(ok, 1.0 / (a2 + b2 * q), 0.0)
-    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rows without data stay 0
-    clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
-    # E[e2] = (a2 + b2 q)(1 - 2w) + sum(w^2 (a2 + b2 q)) : linear in (a2, b2)
+    e, w, _ = _clock_free(r, ok, a2 + b2 * q)
     ca = (1.0 - 2.0 * w) + np.sum(w**2, axis=1, keepdims=True)
     cb = q * (1.0 - 2.0 * w) + np.sum(w**2 * np.where(ok, q, 0.0), axis=1, keepdims=True)
-    return r - clock, ca, cb
-
-
-def _clock_free(r: NDArray, ok: NDArray, var: NDArray) -> tuple[NDArray, NDArray]:
-    """Residuals minus the weighted-mean clock (weights ``1 / var``) and their variance."""
-    w = np.where(ok, 1.0 / var, 0.0)
-    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
-    clock = np.sum(w * np.where(ok, r, 0.0), axis=1, keepdims=True)
-    ev = var * (1.0 - 2.0 * w) + np.sum(w**2 * np.where(ok, var, 0.0), axis=1, keepdims=True)
-    return r - clock, ev
+    return e, ca, cb
 
 
 def fit_error_model(
@@ -382,7 +382,8 @@ def overbound_error_model(
     min_el = 1.0 if fitted is None else fitted.min_el_deg
     el, r, ok, q = _error_inputs(el_deg, residual_m, min_el, n_bins, "overbound_error_model")
     fit = fit_error_model(el_deg, residual_m) if fitted is None else fitted
-    order = np.argsort(el[ok], kind="stable")
+    el_ok = el[ok]
+    order = np.argsort(el_ok, kind="stable")
     chunks = np.array_split(order, n_bins)
     bin_of = np.empty(len(order), int)
     for b, c in enumerate(chunks):
@@ -402,25 +403,22 @@ def overbound_error_model(
     for _ in range(30):
         var = sigma2.copy()
         var[ok] *= factor_b[bin_of] ** 2
-        e, ev = _clock_free(r, ok, var)
+        e, _, ev = _clock_free(r, ok, var)
         z = np.abs(e[ok]) / np.sqrt(np.maximum(ev[ok], 1e-300))
         g = np.array([_tail_factor(z[c], min_tail, max_tail_share) for c in chunks])
         factor_b *= g
         if np.max(np.abs(g - 1.0)) < 1e-4:
             break
-    lo = np.array([float(el[ok][c].min()) for c in chunks])
-    hi = np.array([float(el[ok][c].max()) for c in chunks])
-    bin_factor = factor_b
-    factor = max(1.0, float(bin_factor.max()))
+    factor = max(1.0, float(factor_b.max()))
     model = ErrorModel(a_m=fit.a_m * factor, b_m=fit.b_m * factor, min_el_deg=fit.min_el_deg)
     return Overbound(
         model=model,
         fitted=fit,
         factor=factor,
-        bin_el_lo_deg=lo,
-        bin_el_hi_deg=hi,
+        bin_el_lo_deg=np.array([el_ok[c].min() for c in chunks]),
+        bin_el_hi_deg=np.array([el_ok[c].max() for c in chunks]),
         bin_n=counts,
-        bin_factor=bin_factor,
+        bin_factor=factor_b,
     )
 
 

@@ -140,12 +140,16 @@ class SkyNet:
         """Longest side of the probability map of an image (sets the guided filter's radius)."""
         return self.input_px
 
+    def _logits(self, blob: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Sky logits of a batch of network inputs, ``(n, input_px, input_px)``."""
+        net = _load_net(str(self.path))
+        net.setInput(blob)
+        out = np.asarray(net.forward(), np.float32)
+        return out.reshape(-1, self.input_px, self.input_px)
+
     def logit_tile(self, image_bgr: ArrayLike) -> NDArray[np.float32]:
         """Sky logit of one image at the network's size, ``(input_px, input_px)``."""
-        net = _load_net(str(self.path))
-        net.setInput(network_input(image_bgr, self.input_px))
-        out = np.asarray(net.forward(), np.float32)
-        return out.reshape(self.input_px, self.input_px)
+        return self._logits(network_input(image_bgr, self.input_px))[0]
 
     def probability_tile(self, image_bgr: ArrayLike) -> NDArray[np.float32]:
         """Sky probability of one image at the network's size, ``(input_px, input_px)``.
@@ -158,9 +162,7 @@ class SkyNet:
         blob = network_input(img, s)
         if self.mirror:
             blob = np.concatenate([blob, network_input(img[:, ::-1], s)])
-        net = _load_net(str(self.path))
-        net.setInput(blob)
-        prob = _sigmoid(np.asarray(net.forward(), np.float32).reshape(-1, s, s))
+        prob = _sigmoid(self._logits(blob))
         if self.mirror:
             return np.asarray(0.5 * (prob[0] + prob[1][:, ::-1]), np.float32)
         return np.asarray(prob[0], np.float32)
