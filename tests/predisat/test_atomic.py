@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import stat
 from pathlib import Path
 
 import pytest
@@ -26,3 +28,23 @@ def test_failure_keeps_old_file_and_cleans_up(tmp_path: Path) -> None:
         raise RuntimeError("interrupted")
     assert target.read_bytes() == b"finished work"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["masks.parquet"]
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027, 0o077])
+def test_written_file_gets_the_umask_mode(tmp_path: Path, umask: int) -> None:
+    # A new file made by open() under the same umask is the independent reference.
+    old = os.umask(umask)
+    try:
+        reference = tmp_path / "reference.txt"
+        reference.write_bytes(b"x")
+        write_bytes_atomic(tmp_path / "masks.parquet", b"x")
+    finally:
+        os.umask(old)
+    mode = stat.S_IMODE((tmp_path / "masks.parquet").stat().st_mode)
+    assert mode == stat.S_IMODE(reference.stat().st_mode)
+
+
+def test_directory_target_is_refused_with_a_file_suggestion(tmp_path: Path) -> None:
+    with pytest.raises(IsADirectoryError, match=r"is a directory.*give a file path"):
+        write_bytes_atomic(tmp_path, b"x")
+    assert list(tmp_path.iterdir()) == []
