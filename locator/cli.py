@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from predisat import __version__
+from predisat.cliargs import output_dir, output_file
 
 __all__ = ["main"]
 
@@ -425,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
                    help="per-epoch table format (parquet)")
     p.add_argument("--no-true-masks", action="store_true", help="skip true_masks.parquet")
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("run", help="locate the train at every epoch (simulated or RINEX)")
@@ -437,7 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
     _run_arguments(p)
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
                    help="per-epoch table format (parquet)")
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("evaluate", help="score a run against the true chainage")
@@ -463,11 +464,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
                    help="overbound (default): the fit inflated until it bounds the residual "
                    "tails in every elevation bin; estimate: the least-squares fit")  # fmt: skip
-    p.add_argument("--out", required=True, metavar="JSON")
+    p.add_argument("--out", required=True, type=output_file, metavar="JSON")
     p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("demo", help="a simulated run on the demo line under several trust rules")
-    p.add_argument("--out", default="locator_demo", metavar="DIR")
+    p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--from-predisat-demo", metavar="DIR",
                    help="reuse a `predisat demo` folder: its world and pipeline masks")  # fmt: skip

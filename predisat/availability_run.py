@@ -36,6 +36,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from predisat.availability import Availability, compute_availability
+from predisat.cliargs import output_dir
 from predisat.ephemeris import Ephemeris
 from predisat.gnss_time import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss_time import gps_s_to_text as _iso
@@ -590,7 +591,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
     p.add_argument("--step", type=float, default=30.0, metavar="S", help="epoch spacing, s")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument(
         "--constellation", default="gps",
         help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from predisat import __version__
+from predisat.cliargs import output_dir, output_file
 
 if TYPE_CHECKING:
     from predisat.camera import CameraModel
@@ -389,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--sky", choices=["clear", "cloudy", "overcast", "mixed"], default="mixed", help="sky"
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of scenery and sky")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument("--spacing-m", type=float, default=10.0, help="distance between positions")
     p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
     p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
@@ -457,7 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
     p.add_argument("--format", required=True, choices=("urbannav", "rtklib", "pvgis"))
-    p.add_argument("--out", required=True, type=Path, metavar="FILE", help="output file")
+    p.add_argument("--out", required=True, type=output_file, metavar="FILE", help="output file")
     p.add_argument("--chainage", type=float, metavar="M",
                    help="rtklib and pvgis: the position (nearest surveyed position), metres")
     p.add_argument("--bare", action="store_true", help="the mask without its margin")
@@ -476,7 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("--data", required=True, nargs="+", metavar="DIR", help="photo folder(s)")
-    p.add_argument("--out", metavar="DIR", help="write per-image tables and worst-case sheets")
+    p.add_argument("--out", type=output_dir, metavar="DIR",
+                   help="write per-image tables and worst-case sheets")
     p.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
                    "library's default, see docs/segmentation.md)")
     p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
@@ -492,7 +494,9 @@ def build_parser() -> argparse.ArgumentParser:
             "masks, compare them with the truth and write the availability report."
         ),
     )
-    p.add_argument("--out", default="demo_out", metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out", default="demo_out", type=output_dir, metavar="DIR", help="output folder"
+    )
     p.add_argument("--seed", type=int, default=1, help="random seed")
     p.add_argument(
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
@@ -521,7 +525,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CliError as exc:
         print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except (FileNotFoundError, ValueError) as exc:
+    except (OSError, ValueError) as exc:
         # Library errors are written to be read by a person: show them without a traceback.
         print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
         return 2

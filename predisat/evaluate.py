@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.cliargs import output_dir
 from predisat.masks import BinSource, MaskSet
 
 __all__ = [
@@ -548,7 +549,7 @@ def add_evaluate_arguments(parser: argparse.ArgumentParser) -> None:
         help="synthetic ground truth: generator output folder, its truth/ or true_masks.npz",
     )  # fmt: skip
     parser.add_argument(
-        "--out", type=Path, help="folder for evaluation.csv/json/png (default: none)"
+        "--out", type=output_dir, help="folder for evaluation.csv/json/png (default: none)"
     )
     parser.add_argument(
         "--calibrate", action="store_true",

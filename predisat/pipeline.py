@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
+from predisat.cliargs import output_dir
 from predisat.maskio import read_masks, write_masks
 from predisat.masks import MaskError, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
@@ -1143,7 +1144,7 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("survey", type=Path, help="survey folder (with survey.yaml)")
     parser.add_argument(
-        "--out", type=Path, required=True,
+        "--out", type=output_dir, required=True,
         help="output folder (masks.parquet, chunks/, cache/, bad_frames.csv); "
         "rerun with the same folder to resume",
     )  # fmt: skip

@@ -250,3 +250,32 @@ def test_interrupted_process_keeps_its_work(
     assert cli.main(args) == 0
     done = capsys.readouterr()
     assert ", 0 frames segmented" in done.out + done.err  # the cache of the first run
+
+
+@pytest.mark.parametrize(
+    ("main", "argv"),
+    [
+        (cli.main, ["export", "MASKS", "--format", "urbannav", "--out", "{dir}"]),
+        (cli.main, ["availability", "--out", "{file}"]),
+        (cli.main, ["synth", "--out", "{file}"]),
+        (cli.main, ["process", "SURVEY", "--out", "{file}"]),
+        (locator_cli.main, ["calibrate", "OBS", "--out", "{dir}"]),
+        (locator_cli.main, ["run", "SIM", "--out", "{file}"]),
+    ],
+)
+def test_wrong_kind_of_output_path_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], main, argv: list[str]
+) -> None:
+    # A folder where a file is written (or the reverse) must stop at parse time, not after
+    # minutes of work; and the existing path must be left untouched.
+    existing_file = tmp_path / "report.txt"
+    existing_file.write_text("keep")
+    args = [a.format(dir=tmp_path, file=existing_file) for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--out" in err
+    assert ("is a folder" in err) if "{dir}" in argv else ("is an existing file" in err)
+    assert existing_file.read_text() == "keep"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.txt"]
