@@ -130,6 +130,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _track_check(path, sim.antenna_ecef_m, args.sim)
         source = SimSource(sim, constellation=args.constellation or "all")
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
+        header = None
     else:
         if not args.nav:
             raise CliError("--obs needs --nav FILES (RINEX navigation with the same day)")
@@ -143,6 +144,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation or "G")
         start = args.start_chainage
+        header = obs.header.approx_position_ecef_m
         if start is None:
             hx = obs.header.approx_position_ecef_m
             if not (hx == hx).all() or abs(hx).sum() == 0:
@@ -160,6 +162,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from predisat.availability_run import check_masks_on_track
 
         check_masks_on_track(masks, path.track, str(args.masks))
+    _check_start(float(start), path, masks, args, header)
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
@@ -167,11 +170,50 @@ def cmd_run(args: argparse.Namespace) -> int:
         )  # fmt: skip
     claim = epochs["claim"].mean()
     length = epochs.loc[epochs["claim"], "length_m"]
-    print(
-        f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, interval median "
-        f"{length.median():.1f} m, p95 {length.quantile(0.95):.1f} m -> {folder}"
+    lengths = (
+        f"interval median {length.median():.1f} m, p95 {length.quantile(0.95):.1f} m"
+        if len(length)
+        else "no interval claimed"
     )
+    print(f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, {lengths} -> {folder}")
     return 0
+
+
+# A start this far beyond the surveyed positions has no mask to trust any satellite with.
+_MASK_REACH_M = 50.0
+
+
+def _check_start(
+    start_m: float, path: Any, masks: Any, args: argparse.Namespace, header_ecef_m: Any
+) -> None:
+    """The start chainage must be on the track and, with masks, inside their coverage."""
+    import numpy as np
+
+    if not 0.0 <= start_m <= path.length_m:
+        raise CliError(
+            f"start chainage {start_m:.0f} m is off track {path.track.name!r} "
+            f"(0-{path.length_m:.0f} m); give --start-chainage in metres along this track"
+        )
+    if masks is not None:
+        lo, hi = float(masks.chainage_m.min()), float(masks.chainage_m.max())
+        if not lo - _MASK_REACH_M <= start_m <= hi + _MASK_REACH_M:
+            raise CliError(
+                f"start chainage {start_m:.0f} m is outside the masks of {args.masks} "
+                f"({lo:.0f}-{hi:.0f} m): no satellite could be trusted there; start inside "
+                "them or give the masks of this stretch"
+            )
+    hx = None if header_ecef_m is None else np.asarray(header_ecef_m, float)
+    if args.start_chainage is not None and hx is not None and np.isfinite(hx).all() and hx.any():
+        # The given start overrides the header, but a header far from the line usually means
+        # the wrong observation file or track: say so rather than run silently.
+        from locator.workflow import _track_check
+
+        try:
+            _track_check(path, hx, f"{args.obs} (its header's approximate position)",
+                         _MAX_HEADER_OFFSET_M)  # fmt: skip
+        except ValueError as exc:
+            print(f"locator run: warning: {exc}; running from --start-chainage as asked",
+                  file=sys.stderr)  # fmt: skip
 
 
 # The header's approximate position is a rough fix (tens of metres), so the bound is looser
@@ -214,7 +256,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from locator.runio import read_run
     from locator.workflow import evaluate_folder, truth_for
 
-    epochs, _ = read_run(args.run)
+    epochs, meta = read_run(args.run)
+    length_m = meta.get("track_length_m")
+    if args.truth_chainage is not None and length_m is not None:
+        if not 0.0 <= args.truth_chainage <= float(length_m):
+            raise CliError(
+                f"--truth-chainage {args.truth_chainage:g} m is off track {meta.get('track')!r} "
+                f"(0-{float(length_m):.0f} m of chainage); give the antenna's chainage in metres"
+            )
     sim = None
     if args.sim:
         from locator.simfile import SimRun

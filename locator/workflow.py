@@ -72,12 +72,18 @@ def _track_check(
     given track within ``max_offset_m``."""
     from predisat.geodesy import ecef_to_geodetic
 
-    lat, lon, h = ecef_to_geodetic(np.asarray(ecef_m, float).reshape(-1, 3)[[0, -1]])
+    ends = np.asarray(ecef_m, float).reshape(-1, 3)[[0, -1]]
+    lat, lon, h = ecef_to_geodetic(ends)
     pr = path.track.project(lat, lon, h)
     off = float(np.max(np.hypot(pr.offset_m, pr.along_m)))
     if off > max_offset_m:
+        # The projection's plane offsets are meaningless far from the line (a receiver on
+        # another continent); the straight distance to the projected point is what to tell.
+        near = path.ecef_at(np.clip(pr.chainage_m, 0.0, path.length_m))
+        dist_m = float(np.max(np.linalg.norm(ends - near, axis=-1)))
+        away = f"{dist_m / 1000:.1f} km" if dist_m >= 10_000 else f"{dist_m:.0f} m"
         raise ValueError(
-            f"{label}: the antenna is {off:.0f} m away from track {path.track.name!r}; pass the "
+            f"{label}: the antenna is {away} away from track {path.track.name!r}; pass the "
             f"--track the run was made on{hint}"
         )
 
@@ -152,6 +158,7 @@ def run_to_folder(
     )  # fmt: skip
     info = {
         "track": path.track.name,
+        "track_length_m": path.length_m,
         "antenna_height_m": path.antenna_height_m,
         "start_chainage_m": start_chainage_m,
         "config": config.to_dict(),

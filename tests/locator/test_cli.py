@@ -218,3 +218,51 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     assert ((ep["lo_m"] <= 1000.0) & (1000.0 <= ep["hi_m"])).all()
     assert main(["evaluate", str(tmp_path / "real"), "--truth-chainage", "1000"]) == 0
     assert "epochs 10" in capsys.readouterr().out
+
+
+def test_start_and_truth_chainages_off_the_track_or_masks_are_refused(sim_dir, tmp_path, capsys):
+    from predisat.maskio import read_masks, write_masks
+
+    sim = SimRun.read(sim_dir)
+    length_m = AntennaPath(canyon_world().track, 4.0).length_m
+    base = ["run", "--sim", str(sim_dir), "--out", str(tmp_path / "r")]
+    assert main([*base, "--no-masks", "--start-chainage", str(length_m + 500)]) == 2
+    assert "off track" in capsys.readouterr().err
+    # masks of a stretch that does not hold the start: nothing could be trusted there
+    true = read_masks(sim_dir / "true_masks.parquet")
+    lo_m = sim.chainage_m[0] + 300.0
+    assert lo_m < true.chainage_m.max()
+    part = write_masks(true.subset(lo_m, np.inf), tmp_path / "part.masks.parquet")
+    assert main([*base, "--masks", str(part)]) == 2
+    err = capsys.readouterr().err
+    assert "outside the masks" in err and "part.masks.parquet" in err
+    assert not (tmp_path / "r").exists()  # refused before writing anything
+    # a truth chainage off the run's track is refused and the evaluation left as it was
+    assert main(["-q", *base, "--no-masks"]) == 0
+    assert main(["evaluate", str(tmp_path / "r"), "--sim", str(sim_dir)]) == 0
+    before = (tmp_path / "r" / "evaluation.json").read_text()
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "r"), "--truth-chainage", "99999"]) == 2
+    assert "off track" in capsys.readouterr().err
+    assert (tmp_path / "r" / "evaluation.json").read_text() == before
+
+
+def test_far_receiver_is_told_its_true_distance(test_data, tmp_path, capsys):
+    from pyproj import Transformer
+
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    run = ["run", "--obs", str(obs), "--nav", str(nav), "--no-masks", "--antenna-height", "0"]
+    assert main([*run, "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    km = float(err.split("the antenna is ")[1].split(" km away")[0])
+    # independent reference: PROJ's geodetic-to-ECEF of the line's middle, chord to the station
+    line = demo_track()
+    lat, lon, h = line.position_at(line.length_m / 2)
+    to_ecef = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+    mid = np.array(to_ecef.transform(float(lon), float(lat), float(h)))
+    station = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759
+    assert km == pytest.approx(np.linalg.norm(station - mid) / 1000, rel=0.01)
+    # an explicit start overrides the header, with a warning instead of a silent run
+    assert main(["-q", *run, "--start-chainage", "4500", "--out", str(tmp_path / "b")]) == 0
+    assert "warning" in capsys.readouterr().err
