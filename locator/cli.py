@@ -82,7 +82,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
             spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()))
         else:
-            spec = WorldSpec.mixed(args.from_km * 1e3, args.to_km * 1e3, seed=args.world_seed)
+            from predisat.cli import CliError as PredisatCliError
+            from predisat.cli import _km_range
+
+            try:
+                lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
+            except PredisatCliError as exc:
+                raise CliError(str(exc)) from exc
+            if hi_m - lo_m < 800.0:
+                raise CliError(
+                    f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the mixed scenery needs "
+                    "at least 0.8 km to fit every kind of stretch; widen the stretch or give "
+                    "--scenery YAML"
+                )
+            spec = WorldSpec.mixed(lo_m, hi_m, seed=args.world_seed)
         print(f"building the world ({spec.extent_m[0]:.0f}-{spec.extent_m[1]:.0f} m)")
         world = World.build(track, spec, args.world_seed)
     eph = load_navigation(args.nav)

@@ -450,9 +450,16 @@ def run_availability(
         mask_set, masks_label = _load_masks(masks)
         track = _load_track(track)
         if from_m is not None or to_m is not None:
-            mask_set = mask_set.subset(
-                -np.inf if from_m is None else from_m, np.inf if to_m is None else to_m
-            )
+            lo_m = -np.inf if from_m is None else from_m
+            hi_m = np.inf if to_m is None else to_m
+            ch_m = mask_set.chainage_m
+            if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
+                raise ValueError(
+                    f"the stretch {lo_m:.0f}-{hi_m:.0f} m (--from-km/--to-km, in kilometres) holds "
+                    f"no position of masks {masks_label}, which cover "
+                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km; choose a stretch inside"
+                )
+            mask_set = mask_set.subset(lo_m, hi_m)
         if track is not None:
             check_masks_on_track(mask_set, track, masks_label)
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
@@ -628,6 +635,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 def run_from_args(args: argparse.Namespace, track: Any = None) -> AvailabilityRun:
     """Run from parsed :func:`add_arguments` options (``track`` overrides ``--track``)."""
+    if args.from_km is not None and args.to_km is not None and not args.from_km < args.to_km:
+        raise ValueError(
+            f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the start must be below the end "
+            "(chainage grows along the track)"
+        )
     return run_availability(
         args.masks,
         track if track is not None else args.track,

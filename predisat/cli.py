@@ -126,15 +126,23 @@ def _add_track_selection(p: argparse.ArgumentParser) -> None:
 def _km_range(
     track: TrackMap, from_km: float | None, to_km: float | None
 ) -> tuple[float, float]:
-    from_m = 0.0 if from_km is None else from_km * 1000.0
-    to_m = track.length_m if to_km is None else to_km * 1000.0
-    if not 0.0 <= from_m < to_m <= track.length_m + 1e-6:
-        raise CliError(
-            f"--from-km/--to-km: {from_m / 1000:.3f}-{to_m / 1000:.3f} km is not inside the track "
-            f"(0-{track.length_m / 1000:.3f} km of chainage); give 0 <= A < B <= "
-            f"{track.length_m / 1000:.3f}"
+    """``--from-km/--to-km`` as metres of chainage, refused with the fix when not a stretch."""
+    top_km = track.length_m / 1000.0
+    lo_km = 0.0 if from_km is None else float(from_km)
+    hi_km = top_km if to_km is None else float(to_km)
+    if not lo_km < hi_km:
+        reason = "the start must be below the end (chainage grows along the track)"
+    elif not (0.0 <= lo_km and hi_km <= top_km + 1e-9):
+        reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
+    else:
+        return lo_km * 1000.0, hi_km * 1000.0
+    hint = ""
+    if hi_km > top_km and hi_km / 1000.0 <= top_km:
+        hint = (
+            f"; the values are kilometres, did you give metres? "
+            f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
         )
-    return from_m, to_m
+    raise CliError(f"--from-km {lo_km:g} --to-km {hi_km:g}: {reason}{hint}")
 
 
 def _camera(kind: str, calibration: str | None) -> CameraModel:
@@ -206,11 +214,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     track = trackmod.demo_track()
-    lo_km, hi_km = args.from_km, args.to_km
-    top_km = float(track.length_m) / 1000.0
-    if not 0.0 <= lo_km < hi_km <= top_km:
-        raise CliError(f"--from-km {lo_km} --to-km {hi_km}: need 0 <= from < to <= {top_km:.2f} "
-                       f"(the demo track's length)")
+    lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
+    lo_km, hi_km = lo_m / 1000.0, hi_m / 1000.0
     print(
         f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
         f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"

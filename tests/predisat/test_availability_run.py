@@ -260,6 +260,20 @@ def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: Track
                          progress=False)  # fmt: skip
 
 
+def test_stretch_given_in_metres_or_reversed(tmp_path: Path, masks: MaskSet) -> None:
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    for km, expected in (
+        (["6", "4"], "the start must be below the end"),
+        (["4000", "4100"], r"no position of masks .*m\.masks\.parquet, which cover 4-4\.1 km"),
+    ):
+        args = parser.parse_args(["--masks", str(path), "--out", str(tmp_path / "o"),
+                                  "--from-km", km[0], "--to-km", km[1], "--quiet"])  # fmt: skip
+        with pytest.raises(ValueError, match=expected):
+            run_from_args(args)
+    assert not (tmp_path / "o").exists()
+
+
 def test_bad_step_and_reversed_window(tmp_path: Path, masks: MaskSet) -> None:
     with pytest.raises(ValueError, match="--step"):
         run_availability(masks, None, None, out_dir=tmp_path / "o", step_s=0, progress=False)

@@ -32,7 +32,22 @@ def test_synth_rejects_range_outside_track(tmp_path, capsys: pytest.CaptureFixtu
     code = cli.main(["synth", "--from-km", "3", "--to-km", "99", "--out", str(tmp_path / "o")])
     assert code == 2
     err = capsys.readouterr().err
-    assert "--from-km/--to-km" in err and "99" in err
+    assert "--from-km 3 --to-km 99" in err and "not inside the track" in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--from-km", "6", "--to-km", "4"], "start must be below the end"),
+        (["--from-km", "4000", "--to-km", "6000"], "did you give metres? (--from-km 4 --to-km 6)"),
+    ],
+)
+def test_km_range_mistakes_get_the_fix(tmp_path, capsys, argv: list[str], expected: str) -> None:
+    for main, command in ((cli.main, "synth"), (cli.main, "demo"), (locator_cli.main, "simulate")):
+        code = main([command, *argv, "--out", str(tmp_path / "o")])
+        assert code == 2
+        assert expected in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_synth_rejects_missing_track_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
