@@ -576,9 +576,19 @@ def _run_info(
         },
         "software": f"predisat {version}",
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        "track_attribution": getattr(track, "attribution", "") if track is not None else "",
+        "track_attribution": _track_credit(track),
+        "interval_model_is_default": model == IntervalModel(),
         "nav_is_embedded": nav_label.startswith("embedded"),
     }
+
+
+def _track_credit(track: Any) -> str:
+    """The track named in the report's footer: its name, source and required attribution."""
+    if track is None:
+        return "none given (masks' own positions)"
+    parts = [p for p in (track.name, track.source) if p]
+    credit = ", ".join(dict.fromkeys(parts))  # a file named after its track says it once
+    return f"{credit}. {track.attribution}" if track.attribution else credit
 
 
 # ------------------------------------------------------------------------- command line

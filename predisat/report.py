@@ -528,13 +528,19 @@ def build_report(inputs: ReportInputs) -> str:
         )
     )
     every = info.get("interval_every", "")
+    model_note = (
+        "The error model is the source's default (a = b = 2 m, k = 2), to be calibrated with "
+        "`locator calibrate`, not a measurement."
+        if info.get("interval_model_is_default", True)
+        else f"Error model: {info.get('interval_model', '')}."
+    )
     figs.append(
         _figure(
             _img(plots.interval_along_line(results, posts), "interval length"),
             "Predicted confidence-interval length along the line",
             "Median (line) and 95th percentile (band edge) of the predicted SATHIA interval "
             f"over the epochs with ≥ 4 trusted satellites (computed every {_e(every)} epochs); "
-            "log scale. The error model is a default to be calibrated, not a measurement.",
+            f"log scale. {_e(model_note)}",
         )
     )
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import html
 import json
 from datetime import datetime, timedelta, timezone
 from html.parser import HTMLParser
@@ -374,6 +375,15 @@ def test_interval_model_from_a_locator_error_model_file(
     np.testing.assert_allclose(w, 2.0 * d, rtol=1e-5)
     np.testing.assert_allclose(k, 3.89 / 2.0 * d, rtol=1e-5)
     assert "± 3.89 sigma" in k389.report_html.read_text(encoding="utf-8")
+    # the caption says which model made the intervals: the default is flagged as such
+    captions = [html.unescape(r.report_html.read_text(encoding="utf-8"))
+                for r in (default, wide, k389)]  # fmt: skip
+    assert "source's default" in captions[0]
+    assert "source's default" not in captions[1] and "Error model: sigma" in captions[1]
+    assert "4.000² + (4.000 / sin el)²" in captions[1]
+    assert "source's default" not in captions[2]
+    # a track file given by the user is named in the footer (the test track has no attribution)
+    assert f"Track: {track.name}" in captions[0]
     # the run records the model's numbers, so a report can be made again
     run = json.loads((tmp_path / "w" / "summary.json").read_text())["run"]
     assert run["interval_model_params"] == {"a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0,
