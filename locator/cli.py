@@ -13,7 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from predisat import __version__
-from predisat.cliargs import output_dir, output_file
+from predisat.cliargs import (
+    cutoff_deg,
+    non_negative_float,
+    output_dir,
+    output_file,
+    positive_float,
+)
 
 __all__ = ["main"]
 
@@ -434,7 +440,8 @@ def format_demo_table(table: Any) -> str:
 def _run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--masks", metavar="MASKS",
                    help="mask file, or a predisat process output folder, or true_masks.parquet")
-    p.add_argument("--cutoff", type=float, metavar="DEG", help="flat elevation cut-off instead")
+    p.add_argument("--cutoff", type=cutoff_deg, metavar="DEG",
+                   help="flat elevation cut-off instead")
     p.add_argument("--no-masks", action="store_true", help="trust every received signal")
     p.add_argument("--integrity", choices=("active", "passive"), default="active",
                    help="active: fault detection and exclusion (default); passive: every "
@@ -443,11 +450,11 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--k-sigma", type=float, metavar="K",
                    help="pair interval half width in sigmas (default: the error model's; "
                    "without one 2, the source's; 3.89 gives 1e-4 per pair, docs/locator.md)")
-    p.add_argument("--extra-margin", type=float, default=0.0, metavar="DEG",
+    p.add_argument("--extra-margin", type=non_negative_float, default=0.0, metavar="DEG",
                    help="added to the mask file's margins before trusting a satellite (0)")
     p.add_argument("--start-chainage", type=float, metavar="M",
                    help="default: the simulation's, or the RINEX header position")  # fmt: skip
-    p.add_argument("--start-uncertainty", type=float, default=50.0, metavar="M",
+    p.add_argument("--start-uncertainty", type=non_negative_float, default=50.0, metavar="M",
                    help="half width of the first predicted interval around the start (50)")
     p.add_argument("--antenna-height", type=float, default=4.0, metavar="M",
                    help="antenna above the rail, for --obs runs (4)")
@@ -480,9 +487,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", help="UTC start, ISO 8601 (default 08:00 of the embedded day)")
     p.add_argument("--start-chainage", type=float, metavar="M")
     p.add_argument("--direction", type=int, choices=(1, -1), default=1)
-    p.add_argument("--speed", type=float, default=20.0, metavar="MPS", help="cruise speed")
-    p.add_argument("--duration", type=float, metavar="S", help="default: to the world's end")
-    p.add_argument("--rate", type=float, default=1.0, metavar="HZ")
+    p.add_argument("--speed", type=positive_float, default=20.0, metavar="MPS", help="cruise speed")
+    p.add_argument("--duration", type=positive_float, metavar="S",
+                   help="default: to the world's end")
+    p.add_argument("--rate", type=positive_float, default=1.0, metavar="HZ")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--constellation", default="all")
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",

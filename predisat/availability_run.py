@@ -36,7 +36,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from predisat.availability import Availability, compute_availability
-from predisat.cliargs import output_dir
+from predisat.cliargs import cutoff_deg, output_dir, positive_float, positive_int
 from predisat.ephemeris import Ephemeris
 from predisat.gnss_time import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss_time import gps_s_to_text as _iso
@@ -607,14 +607,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="window start: GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or gps_s",
     )  # fmt: skip
     p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
-    p.add_argument("--step", type=float, default=30.0, metavar="S", help="epoch spacing, s")
+    p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
+                   help="epoch spacing, s")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument(
         "--constellation", default="gps",
         help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",
     )  # fmt: skip
     p.add_argument(
-        "--cutoff", type=float, nargs="+", default=[15.0], metavar="DEG",
+        "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
         help="flat cut-off(s) compared with the masks (default 15)",
     )  # fmt: skip
     p.add_argument("--from-km", type=float, metavar="A", help="stretch start, chainage km")
@@ -624,7 +625,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
     )  # fmt: skip
     p.add_argument(
-        "--interval-every", type=int, default=10, metavar="N",
+        "--interval-every", type=positive_int, default=10, metavar="N",
         help="predict the interval at every N-th epoch (default 10; 1 is slow)",
     )  # fmt: skip
     p.add_argument(
@@ -637,7 +638,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
         "per pair)",
     )  # fmt: skip
-    p.add_argument("--workers", type=int, default=1, help="threads")
+    p.add_argument("--workers", type=positive_int, default=1, help="threads")
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from predisat import __version__
-from predisat.cliargs import output_dir, output_file
+from predisat.cliargs import output_dir, output_file, positive_float, positive_int
 
 if TYPE_CHECKING:
     from predisat.camera import CameraModel
@@ -396,14 +396,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of scenery and sky")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
-    p.add_argument("--spacing-m", type=float, default=10.0, help="distance between positions")
+    p.add_argument("--spacing-m", type=positive_float, default=10.0,
+                   help="distance between positions")
     p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
     p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
     p.add_argument("--pitch-deg", type=float, default=45.0, help="camera pitch above horizontal")
     p.add_argument(
         "--scenery", metavar="YAML", help="scenery recipe (default: mixed, every kind of stretch)"
     )
-    p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
+    p.add_argument("--workers", type=positive_int, default=_default_workers(),
+                   help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
 
@@ -513,7 +515,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
                    "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
                    "cut out of the default demo's")
-    p.add_argument("--workers", type=int, default=_default_workers(), help="rendering processes")
+    p.add_argument("--workers", type=positive_int, default=_default_workers(),
+                   help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
     return parser

@@ -1,15 +1,18 @@
-"""Argument types shared by the command lines: output paths checked before any work starts.
+"""Argument types shared by the command lines, checked before any work starts.
 
 A run that computes for minutes and then cannot write (``--out`` names a file where a folder
-is expected, or the reverse) loses the work; argparse refuses such paths at once, with the fix.
+is expected, or the reverse) loses the work, and a value the library refuses later is reported
+under its internal name; argparse refuses both at once, under the option's name, with the fix.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
-__all__ = ["output_dir", "output_file"]
+__all__ = ["cutoff_deg", "non_negative_float", "output_dir", "output_file", "positive_float",
+           "positive_int"]  # fmt: skip
 
 
 def output_dir(value: str) -> Path:
@@ -35,3 +38,50 @@ def output_file(value: str) -> Path:
             f"{value}: folder {p.parent} does not exist; create it first or choose another path"
         )
     return p
+
+
+def _number(value: str) -> float:
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a number") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"{value} is not a finite number")
+    return x
+
+
+def positive_int(value: str) -> int:
+    """A count of at least 1 (workers, epochs)."""
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a whole number") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be 1 or more")
+    return n
+
+
+def positive_float(value: str) -> float:
+    """A finite number above 0 (a spacing, a step, a duration)."""
+    x = _number(value)
+    if x <= 0.0:
+        raise argparse.ArgumentTypeError(f"{value} must be above 0")
+    return x
+
+
+def non_negative_float(value: str) -> float:
+    """A finite number of 0 or more (a margin, an uncertainty)."""
+    x = _number(value)
+    if x < 0.0:
+        raise argparse.ArgumentTypeError(f"{value} must be 0 or more")
+    return x
+
+
+def cutoff_deg(value: str) -> float:
+    """An elevation cut-off in degrees, in [0, 90)."""
+    x = _number(value)
+    if not 0.0 <= x < 90.0:
+        raise argparse.ArgumentTypeError(
+            f"{value} is not an elevation cut-off; give degrees in [0, 90)"
+        )
+    return x

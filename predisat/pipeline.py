@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
-from predisat.cliargs import output_dir
+from predisat.cliargs import output_dir, positive_float, positive_int
 from predisat.maskio import read_masks, write_masks
 from predisat.masks import MaskError, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
@@ -1149,9 +1149,10 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
         "rerun with the same folder to resume",
     )  # fmt: skip
     parser.add_argument("--track", type=Path, help="track file instead of the survey's own")
-    parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    parser.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     parser.add_argument(
-        "--chunk-m", type=float, default=1000.0, help="chainage per chunk, metres (default 1000)"
+        "--chunk-m", type=positive_float, default=1000.0,
+        help="chainage per chunk, metres (default 1000)",
     )
     parser.add_argument(
         "--strict", action="store_true", help="stop at the first bad frame instead of skipping"

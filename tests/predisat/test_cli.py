@@ -294,3 +294,34 @@ def test_wrong_kind_of_output_path_is_refused_before_any_work(
     assert ("is a folder" in err) if "{dir}" in argv else ("is an existing file" in err)
     assert existing_file.read_text() == "keep"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report.txt"]
+
+
+@pytest.mark.parametrize(
+    ("main", "argv", "option"),
+    [
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--cutoff", "-5"], "--cutoff"),
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--cutoff", "90"], "--cutoff"),
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--workers", "0"], "--workers"),
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--interval-every", "0"],
+         "--interval-every"),
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--step", "nan"], "--step"),
+        (cli.main, ["process", "S", "--out", "o", "--chunk-m", "-1"], "--chunk-m"),
+        (cli.main, ["synth", "--out", "o", "--spacing-m", "0"], "--spacing-m"),
+        (locator_cli.main, ["run", "--out", "o", "--cutoff", "-5"], "--cutoff"),
+        (locator_cli.main, ["run", "--out", "o", "--extra-margin", "-1"], "--extra-margin"),
+        (locator_cli.main, ["run", "--out", "o", "--start-uncertainty", "-1"],
+         "--start-uncertainty"),
+        (locator_cli.main, ["simulate", "--out", "o", "--rate", "0"], "--rate"),
+    ],
+)  # fmt: skip
+def test_out_of_range_options_are_refused_under_their_own_name(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], main, argv: list[str], option: str
+) -> None:
+    args = [str(tmp_path / a) if a == "o" else a for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}" in err
+    assert "_deg" not in err and "_m " not in err  # no internal parameter names
+    assert not (tmp_path / "o").exists()
