@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import pyarrow as pa
 
 from locator import plots
 from locator.simfile import json_default
@@ -100,7 +101,13 @@ def read_table(folder: Path, name: str) -> pd.DataFrame:
         p = folder / f"{name}.{ext}"
         if p.is_file():
             if ext == "parquet":
-                return pd.read_parquet(p)
+                try:
+                    return pd.read_parquet(p)
+                except (pa.ArrowException, OSError) as exc:
+                    raise RunFileError(
+                        f"{p}: not a readable Parquet file ({exc}); the run folder is damaged, "
+                        "rerun `locator run`"
+                    ) from None
             return pd.read_csv(p, keep_default_na=False, na_values=[""])
     raise RunFileError(
         f"{folder}: no {name}.parquet or {name}.csv; give a `locator run --out` folder"

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 from numpy.typing import NDArray
 
 from predisat.geodesy import ecef_to_geodetic
@@ -313,7 +314,13 @@ def json_default(obj: Any) -> Any:
 def _read_table(folder: Path, name: str) -> pd.DataFrame:
     pq, csv = folder / f"{name}.parquet", folder / f"{name}.csv"
     if pq.is_file():
-        return pd.read_parquet(pq)
+        try:
+            return pd.read_parquet(pq)
+        except (pa.ArrowException, OSError) as exc:
+            raise SimRunError(
+                f"{pq}: not a readable Parquet file ({exc}); the simulation folder is damaged, "
+                "rerun `locator simulate`"
+            ) from None
     if csv.is_file():
         return pd.read_csv(csv, keep_default_na=False, na_values=[""],
                            dtype={"sat": str, "state": str, "reflector_material": str})  # fmt: skip

@@ -199,7 +199,11 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
-        raise MaskFileError(f"{path}: not a readable Parquet file ({exc})") from None
+        raise MaskFileError(
+            f"{path}: not a readable Parquet file ({exc}); a mask file is the masks.parquet "
+            "that `predisat process` writes (an interrupted copy is cut short: copy it again, "
+            "or rerun the process command, which resumes)"
+        ) from None
     header = _read_header(path, table.schema.metadata or {})
     n_az = header["n_az"]
     names = set(table.column_names)

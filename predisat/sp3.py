@@ -227,7 +227,16 @@ def _read_one(path: Path):
                 c_text = line[46:60].strip()
                 c_us = float(c_text) if c_text else _BAD_CLOCK_US
             except ValueError:
-                raise Sp3Error(path, j + 1, f"unreadable position record {line[:60]!r}") from None
+                cut = not any(x.strip() for x in lines[j + 1 :])
+                fix = (
+                    "the file ends here without 'EOF': it was cut short, download it again"
+                    if cut
+                    else "a 'P' record holds the satellite and X, Y, Z in km in columns 5-46; "
+                    "the file is damaged, download it again"
+                )
+                raise Sp3Error(
+                    path, j + 1, f"unreadable position record {line[:60]!r}; {fix}"
+                ) from None
             if sat not in col:
                 raise Sp3Error(path, j + 1, f"satellite {sat} is not listed in the header")
             if any(v != 0.0 for v in xyz):

@@ -72,6 +72,12 @@ def test_read_errors_name_the_fix(tmp_path):
     (tmp_path / "run.json").write_text(json.dumps({"format": "other/9"}))
     with pytest.raises(RunFileError, match="is not 'locator-run/1'"):
         read_run(tmp_path)
+    # a table cut short: named, with the fix
+    write_run(pd.DataFrame({"gps_s": [1.0, 2.0]}), tmp_path / "cut", {})
+    data = (tmp_path / "cut" / "epochs.parquet").read_bytes()
+    (tmp_path / "cut" / "epochs.parquet").write_bytes(data[: len(data) // 2])
+    with pytest.raises(RunFileError, match=r"epochs\.parquet: not a readable.*rerun `locator run`"):
+        read_run(tmp_path / "cut")
 
 
 def test_error_model_round_trip_and_errors(tmp_path):

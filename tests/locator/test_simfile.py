@@ -152,6 +152,11 @@ def test_read_errors_name_the_problem(tmp_path):
     sig.to_parquet(folder / "signals.parquet")
     with pytest.raises(SimRunError, match="range_m"):
         SimRun.read(folder)
+    # a copy cut short: named, with the fix
+    data = (folder / "epochs.parquet").read_bytes()
+    (folder / "signals.parquet").write_bytes(data[: len(data) // 2])
+    with pytest.raises(SimRunError, match=r"signals\.parquet: not a readable.*`locator simulate`"):
+        SimRun.read(folder)
     (folder / "signals.parquet").unlink()
     with pytest.raises(SimRunError, match="signals"):
         SimRun.read(folder)

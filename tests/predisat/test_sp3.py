@@ -103,11 +103,15 @@ def test_truncated_and_malformed(tmp_path: Path, test_data: Path) -> None:
     assert "cut.sp3" in str(exc.value)
     assert f"line {len(lines) - 4}" in str(exc.value)
     assert "truncated" in str(exc.value)
+    # cut inside a record: the record is unreadable and the message says the file was cut
+    p.write_text("\n".join(lines[:-3]) + "\n" + lines[-3][:6] + "\n")
+    with pytest.raises(Sp3Error, match=f"line {len(lines) - 2}: .*cut short, download it again"):
+        read_sp3(p)
     bad = list(lines)
     k = next(i for i, ln in enumerate(lines) if ln.startswith("PG02"))
     bad[k] = bad[k][:20] + "x" + bad[k][21:]
     p.write_text("\n".join(bad) + "\n")
-    with pytest.raises(Sp3Error, match=f"line {k + 1}: unreadable position record"):
+    with pytest.raises(Sp3Error, match=f"line {k + 1}: unreadable position record.*damaged"):
         read_sp3(p)
     p.write_text("\n".join(lines[:-1]) + "\n")
     with pytest.raises(Sp3Error, match="no 'EOF' line"):
