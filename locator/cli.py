@@ -149,7 +149,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _track_check(path, sim.antenna_ecef_m, args.sim)
         source = SimSource(sim, constellation=args.constellation or "all")
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
-        header = None
+        header, sim_chainage = None, sim.chainage_m
     else:
         if not args.nav:
             raise CliError("--obs needs --nav FILES (RINEX navigation with the same day)")
@@ -163,7 +163,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation or "G")
         start = args.start_chainage
-        header = obs.header.approx_position_ecef_m
+        header, sim_chainage = obs.header.approx_position_ecef_m, None
         if start is None:
             hx = obs.header.approx_position_ecef_m
             if not (hx == hx).all() or abs(hx).sum() == 0:
@@ -181,7 +181,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from predisat.availability_run import check_masks_on_track
 
         check_masks_on_track(masks, path.track, str(args.masks))
-    _check_start(float(start), path, masks, args, header)
+    _check_start(float(start), path, masks, args, header, sim_chainage)
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
@@ -195,7 +195,36 @@ def cmd_run(args: argparse.Namespace) -> int:
         else "no interval claimed"
     )
     print(f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, {lengths} -> {folder}")
+    print(_losses_text(epochs), end="")
     return 0
+
+
+# What a user can do about satellites left out for a reason (locator.selection.Exclusion names,
+# predisat.ephemeris.Reason names, "fde").
+_EXCLUSION_HINTS = {
+    "outside_coverage": "the masks do not cover where the train is",
+    "NO_DATA": "no navigation record: give --nav files holding every satellite of the day",
+    "OUTSIDE_VALIDITY": "navigation records too old: give the files of the observation day",
+}
+
+
+def _losses_text(epochs: Any) -> str:
+    """Why epochs have no claim and which satellites were left out (lines, or "")."""
+    from locator.evaluate import claim_losses, exclusions
+
+    lines = ""
+    losses = claim_losses(epochs)
+    if losses:
+        parts = ", ".join(f"{cause} {100 * share:.1f} %" for cause, share in losses.items())
+        lines += f"no claim: {parts}\n"
+    left = {k: v for k, v in exclusions(epochs).items() if k != "below the horizon"}
+    if left:
+        parts = ", ".join(
+            f"{why} {len(sats)}" + (f" ({hint})" if (hint := _EXCLUSION_HINTS.get(why)) else "")
+            for why, sats in sorted(left.items(), key=lambda kv: -len(kv[1]))
+        )
+        lines += f"satellites left out at least once: {parts}\n"
+    return lines
 
 
 # A start this far beyond the surveyed positions has no mask to trust any satellite with.
@@ -203,9 +232,15 @@ _MASK_REACH_M = 50.0
 
 
 def _check_start(
-    start_m: float, path: Any, masks: Any, args: argparse.Namespace, header_ecef_m: Any
+    start_m: float,
+    path: Any,
+    masks: Any,
+    args: argparse.Namespace,
+    header_ecef_m: Any,
+    sim_chainage_m: Any,
 ) -> None:
-    """The start chainage must be on the track and, with masks, inside their coverage."""
+    """The start chainage must be on the track; a simulated train must enter the masks (a
+    start outside them is told)."""
     import numpy as np
 
     if not 0.0 <= start_m <= path.length_m:
@@ -214,12 +249,22 @@ def _check_start(
             f"(0-{path.length_m:.0f} m); give --start-chainage in metres along this track"
         )
     if masks is not None:
-        lo, hi = float(masks.chainage_m.min()), float(masks.chainage_m.max())
-        if not lo - _MASK_REACH_M <= start_m <= hi + _MASK_REACH_M:
+        lo, hi = float(masks.chainage_m.min()) - _MASK_REACH_M, float(masks.chainage_m.max())
+        hi += _MASK_REACH_M
+        where = f"the masks of {args.masks} ({lo + _MASK_REACH_M:.0f}-{hi - _MASK_REACH_M:.0f} m)"
+        if sim_chainage_m is not None and not (
+            (sim_chainage_m >= lo) & (sim_chainage_m <= hi)
+        ).any():
             raise CliError(
-                f"start chainage {start_m:.0f} m is outside the masks of {args.masks} "
-                f"({lo:.0f}-{hi:.0f} m): no satellite could be trusted there; start inside "
-                "them or give the masks of this stretch"
+                f"the simulated train ({sim_chainage_m.min():.0f}-{sim_chainage_m.max():.0f} m) "
+                f"never enters {where}: no satellite could be trusted; give the masks of "
+                "this stretch"
+            )
+        if not lo <= start_m <= hi:
+            print(
+                f"locator run: warning: start chainage {start_m:.0f} m is outside {where}: "
+                "no satellite is trusted until the train is inside them",
+                file=sys.stderr,
             )
     hx = None if header_ecef_m is None else np.asarray(header_ecef_m, float)
     if args.start_chainage is not None and hx is not None and np.isfinite(hx).all() and hx.any():

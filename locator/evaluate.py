@@ -18,6 +18,7 @@ percentiles (claimed epochs), absolute error percentiles and the HMI counts.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 
 import numpy as np
@@ -26,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from predisat.interval import IntervalMode
 
-__all__ = ["score_run", "summarise"]
+__all__ = ["claim_losses", "exclusions", "score_run", "summarise"]
 
 
 def score_run(epochs: pd.DataFrame, truth_chainage_m: ArrayLike) -> pd.DataFrame:
@@ -107,4 +108,72 @@ def summarise(scored: pd.DataFrame) -> Mapping[str, float]:
     if "inside" in scored:
         inside = scored["inside"].to_numpy(bool)
         out["inside_share"] = float(inside[claim].mean()) if claim.any() else np.nan
+    return out
+
+
+# Why an epoch has no safety claim, first matching cause first: the flag bits of
+# locator.fde.FixFlag and locator.run.RunFlag, by name.
+_LOSS_CAUSES = (
+    ("TOO_FEW", "fewer than 2 trusted satellites"),
+    ("FAULT_DETECTED", "fault detected and not isolated (NLOS, or an error model tighter than "
+     "the ranges)"),
+    ("INCONSISTENT_PAIRS", "pair intervals without a common point"),
+    ("EMPTY_PAIR", "a pair contradicting the search window"),
+    ("HEADING_FAIL", "heading check failed"),
+    ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
+    ("UNBOUNDED", "interval reaching the search window's end"),
+    ("AMBIGUOUS", "a pair cutting the track twice"),
+    ("NO_ROOT", "a pair not cutting the track"),
+)  # fmt: skip
+
+
+def claim_losses(epochs: pd.DataFrame) -> dict[str, float]:
+    """Share of all epochs without a safety claim, by cause.
+
+    Parameters
+    ----------
+    epochs : pandas.DataFrame
+        :func:`locator.run.run_locator` output (``claim``, ``flag_names``, ``n_used``).
+
+    Returns
+    -------
+    dict
+        Cause (plain words) to share of epochs, largest first; each epoch without a claim
+        counts once, under its first cause in :data:`_LOSS_CAUSES` order, or "2-3 satellites
+        (a fix without claim)" / "other" when no listed flag is set. Empty when every epoch
+        has a claim.
+    """
+    n = max(len(epochs), 1)
+    lost = epochs.loc[~epochs["claim"].to_numpy(bool)]
+    counts: dict[str, int] = {}
+    for names, n_used in zip(lost["flag_names"].astype(str), lost["n_used"], strict=True):
+        flags = set(names.split("|"))
+        cause = next((text for flag, text in _LOSS_CAUSES if flag in flags), None)
+        if cause is None:
+            cause = "2-3 satellites (a fix without claim)" if n_used < 4 else "other"
+        counts[cause] = counts.get(cause, 0) + 1
+    return {k: v / n for k, v in sorted(counts.items(), key=lambda kv: -kv[1])}
+
+
+_EXCLUDED = re.compile(r"([A-Z]\d{2}):(.*?)(?= [A-Z]\d{2}:|$)")
+
+
+def exclusions(epochs: pd.DataFrame) -> dict[str, set[str]]:
+    """Satellites kept out of the solution, by reason, over a whole run.
+
+    Parameters
+    ----------
+    epochs : pandas.DataFrame
+        With the ``excluded`` column of :func:`locator.run.run_locator` (``"G03:below_mask
+        G08:fde ..."``).
+
+    Returns
+    -------
+    dict
+        Reason to the set of satellite ids excluded for it at least once.
+    """
+    out: dict[str, set[str]] = {}
+    for text in epochs["excluded"].astype(str):
+        for sat, why in _EXCLUDED.findall(text.strip()):
+            out.setdefault(why.strip(), set()).add(sat)
     return out

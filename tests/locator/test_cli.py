@@ -235,8 +235,12 @@ def test_start_and_truth_chainages_off_the_track_or_masks_are_refused(sim_dir, t
     part = write_masks(true.subset(lo_m, np.inf), tmp_path / "part.masks.parquet")
     assert main([*base, "--masks", str(part)]) == 2
     err = capsys.readouterr().err
-    assert "outside the masks" in err and "part.masks.parquet" in err
+    assert "never enters the masks" in err and "part.masks.parquet" in err
     assert not (tmp_path / "r").exists()  # refused before writing anything
+    # a train starting before the masks and running into them: told, then run
+    ahead = write_masks(true.subset(sim.chainage_m[0] + 100.0, np.inf), tmp_path / "a.parquet")
+    assert main(["-q", *base[:-1], str(tmp_path / "ahead"), "--masks", str(ahead)]) == 0
+    assert "warning: start chainage" in capsys.readouterr().err
     # a truth chainage off the run's track is refused and the evaluation left as it was
     assert main(["-q", *base, "--no-masks"]) == 0
     assert main(["evaluate", str(tmp_path / "r"), "--sim", str(sim_dir)]) == 0

@@ -53,3 +53,38 @@ def test_summary_figures():
 def test_truth_length_is_checked():
     with pytest.raises(ValueError, match="one true chainage per epoch"):
         score_run(table(), np.zeros(3))
+
+
+def test_claim_losses_count_each_epoch_once_under_its_first_cause():
+    from locator.evaluate import claim_losses
+
+    epochs = pd.DataFrame({
+        "claim": [True, False, False, False, False, False, False, False],
+        "flag_names": ["", "NO_SAFETY_CLAIM|TOO_FEW", "NO_SAFETY_CLAIM|EXCLUDED|FAULT_DETECTED",
+                       "NO_SAFETY_CLAIM|FAULT_DETECTED|INCONSISTENT_PAIRS", "NO_SAFETY_CLAIM",
+                       "NO_SAFETY_CLAIM|HEADING_FAIL", "ODOMETRY_CONFLICT", "BLUNT"],
+        "n_used": [6, 1, 5, 6, 3, 6, 6, 6],
+    })  # fmt: skip
+    losses = claim_losses(epochs)
+    assert sum(losses.values()) == pytest.approx(7 / 8)  # every lost epoch once
+    assert next(iter(losses)).startswith("fault detected")  # 2 of 8, largest first
+    assert losses[next(k for k in losses if k.startswith("fault detected"))] == 2 / 8
+    assert losses["fewer than 2 trusted satellites"] == 1 / 8
+    assert losses["2-3 satellites (a fix without claim)"] == 1 / 8
+    assert losses["heading check failed"] == 1 / 8
+    assert losses["interval missing the odometry prediction"] == 1 / 8
+    assert losses["other"] == 1 / 8
+    assert claim_losses(epochs.iloc[:1]) == {}
+
+
+def test_exclusions_collect_satellites_per_reason():
+    from locator.evaluate import exclusions
+
+    epochs = pd.DataFrame({"excluded": [
+        "G03:below the horizon G08:below_mask", "", "G08:fde E11:NO_DATA G03:below the horizon",
+        "R07:no broadcast group delay for C1P",
+    ]})  # fmt: skip
+    assert exclusions(epochs) == {
+        "below the horizon": {"G03"}, "below_mask": {"G08"}, "fde": {"G08"},
+        "NO_DATA": {"E11"}, "no broadcast group delay for C1P": {"R07"},
+    }  # fmt: skip
