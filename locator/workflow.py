@@ -320,7 +320,10 @@ def demo(
         summary = evaluate_folder(folder, sim.chainage_m)
         rows.append({"rule": label, **summary})
     table = pd.DataFrame(rows)
-    table.to_csv(root / "summary.csv", index=False)
+    # summarise() returns floats throughout; counts read better as integers
+    counts = ["epochs", "hmi", "hmi_fix", "mi"]
+    table[counts] = table[counts].astype(int)
+    table.to_csv(root / "summary.csv", index=False, float_format="%.6g")
     return table
 
 

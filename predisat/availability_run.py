@@ -439,7 +439,7 @@ def run_availability(
 
     t0 = time.perf_counter()
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
-    stages = 4 + len(cutoffs) + 2
+    stages = 2 + (2 + len(cutoffs)) + 3  # masks, navigation; one per rule; tables, figures, report
     bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
     try:
 

@@ -13,7 +13,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from predisat import __version__
 from predisat.cliargs import output_dir, output_file, positive_float, positive_int
@@ -287,9 +287,28 @@ def cmd_availability(args: argparse.Namespace) -> int:
     if args.track is not None:
         track = _load_track(args.track, args.track_name, args.chain, args.where)
     run = run_from_args(args, track=track)
-    print(run.summary.to_string(index=False))
-    print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s)")
+    print(_availability_table(run.summary))
+    print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
+          f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip
     return 0
+
+
+def _availability_table(summary: Any) -> str:
+    """The line-wide figures a reader looks at first, one row per trust rule."""
+    cols = {
+        "rule": "rule",
+        "share_ge2": ">=2 sats %",
+        "share_ge4": ">=4 sats %",
+        "share_ge6": ">=6 sats %",
+        "mean_count": "mean sats",
+        "longest_below4_m": "longest <4 m",
+        "interval_median_m": "interval median m",
+        "interval_p95_m": "p95 m",
+    }
+    t = summary[list(cols)].rename(columns=cols)
+    for c in (">=2 sats %", ">=4 sats %", ">=6 sats %"):
+        t[c] = 100.0 * t[c]
+    return str(t.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
 
 
 def cmd_evaluate_sky(args: argparse.Namespace) -> int:

@@ -392,9 +392,10 @@ def to_urbannav_csv(
     include_margin : bool, optional
         Export ``mask + margin`` (default) or the bare mask.
     header : bool, optional
-        Write a header row ``lat_deg,lon_deg,h_m,az_0,...,az_360``. UrbanNav's published
-        sky-mask tables start with one header line (``Latitude(deg)``, ``Longitude(deg)``,
-        ``Altitude(m)``, ``Skymask(1*361 deg)``), so a reader written for them skips one line.
+        Write a header row ``lat_deg,lon_deg,h_m,e_0,...,e_360`` (``e_a``: elevation at
+        azimuth ``a``, degrees). UrbanNav's published sky-mask tables start with one header
+        line (``Latitude(deg)``, ``Longitude(deg)``, ``Altitude(m)``, ``Skymask(1*361 deg)``),
+        so a reader written for them skips one line.
     """
     path = Path(path)
     mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
@@ -402,7 +403,7 @@ def to_urbannav_csv(
     el = _ceil_to(conservative_resample(mask, masks.az_step_deg, az, 1.0), 0.01)
     with _atomic(path) as f:
         if header:
-            f.write(",".join(["lat_deg", "lon_deg", "h_m", *(f"az_{a}" for a in range(361))]))
+            f.write(",".join(["lat_deg", "lon_deg", "h_m", *(f"e_{a}" for a in range(361))]))
             f.write("\n")
         for i in range(masks.n_pos):
             lead = f"{masks.lat_deg[i]:.9f},{masks.lon_deg[i]:.9f},{masks.h_m[i]:.3f}"

@@ -223,6 +223,10 @@ def test_demo_end_to_end_on_a_short_stretch(tmp_path, capsys: pytest.CaptureFixt
     for name in ("evaluation.png", "contact_sheet.png", "availability/report.html",
                  "locator/summary.csv"):  # fmt: skip
         assert (out / name).stat().st_size > 0, name
+    import pandas as pd
+
+    summary = pd.read_csv(out / "locator" / "summary.csv")
+    assert all(summary[c].dtype.kind == "i" for c in ("epochs", "hmi", "hmi_fix", "mi"))
     # the masks' safety, counted here on a 0.1 deg elevation grid against the rendered truth
     truth = TrueMasks.load(out / "truth" / "true_masks.npz")
     rows = [int(np.argmin(np.abs(truth.chainage_m - s))) for s in masks.chainage_m]

@@ -318,7 +318,7 @@ def test_exports_never_write_negative_zero(tmp_path):
 def test_urbannav_header_option(tmp_path):
     path = to_urbannav_csv(make_set(n_pos=3), tmp_path / "h.csv", header=True)
     first = path.read_text().splitlines()[0].split(",")
-    assert first[:4] == ["lat_deg", "lon_deg", "h_m", "az_0"] and first[-1] == "az_360"
+    assert first[:4] == ["lat_deg", "lon_deg", "h_m", "e_0"] and first[-1] == "e_360"
 
 
 def read_rtklib_elmask(path):
