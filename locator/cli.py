@@ -15,6 +15,7 @@ from typing import Any
 from predisat import __version__
 from predisat.cliargs import (
     cutoff_deg,
+    finite_float,
     non_negative_float,
     output_dir,
     output_file,
@@ -492,7 +493,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="active: fault detection and exclusion (default); passive: every "
                    "measurement kept, faults only flagged")
     p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
-    p.add_argument("--k-sigma", type=float, metavar="K",
+    p.add_argument("--k-sigma", type=positive_float, metavar="K",
                    help="pair interval half width in sigmas (default: the error model's; "
                    "without one 2, the source's; 3.89 gives 1e-4 per pair, docs/locator.md)")
     p.add_argument("--extra-margin", type=non_negative_float, default=0.0, metavar="DEG",
@@ -524,8 +525,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--world", help="world.npz (from `predisat synth` truth/ or a simulation)")
     p.add_argument("--track", help="track GeoJSON/CSV (default: the demo line 144)")
     p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
-    p.add_argument("--from-km", type=float, default=4.0)
-    p.add_argument("--to-km", type=float, default=6.3)
+    p.add_argument("--from-km", type=finite_float, default=4.0)
+    p.add_argument("--to-km", type=finite_float, default=6.3)
     p.add_argument("--scenery", help="scenery recipe YAML (surveys/*.yaml)")
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--nav", nargs="+", help="RINEX nav / SP3 / TLE (default: embedded day)")
@@ -575,7 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--station", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="station ECEF (default: the RINEX header position)")  # fmt: skip
     p.add_argument("--constellation", default="G")
-    p.add_argument("--k-sigma", type=float, default=2.0)
+    p.add_argument("--k-sigma", type=positive_float, default=2.0)
     p.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
                    help="overbound (default): the fit inflated until it bounds the residual "
                    "tails in every elevation bin; estimate: the least-squares fit")  # fmt: skip

@@ -36,7 +36,13 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from predisat.availability import Availability, compute_availability
-from predisat.cliargs import cutoff_deg, output_dir, positive_float, positive_int
+from predisat.cliargs import (
+    cutoff_deg,
+    finite_float,
+    output_dir,
+    positive_float,
+    positive_int,
+)
 from predisat.ephemeris import Ephemeris
 from predisat.gnss_time import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss_time import gps_s_to_text as _iso
@@ -454,10 +460,15 @@ def run_availability(
             hi_m = np.inf if to_m is None else to_m
             ch_m = mask_set.chainage_m
             if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
+                given = " ".join(
+                    f"{flag} {v / 1000:g}"
+                    for flag, v in (("--from-km", from_m), ("--to-km", to_m))
+                    if v is not None
+                )
                 raise ValueError(
-                    f"the stretch {lo_m:.0f}-{hi_m:.0f} m (--from-km/--to-km, in kilometres) holds "
-                    f"no position of masks {masks_label}, which cover "
-                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km; choose a stretch inside"
+                    f"{given}: no position of masks {masks_label}, which cover "
+                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
+                    "choose a stretch inside"
                 )
             mask_set = mask_set.subset(lo_m, hi_m)
         if track is not None:
@@ -618,8 +629,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
         help="flat cut-off(s) compared with the masks (default 15)",
     )  # fmt: skip
-    p.add_argument("--from-km", type=float, metavar="A", help="stretch start, chainage km")
-    p.add_argument("--to-km", type=float, metavar="B", help="stretch end, chainage km")
+    p.add_argument("--from-km", type=finite_float, metavar="A", help="stretch start, chainage km")
+    p.add_argument("--to-km", type=finite_float, metavar="B", help="stretch end, chainage km")
     p.add_argument(
         "--sky-km", type=float, nargs="+", metavar="KM",
         help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
@@ -634,7 +645,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default a = b = 2 m, k = 2)",
     )  # fmt: skip
     p.add_argument(
-        "--k-sigma", type=float, metavar="K",
+        "--k-sigma", type=positive_float, metavar="K",
         help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
         "per pair)",
     )  # fmt: skip

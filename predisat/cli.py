@@ -16,7 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from predisat import __version__
-from predisat.cliargs import output_dir, output_file, positive_float, positive_int
+from predisat.cliargs import (
+    finite_float,
+    output_dir,
+    output_file,
+    positive_float,
+    positive_int,
+)
 
 if TYPE_CHECKING:
     from predisat.camera import CameraModel
@@ -137,7 +143,7 @@ def _km_range(
     else:
         return lo_km * 1000.0, hi_km * 1000.0
     hint = ""
-    if hi_km > top_km and hi_km / 1000.0 <= top_km:
+    if lo_km < hi_km and hi_km > top_km and hi_km / 1000.0 <= top_km:
         hint = (
             f"; the values are kilometres, did you give metres? "
             f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
@@ -408,8 +414,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
     _add_track_selection(p)
-    p.add_argument("--from-km", type=float, metavar="A", help="start chainage in km (default 0)")
-    p.add_argument("--to-km", type=float, metavar="B", help="end chainage in km (default: end)")
+    p.add_argument("--from-km", type=finite_float, metavar="A",
+                   help="start chainage in km (default 0)")
+    p.add_argument("--to-km", type=finite_float, metavar="B",
+                   help="end chainage in km (default: end)")
     p.add_argument(
         "--sky", choices=["clear", "cloudy", "overcast", "mixed"], default="mixed", help="sky"
     )
@@ -528,9 +536,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
         help=f"side camera model (default {DEMO_CAMERA})",
     )  # fmt: skip
-    p.add_argument("--from-km", type=float, default=DEMO_FROM_KM, metavar="KM",
+    p.add_argument("--from-km", type=finite_float, default=DEMO_FROM_KM, metavar="KM",
                    help=f"start of the stretch (default {DEMO_FROM_KM})")
-    p.add_argument("--to-km", type=float, default=DEMO_TO_KM, metavar="KM",
+    p.add_argument("--to-km", type=finite_float, default=DEMO_TO_KM, metavar="KM",
                    help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
                    "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
                    "cut out of the default demo's")

@@ -11,8 +11,8 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["cutoff_deg", "non_negative_float", "output_dir", "output_file", "positive_float",
-           "positive_int"]  # fmt: skip
+__all__ = ["cutoff_deg", "finite_float", "non_negative_float", "output_dir", "output_file",
+           "positive_float", "positive_int"]  # fmt: skip
 
 
 def output_dir(value: str) -> Path:
@@ -27,17 +27,23 @@ def output_dir(value: str) -> Path:
 
 
 def output_file(value: str) -> Path:
-    """An output file: not a folder, in a folder that exists."""
+    """An output file: not a folder, and not under a file (missing folders are created)."""
     p = Path(value)
     if p.is_dir():
         raise argparse.ArgumentTypeError(
             f"{value} is a folder; give a file path (inside it, if that is where it belongs)"
         )
-    if not p.parent.is_dir():
+    blocking = next((a for a in p.parents if a.exists() and not a.is_dir()), None)
+    if blocking is not None:
         raise argparse.ArgumentTypeError(
-            f"{value}: folder {p.parent} does not exist; create it first or choose another path"
+            f"{value}: {blocking} is a file, so no folder can be made there; choose another path"
         )
     return p
+
+
+def finite_float(value: str) -> float:
+    """Any finite number (a chainage, a kilometre)."""
+    return _number(value)
 
 
 def _number(value: str) -> float:

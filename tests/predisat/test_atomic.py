@@ -44,6 +44,13 @@ def test_written_file_gets_the_umask_mode(tmp_path: Path, umask: int) -> None:
     assert mode == stat.S_IMODE(reference.stat().st_mode)
 
 
+def test_missing_folders_are_created(tmp_path: Path) -> None:
+    target = tmp_path / "cal" / "2026" / "model.json"
+    write_bytes_atomic(target, b"{}")
+    assert target.read_bytes() == b"{}"
+    assert [p.name for p in target.parent.iterdir()] == ["model.json"]
+
+
 def test_directory_target_is_refused_with_a_file_suggestion(tmp_path: Path) -> None:
     with pytest.raises(IsADirectoryError, match=r"is a directory.*give a file path"):
         write_bytes_atomic(tmp_path, b"x")

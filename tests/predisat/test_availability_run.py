@@ -272,6 +272,11 @@ def test_stretch_given_in_metres_or_reversed(tmp_path: Path, masks: MaskSet) -> 
                                   "--from-km", km[0], "--to-km", km[1], "--quiet"])  # fmt: skip
         with pytest.raises(ValueError, match=expected):
             run_from_args(args)
+    args = parser.parse_args(["--masks", str(path), "--out", str(tmp_path / "o"),
+                              "--from-km", "7", "--quiet"])  # fmt: skip
+    with pytest.raises(ValueError, match=r"^--from-km 7: no position") as exc:
+        run_from_args(args)
+    assert "inf" not in str(exc.value)
     assert not (tmp_path / "o").exists()
 
 
@@ -392,10 +397,9 @@ def test_interval_model_from_a_locator_error_model_file(
         with pytest.raises(ValueError, match="--error-model"):
             run_from_args(parser.parse_args([*base, "--error-model", str(bad), "--out",
                                              str(tmp_path / "x")]), track)  # fmt: skip
-    for k in ("0", "inf"):
-        with pytest.raises(ValueError, match="--k-sigma"):
-            run_from_args(parser.parse_args([*base, "--k-sigma", k, "--out",
-                                             str(tmp_path / "x")]), track)  # fmt: skip
+    for k in ("0", "inf"):  # refused by the parser, before any work
+        with pytest.raises(SystemExit):
+            parser.parse_args([*base, "--k-sigma", k, "--out", str(tmp_path / "x")])
 
 
 def test_untrusted_satellites_are_reported(run) -> None:

@@ -316,6 +316,12 @@ def test_wrong_kind_of_output_path_is_refused_before_any_work(
         (locator_cli.main, ["run", "--out", "o", "--start-uncertainty", "-1"],
          "--start-uncertainty"),
         (locator_cli.main, ["simulate", "--out", "o", "--rate", "0"], "--rate"),
+        (locator_cli.main, ["run", "--out", "o", "--k-sigma", "0"], "--k-sigma"),
+        (locator_cli.main, ["calibrate", "--out", "o", "--k-sigma", "nan"], "--k-sigma"),
+        (cli.main, ["availability", "--masks", "M", "--out", "o", "--k-sigma", "-1"],
+         "--k-sigma"),
+        (cli.main, ["synth", "--out", "o", "--from-km", "nan"], "--from-km"),
+        (locator_cli.main, ["simulate", "--out", "o", "--to-km", "inf"], "--to-km"),
     ],
 )  # fmt: skip
 def test_out_of_range_options_are_refused_under_their_own_name(
@@ -328,4 +334,14 @@ def test_out_of_range_options_are_refused_under_their_own_name(
     err = capsys.readouterr().err
     assert f"argument {option}" in err
     assert "_deg" not in err and "_m " not in err  # no internal parameter names
-    assert not (tmp_path / "o").exists()
+
+
+def test_output_file_may_be_in_a_new_folder_but_not_under_a_file(tmp_path: Path) -> None:
+    import argparse
+
+    from predisat.cliargs import output_file
+
+    assert output_file(str(tmp_path / "new" / "m.json")) == tmp_path / "new" / "m.json"
+    (tmp_path / "f.txt").write_text("x")
+    with pytest.raises(argparse.ArgumentTypeError, match=r"f\.txt is a file"):
+        output_file(str(tmp_path / "f.txt" / "sub" / "m.json"))
