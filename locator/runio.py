@@ -24,10 +24,9 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import pyarrow as pa
 
 from locator import plots
-from locator.simfile import json_default
+from locator.simfile import json_default, read_folder_table
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
 from predisat.interval import ErrorModel, IntervalModel
@@ -97,21 +96,7 @@ def write_table(df: pd.DataFrame, folder: Path, name: str, fmt: str) -> Path:
 
 def read_table(folder: Path, name: str) -> pd.DataFrame:
     """``name.parquet`` or ``name.csv`` from ``folder``."""
-    for ext in FORMATS:
-        p = folder / f"{name}.{ext}"
-        if p.is_file():
-            if ext == "parquet":
-                try:
-                    return pd.read_parquet(p)
-                except (pa.ArrowException, OSError) as exc:
-                    raise RunFileError(
-                        f"{p}: not a readable Parquet file ({exc}); the run folder is damaged, "
-                        "rerun `locator run`"
-                    ) from None
-            return pd.read_csv(p, keep_default_na=False, na_values=[""])
-    raise RunFileError(
-        f"{folder}: no {name}.parquet or {name}.csv; give a `locator run --out` folder"
-    )
+    return read_folder_table(folder, name, RunFileError, "`locator run`")
 
 
 def write_run(

@@ -38,6 +38,7 @@ __all__ = [
     "SimRun",
     "SimRunError",
     "json_default",
+    "read_folder_table",
 ]
 
 SIMRUN_FORMAT = "locator.simrun/1"
@@ -311,20 +312,37 @@ def json_default(obj: Any) -> Any:
     raise TypeError(f"cannot write {type(obj).__name__} as JSON")
 
 
-def _read_table(folder: Path, name: str) -> pd.DataFrame:
+def read_folder_table(
+    folder: Path,
+    name: str,
+    error: type[Exception],
+    rewrite: str,
+    dtype: Mapping[str, Any] | None = None,
+) -> pd.DataFrame:
+    """``name.parquet`` (preferred) or ``name.csv`` from ``folder``, shared by the simulation
+    and run readers.
+
+    ``error`` is raised for a missing or unreadable table, naming the file and ``rewrite``
+    (the command that writes the folder again); ``dtype`` types CSV columns.
+    """
     pq, csv = folder / f"{name}.parquet", folder / f"{name}.csv"
     if pq.is_file():
         try:
             return pd.read_parquet(pq)
         except (pa.ArrowException, OSError) as exc:
-            raise SimRunError(
-                f"{pq}: not a readable Parquet file ({exc}); the simulation folder is damaged, "
-                "rerun `locator simulate`"
+            raise error(
+                f"{pq}: not a readable Parquet file ({exc}); the folder is damaged, rerun "
+                f"{rewrite}"
             ) from None
     if csv.is_file():
-        return pd.read_csv(csv, keep_default_na=False, na_values=[""],
-                           dtype={"sat": str, "state": str, "reflector_material": str})  # fmt: skip
-    raise SimRunError(f"{folder}: neither {name}.parquet nor {name}.csv; the run is incomplete")
+        return pd.read_csv(csv, keep_default_na=False, na_values=[""], dtype=dtype)
+    raise error(f"{folder}: neither {name}.parquet nor {name}.csv; give a folder written by "
+                f"{rewrite}")  # fmt: skip
+
+
+def _read_table(folder: Path, name: str) -> pd.DataFrame:
+    return read_folder_table(folder, name, SimRunError, "`locator simulate`",
+                             {"sat": str, "state": str, "reflector_material": str})  # fmt: skip
 
 
 def _require(df: pd.DataFrame, cols: tuple[str, ...], where: Path) -> None:

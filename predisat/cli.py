@@ -256,8 +256,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     run = run_availability(
         processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
     )
-    cols = ["rule", "share_ge2", "share_ge4", "share_ge6", "interval_median_m", "interval_p95_m"]
-    print(run.summary[cols].round(3).to_string(index=False))
+    print(_availability_table(run.summary))
     print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
 
     print("demo 5/5: a simulated train run located with the 1-D locator under each trust rule")

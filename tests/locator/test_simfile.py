@@ -155,7 +155,8 @@ def test_read_errors_name_the_problem(tmp_path):
     # a copy cut short: named, with the fix
     data = (folder / "epochs.parquet").read_bytes()
     (folder / "signals.parquet").write_bytes(data[: len(data) // 2])
-    with pytest.raises(SimRunError, match=r"signals\.parquet: not a readable.*`locator simulate`"):
+    damaged = r"signals\.parquet: not a readable.*rerun `locator simulate`"
+    with pytest.raises(SimRunError, match=damaged):
         SimRun.read(folder)
     (folder / "signals.parquet").unlink()
     with pytest.raises(SimRunError, match="signals"):
