@@ -277,6 +277,41 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
     )
 
 
+# Satellites of a constellation in full service (GPS's 24-slot baseline of the SPS performance
+# standard, GLONASS's 24 slots less spares in maintenance, Galileo and BeiDou-3 MEO in 2020):
+# navigation data with fewer usually is a partial file, and every figure is then understated.
+_FULL_CONSTELLATION = {"G": 24, "R": 22, "E": 22, "C": 24}
+
+
+def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
+    """Warnings for constellations with fewer trusted satellites than a full one.
+
+    Parameters
+    ----------
+    sats : SatellitePositions
+        The satellites of the run (``valid`` of shape (n_epoch, n_sat)).
+    nav_label : str
+        How the warning names the navigation data.
+
+    Returns
+    -------
+    list of str
+        One sentence per sparse constellation (empty when none is).
+    """
+    used = [s for j, s in enumerate(sats.sats) if sats.valid[:, j].any()]
+    out = []
+    for system, full in _FULL_CONSTELLATION.items():
+        n = sum(s[0] == system for s in used)
+        if 0 < n < full:
+            out.append(
+                f"{nav_label} holds {n} {SYSTEM_NAMES[system]} satellites with usable records "
+                f"(a full constellation has {full} or more): every count, share and interval is "
+                "understated; give the day's full broadcast navigation file (e.g. IGS "
+                "BRDC00IGS_R_YYYYDDD0000_01D_MN.rnx)"
+            )
+    return out
+
+
 def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
     if isinstance(masks, MaskSet):
         return masks, "in memory"
@@ -492,6 +527,7 @@ def run_availability(
             )
         sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
         _check_window(sats, ephemeris, nav_label)
+        warnings = sparse_navigation(sats, nav_label)
         positions = LinePositions.from_masks(mask_set)
         bar.update(1)
 
@@ -519,6 +555,7 @@ def run_availability(
             mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
             step_s, interval_every, __version__, model,
         )  # fmt: skip
+        info["warnings"] = warnings
         files, summary = write_tables(out, results, track, info, counts_table)
         # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
         # its validity window, inconsistent, no data): such satellites count for no rule.

@@ -292,6 +292,8 @@ def cmd_availability(args: argparse.Namespace) -> int:
     if args.track is not None:
         track = _load_track(args.track, args.track_name, args.chain, args.where)
     run = run_from_args(args, track=track)
+    for warning in run.info.get("warnings", ()):
+        print(f"predisat availability: warning: {warning}", file=sys.stderr)
     print(_availability_table(run.summary))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
           f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip

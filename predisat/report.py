@@ -440,6 +440,7 @@ main{max-width:1180px;margin:0 auto;padding:18px 24px 40px;background:#fff}
 h1{font-size:22px;margin:4px 0 2px}h2{font-size:17px;margin:26px 0 6px;
 border-bottom:1px solid #ddd;padding-bottom:3px}h3{font-size:14px;margin:6px 0}
 .sub{color:#555;margin:0 0 12px}
+.warn{background:#fff3cd;border-left:4px solid #e0a800;padding:6px 10px;margin:8px 0}
 table{border-collapse:collapse}th,td{padding:3px 9px;text-align:left;vertical-align:top}
 table.meta th{color:#555;font-weight:600;white-space:nowrap}
 table.meta td{max-width:950px}
@@ -564,6 +565,7 @@ def build_report(inputs: ReportInputs) -> str:
 <h1>{_e(title)}</h1>
 <p class="sub">Which satellites a train may trust along the line, from the surveyed elevation
 masks, compared with no mask and a flat cut-off.</p>
+{"".join(f'<p class="warn">Warning: {_e(w)}</p>' for w in info.get("warnings", ()))}
 {_header(info)}
 <h2>Summary</h2>
 {_summary_table(results)}

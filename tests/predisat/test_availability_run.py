@@ -338,6 +338,16 @@ def test_sp3_window_defaults_inside_the_file(tmp_path: Path, masks: MaskSet, tes
     assert r.results[0].gps_s[0] == pytest.approx(_gps_s(datetime(2010, 7, 1)))
     assert len(r.results[0].gps_s) == 4
     assert r.results[1].count.max() <= 3
+    # three satellites are not a constellation: said in the run and at the top of the report
+    (warning,) = r.info["warnings"]
+    assert "holds 3 GPS satellites" in warning and "understated" in warning
+    assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
+
+
+def test_full_navigation_day_gives_no_warning(run) -> None:
+    # the embedded day (IGS Esbjerg, 2020-06-25) has the whole GPS constellation
+    assert run.info["warnings"] == []
+    assert 'class="warn"' not in run.report_html.read_text(encoding="utf-8")
 
 
 def test_cli_arguments_round_trip(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
