@@ -68,6 +68,7 @@ __all__ = [
     "parse_time",
     "run_availability",
     "run_from_args",
+    "sparse_navigation",
 ]
 
 _MAX_TRACK_OFFSET_M = 25.0  # mask positions farther than this from the track: wrong track
