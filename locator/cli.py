@@ -14,6 +14,7 @@ from typing import Any
 
 from predisat import __version__
 from predisat.cliargs import (
+    caused_by_interrupt,
     cutoff_deg,
     finite_float,
     non_negative_float,
@@ -606,3 +607,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError, KeyError) as exc:
         print(f"locator: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("\nlocator: interrupted", file=sys.stderr)
+        return 130
+    except SystemError as exc:
+        if caused_by_interrupt(exc):
+            print("\nlocator: interrupted",
+                  file=sys.stderr)  # fmt: skip
+            return 130
+        raise

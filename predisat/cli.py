@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from predisat import __version__
 from predisat.cliargs import (
+    caused_by_interrupt,
     finite_float,
     output_dir,
     output_file,
@@ -566,13 +567,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        kept = (
-            "; finished chunks and segmented frames are kept: rerun the same command to resume"
-            if args.command == "process"
-            else ""
-        )
-        print(f"\npredisat {args.command}: interrupted{kept}", file=sys.stderr)
-        return 130
+        return _interrupted(args.command)
+    except SystemError as exc:
+        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it.
+        if caused_by_interrupt(exc):
+            return _interrupted(args.command)
+        raise
+
+
+def _interrupted(command: str) -> int:
+    kept = (
+        "; finished chunks and segmented frames are kept: rerun the same command to resume"
+        if command == "process"
+        else ""
+    )
+    print(f"\npredisat {command}: interrupted{kept}", file=sys.stderr)
+    return 130
 
 
 if __name__ == "__main__":

@@ -11,8 +11,8 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["cutoff_deg", "finite_float", "non_negative_float", "output_dir", "output_file",
-           "positive_float", "positive_int"]  # fmt: skip
+__all__ = ["caused_by_interrupt", "cutoff_deg", "finite_float", "non_negative_float",
+           "output_dir", "output_file", "positive_float", "positive_int"]  # fmt: skip
 
 
 def output_dir(value: str) -> Path:
@@ -91,3 +91,16 @@ def cutoff_deg(value: str) -> float:
             f"{value} is not an elevation cut-off; give degrees in [0, 90)"
         )
     return x
+
+
+def caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` comes from Ctrl-C: numba-compiled code turns the KeyboardInterrupt
+    into a SystemError caused by it, which a command line should treat as an interrupt."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return False

@@ -272,3 +272,18 @@ def test_far_receiver_is_told_its_true_distance(test_data, tmp_path, capsys):
     assert main(["-q", *run, "--start-chainage", "4500", "--out", str(tmp_path / "b")]) == 0
     err = capsys.readouterr().err
     assert "warning:" in err and " km away from track" in err and "running from --start" in err
+
+
+def test_ctrl_c_is_one_line_not_a_traceback(sim_dir, tmp_path, capsys, monkeypatch):
+    import locator.workflow as wf
+
+    def ctrl_c_in_numba(*_, **__):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher returned a result with an exception set") from exc
+
+    monkeypatch.setattr(wf, "run_to_folder", ctrl_c_in_numba)
+    code = main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out", str(tmp_path / "r")])
+    assert code == 130
+    assert "locator: interrupted" in capsys.readouterr().err

@@ -266,6 +266,25 @@ def test_interrupted_process_keeps_its_work(
     err = capsys.readouterr().err
     assert "interrupted" in err and "rerun the same command" in err and "Traceback" not in err
     assert not (tmp_path / "m" / "masks.parquet").exists()
+
+    def ctrl_c_in_numba(*_: object) -> None:
+        # what a numba-compiled function raises when Ctrl-C lands inside it
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher returned a result with an exception set") from exc
+
+    def other_system_error(*_: object) -> None:
+        raise SystemError("a genuine internal error")
+
+    with monkeypatch.context() as m:
+        m.setattr(pl, "_run_chunks", ctrl_c_in_numba)
+        assert cli.main(args) == 130
+        m.setattr(pl, "_run_chunks", other_system_error)
+        with pytest.raises(SystemError, match="genuine"):
+            cli.main(args)
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Traceback" not in err
     assert cli.main(args) == 0
     done = capsys.readouterr()
     assert ", 0 frames segmented" in done.out + done.err  # the cache of the first run
