@@ -53,7 +53,7 @@ from predisat.atomic import write_bytes_atomic
 from predisat.camera import CameraModel, Mount
 from predisat.cliargs import output_dir, positive_float, positive_int
 from predisat.maskio import read_masks, write_masks
-from predisat.masks import MaskError, MaskSet
+from predisat.masks import BinSource, MaskError, MaskSet
 from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor
 
 __all__ = [
@@ -611,6 +611,68 @@ def concat_masksets(parts: Sequence[MaskSet], provenance: dict[str, Any] | None 
     )  # fmt: skip
 
 
+# A step this many times the survey's usual spacing is a hole (a camera dropout, frames lost
+# or all bad), not a sparser stretch: nothing may be trusted in it.
+GAP_FACTOR = 1.5
+
+
+def close_gaps(masks: MaskSet, track: Any) -> tuple[MaskSet, list[tuple[float, float]]]:
+    """Closed positions inside the survey's holes, so no neighbour's mask is trusted there.
+
+    A mask position stands for the cell between the midpoints to its neighbours, so a hole
+    between two surveyed positions would silently be covered by them. Wherever consecutive
+    positions are more than :data:`GAP_FACTOR` times the median spacing apart, positions are
+    inserted at that spacing with a 90 deg mask (nothing trusted), source ``ASSUMED`` and NaN
+    obstacle descriptors.
+
+    Parameters
+    ----------
+    masks : MaskSet
+        The merged masks, n_pos >= 3 (fewer give no spacing to compare with).
+    track : TrackMap
+        Gives the inserted positions' lat / lon / h and heading.
+
+    Returns
+    -------
+    masks : MaskSet
+        With the inserted positions (the input when there is no hole).
+    gaps : list of (float, float)
+        Chainages (m) of the surveyed positions on either side of each hole.
+    """
+    ch = np.asarray(masks.chainage_m, float)
+    if len(ch) < 3:
+        return masks, []
+    step = np.diff(ch)
+    spacing = float(np.median(step))
+    holes = np.flatnonzero(step > GAP_FACTOR * spacing)
+    if not len(holes):
+        return masks, []
+    new_ch = np.concatenate([
+        np.arange(ch[i] + spacing, ch[i + 1] - spacing / 2, spacing) for i in holes
+    ])  # fmt: skip
+    lat, lon, h = track.position_at(new_ch)
+    n_new, n_az = len(new_ch), masks.n_az
+    order = np.argsort(np.concatenate([ch, new_ch]), kind="stable")
+
+    def cat(old: NDArray, new: NDArray) -> NDArray:
+        return np.concatenate([np.asarray(old), np.asarray(new, dtype=np.asarray(old).dtype)])[
+            order
+        ]
+
+    closed = MaskSet.from_arrays(
+        cat(ch, new_ch), cat(masks.lat_deg, lat), cat(masks.lon_deg, lon), cat(masks.h_m, h),
+        cat(masks.heading_deg, track.heading_at(new_ch)),
+        cat(masks.mask_el_deg, np.full((n_new, n_az), 90.0)),
+        az_step_deg=masks.az_step_deg,
+        source=cat(masks.source, np.full((n_new, n_az), int(BinSource.ASSUMED))),
+        margin_deg=cat(np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape),
+                       np.zeros((n_new, n_az))),
+        descriptors={k: cat(v, np.full(n_new, np.nan)) for k, v in masks.descriptors.items()},
+        provenance=masks.provenance,
+    )  # fmt: skip
+    return closed, [(float(ch[i]), float(ch[i + 1])) for i in holes]
+
+
 # ---------------------------------------------------------------------- the run
 def survey_hash(survey: Any) -> str:
     """SHA-256 of the survey's description: ``survey.yaml``, ``manifest.csv``, calibrations.
@@ -1000,6 +1062,17 @@ def process_survey(
     merged = concat_masksets(parts, final_prov)
     if margin_table is not None:
         merged = margin_table.apply(merged)
+    merged, gaps = close_gaps(merged, trk)
+    if gaps:
+        holes = ", ".join(f"{a:.0f}-{b:.0f} m" for a, b in gaps)
+        _report(
+            f"warning: the survey has {len(gaps)} hole(s) between surveyed positions ({holes}): "
+            "closed (90 deg mask, source ASSUMED), nothing is trusted there; survey them again "
+            "or replace their bad frames",
+            quiet=False,
+        )
+        merged = replace(merged, provenance={**merged.provenance, "gaps_closed_m": gaps})
+        final_prov["gaps_closed_m"] = gaps
     masks_path = write_masks(merged, out / "masks.parquet")
     _write_bad_frames(out / "bad_frames.csv", bad_list)
     timings["merge"] = time.perf_counter() - t3

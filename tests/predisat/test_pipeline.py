@@ -13,7 +13,7 @@ import pytest
 
 from predisat.camera import CameraModel
 from predisat.maskio import read_masks
-from predisat.masks import MaskError, MaskSet
+from predisat.masks import BinSource, MaskError, MaskSet
 from predisat.pipeline import (
     BadFrameError,
     PipelineParams,
@@ -527,3 +527,43 @@ def test_thin_structure_policy_is_an_angle_per_camera(
     assert n_px * barrel.widest_pixel_deg <= 0.7 + barrel.widest_pixel_deg / 2
     with pytest.raises(ValueError, match="thin_deg"):
         PipelineParams(thin_deg=-1.0)
+
+
+def test_a_hole_in_the_survey_is_closed_not_covered_by_neighbours(
+    survey_dir: Path, first_run, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # both frames at 3030 m dropped from the manifest: a camera dropout between 3020 and 3040
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)
+    kept = [r for r in rows if float(r["chainage_m"]) != 3030.0]
+    assert len(kept) == len(rows) - 2
+    with open(src / "manifest.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(kept)
+    capsys.readouterr()
+    res = process_survey(src, tmp_path / "masks", PARAMS, progress=False, segmenter=blue_sky)
+    err = capsys.readouterr().err
+    assert "1 hole(s)" in err and "3020-3040 m" in err
+    masks = read_masks(tmp_path / "masks" / "masks.parquet")
+    np.testing.assert_allclose(masks.chainage_m, first_run[1][0].masks.chainage_m, atol=1e-3)
+    i = int(np.argmin(np.abs(masks.chainage_m - 3030.0)))
+    assert np.all(masks.mask_el_deg[i] == 90.0)
+    assert np.all(masks.source[i] == BinSource.ASSUMED)
+    assert masks.provenance["gaps_closed_m"] == [[3020.0, 3040.0]]
+    # nothing is trusted in the hole, even at 89 deg; at the surveyed neighbours sky still is
+    az = np.arange(0.0, 360.0, 15.0)
+    assert not masks.trusted(np.full_like(az, 3030.0), az, 89.0).any()
+    assert masks.trusted(np.full_like(az, 3010.0), az, 89.0).any()
+    # the surveyed positions keep the masks their chunks computed
+    chunks = concat_masksets([read_masks(p) for p in sorted((tmp_path / "masks" / "chunks")
+                                                            .glob("*.parquet"))])  # fmt: skip
+    surveyed = np.array([k for k in range(masks.n_pos) if k != i])
+    np.testing.assert_array_equal(chunks.chainage_m, masks.chainage_m[surveyed])
+    np.testing.assert_array_equal(chunks.mask_el_deg, masks.mask_el_deg[surveyed])
+    # the hole's position lies on the track like the others
+    full = first_run[1][0].masks
+    np.testing.assert_allclose(masks.lat_deg[i], full.lat_deg[i], atol=1e-7)
+    np.testing.assert_allclose(masks.heading_deg[i], full.heading_deg[i], atol=1e-3)
+    assert res.bad_frames == ()
