@@ -406,6 +406,14 @@ def _check_track(rows: list[_Row], track: _Projects, max_offset_m: float) -> Non
             r.offset_m = float(off)
             if not math.isfinite(r.chainage_m):
                 r.chainage_m = float(ch)
+            elif abs(r.chainage_m - ch) > max_offset_m:
+                # an odometer typo or drift would put the frame's skyline elsewhere on the line
+                r.bad(
+                    f"chainage_m {r.chainage_m:.1f} disagrees with lat_deg/lon_deg, which lie at "
+                    f"chainage {ch:.1f} m of track {name!r} (limit max_offset_m="
+                    f"{max_offset_m:g}); correct one of them, or leave chainage_m empty to "
+                    "take it from the position"
+                )
             dist = math.hypot(off, alo)
             if not dist <= max_offset_m:
                 r.bad(

@@ -324,6 +324,22 @@ def test_off_track_positions(tmp_path: Path) -> None:
     assert len(Survey.load(root, track=track, max_offset_m=100.0).frames) == 6
 
 
+def test_chainage_disagreeing_with_the_position_is_refused(tmp_path: Path) -> None:
+    track = _straight_track()
+    root = _write(tmp_path / "s", n=3, positions=True)  # at 100, 110, 120 m (geodesic)
+    rows = _rows(root)
+    rows[2]["chainage_m"] = "150.0"  # left_000001 lies at 110 m: an odometer typo of 40 m
+    rows[3]["chainage_m"] = "113.0"  # right_000001 at 110 m: 3 m, within the 10 m limit
+    _save_rows(root, rows)
+    problems = _problems(root, track=track)
+    msg = _only(problems, "left_000001", "disagrees").message
+    assert "chainage_m 150.0" in msg and "chainage 110.0 m" in msg
+    assert len(problems) == 1
+    survey = Survey.load(root, track=track, on_error="skip")
+    assert "left_000001" not in list(survey.frames.frame_id)
+    assert survey.chainage_m[list(survey.frames.frame_id).index("right_000001")] == 113.0
+
+
 def test_chainage_outside_the_track(tmp_path: Path) -> None:
     @dataclass(frozen=True)
     class StandInTrack:  # anything with length_m and project() will do
