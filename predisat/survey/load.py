@@ -258,7 +258,7 @@ def _load_track(root: Path, path: Path, name: str | None) -> _Projects:
             [
                 SurveyProblem(
                     f"survey.yaml: track.path {path} cannot be loaded ({exc}); fix the "
-                    "path or pass track= to Survey.load"
+                    "path or give another track (CLI: --track FILE; Python: Survey.load(track=...))"
                 )
             ],
         ) from None
