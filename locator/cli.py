@@ -165,16 +165,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation or "G")
         start = args.start_chainage
-        header, sim_chainage = obs.header.approx_position_ecef_m, None
+        hx = obs.header.approx_position_ecef_m
+        header = hx if (hx == hx).all() and abs(hx).sum() > 0 else None  # RINEX: 0 0 0 if unknown
+        sim_chainage = None
         if start is None:
-            hx = obs.header.approx_position_ecef_m
-            if not (hx == hx).all() or abs(hx).sum() == 0:
+            if header is None:
                 raise CliError(
                     f"{args.obs}: no approximate position in the header; pass --start-chainage"
                 )
-            _track_check(path, hx, f"{args.obs} (its header's approximate position)",
+            _track_check(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
-            start = static_truth(hx, path)
+            start = static_truth(header, path)
     if not (args.masks or args.cutoff is not None or args.no_masks):
         raise CliError("no trust rule: pass --masks FILE, --cutoff DEG or --no-masks")
     cfg = _config(args)
@@ -242,18 +243,16 @@ def _check_start(
     sim_chainage_m: Any,
 ) -> None:
     """The start chainage must be on the track; a simulated train must enter the masks (a
-    start outside them is told)."""
-    import numpy as np
-
+    start outside them is told). ``header_ecef_m``: the RINEX header position, or None."""
     if not 0.0 <= start_m <= path.length_m:
         raise CliError(
             f"start chainage {start_m:.0f} m is off track {path.track.name!r} "
             f"(0-{path.length_m:.0f} m); give --start-chainage in metres along this track"
         )
     if masks is not None:
-        lo, hi = float(masks.chainage_m.min()) - _MASK_REACH_M, float(masks.chainage_m.max())
-        hi += _MASK_REACH_M
-        where = f"the masks of {args.masks} ({lo + _MASK_REACH_M:.0f}-{hi - _MASK_REACH_M:.0f} m)"
+        lo_m, hi_m = float(masks.chainage_m.min()), float(masks.chainage_m.max())
+        lo, hi = lo_m - _MASK_REACH_M, hi_m + _MASK_REACH_M
+        where = f"the masks of {args.masks} ({lo_m:.0f}-{hi_m:.0f} m)"
         if sim_chainage_m is not None and not (
             (sim_chainage_m >= lo) & (sim_chainage_m <= hi)
         ).any():
@@ -268,14 +267,13 @@ def _check_start(
                 "no satellite is trusted until the train is inside them",
                 file=sys.stderr,
             )
-    hx = None if header_ecef_m is None else np.asarray(header_ecef_m, float)
-    if args.start_chainage is not None and hx is not None and np.isfinite(hx).all() and hx.any():
+    if args.start_chainage is not None and header_ecef_m is not None:
         # The given start overrides the header, but a header far from the line usually means
         # the wrong observation file or track: say so rather than run silently.
         from locator.workflow import _track_check
 
         try:
-            _track_check(path, hx, f"{args.obs} (its header's approximate position)",
+            _track_check(path, header_ecef_m, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M)  # fmt: skip
         except ValueError as exc:
             print(f"locator run: warning: {exc}; running from --start-chainage as asked",
@@ -607,12 +605,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError, KeyError) as exc:
         print(f"locator: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as exc:
+        if not caused_by_interrupt(exc):  # a genuine SystemError
+            raise
         print("\nlocator: interrupted", file=sys.stderr)
         return 130
-    except SystemError as exc:
-        if caused_by_interrupt(exc):
-            print("\nlocator: interrupted",
-                  file=sys.stderr)  # fmt: skip
-            return 130
-        raise

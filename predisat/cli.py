@@ -566,23 +566,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Library errors are written to be read by a person: show them without a traceback.
         print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return _interrupted(args.command)
-    except SystemError as exc:
+    except (KeyboardInterrupt, SystemError) as exc:
         # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it.
-        if caused_by_interrupt(exc):
-            return _interrupted(args.command)
-        raise
-
-
-def _interrupted(command: str) -> int:
-    kept = (
-        "; finished chunks and segmented frames are kept: rerun the same command to resume"
-        if command == "process"
-        else ""
-    )
-    print(f"\npredisat {command}: interrupted{kept}", file=sys.stderr)
-    return 130
+        if not caused_by_interrupt(exc):  # a genuine SystemError
+            raise
+        kept = (
+            "; finished chunks and segmented frames are kept: rerun the same command to resume"
+            if args.command == "process"
+            else ""
+        )
+        print(f"\npredisat {args.command}: interrupted{kept}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
