@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from predisat import __version__
-from predisat.cliargs import (
+from predisat.cli.args import (
     caused_by_interrupt,
     cutoff_deg,
     finite_float,
@@ -31,8 +31,8 @@ class CliError(Exception):
 
 
 def _track(path: str | None, name: str | None) -> Any:
-    from predisat.cli import CliError as PredisatCliError
-    from predisat.cli import _load_track
+    from predisat.cli.app import CliError as PredisatCliError
+    from predisat.cli.app import _load_track
 
     try:
         return _load_track(path, name)
@@ -43,7 +43,7 @@ def _track(path: str | None, name: str | None) -> Any:
 def _masks(args: argparse.Namespace) -> Any:
     if args.masks is None:
         return None
-    from predisat.maskio import read_masks
+    from predisat.masks.fileformat import read_masks
 
     return read_masks(args.masks)
 
@@ -52,7 +52,7 @@ def _config(args: argparse.Namespace) -> Any:
     from locator.fde import LocatorConfig
     from locator.run import RunConfig
     from locator.runio import read_error_model
-    from predisat.interval import IntervalModel
+    from predisat.availability.interval import IntervalModel
 
     model = read_error_model(args.error_model) if args.error_model else IntervalModel()
     if args.k_sigma is not None:
@@ -77,8 +77,8 @@ def _progress(total: int, quiet: bool, desc: str) -> Any:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from locator.workflow import simulate_to_folder, stop_and_go
-    from predisat.availability_run import load_navigation, parse_time
-    from predisat.satellites import default_window
+    from predisat.availability.run import load_navigation, parse_time
+    from predisat.availability.satellites import default_window
     from predisat.synth.world import World, WorldSpec
 
     if args.world:
@@ -90,8 +90,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
             spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()))
         else:
-            from predisat.cli import CliError as PredisatCliError
-            from predisat.cli import _km_range
+            from predisat.cli.app import CliError as PredisatCliError
+            from predisat.cli.app import _km_range
 
             try:
                 lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
@@ -137,7 +137,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise CliError("--masks and --cutoff exclude each other; choose one trust rule")
     source: Any
     if args.sim:
-        from locator.simfile import SimRun
+        from locator.sim.simfile import SimRun
 
         sim = SimRun.read(args.sim)
         stored = Path(args.sim) / "world.npz"
@@ -181,7 +181,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg = _config(args)
     masks = _masks(args)
     if masks is not None:
-        from predisat.availability_run import check_masks_on_track
+        from predisat.availability.run import check_masks_on_track
 
         check_masks_on_track(masks, path.track, str(args.masks))
     _check_start(float(start), path, masks, args, header, sim_chainage)
@@ -203,7 +203,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 # What a user can do about satellites left out for a reason (locator.selection.Exclusion names,
-# predisat.ephemeris.Reason names, "fde").
+# predisat.gnss.ephemeris.Reason names, "fde").
 _EXCLUSION_HINTS = {
     "outside_coverage": "the masks do not cover where the train is",
     "NO_DATA": "no navigation record: give --nav files holding every satellite of the day",
@@ -291,8 +291,8 @@ _NAV_REACH_S = 7200.0
 
 def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
     """Observations outside the navigation data's span cannot be positioned at all."""
-    from predisat.availability_run import nav_span_gps_s
-    from predisat.gnss_time import gps_s_to_text as day
+    from predisat.availability.run import nav_span_gps_s
+    from predisat.gnss.timescale import gps_s_to_text as day
 
     lo, hi = nav_span_gps_s(ephemeris)
     t0, t1 = float(obs.gps_s.min()), float(obs.gps_s.max())
@@ -330,7 +330,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             )
     sim = None
     if args.sim:
-        from locator.simfile import SimRun
+        from locator.sim.simfile import SimRun
 
         sim = SimRun.read(args.sim)
     truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv, chainage_m=args.truth_chainage)
@@ -357,7 +357,7 @@ def _summary_text(s: dict[str, float]) -> str:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from locator.calibrate import sim_residuals, static_residuals
+    from locator.errorfit import sim_residuals, static_residuals
     from locator.workflow import calibrate_to_file
 
     if bool(args.sim) == bool(args.obs):
@@ -368,7 +368,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "gives 1e-4 per pair)"
         )
     if args.sim:
-        from locator.simfile import SimRun
+        from locator.sim.simfile import SimRun
 
         states = [s.strip() for s in args.states.split(",")]
         el, res = _stack([sim_residuals(SimRun.read(d), states) for d in args.sim])
@@ -449,9 +449,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     world = pipeline = None
     if args.from_predisat_demo:
-        from predisat.maskio import read_masks
+        from predisat.masks.fileformat import read_masks
         from predisat.synth.world import World
-        from predisat.track import demo_track
+        from predisat.track.map import demo_track
 
         d = Path(args.from_predisat_demo)
         world = World.load(d / "truth" / "world.npz", demo_track())

@@ -11,7 +11,8 @@ corrected term by term::
   c (-TauN + GammaN dt));
 * ``relativity_m`` - the periodic relativistic clock term, c * (-2 r.v / c^2) (equal to the
   ICD's F e sqrt(A) sin E for a Keplerian orbit; 0 for GLONASS, whose broadcast clock needs none
-  by convention, as in RTKLIB). :class:`predisat.ephemeris.Ephemeris` already includes this term
+  by convention, as in RTKLIB). :class:`predisat.gnss.ephemeris.Ephemeris` already includes this
+  term
   in its ``clock_s``; here it is split out for reporting, ``sat_clock_m + relativity_m`` is
   exactly ``c * clock_s``;
 * ``group_delay_m`` - c times the broadcast group delay of the signal used, which the broadcast
@@ -42,11 +43,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.ephemeris import Ephemeris, Reason, ValidityPolicy
 from predisat.fileerror import FileLineError
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
-from predisat.gnss_time import gps_s_to_datetime64
-from predisat.orbits import C_MPS
+from predisat.gnss.ephemeris import Ephemeris, Reason, ValidityPolicy
+from predisat.gnss.orbits import C_MPS
+from predisat.gnss.timescale import gps_s_to_datetime64
 
 __all__ = [
     "OMEGA_E_RADPS",
@@ -122,7 +123,7 @@ def group_delay_s(sat: str, code: str, tgd_s: float, aux26: float, data_source: 
         Satellite id and observation code.
     tgd_s, aux26, data_source : float
         Columns ``tgd_s``, ``aux26`` and ``aux20`` of the Keplerian record in use (see
-        :data:`predisat.rinex_nav.KEPLER_FIELDS`).
+        :data:`predisat.gnss.rinex_nav.KEPLER_FIELDS`).
 
     Returns
     -------
@@ -407,7 +408,7 @@ class SatelliteStates:
     freq_hz : ndarray, shape (n_sat,)
     reason : ndarray of str, shape (n_sat,)
         ``""`` when usable, otherwise why not (``"no pseudorange"``, an ephemeris
-        :class:`~predisat.ephemeris.Reason` name, ``"no group delay for C5X"``, ...).
+        :class:`~predisat.gnss.ephemeris.Reason` name, ``"no group delay for C5X"``, ...).
     """
 
     gps_s: float

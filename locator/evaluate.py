@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
-from predisat.interval import IntervalMode
+from predisat.availability.interval import IntervalMode
 
 __all__ = ["claim_losses", "exclusions", "score_run", "summarise"]
 

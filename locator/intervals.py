@@ -2,7 +2,8 @@
 
 Each SATHIA pair gives an interval from ``K +- k sigma_K`` (:func:`locator.sathia.solve_pairs`).
 How the pairs are combined depends on how many satellites are trusted
-(:class:`predisat.interval.IntervalMode`, the same rule as the availability prediction):
+(:class:`predisat.availability.interval.IntervalMode`, the same rule as the availability
+prediction):
 
 * >= 6 satellites, ``THREE_PAIRS``: three *independent* pairs (six distinct satellites) and the
   union (outermost bounds) of their intervals. The pairs are chosen from the geometry at the
@@ -10,7 +11,7 @@ How the pairs are combined depends on how many satellites are trusted
   that union short: each satellite is ranked by the interval it would give with an ideal
   partner, a pool of the 4 best "low" (``g = u . t`` small) and 4 best "high" satellites is
   searched exhaustively (420 sets of three disjoint pairs). This is the heuristic of
-  :mod:`predisat.interval`, so predicted and actual intervals use the same pairs.
+  :mod:`predisat.availability.interval`, so predicted and actual intervals use the same pairs.
 * 4-5, ``ALL_PAIRS``: every pair combination and their union.
 * 2-3, ``BEST_PAIR``: the pair with the shortest interval; a position with **no safety claim**.
 * < 2, ``NONE``: no interval.
@@ -19,7 +20,8 @@ The scheme ``"all"`` unites every pair instead (passive integrity: every measure
 poor ones only lengthen the interval).
 
 The error model ``sigma(el)**2 = a**2 + (b / sin el)**2`` is
-:class:`predisat.interval.ErrorModel`; :func:`fit_error_model` learns ``a`` and ``b`` from
+:class:`predisat.availability.interval.ErrorModel`; :func:`fit_error_model` learns ``a`` and ``b``
+from
 pseudorange residuals at known positions and :func:`overbound_error_model` inflates it until
 it bounds them in every elevation bin (``locator calibrate``).
 """
@@ -32,8 +34,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from locator.sathia import AntennaPath, PairSolution
-from predisat import interval as _interval
-from predisat.interval import ErrorModel, IntervalMode, interval_mode
+from predisat.availability import interval as _interval
+from predisat.availability.interval import ErrorModel, IntervalMode, interval_mode
 
 __all__ = [
     "PAIR_SCHEMES",
@@ -104,7 +106,7 @@ def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -
 def best_pair(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
     """The pair with the shortest predicted interval, indices shape (1, 2).
 
-    :func:`predisat.interval.best_pair` (the rule of the availability prediction).
+    :func:`predisat.availability.interval.best_pair` (the rule of the availability prediction).
     """
     ga = np.asarray(g, float)
     if ga.size < 2:
@@ -125,7 +127,8 @@ def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2
 
     Notes
     -----
-    :func:`predisat.interval.three_independent_pairs`, the pool heuristic of the availability
+    :func:`predisat.availability.interval.three_independent_pairs`, the pool heuristic of the
+    availability
     prediction (so predicted and actual intervals use the same pairs); exact for up to 8
     satellites.
     """

@@ -1,6 +1,6 @@
 """RINEX 2.10-2.11 and 3.00-3.05 observation files: pseudoranges and the other observables.
 
-A small hand-written reader (the same choice as :mod:`predisat.rinex_nav`): every observable
+A small hand-written reader (the same choice as :mod:`predisat.gnss.rinex_nav`): every observable
 becomes one ``(n_epoch, n_sat)`` float array with NaN where absent, epochs become ``gps_s``, and
 nothing is dropped silently. Anomalies the reader can live with - an unknown observation code,
 an unreadable value, an epoch cut short by the end of the file, a satellite of a system without
@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat.fileerror import FileLineError, read_text_lines
-from predisat.gnss_time import (
+from predisat.gnss.timescale import (
     BDT_MINUS_GPST_S,
     calendar_to_gps_s,
     gps_minus_utc_s,

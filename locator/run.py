@@ -42,9 +42,9 @@ from locator.heading_check import HeadingStatus, check_heading
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochSource
+from predisat.availability.interval import IntervalMode
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
-from predisat.interval import IntervalMode
-from predisat.masks import MaskSet
+from predisat.masks.maskset import MaskSet
 
 __all__ = ["TRUST_MODES", "Odometer", "RunConfig", "RunFlag", "flag_names", "run_locator"]
 

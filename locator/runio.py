@@ -26,10 +26,10 @@ from typing import Any
 import pandas as pd
 
 from locator import plots
-from locator.simfile import json_default, read_folder_table
+from locator.sim.simfile import json_default, read_folder_table
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
-from predisat.interval import ErrorModel, IntervalModel
+from predisat.availability.interval import ErrorModel, IntervalModel
 
 __all__ = [
     "ERROR_MODEL_FORMAT",

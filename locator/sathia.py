@@ -39,7 +39,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.track import TrackMap
+from predisat.track.map import TrackMap
 
 __all__ = [
     "AntennaPath",
@@ -288,7 +288,7 @@ def solve_pairs(
     pseudorange_m : array_like, shape (n_sat,)
         Corrected pseudoranges, metres (the receiver clock is common to all).
     sigma_m : array_like, shape (n_sat,)
-        Pseudorange sigmas, metres (e.g. :meth:`predisat.interval.ErrorModel.sigma_m`).
+        Pseudorange sigmas, metres (e.g. :meth:`predisat.availability.interval.ErrorModel.sigma_m`).
     pairs : array_like of int, shape (p, 2), optional
         Pairs to solve; default every pair.
     prior_m : float

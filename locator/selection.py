@@ -3,7 +3,7 @@
 The locator picks satellites before it knows exactly where it is: a satellite is trusted only
 if it is above the effective mask (mask + margin, plus an optional extra margin) in its azimuth
 bin at *every* position of the current interval ``[lo, hi]``, i.e. above
-:meth:`predisat.masks.MaskSet.worst_case` of that stretch (`../shared/docs/DESIGN.md`, "The
+:meth:`predisat.masks.maskset.MaskSet.worst_case` of that stretch (`../shared/docs/DESIGN.md`, "The
 trust decision").
 
 Approximation: the satellite's azimuth and elevation are taken at one point of the interval
@@ -28,9 +28,9 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from locator.sathia import AntennaPath
+from predisat.availability.satellites import azel
 from predisat.geodesy import enu_rotation
-from predisat.masks import MaskSet
-from predisat.satellites import azel
+from predisat.masks.maskset import MaskSet
 
 __all__ = ["Exclusion", "Selection", "direction_at", "select_satellites"]
 
@@ -138,7 +138,7 @@ def select_satellites(
     az_deg, el_deg : array_like, shape (..., n_sat)
         Satellite directions at a point of the interval (module docstring).
     valid : array_like of bool, shape (..., n_sat), optional
-        Ephemeris status OK (:attr:`predisat.ephemeris.EphemerisStatus.valid`); default all.
+        Ephemeris status OK (:attr:`predisat.gnss.ephemeris.EphemerisStatus.valid`); default all.
     extra_margin_deg : float
         Added to the masks' own margins, degrees >= 0.
     clip : bool

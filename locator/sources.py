@@ -4,7 +4,7 @@ The epoch loop (:func:`locator.run.run_locator`) asks a source, epoch by epoch, 
 corrected pseudoranges of the signals the receiver tracks, given an approximate antenna position
 (the centre of the predicted interval; the corrections need it to ~100 m). Two sources:
 
-* :class:`SimSource` - a :class:`locator.simfile.SimRun` of the synthetic world: every received
+* :class:`SimSource` - a :class:`locator.sim.simfile.SimRun` of the synthetic world: every received
   signal (LOS and NLOS alike: a receiver cannot tell them apart), with the truth kept for
   :mod:`locator.evaluate`, and an odometer with a scale error;
 * :class:`RinexSource` - a RINEX 2/3 observation file and broadcast navigation
@@ -30,8 +30,8 @@ from numpy.typing import NDArray
 
 from locator.corrections import RangeModel
 from locator.observations import Observations, PseudorangeSelection
-from locator.simfile import SignalState, SimRun
-from predisat.satellites import select_satellites
+from locator.sim.simfile import SignalState, SimRun
+from predisat.availability.satellites import select_satellites
 
 __all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource"]
 

@@ -22,12 +22,12 @@ from locator.fde import LocatorConfig
 from locator.run import RunConfig, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
-from locator.simfile import SimRun
-from locator.simulate import simulate_run
+from locator.sim.simfile import SimRun
+from locator.sim.simulate import simulate_run
 from locator.sources import EpochSource, SimSource
-from predisat.interval import IntervalModel
-from predisat.masks import MaskSet
-from predisat.trainrun import SpeedProfile
+from predisat.availability.interval import IntervalModel
+from predisat.availability.trainrun import SpeedProfile
+from predisat.masks.maskset import MaskSet
 
 __all__ = [
     "DEMO_RANGE_M",
@@ -126,7 +126,7 @@ def simulate_to_folder(
     )  # fmt: skip
     folder = sim.write(out, fmt)
     if masks_out:
-        from predisat.maskio import write_masks
+        from predisat.masks.fileformat import write_masks
         from predisat.synth.truth import true_masks
 
         tm = true_masks(world)
@@ -234,7 +234,7 @@ def calibrate_to_file(
     every elevation bin (:func:`locator.intervals.overbound_error_model`), ``"estimate"`` the
     least-squares fit itself.
     """
-    from locator.calibrate import binned_sigma, calibration_figure
+    from locator.errorfit import binned_sigma, calibration_figure
     from locator.intervals import fit_error_model, overbound_error_model
     from locator.runio import write_error_model
 
@@ -285,9 +285,9 @@ def demo(
     pandas.DataFrame
         One row per rule with :func:`locator.evaluate.summarise` figures.
     """
-    from predisat.satellites import default_ephemeris, default_window
+    from predisat.availability.satellites import default_ephemeris, default_window
     from predisat.synth.world import World, WorldSpec
-    from predisat.track import demo_track
+    from predisat.track.map import demo_track
 
     root = Path(out)
     if world is None:
@@ -297,7 +297,7 @@ def demo(
     t0 = float(default_window()[0] + hour_utc * 3600.0)
     log("locator demo 2/3: simulating the train run (LOS, multipath, NLOS, loss) and true masks")
     sim, sim_dir = simulate_to_folder(world, eph, root / "simulation", t0_gps_s=t0, seed=seed)
-    from predisat.maskio import read_masks
+    from predisat.masks.fileformat import read_masks
 
     truth_masks = read_masks(sim_dir / "true_masks.parquet")
     path = AntennaPath(world.track, float(sim.meta["antenna_height_m"]))

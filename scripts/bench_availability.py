@@ -6,7 +6,8 @@ peak RSS: counts only, then counts + interval at every ``--interval-every``-th e
 the target of issue #4: <= 10 s, <= 2 GB on 2 cores). Straightforward per-position float64
 references on a subset in the same run give the speed ratios and the agreement (counts:
 ``reference_counts``; interval: float64 az/el and the public pair functions of
-``predisat.interval``, one epoch at a time). Then the line's figures with masks, with no mask
+``predisat.availability.interval``, one epoch at a time). Then the line's figures with masks, with
+no mask
 and with a 15 deg cut-off (interval every ``--figures-every``-th epoch), next to LOCOPROL's
 line-144 figures (>= 4 satellites 95 % of the time, >= 6 satellites 60 %).
 
@@ -23,15 +24,14 @@ from typing import Any
 
 import numpy as np
 
-from predisat.availability import compute_availability, reference_counts
-from predisat.interval import (
+from predisat.availability.engine import compute_availability, reference_counts
+from predisat.availability.interval import (
     IntervalModel,
     best_pair,
     pair_half_length_m,
     three_independent_pairs,
 )
-from predisat.masks import MaskSet
-from predisat.satellites import (
+from predisat.availability.satellites import (
     LinePositions,
     SatellitePositions,
     TrustRule,
@@ -39,7 +39,8 @@ from predisat.satellites import (
     default_ephemeris,
     default_window,
 )
-from predisat.track import demo_track
+from predisat.masks.maskset import MaskSet
+from predisat.track.map import demo_track
 
 
 def synthetic_masks(spacing_m: float = 10.0, seed: int = 0) -> MaskSet:

@@ -94,11 +94,11 @@ def real_epochs(data: Path, repeat: int) -> tuple[int, float, float]:
 
 def simulated_epochs(repeat: int) -> tuple[int, float, float]:
     from locator.workflow import DEMO_RANGE_M, simulate_to_folder
-    from predisat.masks import MaskSet
-    from predisat.satellites import default_ephemeris, default_window
+    from predisat.availability.satellites import default_ephemeris, default_window
+    from predisat.masks.maskset import MaskSet
     from predisat.synth.truth import true_masks
     from predisat.synth.world import World, WorldSpec
-    from predisat.track import demo_track
+    from predisat.track.map import demo_track
 
     world = World.build(demo_track(), WorldSpec.mixed(*DEMO_RANGE_M, seed=0), 0)
     import tempfile

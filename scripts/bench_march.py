@@ -1,4 +1,5 @@
-"""Benchmark: the horizon ray march (``predisat.reconstruct._march_rays``) against its baseline.
+"""Benchmark: the horizon ray march (``predisat.reconstruct.carving._march_rays``) against its
+baseline.
 
 Usage::
 
@@ -13,7 +14,7 @@ and caps. Both kernels then march the same inputs, ``--repeat`` times, interleav
 machine is shared: the best time of each counts), and must agree bit for bit on every ray.
 
 Baseline: the kernel as it was until 2026-12-02 (commit 3645ffc), kept verbatim as the
-reference of the tests (``tests/predisat/reference_march.py``).
+reference of the tests (``tests/regression/reference_march.py``).
 One thread: BLAS, OpenMP and numba are pinned before numpy loads.
 """
 
@@ -36,11 +37,12 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' reference kernel
 
-import predisat.reconstruct as rc  # noqa: E402
-from predisat.pipeline import _decode_cache  # noqa: E402
-from predisat.reconstruct import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
-from predisat.survey import Survey  # noqa: E402
 from tests.predisat.reference_march import reference_march  # noqa: E402
+
+import predisat.reconstruct.carving as rc  # noqa: E402
+from predisat.reconstruct.batch import _decode_cache  # noqa: E402
+from predisat.reconstruct.carving import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
+from predisat.survey import Survey  # noqa: E402
 
 
 # ---------------------------------------------------------------------- inputs

@@ -9,7 +9,7 @@ Times, per frame and on one thread, interleaved and best of ``--repeat`` (the le
 run on a shared machine):
 
 * ``decode``: ``cv2.imread`` of the frame (the floor);
-* ``input``: the network's input blob (``predisat.skycnn.network_input``);
+* ``input``: the network's input blob (``predisat.sky.network.network_input``);
 * ``cv2.dnn forward, 1 pass``: the shipped network's forward pass on that blob;
 * ``SkyNet, 1 pass``: ``SkyNet.probability_tile`` with ``mirror=False`` (input, forward,
   sigmoid);
@@ -44,7 +44,7 @@ from typing import Any  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from predisat.skycnn import SkyNet, network_input  # noqa: E402
+from predisat.sky.network import SkyNet, network_input  # noqa: E402
 from predisat.survey import Survey  # noqa: E402
 
 

@@ -32,7 +32,7 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 
-from predisat.pipeline import DEFAULT_SEGMENTER, PipelineParams, process_survey  # noqa: E402
+from predisat.reconstruct.batch import DEFAULT_SEGMENTER, PipelineParams, process_survey  # noqa: E402
 from predisat.survey import Survey  # noqa: E402
 
 

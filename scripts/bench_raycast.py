@@ -1,6 +1,6 @@
 """Benchmark: open3d vs trimesh + Embree ray casting on the demo-sized synthetic world.
 
-Builds a 2 km mixed world along Belgian line 144 (``predisat.track.demo_track``), then casts
+Builds a 2 km mixed world along Belgian line 144 (``predisat.track.map.demo_track``), then casts
 the same rays with both backends:
 
 * a side camera frame's worth of pixel rays (the default pinhole camera, left mount, 45 deg
@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.camera import Mount, default_camera
+from predisat.camera.models import Mount, default_camera
 from predisat.geodesy import azel_to_enu
 from predisat.synth.raycast import make_caster
 from predisat.synth.truth import true_masks
 from predisat.synth.world import World, WorldSpec
-from predisat.track import demo_track
+from predisat.track.map import demo_track
 
 
 def _timed(fn, repeat: int = 3):

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.camera import CameraModel, Mount, default_camera
+from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
 from predisat.synth.sky import SKY_CONDITIONS, SkyModel
 from predisat.synth.world import World, WorldSpec
-from predisat.track import demo_track
+from predisat.track.map import demo_track
 
 
 def main() -> None:

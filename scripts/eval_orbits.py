@@ -1,6 +1,6 @@
 """Evaluate broadcast and TLE orbits against precise orbits and skyfield.
 
-Broadcast-derived positions (RINEX nav -> predisat.orbits) are compared with SP3 precise orbits
+Broadcast-derived positions (RINEX nav -> predisat.gnss.orbits) are compared with SP3 precise orbits
 at the SP3 epochs, for every matched file pair of ``../shared/data/gnss``, per constellation:
 3-D RMS and maximum, mean radial difference and clock RMS after removing each epoch's common
 offset (the SP3 reference clock). Only pairs the ephemeris trusts (healthy, inside the validity
@@ -8,7 +8,8 @@ window) are compared; distrusted satellites are counted.
 
 Broadcast orbits refer to the antenna phase centre (APC), SP3 to the centre of mass (CoM). Each
 figure is given twice: raw (APC vs CoM) and PCO-corrected, the broadcast position moved to the
-CoM with the IGS ANTEX block offsets of ``predisat.antenna_offsets`` in the nominal yaw-steering
+CoM with the IGS ANTEX block offsets of ``predisat.gnss.antenna_offsets`` in the nominal
+yaw-steering
 attitude (sun from ``predisat.synth.sky``). Satellites of a block without a published offset in
 that table (GPS IIIA, GLONASS-K) are left uncorrected and listed. The mean radial difference per
 satellite block shows which antenna offsets the broadcast orbits really refer to.
@@ -17,7 +18,7 @@ GLONASS detail: per-satellite RMS, radial / along-track / cross-track decomposit
 the inertial velocity), and the error as a function of the time from the record's reference
 epoch tb, also beyond the +-15 min validity window (every healthy record evaluated directly).
 
-TLE-derived azimuth/elevation (predisat.tle, sgp4) are compared with skyfield's for the same
+TLE-derived azimuth/elevation (predisat.gnss.tle, sgp4) are compared with skyfield's for the same
 TLEs, and with the broadcast orbits of the same day (to show what "coarse" means).
 
 Usage::
@@ -37,17 +38,17 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.antenna_offsets import (
+from predisat.geodesy import enu_rotation, enu_to_azel, geodetic_to_ecef
+from predisat.gnss.antenna_offsets import (
     BLOCK_PCO_M,
     block_pco_m,
     com_from_apc,
     satellite_block,
     sun_direction_ecef,
 )
-from predisat.ephemeris import Ephemeris, Reason
-from predisat.geodesy import enu_rotation, enu_to_azel, geodetic_to_ecef
-from predisat.gnss_time import calendar_to_gps_s, gps_s_to_utc_datetime64
-from predisat.orbits import glonass_state
+from predisat.gnss.ephemeris import Ephemeris, Reason
+from predisat.gnss.orbits import glonass_state
+from predisat.gnss.timescale import calendar_to_gps_s, gps_s_to_utc_datetime64
 
 PAIRS = [
     # (label, nav files, sp3 files)
@@ -390,7 +391,7 @@ def _orbit_lines(pairs: list[dict]) -> list[str]:
             f"{r['worst_sat']} / {r['worst_sat_pco']} | "
             f"{raw['mean_radial_m']:+.2f} / {cor['mean_radial_m']:+.2f} | {r['clock_rms_m']:.2f} |"
         )
-    lines += ["", "Left at the APC (no published offset in predisat.antenna_offsets):", ""]
+    lines += ["", "Left at the APC (no published offset in predisat.gnss.antenna_offsets):", ""]
     lines += [
         f"* {r['pair']} {r['system']}: {', '.join(r['no_pco'])}" for r in rows if r.get("no_pco")
     ]

@@ -30,13 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from predisat.camera import default_camera
-from predisat.masks import BinSource
-from predisat.reconstruct import Reconstruction, ReconstructionParams, Reconstructor
+from predisat.camera.models import default_camera
+from predisat.masks.maskset import BinSource
+from predisat.reconstruct.carving import Reconstruction, ReconstructionParams, Reconstructor
 from predisat.synth.raycast import make_caster
 from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import World, WorldSpec
-from predisat.track import demo_track
+from predisat.track.map import demo_track
 
 
 def sectors(heading_deg: np.ndarray, az_deg: np.ndarray) -> np.ndarray:

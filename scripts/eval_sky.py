@@ -10,7 +10,7 @@ Usage::
         --data ../shared/data/sky/fisheye_hk --out /tmp/eval_sky_out \
         --sheet docs/figures/sky_worst_cases.png
 
-Each folder is one of the layouts of :mod:`predisat.skyeval` (ADE20K, fisheye_hk, generic
+Each folder is one of the layouts of :mod:`predisat.sky.photoeval` (ADE20K, fisheye_hk, generic
 images/ + masks/, or a ``predisat synth`` output folder). For each it writes
 ``<name>_per_image.csv``, ``<name>_summary.md`` and ``<name>_worst.png`` into ``--out`` and prints
 the summary. The research-only photos are read in place; nothing of them is copied elsewhere
@@ -25,9 +25,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from predisat.segmentation import METHODS
-from predisat.skycnn import NET_METHODS, SkyNet, classifier_with_net
-from predisat.skyeval import evaluate_folder, worst_cases_sheet
+from predisat.sky.network import NET_METHODS, SkyNet, classifier_with_net
+from predisat.sky.photoeval import evaluate_folder, worst_cases_sheet
+from predisat.sky.segment import METHODS
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,7 +11,7 @@ multipath, NLOS through reflections, loss) is located with active integrity unde
 * ``none``    - every received signal;
 * ``cutoff15``- a flat 15 deg elevation cut-off.
 
-The error model is learned first (``locator.calibrate``) from six runs in a separate
+The error model is learned first (``locator.errorfit``) from six runs in a separate
 calibration world (``WorldSpec.mixed`` over km 12.3-14.1, seed 99), direct signals only, and
 used by every configuration. Pair intervals are ``+- k sigma_K`` with ``k = 3.89`` (a 1e-4
 two-sided Gaussian risk per pair, the risk the source claims for its ``+- 2 xi``); ``masks_k2``
@@ -44,24 +44,24 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from locator.calibrate import sim_residuals
+from locator.errorfit import sim_residuals
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
 from locator.intervals import fit_error_model
-from locator.multipath import ReflectorIndex
 from locator.run import RunConfig, run_locator
 from locator.runio import read_error_model, write_error_model
 from locator.sathia import AntennaPath
-from locator.simfile import SignalState
-from locator.simulate import simulate_run
+from locator.sim.multipath import ReflectorIndex
+from locator.sim.simfile import SignalState
+from locator.sim.simulate import simulate_run
 from locator.sources import SimSource
-from predisat.interval import IntervalModel
-from predisat.masks import MaskSet
-from predisat.satellites import default_ephemeris, default_window
+from predisat.availability.interval import IntervalModel
+from predisat.availability.satellites import default_ephemeris, default_window
+from predisat.availability.trainrun import SpeedProfile
+from predisat.masks.maskset import MaskSet
 from predisat.synth.truth import TrueMasks, true_masks
 from predisat.synth.world import World, WorldSpec
-from predisat.track import demo_track
-from predisat.trainrun import SpeedProfile
+from predisat.track.map import demo_track
 
 REPO = Path(__file__).resolve().parents[1]
 MARGIN_DEG = 1.0
@@ -156,7 +156,7 @@ def _get_world(name: str) -> tuple[World, MaskSet, MaskSet | None, ReflectorInde
     if name not in _STATE["worlds"]:
         w: tuple[World, MaskSet, MaskSet | None]
         if name == "demo":
-            from predisat.maskio import read_masks
+            from predisat.masks.fileformat import read_masks
 
             d = Path(_STATE["demo"])
             world = World.load(d / "truth" / "world.npz", demo_track())

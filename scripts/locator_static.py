@@ -4,7 +4,7 @@ GEONET stations 0759 and 3040 (RTKLIB test data, 2005-04-02 00:00-00:59:30, 120 
 30 s, GPS C1, ``../shared/data/gnss/rtklib``). A straight virtual track, 4 km long, is laid
 through each station's known antenna position (0759: GEONET coordinates; 3040: its header
 position) at several headings; the station's chainage is the truth (2000 m). The error model
-is learned on the *other* station (``locator.calibrate.static_residuals``), so no figure uses
+is learned on the *other* station (``locator.errorfit.static_residuals``), so no figure uses
 the data it was fitted on; ``--bound`` chooses the overbound (default, as ``locator
 calibrate``) or the least-squares estimate. Every received GPS signal above the horizon is
 used (open sky: no mask), active integrity, the odometer reads zero (the train stands still).
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from locator.calibrate import static_residuals
 from locator.corrections import RangeModel
+from locator.errorfit import static_residuals
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
 from locator.intervals import fit_error_model, overbound_error_model
@@ -37,9 +37,9 @@ from locator.observations import Observations
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
 from locator.sources import RinexSource
+from predisat.availability.interval import IntervalModel
 from predisat.geodesy import LocalFrame, ecef_to_geodetic
-from predisat.interval import IntervalModel
-from predisat.track import TrackMap
+from predisat.track.map import TrackMap
 
 REPO = Path(__file__).resolve().parents[1]
 GEONET_0759_ECEF_M = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET

@@ -11,7 +11,7 @@ with another seed, same recipe) and reports, per sector (cross-track, along-trac
 
 once with the calibrated margins and once with the margins the masks carry as processed
 (``MaskSet.margin_deg``), and for both splits (A -> B and B -> A). Directions are the
-(position, bin, elevation) triples of :mod:`predisat.evaluate` (0.1 deg elevation grid,
+(position, bin, elevation) triples of :mod:`predisat.reconstruct.evaluate` (0.1 deg elevation grid,
 counted analytically per bin).
 
 Usage::
@@ -41,7 +41,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from predisat.evaluate import (
+from predisat.masks.maskset import MaskSet
+from predisat.reconstruct.evaluate import (
     EL_STEP_DEG,
     SECTORS,
     Comparison,
@@ -51,7 +52,6 @@ from predisat.evaluate import (
     load_truth,
     trust_counts,
 )
-from predisat.masks import MaskSet
 
 __all__ = [
     "SplitSurvey",
@@ -75,14 +75,14 @@ def render(
 ) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
-    :func:`predisat.cli.render_demo_survey`, as ``predisat demo --camera CAMERA --seed SEED``.
+    :func:`predisat.cli.app.render_demo_survey`, as ``predisat demo --camera CAMERA --seed SEED``.
 
     Returns
     -------
     Path
         The survey folder (``out_dir / "survey"``).
     """
-    from predisat.cli import render_demo_survey
+    from predisat.cli.app import render_demo_survey
 
     synth = render_demo_survey(
         out_dir, seed=seed, camera=camera, workers=workers, progress=False, spacing_m=spacing_m
@@ -140,7 +140,7 @@ def _masks_path(root: Path) -> Path:
 
 def load_split_survey(root: Path) -> SplitSurvey:
     """Masks (``root/masks``) and truth (``root/truth``) of one generator output folder."""
-    from predisat.maskio import read_masks
+    from predisat.masks.fileformat import read_masks
 
     masks: MaskSet = read_masks(_masks_path(root))
     comp = compare(masks, load_truth(root))
@@ -211,7 +211,8 @@ def split_report(
 ) -> dict[str, Any]:
     """Calibrate on ``calib`` (by sector and source), evaluate on ``test``.
 
-    ``confidence`` is that of :func:`predisat.evaluate.calibrate_margin` (None: in-sample
+    ``confidence`` is that of :func:`predisat.reconstruct.evaluate.calibrate_margin` (None:
+    in-sample
     point estimate). ``offset_deg`` lowers every mask of both surveys by that much before
     calibrating (a stress test: masks that need a margin).
 

@@ -14,7 +14,7 @@ Usage::
 * ``flip``: the ensemble as shipped against the ensemble whose network averages its
   probability over the image and its mirror (test-time flip).
 
-Folders use the layouts of :mod:`predisat.skyeval`; nothing is written.
+Folders use the layouts of :mod:`predisat.sky.photoeval`; nothing is written.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from predisat.segmentation import SkyOptions, segment_sky
-from predisat.skycnn import SkyEnsemble, SkyNet
-from predisat.skyeval import find_pairs, sky_iou
-from predisat.skymodel import SkyClassifier, guided_filter
+from predisat.sky.network import SkyEnsemble, SkyNet
+from predisat.sky.perceptron import SkyClassifier, guided_filter
+from predisat.sky.photoeval import find_pairs, sky_iou
+from predisat.sky.segment import SkyOptions, segment_sky
 
 
 def _pairs(data: Path) -> tuple[bool, list[tuple[np.ndarray, np.ndarray]]]:

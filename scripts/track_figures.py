@@ -1,6 +1,6 @@
 """Measure the demo track map against pyproj and draw the figure of ``docs/track-map.md``.
 
-On ``predisat.track.demo_track()`` (Belgian line 144, track A) it measures: the time to build
+On ``predisat.track.map.demo_track()`` (Belgian line 144, track A) it measures: the time to build
 the map (fit, arc length, projection index); the length of the smooth axis against the WGS84
 geodesic length of the source polyline (pyproj); the largest horizontal deviation between fit
 and polyline; the round trip ``project(position_at(s))`` on 10 001 chainages (largest chainage
@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pyproj import Geod
 
-from predisat.track import TrackMap, demo_track
+from predisat.track.map import TrackMap, demo_track
 
 GEOD = Geod(ellps="WGS84")
 N_ROUND_TRIP = 10001

@@ -12,10 +12,11 @@ Usage::
    party is used, so the model may ship with the project. Surveys already present in
    ``--work`` are reused (delete them to regenerate).
 2. **Samples**: per frame, ``--pixels`` pixels drawn at random (seeded) from the
-   working-resolution feature image (:mod:`predisat.skyfeatures`), half of them within a few
+   working-resolution feature image (:mod:`predisat.sky.features`), half of them within a few
    pixels of the sky boundary where the decision is hard. Labels: 255 sky and 128 thin
    L-band-transparent structure are sky, 0 is obstacle.
-3. **Model**: :func:`predisat.skymodel.train_sky_model` (a small numpy perceptron). The runs in
+3. **Model**: :func:`predisat.sky.perceptron.train_sky_model` (a small numpy perceptron). The runs
+   in
    ``VALIDATION_RUNS`` are held out for the accuracy written to the model card.
 4. **Output**: the model ``sky_mlp.json`` (weights and card: data, seeds, features, held-out
    accuracy) in ``--out``.
@@ -40,8 +41,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from predisat.camera import default_camera
-from predisat.skymodel import (
+from predisat.camera.models import default_camera
+from predisat.sky.perceptron import (
     DEFAULT_MODEL,
     SkyClassifier,
     label_to_sky,
@@ -139,7 +140,7 @@ def generate(run: Run, work: Path, size_px: tuple[int, int], progress: bool = Tr
     """Render ``run`` into ``work/run.name`` unless a complete survey is already there."""
     from predisat.synth.generate import generate_survey
     from predisat.synth.world import WorldSpec
-    from predisat.track import demo_track
+    from predisat.track.map import demo_track
 
     out = work / run.name
     if (out / "truth" / "frames.csv").is_file():
@@ -246,7 +247,7 @@ def samples(
 
 def validate(clf: SkyClassifier, runs: tuple[Run, ...], work: Path) -> dict[str, float]:
     """Full-resolution pixel accuracy and pooled sky IoU of the model alone and of segment_sky."""
-    from predisat.segmentation import SkyOptions, segment_sky
+    from predisat.sky.segment import SkyOptions, segment_sky
 
     acc_raw, inter, union, inter_seg, union_seg = [], 0, 0, 0, 0
     for run in runs:
@@ -280,7 +281,7 @@ def train(args: argparse.Namespace) -> int:
           flush=True)
     card = {
         "description": "PREDISAT sky classifier: multilayer perceptron on per-pixel "
-                       "features (predisat.skyfeatures), trained by scripts/train_sky.py on "
+                       "features (predisat.sky.features), trained by scripts/train_sky.py on "
                        "synthetic frames only (predisat.synth.generate on the demo track).",
         # unset fields left out: the card of a default run reads as before they existed
         "training_runs": [_run_dict(r) for r in args.train_runs],

@@ -58,7 +58,7 @@ with training seed 1.
    Nothing else is used: no third-party photo, so the network may ship with the project.
 2. **Model**: a U-Net (:class:`UNet`, channels ``--channels``, two 3x3 convolutions with batch
    normalisation per level, bilinear upsampling) on 4 input channels (B, G, R and the row
-   position, :func:`predisat.skycnn.network_input`). Loss: binary cross-entropy (weighted
+   position, :func:`predisat.sky.network.network_input`). Loss: binary cross-entropy (weighted
    ``obstacle_weight`` times on the obstacle share of each pixel) plus half a soft-IoU term;
    AdamW with a one-cycle schedule; augmentation: flips, gain and white-balance jitter, grey
    images, random crops. Every random draw is seeded; on one machine two runs give
@@ -344,7 +344,7 @@ def load_onnx_weights(net: Any, path: Path) -> None:
 
 
 def _blob(xb: np.ndarray) -> Any:
-    """``predisat.skycnn.network_input`` for a batch already at the network's size."""
+    """``predisat.sky.network.network_input`` for a batch already at the network's size."""
     import torch
 
     x = torch.from_numpy(xb).permute(0, 3, 1, 2).float() / 255.0 - 0.5
@@ -448,7 +448,7 @@ def export_agreement(net: Any, net_path: Path, data: dict[str, Any], n: int = 16
     """Largest |logit| difference between PyTorch and the exported file run by cv2.dnn."""
     import torch
 
-    from predisat.skycnn import SkyNet
+    from predisat.sky.network import SkyNet
 
     onnx = SkyNet(net_path, data["x"].shape[1])
     with torch.no_grad():
@@ -459,7 +459,7 @@ def export_agreement(net: Any, net_path: Path, data: dict[str, Any], n: int = 16
 
 def pooled_iou(net_path: Path, input_px: int, data: dict[str, Any]) -> float:
     """Pooled sky IoU of the exported network (through cv2.dnn) on squares with soft labels."""
-    from predisat.skycnn import SkyNet
+    from predisat.sky.network import SkyNet
 
     net = SkyNet(net_path, input_px)
     inter = union = 0
@@ -551,7 +551,7 @@ def main(argv: list[str] | None = None) -> int:
         "format": "predisat-sky-unet",
         "version": 1,
         "input_px": size,
-        "input": "BGR / 255 - 0.5 and the row position 0-1 (predisat.skycnn.network_input)",
+        "input": "BGR / 255 - 0.5 and the row position 0-1 (predisat.sky.network.network_input)",
         "output": "sky logit, input_px x input_px",
         "description": "PREDISAT sky segmentation U-Net, trained by scripts/train_sky_cnn.py on "
                        "procedural photos (predisat.synth.photos) and rendered survey frames "

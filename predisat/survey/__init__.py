@@ -5,7 +5,7 @@ Layout (see ``docs/survey-format.md``)::
     survey.yaml      format, version, direction of travel, antenna height, track, cameras
     manifest.csv     one row per frame: frame_id, image, side, gps_s, chainage_m | lat/lon/h
     images/...       the frames (any format PIL and OpenCV read; the writer makes JPEG)
-    calib/...        camera calibrations (OpenCV FileStorage YAML, see predisat.camera)
+    calib/...        camera calibrations (OpenCV FileStorage YAML, see predisat.camera.models)
 
 :meth:`Survey.load` validates everything and reports every problem with its frame and manifest
 line; :class:`SurveyWriter` writes a survey frame by frame (used by the synthetic generator).

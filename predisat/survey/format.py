@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.camera import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -47,7 +47,7 @@ OTHER_SIDE = {"left": "right", "right": "left"}
 
 
 class _Projects(Protocol):
-    """What the loader needs from a track map (``predisat.track.TrackMap``)."""
+    """What the loader needs from a track map (``predisat.track.map.TrackMap``)."""
 
     @property
     def length_m(self) -> float: ...

@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from predisat.camera import CalibrationError, CameraModel, Mount
+from predisat.camera.models import CalibrationError, CameraModel, Mount
 from predisat.survey.format import (
     DIRECTIONS,
     FORMAT,
@@ -246,7 +246,7 @@ def _read_header(root: Path) -> dict[str, Any]:
 
 
 def _load_track(root: Path, path: Path, name: str | None) -> _Projects:
-    from predisat.track import TrackMap
+    from predisat.track.map import TrackMap
 
     try:
         if path.suffix.lower() in (".geojson", ".json"):

@@ -15,7 +15,7 @@ import yaml
 from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
-from predisat.camera import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount
 from predisat.survey.format import DIRECTIONS, FORMAT, FRAME_ID_RE, MANIFEST_COLUMNS, SIDES, VERSION
 
 __all__ = ["SurveyWriter"]

@@ -33,9 +33,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.atomic import atomic_path, write_bytes_atomic
-from predisat.camera import CameraModel, Mount, default_camera
+from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.geodesy import enu_to_azel
-from predisat.gnss_time import calendar_to_gps_s, gps_minus_utc_s
+from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
 from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
 from predisat.synth.sky import SKY_CONDITIONS, SkyModel, sun_azel, sun_direction_enu
 from predisat.synth.truth import true_masks
@@ -172,7 +172,7 @@ def generate_survey(
     spacing_m : float
         Distance between antenna positions.
     camera : CameraModel, optional
-        Both cameras' calibration (default: :func:`predisat.camera.default_camera`).
+        Both cameras' calibration (default: :func:`predisat.camera.models.default_camera`).
     pitch_deg : float
         Camera pitch above the horizontal.
     antenna_height_m, speed_mps : float
@@ -242,7 +242,7 @@ def generate_survey(
     f_az, f_el, _ = enu_to_azel(sun_frame)
     cond, sky_id = sky_schedule(sky, s, seed)
 
-    from predisat.trackio import write_geojson
+    from predisat.track.readers import write_geojson
 
     with atomic_path(survey_dir / "track.geojson") as tmp:
         write_geojson(track, tmp)

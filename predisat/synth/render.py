@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.camera import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount
 from predisat.synth.raycast import Caster, make_caster
 from predisat.synth.sky import SkyModel, fbm
 from predisat.synth.world import MATERIALS

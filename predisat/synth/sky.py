@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtri
 
-from predisat.gnss_time import gps_s_to_utc_datetime64
+from predisat.gnss.timescale import gps_s_to_utc_datetime64
 
 __all__ = [
     "SKY_CONDITIONS",

@@ -503,12 +503,12 @@ def ideal_frames(
 
     Returns
     -------
-    list of predisat.reconstruct.FrameView
+    list of predisat.reconstruct.carving.FrameView
         ``n * len(mounts)`` frames, position by position, in the order of ``mounts``; frame id
         chainage and side initial (``"3000l"``).
     """
-    from predisat.camera import Mount
-    from predisat.reconstruct import FrameView
+    from predisat.camera.models import Mount
+    from predisat.reconstruct.carving import FrameView
 
     if mounts is None:
         mounts = {side: Mount.default(side) for side in ("left", "right")}

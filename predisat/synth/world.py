@@ -428,7 +428,7 @@ class World:
         if track is None:
             if arrays["track_lat_deg"].size < 2:
                 raise ValueError(f"{path}: the track was not stored; pass track= to World.load")
-            from predisat.track import TrackMap
+            from predisat.track.map import TrackMap
 
             track = TrackMap.from_latlon(
                 arrays["track_lat_deg"], arrays["track_lon_deg"], arrays["track_h_m"],

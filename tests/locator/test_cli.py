@@ -18,9 +18,9 @@ import pytest
 from locator.cli import main
 from locator.runio import read_error_model, read_run
 from locator.sathia import AntennaPath
-from locator.simfile import SignalState, SimRun
+from locator.sim.simfile import SignalState, SimRun
 from locator.workflow import _track_check
-from predisat.track import demo_track
+from predisat.track.map import demo_track
 from tests.locator._scene import canyon_world
 
 
@@ -161,8 +161,8 @@ def _virtual_track(path):
 def test_rinex_run_refuses_a_wrong_track_or_masks_and_tells_skipped_epochs(
     test_data, tmp_path, capsys
 ):
-    from predisat.maskio import write_masks
-    from predisat.masks import MaskSet
+    from predisat.masks.fileformat import write_masks
+    from predisat.masks.maskset import MaskSet
 
     track = _virtual_track(tmp_path / "virtual.csv")
     obs = test_data / "gnss_obs" / "07590920_10ep.05o"
@@ -222,7 +222,7 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
 
 
 def test_start_and_truth_chainages_off_the_track_or_masks_are_refused(sim_dir, tmp_path, capsys):
-    from predisat.maskio import read_masks, write_masks
+    from predisat.masks.fileformat import read_masks, write_masks
 
     sim = SimRun.read(sim_dir)
     length_m = AntennaPath(canyon_world().track, 4.0).length_m

@@ -19,8 +19,8 @@ from locator.corrections import (
     troposphere_delay_m,
 )
 from locator.observations import read_rinex_obs
-from predisat.gnss_time import calendar_to_gps_s
-from predisat.rinex_nav import read_rinex_nav
+from predisat.gnss.rinex_nav import read_rinex_nav
+from predisat.gnss.timescale import calendar_to_gps_s
 
 C = 299792458.0
 NAV = "gnss_obs/07590920_0000_0200.05n"

@@ -8,7 +8,7 @@ import pytest
 from locator.fde import FixFlag, LocatorConfig, locate
 from locator.sathia import AntennaPath
 from locator.selection import direction_at
-from predisat.interval import ErrorModel, IntervalMode, IntervalModel
+from predisat.availability.interval import ErrorModel, IntervalMode, IntervalModel
 from tests.locator._scene import random_sky, ranges, sky, straight_path
 
 CFG = LocatorConfig(model=IntervalModel(ErrorModel(1.0, 1.0), k_sigma=2.0), window_m=500.0)
@@ -98,7 +98,7 @@ def test_passive_uses_all_pairs_and_is_wider(path):
 
 
 def test_real_constellation_from_embedded_day(path):
-    from predisat.satellites import default_ephemeris, default_window
+    from predisat.availability.satellites import default_ephemeris, default_window
 
     eph = default_ephemeris()
     t = default_window(3600.0)[[5, 17]]

@@ -17,7 +17,7 @@ from locator.intervals import (
     union_interval,
 )
 from locator.sathia import PairSolution, solve_pairs
-from predisat.interval import ErrorModel, IntervalMode
+from predisat.availability.interval import ErrorModel, IntervalMode
 from tests.locator._scene import random_sky, ranges, sky, straight_path
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from locator.observations import RinexObsError, read_rinex_obs
-from predisat.gnss_time import calendar_to_gps_s
+from predisat.gnss.timescale import calendar_to_gps_s
 
 OBS2 = "gnss_obs/07590920_10ep.05o"
 SEPT = "gnss_obs/rinex_obs_z_tracking.rnx"

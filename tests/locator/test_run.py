@@ -13,8 +13,8 @@ import pytest
 from locator.fde import FixFlag, LocatorConfig
 from locator.run import RunConfig, RunFlag, flag_names, run_locator
 from locator.sources import EpochData
-from predisat.interval import ErrorModel, IntervalModel
-from predisat.masks import MaskSet
+from predisat.availability.interval import ErrorModel, IntervalModel
+from predisat.masks.maskset import MaskSet
 from tests.locator._scene import ranges, sky, straight_path
 
 SIGMA_M = 1.0

@@ -16,7 +16,7 @@ from locator.runio import (
     write_figures,
     write_run,
 )
-from predisat.interval import ErrorModel, IntervalModel
+from predisat.availability.interval import ErrorModel, IntervalModel
 
 
 def epochs() -> pd.DataFrame:

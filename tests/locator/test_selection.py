@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from locator.selection import Exclusion, direction_at, select_satellites
-from predisat.masks import MaskSet
+from predisat.masks.maskset import MaskSet
 from tests.locator._scene import sky, straight_path
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from predisat.fileerror import FileLineError, read_text_lines
-from predisat.rinex_nav import RinexError, read_rinex_nav
+from predisat.gnss.rinex_nav import RinexError, read_rinex_nav
 
 
 def test_plain_and_gzip_give_the_same_lines(tmp_path: Path) -> None:

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from predisat.camera import CameraModel
+from predisat.camera.models import CameraModel
 from predisat.survey import Survey
 from predisat.synth.generate import (
     contact_sheet,
@@ -21,7 +21,7 @@ from predisat.synth.render import RenderOptions
 from predisat.synth.sky import sun_azel
 from predisat.synth.truth import TrueMasks
 from predisat.synth.world import World
-from predisat.track import demo_track
+from predisat.track.map import demo_track
 
 CAM = CameraModel.pinhole_from_fov(160, 120, 74.0, dist=(-0.05, 0.01, 0.0, 0.0, 0.0))
 

@@ -11,8 +11,7 @@ from numpy.typing import NDArray
 
 from predisat.synth.raycast import BACKENDS, Hits, make_caster
 from predisat.synth.world import World, WorldSpec, material_id
-
-from .test_world import straight_track
+from tests.predisat.synth.test_world import straight_track
 
 
 @dataclass(frozen=True)

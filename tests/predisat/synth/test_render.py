@@ -11,7 +11,7 @@ import trimesh
 from scipy import ndimage
 from shapely.geometry import MultiPoint, Point
 
-from predisat.camera import CameraModel
+from predisat.camera.models import CameraModel
 from predisat.synth.render import (
     LABEL_OBSTACLE,
     LABEL_SKY,

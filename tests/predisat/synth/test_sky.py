@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from predisat.geodesy import azel_to_enu
-from predisat.gnss_time import calendar_to_gps_s
+from predisat.gnss.timescale import calendar_to_gps_s
 from predisat.synth.sky import SkyModel, fbm, sun_azel, sun_direction_enu
 
 

@@ -16,8 +16,7 @@ from predisat.synth.truth import (
     true_masks,
 )
 from predisat.synth.world import Stretch, World, WorldSpec
-
-from .test_world import LAT0, LON0, straight_track
+from tests.predisat.synth.test_world import LAT0, LON0, straight_track
 
 AZIMUTH = 60.0  # of the straight test track
 WALL = {"height_m": 30.0, "distance_m": 10.0, "roughness_m": 0.0, "batter": 0.0}
@@ -207,7 +206,7 @@ def test_default_positions_every_10_m(small_mixed: World) -> None:
 def test_ideal_sky_mask_is_the_rendered_label(small_mixed: World) -> None:
     # the renderer labels frames through its own casters (thin structures are sky); the ideal
     # mask must agree pixel for pixel, for both sides and both directions of travel
-    from predisat.camera import CameraModel, Mount
+    from predisat.camera.models import CameraModel, Mount
     from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
     from predisat.synth.sky import SkyModel
 

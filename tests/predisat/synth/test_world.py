@@ -19,7 +19,7 @@ from predisat.synth.world import (
     WorldSpec,
     material_id,
 )
-from predisat.track import TrackMap
+from predisat.track.map import TrackMap
 
 LAT0, LON0, H0 = 50.55, 4.70, 150.0
 

@@ -1,0 +1,583 @@
+"""Availability of trusted satellites along a line over a time window.
+
+:func:`compute_availability` counts, for every position of a line and every epoch, the
+satellites a train may trust (ephemeris status ``OK`` and the
+:class:`~predisat.availability.satellites.
+TrustRule`: mask plus margin, flat cut-off, or horizon), and predicts the SATHIA confidence
+interval (:mod:`predisat.availability.interval`). :class:`Availability` holds the result and
+derives the
+figures of a report: shares of time with >= 2, >= 4, >= 6 satellites per position and over the
+line, the longest stretches below 4 satellites (in metres at one epoch, in seconds at one
+position), interval statistics and the cross-track opening angle, with CSV, Parquet and GeoJSON
+writers.
+
+The dense problem, ``(n_pos, n_epoch, n_sat)`` (line 144 for a day at 30 s with every
+constellation: 1 400 x 2 880 x 110), is never materialised. Satellite positions depend on the
+epoch only; each chunk of positions turns them into local east/north/up components with three
+small matrix products in float32 (coordinates taken relative to the line's centre, so float32
+keeps elevations to about 1e-5 deg), compares ``up`` with ``sin(threshold) * range`` instead of
+computing elevations, and reduces to counts on the fly. Satellite-epoch pairs that are below the
+lowest threshold everywhere on the line (checked at the line's centre with a bound on how much
+a direction can change across the line) are dropped first. Chunks run in threads (numpy releases
+the GIL in these operations). See ``docs/availability.md`` and ``scripts/bench_availability.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from predisat.availability.interval import IntervalModel, predicted_interval
+from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
+from predisat.geodesy import enu_rotation
+from predisat.gnss.timescale import gps_s_to_utc_text
+
+__all__ = [
+    "THRESHOLDS",
+    "Availability",
+    "compute_availability",
+    "longest_run",
+    "reference_counts",
+]
+
+THRESHOLDS = (2, 4, 6)
+"""Satellite counts whose shares of time are reported (>= 2, >= 4, >= 6)."""
+
+_EARTH_RADIUS_M = 6.371e6
+_MIN_SAT_RANGE_M = 1.9e7  # a GNSS satellite (MEO/GEO) above the horizon is at least this far
+
+
+# --------------------------------------------------------------------------- result
+@dataclass(frozen=True)
+class Availability:
+    """Trusted satellites along a line over a time window.
+
+    Attributes
+    ----------
+    positions : LinePositions
+        ``n_pos`` antenna positions.
+    gps_s : ndarray, shape (n_epoch,)
+    sats : tuple of str
+        The satellites considered (after constellation selection).
+    rule : str
+        The trust rule's label (``"masks"``, ``"cutoff 15 deg"``, ``"no mask"``).
+    count : ndarray of uint8, shape (n_pos, n_epoch)
+        Number of trusted satellites.
+    interval_m : ndarray of float32, shape (n_pos, n_epoch), or None
+        Predicted SATHIA interval length (NaN with < 2 satellites and at epochs skipped by
+        ``interval_every``), when computed.
+    sensitivity : ndarray of float32, shape (n_pos, n_epoch), or None
+        Along-track geometry of the best pair: ``max |g_i - g_j|`` over trusted pairs, where
+        ``g = u . t`` (unit vector to the satellite dotted with the track tangent); metres of
+        range difference per metre of chainage, in [0, 2]. NaN with < 2 satellites.
+    opening_angle_deg : ndarray, shape (n_pos,)
+        Cross-track opening angle: 180 deg minus the left and right mask elevations.
+    provenance : dict
+        Sources, options and timings.
+    """
+
+    positions: LinePositions
+    gps_s: NDArray
+    sats: tuple[str, ...]
+    rule: str
+    count: NDArray
+    interval_m: NDArray | None
+    sensitivity: NDArray | None
+    opening_angle_deg: NDArray
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def chainage_m(self) -> NDArray:
+        return self.positions.chainage_m
+
+    @property
+    def step_s(self) -> float:
+        """Epoch spacing (median), seconds."""
+        return float(np.median(np.diff(self.gps_s))) if len(self.gps_s) > 1 else 0.0
+
+    @property
+    def cell_length_m(self) -> NDArray:
+        """Length of line each position stands for (half-way to its neighbours), (n_pos,)."""
+        return _cell_extent(self.chainage_m)[1] - _cell_extent(self.chainage_m)[0]
+
+    # ------------------------------------------------------------------ shares
+    def share_at_least(self, n: int) -> NDArray:
+        """Share of epochs with at least ``n`` trusted satellites, per position, (n_pos,)."""
+        return np.mean(self.count >= n, axis=1)
+
+    def line_share_at_least(self, n: int) -> float:
+        """Share of (place, time) with >= ``n`` satellites over the line (length-weighted)."""
+        w = self.cell_length_m
+        return float(np.sum(self.share_at_least(n) * w) / np.sum(w))
+
+    # ------------------------------------------------------------------ stretches
+    def longest_below_m(self, n: int = 4) -> NDArray:
+        """Longest contiguous chainage run with fewer than ``n`` satellites, per epoch, metres.
+
+        A run of positions stands for their cells (half-way to the neighbours), shape
+        (n_epoch,).
+        """
+        lo, hi = _cell_extent(self.chainage_m)
+        return longest_run(self.count.T < n, lo, hi)
+
+    def longest_below_s(self, n: int = 4) -> NDArray:
+        """Longest contiguous time run with fewer than ``n`` satellites, per position, seconds.
+
+        Each epoch stands for one step (shape (n_pos,)).
+        """
+        t = self.gps_s
+        half = self.step_s / 2.0
+        return longest_run(self.count < n, t - half, t + half)
+
+    # ------------------------------------------------------------------ interval
+    def interval_quantiles(self, q: tuple[float, ...] = (0.5, 0.95), min_count: int = 4) -> NDArray:
+        """Quantiles of the interval length per position over epochs with >= ``min_count``.
+
+        Returns
+        -------
+        ndarray, shape (n_pos, len(q)), metres (NaN where no such epoch)
+        """
+        if self.interval_m is None:
+            return np.full((len(self.chainage_m), len(q)), np.nan)
+        x = np.where(self.count >= min_count, self.interval_m, np.nan).astype(float)
+        out = np.full((x.shape[0], len(q)), np.nan)
+        has = np.any(np.isfinite(x), axis=1)
+        if np.any(has):
+            out[has] = np.nanquantile(x[has], q, axis=1).T
+        return out
+
+    # ------------------------------------------------------------------ tables
+    def summary(self) -> dict[str, Any]:
+        """Line-wide figures (JSON-serialisable)."""
+        by_epoch = self.longest_below_m(4)
+        by_pos = self.longest_below_s(4)
+        e, p = int(np.argmax(by_epoch)), int(np.argmax(by_pos))
+        out: dict[str, Any] = {
+            "rule": self.rule,
+            "n_pos": len(self.chainage_m),
+            "n_epoch": len(self.gps_s),
+            "n_sat": len(self.sats),
+            "line_length_m": float(np.sum(self.cell_length_m)),
+            "step_s": self.step_s,
+        }
+        for n in THRESHOLDS:
+            out[f"share_ge{n}"] = self.line_share_at_least(n)
+        out["mean_count"] = float(self.count.mean())
+        out["longest_below4_m"] = float(by_epoch[e])
+        out["longest_below4_m_at_gps_s"] = float(self.gps_s[e])
+        out["longest_below4_m_at_utc"] = gps_s_to_utc_text(float(self.gps_s[e]))
+        out["longest_below4_s"] = float(by_pos[p])
+        out["longest_below4_s_at_chainage_m"] = float(self.chainage_m[p])
+        out["opening_angle_median_deg"] = float(np.median(self.opening_angle_deg))
+        if self.interval_m is not None:
+            x = self.interval_m[self.count >= 4]
+            x = x[np.isfinite(x)]
+            out["interval_median_m"] = float(np.median(x)) if len(x) else float("nan")
+            out["interval_p95_m"] = float(np.quantile(x, 0.95)) if len(x) else float("nan")
+        return out
+
+    def position_table(self) -> pd.DataFrame:
+        """One row per position: place, shares, longest time below 4, interval, opening."""
+        pos = self.positions
+        df = pd.DataFrame(
+            {
+                "chainage_m": pos.chainage_m,
+                "lat_deg": pos.lat_deg,
+                "lon_deg": pos.lon_deg,
+                "h_m": pos.h_m,
+                "heading_deg": pos.heading_deg,
+            }
+        )
+        for n in THRESHOLDS:
+            df[f"share_ge{n}"] = self.share_at_least(n)
+        df["mean_count"] = self.count.mean(axis=1)
+        df["min_count"] = self.count.min(axis=1)
+        df["longest_below4_s"] = self.longest_below_s(4)
+        q = self.interval_quantiles()
+        df["interval_median_m"] = q[:, 0]
+        df["interval_p95_m"] = q[:, 1]
+        df["opening_angle_deg"] = self.opening_angle_deg
+        return df
+
+    def epoch_table(self) -> pd.DataFrame:
+        """One row per epoch: line-wide shares and the longest stretch below 4 (metres)."""
+        w = self.cell_length_m[:, None]
+        df = pd.DataFrame({"gps_s": self.gps_s})
+        for n in THRESHOLDS:
+            df[f"share_ge{n}"] = np.sum((self.count >= n) * w, axis=0) / np.sum(w)
+        df["min_count"] = self.count.min(axis=0)
+        df["longest_below4_m"] = self.longest_below_m(4)
+        return df
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write :meth:`position_table` as CSV (``.csv``); returns the path."""
+        path = Path(path)
+        self.position_table().to_csv(path, index=False, float_format="%.12g")
+        return path
+
+    def to_parquet(self, path: str | Path, counts: bool = False) -> Path:
+        """Write :meth:`position_table` as Parquet, with the summary in the file metadata.
+
+        With ``counts=True`` the file holds the full ``count`` array instead, long format
+        (``chainage_m, gps_s, count``).
+        """
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        path = Path(path)
+        if counts:
+            n_pos, n_ep = self.count.shape
+            df = pd.DataFrame(
+                {
+                    "chainage_m": np.repeat(self.chainage_m, n_ep),
+                    "gps_s": np.tile(self.gps_s, n_pos),
+                    "count": self.count.ravel(),
+                }
+            )
+        else:
+            df = self.position_table()
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        meta = dict(table.schema.metadata or {})
+        meta[b"predisat.availability.engine"] = json.dumps(
+            {"summary": self.summary(), "provenance": _jsonable(self.provenance)}
+        ).encode()
+        pq.write_table(table.replace_schema_metadata(meta), path)
+        return path
+
+    def to_geojson_lines(self, track: Any = None, path: str | Path | None = None) -> dict:
+        """The line cut into one segment per position, coloured by availability (for QGIS).
+
+        Each LineString covers the position's cell (half-way to its neighbours), following the
+        ``track`` (a :class:`~predisat.track.map.TrackMap`) when given, else straight between the
+        positions. Properties: the :meth:`position_table` columns plus ``class`` ("ge6",
+        "ge4", "ge2", "lt2": the highest count available at least 95 % of the time).
+        """
+        df = self.position_table()
+        lo, hi = _cell_extent(self.chainage_m)
+        feats = []
+        for i, row in enumerate(df.to_dict("records")):
+            s = np.linspace(lo[i], hi[i], 5)
+            if track is not None:
+                lat, lon, _ = track.position_at(s)
+            else:
+                lat = np.interp(s, self.chainage_m, self.positions.lat_deg)
+                lon = np.interp(s, self.chainage_m, self.positions.lon_deg)
+            props = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                     for k, v in row.items()}  # fmt: skip
+            props["class"] = _class_of(row)
+            feats.append(
+                {
+                    "type": "Feature",
+                    "geometry": {
+                        "type": "LineString",
+                        "coordinates": [
+                            [float(a), float(b)] for a, b in zip(lon, lat, strict=True)
+                        ],
+                    },
+                    "properties": _jsonable(props),
+                }
+            )
+        fc = {"type": "FeatureCollection", "features": feats}
+        if path is not None:
+            Path(path).write_text(json.dumps(fc))
+        return fc
+
+
+def _class_of(row: dict) -> str:
+    for n in (6, 4, 2):
+        if row[f"share_ge{n}"] >= 0.95:
+            return f"ge{n}"
+    return "lt2"
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return x
+
+
+def _cell_extent(chainage_m: NDArray) -> tuple[NDArray, NDArray]:
+    """Cell bounds of positions: half-way to each neighbour, half a spacing at the ends."""
+    s = np.asarray(chainage_m, float)
+    if len(s) == 1:
+        return s.copy(), s.copy()
+    mid = (s[1:] + s[:-1]) / 2.0
+    lo = np.concatenate([[s[0] - (mid[0] - s[0])], mid])
+    hi = np.concatenate([mid, [s[-1] + (s[-1] - mid[-1])]])
+    return lo, hi
+
+
+def longest_run(flag: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """Longest contiguous run of True along the last axis, measured with cell bounds.
+
+    Parameters
+    ----------
+    flag : ndarray of bool, shape (..., n)
+    lo, hi : ndarray, shape (n,)
+        Bounds of each cell (consecutive cells are assumed contiguous).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ``hi[last] - lo[first]`` of the longest run (0 where none).
+    """
+    f = np.asarray(flag, bool)
+    n = f.shape[-1]
+    f2 = f.reshape(-1, n)
+    pad = np.zeros((len(f2), 1), bool)
+    d = np.diff(np.concatenate([pad, f2, pad], axis=1).astype(np.int8), axis=1)
+    out = np.zeros(len(f2))
+    r_start, c_start = np.nonzero(d == 1)
+    _r_end, c_end = np.nonzero(d == -1)  # same order: runs are nested row-major
+    if len(r_start):
+        length = np.asarray(hi)[c_end - 1] - np.asarray(lo)[c_start]
+        np.maximum.at(out, r_start, length)
+    return out.reshape(f.shape[:-1])
+
+
+# --------------------------------------------------------------------------- engine
+def compute_availability(
+    satellites: SatellitePositions,
+    positions: LinePositions,
+    rule: TrustRule,
+    *,
+    interval_model: IntervalModel | None = None,
+    with_interval: bool = True,
+    interval_every: int = 1,
+    chunk_positions: int = 2,
+    workers: int = 1,
+    progress: bool = False,
+) -> Availability:
+    """Trusted satellites at every (position, epoch), with interval predictions.
+
+    Parameters
+    ----------
+    satellites : SatellitePositions
+        Satellite ECEF positions over the window (NaN where the ephemeris does not trust).
+    positions : LinePositions
+        Antenna positions (``LinePositions.from_masks(masks)`` for the mask positions).
+    rule : TrustRule
+    interval_model : IntervalModel, optional
+        Default :class:`~predisat.availability.interval.IntervalModel()`.
+    with_interval : bool
+        Also predict interval lengths and pair geometry.
+    interval_every : int
+        Predict the interval at every ``interval_every``-th epoch only (NaN at the others);
+        the interval is the costly part, and its statistics need fewer epochs than the counts.
+    chunk_positions : int
+        Positions per chunk; memory is about ``chunk_positions * n_epoch * n_visible * 60``
+        bytes (2 positions, a day at 30 s, 40 candidates: 14 MB per worker). Small chunks
+        keep the work in the CPU cache (2 was fastest; 4-16 ran 2-3x slower). Use an even
+        number: ``g`` is a float32 BLAS product whose last bit can depend on the chunk's
+        parity (``docs/availability.md``).
+    workers : int
+        Threads.
+    progress : bool
+        Show a tqdm bar.
+
+    Returns
+    -------
+    Availability
+    """
+    if chunk_positions < 1 or workers < 1 or interval_every < 1:
+        raise ValueError("chunk_positions, workers and interval_every must be >= 1")
+    if rule.mode == "mask" and len(rule.masks.az_deg) * float(rule.masks.az_step_deg) != 360.0:
+        raise ValueError("masks: n_az * az_step_deg must be 360 (the bins must cover the circle)")
+    model = interval_model or IntervalModel()
+    t_start = time.perf_counter()
+    n_pos, n_ep = positions.n_pos, len(satellites.gps_s)
+
+    rx = positions.ecef_m
+    centre = rx.mean(axis=0)
+    thr_table = rule.threshold_table(positions.chainage_m)  # (n_pos, n_az)
+    cand, cand_sat = _candidates(satellites, rx, centre, float(np.min(thr_table)))
+    m = cand.shape[1]
+    s32 = (cand.reshape(-1, 3) - centre).astype(np.float32).T.copy()  # (3, n_ep * m)
+
+    count = np.zeros((n_pos, n_ep), np.uint8)
+    interval = np.full((n_pos, n_ep), np.nan, np.float32) if with_interval else None
+    sens = np.full((n_pos, n_ep), np.nan, np.float32) if with_interval else None
+    rot = positions.enu_rotation
+    tan_ecef = np.einsum("pi,pij->pj", positions.tangent_enu, rot)  # t_enu @ R
+    # thresholds at or above 90 deg (or +inf: no coverage) can never be passed: u <= range
+    sin_thr = np.where(
+        thr_table < 90.0, np.sin(np.radians(np.minimum(thr_table, 90.0))), 2.0
+    ).astype(np.float32)
+    bin_scale = 0.0
+    if sin_thr.shape[1] > 1:
+        step = float(rule.masks.az_step_deg)
+        bin_scale = float(np.degrees(1.0) / step)
+        sin_thr = np.concatenate([sin_thr, sin_thr[:, :1]], axis=1)  # 360 deg wraps to bin 0
+
+    def run(sl: slice) -> None:
+        c, iv, se = _chunk(
+            s32, rx[sl] - centre, rot[sl], tan_ecef[sl], sin_thr[sl], bin_scale, n_ep, m,
+            model if with_interval else None, interval_every,
+        )  # fmt: skip
+        count[sl] = c
+        if interval is not None and sens is not None:
+            interval[sl], sens[sl] = iv, se
+
+    slices = [slice(a, min(a + chunk_positions, n_pos)) for a in range(0, n_pos, chunk_positions)]
+    bar = _progress(len(slices), progress)
+    if workers == 1:
+        for sl in slices:
+            run(sl)
+            bar.update(1)
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            for _ in pool.map(run, slices):
+                bar.update(1)
+    bar.close()
+
+    prov = {
+        "n_candidates_per_epoch": m,
+        "candidate_share": float(np.mean(cand_sat >= 0)) * m / max(len(satellites.sats), 1),
+        "chunk_positions": chunk_positions,
+        "workers": workers,
+        "interval_model": repr(model) if with_interval else None,
+        "interval_every": interval_every,
+        "elapsed_s": time.perf_counter() - t_start,
+    }
+    return Availability(
+        positions, satellites.gps_s, satellites.sats, rule.label, count, interval, sens,
+        rule.opening_angle_deg(n_pos), prov,
+    )  # fmt: skip
+
+
+def _progress(total: int, on: bool) -> Any:
+    if on:
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc="availability", unit="chunk")
+
+    class _Null:
+        def update(self, n: int) -> None:
+            pass
+
+        def close(self) -> None:
+            pass
+
+    return _Null()
+
+
+def _candidates(
+    sat: SatellitePositions, rx: NDArray, centre: NDArray, min_thr_deg: float
+) -> tuple[NDArray, NDArray]:
+    """Satellite positions that may be above a threshold somewhere, padded per epoch.
+
+    Returns ``cand`` (n_epoch, m, 3) ECEF (padding: a point straight below the line's
+    centre, never above any threshold) and ``cand_sat`` (n_epoch, m) satellite index (-1 pad).
+    """
+    lat_c, lon_c = _geodetic_of(centre)
+    el_c = azel(centre, enu_rotation(lat_c, lon_c), sat.pos_ecef_m)[1]  # (n_ep, n_sat)
+    # a direction's elevation changes by at most the tilt of the vertical plus the parallax
+    d_max = float(np.max(np.linalg.norm(rx - centre, axis=1))) if len(rx) else 0.0
+    slack = np.degrees(d_max / _EARTH_RADIUS_M + d_max / _MIN_SAT_RANGE_M) + 0.05
+    keep = np.isfinite(el_c) & (el_c > min_thr_deg - slack)
+    m = max(int(keep.sum(axis=1).max(initial=0)), 1)
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :m]
+    taken = np.take_along_axis(keep, order, axis=1)
+    cand_sat = np.where(taken, order, -1)
+    pos = np.take_along_axis(sat.pos_ecef_m, order[:, :, None], axis=1)
+    below = centre - 3.0e7 * centre / np.linalg.norm(centre)
+    cand = np.where(taken[:, :, None], pos, below)
+    return cand, cand_sat
+
+
+def _geodetic_of(xyz: NDArray) -> tuple[float, float]:
+    from predisat.geodesy import ecef_to_geodetic
+
+    lat, lon, _ = ecef_to_geodetic(xyz)
+    return float(lat), float(lon)
+
+
+def _chunk(
+    s32: NDArray,
+    rx_rel: NDArray,
+    rot: NDArray,
+    tan_ecef: NDArray,
+    sin_thr: NDArray,
+    bin_scale: float,
+    n_ep: int,
+    m: int,
+    model: IntervalModel | None,
+    every: int,
+) -> tuple[NDArray, NDArray | None, NDArray | None]:
+    p = len(rx_rel)
+    enu = rot.astype(np.float32) @ s32  # (p, 3, K)
+    enu -= np.einsum("pij,pj->pi", rot, rx_rel).astype(np.float32)[:, :, None]
+    e, n, u = enu[:, 0], enu[:, 1], enu[:, 2]
+    rng = e * e
+    rng += n * n
+    rng += u * u
+    np.sqrt(rng, out=rng)
+    if sin_thr.shape[1] == 1:
+        trusted = u > sin_thr * rng
+    else:
+        # MaskSet bins: bin k covers [k - 1/2, k + 1/2) steps; sin_thr has bin 0 repeated last
+        az = np.arctan2(e, n)
+        az *= np.float32(bin_scale)
+        az += np.float32(0.5)
+        bins = np.floor(az, out=az).astype(np.int32)
+        n_col = sin_thr.shape[1]
+        bins += (bins < 0) * np.int32(n_col - 1)
+        bins += (np.arange(p, dtype=np.int32) * np.int32(n_col))[:, None]  # flat index
+        trusted = u > np.take(sin_thr.reshape(-1), bins) * rng
+        del az, bins
+    tr3 = trusted.reshape(p, n_ep, m)
+    count = tr3.sum(axis=-1, dtype=np.uint8)
+    if model is None:
+        return count, None, None
+    # interval at every `every`-th epoch
+    tr_i = tr3[:, ::every]
+    n_iv = tr_i.shape[1]
+    s_i = s32.reshape(3, n_ep, m)[:, ::every].reshape(3, -1)
+    rng_i = rng.reshape(p, n_ep, m)[:, ::every].reshape(p, -1)
+    g = tan_ecef.astype(np.float32) @ s_i  # (p, K_iv)
+    g -= np.einsum("pi,pi->p", tan_ecef, rx_rel).astype(np.float32)[:, None]
+    g /= rng_i
+    sin_el = u.reshape(p, n_ep, m)[:, ::every].reshape(p, -1) / rng_i
+    sigma = model.error.sigma_from_sin(sin_el)
+    g3 = g.reshape(p, n_iv, m)
+    length = np.full((p, n_ep), np.nan, np.float32)
+    sens = np.full((p, n_ep), np.nan, np.float32)
+    length[:, ::every], _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, model.k_sigma)
+    # max/min over the trusted: push the others out of [-1, 1] (adding 0 keeps g exact)
+    pen = (~tr_i) * np.float32(4.0)
+    gmax = (g3 - pen).max(axis=-1)
+    gmin = (g3 + pen).min(axis=-1)
+    sens[:, ::every] = np.where(count[:, ::every] >= 2, gmax - gmin, np.nan)
+    return count, length, sens
+
+
+# --------------------------------------------------------------------------- reference
+def reference_counts(
+    satellites: SatellitePositions, positions: LinePositions, rule: TrustRule
+) -> NDArray:
+    """Straightforward per-position count (float64 az/el, ``TrustRule.trusted``), (n_pos, n_ep).
+
+    The independent check of the engine, used by the tests and the benchmark.
+    """
+    out = np.zeros((positions.n_pos, len(satellites.gps_s)), np.uint8)
+    rot = positions.enu_rotation
+    rx = positions.ecef_m
+    for i in range(positions.n_pos):
+        az, el = azel(rx[i], rot[i], satellites.pos_ecef_m)
+        ok = rule.trusted(positions.chainage_m[i], az, el)
+        out[i] = ok.sum(axis=-1)
+    return out

@@ -1,0 +1,605 @@
+"""The availability report: one self-contained HTML file, its summary table and GIS layer.
+
+:func:`build_report` assembles the page from :class:`~predisat.availability.engine.Availability`
+results of several trust rules on the same positions (surveyed masks, no mask, flat cut-offs):
+a header saying what was computed from what, a summary table beside the LOCOPROL figures, a
+sentence saying what the survey changes, and the figures of :mod:`predisat.availability.plots`,
+each with a
+one-line caption on how to read it. Figures are embedded as base64 PNG; the page uses no
+script, no external style sheet, font or image, and needs no network.
+
+:func:`summary_frame` is the summary table (one row per rule) and :func:`geojson_layer` the line
+coloured by availability for QGIS. The orchestration (loading, computing, writing files) is
+:func:`predisat.availability.run.run_availability`.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from predisat.availability import plots
+from predisat.availability.engine import Availability
+from predisat.availability.satellites import SatellitePositions, TrustRule, azel
+from predisat.gnss.ephemeris import Reason
+from predisat.gnss.timescale import gps_s_to_utc_datetime64
+
+__all__ = [
+    "LOCOPROL_ROW",
+    "SHARE_CLASSES",
+    "ReportInputs",
+    "build_report",
+    "geojson_layer",
+    "share_class",
+    "summary_frame",
+    "write_tables",
+]
+
+SHARE_CLASSES: tuple[tuple[float, str, str], ...] = (
+    (0.99, ">= 99 %", "#2166ac"),
+    (0.95, "95-99 %", "#92c5de"),
+    (0.80, "80-95 %", "#f4a582"),
+    (0.0, "< 80 %", "#b2182b"),
+)
+"""Classes of the share of time with >= 4 trusted satellites: (lower bound, label, colour)."""
+
+LOCOPROL_ROW: dict[str, str] = {
+    "rule": "LOCOPROL trials, line 144 (GPS, 2000s receiver, real masking)",
+    "share_ge2": "",
+    "share_ge4": "95 %",
+    "share_ge6": "60 %",
+    "mean_count": "",
+    "longest_below4_m": "",
+    "longest_below4_s": "",
+    "interval": "about 70 m typical, up to 600 m",
+}
+"""The reference row of the summary table (``docs/seeds-digest.md``, document 000)."""
+
+
+def share_class(share: float) -> tuple[str, str]:
+    """Label and colour of a share of time with >= 4 satellites (:data:`SHARE_CLASSES`)."""
+    for lo, label, colour in SHARE_CLASSES:
+        if share >= lo:
+            return label, colour
+    return SHARE_CLASSES[-1][1], SHARE_CLASSES[-1][2]
+
+
+# ------------------------------------------------------------------------- tables
+def summary_frame(results: Sequence[Availability]) -> pd.DataFrame:
+    """Line-wide figures, one row per rule (``Availability.summary`` columns, rule first)."""
+    if not results:
+        raise ValueError("results is empty: pass at least one Availability")
+    return pd.DataFrame([r.summary() for r in results])
+
+
+def geojson_layer(results: Sequence[Availability], track: Any = None) -> dict[str, Any]:
+    """The line cut into one segment per position, coloured by the masks' share >= 4.
+
+    The features are those of ``results[0].to_geojson_lines(track)`` (the first result is
+    the masks rule) with, for styling in QGIS or any GeoJSON viewer: ``rule``,
+    ``share_ge4_class`` (:data:`SHARE_CLASSES` label), ``stroke`` (its colour),
+    ``stroke-width``, and ``share_ge4_<rule>`` / ``share_ge6_<rule>`` for every other rule.
+    """
+    if not results:
+        raise ValueError("results is empty: pass at least one Availability")
+    base = results[0]
+    fc = base.to_geojson_lines(track)
+    others = {}
+    for r in results[1:]:
+        slug = _slug(r.rule)
+        others[f"share_ge4_{slug}"] = r.share_at_least(4)
+        others[f"share_ge6_{slug}"] = r.share_at_least(6)
+    for i, feat in enumerate(fc["features"]):
+        props = feat["properties"]
+        label, colour = share_class(float(props["share_ge4"]))
+        props["rule"] = base.rule
+        props["share_ge4_class"] = label
+        props["stroke"] = colour
+        props["stroke-width"] = 4
+        for key, values in others.items():
+            props[key] = float(values[i])
+    return fc
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in text.lower()).strip("_")
+
+
+def write_tables(
+    out: Path,
+    results: Sequence[Availability],
+    track: Any,
+    info: dict[str, Any],
+    counts_table: bool,
+) -> tuple[dict[str, Path], pd.DataFrame]:
+    """Write the summary, per-position and per-epoch tables and the GeoJSON layer.
+
+    Parameters
+    ----------
+    out : Path
+        Existing output folder.
+    results : sequence of Availability
+        One per rule, masks first, on the same positions.
+    track : TrackMap or None
+        Kilometre column (``line_km``) and GeoJSON geometry.
+    info : dict
+        Run description, stored in ``summary.json`` and the Parquet metadata.
+    counts_table : bool
+        Also write ``counts.parquet`` (every count, long format).
+
+    Returns
+    -------
+    files : dict of str to Path
+    summary : pandas.DataFrame
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    files: dict[str, Path] = {}
+    summary = summary_frame(results)
+    files["summary_csv"] = out / "summary.csv"
+    summary.to_csv(files["summary_csv"], index=False, float_format="%.12g")
+    files["summary_json"] = out / "summary.json"
+    files["summary_json"].write_text(
+        json.dumps(
+            {"run": info, "summary": [_plain(r.summary()) for r in results]},
+            indent=1,
+            default=str,
+        )
+    )
+    km = None
+    if track is not None and len(getattr(track, "kilometre_posts", ())) > 0:
+        km = track.kilometre_at(results[0].chainage_m) / 1000.0
+    pos = []
+    ep = []
+    for r in results:
+        p = r.position_table()
+        if km is not None:
+            p.insert(1, "line_km", km)
+        p.insert(0, "rule", r.rule)
+        pos.append(p)
+        e = r.epoch_table()
+        e.insert(0, "rule", r.rule)
+        e.insert(2, "utc", gps_s_to_utc_datetime64(e["gps_s"].to_numpy()).astype("M8[ms]"))
+        ep.append(e)
+    meta = {b"predisat.availability.run": json.dumps(info, default=str).encode()}
+    for name, df in (("positions", pd.concat(pos)), ("epochs", pd.concat(ep))):
+        files[f"{name}_csv"] = out / f"{name}.csv"
+        df.to_csv(files[f"{name}_csv"], index=False, float_format="%.12g")
+        files[f"{name}_parquet"] = out / f"{name}.parquet"
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
+        pq.write_table(table, files[f"{name}_parquet"])
+    if counts_table:
+        n_pos, n_ep = results[0].count.shape
+        parts = [
+            pa.table(
+                {
+                    "rule": pa.array([r.rule] * (n_pos * n_ep)).dictionary_encode(),
+                    "chainage_m": np.repeat(r.chainage_m, n_ep),
+                    "gps_s": np.tile(r.gps_s, n_pos),
+                    "count": r.count.ravel(),
+                }
+            )
+            for r in results
+        ]
+        files["counts_parquet"] = out / "counts.parquet"
+        pq.write_table(pa.concat_tables(parts), files["counts_parquet"])
+    files["geojson"] = out / "availability.geojson"
+    files["geojson"].write_text(json.dumps(geojson_layer(results, track)))
+    return files, summary
+
+
+def _plain(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+# ------------------------------------------------------------------------- inputs
+@dataclass(frozen=True)
+class ReportInputs:
+    """Everything the report shows.
+
+    Attributes
+    ----------
+    results : tuple of Availability
+        One per rule on the same positions; the masks rule first.
+    masks : MaskSet
+        The mask set of the masks rule (sky plots, provenance).
+    satellites : SatellitePositions
+        The satellites of the window (sky-plot tracks).
+    track : TrackMap or None
+        Kilometre posts and attribution.
+    info : dict
+        Header fields: ``line``, ``stretch``, ``window``, ``navigation``, ``constellation``,
+        ``rules``, ``masks``, ``mask_provenance``, ``software``, ``created_utc``, ...
+    sky_chainage_m : tuple of float
+        Places of the sky plots.
+    files : dict of str to path
+        Companion files to list (shown by name, linked relatively).
+    """
+
+    results: tuple[Availability, ...]
+    masks: Any
+    satellites: SatellitePositions
+    track: Any = None
+    info: Mapping[str, Any] = field(default_factory=dict)
+    sky_chainage_m: tuple[float, ...] = ()
+    files: Mapping[str, Any] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------- formatting
+def _pct(x: float) -> str:
+    """Share as a percentage rounded down (99.96 % must not read as 100 %)."""
+    if x is None or not math.isfinite(x):
+        return ""
+    return f"{math.floor(1000.0 * x + 1e-9) / 10.0:.1f} %"
+
+
+def _num(x: float, unit: str, digits: int = 0) -> str:
+    if x is None or not math.isfinite(x):
+        return "–"
+    return f"{x:,.{digits}f}".replace(",", " ") + f" {unit}"
+
+
+def _duration(s: float) -> str:
+    if not math.isfinite(s):
+        return "–"
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    return f"{s / 3600:.1f} h"
+
+
+def _e(x: Any) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _img(fig: Any, alt: str) -> str:
+    data = base64.b64encode(plots.figure_to_png(fig)).decode("ascii")
+    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _km_label(track: Any, chainage_m: float) -> str:
+    if track is not None and len(getattr(track, "kilometre_posts", ())) > 0:
+        km = float(track.kilometre_at(chainage_m))
+        if math.isfinite(km):
+            return f"km {km / 1000:.3f}"
+    return f"chainage {chainage_m / 1000:.3f} km"
+
+
+# ------------------------------------------------------------------------- sections
+def _summary_table(results: Sequence[Availability]) -> str:
+    head = (
+        "<tr><th>rule</th><th>≥ 2</th><th>≥ 4</th><th>≥ 6</th><th>mean count</th>"
+        "<th>longest &lt; 4<br>(along the line)</th><th>longest &lt; 4<br>(at one place)</th>"
+        "<th>interval median / 95 %<br>(epochs with ≥ 4)</th></tr>"
+    )
+    rows = []
+    for r in results:
+        s = r.summary()
+        iv = (
+            f"{_num(s.get('interval_median_m', math.nan), 'm')} / "
+            f"{_num(s.get('interval_p95_m', math.nan), 'm')}"
+        )
+        cls = ' class="main"' if r.rule == "masks" else ""
+        rows.append(
+            f"<tr{cls}><td>{_e(r.rule)}</td><td>{_pct(s['share_ge2'])}</td>"
+            f"<td>{_pct(s['share_ge4'])}</td><td>{_pct(s['share_ge6'])}</td>"
+            f"<td>{s['mean_count']:.1f}</td><td>{_num(s['longest_below4_m'], 'm')}</td>"
+            f"<td>{_duration(s['longest_below4_s'])}</td><td>{iv}</td></tr>"
+        )
+    ref = LOCOPROL_ROW
+    rows.append(
+        f'<tr class="ref"><td>{_e(ref["rule"])}</td><td>{ref["share_ge2"]}</td>'
+        f"<td>{ref['share_ge4']}</td><td>{ref['share_ge6']}</td><td></td><td></td><td></td>"
+        f"<td>{_e(ref['interval'])}</td></tr>"
+    )
+    return (
+        '<table class="summary"><caption>Share of time with at least 2, 4 and 6 trusted '
+        "satellites over the whole stretch (place and time weighted equally)</caption>"
+        f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table>"
+    )
+
+
+def _verdict(results: Sequence[Availability], track: Any) -> str:
+    """One paragraph: what the masks change against the other rules, and the worst place."""
+    m = results[0]
+    sm = m.summary()
+    parts = [
+        f"With the surveyed <b>masks</b>, at least 4 satellites are trusted "
+        f"<b>{_pct(sm['share_ge4'])}</b> of the time and at least 6 "
+        f"<b>{_pct(sm['share_ge6'])}</b>."
+    ]
+    others = [
+        f"{_e(r.rule)} would claim {_pct(r.line_share_at_least(4))} and "
+        f"{_pct(r.line_share_at_least(6))}"
+        for r in results[1:]
+    ]
+    if others:
+        parts.append("Ignoring the survey, " + "; ".join(others) + ".")
+    share4 = m.share_at_least(4)
+    i = int(np.argmin(share4))
+    when = f" ({sm['longest_below4_m_at_utc']})" if sm["longest_below4_m"] > 0 else ""
+    where = (
+        f" ({_km_label(track, float(sm['longest_below4_s_at_chainage_m']))})"
+        if sm["longest_below4_s"] > 0
+        else ""
+    )
+    parts.append(
+        f"The worst place is {_km_label(track, float(m.chainage_m[i]))} "
+        f"({_pct(float(share4[i]))} of the time with ≥ 4); the longest stretch below 4 at one "
+        f"instant is {_num(sm['longest_below4_m'], 'm')}{when}, the longest time below 4 at one "
+        f"place {_duration(sm['longest_below4_s'])}{where}."
+    )
+    return "<p class=verdict>" + " ".join(parts) + "</p>"
+
+
+def _header(info: Mapping[str, Any]) -> str:
+    prov = info.get("mask_provenance", {}) or {}
+    prov_text = "; ".join(
+        f"{k}: {v}" for k, v in prov.items() if not isinstance(v, (dict, list)) and v != ""
+    )
+    margin = info.get("mask_margin_deg")
+    margin_text = ""
+    if margin:
+        lo, hi = margin
+        margin_text = f" (margin {lo:g}°)" if lo == hi else f" (margin {lo:g}–{hi:g}°)"
+    rows = [
+        ("Line", info.get("line", "")),
+        ("Stretch", info.get("stretch", "")),
+        ("Time window", info.get("window", "")),
+        ("Navigation data", info.get("navigation", "")),
+        ("Constellations", info.get("constellation", "")),
+        ("Rules compared", ", ".join(info.get("rules", []))),
+        ("Masks", f"{info.get('masks', '')}{margin_text}"),
+        ("Mask provenance", prov_text),
+        ("Interval model", info.get("interval_model", "")),
+        ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),
+    ]
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)
+    return f'<table class="meta">{body}</table>'
+
+
+def _figure(img: str, title: str, caption: str) -> str:
+    return f"<figure><h3>{_e(title)}</h3>{img}<figcaption>{caption}</figcaption></figure>"
+
+
+def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
+    masks = inputs.masks
+    sats = inputs.satellites
+    rule = TrustRule.mask(masks)
+    cutoffs = tuple(
+        float(r.rule.split()[1]) for r in inputs.results if r.rule.startswith("cutoff ")
+    )
+    share4 = inputs.results[0].share_at_least(4)
+    views = []
+    from predisat.geodesy import enu_rotation, geodetic_to_ecef
+
+    for ch in inputs.sky_chainage_m:
+        i = int(masks.position_index(ch)[0])
+        rx = geodetic_to_ecef(masks.lat_deg[i], masks.lon_deg[i], masks.h_m[i])
+        az, el = azel(rx, enu_rotation(masks.lat_deg[i], masks.lon_deg[i]), sats.pos_ecef_m)
+        trusted = rule.trusted(masks.chainage_m[i], az, el)
+        title = (
+            f"{_km_label(inputs.track, float(masks.chainage_m[i]))}\n"
+            f"≥ 4 trusted {100 * share4[i]:.0f} % of the time"
+        )
+        views.append(
+            plots.SkyView(
+                title,
+                float(masks.heading_deg[i]),
+                float(masks.az_step_deg),
+                np.asarray(masks.mask_el_deg[i], float),
+                np.asarray(masks.margin_deg[i], float),
+                az,
+                el,
+                trusted,
+                tuple(sats.sats),
+                cutoffs,
+            )
+        )
+    return views
+
+
+def _ephemeris_note(sats: SatellitePositions) -> str:
+    reason = sats.status.reason
+    rows = []
+    for code in Reason:
+        if code == Reason.OK:
+            continue
+        hit = reason == code
+        if hit.any():
+            who = [s for j, s in enumerate(sats.sats) if hit[:, j].any()]
+            share = float(hit.mean())
+            rows.append(
+                f"<tr><td>{_e(code.name)}</td><td>{_e(', '.join(who))}</td>"
+                f"<td>{100 * share:.1f} %</td></tr>"
+            )
+    if not rows:
+        return "<p>The ephemeris trusted every satellite at every epoch.</p>"
+    return (
+        "<details><summary>Satellites the ephemeris did not trust (they count for no rule)"
+        "</summary><table class=small><tr><th>reason</th><th>satellites</th><th>share of "
+        f"satellite-epochs</th></tr>{''.join(rows)}</table></details>"
+    )
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,'DejaVu Sans',sans-serif;
+margin:0;background:#f6f6f4;color:#222;font-size:14px;line-height:1.4}
+main{max-width:1180px;margin:0 auto;padding:18px 24px 40px;background:#fff}
+h1{font-size:22px;margin:4px 0 2px}h2{font-size:17px;margin:26px 0 6px;
+border-bottom:1px solid #ddd;padding-bottom:3px}h3{font-size:14px;margin:6px 0}
+.sub{color:#555;margin:0 0 12px}
+.warn{background:#fff3cd;border-left:4px solid #e0a800;padding:6px 10px;margin:8px 0}
+table{border-collapse:collapse}th,td{padding:3px 9px;text-align:left;vertical-align:top}
+table.meta th{color:#555;font-weight:600;white-space:nowrap}
+table.meta td{max-width:950px}
+table.summary{margin:6px 0;font-size:14px}
+table.summary caption{text-align:left;color:#555;font-size:12px;padding-bottom:4px}
+table.summary th{background:#eef1f5;border-bottom:1px solid #bbb;font-weight:600;
+font-size:12px}
+table.summary td{border-bottom:1px solid #e3e3e3;text-align:right;white-space:nowrap}
+table.summary td:first-child{text-align:left;white-space:normal}
+table.summary tr.main td{font-weight:600;background:#f3f8fd}
+table.summary tr.ref td{color:#6a3d9a;font-style:italic}
+p.verdict{background:#fffbe6;border-left:4px solid #e6b800;padding:8px 12px;margin:10px 0}
+figure{margin:18px 0 8px}figure img{max-width:100%;display:block}
+figcaption{color:#444;font-size:13px;margin-top:4px}
+.row{display:flex;gap:18px;align-items:flex-start}.col{flex:1 1 50%}
+figure.map{flex:0 1 auto;max-width:55%;margin:10px 0}
+table.small{font-size:12px}table.small td,table.small th{border-bottom:1px solid #eee}
+.files code{background:#f1f1f1;padding:0 3px}
+footer{color:#666;font-size:12px;margin-top:26px;border-top:1px solid #ddd;padding-top:6px}
+"""
+
+
+def build_report(inputs: ReportInputs) -> str:
+    """The report as one HTML document (figures embedded; no script, no external resource).
+
+    Parameters
+    ----------
+    inputs : ReportInputs
+
+    Returns
+    -------
+    str
+        The HTML text.
+    """
+    results = inputs.results
+    if not results:
+        raise ValueError("ReportInputs.results is empty: compute at least the masks rule")
+    if results[0].rule != "masks":
+        raise ValueError(f"ReportInputs.results[0] must be the masks rule, got {results[0].rule!r}")
+    plots._check_results(results)
+    info = inputs.info
+    posts = tuple(getattr(inputs.track, "kilometre_posts", ()) or ())
+    s = results[0].chainage_m
+    posts = tuple(p for p in posts if s[0] <= p.chainage_m <= s[-1])
+
+    line_map = _img(plots.line_map(results[0], inputs.track, SHARE_CLASSES), "map")
+    figs = [
+        _figure(
+            _img(plots.availability_along_line(results, posts), "availability along the line"),
+            "Availability along the line",
+            "Share of the time window with at least 4 (top) and 6 (bottom) trusted satellites "
+            "at each place, per rule. Where the blue line (masks) drops below the others, the "
+            "survey found obstructions the other rules ignore. Purple: LOCOPROL line-wide "
+            "figures.",
+        ),
+        _figure(
+            _img(plots.count_maps(results, posts), "count maps"),
+            "Trusted satellites over place and time",
+            "Each column is a place (chainage, kilometre posts on top), each row an instant "
+            "(GPS time). Red: fewer than 2 trusted satellites (no position); salmon: 2-3 (no "
+            "safety claim); light blue: 4-5 (all pairs); blue: 6 or more (three independent "
+            "pairs, the SIL-4 case). Long lines or windows show the lowest count of each block "
+            "of cells.",
+        ),
+    ]
+    views = _sky_views(inputs)
+    if views:
+        figs.append(
+            _figure(
+                _img(plots.sky_plots(views), "sky plots"),
+                "Sky plots at chosen places",
+                "Looking up: north at the top, east to the right, zenith at the centre, "
+                "horizon at the rim. Brown: the surveyed mask; beige: its safety margin; "
+                "dotted orange: the flat cut-off; the black line with the arrow is the track "
+                "(increasing chainage), L/R its sides. Satellite tracks over the whole window "
+                "are blue while trusted and grey while masked.",
+            )
+        )
+    figs.append(
+        _figure(
+            _img(plots.opening_angle_along_line(results, posts), "opening angle"),
+            "Opening angle across the track",
+            "180° minus the mask elevation to the left and to the right of the track (margin "
+            "included): the width of the sky slice that reaches the antenna directly. A flat "
+            "cut-off c gives 180° - 2c everywhere.",
+        )
+    )
+    every = info.get("interval_every", "")
+    model_note = (
+        "The error model is the source's default (a = b = 2 m, k = 2), to be calibrated with "
+        "`locator calibrate`, not a measurement."
+        if info.get("interval_model_is_default", True)
+        else f"Error model: {info.get('interval_model', '')}."
+    )
+    figs.append(
+        _figure(
+            _img(plots.interval_along_line(results, posts), "interval length"),
+            "Predicted confidence-interval length along the line",
+            "Median (line) and 95th percentile (band edge) of the predicted SATHIA interval "
+            f"over the epochs with ≥ 4 trusted satellites (computed every {_e(every)} epochs); "
+            f"log scale. {_e(model_note)}",
+        )
+    )
+
+    files = "".join(
+        f"<li><code>{_e(getattr(p, 'name', p))}</code> – {_e(_FILE_DOC.get(k, k))}</li>"
+        for k, p in inputs.files.items()
+    )
+    attribution = info.get("track_attribution", "")
+    nav_note = (
+        "Navigation: IGS station Esbjerg broadcast ephemerides of 2020-06-25 (georust/rinex "
+        "test data, MIT/Apache-2.0)."
+        if info.get("nav_is_embedded")
+        else ""
+    )
+    title = f"GNSS availability – {info.get('line', '')}"
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{_e(title)}</title><style>{_CSS}</style></head>
+<body><main>
+<h1>{_e(title)}</h1>
+<p class="sub">Which satellites a train may trust along the line, from the surveyed elevation
+masks, compared with no mask and a flat cut-off.</p>
+{"".join(f'<p class="warn">Warning: {_e(w)}</p>' for w in info.get("warnings", ()))}
+{_header(info)}
+<h2>Summary</h2>
+{_summary_table(results)}
+<div class="row"><div class="col">
+{_verdict(results, inputs.track)}
+<p class="sub">Trusted: ephemeris healthy and valid, and elevation above the rule's threshold
+(mask + margin of the satellite's azimuth bin; the cut-off; or the horizon). "Longest &lt; 4
+along the line": the longest run of places with fewer than 4 at one instant; "at one place": the
+longest time below 4 at one place. The LOCOPROL row is from other years, satellites and masks:
+a yardstick, not a test.</p></div>
+<figure class="map">{line_map}<figcaption>The stretch, one segment per surveyed position,
+coloured by the share of time with ≥ 4 trusted satellites under the masks; north up. The same
+layer is <code>availability.geojson</code> (QGIS).</figcaption></figure></div>
+{"".join(figs)}
+<h2>Files</h2>
+<ul class="files">{files}</ul>
+{_ephemeris_note(inputs.satellites)}
+<footer>{_e(info.get("software", ""))}. Track: {_e(attribution)} {_e(nav_note)}
+Definitions: docs/availability.md and docs/report.md of PREDISAT.</footer>
+</main></body></html>
+"""
+
+
+_FILE_DOC = {
+    "summary_csv": "one row per rule (the summary table)",
+    "summary_json": "the summary and the run's inputs",
+    "positions_csv": "one row per rule and position",
+    "positions_parquet": "the same, Parquet",
+    "epochs_csv": "one row per rule and epoch (line-wide shares)",
+    "epochs_parquet": "the same, Parquet",
+    "counts_parquet": "every trusted-satellite count (rule, chainage, time)",
+    "geojson": "the line coloured by availability (QGIS: style on share_ge4 or stroke)",
+    "ephemeris_status_csv": "each run of epochs in which the ephemeris did not trust a "
+    "satellite (unhealthy, outside its validity, inconsistent, no data)",
+    "report": "this report",
+}

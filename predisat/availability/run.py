@@ -1,0 +1,743 @@
+"""The ``predisat availability`` run: masks + track + navigation data -> report and tables.
+
+:func:`run_availability` loads a mask file (or takes a :class:`~predisat.masks.maskset.MaskSet`),
+the
+navigation data (RINEX, SP3 or TLE, told apart by content; the embedded navigation day when
+none is given) and a time window, counts trusted satellites along the line under three kinds
+of rule - the surveyed masks (with their margin), no mask (horizon) and flat cut-offs - and
+writes into an output folder:
+
+* ``report.html`` - the self-contained report (:mod:`predisat.availability.report`);
+* ``summary.csv`` / ``summary.json`` - one row per rule (line-wide figures);
+* ``positions.csv`` / ``positions.parquet`` - one row per rule and position;
+* ``epochs.csv`` / ``epochs.parquet`` - one row per rule and epoch;
+* ``availability.geojson`` - the line cut into one segment per position, coloured by the share
+  of time with >= 4 trusted satellites under the masks (QGIS: style on ``share_ge4`` or use the
+  ``stroke`` colour);
+* optionally ``counts.parquet`` - every count, long format (rule, chainage_m, gps_s, count).
+
+:func:`add_arguments` and :func:`run_from_args` give the command line its options. See
+``docs/report.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from predisat.availability.engine import Availability, compute_availability
+from predisat.availability.interval import IntervalModel
+from predisat.availability.satellites import (
+    DEFAULT_NAV_FILE,
+    SYSTEM_NAMES,
+    LinePositions,
+    SatellitePositions,
+    TrustRule,
+    default_ephemeris,
+    default_window,
+    select_satellites,
+)
+from predisat.cli.args import (
+    cutoff_deg,
+    finite_float,
+    output_dir,
+    positive_float,
+    positive_int,
+)
+from predisat.gnss.ephemeris import Ephemeris
+from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
+from predisat.gnss.timescale import gps_s_to_text as _iso
+from predisat.masks.maskset import MaskSet
+
+__all__ = [
+    "AvailabilityRun",
+    "add_arguments",
+    "check_masks_on_track",
+    "load_navigation",
+    "nav_span_gps_s",
+    "parse_time",
+    "run_availability",
+    "run_from_args",
+    "sparse_navigation",
+]
+
+_MAX_TRACK_OFFSET_M = 25.0  # mask positions farther than this from the track: wrong track
+_DEFAULT_WINDOW_S = 86400.0
+
+
+@dataclass(frozen=True)
+class AvailabilityRun:
+    """What :func:`run_availability` wrote and computed.
+
+    Attributes
+    ----------
+    out_dir : Path
+    report_html : Path
+    files : dict of str to Path
+        Every file written, by kind (``"report"``, ``"summary_csv"``, ``"positions_parquet"``,
+        ``"geojson"``, ...).
+    summary : pandas.DataFrame
+        One row per rule (line-wide figures).
+    results : tuple of Availability
+        One per rule, masks first.
+    elapsed_s : float
+    """
+
+    out_dir: Path
+    report_html: Path
+    files: dict[str, Path]
+    summary: pd.DataFrame
+    results: tuple[Availability, ...]
+    elapsed_s: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------- inputs
+def parse_time(value: float | str | np.datetime64 | datetime | None, name: str) -> float | None:
+    """``gps_s`` of a time given as ``gps_s`` (number), ISO 8601 text or a datetime.
+
+    Text such as ``"2020-06-25T06:00"`` is GPS time (as every time in PREDISAT; UTC is 18 s
+    behind since 2017); with a ``Z`` or ``UTC`` suffix (``"2020-06-25T06:00Z"``) it is UTC and
+    the leap seconds are added. A bare number (also as text) is ``gps_s``. Timezone-aware
+    datetimes are UTC instants, naive ones and ``numpy.datetime64`` GPS time. ``None`` stays
+    ``None``.
+    """
+    if value is None:
+        return None
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        out = float(value)
+    elif isinstance(value, str):
+        text = value.strip()
+        try:
+            out = float(text)
+        except ValueError:
+            utc = text.upper().endswith(("Z", "UTC"))
+            if utc:
+                text = text[: -1 if text.upper().endswith("Z") else -3]
+            text = text.strip().replace(" ", "T")
+            try:
+                t = np.datetime64(text, "ns")
+            except ValueError:
+                raise ValueError(
+                    f"{name} {value!r} is not a time: give GPS time as 2020-06-25T06:00, UTC "
+                    "as 2020-06-25T06:00Z, or gps_s seconds"
+                ) from None
+            out = float(utc_datetime64_to_gps_s(t) if utc else datetime64_to_gps_s(t))
+    elif isinstance(value, datetime):
+        if value.tzinfo is not None:
+            naive = value.astimezone(UTC).replace(tzinfo=None)
+            out = float(utc_datetime64_to_gps_s(np.datetime64(naive, "ns")))
+        else:
+            out = float(datetime64_to_gps_s(np.datetime64(value, "ns")))
+    else:
+        out = float(datetime64_to_gps_s(np.asarray(value, "datetime64[ns]")))
+    if not math.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return out
+
+
+def _nav_kind(path: Path) -> str:
+    """``"sp3"``, ``"tle"`` or ``"rinex"`` from a file's first lines."""
+    opener = gzip.open if path.suffix.lower() == ".gz" else open
+    try:
+        with opener(path, "rt", encoding="ascii", errors="replace") as fh:
+            head = [fh.readline() for _ in range(40)]
+    except OSError as exc:
+        raise ValueError(f"--nav {path}: cannot be read ({exc})") from None
+    first = head[0]
+    if first[:2] in ("#a", "#b", "#c", "#d"):
+        return "sp3"
+    if "RINEX VERSION" in "".join(head[:3]):
+        return "rinex"
+    lines = [ln for ln in head if ln.strip() and not ln.startswith("#")]
+    if any(ln.startswith("1 ") for ln in lines) and any(ln.startswith("2 ") for ln in lines):
+        return "tle"
+    raise ValueError(
+        f"--nav {path}: not a RINEX navigation, SP3 or TLE file (first line {first.strip()!r}); "
+        "give broadcast RINEX (*.rnx, *.YYn/g/l), precise SP3 or two-line elements"
+    )
+
+
+def load_navigation(paths: Sequence[str | Path] | None) -> Ephemeris:
+    """An :class:`~predisat.gnss.ephemeris.Ephemeris` from navigation files (kind told by content).
+
+    ``None`` or empty: the embedded navigation day (:func:`~predisat.availability.satellites.
+    default_ephemeris`). Several RINEX or several SP3 files are merged; kinds cannot be mixed
+    and only one TLE file is read.
+    """
+    if not paths:
+        return default_ephemeris()
+    files = [Path(p) for p in paths]
+    for p in files:
+        if not p.is_file():
+            raise FileNotFoundError(
+                f"--nav {p}: no such file; give RINEX navigation, SP3 or TLE files, or leave "
+                "--nav out to use the embedded navigation day (2020-06-25)"
+            )
+    kinds = {p: _nav_kind(p) for p in files}
+    found = sorted(set(kinds.values()))
+    if len(found) > 1:
+        raise ValueError(
+            "--nav mixes kinds of navigation data ("
+            + ", ".join(f"{p.name}: {k}" for p, k in kinds.items())
+            + "); give only RINEX, only SP3 or one TLE file"
+        )
+    if found[0] == "sp3":
+        return Ephemeris.from_sp3(files)
+    if found[0] == "tle":
+        if len(files) > 1:
+            raise ValueError("--nav: give a single TLE file (several were given)")
+        return Ephemeris.from_tle(files[0])
+    return Ephemeris.from_rinex(files)
+
+
+def nav_span_gps_s(ephemeris: Ephemeris) -> tuple[float, float]:
+    """Time span the navigation data covers, ``(first, last)`` in ``gps_s``.
+
+    Broadcast: the first and last reference epoch (toe, tb) of any record; SP3: the first and
+    last tabulated epoch; TLE: the element-set epochs widened by the validity age.
+    """
+    if ephemeris.kind == "sp3" and ephemeris.sp3 is not None:
+        ep = ephemeris.sp3.epochs_gps_s
+        return float(ep[0]), float(ep[-1])
+    if ephemeris.kind == "tle" and ephemeris.tle is not None:
+        ep = ephemeris.tle.epochs_gps_s
+        age = ephemeris.policy.tle_max_age_s
+        return float(np.min(ep) - age), float(np.max(ep) + age)
+    refs = [r.ref_gps_s for r in (ephemeris.kepler, ephemeris.glonass) if r is not None and len(r)]
+    if not refs:
+        raise ValueError(f"navigation data {list(ephemeris.sources)} holds no record")
+    ref = np.concatenate(refs)
+    return float(np.min(ref)), float(np.max(ref))
+
+
+def _window(
+    ephemeris: Ephemeris, embedded: bool, start: float | None, end: float | None, step_s: float
+) -> NDArray:
+    if not (math.isfinite(step_s) and step_s > 0):
+        raise ValueError(f"--step must be a positive number of seconds, got {step_s}")
+    if start is None:
+        start = _default_start(ephemeris, embedded)
+    if end is None:
+        hi = nav_span_gps_s(ephemeris)[1]
+        # broadcast records stay valid about an hour after the last reference epoch
+        last = math.ceil((hi + (3600.0 if ephemeris.kind == "broadcast" else 0.0)) / 3600.0)
+        end = min(start + _DEFAULT_WINDOW_S, max(last * 3600.0, start + step_s))
+    if end <= start:
+        raise ValueError(
+            f"--end ({_iso(end)}) must be after --start ({_iso(start)}); give a later end"
+        )
+    t = np.arange(start, end, step_s)
+    if len(t) > 20000:
+        raise ValueError(
+            f"the window {_iso(start)} - {_iso(end)} at {step_s:g} s has {len(t)} epochs "
+            "(more than 20 000); use a larger --step or a shorter window"
+        )
+    return t
+
+
+def _default_start(ephemeris: Ephemeris, embedded: bool) -> float:
+    """Start of the default window: the embedded day, else the data's first (whole) hour."""
+    if embedded:
+        return float(default_window(3600.0)[0])
+    if ephemeris.kind == "tle" and ephemeris.tle is not None:
+        # element sets are valid for days: the day of the median set's epoch
+        return math.floor(float(np.median(ephemeris.tle.epochs_gps_s)) / 86400.0) * 86400.0
+    lo, _ = nav_span_gps_s(ephemeris)
+    if ephemeris.kind == "sp3":
+        return math.ceil(lo / 3600.0) * 3600.0
+    # a daily broadcast file starts with records of about 00:00 (some from the previous day)
+    return round(lo / 3600.0) * 3600.0
+
+
+def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str) -> None:
+    """Fail when the window is (partly) outside the navigation data: no satellite at all."""
+    ok = sats.valid.any(axis=1)
+    if ok.all():
+        return
+    lo, hi = nav_span_gps_s(ephemeris)
+    t = sats.gps_s
+    bad = np.flatnonzero(~ok)
+    what = "the window" if len(bad) == len(t) else (
+        f"{len(bad)} of {len(t)} epochs ({_iso(t[bad[0]])} - {_iso(t[bad[-1]])})"
+    )  # fmt: skip
+    raise ValueError(
+        f"{what} lie(s) outside the navigation data {nav_label} (no trusted satellite; the data "
+        f"span {_iso(lo)} - {_iso(hi)} GPST); choose --start/--end inside it or give --nav files "
+        "covering the window"
+    )
+
+
+# Satellites of a constellation in full service (GPS's 24-slot baseline of the SPS performance
+# standard, GLONASS's 24 slots less spares in maintenance, Galileo and BeiDou-3 MEO in 2020):
+# navigation data with fewer usually is a partial file, and every figure is then understated.
+_FULL_CONSTELLATION = {"G": 24, "R": 22, "E": 22, "C": 24}
+
+
+def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
+    """Warnings for constellations with fewer trusted satellites than a full one.
+
+    Parameters
+    ----------
+    sats : SatellitePositions
+        The satellites of the run (``valid`` of shape (n_epoch, n_sat)).
+    nav_label : str
+        How the warning names the navigation data.
+
+    Returns
+    -------
+    list of str
+        One sentence per sparse constellation (empty when none is).
+    """
+    used = [s for j, s in enumerate(sats.sats) if sats.valid[:, j].any()]
+    out = []
+    for system, full in _FULL_CONSTELLATION.items():
+        n = sum(s[0] == system for s in used)
+        if 0 < n < full:
+            out.append(
+                f"{nav_label} holds {n} {SYSTEM_NAMES[system]} satellites with usable records "
+                f"(a full constellation has {full} or more): every count, share and interval is "
+                "understated; give the day's full broadcast navigation file (e.g. IGS "
+                "BRDC00IGS_R_YYYYDDD0000_01D_MN.rnx)"
+            )
+    return out
+
+
+def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
+    if isinstance(masks, MaskSet):
+        return masks, "in memory"
+    from predisat.masks.fileformat import mask_file_path, read_masks
+
+    return read_masks(masks), str(mask_file_path(masks))
+
+
+def _load_track(track: Any) -> Any:
+    if track is None or not isinstance(track, (str, Path)):
+        return track
+    from predisat.track.map import TrackMap
+
+    p = Path(track)
+    if not p.is_file():
+        raise FileNotFoundError(f"--track {p}: no such file; give a GeoJSON or CSV track map")
+    if p.suffix.lower() in {".csv", ".txt"}:
+        return TrackMap.from_csv(p)
+    return TrackMap.from_geojson(p)
+
+
+def check_masks_on_track(masks: MaskSet, track: Any, masks_label: str) -> None:
+    """Refuse masks made on another track map: every mask position must lie on ``track``
+    within 25 m, at its own chainage (same map, same chainage origin).
+
+    Parameters
+    ----------
+    masks : MaskSet
+    track : TrackMap
+    masks_label : str
+        How the error names the masks (usually their file).
+
+    Raises
+    ------
+    ValueError
+        Naming the worst position and the fix.
+    """
+    proj = track.project(masks.lat_deg, masks.lon_deg)
+    off = np.abs(np.asarray(proj.offset_m, float))
+    dch = np.abs(np.asarray(proj.chainage_m, float) - masks.chainage_m)
+    worst = np.maximum(off, dch)
+    i = int(np.argmax(worst))
+    if worst[i] > _MAX_TRACK_OFFSET_M:
+        raise ValueError(
+            f"masks {masks_label} do not fit track {track.name!r}: the position at chainage "
+            f"{masks.chainage_m[i]:.1f} m lies {off[i]:.0f} m beside the track and projects to "
+            f"chainage {float(proj.chainage_m[i]):.1f} m; give the track map the masks were "
+            "made on"
+        )
+
+
+def _sky_chainages(
+    masks: MaskSet, track: Any, sky_km: Sequence[float] | None, n_sky: int
+) -> NDArray:
+    lo, hi = float(masks.chainage_m[0]), float(masks.chainage_m[-1])
+    if sky_km is None or len(sky_km) == 0:
+        if n_sky < 1:
+            return np.zeros(0)
+        frac = (np.arange(n_sky) + 0.5) / n_sky
+        want = lo + frac * (hi - lo)
+        return masks.chainage_m[masks.position_index(want)[0]]
+    km_m = np.asarray(sky_km, float) * 1000.0
+    posts = getattr(track, "kilometre_posts", ()) if track is not None else ()
+    if posts:
+        grid = np.linspace(lo, hi, 2001)
+        line_km = track.kilometre_at(grid)
+        if np.all(np.diff(line_km) > 0):
+            ch = np.interp(km_m, line_km, grid, left=np.nan, right=np.nan)
+        elif np.all(np.diff(line_km) < 0):
+            ch = np.interp(km_m, line_km[::-1], grid[::-1], left=np.nan, right=np.nan)
+        else:
+            ch = np.full(km_m.shape, np.nan)
+        span = f"km {line_km.min() / 1000:.3f} - {line_km.max() / 1000:.3f}"
+    else:
+        ch = np.where((km_m >= lo) & (km_m <= hi), km_m, np.nan)
+        span = f"chainage {lo / 1000:.3f} - {hi / 1000:.3f} km (the track has no kilometre posts)"
+    if np.isnan(ch).any():
+        bad = [k for k, c in zip(sky_km, ch, strict=True) if np.isnan(c)]
+        raise ValueError(
+            f"--sky-km {bad} outside the masks' stretch ({span}); give kilometres inside it"
+        )
+    return masks.chainage_m[masks.position_index(ch)[0]]
+
+
+# ------------------------------------------------------------------------- run
+def run_availability(
+    masks: str | Path | MaskSet,
+    track: Any = None,
+    nav: Sequence[str | Path] | None = None,
+    *,
+    out_dir: str | Path,
+    start: float | str | None = None,
+    end: float | str | None = None,
+    step_s: float = 30.0,
+    constellation: str = "gps",
+    cutoff_deg: float | Sequence[float] = 15.0,
+    from_m: float | None = None,
+    to_m: float | None = None,
+    sky_km: Sequence[float] | None = None,
+    n_sky: int = 4,
+    interval_every: int = 10,
+    interval_model: IntervalModel | None = None,
+    workers: int = 1,
+    counts_table: bool = False,
+    progress: bool = True,
+) -> AvailabilityRun:
+    """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
+
+    Parameters
+    ----------
+    masks : path or MaskSet
+        Mask file v1 (``*.masks.parquet``) or a mask set.
+    track : TrackMap or path, optional
+        The track map the masks were made on (checked: mask positions within 25 m of it at
+        their chainage). Supplies the line's name, kilometre posts and the GeoJSON geometry;
+        without it segments are straight between positions.
+    nav : sequence of paths, optional
+        RINEX navigation, SP3 or one TLE file; default the embedded day (2020-06-25).
+    out_dir : path
+        Output folder (created).
+    start, end : float or str, optional
+        Window: ``gps_s``, or ISO text in GPS time (UTC with a ``Z`` suffix, see
+        :func:`parse_time`); end excluded. Default: from the start of the data's
+        first hour, 24 h or to the end of the data.
+    step_s : float
+        Epoch spacing, seconds.
+    constellation : str
+        ``"gps"`` (default, as the LOCOPROL figures), ``"gps+galileo"``, ``"all"`` or letters.
+    cutoff_deg : float or sequence of float
+        Flat cut-off(s) compared with the masks.
+    from_m, to_m : float, optional
+        Chainage stretch (default: the whole mask set).
+    sky_km : sequence of float, optional
+        Line kilometres (kilometre-post reference) of the sky plots; default ``n_sky`` places
+        evenly along the stretch.
+    n_sky : int
+        Number of sky plots when ``sky_km`` is not given.
+    interval_every : int
+        Predict the interval at every n-th epoch (the costly part).
+    interval_model : IntervalModel, optional
+        Pseudorange error model and pair half width of the predicted intervals (for example
+        from ``locator calibrate``, read with ``locator.runio.read_error_model``); default
+        ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
+    workers : int
+        Threads of the availability engine.
+    counts_table : bool
+        Also write ``counts.parquet`` with every count.
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    AvailabilityRun
+
+    Raises
+    ------
+    FileNotFoundError
+        Missing mask, track or navigation file (named).
+    ValueError
+        Window outside the navigation data, masks not on the track, bad options.
+    """
+    from tqdm import tqdm
+
+    from predisat import __version__
+    from predisat.availability.report import ReportInputs, build_report, write_tables
+
+    t0 = time.perf_counter()
+    cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
+    stages = 2 + (2 + len(cutoffs)) + 3  # masks, navigation; one per rule; tables, figures, report
+    bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
+    try:
+
+        def stage(text: str) -> None:
+            bar.set_postfix_str(text)
+
+        stage("masks")
+        mask_set, masks_label = _load_masks(masks)
+        track = _load_track(track)
+        if from_m is not None or to_m is not None:
+            lo_m = -np.inf if from_m is None else from_m
+            hi_m = np.inf if to_m is None else to_m
+            ch_m = mask_set.chainage_m
+            if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
+                given = " ".join(
+                    f"{flag} {v / 1000:g}"
+                    for flag, v in (("--from-km", from_m), ("--to-km", to_m))
+                    if v is not None
+                )
+                raise ValueError(
+                    f"{given}: no position of masks {masks_label}, which cover "
+                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
+                    "choose a stretch inside"
+                )
+            mask_set = mask_set.subset(lo_m, hi_m)
+        if track is not None:
+            check_masks_on_track(mask_set, track, masks_label)
+        sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
+        if interval_every < 1:
+            raise ValueError(f"interval_every must be >= 1, got {interval_every}")
+        model = IntervalModel() if interval_model is None else interval_model
+        bar.update(1)
+
+        stage("navigation")
+        ephemeris = load_navigation(nav)
+        names = ", ".join(Path(p).name for p in nav) if nav else ""
+        nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
+        t0_gps, t1_gps = parse_time(start, "--start"), parse_time(end, "--end")
+        t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
+        if not select_satellites(ephemeris.satellites, constellation):
+            raise ValueError(
+                f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
+                "--constellation or give navigation data for it"
+            )
+        sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
+        _check_window(sats, ephemeris, nav_label)
+        warnings = sparse_navigation(sats, nav_label)
+        positions = LinePositions.from_masks(mask_set)
+        bar.update(1)
+
+        rules = [TrustRule.mask(mask_set), TrustRule.none()]
+        rules += [TrustRule.cutoff(c) for c in cutoffs]
+        results = []
+        for rule in rules:
+            stage(rule.label)
+            results.append(
+                compute_availability(
+                    sats,
+                    positions,
+                    rule,
+                    interval_every=interval_every,
+                    interval_model=model,
+                    workers=workers,
+                )
+            )
+            bar.update(1)
+
+        stage("tables")
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        info = _run_info(
+            mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
+            step_s, interval_every, __version__, model,
+        )  # fmt: skip
+        info["warnings"] = warnings
+        files, summary = write_tables(out, results, track, info, counts_table)
+        # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+        # its validity window, inconsistent, no data): such satellites count for no rule.
+        files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
+        status = sats.status.report()
+        status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
+        bar.update(1)
+
+        stage("figures")
+        inputs = ReportInputs(
+            results=tuple(results), masks=mask_set, satellites=sats, track=track, info=info,
+            sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+        )  # fmt: skip
+        html = build_report(inputs)
+        bar.update(1)
+
+        stage("report")
+        report = out / "report.html"
+        report.write_text(html, encoding="utf-8")
+        files["report"] = report
+        bar.update(1)
+    finally:
+        bar.close()  # also on an error: its message then starts on a line of its own
+    return AvailabilityRun(
+        out, report, files, summary, tuple(results), time.perf_counter() - t0, info
+    )
+
+
+def _run_info(
+    masks: MaskSet, masks_label: str, track: Any, ephemeris: Ephemeris, nav_label: str,
+    sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
+    interval_every: int, version: str, model: IntervalModel,
+) -> dict[str, Any]:  # fmt: skip
+    systems = sorted({s[0] for s in sats.sats})
+    line = track.name if track is not None else str(masks.provenance.get("track", "line"))
+    km = track.kilometre_at(masks.chainage_m[[0, -1]]) if track is not None else None
+    km_text = (
+        f" (km {km[0] / 1000:.3f} - {km[1] / 1000:.3f})"
+        if km is not None and np.all(np.isfinite(km))
+        else ""
+    )
+    return {
+        "line": line,
+        "stretch": f"chainage {masks.chainage_m[0] / 1000:.3f} - {masks.chainage_m[-1] / 1000:.3f}"
+        f" km{km_text}, {masks.n_pos} positions",
+        "window": f"{_iso(sats.gps_s[0])} - {_iso(sats.gps_s[-1] + step_s)} GPST, every "
+        f"{step_s:g} s ({len(sats.gps_s)} epochs)",
+        "window_gps_s": [float(sats.gps_s[0]), float(sats.gps_s[-1] + step_s)],
+        "navigation": f"{nav_label} ({ephemeris.kind})",
+        "constellation": f"{constellation}: "
+        + ", ".join(SYSTEM_NAMES[s] for s in systems)
+        + f" ({len(sats.sats)} satellites)",
+        "rules": [r.label for r in rules],
+        "masks": masks_label,
+        "mask_provenance": dict(masks.provenance),
+        "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
+        "interval_every": interval_every,
+        "interval_model": (
+            f"sigma(el)² = {model.error.a_m:.3f}² + ({model.error.b_m:.3f} / sin el)² m² "
+            f"(elevations below {model.error.min_el_deg:g}° as {model.error.min_el_deg:g}°), "
+            f"pair intervals ± {model.k_sigma:g} sigma"
+        ),
+        "interval_model_params": {
+            "a_m": model.error.a_m, "b_m": model.error.b_m,
+            "min_el_deg": model.error.min_el_deg, "k_sigma": model.k_sigma,
+        },
+        "software": f"predisat {version}",
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "track_attribution": _track_credit(track),
+        "interval_model_is_default": model == IntervalModel(),
+        "nav_is_embedded": nav_label.startswith("embedded"),
+    }
+
+
+def _track_credit(track: Any) -> str:
+    """The track named in the report's footer: its name, source and required attribution."""
+    if track is None:
+        return "none given (masks' own positions)"
+    parts = [p for p in (track.name, track.source) if p]
+    credit = ", ".join(dict.fromkeys(parts))  # a file named after its track says it once
+    return f"{credit}. {track.attribution}" if track.attribution else credit
+
+
+# ------------------------------------------------------------------------- command line
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the ``predisat availability`` options to a (sub)parser; returns it."""
+    p = parser
+    p.add_argument("--masks", required=True, metavar="FILE",
+                   help="mask file, or the output folder of predisat process")
+    p.add_argument("--track", metavar="FILE", help="track map the masks were made on (GeoJSON/CSV)")
+    p.add_argument(
+        "--nav", nargs="+", metavar="FILE",
+        help="RINEX navigation, SP3 or TLE file(s) (default: embedded day 2020-06-25)",
+    )  # fmt: skip
+    p.add_argument(
+        "--start", metavar="TIME",
+        help="window start: GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or gps_s",
+    )  # fmt: skip
+    p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
+    p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
+                   help="epoch spacing, s")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--constellation", default="gps",
+        help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",
+    )  # fmt: skip
+    p.add_argument(
+        "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
+        help="flat cut-off(s) compared with the masks (default 15)",
+    )  # fmt: skip
+    p.add_argument("--from-km", type=finite_float, metavar="A", help="stretch start, chainage km")
+    p.add_argument("--to-km", type=finite_float, metavar="B", help="stretch end, chainage km")
+    p.add_argument(
+        "--sky-km", type=float, nargs="+", metavar="KM",
+        help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
+    )  # fmt: skip
+    p.add_argument(
+        "--interval-every", type=positive_int, default=10, metavar="N",
+        help="predict the interval at every N-th epoch (default 10; 1 is slow)",
+    )  # fmt: skip
+    p.add_argument(
+        "--error-model", metavar="JSON",
+        help="pseudorange error model of the predicted intervals, from `locator calibrate` "
+        "(default a = b = 2 m, k = 2)",
+    )  # fmt: skip
+    p.add_argument(
+        "--k-sigma", type=positive_float, metavar="K",
+        help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
+        "per pair)",
+    )  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=1, help="threads")
+    p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def run_from_args(args: argparse.Namespace, track: Any = None) -> AvailabilityRun:
+    """Run from parsed :func:`add_arguments` options (``track`` overrides ``--track``)."""
+    if args.from_km is not None and args.to_km is not None and not args.from_km < args.to_km:
+        raise ValueError(
+            f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the start must be below the end "
+            "(chainage grows along the track)"
+        )
+    return run_availability(
+        args.masks,
+        track if track is not None else args.track,
+        args.nav,
+        out_dir=args.out,
+        start=args.start,
+        end=args.end,
+        step_s=args.step,
+        constellation=args.constellation,
+        cutoff_deg=tuple(args.cutoff),
+        from_m=None if args.from_km is None else args.from_km * 1000.0,
+        to_m=None if args.to_km is None else args.to_km * 1000.0,
+        sky_km=args.sky_km,
+        interval_every=args.interval_every,
+        interval_model=_interval_model(args.error_model, args.k_sigma),
+        workers=args.workers,
+        counts_table=args.counts,
+        progress=not args.quiet,
+    )
+
+
+def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
+    """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
+    if error_model is not None:
+        from locator.runio import RunFileError, read_error_model
+
+        try:
+            model = read_error_model(error_model)
+        except RunFileError as exc:
+            raise ValueError(f"--error-model: {exc}") from None
+    else:
+        model = IntervalModel()
+    if k_sigma is not None:
+        if not (k_sigma > 0 and np.isfinite(k_sigma)):
+            raise ValueError(
+                f"--k-sigma must be positive and finite, got {k_sigma} (the source's 2; 3.89 "
+                "gives 1e-4 per pair)"
+            )
+        model = IntervalModel(model.error, k_sigma)
+    return model

@@ -1,0 +1,583 @@
+"""Command line of the PREDISAT pipeline (``predisat``).
+
+Each subcommand is a thin layer over the library: it parses arguments, checks them, calls one
+public function and prints a short summary. Errors from bad input are printed as one clear
+message (exit code 2), never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from predisat import __version__
+from predisat.cli.args import (
+    caused_by_interrupt,
+    finite_float,
+    output_dir,
+    output_file,
+    positive_float,
+    positive_int,
+)
+
+if TYPE_CHECKING:
+    from predisat.camera.models import CameraModel
+    from predisat.synth.generate import SynthResult
+    from predisat.synth.world import WorldSpec
+    from predisat.track.map import TrackMap
+
+__all__ = ["main"]
+
+DEMO_FROM_KM = 4.0
+DEMO_TO_KM = 6.0
+DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the demo quick
+# The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
+# the pinhole the masks lose 63-65 % of the visible sky instead of 14-16 % (docs/pipeline.md).
+DEMO_CAMERA = "fisheye"
+
+
+def render_demo_survey(
+    out_dir: str | os.PathLike[str],
+    seed: int = 1,
+    camera: str = DEMO_CAMERA,
+    workers: int = 1,
+    progress: bool = True,
+    spacing_m: float = 10.0,
+    from_km: float = DEMO_FROM_KM,
+    to_km: float = DEMO_TO_KM,
+) -> SynthResult:
+    """The demo's synthetic survey: line 144 km ``from_km``-``to_km`` (default
+    ``DEMO_FROM_KM``-``DEMO_TO_KM``), mixed scenery and skies, the default ``camera``
+    (``"fisheye"`` or ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``, a position every
+    ``spacing_m`` (:func:`predisat.synth.generate.generate_survey`)."""
+    from predisat.camera.models import default_camera
+    from predisat.synth.generate import generate_survey
+    from predisat.track import map as trackmod
+
+    return generate_survey(
+        trackmod.demo_track(),
+        from_km * 1000.0,
+        to_km * 1000.0,
+        sky="mixed",
+        seed=seed,
+        out_dir=out_dir,
+        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),  # type: ignore[arg-type]
+        progress=progress,
+        workers=workers,
+        overwrite=True,
+        spacing_m=spacing_m,
+    )
+
+
+def _default_workers() -> int:
+    return max(1, min(2, os.cpu_count() or 1))
+
+
+class CliError(Exception):
+    """A user-facing error: printed without a traceback."""
+
+
+def _parse_where(items: Sequence[str] | None) -> dict[str, str | None] | None:
+    """``KEY=VALUE`` property filters; ``KEY=`` selects features without that property."""
+    if not items:
+        return None
+    where: dict[str, str | None] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CliError(f"--where {item}: expected KEY=VALUE (or KEY= for 'property absent')")
+        where[key] = value or None
+    return where
+
+
+def _load_track(
+    path: str | None,
+    name: str | None,
+    chain: str = "all",
+    where: Sequence[str] | None = None,
+) -> TrackMap:
+    from predisat.track import map as track
+
+    if path is None:
+        return track.demo_track()
+    p = Path(path)
+    if not p.is_file():
+        raise CliError(f"--track {path}: no such file (give a GeoJSON or lat/lon/h CSV track map)")
+    if p.suffix.lower() in {".csv", ".txt"}:
+        return track.TrackMap.from_csv(p)
+    return track.TrackMap.from_geojson(p, track=name, chain=chain, where=_parse_where(where))
+
+
+def _add_track_selection(p: argparse.ArgumentParser) -> None:
+    """Which line of a GeoJSON holding several (Infrabel files, OpenStreetMap extracts)."""
+    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
+    p.add_argument(
+        "--chain",
+        choices=["all", "longest"],
+        default="all",
+        help="chain every selected way (all) or the longest connected chain of a network",
+    )
+    p.add_argument(
+        "--where",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
+    )
+
+
+def _km_range(
+    track: TrackMap, from_km: float | None, to_km: float | None
+) -> tuple[float, float]:
+    """``--from-km/--to-km`` as metres of chainage, refused with the fix when not a stretch."""
+    top_km = track.length_m / 1000.0
+    lo_km = 0.0 if from_km is None else float(from_km)
+    hi_km = top_km if to_km is None else float(to_km)
+    if not lo_km < hi_km:
+        reason = "the start must be below the end (chainage grows along the track)"
+    elif not (0.0 <= lo_km and hi_km <= top_km + 1e-9):
+        reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
+    else:
+        return lo_km * 1000.0, hi_km * 1000.0
+    hint = ""
+    if lo_km < hi_km and hi_km > top_km and hi_km / 1000.0 <= top_km:
+        hint = (
+            f"; the values are kilometres, did you give metres? "
+            f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
+        )
+    raise CliError(f"--from-km {lo_km:g} --to-km {hi_km:g}: {reason}{hint}")
+
+
+def _camera(kind: str, calibration: str | None) -> CameraModel:
+    from predisat.camera import models as camera
+
+    if calibration is not None:
+        return camera.CameraModel.from_yaml(calibration)
+    return camera.default_camera("fisheye" if kind == "fisheye" else "pinhole")
+
+
+def _scenery(path: str | None) -> WorldSpec | None:
+    if path is None:
+        return None
+    import yaml
+
+    from predisat.synth.world import WorldSpec
+
+    p = Path(path)
+    if not p.is_file():
+        raise CliError(f"--scenery {path}: no such file (give a YAML scenery recipe)")
+    try:
+        recipe = yaml.safe_load(p.read_text())
+        return WorldSpec.from_dict(recipe if isinstance(recipe, dict) else {})
+    except (yaml.YAMLError, ValueError, TypeError, KeyError) as exc:
+        raise CliError(
+            f"--scenery {path}: not a valid scenery recipe ({exc}); see docs/synthetic-world.md"
+        ) from None
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    track = _load_track(args.track, args.track_name, args.chain, args.where)
+    from_m, to_m = _km_range(track, args.from_km, args.to_km)
+    cam = _camera(args.camera, args.calibration)
+    spec = _scenery(args.scenery)
+
+    from predisat.synth.generate import generate_survey
+
+    t0 = time.perf_counter()
+    result = generate_survey(
+        track,
+        from_m,
+        to_m,
+        sky=args.sky,
+        seed=args.seed,
+        out_dir=Path(args.out),
+        spacing_m=args.spacing_m,
+        camera=cam,
+        pitch_deg=args.pitch_deg,
+        spec=spec,
+        progress=not args.quiet,
+        workers=args.workers,
+    )
+    dt = time.perf_counter() - t0
+    print(
+        f"synth: {result.n_frames} frames at {result.n_positions} positions in {dt:.1f} s "
+        f"({result.n_frames / dt:.2f} frames/s); survey {result.survey_dir}, "
+        f"ground truth {result.truth_dir}"
+    )
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from predisat.availability.run import run_availability
+    from predisat.reconstruct.batch import process_survey
+    from predisat.reconstruct.evalfigures import evaluation_figure
+    from predisat.reconstruct.evaluate import compare, evaluate_masks, format_table, load_truth
+    from predisat.synth.generate import contact_sheet
+    from predisat.track import map as trackmod
+
+    out = Path(args.out)
+    track = trackmod.demo_track()
+    lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
+    lo_km, hi_km = lo_m / 1000.0, hi_m / 1000.0
+    print(
+        f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
+        f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
+    )
+    t0 = time.perf_counter()
+    print("demo 1/5: rendering the synthetic survey and its ground truth")
+    synth = render_demo_survey(
+        out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet,
+        from_km=lo_km, to_km=hi_km,
+    )  # fmt: skip
+    t_synth = time.perf_counter() - t0
+    sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
+
+    print("demo 2/5: processing the frames into elevation masks")
+    t1 = time.perf_counter()
+    processed = process_survey(
+        synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
+    )
+    t_process = time.perf_counter() - t1
+    print(f"  {processed}")
+
+    print("demo 3/5: masks against the synthetic ground truth")
+    comp = compare(processed.masks, load_truth(synth.truth_dir))
+    table = evaluate_masks(comp)
+    overall = table[table["source"] == "all"]
+    with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
+    print(format_table(overall[with_cols]))
+    eval_png = out / "evaluation.png"
+    evaluation_figure(comp, title="Demo masks against the ground truth").savefig(eval_png, dpi=100)
+
+    print("demo 4/5: availability report (embedded navigation day, GPS)")
+    run = run_availability(
+        processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
+    )
+    print(_availability_table(run.summary))
+    print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
+
+    print("demo 5/5: a simulated train run located with the 1-D locator under each trust rule")
+    from locator.cli import format_demo_table
+    from locator.workflow import demo as locator_demo
+    from predisat.synth.world import World
+
+    world = World.load(synth.truth_dir / "world.npz", track)
+    loc = locator_demo(
+        out / "locator", world=world, pipeline_masks=processed.masks, log=lambda s: None
+    )
+    print(format_demo_table(loc))
+    dt = time.perf_counter() - t0
+    print(
+        f"demo: done in {dt:.0f} s; {synth.n_frames} frames at {synth.n_positions} positions "
+        f"(rendering {synth.n_frames / t_synth:.2f} frames/s, processing "
+        f"{synth.n_frames / t_process:.2f} frames/s)\n"
+        f"  survey:        {synth.survey_dir}\n"
+        f"  ground truth:  {synth.truth_dir}\n"
+        f"  contact sheet: {sheet}\n"
+        f"  masks:         {processed.masks_path}\n"
+        f"  evaluation:    {eval_png}\n"
+        f"  report:        {run.report_html}\n"
+        f"  locator runs:  {out / 'locator'}"
+    )
+    return 0
+
+
+def cmd_availability(args: argparse.Namespace) -> int:
+    from predisat.availability.run import run_from_args
+
+    track = None
+    if args.track is not None:
+        track = _load_track(args.track, args.track_name, args.chain, args.where)
+    run = run_from_args(args, track=track)
+    for warning in run.info.get("warnings", ()):
+        print(f"predisat availability: warning: {warning}", file=sys.stderr)
+    print(_availability_table(run.summary))
+    print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
+          f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip
+    return 0
+
+
+def _availability_table(summary: Any) -> str:
+    """The line-wide figures a reader looks at first, one row per trust rule."""
+    cols = {
+        "rule": "rule",
+        "share_ge2": ">=2 sats %",
+        "share_ge4": ">=4 sats %",
+        "share_ge6": ">=6 sats %",
+        "mean_count": "mean sats",
+        "longest_below4_m": "longest <4 m",
+        "interval_median_m": "interval median m",
+        "interval_p95_m": "p95 m",
+    }
+    t = summary[list(cols)].rename(columns=cols)
+    for c in (">=2 sats %", ">=4 sats %", ">=6 sats %"):
+        t[c] = 100.0 * t[c]
+    return str(t.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+
+
+def cmd_evaluate_sky(args: argparse.Namespace) -> int:
+    from predisat.sky.photoeval import evaluate_folder
+
+    for data in args.data:
+        if not Path(data).is_dir():
+            raise CliError(f"--data {data}: no such folder (give a folder of photos and masks)")
+    classifier = None
+    if args.sky_net is not None:
+        from predisat.sky.network import SkyNet, classifier_with_net
+        from predisat.sky.segment import SkyOptions
+
+        method = args.method or SkyOptions().method
+        classifier = classifier_with_net(method, SkyNet.load(args.sky_net))
+    for data in args.data:
+        out = None if args.out is None else Path(args.out) / Path(data).name
+        result = evaluate_folder(data, out, progress=not args.quiet, method=args.method,
+                                 classifier=classifier)
+        print(f"{data} ({result.layout}):")
+        print(result.summary.to_string(index=False))
+        if out is not None:
+            print(f"  per-image table and worst cases in {out}")
+    return 0
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    from predisat.reconstruct.batch import process_from_args
+
+    result = process_from_args(args)
+    print(f"process: {result}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from predisat.masks import fileformat as maskio
+
+    path = maskio.mask_file_path(args.masks)
+    chainage_m: float | None = args.chainage
+    if args.format == "urbannav":
+        if chainage_m is not None:
+            raise CliError("--chainage: urbannav exports every position; drop it, or choose "
+                           "--format rtklib or pvgis for one position")
+    elif chainage_m is None:
+        raise CliError(f"--format {args.format} exports one position: give --chainage M")
+    if args.header and args.format != "urbannav":
+        raise CliError(f"--header is for --format urbannav, not {args.format}; drop it")
+    if args.pvgis_layout != "table" and args.format != "pvgis":
+        raise CliError(f"--pvgis-layout is for --format pvgis, not {args.format}; drop it")
+    masks = maskio.read_masks(path)
+    include = not args.bare
+    if args.format == "urbannav":
+        out = maskio.to_urbannav_csv(masks, args.out, include_margin=include, header=args.header)
+        what = f"{masks.n_pos} positions"
+    else:
+        assert chainage_m is not None  # checked above
+        ch_m = float(chainage_m)
+        i, _ = masks.position_index(ch_m)
+        what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
+        if args.format == "rtklib":
+            out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)
+        else:
+            out = maskio.to_pvgis_horizon(masks, ch_m, args.out, layout=args.pvgis_layout,
+                                          include_margin=include)  # fmt: skip
+    kind = "bare mask" if args.bare else "mask + margin"
+    print(f"export: {args.format} ({kind}, {what}) -> {out}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from predisat.reconstruct.evaluate import evaluate_from_args
+
+    evaluate_from_args(args)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from predisat.sky.segment import METHODS
+
+    parser = argparse.ArgumentParser(
+        prog="predisat",
+        description=(
+            "PREDISAT: side-camera railway surveys to GNSS elevation masks. "
+            "Run 'predisat demo' to build the demo survey on Belgian line 144."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser(
+        "synth",
+        help="render a synthetic side-camera survey with exact ground truth",
+        description=(
+            "Build a procedural corridor world along a track, render left and right 45-degree "
+            "camera frames every SPACING metres, and write a survey folder plus ground truth."
+        ),
+    )
+    p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
+    _add_track_selection(p)
+    p.add_argument("--from-km", type=finite_float, metavar="A",
+                   help="start chainage in km (default 0)")
+    p.add_argument("--to-km", type=finite_float, metavar="B",
+                   help="end chainage in km (default: end)")
+    p.add_argument(
+        "--sky", choices=["clear", "cloudy", "overcast", "mixed"], default="mixed", help="sky"
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of scenery and sky")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    p.add_argument("--spacing-m", type=positive_float, default=10.0,
+                   help="distance between positions")
+    p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
+    p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
+    p.add_argument("--pitch-deg", type=float, default=45.0, help="camera pitch above horizontal")
+    p.add_argument(
+        "--scenery", metavar="YAML", help="scenery recipe (default: mixed, every kind of stretch)"
+    )
+    p.add_argument("--workers", type=positive_int, default=_default_workers(),
+                   help="rendering processes")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_synth)
+
+    from predisat.availability.run import add_arguments as add_availability_arguments
+
+    p = sub.add_parser(
+        "availability",
+        help="mask-aware satellite availability report along a line",
+        description=(
+            "Which satellites a train may trust along the line over a time window, under the "
+            "survey masks, with no mask and with flat cut-offs: an HTML report with plots, "
+            "CSV/Parquet tables and a GeoJSON layer for QGIS."
+        ),
+    )
+    add_availability_arguments(p)
+    _add_track_selection(p)
+    p.set_defaults(func=cmd_availability)
+
+    from predisat.reconstruct.batch import add_process_arguments
+    from predisat.reconstruct.evaluate import add_evaluate_arguments
+
+    p = sub.add_parser(
+        "process",
+        help="turn a survey's side-camera frames into elevation masks (resumable)",
+        description=(
+            "Segment the sky in every frame, reconstruct full 360 deg masks along the line in "
+            "chainage chunks written atomically (an interrupted run resumes), and write the "
+            "mask file. Bad frames are reported and skipped (--strict: stop)."
+        ),
+    )
+    add_process_arguments(p)
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser(
+        "evaluate",
+        help="compare masks with synthetic ground truth; calibrate the trust margin",
+        description=(
+            "Mask error by sector and source against the true masks of a synthetic survey, "
+            "false-trust rate and visible sky lost; --calibrate finds the margin meeting the "
+            "target share of truly line-of-sight trusted directions."
+        ),
+    )
+    add_evaluate_arguments(p)
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        "export",
+        help="write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
+        description=(
+            "Convert a mask file (or a `predisat process` output folder) for other tools: "
+            "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
+            "position: 'AZ EL' lines for the file-elmaskfile option of the MALIB / MRTKLIB "
+            "RTKLIB forks, RTKPLOT and simobs) or pvgis (one position: horizon table). Values "
+            "are the mask plus its margin, never below the mask at any azimuth the reader may "
+            "look up (docs/mask-format.md)."
+        ),
+    )
+    p.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
+    p.add_argument("--format", required=True, choices=("urbannav", "rtklib", "pvgis"))
+    p.add_argument("--out", required=True, type=output_file, metavar="FILE", help="output file")
+    p.add_argument("--chainage", type=float, metavar="M",
+                   help="rtklib and pvgis: the position (nearest surveyed position), metres")
+    p.add_argument("--bare", action="store_true", help="the mask without its margin")
+    p.add_argument("--header", action="store_true", help="urbannav: a header row")
+    p.add_argument("--pvgis-layout", choices=("table", "userhorizon"), default="table",
+                   help="pvgis: the horizon-profile table (default) or PVGIS's upload file")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser(
+        "evaluate-sky",
+        help="score sky segmentation on a folder of photos with ground-truth sky masks",
+        description=(
+            "Segment every photo of a folder and compare with its sky mask: IoU per image and "
+            "per set (layouts: ADE20K original/+mask/, fisheye_hk raw_images/+mask_images/, "
+            "images/+masks/, or a predisat synth output folder)."
+        ),
+    )
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR", help="photo folder(s)")
+    p.add_argument("--out", type=output_dir, metavar="DIR",
+                   help="write per-image tables and worst-case sheets")
+    p.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
+                   "library's default, see docs/segmentation.md)")
+    p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
+                   "card) instead of the shipped one, for --method cnn or ensemble")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_evaluate_sky)
+
+    p = sub.add_parser(
+        "demo",
+        help="run the pipeline on the embedded demo (2 km of line 144)",
+        description=(
+            "Render a synthetic survey of 2 km of line 144 with ground truth, process it into "
+            "masks, compare them with the truth and write the availability report."
+        ),
+    )
+    p.add_argument(
+        "--out", default="demo_out", type=output_dir, metavar="DIR", help="output folder"
+    )
+    p.add_argument("--seed", type=int, default=1, help="random seed")
+    p.add_argument(
+        "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
+        help=f"side camera model (default {DEMO_CAMERA})",
+    )  # fmt: skip
+    p.add_argument("--from-km", type=finite_float, default=DEMO_FROM_KM, metavar="KM",
+                   help=f"start of the stretch (default {DEMO_FROM_KM})")
+    p.add_argument("--to-km", type=finite_float, default=DEMO_TO_KM, metavar="KM",
+                   help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
+                   "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
+                   "cut out of the default demo's")
+    p.add_argument("--workers", type=positive_int, default=_default_workers(),
+                   help="rendering processes")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "func", None) is None:
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as exc:
+        # Library errors are written to be read by a person: show them without a traceback.
+        print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, SystemError) as exc:
+        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it.
+        if not caused_by_interrupt(exc):  # a genuine SystemError
+            raise
+        kept = (
+            "; finished chunks and segmented frames are kept: rerun the same command to resume"
+            if args.command == "process"
+            else ""
+        )
+        print(f"\npredisat {args.command}: interrupted{kept}", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,8 @@
+"""GNSS: time scales, navigation and orbit files, satellite positions and clocks.
+
+* :mod:`predisat.gnss.timescale` - GPS seconds, UTC and leap seconds, BeiDou and GLONASS time.
+* :mod:`predisat.gnss.rinex_nav`, :mod:`predisat.gnss.sp3`, :mod:`predisat.gnss.tle` - readers.
+* :mod:`predisat.gnss.orbits` - broadcast orbits (Kepler and GLONASS).
+* :mod:`predisat.gnss.ephemeris` - one facade over broadcast, precise and TLE orbits.
+* :mod:`predisat.gnss.antenna_offsets` - satellite antenna phase-centre offsets.
+"""

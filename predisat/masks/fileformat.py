@@ -1,0 +1,574 @@
+"""Mask file v1 (GeoParquet) reader and writer, and exporters to other tools' mask formats.
+
+The mask file is a GeoParquet 1.1 file: one row per position, a WKB ``Point`` geometry column
+(longitude, latitude; CRS ``OGC:CRS84``) so QGIS and geopandas open it as points along the
+line, plain scalar columns, and the per-bin arrays as fixed-size list columns. The full
+specification is ``docs/mask-format.md``.
+
+Exporters (all conservative: a resampled value is the maximum of every bin its sample may
+stand for, see ``docs/mask-format.md``):
+
+* :func:`to_urbannav_csv` - UrbanNav-style sky-mask CSV, ``lat, lon, h`` then 361 elevations
+  at azimuths 0, 1, ..., 360 deg, one row per position.
+* :func:`to_rtklib_mask` - RTKLIB elevation mask file (``AZ EL`` lines) for one position.
+* :func:`to_pvgis_horizon` - PVGIS horizon table or PVGIS "user horizon" upload file for one
+  position.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import shapely
+from numpy.typing import NDArray
+
+from predisat.atomic import atomic_path
+from predisat.masks.binops import conservative_resample
+from predisat.masks.maskset import REQUIRED_DESCRIPTORS, BinSource, MaskError, MaskSet
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "METADATA_KEY",
+    "MaskFileError",
+    "mask_file_path",
+    "read_masks",
+    "to_pvgis_horizon",
+    "to_rtklib_mask",
+    "to_urbannav_csv",
+    "write_masks",
+]
+
+FORMAT_NAME = "predisat-masks"
+FORMAT_VERSION = 1
+METADATA_KEY = b"predisat"
+"""Parquet file key-value metadata key holding the PREDISAT JSON header."""
+GEOPARQUET_VERSION = "1.1.0"
+
+_SCALARS = ("chainage_m", "lat_deg", "lon_deg", "h_m", "heading_deg")
+_BINNED = {"mask_el_deg": pa.float32(), "source": pa.uint8(), "margin_deg": pa.float32()}
+_DERIVED = ("opening_angle_deg", "assumed_bins")
+_COLUMN_DOC = {
+    "geometry": "WKB Point (lon_deg, lat_deg), OGC:CRS84",
+    "chainage_m": "distance along the track axis from the track map origin, m",
+    "lat_deg": "WGS84 latitude of the position, deg",
+    "lon_deg": "WGS84 longitude of the position, deg",
+    "h_m": "WGS84 ellipsoidal height of the position, m",
+    "heading_deg": "azimuth of increasing chainage, deg clockwise from true north",
+    "mask_el_deg": "skyline elevation per azimuth bin, deg in [0, 90]",
+    "source": "per-bin origin: 0 observed, 1 reconstructed, 2 assumed",
+    "margin_deg": "per-bin margin added to the mask before the trust test, deg >= 0",
+    "opening_angle_deg": "derived, informative: 180 - effective mask left - right (cross-track)",
+    "assumed_bins": "derived, informative: number of bins with source = 2 (assumed)",
+}
+_RTKLIB_STEP_DEG = 0.1  # RTKLIB stores the mask as int16 tenths of a degree, truncated
+# Rounding up treats values within this of a step as on it: float32 storage puts 12.3 at
+# 12.3000002, which must export as 12.3, not 12.4.
+_ROUND_TOL_DEG = 1e-5
+
+
+class MaskFileError(MaskError):
+    """A mask file cannot be read or written; the message names the file, column and row."""
+
+
+# ---------------------------------------------------------------------- GeoParquet
+def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
+    """Write a mask set as a mask file v1 (GeoParquet), atomically.
+
+    The file is written beside ``path`` under a temporary name and moved into place with
+    :func:`os.replace`, so a crash never leaves a half-written mask file.
+
+    Parameters
+    ----------
+    masks : MaskSet
+    path : path-like
+        Destination, conventionally ``*.masks.parquet``.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    n_az = masks.n_az
+    points = shapely.points(masks.lon_deg, masks.lat_deg)
+    cols: dict[str, pa.Array] = {
+        "geometry": pa.array(shapely.to_wkb(points, byte_order=1), type=pa.binary()),
+    }
+    for name in _SCALARS:
+        cols[name] = pa.array(getattr(masks, name), type=pa.float64())
+    for name, typ in _BINNED.items():
+        flat = pa.array(np.ascontiguousarray(getattr(masks, name)).ravel(), type=typ)
+        cols[name] = pa.FixedSizeListArray.from_arrays(flat, n_az)
+    for name, values in masks.descriptors.items():
+        cols[name] = pa.array(values, type=pa.float64(), from_pandas=False)
+    cols["opening_angle_deg"] = pa.array(masks.opening_angle_deg(), type=pa.float64())
+    cols["assumed_bins"] = pa.array(
+        (masks.source == BinSource.ASSUMED).sum(axis=1).astype(np.int32), type=pa.int32()
+    )
+
+    header = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "az_step_deg": masks.az_step_deg,
+        "n_az": n_az,
+        "azimuth_bins": "bin k is centred on k * az_step_deg (deg clockwise from true north) "
+        "and covers [centre - az_step_deg / 2, centre + az_step_deg / 2)",
+        "source_codes": {str(int(s)): s.name.lower() for s in BinSource},
+        "trust_rule": "trusted when elevation > mask_el_deg + margin_deg of the bin",
+        "descriptors": list(masks.descriptors),
+        "derived_columns": list(_DERIVED),
+        "columns": {
+            **_COLUMN_DOC,
+            **{d: "obstacle descriptor (NaN = none)" for d in masks.descriptors},
+        },
+        "provenance": masks.provenance,
+    }
+    geo = {
+        "version": GEOPARQUET_VERSION,
+        "primary_column": "geometry",
+        "columns": {
+            "geometry": {
+                "encoding": "WKB",
+                "geometry_types": ["Point"],
+                "crs": _crs84_projjson(),
+                "edges": "planar",
+                "bbox": [
+                    float(masks.lon_deg.min()),
+                    float(masks.lat_deg.min()),
+                    float(masks.lon_deg.max()),
+                    float(masks.lat_deg.max()),
+                ],
+            }
+        },
+    }
+    table = pa.table(cols).replace_schema_metadata(
+        {METADATA_KEY: json.dumps(header, allow_nan=False), b"geo": json.dumps(geo)}
+    )
+    with _atomic(path, binary=True) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return path
+
+
+def mask_file_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` itself, or ``path / "masks.parquet"`` when it is a folder (the output folder of
+    ``predisat process``)."""
+    p = Path(path)
+    return p / "masks.parquet" if p.is_dir() else p
+
+
+def read_masks(path: str | os.PathLike[str]) -> MaskSet:
+    """Read and validate a mask file v1.
+
+    Checks the format name and version, the presence and types of every column, list lengths,
+    nulls, value ranges, monotonic chainage, and that the geometry points agree with
+    ``lat_deg`` / ``lon_deg``.
+
+    Parameters
+    ----------
+    path : path-like
+        The mask file, or the output folder of ``predisat process`` (its ``masks.parquet``).
+
+    Raises
+    ------
+    MaskFileError
+        Naming the file, the column and the first bad row, and what would fix it.
+    """
+    given = Path(path)
+    path = mask_file_path(given)
+    if given.is_dir() and not path.is_file():
+        raise MaskFileError(
+            f"{given}: a folder without masks.parquet; give a mask file v1 or the output "
+            "folder of a finished `predisat process` run"
+        )
+    if not path.is_file():
+        raise MaskFileError(
+            f"{path}: no such mask file; give a mask file v1 (written by `predisat process` "
+            "or predisat.masks.fileformat.write_masks) or the output folder of `predisat process`"
+        )
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        raise MaskFileError(
+            f"{path}: not a readable Parquet file ({exc}); a mask file is the masks.parquet "
+            "that `predisat process` writes (an interrupted copy is cut short: copy it again, "
+            "or rerun the process command, which resumes)"
+        ) from None
+    header = _read_header(path, table.schema.metadata or {})
+    n_az = header["n_az"]
+    names = set(table.column_names)
+
+    def fail(msg: str) -> MaskFileError:
+        return MaskFileError(f"{path}: {msg}")
+
+    missing = [
+        c for c in ("geometry", *_SCALARS, *_BINNED, *header["descriptors"]) if c not in names
+    ]
+    if missing:
+        raise fail(
+            f"missing column(s) {missing}; the file was not written by predisat.masks.fileformat."
+            "write_masks or a tool dropped columns - rewrite it from the MaskSet"
+        )
+    absent = [d for d in REQUIRED_DESCRIPTORS if d not in header["descriptors"]]
+    if absent:
+        raise fail(f"required descriptor column(s) {absent} are not listed in the header")
+
+    arrays: dict[str, NDArray] = {}
+    for name in _SCALARS:
+        arrays[name] = _scalar_column(table, name, fail, allow_null=False)
+    descriptors = {
+        d: _scalar_column(table, d, fail, allow_null=True) for d in header["descriptors"]
+    }
+    for name in _BINNED:
+        arrays[name] = _binned_column(table, name, n_az, fail)
+    _check_geometry(table, arrays["lon_deg"], arrays["lat_deg"], fail)
+    try:
+        return MaskSet(
+            chainage_m=arrays["chainage_m"],
+            lat_deg=arrays["lat_deg"],
+            lon_deg=arrays["lon_deg"],
+            h_m=arrays["h_m"],
+            heading_deg=arrays["heading_deg"],
+            az_step_deg=header["az_step_deg"],
+            mask_el_deg=arrays["mask_el_deg"],
+            source=arrays["source"],
+            margin_deg=arrays["margin_deg"],
+            descriptors=descriptors,
+            provenance=header["provenance"],
+        )
+    except MaskError as exc:
+        raise fail(str(exc)) from None
+
+
+def _read_header(path: Path, metadata: dict[bytes, bytes]) -> dict[str, Any]:
+    raw = metadata.get(METADATA_KEY)
+    if raw is None:
+        raise MaskFileError(
+            f"{path}: not a PREDISAT mask file (no '{METADATA_KEY.decode()}' key in the Parquet "
+            "metadata); write mask files with predisat.masks.fileformat.write_masks"
+        )
+    try:
+        header = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise MaskFileError(
+            f"{path}: the '{METADATA_KEY.decode()}' metadata is not JSON ({exc})"
+        ) from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
+        got = header.get("format") if isinstance(header, dict) else header
+        raise MaskFileError(f"{path}: metadata format is {got!r}, expected {FORMAT_NAME!r}")
+    version = header.get("format_version")
+    if version != FORMAT_VERSION:
+        hint = (
+            "it was written by a newer PREDISAT: upgrade predisat to read it"
+            if isinstance(version, int) and version > FORMAT_VERSION
+            else "rewrite the file with predisat.masks.fileformat.write_masks"
+        )
+        raise MaskFileError(
+            f"{path}: format_version {version!r} is not supported (this reader reads "
+            f"{FORMAT_VERSION}); {hint}"
+        )
+    step, n_az = header.get("az_step_deg"), header.get("n_az")
+    if not (
+        isinstance(step, int | float)
+        and isinstance(n_az, int)
+        and n_az > 0
+        and math.isclose(step * n_az, 360.0, abs_tol=1e-9)
+    ):
+        raise MaskFileError(
+            f"{path}: header az_step_deg = {step!r}, n_az = {n_az!r} do not give 360 deg"
+        )
+    descriptors = header.get("descriptors", [])
+    if not isinstance(descriptors, list) or not all(isinstance(d, str) for d in descriptors):
+        raise MaskFileError(f"{path}: header 'descriptors' must be a list of column names")
+    provenance = header.get("provenance", {})
+    if not isinstance(provenance, dict):
+        raise MaskFileError(f"{path}: header 'provenance' must be a JSON object")
+    return {
+        "az_step_deg": float(step),
+        "n_az": n_az,
+        "descriptors": descriptors,
+        "provenance": provenance,
+    }
+
+
+def _scalar_column(
+    table: pa.Table, name: str, fail: Callable[[str], MaskFileError], allow_null: bool
+) -> NDArray:
+    col = table.column(name)
+    if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type)):
+        raise fail(f"column {name!r} has type {col.type}, expected a number (float64)")
+    if not allow_null and col.null_count:
+        row = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
+        raise fail(f"column {name!r} row {row} is null; every position needs a value")
+    return np.asarray(col.to_numpy(zero_copy_only=False), dtype=float)
+
+
+def _binned_column(
+    table: pa.Table, name: str, n_az: int, fail: Callable[[str], MaskFileError]
+) -> NDArray:
+    col = table.column(name).combine_chunks()
+    typ = col.type
+    if not (
+        pa.types.is_list(typ) or pa.types.is_large_list(typ) or pa.types.is_fixed_size_list(typ)
+    ):
+        raise fail(f"column {name!r} has type {typ}, expected a list of {n_az} values per row")
+    if col.null_count:
+        row = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
+        raise fail(f"column {name!r} row {row} is null; every position needs {n_az} bins")
+    lengths = np.asarray(pc.list_value_length(col).to_numpy(zero_copy_only=False))
+    bad = np.flatnonzero(lengths != n_az)
+    if bad.size:
+        row = int(bad[0])
+        raise fail(
+            f"column {name!r} row {row} has {lengths[row]} bins, the header says n_az = {n_az}"
+        )
+    values = col.flatten()
+    if values.null_count:
+        flat = int(np.flatnonzero(values.is_null().to_numpy(zero_copy_only=False))[0])
+        raise fail(f"column {name!r} row {flat // n_az} bin {flat % n_az} is null")
+    if not (pa.types.is_floating(values.type) or pa.types.is_integer(values.type)):
+        raise fail(f"column {name!r} holds {values.type}, expected numbers")
+    return np.asarray(values.to_numpy(zero_copy_only=False)).reshape(len(col), n_az)
+
+
+def _check_geometry(
+    table: pa.Table, lon: NDArray, lat: NDArray, fail: Callable[[str], MaskFileError]
+) -> None:
+    try:
+        geoms = shapely.from_wkb(table.column("geometry").to_numpy(zero_copy_only=False))
+    except (shapely.errors.ShapelyError, TypeError, ValueError) as exc:
+        raise fail(f"column 'geometry' is not valid WKB ({exc})") from None
+    gx, gy = shapely.get_x(geoms), shapely.get_y(geoms)
+    ok = (
+        (shapely.get_type_id(geoms) == 0)
+        & np.isclose(gx, lon, rtol=0, atol=1e-9)
+        & np.isclose(gy, lat, rtol=0, atol=1e-9)
+    )
+    if not ok.all():
+        row = int(np.flatnonzero(~ok)[0])
+        raise fail(
+            f"column 'geometry' row {row} is not the point (lon_deg, lat_deg) = "
+            f"({lon[row]}, {lat[row]}); the geometry was edited - rewrite the file"
+        )
+
+
+def _crs84_projjson() -> dict[str, Any]:
+    from pyproj import CRS
+
+    crs: dict[str, Any] = CRS("OGC:CRS84").to_json_dict()
+    return crs
+
+
+# ---------------------------------------------------------------------- exporters
+def to_urbannav_csv(
+    masks: MaskSet,
+    path: str | os.PathLike[str],
+    *,
+    include_margin: bool = True,
+    header: bool = False,
+) -> Path:
+    """Export every position as an UrbanNav-style sky-mask CSV row.
+
+    Each row is ``lat_deg, lon_deg, h_m, e_0, e_1, ..., e_360``: 361 elevations (degrees) at
+    azimuths 0..360 deg inclusive (``e_360 == e_0``). ``e_a`` is the maximum of the effective
+    mask over every bin touching ``[a - 1, a + 1]`` deg, so any lookup a reader may use
+    (nearest sample, floor, ceil, or linear interpolation between neighbours) never falls
+    below the mask. Values are rounded up to 0.01 deg and capped at 90.
+
+    Parameters
+    ----------
+    masks : MaskSet
+    path : path-like
+    include_margin : bool, optional
+        Export ``mask + margin`` (default) or the bare mask.
+    header : bool, optional
+        Write a header row ``lat_deg,lon_deg,h_m,e_0,...,e_360`` (``e_a``: elevation at
+        azimuth ``a``, degrees). UrbanNav's published sky-mask tables start with one header
+        line (``Latitude(deg)``, ``Longitude(deg)``, ``Altitude(m)``, ``Skymask(1*361 deg)``),
+        so a reader written for them skips one line.
+    """
+    path = Path(path)
+    mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
+    az = np.arange(361.0)
+    el = _ceil_to(conservative_resample(mask, masks.az_step_deg, az, 1.0), 0.01)
+    with _atomic(path) as f:
+        if header:
+            f.write(",".join(["lat_deg", "lon_deg", "h_m", *(f"e_{a}" for a in range(361))]))
+            f.write("\n")
+        for i in range(masks.n_pos):
+            lead = f"{masks.lat_deg[i]:.9f},{masks.lon_deg[i]:.9f},{masks.h_m[i]:.3f}"
+            f.write(lead + "," + ",".join(f"{v:.2f}" for v in el[i]) + "\n")
+    return path
+
+
+def to_rtklib_mask(
+    masks: MaskSet,
+    chainage_m: float,
+    path: str | os.PathLike[str],
+    *,
+    include_margin: bool = True,
+) -> Path:
+    """Export the mask at one position as an RTKLIB-style ``AZ EL`` elevation mask file.
+
+    Three readers of this format are known, and the file is conservative for each:
+    ``readelmask`` / ``testelmask`` of the RTKLIB forks that take an azimuth-dependent mask
+    (MALIB, MRTKLIB: option ``file-elmaskfile``; mainline RTKLIB 2.4.3 b34 and demo5 have no
+    such option) keep the first 360 lines, ``EL_i`` for ``AZ_i <= az < AZ_{i+1}`` stored in
+    truncated tenths of a degree and looked up at ``floor(az)``; RTKPLOT's elevation-mask
+    overlay and ``simobs -m`` fill 361 slots and look up ``int(az + 0.5)``. The file has 361
+    lines ``a EL`` for a = 0..360 where ``EL`` is the maximum of the effective mask over every
+    bin touching ``[a - 0.5, a + 1]`` (both lookups; line 360 closes the circle for the
+    rounding readers, which otherwise leave ``[359.5, 360)`` at 0), rounded up to the 0.1-deg
+    storage and written so that truncation keeps it (e.g. ``12.35`` is stored as 12.3),
+    capped at 90.
+
+    Parameters
+    ----------
+    masks : MaskSet
+    chainage_m : float
+        Position (the nearest surveyed position is used; it must be covered).
+    path : path-like
+    include_margin : bool, optional
+    """
+    path = Path(path)
+    i = _single_position(masks, chainage_m)
+    mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
+    el = conservative_resample(mask[i], masks.az_step_deg, np.arange(361) + 0.25, 0.75)
+    with _atomic(path) as f:
+        f.write(_comment_block("%", masks, i, include_margin))
+        f.write("% AZ(deg) EL(deg): EL applies for AZ <= az < next AZ\n")
+        for a, v in enumerate(el):
+            f.write(f"{a:d} {_rtklib_value(float(v))}\n")
+    return path
+
+
+def to_pvgis_horizon(
+    masks: MaskSet,
+    chainage_m: float,
+    path: str | os.PathLike[str],
+    *,
+    n_directions: int = 48,
+    layout: str = "table",
+    include_margin: bool = True,
+) -> Path:
+    """Export the mask at one position as a PVGIS horizon file.
+
+    ``n_directions`` equidistant directions (PVGIS's own horizon tool uses 48, i.e. 7.5 deg).
+    The height at direction ``a`` is the maximum of the effective mask over every bin touching
+    ``[a - d, a + d]`` with ``d = 360 / n_directions``, conservative for nearest-sample and
+    linear-interpolation readers; rounded up to 0.01 deg, capped at 90.
+
+    Parameters
+    ----------
+    layout : {"table", "userhorizon"}
+        ``"table"``: the layout of PVGIS's horizon-profile CSV: ``Latitude``/``Longitude``
+        header lines, a blank line, ``A`` and ``H_hor`` columns separated by two tabs, with
+        PVGIS's azimuth convention (0 = south, 90 = west, -90 = east, +-180 = north), from
+        -180 to +180 inclusive. ``"userhorizon"``: the PVGIS 5 horizon upload file, one height
+        per line, clockwise from north, equidistant (no azimuths written).
+    """
+    path = Path(path)
+    if layout not in ("table", "userhorizon"):
+        raise ValueError(f"layout must be 'table' or 'userhorizon', got {layout!r}")
+    if int(n_directions) != n_directions or n_directions < 4:
+        raise ValueError(f"n_directions must be an integer >= 4, got {n_directions!r}")
+    i = _single_position(masks, chainage_m)
+    mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
+    step = 360.0 / n_directions
+    az_north = np.arange(n_directions) * step
+    h = _ceil_to(conservative_resample(mask[i], masks.az_step_deg, az_north, step), 0.01)
+    with _atomic(path) as f:
+        if layout == "userhorizon":
+            f.writelines(f"{v:.2f}\n" for v in h)
+            return path
+        f.write(f"Latitude (decimal degrees):\t{masks.lat_deg[i]:.6f}\n")
+        f.write(f"Longitude (decimal degrees):\t{masks.lon_deg[i]:.6f}\n\n")
+        f.write("A\t\tH_hor\n")
+        # PVGIS azimuth A = azimuth from north - 180; rows run A = -180 (north) .. +180.
+        for k in range(n_directions + 1):
+            f.write(f"{-180.0 + k * step:.1f}\t\t{h[k % n_directions]:.2f}\n")
+        f.write("\nA: azimuth (deg, 0 = south, 90 = west, -90 = east)\n")
+        what = "effective mask (mask + margin)" if include_margin else "mask without margin"
+        f.write(f"H_hor: horizon height (deg) = PREDISAT {what}, conservative\n")
+        f.write(_comment_block("", masks, i, include_margin))
+    return path
+
+
+# ---------------------------------------------------------------------- helpers
+def _single_position(masks: MaskSet, chainage_m: float) -> int:
+    idx, inside = masks.position_index(float(chainage_m))
+    if not bool(inside):
+        raise MaskError(
+            f"chainage_m = {chainage_m} is outside the mask set's coverage "
+            f"({masks.cell_bounds_m[0]:.1f} .. {masks.cell_bounds_m[-1]:.1f} m)"
+        )
+    return int(idx)
+
+
+_COMMENT_WIDTH = 120
+"""Longest comment line of the text exports, characters (RTKLIB reads at most 255)."""
+
+
+def _comment_block(prefix: str, masks: MaskSet, i: int, include_margin: bool) -> str:
+    src = masks.source[i]
+    lines = [
+        f"PREDISAT mask at chainage {masks.chainage_m[i]:.2f} m "
+        f"(lat {masks.lat_deg[i]:.8f} deg, lon {masks.lon_deg[i]:.8f} deg, "
+        f"h {masks.h_m[i]:.2f} m), heading {masks.heading_deg[i]:.2f} deg",
+        f"values: {'mask + margin' if include_margin else 'mask without margin'}, conservative "
+        f"(max over the {masks.az_step_deg:g}-deg bins each line covers)",
+        f"bins: {int((src == BinSource.OBSERVED).sum())} observed, "
+        f"{int((src == BinSource.RECONSTRUCTED).sum())} reconstructed, "
+        f"{int((src == BinSource.ASSUMED).sum())} assumed of {masks.n_az}",
+        f"provenance: {json.dumps(masks.provenance, sort_keys=True)}",
+    ]
+    lead = f"{prefix} " if prefix else ""
+    # RTKLIB's readelmask reads 255-byte chunks (fgets into char[256]): the rest of a longer
+    # comment line would be parsed as "AZ EL" data, so every line is cut well below that.
+    # Continuation lines start with "+ " (never a number, even without a comment prefix);
+    # dropping the lead and the "+ " and joining gives the line back exactly.
+    width = _COMMENT_WIDTH - len(lead) - 2
+    out = []
+    for line in lines:
+        parts = [line[k : k + width] for k in range(0, max(len(line), 1), width)]
+        out.append(f"{lead}{parts[0]}\n")
+        out.extend(f"{lead}+ {part}\n" for part in parts[1:])
+    return "".join(out)
+
+
+def _rtklib_value(el_deg: float) -> str:
+    """Text for ``el_deg`` that RTKLIB's ``(int16_t)(el / 0.1)`` stores as >= ``el_deg``."""
+    tenths = min(math.ceil((el_deg - _ROUND_TOL_DEG) / _RTKLIB_STEP_DEG), 900)
+    for text in (f"{tenths / 10:.1f}", f"{tenths / 10 + 0.05:.2f}"):
+        if int(float(text) / _RTKLIB_STEP_DEG) >= tenths and float(text) <= 90.0:
+            return text
+    return "90.0"  # unreachable in practice: 90.0 / 0.1 truncates to 900
+
+
+def _ceil_to(values: NDArray, step: float) -> NDArray:
+    """Round up to a multiple of ``step`` (within ``_ROUND_TOL_DEG``), cap at 90."""
+    v = np.asarray(values, float)
+    out = np.round(np.ceil((v - _ROUND_TOL_DEG) / step) * step, 6)
+    return np.minimum(out, 90.0) + 0.0  # + 0.0: an exact 0 came out as -0.0, printed "-0.00"
+
+
+@contextmanager
+def _atomic(path: Path, binary: bool = False) -> Iterator[IO[Any]]:
+    """Write to a temporary file beside ``path`` and move it into place on success."""
+    if not path.parent.is_dir():
+        raise MaskFileError(f"{path}: the folder {path.parent} does not exist; create it first")
+    f: IO[Any]
+    with atomic_path(path) as tmp, (
+        open(tmp, "wb") if binary else open(tmp, "w", newline="\n")
+    ) as f:
+        yield f

@@ -1,0 +1,9 @@
+"""From sky masks to 360 deg elevation masks: skyline directions, carving, the batch run.
+
+* :mod:`predisat.reconstruct.skyline` - a frame's sky mask to skyline directions.
+* :mod:`predisat.reconstruct.heightfield` - the corridor height field carved free by sky rays.
+* :mod:`predisat.reconstruct.carving` - full-360 masks of every position from many frames.
+* :mod:`predisat.reconstruct.batch` - ``predisat process``: survey folder to mask file.
+* :mod:`predisat.reconstruct.evaluate`, :mod:`predisat.reconstruct.evalfigures` - masks
+  against synthetic ground truth, and its figures.
+"""

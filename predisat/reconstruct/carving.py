@@ -1,0 +1,922 @@
+"""Full 360 deg masks from side-camera frames by free-space carving (issue 3, item 4).
+
+Method (``docs/reconstruction.md``):
+
+1. each frame's sky mask becomes a :class:`~predisat.reconstruct.skyline.SkyProfile` (lowest
+   elevation of
+   the top sky run per relative azimuth);
+2. the profiles carve a conservative 2.5-D corridor
+   :class:`~predisat.reconstruct.heightfield.HeightField`
+   (upper bound of obstacle height per cell, ``+inf`` where unknown), and a clearance prior fills
+   the space between the cameras unless an overhead structure is detected;
+3. from each antenna position the height field is ray cast in every azimuth bin (horizon: the
+   steepest cell top along the ray, using each cell's nearest point, so the result is never
+   below what the bounds allow); where a ray leaves the modelled corridor, the far field is
+   bounded by what the position's own cameras saw as sky in that direction (with an azimuth
+   allowance for the camera-antenna parallax), or by a stated default where they saw nothing;
+4. each bin gets a source flag: ASSUMED when the value rests on an unknown cell or on the
+   far-field default (no camera at the position saw that azimuth's far field, e.g. straight
+   along the track), else OBSERVED when the direction at the mask elevation lies in the view of
+   a camera at the position, else RECONSTRUCTED.
+
+The pipeline runs :meth:`Reconstructor.run` on chainage windows; a position's result depends on
+the frames within :attr:`ReconstructionParams.overlap_m` of it only, so a window needs the frames
+of its positions' range extended by ``overlap_m`` on both sides.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera.models import CameraModel, Mount, vehicle_to_enu
+from predisat.masks.maskset import BinSource, MaskSet
+from predisat.reconstruct.heightfield import (
+    HeightField,
+    apply_clearance_prior,
+    carve_profile,
+    corridor_grid,
+)
+from predisat.reconstruct.skyline import Rectifier, SkyProfile
+
+__all__ = [
+    "FrameView",
+    "Reconstruction",
+    "ReconstructionParams",
+    "Reconstructor",
+    "reconstruct_masks",
+]
+
+
+_DESCRIPTOR_TOL_DEG = 3.0
+_WINDOW_MARGIN_M = 5.0  # corridor beyond the rays' reach, so that the prior's bins are whole
+# The cameras' ceiling caps the clearance cells this near an antenna at their exact bound;
+# farther, the rasterised bound is within a few tenths of a degree of it anyway.
+_CEILING_CAP_M = 5.0
+# A camera's view along the track bounds what spans it only if seen up to this near the zenith
+# (the default rectification grid's top row is at 89.94 deg).
+_ZENITH_SEEN_DEG = 1.0
+
+
+@dataclass(frozen=True)
+class ReconstructionParams:
+    """Settings of the reconstruction (metres and degrees).
+
+    Attributes
+    ----------
+    cell_m : float
+        Height-field cell size. Near obstacles are over-estimated by up to about one cell in
+        distance (0.5 m at 10 m: ~1 deg on a tall wall).
+    half_width_m : float
+        Modelled corridor half-width either side of the axis; beyond it the far-field rule
+        applies.
+    reach_m : float
+        How far antenna rays are followed in the height field.
+    carve_range_m : float
+        Horizontal range from a camera within which its sky rays carve cells.
+    clearance_half_width_m : float
+        Half-width of the free space above the track between the cameras (structure gauge),
+        free unless an overhead structure is detected.
+    clearance_floor_m : float
+        Height above the rail assumed for the clearance cells (platforms are lower).
+    overhead_band_m : (float, float)
+        Lateral band (both sides) examined for structures spanning the track.
+    overhead_height_m : float
+        Bands on both sides entirely bounded above this height above the rail mean a deck or a
+        tunnel.
+    zenith_el_deg, zenith_rel_az_deg : float
+        A camera whose sky run starts above ``zenith_el_deg`` over at least half of the
+        relative azimuths within ``zenith_rel_az_deg`` of its look direction has something
+        wide over it (crown, canopy): the clearance is blocked within ``zenith_spread_m`` of
+        that frame.
+    zenith_spread_m : float
+    along_view_half_deg : float or None
+        Half-width of the azimuth window straight along the track in which a position's left
+        and right cameras bound what may span the track (``docs/reconstruction.md``, section 2:
+        a street between facades, a slot between rock walls); ``None`` disables it.
+    antenna_height_m : float
+        Antenna above the rail at the mask positions.
+    az_step_deg : float
+        Mask bin width.
+    n_sub : int
+        Rays per bin (bin edges shared with the neighbours).
+    far_default_deg : float
+        Far-field elevation assumed in directions no camera at the position saw (ASSUMED).
+    position_tol_m : float
+        Frames within this chainage distance of a position are "at" the position.
+    min_confidence : float
+        Image columns with a lower segmentation confidence have their skyline raised (their
+        sky above still clears).
+    low_confidence_windows : float
+        By how many confidence windows (the rows either side of a skyline its confidence
+        speaks for); ``inf``: such columns clear nothing.
+    rectify_az_step_deg, rectify_el_step_deg : float
+        Sky-profile sampling.
+    descriptor_min_el_deg : float
+        A side whose perpendicular horizon is lower has no obstacle descriptor.
+    """
+
+    cell_m: float = 0.5
+    half_width_m: float = 40.0
+    reach_m: float = 250.0
+    carve_range_m: float = 60.0
+    clearance_half_width_m: float = 2.0
+    clearance_floor_m: float = 1.0
+    overhead_band_m: tuple[float, float] = (3.0, 9.0)
+    overhead_height_m: float = 6.0
+    zenith_el_deg: float = 75.0
+    zenith_rel_az_deg: float = 30.0
+    zenith_spread_m: float = 7.0
+    along_view_half_deg: float | None = 1.0
+    antenna_height_m: float = 4.0
+    az_step_deg: float = 0.5
+    n_sub: int = 4
+    far_default_deg: float = 5.0
+    position_tol_m: float = 5.0
+    min_confidence: float = 0.5
+    low_confidence_windows: float = 2.0
+    rectify_az_step_deg: float = 0.25
+    rectify_el_step_deg: float = 0.125
+    descriptor_min_el_deg: float = 10.0
+
+    def __post_init__(self) -> None:
+        n_az = round(360.0 / self.az_step_deg)
+        if abs(n_az * self.az_step_deg - 360.0) > 1e-9:
+            raise ValueError(f"az_step_deg = {self.az_step_deg} must divide 360")
+        for name in ("cell_m", "half_width_m", "reach_m", "carve_range_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ReconstructionParams.{name} must be > 0")
+        if self.n_sub < 1:
+            raise ValueError("ReconstructionParams.n_sub must be >= 1")
+        if not self.low_confidence_windows >= 0:
+            raise ValueError(
+                "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
+                "columns clear nothing)"
+            )
+        if self.along_view_half_deg is not None and not 0.0 < self.along_view_half_deg <= 45.0:
+            raise ValueError(
+                "ReconstructionParams.along_view_half_deg must lie in (0, 45] degrees, or be "
+                "None to disable the cameras' ceiling over the track"
+            )
+
+    @property
+    def overlap_m(self) -> float:
+        """Chainage margin of frames (and corridor) needed beyond a window's positions."""
+        return self.reach_m + self.carve_range_m + _WINDOW_MARGIN_M
+
+    @property
+    def n_az(self) -> int:
+        return round(360.0 / self.az_step_deg)
+
+
+@dataclass(frozen=True, eq=False)
+class FrameView:
+    """One frame as the reconstruction needs it.
+
+    Attributes
+    ----------
+    chainage_m : float
+    sky_mask : ndarray of bool, shape ``camera.shape``
+        True for sky and for thin L-band-transparent structure (wires).
+    camera : CameraModel
+    mount : Mount
+    antenna_enu_m : ndarray, shape (3,)
+        Antenna position at the frame in the track frame (``track.frame``) ENU.
+    heading_deg : float
+        Track heading at the frame.
+    reverse : bool
+        Train driving toward decreasing chainage.
+    confidence : ndarray, shape (width_px,), optional
+        Per-column segmentation confidence.
+    frame_id : str
+    """
+
+    chainage_m: float
+    sky_mask: NDArray = field(repr=False)
+    camera: CameraModel
+    mount: Mount
+    antenna_enu_m: NDArray
+    heading_deg: float
+    reverse: bool = False
+    confidence: NDArray | None = field(default=None, repr=False)
+    frame_id: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """Masks of one chainage window, ready for :class:`~predisat.masks.maskset.MaskSet`.
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (n_pos,)
+    az_deg : ndarray, shape (n_az,)
+        Bin centres.
+    mask_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Final mask, degrees in [0, 90].
+    source : ndarray of uint8, shape (n_pos, n_az)
+        :class:`~predisat.masks.maskset.BinSource` codes.
+    grid_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Horizon of the height field alone (before the far-field rule; may be negative).
+    far_el_deg : ndarray of float32, shape (n_pos, n_az)
+        Far-field bound used beyond the corridor.
+    descriptors : dict of str to ndarray, shape (n_pos,)
+        ``left/right_obstacle_distance_m`` and ``left/right_obstacle_height_m`` (NaN: none or
+        unknown height).
+    overhead_m : ndarray, shape (k, 2)
+        Chainage intervals detected as overhead structures.
+    params : ReconstructionParams
+    """
+
+    chainage_m: NDArray
+    az_deg: NDArray
+    mask_el_deg: NDArray
+    source: NDArray
+    grid_el_deg: NDArray
+    far_el_deg: NDArray
+    descriptors: dict[str, NDArray]
+    overhead_m: NDArray
+    params: ReconstructionParams
+
+    def to_maskset(self, track: Any, **kwargs: Any) -> MaskSet:
+        """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``."""
+        prov = dict(kwargs.pop("provenance", None) or {})
+        prov.setdefault("reconstruction", _params_dict(self.params))
+        return MaskSet.from_track(
+            track,
+            self.chainage_m,
+            self.mask_el_deg,
+            az_step_deg=self.params.az_step_deg,
+            source=self.source,
+            descriptors=self.descriptors,
+            provenance=prov,
+            **kwargs,
+        )
+
+
+def _params_dict(p: ReconstructionParams) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.__dict__.items()}
+
+
+class Reconstructor:
+    """Runs the reconstruction on chainage windows, keeping the per-camera rectifiers.
+
+    Parameters
+    ----------
+    params : ReconstructionParams, optional
+    """
+
+    def __init__(self, params: ReconstructionParams | None = None) -> None:
+        self.params = params or ReconstructionParams()
+        self._rectifiers: dict[tuple[CameraModel, Mount], Rectifier] = {}
+
+    def rectifier(self, camera: CameraModel, mount: Mount) -> Rectifier:
+        """The (cached) :class:`~predisat.reconstruct.skyline.Rectifier` of a camera and mount."""
+        key = (camera, mount)
+        if key not in self._rectifiers:
+            p = self.params
+            self._rectifiers[key] = Rectifier.build(
+                camera, mount, p.rectify_az_step_deg, p.rectify_el_step_deg
+            )
+        return self._rectifiers[key]
+
+    def profiles(self, frames: Sequence[FrameView]) -> list[SkyProfile]:
+        """Sky profile of every frame."""
+        out = []
+        for f in frames:
+            rect = self.rectifier(f.camera, f.mount)
+            try:
+                out.append(
+                    rect.profile(
+                        f.sky_mask, f.heading_deg, f.reverse, f.confidence,
+                        self.params.min_confidence, self.params.low_confidence_windows,
+                    )
+                )  # fmt: skip
+            except ValueError as exc:
+                raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
+        return out
+
+    def height_field(
+        self,
+        frames: Sequence[FrameView],
+        track: Any,
+        lo_m: float,
+        hi_m: float,
+        profiles: Sequence[SkyProfile] | None = None,
+    ) -> HeightField:
+        """Carve the corridor ``[lo_m, hi_m]`` with ``frames``."""
+        p = self.params
+        hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
+        profs = list(profiles) if profiles is not None else self.profiles(frames)
+        bound = hf.bound_m.copy()
+        if frames:
+            cams, rots = _camera_geometry(frames, track)
+            for prof, cam, rot in zip(profs, cams, rots, strict=True):
+                carve_profile(hf, bound, prof, cam, rot, p.carve_range_m)
+        over = [
+            (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
+            for f, prof in zip(frames, profs, strict=True)
+            if _zenith_blocked(prof, p)
+        ]
+        ceilings = None
+        if frames and p.along_view_half_deg is not None:
+            ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg)
+        overhead = apply_clearance_prior(
+            hf, bound, p.clearance_half_width_m, p.clearance_floor_m,
+            p.overhead_band_m, p.overhead_height_m, extra_overhead_m=np.array(over, float),
+            camera_ceilings=ceilings,
+        )  # fmt: skip
+        bound.setflags(write=False)
+        return HeightField(
+            hf.cell_m, hf.ix0, hf.iy0, bound, hf.region, hf.chainage_m, hf.offset_m,
+            hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings,
+        )  # fmt: skip
+
+    def run(self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: Any) -> Reconstruction:
+        """Masks at ``chainage_m`` (one window) from ``frames``.
+
+        ``frames`` should hold every frame within :attr:`ReconstructionParams.overlap_m` of the
+        positions; frames farther away are ignored.
+        """
+        p = self.params
+        s = np.atleast_1d(np.asarray(chainage_m, float))
+        if s.ndim != 1 or s.size == 0 or not np.all(np.isfinite(s)):
+            raise ValueError("chainage_m must be a non-empty 1-D array of finite chainages")
+        lo, hi = float(s.min()), float(s.max())
+        keep = [f for f in frames if lo - p.overlap_m <= f.chainage_m <= hi + p.overlap_m]
+        profs = self.profiles(keep)
+        margin = p.reach_m + _WINDOW_MARGIN_M
+        hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
+        ant, rot = _antennas(track, s, p.antenna_height_m)
+        caps = _ceiling_caps(hf.camera_ceilings, s, ant)
+        near_el, near_unknown, far_grid_el, far_unknown = _horizon_parts(
+            hf, ant, rot, p, caps
+        )
+        far_el, far_seen, seen = _far_field(keep, profs, s, ant, track, p)
+        # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
+        # by that camera's sky: it proves nothing farther stands higher (the parallax
+        # allowance of the far field assumes that distance). Loosely carved far cells (a hill
+        # over a tunnel, bounded only by steep rays) no longer close the sky it saw.
+        far_grid = _bins(far_grid_el, p.n_sub)
+        grid_bin = np.maximum(
+            _bins(near_el, p.n_sub), np.where(far_seen, np.minimum(far_grid, far_el), far_grid)
+        )
+        unknown_bin = (_bins(near_unknown.astype(float), p.n_sub) > 0) | (
+            (_bins(far_unknown.astype(float), p.n_sub) > 0) & ~far_seen
+        )
+        mask = np.clip(np.maximum(grid_bin, far_el), 0.0, 90.0)
+        observed = _observed(seen, mask, p)
+        src = np.full(mask.shape, int(BinSource.RECONSTRUCTED), np.uint8)
+        src[observed] = int(BinSource.OBSERVED)
+        # the value rests on an unknown cell, or on the stated far-field default (no camera at
+        # this position saw the far field in that azimuth)
+        assumed = unknown_bin | ~far_seen
+        src[assumed] = int(BinSource.ASSUMED)
+        desc = _descriptors(hf, track, s, ant, p)
+        return Reconstruction(
+            chainage_m=s,
+            az_deg=np.arange(p.n_az) * p.az_step_deg,
+            mask_el_deg=mask.astype(np.float32),
+            source=src,
+            grid_el_deg=grid_bin.astype(np.float32),
+            far_el_deg=far_el.astype(np.float32),
+            descriptors=desc,
+            overhead_m=hf.overhead_m,
+            params=p,
+        )
+
+
+def reconstruct_masks(
+    frames: Sequence[FrameView],
+    chainage_m: ArrayLike,
+    track: Any,
+    params: ReconstructionParams | None = None,
+) -> Reconstruction:
+    """Masks at ``chainage_m`` from ``frames`` (see :class:`Reconstructor`)."""
+    return Reconstructor(params).run(frames, chainage_m, track)
+
+
+# ---------------------------------------------------------------------- geometry helpers
+
+
+def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:
+    """Whether the camera saw an obstacle near its zenith, close to its look direction."""
+    near = np.abs(prof.rel_az_deg) <= p.zenith_rel_az_deg
+    seen = near & (prof.seen_hi_deg >= p.zenith_el_deg)
+    if not seen.any():
+        return False
+    # a wide obstacle (crown, canopy, close wall), not a mast beside the camera
+    return bool(np.mean(prof.sky_el_deg[seen] > p.zenith_el_deg) >= 0.5)
+
+
+def _camera_ceilings(
+    frames: Sequence[FrameView], profiles: Sequence[SkyProfile], cams: NDArray, half_deg: float
+) -> NDArray:
+    """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
+    :func:`~predisat.reconstruct.heightfield.apply_clearance_prior`: per position seen by a left
+    and a
+    right camera, the tangent of the highest elevation from which either camera saw sky
+    straight along the track (within ``half_deg``) up to the zenith, towards increasing and
+    decreasing chainage (``inf`` when a camera did not see sky there, or did not see that
+    direction up to within ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height
+    of the highest camera, raised by its along-track lever arm times the steeper tangent
+    (with a lever arm, an ``inf`` tangent makes the whole row bound nothing)."""
+    at: dict[float, list[int]] = {}
+    for i, f in enumerate(frames):
+        at.setdefault(round(f.chainage_m, 3), []).append(i)
+    rows = []
+    for ch, idx in at.items():
+        if {frames[i].mount.side for i in idx} != {"left", "right"}:
+            continue  # one camera proves nothing about the other side of the track
+        tans = np.full((len(idx), 2), np.inf)
+        # cameras ahead of or behind the antenna: their ceilings, measured from the antenna's
+        # chainage, start that much higher
+        slack_m = max(abs(float(frames[i].mount.lever_arm_m[0])) for i in idx)
+        for n, i in enumerate(idx):
+            prof = profiles[i]
+            for m, back in enumerate((0.0, 180.0)):
+                rel = prof.az_deg - frames[i].heading_deg - back
+                cols = np.abs(np.mod(rel + 180.0, 360.0) - 180.0) <= half_deg
+                el = prof.sky_el_deg[cols]
+                # +inf skylines (no sky at the top), unseen columns and columns not seen up to
+                # the zenith (a deck above them would go unseen) bound nothing
+                seen = np.isfinite(prof.seen_lo_deg[cols]).all() and bool(
+                    (prof.seen_hi_deg[cols] >= 90.0 - _ZENITH_SEEN_DEG).all()
+                )
+                if cols.any() and seen and el.max() < 90.0:
+                    # sky seen below the horizon proves no less than sky from the horizon up
+                    tans[n, m] = np.tan(np.radians(max(float(el.max()), 0.0)))
+        tan = tans.max(axis=0)
+        z = float(cams[idx, 2].max())
+        if slack_m > 0.0:
+            # between the antenna and a camera the camera's other direction bounds: both must
+            if not np.isfinite(tan).all():
+                tan = np.full(2, np.inf)
+            else:
+                z += slack_m * float(tan.max())
+        rows.append((ch, z, *tan))
+    return np.asarray(rows, float).reshape(-1, 4)
+
+
+def _ceiling_caps(ceilings: NDArray, s: NDArray, antenna_m: NDArray) -> NDArray:
+    """Per antenna ``(tan_cap, dz_m)`` (n, 2): at a position with a ceiling row whose cameras
+    stand below the antenna, ``tan_cap`` bounds the elevation tangent at which the antenna
+    sees anything in the clearance over the track, and ``dz_m`` is the antenna's height above
+    them (``(inf, 0)`` elsewhere).
+
+    A point there at chainage distance ``d`` from the position stands at most at
+    ``z + d * tan`` (the ceiling, pointwise, before any rasterisation), and its horizontal
+    distance ``r`` from the antenna is at least ``d``: seen from the antenna at height
+    ``z + dz`` its tangent is at most ``tan - dz / r``. 1 % is added to ``tan`` for the
+    track's curvature (a chord is shorter than its arc).
+    """
+    out = np.tile(np.array([np.inf, 0.0]), (s.size, 1))
+    c = np.asarray(ceilings, float).reshape(-1, 4)
+    if not c.size:
+        return out
+    j = np.abs(c[None, :, 0] - s[:, None]).argmin(axis=1)
+    at = np.abs(c[j, 0] - s) <= 1e-3
+    tan = np.maximum(c[j, 2], c[j, 3]) * 1.01
+    dz = antenna_m[:, 2] - c[j, 1]
+    ok = at & np.isfinite(tan) & (dz >= 0.0)
+    out[ok, 0] = tan[ok]
+    out[ok, 1] = dz[ok]
+    return out
+
+
+def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:
+    lat, lon, _ = track.frame.to_geodetic(enu_m)
+    return np.asarray(track.frame.rotation_from(lat, lon))
+
+
+def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, NDArray]:
+    """Camera centres (n, 3) and local-to-frame rotations (n, 3, 3) of frames."""
+    ant = np.stack([np.asarray(f.antenna_enu_m, float) for f in frames])
+    rot = _local_rotations(track, ant)
+    cams = np.empty_like(ant)
+    for i, f in enumerate(frames):
+        arm_local = vehicle_to_enu(f.heading_deg, f.reverse) @ np.asarray(f.mount.lever_arm_m)
+        cams[i] = ant[i] + rot[i] @ arm_local
+    return cams, rot
+
+
+def _antennas(track: Any, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
+    axis = np.asarray(track.enu_at(s), float)
+    rot = _local_rotations(track, axis)
+    ant = axis + height_m * rot[:, :, 2]
+    return ant, rot
+
+
+def _sub_azimuths(p: ReconstructionParams) -> NDArray:
+    """Ray azimuths: ``n_sub`` per bin starting at each bin's left edge."""
+    n = p.n_az * p.n_sub
+    return np.mod(np.arange(n) * (p.az_step_deg / p.n_sub) - p.az_step_deg / 2.0, 360.0)
+
+
+def _bins(per_ray: NDArray, n_sub: int) -> NDArray:
+    """Bin maximum of per-ray values (..., n_az * n_sub), the right edge included."""
+    v = per_ray.reshape(*per_ray.shape[:-1], -1, n_sub)
+    right = np.roll(v[..., 0], -1, axis=-1)
+    return np.maximum(v.max(axis=-1), right)
+
+
+def _ray_distances(p: ReconstructionParams) -> NDArray:
+    c = p.cell_m
+    near = np.arange(c / 2.0, min(30.0, p.reach_m), c / 2.0)
+    far = np.arange(near[-1] + c, p.reach_m + 1e-9, c)
+    return np.concatenate([near, far])
+
+
+def horizon(
+    hf: HeightField, antenna_m: NDArray, local_to_frame: NDArray, p: ReconstructionParams
+) -> tuple[NDArray, NDArray]:
+    """Horizon of the height field from antennas, per ray.
+
+    Each ray is sampled every half cell up to 30 m and every cell beyond, up to ``reach_m`` or
+    until it leaves the corridor. A sample's cell counts with its top bound seen from the
+    cell's *nearest* point. Where the ray crosses a cell corner between two samples (both
+    indices change), both cells at that corner count too, so every cell the ray passes
+    through is counted (before 2026-12-02 such cells were skipped: bins up to 3.6 deg low in
+    a check against an exact ceiling on rotated grids).
+
+    Parameters
+    ----------
+    hf : HeightField
+    antenna_m : ndarray, shape (n, 3)
+        Antenna positions in the track frame.
+    local_to_frame : ndarray, shape (n, 3, 3)
+        Rotations from each antenna's local ENU into the track frame.
+    p : ReconstructionParams
+
+    Returns
+    -------
+    el_deg : ndarray, shape (n, n_az * n_sub)
+        Steepest elevation of a cell top along each ray (``-90`` when it meets no cell); 90
+        where it meets an unknown cell or where the antenna's own cell stands above it.
+    unknown : ndarray of bool, shape (n, n_az * n_sub)
+        The ray met an unknown cell.
+    """
+    near, near_unknown, far, far_unknown = _horizon_parts(hf, antenna_m, local_to_frame, p)
+    return np.maximum(near, far), near_unknown | far_unknown
+
+
+def _horizon_parts(
+    hf: HeightField,
+    antenna_m: NDArray,
+    local_to_frame: NDArray,
+    p: ReconstructionParams,
+    caps: NDArray | None = None,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """:func:`horizon` split at ``p.half_width_m``: elevation and unknown flag over the cells
+    whose nearest point is nearer, then over the others (``-90``: no such cell).
+
+    ``caps`` (n, 2), from :func:`_ceiling_caps`: the clearance cells within
+    ``_CEILING_CAP_M`` of each antenna count at most with ``tan_cap - dz_m / r``, ``r`` the
+    distance of the farthest point of the cell and its neighbours (the cameras' ceiling is
+    exact pointwise, its rasterised bound is not: the cell straddling a position holds the
+    bound of its far end). ``_CEILING_CAP_M = 0`` disables the cap.
+    """
+    az = np.radians(_sub_azimuths(p))
+    dist_cells = _ray_distances(p).astype(np.float32) / np.float32(hf.cell_m)
+    c = hf.cell_m
+    ny, nx = hf.shape
+    bound = np.ascontiguousarray(hf.bound_m, np.float32).ravel()
+    region = np.ascontiguousarray(hf.region, np.bool_).ravel()
+    with np.errstate(invalid="ignore"):
+        clear = hf.region & (np.abs(hf.offset_m) < p.clearance_half_width_m)
+    clear = np.ascontiguousarray(clear, np.bool_).ravel()
+    n = antenna_m.shape[0]
+    if caps is None:
+        caps = np.tile(np.array([np.inf, 0.0]), (n, 1))
+    el = np.empty((n, az.size))
+    el_far = np.empty((n, az.size))
+    unknown = np.empty((n, az.size), bool)
+    unknown_far = np.empty((n, az.size), bool)
+    d_loc = np.stack([np.sin(az), np.cos(az), np.zeros_like(az)], axis=-1)
+    for i in range(n):
+        a = antenna_m[i]
+        rot = local_to_frame[i]
+        up = rot[:, 2]
+        d = d_loc @ rot.T
+        d = np.ascontiguousarray(
+            d[:, :2] / np.linalg.norm(d[:, :2], axis=1, keepdims=True), np.float32
+        )
+        # antenna position in cells: integer part (global, exact) and fraction (float32), so
+        # that every window computes bit-identical samples
+        gx, gy = np.floor(a[0] / c), np.floor(a[1] / c)
+        best, best_far = _march_rays(
+            d, dist_cells, bound, region, nx, ny,
+            np.float32(a[0] / c - gx), np.float32(a[1] / c - gy),
+            int(gx) - hf.ix0, int(gy) - hf.iy0, np.float32(c), np.float32(a[2]),
+            np.float32(up[2]), np.float32(up[0] * c), np.float32(up[1] * c),
+            np.float32(p.half_width_m), clear, np.float32(caps[i, 0]), np.float32(caps[i, 1]),
+            np.float32(_CEILING_CAP_M),
+        )  # fmt: skip
+        unknown[i] = np.isposinf(best)
+        unknown_far[i] = np.isposinf(best_far)
+        with np.errstate(invalid="ignore"):
+            el[i] = np.degrees(np.arctan(best.astype(float)))
+            el_far[i] = np.degrees(np.arctan(best_far.astype(float)))
+    return el, unknown, el_far, unknown_far
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _march_rays(
+    d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
+    ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
+    up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
+    clear: NDArray, cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """Steepest bound tangent along each ray, over the cells nearer than ``far_m`` and over the
+    others (float32; ``+inf`` once a ray meets an unknown cell there).
+
+    A ray stops at its first sample outside the modelled region, at its first unknown cell
+    (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). A
+    cell is far when its nearest point is at least ``far_m`` away. A ``clear`` cell (over the
+    track) nearer than ``cap_m`` (the antenna's own cell too, when ``cap_m > 0``) counts at most
+    with ``cap_t - cap_dz / r``, ``r`` the distance of the farthest point of the cell and its
+    8 neighbours (metres; a ray sampled every half cell may cross a neighbour's corner
+    unsampled, and the cap must not hide what that neighbour may hold). All arithmetic is
+    float32 in a fixed order (distances: :func:`_hypot32`), so that overlapping windows give
+    bit-identical results.
+
+    ``d`` (n_rays, 2): unit ray directions in the frame's horizontal plane; ``dist_cells``:
+    increasing sample distances (cells); ``bound``, ``region``, ``clear``: the raster
+    (``ny * nx``, row-major); ``ax, ay``: antenna position within its cell (cells, in
+    ``[0, 1)``), whose raster index is ``(ox, oy)``; ``c``: cell size; ``a_z``: antenna height;
+    ``up_z``, ``up_x_c / c``, ``up_y_c / c``: its local vertical in the frame (the x and y
+    terms tilt each sample point's height); ``far_m``, ``cap_m``: metres.
+    """
+    # Until 2026-12-02 each cell called libm's hypotf and a non-inlined helper that recomputed
+    # the sample's tilt, with the maxima in an array: 3.8-4.0x slower on the demo surveys, for
+    # bit for bit the same values (scripts/bench_march.py). The numpy error model only drops
+    # the checks for division by zero: every divisor is at least 1e-3 m.
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    two = np.float32(2.0)
+    tiny = np.float32(1e-3)
+    overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
+    n_rays = d.shape[0]
+    best = np.empty((2, n_rays), np.float32)  # near part, far part
+    # squared offsets of each column's and row's nearest edge from the antenna (cells, exact in
+    # float64): a cell's distance is then one addition and one square root
+    ex2 = np.empty(nx)
+    for i in range(nx):
+        cl = np.float32(i - ox)
+        ex = max(max(cl - ax, zero), ax - cl - one)
+        ex2[i] = np.float64(ex) * np.float64(ex)
+    ey2 = np.empty(ny)
+    for i in range(ny):
+        rl = np.float32(i - oy)
+        ey = max(max(rl - ay, zero), ay - rl - one)
+        ey2[i] = np.float64(ey) * np.float64(ey)
+    capped = cap_t < np.inf
+    # The antenna's own cell, which rays leaving it early may never sample: standing above the
+    # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
+    # would leave); unknown, it blocks them as unknown.
+    start = np.float32(-np.inf)
+    col0 = np.int32(np.floor(ax)) + ox
+    row0 = np.int32(np.floor(ay)) + oy
+    if 0 <= col0 < nx and 0 <= row0 < ny and region[row0 * nx + col0]:
+        top = bound[row0 * nx + col0]
+        rel0 = (top - a_z) * up_z
+        if rel0 != rel0:
+            start = rel0
+        elif rel0 > zero:
+            start = top if top == np.inf else overhead
+            if start != np.inf and clear[row0 * nx + col0] and capped and cap_m > zero:
+                # the ceiling over the track: nothing in the cell above the cap, seen from the
+                # farthest corner of the cell and its neighbours (the worst point; rays sampled
+                # every half cell may cut a neighbour's corner unsampled)
+                fx0 = max(ax, one - ax) + one
+                fy0 = max(ay, one - ay) + one
+                start = min(start, cap_t - cap_dz / (_hypot32(fx0, fy0) * c))
+    for j in range(n_rays):
+        dx, dy = d[j, 0], d[j, 1]
+        b_near = start
+        b_far = np.float32(-np.inf)
+        best[0, j] = start
+        best[1, j] = b_far
+        if start == np.inf or start != start:
+            continue
+        pcol, prow = col0, row0
+        stop = False
+        for k in range(dist_cells.size):
+            fx = ax + dx * dist_cells[k]
+            fy = ay + dy * dist_cells[k]
+            col = np.int32(np.floor(fx)) + ox
+            row = np.int32(np.floor(fy)) + oy
+            if col < 0 or col >= nx or row < 0 or row >= ny:
+                break
+            if not region[row * nx + col]:
+                break
+            # the tilt of the sample point, the same for every cell it counts
+            tilt = (fx - ax) * up_x_c + (fy - ay) * up_y_c
+            # Samples at most a cell apart change each index by at most one; when both change,
+            # the ray crossed one of the two cells at that corner unsampled: count both.
+            n_cells = 3 if (col != pcol and row != prow) else 1
+            for m in range(n_cells):
+                if m == 0:
+                    cc, rr = col, row  # in the region: checked above
+                else:
+                    cc, rr = (col, prow) if m == 1 else (pcol, row)
+                    if cc < 0 or cc >= nx or rr < 0 or rr >= ny or not region[rr * nx + cc]:
+                        continue
+                flat = rr * nx + cc
+                # bound tangent of the cell seen from its nearest point (the square root is
+                # _hypot32 of that point's offsets)
+                near = max(np.float32(np.sqrt(ex2[cc] + ey2[rr])) * c, tiny)
+                rel = (bound[flat] - a_z) * up_z
+                r = (rel + tilt) / near
+                if capped and near < cap_m and clear[flat] and r < np.inf:
+                    # farthest point of the cell and its 8 neighbours (see the own cell above)
+                    cl = np.float32(cc - ox)
+                    rl = np.float32(rr - oy)
+                    gx = max(abs(cl - one - ax), abs(cl + two - ax))
+                    gy = max(abs(rl - one - ay), abs(rl + two - ay))
+                    r = min(r, cap_t - cap_dz / (_hypot32(gx, gy) * c))
+                # a NaN bound makes the ray's value NaN; an unknown cell hides whatever lies
+                # farther: both stop the ray
+                if near >= far_m:
+                    if r > b_far or r != r:
+                        b_far = r
+                        stop = r == np.inf or r != r
+                elif r > b_near or r != r:
+                    b_near = r
+                    stop = r == np.inf or r != r
+                if stop:
+                    break
+            if stop:
+                break
+            pcol, prow = col, row
+        best[0, j] = b_near
+        best[1, j] = b_far
+    return best[0], best[1]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _hypot32(x: np.float32, y: np.float32) -> np.float32:
+    """``hypot`` of two float32 values, rounded to float32 from float64.
+
+    Their squares are exact in float64, so this is what glibc's ``hypotf`` returns, bit for
+    bit, without the call (which cost more than the rest of the ray march).
+    """
+    xd = np.float64(x)
+    yd = np.float64(y)
+    return np.float32(np.sqrt(xd * xd + yd * yd))
+
+
+# ---------------------------------------------------------------------- far field and flags
+
+
+def _far_field(
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    s: NDArray,
+    ant: NDArray,
+    track: Any,
+    p: ReconstructionParams,
+) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]]]:
+    """Far-field elevation bound per bin, whether a camera saw it, and the profiles per position.
+
+    A frame at the position bounds the far field at an azimuth by the highest skyline it saw
+    within the parallax allowance ``asin(baseline / half_width)`` around it (far objects are seen
+    higher from the camera, which is nearer and lower on its own side). The bound of a bin is the
+    lowest over the frames that saw the whole bin; bins no frame saw get ``far_default_deg``.
+    """
+    n_az = p.n_az
+    far = np.full((s.size, n_az), np.inf)
+    seen_any = np.zeros((s.size, n_az), bool)
+    per_pos: list[list[tuple[SkyProfile, float]]] = [[] for _ in range(s.size)]
+    if frames:
+        ch = np.array([f.chainage_m for f in frames])
+        cams, _ = _camera_geometry(frames, track)
+        az_sub = _sub_azimuths(p)
+        for i in range(s.size):
+            for j in np.flatnonzero(np.abs(ch - s[i]) <= p.position_tol_m):
+                prof = profiles[int(j)]
+                base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
+                allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
+                per_pos[i].append((prof, allow))
+                vals, ok = _profile_max(prof, az_sub, allow)
+                fb = _bins(np.where(ok, vals, np.nan), p.n_sub)
+                covered = ~np.isnan(fb)
+                far[i] = np.where(covered, np.fmin(far[i], fb), far[i])
+                seen_any[i] |= covered
+    far_el = np.where(seen_any, far, p.far_default_deg)
+    far_el = np.where(np.isinf(far_el), 90.0, far_el)
+    return far_el, seen_any, per_pos
+
+
+def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[NDArray, NDArray]:
+    """Highest skyline of a profile within ``+-allow_deg`` of each azimuth, and whether every
+    profile column in that range was seen (values there are +inf when a column had no sky)."""
+    b = prof.rel_az_deg
+    step = float(b[1] - b[0])
+    rel = np.mod(az_deg - prof.look_az_deg + 180.0, 360.0) - 180.0
+    i_lo = np.floor((rel - allow_deg - b[0]) / step).astype(np.int64)
+    i_hi = np.ceil((rel + allow_deg - b[0]) / step).astype(np.int64)
+    inside = (i_lo >= 0) & (i_hi <= b.size - 1)
+    lo, hi = np.clip(i_lo, 0, b.size - 1), np.clip(i_hi, 0, b.size - 1)
+    vals, all_seen = _range_max_seen(
+        np.asarray(prof.sky_el_deg, float), np.isfinite(prof.seen_lo_deg), lo, hi
+    )
+    return vals, inside & all_seen
+
+
+@njit(cache=True, nogil=True)
+def _range_max_seen(
+    values: NDArray, seen: NDArray, lo: NDArray, hi: NDArray
+) -> tuple[NDArray, NDArray]:
+    """Per query ``k``, the maximum of ``values[lo[k]:hi[k] + 1]`` and whether ``seen`` holds
+    over that range (``lo <= hi``).
+
+    The element :class:`~predisat.reconstruct.heightfield.RangeMax1D` returns, bit for bit: both
+    give the
+    range's last maximal element (``np.maximum`` keeps its second operand on ties, so its
+    sparse table does too), NaN when the range holds one. The ranges here span a few columns
+    (the parallax allowance), so a scan beats building two sparse tables per frame.
+    """
+    n = lo.size
+    out = np.empty(n)
+    ok = np.empty(n, np.bool_)
+    for k in range(n):
+        m = values[lo[k]]
+        all_seen = seen[lo[k]]
+        for i in range(lo[k] + 1, hi[k] + 1):
+            v = values[i]
+            if not (m > v or m != m):  # np.maximum(m, v)
+                m = v
+            all_seen = all_seen and seen[i]
+        out[k] = m
+        ok[k] = all_seen
+    return out, ok
+
+
+def _observed(
+    seen: list[list[tuple[SkyProfile, float]]], mask: NDArray, p: ReconstructionParams
+) -> NDArray:
+    """Bins whose direction at the mask elevation lies in the view of a camera at the position."""
+    out = np.zeros(mask.shape, bool)
+    az = np.arange(p.n_az) * p.az_step_deg
+    for i, items in enumerate(seen):
+        for prof, _ in items:
+            b = prof.rel_az_deg
+            step = float(b[1] - b[0])
+            rel = np.mod(az - prof.look_az_deg + 180.0, 360.0) - 180.0
+            k = np.floor((rel - b[0]) / step + 0.5).astype(np.int64)
+            inside = (k >= 0) & (k < b.size)
+            k = np.clip(k, 0, b.size - 1)
+            with np.errstate(invalid="ignore"):
+                ok = inside & (mask[i] >= prof.seen_lo_deg[k] - 1e-6)
+                ok &= mask[i] <= prof.seen_hi_deg[k] + 1e-6
+            out[i] |= ok
+    return out
+
+
+def _descriptors(
+    hf: HeightField, track: Any, s: NDArray, ant: NDArray, p: ReconstructionParams
+) -> dict[str, NDArray]:
+    """Reflection-risk descriptors from the height field, per side.
+
+    Along the horizontal perpendicular through each antenna (left: ``heading - 90``), the cell
+    that sets the horizon there is the obstacle: its nearest distance from the track axis and
+    its bound above the rail. NaN when that horizon is below ``descriptor_min_el_deg`` (open
+    side) and, for the height, when the cell is unknown. A monocular visual hull over-estimates
+    heights behind tall obstacles and cannot range a uniform edge running along the track, so
+    the distance is that of the horizon-setting cell, not of the obstacle's foot.
+    """
+    axis = np.asarray(track.enu_at(s), float)
+    t = np.asarray(track.tangent_at(s), float)[:, :2]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    y = _ray_distances(p)
+    c = hf.cell_m
+    out: dict[str, NDArray] = {}
+    for name, sign in (("left", 1.0), ("right", -1.0)):
+        pts = ant[:, None, :2] + sign * y[None, :, None] * left[:, None, :]
+        row, col, ok = hf.index(pts[..., 0], pts[..., 1])
+        ok &= hf.region[row, col]
+        valid = np.logical_and.accumulate(ok, axis=1)
+        h = hf.bound_m[row, col].astype(float)
+        x0 = (hf.ix0 + col) * c - ant[:, 0:1]
+        y0 = (hf.iy0 + row) * c - ant[:, 1:2]
+        near = np.hypot(np.maximum(np.maximum(x0, 0.0), -(x0 + c)),
+                        np.maximum(np.maximum(y0, 0.0), -(y0 + c)))  # fmt: skip
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(valid, (h - ant[:, 2:3]) / np.maximum(near, 1e-3), -np.inf)
+        rows = np.arange(s.size)
+        el_all = np.degrees(np.arctan(ratio))
+        el = el_all.max(axis=1)
+        # the first cell within a few degrees of the horizon: the obstacle's top edge rather
+        # than the (higher-bounded) hull behind it
+        k = np.argmax(el_all >= el[:, None] - _DESCRIPTOR_TOL_DEG, axis=1)
+        has = el >= p.descriptor_min_el_deg
+        top = h[rows, k] - axis[:, 2]
+        out[f"{name}_obstacle_distance_m"] = np.where(has, near[rows, k], np.nan)
+        out[f"{name}_obstacle_height_m"] = np.where(has & np.isfinite(top), top, np.nan)
+    return out

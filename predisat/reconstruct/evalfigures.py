@@ -1,0 +1,137 @@
+"""Figures of a mask evaluation (``predisat evaluate --out``): where along the line the masks
+lose sky and where they trust blocked directions.
+
+:func:`evaluation_figure` draws, for a :class:`predisat.reconstruct.evaluate.Comparison`:
+
+* a chainage x relative-azimuth map of the error ``mask - truth`` (degrees; blue: the mask is
+  too high, sky lost; red: too low, blocked directions trusted), azimuth measured clockwise
+  from the direction of increasing chainage so that the track runs along 0 and 180 deg;
+* per position, the share of truly visible directions lost, across and along the track, and
+  the share of trusted directions that are truly blocked (log scale).
+
+matplotlib only (no pyplot state); returns a :class:`matplotlib.figure.Figure`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.reconstruct.evaluate import EL_STEP_DEG, Comparison, trust_counts
+
+__all__ = ["evaluation_figure", "per_position_shares"]
+
+
+def per_position_shares(
+    comparison: Comparison, margin_deg: ArrayLike = 0.0, el_step_deg: float = EL_STEP_DEG
+) -> dict[str, NDArray]:
+    """Sky lost and false trust per position.
+
+    Parameters
+    ----------
+    comparison : Comparison
+        Mask and truth, shape (n_pos, n_az).
+    margin_deg : float or array_like, shape (n_pos, n_az)
+        Margin of every bin, degrees.
+
+    Returns
+    -------
+    dict of ndarray, shape (n_pos,)
+        ``sky_lost_cross``, ``sky_lost_along`` (truly visible directions not trusted / truly
+        visible, per sector; NaN when nothing is visible) and ``false_trust`` (trusted and
+        truly blocked / trusted, all bins; 0 when nothing is trusted).
+    """
+    trusted, good, visible = trust_counts(
+        comparison.mask_el_deg, comparison.truth_el_deg, margin_deg, el_step_deg
+    )
+    out: dict[str, NDArray] = {}
+    for sector in ("cross", "along"):
+        sel = comparison.sector == sector
+        vis = np.where(sel, visible, 0).sum(axis=1).astype(float)
+        got = np.where(sel, good, 0).sum(axis=1).astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[f"sky_lost_{sector}"] = np.where(vis > 0, 1.0 - got / vis, np.nan)
+    tr = trusted.sum(axis=1).astype(float)
+    bad = tr - good.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out["false_trust"] = np.where(tr > 0, bad / np.maximum(tr, 1.0), 0.0)
+    return out
+
+
+def evaluation_figure(
+    comparison: Comparison,
+    margin_deg: ArrayLike = 0.0,
+    title: str = "",
+    heading_deg: ArrayLike | None = None,
+) -> Figure:
+    """Error map and per-position shares of one evaluation.
+
+    Parameters
+    ----------
+    comparison : Comparison
+        Mask and truth, shape (n_pos, n_az).
+    margin_deg : float or array_like, shape (n_pos, n_az)
+        Margin of every bin (for the shares), degrees.
+    title : str
+    heading_deg : array_like, shape (n_pos,), optional
+        Track heading at the compared positions (direction of increasing chainage), degrees;
+        default ``comparison.heading_deg`` (set by :func:`predisat.reconstruct.evaluate.compare`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if heading_deg is None:
+        heading_deg = comparison.heading_deg
+    if heading_deg is None:
+        raise ValueError("heading_deg is required when the comparison carries no heading")
+    hd = np.asarray(heading_deg, float)
+    s = np.asarray(comparison.chainage_m, float)
+    if hd.shape != s.shape:
+        raise ValueError(
+            f"heading_deg must have one value per compared position ({s.size}), got {hd.shape}"
+        )
+    az = np.asarray(comparison.az_deg, float)
+    rel = np.mod(az[None, :] - hd[:, None], 360.0)
+    # bins are regular, so sorted by azimuth from the heading, column k sits at ~k * step
+    order = np.argsort(rel, axis=1)
+    err = np.take_along_axis(comparison.mask_el_deg - comparison.truth_el_deg, order, axis=1)
+    shares = per_position_shares(comparison, margin_deg)
+
+    fig = Figure(figsize=(11, 7.5), layout="constrained")
+    ax, bx = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
+    step = float(np.median(np.diff(s))) if s.size > 1 else 10.0
+    extent = (s[0] - step / 2, s[-1] + step / 2, 0.0, 360.0)
+    img = ax.imshow(
+        err.T, origin="lower", aspect="auto", extent=extent, cmap="RdBu", vmin=-30, vmax=30,
+        interpolation="nearest",
+    )  # fmt: skip
+    for y, name in ((0.0, "ahead"), (90.0, "right"), (180.0, "behind"), (270.0, "left")):
+        ax.axhline(y, color="k", lw=0.4, alpha=0.5)
+        ax.text(extent[0], y + 2, f" {name}", fontsize=7, va="bottom")
+    for y in (45.0, 135.0, 225.0, 315.0):
+        ax.axhline(y, color="k", lw=0.4, ls=":", alpha=0.5)
+    ax.set_ylabel("azimuth from the direction of increasing chainage (deg)")
+    ax.set_yticks([0, 45, 90, 135, 180, 225, 270, 315, 360])
+    cb = fig.colorbar(img, ax=ax, shrink=0.9)
+    cb.set_label("mask - truth (deg)\nblue: sky lost, red: blocked trusted")
+    ax.set_title(title or "Masks against ground truth")
+
+    bx.plot(s, 100 * shares["sky_lost_cross"], color="#2166ac", lw=1.2, label="sky lost, across")
+    bx.plot(s, 100 * shares["sky_lost_along"], color="#67a9cf", lw=1.2, label="sky lost, along")
+    bx.set_ylabel("truly visible directions lost (%)")
+    bx.set_ylim(0, 101)
+    bx.set_xlabel("chainage (m)")
+    bx.grid(alpha=0.3)
+    cx = bx.twinx()
+    ft = 100 * shares["false_trust"]
+    cx.semilogy(s, np.where(ft > 0, ft, np.nan), "o", ms=3, color="#b2182b",
+                label="false trust (trusted & blocked / trusted)")  # fmt: skip
+    cx.axhline(0.1, color="#b2182b", ls="--", lw=0.8)
+    cx.set_ylabel("false trust (%), 0.1 % target dashed")
+    cx.set_ylim(1e-4, 100)
+    lines = bx.get_legend_handles_labels()
+    more = cx.get_legend_handles_labels()
+    bx.legend(lines[0] + more[0], lines[1] + more[1], loc="upper right", fontsize=8)
+    return fig

@@ -1,0 +1,481 @@
+"""From a frame's sky mask to skyline directions in the local frame (issue 3, item 3).
+
+Two views of the same information:
+
+* :func:`skyline_directions`: per *image column*, the direction (azimuth, elevation) of the
+  boundary between the column's top sky run and the highest obstacle pixel below it, using the
+  camera model, the mount, the track heading and the direction of travel;
+* :class:`Rectifier` / :class:`SkyProfile`: the sky mask resampled on a regular grid of
+  *relative azimuth* (from the camera's horizontal look direction) and elevation, and per
+  azimuth the lowest elevation of the top sky run. A tilted camera's image columns are not
+  vertical planes (the edge columns of a 45 deg pinhole sweep 40 deg of azimuth from bottom to
+  top), so the reconstruction works on the rectified profile, whose columns are.
+
+Policy (conservative): only the sky *above the highest obstacle* of a column counts, so sky seen
+below an overhang (a bridge deck, a canopy, foliage) never clears anything; obstacle pixels are
+grown by a pixel or two before resampling so that thin obstacles are not lost between samples.
+Pixels labelled as thin L-band-transparent structure (wires) must be passed as sky.
+
+Elevations are above the local horizontal at the frame, azimuths clockwise from true north;
+the vehicle's z is taken as the local vertical (grade and cant neglected, as in
+:func:`predisat.camera.models.vehicle_to_enu`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import cv2
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera.models import CameraModel, Mount
+from predisat.geodesy import enu_to_azel
+from predisat.sky.segment import confidence_window_px
+
+__all__ = [
+    "ColumnSkyline",
+    "Rectifier",
+    "SkyProfile",
+    "leading_sky_rows",
+    "skyline_directions",
+]
+
+_SKY, _UNSEEN = 255, 128  # grid labels; obstacle 0
+
+
+def _as_sky_mask(sky: ArrayLike, camera: CameraModel, name: str = "sky_mask") -> NDArray:
+    m = np.asarray(sky)
+    if m.shape != camera.shape:
+        raise ValueError(
+            f"{name} has shape {m.shape}, expected the camera image shape {camera.shape} "
+            f"(height_px, width_px) of camera {camera.name!r}"
+        )
+    return m.astype(bool) if m.dtype != bool else m
+
+
+def leading_sky_rows(sky_mask: ArrayLike) -> NDArray:
+    """Number of sky pixels above the highest obstacle pixel of each column.
+
+    Parameters
+    ----------
+    sky_mask : array_like of bool, shape (H, W)
+        True for sky (and for thin L-band-transparent structure).
+
+    Returns
+    -------
+    ndarray of int, shape (W,)
+        ``n`` such that rows ``0 .. n-1`` are sky and row ``n`` is not (``H`` for an all-sky
+        column, 0 when the top pixel is already an obstacle).
+    """
+    m = np.asarray(sky_mask, bool)
+    if m.ndim != 2:
+        raise ValueError(f"sky_mask must be 2-D (H, W), got shape {m.shape}")
+    obstacle = ~m
+    first = np.argmax(obstacle, axis=0)
+    return np.where(obstacle.any(axis=0), first, m.shape[0]).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class ColumnSkyline:
+    """Skyline direction of every image column of one frame.
+
+    Attributes
+    ----------
+    sky_rows : ndarray of int, shape (W,)
+        Leading sky rows per column (see :func:`leading_sky_rows`).
+    ray_enu : ndarray, shape (W, 3)
+        Unit direction in the local ENU at the frame of the boundary between the last sky pixel
+        and the first obstacle pixel (the top edge of the obstacle pixel, ``v = n - 0.5``); the
+        bottom edge of the image for an all-sky column; NaN for a column without sky.
+    az_deg, el_deg : ndarray, shape (W,)
+        Azimuth and elevation of ``ray_enu`` (NaN for a column without sky).
+    """
+
+    sky_rows: NDArray
+    ray_enu: NDArray
+    az_deg: NDArray
+    el_deg: NDArray
+
+    @property
+    def valid(self) -> NDArray:
+        """Columns with a sky run (finite direction), shape (W,)."""
+        return np.isfinite(self.el_deg)
+
+
+def skyline_directions(
+    sky: ArrayLike,
+    camera: CameraModel,
+    mount: Mount,
+    heading_deg: float,
+    reverse: bool = False,
+) -> ColumnSkyline:
+    """Skyline direction of each image column in the local ENU frame.
+
+    Parameters
+    ----------
+    sky : array_like
+        Either the sky mask (bool, ``camera.shape``) or the leading sky rows per column
+        (int, shape ``(width_px,)``), e.g. from a segmentation's skyline.
+    camera : CameraModel
+    mount : Mount
+    heading_deg : float
+        Track heading at the frame (azimuth of increasing chainage), degrees.
+    reverse : bool
+        True when the train drives toward decreasing chainage.
+
+    Returns
+    -------
+    ColumnSkyline
+    """
+    s = np.asarray(sky)
+    if s.ndim == 2:
+        rows = leading_sky_rows(_as_sky_mask(s, camera))
+    elif s.shape == (camera.width_px,):
+        rows = s.astype(np.int64)
+        if rows.min() < 0 or rows.max() > camera.height_px:
+            raise ValueError(f"sky rows must lie in [0, {camera.height_px}] (camera height_px)")
+    else:
+        raise ValueError(
+            f"sky must be a ({camera.height_px}, {camera.width_px}) mask or ({camera.width_px},) "
+            f"sky rows for camera {camera.name!r}, got shape {s.shape}"
+        )
+    u = np.arange(camera.width_px, dtype=float)
+    v = rows.astype(float) - 0.5
+    ray_cam = camera.pixel_to_ray(u, v)
+    ray = ray_cam @ mount.camera_to_enu(heading_deg, reverse).T
+    ray = np.where((rows > 0)[:, None], ray, np.nan)
+    az, el, _ = enu_to_azel(ray)
+    return ColumnSkyline(rows, ray, az, el)
+
+
+@dataclass(frozen=True)
+class SkyProfile:
+    """One frame's sky on a regular grid of relative azimuth.
+
+    Attributes
+    ----------
+    rel_az_deg : ndarray, shape (n_b,)
+        Azimuth relative to the camera's horizontal look direction, clockwise, ascending,
+        within [-90, 90] (the camera's own half-space; a fisheye's view past the zenith is left
+        to the camera on the other side).
+    sky_el_deg : ndarray, shape (n_b,)
+        Lowest elevation of the top sky run: every observed direction above it is sky. ``+inf``
+        where the top of the observed column is not sky or nothing is observed.
+    seen_lo_deg, seen_hi_deg : ndarray, shape (n_b,)
+        Elevation range the image covers at that azimuth; NaN where it covers none.
+    look_az_deg : float
+        Azimuth of the camera's horizontal look direction (local ENU at the frame).
+    """
+
+    rel_az_deg: NDArray
+    sky_el_deg: NDArray
+    seen_lo_deg: NDArray
+    seen_hi_deg: NDArray
+    look_az_deg: float
+
+    @property
+    def az_deg(self) -> NDArray:
+        """Absolute azimuths of the profile columns, degrees in [0, 360)."""
+        return np.mod(self.look_az_deg + self.rel_az_deg, 360.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Rectifier:
+    """Resamples a camera's sky masks on a (relative azimuth, elevation) grid.
+
+    Build once per camera and mount with :meth:`build`; the map does not depend on the heading
+    (relative azimuths are taken from the camera's horizontal look direction).
+
+    Attributes
+    ----------
+    camera : CameraModel
+    mount : Mount
+    rel_az_deg : ndarray, shape (n_b,)
+    el_deg : ndarray, shape (n_e,)
+        Descending (row 0 is the highest elevation).
+    map_u, map_v : ndarray of float32, shape (n_e, n_b)
+        Pixel coordinates of each grid direction; -10 where the camera does not see it.
+    pixel_index : ndarray of int32, shape (n_e, n_b)
+        Flat index (``row * width_px + col``) of the pixel that ``cv2.remap`` (nearest) reads
+        for each grid direction; -1 where the camera does not see it or the remap rounds the
+        map off the image (the samples :meth:`rectify` labels unseen).
+    first_seen_row, last_seen_row : ndarray of int64, shape (n_b,)
+        Highest and lowest grid row the camera sees per column (0 and ``n_e - 1`` in a column
+        it does not see at all).
+    grow_px : tuple of int
+        Obstacle growth (horizontal, vertical) in pixels before resampling.
+    first_read_px_row : ndarray of int64, shape (width_px,)
+        Topmost image row per image column that can change what the grid reads: the rows it
+        reads, widened by the obstacle growth ``grow_px`` (``height_px`` in a column that never
+        matters). A side fisheye sees past the zenith, into the other camera's half-space,
+        above it.
+    """
+
+    camera: CameraModel
+    mount: Mount
+    rel_az_deg: NDArray
+    el_deg: NDArray
+    map_u: NDArray = field(repr=False)
+    map_v: NDArray = field(repr=False)
+    pixel_index: NDArray = field(repr=False)
+    first_seen_row: NDArray = field(repr=False)
+    last_seen_row: NDArray = field(repr=False)
+    grow_px: tuple[int, int] = (2, 1)
+    first_read_px_row: NDArray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.first_read_px_row is None:
+            h, w = self.camera.height_px, self.camera.width_px
+            idx = self.pixel_index[self.pixel_index >= 0].astype(np.int64)
+            read = np.full(w, h, np.int64)
+            np.minimum.at(read, idx % w, idx // w)
+            # an obstacle pixel reaches a read one through the erosion by grow_px
+            gx, gy = self.grow_px
+            pad = np.concatenate([np.full(gx, h), read, np.full(gx, h)])
+            near = np.min([pad[k : k + w] for k in range(2 * gx + 1)], axis=0)
+            first = np.where(near < h, np.maximum(near - gy, 0), h).astype(np.int64)
+            first.setflags(write=False)
+            object.__setattr__(self, "first_read_px_row", first)
+
+    @classmethod
+    def build(
+        cls,
+        camera: CameraModel,
+        mount: Mount,
+        az_step_deg: float = 0.25,
+        el_step_deg: float = 0.125,
+        el_min_deg: float = -20.0,
+    ) -> Rectifier:
+        """Precompute the resampling map.
+
+        The obstacle growth is chosen from the sampling steps so that an obstacle one pixel
+        wide always reaches a sample (the image scale is measured over the map).
+        """
+        if not (0 < az_step_deg <= 2 and 0 < el_step_deg <= 2):
+            raise ValueError("az_step_deg and el_step_deg must be in (0, 2] degrees")
+        n_b = round(180.0 / az_step_deg)
+        beta = -90.0 + az_step_deg * (np.arange(n_b) + 0.5)
+        el = np.arange(90.0 - el_step_deg / 2, el_min_deg, -el_step_deg)
+        b, e = np.meshgrid(np.radians(beta), np.radians(el))
+        # vehicle frame (x forward, y left, z up); compass angle from forward is beta - yaw
+        gam = b - np.radians(mount.yaw_deg)
+        d_veh = np.stack([np.cos(e) * np.cos(gam), -np.cos(e) * np.sin(gam), np.sin(e)], -1)
+        d_cam = d_veh @ mount.camera_to_vehicle()  # (R^T d) row-wise
+        u, v = camera.ray_to_pixel(d_cam)
+        inside = camera.contains(u, v)
+        u = np.where(inside, u, -10.0)
+        v = np.where(inside, v, -10.0)
+        # pixels between neighbouring samples, to size the obstacle growth
+        du = np.abs(np.diff(u, axis=1))
+        dv = np.abs(np.diff(v, axis=0))
+        ok_u = inside[:, 1:] & inside[:, :-1]
+        ok_v = inside[1:] & inside[:-1]
+        gap_u = float(np.nanmax(np.where(ok_u, du, 0.0))) if ok_u.any() else 1.0
+        gap_v = float(np.nanmax(np.where(ok_v, dv, 0.0))) if ok_v.any() else 1.0
+        grow = (int(np.ceil(gap_u / 2.0)), int(np.ceil(gap_v / 2.0)))
+        map_u, map_v = u.astype(np.float32), v.astype(np.float32)
+        index = _remap_index(camera.shape, map_u, map_v)
+        seen = index >= 0
+        first = np.argmax(seen, axis=0)
+        last = seen.shape[0] - 1 - np.argmax(seen[::-1], axis=0)
+        for a in (index, first, last):
+            a.setflags(write=False)
+        return cls(
+            camera, mount, beta, el, map_u, map_v, index, first, last, grow,
+        )  # fmt: skip
+
+    @property
+    def look_offset_deg(self) -> float:
+        """Azimuth of the look direction relative to the direction of travel (clockwise)."""
+        return -self.mount.yaw_deg
+
+    def _grown_labels(self, sky: NDArray) -> NDArray:
+        """uint8 labels of a boolean sky mask (sky / obstacle), obstacles grown by ``grow_px``."""
+        # the erosion is a minimum filter: eroding 0 / 1 and scaling gives the 0 / 255 erosion
+        return self._grown_sky(sky) * np.uint8(_SKY)
+
+    @cached_property
+    def _pixel_runs(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """:attr:`pixel_index` down each grid column as runs of one pixel: the runs' first
+        grid rows and pixels (flat, column after column), each column's first run (n_b + 1
+        offsets) and the run holding its :attr:`first_seen_row`.
+
+        Neighbouring grid rows often read the same pixel (1.8 rows per pixel on the demo's
+        fisheye cameras): the top sky run's end is searched pixel by pixel.
+        """
+        return _index_runs(self.pixel_index, self.first_seen_row)
+
+    def _grown_sky(self, sky: NDArray) -> NDArray:
+        """A boolean sky mask as uint8 1 (sky) / 0, C-contiguous, obstacles grown by
+        ``grow_px`` (a view of ``sky`` when nothing grows)."""
+        img = np.ascontiguousarray(sky, np.bool_).view(np.uint8)
+        gx, gy = self.grow_px
+        return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+
+    def rectify(self, sky_mask: ArrayLike) -> NDArray:
+        """Grid labels (n_e, n_b) uint8: 255 sky, 0 obstacle, 128 not seen by the camera."""
+        grown = self._grown_labels(_as_sky_mask(sky_mask, self.camera))
+        return cv2.remap(
+            grown, self.map_u, self.map_v, cv2.INTER_NEAREST,
+            borderMode=cv2.BORDER_CONSTANT, borderValue=_UNSEEN,
+        )  # fmt: skip
+
+    def profile(
+        self,
+        sky_mask: ArrayLike,
+        heading_deg: float,
+        reverse: bool = False,
+        confidence: ArrayLike | None = None,
+        min_confidence: float = 0.5,
+        low_confidence_windows: float = 2.0,
+    ) -> SkyProfile:
+        """The frame's :class:`SkyProfile`.
+
+        Parameters
+        ----------
+        sky_mask : array_like of bool, shape ``camera.shape``
+        heading_deg : float
+            Track heading at the frame, degrees.
+        reverse : bool
+            Train driving toward decreasing chainage.
+        confidence : array_like, shape (width_px,), optional
+            Per image column confidence of the segmentation (of its skyline).
+        min_confidence : float
+            Columns below it have their skyline raised: the lowest ``low_confidence_windows``
+            confidence windows (:func:`predisat.sky.segment.confidence_window_px`, the rows
+            either side of the skyline that the learned methods' confidence speaks for) of
+            their top sky run become obstacle, with everything below. The sky above still
+            clears: a fuzzy tree top on the horizon must not void a fisheye column through the
+            zenith, which every azimuth's top sky run starts from.
+        low_confidence_windows : float
+            ``inf`` voids low-confidence columns from top to bottom (they clear nothing).
+        """
+        m = _as_sky_mask(sky_mask, self.camera)
+        if confidence is not None:
+            c = np.asarray(confidence, float)
+            if c.shape != (self.camera.width_px,):
+                raise ValueError(
+                    f"confidence must have shape ({self.camera.width_px},) (one per column)"
+                )
+            if not low_confidence_windows >= 0:
+                raise ValueError(
+                    f"low_confidence_windows must be >= 0 (inf voids the column), got "
+                    f"{low_confidence_windows}"
+                )
+            low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
+            if low.size:
+                h = self.camera.height_px
+                band, gap = confidence_window_px(h)
+                m = _raise_skyline(
+                    m, low, round(min(low_confidence_windows * (band + gap), h)),
+                    self.first_read_px_row,
+                )  # fmt: skip
+        # The top sky run, read through the remap's own pixel choice (the same grid labels as
+        # :meth:`rectify`, as 1 sky / 0 obstacle) down to its end only, instead of resampling
+        # the whole grid.
+        grown = self._grown_sky(m)
+        top, last_seen = self.first_seen_row, self.last_seen_row
+        any_seen = self.pixel_index[top, np.arange(top.size)] >= 0
+        n_e = self.el_deg.size
+        end = _top_sky_run_end(grown.ravel(), *self._pixel_runs, top, n_e, 1)
+        has_sky = any_seen & (end > top)
+        sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
+        lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
+        hi = np.where(any_seen, self.el_deg[top], np.nan)
+        fwd = float(heading_deg) + (180.0 if reverse else 0.0)
+        look = float(np.mod(fwd + self.look_offset_deg, 360.0))
+        return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)
+
+
+def _raise_skyline(
+    sky: NDArray, cols: NDArray, raise_px: int, from_row: NDArray | None = None
+) -> NDArray:
+    """Copy of ``sky`` whose columns ``cols`` lose the lowest ``raise_px`` rows of their top
+    sky run, and every sky pixel below it.
+
+    The run is searched from ``from_row`` (per image column, default 0) down: the rows above
+    it, which the rectification grid never reads (a side fisheye's view past the zenith), are
+    left as they are. Otherwise a sliver of sky above an obstacle seen past the zenith would
+    be "the top run", and the whole sky below it in the camera's own half-space would go.
+    """
+    out = np.array(sky, np.bool_)  # a C-contiguous copy
+    c = np.unique(np.asarray(cols, np.int64))
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
+    _raise_columns(out, c, top, int(raise_px))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _raise_columns(sky: NDArray, cols: NDArray, top: NDArray, raise_px: int) -> None:
+    """:func:`_raise_skyline` in place: in each column ``cols[k]``, the top sky run searched
+    from row ``top[k]`` loses its lowest ``raise_px`` rows, and every row below it its sky."""
+    n = sky.shape[0]
+    for k in range(cols.size):
+        c = cols[k]
+        start = max(top[k], 0)  # first sky row read
+        while start < n and not sky[start, c]:
+            start += 1
+        end = start  # first obstacle row after it
+        while end < n and sky[end, c]:
+            end += 1
+        for r in range(max(end - raise_px, start), n):
+            sky[r, c] = False
+
+
+def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDArray:
+    """Flat pixel index ``cv2.remap`` (nearest) reads at each map entry; -1 outside the image."""
+    h, w = shape
+    cols, rows = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    # float32 holds pixel coordinates exactly (below 2**24)
+    src = np.ascontiguousarray(np.stack([cols, rows], axis=-1))
+    got = cv2.remap(
+        src, map_u, map_v, cv2.INTER_NEAREST,
+        borderMode=cv2.BORDER_CONSTANT, borderValue=(-1.0, -1.0, 0.0, 0.0),
+    )  # fmt: skip
+    idx = got[..., 1].astype(np.int64) * w + got[..., 0].astype(np.int64)
+    return np.where(got[..., 0] >= 0, idx, -1).astype(np.int32)
+
+
+def _index_runs(
+    pixel_index: NDArray, top: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Runs of equal entries down each column of ``pixel_index`` (n_e, n_b): their first rows
+    and values (flat, column after column), the columns' run offsets (n_b + 1) and, per
+    column, the run holding row ``top[b]``."""
+    cols = np.ascontiguousarray(np.asarray(pixel_index).T)  # (n_b, n_e)
+    start = np.ones(cols.shape, bool)
+    start[:, 1:] = cols[:, 1:] != cols[:, :-1]
+    b, r = np.nonzero(start)  # column by column, rows ascending
+    offsets = np.concatenate([[0], np.cumsum(start.sum(axis=1))]).astype(np.int64)
+    upto = start & (np.arange(cols.shape[1])[None, :] <= np.asarray(top)[:, None])
+    top_run = offsets[:-1] + upto.sum(axis=1) - 1  # the last run starting at or above it
+    return r.astype(np.int64), cols[b, r].astype(np.int64), offsets, top_run
+
+
+@njit(cache=True, nogil=True)
+def _top_sky_run_end(
+    grown: NDArray, run_row: NDArray, run_pixel: NDArray, offsets: NDArray, top_run: NDArray,
+    top: NDArray, n_e: int, sky_label: int = _SKY,
+) -> NDArray:  # fmt: skip
+    """First grid row at or below ``top`` (per column) whose label is not sky; ``n_e`` if none.
+
+    ``grown`` is the flattened label image (sky ``sky_label``); the grid's pixel index comes
+    as runs (:attr:`Rectifier._pixel_runs`): column ``b``'s runs are ``offsets[b]`` to
+    ``offsets[b + 1]``, run ``top_run[b]`` holds row ``top[b]``, pixel -1 is unseen (not sky).
+    A run's rows read one pixel, so the first run that is not sky ends the sky run at its
+    first row (at ``top`` itself for the run holding it).
+    """
+    n_b = top.size
+    end = np.empty(n_b, np.int64)
+    for b in range(n_b):
+        e = n_e
+        for j in range(top_run[b], offsets[b + 1]):
+            k = run_pixel[j]
+            if k < 0 or grown[k] != sky_label:
+                e = max(run_row[j], top[b])
+                break
+        end[b] = e
+    return end

@@ -1,0 +1,462 @@
+"""Scoring of sky segmentation against reference masks: IoU, skyline error, tables, contact sheet.
+
+:func:`evaluate_folder` finds image/mask pairs in a folder, runs
+:func:`predisat.sky.segment.segment_sky` on each image and scores it. Recognised layouts:
+
+* ``ade20k``: ``original/*.jpg`` + ``mask/*.png`` (soft masks, sky where >= 128);
+* ``fisheye_hk``: ``raw_images/*.jpg`` + ``mask_images/*.png`` (upward fisheye; segmented with
+  ``SkyOptions(fisheye=True)``; the mask is 0 outside the lens circle, which does not change the
+  sky IoU since those pixels are non-sky in both);
+* ``generic``: ``images/*`` + ``masks/*.png`` (same stem);
+* ``synthetic``: a folder written by :func:`predisat.synth.generate.generate_survey`
+  (``survey/images`` + ``truth/labels/<frame_id>.png``, labels 255 sky, 128 thin
+  L-band-transparent structure, 0 obstacle: sky where >= 128, per the thin-structure policy),
+  scored per sky condition and also by skyline elevation error through the survey's cameras,
+  with the columns whose skyline is read more than :data:`UNSAFE_LOW_DEG` too low (the unsafe
+  side: a mask built from them would trust satellites behind the obstacle).
+
+The sky IoU of one image is ``|pred & true| / |pred | true|`` over sky pixels (1 when both are
+empty). Summaries give the mean over images and the pooled IoU (sums over all pixels).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.sky.segment import SkyOptions, segment_sky, skyline_from_mask
+
+__all__ = [
+    "UNSAFE_LOW_DEG",
+    "SkyEvaluation",
+    "SkyPair",
+    "confusion_overlay",
+    "evaluate_folder",
+    "find_pairs",
+    "sky_iou",
+    "skyline_elevation_deg",
+    "worst_cases_sheet",
+]
+
+#: A column's skyline more than this below the truth counts as unsafe (``skyline_low_1deg_*``).
+UNSAFE_LOW_DEG = 1.0
+
+_IMAGE_EXT = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
+_LAYOUTS = (
+    ("ade20k", "original", "mask", False),
+    ("fisheye_hk", "raw_images", "mask_images", True),
+    ("generic", "images", "masks", False),
+)
+
+
+@dataclass(frozen=True)
+class SkyPair:
+    """One image with its reference mask; ``group`` is the summary group (set or sky)."""
+
+    name: str
+    image_path: Path
+    mask_path: Path
+    group: str
+    side: str | None = None
+
+
+@dataclass(frozen=True)
+class SkyEvaluation:
+    """Result of :func:`evaluate_folder`.
+
+    Attributes
+    ----------
+    layout : str
+        Detected layout (``ade20k``, ``fisheye_hk``, ``generic``, ``synthetic``).
+    table : pandas.DataFrame
+        One row per image (columns described in ``docs/segmentation.md``).
+    summary : pandas.DataFrame
+        One row per group (data set, or sky condition for synthetic surveys) and ``all``.
+    files : dict
+        What was written (``table``, ``summary``, ``sheet``) when ``out_dir`` was given.
+    worst_cases : list of (name, iou, image_bgr, overlay_bgr)
+        The ``n_worst`` lowest-IoU cases, lowest first, as :func:`worst_cases_sheet` takes them
+        (overlays from :func:`confusion_overlay`).
+    """
+
+    layout: str
+    table: pd.DataFrame
+    summary: pd.DataFrame
+    files: dict[str, Path] = field(default_factory=dict)
+    worst_cases: list[tuple[str, float, NDArray, NDArray]] = field(default_factory=list)
+
+
+def sky_iou(pred: ArrayLike, truth: ArrayLike, valid: ArrayLike | None = None) -> float:
+    """Intersection over union of the sky class of two masks (1.0 when both have no sky).
+
+    Parameters
+    ----------
+    pred, truth : array_like of bool, shape (H, W)
+    valid : array_like of bool, shape (H, W), optional
+        Only these pixels count.
+    """
+    p, t = np.asarray(pred, bool), np.asarray(truth, bool)
+    if p.shape != t.shape:
+        raise ValueError(f"pred shape {p.shape} differs from truth shape {t.shape}")
+    if valid is not None:
+        v = np.asarray(valid, bool)
+        p, t = p & v, t & v
+    union = int(np.count_nonzero(p | t))
+    return 1.0 if union == 0 else float(np.count_nonzero(p & t) / union)
+
+
+def skyline_elevation_deg(
+    skyline_row: ArrayLike, camera: Any, camera_to_vehicle: ArrayLike
+) -> NDArray[np.float64]:
+    """Elevation (deg, vehicle frame, z up) of each column's skyline point.
+
+    Parameters
+    ----------
+    skyline_row : array_like, shape (W,)
+        Skyline rows (``nan`` stays ``nan``); the point is ``(u = column, v = skyline_row)``.
+    camera : CameraModel
+        Anything with ``pixel_to_ray(u_px, v_px) -> (..., 3)`` in the OpenCV camera frame.
+    camera_to_vehicle : array_like, shape (3, 3)
+        ``Mount.camera_to_vehicle()``.
+
+    Returns
+    -------
+    ndarray, shape (W,)
+        Elevation above the vehicle's horizontal plane (the local horizontal on level track).
+    """
+    v = np.asarray(skyline_row, float)
+    u = np.arange(v.size, dtype=float)
+    ok = np.isfinite(v)
+    out = np.full(v.size, np.nan)
+    if ok.any():
+        rays = np.asarray(camera.pixel_to_ray(u[ok], v[ok]), float)
+        vr = rays @ np.asarray(camera_to_vehicle, float).T
+        out[ok] = np.degrees(np.arcsin(np.clip(vr[:, 2] / np.linalg.norm(vr, axis=1), -1, 1)))
+    return out
+
+
+def _pairs_in(data: Path, img_dir: str, mask_dir: str, group: str) -> list[SkyPair]:
+    masks = {p.stem: p for p in (data / mask_dir).iterdir() if p.suffix.lower() == ".png"}
+    pairs = []
+    for p in sorted((data / img_dir).iterdir()):
+        if p.suffix.lower() in _IMAGE_EXT and p.stem in masks:
+            pairs.append(SkyPair(p.stem, p, masks[p.stem], group))
+    return pairs
+
+
+def _synthetic_pairs(root: Path) -> list[SkyPair]:
+    survey, truth = root / "survey", root / "truth"
+    sky_of: dict[str, str] = {}
+    if (truth / "frames.csv").is_file():
+        with open(truth / "frames.csv", newline="", encoding="utf-8") as f:
+            sky_of = {r["frame_id"]: r.get("sky", "synthetic") for r in csv.DictReader(f)}
+    pairs = []
+    with open(survey / "manifest.csv", newline="", encoding="utf-8") as f:
+        for row in csv.DictReader(f):
+            fid = row["frame_id"]
+            label = truth / "labels" / f"{fid}.png"
+            if label.is_file():
+                pairs.append(
+                    SkyPair(fid, survey / row["image"], label, sky_of.get(fid, "synthetic"),
+                            row.get("side"))
+                )
+    return pairs
+
+
+def find_pairs(data_dir: str | os.PathLike[str]) -> tuple[str, list[SkyPair]]:
+    """Detect the layout of ``data_dir`` and list its image/mask pairs (see module docstring).
+
+    Raises
+    ------
+    FileNotFoundError
+        When the folder does not exist or holds no recognised pair; the message names the
+        folder and the layouts looked for.
+    """
+    data = Path(data_dir)
+    if not data.is_dir():
+        raise FileNotFoundError(f"sky evaluation folder {data} does not exist")
+    if (data / "survey" / "manifest.csv").is_file() and (data / "truth" / "labels").is_dir():
+        pairs = _synthetic_pairs(data)
+        if pairs:
+            return "synthetic", pairs
+    for layout, img_dir, mask_dir, _ in _LAYOUTS:
+        if (data / img_dir).is_dir() and (data / mask_dir).is_dir():
+            pairs = _pairs_in(data, img_dir, mask_dir, data.name or layout)
+            if pairs:
+                return layout, pairs
+    looked = ", ".join(f"{i}/ + {m}/" for _, i, m, _ in _LAYOUTS)
+    raise FileNotFoundError(
+        f"no image/mask pairs found in {data}: expected {looked} (images and PNG masks with the "
+        "same file stem), or a synthetic output folder with survey/manifest.csv and truth/labels/"
+    )
+
+
+def confusion_overlay(pred: NDArray, truth: NDArray) -> NDArray:
+    """BGR picture of a prediction: white true sky, red false sky, blue missed sky, black rest."""
+    out = np.zeros((*pred.shape, 3), np.uint8)
+    out[pred & truth] = (255, 255, 255)
+    out[pred & ~truth] = (0, 0, 255)
+    out[~pred & truth] = (255, 0, 0)
+    return out
+
+
+def worst_cases_sheet(
+    items: Iterable[tuple[str, float, NDArray, NDArray]],
+    path: str | os.PathLike[str],
+    thumb_w_px: int = 200,
+    per_row: int = 2,
+) -> Path:
+    """Write a contact sheet: per case a thumbnail and its confusion overlay, captioned.
+
+    Parameters
+    ----------
+    items : iterable of (name, iou, image_bgr, overlay_bgr)
+    path : path-like
+        PNG to write.
+    thumb_w_px : int
+        Width of each thumbnail (height keeps a 3:4 box; images are letterboxed).
+    per_row : int
+        Cases per row.
+    """
+    th = thumb_w_px * 3 // 4
+    tiles = []
+    for name, iou, img, ov in items:
+        pair = []
+        for pic, interp in ((img, cv2.INTER_AREA), (ov, cv2.INTER_NEAREST)):
+            s = min(thumb_w_px / pic.shape[1], th / pic.shape[0])
+            size = (max(1, round(pic.shape[1] * s)), max(1, round(pic.shape[0] * s)))
+            small = cv2.resize(pic, size, interpolation=interp)
+            box = np.full((th, thumb_w_px, 3), 64, np.uint8)
+            y0, x0 = (th - small.shape[0]) // 2, (thumb_w_px - small.shape[1]) // 2
+            box[y0:y0 + small.shape[0], x0:x0 + small.shape[1]] = small
+            pair.append(box)
+        cap = np.full((16, 2 * thumb_w_px, 3), 32, np.uint8)
+        cv2.putText(cap, f"{name}  IoU {iou:.3f}", (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+        tiles.append(np.vstack([cap, np.hstack(pair)]))
+    if not tiles:
+        raise ValueError("worst_cases_sheet needs at least one case")
+    blank = np.zeros_like(tiles[0])
+    while len(tiles) % per_row:
+        tiles.append(blank)
+    sheet = np.vstack([np.hstack(tiles[i:i + per_row]) for i in range(0, len(tiles), per_row)])
+    sheet = np.vstack([sheet, _legend(sheet.shape[1])])
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+        raise OSError(f"could not write contact sheet {out}")
+    return out
+
+
+_LEGEND = (
+    ((255, 255, 255), "sky, right"),
+    ((0, 0, 255), "false sky (unsafe)"),
+    ((255, 0, 0), "missed sky (lost)"),
+    ((0, 0, 0), "obstacle, right"),
+)
+
+
+def _legend(width_px: int) -> NDArray:
+    """A strip naming the colours of :func:`confusion_overlay`."""
+    strip = np.full((18, width_px, 3), 32, np.uint8)
+    x = 4
+    for colour, text in _LEGEND:
+        if x + 140 > width_px:
+            break
+        cv2.rectangle(strip, (x, 4), (x + 10, 14), colour, -1)
+        cv2.rectangle(strip, (x, 4), (x + 10, 14), (160, 160, 160), 1)
+        cv2.putText(strip, text, (x + 14, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                    (255, 255, 255), 1, cv2.LINE_AA)  # fmt: skip
+        x += 140
+    return strip
+
+
+def _read_mask(path: Path, shape: tuple[int, int]) -> NDArray:
+    m = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if m is None:
+        raise OSError(f"cannot read mask {path}")
+    if m.shape != shape:
+        raise ValueError(f"mask {path} is {m.shape[::-1]} px but its image is {shape[::-1]} px")
+    return np.asarray(m >= 128)
+
+
+def _cameras(root: Path) -> dict[str, tuple[Any, NDArray]]:
+    from predisat.survey import Survey
+
+    survey = Survey.load(root / "survey", check_images=False)
+    return {s: (c.camera, c.mount.camera_to_vehicle()) for s, c in survey.cameras.items()}
+
+
+def _summarise(table: pd.DataFrame, skyline_err: dict[str, list[NDArray]]) -> pd.DataFrame:
+    rows = []
+    groups = [*sorted(table["group"].unique()), "all"]
+    for g in groups:
+        t = table if g == "all" else table[table["group"] == g]
+        row: dict[str, Any] = {
+            "group": g,
+            "n_images": len(t),
+            "mean_iou": t["iou"].mean(),
+            "median_iou": t["iou"].median(),
+            "min_iou": t["iou"].min(),
+            "pooled_iou": t["inter_px"].sum() / max(t["union_px"].sum(), 1),
+            "mean_s": t["seconds"].mean(),
+        }
+        if skyline_err:
+            parts = [e for k, v in skyline_err.items() if g in ("all", k) for e in v]
+            err = np.abs(np.concatenate(parts)) if parts else np.zeros(0)
+            err = err[np.isfinite(err)]
+            row["skyline_el_err_median_deg"] = float(np.median(err)) if err.size else np.nan
+            row["skyline_el_err_p95_deg"] = float(np.percentile(err, 95)) if err.size else np.nan
+            row["n_skyline_columns"] = int(err.size)
+            low = int(t["skyline_low_1deg_columns"].sum())
+            row["skyline_low_1deg_columns"] = low
+            row["skyline_low_1deg_share"] = low / err.size if err.size else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def evaluate_folder(
+    data_dir: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+    options: SkyOptions | None = None,
+    limit: int | None = None,
+    n_worst: int = 8,
+    method: str | None = None,
+    classifier: Any = None,
+) -> SkyEvaluation:
+    """Segment every image of a folder with reference masks and score it.
+
+    Parameters
+    ----------
+    data_dir : path-like
+        A folder in one of the layouts of the module docstring.
+    out_dir : path-like, optional
+        When given, writes ``<name>_per_image.csv``, ``<name>_summary.md`` and
+        ``<name>_worst.png`` (the ``n_worst`` lowest-IoU cases) there, ``<name>`` being the
+        folder's name.
+    progress : bool
+        Show a tqdm progress bar.
+    options : SkyOptions, optional
+        Segmentation options; default ``SkyOptions(fisheye=True)`` for the fisheye layout and
+        ``SkyOptions()`` otherwise.
+    limit : int, optional
+        Score only the first ``limit`` pairs (quick runs).
+    n_worst : int
+        Cases in the contact sheet.
+    method : str, optional
+        Segmentation method (:data:`predisat.sky.segment.METHODS`) when ``options`` is not
+        given; default that of ``SkyOptions``.
+    classifier : object, optional
+        Probability model passed to :func:`predisat.sky.segment.segment_sky` (a candidate
+        network or ensemble); default the shipped one of the method.
+
+    Returns
+    -------
+    SkyEvaluation
+    """
+    from tqdm import tqdm
+
+    data = Path(data_dir)
+    layout, pairs = find_pairs(data)
+    if limit is not None:
+        pairs = pairs[: max(0, int(limit))]
+    fisheye = layout == "fisheye_hk"
+    if options is not None:
+        opt = options
+    elif method is not None:
+        opt = SkyOptions(fisheye=fisheye, method=method)
+    else:
+        opt = SkyOptions(fisheye=fisheye)
+    cams = _cameras(data) if layout == "synthetic" else {}
+    rows: list[dict[str, Any]] = []
+    worst: list[tuple[float, SkyPair, NDArray, NDArray]] = []
+    skyline_err: dict[str, list[NDArray]] = {}
+    for pair in tqdm(pairs, desc=f"sky {data.name}", disable=not progress, unit="img"):
+        img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
+        if img is None:
+            raise OSError(f"cannot read image {pair.image_path}")
+        truth = _read_mask(pair.mask_path, img.shape[:2])
+        t0 = time.perf_counter()
+        seg = segment_sky(img, opt, classifier=classifier)
+        dt = time.perf_counter() - t0
+        pred, valid = seg.sky_mask, seg.valid_mask
+        truth_v = truth & valid
+        h = img.shape[0]
+        true_line = skyline_from_mask(truth_v, valid)
+        seen = ((true_line > -0.5) & (true_line < h - 0.5)) | (
+            (seg.skyline_row > -0.5) & (seg.skyline_row < h - 0.5)
+        )
+        row: dict[str, Any] = {
+            "name": pair.name,
+            "group": pair.group,
+            "width_px": img.shape[1],
+            "height_px": h,
+            "iou": sky_iou(pred, truth_v),
+            "inter_px": int(np.count_nonzero(pred & truth_v)),
+            "union_px": int(np.count_nonzero(pred | truth_v)),
+            "true_sky_fraction": float(truth_v.sum() / max(valid.sum(), 1)),
+            "pred_sky_fraction": seg.sky_fraction,
+            "skyline_err_px_median": float(np.median(np.abs(seg.skyline_row - true_line)[seen]))
+            if seen.any() else 0.0,
+            "mean_confidence": float(np.nanmean(seg.confidence)),
+            "seconds": dt,
+        }
+        if layout == "synthetic" and pair.side in cams:
+            cam, r_cv = cams[pair.side]
+            err = skyline_elevation_deg(seg.skyline_row, cam, r_cv) - skyline_elevation_deg(
+                true_line, cam, r_cv
+            )
+            err = err[seen]
+            skyline_err.setdefault(pair.group, []).append(err)
+            row["skyline_el_err_median_deg"] = float(np.median(np.abs(err))) if err.size else 0.0
+            row["skyline_el_err_max_deg"] = float(np.max(np.abs(err))) if err.size else 0.0
+            # the unsafe side: a skyline read too low would let a blocked satellite be trusted
+            row["skyline_low_1deg_columns"] = int(np.count_nonzero(err < -UNSAFE_LOW_DEG))
+        rows.append(row)
+        worst.append((row["iou"], pair, pred, truth_v))
+        worst = sorted(worst, key=lambda w: w[0])[:n_worst]  # keep only the few worst in memory
+    table = pd.DataFrame(rows)
+    summary = _summarise(table, skyline_err)
+    items: list[tuple[str, float, NDArray, NDArray]] = []
+    for iou, pair, pred, truth_v in worst:
+        img = np.asarray(cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR))
+        items.append((pair.name, iou, img, confusion_overlay(pred, truth_v)))
+    files: dict[str, Path] = {}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = data.name or layout
+        files["table"] = out / f"{stem}_per_image.csv"
+        table.to_csv(files["table"], index=False, float_format="%.5g")
+        files["summary"] = out / f"{stem}_summary.md"
+        files["summary"].write_text(
+            f"# Sky segmentation on `{stem}` ({layout}, {len(table)} images)\n\n"
+            + _markdown(summary) + "\n",
+            encoding="utf-8",
+        )
+        if items:
+            files["sheet"] = worst_cases_sheet(items, out / f"{stem}_worst.png")
+    return SkyEvaluation(layout=layout, table=table, summary=summary, files=files,
+                         worst_cases=items)  # fmt: skip
+
+
+def _markdown(df: pd.DataFrame) -> str:
+    """A pipe table (no optional dependency such as tabulate)."""
+
+    def cell(v: Any) -> str:
+        return f"{v:.4f}" if isinstance(v, float) else str(v)
+
+    lines = ["| " + " | ".join(df.columns) + " |", "|" + "---|" * len(df.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in r) + " |" for r in df.itertuples(index=False)]
+    return "\n".join(lines)

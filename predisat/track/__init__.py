@@ -1,0 +1,8 @@
+"""Track maps: the smooth 3-D track axis with chainage, its file readers, part chaining and fit.
+
+* :mod:`predisat.track.map` - :class:`TrackMap` (chainage, heading, curvature, projection).
+* :mod:`predisat.track.readers` - GeoJSON and CSV track files, and :func:`load_track`, the one
+  loader every command uses.
+* :mod:`predisat.track.chain` - chaining the parts of a track file into one polyline.
+* :mod:`predisat.track.smooth` - the penalised B-spline fit through a simplified polyline.
+"""

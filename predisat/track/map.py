@@ -1,0 +1,533 @@
+"""Track maps: a smooth 3-D track axis with chainage, heading, curvature and projection.
+
+A published track axis is a simplified polyline (line 144's file keeps 1 m tolerance, which
+leaves kinks of about 3 deg every 50-60 m). Every quantity here comes from a smoothing cubic
+spline of the polyline in the map's local ENU frame, with the largest smoothing that keeps the
+curve within ``tolerance_m`` of the source; chainage is the arc length of that curve. See
+``docs/track-map.md``.
+
+The fit itself is in :mod:`predisat.track.smooth`. Readers for GeoJSON and CSV files live in
+:mod:`predisat.track.readers` and are exposed here as :meth:`TrackMap.from_geojson` and
+:meth:`TrackMap.from_csv`.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.geodesy import WGS84, LocalFrame
+from predisat.track.smooth import FittedCurve, dense_polyline, fit_curve
+
+__all__ = [
+    "DEMO_TRACK_FILE",
+    "KilometrePost",
+    "Projection",
+    "TrackMap",
+    "TrackMapError",
+    "demo_track",
+]
+
+DEMO_TRACK_FILE = "line144_track_A.geojson"
+"""Packaged demo line (``predisat/data``): Belgian line 144, track A, Infrabel open data."""
+
+
+class TrackMapError(ValueError):
+    """A track map file or vertex list that cannot be used; the message says why and the fix."""
+
+
+@dataclass(frozen=True)
+class KilometrePost:
+    """A kilometre post of the line, kept as metadata at its chainage on this track.
+
+    Attributes
+    ----------
+    chainage_m : float
+        Chainage of the post on this track map.
+    km_m : float
+        The line's own kilometre reference at the post, in metres (e.g. 12850.0 for km 12.850).
+    label : str
+        Free text (a place name, or the formatted kilometre).
+    """
+
+    chainage_m: float
+    km_m: float
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Points projected horizontally onto the track axis (see :meth:`TrackMap.project`).
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (...)
+        Chainage of the foot point, clamped to ``[0, length_m]``.
+    offset_m : ndarray, shape (...)
+        Horizontal cross-track offset, positive to the left of increasing chainage.
+    height_m : ndarray, shape (...)
+        Height of the point above the track axis at the foot point (along the local vertical);
+        meaningless when the point's height was not given.
+    along_m : ndarray, shape (...)
+        Horizontal distance beyond the nearest end of the track (0 inside), metres.
+    clamped : ndarray of bool, shape (...)
+        True where the point lies beyond an end of the track (``along_m > 1 mm``).
+    """
+
+    chainage_m: NDArray
+    offset_m: NDArray
+    height_m: NDArray
+    along_m: NDArray
+    clamped: NDArray
+
+
+@dataclass(frozen=True, eq=False)
+class TrackMap:
+    """A track axis on the WGS84 ellipsoid, with chainage along a smooth fit of the source.
+
+    Build it with :meth:`from_latlon`, :meth:`from_geojson`, :meth:`from_csv` or
+    :func:`demo_track`; do not call the constructor with unchecked data.
+
+    Attributes
+    ----------
+    name : str
+    lat_deg, lon_deg, h_m : ndarray, shape (n,)
+        Vertices of the chained source polyline, in order of increasing chainage.
+    frame : LocalFrame
+        Local ENU frame at the first vertex; ``enu_at`` returns coordinates in it.
+    kilometre_posts : tuple of KilometrePost
+    source, attribution : str
+        Where the geometry came from and the attribution its licence requires.
+    tunnels_m : tuple of (start_m, end_m)
+        Chainage intervals tagged as tunnels in the source (OpenStreetMap ``tunnel=*``).
+    tolerance_m : float
+        Largest horizontal distance allowed between the smooth fit and the source polyline.
+    vertical_tolerance_m : float
+        The same for heights.
+    """
+
+    name: str
+    lat_deg: NDArray
+    lon_deg: NDArray
+    h_m: NDArray
+    frame: LocalFrame
+    kilometre_posts: tuple[KilometrePost, ...] = ()
+    source: str = ""
+    attribution: str = ""
+    tunnels_m: tuple[tuple[float, float], ...] = ()
+    tolerance_m: float = 1.0
+    vertical_tolerance_m: float = 1.0
+    _curve: FittedCurve = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        for arr in (self.lat_deg, self.lon_deg, self.h_m):
+            arr.setflags(write=False)
+        enu = self.frame.to_enu(self.lat_deg, self.lon_deg, self.h_m)
+        curve = fit_curve(enu, self.frame, self.tolerance_m, self.vertical_tolerance_m)
+        object.__setattr__(self, "_curve", curve)
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_latlon(
+        cls,
+        lat_deg: ArrayLike,
+        lon_deg: ArrayLike,
+        h_m: ArrayLike = 0.0,
+        name: str = "track",
+        *,
+        tolerance_m: float = 1.0,
+        vertical_tolerance_m: float | None = None,
+        kilometre_posts: Sequence[KilometrePost] = (),
+        tunnels_m: Sequence[tuple[float, float]] = (),
+        source: str = "",
+        attribution: str = "",
+    ) -> TrackMap:
+        """Track map from the vertices of a polyline, in order of increasing chainage.
+
+        Parameters
+        ----------
+        lat_deg, lon_deg : array_like, shape (n,)
+            Geodetic vertices, degrees; ``n >= 2``.
+        h_m : array_like, shape (n,) or scalar
+            Ellipsoidal heights, metres (default 0).
+        name : str
+        tolerance_m : float
+            Horizontal tolerance of the source (its simplification tolerance); the smooth fit
+            stays within it.
+        vertical_tolerance_m : float, optional
+            Tolerance for heights; default ``tolerance_m``.
+
+        Raises
+        ------
+        TrackMapError
+            Fewer than two distinct vertices, non-finite or impossible coordinates, or a
+            polyline that crosses itself.
+        """
+        lat = np.array(lat_deg, dtype=float).ravel()
+        lon = np.array(lon_deg, dtype=float).ravel()
+        if lat.shape != lon.shape:
+            raise TrackMapError(
+                f"lat_deg has {lat.size} values but lon_deg has {lon.size}; pass one per vertex"
+            )
+        h = np.array(np.broadcast_to(np.asarray(h_m, float), lat.shape), dtype=float)
+        _check_vertices(lat, lon, h, where=f"track {name!r}")
+        if tolerance_m <= 0:
+            raise TrackMapError(f"tolerance_m must be > 0, got {tolerance_m}")
+        vtol = tolerance_m if vertical_tolerance_m is None else float(vertical_tolerance_m)
+        if vtol <= 0:
+            raise TrackMapError(f"vertical_tolerance_m must be > 0, got {vtol}")
+        lat, lon, h = _drop_repeats(lat, lon, h)
+        if lat.size < 2:
+            raise TrackMapError(
+                f"track {name!r} has fewer than 2 distinct vertices; a track needs a line"
+            )
+        frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0]))
+        _check_simple(frame.to_enu(lat, lon, h), where=f"track {name!r}", frame=frame)
+        return cls(
+            name=name,
+            lat_deg=lat,
+            lon_deg=lon,
+            h_m=h,
+            frame=frame,
+            kilometre_posts=tuple(kilometre_posts),
+            source=source,
+            attribution=attribution,
+            tunnels_m=tuple((float(a), float(b)) for a, b in tunnels_m),
+            tolerance_m=float(tolerance_m),
+            vertical_tolerance_m=vtol,
+        )
+
+    @classmethod
+    def from_geojson(
+        cls, path: str | Path, track: str | None = None, h_m: float = 0.0, **kwargs: Any
+    ) -> TrackMap:
+        """Track map from a GeoJSON file; see :func:`predisat.track.readers.read_geojson_track`."""
+        from predisat.track.readers import read_geojson_track
+
+        return read_geojson_track(path, track=track, h_m=h_m, **kwargs)
+
+    @classmethod
+    def from_csv(cls, path: str | Path, **kwargs: Any) -> TrackMap:
+        """Track map from a CSV of lat/lon[/h]; see
+        :func:`predisat.track.readers.read_csv_track`."""
+        from predisat.track.readers import read_csv_track
+
+        return read_csv_track(path, **kwargs)
+
+    def with_metadata(
+        self,
+        *,
+        kilometre_posts: Sequence[KilometrePost] | None = None,
+        tunnels_m: Sequence[tuple[float, float]] | None = None,
+        name: str | None = None,
+    ) -> TrackMap:
+        """A copy with other metadata, sharing the fitted axis (no refit)."""
+        new = copy.copy(self)
+        if kilometre_posts is not None:
+            posts = tuple(sorted(kilometre_posts, key=lambda p: p.chainage_m))
+            object.__setattr__(new, "kilometre_posts", posts)
+        if tunnels_m is not None:
+            tun = tuple((float(a), float(b)) for a, b in tunnels_m)
+            object.__setattr__(new, "tunnels_m", tun)
+        if name is not None:
+            object.__setattr__(new, "name", name)
+        return new
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def length_m(self) -> float:
+        """Arc length of the smooth axis, metres (chainage runs from 0 to this)."""
+        return self._curve.length_m
+
+    @cached_property
+    def max_deviation_m(self) -> float:
+        """Largest horizontal distance between the smooth axis and the source polyline, metres.
+
+        Symmetric (Hausdorff): source points every 1 m projected onto the axis, and axis nodes
+        every metre measured to the source polyline.
+        """
+        import shapely
+
+        poly = self.polyline_enu_m
+        _, dense, _ = dense_polyline(poly, 1.0)
+        to_axis = np.abs(self.project_enu(dense).offset_m)
+        nodes = shapely.points(self._curve.node_enu_m[:, :2])
+        to_poly = shapely.distance(nodes, shapely.LineString(poly[:, :2]))
+        return float(max(np.max(to_axis), np.max(to_poly)))
+
+    @property
+    def max_vertical_deviation_m(self) -> float:
+        """Largest height difference between the smooth axis and the source polyline."""
+        return self._curve.max_vertical_deviation_m
+
+    @cached_property
+    def polyline_enu_m(self) -> NDArray:
+        """Source vertices in :attr:`frame`, shape (n, 3)."""
+        out = self.frame.to_enu(self.lat_deg, self.lon_deg, self.h_m)
+        out.setflags(write=False)
+        return out
+
+    @property
+    def geodesic_length_m(self) -> float:
+        """Length of the source polyline along WGS84 geodesics (pyproj), metres."""
+        return float(WGS84.line_length(self.lon_deg, self.lat_deg))
+
+    # ------------------------------------------------------------------ evaluation
+    def _t(self, chainage_m: ArrayLike) -> NDArray:
+        s = np.asarray(chainage_m, float)
+        if not np.all(np.isfinite(s)):
+            raise TrackMapError("chainage_m contains NaN or infinite values")
+        return np.asarray(self._curve.t_of_s(np.clip(s, 0.0, self.length_m)))
+
+    def enu_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Axis position in :attr:`frame` ENU, shape ``chainage_m.shape + (3,)``, metres.
+
+        Chainages outside ``[0, length_m]`` are clamped to the ends.
+        """
+        return np.asarray(self._curve.spline(self._t(chainage_m)))
+
+    def ecef_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Axis position in ECEF, shape ``chainage_m.shape + (3,)``, metres."""
+        return self.frame.enu_to_ecef(self.enu_at(chainage_m))
+
+    def position_at(self, chainage_m: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
+        """Geodetic axis position ``(lat_deg, lon_deg, h_m)``, each shaped like ``chainage_m``."""
+        return self.frame.to_geodetic(self.enu_at(chainage_m))
+
+    def tangent_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Unit tangent (direction of increasing chainage) in :attr:`frame`, shape (..., 3)."""
+        d = np.asarray(self._curve.spline(self._t(chainage_m), 1))
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def up_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Local vertical (ellipsoid normal) at the axis, in :attr:`frame`, shape (..., 3)."""
+        lat, lon, _ = self.position_at(chainage_m)
+        return self.frame.rotation_from(lat, lon)[..., :, 2]
+
+    def heading_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Azimuth of increasing chainage in the local ENU at the point, degrees in [0, 360)."""
+        s = np.asarray(chainage_m, float)
+        lat, lon, _ = self.position_at(s)
+        rot = self.frame.rotation_from(lat, lon)  # local -> frame; transpose maps back
+        local = np.einsum("...ji,...j->...i", rot, self.tangent_at(s))
+        return np.mod(np.degrees(np.arctan2(local[..., 0], local[..., 1])), 360.0)
+
+    def grade_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Gradient of the axis, rise over horizontal run (dimensionless, + uphill)."""
+        tan = self.tangent_at(chainage_m)
+        up = self.up_at(chainage_m)
+        rise = np.sum(tan * up, axis=-1)
+        return rise / np.sqrt(np.maximum(1.0 - rise**2, 1e-300))
+
+    def curvature_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Signed horizontal curvature, 1/m, positive when the track turns left.
+
+        Computed in the local horizontal plane at the point, from the smooth fit.
+        """
+        t = self._t(chainage_m)
+        d1 = np.asarray(self._curve.spline(t, 1))
+        d2 = np.asarray(self._curve.spline(t, 2))
+        up = self.up_at(chainage_m)
+        h1 = d1 - np.sum(d1 * up, axis=-1, keepdims=True) * up
+        h2 = d2 - np.sum(d2 * up, axis=-1, keepdims=True) * up
+        cross = np.sum(np.cross(h1, h2) * up, axis=-1)
+        return cross / np.linalg.norm(h1, axis=-1) ** 3
+
+    def kilometre_at(self, chainage_m: ArrayLike) -> NDArray:
+        """The line's kilometre reference (metres) at given chainages, from the posts.
+
+        Linear between posts, extrapolated with slope 1 beyond them; NaN when the map has no
+        kilometre posts. Metadata for reports, not a measurement.
+        """
+        s = np.asarray(chainage_m, float)
+        posts = sorted(self.kilometre_posts, key=lambda p: p.chainage_m)
+        if not posts:
+            return np.full(s.shape, np.nan)
+        cs = np.array([p.chainage_m for p in posts])
+        km = np.array([p.km_m for p in posts])
+        if cs.size == 1:
+            return km[0] + (s - cs[0])
+        out = np.interp(s, cs, km)
+        lo, hi = s < cs[0], s > cs[-1]
+        slope_lo = (km[1] - km[0]) / (cs[1] - cs[0]) if cs[1] > cs[0] else 1.0
+        slope_hi = (km[-1] - km[-2]) / (cs[-1] - cs[-2]) if cs[-1] > cs[-2] else 1.0
+        out = np.where(lo, km[0] + slope_lo * (s - cs[0]), out)
+        return np.where(hi, km[-1] + slope_hi * (s - cs[-1]), out)
+
+    def in_tunnel(self, chainage_m: ArrayLike) -> NDArray:
+        """True where the chainage lies in a tagged tunnel interval, shape like ``chainage_m``."""
+        s = np.asarray(chainage_m, float)
+        out = np.zeros(s.shape, bool)
+        for a, b in self.tunnels_m:
+            out |= (s >= a) & (s <= b)
+        return out
+
+    # ------------------------------------------------------------------ projection
+    def project(
+        self, lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike | None = None
+    ) -> Projection:
+        """Project geodetic points horizontally onto the axis.
+
+        Parameters
+        ----------
+        lat_deg, lon_deg : array_like, shape (...)
+        h_m : array_like, shape (...), optional
+            Ellipsoidal heights; when omitted the points are taken at the height of the
+            source's first vertex, which changes only ``height_m`` of the result.
+
+        Returns
+        -------
+        Projection
+        """
+        lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
+        h = self.frame.h_m if h_m is None else np.broadcast_to(np.asarray(h_m, float), lat.shape)
+        return self.project_enu(self.frame.to_enu(lat, lon, h))
+
+    def project_enu(self, enu_m: ArrayLike, *, max_iter: int = 50) -> Projection:
+        """Project points given in :attr:`frame` ENU, shape (..., 3), onto the axis.
+
+        The foot point is where the horizontal (local-vertical-free) part of ``p - r(s)`` is
+        normal to the tangent: a coarse nearest node on a 1 m resample of the axis, then Newton
+        steps until ``|ds| < 1e-6`` m. Points beyond the ends are clamped and flagged.
+        """
+        p = np.asarray(enu_m, float)
+        if p.shape[-1:] != (3,):
+            raise TrackMapError(f"enu_m must have shape (..., 3), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise TrackMapError("enu_m contains NaN or infinite values")
+        shape = p.shape[:-1]
+        pts = p.reshape(-1, 3)
+        c = self._curve
+        _, idx = c.tree.query(pts[:, :2])
+        s = c.node_s_m[idx].astype(float)
+        up = c.node_up[idx]
+        length = self.length_m
+        for _ in range(max_iter):
+            t = np.asarray(c.t_of_s(s))
+            r = np.asarray(c.spline(t))
+            d1 = np.asarray(c.spline(t, 1))
+            d2 = np.asarray(c.spline(t, 2))
+            up = self._up_interp(s)
+            ds_dt = np.linalg.norm(d1, axis=-1, keepdims=True)
+            tan = d1 / ds_dt  # unit, d r / d s
+            dtan = (d2 - np.sum(d2 * tan, -1, keepdims=True) * tan) / ds_dt**2  # d tan / d s
+            d = pts - r
+            dh = d - np.sum(d * up, -1, keepdims=True) * up
+            f = np.sum(dh * tan, -1)
+            # f(s) = dh . tan; df/ds = -|tan_h|^2 + dh . dtan  (up varies negligibly)
+            tan_h = tan - np.sum(tan * up, -1, keepdims=True) * up
+            fp = -np.sum(tan_h * tan_h, -1) + np.sum(dh * dtan, -1)
+            fp = np.where(fp < -0.1, fp, -np.sum(tan_h * tan_h, -1))  # beyond curvature centre
+            step = -f / fp
+            s_new = np.clip(s + step, 0.0, length)
+            done = np.abs(s_new - s) < 1e-6
+            s = s_new
+            if np.all(done):
+                break
+        t = np.asarray(c.t_of_s(s))
+        r = np.asarray(c.spline(t))
+        d1 = np.asarray(c.spline(t, 1))
+        up = self._up_interp(s)
+        tan = d1 / np.linalg.norm(d1, axis=-1, keepdims=True)
+        d = pts - r
+        height = np.sum(d * up, -1)
+        dh = d - height[:, None] * up
+        left = np.cross(up, tan)
+        left /= np.linalg.norm(left, axis=-1, keepdims=True)
+        offset = np.sum(dh * left, -1)
+        at_end = (s <= 0.0) | (s >= length)
+        along = np.where(at_end, np.abs(np.sum(dh * tan, -1)), 0.0)
+        clamped = along > 1e-3
+        return Projection(
+            chainage_m=s.reshape(shape),
+            offset_m=offset.reshape(shape),
+            height_m=height.reshape(shape),
+            along_m=along.reshape(shape),
+            clamped=clamped.reshape(shape),
+        )
+
+    def _up_interp(self, s: NDArray) -> NDArray:
+        c = self._curve
+        up = np.stack([np.interp(s, c.node_s_m, c.node_up[:, k]) for k in range(3)], axis=-1)
+        return up / np.linalg.norm(up, axis=-1, keepdims=True)
+
+    def sample(self, step_m: float, start_m: float = 0.0, end_m: float | None = None) -> NDArray:
+        """Chainages every ``step_m`` from ``start_m`` to ``end_m`` (default the end), inclusive
+        of the start, shape (n,)."""
+        if step_m <= 0:
+            raise TrackMapError(f"step_m must be > 0, got {step_m}")
+        end = self.length_m if end_m is None else float(end_m)
+        return np.arange(float(start_m), end + 1e-9, step_m)
+
+
+# ---------------------------------------------------------------------- helpers
+
+
+def _check_vertices(lat: NDArray, lon: NDArray, h: NDArray, where: str) -> None:
+    if lat.size == 0:
+        raise TrackMapError(f"{where} has no vertices; a track needs at least 2")
+    if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon)) and np.all(np.isfinite(h))):
+        bad = int(np.flatnonzero(~(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)))[0])
+        raise TrackMapError(f"{where}: vertex {bad} has a NaN or infinite coordinate")
+    if np.any(np.abs(lat) > 90.0):
+        bad = int(np.flatnonzero(np.abs(lat) > 90.0)[0])
+        raise TrackMapError(
+            f"{where}: vertex {bad} has latitude {lat[bad]:.6f} deg, outside [-90, 90]; are "
+            "latitude and longitude swapped? (GeoJSON coordinates are [lon, lat])"
+        )
+    if np.any(np.abs(lon) > 360.0):
+        bad = int(np.flatnonzero(np.abs(lon) > 360.0)[0])
+        raise TrackMapError(f"{where}: vertex {bad} has impossible longitude {lon[bad]:.6f} deg")
+    if np.any(np.abs(h) > 10000.0):
+        bad = int(np.flatnonzero(np.abs(h) > 10000.0)[0])
+        raise TrackMapError(
+            f"{where}: vertex {bad} has height {h[bad]:.1f} m; heights are metres above the "
+            "ellipsoid (is a coordinate column misplaced?)"
+        )
+
+
+def _drop_repeats(lat: NDArray, lon: NDArray, h: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    keep = np.ones(lat.size, bool)
+    keep[1:] = (np.diff(lat) != 0) | (np.diff(lon) != 0) | (np.diff(h) != 0)
+    return lat[keep], lon[keep], h[keep]
+
+
+def _check_simple(enu: NDArray, where: str, frame: LocalFrame) -> None:
+    """Reject a polyline whose horizontal trace crosses itself, naming the place."""
+    from shapely import LineString, STRtree, box
+
+    line = LineString(enu[:, :2])
+    if line.is_simple:
+        return
+    segs = [LineString(enu[i : i + 2, :2]) for i in range(len(enu) - 1)]
+    tree = STRtree(segs)
+    for i, seg in enumerate(segs):
+        for j in tree.query(box(*seg.bounds)):
+            if j > i + 1 and seg.intersects(segs[j]):
+                pt = seg.intersection(segs[j]).representative_point()
+                lat, lon, _ = frame.to_geodetic([pt.x, pt.y, 0.0])
+                raise TrackMapError(
+                    f"{where}: the chained line crosses itself between segments {i} and {j} "
+                    f"near lat {float(lat):.6f}, lon {float(lon):.6f}; select a single track "
+                    "(track=..., --track-name) or fix the part order in the file"
+                )
+    raise TrackMapError(f"{where}: the chained line overlaps itself; select a single track")
+
+
+def demo_track() -> TrackMap:
+    """Belgian line 144 (Gembloux - Jemeppe-sur-Sambre), track A, about 14.2 km.
+
+    Infrabel open data (attribution required, see ``predisat/data/ATTRIBUTION.md``), with
+    kilometre posts derived from Infrabel's line sections.
+    """
+    ref = resources.files("predisat") / "data" / DEMO_TRACK_FILE
+    with resources.as_file(ref) as path:
+        return TrackMap.from_geojson(path)

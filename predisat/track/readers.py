@@ -1,0 +1,583 @@
+"""Track map files: GeoJSON (LineString / MultiLineString, WGS84) and CSV of lat/lon[/h].
+
+GeoJSON lines are chained end to start (parts reversed where needed) into one polyline; a file
+holding several tracks needs a selector (``track=`` or ``where=``). Kilometre posts (Point
+features with a ``km_m`` property, or OpenStreetMap ``railway=milestone`` nodes) and tunnel
+tags (OpenStreetMap ``tunnel=*``) are kept as metadata on the :class:`~predisat.track.map.TrackMap`.
+See ``docs/track-map.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.geodesy import WGS84, LocalFrame
+from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
+from predisat.track.map import KilometrePost, TrackMap, TrackMapError
+
+__all__ = [
+    "NAME_KEYS",
+    "kilometre_posts_from_sections",
+    "read_csv_track",
+    "read_geojson_track",
+    "write_geojson",
+]
+
+NAME_KEYS = ("trackname", "trackcode", "name", "ref", "id", "@id")
+"""Feature properties that ``track=`` is matched against (Infrabel, OpenStreetMap, generic)."""
+_ID_KEYS = ("id", "@id")  # feature numbers: a match on them alone may be another line's number
+_LABEL_KEYS = tuple(k for k in NAME_KEYS if k not in _ID_KEYS)  # the names proper
+
+_OSM_ATTRIBUTION = (
+    "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
+)
+
+
+# ---------------------------------------------------------------------- GeoJSON
+
+
+def _load_json(path: Path) -> Any:
+    if not path.is_file():
+        raise TrackMapError(f"{path}: no such file")
+    text = path.read_text(encoding="utf-8-sig")
+    if not text.strip():
+        raise TrackMapError(f"{path}: the file is empty; expected a GeoJSON FeatureCollection")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TrackMapError(
+            f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); "
+            "expected a GeoJSON FeatureCollection"
+        ) from None
+
+
+def _features(doc: Any, path: Path) -> list[dict[str, Any]]:
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise TrackMapError(f"{path}: not a GeoJSON object (no 'type' member)")
+    kind = doc["type"]
+    if kind == "FeatureCollection":
+        feats = doc.get("features")
+        if not isinstance(feats, list):
+            raise TrackMapError(f"{path}: FeatureCollection without a 'features' list")
+        return [f for f in feats if isinstance(f, dict)]
+    if kind == "Feature":
+        return [doc]
+    if kind in ("LineString", "MultiLineString", "Point", "GeometryCollection"):
+        return [{"type": "Feature", "properties": {}, "geometry": doc}]
+    raise TrackMapError(f"{path}: unsupported GeoJSON type {kind!r}")
+
+
+def _feature_label(i: int, props: Mapping[str, Any]) -> str:
+    names = [f"{k}={props[k]}" for k in NAME_KEYS if k in props]
+    return f"feature {i}" + (f" ({', '.join(names[:2])})" if names else "")
+
+
+def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float] | None) -> None:
+    if coords.ndim != 2 or coords.shape[1] < 2 or not np.all(np.isfinite(coords)):
+        raise TrackMapError(
+            f"{path}: {where} has malformed coordinates; expected [[lon, lat(, h)], ...]"
+        )
+    lon, lat = coords[:, 0], coords[:, 1]
+    if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0):
+        k = int(np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))[0])
+        raise TrackMapError(
+            f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} is not a valid "
+            "[lon, lat]; GeoJSON coordinates are [lon, lat] (longitude first): swap them"
+        )
+    if bbox is not None:
+        lon0, lat0, lon1, lat1 = bbox
+        inside = (lon >= lon0) & (lon <= lon1) & (lat >= lat0) & (lat <= lat1)
+        if not np.all(inside):
+            swapped = (lat >= lon0) & (lat <= lon1) & (lon >= lat0) & (lon <= lat1)
+            k = int(np.flatnonzero(~inside)[0])
+            hint = (
+                "the coordinates look swapped: GeoJSON coordinates are [lon, lat]"
+                if np.all(swapped)
+                else "check the file or the expected_bbox"
+            )
+            raise TrackMapError(
+                f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} lies outside the "
+                f"expected bbox {list(bbox)} (lon_min, lat_min, lon_max, lat_max); {hint}"
+            )
+
+
+_LENGTH_KEYS = ("length_m", "length")
+
+
+def _check_declared_length(
+    props: Mapping[str, Any], parts: Sequence[NDArray], where: str, path: Path
+) -> None:
+    """Catch [lat, lon] files that are still valid numbers, from a declared feature length.
+
+    Infrabel and other infrastructure managers publish each track's length; swapping latitude
+    and longitude changes the geodesic length by a few per cent (the degree of longitude
+    shrinks with latitude) while a faithful file agrees to well under 1 %.
+    """
+    declared = next((props[k] for k in _LENGTH_KEYS if k in props), None)
+    if not parts or not isinstance(declared, int | float) or not declared > 0:
+        return
+    direct = sum(float(WGS84.line_length(c[:, 0], c[:, 1])) for c in parts)
+    swapped = sum(
+        float(WGS84.line_length(c[:, 1], c[:, 0])) for c in parts if np.all(np.abs(c[:, 0]) <= 90)
+    )
+    rel_direct = abs(direct - declared) / declared
+    if rel_direct > 0.01 and abs(swapped - declared) / declared < rel_direct / 4:
+        raise TrackMapError(
+            f"{path}: {where}: the coordinates give {direct:.0f} m but the feature declares a "
+            f"length of {declared:.0f} m, which they give when read as [lat, lon]: the "
+            "coordinates look swapped; GeoJSON coordinates are [lon, lat] (longitude first)"
+        )
+
+
+def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, Any] | None) -> bool:
+    if track is not None and not any(str(props.get(k)) == track for k in NAME_KEYS):
+        return False
+    for key, want in (where or {}).items():
+        if want is None:
+            if key in props:
+                return False
+        elif str(props.get(key)) != str(want):
+            return False
+    return True
+
+
+def _numbers(vertex: Any) -> bool:
+    return isinstance(vertex, list) and all(
+        isinstance(c, (int, float)) and not isinstance(c, bool) for c in vertex
+    )
+
+
+def _refuse_id_only_match(
+    selected: Sequence[tuple[int, dict[str, Any], dict[str, Any]]], track: str | None, path: Path
+) -> None:
+    """``track="144"`` must not pick, without a word, the feature numbered 144 of another line:
+    a feature matched only by its number while it has a name is refused."""
+    if track is None:
+        return
+    for i, props, _ in selected:
+        if any(str(props.get(k)) == track for k in _LABEL_KEYS):
+            continue
+        if any(k in props for k in _LABEL_KEYS):
+            key = next(k for k in _ID_KEYS if str(props.get(k)) == track)
+            raise TrackMapError(
+                f"{path}: track={track!r} matches only the {key} of {_feature_label(i, props)}, "
+                f"another name; give the track's name as track=, or "
+                f"where={{{key!r}: {props[key]!r}}} to select that feature by its number"
+            )
+
+
+def read_geojson_track(
+    path: str | Path,
+    track: str | None = None,
+    h_m: float = 0.0,
+    *,
+    where: Mapping[str, Any] | None = None,
+    chain: Literal["all", "longest"] = "all",
+    max_gap_m: float = 2.0,
+    max_turn_deg: float = 30.0,
+    reverse: bool = False,
+    expected_bbox: Sequence[float] | None = None,
+    tolerance_m: float = 1.0,
+    max_post_offset_m: float = 50.0,
+    name: str | None = None,
+    source: str | None = None,
+    attribution: str | None = None,
+) -> TrackMap:
+    """Read a track axis from a GeoJSON file (WGS84 ``[lon, lat(, h)]``).
+
+    Parameters
+    ----------
+    path : str or Path
+    track : str, optional
+        Select the features whose ``trackname``, ``trackcode``, ``name``, ``ref`` or ``id``
+        equals this (e.g. ``"A"`` or ``"L 144_1"``). Needed when the file holds several named
+        tracks.
+    h_m : float
+        Ellipsoidal height used when the coordinates carry none (default 0).
+    where : mapping, optional
+        Further property filters, ``{key: value}``; a value of None requires the key to be
+        absent (e.g. ``{"usage": "main", "service": None}`` for OpenStreetMap main lines).
+    chain : {"all", "longest"}
+        ``"all"``: every selected part must join into one line (gaps above ``max_gap_m`` are
+        errors). ``"longest"``: keep the longest drivable chain (joints within ``max_gap_m``,
+        turning at most ``max_turn_deg``) through a network of ways, as in OpenStreetMap.
+    max_gap_m : float
+        Largest gap allowed between the end of one part and the start of the next.
+    max_turn_deg : float
+        Largest change of direction at a joint for ``chain="longest"``.
+    reverse : bool
+        Reverse the direction of chainage. By default chainage increases with the kilometre
+        posts when the file has at least two, else along the first selected part.
+    expected_bbox : (lon_min, lat_min, lon_max, lat_max), optional
+        Reject vertices outside it (catches swapped coordinates that are still valid).
+    tolerance_m : float
+        Source tolerance for the smooth fit (see :class:`~predisat.track.map.TrackMap`).
+    max_post_offset_m : float
+        Kilometre-post points farther than this from the track are ignored.
+    name, source, attribution : str, optional
+        Override what the file says (``name``/``source``/``attribution`` members written by
+        :func:`write_geojson`; OpenStreetMap's copyright notice).
+
+    Raises
+    ------
+    TrackMapError
+        Naming the file, the feature/part and the fix.
+    """
+    path = Path(path)
+    doc = _load_json(path)
+    feats = _features(doc, path)
+    lines: list[tuple[int, dict[str, Any], dict[str, Any]]] = []
+    points: list[tuple[dict[str, Any], NDArray]] = []
+    for i, f in enumerate(feats):
+        geom = f.get("geometry") or {}
+        props = f.get("properties") or {}
+        if geom.get("type") in ("LineString", "MultiLineString"):
+            lines.append((i, props, geom))
+        elif geom.get("type") == "Point":
+            points.append((props, np.asarray(geom.get("coordinates", []), float)))
+    if not lines:
+        raise TrackMapError(
+            f"{path}: no LineString or MultiLineString feature; a track map needs the track "
+            "axis as a line"
+        )
+    selected = [x for x in lines if _matches(x[1], track, where)]
+    _refuse_id_only_match(selected, track, path)
+    if not selected:
+        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in _LABEL_KEYS if k in p})
+        raise TrackMapError(
+            f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
+            f"available: {', '.join(avail[:20]) or '(no names)'}"
+        )
+    if track is None and chain == "all":
+        for key in ("trackname", "name"):
+            names = sorted({str(p[key]) for _, p, _ in selected if key in p})
+            if len(names) > 1:
+                raise TrackMapError(
+                    f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
+                    "choose one with track=... (command line: --track-name)"
+                )
+
+    parts: list[Part] = []
+    single: list[str] = []  # lines of one vertex, named if nothing else is left
+    for i, props, geom in selected:
+        label = _feature_label(i, props)
+        raw = geom.get("coordinates") or []
+        seqs = [raw] if geom["type"] == "LineString" else list(raw)
+        tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
+        n_before = len(parts)
+        for j, seq in enumerate(seqs):
+            where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
+            try:
+                if not all(_numbers(v) for v in seq):  # "4.6" would pass np.asarray(float)
+                    raise ValueError
+                coords = np.asarray(seq, float)
+            except (TypeError, ValueError):
+                raise TrackMapError(
+                    f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...] "
+                    "of numbers (JSON numbers, not strings)"
+                ) from None
+            if coords.size == 0:
+                continue
+            _check_lonlat(coords, where_s, path, expected_bbox)
+            if len(coords) >= 2:
+                parts.append(Part(where_s, i, coords, tunnel))
+            else:
+                single.append(where_s)
+        _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
+    if not parts:
+        if single:
+            raise TrackMapError(
+                f"{path}: {_first(single)} {'has' if len(single) == 1 else 'have'} a single "
+                "vertex; a track line needs at least two [lon, lat] points"
+            )
+        raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
+
+    first = parts[0].coords[0]
+    frame = LocalFrame(float(first[1]), float(first[0]))
+    if chain == "all":
+        order = chain_all(parts, frame, max_gap_m, path)
+    elif chain == "longest":
+        order = chain_longest(parts, frame, max_gap_m, max_turn_deg, path)
+    else:
+        raise TrackMapError(f"chain must be 'all' or 'longest', got {chain!r}")
+
+    coords, tunnel_spans = concatenate_parts(parts, order)
+    has_h = all(parts[k].coords.shape[1] >= 3 for k, _ in order)
+    lon, lat = coords[:, 0], coords[:, 1]
+    h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
+
+    posts_raw = _points_as_posts(points)
+    members = doc if isinstance(doc, dict) else {}
+    if attribution is None:
+        attribution = str(members.get("attribution", ""))
+        if not attribution and "openstreetmap" in str(members.get("copyright", "")).lower():
+            attribution = _OSM_ATTRIBUTION
+    tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
+    name = name or str(members.get("name") or track or path.stem)
+    try:
+        tm = TrackMap.from_latlon(
+            lat,
+            lon,
+            h,
+            name=name,
+            tolerance_m=tol,
+            source=source or str(members.get("source") or path.name),
+            attribution=attribution,
+        )
+    except TrackMapError as exc:
+        raise TrackMapError(f"{path}: {exc}") from None
+    posts = _project_posts(tm, posts_raw, max_post_offset_m)
+    flip = reverse
+    if not reverse and len(posts) >= 2:
+        by_s = sorted(posts, key=lambda p: p.chainage_m)
+        flip = by_s[-1].km_m < by_s[0].km_m
+    if flip:
+        tm = TrackMap.from_latlon(
+            lat[::-1],
+            lon[::-1],
+            h[::-1],
+            name=tm.name,
+            tolerance_m=tol,
+            source=tm.source,
+            attribution=tm.attribution,
+        )
+        posts = _project_posts(tm, posts_raw, max_post_offset_m)
+        n = len(coords)
+        tunnel_spans = [(n - 1 - b, n - 1 - a) for a, b in tunnel_spans]
+    tunnels = _tunnel_intervals(tm, tunnel_spans)
+    return tm.with_metadata(kilometre_posts=posts, tunnels_m=tunnels)
+
+
+def _points_as_posts(
+    points: Sequence[tuple[dict[str, Any], NDArray]],
+) -> list[tuple[float, str, NDArray]]:
+    out = []
+    for props, xy in points:
+        km: float | None = None
+        if "km_m" in props:
+            km = float(props["km_m"])
+        elif props.get("railway") == "milestone" and "railway:position" in props:
+            txt = str(props["railway:position"]).replace(",", ".").split(";")[0]
+            try:
+                km = 1000.0 * float(txt.strip().lower().removeprefix("km").strip())
+            except ValueError:
+                km = None
+        if km is None or xy.shape not in ((2,), (3,)):
+            continue
+        label = str(props.get("label") or props.get("name") or f"km {km / 1000.0:.3f}")
+        out.append((km, label, xy))
+    return out
+
+
+def _project_posts(
+    tm: TrackMap, posts: Sequence[tuple[float, str, NDArray]], max_offset_m: float
+) -> list[KilometrePost]:
+    if not posts:
+        return []
+    xy = np.array([p[2][:2] for p in posts])
+    pr = tm.project(xy[:, 1], xy[:, 0])
+    keep = (~pr.clamped) & (np.abs(pr.offset_m) <= max_offset_m)
+    out = [
+        KilometrePost(float(s), km, label)
+        for (km, label, _), s, k in zip(posts, pr.chainage_m, keep, strict=True)
+        if k
+    ]
+    return sorted(out, key=lambda p: p.chainage_m)
+
+
+def _tunnel_intervals(tm: TrackMap, spans: Sequence[tuple[int, int]]) -> list[tuple[float, float]]:
+    if not spans:
+        return []
+    idx = np.array(spans)
+    enu = tm.polyline_enu_m
+    s = tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2)
+    s.sort(axis=1)
+    merged: list[list[float]] = []
+    for a, b in sorted(s.tolist()):
+        if merged and a <= merged[-1][1] + 1.0:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
+def kilometre_posts_from_sections(
+    track: TrackMap,
+    path: str | Path,
+    *,
+    step_m: float = 1000.0,
+    max_offset_m: float = 50.0,
+) -> list[KilometrePost]:
+    """Kilometre posts on ``track`` from Infrabel-style line sections.
+
+    Each section is a LineString with ``mfrom`` / ``mto`` kilometre references (metres) and
+    ``ptcarfromname`` / ``ptcartoname`` place names. The kilometre reference runs linearly along
+    the section's geodesic length; posts are placed at every multiple of ``step_m`` and at the
+    section ends, and projected onto ``track`` (points off the track's ends are dropped).
+    """
+    doc = _load_json(Path(path))
+    raw: list[tuple[float, str, NDArray]] = []
+    for i, f in enumerate(_features(doc, Path(path))):
+        props, geom = f.get("properties") or {}, f.get("geometry") or {}
+        if geom.get("type") != "LineString" or "mfrom" not in props or "mto" not in props:
+            continue
+        c = np.asarray(geom["coordinates"], float)
+        _check_lonlat(c, _feature_label(i, props), Path(path), None)
+        _, _, seg = WGS84.inv(c[:-1, 0], c[:-1, 1], c[1:, 0], c[1:, 1])
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        m0, m1 = float(props["mfrom"]), float(props["mto"])
+        km_vertex = m0 + (m1 - m0) * cum / cum[-1]
+        wanted = np.arange(np.ceil(min(m0, m1) / step_m), np.floor(max(m0, m1) / step_m) + 1)
+        kms = np.concatenate([[m0, m1], wanted * step_m])
+        names = [str(props.get("ptcarfromname", "")), str(props.get("ptcartoname", ""))]
+        order = np.argsort(km_vertex) if m1 < m0 else np.arange(len(km_vertex))
+        lon = np.interp(kms, km_vertex[order], c[order, 0])
+        lat = np.interp(kms, km_vertex[order], c[order, 1])
+        for j, km in enumerate(kms):
+            label = names[j] if j < 2 and names[j] else f"km {km / 1000.0:.3f}"
+            raw.append((float(km), label, np.array([lon[j], lat[j]])))
+    posts = _project_posts(track, raw, max_offset_m)
+    unique: dict[float, KilometrePost] = {}
+    for p in posts:  # a section end is also the next section's start
+        if p.km_m not in unique or (unique[p.km_m].label.startswith("km ") and p.label):
+            unique[p.km_m] = p
+    return sorted(unique.values(), key=lambda p: p.chainage_m)
+
+
+def write_geojson(track: TrackMap, path: str | Path) -> None:
+    """Write a track map as GeoJSON that :func:`read_geojson_track` reads back identically.
+
+    The source vertices go in one LineString feature (with heights when any is non-zero),
+    kilometre posts as Point features with ``km_m`` and ``label``; ``name``, ``source``,
+    ``attribution`` and ``tolerance_m`` as members of the FeatureCollection.
+    """
+    with_h = bool(np.any(track.h_m != 0.0))
+    cols = [track.lon_deg, track.lat_deg] + ([track.h_m] if with_h else [])
+    coords = [[round(float(v), 9) for v in row] for row in np.column_stack(cols)]
+    feats: list[dict[str, Any]] = [
+        {
+            "type": "Feature",
+            "properties": {"name": track.name, "length_m": round(track.length_m, 3)},
+            "geometry": {"type": "LineString", "coordinates": coords},
+        }
+    ]
+    if track.kilometre_posts:
+        s = np.array([p.chainage_m for p in track.kilometre_posts])
+        lat, lon, _ = track.position_at(s)
+        for p, la, lo in zip(track.kilometre_posts, lat, lon, strict=True):
+            feats.append(
+                {
+                    "type": "Feature",
+                    "properties": {"km_m": p.km_m, "label": p.label},
+                    "geometry": {
+                        "type": "Point",
+                        "coordinates": [round(float(lo), 9), round(float(la), 9)],
+                    },
+                }
+            )
+    doc = {
+        "type": "FeatureCollection",
+        "name": track.name,
+        "source": track.source,
+        "attribution": track.attribution,
+        "tolerance_m": track.tolerance_m,
+        "features": feats,
+    }
+    Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+
+
+# ---------------------------------------------------------------------- CSV
+
+_LAT = ("lat_deg", "lat", "latitude")
+_LON = ("lon_deg", "lon", "lng", "long", "longitude")
+_H = ("h_m", "h", "height", "height_m", "alt", "altitude", "ele", "elevation")
+
+
+def read_csv_track(
+    path: str | Path,
+    *,
+    name: str | None = None,
+    h_m: float = 0.0,
+    tolerance_m: float = 1.0,
+    vertical_tolerance_m: float | None = None,
+    source: str | None = None,
+    attribution: str = "",
+) -> TrackMap:
+    """Read a track axis from a CSV with a header: ``lat_deg, lon_deg[, h_m]`` (vertex order).
+
+    Accepted header names: latitude ``lat_deg|lat|latitude``, longitude
+    ``lon_deg|lon|lng|long|longitude``, height ``h_m|h|height|alt|altitude|ele|elevation``
+    (ellipsoidal metres; ``h_m`` is used when the column is absent). Lines starting with ``#``
+    are comments.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise TrackMapError(f"{path}: no such file")
+    lines = [
+        ln
+        for ln in path.read_text(encoding="utf-8-sig").splitlines()
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise TrackMapError(f"{path}: the file is empty; expected a header lat_deg,lon_deg[,h_m]")
+    rows = list(csv.reader(lines))
+    header = [c.strip().lower() for c in rows[0]]
+
+    def col(names: Sequence[str]) -> int | None:
+        for nm in names:
+            if nm in header:
+                return header.index(nm)
+        return None
+
+    i_lat, i_lon, i_h = col(_LAT), col(_LON), col(_H)
+    if i_lat is None or i_lon is None:
+        raise TrackMapError(
+            f"{path}: header {rows[0]} lacks a latitude and a longitude column; name them "
+            "lat_deg and lon_deg (h_m optional)"
+        )
+    vals = []
+    for r, row in enumerate(rows[1:], start=2):
+        try:
+            lat = float(row[i_lat])
+            lon = float(row[i_lon])
+            h = float(row[i_h]) if i_h is not None and row[i_h].strip() else h_m
+        except (ValueError, IndexError):
+            raise TrackMapError(
+                f"{path}: data line {r} {row} is not numeric lat/lon/h; fix or remove it"
+            ) from None
+        vals.append((lat, lon, h))
+    if len(vals) < 2:
+        raise TrackMapError(f"{path}: needs at least 2 vertices, found {len(vals)}")
+    arr = np.array(vals)
+    if np.any(np.abs(arr[:, 0]) > 90.0):
+        k = int(np.flatnonzero(np.abs(arr[:, 0]) > 90.0)[0])
+        raise TrackMapError(
+            f"{path}: data line {k + 2} has latitude {arr[k, 0]} outside [-90, 90]; are the "
+            "latitude and longitude columns swapped?"
+        )
+    try:
+        return TrackMap.from_latlon(
+            arr[:, 0],
+            arr[:, 1],
+            arr[:, 2],
+            name=name or path.stem,
+            tolerance_m=tolerance_m,
+            vertical_tolerance_m=vertical_tolerance_m,
+            source=source or path.name,
+            attribution=attribution,
+        )
+    except TrackMapError as exc:
+        raise TrackMapError(f"{path}: {exc}") from None
+
+
+def _first(names: list[str], n: int = 5) -> str:
+    """``a, b, c`` or ``a, b, c and 4 more``."""
+    more = f" and {len(names) - n} more" if len(names) > n else ""
+    return ", ".join(names[:n]) + more

@@ -1,0 +1,307 @@
+"""SATHIA interval: pair formula vs numeric hyperboloid intersection, pair selection vs search,
+fast path vs the straightforward table implementation."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from predisat.availability.interval import (
+    ErrorModel,
+    IntervalMode,
+    IntervalModel,
+    along_track_components,
+    best_pair,
+    interval_mode,
+    pair_half_length_m,
+    pair_pool,
+    predicted_interval,
+    three_independent_pairs,
+)
+
+
+def _hyperbolic_interval(sat_i, sat_j, p0, t, dk):
+    """Chainages where |p - S_i| - |p - S_j| = K(0) -+ dk on the straight track p0 + s t."""
+
+    def k_of(s):
+        p = p0 + s * t
+        return np.linalg.norm(p - sat_i) - np.linalg.norm(p - sat_j)
+
+    k0 = k_of(0.0)
+    ends = [brentq(lambda s, k=k0 + sgn * dk: k_of(s) - k, -5e4, 5e4, xtol=1e-9)
+            for sgn in (-1, 1)]  # fmt: skip
+    return abs(ends[1] - ends[0])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_pair_length_matches_hyperboloid_intersection(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    p0 = np.array([0.0, 0.0, 6.371e6])  # a point on a spherical Earth, local up = z
+    t = np.array([np.cos(rng.uniform(0, 6.28)), np.sin(rng.uniform(0, 6.28)), 0.0])
+    t /= np.linalg.norm(t)
+    sats, units = [], []
+    for _ in range(2):
+        az, el = rng.uniform(0, 2 * np.pi), np.radians(rng.uniform(15, 85))
+        u = np.array([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)])
+        sats.append(p0 + 2.2e7 * u)
+        units.append(u)
+    sigma_i, sigma_j = 3.0, 5.0
+    model = IntervalModel(k_sigma=2.0)
+    dk = model.k_sigma * np.hypot(sigma_i, sigma_j)
+    g = along_track_components(np.array(units), t)
+    half = pair_half_length_m(g[0], g[1], sigma_i, sigma_j, model.k_sigma)
+    numeric = _hyperbolic_interval(sats[0], sats[1], p0, t, dk)
+    # the linearisation is exact to second order: intervals of tens of metres at 22 000 km
+    assert abs(2 * half - numeric) < 1e-3 * numeric + 1e-3
+
+
+def _best_three_pairs(g, s, k):
+    best = np.inf
+    idx = range(len(g))
+
+    def perfect(rest):
+        if not rest:
+            yield []
+            return
+        for x in range(1, len(rest)):
+            for m in perfect(rest[1:x] + rest[x + 1 :]):
+                yield [(rest[0], rest[x]), *m]
+
+    for six in itertools.combinations(idx, 6):
+        for m in perfect(list(six)):
+            best = min(best, max(k * np.hypot(s[a], s[b]) / abs(g[a] - g[b]) for a, b in m))
+    return 2 * best
+
+
+def _random_sky(rng, n):
+    az = rng.uniform(0, 360, n)
+    el = np.degrees(np.arcsin(rng.uniform(np.sin(np.radians(5)), 1, n)))
+    return np.cos(np.radians(el)) * np.cos(np.radians(az)), el
+
+
+def test_three_pairs_exact_with_equal_sigmas() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        n = int(rng.integers(6, 11))
+        g, _ = _random_sky(rng, n)
+        s = np.full(n, 4.0)
+        length, mode = predicted_interval(g[None], s[None], np.ones((1, n), bool), 2.0)
+        assert mode[0] == IntervalMode.THREE_PAIRS
+        assert length[0] == pytest.approx(_best_three_pairs(g, s, 2.0), rel=1e-5)
+
+
+def test_three_pairs_close_to_search_with_elevation_sigmas() -> None:
+    rng = np.random.default_rng(11)
+    em = ErrorModel()
+    ratios = []
+    for _ in range(120):
+        n = int(rng.integers(6, 11))
+        g, el = _random_sky(rng, n)
+        s = em.sigma_m(el)
+        # embed among untrusted padding to exercise the masking
+        m = 14
+        slots = rng.permutation(m)[:n]
+        gg, ss, ok = np.zeros(m), np.ones(m), np.zeros(m, bool)
+        gg[slots], ss[slots], ok[slots] = g, s, True
+        length, _ = predicted_interval(gg[None], ss[None], ok[None], 2.0)
+        ratios.append(length[0] / _best_three_pairs(g, s, 2.0))
+    r = np.array(ratios)
+    assert r.min() > 1 - 1e-5  # never shorter than the optimum: the sets are real
+    assert np.mean(r < 1 + 1e-5) > 0.85 and np.quantile(r, 0.95) < 1.2 and r.max() < 2.0
+
+
+def test_modes_by_count() -> None:
+    g = np.array([[-0.9, 0.8, 0.1, 0.3, -0.2]])
+    s = np.full((1, 5), 2.0)
+    k = 2.0
+    h = lambda a, b: k * np.hypot(2.0, 2.0) / abs(g[0, a] - g[0, b])  # noqa: E731
+    cases = {
+        1: (np.nan, IntervalMode.NONE),
+        2: (2 * h(0, 1), IntervalMode.BEST_PAIR),
+        3: (2 * min(h(0, 1), h(0, 2), h(1, 2)), IntervalMode.BEST_PAIR),
+        4: (
+            2 * max(h(a, b) for a, b in itertools.combinations(range(4), 2)),
+            IntervalMode.ALL_PAIRS,
+        ),
+    }
+    for n, (want, want_mode) in cases.items():
+        ok = np.arange(5)[None] < n
+        length, mode = predicted_interval(g, s, ok, k)
+        assert mode[0] == want_mode
+        np.testing.assert_allclose(length[0], want, rtol=1e-6)
+
+
+def test_error_model_and_risk() -> None:
+    em = ErrorModel(a_m=1.0, b_m=3.0)
+    np.testing.assert_allclose(em.sigma_m([90.0, 30.0]), [np.hypot(1, 3), np.hypot(1, 6)])
+    assert em.sigma_m(-5.0) == em.sigma_m(em.min_el_deg)
+    assert IntervalModel.for_risk(1e-4).k_sigma == pytest.approx(3.8906, abs=1e-3)
+    for k in (0.0, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="k_sigma"):
+            IntervalModel(k_sigma=k)
+    for a, b in ((float("nan"), 1.0), (1.0, float("inf")), (-1.0, 1.0)):
+        with pytest.raises(ValueError, match="a_m, b_m"):
+            ErrorModel(a_m=a, b_m=b)
+
+
+# --------------------------------------------------------------------------- pair choice
+def _table_reference(g, s, ok, k):
+    """The pre-0.2 implementation, kept as a reference: argpartition pool + 420-set table.
+
+    Straightforward and independent of the fast path (subset recursion, repeated argmin).
+    """
+    n, m = g.shape
+    length = np.full(n, np.nan, g.dtype)
+    count = ok.sum(-1)
+    for r in range(n):
+        gr, sr, okr = g[r], s[r], ok[r]
+        if count[r] >= 6:
+            p = min(8, m)
+            s0 = sr[okr].min()
+            spread = np.sqrt(sr * sr + s0 * s0)
+            with np.errstate(divide="ignore"):
+                rank_lo = np.where(okr, spread / (1.0 - gr), 1e30)
+                rank_hi = np.where(okr, spread / (1.0 + gr), 1e30)
+            lo = np.argpartition(rank_lo, p // 2 - 1)[: p // 2]
+            rank_hi[lo] = np.inf
+            hi = np.argpartition(rank_hi, p - p // 2 - 1)[: p - p // 2]
+            pool = np.concatenate([lo, hi])
+            best = np.inf
+            for six in itertools.combinations(pool, 6):
+                for a, b, c in _perfect(list(six)):
+                    hs = [
+                        pair_half_length_m(gr[x], gr[y], sr[x], sr[y], k)
+                        if okr[x] and okr[y]
+                        else np.inf
+                        for x, y in (a, b, c)
+                    ]
+                    best = min(best, max(hs))
+            length[r] = 2.0 * best
+        elif count[r] >= 2:
+            t = np.nonzero(okr)[0]
+            hs = [pair_half_length_m(gr[x], gr[y], sr[x], sr[y], k)
+                  for x, y in itertools.combinations(t, 2)]  # fmt: skip
+            length[r] = 2.0 * (max(hs) if count[r] >= 4 else min(hs))
+    return length.astype(np.float32)
+
+
+def _perfect(rest):
+    if not rest:
+        yield []
+        return
+    for x in range(1, len(rest)):
+        for m in _perfect(rest[1:x] + rest[x + 1 :]):
+            yield [(rest[0], rest[x]), *m]
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("m", [6, 7, 9, 20])
+def test_fast_path_identical_to_table_reference(dtype, m) -> None:
+    rng = np.random.default_rng(m)
+    n = 60
+    g = rng.uniform(-1, 1, (n, m)).astype(dtype)
+    s = rng.uniform(2.0, 12.0, (n, m)).astype(dtype)
+    ok = rng.random((n, m)) < rng.uniform(0.2, 1.0, (n, 1))
+    length, mode = predicted_interval(g, s, ok, 2.0)
+    want = _table_reference(g, s, ok, 2.0)
+    np.testing.assert_array_equal(length, want)  # bit for bit, NaN where < 2
+    np.testing.assert_array_equal(mode, interval_mode(ok.sum(-1)))
+    # NaN/inf in untrusted entries change nothing
+    g_bad = np.where(ok, g, np.nan).astype(dtype)
+    s_bad = np.where(ok, s, np.inf).astype(dtype)
+    np.testing.assert_array_equal(predicted_interval(g_bad, s_bad, ok, 2.0)[0], want)
+
+
+def test_three_independent_pairs_vectorised() -> None:
+    rng = np.random.default_rng(4)
+    em = ErrorModel()
+    n, m = 40, 12
+    g, el = _random_sky(rng, n * m)
+    g, s = g.reshape(n, m), em.sigma_m(el).reshape(n, m)
+    ok = rng.random((n, m)) < 0.75
+    ok[0] = [True] * 5 + [False] * 7  # too few
+    ok[1] = [True] * 7 + [False] * 5  # the pool holds every trusted satellite: exact
+    pairs, half = three_independent_pairs(g, s, ok, 2.0)
+    assert pairs.shape == (n, 3, 2) and half.shape == (n,)
+    length, _ = predicted_interval(g, s, ok, 2.0)
+    for r in range(n):
+        if ok[r].sum() < 6:
+            assert np.all(pairs[r] == -1) and np.isnan(half[r])
+            continue
+        pr = pairs[r]
+        assert len(set(pr.ravel().tolist())) == 6 and np.all(ok[r][pr])
+        assert np.all(pr[:, 0] < pr[:, 1])
+        hs = [2.0 * np.hypot(s[r, a], s[r, b]) / abs(g[r, a] - g[r, b]) for a, b in pr]
+        assert half[r] == pytest.approx(max(hs), rel=1e-12)
+        assert 2 * half[r] == pytest.approx(length[r], rel=1e-6)
+        if ok[r].sum() <= 8:
+            t = np.nonzero(ok[r])[0]
+            assert 2 * half[r] == pytest.approx(_best_three_pairs(g[r, t], s[r, t], 2.0), rel=1e-12)
+    assert np.all(pairs[0] == -1) and np.isnan(half[0])
+
+
+def test_three_pairs_tie_break_prefers_tight_pairs() -> None:
+    """The longest pair decides the union, so equal unions are common: the tighter sum wins."""
+    rng = np.random.default_rng(8)
+    differs = 0
+    for _ in range(30):
+        n = int(rng.integers(6, 9))
+        g = rng.uniform(-0.9, 0.9, n)
+        s = np.full(n, 3.0)
+        pairs, half = three_independent_pairs(g, s)
+
+        def h(a, b, g=g, s=s):
+            return 2.0 * np.hypot(s[a], s[b]) / abs(g[a] - g[b])
+
+        sets = [m for six in itertools.combinations(range(n), 6) for m in _perfect(list(six))]
+        key = [(max(h(*p) for p in m), sum(h(*p) for p in m)) for m in sets]
+        want = sets[min(range(len(sets)), key=key.__getitem__)]
+        first = sets[min(range(len(sets)), key=lambda q: key[q][0])]
+        assert {tuple(p) for p in pairs.tolist()} == set(want)
+        assert half == pytest.approx(key[sets.index(want)][0], rel=1e-12)
+        differs += set(first) != set(want)
+    assert differs > 0  # the tie-break did matter in some skies
+
+
+def test_best_pair_vectorised() -> None:
+    rng = np.random.default_rng(9)
+    n, m = 50, 7
+    g = rng.uniform(-1, 1, (n, m))
+    s = rng.uniform(2, 9, (n, m))
+    ok = rng.random((n, m)) < 0.5
+    pair, half = best_pair(g, s, ok, 2.0)
+    for r in range(n):
+        t = np.nonzero(ok[r])[0]
+        if len(t) < 2:
+            assert np.all(pair[r] == -1) and np.isnan(half[r])
+            continue
+        want = min(
+            (2.0 * np.hypot(s[r, a], s[r, b]) / abs(g[r, a] - g[r, b]), a, b)
+            for a, b in itertools.combinations(t, 2)
+        )
+        assert half[r] == pytest.approx(want[0], rel=1e-12)
+        assert tuple(pair[r]) == (want[1], want[2])
+
+
+def test_pair_pool_ranks() -> None:
+    rng = np.random.default_rng(2)
+    g = rng.uniform(-1, 1, (30, 15))
+    s = rng.uniform(2, 9, (30, 15))
+    ok = rng.random((30, 15)) < 0.8
+    pool = pair_pool(g, s, ok)
+    assert pool.shape == (30, 8) and np.all(np.diff(pool, axis=-1) > 0)
+    for r in range(30):
+        t = np.nonzero(ok[r])[0]
+        s0 = s[r, t].min()
+        spread = {i: np.hypot(s[r, i], s0) for i in t}
+        lo = sorted(t, key=lambda i: spread[i] / (1 - g[r, i]))[:4]
+        rest = [i for i in t if i not in lo]
+        hi = sorted(rest, key=lambda i: spread[i] / (1 + g[r, i]))[:4]
+        if len(t) >= 8:
+            assert set(pool[r].tolist()) == set(lo) | set(hi)
+        else:
+            assert set(t.tolist()) <= set(pool[r].tolist())
+    np.testing.assert_array_equal(pair_pool(g[:, :6], s[:, :6]), np.tile(np.arange(6), (30, 1)))

@@ -1,0 +1,470 @@
+"""Tests of predisat.availability.run: the availability command's orchestration and outputs."""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+from datetime import datetime, timedelta, timezone
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from pyproj import Transformer
+
+from predisat.availability.run import (
+    add_arguments,
+    load_navigation,
+    nav_span_gps_s,
+    parse_time,
+    run_availability,
+    run_from_args,
+)
+from predisat.availability.satellites import default_ephemeris
+from predisat.masks.fileformat import MaskFileError, write_masks
+from predisat.masks.maskset import MaskSet
+from predisat.track.map import TrackMap, demo_track
+
+STEP_DEG = 5.0
+START = "2020-06-25T06:00"
+END = "2020-06-25T08:00"
+STEP_S = 300.0
+WALL = (4200.0, 4300.0)  # chainage of a 60 deg wall on the left
+GPS_EPOCH = datetime(1980, 1, 6)
+
+
+def _synthetic_masks(track: TrackMap) -> MaskSet:
+    """5 deg everywhere, a 60 deg wall over +-60 deg around the left normal inside WALL."""
+    ch = np.arange(4000.0, 4400.1, 20.0)
+    heading = track.heading_at(ch)
+    az = np.arange(round(360 / STEP_DEG)) * STEP_DEG
+    rel = (az[None, :] - (heading[:, None] - 90.0) + 180.0) % 360.0 - 180.0
+    wall = (ch[:, None] >= WALL[0]) & (ch[:, None] <= WALL[1]) & (np.abs(rel) <= 60.0)
+    mask = np.where(wall, 60.0, 5.0)
+    return MaskSet.from_track(track, ch, mask, az_step_deg=STEP_DEG, margin_deg=1.0)
+
+
+@pytest.fixture(scope="module")
+def track() -> TrackMap:
+    return demo_track()
+
+
+@pytest.fixture(scope="module")
+def masks(track: TrackMap) -> MaskSet:
+    return _synthetic_masks(track)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory, track: TrackMap, masks: MaskSet):
+    tmp = tmp_path_factory.mktemp("avail")
+    path = write_masks(masks, tmp / "synthetic.masks.parquet")
+    return run_availability(
+        path, track, None, out_dir=tmp / "out", start=START, end=END, step_s=STEP_S,
+        constellation="gps", cutoff_deg=15.0, n_sky=2, interval_every=1, progress=False,
+        counts_table=True,
+    )  # fmt: skip
+
+
+class _Collect(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.tags: list[tuple[str, dict[str, str | None]]] = []
+        self.rows: list[list[str]] = []
+        self._row: list[str] | None = None
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self.tags.append((tag, dict(attrs)))
+        if tag == "tr":
+            self._row = []
+        elif tag in ("td", "th") and self._row is not None:
+            self._cell = []
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("td", "th") and self._row is not None and self._cell is not None:
+            self._row.append("".join(self._cell).strip())
+            self._cell = None
+        elif tag == "tr" and self._row is not None:
+            self.rows.append(self._row)
+            self._row = None
+
+    def handle_data(self, data: str) -> None:
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def _gps_s(dt: datetime) -> float:
+    return (dt - GPS_EPOCH).total_seconds()
+
+
+def _independent_azel(lat: float, lon: float, h: float, sat_ecef: np.ndarray):
+    """Azimuth/elevation with PROJ's topocentric conversion (independent of predisat)."""
+    tr = Transformer.from_pipeline(
+        f"+proj=topocentric +ellps=WGS84 +lat_0={lat} +lon_0={lon} +h_0={h}"
+    )
+    e, n, u = tr.transform(sat_ecef[..., 0], sat_ecef[..., 1], sat_ecef[..., 2])
+    az = np.degrees(np.arctan2(e, n)) % 360.0
+    el = np.degrees(np.arctan2(u, np.hypot(e, n)))
+    return az, el
+
+
+# ----------------------------------------------------------------------------- outputs
+def test_every_listed_file_is_described(run) -> None:
+    html = run.report_html.read_text()
+    assert "ephemeris_status.csv</code> – each run of epochs" in html
+    assert not any(f"– {key}" in html for key in ("ephemeris_status_csv", "summary_csv"))
+
+
+def test_html_is_self_contained_with_table_and_images(run) -> None:
+    text = run.report_html.read_text(encoding="utf-8")
+    p = _Collect()
+    p.feed(text)
+    names = [t for t, _ in p.tags]
+    assert "script" not in names and "link" not in names and "iframe" not in names
+    for _, attrs in p.tags:
+        for key in ("src", "href"):
+            v = attrs.get(key)
+            if v is not None:
+                assert not v.lower().startswith(("http:", "https:", "//", "ftp:")), v
+    assert "url(" not in text  # no CSS-loaded resources
+    imgs = [a["src"] for t, a in p.tags if t == "img"]
+    assert len(imgs) >= 5
+    import base64
+
+    for src in imgs:
+        assert src is not None and src.startswith("data:image/png;base64,")
+        assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    first = [r[0] for r in p.rows if r]
+    for rule in ("masks", "no mask", "cutoff 15 deg"):
+        assert rule in first
+    assert any(c.startswith("LOCOPROL") for c in first)
+    assert "line 144" in text and "2020-06-25 06:00:00" in text
+
+
+def test_summary_row_matches_positions_table(run, masks: MaskSet) -> None:
+    summ = pd.read_csv(run.files["summary_csv"])
+    pos = pd.read_csv(run.files["positions_csv"])
+    assert list(summ["rule"]) == ["masks", "no mask", "cutoff 15 deg"]
+    assert len(pos) == 3 * masks.n_pos
+    for rule, g in pos.groupby("rule"):
+        # line share = cell-length-weighted mean of the per-position shares (independent cells)
+        s = g["chainage_m"].to_numpy()
+        mid = (s[1:] + s[:-1]) / 2
+        edges = np.concatenate([[s[0] - (mid[0] - s[0])], mid, [s[-1] + (s[-1] - mid[-1])]])
+        w = np.diff(edges)
+        want = np.sum(g["share_ge4"].to_numpy() * w) / np.sum(w)
+        got = float(summ.loc[summ["rule"] == rule, "share_ge4"].iloc[0])
+        assert got == pytest.approx(want, abs=1e-6)
+    # the wall must cost satellites against no mask (and never add any)
+    m = pos[pos["rule"] == "masks"].set_index("chainage_m")
+    n = pos[pos["rule"] == "no mask"].set_index("chainage_m")
+    assert (m["mean_count"] <= n["mean_count"] + 1e-9).all()
+    inside = (m.index >= WALL[0]) & (m.index <= WALL[1])
+    outside = ~inside
+    assert m["mean_count"][inside].mean() < m["mean_count"][outside].mean() - 1.0
+
+
+def test_counts_match_an_independent_computation(run, masks: MaskSet) -> None:
+    t = np.arange(_gps_s(datetime(2020, 6, 25, 6)), _gps_s(datetime(2020, 6, 25, 8)), STEP_S)
+    eph = default_ephemeris()
+    gps = [s for s in eph.satellites if s.startswith("G")]
+    sat = eph.position_ecef(t, gps)  # (n_ep, n_sat, 3), NaN where not trusted
+    counts = pq.read_table(run.files["counts_parquet"]).to_pandas()
+    for i in (0, 11):  # outside and inside the wall
+        ch = float(masks.chainage_m[i])
+        az, el = _independent_azel(masks.lat_deg[i], masks.lon_deg[i], masks.h_m[i], sat)
+        k = np.floor(np.nan_to_num(az) / STEP_DEG + 0.5).astype(int) % round(360 / STEP_DEG)
+        thr = masks.mask_el_deg[i][k] + masks.margin_deg[i][k]
+        want = {
+            "no mask": np.sum(np.nan_to_num(el, nan=-99) > 0.0, axis=1),
+            "cutoff 15 deg": np.sum(np.nan_to_num(el, nan=-99) > 15.0, axis=1),
+            "masks": np.sum(np.nan_to_num(el, nan=-99) > thr, axis=1),
+        }
+        for rule, w in want.items():
+            got = counts[(counts["rule"] == rule) & np.isclose(counts["chainage_m"], ch)]
+            got = got.sort_values("gps_s")
+            np.testing.assert_allclose(got["gps_s"].to_numpy(), t)
+            np.testing.assert_array_equal(got["count"].to_numpy(), w, err_msg=f"{rule} {ch}")
+
+
+def test_parquet_equals_csv(run) -> None:
+    for name in ("positions", "epochs"):
+        a = pd.read_csv(run.files[f"{name}_csv"])
+        b = pq.read_table(run.files[f"{name}_parquet"]).to_pandas()
+        assert list(a.columns) == list(b.columns)
+        num = [c for c in a.columns if pd.api.types.is_float_dtype(b[c])]
+        np.testing.assert_allclose(a[num].to_numpy(), b[num].to_numpy(), rtol=1e-10, atol=1e-9)
+        meta = pq.read_schema(run.files[f"{name}_parquet"]).metadata
+        assert b"predisat.availability.run" in meta
+
+
+def test_geojson_follows_the_track(run, track: TrackMap, masks: MaskSet) -> None:
+    fc = json.loads(run.files["geojson"].read_text())
+    assert fc["type"] == "FeatureCollection"
+    assert len(fc["features"]) == masks.n_pos
+    s = masks.chainage_m
+    edges = np.concatenate([[s[0] - 10.0], (s[1:] + s[:-1]) / 2, [s[-1] + 10.0]])
+    for i, f in enumerate(fc["features"]):
+        assert f["geometry"]["type"] == "LineString"
+        props = f["properties"]
+        assert 0.0 <= props["share_ge4"] <= 1.0
+        assert props["stroke"].startswith("#") and "share_ge4_no_mask" in props
+        xy = np.asarray(f["geometry"]["coordinates"])
+        lat, lon, _ = track.position_at(np.linspace(edges[i], edges[i + 1], len(xy)))
+        np.testing.assert_allclose(xy[:, 0], lon, atol=1e-9)
+        np.testing.assert_allclose(xy[:, 1], lat, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- errors
+def test_missing_masks_file_names_it(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.masks.parquet"
+    with pytest.raises(MaskFileError, match=r"nope\.masks\.parquet: no such mask file"):
+        run_availability(missing, None, None, out_dir=tmp_path / "o", progress=False)
+
+
+def test_missing_nav_file_names_it(tmp_path: Path, masks: MaskSet) -> None:
+    with pytest.raises(FileNotFoundError, match=r"--nav .*brdc9999\.20n.*embedded"):
+        run_availability(
+            masks, None, [tmp_path / "brdc9999.20n"], out_dir=tmp_path / "o", progress=False
+        )
+
+
+def test_window_outside_nav_data(tmp_path: Path, masks: MaskSet) -> None:
+    with pytest.raises(ValueError, match=r"outside the navigation data.*ESBC00DNK.*--start"):
+        run_availability(
+            masks, None, None, out_dir=tmp_path / "o", start="2021-01-01T00:00",
+            end="2021-01-01T01:00", step_s=600, progress=False,
+        )  # fmt: skip
+    # partly outside: the end runs past the data
+    with pytest.raises(ValueError, match=r"epochs .* outside the navigation data"):
+        run_availability(
+            masks, None, None, out_dir=tmp_path / "o", start="2020-06-25T23:00",
+            end="2020-06-26T04:00", step_s=600, progress=False,
+        )  # fmt: skip
+
+
+def test_masks_on_another_track_are_refused(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    # the same line moved 0.005 deg north (about 550 m)
+    other = TrackMap.from_latlon(track.lat_deg + 0.005, track.lon_deg, track.h_m, name="moved")
+    with pytest.raises(ValueError, match="do not fit track"):
+        run_availability(masks, other, None, out_dir=tmp_path / "o", progress=False)
+
+
+def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
+    with pytest.raises(ValueError, match=r"--sky-km \[9\.0\] outside"):
+        run_availability(masks, track, None, out_dir=tmp_path / "o", sky_km=[9.0],
+                         progress=False)  # fmt: skip
+
+
+def test_stretch_given_in_metres_or_reversed(tmp_path: Path, masks: MaskSet) -> None:
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    for km, expected in (
+        (["6", "4"], "the start must be below the end"),
+        (["4000", "4100"], r"no position of masks .*m\.masks\.parquet, which cover 4-4\.1 km"),
+    ):
+        args = parser.parse_args(["--masks", str(path), "--out", str(tmp_path / "o"),
+                                  "--from-km", km[0], "--to-km", km[1], "--quiet"])  # fmt: skip
+        with pytest.raises(ValueError, match=expected):
+            run_from_args(args)
+    args = parser.parse_args(["--masks", str(path), "--out", str(tmp_path / "o"),
+                              "--from-km", "7", "--quiet"])  # fmt: skip
+    with pytest.raises(ValueError, match=r"^--from-km 7: no position") as exc:
+        run_from_args(args)
+    assert "inf" not in str(exc.value)
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_step_and_reversed_window(tmp_path: Path, masks: MaskSet) -> None:
+    with pytest.raises(ValueError, match="--step"):
+        run_availability(masks, None, None, out_dir=tmp_path / "o", step_s=0, progress=False)
+    with pytest.raises(ValueError, match="must be after --start"):
+        run_availability(masks, None, None, out_dir=tmp_path / "o", start=START, end=START,
+                         progress=False)  # fmt: skip
+
+
+# ----------------------------------------------------------------------------- inputs
+def test_parse_time_scales() -> None:
+    gpst = _gps_s(datetime(2020, 6, 25, 6))
+    assert parse_time("2020-06-25T06:00", "--start") == pytest.approx(gpst)
+    assert parse_time("2020-06-25 06:00:00", "--start") == pytest.approx(gpst)
+    # GPST - UTC = 18 s in 2020 (IERS Bulletin C): a UTC instant is 18 s later in GPS time
+    assert parse_time("2020-06-25T06:00Z", "--start") == pytest.approx(gpst + 18.0)
+    assert parse_time("2020-06-25T06:00 utc", "--start") == pytest.approx(gpst + 18.0)
+    aware = datetime(2020, 6, 25, 8, tzinfo=timezone(timedelta(hours=2)))
+    assert parse_time(aware, "--start") == pytest.approx(gpst + 18.0)
+    assert parse_time("1277445600", "--start") == 1277445600.0
+    assert parse_time(None, "--end") is None
+    with pytest.raises(ValueError, match="--end 'tomorrow' is not a time"):
+        parse_time("tomorrow", "--end")
+
+
+@pytest.mark.parametrize(
+    ("name", "kind", "first"),
+    [
+        ("igs15904_G01G02G05.sp3", "sp3", datetime(2010, 7, 1)),
+        ("brdc1820_G01G02G05.10n", "broadcast", datetime(2010, 7, 1)),
+        ("TLE_GNSS_20121101.txt", "tle", None),
+    ],
+)
+def test_navigation_kind_by_content(test_data, name: str, kind: str, first) -> None:
+    eph = load_navigation([test_data / "gnss" / name])
+    assert eph.kind == kind
+    lo, hi = nav_span_gps_s(eph)
+    assert lo < hi
+    if first is not None:
+        assert lo == pytest.approx(_gps_s(first), abs=3600.0)
+
+
+def test_unknown_nav_file_is_refused(tmp_path: Path) -> None:
+    f = tmp_path / "notes.txt"
+    f.write_text("hello\nworld\n")
+    with pytest.raises(ValueError, match="not a RINEX navigation, SP3 or TLE file"):
+        load_navigation([f])
+
+
+def test_sp3_window_defaults_inside_the_file(tmp_path: Path, masks: MaskSet, test_data) -> None:
+    # 3 satellites, 2010-07-01 00:00-07:45: the default window must start at the file's start
+    small = masks.subset(4000.0, 4060.0)
+    r = run_availability(
+        small, None, [test_data / "gnss" / "igs15904_G01G02G05.sp3"], out_dir=tmp_path / "o",
+        end="2010-07-01T01:00", step_s=900, n_sky=1, progress=False,
+    )  # fmt: skip
+    assert r.results[0].gps_s[0] == pytest.approx(_gps_s(datetime(2010, 7, 1)))
+    assert len(r.results[0].gps_s) == 4
+    assert r.results[1].count.max() <= 3
+    # three satellites are not a constellation: said in the run and at the top of the report
+    (warning,) = r.info["warnings"]
+    assert "holds 3 GPS satellites" in warning and "understated" in warning
+    assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
+
+
+def test_full_navigation_day_gives_no_warning(run) -> None:
+    # the embedded day (IGS Esbjerg, 2020-06-25) has the whole GPS constellation
+    assert run.info["warnings"] == []
+    assert 'class="warn"' not in run.report_html.read_text(encoding="utf-8")
+
+
+def test_cli_arguments_round_trip(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    args = parser.parse_args(
+        ["--masks", str(path), "--out", str(tmp_path / "cli"), "--start", START, "--end",
+         "2020-06-25T07:00", "--step", "600", "--cutoff", "10", "20", "--sky-km", "4.05",
+         "--quiet"]
+    )  # fmt: skip
+    r = run_from_args(args, track=track)
+    assert [x.rule for x in r.results] == ["masks", "no mask", "cutoff 10 deg", "cutoff 20 deg"]
+    assert r.report_html.is_file() and (tmp_path / "cli" / "availability.geojson").is_file()
+    # a higher cut-off can only remove satellites
+    assert np.all(r.results[3].count <= r.results[2].count)
+
+
+def test_interval_model_from_a_locator_error_model_file(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    from locator.runio import write_error_model
+    from predisat.availability.interval import ErrorModel, IntervalModel
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
+            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet"]  # fmt: skip
+    default = run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track)
+    # sigma doubled everywhere (a = b = 4 m instead of 2 m): every interval exactly doubles
+    model = write_error_model(tmp_path / "e.json", IntervalModel(ErrorModel(4.0, 4.0), 2.0))
+    wide = run_from_args(
+        parser.parse_args([*base, "--error-model", str(model), "--out", str(tmp_path / "w")]),
+        track,
+    )
+    k389 = run_from_args(
+        parser.parse_args([*base, "--k-sigma", "3.89", "--out", str(tmp_path / "k")]), track
+    )
+    d, w, k = (r.results[0].interval_m for r in (default, wide, k389))
+    assert np.isfinite(d).sum() > 10
+    np.testing.assert_allclose(w, 2.0 * d, rtol=1e-5)
+    np.testing.assert_allclose(k, 3.89 / 2.0 * d, rtol=1e-5)
+    assert "± 3.89 sigma" in k389.report_html.read_text(encoding="utf-8")
+    # the caption says which model made the intervals: the default is flagged as such
+    captions = [html.unescape(r.report_html.read_text(encoding="utf-8"))
+                for r in (default, wide, k389)]  # fmt: skip
+    assert "source's default" in captions[0]
+    assert "source's default" not in captions[1] and "Error model: sigma" in captions[1]
+    assert "4.000² + (4.000 / sin el)²" in captions[1]
+    assert "source's default" not in captions[2]
+    # a track file given by the user is named in the footer (the test track has no attribution)
+    assert f"Track: {track.name}" in captions[0]
+    # the run records the model's numbers, so a report can be made again
+    run = json.loads((tmp_path / "w" / "summary.json").read_text())["run"]
+    assert run["interval_model_params"] == {"a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0,
+                                            "k_sigma": 2.0}  # fmt: skip
+    for bad in (path, tmp_path):  # a Parquet file, a folder
+        with pytest.raises(ValueError, match="--error-model"):
+            run_from_args(parser.parse_args([*base, "--error-model", str(bad), "--out",
+                                             str(tmp_path / "x")]), track)  # fmt: skip
+    for k in ("0", "inf"):  # refused by the parser, before any work
+        with pytest.raises(SystemExit):
+            parser.parse_args([*base, "--k-sigma", k, "--out", str(tmp_path / "x")])
+
+
+def test_untrusted_satellites_are_reported(run) -> None:
+    # Every (epoch, satellite) the ephemeris refuses (NaN position) must appear in the status
+    # table, with its reason: such satellites are never trusted and must not vanish silently.
+    t = np.arange(_gps_s(datetime(2020, 6, 25, 6)), _gps_s(datetime(2020, 6, 25, 8)), STEP_S)
+    eph = default_ephemeris()
+    gps = [s for s in eph.satellites if s.startswith("G")]
+    refused = ~np.all(np.isfinite(eph.position_ecef(t, gps)), axis=-1)
+    status = pd.read_csv(run.files["ephemeris_status_csv"])
+    assert set(status.columns) >= {"sat", "reason", "first_gps_s", "last_gps_s", "n_epochs"}
+    assert int(status["n_epochs"].sum()) == int(refused.sum())
+    for j, sat in enumerate(gps):
+        assert int(status.loc[status["sat"] == sat, "n_epochs"].sum()) == int(refused[:, j].sum())
+    assert (status["reason"] != "OK").all()
+
+
+def test_command_line_selects_one_track_of_a_file(
+    tmp_path: Path, masks: MaskSet, track: TrackMap, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.cli.app import main
+    from predisat.track.readers import write_geojson
+
+    write_geojson(track, tmp_path / "a.geojson")
+    doc = json.loads((tmp_path / "a.geojson").read_text())
+    line_a = next(f for f in doc["features"] if f["geometry"]["type"] == "LineString")
+    line_a["properties"]["trackname"] = "A"
+    line_b = json.loads(json.dumps(line_a))  # a parallel track 30 m east
+    line_b["properties"]["trackname"] = "B"
+    line_b["geometry"]["coordinates"] = [[x + 4.2e-4, y, *h] for x, y, *h in
+                                         line_a["geometry"]["coordinates"]]  # fmt: skip
+    doc["features"] = [line_a, line_b]
+    both = tmp_path / "ab.geojson"
+    both.write_text(json.dumps(doc))
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    argv = ["availability", "--masks", str(path), "--track", str(both), "--start", START,
+            "--end", "2020-06-25T06:30", "--step", "900", "--quiet"]  # fmt: skip
+    assert main([*argv, "--out", str(tmp_path / "x")]) == 2
+    assert "several tracks (trackname: A, B)" in (err := capsys.readouterr().err)
+    assert "--track-name" in err
+    assert main([*argv, "--track-name", "A", "--out", str(tmp_path / "a")]) == 0
+    assert (tmp_path / "a" / "report.html").is_file()
+    assert main([*argv, "--track-name", "B", "--out", str(tmp_path / "b")]) == 2  # 30 m off
+    assert "do not fit track" in capsys.readouterr().err
+
+
+def test_an_error_starts_on_its_own_line_after_the_progress_bar(
+    tmp_path: Path, masks: MaskSet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.cli.app import main
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    argv = ["availability", "--masks", str(path), "--start", START, "--end", START,
+            "--out", str(tmp_path / "x")]  # fmt: skip
+    assert main(argv) == 2  # an empty window, refused after the bar has started
+    err = capsys.readouterr().err
+    assert "availability" in err.split("predisat availability: error")[0]  # the bar was drawn
+    assert "\npredisat availability: error: " in err

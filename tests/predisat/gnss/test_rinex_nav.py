@@ -1,0 +1,146 @@
+"""RINEX navigation reader: values against hand-read records, and error reporting."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from predisat.gnss.rinex_nav import RinexError, read_rinex_nav
+
+GPS_DAY_S = 86400.0
+WEEK_S = 604800.0
+
+
+def test_rinex2_gps_record_matches_hand_read(test_data: Path) -> None:
+    nav = read_rinex_nav(test_data / "gnss/brdc1820_G01G02G05.10n")
+    k = nav.kepler
+    assert sorted(set(k.sat.tolist())) == ["G01", "G02", "G05"]
+    assert len(nav.glonass) == 0
+    first = int(np.nonzero(k.sat == "G01")[0][0])
+    # hand-read from line 9-16 of the file: " 1 10  7  1  0  0  0.0-0.136290676892D-03 ..."
+    assert k.col("af0_s")[first] == pytest.approx(-0.136290676892e-03, rel=1e-12)
+    assert k.col("crs_m")[first] == pytest.approx(-89.75)
+    assert k.col("sqrt_a_sqrtm")[first] == pytest.approx(5154.80139732)
+    assert k.col("health")[first] == 63.0
+    # toe: week 1590 (line 14) and 345600 s of week (line 12)
+    assert k.ref_gps_s[first] == 1590 * WEEK_S + 345600.0
+    # toc 2010-07-01 00:00 GPST = Thursday of week 1590
+    assert k.epoch_gps_s[first] == 1590 * WEEK_S + 4 * GPS_DAY_S
+    assert k.source[first].endswith(":9")
+
+
+def test_rinex2_glonass_record_utc_epoch(test_data: Path) -> None:
+    nav = read_rinex_nav(test_data / "gnss/brdc0910_R02R08.09g")
+    g = nav.glonass
+    assert len(nav.kepler) == 0
+    i = int(np.nonzero(g.sat == "R02")[0][0])
+    # " 2 09  4  1  0 15  0.0" is UTC; GPST-UTC was 15 s in 2009 (header LEAP SECONDS 15)
+    assert nav.leap_seconds == 15
+    expected = 1525 * WEEK_S + 3 * GPS_DAY_S + 15 * 60.0 + 15.0  # 2009-04-01 is a Wednesday
+    assert g.epoch_gps_s[i] == pytest.approx(expected)
+    assert g.col("x_km")[i] == pytest.approx(0.936473925781e04)
+    assert g.col("freq_num")[i] == 1.0
+    assert g.col("minus_tau_n_s")[i] == pytest.approx(0.206762924790e-04)
+
+
+def test_rinex3_mixed_all_systems(test_data: Path) -> None:
+    nav = read_rinex_nav(test_data / "gnss/rinex_nav_BRDM00DLR_S_20230730000_01D_MN.rnx")
+    assert nav.version == pytest.approx(3.04)
+    systems = {s[0] for s in nav.kepler.sat.tolist()}
+    assert systems == {"G", "E", "C", "J", "I"}
+    assert set(nav.glonass.sat.tolist()) == {"R01", "R02"}
+    assert nav.skipped == {"S": 6}
+    k = nav.kepler
+    # line 175: "C01 2023 03 14 00 00 00 9.046400664374e-04" in BDT = GPST - 14 s
+    i = int(np.nonzero(k.sat == "C01")[0][0])
+    assert k.col("af0_s")[i] == pytest.approx(9.046400664374e-04)
+    e = 2253 * WEEK_S + 2 * GPS_DAY_S  # 2023-03-14 is a Tuesday of GPS week 2253
+    assert k.epoch_gps_s[i] == pytest.approx(e + 14.0)
+    j = int(np.nonzero(k.sat == "E01")[0][0])
+    assert k.epoch_gps_s[j] == pytest.approx(e)
+
+
+@pytest.mark.shared
+def test_rinex212_qzss_prefixed_prn(shared_data: Path) -> None:
+    nav = read_rinex_nav(shared_data / "gnss/rtklib/brdc3050.12q")
+    assert set(nav.kepler.sat.tolist()) == {"J01"}
+    assert nav.kepler.col("sqrt_a_sqrtm")[0] == pytest.approx(6.493972862244e03)
+
+
+def test_fortran_three_digit_exponent(tmp_path: Path, test_data: Path) -> None:
+    text = (test_data / "gnss/brdc1820_G01G02G05.10n").read_text().splitlines()
+    # RINEX 2 writers drop the 'D' for 3-digit exponents (seen in brdc3050.12n)
+    text[15] = text[15][:41] + " 0.499063314480-269"
+    p = tmp_path / "odd.10n"
+    p.write_text("\n".join(text) + "\n")
+    nav = read_rinex_nav(p)
+    assert nav.kepler.col("spare29")[0] == pytest.approx(0.499063314480e-269)
+
+
+def test_gzip_is_read(tmp_path: Path, test_data: Path) -> None:
+    src = test_data / "gnss/brdc0910_R02R08.09g"
+    p = tmp_path / "x.09g.gz"
+    p.write_bytes(gzip.compress(src.read_bytes()))
+    assert len(read_rinex_nav(p).glonass) == len(read_rinex_nav(src).glonass)
+
+
+def _write(tmp_path: Path, lines: list[str]) -> Path:
+    p = tmp_path / "bad.10n"
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def test_truncated_file_names_file_and_line(tmp_path: Path, test_data: Path) -> None:
+    lines = (test_data / "gnss/brdc1820_G01G02G05.10n").read_text().splitlines()
+    p = _write(tmp_path, lines[:-3])  # last record loses 3 of its 8 lines
+    with pytest.raises(RinexError) as exc:
+        read_rinex_nav(p)
+    msg = str(exc.value)
+    assert "bad.10n" in msg
+    assert f"line {len(lines) - 7}" in msg
+    assert "truncated" in msg and "download it again" in msg
+
+
+def test_line_cut_inside_field(tmp_path: Path, test_data: Path) -> None:
+    lines = (test_data / "gnss/brdc1820_G01G02G05.10n").read_text().splitlines()
+    lines[10] = lines[10][:50]
+    with pytest.raises(RinexError, match=r"line 11: .*cut short.*download the file again"):
+        read_rinex_nav(_write(tmp_path, lines))
+
+
+def test_bad_number_names_column(tmp_path: Path, test_data: Path) -> None:
+    lines = (test_data / "gnss/brdc1820_G01G02G05.10n").read_text().splitlines()
+    lines[11] = lines[11][:22] + "   0.1x9260351870D+01"[-19:] + lines[11][41:]
+    with pytest.raises(RinexError, match=r"line 12: column 23: .* is not a number"):
+        read_rinex_nav(_write(tmp_path, lines))
+
+
+def test_missing_end_of_header_and_wrong_type(tmp_path: Path, test_data: Path) -> None:
+    lines = (test_data / "gnss/brdc1820_G01G02G05.10n").read_text().splitlines()
+    head = [ln for ln in lines[:8] if "END OF HEADER" not in ln]
+    with pytest.raises(RinexError, match="END OF HEADER"):
+        read_rinex_nav(_write(tmp_path, head))
+    obs = ["     2.11           OBSERVATION DATA    G (GPS)             RINEX VERSION / TYPE"]
+    with pytest.raises(RinexError, match="line 1: file type 'O'"):
+        read_rinex_nav(_write(tmp_path, obs))
+    with pytest.raises(RinexError, match="no such file"):
+        read_rinex_nav(tmp_path / "absent.10n")
+
+
+@pytest.mark.shared
+def test_every_shared_nav_file_reads(shared_data: Path) -> None:
+    gnss = shared_data / "gnss"
+    files = sorted(gnss.glob("rtklib/*.[0-9][0-9][ngq]")) + sorted(gnss.glob("*/*nav*.rnx"))
+    files.append(gnss / "georust_rinex/ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    for f in files:
+        nav = read_rinex_nav(f)
+        assert len(nav.kepler) + len(nav.glonass) > 0, f
+    big = read_rinex_nav(files[-1])
+    # counts from the file's own header statistics (B_SUM lines)
+    assert len(big.glonass) == 510
+    assert big.skipped["S"] == 2130
+    by_sys = {s: int(np.sum(big.kepler.sat.astype("<U1") == s)) for s in "GECJ"}
+    assert by_sys == {"G": 257, "E": 1602, "C": 357, "J": 15}

@@ -1,0 +1,516 @@
+"""Tests for predisat.masks.fileformat: mask file v1 (GeoParquet) and the exporters.
+
+Files are read back with independent parsers (pyarrow + struct for WKB, numpy.loadtxt, a
+Python transcription of RTKLIB's documented readelmask rules) and compared with brute-force
+values computed here from the documented rules.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+import shapely
+
+from predisat.masks.fileformat import (
+    FORMAT_NAME,
+    METADATA_KEY,
+    MaskFileError,
+    read_masks,
+    to_pvgis_horizon,
+    to_rtklib_mask,
+    to_urbannav_csv,
+    write_masks,
+)
+from predisat.masks.maskset import BinSource, MaskError, MaskSet
+
+
+def make_set(n_pos=12, step=1.0, seed=0, margin=None):
+    rng = np.random.default_rng(seed)
+    n_az = round(360 / step)
+    ch = 250.0 + 10.0 * np.arange(n_pos) + rng.uniform(-2, 2, n_pos)
+    src = rng.integers(0, 3, (n_pos, n_az))
+    mask = rng.uniform(0.0, 75.0, (n_pos, n_az))
+    mask[src == BinSource.ASSUMED] = 30.0
+    left = rng.uniform(3, 30, n_pos)
+    left[min(2, n_pos - 1)] = np.nan
+    return MaskSet.from_arrays(
+        ch,
+        50.62 + 1e-4 * np.arange(n_pos),
+        4.45 - 1e-4 * np.arange(n_pos),
+        rng.uniform(100, 120, n_pos),
+        rng.uniform(0, 360, n_pos),
+        mask,
+        az_step_deg=step,
+        source=src,
+        margin_deg=rng.uniform(0, 2, (n_pos, n_az)) if margin is None else margin,
+        descriptors={
+            "left_obstacle_distance_m": left,
+            "left_obstacle_height_m": rng.uniform(0, 10, n_pos),
+            "catenary_mast_distance_m": rng.uniform(2, 4, n_pos),
+        },
+        provenance={"survey": "demo-001", "parameters": {"sky": {"threshold": 0.4}}},
+    )
+
+
+def brute_window_max(row, step, a, w):
+    """Max over bins whose closed interval meets the closed window [a - w, a + w] (circular)."""
+    best = -np.inf
+    for k, v in enumerate(row):
+        d = abs((k * step - a + 180.0) % 360.0 - 180.0)
+        if d <= w + step / 2 + 1e-12:
+            best = max(best, float(v))
+    return best
+
+
+# ---------------------------------------------------------------- GeoParquet round trip
+@pytest.mark.parametrize("step", [1.0, 0.5])
+def test_round_trip_is_exact(tmp_path, step):
+    m = make_set(step=step)
+    path = write_masks(m, tmp_path / "line.masks.parquet")
+    back = read_masks(path)
+    assert back.equals(m)
+    assert np.isnan(back.descriptors["left_obstacle_distance_m"][2])
+    assert back.provenance["parameters"]["sky"]["threshold"] == 0.4
+    assert [p.name for p in tmp_path.iterdir()] == ["line.masks.parquet"]  # no temp left
+
+
+def test_overwrite_replaces_the_file(tmp_path):
+    path = tmp_path / "m.parquet"
+    write_masks(make_set(seed=1), path)
+    m2 = make_set(seed=2, n_pos=5)
+    write_masks(m2, path)
+    assert read_masks(path).equals(m2)
+
+
+def test_write_into_missing_folder_names_it(tmp_path):
+    with pytest.raises(MaskFileError, match="does not exist"):
+        write_masks(make_set(), tmp_path / "nope" / "m.parquet")
+
+
+def test_file_is_geoparquet_readable_by_pyarrow_alone(tmp_path):
+    m = make_set()
+    path = write_masks(m, tmp_path / "m.parquet")
+    table = pq.read_table(path)
+    meta = table.schema.metadata
+    geo = json.loads(meta[b"geo"])
+    assert geo["version"] in ("1.0.0", "1.1.0")
+    assert geo["primary_column"] == "geometry"
+    col = geo["columns"]["geometry"]
+    assert col["encoding"] == "WKB" and col["geometry_types"] == ["Point"]
+    assert col["crs"]["id"] == {"authority": "OGC", "code": "CRS84"}
+    axes = [a["direction"] for a in col["crs"]["coordinate_system"]["axis"]]
+    assert axes == ["east", "north"]  # x = longitude, y = latitude
+    bbox = col["bbox"]
+    assert bbox == pytest.approx(
+        [m.lon_deg.min(), m.lat_deg.min(), m.lon_deg.max(), m.lat_deg.max()]
+    )
+
+    header = json.loads(meta[METADATA_KEY])
+    assert header["format"] == FORMAT_NAME and header["format_version"] == 1
+    assert header["az_step_deg"] == 1.0 and header["n_az"] == 360
+    assert header["provenance"]["survey"] == "demo-001"
+
+    # WKB decoded by hand: byte order 1 (little endian), type 1 (Point), x, y doubles
+    for i, blob in enumerate(table.column("geometry").to_pylist()):
+        order, gtype, x, y = struct.unpack("<BIdd", blob)
+        assert (order, gtype) == (1, 1)
+        assert (x, y) == (m.lon_deg[i], m.lat_deg[i])
+    pts = shapely.from_wkb(table.column("geometry").to_numpy(zero_copy_only=False))
+    np.testing.assert_array_equal(shapely.get_y(pts), m.lat_deg)
+
+    df = table.to_pandas()
+    np.testing.assert_array_equal(df["chainage_m"], m.chainage_m)
+    np.testing.assert_array_equal(np.stack(df["mask_el_deg"].to_numpy()), m.mask_el_deg)
+    np.testing.assert_array_equal(np.stack(df["source"].to_numpy()), m.source)
+    assert (df["assumed_bins"] == (m.source == 2).sum(axis=1)).all()
+
+
+def test_geopandas_reads_points_and_crs(tmp_path):
+    # an independent reader (GeoParquet "geo" metadata, WKB, CRS); a dev dependency only
+    gpd = pytest.importorskip("geopandas")
+    m = make_set()
+    path = write_masks(m, tmp_path / "m.parquet")
+    gdf = gpd.read_parquet(path)
+    assert gdf.crs is not None and gdf.crs.equals("OGC:CRS84")
+    np.testing.assert_allclose(gdf.geometry.x, m.lon_deg)
+    np.testing.assert_allclose(gdf.geometry.y, m.lat_deg)
+
+
+# ---------------------------------------------------------------- validation on read
+def _rewrite(src, dst, table=None, header_change=None, drop_header=False):
+    table = pq.read_table(src) if table is None else table
+    meta = dict(table.schema.metadata)
+    if drop_header:
+        del meta[METADATA_KEY]
+    if header_change:
+        header = json.loads(meta[METADATA_KEY])
+        header.update(header_change)
+        meta[METADATA_KEY] = json.dumps(header).encode()
+    pq.write_table(table.replace_schema_metadata(meta), dst)
+    return dst
+
+
+def _replace_column(table, name, values):
+    i = table.column_names.index(name)
+    return table.set_column(i, name, values)
+
+
+@pytest.fixture
+def good_file(tmp_path):
+    return write_masks(make_set(), tmp_path / "good.parquet")
+
+
+def test_wrong_version_names_file_and_fix(good_file, tmp_path):
+    bad = _rewrite(good_file, tmp_path / "v2.parquet", header_change={"format_version": 2})
+    with pytest.raises(MaskFileError) as err:
+        read_masks(bad)
+    msg = str(err.value)
+    assert "v2.parquet" in msg and "format_version 2" in msg and "upgrade" in msg
+
+
+def test_wrong_format_and_missing_header(good_file, tmp_path):
+    bad = _rewrite(good_file, tmp_path / "f.parquet", header_change={"format": "other"})
+    with pytest.raises(MaskFileError, match="'other'"):
+        read_masks(bad)
+    bad = _rewrite(good_file, tmp_path / "h.parquet", drop_header=True)
+    with pytest.raises(MaskFileError, match="not a PREDISAT mask file"):
+        read_masks(bad)
+
+
+def test_missing_column_is_named(good_file, tmp_path):
+    table = pq.read_table(good_file).drop_columns(["heading_deg"])
+    bad = _rewrite(good_file, tmp_path / "c.parquet", table=table)
+    with pytest.raises(MaskFileError) as err:
+        read_masks(bad)
+    assert "c.parquet" in str(err.value) and "heading_deg" in str(err.value)
+
+
+def test_bad_bin_count_names_column_and_row(good_file, tmp_path):
+    table = pq.read_table(good_file)
+    rows = table.column("mask_el_deg").to_pylist()
+    rows[3] = rows[3][:-1]
+    table = _replace_column(table, "mask_el_deg", pa.array(rows, type=pa.list_(pa.float32())))
+    bad = _rewrite(good_file, tmp_path / "s.parquet", table=table)
+    with pytest.raises(MaskFileError) as err:
+        read_masks(bad)
+    msg = str(err.value)
+    assert "s.parquet" in msg and "'mask_el_deg'" in msg and "row 3" in msg and "359" in msg
+
+
+def test_non_monotonic_chainage_names_row(good_file, tmp_path):
+    table = pq.read_table(good_file)
+    ch = table.column("chainage_m").to_numpy().copy()
+    ch[5] = ch[3]
+    table = _replace_column(table, "chainage_m", pa.array(ch))
+    bad = _rewrite(good_file, tmp_path / "n.parquet", table=table)
+    with pytest.raises(MaskFileError) as err:
+        read_masks(bad)
+    msg = str(err.value)
+    assert "n.parquet" in msg and "chainage_m" in msg and "row 5" in msg
+
+
+def test_elevation_out_of_range_names_row_and_bin(good_file, tmp_path):
+    table = pq.read_table(good_file)
+    mask = np.stack(table.column("mask_el_deg").to_numpy(zero_copy_only=False))
+    mask[4, 7] = 95.0
+    arr = pa.FixedSizeListArray.from_arrays(pa.array(mask.ravel(), pa.float32()), 360)
+    bad = _rewrite(
+        good_file, tmp_path / "r.parquet", table=_replace_column(table, "mask_el_deg", arr)
+    )
+    with pytest.raises(MaskFileError) as err:
+        read_masks(bad)
+    msg = str(err.value)
+    assert "r.parquet" in msg and "mask_el_deg[4, 7]" in msg and "[0, 90]" in msg
+
+
+def test_null_and_edited_geometry_are_rejected(good_file, tmp_path):
+    table = pq.read_table(good_file)
+    h = table.column("h_m").to_pylist()
+    h[6] = None
+    bad = _rewrite(
+        good_file,
+        tmp_path / "null.parquet",
+        table=_replace_column(table, "h_m", pa.array(h, pa.float64())),
+    )
+    with pytest.raises(MaskFileError, match="'h_m' row 6 is null"):
+        read_masks(bad)
+    geoms = table.column("geometry").to_pylist()
+    geoms[2] = shapely.to_wkb(shapely.points(0.0, 0.0))
+    bad = _rewrite(
+        good_file,
+        tmp_path / "geom.parquet",
+        table=_replace_column(table, "geometry", pa.array(geoms, pa.binary())),
+    )
+    with pytest.raises(MaskFileError, match="'geometry' row 2"):
+        read_masks(bad)
+
+
+def test_not_a_parquet_file(tmp_path):
+    txt = tmp_path / "x.parquet"
+    txt.write_text("hello")
+    with pytest.raises(MaskFileError, match=r"not a readable Parquet.*predisat process"):
+        read_masks(txt)
+    with pytest.raises(MaskFileError, match="no such mask file"):
+        read_masks(tmp_path / "missing.parquet")
+
+
+def test_reads_the_output_folder_of_process(tmp_path):
+    m = make_set()
+    (tmp_path / "run").mkdir()
+    write_masks(m, tmp_path / "run" / "masks.parquet")
+    got = read_masks(tmp_path / "run")
+    np.testing.assert_array_equal(got.mask_el_deg, m.mask_el_deg)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(MaskFileError, match=r"empty: a folder without masks\.parquet"):
+        read_masks(tmp_path / "empty")
+
+
+# ---------------------------------------------------------------- exporters
+def test_urbannav_csv_rows_and_conservative_samples(tmp_path):
+    m = make_set(step=0.5)
+    path = to_urbannav_csv(m, tmp_path / "skymask.csv")
+    data = np.loadtxt(path, delimiter=",")
+    assert data.shape == (m.n_pos, 3 + 361)
+    np.testing.assert_allclose(data[:, 0], m.lat_deg, atol=1e-9)
+    np.testing.assert_allclose(data[:, 1], m.lon_deg, atol=1e-9)
+    np.testing.assert_allclose(data[:, 2], m.h_m, atol=1e-3)
+    eff = m.mask_el_deg.astype(float) + m.margin_deg
+    for i in range(m.n_pos):
+        want = np.array([brute_window_max(eff[i], 0.5, a, 1.0) for a in range(361)])
+        want = np.minimum(want, 90.0)
+        assert (data[i, 3:] >= want - 1e-5).all()
+        assert (data[i, 3:] - want < 0.01 + 1e-9).all()
+    np.testing.assert_array_equal(data[:, 3], data[:, -1])  # 0 and 360 deg agree
+    # whatever lookup a reader uses, it never goes below the true effective mask
+    rng = np.random.default_rng(9)
+    az = rng.uniform(0, 360, 2000)
+    for i in (0, 5):
+        true = m.mask_at(m.chainage_m[i], az)
+        row = data[i, 3:]
+        assert (row[np.round(az).astype(int)] >= true - 1e-5).all()
+        assert (row[np.floor(az).astype(int)] >= true - 1e-5).all()
+        assert (row[np.ceil(az).astype(int)] >= true - 1e-5).all()
+        assert (np.interp(az, np.arange(361.0), row) >= true - 1e-5).all()
+
+
+def test_exports_never_write_negative_zero(tmp_path):
+    n = 2
+    m = MaskSet.from_arrays(
+        [0.0, 10.0], np.full(n, 50.0), np.full(n, 4.0), 0.0, np.zeros(n), np.zeros((n, 360)),
+        margin_deg=np.float32(0.0),
+    )  # fmt: skip
+    texts = [
+        to_urbannav_csv(m, tmp_path / "u.csv").read_text(),
+        to_pvgis_horizon(m, 0.0, tmp_path / "p.txt").read_text(),
+        to_pvgis_horizon(m, 0.0, tmp_path / "h.txt", layout="userhorizon").read_text(),
+    ]
+    for text in texts:
+        assert "-0.00" not in text and "0.00" in text
+
+
+def test_urbannav_header_option(tmp_path):
+    path = to_urbannav_csv(make_set(n_pos=3), tmp_path / "h.csv", header=True)
+    first = path.read_text().splitlines()[0].split(",")
+    assert first[:4] == ["lat_deg", "lon_deg", "h_m", "e_0"] and first[-1] == "e_360"
+
+
+def read_rtklib_elmask(path):
+    """readelmask of the RTKLIB forks with ``file-elmaskfile`` (MALIB / MRTKLIB rtkcmn.c),
+    transcribed: fgets into char[256] (chunks of at
+    most 255 bytes, so a longer line goes on as a new "line"), text after % or # ignored, a
+    chunk counts when it starts with two numbers, at most 360 of them; EL_i holds for
+    AZ_i <= az < AZ_{i+1}, stored as int16 tenths of a degree, truncated."""
+    chunks = []
+    for line in path.read_bytes().decode("ascii").splitlines(keepends=True):
+        chunks += [line[k:k + 255] for k in range(0, len(line), 255)]
+    az, el = [], []
+    for chunk in chunks:
+        if len(az) >= 360:
+            break
+        text = chunk.split("%")[0].split("#")[0]
+        m = re.match(r"\s*([-+.\deE]+)\s+([-+.\deE]+)", text)  # sscanf("%lf %lf") == 2
+        if m:
+            try:
+                az.append(float(m.group(1)))
+                el.append(float(m.group(2)))
+            except ValueError:
+                continue
+    elmask = np.zeros(360, int)
+    j, mask = 0, 0.0
+    for i in range(360):
+        if j < len(az) and i >= int(az[j]):
+            mask = el[j]
+            j += 1
+        elmask[i] = int(mask / 0.1)
+    return elmask, np.array(el)
+
+
+def read_rtkplot_elmask(path, variant):
+    """The 361-slot readers, transcribed: RTKPLOT's ReadElMaskData (Qt app, "rtkplot") and
+    simobs's readelmask (util/simobs/simobs.c, "simobs"). Slots 0..360 start at 0; a line
+    ``az1 el1`` (not starting with %) with ``az0 < az1 <= 360`` and ``0 <= el1 <= 90`` sets
+    slots ``int(az0) <= j < int(az1)`` to ``el0`` and then slot ``int(az1)`` to ``el1``
+    (rtkplot) or slots ``int(az0) <= j <= int(az1)`` to ``el0`` (simobs); then ``az0, el0 =
+    az1, el1``. Both look up ``slot[int(az + 0.5)]``."""
+    slots = np.zeros(361)
+    az0 = el0 = 0.0
+    for line in path.read_text().splitlines():
+        if line.startswith("%"):
+            continue
+        parts = line.split()
+        if len(parts) < 2:
+            continue
+        az1, el1 = float(parts[0]), float(parts[1])
+        if az0 < az1 <= 360.0 and 0.0 <= el1 <= 90.0:
+            if variant == "rtkplot":
+                slots[int(az0):int(az1)] = el0
+                slots[int(az1)] = el1
+            else:
+                slots[int(az0):int(az1) + 1] = el0
+        az0, el0 = az1, el1
+    return slots
+
+
+def test_rtklib_mask_is_conservative_after_rtklib_truncation(tmp_path):
+    m = make_set(step=0.5)
+    ch = float(m.chainage_m[4])
+    path = to_rtklib_mask(m, ch + 1.0, tmp_path / "elmask.txt")
+    elmask, el = read_rtklib_elmask(path)
+    assert el.size == 360 and (el <= 90.0).all()
+    eff = m.mask_el_deg[4].astype(float) + m.margin_deg[4]
+    for a in range(360):
+        # bins touching [a - 0.5, a + 1]: floor lookups need [a, a + 1], rounding [a - 0.5, a + 0.5]
+        want = brute_window_max(eff, 0.5, a + 0.25, 0.75)
+        assert elmask[a] * 0.1 >= want - 1e-5
+        assert elmask[a] * 0.1 < want + 0.1 + 1e-9
+    rng = np.random.default_rng(10)
+    az = rng.uniform(0, 360, 3000)
+    # RTKLIB testelmask: masked when el < elmask[floor(az)] * 0.1
+    assert (elmask[np.floor(az).astype(int)] * 0.1 >= m.mask_at(ch, az) - 1e-5).all()
+    assert path.read_text().startswith("% PREDISAT mask at chainage")
+
+
+@pytest.mark.parametrize("variant", ["rtkplot", "simobs"])
+def test_rtklib_mask_is_conservative_for_the_rounding_readers(tmp_path, variant):
+    m = make_set(step=0.5)
+    ch = float(m.chainage_m[4])
+    mask = m.effective_mask_deg.copy()
+    mask[4, -1] = 89.0  # a wall just west of north: the slot the rounding readers left at 0
+    m = MaskSet.from_arrays(
+        m.chainage_m, m.lat_deg, m.lon_deg, m.h_m, m.heading_deg, mask, az_step_deg=0.5,
+    )  # fmt: skip
+    slots = read_rtkplot_elmask(to_rtklib_mask(m, ch, tmp_path / "e.txt"), variant)
+    az = np.concatenate([np.linspace(0.0, 360.0, 36000, endpoint=False), [359.6, 359.99]])
+    assert (slots[(az + 0.5).astype(int)] >= m.mask_at(ch, az) - 1e-5).all()
+
+
+def test_rtklib_mask_ignores_long_provenance(tmp_path):
+    # A provenance longer than RTKLIB's 255-byte line buffer, whose continuation would parse as
+    # an "AZ EL" pair (and push the last azimuth out of RTKLIB's 360 slots) unless wrapped.
+    base = make_set(step=0.5)
+    ch = float(base.chainage_m[4])
+    ref, _ = read_rtklib_elmask(to_rtklib_mask(base, ch, tmp_path / "ref.txt"))
+    long = MaskSet.from_arrays(
+        base.chainage_m, base.lat_deg, base.lon_deg, base.h_m, base.heading_deg,
+        base.mask_el_deg, az_step_deg=0.5, source=base.source, margin_deg=base.margin_deg,
+        provenance={"survey": "x" * 236 + " 45 80 " + "y" * 300, "note": "10 5 " * 80},
+    )  # fmt: skip
+    path = to_rtklib_mask(long, ch, tmp_path / "long.txt")
+    lines = path.read_text().splitlines()
+    assert max(len(line) for line in lines) < 255
+    logical: list[str] = []  # continuation lines "% + ..." glued back on
+    for line in (ln[2:] for ln in lines if ln.startswith("% ")):
+        if line.startswith("+ "):
+            logical[-1] += line[2:]
+        else:
+            logical.append(line)
+    assert "provenance: " + json.dumps(long.provenance, sort_keys=True) in logical
+    elmask, el = read_rtklib_elmask(path)
+    assert el.size == 360
+    np.testing.assert_array_equal(elmask, ref)
+
+
+def test_rtklib_values_survive_truncation_for_awkward_tenths(tmp_path):
+    # 12.3 / 0.1 == 122.999... in floating point: a naive "12.3" would be stored as 12.2
+    n = 2
+    mask = np.full((n, 360), 12.3)
+    mask[:, 100:110] = 89.99
+    m = MaskSet.from_arrays(
+        [0.0, 10.0],
+        np.full(n, 50.0),
+        np.full(n, 4.0),
+        0.0,
+        np.zeros(n),
+        mask,
+        margin_deg=np.float32(0.0),
+    )
+    elmask, _ = read_rtklib_elmask(to_rtklib_mask(m, 0.0, tmp_path / "e.txt"))
+    assert elmask[0] == 123  # 12.3 kept, not truncated to 12.2 nor bumped to 12.4
+    assert elmask[105] == 900
+
+
+def test_pvgis_table_and_userhorizon(tmp_path):
+    m = make_set(step=1.0)
+    i = 7
+    ch = float(m.chainage_m[i])
+    table = to_pvgis_horizon(m, ch, tmp_path / "horizon.csv")
+    lines = table.read_text().splitlines()
+    assert lines[0].startswith("Latitude (decimal degrees):")
+    assert float(lines[0].split("\t")[-1]) == pytest.approx(m.lat_deg[i], abs=1e-6)
+    assert float(lines[1].split("\t")[-1]) == pytest.approx(m.lon_deg[i], abs=1e-6)
+    assert lines[2] == "" and lines[3].split() == ["A", "H_hor"]
+    rows = []
+    for line in lines[4:]:
+        if not line.strip():
+            break
+        rows.append([float(v) for v in line.split()])
+    a_pvgis, h = np.array(rows).T
+    np.testing.assert_allclose(a_pvgis, np.arange(-180.0, 180.1, 7.5))
+    az_north = a_pvgis + 180.0  # PVGIS: 0 = south, 90 = west, -90 = east
+    eff = m.mask_el_deg[i].astype(float) + m.margin_deg[i]
+    want = np.minimum([brute_window_max(eff, 1.0, a % 360, 7.5) for a in az_north], 90.0)
+    assert (h >= want - 1e-5).all() and (h - want < 0.01 + 1e-9).all()
+    # linear interpolation of the profile never dips below the true mask
+    rng = np.random.default_rng(11)
+    az = rng.uniform(0, 360, 3000)
+    assert (np.interp(az, az_north, h) >= m.mask_at(ch, az) - 1e-5).all()
+
+    up = np.loadtxt(to_pvgis_horizon(m, ch, tmp_path / "up.txt", layout="userhorizon"))
+    np.testing.assert_array_equal(up, h[:-1])  # clockwise from north, 48 values
+
+    up12 = np.loadtxt(
+        to_pvgis_horizon(m, ch, tmp_path / "u12.txt", layout="userhorizon", n_directions=12)
+    )
+    want12 = [
+        math.ceil(min(brute_window_max(eff, 1.0, a, 30.0), 90.0) * 100 - 1e-6) / 100
+        for a in range(0, 360, 30)
+    ]
+    np.testing.assert_allclose(up12, want12, atol=0.0100001)
+
+
+def test_exports_cap_at_90_and_reject_uncovered_chainage(tmp_path):
+    n = 2
+    m = MaskSet.from_arrays(
+        [0.0, 10.0],
+        np.full(n, 50.0),
+        np.full(n, 4.0),
+        0.0,
+        np.zeros(n),
+        np.full((n, 360), 89.0),
+        margin_deg=5.0,
+    )
+    up = np.loadtxt(to_pvgis_horizon(m, 0.0, tmp_path / "u.txt", layout="userhorizon"))
+    assert (up == 90.0).all()
+    data = np.loadtxt(to_urbannav_csv(m, tmp_path / "u.csv"), delimiter=",")
+    assert (data[:, 3:] == 90.0).all()
+    with pytest.raises(MaskError, match="outside"):
+        to_rtklib_mask(m, 100.0, tmp_path / "e.txt")
+    with pytest.raises(ValueError, match="layout"):
+        to_pvgis_horizon(m, 0.0, tmp_path / "x.txt", layout="json")

@@ -1,0 +1,571 @@
+"""Tests of predisat.reconstruct.batch on a tiny synthetic survey (160x120 pinhole, 60 m)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from predisat.camera.models import CameraModel
+from predisat.masks.fileformat import read_masks
+from predisat.masks.maskset import BinSource, MaskError, MaskSet
+from predisat.reconstruct.batch import (
+    BadFrameError,
+    PipelineParams,
+    RunStopped,
+    concat_masksets,
+    default_segmenter,
+    process_survey,
+)
+from tests.predisat.candidate_net import net_copy
+
+CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
+PARAMS = PipelineParams(chunk_m=30.0)  # 3 chunks over 3000..3060 m
+
+
+class CountingSegmenter:
+    """The default segmenter, counting its calls (in-process runs only)."""
+
+    def __init__(self) -> None:
+        self.calls: list[int] = []
+
+    def __call__(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        self.calls.append(image.shape[1])
+        return default_segmenter(image)
+
+
+def blue_sky(image: np.ndarray) -> tuple[np.ndarray, None]:
+    """A cheap module-level segmenter (picklable for worker processes)."""
+    b, g, r = (image[..., k].astype(int) for k in range(3))
+    return (b > r + 10) | ((b + g + r) > 600), None
+
+
+@pytest.fixture(scope="module")
+def survey_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from predisat.synth.generate import generate_survey
+    from predisat.track.map import demo_track
+
+    out = tmp_path_factory.mktemp("synth")
+    generate_survey(
+        demo_track(), 3000.0, 3060.0, sky="clear", seed=3, out_dir=out, camera=CAM,
+        progress=False,
+    )  # fmt: skip
+    return out / "survey"
+
+
+@pytest.fixture(scope="module")
+def first_run(survey_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    out = tmp_path_factory.mktemp("run") / "masks"
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    return out, (res, seg)
+
+
+def _manifest(survey_dir: Path) -> list[dict[str, str]]:
+    with open(survey_dir / "manifest.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_positions_are_the_distinct_frame_chainages(survey_dir: Path, first_run) -> None:
+    out, (res, seg) = first_run
+    rows = _manifest(survey_dir)
+    want = np.unique([float(r["chainage_m"]) for r in rows])
+    masks = read_masks(out / "masks.parquet")
+    np.testing.assert_allclose(masks.chainage_m, want, atol=1e-3)
+    assert masks.n_pos == 7 and res.masks.n_pos == 7
+    # every frame segmented exactly once although the chunks' frame windows overlap
+    assert len(seg.calls) == len(rows) == res.frames_segmented
+    assert res.chunks_done == 3 and res.chunks_skipped == 0
+    assert sorted(p.name for p in (out / "chunks").glob("*.parquet")) == [
+        "3000_3030.parquet", "3030_3060.parquet", "3060_3090.parquet",
+    ]  # fmt: skip
+    assert masks.provenance["run_key"] and masks.provenance["survey_hash"]
+    assert np.all((masks.mask_el_deg >= 0) & (masks.mask_el_deg <= 90))
+    assert res.bad_frames == ()
+
+
+def test_resume_redoes_only_the_missing_chunk(first_run, survey_dir: Path, tmp_path) -> None:
+    out0, (res0, _) = first_run
+    out = tmp_path / "copy"
+    shutil.copytree(out0, out)
+    kept = {p.name: p.stat().st_mtime_ns for p in (out / "chunks").iterdir()}
+    for suffix in (".json", ".parquet"):
+        (out / "chunks" / f"3030_3060{suffix}").unlink()
+        kept.pop(f"3030_3060{suffix}")
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    assert (res.chunks_done, res.chunks_skipped) == (1, 2)
+    assert seg.calls == []  # segmentation came from the cache
+    for name, mtime in kept.items():
+        assert (out / "chunks" / name).stat().st_mtime_ns == mtime, name
+    assert (out / "chunks" / "3030_3060.json").is_file()
+    np.testing.assert_array_equal(res.masks.mask_el_deg, res0.masks.mask_el_deg)
+    np.testing.assert_array_equal(res.masks.source, res0.masks.source)
+
+
+def test_resume_redoes_files_emptied_by_a_power_cut(first_run, survey_dir: Path, tmp_path) -> None:
+    out0, (res0, _) = first_run
+    out = tmp_path / "copy"
+    shutil.copytree(out0, out)
+    (out / "chunks" / "3060_3090.parquet").write_bytes(b"")  # renamed, data never flushed
+    # a readable Parquet file holding other rows than its marker says (1 position, not 3)
+    shutil.copy(out0 / "chunks" / "3060_3090.parquet", out / "chunks" / "3030_3060.parquet")
+    # every chunk needs every frame of this 60 m survey, so any two cache entries are read
+    cache = sorted((out / "cache").rglob("*.npz"))
+    cache[0].write_bytes(b"")
+    cache[1].write_bytes(cache[1].read_bytes()[:100])  # torn zip
+    seg = CountingSegmenter()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=seg)
+    assert (res.chunks_done, res.chunks_skipped) == (2, 1)
+    assert len(seg.calls) == 2  # the two damaged cache entries, recomputed
+    np.testing.assert_array_equal(res.masks.mask_el_deg, res0.masks.mask_el_deg)
+
+
+def test_interrupted_run_resumes(survey_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "masks"
+    with pytest.raises(RunStopped):
+        process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky,
+                       max_chunks=1)  # fmt: skip
+    assert len(list((out / "chunks").glob("*.json"))) == 1
+    assert not (out / "masks.parquet").exists()
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert (res.chunks_done, res.chunks_skipped) == (2, 1)
+    assert res.frames_segmented == 0
+    # changed parameters invalidate the finished chunks
+    other = PipelineParams(chunk_m=30.0, segmenter="blue")
+    res2 = process_survey(survey_dir, out, other, progress=False, segmenter=blue_sky)
+    assert (res2.chunks_done, res2.chunks_skipped) == (3, 0)
+
+
+def test_workers_pool_gives_the_same_masks(survey_dir: Path, tmp_path: Path) -> None:
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    one = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky)
+    two = process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
+                         workers=2)  # fmt: skip
+    np.testing.assert_array_equal(one.masks.mask_el_deg, two.masks.mask_el_deg)
+    np.testing.assert_array_equal(one.masks.chainage_m, two.masks.chainage_m)
+
+
+def test_one_worker_pool_serves_both_stages(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The workers start once per run (imports, models and numba caches load once), for the
+    segmentation and the chunks, and are shut down when a strict run stops at a bad frame."""
+    import predisat.reconstruct.batch as pl
+
+    made: list[Any] = []
+    get = pl._Pool.get
+
+    def counting_get(self: Any) -> Any:
+        executor = get(self)
+        if all(executor is not m for m in made):
+            made.append(executor)
+        return executor
+
+    monkeypatch.setattr(pl._Pool, "get", counting_get)
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    res = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky,
+                         workers=2)  # fmt: skip
+    assert res.frames_segmented >= 4 and res.chunks_done >= 2 and len(made) == 1
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    (src / _manifest(src)[4]["image"]).write_bytes(b"not a jpeg at all")
+    with pytest.raises(BadFrameError):
+        process_survey(src, tmp_path / "b", p, progress=False, segmenter=blue_sky, workers=2,
+                       strict=True)  # fmt: skip
+    assert len(made) == 2
+    for executor in made:  # shut down
+        with pytest.raises(RuntimeError):
+            executor.submit(print)
+
+
+def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)
+    victim = rows[4]
+    (src / victim["image"]).write_bytes(b"not a jpeg at all")
+    out = tmp_path / "masks"
+    res = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    with open(out / "bad_frames.csv", newline="") as fh:
+        listed = list(csv.DictReader(fh))
+    assert [r["frame_id"] for r in listed] == [victim["frame_id"]]
+    assert "decode" in listed[0]["message"]
+    assert res.masks.n_pos == 7  # the position keeps its other frame
+    with pytest.raises(BadFrameError, match=victim["frame_id"]):
+        process_survey(src, tmp_path / "strict", PARAMS, progress=False, segmenter=blue_sky,
+                       strict=True)  # fmt: skip
+
+
+def _jpeg(shape: tuple[int, int], seed: int, **save: Any) -> bytes:
+    from PIL import Image
+
+    rng = np.random.default_rng(seed)
+    pixels = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(pixels).save(buf, "JPEG", **save)
+    return buf.getvalue()
+
+
+def _pillow_decodes(data: bytes) -> bool:
+    """Pillow, unlike libjpeg through OpenCV, refuses a truncated file: the independent check."""
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            im.load()
+    except OSError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("progressive", [False, True])
+def test_truncated_jpeg_is_told_from_a_whole_one(progressive: bool, tmp_path: Path) -> None:
+    import cv2
+
+    from predisat.reconstruct.batch import _truncation
+
+    whole = _jpeg((120, 160), 3, quality=90, progressive=progressive)
+    assert _pillow_decodes(whole) and _truncation(whole) is None
+    assert _truncation(whole + bytes(500)) is None  # padding after the end marker
+    sos = whole.index(b"\xff\xda")
+    passed_by_opencv = 0
+    for cut in np.linspace(sos + 20, len(whole) - 2, 7).astype(int):
+        part = whole[:cut]
+        assert not _pillow_decodes(part)
+        assert _truncation(part) is not None
+        (tmp_path / "cut.jpg").write_bytes(part)
+        passed_by_opencv += cv2.imread(str(tmp_path / "cut.jpg")) is not None
+    assert passed_by_opencv > 0  # cv2.imread hands such files back, grey-filled: the reason
+    assert "header" in str(_truncation(whole[: sos - 4]))
+
+
+def test_thumbnail_end_marker_does_not_hide_truncation() -> None:
+    """An EXIF-style APP1 segment carrying a whole thumbnail JPEG (with its own end marker)
+    before the frame's scan data."""
+    whole = _jpeg((120, 160), 4, quality=90)
+    thumb = _jpeg((16, 16), 5)
+    body = b"Exif\x00\x00" + thumb
+    app1 = b"\xff\xe1" + (len(body) + 2).to_bytes(2, "big") + body
+    framed = whole[:2] + app1 + whole[2:]
+    assert _pillow_decodes(framed)
+    from predisat.reconstruct.batch import _truncation
+
+    assert _truncation(framed) is None
+    part = framed[: framed.index(b"\xff\xda") + 200]
+    assert not _pillow_decodes(part) and _truncation(part) is not None
+
+
+def test_truncated_png_is_reported() -> None:
+    import cv2
+
+    from predisat.reconstruct.batch import _truncation
+
+    ok, enc = cv2.imencode(".png", np.random.default_rng(6).integers(0, 256, (60, 80, 3), np.uint8))
+    data = enc.tobytes()
+    assert ok and _pillow_decodes(data) and _truncation(data) is None
+    assert not _pillow_decodes(data[:-30]) and "IEND" in str(_truncation(data[:-30]))
+
+
+def test_truncated_frame_is_reported_and_skipped(
+    survey_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[5]
+    path = src / victim["image"]
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])  # a copy cut short
+    out = tmp_path / "masks"
+    res = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    assert "truncated" in res.bad_frames[0].message
+    # told even without progress output (--quiet): a skipped frame is never silent
+    assert f"bad frame {victim['frame_id']}" in capsys.readouterr().err
+    # the resumed run still names it, from the cache, without segmenting anything
+    again = process_survey(src, out, PARAMS, progress=True, segmenter=blue_sky)
+    assert again.frames_segmented == 0 and len(again.bad_frames) == 1
+    assert f"bad frame {victim['frame_id']}" in (err := capsys.readouterr().err)
+    assert "as in a run before" in err
+
+
+def test_empty_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[3]
+    (src / victim["image"]).write_bytes(b"")  # what a failed copy leaves
+    res = process_survey(src, tmp_path / "masks", PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in res.bad_frames] == [victim["frame_id"]]
+    assert "empty (0 bytes)" in res.bad_frames[0].message
+
+
+def test_fixed_frame_redoes_its_chunks_and_strict_checks_a_finished_folder(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    clean = process_survey(survey_dir, tmp_path / "clean", PARAMS, progress=False,
+                           segmenter=blue_sky)  # fmt: skip
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    victim = _manifest(src)[5]
+    path = src / victim["image"]
+    good = path.read_bytes()
+    path.write_bytes(good[: len(good) // 2])
+    out = tmp_path / "masks"
+    first = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert [b.frame_id for b in first.bad_frames] == [victim["frame_id"]]
+    # a --strict rerun on the finished folder must not pass over the frame skipped before
+    with pytest.raises(BadFrameError, match=f"bad frame {victim['frame_id']}.*run before"):
+        process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky, strict=True)
+    path.write_bytes(good)  # the frame copied again from the camera
+    fixed = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert fixed.bad_frames == () and fixed.frames_segmented == 1
+    # each chunk reads the frames within overlap_m (315 m) of it: here every chunk reads them all
+    assert PARAMS.reconstruction.overlap_m > 60.0
+    assert fixed.chunks_done == first.chunks_done and fixed.chunks_skipped == 0
+    np.testing.assert_array_equal(fixed.masks.mask_el_deg, clean.masks.mask_el_deg)
+    np.testing.assert_array_equal(fixed.masks.source, clean.masks.source)
+    again = process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky, strict=True)
+    assert again.chunks_done == 0 and again.bad_frames == ()
+
+
+def test_concat_masksets_round_trip(first_run) -> None:
+    _, (res, _) = first_run
+    m: MaskSet = res.masks
+    parts = [m.subset(m.chainage_m[0], m.chainage_m[2]), m.subset(m.chainage_m[3], 1e9)]
+    back = concat_masksets(parts, provenance=m.provenance)
+    assert back.equals(m)
+    with pytest.raises(MaskError, match="strictly increasing"):
+        concat_masksets(parts[::-1])
+    coarse = MaskSet.from_arrays([0.0], [50.0], [4.0], [0.0], [0.0], np.zeros((1, 4)))
+    with pytest.raises(MaskError, match="az_step_deg"):
+        concat_masksets([parts[0], coarse])
+
+
+def test_changed_code_redoes_chunks_and_segmentation(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import predisat.reconstruct.batch as pl
+
+    out = tmp_path / "masks"
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    first = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    again = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    assert (again.chunks_done, again.frames_segmented) == (0, 0)
+    # a development install edits code without bumping the version: nothing stale is reused
+    real = pl.code_fingerprint
+    monkeypatch.setattr(pl, "code_fingerprint", lambda parts=None: "f" * 16 + real(parts))
+    edited = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    assert edited.chunks_done == 3 and edited.chunks_skipped == 0
+    assert edited.frames_segmented == first.frames_segmented > 0
+    assert len(list((out / "cache").iterdir())) == 2
+
+
+def test_code_fingerprint_covers_the_named_files() -> None:
+    from predisat.reconstruct.batch import SEGMENTATION_CODE, code_fingerprint
+
+    seg = code_fingerprint(SEGMENTATION_CODE)
+    assert seg == code_fingerprint(SEGMENTATION_CODE)  # deterministic
+    assert seg != code_fingerprint(["reconstruct/carving.py"]) != code_fingerprint()
+    with pytest.raises(OSError):
+        code_fingerprint(["no_such_module.py"])
+
+
+def test_segmentation_fingerprint_covers_every_module_the_segmenters_import() -> None:
+    """A module the segmentation runs but the fingerprint omits would let a stale cache stand
+    after an edit (the network's module was missing until the ensemble became the default)."""
+    import subprocess
+    import sys
+
+    from predisat.reconstruct.batch import SEGMENTATION_CODE
+
+    code = (
+        "import sys, numpy as np\n"
+        "from predisat.sky.segment import METHODS, SkyOptions, segment_sky\n"
+        "img = (np.random.default_rng(0).random((60, 80, 3)) * 255).astype(np.uint8)\n"
+        "for m in METHODS:\n"
+        "    segment_sky(img, SkyOptions(method=m))\n"
+        "import pathlib\n"
+        "root = pathlib.Path(sys.modules['predisat'].__file__).parent\n"
+        "print(' '.join(pathlib.Path(m.__file__).relative_to(root).as_posix()\n"
+        "               for k, m in list(sys.modules.items()) if k.startswith('predisat.')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()  # fmt: skip
+    files = set(out)
+    assert "sky/network.py" in files  # the ensemble ran
+    assert files <= set(SEGMENTATION_CODE)
+
+
+def test_segmenter_name_must_be_a_method_unless_a_function_is_given(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(ValueError, match="segmenter"):
+        process_survey(survey_dir, tmp_path / "a", PipelineParams(segmenter="magic"),
+                       progress=False)
+    res = process_survey(survey_dir, tmp_path / "b", PipelineParams(chunk_m=30.0,
+                         segmenter="magic"), progress=False, segmenter=blue_sky)
+    assert res.masks.n_pos > 0
+
+
+def test_segmenter_method_selects_the_segmentation(survey_dir: Path, tmp_path: Path) -> None:
+    """Two methods give two caches and two provenance records; both give masks."""
+    import json
+
+    for method in ("learned", "ensemble"):
+        res = process_survey(survey_dir, tmp_path / method,
+                             PipelineParams(chunk_m=30.0, segmenter=method), progress=False)
+        assert res.masks.n_pos > 0
+        assert any(p.name.startswith(f"seg-{method}-")
+                   for p in (tmp_path / method / "cache").iterdir())
+        prov = json.loads((tmp_path / method / "provenance.json").read_text())
+        assert method in json.dumps(prov)
+
+
+def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> None:
+    """Entries are deflated at level 1 since 2026-12-03 (np.savez_compressed before): the
+    reader gets the same arrays from both."""
+    import io
+    import json
+
+    from predisat.reconstruct.batch import CACHE_VERSION, _FrameJob, _read_cache, _write_cache
+
+    image = tmp_path / "f.jpg"
+    image.write_bytes(b"an image")
+    job = _FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
+    rng = np.random.default_rng(0)
+    sky = rng.random((5, 37)) < 0.5
+    conf = rng.random(37).astype(np.float32)
+    _write_cache(job, (sky, conf), None)
+    got = _read_cache(job)
+    assert isinstance(got, tuple) and got[0].dtype == bool and got[1] is not None
+    assert np.array_equal(got[0], sky) and np.array_equal(got[1], conf)
+    with np.load(job.cache_path) as z:
+        assert sorted(z.files) == ["confidence", "meta", "sky"]
+        meta = json.loads(str(z["meta"]))
+    old = io.BytesIO()
+    np.savez_compressed(old, meta=np.array(json.dumps(meta)), sky=np.packbits(sky.ravel()),
+                        confidence=conf)  # fmt: skip
+    Path(job.cache_path).write_bytes(old.getvalue())
+    again = _read_cache(job)
+    assert meta["version"] == CACHE_VERSION and isinstance(again, tuple)
+    assert np.array_equal(again[0], sky) and again[1] is not None
+    assert np.array_equal(again[1], conf)
+
+
+def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) -> None:
+    import json
+
+    from predisat.reconstruct.batch import sky_net_sha256
+
+    base = process_survey(survey_dir, tmp_path / "base", PipelineParams(chunk_m=30.0),
+                          progress=False)
+    same = net_copy(tmp_path / "same")
+    out = tmp_path / "cand"
+    res = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(same)),
+                         progress=False)
+    # the shipped network from another file: the same masks, the file in the provenance
+    np.testing.assert_array_equal(res.masks.mask_el_deg, base.masks.mask_el_deg)
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["params"]["sky_net"]["sha256"] == sky_net_sha256(same)
+    assert "sky_net" not in json.loads((tmp_path / "base" / "provenance.json").read_text())[
+        "params"]
+    # another network into the same folder: nothing of the first is reused
+    other = net_copy(tmp_path / "other", input_px=96)
+    assert sky_net_sha256(other) != sky_net_sha256(same)
+    again = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, sky_net=str(other)),
+                           progress=False)
+    assert again.chunks_skipped == 0 and again.frames_segmented == res.frames_segmented > 0
+    # and it is the network that runs: at another input size the masks change
+    assert not np.array_equal(again.masks.mask_el_deg, res.masks.mask_el_deg)
+    assert len([p for p in (out / "cache").iterdir() if p.name.startswith("seg-ensemble-")]) == 2
+
+
+def test_sky_net_errors_name_the_file_and_the_fix(survey_dir: Path, tmp_path: Path) -> None:
+    from predisat.cli.app import main
+
+    with pytest.raises(ValueError, match="--segmenter ensemble"):
+        PipelineParams(segmenter="learned", sky_net="x.onnx")
+    missing = tmp_path / "missing.onnx"
+    with pytest.raises(FileNotFoundError, match=r"missing\.onnx"):
+        process_survey(survey_dir, tmp_path / "o", PipelineParams(sky_net=str(missing)),
+                       progress=False)
+    assert main(["process", str(survey_dir), "--out", str(tmp_path / "c"), "--quiet",
+                 "--sky-net", str(missing)]) == 2
+
+
+def test_thin_structure_policy_is_an_angle_per_camera(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import predisat.reconstruct.batch as pl
+
+    seen: list[int | None] = []
+
+    def recording(image: np.ndarray, method=None, sky_net=None, thin_px=None):
+        seen.append(thin_px)
+        return blue_sky(image)
+
+    monkeypatch.setattr(pl, "default_segmenter", recording)
+    px_deg = np.degrees(2.0 * np.arctan(0.5 / CAM.fx))  # the test camera's centre pixel
+    for thin_deg in (0.7, 2.0 * px_deg, 0.0):
+        seen.clear()
+        p = PipelineParams(chunk_m=30.0, thin_deg=thin_deg)
+        res = process_survey(survey_dir, tmp_path / "out", p, progress=False)
+        # every frame segmented again with the new width: the cache does not mix widths
+        assert len(seen) == res.frames_segmented == len(_manifest(survey_dir))
+        want = 0 if thin_deg == 0 else max(1, round(thin_deg / px_deg))
+        assert set(seen) == {want}
+    assert want == 0 and PipelineParams(thin_deg=2.0 * px_deg).thin_px(CAM) == 2
+    # a barrel pinhole's pixels near its sides are 31 % wider than its centre's: the width follows
+    # the widest, so no feature much wider than thin_deg is transparent anywhere in the frame
+    barrel = CameraModel.pinhole_from_fov(640, 480, 74.0, dist=(-0.4, 0.12, 0.0, 0.0, 0.0))
+    n_px = PipelineParams(thin_deg=0.7).thin_px(barrel)
+    assert round(0.7 / barrel.centre_pixel_deg) == 5 and n_px == 4
+    assert n_px * barrel.widest_pixel_deg <= 0.7 + barrel.widest_pixel_deg / 2
+    with pytest.raises(ValueError, match="thin_deg"):
+        PipelineParams(thin_deg=-1.0)
+
+
+def test_a_hole_in_the_survey_is_closed_not_covered_by_neighbours(
+    survey_dir: Path, first_run, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # both frames at 3030 m dropped from the manifest: a camera dropout between 3020 and 3040
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)
+    kept = [r for r in rows if float(r["chainage_m"]) != 3030.0]
+    assert len(kept) == len(rows) - 2
+    with open(src / "manifest.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(kept)
+    capsys.readouterr()
+    res = process_survey(src, tmp_path / "masks", PARAMS, progress=False, segmenter=blue_sky)
+    err = capsys.readouterr().err
+    assert "1 hole(s)" in err and "3020-3040 m" in err
+    masks = read_masks(tmp_path / "masks" / "masks.parquet")
+    np.testing.assert_allclose(masks.chainage_m, first_run[1][0].masks.chainage_m, atol=1e-3)
+    i = int(np.argmin(np.abs(masks.chainage_m - 3030.0)))
+    assert np.all(masks.mask_el_deg[i] == 90.0)
+    assert np.all(masks.source[i] == BinSource.ASSUMED)
+    assert masks.provenance["gaps_closed_m"] == [[3020.0, 3040.0]]
+    # nothing is trusted in the hole, even at 89 deg; at the surveyed neighbours sky still is
+    az = np.arange(0.0, 360.0, 15.0)
+    assert not masks.trusted(np.full_like(az, 3030.0), az, 89.0).any()
+    assert masks.trusted(np.full_like(az, 3010.0), az, 89.0).any()
+    # the surveyed positions keep the masks their chunks computed
+    chunks = concat_masksets([read_masks(p) for p in sorted((tmp_path / "masks" / "chunks")
+                                                            .glob("*.parquet"))])  # fmt: skip
+    surveyed = np.array([k for k in range(masks.n_pos) if k != i])
+    np.testing.assert_array_equal(chunks.chainage_m, masks.chainage_m[surveyed])
+    np.testing.assert_array_equal(chunks.mask_el_deg, masks.mask_el_deg[surveyed])
+    # the hole's position lies on the track like the others
+    full = first_run[1][0].masks
+    np.testing.assert_allclose(masks.lat_deg[i], full.lat_deg[i], atol=1e-7)
+    np.testing.assert_allclose(masks.heading_deg[i], full.heading_deg[i], atol=1e-3)
+    assert res.bad_frames == ()

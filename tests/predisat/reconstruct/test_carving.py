@@ -1,0 +1,634 @@
+"""Tests of the full-360 mask reconstruction on small synthetic scenes with ideal sky labels.
+
+Ground truth comes from ray casting the world (``true_masks``) and from analytic geometry; the
+sky masks are ray cast too (sky = no L-band-blocking hit), so only the reconstruction is tested.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+
+from predisat.camera.models import CameraModel, Mount
+from predisat.masks.maskset import BinSource, MaskSet
+from predisat.reconstruct.carving import (
+    FrameView,
+    ReconstructionParams,
+    Reconstructor,
+    _ray_distances,
+)
+from predisat.synth.raycast import make_caster
+from predisat.synth.truth import ideal_frames, true_masks
+from predisat.synth.world import Stretch, World, WorldSpec
+from tests.predisat.synth.test_world import straight_track
+from tests.regression.reference_march import reference_march
+
+AZIMUTH = 60.0
+WALL = {"height_m": 30.0, "distance_m": 10.0, "roughness_m": 0.0, "batter": 0.0}
+PINHOLE = CameraModel.pinhole_from_fov(200, 150, 74.0)
+FISHEYE = CameraModel.fisheye_from_fov(200, 150, 110.0)
+PARAMS = ReconstructionParams(reach_m=150.0, carve_range_m=50.0)
+
+
+def frames_for(
+    world: World,
+    chainage_m: np.ndarray,
+    camera: CameraModel,
+    lever_arm: bool = True,
+    reverse: bool = False,
+) -> list[FrameView]:
+    """Left and right frames with ideal sky masks (ray cast, L-band blocking faces only)."""
+    caster = make_caster(world, "open3d", lband_only=True)
+    mounts = {side: Mount.default(side) for side in ("left", "right")}
+    if not lever_arm:
+        mounts = {k: Mount(k, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
+                  for k, m in mounts.items()}
+    return ideal_frames(world, chainage_m, camera, mounts, reverse=reverse, caster=caster)
+
+
+def rel_bins(heading_deg: float, az_deg: np.ndarray, rel_deg: float) -> int:
+    return int(np.argmin(np.abs(np.mod(az_deg - heading_deg - rel_deg + 180, 360) - 180)))
+
+
+@pytest.fixture(scope="module")
+def wall_world() -> World:
+    track = straight_track(700.0, AZIMUTH)
+    spec = WorldSpec((Stretch("rock_walls", 100.0, 600.0, "left", WALL),), False, False)
+    return World.build(track, spec, seed=0)
+
+
+@pytest.fixture(scope="module")
+def wall_result(wall_world: World):
+    s = np.array([340.0, 350.0, 360.0])
+    fr = frames_for(wall_world, np.arange(150.0, 551.0, 10.0), FISHEYE, lever_arm=False)
+    return s, Reconstructor(PARAMS).run(fr, s, wall_world.track), true_masks(wall_world, s)
+
+
+def test_wall_cross_track_mask_is_close_and_never_below_truth(wall_result) -> None:
+    s, rec, tm = wall_result
+    for i in range(s.size):
+        k = rel_bins(tm.heading_deg[i], tm.az_deg, -90.0)  # left
+        analytic = np.degrees(np.arctan2(WALL["height_m"] - 4.0, WALL["distance_m"]))
+        assert tm.mask_el_deg[i, k] == pytest.approx(analytic, abs=0.1)
+        # conservative, over by what the cell size allows: near the track, cells are bounded
+        # by their highest sky-ray height but seen from their nearest point (see the docs)
+        assert analytic - 0.1 <= rec.mask_el_deg[i, k] <= analytic + 7.0
+        assert analytic - 0.1 <= rec.far_el_deg[i, k] <= analytic + 1.5
+        assert rec.source[i, k] == BinSource.OBSERVED
+    # along the whole wall side, never below the truth
+    assert (rec.mask_el_deg - tm.mask_el_deg).min() >= -0.1
+
+
+def test_wall_with_lever_arm_stays_within_the_parallax_bound(wall_world: World) -> None:
+    s = np.array([350.0])
+    fr = frames_for(wall_world, np.arange(200.0, 501.0, 10.0), FISHEYE)
+    rec = Reconstructor(PARAMS).run(fr, s, wall_world.track)
+    k = rel_bins(float(wall_world.track.heading_at(350.0)), rec.az_deg, -90.0)
+    truth = np.degrees(np.arctan2(26.0, 10.0))
+    # the camera, 1.5 m nearer and 0.5 m lower, sees the wall top higher: what lies behind the
+    # wall below that sightline cannot be cleared, so the bound is the camera's view
+    camera_view = np.degrees(np.arctan2(26.5, 8.5))
+    assert truth - 0.1 <= rec.far_el_deg[0, k] <= camera_view + 1.0
+    assert truth - 0.1 <= rec.mask_el_deg[0, k] <= camera_view + 1.0
+
+
+def test_descriptors_find_the_wall(wall_result) -> None:
+    _, rec, _ = wall_result
+    d = rec.descriptors["left_obstacle_distance_m"]
+    h = rec.descriptors["left_obstacle_height_m"]
+    # a monocular hull cannot range the wall's uniform top edge: the descriptor is the nearest
+    # cell that may hold it, never farther than the wall
+    assert np.all((d > 0.0) & (d <= WALL["distance_m"] + 0.5))
+    assert np.all(h > 4.0)  # above the antenna
+    assert np.isnan(rec.descriptors["right_obstacle_distance_m"]).all()
+
+
+@pytest.fixture(scope="module")
+def open_world() -> World:
+    track = straight_track(700.0, AZIMUTH)
+    spec = WorldSpec(
+        (Stretch("open", 100.0, 600.0, "both", {"objects_per_km": 0.0}),),
+        catenary=False,
+        hills=False,
+    )
+    return World.build(track, spec, seed=0)
+
+
+def test_open_country_fisheye_opens_along_track(open_world: World) -> None:
+    s = np.array([350.0])
+    fr = frames_for(open_world, np.arange(140.0, 561.0, 10.0), FISHEYE)
+    rec = Reconstructor(PARAMS).run(fr, s, open_world.track)
+    hd = float(open_world.track.heading_at(350.0))
+    rel = np.mod(rec.az_deg - hd + 180.0, 360.0) - 180.0
+    off = np.minimum(np.abs(rel), 180.0 - np.abs(rel))
+    # cross-track: the fisheye sees below the horizon, the flat ground's horizon is ~0 deg
+    cross = off > 45.0
+    assert np.median(rec.mask_el_deg[0, cross]) < 1.5
+    assert rec.mask_el_deg[0, cross].max() < 7.0  # near-field cells at the sector edges
+    assert (rec.source[0, cross] == BinSource.OBSERVED).all()
+    # off the axis the neighbouring frames bound the corridor: at 40-45 deg the mask is low;
+    # at 20-35 deg cells beside the track between frames, seen only above ~15 deg, limit it
+    assert np.median(rec.mask_el_deg[0, (off >= 40.0) & (off <= 45.0)]) < 6.0
+    assert rec.mask_el_deg[0, (off >= 20.0) & (off <= 45.0)].max() < 16.0
+    # straight along the track nothing is seen: the far-field default holds and is flagged
+    axis = off < 2.0
+    assert (rec.mask_el_deg[0, axis] >= PARAMS.far_default_deg - 1e-6).all()
+    assert (rec.source[0, axis] == BinSource.ASSUMED).all()
+
+
+def test_pinhole_cannot_clear_along_track_and_says_so(open_world: World) -> None:
+    s = np.array([350.0])
+    fr = frames_for(open_world, np.arange(140.0, 561.0, 10.0), PINHOLE)
+    rec = Reconstructor(PARAMS).run(fr, s, open_world.track)
+    hd = float(open_world.track.heading_at(350.0))
+    k = rel_bins(hd, rec.az_deg, 90.0)
+    # the bottom of a 74 deg pinhole pitched 45 deg is 8 deg: lower is never cleared
+    assert rec.mask_el_deg[0, k] == pytest.approx(8.0, abs=0.6)
+    along = rel_bins(hd, rec.az_deg, 10.0)
+    assert rec.mask_el_deg[0, along] > 8.0
+    assert rec.source[0, along] != BinSource.OBSERVED
+
+
+def test_tunnel_and_bridge_are_detected_overhead() -> None:
+    track = straight_track(900.0, AZIMUTH)
+    spec = WorldSpec(
+        (
+            Stretch("open", 100.0, 800.0, "both", {"objects_per_km": 0.0}),
+            Stretch("overbridge", 300.0, 312.0, "both"),
+            Stretch("tunnel", 500.0, 650.0, "both"),
+        ),
+        catenary=False,
+        hills=False,
+    )
+    world = World.build(track, spec, seed=2)
+    s = np.array([306.0, 400.0, 580.0])
+    fr = frames_for(world, np.arange(200.0, 701.0, 10.0), FISHEYE)
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    ov = rec.overhead_m
+
+    def covered(a: float, b: float) -> bool:
+        return bool(np.any((ov[:, 0] <= a) & (ov[:, 1] >= b)))
+
+    assert covered(302.0, 310.0)  # the deck
+    assert covered(520.0, 630.0)  # the tunnel
+    assert not covered(395.0, 405.0)  # open track between them
+    assert (rec.mask_el_deg[2] == 90.0).all()  # inside the tunnel
+    assert rec.mask_el_deg[0].min() > 40.0  # under the deck
+    tm = true_masks(world, s)
+    supported = rec.source != BinSource.ASSUMED
+    assert (rec.mask_el_deg - tm.mask_el_deg)[supported].min() >= -0.1
+
+
+def street_world(decks_m: list[tuple[float, float]], catenary: bool, seed: int) -> World:
+    """A straight street, facades 15 m high 5 m from the axis on both sides from 100 to 800 m
+    (they fire the overhead rule), with footbridges or overbridges over ``decks_m``."""
+    street = {"facade_distance_m": 5.0, "facade_height_m": 15.0}
+    stretches = [Stretch("town", 100.0, 800.0, "both", street)]
+    stretches += [Stretch("overbridge", a, b, "both") for a, b in decks_m]
+    spec = WorldSpec(tuple(stretches), catenary=catenary, hills=False)
+    return World.build(straight_track(900.0, AZIMUTH), spec, seed=seed)
+
+
+def test_a_street_between_facades_is_open_overhead_but_a_deck_is_not() -> None:
+    """Facades 15 m high 5 m from the axis on both sides fire the overhead rule along the whole
+    street; the cameras' view straight along the track bounds the clearance there, so the
+    street is no longer closed to the zenith, while under the deck it still is. Ideal labels:
+    never below the ray-cast truth."""
+    from dataclasses import replace
+
+    world = street_world([(400.0, 412.0)], catenary=False, seed=3)
+    track = world.track
+    fr = frames_for(world, np.arange(200.0, 701.0, 10.0), FISHEYE)
+    s = np.array([300.0, 350.0, 406.0, 500.0])
+    tm = true_masks(world, s)
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    closed = Reconstructor(replace(PARAMS, along_view_half_deg=None)).run(fr, s, track)
+    street_pos = [0, 1, 3]
+    assert (closed.mask_el_deg[street_pos] == 90.0).all()  # the old rule: walls read as a deck
+    assert (rec.mask_el_deg[street_pos] < 89.9).mean() > 0.95
+    assert np.median(rec.mask_el_deg[street_pos] - tm.mask_el_deg[street_pos]) < 15.0
+    assert (rec.mask_el_deg[2] == 90.0).all()  # under the deck
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    with pytest.raises(ValueError, match="along_view_half_deg"):
+        ReconstructionParams(along_view_half_deg=0.0)
+
+
+def test_narrow_decks_between_frames_stay_blocked_in_a_street() -> None:
+    """The ceiling's risky case: footbridges 4 and 6 m wide between two frames 10 m apart, in
+    a street whose facades fire the overhead rule. Masks every 2 m around them (between the
+    frames too) against the ray-cast truth: no supported bin below it."""
+    world = street_world([(302.0, 308.0), (453.0, 457.0)], catenary=True, seed=5)
+    track = world.track
+    fr = frames_for(world, np.arange(150.0, 611.0, 10.0), FISHEYE)
+    s = np.concatenate([np.arange(296.0, 315.0, 2.0), np.arange(446.0, 465.0, 2.0)])
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    tm = true_masks(world, s)
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    under = (s > 302.5) & (s < 307.5) | (s > 453.5) & (s < 456.5)
+    assert (rec.mask_el_deg[under].min(axis=1) > 40.0).all()  # under a deck: closed above
+
+
+def test_the_ceiling_cap_opens_frame_positions_in_a_street_with_masts() -> None:
+    """Masts, cantilevers and footbridges in a street: at the frame positions the cameras'
+    ceiling also caps the clearance cells near the antenna at their exact (pointwise) bound,
+    instead of the rasterised one. Never below the ray-cast truth, and lower masks than
+    without the cap."""
+    import predisat.reconstruct.carving as rc
+
+    world = street_world([(302.0, 308.0)], catenary=True, seed=5)
+    track = world.track
+    fr = frames_for(world, np.arange(200.0, 411.0, 10.0), FISHEYE)
+    s = np.arange(250.0, 361.0, 10.0)
+    tm = true_masks(world, s)
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    under = (s > 302.5) & (s < 307.5)
+    assert (rec.mask_el_deg[under].min(axis=1) > 40.0).all()
+    saved = rc._CEILING_CAP_M
+    try:
+        rc._CEILING_CAP_M = 0.0
+        uncapped = Reconstructor(PARAMS).run(fr, s, track)
+    finally:
+        rc._CEILING_CAP_M = saved
+    assert (rec.mask_el_deg <= uncapped.mask_el_deg).all()  # _CEILING_CAP_M = 0: no cap at all
+    assert rec.mask_el_deg.mean() < uncapped.mask_el_deg.mean() - 0.5
+
+
+def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
+    """A rasterised ceiling over the track (each cell at the bound of its far end) stands
+    above the antenna in the antenna's own cell and closes every ray; the cap opens them,
+    yet no ray reads lower than the exact ceiling ``z + |x| tan e`` seen along it."""
+    from predisat.reconstruct.carving import _horizon_parts
+    from predisat.reconstruct.heightfield import HeightField
+
+    c, n = 0.5, 81
+    e_deg, z_cam, dz = 55.0, 2.0, 0.5
+    t = np.tan(np.radians(e_deg))
+    centres = (np.arange(n) - n // 2 + 0.5) * c
+    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
+    clear = np.abs(y) < 2.0
+    s0 = 0.1  # the position's chainage (frame x), where the antenna stands
+    bound = np.where(clear, z_cam + (np.abs(x - s0) + c * np.sqrt(0.5)) * t, 0.0)
+    bound = bound.astype(np.float32)
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(
+        c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
+        y.astype(np.float32), z,
+    )  # fmt: skip
+    p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
+    ant = np.array([[s0, 0.1, z_cam + dz]])
+    closed = _horizon_parts(hf, ant, np.eye(3)[None], p)[0]
+    assert (closed == 90.0).all()
+    caps = np.array([[t * 1.01, dz]])
+    el = _horizon_parts(hf, ant, np.eye(3)[None], p, caps)[0]
+    assert (el < 89.0).mean() > 0.9
+    # the exact ceiling along each ray, sampled finely inside the clearance
+    az = np.radians(np.arange(el.size) * p.az_step_deg / p.n_sub)
+    r = np.arange(0.01, 17.0, 0.01)
+    px = ant[0, 0] + np.sin(az)[:, None] * r
+    py = ant[0, 1] + np.cos(az)[:, None] * r
+    inside = np.abs(py) < 2.0
+    tan_exact = np.where(inside, (z_cam + np.abs(px - s0) * t - ant[0, 2]) / r, -np.inf)
+    tan_exact = tan_exact.max(axis=1)
+    assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
+
+
+@pytest.fixture(scope="module")
+def mixed():
+    track = straight_track(1300.0, AZIMUTH)
+    world = World.build(track, WorldSpec.mixed(50.0, 1250.0, seed=4), seed=4)
+    frames = frames_for(world, np.arange(150.0, 1151.0, 10.0), FISHEYE)
+    return world, frames
+
+
+def test_conservative_on_a_mixed_world(mixed) -> None:
+    world, frames = mixed
+    s = np.arange(400.0, 901.0, 20.0)
+    rec = Reconstructor(PARAMS).run(frames, s, world.track)
+    tm = true_masks(world, s)
+    err = rec.mask_el_deg - tm.mask_el_deg
+    supported = rec.source != BinSource.ASSUMED
+    # ideal labels: bins the cameras and the reconstruction support are never below the truth
+    assert np.mean(err[supported] < -0.1) == 0.0
+    # assumed bins (far field along the track) hold the stated default at least
+    assert (rec.mask_el_deg[~supported] >= PARAMS.far_default_deg - 1e-6).all()
+    ms = rec.to_maskset(world.track)
+    assert isinstance(ms, MaskSet) and ms.n_pos == s.size
+    assert ms.provenance["reconstruction"]["cell_m"] == PARAMS.cell_m
+
+
+def test_chunks_give_identical_masks(mixed) -> None:
+    world, frames = mixed
+    p = PARAMS
+    a = np.arange(500.0, 601.0, 10.0)
+    b = np.arange(560.0, 701.0, 10.0)
+    rec = Reconstructor(p)
+
+    def window(s: np.ndarray) -> list[FrameView]:
+        return [f for f in frames if s.min() - p.overlap_m <= f.chainage_m <= s.max() + p.overlap_m]
+
+    ra = rec.run(window(a), a, world.track)
+    rb = rec.run(window(b), b, world.track)
+    ia = np.flatnonzero(np.isin(a, b))
+    ib = np.flatnonzero(np.isin(b, a))
+    np.testing.assert_array_equal(ra.mask_el_deg[ia], rb.mask_el_deg[ib])
+    np.testing.assert_array_equal(ra.source[ia], rb.source[ib])
+
+
+def test_frames_farther_than_the_overlap_do_not_matter(mixed) -> None:
+    world, frames = mixed
+    s = np.array([600.0])
+    rec = Reconstructor(PARAMS)
+    near = [f for f in frames if abs(f.chainage_m - 600.0) <= PARAMS.overlap_m]
+    np.testing.assert_array_equal(
+        rec.run(frames, s, world.track).mask_el_deg, rec.run(near, s, world.track).mask_el_deg
+    )
+
+
+def test_horizon_rays_against_analytic_cells() -> None:
+    """The ray march on a hand-made height field: a tall cell, an unknown cell and a gap in the
+    modelled region, each on one compass ray, against elevations computed by hand."""
+    from predisat.reconstruct.carving import horizon
+    from predisat.reconstruct.heightfield import HeightField
+
+    c = 0.5
+    n = 200  # cells from -50 m to +50 m in x and y
+    bound = np.zeros((n, n), np.float32)  # flat ground at z = 0
+    region = np.ones((n, n), bool)
+
+    def cell(x_m: float, y_m: float) -> tuple[int, int]:
+        return int(np.floor(y_m / c)) + n // 2, int(np.floor(x_m / c)) + n // 2
+
+    bound[cell(0.2, 20.2)] = 10.0  # north: a 10 m column in [0, 0.5) x [20, 20.5)
+    bound[cell(-9.8, 0.2)] = np.inf  # west: an unknown cell
+    region[cell(5.2, 0.2)] = False  # east: the ray leaves the model here...
+    bound[cell(10.2, 0.2)] = 20.0  # ...so this column beyond it must not count
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+    ant = np.array([[0.1, 0.1, 4.0]])
+    p = ReconstructionParams()
+    el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+    step = p.az_step_deg / p.n_sub
+
+    def ray(az_deg: float) -> int:
+        return round((az_deg + p.az_step_deg / 2) / step)
+
+    # nearest point of the north column to the antenna: (0.1, 20.0)
+    assert el[0, ray(0.0)] == pytest.approx(np.degrees(np.arctan(6.0 / 19.9)), abs=1e-4)
+    assert el[0, ray(270.0)] == 90.0 and unknown[0, ray(270.0)]
+    assert not unknown[0, ray(0.0)] and not unknown[0, ray(90.0)]
+    # east: only ground before x = 5 m; its steepest top is that of the last cell seen,
+    # [4.5, 5.0), from its nearest point x = 4.5
+    assert el[0, ray(90.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 4.4)), abs=1e-4)
+    # south: flat ground to the edge of the field (cell nearest point at y = -49.5 m)
+    assert el[0, ray(180.0)] == pytest.approx(np.degrees(np.arctan(-4.0 / 49.6)), abs=1e-4)
+
+
+def test_horizon_parts_split_the_cells_at_the_corridor_half_width() -> None:
+    """Cells whose nearest point is at least ``half_width_m`` (40 m) away go to the far part
+    (which the position's own camera may cap), the others to the near part; ``horizon`` is
+    the maximum of both."""
+    from predisat.reconstruct.carving import _horizon_parts, horizon
+    from predisat.reconstruct.heightfield import HeightField
+
+    c, n = 0.5, 200  # cells from -50 m to +50 m
+    bound = np.zeros((n, n), np.float32)
+    region = np.ones((n, n), bool)
+
+    def cell(x_m: float, y_m: float) -> tuple[int, int]:
+        return int(np.floor(y_m / c)) + n // 2, int(np.floor(x_m / c)) + n // 2
+
+    bound[cell(0.2, 20.2)] = 10.0  # north, near: nearest point (0.1, 20.0)
+    bound[cell(0.2, 45.2)] = 40.0  # north, far: nearest point (0.1, 45.0)
+    bound[cell(42.2, 0.2)] = np.inf  # east, far and unknown
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+    ant = np.array([[0.1, 0.1, 4.0]])
+    p = ReconstructionParams()
+    near, near_unk, far, far_unk = _horizon_parts(hf, ant, np.eye(3)[None], p)
+    step = p.az_step_deg / p.n_sub
+    north, east = round(p.az_step_deg / 2 / step), round((90.0 + p.az_step_deg / 2) / step)
+    assert near[0, north] == pytest.approx(np.degrees(np.arctan(6.0 / 19.9)), abs=1e-4)
+    assert far[0, north] == pytest.approx(np.degrees(np.arctan(36.0 / 44.9)), abs=1e-4)
+    assert far_unk[0, east] and not near_unk[0, east] and far[0, east] == 90.0
+    # the near part of the east ray: flat ground, steepest at the last near cell, [40, 40.5)
+    # seen from its nearest point x = 40.0 (39.9 m away); the next one is 40.4 m away: far
+    assert near[0, east] == pytest.approx(np.degrees(np.arctan(-4.0 / 39.9)), abs=1e-4)
+    el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+    np.testing.assert_array_equal(el, np.maximum(near, far))
+    np.testing.assert_array_equal(unknown, near_unk | far_unk)
+
+
+def test_a_column_over_the_antenna_blocks_up_to_the_zenith() -> None:
+    """A finite bound above the antenna in its own cell (e.g. under a deck) must give 90 deg
+    on every ray, not the 89.9 deg a sub-millimetre distance floor would leave; a bound below
+    it (the free clearance) must not."""
+    from predisat.reconstruct.carving import horizon
+    from predisat.reconstruct.heightfield import HeightField
+
+    c, n = 0.5, 40
+    region = np.ones((n, n), bool)
+    z = np.zeros((n, n), np.float32)
+    ant = np.array([[0.1, 0.1, 4.0]])  # in cell (n // 2, n // 2)
+    p = ReconstructionParams()
+    for top, blocked in ((4.5, True), (3.9, False)):
+        bound = np.zeros((n, n), np.float32)
+        bound[n // 2, n // 2] = top
+        hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
+        el, unknown = horizon(hf, ant, np.eye(3)[None], p)
+        assert not unknown.any()
+        if blocked:
+            assert (el == 90.0).all()
+        else:
+            # every ray's steepest top: the flat ground of the next cells, below the antenna
+            assert (el < 0.0).all()
+
+
+@pytest.mark.parametrize("windows", [-1.0, float("nan")])
+def test_params_reject_a_bad_low_confidence_window(windows: float) -> None:
+    with pytest.raises(ValueError, match="low_confidence_windows"):
+        ReconstructionParams(low_confidence_windows=windows)
+
+
+def test_camera_ceiling_rows_and_caps_by_hand() -> None:
+    """Ceiling rows from hand-made profiles (one camera a side, sky straight along the track
+    from 30 deg ahead and 45 deg behind), a forward lever arm raising the row by its length
+    times the steeper tangent; caps only at a row's own chainage, under the antenna."""
+    from predisat.reconstruct.carving import _camera_ceilings, _ceiling_caps
+    from predisat.reconstruct.skyline import SkyProfile
+
+    rel = np.arange(-90.0, 90.01, 0.5)
+    frames, profs = [], []
+    for side, look in (("left", -90.0), ("right", 90.0)):
+        # rel az from the look direction: straight ahead (heading 0) is -look
+        ahead, behind = np.abs(rel + look) < 2.0, np.abs(rel - look) < 2.0
+        el = np.where(ahead, 30.0, np.where(behind, 45.0, 10.0))
+        profs.append(SkyProfile(rel, el, np.full(rel.size, 5.0), np.full(rel.size, 90.0), look))
+        m = Mount(side, -look, 45.0, 0.0, (0.8, 0.0, -0.5))
+        frames.append(FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0))
+    cams = np.array([[0.0, 1.5, 3.5], [0.0, -1.5, 3.4]])
+    rows = _camera_ceilings(frames, profs, cams, 1.0)
+    t30, t45 = np.tan(np.radians(30.0)), np.tan(np.radians(45.0))
+    np.testing.assert_allclose(rows, [[100.0, 3.5 + 0.8 * t45, t30, t45]])
+    # one camera only: no row
+    assert _camera_ceilings(frames[:1], profs[:1], cams[:1], 1.0).shape == (0, 4)
+    s = np.array([100.0, 100.0, 105.0])
+    ant = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 3.0], [5.0, 0.0, 5.0]])
+    caps = _ceiling_caps(rows, s, ant)
+    np.testing.assert_allclose(caps[0], [t45 * 1.01, 5.0 - rows[0, 1]])
+    assert np.isinf(caps[1:, 0]).all()  # antenna below the cameras; no row at 105 m
+
+
+def test_camera_ceiling_needs_the_view_up_to_the_zenith_and_clamps_at_the_horizon() -> None:
+    """A camera that saw the track direction only up to 64 deg (pitched lower) proves nothing
+    about a deck above that: no bound. Sky seen from below the horizon bounds like sky from
+    the horizon up (tangent 0, not negative)."""
+    from predisat.reconstruct.carving import _camera_ceilings
+    from predisat.reconstruct.skyline import SkyProfile
+
+    rel = np.arange(-90.0, 90.01, 0.5)
+
+    def rows(seen_hi_deg: float, sky_el_deg: float) -> np.ndarray:
+        frames, profs = [], []
+        for side, look in (("left", -90.0), ("right", 90.0)):
+            el = np.full(rel.size, sky_el_deg)
+            hi = np.full(rel.size, seen_hi_deg)
+            profs.append(SkyProfile(rel, el, np.full(rel.size, -10.0), hi, look))
+            m = Mount(side, -look, 45.0, 0.0, (0.0, 0.0, -0.5))
+            frames.append(
+                FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0)
+            )
+        return _camera_ceilings(frames, profs, np.array([[0.0, 1.5, 3.5], [0.0, -1.5, 3.5]]), 1.0)
+
+    assert np.isinf(rows(64.0, 25.0)[0, 2:]).all()
+    np.testing.assert_allclose(rows(89.94, 25.0)[0, 2:], np.tan(np.radians(25.0)))
+    np.testing.assert_allclose(rows(89.94, -5.0)[0, 2:], 0.0)
+
+
+# ---------------------------------------------------------------------- the ray march kernel
+# against ``reference_march``, the kernel it replaced (kept verbatim in its own module)
+
+
+def _random_march_case(rng: np.random.Generator, own: str, nan: bool) -> tuple:
+    """Arguments of ``_march_rays`` on a random corridor: a band of region cells along a
+    rotated axis, ground below the antenna rising or falling with the distance, tall and low
+    columns, unknown cells, a clearance strip (``clear``) under a ceiling cap, a tilted
+    vertical and rotated rays; ``own`` sets the antenna's own cell (``"ground"``,
+    ``"above"``: a column over the antenna, ``"unknown"``, ``"nan"``)."""
+    f32 = np.float32
+    c = f32(0.5)
+    ny, nx = (int(v) for v in rng.integers(50, 130, 2))
+    px, py = rng.uniform(0.3, 0.7) * nx, rng.uniform(0.3, 0.7) * ny  # antenna, in cells
+    theta = rng.uniform(0.0, np.pi)
+    yy, xx = np.mgrid[0:ny, 0:nx] + 0.5
+    off = (xx - px) * -np.sin(theta) + (yy - py) * np.cos(theta)  # lateral offset (cells)
+    region = np.abs(off) < rng.uniform(10.0, 60.0)
+    region &= rng.random((ny, nx)) > 0.002  # holes: rays stop there
+    clear = region & (np.abs(off) < 4.0)
+    a_z = f32(rng.uniform(-5.0, 5.0) + 4.0)
+    dist_m = np.hypot(xx - px, yy - py) * c
+    bound = a_z - 4.0 + rng.uniform(-0.1, 0.1) * dist_m + rng.normal(0.0, 0.3, (ny, nx))
+    kind = rng.random((ny, nx))
+    bound = np.where(kind < 0.02, a_z + rng.uniform(0.0, 30.0, (ny, nx)), bound)  # tall
+    bound = np.where((kind >= 0.02) & (kind < 0.04), a_z - 6.0, bound)  # low
+    bound = np.where(kind > 0.995, np.inf, bound)  # unknown
+    if nan:
+        bound = np.where((kind > 0.99) & (kind < 0.9915), np.nan, bound)
+    bound = bound.astype(np.float32)
+    ox, oy = int(np.floor(px)), int(np.floor(py))
+    ax, ay = f32(px - ox), f32(py - oy)
+    if rng.random() < 0.3:  # on a cell corner, far_m a whole number of cells: exact ties
+        ax = ay = f32(0.0)
+    region[oy, ox] = True
+    bound[oy, ox] = {"ground": a_z - 3.0, "above": a_z + 1.0, "unknown": np.inf,
+                     "nan": np.nan}[own]  # fmt: skip
+    clear[oy, ox] = True
+    n_rays = 720
+    az = np.sort(rng.uniform(0.0, 2.0 * np.pi, n_rays))
+    d = np.stack([np.sin(az), np.cos(az)], axis=1)
+    d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    dist_cells = (
+        _ray_distances(ReconstructionParams(reach_m=float(rng.uniform(20.0, 45.0)))) / 0.5
+    ).astype(np.float32)
+    up = np.array([rng.normal(0.0, 1e-3), rng.normal(0.0, 1e-3), 1.0])
+    up /= np.linalg.norm(up)
+    capped = rng.random() < 0.7
+    cap_t, cap_dz = (rng.uniform(0.1, 2.0), rng.uniform(0.0, 1.0)) if capped else (np.inf, 0.0)
+    return (
+        d, dist_cells, bound.ravel(), region.ravel(), nx, ny, ax, ay, ox, oy, c, a_z,
+        f32(up[2]), f32(up[0] * c), f32(up[1] * c), f32(rng.integers(6, 30) * c),
+        clear.ravel(), f32(cap_t), f32(cap_dz), f32(5.0),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("own", ["ground", "above", "unknown", "nan"])
+def test_march_rays_reproduces_the_reference_march_bit_for_bit(own: str) -> None:
+    """The optimised ray march against the straightforward one it replaced (the cell distance
+    computed inline instead of by ``hypotf``, the tilt once per sample, scalar maxima), on
+    random corridors: every ray's near and far values, bit for bit (NaN included)."""
+    from predisat.reconstruct.carving import _march_rays
+
+    rng = np.random.default_rng(["ground", "above", "unknown", "nan"].index(own))
+    seen = np.zeros(5, int)
+    for case in range(12):
+        args = _random_march_case(rng, own, nan=case % 3 == 2)
+        got, want = _march_rays(*args), reference_march(*args)
+        for g, w in zip(got, want, strict=True):
+            assert g.dtype == w.dtype == np.float32
+            np.testing.assert_array_equal(g.view(np.int32), w.view(np.int32))
+        near, far = want
+        seen += [np.isfinite(near).sum(), np.isfinite(far).sum(), np.isposinf(near).sum(),
+                 np.isposinf(far).sum(), np.isnan(near).sum() + np.isnan(far).sum()]  # fmt: skip
+    if own == "ground":  # the cases reach every outcome: finite, unknown and NaN, near and far
+        assert (seen > 0).all(), seen
+
+
+def test_hypot32_is_the_float32_hypot() -> None:
+    """The ray march's inline distance (float64 square root of exact squares, rounded to
+    float32) against ``np.hypot`` on float32 (the C library's ``hypotf``), bit for bit: on
+    random values over 16 decades and on the nearest-edge offsets of a raster."""
+    from predisat.reconstruct.carving import _hypot32
+
+    @njit
+    def many(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        out = np.empty(x.size, np.float32)
+        for i in range(x.size):
+            out[i] = _hypot32(x[i], y[i])
+        return out
+
+    rng = np.random.default_rng(5)
+    x = (rng.random(400_000) * 10.0 ** rng.uniform(-8, 8, 400_000)).astype(np.float32)
+    y = (rng.random(400_000) * 10.0 ** rng.uniform(-8, 8, 400_000)).astype(np.float32)
+    y[::7] = 0.0
+    cl = np.arange(-700, 700, dtype=np.float32)
+    a = np.float32(0.3718)
+    edge = np.maximum(np.maximum(cl - a, np.float32(0.0)), a - cl - np.float32(1.0))
+    gx, gy = (v.ravel() for v in np.meshgrid(edge, edge[::3]))
+    for u, v in ((x, y), (gx, gy)):
+        np.testing.assert_array_equal(many(u, v).view(np.int32), np.hypot(u, v).view(np.int32))
+
+
+def test_range_scan_returns_the_sparse_table_element_bit_for_bit() -> None:
+    """The far field's range maxima by a scan (since 2026-12-03) are the elements
+    RangeMax1D gives: ties of -0.0 and +0.0, infinities and NaN included."""
+    from predisat.reconstruct.carving import _range_max_seen
+    from predisat.reconstruct.heightfield import RangeMax1D
+
+    rng = np.random.default_rng(2)
+    pool = np.array([-0.0, 0.0, 1.5, -2.0, np.inf, -np.inf, 3.0, np.nan])
+    for k in range(300):
+        n = int(rng.integers(1, 60))
+        values = rng.choice(pool[:7] if k % 3 else pool, n)
+        seen = rng.random(n) < 0.9
+        lo = rng.integers(0, n, 50)
+        hi = np.minimum(lo + rng.integers(0, 12, 50), n - 1)
+        got, ok = _range_max_seen(values, seen, lo, hi)
+        ref = RangeMax1D(values).query(lo, hi)
+        assert np.array_equal(got, ref, equal_nan=True)
+        assert np.array_equal(np.signbit(got), np.signbit(ref))
+        ref_seen = -RangeMax1D(-seen.astype(float)).query(lo, hi) > 0.5
+        np.testing.assert_array_equal(ok, ref_seen)

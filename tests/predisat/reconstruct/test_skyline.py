@@ -1,0 +1,310 @@
+"""Tests of skyline directions and sky profiles against analytic camera geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predisat.camera.models import CameraModel, Mount, default_camera
+from predisat.reconstruct.skyline import (
+    Rectifier,
+    _raise_skyline,
+    leading_sky_rows,
+    skyline_directions,
+)
+from predisat.sky.segment import fisheye_valid_mask
+
+PITCH = 45.0
+VFOV = 74.0
+
+
+@pytest.fixture(scope="module")
+def pinhole() -> CameraModel:
+    """Undistorted 400x300 pinhole with a 74 deg vertical field of view."""
+    return CameraModel.pinhole_from_fov(400, 300, VFOV)
+
+
+def elevation_sky(camera: CameraModel, mount: Mount, heading_deg: float, el_deg: float):
+    """Sky mask of a world whose skyline is the elevation ``el_deg`` at every azimuth,
+    built from the camera model's own rays (not from the module under test)."""
+    u, v = camera.pixel_grid()
+    ray = camera.pixel_to_ray(u, v) @ mount.camera_to_enu(heading_deg).T
+    el = np.degrees(np.arcsin(np.clip(ray[..., 2], -1, 1)))
+    return el > el_deg
+
+
+def test_leading_sky_rows_counts_sky_above_the_highest_obstacle() -> None:
+    m = np.ones((6, 4), bool)
+    m[3:, 0] = False  # obstacle from row 3
+    m[0, 1] = False  # obstacle in the top row
+    m[2, 2] = False
+    m[4:, 2] = False  # sky below an overhang does not count
+    np.testing.assert_array_equal(leading_sky_rows(m), [3, 0, 2, 6])
+
+
+def test_centre_column_direction_matches_pinhole_geometry(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    heading = 30.0
+    rows = np.full(pinhole.width_px, 100)
+    sk = skyline_directions(rows, pinhole, mount, heading)
+    c = pinhole.width_px // 2
+    # boundary at v = 99.5: angle above the optical axis is atan((cy - v) / f)
+    expected_el = PITCH + np.degrees(np.arctan((pinhole.cy - 99.5) / pinhole.fy))
+    u_off = np.degrees(np.arctan((c - pinhole.cx) / pinhole.fx))
+    assert sk.el_deg[c] == pytest.approx(expected_el, abs=0.05)
+    # the left camera looks at heading - 90; a column right of centre is further clockwise
+    assert np.mod(sk.az_deg[c] - (heading - 90.0) + 180, 360) - 180 == pytest.approx(u_off, abs=0.3)
+    assert not sk.valid[rows == 0].any()
+
+
+def test_profile_recovers_an_elevation_skyline(pinhole: CameraModel) -> None:
+    mount = Mount.default("right")
+    rect = Rectifier.build(pinhole, mount)
+    prof = rect.profile(elevation_sky(pinhole, mount, 200.0, 20.0), heading_deg=200.0)
+    seen = np.isfinite(prof.seen_lo_deg) & (prof.seen_lo_deg < 19.0)
+    assert seen.sum() > 100
+    err = prof.sky_el_deg[seen] - 20.0
+    # conservative: never below the skyline, by at most a sample and the obstacle growth
+    assert err.min() >= -1e-9 and err.max() <= 0.6
+    assert prof.look_az_deg == pytest.approx(np.mod(200.0 + 90.0, 360.0))
+
+
+def test_profile_field_of_view_matches_analytic_pinhole(pinhole: CameraModel) -> None:
+    rect = Rectifier.build(pinhole, Mount.default("left"))
+    prof = rect.profile(np.ones(pinhole.shape, bool), heading_deg=0.0)
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    # straight out, the image spans pitch -+ half the vertical field of view
+    assert prof.seen_lo_deg[j] == pytest.approx(PITCH - VFOV / 2, abs=0.2)
+    assert prof.seen_hi_deg[j] == pytest.approx(PITCH + VFOV / 2, abs=0.2)
+    # all sky: the skyline is the bottom of the view
+    assert prof.sky_el_deg[j] == pytest.approx(prof.seen_lo_deg[j])
+    # nothing is seen along the track
+    assert np.isnan(prof.seen_lo_deg[np.abs(prof.rel_az_deg) > 85]).all()
+
+
+def test_sky_under_an_overhang_is_ignored(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    sky = elevation_sky(pinhole, mount, 0.0, 15.0)
+    band = ~elevation_sky(pinhole, mount, 0.0, 40.0) & elevation_sky(pinhole, mount, 0.0, 30.0)
+    prof = Rectifier.build(pinhole, mount).profile(sky & ~band, 0.0)
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    assert prof.sky_el_deg[j] >= 40.0 - 1e-9
+    assert prof.sky_el_deg[j] <= 40.6
+
+
+def test_low_confidence_columns_have_their_skyline_raised(pinhole: CameraModel) -> None:
+    mount = Mount.default("left")
+    rect = Rectifier.build(pinhole, mount)
+    sky = elevation_sky(pinhole, mount, 0.0, 20.0)
+    w, h = pinhole.width_px, pinhole.height_px
+    low = np.zeros(w, bool)
+    low[180:220] = True  # the centre columns
+    conf = np.where(low, 0.0, 1.0)
+    prof = rect.profile(sky, 0.0, confidence=conf)
+    ref = rect.profile(sky, 0.0)
+    # expected: the centre column's boundary moves up by two windows of 300 // 30 + 300 // 120
+    # rows, at the elevation the camera model gives that pixel edge
+    c = w // 2
+    row = int(np.argmin(sky[:, c])) - 2 * (h // 30 + h // 120)
+    ray = pinhole.pixel_to_ray(np.array([float(c)]), np.array([row - 0.5]))
+    enu = ray @ mount.camera_to_enu(0.0).T
+    expected = np.degrees(np.arcsin(enu[0, 2]))
+    j = np.argmin(np.abs(prof.rel_az_deg))
+    assert expected > ref.sky_el_deg[j] + 3.0
+    assert prof.sky_el_deg[j] == pytest.approx(expected, abs=0.6)
+    # bins that read no low-confidence column are untouched
+    read = rect.pixel_index
+    for k in range(prof.rel_az_deg.size):
+        cols = read[read[:, k] >= 0, k] % w
+        if cols.size and not low[cols].any():
+            assert prof.sky_el_deg[k] == ref.sky_el_deg[k]
+    # windows = inf: low-confidence columns clear nothing
+    void = rect.profile(sky, 0.0, confidence=np.zeros(w), low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg).all()
+    with pytest.raises(ValueError, match="confidence"):
+        rect.profile(sky, 0.0, confidence=np.ones(3))
+    for bad in (-1.0, np.nan):
+        with pytest.raises(ValueError, match="low_confidence_windows"):
+            rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=bad)
+    # NaN confidence counts as low; a huge window voids the column like inf
+    nan_conf = np.where(low, np.nan, 1.0)
+    assert np.array_equal(rect.profile(sky, 0.0, confidence=nan_conf).sky_el_deg, prof.sky_el_deg)
+    huge = rect.profile(sky, 0.0, confidence=np.zeros(w), low_confidence_windows=1e20)
+    assert np.isinf(huge.sky_el_deg).all()
+
+
+@pytest.mark.parametrize(
+    ("column", "raise_px", "expected"),
+    [
+        ("0110110", 1, "0100000"),  # the top run loses its last row, the lower run goes
+        ("0011100", 1, "0011000"),
+        ("0011100", 5, "0000000"),  # a run shorter than the raise goes entirely
+        ("1111111", 2, "1111100"),  # all sky: raised from the bottom edge
+        ("0000000", 3, "0000000"),
+        ("0110110", 0, "0110000"),  # no raise: still no sky below the top run
+    ],
+)
+def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expected: str) -> None:
+    sky = np.array([[c == "1", True] for c in column])  # column 1 is confident: untouched
+    before = sky.copy()
+    out = _raise_skyline(sky, np.array([0]), raise_px)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == expected
+    assert out[:, 1].all()
+    assert np.array_equal(sky, before)  # the input is not modified
+
+
+def test_raise_skyline_leaves_the_rows_above_the_grid_alone() -> None:
+    """Rows above ``from_row`` are never read by the grid (a side fisheye's view past the
+    zenith): the run is searched below them and they are left as they are."""
+    col = "1100111"
+    sky = np.array([[c == "1"] for c in col])
+    out = _raise_skyline(sky, np.array([0]), 1, np.array([3]))
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "1100110"
+    assert "".join("1" if v else "0" for v in _raise_skyline(sky, np.array([0]), 1)[:, 0]) == (
+        "1000000"  # searched from the top, the sliver is the run and the sky below goes
+    )
+
+
+def _reference_raise(
+    sky: np.ndarray, cols: np.ndarray, raise_px: int, from_row: np.ndarray | None
+) -> np.ndarray:
+    """:func:`_raise_skyline` as written with numpy column gathers (before 2026-12-03)."""
+    sub = sky[:, cols]
+    n = sub.shape[0]
+    rows = np.arange(n)[:, None]
+    top = np.zeros(len(cols), np.int64) if from_row is None else np.asarray(from_row)[cols]
+    reach = rows >= top
+    cand = sub & reach
+    start = np.where(cand.any(axis=0), np.argmax(cand, axis=0), n)
+    after = ~sub & (rows >= start)
+    end = np.where(after.any(axis=0), np.argmax(after, axis=0), n)
+    out = sky.copy()
+    out[:, cols] = sub & (~reach | (rows < np.maximum(end - int(raise_px), start)))
+    return out
+
+
+def test_raise_skyline_matches_the_column_gathers_on_random_masks() -> None:
+    rng = np.random.default_rng(9)
+    for k in range(300):
+        h, w = (int(v) for v in rng.integers(1, 30, 2))
+        sky = rng.random((h, w)) < rng.uniform(0.2, 0.95)
+        sky[: int(rng.integers(0, h + 1))] |= k % 2 == 0  # often a long top run
+        cols = rng.choice(w, int(rng.integers(0, w + 1)), replace=True)  # repeats too
+        from_row = None if k % 3 == 0 else rng.integers(0, h + 2, w)
+        raise_px = int(rng.integers(0, h + 3))
+        before = sky.copy()
+        got = _raise_skyline(sky, cols, raise_px, from_row)
+        np.testing.assert_array_equal(got, _reference_raise(sky, cols, raise_px, from_row))
+        np.testing.assert_array_equal(sky, before)
+
+
+def test_an_obstacle_past_the_zenith_does_not_void_the_own_half_space() -> None:
+    """A side fisheye sees the far side of the track above its zenith line. A wall there,
+    under a sliver of sky at the top edge, in low-confidence columns, must not take the sky
+    of the camera's own half-space below it: the profile is the one without that wall."""
+    cam = default_camera("fisheye")
+    mount = Mount.default("left")
+    rect = Rectifier.build(cam, mount)
+    first = rect.first_read_px_row
+    w = cam.width_px
+    cols = np.flatnonzero((first >= 20) & (first < cam.height_px))
+    assert cols.size > 10  # columns with pixels past the zenith at their top
+    sky = np.ones(cam.shape, bool)
+    sky[int(0.8 * cam.height_px) :] = False  # the ground
+    wall = sky.copy()
+    for c in cols:  # sky on the top rows, then the far wall, ending 6 rows above the grid
+        wall[3 : first[c] - 6, c] = False
+    conf = np.ones(w)
+    conf[cols] = 0.0
+    ref = rect.profile(sky, 0.0, confidence=conf)
+    got = rect.profile(wall, 0.0, confidence=conf)
+    assert np.isfinite(ref.sky_el_deg).mean() > 0.9
+    assert np.array_equal(got.sky_el_deg, ref.sky_el_deg)
+
+
+def test_a_fuzzy_horizon_does_not_void_a_fisheye_zenith() -> None:
+    """Every azimuth's top sky run starts at the zenith, which a side fisheye sees in its
+    centre column: a fuzzy tree top on the horizon there must not void them all."""
+    cam = default_camera("fisheye")
+    mount = Mount.default("left")
+    rect = Rectifier.build(cam, mount)
+    # the corners outside the lens circle are no sky: runs start below them
+    sky = elevation_sky(cam, mount, 0.0, 5.0) & fisheye_valid_mask(cam.shape, None, 0.04)
+    w = cam.width_px
+    conf = np.ones(w)
+    conf[w // 2 - 3 : w // 2 + 3] = 0.0
+    ref = rect.profile(sky, 0.0)
+    seen = np.isfinite(ref.sky_el_deg)
+    assert seen.mean() > 0.5
+    void = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg[seen]).mean() > 0.9  # the whole-column gate voids them
+    prof = rect.profile(sky, 0.0, confidence=conf)
+    assert np.isfinite(prof.sky_el_deg[seen]).all()
+    assert (prof.sky_el_deg[seen] >= ref.sky_el_deg[seen]).all()
+    assert (prof.sky_el_deg[seen] != ref.sky_el_deg[seen]).mean() < 0.1
+
+
+def test_wrong_mask_shape_is_rejected(pinhole: CameraModel) -> None:
+    with pytest.raises(ValueError, match="camera image shape"):
+        Rectifier.build(pinhole, Mount.default("left")).profile(np.ones((10, 10), bool), 0.0)
+
+
+@pytest.mark.parametrize(
+    ("camera", "side"),
+    [
+        (CameraModel.pinhole_from_fov(400, 300, VFOV), "right"),
+        (CameraModel.fisheye_from_fov(200, 150, 110.0), "left"),
+        (CameraModel.pinhole_from_fov(64, 48, 10.0), "right"),  # misses most grid columns
+    ],
+)
+def test_profile_equals_the_top_sky_run_of_the_full_rectified_grid(
+    camera: CameraModel, side: str
+) -> None:
+    """The profile walks each column only down to its sky run's end; the whole grid resampled
+    by ``cv2.remap`` (:meth:`Rectifier.rectify`) must give the same run ends."""
+    mount = Mount.default(side)
+    rect = Rectifier.build(camera, mount)
+    rng = np.random.default_rng(3)
+    sky = elevation_sky(camera, mount, 10.0, 25.0 if camera.height_px > 48 else 44.0)
+    sky[rng.random(sky.shape) < 0.002] = False  # specks: runs end at varied rows
+    w = camera.width_px
+    sky[:, int(0.37 * w) : int(0.42 * w)] = False  # a mast from top to bottom
+    prof = rect.profile(sky, heading_deg=10.0)
+    lab = rect.rectify(sky)
+    n_e = lab.shape[0]
+    for j in range(lab.shape[1]):
+        seen = np.flatnonzero(lab[:, j] != 128)
+        if seen.size == 0:
+            assert np.isnan(prof.seen_lo_deg[j]) and np.isinf(prof.sky_el_deg[j])
+            continue
+        top = seen[0]
+        not_sky = np.flatnonzero(lab[top:, j] != 255)
+        end = top + (not_sky[0] if not_sky.size else n_e - top)
+        expected = rect.el_deg[end - 1] if end > top else np.inf
+        assert prof.sky_el_deg[j] == expected
+        assert prof.seen_hi_deg[j] == rect.el_deg[top]
+        assert prof.seen_lo_deg[j] == rect.el_deg[seen[-1]]
+
+
+def test_sky_run_end_by_pixel_runs_matches_a_walk_down_the_grid() -> None:
+    """The top sky run's end, searched run of equal pixels by run (since 2026-12-03): the
+    first grid row at or below ``top`` whose pixel is unseen or not sky, as a row walk."""
+    from predisat.reconstruct.skyline import _index_runs, _top_sky_run_end
+
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        n_e, n_b, n_px = (int(v) for v in rng.integers(1, 40, 3))
+        # columns that read each pixel over a few rows, with unseen (-1) stretches
+        base = rng.integers(-1, n_px, (n_e, n_b))
+        rows = np.sort(rng.integers(0, n_e, (n_e, n_b)), axis=0)
+        pix = np.take_along_axis(base, rows, axis=0).astype(np.int32)
+        top = rng.integers(0, n_e, n_b)
+        grown = np.where(rng.random(n_px) < 0.85, 1, 0).astype(np.uint8)
+        got = _top_sky_run_end(grown, *_index_runs(pix, top), top, n_e, 1)
+        ref = np.empty(n_b, np.int64)
+        for b in range(n_b):
+            r = top[b]
+            while r < n_e and pix[r, b] >= 0 and grown[pix[r, b]] == 1:
+                r += 1
+            ref[b] = r
+        np.testing.assert_array_equal(got, ref)

@@ -1,0 +1,432 @@
+"""Tests of the survey format v1: writer -> loader round trips and every validation error."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from predisat.camera.models import CameraModel, Mount
+from predisat.geodesy import WGS84
+from predisat.survey import MANIFEST_COLUMNS, Survey, SurveyError, SurveyProblem, SurveyWriter
+
+CAM = CameraModel.pinhole_from_fov(32, 24, 74.0, dist=(-0.1, 0.02, 0.0, 0.0), name="tiny")
+CAMERAS = {"left": (CAM, Mount.default("left")), "right": (CAM, Mount("right", -85.0, 40.0))}
+GPS0 = 1_400_000_000.25
+LAT0, LON0 = 50.5, 4.6  # start of a straight northbound test track
+
+
+def _image(i: int) -> np.ndarray:
+    img = np.zeros((24, 32, 3), np.uint8)
+    img[:, :, 0] = 20 * i
+    img[: 4 + i, :, 2] = 200  # a band whose height encodes the frame
+    return img
+
+
+def _write(root: Path, n: int = 3, positions: bool = False, **kwargs: object) -> Path:
+    """n frames per side, 10 m and 1 s apart, by chainage or by GNSS position."""
+    with SurveyWriter(root, CAMERAS, metadata={"description": "unit test"}, **kwargs) as w:  # type: ignore[arg-type]
+        for i in range(n):
+            for side in ("left", "right"):
+                if positions:
+                    lon, lat, _ = WGS84.fwd(LON0, LAT0, 0.0, 100.0 + 10.0 * i)
+                    w.add_frame(_image(i), side, GPS0 + i, lat_deg=lat, lon_deg=lon, h_m=150.0)
+                else:
+                    w.add_frame(_image(i), side, GPS0 + i, chainage_m=100.0 + 10.0 * i)
+    return root
+
+
+def _rows(root: Path) -> list[dict[str, str]]:
+    with open(root / "manifest.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _save_rows(
+    root: Path, rows: list[dict[str, str]], columns: tuple[str, ...] = MANIFEST_COLUMNS
+) -> None:
+    with open(root / "manifest.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(columns), extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _edit_yaml(root: Path, **changes: object) -> None:
+    doc = yaml.safe_load((root / "survey.yaml").read_text())
+    doc.update(changes)
+    (root / "survey.yaml").write_text(yaml.safe_dump(doc))
+
+
+def _problems(root: Path, **kwargs: object) -> tuple[SurveyProblem, ...]:
+    with pytest.raises(SurveyError) as info:
+        Survey.load(root, **kwargs)  # type: ignore[arg-type]
+    assert str(root) in str(info.value)
+    return info.value.problems
+
+
+def _straight_track():  # -> TrackMap
+    track = pytest.importorskip("predisat.track.map")
+    lon, lat, _ = WGS84.fwd(
+        np.full(11, LON0), np.full(11, LAT0), np.zeros(11), np.arange(11) * 100.0
+    )
+    return track.TrackMap.from_latlon(lat, lon, 150.0, name="straight")
+
+
+# ---------------------------------------------------------------------- round trip
+
+
+def test_round_trip_by_chainage(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=4)
+    survey = Survey.load(root)
+    f = survey.frames
+    assert len(f) == 8 and survey.problems == ()
+    assert list(f.side) == ["left", "right"] * 4
+    assert list(f.track_side) == list(f.side)
+    assert np.allclose(f.gps_s, GPS0 + np.repeat(np.arange(4), 2), rtol=0, atol=1e-9)
+    assert np.array_equal(f.chainage_m, 100.0 + 10.0 * np.repeat(np.arange(4), 2))
+    assert np.isnan(f.lat_deg).all() and np.isnan(f.offset_m).all()
+    assert list(f.row) == list(range(2, 10))
+    assert survey.direction_of_travel == "increasing" and not survey.reverse
+    assert survey.antenna_height_m == 4.0
+    assert survey.metadata["description"] == "unit test"
+    assert survey.camera("left").camera == CAM and survey.camera("left").mount == Mount.default(
+        "left"
+    )
+    assert survey.camera("right").mount == Mount("right", -85.0, 40.0)
+    # the images come back (JPEG: approximately); the band height identifies the frame
+    for i in range(4):
+        img = survey.read_image(f"right_{i:06d}")
+        assert img.shape == (24, 32, 3)
+        assert np.abs(img.astype(int) - _image(i)).mean() < 8
+        assert survey.image_path(2 * i + 1) == root / "images" / f"right_{i:06d}.jpg"
+    assert f.to_dataframe().shape == (8, 11)
+    # nothing half-written remains
+    assert not [p for p in root.rglob(".*")]
+
+
+def test_frames_table_is_read_only(tmp_path: Path) -> None:
+    survey = Survey.load(_write(tmp_path / "s", n=2))
+    with pytest.raises(ValueError, match="read-only"):
+        survey.frames.gps_s[0] = 0.0
+    left = survey.frames.subset(survey.frames.side == "left")
+    assert list(left.frame_id) == ["left_000000", "left_000001"]
+    assert survey.frames.index_of("right_000001") == 3
+    with pytest.raises(KeyError, match="nope"):
+        survey.frames.index_of("nope")
+
+
+def test_positions_are_mapped_on_the_track(tmp_path: Path) -> None:
+    track = _straight_track()
+    root = _write(tmp_path / "s", n=3, positions=True)
+    survey = Survey.load(root, track=track)
+    # ground truth from the geodesic construction: 100, 110, 120 m along a straight meridian
+    assert np.allclose(survey.chainage_m, np.repeat([100.0, 110.0, 120.0], 2), atol=0.05)
+    assert np.allclose(survey.frames.offset_m, 0.0, atol=0.05)
+    assert np.allclose(survey.frames.h_m, 150.0)
+    # without a track the chainage is unknown, not invented
+    assert np.isnan(Survey.load(root).chainage_m).all()
+
+
+def test_track_file_named_in_survey_yaml_is_used(tmp_path: Path) -> None:
+    pytest.importorskip("predisat.track.readers")  # the CSV reader (written in parallel)
+    track = _straight_track()
+    csv_path = tmp_path / "track.csv"
+    with open(csv_path, "w") as fh:
+        fh.write("lat_deg,lon_deg,h_m\n")
+        for la, lo in zip(track.lat_deg, track.lon_deg, strict=True):
+            fh.write(f"{float(la)!r},{float(lo)!r},150.0\n")
+    root = _write(
+        tmp_path / "s", n=2, positions=True, track_name="straight", track_path="../track.csv"
+    )
+    survey = Survey.load(root)
+    assert survey.track_name == "straight"
+    assert np.allclose(survey.chainage_m, np.repeat([100.0, 110.0], 2), atol=0.05)
+
+
+def test_reverse_survey_swaps_track_sides(tmp_path: Path) -> None:
+    survey = Survey.load(_write(tmp_path / "s", n=2, direction_of_travel="decreasing"))
+    assert survey.reverse
+    assert list(survey.frames.track_side) == ["right", "left"] * 2
+
+
+def test_writer_keeps_finished_frames_when_the_run_fails(tmp_path: Path) -> None:
+    root = tmp_path / "s"
+    with pytest.raises(RuntimeError, match="boom"), SurveyWriter(root, CAMERAS) as w:
+        w.add_frame(_image(0), "left", GPS0, chainage_m=0.0)
+        raise RuntimeError("boom")
+    assert list(Survey.load(root).frames.frame_id) == ["left_000000"]
+
+
+def test_writer_flushes_periodically(tmp_path: Path) -> None:
+    w = SurveyWriter(tmp_path / "s", CAMERAS, flush_every=2)
+    for i in range(3):
+        w.add_frame(_image(i), "left", GPS0 + i, chainage_m=float(i))
+    assert len(_rows(tmp_path / "s")) == 2  # flushed after the second frame, not yet closed
+    w.close()
+    assert len(_rows(tmp_path / "s")) == 3 and len(w) == 3
+    with pytest.raises(RuntimeError, match="closed"):
+        w.add_frame(_image(0), "left", GPS0 + 9, chainage_m=0.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"image_bgr": np.zeros((10, 10, 3), np.uint8)}, "shape"),
+        ({"image_bgr": np.zeros((24, 32, 3), np.float32)}, "uint8"),
+        ({"side": "top"}, "side"),
+        ({"gps_s": GPS0 - 1}, "after the previous"),
+        ({"chainage_m": None}, "chainage_m or lat_deg"),
+        ({"frame_id": "left_000000"}, "unique"),
+        ({"frame_id": "a/b"}, "letters"),
+    ],
+)
+def test_writer_rejects_bad_frames(tmp_path: Path, kwargs: dict, match: str) -> None:
+    with SurveyWriter(tmp_path / "s", CAMERAS) as w:
+        w.add_frame(_image(0), "left", GPS0, chainage_m=0.0)
+        args = {"image_bgr": _image(1), "side": "left", "gps_s": GPS0 + 1, "chainage_m": 10.0}
+        with pytest.raises(ValueError, match=match):
+            w.add_frame(**{**args, **kwargs})
+
+
+def test_writer_refuses_to_overwrite(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=1)
+    with pytest.raises(FileExistsError, match="overwrite=True"):
+        SurveyWriter(root, CAMERAS)
+    with pytest.raises(ValueError, match="reserved"):
+        SurveyWriter(tmp_path / "t", CAMERAS, metadata={"cameras": 1})
+
+
+# ---------------------------------------------------------------------- per-frame problems
+
+
+def _only(problems: tuple[SurveyProblem, ...], frame_id: str, match: str) -> SurveyProblem:
+    hits = [p for p in problems if p.frame_id == frame_id]
+    assert len(hits) == 1, problems
+    assert match in hits[0].message, hits[0]
+    return hits[0]
+
+
+def test_missing_unreadable_and_wrong_size_images(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=3)
+    (root / "images" / "left_000001.jpg").unlink()
+    (root / "images" / "right_000001.jpg").write_bytes(b"not an image at all")
+    _, buf = cv2.imencode(".png", np.zeros((30, 40, 3), np.uint8))
+    (root / "images" / "left_000002.jpg").write_bytes(buf.tobytes())  # PNG content, 40x30
+    problems = _problems(root)
+    assert len(problems) == 3
+    p = _only(problems, "left_000001", "missing")
+    assert p.row == 4 and "manifest line 4" in str(p) and "left_000001" in str(p)
+    _only(problems, "right_000001", "cannot be read")
+    _only(problems, "left_000002", "40x30 px")
+    # check_images=False trusts the files
+    assert len(Survey.load(root, check_images=False).frames) == 6
+
+
+def test_image_check_reads_headers_only(tmp_path: Path) -> None:
+    from PIL import Image
+
+    root = _write(tmp_path / "s", n=1)
+    path = root / "images" / "left_000000.jpg"
+    data = path.read_bytes()
+    path.write_bytes(data[: data.index(b"\xff\xda") + 16])  # header intact, pixels gone
+    with Image.open(path) as im, pytest.raises(OSError):
+        im.load()  # the image cannot be decoded...
+    assert len(Survey.load(root).frames) == 2  # ...and loading did not try
+
+
+def test_unknown_side_bad_numbers_and_missing_position(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=4)
+    rows = _rows(root)
+    rows[0]["side"] = "roof"
+    rows[1]["gps_s"] = "12:00:01"
+    rows[2]["chainage_m"] = "1O0.0"
+    rows[3]["chainage_m"] = ""
+    rows[4]["gps_s"] = ""
+    rows[5]["lat_deg"] = "50.5"
+    _save_rows(root, rows)
+    problems = _problems(root)
+    _only(problems, "left_000000", "side 'roof' is unknown")
+    _only(problems, "right_000000", "gps_s '12:00:01' is not a finite number")
+    _only(problems, "left_000001", "chainage_m '1O0.0'")
+    _only(problems, "right_000001", "no position")
+    _only(problems, "left_000002", "gps_s is empty")
+    _only(problems, "right_000002", "lat_deg and lon_deg must be given together")
+    assert [p.row for p in problems] == sorted(p.row for p in problems)  # type: ignore[type-var]
+
+
+def test_side_without_camera(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=2)
+    doc = yaml.safe_load((root / "survey.yaml").read_text())
+    del doc["cameras"]["right"]
+    (root / "survey.yaml").write_text(yaml.safe_dump(doc))
+    problems = _problems(root)
+    assert {p.frame_id for p in problems} == {"right_000000", "right_000001"}
+    assert "add cameras.right" in problems[0].message
+
+
+def test_time_going_backwards_per_side(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=4)
+    rows = _rows(root)
+    rows[4]["gps_s"] = repr(GPS0 + 0.5)  # left_000002 earlier than left_000001 (GPS0 + 1)
+    rows[7]["gps_s"] = repr(GPS0 + 2.5)  # right_000003 still after right_000002: fine
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert len(problems) == 1
+    p = _only(problems, "left_000002", "goes back in time on the left side")
+    assert "left_000001" in p.message and p.row == 6
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "match"),
+    [
+        ("frame_id", "left_000000", "duplicate frame_id (first at manifest line 2)"),
+        ("image", "images/left_000000.jpg", "also listed at manifest line 2"),
+        ("gps_s", repr(GPS0), "same side and gps_s as frame 'left_000000'"),
+    ],
+)
+def test_duplicates(tmp_path: Path, column: str, value: str, match: str) -> None:
+    root = _write(tmp_path / "s", n=2)
+    rows = _rows(root)
+    rows[2][column] = value  # the second left frame
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert len(problems) == 1 and problems[0].row == 4 and match in problems[0].message
+
+
+def test_image_paths_must_stay_inside_the_survey(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=2)
+    rows = _rows(root)
+    rows[0]["image"] = "../elsewhere.jpg"
+    rows[1]["image"] = str(root / "images" / "right_000000.jpg")
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert {p.frame_id for p in problems} == {"left_000000", "right_000000"}
+    assert all("relative path" in p.message for p in problems)
+
+
+def test_off_track_positions(tmp_path: Path) -> None:
+    track = _straight_track()
+    root = _write(tmp_path / "s", n=3, positions=True)
+    rows = _rows(root)
+    lon, lat, _ = WGS84.fwd(float(rows[3]["lon_deg"]), float(rows[3]["lat_deg"]), 90.0, 25.0)
+    rows[3]["lat_deg"], rows[3]["lon_deg"] = repr(lat), repr(lon)  # 25 m east of the axis
+    lon, lat, _ = WGS84.fwd(LON0, LAT0, 180.0, 60.0)  # 60 m before the start of the track
+    rows[4]["lat_deg"], rows[4]["lon_deg"] = repr(lat), repr(lon)
+    _save_rows(root, rows)
+    problems = _problems(root, track=track)
+    assert "25.0 m from track 'straight'" in _only(problems, "right_000001", "m from track").message
+    _only(problems, "left_000002", "m from track")
+    assert len(problems) == 2
+    assert len(Survey.load(root, track=track, max_offset_m=100.0).frames) == 6
+
+
+def test_chainage_disagreeing_with_the_position_is_refused(tmp_path: Path) -> None:
+    track = _straight_track()
+    root = _write(tmp_path / "s", n=3, positions=True)  # at 100, 110, 120 m (geodesic)
+    rows = _rows(root)
+    rows[2]["chainage_m"] = "150.0"  # left_000001 lies at 110 m: an odometer typo of 40 m
+    rows[3]["chainage_m"] = "113.0"  # right_000001 at 110 m: 3 m, within the 10 m limit
+    _save_rows(root, rows)
+    problems = _problems(root, track=track)
+    msg = _only(problems, "left_000001", "disagrees").message
+    assert "chainage_m 150.0" in msg and "chainage 110.0 m" in msg
+    assert len(problems) == 1
+    survey = Survey.load(root, track=track, on_error="skip")
+    assert "left_000001" not in list(survey.frames.frame_id)
+    assert survey.chainage_m[list(survey.frames.frame_id).index("right_000001")] == 113.0
+
+
+def test_chainage_outside_the_track(tmp_path: Path) -> None:
+    @dataclass(frozen=True)
+    class StandInTrack:  # anything with length_m and project() will do
+        name: str = "stand-in"
+        length_m: float = 115.0
+
+        def project(self, lat_deg, lon_deg, h_m=None):
+            raise AssertionError("no positions in this survey")
+
+    root = _write(tmp_path / "s", n=3)  # chainages 100, 110, 120
+    problems = _problems(root, track=StandInTrack(length_m=105.0))
+    assert {p.frame_id for p in problems} == {"left_000002", "right_000002"}
+    assert "outside track 'stand-in'" in problems[0].message
+
+
+def test_skip_mode_drops_bad_frames_and_reports_them(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=4)
+    (root / "images" / "right_000002.jpg").unlink()
+    rows = _rows(root)
+    rows[2]["gps_s"] = "soon"
+    _save_rows(root, rows)
+    survey = Survey.load(root, on_error="skip")
+    assert len(survey.frames) == 6
+    assert "left_000001" not in survey.frames.frame_id
+    assert "right_000002" not in survey.frames.frame_id
+    assert {p.frame_id for p in survey.problems} == {"left_000001", "right_000002"}
+    with pytest.raises(ValueError, match="on_error"):
+        Survey.load(root, on_error="ignore")  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------- survey-level problems
+
+
+def test_missing_columns_are_fatal_even_when_skipping(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=1)
+    _save_rows(root, _rows(root), columns=("frame_id", "image", "side"))
+    with pytest.raises(SurveyError, match=r"missing column\(s\) \['gps_s', 'chainage_m") as info:
+        Survey.load(root, on_error="skip")
+    assert info.value.problems[0].frame_id is None
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"version": 2}, "version 2 is not supported"),
+        ({"format": "something-else"}, "format must be 'predisat-survey'"),
+        ({"direction_of_travel": "north"}, "direction_of_travel"),
+        ({"antenna_height_m": "tall"}, "antenna_height_m"),
+        ({"cameras": {"roof": {"calibration": "calib/left.yaml"}}}, "camera side 'roof'"),
+        ({"cameras": {"left": {"calibration": "calib/nope.yaml"}}}, "nope.yaml"),
+        ({"cameras": {"left": {"calibration": "calib/left.yaml", "mount": {"tilt": 1}}}}, "tilt"),
+    ],
+)
+def test_bad_survey_yaml(tmp_path: Path, changes: dict, match: str) -> None:
+    root = _write(tmp_path / "s", n=1)
+    _edit_yaml(root, **changes)
+    with pytest.raises(SurveyError, match=match):
+        Survey.load(root, on_error="skip")
+
+
+def test_unsupported_calibration_in_survey(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=1)
+    (root / "calib" / "left.yaml").write_text(
+        "model_type: MEI\nimage_width: 32\nimage_height: 24\n"
+    )
+    with pytest.raises(SurveyError, match=r"cameras\.left\.calibration: .*left\.yaml.*MEI"):
+        Survey.load(root)
+
+
+def test_missing_files(tmp_path: Path) -> None:
+    with pytest.raises(SurveyError, match="not a folder"):
+        Survey.load(tmp_path / "nowhere")
+    root = _write(tmp_path / "s", n=1)
+    (root / "manifest.csv").unlink()
+    with pytest.raises(SurveyError, match=r"manifest\.csv is missing"):
+        Survey.load(root / "survey.yaml")  # the yaml path is accepted too
+    (root / "survey.yaml").unlink()
+    with pytest.raises(SurveyError, match=r"survey\.yaml is missing"):
+        Survey.load(root)
+
+
+def test_error_message_lists_every_problem(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=3)
+    for p in (root / "images").iterdir():
+        p.unlink()
+    with pytest.raises(SurveyError) as info:
+        Survey.load(root)
+    text = str(info.value)
+    assert "6 problem(s)" in text
+    assert all(f"{side}_00000{i}" in text for side in ("left", "right") for i in range(3))

@@ -1,0 +1,508 @@
+"""Tests for predisat.track.map and predisat.track.readers (and, through them, trackfit and
+trackchain).
+
+Ground truth comes from pyproj (geodesic lengths, azimuths, forward problems, an azimuthal
+equidistant projection) and from analytic geometry, never from the code under test.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+from pyproj import Geod, Transformer
+
+from predisat.track.map import TrackMap, TrackMapError, demo_track
+from predisat.track.readers import kilometre_posts_from_sections, write_geojson
+
+GEOD = Geod(ellps="WGS84")
+RIVIERA = "track/riviera_andora_alassio.geojson"
+MAIN = {"usage": "main", "service": None}
+
+
+@pytest.fixture(scope="module")
+def demo() -> TrackMap:
+    return demo_track()
+
+
+def wrap180(x):
+    return (np.asarray(x) + 180.0) % 360.0 - 180.0
+
+
+def arc_latlon(radius_m, sweep_deg, step_m, clockwise=True, centre=(50.5, 4.7), az0=0.0):
+    """Vertices of a circular arc on the ellipsoid, built with pyproj's forward problem."""
+    n = int(np.ceil(np.radians(sweep_deg) * radius_m / step_m)) + 1
+    az = az0 + np.linspace(0.0, sweep_deg, n) * (1 if clockwise else -1)
+    lon, lat, _ = GEOD.fwd(np.full(n, centre[1]), np.full(n, centre[0]), az, np.full(n, radius_m))
+    return np.asarray(lat), np.asarray(lon)
+
+
+def straight_latlon(length_m, az_deg, step_m, start=(50.5, 4.7)):
+    """A geodesic polyline from pyproj's inverse-problem intermediate points."""
+    n = int(length_m // step_m)
+    lon1, lat1, _ = GEOD.fwd(start[1], start[0], az_deg, length_m)
+    pts = GEOD.npts(start[1], start[0], lon1, lat1, n - 1)
+    lon = np.array([start[1]] + [p[0] for p in pts] + [lon1])
+    lat = np.array([start[0]] + [p[1] for p in pts] + [lat1])
+    return lat, lon
+
+
+def feature_collection(features):
+    return {"type": "FeatureCollection", "features": features}
+
+
+def line_feature(coords, **props):
+    return {"type": "Feature", "properties": props,
+            "geometry": {"type": "LineString", "coordinates": coords}}
+
+
+# ---------------------------------------------------------------------- demo line 144
+
+
+def test_demo_length_matches_geodesic_length(demo):
+    geodesic = GEOD.line_length(demo.lon_deg, demo.lat_deg)
+    assert 14_000 < geodesic < 14_300
+    assert abs(demo.length_m - geodesic) / geodesic < 1e-4  # 0.01 %
+
+
+def test_demo_metadata(demo):
+    assert "Infrabel" in demo.attribution
+    assert demo.tolerance_m == 1.0
+    posts = demo.kilometre_posts
+    assert len(posts) >= 14
+    s = np.array([p.chainage_m for p in posts])
+    km = np.array([p.km_m for p in posts])
+    assert np.all(np.diff(s) > 0) and np.all(np.diff(km) > 0)
+    assert any(p.label == "JEMEPPE-FR.M" and p.km_m == 12850 for p in posts)
+    np.testing.assert_allclose(demo.kilometre_at(s), km, atol=1e-9)
+    # Kilometre references are nominal: within 2 % of a metre of track per metre on section
+    # 180, 15 % on the short section 595 (Infrabel's own figures).
+    assert np.all(np.abs(np.diff(km) / np.diff(s) - 1.0) < 0.2)
+
+
+def test_demo_projection_round_trip_within_1_mm(demo):
+    s = np.linspace(0.0, demo.length_m, 3001)
+    lat, lon, h = demo.position_at(s)
+    pr = demo.project(lat, lon, h)
+    assert np.max(np.abs(pr.chainage_m - s)) < 1e-3
+    assert np.max(np.abs(pr.offset_m)) < 1e-3
+    assert not np.any(pr.clamped[1:-1])
+
+
+def test_demo_smooth_fit_stays_within_source_tolerance(demo):
+    """Hausdorff distance in an independent azimuthal equidistant projection (pyproj)."""
+    lat_c, lon_c = np.mean(demo.lat_deg), np.mean(demo.lon_deg)
+    aeqd = Transformer.from_crs(
+        "EPSG:4326", f"+proj=aeqd +lat_0={lat_c} +lon_0={lon_c} +ellps=WGS84", always_xy=True
+    )
+    px, py = aeqd.transform(demo.lon_deg, demo.lat_deg)
+    poly = shapely.LineString(np.column_stack([px, py]))
+    s = np.linspace(0.0, demo.length_m, int(demo.length_m / 2.0) + 1)
+    lat, lon, _ = demo.position_at(s)
+    cx, cy = aeqd.transform(lon, lat)
+    curve = shapely.LineString(np.column_stack([cx, cy]))
+    d_curve = shapely.distance(shapely.points(cx, cy), poly)
+    dense = shapely.segmentize(poly, 2.0)
+    d_poly = shapely.distance(shapely.points(shapely.get_coordinates(dense)), curve)
+    worst = max(d_curve.max(), d_poly.max())
+    assert worst <= 1.0 + 0.02
+    assert demo.max_deviation_m == pytest.approx(worst, abs=0.02)
+
+
+def test_demo_heading_matches_geodesic_azimuth_of_short_chords(demo):
+    s = np.linspace(1.0, demo.length_m - 1.0, 500)
+    lat0, lon0, _ = demo.position_at(s - 0.5)
+    lat1, lon1, _ = demo.position_at(s + 0.5)
+    az, _, _ = GEOD.inv(lon0, lat0, lon1, lat1)
+    err = wrap180(demo.heading_at(s) - az)
+    assert np.max(np.abs(err)) < 0.005
+
+
+def test_demo_heading_removes_polyline_kinks(demo):
+    """At a source vertex, an arc through its neighbours has a known tangent; the smooth
+    heading follows it while the polyline itself is off by half a kink (~1.5-2 deg)."""
+    lon, lat = demo.lon_deg, demo.lat_deg
+    az, _, dist = GEOD.inv(lon[:-1], lat[:-1], lon[1:], lat[1:])
+    turn = wrap180(np.diff(az))
+    tangent = az[:-1] + turn * dist[:-1] / (dist[:-1] + dist[1:])
+    ok = (dist[:-1] < 120) & (dist[1:] < 120) & (np.abs(turn) > 1.0)  # curved stretches
+    assert ok.sum() > 50
+    pr = demo.project(lat[1:-1][ok], lon[1:-1][ok])
+    err = wrap180(demo.heading_at(pr.chainage_m) - tangent[ok])
+    assert np.sqrt(np.mean(err**2)) < 0.25
+    assert np.max(np.abs(err)) < 1.0
+    # The smooth curvature never shows a kink: bounded by a 300 m radius on this line.
+    k = demo.curvature_at(np.arange(0.0, demo.length_m, 2.0))
+    assert np.max(np.abs(k)) < 1 / 300.0
+
+
+def test_offset_of_points_displaced_sideways(demo):
+    s = np.linspace(50.0, demo.length_m - 50.0, 200)
+    lat, lon, _ = demo.position_at(s)
+    hdg = demo.heading_at(s)
+    off = np.where(np.arange(s.size) % 2 == 0, 4.0, -7.5)
+    lon1, lat1, _ = GEOD.fwd(lon, lat, hdg - 90.0, np.full(s.size, 1.0) * off)
+    pr = demo.project(lat1, lon1)
+    np.testing.assert_allclose(pr.offset_m, off, atol=5e-3)
+    np.testing.assert_allclose(pr.chainage_m, s, atol=0.02)
+
+
+def test_projection_beyond_the_ends_is_clamped_and_flagged(demo):
+    lat, lon, _ = demo.position_at(np.array([0.0, demo.length_m]))
+    hdg = demo.heading_at(np.array([0.0, demo.length_m]))
+    lon1, lat1, _ = GEOD.fwd(lon, lat, hdg + np.array([180.0, 0.0]), [100.0, 60.0])
+    pr = demo.project(lat1, lon1)
+    np.testing.assert_array_equal(pr.clamped, [True, True])
+    np.testing.assert_allclose(pr.chainage_m, [0.0, demo.length_m])
+    np.testing.assert_allclose(pr.along_m, [100.0, 60.0], atol=0.05)
+
+
+def test_shapes_are_vectorised(demo):
+    s = np.array([[10.0, 20.0, 30.0], [1000.0, 2000.0, 3000.0]])
+    lat, lon, h = demo.position_at(s)
+    assert lat.shape == lon.shape == h.shape == (2, 3)
+    assert demo.enu_at(s).shape == (2, 3, 3)
+    assert demo.ecef_at(s).shape == (2, 3, 3)
+    assert demo.heading_at(s).shape == (2, 3)
+    assert demo.curvature_at(s).shape == (2, 3)
+    pr = demo.project(lat, lon)
+    assert pr.chainage_m.shape == (2, 3)
+    np.testing.assert_allclose(pr.chainage_m, s, atol=1e-3)
+    np.testing.assert_allclose(demo.enu_at(0.0), [0.0, 0.0, 0.0], atol=1.0)  # origin vertex
+
+
+# ---------------------------------------------------------------------- analytic shapes
+
+
+@pytest.mark.parametrize("clockwise", [True, False])
+def test_curvature_of_a_circular_arc(clockwise):
+    radius = 600.0
+    lat, lon = arc_latlon(radius, 60.0, 5.0, clockwise=clockwise)
+    tm = TrackMap.from_latlon(lat, lon)
+    # Away from the free ends, where the fit's curvature relaxes to zero over ~100 m.
+    s = np.linspace(0.3, 0.7, 20) * tm.length_m
+    k = tm.curvature_at(s)
+    expected = (-1.0 if clockwise else 1.0) / radius  # a clockwise arc turns right
+    np.testing.assert_allclose(k, expected, rtol=0.01)
+    assert tm.length_m == pytest.approx(np.radians(60.0) * radius, rel=2e-4)
+
+
+def test_heading_and_length_of_a_long_straight():
+    lat, lon = straight_latlon(5000.0, 37.0, 250.0)
+    tm = TrackMap.from_latlon(lat, lon, name="straight")
+    assert tm.length_m == pytest.approx(5000.0, abs=0.01)
+    s = np.linspace(0.0, 5000.0, 11)
+    plat, plon, _ = tm.position_at(s)
+    az_fwd, _, _ = GEOD.inv(plon[:-1], plat[:-1], plon[1:], plat[1:])
+    np.testing.assert_allclose(wrap180(tm.heading_at(s[:-1]) - az_fwd), 0.0, atol=1e-3)
+    np.testing.assert_allclose(tm.curvature_at(s), 0.0, atol=1e-6)
+
+
+def test_heights_follow_the_ellipsoid_not_the_tangent_plane():
+    lat, lon = straight_latlon(12000.0, 90.0, 500.0)
+    tm = TrackMap.from_latlon(lat, lon, 100.0)
+    _, _, h = tm.position_at(np.linspace(0.0, tm.length_m, 25))
+    np.testing.assert_allclose(h, 100.0, atol=0.02)
+    assert tm.enu_at(tm.length_m)[2] < -10.0  # the frame's up drops ~11 m over 12 km
+
+
+def test_grade_of_a_climbing_track():
+    lat, lon = straight_latlon(3000.0, 10.0, 100.0)
+    h = np.linspace(0.0, 30.0, lat.size)  # 1 %
+    tm = TrackMap.from_latlon(lat, lon, h)
+    np.testing.assert_allclose(tm.grade_at(np.linspace(100, 2900, 10)), 0.01, atol=2e-4)
+
+
+# ---------------------------------------------------------------------- GeoJSON reading
+
+
+def test_geojson_chains_shuffled_and_reversed_parts(tmp_path):
+    lat, lon = arc_latlon(800.0, 90.0, 20.0, az0=200.0)
+    coords = np.column_stack([lon, lat]).tolist()
+    parts = [coords[:20], coords[19:45], coords[44:]]
+    multi = [parts[2][::-1], parts[0], parts[1][::-1]]  # shuffled, two reversed
+    doc = feature_collection([{"type": "Feature", "properties": {"trackname": "A"},
+                               "geometry": {"type": "MultiLineString", "coordinates": multi}}])
+    path = tmp_path / "t.geojson"
+    path.write_text(json.dumps(doc))
+    tm = TrackMap.from_geojson(path)
+    assert tm.lat_deg.size == lat.size
+    geodesic = GEOD.line_length(lon, lat)
+    assert tm.length_m == pytest.approx(geodesic, rel=1e-4)
+    # Chainage follows the file's first part (reversed there: it starts at the arc's end).
+    np.testing.assert_allclose([tm.lat_deg[0], tm.lon_deg[0]], [lat[-1], lon[-1]])
+    rev = TrackMap.from_geojson(path, reverse=True)
+    np.testing.assert_allclose([rev.lat_deg[0], rev.lon_deg[0]], [lat[0], lon[0]])
+
+
+def test_geojson_selects_a_named_track_and_reads_kilometre_posts(tmp_path):
+    lat, lon = straight_latlon(2000.0, 0.0, 100.0)
+    lat_b, lon_b = straight_latlon(2000.0, 0.0, 100.0, start=(50.5, 4.71))
+    plon, plat, _ = GEOD.fwd([4.7, 4.7], [50.5, 50.5], [0.0, 0.0], [500.0, 1500.0])
+    pts = [{"type": "Feature", "properties": {"km_m": km, "label": f"P{km}"},
+            "geometry": {"type": "Point", "coordinates": [x, y]}}
+           for km, x, y in zip([7000.0, 6000.0], plon, plat, strict=True)]
+    doc = feature_collection([
+        line_feature(np.column_stack([lon, lat]).tolist(), trackname="A"),
+        line_feature(np.column_stack([lon_b, lat_b]).tolist(), trackname="B"),
+        *pts,
+    ])
+    path = tmp_path / "two.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"several tracks .*A, B.*track="):
+        TrackMap.from_geojson(path)
+    with pytest.raises(TrackMapError, match=r"no line feature matches track='C'.*trackname=A"):
+        TrackMap.from_geojson(path, track="C")
+    tm = TrackMap.from_geojson(path, track="A")
+    # Kilometre posts decrease northward, so chainage is turned to run southward.
+    assert tm.lat_deg[0] > tm.lat_deg[-1]
+    s = [p.chainage_m for p in tm.kilometre_posts]
+    np.testing.assert_allclose(s, [500.0, 1500.0], atol=1e-3)
+    assert [p.label for p in tm.kilometre_posts] == ["P6000.0", "P7000.0"]
+    assert tm.kilometre_at(1000.0) == pytest.approx(6500.0)
+
+
+def test_geojson_track_number_never_picks_another_lines_feature(tmp_path):
+    # Infrabel's network file: feature id 144 belongs to line 39, line 144 is "L 144_1"
+    lat, lon = straight_latlon(2000.0, 0.0, 100.0)
+    lat_b, lon_b = straight_latlon(1500.0, 0.0, 100.0, start=(50.5, 4.71))
+    doc = feature_collection([
+        line_feature(np.column_stack([lon, lat]).tolist(), trackcode="L 144_1", id=7),
+        line_feature(np.column_stack([lon_b, lat_b]).tolist(), trackcode="L 39_3", id=144),
+    ])
+    path = tmp_path / "net.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"track='144' matches only the id .*L 39_3.*where="):
+        TrackMap.from_geojson(path, track="144")
+    assert TrackMap.from_geojson(path, track="L 144_1").length_m == pytest.approx(2000.0, 1e-3)
+    by_id = TrackMap.from_geojson(path, where={"id": 144})
+    assert by_id.length_m == pytest.approx(1500.0, rel=1e-3)
+    # a feature with no name at all may still be selected by its number
+    bare = feature_collection([line_feature(np.column_stack([lon, lat]).tolist(), id=5)])
+    path.write_text(json.dumps(bare))
+    assert TrackMap.from_geojson(path, track="5").length_m == pytest.approx(2000.0, rel=1e-3)
+
+
+def test_geojson_heights_from_coordinates(tmp_path):
+    lat, lon = straight_latlon(1000.0, 45.0, 50.0)
+    h = np.linspace(80.0, 90.0, lat.size)
+    path = tmp_path / "h.geojson"
+    path.write_text(json.dumps(line_feature(np.column_stack([lon, lat, h]).tolist())))
+    tm = TrackMap.from_geojson(path)
+    _, _, hh = tm.position_at([0.0, tm.length_m / 2, tm.length_m])
+    np.testing.assert_allclose(hh, [80.0, 85.0, 90.0], atol=0.05)
+
+
+def test_write_geojson_round_trip(demo, tmp_path):
+    path = tmp_path / "rt.geojson"
+    write_geojson(demo, path)
+    back = TrackMap.from_geojson(path)
+    assert back.length_m == pytest.approx(demo.length_m, abs=1e-6)
+    assert back.attribution == demo.attribution and back.name == demo.name
+    np.testing.assert_allclose([p.chainage_m for p in back.kilometre_posts],
+                               [p.chainage_m for p in demo.kilometre_posts], atol=1e-4)
+
+
+# ---------------------------------------------------------------------- OpenStreetMap excerpt
+
+
+def osm_ways(test_data: Path):
+    doc = json.loads((test_data / RIVIERA).read_text())
+    return [f for f in doc["features"] if f["geometry"]["type"] == "LineString"]
+
+
+def test_riviera_excerpt_needs_a_network_chain(test_data):
+    with pytest.raises(TrackMapError, match=r"cannot chain feature .* m from the end of"):
+        TrackMap.from_geojson(test_data / RIVIERA, where=MAIN)
+
+
+def test_riviera_longest_chain_length_and_tunnels(test_data):
+    tm = TrackMap.from_geojson(test_data / RIVIERA, where=MAIN, chain="longest")
+    assert "OpenStreetMap" in tm.attribution
+    ways = [w for w in osm_ways(test_data)
+            if w["properties"].get("usage") == "main" and "service" not in w["properties"]]
+    # Ways lying on the chain (all their vertices within 1.5 m of the axis) make up its length.
+    on_chain, in_tunnel = 0.0, 0.0
+    for w in ways:
+        c = np.array(w["geometry"]["coordinates"])
+        pr = tm.project(c[:, 1], c[:, 0])
+        if np.all(np.abs(pr.offset_m) < 1.5) and np.all(pr.along_m < 1.5):
+            length = GEOD.line_length(c[:, 0], c[:, 1])
+            on_chain += length
+            if w["properties"].get("tunnel", "no") != "no":
+                in_tunnel += length
+    assert on_chain > 7000.0
+    assert tm.length_m == pytest.approx(on_chain, rel=5e-4)
+    assert tm.length_m == pytest.approx(GEOD.line_length(tm.lon_deg, tm.lat_deg), rel=5e-4)
+    tunnels = np.array(tm.tunnels_m)
+    assert in_tunnel > 500.0
+    assert np.sum(tunnels[:, 1] - tunnels[:, 0]) == pytest.approx(in_tunnel, rel=0.01)
+    assert tm.in_tunnel(tunnels.mean(axis=1)).all()
+
+
+def test_riviera_smooth_fit_within_tolerance(test_data):
+    tm = TrackMap.from_geojson(test_data / RIVIERA, where=MAIN, chain="longest")
+    assert tm.max_deviation_m <= 1.0 + 0.05
+
+
+# ---------------------------------------------------------------------- bad input
+
+
+def write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_bad_files_give_clear_errors(tmp_path):
+    with pytest.raises(TrackMapError, match=r"empty\.geojson: the file is empty"):
+        TrackMap.from_geojson(write(tmp_path, "empty.geojson", "  \n"))
+    with pytest.raises(TrackMapError, match=r"not valid JSON .* line 1"):
+        TrackMap.from_geojson(write(tmp_path, "bad.geojson", '{"type": "Feature"'))
+    with pytest.raises(TrackMapError, match="no such file"):
+        TrackMap.from_geojson(tmp_path / "missing.geojson")
+    point = {"type": "Feature", "properties": {},
+             "geometry": {"type": "Point", "coordinates": [4.7, 50.5]}}
+    with pytest.raises(TrackMapError, match="no LineString or MultiLineString"):
+        TrackMap.from_geojson(
+            write(tmp_path, "pt.geojson", json.dumps(feature_collection([point])))
+        )
+
+
+def test_swapped_coordinates_are_detected(tmp_path):
+    lat, lon = straight_latlon(1000.0, 0.0, 100.0, start=(30.0, 120.0))
+    path = write(tmp_path, "swap.geojson",
+                 json.dumps(line_feature(np.column_stack([lat, lon]).tolist(), name="x")))
+    with pytest.raises(TrackMapError, match=r"feature 0 \(name=x\).*\[lon, lat\].*swap"):
+        TrackMap.from_geojson(path)
+    # In Belgium swapped values are still valid numbers: the expected bbox catches them.
+    lat, lon = straight_latlon(1000.0, 0.0, 100.0)
+    path = write(tmp_path, "swap2.geojson",
+                 json.dumps(line_feature(np.column_stack([lat, lon]).tolist())))
+    with pytest.raises(TrackMapError, match=r"outside the expected bbox.*swapped.*\[lon, lat\]"):
+        TrackMap.from_geojson(path, expected_bbox=(2.5, 49.4, 6.5, 51.6))
+
+
+def test_coordinates_given_as_strings_are_refused(tmp_path):
+    lat, lon = straight_latlon(1000.0, 0.0, 100.0)
+    coords = [[lo, la] for lo, la in zip(lon, lat, strict=True)]
+    coords[3] = [str(coords[3][0]), str(coords[3][1])]  # one vertex quoted by an exporter
+    path = write(tmp_path, "str.geojson", json.dumps(line_feature(coords, name="x")))
+    with pytest.raises(TrackMapError, match=r"feature 0 \(name=x\) has malformed .*not strings"):
+        TrackMap.from_geojson(path)
+
+
+def test_a_line_of_one_vertex_is_named(tmp_path):
+    path = write(tmp_path, "one.geojson", json.dumps(line_feature([[4.0, 50.0]], name="x")))
+    with pytest.raises(TrackMapError, match=r"feature 0 \(name=x\) has a single vertex"):
+        TrackMap.from_geojson(path)
+
+
+def test_self_crossing_chain_is_rejected(tmp_path):
+    # North 1 km, east 500 m, then back south-west across the first leg.
+    lon, lat = [4.7], [50.5]
+    for az, dist in [(0.0, 1000.0), (90.0, 500.0), (225.0, 1000.0)]:
+        x, y, _ = GEOD.fwd(lon[-1], lat[-1], az, dist)
+        lon.append(x)
+        lat.append(y)
+    coords = np.column_stack([lon, lat]).tolist()
+    path = write(tmp_path, "eight.geojson", json.dumps(line_feature(coords)))
+    with pytest.raises(TrackMapError, match=r"eight\.geojson: .*crosses itself .* near lat"):
+        TrackMap.from_geojson(path)
+
+
+def test_gap_between_parts_is_named(tmp_path):
+    lat, lon = straight_latlon(2000.0, 0.0, 100.0)
+    c = np.column_stack([lon, lat]).tolist()
+    doc = feature_collection([line_feature(c[:8], ref="p1"), line_feature(c[9:], ref="p2")])
+    path = write(tmp_path, "gap.geojson", json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"cannot chain feature \d \(ref=p\d\).* 200\.0 m from"):
+        TrackMap.from_geojson(path)
+    tm = TrackMap.from_geojson(path, max_gap_m=250.0)
+    assert tm.length_m == pytest.approx(2000.0, abs=0.1)
+
+
+def test_from_latlon_guards():
+    with pytest.raises(TrackMapError, match="fewer than 2 distinct"):
+        TrackMap.from_latlon([50.0, 50.0], [4.0, 4.0])
+    with pytest.raises(TrackMapError, match=r"latitude 120.*swapped"):
+        TrackMap.from_latlon([50.0, 120.0], [4.0, 4.1])
+    with pytest.raises(TrackMapError, match="NaN"):
+        TrackMap.from_latlon([50.0, np.nan], [4.0, 4.1])
+
+
+# ---------------------------------------------------------------------- CSV
+
+
+def test_csv_round_trip_and_errors(tmp_path):
+    lat, lon = arc_latlon(1000.0, 30.0, 25.0)
+    h = np.full(lat.size, 120.0)
+    rows = "\n".join(f"{a:.9f},{o:.9f},{z:.2f}" for a, o, z in zip(lat, lon, h, strict=True))
+    path = write(tmp_path, "t.csv", "# track\nlatitude,longitude,h_m\n" + rows + "\n")
+    tm = TrackMap.from_csv(path)
+    # Analytic arc length; the fit's free ends relax the curvature and cut ~0.1 m.
+    assert tm.length_m == pytest.approx(np.radians(30.0) * 1000.0, rel=3e-4)
+    np.testing.assert_allclose(tm.position_at(100.0)[2], 120.0, atol=0.01)
+    with pytest.raises(TrackMapError, match="lacks a latitude and a longitude"):
+        TrackMap.from_csv(write(tmp_path, "c.csv", "x,y\n1,2\n3,4\n"))
+    swapped = "\n".join(f"{o:.9f},{a:.9f}" for a, o in zip(lat, lon + 100, strict=True))
+    with pytest.raises(TrackMapError, match=r"line 2 .*swapped"):
+        TrackMap.from_csv(write(tmp_path, "s.csv", "lat,lon\n" + swapped))
+    with pytest.raises(TrackMapError, match=r"line 3 .* not numeric"):
+        TrackMap.from_csv(write(tmp_path, "n.csv", "lat,lon\n50,4\nfifty,4.1\n"))
+    with pytest.raises(TrackMapError, match="empty"):
+        TrackMap.from_csv(write(tmp_path, "e.csv", ""))
+
+
+# ---------------------------------------------------------------------- real files (shared)
+
+
+@pytest.mark.shared
+def test_infrabel_track_a_matches_the_packaged_demo(shared_data, demo):
+    folder = shared_data / "railway" / "infrabel"
+    tm = TrackMap.from_geojson(folder / "line144_tracks_simpl1m.geojson", track="L 144_1")
+    assert tm.length_m == pytest.approx(demo.length_m, abs=1e-6)
+    posts = kilometre_posts_from_sections(tm, folder / "line144_line_sections.geojson")
+    np.testing.assert_allclose([p.chainage_m for p in posts],
+                               [p.chainage_m for p in demo.kilometre_posts], atol=1e-3)
+    # The section boundary point (km 12.850) is the first vertex of section 595.
+    doc = json.loads((folder / "line144_line_sections.geojson").read_text())
+    sec = next(f for f in doc["features"] if f["properties"]["mfrom"] == 12850)
+    lon0, lat0 = sec["geometry"]["coordinates"][0]
+    pr = tm.project(lat0, lon0)
+    post = next(p for p in posts if p.km_m == 12850)
+    assert float(pr.chainage_m) == pytest.approx(post.chainage_m, abs=0.5)
+    with pytest.raises(TrackMapError, match="several tracks"):
+        TrackMap.from_geojson(folder / "line144_tracks_simpl1m.geojson")
+
+
+@pytest.mark.shared
+def test_full_riviera_file(shared_data):
+    tm = TrackMap.from_geojson(shared_data / "railway" / "osm" / "Ventimiglia_Albenga.geojson",
+                               where=MAIN, chain="longest")
+    geodesic = GEOD.line_length(tm.lon_deg, tm.lat_deg)
+    assert tm.length_m > 50_000
+    assert tm.length_m == pytest.approx(geodesic, rel=1e-4)
+    assert len(tm.tunnels_m) >= 10
+    assert tm.max_deviation_m <= 1.05
+
+
+def test_swapped_coordinates_caught_by_the_declared_length(tmp_path):
+    # In Belgium a [lat, lon] file is still valid numbers; its declared track length (as
+    # Infrabel publishes) is what the [lon, lat] reading fails to match.
+    from importlib import resources
+
+    from predisat.track.map import DEMO_TRACK_FILE
+
+    doc = json.loads((resources.files("predisat") / "data" / DEMO_TRACK_FILE).read_text())
+    lines = [f for f in doc["features"] if f["geometry"]["type"] == "LineString"]
+    assert lines and any(k in lines[0]["properties"] for k in ("length", "length_m"))
+    for f in lines:
+        f["geometry"]["coordinates"] = [[c[1], c[0]] for c in f["geometry"]["coordinates"]]
+    path = tmp_path / "swapped.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"declares a length.*swapped.*\[lon, lat\]"):
+        TrackMap.from_geojson(path)
