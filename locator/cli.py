@@ -51,8 +51,7 @@ def _masks(args: argparse.Namespace) -> Any:
 def _config(args: argparse.Namespace) -> Any:
     from locator.fde import LocatorConfig
     from locator.run import RunConfig
-    from locator.runio import read_error_model
-    from predisat.availability.interval import IntervalModel
+    from predisat.gnss.errormodel import IntervalModel, read_error_model
 
     model = read_error_model(args.error_model) if args.error_model else IntervalModel()
     if args.k_sigma is not None:

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from locator.observations import Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
-from predisat.availability.interval import ErrorModel
+from predisat.gnss.errormodel import ErrorModel
 
 __all__ = ["binned_sigma", "calibration_figure", "sim_residuals", "static_residuals"]
 

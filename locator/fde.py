@@ -38,7 +38,8 @@ from numpy.typing import ArrayLike, NDArray
 from locator.intervals import along_track_g, plan_pairs, union_interval
 from locator.sathia import AntennaPath, PairSolution, PairStatus, solve_pairs
 from locator.wls import WlsSolution, solve_wls
-from predisat.availability.interval import IntervalMode, IntervalModel
+from predisat.availability.interval import IntervalMode
+from predisat.gnss.errormodel import IntervalModel
 
 __all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
 

@@ -35,7 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from locator.sathia import AntennaPath, PairSolution
 from predisat.availability import interval as _interval
-from predisat.availability.interval import ErrorModel, IntervalMode, interval_mode
+from predisat.availability.interval import IntervalMode, interval_mode
+from predisat.gnss.errormodel import ErrorModel
 
 __all__ = [
     "PAIR_SCHEMES",

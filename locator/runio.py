@@ -11,8 +11,8 @@ A run folder (``locator run --out DIR``) holds::
 ``locator evaluate`` adds ``scored.parquet|csv`` (truth, error, HMI columns),
 ``evaluation.json`` and redraws the figures relative to the truth.
 
-An error-model file (``locator calibrate --out FILE.json``) is a JSON object with ``format``,
-``a_m``, ``b_m``, ``min_el_deg``, ``k_sigma`` and how it was fitted.
+Error-model files (``locator calibrate --out FILE.json``) are read and written by
+:mod:`predisat.gnss.errormodel`.
 """
 
 from __future__ import annotations
@@ -29,21 +29,16 @@ from locator import plots
 from locator.sim.simfile import json_default, read_folder_table
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
-from predisat.availability.interval import ErrorModel, IntervalModel
 
 __all__ = [
-    "ERROR_MODEL_FORMAT",
     "RUN_FORMAT",
     "RunFileError",
-    "read_error_model",
     "read_run",
-    "write_error_model",
     "write_figures",
     "write_run",
 ]
 
 RUN_FORMAT = "locator-run/1"
-ERROR_MODEL_FORMAT = "locator-error-model/1"
 FORMATS = ("parquet", "csv")
 
 
@@ -148,48 +143,3 @@ def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> 
     return paths
 
 
-def write_error_model(
-    path: str | Path, model: IntervalModel, fitted: Mapping[str, Any] | None = None
-) -> Path:
-    """Write an error-model JSON file."""
-    e = model.error
-    data = {
-        "format": ERROR_MODEL_FORMAT,
-        "a_m": e.a_m,
-        "b_m": e.b_m,
-        "min_el_deg": e.min_el_deg,
-        "k_sigma": model.k_sigma,
-        "fitted": dict(fitted or {}),
-        "software_version": __version__,
-    }
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    _write_json(p, data)
-    return p
-
-
-def read_error_model(path: str | Path) -> IntervalModel:
-    """Read an error-model JSON file (:func:`write_error_model`)."""
-    p = Path(path)
-    try:
-        d = json.loads(p.read_text())
-    except FileNotFoundError as exc:
-        raise RunFileError(f"{p}: no such file; make one with `locator calibrate`") from exc
-    except IsADirectoryError as exc:
-        raise RunFileError(
-            f"{p}: is a folder; give the JSON file `locator calibrate` wrote"
-        ) from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise RunFileError(
-            f"{p}: not a JSON text file ({exc}); give the file `locator calibrate` wrote"
-        ) from exc
-    if not isinstance(d, dict) or d.get("format") != ERROR_MODEL_FORMAT:
-        raise RunFileError(
-            f"{p}: not an error-model file ({ERROR_MODEL_FORMAT}); "
-            "make one with `locator calibrate`"
-        )
-    try:
-        err = ErrorModel(float(d["a_m"]), float(d["b_m"]), float(d.get("min_el_deg", 1.0)))
-        return IntervalModel(err, float(d.get("k_sigma", 2.0)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise RunFileError(f"{p}: bad error model ({exc}); expected a_m, b_m, k_sigma") from exc

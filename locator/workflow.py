@@ -25,8 +25,8 @@ from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from locator.sim.simulate import simulate_run
 from locator.sources import EpochSource, SimSource
-from predisat.availability.interval import IntervalModel
 from predisat.availability.trainrun import SpeedProfile
+from predisat.gnss.errormodel import IntervalModel
 from predisat.masks.maskset import MaskSet
 
 __all__ = [
@@ -236,7 +236,7 @@ def calibrate_to_file(
     """
     from locator.errorfit import binned_sigma, calibration_figure
     from locator.intervals import fit_error_model, overbound_error_model
-    from locator.runio import write_error_model
+    from predisat.gnss.errormodel import write_error_model
 
     if bound not in ("overbound", "estimate"):
         raise ValueError(f"bound must be 'overbound' or 'estimate', got {bound!r}")

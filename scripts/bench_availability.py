@@ -25,12 +25,7 @@ from typing import Any
 import numpy as np
 
 from predisat.availability.engine import compute_availability, reference_counts
-from predisat.availability.interval import (
-    IntervalModel,
-    best_pair,
-    pair_half_length_m,
-    three_independent_pairs,
-)
+from predisat.availability.interval import best_pair, pair_half_length_m, three_independent_pairs
 from predisat.availability.satellites import (
     LinePositions,
     SatellitePositions,
@@ -39,6 +34,7 @@ from predisat.availability.satellites import (
     default_ephemeris,
     default_window,
 )
+from predisat.gnss.errormodel import IntervalModel
 from predisat.masks.maskset import MaskSet
 from predisat.track.map import demo_track
 

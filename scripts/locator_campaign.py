@@ -49,15 +49,14 @@ from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
 from locator.intervals import fit_error_model
 from locator.run import RunConfig, run_locator
-from locator.runio import read_error_model, write_error_model
 from locator.sathia import AntennaPath
 from locator.sim.multipath import ReflectorIndex
 from locator.sim.simfile import SignalState
 from locator.sim.simulate import simulate_run
 from locator.sources import SimSource
-from predisat.availability.interval import IntervalModel
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
+from predisat.gnss.errormodel import IntervalModel, read_error_model, write_error_model
 from predisat.masks.maskset import MaskSet
 from predisat.synth.truth import TrueMasks, true_masks
 from predisat.synth.world import World, WorldSpec

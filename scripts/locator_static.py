@@ -37,8 +37,8 @@ from locator.observations import Observations
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
 from locator.sources import RinexSource
-from predisat.availability.interval import IntervalModel
 from predisat.geodesy import LocalFrame, ecef_to_geodetic
+from predisat.gnss.errormodel import IntervalModel
 from predisat.track.map import TrackMap
 
 REPO = Path(__file__).resolve().parents[1]

@@ -46,10 +46,10 @@ from locator.sim.multipath import (
     find_reflections,
 )
 from locator.sim.simfile import SignalState, SimRun
-from predisat.availability.interval import ErrorModel
 from predisat.availability.satellites import select_satellites
 from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import enu_rotation, enu_to_azel
+from predisat.gnss.errormodel import ErrorModel
 from predisat.gnss.orbits import C_MPS
 
 __all__ = ["ClockModel", "simulate_run", "transmit_positions"]

@@ -35,9 +35,10 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from predisat.availability.interval import IntervalModel, predicted_interval
+from predisat.availability.interval import predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.geodesy import enu_rotation
+from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import gps_s_to_utc_text
 
 __all__ = [

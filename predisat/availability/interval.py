@@ -35,14 +35,13 @@ locator (``locator.intervals``) solves the very pairs that were predicted.
 :func:`predicted_interval` gets the same lengths without the indices by a faster, exact subset
 recursion (``docs/availability.md``, Engine).
 
-The pseudorange error model (:class:`ErrorModel`) is a placeholder with stated defaults, to be
-learned from data by ``locator calibrate``.
+The pseudorange error model (:class:`predisat.gnss.errormodel.ErrorModel`) is a placeholder with
+stated defaults, to be learned from data by ``locator calibrate``.
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import lru_cache
 
@@ -51,9 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "POOL_SIZE",
-    "ErrorModel",
     "IntervalMode",
-    "IntervalModel",
     "along_track_components",
     "best_pair",
     "interval_mode",
@@ -71,81 +68,6 @@ class IntervalMode(IntEnum):
     BEST_PAIR = 1  # 2-3 satellites: best pair, no safety claim
     ALL_PAIRS = 2  # 4-5 satellites: union of all pairs
     THREE_PAIRS = 3  # >= 6 satellites: union of three independent pairs
-
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """Elevation-dependent pseudorange error, ``sigma(el)**2 = a**2 + (b / sin(el))**2``.
-
-    The form is RTKLIB's code/phase variance model; the defaults (a = b = 2 m: 2.8 m at the
-    zenith, 3.5 m at 45 deg, 8.0 m at 15 deg, 11.7 m at 10 deg) are of the order of
-    single-frequency code errors with broadcast orbits, clocks and ionosphere. They are a
-    **model to be learned** (``locator calibrate``), not measured values.
-
-    Attributes
-    ----------
-    a_m, b_m : float
-        Constant and elevation-dependent parts, metres.
-    min_el_deg : float
-        Elevations below this are treated as this (keeps sigma finite at the horizon).
-    """
-
-    a_m: float = 2.0
-    b_m: float = 2.0
-    min_el_deg: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.a_m) and np.isfinite(self.b_m)):
-            raise ValueError(f"ErrorModel a_m, b_m must be finite metres: {self}")
-        if self.a_m < 0 or self.b_m < 0 or self.a_m + self.b_m <= 0:
-            raise ValueError(f"ErrorModel a_m, b_m must be >= 0, not both 0: {self}")
-        if not 0 < self.min_el_deg < 90:
-            raise ValueError(f"ErrorModel.min_el_deg must be in (0, 90), got {self.min_el_deg}")
-
-    def sigma_m(self, el_deg: ArrayLike) -> NDArray:
-        """Pseudorange sigma in metres, shape of ``el_deg``."""
-        el = np.maximum(np.asarray(el_deg, float), self.min_el_deg)
-        return self.sigma_from_sin(np.sin(np.radians(el)))
-
-    def sigma_from_sin(self, sin_el: ArrayLike) -> NDArray:
-        """The same from ``sin(el)`` (any float dtype, kept), for the vectorised engine."""
-        s = np.asarray(sin_el)
-        lo = np.sin(np.radians(self.min_el_deg))
-        s = np.maximum(s, np.asarray(lo, s.dtype))
-        return np.sqrt(self.a_m**2 + (self.b_m / s) ** 2)
-
-
-@dataclass(frozen=True)
-class IntervalModel:
-    """Error model plus the width factor of each pair interval.
-
-    Attributes
-    ----------
-    error : ErrorModel
-    k_sigma : float
-        Half width of a pair interval in sigmas of ``K``. Default 2 as in the source
-        (``+-2 xi``). Note: for Gaussian errors 2 sigma leaves 4.6e-2 outside per pair, not
-        the 1e-4 the source claims (that needs 3.89 sigma: :meth:`for_risk`).
-    """
-
-    error: ErrorModel = field(default_factory=ErrorModel)
-    k_sigma: float = 2.0
-
-    def __post_init__(self) -> None:
-        if not (self.k_sigma > 0 and np.isfinite(self.k_sigma)):
-            raise ValueError(
-                f"IntervalModel.k_sigma must be positive and finite, got {self.k_sigma} "
-                "(the source's 2; 3.89 gives 1e-4 per pair)"
-            )
-
-    @classmethod
-    def for_risk(cls, risk_per_pair: float, error: ErrorModel | None = None) -> IntervalModel:
-        """``k_sigma`` giving a two-sided Gaussian risk per pair (1e-4 -> 3.89)."""
-        from scipy.stats import norm
-
-        if not 0 < risk_per_pair < 1:
-            raise ValueError(f"risk_per_pair must be in (0, 1), got {risk_per_pair}")
-        return cls(error or ErrorModel(), float(norm.isf(risk_per_pair / 2.0)))
 
 
 def along_track_components(unit_m: ArrayLike, tangent: ArrayLike) -> NDArray:

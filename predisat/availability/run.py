@@ -37,7 +37,6 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from predisat.availability.engine import Availability, compute_availability
-from predisat.availability.interval import IntervalModel
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
     SYSTEM_NAMES,
@@ -56,6 +55,7 @@ from predisat.cli.args import (
     positive_int,
 )
 from predisat.gnss.ephemeris import Ephemeris
+from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.masks.maskset import MaskSet
@@ -455,7 +455,8 @@ def run_availability(
         Predict the interval at every n-th epoch (the costly part).
     interval_model : IntervalModel, optional
         Pseudorange error model and pair half width of the predicted intervals (for example
-        from ``locator calibrate``, read with ``locator.runio.read_error_model``); default
+        from ``locator calibrate``, read with
+        :func:`predisat.gnss.errormodel.read_error_model`); default
         ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
     workers : int
         Threads of the availability engine.
@@ -725,11 +726,11 @@ def run_from_args(args: argparse.Namespace, track: Any = None) -> AvailabilityRu
 def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
     """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
     if error_model is not None:
-        from locator.runio import RunFileError, read_error_model
+        from predisat.gnss.errormodel import ErrorModelFileError, read_error_model
 
         try:
             model = read_error_model(error_model)
-        except RunFileError as exc:
+        except ErrorModelFileError as exc:
             raise ValueError(f"--error-model: {exc}") from None
     else:
         model = IntervalModel()

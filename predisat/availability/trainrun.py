@@ -18,9 +18,10 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.availability.interval import IntervalModel, along_track_components, predicted_interval
+from predisat.availability.interval import along_track_components, predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.gnss.ephemeris import Ephemeris
+from predisat.gnss.errormodel import IntervalModel
 
 __all__ = ["SpeedProfile", "TrainRun", "trainrun"]
 

@@ -55,6 +55,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.gnss.sun import sun_azel
 from predisat.gnss.timescale import datetime64_to_gps_s
 
 __all__ = [
@@ -362,7 +363,7 @@ def com_from_apc(pos_apc_ecef_m: ArrayLike, pco_m: ArrayLike, sun_dir_ecef: Arra
 def sun_direction_ecef(gps_s: ArrayLike) -> NDArray:
     """Geocentric unit direction of the sun in ECEF (low precision, about 0.01 deg).
 
-    Uses :func:`predisat.synth.sky.sun_azel` (NOAA/Meeus) seen from latitude 0, longitude 0,
+    Uses :func:`predisat.gnss.sun.sun_azel` (NOAA/Meeus) seen from latitude 0, longitude 0,
     where east, north and up are the ECEF y, z and x axes; that function ignores the solar
     parallax, so the direction is the geocentric one.
 
@@ -375,9 +376,6 @@ def sun_direction_ecef(gps_s: ArrayLike) -> NDArray:
     -------
     ndarray, shape (..., 3)
     """
-    # imported here: the sky module pulls OpenCV, which orbit users need not load
-    from predisat.synth.sky import sun_azel
-
     t = np.asarray(gps_s, float)
     az_deg, el_deg = sun_azel(t, np.zeros_like(t), np.zeros_like(t), refraction=False)
     az, el = np.radians(az_deg), np.radians(el_deg)

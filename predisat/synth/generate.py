@@ -35,9 +35,10 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.atomic import atomic_path, write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.geodesy import enu_to_azel
+from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
 from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
-from predisat.synth.sky import SKY_CONDITIONS, SkyModel, sun_azel, sun_direction_enu
+from predisat.synth.sky import SKY_CONDITIONS, SkyModel
 from predisat.synth.truth import true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 

@@ -16,10 +16,11 @@ import pandas as pd
 import pytest
 
 from locator.cli import main
-from locator.runio import read_error_model, read_run
+from locator.runio import read_run
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SignalState, SimRun
 from locator.workflow import _track_check
+from predisat.gnss.errormodel import read_error_model
 from predisat.track.map import demo_track
 from tests.locator._scene import canyon_world
 

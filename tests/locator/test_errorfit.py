@@ -10,7 +10,7 @@ from locator.errorfit import binned_sigma, calibration_figure, static_residuals
 from locator.intervals import fit_error_model
 from locator.observations import read_rinex_obs
 from locator.sources import RinexSource
-from predisat.availability.interval import ErrorModel
+from predisat.gnss.errormodel import ErrorModel
 
 STATION = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759, SOURCE.md
 

@@ -8,7 +8,8 @@ import pytest
 from locator.fde import FixFlag, LocatorConfig, locate
 from locator.sathia import AntennaPath
 from locator.selection import direction_at
-from predisat.availability.interval import ErrorModel, IntervalMode, IntervalModel
+from predisat.availability.interval import IntervalMode
+from predisat.gnss.errormodel import ErrorModel, IntervalModel
 from tests.locator._scene import random_sky, ranges, sky, straight_path
 
 CFG = LocatorConfig(model=IntervalModel(ErrorModel(1.0, 1.0), k_sigma=2.0), window_m=500.0)

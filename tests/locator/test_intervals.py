@@ -17,7 +17,8 @@ from locator.intervals import (
     union_interval,
 )
 from locator.sathia import PairSolution, solve_pairs
-from predisat.availability.interval import ErrorModel, IntervalMode
+from predisat.availability.interval import IntervalMode
+from predisat.gnss.errormodel import ErrorModel
 from tests.locator._scene import random_sky, ranges, sky, straight_path
 
 

@@ -13,7 +13,7 @@ import pytest
 from locator.fde import FixFlag, LocatorConfig
 from locator.run import RunConfig, RunFlag, flag_names, run_locator
 from locator.sources import EpochData
-from predisat.availability.interval import ErrorModel, IntervalModel
+from predisat.gnss.errormodel import ErrorModel, IntervalModel
 from predisat.masks.maskset import MaskSet
 from tests.locator._scene import ranges, sky, straight_path
 

@@ -8,15 +8,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from locator.runio import (
-    RunFileError,
+from locator.runio import RunFileError, read_run, write_figures, write_run
+from predisat.gnss.errormodel import (
+    ErrorModel,
+    ErrorModelFileError,
+    IntervalModel,
     read_error_model,
-    read_run,
     write_error_model,
-    write_figures,
-    write_run,
 )
-from predisat.availability.interval import ErrorModel, IntervalModel
 
 
 def epochs() -> pd.DataFrame:
@@ -84,11 +83,11 @@ def test_error_model_round_trip_and_errors(tmp_path):
     m = IntervalModel(ErrorModel(0.4, 1.3, 2.0), k_sigma=3.5)
     p = write_error_model(tmp_path / "m.json", m, {"data": "test"})
     assert read_error_model(p) == m
-    with pytest.raises(RunFileError, match="locator calibrate"):
+    with pytest.raises(ErrorModelFileError, match="locator calibrate"):
         read_error_model(tmp_path / "missing.json")
     (tmp_path / "bad.json").write_text(json.dumps({"format": "locator-error-model/1", "a_m": -1,
                                                    "b_m": 0}))  # fmt: skip
-    with pytest.raises(RunFileError, match="bad error model"):
+    with pytest.raises(ErrorModelFileError, match="bad error model"):
         read_error_model(tmp_path / "bad.json")
 
 

@@ -17,9 +17,9 @@ from locator.corrections import OMEGA_E_RADPS, RangeModel
 from locator.sim.multipath import ReflectorIndex, SignalModel, dll_error_m
 from locator.sim.simfile import SignalState, SimRun
 from locator.sim.simulate import ClockModel, simulate_run, transmit_positions
-from predisat.availability.interval import ErrorModel
 from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import azel_to_enu, enu_rotation
+from predisat.gnss.errormodel import ErrorModel
 from predisat.gnss.orbits import C_MPS
 from predisat.synth.world import MATERIALS, Stretch, World, WorldSpec
 from tests.locator._scene import (
@@ -347,8 +347,8 @@ def test_real_ephemeris_consistent_with_range_model(real_eph):
 
 def test_open_world_real_sky_feeds_the_locator(real_eph):
     from locator import AntennaPath, LocatorConfig, locate
-    from predisat.availability.interval import IntervalModel
     from predisat.availability.satellites import default_window
+    from predisat.gnss.errormodel import IntervalModel
 
     track = canyon_track(900.0)
     spec = WorldSpec((Stretch("open", 0, 880),), catenary=False, hills=False,

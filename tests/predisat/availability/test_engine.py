@@ -18,12 +18,7 @@ from predisat.availability.engine import (
     longest_run,
     reference_counts,
 )
-from predisat.availability.interval import (
-    IntervalModel,
-    best_pair,
-    pair_half_length_m,
-    three_independent_pairs,
-)
+from predisat.availability.interval import best_pair, pair_half_length_m, three_independent_pairs
 from predisat.availability.satellites import (
     LinePositions,
     SatellitePositions,
@@ -32,6 +27,7 @@ from predisat.availability.satellites import (
     default_ephemeris,
     default_window,
 )
+from predisat.gnss.errormodel import IntervalModel
 from predisat.masks.maskset import MaskSet
 from predisat.track.map import TrackMap
 

@@ -10,9 +10,7 @@ import pytest
 from scipy.optimize import brentq
 
 from predisat.availability.interval import (
-    ErrorModel,
     IntervalMode,
-    IntervalModel,
     along_track_components,
     best_pair,
     interval_mode,
@@ -21,6 +19,7 @@ from predisat.availability.interval import (
     predicted_interval,
     three_independent_pairs,
 )
+from predisat.gnss.errormodel import ErrorModel, IntervalModel
 
 
 def _hyperbolic_interval(sat_i, sat_j, p0, t, dk):

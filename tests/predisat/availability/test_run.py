@@ -368,8 +368,7 @@ def test_cli_arguments_round_trip(tmp_path: Path, masks: MaskSet, track: TrackMa
 def test_interval_model_from_a_locator_error_model_file(
     tmp_path: Path, masks: MaskSet, track: TrackMap
 ) -> None:
-    from locator.runio import write_error_model
-    from predisat.availability.interval import ErrorModel, IntervalModel
+    from predisat.gnss.errormodel import ErrorModel, IntervalModel, write_error_model
 
     path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
     parser = add_arguments(argparse.ArgumentParser())

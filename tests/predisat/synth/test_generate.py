@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from predisat.camera.models import CameraModel
+from predisat.gnss.sun import sun_azel
 from predisat.survey import Survey
 from predisat.synth.generate import (
     contact_sheet,
@@ -18,7 +19,6 @@ from predisat.synth.generate import (
     sky_schedule,
 )
 from predisat.synth.render import RenderOptions
-from predisat.synth.sky import sun_azel
 from predisat.synth.truth import TrueMasks
 from predisat.synth.world import World
 from predisat.track.map import demo_track

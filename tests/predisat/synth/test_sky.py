@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from predisat.geodesy import azel_to_enu
+from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.gnss.timescale import calendar_to_gps_s
-from predisat.synth.sky import SkyModel, fbm, sun_azel, sun_direction_enu
+from predisat.synth.sky import SkyModel, fbm
 
 
 def test_sun_matches_spa_published_example() -> None:
