@@ -58,7 +58,8 @@ from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.gnss.errormodel import IntervalModel, read_error_model, write_error_model
 from predisat.masks.maskset import MaskSet
-from predisat.synth.truth import TrueMasks, true_masks
+from predisat.masks.truth import TrueMasks
+from predisat.synth.truth import true_masks
 from predisat.synth.world import World, WorldSpec
 from predisat.track.map import demo_track
 

@@ -41,12 +41,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.masks.margins import EL_STEP_DEG, SECTORS, MarginTable
 from predisat.masks.maskset import MaskSet
 from predisat.reconstruct.evaluate import (
-    EL_STEP_DEG,
-    SECTORS,
     Comparison,
-    MarginTable,
     calibrate_margin,
     compare,
     load_truth,

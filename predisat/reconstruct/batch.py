@@ -741,7 +741,7 @@ def _run_key(provenance: dict[str, Any]) -> str:
 def _load_margins(margins: Any) -> tuple[Any, dict[str, Any]]:
     """(MarginTable or None, its provenance record) from a table, a path or None; every check
     is made here, before any work, so that a bad table never stops a run at its merge."""
-    from predisat.reconstruct.evaluate import MarginTable
+    from predisat.masks.margins import MarginTable
 
     if margins is None:
         return None, {}

@@ -18,7 +18,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.reconstruct.evaluate import EL_STEP_DEG, Comparison, trust_counts
+from predisat.masks.margins import EL_STEP_DEG
+from predisat.reconstruct.evaluate import Comparison, trust_counts
 
 __all__ = ["evaluation_figure", "per_position_shares"]
 

@@ -12,7 +12,7 @@ with :class:`~predisat.survey.SurveyWriter` and writes the ground truth beside t
         labels/<frame_id>.png  per-frame sky label: 255 sky, 128 thin L-band-transparent
                              structure against the sky, 0 obstacle
         frames.csv           per frame: side, chainage, time, sky condition, sun position
-        true_masks.npz       per-position true 360 deg masks (predisat.synth.truth.TrueMasks)
+        true_masks.npz       per-position true 360 deg masks (predisat.masks.truth.TrueMasks)
         world.npz            the world mesh and recipe (World.load)
 
 :func:`contact_sheet` tiles sample frames of a survey into one captioned PNG.
@@ -435,7 +435,7 @@ labels/<frame_id>.png  8-bit sky label of each survey frame (same size as the im
                        from the ray through each pixel centre.
 frames.csv             per frame: frame_id, side, chainage_m, gps_s, sky condition, cloud cover,
                        sun azimuth/elevation (deg, local ENU at the antenna), sky fraction.
-true_masks.npz         predisat.synth.truth.TrueMasks.load(): per position, the highest
+true_masks.npz         predisat.masks.truth.TrueMasks.load(): per position, the highest
                        L-band-blocking elevation in every azimuth bin, and obstacle descriptors.
 world.npz              predisat.synth.world.World.load(): the scene mesh and recipe.
 

@@ -210,7 +210,7 @@ def test_demo_end_to_end_on_a_short_stretch(tmp_path, capsys: pytest.CaptureFixt
     import numpy as np
 
     from predisat.masks.fileformat import read_masks
-    from predisat.synth.truth import TrueMasks
+    from predisat.masks.truth import TrueMasks
 
     out = tmp_path / "demo"
     assert cli.main(["demo", "--out", str(out), "--from-km", "4.0", "--to-km", "4.1",

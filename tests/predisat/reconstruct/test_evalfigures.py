@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
+from predisat.masks.margins import sector_of
 from predisat.reconstruct.evalfigures import evaluation_figure, per_position_shares
-from predisat.reconstruct.evaluate import Comparison, sector_of
+from predisat.reconstruct.evaluate import Comparison
 
 GRID = (np.arange(900) + 0.5) * 0.1
 

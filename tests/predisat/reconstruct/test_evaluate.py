@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from predisat.camera.models import CameraModel
+from predisat.masks.margins import MarginTable, sector_of
 from predisat.reconstruct.evaluate import (
     Comparison,
-    MarginTable,
     add_evaluate_arguments,
     calibrate_margin,
     compare,
@@ -24,7 +24,6 @@ from predisat.reconstruct.evaluate import (
     evaluate_masks,
     format_table,
     load_truth,
-    sector_of,
     trust_counts,
 )
 

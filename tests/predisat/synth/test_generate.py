@@ -11,6 +11,7 @@ import pytest
 
 from predisat.camera.models import CameraModel
 from predisat.gnss.sun import sun_azel
+from predisat.masks.truth import TrueMasks
 from predisat.survey import Survey
 from predisat.synth.generate import (
     contact_sheet,
@@ -19,7 +20,6 @@ from predisat.synth.generate import (
     sky_schedule,
 )
 from predisat.synth.render import RenderOptions
-from predisat.synth.truth import TrueMasks
 from predisat.synth.world import World
 from predisat.track.map import demo_track
 

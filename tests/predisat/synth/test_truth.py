@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from predisat.geodesy import WGS84
+from predisat.masks.truth import TrueMasks
 from predisat.synth.raycast import make_caster
 from predisat.synth.truth import (
-    TrueMasks,
     ideal_sky_mask,
     is_blocked,
     obstacle_descriptors,

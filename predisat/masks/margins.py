@@ -1,0 +1,138 @@
+"""Trust margins per (sector, source) group: the table the pipeline applies to its masks.
+
+A margin raises the mask of a bin by a few tenths of a degree, by the bin's sector relative to
+the track (:data:`SECTORS`: ``cross`` within 45 deg of the perpendicular, else ``along``) and its
+source (observed, reconstructed, assumed...). :class:`MarginTable` is fitted on a synthetic
+survey against its ground truth by :func:`predisat.reconstruct.evaluate.calibrate_margin`
+(``predisat evaluate --calibrate`` writes ``margins.json``), and applied by
+``predisat process --margins``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.masks.maskset import BinSource, MaskSet
+
+__all__ = ["EL_STEP_DEG", "SECTORS", "MarginTable", "sector_of"]
+
+EL_STEP_DEG = 0.1
+"""Elevation grid step of the direction counts (cell centres ``(k + 0.5) * step``)."""
+SECTORS = ("cross", "along")
+_SOURCE_NAMES = {int(s): s.name.lower() for s in BinSource}
+
+
+def sector_of(az_deg: ArrayLike, heading_deg: ArrayLike) -> NDArray:
+    """``"cross"`` within 45 deg of ``heading +- 90``, else ``"along"`` (broadcast shapes)."""
+    rel = np.mod(np.asarray(az_deg, float) - np.asarray(heading_deg, float), 180.0)
+    return np.where(np.abs(rel - 90.0) <= 45.0, "cross", "along")
+
+
+@dataclass(frozen=True, eq=False)
+class MarginTable:
+    """Margins per (sector, source) group, from :func:`calibrate_margin`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        Columns ``sector``, ``source`` (name), ``margin_deg``, ``n_bins``, ``n_positions``,
+        ``sampled`` (enough positions to calibrate alone), ``reached`` (target met),
+        ``los_share`` (trusted directions truly in line of sight, achieved),
+        ``sky_lost`` (truly visible directions not trusted); plus ``sector="*"`` /
+        ``source="*"`` wildcard rows for unseen groups.
+    target : float
+    el_step_deg : float
+    """
+
+    table: pd.DataFrame
+    target: float
+    el_step_deg: float = EL_STEP_DEG
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def margin_for(self, sector: NDArray, source: NDArray) -> NDArray:
+        """Margin of every bin given its sector (str) and source code, degrees.
+
+        Raises
+        ------
+        ValueError
+            When a bin's (sector, source) group has no row in the table (a guess, even the
+            table's largest margin, could be below what calibration would give it).
+        """
+        lut = {
+            (str(sec), str(src)): float(m)
+            for sec, src, m in zip(
+                self.table["sector"], self.table["source"], self.table["margin_deg"], strict=True
+            )
+        }
+        out = np.full(np.shape(sector), np.nan, float)
+        for (sec, src), m in lut.items():
+            code = next((c for c, n in _SOURCE_NAMES.items() if n == src), None)
+            if code is None:
+                continue
+            out[(sector == sec) & (source == code)] = m
+        if np.isnan(out).any():
+            k = np.flatnonzero(np.isnan(out).ravel())[0]
+            group = (str(np.ravel(sector)[k]), _SOURCE_NAMES.get(int(np.ravel(source)[k]), "?"))
+            raise ValueError(
+                f"margin table has no row for (sector, source) {group}; calibrate with "
+                "calibrate_margin (it writes every group) or add the row"
+            )
+        return out
+
+    def check(self, where: str = "margin table") -> None:
+        """Raise ValueError, naming ``where`` and the fix, unless the table has the columns
+        ``sector``, ``source`` and ``margin_deg``, a finite margin >= 0 in every row and a row
+        for each (sector, source) group by its name (wildcard ``*`` rows allowed)."""
+        fix = "write it with `predisat evaluate MASKS --truth DIR --calibrate`"
+        t = self.table
+        missing = {"sector", "source", "margin_deg"} - set(t.columns)
+        if missing:
+            raise ValueError(f"{where}: no column(s) {sorted(missing)}; {fix}")
+        margin = pd.to_numeric(t["margin_deg"], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(margin) | (margin < 0)
+        if bad.any():
+            raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
+                             f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
+        sources = tuple(_SOURCE_NAMES.values())
+        pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
+        want = {(s, c) for s in SECTORS for c in sources}
+        if not want <= pairs:
+            raise ValueError(f"{where}: no margin for (sector, source) {sorted(want - pairs)}; "
+                             f"a table needs all of {sorted(want)}; {fix}")  # fmt: skip
+        odd = {p for p in pairs - want if "*" not in p}
+        if odd:
+            raise ValueError(f"{where}: unknown (sector, source) {sorted(odd)}; sectors are "
+                             f"{list(SECTORS)}, sources {list(sources)}; {fix}")  # fmt: skip
+
+    def apply(self, masks: MaskSet) -> MaskSet:
+        """Copy of ``masks`` with these margins (:meth:`MaskSet.with_margin`)."""
+        sec = sector_of(masks.az_deg[None, :], masks.heading_deg[:, None])
+        return masks.with_margin(self.margin_for(sec, masks.source))
+
+    def to_json(self, path: str | os.PathLike[str]) -> None:
+        doc = {
+            "target": self.target,
+            "el_step_deg": self.el_step_deg,
+            "meta": self.meta,
+            "margins": self.table.to_dict(orient="records"),
+        }
+        Path(path).write_text(json.dumps(doc, indent=1))
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike[str]) -> MarginTable:
+        doc = json.loads(Path(path).read_text())
+        for key in ("target", "margins"):
+            if key not in doc:
+                raise ValueError(f"{path}: no {key!r}; write it with MarginTable.to_json")
+        return cls(
+            pd.DataFrame(doc["margins"]), float(doc["target"]),
+            float(doc.get("el_step_deg", EL_STEP_DEG)), dict(doc.get("meta", {})),
+        )  # fmt: skip
