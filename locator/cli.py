@@ -14,7 +14,6 @@ from typing import Any
 
 from predisat import __version__
 from predisat.cli.args import (
-    caused_by_interrupt,
     cutoff_deg,
     finite_float,
     non_negative_float,
@@ -22,22 +21,9 @@ from predisat.cli.args import (
     output_file,
     positive_float,
 )
+from predisat.cli.common import CliError, km_range, run_main, track_option
 
 __all__ = ["main"]
-
-
-class CliError(Exception):
-    """A user-facing error: printed without a traceback."""
-
-
-def _track(path: str | None, name: str | None) -> Any:
-    from predisat.cli.app import CliError as PredisatCliError
-    from predisat.cli.app import _load_track
-
-    try:
-        return _load_track(path, name)
-    except PredisatCliError as exc:
-        raise CliError(str(exc)) from exc
 
 
 def _masks(args: argparse.Namespace) -> Any:
@@ -81,21 +67,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from predisat.synth.world import World, WorldSpec
 
     if args.world:
-        world = World.load(args.world, _track(args.track, args.track_name) if args.track else None)
+        track = track_option(args.track, args.track_name) if args.track else None
+        world = World.load(args.world, track)
     else:
-        track = _track(args.track, args.track_name)
+        track = track_option(args.track, args.track_name)
         if args.scenery:
             import yaml
 
             spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()))
         else:
-            from predisat.cli.app import CliError as PredisatCliError
-            from predisat.cli.app import _km_range
-
-            try:
-                lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
-            except PredisatCliError as exc:
-                raise CliError(str(exc)) from exc
+            lo_m, hi_m = km_range(track, args.from_km, args.to_km)
             if hi_m - lo_m < 800.0:
                 raise CliError(
                     f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the mixed scenery needs "
@@ -128,7 +109,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from locator.sathia import AntennaPath
     from locator.sources import RinexSource, SimSource
-    from locator.workflow import _track_check, run_to_folder, static_truth
+    from locator.workflow import check_track, run_to_folder, static_truth
 
     if bool(args.sim) == bool(args.obs):
         raise CliError("give either --sim DIR (a simulated run) or --obs FILE with --nav FILES")
@@ -145,9 +126,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             track = World.load(stored).track
         else:
-            track = _track(args.track, args.track_name)
+            track = track_option(args.track, args.track_name)
         path = AntennaPath(track, args.antenna_height)
-        _track_check(path, sim.antenna_ecef_m, args.sim)
+        check_track(path, sim.antenna_ecef_m, args.sim)
         source = SimSource(sim, constellation=args.constellation or "all")
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
         header, sim_chainage = None, sim.chainage_m
@@ -157,7 +138,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from locator.corrections import RangeModel
         from locator.observations import Observations
 
-        path = AntennaPath(_track(args.track, args.track_name), args.antenna_height)
+        path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
         _report_problems(args.obs, obs.problems)
         model = RangeModel.from_rinex_nav(args.nav)
@@ -172,7 +153,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 raise CliError(
                     f"{args.obs}: no approximate position in the header; pass --start-chainage"
                 )
-            _track_check(path, header, f"{args.obs} (its header's approximate position)",
+            check_track(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
     if not (args.masks or args.cutoff is not None or args.no_masks):
@@ -269,10 +250,10 @@ def _check_start(
     if args.start_chainage is not None and header_ecef_m is not None:
         # The given start overrides the header, but a header far from the line usually means
         # the wrong observation file or track: say so rather than run silently.
-        from locator.workflow import _track_check
+        from locator.workflow import check_track
 
         try:
-            _track_check(path, header_ecef_m, f"{args.obs} (its header's approximate position)",
+            check_track(path, header_ecef_m, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M)  # fmt: skip
         except ValueError as exc:
             print(f"locator run: warning: {exc}; running from --start-chainage as asked",
@@ -591,21 +572,5 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "func", None) is None:
-        parser.print_help()
-        return 0
-    try:
-        return int(args.func(args))
-    except CliError as exc:
-        print(f"locator: error: {exc}", file=sys.stderr)
-        return 2
-    except (ValueError, OSError, KeyError) as exc:
-        print(f"locator: error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, SystemError) as exc:
-        if not caused_by_interrupt(exc):  # a genuine SystemError
-            raise
-        print("\nlocator: interrupted", file=sys.stderr)
-        return 130
+    """The ``locator`` command line; returns the exit status."""
+    return run_main(build_parser(), argv, "locator")

@@ -32,6 +32,7 @@ from predisat.masks.maskset import MaskSet
 __all__ = [
     "DEMO_RANGE_M",
     "calibrate_to_file",
+    "check_track",
     "demo",
     "evaluate_folder",
     "run_to_folder",
@@ -61,7 +62,7 @@ def stop_and_go(
     return SpeedProfile.from_time_table(t, v)
 
 
-def _track_check(
+def check_track(
     path: AntennaPath,
     ecef_m: np.ndarray,
     label: str,

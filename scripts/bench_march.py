@@ -40,8 +40,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' refer
 from tests.predisat.reference_march import reference_march  # noqa: E402
 
 import predisat.reconstruct.carving as rc  # noqa: E402
-from predisat.reconstruct.batch import _decode_cache  # noqa: E402
 from predisat.reconstruct.carving import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
+from predisat.reconstruct.framecache import decode_cache  # noqa: E402
 from predisat.survey import Survey  # noqa: E402
 
 
@@ -79,7 +79,7 @@ def record_inputs(
     for k, i in enumerate(idx):
         fid = str(fr.frame_id[i])
         with np.load(cache / f"{fid}.npz", allow_pickle=False) as z:
-            seg = _decode_cache(z, json.loads(str(z["meta"])), fid)
+            seg = decode_cache(z, json.loads(str(z["meta"])), fid)
         if isinstance(seg, tuple):
             cam = sv.cameras[str(fr.side[i])]
             views.append(

@@ -32,7 +32,8 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 
-from predisat.reconstruct.batch import DEFAULT_SEGMENTER, PipelineParams, process_survey  # noqa: E402
+from predisat.reconstruct.batch import process_survey  # noqa: E402
+from predisat.reconstruct.params import DEFAULT_SEGMENTER, PipelineParams  # noqa: E402
 from predisat.survey import Survey  # noqa: E402
 
 

@@ -17,19 +17,24 @@ from typing import TYPE_CHECKING, Any
 
 from predisat import __version__
 from predisat.cli.args import (
-    caused_by_interrupt,
     finite_float,
     output_dir,
     output_file,
     positive_float,
     positive_int,
 )
+from predisat.cli.common import (
+    CliError,
+    add_track_selection,
+    km_range,
+    run_main,
+    track_option,
+)
 
 if TYPE_CHECKING:
     from predisat.camera.models import CameraModel
     from predisat.synth.generate import SynthResult
     from predisat.synth.world import WorldSpec
-    from predisat.track.map import TrackMap
 
 __all__ = ["main"]
 
@@ -78,80 +83,6 @@ def _default_workers() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
 
-class CliError(Exception):
-    """A user-facing error: printed without a traceback."""
-
-
-def _parse_where(items: Sequence[str] | None) -> dict[str, str | None] | None:
-    """``KEY=VALUE`` property filters; ``KEY=`` selects features without that property."""
-    if not items:
-        return None
-    where: dict[str, str | None] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise CliError(f"--where {item}: expected KEY=VALUE (or KEY= for 'property absent')")
-        where[key] = value or None
-    return where
-
-
-def _load_track(
-    path: str | None,
-    name: str | None,
-    chain: str = "all",
-    where: Sequence[str] | None = None,
-) -> TrackMap:
-    from predisat.track import map as track
-
-    if path is None:
-        return track.demo_track()
-    p = Path(path)
-    if not p.is_file():
-        raise CliError(f"--track {path}: no such file (give a GeoJSON or lat/lon/h CSV track map)")
-    if p.suffix.lower() in {".csv", ".txt"}:
-        return track.TrackMap.from_csv(p)
-    return track.TrackMap.from_geojson(p, track=name, chain=chain, where=_parse_where(where))
-
-
-def _add_track_selection(p: argparse.ArgumentParser) -> None:
-    """Which line of a GeoJSON holding several (Infrabel files, OpenStreetMap extracts)."""
-    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
-    p.add_argument(
-        "--chain",
-        choices=["all", "longest"],
-        default="all",
-        help="chain every selected way (all) or the longest connected chain of a network",
-    )
-    p.add_argument(
-        "--where",
-        nargs="+",
-        metavar="KEY=VALUE",
-        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
-    )
-
-
-def _km_range(
-    track: TrackMap, from_km: float | None, to_km: float | None
-) -> tuple[float, float]:
-    """``--from-km/--to-km`` as metres of chainage, refused with the fix when not a stretch."""
-    top_km = track.length_m / 1000.0
-    lo_km = 0.0 if from_km is None else float(from_km)
-    hi_km = top_km if to_km is None else float(to_km)
-    if not lo_km < hi_km:
-        reason = "the start must be below the end (chainage grows along the track)"
-    elif not (0.0 <= lo_km and hi_km <= top_km + 1e-9):
-        reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
-    else:
-        return lo_km * 1000.0, hi_km * 1000.0
-    hint = ""
-    if lo_km < hi_km and hi_km > top_km and hi_km / 1000.0 <= top_km:
-        hint = (
-            f"; the values are kilometres, did you give metres? "
-            f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
-        )
-    raise CliError(f"--from-km {lo_km:g} --to-km {hi_km:g}: {reason}{hint}")
-
-
 def _camera(kind: str, calibration: str | None) -> CameraModel:
     from predisat.camera import models as camera
 
@@ -180,8 +111,8 @@ def _scenery(path: str | None) -> WorldSpec | None:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    track = _load_track(args.track, args.track_name, args.chain, args.where)
-    from_m, to_m = _km_range(track, args.from_km, args.to_km)
+    track = track_option(args.track, args.track_name, args.chain, args.where)
+    from_m, to_m = km_range(track, args.from_km, args.to_km)
     cam = _camera(args.camera, args.calibration)
     spec = _scenery(args.scenery)
 
@@ -221,7 +152,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     track = trackmod.demo_track()
-    lo_m, hi_m = _km_range(track, args.from_km, args.to_km)
+    lo_m, hi_m = km_range(track, args.from_km, args.to_km)
     lo_km, hi_km = lo_m / 1000.0, hi_m / 1000.0
     print(
         f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
@@ -291,7 +222,7 @@ def cmd_availability(args: argparse.Namespace) -> int:
 
     track = None
     if args.track is not None:
-        track = _load_track(args.track, args.track_name, args.chain, args.where)
+        track = track_option(args.track, args.track_name, args.chain, args.where)
     run = run_from_args(args, track=track)
     for warning in run.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)
@@ -344,9 +275,9 @@ def cmd_evaluate_sky(args: argparse.Namespace) -> int:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    from predisat.reconstruct.batch import process_from_args
+    from predisat.cli import process
 
-    result = process_from_args(args)
+    result = process.run(args)
     print(f"process: {result}")
     return 0
 
@@ -415,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
-    _add_track_selection(p)
+    add_track_selection(p)
     p.add_argument("--from-km", type=finite_float, metavar="A",
                    help="start chainage in km (default 0)")
     p.add_argument("--to-km", type=finite_float, metavar="B",
@@ -450,10 +381,10 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     add_availability_arguments(p)
-    _add_track_selection(p)
+    add_track_selection(p)
     p.set_defaults(func=cmd_availability)
 
-    from predisat.reconstruct.batch import add_process_arguments
+    from predisat.cli import process
     from predisat.reconstruct.evaluate import add_evaluate_arguments
 
     p = sub.add_parser(
@@ -465,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
             "mask file. Bad frames are reported and skipped (--strict: stop)."
         ),
     )
-    add_process_arguments(p)
+    process.add_arguments(p)
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser(
@@ -552,31 +483,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "func", None) is None:
-        parser.print_help()
-        return 0
-    try:
-        return int(args.func(args))
-    except CliError as exc:
-        print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except (OSError, ValueError) as exc:
-        # Library errors are written to be read by a person: show them without a traceback.
-        print(f"predisat {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, SystemError) as exc:
-        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it.
-        if not caused_by_interrupt(exc):  # a genuine SystemError
-            raise
-        kept = (
-            "; finished chunks and segmented frames are kept: rerun the same command to resume"
-            if args.command == "process"
-            else ""
-        )
-        print(f"\npredisat {args.command}: interrupted{kept}", file=sys.stderr)
-        return 130
+    """The ``predisat`` command line; returns the exit status."""
+    resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
+    return run_main(
+        build_parser(), argv, "predisat {command}", interrupted_note={"process": resume}
+    )
 
 
 if __name__ == "__main__":

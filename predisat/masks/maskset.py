@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from enum import IntEnum
@@ -38,6 +38,7 @@ __all__ = [
     "BinSource",
     "MaskError",
     "MaskSet",
+    "concat_masksets",
 ]
 
 REQUIRED_DESCRIPTORS: tuple[str, ...] = (
@@ -593,3 +594,44 @@ def _default_provenance(provenance: Mapping[str, Any] | None) -> dict[str, Any]:
     prov.setdefault("software_version", __version__)
     prov.setdefault("created_utc", datetime.now(UTC).isoformat(timespec="seconds"))
     return prov
+
+
+def concat_masksets(parts: Sequence[MaskSet], provenance: dict[str, Any] | None = None) -> MaskSet:
+    """One mask set from parts covering disjoint, increasing chainage ranges.
+
+    Parameters
+    ----------
+    parts : sequence of MaskSet
+        Same ``az_step_deg``; positions strictly increasing across the parts.
+    provenance : dict, optional
+        Provenance of the result (default: that of the first part).
+
+    Raises
+    ------
+    MaskError
+        When the parts differ in azimuth step or overlap in chainage.
+    """
+    if not parts:
+        raise MaskError("concat_masksets: no parts given; process at least one chunk")
+    step = parts[0].az_step_deg
+    for k, p in enumerate(parts):
+        if p.az_step_deg != step:
+            raise MaskError(
+                f"concat_masksets: part {k} has az_step_deg {p.az_step_deg}, part 0 has {step}; "
+                "reprocess with one azimuth step"
+            )
+    names = sorted({n for p in parts for n in p.descriptors})
+
+    def cat(attr: str) -> NDArray:
+        return np.concatenate([getattr(p, attr) for p in parts])
+
+    desc = {
+        n: np.concatenate([p.descriptors.get(n, np.full(p.n_pos, np.nan)) for p in parts])
+        for n in names
+    }
+    return MaskSet.from_arrays(
+        cat("chainage_m"), cat("lat_deg"), cat("lon_deg"), cat("h_m"), cat("heading_deg"),
+        cat("mask_el_deg"), az_step_deg=step, source=cat("source"),
+        margin_deg=cat("margin_deg"), descriptors=desc,
+        provenance=dict(parts[0].provenance if provenance is None else provenance),
+    )  # fmt: skip

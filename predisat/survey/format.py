@@ -12,7 +12,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,17 +44,6 @@ REQUIRED_COLUMNS = ("frame_id", "image", "side", "gps_s")
 MANIFEST_COLUMNS = ("frame_id", "image", "side", "gps_s", "chainage_m", "lat_deg", "lon_deg", "h_m")
 FRAME_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 OTHER_SIDE = {"left": "right", "right": "left"}
-
-
-class _Projects(Protocol):
-    """What the loader needs from a track map (``predisat.track.map.TrackMap``)."""
-
-    @property
-    def length_m(self) -> float: ...
-
-    def project(
-        self, lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike | None = None
-    ) -> Any: ...
 
 
 @dataclass(frozen=True)

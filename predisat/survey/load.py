@@ -29,9 +29,9 @@ from predisat.survey.format import (
     SurveyCamera,
     SurveyError,
     SurveyProblem,
-    _Projects,
     empty_frames,
 )
+from predisat.track import TrackMap, load_track
 
 __all__ = ["Survey"]
 
@@ -68,7 +68,7 @@ class Survey:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     problems: tuple[SurveyProblem, ...] = ()
     version: int = VERSION
-    track: _Projects | None = field(default=None, repr=False)
+    track: TrackMap | None = field(default=None, repr=False)
 
     @property
     def reverse(self) -> bool:
@@ -107,7 +107,7 @@ class Survey:
     def load(
         cls,
         path: str | os.PathLike[str],
-        track: _Projects | None = None,
+        track: TrackMap | None = None,
         check_images: bool = True,
         max_offset_m: float = 10.0,
         on_error: Literal["raise", "skip"] = "raise",
@@ -245,13 +245,9 @@ def _read_header(root: Path) -> dict[str, Any]:
     }
 
 
-def _load_track(root: Path, path: Path, name: str | None) -> _Projects:
-    from predisat.track.map import TrackMap
-
+def _load_track(root: Path, path: Path, name: str | None) -> TrackMap:
     try:
-        if path.suffix.lower() in (".geojson", ".json"):
-            return TrackMap.from_geojson(path, track=name)
-        return TrackMap.from_csv(path)
+        return load_track(path, name)
     except (OSError, ValueError) as exc:
         raise SurveyError(
             root,
@@ -392,7 +388,7 @@ def _parse_rows(root: Path, header: dict[str, Any], check_images: bool) -> list[
     return rows
 
 
-def _check_track(rows: list[_Row], track: _Projects, max_offset_m: float) -> None:
+def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None:
     with_pos = [r for r in rows if abs(r.lat_deg) <= 90 and abs(r.lon_deg) <= 180]  # NaN: False
     name = getattr(track, "name", "track")
     if with_pos:
@@ -435,7 +431,7 @@ def _check_track(rows: list[_Row], track: _Projects, max_offset_m: float) -> Non
 def _read_manifest(
     root: Path,
     header: dict[str, Any],
-    track: _Projects | None,
+    track: TrackMap | None,
     check_images: bool,
     max_offset_m: float,
 ) -> tuple[Frames, list[SurveyProblem]]:

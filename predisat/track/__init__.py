@@ -6,3 +6,9 @@
 * :mod:`predisat.track.chain` - chaining the parts of a track file into one polyline.
 * :mod:`predisat.track.smooth` - the penalised B-spline fit through a simplified polyline.
 """
+
+from predisat.track.errors import TrackMapError
+from predisat.track.map import TrackMap, demo_track, load_track
+from predisat.track.posts import KilometrePost
+
+__all__ = ["KilometrePost", "TrackMap", "TrackMapError", "demo_track", "load_track"]

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat.geodesy import LocalFrame
-from predisat.track.map import TrackMapError
+from predisat.track.errors import TrackMapError
 
 __all__ = ["Part", "chain_all", "chain_longest", "concatenate_parts"]
 

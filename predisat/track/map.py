@@ -14,17 +14,21 @@ The fit itself is in :mod:`predisat.track.smooth`. Readers for GeoJSON and CSV f
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.geodesy import WGS84, LocalFrame
+from predisat.track.errors import TrackMapError
+from predisat.track.posts import KilometrePost, project_posts
+from predisat.track.readers import TrackFile, parse_csv_track, parse_geojson_track, sniff_format
 from predisat.track.smooth import FittedCurve, dense_polyline, fit_curve
 
 __all__ = [
@@ -34,33 +38,11 @@ __all__ = [
     "TrackMap",
     "TrackMapError",
     "demo_track",
+    "load_track",
 ]
 
 DEMO_TRACK_FILE = "line144_track_A.geojson"
 """Packaged demo line (``predisat/data``): Belgian line 144, track A, Infrabel open data."""
-
-
-class TrackMapError(ValueError):
-    """A track map file or vertex list that cannot be used; the message says why and the fix."""
-
-
-@dataclass(frozen=True)
-class KilometrePost:
-    """A kilometre post of the line, kept as metadata at its chainage on this track.
-
-    Attributes
-    ----------
-    chainage_m : float
-        Chainage of the post on this track map.
-    km_m : float
-        The line's own kilometre reference at the post, in metres (e.g. 12850.0 for km 12.850).
-    label : str
-        Free text (a place name, or the formatted kilometre).
-    """
-
-    chainage_m: float
-    km_m: float
-    label: str = ""
 
 
 @dataclass(frozen=True)
@@ -209,18 +191,43 @@ class TrackMap:
     def from_geojson(
         cls, path: str | Path, track: str | None = None, h_m: float = 0.0, **kwargs: Any
     ) -> TrackMap:
-        """Track map from a GeoJSON file; see :func:`predisat.track.readers.read_geojson_track`."""
-        from predisat.track.readers import read_geojson_track
-
-        return read_geojson_track(path, track=track, h_m=h_m, **kwargs)
+        """Track map from a GeoJSON file; the options are those of
+        :func:`predisat.track.readers.parse_geojson_track`."""
+        return cls.from_track_file(parse_geojson_track(path, track=track, h_m=h_m, **kwargs))
 
     @classmethod
     def from_csv(cls, path: str | Path, **kwargs: Any) -> TrackMap:
-        """Track map from a CSV of lat/lon[/h]; see
-        :func:`predisat.track.readers.read_csv_track`."""
-        from predisat.track.readers import read_csv_track
+        """Track map from a CSV of lat/lon[/h]; the options are those of
+        :func:`predisat.track.readers.parse_csv_track`."""
+        return cls.from_track_file(parse_csv_track(path, **kwargs))
 
-        return read_csv_track(path, **kwargs)
+    @classmethod
+    def from_track_file(cls, tf: TrackFile) -> TrackMap:
+        """Track map from a parsed file: the smooth fit, the chainage direction (with the
+        kilometre posts when the file has at least two), posts and tunnels on the axis."""
+
+        def build(lat: NDArray, lon: NDArray, h: NDArray) -> TrackMap:
+            try:
+                return cls.from_latlon(
+                    lat, lon, h, name=tf.name, tolerance_m=tf.tolerance_m,
+                    vertical_tolerance_m=tf.vertical_tolerance_m, source=tf.source,
+                    attribution=tf.attribution,
+                )  # fmt: skip
+            except TrackMapError as exc:
+                raise TrackMapError(f"{tf.path}: {exc}") from None
+
+        tm = build(tf.lat_deg, tf.lon_deg, tf.h_m)
+        posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
+        flip, spans = tf.reverse, list(tf.tunnel_spans)
+        if not flip and len(posts) >= 2:
+            by_s = sorted(posts, key=lambda p: p.chainage_m)
+            flip = by_s[-1].km_m < by_s[0].km_m
+        if flip:
+            tm = build(tf.lat_deg[::-1], tf.lon_deg[::-1], tf.h_m[::-1])
+            posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
+            n = len(tf.lat_deg)
+            spans = [(n - 1 - b, n - 1 - a) for a, b in spans]
+        return tm.with_metadata(kilometre_posts=posts, tunnels_m=_tunnel_intervals(tm, spans))
 
     def with_metadata(
         self,
@@ -531,3 +538,61 @@ def demo_track() -> TrackMap:
     ref = resources.files("predisat") / "data" / DEMO_TRACK_FILE
     with resources.as_file(ref) as path:
         return TrackMap.from_geojson(path)
+
+
+def _tunnel_intervals(
+    tm: TrackMap, spans: Sequence[tuple[int, int]]
+) -> list[tuple[float, float]]:
+    if not spans:
+        return []
+    idx = np.array(spans)
+    enu = tm.polyline_enu_m
+    s = tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2)
+    s.sort(axis=1)
+    merged: list[list[float]] = []
+    for a, b in sorted(s.tolist()):
+        if merged and a <= merged[-1][1] + 1.0:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
+def load_track(
+    path: str | os.PathLike[str],
+    name: str | None = None,
+    *,
+    chain: Literal["all", "longest"] = "all",
+    where: Mapping[str, str | None] | None = None,
+) -> TrackMap:
+    """The track map in a file, GeoJSON or CSV by its content (not its suffix).
+
+    The one loader of every command (``predisat process``, ``synth``, ``availability``,
+    ``locator run`` ...) and of survey folders.
+
+    Parameters
+    ----------
+    path : path-like
+        A GeoJSON file (LineString / MultiLineString) or a CSV of ``lat_deg, lon_deg[, h_m]``.
+    name : str, optional
+        Which track of a GeoJSON file holding several (``track=`` of
+        :func:`~predisat.track.readers.parse_geojson_track`); ignored for a CSV (one line).
+    chain : {"all", "longest"}
+        How the selected GeoJSON parts are chained.
+    where : mapping, optional
+        GeoJSON property filters (``{key: value}``, None: key absent).
+
+    Raises
+    ------
+    TrackMapError
+        When the file is missing or unusable, naming the file, the record and the fix.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise TrackMapError(
+            f"{p}: no such file; give a GeoJSON (LineString) or CSV (lat_deg, lon_deg[, h_m]) "
+            "track map"
+        )
+    if sniff_format(p) == "geojson":
+        return TrackMap.from_geojson(p, track=name, chain=chain, where=where)
+    return TrackMap.from_csv(p)

@@ -12,21 +12,28 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
-from predisat.track.map import KilometrePost, TrackMap, TrackMapError
+from predisat.track.errors import TrackMapError
+from predisat.track.posts import KilometrePost, points_as_posts, project_posts
+
+if TYPE_CHECKING:
+    from predisat.track.map import TrackMap
 
 __all__ = [
     "NAME_KEYS",
+    "TrackFile",
     "kilometre_posts_from_sections",
-    "read_csv_track",
-    "read_geojson_track",
+    "parse_csv_track",
+    "parse_geojson_track",
+    "sniff_format",
     "write_geojson",
 ]
 
@@ -38,6 +45,54 @@ _LABEL_KEYS = tuple(k for k in NAME_KEYS if k not in _ID_KEYS)  # the names prop
 _OSM_ATTRIBUTION = (
     "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
 )
+
+
+@dataclass(frozen=True)
+class TrackFile:
+    """What a track map file says: the chained source vertices and the metadata.
+
+    :meth:`predisat.track.map.TrackMap.from_geojson` and ``from_csv`` build the track map from
+    it (smooth fit, chainage direction, kilometre posts and tunnels on the fitted axis).
+
+    Attributes
+    ----------
+    path : Path
+    lat_deg, lon_deg, h_m : ndarray, shape (n,)
+        Source vertices in file order after chaining (WGS84, ellipsoidal metres).
+    name, source, attribution : str
+    tolerance_m : float
+    vertical_tolerance_m : float or None
+    posts : list of (km_m, label, [lon, lat(, h)])
+        Kilometre posts as found in the file (:func:`predisat.track.posts.points_as_posts`).
+    tunnel_spans : list of (int, int)
+        Vertex index spans of tunnel parts.
+    reverse : bool
+        Chainage asked to run against the vertex order (``reverse=True``).
+    max_post_offset_m : float
+        Posts farther than this from the track are ignored.
+    """
+
+    path: Path
+    lat_deg: NDArray
+    lon_deg: NDArray
+    h_m: NDArray
+    name: str
+    source: str
+    attribution: str = ""
+    tolerance_m: float = 1.0
+    vertical_tolerance_m: float | None = None
+    posts: list[tuple[float, str, NDArray]] = field(default_factory=list)
+    tunnel_spans: list[tuple[int, int]] = field(default_factory=list)
+    reverse: bool = False
+    max_post_offset_m: float = 50.0
+
+
+def sniff_format(path: str | Path) -> Literal["geojson", "csv"]:
+    """``"geojson"`` when the file's first non-blank character opens a JSON object, else
+    ``"csv"``: by content, so that a ``.txt`` or ``.json`` file is read for what it is."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096).lstrip(b"\xef\xbb\xbf \t\r\n")
+    return "geojson" if head[:1] in (b"{", b"[") else "csv"
 
 
 # ---------------------------------------------------------------------- GeoJSON
@@ -173,7 +228,7 @@ def _refuse_id_only_match(
             )
 
 
-def read_geojson_track(
+def parse_geojson_track(
     path: str | Path,
     track: str | None = None,
     h_m: float = 0.0,
@@ -189,8 +244,9 @@ def read_geojson_track(
     name: str | None = None,
     source: str | None = None,
     attribution: str | None = None,
-) -> TrackMap:
-    """Read a track axis from a GeoJSON file (WGS84 ``[lon, lat(, h)]``).
+) -> TrackFile:
+    """Read a track axis from a GeoJSON file (WGS84 ``[lon, lat(, h)]``); see
+    :meth:`predisat.track.map.TrackMap.from_geojson`, which builds the track map from it.
 
     Parameters
     ----------
@@ -313,99 +369,20 @@ def read_geojson_track(
     lon, lat = coords[:, 0], coords[:, 1]
     h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
 
-    posts_raw = _points_as_posts(points)
+    posts_raw = points_as_posts(points)
     members = doc if isinstance(doc, dict) else {}
     if attribution is None:
         attribution = str(members.get("attribution", ""))
         if not attribution and "openstreetmap" in str(members.get("copyright", "")).lower():
             attribution = _OSM_ATTRIBUTION
     tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
-    name = name or str(members.get("name") or track or path.stem)
-    try:
-        tm = TrackMap.from_latlon(
-            lat,
-            lon,
-            h,
-            name=name,
-            tolerance_m=tol,
-            source=source or str(members.get("source") or path.name),
-            attribution=attribution,
-        )
-    except TrackMapError as exc:
-        raise TrackMapError(f"{path}: {exc}") from None
-    posts = _project_posts(tm, posts_raw, max_post_offset_m)
-    flip = reverse
-    if not reverse and len(posts) >= 2:
-        by_s = sorted(posts, key=lambda p: p.chainage_m)
-        flip = by_s[-1].km_m < by_s[0].km_m
-    if flip:
-        tm = TrackMap.from_latlon(
-            lat[::-1],
-            lon[::-1],
-            h[::-1],
-            name=tm.name,
-            tolerance_m=tol,
-            source=tm.source,
-            attribution=tm.attribution,
-        )
-        posts = _project_posts(tm, posts_raw, max_post_offset_m)
-        n = len(coords)
-        tunnel_spans = [(n - 1 - b, n - 1 - a) for a, b in tunnel_spans]
-    tunnels = _tunnel_intervals(tm, tunnel_spans)
-    return tm.with_metadata(kilometre_posts=posts, tunnels_m=tunnels)
-
-
-def _points_as_posts(
-    points: Sequence[tuple[dict[str, Any], NDArray]],
-) -> list[tuple[float, str, NDArray]]:
-    out = []
-    for props, xy in points:
-        km: float | None = None
-        if "km_m" in props:
-            km = float(props["km_m"])
-        elif props.get("railway") == "milestone" and "railway:position" in props:
-            txt = str(props["railway:position"]).replace(",", ".").split(";")[0]
-            try:
-                km = 1000.0 * float(txt.strip().lower().removeprefix("km").strip())
-            except ValueError:
-                km = None
-        if km is None or xy.shape not in ((2,), (3,)):
-            continue
-        label = str(props.get("label") or props.get("name") or f"km {km / 1000.0:.3f}")
-        out.append((km, label, xy))
-    return out
-
-
-def _project_posts(
-    tm: TrackMap, posts: Sequence[tuple[float, str, NDArray]], max_offset_m: float
-) -> list[KilometrePost]:
-    if not posts:
-        return []
-    xy = np.array([p[2][:2] for p in posts])
-    pr = tm.project(xy[:, 1], xy[:, 0])
-    keep = (~pr.clamped) & (np.abs(pr.offset_m) <= max_offset_m)
-    out = [
-        KilometrePost(float(s), km, label)
-        for (km, label, _), s, k in zip(posts, pr.chainage_m, keep, strict=True)
-        if k
-    ]
-    return sorted(out, key=lambda p: p.chainage_m)
-
-
-def _tunnel_intervals(tm: TrackMap, spans: Sequence[tuple[int, int]]) -> list[tuple[float, float]]:
-    if not spans:
-        return []
-    idx = np.array(spans)
-    enu = tm.polyline_enu_m
-    s = tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2)
-    s.sort(axis=1)
-    merged: list[list[float]] = []
-    for a, b in sorted(s.tolist()):
-        if merged and a <= merged[-1][1] + 1.0:
-            merged[-1][1] = max(merged[-1][1], b)
-        else:
-            merged.append([a, b])
-    return [(a, b) for a, b in merged]
+    return TrackFile(
+        path, lat, lon, h,
+        name=name or str(members.get("name") or track or path.stem),
+        source=source or str(members.get("source") or path.name),
+        attribution=attribution, tolerance_m=tol, posts=posts_raw,
+        tunnel_spans=list(tunnel_spans), reverse=reverse, max_post_offset_m=max_post_offset_m,
+    )  # fmt: skip
 
 
 def kilometre_posts_from_sections(
@@ -443,7 +420,7 @@ def kilometre_posts_from_sections(
         for j, km in enumerate(kms):
             label = names[j] if j < 2 and names[j] else f"km {km / 1000.0:.3f}"
             raw.append((float(km), label, np.array([lon[j], lat[j]])))
-    posts = _project_posts(track, raw, max_offset_m)
+    posts = project_posts(track, raw, max_offset_m)
     unique: dict[float, KilometrePost] = {}
     for p in posts:  # a section end is also the next section's start
         if p.km_m not in unique or (unique[p.km_m].label.startswith("km ") and p.label):
@@ -452,7 +429,7 @@ def kilometre_posts_from_sections(
 
 
 def write_geojson(track: TrackMap, path: str | Path) -> None:
-    """Write a track map as GeoJSON that :func:`read_geojson_track` reads back identically.
+    """Write a track map as GeoJSON that :meth:`TrackMap.from_geojson` reads back identically.
 
     The source vertices go in one LineString feature (with heights when any is non-zero),
     kilometre posts as Point features with ``km_m`` and ``label``; ``name``, ``source``,
@@ -500,7 +477,7 @@ _LON = ("lon_deg", "lon", "lng", "long", "longitude")
 _H = ("h_m", "h", "height", "height_m", "alt", "altitude", "ele", "elevation")
 
 
-def read_csv_track(
+def parse_csv_track(
     path: str | Path,
     *,
     name: str | None = None,
@@ -509,7 +486,7 @@ def read_csv_track(
     vertical_tolerance_m: float | None = None,
     source: str | None = None,
     attribution: str = "",
-) -> TrackMap:
+) -> TrackFile:
     """Read a track axis from a CSV with a header: ``lat_deg, lon_deg[, h_m]`` (vertex order).
 
     Accepted header names: latitude ``lat_deg|lat|latitude``, longitude
@@ -562,19 +539,11 @@ def read_csv_track(
             f"{path}: data line {k + 2} has latitude {arr[k, 0]} outside [-90, 90]; are the "
             "latitude and longitude columns swapped?"
         )
-    try:
-        return TrackMap.from_latlon(
-            arr[:, 0],
-            arr[:, 1],
-            arr[:, 2],
-            name=name or path.stem,
-            tolerance_m=tolerance_m,
-            vertical_tolerance_m=vertical_tolerance_m,
-            source=source or path.name,
-            attribution=attribution,
-        )
-    except TrackMapError as exc:
-        raise TrackMapError(f"{path}: {exc}") from None
+    return TrackFile(
+        path, arr[:, 0], arr[:, 1], arr[:, 2], name=name or path.stem,
+        source=source or path.name, attribution=attribution, tolerance_m=tolerance_m,
+        vertical_tolerance_m=vertical_tolerance_m,
+    )  # fmt: skip
 
 
 def _first(names: list[str], n: int = 5) -> str:

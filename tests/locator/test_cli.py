@@ -19,7 +19,7 @@ from locator.cli import main
 from locator.runio import read_run
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SignalState, SimRun
-from locator.workflow import _track_check
+from locator.workflow import check_track
 from predisat.gnss.errormodel import read_error_model
 from predisat.track.map import demo_track
 from tests.locator._scene import canyon_world
@@ -142,7 +142,7 @@ def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
 def test_a_run_on_another_track_is_refused(sim_dir):
     sim = SimRun.read(sim_dir)
     with pytest.raises(ValueError, match="away from track"):
-        _track_check(AntennaPath(demo_track(), 4.0), sim.antenna_ecef_m, "sim")
+        check_track(AntennaPath(demo_track(), 4.0), sim.antenna_ecef_m, "sim")
 
 
 def _virtual_track(path):

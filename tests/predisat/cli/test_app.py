@@ -10,6 +10,7 @@ import pytest
 
 from locator import cli as locator_cli
 from predisat.cli import app as cli
+from predisat.cli import common
 
 
 def test_help_lists_commands(capsys: pytest.CaptureFixture[str]) -> None:
@@ -94,10 +95,10 @@ def test_synth_rejects_bad_scenery_recipe(tmp_path, capsys: pytest.CaptureFixtur
 
 
 def test_where_filters_parse_and_reject_bad_items() -> None:
-    assert cli._parse_where(["usage=main", "service="]) == {"usage": "main", "service": None}
-    assert cli._parse_where(None) is None
-    with pytest.raises(cli.CliError, match="KEY=VALUE"):
-        cli._parse_where(["usage"])
+    assert common.parse_where(["usage=main", "service="]) == {"usage": "main", "service": None}
+    assert common.parse_where(None) is None
+    with pytest.raises(common.CliError, match="KEY=VALUE"):
+        common.parse_where(["usage"])
 
 
 def test_evaluate_sky_with_a_candidate_network(
@@ -259,7 +260,7 @@ def test_interrupted_process_keeps_its_work(
         raise KeyboardInterrupt
 
     with monkeypatch.context() as m:
-        m.setattr(pl, "_run_chunks", ctrl_c)
+        m.setattr(pl, "run_chunks", ctrl_c)
         capsys.readouterr()
         assert cli.main(args) == 130
     err = capsys.readouterr().err
@@ -277,9 +278,9 @@ def test_interrupted_process_keeps_its_work(
         raise SystemError("a genuine internal error")
 
     with monkeypatch.context() as m:
-        m.setattr(pl, "_run_chunks", ctrl_c_in_numba)
+        m.setattr(pl, "run_chunks", ctrl_c_in_numba)
         assert cli.main(args) == 130
-        m.setattr(pl, "_run_chunks", other_system_error)
+        m.setattr(pl, "run_chunks", other_system_error)
         with pytest.raises(SystemError, match="genuine"):
             cli.main(args)
     err = capsys.readouterr().err

@@ -13,15 +13,11 @@ import pytest
 
 from predisat.camera.models import CameraModel
 from predisat.masks.fileformat import read_masks
-from predisat.masks.maskset import BinSource, MaskError, MaskSet
-from predisat.reconstruct.batch import (
-    BadFrameError,
-    PipelineParams,
-    RunStopped,
-    concat_masksets,
-    default_segmenter,
-    process_survey,
-)
+from predisat.masks.maskset import BinSource, MaskError, MaskSet, concat_masksets
+from predisat.reconstruct.badframes import BadFrameError
+from predisat.reconstruct.batch import RunStopped, process_survey
+from predisat.reconstruct.frames import default_segmenter
+from predisat.reconstruct.params import PipelineParams
 from tests.predisat.candidate_net import net_copy
 
 CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
@@ -156,10 +152,10 @@ def test_one_worker_pool_serves_both_stages(
 ) -> None:
     """The workers start once per run (imports, models and numba caches load once), for the
     segmentation and the chunks, and are shut down when a strict run stops at a bad frame."""
-    import predisat.reconstruct.batch as pl
+    import predisat.reconstruct.executor as ex
 
     made: list[Any] = []
-    get = pl._Pool.get
+    get = ex.WorkerPool.get
 
     def counting_get(self: Any) -> Any:
         executor = get(self)
@@ -167,7 +163,7 @@ def test_one_worker_pool_serves_both_stages(
             made.append(executor)
         return executor
 
-    monkeypatch.setattr(pl._Pool, "get", counting_get)
+    monkeypatch.setattr(ex.WorkerPool, "get", counting_get)
     p = PipelineParams(chunk_m=30.0, segmenter="blue")
     res = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky,
                          workers=2)  # fmt: skip
@@ -229,21 +225,21 @@ def _pillow_decodes(data: bytes) -> bool:
 def test_truncated_jpeg_is_told_from_a_whole_one(progressive: bool, tmp_path: Path) -> None:
     import cv2
 
-    from predisat.reconstruct.batch import _truncation
+    from predisat.reconstruct.frames import truncation
 
     whole = _jpeg((120, 160), 3, quality=90, progressive=progressive)
-    assert _pillow_decodes(whole) and _truncation(whole) is None
-    assert _truncation(whole + bytes(500)) is None  # padding after the end marker
+    assert _pillow_decodes(whole) and truncation(whole) is None
+    assert truncation(whole + bytes(500)) is None  # padding after the end marker
     sos = whole.index(b"\xff\xda")
     passed_by_opencv = 0
     for cut in np.linspace(sos + 20, len(whole) - 2, 7).astype(int):
         part = whole[:cut]
         assert not _pillow_decodes(part)
-        assert _truncation(part) is not None
+        assert truncation(part) is not None
         (tmp_path / "cut.jpg").write_bytes(part)
         passed_by_opencv += cv2.imread(str(tmp_path / "cut.jpg")) is not None
     assert passed_by_opencv > 0  # cv2.imread hands such files back, grey-filled: the reason
-    assert "header" in str(_truncation(whole[: sos - 4]))
+    assert "header" in str(truncation(whole[: sos - 4]))
 
 
 def test_thumbnail_end_marker_does_not_hide_truncation() -> None:
@@ -255,22 +251,22 @@ def test_thumbnail_end_marker_does_not_hide_truncation() -> None:
     app1 = b"\xff\xe1" + (len(body) + 2).to_bytes(2, "big") + body
     framed = whole[:2] + app1 + whole[2:]
     assert _pillow_decodes(framed)
-    from predisat.reconstruct.batch import _truncation
+    from predisat.reconstruct.frames import truncation
 
-    assert _truncation(framed) is None
+    assert truncation(framed) is None
     part = framed[: framed.index(b"\xff\xda") + 200]
-    assert not _pillow_decodes(part) and _truncation(part) is not None
+    assert not _pillow_decodes(part) and truncation(part) is not None
 
 
 def test_truncated_png_is_reported() -> None:
     import cv2
 
-    from predisat.reconstruct.batch import _truncation
+    from predisat.reconstruct.frames import truncation
 
     ok, enc = cv2.imencode(".png", np.random.default_rng(6).integers(0, 256, (60, 80, 3), np.uint8))
     data = enc.tobytes()
-    assert ok and _pillow_decodes(data) and _truncation(data) is None
-    assert not _pillow_decodes(data[:-30]) and "IEND" in str(_truncation(data[:-30]))
+    assert ok and _pillow_decodes(data) and truncation(data) is None
+    assert not _pillow_decodes(data[:-30]) and "IEND" in str(truncation(data[:-30]))
 
 
 def test_truncated_frame_is_reported_and_skipped(
@@ -367,7 +363,7 @@ def test_changed_code_redoes_chunks_and_segmentation(
 
 
 def test_code_fingerprint_covers_the_named_files() -> None:
-    from predisat.reconstruct.batch import SEGMENTATION_CODE, code_fingerprint
+    from predisat.reconstruct.framecache import SEGMENTATION_CODE, code_fingerprint
 
     seg = code_fingerprint(SEGMENTATION_CODE)
     assert seg == code_fingerprint(SEGMENTATION_CODE)  # deterministic
@@ -382,7 +378,7 @@ def test_segmentation_fingerprint_covers_every_module_the_segmenters_import() ->
     import subprocess
     import sys
 
-    from predisat.reconstruct.batch import SEGMENTATION_CODE
+    from predisat.reconstruct.framecache import SEGMENTATION_CODE
 
     code = (
         "import sys, numpy as np\n"
@@ -433,16 +429,16 @@ def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> N
     import io
     import json
 
-    from predisat.reconstruct.batch import CACHE_VERSION, _FrameJob, _read_cache, _write_cache
+    from predisat.reconstruct.framecache import CACHE_VERSION, FrameJob, read_cache, write_cache
 
     image = tmp_path / "f.jpg"
     image.write_bytes(b"an image")
-    job = _FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
+    job = FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
     rng = np.random.default_rng(0)
     sky = rng.random((5, 37)) < 0.5
     conf = rng.random(37).astype(np.float32)
-    _write_cache(job, (sky, conf), None)
-    got = _read_cache(job)
+    write_cache(job, (sky, conf), None)
+    got = read_cache(job)
     assert isinstance(got, tuple) and got[0].dtype == bool and got[1] is not None
     assert np.array_equal(got[0], sky) and np.array_equal(got[1], conf)
     with np.load(job.cache_path) as z:
@@ -452,7 +448,7 @@ def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> N
     np.savez_compressed(old, meta=np.array(json.dumps(meta)), sky=np.packbits(sky.ravel()),
                         confidence=conf)  # fmt: skip
     Path(job.cache_path).write_bytes(old.getvalue())
-    again = _read_cache(job)
+    again = read_cache(job)
     assert meta["version"] == CACHE_VERSION and isinstance(again, tuple)
     assert np.array_equal(again[0], sky) and again[1] is not None
     assert np.array_equal(again[1], conf)
@@ -461,7 +457,7 @@ def test_cache_entries_read_back_as_written_old_entries_too(tmp_path: Path) -> N
 def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) -> None:
     import json
 
-    from predisat.reconstruct.batch import sky_net_sha256
+    from predisat.reconstruct.framecache import sky_net_sha256
 
     base = process_survey(survey_dir, tmp_path / "base", PipelineParams(chunk_m=30.0),
                           progress=False)

@@ -122,7 +122,8 @@ def test_evaluate_with_margin_meets_target_on_the_calibration_set(tmp_path: Path
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    from predisat.reconstruct.batch import PipelineParams, process_survey
+    from predisat.reconstruct.batch import process_survey
+    from predisat.reconstruct.params import PipelineParams
     from predisat.synth.generate import generate_survey
     from predisat.track.map import demo_track
 
@@ -254,7 +255,8 @@ def test_process_writes_margins_and_evaluate_uses_them(
     import shutil
 
     from predisat.masks.fileformat import read_masks, write_masks
-    from predisat.reconstruct.batch import PipelineParams, process_survey
+    from predisat.reconstruct.batch import process_survey
+    from predisat.reconstruct.params import PipelineParams
 
     synth, masks_dir = tiny
     lut = {("cross", "observed"): 1.0, ("cross", "reconstructed"): 2.0,
@@ -305,7 +307,8 @@ def test_process_checks_margin_tables_before_any_work(
 ) -> None:
     import shutil
 
-    from predisat.reconstruct.batch import PipelineParams, process_survey
+    from predisat.reconstruct.batch import process_survey
+    from predisat.reconstruct.params import PipelineParams
 
     synth, masks_dir = tiny
     # a real calibration: groups without bins get 90 deg and NaN shares (null in JSON)

@@ -15,7 +15,8 @@ import pytest
 import shapely
 from pyproj import Geod, Transformer
 
-from predisat.track.map import TrackMap, TrackMapError, demo_track
+from predisat.track.errors import TrackMapError
+from predisat.track.map import TrackMap, demo_track
 from predisat.track.readers import kilometre_posts_from_sections, write_geojson
 
 GEOD = Geod(ellps="WGS84")

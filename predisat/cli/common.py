@@ -1,0 +1,125 @@
+"""What the ``predisat`` and ``locator`` command lines share: the error wrapper of ``main``,
+the track options and the kilometre range.
+
+``locator`` uses this public module; neither command line imports the other.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from predisat.cli.args import caused_by_interrupt
+from predisat.track import TrackMap, TrackMapError, demo_track, load_track
+
+__all__ = ["CliError", "add_track_selection", "km_range", "parse_where", "run_main", "track_option"]
+
+
+class CliError(Exception):
+    """A user-facing error: printed without a traceback."""
+
+
+def run_main(
+    parser: argparse.ArgumentParser,
+    argv: Sequence[str] | None,
+    label: str,
+    *,
+    interrupted_note: dict[str, str] | None = None,
+) -> int:
+    """Parse ``argv`` and run the chosen subcommand's ``func``, as a command line should.
+
+    Errors written for a person (:class:`CliError`, ``ValueError``, ``OSError``, ``KeyError``)
+    are printed on one line as ``<label>: error: ...`` (exit 2), Ctrl-C as ``interrupted``
+    (exit 130, with ``interrupted_note[command]`` when given); ``label`` may hold
+    ``{command}``, the subcommand's name.
+    """
+    args = parser.parse_args(argv)
+    if getattr(args, "func", None) is None:
+        parser.print_help()
+        return 0
+    name = label.format(command=getattr(args, "command", ""))
+    try:
+        return int(args.func(args))
+    except (CliError, ValueError, OSError, KeyError) as exc:
+        # library errors are written to be read by a person: no traceback
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, SystemError) as exc:
+        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it
+        if not caused_by_interrupt(exc):  # a genuine SystemError
+            raise
+        note = (interrupted_note or {}).get(getattr(args, "command", ""), "")
+        print(f"\n{name}: interrupted{note}", file=sys.stderr)
+        return 130
+
+
+def parse_where(items: Sequence[str] | None) -> dict[str, str | None] | None:
+    """``KEY=VALUE`` property filters; ``KEY=`` selects features without that property."""
+    if not items:
+        return None
+    where: dict[str, str | None] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CliError(f"--where {item}: expected KEY=VALUE (or KEY= for 'property absent')")
+        where[key] = value or None
+    return where
+
+
+def track_option(
+    path: str | None,
+    name: str | None = None,
+    chain: str = "all",
+    where: Sequence[str] | None = None,
+) -> TrackMap:
+    """``--track`` (with ``--track-name``, ``--chain``, ``--where``): the demo line when
+    absent, else :func:`predisat.track.load_track` (GeoJSON or CSV by content)."""
+    if path is None:
+        return demo_track()
+    if chain not in ("all", "longest"):
+        raise CliError(f"--chain {chain}: choose all or longest")
+    try:
+        return load_track(path, name, chain="all" if chain == "all" else "longest",
+                          where=parse_where(where))  # fmt: skip
+    except TrackMapError as exc:
+        raise CliError(f"--track {exc}") from None
+
+
+def add_track_selection(p: argparse.ArgumentParser) -> None:
+    """Which line of a GeoJSON holding several (Infrabel files, OpenStreetMap extracts)."""
+    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
+    p.add_argument(
+        "--chain",
+        choices=["all", "longest"],
+        default="all",
+        help="chain every selected way (all) or the longest connected chain of a network",
+    )
+    p.add_argument(
+        "--where",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
+    )
+
+
+def km_range(
+    track: TrackMap, from_km: float | None, to_km: float | None
+) -> tuple[float, float]:
+    """``--from-km/--to-km`` as metres of chainage, refused with the fix when not a stretch."""
+    top_km = track.length_m / 1000.0
+    lo_km = 0.0 if from_km is None else float(from_km)
+    hi_km = top_km if to_km is None else float(to_km)
+    if not lo_km < hi_km:
+        reason = "the start must be below the end (chainage grows along the track)"
+    elif not (0.0 <= lo_km and hi_km <= top_km + 1e-9):
+        reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
+    else:
+        return lo_km * 1000.0, hi_km * 1000.0
+    hint = ""
+    if lo_km < hi_km and hi_km > top_km and hi_km / 1000.0 <= top_km:
+        hint = (
+            f"; the values are kilometres, did you give metres? "
+            f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
+        )
+    raise CliError(f"--from-km {lo_km:g} --to-km {hi_km:g}: {reason}{hint}")

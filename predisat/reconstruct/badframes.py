@@ -1,0 +1,47 @@
+"""Bad frames: frames a run skips, with the reason and the fix; their list ``bad_frames.csv``."""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from predisat.atomic import write_bytes_atomic
+
+__all__ = ["BadFrame", "BadFrameError", "write_bad_frames"]
+
+
+class BadFrameError(ValueError):
+    """A bad frame met with ``strict=True``; the message names the frame and the fix."""
+
+
+
+@dataclass(frozen=True)
+class BadFrame:
+    """A frame skipped by the pipeline.
+
+    Attributes
+    ----------
+    frame_id : str
+    message : str
+        What is wrong (and how to fix it).
+    stage : str
+        ``"load"`` (rejected by the survey loader) or ``"segment"`` (image unreadable or
+        segmentation failed).
+    """
+
+    frame_id: str
+    message: str
+    stage: str = "segment"
+
+
+
+def write_bad_frames(path: Path, bad: Iterable[BadFrame]) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame_id", "stage", "message"])
+    for b in bad:
+        w.writerow([b.frame_id, b.stage, b.message])
+    write_bytes_atomic(path, buf.getvalue().encode())

@@ -1,0 +1,171 @@
+"""A chainage chunk of a batch run: its frames, its reconstruction, its files and its marker.
+
+Chunk ``k`` holds the positions in ``[k * chunk_m, (k + 1) * chunk_m)`` and is reconstructed
+from the cached segmentations of the frames within ``overlap_m`` of it (:func:`run_chunk`). It
+is written atomically as ``chunks/<lo>_<hi>.parquet`` (a mask file), then ``<lo>_<hi>.json``
+(its provenance, the completion marker); :func:`chunk_finished` decides whether a marker left
+by an earlier run may be kept.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.atomic import write_bytes_atomic
+from predisat.camera.models import CameraModel, Mount
+from predisat.masks.fileformat import write_masks
+from predisat.reconstruct.badframes import BadFrame
+from predisat.reconstruct.carving import FrameView, Reconstructor
+from predisat.reconstruct.framecache import decode_cache
+from predisat.reconstruct.params import PipelineParams
+
+__all__ = [
+    "ChunkFrame",
+    "ChunkJob",
+    "chunk_finished",
+    "chunk_name",
+    "reconstructor_for",
+    "run_chunk",
+]
+
+@dataclass(frozen=True)
+class ChunkFrame:
+    frame_id: str
+    side: str
+    chainage_m: float
+    cache_path: str
+
+
+
+@dataclass(frozen=True)
+class ChunkJob:
+    name: str
+    lo_m: float
+    hi_m: float
+    positions_m: NDArray
+    frames: tuple[ChunkFrame, ...]
+    cameras: dict[str, tuple[CameraModel, Mount]]
+    reverse: bool
+    antenna_height_m: float
+    track: Any
+    params: PipelineParams
+    provenance: dict[str, Any]
+    chunk_dir: str
+    # the chunk's frames found bad before it ran: recorded in its marker, so that a resumed
+    # run that skips the chunk still lists them
+    known_bad: tuple[BadFrame, ...] = ()
+    frames_key: str = ""  # frames_key of every frame the chunk may use, bad ones included
+
+
+
+def _fmt_m(x: float) -> str:
+    text = f"{x:.3f}".rstrip("0").rstrip(".")
+    return text if text != "-0" else "0"
+
+
+
+
+def chunk_name(lo_m: float, hi_m: float) -> str:
+    """File stem of the chunk ``[lo_m, hi_m)``: ``"3000_4000"`` (metres, up to mm)."""
+    return f"{_fmt_m(lo_m)}_{_fmt_m(hi_m)}"
+
+
+
+def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstructor:
+    """``previous`` when it has the job's parameters, else a new one."""
+    p = job.params.reconstruction
+    return previous if previous is not None and previous.params == p else Reconstructor(p)
+
+
+
+def run_chunk(
+    job: ChunkJob, reconstructor: Reconstructor | None = None
+) -> tuple[str, list[BadFrame]]:
+    """Reconstruct one chunk from cached segmentations and write it atomically.
+
+    ``reconstructor`` (with ``job.params.reconstruction``) may be shared by the chunks of a run,
+    so that its per-camera rectifiers are built once.
+    """
+    track = job.track
+    bad: list[BadFrame] = list(job.known_bad)
+    views: list[FrameView] = []
+    ok_frames = []
+    for f in job.frames:
+        cached = _load_cached(f)
+        if isinstance(cached, BadFrame):
+            bad.append(cached)
+            continue
+        ok_frames.append((f, cached))
+    if ok_frames:
+        s = np.array([f.chainage_m for f, _ in ok_frames])
+        axis = np.asarray(track.enu_at(s), float)
+        ant = axis + job.antenna_height_m * np.asarray(track.up_at(s), float)
+        heading = np.asarray(track.heading_at(s), float)
+        for k, (f, (sky, conf)) in enumerate(ok_frames):
+            cam, mount = job.cameras[f.side]
+            views.append(
+                FrameView(
+                    chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
+                    antenna_enu_m=ant[k], heading_deg=float(heading[k]), reverse=job.reverse,
+                    confidence=conf, frame_id=f.frame_id,
+                )
+            )  # fmt: skip
+    if reconstructor is None:
+        reconstructor = Reconstructor(job.params.reconstruction)
+    rec = reconstructor.run(views, job.positions_m, track)
+    prov = dict(job.provenance)
+    prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
+    masks = rec.to_maskset(track, provenance=prov)
+    chunk_dir = Path(job.chunk_dir)
+    write_masks(masks, chunk_dir / f"{job.name}.parquet")
+    marker = {
+        **prov,
+        "frames_key": job.frames_key,
+        "n_positions": int(masks.n_pos),
+        "n_frames": len(views),
+        "bad_frames": [asdict(b) for b in bad],
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    # the JSON is the completion marker: written last, so a half-done chunk is redone
+    write_bytes_atomic(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())
+    return job.name, bad
+
+
+
+def _load_cached(f: ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
+    path = Path(f.cache_path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return decode_cache(z, json.loads(str(z["meta"])), f.frame_id)
+    except (OSError, ValueError, KeyError) as exc:
+        return BadFrame(f.frame_id, f"segmentation cache {path} unreadable ({exc}); rerun")
+
+
+
+def chunk_finished(
+    chunk_dir: Path, name: str, run_key: str, frames_key: str
+) -> dict[str, Any] | None:
+    """The completion marker of a chunk that need not be redone, else None."""
+    import pyarrow.parquet as pq
+
+    marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
+    if not (marker.is_file() and data.is_file()):
+        return None
+    try:
+        done = json.loads(marker.read_text())
+        if done.get("run_key") != run_key or done.get("frames_key") != frames_key:
+            return None
+        # A power cut after the rename may leave an empty or torn file (no fsync, for speed):
+        # a chunk whose Parquet footer does not read, or holds other than its rows, is redone.
+        rows = pq.read_metadata(data).num_rows
+        ok = rows > 0 and rows == done.get("n_positions", rows)
+        return done if ok and isinstance(done, dict) else None
+    except (OSError, ValueError, AttributeError):
+        return None

@@ -1,0 +1,226 @@
+"""The segmentation cache of a run, and the fingerprints that decide what may be reused.
+
+Each frame's segmentation (packed sky mask plus per-column confidence, or the recorded failure)
+is kept in ``out/cache/seg-<method>-<code>/<frame_id>.npz`` and reused while the image keeps
+its size and modification time (:func:`read_cache`, :func:`write_cache`). The cache folder is
+keyed by :func:`code_fingerprint` of :data:`SEGMENTATION_CODE`; a run's resume key by the
+whole package's fingerprint, the survey's description (:func:`survey_hash`) and, for a
+candidate network, its files (:func:`sky_net_sha256`). :func:`frames_key` stamps the images a
+chunk reads, so that replacing one redoes that chunk.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import zipfile
+import zlib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.atomic import write_bytes_atomic
+from predisat.reconstruct.badframes import BadFrame
+
+if TYPE_CHECKING:
+    from predisat.survey import Survey
+
+if TYPE_CHECKING:
+    pass
+
+__all__ = [
+    "CACHE_VERSION",
+    "SEGMENTATION_CODE",
+    "FrameJob",
+    "code_fingerprint",
+    "decode_cache",
+    "frames_key",
+    "read_cache",
+    "sky_net_sha256",
+    "stat_key",
+    "survey_hash",
+    "write_cache",
+]
+
+
+CACHE_VERSION = 1
+
+
+# The files the segmentation depends on (its cache is kept while they do not change).
+SEGMENTATION_CODE = (
+    "sky/__init__.py", "sky/segment.py", "sky/perceptron.py", "sky/features.py",
+    "sky/grabcut.py", "sky/network.py", "data/models",
+)
+
+
+
+@dataclass(frozen=True)
+class FrameJob:
+    frame_id: str
+    image_path: str
+    width_px: int
+    height_px: int
+    cache_path: str
+    thin_px: int | None = None  # given to the default segmenter only
+
+
+
+def stat_key(path: str) -> list[int]:
+    st = os.stat(path)
+    return [int(st.st_size), int(st.st_mtime_ns)]
+
+
+
+def frames_key(frame_ids: Iterable[str], image_paths: Iterable[str]) -> str:
+    """Hash of a chunk's frames and their images' size and modification time (None when
+    missing), so that a finished chunk is redone once one of its images is replaced."""
+    stamps = [
+        [fid, stat_key(path) if os.path.exists(path) else None]
+        for fid, path in zip(frame_ids, image_paths, strict=True)
+    ]
+    return hashlib.sha256(json.dumps(stamps).encode()).hexdigest()[:16]
+
+
+
+def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
+    """Cached result of a frame (None when absent or stale: the image changed)."""
+    path = Path(job.cache_path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("version") != CACHE_VERSION or meta.get("thin_px") != job.thin_px:
+                return None
+            if os.path.exists(job.image_path):
+                if meta.get("image_stat") != stat_key(job.image_path):
+                    return None
+            elif meta.get("image_stat") is not None:
+                return None
+            return decode_cache(z, meta, job.frame_id)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
+        return None  # a damaged cache entry (e.g. emptied by a power cut) is recomputed
+
+
+
+def decode_cache(
+    z: Any, meta: dict[str, Any], frame_id: str
+) -> tuple[NDArray, NDArray | None] | BadFrame:
+    """The segmentation (or the recorded failure) of an opened cache entry."""
+    if meta.get("bad"):
+        return BadFrame(frame_id, str(meta["bad"]))
+    h, w = meta["shape"]
+    sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).view(bool)  # 0 / 1: no copy
+    conf = z["confidence"] if "confidence" in z.files else None
+    return sky, conf
+
+
+
+def write_cache(
+    job: FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
+) -> None:
+    stat = stat_key(job.image_path) if os.path.exists(job.image_path) else None
+    meta: dict[str, Any] = {
+        "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
+    }  # fmt: skip
+    arrays: dict[str, Any] = {}
+    if result is not None:
+        sky, conf = result
+        meta["shape"] = list(sky.shape)
+        arrays["sky"] = np.packbits(sky.ravel())
+        if conf is not None:
+            arrays["confidence"] = np.asarray(conf, np.float32)
+    payload = _npz_bytes({"meta": np.array(json.dumps(meta)), **arrays})
+    write_bytes_atomic(Path(job.cache_path), payload)
+
+
+
+def _npz_bytes(arrays: dict[str, Any]) -> bytes:
+    """An ``.npz`` archive of ``arrays`` (what ``np.load`` reads), deflated at level 1.
+
+    ``np.savez_compressed`` deflates at level 6: 0.32 ms per 640x480 frame's entry against
+    0.19 ms here, for 4.0 instead of 3.7 kB (2026-12-02).
+    """
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        for name, arr in arrays.items():
+            npy = io.BytesIO()
+            np.lib.format.write_array(npy, np.asanyarray(arr), allow_pickle=False)
+            zf.writestr(f"{name}.npy", npy.getvalue())
+    return buf.getvalue()
+
+
+
+def code_fingerprint(parts: Sequence[str] | None = None) -> str:
+    """Hash of the package's own source, so results of changed code are never reused.
+
+    A development install changes code without changing ``predisat.__version__``; the
+    resume key and the segmentation cache therefore carry this fingerprint too.
+
+    Parameters
+    ----------
+    parts : sequence of str, optional
+        Files or folders relative to the package; default every ``.py`` file and the
+        shipped models.
+
+    Returns
+    -------
+    str
+        16 hex digits of SHA-256 over the files' relative paths and contents.
+    """
+    root = Path(__file__).resolve().parents[1]  # the predisat package
+    if parts is None:
+        files = sorted(root.rglob("*.py")) + sorted((root / "data" / "models").glob("*"))
+    else:
+        files = []
+        for part in parts:
+            q = root / part
+            if not q.exists():
+                raise FileNotFoundError(f"code_fingerprint: {q} is not part of the package")
+            files += sorted(f for f in q.rglob("*") if f.is_file()) if q.is_dir() else [q]
+    h = hashlib.sha256()
+    for f in files:
+        if f.is_file() and "__pycache__" not in f.parts:
+            h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+
+def survey_hash(survey: Survey) -> str:
+    """SHA-256 of the survey's description: ``survey.yaml``, ``manifest.csv``, calibrations.
+
+    Image content is not hashed (too slow for a resume check); the segmentation cache checks
+    each image's size and modification time instead.
+    """
+    root = Path(survey.root)
+    h = hashlib.sha256()
+    files = [root / "survey.yaml", root / "manifest.csv"]
+    files += sorted({Path(c.calibration_path) for c in survey.cameras.values()})
+    for p in files:
+        h.update(str(p.name).encode() + b"\0")
+        h.update(p.read_bytes() if p.is_file() else b"<missing>")
+    return h.hexdigest()
+
+
+
+def sky_net_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a sky network: its ONNX file and its card (the card sets the input size).
+
+    Raises
+    ------
+    FileNotFoundError
+        Naming the missing file.
+    """
+    from predisat.sky.network import SkyNet
+
+    net = SkyNet.load(path)  # checks both files and the card
+    h = hashlib.sha256()
+    for f in (net.path, net.path.with_suffix(".json")):
+        h.update(f.read_bytes())
+    return h.hexdigest()

@@ -1,0 +1,154 @@
+"""Reading a frame's image with its checks, and segmenting it into the cache.
+
+:func:`read_image` refuses missing, empty, truncated (:func:`truncation`) and undecodable files
+with the problem and its fix; :func:`segment_frame` checks the size against the calibration,
+runs the segmenter (:func:`default_segmenter`, or a user's function) and records the result or
+the failure in the cache. One bad frame never stops a run: its problem is returned.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from predisat.reconstruct.framecache import FrameJob, write_cache
+
+__all__ = ["Segmenter", "default_segmenter", "read_image", "segment_frame", "truncation"]
+
+
+Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
+"""Image (H, W, 3) BGR uint8 -> (sky mask (H, W) bool, per-column confidence (W,) or None)."""
+
+
+
+def default_segmenter(
+    image_bgr: NDArray,
+    method: str | None = None,
+    sky_net: str | None = None,
+    thin_px: int | None = None,
+) -> tuple[NDArray, NDArray | None]:
+    """:func:`predisat.sky.segment.segment_sky`: sky mask and per-column confidence.
+
+    ``method`` is one of :data:`predisat.sky.segment.METHODS` (default: ``SkyOptions``'s);
+    ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``);
+    ``thin_px`` the thin-structure width (default ``SkyOptions``'s; the pipeline gives each
+    camera's, ``PipelineParams.thin_px``).
+    """
+    from predisat.sky.segment import SkyOptions, segment_sky
+
+    opt = SkyOptions() if method is None else SkyOptions(method=method)
+    if thin_px is not None:
+        opt = replace(opt, thin_px=int(thin_px))
+    classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
+    seg = segment_sky(image_bgr, opt, classifier=classifier)
+    return seg.sky_mask, seg.confidence
+
+
+
+@functools.lru_cache(maxsize=4)
+def _candidate_classifier(method: str, sky_net: str) -> Any:
+    # read once per process and file, not once per frame
+    from predisat.sky.network import SkyNet, classifier_with_net
+
+    return classifier_with_net(method, SkyNet.load(sky_net))
+
+
+
+def read_image(path: str) -> tuple[NDArray | None, str | None]:
+    """The BGR image at ``path``, or None and the problem with the file and its fix."""
+    import cv2
+
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        return None, f"image {path} is missing; restore it or drop the frame"
+    except OSError as exc:
+        return None, f"image {path} cannot be read ({exc.strerror}); check the file"
+    if not data:
+        return None, (
+            f"image {path} is empty (0 bytes): copy it again from the camera or drop the frame"
+        )
+    cut = truncation(data)
+    if cut is not None:
+        return None, (
+            f"image {path} is truncated ({cut}): the file was cut short, "
+            "copy it again from the camera or drop the frame"
+        )
+    try:
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        img = None
+    if img is None:
+        return None, f"image {path} cannot be decoded; re-export it as JPEG or PNG"
+    return img, None
+
+
+
+def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
+    """Segment one frame into the cache; returns (frame_id, problem or None)."""
+    result = None
+    img, problem = read_image(job.image_path)
+    if img is None:
+        pass  # the problem says why
+    elif img.shape[:2] != (job.height_px, job.width_px):
+        problem = (
+            f"image {job.image_path} is {img.shape[1]}x{img.shape[0]} px, the calibration "
+            f"says {job.width_px}x{job.height_px}; fix the calibration or the image"
+        )
+    else:
+        try:
+            if job.thin_px is None:
+                sky, conf = segmenter(img)
+            else:
+                sky, conf = segmenter(img, thin_px=job.thin_px)  # type: ignore[call-arg]
+            sky = np.asarray(sky, bool)
+            if sky.shape != img.shape[:2]:
+                raise ValueError(f"segmenter returned a {sky.shape} mask for a {img.shape} image")
+            result = (sky, None if conf is None else np.asarray(conf, np.float32))
+        except Exception as exc:  # any failure of one frame must not stop a long run
+            problem = f"segmentation failed ({type(exc).__name__}: {exc})"
+    write_cache(job, result, problem)
+    return job.frame_id, problem
+
+
+
+_JPEG_STANDALONE = frozenset({0x01, *range(0xD0, 0xD8)})  # markers without a length field
+
+
+
+def truncation(data: bytes) -> str | None:
+    """Why the image file ``data`` is cut short, or None when it is whole (or not JPEG / PNG).
+
+    libjpeg decodes a truncated JPEG with a warning only and fills the missing rows with grey,
+    which ``cv2.imread`` (OpenCV 5.1) returns as a good image: such a frame would be segmented
+    with a flat grey band. ``cv2.imdecode`` refuses it, but says only that it cannot decode.
+    A whole JPEG has its end-of-image marker after the scan data, where byte stuffing keeps
+    the two bytes from occurring by chance; the header segments are skipped by their
+    lengths, so an EXIF thumbnail's own marker does not count.
+    """
+    if data[:2] == b"\xff\xd8":
+        i, n = 2, len(data)
+        while i + 4 <= n:
+            if data[i] != 0xFF:
+                return f"no JPEG marker at byte {i} of the header"
+            marker = data[i + 1]
+            if marker == 0xFF:  # fill byte
+                i += 1
+            elif marker == 0xDA:  # start of scan: the compressed pixels follow
+                if data.rfind(b"\xff\xd9") < i:
+                    return f"no JPEG end-of-image marker after the scan data, {n} bytes"
+                return None
+            elif marker in _JPEG_STANDALONE:
+                i += 2
+            else:
+                i += 2 + int.from_bytes(data[i + 2 : i + 4], "big")
+        return f"the JPEG header ends at byte {n} before the scan data"
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and b"IEND" not in data[-12:]:
+        return f"no PNG IEND chunk at the end, {len(data)} bytes"
+    return None

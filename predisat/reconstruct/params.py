@@ -1,0 +1,96 @@
+"""Settings of a batch run (``predisat process``): chunk length, reconstruction, segmenter."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from predisat.camera.models import CameraModel
+from predisat.reconstruct.carving import ReconstructionParams
+from predisat.reconstruct.framecache import sky_net_sha256
+
+__all__ = [
+    "DEFAULT_SEGMENTER",
+    "THIN_DEG",
+    "PipelineParams",
+]
+
+# chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
+DEFAULT_SEGMENTER = "ensemble"
+THIN_DEG = 0.7  # docs/segmentation.md, "Thin-structure policy": wires and cables, not masts
+
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Settings of :func:`process_survey`.
+
+    Attributes
+    ----------
+    chunk_m : float
+        Chainage length of a chunk; chunk ``k`` holds the positions in
+        ``[k * chunk_m, (k + 1) * chunk_m)``. A chunk is reconstructed from the frames within
+        ``reconstruction.overlap_m`` (315 m) of it, so short chunks carve frames many times
+        over (200 m: ~4x); 1000 m (~1.6x) keeps a resumed run's loss under a minute.
+    reconstruction : ReconstructionParams
+    segmenter : str
+        Segmentation method of :func:`default_segmenter` (one of
+        :data:`predisat.sky.segment.METHODS`), recorded in the provenance and the cache key;
+        with a custom segmenter function, its own distinct name.
+    sky_net : str, optional
+        A sky network file (ONNX, with its ``.json`` card beside it, as written by
+        ``scripts/train_sky_cnn.py``) used instead of the shipped one by the ``cnn`` and
+        ``ensemble`` methods, to try a candidate. Its files' SHA-256 goes into the provenance,
+        the resume key and the segmentation cache key, so no result of another network is
+        reused.
+    thin_deg : float
+        The thin-structure policy of the default segmenter in angle: obstacle features at most
+        this wide are L-band transparent (``docs/segmentation.md``). Each camera gets
+        ``SkyOptions.thin_px = max(1, round(thin_deg / camera.widest_pixel_deg))`` (3 px on the
+        demo's 640x480 fisheye): the widest pixel of the frame, so that no feature much wider
+        than ``thin_deg`` anywhere in it is made transparent; 0 disables the policy. Custom
+        segmenters apply their own.
+    """
+
+    chunk_m: float = 1000.0
+    reconstruction: ReconstructionParams = field(default_factory=ReconstructionParams)
+    segmenter: str = DEFAULT_SEGMENTER
+    sky_net: str | None = None
+    thin_deg: float = THIN_DEG
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
+            raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
+        if not (math.isfinite(self.thin_deg) and 0.0 <= self.thin_deg < 10.0):
+            raise ValueError(f"thin_deg must lie in [0, 10) degrees (0 disables the "
+                             f"thin-structure policy), got {self.thin_deg}")  # fmt: skip
+        if self.sky_net is not None:
+            from predisat.sky.network import NET_METHODS
+
+            if self.segmenter not in NET_METHODS:
+                raise ValueError(
+                    f"sky_net {self.sky_net} is used by the segmenters {NET_METHODS}, not by "
+                    f"{self.segmenter!r}; choose one of them (CLI: --segmenter ensemble)"
+                )
+
+    def thin_px(self, camera: CameraModel) -> int:
+        """``SkyOptions.thin_px`` for frames of ``camera`` (see ``thin_deg``)."""
+        if self.thin_deg == 0.0:
+            return 0
+        return max(1, round(self.thin_deg / camera.widest_pixel_deg))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable form (recorded in every chunk's provenance)."""
+        rec = {
+            k: (list(v) if isinstance(v, tuple) else v)
+            for k, v in asdict(self.reconstruction).items()
+        }
+        out: dict[str, Any] = {
+            "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
+            "thin_deg": self.thin_deg,
+        }  # fmt: skip
+        if self.sky_net is not None:
+            # absent for the shipped network, so the run keys of earlier runs stay valid
+            out["sky_net"] = {"path": str(self.sky_net), "sha256": sky_net_sha256(self.sky_net)}
+        return out
