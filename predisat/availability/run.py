@@ -16,15 +16,15 @@ writes into an output folder:
   ``stroke`` colour);
 * optionally ``counts.parquet`` - every count, long format (rule, chainage_m, gps_s, count).
 
-:func:`add_arguments` and :func:`run_from_args` give the command line its options. See
+The command line (:mod:`predisat.cli.availability`) maps its options onto it. See
 ``docs/report.md``.
 """
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import math
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -47,28 +47,20 @@ from predisat.availability.satellites import (
     default_window,
     select_satellites,
 )
-from predisat.cli.args import (
-    cutoff_deg,
-    finite_float,
-    output_dir,
-    positive_float,
-    positive_int,
-)
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.masks.maskset import MaskSet
+from predisat.track import TrackMap, TrackMapError, load_track
 
 __all__ = [
     "AvailabilityRun",
-    "add_arguments",
     "check_masks_on_track",
     "load_navigation",
     "nav_span_gps_s",
     "parse_time",
     "run_availability",
-    "run_from_args",
     "sparse_navigation",
 ]
 
@@ -154,7 +146,7 @@ def _nav_kind(path: Path) -> str:
         with opener(path, "rt", encoding="ascii", errors="replace") as fh:
             head = [fh.readline() for _ in range(40)]
     except OSError as exc:
-        raise ValueError(f"--nav {path}: cannot be read ({exc})") from None
+        raise ValueError(f"nav file {path} (--nav): cannot be read ({exc})") from None
     first = head[0]
     if first[:2] in ("#a", "#b", "#c", "#d"):
         return "sp3"
@@ -164,7 +156,8 @@ def _nav_kind(path: Path) -> str:
     if any(ln.startswith("1 ") for ln in lines) and any(ln.startswith("2 ") for ln in lines):
         return "tle"
     raise ValueError(
-        f"--nav {path}: not a RINEX navigation, SP3 or TLE file (first line {first.strip()!r}); "
+        f"nav file {path} (--nav): not a RINEX navigation, SP3 or TLE file (first line "
+        f"{first.strip()!r}); "
         "give broadcast RINEX (*.rnx, *.YYn/g/l), precise SP3 or two-line elements"
     )
 
@@ -182,14 +175,14 @@ def load_navigation(paths: Sequence[str | Path] | None) -> Ephemeris:
     for p in files:
         if not p.is_file():
             raise FileNotFoundError(
-                f"--nav {p}: no such file; give RINEX navigation, SP3 or TLE files, or leave "
-                "--nav out to use the embedded navigation day (2020-06-25)"
+                f"nav file {p} (--nav): no such file; give RINEX navigation, SP3 or TLE files, "
+                "or none (leave --nav out) to use the embedded navigation day (2020-06-25)"
             )
     kinds = {p: _nav_kind(p) for p in files}
     found = sorted(set(kinds.values()))
     if len(found) > 1:
         raise ValueError(
-            "--nav mixes kinds of navigation data ("
+            "nav (--nav) mixes kinds of navigation data ("
             + ", ".join(f"{p.name}: {k}" for p, k in kinds.items())
             + "); give only RINEX, only SP3 or one TLE file"
         )
@@ -197,7 +190,7 @@ def load_navigation(paths: Sequence[str | Path] | None) -> Ephemeris:
         return Ephemeris.from_sp3(files)
     if found[0] == "tle":
         if len(files) > 1:
-            raise ValueError("--nav: give a single TLE file (several were given)")
+            raise ValueError("nav (--nav): give a single TLE file (several were given)")
         return Ephemeris.from_tle(files[0])
     return Ephemeris.from_rinex(files)
 
@@ -226,7 +219,9 @@ def _window(
     ephemeris: Ephemeris, embedded: bool, start: float | None, end: float | None, step_s: float
 ) -> NDArray:
     if not (math.isfinite(step_s) and step_s > 0):
-        raise ValueError(f"--step must be a positive number of seconds, got {step_s}")
+        raise ValueError(
+            f"step_s (--step) must be a positive number of seconds, got {step_s}"
+        )
     if start is None:
         start = _default_start(ephemeris, embedded)
     if end is None:
@@ -236,13 +231,14 @@ def _window(
         end = min(start + _DEFAULT_WINDOW_S, max(last * 3600.0, start + step_s))
     if end <= start:
         raise ValueError(
-            f"--end ({_iso(end)}) must be after --start ({_iso(start)}); give a later end"
+            f"end ({_iso(end)}, --end) must be after start ({_iso(start)}, --start); give a "
+            "later end"
         )
     t = np.arange(start, end, step_s)
     if len(t) > 20000:
         raise ValueError(
             f"the window {_iso(start)} - {_iso(end)} at {step_s:g} s has {len(t)} epochs "
-            "(more than 20 000); use a larger --step or a shorter window"
+            "(more than 20 000); use a larger step_s (--step) or a shorter window"
         )
     return t
 
@@ -274,7 +270,8 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
     )  # fmt: skip
     raise ValueError(
         f"{what} lie(s) outside the navigation data {nav_label} (no trusted satellite; the data "
-        f"span {_iso(lo)} - {_iso(hi)} GPST); choose --start/--end inside it or give --nav files "
+        f"span {_iso(lo)} - {_iso(hi)} GPST); choose start/end (--start/--end) inside it or give "
+        "navigation files (--nav) "
         "covering the window"
     )
 
@@ -322,20 +319,16 @@ def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
     return read_masks(masks), str(mask_file_path(masks))
 
 
-def _load_track(track: Any) -> Any:
-    if track is None or not isinstance(track, (str, Path)):
+def _load_track(track: TrackMap | str | os.PathLike[str] | None) -> TrackMap | None:
+    if track is None or isinstance(track, TrackMap):
         return track
-    from predisat.track.map import TrackMap
-
-    p = Path(track)
-    if not p.is_file():
-        raise FileNotFoundError(f"--track {p}: no such file; give a GeoJSON or CSV track map")
-    if p.suffix.lower() in {".csv", ".txt"}:
-        return TrackMap.from_csv(p)
-    return TrackMap.from_geojson(p)
+    try:
+        return load_track(track)
+    except TrackMapError as exc:
+        raise TrackMapError(f"track (--track): {exc}") from None
 
 
-def check_masks_on_track(masks: MaskSet, track: Any, masks_label: str) -> None:
+def check_masks_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> None:
     """Refuse masks made on another track map: every mask position must lie on ``track``
     within 25 m, at its own chainage (same map, same chainage origin).
 
@@ -393,7 +386,8 @@ def _sky_chainages(
     if np.isnan(ch).any():
         bad = [k for k, c in zip(sky_km, ch, strict=True) if np.isnan(c)]
         raise ValueError(
-            f"--sky-km {bad} outside the masks' stretch ({span}); give kilometres inside it"
+            f"sky_km (--sky-km) {bad} outside the masks' stretch ({span}); give kilometres "
+            "inside it"
         )
     return masks.chainage_m[masks.position_index(ch)[0]]
 
@@ -401,7 +395,7 @@ def _sky_chainages(
 # ------------------------------------------------------------------------- run
 def run_availability(
     masks: str | Path | MaskSet,
-    track: Any = None,
+    track: TrackMap | str | os.PathLike[str] | None = None,
     nav: Sequence[str | Path] | None = None,
     *,
     out_dir: str | Path,
@@ -499,8 +493,10 @@ def run_availability(
             ch_m = mask_set.chainage_m
             if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
                 given = " ".join(
-                    f"{flag} {v / 1000:g}"
-                    for flag, v in (("--from-km", from_m), ("--to-km", to_m))
+                    f"{name} {v:g} m ({flag} {v / 1000:g})"
+                    for name, flag, v in (
+                        ("from_m", "--from-km", from_m), ("to_m", "--to-km", to_m)
+                    )
                     if v is not None
                 )
                 raise ValueError(
@@ -521,12 +517,12 @@ def run_availability(
         ephemeris = load_navigation(nav)
         names = ", ".join(Path(p).name for p in nav) if nav else ""
         nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
-        t0_gps, t1_gps = parse_time(start, "--start"), parse_time(end, "--end")
+        t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
         t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
         if not select_satellites(ephemeris.satellites, constellation):
             raise ValueError(
                 f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
-                "--constellation or give navigation data for it"
+                "constellation (--constellation) or give navigation data for it"
             )
         sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
         _check_window(sats, ephemeris, nav_label)
@@ -588,7 +584,7 @@ def run_availability(
 
 
 def _run_info(
-    masks: MaskSet, masks_label: str, track: Any, ephemeris: Ephemeris, nav_label: str,
+    masks: MaskSet, masks_label: str, track: TrackMap | None, ephemeris: Ephemeris, nav_label: str,
     sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
     interval_every: int, version: str, model: IntervalModel,
 ) -> dict[str, Any]:  # fmt: skip
@@ -633,7 +629,7 @@ def _run_info(
     }
 
 
-def _track_credit(track: Any) -> str:
+def _track_credit(track: TrackMap | None) -> str:
     """The track named in the report's footer: its name, source and required attribution."""
     if track is None:
         return "none given (masks' own positions)"
@@ -643,102 +639,3 @@ def _track_credit(track: Any) -> str:
 
 
 # ------------------------------------------------------------------------- command line
-def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Add the ``predisat availability`` options to a (sub)parser; returns it."""
-    p = parser
-    p.add_argument("--masks", required=True, metavar="FILE",
-                   help="mask file, or the output folder of predisat process")
-    p.add_argument("--track", metavar="FILE", help="track map the masks were made on (GeoJSON/CSV)")
-    p.add_argument(
-        "--nav", nargs="+", metavar="FILE",
-        help="RINEX navigation, SP3 or TLE file(s) (default: embedded day 2020-06-25)",
-    )  # fmt: skip
-    p.add_argument(
-        "--start", metavar="TIME",
-        help="window start: GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or gps_s",
-    )  # fmt: skip
-    p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
-    p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
-                   help="epoch spacing, s")
-    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
-    p.add_argument(
-        "--constellation", default="gps",
-        help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",
-    )  # fmt: skip
-    p.add_argument(
-        "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
-        help="flat cut-off(s) compared with the masks (default 15)",
-    )  # fmt: skip
-    p.add_argument("--from-km", type=finite_float, metavar="A", help="stretch start, chainage km")
-    p.add_argument("--to-km", type=finite_float, metavar="B", help="stretch end, chainage km")
-    p.add_argument(
-        "--sky-km", type=float, nargs="+", metavar="KM",
-        help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
-    )  # fmt: skip
-    p.add_argument(
-        "--interval-every", type=positive_int, default=10, metavar="N",
-        help="predict the interval at every N-th epoch (default 10; 1 is slow)",
-    )  # fmt: skip
-    p.add_argument(
-        "--error-model", metavar="JSON",
-        help="pseudorange error model of the predicted intervals, from `locator calibrate` "
-        "(default a = b = 2 m, k = 2)",
-    )  # fmt: skip
-    p.add_argument(
-        "--k-sigma", type=positive_float, metavar="K",
-        help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
-        "per pair)",
-    )  # fmt: skip
-    p.add_argument("--workers", type=positive_int, default=1, help="threads")
-    p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
-
-
-def run_from_args(args: argparse.Namespace, track: Any = None) -> AvailabilityRun:
-    """Run from parsed :func:`add_arguments` options (``track`` overrides ``--track``)."""
-    if args.from_km is not None and args.to_km is not None and not args.from_km < args.to_km:
-        raise ValueError(
-            f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the start must be below the end "
-            "(chainage grows along the track)"
-        )
-    return run_availability(
-        args.masks,
-        track if track is not None else args.track,
-        args.nav,
-        out_dir=args.out,
-        start=args.start,
-        end=args.end,
-        step_s=args.step,
-        constellation=args.constellation,
-        cutoff_deg=tuple(args.cutoff),
-        from_m=None if args.from_km is None else args.from_km * 1000.0,
-        to_m=None if args.to_km is None else args.to_km * 1000.0,
-        sky_km=args.sky_km,
-        interval_every=args.interval_every,
-        interval_model=_interval_model(args.error_model, args.k_sigma),
-        workers=args.workers,
-        counts_table=args.counts,
-        progress=not args.quiet,
-    )
-
-
-def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
-    """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
-    if error_model is not None:
-        from predisat.gnss.errormodel import ErrorModelFileError, read_error_model
-
-        try:
-            model = read_error_model(error_model)
-        except ErrorModelFileError as exc:
-            raise ValueError(f"--error-model: {exc}") from None
-    else:
-        model = IntervalModel()
-    if k_sigma is not None:
-        if not (k_sigma > 0 and np.isfinite(k_sigma)):
-            raise ValueError(
-                f"--k-sigma must be positive and finite, got {k_sigma} (the source's 2; 3.89 "
-                "gives 1e-4 per pair)"
-            )
-        model = IntervalModel(model.error, k_sigma)
-    return model

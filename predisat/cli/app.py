@@ -218,12 +218,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_availability(args: argparse.Namespace) -> int:
-    from predisat.availability.run import run_from_args
+    from predisat.cli import availability
 
     track = None
     if args.track is not None:
         track = track_option(args.track, args.track_name, args.chain, args.where)
-    run = run_from_args(args, track=track)
+    run = availability.run(args, track=track)
     for warning in run.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)
     print(_availability_table(run.summary))
@@ -369,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
 
-    from predisat.availability.run import add_arguments as add_availability_arguments
+    from predisat.cli import availability
 
     p = sub.add_parser(
         "availability",
@@ -380,7 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
             "CSV/Parquet tables and a GeoJSON layer for QGIS."
         ),
     )
-    add_availability_arguments(p)
+    availability.add_arguments(p)
     add_track_selection(p)
     p.set_defaults(func=cmd_availability)
 

@@ -16,14 +16,14 @@ import pytest
 from pyproj import Transformer
 
 from predisat.availability.run import (
-    add_arguments,
     load_navigation,
     nav_span_gps_s,
     parse_time,
     run_availability,
-    run_from_args,
 )
 from predisat.availability.satellites import default_ephemeris
+from predisat.cli.availability import add_arguments
+from predisat.cli.availability import run as run_from_args
 from predisat.masks.fileformat import MaskFileError, write_masks
 from predisat.masks.maskset import MaskSet
 from predisat.track.map import TrackMap, demo_track
@@ -226,7 +226,7 @@ def test_missing_masks_file_names_it(tmp_path: Path) -> None:
 
 
 def test_missing_nav_file_names_it(tmp_path: Path, masks: MaskSet) -> None:
-    with pytest.raises(FileNotFoundError, match=r"--nav .*brdc9999\.20n.*embedded"):
+    with pytest.raises(FileNotFoundError, match=r"nav file .*brdc9999\.20n \(--nav\).*embedded"):
         run_availability(
             masks, None, [tmp_path / "brdc9999.20n"], out_dir=tmp_path / "o", progress=False
         )
@@ -256,7 +256,7 @@ def test_masks_on_another_track_are_refused(
 
 
 def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
-    with pytest.raises(ValueError, match=r"--sky-km \[9\.0\] outside"):
+    with pytest.raises(ValueError, match=r"sky_km \(--sky-km\) \[9\.0\] outside"):
         run_availability(masks, track, None, out_dir=tmp_path / "o", sky_km=[9.0],
                          progress=False)  # fmt: skip
 
@@ -274,16 +274,16 @@ def test_stretch_given_in_metres_or_reversed(tmp_path: Path, masks: MaskSet) -> 
             run_from_args(args)
     args = parser.parse_args(["--masks", str(path), "--out", str(tmp_path / "o"),
                               "--from-km", "7", "--quiet"])  # fmt: skip
-    with pytest.raises(ValueError, match=r"^--from-km 7: no position") as exc:
+    with pytest.raises(ValueError, match=r"^from_m 7000 m \(--from-km 7\): no position") as exc:
         run_from_args(args)
     assert "inf" not in str(exc.value)
     assert not (tmp_path / "o").exists()
 
 
 def test_bad_step_and_reversed_window(tmp_path: Path, masks: MaskSet) -> None:
-    with pytest.raises(ValueError, match="--step"):
+    with pytest.raises(ValueError, match=r"step_s \(--step\)"):
         run_availability(masks, None, None, out_dir=tmp_path / "o", step_s=0, progress=False)
-    with pytest.raises(ValueError, match="must be after --start"):
+    with pytest.raises(ValueError, match=r"end \(.*--end\) must be after start \(.*--start\)"):
         run_availability(masks, None, None, out_dir=tmp_path / "o", start=START, end=START,
                          progress=False)  # fmt: skip
 

@@ -1,0 +1,114 @@
+"""``predisat availability``: its options, mapped onto
+:func:`predisat.availability.run.run_availability`."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from predisat.availability.run import AvailabilityRun, run_availability
+from predisat.cli.args import cutoff_deg, finite_float, output_dir, positive_float, positive_int
+from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model
+from predisat.track import TrackMap
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the ``predisat availability`` options to a (sub)parser; returns it."""
+    p = parser
+    p.add_argument("--masks", required=True, metavar="FILE",
+                   help="mask file, or the output folder of predisat process")
+    p.add_argument("--track", metavar="FILE", help="track map the masks were made on (GeoJSON/CSV)")
+    p.add_argument(
+        "--nav", nargs="+", metavar="FILE",
+        help="RINEX navigation, SP3 or TLE file(s) (default: embedded day 2020-06-25)",
+    )  # fmt: skip
+    p.add_argument(
+        "--start", metavar="TIME",
+        help="window start: GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or gps_s",
+    )  # fmt: skip
+    p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
+    p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
+                   help="epoch spacing, s")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--constellation", default="gps",
+        help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",
+    )  # fmt: skip
+    p.add_argument(
+        "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
+        help="flat cut-off(s) compared with the masks (default 15)",
+    )  # fmt: skip
+    p.add_argument("--from-km", type=finite_float, metavar="A", help="stretch start, chainage km")
+    p.add_argument("--to-km", type=finite_float, metavar="B", help="stretch end, chainage km")
+    p.add_argument(
+        "--sky-km", type=float, nargs="+", metavar="KM",
+        help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
+    )  # fmt: skip
+    p.add_argument(
+        "--interval-every", type=positive_int, default=10, metavar="N",
+        help="predict the interval at every N-th epoch (default 10; 1 is slow)",
+    )  # fmt: skip
+    p.add_argument(
+        "--error-model", metavar="JSON",
+        help="pseudorange error model of the predicted intervals, from `locator calibrate` "
+        "(default a = b = 2 m, k = 2)",
+    )  # fmt: skip
+    p.add_argument(
+        "--k-sigma", type=positive_float, metavar="K",
+        help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
+        "per pair)",
+    )  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=1, help="threads")
+    p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def run(args: argparse.Namespace, track: TrackMap | None = None) -> AvailabilityRun:
+    """Run from parsed :func:`add_arguments` options (``track`` overrides ``--track``)."""
+    if args.from_km is not None and args.to_km is not None and not args.from_km < args.to_km:
+        raise ValueError(
+            f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the start must be below the end "
+            "(chainage grows along the track)"
+        )
+    return run_availability(
+        args.masks,
+        track if track is not None else args.track,
+        args.nav,
+        out_dir=args.out,
+        start=args.start,
+        end=args.end,
+        step_s=args.step,
+        constellation=args.constellation,
+        cutoff_deg=tuple(args.cutoff),
+        from_m=None if args.from_km is None else args.from_km * 1000.0,
+        to_m=None if args.to_km is None else args.to_km * 1000.0,
+        sky_km=args.sky_km,
+        interval_every=args.interval_every,
+        interval_model=_interval_model(args.error_model, args.k_sigma),
+        workers=args.workers,
+        counts_table=args.counts,
+        progress=not args.quiet,
+    )
+
+
+def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
+    """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
+    if error_model is not None:
+        try:
+            model = read_error_model(error_model)
+        except ErrorModelFileError as exc:
+            raise ValueError(f"--error-model: {exc}") from None
+    else:
+        model = IntervalModel()
+    if k_sigma is not None:
+        if not (k_sigma > 0 and np.isfinite(k_sigma)):
+            raise ValueError(
+                f"--k-sigma must be positive and finite, got {k_sigma} (the source's 2; 3.89 "
+                "gives 1e-4 per pair)"
+            )
+        model = IntervalModel(model.error, k_sigma)
+    return model
