@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from locator.demostep import format_demo_table
 from predisat import __version__
 from predisat.cli.args import (
     cutoff_deg,
@@ -440,26 +441,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(format_demo_table(table))
     print(f"locator demo: done in {time.perf_counter() - t0:.0f} s -> {args.out}")
     return 0
-
-
-def format_demo_table(table: Any) -> str:
-    cols = {
-        "rule": "rule",
-        "claim_share": "claim %",
-        "mode_three_pairs_share": ">=6 sats %",
-        "length_median_m": "interval med m",
-        "length_p95_m": "p95 m",
-        "abs_error_median_m": "|err| med m",
-        "hmi": "HMI",
-        "hmi_fix": "HMI before checks",
-    }
-    t = table[list(cols)].rename(columns=cols).copy()
-    for c in ("claim %", ">=6 sats %"):
-        t[c] = 100 * t[c]
-    return str(t.round(1).to_string(index=False)) + (
-        "\n  (LOCOPROL on line 144: six satellites 60 % of the time; intervals about 70 m, up "
-        "to 600 m)"
-    )
 
 
 def _run_arguments(p: argparse.ArgumentParser) -> None:

@@ -84,10 +84,10 @@ def measure() -> dict[str, object]:
         by_pkg[".".join(parts[:2]) if len(parts) > 2 else parts[0]].append(m)
     return {
         "packages": {p: {"modules": len(ms), "lines": sum(int(modules[m]["lines"]) for m in ms)}
-                     for p, ms in sorted(by_pkg.items())},  # fmt: skip
+                     for p, ms in sorted(by_pkg.items())},
         "modules": len(modules),
         "largest_module": max(((m, int(v["lines"])) for m, v in modules.items()),
-                              key=lambda x: x[1]),  # fmt: skip
+                              key=lambda x: x[1]),
         "functions_over_80_lines": sorted(long_funcs, key=lambda x: -x[1]),
         "any_in_public_signatures": any_public,
         "function_local_imports": local_imports,

@@ -73,14 +73,14 @@ def render(
 ) -> Path:
     """Render the demo's synthetic survey (``predisat demo`` recipe) with another seed.
 
-    :func:`predisat.cli.app.render_demo_survey`, as ``predisat demo --camera CAMERA --seed SEED``.
+    :func:`predisat.cli.demo.render_demo_survey`, as ``predisat demo --camera CAMERA --seed SEED``.
 
     Returns
     -------
     Path
         The survey folder (``out_dir / "survey"``).
     """
-    from predisat.cli.app import render_demo_survey
+    from predisat.cli.demo import render_demo_survey
 
     synth = render_demo_survey(
         out_dir, seed=seed, camera=camera, workers=workers, progress=False, spacing_m=spacing_m

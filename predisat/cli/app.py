@@ -8,14 +8,14 @@ message (exit code 2), never as a traceback.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from predisat import __version__
+from predisat.cli import demo
 from predisat.cli.args import (
     finite_float,
     output_dir,
@@ -30,58 +30,13 @@ from predisat.cli.common import (
     run_main,
     track_option,
 )
+from predisat.cli.demo import availability_table, default_workers
 
 if TYPE_CHECKING:
     from predisat.camera.models import CameraModel
-    from predisat.synth.generate import SynthResult
     from predisat.synth.world import WorldSpec
 
 __all__ = ["main"]
-
-DEMO_FROM_KM = 4.0
-DEMO_TO_KM = 6.0
-DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the demo quick
-# The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
-# the pinhole the masks lose 63-65 % of the visible sky instead of 14-16 % (docs/pipeline.md).
-DEMO_CAMERA = "fisheye"
-
-
-def render_demo_survey(
-    out_dir: str | os.PathLike[str],
-    seed: int = 1,
-    camera: str = DEMO_CAMERA,
-    workers: int = 1,
-    progress: bool = True,
-    spacing_m: float = 10.0,
-    from_km: float = DEMO_FROM_KM,
-    to_km: float = DEMO_TO_KM,
-) -> SynthResult:
-    """The demo's synthetic survey: line 144 km ``from_km``-``to_km`` (default
-    ``DEMO_FROM_KM``-``DEMO_TO_KM``), mixed scenery and skies, the default ``camera``
-    (``"fisheye"`` or ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``, a position every
-    ``spacing_m`` (:func:`predisat.synth.generate.generate_survey`)."""
-    from predisat.camera.models import default_camera
-    from predisat.synth.generate import generate_survey
-    from predisat.track import map as trackmod
-
-    return generate_survey(
-        trackmod.demo_track(),
-        from_km * 1000.0,
-        to_km * 1000.0,
-        sky="mixed",
-        seed=seed,
-        out_dir=out_dir,
-        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),  # type: ignore[arg-type]
-        progress=progress,
-        workers=workers,
-        overwrite=True,
-        spacing_m=spacing_m,
-    )
-
-
-def _default_workers() -> int:
-    return max(1, min(2, os.cpu_count() or 1))
-
 
 def _camera(kind: str, calibration: str | None) -> CameraModel:
     from predisat.camera import models as camera
@@ -142,81 +97,6 @@ def cmd_synth(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_demo(args: argparse.Namespace) -> int:
-    from predisat.availability.run import run_availability
-    from predisat.reconstruct.batch import process_survey
-    from predisat.reconstruct.evalfigures import evaluation_figure
-    from predisat.reconstruct.evaluate import compare, evaluate_masks, format_table, load_truth
-    from predisat.synth.generate import contact_sheet
-    from predisat.track import map as trackmod
-
-    out = Path(args.out)
-    track = trackmod.demo_track()
-    lo_m, hi_m = km_range(track, args.from_km, args.to_km)
-    lo_km, hi_km = lo_m / 1000.0, hi_m / 1000.0
-    print(
-        f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
-        f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
-    )
-    t0 = time.perf_counter()
-    print("demo 1/5: rendering the synthetic survey and its ground truth")
-    synth = render_demo_survey(
-        out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet,
-        from_km=lo_km, to_km=hi_km,
-    )  # fmt: skip
-    t_synth = time.perf_counter() - t0
-    sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
-
-    print("demo 2/5: processing the frames into elevation masks")
-    t1 = time.perf_counter()
-    processed = process_survey(
-        synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
-    )
-    t_process = time.perf_counter() - t1
-    print(f"  {processed}")
-
-    print("demo 3/5: masks against the synthetic ground truth")
-    comp = compare(processed.masks, load_truth(synth.truth_dir))
-    table = evaluate_masks(comp)
-    overall = table[table["source"] == "all"]
-    with_cols = ["sector", "median_error_deg", "p95_error_deg", "false_trust", "sky_lost"]
-    print(format_table(overall[with_cols]))
-    eval_png = out / "evaluation.png"
-    evaluation_figure(comp, title="Demo masks against the ground truth").savefig(eval_png, dpi=100)
-
-    print("demo 4/5: availability report (embedded navigation day, GPS)")
-    run = run_availability(
-        processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
-    )
-    print(_availability_table(run.summary))
-    print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
-
-    print("demo 5/5: a simulated train run located with the 1-D locator under each trust rule")
-    from locator.cli import format_demo_table
-    from locator.workflow import demo as locator_demo
-    from predisat.synth.world import World
-
-    world = World.load(synth.truth_dir / "world.npz", track)
-    loc = locator_demo(
-        out / "locator", world=world, pipeline_masks=processed.masks, log=lambda s: None
-    )
-    print(format_demo_table(loc))
-    dt = time.perf_counter() - t0
-    print(
-        f"demo: done in {dt:.0f} s; {synth.n_frames} frames at {synth.n_positions} positions "
-        f"(rendering {synth.n_frames / t_synth:.2f} frames/s, processing "
-        f"{synth.n_frames / t_process:.2f} frames/s)\n"
-        f"  survey:        {synth.survey_dir}\n"
-        f"  ground truth:  {synth.truth_dir}\n"
-        f"  contact sheet: {sheet}\n"
-        f"  masks:         {processed.masks_path}\n"
-        f"  evaluation:    {eval_png}\n"
-        f"  report:        {run.report_html}\n"
-        f"  locator runs:  {out / 'locator'}"
-    )
-    return 0
-
-
 def cmd_availability(args: argparse.Namespace) -> int:
     from predisat.cli import availability
 
@@ -226,28 +106,10 @@ def cmd_availability(args: argparse.Namespace) -> int:
     run = availability.run(args, track=track)
     for warning in run.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)
-    print(_availability_table(run.summary))
+    print(availability_table(run.summary))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
           f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip
     return 0
-
-
-def _availability_table(summary: Any) -> str:
-    """The line-wide figures a reader looks at first, one row per trust rule."""
-    cols = {
-        "rule": "rule",
-        "share_ge2": ">=2 sats %",
-        "share_ge4": ">=4 sats %",
-        "share_ge6": ">=6 sats %",
-        "mean_count": "mean sats",
-        "longest_below4_m": "longest <4 m",
-        "interval_median_m": "interval median m",
-        "interval_p95_m": "p95 m",
-    }
-    t = summary[list(cols)].rename(columns=cols)
-    for c in (">=2 sats %", ">=4 sats %", ">=6 sats %"):
-        t[c] = 100.0 * t[c]
-    return str(t.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
 
 
 def cmd_evaluate_sky(args: argparse.Namespace) -> int:
@@ -318,9 +180,9 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from predisat.reconstruct.evaluate import evaluate_from_args
+    from predisat.cli import evaluate
 
-    evaluate_from_args(args)
+    evaluate.run(args)
     return 0
 
 
@@ -364,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--scenery", metavar="YAML", help="scenery recipe (default: mixed, every kind of stretch)"
     )
-    p.add_argument("--workers", type=positive_int, default=_default_workers(),
+    p.add_argument("--workers", type=positive_int, default=default_workers(),
                    help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
@@ -384,8 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_track_selection(p)
     p.set_defaults(func=cmd_availability)
 
-    from predisat.cli import process
-    from predisat.reconstruct.evaluate import add_evaluate_arguments
+    from predisat.cli import evaluate, process
 
     p = sub.add_parser(
         "process",
@@ -408,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
             "target share of truly line-of-sight trusted directions."
         ),
     )
-    add_evaluate_arguments(p)
+    evaluate.add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser(
@@ -453,32 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate_sky)
 
-    p = sub.add_parser(
-        "demo",
-        help="run the pipeline on the embedded demo (2 km of line 144)",
-        description=(
-            "Render a synthetic survey of 2 km of line 144 with ground truth, process it into "
-            "masks, compare them with the truth and write the availability report."
-        ),
-    )
-    p.add_argument(
-        "--out", default="demo_out", type=output_dir, metavar="DIR", help="output folder"
-    )
-    p.add_argument("--seed", type=int, default=1, help="random seed")
-    p.add_argument(
-        "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
-        help=f"side camera model (default {DEMO_CAMERA})",
-    )  # fmt: skip
-    p.add_argument("--from-km", type=finite_float, default=DEMO_FROM_KM, metavar="KM",
-                   help=f"start of the stretch (default {DEMO_FROM_KM})")
-    p.add_argument("--to-km", type=finite_float, default=DEMO_TO_KM, metavar="KM",
-                   help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
-                   "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
-                   "cut out of the default demo's")
-    p.add_argument("--workers", type=positive_int, default=_default_workers(),
-                   help="rendering processes")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_demo)
+    demo.add_parser(sub)
+
     return parser
 
 

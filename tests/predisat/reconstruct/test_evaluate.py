@@ -13,14 +13,14 @@ import pandas as pd
 import pytest
 
 from predisat.camera.models import CameraModel
+from predisat.cli.evaluate import add_arguments as add_evaluate_arguments
+from predisat.cli.evaluate import run as evaluate_from_args
 from predisat.masks.margins import MarginTable, sector_of
 from predisat.reconstruct.evaluate import (
     Comparison,
-    add_evaluate_arguments,
     calibrate_margin,
     compare,
     count_above,
-    evaluate_from_args,
     evaluate_masks,
     format_table,
     load_truth,

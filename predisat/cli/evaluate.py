@@ -1,0 +1,95 @@
+"""``predisat evaluate``: masks against synthetic ground truth (and margin calibration),
+printed and written as ``evaluation.csv/json/png``; the library is
+:mod:`predisat.reconstruct.evaluate`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from predisat.cli.args import output_dir
+from predisat.masks.fileformat import mask_file_path, read_masks
+from predisat.masks.margins import MarginTable
+from predisat.reconstruct.evalfigures import evaluation_figure
+from predisat.reconstruct.evaluate import (
+    applied_margins,
+    calibrate_margin,
+    compare,
+    evaluate_masks,
+    format_table,
+    load_truth,
+)
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``predisat evaluate``."""
+    parser.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
+    parser.add_argument(
+        "--truth", type=Path, required=True,
+        help="synthetic ground truth: generator output folder, its truth/ or true_masks.npz",
+    )  # fmt: skip
+    parser.add_argument(
+        "--out", type=output_dir, help="folder for evaluation.csv/json/png (default: none)"
+    )
+    parser.add_argument(
+        "--calibrate", action="store_true",
+        help="calibrate margins on this truth and write margins.json (in --out)",
+    )  # fmt: skip
+    parser.add_argument("--margins", type=Path, help="margin table (margins.json) to evaluate")
+    parser.add_argument("--target", type=float, default=0.999, help="LOS share target (0.999)")
+    parser.add_argument(
+        "--confidence", type=float, default=0.99,
+        help="with --calibrate: the target must hold on this share of 200 m block resamples "
+        "of the line (0.99; 0 for the in-sample point estimate)",
+    )  # fmt: skip
+
+
+def run(args: argparse.Namespace) -> pd.DataFrame:
+    """Run ``predisat evaluate`` from parsed arguments; prints and returns the table."""
+    path = mask_file_path(args.masks)
+    masks = read_masks(path)
+    comp = compare(masks, load_truth(args.truth))
+    margins = MarginTable.from_json(args.margins) if args.margins is not None else None
+    out = Path(args.out) if args.out is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    if args.calibrate:
+        conf = args.confidence if args.confidence > 0 else None
+        margins = calibrate_margin(comp, target=args.target, confidence=conf)
+        print(margins.table.to_string(index=False))
+        if out is not None:
+            margins.to_json(out / "margins.json")
+            margins.table.to_csv(out / "margins.csv", index=False)
+    table = evaluate_masks(comp, margins)
+    applied = applied_margins(comp, margins)
+    file_margins = margins is None and applied is not None
+    if file_margins:
+        print("the *_margin columns use the mask file's own margins (margin_deg)")
+    elif margins is not None and applied_margins(comp, None) is not None:
+        print("the *_margin columns use the margin table, not the mask file's own margins")
+    print(format_table(table))
+    if comp.unmatched:
+        print(f"{comp.unmatched} mask position(s) without truth were left out")
+    if out is not None:
+        table.to_csv(out / "evaluation.csv", index=False)
+        doc = {
+            "masks": str(path),
+            "truth": str(args.truth),
+            "margins": (
+                margins.table.to_dict(orient="records") if margins is not None
+                else "mask file" if file_margins else None
+            ),
+            "n_positions": int(comp.chainage_m.size),
+            "rows": json.loads(table.to_json(orient="records")),
+        }
+        (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+        fig = evaluation_figure(comp, 0.0 if applied is None else applied,
+                                title=f"{path.name} against {args.truth}")
+        fig.savefig(out / "evaluation.png", dpi=100)
+        print(f"written {out / 'evaluation.csv'}, evaluation.json, evaluation.png")
+    return table
