@@ -186,19 +186,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from predisat.sky.segment import METHODS
-
-    parser = argparse.ArgumentParser(
-        prog="predisat",
-        description=(
-            "PREDISAT: side-camera railway surveys to GNSS elevation masks. "
-            "Run 'predisat demo' to build the demo survey on Belgian line 144."
-        ),
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-
+def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "synth",
         help="render a synthetic side-camera survey with exact ground truth",
@@ -231,6 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
 
+
+def _add_availability(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.cli import availability
 
     p = sub.add_parser(
@@ -246,7 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_track_selection(p)
     p.set_defaults(func=cmd_availability)
 
-    from predisat.cli import evaluate, process
+
+def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.cli import process
 
     p = sub.add_parser(
         "process",
@@ -260,6 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     process.add_arguments(p)
     p.set_defaults(func=cmd_process)
 
+
+def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.cli import evaluate
+
     p = sub.add_parser(
         "evaluate",
         help="compare masks with synthetic ground truth; calibrate the trust margin",
@@ -272,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
 
+
+def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "export",
         help="write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
@@ -295,6 +293,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pvgis: the horizon-profile table (default) or PVGIS's upload file")
     p.set_defaults(func=cmd_export)
 
+
+def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.sky.segment import METHODS  # lazy: the segmenters load OpenCV models
+
     p = sub.add_parser(
         "evaluate-sky",
         help="score sky segmentation on a folder of photos with ground-truth sky masks",
@@ -314,8 +316,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate_sky)
 
-    demo.add_parser(sub)
 
+def build_parser() -> argparse.ArgumentParser:
+    """The ``predisat`` parser: one subcommand per job."""
+    parser = argparse.ArgumentParser(
+        prog="predisat",
+        description=(
+            "PREDISAT: side-camera railway surveys to GNSS elevation masks. "
+            "Run 'predisat demo' to build the demo survey on Belgian line 144."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_synth(sub)
+    _add_availability(sub)
+    _add_process(sub)
+    _add_evaluate(sub)
+    _add_export(sub)
+    _add_evaluate_sky(sub)
+    demo.add_parser(sub)
     return parser
 
 
