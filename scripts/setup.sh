@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Set up PREDISAT on Debian/Ubuntu: the system libraries open3d links against, a virtual
-# environment in .venv and the package (editable). `--dev` adds the test and lint tools.
+# environment in .venv and the package (editable) with the [synth] extra the demo renders with.
+# `--dev` adds the test and lint tools. (`pip install .` alone is the core: no renderer.)
 # Safe to run again: it installs only what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-extras=""
-if [ "${1:-}" = "--dev" ]; then extras="[dev]"; fi
+extras="[synth]"
+if [ "${1:-}" = "--dev" ]; then extras="[synth,dev]"; fi
 
 # open3d's binary links libEGL/libGL/libX11/libudev/libusb; a minimal Debian lacks libusb-1.0-0.
 pkgs="libusb-1.0-0 libudev1 libgl1 libegl1 libx11-6 libgomp1 python3-venv"

@@ -13,7 +13,18 @@ from collections.abc import Sequence
 from predisat.cli.args import caused_by_interrupt
 from predisat.track import TrackMap, TrackMapError, demo_track, load_track
 
-__all__ = ["CliError", "add_track_selection", "km_range", "parse_where", "run_main", "track_option"]
+__all__ = [
+    "SYNTH_MODULES",
+    "CliError",
+    "add_track_selection",
+    "km_range",
+    "parse_where",
+    "run_main",
+    "track_option",
+]
+
+SYNTH_MODULES = frozenset({"trimesh", "open3d", "embreex"})
+"""The packages of the ``[synth]`` extra (the synthetic world and its renderer)."""
 
 
 class CliError(Exception):
@@ -41,6 +52,13 @@ def run_main(
     name = label.format(command=getattr(args, "command", ""))
     try:
         return int(args.func(args))
+    except ModuleNotFoundError as exc:
+        if exc.name not in SYNTH_MODULES:
+            raise
+        print(f"{name}: error: this command needs the synthetic world's ray casting ({exc.name} "
+              "is not installed): pip install 'predisat[synth]' (or bash scripts/setup.sh)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     except (CliError, ValueError, OSError, KeyError) as exc:
         # library errors are written to be read by a person: no traceback
         print(f"{name}: error: {exc}", file=sys.stderr)
