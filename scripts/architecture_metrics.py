@@ -24,8 +24,8 @@ PACKAGES = ("predisat", "locator")
 LONG_LINES = 80
 
 
-def _module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix("").parts
+def _module_name(path: Path, root: Path) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -60,15 +60,15 @@ def _public(name: str) -> bool:
     return not any(part.startswith("_") for part in name.split("."))
 
 
-def measure() -> dict[str, object]:
-    """The figures, as a JSON-serialisable dict."""
+def measure(root: Path = ROOT) -> dict[str, object]:
+    """The figures of the source tree at ``root``, as a JSON-serialisable dict."""
     modules: dict[str, dict[str, object]] = {}
     local_imports = 0
     any_public: list[str] = []
     long_funcs: list[tuple[str, int]] = []
     for pkg in PACKAGES:
-        for path in sorted((ROOT / pkg).rglob("*.py")):
-            name = _module_name(path)
+        for path in sorted((root / pkg).rglob("*.py")):
+            name = _module_name(path, root)
             text = path.read_text()
             tree = ast.parse(text)
             modules[name] = {"lines": len(text.splitlines())}
@@ -115,8 +115,10 @@ def _in_type_checking(tree: ast.AST, target: ast.AST) -> bool:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+    ap.add_argument("--root", type=Path, default=ROOT,
+                    help="source tree to measure (default: this checkout)")
     args = ap.parse_args(argv)
-    m = measure()
+    m = measure(args.root)
     print(f"{'package':32} {'modules':>7} {'lines':>7}")
     for p, v in m["packages"].items():  # type: ignore[attr-defined]
         print(f"{p:32} {v['modules']:7d} {v['lines']:7d}")
