@@ -79,9 +79,13 @@ class Caster(Protocol):
 
     backend: str
 
-    def cast(self, origins_m: ArrayLike, directions: ArrayLike) -> Hits: ...
+    def cast(self, origins_m: ArrayLike, directions: ArrayLike) -> Hits:
+        """First hits of rays (n, 3) from ``origins_m`` (frame ENU, metres) along ``directions``."""
+        ...
 
-    def occluded(self, origins_m: ArrayLike, directions: ArrayLike) -> NDArray: ...
+    def occluded(self, origins_m: ArrayLike, directions: ArrayLike) -> NDArray:
+        """Whether each ray (n, 3) hits anything, shape (n,) bool."""
+        ...
 
 
 def _rays(origins_m: ArrayLike, directions: ArrayLike) -> tuple[NDArray, NDArray]:

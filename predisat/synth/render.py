@@ -120,6 +120,7 @@ class SensorState:
 
     @classmethod
     def draw(cls, rng: np.random.Generator, options: RenderOptions) -> SensorState:
+        """The state of one frame, drawn from ``rng`` with the spreads of ``options``."""
         ev = float(rng.normal(0.0, options.exposure_ev_sd))
         blur = float(options.blur_px * rng.uniform(0.75, 1.25))
         wb = 1.0 + options.wb_error * rng.standard_normal(3)

@@ -75,7 +75,9 @@ class Corridor:
     h_m: NDArray
 
     @classmethod
-    def from_track(cls, track: _TrackLike, start_m: float, end_m: float, step_m: float = 1.0):
+    def from_track(
+        cls, track: _TrackLike, start_m: float, end_m: float, step_m: float = 1.0
+    ) -> Corridor:
         """Sample ``track`` every ``step_m`` over ``[start_m, end_m]`` clipped to the track."""
         lo, hi = max(0.0, float(start_m)), min(float(track.length_m), float(end_m))
         if not hi > lo:
@@ -140,6 +142,8 @@ class MeshBuilder:
         self._count = 0
 
     def add(self, vertices_m: ArrayLike, faces: ArrayLike, material: int | ArrayLike) -> None:
+        """Append a mesh: vertices (n, 3) metres, faces (m, 3) indexing them, and one material
+        id or one per face (m,)."""
         v = np.asarray(vertices_m, float).reshape(-1, 3)
         f = np.asarray(faces, np.int64).reshape(-1, 3)
         self._vertices.append(v)
@@ -338,6 +342,7 @@ class Context:
         self.solid(s_c, _box(a0, a1, min(b0, b1), max(b0, b1), c0, c1), _BOX_FACES, material)
 
     def sweep(self, s_m: ArrayLike, profiles: ArrayLike, material: str, cap: str = "fan") -> None:
+        """Add the solid :func:`extrude` sweeps through ``profiles`` at chainages ``s_m``."""
         v, f, _ = extrude(self.corridor, s_m, profiles, cap)
         self.mb.add(v, f, self.mat[material])
 

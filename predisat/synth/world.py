@@ -231,6 +231,7 @@ class WorldSpec:
 
     @property
     def kinds(self) -> set[str]:
+        """The stretch kinds the recipe uses."""
         return {s.kind for s in self.stretches}
 
     @classmethod
