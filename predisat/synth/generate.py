@@ -22,25 +22,31 @@ from __future__ import annotations
 
 import csv
 import io
+import multiprocessing as mp
 import os
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from tqdm import tqdm
 
 from predisat.atomic import atomic_path, write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.geodesy import enu_to_azel
 from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
+from predisat.survey import Survey, SurveyWriter
 from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
 from predisat.synth.sky import SKY_CONDITIONS, SkyModel
 from predisat.synth.truth import true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
+from predisat.track import TrackMap
+from predisat.track.readers import write_geojson
 
 __all__ = [
     "SKY_CHOICES",
@@ -138,7 +144,7 @@ def _short_spec(lo_m: float, hi_m: float, seed: int) -> WorldSpec:
 
 
 def generate_survey(
-    track: Any,
+    track: TrackMap,
     from_m: float,
     to_m: float,
     sky: str = "mixed",
@@ -199,15 +205,7 @@ def generate_survey(
     SynthResult
     """
     length = float(track.length_m)
-    if not (0.0 <= from_m < to_m <= length + 1e-6):
-        raise ValueError(
-            f"chainage interval [{from_m}, {to_m}] m must satisfy 0 <= from_m < to_m <= "
-            f"{length:.1f} (the track length); choose a stretch inside the track"
-        )
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
-    if spacing_m <= 0 or speed_mps <= 0:
-        raise ValueError(f"spacing_m and speed_mps must be positive, got {spacing_m}, {speed_mps}")
+    _check_request(from_m, to_m, length, workers, spacing_m, speed_mps)
     out = Path(out_dir)
     survey_dir, truth_dir = out / "survey", out / "truth"
     (truth_dir / "labels").mkdir(parents=True, exist_ok=True)
@@ -228,46 +226,12 @@ def generate_survey(
     with atomic_path(truth_dir / "true_masks.npz") as tmp:
         truth.save(tmp)
 
-    ant = world.antenna_enu(s, antenna_height_m)
-    lat, lon, h = world.frame.to_geodetic(ant)
-    if start_gps_s is None:
-        start_gps_s = daytime_gps_s(float(np.mean(lon)))
-    gps = start_gps_s + (s - from_m) / speed_mps
-    sun_az, sun_el = sun_azel(gps, lat, lon)
-    rot = world.frame.rotation_from(lat, lon)
-    sun_frame = np.einsum(
-        "nij,nj->ni",
-        rot,
-        np.stack([sun_direction_enu(a, e) for a, e in zip(sun_az, sun_el, strict=True)]),
-    )
-    f_az, f_el, _ = enu_to_azel(sun_frame)
-    cond, sky_id = sky_schedule(sky, s, seed)
-
-    from predisat.track.readers import write_geojson
-
+    run = _Positions.along(world, s, antenna_height_m, speed_mps, start_gps_s, sky, seed)
     with atomic_path(survey_dir / "track.geojson") as tmp:
         write_geojson(track, tmp)
-    mounts: dict[str, Mount] = {
-        side: Mount(
-            side, 90.0 if side == "left" else -90.0, pitch_deg, 0.0, Mount.default(side).lever_arm_m
-        )
-        for side in ("left", "right")
-    }
-    jobs = [
-        _PositionJob(
-            index=i,
-            chainage_m=float(s[i]),
-            elapsed_s=float(gps[i] - start_gps_s),
-            sky=SkyModel.of(
-                str(cond[i]), float(f_az[i]), float(f_el[i]), seed=seed * 1000 + int(sky_id[i])
-            ),
-        )
-        for i in range(s.size)
-    ]
+    mounts = _side_mounts(pitch_deg)
     context = _RenderContext(world, backend, cam, opt, mounts, antenna_height_m, seed)
-    rows: list[dict[str, Any]] = []
-    from predisat.survey import SurveyWriter
-
+    rows: list[dict[str, str]] = []
     with SurveyWriter(
         survey_dir,
         {side: (cam, m) for side, m in mounts.items()},
@@ -280,40 +244,39 @@ def generate_survey(
         },
         overwrite=overwrite,
     ) as writer:
-        for job, frames in _render_all(context, jobs, workers, casters, progress):
-            i = job.index
-            for side, img, label, quality in frames:
-                fid = writer.add_frame(
-                    img,
-                    side,
-                    float(gps[i]),
-                    chainage_m=job.chainage_m,
-                    lat_deg=float(lat[i]),
-                    lon_deg=float(lon[i]),
-                    h_m=float(h[i]),
-                    jpeg_quality=quality,
-                )
-                ok, buf = cv2.imencode(".png", label)
-                if not ok:
-                    raise OSError(f"PNG encoding of the label of frame {fid} failed")
-                write_bytes_atomic(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
-                rows.append({
-                    "frame_id": fid, "side": side, "chainage_m": repr(job.chainage_m),
-                    "gps_s": repr(float(gps[i])), "sky": job.sky.condition,
-                    "cloud_cover": f"{job.sky.cloud_cover:.3f}",
-                    "sun_az_deg": f"{sun_az[i]:.4f}", "sun_el_deg": f"{sun_el[i]:.4f}",
-                    "sky_fraction": f"{float(np.mean(label == 255)):.4f}",
-                })  # fmt: skip
-    buf_csv = io.StringIO()
-    wr = csv.DictWriter(buf_csv, fieldnames=list(rows[0]), lineterminator="\n")
-    wr.writeheader()
-    wr.writerows(rows)
-    write_bytes_atomic(truth_dir / "frames.csv", buf_csv.getvalue().encode())
+        for job, frames in _render_all(context, run.jobs, workers, casters, progress):
+            rows += [_write_frame(writer, truth_dir, run, job, frame) for frame in frames]
+    _write_frames_csv(truth_dir / "frames.csv", rows)
     write_bytes_atomic(
         truth_dir / "README.txt",
         _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
     )
     return SynthResult(out, survey_dir, truth_dir, int(s.size), len(rows))
+
+
+def _check_request(
+    from_m: float, to_m: float, length_m: float, workers: int, spacing_m: float, speed_mps: float
+) -> None:
+    """Raise ValueError for a chainage interval off the track or a non-positive setting."""
+    if not (0.0 <= from_m < to_m <= length_m + 1e-6):
+        raise ValueError(
+            f"chainage interval [{from_m}, {to_m}] m must satisfy 0 <= from_m < to_m <= "
+            f"{length_m:.1f} (the track length); choose a stretch inside the track"
+        )
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if spacing_m <= 0 or speed_mps <= 0:
+        raise ValueError(f"spacing_m and speed_mps must be positive, got {spacing_m}, {speed_mps}")
+
+
+def _side_mounts(pitch_deg: float) -> dict[str, Mount]:
+    """The left and right cameras looking square to the track, pitched up ``pitch_deg``."""
+    return {
+        side: Mount(
+            side, 90.0 if side == "left" else -90.0, pitch_deg, 0.0, Mount.default(side).lever_arm_m
+        )
+        for side in ("left", "right")
+    }
 
 
 @dataclass(frozen=True)
@@ -324,6 +287,100 @@ class _PositionJob:
     chainage_m: float
     elapsed_s: float
     sky: SkyModel
+
+
+@dataclass(frozen=True)
+class _Positions:
+    """The antenna positions of a run: where, when, the sun, and the render job of each.
+
+    Arrays have shape (n,): geodetic position (deg, deg, m), time (GPS s), sun azimuth and
+    elevation (deg, local ENU at the antenna).
+    """
+
+    lat_deg: NDArray
+    lon_deg: NDArray
+    h_m: NDArray
+    gps_s: NDArray
+    sun_az_deg: NDArray
+    sun_el_deg: NDArray
+    jobs: list[_PositionJob]
+
+    @classmethod
+    def along(
+        cls,
+        world: World,
+        chainage_m: NDArray,
+        antenna_height_m: float,
+        speed_mps: float,
+        start_gps_s: float | None,
+        sky: str,
+        seed: int,
+    ) -> _Positions:
+        """Positions at ``chainage_m`` (the first at ``start_gps_s``, default mid-morning)."""
+        s = chainage_m
+        ant = world.antenna_enu(s, antenna_height_m)
+        lat, lon, h = world.frame.to_geodetic(ant)
+        if start_gps_s is None:
+            start_gps_s = daytime_gps_s(float(np.mean(lon)))
+        gps = start_gps_s + (s - s[0]) / speed_mps
+        sun_az, sun_el = sun_azel(gps, lat, lon)
+        rot = world.frame.rotation_from(lat, lon)
+        sun_frame = np.einsum(
+            "nij,nj->ni",
+            rot,
+            np.stack([sun_direction_enu(a, e) for a, e in zip(sun_az, sun_el, strict=True)]),
+        )
+        f_az, f_el, _ = enu_to_azel(sun_frame)
+        cond, sky_id = sky_schedule(sky, s, seed)
+        jobs = [
+            _PositionJob(
+                index=i,
+                chainage_m=float(s[i]),
+                elapsed_s=float(gps[i] - start_gps_s),
+                sky=SkyModel.of(
+                    str(cond[i]), float(f_az[i]), float(f_el[i]), seed=seed * 1000 + int(sky_id[i])
+                ),
+            )
+            for i in range(s.size)
+        ]
+        return cls(lat, lon, h, gps, sun_az, sun_el, jobs)
+
+
+def _write_frame(
+    writer: SurveyWriter, truth_dir: Path, run: _Positions, job: _PositionJob, frame: _Frame
+) -> dict[str, str]:
+    """Add one rendered frame to the survey, write its label; its row of ``frames.csv``."""
+    i = job.index
+    side, img, label, quality = frame
+    fid = writer.add_frame(
+        img,
+        side,
+        float(run.gps_s[i]),
+        chainage_m=job.chainage_m,
+        lat_deg=float(run.lat_deg[i]),
+        lon_deg=float(run.lon_deg[i]),
+        h_m=float(run.h_m[i]),
+        jpeg_quality=quality,
+    )
+    ok, buf = cv2.imencode(".png", label)
+    if not ok:
+        raise OSError(f"PNG encoding of the label of frame {fid} failed")
+    write_bytes_atomic(truth_dir / "labels" / f"{fid}.png", buf.tobytes())
+    return {
+        "frame_id": fid, "side": side, "chainage_m": repr(job.chainage_m),
+        "gps_s": repr(float(run.gps_s[i])), "sky": job.sky.condition,
+        "cloud_cover": f"{job.sky.cloud_cover:.3f}",
+        "sun_az_deg": f"{run.sun_az_deg[i]:.4f}", "sun_el_deg": f"{run.sun_el_deg[i]:.4f}",
+        "sky_fraction": f"{float(np.mean(label == 255)):.4f}",
+    }  # fmt: skip
+
+
+def _write_frames_csv(path: Path, rows: list[dict[str, str]]) -> None:
+    buf_csv = io.StringIO()
+    wr = csv.DictWriter(buf_csv, fieldnames=list(rows[0]), lineterminator="\n")
+    wr.writeheader()
+    wr.writerows(rows)
+    write_bytes_atomic(path, buf_csv.getvalue().encode())
 
 
 @dataclass(frozen=True)
@@ -361,7 +418,7 @@ def _render_position(context: _RenderContext, casters: Casters, job: _PositionJo
 
 # Per-process state of the rendering pool: the context and the casters built from it once per
 # worker (open3d scenes cannot be pickled, and rebuilding them per job would dominate).
-_POOL_STATE: dict[str, Any] = {}
+_POOL_STATE: dict[str, Any] = {}  # Any: "context" a _RenderContext, "casters" its Casters
 
 
 def _pool_init(context: _RenderContext) -> None:
@@ -381,10 +438,8 @@ def _render_all(
     progress: bool,
 ) -> Iterator[tuple[_PositionJob, list[_Frame]]]:
     """Render every job, in order, serially or in a pool of ``workers`` processes."""
-    bar: Any = None
+    bar: tqdm[NoReturn] | None = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=len(jobs), desc="rendering", unit="pos")
     try:
         if workers == 1:
@@ -393,9 +448,6 @@ def _render_all(
                 if bar is not None:
                     bar.update()
             return
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
         # spawn, not fork: open3d's thread pool does not survive a fork.
         with ProcessPoolExecutor(
             workers, mp_context=mp.get_context("spawn"), initializer=_pool_init,
@@ -411,7 +463,7 @@ def _render_all(
 
 
 def _readme(
-    track: Any,
+    track: TrackMap,
     from_m: float,
     to_m: float,
     sky: str,
@@ -476,8 +528,6 @@ def contact_sheet(
     Path
         ``out_png``.
     """
-    from predisat.survey import Survey
-
     survey = Survey.load(survey_dir, check_images=False)
     ids = [str(x) for x in survey.frames.frame_id]
     if not ids:

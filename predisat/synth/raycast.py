@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["BACKENDS", "Caster", "Hits", "make_caster"]
+__all__ = ["BACKENDS", "Caster", "Hits", "SceneMesh", "make_caster"]
 
 BACKENDS = ("open3d", "trimesh")
 
@@ -49,14 +49,43 @@ class Hits:
         return np.where(self.hit, fm[np.maximum(self.face_id, 0)], -1)
 
 
+class SceneMesh(Protocol):
+    """The part of a scene a caster reads (:class:`predisat.synth.world.World` is one).
+
+    Attributes
+    ----------
+    vertices_m : ndarray, shape (n, 3)
+        Vertices in frame ENU, metres.
+    faces : ndarray, shape (m, 3), int
+        Vertex indices of the triangles.
+    face_material : ndarray, shape (m,), int
+        Index into :data:`predisat.synth.world.MATERIALS` of each face.
+    blocking_faces : ndarray, shape (m,), bool
+        Faces that block L-band signals.
+    """
+
+    @property
+    def vertices_m(self) -> NDArray: ...
+    @property
+    def faces(self) -> NDArray: ...
+    @property
+    def face_material(self) -> NDArray: ...
+    @property
+    def blocking_faces(self) -> NDArray: ...
+
+
 class Caster(Protocol):
     """What :func:`make_caster` returns."""
 
     backend: str
 
-    def cast(self, origins_m: ArrayLike, directions: ArrayLike) -> Hits: ...
+    def cast(self, origins_m: ArrayLike, directions: ArrayLike) -> Hits:
+        """First hits of rays (n, 3) from ``origins_m`` (frame ENU, metres) along ``directions``."""
+        ...
 
-    def occluded(self, origins_m: ArrayLike, directions: ArrayLike) -> NDArray: ...
+    def occluded(self, origins_m: ArrayLike, directions: ArrayLike) -> NDArray:
+        """Whether each ray (n, 3) hits anything, shape (n,) bool."""
+        ...
 
 
 def _rays(origins_m: ArrayLike, directions: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -77,7 +106,7 @@ class _Base:
 
     backend = ""
 
-    def __init__(self, world: Any, lband_only: bool) -> None:
+    def __init__(self, world: SceneMesh, lband_only: bool) -> None:
         keep = np.flatnonzero(world.blocking_faces) if lband_only else np.arange(len(world.faces))
         faces = np.asarray(world.faces)[keep]
         v = np.asarray(world.vertices_m, float)
@@ -110,7 +139,8 @@ class Open3dCaster(_Base):
 
     backend = "open3d"
 
-    def __init__(self, world: Any, lband_only: bool = False) -> None:
+    def __init__(self, world: SceneMesh, lband_only: bool = False) -> None:
+        # lazy: open3d is heavy and only this backend needs it
         import open3d
 
         super().__init__(world, lband_only)
@@ -150,7 +180,8 @@ class EmbreeCaster(_Base):
 
     backend = "trimesh"
 
-    def __init__(self, world: Any, lband_only: bool = False) -> None:
+    def __init__(self, world: SceneMesh, lband_only: bool = False) -> None:
+        # lazy: trimesh and embreex are needed by this backend only
         import trimesh
         from trimesh.ray.ray_pyembree import RayMeshIntersector
 
@@ -181,12 +212,13 @@ def _no_hits(n: int) -> Hits:
     return Hits(np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)))
 
 
-def make_caster(world: Any, backend: str = "open3d", lband_only: bool = False) -> Caster:
+def make_caster(world: SceneMesh, backend: str = "open3d", lband_only: bool = False) -> Caster:
     """A ray caster for ``world``.
 
     Parameters
     ----------
-    world : World
+    world : SceneMesh
+        A :class:`~predisat.synth.world.World`, or any mesh with its faces' materials.
     backend : {"open3d", "trimesh"}
         ``open3d``: ``RaycastingScene``; ``trimesh``: ``RayMeshIntersector`` on Embree
         (``embreex``), the independent check.

@@ -23,16 +23,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount
-from predisat.synth.raycast import Caster, make_caster
+from predisat.synth.raycast import Caster, Hits, SceneMesh, make_caster
 from predisat.synth.sky import SkyModel, fbm
-from predisat.synth.world import MATERIALS
+from predisat.synth.world import MATERIALS, World
 
 __all__ = [
     "LABEL_OBSTACLE",
@@ -121,6 +120,7 @@ class SensorState:
 
     @classmethod
     def draw(cls, rng: np.random.Generator, options: RenderOptions) -> SensorState:
+        """The state of one frame, drawn from ``rng`` with the spreads of ``options``."""
         ev = float(rng.normal(0.0, options.exposure_ev_sd))
         blur = float(options.blur_px * rng.uniform(0.75, 1.25))
         wb = 1.0 + options.wb_error * rng.standard_normal(3)
@@ -138,12 +138,13 @@ class Casters:
     lband: Caster
 
     @classmethod
-    def for_world(cls, world: Any, backend: str = "open3d") -> Casters:
+    def for_world(cls, world: SceneMesh, backend: str = "open3d") -> Casters:
+        """Both casters of ``world`` with ray-casting ``backend`` ``"open3d"`` or ``"trimesh"``."""
         return cls(make_caster(world, backend), make_caster(world, backend, lband_only=True))
 
 
 def camera_pose(
-    world: Any,
+    world: World,
     chainage_m: float,
     mount: Mount,
     antenna_height_m: float = 4.0,
@@ -278,7 +279,7 @@ def _hemisphere(n: NDArray, rng: np.random.Generator) -> NDArray:
 
 
 def _shade(
-    world: Any,
+    world: SceneMesh,
     casters: Casters,
     sky: SkyModel,
     origin: NDArray,
@@ -323,7 +324,7 @@ def _shade(
         )
     vis_m = options.visibility_m / (3.0 if sky.condition == "overcast" else 1.0)
     haze = (1.0 - np.exp(-t / vis_m))[:, None]
-    return rad * (1.0 - haze) + sky._horizon_radiance[None, :] * haze
+    return rad * (1.0 - haze) + sky.horizon_radiance[None, :] * haze
 
 
 def _ambient_visibility(
@@ -386,7 +387,7 @@ def _camera_rays(camera: CameraModel) -> tuple[NDArray, NDArray]:
 
 
 def render_radiance(
-    world: Any,
+    world: SceneMesh,
     casters: Casters,
     camera: CameraModel,
     camera_pose: tuple[ArrayLike, ArrayLike],
@@ -404,8 +405,9 @@ def render_radiance(
 
     Parameters
     ----------
-    world : World
-        Needs ``face_material`` (indices into ``MATERIALS``) and optionally ``seed``.
+    world : SceneMesh
+        A :class:`~predisat.synth.world.World`, or any mesh with ``face_material`` (indices
+        into ``MATERIALS``) and optionally ``seed``.
     casters : Casters
         Built on ``world`` (see :meth:`Casters.for_world`).
     camera : CameraModel
@@ -428,68 +430,17 @@ def render_radiance(
         ray through the pixel centre.
     """
     opt = options or RenderOptions()
-    pos = np.asarray(camera_pose[0], float).reshape(3)
-    rot = np.asarray(camera_pose[1], float)
-    if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6):
-        raise ValueError("camera_pose[1] must be a (3, 3) rotation matrix (camera to ENU)")
+    pos, rot = _checked_pose(camera_pose)
     h, w = camera.height_px, camera.width_px
     rc, corner = _camera_rays(camera)
     valid = np.all(np.isfinite(rc), axis=-1)
     dc = np.where(valid[:, None], rc, [0.0, 0.0, 1.0]) @ rot.T
     orig = np.broadcast_to(pos, dc.shape)
-
-    # the label from the centre ray; L-band-transparent hits are looked through
     hc = casters.full.cast(orig, dc)
-    mat_c = hc.material_id(world.face_material)
-    thin = hc.hit & _THIN[np.maximum(mat_c, 0)]
-    label = np.where(hc.hit, LABEL_OBSTACLE, LABEL_SKY).astype(np.uint8)
-    if np.any(thin):
-        behind = casters.lband.occluded(orig[: int(thin.sum())], dc[thin])
-        label[np.flatnonzero(thin)[~behind]] = LABEL_THIN
-    label[~valid] = LABEL_OBSTACLE
-
-    # coverage by jittered sub-rays near silhouettes (within 3 px of a hit/miss change, which
-    # also catches wires thinner than a pixel: their centre-ray hits are dashes 1 / width px
-    # apart); remember one hitting sub-ray where the centre misses
-    n = int(opt.supersample)
+    label = _centre_label(casters, world.face_material, hc, orig, dc, valid)
     hit_c = hc.hit & valid
-    cover = hit_c.astype(float)
-    d_obj = dc
-    if n > 1:
-        hm = hit_c.reshape(h, w).astype(np.uint8)
-        kernel = np.ones((7, 7), np.uint8)
-        near = (cv2.dilate(hm, kernel) > 0) & (cv2.dilate(1 - hm, kernel) > 0)
-        edge = np.flatnonzero(near.ravel() & valid)
-        corner_e = np.stack([corner[:-1, :-1], corner[:-1, 1:], corner[1:, :-1], corner[1:, 1:]],
-                            -2).reshape(-1, 4, 3)[edge]  # fmt: skip
-        cov = np.zeros(edge.size)
-        d_obj = dc.copy()
-        found = hit_c[edge].copy()
-        grid = (np.arange(n) + 0.5) / n
-        for ga in grid:
-            for gb in grid:
-                fu = np.clip(ga + rng.uniform(-0.5, 0.5, edge.size) / n, 0.0, 1.0)[:, None]
-                fv = np.clip(gb + rng.uniform(-0.5, 0.5, edge.size) / n, 0.0, 1.0)[:, None]
-                r = (corner_e[:, 0] * (1 - fu) + corner_e[:, 1] * fu) * (1 - fv) + (
-                    corner_e[:, 2] * (1 - fu) + corner_e[:, 3] * fu
-                ) * fv
-                d = r @ rot.T
-                d /= np.linalg.norm(d, axis=-1, keepdims=True)
-                occ = casters.full.occluded(orig[: edge.size], d)
-                cov += occ
-                new = occ & ~found
-                d_obj[edge[new]] = d[new]
-                found |= new
-        cover[edge] = cov / (n * n)
-    obj = np.flatnonzero(cover > 0)
-    # the surface radiance of covered pixels
-    ho = hc
-    redo = obj[~hit_c[obj]]
-    t_o, f_o, n_o = hc.distance_m.copy(), hc.face_id.copy(), hc.normal.copy()
-    if redo.size:
-        ho = casters.full.cast(orig[: redo.size], d_obj[redo])
-        t_o[redo], f_o[redo], n_o[redo] = ho.distance_m, ho.face_id, ho.normal
-    obj = obj[f_o[obj] >= 0]
+    cover, d_obj = _coverage(casters, hit_c, valid, corner, rot, orig, dc, (h, w), rng, opt)
+    obj, t_o, f_o, n_o = _surface_hits(casters, hc, hit_c, cover, orig, d_obj)
     vis = _ambient_visibility(casters, pos, d_obj, t_o, n_o, obj, (h, w), rng, opt.ambient_rays)
     out = np.zeros((h * w, 3))
     if obj.size:
@@ -514,6 +465,96 @@ def render_radiance(
         out[sky_px] = out[sky_px] * c + sky.radiance(dc[sky_px], pos, elapsed_s) * (1.0 - c)
     out[~valid] = 0.0
     return out.reshape(h, w, 3).astype(np.float32), label.reshape(h, w)
+
+
+def _checked_pose(camera_pose: tuple[ArrayLike, ArrayLike]) -> tuple[NDArray, NDArray]:
+    """Camera centre (3,) and camera-to-ENU rotation (3, 3) of a pose, the rotation checked."""
+    pos = np.asarray(camera_pose[0], float).reshape(3)
+    rot = np.asarray(camera_pose[1], float)
+    if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6):
+        raise ValueError("camera_pose[1] must be a (3, 3) rotation matrix (camera to ENU)")
+    return pos, rot
+
+
+def _centre_label(
+    casters: Casters, face_material: NDArray, hc: Hits, orig: NDArray, dc: NDArray, valid: NDArray
+) -> NDArray:
+    """Label (H*W,) uint8 from the centre rays' hits ``hc``; L-band-transparent hits are looked
+    through."""
+    mat_c = hc.material_id(face_material)
+    thin = hc.hit & _THIN[np.maximum(mat_c, 0)]
+    label = np.where(hc.hit, LABEL_OBSTACLE, LABEL_SKY).astype(np.uint8)
+    if np.any(thin):
+        behind = casters.lband.occluded(orig[: int(thin.sum())], dc[thin])
+        label[np.flatnonzero(thin)[~behind]] = LABEL_THIN
+    label[~valid] = LABEL_OBSTACLE
+    return label
+
+
+def _coverage(
+    casters: Casters,
+    hit_c: NDArray,
+    valid: NDArray,
+    corner: NDArray,
+    rot: NDArray,
+    orig: NDArray,
+    dc: NDArray,
+    shape: tuple[int, int],
+    rng: np.random.Generator,
+    opt: RenderOptions,
+) -> tuple[NDArray, NDArray]:
+    """Obstacle coverage (H*W,) of each pixel and the direction (H*W, 3) to shade it along.
+
+    Jittered sub-rays are cast near silhouettes only (within 3 px of a hit/miss change, which
+    also catches wires thinner than a pixel: their centre-ray hits are dashes 1 / width px
+    apart); where the centre ray misses, one hitting sub-ray's direction is kept.
+    """
+    n = int(opt.supersample)
+    cover = hit_c.astype(float)
+    if n <= 1:
+        return cover, dc
+    h, w = shape
+    hm = hit_c.reshape(h, w).astype(np.uint8)
+    kernel = np.ones((7, 7), np.uint8)
+    near = (cv2.dilate(hm, kernel) > 0) & (cv2.dilate(1 - hm, kernel) > 0)
+    edge = np.flatnonzero(near.ravel() & valid)
+    corner_e = np.stack([corner[:-1, :-1], corner[:-1, 1:], corner[1:, :-1], corner[1:, 1:]],
+                        -2).reshape(-1, 4, 3)[edge]  # fmt: skip
+    cov = np.zeros(edge.size)
+    d_obj = dc.copy()
+    found = hit_c[edge].copy()
+    grid = (np.arange(n) + 0.5) / n
+    for ga in grid:
+        for gb in grid:
+            fu = np.clip(ga + rng.uniform(-0.5, 0.5, edge.size) / n, 0.0, 1.0)[:, None]
+            fv = np.clip(gb + rng.uniform(-0.5, 0.5, edge.size) / n, 0.0, 1.0)[:, None]
+            r = (corner_e[:, 0] * (1 - fu) + corner_e[:, 1] * fu) * (1 - fv) + (
+                corner_e[:, 2] * (1 - fu) + corner_e[:, 3] * fu
+            ) * fv
+            d = r @ rot.T
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            occ = casters.full.occluded(orig[: edge.size], d)
+            cov += occ
+            new = occ & ~found
+            d_obj[edge[new]] = d[new]
+            found |= new
+    cover[edge] = cov / (n * n)
+    return cover, d_obj
+
+
+def _surface_hits(
+    casters: Casters, hc: Hits, hit_c: NDArray, cover: NDArray, orig: NDArray, d_obj: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Covered pixels with a surface to shade (k,) and every pixel's hit distance (H*W,), face
+    (H*W,) and normal (H*W, 3) along ``d_obj`` (recast where only a sub-ray hit)."""
+    obj = np.flatnonzero(cover > 0)
+    redo = obj[~hit_c[obj]]
+    t_o, f_o, n_o = hc.distance_m.copy(), hc.face_id.copy(), hc.normal.copy()
+    if redo.size:
+        ho = casters.full.cast(orig[: redo.size], d_obj[redo])
+        t_o[redo], f_o[redo], n_o[redo] = ho.distance_m, ho.face_id, ho.normal
+    obj = obj[f_o[obj] >= 0]
+    return obj, t_o, f_o, n_o
 
 
 # --------------------------------------------------------------------------------------------
@@ -644,7 +685,7 @@ def expose(
 
 
 def render_frame(
-    world: Any,
+    world: SceneMesh,
     casters: Casters,
     camera: CameraModel,
     camera_pose: tuple[ArrayLike, ArrayLike],

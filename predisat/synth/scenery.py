@@ -15,11 +15,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
+
+from predisat.geodesy import LocalFrame
+
+if TYPE_CHECKING:  # world imports this module: the type only, no import at run time
+    from predisat.synth.world import Stretch
 
 __all__ = [
     "Context",
@@ -37,7 +42,7 @@ _SIDES = {"left": (1.0,), "right": (-1.0,), "both": (1.0, -1.0)}
 
 class _TrackLike(Protocol):
     @property
-    def frame(self) -> Any: ...
+    def frame(self) -> LocalFrame: ...
     @property
     def length_m(self) -> float: ...
 
@@ -70,7 +75,9 @@ class Corridor:
     h_m: NDArray
 
     @classmethod
-    def from_track(cls, track: _TrackLike, start_m: float, end_m: float, step_m: float = 1.0):
+    def from_track(
+        cls, track: _TrackLike, start_m: float, end_m: float, step_m: float = 1.0
+    ) -> Corridor:
         """Sample ``track`` every ``step_m`` over ``[start_m, end_m]`` clipped to the track."""
         lo, hi = max(0.0, float(start_m)), min(float(track.length_m), float(end_m))
         if not hi > lo:
@@ -135,6 +142,8 @@ class MeshBuilder:
         self._count = 0
 
     def add(self, vertices_m: ArrayLike, faces: ArrayLike, material: int | ArrayLike) -> None:
+        """Append a mesh: vertices (n, 3) metres, faces (m, 3) indexing them, and one material
+        id or one per face (m,)."""
         v = np.asarray(vertices_m, float).reshape(-1, 3)
         f = np.asarray(faces, np.int64).reshape(-1, 3)
         self._vertices.append(v)
@@ -292,7 +301,7 @@ def _blob(
     return v * (radius_m * bump)[:, None], np.asarray(ico.faces)
 
 
-def _sides(stretch: Any) -> tuple[float, ...]:
+def _sides(stretch: Stretch) -> tuple[float, ...]:
     return _SIDES[stretch.side]
 
 
@@ -303,7 +312,7 @@ def _taper(s: NDArray, s0: float, s1: float, ramp_m: float) -> NDArray:
     return x * x * (3 - 2 * x)
 
 
-def _param(stretch: Any, name: str, rng: np.random.Generator, lo: float, hi: float) -> float:
+def _param(stretch: Stretch, name: str, rng: np.random.Generator, lo: float, hi: float) -> float:
     """A stretch parameter: the recipe's value if given, else uniform in ``[lo, hi]``."""
     draw = float(rng.uniform(lo, hi))  # always draw, so overrides do not shift other draws
     return float(stretch.params.get(name, draw))
@@ -333,6 +342,7 @@ class Context:
         self.solid(s_c, _box(a0, a1, min(b0, b1), max(b0, b1), c0, c1), _BOX_FACES, material)
 
     def sweep(self, s_m: ArrayLike, profiles: ArrayLike, material: str, cap: str = "fan") -> None:
+        """Add the solid :func:`extrude` sweeps through ``profiles`` at chainages ``s_m``."""
         v, f, _ = extrude(self.corridor, s_m, profiles, cap)
         self.mb.add(v, f, self.mat[material])
 
@@ -351,7 +361,7 @@ def _building(ctx: Context, s_c: float, side: float, y_near: float, size: tuple,
         ctx.solid(s_c, pts, _outward(pts, faces), roof)
 
 
-def _station(ctx: Context, st: Any) -> None:
+def _station(ctx: Context, st: Stretch) -> None:
     rng, (s0, s1) = ctx.rng, (st.start_m, st.end_m)
     edge = 1.65  # platform edge from the axis (loading gauge), 0.76 m high
     for side in _sides(st):
@@ -382,7 +392,7 @@ def _station(ctx: Context, st: Any) -> None:
             _building(ctx, s_c, side, y_near, size, "brick", "roof_tiles")
 
 
-def _town(ctx: Context, st: Any) -> None:
+def _town(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng
     for side in _sides(st):
         setback = _param(st, "facade_distance_m", rng, 5.0, 15.0)
@@ -418,7 +428,7 @@ def _tree(ctx: Context, s_c: float, y: float, height: float) -> None:
         ctx.solid(s_c, v + c, f, "foliage")
 
 
-def _trees(ctx: Context, st: Any) -> None:
+def _trees(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng
     for side in _sides(st):
         y_row = _param(st, "row_distance_m", rng, 6.0, 12.0)
@@ -430,7 +440,7 @@ def _trees(ctx: Context, st: Any) -> None:
             s += rng.uniform(5.0, 11.0)
 
 
-def _open(ctx: Context, st: Any) -> None:
+def _open(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng  # sparse isolated trees and farm sheds well away from the track
     rate_per_km = st.params.get("objects_per_km", 8.0)
     for _ in range(rng.poisson((st.end_m - st.start_m) * rate_per_km / 1000.0)):
@@ -443,7 +453,7 @@ def _open(ctx: Context, st: Any) -> None:
             _building(ctx, s_c, side, float(rng.uniform(30, 120)), size, "plaster", "roof_tiles")
 
 
-def _cutting(ctx: Context, st: Any) -> None:
+def _cutting(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng
     ss = np.linspace(st.start_m, st.end_m, max(2, int((st.end_m - st.start_m) / 4) + 1))
     for side in _sides(st):
@@ -460,7 +470,7 @@ def _cutting(ctx: Context, st: Any) -> None:
         ctx.sweep(ss, prof * [side, 1], "grass")
 
 
-def _rock_walls(ctx: Context, st: Any) -> None:
+def _rock_walls(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng
     ss = np.linspace(st.start_m, st.end_m, max(2, int((st.end_m - st.start_m) / 3) + 1))
     t = np.linspace(0.0, 1.0, 10)
@@ -480,7 +490,7 @@ def _rock_walls(ctx: Context, st: Any) -> None:
         ctx.sweep(ss, prof * [side, 1], "rock")
 
 
-def _overbridge(ctx: Context, st: Any) -> None:
+def _overbridge(ctx: Context, st: Stretch) -> None:
     rng = ctx.rng
     s_c, w = (st.start_m + st.end_m) / 2, st.end_m - st.start_m
     z_d = _param(st, "clearance_m", rng, 7.1, 7.6)
@@ -509,7 +519,7 @@ def _arch(half_width: float, spring: float, n_arc: int) -> NDArray:
     return np.concatenate([[[-half_width, _GROUND_Z]], arc, [[half_width, _GROUND_Z]]])
 
 
-def _tunnel(ctx: Context, st: Any) -> None:
+def _tunnel(ctx: Context, st: Stretch) -> None:
     s0, s1 = st.start_m, st.end_m
     ss = np.linspace(s0, s1, max(2, int((s1 - s0) / 4) + 1))
     half, spring, lining = 4.2, 3.5, 0.6
@@ -540,7 +550,7 @@ _BUILDERS = {
 }
 
 
-def build_stretch(ctx: Context, stretch: Any) -> None:
+def build_stretch(ctx: Context, stretch: Stretch) -> None:
     """Add the scenery of one :class:`~predisat.synth.world.Stretch`."""
     _BUILDERS[stretch.kind](ctx, stretch)
 

@@ -395,7 +395,7 @@ class SkyModel:
         alpha = np.clip(dens * 1.05, 0.0, 1.0) * (1.0 - far) + 0.6 * self.cloud_cover * far
         alpha = np.where(up, alpha, 0.0) * _smoothstep(0.0, 0.03, d[..., 2])
         haze = 1.0 - np.exp(-ell / 25e3)
-        horizon = self._horizon_radiance
+        horizon = self.horizon_radiance
         cloud = cloud * (1.0 - haze[..., None]) + horizon * haze[..., None]
         return clear * (1.0 - alpha[..., None]) + cloud * alpha[..., None]
 
@@ -414,8 +414,9 @@ class SkyModel:
         return lum[..., None] * tint
 
     @cached_property
-    def _horizon_radiance(self) -> NDArray:
-        """Mean sky radiance just above the horizon, RGB (3,) (haze colour)."""
+    def horizon_radiance(self) -> NDArray:
+        """Mean sky radiance just above the horizon, linear RGB (3,), kcd/m2: the haze colour
+        of aerial perspective."""
         az = np.radians(np.arange(0.0, 360.0, 10.0))
         d = np.stack([np.sin(az) * 0.999, np.cos(az) * 0.999, np.full_like(az, 0.045)], -1)
         d /= np.linalg.norm(d, axis=-1, keepdims=True)

@@ -14,14 +14,22 @@ north; the method and its limits are in ``docs/synthetic-world.md``.
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from tqdm import tqdm
 
+from predisat.camera.models import CameraModel, Mount
 from predisat.geodesy import azel_to_enu
 from predisat.masks.truth import TrueMasks
 from predisat.synth.raycast import Caster, make_caster
+from predisat.synth.render import camera_pose
+from predisat.synth.world import World
+
+if TYPE_CHECKING:  # the type only: the reconstruction (numba) is imported where it is used
+    from predisat.reconstruct.carving import FrameView
 
 __all__ = [
     "ideal_frames",
@@ -31,7 +39,6 @@ __all__ = [
     "scan_levels_deg",
     "true_masks",
 ]
-
 
 
 def scan_levels_deg(rel_step: float = 0.1, min_step_deg: float = 0.05) -> NDArray:
@@ -53,17 +60,17 @@ def scan_levels_deg(rel_step: float = 0.1, min_step_deg: float = 0.05) -> NDArra
 _LEVELS = scan_levels_deg()
 
 
-def _local_rotations(world: Any, enu_m: NDArray) -> NDArray:
+def _local_rotations(world: World, enu_m: NDArray) -> NDArray:
     """Rotations (..., 3, 3) from the local ENU at points (frame ENU) into the frame."""
     lat, lon, _ = world.frame.to_geodetic(enu_m)
     return world.frame.rotation_from(lat, lon)
 
 
-def _caster(world: Any, backend: str, caster: Caster | None) -> Caster:
+def _caster(world: World, backend: str, caster: Caster | None) -> Caster:
     return caster if caster is not None else make_caster(world, backend, lband_only=True)
 
 
-def _triangle_spheres(world: Any) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _triangle_spheres(world: World) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Blocking faces (m, 3), their centroids (m, 3), the largest horizontal (frame) and 3-D
     distances from the centroid to a vertex (m,) each."""
     faces = np.asarray(world.faces)[world.blocking_faces]
@@ -79,7 +86,7 @@ def _triangle_spheres(world: Any) -> tuple[NDArray, NDArray, NDArray, NDArray]:
 
 
 def _sector_bounds(
-    world: Any, ant: NDArray, rot: NDArray, spheres: tuple[NDArray, ...], n_sector: int
+    world: World, ant: NDArray, rot: NDArray, spheres: tuple[NDArray, ...], n_sector: int
 ) -> NDArray:
     """Upper bound (n_sector,) of the blocking elevation in equal azimuth sectors.
 
@@ -161,7 +168,7 @@ def _scan(
 
 
 def true_masks(
-    world: Any,
+    world: World,
     chainage_m: ArrayLike | None = None,
     antenna_height_m: float = 4.0,
     az_step_deg: float = 0.5,
@@ -214,11 +221,7 @@ def true_masks(
     mask = np.full((s.size, n_az), 90.0)
     mask_min = np.full((s.size, n_az), 90.0)
     todo = np.flatnonzero(~covered)
-    it: Any = todo
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(todo, desc="true masks", unit="pos")
+    it: Iterable[int] = tqdm(todo, desc="true masks", unit="pos") if progress else todo
     chunk: list[int] = []
     for j, p in enumerate(it):
         chunk.append(int(p))
@@ -254,7 +257,7 @@ def true_masks(
 
 
 def obstacle_descriptors(
-    world: Any,
+    world: World,
     chainage_m: ArrayLike,
     antenna_height_m: float = 4.0,
     backend: str = "open3d",
@@ -309,7 +312,7 @@ def obstacle_descriptors(
 
 
 def is_blocked(
-    world: Any,
+    world: World,
     antenna_enu: ArrayLike,
     az_deg: ArrayLike,
     el_deg: ArrayLike,
@@ -342,10 +345,10 @@ def is_blocked(
 
 
 def ideal_sky_mask(
-    world: Any,
+    world: World,
     chainage_m: ArrayLike,
-    camera: Any,
-    mount: Any,
+    camera: CameraModel,
+    mount: Mount,
     antenna_height_m: float = 4.0,
     reverse: bool = False,
     backend: str = "open3d",
@@ -377,8 +380,6 @@ def ideal_sky_mask(
     -------
     ndarray of bool, shape (*S, H, W)
     """
-    from predisat.synth.render import camera_pose
-
     s = np.asarray(chainage_m, float)
     cast = _caster(world, backend, caster)
     rays = camera.pixel_to_ray(*camera.pixel_grid())  # once for every frame
@@ -392,16 +393,16 @@ def ideal_sky_mask(
 
 
 def ideal_frames(
-    world: Any,
+    world: World,
     chainage_m: ArrayLike,
-    camera: Any,
-    mounts: dict[str, Any] | None = None,
+    camera: CameraModel,
+    mounts: Mapping[str, Mount] | None = None,
     antenna_height_m: float = 4.0,
     reverse: bool = False,
     backend: str = "open3d",
     *,
     caster: Caster | None = None,
-) -> list[Any]:
+) -> list[FrameView]:
     """Frames with ideal sky masks (:func:`ideal_sky_mask`) at chainages, for the reconstruction.
 
     Parameters
@@ -421,7 +422,7 @@ def ideal_frames(
         ``n * len(mounts)`` frames, position by position, in the order of ``mounts``; frame id
         chainage and side initial (``"3000l"``).
     """
-    from predisat.camera.models import Mount
+    # lazy: the reconstruction pulls numba, which the other truth functions do not need
     from predisat.reconstruct.carving import FrameView
 
     if mounts is None:

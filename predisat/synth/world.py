@@ -19,7 +19,7 @@ import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TypeAlias, TypedDict, Unpack
 
 import numpy as np
 import trimesh
@@ -27,14 +27,18 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from predisat.geodesy import LocalFrame
+from predisat.jsontypes import JsonDict
 from predisat.synth.scenery import Context, Corridor, MeshBuilder, build_catenary, build_stretch
+from predisat.track import TrackMap
 
 __all__ = [
     "MATERIALS",
     "STRETCH_KINDS",
     "Material",
     "Stretch",
+    "StretchTuple",
     "World",
+    "WorldOptions",
     "WorldSpec",
     "material_id",
 ]
@@ -148,21 +152,34 @@ class Stretch:
         object.__setattr__(self, "end_m", float(self.end_m))
         object.__setattr__(self, "params", {k: float(v) for k, v in dict(self.params).items()})
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
         """Plain dict (YAML/JSON-ready)."""
-        out: dict[str, Any] = {"kind": self.kind, "start_m": self.start_m, "end_m": self.end_m}
+        out: JsonDict = {"kind": self.kind, "start_m": self.start_m, "end_m": self.end_m}
         out["side"] = self.side
         if self.params:
             out["params"] = dict(self.params)
         return out
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Stretch:
+    def from_dict(cls, d: JsonDict) -> Stretch:
         """Inverse of :meth:`to_dict`; unknown keys are an error."""
         extra = set(d) - {"kind", "start_m", "end_m", "side", "params"}
         if extra:
             raise ValueError(f"stretch {dict(d)!r} has unknown keys {sorted(extra)}")
         return cls(d["kind"], d["start_m"], d["end_m"], d.get("side", "both"), d.get("params", {}))
+
+
+StretchTuple: TypeAlias = tuple[str, float, float] | tuple[str, float, float, str]
+"""A stretch written as ``(kind, start_m, end_m[, side])``."""
+
+
+class WorldOptions(TypedDict, total=False):
+    """The optional fields of :class:`WorldSpec` besides the stretches (keyword arguments)."""
+
+    catenary: bool
+    hills: bool
+    hill_height_m: float
+    terrain_margin_m: float
 
 
 _MIXED_LENGTHS_M = {
@@ -214,12 +231,13 @@ class WorldSpec:
 
     @property
     def kinds(self) -> set[str]:
+        """The stretch kinds the recipe uses."""
         return {s.kind for s in self.stretches}
 
     @classmethod
     def from_stretches(
-        cls, items: Iterable[Stretch | Mapping[str, Any] | Sequence[Any]], **kw: Any
-    ):
+        cls, items: Iterable[Stretch | JsonDict | StretchTuple], **kw: Unpack[WorldOptions]
+    ) -> WorldSpec:
         """Spec from :class:`Stretch` es, dicts or ``(kind, start_m, end_m[, side])`` tuples."""
         out = []
         for it in items:
@@ -231,7 +249,7 @@ class WorldSpec:
                 out.append(Stretch(*it))
         return cls(tuple(out), **kw)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
         """Plain dict (YAML/JSON-ready); :meth:`from_dict` reads it back."""
         return {
             "stretches": [s.to_dict() for s in self.stretches],
@@ -242,7 +260,7 @@ class WorldSpec:
         }
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> WorldSpec:
+    def from_dict(cls, d: JsonDict) -> WorldSpec:
         """Spec from a dict such as a YAML scenery recipe (see ``docs/synthetic-world.md``)."""
         if "stretches" not in d:
             raise ValueError("scenery recipe needs a 'stretches' list of {kind, start_m, end_m}")
@@ -250,7 +268,9 @@ class WorldSpec:
         return cls.from_stretches(d["stretches"], **kw)
 
     @classmethod
-    def mixed(cls, start_m: float, end_m: float, seed: int = 0, **kw: Any) -> WorldSpec:
+    def mixed(
+        cls, start_m: float, end_m: float, seed: int = 0, **kw: Unpack[WorldOptions]
+    ) -> WorldSpec:
         """A varied run with every stretch kind (in a random order) over ``[start_m, end_m]``.
 
         Lengths are scaled to fill the interval; 2 km gives realistic sizes. A tunnel is never
@@ -321,7 +341,7 @@ class World:
         Index into :data:`MATERIALS`.
     """
 
-    track: Any
+    track: TrackMap
     frame: LocalFrame
     spec: WorldSpec
     seed: int
@@ -334,7 +354,7 @@ class World:
             arr.setflags(write=False)
 
     @classmethod
-    def build(cls, track: Any, spec: WorldSpec, seed: int = 0) -> World:
+    def build(cls, track: TrackMap, spec: WorldSpec, seed: int = 0) -> World:
         """Build the scene of ``spec`` along ``track`` (a TrackMap), deterministically.
 
         Tunnels tagged on the track (``track.tunnels_m``, e.g. from OpenStreetMap) are added to
@@ -412,7 +432,7 @@ class World:
             )
 
     @classmethod
-    def load(cls, path: str | Path, track: Any = None) -> World:
+    def load(cls, path: str | Path, track: TrackMap | None = None) -> World:
         """Read a world written by :meth:`save`.
 
         Without ``track`` the track map is rebuilt from the stored vertices with
@@ -428,8 +448,6 @@ class World:
         if track is None:
             if arrays["track_lat_deg"].size < 2:
                 raise ValueError(f"{path}: the track was not stored; pass track= to World.load")
-            from predisat.track.map import TrackMap
-
             track = TrackMap.from_latlon(
                 arrays["track_lat_deg"], arrays["track_lon_deg"], arrays["track_h_m"],
                 name=meta["track_name"], tolerance_m=meta["track_tolerance_m"],
