@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,6 +32,7 @@ from predisat.camera.calibfile import (
     CalibrationError,
     read_calibration,
 )
+from predisat.jsontypes import JsonDict
 
 __all__ = [
     "CalibrationError",
@@ -575,7 +576,7 @@ class Mount:
         return cls(side, 90.0 if side == "left" else -90.0, 45.0, 0.0, _DEFAULT_LEVER_ARM_M[side])
 
     @classmethod
-    def from_dict(cls, side: Literal["left", "right"], data: dict[str, Any]) -> Mount:
+    def from_dict(cls, side: Literal["left", "right"], data: JsonDict) -> Mount:
         """Build from a survey.yaml ``mount`` mapping (missing keys take the side's defaults)."""
         base = cls.default(side)
         unknown = set(data) - {"yaw_deg", "pitch_deg", "roll_deg", "lever_arm_m", "side"}
@@ -594,7 +595,8 @@ class Mount:
             tuple(data.get("lever_arm_m", base.lever_arm_m)),
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
+        """The survey.yaml ``mount`` mapping (angles in degrees, lever arm in metres)."""
         return {
             "yaw_deg": self.yaw_deg,
             "pitch_deg": self.pitch_deg,

@@ -115,7 +115,7 @@ class IntervalModel:
 
 
 def write_error_model(
-    path: str | Path, model: IntervalModel, fitted: Mapping[str, Any] | None = None
+    path: str | Path, model: IntervalModel, fitted: Mapping[str, object] | None = None
 ) -> Path:
     """Write an error-model JSON file."""
     e = model.error

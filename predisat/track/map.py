@@ -189,14 +189,20 @@ class TrackMap:
 
     @classmethod
     def from_geojson(
-        cls, path: str | Path, track: str | None = None, h_m: float = 0.0, **kwargs: Any
+        cls,
+        path: str | Path,
+        track: str | None = None,
+        h_m: float = 0.0,
+        **kwargs: Any,  # Any: forwarded to parse_geojson_track's keyword options
     ) -> TrackMap:
         """Track map from a GeoJSON file; the options are those of
         :func:`predisat.track.readers.parse_geojson_track`."""
         return cls.from_track_file(parse_geojson_track(path, track=track, h_m=h_m, **kwargs))
 
     @classmethod
-    def from_csv(cls, path: str | Path, **kwargs: Any) -> TrackMap:
+    def from_csv(
+        cls, path: str | Path, **kwargs: Any  # Any: forwarded to parse_csv_track's options
+    ) -> TrackMap:
         """Track map from a CSV of lat/lon[/h]; the options are those of
         :func:`predisat.track.readers.parse_csv_track`."""
         return cls.from_track_file(parse_csv_track(path, **kwargs))
