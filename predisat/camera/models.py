@@ -22,6 +22,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Literal
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -231,8 +232,6 @@ class CameraModel:
 
     def to_yaml(self, path: str | os.PathLike[str]) -> Path:
         """Write the canonical calibration file with ``cv2.FileStorage`` (atomically)."""
-        import cv2
-
         p = Path(path)
         if p.suffix.lower() not in (".yaml", ".yml"):
             raise ValueError(f"{p}: calibration files must end in .yaml or .yml")

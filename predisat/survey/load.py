@@ -12,9 +12,11 @@ from pathlib import Path, PurePosixPath
 from types import MappingProxyType
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+from PIL import Image, UnidentifiedImageError
 
 from predisat.camera.models import CalibrationError, CameraModel, Mount
 from predisat.jsontypes import JsonDict
@@ -96,8 +98,6 @@ class Survey:
 
     def read_image(self, frame: int | str) -> NDArray:
         """A frame's image as a BGR uint8 array (H, W, 3)."""
-        import cv2
-
         path = self.image_path(frame)
         img = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if img is None:
@@ -334,8 +334,6 @@ class _Row:
 
 
 def _check_image(root: Path, rel: str, cam: CameraModel) -> str | None:
-    from PIL import Image, UnidentifiedImageError
-
     path = root / rel
     if not path.is_file():
         return f"image {rel} is missing; copy it into the survey folder or remove the row"

@@ -23,7 +23,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike, NDArray
+from shapely import LineString, STRtree, box
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.track.errors import TrackMapError
@@ -267,8 +269,6 @@ class TrackMap:
         Symmetric (Hausdorff): source points every 1 m projected onto the axis, and axis nodes
         every metre measured to the source polyline.
         """
-        import shapely
-
         poly = self.polyline_enu_m
         _, dense, _ = dense_polyline(poly, 1.0)
         to_axis = np.abs(self.project_enu(dense).offset_m)
@@ -515,8 +515,6 @@ def _drop_repeats(lat: NDArray, lon: NDArray, h: NDArray) -> tuple[NDArray, NDAr
 
 def _check_simple(enu: NDArray, where: str, frame: LocalFrame) -> None:
     """Reject a polyline whose horizontal trace crosses itself, naming the place."""
-    from shapely import LineString, STRtree, box
-
     line = LineString(enu[:, :2])
     if line.is_simple:
         return
