@@ -26,12 +26,18 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import yaml
 
-__all__ = ["CANONICAL_FORMAT", "CANONICAL_VERSION", "CalibrationError", "read_calibration"]
+__all__ = [
+    "CANONICAL_FORMAT",
+    "CANONICAL_VERSION",
+    "CalibrationError",
+    "CalibrationFields",
+    "read_calibration",
+]
 
 CANONICAL_FORMAT = "predisat-camera"
 CANONICAL_VERSION = 1
@@ -51,6 +57,22 @@ class CalibrationError(ValueError):
 
 class _Loader(yaml.SafeLoader):
     """SafeLoader that understands OpenCV's ``!!opencv-matrix`` tags."""
+
+
+class CalibrationFields(TypedDict):
+    """:class:`~predisat.camera.models.CameraModel` keyword arguments read from a calibration
+    file (:func:`read_calibration`): focal lengths and principal point in pixels, the lens model
+    and its distortion coefficients (OpenCV order)."""
+
+    name: str
+    model: Literal["pinhole", "fisheye"]
+    width_px: int
+    height_px: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, ...]
 
 
 def _construct_opencv_matrix(loader: yaml.SafeLoader, node: yaml.MappingNode) -> np.ndarray:
@@ -133,7 +155,7 @@ def _reject(path: Path, model: object) -> CalibrationError:
     return CalibrationError(f"{path}: camera model {what} is not supported. {_UNSUPPORTED_HINT}")
 
 
-def _model_name(value: object, path: Path) -> str:
+def _model_name(value: object, path: Path) -> Literal["pinhole", "fisheye"]:
     name = str(value).strip().lower()
     if name in _PINHOLE_NAMES:
         return "pinhole"
@@ -142,8 +164,9 @@ def _model_name(value: object, path: Path) -> str:
     raise _reject(path, value)
 
 
-def _from_opencv(data: dict[str, Any], path: Path) -> dict[str, Any]:
+def _from_opencv(data: dict[str, Any], path: Path) -> CalibrationFields:
     """Canonical layout, OpenCV calibration sample and ROS camera_info."""
+    model: Literal["pinhole", "fisheye"]
     if "model" in data:
         model = _model_name(data["model"], path)
     elif "distortion_model" in data:
@@ -176,19 +199,17 @@ def _from_opencv(data: dict[str, Any], path: Path) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _from_camodocal(data: dict[str, Any], path: Path) -> dict[str, Any]:
+def _from_camodocal(data: dict[str, Any], path: Path) -> CalibrationFields:
     """camodocal layout (VINS-Mono/Fusion, GVINS): PINHOLE and KANNALA_BRANDT."""
     model_type = str(data["model_type"]).strip().upper()
     proj = data.get("projection_parameters") or {}
-    common = {
-        "name": str(data.get("camera_name", path.stem)),
-        "width_px": int(_num(data, "image_width", path)),
-        "height_px": int(_num(data, "image_height", path)),
-    }
+    name = str(data.get("camera_name", path.stem))
+    width_px = int(_num(data, "image_width", path))
+    height_px = int(_num(data, "image_height", path))
     if model_type == "PINHOLE":
         dist = data.get("distortion_parameters") or {}
         return {
-            **common, "model": "pinhole",
+            "name": name, "width_px": width_px, "height_px": height_px, "model": "pinhole",
             "fx": _num(proj, "fx", path), "fy": _num(proj, "fy", path),
             "cx": _num(proj, "cx", path), "cy": _num(proj, "cy", path),
             "dist": tuple(_num(dist, k, path) for k in ("k1", "k2", "p1", "p2")),
@@ -196,7 +217,7 @@ def _from_camodocal(data: dict[str, Any], path: Path) -> dict[str, Any]:
     if model_type == "KANNALA_BRANDT":
         # camodocal's k2..k5 are the theta^3..theta^9 coefficients, OpenCV's k1..k4
         return {
-            **common, "model": "fisheye",
+            "name": name, "width_px": width_px, "height_px": height_px, "model": "fisheye",
             "fx": _num(proj, "mu", path), "fy": _num(proj, "mv", path),
             "cx": _num(proj, "u0", path), "cy": _num(proj, "v0", path),
             "dist": tuple(_num(proj, k, path) for k in ("k2", "k3", "k4", "k5")),
@@ -204,7 +225,7 @@ def _from_camodocal(data: dict[str, Any], path: Path) -> dict[str, Any]:
     raise _reject(path, data["model_type"])
 
 
-def _from_kalibr(data: dict[str, Any], path: Path) -> dict[str, Any]:
+def _from_kalibr(data: dict[str, Any], path: Path) -> CalibrationFields:
     """Kalibr camchain entry: intrinsics [fu, fv, pu, pv], distortion_coeffs, resolution."""
     if str(data["camera_model"]).strip().lower() != "pinhole":
         raise _reject(path, data["camera_model"])
@@ -223,29 +244,27 @@ def _from_kalibr(data: dict[str, Any], path: Path) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _from_orbslam(data: dict[str, Any], path: Path) -> dict[str, Any]:
+def _from_orbslam(data: dict[str, Any], path: Path) -> CalibrationFields:
     """ORB-SLAM3 (``Camera1.*``) and ORB-SLAM2 (``Camera.*``) settings."""
     cam_type = str(data.get("Camera.type", "PinHole")).strip()
     prefix = "Camera1." if "Camera1.fx" in data else "Camera."
-    intr = {k: _num(data, prefix + k, path) for k in ("fx", "fy", "cx", "cy")}
-    common = {
-        "name": path.stem,
-        "width_px": int(_num(data, "Camera.width", path)),
-        "height_px": int(_num(data, "Camera.height", path)),
-        **intr,
-    }
+    fx, fy, cx, cy = (_num(data, prefix + k, path) for k in ("fx", "fy", "cx", "cy"))
+    width_px = int(_num(data, "Camera.width", path))
+    height_px = int(_num(data, "Camera.height", path))
     if cam_type.lower() == "pinhole":
         dist = [_num(data, prefix + k, path) for k in ("k1", "k2", "p1", "p2")]
         if prefix + "k3" in data:
             dist.append(_num(data, prefix + "k3", path))
-        return {**common, "model": "pinhole", "dist": tuple(dist)}
+        return {"name": path.stem, "width_px": width_px, "height_px": height_px, "fx": fx,
+                "fy": fy, "cx": cx, "cy": cy, "model": "pinhole", "dist": tuple(dist)}  # fmt: skip
     if cam_type.lower() == "kannalabrandt8":
         dist4 = tuple(_num(data, prefix + k, path) for k in ("k1", "k2", "k3", "k4"))
-        return {**common, "model": "fisheye", "dist": dist4}
+        return {"name": path.stem, "width_px": width_px, "height_px": height_px, "fx": fx,
+                "fy": fy, "cx": cx, "cy": cy, "model": "fisheye", "dist": dist4}  # fmt: skip
     raise _reject(path, cam_type)
 
 
-def read_calibration(path: str | os.PathLike[str]) -> dict[str, Any]:
+def read_calibration(path: str | os.PathLike[str]) -> CalibrationFields:
     """Read a calibration file into :class:`~predisat.camera.models.CameraModel` keyword arguments.
 
     Parameters
@@ -255,8 +274,8 @@ def read_calibration(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     Returns
     -------
-    dict
-        ``name, model, width_px, height_px, fx, fy, cx, cy, dist``.
+    CalibrationFields
+        ``name, model, width_px, height_px, fx, fy, cx, cy`` (pixels) and ``dist``.
 
     Raises
     ------

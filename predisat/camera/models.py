@@ -20,8 +20,9 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -32,6 +33,7 @@ from predisat.camera.calibfile import (
     CalibrationError,
     read_calibration,
 )
+from predisat.jsontypes import JsonDict
 
 __all__ = [
     "CalibrationError",
@@ -230,8 +232,6 @@ class CameraModel:
 
     def to_yaml(self, path: str | os.PathLike[str]) -> Path:
         """Write the canonical calibration file with ``cv2.FileStorage`` (atomically)."""
-        import cv2
-
         p = Path(path)
         if p.suffix.lower() not in (".yaml", ".yml"):
             raise ValueError(f"{p}: calibration files must end in .yaml or .yml")
@@ -575,7 +575,7 @@ class Mount:
         return cls(side, 90.0 if side == "left" else -90.0, 45.0, 0.0, _DEFAULT_LEVER_ARM_M[side])
 
     @classmethod
-    def from_dict(cls, side: Literal["left", "right"], data: dict[str, Any]) -> Mount:
+    def from_dict(cls, side: Literal["left", "right"], data: JsonDict) -> Mount:
         """Build from a survey.yaml ``mount`` mapping (missing keys take the side's defaults)."""
         base = cls.default(side)
         unknown = set(data) - {"yaw_deg", "pitch_deg", "roll_deg", "lever_arm_m", "side"}
@@ -594,7 +594,8 @@ class Mount:
             tuple(data.get("lever_arm_m", base.lever_arm_m)),
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
+        """The survey.yaml ``mount`` mapping (angles in degrees, lever arm in metres)."""
         return {
             "yaw_deg": self.yaw_deg,
             "pitch_deg": self.pitch_deg,

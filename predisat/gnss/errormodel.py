@@ -107,6 +107,7 @@ class IntervalModel:
     @classmethod
     def for_risk(cls, risk_per_pair: float, error: ErrorModel | None = None) -> IntervalModel:
         """``k_sigma`` giving a two-sided Gaussian risk per pair (1e-4 -> 3.89)."""
+        # lazy: scipy.stats is slow to import and only this rarely used constructor needs it
         from scipy.stats import norm
 
         if not 0 < risk_per_pair < 1:
@@ -115,7 +116,7 @@ class IntervalModel:
 
 
 def write_error_model(
-    path: str | Path, model: IntervalModel, fitted: Mapping[str, Any] | None = None
+    path: str | Path, model: IntervalModel, fitted: Mapping[str, object] | None = None
 ) -> Path:
     """Write an error-model JSON file."""
     e = model.error

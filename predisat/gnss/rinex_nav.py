@@ -308,8 +308,6 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     path = Path(path)
     lines = _open_lines(path)
     version, default_sys, leap, first = _parse_header(path, lines)
-    v3 = version >= 3.0
-    start1, startn = (23, 4) if v3 else (22, 3)
     n = len(lines)
     rows: dict[str, list] = {"kepler": [], "glonass": []}
     skipped: dict[str, int] = {}
@@ -321,68 +319,14 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             continue
         if not line[:3].strip():
             raise RinexError(path, i + 1, "continuation line found where a record should start")
-        lineno = i + 1
-        if v3:
-            sys_letter = line[0].upper()
-            prn_text = line[1:3]
-            t_line = line
-            body_start1 = start1
-            offset = 0
-        else:
-            sys_letter = default_sys
-            offset = 1 if line[0].isalpha() else 0  # RINEX 2.12 QZSS writes "J 1"
-            if offset:
-                sys_letter = line[0].upper()
-            prn_text = line[offset : offset + 2]
-            t_line = line[offset:]
-            body_start1 = start1 + offset
-        body_startn = startn + offset
-        try:
-            prn = int(prn_text)
-        except ValueError:
-            raise RinexError(path, lineno, f"unreadable satellite number {line[:3]!r}") from None
-        if sys_letter not in _N_LINES:
-            raise RinexError(path, lineno, f"unknown satellite system {sys_letter!r}")
-        n_lines = _N_LINES[sys_letter]
-        # a record runs until the next line whose first three columns are not blank
-        j = i + 1
-        while j < n and (not lines[j][:3].strip()) and lines[j].strip():
-            j += 1
-        got = j - i
-        if sys_letter == "R" and v3 and version >= 3.05 and got == 5:
-            n_lines = 5
-        if got < n_lines:
-            where = "end of file" if j >= n else f"line {j + 1}"
-            raise RinexError(
-                path,
-                lineno,
-                f"record of {sys_letter}{prn:02d} has {got} of {n_lines} lines (ends at {where}):"
-                " the file is truncated or a line is missing; copy or download it again",
-            )
-        if got > n_lines:
-            raise RinexError(
-                path, i + n_lines + 1, f"record of {sys_letter}{prn:02d} has extra lines"
-            )
-        if sys_letter == "S":
+        rec = _record_start(path, line, i + 1, default_sys, version >= 3.0)
+        j, n_lines = _record_extent(path, lines, i, rec, version)
+        if rec.sys_letter == "S":
             skipped["S"] = skipped.get("S", 0) + 1
             i = j
             continue
-        epoch = _epoch(path, lineno, t_line, v3)
-        vals = _fields(path, lineno, line, body_start1, 3)
-        for k in range(1, n_lines):
-            vals += _fields(path, lineno + k, lines[i + k], body_startn, 4)
-        kind = "glonass" if sys_letter == "R" else "kepler"
-        required = _REQUIRED_GLONASS if kind == "glonass" else _REQUIRED_KEPLER
-        missing = [idx for idx in required if np.isnan(vals[idx])]
-        if missing:
-            names = GLONASS_FIELDS if kind == "glonass" else KEPLER_FIELDS
-            raise RinexError(
-                path,
-                lineno,
-                f"record of {sys_letter}{prn:02d} lacks required field(s) "
-                + ", ".join(names[m] for m in missing),
-            )
-        rows[kind].append((f"{sys_letter}{prn:02d}", epoch, vals, f"{path.name}:{lineno}"))
+        kind, row = _record_row(path, lines, i, rec, n_lines, version >= 3.0)
+        rows[kind].append(row)
         i = j
     return RinexNav(
         str(path),
@@ -392,6 +336,99 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
         leap,
         skipped,
     )
+
+
+@dataclass(frozen=True)
+class _RecordStart:
+    """The first line of a navigation record: satellite, where its epoch and fields are."""
+
+    lineno: int  # 1-based
+    sys_letter: str
+    prn: int
+    t_line: str  # the line from the satellite number on (the epoch's columns)
+    body_start1: int  # first column of the first line's fields
+    body_startn: int  # first column of the continuation lines' fields
+
+
+def _record_start(
+    path: Path, line: str, lineno: int, default_sys: str, v3: bool
+) -> _RecordStart:
+    """Satellite and field columns of a record's first line (RINEX 3 or 2)."""
+    start1, startn = (23, 4) if v3 else (22, 3)
+    if v3:
+        sys_letter = line[0].upper()
+        prn_text = line[1:3]
+        t_line = line
+        body_start1 = start1
+        offset = 0
+    else:
+        sys_letter = default_sys
+        offset = 1 if line[0].isalpha() else 0  # RINEX 2.12 QZSS writes "J 1"
+        if offset:
+            sys_letter = line[0].upper()
+        prn_text = line[offset : offset + 2]
+        t_line = line[offset:]
+        body_start1 = start1 + offset
+    body_startn = startn + offset
+    try:
+        prn = int(prn_text)
+    except ValueError:
+        raise RinexError(path, lineno, f"unreadable satellite number {line[:3]!r}") from None
+    if sys_letter not in _N_LINES:
+        raise RinexError(path, lineno, f"unknown satellite system {sys_letter!r}")
+    return _RecordStart(lineno, sys_letter, prn, t_line, body_start1, body_startn)
+
+
+def _record_extent(
+    path: Path, lines: list[str], i: int, rec: _RecordStart, version: float
+) -> tuple[int, int]:
+    """Index of the line after the record starting at ``lines[i]``, and its number of lines
+    (checked against the system's)."""
+    n = len(lines)
+    n_lines = _N_LINES[rec.sys_letter]
+    # a record runs until the next line whose first three columns are not blank
+    j = i + 1
+    while j < n and (not lines[j][:3].strip()) and lines[j].strip():
+        j += 1
+    got = j - i
+    if rec.sys_letter == "R" and version >= 3.05 and got == 5:
+        n_lines = 5
+    sat = f"{rec.sys_letter}{rec.prn:02d}"
+    if got < n_lines:
+        where = "end of file" if j >= n else f"line {j + 1}"
+        raise RinexError(
+            path,
+            rec.lineno,
+            f"record of {sat} has {got} of {n_lines} lines (ends at {where}):"
+            " the file is truncated or a line is missing; copy or download it again",
+        )
+    if got > n_lines:
+        raise RinexError(path, i + n_lines + 1, f"record of {sat} has extra lines")
+    return j, n_lines
+
+
+def _record_row(
+    path: Path, lines: list[str], i: int, rec: _RecordStart, n_lines: int, v3: bool
+) -> tuple[str, tuple[str, tuple[int, ...], list[float], str]]:
+    """The kind (``"kepler"`` or ``"glonass"``) and row (satellite, epoch, fields, source) of
+    the record of ``n_lines`` lines starting at ``lines[i]``; its required fields checked."""
+    lineno = rec.lineno
+    epoch = _epoch(path, lineno, rec.t_line, v3)
+    vals = _fields(path, lineno, lines[i], rec.body_start1, 3)
+    for k in range(1, n_lines):
+        vals += _fields(path, lineno + k, lines[i + k], rec.body_startn, 4)
+    kind = "glonass" if rec.sys_letter == "R" else "kepler"
+    required = _REQUIRED_GLONASS if kind == "glonass" else _REQUIRED_KEPLER
+    missing = [idx for idx in required if np.isnan(vals[idx])]
+    sat = f"{rec.sys_letter}{rec.prn:02d}"
+    if missing:
+        names = GLONASS_FIELDS if kind == "glonass" else KEPLER_FIELDS
+        raise RinexError(
+            path,
+            lineno,
+            f"record of {sat} lacks required field(s) " + ", ".join(names[m] for m in missing),
+        )
+    return kind, (sat, epoch, vals, f"{path.name}:{lineno}")
 
 
 def _to_records(rows: list, kind: str) -> NavRecords:

@@ -160,12 +160,40 @@ def _sat_id(text: str) -> str:
     return f"{s[0] if s[0] != ' ' else 'G'}{int(s[1:]):02d}"
 
 
-def _read_one(path: Path):
+_TIME_SYSTEMS = ("GPS", "GAL", "QZS", "IRN", "UTC", "GLO", "TAI", "BDT")
+
+_Calendar = tuple[int, int, int, int, int, float]
+
+
+@dataclass(frozen=True)
+class _Body:
+    """The epochs of one SP3 file: calendar, positions (NaN: none) and clocks per epoch line."""
+
+    calendar: list[_Calendar]
+    pos: list[NDArray]
+    clk: list[NDArray]
+    epoch_line: list[int]
+
+
+def _read_one(path: Path) -> tuple[list[str], NDArray, NDArray, NDArray, str, str]:
+    """Satellites, epochs (gps_s), positions (m), clocks (s), time system and frame of a file."""
     lines = _read_text(path)
     if not lines or not lines[0].startswith("#") or lines[0][1:2] not in ("c", "d", "a", "b"):
         raise Sp3Error(path, 1, "first line must start with '#c' or '#d' (SP3-c/d)")
-    first = lines[0]
-    coord = first[46:51].strip()
+    coord = lines[0][46:51].strip()
+    sats, time_system, i = _read_header(path, lines)
+    body = _read_body(path, lines, i, sats)
+    ep = np.array(body.calendar)
+    cal_s = calendar_to_gps_s(ep[:, 0], ep[:, 1], ep[:, 2], ep[:, 3], ep[:, 4], ep[:, 5])
+    t = _to_gps_s(cal_s, time_system)
+    if np.any(np.diff(t) <= 0):
+        bad = int(np.nonzero(np.diff(t) <= 0)[0][0]) + 1
+        raise Sp3Error(path, body.epoch_line[bad], "epochs are not strictly increasing")
+    return sats, t, np.array(body.pos), np.array(body.clk), time_system, coord
+
+
+def _read_header(path: Path, lines: list[str]) -> tuple[list[str], str, int]:
+    """The header's satellites and time system, and the index of the first epoch line."""
     n_sats_header = None
     sats: list[str] = []
     time_system = "GPS"
@@ -180,14 +208,7 @@ def _read_one(path: Path):
                     n_sats_header = int(line[3:6])
                 except ValueError:
                     raise Sp3Error(path, i + 1, "unreadable number of satellites") from None
-            body = line[9:60]
-            for k in range(0, len(body) - 2, 3):
-                tok = body[k : k + 3]
-                if tok.strip() and tok.strip() != "0" and len(sats) < n_sats_header:
-                    try:
-                        sats.append(_sat_id(tok))
-                    except ValueError:
-                        raise Sp3Error(path, i + 1, f"unreadable satellite id {tok!r}") from None
+            _add_header_sats(path, i + 1, line, sats, n_sats_header)
         elif line.startswith("%c") and not seen_pct_c:
             seen_pct_c = True
             time_system = line[9:12].strip() or "GPS"
@@ -198,51 +219,47 @@ def _read_one(path: Path):
         raise Sp3Error(path, n, "no epoch line ('*  YYYY ...'): the file is truncated")
     if n_sats_header is None or len(sats) != n_sats_header:
         raise Sp3Error(path, 3, f"header lists {len(sats)} satellites, expected {n_sats_header}")
-    if time_system not in ("GPS", "GAL", "QZS", "IRN", "UTC", "GLO", "TAI", "BDT"):
+    if time_system not in _TIME_SYSTEMS:
         raise Sp3Error(path, None, f"unknown time system {time_system!r} in the '%c' line")
+    return sats, time_system, i
+
+
+def _add_header_sats(
+    path: Path, line_no: int, line: str, sats: list[str], n_sats_header: int
+) -> None:
+    """Append the satellite ids of a ``+`` header line to ``sats`` (up to ``n_sats_header``)."""
+    body = line[9:60]
+    for k in range(0, len(body) - 2, 3):
+        tok = body[k : k + 3]
+        if tok.strip() and tok.strip() != "0" and len(sats) < n_sats_header:
+            try:
+                sats.append(_sat_id(tok))
+            except ValueError:
+                raise Sp3Error(path, line_no, f"unreadable satellite id {tok!r}") from None
+
+
+def _read_body(path: Path, lines: list[str], start: int, sats: list[str]) -> _Body:
+    """The epochs from line index ``start`` (the first ``*`` line) to ``EOF``, checked complete."""
     col = {s: j for j, s in enumerate(sats)}
-    epochs: list[tuple] = []
-    pos = []
-    clk = []
+    body = _Body([], [], [], [])
     counts: list[int] = []
-    epoch_line: list[int] = []
     eof = False
-    for j in range(i, n):
+    for j in range(start, len(lines)):
         line = lines[j]
         if line.startswith("*"):
-            try:
-                y, mo, d, h, mi = (int(x) for x in line[3:31].split()[:5])
-                s = float(line[3:31].split()[5])
-            except (ValueError, IndexError):
-                raise Sp3Error(path, j + 1, f"unreadable epoch line {line.strip()!r}") from None
-            epochs.append((y, mo, d, h, mi, s))
-            pos.append(np.full((len(sats), 3), np.nan))
-            clk.append(np.full(len(sats), np.nan))
+            body.calendar.append(_epoch_calendar(path, j + 1, line))
+            body.pos.append(np.full((len(sats), 3), np.nan))
+            body.clk.append(np.full(len(sats), np.nan))
             counts.append(0)
-            epoch_line.append(j + 1)
+            body.epoch_line.append(j + 1)
         elif line.startswith("P"):
-            try:
-                sat = _sat_id(line[1:4])
-                xyz = [float(line[4 + 14 * q : 18 + 14 * q]) for q in range(3)]
-                c_text = line[46:60].strip()
-                c_us = float(c_text) if c_text else _BAD_CLOCK_US
-            except ValueError:
-                cut = not any(x.strip() for x in lines[j + 1 :])
-                fix = (
-                    "the file ends here without 'EOF': it was cut short, download it again"
-                    if cut
-                    else "a 'P' record holds the satellite and X, Y, Z in km in columns 5-46; "
-                    "the file is damaged, download it again"
-                )
-                raise Sp3Error(
-                    path, j + 1, f"unreadable position record {line[:60]!r}; {fix}"
-                ) from None
+            sat, xyz, c_us = _position_record(path, lines, j)
             if sat not in col:
                 raise Sp3Error(path, j + 1, f"satellite {sat} is not listed in the header")
             if any(v != 0.0 for v in xyz):
-                pos[-1][col[sat]] = np.array(xyz) * 1000.0
+                body.pos[-1][col[sat]] = np.array(xyz) * 1000.0
             if abs(c_us) < _BAD_CLOCK_US:
-                clk[-1][col[sat]] = c_us * 1e-6
+                body.clk[-1][col[sat]] = c_us * 1e-6
             counts[-1] += 1
         elif line.startswith("EOF"):
             eof = True
@@ -257,26 +274,54 @@ def _read_one(path: Path):
         if c != len(sats):
             raise Sp3Error(
                 path,
-                epoch_line[k],
+                body.epoch_line[k],
                 f"epoch has {c} position records, the header lists {len(sats)} satellites"
                 + (": the file is truncated" if k == len(counts) - 1 else ""),
             )
     if not eof:
-        raise Sp3Error(path, n, "no 'EOF' line: the file is truncated")
-    ep = np.array(epochs)
-    cal_s = calendar_to_gps_s(ep[:, 0], ep[:, 1], ep[:, 2], ep[:, 3], ep[:, 4], ep[:, 5])
+        raise Sp3Error(path, len(lines), "no 'EOF' line: the file is truncated")
+    return body
+
+
+def _epoch_calendar(path: Path, line_no: int, line: str) -> _Calendar:
+    """Year, month, day, hour, minute and second of an epoch (``*``) line."""
+    try:
+        y, mo, d, h, mi = (int(x) for x in line[3:31].split()[:5])
+        s = float(line[3:31].split()[5])
+    except (ValueError, IndexError):
+        raise Sp3Error(path, line_no, f"unreadable epoch line {line.strip()!r}") from None
+    return (y, mo, d, h, mi, s)
+
+
+def _position_record(path: Path, lines: list[str], j: int) -> tuple[str, list[float], float]:
+    """Satellite, X, Y, Z (km) and clock (microseconds) of the ``P`` record ``lines[j]``."""
+    line = lines[j]
+    try:
+        sat = _sat_id(line[1:4])
+        xyz = [float(line[4 + 14 * q : 18 + 14 * q]) for q in range(3)]
+        c_text = line[46:60].strip()
+        c_us = float(c_text) if c_text else _BAD_CLOCK_US
+    except ValueError:
+        cut = not any(x.strip() for x in lines[j + 1 :])
+        fix = (
+            "the file ends here without 'EOF': it was cut short, download it again"
+            if cut
+            else "a 'P' record holds the satellite and X, Y, Z in km in columns 5-46; "
+            "the file is damaged, download it again"
+        )
+        raise Sp3Error(path, j + 1, f"unreadable position record {line[:60]!r}; {fix}") from None
+    return sat, xyz, c_us
+
+
+def _to_gps_s(cal_s: NDArray, time_system: str) -> NDArray:
+    """Calendar seconds of ``time_system`` converted to ``gps_s``."""
     if time_system in ("UTC", "GLO"):
-        t = cal_s + gps_minus_utc_s(cal_s)
-    elif time_system == "TAI":
-        t = cal_s - 19.0
-    elif time_system == "BDT":
-        t = cal_s + 14.0
-    else:
-        t = cal_s
-    if np.any(np.diff(t) <= 0):
-        bad = int(np.nonzero(np.diff(t) <= 0)[0][0]) + 1
-        raise Sp3Error(path, epoch_line[bad], "epochs are not strictly increasing")
-    return sats, t, np.array(pos), np.array(clk), time_system, coord
+        return np.asarray(cal_s + gps_minus_utc_s(cal_s))
+    if time_system == "TAI":
+        return np.asarray(cal_s - 19.0)
+    if time_system == "BDT":
+        return np.asarray(cal_s + 14.0)
+    return cal_s
 
 
 def read_sp3(paths: str | Path | Sequence[str | Path]) -> Sp3:

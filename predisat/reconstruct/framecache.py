@@ -54,8 +54,9 @@ CACHE_VERSION = 1
 
 # The files the segmentation depends on (its cache is kept while they do not change).
 SEGMENTATION_CODE = (
-    "sky/__init__.py", "sky/segment.py", "sky/perceptron.py", "sky/features.py",
-    "sky/grabcut.py", "sky/network.py", "data/models",
+    "sky/__init__.py", "sky/segment.py", "sky/options.py", "sky/morphology.py",
+    "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
+    "sky/network.py", "data/models",
 )
 
 

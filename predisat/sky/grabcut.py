@@ -6,14 +6,12 @@ to keep that module short. :func:`sky_gaps` also serves the learned method on fi
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    from predisat.sky.segment import SkyOptions
+from predisat.sky.morphology import remove_thin_obstacles
+from predisat.sky.options import SkyOptions
 
 __all__ = ["grabcut_sky", "refine_boundary", "sky_gaps", "sky_seeds", "texture", "working_image"]
 
@@ -54,8 +52,6 @@ def sky_seeds(
     # Wires cut the sky into strips (their texture footprint is ~11 px wide after filtering):
     # components are found on the candidates with thin gaps bridged, so that the sky below a
     # catenary wire is as much a seed as the sky above it.
-    from predisat.sky.segment import remove_thin_obstacles
-
     bridged = remove_thin_obstacles(cand, _BRIDGE_PX).astype(np.uint8)
     n, lbl, stats, _ = cv2.connectedComponentsWithStats(bridged, connectivity=4)
     if n <= 1:

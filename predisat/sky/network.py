@@ -27,14 +27,17 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky.features import working_size
-from predisat.sky.perceptron import SkyClassifier, _sigmoid
+from predisat.sky.perceptron import SkyClassifier, SkyModel, sigmoid
+
+if TYPE_CHECKING:  # an alias only: the segmentation loads no module outside predisat.sky
+    from predisat.jsontypes import JsonDict
 
 __all__ = ["DEFAULT_NET", "NET_METHODS", "SkyEnsemble", "SkyNet", "classifier_with_net",
            "network_input"]
@@ -101,7 +104,7 @@ class SkyNet:
 
     path: Path
     input_px: int = 128
-    card: dict[str, Any] = field(default_factory=dict, compare=False)
+    card: JsonDict = field(default_factory=dict, compare=False)
     mirror: bool = True
 
     def __post_init__(self) -> None:
@@ -162,7 +165,7 @@ class SkyNet:
         blob = network_input(img, s)
         if self.mirror:
             blob = np.concatenate([blob, network_input(img[:, ::-1], s)])
-        prob = _sigmoid(self._logits(blob))
+        prob = sigmoid(self._logits(blob))
         if self.mirror:
             return np.asarray(0.5 * (prob[0] + prob[1][:, ::-1]), np.float32)
         return np.asarray(prob[0], np.float32)
@@ -208,7 +211,7 @@ class SkyEnsemble:
         One per member (normalised to sum 1).
     """
 
-    members: tuple[Any, ...]
+    members: tuple[SkyModel, ...]
     weights: tuple[float, ...]
 
     def __post_init__(self) -> None:

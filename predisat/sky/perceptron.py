@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 import cv2
 import numpy as np
@@ -28,12 +28,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky.features import FEATURE_NAMES, image_features, working_image
 
+if TYPE_CHECKING:  # an alias only: the segmentation loads no module outside predisat.sky
+    from predisat.jsontypes import JsonDict
+
 __all__ = [
     "DEFAULT_MODEL",
     "SkyClassifier",
+    "SkyModel",
     "guided_filter",
     "label_to_sky",
     "sample_pixels",
+    "sigmoid",
     "sky_probability",
     "train_sky_model",
 ]
@@ -47,8 +52,28 @@ def label_to_sky(label: ArrayLike) -> NDArray[np.bool_]:
     return np.asarray(np.asarray(label) >= 128)
 
 
-def _sigmoid(z: NDArray) -> NDArray:
+def sigmoid(z: NDArray) -> NDArray:
+    """The logistic function ``1 / (1 + exp(-z))`` elementwise, same shape as ``z``.
+
+    Computed as ``0.5 (1 + tanh(z / 2))``, which cannot overflow (shared with
+    :mod:`predisat.sky.network`).
+    """
     return np.asarray(0.5 * (1.0 + np.tanh(0.5 * z)))  # overflow-free logistic
+
+
+class SkyModel(Protocol):
+    """A sky probability model: :class:`SkyClassifier`, :class:`predisat.sky.network.SkyNet` or
+    :class:`predisat.sky.network.SkyEnsemble` (what :func:`sky_probability` and
+    :func:`predisat.sky.segment.segment_sky` run)."""
+
+    @property
+    def max_side_px(self) -> int:
+        """Longest side of the working image, pixels."""
+        ...
+
+    def predict_image(self, image_bgr: ArrayLike) -> NDArray[np.float32]:
+        """Sky probability, shape (h, w) at working resolution, of an upright BGR image."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -77,7 +102,7 @@ class SkyClassifier:
     scale: NDArray[np.float32]
     max_side_px: int = 160
     feature_names: tuple[str, ...] = FEATURE_NAMES
-    card: dict[str, Any] = field(default_factory=dict, compare=False)
+    card: JsonDict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         if tuple(self.feature_names) != FEATURE_NAMES:
@@ -112,7 +137,7 @@ class SkyClassifier:
         if data.get("format") != _FORMAT:
             raise ValueError(f"{p} is not a PREDISAT sky model (format {data.get('format')!r})")
 
-        def arr(v: Any) -> NDArray[np.float32]:
+        def arr(v: ArrayLike) -> NDArray[np.float32]:
             return np.asarray(v, np.float32)
 
         return cls(
@@ -135,7 +160,7 @@ class SkyClassifier:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
 
-        def lst(a: NDArray) -> Any:
+        def lst(a: NDArray) -> list[object]:
             return np.round(np.asarray(a, np.float64), 7).tolist()
 
         data = {
@@ -187,7 +212,7 @@ class SkyClassifier:
         -------
         ndarray of float32, shape (n,), in [0, 1]
         """
-        return np.asarray(_sigmoid(self.logit(features)), np.float32)
+        return np.asarray(sigmoid(self.logit(features)), np.float32)
 
     def predict_image(self, image_bgr: ArrayLike) -> NDArray[np.float32]:
         """Sky probability map of an upright BGR image at working resolution.
@@ -281,7 +306,7 @@ def train_sky_model(
     l2: float = 1e-5,
     seed: int = 0,
     max_side_px: int = 160,
-    card: dict[str, Any] | None = None,
+    card: JsonDict | None = None,
 ) -> SkyClassifier:
     """Train the perceptron on sky targets (0 obstacle, 1 sky, soft in between).
 
@@ -339,7 +364,7 @@ def train_sky_model(
             for w, b in zip(ws[:-1], bs[:-1], strict=True):
                 acts.append(np.maximum(acts[-1] @ w + b, 0.0))
             z = (acts[-1] @ ws[-1] + bs[-1])[:, 0]
-            grad = ((_sigmoid(z) - y[idx]) / idx.size)[:, None].astype(np.float32)
+            grad = ((sigmoid(z) - y[idx]) / idx.size)[:, None].astype(np.float32)
             gw: list[NDArray] = [np.empty(0)] * len(ws)
             gb: list[NDArray] = [np.empty(0)] * len(bs)
             for k in range(len(ws) - 1, -1, -1):
@@ -431,7 +456,7 @@ def guided_filter(
 
 def sky_probability(
     image_bgr: ArrayLike,
-    classifier: SkyClassifier | None = None,
+    classifier: SkyModel | None = None,
     circle_px: tuple[float, float, float] | None = None,
     refine: bool = True,
 ) -> NDArray[np.float32]:
@@ -446,7 +471,7 @@ def sky_probability(
     image_bgr : array_like, shape (H, W, 3), uint8
         An upright frame (sky toward the top), or an upward fisheye photo when ``circle_px``
         is given.
-    classifier : SkyClassifier, optional
+    classifier : SkyModel, optional
         Default: :meth:`SkyClassifier.default`.
     circle_px : (cx, cy, radius), optional
         Lens circle of an upward fisheye: the photo is unwrapped to polar coordinates (zenith

@@ -33,8 +33,13 @@ import cv2
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
+from tqdm import tqdm
 
+from predisat.camera.models import CameraModel
+from predisat.jsontypes import JsonDict
+from predisat.sky.perceptron import SkyModel
 from predisat.sky.segment import SkyOptions, segment_sky, skyline_from_mask
+from predisat.survey import Survey
 
 __all__ = [
     "UNSAFE_LOW_DEG",
@@ -116,7 +121,7 @@ def sky_iou(pred: ArrayLike, truth: ArrayLike, valid: ArrayLike | None = None) -
 
 
 def skyline_elevation_deg(
-    skyline_row: ArrayLike, camera: Any, camera_to_vehicle: ArrayLike
+    skyline_row: ArrayLike, camera: CameraModel, camera_to_vehicle: ArrayLike
 ) -> NDArray[np.float64]:
     """Elevation (deg, vehicle frame, z up) of each column's skyline point.
 
@@ -125,7 +130,7 @@ def skyline_elevation_deg(
     skyline_row : array_like, shape (W,)
         Skyline rows (``nan`` stays ``nan``); the point is ``(u = column, v = skyline_row)``.
     camera : CameraModel
-        Anything with ``pixel_to_ray(u_px, v_px) -> (..., 3)`` in the OpenCV camera frame.
+        Its ``pixel_to_ray(u_px, v_px) -> (..., 3)`` in the OpenCV camera frame is used.
     camera_to_vehicle : array_like, shape (3, 3)
         ``Mount.camera_to_vehicle()``.
 
@@ -290,9 +295,7 @@ def _read_mask(path: Path, shape: tuple[int, int]) -> NDArray:
     return np.asarray(m >= 128)
 
 
-def _cameras(root: Path) -> dict[str, tuple[Any, NDArray]]:
-    from predisat.survey import Survey
-
+def _cameras(root: Path) -> dict[str, tuple[CameraModel, NDArray]]:
     survey = Survey.load(root / "survey", check_images=False)
     return {s: (c.camera, c.mount.camera_to_vehicle()) for s, c in survey.cameras.items()}
 
@@ -302,7 +305,7 @@ def _summarise(table: pd.DataFrame, skyline_err: dict[str, list[NDArray]]) -> pd
     groups = [*sorted(table["group"].unique()), "all"]
     for g in groups:
         t = table if g == "all" else table[table["group"] == g]
-        row: dict[str, Any] = {
+        row: JsonDict = {
             "group": g,
             "n_images": len(t),
             "mean_iou": t["iou"].mean(),
@@ -333,7 +336,7 @@ def evaluate_folder(
     limit: int | None = None,
     n_worst: int = 8,
     method: str | None = None,
-    classifier: Any = None,
+    classifier: SkyModel | None = None,
 ) -> SkyEvaluation:
     """Segment every image of a folder with reference masks and score it.
 
@@ -357,7 +360,7 @@ def evaluate_folder(
     method : str, optional
         Segmentation method (:data:`predisat.sky.segment.METHODS`) when ``options`` is not
         given; default that of ``SkyOptions``.
-    classifier : object, optional
+    classifier : SkyModel, optional
         Probability model passed to :func:`predisat.sky.segment.segment_sky` (a candidate
         network or ensemble); default the shipped one of the method.
 
@@ -365,64 +368,19 @@ def evaluate_folder(
     -------
     SkyEvaluation
     """
-    from tqdm import tqdm
-
     data = Path(data_dir)
     layout, pairs = find_pairs(data)
     if limit is not None:
         pairs = pairs[: max(0, int(limit))]
-    fisheye = layout == "fisheye_hk"
-    if options is not None:
-        opt = options
-    elif method is not None:
-        opt = SkyOptions(fisheye=fisheye, method=method)
-    else:
-        opt = SkyOptions(fisheye=fisheye)
+    opt = _options_for(layout, options, method)
     cams = _cameras(data) if layout == "synthetic" else {}
-    rows: list[dict[str, Any]] = []
+    rows: list[JsonDict] = []
     worst: list[tuple[float, SkyPair, NDArray, NDArray]] = []
     skyline_err: dict[str, list[NDArray]] = {}
     for pair in tqdm(pairs, desc=f"sky {data.name}", disable=not progress, unit="img"):
-        img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
-        if img is None:
-            raise OSError(f"cannot read image {pair.image_path}")
-        truth = _read_mask(pair.mask_path, img.shape[:2])
-        t0 = time.perf_counter()
-        seg = segment_sky(img, opt, classifier=classifier)
-        dt = time.perf_counter() - t0
-        pred, valid = seg.sky_mask, seg.valid_mask
-        truth_v = truth & valid
-        h = img.shape[0]
-        true_line = skyline_from_mask(truth_v, valid)
-        seen = ((true_line > -0.5) & (true_line < h - 0.5)) | (
-            (seg.skyline_row > -0.5) & (seg.skyline_row < h - 0.5)
-        )
-        row: dict[str, Any] = {
-            "name": pair.name,
-            "group": pair.group,
-            "width_px": img.shape[1],
-            "height_px": h,
-            "iou": sky_iou(pred, truth_v),
-            "inter_px": int(np.count_nonzero(pred & truth_v)),
-            "union_px": int(np.count_nonzero(pred | truth_v)),
-            "true_sky_fraction": float(truth_v.sum() / max(valid.sum(), 1)),
-            "pred_sky_fraction": seg.sky_fraction,
-            "skyline_err_px_median": float(np.median(np.abs(seg.skyline_row - true_line)[seen]))
-            if seen.any() else 0.0,
-            "mean_confidence": float(np.nanmean(seg.confidence)),
-            "seconds": dt,
-        }
-        if layout == "synthetic" and pair.side in cams:
-            cam, r_cv = cams[pair.side]
-            err = skyline_elevation_deg(seg.skyline_row, cam, r_cv) - skyline_elevation_deg(
-                true_line, cam, r_cv
-            )
-            err = err[seen]
+        row, pred, truth_v, err = _score_pair(pair, opt, classifier, cams)
+        if err is not None:
             skyline_err.setdefault(pair.group, []).append(err)
-            row["skyline_el_err_median_deg"] = float(np.median(np.abs(err))) if err.size else 0.0
-            row["skyline_el_err_max_deg"] = float(np.max(np.abs(err))) if err.size else 0.0
-            # the unsafe side: a skyline read too low would let a blocked satellite be trusted
-            row["skyline_low_1deg_columns"] = int(np.count_nonzero(err < -UNSAFE_LOW_DEG))
         rows.append(row)
         worst.append((row["iou"], pair, pred, truth_v))
         worst = sorted(worst, key=lambda w: w[0])[:n_worst]  # keep only the few worst in memory
@@ -434,21 +392,94 @@ def evaluate_folder(
         items.append((pair.name, iou, img, confusion_overlay(pred, truth_v)))
     files: dict[str, Path] = {}
     if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        stem = data.name or layout
-        files["table"] = out / f"{stem}_per_image.csv"
-        table.to_csv(files["table"], index=False, float_format="%.5g")
-        files["summary"] = out / f"{stem}_summary.md"
-        files["summary"].write_text(
-            f"# Sky segmentation on `{stem}` ({layout}, {len(table)} images)\n\n"
-            + _markdown(summary) + "\n",
-            encoding="utf-8",
-        )
-        if items:
-            files["sheet"] = worst_cases_sheet(items, out / f"{stem}_worst.png")
+        files = _write_outputs(Path(out_dir), data.name or layout, layout, table, summary, items)
     return SkyEvaluation(layout=layout, table=table, summary=summary, files=files,
                          worst_cases=items)  # fmt: skip
+
+
+def _options_for(layout: str, options: SkyOptions | None, method: str | None) -> SkyOptions:
+    """``options``, else the defaults of the layout (fisheye or not) with ``method``."""
+    fisheye = layout == "fisheye_hk"
+    if options is not None:
+        return options
+    if method is not None:
+        return SkyOptions(fisheye=fisheye, method=method)
+    return SkyOptions(fisheye=fisheye)
+
+
+def _score_pair(
+    pair: SkyPair,
+    opt: SkyOptions,
+    classifier: SkyModel | None,
+    cams: dict[str, tuple[CameraModel, NDArray]],
+) -> tuple[JsonDict, NDArray, NDArray, NDArray | None]:
+    """Segment one image and score it: the table row, the predicted and (valid) true sky, and
+    the skyline elevation errors (deg, seen columns) when the pair's camera is in ``cams``."""
+    img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise OSError(f"cannot read image {pair.image_path}")
+    truth = _read_mask(pair.mask_path, img.shape[:2])
+    t0 = time.perf_counter()
+    seg = segment_sky(img, opt, classifier=classifier)
+    dt = time.perf_counter() - t0
+    pred, valid = seg.sky_mask, seg.valid_mask
+    truth_v = truth & valid
+    h = img.shape[0]
+    true_line = skyline_from_mask(truth_v, valid)
+    seen = ((true_line > -0.5) & (true_line < h - 0.5)) | (
+        (seg.skyline_row > -0.5) & (seg.skyline_row < h - 0.5)
+    )
+    row: JsonDict = {
+        "name": pair.name,
+        "group": pair.group,
+        "width_px": img.shape[1],
+        "height_px": h,
+        "iou": sky_iou(pred, truth_v),
+        "inter_px": int(np.count_nonzero(pred & truth_v)),
+        "union_px": int(np.count_nonzero(pred | truth_v)),
+        "true_sky_fraction": float(truth_v.sum() / max(valid.sum(), 1)),
+        "pred_sky_fraction": seg.sky_fraction,
+        "skyline_err_px_median": float(np.median(np.abs(seg.skyline_row - true_line)[seen]))
+        if seen.any() else 0.0,
+        "mean_confidence": float(np.nanmean(seg.confidence)),
+        "seconds": dt,
+    }
+    if pair.side not in cams:
+        return row, pred, truth_v, None
+    cam, r_cv = cams[pair.side]
+    err = skyline_elevation_deg(seg.skyline_row, cam, r_cv) - skyline_elevation_deg(
+        true_line, cam, r_cv
+    )
+    err = err[seen]
+    row["skyline_el_err_median_deg"] = float(np.median(np.abs(err))) if err.size else 0.0
+    row["skyline_el_err_max_deg"] = float(np.max(np.abs(err))) if err.size else 0.0
+    # the unsafe side: a skyline read too low would let a blocked satellite be trusted
+    row["skyline_low_1deg_columns"] = int(np.count_nonzero(err < -UNSAFE_LOW_DEG))
+    return row, pred, truth_v, err
+
+
+def _write_outputs(
+    out: Path,
+    stem: str,
+    layout: str,
+    table: pd.DataFrame,
+    summary: pd.DataFrame,
+    items: list[tuple[str, float, NDArray, NDArray]],
+) -> dict[str, Path]:
+    """Write ``<stem>_per_image.csv``, ``<stem>_summary.md`` and ``<stem>_worst.png``."""
+    files: dict[str, Path] = {}
+    out.mkdir(parents=True, exist_ok=True)
+    files["table"] = out / f"{stem}_per_image.csv"
+    table.to_csv(files["table"], index=False, float_format="%.5g")
+    files["summary"] = out / f"{stem}_summary.md"
+    files["summary"].write_text(
+        f"# Sky segmentation on `{stem}` ({layout}, {len(table)} images)\n\n"
+        + _markdown(summary) + "\n",
+        encoding="utf-8",
+    )
+    if items:
+        files["sheet"] = worst_cases_sheet(items, out / f"{stem}_worst.png")
+    return files
 
 
 def _markdown(df: pd.DataFrame) -> str:

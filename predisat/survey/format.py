@@ -155,6 +155,7 @@ class Frames:
 
     def to_dataframe(self) -> pd.DataFrame:
         """A pandas copy of the table."""
+        # lazy: pandas takes 0.7 s to import and only this export needs it
         import pandas as pd
 
         return pd.DataFrame({name: getattr(self, name) for name in self.__dataclass_fields__})

@@ -6,17 +6,20 @@ import csv
 import io
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from types import MappingProxyType
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+from PIL import Image, UnidentifiedImageError
 
 from predisat.camera.models import CalibrationError, CameraModel, Mount
+from predisat.jsontypes import JsonDict
 from predisat.survey.format import (
     DIRECTIONS,
     FORMAT,
@@ -95,8 +98,6 @@ class Survey:
 
     def read_image(self, frame: int | str) -> NDArray:
         """A frame's image as a BGR uint8 array (H, W, 3)."""
-        import cv2
-
         path = self.image_path(frame)
         img = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if img is None:
@@ -162,6 +163,32 @@ class Survey:
 
 def _read_header(root: Path) -> dict[str, Any]:
     """Parse survey.yaml and the calibrations; raise SurveyError listing every problem."""
+    doc = _read_yaml(root)
+    probs: list[SurveyProblem] = []
+
+    def bad(msg: str) -> None:
+        probs.append(SurveyProblem(f"survey.yaml: {msg}"))
+
+    version, direction = _check_format(doc, bad)
+    antenna_height_m = _antenna_height_m(doc, bad)
+    track_name, track_path = _track_spec(root, doc, bad)
+    cameras = _read_cameras(root, doc, bad)
+    if probs:
+        raise SurveyError(root, probs)
+    known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras"}
+    return {
+        "version": version,
+        "direction": direction,
+        "antenna_height_m": antenna_height_m,
+        "track_name": None if track_name is None else str(track_name),
+        "track_path": track_path,
+        "cameras": cameras,
+        "metadata": {k: v for k, v in doc.items() if k not in known},
+    }
+
+
+def _read_yaml(root: Path) -> JsonDict:
+    """The mapping of ``root/survey.yaml``; SurveyError if the folder or file is unreadable."""
     yaml_path = root / "survey.yaml"
     if not root.is_dir():
         raise SurveyError(root, [SurveyProblem("not a folder; give the survey folder")])
@@ -175,11 +202,14 @@ def _read_header(root: Path) -> dict[str, Any]:
         raise SurveyError(root, [SurveyProblem(f"survey.yaml cannot be parsed: {exc}")]) from None
     if not isinstance(doc, dict):
         raise SurveyError(root, [SurveyProblem("survey.yaml must be a mapping of fields")])
-    probs: list[SurveyProblem] = []
+    return doc
 
-    def bad(msg: str) -> None:
-        probs.append(SurveyProblem(f"survey.yaml: {msg}"))
 
+def _check_format(doc: JsonDict, bad: Callable[[str], None]) -> tuple[Any, Any]:
+    """The ``version`` and ``direction_of_travel`` (as written), checked with ``format``.
+
+    ``Any``: values as the YAML gives them, reported through ``bad`` when wrong.
+    """
     if doc.get("format") != FORMAT:
         bad(f"format must be {FORMAT!r}, got {doc.get('format')!r}")
     version = doc.get("version")
@@ -191,6 +221,11 @@ def _read_header(root: Path) -> dict[str, Any]:
     direction = doc.get("direction_of_travel")
     if direction not in DIRECTIONS:
         bad(f"direction_of_travel must be 'increasing' or 'decreasing' chainage, got {direction!r}")
+    return version, direction
+
+
+def _antenna_height_m(doc: JsonDict, bad: Callable[[str], None]) -> float:
+    """``antenna_height_m``, metres (nan, reported through ``bad``, when not a finite number)."""
     antenna_height_m = math.nan
     try:
         antenna_height_m = float(doc.get("antenna_height_m"))  # type: ignore[arg-type]
@@ -201,12 +236,25 @@ def _read_header(root: Path) -> dict[str, Any]:
             "antenna_height_m must be a number (metres above the track axis), "
             f"got {doc.get('antenna_height_m')!r}"
         )
+    return antenna_height_m
+
+
+def _track_spec(
+    root: Path, doc: JsonDict, bad: Callable[[str], None]
+) -> tuple[Any, Path | None]:  # Any: the name as the YAML gives it
+    """The ``track`` mapping's ``name`` and ``path`` (relative to ``root``, None if absent)."""
     track_doc = doc.get("track") or {}
     if not isinstance(track_doc, dict):
         bad("track must be a mapping with 'name' and optional 'path'")
         track_doc = {}
-    track_name = track_doc.get("name")
     track_path = root / str(track_doc["path"]) if track_doc.get("path") else None
+    return track_doc.get("name"), track_path
+
+
+def _read_cameras(
+    root: Path, doc: JsonDict, bad: Callable[[str], None]
+) -> dict[str, SurveyCamera]:
+    """The cameras by side, their calibrations read; each problem reported through ``bad``."""
     cameras: dict[str, SurveyCamera] = {}
     cams = doc.get("cameras")
     if not isinstance(cams, dict) or not cams:
@@ -231,18 +279,7 @@ def _read_header(root: Path) -> dict[str, Any]:
             bad(f"cameras.{side}.mount: {exc}")
             continue
         cameras[side] = SurveyCamera(side, model, mount, calib_path)
-    if probs:
-        raise SurveyError(root, probs)
-    known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras"}
-    return {
-        "version": version,
-        "direction": direction,
-        "antenna_height_m": antenna_height_m,
-        "track_name": None if track_name is None else str(track_name),
-        "track_path": track_path,
-        "cameras": cameras,
-        "metadata": {k: v for k, v in doc.items() if k not in known},
-    }
+    return cameras
 
 
 def _load_track(root: Path, path: Path, name: str | None) -> TrackMap:
@@ -297,8 +334,6 @@ class _Row:
 
 
 def _check_image(root: Path, rel: str, cam: CameraModel) -> str | None:
-    from PIL import Image, UnidentifiedImageError
-
     path = root / rel
     if not path.is_file():
         return f"image {rel} is missing; copy it into the survey folder or remove the row"

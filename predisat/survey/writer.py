@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 import yaml
 from numpy.typing import NDArray
@@ -138,8 +139,6 @@ class SurveyWriter:
         ``image_bgr`` is uint8 (H, W, 3) BGR (or (H, W) grey) with the side's calibrated size.
         Give ``chainage_m`` and/or ``lat_deg, lon_deg[, h_m]`` (antenna position).
         """
-        import cv2
-
         if self._closed:
             raise RuntimeError(f"SurveyWriter for {self.root} is closed")
         if side not in self.cameras:

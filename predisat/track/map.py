@@ -23,7 +23,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike, NDArray
+from shapely import LineString, STRtree, box
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.track.errors import TrackMapError
@@ -189,14 +191,20 @@ class TrackMap:
 
     @classmethod
     def from_geojson(
-        cls, path: str | Path, track: str | None = None, h_m: float = 0.0, **kwargs: Any
+        cls,
+        path: str | Path,
+        track: str | None = None,
+        h_m: float = 0.0,
+        **kwargs: Any,  # Any: forwarded to parse_geojson_track's keyword options
     ) -> TrackMap:
         """Track map from a GeoJSON file; the options are those of
         :func:`predisat.track.readers.parse_geojson_track`."""
         return cls.from_track_file(parse_geojson_track(path, track=track, h_m=h_m, **kwargs))
 
     @classmethod
-    def from_csv(cls, path: str | Path, **kwargs: Any) -> TrackMap:
+    def from_csv(
+        cls, path: str | Path, **kwargs: Any  # Any: forwarded to parse_csv_track's options
+    ) -> TrackMap:
         """Track map from a CSV of lat/lon[/h]; the options are those of
         :func:`predisat.track.readers.parse_csv_track`."""
         return cls.from_track_file(parse_csv_track(path, **kwargs))
@@ -261,8 +269,6 @@ class TrackMap:
         Symmetric (Hausdorff): source points every 1 m projected onto the axis, and axis nodes
         every metre measured to the source polyline.
         """
-        import shapely
-
         poly = self.polyline_enu_m
         _, dense, _ = dense_polyline(poly, 1.0)
         to_axis = np.abs(self.project_enu(dense).offset_m)
@@ -509,8 +515,6 @@ def _drop_repeats(lat: NDArray, lon: NDArray, h: NDArray) -> tuple[NDArray, NDAr
 
 def _check_simple(enu: NDArray, where: str, frame: LocalFrame) -> None:
     """Reject a polyline whose horizontal trace crosses itself, naming the place."""
-    from shapely import LineString, STRtree, box
-
     line = LineString(enu[:, :2])
     if line.is_simple:
         return

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from predisat.jsontypes import JsonDict
 
 __all__ = ["KilometrePost", "points_as_posts", "project_posts"]
 
@@ -53,7 +55,7 @@ class _Projects(Protocol):  # the part of predisat.track.map.TrackMap used here
 
 
 def points_as_posts(
-    points: Sequence[tuple[dict[str, Any], NDArray]],
+    points: Sequence[tuple[JsonDict, NDArray]],
 ) -> list[tuple[float, str, NDArray]]:
     """``(km_m, label, [lon, lat(, h)])`` of the point features that are kilometre posts.
 

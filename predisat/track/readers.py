@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat.geodesy import WGS84, LocalFrame
+from predisat.jsontypes import JsonDict
 from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
 from predisat.track.errors import TrackMapError
 from predisat.track.posts import KilometrePost, points_as_posts, project_posts
@@ -191,7 +192,9 @@ def _check_declared_length(
         )
 
 
-def _matches(props: Mapping[str, Any], track: str | None, where: Mapping[str, Any] | None) -> bool:
+def _matches(
+    props: Mapping[str, Any], track: str | None, where: Mapping[str, object] | None
+) -> bool:
     if track is not None and not any(str(props.get(k)) == track for k in NAME_KEYS):
         return False
     for key, want in (where or {}).items():
@@ -233,7 +236,7 @@ def parse_geojson_track(
     track: str | None = None,
     h_m: float = 0.0,
     *,
-    where: Mapping[str, Any] | None = None,
+    where: Mapping[str, object] | None = None,
     chain: Literal["all", "longest"] = "all",
     max_gap_m: float = 2.0,
     max_turn_deg: float = 30.0,
@@ -288,72 +291,9 @@ def parse_geojson_track(
     """
     path = Path(path)
     doc = _load_json(path)
-    feats = _features(doc, path)
-    lines: list[tuple[int, dict[str, Any], dict[str, Any]]] = []
-    points: list[tuple[dict[str, Any], NDArray]] = []
-    for i, f in enumerate(feats):
-        geom = f.get("geometry") or {}
-        props = f.get("properties") or {}
-        if geom.get("type") in ("LineString", "MultiLineString"):
-            lines.append((i, props, geom))
-        elif geom.get("type") == "Point":
-            points.append((props, np.asarray(geom.get("coordinates", []), float)))
-    if not lines:
-        raise TrackMapError(
-            f"{path}: no LineString or MultiLineString feature; a track map needs the track "
-            "axis as a line"
-        )
-    selected = [x for x in lines if _matches(x[1], track, where)]
-    _refuse_id_only_match(selected, track, path)
-    if not selected:
-        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in _LABEL_KEYS if k in p})
-        raise TrackMapError(
-            f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
-            f"available: {', '.join(avail[:20]) or '(no names)'}"
-        )
-    if track is None and chain == "all":
-        for key in ("trackname", "name"):
-            names = sorted({str(p[key]) for _, p, _ in selected if key in p})
-            if len(names) > 1:
-                raise TrackMapError(
-                    f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
-                    "choose one with track=... (command line: --track-name)"
-                )
-
-    parts: list[Part] = []
-    single: list[str] = []  # lines of one vertex, named if nothing else is left
-    for i, props, geom in selected:
-        label = _feature_label(i, props)
-        raw = geom.get("coordinates") or []
-        seqs = [raw] if geom["type"] == "LineString" else list(raw)
-        tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
-        n_before = len(parts)
-        for j, seq in enumerate(seqs):
-            where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
-            try:
-                if not all(_numbers(v) for v in seq):  # "4.6" would pass np.asarray(float)
-                    raise ValueError
-                coords = np.asarray(seq, float)
-            except (TypeError, ValueError):
-                raise TrackMapError(
-                    f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...] "
-                    "of numbers (JSON numbers, not strings)"
-                ) from None
-            if coords.size == 0:
-                continue
-            _check_lonlat(coords, where_s, path, expected_bbox)
-            if len(coords) >= 2:
-                parts.append(Part(where_s, i, coords, tunnel))
-            else:
-                single.append(where_s)
-        _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
-    if not parts:
-        if single:
-            raise TrackMapError(
-                f"{path}: {_first(single)} {'has' if len(single) == 1 else 'have'} a single "
-                "vertex; a track line needs at least two [lon, lat] points"
-            )
-        raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
+    lines, points = _lines_and_points(_features(doc, path), path)
+    selected = _select_lines(lines, track, where, chain, path)
+    parts = _line_parts(selected, expected_bbox, path)
 
     first = parts[0].coords[0]
     frame = LocalFrame(float(first[1]), float(first[0]))
@@ -383,6 +323,105 @@ def parse_geojson_track(
         attribution=attribution, tolerance_m=tol, posts=posts_raw,
         tunnel_spans=list(tunnel_spans), reverse=reverse, max_post_offset_m=max_post_offset_m,
     )  # fmt: skip
+
+
+_LineFeature = tuple[int, JsonDict, JsonDict]  # feature index, properties, geometry
+
+
+def _lines_and_points(
+    feats: list[JsonDict], path: Path
+) -> tuple[list[_LineFeature], list[tuple[JsonDict, NDArray]]]:
+    """The line features and the points (properties, ``[lon, lat(, h)]``) of a GeoJSON file."""
+    lines: list[_LineFeature] = []
+    points: list[tuple[JsonDict, NDArray]] = []
+    for i, f in enumerate(feats):
+        geom = f.get("geometry") or {}
+        props = f.get("properties") or {}
+        if geom.get("type") in ("LineString", "MultiLineString"):
+            lines.append((i, props, geom))
+        elif geom.get("type") == "Point":
+            points.append((props, np.asarray(geom.get("coordinates", []), float)))
+    if not lines:
+        raise TrackMapError(
+            f"{path}: no LineString or MultiLineString feature; a track map needs the track "
+            "axis as a line"
+        )
+    return lines, points
+
+
+def _select_lines(
+    lines: list[_LineFeature],
+    track: str | None,
+    where: Mapping[str, object] | None,
+    chain: str,
+    path: Path,
+) -> list[_LineFeature]:
+    """The line features selected by ``track`` and ``where``: at least one, of one track
+    unless ``chain="longest"``."""
+    selected = [x for x in lines if _matches(x[1], track, where)]
+    _refuse_id_only_match(selected, track, path)
+    if not selected:
+        avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in _LABEL_KEYS if k in p})
+        raise TrackMapError(
+            f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
+            f"available: {', '.join(avail[:20]) or '(no names)'}"
+        )
+    if track is None and chain == "all":
+        for key in ("trackname", "name"):
+            names = sorted({str(p[key]) for _, p, _ in selected if key in p})
+            if len(names) > 1:
+                raise TrackMapError(
+                    f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
+                    "choose one with track=... (command line: --track-name)"
+                )
+    return selected
+
+
+def _line_parts(
+    selected: list[_LineFeature], expected_bbox: Sequence[float] | None, path: Path
+) -> list[Part]:
+    """The parts (polylines of at least two vertices) of the selected line features, checked;
+    at least one."""
+    parts: list[Part] = []
+    single: list[str] = []  # lines of one vertex, named if nothing else is left
+    for i, props, geom in selected:
+        label = _feature_label(i, props)
+        raw = geom.get("coordinates") or []
+        seqs = [raw] if geom["type"] == "LineString" else list(raw)
+        tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
+        n_before = len(parts)
+        for j, seq in enumerate(seqs):
+            where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
+            coords = _part_coords(seq, where_s, path)
+            if coords.size == 0:
+                continue
+            _check_lonlat(coords, where_s, path, expected_bbox)
+            if len(coords) >= 2:
+                parts.append(Part(where_s, i, coords, tunnel))
+            else:
+                single.append(where_s)
+        _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
+    if not parts:
+        if single:
+            raise TrackMapError(
+                f"{path}: {_first(single)} {'has' if len(single) == 1 else 'have'} a single "
+                "vertex; a track line needs at least two [lon, lat] points"
+            )
+        raise TrackMapError(f"{path}: the selected features have no coordinates (empty lines)")
+    return parts
+
+
+def _part_coords(seq: Any, where_s: str, path: Path) -> NDArray:  # Any: a JSON value
+    """The vertices of one part as floats, shape (n, 2 or 3); JSON numbers only."""
+    try:
+        if not all(_numbers(v) for v in seq):  # "4.6" would pass np.asarray(float)
+            raise ValueError
+        return np.asarray(seq, float)
+    except (TypeError, ValueError):
+        raise TrackMapError(
+            f"{path}: {where_s} has malformed coordinates; expected [[lon, lat], ...] "
+            "of numbers (JSON numbers, not strings)"
+        ) from None
 
 
 def kilometre_posts_from_sections(

@@ -399,13 +399,13 @@ def _blobs(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
 def test_run_components_match_opencv_regions_areas_and_boxes(connectivity: int) -> None:
     import cv2
 
-    from predisat.sky.segment import _Components
+    from predisat.sky.morphology import RunComponents
 
     rng = np.random.default_rng(connectivity)
     for k in range(300):
         h, w = (int(v) for v in rng.integers(1, 40, 2))
         m = rng.random((h, w)) < rng.random() if k % 2 else _blobs(rng, h, w) > 0.5
-        cc = _Components.of(m, connectivity)
+        cc = RunComponents.of(m, connectivity)
         n, lbl, st, _ = cv2.connectedComponentsWithStats(m.view(np.uint8),
                                                          connectivity=connectivity)  # fmt: skip
         assert cc.n == n - 1
