@@ -294,6 +294,23 @@ def _known_code(system: str, code: str, v3: bool) -> bool:
     return code[1] in _BANDS.get(system, "") and code[2] in _ATTRIBUTES
 
 
+@dataclass(frozen=True)
+class _Body:
+    """What one pass over the body found, for :func:`_assemble`.
+
+    Attributes
+    ----------
+    rows : list of (epoch index, satellite, system letter, record text, line)
+    epochs : list of (gps_s, flag, receiver clock offset s, line)
+    types_at : list of mapping of system letter to codes
+        The observation types in force at each epoch.
+    """
+
+    rows: list[tuple[int, str, str, str, int]]
+    epochs: list[tuple[float, int, float, int]]
+    types_at: list[dict[str, list[str]]]
+
+
 class _HeaderScan:
     """What the header records say, gathered record by record (:meth:`take`)."""
 
@@ -354,7 +371,9 @@ class _HeaderScan:
 class _Reader:
     """State of one pass over a file (problems are collected or raised)."""
 
-    def __init__(self, path: Path, lines: list[str], codes: Sequence[str] | None, strict: bool):
+    def __init__(
+        self, path: Path, lines: list[str], codes: Sequence[str] | None, strict: bool
+    ) -> None:
         self.path, self.lines, self.strict = path, lines, strict
         self.codes = None if codes is None else set(codes)
         self.problems: list[ObsProblem] = []
@@ -483,7 +502,7 @@ class _Reader:
             raise ValueError("date out of range")
         return (y, mo, d, h, mi, s), flag, count, clock
 
-    def body(self, head: ObsHeader, first: int) -> dict:
+    def body(self, head: ObsHeader, first: int) -> _Body:
         lines, n = self.lines, len(self.lines)
         v3 = head.version >= 3.0
         types = {s: list(t) for s, t in head.obs_types.items()}
@@ -529,7 +548,7 @@ class _Reader:
             sats_or_none = sats if not v3 else [None] * count
             new_rows, i = self._records(e, sats_or_none, per_sat, j, t, v3, default_sys)
             rows += new_rows
-        return {"rows": rows, "epochs": epochs, "types_at": types_at}
+        return _Body(rows, epochs, types_at)
 
     def _skip_to_epoch(self, i: int, v3: bool) -> int:
         """Report the stray line ``i`` and return the index of the next epoch line."""
@@ -630,7 +649,9 @@ class _Reader:
         except ValueError:
             return None
 
-    def _sat_list(self, line, count, i, v3, default_sys, t) -> tuple[list | None, int]:
+    def _sat_list(
+        self, line: str, count: int, i: int, v3: bool, default_sys: str, t: float
+    ) -> tuple[list[str] | None, int]:
         if v3:
             return [], i + 1
         lines, n = self.lines, len(self.lines)
@@ -655,7 +676,14 @@ class _Reader:
             sats.append(s)
         return sats, j
 
-    def _redefine(self, types, recs, line0, v3, default_sys):
+    def _redefine(
+        self,
+        types: dict[str, list[str]],
+        recs: tuple[str, ...],
+        line0: int,
+        v3: bool,
+        default_sys: str,
+    ) -> dict[str, list[str]]:
         """Observation types after a flag-4 event whose header records redefine them."""
         found: dict[str, list[str]] = {}
         last = ""
@@ -680,8 +708,8 @@ class _Reader:
         return new
 
 
-def _assemble(reader: _Reader, head: ObsHeader, parsed: dict) -> Observations:
-    rows, epochs, types_at = parsed["rows"], parsed["epochs"], parsed["types_at"]
+def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
+    rows, epochs, types_at = parsed.rows, parsed.epochs, parsed.types_at
     n_t = len(epochs)
     gps_s = np.array([e[0] for e in epochs], float)
     sats = tuple(sorted({r[1] for r in rows if r[1] and r[1][0] in _SYSTEMS}))
@@ -790,7 +818,14 @@ def _fields(
     return out
 
 
-def _report_unknown_values(reader, head, values, gps_s, epochs, v3) -> None:
+def _report_unknown_values(
+    reader: _Reader,
+    head: ObsHeader,
+    values: Mapping[str, NDArray],
+    gps_s: NDArray,
+    epochs: list[tuple[float, int, float, int]],
+    v3: bool,
+) -> None:
     for s, tt in head.obs_types.items():
         for c in tt:
             if _known_code(s, c, v3) or c not in values:
@@ -837,6 +872,6 @@ def read_rinex_obs(
     reader = _Reader(path, _open_lines(path), codes, strict)
     head, first, _ = reader.header()
     parsed = reader.body(head, first)
-    if not parsed["epochs"]:
+    if not parsed.epochs:
         reader.problem(first + 1, None, "no observation epoch in the file")
     return _assemble(reader, head, parsed)

@@ -31,15 +31,19 @@ from predisat.atomic import write_bytes_atomic
 from predisat.jsontypes import JsonDict
 
 __all__ = [
+    "FORMATS",
     "RUN_FORMAT",
     "RunFileError",
     "read_run",
+    "read_table",
     "write_figures",
     "write_run",
+    "write_table",
 ]
 
 RUN_FORMAT = "locator-run/1"
 FORMATS = ("parquet", "csv")
+"""Table formats of a run folder."""
 
 
 class RunFileError(ValueError):

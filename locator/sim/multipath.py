@@ -34,14 +34,18 @@ classical multipath error envelope sampled at the reflection's carrier phase.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from predisat.synth.raycast import Caster, make_caster
-from predisat.synth.world import MATERIALS, World, material_id
+
+if TYPE_CHECKING:
+    from predisat.synth.world import World
 
 __all__ = [
     "REFLECTING_MATERIALS",
@@ -156,15 +160,25 @@ class ReflectorSearch:
                 f"specular_tolerance_deg must be in [0, 90), got {self.specular_tolerance_deg}"
             )
         object.__setattr__(self, "materials", tuple(self.materials))
-        for name in self.materials:
-            material_id(name)  # raises, naming the known materials
+        _material_ids(self.materials)  # raises, naming the known materials
 
     @property
     def reflects(self) -> NDArray:
         """Boolean lookup by material id: does the material reflect."""
-        out = np.zeros(len(MATERIALS), bool)
-        out[[material_id(m) for m in self.materials]] = True
+        n_materials, ids = _material_ids(self.materials)
+        out = np.zeros(n_materials, bool)
+        out[ids] = True
         return out
+
+
+def _material_ids(names: Sequence[str]) -> tuple[int, list[int]]:
+    """Number of materials of the synthetic world and the ids of ``names`` (KeyError naming
+    the known materials at the first unknown name)."""
+    # lazy: predisat.synth.world imports trimesh (the renderer); importing the simulator (and
+    # the locator's command line through it) must not need it, running a simulation does
+    from predisat.synth.world import MATERIALS, material_id
+
+    return len(MATERIALS), [material_id(m) for m in names]
 
 
 @dataclass(frozen=True)
@@ -212,7 +226,9 @@ class ReflectorIndex:
     backend : {"open3d", "trimesh"}
     """
 
-    def __init__(self, world: World, caster: Caster | None = None, backend: str = "open3d"):
+    def __init__(
+        self, world: World, caster: Caster | None = None, backend: str = "open3d"
+    ) -> None:
         self.caster = caster or make_caster(world, backend, lband_only=True)
         keep = np.flatnonzero(world.blocking_faces)
         tri = np.asarray(world.vertices_m, float)[np.asarray(world.faces)[keep]]
