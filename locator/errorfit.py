@@ -18,16 +18,20 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from locator.observations import Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
+from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
 from predisat.gnss.errormodel import ErrorModel
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["binned_sigma", "calibration_figure", "sim_residuals", "static_residuals"]
 
@@ -75,8 +79,6 @@ def static_residuals(
     col = {s: k for k, s in enumerate(names)}
     el = np.full((len(obs.gps_s), len(names)), np.nan)
     res = np.full_like(el, np.nan)
-    from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
-
     lat, lon, _ = ecef_to_geodetic(x)
     rot = enu_rotation(lat, lon)
     for k in range(len(obs.gps_s)):
@@ -127,6 +129,9 @@ def calibration_figure(
     table: pd.DataFrame, model: ErrorModel, title: str = "", estimate: ErrorModel | None = None
 ) -> Figure:
     """Binned empirical sigma against the model's ``sigma(el)`` (and the estimate it bounds)."""
+    # lazy: matplotlib only for this figure; the residual functions must not import it
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(6, 4), layout="constrained")
     ax = fig.subplots()
     ax.plot(table["el_mid_deg"], table["sigma_m"], "o", label="residual RMS per 5 deg bin")

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import nnls
 
 from locator.sathia import AntennaPath, PairSolution
 from predisat.availability import interval as _interval
@@ -280,8 +281,6 @@ def fit_error_model(
     a non-negative least squares of the binned squared residuals on that linear form in
     ``(a**2, b**2)``, iterated twice (weights from the previous fit).
     """
-    from scipy.optimize import nnls
-
     el, r, ok, q = _error_inputs(el_deg, residual_m, min_el_deg, n_bins, "fit_error_model")
     a2, b2 = 1.0, 1.0
     for _ in range(3):
@@ -428,6 +427,7 @@ def overbound_error_model(
 
 def _tail_factor(z: NDArray, min_tail: int, max_tail_share: float) -> float:
     """Smallest ``f`` with ``P(|N(0, f**2)| >= |z|_i)`` >= the share at or beyond ``|z|_i``."""
+    # lazy: scipy.stats is slow to import and only calibration (overbounding) needs it
     from scipy.stats import norm
 
     zs = np.sort(z)

@@ -294,10 +294,86 @@ def _known_code(system: str, code: str, v3: bool) -> bool:
     return code[1] in _BANDS.get(system, "") and code[2] in _ATTRIBUTES
 
 
+@dataclass(frozen=True)
+class _Body:
+    """What one pass over the body found, for :func:`_assemble`.
+
+    Attributes
+    ----------
+    rows : list of (epoch index, satellite, system letter, record text, line)
+    epochs : list of (gps_s, flag, receiver clock offset s, line)
+    types_at : list of mapping of system letter to codes
+        The observation types in force at each epoch.
+    """
+
+    rows: list[tuple[int, str, str, str, int]]
+    epochs: list[tuple[float, int, float, int]]
+    types_at: list[dict[str, list[str]]]
+
+
+class _HeaderScan:
+    """What the header records say, gathered record by record (:meth:`take`)."""
+
+    def __init__(self) -> None:
+        self.kw: dict = {}
+        self.types: dict[str, list[str]] = {}
+        self.type_line: dict[str, int] = {}
+        self.slots: dict[str, int] = {}
+        self.v2_types: list[str] = []
+        self.last_sys = ""
+        self.time_sys = ""
+
+    def take(self, label: str, line: str, i: int) -> None:
+        """Record ``line`` (0-based line ``i``) of label ``label``; ValueError if unreadable."""
+        kw = self.kw
+        if label == "MARKER NAME":
+            kw["marker_name"] = line[:60].strip()
+        elif label == "REC # / TYPE / VERS":
+            kw["receiver_type"] = line[20:40].strip()
+            kw["receiver_version"] = line[40:60].strip()
+        elif label == "ANT # / TYPE":
+            kw["antenna_type"] = line[20:40].strip()
+        elif label == "PGM / RUN BY / DATE":
+            kw["program"] = line[:20].strip()
+        elif label == "APPROX POSITION XYZ":
+            kw["approx_position_ecef_m"] = np.array([_float(line[k : k + 14]) for k in (0, 14, 28)])
+        elif label == "ANTENNA: DELTA H/E/N":
+            kw["antenna_delta_hen_m"] = np.array([_float(line[k : k + 14]) for k in (0, 14, 28)])
+        elif label == "INTERVAL":
+            kw["interval_s"] = _float(line[:10])
+        elif label == "TIME OF FIRST OBS":
+            self.time_sys = line[48:51].strip()
+        elif label == "# / TYPES OF OBSERV":
+            self.v2_types += [line[k : k + 6].strip() for k in range(6, 60, 6)]
+            self.v2_types = [t for t in self.v2_types if t]
+            self.type_line.setdefault("*", i + 1)
+        elif label == "SYS / # / OBS TYPES":
+            self._sys_types(line, i)
+        elif label == "GLONASS SLOT / FRQ #":
+            for k in range(4, 60, 7):
+                sat = line[k : k + 3].strip()
+                if sat:
+                    self.slots[f"R{int(sat[1:]):02d}"] = int(line[k + 3 : k + 6])
+
+    def _sys_types(self, line: str, i: int) -> None:
+        types = self.types
+        if line[0].strip():
+            self.last_sys = line[0].upper()
+            types[self.last_sys] = []
+            self.type_line[self.last_sys] = i + 1
+        if not self.last_sys:
+            raise ValueError("continuation line before any system")
+        last_sys = self.last_sys
+        types[last_sys] += [line[k : k + 3].strip() for k in range(7, 59, 4)]
+        types[last_sys] = [t for t in types[last_sys] if t]
+
+
 class _Reader:
     """State of one pass over a file (problems are collected or raised)."""
 
-    def __init__(self, path: Path, lines: list[str], codes: Sequence[str] | None, strict: bool):
+    def __init__(
+        self, path: Path, lines: list[str], codes: Sequence[str] | None, strict: bool
+    ) -> None:
         self.path, self.lines, self.strict = path, lines, strict
         self.codes = None if codes is None else set(codes)
         self.problems: list[ObsProblem] = []
@@ -317,6 +393,36 @@ class _Reader:
     # --------------------------------------------------------------------- header
     def header(self) -> tuple[ObsHeader, int, dict[str, int]]:
         lines, path = self.lines, self.path
+        version, file_system = self._version_line()
+        scan = _HeaderScan()
+        for i, line in enumerate(lines):
+            label = line[60:].strip()
+            if label == "END OF HEADER":
+                first = i + 1
+                break
+            try:
+                scan.take(label, line, i)
+            except ValueError as exc:
+                raise RinexObsError(path, i + 1, f"unreadable {label!r} record ({exc})") from None
+        else:
+            raise RinexObsError(path, len(lines), "no 'END OF HEADER' line: the file is truncated")
+        v3 = version >= 3.0
+        types, type_line = self._obs_types(scan, v3, file_system, first)
+        default_ts = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS", "I": "IRN"}
+        scan.kw["time_system"] = scan.time_sys or default_ts.get(file_system, "GPS")
+        head = ObsHeader(
+            version,
+            file_system,
+            obs_types={s: tuple(t) for s, t in types.items()},
+            glonass_slots=scan.slots,
+            **scan.kw,
+        )
+        self.check_codes(head.obs_types, type_line, v3)
+        return head, first, type_line
+
+    def _version_line(self) -> tuple[float, str]:
+        """RINEX version and file system letter of the first line; raises when unsupported."""
+        lines, path = self.lines, self.path
         if not lines or "RINEX VERSION / TYPE" not in lines[0]:
             raise RinexObsError(path, 1, "first line is not a 'RINEX VERSION / TYPE' header line")
         try:
@@ -330,83 +436,24 @@ class _Reader:
                 path, 1, f"RINEX {version} observation files are not supported; convert the "
                 "file to RINEX 3 (e.g. gfzrnx -vo 3)"
             )
-        file_system = lines[0][40:41].upper().strip() or "G"
-        kw: dict = {}
-        types: dict[str, list[str]] = {}
-        type_line: dict[str, int] = {}
-        slots: dict[str, int] = {}
-        v2_types: list[str] = []
-        last_sys = ""
-        time_sys = ""
-        for i, line in enumerate(lines):
-            label = line[60:].strip()
-            if label == "END OF HEADER":
-                first = i + 1
-                break
-            try:
-                if label == "MARKER NAME":
-                    kw["marker_name"] = line[:60].strip()
-                elif label == "REC # / TYPE / VERS":
-                    kw["receiver_type"] = line[20:40].strip()
-                    kw["receiver_version"] = line[40:60].strip()
-                elif label == "ANT # / TYPE":
-                    kw["antenna_type"] = line[20:40].strip()
-                elif label == "PGM / RUN BY / DATE":
-                    kw["program"] = line[:20].strip()
-                elif label == "APPROX POSITION XYZ":
-                    kw["approx_position_ecef_m"] = np.array(
-                        [_float(line[k : k + 14]) for k in (0, 14, 28)]
-                    )
-                elif label == "ANTENNA: DELTA H/E/N":
-                    kw["antenna_delta_hen_m"] = np.array(
-                        [_float(line[k : k + 14]) for k in (0, 14, 28)]
-                    )
-                elif label == "INTERVAL":
-                    kw["interval_s"] = _float(line[:10])
-                elif label == "TIME OF FIRST OBS":
-                    time_sys = line[48:51].strip()
-                elif label == "# / TYPES OF OBSERV":
-                    v2_types += [line[k : k + 6].strip() for k in range(6, 60, 6)]
-                    v2_types = [t for t in v2_types if t]
-                    type_line.setdefault("*", i + 1)
-                elif label == "SYS / # / OBS TYPES":
-                    if line[0].strip():
-                        last_sys = line[0].upper()
-                        types[last_sys] = []
-                        type_line[last_sys] = i + 1
-                    if not last_sys:
-                        raise ValueError("continuation line before any system")
-                    types[last_sys] += [line[k : k + 3].strip() for k in range(7, 59, 4)]
-                    types[last_sys] = [t for t in types[last_sys] if t]
-                elif label == "GLONASS SLOT / FRQ #":
-                    for k in range(4, 60, 7):
-                        sat = line[k : k + 3].strip()
-                        if sat:
-                            slots[f"R{int(sat[1:]):02d}"] = int(line[k + 3 : k + 6])
-            except ValueError as exc:
-                raise RinexObsError(path, i + 1, f"unreadable {label!r} record ({exc})") from None
-        else:
-            raise RinexObsError(path, len(lines), "no 'END OF HEADER' line: the file is truncated")
-        v3 = version >= 3.0
+        return version, lines[0][40:41].upper().strip() or "G"
+
+    def _obs_types(
+        self, scan: _HeaderScan, v3: bool, file_system: str, first: int
+    ) -> tuple[dict[str, list[str]], dict[str, int]]:
+        """Observation types per system and their header lines (RINEX 2: one list for all)."""
+        types, type_line = scan.types, scan.type_line
         if not v3:
-            if not v2_types:
-                raise RinexObsError(path, first, "no '# / TYPES OF OBSERV' record in the header")
+            if not scan.v2_types:
+                raise RinexObsError(
+                    self.path, first, "no '# / TYPES OF OBSERV' record in the header"
+                )
             letters = _SYSTEMS if file_system == "M" else file_system
-            types = {s: list(v2_types) for s in letters}
+            types = {s: list(scan.v2_types) for s in letters}
             type_line = {s: type_line["*"] for s in letters}
         elif not types:
-            raise RinexObsError(path, first, "no 'SYS / # / OBS TYPES' record in the header")
-        default_ts = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS", "I": "IRN"}
-        kw["time_system"] = time_sys or default_ts.get(file_system, "GPS")
-        head = ObsHeader(
-            version,
-            file_system,
-            obs_types={s: tuple(t) for s, t in types.items()},
-            glonass_slots=slots,
-            **kw,
-        )
-        self.check_codes(head.obs_types, type_line, v3)
-        return head, first, type_line
+            raise RinexObsError(self.path, first, "no 'SYS / # / OBS TYPES' record in the header")
+        return types, type_line
 
     def check_codes(self, obs_types: Mapping[str, tuple[str, ...]], where: dict, v3: bool) -> None:
         for s, tt in obs_types.items():
@@ -455,7 +502,7 @@ class _Reader:
             raise ValueError("date out of range")
         return (y, mo, d, h, mi, s), flag, count, clock
 
-    def body(self, head: ObsHeader, first: int) -> dict:
+    def body(self, head: ObsHeader, first: int) -> _Body:
         lines, n = self.lines, len(self.lines)
         v3 = head.version >= 3.0
         types = {s: list(t) for s, t in head.obs_types.items()}
@@ -473,29 +520,11 @@ class _Reader:
             try:
                 cal, flag, count, clock = self.parse_epoch(line, v3)
             except (ValueError, IndexError):
-                self.problem(
-                    i + 1,
-                    None,
-                    f"expected an epoch line, found {line[:40]!r}; skipped"
-                    " up to the next epoch line",
-                )
-                i += 1
-                while i < n and not self._looks_like_epoch(lines[i], v3):
-                    i += 1
+                i = self._skip_to_epoch(i, v3)
                 continue
             t = float("nan") if cal is None else self.to_gps_s(cal, ts)
             if 2 <= flag <= 5:
-                recs = tuple(lines[i + 1 : i + 1 + count])
-                if len(recs) < count:
-                    self.problem(
-                        i + 1,
-                        t,
-                        f"event record announces {count} lines, the file"
-                        f" ends after {len(recs)}: the file is truncated",
-                    )
-                self.events.append(ObsEvent(i + 1, t, flag, recs))
-                if flag == 4:
-                    types = self._redefine(types, recs, i + 2, v3, default_sys)
+                types = self._event(i, t, flag, count, types, v3, default_sys)
                 i += 1 + count
                 continue
             sats, j = self._sat_list(line, count, i, v3, default_sys, t)
@@ -505,15 +534,9 @@ class _Reader:
                 [1] * count if v3 else [max(1, -(-len(types.get(s[0], [])) // 5)) for s in sats]
             )
             need = sum(per_sat)
-            if j + need > n or (v3 and any(lines[k].startswith(">") for k in range(j, j + need))):
-                got = sum(1 for k in range(j, min(n, j + need)) if not lines[k].startswith(">"))
-                self.problem(
-                    i + 1,
-                    t,
-                    f"epoch record has {got} of {need} observation lines:"
-                    " the file is truncated or a line is missing; epoch dropped",
-                )
-                i = j + got
+            cut = self._cut_record(i, j, need, t, v3)
+            if cut is not None:
+                i = cut
                 continue
             if flag == 6:
                 self.events.append(ObsEvent(i + 1, t, 6, tuple(lines[j : j + need])))
@@ -522,26 +545,99 @@ class _Reader:
             e = len(epochs)
             epochs.append((t, flag, clock, i + 1))
             types_at.append(types)
-            k = j
-            for s, m in zip(sats if not v3 else [None] * count, per_sat, strict=True):
-                if v3:
-                    s = self._sat_id(lines[k][:3], default_sys)
-                    text = lines[k][3:]
-                else:
-                    text = "".join(lines[k + q][:80].ljust(80) for q in range(m))
-                    for q in range(m):
-                        if len(lines[k + q].rstrip()) % _FIELD not in _GOOD_TAIL:
-                            self.problem(
-                                k + q + 1,
-                                t,
-                                f"observation line of {s} ends inside a"
-                                " 16-character field: cut short or misaligned",
-                            )
-                assert s is not None
-                rows.append((e, s, s[0] if s else "", text, k + 1))
-                k += m
-            i = k
-        return {"rows": rows, "epochs": epochs, "types_at": types_at}
+            sats_or_none = sats if not v3 else [None] * count
+            new_rows, i = self._records(e, sats_or_none, per_sat, j, t, v3, default_sys)
+            rows += new_rows
+        return _Body(rows, epochs, types_at)
+
+    def _skip_to_epoch(self, i: int, v3: bool) -> int:
+        """Report the stray line ``i`` and return the index of the next epoch line."""
+        lines, n = self.lines, len(self.lines)
+        self.problem(
+            i + 1,
+            None,
+            f"expected an epoch line, found {lines[i][:40]!r}; skipped up to the next epoch line",
+        )
+        i += 1
+        while i < n and not self._looks_like_epoch(lines[i], v3):
+            i += 1
+        return i
+
+    def _event(
+        self,
+        i: int,
+        t: float,
+        flag: int,
+        count: int,
+        types: dict[str, list[str]],
+        v3: bool,
+        default_sys: str,
+    ) -> dict[str, list[str]]:
+        """Keep the event record at line ``i`` (flags 2-5); the observation types after it."""
+        recs = tuple(self.lines[i + 1 : i + 1 + count])
+        if len(recs) < count:
+            self.problem(
+                i + 1,
+                t,
+                f"event record announces {count} lines, the file"
+                f" ends after {len(recs)}: the file is truncated",
+            )
+        self.events.append(ObsEvent(i + 1, t, flag, recs))
+        if flag == 4:
+            return self._redefine(types, recs, i + 2, v3, default_sys)
+        return types
+
+    def _cut_record(self, i: int, j: int, need: int, t: float, v3: bool) -> int | None:
+        """Where to go on when the epoch at line ``i`` lacks some of its ``need`` observation
+        lines from ``j`` on (reported, epoch dropped); None when it has them all."""
+        lines, n = self.lines, len(self.lines)
+        if j + need > n or (v3 and any(lines[k].startswith(">") for k in range(j, j + need))):
+            got = sum(1 for k in range(j, min(n, j + need)) if not lines[k].startswith(">"))
+            self.problem(
+                i + 1,
+                t,
+                f"epoch record has {got} of {need} observation lines:"
+                " the file is truncated or a line is missing; epoch dropped",
+            )
+            return j + got
+        return None
+
+    def _records(
+        self,
+        e: int,
+        sats: Sequence[str | None],
+        per_sat: list[int],
+        j: int,
+        t: float,
+        v3: bool,
+        default_sys: str,
+    ) -> tuple[list[tuple[int, str, str, str, int]], int]:
+        """Observation records of epoch ``e`` from line ``j``; rows and the next line index.
+
+        ``sats`` are the satellites of the RINEX 2 epoch line (None in RINEX 3, where each
+        record names its satellite); ``per_sat`` the lines of each record.
+        """
+        lines = self.lines
+        rows = []
+        k = j
+        for s, m in zip(sats, per_sat, strict=True):
+            if v3:
+                s = self._sat_id(lines[k][:3], default_sys)
+                text = lines[k][3:]
+            else:
+                text = "".join(lines[k + q][:80].ljust(80) for q in range(m))
+                for q in range(m):
+                    if len(lines[k + q].rstrip()) % _FIELD not in _GOOD_TAIL:
+                        self.problem(
+                            k + q + 1,
+                            t,
+                            f"observation line of {s} ends inside a"
+                            " 16-character field: cut short or misaligned",
+                        )
+            assert s is not None
+            rows.append((e, s, s[0] if s else "", text, k + 1))
+            k += m
+        return rows, k
 
     def _looks_like_epoch(self, line: str, v3: bool) -> bool:
         return line.startswith(">") if v3 else bool(_V2_EPOCH.match(line))
@@ -553,7 +649,9 @@ class _Reader:
         except ValueError:
             return None
 
-    def _sat_list(self, line, count, i, v3, default_sys, t) -> tuple[list | None, int]:
+    def _sat_list(
+        self, line: str, count: int, i: int, v3: bool, default_sys: str, t: float
+    ) -> tuple[list[str] | None, int]:
         if v3:
             return [], i + 1
         lines, n = self.lines, len(self.lines)
@@ -578,7 +676,14 @@ class _Reader:
             sats.append(s)
         return sats, j
 
-    def _redefine(self, types, recs, line0, v3, default_sys):
+    def _redefine(
+        self,
+        types: dict[str, list[str]],
+        recs: tuple[str, ...],
+        line0: int,
+        v3: bool,
+        default_sys: str,
+    ) -> dict[str, list[str]]:
         """Observation types after a flag-4 event whose header records redefine them."""
         found: dict[str, list[str]] = {}
         last = ""
@@ -603,19 +708,14 @@ class _Reader:
         return new
 
 
-def _assemble(reader: _Reader, head: ObsHeader, parsed: dict) -> Observations:
-    rows, epochs, types_at = parsed["rows"], parsed["epochs"], parsed["types_at"]
+def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
+    rows, epochs, types_at = parsed.rows, parsed.epochs, parsed.types_at
     n_t = len(epochs)
     gps_s = np.array([e[0] for e in epochs], float)
     sats = tuple(sorted({r[1] for r in rows if r[1] and r[1][0] in _SYSTEMS}))
     col = {s: k for k, s in enumerate(sats)}
     v3 = head.version >= 3.0
-    start_code_order: list[str] = []
-    for tt in [head.obs_types, *types_at]:
-        for lst in tt.values():
-            for c in lst:
-                if c not in start_code_order and (reader.codes is None or c in reader.codes):
-                    start_code_order.append(c)
+    start_code_order = _code_order(reader, head, types_at)
     values = {c: np.full((n_t, len(sats)), np.nan) for c in start_code_order}
     lli = {c: np.zeros((n_t, len(sats)), np.int8) for c in start_code_order}
     snr = {c: np.zeros((n_t, len(sats)), np.int8) for c in start_code_order}
@@ -642,37 +742,16 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: dict) -> Observations:
                     " observation types in the header; its observations are ignored",
                 )
             continue
-        stripped = text.rstrip() if v3 else text
-        if v3:
-            tail = len(stripped) % _FIELD
-            if tail not in _GOOD_TAIL or len(stripped) > _FIELD * len(tt):
-                reader.problem(
-                    lineno,
-                    t,
-                    f"observation line of {sat} ends inside a 16-character"
-                    " field or is too long: cut short or misaligned; kept the"
-                    " complete fields",
-                )
-        j = col[sat]
-        for k, c in enumerate(tt):
+        for c, f in _fields(reader, sat, tt, text, lineno, t, v3):
             if c not in values:
                 continue
-            if v3:
-                f = stripped[_FIELD * k : _FIELD * (k + 1)]
-            else:
-                q, r = divmod(k, 5)
-                f = text[80 * q + _FIELD * r : 80 * q + _FIELD * (r + 1)]
-            if not f.strip():
-                continue
-            if v3 and len(f) < 14 and k == len(stripped) // _FIELD:
-                continue  # the cut field reported above
             try:
                 if f[:14].strip():
-                    values[c][e, j] = float(f[:14])
+                    values[c][e, col[sat]] = float(f[:14])
                 if f[14:15].strip():
-                    lli[c][e, j] = int(f[14])
+                    lli[c][e, col[sat]] = int(f[14])
                 if f[15:16].strip():
-                    snr[c][e, j] = int(f[15])
+                    snr[c][e, col[sat]] = int(f[15])
             except ValueError:
                 reader.problem(lineno, t, f"{sat} {c}: unreadable field {f!r}; left empty")
     bad = np.nonzero(np.diff(gps_s) <= 0)[0] + 1
@@ -695,7 +774,58 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: dict) -> Observations:
     )
 
 
-def _report_unknown_values(reader, head, values, gps_s, epochs, v3) -> None:
+def _code_order(
+    reader: _Reader, head: ObsHeader, types_at: list[dict[str, list[str]]]
+) -> list[str]:
+    """Codes kept (``reader.codes``), in order of first declaration (header, then events)."""
+    start_code_order: list[str] = []
+    for tt in [head.obs_types, *types_at]:
+        for lst in tt.values():
+            for c in lst:
+                if c not in start_code_order and (reader.codes is None or c in reader.codes):
+                    start_code_order.append(c)
+    return start_code_order
+
+
+def _fields(
+    reader: _Reader, sat: str, tt: Sequence[str], text: str, lineno: int, t: float, v3: bool
+) -> list[tuple[str, str]]:
+    """(code, 16-character field) of one satellite's observation record, blank fields left
+    out; a RINEX 3 line cut inside a field or too long is reported (its cut field dropped)."""
+    stripped = text.rstrip() if v3 else text
+    if v3:
+        tail = len(stripped) % _FIELD
+        if tail not in _GOOD_TAIL or len(stripped) > _FIELD * len(tt):
+            reader.problem(
+                lineno,
+                t,
+                f"observation line of {sat} ends inside a 16-character"
+                " field or is too long: cut short or misaligned; kept the"
+                " complete fields",
+            )
+    out = []
+    for k, c in enumerate(tt):
+        if v3:
+            f = stripped[_FIELD * k : _FIELD * (k + 1)]
+        else:
+            q, r = divmod(k, 5)
+            f = text[80 * q + _FIELD * r : 80 * q + _FIELD * (r + 1)]
+        if not f.strip():
+            continue
+        if v3 and len(f) < 14 and k == len(stripped) // _FIELD:
+            continue  # the cut field reported above
+        out.append((c, f))
+    return out
+
+
+def _report_unknown_values(
+    reader: _Reader,
+    head: ObsHeader,
+    values: Mapping[str, NDArray],
+    gps_s: NDArray,
+    epochs: list[tuple[float, int, float, int]],
+    v3: bool,
+) -> None:
     for s, tt in head.obs_types.items():
         for c in tt:
             if _known_code(s, c, v3) or c not in values:
@@ -742,6 +872,6 @@ def read_rinex_obs(
     reader = _Reader(path, _open_lines(path), codes, strict)
     head, first, _ = reader.header()
     parsed = reader.body(head, first)
-    if not parsed["epochs"]:
+    if not parsed.epochs:
         reader.problem(first + 1, None, "no observation epoch in the file")
     return _assemble(reader, head, parsed)

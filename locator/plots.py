@@ -14,11 +14,14 @@ Every function takes the epoch table of :func:`locator.run.run_locator` (scored 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["interval_vs_chainage", "interval_vs_time", "length_histogram"]
 
@@ -39,7 +42,7 @@ def _relative(epochs: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     )
 
 
-def _draw(ax: Any, x: np.ndarray, epochs: pd.DataFrame) -> None:
+def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     est, lo, hi, label = _relative(epochs)
     claim = epochs["claim"].to_numpy(bool)
     for sel, colour, name in ((claim, "#2166ac", "claimed"), (~claim, "#bbbbbb", "no claim")):

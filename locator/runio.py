@@ -17,43 +17,47 @@ Error-model files (``locator calibrate --out FILE.json``) are read and written b
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
-from locator import plots
 from locator.sim.simfile import json_default, read_folder_table
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
+from predisat.jsontypes import JsonDict
 
 __all__ = [
+    "FORMATS",
     "RUN_FORMAT",
     "RunFileError",
     "read_run",
+    "read_table",
     "write_figures",
     "write_run",
+    "write_table",
 ]
 
 RUN_FORMAT = "locator-run/1"
 FORMATS = ("parquet", "csv")
+"""Table formats of a run folder."""
 
 
 class RunFileError(ValueError):
     """A run folder or error-model file that cannot be read; the message names the fix."""
 
 
-def _json(obj: Any) -> Any:
+def _json(obj: object) -> object:
     try:
         return json_default(obj)
     except TypeError:
         return str(obj)  # run descriptions may hold paths and enums
 
 
-def _null_non_finite(obj: Any) -> Any:
+def _null_non_finite(obj: object) -> object:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, dict):
@@ -63,7 +67,7 @@ def _null_non_finite(obj: Any) -> Any:
     return obj
 
 
-def _write_json(path: Path, data: Mapping[str, Any]) -> None:
+def _write_json(path: Path, data: Mapping[str, object]) -> None:
     # NaN (e.g. the interval median of a run without a claim) becomes null: strict JSON,
     # which other tools (jq, browsers, JSON schema validators) read
     plain = json.loads(json.dumps(data, default=_json, allow_nan=True))
@@ -79,8 +83,6 @@ def write_table(df: pd.DataFrame, folder: Path, name: str, fmt: str) -> Path:
         (folder / f"{name}.{ext}").unlink(missing_ok=True)
     path = folder / f"{name}.{fmt}"
     if fmt == "parquet":
-        import io
-
         buf = io.BytesIO()
         df.to_parquet(buf, index=False)
         write_bytes_atomic(path, buf.getvalue())
@@ -95,7 +97,7 @@ def read_table(folder: Path, name: str) -> pd.DataFrame:
 
 
 def write_run(
-    epochs: pd.DataFrame, folder: str | Path, meta: Mapping[str, Any], fmt: str = "parquet"
+    epochs: pd.DataFrame, folder: str | Path, meta: Mapping[str, object], fmt: str = "parquet"
 ) -> Path:
     """Write a run folder (table and ``run.json``); returns the folder."""
     out = Path(folder)
@@ -105,7 +107,7 @@ def write_run(
     return out
 
 
-def read_run(folder: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
+def read_run(folder: str | Path) -> tuple[pd.DataFrame, JsonDict]:
     """The epoch table and metadata of a run folder."""
     f = Path(folder)
     meta_path = f / "run.json"
@@ -126,6 +128,9 @@ def read_run(folder: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
 
 def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> list[Path]:
     """The three PNG figures of a run (relative to the truth when ``truth_m`` is present)."""
+    # lazy: matplotlib only for the figures; reading and writing run tables must not import it
+    from locator import plots
+
     out = Path(folder)
     figs = {
         "interval_time.png": plots.interval_vs_time(epochs, title),
@@ -134,8 +139,6 @@ def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> 
     }
     paths = []
     for name, fig in figs.items():
-        import io
-
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=100)
         write_bytes_atomic(out / name, buf.getvalue())

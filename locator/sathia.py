@@ -310,14 +310,7 @@ def solve_pairs(
     sig = np.asarray(sigma_m, float)
     n = _check_inputs(sat, rho, sig)
     pr = all_pairs(n) if pairs is None else np.asarray(pairs, np.intp).reshape(-1, 2)
-    if pr.size and (pr.min() < 0 or pr.max() >= n or np.any(pr[:, 0] == pr[:, 1])):
-        raise ValueError(f"pairs must hold two distinct satellite indices in [0, {n}); got {pr}")
-    if not (window_m > 0 and step_m > 0 and k_sigma > 0):
-        raise ValueError(
-            f"window_m, step_m and k_sigma must be positive: {window_m}, {step_m}, {k_sigma}"
-        )
-    if not np.isfinite(prior_m):
-        raise ValueError(f"prior_m must be finite, got {prior_m}")
+    _check_options(pr, n, prior_m, window_m, k_sigma, step_m)
     i, j = pr[:, 0], pr[:, 1]
     p = len(i)
     length = path.length_m
@@ -346,52 +339,10 @@ def solve_pairs(
     centre = l_idx == 0
     n_roots = np.bincount(p_idx[centre], minlength=p)
     chosen = _choose_roots(p_idx[centre], roots[centre], n_roots, prior_m, p)
-
-    # interval: nearest bound-level root on each side of the chosen root
-    bound = ~centre
-    bp, bs = p_idx[bound], roots[bound]
-    below = np.full(p, -np.inf)
-    above = np.full(p, np.inf)
-    if bound.any():
-        c = chosen[bp]
-        np.maximum.at(below, bp[bs < c], bs[bs < c])
-        np.minimum.at(above, bp[bs > c], bs[bs > c])
-    has = np.isfinite(chosen)
-    # no root: the pair's set {|f| <= k sigma_K} may still meet the window (a blunt pair whose
-    # root lies outside it); keep the hull of that set, NaN when it is empty
-    none = ~has
     band = np.abs(f[:, :, 0]) <= k_sigma * sk  # (g, p)
-    hull_lo = np.full(p, np.inf)
-    hull_hi = np.full(p, -np.inf)
-    np.minimum.at(hull_lo, bp, bs)
-    np.maximum.at(hull_hi, bp, bs)
-    if p:
-        hull_lo = np.where(band[0], -np.inf, hull_lo)
-        hull_hi = np.where(band[-1], np.inf, hull_hi)
-    empty = none & ~(hull_lo <= hull_hi)
-    below = np.where(none, hull_lo, below)
-    above = np.where(none, hull_hi, above)
-    # the track ends bound the train; window ends inside the track do not
-    lo = np.where(np.isneginf(below) & (a <= 0.0), 0.0, below)
-    hi = np.where(np.isposinf(above) & (b >= length), length, above)
-    lo = np.where(empty, np.nan, lo)
-    hi = np.where(empty, np.nan, hi)
-
-    status = np.zeros(p, np.uint8)
-    status |= np.where(n_roots == 0, PairStatus.NO_ROOT, 0).astype(np.uint8)
-    status |= np.where(empty, PairStatus.EMPTY, 0).astype(np.uint8)
-    status |= np.where(n_roots > 1, PairStatus.MULTIPLE_ROOTS, 0).astype(np.uint8)
-    status |= np.where(np.isneginf(lo), PairStatus.UNBOUNDED_LOW, 0).astype(np.uint8)
-    status |= np.where(np.isposinf(hi), PairStatus.UNBOUNDED_HIGH, 0).astype(np.uint8)
-
-    slope = np.full(p, np.nan)
-    if has.any():
-        s_ok = chosen[has]
-        x = path.ecef_at(s_ok)
-        t = path.tangent_ecef_at(s_ok)
-        u_i = _unit(sat[i[has]] - x)
-        u_j = _unit(sat[j[has]] - x)
-        slope[has] = np.sum((u_j - u_i) * t, axis=-1)
+    lo, hi, empty = _intervals(chosen, p_idx[~centre], roots[~centre], band, a, b, length)
+    status = _status(n_roots, empty, lo, hi)
+    slope = _slopes(path, sat, i, j, chosen)
     return PairSolution(
         i=i, j=j, k_m=k, sigma_k_m=sk, k_sigma=float(k_sigma), root_m=chosen, lo_m=lo, hi_m=hi,
         slope=slope, n_roots=n_roots, misfit_m=np.where(n_roots > 0, 0.0, misfit),
@@ -418,6 +369,87 @@ def _check_inputs(sat: NDArray, rho: NDArray, sig: NDArray) -> int:
             "non-positive sigma; drop it before solving (see locator.selection)"
         )
     return n
+
+
+def _check_options(
+    pr: NDArray, n: int, prior_m: float, window_m: float, k_sigma: float, step_m: float
+) -> None:
+    if pr.size and (pr.min() < 0 or pr.max() >= n or np.any(pr[:, 0] == pr[:, 1])):
+        raise ValueError(f"pairs must hold two distinct satellite indices in [0, {n}); got {pr}")
+    if not (window_m > 0 and step_m > 0 and k_sigma > 0):
+        raise ValueError(
+            f"window_m, step_m and k_sigma must be positive: {window_m}, {step_m}, {k_sigma}"
+        )
+    if not np.isfinite(prior_m):
+        raise ValueError(f"prior_m must be finite, got {prior_m}")
+
+
+def _intervals(
+    chosen: NDArray,
+    bp: NDArray,
+    bs: NDArray,
+    band: NDArray,
+    a: float,
+    b: float,
+    length: float,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Interval ``(lo, hi)`` per pair and its emptiness, from the bound-level roots.
+
+    ``bp``, ``bs``: pair and chainage of each bound-level root; ``band`` (g, p): the grid
+    points inside ``|f| <= k sigma_K``; ``[a, b]`` the window on a track of ``length``.
+    """
+    p = len(chosen)
+    # interval: nearest bound-level root on each side of the chosen root
+    below = np.full(p, -np.inf)
+    above = np.full(p, np.inf)
+    if len(bp):
+        c = chosen[bp]
+        np.maximum.at(below, bp[bs < c], bs[bs < c])
+        np.minimum.at(above, bp[bs > c], bs[bs > c])
+    # no root: the pair's set {|f| <= k sigma_K} may still meet the window (a blunt pair whose
+    # root lies outside it); keep the hull of that set, NaN when it is empty
+    none = ~np.isfinite(chosen)
+    hull_lo = np.full(p, np.inf)
+    hull_hi = np.full(p, -np.inf)
+    np.minimum.at(hull_lo, bp, bs)
+    np.maximum.at(hull_hi, bp, bs)
+    if p:
+        hull_lo = np.where(band[0], -np.inf, hull_lo)
+        hull_hi = np.where(band[-1], np.inf, hull_hi)
+    empty = none & ~(hull_lo <= hull_hi)
+    below = np.where(none, hull_lo, below)
+    above = np.where(none, hull_hi, above)
+    # the track ends bound the train; window ends inside the track do not
+    lo = np.where(np.isneginf(below) & (a <= 0.0), 0.0, below)
+    hi = np.where(np.isposinf(above) & (b >= length), length, above)
+    lo = np.where(empty, np.nan, lo)
+    hi = np.where(empty, np.nan, hi)
+    return lo, hi, empty
+
+
+def _status(n_roots: NDArray, empty: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """:class:`PairStatus` flags per pair, uint8."""
+    status = np.zeros(len(n_roots), np.uint8)
+    status |= np.where(n_roots == 0, PairStatus.NO_ROOT, 0).astype(np.uint8)
+    status |= np.where(empty, PairStatus.EMPTY, 0).astype(np.uint8)
+    status |= np.where(n_roots > 1, PairStatus.MULTIPLE_ROOTS, 0).astype(np.uint8)
+    status |= np.where(np.isneginf(lo), PairStatus.UNBOUNDED_LOW, 0).astype(np.uint8)
+    status |= np.where(np.isposinf(hi), PairStatus.UNBOUNDED_HIGH, 0).astype(np.uint8)
+    return status
+
+
+def _slopes(path: AntennaPath, sat: NDArray, i: NDArray, j: NDArray, chosen: NDArray) -> NDArray:
+    """``dK/ds`` of each pair at its chosen root (NaN without a root)."""
+    has = np.isfinite(chosen)
+    slope = np.full(len(chosen), np.nan)
+    if has.any():
+        s_ok = chosen[has]
+        x = path.ecef_at(s_ok)
+        t = path.tangent_ecef_at(s_ok)
+        u_i = _unit(sat[i[has]] - x)
+        u_j = _unit(sat[j[has]] - x)
+        slope[has] = np.sum((u_j - u_i) * t, axis=-1)
+    return slope
 
 
 def _unit(v: NDArray) -> NDArray:

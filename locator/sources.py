@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +32,7 @@ from locator.corrections import RangeModel
 from locator.observations import Observations, PseudorangeSelection
 from locator.sim.simfile import SignalState, SimRun
 from predisat.availability.satellites import select_satellites
+from predisat.jsontypes import JsonDict
 
 __all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource"]
 
@@ -69,7 +70,7 @@ class EpochSource(Protocol):
 
     def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData: ...
 
-    def describe(self) -> dict[str, Any]: ...
+    def describe(self) -> JsonDict: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,7 +132,7 @@ class SimSource:
             {},
         )
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonDict:
         return {
             "source": "simulation",
             "odometer_scale_error": self.odometer_scale_error,
@@ -222,7 +223,7 @@ class RinexSource:
         """File, line and epoch of ``epoch``, for messages."""
         return self.obs.where(epoch)
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonDict:
         return {
             "source": "rinex",
             "obs": str(self.obs.path),

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.special import chdtrc
 
 from locator.sathia import AntennaPath
 
@@ -69,8 +70,6 @@ class WlsSolution:
 
     def p_value(self) -> float:
         """Probability of a chi-square this large without a fault (NaN when ``dof < 1``)."""
-        from scipy.special import chdtrc
-
         return float(chdtrc(self.dof, self.chi2)) if self.dof >= 1 else float("nan")
 
 

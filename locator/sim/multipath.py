@@ -34,15 +34,18 @@ classical multipath error envelope sampled at the reflection's carrier phase.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from predisat.synth.raycast import Caster, make_caster
-from predisat.synth.world import MATERIALS, material_id
+
+if TYPE_CHECKING:
+    from predisat.synth.world import World
 
 __all__ = [
     "REFLECTING_MATERIALS",
@@ -157,15 +160,25 @@ class ReflectorSearch:
                 f"specular_tolerance_deg must be in [0, 90), got {self.specular_tolerance_deg}"
             )
         object.__setattr__(self, "materials", tuple(self.materials))
-        for name in self.materials:
-            material_id(name)  # raises, naming the known materials
+        _material_ids(self.materials)  # raises, naming the known materials
 
     @property
     def reflects(self) -> NDArray:
         """Boolean lookup by material id: does the material reflect."""
-        out = np.zeros(len(MATERIALS), bool)
-        out[[material_id(m) for m in self.materials]] = True
+        n_materials, ids = _material_ids(self.materials)
+        out = np.zeros(n_materials, bool)
+        out[ids] = True
         return out
+
+
+def _material_ids(names: Sequence[str]) -> tuple[int, list[int]]:
+    """Number of materials of the synthetic world and the ids of ``names`` (KeyError naming
+    the known materials at the first unknown name)."""
+    # lazy: predisat.synth.world imports trimesh (the renderer); importing the simulator (and
+    # the locator's command line through it) must not need it, running a simulation does
+    from predisat.synth.world import MATERIALS, material_id
+
+    return len(MATERIALS), [material_id(m) for m in names]
 
 
 @dataclass(frozen=True)
@@ -213,7 +226,9 @@ class ReflectorIndex:
     backend : {"open3d", "trimesh"}
     """
 
-    def __init__(self, world: Any, caster: Caster | None = None, backend: str = "open3d"):
+    def __init__(
+        self, world: World, caster: Caster | None = None, backend: str = "open3d"
+    ) -> None:
         self.caster = caster or make_caster(world, backend, lband_only=True)
         keep = np.flatnonzero(world.blocking_faces)
         tri = np.asarray(world.vertices_m, float)[np.asarray(world.faces)[keep]]
@@ -344,10 +359,54 @@ def _search_block(
     n_ep, n_sat = sat.shape[:2]
     with np.errstate(invalid="ignore", divide="ignore"):
         u = (sat - ant[:, None]) / np.linalg.norm(sat - ant[:, None], axis=-1, keepdims=True)
+    out = Reflections(
+        np.full((n_ep, n_sat), np.nan),
+        np.full((n_ep, n_sat), -1, np.int64),
+        np.full((n_ep, n_sat, 3), np.nan),
+        np.full((n_ep, n_sat), np.nan),
+    )
+    rays = _candidate_rays(index, ant, u, ok, search, sin_min)
+    if rays is None:
+        return out
+    pair, d, n_or = rays
+    a = ant[pair // n_sat]
+    t, face = _cast_chunked(index.caster, a, d, chunk_rays)
+    cos_tol = np.cos(np.radians(search.specular_tolerance_deg))
+    hit = (face >= 0) & (t <= search.max_distance_m)
+    hit &= search.reflects[index.face_material[np.maximum(face, 0)]]
+    spec = np.abs(np.sum(index.normal_of(np.maximum(face, 0)) * n_or, -1)) >= cos_tol
+    sel = np.flatnonzero(hit & spec)
+    if not len(sel):
+        return out
+    pair, d, n_or, a, t, face = pair[sel], d[sel], n_or[sel], a[sel], t[sel], face[sel]
+    p = a + t[:, None] * d
+    s = sat.reshape(-1, 3)[pair]
+    us = u.reshape(-1, 3)[pair]
+    # the leg reflection point -> satellite, started just in front of the surface
+    free = _unoccluded(index.caster, p + 0.02 * n_or, us, chunk_rays)
+    if not free.any():
+        return out
+    pair, d, a, t, face = pair[free], d[free], a[free], t[free], face[free]
+    p, s = p[free], s[free]
+    _keep_best(out, n_sat, pair, d, a, t, face, p, s)
+    return out
 
-    # rays: one per (pair, candidate plane) with the satellite in front of the plane
+
+def _candidate_rays(
+    index: ReflectorIndex,
+    ant: NDArray,
+    u: NDArray,
+    ok: NDArray,
+    search: ReflectorSearch,
+    sin_min: float,
+) -> tuple[NDArray, NDArray, NDArray] | None:
+    """Rays (flat pair index, direction, plane normal toward the satellite), None if none.
+
+    One ray per (pair, candidate plane) with the satellite in front of the plane.
+    """
+    n_sat = u.shape[1]
     pair_l, dir_l, nrm_l = [], [], []
-    for e in range(n_ep):
+    for e in range(len(u)):
         js = np.flatnonzero(ok[e])
         if not len(js):
             continue
@@ -363,47 +422,46 @@ def _search_block(
         pair_l.append(e * n_sat + js[jj])
         dir_l.append(r[jj, kk])
         nrm_l.append(n_or[jj, kk])
-    out = Reflections(
-        np.full((n_ep, n_sat), np.nan),
-        np.full((n_ep, n_sat), -1, np.int64),
-        np.full((n_ep, n_sat, 3), np.nan),
-        np.full((n_ep, n_sat), np.nan),
-    )
     if not pair_l:
-        return out
-    pair = np.concatenate(pair_l)
-    d = np.concatenate(dir_l)
-    n_or = np.concatenate(nrm_l)
-    a = ant[pair // n_sat]
-    caster = index.caster
-    t = np.empty(len(pair))
-    face = np.empty(len(pair), np.int64)
-    for lo in range(0, len(pair), chunk_rays):
-        h = caster.cast(a[lo : lo + chunk_rays], d[lo : lo + chunk_rays])
+        return None
+    return np.concatenate(pair_l), np.concatenate(dir_l), np.concatenate(nrm_l)
+
+
+def _cast_chunked(
+    caster: Caster, origin: NDArray, direction: NDArray, chunk_rays: int
+) -> tuple[NDArray, NDArray]:
+    """Distance (m) and face id of the first hit of each ray, ``chunk_rays`` rays per call."""
+    t = np.empty(len(origin))
+    face = np.empty(len(origin), np.int64)
+    for lo in range(0, len(origin), chunk_rays):
+        h = caster.cast(origin[lo : lo + chunk_rays], direction[lo : lo + chunk_rays])
         t[lo : lo + chunk_rays] = h.distance_m
         face[lo : lo + chunk_rays] = h.face_id
-    cos_tol = np.cos(np.radians(search.specular_tolerance_deg))
-    hit = (face >= 0) & (t <= search.max_distance_m)
-    hit &= search.reflects[index.face_material[np.maximum(face, 0)]]
-    spec = np.abs(np.sum(index.normal_of(np.maximum(face, 0)) * n_or, -1)) >= cos_tol
-    sel = np.flatnonzero(hit & spec)
-    if not len(sel):
-        return out
-    pair, d, n_or, a, t, face = pair[sel], d[sel], n_or[sel], a[sel], t[sel], face[sel]
-    p = a + t[:, None] * d
-    s = sat.reshape(-1, 3)[pair]
-    us = u.reshape(-1, 3)[pair]
-    # the leg reflection point -> satellite, started just in front of the surface
-    free = np.empty(len(pair), bool)
-    start = p + 0.02 * n_or
-    for lo in range(0, len(pair), chunk_rays):
+    return t, face
+
+
+def _unoccluded(caster: Caster, start: NDArray, direction: NDArray, chunk_rays: int) -> NDArray:
+    """Boolean per ray: nothing blocks it (``chunk_rays`` rays per call)."""
+    free = np.empty(len(start), bool)
+    for lo in range(0, len(start), chunk_rays):
         free[lo : lo + chunk_rays] = ~caster.occluded(
-            start[lo : lo + chunk_rays], us[lo : lo + chunk_rays]
+            start[lo : lo + chunk_rays], direction[lo : lo + chunk_rays]
         )
-    if not free.any():
-        return out
-    pair, d, a, t, face = pair[free], d[free], a[free], t[free], face[free]
-    p, s = p[free], s[free]
+    return free
+
+
+def _keep_best(
+    out: Reflections,
+    n_sat: int,
+    pair: NDArray,
+    d: NDArray,
+    a: NDArray,
+    t: NDArray,
+    face: NDArray,
+    p: NDArray,
+    s: NDArray,
+) -> None:
+    """Write into ``out`` the best reflection of each pair (fills the arrays of ``out``)."""
     # |S - P| - |S - A| without cancellation: ((A - P) . (2S - A - P)) / (|S - P| + |S - A|)
     dsp = np.linalg.norm(s - p, axis=-1)
     dsa = np.linalg.norm(s - a, axis=-1)
@@ -417,7 +475,6 @@ def _search_block(
     out.face_id[pe, ps] = face[first]
     out.point_enu_m[pe, ps] = p[first]
     out.arrival_el_deg[pe, ps] = arrival[first]
-    return out
 
 
 def dll_error_m(

@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -29,7 +29,10 @@ import pyarrow as pa
 from numpy.typing import NDArray
 
 from predisat.geodesy import ecef_to_geodetic
-from predisat.synth.world import MATERIALS
+from predisat.jsontypes import JsonDict
+
+if TYPE_CHECKING:
+    from predisat.synth.world import Material
 
 __all__ = [
     "SIMRUN_FORMAT",
@@ -156,7 +159,7 @@ class SimRun:
     reflector_face: NDArray
     reflector_material: NDArray
     reflection_point_enu_m: NDArray
-    meta: Mapping[str, Any] = field(default_factory=dict)
+    meta: Mapping[str, Any] = field(default_factory=dict)  # Any: JSON values (as JsonDict)
 
     def __post_init__(self) -> None:
         n_ep, n_sat = len(self.gps_s), len(self.sats)
@@ -226,7 +229,6 @@ class SimRun:
         lat, lon, h = ecef_to_geodetic(self.antenna_ecef_m)
         ep.update(lat_deg=lat, lon_deg=lon, h_m=h)
         i, j = np.nonzero(self.state != SignalState.NOT_VISIBLE)
-        names = np.array([m.name for m in MATERIALS] + [""], dtype=object)
         sig: dict[str, Any] = {
             "epoch": i,
             "gps_s": self.gps_s[i],
@@ -240,7 +242,7 @@ class SimRun:
             for k, c in enumerate(cols):
                 sig[c] = getattr(self, name)[i, j, k]
         sig["reflector_face"] = self.reflector_face[i, j]
-        sig["reflector_material"] = names[self.reflector_material[i, j]]
+        sig["reflector_material"] = _material_names(self.reflector_material[i, j])
         return pd.DataFrame(ep), pd.DataFrame(sig)
 
     # ----------------------------------------------------------------- files
@@ -301,7 +303,7 @@ class SimRun:
         return _from_frames(folder, epochs, signals, sats, meta)
 
 
-def json_default(obj: Any) -> Any:
+def json_default(obj: object) -> object:
     """``json.dumps`` ``default`` for numpy scalars and arrays, tuples and sets."""
     if isinstance(obj, np.generic):
         return obj.item()
@@ -317,7 +319,7 @@ def read_folder_table(
     name: str,
     error: type[Exception],
     rewrite: str,
-    dtype: Mapping[str, Any] | None = None,
+    dtype: Mapping[str, type] | None = None,
 ) -> pd.DataFrame:
     """``name.parquet`` (preferred) or ``name.csv`` from ``folder``, shared by the simulation
     and run readers.
@@ -340,6 +342,34 @@ def read_folder_table(
                 f"{rewrite}")  # fmt: skip
 
 
+def _materials() -> tuple[Material, ...]:
+    """:data:`predisat.synth.world.MATERIALS`, imported only when a run names a material."""
+    # lazy: predisat.synth.world imports trimesh (the renderer); a run without reflections must
+    # be written and read without it
+    from predisat.synth.world import MATERIALS
+
+    return MATERIALS
+
+
+def _material_names(ids: NDArray) -> NDArray:
+    """Material names (object array, ``""`` for -1) of the material ids ``ids``."""
+    if not np.any(ids >= 0):
+        return np.array([""], dtype=object)[ids]
+    return np.array([m.name for m in _materials()] + [""], dtype=object)[ids]
+
+
+def _material_ids(names: pd.Series, where: Path) -> list[int]:
+    """Material ids (-1 for ``""``) of the material names ``names``; unknown names raise."""
+    named = set(names) - {""}
+    if not named:
+        return [-1] * len(names)
+    mat_ids = {m.name: k for k, m in enumerate(_materials())}
+    bad = sorted(named - set(mat_ids))
+    if bad:
+        raise SimRunError(f"{where}: unknown reflector materials {bad}")
+    return [mat_ids.get(m, -1) for m in names]
+
+
 def _read_table(folder: Path, name: str) -> pd.DataFrame:
     return read_folder_table(folder, name, SimRunError, "`locator simulate`",
                              {"sat": str, "state": str, "reflector_material": str})  # fmt: skip
@@ -352,7 +382,7 @@ def _require(df: pd.DataFrame, cols: tuple[str, ...], where: Path) -> None:
 
 
 def _from_frames(
-    folder: Path, epochs: pd.DataFrame, signals: pd.DataFrame, sats: tuple[str, ...], meta: dict
+    folder: Path, epochs: pd.DataFrame, signals: pd.DataFrame, sats: tuple[str, ...], meta: JsonDict
 ) -> SimRun:
     ep_cols = ("epoch", *_EPOCH_SCALARS, *(c for v in _EPOCH_VECTORS.values() for c in v))
     sig_vec = tuple(c for v in _SIGNAL_VECTORS.values() for c in v)
@@ -393,12 +423,8 @@ def _from_frames(
         kw[name] = arr
     face = np.full((n_ep, n_sat), -1, np.int64)
     face[i, j] = signals["reflector_face"].to_numpy(np.int64)
-    mat_ids = {m.name: k for k, m in enumerate(MATERIALS)}
     mat_names = signals["reflector_material"].fillna("").astype(str)
-    bad = sorted(set(mat_names) - set(mat_ids) - {""})
-    if bad:
-        raise SimRunError(f"{folder / 'signals'}: unknown reflector materials {bad}")
     mat = np.full((n_ep, n_sat), -1, np.int16)
-    mat[i, j] = [mat_ids.get(m, -1) for m in mat_names]
+    mat[i, j] = _material_ids(mat_names, folder / "signals")
     return SimRun(sats=sats, state=state, reflector_face=face, reflector_material=mat,
                   meta=meta, **kw)  # fmt: skip
