@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.raycast import Caster, make_caster
 
 if TYPE_CHECKING:
@@ -174,10 +175,6 @@ class ReflectorSearch:
 def _material_ids(names: Sequence[str]) -> tuple[int, list[int]]:
     """Number of materials of the synthetic world and the ids of ``names`` (KeyError naming
     the known materials at the first unknown name)."""
-    # lazy: predisat.synth.world imports trimesh (the renderer); importing the simulator (and
-    # the locator's command line through it) must not need it, running a simulation does
-    from predisat.synth.world import MATERIALS, material_id
-
     return len(MATERIALS), [material_id(m) for m in names]
 
 

@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -30,9 +30,7 @@ from numpy.typing import NDArray
 
 from predisat.geodesy import ecef_to_geodetic
 from predisat.jsontypes import JsonDict
-
-if TYPE_CHECKING:
-    from predisat.synth.world import Material
+from predisat.synth.materials import MATERIALS
 
 __all__ = [
     "SIMRUN_FORMAT",
@@ -342,20 +340,11 @@ def read_folder_table(
                 f"{rewrite}")  # fmt: skip
 
 
-def _materials() -> tuple[Material, ...]:
-    """:data:`predisat.synth.world.MATERIALS`, imported only when a run names a material."""
-    # lazy: predisat.synth.world imports trimesh (the renderer); a run without reflections must
-    # be written and read without it
-    from predisat.synth.world import MATERIALS
-
-    return MATERIALS
-
-
 def _material_names(ids: NDArray) -> NDArray:
     """Material names (object array, ``""`` for -1) of the material ids ``ids``."""
     if not np.any(ids >= 0):
         return np.array([""], dtype=object)[ids]
-    return np.array([m.name for m in _materials()] + [""], dtype=object)[ids]
+    return np.array([m.name for m in MATERIALS] + [""], dtype=object)[ids]
 
 
 def _material_ids(names: pd.Series, where: Path) -> list[int]:
@@ -363,7 +352,7 @@ def _material_ids(names: pd.Series, where: Path) -> list[int]:
     named = set(names) - {""}
     if not named:
         return [-1] * len(names)
-    mat_ids = {m.name: k for k, m in enumerate(_materials())}
+    mat_ids = {m.name: k for k, m in enumerate(MATERIALS)}
     bad = sorted(named - set(mat_ids))
     if bad:
         raise SimRunError(f"{where}: unknown reflector materials {bad}")

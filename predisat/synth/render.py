@@ -29,9 +29,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount
+from predisat.synth.materials import MATERIALS
 from predisat.synth.raycast import Caster, Hits, SceneMesh, make_caster
 from predisat.synth.sky import SkyModel, fbm
-from predisat.synth.world import MATERIALS, World
+from predisat.synth.world import World
 
 __all__ = [
     "LABEL_OBSTACLE",

@@ -3,7 +3,8 @@
 A :class:`WorldSpec` is a recipe: a sequence of :class:`Stretch` es (open country, stations,
 towns, tree rows, cuttings, rock walls, overbridges, tunnels), catenary on or off, distant hills
 on or off. :meth:`World.build` turns it into one triangle mesh in the track's local ENU frame,
-with a :class:`Material` per face. The same track, recipe and seed always give the same mesh.
+with a :class:`~predisat.synth.materials.Material` per face. The same track, recipe and seed
+always give the same mesh.
 
 L-band policy: a structure blocks GNSS signals (``blocks_lband=True``) unless it is much thinner
 than the L1 wavelength (19 cm) and its first Fresnel zone (about 1.5 m across at 10 m), such as
@@ -28,69 +29,21 @@ from scipy.spatial import cKDTree
 
 from predisat.geodesy import LocalFrame
 from predisat.jsontypes import JsonDict
+from predisat.synth.materials import MATERIAL_IDS, MATERIALS
 from predisat.synth.scenery import Context, Corridor, MeshBuilder, build_catenary, build_stretch
 from predisat.track import TrackMap
 
 __all__ = [
-    "MATERIALS",
     "STRETCH_KINDS",
-    "Material",
     "Stretch",
     "StretchTuple",
     "World",
     "WorldOptions",
     "WorldSpec",
-    "material_id",
 ]
 
 WORLD_FORMAT = "predisat.synth.world/1"
 
-
-@dataclass(frozen=True)
-class Material:
-    """Appearance and radio behaviour of a surface.
-
-    Attributes
-    ----------
-    name : str
-    albedo_rgb : tuple of float, shape (3,)
-        Diffuse reflectance in linear RGB, 0-1.
-    texture : str
-        Hint for the renderer (``"grass"``, ``"brick"``, ``"foliage"``, ...).
-    blocks_lband : bool
-        True when the surface blocks GNSS L-band signals.
-    thin : bool
-        True for structures much thinner than the L1 wavelength (wires, thin tubes); such
-        surfaces never block L-band and are labelled separately by the renderer.
-    """
-
-    name: str
-    albedo_rgb: tuple[float, float, float]
-    texture: str
-    blocks_lband: bool = True
-    thin: bool = False
-
-
-MATERIALS: tuple[Material, ...] = (
-    Material("grass", (0.10, 0.17, 0.05), "grass"),
-    Material("ballast", (0.22, 0.20, 0.18), "gravel"),
-    Material("platform", (0.40, 0.38, 0.35), "concrete"),
-    Material("brick", (0.35, 0.14, 0.08), "brick"),
-    Material("plaster", (0.60, 0.55, 0.45), "plaster"),
-    Material("roof_tiles", (0.30, 0.10, 0.06), "tiles"),
-    Material("canopy", (0.45, 0.47, 0.50), "metal"),
-    Material("steel", (0.25, 0.27, 0.28), "metal"),
-    Material("wire", (0.12, 0.10, 0.08), "wire", blocks_lband=False, thin=True),
-    Material("cantilever", (0.30, 0.30, 0.30), "metal", blocks_lband=False, thin=True),
-    Material("foliage", (0.05, 0.12, 0.03), "foliage"),
-    Material("bark", (0.12, 0.09, 0.06), "bark"),
-    Material("rock", (0.38, 0.34, 0.28), "rock"),
-    Material("concrete", (0.45, 0.44, 0.42), "concrete"),
-    Material("hills", (0.09, 0.15, 0.05), "grass"),
-)
-"""Materials of the synthetic world; a face's material id indexes this tuple."""
-
-_MAT = {m.name: i for i, m in enumerate(MATERIALS)}
 
 STRETCH_KINDS = (
     "open",
@@ -103,13 +56,6 @@ STRETCH_KINDS = (
     "tunnel",
 )
 _SPANNING = ("overbridge", "tunnel")  # always cross the whole corridor
-
-
-def material_id(name: str) -> int:
-    """Index in :data:`MATERIALS` of the material called ``name``."""
-    if name not in _MAT:
-        raise KeyError(f"unknown material {name!r}; known: {sorted(_MAT)}")
-    return _MAT[name]
 
 
 @dataclass(frozen=True)
@@ -338,7 +284,7 @@ class World:
     vertices_m : ndarray, shape (n, 3), float64
     faces : ndarray, shape (m, 3), int32
     face_material : ndarray, shape (m,), int16
-        Index into :data:`MATERIALS`.
+        Index into :data:`predisat.synth.materials.MATERIALS`.
     """
 
     track: TrackMap
@@ -372,7 +318,7 @@ class World:
         mb = MeshBuilder()
         rng = np.random.default_rng([int(seed), 3])
         _add_terrain(mb, corridor, track.frame, spec, rng)
-        ctx = Context(corridor, rng, _MAT, mb)
+        ctx = Context(corridor, rng, MATERIAL_IDS, mb)
         ss = np.arange(corridor.s_m[0], corridor.s_m[-1] + 5.0, 5.0)
         bed = [[-3.0, -0.55], [3.0, -0.55], [1.7, -0.2], [-1.7, -0.2]]
         ctx.sweep(ss, bed, "ballast")
@@ -508,4 +454,5 @@ def _add_terrain(
     faces = np.concatenate(
         [np.stack([i, i + ny, i + ny + 1], -1), np.stack([i, i + ny + 1, i + 1], -1)]
     )
-    mb.add(verts, faces, np.where(dist[faces].max(1) > 300.0, _MAT["hills"], _MAT["grass"]))
+    far = dist[faces].max(1) > 300.0
+    mb.add(verts, faces, np.where(far, MATERIAL_IDS["hills"], MATERIAL_IDS["grass"]))

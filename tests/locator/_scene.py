@@ -12,7 +12,8 @@ from numpy.typing import NDArray
 
 from locator.sathia import AntennaPath
 from predisat.geodesy import LocalFrame, azel_to_enu, ecef_to_geodetic, enu_rotation
-from predisat.synth.world import Stretch, World, WorldSpec, material_id
+from predisat.synth.materials import material_id
+from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track.map import TrackMap
 
 FRAME = LocalFrame(50.45, 4.45, 150.0)

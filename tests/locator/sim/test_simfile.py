@@ -10,7 +10,7 @@ import pytest
 
 from locator.sim.simfile import SIMRUN_FORMAT, SignalState, SimRun, SimRunError
 from predisat.geodesy import LocalFrame, ecef_to_geodetic
-from predisat.synth.world import material_id
+from predisat.synth.materials import material_id
 
 FRAME = LocalFrame(44.0, 6.2, 600.0)
 SATS = ("G01", "E11", "C05", "R07")

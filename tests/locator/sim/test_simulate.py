@@ -21,7 +21,8 @@ from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import azel_to_enu, enu_rotation
 from predisat.gnss.errormodel import ErrorModel
 from predisat.gnss.orbits import C_MPS
-from predisat.synth.world import MATERIALS, Stretch, World, WorldSpec
+from predisat.synth.materials import MATERIALS
+from predisat.synth.world import Stretch, World, WorldSpec
 from tests.locator._scene import (
     CANYON_FRAME as FRAME,
 )

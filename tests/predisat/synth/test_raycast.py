@@ -9,8 +9,9 @@ import pytest
 import trimesh
 from numpy.typing import NDArray
 
+from predisat.synth.materials import material_id
 from predisat.synth.raycast import BACKENDS, Hits, make_caster
-from predisat.synth.world import World, WorldSpec, material_id
+from predisat.synth.world import World, WorldSpec
 from tests.predisat.synth.test_world import straight_track
 
 

@@ -12,6 +12,7 @@ from scipy import ndimage
 from shapely.geometry import MultiPoint, Point
 
 from predisat.camera.models import CameraModel
+from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.render import (
     LABEL_OBSTACLE,
     LABEL_SKY,
@@ -24,7 +25,6 @@ from predisat.synth.render import (
     render_radiance,
 )
 from predisat.synth.sky import SkyModel
-from predisat.synth.world import MATERIALS, material_id
 
 GRASS, CONCRETE, WIRE = material_id("grass"), material_id("concrete"), material_id("wire")
 BOX = (8.0, 14.0, -3.0, 3.0, 0.0, 8.0)  # x0, x1, y0, y1, z0, z1 (m)

@@ -10,15 +10,9 @@ import trimesh
 import yaml
 
 from predisat.geodesy import WGS84
+from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.scenery import Corridor, extrude
-from predisat.synth.world import (
-    MATERIALS,
-    STRETCH_KINDS,
-    Stretch,
-    World,
-    WorldSpec,
-    material_id,
-)
+from predisat.synth.world import STRETCH_KINDS, Stretch, World, WorldSpec
 from predisat.track.map import TrackMap
 
 LAT0, LON0, H0 = 50.55, 4.70, 150.0
