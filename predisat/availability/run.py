@@ -30,12 +30,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+from tqdm import tqdm
 
+from predisat import __version__
 from predisat.availability.engine import Availability, compute_availability
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
@@ -51,6 +52,8 @@ from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
+from predisat.jsontypes import JsonDict
+from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.maskset import MaskSet
 from predisat.track import TrackMap, TrackMapError, load_track
 
@@ -92,7 +95,7 @@ class AvailabilityRun:
     summary: pd.DataFrame
     results: tuple[Availability, ...]
     elapsed_s: float = 0.0
-    info: dict[str, Any] = field(default_factory=dict)
+    info: JsonDict = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------- inputs
@@ -314,8 +317,6 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
 def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
     if isinstance(masks, MaskSet):
         return masks, "in memory"
-    from predisat.masks.fileformat import mask_file_path, read_masks
-
     return read_masks(masks), str(mask_file_path(masks))
 
 
@@ -359,7 +360,7 @@ def check_masks_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> N
 
 
 def _sky_chainages(
-    masks: MaskSet, track: Any, sky_km: Sequence[float] | None, n_sky: int
+    masks: MaskSet, track: TrackMap | None, sky_km: Sequence[float] | None, n_sky: int
 ) -> NDArray:
     lo, hi = float(masks.chainage_m[0]), float(masks.chainage_m[-1])
     if sky_km is None or len(sky_km) == 0:
@@ -369,8 +370,7 @@ def _sky_chainages(
         want = lo + frac * (hi - lo)
         return masks.chainage_m[masks.position_index(want)[0]]
     km_m = np.asarray(sky_km, float) * 1000.0
-    posts = getattr(track, "kilometre_posts", ()) if track is not None else ()
-    if posts:
+    if track is not None and track.kilometre_posts:
         grid = np.linspace(lo, hi, 2001)
         line_km = track.kilometre_at(grid)
         if np.all(np.diff(line_km) > 0):
@@ -470,10 +470,8 @@ def run_availability(
     ValueError
         Window outside the navigation data, masks not on the track, bad options.
     """
-    from tqdm import tqdm
-
-    from predisat import __version__
-    from predisat.availability.report import ReportInputs, build_report, write_tables
+    # lazy: the report's figures need matplotlib, which the module's other users do not
+    from predisat.availability.report import ReportInputs, build_report
 
     t0 = time.perf_counter()
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
@@ -487,24 +485,7 @@ def run_availability(
         stage("masks")
         mask_set, masks_label = _load_masks(masks)
         track = _load_track(track)
-        if from_m is not None or to_m is not None:
-            lo_m = -np.inf if from_m is None else from_m
-            hi_m = np.inf if to_m is None else to_m
-            ch_m = mask_set.chainage_m
-            if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
-                given = " ".join(
-                    f"{name} {v:g} m ({flag} {v / 1000:g})"
-                    for name, flag, v in (
-                        ("from_m", "--from-km", from_m), ("to_m", "--to-km", to_m)
-                    )
-                    if v is not None
-                )
-                raise ValueError(
-                    f"{given}: no position of masks {masks_label}, which cover "
-                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
-                    "choose a stretch inside"
-                )
-            mask_set = mask_set.subset(lo_m, hi_m)
+        mask_set = _stretch(mask_set, masks_label, from_m, to_m)
         if track is not None:
             check_masks_on_track(mask_set, track, masks_label)
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
@@ -514,19 +495,7 @@ def run_availability(
         bar.update(1)
 
         stage("navigation")
-        ephemeris = load_navigation(nav)
-        names = ", ".join(Path(p).name for p in nav) if nav else ""
-        nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
-        t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
-        t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
-        if not select_satellites(ephemeris.satellites, constellation):
-            raise ValueError(
-                f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
-                "constellation (--constellation) or give navigation data for it"
-            )
-        sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
-        _check_window(sats, ephemeris, nav_label)
-        warnings = sparse_navigation(sats, nav_label)
+        nav_data = _navigation(nav, start, end, step_s, constellation)
         positions = LinePositions.from_masks(mask_set)
         bar.update(1)
 
@@ -537,7 +506,7 @@ def run_availability(
             stage(rule.label)
             results.append(
                 compute_availability(
-                    sats,
+                    nav_data.sats,
                     positions,
                     rule,
                     interval_every=interval_every,
@@ -551,22 +520,17 @@ def run_availability(
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         info = _run_info(
-            mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
-            step_s, interval_every, __version__, model,
+            mask_set, masks_label, track, nav_data.ephemeris, nav_data.label, nav_data.sats,
+            constellation, rules, step_s, interval_every, __version__, model,
         )  # fmt: skip
-        info["warnings"] = warnings
-        files, summary = write_tables(out, results, track, info, counts_table)
-        # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
-        # its validity window, inconsistent, no data): such satellites count for no rule.
-        files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
-        status = sats.status.report()
-        status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
+        info["warnings"] = nav_data.warnings
+        files, summary = _write_run_tables(out, results, track, info, counts_table, nav_data.sats)
         bar.update(1)
 
         stage("figures")
         inputs = ReportInputs(
-            results=tuple(results), masks=mask_set, satellites=sats, track=track, info=info,
-            sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+            results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
+            info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
         )  # fmt: skip
         html = build_report(inputs)
         bar.update(1)
@@ -583,11 +547,89 @@ def run_availability(
     )
 
 
+def _stretch(
+    mask_set: MaskSet, masks_label: str, from_m: float | None, to_m: float | None
+) -> MaskSet:
+    """The masks of the chainage stretch ``[from_m, to_m]`` (all when neither is given)."""
+    if from_m is None and to_m is None:
+        return mask_set
+    lo_m = -np.inf if from_m is None else from_m
+    hi_m = np.inf if to_m is None else to_m
+    ch_m = mask_set.chainage_m
+    if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
+        given = " ".join(
+            f"{name} {v:g} m ({flag} {v / 1000:g})"
+            for name, flag, v in (("from_m", "--from-km", from_m), ("to_m", "--to-km", to_m))
+            if v is not None
+        )
+        raise ValueError(
+            f"{given}: no position of masks {masks_label}, which cover "
+            f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
+            "choose a stretch inside"
+        )
+    return mask_set.subset(lo_m, hi_m)
+
+
+@dataclass(frozen=True)
+class _Navigation:
+    """The navigation data of a run and the satellites it gives over the window."""
+
+    ephemeris: Ephemeris
+    label: str  # how messages name the navigation data
+    sats: SatellitePositions
+    warnings: list[str]
+
+
+def _navigation(
+    nav: Sequence[str | Path] | None,
+    start: float | str | None,
+    end: float | str | None,
+    step_s: float,
+    constellation: str,
+) -> _Navigation:
+    """Load the navigation data, build the window and the satellites' positions over it."""
+    ephemeris = load_navigation(nav)
+    names = ", ".join(Path(p).name for p in nav) if nav else ""
+    nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
+    t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
+    t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
+    if not select_satellites(ephemeris.satellites, constellation):
+        raise ValueError(
+            f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
+            "constellation (--constellation) or give navigation data for it"
+        )
+    sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
+    _check_window(sats, ephemeris, nav_label)
+    warnings = sparse_navigation(sats, nav_label)
+    return _Navigation(ephemeris, nav_label, sats, warnings)
+
+
+def _write_run_tables(
+    out: Path,
+    results: Sequence[Availability],
+    track: TrackMap | None,
+    info: JsonDict,
+    counts_table: bool,
+    sats: SatellitePositions,
+) -> tuple[dict[str, Path], pd.DataFrame]:
+    """Write the tables, the GIS layer and the ephemeris status; returns the files and summary."""
+    # lazy: the report module needs matplotlib, which the module's other users do not
+    from predisat.availability.report import write_tables
+
+    files, summary = write_tables(out, results, track, info, counts_table)
+    # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+    # its validity window, inconsistent, no data): such satellites count for no rule.
+    files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
+    status = sats.status.report()
+    status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
+    return files, summary
+
+
 def _run_info(
     masks: MaskSet, masks_label: str, track: TrackMap | None, ephemeris: Ephemeris, nav_label: str,
     sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
     interval_every: int, version: str, model: IntervalModel,
-) -> dict[str, Any]:  # fmt: skip
+) -> JsonDict:  # fmt: skip
     systems = sorted({s[0] for s in sats.sats})
     line = track.name if track is not None else str(masks.provenance.get("track", "line"))
     km = track.kilometre_at(masks.chainage_m[[0, -1]]) if track is not None else None
