@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -478,16 +479,10 @@ def run_availability(
     stages = 2 + (2 + len(cutoffs)) + 3  # masks, navigation; one per rule; tables, figures, report
     bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
     try:
-
-        def stage(text: str) -> None:
-            bar.set_postfix_str(text)
+        stage = bar.set_postfix_str
 
         stage("masks")
-        mask_set, masks_label = _load_masks(masks)
-        track = _load_track(track)
-        mask_set = _stretch(mask_set, masks_label, from_m, to_m)
-        if track is not None:
-            check_masks_on_track(mask_set, track, masks_label)
+        mask_set, masks_label, track = _masks_on_track(masks, track, from_m, to_m)
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
@@ -501,29 +496,17 @@ def run_availability(
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
-        results = []
-        for rule in rules:
-            stage(rule.label)
-            results.append(
-                compute_availability(
-                    nav_data.sats,
-                    positions,
-                    rule,
-                    interval_every=interval_every,
-                    interval_model=model,
-                    workers=workers,
-                )
-            )
-            bar.update(1)
+        results = _compute_rules(
+            rules, nav_data.sats, positions, interval_every, model, workers, bar
+        )
 
         stage("tables")
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         info = _run_info(
-            mask_set, masks_label, track, nav_data.ephemeris, nav_data.label, nav_data.sats,
-            constellation, rules, step_s, interval_every, __version__, model,
+            mask_set, masks_label, track, nav_data, constellation, rules, step_s,
+            interval_every, __version__, model,
         )  # fmt: skip
-        info["warnings"] = nav_data.warnings
         files, summary = _write_run_tables(out, results, track, info, counts_table, nav_data.sats)
         bar.update(1)
 
@@ -545,6 +528,21 @@ def run_availability(
     return AvailabilityRun(
         out, report, files, summary, tuple(results), time.perf_counter() - t0, info
     )
+
+
+def _masks_on_track(
+    masks: str | Path | MaskSet,
+    track: TrackMap | str | os.PathLike[str] | None,
+    from_m: float | None,
+    to_m: float | None,
+) -> tuple[MaskSet, str, TrackMap | None]:
+    """The masks of the stretch (checked to lie on ``track``), how to name them, the track."""
+    mask_set, masks_label = _load_masks(masks)
+    track_map = _load_track(track)
+    mask_set = _stretch(mask_set, masks_label, from_m, to_m)
+    if track_map is not None:
+        check_masks_on_track(mask_set, track_map, masks_label)
+    return mask_set, masks_label, track_map
 
 
 def _stretch(
@@ -604,6 +602,33 @@ def _navigation(
     return _Navigation(ephemeris, nav_label, sats, warnings)
 
 
+def _compute_rules(
+    rules: Sequence[TrustRule],
+    sats: SatellitePositions,
+    positions: LinePositions,
+    interval_every: int,
+    model: IntervalModel,
+    workers: int,
+    bar: tqdm[NoReturn],
+) -> list[Availability]:
+    """The availability under every rule, in order; one step of ``bar`` each."""
+    results = []
+    for rule in rules:
+        bar.set_postfix_str(rule.label)
+        results.append(
+            compute_availability(
+                sats,
+                positions,
+                rule,
+                interval_every=interval_every,
+                interval_model=model,
+                workers=workers,
+            )
+        )
+        bar.update(1)
+    return results
+
+
 def _write_run_tables(
     out: Path,
     results: Sequence[Availability],
@@ -626,10 +651,11 @@ def _write_run_tables(
 
 
 def _run_info(
-    masks: MaskSet, masks_label: str, track: TrackMap | None, ephemeris: Ephemeris, nav_label: str,
-    sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
-    interval_every: int, version: str, model: IntervalModel,
+    masks: MaskSet, masks_label: str, track: TrackMap | None, nav: _Navigation,
+    constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
+    version: str, model: IntervalModel,
 ) -> JsonDict:  # fmt: skip
+    ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
     line = track.name if track is not None else str(masks.provenance.get("track", "line"))
     km = track.kilometre_at(masks.chainage_m[[0, -1]]) if track is not None else None
@@ -668,6 +694,7 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model == IntervalModel(),
         "nav_is_embedded": nav_label.startswith("embedded"),
+        "warnings": nav.warnings,
     }
 
 

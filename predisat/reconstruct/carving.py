@@ -35,6 +35,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount, vehicle_to_enu
+from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.reconstruct.heightfield import (
     HeightField,
@@ -43,6 +44,7 @@ from predisat.reconstruct.heightfield import (
     corridor_grid,
 )
 from predisat.reconstruct.skyline import Rectifier, SkyProfile
+from predisat.track import TrackMap
 
 __all__ = [
     "FrameView",
@@ -242,7 +244,11 @@ class Reconstruction:
     overhead_m: NDArray
     params: ReconstructionParams
 
-    def to_maskset(self, track: Any, **kwargs: Any) -> MaskSet:
+    def to_maskset(
+        self,
+        track: TrackMap,
+        **kwargs: Any,  # Any: forwarded to MaskSet.from_arrays, whose signature types them
+    ) -> MaskSet:
         """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``."""
         prov = dict(kwargs.pop("provenance", None) or {})
         prov.setdefault("reconstruction", _params_dict(self.params))
@@ -258,7 +264,7 @@ class Reconstruction:
         )
 
 
-def _params_dict(p: ReconstructionParams) -> dict[str, Any]:
+def _params_dict(p: ReconstructionParams) -> JsonDict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.__dict__.items()}
 
 
@@ -303,7 +309,7 @@ class Reconstructor:
     def height_field(
         self,
         frames: Sequence[FrameView],
-        track: Any,
+        track: TrackMap,
         lo_m: float,
         hi_m: float,
         profiles: Sequence[SkyProfile] | None = None,
@@ -336,7 +342,9 @@ class Reconstructor:
             hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings,
         )  # fmt: skip
 
-    def run(self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: Any) -> Reconstruction:
+    def run(
+        self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: TrackMap
+    ) -> Reconstruction:
         """Masks at ``chainage_m`` (one window) from ``frames``.
 
         ``frames`` should hold every frame within :attr:`ReconstructionParams.overlap_m` of the
@@ -393,7 +401,7 @@ class Reconstructor:
 def reconstruct_masks(
     frames: Sequence[FrameView],
     chainage_m: ArrayLike,
-    track: Any,
+    track: TrackMap,
     params: ReconstructionParams | None = None,
 ) -> Reconstruction:
     """Masks at ``chainage_m`` from ``frames`` (see :class:`Reconstructor`)."""
@@ -488,12 +496,12 @@ def _ceiling_caps(ceilings: NDArray, s: NDArray, antenna_m: NDArray) -> NDArray:
     return out
 
 
-def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:
+def _local_rotations(track: TrackMap, enu_m: NDArray) -> NDArray:
     lat, lon, _ = track.frame.to_geodetic(enu_m)
     return np.asarray(track.frame.rotation_from(lat, lon))
 
 
-def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, NDArray]:
+def _camera_geometry(frames: Sequence[FrameView], track: TrackMap) -> tuple[NDArray, NDArray]:
     """Camera centres (n, 3) and local-to-frame rotations (n, 3, 3) of frames."""
     ant = np.stack([np.asarray(f.antenna_enu_m, float) for f in frames])
     rot = _local_rotations(track, ant)
@@ -504,7 +512,7 @@ def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, 
     return cams, rot
 
 
-def _antennas(track: Any, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
+def _antennas(track: TrackMap, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
     axis = np.asarray(track.enu_at(s), float)
     rot = _local_rotations(track, axis)
     ant = axis + height_m * rot[:, :, 2]
@@ -778,7 +786,7 @@ def _far_field(
     profiles: Sequence[SkyProfile],
     s: NDArray,
     ant: NDArray,
-    track: Any,
+    track: TrackMap,
     p: ReconstructionParams,
 ) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]]]:
     """Far-field elevation bound per bin, whether a camera saw it, and the profiles per position.
@@ -879,7 +887,7 @@ def _observed(
 
 
 def _descriptors(
-    hf: HeightField, track: Any, s: NDArray, ant: NDArray, p: ReconstructionParams
+    hf: HeightField, track: TrackMap, s: NDArray, ant: NDArray, p: ReconstructionParams
 ) -> dict[str, NDArray]:
     """Reflection-risk descriptors from the height field, per side.
 
