@@ -632,6 +632,7 @@ def _horizon_parts(
     return el, unknown, el_far, unknown_far
 
 
+# long: one numba kernel; helpers called per cell cost 3.8-4x (scripts/bench_march.py)
 @njit(cache=True, nogil=True, error_model="numpy")
 def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
