@@ -239,7 +239,12 @@ class MaskSet:
         track: _Track,
         chainage_m: ArrayLike,
         mask_el_deg: ArrayLike,
-        **kwargs: Any,  # Any: forwarded to from_arrays, whose signature types them
+        *,
+        az_step_deg: float | None = None,
+        source: ArrayLike | None = None,
+        margin_deg: ArrayLike = 0.0,
+        descriptors: Mapping[str, ArrayLike] | None = None,
+        provenance: JsonDict | None = None,
     ) -> MaskSet:
         """Mask set whose positions and headings come from a track map.
 
@@ -249,17 +254,20 @@ class MaskSet:
             Supplies ``position_at`` (lat, lon, h) and ``heading_at`` at each chainage.
         chainage_m : array_like, shape (n_pos,)
         mask_el_deg : array_like, shape (n_pos, n_az)
-        **kwargs
-            Passed to :meth:`from_arrays` (``source``, ``margin_deg``, ...). The track's
-            name is recorded in the provenance as ``track`` unless given.
+        az_step_deg, source, margin_deg, descriptors
+            As in :meth:`from_arrays`.
+        provenance : mapping, optional
+            As in :meth:`from_arrays`; the track's name is recorded as ``track`` unless given.
         """
         ch = np.asarray(chainage_m, float)
         lat, lon, h = track.position_at(ch)
-        prov = dict(kwargs.pop("provenance", None) or {})
+        prov = dict(provenance or {})
         prov.setdefault("track", getattr(track, "name", ""))
         return cls.from_arrays(
-            ch, lat, lon, h, track.heading_at(ch), mask_el_deg, provenance=prov, **kwargs
-        )
+            ch, lat, lon, h, track.heading_at(ch), mask_el_deg, provenance=prov,
+            az_step_deg=az_step_deg, source=source, margin_deg=margin_deg,
+            descriptors=descriptors,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ properties
     @property

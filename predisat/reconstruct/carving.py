@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numba import njit
@@ -247,10 +246,17 @@ class Reconstruction:
     def to_maskset(
         self,
         track: TrackMap,
-        **kwargs: Any,  # Any: forwarded to MaskSet.from_arrays, whose signature types them
+        *,
+        margin_deg: ArrayLike = 0.0,
+        provenance: JsonDict | None = None,
     ) -> MaskSet:
-        """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``."""
-        prov = dict(kwargs.pop("provenance", None) or {})
+        """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``.
+
+        ``margin_deg`` and ``provenance`` as in :meth:`MaskSet.from_arrays
+        <predisat.masks.maskset.MaskSet.from_arrays>`; the reconstruction parameters are
+        recorded in the provenance as ``reconstruction`` unless given.
+        """
+        prov = dict(provenance or {})
         prov.setdefault("reconstruction", _params_dict(self.params))
         return MaskSet.from_track(
             track,
@@ -260,7 +266,7 @@ class Reconstruction:
             source=self.source,
             descriptors=self.descriptors,
             provenance=prov,
-            **kwargs,
+            margin_deg=margin_deg,
         )
 
 
