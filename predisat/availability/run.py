@@ -472,7 +472,7 @@ def run_availability(
         Window outside the navigation data, masks not on the track, bad options.
     """
     # lazy: the report's figures need matplotlib, which the module's other users do not
-    from predisat.availability.report import ReportInputs, build_report
+    from predisat.availability.report import ReportInputs, build_report, write_tables
 
     t0 = time.perf_counter()
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
@@ -507,7 +507,8 @@ def run_availability(
             mask_set, masks_label, track, nav_data, constellation, rules, step_s,
             interval_every, __version__, model,
         )  # fmt: skip
-        files, summary = _write_run_tables(out, results, track, info, counts_table, nav_data.sats)
+        files, summary = write_tables(out, results, track, info, counts_table)
+        files["ephemeris_status_csv"] = _write_ephemeris_status(out, nav_data.sats)
         bar.update(1)
 
         stage("figures")
@@ -629,25 +630,16 @@ def _compute_rules(
     return results
 
 
-def _write_run_tables(
-    out: Path,
-    results: Sequence[Availability],
-    track: TrackMap | None,
-    info: JsonDict,
-    counts_table: bool,
-    sats: SatellitePositions,
-) -> tuple[dict[str, Path], pd.DataFrame]:
-    """Write the tables, the GIS layer and the ephemeris status; returns the files and summary."""
-    # lazy: the report module needs matplotlib, which the module's other users do not
-    from predisat.availability.report import write_tables
+def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:
+    """Write ``ephemeris_status.csv`` into ``out``; returns its path.
 
-    files, summary = write_tables(out, results, track, info, counts_table)
-    # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
-    # its validity window, inconsistent, no data): such satellites count for no rule.
-    files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
+    Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+    its validity window, inconsistent, no data): such satellites count for no rule.
+    """
+    path = out / "ephemeris_status.csv"
     status = sats.status.report()
-    status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
-    return files, summary
+    status.to_csv(path, index=False, float_format="%.12g")
+    return path
 
 
 def _run_info(
