@@ -34,12 +34,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+from tqdm import tqdm
 
 from predisat.availability.interval import predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
-from predisat.geodesy import enu_rotation
+from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import gps_s_to_utc_text
+from predisat.jsontypes import JsonDict
+from predisat.track import TrackMap
 
 __all__ = [
     "THRESHOLDS",
@@ -93,7 +96,7 @@ class Availability:
     interval_m: NDArray | None
     sensitivity: NDArray | None
     opening_angle_deg: NDArray
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: JsonDict = field(default_factory=dict)
 
     @property
     def chainage_m(self) -> NDArray:
@@ -156,12 +159,12 @@ class Availability:
         return out
 
     # ------------------------------------------------------------------ tables
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonDict:
         """Line-wide figures (JSON-serialisable)."""
         by_epoch = self.longest_below_m(4)
         by_pos = self.longest_below_s(4)
         e, p = int(np.argmax(by_epoch)), int(np.argmax(by_pos))
-        out: dict[str, Any] = {
+        out: JsonDict = {
             "rule": self.rule,
             "n_pos": len(self.chainage_m),
             "n_epoch": len(self.gps_s),
@@ -230,6 +233,7 @@ class Availability:
         With ``counts=True`` the file holds the full ``count`` array instead, long format
         (``chainage_m, gps_s, count``).
         """
+        # lazy: pyarrow only for this writer, not for the engine's computations
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -253,7 +257,9 @@ class Availability:
         pq.write_table(table.replace_schema_metadata(meta), path)
         return path
 
-    def to_geojson_lines(self, track: Any = None, path: str | Path | None = None) -> dict:
+    def to_geojson_lines(
+        self, track: TrackMap | None = None, path: str | Path | None = None
+    ) -> JsonDict:
         """The line cut into one segment per position, coloured by availability (for QGIS).
 
         Each LineString covers the position's cell (half-way to its neighbours), following the
@@ -462,8 +468,6 @@ def compute_availability(
 
 def _progress(total: int, on: bool) -> Any:
     if on:
-        from tqdm import tqdm
-
         return tqdm(total=total, desc="availability", unit="chunk")
 
     class _Null:
@@ -501,8 +505,6 @@ def _candidates(
 
 
 def _geodetic_of(xyz: NDArray) -> tuple[float, float]:
-    from predisat.geodesy import ecef_to_geodetic
-
     lat, lon, _ = ecef_to_geodetic(xyz)
     return float(lat), float(lon)
 

@@ -22,23 +22,29 @@ from __future__ import annotations
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import matplotlib.dates as mdates
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from numpy.typing import NDArray
 
 from predisat.availability.engine import Availability
+from predisat.geodesy import LocalFrame
 from predisat.gnss.timescale import gps_s_to_datetime64
+from predisat.track import KilometrePost, TrackMap
 
 __all__ = [
     "COUNT_CLASSES",
     "LOCOPROL",
+    "LineStyle",
     "SkyView",
     "availability_along_line",
+    "check_results",
     "count_maps",
     "figure_to_png",
     "interval_along_line",
@@ -71,7 +77,15 @@ _MAP_MAX_CELLS = (400, 720)  # (positions, epochs) drawn per count-map panel
 _FIG_W_IN = 11.0
 
 
-def rule_style(label: str, index: int = 0) -> dict[str, Any]:
+class LineStyle(TypedDict):
+    """Keyword arguments of ``Axes.plot`` that draw a trust rule."""
+
+    color: str
+    linestyle: str
+    linewidth: float
+
+
+def rule_style(label: str, index: int = 0) -> LineStyle:
     """Line style of a trust rule in every figure (masks: solid blue; no mask: grey dashed)."""
     if label == "masks":
         return {"color": "#1f5fa8", "linestyle": "-", "linewidth": 1.8}
@@ -81,7 +95,7 @@ def rule_style(label: str, index: int = 0) -> dict[str, Any]:
     return {"color": others[index % len(others)], "linestyle": ":", "linewidth": 1.8}
 
 
-def _styles(results: Sequence[Availability]) -> list[dict[str, Any]]:
+def _styles(results: Sequence[Availability]) -> list[LineStyle]:
     out, k = [], 0
     for r in results:
         out.append(rule_style(r.rule, k))
@@ -99,7 +113,7 @@ def figure_to_png(fig: Figure, dpi: int = 100) -> bytes:
 
 # ------------------------------------------------------------------------- axes helpers
 def _km_axis(
-    ax: Any, posts: Sequence[Any], lo_m: float, hi_m: float, max_labels: int = 14,
+    ax: Axes, posts: Sequence[KilometrePost], lo_m: float, hi_m: float, max_labels: int = 14,
     lines: bool = True,
 ) -> None:  # fmt: skip
     """Kilometre posts (``KilometrePost``-like: chainage_m, km_m, label) on the top axis.
@@ -119,24 +133,26 @@ def _km_axis(
             ax.axvline(p.chainage_m / 1000.0, color="#dddddd", linewidth=0.6, zorder=0)
 
 
-def _thin(posts: Sequence[Any], lo_m: float, hi_m: float, max_labels: int) -> list[Any]:
+def _thin(
+    posts: Sequence[KilometrePost], lo_m: float, hi_m: float, max_labels: int
+) -> list[KilometrePost]:
     """Posts inside [lo, hi], each at least (hi - lo) / max_labels after the previous one."""
     inside = sorted((p for p in posts if lo_m <= p.chainage_m <= hi_m), key=_chainage)
     gap = (hi_m - lo_m) / max(max_labels, 1)
-    shown: list[Any] = []
+    shown: list[KilometrePost] = []
     for p in inside:
         if not shown or p.chainage_m - shown[-1].chainage_m >= gap:
             shown.append(p)
     return shown
 
 
-def _chainage(post: Any) -> float:
+def _chainage(post: KilometrePost) -> float:
     return float(post.chainage_m)
 
 
 def _along_axes(
-    n_rows: int, height_in: float, results: Sequence[Availability], posts: Sequence[Any]
-) -> tuple[Figure, list[Any]]:
+    n_rows: int, height_in: float, results: Sequence[Availability], posts: Sequence[KilometrePost]
+) -> tuple[Figure, list[Axes]]:
     fig = Figure(figsize=(_FIG_W_IN, height_in), layout="constrained")
     axes = [fig.add_subplot(n_rows, 1, i + 1) for i in range(n_rows)]
     s = results[0].chainage_m
@@ -155,7 +171,19 @@ def _along_axes(
     return fig, axes
 
 
-def _check_results(results: Sequence[Availability]) -> None:
+def check_results(results: Sequence[Availability]) -> None:
+    """Fail unless ``results`` holds at least one result and all share their positions.
+
+    Parameters
+    ----------
+    results : sequence of Availability
+        One per trust rule.
+
+    Raises
+    ------
+    ValueError
+        Empty, or a rule computed on other positions than the first.
+    """
     if not results:
         raise ValueError("results is empty: pass at least one Availability")
     s0 = results[0].chainage_m
@@ -170,7 +198,7 @@ def _check_results(results: Sequence[Availability]) -> None:
 
 # ------------------------------------------------------------------------- along the line
 def availability_along_line(
-    results: Sequence[Availability], kilometre_posts: Sequence[Any] = ()
+    results: Sequence[Availability], kilometre_posts: Sequence[KilometrePost] = ()
 ) -> Figure:
     """Share of time with >= 4 (top) and >= 6 (bottom) trusted satellites along the line.
 
@@ -181,7 +209,7 @@ def availability_along_line(
     kilometre_posts : sequence of KilometrePost, optional
         Shown on the top axis.
     """
-    _check_results(results)
+    check_results(results)
     fig, axes = _along_axes(2, 4.6, results, kilometre_posts)
     for ax, n in zip(axes, (4, 6), strict=True):
         for r, style in zip(results, _styles(results), strict=True):
@@ -199,10 +227,10 @@ def availability_along_line(
 
 
 def opening_angle_along_line(
-    results: Sequence[Availability], kilometre_posts: Sequence[Any] = ()
+    results: Sequence[Availability], kilometre_posts: Sequence[KilometrePost] = ()
 ) -> Figure:
     """Cross-track opening angle along the line, per rule (degrees)."""
-    _check_results(results)
+    check_results(results)
     fig, (ax,) = _along_axes(1, 2.6, results, kilometre_posts)
     for r, style in zip(results, _styles(results), strict=True):
         ax.plot(r.chainage_m / 1000.0, r.opening_angle_deg, label=r.rule, **style)
@@ -220,13 +248,13 @@ def opening_angle_along_line(
 
 
 def interval_along_line(
-    results: Sequence[Availability], kilometre_posts: Sequence[Any] = ()
+    results: Sequence[Availability], kilometre_posts: Sequence[KilometrePost] = ()
 ) -> Figure:
     """Predicted interval length along the line: median (line) and 95th percentile (band).
 
     Over the epochs with >= 4 trusted satellites at each position; log scale.
     """
-    _check_results(results)
+    check_results(results)
     fig, (ax,) = _along_axes(1, 3.0, results, kilometre_posts)
     any_value = False
     top = 0.0
@@ -264,13 +292,15 @@ def _count_cmap() -> tuple[ListedColormap, BoundaryNorm]:
     return cmap, BoundaryNorm(bounds, cmap.N)
 
 
-def count_maps(results: Sequence[Availability], kilometre_posts: Sequence[Any] = ()) -> Figure:
+def count_maps(
+    results: Sequence[Availability], kilometre_posts: Sequence[KilometrePost] = ()
+) -> Figure:
     """Trusted-satellite count over chainage (x) and GPS time (y), one panel per rule.
 
     Counts are binned in :data:`COUNT_CLASSES`; every cell is one position and one epoch, or,
     beyond 400 positions or 720 epochs, the lowest count of a block of them.
     """
-    _check_results(results)
+    check_results(results)
     n = len(results)
     fig = Figure(figsize=(_FIG_W_IN, 3.9), layout="constrained")
     axes = [fig.add_subplot(1, n, i + 1) for i in range(n)]
@@ -487,7 +517,7 @@ def sky_plots(views: Sequence[SkyView], label_sats: bool = False) -> Figure:
 # ------------------------------------------------------------------------- map
 def line_map(
     result: Availability,
-    track: Any = None,
+    track: TrackMap | None = None,
     classes: Sequence[tuple[float, str, str]] = (),
 ) -> Figure:
     """Map of the stretch (local east/north, km), segments coloured by share of time >= 4.
@@ -502,10 +532,6 @@ def line_map(
     classes : sequence of (lower bound, label, colour)
         Share classes, highest first (default: a single blue).
     """
-    from matplotlib.collections import LineCollection
-
-    from predisat.geodesy import LocalFrame
-
     classes = tuple(classes) or ((0.0, "all", "#1f5fa8"),)
     pos = result.positions
     mid = len(pos.chainage_m) // 2

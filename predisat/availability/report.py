@@ -26,12 +26,19 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+from matplotlib.figure import Figure
 
 from predisat.availability import plots
 from predisat.availability.engine import Availability
 from predisat.availability.satellites import SatellitePositions, TrustRule, azel
+from predisat.geodesy import enu_rotation, geodetic_to_ecef
 from predisat.gnss.ephemeris import Reason
 from predisat.gnss.timescale import gps_s_to_utc_datetime64
+from predisat.jsontypes import JsonDict
+from predisat.masks.maskset import MaskSet
+from predisat.track import KilometrePost, TrackMap
 
 __all__ = [
     "LOCOPROL_ROW",
@@ -81,7 +88,9 @@ def summary_frame(results: Sequence[Availability]) -> pd.DataFrame:
     return pd.DataFrame([r.summary() for r in results])
 
 
-def geojson_layer(results: Sequence[Availability], track: Any = None) -> dict[str, Any]:
+def geojson_layer(
+    results: Sequence[Availability], track: TrackMap | None = None
+) -> JsonDict:
     """The line cut into one segment per position, coloured by the masks' share >= 4.
 
     The features are those of ``results[0].to_geojson_lines(track)`` (the first result is
@@ -117,8 +126,8 @@ def _slug(text: str) -> str:
 def write_tables(
     out: Path,
     results: Sequence[Availability],
-    track: Any,
-    info: dict[str, Any],
+    track: TrackMap | None,
+    info: JsonDict,
     counts_table: bool,
 ) -> tuple[dict[str, Path], pd.DataFrame]:
     """Write the summary, per-position and per-epoch tables and the GeoJSON layer.
@@ -141,9 +150,6 @@ def write_tables(
     files : dict of str to Path
     summary : pandas.DataFrame
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     files: dict[str, Path] = {}
     summary = summary_frame(results)
     files["summary_csv"] = out / "summary.csv"
@@ -199,7 +205,7 @@ def write_tables(
     return files, summary
 
 
-def _plain(d: dict[str, Any]) -> dict[str, Any]:
+def _plain(d: JsonDict) -> JsonDict:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
@@ -228,12 +234,12 @@ class ReportInputs:
     """
 
     results: tuple[Availability, ...]
-    masks: Any
+    masks: MaskSet
     satellites: SatellitePositions
-    track: Any = None
-    info: Mapping[str, Any] = field(default_factory=dict)
+    track: TrackMap | None = None
+    info: Mapping[str, Any] = field(default_factory=dict)  # Any: JSON values of the run info
     sky_chainage_m: tuple[float, ...] = ()
-    files: Mapping[str, Any] = field(default_factory=dict)
+    files: Mapping[str, str | Path] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------- formatting
@@ -260,16 +266,16 @@ def _duration(s: float) -> str:
     return f"{s / 3600:.1f} h"
 
 
-def _e(x: Any) -> str:
+def _e(x: object) -> str:
     return html.escape(str(x), quote=True)
 
 
-def _img(fig: Any, alt: str) -> str:
+def _img(fig: Figure, alt: str) -> str:
     data = base64.b64encode(plots.figure_to_png(fig)).decode("ascii")
     return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
 
 
-def _km_label(track: Any, chainage_m: float) -> str:
+def _km_label(track: TrackMap | None, chainage_m: float) -> str:
     if track is not None and len(getattr(track, "kilometre_posts", ())) > 0:
         km = float(track.kilometre_at(chainage_m))
         if math.isfinite(km):
@@ -311,7 +317,7 @@ def _summary_table(results: Sequence[Availability]) -> str:
     )
 
 
-def _verdict(results: Sequence[Availability], track: Any) -> str:
+def _verdict(results: Sequence[Availability], track: TrackMap | None) -> str:
     """One paragraph: what the masks change against the other rules, and the worst place."""
     m = results[0]
     sm = m.summary()
@@ -383,8 +389,6 @@ def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
     )
     share4 = inputs.results[0].share_at_least(4)
     views = []
-    from predisat.geodesy import enu_rotation, geodetic_to_ecef
-
     for ch in inputs.sky_chainage_m:
         i = int(masks.position_index(ch)[0])
         rx = geodetic_to_ecef(masks.lat_deg[i], masks.lon_deg[i], masks.h_m[i])
@@ -481,13 +485,20 @@ def build_report(inputs: ReportInputs) -> str:
         raise ValueError("ReportInputs.results is empty: compute at least the masks rule")
     if results[0].rule != "masks":
         raise ValueError(f"ReportInputs.results[0] must be the masks rule, got {results[0].rule!r}")
-    plots._check_results(results)
-    info = inputs.info
+    plots.check_results(results)
     posts = tuple(getattr(inputs.track, "kilometre_posts", ()) or ())
     s = results[0].chainage_m
     posts = tuple(p for p in posts if s[0] <= p.chainage_m <= s[-1])
 
     line_map = _img(plots.line_map(results[0], inputs.track, SHARE_CLASSES), "map")
+    figs = _figures(inputs, posts)
+    return _page(inputs, line_map, figs)
+
+
+def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> list[str]:
+    """The report's figures along the line and at its places, in the order shown."""
+    results = inputs.results
+    info = inputs.info
     figs = [
         _figure(
             _img(plots.availability_along_line(results, posts), "availability along the line"),
@@ -545,7 +556,13 @@ def build_report(inputs: ReportInputs) -> str:
             f"log scale. {_e(model_note)}",
         )
     )
+    return figs
 
+
+def _page(inputs: ReportInputs, line_map: str, figs: Sequence[str]) -> str:
+    """The HTML document around the figures: header, summary, verdict, map, files, footer."""
+    results = inputs.results
+    info = inputs.info
     files = "".join(
         f"<li><code>{_e(getattr(p, 'name', p))}</code> – {_e(_FILE_DOC.get(k, k))}</li>"
         for k, p in inputs.files.items()

@@ -30,12 +30,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+from tqdm import tqdm
 
+from predisat import __version__
 from predisat.availability.engine import Availability, compute_availability
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
@@ -51,6 +53,8 @@ from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
+from predisat.jsontypes import JsonDict
+from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.maskset import MaskSet
 from predisat.track import TrackMap, TrackMapError, load_track
 
@@ -92,7 +96,7 @@ class AvailabilityRun:
     summary: pd.DataFrame
     results: tuple[Availability, ...]
     elapsed_s: float = 0.0
-    info: dict[str, Any] = field(default_factory=dict)
+    info: JsonDict = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------- inputs
@@ -314,8 +318,6 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
 def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
     if isinstance(masks, MaskSet):
         return masks, "in memory"
-    from predisat.masks.fileformat import mask_file_path, read_masks
-
     return read_masks(masks), str(mask_file_path(masks))
 
 
@@ -359,7 +361,7 @@ def check_masks_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> N
 
 
 def _sky_chainages(
-    masks: MaskSet, track: Any, sky_km: Sequence[float] | None, n_sky: int
+    masks: MaskSet, track: TrackMap | None, sky_km: Sequence[float] | None, n_sky: int
 ) -> NDArray:
     lo, hi = float(masks.chainage_m[0]), float(masks.chainage_m[-1])
     if sky_km is None or len(sky_km) == 0:
@@ -369,8 +371,7 @@ def _sky_chainages(
         want = lo + frac * (hi - lo)
         return masks.chainage_m[masks.position_index(want)[0]]
     km_m = np.asarray(sky_km, float) * 1000.0
-    posts = getattr(track, "kilometre_posts", ()) if track is not None else ()
-    if posts:
+    if track is not None and track.kilometre_posts:
         grid = np.linspace(lo, hi, 2001)
         line_km = track.kilometre_at(grid)
         if np.all(np.diff(line_km) > 0):
@@ -470,9 +471,7 @@ def run_availability(
     ValueError
         Window outside the navigation data, masks not on the track, bad options.
     """
-    from tqdm import tqdm
-
-    from predisat import __version__
+    # lazy: the report's figures need matplotlib, which the module's other users do not
     from predisat.availability.report import ReportInputs, build_report, write_tables
 
     t0 = time.perf_counter()
@@ -480,33 +479,10 @@ def run_availability(
     stages = 2 + (2 + len(cutoffs)) + 3  # masks, navigation; one per rule; tables, figures, report
     bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
     try:
-
-        def stage(text: str) -> None:
-            bar.set_postfix_str(text)
+        stage = bar.set_postfix_str
 
         stage("masks")
-        mask_set, masks_label = _load_masks(masks)
-        track = _load_track(track)
-        if from_m is not None or to_m is not None:
-            lo_m = -np.inf if from_m is None else from_m
-            hi_m = np.inf if to_m is None else to_m
-            ch_m = mask_set.chainage_m
-            if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
-                given = " ".join(
-                    f"{name} {v:g} m ({flag} {v / 1000:g})"
-                    for name, flag, v in (
-                        ("from_m", "--from-km", from_m), ("to_m", "--to-km", to_m)
-                    )
-                    if v is not None
-                )
-                raise ValueError(
-                    f"{given}: no position of masks {masks_label}, which cover "
-                    f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
-                    "choose a stretch inside"
-                )
-            mask_set = mask_set.subset(lo_m, hi_m)
-        if track is not None:
-            check_masks_on_track(mask_set, track, masks_label)
+        mask_set, masks_label, track = _masks_on_track(masks, track, from_m, to_m)
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
@@ -514,59 +490,31 @@ def run_availability(
         bar.update(1)
 
         stage("navigation")
-        ephemeris = load_navigation(nav)
-        names = ", ".join(Path(p).name for p in nav) if nav else ""
-        nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
-        t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
-        t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
-        if not select_satellites(ephemeris.satellites, constellation):
-            raise ValueError(
-                f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
-                "constellation (--constellation) or give navigation data for it"
-            )
-        sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
-        _check_window(sats, ephemeris, nav_label)
-        warnings = sparse_navigation(sats, nav_label)
+        nav_data = _navigation(nav, start, end, step_s, constellation)
         positions = LinePositions.from_masks(mask_set)
         bar.update(1)
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
-        results = []
-        for rule in rules:
-            stage(rule.label)
-            results.append(
-                compute_availability(
-                    sats,
-                    positions,
-                    rule,
-                    interval_every=interval_every,
-                    interval_model=model,
-                    workers=workers,
-                )
-            )
-            bar.update(1)
+        results = _compute_rules(
+            rules, nav_data.sats, positions, interval_every, model, workers, bar
+        )
 
         stage("tables")
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         info = _run_info(
-            mask_set, masks_label, track, ephemeris, nav_label, sats, constellation, rules,
-            step_s, interval_every, __version__, model,
+            mask_set, masks_label, track, nav_data, constellation, rules, step_s,
+            interval_every, __version__, model,
         )  # fmt: skip
-        info["warnings"] = warnings
         files, summary = write_tables(out, results, track, info, counts_table)
-        # Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
-        # its validity window, inconsistent, no data): such satellites count for no rule.
-        files["ephemeris_status_csv"] = out / "ephemeris_status.csv"
-        status = sats.status.report()
-        status.to_csv(files["ephemeris_status_csv"], index=False, float_format="%.12g")
+        files["ephemeris_status_csv"] = _write_ephemeris_status(out, nav_data.sats)
         bar.update(1)
 
         stage("figures")
         inputs = ReportInputs(
-            results=tuple(results), masks=mask_set, satellites=sats, track=track, info=info,
-            sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+            results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
+            info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
         )  # fmt: skip
         html = build_report(inputs)
         bar.update(1)
@@ -583,11 +531,123 @@ def run_availability(
     )
 
 
+def _masks_on_track(
+    masks: str | Path | MaskSet,
+    track: TrackMap | str | os.PathLike[str] | None,
+    from_m: float | None,
+    to_m: float | None,
+) -> tuple[MaskSet, str, TrackMap | None]:
+    """The masks of the stretch (checked to lie on ``track``), how to name them, the track."""
+    mask_set, masks_label = _load_masks(masks)
+    track_map = _load_track(track)
+    mask_set = _stretch(mask_set, masks_label, from_m, to_m)
+    if track_map is not None:
+        check_masks_on_track(mask_set, track_map, masks_label)
+    return mask_set, masks_label, track_map
+
+
+def _stretch(
+    mask_set: MaskSet, masks_label: str, from_m: float | None, to_m: float | None
+) -> MaskSet:
+    """The masks of the chainage stretch ``[from_m, to_m]`` (all when neither is given)."""
+    if from_m is None and to_m is None:
+        return mask_set
+    lo_m = -np.inf if from_m is None else from_m
+    hi_m = np.inf if to_m is None else to_m
+    ch_m = mask_set.chainage_m
+    if not ((ch_m >= lo_m) & (ch_m <= hi_m)).any():
+        given = " ".join(
+            f"{name} {v:g} m ({flag} {v / 1000:g})"
+            for name, flag, v in (("from_m", "--from-km", from_m), ("to_m", "--to-km", to_m))
+            if v is not None
+        )
+        raise ValueError(
+            f"{given}: no position of masks {masks_label}, which cover "
+            f"{ch_m.min() / 1000:g}-{ch_m.max() / 1000:g} km (values are kilometres); "
+            "choose a stretch inside"
+        )
+    return mask_set.subset(lo_m, hi_m)
+
+
+@dataclass(frozen=True)
+class _Navigation:
+    """The navigation data of a run and the satellites it gives over the window."""
+
+    ephemeris: Ephemeris
+    label: str  # how messages name the navigation data
+    sats: SatellitePositions
+    warnings: list[str]
+
+
+def _navigation(
+    nav: Sequence[str | Path] | None,
+    start: float | str | None,
+    end: float | str | None,
+    step_s: float,
+    constellation: str,
+) -> _Navigation:
+    """Load the navigation data, build the window and the satellites' positions over it."""
+    ephemeris = load_navigation(nav)
+    names = ", ".join(Path(p).name for p in nav) if nav else ""
+    nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
+    t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
+    t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
+    if not select_satellites(ephemeris.satellites, constellation):
+        raise ValueError(
+            f"no satellite of constellation {constellation!r} in {nav_label}; choose another "
+            "constellation (--constellation) or give navigation data for it"
+        )
+    sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
+    _check_window(sats, ephemeris, nav_label)
+    warnings = sparse_navigation(sats, nav_label)
+    return _Navigation(ephemeris, nav_label, sats, warnings)
+
+
+def _compute_rules(
+    rules: Sequence[TrustRule],
+    sats: SatellitePositions,
+    positions: LinePositions,
+    interval_every: int,
+    model: IntervalModel,
+    workers: int,
+    bar: tqdm[NoReturn],
+) -> list[Availability]:
+    """The availability under every rule, in order; one step of ``bar`` each."""
+    results = []
+    for rule in rules:
+        bar.set_postfix_str(rule.label)
+        results.append(
+            compute_availability(
+                sats,
+                positions,
+                rule,
+                interval_every=interval_every,
+                interval_model=model,
+                workers=workers,
+            )
+        )
+        bar.update(1)
+    return results
+
+
+def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:
+    """Write ``ephemeris_status.csv`` into ``out``; returns its path.
+
+    Every run of epochs in which the ephemeris did not trust a satellite (unhealthy, outside
+    its validity window, inconsistent, no data): such satellites count for no rule.
+    """
+    path = out / "ephemeris_status.csv"
+    status = sats.status.report()
+    status.to_csv(path, index=False, float_format="%.12g")
+    return path
+
+
 def _run_info(
-    masks: MaskSet, masks_label: str, track: TrackMap | None, ephemeris: Ephemeris, nav_label: str,
-    sats: SatellitePositions, constellation: str, rules: Sequence[TrustRule], step_s: float,
-    interval_every: int, version: str, model: IntervalModel,
-) -> dict[str, Any]:  # fmt: skip
+    masks: MaskSet, masks_label: str, track: TrackMap | None, nav: _Navigation,
+    constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
+    version: str, model: IntervalModel,
+) -> JsonDict:  # fmt: skip
+    ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
     line = track.name if track is not None else str(masks.provenance.get("track", "line"))
     km = track.kilometre_at(masks.chainage_m[[0, -1]]) if track is not None else None
@@ -626,6 +686,7 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model == IntervalModel(),
         "nav_is_embedded": nav_label.startswith("embedded"),
+        "warnings": nav.warnings,
     }
 
 

@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.geodesy import enu_rotation, enu_to_azel, geodetic_to_ecef
 from predisat.gnss.ephemeris import Ephemeris, EphemerisStatus
 from predisat.gnss.timescale import calendar_to_gps_s
+from predisat.track import TrackMap
 
 __all__ = [
     "CONSTELLATIONS",
@@ -144,7 +145,7 @@ class LinePositions:
 
     @classmethod
     def from_track(
-        cls, track: Any, chainage_m: ArrayLike, antenna_height_m: float = 0.0
+        cls, track: TrackMap, chainage_m: ArrayLike, antenna_height_m: float = 0.0
     ) -> LinePositions:
         """Positions on a :class:`~predisat.track.map.TrackMap` axis, raised by an antenna
         height."""
@@ -312,7 +313,7 @@ class TrustRule:
 
     mode: str
     cutoff_deg: float = 0.0
-    masks: Any = None
+    masks: Any = None  # Any: a MaskLike in mode 'mask' (checked below), else None
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:

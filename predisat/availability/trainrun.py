@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -22,6 +21,7 @@ from predisat.availability.interval import along_track_components, predicted_int
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
+from predisat.track import TrackMap
 
 __all__ = ["SpeedProfile", "TrainRun", "trainrun"]
 
@@ -185,7 +185,7 @@ class TrainRun:
 
 
 def trainrun(
-    track: Any,
+    track: TrackMap,
     ephemeris: Ephemeris,
     rule: TrustRule,
     start_chainage_m: float,

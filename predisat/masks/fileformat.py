@@ -31,8 +31,10 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import shapely
 from numpy.typing import NDArray
+from pyproj import CRS
 
 from predisat.atomic import atomic_path
+from predisat.jsontypes import JsonDict
 from predisat.masks.binops import conservative_resample
 from predisat.masks.maskset import REQUIRED_DESCRIPTORS, BinSource, MaskError, MaskSet
 
@@ -250,7 +252,7 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
         raise fail(str(exc)) from None
 
 
-def _read_header(path: Path, metadata: dict[bytes, bytes]) -> dict[str, Any]:
+def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
     raw = metadata.get(METADATA_KEY)
     if raw is None:
         raise MaskFileError(
@@ -362,10 +364,8 @@ def _check_geometry(
         )
 
 
-def _crs84_projjson() -> dict[str, Any]:
-    from pyproj import CRS
-
-    crs: dict[str, Any] = CRS("OGC:CRS84").to_json_dict()
+def _crs84_projjson() -> JsonDict:
+    crs: JsonDict = CRS("OGC:CRS84").to_json_dict()
     return crs
 
 

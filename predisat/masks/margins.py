@@ -14,12 +14,12 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 
 __all__ = ["EL_STEP_DEG", "SECTORS", "MarginTable", "sector_of"]
@@ -55,7 +55,7 @@ class MarginTable:
     table: pd.DataFrame
     target: float
     el_step_deg: float = EL_STEP_DEG
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: JsonDict = field(default_factory=dict)
 
     def margin_for(self, sector: NDArray, source: NDArray) -> NDArray:
         """Margin of every bin given its sector (str) and source code, degrees.

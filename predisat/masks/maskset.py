@@ -31,6 +31,8 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat import __version__
+from predisat.jsontypes import JsonDict
 from predisat.masks.binops import RangeMax, conservative_resample
 
 __all__ = [
@@ -133,21 +135,12 @@ class MaskSet:
     source: NDArray
     margin_deg: NDArray
     descriptors: dict[str, NDArray] = field(default_factory=dict)
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: JsonDict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        ch = _vector(self.chainage_m, "chainage_m", None)
+        ch = _chainage_vector(self.chainage_m)
         n = ch.size
-        if n == 0:
-            raise MaskError("chainage_m is empty: a mask set needs at least one position")
-        bad = np.flatnonzero(np.diff(ch) <= 0)
-        if bad.size:
-            i = int(bad[0]) + 1
-            raise MaskError(
-                f"chainage_m must be strictly increasing: row {i} ({_num(ch[i])} m) follows row "
-                f"{i - 1} ({_num(ch[i - 1])} m); sort the positions and drop duplicates"
-            )
         lat = _vector(self.lat_deg, "lat_deg", n)
         lon = _vector(self.lon_deg, "lon_deg", n)
         _check_range(lat, "lat_deg", -90.0, 90.0)
@@ -156,68 +149,12 @@ class MaskSet:
         hdg = np.mod(_vector(self.heading_deg, "heading_deg", n), 360.0)
         hdg[hdg >= 360.0] = 0.0  # np.mod(-1e-14, 360) rounds to 360
 
-        step = float(self.az_step_deg)
-        if not (math.isfinite(step) and step > 0):
-            raise MaskError(f"az_step_deg must be a positive number of degrees, got {step!r}")
-        n_az = round(360.0 / step)
-        if n_az < 1 or abs(n_az * step - 360.0) > 1e-9:
-            raise MaskError(
-                f"az_step_deg = {step!r} does not divide 360 deg into a whole number of bins; "
-                "use a step such as 0.5, 1, 2 or 5"
-            )
-        mask = np.array(self.mask_el_deg, dtype=np.float32)
-        if mask.shape != (n, n_az):
-            raise MaskError(
-                f"mask_el_deg has shape {mask.shape}, expected (n_pos, n_az) = ({n}, {n_az}) "
-                f"for {n} positions and az_step_deg = {step}"
-            )
-        _check_range(mask, "mask_el_deg", 0.0, 90.0)
-
-        src = np.asarray(self.source)
-        if src.shape != (n, n_az):
-            raise MaskError(f"source has shape {src.shape}, expected ({n}, {n_az})")
-        valid = [int(s) for s in BinSource]
-        if not np.issubdtype(src.dtype, np.integer) or not np.isin(src, valid).all():
-            where = _first_bad(~np.isin(src, valid)) if src.size else ""
-            raise MaskError(
-                f"source{where} holds a value that is not a BinSource code {valid} "
-                "(0 observed, 1 reconstructed, 2 assumed)"
-            )
-        src = src.astype(np.uint8)
-
-        margin = np.asarray(self.margin_deg, dtype=np.float32)
-        try:
-            margin = np.broadcast_to(margin, (n, n_az)).copy()
-        except ValueError:
-            raise MaskError(
-                f"margin_deg has shape {margin.shape}, expected a scalar or ({n}, {n_az})"
-            ) from None
-        bad_margin = ~(np.isfinite(margin) & (margin >= 0))
-        if bad_margin.any():
-            raise MaskError(
-                f"margin_deg{_first_bad(bad_margin)} is negative or not finite; "
-                "margins are degrees >= 0"
-            )
-
-        desc = {}
-        for name, values in dict(self.descriptors).items():
-            if not isinstance(name, str) or not _NAME_RE.match(name) or name in _CORE_NAMES:
-                raise MaskError(
-                    f"descriptor name {name!r} is not allowed: use a lower-case identifier "
-                    "with a unit suffix (e.g. 'left_obstacle_distance_m') that is not a core "
-                    "column name"
-                )
-            desc[name] = _vector(values, f"descriptors[{name!r}]", n, allow_nan=True)
-        for name in REQUIRED_DESCRIPTORS:
-            desc.setdefault(name, np.full(n, np.nan))
-
-        prov = dict(self.provenance)
-        try:
-            json.dumps(prov, allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            raise MaskError(
-                f"provenance must be JSON-serialisable (str, numbers, lists, dicts): {exc}"
-            ) from None
+        step, n_az = _az_bins(self.az_step_deg)
+        mask = _mask_array(self.mask_el_deg, n, n_az, step)
+        src = _source_array(self.source, n, n_az)
+        margin = _margin_array(self.margin_deg, n, n_az)
+        desc = _descriptor_arrays(self.descriptors, n)
+        prov = _json_provenance(self.provenance)
 
         for arr in (ch, lat, lon, h, hdg, mask, src, margin, *desc.values()):
             arr.setflags(write=False)
@@ -248,7 +185,7 @@ class MaskSet:
         source: ArrayLike | None = None,
         margin_deg: ArrayLike = 0.0,
         descriptors: Mapping[str, ArrayLike] | None = None,
-        provenance: Mapping[str, Any] | None = None,
+        provenance: JsonDict | None = None,
     ) -> MaskSet:
         """Mask set from plain arrays, validated.
 
@@ -302,7 +239,12 @@ class MaskSet:
         track: _Track,
         chainage_m: ArrayLike,
         mask_el_deg: ArrayLike,
-        **kwargs: Any,
+        *,
+        az_step_deg: float | None = None,
+        source: ArrayLike | None = None,
+        margin_deg: ArrayLike = 0.0,
+        descriptors: Mapping[str, ArrayLike] | None = None,
+        provenance: JsonDict | None = None,
     ) -> MaskSet:
         """Mask set whose positions and headings come from a track map.
 
@@ -312,17 +254,20 @@ class MaskSet:
             Supplies ``position_at`` (lat, lon, h) and ``heading_at`` at each chainage.
         chainage_m : array_like, shape (n_pos,)
         mask_el_deg : array_like, shape (n_pos, n_az)
-        **kwargs
-            Passed to :meth:`from_arrays` (``source``, ``margin_deg``, ...). The track's
-            name is recorded in the provenance as ``track`` unless given.
+        az_step_deg, source, margin_deg, descriptors
+            As in :meth:`from_arrays`.
+        provenance : mapping, optional
+            As in :meth:`from_arrays`; the track's name is recorded as ``track`` unless given.
         """
         ch = np.asarray(chainage_m, float)
         lat, lon, h = track.position_at(ch)
-        prov = dict(kwargs.pop("provenance", None) or {})
+        prov = dict(provenance or {})
         prov.setdefault("track", getattr(track, "name", ""))
         return cls.from_arrays(
-            ch, lat, lon, h, track.heading_at(ch), mask_el_deg, provenance=prov, **kwargs
-        )
+            ch, lat, lon, h, track.heading_at(ch), mask_el_deg, provenance=prov,
+            az_step_deg=az_step_deg, source=source, margin_deg=margin_deg,
+            descriptors=descriptors,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ properties
     @property
@@ -543,6 +488,109 @@ class MaskSet:
         )
 
 
+# ---------------------------------------------------------------------- validation
+def _chainage_vector(values: ArrayLike) -> NDArray:
+    """Chainages as a float64 copy, shape (n_pos,): non-empty, finite, strictly increasing."""
+    ch = _vector(values, "chainage_m", None)
+    if ch.size == 0:
+        raise MaskError("chainage_m is empty: a mask set needs at least one position")
+    bad = np.flatnonzero(np.diff(ch) <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise MaskError(
+            f"chainage_m must be strictly increasing: row {i} ({_num(ch[i])} m) follows row "
+            f"{i - 1} ({_num(ch[i - 1])} m); sort the positions and drop duplicates"
+        )
+    return ch
+
+
+def _az_bins(az_step_deg: float) -> tuple[float, int]:
+    """Bin width (degrees, float) and number of bins; the width must divide 360 degrees."""
+    step = float(az_step_deg)
+    if not (math.isfinite(step) and step > 0):
+        raise MaskError(f"az_step_deg must be a positive number of degrees, got {step!r}")
+    n_az = round(360.0 / step)
+    if n_az < 1 or abs(n_az * step - 360.0) > 1e-9:
+        raise MaskError(
+            f"az_step_deg = {step!r} does not divide 360 deg into a whole number of bins; "
+            "use a step such as 0.5, 1, 2 or 5"
+        )
+    return step, n_az
+
+
+def _mask_array(values: ArrayLike, n: int, n_az: int, step: float) -> NDArray:
+    """Mask elevations as a float32 copy, shape (n, n_az), degrees in [0, 90]."""
+    mask = np.array(values, dtype=np.float32)
+    if mask.shape != (n, n_az):
+        raise MaskError(
+            f"mask_el_deg has shape {mask.shape}, expected (n_pos, n_az) = ({n}, {n_az}) "
+            f"for {n} positions and az_step_deg = {step}"
+        )
+    _check_range(mask, "mask_el_deg", 0.0, 90.0)
+    return mask
+
+
+def _source_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
+    """:class:`BinSource` codes as uint8, shape (n, n_az)."""
+    src = np.asarray(values)
+    if src.shape != (n, n_az):
+        raise MaskError(f"source has shape {src.shape}, expected ({n}, {n_az})")
+    valid = [int(s) for s in BinSource]
+    if not np.issubdtype(src.dtype, np.integer) or not np.isin(src, valid).all():
+        where = _first_bad(~np.isin(src, valid)) if src.size else ""
+        raise MaskError(
+            f"source{where} holds a value that is not a BinSource code {valid} "
+            "(0 observed, 1 reconstructed, 2 assumed)"
+        )
+    return src.astype(np.uint8)
+
+
+def _margin_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
+    """Margins as a float32 copy broadcast to shape (n, n_az), degrees >= 0."""
+    margin = np.asarray(values, dtype=np.float32)
+    try:
+        margin = np.broadcast_to(margin, (n, n_az)).copy()
+    except ValueError:
+        raise MaskError(
+            f"margin_deg has shape {margin.shape}, expected a scalar or ({n}, {n_az})"
+        ) from None
+    bad_margin = ~(np.isfinite(margin) & (margin >= 0))
+    if bad_margin.any():
+        raise MaskError(
+            f"margin_deg{_first_bad(bad_margin)} is negative or not finite; "
+            "margins are degrees >= 0"
+        )
+    return margin
+
+
+def _descriptor_arrays(descriptors: Mapping[str, ArrayLike], n: int) -> dict[str, NDArray]:
+    """Descriptors as float64 copies of shape (n,), the required ones filled with NaN."""
+    desc = {}
+    for name, values in dict(descriptors).items():
+        if not isinstance(name, str) or not _NAME_RE.match(name) or name in _CORE_NAMES:
+            raise MaskError(
+                f"descriptor name {name!r} is not allowed: use a lower-case identifier "
+                "with a unit suffix (e.g. 'left_obstacle_distance_m') that is not a core "
+                "column name"
+            )
+        desc[name] = _vector(values, f"descriptors[{name!r}]", n, allow_nan=True)
+    for name in REQUIRED_DESCRIPTORS:
+        desc.setdefault(name, np.full(n, np.nan))
+    return desc
+
+
+def _json_provenance(provenance: Mapping[str, Any]) -> JsonDict:
+    """A copy of the provenance, which must be JSON-serialisable."""
+    prov = dict(provenance)
+    try:
+        json.dumps(prov, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise MaskError(
+            f"provenance must be JSON-serialisable (str, numbers, lists, dicts): {exc}"
+        ) from None
+    return prov
+
+
 # ---------------------------------------------------------------------- helpers
 def _vector(values: ArrayLike, name: str, n: int | None, allow_nan: bool = False) -> NDArray:
     arr = np.array(values, dtype=float)
@@ -586,9 +634,7 @@ def _first_bad(bad: NDArray) -> str:
     return "[" + ", ".join(str(int(k)) for k in idx) + "] (row, bin)"
 
 
-def _default_provenance(provenance: Mapping[str, Any] | None) -> dict[str, Any]:
-    from predisat import __version__
-
+def _default_provenance(provenance: Mapping[str, Any] | None) -> JsonDict:
     prov = dict(provenance or {})
     prov.setdefault("software", "predisat")
     prov.setdefault("software_version", __version__)
@@ -596,7 +642,7 @@ def _default_provenance(provenance: Mapping[str, Any] | None) -> dict[str, Any]:
     return prov
 
 
-def concat_masksets(parts: Sequence[MaskSet], provenance: dict[str, Any] | None = None) -> MaskSet:
+def concat_masksets(parts: Sequence[MaskSet], provenance: JsonDict | None = None) -> MaskSet:
     """One mask set from parts covering disjoint, increasing chainage ranges.
 
     Parameters

@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.jsontypes import JsonDict
+
 __all__ = ["SIDES", "TRUTH_FORMAT", "TrueMasks"]
 
 TRUTH_FORMAT = "predisat.synth.truemasks/1"
@@ -78,7 +80,7 @@ class TrueMasks:
     def save(self, path: str | Path) -> None:
         """Write to a compressed ``.npz`` (arrays by field name plus a JSON ``meta``)."""
         arrays: dict[str, Any] = {}
-        meta: dict[str, Any] = {"format": TRUTH_FORMAT, "sides": list(SIDES)}
+        meta: JsonDict = {"format": TRUTH_FORMAT, "sides": list(SIDES)}
         for f in fields(self):
             val = getattr(self, f.name)
             if isinstance(val, np.ndarray):

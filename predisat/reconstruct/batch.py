@@ -41,13 +41,14 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
+from predisat.camera.models import CameraModel, Mount
+from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
@@ -65,6 +66,7 @@ from predisat.reconstruct.framecache import (
 )
 from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import PipelineParams
+from predisat.sky.segment import METHODS
 from predisat.survey import Survey
 from predisat.track.map import TrackMap
 
@@ -130,7 +132,7 @@ class _Plan:
     chunks: list[tuple[str, float, float, NDArray]]  # name, lo, hi, positions
     frames_of: dict[str, NDArray]  # frame indices each chunk reads
     frames_key: dict[str, str]
-    provenance: dict[str, Any]
+    provenance: JsonDict
     chunk_dir: Path
     cache_dir: Path
 
@@ -152,7 +154,7 @@ def _bad(fid: str, message: str, strict: bool, before: str = "") -> None:
     _report(f"bad frame {fid}: {message} - skipped{before}", quiet=False)
 
 
-def _run_key(provenance: dict[str, Any]) -> str:
+def _run_key(provenance: JsonDict) -> str:
     keys = ("survey_hash", "params", "software_version", "code_fingerprint", "track")
     keep = {k: provenance[k] for k in keys}
     return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:16]
@@ -160,12 +162,12 @@ def _run_key(provenance: dict[str, Any]) -> str:
 
 def _load_margins(
     margins: MarginTable | str | os.PathLike[str] | None,
-) -> tuple[MarginTable | None, dict[str, Any]]:
+) -> tuple[MarginTable | None, JsonDict]:
     """(MarginTable or None, its provenance record) from a table, a path or None; every check
     is made here, before any work, so that a bad table never stops a run at its merge."""
     if margins is None:
         return None, {}
-    record: dict[str, Any]
+    record: JsonDict
     if isinstance(margins, MarginTable):
         table, record = margins, {"file": None}
     else:
@@ -196,8 +198,6 @@ def _load_margins(
 def _segmenter_for(params: PipelineParams, segmenter: Segmenter | None) -> Segmenter:
     if segmenter is not None:
         return segmenter
-    from predisat.sky.segment import METHODS
-
     if params.segmenter not in METHODS:
         raise ValueError(
             f"params.segmenter {params.segmenter!r} is not a segmentation method {METHODS}; "
@@ -241,7 +241,7 @@ def _plan(
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
     positions = np.unique(ch[finite])
     params_dict = params.to_dict()  # hashes a candidate network's files once, for both keys
-    prov: dict[str, Any] = {
+    prov: JsonDict = {
         "software": "predisat",
         "software_version": str(__version__),
         "code_fingerprint": code_fingerprint(),
@@ -308,7 +308,7 @@ def _pending(
     return pending, skipped
 
 
-def _cameras(plan: _Plan) -> dict[str, Any]:
+def _cameras(plan: _Plan) -> dict[str, tuple[CameraModel, Mount]]:
     return {side: (sc.camera, sc.mount) for side, sc in plan.survey.cameras.items()}
 
 
@@ -375,8 +375,8 @@ def _merge(
     plan: _Plan,
     ran: set[str],
     bad: dict[str, BadFrame],
-    margins: tuple[MarginTable | None, dict[str, Any]],
-) -> tuple[MaskSet, dict[str, Any]]:
+    margins: tuple[MarginTable | None, JsonDict],
+) -> tuple[MaskSet, JsonDict]:
     """The chunks merged into one mask set (margins applied, holes closed) and its provenance;
     bad frames met by the chunks are added to ``bad``."""
     parts = []

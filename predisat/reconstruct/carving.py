@@ -28,13 +28,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount, vehicle_to_enu
+from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.reconstruct.heightfield import (
     HeightField,
@@ -43,6 +43,7 @@ from predisat.reconstruct.heightfield import (
     corridor_grid,
 )
 from predisat.reconstruct.skyline import Rectifier, SkyProfile
+from predisat.track import TrackMap
 
 __all__ = [
     "FrameView",
@@ -242,9 +243,20 @@ class Reconstruction:
     overhead_m: NDArray
     params: ReconstructionParams
 
-    def to_maskset(self, track: Any, **kwargs: Any) -> MaskSet:
-        """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``."""
-        prov = dict(kwargs.pop("provenance", None) or {})
+    def to_maskset(
+        self,
+        track: TrackMap,
+        *,
+        margin_deg: ArrayLike = 0.0,
+        provenance: JsonDict | None = None,
+    ) -> MaskSet:
+        """A :class:`~predisat.masks.maskset.MaskSet` of these masks along ``track``.
+
+        ``margin_deg`` and ``provenance`` as in :meth:`MaskSet.from_arrays
+        <predisat.masks.maskset.MaskSet.from_arrays>`; the reconstruction parameters are
+        recorded in the provenance as ``reconstruction`` unless given.
+        """
+        prov = dict(provenance or {})
         prov.setdefault("reconstruction", _params_dict(self.params))
         return MaskSet.from_track(
             track,
@@ -254,11 +266,11 @@ class Reconstruction:
             source=self.source,
             descriptors=self.descriptors,
             provenance=prov,
-            **kwargs,
+            margin_deg=margin_deg,
         )
 
 
-def _params_dict(p: ReconstructionParams) -> dict[str, Any]:
+def _params_dict(p: ReconstructionParams) -> JsonDict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in p.__dict__.items()}
 
 
@@ -303,7 +315,7 @@ class Reconstructor:
     def height_field(
         self,
         frames: Sequence[FrameView],
-        track: Any,
+        track: TrackMap,
         lo_m: float,
         hi_m: float,
         profiles: Sequence[SkyProfile] | None = None,
@@ -336,7 +348,9 @@ class Reconstructor:
             hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings,
         )  # fmt: skip
 
-    def run(self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: Any) -> Reconstruction:
+    def run(
+        self, frames: Sequence[FrameView], chainage_m: ArrayLike, track: TrackMap
+    ) -> Reconstruction:
         """Masks at ``chainage_m`` (one window) from ``frames``.
 
         ``frames`` should hold every frame within :attr:`ReconstructionParams.overlap_m` of the
@@ -393,7 +407,7 @@ class Reconstructor:
 def reconstruct_masks(
     frames: Sequence[FrameView],
     chainage_m: ArrayLike,
-    track: Any,
+    track: TrackMap,
     params: ReconstructionParams | None = None,
 ) -> Reconstruction:
     """Masks at ``chainage_m`` from ``frames`` (see :class:`Reconstructor`)."""
@@ -488,12 +502,12 @@ def _ceiling_caps(ceilings: NDArray, s: NDArray, antenna_m: NDArray) -> NDArray:
     return out
 
 
-def _local_rotations(track: Any, enu_m: NDArray) -> NDArray:
+def _local_rotations(track: TrackMap, enu_m: NDArray) -> NDArray:
     lat, lon, _ = track.frame.to_geodetic(enu_m)
     return np.asarray(track.frame.rotation_from(lat, lon))
 
 
-def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, NDArray]:
+def _camera_geometry(frames: Sequence[FrameView], track: TrackMap) -> tuple[NDArray, NDArray]:
     """Camera centres (n, 3) and local-to-frame rotations (n, 3, 3) of frames."""
     ant = np.stack([np.asarray(f.antenna_enu_m, float) for f in frames])
     rot = _local_rotations(track, ant)
@@ -504,7 +518,7 @@ def _camera_geometry(frames: Sequence[FrameView], track: Any) -> tuple[NDArray, 
     return cams, rot
 
 
-def _antennas(track: Any, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
+def _antennas(track: TrackMap, s: NDArray, height_m: float) -> tuple[NDArray, NDArray]:
     axis = np.asarray(track.enu_at(s), float)
     rot = _local_rotations(track, axis)
     ant = axis + height_m * rot[:, :, 2]
@@ -624,6 +638,7 @@ def _horizon_parts(
     return el, unknown, el_far, unknown_far
 
 
+# long: one numba kernel; helpers called per cell cost 3.8-4x (scripts/bench_march.py)
 @njit(cache=True, nogil=True, error_model="numpy")
 def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
@@ -778,7 +793,7 @@ def _far_field(
     profiles: Sequence[SkyProfile],
     s: NDArray,
     ant: NDArray,
-    track: Any,
+    track: TrackMap,
     p: ReconstructionParams,
 ) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]]]:
     """Far-field elevation bound per bin, whether a camera saw it, and the profiles per position.
@@ -879,7 +894,7 @@ def _observed(
 
 
 def _descriptors(
-    hf: HeightField, track: Any, s: NDArray, ant: NDArray, p: ReconstructionParams
+    hf: HeightField, track: TrackMap, s: NDArray, ant: NDArray, p: ReconstructionParams
 ) -> dict[str, NDArray]:
     """Reflection-risk descriptors from the height field, per side.
 

@@ -13,18 +13,20 @@ import json
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount
+from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
 from predisat.reconstruct.badframes import BadFrame
 from predisat.reconstruct.carving import FrameView, Reconstructor
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
+from predisat.track import TrackMap
 
 __all__ = [
     "ChunkFrame",
@@ -54,9 +56,9 @@ class ChunkJob:
     cameras: dict[str, tuple[CameraModel, Mount]]
     reverse: bool
     antenna_height_m: float
-    track: Any
+    track: TrackMap
     params: PipelineParams
-    provenance: dict[str, Any]
+    provenance: JsonDict
     chunk_dir: str
     # the chunk's frames found bad before it ran: recorded in its marker, so that a resumed
     # run that skips the chunk still lists them
@@ -151,10 +153,8 @@ def _load_cached(f: ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
 
 def chunk_finished(
     chunk_dir: Path, name: str, run_key: str, frames_key: str
-) -> dict[str, Any] | None:
+) -> JsonDict | None:
     """The completion marker of a chunk that need not be redone, else None."""
-    import pyarrow.parquet as pq
-
     marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
     if not (marker.is_file() and data.is_file()):
         return None

@@ -26,12 +26,12 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.jsontypes import JsonDict
 from predisat.masks.margins import EL_STEP_DEG, SECTORS, MarginTable, sector_of
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.truth import TrueMasks
@@ -232,15 +232,7 @@ def calibrate_margin(
     -------
     MarginTable
     """
-    if not 0.0 < target <= 1.0:
-        raise ValueError(f"target must be in (0, 1], got {target}")
-    if confidence is not None and not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1) (e.g. 0.95), got {confidence}")
-    if confidence is not None and n_boot < 10:
-        raise ValueError(f"n_boot must be at least 10, got {n_boot}")
-    bad = set(by) - {"sector", "source"}
-    if bad:
-        raise ValueError(f"by may hold 'sector' and 'source' only, got {sorted(bad)}")
+    _check_calibration(target, by, confidence, n_boot)
     cands = (
         np.round(np.arange(0.0, 30.0 + 1e-9, 0.1), 6)
         if candidates_deg is None
@@ -258,7 +250,7 @@ def calibrate_margin(
         if confidence is not None
         else None
     )
-    rows: list[dict[str, Any]] = []
+    rows: list[JsonDict] = []
     sels: list[NDArray] = []
     los_all = count_above(t, el_step_deg)
     for s_name in ("cross", "along") if "sector" in by else ("*",):
@@ -266,18 +258,9 @@ def calibrate_margin(
             sel = (sec == s_name) & (src == c_name)
             margin, reached, share = 90.0, False, float("nan")
             if sel.any():
-                mm, tt = m[sel][None, :], t[sel][None, :]
-                trusted, good, _ = trust_counts(mm, tt, cands[:, None], el_step_deg)
-                n_tr, n_good = trusted.sum(axis=1), good.sum(axis=1)
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    ratio = np.where(n_tr > 0, n_good / np.maximum(n_tr, 1), 1.0)
-                ok = np.flatnonzero(ratio >= target)
-                if ok.size and weights is not None and confidence is not None:
-                    firsts = _bootstrap_index(trusted, good, pos[sel], weights, target)
-                    first = min(int(np.ceil(np.quantile(firsts, confidence))), cands.size)
-                    ok = np.arange(first, cands.size)
-                if ok.size:
-                    margin, reached, share = float(cands[ok[0]]), True, float(ratio[ok[0]])
+                margin, reached, share = _group_margin(
+                    m[sel], t[sel], pos[sel], cands, target, el_step_deg, weights, confidence
+                )
             n_group_pos = int(np.unique(pos[sel]).size)
             sels.append(sel)
             rows.append({
@@ -286,6 +269,68 @@ def calibrate_margin(
                 "sampled": n_group_pos >= min_positions, "reached": reached,
                 "los_share": share,
             })  # fmt: skip
+    _settle_groups(rows, sels, m, t, el_step_deg)
+    table = pd.DataFrame(rows)
+    meta = {"n_positions": int(comparison.chainage_m.size), "by": list(by),
+            "truly_visible_directions": int(los_all.sum()), "confidence": confidence,
+            "n_boot": n_boot if confidence is not None else 0, "seed": seed,
+            "block_m": block_m, "min_positions": min_positions}  # fmt: skip
+    return MarginTable(_expand(table, by), float(target), el_step_deg, meta)
+
+
+def _check_calibration(
+    target: float, by: Sequence[str], confidence: float | None, n_boot: int
+) -> None:
+    """Fail on a target, grouping, confidence or resample count :func:`calibrate_margin`
+    cannot use."""
+    if not 0.0 < target <= 1.0:
+        raise ValueError(f"target must be in (0, 1], got {target}")
+    if confidence is not None and not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1) (e.g. 0.95), got {confidence}")
+    if confidence is not None and n_boot < 10:
+        raise ValueError(f"n_boot must be at least 10, got {n_boot}")
+    bad = set(by) - {"sector", "source"}
+    if bad:
+        raise ValueError(f"by may hold 'sector' and 'source' only, got {sorted(bad)}")
+
+
+def _group_margin(
+    mask_el: NDArray,
+    truth_el: NDArray,
+    pos: NDArray,
+    cands: NDArray,
+    target: float,
+    el_step_deg: float,
+    weights: NDArray | None,
+    confidence: float | None,
+) -> tuple[float, bool, float]:
+    """Margin, target reached, line-of-sight share of one group's bins, shape (n_bins,) each.
+
+    The smallest candidate reaching ``target`` (with ``weights``: the ``confidence`` quantile
+    of the resamples' smallest); (90, False, NaN) when none does.
+    """
+    mm, tt = mask_el[None, :], truth_el[None, :]
+    trusted, good, _ = trust_counts(mm, tt, cands[:, None], el_step_deg)
+    n_tr, n_good = trusted.sum(axis=1), good.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(n_tr > 0, n_good / np.maximum(n_tr, 1), 1.0)
+    ok = np.flatnonzero(ratio >= target)
+    if ok.size and weights is not None and confidence is not None:
+        firsts = _bootstrap_index(trusted, good, pos, weights, target)
+        first = min(int(np.ceil(np.quantile(firsts, confidence))), cands.size)
+        ok = np.arange(first, cands.size)
+    if ok.size:
+        return float(cands[ok[0]]), True, float(ratio[ok[0]])
+    return 90.0, False, float("nan")
+
+
+def _settle_groups(
+    rows: list[JsonDict], sels: list[NDArray], m: NDArray, t: NDArray, el_step_deg: float
+) -> None:
+    """Give the unsampled groups their sector's largest margin and every group its sky lost.
+
+    ``rows`` (modified in place) and ``sels`` (bin selections) are one per group.
+    """
     for r, sel in zip(rows, sels, strict=True):
         if not r["sampled"]:
             peers = [q["margin_deg"] for q in rows if q["sampled"] and q["sector"] == r["sector"]]
@@ -297,12 +342,6 @@ def calibrate_margin(
                 r["los_share"] = float(good1.sum() / tr1.sum())
         else:
             r["sky_lost"] = float("nan")
-    table = pd.DataFrame(rows)
-    meta = {"n_positions": int(comparison.chainage_m.size), "by": list(by),
-            "truly_visible_directions": int(los_all.sum()), "confidence": confidence,
-            "n_boot": n_boot if confidence is not None else 0, "seed": seed,
-            "block_m": block_m, "min_positions": min_positions}  # fmt: skip
-    return MarginTable(_expand(table, by), float(target), el_step_deg, meta)
 
 
 def _block_weights(chainage_m: NDArray, block_m: float, n_boot: int, seed: int) -> NDArray:
@@ -397,7 +436,7 @@ def evaluate_masks(
         if c_name != "all":
             sel &= src == c_name
         n = int(sel.sum())
-        row: dict[str, Any] = {"sector": s_name, "source": c_name, "n_bins": n}
+        row: JsonDict = {"sector": s_name, "source": c_name, "n_bins": n}
         if n:
             e = err[sel]
             row |= {

@@ -9,10 +9,12 @@ a progress bar on stderr.
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from multiprocessing import get_context
-from typing import Any
+from typing import Any, NoReturn, TypeVar
+
+from tqdm import tqdm
 
 from predisat.reconstruct.badframes import BadFrame
 from predisat.reconstruct.carving import Reconstructor
@@ -25,6 +27,9 @@ __all__ = [
     "run_chunks",
     "run_segmentation",
 ]
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 _WORKER: dict[str, Any] = {}  # per-process segmenter set by the pool initialiser
 
@@ -47,9 +52,7 @@ def _pool_chunk(job: ChunkJob) -> tuple[str, list[BadFrame]]:
 
 
 
-def _progress(total: int, desc: str, enabled: bool) -> Any:
-    from tqdm import tqdm
-
+def _progress(total: int, desc: str, enabled: bool) -> tqdm[NoReturn]:
     return tqdm(total=total, desc=desc, unit="frame" if "segment" in desc else "chunk",
                 disable=not enabled or total == 0, file=sys.stderr)  # fmt: skip
 
@@ -75,10 +78,10 @@ class WorkerPool:
             )  # fmt: skip
         return self._pool
 
-    def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterable[Any]:
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[R]:
         """``fn`` of every item in the workers, results as they finish; on an error or Ctrl-C
         the queued items are dropped (finished chunks are already on disk)."""
-        futures: set[Future[Any]] = {self.get().submit(fn, it) for it in items}
+        futures: set[Future[R]] = {self.get().submit(fn, it) for it in items}
         try:
             while futures:
                 done, futures = wait(futures, return_when=FIRST_COMPLETED)

@@ -23,10 +23,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.lib.npyio import NpzFile
 from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
+from predisat.jsontypes import JsonDict
 from predisat.reconstruct.badframes import BadFrame
+from predisat.sky.network import SkyNet
 
 if TYPE_CHECKING:
     from predisat.survey import Survey
@@ -111,9 +114,24 @@ def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | Non
 
 
 def decode_cache(
-    z: Any, meta: dict[str, Any], frame_id: str
+    z: NpzFile, meta: JsonDict, frame_id: str
 ) -> tuple[NDArray, NDArray | None] | BadFrame:
-    """The segmentation (or the recorded failure) of an opened cache entry."""
+    """The segmentation (or the recorded failure) of an opened cache entry.
+
+    Parameters
+    ----------
+    z : numpy.lib.npyio.NpzFile
+        The opened entry (``sky``: packed bits of the (h, w) sky mask; ``confidence``:
+        optional (w,) float32).
+    meta : dict
+        The entry's JSON header (``shape`` (h, w), ``bad``: the failure or None).
+    frame_id : str
+
+    Returns
+    -------
+    (sky, confidence) or BadFrame
+        ``sky`` of shape (h, w), bool; ``confidence`` of shape (w,) or None.
+    """
     if meta.get("bad"):
         return BadFrame(frame_id, str(meta["bad"]))
     h, w = meta["shape"]
@@ -127,7 +145,7 @@ def write_cache(
     job: FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
 ) -> None:
     stat = stat_key(job.image_path) if os.path.exists(job.image_path) else None
-    meta: dict[str, Any] = {
+    meta: JsonDict = {
         "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
     }  # fmt: skip
     arrays: dict[str, Any] = {}
@@ -218,8 +236,6 @@ def sky_net_sha256(path: str | os.PathLike[str]) -> str:
     FileNotFoundError
         Naming the missing file.
     """
-    from predisat.sky.network import SkyNet
-
     net = SkyNet.load(path)  # checks both files and the card
     h = hashlib.sha256()
     for f in (net.path, net.path.with_suffix(".json")):

@@ -14,10 +14,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from predisat.reconstruct.framecache import FrameJob, write_cache
+from predisat.sky.network import SkyNet, classifier_with_net
+from predisat.sky.segment import SkyOptions, segment_sky
 
 __all__ = ["Segmenter", "default_segmenter", "read_image", "segment_frame", "truncation"]
 
@@ -40,8 +43,6 @@ def default_segmenter(
     ``thin_px`` the thin-structure width (default ``SkyOptions``'s; the pipeline gives each
     camera's, ``PipelineParams.thin_px``).
     """
-    from predisat.sky.segment import SkyOptions, segment_sky
-
     opt = SkyOptions() if method is None else SkyOptions(method=method)
     if thin_px is not None:
         opt = replace(opt, thin_px=int(thin_px))
@@ -54,16 +55,12 @@ def default_segmenter(
 @functools.lru_cache(maxsize=4)
 def _candidate_classifier(method: str, sky_net: str) -> Any:
     # read once per process and file, not once per frame
-    from predisat.sky.network import SkyNet, classifier_with_net
-
     return classifier_with_net(method, SkyNet.load(sky_net))
 
 
 
 def read_image(path: str) -> tuple[NDArray | None, str | None]:
     """The BGR image at ``path``, or None and the problem with the file and its fix."""
-    import cv2
-
     try:
         data = Path(path).read_bytes()
     except FileNotFoundError:

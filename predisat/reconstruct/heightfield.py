@@ -26,6 +26,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from predisat.reconstruct.skyline import SkyProfile
+from predisat.track import TrackMap
 
 __all__ = [
     "HeightField",
@@ -119,7 +120,12 @@ class HeightField:
 
 
 def corridor_grid(
-    track: Any, lo_m: float, hi_m: float, half_width_m: float, cell_m: float, seg_m: float = 2.0
+    track: TrackMap,
+    lo_m: float,
+    hi_m: float,
+    half_width_m: float,
+    cell_m: float,
+    seg_m: float = 2.0,
 ) -> HeightField:
     """An empty (all unknown) height field over the corridor ``[lo_m, hi_m]`` x ``+-half_width``.
 

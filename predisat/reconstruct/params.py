@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
 
 from predisat.camera.models import CameraModel
+from predisat.jsontypes import JsonDict
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.framecache import sky_net_sha256
+from predisat.sky.network import NET_METHODS
 
 __all__ = [
     "DEFAULT_SEGMENTER",
@@ -66,8 +67,6 @@ class PipelineParams:
             raise ValueError(f"thin_deg must lie in [0, 10) degrees (0 disables the "
                              f"thin-structure policy), got {self.thin_deg}")  # fmt: skip
         if self.sky_net is not None:
-            from predisat.sky.network import NET_METHODS
-
             if self.segmenter not in NET_METHODS:
                 raise ValueError(
                     f"sky_net {self.sky_net} is used by the segmenters {NET_METHODS}, not by "
@@ -80,13 +79,13 @@ class PipelineParams:
             return 0
         return max(1, round(self.thin_deg / camera.widest_pixel_deg))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
         """JSON-serialisable form (recorded in every chunk's provenance)."""
         rec = {
             k: (list(v) if isinstance(v, tuple) else v)
             for k, v in asdict(self.reconstruction).items()
         }
-        out: dict[str, Any] = {
+        out: JsonDict = {
             "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
             "thin_deg": self.thin_deg,
         }  # fmt: skip
