@@ -1,8 +1,8 @@
 """The horizon ray march as it was until 2026-12-02 (commit 3645ffc), kept verbatim.
 
-It is the reference that the faster ``predisat.reconstruct.carving._march_rays`` must reproduce bit
-for
-bit (``test_reconstruct.py``) and the baseline of ``scripts/bench_march.py``.
+It is the reference that the faster ``predisat.reconstruct.carving._march_rays`` must reproduce
+bit for bit (``tests/regression/test_march_kernels.py``) and the baseline of
+``scripts/bench_march.py``. It pins an optimisation, not correctness.
 """
 
 import numpy as np
