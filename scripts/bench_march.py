@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' reference kernel
 
-from tests.predisat.reference_march import reference_march  # noqa: E402
+from tests.regression.reference_march import reference_march  # noqa: E402
 
 import predisat.reconstruct.carving as rc  # noqa: E402
 from predisat.reconstruct.carving import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
