@@ -1,10 +1,12 @@
-"""Track maps: the smooth 3-D track axis with chainage, its file readers, part chaining and fit.
+"""Track maps: the smooth 3-D track axis with chainage, its files, part chaining and fit.
 
-* :mod:`predisat.track.map` - :class:`TrackMap` (chainage, heading, curvature, projection).
-* :mod:`predisat.track.readers` - GeoJSON and CSV track files, and :func:`load_track`, the one
-  loader every command uses.
+* :mod:`predisat.track.map` - :class:`TrackMap` (chainage, heading, curvature, projection) and
+  :func:`load_track`, the one loader every command uses (GeoJSON or CSV by content).
+* :mod:`predisat.track.readers` - parsing GeoJSON and CSV track files (:class:`TrackFile`),
+  kilometre posts from line sections, writing GeoJSON.
 * :mod:`predisat.track.chain` - chaining the parts of a track file into one polyline.
 * :mod:`predisat.track.smooth` - the penalised B-spline fit through a simplified polyline.
+* :mod:`predisat.track.posts` - kilometre posts; :mod:`predisat.track.errors` - the error.
 """
 
 from predisat.track.errors import TrackMapError
