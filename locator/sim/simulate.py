@@ -12,9 +12,8 @@ ephemeris above the horizon:
    causes code **multipath** (delay-lock-loop error); for a blocked one it is tracked when
    strong enough (**NLOS**: the pseudorange is long by the reflection's extra path), otherwise
    the signal is **LOST**;
-4. noise of standard deviation :class:`predisat.availability.interval.ErrorModel` ``sigma(el)``
-   (scaled up
-   by the C/N0 loss of a reflected signal), white or first-order Gauss-Markov;
+4. noise of standard deviation :class:`predisat.gnss.errormodel.ErrorModel` ``sigma(el)``
+   (scaled up by the C/N0 loss of a reflected signal), white or first-order Gauss-Markov;
 5. the receiver clock, bias and drift driven by white and random-walk frequency noise
    (:class:`ClockModel`).
 
@@ -31,7 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from locator.corrections import OMEGA_E_RADPS
 from locator.sim.multipath import (
     SIGNALS,
+    Reflections,
     ReflectorIndex,
     ReflectorSearch,
     SignalModel,
@@ -51,8 +51,28 @@ from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import enu_rotation, enu_to_azel
 from predisat.gnss.errormodel import ErrorModel
 from predisat.gnss.orbits import C_MPS
+from predisat.jsontypes import JsonDict
 
-__all__ = ["ClockModel", "simulate_run", "transmit_positions"]
+if TYPE_CHECKING:
+    from predisat.synth.world import World  # the renderer's world: needs the [synth] extra
+
+__all__ = ["ClockModel", "OrbitSource", "SkySource", "simulate_run", "transmit_positions"]
+
+
+class OrbitSource(Protocol):
+    """What :func:`transmit_positions` needs of an ephemeris
+    (:class:`predisat.gnss.ephemeris.Ephemeris` is one)."""
+
+    def evaluate(
+        self, gps_s: ArrayLike, sats: Sequence[str]
+    ) -> tuple[NDArray, NDArray, object]: ...
+
+
+class SkySource(OrbitSource, Protocol):
+    """What :func:`simulate_run` needs of an ephemeris: positions and the satellite list."""
+
+    @property
+    def satellites(self) -> Sequence[str]: ...
 
 
 @dataclass(frozen=True)
@@ -128,7 +148,7 @@ def _rotate_earth(pos: NDArray, theta: NDArray) -> NDArray:
 
 
 def transmit_positions(
-    ephemeris: Any, gps_s: ArrayLike, sats: Sequence[str], rx_ecef_m: ArrayLike
+    ephemeris: OrbitSource, gps_s: ArrayLike, sats: Sequence[str], rx_ecef_m: ArrayLike
 ) -> tuple[NDArray, NDArray]:
     """Satellite positions at transmission, in the Earth-fixed frame at reception.
 
@@ -172,8 +192,8 @@ def transmit_positions(
 
 
 def simulate_run(
-    world: Any,
-    ephemeris: Any,
+    world: World,
+    ephemeris: SkySource,
     start_chainage_m: float,
     t0_gps_s: float,
     speed_profile: SpeedProfile,
@@ -254,93 +274,12 @@ def simulate_run(
     dt = 1.0 / rate_hz
     t_rel = np.arange(int(np.floor(duration_s * rate_hz + 1e-9)) + 1) * dt
     gps = t0_gps_s + t_rel
-
-    # ---- train motion
-    chain = start_chainage_m + direction * speed_profile.distance_at(t_rel)
-    lo, hi = world.extent_m
-    if chain.min() < lo - 1e-6 or chain.max() > hi + 1e-6:
-        raise ValueError(
-            f"the run covers chainage {chain.min():.1f}-{chain.max():.1f} m but the world's "
-            f"scenery is {lo:.1f}-{hi:.1f} m; shorten duration_s, move start_chainage_m or "
-            "build a longer world"
-        )
-    speed = speed_profile.speed_at(t_rel)
-    heading = (np.asarray(world.track.heading_at(chain), float) + (direction < 0) * 180.0) % 360
-    ant_enu = world.antenna_enu(chain, antenna_height_m)
-    ant_ecef = world.frame.enu_to_ecef(ant_enu)
-
-    # ---- satellites above the horizon
-    names = select_satellites(ephemeris.satellites if sats is None else sats, constellation)
-    if not names:
-        raise ValueError(
-            f"no satellite of constellation {constellation!r} among "
-            f"{'the ephemeris' if sats is None else 'sats'}; choose another constellation"
-        )
-    sat_ecef, rng_m = transmit_positions(ephemeris, gps, names, ant_ecef)
-    lat, lon, _ = world.frame.to_geodetic(ant_enu)
-    rot = enu_rotation(lat, lon)
-    az, el, _ = enu_to_azel(np.einsum("tij,tsj->tsi", rot, sat_ecef - ant_ecef[:, None]))
-    visible = np.isfinite(el) & (el > min_el_deg)
-    n_ep, n_sat = visible.shape
-
-    # ---- direct path
+    move = _motion(world, start_chainage_m, t_rel, speed_profile, direction, antenna_height_m)
+    sky = _sky(world, ephemeris, gps, move, constellation, sats, min_el_deg)
     index = reflectors or ReflectorIndex(world, backend=backend)
-    sat_enu = world.frame.ecef_to_enu(np.where(visible[..., None], sat_ecef, 0.0))
-    sat_enu = np.where(visible[..., None], sat_enu, np.nan)
-    ie, js = np.nonzero(visible)
-    los = np.zeros((n_ep, n_sat), bool)
-    if len(ie):
-        u = sat_enu[ie, js] - ant_enu[ie]
-        los[ie, js] = ~index.caster.occluded(ant_enu[ie], u)
-
-    # ---- reflections and signal levels
-    refl = find_reflections(
-        index, ant_enu, sat_enu, visible, search, signal_model.min_arrival_el_deg
-    )
-    cn0_direct = signal_model.cn0_direct_dbhz(el)
-    cn0_refl = signal_model.cn0_reflected_dbhz(refl.arrival_el_deg)
-    tracked_direct = los & (cn0_direct >= signal_model.threshold_dbhz)
-    nlos = visible & ~los & refl.found & (cn0_refl >= signal_model.threshold_dbhz)
-    state = np.full((n_ep, n_sat), SignalState.NOT_VISIBLE, np.int8)
-    state[visible] = SignalState.LOST
-    state[tracked_direct] = SignalState.LOS
-    state[nlos] = SignalState.NLOS
-    received = tracked_direct | nlos
-
-    # ---- errors
-    gen = np.random.default_rng([int(seed), 5])
-    bias, drift = clock_model.sample(n_ep, dt, gen)
-    z = gen.standard_normal((n_ep, n_sat))
-    if noise_time_constant_s > 0:
-        phi = np.exp(-dt / noise_time_constant_s)
-        for k in range(1, n_ep):  # stationary unit-variance AR(1) per satellite
-            z[k] = phi * z[k - 1] + np.sqrt(1.0 - phi**2) * z[k]
-    sigma = np.asarray(error_model.sigma_m(np.where(visible, el, 90.0)), float)
-    sigma = np.where(nlos, sigma * 10.0 ** ((cn0_direct - cn0_refl) / 20.0), sigma)
-    chip = np.array([SIGNALS.get(s[0], SIGNALS["G"])[0] for s in names])
-    wavelength = np.array([SIGNALS.get(s[0], SIGNALS["G"])[1] for s in names])
-    mp = np.zeros((n_ep, n_sat))
-    if multipath:
-        with_refl = tracked_direct & refl.found
-        amp = np.clip(10.0 ** ((cn0_refl - cn0_direct) / 20.0), 0.0, 0.99)
-        phase = 2.0 * np.pi * refl.extra_m / wavelength + signal_model.reflection_phase_rad
-        mp_all = dll_error_m(
-            np.where(with_refl, refl.extra_m, np.nan), np.where(with_refl, amp, 0.0),
-            np.nan_to_num(phase), chip, signal_model.correlator_spacing_chip,
-        )  # fmt: skip
-        mp = np.where(with_refl, mp_all, 0.0)
-    noise = sigma * z
-    extra = np.where(nlos, refl.extra_m, 0.0)
-    corrected = rng_m + bias[:, None] + noise + mp + extra
-
-    def rx_only(a: NDArray) -> NDArray:
-        return np.where(received, a, np.nan)
-
-    def vis_only(a: NDArray) -> NDArray:
-        return np.where(visible[..., None] if a.ndim == 3 else visible, a, np.nan)
-
-    mat = np.where(refl.found, np.asarray(world.face_material)[np.maximum(refl.face_id, 0)], -1)
-    cn0 = np.where(tracked_direct, cn0_direct, np.where(refl.found, cn0_refl, np.nan))
+    sig = _signals(index, move, sky, search, signal_model)
+    err = _errors(sky, sig, signal_model, error_model, clock_model, dt, seed,
+                  noise_time_constant_s, multipath)  # fmt: skip
     meta = {
         "created_by": "locator.sim.simulate.simulate_run",
         "t0_gps_s": float(t0_gps_s),
@@ -365,27 +304,197 @@ def simulate_run(
         "ephemeris": list(getattr(ephemeris, "sources", ())),
         "backend": getattr(index.caster, "backend", backend),
     }
+    return _sim_run(world, gps, move, sky, sig, err, meta)
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """The train along the run: chainage, speed, heading of travel, antenna positions."""
+
+    chainage_m: NDArray
+    speed_mps: NDArray
+    heading_deg: NDArray
+    ant_enu_m: NDArray
+    ant_ecef_m: NDArray
+
+
+def _motion(
+    world: World, start_chainage_m: float, t_rel: NDArray, speed_profile: SpeedProfile,
+    direction: int, antenna_height_m: float,
+) -> _Motion:  # fmt: skip
+    chain = start_chainage_m + direction * speed_profile.distance_at(t_rel)
+    lo, hi = world.extent_m
+    if chain.min() < lo - 1e-6 or chain.max() > hi + 1e-6:
+        raise ValueError(
+            f"the run covers chainage {chain.min():.1f}-{chain.max():.1f} m but the world's "
+            f"scenery is {lo:.1f}-{hi:.1f} m; shorten duration_s, move start_chainage_m or "
+            "build a longer world"
+        )
+    speed = speed_profile.speed_at(t_rel)
+    heading = (np.asarray(world.track.heading_at(chain), float) + (direction < 0) * 180.0) % 360
+    ant_enu = world.antenna_enu(chain, antenna_height_m)
+    return _Motion(chain, speed, heading, ant_enu, world.frame.enu_to_ecef(ant_enu))
+
+
+@dataclass(frozen=True)
+class _Sky:
+    """The satellites above the horizon at every epoch, (n_epoch, n_sat[, 3])."""
+
+    names: tuple[str, ...]
+    sat_ecef_m: NDArray
+    range_m: NDArray
+    az_deg: NDArray
+    el_deg: NDArray
+    visible: NDArray
+    sat_enu_m: NDArray  # NaN where not visible
+
+
+def _sky(
+    world: World, ephemeris: SkySource, gps: NDArray, move: _Motion,
+    constellation: str | Sequence[str], sats: Sequence[str] | None, min_el_deg: float,
+) -> _Sky:  # fmt: skip
+    names = select_satellites(ephemeris.satellites if sats is None else sats, constellation)
+    if not names:
+        raise ValueError(
+            f"no satellite of constellation {constellation!r} among "
+            f"{'the ephemeris' if sats is None else 'sats'}; choose another constellation"
+        )
+    ant_enu, ant_ecef = move.ant_enu_m, move.ant_ecef_m
+    sat_ecef, rng_m = transmit_positions(ephemeris, gps, names, ant_ecef)
+    lat, lon, _ = world.frame.to_geodetic(ant_enu)
+    rot = enu_rotation(lat, lon)
+    az, el, _ = enu_to_azel(np.einsum("tij,tsj->tsi", rot, sat_ecef - ant_ecef[:, None]))
+    visible = np.isfinite(el) & (el > min_el_deg)
+    sat_enu = world.frame.ecef_to_enu(np.where(visible[..., None], sat_ecef, 0.0))
+    sat_enu = np.where(visible[..., None], sat_enu, np.nan)
+    return _Sky(tuple(names), sat_ecef, rng_m, az, el, visible, sat_enu)
+
+
+@dataclass(frozen=True)
+class _Signals:
+    """What the receiver gets of each satellite: direct, reflected, tracked, state."""
+
+    refl: Reflections
+    cn0_direct_dbhz: NDArray
+    cn0_refl_dbhz: NDArray
+    tracked_direct: NDArray
+    nlos: NDArray
+    state: NDArray
+    received: NDArray
+
+
+def _signals(
+    index: ReflectorIndex, move: _Motion, sky: _Sky, search: ReflectorSearch,
+    signal_model: SignalModel,
+) -> _Signals:  # fmt: skip
+    ant_enu, visible, el = move.ant_enu_m, sky.visible, sky.el_deg
+    n_ep, n_sat = visible.shape
+    ie, js = np.nonzero(visible)
+    los = np.zeros((n_ep, n_sat), bool)
+    if len(ie):
+        u = sky.sat_enu_m[ie, js] - ant_enu[ie]
+        los[ie, js] = ~index.caster.occluded(ant_enu[ie], u)
+    refl = find_reflections(
+        index, ant_enu, sky.sat_enu_m, visible, search, signal_model.min_arrival_el_deg
+    )
+    cn0_direct = signal_model.cn0_direct_dbhz(el)
+    cn0_refl = signal_model.cn0_reflected_dbhz(refl.arrival_el_deg)
+    tracked_direct = los & (cn0_direct >= signal_model.threshold_dbhz)
+    nlos = visible & ~los & refl.found & (cn0_refl >= signal_model.threshold_dbhz)
+    state = np.full((n_ep, n_sat), SignalState.NOT_VISIBLE, np.int8)
+    state[visible] = SignalState.LOST
+    state[tracked_direct] = SignalState.LOS
+    state[nlos] = SignalState.NLOS
+    return _Signals(refl, cn0_direct, cn0_refl, tracked_direct, nlos, state,
+                    tracked_direct | nlos)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Errors:
+    """The terms of the corrected pseudoranges, (n_epoch[, n_sat])."""
+
+    clock_bias_m: NDArray
+    clock_drift_mps: NDArray
+    sigma_m: NDArray
+    noise_m: NDArray
+    multipath_m: NDArray
+    nlos_extra_m: NDArray
+    corrected_m: NDArray
+
+
+def _errors(
+    sky: _Sky, sig: _Signals, signal_model: SignalModel, error_model: ErrorModel,
+    clock_model: ClockModel, dt: float, seed: int, noise_time_constant_s: float,
+    multipath: bool,
+) -> _Errors:  # fmt: skip
+    n_ep, n_sat = sky.visible.shape
+    refl, nlos = sig.refl, sig.nlos
+    gen = np.random.default_rng([int(seed), 5])
+    bias, drift = clock_model.sample(n_ep, dt, gen)
+    z = gen.standard_normal((n_ep, n_sat))
+    if noise_time_constant_s > 0:
+        phi = np.exp(-dt / noise_time_constant_s)
+        for k in range(1, n_ep):  # stationary unit-variance AR(1) per satellite
+            z[k] = phi * z[k - 1] + np.sqrt(1.0 - phi**2) * z[k]
+    sigma = np.asarray(error_model.sigma_m(np.where(sky.visible, sky.el_deg, 90.0)), float)
+    sigma = np.where(
+        nlos, sigma * 10.0 ** ((sig.cn0_direct_dbhz - sig.cn0_refl_dbhz) / 20.0), sigma
+    )
+    mp = np.zeros((n_ep, n_sat))
+    if multipath:
+        chip = np.array([SIGNALS.get(s[0], SIGNALS["G"])[0] for s in sky.names])
+        wavelength = np.array([SIGNALS.get(s[0], SIGNALS["G"])[1] for s in sky.names])
+        with_refl = sig.tracked_direct & refl.found
+        amp = np.clip(10.0 ** ((sig.cn0_refl_dbhz - sig.cn0_direct_dbhz) / 20.0), 0.0, 0.99)
+        phase = 2.0 * np.pi * refl.extra_m / wavelength + signal_model.reflection_phase_rad
+        mp_all = dll_error_m(
+            np.where(with_refl, refl.extra_m, np.nan), np.where(with_refl, amp, 0.0),
+            np.nan_to_num(phase), chip, signal_model.correlator_spacing_chip,
+        )  # fmt: skip
+        mp = np.where(with_refl, mp_all, 0.0)
+    noise = sigma * z
+    extra = np.where(nlos, refl.extra_m, 0.0)
+    corrected = sky.range_m + bias[:, None] + noise + mp + extra
+    return _Errors(bias, drift, sigma, noise, mp, extra, corrected)
+
+
+def _sim_run(
+    world: World, gps: NDArray, move: _Motion, sky: _Sky, sig: _Signals, err: _Errors,
+    meta: JsonDict,
+) -> SimRun:  # fmt: skip
+    """The run's record: received terms NaN where not received, geometry where not visible."""
+    received, visible, refl = sig.received, sky.visible, sig.refl
+
+    def rx_only(a: NDArray) -> NDArray:
+        return np.where(received, a, np.nan)
+
+    def vis_only(a: NDArray) -> NDArray:
+        return np.where(visible[..., None] if a.ndim == 3 else visible, a, np.nan)
+
+    mat = np.where(refl.found, np.asarray(world.face_material)[np.maximum(refl.face_id, 0)], -1)
+    cn0 = np.where(sig.tracked_direct, sig.cn0_direct_dbhz,
+                   np.where(refl.found, sig.cn0_refl_dbhz, np.nan))  # fmt: skip
     return SimRun(
         gps_s=gps,
-        chainage_m=chain,
-        speed_mps=speed,
-        heading_deg=heading,
-        antenna_ecef_m=ant_ecef,
-        antenna_enu_m=ant_enu,
-        clock_bias_m=bias,
-        clock_drift_mps=drift,
-        sats=names,
-        state=state,
-        sat_ecef_m=vis_only(sat_ecef),
-        az_deg=vis_only(az),
-        el_deg=vis_only(el),
-        range_m=vis_only(rng_m),
-        corrected_m=rx_only(corrected),
-        sigma_m=rx_only(sigma),
+        chainage_m=move.chainage_m,
+        speed_mps=move.speed_mps,
+        heading_deg=move.heading_deg,
+        antenna_ecef_m=move.ant_ecef_m,
+        antenna_enu_m=move.ant_enu_m,
+        clock_bias_m=err.clock_bias_m,
+        clock_drift_mps=err.clock_drift_mps,
+        sats=sky.names,
+        state=sig.state,
+        sat_ecef_m=vis_only(sky.sat_ecef_m),
+        az_deg=vis_only(sky.az_deg),
+        el_deg=vis_only(sky.el_deg),
+        range_m=vis_only(sky.range_m),
+        corrected_m=rx_only(err.corrected_m),
+        sigma_m=rx_only(err.sigma_m),
         cn0_dbhz=vis_only(cn0),
-        noise_m=rx_only(noise),
-        multipath_m=rx_only(mp),
-        nlos_extra_m=rx_only(extra),
+        noise_m=rx_only(err.noise_m),
+        multipath_m=rx_only(err.multipath_m),
+        nlos_extra_m=rx_only(err.nlos_extra_m),
         reflection_delay_m=vis_only(refl.extra_m),
         reflector_face=np.where(visible, refl.face_id, -1),
         reflector_material=mat.astype(np.int16),
