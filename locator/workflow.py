@@ -11,23 +11,33 @@ import json
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
+from locator.errorfit import binned_sigma, calibration_figure
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
+from locator.intervals import fit_error_model, overbound_error_model
 from locator.run import RunConfig, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
-from locator.sim.simulate import simulate_run
+from locator.sim.simulate import SkySource, simulate_run
 from locator.sources import EpochSource, SimSource
+from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
-from predisat.gnss.errormodel import IntervalModel
+from predisat.geodesy import ecef_to_geodetic
+from predisat.gnss.errormodel import IntervalModel, write_error_model
+from predisat.jsontypes import JsonDict
+from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.maskset import MaskSet
+from predisat.track import demo_track
+
+if TYPE_CHECKING:
+    from predisat.synth.world import World  # the renderer's world: needs the [synth] extra
 
 __all__ = [
     "DEMO_RANGE_M",
@@ -71,8 +81,6 @@ def check_track(
 ) -> None:
     """The antenna positions of a run (first and last rows of ``ecef_m``) must lie on the
     given track within ``max_offset_m``."""
-    from predisat.geodesy import ecef_to_geodetic
-
     ends = np.asarray(ecef_m, float).reshape(-1, 3)[[0, -1]]
     lat, lon, h = ecef_to_geodetic(ends)
     pr = path.track.project(lat, lon, h)
@@ -90,8 +98,8 @@ def check_track(
 
 
 def simulate_to_folder(
-    world: Any,
-    ephemeris: Any,
+    world: World,
+    ephemeris: SkySource,
     out: str | Path,
     *,
     t0_gps_s: float,
@@ -127,7 +135,7 @@ def simulate_to_folder(
     )  # fmt: skip
     folder = sim.write(out, fmt)
     if masks_out:
-        from predisat.masks.fileformat import write_masks
+        # lazy: the world's true masks are ray cast by the renderer ([synth] extra)
         from predisat.synth.truth import true_masks
 
         tm = true_masks(world)
@@ -149,8 +157,8 @@ def run_to_folder(
     config: RunConfig,
     masks: MaskSet | None = None,
     fmt: str = "parquet",
-    meta: Mapping[str, Any] | None = None,
-    progress: Callable[[int], Any] | None = None,
+    meta: Mapping[str, object] | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> tuple[pd.DataFrame, Path]:
     """Run the locator over a source and write the run folder with its figures."""
     epochs = run_locator(
@@ -227,7 +235,7 @@ def calibrate_to_file(
     *,
     k_sigma: float = 2.0,
     bound: str = "overbound",
-    fitted: Mapping[str, Any] | None = None,
+    fitted: Mapping[str, object] | None = None,
 ) -> IntervalModel:
     """Fit the error model, write it (JSON) and its figure (``.png`` beside it).
 
@@ -235,14 +243,10 @@ def calibrate_to_file(
     every elevation bin (:func:`locator.intervals.overbound_error_model`), ``"estimate"`` the
     least-squares fit itself.
     """
-    from locator.errorfit import binned_sigma, calibration_figure
-    from locator.intervals import fit_error_model, overbound_error_model
-    from predisat.gnss.errormodel import write_error_model
-
     if bound not in ("overbound", "estimate"):
         raise ValueError(f"bound must be 'overbound' or 'estimate', got {bound!r}")
     estimate = fit_error_model(el_deg, residual_m)
-    info: dict[str, Any] = {**dict(fitted or {}), "bound": bound,
+    info: JsonDict = {**dict(fitted or {}), "bound": bound,
                             "estimate": {"a_m": estimate.a_m, "b_m": estimate.b_m}}  # fmt: skip
     error = estimate
     if bound == "overbound":
@@ -269,11 +273,11 @@ def calibrate_to_file(
 def demo(
     out: str | Path,
     *,
-    world: Any = None,
+    world: World | None = None,
     pipeline_masks: MaskSet | None = None,
     seed: int = 1,
     hour_utc: float = 8.0,
-    log: Callable[[str], Any] = print,
+    log: Callable[[str], object] = print,
 ) -> pd.DataFrame:
     """A simulated run on the demo line located under several trust rules, scored.
 
@@ -286,20 +290,17 @@ def demo(
     pandas.DataFrame
         One row per rule with :func:`locator.evaluate.summarise` figures.
     """
-    from predisat.availability.satellites import default_ephemeris, default_window
-    from predisat.synth.world import World, WorldSpec
-    from predisat.track.map import demo_track
-
     root = Path(out)
     if world is None:
+        # lazy: building a world needs the renderer ([synth] extra)
+        from predisat.synth.world import World, WorldSpec
+
         log("locator demo 1/3: building the synthetic world (line 144, km 4.0-6.3)")
         world = World.build(demo_track(), WorldSpec.mixed(*DEMO_RANGE_M, seed=0), 0)
     eph = default_ephemeris()
     t0 = float(default_window()[0] + hour_utc * 3600.0)
     log("locator demo 2/3: simulating the train run (LOS, multipath, NLOS, loss) and true masks")
     sim, sim_dir = simulate_to_folder(world, eph, root / "simulation", t0_gps_s=t0, seed=seed)
-    from predisat.masks.fileformat import read_masks
-
     truth_masks = read_masks(sim_dir / "true_masks.parquet")
     path = AntennaPath(world.track, float(sim.meta["antenna_height_m"]))
     rules: dict[str, tuple[str, MaskSet | None, float]] = {
@@ -337,7 +338,5 @@ def with_model(config: RunConfig, model: IntervalModel | None) -> RunConfig:
 
 def static_truth(obs_header_ecef_m: ArrayLike, path: AntennaPath) -> float:
     """Chainage of a static antenna on ``path`` (its projection)."""
-    from predisat.geodesy import ecef_to_geodetic
-
     lat, lon, h = ecef_to_geodetic(np.asarray(obs_header_ecef_m, float))
     return float(path.track.project(lat, lon, h).chainage_m)
