@@ -23,6 +23,7 @@ Raw values keep the units of the file (RINEX: s, m, rad, rad/s; GLONASS: km, km/
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -455,6 +456,14 @@ def _read_v4_body(
             key = f"{sat[0]} {msg}" if rtype == "EPH" and key != "S" else key
             skipped[key] = skipped.get(key, 0) + 1
         i = j
+    modern = {k: v for k, v in skipped.items() if len(k.split()) == 2}
+    if modern:
+        warnings.warn(
+            f"{path}: {sum(modern.values())} ephemeris record(s) of modernised messages skipped"
+            f" ({', '.join(f'{k} {v}' for k, v in sorted(modern.items()))}): their orbit model"
+            " is not implemented; the legacy messages (LNAV, INAV, FNAV, D1, D2, FDMA) are used",
+            stacklevel=2,
+        )
     return RinexNav(
         str(path),
         version,
