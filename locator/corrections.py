@@ -51,6 +51,7 @@ from predisat.gnss.timescale import gps_s_to_datetime64
 
 __all__ = [
     "OMEGA_E_RADPS",
+    "UNCORRECTED_IONO_SIGMA_M",
     "BroadcastIono",
     "CorrectedRanges",
     "RangeModel",
@@ -61,6 +62,7 @@ __all__ = [
     "niell_mapping",
     "saastamoinen_zenith_m",
     "troposphere_delay_m",
+    "uncorrected_iono_sigma_m",
 ]
 
 OMEGA_E_RADPS = 7.2921151467e-5
@@ -291,6 +293,36 @@ def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
     return out
 
 
+UNCORRECTED_IONO_SIGMA_M = 5.0
+"""Standard deviation added, at the zenith on L1, to a pseudorange whose ionospheric delay no
+broadcast model corrects, metres (scaled by the thin-shell obliquity factor and (f_L1 / f)^2:
+about 15 m on L1 at 5 deg). The mid-latitude daytime vertical delay on L1 is 2-10 m at moderate
+solar activity; an uncorrected Galileo-only run showed hour-long along-track biases of 4-5 m
+(issue 31). A bias, not noise: the inflation widens the intervals, it cannot average it away."""
+
+
+def uncorrected_iono_sigma_m(el_deg: ArrayLike, freq_hz: ArrayLike = F_L1_HZ) -> NDArray:
+    """Pseudorange sigma standing for an ionospheric delay left uncorrected, metres.
+
+    Parameters
+    ----------
+    el_deg : array_like
+        Elevation, degrees.
+    freq_hz : array_like
+        Carrier frequency (NaN gives NaN).
+
+    Returns
+    -------
+    ndarray
+        ``UNCORRECTED_IONO_SIGMA_M * F(el) * (f_L1 / f)^2`` with the 350 km thin-shell obliquity
+        factor ``F = 1 / sqrt(1 - (R cos el / (R + 350 km))^2)``.
+    """
+    el = np.radians(np.asarray(el_deg, float))
+    ratio = 6371.0 / (6371.0 + 350.0) * np.cos(el)
+    obliquity = 1.0 / np.sqrt(1.0 - ratio**2)
+    return UNCORRECTED_IONO_SIGMA_M * obliquity * (F_L1_HZ / np.asarray(freq_hz, float)) ** 2
+
+
 def klobuchar_delay_m(
     gps_s: ArrayLike,
     lat_deg: ArrayLike,
@@ -497,6 +529,9 @@ class CorrectedRanges:
     az_deg, el_deg : ndarray, shape (n_sat,)
     usable : ndarray of bool, shape (n_sat,)
     reason : ndarray of str, shape (n_sat,)
+    iono_model : ndarray of str, shape (n_sat,)
+        Klobuchar set applied (``"GPS"``, ``"QZS"``, ``"BDS"``, :meth:`BroadcastIono.klobuchar`);
+        ``""`` where no ionospheric correction was applied (see :attr:`iono_uncorrected`).
     """
 
     states: SatelliteStates
@@ -510,6 +545,14 @@ class CorrectedRanges:
     el_deg: NDArray
     usable: NDArray
     reason: NDArray
+    iono_model: NDArray = field(default_factory=lambda: np.zeros(0, "<U3"))
+
+    @property
+    def iono_uncorrected(self) -> NDArray:
+        """Satellites whose ionospheric delay stays in :attr:`corrected_m`, shape (n_sat,)."""
+        if len(self.iono_model) != len(self.states.sats):
+            return np.ones(len(self.states.sats), bool)
+        return self.iono_model == ""
 
     @property
     def corrected_m(self) -> NDArray:
@@ -714,6 +757,7 @@ class RangeModel:
         reason = st.reason.astype(object).copy()
         az = el = np.full(n, np.nan)
         iono = tropo = np.zeros(n)
+        iono_model = np.full(n, "", "<U3")
         if np.linalg.norm(rx) > 6.0e6:
             lat, lon, h = (float(v) for v in ecef_to_geodetic(rx))
             enu = (rot - rx) @ enu_rotation(lat, lon).T
@@ -723,10 +767,11 @@ class RangeModel:
                 iono = np.zeros(n)
                 for letter in {s[0] for s in st.sats}:
                     sel = np.array([s[0] == letter for s in st.sats])
-                    coef = self.iono.coefficients(letter)
+                    coef = self.iono.klobuchar(letter)
                     if coef is not None:
-                        d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef)
+                        d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef[:2])
                         iono[sel] = d * (F_L1_HZ / st.freq_hz[sel]) ** 2
+                        iono_model[sel] = coef[2]
                 below = el <= 0
                 reason[below & (reason == "")] = "below the horizon"
                 tropo = np.where(below, np.nan, tropo)
@@ -737,5 +782,6 @@ class RangeModel:
             )
         usable = reason == ""
         return CorrectedRanges(
-            st, rx, rot, rng, rng - rng0, iono, tropo, az, el, usable, reason.astype(str)
-        )
+            st, rx, rot, rng, rng - rng0, iono, tropo, az, el, usable, reason.astype(str),
+            iono_model,
+        )  # fmt: skip

@@ -276,3 +276,33 @@ def test_klobuchar_from_another_system_when_gps_has_none(test_data: Path, tmp_pa
         k = iono.klobuchar(system)
         assert k is not None and k[2] == "BDS" and k[0] is iono.bds_alpha, system
     assert BroadcastIono().klobuchar("G") is None
+
+
+def test_uncorrected_iono_sigma_scales_with_obliquity_and_frequency() -> None:
+    from locator.corrections import UNCORRECTED_IONO_SIGMA_M, uncorrected_iono_sigma_m
+
+    assert uncorrected_iono_sigma_m(90.0) == pytest.approx(UNCORRECTED_IONO_SIGMA_M)
+    s = uncorrected_iono_sigma_m(np.array([90.0, 45.0, 20.0, 5.0]))
+    assert np.all(np.diff(s) > 0) and 2.5 < s[-1] / s[0] < 3.2  # thin-shell factor, ~3 at 5 deg
+    l5 = uncorrected_iono_sigma_m(90.0, 1176.45e6)
+    assert l5 == pytest.approx(UNCORRECTED_IONO_SIGMA_M * (1575.42 / 1176.45) ** 2)
+
+
+def test_epochs_without_any_iono_model_are_flagged_and_inflated(test_data: Path) -> None:
+    """KMS3 Galileo: with the RINEX 4 file's GPS Klobuchar set every satellite is corrected;
+    without any set the source reports every satellite uncorrected with the inflated sigma."""
+    from locator.observations import read_rinex_obs
+    from locator.sources import RinexSource
+
+    model = RangeModel.from_rinex_nav(test_data / NAV4)
+    obs = read_rinex_obs(test_data / "gnss_obs/KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    x = obs.header.approx_position_ecef_m
+    with_iono = RinexSource(model, obs, "E")
+    bare = RinexSource(RangeModel.from_ephemeris(model.ephemeris, BroadcastIono()), obs, "E")
+    assert with_iono.iono_missing == () and bare.iono_missing == ("E",)
+    a, b = with_iono.observe(0, x), bare.observe(0, x)
+    assert a.sats == b.sats and len(a.sats) >= 4
+    assert a.extra_sigma_m is not None and np.all(a.extra_sigma_m == 0.0)
+    assert b.extra_sigma_m is not None and np.all(b.extra_sigma_m >= 5.0)
+    cr = model.correct(float(obs.gps_s[0]), a.sats, np.full(len(a.sats), 2.3e7), x, "C1C")
+    assert set(cr.iono_model.tolist()) == {"GPS"} and not cr.iono_uncorrected.any()
