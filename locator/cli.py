@@ -145,6 +145,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         model = RangeModel.from_rinex_nav(args.nav)
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation or "G")
+        _warn_no_iono(source, args.nav)
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
         header = hx if (hx == hx).all() and abs(hx).sum() > 0 else None  # RINEX: 0 0 0 if unknown
@@ -282,6 +283,23 @@ def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
             f"{obs.path}: its epochs ({day(t0)} - {day(t1)} GPS) lie outside the navigation "
             f"data of {', '.join(map(str, nav))} ({day(lo)} - {day(hi)}); give the broadcast "
             "navigation files of the observation day"
+        )
+
+
+def _warn_no_iono(source: Any, nav: Sequence[str]) -> None:
+    """Told once: systems without any broadcast ionosphere model (their epochs are flagged)."""
+    from locator.corrections import UNCORRECTED_IONO_SIGMA_M
+
+    missing = source.iono_missing
+    if missing:
+        print(
+            f"locator run: warning: no broadcast ionosphere model for {', '.join(missing)} in "
+            f"{', '.join(map(str, nav))} (no GPS, QZSS or BeiDou Klobuchar coefficients; "
+            "Galileo NeQuick-G is not applied): the ionospheric delay stays in the pseudoranges,"
+            " every epoch is flagged iono_uncorrected and its sigma inflated by "
+            f"{UNCORRECTED_IONO_SIGMA_M:g} m at the zenith (x obliquity); add the same day's GPS"
+            " or mixed broadcast navigation file to --nav",
+            file=sys.stderr,
         )
 
 

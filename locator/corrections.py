@@ -35,7 +35,6 @@ tau being the geometric travel time to the approximate receiver position, iterat
 
 from __future__ import annotations
 
-import gzip
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,14 +42,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.fileerror import FileLineError
+from predisat.fileerror import FileLineError, read_text_lines
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
 from predisat.gnss.ephemeris import Ephemeris, Reason, ValidityPolicy
 from predisat.gnss.orbits import C_MPS
+from predisat.gnss.rinex_nav import read_rinex_nav
 from predisat.gnss.timescale import gps_s_to_datetime64
 
 __all__ = [
     "OMEGA_E_RADPS",
+    "UNCORRECTED_IONO_SIGMA_M",
     "BroadcastIono",
     "CorrectedRanges",
     "RangeModel",
@@ -61,6 +62,7 @@ __all__ = [
     "niell_mapping",
     "saastamoinen_zenith_m",
     "troposphere_delay_m",
+    "uncorrected_iono_sigma_m",
 ]
 
 OMEGA_E_RADPS = 7.2921151467e-5
@@ -158,21 +160,34 @@ def group_delay_s(sat: str, code: str, tgd_s: float, aux26: float, data_source: 
 
 
 # ------------------------------------------------------------------------- ionosphere
+# Klobuchar coefficient sets tried per system, own system first (see BroadcastIono.klobuchar)
+_KLOBUCHAR_ORDER = {"C": ("BDS", "GPS", "QZS"), "J": ("QZS", "GPS", "BDS")}
+_KLOBUCHAR_DEFAULT_ORDER = ("GPS", "QZS", "BDS")
+# RINEX 4 "> ION" messages -> the RINEX 3 header keys of the same coefficients
+_ION_KEYS = {("G", "LNAV"): "GPS", ("J", "LNAV"): "QZS", ("C", "D1D2"): "BDS", ("E", "IFNV"): "GAL"}
+
+
 @dataclass(frozen=True)
 class BroadcastIono:
-    """Ionospheric coefficients of navigation headers.
+    """Broadcast ionospheric coefficients of navigation files.
 
     Attributes
     ----------
     gps_alpha, gps_beta : ndarray, shape (4,) or None
         Klobuchar coefficients (s, s/sc, s/sc^2, s/sc^3 and s, ...), RINEX 2 ``ION ALPHA`` /
-        ``ION BETA`` or RINEX 3 ``GPSA``/``GPSB``.
+        ``ION BETA``, RINEX 3 ``GPSA``/``GPSB`` or the first RINEX 4 ``> ION G.. LNAV``.
     bds_alpha, bds_beta : ndarray, shape (4,) or None
-        BeiDou Klobuchar coefficients (``BDSA``/``BDSB``).
+        BeiDou Klobuchar coefficients (``BDSA``/``BDSB``, RINEX 4 ``> ION C.. D1D2``).
     gal_ai : ndarray, shape (3,) or None
-        Galileo NeQuick-G effective ionisation coefficients (``GAL``); read, not used.
+        Galileo NeQuick-G effective ionisation coefficients (``GAL``, RINEX 4
+        ``> ION E.. IFNV``); read, not used (no maintained NeQuick-G package: see
+        ``docs/ephemerides.md``).
     source : str
         ``"file:line"`` of the GPS coefficients.
+    qzs_alpha, qzs_beta : ndarray, shape (4,) or None
+        QZSS Klobuchar coefficients (``QZSA``/``QZSB``, RINEX 4 ``> ION J.. LNAV``).
+    sources : mapping of str to str
+        ``"file:line"`` of every set held, by ``"GPS"``, ``"QZS"``, ``"BDS"``, ``"GAL"``.
     """
 
     gps_alpha: NDArray | None = None
@@ -181,15 +196,19 @@ class BroadcastIono:
     bds_beta: NDArray | None = None
     gal_ai: NDArray | None = None
     source: str = ""
+    qzs_alpha: NDArray | None = None
+    qzs_beta: NDArray | None = None
+    sources: Mapping[str, str] = field(default_factory=dict)
 
     @classmethod
     def from_rinex_nav(cls, paths: str | Path | Sequence[str | Path]) -> BroadcastIono:
-        """Coefficients from the headers of RINEX 2/3 navigation files (first file wins)."""
+        """Coefficients of RINEX 2/3 navigation headers and RINEX 4 ``> ION`` records (for each
+        set, the first file that has it wins; within a RINEX 4 file, the first record)."""
         if isinstance(paths, (str, Path)):
             paths = [paths]
         found: dict[str, tuple[NDArray, str]] = {}
         for p in paths:
-            for key, (val, where) in _read_iono_header(Path(p)).items():
+            for key, (val, where) in _read_iono(Path(p)).items():
                 found.setdefault(key, (val, where))
         get = {k: v[0] for k, v in found.items()}
         return cls(
@@ -199,25 +218,62 @@ class BroadcastIono:
             get.get("BDSB"),
             get.get("GAL"),
             found.get("GPSA", (None, ""))[1],
+            get.get("QZSA"),
+            get.get("QZSB"),
+            {k[:3]: v[1] for k, v in sorted(found.items()) if k[:3] in _ION_KEYS.values()},
         )
 
-    def coefficients(self, system: str) -> tuple[NDArray, NDArray] | None:
-        """Klobuchar (alpha, beta) used for a system letter, or None."""
-        if system == "C" and self.bds_alpha is not None and self.bds_beta is not None:
-            return self.bds_alpha, self.bds_beta
-        if self.gps_alpha is not None and self.gps_beta is not None:
-            return self.gps_alpha, self.gps_beta
+    def klobuchar(self, system: str) -> tuple[NDArray, NDArray, str] | None:
+        """Klobuchar (alpha, beta, set name) used for a system letter, or None when no set.
+
+        A system uses its own set (BeiDou ``BDS``, QZSS ``QZS``), else GPS's, else any other
+        broadcast Klobuchar set: the coefficients describe the same ionosphere, and any of them
+        removes much more of the delay than none (Galileo and GLONASS broadcast no Klobuchar
+        set). The name tells which (``"GPS"``, ``"QZS"``, ``"BDS"``).
+        """
+        sets = {
+            "GPS": (self.gps_alpha, self.gps_beta),
+            "QZS": (self.qzs_alpha, self.qzs_beta),
+            "BDS": (self.bds_alpha, self.bds_beta),
+        }
+        for name in _KLOBUCHAR_ORDER.get(system, _KLOBUCHAR_DEFAULT_ORDER):
+            a, b = sets[name]
+            if a is not None and b is not None:
+                return a, b, name
         return None
+
+    def coefficients(self, system: str) -> tuple[NDArray, NDArray] | None:
+        """Klobuchar (alpha, beta) used for a system letter (:meth:`klobuchar`), or None."""
+        k = self.klobuchar(system)
+        return None if k is None else (k[0], k[1])
+
+
+def _read_iono(path: Path) -> dict[str, tuple[NDArray, str]]:
+    """Coefficient sets of one file by RINEX 3 header key (``GPSA``, ``BDSB``, ``GAL``...)."""
+    if not path.is_file():
+        raise FileLineError(path, None, "no such navigation file; check the path")
+    first = read_text_lines(path, FileLineError)[:1]
+    try:
+        v4 = bool(first) and "RINEX VERSION / TYPE" in first[0] and float(first[0][:9]) >= 4.0
+    except ValueError:
+        v4 = False
+    if not v4:
+        return _read_iono_header(path)
+    out: dict[str, tuple[NDArray, str]] = {}
+    for m in read_rinex_nav(path).iono:
+        key = _ION_KEYS[(m.system, m.message)]
+        if key == "GAL":
+            out.setdefault(key, (m.coefficients, m.source))
+        else:
+            out.setdefault(key + "A", (m.coefficients[:4], m.source))
+            out.setdefault(key + "B", (m.coefficients[4:], m.source))
+    return out
 
 
 def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
-    if not path.is_file():
-        raise FileLineError(path, None, "no such navigation file; check the path")
-    raw = path.read_bytes()
-    if raw[:2] == b"\x1f\x8b":
-        raw = gzip.decompress(raw)
+    lines = read_text_lines(path, FileLineError)
     out: dict[str, tuple[NDArray, str]] = {}
-    for i, line in enumerate(raw.decode("ascii", errors="replace").splitlines()):
+    for i, line in enumerate(lines):
         label = line[60:].strip()
         try:
             if label in ("ION ALPHA", "ION BETA"):
@@ -235,6 +291,36 @@ def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
             raise FileLineError(path, i + 1, f"unreadable {label!r} coefficients") from None
         out.setdefault(key, (arr, f"{path.name}:{i + 1}"))
     return out
+
+
+UNCORRECTED_IONO_SIGMA_M = 5.0
+"""Standard deviation added, at the zenith on L1, to a pseudorange whose ionospheric delay no
+broadcast model corrects, metres (scaled by the thin-shell obliquity factor and (f_L1 / f)^2:
+about 15 m on L1 at 5 deg). The mid-latitude daytime vertical delay on L1 is 2-10 m at moderate
+solar activity; an uncorrected Galileo-only run showed hour-long along-track biases of 4-5 m
+(issue 31). A bias, not noise: the inflation widens the intervals, it cannot average it away."""
+
+
+def uncorrected_iono_sigma_m(el_deg: ArrayLike, freq_hz: ArrayLike = F_L1_HZ) -> NDArray:
+    """Pseudorange sigma standing for an ionospheric delay left uncorrected, metres.
+
+    Parameters
+    ----------
+    el_deg : array_like
+        Elevation, degrees.
+    freq_hz : array_like
+        Carrier frequency (NaN gives NaN).
+
+    Returns
+    -------
+    ndarray
+        ``UNCORRECTED_IONO_SIGMA_M * F(el) * (f_L1 / f)^2`` with the 350 km thin-shell obliquity
+        factor ``F = 1 / sqrt(1 - (R cos el / (R + 350 km))^2)``.
+    """
+    el = np.radians(np.asarray(el_deg, float))
+    ratio = 6371.0 / (6371.0 + 350.0) * np.cos(el)
+    obliquity = 1.0 / np.sqrt(1.0 - ratio**2)
+    return UNCORRECTED_IONO_SIGMA_M * obliquity * (F_L1_HZ / np.asarray(freq_hz, float)) ** 2
 
 
 def klobuchar_delay_m(
@@ -443,6 +529,9 @@ class CorrectedRanges:
     az_deg, el_deg : ndarray, shape (n_sat,)
     usable : ndarray of bool, shape (n_sat,)
     reason : ndarray of str, shape (n_sat,)
+    iono_model : ndarray of str, shape (n_sat,)
+        Klobuchar set applied (``"GPS"``, ``"QZS"``, ``"BDS"``, :meth:`BroadcastIono.klobuchar`);
+        ``""`` where no ionospheric correction was applied (see :attr:`iono_uncorrected`).
     """
 
     states: SatelliteStates
@@ -456,6 +545,14 @@ class CorrectedRanges:
     el_deg: NDArray
     usable: NDArray
     reason: NDArray
+    iono_model: NDArray = field(default_factory=lambda: np.zeros(0, "<U3"))
+
+    @property
+    def iono_uncorrected(self) -> NDArray:
+        """Satellites whose ionospheric delay stays in :attr:`corrected_m`, shape (n_sat,)."""
+        if len(self.iono_model) != len(self.states.sats):
+            return np.ones(len(self.states.sats), bool)
+        return self.iono_model == ""
 
     @property
     def corrected_m(self) -> NDArray:
@@ -660,6 +757,7 @@ class RangeModel:
         reason = st.reason.astype(object).copy()
         az = el = np.full(n, np.nan)
         iono = tropo = np.zeros(n)
+        iono_model = np.full(n, "", "<U3")
         if np.linalg.norm(rx) > 6.0e6:
             lat, lon, h = (float(v) for v in ecef_to_geodetic(rx))
             enu = (rot - rx) @ enu_rotation(lat, lon).T
@@ -669,10 +767,11 @@ class RangeModel:
                 iono = np.zeros(n)
                 for letter in {s[0] for s in st.sats}:
                     sel = np.array([s[0] == letter for s in st.sats])
-                    coef = self.iono.coefficients(letter)
+                    coef = self.iono.klobuchar(letter)
                     if coef is not None:
-                        d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef)
+                        d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef[:2])
                         iono[sel] = d * (F_L1_HZ / st.freq_hz[sel]) ** 2
+                        iono_model[sel] = coef[2]
                 below = el <= 0
                 reason[below & (reason == "")] = "below the horizon"
                 tropo = np.where(below, np.nan, tropo)
@@ -683,5 +782,6 @@ class RangeModel:
             )
         usable = reason == ""
         return CorrectedRanges(
-            st, rx, rot, rng, rng - rng0, iono, tropo, az, el, usable, reason.astype(str)
-        )
+            st, rx, rot, rng, rng - rng0, iono, tropo, az, el, usable, reason.astype(str),
+            iono_model,
+        )  # fmt: skip

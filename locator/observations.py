@@ -1,4 +1,4 @@
-"""RINEX 2.10-2.11 and 3.00-3.05 observation files: pseudoranges and the other observables.
+"""RINEX 2.10-2.11, 3.00-3.05 and 4.00-4.02 observation files, plain, gzip or Hatanaka.
 
 A small hand-written reader (the same choice as :mod:`predisat.gnss.rinex_nav`): every observable
 becomes one ``(n_epoch, n_sat)`` float array with NaN where absent, epochs become ``gps_s``, and
@@ -9,10 +9,12 @@ epoch; ``strict=True`` turns the first of them into a :class:`RinexObsError`.
 
 Supported: RINEX 2.10/2.11 (multi-line ``# / TYPES OF OBSERV``, satellite-list continuation
 lines for more than 12 satellites, event flags 1-6), RINEX 3.00-3.05 (``SYS / # / OBS TYPES``,
-``>`` epoch lines), plain or gzip-compressed. Event records (flags 2-5) are kept in
-:attr:`Observations.events`; header records following flag 4 may redefine the observation types,
-and the new types apply to the epochs that follow. Cycle-slip records (flag 6) are skipped and
-reported as events.
+``>`` epoch lines), RINEX 4.00-4.02 (read as 3.05: the body is unchanged, the new header records
+are ignored), plain or gzip-compressed, and Hatanaka-compressed (CRINEX 1.0/3.0, ``.crx``,
+``.crx.gz``, ``.YYd``), expanded in memory by the ``hatanaka`` package. Event records
+(flags 2-5) are kept in :attr:`Observations.events`; header records following flag 4 may redefine
+the observation types, and the new types apply to the epochs that follow. Cycle-slip records
+(flag 6) are skipped and reported as events.
 
 The pseudorange used for single-frequency ranging is chosen per system from
 :data:`DEFAULT_PSEUDORANGE_PRIORITY` (see ``docs/observations.md``).
@@ -22,7 +24,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +68,7 @@ _V2_TYPES = re.compile(r"^[CPLDS][125678]$")
 _V2_EPOCH = re.compile(
     r"^(?: [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d[ \d.]{11}| {26})  [0-6][ \d]{3}"
 )
+_MAX_VERSION = 4.03  # RINEX 4.00-4.02 observation files read as 3.05 (docs/observations.md)
 _FIELD = 16  # F14.3 value, I1 loss-of-lock indicator, I1 signal strength
 _GOOD_TAIL = {0, 14, 15}  # where a stripped line may end inside its last 16-character field
 
@@ -207,6 +210,9 @@ class Observations:
         Line of each epoch record, for reports.
     events : tuple of ObsEvent
     problems : tuple of ObsProblem
+    crinex : str
+        CRINEX version (``"1.0"``, ``"3.0"``) the file was expanded from; ``""`` for plain RINEX.
+        Line numbers then count lines of the expanded text.
     """
 
     path: str
@@ -221,12 +227,13 @@ class Observations:
     epoch_line: NDArray
     events: tuple[ObsEvent, ...] = ()
     problems: tuple[ObsProblem, ...] = ()
+    crinex: str = ""
 
     @classmethod
     def from_rinex(
         cls, path: str | Path, codes: Sequence[str] | None = None, strict: bool = False
     ) -> Observations:
-        """Read a RINEX 2 or 3 observation file; see :func:`read_rinex_obs`."""
+        """Read a RINEX 2, 3 or 4 observation file; see :func:`read_rinex_obs`."""
         return read_rinex_obs(path, codes, strict)
 
     @property
@@ -272,11 +279,36 @@ class Observations:
         return PseudorangeSelection(out, code)
 
 
-def _open_lines(path: Path) -> list[str]:
+def _is_crinex(first_line: str) -> bool:
+    return "COMPACT RINEX" in first_line and "CRINEX VERS" in first_line
+
+
+def _open_lines(path: Path) -> tuple[list[str], str]:
+    """Lines of the RINEX text and the CRINEX version it was expanded from (``""`` if none).
+
+    Hatanaka-compressed files (CRINEX 1.0 for RINEX 2, 3.0 for RINEX 3 and 4; plain or gzip)
+    are expanded in memory by the ``hatanaka`` package (the GSI RNXCMP code); line numbers are
+    then those of the expanded text, as ``crx2rnx`` would write it.
+    """
     lines = read_text_lines(path, RinexObsError)
-    if lines and lines[0][:5] in ("1.0  ", "3.0  ") and "COMPACT RINEX" in lines[0]:
-        raise RinexObsError(path, 1, "Hatanaka-compressed (CRINEX); expand it with crx2rnx")
-    return lines
+    if not lines or not _is_crinex(lines[0]):
+        return lines, ""
+    crinex = lines[0][:20].strip()
+    import hatanaka  # only needed for compressed files
+
+    try:
+        text = hatanaka.decompress("\n".join(lines).encode("ascii") + b"\n")
+    except hatanaka.HatanakaException as exc:
+        # RNXCMP names the line of the compressed text: "ERROR at line 144 : ..."
+        text = " ".join(str(exc).split())
+        at = re.search(r"line (\d+)", text)
+        raise RinexObsError(
+            path,
+            int(at[1]) if at else None,
+            f"Hatanaka (CRINEX {crinex}) data cannot be expanded (crx2rnx: {text[:160]}):"
+            " the file is damaged or truncated; download it again",
+        ) from None
+    return text.decode("ascii", errors="replace").splitlines(), crinex
 
 
 def _float(text: str) -> float:
@@ -431,10 +463,12 @@ class _Reader:
             raise RinexObsError(path, 1, f"unreadable RINEX version {lines[0][:9]!r}") from None
         if lines[0][20:21].upper() != "O":
             raise RinexObsError(path, 1, "not an observation file (file type is not 'O')")
-        if not 2.0 <= version < 4.0:
+        if not 2.0 <= version < _MAX_VERSION:
             raise RinexObsError(
-                path, 1, f"RINEX {version} observation files are not supported; convert the "
-                "file to RINEX 3 (e.g. gfzrnx -vo 3)"
+                path,
+                1,
+                f"RINEX {version} observation files are not supported (2.10-4.02);"
+                " convert the file to RINEX 3 or 4.02 (e.g. gfzrnx -vo 3)",
             )
         return version, lines[0][40:41].upper().strip() or "G"
 
@@ -846,12 +880,13 @@ def _report_unknown_values(
 def read_rinex_obs(
     path: str | Path, codes: Sequence[str] | None = None, strict: bool = False
 ) -> Observations:
-    """Read a RINEX 2 or 3 observation file.
+    """Read a RINEX 2, 3 or 4 observation file, plain, gzip or Hatanaka-compressed.
 
     Parameters
     ----------
     path : str or Path
-        Plain or gzip-compressed RINEX 2.10/2.11/3.0x observation file.
+        RINEX 2.10/2.11/3.0x/4.00-4.02 observation file: plain, gzip-compressed or
+        Hatanaka-compressed (CRINEX, optionally gzipped), recognised by content, not by name.
     codes : sequence of str, optional
         Observation codes to keep (default: all); keeps memory small for long files.
     strict : bool
@@ -869,9 +904,18 @@ def read_rinex_obs(
         any anomaly: truncated epoch, unknown code, unreadable value, stray line.
     """
     path = Path(path)
-    reader = _Reader(path, _open_lines(path), codes, strict)
-    head, first, _ = reader.header()
-    parsed = reader.body(head, first)
-    if not parsed.epochs:
-        reader.problem(first + 1, None, "no observation epoch in the file")
-    return _assemble(reader, head, parsed)
+    lines, crinex = _open_lines(path)
+    reader = _Reader(path, lines, codes, strict)
+    try:
+        head, first, _ = reader.header()
+        parsed = reader.body(head, first)
+        if not parsed.epochs:
+            reader.problem(first + 1, None, "no observation epoch in the file")
+    except RinexObsError as exc:
+        if not crinex:
+            raise
+        raise RinexObsError(
+            path, exc.line, exc.what + f" (CRINEX {crinex}: the line of the expanded RINEX text)"
+        ) from None
+    obs = _assemble(reader, head, parsed)
+    return replace(obs, crinex=crinex) if crinex else obs

@@ -176,7 +176,9 @@ def run_locator(
         ``flag_names``, ``claim`` (safety claim after every check), ``claim_fix`` (the fix's own
         claim, before the heading and odometry checks), ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
-        ``excluded`` (``sat:reason`` items), ``solve_ms``.
+        ``excluded`` (``sat:reason`` items), ``solve_ms``, ``iono_uncorrected`` (True when a
+        trusted satellite's ionospheric delay was left uncorrected, no broadcast model being
+        available, and its sigma inflated: :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
     """
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
@@ -212,13 +214,20 @@ def run_locator(
         trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
         idx = np.flatnonzero(trusted)
         fix: Fix | None = None
+        sigma = None
+        extra = data.extra_sigma_m
+        uncorrected = extra is not None and bool(np.any(extra[idx] > 0))
+        if uncorrected:
+            assert extra is not None
+            sigma = np.hypot(cfg.locator.model.error.sigma_m(el[idx]), extra[idx])
         if len(idx) >= 2:
             fix = locate(
                 path, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], prior_m=centre,
-                integrity=cfg.integrity, config=cfg.locator,
+                integrity=cfg.integrity, config=cfg.locator, sigma_m=sigma,
                 sats=[data.sats[i] for i in idx],
             )  # fmt: skip
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
+        row["iono_uncorrected"] = uncorrected
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"

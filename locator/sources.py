@@ -10,7 +10,9 @@ corrected pseudoranges of the signals the receiver tracks, given an approximate 
 * :class:`RinexSource` - a RINEX 2/3 observation file and broadcast navigation
   (:class:`locator.corrections.RangeModel`): single-frequency pseudoranges corrected for the
   satellite clock, relativity, group delay, Earth rotation, Klobuchar ionosphere and troposphere.
-  Satellites without usable navigation data are reported per epoch with the reason.
+  Satellites without usable navigation data are reported per epoch with the reason. Where no
+  broadcast ionosphere model exists, the delay stays in the pseudorange and the epoch data carry
+  an inflated sigma for it (:attr:`EpochData.extra_sigma_m`).
 
 Pairs of pseudoranges are differenced, so every satellite of an epoch must share one receiver
 clock: the simulator has a single clock; on real data mixing systems needs inter-system biases,
@@ -28,7 +30,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from locator.corrections import RangeModel
+from locator.corrections import RangeModel, uncorrected_iono_sigma_m
 from locator.observations import Observations, PseudorangeSelection
 from locator.sim.simfile import SignalState, SimRun
 from predisat.availability.satellites import select_satellites
@@ -49,12 +51,18 @@ class EpochData(NamedTuple):
         Corrected pseudoranges (one receiver clock left in them), metres.
     rejected : mapping of str to str
         Satellites observed but not usable, with the reason.
+    extra_sigma_m : ndarray, shape (n,), optional
+        Standard deviation to add (root sum of squares) to the error model's for each
+        satellite, metres: the ionospheric delay no broadcast model corrected
+        (:func:`locator.corrections.uncorrected_iono_sigma_m`), 0 where corrected. None: nothing
+        to add (the simulator).
     """
 
     sats: tuple[str, ...]
     sat_ecef_m: NDArray
     pseudorange_m: NDArray
     rejected: Mapping[str, str]
+    extra_sigma_m: NDArray | None = None
 
 
 class EpochSource(Protocol):
@@ -195,6 +203,17 @@ class RinexSource:
     def _model(self) -> RangeModel:
         return self.model.with_glonass_slots(self.obs.header.glonass_slots)
 
+    @property
+    def systems(self) -> tuple[str, ...]:
+        """System letters of the satellites used, sorted."""
+        return tuple(sorted({s[0] for s, c in zip(self.obs.sats, self._columns, strict=True) if c}))
+
+    @property
+    def iono_missing(self) -> tuple[str, ...]:
+        """Systems used for which no broadcast ionosphere model exists: their delay stays in
+        the pseudoranges, every epoch is flagged and its sigma inflated (module docstring)."""
+        return tuple(s for s in self.systems if self.model.iono.klobuchar(s) is None)
+
     @cached_property
     def _columns(self) -> NDArray:
         keep = set(select_satellites(self.obs.sats, self.constellation))
@@ -212,11 +231,15 @@ class RinexSource:
         ok = cr.usable & np.isfinite(cr.corrected_m)
         rejected = {s: str(r) or "not usable" for s, r, u in zip(sats, cr.reason, ok, strict=True)
                     if not u}  # fmt: skip
+        extra = np.where(
+            cr.iono_uncorrected, uncorrected_iono_sigma_m(cr.el_deg, cr.states.freq_hz), 0.0
+        )
         return EpochData(
             tuple(s for s, u in zip(sats, ok, strict=True) if u),
             cr.sat_ecef_m[ok],
             cr.corrected_m[ok],
             rejected,
+            extra[ok],
         )
 
     def where(self, epoch: int) -> str:

@@ -1,4 +1,4 @@
-"""RINEX 2 and 3 broadcast navigation files: GPS, Galileo, BeiDou, QZSS, IRNSS and GLONASS.
+"""RINEX 2, 3 and 4 broadcast navigation files: GPS, Galileo, BeiDou, QZSS, IRNSS and GLONASS.
 
 A small hand-written reader (see ``docs/ephemerides.md`` for why not georinex): it keeps every
 record's raw values in one float table per orbit family, converts every epoch to ``gps_s``, and
@@ -6,7 +6,15 @@ rejects a malformed or truncated file with a :class:`RinexError` naming the file
 what is wrong. SBAS records are counted and skipped (they are not used for ranging here).
 
 Supported: RINEX 2.x GPS (``N``), GLONASS (``G``) and QZSS (2.12 ``N``/``J``) navigation files,
-RINEX 3.00-3.05 mixed or single-system navigation files, plain or gzip-compressed (``.gz``).
+RINEX 3.00-3.05 mixed or single-system navigation files, and RINEX 4.00-4.02 files, plain or
+gzip-compressed (``.gz``). RINEX 4 wraps every record in a ``> EPH``, ``> ION``, ``> STO`` or
+``> EOP`` line naming the satellite and the message type. ``EPH`` records of the legacy messages
+(GPS/QZSS/NavIC ``LNAV``, Galileo ``INAV``/``FNAV``, BeiDou ``D1``/``D2``, GLONASS ``FDMA``) have
+the RINEX 3.05 layout and land in the same tables; the modernised messages (``CNAV``, ``CNV1``,
+``CNV2``, ``CNV3``, ``L1NV``) use orbit models not implemented here and are counted in
+:attr:`RinexNav.skipped` (key ``"G CNAV"``, ...) like SBAS (key ``"S"``). ``ION`` records
+(Klobuchar of GPS/QZSS ``LNAV`` and BeiDou ``D1D2``, Galileo NeQuick-G ``IFNV``) are kept in
+:attr:`RinexNav.iono`; ``STO`` and ``EOP`` records are counted and skipped.
 
 Raw values keep the units of the file (RINEX: s, m, rad, rad/s; GLONASS: km, km/s, km/s^2);
 :mod:`predisat.gnss.orbits` turns them into positions.
@@ -15,6 +23,7 @@ Raw values keep the units of the file (RINEX: s, m, rad, rad/s; GLONASS: km, km/
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +43,8 @@ __all__ = [
     "GLONASS_FIELDS",
     "KEPLER_FIELDS",
     "KEPLER_SYSTEMS",
+    "LEGACY_MESSAGES",
+    "IonoMessage",
     "NavRecords",
     "RinexError",
     "RinexNav",
@@ -68,6 +79,16 @@ GLONASS_FIELDS: tuple[str, ...] = (
     "z_km", "vz_kmps", "az_kmps2", "age_d",
     "status_flags", "delay_l1l2_s", "urai", "health_flags",
 )  # fmt: skip
+
+LEGACY_MESSAGES: dict[str, tuple[str, ...]] = {
+    "G": ("LNAV",), "J": ("LNAV",), "I": ("LNAV",), "E": ("INAV", "FNAV"),
+    "C": ("D1", "D2"), "R": ("FDMA",),
+}  # fmt: skip
+"""RINEX 4 ``EPH`` message types per system whose records have the RINEX 3.05 layout (read)."""
+
+# RINEX 4 "> ION" records read: system, message -> number of coefficients (the rest skipped)
+_ION_MESSAGES = {("G", "LNAV"): 8, ("J", "LNAV"): 8, ("C", "D1D2"): 8, ("E", "IFNV"): 3}
+_MAX_VERSION = 4.03  # RINEX 4.00-4.02
 
 _N_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
 _REQUIRED_KEPLER = (*tuple(range(0, 20)), 24)
@@ -171,6 +192,36 @@ class NavRecords:
 
 
 @dataclass(frozen=True)
+class IonoMessage:
+    """A broadcast ionosphere message of a RINEX 4 ``> ION`` record.
+
+    Attributes
+    ----------
+    system : str
+        System letter of the transmitting satellite (``"G"``, ``"J"``, ``"C"``, ``"E"``).
+    message : str
+        ``"LNAV"`` (GPS/QZSS Klobuchar), ``"D1D2"`` (BeiDou Klobuchar) or ``"IFNV"`` (Galileo
+        NeQuick-G).
+    sat : str
+        Transmitting satellite.
+    epoch_gps_s : float
+        Transmission time of the message (on the system's scale, converted to ``gps_s``).
+    coefficients : ndarray, shape (8,) or (3,)
+        Klobuchar alpha0-3 (s, s/sc, s/sc^2, s/sc^3) then beta0-3 (s, ...), or NeQuick-G
+        ai0 (sfu), ai1 (sfu/deg), ai2 (sfu/deg^2), as written in the file.
+    source : str
+        ``"file:line"`` of the record.
+    """
+
+    system: str
+    message: str
+    sat: str
+    epoch_gps_s: float
+    coefficients: NDArray
+    source: str
+
+
+@dataclass(frozen=True)
 class RinexNav:
     """Contents of one RINEX navigation file.
 
@@ -185,7 +236,12 @@ class RinexNav:
         Value of the header's LEAP SECONDS line, if any (the built-in table of
         :mod:`predisat.gnss.timescale` is what converts GLONASS epochs).
     skipped : dict
-        Count of records skipped per system letter (SBAS).
+        Count of records skipped: per system letter (SBAS, ``"S"``) and, in RINEX 4, per
+        ``"<system> <message>"`` for modernised ephemerides (``"G CNAV"``) and per record type
+        (``"STO"``, ``"EOP"``, ``"ION C CNVX"``, ...).
+    iono : tuple of IonoMessage
+        RINEX 4 ``> ION`` records, in file order (RINEX 2/3 keep them in the header: see
+        :class:`locator.corrections.BroadcastIono`).
     """
 
     path: str
@@ -194,10 +250,12 @@ class RinexNav:
     glonass: NavRecords
     leap_seconds: int | None = None
     skipped: dict[str, int] = field(default_factory=dict)
+    iono: tuple[IonoMessage, ...] = ()
 
     @classmethod
     def read(cls, path: str | Path) -> RinexNav:
-        """Read a RINEX 2 or 3 navigation file (plain or ``.gz``); see :func:`read_rinex_nav`."""
+        """Read a RINEX 2, 3 or 4 navigation file (plain or ``.gz``); see
+        :func:`read_rinex_nav`."""
         return read_rinex_nav(path)
 
 
@@ -216,8 +274,13 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None,
         raise RinexError(path, 1, f"unreadable RINEX version {head[:9]!r}") from None
     ftype = head[20:21].upper()
     sys_letter = head[40:41].upper()
-    if version >= 4.0:
-        raise RinexError(path, 1, f"RINEX {version} navigation is not supported; use RINEX 2 or 3")
+    if version >= _MAX_VERSION:
+        raise RinexError(
+            path,
+            1,
+            f"RINEX {version} navigation is not supported (2.x-4.02); convert it to RINEX 3.05"
+            " or 4.02 (e.g. gfzrnx -vo 3)",
+        )
     if version < 3.0:
         if ftype == "G":
             default = "R"
@@ -288,12 +351,12 @@ def _epoch(path: Path, lineno: int, text: str, v3: bool) -> tuple[int, ...]:
 
 
 def read_rinex_nav(path: str | Path) -> RinexNav:
-    """Read a RINEX 2 or 3 navigation file.
+    """Read a RINEX 2, 3 or 4 navigation file.
 
     Parameters
     ----------
     path : str or Path
-        Plain or gzip-compressed RINEX navigation file.
+        Plain or gzip-compressed RINEX navigation file (2.x, 3.00-3.05, 4.00-4.02).
 
     Returns
     -------
@@ -308,6 +371,8 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     path = Path(path)
     lines = _open_lines(path)
     version, default_sys, leap, first = _parse_header(path, lines)
+    if version >= 4.0:
+        return _read_v4_body(path, lines, version, leap, first)
     n = len(lines)
     rows: dict[str, list] = {"kepler": [], "glonass": []}
     skipped: dict[str, int] = {}
@@ -336,6 +401,101 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
         leap,
         skipped,
     )
+
+
+def _read_v4_body(
+    path: Path, lines: list[str], version: float, leap: int | None, first: int
+) -> RinexNav:
+    """The records of a RINEX 4 file after its header (module docstring)."""
+    n = len(lines)
+    rows: dict[str, list] = {"kepler": [], "glonass": []}
+    skipped: dict[str, int] = {}
+    iono: list[IonoMessage] = []
+    i = first
+    while i < n:
+        line = lines[i]
+        if not line.strip():
+            i += 1
+            continue
+        if not line.startswith(">"):
+            raise RinexError(
+                path,
+                i + 1,
+                f"expected a '> EPH', '> ION', '> STO' or '> EOP' line, found {line[:30]!r}:"
+                " a record has extra lines or the file is damaged; download it again",
+            )
+        rtype, sat, msg = line[2:5], line[6:9].strip(), line[10:].strip()
+        j = i + 1
+        while j < n and not lines[j].startswith(">"):
+            j += 1
+        if rtype not in ("EPH", "ION", "STO", "EOP") or len(sat) != 3:
+            raise RinexError(
+                path,
+                i + 1,
+                f"unknown record line {line.rstrip()!r}: RINEX 4 records start with"
+                " '> EPH|ION|STO|EOP <satellite> <message>'",
+            )
+        if rtype == "EPH" and msg in LEGACY_MESSAGES.get(sat[0], ()):
+            if j == i + 1:
+                raise RinexError(path, i + 1, f"EPH record of {sat} has no data line: the file is"
+                                 " cut or damaged; download it again")  # fmt: skip
+            rec = _record_start(path, lines[i + 1], i + 2, sat[0], True)
+            if f"{rec.sys_letter}{rec.prn:02d}" != f"{sat[0]}{int(sat[1:]):02d}":
+                raise RinexError(
+                    path, i + 2, f"record of {line[6:9]} starts with {lines[i + 1][:3]!r}"
+                )
+            end, n_lines = _record_extent(path, lines, i + 1, rec, version)
+            if end != j:
+                raise RinexError(path, end + 1, f"record of {sat} has extra lines")
+            kind, row = _record_row(path, lines, i + 1, rec, n_lines, True)
+            rows[kind].append(row)
+        elif rtype == "ION" and (sat[0], msg) in _ION_MESSAGES:
+            iono.append(_ion_record(path, lines, i, j, sat, msg))
+        else:
+            key = "S" if sat[0] == "S" and rtype == "EPH" else f"{rtype} {sat[0]} {msg}"
+            key = f"{sat[0]} {msg}" if rtype == "EPH" and key != "S" else key
+            skipped[key] = skipped.get(key, 0) + 1
+        i = j
+    modern = {k: v for k, v in skipped.items() if len(k.split()) == 2}
+    if modern:
+        warnings.warn(
+            f"{path}: {sum(modern.values())} ephemeris record(s) of modernised messages skipped"
+            f" ({', '.join(f'{k} {v}' for k, v in sorted(modern.items()))}): their orbit model"
+            " is not implemented; the legacy messages (LNAV, INAV, FNAV, D1, D2, FDMA) are used",
+            stacklevel=2,
+        )
+    return RinexNav(
+        str(path),
+        version,
+        _to_records(rows["kepler"], "kepler"),
+        _to_records(rows["glonass"], "glonass"),
+        leap,
+        skipped,
+        tuple(iono),
+    )
+
+
+def _ion_record(path: Path, lines: list[str], i: int, j: int, sat: str, msg: str) -> IonoMessage:
+    """The ``> ION`` record at ``lines[i]`` (its body up to ``lines[j]``)."""
+    need = _ION_MESSAGES[(sat[0], msg)]
+    if j < i + 2:
+        raise RinexError(path, i + 1, f"ION record of {sat} has no data line: the file is cut")
+    epoch = _epoch(path, i + 2, lines[i + 1], True)
+    vals = _fields(path, i + 2, lines[i + 1], 23, 3)
+    for k in range(i + 2, j):
+        vals += _fields(path, k + 1, lines[k], 4, 4)
+    coef = np.array(vals[:need], float)
+    if len(coef) < need or not np.all(np.isfinite(coef)):
+        raise RinexError(
+            path,
+            i + 1,
+            f"ION {msg} record of {sat} has {int(np.isfinite(coef).sum())} of {need}"
+            " coefficients: a line is missing or cut; download the file again",
+        )
+    y, mo, d, h, mi, us = epoch
+    cal = calendar_to_gps_s(y, mo, d, h, mi, us * 1e-6)
+    t = float(cal) - (BDT_MINUS_GPST_S if sat[0] == "C" else 0.0)
+    return IonoMessage(sat[0], msg, sat, t, coef, f"{path.name}:{i + 1}")
 
 
 @dataclass(frozen=True)

@@ -288,3 +288,23 @@ def test_ctrl_c_is_one_line_not_a_traceback(sim_dir, tmp_path, capsys, monkeypat
     code = main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out", str(tmp_path / "r")])
     assert code == 130
     assert "locator: interrupted" in capsys.readouterr().err
+
+
+def test_rinex_run_without_any_iono_model_warns_once_and_flags_epochs(
+    test_data, tmp_path, capsys
+):
+    track = _virtual_track(tmp_path / "virtual.csv")
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav_lines = (test_data / "gnss_obs" / "07590920_0000_0200.05n").read_text().splitlines(True)
+    nav = tmp_path / "no_iono.05n"
+    nav.write_text("".join(t for t in nav_lines if "ION ALPHA" not in t and "ION BETA" not in t))
+    run = ["-q", "run", "--obs", str(obs), "--antenna-height", "0", "--track", str(track),
+           "--no-masks"]  # fmt: skip
+    assert main([*run, "--nav", str(nav), "--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("no broadcast ionosphere model for G") == 1 and "iono_uncorrected" in err
+    assert read_run(tmp_path / "a")[0]["iono_uncorrected"].all()
+    nav_ok = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    assert main([*run, "--nav", str(nav_ok), "--out", str(tmp_path / "b")]) == 0
+    assert "ionosphere" not in capsys.readouterr().err
+    assert not read_run(tmp_path / "b")[0]["iono_uncorrected"].any()

@@ -237,3 +237,72 @@ def test_missing_navigation_and_unknown_signal_are_flagged(
     assert gone.reason[0] == "OUTSIDE_VALIDITY"
     with pytest.raises(ValueError, match="atmosphere=False"):
         model.correct(t, sats, pr, np.zeros(3), codes)
+
+
+NAV4 = "gnss/KMS300DNK_R_20221591000_01H_MN.rnx.gz"
+
+
+def test_iono_coefficients_from_rinex4_ion_records(test_data: Path) -> None:
+    iono = BroadcastIono.from_rinex_nav(test_data / NAV4)
+    # "> ION G29 LNAV" / "    2022 06 08 09 59 48 1.024454832077E-08 2.235174179077E-08 ..."
+    np.testing.assert_array_equal(
+        iono.gps_alpha,
+        [1.024454832077e-08, 2.235174179077e-08, -5.960464477539e-08, -1.192092895508e-07],
+    )
+    np.testing.assert_array_equal(iono.gps_beta, [9.6256e04, 1.31072e05, -6.5536e04, -5.89824e05])
+    np.testing.assert_array_equal(iono.bds_beta, [1.20832e05, 1.47456e05, -1.31072e05, -6.5536e04])
+    np.testing.assert_array_equal(iono.gal_ai, [7.85e01, 5.390625e-01, 2.713012695312e-02])
+    assert set(iono.sources) == {"GPS", "BDS", "GAL"} and iono.source == iono.sources["GPS"]
+    k = iono.klobuchar("E")
+    assert k is not None and k[2] == "GPS"  # Galileo broadcasts no Klobuchar set: GPS's is used
+
+
+def test_klobuchar_from_another_system_when_gps_has_none(test_data: Path, tmp_path: Path) -> None:
+    """A navigation file without GPS coefficients: every system uses whatever Klobuchar set
+    exists (here BeiDou's), never none."""
+    src = test_data / "gnss/rinex_nav_BRDM00DLR_S_20230730000_01D_MN.rnx"
+    lines = src.read_text().splitlines(keepends=True)
+    no_gps = tmp_path / "no_gps_iono.rnx"
+    no_gps.write_text("".join(t for t in lines if not t.startswith("GPS")))
+    iono = BroadcastIono.from_rinex_nav(no_gps)
+    # header line 11: "QZSA   2.9802e-08 -2.2352e-08 -3.5763e-07 -2.3842e-07"
+    k = iono.klobuchar("G")
+    assert iono.gps_alpha is None and k is not None and k[2] == "QZS"
+    np.testing.assert_array_equal(k[0], [2.9802e-08, -2.2352e-08, -3.5763e-07, -2.3842e-07])
+    only_bds = tmp_path / "only_bds_iono.rnx"
+    only_bds.write_text("".join(t for t in lines if not t.startswith(("GPS", "QZS"))))
+    iono = BroadcastIono.from_rinex_nav(only_bds)
+    for system in "GECJR":
+        k = iono.klobuchar(system)
+        assert k is not None and k[2] == "BDS" and k[0] is iono.bds_alpha, system
+    assert BroadcastIono().klobuchar("G") is None
+
+
+def test_uncorrected_iono_sigma_scales_with_obliquity_and_frequency() -> None:
+    from locator.corrections import UNCORRECTED_IONO_SIGMA_M, uncorrected_iono_sigma_m
+
+    assert uncorrected_iono_sigma_m(90.0) == pytest.approx(UNCORRECTED_IONO_SIGMA_M)
+    s = uncorrected_iono_sigma_m(np.array([90.0, 45.0, 20.0, 5.0]))
+    assert np.all(np.diff(s) > 0) and 2.5 < s[-1] / s[0] < 3.2  # thin-shell factor, ~3 at 5 deg
+    l5 = uncorrected_iono_sigma_m(90.0, 1176.45e6)
+    assert l5 == pytest.approx(UNCORRECTED_IONO_SIGMA_M * (1575.42 / 1176.45) ** 2)
+
+
+def test_epochs_without_any_iono_model_are_flagged_and_inflated(test_data: Path) -> None:
+    """KMS3 Galileo: with the RINEX 4 file's GPS Klobuchar set every satellite is corrected;
+    without any set the source reports every satellite uncorrected with the inflated sigma."""
+    from locator.observations import read_rinex_obs
+    from locator.sources import RinexSource
+
+    model = RangeModel.from_rinex_nav(test_data / NAV4)
+    obs = read_rinex_obs(test_data / "gnss_obs/KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    x = obs.header.approx_position_ecef_m
+    with_iono = RinexSource(model, obs, "E")
+    bare = RinexSource(RangeModel.from_ephemeris(model.ephemeris, BroadcastIono()), obs, "E")
+    assert with_iono.iono_missing == () and bare.iono_missing == ("E",)
+    a, b = with_iono.observe(0, x), bare.observe(0, x)
+    assert a.sats == b.sats and len(a.sats) >= 4
+    assert a.extra_sigma_m is not None and np.all(a.extra_sigma_m == 0.0)
+    assert b.extra_sigma_m is not None and np.all(b.extra_sigma_m >= 5.0)
+    cr = model.correct(float(obs.gps_s[0]), a.sats, np.full(len(a.sats), 2.3e7), x, "C1C")
+    assert set(cr.iono_model.tolist()) == {"GPS"} and not cr.iono_uncorrected.any()

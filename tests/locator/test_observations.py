@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from locator.observations import RinexObsError, read_rinex_obs
+from locator.observations import Observations, RinexObsError, read_rinex_obs
 from predisat.gnss.timescale import calendar_to_gps_s
 
 OBS2 = "gnss_obs/07590920_10ep.05o"
@@ -230,10 +230,10 @@ def test_errors_name_the_file(test_data: Path, tmp_path: Path) -> None:
         read_rinex_obs(tmp_path / "missing.05o")
     with pytest.raises(RinexObsError, match="line 1: not an observation file"):
         read_rinex_obs(test_data / "gnss_obs/07590920_0000_0200.05n")
-    v4 = _lines(test_data / OBS2)
-    v4[0] = "     4.00" + v4[0][9:]
-    with pytest.raises(RinexObsError, match=r"line 1: RINEX 4.0 .* convert the file to RINEX 3"):
-        read_rinex_obs(_write(tmp_path / "v4.rnx", v4))
+    v5 = _lines(test_data / OBS2)
+    v5[0] = "     5.00" + v5[0][9:]
+    with pytest.raises(RinexObsError, match=r"line 1: RINEX 5.0 .* convert the file to RINEX 3"):
+        read_rinex_obs(_write(tmp_path / "v5.rnx", v5))
     lines = _lines(test_data / OBS2)
     with pytest.raises(RinexObsError, match="END OF HEADER"):
         read_rinex_obs(_write(tmp_path / "h.05o", lines[:10]))
@@ -263,12 +263,78 @@ def test_every_shared_observation_file_parses(shared_data: Path) -> None:
     assert all(e.flag == 4 and "SPLICE" in e.records[0] for e in full.events)
 
 
-def test_hatanaka_file_is_refused_with_the_fix(tmp_path) -> None:
-    from locator.observations import RinexObsError, read_rinex_obs
+def _same_observations(a: Observations, b: Observations) -> None:
+    assert a.sats == b.sats and a.codes == b.codes
+    np.testing.assert_array_equal(a.gps_s, b.gps_s)
+    np.testing.assert_array_equal(a.epoch_line, b.epoch_line)
+    for c in a.codes:
+        np.testing.assert_array_equal(a.values[c], b.values[c], err_msg=c)
+        np.testing.assert_array_equal(a.lli[c], b.lli[c], err_msg=c)
+        np.testing.assert_array_equal(a.snr[c], b.snr[c], err_msg=c)
 
-    path = tmp_path / "site.crx"
-    path.write_text(
-        "1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE\n"
+
+@pytest.mark.parametrize("name", [OBS2, SEPT, PIXEL])
+@pytest.mark.parametrize("compression", ["none", "gz"])
+def test_hatanaka_round_trip(test_data: Path, tmp_path: Path, name: str, compression: str) -> None:
+    """A file compressed by the hatanaka package (RNXCMP) reads as the plain file does."""
+    import hatanaka
+
+    plain = test_data / name
+    crx = tmp_path / "site.crx"
+    crx.write_bytes(hatanaka.compress(plain.read_bytes(), compression=compression))
+    assert (
+        b"COMPACT RINEX"
+        in (gzip.decompress if compression == "gz" else bytes)(crx.read_bytes())[:80]
     )
-    with pytest.raises(RinexObsError, match="crx2rnx"):
-        read_rinex_obs(path)
+    ref, got = read_rinex_obs(plain), read_rinex_obs(crx)
+    _same_observations(ref, got)
+    assert got.crinex == ("1.0" if ref.header.version < 3 else "3.0") and ref.crinex == ""
+
+
+def test_real_rinex4_hatanaka_file(test_data: Path, tmp_path: Path) -> None:
+    """KMS3 (Septentrio, RINEX 4.00 in CRINEX 3.0): the reader's expansion equals the hatanaka
+    package's, and the values equal the expanded text's lines, read by hand."""
+    import hatanaka
+
+    crx = test_data / "gnss_obs/KMS300DNK_R_20221591000_01H_30S_MO.crx"
+    obs = read_rinex_obs(crx, strict=True)
+    h = obs.header
+    assert h.version == 4.0 and obs.crinex == "3.0" and h.receiver_type == "SEPT POLARX5"
+    xyz = [3516213.4380, 781859.8595, 5246037.9660]  # the header line, read by hand
+    np.testing.assert_array_equal(h.approx_position_ecef_m, xyz)
+    assert h.obs_types["E"][:3] == ("C1C", "C5Q", "C6C") and h.glonass_slots["R03"] == 5
+    expanded = tmp_path / "KMS3.rnx"
+    expanded.write_bytes(hatanaka.decompress(crx.read_bytes()))
+    _same_observations(read_rinex_obs(expanded, strict=True), obs)
+    lines = expanded.read_text().splitlines()
+    first = next(i for i, t in enumerate(lines) if t.startswith("> 2022 06 08 10 00 00"))
+    assert obs.epoch_line[0] == first + 1 and len(obs.gps_s) == 19
+    np.testing.assert_array_equal(np.diff(obs.gps_s), 30.0)
+    g = next(t for t in lines[first:] if t.startswith("G"))
+    sat, c1c = g[:3], float(g[3:17])
+    assert obs.obs("C1C")[0, obs.sats.index(sat)] == c1c
+
+
+def test_damaged_hatanaka_file_names_file_and_fix(test_data: Path, tmp_path: Path) -> None:
+    crx = (test_data / "gnss_obs/KMS300DNK_R_20221591000_01H_30S_MO.crx").read_text()
+    lines = crx.splitlines(keepends=True)
+    i = next(k for k, t in enumerate(lines) if t.startswith(">"))  # first epoch
+    bad = tmp_path / "bad.crx"
+    bad.write_text("".join([*lines[: i + 5], "&&garbage\n", *lines[i + 6 :]]))
+    with pytest.raises(RinexObsError, match=r"bad\.crx, line \d+: .*download it again") as err:
+        read_rinex_obs(bad)
+    assert err.value.line is not None and err.value.line >= i + 6  # at or after the damage
+    cut = tmp_path / "cut.crx.gz"
+    cut.write_bytes(gzip.compress("".join(lines[: i + 300]).encode() + lines[i + 300][:5].encode()))
+    with pytest.raises(RinexObsError, match=r"cut\.crx\.gz.*truncated.*download it again"):
+        read_rinex_obs(cut)
+
+
+@pytest.mark.shared
+def test_shared_hatanaka_day(shared_data: Path) -> None:
+    """A full IGS day in .crx.gz (Ny-Alesund, RINEX 3.05): 2880 epochs at 30 s, no anomaly."""
+    path = shared_data / "gnss/georust_rinex/NYA100NOR_S_20241240000_01D_30S_MO.crx.gz"
+    obs = read_rinex_obs(path, codes=["C1C", "C2I"], strict=True)
+    assert obs.crinex == "3.0" and obs.header.version == 3.05
+    assert len(obs.gps_s) == 2880 and np.all(np.diff(obs.gps_s) == 30.0)
+    assert np.isfinite(obs.pseudorange().pseudorange_m).any(axis=1).all()

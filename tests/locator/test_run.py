@@ -163,3 +163,32 @@ def test_flag_names():
     assert flag_names(0) == ""
     f = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.HEADING_FAIL | RunFlag.ODOMETRY_CONFLICT)
     assert flag_names(f) == "NO_SAFETY_CLAIM|HEADING_FAIL|ODOMETRY_CONFLICT"
+
+
+class UncorrectedSource(FakeSource):
+    """The FakeSource with a common ionosphere-like bias on every satellite and the extra
+    sigma a source without any ionosphere model reports."""
+
+    def __init__(self, path, truth_m, extra_m):
+        super().__init__(path, truth_m)
+        self.extra = np.full(len(AZ), extra_m)
+
+    def observe(self, k, rx_ecef_m):
+        d = super().observe(k, rx_ecef_m)
+        return d._replace(extra_sigma_m=self.extra)
+
+
+def test_uncorrected_ionosphere_is_flagged_and_widens_the_intervals(path):
+    truth = truth_run(n=10)
+    cfg = RunConfig(MODEL, trust="none")
+    base = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg)
+    none = run_locator(
+        path, UncorrectedSource(path, truth, 0.0), start_chainage_m=truth[0], config=cfg
+    )
+    wide = run_locator(
+        path, UncorrectedSource(path, truth, 5.0), start_chainage_m=truth[0], config=cfg
+    )
+    assert not base["iono_uncorrected"].any() and not none["iono_uncorrected"].any()
+    assert wide["iono_uncorrected"].all()
+    np.testing.assert_allclose(none["length_m"], base["length_m"])
+    assert (wide["length_m"] > 2.0 * base["length_m"]).all()

@@ -78,3 +78,27 @@ def test_spp_full_hour_of_station_0759(shared_data: Path) -> None:
     # measured 0.49 m horizontal and 0.83 m vertical RMS (docs/observations.md)
     assert np.sqrt(np.mean(enu[:, 0] ** 2 + enu[:, 1] ** 2)) < 1.0
     assert np.sqrt(np.mean(enu[:, 2] ** 2)) < 1.5
+
+
+@pytest.mark.parametrize("system", ["G", "E", "C"])
+def test_spp_rinex4_hatanaka_obs_and_rinex4_nav(test_data: Path, system: str) -> None:
+    """KMS3 (RINEX 4.00 .crx observations, RINEX 4.00 navigation): each system alone lands on
+    the station's header position, and the ionosphere of the '> ION' records brings it closer
+    (Galileo through the GPS Klobuchar set: the file's NeQuick-G set is not used)."""
+    from locator.corrections import BroadcastIono
+    from locator.observations import DEFAULT_PSEUDORANGE_PRIORITY
+
+    model = RangeModel.from_rinex_nav(test_data / "gnss/KMS300DNK_R_20221591000_01H_MN.rnx.gz")
+    obs = read_rinex_obs(test_data / "gnss_obs/KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    station = obs.header.approx_position_ecef_m  # the IGS station's coordinates
+    prio = {system: DEFAULT_PSEUDORANGE_PRIORITY[system]}
+    table, _ = solve_observations(model, obs, priority=prio)
+    bare, _ = solve_observations(
+        RangeModel.from_ephemeris(model.ephemeris, BroadcastIono()), obs, priority=prio
+    )
+    err = [
+        np.linalg.norm(t[["x_m", "y_m", "z_m"]].to_numpy() - station, axis=1) for t in (table, bare)
+    ]
+    assert (table.status == "ok").all() and len(table) == 19
+    assert np.sqrt(np.mean(err[0] ** 2)) < 4.0
+    assert np.sqrt(np.mean(err[0] ** 2)) < np.sqrt(np.mean(err[1] ** 2)) - 1.0

@@ -144,3 +144,132 @@ def test_every_shared_nav_file_reads(shared_data: Path) -> None:
     assert big.skipped["S"] == 2130
     by_sys = {s: int(np.sum(big.kepler.sat.astype("<U1") == s)) for s in "GECJ"}
     assert by_sys == {"G": 257, "E": 1602, "C": 357, "J": 15}
+
+
+NAV4 = "gnss/KMS300DNK_R_20221591000_01H_MN.rnx.gz"
+
+
+def _v4_text(test_data: Path) -> list[str]:
+    return gzip.decompress((test_data / NAV4).read_bytes()).decode().splitlines()
+
+
+def test_rinex4_legacy_records_and_counts(test_data: Path) -> None:
+    """KMS3 (sbf2rin, RINEX 4.00): every '> EPH' record of a legacy message is read, the others
+    are counted; the counts come from the file's own '>' lines, values from hand-read lines."""
+    text = _v4_text(test_data)
+    heads = [ln.split() for ln in text if ln.startswith("> ")]
+    n = {(h[1], h[2][0], h[3]): 0 for h in heads}
+    for h in heads:
+        n[(h[1], h[2][0], h[3])] += 1
+    nav = read_rinex_nav(test_data / NAV4)
+    assert nav.version == 4.0 and nav.leap_seconds == 18
+    kep = nav.kepler.sat.astype("<U1")
+    assert int(np.sum(kep == "G")) == n[("EPH", "G", "LNAV")]
+    assert int(np.sum(kep == "J")) == n.get(("EPH", "J", "LNAV"), 0)
+    assert int(np.sum(kep == "E")) == n[("EPH", "E", "INAV")] + n[("EPH", "E", "FNAV")]
+    assert int(np.sum(kep == "C")) == n[("EPH", "C", "D1")] + n[("EPH", "C", "D2")]
+    assert len(nav.glonass) == n[("EPH", "R", "FDMA")]
+    assert nav.skipped["S"] == n[("EPH", "S", "SBAS")]
+    assert nav.skipped["STO E IFNV"] == n[("STO", "E", "IFNV")]
+    # "> EPH G02 LNAV" / "G02 2022 06 08 10 00 00-6.528543308377E-04 3.410605131648E-13 ..."
+    i = int(np.nonzero(nav.kepler.sat == "G02")[0][0])
+    line = next(k for k, t in enumerate(text) if t.startswith("G02 2022 06 08 10 00 00"))
+    assert nav.kepler.source[i] == f"{NAV4[5:]}:{line + 1}"
+    assert nav.kepler.col("af0_s")[i] == -6.528543308377e-04
+    assert nav.kepler.col("sqrt_a_sqrtm")[i] == 5.153679471970e03
+    assert nav.kepler.col("toe_sow_s")[i] == 2.952e05
+    # Galileo I/NAV and F/NAV of E01 keep their data-source words (517, 258)
+    e01 = nav.kepler.col("aux20")[nav.kepler.sat == "E01"]
+    assert {517.0, 258.0} <= set(e01.tolist())
+    # GLONASS FDMA: five lines, channel of R03 is 5 (its record and the obs header agree)
+    r03 = nav.glonass.col("freq_num")[nav.glonass.sat == "R03"]
+    assert set(r03.tolist()) == {5.0}
+
+
+def test_rinex4_ionosphere_messages(test_data: Path) -> None:
+    nav = read_rinex_nav(test_data / NAV4)
+    by = {(m.system, m.message): m for m in nav.iono}
+    assert set(by) == {("G", "LNAV"), ("E", "IFNV"), ("C", "D1D2")}
+    # "> ION G29 LNAV" / "    2022 06 08 09 59 48 1.024454832077E-08 ..." (hand-read)
+    g = by[("G", "LNAV")]
+    assert g.sat == "G29" and g.epoch_gps_s == 2213 * WEEK_S + 3 * GPS_DAY_S + 35988.0
+    np.testing.assert_array_equal(
+        g.coefficients,
+        [1.024454832077e-08, 2.235174179077e-08, -5.960464477539e-08, -1.192092895508e-07,
+         9.6256e04, 1.31072e05, -6.5536e04, -5.89824e05],
+    )  # fmt: skip
+    np.testing.assert_array_equal(
+        by[("E", "IFNV")].coefficients, [7.85e01, 5.390625e-01, 2.713012695312e-02]
+    )
+    c = by[("C", "D1D2")]  # BDT 09:59:50 = GPST 10:00:04
+    assert c.epoch_gps_s == 2213 * WEEK_S + 3 * GPS_DAY_S + 36004.0
+
+
+def test_rinex4_same_orbits_as_its_rinex3_form(test_data: Path, tmp_path: Path) -> None:
+    """The RINEX 4 legacy records are RINEX 3.05 records behind a '> EPH' line: rewritten as a
+    3.05 file (the RINEX 3 path of the reader, tested against SP3), the positions are equal."""
+    from predisat.gnss.ephemeris import Ephemeris
+
+    text = _v4_text(test_data)
+    out, k = [], 0
+    legacy = {"LNAV", "INAV", "FNAV", "D1", "D2", "FDMA"}
+    out.append("     3.05" + text[0][9:])
+    k = 1
+    while k < len(text):
+        t = text[k]
+        if t.startswith("> "):
+            j = k + 1
+            while j < len(text) and not text[j].startswith(">"):
+                j += 1
+            if t.split()[1] == "EPH" and t.split()[3] in legacy:
+                out += text[k + 1 : j]
+            k = j
+        else:
+            out.append(t)
+            k += 1
+    v3 = tmp_path / "KMS3_v305.rnx"
+    v3.write_text("\n".join(out) + "\n")
+    e4, e3 = Ephemeris.from_rinex(test_data / NAV4), Ephemeris.from_rinex(v3)
+    sats = sorted(set(e4.kepler.sat.tolist()) | set(e4.glonass.sat.tolist()))
+    t = 2213 * WEEK_S + 3 * GPS_DAY_S + 36000.0 + np.arange(0.0, 3600.0, 300.0)
+    p4, c4, _ = e4.evaluate(t, sats)
+    p3, c3, _ = e3.evaluate(t, sats)
+    assert np.isfinite(p4).any(axis=(0, 2)).sum() >= 60
+    np.testing.assert_array_equal(p4, p3)
+    np.testing.assert_array_equal(c4, c3)
+
+
+def test_rinex4_damage_names_file_line_and_fix(test_data: Path, tmp_path: Path) -> None:
+    text = _v4_text(test_data)
+    g02 = next(k for k, t in enumerate(text) if t.startswith("G02 2022"))
+    cut = [*text[: g02 + 3], *text[g02 + 4 :]]  # one orbit line missing
+    with pytest.raises(RinexError, match=rf"line {g02 + 1}: record of G02 has 7 of 8 lines"):
+        read_rinex_nav(_write(tmp_path, cut))
+    bad = list(text)
+    bad[g02 - 1] = "> XYZ G02 LNAV"
+    with pytest.raises(RinexError, match=rf"line {g02}: unknown record line"):
+        read_rinex_nav(_write(tmp_path, bad))
+    ion = next(k for k, t in enumerate(text) if t.startswith("> ION G29"))
+    short = [*text[: ion + 3], *text[ion + 4 :]]  # the beta3 line missing
+    with pytest.raises(RinexError, match=rf"line {ion + 1}: ION LNAV record of G29 has 7 of 8"):
+        read_rinex_nav(_write(tmp_path, short))
+    v5 = ["     4.05" + text[0][9:], *text[1:]]
+    with pytest.raises(RinexError, match=r"line 1: RINEX 4\.05 navigation is not supported"):
+        read_rinex_nav(_write(tmp_path, v5))
+
+
+def test_rinex4_modernised_messages_counted_with_a_warning(
+    test_data: Path, tmp_path: Path
+) -> None:
+    """CNAV/CNV2 ephemerides (not in the KMS3 file: a '> EPH G02 CNAV' block is added) are
+    skipped, counted and told: their orbit model is not implemented."""
+    text = _v4_text(test_data)
+    g02 = next(k for k, t in enumerate(text) if t.startswith("> EPH G02 LNAV"))
+    cnav = ["> EPH G02 CNAV", *(t for t in text[g02 + 1 : g02 + 9]), "     0.0"]
+    cnv2 = ["> EPH C19 CNV2", *text[g02 + 1 : g02 + 9], "     0.0", "     0.0"]
+    path = _write(tmp_path, [*text[:g02], *cnav, *cnv2, *text[g02:]])
+    with pytest.warns(UserWarning, match=r"2 ephemeris record\(s\).*C CNV2 1, G CNAV 1.*not impl"):
+        nav = read_rinex_nav(path)
+    assert nav.skipped["G CNAV"] == 1 and nav.skipped["C CNV2"] == 1
+    ref = read_rinex_nav(test_data / NAV4)
+    np.testing.assert_array_equal(nav.kepler.values, ref.kepler.values)
