@@ -37,12 +37,11 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' reference kernel
 
-from tests.regression.reference_march import reference_march  # noqa: E402
-
 import predisat.reconstruct.carving as rc  # noqa: E402
 from predisat.reconstruct.carving import FrameView, ReconstructionParams, Reconstructor  # noqa: E402
 from predisat.reconstruct.framecache import decode_cache  # noqa: E402
 from predisat.survey import Survey  # noqa: E402
+from tests.regression.reference_march import reference_march  # noqa: E402
 
 
 # ---------------------------------------------------------------------- inputs
