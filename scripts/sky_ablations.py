@@ -25,6 +25,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky.network import SkyEnsemble, SkyNet
 from predisat.sky.perceptron import SkyClassifier, guided_filter
@@ -71,10 +72,11 @@ class _Flipped:
     def __init__(self, model: SkyNet) -> None:
         self.model, self.max_side_px = model, model.max_side_px
 
-    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
-        mirror = np.ascontiguousarray(image_bgr[:, ::-1])
-        return 0.5 * (self.model.predict_image(image_bgr)
-                      + self.model.predict_image(mirror)[:, ::-1])
+    def predict_image(self, image_bgr: ArrayLike) -> NDArray[np.float32]:
+        image = np.asarray(image_bgr)
+        mirror = np.ascontiguousarray(image[:, ::-1])
+        return (0.5 * (self.model.predict_image(image)
+                       + self.model.predict_image(mirror)[:, ::-1])).astype(np.float32)
 
 
 def flip(data: Path) -> None:
