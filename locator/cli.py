@@ -487,18 +487,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip the heading-based integrity check")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="locator",
-        description=(
-            "1-D track-constrained GNSS locator (satellite-pair hyperbolic intersection with "
-            "the track, SATHIA) with mask-aware satellite selection and integrity checks."
-        ),
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-
+def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("simulate", help="simulate a train run's pseudoranges in a synthetic world")
     p.add_argument("--world", help="world.npz (from `predisat synth` truth/ or a simulation)")
     p.add_argument("--track", help="track GeoJSON/CSV (default: the demo line 144)")
@@ -523,6 +512,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
     p.set_defaults(func=cmd_simulate)
 
+
+def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", help="locate the train at every epoch (simulated or RINEX)")
     p.add_argument("--track", help="track GeoJSON/CSV (default: the simulation's, or line 144)")
     p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
@@ -535,6 +526,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
     p.set_defaults(func=cmd_run)
 
+
+def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("evaluate", help="score a run against the true chainage")
     p.add_argument("run", metavar="RUN_DIR")
     g = p.add_mutually_exclusive_group(required=True)
@@ -543,6 +536,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--truth-chainage", type=float, metavar="M", help="a static antenna")
     p.set_defaults(func=cmd_evaluate)
 
+
+def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("calibrate", help="learn sigma(el) from data with known truth")
     p.add_argument("--sim", nargs="+", metavar="DIR", help="simulated runs")
     p.add_argument("--states", default="los", help="signal states to learn from (los,nlos)")
@@ -561,12 +556,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=output_file, metavar="JSON")
     p.set_defaults(func=cmd_calibrate)
 
+
+def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("demo", help="a simulated run on the demo line under several trust rules")
     p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--from-predisat-demo", metavar="DIR",
                    help="reuse a `predisat demo` folder: its world and pipeline masks")  # fmt: skip
     p.set_defaults(func=cmd_demo)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``locator`` parser: one subcommand per job."""
+    parser = argparse.ArgumentParser(
+        prog="locator",
+        description=(
+            "1-D track-constrained GNSS locator (satellite-pair hyperbolic intersection with "
+            "the track, SATHIA) with mask-aware satellite selection and integrity checks."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_simulate(sub)
+    _add_run(sub)
+    _add_evaluate(sub)
+    _add_calibrate(sub)
+    _add_demo(sub)
     return parser
 
 
