@@ -1,0 +1,121 @@
+"""Fusion of the odometry interval with the satellite interval.
+
+Between satellite claims the odometry carries the train: the last fused interval (the anchor)
+moved by the odometer's displacement and widened by its over- and under-reading bounds
+(:meth:`locator.odometry.confidence.OdometerAccuracy.displacement_bounds_m`); without an
+odometer, by a maximum speed times the elapsed time. Where a satellite claim and the odometry
+interval are both valid the fused interval is their **intersection**: each holds the train
+unless its own error bound fails, so the intersection fails only when one of them does (the
+risks add; nothing is assumed independent). A claimed satellite interval that does **not meet**
+the odometry interval is an **alarm**: the two sources contradict each other, the claim is
+voided and the odometry interval goes on unchanged (never reset by the contradicting source).
+
+All functions are pure and vectorised over epochs (chainages in metres).
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from locator.odometry.confidence import OdometerAccuracy
+
+__all__ = ["Fused", "FusionStatus", "fuse_intervals", "motion_bound", "predict_interval"]
+
+
+class FusionStatus(IntEnum):
+    """Where the fused interval of an epoch comes from."""
+
+    ODOMETRY = 0  # no satellite claim: the odometry interval alone
+    FUSED = 1  # a satellite claim meeting the odometry interval: the intersection
+    CONFLICT = 2  # a satellite claim outside the odometry interval: alarm, odometry kept
+
+
+class Fused(NamedTuple):
+    """Fused interval per epoch.
+
+    Attributes
+    ----------
+    lo_m, hi_m : ndarray
+        Chainage bounds, m.
+    status : ndarray of int8
+        :class:`FusionStatus`.
+    """
+
+    lo_m: NDArray
+    hi_m: NDArray
+    status: NDArray
+
+
+def predict_interval(
+    lo_m: ArrayLike, hi_m: ArrayLike, odo_m: ArrayLike, accuracy: OdometerAccuracy
+) -> tuple[NDArray, NDArray]:
+    """An interval moved by a measured displacement and widened by the odometer's bounds.
+
+    Parameters
+    ----------
+    lo_m, hi_m : array_like
+        Anchor interval (chainage), m.
+    odo_m : array_like
+        Odometer displacement since the anchor, signed toward increasing chainage, m.
+    accuracy : OdometerAccuracy
+
+    Returns
+    -------
+    lo_m, hi_m : ndarray
+        ``[lo + min true displacement, hi + max true displacement]``.
+    """
+    d_lo, d_hi = accuracy.displacement_bounds_m(odo_m)
+    return np.asarray(lo_m, float) + d_lo, np.asarray(hi_m, float) + d_hi
+
+
+def motion_bound(
+    lo_m: ArrayLike, hi_m: ArrayLike, elapsed_s: ArrayLike, accuracy: OdometerAccuracy
+) -> tuple[NDArray, NDArray]:
+    """Without an odometer: the train moved at most ``max_speed_mps`` either way.
+
+    Returns ``[lo - g, hi + g]`` with ``g = abs_error_m + max_speed_mps * elapsed_s``.
+    """
+    g = accuracy.abs_error_m + accuracy.max_speed_mps * np.abs(np.asarray(elapsed_s, float))
+    return np.asarray(lo_m, float) - g, np.asarray(hi_m, float) + g
+
+
+def fuse_intervals(
+    odo_lo_m: ArrayLike,
+    odo_hi_m: ArrayLike,
+    gnss_lo_m: ArrayLike,
+    gnss_hi_m: ArrayLike,
+    gnss_claim: ArrayLike,
+) -> Fused:
+    """Fuse the odometry interval with a satellite interval, epoch by epoch.
+
+    Parameters
+    ----------
+    odo_lo_m, odo_hi_m : array_like, shape (n,)
+        Odometry (predicted) interval.
+    gnss_lo_m, gnss_hi_m : array_like, shape (n,)
+        Satellite interval (ignored where ``gnss_claim`` is False; may be NaN there).
+    gnss_claim : array_like of bool, shape (n,)
+        The satellite interval carries a safety claim.
+
+    Returns
+    -------
+    Fused
+        Intersection where the claim meets the odometry interval (``FUSED``), the odometry
+        interval where there is no claim (``ODOMETRY``) or where the claim misses it
+        (``CONFLICT``: an alarm, not a reset).
+    """
+    olo, ohi = np.asarray(odo_lo_m, float), np.asarray(odo_hi_m, float)
+    glo, ghi = np.asarray(gnss_lo_m, float), np.asarray(gnss_hi_m, float)
+    claim = np.asarray(gnss_claim, bool)
+    with np.errstate(invalid="ignore"):
+        meet = claim & (ghi >= olo) & (glo <= ohi)
+    conflict = claim & ~meet
+    lo = np.where(meet, np.maximum(olo, glo), olo)
+    hi = np.where(meet, np.minimum(ohi, ghi), ohi)
+    status = np.where(meet, FusionStatus.FUSED, FusionStatus.ODOMETRY)
+    status = np.where(conflict, FusionStatus.CONFLICT, status).astype(np.int8)
+    return Fused(lo, hi, status)
