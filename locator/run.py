@@ -2,9 +2,10 @@
 
 Per epoch ``k`` (see ``docs/locator.md``, "A run"):
 
-1. **Predicted interval.** The last interval that carried a safety claim, moved by the odometer
-   distance since then and widened by the odometer's confidence ``abs + rel * |d|`` (ETCS
-   SUBSET-041 style, default 5 m + 5 %). Without an odometer the motion is bounded by
+1. **Predicted interval** (odometry, :mod:`locator.odometry.fusion`). The last fused interval,
+   moved by the odometer distance since then and widened by the odometer's over- and
+   under-reading bounds (:class:`locator.odometry.confidence.OdometerAccuracy`; default the
+   ETCS SUBSET-041 requirement, 5 m + 5 %). Without an odometer the motion is bounded by
    ``max_speed_mps`` times the elapsed time. At the start: ``start_chainage_m +-
    start_uncertainty_m`` (a balise, a stop at a known platform).
 2. **Trust decision** (``trust``): ``"masks"`` keeps a satellite only above the worst case of
@@ -18,10 +19,14 @@ Per epoch ``k`` (see ``docs/locator.md``, "A run"):
    at least half a spacing behind the estimate; the heading estimated from the delays must agree
    with the chord from the beacon to the estimate's track point. A failure voids the claim.
 5. **Odometry check**: a claimed interval that does not meet the predicted one contradicts the
-   odometer: the claim is voided (``ODOMETRY_CONFLICT``).
+   odometer: the claim is voided (``ODOMETRY_CONFLICT``), an alarm, not a reset.
+6. **Fusion**: a claimed interval that meets the prediction is intersected with it
+   (``fused_lo_m``, ``fused_hi_m``); without a claim the fused interval is the prediction. The
+   estimate (``fused_chainage_m``) is the fix's, clipped to the fused interval, or the anchor's
+   moved by the odometer.
 
-A fix with a safety claim becomes the next anchor; otherwise the prediction keeps growing from
-the last anchor, so a wrong claim cannot be "forgotten" silently.
+A fix with a safety claim makes the fused interval the next anchor; otherwise the prediction
+keeps growing from the last anchor, so a wrong claim cannot be "forgotten" silently.
 """
 
 from __future__ import annotations
@@ -39,6 +44,8 @@ from numpy.typing import NDArray
 
 from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate
 from locator.heading_check import HeadingStatus, check_heading
+from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.fusion import FusionStatus, motion_bound, predict_interval
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochSource
@@ -64,27 +71,9 @@ def flag_names(flags: int) -> str:
     return "|".join(n for n in names if n)
 
 
-@dataclass(frozen=True)
-class Odometer:
-    """Odometer confidence, and the motion bound without one.
-
-    Attributes
-    ----------
-    abs_error_m : float
-        Fixed part of the confidence interval since the last reference, metres.
-    rel_error : float
-        Part proportional to the distance travelled since the reference.
-    max_speed_mps : float
-        Used when the source has no odometer: the train moved at most this fast either way.
-    """
-
-    abs_error_m: float = 5.0
-    rel_error: float = 0.05
-    max_speed_mps: float = 45.0
-
-    def __post_init__(self) -> None:
-        if self.abs_error_m < 0 or not 0 <= self.rel_error < 1 or self.max_speed_mps < 0:
-            raise ValueError(f"Odometer needs abs_error_m >= 0, 0 <= rel_error < 1: {self}")
+# The odometer's confidence (over- and under-reading bounds, motion bound without one); the name
+# ``Odometer`` is kept for the callers of the placeholder it replaces.
+Odometer = OdometerAccuracy
 
 
 @dataclass(frozen=True)
@@ -101,12 +90,16 @@ class RunConfig:
         Flat elevation cut-off of ``trust="cutoff"``.
     extra_margin_deg : float
         Added to the masks' own margins.
-    odometer : Odometer
+    odometer : OdometerAccuracy
+        Over- and under-reading bounds of the source's odometer (default SUBSET-041).
     start_uncertainty_m : float
         Half width of the first predicted interval around ``start_chainage_m``.
     heading_check : bool
     beacon_spacing_m, heading_tolerance_deg : float
     odometry_check : bool
+    fusion : bool
+        Intersect claimed intervals with the odometry prediction (the next anchor); False
+        anchors on the claimed interval alone.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -114,12 +107,13 @@ class RunConfig:
     trust: str = "masks"
     cutoff_deg: float = 15.0
     extra_margin_deg: float = 0.0
-    odometer: Odometer = field(default_factory=Odometer)
+    odometer: OdometerAccuracy = field(default_factory=OdometerAccuracy.subset041)
     start_uncertainty_m: float = 50.0
     heading_check: bool = True
     beacon_spacing_m: float = 100.0
     heading_tolerance_deg: float = 2.0
     odometry_check: bool = True
+    fusion: bool = True
 
     def __post_init__(self) -> None:
         if self.integrity not in INTEGRITY_MODES:
@@ -176,7 +170,10 @@ def run_locator(
         ``flag_names``, ``claim`` (safety claim after every check), ``claim_fix`` (the fix's own
         claim, before the heading and odometry checks), ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
-        ``excluded`` (``sat:reason`` items), ``solve_ms``.
+        ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
+        ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
+        (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (odometer
+        distance since the anchor, m), ``solve_ms``.
     """
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
@@ -189,18 +186,22 @@ def run_locator(
     odo = source.odometer_m
     length = path.length_m
     u0 = cfg.start_uncertainty_m
-    anchor = (start_chainage_m - u0, start_chainage_m + u0, 0.0 if odo is None else odo[0], gps[0])
+    odo0 = 0.0 if odo is None else float(odo[0])
+    anchor = (start_chainage_m - u0, start_chainage_m + u0, odo0, gps[0], start_chainage_m)
     rows: list[dict[str, Any]] = []
     for k in range(len(gps)):
         t0 = time.perf_counter()
-        lo_a, hi_a, odo_a, t_a = anchor
+        lo_a, hi_a, odo_a, t_a, est_a = anchor
         if odo is not None:
             d = float(odo[k] - odo_a)
-            grow = cfg.odometer.abs_error_m + cfg.odometer.rel_error * abs(d)
+            lo_p, hi_p = predict_interval(lo_a, hi_a, d, cfg.odometer)
         else:
-            d, grow = 0.0, cfg.odometer.abs_error_m + cfg.odometer.max_speed_mps * (gps[k] - t_a)
-        p_lo = float(np.clip(lo_a + d - grow, 0.0, length))
-        p_hi = float(np.clip(hi_a + d + grow, 0.0, length))
+            d = 0.0
+            lo_p, hi_p = motion_bound(lo_a, hi_a, gps[k] - t_a, cfg.odometer)
+        p_lo = float(np.clip(lo_p, 0.0, length))
+        p_hi = float(np.clip(hi_p, 0.0, length))
+        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
+        f_est = float(np.clip(est_a + d, p_lo, p_hi))
         centre = 0.5 * (p_lo + p_hi)
         data = source.observe(k, path.ecef_at(centre))
         excluded = dict(data.rejected)
@@ -232,10 +233,20 @@ def run_locator(
             claim = row["claim_fix"]
             if claim and cfg.odometry_check and (fix.hi_m < p_lo or fix.lo_m > p_hi):
                 flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
+                status = FusionStatus.CONFLICT
             claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
             row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
             if claim:
-                anchor = (fix.lo_m, fix.hi_m, 0.0 if odo is None else odo[k], gps[k])
+                f_lo, f_hi = fix.lo_m, fix.hi_m
+                if cfg.fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
+                    f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
+                f_est = float(np.clip(fix.chainage_m, f_lo, f_hi))
+                status = FusionStatus.FUSED
+                anchor = (f_lo, f_hi, 0.0 if odo is None else odo[k], gps[k], f_est)
+        row.update(
+            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=f_est,
+            fusion=status.name.lower(), odo_since_anchor_m=abs(d),
+        )  # fmt: skip
         row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())
         row["solve_ms"] = 1e3 * (time.perf_counter() - t0)
         rows.append(row)
