@@ -1,4 +1,5 @@
-"""Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo.
+"""Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo,
+balises.
 
 Errors from bad input are printed as one message naming the file and the fix (exit code 2).
 """
@@ -587,6 +588,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from-predisat-demo", metavar="DIR",
                    help="reuse a `predisat demo` folder: its world and pipeline masks")  # fmt: skip
     p.set_defaults(func=cmd_demo)
+
+    from locator.balises.command import add_parser as add_balises_parser
+
+    add_balises_parser(sub)  # `locator balises` (issue 34): arguments and job in locator.balises
     return parser
 
 

@@ -22,8 +22,8 @@ Per epoch ``k`` (see ``docs/locator.md``, "A run"):
    odometer: the claim is voided (``ODOMETRY_CONFLICT``), an alarm, not a reset.
 6. **Fusion**: a claimed interval that meets the prediction is intersected with it
    (``fused_lo_m``, ``fused_hi_m``); without a claim the fused interval is the prediction. The
-   estimate (``fused_chainage_m``) is the fix's, clipped to the fused interval, or the anchor's
-   moved by the odometer.
+   estimate (``fused_chainage_m``) is a 1-D Kalman filter (odometer steps, claimed fixes
+   weighted by their WLS variance), clipped to the fused interval.
 
 A fix with a safety claim makes the fused interval the next anchor; otherwise the prediction
 keeps growing from the last anchor, so a wrong claim cannot be "forgotten" silently.
@@ -45,7 +45,13 @@ from numpy.typing import NDArray
 from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate
 from locator.heading_check import HeadingStatus, check_heading
 from locator.odometry.confidence import OdometerAccuracy
-from locator.odometry.fusion import FusionStatus, motion_bound, predict_interval
+from locator.odometry.fusion import (
+    FusionStatus,
+    blend_estimate,
+    motion_bound,
+    predict_estimate,
+    predict_interval,
+)
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochSource
@@ -187,11 +193,12 @@ def run_locator(
     length = path.length_m
     u0 = cfg.start_uncertainty_m
     odo0 = 0.0 if odo is None else float(odo[0])
-    anchor = (start_chainage_m - u0, start_chainage_m + u0, odo0, gps[0], start_chainage_m)
+    anchor = (start_chainage_m - u0, start_chainage_m + u0, odo0, gps[0])
+    est, est_var, odo_prev = start_chainage_m, (u0 / 3.0) ** 2, odo0  # the estimate's filter
     rows: list[dict[str, Any]] = []
     for k in range(len(gps)):
         t0 = time.perf_counter()
-        lo_a, hi_a, odo_a, t_a, est_a = anchor
+        lo_a, hi_a, odo_a, t_a = anchor
         if odo is not None:
             d = float(odo[k] - odo_a)
             lo_p, hi_p = predict_interval(lo_a, hi_a, d, cfg.odometer)
@@ -201,7 +208,12 @@ def run_locator(
         p_lo = float(np.clip(lo_p, 0.0, length))
         p_hi = float(np.clip(hi_p, 0.0, length))
         f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
-        f_est = float(np.clip(est_a + d, p_lo, p_hi))
+        step = 0.0 if odo is None else float(odo[k]) - odo_prev
+        e, v = predict_estimate(est, est_var, step, cfg.odometer)
+        odo_prev = odo_prev + step
+        if odo is None:  # no motion model: the estimate's variance grows with the motion bound
+            v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
+        est, est_var = float(np.clip(e, p_lo, p_hi)), float(v)
         centre = 0.5 * (p_lo + p_hi)
         data = source.observe(k, path.ecef_at(centre))
         excluded = dict(data.rejected)
@@ -240,11 +252,15 @@ def run_locator(
                 f_lo, f_hi = fix.lo_m, fix.hi_m
                 if cfg.fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
                     f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
-                f_est = float(np.clip(fix.chainage_m, f_lo, f_hi))
+                fix_sd = row["wls_sigma_m"]
+                if not np.isfinite(fix_sd) or fix_sd <= 0:
+                    fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
+                e, v = blend_estimate(est, est_var, fix.chainage_m, fix_sd**2)
+                est, est_var = float(np.clip(e, f_lo, f_hi)), float(v)
                 status = FusionStatus.FUSED
-                anchor = (f_lo, f_hi, 0.0 if odo is None else odo[k], gps[k], f_est)
+                anchor = (f_lo, f_hi, 0.0 if odo is None else odo[k], gps[k])
         row.update(
-            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=f_est,
+            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
         )  # fmt: skip
         row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())

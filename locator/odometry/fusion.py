@@ -10,6 +10,13 @@ risks add; nothing is assumed independent). A claimed satellite interval that do
 the odometry interval is an **alarm**: the two sources contradict each other, the claim is
 voided and the odometry interval goes on unchanged (never reset by the contradicting source).
 
+The **estimate** inside the fused interval is a one-dimensional Kalman filter: the odometer
+moves it (:func:`predict_estimate`, variance growing with the distance: the odometer's bounds
+taken as 3 sigma of independent steps) and each claimed fix pulls it by inverse-variance
+weighting (:func:`blend_estimate`). The estimate only places the train inside the interval
+(e.g. for a virtual balise's passage time); the safety bounds are the intervals, never the
+estimate's variance.
+
 All functions are pure and vectorised over epochs (chainages in metres).
 """
 
@@ -23,7 +30,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from locator.odometry.confidence import OdometerAccuracy
 
-__all__ = ["Fused", "FusionStatus", "fuse_intervals", "motion_bound", "predict_interval"]
+__all__ = [
+    "Fused",
+    "FusionStatus",
+    "blend_estimate",
+    "fuse_intervals",
+    "motion_bound",
+    "predict_estimate",
+    "predict_interval",
+]
 
 
 class FusionStatus(IntEnum):
@@ -119,3 +134,47 @@ def fuse_intervals(
     status = np.where(meet, FusionStatus.FUSED, FusionStatus.ODOMETRY)
     status = np.where(conflict, FusionStatus.CONFLICT, status).astype(np.int8)
     return Fused(lo, hi, status)
+
+
+def predict_estimate(
+    est_m: ArrayLike,
+    var_m2: ArrayLike,
+    odo_step_m: ArrayLike,
+    accuracy: OdometerAccuracy,
+    floor_m: float = 0.05,
+) -> tuple[NDArray, NDArray]:
+    """Move an estimate by an odometer step and grow its variance.
+
+    ``var += (max(over_rel, under_rel) / 3 * |step|)^2 + floor_m^2``: the odometer's bound
+    read as 3 sigma, steps independent (a filter model, not a bound).
+
+    Parameters
+    ----------
+    est_m, var_m2 : array_like
+        Estimate (chainage, m) and its variance (m^2).
+    odo_step_m : array_like
+        Odometer step, signed toward increasing chainage, m.
+    accuracy : OdometerAccuracy
+    floor_m : float
+        Standard deviation added per step (timing, quantisation), m.
+    """
+    d = np.asarray(odo_step_m, float)
+    rel = max(accuracy.over_rel, accuracy.under_rel) / 3.0
+    return np.asarray(est_m, float) + d, np.asarray(var_m2, float) + (rel * d) ** 2 + floor_m**2
+
+
+def blend_estimate(
+    pred_m: ArrayLike, pred_var_m2: ArrayLike, fix_m: ArrayLike, fix_var_m2: ArrayLike
+) -> tuple[NDArray, NDArray]:
+    """Inverse-variance combination of a predicted estimate and a fix (the Kalman update).
+
+    Returns the combined estimate and variance; where either variance is not finite and
+    positive, the fix alone.
+    """
+    p, pv = np.asarray(pred_m, float), np.asarray(pred_var_m2, float)
+    f, fv = np.asarray(fix_m, float), np.asarray(fix_var_m2, float)
+    ok = np.isfinite(pv) & np.isfinite(fv) & (pv > 0) & (fv > 0) & np.isfinite(p)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.where(ok, pv / (pv + fv), 1.0)
+    est = np.where(ok, p + gain * (np.where(ok, f, p) - p), f)
+    return est, np.where(ok, (1.0 - gain) * pv, fv)
