@@ -3,9 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from locator.odometry.confidence import OdometerAccuracy
-from locator.odometry.fusion import FusionStatus, fuse_intervals, motion_bound, predict_interval
+from locator.odometry.fusion import (
+    FusionStatus,
+    blend_estimate,
+    fuse_intervals,
+    motion_bound,
+    predict_estimate,
+    predict_interval,
+)
 from locator.run import RunConfig, run_locator
 from tests.locator._scene import straight_path
 from tests.locator.test_run import MODEL, FakeSource, truth_run
@@ -70,3 +78,25 @@ def test_claim_outside_the_odometry_interval_is_an_alarm_not_a_reset():
     assert (bad["fusion"] == "conflict").all() and not bad["claim"].any()
     # the anchor stays at epoch 5: the odometry interval is the jumped one, not reset
     assert (bad["fused_lo_m"] > truth[6:]).all()
+
+
+def test_estimate_filter_blends_by_inverse_variance():
+    e, v = blend_estimate(10.0, 4.0, 14.0, 4.0)
+    assert e == 12.0 and v == 2.0
+    e, v = blend_estimate(10.0, 1.0, 14.0, 3.0)
+    assert e == 11.0 and v == 0.75
+    e, v = blend_estimate(10.0, np.nan, 14.0, 3.0)  # no prediction: the fix
+    assert e == 14.0 and v == 3.0
+    acc = OdometerAccuracy(abs_error_m=1.0, over_rel=0.03, under_rel=0.06)
+    e, v = predict_estimate(100.0, 1.0, -50.0, acc, floor_m=0.1)
+    assert e == 50.0 and v == pytest.approx(1.0 + (0.02 * 50.0) ** 2 + 0.01)
+
+
+def test_fused_estimate_is_closer_than_the_fix():
+    path = straight_path(heading_deg=60.0, length_m=4000.0)
+    truth = truth_run(n=40)
+    ep = run_locator(path, FakeSource(path, truth, seed=4), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    fix_err = np.abs(ep["chainage_m"] - truth)[10:]
+    fused_err = np.abs(ep["fused_chainage_m"] - truth)[10:]
+    assert fused_err.mean() < 0.7 * fix_err.mean()
