@@ -21,7 +21,7 @@ length, distance since the last anchor, stretch kind); a rerun skips finished jo
 Usage::
 
     PYTHONPATH=. .venv/bin/python scripts/balise_campaign.py --out /tmp/balises \\
-        --cache /tmp/balise_cache --runs-per-world 28 --workers 2 \\
+        --cache /tmp/balise_cache --runs-per-world 32 --runs-fast 8 --workers 2 \\
         [--figure docs/figures/odometry_balises.png]
 """
 
@@ -184,15 +184,22 @@ def _do(args: tuple[Job, str]) -> tuple[str, float]:
     return job.name, time.perf_counter() - t
 
 
-def jobs_for(runs: int, rates: tuple[float, ...], stopgo_runs: int) -> list[Job]:
+def jobs_for(
+    runs: int, rates: tuple[float, ...], stopgo_runs: int, runs_fast: int
+) -> list[Job]:
+    """1 Hz cruise jobs first, then stop-and-go, then the faster rates (``runs_fast`` runs per
+    world: ten times the epochs per run)."""
     jobs = []
-    for rate in rates:
-        for v in SPEEDS_KMH:
-            for w in WORLDS:
-                jobs += [Job("cruise", w, r, v, rate, "trailer-radar") for r in range(runs)]
+    for v in SPEEDS_KMH:
+        for w in WORLDS:
+            jobs += [Job("cruise", w, r, v, 1.0, "trailer-radar") for r in range(runs)]
     for odo in ("motor", "motor-radar"):
         for w in WORLDS:
             jobs += [Job("stopgo", w, r, 72.0, 1.0, odo) for r in range(stopgo_runs)]
+    for rate in (r for r in rates if r != 1.0):
+        for v in SPEEDS_KMH:
+            for w in WORLDS:
+                jobs += [Job("cruise", w, r, v, rate, "trailer-radar") for r in range(runs_fast)]
     return jobs
 
 
@@ -293,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", required=True, help="worlds, masks and error model (reused)")
     ap.add_argument("--runs-per-world", type=int, default=28)
     ap.add_argument("--stopgo-runs", type=int, default=12)
+    ap.add_argument("--runs-fast", type=int, default=8, help="runs per world above 1 Hz")
     ap.add_argument("--rates", type=float, nargs="+", default=[1.0, 10.0])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--figure")
@@ -304,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
     lc.calibrate(cache)
     for w in WORLDS:  # build and cache the worlds once, before the workers start
         lc._world(w, cache)
-    jobs = jobs_for(args.runs_per_world, tuple(args.rates), args.stopgo_runs)
+    jobs = jobs_for(args.runs_per_world, tuple(args.rates), args.stopgo_runs, args.runs_fast)
     todo = [(j, str(out / j.name)) for j in jobs
             if not Path(f"{out / j.name}_epochs.parquet").exists()]  # fmt: skip
     print(f"{len(jobs)} jobs, {len(todo)} to run", flush=True)
