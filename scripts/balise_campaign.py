@@ -208,7 +208,19 @@ def _q(a: pd.Series, q: float) -> float:
     return float(a.quantile(q)) if len(a) else float("nan")
 
 
+def _in_window(caps: pd.DataFrame, accuracy_m: float = 1.0) -> pd.Series:
+    """The expectation window at the crossing fix (as ``CaptureConfig.require_window``), from
+    the stored fused interval of each capture (``along_track`` balises: 1 m accuracy)."""
+    o = caps["direction"].to_numpy(float)
+    b = caps["chainage_m"].to_numpy(float)
+    max_safe = np.where(o > 0, caps["hi_m"], caps["lo_m"])
+    min_safe = np.where(o > 0, caps["lo_m"], caps["hi_m"])
+    ok = (o * (max_safe - b) >= -accuracy_m) & (o * (min_safe - b) <= accuracy_m)
+    return pd.Series(ok, index=caps.index)
+
+
 def capture_report(caps: pd.DataFrame) -> pd.DataFrame:
+    caps = caps.assign(in_window=_in_window(caps))
     rows = []
     keys = ["job", "rate_hz", "speed_kmh", "config"]
     for key, g in caps.groupby(keys, sort=False):
@@ -218,6 +230,7 @@ def capture_report(caps: pd.DataFrame) -> pd.DataFrame:
             **dict(zip(keys, key, strict=True)), "passages": len(p),
             "capture_pct": 100.0 * len(c) / max(len(p), 1), "false": int(g["false"].sum()),
             "arm_pct": 100.0 * float((c["zone"] == "arm").mean()) if len(c) else np.nan,
+            "in_window_pct": 100.0 * float(c["in_window"].mean()) if len(c) else np.nan,
             "timing_abs_p50_ms": 1e3 * _q(c["timing_error_s"].abs(), 0.5),
             "timing_abs_p95_ms": 1e3 * _q(c["timing_error_s"].abs(), 0.95),
             "delay_p50_s": _q(c["delay_s"], 0.5), "delay_p95_s": _q(c["delay_s"], 0.95),

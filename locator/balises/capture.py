@@ -66,6 +66,10 @@ class CaptureConfig:
     emit : {"at_fix", "predicted"}
     latency_s : float
         Processing time added to every emission, s.
+    require_window : bool
+        Reject a capture outside the balise's expectation window at the crossing fix (the
+        ETCS rule for linked balises, :func:`locator.odometry.confidence.in_expectation_window`
+        on the fused interval); False only reports it (``in_window``).
     """
 
     capture_radius_m: float = 12.0
@@ -75,6 +79,7 @@ class CaptureConfig:
     max_half_width_m: float = 50.0
     emit: str = "at_fix"
     latency_s: float = 0.0
+    require_window: bool = False
 
     def __post_init__(self) -> None:
         if not self.capture_radius_m > 0 or self.arm_radius_m < 0:
@@ -147,7 +152,8 @@ def capture_balises(
         One row per balise: ``id``, ``chainage_m``, ``telegram``, ``captured``, ``zone``
         (``capture``, ``arm`` or ``""``), ``epoch`` (the crossing fix, -1 if none),
         ``t_pass_s`` (reported passage time), ``t_emit_s``, ``lo_m``, ``hi_m`` (fused interval
-        at the crossing fix), ``gap_s`` (time between the two fixes).
+        at the crossing fix), ``gap_s`` (time between the two fixes), ``in_window`` (the
+        passage fell inside the balise's expectation window on the fused interval).
     """
     if orientation not in (1, -1):
         raise ValueError(f"orientation must be +1 or -1, got {orientation}")
@@ -169,6 +175,7 @@ def capture_balises(
         "epoch": np.full(n_b, -1, np.int64), "t_pass_s": np.full(n_b, np.nan),
         "t_emit_s": np.full(n_b, np.nan), "lo_m": np.full(n_b, np.nan),
         "hi_m": np.full(n_b, np.nan), "gap_s": np.full(n_b, np.nan),
+        "in_window": np.zeros(n_b, bool),
     }  # fmt: skip
     if len(idx) >= 2 and n_b:
         u = orientation * (s[idx][None, :] - b[:, None])  # (n_b, n_valid)
@@ -181,7 +188,17 @@ def capture_balises(
         up, uc = u[rows, jp], u[rows, jp + 1]
         in_c = config.in_capture(up) | config.in_capture(uc)
         in_a = ~in_c & (config.in_arm(up) | config.in_arm(uc))
+        # expectation window at the crossing fix: max safe front reached b - acc, min safe
+        # front not past b + acc (the fused interval's ends in the travel direction)
+        acc = np.asarray(balises.accuracy_m, float)[rows]
+        max_safe = np.where(orientation > 0, hi[kc], lo[kc])
+        min_safe = np.where(orientation > 0, lo[kc], hi[kc])
+        window = (orientation * (max_safe - b[rows]) >= -acc) & (
+            orientation * (min_safe - b[rows]) <= acc
+        )
         got = in_c | in_a
+        if config.require_window:
+            got &= window
         frac = -up / (uc - up)
         t_pass = t[kp] + frac * (t[kc] - t[kp])
         t_emit = t[kc].copy()
@@ -202,6 +219,7 @@ def capture_balises(
         out["lo_m"][r] = lo[kc[got]]
         out["hi_m"][r] = hi[kc[got]]
         out["gap_s"][r] = (t[kc] - t[kp])[got]
+        out["in_window"][rows] = window
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
 

@@ -130,3 +130,18 @@ def test_guards():
     with pytest.raises(ValueError, match="speed_mps"):
         capture_balises([0, 1], [0, 1], [0, 1], [0, 1], balises([0.5]),
                         CaptureConfig(emit="predicted"), orientation=1)  # fmt: skip
+
+
+def test_expectation_window_on_the_fused_interval():
+    # 117 km/h at 1 Hz, intervals +-10 m: the crossing fix at 65 m is 25 m past a balise at
+    # 40 m, so its min safe front (55 m) has passed the balise's last position (41 m)
+    t, _truth, est, lo, hi = fixes(1.0, 32.5, 10.0)
+    bl = balises([40.0, 70.0])  # 70: crossing fix at 97.5, min safe 87.5 > 71: outside too
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(capture_radius_m=10.0),
+                          orientation=1)  # fmt: skip
+    assert cap["captured"].tolist() == [True, True] and not cap["in_window"].any()
+    strict = CaptureConfig(capture_radius_m=10.0, require_window=True)
+    assert not capture_balises(t, est, lo, hi, bl, strict, orientation=1)["captured"].any()
+    # intervals +-30 m: inside the window, accepted
+    ok = capture_balises(t, est, est - 30.0, est + 30.0, bl, strict, orientation=1)
+    assert ok["captured"].all() and ok["in_window"].all()
