@@ -21,8 +21,8 @@ import pandas as pd
 from locator.balises.balisefile import BaliseList
 from locator.balises.capture import CaptureConfig, capture_balises, score_captures
 from locator.odometry.confidence import OdometerAccuracy
-from locator.odometry.odometer import OdometerConfig
-from locator.odometry.simulated import SimOdometer, odometer_along_run
+from locator.odometry.odometer import OdometerConfig, OdometerLog
+from locator.odometry.simulated import SimOdometer, odometer_along_run, odometer_from_log
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
@@ -75,15 +75,19 @@ def locate_with_odometry(
     odometer: OdometerConfig | None = None,
     seed: int = 0,
     accuracy: OdometerAccuracy | None = None,
+    log: OdometerLog | None = None,
 ) -> LocatedRun:
-    """Simulate the odometer along ``sim`` and run the locator with its bounds.
+    """Simulate the odometer along ``sim`` (or take ``log``) and run the locator with its bounds.
 
     ``accuracy`` defaults to the configured odometer's bounds
     (:meth:`OdometerAccuracy.from_config`); pass :meth:`OdometerAccuracy.subset041` to use the
-    ETCS requirement instead.
+    ETCS requirement instead (the safe choice for a recorded log of unknown odometer).
     """
     odo_cfg = odometer or OdometerConfig()
-    so = odometer_along_run(sim, odo_cfg, seed)
+    if log is not None:
+        so = odometer_from_log(sim, log, odo_cfg.cycle_s)
+    else:
+        so = odometer_along_run(sim, odo_cfg, seed)
     acc = accuracy or OdometerAccuracy.from_config(odo_cfg)
     cfg = replace(config, odometer=acc)
     ep = run_locator(
@@ -236,10 +240,14 @@ def balises_to_folder(
     captures: Mapping[str, CaptureConfig] | None = None,
     seed: int = 0,
     meta: Mapping[str, Any] | None = None,
+    log: OdometerLog | None = None,
+    accuracy: OdometerAccuracy | None = None,
 ) -> tuple[pd.DataFrame, Path]:
     """Locate a simulated run with odometry, capture the balises, write the folder.
 
-    Writes ``epochs.parquet`` (the run table with the truth), ``captures.csv`` (one row per
+    ``log`` replaces the simulated odometer by a recorded one (``accuracy`` then should be its
+    bounds, e.g. :meth:`OdometerAccuracy.subset041`). Writes ``epochs.parquet`` (the run table
+    with the truth), ``captures.csv`` (one row per
     configuration and balise, with timing errors), ``summary.json`` and ``captures.png``.
 
     Returns
@@ -252,7 +260,8 @@ def balises_to_folder(
     folder.mkdir(parents=True, exist_ok=True)
     odo_cfg = odometer or OdometerConfig()
     caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
-    run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed)
+    run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
+                               log=log, accuracy=accuracy)  # fmt: skip
     scored = capture_table(run, balises, caps)
     summary = capture_summary(scored)
     run.epochs.to_parquet(folder / "epochs.parquet")

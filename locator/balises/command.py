@@ -58,6 +58,19 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         choices=("trailer-radar", "motor-radar", "motor", "ideal"),
         help="the simulated odometer (default: braked trailer axle and radar)",
     )
+    p.add_argument("--odometer-log", metavar="CSV",
+                   help="a recorded odometer log of the run instead of the simulated odometer "
+                   "(docs/odometry.md; its bounds: --odometer-accuracy)")  # fmt: skip
+    p.add_argument("--odometer-accuracy", nargs=3, type=float, metavar=("ABS_M", "OVER", "UNDER"),
+                   help="bounds of the odometer: fixed part (m), relative over- and under-reading "
+                   "(default: the simulated odometer's; 5 0.05 0.05 for a log)")  # fmt: skip
+    p.add_argument(
+        "--max-accel",
+        type=positive_float,
+        default=1.5,
+        metavar="MPS2",
+        help="the odometer's configured maximum acceleration, for --odometer-log (1.5)",
+    )
     p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
     p.add_argument("--seed", type=int, default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
@@ -87,6 +100,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from locator.balises.campaign import ODOMETERS, balises_to_folder
     from locator.balises.capture import CaptureConfig
     from locator.fde import LocatorConfig
+    from locator.odometry.confidence import OdometerAccuracy
     from locator.run import RunConfig
     from locator.sathia import AntennaPath
     from locator.sim.simfile import SimRun
@@ -114,13 +128,23 @@ def cmd_balises(args: argparse.Namespace) -> int:
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
     cfg = RunConfig(LocatorConfig(model=model), trust=trust,
                     cutoff_deg=args.cutoff if args.cutoff is not None else 15.0)  # fmt: skip
+    log, accuracy = None, None
+    if args.odometer_log:
+        from locator.odometry.logfile import read_odometer_log
+
+        log = read_odometer_log(args.odometer_log, max_accel_mps2=args.max_accel)
+        accuracy = OdometerAccuracy.subset041()
+    if args.odometer_accuracy:
+        a, over, under = args.odometer_accuracy
+        accuracy = OdometerAccuracy(a, over, under)
     caps = {
         f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
         for r in args.radius
     }
     summary, folder = balises_to_folder(
         sim, path, balises, args.out, config=cfg, masks=masks, odometer=ODOMETERS[args.odometer](),
-        captures=caps, seed=args.seed, meta={"sim": str(args.sim), "odometer_kind": args.odometer},
+        captures=caps, seed=args.seed, log=log, accuracy=accuracy,
+        meta={"sim": str(args.sim), "odometer_kind": args.odometer_log or args.odometer},
     )  # fmt: skip
     cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
             "delay_median_s", "delay_p95_s"]  # fmt: skip

@@ -78,3 +78,23 @@ def test_a_bad_balise_list_is_one_line_naming_the_row(sim_dir, tmp_path, capsys)
     assert rc == 2
     err = capsys.readouterr().err
     assert "line 4" in err and "already used on line 2" in err and "\n" == err[-1]
+
+
+def test_a_recorded_odometer_log_is_used_and_a_gap_is_refused(sim_dir, tmp_path, capsys):
+    from locator.odometry.logfile import write_odometer_log
+
+    sim = SimRun.read(sim_dir)
+    log = odometer_along_run(sim, OdometerConfig(), seed=5).log
+    p = write_odometer_log(log, tmp_path / "odo.csv")
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25",
+               "--odometer-log", str(p), "--out", str(tmp_path / "ok")])  # fmt: skip
+    assert rc == 0
+    info = json.loads((tmp_path / "ok" / "summary.json").read_text())
+    assert info["accuracy"]["over_rel"] == 0.05  # a log of unknown odometer: SUBSET-041
+    assert info["safe_front"]["front_outside"] == 0
+    df = pd.read_csv(p)
+    df.drop(index=range(100, 110)).to_csv(p, index=False)
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--odometer-log", str(p),
+               "--out", str(tmp_path / "bad")])  # fmt: skip
+    assert rc == 2
+    assert "line 102: gap of 1.10 s" in capsys.readouterr().err
