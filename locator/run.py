@@ -18,8 +18,9 @@ Per epoch ``k`` (see ``docs/locator.md``, "A run"):
 4. **Heading check** (2024 patent): the virtual beacon is the multiple of ``beacon_spacing_m``
    at least half a spacing behind the estimate; the heading estimated from the delays must agree
    with the chord from the beacon to the estimate's track point. A failure voids the claim.
-5. **Odometry check**: a claimed interval that does not meet the predicted one contradicts the
-   odometer: the claim is voided (``ODOMETRY_CONFLICT``), an alarm, not a reset.
+5. **Odometry check**: a claimed interval that does not meet the predicted one, or (by default,
+   ``odometry_conflict="estimate"``) whose estimate lies outside it, contradicts the odometer:
+   the claim is voided (``ODOMETRY_CONFLICT``), an alarm, not a reset.
 6. **Fusion**: a claimed interval that meets the prediction is intersected with it
    (``fused_lo_m``, ``fused_hi_m``); without a claim the fused interval is the prediction. The
    estimate (``fused_chainage_m``) is a 1-D Kalman filter (odometer steps, claimed fixes
@@ -103,6 +104,11 @@ class RunConfig:
     heading_check : bool
     beacon_spacing_m, heading_tolerance_deg : float
     odometry_check : bool
+    odometry_conflict : {"estimate", "overlap"}
+        When a claim contradicts the odometry: ``"overlap"`` when its interval misses the
+        prediction; ``"estimate"`` (default, stricter) also when its estimate lies outside the
+        prediction (a fix whose interval only grazes the prediction is suspect: a fault the FDE
+        missed shows up as an estimate far from where the odometer says the train is).
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
@@ -119,6 +125,7 @@ class RunConfig:
     beacon_spacing_m: float = 100.0
     heading_tolerance_deg: float = 2.0
     odometry_check: bool = True
+    odometry_conflict: str = "estimate"
     fusion: bool = True
 
     def __post_init__(self) -> None:
@@ -130,6 +137,10 @@ class RunConfig:
             raise ValueError(f"cutoff_deg must be in [0, 90), got {self.cutoff_deg}")
         if self.extra_margin_deg < 0 or self.start_uncertainty_m < 0:
             raise ValueError("extra_margin_deg and start_uncertainty_m must be >= 0")
+        if self.odometry_conflict not in ("estimate", "overlap"):
+            raise ValueError(
+                f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
+            )
         if not self.beacon_spacing_m > 0:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
 
@@ -243,7 +254,10 @@ def run_locator(
                 if hc.status == HeadingStatus.FAIL:
                     flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
             claim = row["claim_fix"]
-            if claim and cfg.odometry_check and (fix.hi_m < p_lo or fix.lo_m > p_hi):
+            miss = fix.hi_m < p_lo or fix.lo_m > p_hi
+            if cfg.odometry_conflict == "estimate":
+                miss = miss or not p_lo <= fix.chainage_m <= p_hi
+            if claim and cfg.odometry_check and miss:
                 flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
                 status = FusionStatus.CONFLICT
             claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)

@@ -7,8 +7,9 @@ odometer, by a maximum speed times the elapsed time. Where a satellite claim and
 interval are both valid the fused interval is their **intersection**: each holds the train
 unless its own error bound fails, so the intersection fails only when one of them does (the
 risks add; nothing is assumed independent). A claimed satellite interval that does **not meet**
-the odometry interval is an **alarm**: the two sources contradict each other, the claim is
-voided and the odometry interval goes on unchanged (never reset by the contradicting source).
+the odometry interval (or, stricter, whose estimate lies outside it) is an **alarm**: the two
+sources contradict each other, the claim is voided and the odometry interval goes on unchanged
+(never reset by the contradicting source).
 
 The **estimate** inside the fused interval is a one-dimensional Kalman filter: the odometer
 moves it (:func:`predict_estimate`, variance growing with the distance: the odometer's bounds
@@ -46,7 +47,7 @@ class FusionStatus(IntEnum):
 
     ODOMETRY = 0  # no satellite claim: the odometry interval alone
     FUSED = 1  # a satellite claim meeting the odometry interval: the intersection
-    CONFLICT = 2  # a satellite claim outside the odometry interval: alarm, odometry kept
+    CONFLICT = 2  # a claim missing the odometry interval (or its estimate outside): alarm
 
 
 class Fused(NamedTuple):
@@ -104,6 +105,7 @@ def fuse_intervals(
     gnss_lo_m: ArrayLike,
     gnss_hi_m: ArrayLike,
     gnss_claim: ArrayLike,
+    gnss_est_m: ArrayLike | None = None,
 ) -> Fused:
     """Fuse the odometry interval with a satellite interval, epoch by epoch.
 
@@ -115,6 +117,9 @@ def fuse_intervals(
         Satellite interval (ignored where ``gnss_claim`` is False; may be NaN there).
     gnss_claim : array_like of bool, shape (n,)
         The satellite interval carries a safety claim.
+    gnss_est_m : array_like, shape (n,), optional
+        The satellite estimate; when given, a claim whose estimate lies outside the odometry
+        interval is a conflict too (the stricter rule of ``RunConfig.odometry_conflict``).
 
     Returns
     -------
@@ -128,6 +133,9 @@ def fuse_intervals(
     claim = np.asarray(gnss_claim, bool)
     with np.errstate(invalid="ignore"):
         meet = claim & (ghi >= olo) & (glo <= ohi)
+        if gnss_est_m is not None:
+            est = np.asarray(gnss_est_m, float)
+            meet &= (est >= olo) & (est <= ohi)
     conflict = claim & ~meet
     lo = np.where(meet, np.maximum(olo, glo), olo)
     hi = np.where(meet, np.minimum(ohi, ghi), ohi)

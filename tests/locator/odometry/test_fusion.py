@@ -100,3 +100,19 @@ def test_fused_estimate_is_closer_than_the_fix():
     fix_err = np.abs(ep["chainage_m"] - truth)[10:]
     fused_err = np.abs(ep["fused_chainage_m"] - truth)[10:]
     assert fused_err.mean() < 0.7 * fix_err.mean()
+
+
+def test_a_fix_whose_estimate_lies_outside_the_odometry_interval_is_an_alarm():
+    # the claim [40, 140] meets the odometry interval [0, 100] but its estimate 120 does not
+    f = fuse_intervals([0.0], [100.0], [40.0], [140.0], [True], gnss_est_m=[120.0])
+    assert f.status[0] == FusionStatus.CONFLICT and f.lo_m[0] == 0.0 and f.hi_m[0] == 100.0
+    f = fuse_intervals([0.0], [100.0], [40.0], [140.0], [True])  # the overlap rule alone
+    assert f.status[0] == FusionStatus.FUSED
+    path = straight_path(heading_deg=60.0, length_m=4000.0)
+    truth = truth_run(n=12)
+    odo = (truth - truth[0]).copy()
+    odo[6:] += 14.0  # a 14 m jump: the prediction still meets the fix interval, not its estimate
+    for rule, conflicts in (("estimate", True), ("overlap", False)):
+        ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                         config=RunConfig(MODEL, trust="none", odometry_conflict=rule))  # fmt: skip
+        assert (ep["fusion"].iloc[6] == "conflict") == conflicts, rule
