@@ -159,6 +159,10 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
         "gnss_length_m": np.where(ep["claim"], ep["hi_m"] - ep["lo_m"], np.nan),
         "odo_since_anchor_m": ep["odo_since_anchor_m"].to_numpy(float),
         "claim": ep["claim"].to_numpy(bool),
+        "gnss_hmi": ep["claim"].to_numpy(bool)
+        & ~((ep["lo_m"] <= truth + 1e-9) & (truth <= ep["hi_m"] + 1e-9)).to_numpy(bool),
+        "fix_hmi": ep["claim_fix"].to_numpy(bool)
+        & ~((ep["lo_m"] <= truth + 1e-9) & (truth <= ep["hi_m"] + 1e-9)).to_numpy(bool),
         "fusion": ep["fusion"].to_numpy(str),
         "fix_error_m": ep["chainage_m"].to_numpy(float) - truth,
         "fused_error_m": ep["fused_chainage_m"].to_numpy(float) - truth,
@@ -246,6 +250,7 @@ def integrity_report(epochs: pd.DataFrame) -> pd.DataFrame:
         rows.append({
             "job": key[0], "rate_hz": key[1], "odometer": key[2], "epochs": len(g),
             "front_outside": int(g["front_outside"].sum()),
+            "gnss_hmi": int(g["gnss_hmi"].sum()), "fix_hmi": int(g["fix_hmi"].sum()),
             "gnss_claim_pct": 100.0 * g["claim"].mean(),
             "fused_le_50m_pct": 100.0 * (g["fused_length_m"] <= 50.0).mean(),
             "fused_le_100m_pct": 100.0 * (g["fused_length_m"] <= 100.0).mean(),
