@@ -11,7 +11,8 @@ Per balise at chainage ``b``, with ``u_k = o (s_k - b)`` the estimate's progress
 direction of travel ``o`` over the valid fixes:
 
 1. **passage**: the first pair of consecutive valid fixes with ``u_prev < 0 <= u_cross`` (one
-   telegram per balise; the estimate wandering back does not emit again);
+   telegram per balise; the estimate wandering back does not emit again), at most
+   ``max_gap_s`` apart (else missed: no telegram rather than a wrongly timed one);
 2. **zone**: ``capture`` when one of the two fixes is in the capture zone (``|u| <= radius``,
    or the along-track window ``-before <= u <= after``), else ``arm`` when one is in the arm
    zone, else missed (the fixes jumped over the zones);
@@ -70,6 +71,10 @@ class CaptureConfig:
         Reject a capture outside the balise's expectation window at the crossing fix (the
         ETCS rule for linked balises, :func:`locator.odometry.confidence.in_expectation_window`
         on the fused interval); False only reports it (``in_window``).
+    max_gap_s : float
+        The two fixes around the passage must be at most this far apart, s: across a longer
+        gap (fixes voided by the accuracy gate, a stop between them) the time cannot be
+        interpolated, and no telegram is safer than a wrong one.
     """
 
     capture_radius_m: float = 12.0
@@ -80,6 +85,7 @@ class CaptureConfig:
     emit: str = "at_fix"
     latency_s: float = 0.0
     require_window: bool = False
+    max_gap_s: float = 2.0
 
     def __post_init__(self) -> None:
         if not self.capture_radius_m > 0 or self.arm_radius_m < 0:
@@ -93,6 +99,8 @@ class CaptureConfig:
             self.window_before_m < 0 or self.window_after_m is None or self.window_after_m < 0
         ):
             raise ValueError("window_before_m and window_after_m must be >= 0")
+        if not self.max_gap_s > 0:
+            raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
         if not self.max_half_width_m > 0 or self.latency_s < 0:
             raise ValueError("max_half_width_m must be > 0 and latency_s >= 0")
         if self.emit not in EMIT_MODES:
@@ -196,7 +204,7 @@ def capture_balises(
         window = (orientation * (max_safe - b[rows]) >= -acc) & (
             orientation * (min_safe - b[rows]) <= acc
         )
-        got = in_c | in_a
+        got = (in_c | in_a) & (t[kc] - t[kp] <= config.max_gap_s + 1e-9)
         if config.require_window:
             got &= window
         frac = -up / (uc - up)

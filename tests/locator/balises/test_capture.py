@@ -145,3 +145,20 @@ def test_expectation_window_on_the_fused_interval():
     # intervals +-30 m: inside the window, accepted
     ok = capture_balises(t, est, est - 30.0, est + 30.0, bl, strict, orientation=1)
     assert ok["captured"].all() and ok["in_window"].all()
+
+
+def test_no_capture_across_a_gap_of_voided_fixes():
+    # fixes voided (interval too long) from 3 s to 8 s while the train stops at 60 m for 4 s:
+    # interpolating across the gap would time the passage of a balise at 50 m wrongly
+    t = np.arange(0.0, 15.0)
+    truth = np.array([0, 20, 40, 55, 60, 60, 60, 60, 65, 80, 100, 120, 140, 160, 180.0])
+    lo, hi = truth - 10.0, truth + 10.0
+    hi[3:8] += 300.0
+    bl = balises([50.0, 110.0])
+    cap = capture_balises(t, truth, lo, hi, bl, CaptureConfig(25.0), orientation=1)
+    assert cap["captured"].tolist() == [False, True]
+    wide = CaptureConfig(25.0, max_gap_s=10.0)
+    cap = capture_balises(t, truth, lo, hi, bl, wide, orientation=1)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
+    # across the gap the interpolated time (2 + 10/25 * 6 = 4.4 s) is 1.7 s after the true 2.67
+    assert sc["timing_error_s"].iloc[0] == pytest.approx(4.4 - (2 + 10 / 15))
