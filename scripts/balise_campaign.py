@@ -252,9 +252,8 @@ def integrity_report(epochs: pd.DataFrame) -> pd.DataFrame:
             "front_outside": int(g["front_outside"].sum()),
             "gnss_hmi": int(g["gnss_hmi"].sum()), "fix_hmi": int(g["fix_hmi"].sum()),
             "gnss_claim_pct": 100.0 * g["claim"].mean(),
-            "fused_le_50m_pct": 100.0 * (g["fused_length_m"] <= 50.0).mean(),
-            "fused_le_100m_pct": 100.0 * (g["fused_length_m"] <= 100.0).mean(),
-            "fused_le_200m_pct": 100.0 * (g["fused_length_m"] <= 200.0).mean(),
+            **{f"{src}_le_{m}m_pct": 100.0 * (g[f"{src}_length_m"] <= m).mean()
+               for m in (50, 100, 200) for src in ("gnss", "fused")},
             "conflicts": int((g["fusion"] == "conflict").sum()),
             "fused_len_p50_m": _q(g["fused_length_m"], 0.5),
             "gnss_len_p50_m": _q(g["gnss_length_m"], 0.5),
