@@ -26,8 +26,10 @@ Per epoch ``k`` (see ``docs/locator.md``, "A run"):
    estimate (``fused_chainage_m``) is a 1-D Kalman filter (odometer steps, claimed fixes
    weighted by their WLS variance), clipped to the fused interval.
 
-A fix with a safety claim makes the fused interval the next anchor; otherwise the prediction
-keeps growing from the last anchor, so a wrong claim cannot be "forgotten" silently.
+A fix with a safety claim re-anchors the bounds it tightened (each bound of the fused interval
+keeps its own anchor: the odometer's fixed error is counted once per anchor, not at every epoch);
+otherwise the prediction keeps growing from the last anchors, so a wrong claim cannot be
+"forgotten" silently.
 """
 
 from __future__ import annotations
@@ -190,7 +192,7 @@ def run_locator(
         ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
         ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
         (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (odometer
-        distance since the anchor, m), ``solve_ms``.
+        distance since the older of the two bounds' anchors, m), ``solve_ms``.
     """
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
@@ -204,18 +206,23 @@ def run_locator(
     length = path.length_m
     u0 = cfg.start_uncertainty_m
     odo0 = 0.0 if odo is None else float(odo[0])
-    anchor = (start_chainage_m - u0, start_chainage_m + u0, odo0, gps[0])
+    # one anchor per bound (value, odometer, time): a bound the satellites did not tighten keeps
+    # its older anchor, so the odometer's fixed error is not added again at every epoch
+    lo_anchor = (start_chainage_m - u0, odo0, gps[0])
+    hi_anchor = (start_chainage_m + u0, odo0, gps[0])
     est, est_var, odo_prev = start_chainage_m, (u0 / 3.0) ** 2, odo0  # the estimate's filter
     rows: list[dict[str, Any]] = []
     for k in range(len(gps)):
         t0 = time.perf_counter()
-        lo_a, hi_a, odo_a, t_a = anchor
         if odo is not None:
-            d = float(odo[k] - odo_a)
-            lo_p, hi_p = predict_interval(lo_a, hi_a, d, cfg.odometer)
+            d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
+            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer)[0]
+            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer)[1]
         else:
-            d = 0.0
-            lo_p, hi_p = motion_bound(lo_a, hi_a, gps[k] - t_a, cfg.odometer)
+            d_lo = d_hi = 0.0
+            lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
+            hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
+        d = max(abs(d_lo), abs(d_hi))
         p_lo = float(np.clip(lo_p, 0.0, length))
         p_hi = float(np.clip(hi_p, 0.0, length))
         f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
@@ -264,15 +271,21 @@ def run_locator(
             row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
             if claim:
                 f_lo, f_hi = fix.lo_m, fix.hi_m
+                here = (0.0 if odo is None else float(odo[k]), gps[k])
                 if cfg.fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
                     f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
+                    if fix.lo_m > p_lo:  # the satellites tightened the lower bound
+                        lo_anchor = (f_lo, *here)
+                    if fix.hi_m < p_hi:
+                        hi_anchor = (f_hi, *here)
+                else:
+                    lo_anchor, hi_anchor = (f_lo, *here), (f_hi, *here)
                 fix_sd = row["wls_sigma_m"]
                 if not np.isfinite(fix_sd) or fix_sd <= 0:
                     fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
                 e, v = blend_estimate(est, est_var, fix.chainage_m, fix_sd**2)
                 est, est_var = float(np.clip(e, f_lo, f_hi)), float(v)
                 status = FusionStatus.FUSED
-                anchor = (f_lo, f_hi, 0.0 if odo is None else odo[k], gps[k])
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),

@@ -116,3 +116,20 @@ def test_a_fix_whose_estimate_lies_outside_the_odometry_interval_is_an_alarm():
         ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
                          config=RunConfig(MODEL, trust="none", odometry_conflict=rule))  # fmt: skip
         assert (ep["fusion"].iloc[6] == "conflict") == conflicts, rule
+
+
+def test_the_odometer_fixed_error_is_not_added_again_at_every_epoch():
+    # a 2 m start (a balise) and satellite intervals of about 12 m that never tighten it: the
+    # fused interval grows by the odometer's bounds since the start, once, not by 2 x 0.5 m per
+    # epoch (which would reach the satellite width within ten epochs)
+    path = straight_path(heading_deg=60.0, length_m=4000.0)
+    truth = truth_run(n=30)
+    acc = OdometerAccuracy(abs_error_m=0.5, over_rel=0.001, under_rel=0.001)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none", odometer=acc,
+                                      start_uncertainty_m=1.0))  # fmt: skip
+    width = (ep["fused_hi_m"] - ep["fused_lo_m"]).to_numpy()
+    assert ((ep["fused_lo_m"] <= truth) & (truth <= ep["fused_hi_m"])).all()
+    moved = truth - truth[0]
+    assert np.all(width <= 2.0 + 2 * 0.5 + 2 * 0.001 * moved + 1e-9)
+    assert (ep["hi_m"] - ep["lo_m"]).min() > 3 * width.max()  # the satellites are wider
