@@ -1,4 +1,5 @@
-"""Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo.
+"""Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo,
+balises.
 
 Errors from bad input are printed as one message naming the file and the fix (exit code 2).
 """
@@ -12,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from locator.balises.command import add_parser as add_balises_parser
 from locator.demostep import format_demo_table
 from predisat import __version__
 from predisat.cli.args import (
@@ -583,6 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_evaluate(sub)
     _add_calibrate(sub)
     _add_demo(sub)
+    add_balises_parser(sub)  # `locator balises`: arguments and job in locator.balises
     return parser
 
 

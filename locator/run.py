@@ -2,9 +2,10 @@
 
 Per epoch ``k`` (see ``docs/locator.md``, "A run"):
 
-1. **Predicted interval.** The last interval that carried a safety claim, moved by the odometer
-   distance since then and widened by the odometer's confidence ``abs + rel * |d|`` (ETCS
-   SUBSET-041 style, default 5 m + 5 %). Without an odometer the motion is bounded by
+1. **Predicted interval** (odometry, :mod:`locator.odometry.fusion`). The last fused interval,
+   moved by the odometer distance since then and widened by the odometer's over- and
+   under-reading bounds (:class:`locator.odometry.confidence.OdometerAccuracy`; default the
+   ETCS SUBSET-041 requirement, 5 m + 5 %). Without an odometer the motion is bounded by
    ``max_speed_mps`` times the elapsed time. At the start: ``start_chainage_m +-
    start_uncertainty_m`` (a balise, a stop at a known platform).
 2. **Trust decision** (``trust``): ``"masks"`` keeps a satellite only above the worst case of
@@ -17,11 +18,18 @@ Per epoch ``k`` (see ``docs/locator.md``, "A run"):
 4. **Heading check** (2024 patent): the virtual beacon is the multiple of ``beacon_spacing_m``
    at least half a spacing behind the estimate; the heading estimated from the delays must agree
    with the chord from the beacon to the estimate's track point. A failure voids the claim.
-5. **Odometry check**: a claimed interval that does not meet the predicted one contradicts the
-   odometer: the claim is voided (``ODOMETRY_CONFLICT``).
+5. **Odometry check**: a claimed interval that does not meet the predicted one, or (by default,
+   ``odometry_conflict="estimate"``) whose estimate lies outside it, contradicts the odometer:
+   the claim is voided (``ODOMETRY_CONFLICT``), an alarm, not a reset.
+6. **Fusion**: a claimed interval that meets the prediction is intersected with it
+   (``fused_lo_m``, ``fused_hi_m``); without a claim the fused interval is the prediction. The
+   estimate (``fused_chainage_m``) is a 1-D Kalman filter (odometer steps, claimed fixes
+   weighted by their WLS variance), clipped to the fused interval.
 
-A fix with a safety claim becomes the next anchor; otherwise the prediction keeps growing from
-the last anchor, so a wrong claim cannot be "forgotten" silently.
+A fix with a safety claim re-anchors the bounds it tightened (each bound of the fused interval
+keeps its own anchor: the odometer's fixed error is counted once per anchor, not at every epoch);
+otherwise the prediction keeps growing from the last anchors, so a wrong claim cannot be
+"forgotten" silently.
 """
 
 from __future__ import annotations
@@ -39,6 +47,14 @@ from numpy.typing import NDArray
 
 from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate
 from locator.heading_check import HeadingStatus, check_heading
+from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.fusion import (
+    FusionStatus,
+    blend_estimate,
+    motion_bound,
+    predict_estimate,
+    predict_interval,
+)
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochSource
@@ -64,27 +80,9 @@ def flag_names(flags: int) -> str:
     return "|".join(n for n in names if n)
 
 
-@dataclass(frozen=True)
-class Odometer:
-    """Odometer confidence, and the motion bound without one.
-
-    Attributes
-    ----------
-    abs_error_m : float
-        Fixed part of the confidence interval since the last reference, metres.
-    rel_error : float
-        Part proportional to the distance travelled since the reference.
-    max_speed_mps : float
-        Used when the source has no odometer: the train moved at most this fast either way.
-    """
-
-    abs_error_m: float = 5.0
-    rel_error: float = 0.05
-    max_speed_mps: float = 45.0
-
-    def __post_init__(self) -> None:
-        if self.abs_error_m < 0 or not 0 <= self.rel_error < 1 or self.max_speed_mps < 0:
-            raise ValueError(f"Odometer needs abs_error_m >= 0, 0 <= rel_error < 1: {self}")
+# The odometer's confidence (over- and under-reading bounds, motion bound without one); the name
+# ``Odometer`` is kept for the callers of the placeholder it replaces.
+Odometer = OdometerAccuracy
 
 
 @dataclass(frozen=True)
@@ -101,12 +99,21 @@ class RunConfig:
         Flat elevation cut-off of ``trust="cutoff"``.
     extra_margin_deg : float
         Added to the masks' own margins.
-    odometer : Odometer
+    odometer : OdometerAccuracy
+        Over- and under-reading bounds of the source's odometer (default SUBSET-041).
     start_uncertainty_m : float
         Half width of the first predicted interval around ``start_chainage_m``.
     heading_check : bool
     beacon_spacing_m, heading_tolerance_deg : float
     odometry_check : bool
+    odometry_conflict : {"estimate", "overlap"}
+        When a claim contradicts the odometry: ``"overlap"`` when its interval misses the
+        prediction; ``"estimate"`` (default, stricter) also when its estimate lies outside the
+        prediction (a fix whose interval only grazes the prediction is suspect: a fault the FDE
+        missed shows up as an estimate far from where the odometer says the train is).
+    fusion : bool
+        Intersect claimed intervals with the odometry prediction (the next anchor); False
+        anchors on the claimed interval alone.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -114,12 +121,14 @@ class RunConfig:
     trust: str = "masks"
     cutoff_deg: float = 15.0
     extra_margin_deg: float = 0.0
-    odometer: Odometer = field(default_factory=Odometer)
+    odometer: OdometerAccuracy = field(default_factory=OdometerAccuracy.subset041)
     start_uncertainty_m: float = 50.0
     heading_check: bool = True
     beacon_spacing_m: float = 100.0
     heading_tolerance_deg: float = 2.0
     odometry_check: bool = True
+    odometry_conflict: str = "estimate"
+    fusion: bool = True
 
     def __post_init__(self) -> None:
         if self.integrity not in INTEGRITY_MODES:
@@ -130,6 +139,10 @@ class RunConfig:
             raise ValueError(f"cutoff_deg must be in [0, 90), got {self.cutoff_deg}")
         if self.extra_margin_deg < 0 or self.start_uncertainty_m < 0:
             raise ValueError("extra_margin_deg and start_uncertainty_m must be >= 0")
+        if self.odometry_conflict not in ("estimate", "overlap"):
+            raise ValueError(
+                f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
+            )
         if not self.beacon_spacing_m > 0:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
 
@@ -176,9 +189,13 @@ def run_locator(
         ``flag_names``, ``claim`` (safety claim after every check), ``claim_fix`` (the fix's own
         claim, before the heading and odometry checks), ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
-        ``excluded`` (``sat:reason`` items), ``solve_ms``, ``iono_uncorrected`` (True when a
-        trusted satellite's ionospheric delay was left uncorrected, no broadcast model being
-        available, and its sigma inflated: :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
+        ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
+        ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
+        (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (odometer
+        distance since the older of the two bounds' anchors, m), ``solve_ms``,
+        ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
+        uncorrected, no broadcast model being available, and its sigma inflated:
+        :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
     """
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
@@ -191,18 +208,33 @@ def run_locator(
     odo = source.odometer_m
     length = path.length_m
     u0 = cfg.start_uncertainty_m
-    anchor = (start_chainage_m - u0, start_chainage_m + u0, 0.0 if odo is None else odo[0], gps[0])
+    odo0 = 0.0 if odo is None else float(odo[0])
+    # one anchor per bound (value, odometer, time): a bound the satellites did not tighten keeps
+    # its older anchor, so the odometer's fixed error is not added again at every epoch
+    lo_anchor = (start_chainage_m - u0, odo0, gps[0])
+    hi_anchor = (start_chainage_m + u0, odo0, gps[0])
+    est, est_var, odo_prev = start_chainage_m, (u0 / 3.0) ** 2, odo0  # the estimate's filter
     rows: list[dict[str, Any]] = []
     for k in range(len(gps)):
         t0 = time.perf_counter()
-        lo_a, hi_a, odo_a, t_a = anchor
         if odo is not None:
-            d = float(odo[k] - odo_a)
-            grow = cfg.odometer.abs_error_m + cfg.odometer.rel_error * abs(d)
+            d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
+            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer)[0]
+            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer)[1]
         else:
-            d, grow = 0.0, cfg.odometer.abs_error_m + cfg.odometer.max_speed_mps * (gps[k] - t_a)
-        p_lo = float(np.clip(lo_a + d - grow, 0.0, length))
-        p_hi = float(np.clip(hi_a + d + grow, 0.0, length))
+            d_lo = d_hi = 0.0
+            lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
+            hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
+        d = max(abs(d_lo), abs(d_hi))
+        p_lo = float(np.clip(lo_p, 0.0, length))
+        p_hi = float(np.clip(hi_p, 0.0, length))
+        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
+        step = 0.0 if odo is None else float(odo[k]) - odo_prev
+        e, v = predict_estimate(est, est_var, step, cfg.odometer)
+        odo_prev = odo_prev + step
+        if odo is None:  # no motion model: the estimate's variance grows with the motion bound
+            v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
+        est, est_var = float(np.clip(e, p_lo, p_hi)), float(v)
         centre = 0.5 * (p_lo + p_hi)
         data = source.observe(k, path.ecef_at(centre))
         excluded = dict(data.rejected)
@@ -239,12 +271,35 @@ def run_locator(
                 if hc.status == HeadingStatus.FAIL:
                     flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
             claim = row["claim_fix"]
-            if claim and cfg.odometry_check and (fix.hi_m < p_lo or fix.lo_m > p_hi):
+            miss = fix.hi_m < p_lo or fix.lo_m > p_hi
+            if cfg.odometry_conflict == "estimate":
+                miss = miss or not p_lo <= fix.chainage_m <= p_hi
+            if claim and cfg.odometry_check and miss:
                 flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
+                status = FusionStatus.CONFLICT
             claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
             row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
             if claim:
-                anchor = (fix.lo_m, fix.hi_m, 0.0 if odo is None else odo[k], gps[k])
+                f_lo, f_hi = fix.lo_m, fix.hi_m
+                here = (0.0 if odo is None else float(odo[k]), gps[k])
+                if cfg.fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
+                    f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
+                    if fix.lo_m > p_lo:  # the satellites tightened the lower bound
+                        lo_anchor = (f_lo, *here)
+                    if fix.hi_m < p_hi:
+                        hi_anchor = (f_hi, *here)
+                else:
+                    lo_anchor, hi_anchor = (f_lo, *here), (f_hi, *here)
+                fix_sd = row["wls_sigma_m"]
+                if not np.isfinite(fix_sd) or fix_sd <= 0:
+                    fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
+                e, v = blend_estimate(est, est_var, fix.chainage_m, fix_sd**2)
+                est, est_var = float(np.clip(e, f_lo, f_hi)), float(v)
+                status = FusionStatus.FUSED
+        row.update(
+            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=est,
+            fusion=status.name.lower(), odo_since_anchor_m=abs(d),
+        )  # fmt: skip
         row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())
         row["solve_ms"] = 1e3 * (time.perf_counter() - t0)
         rows.append(row)

@@ -95,17 +95,27 @@ class SimSource:
         Give NLOS signals to the locator (a real receiver does); False shows the ideal.
     constellation : str
         Systems used (``"all"``, ``"G"``, ``"GE"``, ...).
+    odometer : ndarray, shape (n_epoch,), optional
+        Odometer distance per epoch, signed toward increasing chainage (e.g. a simulated
+        :class:`locator.odometry.odometer.OdometerLog` sampled at the epochs); replaces the
+        scale-error model when given.
     """
 
     sim: SimRun
     odometer_scale_error: float = 0.02
     include_nlos: bool = True
     constellation: str = "all"
+    odometer: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
         if not abs(self.odometer_scale_error) < 0.5:
             raise ValueError(
                 f"odometer_scale_error must be within +-0.5, got {self.odometer_scale_error}"
+            )
+        if self.odometer is not None and np.shape(self.odometer) != self.sim.gps_s.shape:
+            raise ValueError(
+                f"odometer must have one value per epoch ({self.sim.gps_s.shape}), got "
+                f"{np.shape(self.odometer)}"
             )
 
     @property
@@ -118,6 +128,8 @@ class SimSource:
 
     @property
     def odometer_m(self) -> NDArray:
+        if self.odometer is not None:
+            return np.asarray(self.odometer, float)
         c = self.sim.chainage_m
         return (c - c[0]) * (1.0 + self.odometer_scale_error)
 
@@ -143,7 +155,9 @@ class SimSource:
     def describe(self) -> JsonDict:
         return {
             "source": "simulation",
-            "odometer_scale_error": self.odometer_scale_error,
+            "odometer_scale_error": None if self.odometer is not None
+            else self.odometer_scale_error,
+            "odometer": "given" if self.odometer is not None else "scale error",
             "include_nlos": self.include_nlos,
             "constellation": self.constellation,
             "sim": {k: self.sim.meta.get(k) for k in ("seed", "world_seed", "t0_gps_s",

@@ -1,0 +1,287 @@
+"""The job behind ``locator balises``: locate a simulated run with odometry, capture its balises.
+
+:func:`locate_with_odometry` simulates the odometer along the run, runs the epoch loop with its
+bounds (fusion, :mod:`locator.odometry.fusion`) and returns the epochs with the truth;
+:func:`capture_table` captures a balise list under several capture configurations and scores
+every passage; :func:`balises_to_folder` does both and writes ``epochs.parquet``,
+``captures.csv``, ``summary.json`` and ``captures.png``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from locator.balises.balisefile import BaliseList
+from locator.balises.capture import CaptureConfig, capture_balises, score_captures
+from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.odometer import OdometerConfig, OdometerLog
+from locator.odometry.simulated import SimOdometer, odometer_along_run, odometer_from_log
+from locator.run import RunConfig, run_locator
+from locator.sathia import AntennaPath
+from locator.sim.simfile import SimRun
+from locator.sources import SimSource
+from predisat.masks.maskset import MaskSet
+
+__all__ = [
+    "ODOMETERS",
+    "LocatedRun",
+    "balises_to_folder",
+    "capture_summary",
+    "capture_table",
+    "locate_with_odometry",
+    "safe_front_check",
+]
+
+ODOMETERS = {
+    "trailer-radar": OdometerConfig.trailer_axle_with_radar,
+    "motor-radar": lambda: OdometerConfig.motor_axle(radar=True),
+    "motor": lambda: OdometerConfig.motor_axle(radar=False),
+    "ideal": OdometerConfig.ideal,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class LocatedRun:
+    """A run located with odometry.
+
+    Attributes
+    ----------
+    epochs : pandas.DataFrame
+        :func:`locator.run.run_locator`'s table plus ``truth_m`` (true antenna chainage) and
+        ``odo_speed_mps`` (odometer speed at the epoch).
+    odometer : SimOdometer
+    accuracy : OdometerAccuracy
+        The bounds the run used.
+    """
+
+    epochs: pd.DataFrame
+    odometer: SimOdometer
+    accuracy: OdometerAccuracy
+
+
+def locate_with_odometry(
+    sim: SimRun,
+    path: AntennaPath,
+    config: RunConfig,
+    *,
+    masks: MaskSet | None = None,
+    odometer: OdometerConfig | None = None,
+    seed: int = 0,
+    accuracy: OdometerAccuracy | None = None,
+    log: OdometerLog | None = None,
+) -> LocatedRun:
+    """Simulate the odometer along ``sim`` (or take ``log``) and run the locator with its bounds.
+
+    ``accuracy`` defaults to the configured odometer's bounds
+    (:meth:`OdometerAccuracy.from_config`); pass :meth:`OdometerAccuracy.subset041` to use the
+    ETCS requirement instead (the safe choice for a recorded log of unknown odometer).
+    """
+    odo_cfg = odometer or OdometerConfig()
+    if log is not None:
+        so = odometer_from_log(sim, log, odo_cfg.cycle_s)
+    else:
+        so = odometer_along_run(sim, odo_cfg, seed)
+    acc = accuracy or OdometerAccuracy.from_config(odo_cfg)
+    cfg = replace(config, odometer=acc)
+    ep = run_locator(
+        path,
+        SimSource(sim, odometer=so.epoch_odo_m),
+        start_chainage_m=float(sim.chainage_m[0]),
+        config=cfg,
+        masks=masks,
+    )
+    ep["truth_m"] = np.asarray(sim.chainage_m, float)
+    ep["odo_speed_mps"] = so.log.speed_at(ep["gps_s"].to_numpy(float))
+    return LocatedRun(ep, so, acc)
+
+
+def capture_table(
+    run: LocatedRun,
+    balises: BaliseList,
+    configs: Mapping[str, CaptureConfig],
+    *,
+    margin_m: float = 30.0,
+) -> pd.DataFrame:
+    """Capture and score every balise under each configuration.
+
+    Returns one row per (configuration, balise): :func:`score_captures` columns plus
+    ``config`` and ``capture_radius_m``. A capture is false when the true position at the
+    reported passage time is further from the balise than the configuration's capture radius.
+    """
+    ep = run.epochs
+    t = ep["gps_s"].to_numpy(float)
+    o = run.odometer.orientation
+    out = []
+    for name, cc in configs.items():
+        cap = capture_balises(
+            t, ep["fused_chainage_m"].to_numpy(float), ep["fused_lo_m"].to_numpy(float),
+            ep["fused_hi_m"].to_numpy(float), balises, cc, orientation=o,
+            speed_mps=ep["odo_speed_mps"].to_numpy(float),
+        )  # fmt: skip
+        sc = score_captures(cap, run.odometer.truth_t_s, run.odometer.truth_chainage_m,
+                            orientation=o, false_tolerance_m=cc.capture_radius_m,
+                            margin_m=margin_m)  # fmt: skip
+        sc.insert(0, "config", name)
+        sc.insert(1, "capture_radius_m", cc.capture_radius_m)
+        out.append(sc)
+    return pd.concat(out, ignore_index=True)
+
+
+def capture_summary(scored: pd.DataFrame) -> pd.DataFrame:
+    """Per configuration: passages, capture rate, false captures, timing error, delay."""
+    rows = []
+    for name, g in scored.groupby("config", sort=False):
+        p = g[g["passed"]]
+        cap = p[p["captured"]]
+        te = np.abs(cap["timing_error_s"].to_numpy(float))
+        dl = cap["delay_s"].to_numpy(float)
+        rows.append({
+            "config": name, "capture_radius_m": float(g["capture_radius_m"].iloc[0]),
+            "passages": len(p), "captured": len(cap),
+            "capture_rate": len(cap) / len(p) if len(p) else np.nan,
+            "arm_share": float((cap["zone"] == "arm").mean()) if len(cap) else np.nan,
+            "false": int(g["false"].sum()),
+            "timing_abs_median_s": float(np.median(te)) if len(te) else np.nan,
+            "timing_abs_p95_s": float(np.quantile(te, 0.95)) if len(te) else np.nan,
+            "delay_median_s": float(np.median(dl)) if len(dl) else np.nan,
+            "delay_p95_s": float(np.quantile(dl, 0.95)) if len(dl) else np.nan,
+            "position_abs_p95_m": float(np.quantile(np.abs(cap["position_error_m"]), 0.95))
+            if len(cap) else np.nan,
+        })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def safe_front_check(
+    run: LocatedRun, *, antenna_to_front_m: float = 5.0, max_length_m: float = 100.0
+) -> dict[str, float]:
+    """Safe-front integrity and availability of a located run.
+
+    The front end is ``antenna_to_front_m`` ahead of the antenna in the direction of travel;
+    its safe bounds are the fused interval moved by the same amount (the offset is exact), so
+    the true front lies in ``[min safe, max safe]`` exactly when the true antenna lies in the
+    fused interval.
+
+    Returns
+    -------
+    dict
+        ``epochs``, ``front_outside`` (count), ``gnss_claim_share`` (satellite claims),
+        ``fused_share`` (fused interval at most ``max_length_m`` long), ``odometry_only``
+        (share of epochs carried by the odometry), ``conflicts`` (alarms).
+    """
+    ep = run.epochs
+    o = run.odometer.orientation
+    truth_front = ep["truth_m"] + o * antenna_to_front_m
+    lo = ep["fused_lo_m"] + o * antenna_to_front_m
+    hi = ep["fused_hi_m"] + o * antenna_to_front_m
+    outside = ~((lo <= truth_front + 1e-9) & (truth_front <= hi + 1e-9))
+    length = ep["fused_hi_m"] - ep["fused_lo_m"]
+    return {
+        "epochs": float(len(ep)),
+        "front_outside": float(outside.sum()),
+        "gnss_claim_share": float(ep["claim"].mean()),
+        "fused_share": float((length <= max_length_m).mean()),
+        "odometry_only": float((ep["fusion"] == "odometry").mean()),
+        "conflicts": float((ep["fusion"] == "conflict").sum()),
+    }
+
+
+def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ep = run.epochs
+    t = ep["gps_s"].to_numpy(float)
+    t = t - t[0]
+    truth = ep["truth_m"].to_numpy(float)
+    fig, ax = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    ax[0].fill_between(t, ep["fused_lo_m"] - truth, ep["fused_hi_m"] - truth, step="mid",
+                       color="tab:blue", alpha=0.3, label="fused interval - truth")  # fmt: skip
+    claim = ep["claim"].to_numpy(bool)
+    ax[0].plot(t[claim], (ep["fused_chainage_m"] - truth)[claim], ".", ms=2, color="tab:blue",
+               label="estimate - truth (satellite claim)")  # fmt: skip
+    ax[0].plot(t[~claim], (ep["fused_chainage_m"] - truth)[~claim], ".", ms=2, color="tab:red",
+               label="estimate - truth (odometry only)")  # fmt: skip
+    ax[0].axhline(0.0, color="k", lw=0.5)
+    ax[0].set_ylabel("m")
+    ax[0].legend(loc="upper left", fontsize=8)
+    ax[0].set_title(title)
+    t0 = float(ep["gps_s"].iloc[0])
+    for name, g in scored.groupby("config", sort=False):
+        g = g[g["passed"]]
+        c = g["captured"].to_numpy(bool)
+        ax[1].plot(g["t_true_s"][c] - t0, 1e3 * g["timing_error_s"][c], "o", ms=3,
+                   label=f"{name}: timing error")  # fmt: skip
+        ax[1].plot(g["t_true_s"][~c] - t0, np.zeros((~c).sum()), "x", color="k", ms=5)
+    ax[1].set_ylabel("reported - true passage (ms)")
+    ax[1].set_xlabel("time since start (s); x: missed")
+    ax[1].legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def balises_to_folder(
+    sim: SimRun,
+    path: AntennaPath,
+    balises: BaliseList,
+    out: str | Path,
+    *,
+    config: RunConfig,
+    masks: MaskSet | None = None,
+    odometer: OdometerConfig | None = None,
+    captures: Mapping[str, CaptureConfig] | None = None,
+    seed: int = 0,
+    meta: Mapping[str, Any] | None = None,
+    log: OdometerLog | None = None,
+    accuracy: OdometerAccuracy | None = None,
+) -> tuple[pd.DataFrame, Path]:
+    """Locate a simulated run with odometry, capture the balises, write the folder.
+
+    ``log`` replaces the simulated odometer by a recorded one (``accuracy`` then should be its
+    bounds, e.g. :meth:`OdometerAccuracy.subset041`). Writes ``epochs.parquet`` (the run table
+    with the truth), ``captures.csv`` (one row per
+    configuration and balise, with timing errors), ``summary.json`` and ``captures.png``.
+
+    Returns
+    -------
+    summary : pandas.DataFrame
+        :func:`capture_summary` of the captures.
+    folder : Path
+    """
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    odo_cfg = odometer or OdometerConfig()
+    caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
+    run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
+                               log=log, accuracy=accuracy)  # fmt: skip
+    scored = capture_table(run, balises, caps)
+    summary = capture_summary(scored)
+    run.epochs.to_parquet(folder / "epochs.parquet")
+    scored.to_csv(folder / "captures.csv", index=False, float_format="%.9g")
+    info = {
+        "balises": balises.source, "n_balises": len(balises),
+        "odometer": asdict(odo_cfg), "accuracy": asdict(run.accuracy),
+        "captures": {k: asdict(v) for k, v in caps.items()},
+        "summary": summary.to_dict(orient="records"),
+        "safe_front": safe_front_check(run), **dict(meta or {}),
+    }  # fmt: skip
+    (folder / "summary.json").write_text(json.dumps(info, indent=2, default=_json) + "\n")
+    fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval")
+    fig.savefig(folder / "captures.png", dpi=100)
+    return summary, folder
+
+
+def _json(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, (np.ndarray, Sequence)):
+        return list(x)
+    return str(x)

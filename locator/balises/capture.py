@@ -1,0 +1,291 @@
+"""Virtual balise capture on the fused interval (source document 001), and its scoring.
+
+GADEROS used two zones around a virtual balise: a large **arm zone** and a small **capture
+zone**. A fix inside the capture zone captures the balise; a balise passed with fixes in the arm
+zone only is captured too, its time recomputed from the fixes. Here the fixes are the locator's
+**fused** estimates (satellites and odometry, :mod:`locator.odometry.fusion`), each with its
+interval; a fix counts only when the fused interval is short enough (``max_half_width_m``: "if
+the current accuracy is good enough").
+
+Per balise at chainage ``b``, with ``u_k = o (s_k - b)`` the estimate's progress past it in the
+direction of travel ``o`` over the valid fixes:
+
+1. **passage**: the first pair of consecutive valid fixes with ``u_prev < 0 <= u_cross`` (one
+   telegram per balise; the estimate wandering back does not emit again), at most
+   ``max_gap_s`` apart (else missed: no telegram rather than a wrongly timed one);
+2. **zone**: ``capture`` when one of the two fixes is in the capture zone (``|u| <= radius``,
+   or the along-track window ``-before <= u <= after``), else ``arm`` when one is in the arm
+   zone, else missed (the fixes jumped over the zones);
+3. **reported passage time**: linear interpolation of the estimate between the two fixes
+   (the time the telegram carries);
+4. **emission**: ``emit="at_fix"`` sends the telegram at the crossing fix (causal: the train
+   knows it passed only then; Barbu, GADEROS final report), plus ``latency_s``;
+   ``emit="predicted"`` schedules it from the last fix before the balise when that fix is in a
+   zone, at ``t_prev + (-u_prev) / v`` with the odometer speed, and at the crossing fix
+   otherwise.
+
+The radius is tested along the track (the fixes are map-matched): the chord between two track
+points is shorter than the arc by under 3 cm for 25 m on a 300 m radius, so the along-track test
+never captures where the chord test would not.
+
+:func:`score_captures` compares with the truth (true passage time from the true chainage):
+timing error, delay, position error; a capture is **false** when the train was not passing the
+balise at the reported time (true position more than ``false_tolerance_m`` away; default the
+capture radius) or never passed it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from locator.balises.balisefile import BaliseList
+
+__all__ = ["EMIT_MODES", "CaptureConfig", "capture_balises", "score_captures"]
+
+EMIT_MODES = ("at_fix", "predicted")
+
+
+@dataclass(frozen=True)
+class CaptureConfig:
+    """Zones and rules of the capture.
+
+    Attributes
+    ----------
+    capture_radius_m : float
+        Capture zone half length (radius mode), m.
+    arm_radius_m : float
+        Arm zone half length, m (0: no arm zone).
+    window_before_m, window_after_m : float or None
+        Along-track capture window instead of the radius: from ``before`` metres ahead of the
+        balise to ``after`` metres past it (both given, or neither).
+    max_half_width_m : float
+        A fix counts only when its fused interval is at most twice this long, m.
+    emit : {"at_fix", "predicted"}
+    latency_s : float
+        Processing time added to every emission, s.
+    require_window : bool
+        Reject a capture outside the balise's expectation window at the crossing fix (the
+        ETCS rule for linked balises, :func:`locator.odometry.confidence.in_expectation_window`
+        on the fused interval); False only reports it (``in_window``).
+    max_gap_s : float
+        The two fixes around the passage must be at most this far apart, s: across a longer
+        gap (fixes voided by the accuracy gate, a stop between them) the time cannot be
+        interpolated, and no telegram is safer than a wrong one.
+    """
+
+    capture_radius_m: float = 12.0
+    arm_radius_m: float = 0.0
+    window_before_m: float | None = None
+    window_after_m: float | None = None
+    max_half_width_m: float = 50.0
+    emit: str = "at_fix"
+    latency_s: float = 0.0
+    require_window: bool = False
+    max_gap_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not self.capture_radius_m > 0 or self.arm_radius_m < 0:
+            raise ValueError(
+                f"capture_radius_m must be > 0 and arm_radius_m >= 0, got "
+                f"{self.capture_radius_m}, {self.arm_radius_m}"
+            )
+        if (self.window_before_m is None) != (self.window_after_m is None):
+            raise ValueError("give both window_before_m and window_after_m, or neither")
+        if self.window_before_m is not None and (
+            self.window_before_m < 0 or self.window_after_m is None or self.window_after_m < 0
+        ):
+            raise ValueError("window_before_m and window_after_m must be >= 0")
+        if not self.max_gap_s > 0:
+            raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if not self.max_half_width_m > 0 or self.latency_s < 0:
+            raise ValueError("max_half_width_m must be > 0 and latency_s >= 0")
+        if self.emit not in EMIT_MODES:
+            raise ValueError(f"emit must be one of {EMIT_MODES}, got {self.emit!r}")
+
+    @classmethod
+    def gaderos(cls, capture_radius_m: float, arm_radius_m: float = 0.0) -> CaptureConfig:
+        """Radius zones (GADEROS): capture radius, optional arm radius."""
+        return cls(capture_radius_m=capture_radius_m, arm_radius_m=arm_radius_m)
+
+    @classmethod
+    def window(cls, before_m: float, after_m: float) -> CaptureConfig:
+        """An along-track capture window ``[b - before, b + after]`` in the travel direction."""
+        return cls(capture_radius_m=max(before_m, after_m, 1e-3), window_before_m=before_m,
+                   window_after_m=after_m)  # fmt: skip
+
+    def in_capture(self, u_m: NDArray) -> NDArray:
+        """Progress past the balise (m, signed) inside the capture zone."""
+        if self.window_before_m is not None and self.window_after_m is not None:
+            return (u_m >= -self.window_before_m) & (u_m <= self.window_after_m)
+        return np.abs(u_m) <= self.capture_radius_m
+
+    def in_arm(self, u_m: NDArray) -> NDArray:
+        """Progress past the balise inside the arm zone."""
+        return np.abs(u_m) <= self.arm_radius_m
+
+
+def capture_balises(
+    t_s: ArrayLike,
+    est_m: ArrayLike,
+    lo_m: ArrayLike,
+    hi_m: ArrayLike,
+    balises: BaliseList,
+    config: CaptureConfig,
+    *,
+    orientation: int,
+    speed_mps: ArrayLike | None = None,
+) -> pd.DataFrame:
+    """Capture the balises of a list along a run.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Fix times, increasing, s.
+    est_m, lo_m, hi_m : array_like, shape (n,)
+        Fused estimate and interval per fix (chainage), m; NaN where there is none.
+    balises : BaliseList
+    config : CaptureConfig
+    orientation : {+1, -1}
+        Direction of travel along the chainage.
+    speed_mps : array_like, shape (n,), optional
+        Odometer speed, needed by ``emit="predicted"``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per balise: ``id``, ``chainage_m``, ``telegram``, ``captured``, ``zone``
+        (``capture``, ``arm`` or ``""``), ``epoch`` (the crossing fix, -1 if none),
+        ``t_pass_s`` (reported passage time), ``t_emit_s``, ``lo_m``, ``hi_m`` (fused interval
+        at the crossing fix), ``gap_s`` (time between the two fixes), ``in_window`` (the
+        passage fell inside the balise's expectation window on the fused interval).
+    """
+    if orientation not in (1, -1):
+        raise ValueError(f"orientation must be +1 or -1, got {orientation}")
+    t = np.asarray(t_s, float)
+    s = np.asarray(est_m, float)
+    lo, hi = np.asarray(lo_m, float), np.asarray(hi_m, float)
+    if not (t.shape == s.shape == lo.shape == hi.shape) or t.ndim != 1:
+        raise ValueError("t_s, est_m, lo_m and hi_m must be 1-D of one length")
+    v = None if speed_mps is None else np.asarray(speed_mps, float)
+    if config.emit == "predicted" and (v is None or v.shape != t.shape):
+        raise ValueError("emit='predicted' needs speed_mps with one value per fix")
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(s) & (hi - lo <= 2.0 * config.max_half_width_m)
+    idx = np.flatnonzero(valid)
+    b = np.asarray(balises.chainage_m, float)
+    n_b = len(b)
+    out = {
+        "captured": np.zeros(n_b, bool), "zone": np.full(n_b, "", object),
+        "epoch": np.full(n_b, -1, np.int64), "t_pass_s": np.full(n_b, np.nan),
+        "t_emit_s": np.full(n_b, np.nan), "lo_m": np.full(n_b, np.nan),
+        "hi_m": np.full(n_b, np.nan), "gap_s": np.full(n_b, np.nan),
+        "in_window": np.zeros(n_b, bool),
+    }  # fmt: skip
+    if len(idx) >= 2 and n_b:
+        u = orientation * (s[idx][None, :] - b[:, None])  # (n_b, n_valid)
+        cross = (u[:, :-1] < 0.0) & (u[:, 1:] >= 0.0)
+        has = cross.any(axis=1)
+        j = np.argmax(cross, axis=1)
+        rows = np.flatnonzero(has)
+        jp = j[rows]
+        kp, kc = idx[jp], idx[jp + 1]
+        up, uc = u[rows, jp], u[rows, jp + 1]
+        in_c = config.in_capture(up) | config.in_capture(uc)
+        in_a = ~in_c & (config.in_arm(up) | config.in_arm(uc))
+        # expectation window at the crossing fix: max safe front reached b - acc, min safe
+        # front not past b + acc (the fused interval's ends in the travel direction)
+        acc = np.asarray(balises.accuracy_m, float)[rows]
+        max_safe = np.where(orientation > 0, hi[kc], lo[kc])
+        min_safe = np.where(orientation > 0, lo[kc], hi[kc])
+        window = (orientation * (max_safe - b[rows]) >= -acc) & (
+            orientation * (min_safe - b[rows]) <= acc
+        )
+        got = (in_c | in_a) & (t[kc] - t[kp] <= config.max_gap_s + 1e-9)
+        if config.require_window:
+            got &= window
+        frac = -up / (uc - up)
+        t_pass = t[kp] + frac * (t[kc] - t[kp])
+        t_emit = t[kc].copy()
+        if config.emit == "predicted":
+            assert v is not None
+            early = in_c & config.in_capture(up) | in_a & config.in_arm(up)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sched = t[kp] + (-up) / v[kp]
+            use = early & np.isfinite(sched) & (sched < t[kc])
+            t_emit = np.where(use, np.maximum(sched, t[kp]), t_emit)
+            t_pass = np.where(use, t_emit, t_pass)
+        r = rows[got]
+        out["captured"][r] = True
+        out["zone"][r] = np.where(in_c[got], "capture", "arm")
+        out["epoch"][r] = kc[got]
+        out["t_pass_s"][r] = t_pass[got]
+        out["t_emit_s"][r] = t_emit[got] + config.latency_s
+        out["lo_m"][r] = lo[kc[got]]
+        out["hi_m"][r] = hi[kc[got]]
+        out["gap_s"][r] = (t[kc] - t[kp])[got]
+        out["in_window"][rows] = window
+    return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
+                         "telegram": list(balises.telegram), **out})  # fmt: skip
+
+
+def score_captures(
+    captures: pd.DataFrame,
+    truth_t_s: ArrayLike,
+    truth_chainage_m: ArrayLike,
+    *,
+    orientation: int,
+    false_tolerance_m: float,
+    margin_m: float = 0.0,
+) -> pd.DataFrame:
+    """Captures against the true motion.
+
+    Parameters
+    ----------
+    captures : pandas.DataFrame
+        From :func:`capture_balises`.
+    truth_t_s, truth_chainage_m : array_like, shape (m,)
+        True chainage of the antenna over time, dense enough for linear interpolation (the
+        simulation's epochs or an odometer cycle grid); monotone in the travel direction.
+    orientation : {+1, -1}
+    false_tolerance_m : float
+        A capture whose true position at the reported passage time is further than this from
+        the balise is false.
+    margin_m : float
+        A balise counts as passed only when the true run covers it with this margin at both
+        ends (the first fixes need to arm).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``captures`` plus ``passed`` (the train truly passed it, with the margin: the
+        passages the capture rate counts), ``t_true_s`` (true passage
+        time), ``timing_error_s`` (reported - true), ``delay_s`` (emission - true),
+        ``position_error_m`` (true position at the reported time minus the balise, along the
+        travel direction), ``false`` (captured and never reached, or off by more than the
+        tolerance), ``missed`` (passed and not captured).
+    """
+    tt = np.asarray(truth_t_s, float)
+    u_true = orientation * np.asarray(truth_chainage_m, float)
+    if np.any(np.diff(u_true) < -1e-9):
+        raise ValueError("truth_chainage_m must not move against the travel direction")
+    b = orientation * captures["chainage_m"].to_numpy(float)
+    reached = (b >= u_true[0]) & (b <= u_true[-1])
+    passed = (b >= u_true[0] + margin_m) & (b <= u_true[-1] - margin_m)
+    t_true = np.where(reached, np.interp(b, u_true, tt), np.nan)
+    # a stop exactly at the balise: interp takes the first time it is reached
+    t_pass = captures["t_pass_s"].to_numpy(float)
+    pos = np.interp(t_pass, tt, u_true) - b
+    cap = captures["captured"].to_numpy(bool)
+    out = captures.copy()
+    out["passed"] = passed
+    out["t_true_s"] = t_true
+    out["timing_error_s"] = t_pass - t_true
+    out["delay_s"] = captures["t_emit_s"].to_numpy(float) - t_true
+    out["position_error_m"] = np.where(cap, pos, np.nan)
+    out["false"] = cap & (~reached | (np.abs(np.nan_to_num(pos, nan=np.inf)) > false_tolerance_m))
+    out["missed"] = passed & ~cap
+    return out

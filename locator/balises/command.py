@@ -1,0 +1,153 @@
+"""The ``locator balises`` sub-command: its arguments and its entry point.
+
+:func:`add_parser` registers the sub-command on the ``locator`` command line
+(:mod:`locator.cli` calls it), :func:`cmd_balises` runs it through
+:func:`locator.balises.campaign.balises_to_folder`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from predisat.cli.args import cutoff_deg, output_dir, positive_float
+
+__all__ = ["add_parser", "cmd_balises"]
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add ``balises`` to the sub-parsers of the ``locator`` command line."""
+    p = sub.add_parser(
+        "balises",
+        help="virtual balises: locate a simulated run with odometry and capture its balises",
+    )
+    p.add_argument("--sim", required=True, metavar="DIR", help="a `locator simulate` folder")
+    p.add_argument("--track", metavar="FILE",
+                   help="track GeoJSON/CSV (default: the simulation's world.npz)")  # fmt: skip
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--masks", metavar="MASKS", help="mask file (e.g. the run's true_masks.parquet)")
+    g.add_argument("--cutoff", type=cutoff_deg, metavar="DEG", help="flat elevation cut-off")
+    g.add_argument("--no-masks", action="store_true", help="trust every received signal")
+    b = p.add_mutually_exclusive_group()
+    b.add_argument("--balises", metavar="CSV", help="balise list (docs/odometry.md)")
+    b.add_argument(
+        "--spacing",
+        type=positive_float,
+        default=120.0,
+        metavar="M",
+        help="without --balises: a balise every M metres of the run (120, GADEROS)",
+    )
+    p.add_argument(
+        "--radius",
+        type=positive_float,
+        nargs="+",
+        default=[12.0],
+        metavar="M",
+        help="capture radii (12)",
+    )
+    p.add_argument(
+        "--arm-radius", type=float, default=0.0, metavar="M", help="arm zone radius (0: none)"
+    )
+    p.add_argument("--emit", choices=("at_fix", "predicted"), default="at_fix",
+                   help="telegram at the first fix past the balise, or predicted from the last "
+                   "fix before it with the odometer speed")  # fmt: skip
+    p.add_argument(
+        "--odometer",
+        default="trailer-radar",
+        choices=("trailer-radar", "motor-radar", "motor", "ideal"),
+        help="the simulated odometer (default: braked trailer axle and radar)",
+    )
+    p.add_argument("--odometer-log", metavar="CSV",
+                   help="a recorded odometer log of the run instead of the simulated odometer "
+                   "(docs/odometry.md; its bounds: --odometer-accuracy)")  # fmt: skip
+    p.add_argument("--odometer-accuracy", nargs=3, type=float, metavar=("ABS_M", "OVER", "UNDER"),
+                   help="bounds of the odometer: fixed part (m), relative over- and under-reading "
+                   "(default: the simulated odometer's; 5 0.05 0.05 for a log)")  # fmt: skip
+    p.add_argument(
+        "--max-accel",
+        type=positive_float,
+        default=1.5,
+        metavar="MPS2",
+        help="the odometer's configured maximum acceleration, for --odometer-log (1.5)",
+    )
+    p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
+    p.add_argument("--seed", type=int, default=0, help="odometer seed")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
+    p.set_defaults(func=cmd_balises)
+    return p
+
+
+def _track(args: argparse.Namespace) -> Any:
+    from predisat.track.map import TrackMap
+
+    if args.track:
+        t = Path(args.track)
+        return TrackMap.from_csv(t) if t.suffix.lower() == ".csv" else TrackMap.from_geojson(t)
+    stored = Path(args.sim) / "world.npz"
+    if stored.is_file():
+        from predisat.synth.world import World
+
+        return World.load(stored).track
+    from predisat.track.map import demo_track
+
+    return demo_track()
+
+
+def cmd_balises(args: argparse.Namespace) -> int:
+    """Run ``locator balises``; prints the capture table."""
+    from locator.balises.balisefile import BaliseList
+    from locator.balises.campaign import ODOMETERS, balises_to_folder
+    from locator.balises.capture import CaptureConfig
+    from locator.fde import LocatorConfig
+    from locator.odometry.confidence import OdometerAccuracy
+    from locator.run import RunConfig
+    from locator.sathia import AntennaPath
+    from locator.sim.simfile import SimRun
+    from predisat.gnss.errormodel import IntervalModel, read_error_model
+
+    sim = SimRun.read(args.sim)
+    track = _track(args)
+    path = AntennaPath(track, float(sim.meta.get("antenna_height_m", 4.0)))
+    if args.balises:
+        balises = BaliseList.from_csv(args.balises, track)
+    else:
+        lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
+        if hi - lo < args.spacing:
+            raise ValueError(
+                f"{args.sim}: the run covers {hi - lo:.0f} m, less than --spacing "
+                f"{args.spacing:g} m; give a shorter spacing or a --balises list"
+            )
+        balises = BaliseList.along_track(track, lo + 0.5 * args.spacing, hi, args.spacing)
+    masks = None
+    if args.masks:
+        from predisat.masks.fileformat import read_masks
+
+        masks = read_masks(args.masks)
+    model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
+    cfg = RunConfig(LocatorConfig(model=model), trust=trust,
+                    cutoff_deg=args.cutoff if args.cutoff is not None else 15.0)  # fmt: skip
+    log, accuracy = None, None
+    if args.odometer_log:
+        from locator.odometry.logfile import read_odometer_log
+
+        log = read_odometer_log(args.odometer_log, max_accel_mps2=args.max_accel)
+        accuracy = OdometerAccuracy.subset041()
+    if args.odometer_accuracy:
+        a, over, under = args.odometer_accuracy
+        accuracy = OdometerAccuracy(a, over, under)
+    caps = {
+        f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
+        for r in args.radius
+    }
+    summary, folder = balises_to_folder(
+        sim, path, balises, args.out, config=cfg, masks=masks, odometer=ODOMETERS[args.odometer](),
+        captures=caps, seed=args.seed, log=log, accuracy=accuracy,
+        meta={"sim": str(args.sim), "odometer_kind": args.odometer_log or args.odometer},
+    )  # fmt: skip
+    cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
+            "delay_median_s", "delay_p95_s"]  # fmt: skip
+    print(summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    print(f"-> {folder}")
+    return 0

@@ -1,0 +1,370 @@
+"""The ETCS confidence interval of the odometer and the train's safe front and rear ends.
+
+Source document 004. The odometer measures the distance from the last relevant reference
+(balise group, real or virtual, usable as reference: ``Q_REFERENCE = 1``) and a confidence
+interval growing with that distance:
+
+* ``D_DOUBTOVER``: how much the odometer may have over-read (the train is at most that much
+  behind the estimate); ``D_DOUBTUNDER``: how much it may have under-read (at most that much
+  ahead). Both are ``reference accuracy + abs + rel * distance since the reference``
+  (:class:`OdometerAccuracy`; ETCS SUBSET-041 asks for at least ``5 m + 5 %``).
+* estimated front end; **max safe front end** = estimated + ``D_DOUBTUNDER`` (furthest ahead
+  in the direction of travel); **min safe front end** = estimated - ``D_DOUBTOVER``. The same
+  for the rear end (front minus the train length), valid only with train-integrity
+  confirmation (NaN otherwise).
+* A reference balise resets the interval to the reference's location accuracy; a balise with
+  ``Q_REFERENCE = 0`` does not reset it, but a later balise at a **known distance** from it lets
+  the interval fall back to its value at the first one.
+* A **linked** balise is accepted only inside its **expectation window**: from when the max
+  safe front reaches its first possible position (location - accuracy) until the min safe
+  front passes its last possible position (location + accuracy). Outside the window it is
+  rejected (no reset): :func:`in_expectation_window`.
+
+Positions are chainages (m); the train moves with ``orientation`` +1 (toward increasing
+chainage) or -1. The odometer distance is signed along the train's forward axis.
+Every bound errs on the safe side: ``over`` and ``under`` are bounds of the sensor errors (from
+:class:`locator.odometry.odometer.OdometerConfig` by :meth:`OdometerAccuracy.from_config`, or the
+SUBSET-041 requirement), never estimates.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from locator.odometry.odometer import OdometerConfig
+
+__all__ = [
+    "BalisePassage",
+    "OdometerAccuracy",
+    "SafeFronts",
+    "in_expectation_window",
+    "safe_fronts",
+]
+
+
+@dataclass(frozen=True)
+class OdometerAccuracy:
+    """Growth of the odometer's confidence interval with the distance since the reference.
+
+    ``D_DOUBTOVER(d) = abs_error_m + over_rel * |d|`` and ``D_DOUBTUNDER(d) = abs_error_m +
+    under_rel * |d|`` (plus the reference's own accuracy, added by the caller).
+
+    Attributes
+    ----------
+    abs_error_m : float
+        Fixed part, m.
+    over_rel, under_rel : float
+        Bounds of the relative over- and under-reading.
+    max_speed_mps : float
+        Motion bound where no odometer is available: the train moved at most this fast, m/s.
+    """
+
+    abs_error_m: float = 5.0
+    over_rel: float = 0.05
+    under_rel: float = 0.05
+    max_speed_mps: float = 45.0
+
+    def __post_init__(self) -> None:
+        if self.abs_error_m < 0 or self.max_speed_mps < 0:
+            raise ValueError(f"OdometerAccuracy needs abs_error_m, max_speed_mps >= 0: {self}")
+        if not (0 <= self.over_rel < 1 and 0 <= self.under_rel < 1):
+            raise ValueError(f"OdometerAccuracy needs over_rel, under_rel in [0, 1): {self}")
+
+    @classmethod
+    def subset041(cls) -> OdometerAccuracy:
+        """The ETCS requirement: ``+-(5 m + 5 %)`` of the distance since the reference."""
+        return cls(5.0, 0.05, 0.05)
+
+    @classmethod
+    def symmetric(cls, abs_error_m: float, rel_error: float,
+                  max_speed_mps: float = 45.0) -> OdometerAccuracy:  # fmt: skip
+        """``+-(abs_error_m + rel_error * d)``."""
+        return cls(abs_error_m, rel_error, rel_error, max_speed_mps)
+
+    @classmethod
+    def from_config(cls, config: OdometerConfig) -> OdometerAccuracy:
+        """Error bounds of a configured odometer (worst case of every term, safe side).
+
+        Over-reading (true distance shorter than measured): a calibration error, wear (a
+        smaller wheel), slip of a driven axle. Under-reading: a calibration error, slide of a
+        braked axle. With a radar, slip and slide are detected above its tolerance and the
+        radar's speed is used, so the creep term becomes the tolerance plus the radar's scale
+        error (plus 0.5 % for the noise of a few cycles); without one, the whole creep.
+        """
+        r = config.radar
+        if r is not None:
+            creep_over = creep_under = r.tolerance + r.scale_error + 0.005
+        else:
+            creep_over = config.slip_max if config.driven else 0.0
+            creep_under = config.slide_max if config.braked else 0.0
+        # true = measured * ratio / (1 + creep): relative error bounds, to first order plus
+        # the cross term (ratio and creep both at their bound)
+        over = config.calibration_error + config.wear + creep_over
+        under = config.calibration_error + creep_under
+        over += config.calibration_error * creep_over
+        under += config.calibration_error * creep_under
+        return cls(config.abs_error_m, float(over), float(under))
+
+    def doubt_over_m(self, dist_m: ArrayLike) -> NDArray:
+        """``D_DOUBTOVER`` after ``dist_m`` metres (either sign) since the reference."""
+        return self.abs_error_m + self.over_rel * np.abs(np.asarray(dist_m, float))
+
+    def doubt_under_m(self, dist_m: ArrayLike) -> NDArray:
+        """``D_DOUBTUNDER`` after ``dist_m`` metres (either sign) since the reference."""
+        return self.abs_error_m + self.under_rel * np.abs(np.asarray(dist_m, float))
+
+    def displacement_bounds_m(self, odo_m: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Bounds of the true signed displacement for a measured signed displacement.
+
+        Parameters
+        ----------
+        odo_m : array_like
+            Measured displacement, signed (either frame), m.
+
+        Returns
+        -------
+        lo_m, hi_m : ndarray
+            ``lo <= true <= hi``. Moving forward (``odo >= 0``) an over-read means the true
+            displacement is shorter: ``lo = odo - D_DOUBTOVER``, ``hi = odo + D_DOUBTUNDER``;
+            backward, the roles swap.
+        """
+        d = np.asarray(odo_m, float)
+        over, under = self.doubt_over_m(d), self.doubt_under_m(d)
+        fwd = d >= 0
+        return d - np.where(fwd, over, under), d + np.where(fwd, under, over)
+
+
+@dataclass(frozen=True)
+class BalisePassage:
+    """A balise group detected by the train (a reference candidate for the odometer).
+
+    Attributes
+    ----------
+    index : int
+        Odometer sample at which it was read.
+    chainage_m : float
+        Its location.
+    accuracy_m : float
+        Its location accuracy (``Q_LOCACC``), m.
+    q_reference : bool
+        Usable as a reference (``Q_REFERENCE = 1``): resets the interval.
+    linked : bool
+        Announced by linking: accepted only inside its expectation window.
+    known_from : int or None
+        Position in the passage list of an earlier balise at a known distance from this one
+        (the linking distance); the interval falls back to its value there.
+    """
+
+    index: int
+    chainage_m: float
+    accuracy_m: float = 1.0
+    q_reference: bool = True
+    linked: bool = True
+    known_from: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.index < 0 or self.accuracy_m < 0:
+            raise ValueError(f"BalisePassage needs index >= 0 and accuracy_m >= 0: {self}")
+
+
+@dataclass(frozen=True)
+class SafeFronts:
+    """Estimated and safe front and rear ends per odometer sample (chainages, m).
+
+    Attributes
+    ----------
+    est_front_m, max_safe_front_m, min_safe_front_m : ndarray, shape (n,)
+        Max safe = furthest ahead in the direction of travel; NaN before the first reference.
+    est_rear_m, max_safe_rear_m, min_safe_rear_m : ndarray, shape (n,)
+        NaN without train-integrity confirmation.
+    doubt_over_m, doubt_under_m : ndarray, shape (n,)
+        ``D_DOUBTOVER``, ``D_DOUBTUNDER``.
+    dist_since_ref_m : ndarray, shape (n,)
+        Odometer distance since the last reference (absolute), m.
+    accepted : ndarray of bool, shape (n_passage,)
+        Whether each passage was accepted (inside its expectation window, or not linked).
+    orientation : int
+    """
+
+    est_front_m: NDArray
+    max_safe_front_m: NDArray
+    min_safe_front_m: NDArray
+    est_rear_m: NDArray
+    max_safe_rear_m: NDArray
+    min_safe_rear_m: NDArray
+    doubt_over_m: NDArray
+    doubt_under_m: NDArray
+    dist_since_ref_m: NDArray
+    accepted: NDArray
+    orientation: int
+
+    @property
+    def front_lo_m(self) -> NDArray:
+        """Lower chainage bound of the front end."""
+        return np.minimum(self.max_safe_front_m, self.min_safe_front_m)
+
+    @property
+    def front_hi_m(self) -> NDArray:
+        """Upper chainage bound of the front end."""
+        return np.maximum(self.max_safe_front_m, self.min_safe_front_m)
+
+    @property
+    def length_m(self) -> NDArray:
+        """Length of the confidence interval, m."""
+        return self.doubt_over_m + self.doubt_under_m
+
+
+def in_expectation_window(
+    balise_chainage_m: float,
+    accuracy_m: float,
+    max_safe_front_m: ArrayLike,
+    min_safe_front_m: ArrayLike,
+    orientation: int,
+) -> NDArray:
+    """Whether a linked balise read now is inside its expectation window.
+
+    Accepted from when the max safe front has reached the balise's first possible position
+    (``chainage - accuracy`` in the direction of travel) until the min safe front passes its
+    last possible position (``chainage + accuracy``).
+
+    Parameters
+    ----------
+    balise_chainage_m, accuracy_m : float
+    max_safe_front_m, min_safe_front_m : array_like, shape (n,)
+        Chainages at the reading time(s).
+    orientation : {+1, -1}
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    o = _orientation(orientation)
+    ahead = o * (np.asarray(max_safe_front_m, float) - balise_chainage_m) >= -accuracy_m
+    behind = o * (np.asarray(min_safe_front_m, float) - balise_chainage_m) <= accuracy_m
+    return ahead & behind
+
+
+def _orientation(orientation: int) -> int:
+    if orientation not in (1, -1):
+        raise ValueError(f"orientation must be +1 or -1, got {orientation}")
+    return int(orientation)
+
+
+def safe_fronts(
+    odo_m: ArrayLike,
+    passages: Sequence[BalisePassage],
+    accuracy: OdometerAccuracy,
+    *,
+    orientation: int = 1,
+    antenna_to_front_m: float = 0.0,
+    train_length_m: float = 100.0,
+    integrity_confirmed: ArrayLike | bool = True,
+) -> SafeFronts:
+    """ETCS confidence interval and safe ends along an odometer log.
+
+    The balise reader is taken at the location the odometer's position refers to (the
+    antenna); the front end is ``antenna_to_front_m`` ahead of it in the direction of travel.
+
+    Parameters
+    ----------
+    odo_m : array_like, shape (n,)
+        Odometer distance, signed along the train's forward axis, m.
+    passages : sequence of BalisePassage
+        In reading order (non-decreasing ``index``). The first must be a reference (the start).
+    accuracy : OdometerAccuracy
+    orientation : {+1, -1}
+        +1 when the train's forward axis points toward increasing chainage.
+    antenna_to_front_m, train_length_m : float
+        Geometry, m.
+    integrity_confirmed : bool or array_like of bool, shape (n,)
+        Train integrity confirmed at each sample (rear ends NaN where not).
+
+    Returns
+    -------
+    SafeFronts
+    """
+    o = _orientation(orientation)
+    odo = np.asarray(odo_m, float)
+    n = len(odo)
+    if odo.ndim != 1:
+        raise ValueError("odo_m must be 1-D")
+    idx = [p.index for p in passages]
+    if any(b < a for a, b in itertools.pairwise(idx)) or any(i >= n for i in idx):
+        raise ValueError("passages must be in reading order with index < len(odo_m)")
+    if antenna_to_front_m < 0 or train_length_m <= 0:
+        raise ValueError("antenna_to_front_m must be >= 0 and train_length_m > 0")
+    est = np.full(n, np.nan)
+    over = np.full(n, np.nan)
+    under = np.full(n, np.nan)
+    since = np.full(n, np.nan)
+    accepted = np.zeros(len(passages), bool)
+    # the reference in force: (odometer at it, its chainage, doubt over / under at it)
+    ref: tuple[float, float, float, float] | None = None
+    at_passage: dict[int, tuple[float, float, float]] = {}  # estimate and doubts at passages
+    bounds = [*idx[1:], n]
+    for j, p in enumerate(passages):
+        k = p.index
+        e_k = ov_k = un_k = float("nan")
+        if ref is not None:
+            e_k, ov_k, un_k = (float(v) for v in _state_at(ref, odo[k], accuracy, o))
+            if p.linked:
+                hi_f = e_k + o * un_k
+                lo_f = e_k - o * ov_k
+                ok = bool(in_expectation_window(p.chainage_m, p.accuracy_m, hi_f, lo_f, o))
+            else:
+                ok = True
+        else:
+            if not p.q_reference:
+                raise ValueError("the first passage must be a reference (Q_REFERENCE = 1)")
+            ok = True
+        accepted[j] = ok
+        if ok and p.q_reference:
+            ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m)
+        elif ok and p.known_from is not None and p.known_from in at_passage:
+            # known distance from an earlier balise: fall back to the doubts held there
+            _, ov_b, un_b = at_passage[p.known_from]
+            ref = (float(odo[k]), p.chainage_m, ov_b, un_b)
+        at_passage[j] = (
+            (p.chainage_m, p.accuracy_m, p.accuracy_m) if ok and p.q_reference
+            else (e_k, ov_k, un_k)
+        )  # fmt: skip
+        assert ref is not None
+        seg = slice(k, bounds[j])
+        e, ov, un = _state_at(ref, odo[seg], accuracy, o)
+        est[seg], over[seg], under[seg] = e, ov, un
+        since[seg] = np.abs(odo[seg] - ref[0])
+    front = est + o * antenna_to_front_m
+    max_f = front + o * under
+    min_f = front - o * over
+    conf = np.broadcast_to(np.asarray(integrity_confirmed, bool), (n,))
+    rear = front - o * train_length_m
+
+    def only_confirmed(a: NDArray) -> NDArray:
+        return np.where(conf, a, np.nan)
+
+    return SafeFronts(
+        est_front_m=front, max_safe_front_m=max_f, min_safe_front_m=min_f,
+        est_rear_m=only_confirmed(rear), max_safe_rear_m=only_confirmed(max_f - o * train_length_m),
+        min_safe_rear_m=only_confirmed(min_f - o * train_length_m),
+        doubt_over_m=over, doubt_under_m=under, dist_since_ref_m=since, accepted=accepted,
+        orientation=o,
+    )  # fmt: skip
+
+
+def _state_at(
+    ref: tuple[float, float, float, float], odo: ArrayLike, acc: OdometerAccuracy, o: int
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Estimate (chainage) and doubts at odometer readings, from the reference in force."""
+    odo0, chain0, over0, under0 = ref
+    d = np.asarray(odo, float) - odo0
+    est = chain0 + o * d
+    # forward motion: over-reading shortens the true travel (true behind the estimate)
+    fwd = d >= 0
+    over = over0 + np.where(fwd, acc.doubt_over_m(d), acc.doubt_under_m(d))
+    under = under0 + np.where(fwd, acc.doubt_under_m(d), acc.doubt_over_m(d))
+    return est, over, under

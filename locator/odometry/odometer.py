@@ -1,0 +1,383 @@
+"""The ETCS odometer's sensors, simulated: a two-channel wheel sensor and a Doppler radar.
+
+Source document 004: a wheel sensor on an axle gives two phase-shifted square waves; their
+frequency is proportional to the speed, their phase order gives the direction. On a driven axle
+the wheel slips under traction, on a braked axle it slides under braking; a Doppler radar
+(optional) measures the speed over the ground independently of the wheel. The odometer is
+configured with its cycle time and the train's maximum acceleration.
+
+Model (per run, the truth being a signed distance along the train's forward axis on a regular
+cycle grid, e.g. from :meth:`predisat.availability.trainrun.SpeedProfile.distance_at`):
+
+* **wheel diameter**: the odometer is configured with ``wheel_diameter_m``; the true diameter
+  differs by a calibration error drawn uniformly in ``+-calibration_error`` and a wear drawn
+  uniformly in ``[0, wear]`` (a worn wheel is smaller, so the odometer over-reads);
+* **creep**: the wheel's surface moves ``(1 + creep)`` times the train's distance. Under
+  traction (acceleration above ``traction_threshold_mps2``) a driven axle enters low-adhesion
+  episodes (probability ``episode_rate_hz`` per second, mean length ``episode_s``) in which it
+  slips by a ratio up to ``slip_max``; under braking a braked axle slides by up to
+  ``slide_max`` (negative creep);
+* **pulses**: ``pulses_per_rev`` periods per wheel turn on channel A, channel B a quarter
+  period later (:func:`quadrature_levels`); the decoder counts every edge of both channels
+  (four per period) with the sign of the phase order (:func:`decode_quadrature`);
+* **speed from the frequency**: edges per cycle times the configured circumference over
+  ``4 pulses_per_rev`` and the cycle time; **direction** from the phase order;
+* **radar**: speed over ground with a scale error in ``+-radar.scale_error`` and white noise;
+  when the wheel and radar speeds differ by more than ``radar.tolerance``, the cycle is marked
+  as slip / slide and the radar's speed is integrated instead of the wheel's;
+* **maximum acceleration**: without a radar, a wheel speed changing faster than
+  ``max_accel_mps2`` is implausible (slip, slide): the cycle is marked and the speed used is
+  clamped to the previous one +- ``max_accel_mps2 * cycle_s``.
+
+All random draws come from ``numpy.random.default_rng(seed)``; the same inputs and seed give
+the same log. Nothing is mutated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "OdometerConfig",
+    "OdometerLog",
+    "RadarConfig",
+    "decode_quadrature",
+    "quadrature_levels",
+    "simulate_odometer",
+    "true_distance_m",
+]
+
+
+@dataclass(frozen=True)
+class RadarConfig:
+    """Doppler radar (speed over ground).
+
+    Attributes
+    ----------
+    scale_error : float
+        Bound of the radar's relative scale error (beam angle, ballast); the run draws one
+        value uniformly in ``+-scale_error``.
+    noise_mps : float
+        Standard deviation of the white speed noise per cycle, m/s.
+    tolerance : float
+        Relative wheel-radar speed difference above which a cycle counts as slip / slide.
+    tolerance_mps : float
+        Absolute part of that tolerance (low speeds), m/s.
+    """
+
+    scale_error: float = 0.005
+    noise_mps: float = 0.05
+    tolerance: float = 0.02
+    tolerance_mps: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.scale_error < 0.2 and self.noise_mps >= 0):
+            raise ValueError(f"RadarConfig needs 0 <= scale_error < 0.2, noise_mps >= 0: {self}")
+        if not (0 < self.tolerance < 0.5 and self.tolerance_mps >= 0):
+            raise ValueError(f"RadarConfig needs 0 < tolerance < 0.5, tolerance_mps >= 0: {self}")
+
+
+@dataclass(frozen=True)
+class OdometerConfig:
+    """An odometer: wheel sensor, its axle, an optional radar, cycle time, maximum acceleration.
+
+    Attributes
+    ----------
+    cycle_s : float
+        Output cycle of the odometer, s (ETCS: configured by the EVC).
+    max_accel_mps2 : float
+        Largest acceleration or braking the train can have, m/s^2 (ETCS: configured by the EVC).
+    wheel_diameter_m : float
+        Diameter configured in the odometer, m.
+    pulses_per_rev : int
+        Periods of each channel per wheel turn.
+    calibration_error : float
+        Bound of the relative diameter calibration error (true / configured - 1 in
+        ``+-calibration_error``).
+    wear : float
+        Bound of the relative diameter loss by wear since the calibration.
+    driven, braked : bool
+        The sensor's axle is driven (slips under traction) / braked (slides under braking).
+    slip_max, slide_max : float
+        Largest creep ratio in a low-adhesion episode under traction / braking.
+    episode_rate_hz, episode_s : float
+        Low-adhesion episodes start at this rate (per second of traction or braking) and last
+        this long on average (exponential), s.
+    traction_threshold_mps2 : float
+        Accelerations (absolute) below this count as coasting: no slip, no slide.
+    radar : RadarConfig or None
+    abs_error_m : float
+        Fixed part of the odometer's error budget (pulse quantisation, cycle timing, the
+        reference's detection), m; used by
+        :meth:`locator.odometry.confidence.OdometerAccuracy.from_config`.
+    """
+
+    cycle_s: float = 0.1
+    max_accel_mps2: float = 1.5
+    wheel_diameter_m: float = 0.92
+    pulses_per_rev: int = 100
+    calibration_error: float = 0.002
+    wear: float = 0.003
+    driven: bool = False
+    braked: bool = True
+    slip_max: float = 0.15
+    slide_max: float = 0.15
+    episode_rate_hz: float = 0.05
+    episode_s: float = 3.0
+    traction_threshold_mps2: float = 0.05
+    radar: RadarConfig | None = field(default_factory=RadarConfig)
+    abs_error_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (0 < self.cycle_s <= 1.0):
+            raise ValueError(f"cycle_s must be in (0, 1] s, got {self.cycle_s}")
+        if not self.max_accel_mps2 > 0:
+            raise ValueError(f"max_accel_mps2 must be positive, got {self.max_accel_mps2}")
+        if not (self.wheel_diameter_m > 0 and self.pulses_per_rev >= 1):
+            raise ValueError("wheel_diameter_m must be positive and pulses_per_rev >= 1")
+        for name in ("calibration_error", "wear", "slip_max", "slide_max"):
+            if not 0 <= getattr(self, name) < 0.5:
+                raise ValueError(f"{name} must be in [0, 0.5), got {getattr(self, name)}")
+        if self.episode_rate_hz < 0 or self.episode_s <= 0 or self.abs_error_m < 0:
+            raise ValueError("episode_rate_hz >= 0, episode_s > 0 and abs_error_m >= 0 needed")
+
+    @classmethod
+    def trailer_axle_with_radar(cls, cycle_s: float = 0.1) -> OdometerConfig:
+        """Sensor on a braked, non-driven axle, with a Doppler radar (the default)."""
+        return cls(cycle_s=cycle_s)
+
+    @classmethod
+    def motor_axle(cls, radar: bool = True, cycle_s: float = 0.1) -> OdometerConfig:
+        """Sensor on a driven and braked axle (slip and slide), with or without a radar."""
+        return cls(cycle_s=cycle_s, driven=True, braked=True,
+                   radar=RadarConfig() if radar else None)  # fmt: skip
+
+    @classmethod
+    def ideal(cls, cycle_s: float = 0.1) -> OdometerConfig:
+        """No calibration error, no wear, no creep, no radar: pulse quantisation only."""
+        return cls(cycle_s=cycle_s, calibration_error=0.0, wear=0.0, braked=False, radar=None,
+                   abs_error_m=0.1)  # fmt: skip
+
+    @property
+    def edge_m(self) -> float:
+        """Distance of one decoder edge with the configured diameter, m."""
+        return float(np.pi * self.wheel_diameter_m / (4 * self.pulses_per_rev))
+
+
+@dataclass(frozen=True)
+class OdometerLog:
+    """What the odometer reports each cycle, and the run's hidden error draws.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n,)
+        Cycle times, s (any origin, e.g. GPS seconds).
+    dist_m : ndarray, shape (n,)
+        Distance measured since the first cycle, signed along the train's forward axis, m.
+    speed_mps : ndarray, shape (n,)
+        Speed used for the distance (wheel, or radar in slip / slide), >= 0, m/s.
+    wheel_speed_mps : ndarray, shape (n,)
+        Speed from the pulse frequency, >= 0, m/s.
+    direction : ndarray of int8, shape (n,)
+        +1 forward, -1 backward (phase order), 0 no edge in the cycle.
+    edges : ndarray of int64, shape (n,)
+        Decoder count (four per pulse period), signed.
+    slip : ndarray of bool, shape (n,)
+        Cycle marked as slip / slide (radar mismatch or implausible acceleration).
+    diameter_ratio : float
+        True over configured wheel diameter drawn for the run (truth, for tests).
+    radar_scale : float
+        Radar scale factor drawn for the run (truth; 1 without a radar).
+    """
+
+    t_s: NDArray
+    dist_m: NDArray
+    speed_mps: NDArray
+    wheel_speed_mps: NDArray
+    direction: NDArray
+    edges: NDArray
+    slip: NDArray
+    diameter_ratio: float
+    radar_scale: float
+
+    def at(self, t_s: ArrayLike) -> NDArray:
+        """Measured distance at times ``t_s`` (linear between cycles), m, shape of ``t_s``."""
+        return np.interp(np.asarray(t_s, float), self.t_s, self.dist_m)
+
+    def speed_at(self, t_s: ArrayLike) -> NDArray:
+        """Measured speed at times ``t_s`` (linear between cycles), m/s."""
+        return np.interp(np.asarray(t_s, float), self.t_s, self.speed_mps)
+
+
+def quadrature_levels(phase_periods: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Levels of the two channels for a wheel phase counted in pulse periods.
+
+    Channel A is high in the first half of each period, channel B a quarter period later.
+
+    Parameters
+    ----------
+    phase_periods : array_like, shape (n,)
+
+    Returns
+    -------
+    a, b : ndarray of bool, shape (n,)
+    """
+    p = np.asarray(phase_periods, float)
+    return np.mod(p, 1.0) < 0.5, np.mod(p - 0.25, 1.0) < 0.5
+
+
+# Gray-code state of (A, B): 0 = (1, 0), 1 = (1, 1), 2 = (0, 1), 3 = (0, 0) in forward order
+_STATE = np.array([[3, 2], [0, 1]])  # indexed [a, b]
+
+
+def decode_quadrature(a: ArrayLike, b: ArrayLike) -> NDArray:
+    """Signed edge count from sampled channel levels (phase order gives the sign).
+
+    Forward motion (A leading B) visits the states (1,0) -> (1,1) -> (0,1) -> (0,0); each step
+    counts +1, each step the other way -1. A jump by two states between samples (the sampling
+    too slow for the speed) cannot be signed and raises ``ValueError``.
+
+    Parameters
+    ----------
+    a, b : array_like of bool, shape (n,)
+        Channel levels, sampled at least four times per pulse period.
+
+    Returns
+    -------
+    ndarray of int64, shape (n,)
+        Count since the first sample (0 at the first).
+    """
+    s = _STATE[np.asarray(a, bool).astype(int), np.asarray(b, bool).astype(int)]
+    step = np.mod(np.diff(s), 4)
+    if np.any(step == 2):
+        k = int(np.flatnonzero(step == 2)[0]) + 1
+        raise ValueError(
+            f"decode_quadrature: the channels skip a state at sample {k}; sample at least four "
+            "times per pulse period"
+        )
+    signed = np.where(step == 3, -1, step)
+    return np.concatenate([[0], np.cumsum(signed)]).astype(np.int64)
+
+
+def _episodes(active: NDArray, dt: float, rate_hz: float, mean_s: float,
+              rng: np.random.Generator) -> NDArray:  # fmt: skip
+    """Creep amplitude in [0, 1] per cycle: low-adhesion episodes while ``active``."""
+    n = len(active)
+    start = rng.random(n) < rate_hz * dt
+    length = np.maximum(1, np.round(rng.exponential(mean_s / dt, n))).astype(int)
+    depth = rng.uniform(0.3, 1.0, n)
+    amp = np.zeros(n)
+    for k in np.flatnonzero(start & active).tolist():  # few episodes per run
+        stop = min(n, k + int(length[k]))
+        ramp = np.minimum(1.0, np.arange(1, stop - k + 1) / 5.0)  # builds up over ~5 cycles
+        amp[k:stop] = np.maximum(amp[k:stop], depth[k] * ramp)
+    return np.where(active, amp, 0.0)
+
+
+def true_distance_m(speed_at: Callable[[NDArray], NDArray], t_s: ArrayLike,
+                    substeps: int = 20) -> NDArray:  # fmt: skip
+    """Distance run since ``t_s[0]``: the speed integrated by the trapezoid rule.
+
+    Parameters
+    ----------
+    speed_at : callable
+        Speed (m/s) as a vectorised function of time (e.g. ``SpeedProfile.speed_at``).
+    t_s : array_like, shape (n,)
+        Increasing times, s.
+    substeps : int
+        Trapezoid steps per interval of ``t_s`` (exact for piecewise-linear speeds between
+        kinks; a kink inside a step costs at most ``a dt^2 / (8 substeps^2)``).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Metres, 0 at ``t_s[0]``.
+    """
+    t = np.asarray(t_s, float)
+    if t.ndim != 1 or len(t) < 1 or np.any(np.diff(t) <= 0) or substeps < 1:
+        raise ValueError("t_s must be 1-D and strictly increasing, substeps >= 1")
+    if len(t) == 1:
+        return np.zeros(1)
+    frac = np.arange(substeps + 1) / substeps
+    grid = (t[:-1, None] + np.diff(t)[:, None] * frac).ravel()
+    v = np.asarray(speed_at(grid), float).reshape(-1, substeps + 1)
+    inc = (0.5 * (v[:, 1:] + v[:, :-1]) * (np.diff(t)[:, None] / substeps)).sum(axis=1)
+    return np.concatenate([[0.0], np.cumsum(inc)])
+
+
+def simulate_odometer(
+    t_s: ArrayLike, true_dist_m: ArrayLike, config: OdometerConfig, seed: int = 0
+) -> OdometerLog:
+    """Simulate the odometer along a true motion.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Cycle times, strictly increasing by ``config.cycle_s`` (within 1e-6 s), s.
+    true_dist_m : array_like, shape (n,)
+        True distance since the first cycle, signed along the train's forward axis, m.
+    config : OdometerConfig
+    seed : int
+
+    Returns
+    -------
+    OdometerLog
+    """
+    t = np.asarray(t_s, float)
+    x = np.asarray(true_dist_m, float)
+    dt = config.cycle_s
+    if t.ndim != 1 or t.shape != x.shape or len(t) < 3:
+        raise ValueError("t_s and true_dist_m must be 1-D of one length >= 3")
+    if np.any(np.abs(np.diff(t) - dt) > 1e-6):
+        raise ValueError(f"t_s must step by config.cycle_s = {dt} s; resample the truth")
+    rng = np.random.default_rng([int(seed), 34])
+    ratio = (1.0 + rng.uniform(-1, 1) * config.calibration_error) * (
+        1.0 - rng.uniform(0, 1) * config.wear
+    )
+    v = np.gradient(x, dt)
+    acc = np.gradient(v, dt)
+    traction = (np.sign(v) * acc > config.traction_threshold_mps2) & config.driven
+    braking = (np.sign(v) * acc < -config.traction_threshold_mps2) & config.braked
+    creep = config.slip_max * _episodes(
+        traction, dt, config.episode_rate_hz, config.episode_s, rng
+    ) - config.slide_max * _episodes(braking, dt, config.episode_rate_hz, config.episode_s, rng)
+    creep = np.maximum(creep, -0.99)  # a sliding wheel turns slower, never backwards
+    # wheel surface distance: integral of v (1 + creep), trapezoidal on the cycle grid
+    dv = np.diff(x) * (1.0 + 0.5 * (creep[1:] + creep[:-1]))
+    surface = np.concatenate([[0.0], np.cumsum(dv)])
+    phase = surface / (np.pi * config.wheel_diameter_m * ratio) * config.pulses_per_rev
+    edges = np.floor(4.0 * phase).astype(np.int64)  # edge counter (hardware counts every edge)
+    edges -= edges[0]
+    d_edges = np.diff(edges, prepend=edges[0])
+    direction = np.sign(d_edges).astype(np.int8)
+    wheel_v = np.abs(d_edges) * config.edge_m / dt
+    wheel_v[0] = wheel_v[1]  # the first cycle has no earlier count: its speed is the next one's
+    if config.radar is not None:
+        r = config.radar
+        scale = 1.0 + rng.uniform(-1, 1) * r.scale_error
+        radar_v = np.abs(v) * scale + rng.normal(0.0, r.noise_mps, len(t))
+        radar_v = np.maximum(radar_v, 0.0)
+        slip = np.abs(wheel_v - radar_v) > r.tolerance * radar_v + r.tolerance_mps
+        used_v = np.where(slip, radar_v, wheel_v)
+    else:
+        scale = 1.0
+        used_v = wheel_v.copy()
+        slip = np.zeros(len(t), bool)
+        lim = config.max_accel_mps2 * dt
+        for k in range(1, len(t)):  # sequential: each clamp depends on the previous speed
+            if abs(used_v[k] - used_v[k - 1]) > lim:
+                slip[k] = True
+                used_v[k] = float(np.clip(used_v[k], used_v[k - 1] - lim, used_v[k - 1] + lim))
+    # measured distance: the wheel's edges where trusted, the speed used where not
+    step = np.where(slip, used_v * dt * direction, d_edges * config.edge_m)
+    dist = np.cumsum(step)
+    dist -= dist[0]
+    return OdometerLog(
+        t_s=t.copy(), dist_m=dist, speed_mps=used_v, wheel_speed_mps=wheel_v,
+        direction=direction, edges=edges, slip=slip, diameter_ratio=float(ratio),
+        radar_scale=float(scale),
+    )  # fmt: skip

@@ -1,0 +1,164 @@
+"""Capture of virtual balises against closed-form motion (locator.balises.capture).
+
+The fixes are a constant-speed truth plus known offsets, so the expected capture decision,
+passage time, delay and errors follow from arithmetic, not from the code under test.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.balises.balisefile import BaliseList
+from locator.balises.capture import CaptureConfig, capture_balises, score_captures
+
+
+def balises(chainages):
+    c = np.asarray(chainages, float)
+    n = len(c)
+    return BaliseList(
+        tuple(f"B{k}" for k in range(n)),
+        c,
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(n),
+        tuple("T" for _ in range(n)),
+        np.ones(n, bool),
+        np.ones(n),
+    )
+
+
+def fixes(rate_hz, speed_mps, duration_s, start_m=0.0, offset_m=0.0, orientation=1):
+    t = np.arange(0.0, duration_s + 1e-9, 1.0 / rate_hz)
+    truth = start_m + orientation * speed_mps * t
+    est = truth + offset_m
+    return t, truth, est, est - 10.0, est + 10.0
+
+
+def test_exact_fixes_capture_with_interpolated_time_and_fix_rate_delay():
+    t, truth, est, lo, hi = fixes(1.0, 22.0, 20.0)
+    bl = balises([105.0, 230.0])
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(25.0), orientation=1)
+    assert cap["captured"].all() and (cap["zone"] == "capture").all()
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
+    np.testing.assert_allclose(sc["t_true_s"], [105 / 22, 230 / 22])
+    np.testing.assert_allclose(sc["timing_error_s"], 0.0, atol=1e-12)  # linear motion
+    # emitted at the first fix past the balise: 5 s and 11 s
+    np.testing.assert_allclose(sc["t_emit_s"], [5.0, 11.0])
+    np.testing.assert_allclose(sc["delay_s"], [5 - 105 / 22, 11 - 230 / 22])
+    assert not sc["false"].any() and not sc["missed"].any()
+
+
+def test_capture_rate_rises_with_the_radius_as_the_fix_spacing_says():
+    # fixes every 22 m; balises at every 0.5 m phase: a radius r catches the balises whose
+    # nearer bracketing fix is within r, i.e. a share min(1, 2 r / 22)
+    t, _truth, est, lo, hi = fixes(1.0, 22.0, 60.0)
+    bl = balises(50.0 + np.arange(0.0, 22.0, 0.25))
+    for r, share in [(2.0, 4.0 / 22.0), (5.5, 11.0 / 22.0), (11.0, 1.0), (25.0, 1.0)]:
+        cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(r), orientation=1)
+        assert cap["captured"].mean() == pytest.approx(share, abs=0.025), r
+
+
+def test_arm_zone_recovers_jumped_balises():
+    t, _truth, est, lo, hi = fixes(1.0, 32.5, 10.0)  # 117 km/h at 1 Hz
+    bl = balises([16.25])  # halfway between fixes 0 and 32.5
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(5.0), orientation=1)
+    assert not cap["captured"].any()
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(5.0, 25.0), orientation=1)
+    assert cap["zone"].tolist() == ["arm"]
+    assert cap["t_pass_s"].iloc[0] == pytest.approx(0.5)
+
+
+def test_offset_fixes_give_the_expected_timing_and_false_captures():
+    # the estimate runs 3 m ahead: the reported time is early by 3 m / v
+    t, truth, est, lo, hi = fixes(10.0, 22.0, 10.0, offset_m=3.0)
+    bl = balises([50.0, 100.0])
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(2.0), orientation=1)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=2.0)
+    np.testing.assert_allclose(sc["timing_error_s"], -3.0 / 22.0, atol=1e-9)
+    np.testing.assert_allclose(sc["position_error_m"], -3.0, atol=1e-9)
+    assert sc["false"].all()  # 3 m off with a 2 m capture zone
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=5.0)
+    assert not sc["false"].any()
+
+
+def test_reverse_direction_and_window_zone():
+    t, _truth, est, lo, hi = fixes(1.0, 10.0, 30.0, start_m=500.0, orientation=-1)
+    bl = balises([255.0, 395.0])
+    cfg = CaptureConfig.window(before_m=2.0, after_m=6.0)
+    cap = capture_balises(t, est, lo, hi, bl, cfg, orientation=-1)
+    # 395: fixes at 400 (5 m before: outside) and 390 (5 m after: inside)
+    # 255: fixes at 260 (5 m before) and 250 (5 m after): captured by the fix after
+    assert cap["captured"].tolist() == [True, True]
+    np.testing.assert_allclose(cap["t_pass_s"], [24.5, 10.5])
+
+
+def test_long_fused_intervals_do_not_capture_and_a_balise_not_reached_is_false():
+    t, _truth, est, lo, hi = fixes(1.0, 20.0, 10.0)
+    wide_lo, wide_hi = lo - 200.0, hi + 200.0
+    bl = balises([55.0])
+    cap = capture_balises(t, est, wide_lo, wide_hi, bl, CaptureConfig(25.0), orientation=1)
+    assert not cap["captured"].any()
+    # the estimate runs 40 m ahead of a train that stops at 180 m: balise at 200 m captured
+    t2 = np.arange(0.0, 20.0)
+    truth2 = np.minimum(20.0 * t2, 180.0)
+    est2 = truth2 + 40.0
+    cap = capture_balises(t2, est2, est2 - 45, est2 + 45, balises([200.0]),
+                          CaptureConfig(25.0), orientation=1)  # fmt: skip
+    sc = score_captures(cap, t2, truth2, orientation=1, false_tolerance_m=25.0)
+    assert sc["captured"].all() and sc["false"].all() and not sc["passed"].any()
+
+
+def test_predicted_emission_cuts_the_fix_rate_delay():
+    t, truth, est, lo, hi = fixes(1.0, 32.5, 10.0)
+    bl = balises([40.0])  # fixes at 32.5 (7.5 m before) and 65
+    speed = np.full(len(t), 32.5)
+    cfg = CaptureConfig(capture_radius_m=10.0, emit="predicted")
+    cap = capture_balises(t, est, lo, hi, bl, cfg, orientation=1, speed_mps=speed)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=10.0)
+    assert sc["delay_s"].iloc[0] == pytest.approx(0.0, abs=1e-9)
+    at_fix = capture_balises(t, est, lo, hi, bl, CaptureConfig(10.0), orientation=1)
+    sc2 = score_captures(at_fix, t, truth, orientation=1, false_tolerance_m=10.0)
+    assert sc2["delay_s"].iloc[0] == pytest.approx(2.0 - 40.0 / 32.5)
+
+
+def test_guards():
+    with pytest.raises(ValueError, match="capture_radius_m"):
+        CaptureConfig(capture_radius_m=0.0)
+    with pytest.raises(ValueError, match="window_after_m"):
+        CaptureConfig(window_before_m=3.0)
+    with pytest.raises(ValueError, match="speed_mps"):
+        capture_balises([0, 1], [0, 1], [0, 1], [0, 1], balises([0.5]),
+                        CaptureConfig(emit="predicted"), orientation=1)  # fmt: skip
+
+
+def test_expectation_window_on_the_fused_interval():
+    # 117 km/h at 1 Hz, intervals +-10 m: the crossing fix at 65 m is 25 m past a balise at
+    # 40 m, so its min safe front (55 m) has passed the balise's last position (41 m)
+    t, _truth, est, lo, hi = fixes(1.0, 32.5, 10.0)
+    bl = balises([40.0, 70.0])  # 70: crossing fix at 97.5, min safe 87.5 > 71: outside too
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(capture_radius_m=10.0),
+                          orientation=1)  # fmt: skip
+    assert cap["captured"].tolist() == [True, True] and not cap["in_window"].any()
+    strict = CaptureConfig(capture_radius_m=10.0, require_window=True)
+    assert not capture_balises(t, est, lo, hi, bl, strict, orientation=1)["captured"].any()
+    # intervals +-30 m: inside the window, accepted
+    ok = capture_balises(t, est, est - 30.0, est + 30.0, bl, strict, orientation=1)
+    assert ok["captured"].all() and ok["in_window"].all()
+
+
+def test_no_capture_across_a_gap_of_voided_fixes():
+    # fixes voided (interval too long) from 3 s to 8 s while the train stops at 60 m for 4 s:
+    # interpolating across the gap would time the passage of a balise at 50 m wrongly
+    t = np.arange(0.0, 15.0)
+    truth = np.array([0, 20, 40, 55, 60, 60, 60, 60, 65, 80, 100, 120, 140, 160, 180.0])
+    lo, hi = truth - 10.0, truth + 10.0
+    hi[3:8] += 300.0
+    bl = balises([50.0, 110.0])
+    cap = capture_balises(t, truth, lo, hi, bl, CaptureConfig(25.0), orientation=1)
+    assert cap["captured"].tolist() == [False, True]
+    wide = CaptureConfig(25.0, max_gap_s=10.0)
+    cap = capture_balises(t, truth, lo, hi, bl, wide, orientation=1)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
+    # across the gap the interpolated time (2 + 10/25 * 6 = 4.4 s) is 1.7 s after the true 2.67
+    assert sc["timing_error_s"].iloc[0] == pytest.approx(4.4 - (2 + 10 / 15))

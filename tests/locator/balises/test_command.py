@@ -1,0 +1,100 @@
+"""``locator balises`` end to end in the small synthetic canyon of tests/locator/_scene.py.
+
+Truth: the simulator's chainage of the antenna; the balise passage times follow from it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from locator.balises.balisefile import BaliseList
+from locator.cli import main
+from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.odometer import OdometerConfig
+from locator.odometry.simulated import odometer_along_run
+from locator.sim.simfile import SimRun
+from predisat.synth.world import World
+from tests.locator._scene import canyon_world
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory):
+    root = tmp_path_factory.mktemp("balises")
+    canyon_world().save(root / "world.npz")
+    rc = main(["-q", "simulate", "--world", str(root / "world.npz"), "--duration", "40",
+               "--speed", "10", "--seed", "3", "--out", str(root / "sim")])  # fmt: skip
+    assert rc == 0
+    return root / "sim"
+
+
+def test_odometer_along_a_simulated_run_keeps_the_truth(sim_dir):
+    sim = SimRun.read(sim_dir)
+    cfg = OdometerConfig()
+    so = odometer_along_run(sim, cfg, seed=2)
+    # the truth on the cycle grid passes through the simulator's chainage at every epoch
+    np.testing.assert_allclose(np.interp(sim.gps_s, so.truth_t_s, so.truth_chainage_m),
+                               sim.chainage_m, atol=1e-6)  # fmt: skip
+    moved = sim.chainage_m - sim.chainage_m[0]
+    lo, hi = OdometerAccuracy.from_config(cfg).displacement_bounds_m(so.epoch_odo_m)
+    assert np.all((lo <= moved) & (moved <= hi))
+    assert abs(so.epoch_odo_m[-1] - moved[-1]) < 0.02 * abs(moved[-1]) + 1.0
+
+
+def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
+    out = tmp_path / "b"
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--masks",
+               str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--radius", "12", "25",
+               "--out", str(out)])  # fmt: skip
+    assert rc == 0
+    assert "r25" in capsys.readouterr().out
+    caps = pd.read_csv(out / "captures.csv")
+    assert (out / "captures.png").is_file() and (out / "epochs.parquet").is_file()
+    info = json.loads((out / "summary.json").read_text())
+    assert info["safe_front"]["front_outside"] == 0
+    sim = SimRun.read(sim_dir)
+    p = caps[caps["passed"] & (caps["config"] == "r25")]
+    assert len(p) >= 4
+    # true passage times from the simulator's chainage (stop-and-go profile, from rest)
+    t_true = np.interp(p["chainage_m"], sim.chainage_m, sim.gps_s)
+    np.testing.assert_allclose(p["t_true_s"], t_true, atol=0.02)
+    got = p[p["captured"]]
+    assert len(got) >= 0.75 * len(p)
+    assert (got["timing_error_s"].abs() < 1.0).all()
+
+
+def test_a_bad_balise_list_is_one_line_naming_the_row(sim_dir, tmp_path, capsys):
+    track = World.load(sim_dir / "world.npz").track
+    bl = BaliseList.along_track(track, 100.0, 400.0, 100.0)
+    p = bl.to_csv(tmp_path / "b.csv")
+    df = pd.read_csv(p)
+    df.loc[2, "id"] = df.loc[0, "id"]
+    df.to_csv(p, index=False)
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--balises", str(p),
+               "--out", str(tmp_path / "x")])  # fmt: skip
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "line 4" in err and "already used on line 2" in err and "\n" == err[-1]
+
+
+def test_a_recorded_odometer_log_is_used_and_a_gap_is_refused(sim_dir, tmp_path, capsys):
+    from locator.odometry.logfile import write_odometer_log
+
+    sim = SimRun.read(sim_dir)
+    log = odometer_along_run(sim, OdometerConfig(), seed=5).log
+    p = write_odometer_log(log, tmp_path / "odo.csv")
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25",
+               "--odometer-log", str(p), "--out", str(tmp_path / "ok")])  # fmt: skip
+    assert rc == 0
+    info = json.loads((tmp_path / "ok" / "summary.json").read_text())
+    assert info["accuracy"]["over_rel"] == 0.05  # a log of unknown odometer: SUBSET-041
+    assert info["safe_front"]["front_outside"] == 0
+    df = pd.read_csv(p)
+    df.drop(index=range(100, 110)).to_csv(p, index=False)
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--odometer-log", str(p),
+               "--out", str(tmp_path / "bad")])  # fmt: skip
+    assert rc == 2
+    assert "line 102: gap of 1.10 s" in capsys.readouterr().err

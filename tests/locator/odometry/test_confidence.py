@@ -1,0 +1,108 @@
+"""ETCS confidence interval and safe ends (locator.odometry.confidence), closed-form truths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.odometry.confidence import (
+    BalisePassage,
+    OdometerAccuracy,
+    in_expectation_window,
+    safe_fronts,
+)
+from locator.odometry.odometer import OdometerConfig, simulate_odometer
+
+ACC = OdometerAccuracy(abs_error_m=2.0, over_rel=0.04, under_rel=0.02)
+
+
+def test_doubts_grow_linearly_from_the_reference():
+    odo = np.arange(0.0, 1001.0, 100.0)
+    sf = safe_fronts(odo, [BalisePassage(0, 5000.0, accuracy_m=1.0)], ACC, orientation=1)
+    np.testing.assert_allclose(sf.doubt_over_m, 1.0 + 2.0 + 0.04 * odo)
+    np.testing.assert_allclose(sf.doubt_under_m, 1.0 + 2.0 + 0.02 * odo)
+    np.testing.assert_allclose(sf.est_front_m, 5000.0 + odo)
+    np.testing.assert_allclose(sf.max_safe_front_m, 5000.0 + odo + sf.doubt_under_m)
+    np.testing.assert_allclose(sf.min_safe_front_m, 5000.0 + odo - sf.doubt_over_m)
+    np.testing.assert_allclose(sf.dist_since_ref_m, odo)
+
+
+def test_orientation_minus_one_mirrors_the_fronts():
+    odo = np.arange(0.0, 501.0, 50.0)
+    sf = safe_fronts(odo, [BalisePassage(0, 5000.0)], ACC, orientation=-1,
+                     antenna_to_front_m=10.0)  # fmt: skip
+    np.testing.assert_allclose(sf.est_front_m, 5000.0 - odo - 10.0)
+    assert np.all(sf.max_safe_front_m < sf.est_front_m)  # furthest ahead = lowest chainage
+    assert np.all(sf.min_safe_front_m > sf.est_front_m)
+
+
+def test_reference_resets_non_reference_does_not_known_distance_falls_back():
+    odo = np.arange(0.0, 3001.0, 10.0)  # samples every 10 m
+    passages = [
+        BalisePassage(0, 1000.0, accuracy_m=1.0),  # A: reference
+        BalisePassage(100, 2000.0, q_reference=False),  # B at 1000 m: no reset
+        BalisePassage(200, 3000.0, q_reference=False, known_from=1),  # C: known distance to B
+        BalisePassage(250, 3500.0, q_reference=True),  # D: reference
+    ]
+    sf = safe_fronts(odo, passages, ACC)
+    assert sf.accepted.all()
+    over_at_b = 1.0 + 2.0 + 0.04 * 1000.0
+    assert sf.doubt_over_m[100] == pytest.approx(over_at_b)
+    assert sf.doubt_over_m[150] == pytest.approx(1.0 + 2.0 + 0.04 * 1500.0)  # kept growing
+    # at C the doubt falls back to its value at B, then grows again from C
+    assert sf.doubt_over_m[200] == pytest.approx(over_at_b + 2.0)
+    assert sf.doubt_over_m[240] == pytest.approx(over_at_b + 2.0 + 0.04 * 400.0)
+    assert sf.est_front_m[200] == pytest.approx(3000.0)
+    assert sf.doubt_over_m[250] == pytest.approx(1.0 + 2.0)  # D resets
+    assert sf.dist_since_ref_m[260] == pytest.approx(100.0)
+
+
+def test_expectation_window_accepts_only_between_max_and_min_safe_front():
+    # estimate 1000 m with doubts 20 m: max safe 1020, min safe 980; accuracy 1 m
+    assert in_expectation_window(1015.0, 1.0, 1020.0, 980.0, 1)
+    assert not in_expectation_window(1025.0, 1.0, 1020.0, 980.0, 1)  # not reachable yet
+    assert not in_expectation_window(975.0, 1.0, 1020.0, 980.0, 1)  # already passed
+    assert in_expectation_window(985.0, 1.0, 980.0, 1020.0, -1)
+
+
+def test_linked_balise_outside_its_window_is_rejected_and_does_not_reset():
+    odo = np.arange(0.0, 2001.0, 10.0)
+    passages = [BalisePassage(0, 0.0), BalisePassage(100, 1200.0)]  # read 200 m too early
+    sf = safe_fronts(odo, passages, ACC)
+    assert not sf.accepted[1]
+    assert sf.est_front_m[150] == pytest.approx(1500.0)  # still dead-reckoned from A
+    ok = safe_fronts(odo, [BalisePassage(0, 0.0), BalisePassage(100, 1010.0)], ACC)
+    assert ok.accepted[1] and ok.est_front_m[150] == pytest.approx(1510.0)
+
+
+def test_rear_needs_train_integrity():
+    odo = np.arange(0.0, 100.0, 10.0)
+    conf = np.arange(10) < 5
+    sf = safe_fronts(odo, [BalisePassage(0, 0.0)], ACC, train_length_m=80.0,
+                     integrity_confirmed=conf)  # fmt: skip
+    assert np.isnan(sf.est_rear_m[5:]).all() and np.isfinite(sf.est_rear_m[:5]).all()
+    np.testing.assert_allclose(sf.max_safe_rear_m[:5], sf.max_safe_front_m[:5] - 80.0)
+
+
+def test_true_front_stays_between_the_safe_fronts_of_a_simulated_odometer():
+    dt = 0.1
+    t = np.arange(0.0, 300.0, dt)
+    truth = 0.5 * np.minimum(t, 40.0) ** 2 / 2 + 20.0 * np.maximum(t - 40.0, 0.0)  # 0.5 m/s^2
+    cfg = OdometerConfig.motor_axle(radar=True)
+    acc = OdometerAccuracy.from_config(cfg)
+    for seed in range(5):
+        log = simulate_odometer(t, truth, cfg, seed=seed)
+        refs = [BalisePassage(int(k), 100.0 + truth[k], accuracy_m=1.0)
+                for k in (0, 1500, 2500)]  # fmt: skip
+        sf = safe_fronts(log.dist_m, refs, acc, antenna_to_front_m=5.0)
+        true_front = 100.0 + truth + 5.0
+        assert np.all((sf.min_safe_front_m <= true_front) & (true_front <= sf.max_safe_front_m))
+
+
+def test_guards():
+    with pytest.raises(ValueError, match="first passage must be a reference"):
+        safe_fronts(np.zeros(3), [BalisePassage(0, 0.0, q_reference=False)], ACC)
+    with pytest.raises(ValueError, match="orientation"):
+        safe_fronts(np.zeros(3), [BalisePassage(0, 0.0)], ACC, orientation=0)
+    with pytest.raises(ValueError, match="over_rel"):
+        OdometerAccuracy(over_rel=1.5)

@@ -1,0 +1,128 @@
+"""Odometer sensor simulation against closed-form kinematics (locator.odometry.odometer)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.odometer import (
+    OdometerConfig,
+    RadarConfig,
+    decode_quadrature,
+    quadrature_levels,
+    simulate_odometer,
+    true_distance_m,
+)
+
+DT = 0.1
+
+
+def accel_cruise_brake(t):
+    """0 -> 20 m/s at 0.5 m/s^2 (40 s), cruise 30 s, brake at 2/3 m/s^2 to a stop (30 s)."""
+    t = np.asarray(t, float)
+    x1 = 0.25 * np.minimum(t, 40.0) ** 2
+    x2 = 20.0 * np.clip(t - 40.0, 0.0, 30.0)
+    tb = np.clip(t - 70.0, 0.0, 30.0)
+    x3 = 20.0 * tb - tb**2 / 3.0
+    return x1 + x2 + x3
+
+
+def speed(t):
+    t = np.asarray(t, float)
+    return np.where(t < 40, 0.5 * t, np.where(t < 70, 20.0, np.maximum(0.0, 20 - (t - 70) / 1.5)))
+
+
+def test_quadrature_decoder_counts_edges_with_the_direction():
+    # forward 3.3 periods, then back 1.1 periods, sampled 20 times per period
+    phase = np.concatenate([np.linspace(0, 3.3, 67), np.linspace(3.3, 2.2, 23)[1:]])
+    a, b = quadrature_levels(phase)
+    count = decode_quadrature(a, b)
+    # closed form: edges are at multiples of a quarter period
+    assert count[66] == np.floor(4 * 3.3) - np.floor(4 * 0.0)
+    assert count[-1] == np.floor(4 * 2.2)
+    assert np.all(np.diff(count[:67]) >= 0) and np.all(np.diff(count[66:]) <= 0)
+
+
+def test_quadrature_decoder_refuses_undersampled_channels():
+    a, b = quadrature_levels(np.array([0.0, 0.6]))  # half a period between samples
+    with pytest.raises(ValueError, match="four times per pulse period"):
+        decode_quadrature(a, b)
+
+
+def test_true_distance_integrates_the_speed():
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    assert np.abs(true_distance_m(speed, t) - accel_cruise_brake(t)).max() < 1e-3
+
+
+def test_ideal_odometer_reads_the_distance_within_one_edge():
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    x = accel_cruise_brake(t)
+    cfg = OdometerConfig.ideal()
+    log = simulate_odometer(t, x, cfg)
+    assert np.abs(log.dist_m - x).max() <= cfg.edge_m + 1e-9
+    # speed from the pulse frequency: the mean speed over the cycle, within one edge per cycle
+    v_mean = np.diff(x) / DT
+    assert np.abs(log.wheel_speed_mps[1:] - v_mean).max() <= cfg.edge_m / DT + 1e-9
+    assert set(np.unique(log.direction[1:-30])) <= {0, 1}
+
+
+def test_reverse_motion_reads_negative_with_backward_direction():
+    t = np.arange(0.0, 50.0, DT)
+    x = -accel_cruise_brake(t)  # the train backs along its forward axis
+    log = simulate_odometer(t, x, OdometerConfig.ideal())
+    assert np.abs(log.dist_m - x).max() <= OdometerConfig.ideal().edge_m + 1e-9
+    assert np.all(log.direction[5:] == -1)
+
+
+def test_diameter_error_scales_the_reading():
+    t = np.arange(0.0, 200.0, DT)
+    x = 25.0 * t  # constant speed: no slip, no slide
+    cfg = OdometerConfig(calibration_error=0.01, wear=0.0, braked=False, radar=None)
+    for seed in range(4):
+        log = simulate_odometer(t, x, cfg, seed=seed)
+        # the wheel is ratio times the configured one: each turn covers ratio x more
+        expected = x[-1] / log.diameter_ratio
+        assert abs(log.dist_m[-1] - expected) <= cfg.edge_m + 1e-6
+        assert abs(log.diameter_ratio - 1.0) <= 0.01
+
+
+def test_motor_axle_without_radar_over_reads_in_traction_and_bounds_hold():
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    x = accel_cruise_brake(t)
+    cfg = OdometerConfig.motor_axle(radar=False)
+    cfg = OdometerConfig(**{**cfg.__dict__, "episode_rate_hz": 0.5})  # slippery rail
+    acc = OdometerAccuracy.from_config(cfg)
+    over_seen = False
+    for seed in range(6):
+        log = simulate_odometer(t, x, cfg, seed=seed)
+        lo, hi = acc.displacement_bounds_m(log.dist_m)
+        assert np.all((lo <= x) & (x <= hi)), seed
+        over_seen |= bool(log.slip.any())
+    assert over_seen
+
+
+def test_radar_detects_slip_and_keeps_the_distance():
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    x = accel_cruise_brake(t)
+    base = OdometerConfig.motor_axle(radar=True)
+    cfg = OdometerConfig(**{**base.__dict__, "episode_rate_hz": 0.5})
+    no_radar = OdometerConfig(**{**cfg.__dict__, "radar": None, "max_accel_mps2": 50.0})
+    err_radar, err_wheel = [], []
+    for seed in range(4):
+        err_radar.append(abs(simulate_odometer(t, x, cfg, seed=seed).dist_m[-1] - x[-1]))
+        err_wheel.append(abs(simulate_odometer(t, x, no_radar, seed=seed).dist_m[-1] - x[-1]))
+    assert np.mean(err_radar) < 0.5 * np.mean(err_wheel)
+    acc = OdometerAccuracy.from_config(cfg)
+    assert acc.over_rel < 0.05 and acc.under_rel < 0.05  # radar: a few percent at most
+
+
+def test_config_guards_name_the_parameter():
+    with pytest.raises(ValueError, match="cycle_s"):
+        OdometerConfig(cycle_s=0.0)
+    with pytest.raises(ValueError, match="slip_max"):
+        OdometerConfig(slip_max=0.7)
+    with pytest.raises(ValueError, match="tolerance"):
+        RadarConfig(tolerance=0.0)
+    with pytest.raises(ValueError, match="cycle_s"):
+        simulate_odometer(np.arange(0, 5, 0.2), np.zeros(25), OdometerConfig())
