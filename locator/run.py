@@ -60,6 +60,7 @@ from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochSource
 from predisat.availability.interval import IntervalMode
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import MaskSet
 
 __all__ = ["TRUST_MODES", "Odometer", "RunConfig", "RunFlag", "flag_names", "run_locator"]
@@ -146,7 +147,7 @@ class RunConfig:
         if not self.beacon_spacing_m > 0:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonDict:
         d = dataclasses.asdict(self)
         d["locator"]["model"]["error"] = dataclasses.asdict(self.locator.model.error)
         return d
@@ -162,7 +163,7 @@ def run_locator(
     start_chainage_m: float,
     config: RunConfig | None = None,
     masks: MaskSet | None = None,
-    progress: Callable[[int], Any] | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> pd.DataFrame:
     """Locate the train at every epoch of a source.
 
