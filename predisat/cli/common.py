@@ -9,9 +9,12 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from predisat.cli.args import caused_by_interrupt
-from predisat.track import TrackMap, TrackMapError, demo_track, load_track
+
+if TYPE_CHECKING:
+    from predisat.track import TrackMap
 
 __all__ = [
     "SYNTH_MODULES",
@@ -93,6 +96,9 @@ def track_option(
 ) -> TrackMap:
     """``--track`` (with ``--track-name``, ``--chain``, ``--where``): the demo line when
     absent, else :func:`predisat.track.load_track` (GeoJSON or CSV by content)."""
+    # lazy, as every library import of the command line: `--help` answers without pyproj
+    from predisat.track import TrackMapError, demo_track, load_track
+
     if path is None:
         return demo_track()
     if chain not in ("all", "longest"):

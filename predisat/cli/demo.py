@@ -14,19 +14,18 @@ import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-import pandas as pd
-
 from predisat.cli.args import finite_float, output_dir, positive_int
 from predisat.cli.common import km_range
-from predisat.masks.maskset import MaskSet
-from predisat.track import TrackMap, demo_track
 
 if TYPE_CHECKING:
+    import pandas as pd
+
+    from predisat.masks.maskset import MaskSet
     from predisat.synth.generate import SynthResult
+    from predisat.track import TrackMap
 
 __all__ = [
     "DEMO_CAMERA",
@@ -90,6 +89,8 @@ class DemoStep(Protocol):
 
 def demo_steps() -> list[DemoStep]:
     """The installed demo steps, in the order of their entry-point names."""
+    from importlib.metadata import entry_points  # lazy: 25 ms, only the demo needs it
+
     found = sorted(entry_points(group=DEMO_STEPS_GROUP), key=lambda ep: ep.name)
     return [ep.load() for ep in found]
 
@@ -118,6 +119,7 @@ def render_demo_survey(
     ``spacing_m`` (:func:`predisat.synth.generate.generate_survey`)."""
     from predisat.camera.models import default_camera
     from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
 
     return generate_survey(
         demo_track(),
@@ -166,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
     from predisat.reconstruct.evalfigures import evaluation_figure
     from predisat.reconstruct.evaluate import compare, evaluate_masks, format_table, load_truth
     from predisat.synth.generate import contact_sheet
+    from predisat.track import demo_track
 
     steps = demo_steps()
     n = 4 + len(steps)
