@@ -57,7 +57,7 @@ from locator.odometry.fusion import (
 )
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
-from locator.sources import EpochSource
+from locator.sources import EpochData, EpochSource
 from predisat.availability.interval import IntervalMode
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
 from predisat.jsontypes import JsonDict
@@ -207,35 +207,11 @@ def run_locator(
         )
     gps = np.asarray(source.gps_s, float)
     odo = source.odometer_m
-    length = path.length_m
-    u0 = cfg.start_uncertainty_m
-    odo0 = 0.0 if odo is None else float(odo[0])
-    # one anchor per bound (value, odometer, time): a bound the satellites did not tighten keeps
-    # its older anchor, so the odometer's fixed error is not added again at every epoch
-    lo_anchor = (start_chainage_m - u0, odo0, gps[0])
-    hi_anchor = (start_chainage_m + u0, odo0, gps[0])
-    est, est_var, odo_prev = start_chainage_m, (u0 / 3.0) ** 2, odo0  # the estimate's filter
-    rows: list[dict[str, Any]] = []
+    state = _Tracker.start(start_chainage_m, cfg.start_uncertainty_m, odo, gps)
+    rows: list[JsonDict] = []
     for k in range(len(gps)):
         t0 = time.perf_counter()
-        if odo is not None:
-            d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
-            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer)[0]
-            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer)[1]
-        else:
-            d_lo = d_hi = 0.0
-            lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
-            hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
-        d = max(abs(d_lo), abs(d_hi))
-        p_lo = float(np.clip(lo_p, 0.0, length))
-        p_hi = float(np.clip(hi_p, 0.0, length))
-        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
-        step = 0.0 if odo is None else float(odo[k]) - odo_prev
-        e, v = predict_estimate(est, est_var, step, cfg.odometer)
-        odo_prev = odo_prev + step
-        if odo is None:  # no motion model: the estimate's variance grows with the motion bound
-            v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
-        est, est_var = float(np.clip(e, p_lo, p_hi)), float(v)
+        p_lo, p_hi, d = state.predict(k, gps, odo, cfg, path.length_m)
         centre = 0.5 * (p_lo + p_hi)
         data = source.observe(k, path.ecef_at(centre))
         excluded = dict(data.rejected)
@@ -246,59 +222,20 @@ def run_locator(
             az = el = np.zeros(0)
         trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
         idx = np.flatnonzero(trusted)
-        fix: Fix | None = None
-        sigma = None
-        extra = data.extra_sigma_m
-        uncorrected = extra is not None and bool(np.any(extra[idx] > 0))
-        if uncorrected:
-            assert extra is not None
-            sigma = np.hypot(cfg.locator.model.error.sigma_m(el[idx]), extra[idx])
-        if len(idx) >= 2:
-            fix = locate(
-                path, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], prior_m=centre,
-                integrity=cfg.integrity, config=cfg.locator, sigma_m=sigma,
-                sats=[data.sats[i] for i in idx],
-            )  # fmt: skip
+        fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
         row["iono_uncorrected"] = uncorrected
+        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
-            hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
-            flags = int(fix.flags)
-            if hc is not None:
-                row["heading_status"] = hc.status.name.lower()
-                row["heading_diff_deg"] = hc.difference_deg
-                if hc.status == HeadingStatus.FAIL:
-                    flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
-            claim = row["claim_fix"]
-            miss = fix.hi_m < p_lo or fix.lo_m > p_hi
-            if cfg.odometry_conflict == "estimate":
-                miss = miss or not p_lo <= fix.chainage_m <= p_hi
-            if claim and cfg.odometry_check and miss:
-                flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
-                status = FusionStatus.CONFLICT
-            claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
-            row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
-            if claim:
-                f_lo, f_hi = fix.lo_m, fix.hi_m
+            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi)
+            if row["claim"]:
                 here = (0.0 if odo is None else float(odo[k]), gps[k])
-                if cfg.fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
-                    f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
-                    if fix.lo_m > p_lo:  # the satellites tightened the lower bound
-                        lo_anchor = (f_lo, *here)
-                    if fix.hi_m < p_hi:
-                        hi_anchor = (f_hi, *here)
-                else:
-                    lo_anchor, hi_anchor = (f_lo, *here), (f_hi, *here)
-                fix_sd = row["wls_sigma_m"]
-                if not np.isfinite(fix_sd) or fix_sd <= 0:
-                    fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
-                e, v = blend_estimate(est, est_var, fix.chainage_m, fix_sd**2)
-                est, est_var = float(np.clip(e, f_lo, f_hi)), float(v)
+                f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
                 status = FusionStatus.FUSED
         row.update(
-            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=est,
+            fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
         )  # fmt: skip
         row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())
@@ -307,6 +244,129 @@ def run_locator(
         if progress is not None:
             progress(1)
     return pd.DataFrame(rows)
+
+
+Anchor = tuple[float, float, float]
+"""A bound's anchor: (chainage m, odometer reading m, gps_s) where it was last set."""
+
+
+@dataclass
+class _Tracker:
+    """The run's state between epochs: each bound's anchor and the estimate's filter.
+
+    One anchor per bound: a bound the satellites did not tighten keeps its older anchor, so the
+    odometer's fixed error is not added again at every epoch.
+    """
+
+    lo_anchor: Anchor
+    hi_anchor: Anchor
+    est: float
+    est_var: float
+    odo_prev: float
+
+    @classmethod
+    def start(
+        cls, start_m: float, uncertainty_m: float, odo: NDArray | None, gps: NDArray
+    ) -> _Tracker:
+        odo0 = 0.0 if odo is None else float(odo[0])
+        return cls((start_m - uncertainty_m, odo0, gps[0]), (start_m + uncertainty_m, odo0, gps[0]),
+                   start_m, (uncertainty_m / 3.0) ** 2, odo0)  # fmt: skip
+
+    def predict(
+        self, k: int, gps: NDArray, odo: NDArray | None, cfg: RunConfig, length_m: float
+    ) -> tuple[float, float, float]:
+        """The odometry prediction ``(lo, hi)`` on the track at epoch ``k``, the odometer
+        distance since the older anchor; advances the estimate by the odometer's step."""
+        lo_anchor, hi_anchor = self.lo_anchor, self.hi_anchor
+        if odo is not None:
+            d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
+            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer)[0]
+            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer)[1]
+        else:
+            d_lo = d_hi = 0.0
+            lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
+            hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
+        d = max(abs(d_lo), abs(d_hi))
+        p_lo = float(np.clip(lo_p, 0.0, length_m))
+        p_hi = float(np.clip(hi_p, 0.0, length_m))
+        step = 0.0 if odo is None else float(odo[k]) - self.odo_prev
+        e, v = predict_estimate(self.est, self.est_var, step, cfg.odometer)
+        self.odo_prev = self.odo_prev + step
+        if odo is None:  # no motion model: the estimate's variance grows with the motion bound
+            v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
+        self.est, self.est_var = float(np.clip(e, p_lo, p_hi)), float(v)
+        return p_lo, p_hi, d
+
+    def fuse(
+        self, fix: Fix, wls_sigma_m: float, p_lo: float, p_hi: float, here: tuple[float, float],
+        fusion: bool,
+    ) -> tuple[float, float]:  # fmt: skip
+        """The fused interval of a claimed fix and the prediction; re-anchors the bounds the
+        satellites tightened (all of them without fusion or outside the prediction) and blends
+        the fix into the estimate."""
+        f_lo, f_hi = fix.lo_m, fix.hi_m
+        if fusion and fix.hi_m >= p_lo and fix.lo_m <= p_hi:
+            f_lo, f_hi = max(f_lo, p_lo), min(f_hi, p_hi)
+            if fix.lo_m > p_lo:  # the satellites tightened the lower bound
+                self.lo_anchor = (f_lo, *here)
+            if fix.hi_m < p_hi:
+                self.hi_anchor = (f_hi, *here)
+        else:
+            self.lo_anchor, self.hi_anchor = (f_lo, *here), (f_hi, *here)
+        fix_sd = wls_sigma_m
+        if not np.isfinite(fix_sd) or fix_sd <= 0:
+            fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
+        e, v = blend_estimate(self.est, self.est_var, fix.chainage_m, fix_sd**2)
+        self.est, self.est_var = float(np.clip(e, f_lo, f_hi)), float(v)
+        return f_lo, f_hi
+
+
+def _fix(
+    path: AntennaPath, cfg: RunConfig, data: EpochData, el: NDArray, idx: NDArray,
+    centre: float,
+) -> tuple[Fix | None, bool]:  # fmt: skip
+    """The fix of the trusted satellites ``idx`` (None below 2) and whether an uncorrected
+    ionosphere inflated their sigma."""
+    sigma = None
+    extra = data.extra_sigma_m
+    uncorrected = extra is not None and bool(np.any(extra[idx] > 0))
+    if uncorrected:
+        assert extra is not None
+        sigma = np.hypot(cfg.locator.model.error.sigma_m(el[idx]), extra[idx])
+    if len(idx) < 2:
+        return None, uncorrected
+    fix = locate(
+        path, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], prior_m=centre,
+        integrity=cfg.integrity, config=cfg.locator, sigma_m=sigma,
+        sats=[data.sats[i] for i in idx],
+    )  # fmt: skip
+    return fix, uncorrected
+
+
+def _check(
+    path: AntennaPath, cfg: RunConfig, fix: Fix, data: EpochData, el: NDArray, idx: NDArray,
+    row: JsonDict, p_lo: float, p_hi: float,
+) -> FusionStatus:  # fmt: skip
+    """The heading and odometry checks of a fix, written into ``row`` (flags, claim); the
+    fusion status (``CONFLICT`` when the claim contradicts the odometry)."""
+    status = FusionStatus.ODOMETRY
+    hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
+    flags = int(fix.flags)
+    if hc is not None:
+        row["heading_status"] = hc.status.name.lower()
+        row["heading_diff_deg"] = hc.difference_deg
+        if hc.status == HeadingStatus.FAIL:
+            flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
+    claim = row["claim_fix"]
+    miss = fix.hi_m < p_lo or fix.lo_m > p_hi
+    if cfg.odometry_conflict == "estimate":
+        miss = miss or not p_lo <= fix.chainage_m <= p_hi
+    if claim and cfg.odometry_check and miss:
+        flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
+        status = FusionStatus.CONFLICT
+    claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+    row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
+    return status
 
 
 def _trust(
