@@ -23,11 +23,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+
+from predisat.track import TrackMap
 
 __all__ = ["BaliseFileError", "BaliseList"]
 
@@ -75,7 +76,7 @@ class BaliseList:
     @classmethod
     def along_track(
         cls,
-        track: Any,
+        track: TrackMap,
         start_m: float,
         stop_m: float,
         spacing_m: float,
@@ -110,7 +111,9 @@ class BaliseList:
         )  # fmt: skip
 
     @classmethod
-    def from_csv(cls, path: str | Path, track: Any, *, max_offset_m: float = 5.0) -> BaliseList:
+    def from_csv(
+        cls, path: str | Path, track: TrackMap, *, max_offset_m: float = 5.0
+    ) -> BaliseList:
         """Read and validate a balise list against the track map it refers to.
 
         Parameters

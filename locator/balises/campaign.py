@@ -239,7 +239,7 @@ def balises_to_folder(
     odometer: OdometerConfig | None = None,
     captures: Mapping[str, CaptureConfig] | None = None,
     seed: int = 0,
-    meta: Mapping[str, Any] | None = None,
+    meta: Mapping[str, object] | None = None,
     log: OdometerLog | None = None,
     accuracy: OdometerAccuracy | None = None,
 ) -> tuple[pd.DataFrame, Path]:

@@ -16,7 +16,7 @@ from predisat.cli.args import cutoff_deg, output_dir, positive_float
 __all__ = ["add_parser", "cmd_balises"]
 
 
-def add_parser(sub: Any) -> argparse.ArgumentParser:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     """Add ``balises`` to the sub-parsers of the ``locator`` command line."""
     p = sub.add_parser(
         "balises",
