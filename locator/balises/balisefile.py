@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from predisat.geodesy import geodetic_to_ecef
 from predisat.track import TrackMap
 
 __all__ = ["BaliseFileError", "BaliseList"]
@@ -177,8 +178,6 @@ class BaliseList:
             )
         lat, lon, h = num["lat_deg"], num["lon_deg"], num["h_m"]
         here = track.ecef_at(c)
-        from predisat.geodesy import geodetic_to_ecef
-
         off = np.linalg.norm(geodetic_to_ecef(lat, lon, h) - here, axis=-1)
         bad = np.flatnonzero(off > max_offset_m)
         if len(bad):

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from locator.balises.balisefile import BaliseList
 from locator.balises.capture import CaptureConfig, capture_balises, score_captures
@@ -192,17 +193,14 @@ def safe_front_check(
     }
 
 
-def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Figure:
+    # a Figure of its own, no pyplot state (as the report's figures)
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
     t = t - t[0]
     truth = ep["truth_m"].to_numpy(float)
-    fig, ax = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    fig = Figure(figsize=(10, 7))
+    ax = fig.subplots(2, 1, sharex=True)
     ax[0].fill_between(t, ep["fused_lo_m"] - truth, ep["fused_hi_m"] - truth, step="mid",
                        color="tab:blue", alpha=0.3, label="fused interval - truth")  # fmt: skip
     claim = ep["claim"].to_numpy(bool)
