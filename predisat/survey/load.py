@@ -112,6 +112,7 @@ class Survey:
         check_images: bool = True,
         max_offset_m: float = 10.0,
         on_error: Literal["raise", "skip"] = "raise",
+        max_speed_mps: float = 100.0,
     ) -> Survey:
         """Read and validate a survey folder.
 
@@ -130,6 +131,11 @@ class Survey:
             ``"raise"``: any problem raises :class:`SurveyError` listing all of them.
             ``"skip"``: bad frames are dropped and listed in :attr:`problems`; survey-level
             problems (survey.yaml, calibrations, manifest columns) still raise.
+        max_speed_mps : float
+            Fastest plausible survey speed: a frame whose chainage is further from both
+            neighbours on its side than this speed allows in their time apart (while the two
+            neighbours agree) contradicts the run and is a bad frame. Default 100 m/s
+            (360 km/h).
 
         Raises
         ------
@@ -143,7 +149,9 @@ class Survey:
         header = _read_header(root)
         if track is None and header["track_path"] is not None:
             track = _load_track(root, header["track_path"], header["track_name"])
-        rows, frame_problems = _read_manifest(root, header, track, check_images, max_offset_m)
+        rows, frame_problems = _read_manifest(
+            root, header, track, check_images, max_offset_m, max_speed_mps
+        )
         if frame_problems and on_error == "raise":
             raise SurveyError(root, frame_problems)
         return cls(
@@ -463,12 +471,54 @@ def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None
             )
 
 
+def _speed_mps(a: _Row, b: _Row) -> float:
+    """Speed implied by two frames of one side (inf when their time is the same)."""
+    dt = abs(b.gps_s - a.gps_s)
+    dist = abs(b.chainage_m - a.chainage_m)
+    return dist / dt if dt > 0 else (math.inf if dist > 0 else 0.0)
+
+
+def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Row]:
+    """``accepted`` less the frames whose chainage contradicts the run: per side, a frame
+    further from both its neighbours than ``max_speed_mps`` allows in their time apart, while
+    the neighbours agree with each other (at the ends: the first or last frame too far from the
+    next two, which agree). Each dropped frame gets its problem and fix."""
+    dropped: set[int] = set()
+    for side in {r.side for r in accepted}:
+        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        for k, r in enumerate(seq):
+            if len(seq) < 3:
+                break
+            if k == 0 or k == len(seq) - 1:
+                near = [seq[1], seq[2]] if k == 0 else [seq[-2], seq[-3]]
+                spike = (_speed_mps(r, near[0]) > max_speed_mps
+                         and _speed_mps(near[0], near[1]) <= max_speed_mps)  # fmt: skip
+            else:
+                near = [seq[k - 1], seq[k + 1]]
+                spike = (
+                    _speed_mps(near[0], r) > max_speed_mps
+                    and _speed_mps(r, near[1]) > max_speed_mps
+                    and _speed_mps(near[0], near[1]) <= max_speed_mps
+                )
+            if spike:
+                v = _speed_mps(near[0], r)
+                r.bad(
+                    f"chainage_m {r.chainage_m:.1f} contradicts the run: reaching it from frame "
+                    f"{near[0].frame_id!r} (line {near[0].row}, {near[0].chainage_m:.1f} m) "
+                    f"takes {v:.0f} m/s, over max_speed_mps={max_speed_mps:g}, while the "
+                    "neighbouring frames agree; fix the chainage, position or gps_s"
+                )
+                dropped.add(id(r))
+    return [r for r in accepted if id(r) not in dropped]
+
+
 def _read_manifest(
     root: Path,
     header: dict[str, Any],
     track: TrackMap | None,
     check_images: bool,
     max_offset_m: float,
+    max_speed_mps: float = 100.0,
 ) -> tuple[Frames, list[SurveyProblem]]:
     rows = _parse_rows(root, header, check_images)
     if not rows:
@@ -514,6 +564,7 @@ def _read_manifest(
         seen_time[(r.side, r.gps_s)] = r
         last[r.side] = r
         accepted.append(r)
+    accepted = _drop_position_jumps(accepted, max_speed_mps)
     problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)
     reverse = header["direction"] == "decreasing"
     if not accepted:
