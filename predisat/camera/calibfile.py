@@ -105,6 +105,11 @@ def _load_yaml(path: Path) -> dict[str, Any]:
         raise CalibrationError(
             f"{path}: cannot read calibration file ({exc.strerror}); {fix}"
         ) from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); save the calibration "
+            "as UTF-8 YAML (OpenCV FileStorage)"
+        ) from None
     # OpenCV writes a "%YAML:1.0" directive that is not valid YAML; drop any directive line.
     lines = [ln for ln in text.splitlines() if not ln.startswith("%YAML")]
     try:

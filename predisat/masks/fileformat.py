@@ -261,7 +261,7 @@ def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
         )
     try:
         header = json.loads(raw)
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MaskFileError(
             f"{path}: the '{METADATA_KEY.decode()}' metadata is not JSON ({exc})"
         ) from None

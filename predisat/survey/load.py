@@ -208,6 +208,10 @@ def _read_yaml(root: Path) -> JsonDict:
         doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise SurveyError(root, [SurveyProblem(f"survey.yaml cannot be parsed: {exc}")]) from None
+    except UnicodeDecodeError as exc:
+        raise SurveyError(root, [SurveyProblem(
+            f"survey.yaml is not UTF-8 text (byte {exc.start}: {exc.reason}); save it as UTF-8"
+        )]) from None  # fmt: skip
     if not isinstance(doc, dict):
         raise SurveyError(root, [SurveyProblem("survey.yaml must be a mapping of fields")])
     return doc
