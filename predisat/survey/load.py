@@ -475,6 +475,31 @@ def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None
             )
 
 
+def _next_on_side(rows: list[_Row]) -> dict[int, _Row]:
+    """For each row (by id), the next row on its side without a problem yet."""
+    after: dict[int, _Row] = {}
+    last: dict[str, _Row] = {}
+    for r in rows:
+        if not r.probs:
+            if r.side in last:
+                after[id(last[r.side])] = r
+            last[r.side] = r
+    return after
+
+
+def _late_spike(stack: list[_Row], r: _Row, nxt: _Row | None) -> bool:
+    """Whether the last accepted frame of ``stack`` has a time ahead of the run: later than
+    both ``r`` and the frame after it, which are in order and after the frame before it."""
+    prev = stack[-1]
+    return (
+        nxt is not None
+        and r.gps_s < prev.gps_s
+        and nxt.gps_s < prev.gps_s
+        and r.gps_s < nxt.gps_s
+        and (len(stack) < 2 or stack[-2].gps_s < r.gps_s)
+    )
+
+
 def _speed_mps(a: _Row, b: _Row) -> float:
     """Speed implied by two frames of one side (inf when their time is the same)."""
     dt = abs(b.gps_s - a.gps_s)
@@ -532,8 +557,9 @@ def _read_manifest(
     first_id: dict[str, int] = {}
     first_image: dict[str, int] = {}
     seen_time: dict[tuple[str, float], _Row] = {}
-    last: dict[str, _Row] = {}
+    kept: dict[str, list[_Row]] = {}  # per side, the accepted frames in order
     accepted: list[_Row] = []
+    after = _next_on_side(rows)
     for r in rows:
         if r.frame_id in first_id:
             r.bad(
@@ -551,7 +577,20 @@ def _read_manifest(
         if r.probs:
             continue
         twin = seen_time.get((r.side, r.gps_s))
-        prev = last.get(r.side)
+        stack = kept.setdefault(r.side, [])
+        prev = stack[-1] if stack else None
+        if twin is None and prev is not None and _late_spike(stack, r, after.get(id(r))):
+            # one frame's time far ahead: it is wrong, not every frame after it
+            nxt = after[id(r)]
+            prev.bad(
+                f"gps_s {prev.gps_s!r} is later than the next two frames on the {r.side} side "
+                f"({r.frame_id!r} at line {r.row} has {r.gps_s!r}, {nxt.frame_id!r} at line "
+                f"{nxt.row} has {nxt.gps_s!r}), which agree with the frames before; fix the time"
+            )
+            stack.pop()
+            accepted.remove(prev)
+            seen_time.pop((prev.side, prev.gps_s), None)
+            prev = stack[-1] if stack else None
         if twin is not None:
             r.bad(
                 f"same side and gps_s as frame {twin.frame_id!r} (line {twin.row}): "
@@ -566,7 +605,7 @@ def _read_manifest(
         if r.probs:
             continue
         seen_time[(r.side, r.gps_s)] = r
-        last[r.side] = r
+        stack.append(r)
         accepted.append(r)
     accepted = _drop_position_jumps(accepted, max_speed_mps)
     problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)

@@ -450,3 +450,16 @@ def test_chainage_jump_contradicting_the_run_is_refused(tmp_path: Path) -> None:
     assert len(survey.frames) == 8
     # a survey at 10 m/s passes; the limit is the caller's
     assert len(Survey.load(root, max_speed_mps=1000.0).frames) == 10
+
+
+def test_one_time_far_ahead_is_that_frame_s_problem_not_every_later_one(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=5)
+    rows = _rows(root)
+    rows[4]["gps_s"] = repr(GPS0 + 86400.0 + 2)  # left_000002: a day ahead (a clock glitch)
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert len(problems) == 1  # not left_000003 and left_000004 "going back in time"
+    msg = _only(problems, "left_000002", "later than the next two frames on the left").message
+    assert "'left_000003' at line 8" in msg and "fix the time" in msg
+    survey = Survey.load(root, on_error="skip")
+    assert "left_000002" not in list(survey.frames.frame_id) and len(survey.frames) == 9
