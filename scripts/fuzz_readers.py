@@ -38,13 +38,16 @@ def _where(exc: BaseException) -> str:
     return f"{Path(f.filename).name}:{f.lineno}"
 
 
-def fuzz(name: str, examples: int, seed: int, out: Path | None) -> tuple[int, int, int, dict]:
+def fuzz(
+    name: str, examples: int, seed: int, out: Path | None, every: int = 0
+) -> tuple[int, int, int, dict]:
     """Run ``examples`` inputs through reader ``name``.
 
     Returns
     -------
     tuple
-        (inputs run, read, refused with a named error, {failure key: count}).
+        (inputs run, read, refused with a named error, {failure key: count}). With ``every``,
+        a progress line each ``every`` inputs.
     """
     r = reader(name)
     rng = random.Random(f"{seed}-{name}")
@@ -56,6 +59,8 @@ def fuzz(name: str, examples: int, seed: int, out: Path | None) -> tuple[int, in
     failures: dict[str, int] = {}
     with tempfile.TemporaryDirectory(dir="/dev/shm" if Path("/dev/shm").is_dir() else None) as t:
         for k in range(examples):
+            if every and k and k % every == 0:
+                print(f"  {name}: {k} inputs, {sum(failures.values())} failures", flush=True)
             s = r.seeds[draw(0, len(r.seeds) - 1)]
             files = targets(r, s)
             target = files[draw(0, len(files) - 1)]
@@ -87,12 +92,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--readers", default=",".join(READERS), help="comma-separated names")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="folder for failing inputs")
+    ap.add_argument("--progress", type=int, default=0, help="a line each N inputs (0: none)")
     args = ap.parse_args(argv)
     total = n_fail = 0
     print(f"{'reader':<12} {'inputs':>9} {'read':>9} {'refused':>9} {'failures':>8} {'s':>7}")
     for name in args.readers.split(","):
         t0 = time.perf_counter()
-        n, ok, refused, failures = fuzz(name, args.examples, args.seed, args.out)
+        n, ok, refused, failures = fuzz(name, args.examples, args.seed, args.out, args.progress)
         total += n
         n_fail += sum(failures.values())
         print(f"{name:<12} {n:>9} {ok:>9} {refused:>9} {sum(failures.values()):>8} "

@@ -132,6 +132,16 @@ def _num(data: dict[str, Any], key: str, path: Path) -> float:
         ) from None
 
 
+def _pixels(data: dict[str, Any], key: str, path: Path) -> int:
+    """An image size field as int; CalibrationError when it is not finite."""
+    value = _num(data, key, path)
+    if not np.isfinite(value):
+        raise CalibrationError(
+            f"{path}: field {key!r} must be a number of pixels, got {data[key]!r}"
+        )
+    return int(value)
+
+
 def _matrix(data: dict[str, Any], key: str, path: Path) -> np.ndarray:
     """A matrix given as ``!!opencv-matrix``, a ROS ``{rows, cols, data}`` map or a list."""
     value = data.get(key)
@@ -197,8 +207,8 @@ def _from_opencv(data: dict[str, Any], path: Path) -> CalibrationFields:
     return {
         "name": str(data.get("camera_name", path.stem)),
         "model": model,
-        "width_px": int(_num(data, "image_width", path)),
-        "height_px": int(_num(data, "image_height", path)),
+        "width_px": _pixels(data, "image_width", path),
+        "height_px": _pixels(data, "image_height", path),
         "fx": k[0, 0], "fy": k[1, 1], "cx": k[0, 2], "cy": k[1, 2],
         "dist": tuple(dist.tolist()),
     }  # fmt: skip
@@ -209,8 +219,8 @@ def _from_camodocal(data: dict[str, Any], path: Path) -> CalibrationFields:
     model_type = str(data["model_type"]).strip().upper()
     proj = data.get("projection_parameters") or {}
     name = str(data.get("camera_name", path.stem))
-    width_px = int(_num(data, "image_width", path))
-    height_px = int(_num(data, "image_height", path))
+    width_px = _pixels(data, "image_width", path)
+    height_px = _pixels(data, "image_height", path)
     if model_type == "PINHOLE":
         dist = data.get("distortion_parameters") or {}
         return {
@@ -254,8 +264,8 @@ def _from_orbslam(data: dict[str, Any], path: Path) -> CalibrationFields:
     cam_type = str(data.get("Camera.type", "PinHole")).strip()
     prefix = "Camera1." if "Camera1.fx" in data else "Camera."
     fx, fy, cx, cy = (_num(data, prefix + k, path) for k in ("fx", "fy", "cx", "cy"))
-    width_px = int(_num(data, "Camera.width", path))
-    height_px = int(_num(data, "Camera.height", path))
+    width_px = _pixels(data, "Camera.width", path)
+    height_px = _pixels(data, "Camera.height", path)
     if cam_type.lower() == "pinhole":
         dist = [_num(data, prefix + k, path) for k in ("k1", "k2", "p1", "p2")]
         if prefix + "k3" in data:

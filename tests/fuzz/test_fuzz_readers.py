@@ -102,3 +102,14 @@ def test_mask_file_metadata_not_utf8(tmp_path: Path) -> None:
     pq.write_table(table.replace_schema_metadata(meta), tmp_path / "bad.parquet")
     with pytest.raises(MaskFileError, match=r"bad\.parquet: the .* metadata is not JSON"):
         read_masks(tmp_path / "bad.parquet")
+
+
+def test_calibration_image_size_infinite(tmp_path: Path) -> None:
+    from predisat.camera.calibfile import CalibrationError, read_calibration
+
+    seed = next(iter(reader("calibration").seeds[0].values()))
+    path = tmp_path / "cal.yaml"
+    path.write_bytes(seed.replace(b"image_width: 32", b"image_width: .inf"))
+    assert b".inf" in path.read_bytes()
+    with pytest.raises(CalibrationError, match=r"cal\.yaml: field 'image_width' must be a number"):
+        read_calibration(path)
