@@ -677,3 +677,18 @@ def cv2_encode(pixels: np.ndarray) -> bytes:
     ok, enc = cv2.imencode(".jpg", pixels)
     assert ok
     return enc.tobytes()
+
+
+def test_png_zeroed_inside_is_refused_by_its_checksums(tmp_path: Path) -> None:
+    import cv2
+
+    from predisat.reconstruct.frames import read_image
+
+    pixels = np.random.default_rng(7).integers(0, 256, (120, 160, 3), np.uint8)
+    ok, enc = cv2.imencode(".png", pixels)
+    data = enc.tobytes()
+    mid = len(data) // 2
+    path = tmp_path / "f.png"
+    path.write_bytes(data[:mid] + bytes(3000) + data[mid + 3000 :])
+    img, problem = read_image(str(path))
+    assert img is None and "cannot be decoded" in str(problem) and str(path) in str(problem)
