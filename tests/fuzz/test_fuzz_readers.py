@@ -113,3 +113,11 @@ def test_calibration_image_size_infinite(tmp_path: Path) -> None:
     assert b".inf" in path.read_bytes()
     with pytest.raises(CalibrationError, match=r"cal\.yaml: field 'image_width' must be a number"):
         read_calibration(path)
+
+
+def test_mask_file_column_name_not_utf8() -> None:
+    from predisat.masks.fileformat import MaskFileError, read_masks
+
+    path = DATA / "fuzz/masks_column_name_not_utf8.parquet"
+    with pytest.raises(MaskFileError, match=r"not_utf8\.parquet: a column name is not UTF-8"):
+        read_masks(path)
