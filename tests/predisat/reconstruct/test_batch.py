@@ -686,6 +686,7 @@ def test_png_zeroed_inside_is_refused_by_its_checksums(tmp_path: Path) -> None:
 
     pixels = np.random.default_rng(7).integers(0, 256, (120, 160, 3), np.uint8)
     ok, enc = cv2.imencode(".png", pixels)
+    assert ok
     data = enc.tobytes()
     mid = len(data) // 2
     path = tmp_path / "f.png"
