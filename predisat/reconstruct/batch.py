@@ -348,7 +348,7 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
         if j is not None and _same_file(root / str(fr.image[i]), root / str(fr.image[j])):
             frozen[int(i)] = (
                 f"image {root / str(fr.image[i])} is frozen: the same file as the {fr.side[i]} "
-                f"camera's frame before ({fr.frame_id[j]!r}, manifest line {fr.row[j]}), so "
+                f"camera's frame before ({str(fr.frame_id[j])!r}, manifest line {fr.row[j]}), so "
                 "the camera stopped updating its picture; check the camera and drop the frame"
             )
     return frozen

@@ -83,6 +83,10 @@ def read_image(path: str) -> tuple[NDArray | None, str | None]:
             f"image {path} is empty (0 bytes): copy it again from the camera or drop the frame"
         )
     cut = truncation(data)
+    if cut is not None and cut.startswith("no JPEG marker"):  # bytes overwritten in the header
+        return None, (
+            f"image {path} is damaged ({cut}): copy it again from the camera or drop the frame"
+        )
     if cut is not None:
         return None, (
             f"image {path} is truncated ({cut}): the file was cut short, "

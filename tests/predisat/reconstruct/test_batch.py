@@ -601,6 +601,16 @@ def test_jpeg_zeroed_inside_is_corrupt_although_opencv_and_pillow_decode_it() ->
     assert jpeg_corruption(b"\x89PNG\r\n\x1a\n") is None  # not a JPEG: not its business
 
 
+def test_jpeg_header_overwritten_is_damaged_not_truncated(tmp_path: Path) -> None:
+    from predisat.reconstruct.frames import read_image
+
+    whole = _jpeg((120, 160), 8, quality=90)
+    path = tmp_path / "f.jpg"
+    path.write_bytes(whole[:20] + bytes(200) + whole[220:])  # zeros over the header
+    img, problem = read_image(str(path))
+    assert img is None and f"image {path} is damaged (no JPEG marker at byte" in str(problem)
+
+
 def test_blank_image_kinds() -> None:
     from predisat.reconstruct.frames import blank_image
 
@@ -657,7 +667,7 @@ def test_corrupt_and_implausible_frames_are_caught(
         if data is not None:
             assert rows[i]["image"] in b.message  # the file
         assert f"bad frame {rows[i]['frame_id']}" in err  # what the user sees
-    assert "right_000002" in by_id[rows[7]["frame_id"]].message  # frozen: like which frame
+    assert "frame before ('right_000002', manifest line 7)" in by_id[rows[7]["frame_id"]].message
     # none of them reached the segmenter: every image it got is a good one
     from predisat.reconstruct.frames import blank_image
 
