@@ -668,7 +668,15 @@ class _Reader:
                             f"observation line of {s} ends inside a"
                             " 16-character field: cut short or misaligned",
                         )
-            assert s is not None
+            if s is None:  # RINEX 3: the record's first 3 characters are no satellite id
+                self.problem(
+                    k + 1,
+                    t,
+                    f"observation record starts with {lines[k][:3]!r}, not a satellite id "
+                    "(letter and two digits, e.g. G05): the line is damaged; record dropped",
+                )
+                k += m
+                continue
             rows.append((e, s, s[0] if s else "", text, k + 1))
             k += m
         return rows, k

@@ -105,6 +105,11 @@ def _load_yaml(path: Path) -> dict[str, Any]:
         raise CalibrationError(
             f"{path}: cannot read calibration file ({exc.strerror}); {fix}"
         ) from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); save the calibration "
+            "as UTF-8 YAML (OpenCV FileStorage)"
+        ) from None
     # OpenCV writes a "%YAML:1.0" directive that is not valid YAML; drop any directive line.
     lines = [ln for ln in text.splitlines() if not ln.startswith("%YAML")]
     try:
@@ -125,6 +130,16 @@ def _num(data: dict[str, Any], key: str, path: Path) -> float:
         raise CalibrationError(
             f"{path}: field {key!r} must be a number, got {data[key]!r}"
         ) from None
+
+
+def _pixels(data: dict[str, Any], key: str, path: Path) -> int:
+    """An image size field as int; CalibrationError when it is not finite."""
+    value = _num(data, key, path)
+    if not np.isfinite(value):
+        raise CalibrationError(
+            f"{path}: field {key!r} must be a number of pixels, got {data[key]!r}"
+        )
+    return int(value)
 
 
 def _matrix(data: dict[str, Any], key: str, path: Path) -> np.ndarray:
@@ -192,8 +207,8 @@ def _from_opencv(data: dict[str, Any], path: Path) -> CalibrationFields:
     return {
         "name": str(data.get("camera_name", path.stem)),
         "model": model,
-        "width_px": int(_num(data, "image_width", path)),
-        "height_px": int(_num(data, "image_height", path)),
+        "width_px": _pixels(data, "image_width", path),
+        "height_px": _pixels(data, "image_height", path),
         "fx": k[0, 0], "fy": k[1, 1], "cx": k[0, 2], "cy": k[1, 2],
         "dist": tuple(dist.tolist()),
     }  # fmt: skip
@@ -204,8 +219,8 @@ def _from_camodocal(data: dict[str, Any], path: Path) -> CalibrationFields:
     model_type = str(data["model_type"]).strip().upper()
     proj = data.get("projection_parameters") or {}
     name = str(data.get("camera_name", path.stem))
-    width_px = int(_num(data, "image_width", path))
-    height_px = int(_num(data, "image_height", path))
+    width_px = _pixels(data, "image_width", path)
+    height_px = _pixels(data, "image_height", path)
     if model_type == "PINHOLE":
         dist = data.get("distortion_parameters") or {}
         return {
@@ -249,8 +264,8 @@ def _from_orbslam(data: dict[str, Any], path: Path) -> CalibrationFields:
     cam_type = str(data.get("Camera.type", "PinHole")).strip()
     prefix = "Camera1." if "Camera1.fx" in data else "Camera."
     fx, fy, cx, cy = (_num(data, prefix + k, path) for k in ("fx", "fy", "cx", "cy"))
-    width_px = int(_num(data, "Camera.width", path))
-    height_px = int(_num(data, "Camera.height", path))
+    width_px = _pixels(data, "Camera.width", path)
+    height_px = _pixels(data, "Camera.height", path)
     if cam_type.lower() == "pinhole":
         dist = [_num(data, prefix + k, path) for k in ("k1", "k2", "p1", "p2")]
         if prefix + "k3" in data:

@@ -208,10 +208,17 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
         ) from None
     header = _read_header(path, table.schema.metadata or {})
     n_az = header["n_az"]
-    names = set(table.column_names)
 
     def fail(msg: str) -> MaskFileError:
         return MaskFileError(f"{path}: {msg}")
+
+    try:
+        names = set(table.column_names)
+    except UnicodeDecodeError as exc:
+        raise fail(
+            f"a column name is not UTF-8 ({exc.reason} at byte {exc.start}): the file is "
+            "damaged; copy it again, or rerun the process command"
+        ) from None
 
     missing = [
         c for c in ("geometry", *_SCALARS, *_BINNED, *header["descriptors"]) if c not in names
@@ -261,7 +268,7 @@ def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
         )
     try:
         header = json.loads(raw)
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MaskFileError(
             f"{path}: the '{METADATA_KEY.decode()}' metadata is not JSON ({exc})"
         ) from None

@@ -6,9 +6,11 @@
 1. **Segmentation** of every frame a pending chunk needs (:func:`predisat.sky.segment.
    segment_sky` by default), each result cached on disk under ``out/cache/`` (packed sky mask
    plus per-column confidence), so overlapping chunks and resumed runs never segment a frame
-   twice. A frame whose image is missing, undecodable, of the wrong size or fails to segment is
-   a *bad frame*: reported, listed in ``bad_frames.csv`` and skipped (``strict=True`` stops at
-   the first instead). Frames the survey loader rejects are bad frames too.
+   twice. A frame whose image is missing, truncated, corrupt inside, undecodable, blank (all
+   black, all white), frozen (the same file as the camera's frame before), of the wrong size
+   or fails to segment is a *bad frame*: reported with its manifest line, listed in
+   ``bad_frames.csv`` and skipped (``strict=True`` stops at the first instead). Frames the
+   survey loader rejects (times and positions that contradict the run) are bad frames too.
 2. **Reconstruction** (:class:`predisat.reconstruct.carving.Reconstructor`) per chainage chunk
    ``[k * chunk_m, (k + 1) * chunk_m)`` from the frames within
    :attr:`~predisat.reconstruct.carving.ReconstructionParams.overlap_m` of it. Each finished chunk
@@ -216,8 +218,8 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
     for i in np.flatnonzero(~np.isfinite(chainage_m)):
         fid = str(fr.frame_id[i])
         bad.setdefault(fid, BadFrame(
-            fid, "no chainage (not on the track): give chainage_m in the manifest, or a "
-            "position near the survey's track", "load",
+            fid, f"manifest line {fr.row[i]}: no chainage (not on the track): give chainage_m "
+            "in the manifest, or a position near the survey's track", "load",
         ))  # fmt: skip
     if bad and strict:
         first = next(iter(bad.values()))
@@ -312,6 +314,46 @@ def _cameras(plan: _Plan) -> dict[str, tuple[CameraModel, Mount]]:
     return {side: (sc.camera, sc.mount) for side, sc in plan.survey.cameras.items()}
 
 
+def _at_line(plan: _Plan, i: int, message: str) -> str:
+    """``message`` prefixed with frame ``i``'s manifest line (where the user fixes it)."""
+    line = f"manifest line {plan.survey.frames.row[i]}: "
+    return message if message.startswith(line) else line + message
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether the two image files hold the same bytes (sizes first: no read when they differ).
+    """
+    try:
+        if a.stat().st_size != b.stat().st_size:
+            return False
+        return a.read_bytes() == b.read_bytes()
+    except OSError:
+        return False  # a missing file is reported when it is read
+
+
+def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
+    """Frames among ``need`` whose image file is byte for byte the one of the frame before on
+    the same side (a camera stuck on one picture), with the problem and its fix."""
+    fr, root = plan.survey.frames, plan.survey.root
+    prev_of: dict[int, int] = {}
+    last: dict[str, int] = {}
+    for i in range(len(fr.frame_id)):  # manifest order, increasing time per side
+        side = str(fr.side[i])
+        if side in last:
+            prev_of[i] = last[side]
+        last[side] = i
+    frozen = {}
+    for i in need:
+        j = prev_of.get(int(i))
+        if j is not None and _same_file(root / str(fr.image[i]), root / str(fr.image[j])):
+            frozen[int(i)] = (
+                f"image {root / str(fr.image[i])} is frozen: the same file as the {fr.side[i]} "
+                f"camera's frame before ({str(fr.frame_id[j])!r}, manifest line {fr.row[j]}), so "
+                "the camera stopped updating its picture; check the camera and drop the frame"
+            )
+    return frozen
+
+
 def _frame_jobs(
     plan: _Plan,
     pending: list[tuple[str, float, float, NDArray]],
@@ -331,8 +373,14 @@ def _frame_jobs(
     thin = {side: (None if custom_segmenter else plan.params.thin_px(c))
             for side, (c, _) in cams.items()}  # fmt: skip
     jobs = []
+    frozen = _frozen_frames(plan, need)
     for i in need:
         fid = str(fr.frame_id[i])
+        if int(i) in frozen:
+            message = _at_line(plan, int(i), frozen[int(i)])
+            _bad(fid, message, strict)
+            bad.setdefault(fid, BadFrame(fid, message))
+            continue
         cam = cams[str(fr.side[i])][0]
         job = FrameJob(
             fid, str(plan.survey.root / str(fr.image[i])), int(cam.width_px),
@@ -342,6 +390,7 @@ def _frame_jobs(
         if cached is None:
             jobs.append(job)
         elif isinstance(cached, BadFrame):
+            cached = replace(cached, message=_at_line(plan, int(i), cached.message))
             _bad(fid, cached.message, strict, " (as in a run before)")
             bad.setdefault(fid, cached)
     return jobs
@@ -502,9 +551,11 @@ def process_survey(
     try:
         t1 = time.perf_counter()
         n_seg = 0
+        index = {str(f): k for k, f in enumerate(survey.frames.frame_id)}
         for fid, problem in run_segmentation(jobs, pool, progress):
             n_seg += 1
             if problem is not None:
+                problem = _at_line(plan, index[fid], problem)
                 _bad(fid, problem, strict)
                 bad.setdefault(fid, BadFrame(fid, problem))
         timings["segment"] = time.perf_counter() - t1

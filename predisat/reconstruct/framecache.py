@@ -60,6 +60,8 @@ SEGMENTATION_CODE = (
     "sky/__init__.py", "sky/segment.py", "sky/options.py", "sky/morphology.py",
     "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
     "sky/network.py", "data/models",
+    # reading the image: its checks (corrupt, blank) decide whether a frame is segmented
+    "reconstruct/frames.py",
 )
 
 

@@ -1,9 +1,11 @@
 """Reading a frame's image with its checks, and segmenting it into the cache.
 
-:func:`read_image` refuses missing, empty, truncated (:func:`truncation`) and undecodable files
-with the problem and its fix; :func:`segment_frame` checks the size against the calibration,
-runs the segmenter (:func:`default_segmenter`, or a user's function) and records the result or
-the failure in the cache. One bad frame never stops a run: its problem is returned.
+:func:`read_image` refuses missing, empty, truncated (:func:`truncation`), internally corrupt
+(:func:`jpeg_corruption`), undecodable and blank (:func:`blank_image`: all black, all white or
+one flat grey) files with the problem and its fix; :func:`segment_frame` checks the size
+against the calibration, runs the segmenter (:func:`default_segmenter`, or a user's
+function) and records the result or the failure in the cache. One bad frame never stops a
+run: its problem is returned.
 """
 
 from __future__ import annotations
@@ -22,7 +24,16 @@ from predisat.reconstruct.framecache import FrameJob, write_cache
 from predisat.sky.network import SkyNet, classifier_with_net
 from predisat.sky.segment import SkyOptions, segment_sky
 
-__all__ = ["Segmenter", "default_segmenter", "read_image", "segment_frame", "truncation"]
+__all__ = [
+    "BLANK_SPREAD_LEVELS",
+    "Segmenter",
+    "blank_image",
+    "default_segmenter",
+    "jpeg_corruption",
+    "read_image",
+    "segment_frame",
+    "truncation",
+]
 
 
 Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
@@ -72,6 +83,10 @@ def read_image(path: str) -> tuple[NDArray | None, str | None]:
             f"image {path} is empty (0 bytes): copy it again from the camera or drop the frame"
         )
     cut = truncation(data)
+    if cut is not None and cut.startswith("no JPEG marker"):  # bytes overwritten in the header
+        return None, (
+            f"image {path} is damaged ({cut}): copy it again from the camera or drop the frame"
+        )
     if cut is not None:
         return None, (
             f"image {path} is truncated ({cut}): the file was cut short, "
@@ -83,6 +98,19 @@ def read_image(path: str) -> tuple[NDArray | None, str | None]:
         img = None
     if img is None:
         return None, f"image {path} cannot be decoded; re-export it as JPEG or PNG"
+    corrupt = jpeg_corruption(data)
+    if corrupt is not None:
+        return None, (
+            f"image {path} is corrupt inside (libjpeg: {corrupt}): part of the picture is "
+            "lost and would be filled with grey, which can read as overcast sky; copy it again "
+            "from the camera or drop the frame"
+        )
+    flat = blank_image(img)
+    if flat is not None:
+        return None, (
+            f"image {path} is {flat}: a covered lens, a dead or overexposed sensor or a "
+            "blank export shows no skyline; check the camera and drop the frame"
+        )
     return img, None
 
 
@@ -113,6 +141,57 @@ def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]
     write_cache(job, result, problem)
     return job.frame_id, problem
 
+
+
+BLANK_SPREAD_LEVELS = 4
+"""A frame whose grey levels (0.5 to 99.5 percentile) span at most this many levels is blank."""
+
+
+def blank_image(image_bgr: NDArray) -> str | None:
+    """What makes ``image_bgr`` blank (all black, all white, one flat grey), or None.
+
+    The grey levels of every 4th pixel in each direction are taken; when their 0.5 and 99.5
+    percentiles are within :data:`BLANK_SPREAD_LEVELS` of each other the frame shows nothing
+    (a real side-camera frame has at least the skyline's edge in it).
+
+    Parameters
+    ----------
+    image_bgr : ndarray of uint8, shape (H, W, 3)
+
+    Returns
+    -------
+    str or None
+        e.g. ``"all black (grey level 0 to 2 of 255)"``.
+    """
+    grey = np.asarray(image_bgr[::4, ::4], np.float32).mean(axis=-1)
+    if grey.size == 0:
+        return "empty (0 pixels)"
+    lo, hi = (float(v) for v in np.percentile(grey, [0.5, 99.5]))
+    if hi - lo > BLANK_SPREAD_LEVELS:
+        return None
+    kind = "all black" if hi <= 32 else "all white" if lo >= 223 else "one flat grey"
+    return f"{kind} (grey level {lo:.0f} to {hi:.0f} of 255)"
+
+
+def jpeg_corruption(data: bytes) -> str | None:
+    """libjpeg's complaint about the JPEG file ``data``, or None when it decodes cleanly (or is
+    not a JPEG).
+
+    libjpeg treats corrupt entropy-coded data (bytes overwritten or zeroed inside the scan) as
+    a *warning*: ``cv2.imdecode`` and Pillow both hand back an image with the lost part filled
+    with grey, and only print "Corrupt JPEG data" on stderr. ``simplejpeg`` (libjpeg-turbo)
+    with ``strict=True`` turns those warnings into errors; the image it decodes is discarded
+    (OpenCV's stays the one segmented).
+    """
+    if data[:2] != b"\xff\xd8":
+        return None
+    import simplejpeg
+
+    try:
+        simplejpeg.decode_jpeg(data, colorspace="BGR", strict=True)
+    except ValueError as exc:
+        return str(exc).strip() or type(exc).__name__
+    return None
 
 
 _JPEG_STANDALONE = frozenset({0x01, *range(0xD0, 0xD8)})  # markers without a length field

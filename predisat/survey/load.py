@@ -112,6 +112,7 @@ class Survey:
         check_images: bool = True,
         max_offset_m: float = 10.0,
         on_error: Literal["raise", "skip"] = "raise",
+        max_speed_mps: float = 100.0,
     ) -> Survey:
         """Read and validate a survey folder.
 
@@ -130,6 +131,11 @@ class Survey:
             ``"raise"``: any problem raises :class:`SurveyError` listing all of them.
             ``"skip"``: bad frames are dropped and listed in :attr:`problems`; survey-level
             problems (survey.yaml, calibrations, manifest columns) still raise.
+        max_speed_mps : float
+            Fastest plausible survey speed: a frame whose chainage is further from both
+            neighbours on its side than this speed allows in their time apart (while the two
+            neighbours agree) contradicts the run and is a bad frame. Default 100 m/s
+            (360 km/h).
 
         Raises
         ------
@@ -143,7 +149,9 @@ class Survey:
         header = _read_header(root)
         if track is None and header["track_path"] is not None:
             track = _load_track(root, header["track_path"], header["track_name"])
-        rows, frame_problems = _read_manifest(root, header, track, check_images, max_offset_m)
+        rows, frame_problems = _read_manifest(
+            root, header, track, check_images, max_offset_m, max_speed_mps
+        )
         if frame_problems and on_error == "raise":
             raise SurveyError(root, frame_problems)
         return cls(
@@ -200,6 +208,10 @@ def _read_yaml(root: Path) -> JsonDict:
         doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise SurveyError(root, [SurveyProblem(f"survey.yaml cannot be parsed: {exc}")]) from None
+    except UnicodeDecodeError as exc:
+        raise SurveyError(root, [SurveyProblem(
+            f"survey.yaml is not UTF-8 text (byte {exc.start}: {exc.reason}); save it as UTF-8"
+        )]) from None  # fmt: skip
     if not isinstance(doc, dict):
         raise SurveyError(root, [SurveyProblem("survey.yaml must be a mapping of fields")])
     return doc
@@ -463,12 +475,79 @@ def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None
             )
 
 
+def _next_on_side(rows: list[_Row]) -> dict[int, _Row]:
+    """For each row (by id), the next row on its side without a problem yet."""
+    after: dict[int, _Row] = {}
+    last: dict[str, _Row] = {}
+    for r in rows:
+        if not r.probs:
+            if r.side in last:
+                after[id(last[r.side])] = r
+            last[r.side] = r
+    return after
+
+
+def _late_spike(stack: list[_Row], r: _Row, nxt: _Row | None) -> bool:
+    """Whether the last accepted frame of ``stack`` has a time ahead of the run: later than
+    both ``r`` and the frame after it, which are in order and after the frame before it."""
+    prev = stack[-1]
+    return (
+        nxt is not None
+        and r.gps_s < prev.gps_s
+        and nxt.gps_s < prev.gps_s
+        and r.gps_s < nxt.gps_s
+        and (len(stack) < 2 or stack[-2].gps_s < r.gps_s)
+    )
+
+
+def _speed_mps(a: _Row, b: _Row) -> float:
+    """Speed implied by two frames of one side (inf when their time is the same)."""
+    dt = abs(b.gps_s - a.gps_s)
+    dist = abs(b.chainage_m - a.chainage_m)
+    return dist / dt if dt > 0 else (math.inf if dist > 0 else 0.0)
+
+
+def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Row]:
+    """``accepted`` less the frames whose chainage contradicts the run: per side, a frame
+    further from both its neighbours than ``max_speed_mps`` allows in their time apart, while
+    the neighbours agree with each other (at the ends: the first or last frame too far from the
+    next two, which agree). Each dropped frame gets its problem and fix."""
+    dropped: set[int] = set()
+    for side in {r.side for r in accepted}:
+        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        for k, r in enumerate(seq):
+            if len(seq) < 3:
+                break
+            if k == 0 or k == len(seq) - 1:
+                near = [seq[1], seq[2]] if k == 0 else [seq[-2], seq[-3]]
+                spike = (_speed_mps(r, near[0]) > max_speed_mps
+                         and _speed_mps(near[0], near[1]) <= max_speed_mps)  # fmt: skip
+            else:
+                near = [seq[k - 1], seq[k + 1]]
+                spike = (
+                    _speed_mps(near[0], r) > max_speed_mps
+                    and _speed_mps(r, near[1]) > max_speed_mps
+                    and _speed_mps(near[0], near[1]) <= max_speed_mps
+                )
+            if spike:
+                v = _speed_mps(near[0], r)
+                r.bad(
+                    f"chainage_m {r.chainage_m:.1f} contradicts the run: reaching it from frame "
+                    f"{near[0].frame_id!r} (line {near[0].row}, {near[0].chainage_m:.1f} m) "
+                    f"takes {v:.0f} m/s, over max_speed_mps={max_speed_mps:g}, while the "
+                    "neighbouring frames agree; fix the chainage, position or gps_s"
+                )
+                dropped.add(id(r))
+    return [r for r in accepted if id(r) not in dropped]
+
+
 def _read_manifest(
     root: Path,
     header: dict[str, Any],
     track: TrackMap | None,
     check_images: bool,
     max_offset_m: float,
+    max_speed_mps: float = 100.0,
 ) -> tuple[Frames, list[SurveyProblem]]:
     rows = _parse_rows(root, header, check_images)
     if not rows:
@@ -478,8 +557,9 @@ def _read_manifest(
     first_id: dict[str, int] = {}
     first_image: dict[str, int] = {}
     seen_time: dict[tuple[str, float], _Row] = {}
-    last: dict[str, _Row] = {}
+    kept: dict[str, list[_Row]] = {}  # per side, the accepted frames in order
     accepted: list[_Row] = []
+    after = _next_on_side(rows)
     for r in rows:
         if r.frame_id in first_id:
             r.bad(
@@ -497,7 +577,20 @@ def _read_manifest(
         if r.probs:
             continue
         twin = seen_time.get((r.side, r.gps_s))
-        prev = last.get(r.side)
+        stack = kept.setdefault(r.side, [])
+        prev = stack[-1] if stack else None
+        if twin is None and prev is not None and _late_spike(stack, r, after.get(id(r))):
+            # one frame's time far ahead: it is wrong, not every frame after it
+            nxt = after[id(r)]
+            prev.bad(
+                f"gps_s {prev.gps_s!r} is later than the next two frames on the {r.side} side "
+                f"({r.frame_id!r} at line {r.row} has {r.gps_s!r}, {nxt.frame_id!r} at line "
+                f"{nxt.row} has {nxt.gps_s!r}), which agree with the frames before; fix the time"
+            )
+            stack.pop()
+            accepted.remove(prev)
+            seen_time.pop((prev.side, prev.gps_s), None)
+            prev = stack[-1] if stack else None
         if twin is not None:
             r.bad(
                 f"same side and gps_s as frame {twin.frame_id!r} (line {twin.row}): "
@@ -512,8 +605,9 @@ def _read_manifest(
         if r.probs:
             continue
         seen_time[(r.side, r.gps_s)] = r
-        last[r.side] = r
+        stack.append(r)
         accepted.append(r)
+    accepted = _drop_position_jumps(accepted, max_speed_mps)
     problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)
     reverse = header["direction"] == "decreasing"
     if not accepted:

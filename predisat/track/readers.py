@@ -99,10 +99,23 @@ def sniff_format(path: str | Path) -> Literal["geojson", "csv"]:
 # ---------------------------------------------------------------------- GeoJSON
 
 
+def _read_utf8(path: Path) -> str:
+    """The text of a track file; TrackMapError when it is not UTF-8, naming the line."""
+    data = path.read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise TrackMapError(
+            f"{path}, line {line}: not UTF-8 text (byte {exc.start}: {exc.reason}); save the "
+            "track map as UTF-8"
+        ) from None
+
+
 def _load_json(path: Path) -> Any:
     if not path.is_file():
         raise TrackMapError(f"{path}: no such file")
-    text = path.read_text(encoding="utf-8-sig")
+    text = _read_utf8(path)
     if not text.strip():
         raise TrackMapError(f"{path}: the file is empty; expected a GeoJSON FeatureCollection")
     try:
@@ -538,7 +551,7 @@ def parse_csv_track(
         raise TrackMapError(f"{path}: no such file")
     lines = [
         ln
-        for ln in path.read_text(encoding="utf-8-sig").splitlines()
+        for ln in _read_utf8(path).splitlines()
         if ln.strip() and not ln.lstrip().startswith("#")
     ]
     if not lines:

@@ -96,11 +96,11 @@ class _PSpline:
             diag = gram.diagonal(off)
             self.band[3 - off, off:] = diag
         d2 = np.zeros((4, m))  # D^T D of the second-difference operator, upper banded
-        dd = np.zeros((m - 2, m))
-        rows = np.arange(m - 2)
-        dd[rows, rows], dd[rows, rows + 1], dd[rows, rows + 2] = 1.0, -2.0, 1.0
-        dtd = dd.T @ dd if m <= 4 else None
-        if dtd is not None:
+        if m <= 4:  # dense: (m - 2, m) for a long track would not fit in memory
+            dd = np.zeros((m - 2, m))
+            rows = np.arange(m - 2)
+            dd[rows, rows], dd[rows, rows + 1], dd[rows, rows + 2] = 1.0, -2.0, 1.0
+            dtd = dd.T @ dd
             for off in range(min(4, m)):
                 d2[3 - off, off:] = np.diagonal(dtd, off)
         else:

@@ -565,3 +565,141 @@ def test_a_hole_in_the_survey_is_closed_not_covered_by_neighbours(
     np.testing.assert_allclose(masks.lat_deg[i], full.lat_deg[i], atol=1e-7)
     np.testing.assert_allclose(masks.heading_deg[i], full.heading_deg[i], atol=1e-3)
     assert res.bad_frames == ()
+
+
+class RecordingSegmenter:
+    """:func:`blue_sky`, recording each image it is given (in-process runs only)."""
+
+    def __init__(self) -> None:
+        self.images: list[np.ndarray] = []
+
+    def __call__(self, image: np.ndarray) -> tuple[np.ndarray, None]:
+        self.images.append(image.copy())
+        return blue_sky(image)
+
+
+def _zero_mid(data: bytes, n_bytes: int = 3000) -> bytes:
+    """``data`` with ``n_bytes`` zeroed in the middle of its scan (a damaged copy)."""
+    sos = data.index(b"\xff\xda")
+    mid = max(sos + 40, (sos + len(data)) // 2 - n_bytes // 2)
+    n_bytes = min(n_bytes, len(data) - 2 - mid)
+    return data[:mid] + bytes(n_bytes) + data[mid + n_bytes :]
+
+
+def test_jpeg_zeroed_inside_is_corrupt_although_opencv_and_pillow_decode_it() -> None:
+    import cv2
+
+    from predisat.reconstruct.frames import jpeg_corruption, truncation
+
+    whole = (Path(__file__).parents[2] / "data/sky_synth/cloudy_right_000012.jpg").read_bytes()
+    hurt = _zero_mid(whole)
+    assert len(hurt) == len(whole) and truncation(hurt) is None  # the end marker is there
+    assert cv2.imdecode(np.frombuffer(hurt, np.uint8), cv2.IMREAD_COLOR) is not None
+    assert _pillow_decodes(hurt)  # Pillow too: libjpeg only warns on stderr
+    assert jpeg_corruption(whole) is None
+    assert "Corrupt JPEG data" in str(jpeg_corruption(hurt))
+    assert jpeg_corruption(b"\x89PNG\r\n\x1a\n") is None  # not a JPEG: not its business
+
+
+def test_jpeg_header_overwritten_is_damaged_not_truncated(tmp_path: Path) -> None:
+    from predisat.reconstruct.frames import read_image
+
+    whole = _jpeg((120, 160), 8, quality=90)
+    path = tmp_path / "f.jpg"
+    path.write_bytes(whole[:20] + bytes(200) + whole[220:])  # zeros over the header
+    img, problem = read_image(str(path))
+    assert img is None and f"image {path} is damaged (no JPEG marker at byte" in str(problem)
+
+
+def test_blank_image_kinds() -> None:
+    from predisat.reconstruct.frames import blank_image
+
+    rng = np.random.default_rng(1)
+    assert "all black" in str(blank_image(np.zeros((120, 160, 3), np.uint8)))
+    assert "all white" in str(blank_image(np.full((120, 160, 3), 255, np.uint8)))
+    noisy_grey = np.clip(128 + rng.normal(0, 0.5, (120, 160, 3)), 0, 255).astype(np.uint8)
+    assert "one flat grey" in str(blank_image(noisy_grey))
+    scene = np.zeros((120, 160, 3), np.uint8)
+    scene[:40] = 200  # a skyline: sky above, ground below
+    assert blank_image(scene) is None
+
+
+def test_corrupt_and_implausible_frames_are_caught(
+    survey_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each class of bad frame injected into one survey: each reported with its reason, file
+    and manifest line, none given to the segmenter."""
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)  # manifest line = index + 2
+    white = cv2_encode(np.full((120, 160, 3), 255, np.uint8))
+    black = cv2_encode(np.zeros((120, 160, 3), np.uint8))
+    injected = {  # frame index -> (reason expected, new bytes or None for the manifest edit)
+        1: ("corrupt inside", _zero_mid((src / rows[1]["image"]).read_bytes(), 1500)),
+        3: ("all black", black),
+        4: ("all white", white),
+        # frozen: right_000003 holds right_000002's picture
+        7: ("frozen", (src / rows[5]["image"]).read_bytes()),
+        10: ("goes back in time", None),
+        12: ("contradicts the run", None),
+    }
+    for i, (_, data) in injected.items():
+        if data is not None:
+            (src / rows[i]["image"]).write_bytes(data)
+    rows[10]["gps_s"] = str(float(rows[8]["gps_s"]) - 0.5)  # left_000005 before left_000004
+    rows[12]["chainage_m"] = "3900.0"  # left_000006: 840 m on from 3060 m in 0.8 s
+    rows[12]["lat_deg"] = rows[12]["lon_deg"] = rows[12]["h_m"] = ""
+    with open(src / "manifest.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    # left_000006 is the last left frame: the two before it agree, it does not
+    seg = RecordingSegmenter()
+    out = tmp_path / "masks"
+    res = process_survey(src, out, PARAMS, progress=False, segmenter=seg)
+    err = capsys.readouterr().err
+    by_id = {b.frame_id: b for b in res.bad_frames}
+    assert sorted(by_id) == sorted(rows[i]["frame_id"] for i in injected)  # 100 %, nothing else
+    for i, (reason, data) in injected.items():
+        b = by_id[rows[i]["frame_id"]]
+        assert reason in b.message, b
+        assert f"manifest line {i + 2}" in b.message, b
+        if data is not None:
+            assert rows[i]["image"] in b.message  # the file
+        assert f"bad frame {rows[i]['frame_id']}" in err  # what the user sees
+    assert "frame before ('right_000002', manifest line 7)" in by_id[rows[7]["frame_id"]].message
+    # none of them reached the segmenter: every image it got is a good one
+    from predisat.reconstruct.frames import blank_image
+
+    assert len(seg.images) == len(rows) - len(injected)
+    assert all(blank_image(im) is None for im in seg.images)
+    with open(out / "bad_frames.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == len(injected)
+    # and --strict stops at one of them
+    with pytest.raises(BadFrameError, match="bad frame"):
+        process_survey(src, tmp_path / "strict", PARAMS, progress=False, segmenter=blue_sky,
+                       strict=True)  # fmt: skip
+
+
+def cv2_encode(pixels: np.ndarray) -> bytes:
+    import cv2
+
+    ok, enc = cv2.imencode(".jpg", pixels)
+    assert ok
+    return enc.tobytes()
+
+
+def test_png_zeroed_inside_is_refused_by_its_checksums(tmp_path: Path) -> None:
+    import cv2
+
+    from predisat.reconstruct.frames import read_image
+
+    pixels = np.random.default_rng(7).integers(0, 256, (120, 160, 3), np.uint8)
+    ok, enc = cv2.imencode(".png", pixels)
+    assert ok
+    data = enc.tobytes()
+    mid = len(data) // 2
+    path = tmp_path / "f.png"
+    path.write_bytes(data[:mid] + bytes(3000) + data[mid + 3000 :])
+    img, problem = read_image(str(path))
+    assert img is None and "cannot be decoded" in str(problem) and str(path) in str(problem)

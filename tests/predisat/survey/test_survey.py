@@ -321,7 +321,8 @@ def test_off_track_positions(tmp_path: Path) -> None:
     assert "25.0 m from track 'straight'" in _only(problems, "right_000001", "m from track").message
     _only(problems, "left_000002", "m from track")
     assert len(problems) == 2
-    assert len(Survey.load(root, track=track, max_offset_m=100.0).frames) == 6
+    # left_000002 is then 110 m behind the frame 1 s before it: over max_speed_mps too
+    assert len(Survey.load(root, track=track, max_offset_m=100.0, max_speed_mps=200.0).frames) == 6
 
 
 def test_chainage_disagreeing_with_the_position_is_refused(tmp_path: Path) -> None:
@@ -430,3 +431,35 @@ def test_error_message_lists_every_problem(tmp_path: Path) -> None:
     text = str(info.value)
     assert "6 problem(s)" in text
     assert all(f"{side}_00000{i}" in text for side in ("left", "right") for i in range(3))
+
+
+def test_chainage_jump_contradicting_the_run_is_refused(tmp_path: Path) -> None:
+    """No position to check the chainage against: only the time tells an odometer typo."""
+    root = _write(tmp_path / "s", n=5)  # 100..140 m, 1 s apart per side
+    rows = _rows(root)
+    rows[4]["chainage_m"] = "320.0"  # left_000002 at 120 m: a typo of 200 m in 1 s
+    rows[9]["chainage_m"] = "900.0"  # right_000004, the last frame: 760 m in 1 s
+    _save_rows(root, rows)
+    problems = _problems(root)
+    msg = _only(problems, "left_000002", "contradicts the run").message
+    assert "chainage_m 320.0" in msg and "'left_000001' (line 4" in msg and "210 m/s" in msg
+    _only(problems, "right_000004", "contradicts the run")
+    assert len(problems) == 2 and problems[0].row == 6
+    assert "manifest line 6, frame 'left_000002'" in str(problems[0])
+    survey = Survey.load(root, on_error="skip")
+    assert len(survey.frames) == 8
+    # a survey at 10 m/s passes; the limit is the caller's
+    assert len(Survey.load(root, max_speed_mps=1000.0).frames) == 10
+
+
+def test_one_time_far_ahead_is_that_frame_s_problem_not_every_later_one(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=5)
+    rows = _rows(root)
+    rows[4]["gps_s"] = repr(GPS0 + 86400.0 + 2)  # left_000002: a day ahead (a clock glitch)
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert len(problems) == 1  # not left_000003 and left_000004 "going back in time"
+    msg = _only(problems, "left_000002", "later than the next two frames on the left").message
+    assert "'left_000003' at line 8" in msg and "fix the time" in msg
+    survey = Survey.load(root, on_error="skip")
+    assert "left_000002" not in list(survey.frames.frame_id) and len(survey.frames) == 9
