@@ -53,6 +53,8 @@ from locator.sim.simulate import simulate_run
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.gnss.errormodel import IntervalModel, read_error_model
+from predisat.masks.maskset import MaskSet
+from predisat.synth.world import World
 
 WORLDS = ["mixed-1", "mixed-2", "mixed-3", "mixed-4", "canyon"]
 SPEEDS_KMH = (45.0, 80.0, 117.0)
@@ -97,14 +99,14 @@ def _init(cache: str) -> None:
                   model=read_error_model(Path(cache) / "error_model.json"))  # fmt: skip
 
 
-def _world(name: str):  # type: ignore[no-untyped-def]
+def _world(name: str) -> tuple[World, MaskSet, ReflectorIndex]:
     if name not in _STATE["worlds"]:
         world, masks, _ = lc._world(name, _STATE["cache"])
         _STATE["worlds"][name] = (world, masks, ReflectorIndex(world))
     return _STATE["worlds"][name]
 
 
-def _kind_at(world, chainage_m: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _kind_at(world: World, chainage_m: np.ndarray) -> np.ndarray:
     """Scenery kind per chainage (tunnel and rock walls win over what they overlap)."""
     out = np.full(len(chainage_m), "open", object)
     order = {"tunnel": 3, "rock_walls": 2}
