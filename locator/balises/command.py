@@ -9,9 +9,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from predisat.cli.args import cutoff_deg, output_dir, positive_float
+from predisat.cli.common import track_option
+
+if TYPE_CHECKING:
+    from predisat.track import TrackMap
 
 __all__ = ["add_parser", "cmd_balises"]
 
@@ -78,20 +82,16 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     return p
 
 
-def _track(args: argparse.Namespace) -> Any:
-    from predisat.track.map import TrackMap
-
+def _track(args: argparse.Namespace) -> TrackMap:
+    """``--track`` through the one track loader; else the simulation's world's, or line 144."""
     if args.track:
-        t = Path(args.track)
-        return TrackMap.from_csv(t) if t.suffix.lower() == ".csv" else TrackMap.from_geojson(t)
+        return track_option(args.track)
     stored = Path(args.sim) / "world.npz"
     if stored.is_file():
-        from predisat.synth.world import World
+        from predisat.synth.world import World  # lazy: the world needs the [synth] extra
 
         return World.load(stored).track
-    from predisat.track.map import demo_track
-
-    return demo_track()
+    return track_option(None)
 
 
 def cmd_balises(args: argparse.Namespace) -> int:

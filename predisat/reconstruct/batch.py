@@ -152,7 +152,9 @@ def _report(msg: str, quiet: bool) -> None:
 def _bad(fid: str, message: str, strict: bool, before: str = "") -> None:
     """Report a bad frame, or stop there with ``strict``."""
     if strict:
-        raise BadFrameError(f"bad frame {fid}: {message} (run without --strict to skip it)")
+        raise BadFrameError(
+            f"bad frame {fid}: {message} (run without --strict, strict=False, to skip it)"
+        )
     _report(f"bad frame {fid}: {message} - skipped{before}", quiet=False)
 
 
@@ -225,7 +227,7 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
         first = next(iter(bad.values()))
         raise BadFrameError(
             f"survey {survey.root}: bad frame {first.frame_id}: {first.message} "
-            "(run without --strict to skip it)"
+            "(run without --strict, strict=False, to skip it)"
         )
     for b in bad.values():
         _report(f"bad frame {b.frame_id}: {b.message} - skipped", quiet=False)
