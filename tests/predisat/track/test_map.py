@@ -507,3 +507,28 @@ def test_swapped_coordinates_caught_by_the_declared_length(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match=r"declares a length.*swapped.*\[lon, lat\]"):
         TrackMap.from_geojson(path)
+
+
+def test_load_track_reads_by_content_not_suffix(tmp_path) -> None:
+    """One loader for every command: a CSV named .txt and a GeoJSON named .txt load as what
+    they are (the process command used to parse a .txt CSV as GeoJSON)."""
+    from predisat.cli.common import CliError, track_option
+    from predisat.track import TrackMapError, load_track
+    from predisat.track.readers import write_geojson
+
+    ref = demo_track()
+    lat, lon, h = ref.position_at(np.linspace(0.0, 3000.0, 40))
+    csv_txt = tmp_path / "line.txt"
+    csv_txt.write_text("lat_deg,lon_deg,h_m\n" + "".join(
+        f"{a:.9f},{b:.9f},{c:.3f}\n" for a, b, c in zip(lat, lon, h, strict=True)))
+    from_csv = TrackMap.from_csv(csv_txt)
+    for got in (load_track(csv_txt), track_option(str(csv_txt))):
+        assert got.length_m == pytest.approx(from_csv.length_m, abs=1e-9)
+        assert got.source == from_csv.source
+    geo_txt = tmp_path / "line_geo.txt"
+    write_geojson(ref, geo_txt)
+    assert load_track(geo_txt).length_m == pytest.approx(ref.length_m, abs=1e-6)
+    with pytest.raises(TrackMapError, match="no such file"):
+        load_track(tmp_path / "missing.geojson")
+    with pytest.raises(CliError, match=r"--track .*missing\.geojson: no such file"):
+        track_option(str(tmp_path / "missing.geojson"))
