@@ -19,16 +19,15 @@ from __future__ import annotations
 
 import io
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 
 import pandas as pd
 
-from locator.sim.simfile import json_default, read_folder_table
+from locator.sim.simfile import read_folder_table
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
-from predisat.jsontypes import JsonDict
+from predisat.jsontypes import JsonDict, strict_json_text
 
 __all__ = [
     "FORMATS",
@@ -50,29 +49,9 @@ class RunFileError(ValueError):
     """A run folder or error-model file that cannot be read; the message names the fix."""
 
 
-def _json(obj: object) -> object:
-    try:
-        return json_default(obj)
-    except TypeError:
-        return str(obj)  # run descriptions may hold paths and enums
-
-
-def _null_non_finite(obj: object) -> object:
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _null_non_finite(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_null_non_finite(v) for v in obj]
-    return obj
-
-
 def _write_json(path: Path, data: Mapping[str, object]) -> None:
-    # NaN (e.g. the interval median of a run without a claim) becomes null: strict JSON,
-    # which other tools (jq, browsers, JSON schema validators) read
-    plain = json.loads(json.dumps(data, default=_json, allow_nan=True))
-    text = json.dumps(_null_non_finite(plain), indent=2, allow_nan=False) + "\n"
-    write_bytes_atomic(path, text.encode())
+    # NaN (e.g. the interval median of a run without a claim) becomes null
+    write_bytes_atomic(path, strict_json_text(data).encode())
 
 
 def write_table(df: pd.DataFrame, folder: Path, name: str, fmt: str) -> Path:

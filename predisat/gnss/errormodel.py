@@ -11,17 +11,16 @@ file (``locator calibrate --out FILE.json``) is a JSON object with ``format``
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
+from predisat.jsontypes import strict_json_text
 
 __all__ = [
     "ERROR_MODEL_FORMAT",
@@ -131,9 +130,7 @@ def write_error_model(
     }
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    data = json.loads(json.dumps(data, default=_json_value, allow_nan=True))
-    text = json.dumps(_finite_or_null(data), indent=2, allow_nan=False)
-    write_bytes_atomic(p, (text + "\n").encode())
+    write_bytes_atomic(p, strict_json_text(data).encode())
     return p
 
 
@@ -164,24 +161,3 @@ def read_error_model(path: str | Path) -> IntervalModel:
         raise ErrorModelFileError(
             f"{p}: bad error model ({exc}); expected a_m, b_m, k_sigma"
         ) from exc
-
-
-def _json_value(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (tuple, set)):
-        return list(obj)
-    return str(obj)  # descriptions of the fit may hold paths and enums
-
-
-def _finite_or_null(obj: Any) -> Any:
-    # strict JSON, as jq and browsers read it: a NaN of the fit's summary becomes null
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _finite_or_null(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_finite_or_null(v) for v in obj]
-    return obj
