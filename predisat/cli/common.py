@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from predisat.cli.args import caused_by_interrupt
 
@@ -91,7 +91,7 @@ def parse_where(items: Sequence[str] | None) -> dict[str, str | None] | None:
 def track_option(
     path: str | None,
     name: str | None = None,
-    chain: str = "all",
+    chain: Literal["all", "longest"] = "all",
     where: Sequence[str] | None = None,
 ) -> TrackMap:
     """``--track`` (with ``--track-name``, ``--chain``, ``--where``): the demo line when
@@ -101,11 +101,8 @@ def track_option(
 
     if path is None:
         return demo_track()
-    if chain not in ("all", "longest"):
-        raise CliError(f"--chain {chain}: choose all or longest")
     try:
-        return load_track(path, name, chain="all" if chain == "all" else "longest",
-                          where=parse_where(where))  # fmt: skip
+        return load_track(path, name, chain=chain, where=parse_where(where))
     except TrackMapError as exc:
         raise CliError(f"--track {exc}") from None
 

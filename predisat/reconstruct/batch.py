@@ -235,11 +235,11 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
 
 
 def _plan(
-    survey: Survey, track: TrackMap, params: PipelineParams, out: Path
+    survey: Survey, track: TrackMap, params: PipelineParams, out: Path, ch: NDArray
 ) -> _Plan:
-    """Positions, chunks, the frames each chunk reads, the run's provenance and folders."""
+    """Positions, chunks, the frames each chunk reads, the run's provenance and folders;
+    ``ch`` is every frame's chainage, rounded (NaN off the track)."""
     fr = survey.frames
-    ch = np.round(np.asarray(fr.chainage_m, float), _CHAINAGE_DECIMALS)
     finite = np.isfinite(ch)
     if not finite.any():
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
@@ -538,7 +538,7 @@ def process_survey(
     out = Path(out_dir)
     ch = np.round(np.asarray(survey.frames.chainage_m, float), _CHAINAGE_DECIMALS)
     bad = _load_bad_frames(survey, ch, strict)
-    plan = _plan(survey, trk, p, out)
+    plan = _plan(survey, trk, p, out, ch)
     timings["load"] = time.perf_counter() - t0
     pending, skipped = _pending(plan, strict, max_chunks)
     _report(
