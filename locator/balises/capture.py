@@ -4,8 +4,12 @@ GADEROS used two zones around a virtual balise: a large **arm zone** and a small
 zone**. A fix inside the capture zone captures the balise; a balise passed with fixes in the arm
 zone only is captured too, its time recomputed from the fixes. Here the fixes are the locator's
 **fused** estimates (satellites and odometry, :mod:`locator.odometry.fusion`), each with its
-interval; a fix counts only when the fused interval is short enough (``max_half_width_m``: "if
-the current accuracy is good enough").
+interval; a fix counts only when the fused interval is short enough: "if the current accuracy
+is good enough". Enough here is what a balise telegram can state: the capture carries its
+location accuracy ``q_locacc_m`` (the fused interval's reach about the estimate, plus the
+balise's own survey accuracy), and ETCS's ``Q_LOCACC`` field holds 0-63 m (6 bits, SUBSET-026
+packet 5), so a fix whose interval reaches further than ``max_locacc_m`` (63 m) from its
+estimate cannot capture.
 
 Per balise at chainage ``b``, with ``u_k = o (s_k - b)`` the estimate's progress past it in the
 direction of travel ``o`` over the valid fixes:
@@ -31,7 +35,9 @@ never captures where the chord test would not.
 :func:`score_captures` compares with the truth (true passage time from the true chainage):
 timing error, delay, position error; a capture is **false** when the train was not passing the
 balise at the reported time (true position more than ``false_tolerance_m`` away; default the
-capture radius) or never passed it.
+capture radius, or the reported time outside the truth), and **hazardous** when the true
+position lies outside the telegram's own stated accuracy ``q_locacc_m``: a consumer that resets
+on the telegram would then hold a wrong interval.
 """
 
 from __future__ import annotations
@@ -44,9 +50,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from locator.balises.balisefile import BaliseList
 
-__all__ = ["EMIT_MODES", "CaptureConfig", "capture_balises", "score_captures"]
+__all__ = ["EMIT_MODES", "Q_LOCACC_MAX_M", "CaptureConfig", "capture_balises", "score_captures"]
 
 EMIT_MODES = ("at_fix", "predicted")
+#: the largest location accuracy a balise telegram can state (Q_LOCACC, 6 bits of 1 m)
+Q_LOCACC_MAX_M = 63.0
 
 
 @dataclass(frozen=True)
@@ -62,8 +70,10 @@ class CaptureConfig:
     window_before_m, window_after_m : float or None
         Along-track capture window instead of the radius: from ``before`` metres ahead of the
         balise to ``after`` metres past it (both given, or neither).
-    max_half_width_m : float
-        A fix counts only when its fused interval is at most twice this long, m.
+    max_locacc_m : float
+        A fix counts only when its fused interval reaches at most this far from its estimate
+        (either side, plus the balise's survey accuracy), m; at most ``Q_LOCACC_MAX_M``, the
+        largest accuracy a telegram can state.
     emit : {"at_fix", "predicted"}
     latency_s : float
         Processing time added to every emission, s.
@@ -81,7 +91,7 @@ class CaptureConfig:
     arm_radius_m: float = 0.0
     window_before_m: float | None = None
     window_after_m: float | None = None
-    max_half_width_m: float = 50.0
+    max_locacc_m: float = Q_LOCACC_MAX_M
     emit: str = "at_fix"
     latency_s: float = 0.0
     require_window: bool = False
@@ -101,8 +111,11 @@ class CaptureConfig:
             raise ValueError("window_before_m and window_after_m must be >= 0")
         if not self.max_gap_s > 0:
             raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
-        if not self.max_half_width_m > 0 or self.latency_s < 0:
-            raise ValueError("max_half_width_m must be > 0 and latency_s >= 0")
+        if not 0 < self.max_locacc_m <= Q_LOCACC_MAX_M or self.latency_s < 0:
+            raise ValueError(
+                f"max_locacc_m must be in (0, {Q_LOCACC_MAX_M:g}] m (what Q_LOCACC can state) "
+                f"and latency_s >= 0, got {self.max_locacc_m}, {self.latency_s}"
+            )
         if self.emit not in EMIT_MODES:
             raise ValueError(f"emit must be one of {EMIT_MODES}, got {self.emit!r}")
 
@@ -161,7 +174,10 @@ def capture_balises(
         (``capture``, ``arm`` or ``""``), ``epoch`` (the crossing fix, -1 if none),
         ``t_pass_s`` (reported passage time), ``t_emit_s``, ``lo_m``, ``hi_m`` (fused interval
         at the crossing fix), ``gap_s`` (time between the two fixes), ``in_window`` (the
-        passage fell inside the balise's expectation window on the fused interval).
+        passage fell inside the balise's expectation window on the fused interval),
+        ``q_locacc_m`` (the telegram's location accuracy: the furthest either fix's fused
+        interval reaches from its estimate, plus the balise's survey accuracy, rounded up to
+        the metre as Q_LOCACC).
     """
     if orientation not in (1, -1):
         raise ValueError(f"orientation must be +1 or -1, got {orientation}")
@@ -173,17 +189,19 @@ def capture_balises(
     v = None if speed_mps is None else np.asarray(speed_mps, float)
     if config.emit == "predicted" and (v is None or v.shape != t.shape):
         raise ValueError("emit='predicted' needs speed_mps with one value per fix")
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(s) & (hi - lo <= 2.0 * config.max_half_width_m)
-    idx = np.flatnonzero(valid)
     b = np.asarray(balises.chainage_m, float)
+    b_acc = np.asarray(balises.accuracy_m, float)
+    with np.errstate(invalid="ignore"):
+        reach = np.maximum(s - lo, hi - s)  # the interval's reach about the estimate
+        valid = np.isfinite(s) & (reach <= config.max_locacc_m)  # voided fixes are skipped
+    idx = np.flatnonzero(valid)
     n_b = len(b)
     out = {
         "captured": np.zeros(n_b, bool), "zone": np.full(n_b, "", object),
         "epoch": np.full(n_b, -1, np.int64), "t_pass_s": np.full(n_b, np.nan),
         "t_emit_s": np.full(n_b, np.nan), "lo_m": np.full(n_b, np.nan),
         "hi_m": np.full(n_b, np.nan), "gap_s": np.full(n_b, np.nan),
-        "in_window": np.zeros(n_b, bool),
+        "in_window": np.zeros(n_b, bool), "q_locacc_m": np.full(n_b, np.nan),
     }  # fmt: skip
     if len(idx) >= 2 and n_b:
         u = orientation * (s[idx][None, :] - b[:, None])  # (n_b, n_valid)
@@ -198,13 +216,15 @@ def capture_balises(
         in_a = ~in_c & (config.in_arm(up) | config.in_arm(uc))
         # expectation window at the crossing fix: max safe front reached b - acc, min safe
         # front not past b + acc (the fused interval's ends in the travel direction)
-        acc = np.asarray(balises.accuracy_m, float)[rows]
+        acc = b_acc[rows]
         max_safe = np.where(orientation > 0, hi[kc], lo[kc])
         min_safe = np.where(orientation > 0, lo[kc], hi[kc])
         window = (orientation * (max_safe - b[rows]) >= -acc) & (
             orientation * (min_safe - b[rows]) <= acc
         )
+        q = np.ceil(np.maximum(reach[kp], reach[kc]) + b_acc[rows] - 1e-9)
         got = (in_c | in_a) & (t[kc] - t[kp] <= config.max_gap_s + 1e-9)
+        got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
         frac = -up / (uc - up)
@@ -227,6 +247,7 @@ def capture_balises(
         out["lo_m"][r] = lo[kc[got]]
         out["hi_m"][r] = hi[kc[got]]
         out["gap_s"][r] = (t[kc] - t[kp])[got]
+        out["q_locacc_m"][r] = q[got]
         out["in_window"][rows] = window
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
@@ -265,8 +286,16 @@ def score_captures(
         passages the capture rate counts), ``t_true_s`` (true passage
         time), ``timing_error_s`` (reported - true), ``delay_s`` (emission - true),
         ``position_error_m`` (true position at the reported time minus the balise, along the
-        travel direction), ``false`` (captured and never reached, or off by more than the
-        tolerance), ``missed`` (passed and not captured).
+        travel direction), ``false`` (captured, and the true position at the reported time
+        is off by more than the tolerance, or that time lies outside the truth),
+        ``hazardous`` (captured, and the true position is off by more than the telegram's
+        ``q_locacc_m``, or unknown), ``missed`` (passed and not captured).
+
+    Notes
+    -----
+    A balise beyond the truth's last position is not "never reached" by itself: a simulated
+    run ends in motion, and the estimate may cross a balise the train reaches a metre after
+    the recording stops. The position at the reported time judges it, as everywhere else.
     """
     tt = np.asarray(truth_t_s, float)
     u_true = orientation * np.asarray(truth_chainage_m, float)
@@ -286,6 +315,10 @@ def score_captures(
     out["timing_error_s"] = t_pass - t_true
     out["delay_s"] = captures["t_emit_s"].to_numpy(float) - t_true
     out["position_error_m"] = np.where(cap, pos, np.nan)
-    out["false"] = cap & (~reached | (np.abs(np.nan_to_num(pos, nan=np.inf)) > false_tolerance_m))
+    known = (t_pass >= tt[0]) & (t_pass <= tt[-1])
+    off = np.where(known, np.abs(np.nan_to_num(pos, nan=np.inf)), np.inf)
+    out["false"] = cap & (off > false_tolerance_m)
+    q = captures["q_locacc_m"].to_numpy(float)
+    out["hazardous"] = cap & ~(off <= q)
     out["missed"] = passed & ~cap
     return out

@@ -162,3 +162,47 @@ def test_no_capture_across_a_gap_of_voided_fixes():
     sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
     # across the gap the interpolated time (2 + 10/25 * 6 = 4.4 s) is 1.7 s after the true 2.67
     assert sc["timing_error_s"].iloc[0] == pytest.approx(4.4 - (2 + 10 / 15))
+
+
+def test_telegram_accuracy_states_the_interval_reach_and_gates_at_q_locacc():
+    # intervals reaching 10 m either side of the estimate, balise surveyed to 1 m: Q_LOCACC 11
+    t, _truth, est, lo, hi = fixes(1.0, 20.0, 10.0)
+    bl = balises([55.0])
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(25.0), orientation=1)
+    assert cap["q_locacc_m"].tolist() == [11.0]
+    # a lopsided interval: the longer side counts
+    cap = capture_balises(t, est, est - 4.0, est + 30.0, bl, CaptureConfig(25.0), orientation=1)
+    assert cap["q_locacc_m"].tolist() == [31.0]
+    # 61.5 m + 1 m rounds up to 63 (the largest Q_LOCACC): captured; 62.5 + 1 -> 64: not
+    ok = capture_balises(t, est, est - 61.5, est + 61.5, bl, CaptureConfig(25.0), orientation=1)
+    assert ok["captured"].all() and ok["q_locacc_m"].iloc[0] == 63.0
+    no = capture_balises(t, est, est - 62.5, est + 62.5, bl, CaptureConfig(25.0), orientation=1)
+    assert not no["captured"].any()
+    with pytest.raises(ValueError, match="Q_LOCACC"):
+        CaptureConfig(25.0, max_locacc_m=64.0)
+
+
+def test_hazardous_only_when_the_truth_leaves_the_stated_accuracy():
+    # the estimate runs 30 m ahead: 30 m off is false with a 25 m zone; with an interval
+    # reaching 40 m the telegram's accuracy (41 m) still holds the train; with 20 m it does not
+    t, truth, est, _lo, _hi = fixes(1.0, 20.0, 10.0, offset_m=30.0)
+    bl = balises([95.0])
+    for reach_m, hazardous in ((40.0, False), (20.0, True)):
+        cap = capture_balises(t, est, est - reach_m, est + reach_m, bl, CaptureConfig(25.0),
+                              orientation=1)  # fmt: skip
+        sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
+        np.testing.assert_allclose(sc["position_error_m"], -30.0, atol=1e-9)
+        assert sc["false"].tolist() == [True]
+        assert sc["hazardous"].tolist() == [hazardous]
+
+
+def test_a_recording_ending_just_short_of_the_balise_is_judged_by_position():
+    # the truth stops being recorded 2 m before the balise; the estimate, 2.5 m ahead, has
+    # crossed it: the train was 2.5 m from the balise at the reported time, not "never there"
+    t, truth, est, lo, hi = fixes(1.0, 20.0, 5.0, offset_m=2.5)  # truth ends at 100 m
+    bl = balises([102.0])
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(12.0), orientation=1)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=12.0)
+    assert sc["captured"].all() and not sc["passed"].any()
+    np.testing.assert_allclose(sc["position_error_m"], -2.5, atol=1e-9)
+    assert not sc["false"].any() and not sc["hazardous"].any()

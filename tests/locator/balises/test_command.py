@@ -12,10 +12,13 @@ import pandas as pd
 import pytest
 
 from locator.balises.balisefile import BaliseList
+from locator.balises.campaign import locate_with_odometry
 from locator.cli import main
 from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.odometer import OdometerConfig
 from locator.odometry.simulated import odometer_along_run
+from locator.run import RunConfig
+from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from predisat.synth.world import World
 from tests.locator._scene import canyon_world
@@ -98,3 +101,17 @@ def test_a_recorded_odometer_log_is_used_and_a_gap_is_refused(sim_dir, tmp_path,
                "--out", str(tmp_path / "bad")])  # fmt: skip
     assert rc == 2
     assert "line 102: gap of 1.10 s" in capsys.readouterr().err
+
+
+def test_a_start_error_beyond_the_start_uncertainty_is_refused(sim_dir):
+    sim = SimRun.read(sim_dir)
+    path = AntennaPath(World.load(sim_dir.parent / "world.npz").track, 4.0)
+    with pytest.raises(ValueError, match="start_uncertainty_m"):
+        locate_with_odometry(sim, path, RunConfig(trust="none", start_uncertainty_m=10.0),
+                             start_error_m=12.0)  # fmt: skip
+    # within it, the run starts off the truth by that much and its interval still holds it
+    run = locate_with_odometry(sim, path, RunConfig(trust="none", start_uncertainty_m=10.0),
+                               start_error_m=-9.0)  # fmt: skip
+    ep = run.epochs
+    assert ep["fused_chainage_m"].iloc[0] == pytest.approx(sim.chainage_m[0] - 9.0, abs=1e-6)
+    assert ((ep["fused_lo_m"] <= ep["truth_m"]) & (ep["truth_m"] <= ep["fused_hi_m"])).all()
