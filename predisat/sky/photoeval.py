@@ -17,6 +17,15 @@
 
 The sky IoU of one image is ``|pred & true| / |pred | true|`` over sky pixels (1 when both are
 empty). Summaries give the mean over images and the pooled IoU (sums over all pixels).
+
+Safety first (:func:`sky_safety_counts`): the **false-sky rate** (non-sky pixels labelled sky,
+over all non-sky pixels: what would let a blocked satellite be trusted), the share of **unsafe
+columns** (columns with false sky over at least :data:`UNSAFE_COLUMN_FRACTION` of the image
+height) and the **missed-sky rate** (true sky labelled obstacle: availability lost), for the
+default segmenter and, beside it, the naive baseline of :mod:`predisat.sky.naive`; each also
+for the sky the pipeline keeps in an upright frame (``trusted_``: above the skyline, sky holes
+below it blocked; a fisheye photo keeps every region). Summaries pool them (sums over the
+images), and give the throughput in frames per CPU-second beside the JPEG decode's.
 """
 
 from __future__ import annotations
@@ -37,24 +46,34 @@ from tqdm import tqdm
 
 from predisat.camera.models import CameraModel
 from predisat.jsontypes import JsonDict
+from predisat.sky.naive import naive_sky_mask
 from predisat.sky.perceptron import SkyModel
-from predisat.sky.segment import SkyOptions, segment_sky, skyline_from_mask
+from predisat.sky.segment import SkyOptions, mask_above_skyline, segment_sky, skyline_from_mask
 from predisat.survey import Survey
 
 __all__ = [
+    "UNSAFE_COLUMN_FRACTION",
     "UNSAFE_LOW_DEG",
     "SkyEvaluation",
     "SkyPair",
     "confusion_overlay",
     "evaluate_folder",
     "find_pairs",
+    "safety_table",
     "sky_iou",
+    "sky_safety_counts",
     "skyline_elevation_deg",
     "worst_cases_sheet",
 ]
 
 #: A column's skyline more than this below the truth counts as unsafe (``skyline_low_1deg_*``).
 UNSAFE_LOW_DEG = 1.0
+#: A column is unsafe when its false sky covers at least this share of the image height.
+UNSAFE_COLUMN_FRACTION = 0.01
+#: The two segmentations scored side by side: the default (no prefix) and the naive baseline.
+_METHODS = ("", "naive_")
+_COUNTS = ("false_sky_px", "non_sky_px", "unsafe_columns", "n_columns", "missed_sky_px",
+           "true_sky_px")  # fmt: skip
 
 _IMAGE_EXT = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 _LAYOUTS = (
@@ -118,6 +137,80 @@ def sky_iou(pred: ArrayLike, truth: ArrayLike, valid: ArrayLike | None = None) -
         p, t = p & v, t & v
     union = int(np.count_nonzero(p | t))
     return 1.0 if union == 0 else float(np.count_nonzero(p & t) / union)
+
+
+def sky_safety_counts(pred: ArrayLike, truth: ArrayLike, valid: ArrayLike) -> dict[str, int]:
+    """Pixel and column counts of the safety figures of one image.
+
+    Parameters
+    ----------
+    pred, truth, valid : array_like of bool, shape (H, W)
+        Predicted sky, true sky, pixels that count (the lens circle of a fisheye photo).
+
+    Returns
+    -------
+    dict
+        ``false_sky_px`` (valid non-sky labelled sky), ``non_sky_px``, ``unsafe_columns``
+        (columns with at least ``UNSAFE_COLUMN_FRACTION * H`` false-sky pixels), ``n_columns``
+        (columns with a valid pixel), ``missed_sky_px`` (true sky labelled obstacle),
+        ``true_sky_px``. Rates are ratios of sums, so images pool by adding the counts.
+    """
+    p, t, v = (np.asarray(a, bool) for a in (pred, truth, valid))
+    if not p.shape == t.shape == v.shape or p.ndim != 2:
+        raise ValueError(f"pred, truth and valid must be 2-D of one shape, got {p.shape}, "
+                         f"{t.shape}, {v.shape}")  # fmt: skip
+    t = t & v
+    false_sky = p & ~t & v
+    cols = v.any(axis=0)
+    unsafe = (false_sky.sum(axis=0) >= UNSAFE_COLUMN_FRACTION * p.shape[0]) & cols
+    return {
+        "false_sky_px": int(false_sky.sum()), "non_sky_px": int((v & ~t).sum()),
+        "unsafe_columns": int(unsafe.sum()), "n_columns": int(cols.sum()),
+        "missed_sky_px": int((t & ~p).sum()), "true_sky_px": int(t.sum()),
+    }  # fmt: skip
+
+
+def safety_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """The safety-first view of a summary: per group, the default segmenter and the naive
+    baseline side by side (percent), the sky the pipeline keeps beside the raw labels.
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        ``SkyEvaluation.summary``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per group and method (``default``, ``naive``): ``false_sky_pct``,
+        ``unsafe_columns_pct``, ``missed_sky_pct``, the same of the kept sky (``trusted_``),
+        and ``mean_iou``.
+    """
+    rows = []
+    for r in summary.to_dict(orient="records"):
+        for name, m in (("default", ""), ("naive", "naive_")):
+            rows.append({
+                "group": r["group"], "method": name,
+                **{k: r[m + k] for k in ("false_sky_pct", "unsafe_columns_pct",
+                                         "missed_sky_pct", "trusted_false_sky_pct",
+                                         "trusted_unsafe_columns_pct", "trusted_missed_sky_pct")},
+                "mean_iou": r[m + "mean_iou"],
+            })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _rates(counts: pd.DataFrame | dict[str, Any], prefix: str) -> dict[str, float]:
+    """The three rates (percent) of summed ``sky_safety_counts`` columns under ``prefix``."""
+
+    def ratio(a: str, b: str) -> float:
+        den = float(np.sum(counts[prefix + b]))
+        return 100.0 * float(np.sum(counts[prefix + a])) / den if den else float("nan")
+
+    return {
+        f"{prefix}false_sky_pct": ratio("false_sky_px", "non_sky_px"),
+        f"{prefix}unsafe_columns_pct": ratio("unsafe_columns", "n_columns"),
+        f"{prefix}missed_sky_pct": ratio("missed_sky_px", "true_sky_px"),
+    }
 
 
 def skyline_elevation_deg(
@@ -220,18 +313,21 @@ def worst_cases_sheet(
     path: str | os.PathLike[str],
     thumb_w_px: int = 200,
     per_row: int = 2,
+    score_label: str = "IoU {:.3f}",
 ) -> Path:
     """Write a contact sheet: per case a thumbnail and its confusion overlay, captioned.
 
     Parameters
     ----------
-    items : iterable of (name, iou, image_bgr, overlay_bgr)
+    items : iterable of (name, score, image_bgr, overlay_bgr)
     path : path-like
         PNG to write.
     thumb_w_px : int
         Width of each thumbnail (height keeps a 3:4 box; images are letterboxed).
     per_row : int
         Cases per row.
+    score_label : str
+        Format of the score in each caption.
     """
     th = thumb_w_px * 3 // 4
     tiles = []
@@ -246,8 +342,8 @@ def worst_cases_sheet(
             box[y0:y0 + small.shape[0], x0:x0 + small.shape[1]] = small
             pair.append(box)
         cap = np.full((16, 2 * thumb_w_px, 3), 32, np.uint8)
-        cv2.putText(cap, f"{name}  IoU {iou:.3f}", (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
-                    (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.putText(cap, f"{name}  {score_label.format(iou)}", (4, 12),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
         tiles.append(np.vstack([cap, np.hstack(pair)]))
     if not tiles:
         raise ValueError("worst_cases_sheet needs at least one case")
@@ -313,7 +409,15 @@ def _summarise(table: pd.DataFrame, skyline_err: dict[str, list[NDArray]]) -> pd
             "min_iou": t["iou"].min(),
             "pooled_iou": t["inter_px"].sum() / max(t["union_px"].sum(), 1),
             "mean_s": t["seconds"].mean(),
+            "naive_mean_iou": t["naive_iou"].mean(),
         }
+        for kind in ("", "trusted_"):
+            for m in _METHODS:
+                row.update(_rates(t, m + kind))
+        cpu = float(t["cpu_s"].sum())
+        row["frames_per_cpu_s"] = len(t) / cpu if cpu > 0 else float("nan")
+        dec = float(t["decode_cpu_s"].sum())
+        row["decode_frames_per_cpu_s"] = len(t) / dec if dec > 0 else float("nan")
         if skyline_err:
             parts = [e for k, v in skyline_err.items() if g in ("all", k) for e in v]
             err = np.abs(np.concatenate(parts)) if parts else np.zeros(0)
@@ -345,9 +449,10 @@ def evaluate_folder(
     data_dir : path-like
         A folder in one of the layouts of the module docstring.
     out_dir : path-like, optional
-        When given, writes ``<name>_per_image.csv``, ``<name>_summary.md`` and
-        ``<name>_worst.png`` (the ``n_worst`` lowest-IoU cases) there, ``<name>`` being the
-        folder's name.
+        When given, writes ``<name>_per_image.csv``, ``<name>_summary.md`` (the safety table
+        first), ``<name>_worst.png`` (the ``n_worst`` lowest-IoU cases) and
+        ``<name>_worst_false_sky.png`` (the ``n_worst`` highest false-sky rates) there,
+        ``<name>`` being the folder's name.
     progress : bool
         Show a tqdm progress bar.
     options : SkyOptions, optional
@@ -376,6 +481,7 @@ def evaluate_folder(
     cams = _cameras(data) if layout == "synthetic" else {}
     rows: list[JsonDict] = []
     worst: list[tuple[float, SkyPair, NDArray, NDArray]] = []
+    unsafe: list[tuple[float, SkyPair, NDArray, NDArray]] = []  # highest false-sky rate first
     skyline_err: dict[str, list[NDArray]] = {}
     for pair in tqdm(pairs, desc=f"sky {data.name}", disable=not progress, unit="img"):
         row, pred, truth_v, err = _score_pair(pair, opt, classifier, cams)
@@ -384,17 +490,33 @@ def evaluate_folder(
         rows.append(row)
         worst.append((row["iou"], pair, pred, truth_v))
         worst = sorted(worst, key=lambda w: w[0])[:n_worst]  # keep only the few worst in memory
+        unsafe.append((row["false_sky_pct"], pair, pred, truth_v))
+        unsafe = sorted(unsafe, key=lambda w: -np.nan_to_num(w[0], nan=-1.0))[:n_worst]
     table = pd.DataFrame(rows)
     summary = _summarise(table, skyline_err)
-    items: list[tuple[str, float, NDArray, NDArray]] = []
-    for iou, pair, pred, truth_v in worst:
-        img = np.asarray(cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR))
-        items.append((pair.name, iou, img, confusion_overlay(pred, truth_v)))
+    items, unsafe_items = _sheet_items(worst), _sheet_items(unsafe)
     files: dict[str, Path] = {}
     if out_dir is not None:
-        files = _write_outputs(Path(out_dir), data.name or layout, layout, table, summary, items)
+        stem = data.name or layout
+        files = _write_outputs(Path(out_dir), stem, layout, table, summary, items)
+        if unsafe_items:
+            files["unsafe_sheet"] = worst_cases_sheet(
+                unsafe_items, Path(out_dir) / f"{stem}_worst_false_sky.png",
+                score_label="false sky {:.2f} %",
+            )
     return SkyEvaluation(layout=layout, table=table, summary=summary, files=files,
                          worst_cases=items)  # fmt: skip
+
+
+def _sheet_items(
+    cases: list[tuple[float, SkyPair, NDArray, NDArray]],
+) -> list[tuple[str, float, NDArray, NDArray]]:
+    """(name, score, image, confusion overlay) of each case, as :func:`worst_cases_sheet` takes."""
+    out = []
+    for score, pair, pred, truth_v in cases:
+        img = np.asarray(cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR))
+        out.append((pair.name, score, img, confusion_overlay(pred, truth_v)))
+    return out
 
 
 def _options_for(layout: str, options: SkyOptions | None, method: str | None) -> SkyOptions:
@@ -415,16 +537,28 @@ def _score_pair(
 ) -> tuple[JsonDict, NDArray, NDArray, NDArray | None]:
     """Segment one image and score it: the table row, the predicted and (valid) true sky, and
     the skyline elevation errors (deg, seen columns) when the pair's camera is in ``cams``."""
+    c0 = time.process_time()
     img = cv2.imread(str(pair.image_path), cv2.IMREAD_COLOR)
+    decode_cpu = time.process_time() - c0
     if img is None:
         raise OSError(f"cannot read image {pair.image_path}")
     truth = _read_mask(pair.mask_path, img.shape[:2])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     seg = segment_sky(img, opt, classifier=classifier)
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     pred, valid = seg.sky_mask, seg.valid_mask
     truth_v = truth & valid
     h = img.shape[0]
+    naive = naive_sky_mask(img, valid, upright=not opt.fisheye)
+    # what the pipeline keeps of an upright frame: sky above the skyline (holes blocked)
+    kept = (lambda m: m) if opt.fisheye else (
+        lambda m: mask_above_skyline(skyline_from_mask(m, valid), h) & valid
+    )  # fmt: skip
+    counts: dict[str, Any] = {}
+    for prefix, mask in (("", pred), ("naive_", naive)):
+        for kind, m in (("", mask), ("trusted_", kept(mask))):
+            c = sky_safety_counts(m, truth_v, valid)
+            counts.update({prefix + kind + k: v for k, v in c.items()})
     true_line = skyline_from_mask(truth_v, valid)
     seen = ((true_line > -0.5) & (true_line < h - 0.5)) | (
         (seg.skyline_row > -0.5) & (seg.skyline_row < h - 0.5)
@@ -443,7 +577,13 @@ def _score_pair(
         if seen.any() else 0.0,
         "mean_confidence": float(np.nanmean(seg.confidence)),
         "seconds": dt,
+        "cpu_s": cpu,
+        "decode_cpu_s": decode_cpu,
+        "naive_iou": sky_iou(naive, truth_v),
+        **counts,
     }
+    for m in _METHODS:
+        row.update(_rates(counts, m))
     if pair.side not in cams:
         return row, pred, truth_v, None
     cam, r_cv = cams[pair.side]
@@ -474,6 +614,8 @@ def _write_outputs(
     files["summary"] = out / f"{stem}_summary.md"
     files["summary"].write_text(
         f"# Sky segmentation on `{stem}` ({layout}, {len(table)} images)\n\n"
+        "Safety first (percent; `trusted_`: the sky the pipeline keeps, above the skyline of "
+        "an upright frame):\n\n" + _markdown(safety_table(summary)) + "\n\nAll figures:\n\n"
         + _markdown(summary) + "\n",
         encoding="utf-8",
     )

@@ -8,7 +8,16 @@ import cv2
 import numpy as np
 import pytest
 
-from predisat.sky.photoeval import evaluate_folder, find_pairs, sky_iou, skyline_elevation_deg
+from predisat.sky.naive import naive_sky_mask
+from predisat.sky.photoeval import (
+    UNSAFE_COLUMN_FRACTION,
+    evaluate_folder,
+    find_pairs,
+    safety_table,
+    sky_iou,
+    sky_safety_counts,
+    skyline_elevation_deg,
+)
 
 
 def test_sky_iou_against_numpy_sets() -> None:
@@ -181,3 +190,64 @@ def test_synthetic_unsafe_columns(synth_dir: Path) -> None:
     # a skyline at the top edge is never too low
     assert (no_sky.table["skyline_low_1deg_columns"] == 0).all()
     assert no_sky.summary.set_index("group").loc["all"]["n_skyline_columns"] > 0
+
+
+def test_safety_counts_against_loops() -> None:
+    rng = np.random.default_rng(3)
+    h, w = 200, 30
+    truth = np.zeros((h, w), bool)
+    truth[:80] = True
+    pred = truth.copy()
+    pred[80:82, :10] = True  # 2 rows of false sky: 1 % of 200 -> unsafe columns 0-9
+    pred[80, 10:20] = True  # 1 row: below 1 %, not unsafe
+    pred[:5, 25:] = False  # missed sky
+    pred |= rng.random((h, w)) > 0.999  # a few specks
+    valid = np.ones((h, w), bool)
+    valid[:, -2:] = False  # two columns outside the lens
+    c = sky_safety_counts(pred, truth, valid)
+    fs = [(r, k) for r in range(h) for k in range(w - 2) if pred[r, k] and not truth[r, k]]
+    assert c["false_sky_px"] == len(fs)
+    assert c["non_sky_px"] == (h - 80) * (w - 2)
+    per_col = [sum(1 for r, k in fs if k == col) for col in range(w - 2)]
+    assert c["unsafe_columns"] == sum(n >= UNSAFE_COLUMN_FRACTION * h for n in per_col)
+    assert c["unsafe_columns"] >= 10 and c["n_columns"] == w - 2
+    missed = sum(1 for r in range(80) for k in range(w - 2) if truth[r, k] and not pred[r, k])
+    assert c["missed_sky_px"] == missed and c["true_sky_px"] == 80 * (w - 2)
+    with pytest.raises(ValueError, match="one shape"):
+        sky_safety_counts(pred, truth[:10], valid)
+
+
+def test_naive_baseline_is_otsu_on_blue_connected_to_the_top() -> None:
+    img = np.full((60, 80, 3), 60, np.uint8)
+    img[:25] = (230, 190, 150)  # bright blue-ish sky band
+    img[40:48, 30:50] = (235, 195, 155)  # a sky-coloured patch not touching the top
+    valid = np.ones((60, 80), bool)
+    up = naive_sky_mask(img, valid, upright=True)
+    assert up[:24].all() and not up[26:].any()  # the patch is cut off from the top
+    fe = naive_sky_mask(img, valid, upright=False)
+    assert fe[41:47, 31:49].all()  # a fisheye keeps any region of >= 1 % of the circle
+    half = valid.copy()
+    half[:, 40:] = False
+    assert not naive_sky_mask(img, half, upright=True)[:, 40:].any()
+    with pytest.raises(ValueError, match="valid_mask"):
+        naive_sky_mask(img, valid[:10], upright=True)
+
+
+def test_evaluation_reports_safety_beside_the_naive_baseline(tmp_path: Path) -> None:
+    data = tmp_path / "toy"
+    _write_folder(data, "images", "masks", 2)
+    ev = evaluate_folder(data, out_dir=tmp_path / "out", progress=False, method="learned",
+                         classifier=_AllSky())  # fmt: skip
+    # every pixel sky: all non-sky is false sky, every column unsafe, no sky missed
+    row = ev.summary.iloc[-1]
+    assert row["false_sky_pct"] == pytest.approx(100.0)
+    assert row["unsafe_columns_pct"] == pytest.approx(100.0)
+    assert row["missed_sky_pct"] == pytest.approx(0.0)
+    # the naive baseline finds the blue band of the toy images (no false sky there)
+    assert row["naive_false_sky_pct"] < 5.0 and row["naive_missed_sky_pct"] < 5.0
+    tab = safety_table(ev.summary)
+    assert list(tab["method"][:2]) == ["default", "naive"]
+    assert tab["false_sky_pct"].iloc[0] > tab["false_sky_pct"].iloc[1]
+    assert row["frames_per_cpu_s"] > 0 and row["decode_frames_per_cpu_s"] > 0
+    assert ev.files["unsafe_sheet"].is_file()
+    assert "Safety first" in ev.files["summary"].read_text()
