@@ -156,6 +156,10 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
     ep = run.epochs
     o = run.odometer.orientation
     truth = ep["truth_m"].to_numpy(float)
+    # passages after the first satellite claim (before it the run is not located)
+    claimed = np.flatnonzero(ep["claim"].to_numpy(bool))
+    first = truth[claimed[0]] if len(claimed) else o * np.inf
+    caps["located"] = o * (caps["chainage_m"].to_numpy(float) - first) > 0
     front = truth + o * ANTENNA_TO_FRONT_M
     f_lo = ep["fused_lo_m"].to_numpy(float) + o * ANTENNA_TO_FRONT_M
     f_hi = ep["fused_hi_m"].to_numpy(float) + o * ANTENNA_TO_FRONT_M
@@ -237,9 +241,13 @@ def capture_report(caps: pd.DataFrame) -> pd.DataFrame:
     for key, g in caps.groupby(keys, sort=False):
         p = g[g["passed"]]
         c = p[p["captured"]]
+        pl = p[p["located"]]
         rows.append({
             **dict(zip(keys, key, strict=True)), "passages": len(p),
-            "capture_pct": 100.0 * len(c) / max(len(p), 1), "false": int(g["false"].sum()),
+            "capture_pct": 100.0 * len(c) / max(len(p), 1),
+            "located_passages": len(pl),
+            "located_capture_pct": 100.0 * int(pl["captured"].sum()) / max(len(pl), 1),
+            "false": int(g["false"].sum()),
             "hazardous": int(g["hazardous"].sum()),
             "q_locacc_p95_m": _q(c["q_locacc_m"], 0.95),
             "arm_pct": 100.0 * float((c["zone"] == "arm").mean()) if len(c) else np.nan,

@@ -124,6 +124,9 @@ def capture_table(
 ) -> pd.DataFrame:
     """Capture and score every balise under each configuration.
 
+    A fix captures only once a satellite claim has confirmed the run's position (``located``
+    of :func:`capture_balises`), and the passage is timed back along the odometer.
+
     Returns one row per (configuration, balise): :func:`score_captures` columns plus
     ``config`` and ``capture_radius_m``. A capture is false when the true position at the
     reported passage time is further from the balise than the configuration's capture radius.
@@ -131,12 +134,14 @@ def capture_table(
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
     o = run.odometer.orientation
+    located = np.logical_or.accumulate(ep["claim"].to_numpy(bool))  # satellites confirmed
     out = []
     for name, cc in configs.items():
         cap = capture_balises(
             t, ep["fused_chainage_m"].to_numpy(float), ep["fused_lo_m"].to_numpy(float),
             ep["fused_hi_m"].to_numpy(float), balises, cc, orientation=o,
-            speed_mps=ep["odo_speed_mps"].to_numpy(float),
+            speed_mps=ep["odo_speed_mps"].to_numpy(float), odo_m=run.odometer.epoch_odo_m,
+            located=located,
         )  # fmt: skip
         sc = score_captures(cap, run.odometer.truth_t_s, run.odometer.truth_chainage_m,
                             orientation=o, false_tolerance_m=cc.capture_radius_m,

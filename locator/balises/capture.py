@@ -20,8 +20,11 @@ direction of travel ``o`` over the valid fixes:
 2. **zone**: ``capture`` when one of the two fixes is in the capture zone (``|u| <= radius``,
    or the along-track window ``-before <= u <= after``), else ``arm`` when one is in the arm
    zone, else missed (the fixes jumped over the zones);
-3. **reported passage time**: linear interpolation of the estimate between the two fixes
-   (the time the telegram carries);
+3. **reported passage time** (the time the telegram carries): with the odometer, the time at
+   which the crossing fix's estimate, carried back along the odometer's distance, was at the
+   balise (a satellite correction between the two fixes moves the estimate by a jump that is
+   not motion: interpolating across it would time the passage by the jump); without it,
+   linear interpolation of the estimate between the two fixes;
 4. **emission**: ``emit="at_fix"`` sends the telegram at the crossing fix (causal: the train
    knows it passed only then; Barbu, GADEROS final report), plus ``latency_s``;
    ``emit="predicted"`` schedules it from the last fix before the balise when that fix is in a
@@ -151,6 +154,8 @@ def capture_balises(
     *,
     orientation: int,
     speed_mps: ArrayLike | None = None,
+    odo_m: ArrayLike | None = None,
+    located: ArrayLike | None = None,
 ) -> pd.DataFrame:
     """Capture the balises of a list along a run.
 
@@ -166,6 +171,13 @@ def capture_balises(
         Direction of travel along the chainage.
     speed_mps : array_like, shape (n,), optional
         Odometer speed, needed by ``emit="predicted"``.
+    odo_m : array_like, shape (n,), optional
+        Odometer distance at each fix, signed toward increasing chainage, m: times the passage
+        from the crossing fix back along the odometer (module docstring, step 3).
+    located : array_like of bool, shape (n,), optional
+        Fixes whose interval the satellites have confirmed (a claim at or before the fix);
+        others cannot capture: an estimate carried from an unverified start position is no
+        satellite location. Default: every fix.
 
     Returns
     -------
@@ -191,9 +203,15 @@ def capture_balises(
         raise ValueError("emit='predicted' needs speed_mps with one value per fix")
     b = np.asarray(balises.chainage_m, float)
     b_acc = np.asarray(balises.accuracy_m, float)
+    odo = None if odo_m is None else np.asarray(odo_m, float)
+    if odo is not None and odo.shape != t.shape:
+        raise ValueError("odo_m must have one value per fix")
+    ok = np.ones(t.shape, bool) if located is None else np.asarray(located, bool)
+    if ok.shape != t.shape:
+        raise ValueError("located must have one value per fix")
     with np.errstate(invalid="ignore"):
         reach = np.maximum(s - lo, hi - s)  # the interval's reach about the estimate
-        valid = np.isfinite(s) & (reach <= config.max_locacc_m)  # voided fixes are skipped
+        valid = ok & np.isfinite(s) & (reach <= config.max_locacc_m)  # voided fixes skipped
     idx = np.flatnonzero(valid)
     n_b = len(b)
     out = {
@@ -227,8 +245,12 @@ def capture_balises(
         got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
-        frac = -up / (uc - up)
-        t_pass = t[kp] + frac * (t[kc] - t[kp])
+        if odo is not None:
+            # the odometer reading when the crossing fix's estimate, carried back, was at b
+            o_pass = orientation * (odo[kc] - (s[kc] - b[rows]))
+            t_pass = np.minimum(np.interp(o_pass, orientation * odo, t), t[kc])
+        else:
+            t_pass = t[kp] + (-up / (uc - up)) * (t[kc] - t[kp])
         t_emit = t[kc].copy()
         if config.emit == "predicted":
             assert v is not None

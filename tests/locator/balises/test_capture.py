@@ -206,3 +206,36 @@ def test_a_recording_ending_just_short_of_the_balise_is_judged_by_position():
     assert sc["captured"].all() and not sc["passed"].any()
     np.testing.assert_allclose(sc["position_error_m"], -2.5, atol=1e-9)
     assert not sc["false"].any() and not sc["hazardous"].any()
+
+
+def test_a_correction_jump_is_not_motion_the_odometer_times_the_passage():
+    # 20 m/s; the estimate lags 15 m (carried from a wrong start) until a satellite fix at
+    # t = 5 s corrects it; a balise at 95 m is crossed by the jump between the fixes at 4 s
+    # (estimate 65 m) and 5 s (100 m): the train truly passed it at 4.75 s
+    t, truth, est, _lo, _hi = fixes(1.0, 20.0, 10.0)
+    est = np.where(t < 5.0, truth - 15.0, truth)
+    bl = balises([95.0])
+    plain = capture_balises(t, est, est - 20, est + 20, bl, CaptureConfig(25.0), orientation=1)
+    # interpolating across the jump: 4 + 30/35 s, 0.11 s late
+    assert plain["t_pass_s"].iloc[0] == pytest.approx(4.0 + 30.0 / 35.0)
+    odo = truth - truth[0]  # an exact odometer
+    cap = capture_balises(t, est, est - 20, est + 20, bl, CaptureConfig(25.0), orientation=1,
+                          odo_m=odo)  # fmt: skip
+    assert cap["t_pass_s"].iloc[0] == pytest.approx(95.0 / 20.0)
+    # reverse direction: the same along decreasing chainage
+    t2, truth2, est2, _lo, _hi = fixes(1.0, 20.0, 10.0, start_m=200.0, orientation=-1)
+    est2 = np.where(t2 < 5.0, truth2 + 15.0, truth2)
+    cap2 = capture_balises(t2, est2, est2 - 20, est2 + 20, balises([105.0]), CaptureConfig(25.0),
+                           orientation=-1, odo_m=truth2 - truth2[0])  # fmt: skip
+    assert cap2["t_pass_s"].iloc[0] == pytest.approx(95.0 / 20.0)
+
+
+def test_fixes_not_yet_located_by_the_satellites_do_not_capture():
+    t, _truth, est, lo, hi = fixes(1.0, 20.0, 10.0)
+    bl = balises([50.0, 150.0])
+    located = t >= 4.0  # the first satellite claim at 4 s (80 m)
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(25.0), orientation=1, located=located)
+    assert cap["captured"].tolist() == [False, True]
+    with pytest.raises(ValueError, match="located"):
+        capture_balises(t, est, lo, hi, bl, CaptureConfig(25.0), orientation=1,
+                        located=located[:3])  # fmt: skip
