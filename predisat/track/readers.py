@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pyproj import Geod
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.jsontypes import JsonDict
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from predisat.track.map import TrackMap
 
 __all__ = [
+    "MAX_VERTEX_SPACING_M",
     "NAME_KEYS",
     "TrackFile",
     "kilometre_posts_from_sections",
@@ -175,6 +177,21 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
                 f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} lies outside the "
                 f"expected bbox {list(bbox)} (lon_min, lat_min, lon_max, lat_max); {hint}"
             )
+
+
+#: Consecutive vertices further apart than this are refused: no railway map draws 50 km of
+#: track as one straight chord, while one mistyped digit of a coordinate moves a vertex by
+#: hundreds of km (and the smooth fit of such a "track" takes minutes and gigabytes).
+MAX_VERTEX_SPACING_M = 50_000.0
+_GEOD = Geod(ellps="WGS84")
+
+
+def _far_vertex(lat_deg: NDArray, lon_deg: NDArray) -> tuple[int, float] | None:
+    """The first pair ``(k, distance_m)`` of consecutive vertices k, k + 1 further apart than
+    :data:`MAX_VERTEX_SPACING_M` on the WGS84 ellipsoid, or None."""
+    d = np.asarray(_GEOD.inv(lon_deg[:-1], lat_deg[:-1], lon_deg[1:], lat_deg[1:])[2], float)
+    far = np.flatnonzero(d > MAX_VERTEX_SPACING_M)
+    return (int(far[0]), float(d[far[0]])) if far.size else None
 
 
 _LENGTH_KEYS = ("length_m", "length")
@@ -409,6 +426,14 @@ def _line_parts(
             if coords.size == 0:
                 continue
             _check_lonlat(coords, where_s, path, expected_bbox)
+            far = _far_vertex(coords[:, 1], coords[:, 0]) if len(coords) >= 2 else None
+            if far is not None:
+                k, d = far
+                raise TrackMapError(
+                    f"{path}: {where_s} vertices {k} and {k + 1} ({coords[k, :2].tolist()}, "
+                    f"{coords[k + 1, :2].tolist()}) are {d / 1000:.0f} km apart (more than "
+                    f"{MAX_VERTEX_SPACING_M / 1000:.0f} km): a mistyped coordinate? fix it"
+                )
             if len(coords) >= 2:
                 parts.append(Part(where_s, i, coords, tunnel))
             else:
@@ -590,6 +615,15 @@ def parse_csv_track(
         raise TrackMapError(
             f"{path}: data line {k + 2} has latitude {arr[k, 0]} outside [-90, 90]; are the "
             "latitude and longitude columns swapped?"
+        )
+    far = _far_vertex(arr[:, 0], arr[:, 1])
+    if far is not None:
+        k, d = far
+        raise TrackMapError(
+            f"{path}: data lines {k + 2} and {k + 3} ({arr[k, 0]}, {arr[k, 1]} and "
+            f"{arr[k + 1, 0]}, {arr[k + 1, 1]}) are {d / 1000:.0f} km apart (more than "
+            f"{MAX_VERTEX_SPACING_M / 1000:.0f} km between vertices): a mistyped coordinate? "
+            "fix it"
         )
     return TrackFile(
         path, arr[:, 0], arr[:, 1], arr[:, 2], name=name or path.stem,

@@ -532,3 +532,28 @@ def test_load_track_reads_by_content_not_suffix(tmp_path) -> None:
         load_track(tmp_path / "missing.geojson")
     with pytest.raises(CliError, match=r"--track .*missing\.geojson: no such file"):
         track_option(str(tmp_path / "missing.geojson"))
+
+
+def test_a_vertex_moved_by_a_mistyped_digit_is_refused_quickly(tmp_path):
+    # the fuzzer's slow case: one latitude 50.5 -> 10.5 made a 4 400 km "track" whose smooth
+    # fit took minutes; the distance between the two vertices comes from pyproj's geodesic
+    lat = [50.50, 50.51, 50.52, 10.53, 50.54]
+    lon = [4.60, 4.61, 4.62, 4.63, 4.64]
+    csv_path = tmp_path / "t.csv"
+    pairs = list(zip(lat, lon, strict=True))
+    csv_path.write_text("lat_deg,lon_deg\n" + "".join(f"{a},{o}\n" for a, o in pairs))
+    km = Geod(ellps="WGS84").inv(lon[2], lat[2], lon[3], lat[3])[2] / 1000
+    with pytest.raises(TrackMapError, match=rf"data lines 4 and 5 .* {km:.0f} km apart") as e:
+        TrackMap.from_csv(csv_path)
+    assert "mistyped" in str(e.value)
+    gj = tmp_path / "t.geojson"
+    gj.write_text(json.dumps({"type": "FeatureCollection", "features": [{
+        "type": "Feature", "properties": {"name": "x"},
+        "geometry": {"type": "LineString", "coordinates": [[o, a] for a, o in pairs]},
+    }]}))  # fmt: skip
+    with pytest.raises(TrackMapError, match=r"vertices 2 and 3 .* km apart"):
+        TrackMap.from_geojson(gj)
+    # 30 km between two vertices (a long chord, under the limit) is still read
+    ok = tmp_path / "ok.csv"
+    ok.write_text("lat_deg,lon_deg\n50.0,4.6\n50.27,4.6\n50.28,4.6\n")
+    assert TrackMap.from_csv(ok).length_m == pytest.approx(31_100, rel=0.01)
