@@ -69,7 +69,7 @@ def test_core_modules_import_without_the_renderer(tmp_path: Path) -> None:
         "predisat.availability.report", "predisat.reconstruct.batch",
         "predisat.reconstruct.evaluate",
         "predisat.masks.fileformat", "predisat.masks.truth", "predisat.gnss.ephemeris",
-        "predisat.survey", "predisat.sky.segment", "predisat.track",
+        "predisat.survey", "predisat.sky.segment", "predisat.track", "predisat.terrain",
         "locator", "locator.cli", "locator.run", "locator.sources", "locator.runio",
         "locator.errorfit", "locator.evaluate", "locator.sim.simfile", "locator.spp",
         "locator.odometry.fusion", "locator.odometry.confidence", "locator.balises.capture",

@@ -52,7 +52,10 @@ __all__ = [
 ]
 
 FORMAT_NAME = "predisat-masks"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""The newest version: 2 adds source code 3 (``terrain``). A file without terrain bins is
+written as version 1, so that readers older than the terrain step still read it."""
+_READ_VERSIONS = (1, 2)
 METADATA_KEY = b"predisat"
 """Parquet file key-value metadata key holding the PREDISAT JSON header."""
 GEOPARQUET_VERSION = "1.1.0"
@@ -68,7 +71,7 @@ _COLUMN_DOC = {
     "h_m": "WGS84 ellipsoidal height of the position, m",
     "heading_deg": "azimuth of increasing chainage, deg clockwise from true north",
     "mask_el_deg": "skyline elevation per azimuth bin, deg in [0, 90]",
-    "source": "per-bin origin: 0 observed, 1 reconstructed, 2 assumed",
+    "source": "per-bin origin: 0 observed, 1 reconstructed, 2 assumed, 3 terrain (version 2)",
     "margin_deg": "per-bin margin added to the mask before the trust test, deg >= 0",
     "opening_angle_deg": "derived, informative: 180 - effective mask left - right (cross-track)",
     "assumed_bins": "derived, informative: number of bins with source = 2 (assumed)",
@@ -121,7 +124,7 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
 
     header = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": FORMAT_VERSION if (masks.source == BinSource.TERRAIN).any() else 1,
         "az_step_deg": masks.az_step_deg,
         "n_az": n_az,
         "azimuth_bins": "bin k is centred on k * az_step_deg (deg clockwise from true north) "
@@ -241,6 +244,9 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
     for name in _BINNED:
         arrays[name] = _binned_column(table, name, n_az, fail)
     _check_geometry(table, arrays["lon_deg"], arrays["lat_deg"], fail)
+    if header["format_version"] == 1 and np.any(arrays["source"] == BinSource.TERRAIN):
+        raise fail(f"source code {int(BinSource.TERRAIN)} (terrain) appears in a version 1 file, "
+                   "which has no such code; rewrite the file with write_masks")  # fmt: skip
     try:
         return MaskSet(
             chainage_m=arrays["chainage_m"],
@@ -276,7 +282,7 @@ def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
         got = header.get("format") if isinstance(header, dict) else header
         raise MaskFileError(f"{path}: metadata format is {got!r}, expected {FORMAT_NAME!r}")
     version = header.get("format_version")
-    if version != FORMAT_VERSION:
+    if version not in _READ_VERSIONS or isinstance(version, bool):
         hint = (
             "it was written by a newer PREDISAT: upgrade predisat to read it"
             if isinstance(version, int) and version > FORMAT_VERSION
@@ -284,7 +290,7 @@ def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
         )
         raise MaskFileError(
             f"{path}: format_version {version!r} is not supported (this reader reads "
-            f"{FORMAT_VERSION}); {hint}"
+            f"{', '.join(map(str, _READ_VERSIONS))}); {hint}"
         )
     step, n_az = header.get("az_step_deg"), header.get("n_az")
     if not (
@@ -303,6 +309,7 @@ def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:
     if not isinstance(provenance, dict):
         raise MaskFileError(f"{path}: header 'provenance' must be a JSON object")
     return {
+        "format_version": version,
         "az_step_deg": float(step),
         "n_az": n_az,
         "descriptors": descriptors,

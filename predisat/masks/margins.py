@@ -28,6 +28,10 @@ EL_STEP_DEG = 0.1
 """Elevation grid step of the direction counts (cell centres ``(k + 0.5) * step``)."""
 SECTORS = ("cross", "along")
 _SOURCE_NAMES = {int(s): s.name.lower() for s in BinSource}
+# A terrain bin was raised to a DEM horizon after the margins were fitted: it takes the margin
+# of the far field it replaced (ASSUMED); a table needs no row of its own for it.
+_MARGIN_SOURCE = {int(BinSource.TERRAIN): int(BinSource.ASSUMED)}
+_TABLE_SOURCES = tuple(n for c, n in _SOURCE_NAMES.items() if c not in _MARGIN_SOURCE)
 
 
 def sector_of(az_deg: ArrayLike, heading_deg: ArrayLike) -> NDArray:
@@ -73,6 +77,9 @@ class MarginTable:
             )
         }
         out = np.full(np.shape(sector), np.nan, float)
+        source = np.asarray(source).copy()
+        for terrain, like in _MARGIN_SOURCE.items():
+            source[source == terrain] = like
         for (sec, src), m in lut.items():
             code = next((c for c, n in _SOURCE_NAMES.items() if n == src), None)
             if code is None:
@@ -101,7 +108,7 @@ class MarginTable:
         if bad.any():
             raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
                              f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
-        sources = tuple(_SOURCE_NAMES.values())
+        sources = _TABLE_SOURCES
         pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
         want = {(s, c) for s in SECTORS for c in sources}
         if not want <= pairs:

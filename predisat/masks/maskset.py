@@ -82,6 +82,10 @@ class BinSource(IntEnum):
     """Neither seen nor reconstructed: the value rests on an unknown cell (an obstacle up to its
     bound) or on the stated far-field default (``ReconstructionParams.far_default_deg``), and
     is flagged so that a margin, or the user, can treat it apart."""
+    TERRAIN = 3
+    """Raised to the horizon of a digital elevation model (its stated vertical error added):
+    the terrain beyond the surveyed corridor stood higher than what the frames or the far-field
+    default gave (:func:`predisat.masks.terrain.raise_to_terrain`)."""
 
 
 class _Track(Protocol):  # the part of predisat.track.map.TrackMap used here
@@ -540,7 +544,7 @@ def _source_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
         where = _first_bad(~np.isin(src, valid)) if src.size else ""
         raise MaskError(
             f"source{where} holds a value that is not a BinSource code {valid} "
-            "(0 observed, 1 reconstructed, 2 assumed)"
+            "(0 observed, 1 reconstructed, 2 assumed, 3 terrain)"
         )
     return src.astype(np.uint8)
 

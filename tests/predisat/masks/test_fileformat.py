@@ -168,11 +168,11 @@ def good_file(tmp_path):
 
 
 def test_wrong_version_names_file_and_fix(good_file, tmp_path):
-    bad = _rewrite(good_file, tmp_path / "v2.parquet", header_change={"format_version": 2})
+    bad = _rewrite(good_file, tmp_path / "v3.parquet", header_change={"format_version": 3})
     with pytest.raises(MaskFileError) as err:
         read_masks(bad)
     msg = str(err.value)
-    assert "v2.parquet" in msg and "format_version 2" in msg and "upgrade" in msg
+    assert "v3.parquet" in msg and "format_version 3" in msg and "upgrade" in msg
 
 
 def test_wrong_format_and_missing_header(good_file, tmp_path):
