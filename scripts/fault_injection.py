@@ -14,9 +14,11 @@ Three steps, each reusing the previous one's files::
         --real /tmp/fi/real.json --out /tmp/fi/curve.json --figure docs/figures/fault_injection.png
 
 The operating point: per-class rates cannot be measured on the real photos (they carry sky
-masks, not fault classes), so the faults are injected in the mix of
-:meth:`FaultRates.mix <predisat.reconstruct.faults.FaultRates.mix>` at the total rate whose
-unsafe-column share on the survey's frames equals the one measured on the real street photos.
+masks, not fault classes). Whole-frame failures strike at the share of real street photos
+with false sky over at least a fifth of their non-sky pixels; the local classes are injected
+in the mix of :meth:`FaultRates.mix <predisat.reconstruct.faults.FaultRates.mix>` at the total
+rate whose unsafe-column share on the survey's frames equals the one measured on the real
+street photos.
 """
 
 from __future__ import annotations
@@ -161,8 +163,9 @@ def _frames(data: Any, masks: list[np.ndarray], camera_kind: str) -> list[Any]:
     axis = np.asarray(track.enu_at(ch), float)
     ant = axis + 4.0 * np.asarray(track.up_at(ch), float)
     hd = np.asarray(track.heading_at(ch), float)
+    mounts = {"left": Mount.default("left"), "right": Mount.default("right")}
     return [
-        FrameView(float(ch[i]), masks[i], cam, Mount.default(str(data["side"][i])), ant[i],
+        FrameView(float(ch[i]), masks[i], cam, mounts[str(data["side"][i])], ant[i],
                   float(hd[i]), frame_id=f"{ch[i]:.0f}{str(data['side'][i])[0]}")
         for i in range(len(masks))
     ]  # fmt: skip
@@ -196,14 +199,15 @@ def _fault_stats(clean: np.ndarray, faulty: list[np.ndarray], labels: np.ndarray
     }
 
 
-def calibrate(data: Any, target: float, seed: int) -> float:
-    """Total fault rate (mix of FaultRates.mix) whose unsafe-column share is ``target``
-    (bisection on the survey's frames, faults of one seed)."""
+def calibrate(data: Any, target: float, whole: float, seed: int) -> float:
+    """Total rate of the local fault classes (mix of FaultRates.mix, whole-frame failures at
+    the measured ``whole``) whose unsafe-column share is ``target`` (bisection on the survey's
+    frames, faults of one seed)."""
     lo, hi = 0.0, 8.0
     for _ in range(12):
         mid = 0.5 * (lo + hi)
         faulty, _ = inject_faults(list(data["sky"]), list(data["labels"]), list(data["side"]),
-                                  FaultRates.mix(mid), seed)  # fmt: skip
+                                  FaultRates.mix(mid, whole), seed)  # fmt: skip
         share = _fault_stats(data["sky"], faulty, data["labels"])["unsafe_column_share"]
         lo, hi = (mid, hi) if share < target else (lo, mid)
     return 0.5 * (lo + hi)
@@ -219,9 +223,11 @@ def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
     measured = json.loads(real.read_text())
     street = next(v for v in measured.values() if v["layout"] != "fisheye_hk")
     target = float(street["unsafe_column_share"])
-    total = calibrate(data, target, 0)
-    print(f"operating point: total fault rate {total:.3f} per frame (unsafe columns {target:.3f} "
-          "as measured on the real street photos)")  # fmt: skip
+    whole = float(street["whole_frame_share"])
+    total = calibrate(data, target, whole, 0)
+    print(f"operating point: local faults {total:.3f} per frame, whole-frame failures {whole:.3f} "
+          f"(unsafe columns {target:.3f} and whole-frame share as measured on the real street "
+          "photos)")  # fmt: skip
     track = demo_track()
     pos = data["positions_m"]
     truth = data["truth_el_deg"]
@@ -236,7 +242,7 @@ def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
     rows = []
     for factor in factors:
         for seed in range(seeds if factor > 0 else 1):
-            rates = FaultRates.mix(total * factor)
+            rates = FaultRates.mix(total * factor, whole * factor)
             faulty, faults = inject_faults(list(data["sky"]), list(data["labels"]),
                                            list(data["side"]), rates, seed)  # fmt: skip
             fs = _fault_stats(data["sky"], faulty, data["labels"])
@@ -251,7 +257,8 @@ def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
                 rows.append(row)
                 print(json.dumps(row))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"operating_total_rate": total, "target_unsafe_columns": target,
+    out.write_text(json.dumps({"operating_total_rate": total, "operating_whole_frame": whole,
+                               "target_unsafe_columns": target,
                                "measured": measured, "rows": rows}, indent=1))  # fmt: skip
     _table(rows)
     if figure is not None:

@@ -963,12 +963,14 @@ def _far_field(
     higher from the camera, which is nearer and lower on its own side). The bound of a bin is the
     lowest over the frames that saw the whole bin; bins no frame saw get ``far_default_deg``.
 
-    With ``fusion_rank`` above 1 no single view sets the far field either: in a bin a frame at
-    the position saw, the bound is the ``min(fusion_rank, n)``-th lowest over the ``n`` views
-    (frames, or ``view_group`` groups) among that frame and the frames within
-    ``suspect_neighbour_m`` of the position that saw the bin, each with its own parallax
-    allowance (a neighbour 10 m away sees a far object up to ``asin(10 / half_width)``
-    aside).
+    With ``fusion_rank`` above 1 no single view lowers the far field either: in a bin a frame
+    at the position saw, the bound is the higher of the position's own bound and the
+    ``min(fusion_rank, n)``-th lowest over the ``n`` views (frames, or ``view_group``
+    groups) among the position's frames and the frames within ``suspect_neighbour_m`` of it
+    that saw the bin, each with its own azimuth allowance (a neighbour 10 m away sees a far
+    object up to ``asin(10 / half_width)`` aside). The own bound stays a floor: a neighbour
+    sees a far object from elsewhere, a little lower or higher, which no allowance covers
+    (taking the order statistic alone doubled the false trust under injected faults).
     """
     n_az = p.n_az
     far = np.full((s.size, n_az), np.inf)
@@ -992,9 +994,11 @@ def _far_field(
             if p.fusion_rank > 1 and seen_any[i].any():
                 near = np.flatnonzero(np.abs(ch - s[i]) <= max(p.suspect_neighbour_m,
                                                                 p.position_tol_m))  # fmt: skip
+                # never below the position's own frames: a neighbour sees a far object from
+                # elsewhere (the azimuth allowance covers its parallax, not its elevation)
                 far[i] = np.where(
                     seen_any[i],
-                    _robust_far(frames, profiles, cams, near, ant[i], az_sub, p),
+                    np.fmax(far[i], _robust_far(frames, profiles, cams, near, ant[i], az_sub, p)),
                     far[i],
                 )
     far_el = np.where(seen_any, far, p.far_default_deg)

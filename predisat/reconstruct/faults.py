@@ -88,17 +88,25 @@ class FaultRates:
                 raise ValueError(f"fault rate of {k} must lie in [0, 1], got {v}")
 
     @classmethod
-    def mix(cls, total: float) -> FaultRates:
+    def mix(cls, total: float, whole_frame: float | None = None) -> FaultRates:
         """Rates in the mix the issue attributes false trust to (half facades and glass, a
         third thin structures, the rest frame, lens, ground and skyline faults), ``total``
-        being their sum (expected faults per frame; each rate capped at 1)."""
+        being their sum (expected faults per frame; each rate capped at 1). ``whole_frame``:
+        that class's rate given apart (a measured one), ``total`` then shared by the others.
+        """
         weights = {
             "facade_band": 0.25, "glass_mirror": 0.20, "thin_lost": 0.30, "wet_ground": 0.05,
             "whole_frame": 0.05, "lens_drop": 0.05, "skyline_shift": 0.10,
         }  # fmt: skip
         if not total >= 0:
             raise ValueError(f"total fault rate must be >= 0, got {total}")
-        return cls({k: min(1.0, w * float(total)) for k, w in weights.items()})
+        if whole_frame is not None:
+            rest = 1.0 - weights.pop("whole_frame")
+            weights = {k: w / rest for k, w in weights.items()}
+        out = {k: min(1.0, w * float(total)) for k, w in weights.items()}
+        if whole_frame is not None:
+            out["whole_frame"] = min(1.0, float(whole_frame))
+        return cls(out)
 
     def scaled(self, factor: float) -> FaultRates:
         """Every rate times ``factor`` (capped at 1)."""
@@ -234,7 +242,7 @@ def _under_skyline(
 
 def _facade_band(sky: NDArray, lab: NDArray, rng: np.random.Generator) -> NDArray:
     h = sky.shape[0]
-    return _under_skyline(sky, lab, rng, LABEL_BUILDING, int(rng.uniform(0.02, 0.06) * h),
+    return _under_skyline(sky, lab, rng, LABEL_BUILDING, max(1, int(rng.uniform(0.02, 0.06) * h)),
                           (0.05, 0.3))  # fmt: skip
 
 
@@ -244,7 +252,7 @@ def _glass_mirror(sky: NDArray, lab: NDArray, rng: np.random.Generator) -> NDArr
 
 def _wet_ground(sky: NDArray, lab: NDArray, rng: np.random.Generator) -> NDArray:
     h = sky.shape[0]
-    return _under_skyline(sky, lab, rng, LABEL_GROUND, int(rng.uniform(0.01, 0.05) * h),
+    return _under_skyline(sky, lab, rng, LABEL_GROUND, max(1, int(rng.uniform(0.01, 0.05) * h)),
                           (0.1, 0.5))  # fmt: skip
 
 
@@ -261,9 +269,10 @@ def _whole_frame(sky: NDArray, lab: NDArray, rng: np.random.Generator) -> NDArra
 
 
 def _thin_lost(sky: NDArray, lab: NDArray, rng: np.random.Generator) -> NDArray:
-    width = int(rng.integers(3, 9))
+    # features at most 2-8 px wide: an opening with an odd (centred) kernel one wider
+    width = 2 * int(rng.integers(1, 5)) + 1
     solid = (~sky).astype(np.uint8)
-    kept = cv2.morphologyEx(solid, cv2.MORPH_OPEN, np.ones((1, width + 1), np.uint8))
+    kept = cv2.morphologyEx(solid, cv2.MORPH_OPEN, np.ones((1, width), np.uint8))
     return (solid > 0) & (kept == 0)
 
 
