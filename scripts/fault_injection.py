@@ -12,6 +12,9 @@ Three steps, each reusing the previous one's files::
     # 3. faults at multiples of the operating point, both fusions on the same faults
     .venv/bin/python scripts/fault_injection.py curve --survey /tmp/fi/survey.npz \\
         --real /tmp/fi/real.json --out /tmp/fi/curve.json --figure docs/figures/fault_injection.png
+    # the table and the figure again, from the JSON
+    .venv/bin/python scripts/fault_injection.py plot --curve /tmp/fi/curve.json \
+        --figure docs/figures/fault_injection.png
 
 The operating point: per-class rates cannot be measured on the real photos (they carry sky
 masks, not fault classes). Whole-frame failures strike at the share of real street photos
@@ -304,7 +307,7 @@ def _figure(rows: list[dict], path: Path) -> None:
         ax[0].plot(f, [100 * mean[(x, name)]["false_trust"] for x in f], "o-", label=name)
         ax[1].plot(f, [100 * mean[(x, name)]["sky_lost"] for x in f], "o-", label=name)
     ax[0].set(xlabel="fault rate / operating point", ylabel="false trust (% of trusted)",
-              title="false trust")  # fmt: skip
+              title="false trust", yscale="log")  # fmt: skip
     ax[1].set(xlabel="fault rate / operating point", ylabel="visible sky lost (%)",
               title="sky lost")  # fmt: skip
     for a in ax:
@@ -336,8 +339,15 @@ def main() -> None:
     c.add_argument("--ranks", type=int, nargs="+", default=[2])
     c.add_argument("--suspect", type=float, default=0.25,
                    help="suspect_share of the robust settings (negative: no check)")
+    g = sub.add_parser("plot", help="table and figure again from a curve's JSON")
+    g.add_argument("--curve", type=Path, required=True)
+    g.add_argument("--figure", type=Path, required=True)
     a = ap.parse_args()
-    if a.cmd == "measure":
+    if a.cmd == "plot":
+        rows = json.loads(a.curve.read_text())["rows"]
+        _table(rows)
+        _figure(rows, a.figure)
+    elif a.cmd == "measure":
         measure(a.data, a.out)
     elif a.cmd == "build":
         build(a.out, a.camera)
