@@ -12,6 +12,9 @@ Three steps, each reusing the previous one's files::
     # 3. faults at multiples of the operating point, both fusions on the same faults
     .venv/bin/python scripts/fault_injection.py curve --survey /tmp/fi/survey.npz \\
         --real /tmp/fi/real.json --out /tmp/fi/curve.json --figure docs/figures/fault_injection.png
+    # each class alone at 3x its operating rate
+    .venv/bin/python scripts/fault_injection.py classes --survey /tmp/fi/survey.npz \
+        --curve /tmp/fi/curve.json --factor 3
     # the table and the figure again, from the JSON
     .venv/bin/python scripts/fault_injection.py plot --curve /tmp/fi/curve.json \
         --figure docs/figures/fault_injection.png
@@ -268,6 +271,36 @@ def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
         _figure(rows, figure)
 
 
+def per_class(survey: Path, curve_json: Path, factor: float, ranks: list[int]) -> None:
+    """Each fault class alone at ``factor`` times its operating rate (from a curve's JSON),
+    the fusions side by side (one seed)."""
+    from predisat.reconstruct.carving import ReconstructionParams, Reconstructor
+    from predisat.track.map import demo_track
+
+    data = dict(np.load(survey, allow_pickle=False))
+    done = json.loads(curve_json.read_text())
+    rates = FaultRates.mix(done["operating_total_rate"] * factor,
+                           done["operating_whole_frame"] * factor)  # fmt: skip
+    track = demo_track()
+    settings = {"min": ReconstructionParams(reach_m=REACH_M)}
+    settings |= {f"rank{k}": ReconstructionParams(reach_m=REACH_M, fusion_rank=k) for k in ranks}
+    print(f"\n| class (x{factor:g} operating) | rate per frame | false-sky rate | unsafe columns | "
+          + " | ".join(f"false trust {n} | sky lost {n}" for n in settings) + " |")
+    print("|---|---|---|---|" + "---|---|" * len(settings))
+    for kind, rate in rates.rates.items():
+        faulty, _ = inject_faults(list(data["sky"]), list(data["labels"]), list(data["side"]),
+                                  FaultRates({kind: rate}), 0)  # fmt: skip
+        fs = _fault_stats(data["sky"], faulty, data["labels"])
+        frames = _frames(data, faulty, str(data["camera"]))
+        cells = []
+        for p in settings.values():
+            r = Reconstructor(p).run(frames, data["positions_m"], track)
+            sc = _score(r.mask_el_deg.astype(float), data["truth_el_deg"])
+            cells.append(f"{100 * sc['false_trust']:.4f} % | {100 * sc['sky_lost']:.1f} %")
+        print(f"| {kind} | {rate:.2f} | {100 * fs['false_sky_rate']:.2f} % | "
+              f"{100 * fs['unsafe_column_share']:.1f} % | " + " | ".join(cells) + " |")
+
+
 def _mean_rows(rows: list[dict]) -> dict[tuple[float, str], dict[str, float]]:
     agg: dict[tuple[float, str], list[dict]] = {}
     for r in rows:
@@ -342,8 +375,15 @@ def main() -> None:
     g = sub.add_parser("plot", help="table and figure again from a curve's JSON")
     g.add_argument("--curve", type=Path, required=True)
     g.add_argument("--figure", type=Path, required=True)
+    k = sub.add_parser("classes", help="each fault class alone, the fusions side by side")
+    k.add_argument("--survey", type=Path, required=True)
+    k.add_argument("--curve", type=Path, required=True, help="JSON written by curve")
+    k.add_argument("--factor", type=float, default=3.0)
+    k.add_argument("--ranks", type=int, nargs="+", default=[2, 3])
     a = ap.parse_args()
-    if a.cmd == "plot":
+    if a.cmd == "classes":
+        per_class(a.survey, a.curve, a.factor, a.ranks)
+    elif a.cmd == "plot":
         rows = json.loads(a.curve.read_text())["rows"]
         _table(rows)
         _figure(rows, a.figure)
