@@ -28,8 +28,10 @@ class BadFrame:
     message : str
         What is wrong (and how to fix it).
     stage : str
-        ``"load"`` (rejected by the survey loader) or ``"segment"`` (image unreadable or
-        segmentation failed).
+        ``"load"`` (rejected by the survey loader), ``"segment"`` (image unreadable or
+        segmentation failed) or ``"fusion"`` (a suspect frame: its sky contradicts both
+        neighbouring frames of its camera, ``ReconstructionParams.suspect_share``; left out
+        of the reconstruction).
     """
 
     frame_id: str

@@ -38,7 +38,9 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.reconstruct.heightfield import (
     HeightField,
+    LowestBounds,
     apply_clearance_prior,
+    carve_box,
     carve_profile,
     corridor_grid,
 )
@@ -51,6 +53,7 @@ __all__ = [
     "ReconstructionParams",
     "Reconstructor",
     "reconstruct_masks",
+    "suspect_frames",
 ]
 
 
@@ -120,6 +123,17 @@ class ReconstructionParams:
         Sky-profile sampling.
     descriptor_min_el_deg : float
         A side whose perpendicular horizon is lower has no obstacle descriptor.
+    fusion_rank : int
+        Independent views (frames, or groups of frames sharing a ``FrameView.view_group``)
+        that must agree before a cell is lowered: a cell keeps the ``min(fusion_rank, n)``-th
+        lowest bound of the ``n`` views that bounded it (``docs/reconstruction.md``, fault
+        model). 1: the lowest bound (the carving before issue 30, bit for bit).
+    suspect_share : float or None
+        A frame whose skyline lies more than ``suspect_tol_deg`` below both neighbouring frames
+        of its camera (within ``suspect_neighbour_m``) over at least this share of the azimuths
+        all three saw is a *suspect frame*: reported with the reason and left out of the
+        reconstruction (leaving a frame out only removes sky evidence). ``None``: no check.
+    suspect_tol_deg, suspect_neighbour_m : float
     """
 
     cell_m: float = 0.5
@@ -144,6 +158,10 @@ class ReconstructionParams:
     rectify_az_step_deg: float = 0.25
     rectify_el_step_deg: float = 0.125
     descriptor_min_el_deg: float = 10.0
+    fusion_rank: int = 1
+    suspect_share: float | None = None
+    suspect_tol_deg: float = 5.0
+    suspect_neighbour_m: float = 25.0
 
     def __post_init__(self) -> None:
         n_az = round(360.0 / self.az_step_deg)
@@ -159,6 +177,20 @@ class ReconstructionParams:
                 "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
                 "columns clear nothing)"
             )
+        if self.fusion_rank < 1:
+            raise ValueError(
+                "ReconstructionParams.fusion_rank must be >= 1 (1: the lowest bound over the "
+                f"frames, 2: no single view can lower a cell), got {self.fusion_rank}"
+            )
+        if self.suspect_share is not None and not 0.0 < self.suspect_share <= 1.0:
+            raise ValueError(
+                "ReconstructionParams.suspect_share must lie in (0, 1], or be None to disable "
+                f"the suspect-frame check, got {self.suspect_share}"
+            )
+        if not (self.suspect_tol_deg > 0 and self.suspect_neighbour_m > 0):
+            raise ValueError(
+                "ReconstructionParams.suspect_tol_deg and suspect_neighbour_m must be > 0"
+            )
         if self.along_view_half_deg is not None and not 0.0 < self.along_view_half_deg <= 45.0:
             raise ValueError(
                 "ReconstructionParams.along_view_half_deg must lie in (0, 45] degrees, or be "
@@ -167,7 +199,13 @@ class ReconstructionParams:
 
     @property
     def overlap_m(self) -> float:
-        """Chainage margin of frames (and corridor) needed beyond a window's positions."""
+        """Chainage margin of frames (and corridor) needed beyond a window's positions (with
+        the suspect-frame check, the frames used plus their neighbours)."""
+        return self.used_m + (0.0 if self.suspect_share is None else self.suspect_neighbour_m)
+
+    @property
+    def used_m(self) -> float:
+        """Chainage margin of the frames a window's reconstruction uses."""
         return self.reach_m + self.carve_range_m + _WINDOW_MARGIN_M
 
     @property
@@ -195,6 +233,10 @@ class FrameView:
     confidence : ndarray, shape (width_px,), optional
         Per-column segmentation confidence.
     frame_id : str
+    view_group : str
+        Frames with the same non-empty group count as one view in the fault-tolerant fusion
+        (``ReconstructionParams.fusion_rank``): frames that may share a fault, such as one
+        camera's frames of one pass (dirt on its lens). Empty: the frame is a view of its own.
     """
 
     chainage_m: float
@@ -206,6 +248,7 @@ class FrameView:
     reverse: bool = False
     confidence: NDArray | None = field(default=None, repr=False)
     frame_id: str = ""
+    view_group: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,6 +274,8 @@ class Reconstruction:
     overhead_m : ndarray, shape (k, 2)
         Chainage intervals detected as overhead structures.
     params : ReconstructionParams
+    suspect_frames : tuple of (str, str)
+        Frames left out by the suspect-frame check: ``(frame_id, reason)``.
     """
 
     chainage_m: NDArray
@@ -242,6 +287,7 @@ class Reconstruction:
     descriptors: dict[str, NDArray]
     overhead_m: NDArray
     params: ReconstructionParams
+    suspect_frames: tuple[tuple[str, str], ...] = ()
 
     def to_maskset(
         self,
@@ -327,8 +373,11 @@ class Reconstructor:
         bound = hf.bound_m.copy()
         if frames:
             cams, rots = _camera_geometry(frames, track)
-            for prof, cam, rot in zip(profs, cams, rots, strict=True):
-                carve_profile(hf, bound, prof, cam, rot, p.carve_range_m)
+            if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
+                for prof, cam, rot in zip(profs, cams, rots, strict=True):
+                    carve_profile(hf, bound, prof, cam, rot, p.carve_range_m)
+            else:
+                bound = _fused_bounds(hf, frames, profs, cams, rots, p)
         over = [
             (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
             for f, prof in zip(frames, profs, strict=True)
@@ -363,6 +412,22 @@ class Reconstructor:
         lo, hi = float(s.min()), float(s.max())
         keep = [f for f in frames if lo - p.overlap_m <= f.chainage_m <= hi + p.overlap_m]
         profs = self.profiles(keep)
+        suspects: dict[int, str] = {}
+        if p.suspect_share is not None:
+            suspects = suspect_frames(keep, profs, p)
+        # the frames used: within used_m; the check above also read their neighbours, so a
+        # frame is judged the same in every window
+        use = [
+            i for i, f in enumerate(keep)
+            if lo - p.used_m <= f.chainage_m <= hi + p.used_m and i not in suspects
+        ]  # fmt: skip
+        suspect_list = tuple(
+            (keep[i].frame_id or f"{keep[i].chainage_m:.3f}", why)
+            for i, why in sorted(suspects.items())
+            if lo - p.used_m <= keep[i].chainage_m <= hi + p.used_m
+        )
+        keep = [keep[i] for i in use]
+        profs = [profs[i] for i in use]
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
@@ -401,6 +466,7 @@ class Reconstructor:
             descriptors=desc,
             overhead_m=hf.overhead_m,
             params=p,
+            suspect_frames=suspect_list,
         )
 
 
@@ -412,6 +478,100 @@ def reconstruct_masks(
 ) -> Reconstruction:
     """Masks at ``chainage_m`` from ``frames`` (see :class:`Reconstructor`)."""
     return Reconstructor(params).run(frames, chainage_m, track)
+
+
+# ---------------------------------------------------------------------- fault tolerance
+
+
+def _fused_bounds(
+    hf: HeightField,
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    cams: NDArray,
+    rots: NDArray,
+    p: ReconstructionParams,
+) -> NDArray:
+    """Bounds fused over independent views (:class:`~predisat.reconstruct.heightfield.
+    LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
+    ``view_group``) carves a scratch raster of its own, then counts once per cell."""
+    groups: dict[str, list[int]] = {}
+    for i, f in enumerate(frames):
+        groups.setdefault(f.view_group or f"\0frame{i}", []).append(i)
+    fusion = LowestBounds(hf.shape, p.fusion_rank)
+    scratch = np.full(hf.shape, np.inf, np.float32)
+    for idx in groups.values():
+        boxes = []
+        for i in idx:
+            box = carve_box(hf, cams[i], p.carve_range_m)
+            if box[1] > box[0] and box[3] > box[2]:
+                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m)
+                boxes.append(box)
+        if not boxes:
+            continue
+        b = np.array(boxes)
+        union = (int(b[:, 0].min()), int(b[:, 1].max()), int(b[:, 2].min()), int(b[:, 3].max()))
+        fusion.add(scratch, union)
+        scratch[union[0] : union[1], union[2] : union[3]] = np.inf
+    return np.minimum(hf.bound_m, fusion.fused())
+
+
+def suspect_frames(
+    frames: Sequence[FrameView], profiles: Sequence[SkyProfile], p: ReconstructionParams
+) -> dict[int, str]:
+    """Frames whose sky contradicts both neighbouring frames of the same camera.
+
+    For each frame with a frame of the same camera (side) before and after it within
+    ``p.suspect_neighbour_m`` of chainage, compare the three sky profiles azimuth by
+    azimuth (same relative azimuth: the neighbours look the same way): the frame contradicts
+    its neighbours where it saw sky more than ``p.suspect_tol_deg`` below the lower of their
+    skylines (or where they saw no sky at all). A frame contradicting them over at least
+    ``p.suspect_share`` of the azimuths all three saw is suspect: over-exposure, flare, a
+    drop or dirt on the lens, a wrong mask. Objects near the camera shift between frames
+    10 m apart, which is why the share must be large; a fault shared by the neighbours (the
+    same dirt on three frames) is not seen.
+
+    Returns
+    -------
+    dict of int to str
+        Index into ``frames`` -> reason (names the neighbours and the share).
+    """
+    share_min = 1.0 if p.suspect_share is None else p.suspect_share
+    by_side: dict[str, list[int]] = {}
+    for i, f in enumerate(frames):
+        by_side.setdefault(f.mount.side, []).append(i)
+    out: dict[int, str] = {}
+    for idx in by_side.values():
+        order = sorted(idx, key=lambda i: frames[i].chainage_m)
+        for a, i, b in zip(order[:-2], order[1:-1], order[2:], strict=True):
+            fi, fa, fb = frames[i], frames[a], frames[b]
+            if (
+                fi.chainage_m - fa.chainage_m > p.suspect_neighbour_m
+                or fb.chainage_m - fi.chainage_m > p.suspect_neighbour_m
+            ):
+                continue
+            pi, pa, pb = profiles[i], profiles[a], profiles[b]
+            if not (pi.rel_az_deg.shape == pa.rel_az_deg.shape == pb.rel_az_deg.shape):
+                continue  # another camera model: not comparable column by column
+            seen = (
+                np.isfinite(pi.seen_lo_deg) & np.isfinite(pa.seen_lo_deg)
+                & np.isfinite(pb.seen_lo_deg)
+            )  # fmt: skip
+            n = int(seen.sum())
+            if n == 0:
+                continue
+            with np.errstate(invalid="ignore"):
+                top = np.minimum(pa.sky_el_deg, pb.sky_el_deg)  # +inf: neither saw sky
+                low = np.isfinite(pi.sky_el_deg) & (pi.sky_el_deg < top - p.suspect_tol_deg)
+            share = float((low & seen).sum()) / n
+            if share >= share_min:
+                out[i] = (
+                    f"sky contradicts the neighbouring frames {fa.frame_id or fa.chainage_m} "
+                    f"and {fb.frame_id or fb.chainage_m}: on {100 * share:.0f} % of the "
+                    f"azimuths all three saw, its skyline is more than {p.suspect_tol_deg:g} "
+                    "deg below both (over-exposure, flare, a drop or dirt on the lens, or a "
+                    "wrong mask); left out of the reconstruction: check the image"
+                )
+    return out
 
 
 # ---------------------------------------------------------------------- geometry helpers
@@ -802,6 +962,15 @@ def _far_field(
     within the parallax allowance ``asin(baseline / half_width)`` around it (far objects are seen
     higher from the camera, which is nearer and lower on its own side). The bound of a bin is the
     lowest over the frames that saw the whole bin; bins no frame saw get ``far_default_deg``.
+
+    With ``fusion_rank`` above 1 no single view lowers the far field either: in a bin a frame
+    at the position saw, the bound is the higher of the position's own bound and the
+    ``min(fusion_rank, n)``-th lowest over the ``n`` views (frames, or ``view_group``
+    groups) among the position's frames and the frames within ``suspect_neighbour_m`` of it
+    that saw the bin, each with its own azimuth allowance (a neighbour 10 m away sees a far
+    object up to ``asin(10 / half_width)`` aside). The own bound stays a floor: a neighbour
+    sees a far object from elsewhere, a little lower or higher, which no allowance covers
+    (taking the order statistic alone doubled the false trust under injected faults).
     """
     n_az = p.n_az
     far = np.full((s.size, n_az), np.inf)
@@ -822,9 +991,48 @@ def _far_field(
                 covered = ~np.isnan(fb)
                 far[i] = np.where(covered, np.fmin(far[i], fb), far[i])
                 seen_any[i] |= covered
+            if p.fusion_rank > 1 and seen_any[i].any():
+                near = np.flatnonzero(np.abs(ch - s[i]) <= max(p.suspect_neighbour_m,
+                                                                p.position_tol_m))  # fmt: skip
+                # never below the position's own frames: a neighbour sees a far object from
+                # elsewhere (the azimuth allowance covers its parallax, not its elevation)
+                far[i] = np.where(
+                    seen_any[i],
+                    np.fmax(far[i], _robust_far(frames, profiles, cams, near, ant[i], az_sub, p)),
+                    far[i],
+                )
     far_el = np.where(seen_any, far, p.far_default_deg)
     far_el = np.where(np.isinf(far_el), 90.0, far_el)
     return far_el, seen_any, per_pos
+
+
+def _robust_far(
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    cams: NDArray,
+    near: NDArray,
+    antenna_m: NDArray,
+    az_sub: NDArray,
+    p: ReconstructionParams,
+) -> NDArray:
+    """Far-field bound per bin from the frames ``near`` an antenna: per view (a frame, or the
+    lowest over a ``view_group``) the highest skyline within its parallax allowance, then the
+    ``min(fusion_rank, n)``-th lowest over the ``n`` views that saw the bin (``+inf`` where
+    none did)."""
+    views: dict[str, NDArray] = {}
+    for j in near:
+        f = frames[int(j)]
+        base = float(np.hypot(*(cams[j, :2] - antenna_m[:2])))
+        allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
+        vals, ok = _profile_max(profiles[int(j)], az_sub, allow)
+        fb = _bins(np.where(ok, vals, np.nan), p.n_sub)
+        key = f.view_group or f"\0frame{int(j)}"
+        views[key] = np.fmin(views[key], fb) if key in views else fb
+    stack = np.sort(np.stack(list(views.values())), axis=0)  # NaN (unseen) sorts last
+    n = np.sum(~np.isnan(stack), axis=0)
+    k = np.minimum(n, p.fusion_rank) - 1
+    out = np.take_along_axis(stack, np.maximum(k, 0)[None], axis=0)[0]
+    return np.where(n > 0, out, np.inf)
 
 
 def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[NDArray, NDArray]:

@@ -122,6 +122,8 @@ def run_chunk(
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     rec = reconstructor.run(views, job.positions_m, track)
+    # frames the fusion's consistency check left out (ReconstructionParams.suspect_share)
+    bad.extend(BadFrame(fid, why, "fusion") for fid, why in rec.suspect_frames)
     prov = dict(job.provenance)
     prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
     masks = rec.to_maskset(track, provenance=prov)

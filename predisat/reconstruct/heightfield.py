@@ -30,8 +30,10 @@ from predisat.track import TrackMap
 
 __all__ = [
     "HeightField",
+    "LowestBounds",
     "RangeMax1D",
     "apply_clearance_prior",
+    "carve_box",
     "carve_profile",
     "corridor_grid",
 ]
@@ -191,6 +193,89 @@ def corridor_grid(
     return HeightField(float(cell_m), ix0, iy0, bound, region, chain, offset, rail)
 
 
+def carve_box(hf: HeightField, camera_m: NDArray, range_m: float) -> tuple[int, int, int, int]:
+    """Rows ``[r0, r1)`` and columns ``[c0, c1)`` of ``hf``'s raster that :func:`carve_profile`
+    may lower for a camera at ``camera_m`` (track frame, metres) carving to ``range_m``
+    (empty when ``r1 <= r0`` or ``c1 <= c0``)."""
+    c = hf.cell_m
+    ny, nx = hf.shape
+    cx, cy = float(camera_m[0]), float(camera_m[1])
+    c0 = max(int(np.floor((cx - range_m) / c)) - hf.ix0, 0)
+    c1 = min(int(np.ceil((cx + range_m) / c)) - hf.ix0, nx)
+    r0 = max(int(np.floor((cy - range_m) / c)) - hf.iy0, 0)
+    r1 = min(int(np.ceil((cy + range_m) / c)) - hf.iy0, ny)
+    return r0, r1, c0, c1
+
+
+class LowestBounds:
+    """Fault-tolerant fusion of the frames' bounds: per cell, the ``rank`` lowest bounds of
+    independent views, the view being a frame or a group of frames (``docs/reconstruction.md``,
+    section 2, fault model).
+
+    A view's bound is a view's own lowest bound over the cell (a group's frames may share a
+    fault, such as dirt on one camera's lens: their lowest counts once). The fused bound of a
+    cell is the ``min(rank, n)``-th lowest of the ``n`` views that bounded it: the highest of
+    them when fewer than ``rank`` did. It is an upper bound of the true top whenever fewer
+    than ``min(rank, n)`` of those views are below the truth; ``rank = 1`` is the lowest
+    bound, the plain carving.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The raster's ``(ny, nx)``.
+    rank : int
+        Views that must agree before a cell is lowered (>= 1).
+    """
+
+    def __init__(self, shape: tuple[int, int], rank: int) -> None:
+        if rank < 1:
+            raise ValueError(f"rank must be >= 1 (1: the lowest bound), got {rank}")
+        self.rank = int(rank)
+        self._low = np.full((self.rank, *shape), np.inf, np.float32)
+        self._views = np.zeros(shape, np.int32)
+
+    def add(self, view_bound: NDArray, box: tuple[int, int, int, int]) -> None:
+        """Add one view: ``view_bound`` (the raster's shape, ``+inf`` where the view bounded
+        nothing) within the rows and columns ``box = (r0, r1, c0, c1)``; elsewhere it must
+        be ``+inf``."""
+        r0, r1, c0, c1 = box
+        if r1 > r0 and c1 > c0:
+            _insert_lowest(self._low, self._views, view_bound, r0, r1, c0, c1)
+
+    @property
+    def views(self) -> NDArray:
+        """Number of views that bounded each cell (int32, the raster's shape)."""
+        return self._views.copy()
+
+    def fused(self) -> NDArray:
+        """The fused bound of every cell (float32, ``+inf`` where no view bounded it)."""
+        k = np.minimum(self._views, self.rank) - 1
+        out = np.take_along_axis(self._low, np.maximum(k, 0)[None], axis=0)[0]
+        return np.where(k >= 0, out, np.float32(np.inf)).astype(np.float32)
+
+
+@njit(cache=True, nogil=True)
+def _insert_lowest(
+    low: NDArray, views: NDArray, value: NDArray, r0: int, r1: int, c0: int, c1: int
+) -> None:
+    """Insert each finite ``value[r, c]`` of the box into the sorted ``low[:, r, c]`` (the
+    ``rank`` lowest so far) and count it in ``views``."""
+    k = low.shape[0]
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            v = value[r, c]
+            if not v < np.inf:
+                continue
+            views[r, c] += 1
+            if v >= low[k - 1, r, c]:
+                continue
+            i = k - 1
+            while i > 0 and low[i - 1, r, c] > v:
+                low[i, r, c] = low[i - 1, r, c]
+                i -= 1
+            low[i, r, c] = v
+
+
 def carve_profile(
     hf: HeightField,
     bound: NDArray,
@@ -222,12 +307,8 @@ def carve_profile(
         Number of cells the frame bounded.
     """
     c = hf.cell_m
-    ny, nx = hf.shape
     cx, cy, cz = (float(v) for v in camera_m)
-    c0 = max(int(np.floor((cx - range_m) / c)) - hf.ix0, 0)
-    c1 = min(int(np.ceil((cx + range_m) / c)) - hf.ix0, nx)
-    r0 = max(int(np.floor((cy - range_m) / c)) - hf.iy0, 0)
-    r1 = min(int(np.ceil((cy + range_m) / c)) - hf.iy0, ny)
+    r0, r1, c0, c1 = carve_box(hf, camera_m, range_m)
     if c1 <= c0 or r1 <= r0:
         return 0
     rot = np.asarray(local_to_frame, float)

@@ -1,0 +1,200 @@
+"""Tests of the fault-tolerant fusion, clause by clause of the fault model
+(``docs/reconstruction.md``, section 6).
+
+The truth is ray cast (``true_masks``) and the scene analytic (a 30 m wall 10 m left of a
+straight track); the faults are put into ideal masks by hand, so each test knows which views
+are wrong.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from predisat.camera.models import CameraModel, Mount
+from predisat.reconstruct.carving import (
+    FrameView,
+    ReconstructionParams,
+    Reconstructor,
+    suspect_frames,
+)
+from predisat.reconstruct.heightfield import LowestBounds, carve_box, carve_profile
+from predisat.synth.raycast import make_caster
+from predisat.synth.truth import ideal_frames, true_masks
+from predisat.synth.world import Stretch, World, WorldSpec
+from tests.predisat.synth.test_world import straight_track
+
+WALL = {"height_m": 30.0, "distance_m": 10.0, "roughness_m": 0.0, "batter": 0.0}
+# a side fisheye seeing +-85 deg of relative azimuth, as the default one: a wall cell 10 m off
+# the track is seen by several frames 10 m apart
+FISHEYE = CameraModel.fisheye_from_fov(200, 150, 185.0)
+BASE = ReconstructionParams(reach_m=100.0, carve_range_m=50.0)
+ROBUST = dataclasses.replace(BASE, fusion_rank=2)
+POS = np.array([340.0, 350.0, 360.0])
+
+
+@pytest.fixture(scope="module")
+def scene() -> tuple[World, list[FrameView], np.ndarray]:
+    track = straight_track(700.0, 60.0)
+    spec = WorldSpec((Stretch("rock_walls", 100.0, 600.0, "left", WALL),), False, False)
+    world = World.build(track, spec, seed=0)
+    caster = make_caster(world, "open3d", lband_only=True)
+    mounts = {k: Mount(k, m.yaw_deg, m.pitch_deg, 0.0, (0.0, 0.0, 0.0))
+              for k, m in ((s, Mount.default(s)) for s in ("left", "right"))}  # fmt: skip
+    frames = ideal_frames(world, np.arange(150.0, 551.0, 10.0), FISHEYE, mounts, caster=caster)
+    truth = true_masks(world, POS, caster=caster).mask_el_deg
+    return world, frames, truth
+
+
+def _all_sky(frames: list[FrameView], ids: set[str], group: str = "") -> list[FrameView]:
+    """The frames, those named turned to all sky (over-exposure), in ``group`` when given."""
+    return [
+        dataclasses.replace(f, sky_mask=np.ones_like(f.sky_mask), view_group=group)
+        if f.frame_id in ids else f
+        for f in frames
+    ]  # fmt: skip
+
+
+def _low_deg(rec_mask: np.ndarray, truth: np.ndarray, sector: bool = False) -> float:
+    """How far the mask goes below the truth at worst (deg, > 0: unsafe); with ``sector``,
+    in the bins within 60 deg of the left perpendicular only (the wall's side, seen by
+    several frames)."""
+    d = truth - rec_mask
+    if sector:
+        az = np.arange(d.shape[1]) * 0.5
+        rel = np.abs(np.mod(az - (60.0 - 90.0) + 180.0, 360.0) - 180.0)
+        d = d[:, rel <= 60.0]
+    return float(np.max(d))
+
+
+# ---------------------------------------------------------------------- the order statistic
+
+
+def test_lowest_bounds_is_the_order_statistic_of_the_views() -> None:
+    rng = np.random.default_rng(4)
+    n_views, shape = 7, (5, 6)
+    vals = rng.uniform(0.0, 10.0, (n_views, *shape)).astype(np.float32)
+    vals[rng.uniform(size=vals.shape) < 0.4] = np.inf  # views that did not see the cell
+    for rank in (1, 2, 3):
+        fusion = LowestBounds(shape, rank)
+        for v in vals:
+            fusion.add(v, (0, shape[0], 0, shape[1]))
+        got = fusion.fused()
+        for r in range(shape[0]):
+            for c in range(shape[1]):
+                seen = np.sort(vals[:, r, c][np.isfinite(vals[:, r, c])])
+                want = np.inf if seen.size == 0 else seen[min(rank, seen.size) - 1]
+                assert got[r, c] == want
+                assert fusion.views[r, c] == seen.size
+
+
+def test_rank_one_is_the_plain_carving_bit_for_bit(scene) -> None:
+    world, frames, _ = scene
+    rec = Reconstructor(BASE)
+    profs = rec.profiles(frames)
+    hf = rec.height_field(frames, world.track, 250.0, 450.0, profs)
+    # the same frames carved one by one into scratch rasters and fused at rank 1
+    from predisat.reconstruct.carving import _camera_geometry
+
+    cams, rots = _camera_geometry(frames, world.track)
+    fusion = LowestBounds(hf.shape, 1)
+    plain = np.full(hf.shape, np.inf, np.float32)
+    for prof, cam, rot in zip(profs, cams, rots, strict=True):
+        scratch = np.full(hf.shape, np.inf, np.float32)
+        carve_profile(hf, scratch, prof, cam, rot, BASE.carve_range_m)
+        carve_profile(hf, plain, prof, cam, rot, BASE.carve_range_m)
+        fusion.add(scratch, carve_box(hf, cam, BASE.carve_range_m))
+    np.testing.assert_array_equal(fusion.fused(), plain)
+
+
+# ---------------------------------------------------------------------- clauses
+
+
+def test_one_false_sky_frame_carves_the_wall_with_min_but_not_with_rank_two(scene) -> None:
+    """Clause 1: a single wrong view per cell cannot lower it below the truth at rank 2."""
+    world, frames, truth = scene
+    bad = _all_sky(frames, {"350l"})
+    clean = Reconstructor(BASE).run(frames, POS, world.track).mask_el_deg
+    assert _low_deg(clean, truth) <= 0.1
+    low_min = _low_deg(Reconstructor(BASE).run(bad, POS, world.track).mask_el_deg, truth)
+    assert low_min > 5.0  # the fault bites the plain carving
+    low_rob = _low_deg(Reconstructor(ROBUST).run(bad, POS, world.track).mask_el_deg, truth)
+    assert low_rob <= 0.1
+
+
+def test_a_fault_shared_by_grouped_frames_counts_once(scene) -> None:
+    """Clause 2: frames that may share a fault (one lens, one pass) are one view if grouped;
+    two ungrouped wrong frames are two wrong views, more than rank 2 tolerates. Checked where
+    other views see the scene too (within 60 deg of the perpendicular: along the track, at
+    the edge of the view, the far field is seen by the position's own frame alone)."""
+    world, frames, truth = scene
+    ids = {"340l", "350l"}
+    ungrouped = _all_sky(frames, ids)
+    grouped = _all_sky(frames, ids, group="left lens, drop")
+
+    def low(params: ReconstructionParams, fr: list[FrameView]) -> float:
+        return _low_deg(Reconstructor(params).run(fr, POS, world.track).mask_el_deg, truth, True)
+
+    assert low(ROBUST, ungrouped) > 5.0
+    assert low(ROBUST, grouped) <= 0.1
+    # rank 3 tolerates two wrong views without grouping
+    assert low(dataclasses.replace(BASE, fusion_rank=3), ungrouped) <= 0.1
+
+
+def test_a_fault_every_view_shares_is_not_caught(scene) -> None:
+    """What does not stay safe: false sky consistent across all views (glass mirroring the
+    sky is seen as sky from every frame) lowers the wall at any rank."""
+    world, frames, truth = scene
+    # every left frame sees the wall 12 m lower than it is (its top 12 m labelled sky): the
+    # masks of an 18 m wall, ray cast in a second scene
+    low_world = World.build(
+        world.track,
+        WorldSpec((Stretch("rock_walls", 100.0, 600.0, "left", {**WALL, "height_m": 18.0}),),
+                  False, False),
+        seed=0,
+    )  # fmt: skip
+    caster = make_caster(low_world, "open3d", lband_only=True)
+    mounts = {"left": Mount("left", Mount.default("left").yaw_deg,
+                            Mount.default("left").pitch_deg, 0.0, (0.0, 0.0, 0.0))}  # fmt: skip
+    low_left = ideal_frames(low_world, np.arange(150.0, 551.0, 10.0), FISHEYE, mounts,
+                            caster=caster)  # fmt: skip
+    by_id = {f.frame_id: f for f in low_left}
+    faulty = [by_id.get(f.frame_id, f) if f.mount.side == "left" else f for f in frames]
+    for params in (BASE, ROBUST, dataclasses.replace(BASE, fusion_rank=3)):
+        rec = Reconstructor(params).run(faulty, POS, world.track)
+        assert _low_deg(rec.mask_el_deg, truth) > 2.0
+
+
+def test_a_whole_frame_failure_is_a_suspect_frame_and_a_clean_survey_has_none(scene) -> None:
+    """Clause 3: a frame whose sky contradicts both neighbours of its camera is reported and
+    left out; with the check the plain carving is safe again."""
+    world, frames, truth = scene
+    params = dataclasses.replace(BASE, suspect_share=0.25)
+    rec = Reconstructor(params)
+    assert suspect_frames(frames, rec.profiles(frames), params) == {}
+    bad = _all_sky(frames, {"350l"})
+    found = suspect_frames(bad, rec.profiles(bad), params)
+    assert [bad[i].frame_id for i in found] == ["350l"]
+    assert "340l and 360l" in next(iter(found.values()))
+    out = rec.run(bad, POS, world.track)
+    assert [fid for fid, _ in out.suspect_frames] == ["350l"]
+    assert _low_deg(out.mask_el_deg, truth) <= 0.1
+
+
+def test_suspect_frames_are_judged_the_same_in_every_window(scene) -> None:
+    world, frames, _ = scene
+    params = dataclasses.replace(BASE, fusion_rank=2, suspect_share=0.25)
+    bad = _all_sky(frames, {"350l", "200r"})
+    rec = Reconstructor(params)
+    whole = rec.run(bad, np.array([340.0, 350.0, 360.0]), world.track)
+    part = rec.run(bad, np.array([350.0]), world.track)
+    np.testing.assert_array_equal(whole.mask_el_deg[1], part.mask_el_deg[0])
+
+
+@pytest.mark.parametrize("field,value", [("fusion_rank", 0), ("suspect_share", 0.0),
+                                         ("suspect_share", 1.5), ("suspect_tol_deg", 0.0)])
+def test_params_reject_bad_fusion_settings(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        dataclasses.replace(BASE, **{field: value})
