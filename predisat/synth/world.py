@@ -126,6 +126,7 @@ class WorldOptions(TypedDict, total=False):
     hills: bool
     hill_height_m: float
     terrain_margin_m: float
+    dem_files: tuple[str, ...]
 
 
 _MIXED_LENGTHS_M = {
@@ -155,6 +156,12 @@ class WorldSpec:
         Typical height of the distant hills above the track.
     terrain_margin_m : float
         How far the ground extends beyond the track, metres.
+    dem_files : tuple of str
+        Terrain mode: elevation tiles (SRTM ``.hgt`` or GeoTIFF, :class:`predisat.terrain.Dem`)
+        that replace the hills beyond 400 m of the track (blended from 150 m), shifted so that
+        the DEM meets the track's heights (the median difference along it: the geoid, or a
+        track file without heights). The tiles must cover the track; give a
+        ``terrain_margin_m`` of several km so that the far terrain is in the world.
     """
 
     stretches: tuple[Stretch, ...]
@@ -162,6 +169,7 @@ class WorldSpec:
     hills: bool = True
     hill_height_m: float = 70.0
     terrain_margin_m: float = 1500.0
+    dem_files: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.stretches:
@@ -169,6 +177,7 @@ class WorldSpec:
                 "a WorldSpec needs at least one stretch (e.g. Stretch('open', 0, 500))"
             )
         object.__setattr__(self, "stretches", tuple(self.stretches))
+        object.__setattr__(self, "dem_files", tuple(str(f) for f in self.dem_files))
 
     @property
     def extent_m(self) -> tuple[float, float]:
@@ -203,6 +212,7 @@ class WorldSpec:
             "hills": self.hills,
             "hill_height_m": self.hill_height_m,
             "terrain_margin_m": self.terrain_margin_m,
+            **({"dem_files": list(self.dem_files)} if self.dem_files else {}),
         }
 
     @classmethod
@@ -210,7 +220,13 @@ class WorldSpec:
         """Spec from a dict such as a YAML scenery recipe (see ``docs/synthetic-world.md``)."""
         if "stretches" not in d:
             raise ValueError("scenery recipe needs a 'stretches' list of {kind, start_m, end_m}")
-        kw = {k: d[k] for k in ("catenary", "hills", "hill_height_m", "terrain_margin_m") if k in d}
+        keys = ("catenary", "hills", "hill_height_m", "terrain_margin_m")
+        kw = {k: d[k] for k in keys if k in d}
+        if "dem_files" in d:
+            files = d["dem_files"]
+            if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+                raise ValueError("scenery recipe: 'dem_files' must be a list of tile paths")
+            kw["dem_files"] = tuple(files)
         return cls.from_stretches(d["stretches"], **kw)
 
     @classmethod
@@ -440,7 +456,9 @@ def _add_terrain(
     lat, lon, _ = frame.to_geodetic(np.stack([gx, gy, np.zeros_like(gx)], -1))
     dist, idx = cKDTree(xy).query(np.stack([gx.ravel(), gy.ravel()], -1))
     h = corridor.h_m[idx].reshape(gx.shape) - 0.5
-    if spec.hills:
+    if spec.dem_files:
+        h = _dem_ground(h, lat, lon, dist.reshape(gx.shape), corridor, frame, spec.dem_files)
+    elif spec.hills:
         ramp = np.clip((dist.reshape(gx.shape) - 150.0) / 1000.0, 0.0, 1.0)
         noise = np.zeros_like(gx)
         for _ in range(5):  # a few long random ripples
@@ -456,3 +474,29 @@ def _add_terrain(
     )
     far = dist[faces].max(1) > 300.0
     mb.add(verts, faces, np.where(far, MATERIAL_IDS["hills"], MATERIAL_IDS["grass"]))
+
+
+def _dem_ground(
+    near_h: NDArray,
+    lat: NDArray,
+    lon: NDArray,
+    dist_m: NDArray,
+    corridor: Corridor,
+    frame: LocalFrame,
+    dem_files: Sequence[str],
+) -> NDArray:
+    """The DEM's heights beyond 400 m of the track, the corridor's flat ground within 150 m,
+    blended between (smoothstep); the DEM shifted onto the track's height datum."""
+    from predisat.terrain import Dem
+
+    dem = Dem.from_files(list(dem_files), vertical_error_m=0.0)
+    t_lat, t_lon, _ = frame.to_geodetic(corridor.point_m)
+    at_track = dem.height_at(t_lat, t_lon)
+    if not np.isfinite(at_track).any():
+        raise ValueError(f"the DEM ({dem.source}) does not cover the track: give tiles "
+                         f"around {float(np.mean(t_lat)):.3f} N {float(np.mean(t_lon)):.3f} E")
+    offset = float(np.nanmedian(corridor.h_m - at_track))
+    far = dem.height_at(lat, lon) + offset
+    w = np.clip((dist_m - 150.0) / 250.0, 0.0, 1.0)
+    w = w * w * (3 - 2 * w)
+    return np.where(np.isfinite(far), (1 - w) * near_h + w * far, near_h)

@@ -13,6 +13,7 @@ from predisat.geodesy import WGS84
 from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.scenery import Corridor, extrude
 from predisat.synth.world import STRETCH_KINDS, Stretch, World, WorldSpec
+from predisat.terrain import DemError
 from predisat.track.map import TrackMap
 
 LAT0, LON0, H0 = 50.55, 4.70, 150.0
@@ -267,3 +268,37 @@ def test_save_and_load(tmp_path, mixed_world: World) -> None:
     with pytest.raises(ValueError, match="frame differs"):
         World.load(path, track=straight_track(800.0, azimuth_deg=10.0).__class__.from_latlon(
             [LAT0 + 0.01, LAT0 + 0.02], [LON0, LON0]))  # fmt: skip
+
+
+def test_terrain_mode_lays_the_dem_beyond_the_corridor(tmp_path) -> None:
+    from tests.predisat.terrain._dem import surface_m, write_synthetic_dem
+
+    tif = write_synthetic_dem(tmp_path / "dem.tif")
+    csv = tmp_path / "track.csv"
+    # 400 m east-west across the plain at 100 m, the rails 2 m above it (the track's datum)
+    csv.write_text("lat_deg,lon_deg,h_m\n44.990,5.990,102\n44.990,5.995,102\n44.990,6.000,102\n")
+    track = TrackMap.from_csv(csv)
+    spec = WorldSpec((Stretch("open", 0.0, 300.0),), catenary=False, terrain_margin_m=4000.0,
+                     dem_files=(str(tif),))  # fmt: skip
+    assert WorldSpec.from_dict(spec.to_dict()) == spec
+    world = World.build(track, spec)
+    ground = np.isin(world.face_material, [material_id("grass"), material_id("hills")])
+    lat, lon, h = world.frame.to_geodetic(world.vertices_m[np.unique(world.faces[ground])])
+    s_lat, s_lon, _ = track.position_at(np.linspace(0.0, 400.0, 50))  # the corridor: 0-400 m
+    d_m = np.min(WGS84.inv(np.repeat(lon[:, None], 50, 1), np.repeat(lat[:, None], 50, 1),
+                           np.broadcast_to(s_lon, (lon.size, 50)),
+                           np.broadcast_to(s_lat, (lon.size, 50)))[2], axis=1)  # fmt: skip
+    on_dem = (lat > 44.951) & (lat < 45.049) & (lon > 5.951) & (lon < 6.149)
+    far = (d_m > 600.0) & on_dem  # on the DEM, off the corridor
+    assert far.sum() > 50
+    # the analytic surface the tile was made from, shifted by the track's 2 m over the plain;
+    # 3" bilinear against the formula: within 15 m on the hill's flanks
+    np.testing.assert_allclose(h[far], surface_m(lat[far], lon[far]) + 2.0, atol=15.0)
+    assert h[far].max() > 500.0  # the plateau's rise is in the world, not a flat plain
+    near = d_m < 100.0  # the corridor keeps its flat ground, 0.5 m under the rails
+    assert np.all(np.abs(h[near] - 101.5) < 1.0)
+    off = (d_m > 600.0) & ((lon < 5.949) | (lat < 44.949))  # off the tile: flat ground goes on
+    assert off.any() and np.all(np.abs(h[off] - 101.5) < 1.0)
+    bad = WorldSpec((Stretch("open", 0.0, 300.0),), dem_files=(str(tmp_path / "none.hgt"),))
+    with pytest.raises(DemError, match=r"none\.hgt"):
+        World.build(track, bad)
