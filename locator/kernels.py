@@ -210,37 +210,16 @@ def pair_kernel(
     fa = np.empty(cap)
     fb = np.empty(cap)
     n_br = 0
-    prev = np.empty(3)
-    cur = np.empty(3)
     for q in range(p):
-        iq, jq = pi[q], pj[q]
-        band = k_sigma * sk[q]
-        m_ = 0.0
-        for g in range(g_n):
-            diff = rng[iq, g] - rng[jq, g]
-            for lv in range(3):
-                cur[lv] = diff - target[q, lv]
-            v = np.abs(cur[0])
-            if g == 0:
-                m_ = v
-                first_in[q] = v <= band
-            else:
-                if v < m_ or np.isnan(v):  # np.min: NaN propagates
-                    m_ = v
-                for lv in range(3):
-                    if (prev[lv] < 0) != (cur[lv] < 0):
-                        if n_br == cap:
-                            cap *= 2
-                            bq, bl, bg = _grow(bq, cap), _grow(bl, cap), _grow(bg, cap)
-                            fa, fb = _grow(fa, cap), _grow(fb, cap)
-                        bq[n_br], bl[n_br], bg[n_br] = q, lv, g - 1
-                        fa[n_br], fb[n_br] = prev[lv], cur[lv]
-                        n_br += 1
-            if g == g_n - 1:
-                last_in[q] = v <= band
-            for lv in range(3):
-                prev[lv] = cur[lv]
-        misfit[q] = m_
+        while True:  # grow the bracket arrays outside the hot loop (_scan_pair) when full
+            n_new = _scan_pair(rng, pi[q], pj[q], target, k_sigma * sk[q], q, bq, bl, bg, fa,
+                               fb, n_br, misfit, first_in, last_in)  # fmt: skip
+            if n_new >= 0:
+                n_br = n_new
+                break
+            cap *= 2
+            bq, bl, bg = _grow(bq, cap), _grow(bl, cap), _grow(bg, cap)
+            fa, fb = _grow(fa, cap), _grow(fb, cap)
     # numpy's nonzero order (grid, pair, level): the order ties between roots are broken in
     order = np.argsort(bg[:n_br] * (3 * p) + bq[:n_br] * 3 + bl[:n_br], kind="mergesort")
     bq, bl, bg = bq[:n_br][order], bl[:n_br][order], bg[:n_br][order]
@@ -371,6 +350,45 @@ def pair_kernel(
         if n_roots[q] > 0:
             misfit[q] = 0.0
     return k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad
+
+
+@njit(**_OPTS)
+def _scan_pair(
+    rng: NDArray, iq: int, jq: int, target: NDArray, band: float, q: int, bq: NDArray,
+    bl: NDArray, bg: NDArray, fa: NDArray, fb: NDArray, n_br: int, misfit: NDArray,
+    first_in: NDArray, last_in: NDArray,
+) -> int:  # fmt: skip
+    """One pair's ``f`` on the grid: its brackets appended from ``n_br`` (the new count, -1
+    when the arrays are full), smallest ``|f|`` of level 0, the window's ends in the band."""
+    g_n = rng.shape[1]
+    cap = bq.shape[0]
+    t0, t1, t2 = target[q, 0], target[q, 1], target[q, 2]
+    p0 = p1 = p2 = 0.0
+    m_ = 0.0
+    for g in range(g_n):
+        diff = rng[iq, g] - rng[jq, g]
+        c0, c1, c2 = diff - t0, diff - t1, diff - t2
+        v = np.abs(c0)
+        if g == 0:
+            m_ = v
+            first_in[q] = v <= band
+        else:
+            if v < m_ or np.isnan(v):  # np.min: NaN propagates
+                m_ = v
+            for lv in range(3):
+                pv = p0 if lv == 0 else (p1 if lv == 1 else p2)
+                cv = c0 if lv == 0 else (c1 if lv == 1 else c2)
+                if (pv < 0) != (cv < 0):
+                    if n_br == cap:
+                        return -1
+                    bq[n_br], bl[n_br], bg[n_br] = q, lv, g - 1
+                    fa[n_br], fb[n_br] = pv, cv
+                    n_br += 1
+        if g == g_n - 1:
+            last_in[q] = v <= band
+        p0, p1, p2 = c0, c1, c2
+    misfit[q] = m_
+    return n_br
 
 
 @njit(**_OPTS)
