@@ -555,3 +555,129 @@ def wls_kernel(
             nres[k] = res[k] / np.sqrt(max(qr, 0.0))
         tmp[k] = w[k] * res[k] ** 2
     return s, b, cov, res, nres, pairwise_sum(tmp), it, converged, False
+
+
+# ---------------------------------------------------------------------- pair planning, union
+
+
+@njit(**_OPTS)
+def along_track_kernel(
+    x: NDArray, dx: NDArray, length: float, s: float, sat: NDArray
+) -> NDArray:
+    """:func:`locator.intervals.along_track_g`: ``(d @ t) / |d|``, ``d = sat - x(s)``."""
+    xs = np.empty(3)
+    tt = np.empty(3)
+    _pos_scalar(x, dx, length, s, xs)
+    _tangent(x, dx, length, s, tt)
+    out = np.empty(sat.shape[0])
+    for k in range(sat.shape[0]):
+        d0, d1, d2 = sat[k, 0] - xs[0], sat[k, 1] - xs[1], sat[k, 2] - xs[2]
+        out[k] = dot3(d0, d1, d2, tt[0], tt[1], tt[2]) / _norm3(d0, d1, d2)
+    return out
+
+
+@njit(**_OPTS)
+def _argmin(v: NDArray) -> int:
+    """``np.argmin``: the first minimum, the first NaN if any."""
+    best = 0
+    for k in range(v.shape[0]):
+        if np.isnan(v[k]):
+            return k
+        if v[k] < v[best]:
+            best = k
+    return best
+
+
+@njit(**_OPTS)
+def three_pairs_kernel(
+    g: NDArray, sig: NDArray, k_sigma: float, pool_size: int, pi: NDArray, pj: NDArray,
+    sets: NDArray,
+) -> NDArray:  # fmt: skip
+    """:func:`predisat.availability.interval.three_independent_pairs` of one epoch whose
+    satellites are all trusted (``m >= 6``), shape (3, 2); ``pi, pj, sets``: its matching table
+    for the pool size ``min(pool_size, m)``."""
+    m = g.shape[0]
+    p = min(pool_size, m)
+    pool = np.arange(m)
+    if m > p:
+        s0 = sig[0] + 0.0
+        for k in range(1, m):
+            v = sig[k] + 0.0
+            if v < s0 or np.isnan(v):
+                s0 = v
+        rank_lo = np.empty(m)
+        rank_hi = np.empty(m)
+        for k in range(m):
+            spread = np.sqrt(sig[k] * sig[k] + s0 * s0)
+            rank_lo[k] = spread / (1.0 - g[k]) + 0.0
+            rank_hi[k] = spread / (1.0 + g[k]) + 0.0
+        picked = np.empty(p, np.int64)
+        n_lo = p // 2
+        for c in range(p):
+            k = _argmin(rank_lo) if c < n_lo else _argmin(rank_hi)
+            picked[c] = k
+            rank_hi[k] = np.inf
+            if c < n_lo:
+                rank_lo[k] = np.inf
+        pool = np.sort(picked)
+    n_pairs = pi.shape[0]
+    h = np.empty(n_pairs)
+    for q in range(n_pairs):
+        a, b = pool[pi[q]], pool[pj[q]]
+        dg = np.abs(g[a] - g[b])
+        sk = np.sqrt(sig[a] ** 2 + sig[b] ** 2)
+        h[q] = k_sigma * sk / dg if dg > 0 else np.inf
+    n_sets = sets.shape[0]
+    worst = np.empty(n_sets)
+    for t in range(n_sets):
+        h0, h1, h2 = h[sets[t, 0]], h[sets[t, 1]], h[sets[t, 2]]
+        if np.isnan(h0) or np.isnan(h1) or np.isnan(h2):
+            worst[t] = np.nan
+        else:
+            worst[t] = max(h0, max(h1, h2))
+    w_min = worst[_argmin(worst)]
+    total = np.empty(n_sets)
+    for t in range(n_sets):
+        if worst[t] == w_min:
+            total[t] = 0.0 + h[sets[t, 0]] + h[sets[t, 1]] + h[sets[t, 2]]
+        else:
+            total[t] = np.inf
+    best = _argmin(total)
+    out = np.empty((3, 2), np.int64)
+    for c in range(3):
+        out[c, 0] = pool[pi[sets[best, c]]]
+        out[c, 1] = pool[pj[sets[best, c]]]
+    return out
+
+
+@njit(**_OPTS)
+def union_kernel(
+    lo: NDArray, hi: NDArray, root: NDArray, slope: NDArray, sk: NDArray
+) -> tuple[float, float, float, bool]:
+    """The arithmetic of :func:`locator.intervals.union_interval` (no NaN bound):
+    ``lo, hi, estimate, consistent``."""
+    p = lo.shape[0]
+    w = np.empty(p)
+    wr = np.empty(p)
+    lo_min, lo_max, hi_min, hi_max = lo[0], lo[0], hi[0], hi[0]
+    for q in range(p):
+        lo_min, lo_max = min(lo_min, lo[q]), max(lo_max, lo[q])
+        hi_min, hi_max = min(hi_min, hi[q]), max(hi_max, hi[q])
+        if np.isfinite(root[q]):
+            sl = slope[q]
+            if np.isnan(sl):
+                sl = 0.0
+            elif np.isinf(sl):
+                sl = np.finfo(np.float64).max if sl > 0 else -np.finfo(np.float64).max
+            w[q] = (sl / sk[q]) ** 2
+        else:
+            w[q] = 0.0
+        r = root[q]
+        if np.isnan(r):
+            r = 0.0
+        elif np.isinf(r):
+            r = np.finfo(np.float64).max if r > 0 else -np.finfo(np.float64).max
+        wr[q] = w[q] * r
+    sw = pairwise_sum(w)
+    est = pairwise_sum(wr) / pairwise_sum(w) if sw > 0 else np.nan
+    return lo_min, hi_max, est, lo_max <= hi_min
