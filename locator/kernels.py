@@ -15,10 +15,12 @@ test_locator_reference.py`` pins this on frozen outputs of the numpy code):
   included (:func:`fma`): ``(n, 3) @ (3,)`` (:func:`dot3`), ``(2, n) @ (n, 2)`` and
   ``(2, n) @ (n,)`` (:func:`_normal_equations`), the 2 x 2 ``solve`` and ``inv`` (LU with
   partial pivoting, :func:`_lu2`). These were found by comparing with numpy on random inputs
-  (``tests/locator/test_kernels.py`` keeps that comparison); unlike a BLAS call, whose kernel
-  depends on the CPU, the kernels give the same bits on every machine.
+  on the machine the reference was made on (AMD EPYC, OpenBLAS 0.3.31 as numpy 2.4 ships it);
+  unlike a BLAS call, whose kernel depends on the CPU, the kernels give the same bits on
+  every machine.
 
-Functions are private to the locator (no ``__all__`` entries beyond what the tests use).
+The trigonometry of the run (directions, the heading check) stays numpy's: its SIMD sin/cos
+are not libm's, so a compiled copy would not give the same bits.
 """
 
 from __future__ import annotations
@@ -29,16 +31,25 @@ from numba import njit, types
 from numba.extending import intrinsic
 from numpy.typing import NDArray
 
-__all__ = ["dot3", "fma", "pair_kernel", "pairwise_sum", "wls_kernel"]
+__all__ = [
+    "along_track_kernel",
+    "dot3",
+    "fma",
+    "pair_kernel",
+    "pairwise_sum",
+    "three_pairs_kernel",
+    "union_kernel",
+    "wls_kernel",
+]
 
-_OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 @intrinsic
-def _fma_intrinsic(typingctx, a, b, c):  # type: ignore[no-untyped-def]
+def _fma_intrinsic(typingctx: object, a: object, b: object, c: object) -> tuple[object, object]:
+    """The LLVM ``fma`` intrinsic (numba's typing context passes ``typingctx``)."""
     sig = types.float64(types.float64, types.float64, types.float64)
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context: object, builder: ir.IRBuilder, signature: object, args: list) -> object:
         f64 = ir.DoubleType()
         fnty = ir.FunctionType(f64, [f64, f64, f64])
         fn = builder.module.declare_intrinsic("llvm.fma", [f64], fnty)
@@ -47,13 +58,13 @@ def _fma_intrinsic(typingctx, a, b, c):  # type: ignore[no-untyped-def]
     return sig, codegen
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fma(a: float, b: float, c: float) -> float:
     """``a * b + c`` rounded once (IEEE fused multiply-add)."""
-    return _fma_intrinsic(a, b, c)
+    return _fma_intrinsic(a, b, c)  # type: ignore[call-arg]  # the typing context is implicit
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def pairwise_sum(a: NDArray) -> float:
     """``np.sum`` of a contiguous float64 vector, bit for bit (numpy's pairwise summation)."""
     n = a.shape[0]
@@ -79,13 +90,13 @@ def pairwise_sum(a: NDArray) -> float:
     return pairwise_sum(a[:n2]) + pairwise_sum(a[n2:])
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def dot3(d0: float, d1: float, d2: float, t0: float, t1: float, t2: float) -> float:
     """A row of numpy's ``(n, 3) @ (3,)`` (OpenBLAS ``dgemv_t``)."""
     return fma(d2, t2, fma(d0, t0, d1 * t1))
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _norm3(x: float, y: float, z: float) -> float:
     return np.sqrt((x * x + y * y) + z * z)
 
@@ -94,14 +105,14 @@ def _norm3(x: float, y: float, z: float) -> float:
 # AntennaPath's cubic Hermite table (step 1 m, see locator.sathia): ``x``, ``dx`` (n_tab, 3)
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cell(s: float, n_tab: int, length: float) -> tuple[int, float]:
     c = min(max(s, 0.0), length)
     i = min(int(c / 1.0), n_tab - 2)
     return i, (c - float(i)) / 1.0
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pos_vec(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> None:
     """``AntennaPath.ecef_at`` of an array (its vectorised formula) at one chainage."""
     i, u = _cell(s, x.shape[0], length)
@@ -115,7 +126,7 @@ def _pos_vec(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> 
         out[c] = h00 * x[i, c] + h10 * dx[i, c] + h01 * x[i + 1, c] + h11 * dx[i + 1, c]
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pos_scalar(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> None:
     """``AntennaPath.ecef_at`` of a Python float (its scalar formula)."""
     k, v = _cell(s, x.shape[0], length)
@@ -129,7 +140,7 @@ def _pos_scalar(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) 
         out[c] = a * x[k, c] + b * dx[k, c] + c_ * x[k + 1, c] + d * dx[k + 1, c]
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _tangent(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> None:
     """``AntennaPath.tangent_ecef_at`` at one chainage (unit vector)."""
     i, u = _cell(s, x.shape[0], length)
@@ -147,14 +158,14 @@ def _tangent(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> 
 # ---------------------------------------------------------------------- SATHIA pairs
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _range_diff(xs: NDArray, sat: NDArray, i: int, j: int) -> float:
     ri = _norm3(xs[0] - sat[i, 0], xs[1] - sat[i, 1], xs[2] - sat[i, 2])
     rj = _norm3(xs[0] - sat[j, 0], xs[1] - sat[j, 1], xs[2] - sat[j, 2])
     return ri - rj
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _median(v: NDArray) -> float:
     if np.isnan(v).any():
         return np.nan
@@ -165,12 +176,12 @@ def _median(v: NDArray) -> float:
     return (0.0 + s[n // 2 - 1] + s[n // 2]) / 2.0
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def pair_kernel(
     x: NDArray, dx: NDArray, length: float, a_w: float, b_w: float, grid: NDArray,
     sat: NDArray, rho: NDArray, sig: NDArray, pi: NDArray, pj: NDArray, k_sigma: float,
     prior_m: float, tol_m: float, max_iter: int,
-) -> tuple[NDArray, ...]:  # fmt: skip
+) -> tuple:  # fmt: skip
     """The arithmetic of :func:`locator.sathia.solve_pairs` (grid, brackets, Illinois, roots,
     intervals, status, slopes); returns ``k, sk, root, lo, hi, slope, n_roots, misfit,
     status`` and whether a refined chainage was not finite (the caller raises)."""
@@ -352,7 +363,7 @@ def pair_kernel(
     return k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _scan_pair(
     rng: NDArray, iq: int, jq: int, target: NDArray, band: float, q: int, bq: NDArray,
     bl: NDArray, bg: NDArray, fa: NDArray, fb: NDArray, n_br: int, misfit: NDArray,
@@ -391,14 +402,14 @@ def _scan_pair(
     return n_br
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _grow(v: NDArray, n: int) -> NDArray:
     out = np.empty(n, v.dtype)
     out[: v.shape[0]] = v
     return out
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _nanmax(a: float, b: float) -> float:
     """``np.maximum``: NaN propagates."""
     if np.isnan(a) or np.isnan(b):
@@ -406,7 +417,7 @@ def _nanmax(a: float, b: float) -> float:
     return a if a >= b else b
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _nanmin(a: float, b: float) -> float:
     """``np.minimum``: NaN propagates."""
     if np.isnan(a) or np.isnan(b):
@@ -417,7 +428,7 @@ def _nanmin(a: float, b: float) -> float:
 # ---------------------------------------------------------------------- 1-D WLS
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _lu2(m00: float, m01: float, m10: float, m11: float) -> tuple[bool, float, float, float, float]:
     """LU of a 2 x 2 matrix with partial pivoting as OpenBLAS's ``dgetrf`` computes it:
     ``(swapped, u11, u12, l21, u22)``."""
@@ -428,7 +439,7 @@ def _lu2(m00: float, m01: float, m10: float, m11: float) -> tuple[bool, float, f
     return piv, m00, m01, l21, m11 - l21 * m01
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _normal_equations(
     h0: NDArray, w: NDArray, v: NDArray, tmp: NDArray
 ) -> tuple[float, float, float, float, float, float]:
@@ -457,7 +468,7 @@ def _normal_equations(
     return n00, n01, n10, n11, r0, r1
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _design(
     x: NDArray, dx: NDArray, length: float, sat: NDArray, s: float, r: NDArray, h0: NDArray
 ) -> None:
@@ -472,7 +483,7 @@ def _design(
         h0[k] = -dot3(d0, d1, d2, tt[0], tt[1], tt[2]) / r[k]
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _clock(
     x: NDArray, dx: NDArray, length: float, sat: NDArray, rho: NDArray, w: NDArray, s: float
 ) -> float:
@@ -486,7 +497,7 @@ def _clock(
     return pairwise_sum(tmp) / pairwise_sum(w)
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def wls_kernel(
     x: NDArray, dx: NDArray, length: float, sat: NDArray, rho: NDArray, sig: NDArray,
     prior_m: float, max_iter: int, tol_m: float,
@@ -560,7 +571,7 @@ def wls_kernel(
 # ---------------------------------------------------------------------- pair planning, union
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def along_track_kernel(
     x: NDArray, dx: NDArray, length: float, s: float, sat: NDArray
 ) -> NDArray:
@@ -576,7 +587,7 @@ def along_track_kernel(
     return out
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _argmin(v: NDArray) -> int:
     """``np.argmin``: the first minimum, the first NaN if any."""
     best = 0
@@ -588,7 +599,7 @@ def _argmin(v: NDArray) -> int:
     return best
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def three_pairs_kernel(
     g: NDArray, sig: NDArray, k_sigma: float, pool_size: int, pi: NDArray, pj: NDArray,
     sets: NDArray,
@@ -650,7 +661,7 @@ def three_pairs_kernel(
     return out
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def union_kernel(
     lo: NDArray, hi: NDArray, root: NDArray, slope: NDArray, sk: NDArray
 ) -> tuple[float, float, float, bool]:
