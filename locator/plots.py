@@ -126,6 +126,9 @@ def length_histogram(epochs: pd.DataFrame, title: str = "") -> Figure:
     return fig
 
 
+STANFORD_MIN_M = 0.1
+"""Lower edge of the Stanford diagram's axes, metres (smaller errors are drawn on it)."""
+
 _STANFORD_STYLE = {
     "normal": ("#1b7837", "normal"),
     "hmi": ("#b2182b", "HMI"),
@@ -140,8 +143,9 @@ def stanford_diagram(
     """Stanford integrity diagram: absolute along-track error against the protection level.
 
     Every epoch with an estimate and a bounded interval is a point (``|error|``, the
-    half-interval toward the truth, :func:`locator.evaluate.stanford_points`): claimed epochs
-    as a 2-D histogram (log colour), epochs without a claim in grey. Regions: below the
+    half-interval toward the truth, :func:`locator.evaluate.stanford_points`) on log axes from
+    :data:`STANFORD_MIN_M`: claimed epochs as a 2-D histogram (log colour), epochs without a
+    claim in grey. Regions: below the
     diagonal the truth is inside the interval (normal when claimed, unavailable otherwise),
     above it outside (HMI when claimed, MI otherwise); with an alert limit, protection levels
     above it are unavailable. The count of each region is printed in it.
@@ -168,11 +172,10 @@ def stanford_diagram(
     ax = fig.subplots()
     finite = np.concatenate([x[drawn], y[drawn]])
     finite = finite[np.isfinite(finite) & (finite > 0)]
-    lo = max(float(finite.min()) / 1.5, 1e-3) if finite.size else 0.1
-    hi = float(finite.max()) * 1.5 if finite.size else 100.0
+    top = float(finite.max()) * 1.5 if finite.size else 100.0
     if alert_limit_m is not None:
-        hi = max(hi, 1.5 * alert_limit_m)
-    lim = (min(lo, 0.1), hi)
+        top = max(top, 1.5 * alert_limit_m)
+    lim = (STANFORD_MIN_M, max(top, 10.0 * STANFORD_MIN_M))  # smaller values drawn at the edge
     edges = np.geomspace(lim[0], lim[1], 61)
     claimed = drawn & np.isin(region, ["normal", "hmi"])
     if claimed.any():
@@ -182,8 +185,9 @@ def stanford_diagram(
                              norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)))  # fmt: skip
         fig.colorbar(mesh, ax=ax, label="claimed epochs per bin")
     other = drawn & ~claimed
-    ax.scatter(np.clip(x[other], *lim), np.clip(y[other], *lim), s=3, color="#999999",
-               alpha=0.35, lw=0, label="no safety claim", rasterized=True)  # fmt: skip
+    ax.fill_between(lim, lim, [lim[0], lim[0]], color="#b2182b", alpha=0.07, lw=0)
+    ax.scatter(np.clip(x[other], *lim), np.clip(y[other], *lim), s=9, color="#555555",
+               alpha=0.5, lw=0, label="no safety claim", rasterized=True)  # fmt: skip
     hmi = region == "hmi"
     ax.scatter(np.clip(x[hmi], *lim), np.clip(y[hmi], *lim), s=28,
                marker="x", color="#b2182b", label="HMI epochs")  # fmt: skip
