@@ -94,3 +94,36 @@ def test_reference_exercises_the_locator() -> None:
               "INCONSISTENT_PAIRS", "HEADING_FAIL", "TOO_FEW"):  # fmt: skip
         assert f in flags
     assert 0.3 < ref["claim"].mean() < 0.9
+
+
+def test_against_the_numpy_code_on_random_epochs() -> None:
+    """Beyond the frozen outputs: the numpy code itself (kept verbatim) on random epochs of
+    2-40 satellites, paths straight and curved, priors near and far, a faulty range."""
+    from locator.sathia import solve_pairs
+    from locator.wls import solve_wls
+    from tests.locator._scene import arc_path, random_sky, ranges, sky, straight_path
+    from tests.regression.reference_locator import reference_solve_pairs, reference_solve_wls
+
+    paths = [straight_path(20.0), arc_path(250.0, 200.0, lead_m=100.0)]
+    for case in range(40):
+        rng = np.random.default_rng(5000 + case)
+        path = paths[case % 2]
+        s_true = float(rng.uniform(0.0, path.length_m))
+        x = path.ecef_at(s_true)
+        n = int(rng.integers(2, 41))
+        sat = sky(x, *random_sky(rng, n, 5.0))
+        sig = rng.uniform(0.3, 8.0, n)
+        rho = ranges(sat, x, sig, rng)
+        if case % 3 == 0:
+            rho[0] += 250.0
+        prior = s_true + float(rng.normal(0.0, 200.0))
+        pairs = np.stack(np.triu_indices(n, 1), -1)[rng.random(n * (n - 1) // 2) < 0.3]
+        for new, old in (
+            (solve_wls(path, sat, rho, sig, prior_m=prior),
+             reference_solve_wls(path, sat, rho, sig, prior_m=prior)),
+            (solve_pairs(path, sat, rho, sig, pairs, prior_m=prior, window_m=600.0),
+             reference_solve_pairs(path, sat, rho, sig, pairs, prior_m=prior, window_m=600.0)),
+        ):  # fmt: skip
+            for f in new.__dataclass_fields__:
+                _assert_identical(np.asarray(getattr(new, f)), np.asarray(getattr(old, f)),
+                                  f"case {case}: {type(new).__name__}.{f}")  # fmt: skip
