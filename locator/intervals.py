@@ -105,7 +105,7 @@ def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -
     s = float(chainage_m)
     if not np.isfinite(s):
         raise ValueError("chainage_m contains NaN or infinite values")
-    _, x, dx = path._table
+    x, dx = path.hermite_table
     return along_track_kernel(x, dx, float(path.length_m), s, sat)  # compiled, bit for bit
 
 
@@ -146,7 +146,7 @@ def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2
     if sig.shape != ga.shape or not (np.isfinite(ga).all() and np.isfinite(sig).all()):
         raise ValueError(f"g and sigma_m must be finite of one shape: {ga.shape}, {sig.shape}")
     # compiled: the availability prediction's pool heuristic, bit for bit (its matching table)
-    i, j, sets = _interval._matching_table(min(_interval.POOL_SIZE, n))
+    i, j, sets = _interval.matching_table(min(_interval.POOL_SIZE, n))
     return three_pairs_kernel(np.ascontiguousarray(ga), sig, float(k_sigma),
                               _interval.POOL_SIZE, i, j, sets).astype(np.intp)  # fmt: skip
 

@@ -186,7 +186,6 @@ def pair_kernel(
     intervals, status, slopes); returns ``k, sk, root, lo, hi, slope, n_roots, misfit,
     status`` and whether a refined chainage was not finite (the caller raises)."""
     p = pi.shape[0]
-    g_n = grid.shape[0]
     k = np.empty(p)
     sk = np.empty(p)
     target = np.empty((p, 3))
@@ -196,10 +195,32 @@ def pair_kernel(
         target[q, 0] = k[q] + 0.0
         target[q, 1] = k[q] + k_sigma * sk[q]
         target[q, 2] = k[q] + -k_sigma * sk[q]
-    # ranges of the satellites in pairs at every grid point
-    n_sat = sat.shape[0]
-    used = np.zeros(n_sat, np.bool_)
+    rng = _grid_ranges(x, dx, length, grid, sat, pi, pj)
+    misfit = np.zeros(p)
+    first_in = np.zeros(p, np.bool_)
+    last_in = np.zeros(p, np.bool_)
+    bq, bl, a, b, fa, fb = _brackets(rng, grid, pi, pj, target, k_sigma, sk, misfit, first_in,
+                                     last_in)  # fmt: skip
+    s, bad = _illinois(x, dx, length, sat, pi, pj, target, bq, bl, a, b, fa, fb, tol_m,
+                       max_iter)  # fmt: skip
+    n_roots, chosen = _choose_roots(bq, bl, s, p, prior_m)
+    lo, hi, status = _bounds(bq, bl, s, chosen, n_roots, first_in, last_in, a_w, b_w, length)
+    slope = _slopes(x, dx, length, sat, pi, pj, chosen)
     for q in range(p):
+        if n_roots[q] > 0:
+            misfit[q] = 0.0
+    return k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _grid_ranges(
+    x: NDArray, dx: NDArray, length: float, grid: NDArray, sat: NDArray, pi: NDArray,
+    pj: NDArray,
+) -> NDArray:  # fmt: skip
+    """Ranges (n_sat, n_grid) of the satellites in pairs at every grid point (others unset)."""
+    n_sat, g_n = sat.shape[0], grid.shape[0]
+    used = np.zeros(n_sat, np.bool_)
+    for q in range(pi.shape[0]):
         used[pi[q]] = True
         used[pj[q]] = True
     rng = np.empty((n_sat, g_n))
@@ -209,11 +230,17 @@ def pair_kernel(
         for m in range(n_sat):
             if used[m]:
                 rng[m, g] = _norm3(xs[0] - sat[m, 0], xs[1] - sat[m, 1], xs[2] - sat[m, 2])
-    # f = range difference - target on the grid, pair by pair: its smallest |f| at level 0,
-    # whether the window's ends are in the band, and the sign changes (brackets) of each level
-    misfit = np.zeros(p)
-    first_in = np.zeros(p, np.bool_)
-    last_in = np.zeros(p, np.bool_)
+    return rng
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _brackets(
+    rng: NDArray, grid: NDArray, pi: NDArray, pj: NDArray, target: NDArray, k_sigma: float,
+    sk: NDArray, misfit: NDArray, first_in: NDArray, last_in: NDArray,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:  # fmt: skip
+    """Every sign change of ``f`` on the grid (pair, level, ends, ``f`` at the ends) in numpy's
+    ``nonzero`` order (grid, pair, level); fills ``misfit``, ``first_in``, ``last_in``."""
+    p = pi.shape[0]
     cap = max(16, 4 * p)
     bq = np.empty(cap, np.int64)
     bl = np.empty(cap, np.int64)
@@ -231,7 +258,7 @@ def pair_kernel(
             cap *= 2
             bq, bl, bg = _grow(bq, cap), _grow(bl, cap), _grow(bg, cap)
             fa, fb = _grow(fa, cap), _grow(fb, cap)
-    # numpy's nonzero order (grid, pair, level): the order ties between roots are broken in
+    # the order ties between roots are broken in
     order = np.argsort(bg[:n_br] * (3 * p) + bq[:n_br] * 3 + bl[:n_br], kind="mergesort")
     bq, bl, bg = bq[:n_br][order], bl[:n_br][order], bg[:n_br][order]
     fa, fb = fa[:n_br][order], fb[:n_br][order]
@@ -239,7 +266,19 @@ def pair_kernel(
     b = np.empty(n_br)
     for t in range(n_br):
         a[t], b[t] = grid[bg[t]], grid[bg[t] + 1]
-    # Illinois on every bracket in lockstep (the numpy code stopped when all had converged)
+    return bq, bl, a, b, fa, fb
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _illinois(
+    x: NDArray, dx: NDArray, length: float, sat: NDArray, pi: NDArray, pj: NDArray,
+    target: NDArray, bq: NDArray, bl: NDArray, a: NDArray, b: NDArray, fa: NDArray,
+    fb: NDArray, tol_m: float, max_iter: int,
+) -> tuple[NDArray, bool]:  # fmt: skip
+    """Illinois on every bracket in lockstep (the numpy code stopped when all had converged):
+    the roots, and whether a chainage was not finite. Updates ``a, b, fa, fb`` in place."""
+    n_br = a.shape[0]
+    xs = np.empty(3)
     s = a.copy()
     fs = np.empty(n_br)
     side = np.zeros(n_br, np.int8)
@@ -273,7 +312,15 @@ def pair_kernel(
             else:
                 b[t], fb[t] = s[t], fs[t]
             side[t] = 1 if left else -1
-    # one root per pair: the one closest to the consensus of the unambiguous pairs
+    return s, bad
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _choose_roots(
+    bq: NDArray, bl: NDArray, s: NDArray, p: int, prior_m: float
+) -> tuple[NDArray, NDArray]:
+    """Roots per pair and the chosen one: closest to the consensus of the unambiguous pairs."""
+    n_br = s.shape[0]
     n_roots = np.zeros(p, np.int64)
     for t in range(n_br):
         if bl[t] == 0:
@@ -297,7 +344,17 @@ def pair_kernel(
     for t in range(n_br):
         if bl[t] == 0 and np.abs(s[t] - ref) == best[bq[t]]:
             chosen[bq[t]] = s[t]
-    # intervals: nearest bound-level root each side of the chosen root; hull without a root
+    return n_roots, chosen
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _bounds(
+    bq: NDArray, bl: NDArray, s: NDArray, chosen: NDArray, n_roots: NDArray, first_in: NDArray,
+    last_in: NDArray, a_w: float, b_w: float, length: float,
+) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
+    """Pair intervals (nearest bound-level roots each side of the chosen root; the band's
+    hull without a root) and :class:`locator.sathia.PairStatus` flags."""
+    p, n_br = chosen.shape[0], s.shape[0]
     below = np.full(p, -np.inf)
     above = np.full(p, np.inf)
     hull_lo = np.full(p, np.inf)
@@ -342,7 +399,17 @@ def pair_kernel(
         if np.isinf(hi[q]) and hi[q] > 0:
             st |= 8
         status[q] = st
-    # slopes dK/ds at the chosen roots
+    return lo, hi, status
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _slopes(
+    x: NDArray, dx: NDArray, length: float, sat: NDArray, pi: NDArray, pj: NDArray,
+    chosen: NDArray,
+) -> NDArray:  # fmt: skip
+    """``dK/ds = (u_j - u_i) . t`` at the chosen roots (NaN without one)."""
+    p = chosen.shape[0]
+    xs = np.empty(3)
     slope = np.full(p, np.nan)
     tt = np.empty(3)
     for q in range(p):
@@ -358,9 +425,7 @@ def pair_kernel(
             e1 = (vj1 / nj - vi1 / ni) * tt[1]
             e2 = (vj2 / nj - vi2 / ni) * tt[2]
             slope[q] = (e0 + e1) + e2
-        if n_roots[q] > 0:
-            misfit[q] = 0.0
-    return k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad
+    return slope
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

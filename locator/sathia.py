@@ -144,6 +144,14 @@ class AntennaPath:
         n = axis * _INV_AXES2
         return axis + self.antenna_height_m * n / np.linalg.norm(n, axis=-1, keepdims=True)
 
+    @property
+    def hermite_table(self) -> tuple[NDArray, NDArray]:
+        """Positions and unit tangents (both ECEF, shape (n, 3)) every :data:`TABLE_STEP_M`
+        from chainage 0 (the last node may lie past the end, extended linearly): what
+        :meth:`ecef_at` interpolates (and ``locator.kernels`` with it)."""
+        _, x, dx = self._table
+        return x, dx
+
     def _locate_scalar(self, chainage_m: float) -> tuple[int, float]:
         if not math.isfinite(chainage_m):
             raise ValueError("chainage_m contains NaN or infinite values")
@@ -318,7 +326,7 @@ def solve_pairs(
     b = float(np.clip(prior_m + window_m, 0.0, length))
     n_step = max(int(np.ceil((b - a) / step_m)), 1)
     grid = np.linspace(a, b, n_step + 1)
-    _, x, dx = path._table
+    x, dx = path.hermite_table
     # compiled (locator.kernels): the same arithmetic as the numpy code it replaced, bit for bit
     k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad = pair_kernel(
         x, dx, float(length), a, b, grid, sat, rho, sig, np.ascontiguousarray(i, np.int64),

@@ -132,7 +132,7 @@ def solve_wls(
     if not (np.isfinite(sat).all() and np.isfinite(rho).all() and np.all(sig > 0)):
         raise ValueError("sat_ecef_m / pseudorange_m must be finite and sigma_m positive")
     length = path.length_m
-    _, x, dx = path._table
+    x, dx = path.hermite_table
     # compiled (locator.kernels): the same arithmetic as the numpy code it replaced (BLAS and
     # LAPACK calls spelled out), bit for bit
     s, b, cov, res, nres, chi2, it, converged, singular = wls_kernel(

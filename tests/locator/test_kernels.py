@@ -50,7 +50,7 @@ def test_three_pairs_kernel_is_the_prediction_rule(m: int) -> None:
             g[1] = g[0]
         sig = rng.choice([1.5, 2.0, 3.0], m) if rng.random() < 0.5 else rng.uniform(0.5, 6, m)
         want, _ = pred.three_independent_pairs(g, sig, None, 3.89)
-        i, j, sets = pred._matching_table(min(pred.POOL_SIZE, m))
+        i, j, sets = pred.matching_table(min(pred.POOL_SIZE, m))
         got = three_pairs_kernel(g, sig, 3.89, pred.POOL_SIZE, i, j, sets)
         np.testing.assert_array_equal(got, want)
 
