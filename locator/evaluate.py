@@ -14,6 +14,27 @@ An epoch's outcome, with ``truth`` the true antenna chainage:
 :func:`score_run` adds these columns to the epoch table; :func:`summarise` reduces a table to
 the figures of the issue: shares of epochs per integrity mode and with a claim, interval length
 percentiles (claimed epochs), absolute error percentiles and the HMI counts.
+
+**Stanford integrity diagram** (:func:`stanford_points`, :func:`stanford_counts`; drawn by
+:func:`locator.plots.stanford_diagram`): each epoch with an estimate and a bounded interval is
+a point ``(|error|, protection level)``. The protection level is the interval's extent from the
+estimate toward the truth (``estimate - lo`` when the truth lies below the estimate, ``hi -
+estimate`` above it: the half-interval on the error's side, the half length of a symmetric
+interval), so that the truth lies outside the interval exactly when ``|error| > protection``
+(the estimate, a weighted mean of pair roots, lies inside the interval). The regions:
+
+* **normal**: a safety claim, ``|error| <= protection`` (<= the alert limit, when one is
+  given);
+* **HMI**: a safety claim and ``|error| > protection``: the truth outside a claimed interval
+  (the ``hmi`` count of :func:`score_run`);
+* **unavailable**: no safety claim (or a protection level above the alert limit) and ``|error|
+  <= protection``: the locator said it could not vouch for the interval;
+* **MI**: no claim (or above the alert limit) and ``|error| > protection``: misleading, but
+  flagged (the ``mi`` count of :func:`score_run` without an alert limit);
+* **no interval**: no estimate or an unbounded interval (not drawn).
+
+Unlike the aviation diagram, whose alert limit separates MI (the error inside the alert limit)
+from HMI, a claimed interval here *is* the protection: any claimed miss is hazardous.
 """
 
 from __future__ import annotations
@@ -27,7 +48,18 @@ from numpy.typing import ArrayLike
 
 from predisat.availability.interval import IntervalMode
 
-__all__ = ["claim_losses", "exclusions", "score_run", "summarise"]
+__all__ = [
+    "STANFORD_REGIONS",
+    "claim_losses",
+    "exclusions",
+    "score_run",
+    "stanford_counts",
+    "stanford_points",
+    "summarise",
+]
+
+STANFORD_REGIONS = ("normal", "hmi", "unavailable", "mi", "no_interval")
+"""Regions of the Stanford diagram, in the order of :func:`stanford_counts` (module docstring)."""
 
 
 def score_run(epochs: pd.DataFrame, truth_chainage_m: ArrayLike) -> pd.DataFrame:
@@ -108,7 +140,61 @@ def summarise(scored: pd.DataFrame) -> Mapping[str, float]:
     if "inside" in scored:
         inside = scored["inside"].to_numpy(bool)
         out["inside_share"] = float(inside[claim].mean()) if claim.any() else np.nan
+    if "truth_m" in scored:
+        out.update({f"stanford_{k}": float(v) for k, v in stanford_counts(scored).items()})
     return out
+
+
+def stanford_points(scored: pd.DataFrame, alert_limit_m: float | None = None) -> pd.DataFrame:
+    """Each epoch's point and region of the Stanford diagram (module docstring).
+
+    Parameters
+    ----------
+    scored : pandas.DataFrame
+        :func:`score_run` output (``chainage_m``, ``lo_m``, ``hi_m``, ``truth_m``, ``claim``).
+    alert_limit_m : float, optional
+        Protection levels above it count as unavailable, claimed or not. Default: none.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per epoch, same index: ``abs_error_m``, ``protection_m`` (NaN without an
+        interval), ``region`` (one of :data:`STANFORD_REGIONS`).
+    """
+    if alert_limit_m is not None and not alert_limit_m > 0:
+        raise ValueError(f"alert_limit_m must be positive, got {alert_limit_m}")
+    missing = {"chainage_m", "lo_m", "hi_m", "truth_m", "claim"} - set(scored.columns)
+    if missing:
+        raise ValueError(
+            f"stanford_points needs a scored table (locator.evaluate.score_run); missing "
+            f"columns {sorted(missing)}"
+        )
+    est = scored["chainage_m"].to_numpy(float)
+    lo = scored["lo_m"].to_numpy(float)
+    hi = scored["hi_m"].to_numpy(float)
+    truth = scored["truth_m"].to_numpy(float)
+    err = est - truth  # > 0: the truth lies below the estimate, toward lo
+    ok = np.isfinite(est) & np.isfinite(lo) & np.isfinite(hi) & np.isfinite(truth)
+    pl = np.where(ok, np.where(err >= 0.0, est - lo, hi - est), np.nan)
+    ae = np.abs(err)
+    available = scored["claim"].to_numpy(bool) & ok
+    if alert_limit_m is not None:
+        available &= pl <= alert_limit_m
+    miss = ok & (ae > pl)
+    region = np.select(
+        [~ok, available & ~miss, available & miss, ~miss],
+        ["no_interval", "normal", "hmi", "unavailable"],
+        "mi",
+    )  # fmt: skip
+    return pd.DataFrame(
+        {"abs_error_m": ae, "protection_m": pl, "region": region}, index=scored.index
+    )
+
+
+def stanford_counts(scored: pd.DataFrame, alert_limit_m: float | None = None) -> dict[str, int]:
+    """Epochs per region of the Stanford diagram, in :data:`STANFORD_REGIONS` order."""
+    region = stanford_points(scored, alert_limit_m)["region"].to_numpy(str)
+    return {r: int((region == r).sum()) for r in STANFORD_REGIONS}
 
 
 # Why an epoch has no safety claim, first matching cause first: the flag bits of

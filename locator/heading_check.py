@@ -110,6 +110,7 @@ def check_heading(
     k_sigma: float = 3.0,
     tolerance_deg: float = 1.0,
     max_sigma_deg: float = 10.0,
+    rotation: ArrayLike | None = None,
 ) -> HeadingCheck:
     """Estimate heading and offset from a virtual beacon and compare with its stored heading.
 
@@ -126,6 +127,9 @@ def check_heading(
         Known height of the antenna above B1 along the vertical, metres.
     k_sigma, tolerance_deg, max_sigma_deg : float
         Decision parameters (module docstring).
+    rotation : array_like, shape (3, 3), optional
+        ``predisat.geodesy.enu_rotation`` at the beacon's geodetic position, when the caller
+        has it already (the run loop does); computed from ``beacon_ecef_m`` otherwise.
 
     Returns
     -------
@@ -137,8 +141,13 @@ def check_heading(
         raise ValueError("sat_ecef_m / pseudorange_m must be finite and sigma_m positive")
     if len(rho) < 3:
         raise ValueError(f"check_heading needs at least 3 satellites, got {len(rho)}")
-    lat, lon, _ = ecef_to_geodetic(b1)
-    rot = enu_rotation(lat, lon)
+    if rotation is None:
+        lat, lon, _ = ecef_to_geodetic(b1)
+        rot = enu_rotation(lat, lon)
+    else:
+        rot = np.asarray(rotation, float)
+        if rot.shape != (3, 3):
+            raise ValueError(f"rotation must be a (3, 3) matrix, got shape {rot.shape}")
     enu = (sat - b1) @ rot.T
     az, el, rng = enu_to_azel(enu)
     delay = rho - rng

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
 
+from locator.kernels import along_track_kernel, three_pairs_kernel, union_kernel
 from locator.sathia import AntennaPath, PairSolution
 from predisat.availability import interval as _interval
 from predisat.availability.interval import IntervalMode, interval_mode
@@ -98,11 +99,14 @@ def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -
     ``u`` is the unit vector antenna -> satellite and ``t`` the path's unit tangent; a pair's
     sensitivity is ``|g_i - g_j|`` metres of range difference per metre of chainage.
     """
-    sat = np.asarray(sat_ecef_m, float)
-    x = path.ecef_at(float(chainage_m))
-    t = path.tangent_ecef_at(float(chainage_m))
-    d = sat - x
-    return (d @ t) / np.linalg.norm(d, axis=-1)
+    sat = np.ascontiguousarray(sat_ecef_m, float)
+    if sat.ndim != 2 or sat.shape[1] != 3:
+        raise ValueError(f"sat_ecef_m must have shape (n_sat, 3), got {sat.shape}")
+    s = float(chainage_m)
+    if not np.isfinite(s):
+        raise ValueError("chainage_m contains NaN or infinite values")
+    x, dx = path.hermite_table
+    return along_track_kernel(x, dx, float(path.length_m), s, sat)  # compiled, bit for bit
 
 
 def best_pair(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2.0) -> NDArray:
@@ -138,8 +142,13 @@ def three_independent_pairs(g: ArrayLike, sigma_m: ArrayLike, k_sigma: float = 2
     n = ga.size
     if n < 6:
         raise ValueError(f"three independent pairs need at least 6 satellites, got {n}")
-    pairs, _ = _interval.three_independent_pairs(ga, np.asarray(sigma_m, float), None, k_sigma)
-    return pairs
+    sig = np.ascontiguousarray(sigma_m, float)
+    if sig.shape != ga.shape or not (np.isfinite(ga).all() and np.isfinite(sig).all()):
+        raise ValueError(f"g and sigma_m must be finite of one shape: {ga.shape}, {sig.shape}")
+    # compiled: the availability prediction's pool heuristic, bit for bit (its matching table)
+    i, j, sets = _interval.matching_table(min(_interval.POOL_SIZE, n))
+    return three_pairs_kernel(np.ascontiguousarray(ga), sig, float(k_sigma),
+                              _interval.POOL_SIZE, i, j, sets).astype(np.intp)  # fmt: skip
 
 
 def plan_pairs(
@@ -188,12 +197,13 @@ def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
         return UnionInterval(np.nan, np.nan, np.nan, IntervalMode.NONE, False, False, pairs)
     if np.isnan(pairs.lo_m).any():
         return UnionInterval(np.nan, np.nan, np.nan, mode, False, False, pairs)
-    lo = float(np.min(pairs.lo_m))
-    hi = float(np.max(pairs.hi_m))
-    root = np.isfinite(pairs.root_m)
-    w = np.where(root, (np.nan_to_num(pairs.slope) / pairs.sigma_k_m) ** 2, 0.0)
-    est = float(np.sum(w * np.nan_to_num(pairs.root_m)) / np.sum(w)) if np.sum(w) > 0 else np.nan
-    consistent = bool(np.max(pairs.lo_m) <= np.min(pairs.hi_m))
+    # compiled: min/max of the bounds, the weights (slope / sigma_K)**2 of the pairs with a
+    # root, their weighted mean (numpy's pairwise sums), bit for bit
+    lo, hi, est, consistent = union_kernel(
+        *(np.ascontiguousarray(v, float) for v in (pairs.lo_m, pairs.hi_m, pairs.root_m,
+                                                    pairs.slope, pairs.sigma_k_m))
+    )  # fmt: skip
+    consistent = bool(consistent)
     claim = (
         mode in (IntervalMode.THREE_PAIRS, IntervalMode.ALL_PAIRS)
         and bool(np.isfinite(lo) and np.isfinite(hi))

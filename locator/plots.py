@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ["interval_vs_chainage", "interval_vs_time", "length_histogram"]
+__all__ = ["interval_vs_chainage", "interval_vs_time", "length_histogram", "stanford_diagram"]
 
 LOCOPROL_TYPICAL_M = 70.0
 LOCOPROL_WORST_M = 600.0
@@ -123,4 +123,100 @@ def length_histogram(epochs: pd.DataFrame, title: str = "") -> Figure:
     ax.set_xlabel("interval length (m)")
     ax.set_ylabel("epochs")
     ax.legend(fontsize=7)
+    return fig
+
+
+STANFORD_MIN_M = 0.1
+"""Lower edge of the Stanford diagram's axes, metres (smaller errors are drawn on it)."""
+
+_STANFORD_STYLE = {
+    "normal": ("#1b7837", "normal"),
+    "hmi": ("#b2182b", "HMI"),
+    "unavailable": ("#6a6a6a", "unavailable"),
+    "mi": ("#e08214", "MI"),
+}
+
+
+def stanford_diagram(
+    scored: pd.DataFrame, title: str = "", alert_limit_m: float | None = None
+) -> Figure:
+    """Stanford integrity diagram: absolute along-track error against the protection level.
+
+    Every epoch with an estimate and a bounded interval is a point (``|error|``, the
+    half-interval toward the truth, :func:`locator.evaluate.stanford_points`) on log axes from
+    :data:`STANFORD_MIN_M`: claimed epochs as a 2-D histogram (log colour), epochs without a
+    claim in grey. Regions: below the
+    diagonal the truth is inside the interval (normal when claimed, unavailable otherwise),
+    above it outside (HMI when claimed, MI otherwise); with an alert limit, protection levels
+    above it are unavailable. The count of each region is printed in it.
+
+    Parameters
+    ----------
+    scored : pandas.DataFrame
+        :func:`locator.evaluate.score_run` output.
+    title : str
+    alert_limit_m : float, optional
+    """
+    # lazy: evaluate is light, but keep the figure module's imports to plotting
+    from matplotlib.colors import LogNorm
+
+    from locator.evaluate import stanford_counts, stanford_points
+
+    pts = stanford_points(scored, alert_limit_m)
+    counts = stanford_counts(scored, alert_limit_m)
+    region = pts["region"].to_numpy(str)
+    x = pts["abs_error_m"].to_numpy(float)
+    y = pts["protection_m"].to_numpy(float)
+    drawn = region != "no_interval"
+    fig = Figure(figsize=(6.4, 5.6), layout="constrained")
+    ax = fig.subplots()
+    finite = np.concatenate([x[drawn], y[drawn]])
+    finite = finite[np.isfinite(finite) & (finite > 0)]
+    top = float(finite.max()) * 1.5 if finite.size else 100.0
+    if alert_limit_m is not None:
+        top = max(top, 1.5 * alert_limit_m)
+    lim = (STANFORD_MIN_M, max(top, 10.0 * STANFORD_MIN_M))  # smaller values drawn at the edge
+    edges = np.geomspace(lim[0], lim[1], 61)
+    claimed = drawn & np.isin(region, ["normal", "hmi"])
+    if claimed.any():
+        cx, cy = np.clip(x[claimed], *lim), np.clip(y[claimed], *lim)
+        h, _, _ = np.histogram2d(cx, cy, bins=[edges, edges])
+        mesh = ax.pcolormesh(edges, edges, np.where(h > 0, h, np.nan).T, cmap="viridis",
+                             norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)))  # fmt: skip
+        fig.colorbar(mesh, ax=ax, label="claimed epochs per bin")
+    other = drawn & ~claimed
+    ax.fill_between(lim, lim, [lim[0], lim[0]], color="#b2182b", alpha=0.07, lw=0)
+    ax.scatter(np.clip(x[other], *lim), np.clip(y[other], *lim), s=9, color="#555555",
+               alpha=0.5, lw=0, label="no safety claim", rasterized=True)  # fmt: skip
+    hmi = region == "hmi"
+    ax.scatter(np.clip(x[hmi], *lim), np.clip(y[hmi], *lim), s=28,
+               marker="x", color="#b2182b", label="HMI epochs")  # fmt: skip
+    ax.plot(lim, lim, color="k", lw=1.0)
+    if alert_limit_m is not None:
+        ax.axhline(alert_limit_m, color="k", ls="--", lw=1.0)
+        ax.text(lim[0] * 1.2, alert_limit_m * 1.08, f"alert limit {alert_limit_m:g} m",
+                fontsize=8)  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(*lim)
+    ax.set_ylim(*lim)
+    ax.set_aspect("equal")
+    # region labels with counts: below the diagonal inside, above it outside
+    g = np.sqrt(lim[1] / lim[0])
+    spots = {"normal": (lim[0] * g**0.25, lim[1] / g**0.35),
+             "hmi": (lim[1] / g**0.35, lim[0] * g**0.25)}  # fmt: skip
+    for key, (px, py) in spots.items():
+        colour, name = _STANFORD_STYLE[key]
+        ax.text(px, py, f"{name}\n{counts[key]:,}", color=colour, fontsize=10, ha="center",
+                va="center", fontweight="bold")  # fmt: skip
+    n_all = len(region)
+    ax.text(0.98, 0.02,
+            f"no claim: unavailable {counts['unavailable']:,}, MI {counts['mi']:,}\n"
+            f"no interval {counts['no_interval']:,} of {n_all:,} epochs",
+            transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
+            color=_STANFORD_STYLE["mi"][0])  # fmt: skip
+    ax.set_xlabel("absolute along-track error |estimate - truth| (m)")
+    ax.set_ylabel("protection level: half-interval toward the truth (m)")
+    ax.set_title(title or "Stanford integrity diagram")
+    ax.legend(loc="upper left", fontsize=7)
     return fig

@@ -76,9 +76,13 @@ class RunFlag(IntFlag):
 
 def flag_names(flags: int) -> str:
     """``"NO_SAFETY_CLAIM|BLUNT"`` for a flags value ("" for 0)."""
-    names = [f.name for f in FixFlag if f.value and flags & f.value]
-    names += [f.name for f in RunFlag if flags & f.value]
-    return "|".join(n for n in names if n)
+    return "|".join(name for value, name in _FLAG_BITS if flags & value)
+
+
+# (value, name) of every named flag bit, FixFlag's then RunFlag's (iterating the enums per
+# epoch cost more than the rest of the row)
+_FLAG_BITS = tuple((int(f.value), str(f.name)) for enum in (FixFlag, RunFlag) for f in enum
+                   if f.value and f.name)  # fmt: skip
 
 
 # The odometer's confidence (over- and under-reading bounds, motion bound without one); the name
@@ -446,10 +450,12 @@ def _heading(
         return None
     beacon = path.ecef_at(b)
     lat, lon, _ = ecef_to_geodetic(beacon)
-    chord = (path.ecef_at(s) - beacon) @ enu_rotation(lat, lon).T
+    rot = enu_rotation(lat, lon)
+    chord = (path.ecef_at(s) - beacon) @ rot.T
     az, _, _ = enu_to_azel(chord)
     u = fix.used
     sigma = cfg.locator.model.error.sigma_m(el[u])
     return check_heading(
-        beacon, float(az), sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg
-    )
+        beacon, float(az), sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg,
+        rotation=rot,
+    )  # fmt: skip

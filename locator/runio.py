@@ -106,7 +106,8 @@ def read_run(folder: str | Path) -> tuple[pd.DataFrame, JsonDict]:
 
 
 def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> list[Path]:
-    """The three PNG figures of a run (relative to the truth when ``truth_m`` is present)."""
+    """The PNG figures of a run: interval against time and chainage, lengths, and, when the
+    table is scored (``truth_m`` present: relative to the truth), the Stanford diagram."""
     # lazy: matplotlib only for the figures; reading and writing run tables must not import it
     from locator import plots
 
@@ -116,6 +117,8 @@ def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> 
         "interval_chainage.png": plots.interval_vs_chainage(epochs, title),
         "interval_lengths.png": plots.length_histogram(epochs),
     }
+    if "truth_m" in epochs:
+        figs["stanford.png"] = plots.stanford_diagram(epochs, title)
     paths = []
     for name, fig in figs.items():
         buf = io.BytesIO()

@@ -39,6 +39,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from locator.kernels import pair_kernel
 from predisat.track.map import TrackMap
 
 __all__ = [
@@ -142,6 +143,14 @@ class AntennaPath:
         # within h e^2 / a (2e-9 rad at h = 2 km), far cheaper than a geodetic round trip
         n = axis * _INV_AXES2
         return axis + self.antenna_height_m * n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    @property
+    def hermite_table(self) -> tuple[NDArray, NDArray]:
+        """Positions and unit tangents (both ECEF, shape (n, 3)) every :data:`TABLE_STEP_M`
+        from chainage 0 (the last node may lie past the end, extended linearly): what
+        :meth:`ecef_at` interpolates (and ``locator.kernels`` with it)."""
+        _, x, dx = self._table
+        return x, dx
 
     def _locate_scalar(self, chainage_m: float) -> tuple[int, float]:
         if not math.isfinite(chainage_m):
@@ -312,41 +321,22 @@ def solve_pairs(
     pr = all_pairs(n) if pairs is None else np.asarray(pairs, np.intp).reshape(-1, 2)
     _check_options(pr, n, prior_m, window_m, k_sigma, step_m)
     i, j = pr[:, 0], pr[:, 1]
-    p = len(i)
     length = path.length_m
     a = float(np.clip(prior_m - window_m, 0.0, length))
     b = float(np.clip(prior_m + window_m, 0.0, length))
     n_step = max(int(np.ceil((b - a) / step_m)), 1)
     grid = np.linspace(a, b, n_step + 1)
-
-    k = rho[i] - rho[j]
-    sk = np.sqrt(sig[i] ** 2 + sig[j] ** 2)
-    # three level sets per pair: the root and the two interval bounds
-    level = np.stack([np.zeros(p), k_sigma * sk, -k_sigma * sk], axis=-1)  # (p, 3)
-    target = k[:, None] + level  # (p, 3)
-
-    rng = np.linalg.norm(path.ecef_at(grid)[:, None, :] - sat[None], axis=-1)  # (g, n)
-    diff = rng[:, i] - rng[:, j]  # (g, p)
-    f = diff[:, :, None] - target[None]  # (g, p, 3)
-    misfit = np.abs(f[:, :, 0]).min(axis=0) if p else np.zeros(0)
-
-    neg = f < 0
-    g_idx, p_idx, l_idx = np.nonzero(neg[:-1] != neg[1:])
-    roots = _refine(path, sat, i[p_idx], j[p_idx], target[p_idx, l_idx],
-                    grid[g_idx], grid[g_idx + 1], f[g_idx, p_idx, l_idx],
-                    f[g_idx + 1, p_idx, l_idx])  # fmt: skip
-
-    centre = l_idx == 0
-    n_roots = np.bincount(p_idx[centre], minlength=p)
-    chosen = _choose_roots(p_idx[centre], roots[centre], n_roots, prior_m, p)
-    band = np.abs(f[:, :, 0]) <= k_sigma * sk  # (g, p)
-    lo, hi, empty = _intervals(chosen, p_idx[~centre], roots[~centre], band, a, b, length)
-    status = _status(n_roots, empty, lo, hi)
-    slope = _slopes(path, sat, i, j, chosen)
+    x, dx = path.hermite_table
+    # compiled (locator.kernels): the same arithmetic as the numpy code it replaced, bit for bit
+    k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad = pair_kernel(
+        x, dx, float(length), a, b, grid, sat, rho, sig, np.ascontiguousarray(i, np.int64),
+        np.ascontiguousarray(j, np.int64), float(k_sigma), float(prior_m), 1e-4, 30,
+    )  # fmt: skip
+    if bad:
+        raise ValueError("chainage_m contains NaN or infinite values")
     return PairSolution(
         i=i, j=j, k_m=k, sigma_k_m=sk, k_sigma=float(k_sigma), root_m=chosen, lo_m=lo, hi_m=hi,
-        slope=slope, n_roots=n_roots, misfit_m=np.where(n_roots > 0, 0.0, misfit),
-        status=status,
+        slope=slope, n_roots=n_roots, misfit_m=misfit, status=status,
     )  # fmt: skip
 
 
@@ -383,125 +373,3 @@ def _check_options(
     if not np.isfinite(prior_m):
         raise ValueError(f"prior_m must be finite, got {prior_m}")
 
-
-def _intervals(
-    chosen: NDArray,
-    bp: NDArray,
-    bs: NDArray,
-    band: NDArray,
-    a: float,
-    b: float,
-    length: float,
-) -> tuple[NDArray, NDArray, NDArray]:
-    """Interval ``(lo, hi)`` per pair and its emptiness, from the bound-level roots.
-
-    ``bp``, ``bs``: pair and chainage of each bound-level root; ``band`` (g, p): the grid
-    points inside ``|f| <= k sigma_K``; ``[a, b]`` the window on a track of ``length``.
-    """
-    p = len(chosen)
-    # interval: nearest bound-level root on each side of the chosen root
-    below = np.full(p, -np.inf)
-    above = np.full(p, np.inf)
-    if len(bp):
-        c = chosen[bp]
-        np.maximum.at(below, bp[bs < c], bs[bs < c])
-        np.minimum.at(above, bp[bs > c], bs[bs > c])
-    # no root: the pair's set {|f| <= k sigma_K} may still meet the window (a blunt pair whose
-    # root lies outside it); keep the hull of that set, NaN when it is empty
-    none = ~np.isfinite(chosen)
-    hull_lo = np.full(p, np.inf)
-    hull_hi = np.full(p, -np.inf)
-    np.minimum.at(hull_lo, bp, bs)
-    np.maximum.at(hull_hi, bp, bs)
-    if p:
-        hull_lo = np.where(band[0], -np.inf, hull_lo)
-        hull_hi = np.where(band[-1], np.inf, hull_hi)
-    empty = none & ~(hull_lo <= hull_hi)
-    below = np.where(none, hull_lo, below)
-    above = np.where(none, hull_hi, above)
-    # the track ends bound the train; window ends inside the track do not
-    lo = np.where(np.isneginf(below) & (a <= 0.0), 0.0, below)
-    hi = np.where(np.isposinf(above) & (b >= length), length, above)
-    lo = np.where(empty, np.nan, lo)
-    hi = np.where(empty, np.nan, hi)
-    return lo, hi, empty
-
-
-def _status(n_roots: NDArray, empty: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
-    """:class:`PairStatus` flags per pair, uint8."""
-    status = np.zeros(len(n_roots), np.uint8)
-    status |= np.where(n_roots == 0, PairStatus.NO_ROOT, 0).astype(np.uint8)
-    status |= np.where(empty, PairStatus.EMPTY, 0).astype(np.uint8)
-    status |= np.where(n_roots > 1, PairStatus.MULTIPLE_ROOTS, 0).astype(np.uint8)
-    status |= np.where(np.isneginf(lo), PairStatus.UNBOUNDED_LOW, 0).astype(np.uint8)
-    status |= np.where(np.isposinf(hi), PairStatus.UNBOUNDED_HIGH, 0).astype(np.uint8)
-    return status
-
-
-def _slopes(path: AntennaPath, sat: NDArray, i: NDArray, j: NDArray, chosen: NDArray) -> NDArray:
-    """``dK/ds`` of each pair at its chosen root (NaN without a root)."""
-    has = np.isfinite(chosen)
-    slope = np.full(len(chosen), np.nan)
-    if has.any():
-        s_ok = chosen[has]
-        x = path.ecef_at(s_ok)
-        t = path.tangent_ecef_at(s_ok)
-        u_i = _unit(sat[i[has]] - x)
-        u_j = _unit(sat[j[has]] - x)
-        slope[has] = np.sum((u_j - u_i) * t, axis=-1)
-    return slope
-
-
-def _unit(v: NDArray) -> NDArray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _refine(
-    path: AntennaPath,
-    sat: NDArray,
-    i: NDArray,
-    j: NDArray,
-    target: NDArray,
-    a: NDArray,
-    b: NDArray,
-    fa: NDArray,
-    fb: NDArray,
-    *,
-    tol_m: float = 1e-4,
-    max_iter: int = 30,
-) -> NDArray:
-    """Roots of ``range_diff(s) - target`` in brackets ``[a, b]``, all at once (Illinois)."""
-    a, b, fa, fb = a.copy(), b.copy(), fa.copy(), fb.copy()
-    if a.size == 0:
-        return a
-    s = a
-    side = np.zeros(a.shape, np.int8)
-    for _ in range(max_iter):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = np.where(fb != fa, (a * fb - b * fa) / (fb - fa), 0.5 * (a + b))
-        fs = range_difference_m(path.ecef_at(s), sat[i], sat[j]) - target
-        if np.all(np.abs(fs) < tol_m):
-            break
-        left = (fs < 0) == (fa < 0)  # root in [s, b]
-        # Illinois: halve the stale end's value when the same end is kept twice
-        fb = np.where(left & (side == 1), 0.5 * fb, fb)
-        fa = np.where(~left & (side == -1), 0.5 * fa, fa)
-        a, fa = np.where(left, s, a), np.where(left, fs, fa)
-        b, fb = np.where(left, b, s), np.where(left, fb, fs)
-        side = np.where(left, 1, -1).astype(np.int8)
-    return s
-
-
-def _choose_roots(
-    pair: NDArray, root: NDArray, n_roots: NDArray, prior_m: float, p: int
-) -> NDArray:
-    """One root per pair: the one closest to the consensus of the unambiguous pairs."""
-    single = n_roots[pair] == 1
-    ref = float(np.median(root[single])) if single.any() else float(prior_m)
-    dist = np.abs(root - ref)
-    best = np.full(p, np.inf)
-    np.minimum.at(best, pair, dist)
-    pick = dist == best[pair]
-    chosen = np.full(p, np.nan)
-    chosen[pair[pick]] = root[pick]
-    return chosen

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtrc
 
+from locator.kernels import wls_kernel
 from locator.sathia import AntennaPath
 
 __all__ = ["WlsSolution", "as_observations", "solve_wls"]
@@ -130,48 +131,23 @@ def solve_wls(
         raise ValueError(f"solve_wls needs at least 2 satellites, got {n}")
     if not (np.isfinite(sat).all() and np.isfinite(rho).all() and np.all(sig > 0)):
         raise ValueError("sat_ecef_m / pseudorange_m must be finite and sigma_m positive")
-    w = 1.0 / sig**2
     length = path.length_m
-    s = float(np.clip(prior_m, 0.0, length))
-    x = path.ecef_at(s)
-    b = float(np.sum(w * (rho - np.linalg.norm(sat - x, axis=-1))) / np.sum(w))
-    converged = False
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported
-        x = path.ecef_at(s)
-        d = sat - x
-        r = np.linalg.norm(d, axis=-1)
-        h = np.stack([-(d @ path.tangent_ecef_at(s)) / r, np.ones(n)], axis=-1)
-        v = rho - r - b
-        normal = h.T @ (w[:, None] * h)
-        step = np.linalg.solve(normal, h.T @ (w * v))
-        s_new = float(np.clip(s + step[0], 0.0, length))
-        b += float(step[1])
-        ds = s_new - s
-        if s_new != s + step[0]:  # clamped: re-solve the clock at the end point
-            r_end = np.linalg.norm(sat - path.ecef_at(s_new), axis=-1)
-            b = float(np.sum(w * (rho - r_end)) / np.sum(w))
-        s = s_new
-        if abs(ds) < tol_m:
-            converged = True
-            break
-    x = path.ecef_at(s)
-    d = sat - x
-    r = np.linalg.norm(d, axis=-1)
-    h = np.stack([-(d @ path.tangent_ecef_at(s)) / r, np.ones(n)], axis=-1)
-    res = rho - r - b
-    normal = h.T @ (w[:, None] * h)
-    cov = np.linalg.inv(normal)
-    qr = 1.0 / w - np.einsum("ki,ij,kj->k", h, cov, h)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nres = np.where(qr > 1e-9 / w, res / np.sqrt(np.maximum(qr, 0.0)), np.nan)
+    x, dx = path.hermite_table
+    # compiled (locator.kernels): the same arithmetic as the numpy code it replaced (BLAS and
+    # LAPACK calls spelled out), bit for bit
+    s, b, cov, res, nres, chi2, it, converged, singular = wls_kernel(
+        x, dx, float(length), np.ascontiguousarray(sat), np.ascontiguousarray(rho),
+        np.ascontiguousarray(sig), float(prior_m), int(max_iter), float(tol_m),
+    )  # fmt: skip
+    if singular:
+        raise np.linalg.LinAlgError("Singular matrix")
     return WlsSolution(
         chainage_m=s,
         clock_m=b,
         covariance=cov,
         residual_m=res,
         normalised_residual=nres,
-        chi2=float(np.sum(w * res**2)),
+        chi2=float(chi2),
         dof=n - 2,
         iterations=it,
         converged=converged,

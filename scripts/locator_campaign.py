@@ -19,7 +19,9 @@ repeats the masks rule with the source's ``k = 2``.
 
 Per configuration: epochs, share of epochs per integrity mode, share with a safety claim,
 interval length (median, 95th percentile, max) on claimed epochs, absolute error, and HMI
-(truth outside a claimed interval), also before the heading/odometry checks (``hmi_fix``).
+(truth outside a claimed interval), also before the heading/odometry checks (``hmi_fix``), the
+epochs in each region of the Stanford diagram (``stanford_*``), and that diagram per
+configuration (``stanford_<config>.png``, :func:`locator.plots.stanford_diagram`).
 
 Jobs are written one Parquet file each under ``--out``; a rerun skips finished jobs.
 
@@ -347,7 +349,20 @@ def main(argv: list[str] | None = None) -> int:
     )
     table.to_csv(out / "summary.csv")
     figure(frames, table, [out / "campaign.png", *([args.figure] if args.figure else [])])
+    stanford(frames, out)
     return 0
+
+
+def stanford(frames: pd.DataFrame, out: Path) -> list[Path]:
+    """One Stanford integrity diagram per configuration, ``out/stanford_<config>.png``."""
+    from locator.plots import stanford_diagram
+
+    paths = []
+    for cfg, g in frames.groupby("config", sort=False):
+        fig = stanford_diagram(g, title=f"Stanford diagram, rule {cfg} ({len(g):,} epochs)")
+        paths.append(out / f"stanford_{cfg}.png")
+        fig.savefig(paths[-1], dpi=110)
+    return paths
 
 
 if __name__ == "__main__":

@@ -54,6 +54,7 @@ __all__ = [
     "along_track_components",
     "best_pair",
     "interval_mode",
+    "matching_table",
     "pair_half_length_m",
     "pair_pool",
     "predicted_interval",
@@ -236,6 +237,16 @@ def _pool(g: NDArray, s: NDArray, ok: NDArray, p: int) -> NDArray:
         if c < n_lo:
             lo_flat[flat + k] = np.inf
     return out
+
+
+def matching_table(pool_size: int) -> tuple[NDArray, NDArray, NDArray]:
+    """The pairs ``(i, j)`` of a pool of ``pool_size`` satellites (``np.triu_indices`` order)
+    and every set of three disjoint pairs, shape (n_sets, 3), as pair indices, in the order in
+    which :func:`three_independent_pairs` breaks ties (the locator's compiled copy of the
+    rule uses it)."""
+    if pool_size < 6:
+        raise ValueError(f"three disjoint pairs need a pool of at least 6, got {pool_size}")
+    return _matching_table(int(pool_size))
 
 
 @lru_cache(maxsize=8)

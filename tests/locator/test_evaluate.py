@@ -6,7 +6,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from locator.evaluate import score_run, summarise
+from locator.evaluate import (
+    STANFORD_REGIONS,
+    score_run,
+    stanford_counts,
+    stanford_points,
+    summarise,
+)
 
 
 def table() -> pd.DataFrame:
@@ -88,3 +94,63 @@ def test_exclusions_collect_satellites_per_reason():
         "below the horizon": {"G03"}, "below_mask": {"G08"}, "fde": {"G08"},
         "NO_DATA": {"E11"}, "no broadcast group delay for C1P": {"R07"},
     }  # fmt: skip
+
+
+def _random_scored(seed: int, n: int = 4000) -> pd.DataFrame:
+    """Random epochs: estimates inside asymmetric intervals, truths around them, random
+    claims, some epochs without an estimate or with an unbounded interval."""
+    rng = np.random.default_rng(seed)
+    est = rng.uniform(1000.0, 5000.0, n)
+    lo = est - rng.uniform(0.5, 60.0, n)
+    hi = est + rng.uniform(0.5, 60.0, n)
+    truth = est + rng.standard_t(3, n) * 15.0
+    est[rng.random(n) < 0.03] = np.nan
+    hi[rng.random(n) < 0.02] = np.inf
+    ep = pd.DataFrame({"chainage_m": est, "lo_m": lo, "hi_m": hi, "length_m": hi - lo,
+                       "wls_chainage_m": est, "claim": rng.random(n) < 0.7,
+                       "claim_fix": True, "mode": "three_pairs"})  # fmt: skip
+    return score_run(ep, truth)
+
+
+def test_stanford_counts_from_containment():
+    """The diagram's regions (|error| against the half-interval toward the truth) counted
+    independently: the truth inside or outside [lo, hi], claimed or not."""
+    sc = _random_scored(1)
+    est, lo, hi = (sc[c].to_numpy(float) for c in ("chainage_m", "lo_m", "hi_m"))
+    truth, claim = sc["truth_m"].to_numpy(float), sc["claim"].to_numpy(bool)
+    has = np.isfinite(est) & np.isfinite(lo) & np.isfinite(hi)
+    out = (truth < lo) | (truth > hi)
+    want = {
+        "normal": int((has & claim & ~out).sum()),
+        "hmi": int((has & claim & out).sum()),
+        "unavailable": int((has & ~claim & ~out).sum()),
+        "mi": int((has & ~claim & out).sum()),
+        "no_interval": int((~has).sum()),
+    }
+    got = stanford_counts(sc)
+    assert list(got) == list(STANFORD_REGIONS)
+    assert got == want
+    assert min(want.values()) > 20  # every region is exercised
+    assert got["hmi"] == sc.loc[has, "hmi"].sum()  # score_run's HMI, epochs with an estimate
+    s = summarise(sc)
+    assert s["stanford_hmi"] == want["hmi"] and s["stanford_mi"] == want["mi"]
+
+
+def test_stanford_points_protection_level_and_alert_limit():
+    # truth below the estimate: protection = est - lo; above: hi - est
+    ep = pd.DataFrame({"chainage_m": [100.0, 100.0, 100.0, 100.0], "lo_m": [90.0, 95.0, 40.0, 90.0],
+                       "hi_m": [130.0, 101.0, 160.0, 130.0], "length_m": 0.0,
+                       "wls_chainage_m": 100.0, "claim": [True, True, True, False],
+                       "claim_fix": True, "mode": "three_pairs"})  # fmt: skip
+    sc = score_run(ep, np.array([92.0, 103.0, 150.0, 80.0]))
+    pts = stanford_points(sc)
+    np.testing.assert_allclose(pts["abs_error_m"], [8.0, 3.0, 50.0, 20.0])
+    np.testing.assert_allclose(pts["protection_m"], [10.0, 1.0, 60.0, 10.0])
+    assert pts["region"].tolist() == ["normal", "hmi", "normal", "mi"]
+    # a 50 m alert limit: the 60 m protection level is unavailable although claimed
+    assert stanford_points(sc, alert_limit_m=50.0)["region"].tolist() == [
+        "normal", "hmi", "unavailable", "mi"]  # fmt: skip
+    with pytest.raises(ValueError, match="alert_limit_m"):
+        stanford_points(sc, alert_limit_m=0.0)
+    with pytest.raises(ValueError, match="score_run"):
+        stanford_points(ep)

@@ -93,3 +93,20 @@ def test_validation(tracks):
     a, _ = tracks
     with pytest.raises(ValueError, match="at least 3"):
         check_heading(a.ecef_at(0.0), 0.0, np.ones((2, 3)) * 2e7, np.ones(2), np.ones(2))
+
+
+def test_given_rotation_is_the_beacon_frame(tracks):
+    a, b = tracks
+    rng = np.random.default_rng(1)
+    x, beacon = a.ecef_at(700.0), b.ecef_at(600.0)
+    sat = _sats(x, 2)
+    sig = np.full(len(sat), 1.0)
+    rho = ranges(sat, x, sig, rng)
+    lat, lon, _ = ecef_to_geodetic(beacon)
+    given = check_heading(beacon, HDG_B, sat, rho, sig, rotation=enu_rotation(lat, lon))
+    assert given == check_heading(beacon, HDG_B, sat, rho, sig)
+    # another frame (the one of a point 50 km away) changes the answer
+    far = check_heading(beacon, HDG_B, sat, rho, sig, rotation=enu_rotation(lat + 0.5, lon))
+    assert far.heading_deg != given.heading_deg
+    with pytest.raises(ValueError, match="rotation"):
+        check_heading(beacon, HDG_B, sat, rho, sig, rotation=np.eye(2))

@@ -92,8 +92,11 @@ def test_error_model_round_trip_and_errors(tmp_path):
 
 
 def test_figures_are_written(tmp_path):
-    paths = write_figures(epochs(), tmp_path)
+    paths = write_figures(epochs().drop(columns="truth_m"), tmp_path)
     assert [p.name for p in paths] == ["interval_time.png", "interval_chainage.png",
                                        "interval_lengths.png"]  # fmt: skip
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
+    # with the truth (a scored table) the Stanford diagram too
+    paths = write_figures(epochs(), tmp_path)
+    assert paths[-1].name == "stanford.png" and paths[-1].stat().st_size > 5000

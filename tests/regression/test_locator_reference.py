@@ -1,0 +1,129 @@
+"""Regression: the 1-D locator against its outputs frozen before its pair work was compiled.
+
+Every interval, estimate, flag, used and excluded satellite of the campaign's rules on two
+stored simulated runs and on the in-repo GEONET epochs, and every field of ``solve_pairs`` on
+random epochs, must equal the reference (``tests/regression/locator_cases.py`` wrote it with
+the code of commit 1403519) bit for bit: same values, NaN at the same places, same sign of
+zero. This pins an optimisation, not correctness (``tests/locator`` does that).
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.regression.locator_cases import (
+    COMPARED,
+    DATA,
+    PAIR_FIELDS,
+    REAL_HEADINGS_DEG,
+    SIM_CASES,
+    SimCase,
+    load_sim_case,
+    pair_cases,
+    run_real_case,
+    run_sim_case,
+    sim_configs,
+)
+
+
+@cache
+def _reference() -> pd.DataFrame:
+    return pd.read_parquet(DATA / "reference_runs.parquet")
+
+
+@cache
+def _case(name: str) -> SimCase:
+    return load_sim_case(name)
+
+
+def _assert_identical(got: np.ndarray, want: np.ndarray, what: str) -> None:
+    assert got.shape == want.shape, f"{what}: shape {got.shape} != {want.shape}"
+    if want.dtype.kind == "f":
+        g, w = got.astype(float), want.astype(float)
+        nan = np.isnan(w)
+        assert np.array_equal(np.isnan(g), nan), f"{what}: NaN at other places"
+        bad = np.flatnonzero(~nan & ((g != w) | (np.signbit(g) != np.signbit(w))))
+        assert bad.size == 0, f"{what}: {bad.size} values differ, first at {bad[0]}: " \
+                              f"{g[bad[0]]!r} != {w[bad[0]]!r}"  # fmt: skip
+    else:
+        assert np.array_equal(got, want), f"{what}: differs"
+
+
+def _assert_frame(got: pd.DataFrame, case: str, config: str) -> None:
+    ref = _reference()
+    want = ref[(ref["case"] == case) & (ref["config"] == config)]
+    assert len(want) > 0
+    assert len(got) == len(want)
+    for col in COMPARED:
+        _assert_identical(got[col].to_numpy(), want[col].to_numpy(), f"{case}/{config}/{col}")
+
+
+@pytest.mark.parametrize("config", list(sim_configs()))
+@pytest.mark.parametrize("case", SIM_CASES)
+def test_simulated_runs_identical(case: str, config: str) -> None:
+    _assert_frame(run_sim_case(_case(case), config), case, config)
+
+
+@pytest.mark.parametrize("integrity", ["active", "passive"])
+@pytest.mark.parametrize("heading_deg", REAL_HEADINGS_DEG)
+def test_real_epochs_identical(heading_deg: float, integrity: str) -> None:
+    _assert_frame(run_real_case(heading_deg, integrity), f"0759_{heading_deg:.0f}", integrity)
+
+
+def test_solve_pairs_identical() -> None:
+    ref = np.load(DATA / "reference_pairs.npz")
+    n = 0
+    for case, sol in pair_cases():
+        for f in PAIR_FIELDS:
+            _assert_identical(sol[f], ref[f"{case}/{f}"], f"pair case {case}/{f}")
+        n += 1
+    assert n * len(PAIR_FIELDS) == len(ref.files)
+
+
+def test_reference_exercises_the_locator() -> None:
+    """The frozen runs cover what the speed-up must keep: every interval mode, exclusions,
+    ambiguous, rootless, empty and unbounded pairs, claims and their refusal."""
+    ref = _reference()
+    assert set(ref["mode"]) == {"three_pairs", "all_pairs", "best_pair", "none"}
+    flags = set("|".join(ref["flag_names"]).split("|"))
+    for f in ("EXCLUDED", "AMBIGUOUS", "NO_ROOT", "EMPTY_PAIR", "UNBOUNDED", "BLUNT",
+              "INCONSISTENT_PAIRS", "HEADING_FAIL", "TOO_FEW"):  # fmt: skip
+        assert f in flags
+    assert 0.3 < ref["claim"].mean() < 0.9
+
+
+def test_against_the_numpy_code_on_random_epochs() -> None:
+    """Beyond the frozen outputs: the numpy code itself (kept verbatim) on random epochs of
+    2-40 satellites, paths straight and curved, priors near and far, a faulty range."""
+    from locator.sathia import solve_pairs
+    from locator.wls import solve_wls
+    from tests.locator._scene import arc_path, random_sky, ranges, sky, straight_path
+    from tests.regression.reference_locator import reference_solve_pairs, reference_solve_wls
+
+    paths = [straight_path(20.0), arc_path(250.0, 200.0, lead_m=100.0)]
+    for case in range(40):
+        rng = np.random.default_rng(5000 + case)
+        path = paths[case % 2]
+        s_true = float(rng.uniform(0.0, path.length_m))
+        x = path.ecef_at(s_true)
+        n = int(rng.integers(2, 41))
+        sat = sky(x, *random_sky(rng, n, 5.0))
+        sig = rng.uniform(0.3, 8.0, n)
+        rho = ranges(sat, x, sig, rng)
+        if case % 3 == 0:
+            rho[0] += 250.0
+        prior = s_true + float(rng.normal(0.0, 200.0))
+        pairs = np.stack(np.triu_indices(n, 1), -1)[rng.random(n * (n - 1) // 2) < 0.3]
+        for new, old in (
+            (solve_wls(path, sat, rho, sig, prior_m=prior),
+             reference_solve_wls(path, sat, rho, sig, prior_m=prior)),
+            (solve_pairs(path, sat, rho, sig, pairs, prior_m=prior, window_m=600.0),
+             reference_solve_pairs(path, sat, rho, sig, pairs, prior_m=prior, window_m=600.0)),
+        ):  # fmt: skip
+            for f in new.__dataclass_fields__:
+                _assert_identical(np.asarray(getattr(new, f)), np.asarray(getattr(old, f)),
+                                  f"case {case}: {type(new).__name__}.{f}")  # fmt: skip
