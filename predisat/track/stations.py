@@ -2,7 +2,8 @@
 
 :func:`points_as_stations` reads them from GeoJSON point features: OpenStreetMap
 ``railway=station`` / ``halt`` / ``stop`` nodes or train ``public_transport`` stops with a
-``name``, or any point with a ``station`` property (its name); one per name. Kilometre-post points (``km_m``, ``railway=milestone``) are not stations.
+``name``, or any point with a ``station`` property (its name); one per name. Kilometre-post
+points (``km_m``, ``railway=milestone``) are not stations.
 """
 
 from __future__ import annotations
