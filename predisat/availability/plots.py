@@ -630,24 +630,25 @@ def _sat_labels(
 
     Candidates are the track points between 15 and 75 deg elevation; satellites are placed
     one after the other (fewest candidates first), each at the candidate farthest from the
-    labels already placed, so names do not pile up at the zenith or on one another.
+    labels already placed (the ring labels included), so names do not pile up at the zenith,
+    on one another or under a ring label.
     """
     x = (90.0 - el) * np.sin(theta)
     y = (90.0 - el) * np.cos(theta)
     ok = np.isfinite(el) & (el >= 15.0) & (el <= 75.0)
-    placed: list[tuple[float, float]] = []
+    ring_th = np.radians(_RING_LABEL_AZ_DEG)
+    # the ring labels count as placed: names keep clear of them
+    placed = [(float((90 - e) * np.sin(ring_th)), float((90 - e) * np.cos(ring_th)))
+              for e in _RING_EL_DEG]  # fmt: skip
     order = np.argsort(ok.sum(axis=0), kind="stable")
     for j in order:
         cand = np.flatnonzero(ok[:, j])
         if cand.size == 0:
             continue
         cand = cand[:: max(1, cand.size // 200)]
-        if placed:
-            px, py = np.asarray(placed).T
-            d = np.hypot(x[cand, j, None] - px[None, :], y[cand, j, None] - py[None, :])
-            k = int(cand[np.argmax(d.min(axis=1))])
-        else:
-            k = int(cand[len(cand) // 2])
+        px, py = np.asarray(placed).T
+        d = np.hypot(x[cand, j, None] - px[None, :], y[cand, j, None] - py[None, :])
+        k = int(cand[np.argmax(d.min(axis=1))])
         placed.append((float(x[k, j]), float(y[k, j])))
         colour = "#1f5fa8" if trusted[k, j] else "#606060"
         ax.text(theta[k, j], 90.0 - el[k, j], sats[j], fontsize=6, color=colour, ha="center",
@@ -660,8 +661,8 @@ def sky_plots(views: Sequence[SkyView], label_sats: bool = True, title: str = ""
     Filled: the mask (dark), the margin (light, when there is one) and assumed bins (hatched);
     dotted circles: flat cut-offs; line with arrow: the track, increasing chainage; blue:
     satellite track while trusted under the masks, grey: above the horizon but not trusted;
-    each satellite named at its highest point (``label_sats``). Elevation rings 15, 30 and 60
-    deg are labelled on white above the tracks.
+    each satellite named on its own track, spread apart (``label_sats``). Elevation rings 15,
+    30 and 60 deg are labelled on white above the tracks.
     """
     if not views:
         raise ValueError("views is empty: pass at least one SkyView")

@@ -752,8 +752,8 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, 
             "surveyed mask; beige: its safety margin; hatched: assumed bins (not seen by a "
             "camera nor reconstructed); dotted orange: the flat cut-off; the black line with "
             "the arrow is the track (increasing chainage), L/R its sides. Satellite tracks "
-            "over the whole window are blue while trusted and grey while masked, each named at "
-            "its highest point.",
+            "over the whole window are blue while trusted and grey while masked, each named on "
+            "its own track.",
             "sky",
         )
     figs["opening"] = _figure(

@@ -134,11 +134,12 @@ def evaluation_figure(
                  loc="left")  # fmt: skip
 
     ft = 100 * shares["false_trust"]
-    cx.semilogy(s, np.where(ft > 0, ft, np.nan), "o", ms=3, color="#b2182b",
-                label="false trust (trusted & blocked / trusted)")  # fmt: skip
+    cx.set_yscale("log")
+    cx.set_ylim(1e-4, 100)
+    cx.plot(s[ft > 0], ft[ft > 0], "o", ms=3, color="#b2182b",
+            label="false trust (trusted & blocked / trusted)")  # fmt: skip
     cx.axhline(FALSE_TRUST_TARGET_PCT, color="#b2182b", ls="--", lw=1.0,
                label=f"target {FALSE_TRUST_TARGET_PCT:g} %")  # fmt: skip
-    cx.set_ylim(1e-4, 100)
     cx.set_ylabel("false trust (%)\nlog scale")
     cx.grid(alpha=0.3, which="major")
     zero = int(np.sum(ft <= 0))
