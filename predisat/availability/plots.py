@@ -835,7 +835,7 @@ def line_map(
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(box[2], box[3])
     if track is not None:
-        _map_posts(ax, track, frame, box)
+        _map_posts(ax, track, frame, box, skip={st.name for st in stations})
     _map_stations(ax, stations, frame, box)
     ax.set_title("the stretch", fontsize=9)
     _scale_bar(ax)
@@ -860,7 +860,7 @@ def _overview(
     _map_axes_decor(ax)
     ax.set_xlim(lim[0], lim[1])
     ax.set_ylim(lim[2], lim[3])
-    _map_posts(ax, track, frame, lim, max_labels=6)
+    _map_posts(ax, track, frame, lim, max_labels=6, skip={st.name for st in stations})
     _map_stations(ax, stations, frame, lim)
     ax.set_title("the whole line", fontsize=9)
     _scale_bar(ax)
@@ -869,9 +869,10 @@ def _overview(
 
 def _map_posts(
     ax: Axes, track: TrackMap, frame: LocalFrame, box: tuple[float, float, float, float],
-    max_labels: int = 8,
+    max_labels: int = 8, skip: set[str] | frozenset[str] = frozenset(),
 ) -> None:  # fmt: skip
-    """Kilometre posts inside ``box`` (km), at most ``max_labels`` labelled along it."""
+    """Kilometre posts inside ``box`` (km), at most ``max_labels`` labelled along it; posts
+    labelled with a name in ``skip`` (a station drawn with its own label) stay unlabelled."""
     posts = getattr(track, "kilometre_posts", ())
     if not posts:
         return
@@ -891,7 +892,7 @@ def _map_posts(
         if p not in inside:
             continue
         ax.plot(x, y, "o", color="#444444", markersize=3, zorder=3, gid="kmpost")
-        if id(p) in shown:
+        if id(p) in shown and _post_label(p) not in skip:
             ax.annotate(_post_label(p), (x, y), fontsize=7, color="#444444", xytext=(4, 2),
                         textcoords="offset points", zorder=6, gid=f"kmpost:{_post_label(p)}",
                         path_effects=_halo(2.0))  # fmt: skip
