@@ -8,14 +8,18 @@ from __future__ import annotations
 
 import pandas as pd
 
+from locator.plots import systems_text
+from locator.runio import read_run
 from locator.workflow import demo
 from predisat.cli.demo import DemoContext, DemoStepResult
 
 __all__ = ["STEP", "LocatorDemoStep", "format_demo_table"]
 
 
-def format_demo_table(table: pd.DataFrame) -> str:
-    """The demo's summary table (one row per trust rule) as text, shares in percent."""
+def format_demo_table(table: pd.DataFrame, constellations: str = "") -> str:
+    """The demo's summary table (one row per trust rule) as text, shares in percent, with
+    every count of ``summary.csv`` (HMI before and after the checks, MI) and the
+    constellations the run received (the availability report counts GPS only by default)."""
     cols = {
         "rule": "rule",
         "claim_share": "claim %",
@@ -25,11 +29,16 @@ def format_demo_table(table: pd.DataFrame) -> str:
         "abs_error_median_m": "|err| med m",
         "hmi": "HMI",
         "hmi_fix": "HMI before checks",
+        "mi": "MI",
     }
     t = table[list(cols)].rename(columns=cols).copy()
     for c in ("claim %", ">=6 sats %"):
         t[c] = 100 * t[c]
+    gnss = constellations or "every constellation of the navigation day"
     return str(t.round(1).to_string(index=False)) + (
+        f"\n  ({gnss} received; the availability report above counts GPS only, as the "
+        "LOCOPROL figures. MI: epochs whose interval misses the truth without a safety claim; "
+        "HMI: missed while claimed)"
         "\n  (LOCOPROL on line 144: six satellites 60 % of the time; intervals about 70 m, up "
         "to 600 m)"
     )
@@ -48,7 +57,8 @@ class LocatorDemoStep:
         world = World.load(ctx.truth_dir / "world.npz", ctx.track)
         out = ctx.out_dir / "locator"
         table = demo(out, world=world, pipeline_masks=ctx.masks, log=lambda s: None)
-        return DemoStepResult(format_demo_table(table), {"locator runs": out})
+        gnss = systems_text(read_run(out / "true_masks")[0])  # the satellites the runs received
+        return DemoStepResult(format_demo_table(table, gnss), {"locator runs": out})
 
 
 STEP = LocatorDemoStep()

@@ -19,15 +19,26 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ["interval_vs_chainage", "interval_vs_time", "length_histogram", "stanford_diagram"]
+__all__ = [
+    "interval_vs_chainage",
+    "interval_vs_time",
+    "length_histogram",
+    "stanford_diagram",
+    "systems_text",
+]
 
 LOCOPROL_TYPICAL_M = 70.0
 LOCOPROL_WORST_M = 600.0
 _MODE_COLOURS = {"three_pairs": "#1b7837", "all_pairs": "#5aae61", "best_pair": "#f1a340"}
+
+
+def _with_systems(title: str, constellations: str) -> str:
+    return f"{title} ({constellations})" if constellations else title
 
 
 def _relative(epochs: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
@@ -66,43 +77,53 @@ def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     ax.grid(alpha=0.3)
 
 
-def interval_vs_time(epochs: pd.DataFrame, title: str = "") -> Figure:
-    """Interval and estimate against time since the first epoch, and trusted counts."""
+def interval_vs_time(epochs: pd.DataFrame, title: str = "", constellations: str = "") -> Figure:
+    """Interval and estimate against time since the first epoch, and trusted counts
+    (``constellations`` named in the title)."""
     fig = Figure(figsize=(10, 6), layout="constrained")
     ax, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1])
     t = epochs["gps_s"].to_numpy(float)
     t = t - t[0] if len(t) else t
     _draw(ax, t, epochs)
-    ax.set_title(title or "Confidence interval against time")
+    ax.set_title(_with_systems(title or "Confidence interval against time", constellations))
     ax2.step(t, epochs["n_received"], where="mid", color="#999999", label="received")
     ax2.step(t, epochs["n_trusted"], where="mid", color="#2166ac", label="trusted")
     ax2.step(t, epochs["n_used"], where="mid", color="k", lw=0.8, label="used")
     for n in (2, 4, 6):
         ax2.axhline(n, color="#dddddd", lw=0.6, zorder=0)
-    ax2.set_ylabel("satellites")
+    ax2.set_ylabel(f"{constellations}\nsatellites" if constellations else "satellites",
+                   fontsize=8)  # fmt: skip
     ax2.set_xlabel("time since start (s)")
     ax2.legend(loc="upper right", fontsize=7, ncol=3)
     return fig
 
 
-def interval_vs_chainage(epochs: pd.DataFrame, title: str = "") -> Figure:
-    """Interval and estimate along the line (x: true chainage when known, else the estimate)."""
+def interval_vs_chainage(
+    epochs: pd.DataFrame, title: str = "", constellations: str = ""
+) -> Figure:
+    """Interval and estimate along the line (x: true chainage when known, else the estimate);
+    ``constellations`` named in the title."""
     fig = Figure(figsize=(10, 4), layout="constrained")
     ax = fig.subplots()
     col = "truth_m" if "truth_m" in epochs else "chainage_m"
     _draw(ax, epochs[col].to_numpy(float) / 1e3, epochs)
     ax.set_xlabel(("true " if col == "truth_m" else "estimated ") + "chainage (km)")
-    ax.set_title(title or "Confidence interval along the line")
+    ax.set_title(_with_systems(title or "Confidence interval along the line", constellations))
     return fig
 
 
-def length_histogram(epochs: pd.DataFrame, title: str = "") -> Figure:
-    """Histogram of claimed interval lengths per integrity mode (log x axis)."""
+def length_histogram(epochs: pd.DataFrame, title: str = "", constellations: str = "") -> Figure:
+    """Histogram of claimed interval lengths per integrity mode (log x axis).
+
+    The x axis is labelled at 1-2-5 steps in plain metres (no overlapping minor labels);
+    LOCOPROL's typical and largest intervals are drawn in two different styles.
+    """
     fig = Figure(figsize=(7, 4), layout="constrained")
     ax = fig.subplots()
     claim = epochs["claim"].to_numpy(bool)
     length = epochs["length_m"].to_numpy(float)
     ok = claim & np.isfinite(length) & (length > 0)
+    lo, hi = LOCOPROL_TYPICAL_M, LOCOPROL_WORST_M
     if ok.any():
         bins = np.geomspace(max(length[ok].min(), 1.0), max(length[ok].max(), 10.0) * 1.01, 40)
         data, labels, colours = [], [], []
@@ -113,14 +134,19 @@ def length_histogram(epochs: pd.DataFrame, title: str = "") -> Figure:
                 labels.append(f"{mode.replace('_', ' ')} ({sel.sum()})")
                 colours.append(colour)
         ax.hist(data, bins=list(bins), stacked=True, color=colours, label=labels)
-        ax.set_xscale("log")
         med = float(np.median(length[ok]))
         ax.axvline(med, color="k", lw=1.0, label=f"median {med:.0f} m")
-    for v, name in ((LOCOPROL_TYPICAL_M, "LOCOPROL typical"), (LOCOPROL_WORST_M, "LOCOPROL max")):
-        ax.axvline(v, color="#b2182b", ls="--", lw=0.8, label=f"{name} {v:.0f} m")
+        lo, hi = min(lo, float(bins[0])), max(hi, float(bins[-1]))
+    for v, name, colour, dash in _LOCOPROL_LINES:
+        ax.axvline(v, color=colour, linestyle=dash, lw=1.2, label=f"{name} {v:.0f} m")
+    ax.set_xscale("log")
+    ax.set_xlim(lo / 1.15, hi * 1.15)
+    _clean_log_ticks(ax, lo / 1.15, hi * 1.15)
     share = claim.mean() if len(claim) else 0.0
-    ax.set_title(title or f"Interval length, claimed epochs ({100 * share:.1f} % of epochs)")
-    ax.set_xlabel("interval length (m)")
+    gnss = f" - {constellations}" if constellations else ""
+    ax.set_title(title or f"Interval length, claimed epochs ({100 * share:.1f} % of "
+                 f"epochs){gnss}", fontsize=10)  # fmt: skip
+    ax.set_xlabel("interval length (m, log scale)")
     ax.set_ylabel("epochs")
     ax.legend(fontsize=7)
     return fig
@@ -220,3 +246,38 @@ def stanford_diagram(
     ax.set_title(title or "Stanford integrity diagram")
     ax.legend(loc="upper left", fontsize=7)
     return fig
+
+
+_LOCOPROL_LINES: tuple[tuple[float, str, str, str], ...] = (
+    (LOCOPROL_TYPICAL_M, "LOCOPROL typical", "#b2182b", "--"),
+    (LOCOPROL_WORST_M, "LOCOPROL max", "#542788", ":"),
+)
+"""The two LOCOPROL references: value, label, line style (distinct colour and dash)."""
+
+
+def _clean_log_ticks(ax: Axes, lo: float, hi: float) -> None:
+    """Major ticks at 1-2-5 steps inside [lo, hi] labelled in plain numbers, minor unlabelled;
+    thinned to 1-10 steps when the range is wide."""
+    decades = np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
+    steps = (1.0, 2.0, 5.0) if np.log10(hi / lo) <= 2.5 else (1.0,)
+    ticks = [m * 10.0**d for d in decades for m in steps if lo <= m * 10.0**d <= hi]
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=[2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def systems_text(epochs: pd.DataFrame) -> str:
+    """The constellations of the satellites a run received (``used`` and ``excluded``
+    columns), spelt out: ``"GPS + GLONASS + Galileo + BeiDou"``; "" when unknown."""
+    ids: set[str] = set()
+    for col in ("used", "excluded"):
+        if col in epochs:
+            for cell in epochs[col].dropna().astype(str).unique():
+                ids.update(tok.split(":")[0] for tok in cell.split() if tok)
+    letters = {i[0] for i in ids if len(i) >= 2 and i[0] in _SYSTEM_NAMES}
+    return " + ".join(name for c, name in _SYSTEM_NAMES.items() if c in letters)
+
+
+_SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou", "J": "QZSS",
+                 "I": "NavIC", "S": "SBAS"}  # fmt: skip

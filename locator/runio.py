@@ -107,15 +107,17 @@ def read_run(folder: str | Path) -> tuple[pd.DataFrame, JsonDict]:
 
 def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> list[Path]:
     """The PNG figures of a run: interval against time and chainage, lengths, and, when the
-    table is scored (``truth_m`` present: relative to the truth), the Stanford diagram."""
+    table is scored (``truth_m`` present: relative to the truth), the Stanford diagram; each
+    names the constellations the run received."""
     # lazy: matplotlib only for the figures; reading and writing run tables must not import it
     from locator import plots
 
     out = Path(folder)
+    gnss = plots.systems_text(epochs)
     figs = {
-        "interval_time.png": plots.interval_vs_time(epochs, title),
-        "interval_chainage.png": plots.interval_vs_chainage(epochs, title),
-        "interval_lengths.png": plots.length_histogram(epochs),
+        "interval_time.png": plots.interval_vs_time(epochs, title, gnss),
+        "interval_chainage.png": plots.interval_vs_chainage(epochs, title, gnss),
+        "interval_lengths.png": plots.length_histogram(epochs, constellations=gnss),
     }
     if "truth_m" in epochs:
         figs["stanford.png"] = plots.stanford_diagram(epochs, title)

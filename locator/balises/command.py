@@ -11,13 +11,15 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import pandas as pd
+
 from predisat.cli.args import cutoff_deg, output_dir, positive_float
 from predisat.cli.common import track_option
 
 if TYPE_CHECKING:
     from predisat.track import TrackMap
 
-__all__ = ["add_parser", "cmd_balises"]
+__all__ = ["add_parser", "cmd_balises", "format_summary"]
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
@@ -80,6 +82,18 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
     p.set_defaults(func=cmd_balises)
     return p
+
+
+def format_summary(summary: pd.DataFrame) -> str:
+    """The printed summary: one row per capture configuration, the capture rate in percent
+    (a fraction in ``summary.csv``), times in seconds with 3 decimals."""
+    cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
+            "delay_median_s", "delay_p95_s"]  # fmt: skip
+    t = summary[cols].copy()
+    t["capture_rate"] = 100.0 * t["capture_rate"]
+    t = t.rename(columns={"capture_rate": "capture_%"})
+    return str(t.to_string(index=False, float_format=lambda x: f"{x:.3f}",
+                           formatters={"capture_%": "{:.1f}".format}))  # fmt: skip
 
 
 def _track(args: argparse.Namespace) -> TrackMap:
@@ -146,8 +160,6 @@ def cmd_balises(args: argparse.Namespace) -> int:
         captures=caps, seed=args.seed, log=log, accuracy=accuracy,
         meta={"sim": str(args.sim), "odometer_kind": args.odometer_log or args.odometer},
     )  # fmt: skip
-    cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
-            "delay_median_s", "delay_p95_s"]  # fmt: skip
-    print(summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    print(format_summary(summary))
     print(f"-> {folder}")
     return 0

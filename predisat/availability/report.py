@@ -29,23 +29,27 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
 from predisat.availability import plots
 from predisat.availability.engine import Availability
-from predisat.availability.satellites import SatellitePositions, TrustRule, azel
+from predisat.availability.satellites import SYSTEM_NAMES, SatellitePositions, TrustRule, azel
 from predisat.geodesy import enu_rotation, geodetic_to_ecef
 from predisat.gnss.ephemeris import Reason
-from predisat.gnss.timescale import gps_s_to_utc_datetime64
+from predisat.gnss.timescale import gps_s_to_utc_datetime64, gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
-from predisat.masks.maskset import MaskSet
+from predisat.masks.maskset import BinSource, MaskSet
 from predisat.track import KilometrePost, TrackMap
 
 __all__ = [
     "LOCOPROL_ROW",
     "SHARE_CLASSES",
     "ReportInputs",
+    "basemap_from_geojson",
     "build_report",
+    "constellation_names",
     "geojson_layer",
+    "line_spans",
     "share_class",
     "summary_frame",
     "write_tables",
@@ -205,6 +209,73 @@ def write_tables(
     return files, summary
 
 
+def basemap_from_geojson(path: str | Path, max_lines: int = 20000) -> tuple[NDArray, ...]:
+    """The lines of a GeoJSON file as an offline basemap (``ReportInputs.basemap_lonlat``).
+
+    LineString, MultiLineString and the rings of (Multi)Polygon features, WGS84 longitude /
+    latitude in degrees (for example an OpenStreetMap extract of railways or roads).
+
+    Parameters
+    ----------
+    path : path
+        The GeoJSON file.
+    max_lines : int
+        Refuse files with more polylines than this (a basemap is a background, not a
+        country).
+
+    Returns
+    -------
+    tuple of ndarray, shape (n, 2)
+
+    Raises
+    ------
+    ValueError
+        Naming the file, the feature and the fix.
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(
+            f"basemap {p}: cannot be read as GeoJSON ({exc}); give a GeoJSON FeatureCollection "
+            "of lines (WGS84 lon/lat)"
+        ) from None
+    feats = doc.get("features") if isinstance(doc, dict) else None
+    if not isinstance(feats, list):
+        raise ValueError(f"basemap {p}: no 'features' list; give a GeoJSON FeatureCollection")
+    out: list[NDArray] = []
+    for i, f in enumerate(feats):
+        geom = (f or {}).get("geometry") or {}
+        kind, coords = geom.get("type"), geom.get("coordinates") or []
+        if kind == "LineString":
+            parts = [coords]
+        elif kind in ("MultiLineString", "Polygon"):
+            parts = list(coords)
+        elif kind == "MultiPolygon":
+            parts = [ring for poly in coords for ring in poly]
+        else:
+            continue
+        for part in parts:
+            a = np.asarray(part, float)
+            if a.ndim != 2 or a.shape[1] < 2 or not np.isfinite(a[:, :2]).all():
+                raise ValueError(
+                    f"basemap {p}: feature {i} ({kind}) has malformed coordinates; give "
+                    "[lon, lat] pairs"
+                )
+            if np.abs(a[:, 1]).max() > 90.0 or np.abs(a[:, 0]).max() > 180.0:
+                raise ValueError(
+                    f"basemap {p}: feature {i} has coordinates outside lon/lat range; give "
+                    "WGS84 longitude, latitude in degrees"
+                )
+            out.append(a[:, :2])
+    if len(out) > max_lines:
+        raise ValueError(
+            f"basemap {p}: {len(out)} lines, more than {max_lines}; cut the file to the "
+            "line's surroundings"
+        )
+    return tuple(out)
+
+
 def _plain(d: JsonDict) -> JsonDict:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
@@ -230,7 +301,11 @@ class ReportInputs:
     sky_chainage_m : tuple of float
         Places of the sky plots.
     files : dict of str to path
-        Companion files to list (shown by name, linked relatively).
+        Companion files to list (shown by name, linked relatively: they must sit in the
+        report's folder).
+    basemap_lonlat : tuple of ndarray, shape (n, 2)
+        Offline background polylines of the map (longitude, latitude, degrees), e.g. from
+        :func:`basemap_from_geojson`.
     """
 
     results: tuple[Availability, ...]
@@ -240,6 +315,7 @@ class ReportInputs:
     info: Mapping[str, Any] = field(default_factory=dict)  # Any: JSON values of the run info
     sky_chainage_m: tuple[float, ...] = ()
     files: Mapping[str, str | Path] = field(default_factory=dict)
+    basemap_lonlat: tuple[NDArray, ...] = ()
 
 
 # ------------------------------------------------------------------------- formatting
@@ -276,15 +352,18 @@ def _img(fig: Figure, alt: str) -> str:
 
 
 def _km_label(track: TrackMap | None, chainage_m: float) -> str:
+    """A place: the line's kilometre first, the chainage beside (``km 4.123 (chainage
+    4.150 km)``); the chainage alone when the track has no kilometre posts."""
+    chain = f"chainage {chainage_m / 1000:.3f} km"
     if track is not None and len(getattr(track, "kilometre_posts", ())) > 0:
         km = float(track.kilometre_at(chainage_m))
         if math.isfinite(km):
-            return f"km {km / 1000:.3f}"
-    return f"chainage {chainage_m / 1000:.3f} km"
+            return f"km {km / 1000:.3f} ({chain})"
+    return chain
 
 
 # ------------------------------------------------------------------------- sections
-def _summary_table(results: Sequence[Availability]) -> str:
+def _summary_table(results: Sequence[Availability], gnss: str = "") -> str:
     head = (
         "<tr><th>rule</th><th>≥ 2</th><th>≥ 4</th><th>≥ 6</th><th>mean count</th>"
         "<th>longest &lt; 4<br>(along the line)</th><th>longest &lt; 4<br>(at one place)</th>"
@@ -312,7 +391,8 @@ def _summary_table(results: Sequence[Availability]) -> str:
     )
     return (
         '<table class="summary"><caption>Share of time with at least 2, 4 and 6 trusted '
-        "satellites over the whole stretch (place and time weighted equally)</caption>"
+        f"{_e(gnss) + ' ' if gnss else ''}satellites over the whole stretch (place and time "
+        "weighted equally)</caption>"
         f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table>"
     )
 
@@ -350,11 +430,26 @@ def _verdict(results: Sequence[Availability], track: TrackMap | None) -> str:
     return "<p class=verdict>" + " ".join(parts) + "</p>"
 
 
-def _header(info: Mapping[str, Any]) -> str:
-    prov = info.get("mask_provenance", {}) or {}
-    prov_text = "; ".join(
-        f"{k}: {v}" for k, v in prov.items() if not isinstance(v, (dict, list)) and v != ""
+def constellation_names(sats: Sequence[str]) -> str:
+    """The constellations of satellite names, spelt out: ``"GPS"``, ``"GPS + Galileo"``."""
+    letters = sorted({x[0] for x in sats}, key=lambda c: "GRECJIS".find(c) % 10)
+    return " + ".join(SYSTEM_NAMES.get(c, c) for c in letters)
+
+
+def _window_text(info: Mapping[str, Any]) -> str:
+    """The time window in GPS time with UTC beside (from ``window_gps_s``)."""
+    gps = info.get("window", "")
+    span = info.get("window_gps_s")
+    if not span:
+        return str(gps)
+    lo, hi = (float(x) for x in span)
+    return (
+        f"{gps}; UTC {gps_s_to_utc_text(lo).removesuffix(' UTC')} - "
+        f"{gps_s_to_utc_text(hi)}"
     )
+
+
+def _header(info: Mapping[str, Any]) -> str:
     margin = info.get("mask_margin_deg")
     margin_text = ""
     if margin:
@@ -362,22 +457,95 @@ def _header(info: Mapping[str, Any]) -> str:
         margin_text = f" (margin {lo:g}°)" if lo == hi else f" (margin {lo:g}–{hi:g}°)"
     rows = [
         ("Line", info.get("line", "")),
+        ("Track", info.get("track", "")),
         ("Stretch", info.get("stretch", "")),
-        ("Time window", info.get("window", "")),
+        ("Time window", _window_text(info)),
         ("Navigation data", info.get("navigation", "")),
         ("Constellations", info.get("constellation", "")),
         ("Rules compared", ", ".join(info.get("rules", []))),
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
-        ("Mask provenance", prov_text),
         ("Interval model", info.get("interval_model", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),
     ]
-    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v != "")
     return f'<table class="meta">{body}</table>'
 
 
-def _figure(img: str, title: str, caption: str) -> str:
-    return f"<figure><h3>{_e(title)}</h3>{img}<figcaption>{caption}</figcaption></figure>"
+def _banners(info: Mapping[str, Any]) -> str:
+    """The synthetic-data banner and the warnings, above everything."""
+    out = [
+        f'<p class="synthetic" role="note"><b>Synthetic data.</b> {_e(w)}</p>'
+        for w in info.get("synthetic", ())
+    ]
+    out += [f'<p class="warn">Warning: {_e(w)}</p>' for w in info.get("warnings", ())]
+    return "".join(out)
+
+
+def _provenance(info: Mapping[str, Any]) -> str:
+    """Hashes and inputs in a folded section (one row per field; nested values as JSON)."""
+    rows: list[tuple[str, object]] = [
+        ("masks file", info.get("masks", "")),
+        ("navigation", info.get("navigation", "")),
+        ("track source", info.get("track_source", "")),
+        ("software", info.get("software", "")),
+        ("report made (UTC)", info.get("created_utc", "")),
+    ]
+    for k, v in (info.get("mask_provenance", {}) or {}).items():
+        text = json.dumps(v, default=str) if isinstance(v, (dict, list)) else v
+        rows.append((f"masks: {k}", text))
+    body = "".join(
+        f"<tr><th>{_e(k)}</th><td><code>{_e(v)}</code></td></tr>" for k, v in rows if v != ""
+    )
+    return (
+        "<details><summary>Provenance: the inputs, their hashes and the software (click to "
+        f"open)</summary><table class=\"small prov\">{body}</table></details>"
+    )
+
+
+def _figure(img: str, title: str, caption: str, fig_id: str) -> str:
+    return (
+        f'<figure id="fig-{fig_id}"><h3>{_e(title)}</h3>{img}<figcaption>{caption}'
+        "</figcaption></figure>"
+    )
+
+
+def line_spans(results: Sequence[Availability], track: TrackMap | None) -> list[plots.LineSpan]:
+    """The stretches labelled on the along-line figures, in chainage order.
+
+    Tunnels (``track.tunnels_m``) and bridges (``track.bridges_m``) of the track map that
+    overlap the positions, and "no sky" stretches: runs of positions where the masks rule
+    (``results[0]``) trusts no satellite at any epoch, each covering its positions' cells
+    (half-way to the neighbours).
+
+    Parameters
+    ----------
+    results : sequence of Availability
+        The masks rule first.
+    track : TrackMap or None
+
+    Returns
+    -------
+    list of plots.LineSpan
+    """
+    s = np.asarray(results[0].chainage_m, float)
+    lo_s, hi_s = float(s[0]), float(s[-1])
+    spans: list[plots.LineSpan] = []
+    for kind, attr in (("tunnel", "tunnels_m"), ("bridge", "bridges_m")):
+        for a, b in getattr(track, attr, ()) or ():
+            if b >= lo_s and a <= hi_s:
+                spans.append(plots.LineSpan(float(a), float(b), kind))
+    blind = np.asarray(results[0].count).max(axis=1) == 0
+    if blind.any():
+        mid = (s[1:] + s[:-1]) / 2.0
+        lo_c = np.r_[s[0], mid]
+        hi_c = np.r_[mid, s[-1]]
+        edges = np.flatnonzero(np.diff(np.r_[0, blind.astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2] - 1, strict=True):
+            length = hi_c[b] - lo_c[a]
+            spans.append(
+                plots.LineSpan(float(lo_c[a]), float(hi_c[b]), "no sky", f"no sky {length:.0f} m")
+            )
+    return sorted(spans, key=lambda x: x.start_m)
 
 
 def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
@@ -410,6 +578,7 @@ def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
                 trusted,
                 tuple(sats.sats),
                 cutoffs,
+                assumed=np.asarray(masks.source[i]) == BinSource.ASSUMED,
             )
         )
     return views
@@ -446,6 +615,10 @@ h1{font-size:22px;margin:4px 0 2px}h2{font-size:17px;margin:26px 0 6px;
 border-bottom:1px solid #ddd;padding-bottom:3px}h3{font-size:14px;margin:6px 0}
 .sub{color:#555;margin:0 0 12px}
 .warn{background:#fff3cd;border-left:4px solid #e0a800;padding:6px 10px;margin:8px 0}
+.synthetic{background:#fde0ef;border:2px solid #c51b7d;color:#4d0026;padding:8px 12px;
+margin:8px 0;font-size:15px}
+details{margin:8px 0}summary{cursor:pointer;color:#333;font-weight:600}
+table.prov td code{word-break:break-all;font-size:11px}
 table{border-collapse:collapse}th,td{padding:3px 9px;text-align:left;vertical-align:top}
 table.meta th{color:#555;font-weight:600;white-space:nowrap}
 table.meta td{max-width:950px}
@@ -461,7 +634,6 @@ p.verdict{background:#fffbe6;border-left:4px solid #e6b800;padding:8px 12px;marg
 figure{margin:18px 0 8px}figure img{max-width:100%;display:block}
 figcaption{color:#444;font-size:13px;margin-top:4px}
 .row{display:flex;gap:18px;align-items:flex-start}.col{flex:1 1 50%}
-figure.map{flex:0 1 auto;max-width:55%;margin:10px 0}
 table.small{font-size:12px}table.small td,table.small th{border-bottom:1px solid #eee}
 .files code{background:#f1f1f1;padding:0 3px}
 footer{color:#666;font-size:12px;margin-top:26px;border-top:1px solid #ddd;padding-top:6px}
@@ -489,56 +661,111 @@ def build_report(inputs: ReportInputs) -> str:
     posts = tuple(getattr(inputs.track, "kilometre_posts", ()) or ())
     s = results[0].chainage_m
     posts = tuple(p for p in posts if s[0] <= p.chainage_m <= s[-1])
-
-    line_map = _img(plots.line_map(results[0], inputs.track, SHARE_CLASSES), "map")
-    figs = _figures(inputs, posts)
-    return _page(inputs, line_map, figs)
+    return _page(inputs, _figures(inputs, posts))
 
 
-def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> list[str]:
-    """The report's figures along the line and at its places, in the order shown."""
+def _stations(track: TrackMap | None) -> list[plots.MapPoint]:
+    return [
+        plots.MapPoint(st.name, float(st.lat_deg), float(st.lon_deg))
+        for st in getattr(track, "stations", ()) or ()
+    ]
+
+
+def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, str]:
+    """The report's figures by section id, in the order shown."""
     results = inputs.results
     info = inputs.info
-    figs = [
-        _figure(
-            _img(plots.availability_along_line(results, posts), "availability along the line"),
-            "Availability along the line",
-            "Share of the time window with at least 4 (top) and 6 (bottom) trusted satellites "
-            "at each place, per rule. Where the blue line (masks) drops below the others, the "
-            "survey found obstructions the other rules ignore. Purple: LOCOPROL line-wide "
-            "figures.",
+    gnss = constellation_names(inputs.satellites.sats)
+    rules = ", ".join(r.rule for r in results)
+    spans = line_spans(results, inputs.track)
+    where = _stretch_text(inputs)
+    span_note = (
+        " Hatched bands: "
+        + ", ".join(f"{x.text} ({_km_label(inputs.track, x.start_m)})" for x in spans)
+        + "."
+        if spans
+        else ""
+    )
+    axis_note = (
+        "Bottom axis: the line's kilometre posts; top axis: chainage along the track map."
+        if posts
+        else "Axis: chainage along the track map (the track has no kilometre posts)."
+    )
+    figs: dict[str, str] = {}
+    figs["map"] = _figure(
+        _img(
+            plots.line_map(
+                results[0], inputs.track, SHARE_CLASSES, _stations(inputs.track),
+                inputs.basemap_lonlat, title=f"{where}, {gnss}",
+            ),
+            f"Map of {where}: the line coloured by the share of time with at least 4 trusted "
+            f"{gnss} satellites under the masks, with kilometre posts, stations, a scale bar "
+            "and a north arrow",
         ),
-        _figure(
-            _img(plots.count_maps(results, posts), "count maps"),
-            "Trusted satellites over place and time",
-            "Each column is a place (chainage, kilometre posts on top), each row an instant "
-            "(GPS time). Red: fewer than 2 trusted satellites (no position); salmon: 2-3 (no "
-            "safety claim); light blue: 4-5 (all pairs); blue: 6 or more (three independent "
-            "pairs, the SIL-4 case). Long lines or windows show the lowest count of each block "
-            "of cells.",
+        f"Map ({gnss}, masks)",
+        "Left: the whole line with its stations (squares) and kilometre posts (dots), the "
+        "stretch boxed in red. Right: the stretch, one segment per surveyed position, coloured "
+        f"by the share of time with ≥ 4 trusted {gnss} satellites under the masks. North up; "
+        "the scale bar is in the lower left corner. The same layer is "
+        "<code>availability.geojson</code> (QGIS).",
+        "map",
+    )
+    figs["along"] = _figure(
+        _img(
+            plots.availability_along_line(results, posts, spans, f"Trusted {gnss} satellites"),
+            f"Line plot: share of time with at least 4 (top) and 6 (bottom) trusted {gnss} "
+            f"satellites along {where}, one line per rule ({rules})",
         ),
-    ]
+        f"Availability along the line ({gnss})",
+        f"Share of the time window with at least 4 (top) and 6 (bottom) trusted {gnss} "
+        "satellites at each place, per rule. Where the blue line (masks) drops below the "
+        "others, the survey found obstructions the other rules ignore. Purple: LOCOPROL "
+        f"line-wide figures (GPS). {axis_note}{span_note}",
+        "along",
+    )
+    figs["counts"] = _figure(
+        _img(
+            plots.count_maps(results, posts, f"Trusted {gnss} satellites over place and time"),
+            f"Colour maps of the number of trusted {gnss} satellites over place (x) and time "
+            f"(y), one panel per rule ({rules})",
+        ),
+        f"Trusted {gnss} satellites over place and time",
+        "Each column is a place (kilometre posts below, chainage above), each row an instant "
+        "(GPS time; UTC is GPS time minus the leap seconds given on the axis). Red: fewer than "
+        "2 trusted satellites (no position); salmon: 2-3 (no safety claim); light blue: 4-5 "
+        "(all pairs); blue: 6 or more (three independent pairs, the SIL-4 case). Long lines "
+        "or windows show the lowest count of each block of cells.",
+        "counts",
+    )
     views = _sky_views(inputs)
     if views:
-        figs.append(
-            _figure(
-                _img(plots.sky_plots(views), "sky plots"),
-                "Sky plots at chosen places",
-                "Looking up: north at the top, east to the right, zenith at the centre, "
-                "horizon at the rim. Brown: the surveyed mask; beige: its safety margin; "
-                "dotted orange: the flat cut-off; the black line with the arrow is the track "
-                "(increasing chainage), L/R its sides. Satellite tracks over the whole window "
-                "are blue while trusted and grey while masked.",
-            )
+        places = "; ".join(v.title.split("\n")[0] for v in views)
+        figs["sky"] = _figure(
+            _img(
+                plots.sky_plots(views, title=f"{gnss} satellites over the window"),
+                f"Polar sky plots at {len(views)} places ({places}): the surveyed mask, its "
+                f"margin and the tracks of the {gnss} satellites, each named",
+            ),
+            f"Sky plots at chosen places ({gnss})",
+            "Looking up: north at the top, east to the right, zenith at the centre, horizon "
+            "at the rim; rings at 15, 30 and 60° elevation (labelled on white). Brown: the "
+            "surveyed mask; beige: its safety margin; hatched: assumed bins (not seen by a "
+            "camera nor reconstructed); dotted orange: the flat cut-off; the black line with "
+            "the arrow is the track (increasing chainage), L/R its sides. Satellite tracks "
+            "over the whole window are blue while trusted and grey while masked, each named on "
+            "its own track.",
+            "sky",
         )
-    figs.append(
-        _figure(
-            _img(plots.opening_angle_along_line(results, posts), "opening angle"),
-            "Opening angle across the track",
-            "180° minus the mask elevation to the left and to the right of the track (margin "
-            "included): the width of the sky slice that reaches the antenna directly. A flat "
-            "cut-off c gives 180° - 2c everywhere.",
-        )
+    figs["opening"] = _figure(
+        _img(
+            plots.opening_angle_along_line(results, posts, spans),
+            f"Line plot: the opening angle across the track along {where}, per rule",
+        ),
+        "Opening angle across the track",
+        "180° minus the mask elevation to the left and to the right of the track (margin "
+        "included): the width of the sky slice that reaches the antenna directly. A flat "
+        f"cut-off c gives 180° - 2c everywhere. {axis_note}",
+        "opening",
     )
     every = info.get("interval_every", "")
     model_note = (
@@ -547,24 +774,43 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> list[str]:
         if info.get("interval_model_is_default", True)
         else f"Error model: {info.get('interval_model', '')}."
     )
-    figs.append(
-        _figure(
-            _img(plots.interval_along_line(results, posts), "interval length"),
-            "Predicted confidence-interval length along the line",
-            "Median (line) and 95th percentile (band edge) of the predicted SATHIA interval "
-            f"over the epochs with ≥ 4 trusted satellites (computed every {_e(every)} epochs); "
-            f"log scale. {_e(model_note)}",
-        )
+    figs["interval"] = _figure(
+        _img(
+            plots.interval_along_line(
+                results, posts, spans, f"Predicted interval with {gnss} satellites"
+            ),
+            f"Line plot, logarithmic: median and 95th percentile of the predicted confidence "
+            f"interval length with {gnss} satellites along {where}, per rule, with the LOCOPROL "
+            "typical (dashed) and largest (dotted) lengths",
+        ),
+        f"Predicted confidence-interval length along the line ({gnss})",
+        "Median (line) and 95th percentile (band edge) of the predicted SATHIA interval "
+        f"over the epochs with ≥ 4 trusted {gnss} satellites (computed every {_e(every)} "
+        "epochs); log scale. Purple dashed: LOCOPROL's typical 70 m; purple dotted: its "
+        f"largest 600 m. {_e(model_note)}",
+        "interval",
     )
     return figs
 
 
-def _page(inputs: ReportInputs, line_map: str, figs: Sequence[str]) -> str:
-    """The HTML document around the figures: header, summary, verdict, map, files, footer."""
+def _stretch_text(inputs: ReportInputs) -> str:
+    s = inputs.results[0].chainage_m
+    a, b = _km_label(inputs.track, float(s[0])), _km_label(inputs.track, float(s[-1]))
+    return f"{a} to {b}"
+
+
+def _section(sid: str, body: str) -> str:
+    return f'<section id="{sid}">{body}</section>\n'
+
+
+def _page(inputs: ReportInputs, figs: Mapping[str, str]) -> str:
+    """The HTML document: banners, header, summary, verdict, figures, files, provenance."""
     results = inputs.results
     info = inputs.info
+    gnss = constellation_names(inputs.satellites.sats)
     files = "".join(
-        f"<li><code>{_e(getattr(p, 'name', p))}</code> – {_e(_FILE_DOC.get(k, k))}</li>"
+        f'<li><a href="{_e(Path(p).name)}"><code>{_e(Path(p).name)}</code></a> – '
+        f"{_e(_FILE_DOC.get(k, k))}</li>"
         for k, p in inputs.files.items()
     )
     attribution = info.get("track_attribution", "")
@@ -575,32 +821,36 @@ def _page(inputs: ReportInputs, line_map: str, figs: Sequence[str]) -> str:
         else ""
     )
     title = f"GNSS availability – {info.get('line', '')}"
+    sections = [
+        _section("header", f"{_banners(info)}{_header(info)}"),
+        _section(
+            "summary",
+            f"<h2>Summary ({_e(gnss)})</h2>{_summary_table(results, gnss)}"
+            f"{_verdict(results, inputs.track)}"
+            '<p class="sub">Trusted: ephemeris healthy and valid, and elevation above the '
+            "rule's threshold (mask + margin of the satellite's azimuth bin; the cut-off; or "
+            'the horizon). "Longest &lt; 4 along the line": the longest run of places with '
+            'fewer than 4 at one instant; "at one place": the longest time below 4 at one '
+            "place. Places are given by the line's kilometre posts with the chainage beside. "
+            "The LOCOPROL row is from other years, satellites and masks (GPS only): a "
+            "yardstick, not a test.</p>",
+        ),
+        *(_section(k, v) for k, v in figs.items()),
+        _section(
+            "files",
+            f'<h2>Files</h2><ul class="files">{files}</ul>{_ephemeris_note(inputs.satellites)}',
+        ),
+        _section("provenance", f"<h2>Provenance</h2>{_provenance(info)}"),
+    ]
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{_e(title)}</title><style>{_CSS}</style></head>
 <body><main>
 <h1>{_e(title)}</h1>
-<p class="sub">Which satellites a train may trust along the line, from the surveyed elevation
-masks, compared with no mask and a flat cut-off.</p>
-{"".join(f'<p class="warn">Warning: {_e(w)}</p>' for w in info.get("warnings", ()))}
-{_header(info)}
-<h2>Summary</h2>
-{_summary_table(results)}
-<div class="row"><div class="col">
-{_verdict(results, inputs.track)}
-<p class="sub">Trusted: ephemeris healthy and valid, and elevation above the rule's threshold
-(mask + margin of the satellite's azimuth bin; the cut-off; or the horizon). "Longest &lt; 4
-along the line": the longest run of places with fewer than 4 at one instant; "at one place": the
-longest time below 4 at one place. The LOCOPROL row is from other years, satellites and masks:
-a yardstick, not a test.</p></div>
-<figure class="map">{line_map}<figcaption>The stretch, one segment per surveyed position,
-coloured by the share of time with ≥ 4 trusted satellites under the masks; north up. The same
-layer is <code>availability.geojson</code> (QGIS).</figcaption></figure></div>
-{"".join(figs)}
-<h2>Files</h2>
-<ul class="files">{files}</ul>
-{_ephemeris_note(inputs.satellites)}
+<p class="sub">Which {_e(gnss)} satellites a train may trust along the line, from the surveyed
+elevation masks, compared with no mask and a flat cut-off.</p>
+{"".join(sections)}
 <footer>{_e(info.get("software", ""))}. Track: {_e(attribution)} {_e(nav_note)}
 Definitions: docs/availability.md and docs/report.md of PREDISAT.</footer>
 </main></body></html>
@@ -619,4 +869,5 @@ _FILE_DOC = {
     "ephemeris_status_csv": "each run of epochs in which the ephemeris did not trust a "
     "satellite (unhealthy, outside its validity, inconsistent, no data)",
     "report": "this report",
+    "basemap": "the offline background of the map",
 }

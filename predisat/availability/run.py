@@ -34,6 +34,7 @@ from typing import NoReturn
 
 import numpy as np
 import pandas as pd
+import yaml
 from numpy.typing import NDArray
 from tqdm import tqdm
 
@@ -66,6 +67,7 @@ __all__ = [
     "parse_time",
     "run_availability",
     "sparse_navigation",
+    "synthetic_notes",
 ]
 
 _MAX_TRACK_OFFSET_M = 25.0  # mask positions farther than this from the track: wrong track
@@ -414,6 +416,7 @@ def run_availability(
     workers: int = 1,
     counts_table: bool = False,
     progress: bool = True,
+    basemap: str | Path | None = None,
 ) -> AvailabilityRun:
     """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
 
@@ -459,6 +462,9 @@ def run_availability(
         Also write ``counts.parquet`` with every count.
     progress : bool
         Show a tqdm progress bar.
+    basemap : path, optional
+        A GeoJSON of lines drawn under the map as an offline background (for example an
+        OpenStreetMap extract of the railways and roads around the line).
 
     Returns
     -------
@@ -472,7 +478,12 @@ def run_availability(
         Window outside the navigation data, masks not on the track, bad options.
     """
     # lazy: the report's figures need matplotlib, which the module's other users do not
-    from predisat.availability.report import ReportInputs, build_report, write_tables
+    from predisat.availability.report import (
+        ReportInputs,
+        basemap_from_geojson,
+        build_report,
+        write_tables,
+    )
 
     t0 = time.perf_counter()
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
@@ -487,6 +498,7 @@ def run_availability(
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
         model = IntervalModel() if interval_model is None else interval_model
+        background = () if basemap is None else basemap_from_geojson(basemap)
         bar.update(1)
 
         stage("navigation")
@@ -515,6 +527,7 @@ def run_availability(
         inputs = ReportInputs(
             results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
             info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+            basemap_lonlat=background,
         )  # fmt: skip
         html = build_report(inputs)
         bar.update(1)
@@ -650,18 +663,27 @@ def _run_info(
     ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
     line = track.name if track is not None else str(masks.provenance.get("track", "line"))
-    km = track.kilometre_at(masks.chainage_m[[0, -1]]) if track is not None else None
-    km_text = (
-        f" (km {km[0] / 1000:.3f} - {km[1] / 1000:.3f})"
+    chain = (
+        f"chainage {masks.chainage_m[0] / 1000:.3f} - {masks.chainage_m[-1] / 1000:.3f} km"
+    )
+    km = (
+        track.kilometre_at(masks.chainage_m[[0, -1]])
+        if track is not None and track.kilometre_posts
+        else None
+    )
+    stretch = (
+        f"km {km[0] / 1000:.3f} - {km[1] / 1000:.3f} ({chain})"
         if km is not None and np.all(np.isfinite(km))
-        else ""
+        else f"{chain} (the track has no kilometre posts)"
     )
     return {
         "line": line,
-        "stretch": f"chainage {masks.chainage_m[0] / 1000:.3f} - {masks.chainage_m[-1] / 1000:.3f}"
-        f" km{km_text}, {masks.n_pos} positions",
+        "track": _track_text(track),
+        "track_source": "" if track is None else track.source,
+        "stretch": f"{stretch}, {masks.n_pos} positions",
         "window": f"{_iso(sats.gps_s[0])} - {_iso(sats.gps_s[-1] + step_s)} GPST, every "
         f"{step_s:g} s ({len(sats.gps_s)} epochs)",
+        "synthetic": synthetic_notes(masks.provenance),
         "window_gps_s": [float(sats.gps_s[0]), float(sats.gps_s[-1] + step_s)],
         "navigation": f"{nav_label} ({ephemeris.kind})",
         "constellation": f"{constellation}: "
@@ -688,6 +710,61 @@ def _run_info(
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": nav.warnings,
     }
+
+
+def _track_text(track: TrackMap | None) -> str:
+    """The track's name (with the part chosen in a file of several) and its length."""
+    if track is None:
+        return "none given: the masks' own positions"
+    return f"{track.name} ({track.length_m / 1000:.2f} km)"
+
+
+def synthetic_notes(provenance: JsonDict) -> list[str]:
+    """Sentences for the report's banner when masks come from synthetic data.
+
+    Recognised from the mask provenance: a survey made by ``predisat synth``
+    (``survey_generator``, ``survey_description``, or the ``generator`` in the ``survey.yaml``
+    of the ``survey`` folder when it still exists) and masks stated as a simulated or
+    synthetic world's truth (``source``).
+
+    Parameters
+    ----------
+    provenance : dict
+        ``MaskSet.provenance``.
+
+    Returns
+    -------
+    list of str
+        Empty for masks from a real survey.
+    """
+    generator = str(provenance.get("survey_generator", ""))
+    description = str(provenance.get("survey_description", ""))
+    survey = provenance.get("survey")
+    if not generator and isinstance(survey, str) and survey:
+        yaml_path = Path(survey) / "survey.yaml"
+        if yaml_path.is_file():
+            try:
+                doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8")) or {}
+            except (OSError, yaml.YAMLError):
+                doc = {}
+            if isinstance(doc, dict):
+                generator = str(doc.get("generator", ""))
+                description = description or str(doc.get("description", ""))
+    source = str(provenance.get("source", "")).lower()
+    if generator.startswith("predisat.synth") or "synthetic" in description.lower():
+        return [
+            "The masks were made from a synthetic survey (frames rendered from a procedural "
+            f"world by {generator or 'predisat synth'}: {description or 'synthetic survey'}) "
+            "laid on the real track. The obstructions (tunnels, cuttings, bridges, trees, "
+            "buildings) are invented; the track geometry and the satellites (navigation "
+            "data) are real. Do not read these figures as the line's real availability."
+        ]
+    if "simulated" in source or "synthetic" in source:
+        return [
+            f"The masks are the ground truth of a synthetic world ({provenance.get('source')}):"
+            " the obstructions are invented; the track and the satellites are real."
+        ]
+    return []
 
 
 def _track_credit(track: TrackMap | None) -> str:

@@ -256,6 +256,10 @@ def _plan(
         "reverse": bool(survey.reverse),
         "antenna_height_m": float(survey.antenna_height_m),
     }
+    # what made the frames (a synthetic survey says so): the report warns on synthetic masks
+    for key in ("generator", "description"):
+        if survey.metadata.get(key):
+            prov[f"survey_{key}"] = str(survey.metadata[key])
     prov["run_key"] = _run_key(prov)
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
     if params.sky_net is not None:

@@ -466,11 +466,20 @@ def evaluate_masks(
 
 # ---------------------------------------------------------------------- command line
 def format_table(table: pd.DataFrame) -> str:
-    """Text of an :func:`evaluate_masks` table: 4 decimals, but the rare-event shares
-    (``unsafe_share``, ``false_trust`` and their ``_margin`` columns) in scientific notation,
-    which 4 decimals would print as 0 (the target is 1e-3, the pipeline reaches ~1e-6)."""
+    """Text of an :func:`evaluate_masks` table for people: shares in percent.
+
+    The share columns (``sky_lost``, ``false_trust``, ``unsafe_share`` and their ``_margin``
+    variants, fractions in the table and its CSV) are printed in percent under a ``_%`` name
+    (``sky_lost_%``): ``sky_lost`` with 2 decimals, the rare-event shares in scientific
+    notation, which 2 decimals would print as 0 (the target is 0.1 %, the pipeline reaches
+    ~1e-4 %); other numbers with 4 decimals."""
     rare = [c for c in table.columns if c.startswith(("unsafe_share", "false_trust"))]
-    formatters = {c: "{:.2e}".format for c in rare}
+    shares = rare + [c for c in table.columns if c.startswith("sky_lost")]
+    shown = table.copy()
+    shown[shares] = 100.0 * shown[shares]
+    shown = shown.round({c: 4 for c in table.columns if c not in shares})
+    shown = shown.round({c: 2 for c in shares if c not in rare})
+    formatters = {f"{c}_%": "{:.2e}".format for c in rare}
+    shown = shown.rename(columns={c: f"{c}_%" for c in shares})
     with pd.option_context("display.width", 200, "display.max_columns", 30):
-        shown = table.round({c: 4 for c in table.columns if c not in rare})
         return str(shown.to_string(index=False, formatters=formatters))

@@ -14,6 +14,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,12 +39,15 @@ class Part:
         ``lon_deg, lat_deg[, h_m]`` vertices in file order, ``k >= 2``.
     tunnel : bool
         The feature is tagged as a tunnel (OpenStreetMap ``tunnel=*``).
+    bridge : bool
+        The feature is tagged as a bridge (OpenStreetMap ``bridge=*``).
     """
 
     label: str
     feature: int
     coords: NDArray
     tunnel: bool
+    bridge: bool = False
 
 
 def _endpoints_enu(parts: Sequence[Part], frame: LocalFrame) -> tuple[NDArray, NDArray]:
@@ -198,7 +202,9 @@ def chain_longest(
 
 
 def concatenate_parts(
-    parts: Sequence[Part], order: Sequence[tuple[int, bool]]
+    parts: Sequence[Part],
+    order: Sequence[tuple[int, bool]],
+    flag: Literal["tunnel", "bridge"] = "tunnel",
 ) -> tuple[NDArray, list[tuple[int, int]]]:
     """Join ordered parts into one vertex array, dropping shared joint vertices.
 
@@ -207,7 +213,8 @@ def concatenate_parts(
     coords : ndarray, shape (n, 2) or (n, 3)
         ``lon_deg, lat_deg[, h_m]``; heights only when every part has them.
     spans : list of (int, int)
-        First and last vertex index of every tunnel part in ``coords``.
+        First and last vertex index of every part flagged ``flag`` (tunnel or bridge) in
+        ``coords``.
     """
     chunks: list[NDArray] = []
     spans: list[tuple[int, int]] = []
@@ -223,6 +230,6 @@ def concatenate_parts(
             first = n
         chunks.append(c)
         n += len(c)
-        if parts[k].tunnel:
+        if getattr(parts[k], flag):
             spans.append((first, n - 1))
     return np.concatenate(chunks), spans

@@ -32,6 +32,7 @@ from predisat.track.errors import TrackMapError
 from predisat.track.posts import KilometrePost, project_posts
 from predisat.track.readers import TrackFile, parse_csv_track, parse_geojson_track, sniff_format
 from predisat.track.smooth import FittedCurve, dense_polyline, fit_curve
+from predisat.track.stations import Station
 
 __all__ = [
     "DEMO_TRACK_FILE",
@@ -92,6 +93,10 @@ class TrackMap:
         Where the geometry came from and the attribution its licence requires.
     tunnels_m : tuple of (start_m, end_m)
         Chainage intervals tagged as tunnels in the source (OpenStreetMap ``tunnel=*``).
+    bridges_m : tuple of (start_m, end_m)
+        Chainage intervals tagged as bridges in the source (OpenStreetMap ``bridge=*``).
+    stations : tuple of Station
+        Named places of the line found in the source (for maps).
     tolerance_m : float
         Largest horizontal distance allowed between the smooth fit and the source polyline.
     vertical_tolerance_m : float
@@ -107,6 +112,8 @@ class TrackMap:
     source: str = ""
     attribution: str = ""
     tunnels_m: tuple[tuple[float, float], ...] = ()
+    bridges_m: tuple[tuple[float, float], ...] = ()
+    stations: tuple[Station, ...] = ()
     tolerance_m: float = 1.0
     vertical_tolerance_m: float = 1.0
     _curve: FittedCurve = field(init=False, repr=False, compare=False)
@@ -226,7 +233,7 @@ class TrackMap:
 
         tm = build(tf.lat_deg, tf.lon_deg, tf.h_m)
         posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
-        flip, spans = tf.reverse, list(tf.tunnel_spans)
+        flip, spans, bridges = tf.reverse, list(tf.tunnel_spans), list(tf.bridge_spans)
         if not flip and len(posts) >= 2:
             by_s = sorted(posts, key=lambda p: p.chainage_m)
             flip = by_s[-1].km_m < by_s[0].km_m
@@ -235,7 +242,11 @@ class TrackMap:
             posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
             n = len(tf.lat_deg)
             spans = [(n - 1 - b, n - 1 - a) for a, b in spans]
-        return tm.with_metadata(kilometre_posts=posts, tunnels_m=_tunnel_intervals(tm, spans))
+            bridges = [(n - 1 - b, n - 1 - a) for a, b in bridges]
+        return tm.with_metadata(
+            kilometre_posts=posts, tunnels_m=_tunnel_intervals(tm, spans),
+            bridges_m=_tunnel_intervals(tm, bridges), stations=tf.stations,
+        )  # fmt: skip
 
     def with_metadata(
         self,
@@ -243,6 +254,8 @@ class TrackMap:
         kilometre_posts: Sequence[KilometrePost] | None = None,
         tunnels_m: Sequence[tuple[float, float]] | None = None,
         name: str | None = None,
+        bridges_m: Sequence[tuple[float, float]] | None = None,
+        stations: Sequence[Station] | None = None,
     ) -> TrackMap:
         """A copy with other metadata, sharing the fitted axis (no refit)."""
         new = copy.copy(self)
@@ -254,6 +267,10 @@ class TrackMap:
             object.__setattr__(new, "tunnels_m", tun)
         if name is not None:
             object.__setattr__(new, "name", name)
+        if bridges_m is not None:
+            object.__setattr__(new, "bridges_m", tuple((float(a), float(b)) for a, b in bridges_m))
+        if stations is not None:
+            object.__setattr__(new, "stations", tuple(stations))
         return new
 
     # ------------------------------------------------------------------ properties

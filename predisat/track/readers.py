@@ -25,6 +25,7 @@ from predisat.jsontypes import JsonDict
 from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
 from predisat.track.errors import TrackMapError
 from predisat.track.posts import KilometrePost, points_as_posts, project_posts
+from predisat.track.stations import Station, points_as_stations
 
 if TYPE_CHECKING:
     from predisat.track.map import TrackMap
@@ -67,8 +68,10 @@ class TrackFile:
     vertical_tolerance_m : float or None
     posts : list of (km_m, label, [lon, lat(, h)])
         Kilometre posts as found in the file (:func:`predisat.track.posts.points_as_posts`).
-    tunnel_spans : list of (int, int)
-        Vertex index spans of tunnel parts.
+    tunnel_spans, bridge_spans : list of (int, int)
+        Vertex index spans of tunnel and bridge parts.
+    stations : list of Station
+        Named places found in the file (:func:`predisat.track.stations.points_as_stations`).
     reverse : bool
         Chainage asked to run against the vertex order (``reverse=True``).
     max_post_offset_m : float
@@ -86,6 +89,8 @@ class TrackFile:
     vertical_tolerance_m: float | None = None
     posts: list[tuple[float, str, NDArray]] = field(default_factory=list)
     tunnel_spans: list[tuple[int, int]] = field(default_factory=list)
+    bridge_spans: list[tuple[int, int]] = field(default_factory=list)
+    stations: list[Station] = field(default_factory=list)
     reverse: bool = False
     max_post_offset_m: float = 50.0
 
@@ -335,6 +340,7 @@ def parse_geojson_track(
         raise TrackMapError(f"chain must be 'all' or 'longest', got {chain!r}")
 
     coords, tunnel_spans = concatenate_parts(parts, order)
+    _, bridge_spans = concatenate_parts(parts, order, "bridge")
     has_h = all(parts[k].coords.shape[1] >= 3 for k, _ in order)
     lon, lat = coords[:, 0], coords[:, 1]
     h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
@@ -348,11 +354,25 @@ def parse_geojson_track(
     tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
     return TrackFile(
         path, lat, lon, h,
-        name=name or str(members.get("name") or track or path.stem),
+        name=name or _selected_name(str(members.get("name") or path.stem), track, selected),
         source=source or str(members.get("source") or path.name),
         attribution=attribution, tolerance_m=tol, posts=posts_raw,
-        tunnel_spans=list(tunnel_spans), reverse=reverse, max_post_offset_m=max_post_offset_m,
+        tunnel_spans=list(tunnel_spans), bridge_spans=list(bridge_spans),
+        stations=points_as_stations(points), reverse=reverse,
+        max_post_offset_m=max_post_offset_m,
     )  # fmt: skip
+
+
+def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -> str:
+    """The file's name, with the track chosen in it (``--track-name``) and that track's other
+    names (``trackname``, ``trackcode``, ...): ``"line144, track A (L 144_1)"``."""
+    if track is None:
+        return base
+    keys = ("trackname", "trackcode", "name", "ref")
+    others = sorted(
+        {str(p[k]) for _, p, _ in selected for k in keys if p.get(k) not in (None, "")} - {track}
+    )
+    return f"{base}, track {track}" + (f" ({', '.join(others)})" if others else "")
 
 
 _LineFeature = tuple[int, JsonDict, JsonDict]  # feature index, properties, geometry
@@ -419,6 +439,7 @@ def _line_parts(
         raw = geom.get("coordinates") or []
         seqs = [raw] if geom["type"] == "LineString" else list(raw)
         tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
+        bridge = str(props.get("bridge", "no")).lower() not in ("no", "false", "0")
         n_before = len(parts)
         for j, seq in enumerate(seqs):
             where_s = label if geom["type"] == "LineString" else f"{label} part {j}"
@@ -435,7 +456,7 @@ def _line_parts(
                     f"{MAX_VERTEX_SPACING_M / 1000:.0f} km): a mistyped coordinate? fix it"
                 )
             if len(coords) >= 2:
-                parts.append(Part(where_s, i, coords, tunnel))
+                parts.append(Part(where_s, i, coords, tunnel, bridge))
             else:
                 single.append(where_s)
         _check_declared_length(props, [p.coords for p in parts[n_before:]], label, path)
@@ -509,7 +530,8 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
     """Write a track map as GeoJSON that :meth:`TrackMap.from_geojson` reads back identically.
 
     The source vertices go in one LineString feature (with heights when any is non-zero),
-    kilometre posts as Point features with ``km_m`` and ``label``; ``name``, ``source``,
+    kilometre posts as Point features with ``km_m`` and ``label``, stations as Point features
+    with ``station``; ``name``, ``source``,
     ``attribution`` and ``tolerance_m`` as members of the FeatureCollection.
     """
     with_h = bool(np.any(track.h_m != 0.0))
@@ -536,6 +558,17 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
                     },
                 }
             )
+    for st in track.stations:
+        feats.append(
+            {
+                "type": "Feature",
+                "properties": {"station": st.name},
+                "geometry": {
+                    "type": "Point",
+                    "coordinates": [round(st.lon_deg, 9), round(st.lat_deg, 9)],
+                },
+            }
+        )
     doc = {
         "type": "FeatureCollection",
         "name": track.name,

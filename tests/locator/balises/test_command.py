@@ -115,3 +115,17 @@ def test_a_start_error_beyond_the_start_uncertainty_is_refused(sim_dir):
     ep = run.epochs
     assert ep["fused_chainage_m"].iloc[0] == pytest.approx(sim.chainage_m[0] - 9.0, abs=1e-6)
     assert ((ep["fused_lo_m"] <= ep["truth_m"]) & (ep["truth_m"] <= ep["fused_hi_m"])).all()
+
+
+def test_printed_summary_gives_the_capture_rate_in_percent():
+    from locator.balises.command import format_summary
+
+    summary = pd.DataFrame({
+        "config": ["r25"], "passages": [12], "captured": [11], "capture_rate": [11 / 12],
+        "false": [0], "timing_abs_median_s": [0.0123], "delay_median_s": [0.5],
+        "delay_p95_s": [0.9],
+    })  # fmt: skip
+    header, row = format_summary(summary).splitlines()
+    cells = dict(zip(header.split(), row.split(), strict=True))
+    assert cells["capture_%"] == "91.7" and "capture_rate" not in cells
+    assert cells["timing_abs_median_s"] == "0.012"

@@ -138,7 +138,8 @@ def test_report_table_values_and_no_external_resources(results, masks, satellite
     utc = datetime(1980, 1, 6) + timedelta(seconds=T0 + 2 * STEP_S - LEAP_S)
     assert f"50 m ({utc:%Y-%m-%d %H:%M:%S} UTC)" in text
     km = float(track.kilometre_at(CH[0])) / 1000.0  # position 0, from the track's km posts
-    assert f"20 min (km {km:.3f})" in text
+    # kilometre posts first, chainage beside
+    assert f"20 min (km {km:.3f} (chainage {CH[0] / 1000:.3f} km))" in text
     assert rows["no mask"][2] == "100.0 %" and rows["cutoff 15 deg"][3] == "100.0 %"
     assert any(k.startswith("LOCOPROL") for k in rows)
     assert "test line" in text

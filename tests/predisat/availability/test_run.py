@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import html
 import json
+import re
 from datetime import datetime, timedelta, timezone
 from html.parser import HTMLParser
 from pathlib import Path
@@ -114,8 +115,11 @@ def _independent_azel(lat: float, lon: float, h: float, sat_ecef: np.ndarray):
 # ----------------------------------------------------------------------------- outputs
 def test_every_listed_file_is_described(run) -> None:
     html = run.report_html.read_text()
-    assert "ephemeris_status.csv</code> – each run of epochs" in html
+    assert "ephemeris_status.csv</code></a> – each run of epochs" in html
     assert not any(f"– {key}" in html for key in ("ephemeris_status_csv", "summary_csv"))
+    # every listed file is a link to a file the run wrote beside the report
+    for name in re.findall(r'<a href="([^"]+)">', html):
+        assert (run.report_html.parent / name).is_file(), name
 
 
 def test_html_is_self_contained_with_table_and_images(run) -> None:

@@ -81,6 +81,9 @@ def test_positions_are_the_distinct_frame_chainages(survey_dir: Path, first_run)
         "3000_3030.parquet", "3030_3060.parquet", "3060_3090.parquet",
     ]  # fmt: skip
     assert masks.provenance["run_key"] and masks.provenance["survey_hash"]
+    # a rendered survey says so in the masks (the availability report's synthetic banner)
+    assert masks.provenance["survey_generator"] == "predisat.synth.generate"
+    assert masks.provenance["survey_description"].startswith("synthetic survey, seed 3")
     assert np.all((masks.mask_el_deg >= 0) & (masks.mask_el_deg <= 90))
     assert res.bad_frames == ()
 

@@ -54,3 +54,33 @@ def test_figure_draws_and_checks_headings() -> None:
         evaluation_figure(comp, heading_deg=heading[:-1])
     with pytest.raises(ValueError, match="heading_deg"):
         evaluation_figure(comp)  # built by hand, without headings
+
+
+def test_each_target_sits_on_its_own_axis() -> None:
+    """The 0.1 % false-trust target is a horizontal line on a log axis that holds nothing
+    else; the sky-lost axis is linear and holds no target (issue 33: the target used to sit on
+    a twin axis at the height of "50 %" of the sky-lost scale)."""
+    from predisat.reconstruct.evalfigures import FALSE_TRUST_TARGET_PCT
+
+    comp, heading = _comparison()
+    fig = evaluation_figure(comp, 0.5, title="t", heading_deg=heading)
+    image, lost, trust = (ax for ax in fig.axes if ax.get_label() != "<colorbar>")
+    # no twin axes: every data axis has its own place in the figure
+    boxes = [ax.get_position().bounds for ax in (image, lost, trust)]
+    assert len(set(boxes)) == 3
+    assert lost.get_yscale() == "linear" and trust.get_yscale() == "log"
+    assert "sky lost (%)" in lost.get_ylabel() and "false trust (%)" in trust.get_ylabel()
+
+    def flat_lines(ax):
+        return [ln for ln in ax.get_lines() if len(set(np.asarray(ln.get_ydata(), float))) == 1]
+
+    assert flat_lines(lost) == []
+    (target,) = flat_lines(trust)
+    assert np.asarray(target.get_ydata(), float)[0] == FALSE_TRUST_TARGET_PCT == 0.1
+    assert "0.1 %" in target.get_label()
+    # the target is drawn at 0.1 on the axis' own (log) scale: its display height matches
+    fig.canvas.draw()
+    y_disp = trust.transData.transform((0.0, 0.1))[1]
+    y0, y1 = trust.get_window_extent().y0, trust.get_window_extent().y1
+    lo, hi = np.log10(trust.get_ylim())
+    assert (y_disp - y0) / (y1 - y0) == pytest.approx((np.log10(0.1) - lo) / (hi - lo))

@@ -358,6 +358,8 @@ def test_format_table_keeps_rare_shares_visible() -> None:
     })  # fmt: skip
     header, row = format_table(table).splitlines()
     cells = dict(zip(header.split(), row.split(), strict=True))
-    assert cells["false_trust"] == "5.37e-06" and cells["unsafe_share"] == "6.50e-04"
-    assert float(cells["false_trust_margin"]) == 0.0
-    assert cells["p95_error_deg"] == "34.9999" and cells["sky_lost"] == "0.1539"
+    # shares in percent (as the figures and the README), named so
+    assert cells["false_trust_%"] == "5.37e-04" and cells["unsafe_share_%"] == "6.50e-02"
+    assert float(cells["false_trust_margin_%"]) == 0.0
+    assert cells["p95_error_deg"] == "34.9999" and cells["sky_lost_%"] == "15.39"
+    assert "sky_lost" not in header.split()  # no bare fraction column left
