@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -119,11 +118,8 @@ def test_full_day_speed_and_shared_pairs(shared_data: Path) -> None:
     eph = Ephemeris.from_rinex(g / "georust_rinex/ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
     t = calendar_to_gps_s(2020, 6, 25) + np.arange(0.0, 86400.0, 30.0)
     kep = [s for s in eph.satellites if s[0] != "R"]
-    t0 = time.perf_counter()
-    pos = eph.position_ecef(t, kep)
-    elapsed = time.perf_counter() - t0
+    pos = eph.position_ecef(t, kep)  # speed: scripts/bench_availability.py
     assert np.isfinite(pos[..., 0]).sum() > 1e5
-    assert elapsed < 2.0  # ~0.2 s measured; generous for a loaded CI machine
     pairs = [
         (["rtklib/brdc1820.10n"], ["rtklib/igs15904.sp3"], {"G": 3.0}),
         (["rtklib/brdc0910.09g"], ["rtklib/igl15253.sp3"], {"R": 8.0}),
