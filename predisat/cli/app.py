@@ -21,6 +21,7 @@ from predisat.cli.args import (
     add_checks,
     add_command,
     chainage_hint,
+    constellation_label,
     existing_file,
     existing_path,
     finite_float,
@@ -118,6 +119,8 @@ def cmd_availability(args: argparse.Namespace) -> int:
     run = availability.run(args, track=track)
     for warning in run.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)
+    print(f"satellites counted: {constellation_label(args.constellation)} (--constellation "
+          f"{args.constellation})")
     print(availability_table(run.summary))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
           f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip

@@ -217,7 +217,13 @@ def test_demo_end_to_end_on_a_short_stretch(tmp_path, capsys: pytest.CaptureFixt
     assert cli.main(["demo", "--out", str(out), "--from-km", "4.0", "--to-km", "4.1",
                      "--workers", "1", "--quiet"]) == 0  # fmt: skip
     printed = capsys.readouterr().out
-    assert "demo 5/5" in printed and "demo: done" in printed
+    assert "demo 5/5" in printed and "demo: done" in printed and "demo: estimate" in printed
+    from tests.predisat.cli.test_demo import assert_index_complete
+
+    links = assert_index_complete(out)
+    for name in ("contact_sheet.png", "evaluation.png", "availability/report.html",
+                 "masks/masks.parquet", "locator/summary.csv"):  # fmt: skip
+        assert name in links
     masks = read_masks(out / "masks" / "masks.parquet")
     np.testing.assert_allclose(masks.chainage_m, np.arange(4000.0, 4100.1, 10.0), atol=1e-3)
     for name in ("evaluation.png", "contact_sheet.png", "availability/report.html",

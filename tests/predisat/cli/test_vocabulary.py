@@ -233,3 +233,83 @@ def test_the_default_constellations_agree_and_are_printed() -> None:
     assert run.constellation == avail.constellation == DEMO_CONSTELLATION == "gps"
     assert constellation_label(run.constellation) == "GPS"
     assert constellation_label("GE") == "GPS, Galileo"
+
+
+# --- the user's other cases -----------------------------------------------------------------
+
+
+def test_export_chainage_in_km_gets_the_metres_meant(tmp_path: Path, capsys) -> None:
+    from predisat.masks import fileformat as maskio
+    from tests.predisat.masks.test_fileformat import make_set
+
+    masks = make_set()  # positions at 250-360 m of chainage
+    src = maskio.write_masks(masks, tmp_path / "masks.parquet")
+    out = tmp_path / "r.txt"
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "0.3",
+                              "--out", str(out)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "did you give kilometres? (--chainage 300)" in err and not out.exists()
+    # far from every position (not km either): refused, no nearest-position mask written
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "2000",
+                              "--out", str(out)]) == 2  # fmt: skip
+    assert "outside the masks" in capsys.readouterr().err and not out.exists()
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "300",
+                              "--out", str(out)]) == 0  # fmt: skip
+
+
+def test_simulate_builds_a_short_world(tmp_path: Path, capsys) -> None:
+    """`locator simulate --from-km 4 --to-km 4.2` was refused (the mixed recipe needs 0.8 km)."""
+    from locator.sim.simfile import SimRun
+
+    out = tmp_path / "sim"
+    assert locator_cli.main(["simulate", "--from-km", "4", "--to-km", "4.2", "--out",
+                             str(out)]) == 0  # fmt: skip
+    sim = SimRun.read(out)
+    assert sim.n_epoch > 5
+    assert 4000.0 < sim.chainage_m.min() and sim.chainage_m.max() < 4200.0
+    capsys.readouterr()
+    # below the minimum: refused with the minimum named
+    assert locator_cli.main(["simulate", "--from-km", "4", "--to-km", "4.05", "--out",
+                             str(tmp_path / "tiny")]) == 2  # fmt: skip
+    assert "at least 0.1 km" in capsys.readouterr().err
+
+
+def test_process_refuses_another_surveys_folder_unless_replace(tmp_path: Path, capsys) -> None:
+    """`process` into another survey's --out recomputed silently and left stale chunks."""
+    import json
+
+    from predisat.camera.models import CameraModel
+    from predisat.masks.fileformat import read_masks
+    from predisat.synth.generate import generate_survey
+    from predisat.track.map import demo_track
+
+    cam = CameraModel.pinhole_from_fov(160, 120, 74.0)
+    for name, lo_m in (("a", 4000.0), ("b", 5000.0)):
+        generate_survey(demo_track(), lo_m, lo_m + 20.0, sky="clear", seed=5,
+                        out_dir=tmp_path / name, camera=cam, progress=False)  # fmt: skip
+    out = tmp_path / "m"
+
+    def process(name: str, *extra: str) -> int:
+        return predisat_cli.main(["process", str(tmp_path / name / "survey"), "--quiet",
+                                  "--out", str(out), *extra])  # fmt: skip
+
+    def chunks() -> set[str]:
+        return {p.name for p in (out / "chunks").iterdir()}
+
+    assert process("a") == 0
+    first, masks_a = chunks(), (out / "masks.parquet").read_bytes()
+    assert first == {"4000_5000.json", "4000_5000.parquet"}
+    capsys.readouterr()
+    assert process("b") == 2
+    err = capsys.readouterr().err
+    assert str(out) in err and "another survey" in err and "--replace" in err
+    assert chunks() == first and (out / "masks.parquet").read_bytes() == masks_a  # untouched
+    assert process("b", "--replace") == 0
+    assert chunks() == {"5000_6000.json", "5000_6000.parquet"}  # survey a's chunk removed
+    ch = read_masks(out / "masks.parquet").chainage_m
+    assert ch.min() >= 5000.0 and ch.max() <= 5020.0 + 1e-6
+    # the same survey in other chunks: the old chunks do not stay beside the new ones
+    assert process("b", "--chunk-m", "10") == 0
+    names = set(json.loads((out / "provenance.json").read_text())["chunks"])
+    assert chunks() == {f"{n}{s}" for n in names for s in (".json", ".parquet")}
+    assert "5000_6000.json" not in chunks()
