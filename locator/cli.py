@@ -358,6 +358,11 @@ def _report_problems(label: str, problems: Sequence[Any]) -> None:
         )
 
 
+# `evaluate --truth-chainage` this far from the run's median estimate, and a thousand times
+# nearer, was given in km
+_TRUTH_REACH_M = 500.0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from locator.runio import read_run
     from locator.workflow import evaluate_folder, truth_for
@@ -370,6 +375,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                 f"--truth-chainage {args.truth_chainage:g} m is off track {meta.get('track')!r} "
                 f"(0-{float(length_m):.0f} m of chainage); give the antenna's chainage in metres"
             )
+    if args.truth_chainage is not None and "chainage_m" in epochs:
+        # a static antenna given in km: the run's own estimates are a thousand times farther
+        est_m = float(epochs["chainage_m"].median())
+        hint = chainage_hint(args.truth_chainage, est_m - _TRUTH_REACH_M, est_m + _TRUTH_REACH_M,
+                             "--truth-chainage")  # fmt: skip
+        if hint:
+            raise CliError(f"--truth-chainage {args.truth_chainage:g} m is far from the run's "
+                           f"estimates (median {est_m:.0f} m){hint}")  # fmt: skip
     sim = None
     if args.sim:
         from locator.sim.simfile import SimRun
@@ -532,7 +545,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="half width of the first predicted interval around the start, metres")
     p.add_argument("--antenna-height", type=antenna_height_m, default=4.0, metavar="M",
                    help="antenna above the rail, metres")
-    p.add_argument("--constellation", type=constellation, default="gps",
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
                    help="systems used: gps (as `predisat availability` and LOCOPROL), "
                    "gps+galileo, all, or system letters such as GE")
     p.add_argument("--no-heading-check", action="store_true",
@@ -569,7 +582,7 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
                    help="navigation data (default: the embedded day, 2020-06-25)")
     p.add_argument("--start", metavar="TIME",
-                   help=f"time of the first epoch: {TIME_HELP} (default: 08:00 UTC of the "
+                   help=f"time of the first epoch: {TIME_HELP} (default: 08:00 GPS time of the "
                    "embedded day)")
     p.add_argument("--start-chainage", type=finite_float, metavar="M",
                    help="chainage of the first epoch, metres (default: 15 m inside the world "
@@ -582,8 +595,8 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="length of the run, seconds (default: until 15 m before the world's end)")
     p.add_argument("--rate", type=rate_hz, default=1.0, metavar="HZ",
                    help="epochs per second, Hz")
-    p.add_argument("--seed", type=int, default=0, help="seed of the signal errors")
-    p.add_argument("--constellation", type=constellation, default="all",
+    p.add_argument("--seed", type=int, metavar="N", default=0, help="seed of the signal errors")
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="all",
                    help="systems simulated (`locator run --constellation` chooses the ones used): "
                    "gps, gps+galileo, all, or system letters")
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
@@ -687,7 +700,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     p.add_argument("--station", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                    help="with one --obs file: station ECEF, metres (default: the RINEX header "
                    "position)")  # fmt: skip
-    p.add_argument("--constellation", type=constellation, default="gps",
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
                    help="systems used: gps, gps+galileo, all, or system letters")
     p.add_argument("--k-sigma", type=positive_float, default=2.0, metavar="K",
                    help="pair interval half width in sigmas written into the model")
@@ -719,7 +732,7 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )  # fmt: skip
     p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR",
                    help="output folder")
-    p.add_argument("--seed", type=int, default=1, help="seed of the signal errors")
+    p.add_argument("--seed", type=int, metavar="N", default=1, help="seed of the signal errors")
     p.add_argument("--from-predisat-demo", type=existing_dir("a `predisat demo` output folder "
                    "(truth/world.npz, masks/masks.parquet)"), metavar="DIR",
                    help="reuse a `predisat demo` folder's world and pipeline masks (default: "

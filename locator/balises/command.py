@@ -106,7 +106,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     p.add_argument("--error-model", type=existing_file("a pseudorange error model JSON written "
                    "by `locator calibrate`"), metavar="JSON",
                    help="from `locator calibrate` (default: a = b = 2 m, k = 2)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=0, help="odometer seed")
+    p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
         p,

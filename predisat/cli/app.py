@@ -220,7 +220,8 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="end chainage, km (default: the track's end)")
     p.add_argument("--sky", choices=SKY_CHOICES, default="mixed",
                    help="sky condition of the frames (mixed: varies along the run)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of scenery and sky")
+    p.add_argument("--seed", type=int, metavar="N", default=0,
+                   help="random seed of scenery and sky")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument("--spacing-m", type=positive_float, default=10.0, metavar="M",
                    help="distance between positions, metres")

@@ -85,9 +85,6 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
             return text
         return f"{text} (default: %(default)s)"
 
-    def _get_default_metavar_for_optional(self, action: argparse.Action) -> str:
-        return action.dest.upper()
-
 
 def add_command(
     sub: argparse._SubParsersAction[argparse.ArgumentParser],

@@ -33,8 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--masks", required=True, type=existing_path(_MASKS), metavar="MASKS",
                    help="mask file, or the output folder of predisat process")
     p.add_argument("--track", metavar="FILE",
-                   help="track map the masks were made on, GeoJSON/CSV (default: the masks' "
-                   "own, else line 144)")
+                   help="track map the masks were made on, GeoJSON/CSV: the line's name, "
+                   "kilometre posts and geometry (default: none, segments straight between "
+                   "positions)")
     p.add_argument(
         "--nav", nargs="+", type=existing_file("RINEX navigation, SP3 or TLE files"),
         metavar="FILE",
@@ -42,15 +43,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument(
         "--start", metavar="TIME",
-        help=f"window start: {TIME_HELP} (default: the navigation data's first day, 00:00)",
+        help=f"window start: {TIME_HELP} (default: the start of the navigation data's first "
+        "hour)",
     )  # fmt: skip
     p.add_argument("--end", metavar="TIME",
-                   help="window end (excluded), same forms as --start (default: 24 h after it)")
+                   help="window end (excluded), same forms as --start (default: 24 h after the "
+                   "start, or the data's end)")
     p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
                    help="epoch spacing, seconds")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument(
-        "--constellation", type=constellation, default="gps",
+        "--constellation", type=constellation, metavar="SYSTEMS", default="gps",
         help="systems counted: gps (as LOCOPROL and `locator run`), gps+galileo, all, or system "
         "letters such as GE",
     )  # fmt: skip

@@ -429,7 +429,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help=f"the same steps, short: {quick.to_km - quick.from_km:g} km, "
                    f"{quick.image_size_px[0]} x {quick.image_size_px[1]} frames every "
                    f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s")
-    p.add_argument("--seed", type=int, default=1, help="random seed")
+    p.add_argument("--seed", type=int, metavar="N", default=1, help="random seed")
     p.add_argument(
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
         help="side camera model",

@@ -313,3 +313,25 @@ def test_process_refuses_another_surveys_folder_unless_replace(tmp_path: Path, c
     names = set(json.loads((out / "provenance.json").read_text())["chunks"])
     assert chunks() == {f"{n}{s}" for n in names for s in (".json", ".parquet")}
     assert "5000_6000.json" not in chunks()
+
+
+def test_chainage_hint_names_the_metres_meant_only_when_they_fit() -> None:
+    from predisat.cli.args import chainage_hint
+
+    assert chainage_hint(5.2, 4000.0, 6000.0, "--chainage").endswith("(--chainage 5200)")
+    assert chainage_hint(5200.0, 4000.0, 6000.0, "--chainage") == ""  # inside: no hint
+    assert chainage_hint(9.0, 4000.0, 6000.0, "--chainage") == ""  # 9 km is not inside either
+
+
+def test_quiet_is_accepted_before_and_after_the_locator_subcommand() -> None:
+    parser = locator_cli.build_parser()
+    run = ["run", "--sim", ".", "--no-masks", "--out", "o"]
+    assert parser.parse_args(run).quiet is False
+    assert parser.parse_args(["-q", *run]).quiet is True
+    assert parser.parse_args([*run, "--quiet"]).quiet is True
+
+
+def test_synth_sky_choices_are_the_renderers() -> None:
+    from predisat.synth.generate import SKY_CHOICES
+
+    assert set(predisat_cli.SKY_CHOICES) == set(SKY_CHOICES)
