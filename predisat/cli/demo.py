@@ -219,19 +219,23 @@ QUICK_LENGTH_KM = 0.3
 QUICK_IMAGE_SIZE_PX = (320, 240)
 
 DEMO_RATES: dict[str, float] = {
-    "render_s": 8.0,
-    "render_s_per_frame": 0.5,
-    "process_s": 6.0,
-    "process_s_per_frame": 0.3,
-    "evaluate_s": 2.0,
-    "availability_s": 6.0,
-    "availability_s_per_position_epoch": 2e-5,
-    "steps_s": 15.0,
+    "render_s": 5.0,
+    "render_s_per_frame": 0.42,
+    "process_s": 4.0,
+    "process_s_per_frame": 0.03,
+    "evaluate_s": 1.0,
+    "availability_s": 2.0,
+    "availability_s_per_position_epoch": 3e-6,
+    "steps_s": 6.0,
     "steps_s_per_position": 0.05,
 }
-"""Rates of the demo's steps (seconds; fixed part and per frame, position or position-epoch),
-measured with ``predisat demo`` and ``predisat demo --quick`` on two cores (``--workers 2``,
-640 x 480 and 320 x 240 frames); :meth:`DemoPlan.estimate_s` adds them up."""
+"""Wall seconds of the demo's steps on two quiet cores: a fixed part and a part per 640 x 480
+frame, per position-epoch of the availability report or per position. From the CPU seconds
+of each step (this process and its workers) of ``predisat demo --quick`` (32 frames of 320 x
+240: rendering 11.5 s, processing 5.9, evaluation 0.4, availability 1.8, locator 6.8) and
+``predisat demo --from-km 4.0 --to-km 4.4`` (82 frames of 640 x 480: 69.8, 9.2, 0.5, 2.1, 7.1),
+measured on 2026-12-04 with ``--workers 2``; rendering and processing divided by their two
+workers."""
 
 
 def default_workers() -> int:
@@ -415,7 +419,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p = add_command(
         sub, "demo", "run the pipeline on the embedded demo (2 km of line 144)",
         f"Render a synthetic survey of line 144 (km {full.from_km:g}-{full.to_km:g}: "
-        f"{full.n_frames} frames, 4-7 min on two cores) with ground truth, process it into "
+        f"{full.n_frames} frames, about {sum(full.estimate_s(2).values()) / 60:.0f} min on two "
+        "quiet cores) with ground truth, process it into "
         "masks, compare them with the truth, write the availability report, then run the "
         "installed demo steps: the locator's locates a simulated train run under each trust "
         "rule (`locator demo`). An estimate of the time is printed first; --quick runs the "
