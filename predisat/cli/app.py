@@ -322,6 +322,7 @@ def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 
 
 def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.sky.network import NET_METHODS
     from predisat.sky.segment import METHODS  # lazy: the segmenters load OpenCV models
 
     p = add_command(
@@ -339,6 +340,11 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
                    "card) for --method cnn or ensemble (default: the shipped one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_checks(
+        p,
+        needs("--sky-net", "sky_net", lambda a: a.method in (None, *NET_METHODS),
+              f"--method {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_evaluate_sky)
 
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 import argparse
 
 from predisat.cli.args import (
+    add_checks,
     existing_dir,
     existing_file,
+    needs,
     non_negative_float,
     output_dir,
     positive_float,
@@ -16,6 +18,7 @@ from predisat.cli.args import (
 from predisat.cli.common import track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
+from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
 
 __all__ = ["add_arguments", "run"]
@@ -68,6 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "margins.json of `predisat evaluate --calibrate`)",
     )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_checks(
+        parser,
+        needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,
+              f"--segmenter {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> ProcessResult:

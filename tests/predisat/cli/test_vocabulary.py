@@ -142,6 +142,10 @@ CONTRADICTIONS = [
     (predisat_cli.main, "evaluate {masks} --truth {dir} --target 0.99", "--target"),
     (predisat_cli.main, "synth --camera fisheye --calibration {yaml} --out {out}",
      "--calibration"),
+    (predisat_cli.main, "process {dir} --segmenter learned --sky-net {npz} --out {out}",
+     "--sky-net"),
+    (predisat_cli.main, "evaluate-sky --data {dir} --method grabcut --sky-net {npz}",
+     "--sky-net"),
 ]
 
 
