@@ -134,9 +134,11 @@ def test_evaluate_sky_with_a_candidate_network(
     assert ious("--sky-net", str(net_copy(tmp_path / "same"))) == shipped
     assert ious("--sky-net", str(net_copy(tmp_path / "other", input_px=32))) != shipped
     capsys.readouterr()
-    code = cli.main(["evaluate-sky", "--data", str(data), "--method", "learned",
-                     "--sky-net", str(tmp_path / "same" / "net.onnx")])
-    assert code == 2 and "runs no network" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
+        cli.main(["evaluate-sky", "--data", str(data), "--method", "learned",
+                  "--sky-net", str(tmp_path / "same" / "net.onnx")])
+    assert exc.value.code == 2
+    assert "--sky-net is for --method cnn or ensemble" in capsys.readouterr().err
 
 
 def test_process_strict_and_bad_margins_fail_cleanly(
