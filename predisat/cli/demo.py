@@ -433,7 +433,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--quick", action="store_true",
                    help=f"the same steps, short: {quick.to_km - quick.from_km:g} km, "
                    f"{quick.image_size_px[0]} x {quick.image_size_px[1]} frames every "
-                   f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s")
+                   f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s (coarser "
+                   "masks: its figures are not the demo's)")
     p.add_argument("--seed", type=int, metavar="N", default=1, help="random seed")
     p.add_argument(
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
