@@ -17,12 +17,28 @@ from locator.balises.command import add_parser as add_balises_parser
 from locator.demostep import format_demo_table
 from predisat import __version__
 from predisat.cli.args import (
+    TIME_HELP,
+    HelpFormatter,
+    add_checks,
+    add_command,
+    antenna_height_m,
+    chainage_hint,
+    constellation,
+    constellation_label,
     cutoff_deg,
+    existing_dir,
+    existing_file,
+    existing_path,
     finite_float,
+    given,
+    needs,
     non_negative_float,
     output_dir,
     output_file,
     positive_float,
+    rate_hz,
+    requires,
+    speed_mps,
 )
 from predisat.cli.common import CliError, km_range, run_main, track_option
 
@@ -51,7 +67,7 @@ def _config(args: argparse.Namespace) -> Any:
         integrity=args.integrity,
         trust=trust,
         cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
-        extra_margin_deg=args.extra_margin,
+        extra_margin_deg=args.extra_margin or 0.0,
         start_uncertainty_m=args.start_uncertainty,
         heading_check=not args.no_heading_check,
     )
@@ -61,6 +77,12 @@ def _progress(total: int, quiet: bool, desc: str) -> Any:
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="epoch", disable=quiet, mininterval=0.5)
+
+
+# The default world of `locator simulate` (line 144 km 4.0-6.3, as the locator demo's) and the
+# shortest: a run starts and ends 15 m inside the world.
+_SIM_FROM_KM, _SIM_TO_KM = 4.0, 6.3
+_MIN_WORLD_M = 100.0
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -74,21 +96,38 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         world = World.load(args.world, track)
     else:
         track = track_option(args.track, args.track_name)
+        seed = 0 if args.world_seed is None else args.world_seed
         if args.scenery:
             import yaml
 
-            spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()))
+            try:
+                spec = WorldSpec.from_dict(yaml.safe_load(Path(args.scenery).read_text()) or {})
+            except (yaml.YAMLError, ValueError, TypeError, KeyError) as exc:
+                raise CliError(f"--scenery {args.scenery}: not a valid scenery recipe ({exc}); "
+                               "see docs/synthetic-world.md") from None  # fmt: skip
         else:
-            lo_m, hi_m = km_range(track, args.from_km, args.to_km)
-            if hi_m - lo_m < 800.0:
+            from predisat.synth.generate import default_scenery
+
+            from_km = _SIM_FROM_KM if args.from_km is None else args.from_km
+            to_km = _SIM_TO_KM if args.to_km is None else args.to_km
+            lo_m, hi_m = km_range(track, from_km, to_km)
+            if hi_m - lo_m < _MIN_WORLD_M:
                 raise CliError(
-                    f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the mixed scenery needs "
-                    "at least 0.8 km to fit every kind of stretch; widen the stretch or give "
-                    "--scenery YAML"
+                    f"--from-km {from_km:g} --to-km {to_km:g}: a world of {hi_m - lo_m:.0f} m is "
+                    f"too short; give at least {_MIN_WORLD_M / 1000:g} km (the run starts and "
+                    "ends 15 m inside it)"
                 )
-            spec = WorldSpec.mixed(lo_m, hi_m, seed=args.world_seed)
+            spec = default_scenery(lo_m, hi_m, seed)
         print(f"building the world ({spec.extent_m[0]:.0f}-{spec.extent_m[1]:.0f} m)")
-        world = World.build(track, spec, args.world_seed)
+        world = World.build(track, spec, seed)
+    if args.start_chainage is not None:
+        lo_m, hi_m = world.spec.extent_m
+        if not lo_m <= args.start_chainage <= hi_m:
+            raise CliError(
+                f"--start-chainage {args.start_chainage:g} m is outside the world ({lo_m:.0f}-"
+                f"{hi_m:.0f} m of chainage)"
+                + chainage_hint(args.start_chainage, lo_m, hi_m, "--start-chainage")
+            )
     eph = load_navigation(args.nav)
     t0 = parse_time(args.start, "--start")
     if t0 is None:
@@ -114,10 +153,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     from locator.sources import RinexSource, SimSource
     from locator.workflow import check_track, run_to_folder, static_truth
 
-    if bool(args.sim) == bool(args.obs):
-        raise CliError("give either --sim DIR (a simulated run) or --obs FILE with --nav FILES")
-    if args.masks and args.cutoff is not None:
-        raise CliError("--masks and --cutoff exclude each other; choose one trust rule")
     source: Any
     if args.sim:
         from locator.sim.simfile import SimRun
@@ -132,12 +167,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             track = track_option(args.track, args.track_name)
         path = AntennaPath(track, args.antenna_height)
         check_track(path, sim.antenna_ecef_m, args.sim)
-        source = SimSource(sim, constellation=args.constellation or "all")
+        source = SimSource(sim, constellation=args.constellation)
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
         header, sim_chainage = None, sim.chainage_m
     else:
-        if not args.nav:
-            raise CliError("--obs needs --nav FILES (RINEX navigation with the same day)")
         from locator.corrections import RangeModel
         from locator.observations import Observations
 
@@ -146,7 +179,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _report_problems(args.obs, obs.problems)
         model = RangeModel.from_rinex_nav(args.nav)
         _nav_covers(model.ephemeris, obs, args.nav)
-        source = RinexSource(model, obs, args.constellation or "G")
+        source = RinexSource(model, obs, args.constellation)
         _warn_no_iono(source, args.nav)
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
@@ -160,8 +193,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             check_track(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
-    if not (args.masks or args.cutoff is not None or args.no_masks):
-        raise CliError("no trust rule: pass --masks FILE, --cutoff DEG or --no-masks")
     cfg = _config(args)
     masks = _masks(args)
     if masks is not None:
@@ -169,6 +200,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         check_masks_on_track(masks, path.track, str(args.masks))
     _check_start(float(start), path, masks, args, header, sim_chainage)
+    print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
+          f"({constellation_label(args.constellation)}), trust rule {cfg.trust}")
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
@@ -233,6 +266,13 @@ def _check_start(
             f"start chainage {start_m:.0f} m is off track {path.track.name!r} "
             f"(0-{path.length_m:.0f} m); give --start-chainage in metres along this track"
         )
+    if args.start_chainage is not None and sim_chainage_m is not None:
+        lo_m, hi_m = float(sim_chainage_m.min()), float(sim_chainage_m.max())
+        hint = chainage_hint(start_m, lo_m - _MASK_REACH_M, hi_m + _MASK_REACH_M,
+                             "--start-chainage")  # fmt: skip
+        if hint:
+            raise CliError(f"--start-chainage {start_m:g} m: the simulated train runs "
+                           f"{lo_m:.0f}-{hi_m:.0f} m{hint}")  # fmt: skip
     if masks is not None:
         lo_m, hi_m = float(masks.chainage_m.min()), float(masks.chainage_m.max())
         lo, hi = lo_m - _MASK_REACH_M, hi_m + _MASK_REACH_M
@@ -248,7 +288,8 @@ def _check_start(
         if not lo <= start_m <= hi:
             print(
                 f"locator run: warning: start chainage {start_m:.0f} m is outside {where}: "
-                "no satellite is trusted until the train is inside them",
+                "no satellite is trusted until the train is inside them"
+                + chainage_hint(start_m, lo_m, hi_m, "--start-chainage"),
                 file=sys.stderr,
             )
     if args.start_chainage is not None and header_ecef_m is not None:
@@ -317,6 +358,11 @@ def _report_problems(label: str, problems: Sequence[Any]) -> None:
         )
 
 
+# `evaluate --truth-chainage` this far from the run's median estimate, and a thousand times
+# nearer, was given in km
+_TRUTH_REACH_M = 500.0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from locator.runio import read_run
     from locator.workflow import evaluate_folder, truth_for
@@ -329,6 +375,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                 f"--truth-chainage {args.truth_chainage:g} m is off track {meta.get('track')!r} "
                 f"(0-{float(length_m):.0f} m of chainage); give the antenna's chainage in metres"
             )
+    if args.truth_chainage is not None and "chainage_m" in epochs:
+        # a static antenna given in km: the run's own estimates are a thousand times farther
+        est_m = float(epochs["chainage_m"].median())
+        hint = chainage_hint(args.truth_chainage, est_m - _TRUTH_REACH_M, est_m + _TRUTH_REACH_M,
+                             "--truth-chainage")  # fmt: skip
+        if hint:
+            raise CliError(f"--truth-chainage {args.truth_chainage:g} m is far from the run's "
+                           f"estimates (median {est_m:.0f} m){hint}")  # fmt: skip
     sim = None
     if args.sim:
         from locator.sim.simfile import SimRun
@@ -361,8 +415,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from locator.errorfit import sim_residuals, static_residuals
     from locator.workflow import calibrate_to_file
 
-    if bool(args.sim) == bool(args.obs):
-        raise CliError("give either --sim DIR [DIR ...] or --obs FILE [FILE ...] --nav FILES")
     if not (args.k_sigma > 0 and np.isfinite(args.k_sigma)):
         raise CliError(
             f"--k-sigma must be positive and finite, got {args.k_sigma} (the source's 2; 3.89 "
@@ -371,22 +423,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.sim:
         from locator.sim.simfile import SimRun
 
-        states = [s.strip() for s in args.states.split(",")]
+        states = [s.strip() for s in (args.states or "los").split(",")]
         el, res = _stack([sim_residuals(SimRun.read(d), states) for d in args.sim])
-        fitted: dict[str, Any] = {"simulations": list(args.sim), "states": states}
+        fitted: dict[str, Any] = {"simulations": [str(d) for d in args.sim], "states": states}
     else:
-        if not args.nav:
-            raise CliError("--obs needs --nav FILES (covering every observation file's day)")
         seen = [Path(f).resolve() for f in args.obs]
         if len(set(seen)) < len(seen):
             raise CliError(
                 "an --obs file is given twice; each file counts once (its residuals would weigh "
                 "double in the tail check)"
-            )
-        if args.station and len(args.obs) > 1:
-            raise CliError(
-                "--station gives one position; with several --obs files each file's header "
-                "position is used (calibrate one file at a time to give its position)"
             )
         from locator.corrections import RangeModel
         from locator.observations import Observations
@@ -409,7 +454,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             parts.append(static_residuals(RinexSource(ranges, obs, args.constellation), x))
             stations.append(x.tolist())
         el, res = _stack(parts)
-        fitted = {"obs": list(args.obs), "nav": list(args.nav), "station_ecef_m": stations}
+        fitted = {"obs": [str(f) for f in args.obs], "nav": [str(f) for f in args.nav],
+                  "station_ecef_m": stations}
     try:
         model = calibrate_to_file(
             el, res, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted
@@ -463,108 +509,234 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+# What the input files hold, for the messages when one is missing.
+_MASKS = ("a mask file (masks.parquet of `predisat process`, or a simulation's "
+          "true_masks.parquet) or a `predisat process` output folder")
+_SIM = "a `locator simulate` output folder (epochs, meta.json, world.npz)"
+_ERROR_MODEL = "a pseudorange error model JSON written by `locator calibrate`"
+_NAV = "RINEX navigation, SP3 or TLE files"
+_TRACK = "a track map: GeoJSON line(s) or a lat,lon[,h] CSV (docs/track-map.md)"
+
+
 def _run_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--masks", metavar="MASKS",
-                   help="mask file, or a predisat process output folder, or true_masks.parquet")
-    p.add_argument("--cutoff", type=cutoff_deg, metavar="DEG",
-                   help="flat elevation cut-off instead")
-    p.add_argument("--no-masks", action="store_true", help="trust every received signal")
+    rule = p.add_mutually_exclusive_group(required=True)
+    rule.add_argument("--masks", type=existing_path(_MASKS), metavar="MASKS",
+                      help="trust rule: the satellites the masks say are in view")
+    rule.add_argument("--cutoff", type=cutoff_deg, metavar="DEG",
+                      help="trust rule: a flat elevation cut-off, degrees")
+    rule.add_argument("--no-masks", action="store_true",
+                      help="trust rule: every received signal")
     p.add_argument("--integrity", choices=("active", "passive"), default="active",
-                   help="active: fault detection and exclusion (default); passive: every "
-                   "measurement kept, faults only flagged")
-    p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
+                   help="active: fault detection and exclusion; passive: every measurement kept, "
+                   "faults only flagged")
+    p.add_argument("--error-model", type=existing_file(_ERROR_MODEL), metavar="JSON",
+                   help="pseudorange error model from `locator calibrate` (default: a = b = 2 m, "
+                   "k = 2, the source's)")
     p.add_argument("--k-sigma", type=positive_float, metavar="K",
                    help="pair interval half width in sigmas (default: the error model's; "
                    "without one 2, the source's; 3.89 gives 1e-4 per pair, docs/locator.md)")
-    p.add_argument("--extra-margin", type=non_negative_float, default=0.0, metavar="DEG",
-                   help="added to the mask file's margins before trusting a satellite (0)")
-    p.add_argument("--start-chainage", type=float, metavar="M",
-                   help="default: the simulation's, or the RINEX header position")  # fmt: skip
+    p.add_argument("--extra-margin", type=non_negative_float, metavar="DEG",
+                   help="with --masks: degrees added to the mask file's margins before trusting "
+                   "a satellite (default 0)")
+    p.add_argument("--start-chainage", type=finite_float, metavar="M",
+                   help="chainage of the first epoch, metres (default: the simulation's, or the "
+                   "RINEX header position's)")
     p.add_argument("--start-uncertainty", type=non_negative_float, default=50.0, metavar="M",
-                   help="half width of the first predicted interval around the start (50)")
-    p.add_argument("--antenna-height", type=float, default=4.0, metavar="M",
-                   help="antenna above the rail, for --obs runs (4)")
-    p.add_argument("--constellation", help="systems used (default: all for --sim, G for --obs)")
+                   help="half width of the first predicted interval around the start, metres")
+    p.add_argument("--antenna-height", type=antenna_height_m, default=4.0, metavar="M",
+                   help="antenna above the rail, metres")
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
+                   help="systems used: gps (as `predisat availability` and LOCOPROL), "
+                   "gps+galileo, all, or system letters such as GE")
     p.add_argument("--no-heading-check", action="store_true",
                    help="skip the heading-based integrity check")
 
 
 def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("simulate", help="simulate a train run's pseudoranges in a synthetic world")
-    p.add_argument("--world", help="world.npz (from `predisat synth` truth/ or a simulation)")
-    p.add_argument("--track", help="track GeoJSON/CSV (default: the demo line 144)")
-    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
-    p.add_argument("--from-km", type=finite_float, default=4.0)
-    p.add_argument("--to-km", type=finite_float, default=6.3)
-    p.add_argument("--scenery", help="scenery recipe YAML (surveys/*.yaml)")
-    p.add_argument("--world-seed", type=int, default=0)
-    p.add_argument("--nav", nargs="+", help="RINEX nav / SP3 / TLE (default: embedded day)")
-    p.add_argument("--start", help="UTC start, ISO 8601 (default 08:00 of the embedded day)")
-    p.add_argument("--start-chainage", type=float, metavar="M")
-    p.add_argument("--direction", type=int, choices=(1, -1), default=1)
-    p.add_argument("--speed", type=positive_float, default=20.0, metavar="MPS", help="cruise speed")
+    p = add_command(
+        sub, "simulate", "simulate a train run's pseudoranges in a synthetic world",
+        "Build (or load) a synthetic world along the track, drive a stop-and-go train through "
+        "it on the navigation day and write per-epoch pseudoranges with their true signal "
+        "states (LOS, multipath, NLOS, lost), the true chainage and the true masks. A stretch "
+        "under 0.8 km gets a short scenery recipe (not every kind of stretch fits); the "
+        f"shortest is {_MIN_WORLD_M / 1000:g} km.",
+    )  # fmt: skip
+    w = p.add_mutually_exclusive_group()
+    w.add_argument("--world", type=existing_file("a world.npz (a `predisat synth` truth/ folder "
+                   "or a simulation's)"), metavar="NPZ",
+                   help="a world saved before (default: build one)")  # fmt: skip
+    w.add_argument("--scenery", type=existing_file("a YAML scenery recipe (surveys/*.yaml, "
+                   "docs/synthetic-world.md)"), metavar="YAML",
+                   help="scenery recipe of the world to build (default: drawn for --from-km "
+                   "--to-km)")  # fmt: skip
+    p.add_argument("--track", metavar="FILE",
+                   help="track GeoJSON/CSV (default: the demo line 144, or the world's)")
+    p.add_argument("--track-name", metavar="NAME",
+                   help="which track when the file holds several (default: the only one)")
+    p.add_argument("--from-km", type=finite_float, metavar="KM",
+                   help=f"start of the world to build, chainage km (default {_SIM_FROM_KM})")
+    p.add_argument("--to-km", type=finite_float, metavar="KM",
+                   help=f"end of the world to build, chainage km (default {_SIM_TO_KM})")
+    p.add_argument("--world-seed", type=int, metavar="N",
+                   help="seed of the world to build (default 0)")
+    p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
+                   help="navigation data (default: the embedded day, 2020-06-25)")
+    p.add_argument("--start", metavar="TIME",
+                   help=f"time of the first epoch: {TIME_HELP} (default: 08:00 GPS time of the "
+                   "embedded day)")
+    p.add_argument("--start-chainage", type=finite_float, metavar="M",
+                   help="chainage of the first epoch, metres (default: 15 m inside the world "
+                   "at the end --direction starts from)")
+    p.add_argument("--direction", type=int, choices=(1, -1), default=1,
+                   help="1: towards growing chainage, -1: towards falling chainage")
+    p.add_argument("--speed", type=speed_mps, default=20.0, metavar="MPS",
+                   help="cruise speed between stops, m/s (20 m/s = 72 km/h)")
     p.add_argument("--duration", type=positive_float, metavar="S",
-                   help="default: to the world's end")
-    p.add_argument("--rate", type=positive_float, default=1.0, metavar="HZ")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--constellation", default="all")
+                   help="length of the run, seconds (default: until 15 m before the world's end)")
+    p.add_argument("--rate", type=rate_hz, default=1.0, metavar="HZ",
+                   help="epochs per second, Hz")
+    p.add_argument("--seed", type=int, metavar="N", default=0, help="seed of the signal errors")
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="all",
+                   help="systems simulated (`locator run --constellation` chooses the ones used): "
+                   "gps, gps+galileo, all, or system letters")
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
-                   help="per-epoch table format (parquet)")
+                   help="per-epoch table format")
     p.add_argument("--no-true-masks", action="store_true", help="skip true_masks.parquet")
-    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    add_checks(
+        p,
+        needs("--from-km", "from_km", lambda a: not given(a, "world"), "building a world, "
+              "not with --world (the world sets the stretch)"),
+        needs("--to-km", "to_km", lambda a: not given(a, "world"), "building a world, not "
+              "with --world (the world sets the stretch)"),
+        needs("--from-km", "from_km", lambda a: not given(a, "scenery"), "the drawn scenery, "
+              "not with --scenery (the recipe sets the stretch)"),
+        needs("--to-km", "to_km", lambda a: not given(a, "scenery"), "the drawn scenery, not "
+              "with --scenery (the recipe sets the stretch)"),
+        needs("--world-seed", "world_seed", lambda a: not given(a, "world"),
+              "building a world, not with --world"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_simulate)
 
 
 def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("run", help="locate the train at every epoch (simulated or RINEX)")
-    p.add_argument("--track", help="track GeoJSON/CSV (default: the simulation's, or line 144)")
-    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
-    p.add_argument("--sim", metavar="DIR", help="a `locator simulate` folder")
-    p.add_argument("--obs", metavar="FILE", help="RINEX 2/3 observation file")
-    p.add_argument("--nav", nargs="+", metavar="FILE", help="RINEX navigation files")
+    p = add_command(
+        sub, "run", "locate the train at every epoch (simulated or RINEX)",
+        "Locate the train along the track at every epoch (SATHIA satellite pairs intersected "
+        "with the track), trusting satellites by the masks, a cut-off or not at all, with "
+        "fault detection and the heading check; writes the per-epoch table (interval, claim, "
+        "satellites used and left out) and the run's description.",
+    )  # fmt: skip
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--sim", type=existing_dir(_SIM), metavar="DIR",
+                     help="a simulated run (`locator simulate` folder)")
+    src.add_argument("--obs", type=existing_file("a RINEX 2/3 observation file"),
+                     metavar="FILE", help="a RINEX 2/3 observation file (with --nav)")
+    p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
+                   help="broadcast navigation files of the observation day (required with --obs, "
+                   "no default)")
+    p.add_argument("--track", metavar="FILE",
+                   help="track GeoJSON/CSV (default: the simulation's, or line 144)")
+    p.add_argument("--track-name", metavar="NAME",
+                   help="which track when the file holds several (default: the only one)")
     _run_arguments(p)
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
-                   help="per-epoch table format (parquet)")
-    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
+                   help="per-epoch table format")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="no progress bar (as `locator -q`)")
+    add_checks(
+        p,
+        needs("--nav", "nav", lambda a: given(a, "obs"), "--obs runs (a simulation carries "
+              "its satellites' positions)"),
+        requires("--obs", "obs", "--nav FILES", "nav", "RINEX navigation with the same day"),
+        needs("--extra-margin", "extra_margin", lambda a: given(a, "masks"),
+              "--masks runs (it widens the masks' margins)"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_run)
 
 
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("evaluate", help="score a run against the true chainage")
-    p.add_argument("run", metavar="RUN_DIR")
+    p = add_command(
+        sub, "evaluate", "score a run against the true chainage",
+        "Score a `locator run` folder against the true chainage (a simulation's, a CSV's or a "
+        "static antenna's): interval lengths, errors, hazardously misleading epochs; writes "
+        "evaluation.json, the scored table and figures into the run folder.",
+    )  # fmt: skip
+    p.add_argument("run", type=existing_dir("a `locator run` output folder"), metavar="RUN_DIR",
+                   help="the run folder to score")
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--sim", metavar="DIR", help="the simulation the run was made from")
-    g.add_argument("--truth-csv", metavar="CSV", help="columns gps_s, chainage_m")
-    g.add_argument("--truth-chainage", type=float, metavar="M", help="a static antenna")
+    g.add_argument("--sim", type=existing_dir(_SIM), metavar="DIR",
+                   help="the simulation the run was made from")
+    g.add_argument("--truth-csv", type=existing_file(_TRUTH_CSV), metavar="CSV", help=_TRUTH_CSV)
+    g.add_argument("--truth-chainage", type=finite_float, metavar="M",
+                   help="a static antenna's chainage, metres")
     p.set_defaults(func=cmd_evaluate)
 
 
+_TRUTH_CSV = ("a CSV with columns gps_s (GPS seconds) and chainage_m (true chainage, metres) "
+              "covering the run's epochs")
+
+
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("calibrate", help="learn sigma(el) from data with known truth")
-    p.add_argument("--sim", nargs="+", metavar="DIR", help="simulated runs")
-    p.add_argument("--states", default="los", help="signal states to learn from (los,nlos)")
-    p.add_argument("--obs", nargs="+", metavar="FILE",
-                   help="static station RINEX observations (several files: several days or "
-                   "sites, each at its header position)")  # fmt: skip
-    p.add_argument("--nav", nargs="+", metavar="FILE",
-                   help="broadcast navigation files covering every --obs file")  # fmt: skip
-    p.add_argument("--station", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="station ECEF (default: the RINEX header position)")  # fmt: skip
-    p.add_argument("--constellation", default="G")
-    p.add_argument("--k-sigma", type=positive_float, default=2.0)
+    p = add_command(
+        sub, "calibrate", "learn sigma(el) from data with known truth",
+        "Fit the pseudorange error model sigma(el)^2 = a^2 + (b / sin el)^2 to residuals at a "
+        "known position (simulated runs, or static stations at their header position), "
+        "inflated to bound the tails (--bound overbound); writes the JSON model and a figure.",
+    )  # fmt: skip
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--sim", nargs="+", type=existing_dir(_SIM), metavar="DIR",
+                     help="simulated runs")
+    src.add_argument("--obs", nargs="+", type=existing_file("RINEX 2/3 observation files"),
+                     metavar="FILE", help="static station RINEX observations (several files: "
+                     "several days or sites, each at its header position)")  # fmt: skip
+    p.add_argument("--states", metavar="LIST",
+                   help="with --sim: signal states to learn from, comma separated, of los, "
+                   "multipath, nlos (default: los)")
+    p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
+                   help="with --obs: broadcast navigation files covering every --obs file "
+                   "(required, no default)")  # fmt: skip
+    p.add_argument("--station", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
+                   help="with one --obs file: station ECEF, metres (default: the RINEX header "
+                   "position)")  # fmt: skip
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
+                   help="systems used: gps, gps+galileo, all, or system letters")
+    p.add_argument("--k-sigma", type=positive_float, default=2.0, metavar="K",
+                   help="pair interval half width in sigmas written into the model")
     p.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
-                   help="overbound (default): the fit inflated until it bounds the residual "
-                   "tails in every elevation bin; estimate: the least-squares fit")  # fmt: skip
-    p.add_argument("--out", required=True, type=output_file, metavar="JSON")
+                   help="overbound: the fit inflated until it bounds the residual tails in every "
+                   "elevation bin; estimate: the least-squares fit")  # fmt: skip
+    p.add_argument("--out", required=True, type=output_file, metavar="JSON",
+                   help="the model file (its figure beside it, .png)")
+    add_checks(
+        p,
+        needs("--states", "states", lambda a: given(a, "sim"), "--sim (a simulation knows each "
+              "signal's state)"),
+        needs("--nav", "nav", lambda a: given(a, "obs"), "--obs"),
+        requires("--obs", "obs", "--nav FILES", "nav", "covering every observation file's day"),
+        needs("--station", "station", lambda a: given(a, "obs") and len(a.obs) == 1,
+              "one --obs file (with several, each file's header position is used; calibrate "
+              "one file at a time to give its position)"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_calibrate)
 
 
 def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("demo", help="a simulated run on the demo line under several trust rules")
-    p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--from-predisat-demo", metavar="DIR",
-                   help="reuse a `predisat demo` folder: its world and pipeline masks")  # fmt: skip
+    p = add_command(
+        sub, "demo", "a simulated run on the demo line under several trust rules",
+        "Build the demo world of line 144 (km 4.0-6.3) or reuse a `predisat demo` folder's, "
+        "simulate a stop-and-go run on the embedded navigation day and locate it under each "
+        "trust rule (true masks, pipeline masks when reused, no masks, a 15 deg cut-off), GPS "
+        "only as `predisat availability`; writes a run folder per rule and summary.csv.",
+    )  # fmt: skip
+    p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR",
+                   help="output folder")
+    p.add_argument("--seed", type=int, metavar="N", default=1, help="seed of the signal errors")
+    p.add_argument("--from-predisat-demo", type=existing_dir("a `predisat demo` output folder "
+                   "(truth/world.npz, masks/masks.parquet)"), metavar="DIR",
+                   help="reuse a `predisat demo` folder's world and pipeline masks (default: "
+                   "build the world)")  # fmt: skip
     p.set_defaults(func=cmd_demo)
 
 
@@ -572,6 +744,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``locator`` parser: one subcommand per job."""
     parser = argparse.ArgumentParser(
         prog="locator",
+        formatter_class=HelpFormatter,
         description=(
             "1-D track-constrained GNSS locator (satellite-pair hyperbolic intersection with "
             "the track, SATHIA) with mask-aware satellite selection and integrity checks."

@@ -45,6 +45,7 @@ __all__ = [
     "check_track",
     "demo",
     "evaluate_folder",
+    "rule_folder",
     "run_to_folder",
     "simulate_to_folder",
     "static_truth",
@@ -112,11 +113,13 @@ def simulate_to_folder(
     constellation: str = "all",
     fmt: str = "parquet",
     masks_out: bool = True,
+    end_chainage_m: float | None = None,
 ) -> tuple[SimRun, Path]:
     """Simulate a run and write it (and the world's true masks, for ``--masks``) to ``out``.
 
     The run starts 15 m inside the world's scenery at the end chosen by ``direction`` unless
-    ``start_chainage_m`` is given, and lasts until 15 m before the other end by default.
+    ``start_chainage_m`` is given, and lasts until 15 m before the other end by default (until
+    ``end_chainage_m`` when given and ``duration_s`` is not).
     """
     profile = profile or stop_and_go()
     lo, hi = world.extent_m
@@ -126,7 +129,10 @@ def simulate_to_folder(
         else start_chainage_m
     )
     if duration_s is None:
-        span = (hi - start - 15.0) if direction > 0 else (start - lo - 15.0)
+        if end_chainage_m is not None:
+            span = (end_chainage_m - start) * (1.0 if direction > 0 else -1.0)
+        else:
+            span = (hi - start - 15.0) if direction > 0 else (start - lo - 15.0)
         grid = np.arange(0.0, 3600.0, 0.5)
         duration_s = float(np.floor(np.interp(span, profile.distance_at(grid), grid)))
     sim = simulate_run(
@@ -270,6 +276,12 @@ def calibrate_to_file(
     return model
 
 
+def rule_folder(rule: str) -> str:
+    """The run folder of a trust rule in :func:`demo` (``"15 deg cut-off"`` ->
+    ``"15_deg_cutoff"``)."""
+    return rule.replace(" ", "_").replace("-", "")
+
+
 def demo(
     out: str | Path,
     *,
@@ -278,12 +290,19 @@ def demo(
     seed: int = 1,
     hour_utc: float = 8.0,
     log: Callable[[str], object] = print,
+    constellation: str = "gps",
+    rate_hz: float = 1.0,
+    stretch_m: tuple[float, float] | None = None,
 ) -> pd.DataFrame:
     """A simulated run on the demo line located under several trust rules, scored.
 
     Builds (or takes) the demo world of line 144 km 4.0-6.3, simulates a stop-and-go run on
     the embedded navigation day, and locates it with the world's true masks, with the pipeline
-    masks when given, with no masks, and with a 15 deg cut-off.
+    masks when given, with no masks, and with a 15 deg cut-off, using the satellites of
+    ``constellation`` (default GPS, as ``predisat availability`` and the LOCOPROL figures; the
+    simulation holds every system). ``rate_hz``: epochs per second of the simulated run;
+    ``stretch_m``: the chainages it runs between (default: the world's, 15 m inside; the
+    demo gives the pipeline masks' own, so that every rule is scored where it has masks).
 
     Returns
     -------
@@ -300,7 +319,11 @@ def demo(
     eph = default_ephemeris()
     t0 = float(default_window()[0] + hour_utc * 3600.0)
     log("locator demo 2/3: simulating the train run (LOS, multipath, NLOS, loss) and true masks")
-    sim, sim_dir = simulate_to_folder(world, eph, root / "simulation", t0_gps_s=t0, seed=seed)
+    start_m, end_m = (None, None) if stretch_m is None else stretch_m
+    sim, sim_dir = simulate_to_folder(
+        world, eph, root / "simulation", t0_gps_s=t0, seed=seed, rate_hz=rate_hz,
+        start_chainage_m=start_m, end_chainage_m=end_m,
+    )  # fmt: skip
     truth_masks = read_masks(sim_dir / "true_masks.parquet")
     path = AntennaPath(world.track, float(sim.meta["antenna_height_m"]))
     rules: dict[str, tuple[str, MaskSet | None, float]] = {
@@ -314,13 +337,14 @@ def demo(
     rows = []
     for label, (trust, masks, cut) in rules.items():
         cfg = RunConfig(LocatorConfig(), trust=trust, cutoff_deg=cut or 15.0)
-        name = label.replace(" ", "_").replace("-", "")
+        name = rule_folder(label)
         _, folder = run_to_folder(
-            path, SimSource(sim), root / name, start_chainage_m=float(sim.chainage_m[0]),
-            config=cfg, masks=masks, meta={"rule": label},
+            path, SimSource(sim, constellation=constellation), root / name,
+            start_chainage_m=float(sim.chainage_m[0]), config=cfg, masks=masks,
+            meta={"rule": label, "constellation": constellation},
         )  # fmt: skip
         summary = evaluate_folder(folder, sim.chainage_m)
-        rows.append({"rule": label, **summary})
+        rows.append({"rule": label, "constellation": constellation, **summary})
     table = pd.DataFrame(rows)
     # summarise() returns floats throughout; counts read better as integers
     counts = ["epochs", "hmi", "hmi_fix", "mi"]

@@ -13,7 +13,19 @@ from typing import TYPE_CHECKING
 
 import pandas as pd
 
-from predisat.cli.args import cutoff_deg, output_dir, positive_float
+from predisat.cli.args import (
+    add_checks,
+    add_command,
+    cutoff_deg,
+    existing_dir,
+    existing_file,
+    existing_path,
+    given,
+    needs,
+    non_negative_float,
+    output_dir,
+    positive_float,
+)
 from predisat.cli.common import track_option
 
 if TYPE_CHECKING:
@@ -21,28 +33,43 @@ if TYPE_CHECKING:
 
 __all__ = ["add_parser", "cmd_balises", "format_summary"]
 
+# defaults stated in the help and applied in cmd_balises (None in the parser: given or not)
+_SPACING_M = 120.0
+_ODOMETER = "trailer-radar"
+_ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
+_MAX_ACCEL_MPS2 = 1.5
+
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     """Add ``balises`` to the sub-parsers of the ``locator`` command line."""
-    p = sub.add_parser(
-        "balises",
-        help="virtual balises: locate a simulated run with odometry and capture its balises",
-    )
-    p.add_argument("--sim", required=True, metavar="DIR", help="a `locator simulate` folder")
+    p = add_command(
+        sub, "balises",
+        "virtual balises: locate a simulated run with odometry and capture its balises",
+        "Locate a simulated run with the GNSS locator and the odometer between fixes, and "
+        "capture virtual balises (a list, or one every --spacing metres): when each telegram "
+        "is emitted, how late, and whether the balise was passed; writes the capture table "
+        "and the per-epoch run (docs/odometry.md).",
+    )  # fmt: skip
+    p.add_argument("--sim", required=True, type=existing_dir("a `locator simulate` output "
+                   "folder"), metavar="DIR", help="a `locator simulate` folder")  # fmt: skip
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's world.npz)")  # fmt: skip
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--masks", metavar="MASKS", help="mask file (e.g. the run's true_masks.parquet)")
-    g.add_argument("--cutoff", type=cutoff_deg, metavar="DEG", help="flat elevation cut-off")
-    g.add_argument("--no-masks", action="store_true", help="trust every received signal")
+    g.add_argument("--masks", type=existing_path("a mask file (e.g. the run's "
+                   "true_masks.parquet) or a `predisat process` output folder"), metavar="MASKS",
+                   help="trust rule: the satellites the masks say are in view")  # fmt: skip
+    g.add_argument("--cutoff", type=cutoff_deg, metavar="DEG",
+                   help="trust rule: a flat elevation cut-off, degrees")
+    g.add_argument("--no-masks", action="store_true", help="trust rule: every received signal")
     b = p.add_mutually_exclusive_group()
-    b.add_argument("--balises", metavar="CSV", help="balise list (docs/odometry.md)")
+    b.add_argument("--balises", type=existing_file("a balise list CSV (docs/odometry.md)"),
+                   metavar="CSV", help="balise list (default: one every --spacing metres)")
     b.add_argument(
         "--spacing",
         type=positive_float,
-        default=120.0,
         metavar="M",
-        help="without --balises: a balise every M metres of the run (120, GADEROS)",
+        help=f"without --balises: a balise every M metres of the run (default {_SPACING_M:g}, "
+        "GADEROS)",
     )
     p.add_argument(
         "--radius",
@@ -50,36 +77,43 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         nargs="+",
         default=[12.0],
         metavar="M",
-        help="capture radii (12)",
+        help="capture radii, metres (one configuration each)",
     )
-    p.add_argument(
-        "--arm-radius", type=float, default=0.0, metavar="M", help="arm zone radius (0: none)"
-    )
+    p.add_argument("--arm-radius", type=non_negative_float, default=0.0, metavar="M",
+                   help="arm zone radius, metres (0: none)")
     p.add_argument("--emit", choices=("at_fix", "predicted"), default="at_fix",
                    help="telegram at the first fix past the balise, or predicted from the last "
                    "fix before it with the odometer speed")  # fmt: skip
-    p.add_argument(
+    o = p.add_mutually_exclusive_group()
+    o.add_argument(
         "--odometer",
-        default="trailer-radar",
-        choices=("trailer-radar", "motor-radar", "motor", "ideal"),
-        help="the simulated odometer (default: braked trailer axle and radar)",
+        choices=tuple(_ODOMETERS),
+        help=f"the simulated odometer (default {_ODOMETER}: braked trailer axle and radar)",
     )
-    p.add_argument("--odometer-log", metavar="CSV",
+    o.add_argument("--odometer-log", type=existing_file("an odometer log CSV (docs/odometry.md)"),
+                   metavar="CSV",
                    help="a recorded odometer log of the run instead of the simulated odometer "
-                   "(docs/odometry.md; its bounds: --odometer-accuracy)")  # fmt: skip
-    p.add_argument("--odometer-accuracy", nargs=3, type=float, metavar=("ABS_M", "OVER", "UNDER"),
+                   "(docs/odometry.md; its bounds: --odometer-accuracy; default: none)")
+    p.add_argument("--odometer-accuracy", nargs=3, type=non_negative_float,
+                   metavar=("ABS_M", "OVER", "UNDER"),
                    help="bounds of the odometer: fixed part (m), relative over- and under-reading "
                    "(default: the simulated odometer's; 5 0.05 0.05 for a log)")  # fmt: skip
     p.add_argument(
         "--max-accel",
         type=positive_float,
-        default=1.5,
         metavar="MPS2",
-        help="the odometer's configured maximum acceleration, for --odometer-log (1.5)",
+        help="with --odometer-log: the odometer's configured maximum acceleration, m/s^2 "
+        f"(default {_MAX_ACCEL_MPS2:g})",
     )
-    p.add_argument("--error-model", metavar="JSON", help="from `locator calibrate`")
-    p.add_argument("--seed", type=int, default=0, help="odometer seed")
-    p.add_argument("--out", required=True, type=output_dir, metavar="DIR")
+    p.add_argument("--error-model", type=existing_file("a pseudorange error model JSON written "
+                   "by `locator calibrate`"), metavar="JSON",
+                   help="from `locator calibrate` (default: a = b = 2 m, k = 2)")  # fmt: skip
+    p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    add_checks(
+        p,
+        needs("--max-accel", "max_accel", lambda a: given(a, "odometer_log"), "--odometer-log"),
+    )
     p.set_defaults(func=cmd_balises)
     return p
 
@@ -127,12 +161,13 @@ def cmd_balises(args: argparse.Namespace) -> int:
         balises = BaliseList.from_csv(args.balises, track)
     else:
         lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
-        if hi - lo < args.spacing:
+        spacing = _SPACING_M if args.spacing is None else args.spacing
+        if hi - lo < spacing:
             raise ValueError(
                 f"{args.sim}: the run covers {hi - lo:.0f} m, less than --spacing "
-                f"{args.spacing:g} m; give a shorter spacing or a --balises list"
+                f"{spacing:g} m; give a shorter spacing or a --balises list"
             )
-        balises = BaliseList.along_track(track, lo + 0.5 * args.spacing, hi, args.spacing)
+        balises = BaliseList.along_track(track, lo + 0.5 * spacing, hi, spacing)
     masks = None
     if args.masks:
         from predisat.masks.fileformat import read_masks
@@ -146,7 +181,8 @@ def cmd_balises(args: argparse.Namespace) -> int:
     if args.odometer_log:
         from locator.odometry.logfile import read_odometer_log
 
-        log = read_odometer_log(args.odometer_log, max_accel_mps2=args.max_accel)
+        max_accel = _MAX_ACCEL_MPS2 if args.max_accel is None else args.max_accel
+        log = read_odometer_log(args.odometer_log, max_accel_mps2=max_accel)
         accuracy = OdometerAccuracy.subset041()
     if args.odometer_accuracy:
         a, over, under = args.odometer_accuracy
@@ -156,9 +192,11 @@ def cmd_balises(args: argparse.Namespace) -> int:
         for r in args.radius
     }
     summary, folder = balises_to_folder(
-        sim, path, balises, args.out, config=cfg, masks=masks, odometer=ODOMETERS[args.odometer](),
-        captures=caps, seed=args.seed, log=log, accuracy=accuracy,
-        meta={"sim": str(args.sim), "odometer_kind": args.odometer_log or args.odometer},
+        sim, path, balises, args.out, config=cfg, masks=masks,
+        odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed, log=log,
+        accuracy=accuracy,
+        meta={"sim": str(args.sim), "odometer_kind": str(args.odometer_log or args.odometer
+                                                          or _ODOMETER)},
     )  # fmt: skip
     print(format_summary(summary))
     print(f"-> {folder}")

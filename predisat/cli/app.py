@@ -17,9 +17,18 @@ from typing import TYPE_CHECKING
 from predisat import __version__
 from predisat.cli import demo
 from predisat.cli.args import (
+    HelpFormatter,
+    add_checks,
+    add_command,
+    chainage_hint,
+    constellation_label,
+    existing_file,
+    existing_path,
     finite_float,
+    needs,
     output_dir,
     output_file,
+    pitch_deg,
     positive_float,
     positive_int,
 )
@@ -38,7 +47,11 @@ if TYPE_CHECKING:
 
 __all__ = ["main"]
 
-def _camera(kind: str, calibration: str | None) -> CameraModel:
+# the choices of `synth --sky` (predisat.synth.generate.SKY_CHOICES, which loads the renderer)
+SKY_CHOICES = ("clear", "cloudy", "overcast", "mixed")
+_MASKS = "a mask file (masks.parquet) or a `predisat process` output folder"
+
+def _camera(kind: str | None, calibration: Path | None) -> CameraModel:
     from predisat.camera import models as camera
 
     if calibration is not None:
@@ -106,6 +119,8 @@ def cmd_availability(args: argparse.Namespace) -> int:
     run = availability.run(args, track=track)
     for warning in run.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)
+    print(f"satellites counted: {constellation_label(args.constellation)} (--constellation "
+          f"{args.constellation})")
     print(availability_table(run.summary))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
           f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip
@@ -148,21 +163,16 @@ def cmd_process(args: argparse.Namespace) -> int:
     return 0
 
 
+# `export --chainage` farther than this from every surveyed position is refused: the nearest
+# position's mask would be written for a place nobody surveyed.
+_EXPORT_REACH_M = 50.0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat.masks import fileformat as maskio
 
     path = maskio.mask_file_path(args.masks)
     chainage_m: float | None = args.chainage
-    if args.format == "urbannav":
-        if chainage_m is not None:
-            raise CliError("--chainage: urbannav exports every position; drop it, or choose "
-                           "--format rtklib or pvgis for one position")
-    elif chainage_m is None:
-        raise CliError(f"--format {args.format} exports one position: give --chainage M")
-    if args.header and args.format != "urbannav":
-        raise CliError(f"--header is for --format urbannav, not {args.format}; drop it")
-    if args.pvgis_layout != "table" and args.format != "pvgis":
-        raise CliError(f"--pvgis-layout is for --format pvgis, not {args.format}; drop it")
     masks = maskio.read_masks(path)
     include = not args.bare
     if args.format == "urbannav":
@@ -171,12 +181,20 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:
         assert chainage_m is not None  # checked above
         ch_m = float(chainage_m)
+        lo_m, hi_m = float(masks.chainage_m.min()), float(masks.chainage_m.max())
+        reach_m = _EXPORT_REACH_M
+        if not lo_m - reach_m <= ch_m <= hi_m + reach_m:
+            raise CliError(
+                f"--chainage {ch_m:g} m is outside the masks of {path} ({lo_m:.0f}-{hi_m:.0f} m "
+                "of chainage)" + chainage_hint(ch_m, lo_m, hi_m, "--chainage")
+            )
         i, _ = masks.position_index(ch_m)
         what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
         if args.format == "rtklib":
             out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)
         else:
-            out = maskio.to_pvgis_horizon(masks, ch_m, args.out, layout=args.pvgis_layout,
+            layout = args.pvgis_layout or "table"
+            out = maskio.to_pvgis_horizon(masks, ch_m, args.out, layout=layout,
                                           include_margin=include)  # fmt: skip
     kind = "bare mask" if args.bare else "mask + margin"
     print(f"export: {args.format} ({kind}, {what}) -> {out}")
@@ -191,34 +209,40 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "synth",
-        help="render a synthetic side-camera survey with exact ground truth",
-        description=(
-            "Build a procedural corridor world along a track, render left and right 45-degree "
-            "camera frames every SPACING metres, and write a survey folder plus ground truth."
-        ),
-    )
-    p.add_argument("--track", metavar="FILE", help="GeoJSON or lat/lon/h CSV (default: line 144)")
+    p = add_command(
+        sub, "synth", "render a synthetic side-camera survey with exact ground truth",
+        "Build a procedural corridor world along a track, render left and right 45-degree "
+        "camera frames every SPACING metres, and write a survey folder plus ground truth (the "
+        "world, the true masks, per-frame labels).",
+    )  # fmt: skip
+    p.add_argument("--track", metavar="FILE",
+                   help="GeoJSON or lat/lon/h CSV (default: the demo line 144)")
     add_track_selection(p)
-    p.add_argument("--from-km", type=finite_float, metavar="A",
-                   help="start chainage in km (default 0)")
-    p.add_argument("--to-km", type=finite_float, metavar="B",
-                   help="end chainage in km (default: end)")
-    p.add_argument(
-        "--sky", choices=["clear", "cloudy", "overcast", "mixed"], default="mixed", help="sky"
-    )
-    p.add_argument("--seed", type=int, default=0, help="random seed of scenery and sky")
+    p.add_argument("--from-km", type=finite_float, metavar="KM",
+                   help="start chainage, km (default 0)")
+    p.add_argument("--to-km", type=finite_float, metavar="KM",
+                   help="end chainage, km (default: the track's end)")
+    p.add_argument("--sky", choices=SKY_CHOICES, default="mixed",
+                   help="sky condition of the frames (mixed: varies along the run)")
+    p.add_argument("--seed", type=int, metavar="N", default=0,
+                   help="random seed of scenery and sky")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
-    p.add_argument("--spacing-m", type=positive_float, default=10.0,
-                   help="distance between positions")
-    p.add_argument("--camera", choices=["pinhole", "fisheye"], default="pinhole")
-    p.add_argument("--calibration", metavar="YAML", help="OpenCV FileStorage calibration")
-    p.add_argument("--pitch-deg", type=float, default=45.0, help="camera pitch above horizontal")
+    p.add_argument("--spacing-m", type=positive_float, default=10.0, metavar="M",
+                   help="distance between positions, metres")
+    cam = p.add_mutually_exclusive_group()
+    cam.add_argument("--camera", choices=["pinhole", "fisheye"],
+                     help="built-in side camera model (default pinhole)")
+    cam.add_argument("--calibration", type=existing_file("an OpenCV FileStorage camera "
+                     "calibration YAML (docs/camera-model.md)"), metavar="YAML",
+                     help="a camera calibration instead of a built-in model (default: none, "
+                     "--camera)")  # fmt: skip
+    p.add_argument("--pitch-deg", type=pitch_deg, default=45.0, metavar="DEG",
+                   help="camera pitch above horizontal, degrees")
     p.add_argument(
-        "--scenery", metavar="YAML", help="scenery recipe (default: mixed, every kind of stretch)"
-    )
-    p.add_argument("--workers", type=positive_int, default=default_workers(),
+        "--scenery", metavar="YAML",
+        help="scenery recipe (default: drawn for the stretch, every kind of stretch from 0.8 km)",
+    )  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
@@ -227,15 +251,13 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def _add_availability(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.cli import availability
 
-    p = sub.add_parser(
-        "availability",
-        help="mask-aware satellite availability report along a line",
-        description=(
-            "Which satellites a train may trust along the line over a time window, under the "
-            "survey masks, with no mask and with flat cut-offs: an HTML report with plots, "
-            "CSV/Parquet tables and a GeoJSON layer for QGIS."
-        ),
-    )
+    p = add_command(
+        sub, "availability", "mask-aware satellite availability report along a line",
+        "Which satellites a train may trust along the line over a time window, under the "
+        "survey masks, with no mask and with flat cut-offs: an HTML report with plots, "
+        "CSV/Parquet tables and a GeoJSON layer for QGIS. GPS only by default, as the LOCOPROL "
+        "figures and `locator run` (--constellation).",
+    )  # fmt: skip
     availability.add_arguments(p)
     add_track_selection(p)
     p.set_defaults(func=cmd_availability)
@@ -244,15 +266,13 @@ def _add_availability(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
 def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.cli import process
 
-    p = sub.add_parser(
-        "process",
-        help="turn a survey's side-camera frames into elevation masks (resumable)",
-        description=(
-            "Segment the sky in every frame, reconstruct full 360 deg masks along the line in "
-            "chainage chunks written atomically (an interrupted run resumes), and write the "
-            "mask file. Bad frames are reported and skipped (--strict: stop)."
-        ),
-    )
+    p = add_command(
+        sub, "process", "turn a survey's side-camera frames into elevation masks (resumable)",
+        "Segment the sky in every frame, reconstruct full 360 deg masks along the line in "
+        "chainage chunks written atomically (an interrupted run resumes), and write the "
+        "mask file. Bad frames are reported and skipped (--strict: stop). An --out holding "
+        "another survey's chunks is refused unless --replace.",
+    )  # fmt: skip
     process.add_arguments(p)
     p.set_defaults(func=cmd_process)
 
@@ -260,64 +280,75 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.cli import evaluate
 
-    p = sub.add_parser(
-        "evaluate",
-        help="compare masks with synthetic ground truth; calibrate the trust margin",
-        description=(
-            "Mask error by sector and source against the true masks of a synthetic survey, "
-            "false-trust rate and visible sky lost; --calibrate finds the margin meeting the "
-            "target share of truly line-of-sight trusted directions."
-        ),
-    )
+    p = add_command(
+        sub, "evaluate", "compare masks with synthetic ground truth; calibrate the trust margin",
+        "Mask error by sector and source against the true masks of a synthetic survey, "
+        "false-trust rate and visible sky lost; --calibrate finds the margin meeting the "
+        "target share of truly line-of-sight trusted directions.",
+    )  # fmt: skip
     evaluate.add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
 
 
 def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "export",
-        help="write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
-        description=(
-            "Convert a mask file (or a `predisat process` output folder) for other tools: "
-            "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
-            "position: 'AZ EL' lines for the file-elmaskfile option of the MALIB / MRTKLIB "
-            "RTKLIB forks, RTKPLOT and simobs) or pvgis (one position: horizon table). Values "
-            "are the mask plus its margin, never below the mask at any azimuth the reader may "
-            "look up (docs/mask-format.md)."
-        ),
-    )
-    p.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
-    p.add_argument("--format", required=True, choices=("urbannav", "rtklib", "pvgis"))
+    p = add_command(
+        sub, "export",
+        "write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
+        "Convert a mask file (or a `predisat process` output folder) for other tools: "
+        "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
+        "position: 'AZ EL' lines for the file-elmaskfile option of the MALIB / MRTKLIB "
+        "RTKLIB forks, RTKPLOT and simobs) or pvgis (one position: horizon table). Values "
+        "are the mask plus its margin, never below the mask at any azimuth the reader may "
+        "look up (docs/mask-format.md).",
+    )  # fmt: skip
+    p.add_argument("masks", type=existing_path(_MASKS), metavar="MASKS",
+                   help="mask file, or a `predisat process` output folder")
+    p.add_argument("--format", required=True, choices=("urbannav", "rtklib", "pvgis"),
+                   help="the reader's format")
     p.add_argument("--out", required=True, type=output_file, metavar="FILE", help="output file")
-    p.add_argument("--chainage", type=float, metavar="M",
-                   help="rtklib and pvgis: the position (nearest surveyed position), metres")
+    p.add_argument("--chainage", type=finite_float, metavar="M",
+                   help="rtklib and pvgis: the position's chainage, metres (the nearest "
+                   "surveyed position is written; no default, required with these formats)")
     p.add_argument("--bare", action="store_true", help="the mask without its margin")
     p.add_argument("--header", action="store_true", help="urbannav: a header row")
-    p.add_argument("--pvgis-layout", choices=("table", "userhorizon"), default="table",
-                   help="pvgis: the horizon-profile table (default) or PVGIS's upload file")
+    p.add_argument("--pvgis-layout", choices=("table", "userhorizon"),
+                   help="pvgis: the horizon-profile table or PVGIS's upload file (default table)")
+    add_checks(
+        p,
+        needs("--chainage", "chainage", lambda a: a.format != "urbannav", "--format rtklib or "
+              "pvgis (one position); urbannav exports every position"),
+        lambda a: (f"--format {a.format} exports one position: give --chainage M"
+                   if a.format != "urbannav" and a.chainage is None else None),
+        needs("--header", "header", lambda a: a.format == "urbannav", "--format urbannav"),
+        needs("--pvgis-layout", "pvgis_layout", lambda a: a.format == "pvgis", "--format pvgis"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_export)
 
 
 def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.sky.network import NET_METHODS
     from predisat.sky.segment import METHODS  # lazy: the segmenters load OpenCV models
 
-    p = sub.add_parser(
-        "evaluate-sky",
-        help="score sky segmentation on a folder of photos with ground-truth sky masks",
-        description=(
-            "Segment every photo of a folder and compare with its sky mask: IoU per image and "
-            "per set (layouts: ADE20K original/+mask/, fisheye_hk raw_images/+mask_images/, "
-            "images/+masks/, or a predisat synth output folder)."
-        ),
-    )
+    p = add_command(
+        sub, "evaluate-sky",
+        "score sky segmentation on a folder of photos with ground-truth sky masks",
+        "Segment every photo of a folder and compare with its sky mask: IoU per image and "
+        "per set (layouts: ADE20K original/+mask/, fisheye_hk raw_images/+mask_images/, "
+        "images/+masks/, or a predisat synth output folder).",
+    )  # fmt: skip
     p.add_argument("--data", required=True, nargs="+", metavar="DIR", help="photo folder(s)")
     p.add_argument("--out", type=output_dir, metavar="DIR",
-                   help="write per-image tables and worst-case sheets")
+                   help="write per-image tables and worst-case sheets (default: print only)")
     p.add_argument("--method", choices=METHODS, help="segmentation method (default: the "
                    "library's default, see docs/segmentation.md)")
     p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
-                   "card) instead of the shipped one, for --method cnn or ensemble")
+                   "card) for --method cnn or ensemble (default: the shipped one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_checks(
+        p,
+        needs("--sky-net", "sky_net", lambda a: a.method in (None, *NET_METHODS),
+              f"--method {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+    )  # fmt: skip
     p.set_defaults(func=cmd_evaluate_sky)
 
 
@@ -325,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``predisat`` parser: one subcommand per job."""
     parser = argparse.ArgumentParser(
         prog="predisat",
+        formatter_class=HelpFormatter,
         description=(
             "PREDISAT: side-camera railway surveys to GNSS elevation masks. "
             "Run 'predisat demo' to build the demo survey on Belgian line 144."

@@ -1,18 +1,148 @@
-"""Argument types shared by the command lines, checked before any work starts.
+"""Argument types and checks shared by the ``predisat`` and ``locator`` command lines.
 
-A run that computes for minutes and then cannot write (``--out`` names a file where a folder
-is expected, or the reverse) loses the work, and a value the library refuses later is reported
-under its internal name; argparse refuses both at once, under the option's name, with the fix.
+One vocabulary for both: every option's value is checked before any work starts, under the
+option's name and with the fix, and the values a person is likely to give in the wrong unit
+(an angle in radians, a chainage in kilometres, a speed in km/h, a share in percent) are
+refused with the value they probably meant.
+
+* Types (``type=`` of ``add_argument``): :func:`output_dir`, :func:`output_file`,
+  :func:`existing_file`, :func:`existing_path`, :func:`existing_dir` (a missing input names
+  what it should contain), :func:`finite_float`, :func:`positive_int`, :func:`positive_float`,
+  :func:`non_negative_float`, :func:`cutoff_deg`, :func:`pitch_deg`, :func:`speed_mps`,
+  :func:`rate_hz`, :func:`antenna_height_m`, :func:`fraction`, :func:`constellation`.
+* Parsers: :class:`HelpFormatter` (argparse's own defaults in the help),
+  :func:`add_command` (a described subcommand), :func:`add_checks` and :func:`run_checks`
+  (options that exclude or need each other, refused at parse time), :func:`chainage_hint`.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["caused_by_interrupt", "cutoff_deg", "finite_float", "non_negative_float",
-           "output_dir", "output_file", "positive_float", "positive_int"]  # fmt: skip
+__all__ = [
+    "MAX_TRAIN_SPEED_MPS",
+    "TIME_HELP",
+    "HelpFormatter",
+    "add_checks",
+    "add_command",
+    "antenna_height_m",
+    "caused_by_interrupt",
+    "chainage_hint",
+    "constellation",
+    "constellation_label",
+    "cutoff_deg",
+    "existing_dir",
+    "existing_file",
+    "existing_path",
+    "finite_float",
+    "fraction",
+    "given",
+    "needs",
+    "non_negative_float",
+    "output_dir",
+    "output_file",
+    "pitch_deg",
+    "positive_float",
+    "positive_int",
+    "rate_hz",
+    "requires",
+    "run_checks",
+    "speed_mps",
+]
+
+MAX_TRAIN_SPEED_MPS = 100.0
+"""360 km/h: above every commercial service (350 km/h); a faster value is a unit mistake."""
+
+_MAX_RATE_HZ = 100.0  # GNSS receivers log at 1-20 Hz, the fastest at 100 Hz
+_MAX_ANTENNA_HEIGHT_M = 10.0  # a train's roof antenna is 4-5 m above the rail
+
+TIME_HELP = "GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or GPS seconds"
+"""The forms of a time option (``--start``), as :func:`predisat.availability.run.parse_time`
+reads them."""
+
+Check = Callable[[argparse.Namespace], str | None]
+"""A check of parsed options: the error message, or None when they are consistent."""
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's ``(default: ...)`` after every option's help, except where it says nothing:
+    flags, required options, positionals and ``None`` defaults (whose help says what happens
+    when the option is absent)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if (
+            "%(default)" in text
+            or action.default is None
+            or action.default is argparse.SUPPRESS
+            or action.required
+            or not action.option_strings
+            or action.nargs == 0  # flags: store_true, store_const, help, version
+        ):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def add_command(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+    name: str,
+    help: str,
+    description: str,
+) -> argparse.ArgumentParser:
+    """A subcommand with its one-line ``help`` (the command list), its ``description`` (its own
+    ``--help``) and :class:`HelpFormatter`."""
+    if not description.strip():
+        raise ValueError(f"subcommand {name}: give a description (what it does, what it writes)")
+    return sub.add_parser(name, help=help, description=description, formatter_class=HelpFormatter)
+
+
+def given(args: argparse.Namespace, dest: str) -> bool:
+    """Whether the option stored in ``dest`` was given (its default is None or False)."""
+    value = getattr(args, dest, None)
+    return value is not None and value is not False
+
+
+def needs(
+    option: str, dest: str, condition: Callable[[argparse.Namespace], bool], what: str
+) -> Check:
+    """``option`` (stored in ``dest``) is refused unless ``condition`` holds: "``option`` is for
+    ``what``; drop it"."""
+
+    def check(args: argparse.Namespace) -> str | None:
+        if given(args, dest) and not condition(args):
+            return f"{option} is for {what}; drop it"
+        return None
+
+    return check
+
+
+def requires(option: str, dest: str, other: str, other_dest: str, why: str = "") -> Check:
+    """``option`` (stored in ``dest``) is refused without ``other`` (stored in ``other_dest``)."""
+
+    def check(args: argparse.Namespace) -> str | None:
+        if given(args, dest) and not given(args, other_dest):
+            return f"{option} needs {other}" + (f" ({why})" if why else "")
+        return None
+
+    return check
+
+
+def add_checks(parser: argparse.ArgumentParser, *checks: Check) -> None:
+    """Checks of the parsed options of ``parser`` (a subcommand), run by :func:`run_checks`."""
+    parser.set_defaults(_checks=tuple(checks), _parser=parser)
+
+
+def run_checks(args: argparse.Namespace) -> None:
+    """Run the chosen subcommand's checks: the first failing one exits through argparse's
+    ``error`` (usage, message, exit code 2), before any work."""
+    parser: argparse.ArgumentParser | None = getattr(args, "_parser", None)
+    for check in getattr(args, "_checks", ()):
+        message = check(args)
+        if message and parser is not None:
+            parser.error(message)
 
 
 def output_dir(value: str) -> Path:
@@ -41,9 +171,47 @@ def output_file(value: str) -> Path:
     return p
 
 
-def finite_float(value: str) -> float:
-    """Any finite number (a chainage, a kilometre)."""
-    return _number(value)
+def existing_file(content: str) -> Callable[[str], Path]:
+    """An input file, which must exist and not be a folder; ``content`` says what it holds
+    (``"a CSV with columns gps_s, chainage_m"``) for the message when it does not."""
+
+    def parse(value: str) -> Path:
+        p = Path(value)
+        if p.is_dir():
+            raise argparse.ArgumentTypeError(f"{value} is a folder; give {content}")
+        if not p.is_file():
+            raise argparse.ArgumentTypeError(f"{value}: no such file; give {content}")
+        return p
+
+    parse.__name__ = "file"  # argparse names the type in its messages
+    return parse
+
+
+def existing_dir(content: str) -> Callable[[str], Path]:
+    """An input folder, which must exist; ``content`` says what it holds."""
+
+    def parse(value: str) -> Path:
+        p = Path(value)
+        if not p.is_dir():
+            kind = "a file, not a folder" if p.exists() else "no such folder"
+            raise argparse.ArgumentTypeError(f"{value}: {kind}; give {content}")
+        return p
+
+    parse.__name__ = "folder"
+    return parse
+
+
+def existing_path(content: str) -> Callable[[str], Path]:
+    """An input file or folder, which must exist; ``content`` says what it holds."""
+
+    def parse(value: str) -> Path:
+        p = Path(value)
+        if not p.exists():
+            raise argparse.ArgumentTypeError(f"{value}: no such file or folder; give {content}")
+        return p
+
+    parse.__name__ = "path"
+    return parse
 
 
 def _number(value: str) -> float:
@@ -54,6 +222,11 @@ def _number(value: str) -> float:
     if not math.isfinite(x):
         raise argparse.ArgumentTypeError(f"{value} is not a finite number")
     return x
+
+
+def finite_float(value: str) -> float:
+    """Any finite number (a chainage, a kilometre)."""
+    return _number(value)
 
 
 def positive_int(value: str) -> int:
@@ -83,14 +256,119 @@ def non_negative_float(value: str) -> float:
     return x
 
 
+def _degrees(value: str) -> float:
+    """An angle in degrees; a value that reads as radians (a fraction up to pi/2) is refused
+    with its degrees, unless written with the unit (``0.5deg``)."""
+    text = value.strip()
+    explicit = text.lower().endswith("deg")
+    x = _number(text[:-3] if explicit else text)
+    if not explicit and x != round(x) and abs(x) <= 0.5 * math.pi + 1e-9:
+        raise argparse.ArgumentTypeError(
+            f"{value} looks like radians ({value} rad = {math.degrees(x):.1f} deg); give "
+            f"degrees ({round(math.degrees(x)):g}), or write {value}deg if you mean "
+            f"{value} degrees"
+        )
+    return x
+
+
 def cutoff_deg(value: str) -> float:
-    """An elevation cut-off in degrees, in [0, 90)."""
-    x = _number(value)
+    """An elevation cut-off in degrees, in [0, 90); a fraction up to pi/2 reads as radians
+    and is refused unless written ``0.5deg``."""
+    x = _degrees(value)
     if not 0.0 <= x < 90.0:
         raise argparse.ArgumentTypeError(
             f"{value} is not an elevation cut-off; give degrees in [0, 90)"
         )
     return x
+
+
+def pitch_deg(value: str) -> float:
+    """A camera pitch above the horizontal in degrees, in [-90, 90] (radians refused)."""
+    x = _degrees(value)
+    if not -90.0 <= x <= 90.0:
+        raise argparse.ArgumentTypeError(f"{value} is not a pitch; give degrees in [-90, 90]")
+    return x
+
+
+def speed_mps(value: str) -> float:
+    """A train speed in metres per second, above 0 and at most :data:`MAX_TRAIN_SPEED_MPS`."""
+    x = positive_float(value)
+    if x > MAX_TRAIN_SPEED_MPS:
+        raise argparse.ArgumentTypeError(
+            f"{value} m/s is {3.6 * x:.0f} km/h, beyond any train (at most "
+            f"{MAX_TRAIN_SPEED_MPS:g} m/s = {3.6 * MAX_TRAIN_SPEED_MPS:.0f} km/h); give metres "
+            f"per second: {value} km/h is {x / 3.6:.1f}"
+        )
+    return x
+
+
+def rate_hz(value: str) -> float:
+    """An epoch rate in hertz, above 0 and at most 100 (what GNSS receivers log at)."""
+    x = positive_float(value)
+    if x > _MAX_RATE_HZ:
+        raise argparse.ArgumentTypeError(
+            f"{value} Hz is beyond any GNSS receiver (at most {_MAX_RATE_HZ:g} Hz); give epochs "
+            "per second, e.g. 1 or 10"
+        )
+    return x
+
+
+def antenna_height_m(value: str) -> float:
+    """An antenna height above the rail in metres, in [0, 10]."""
+    x = non_negative_float(value)
+    if x > _MAX_ANTENNA_HEIGHT_M:
+        raise argparse.ArgumentTypeError(
+            f"{value} m is no antenna height above the rail (at most {_MAX_ANTENNA_HEIGHT_M:g} m;"
+            f" a roof antenna is 4-5 m); give metres ({value} cm is {x / 100:g})"
+        )
+    return x
+
+
+def fraction(value: str) -> float:
+    """A share in (0, 1]; a value in (1, 100] reads as percent and is refused with the share."""
+    x = _number(value)
+    if 1.0 < x <= 100.0:
+        raise argparse.ArgumentTypeError(
+            f"{value} looks like percent; give a share in (0, 1] ({value} % is {x / 100:g})"
+        )
+    if not 0.0 < x <= 1.0:
+        raise argparse.ArgumentTypeError(f"{value} is not a share; give a number in (0, 1]")
+    return x
+
+
+def constellation(value: str) -> str:
+    """A constellation selection: a name (``gps``, ``gps+galileo``, ``galileo``,
+    ``gps+glonass``, ``all``) or RINEX system letters (``GE``); kept as given."""
+    from predisat.availability.satellites import CONSTELLATIONS, SYSTEM_NAMES
+
+    key = value.strip().lower()
+    letters = [c for c in value.upper() if c not in " ,+;"]
+    if key in CONSTELLATIONS or (letters and all(c in SYSTEM_NAMES for c in letters)):
+        return value
+    names = ", ".join(CONSTELLATIONS)
+    raise argparse.ArgumentTypeError(
+        f"{value!r} is no constellation; give one of {names}, or system letters "
+        f"({', '.join(f'{k} {v}' for k, v in SYSTEM_NAMES.items())})"
+    )
+
+
+def constellation_label(value: str) -> str:
+    """The systems of a :func:`constellation` selection by name (``"GPS, Galileo"``)."""
+    from predisat.availability.satellites import CONSTELLATIONS, SYSTEM_NAMES
+
+    key = value.strip().lower()
+    letters = CONSTELLATIONS.get(key, "".join(c for c in value.upper() if c not in " ,+;"))
+    return ", ".join(SYSTEM_NAMES.get(c, c) for c in dict.fromkeys(letters))
+
+
+def chainage_hint(value_m: float, lo_m: float, hi_m: float, option: str) -> str:
+    """A hint when ``value_m`` (outside ``[lo_m, hi_m]``) reads as kilometres inside it
+    (``"; did you give kilometres? (--chainage 5200)"``), else ``""``."""
+    if lo_m <= value_m <= hi_m:
+        return ""
+    if lo_m <= 1000.0 * value_m <= hi_m:
+        return f"; the value is metres, did you give kilometres? ({option} {1000.0 * value_m:g})"
+    return ""
 
 
 def caused_by_interrupt(exc: BaseException) -> bool:

@@ -8,51 +8,74 @@ import argparse
 import numpy as np
 
 from predisat.availability.run import AvailabilityRun, run_availability
-from predisat.cli.args import cutoff_deg, finite_float, output_dir, positive_float, positive_int
+from predisat.cli.args import (
+    TIME_HELP,
+    constellation,
+    cutoff_deg,
+    existing_file,
+    existing_path,
+    finite_float,
+    output_dir,
+    positive_float,
+    positive_int,
+)
 from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model
 from predisat.track import TrackMap
 
 __all__ = ["add_arguments", "run"]
 
+_MASKS = "a mask file (masks.parquet) or a `predisat process` output folder"
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the ``predisat availability`` options to a (sub)parser; returns it."""
     p = parser
-    p.add_argument("--masks", required=True, metavar="FILE",
+    p.add_argument("--masks", required=True, type=existing_path(_MASKS), metavar="MASKS",
                    help="mask file, or the output folder of predisat process")
-    p.add_argument("--track", metavar="FILE", help="track map the masks were made on (GeoJSON/CSV)")
+    p.add_argument("--track", metavar="FILE",
+                   help="track map the masks were made on, GeoJSON/CSV: the line's name, "
+                   "kilometre posts and geometry (default: none, segments straight between "
+                   "positions)")
     p.add_argument(
-        "--nav", nargs="+", metavar="FILE",
-        help="RINEX navigation, SP3 or TLE file(s) (default: embedded day 2020-06-25)",
+        "--nav", nargs="+", type=existing_file("RINEX navigation, SP3 or TLE files"),
+        metavar="FILE",
+        help="RINEX navigation, SP3 or TLE file(s) (default: the embedded day 2020-06-25)",
     )  # fmt: skip
     p.add_argument(
         "--start", metavar="TIME",
-        help="window start: GPS time 2020-06-25T06:00, UTC 2020-06-25T06:00Z, or gps_s",
+        help=f"window start: {TIME_HELP} (default: the start of the navigation data's first "
+        "hour)",
     )  # fmt: skip
-    p.add_argument("--end", metavar="TIME", help="window end (excluded), same forms as --start")
+    p.add_argument("--end", metavar="TIME",
+                   help="window end (excluded), same forms as --start (default: 24 h after the "
+                   "start, or the data's end)")
     p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
-                   help="epoch spacing, s")
+                   help="epoch spacing, seconds")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument(
-        "--constellation", default="gps",
-        help="gps (default, as LOCOPROL), gps+galileo, all, or system letters such as GE",
+        "--constellation", type=constellation, metavar="SYSTEMS", default="gps",
+        help="systems counted: gps (as LOCOPROL and `locator run`), gps+galileo, all, or system "
+        "letters such as GE",
     )  # fmt: skip
     p.add_argument(
         "--cutoff", type=cutoff_deg, nargs="+", default=[15.0], metavar="DEG",
-        help="flat cut-off(s) compared with the masks (default 15)",
+        help="flat cut-off(s) compared with the masks, degrees",
     )  # fmt: skip
-    p.add_argument("--from-km", type=finite_float, metavar="A", help="stretch start, chainage km")
-    p.add_argument("--to-km", type=finite_float, metavar="B", help="stretch end, chainage km")
+    p.add_argument("--from-km", type=finite_float, metavar="KM",
+                   help="stretch start, chainage km (default: the masks' first position)")
+    p.add_argument("--to-km", type=finite_float, metavar="KM",
+                   help="stretch end, chainage km (default: the masks' last position)")
     p.add_argument(
-        "--sky-km", type=float, nargs="+", metavar="KM",
+        "--sky-km", type=finite_float, nargs="+", metavar="KM",
         help="line kilometres (kilometre posts) of the sky plots (default: 4 evenly spaced)",
     )  # fmt: skip
     p.add_argument(
         "--interval-every", type=positive_int, default=10, metavar="N",
-        help="predict the interval at every N-th epoch (default 10; 1 is slow)",
+        help="predict the interval at every N-th epoch (1 is slow)",
     )  # fmt: skip
     p.add_argument(
-        "--error-model", metavar="JSON",
+        "--error-model", type=existing_file("a pseudorange error model JSON written by "
+        "`locator calibrate`"), metavar="JSON",
         help="pseudorange error model of the predicted intervals, from `locator calibrate` "
         "(default a = b = 2 m, k = 2)",
     )  # fmt: skip
@@ -61,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
         "per pair)",
     )  # fmt: skip
-    p.add_argument("--workers", type=positive_int, default=1, help="threads")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N", help="threads")
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
-from predisat.cli.args import caused_by_interrupt
+from predisat.cli.args import caused_by_interrupt, run_checks
 
 if TYPE_CHECKING:
     from predisat.track import TrackMap
@@ -43,12 +43,15 @@ def run_main(
 ) -> int:
     """Parse ``argv`` and run the chosen subcommand's ``func``, as a command line should.
 
-    Errors written for a person (:class:`CliError`, ``ValueError``, ``OSError``, ``KeyError``)
-    are printed on one line as ``<label>: error: ...`` (exit 2), Ctrl-C as ``interrupted``
-    (exit 130, with ``interrupted_note[command]`` when given); ``label`` may hold
-    ``{command}``, the subcommand's name.
+    Options that exclude or need each other are refused at parse time
+    (:func:`predisat.cli.args.run_checks`: usage and message, exit 2). Errors written for a
+    person (:class:`CliError`, ``ValueError``, ``OSError``, ``KeyError``) are printed on one
+    line as ``<label>: error: ...`` (exit 2), Ctrl-C as ``interrupted`` (exit 130, with
+    ``interrupted_note[command]`` when given); ``label`` may hold ``{command}``, the
+    subcommand's name.
     """
     args = parser.parse_args(argv)
+    run_checks(args)  # options that exclude or need each other: refused before any work
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
@@ -109,7 +112,8 @@ def track_option(
 
 def add_track_selection(p: argparse.ArgumentParser) -> None:
     """Which line of a GeoJSON holding several (Infrabel files, OpenStreetMap extracts)."""
-    p.add_argument("--track-name", metavar="NAME", help="which track when the file holds several")
+    p.add_argument("--track-name", metavar="NAME",
+                   help="which track when the file holds several (default: the only one)")
     p.add_argument(
         "--chain",
         choices=["all", "longest"],
@@ -120,7 +124,8 @@ def add_track_selection(p: argparse.ArgumentParser) -> None:
         "--where",
         nargs="+",
         metavar="KEY=VALUE",
-        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent)",
+        help="GeoJSON property filters, e.g. usage=main service= (KEY=: property absent; "
+        "default: no filter)",
     )
 
 

@@ -10,14 +10,16 @@ dependencies run one way (``docs/architecture.md``).
 from __future__ import annotations
 
 import argparse
+import html
+import math
 import os
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from predisat.cli.args import finite_float, output_dir, positive_int
+from predisat.cli.args import add_command, finite_float, output_dir, positive_int
 from predisat.cli.common import km_range
 
 if TYPE_CHECKING:
@@ -30,9 +32,11 @@ if TYPE_CHECKING:
 __all__ = [
     "DEMO_CAMERA",
     "DEMO_FROM_KM",
+    "DEMO_RATES",
     "DEMO_STEPS_GROUP",
     "DEMO_TO_KM",
     "DemoContext",
+    "DemoPlan",
     "DemoStep",
     "DemoStepResult",
     "add_parser",
@@ -41,6 +45,7 @@ __all__ = [
     "demo_steps",
     "render_demo_survey",
     "run",
+    "write_index",
 ]
 
 DEMO_STEPS_GROUP = "predisat.demo_steps"
@@ -61,6 +66,8 @@ class DemoContext:
     masks : MaskSet
         The masks the pipeline made from the frames.
     quiet : bool
+    quick : bool
+        ``predisat demo --quick``: a step keeps its work short (fewer epochs), not its kind.
     """
 
     out_dir: Path
@@ -68,14 +75,18 @@ class DemoContext:
     truth_dir: Path
     masks: MaskSet
     quiet: bool = False
+    quick: bool = False
 
 
 @dataclass(frozen=True)
 class DemoStepResult:
-    """What a demo step prints (``text``) and the outputs it lists at the end, by name."""
+    """What a demo step prints (``text``), the outputs it lists at the end by name
+    (``outputs``) and one line on what each shows (``what``, by the same names; the demo's
+    ``index.html`` links every output with it)."""
 
     text: str
     outputs: Mapping[str, Path] = field(default_factory=dict)
+    what: Mapping[str, str] = field(default_factory=dict)
 
 
 class DemoStep(Protocol):
@@ -112,11 +123,13 @@ def render_demo_survey(
     spacing_m: float = 10.0,
     from_km: float = DEMO_FROM_KM,
     to_km: float = DEMO_TO_KM,
+    image_size_px: tuple[int, int] = DEMO_IMAGE_SIZE_PX,
 ) -> SynthResult:
     """The demo's synthetic survey: line 144 km ``from_km``-``to_km`` (default
     ``DEMO_FROM_KM``-``DEMO_TO_KM``), mixed scenery and skies, the default ``camera``
-    (``"fisheye"`` or ``"pinhole"``) resized to ``DEMO_IMAGE_SIZE_PX``, a position every
-    ``spacing_m`` (:func:`predisat.synth.generate.generate_survey`)."""
+    (``"fisheye"`` or ``"pinhole"``) resized to ``image_size_px`` (width, height; default
+    ``DEMO_IMAGE_SIZE_PX``), a position every ``spacing_m``
+    (:func:`predisat.synth.generate.generate_survey`)."""
     from predisat.camera.models import default_camera
     from predisat.synth.generate import generate_survey
     from predisat.track import demo_track
@@ -128,12 +141,101 @@ def render_demo_survey(
         sky="mixed",
         seed=seed,
         out_dir=out_dir,
-        camera=default_camera(camera).resized(*DEMO_IMAGE_SIZE_PX),  # type: ignore[arg-type]
+        camera=default_camera(camera).resized(*image_size_px),  # type: ignore[arg-type]
         progress=progress,
         workers=workers,
         overwrite=True,
         spacing_m=spacing_m,
     )
+
+
+@dataclass(frozen=True)
+class DemoPlan:
+    """The size of a demo run: the stretch, the spacing of the positions, the frames' size
+    and the availability epochs.
+
+    Attributes
+    ----------
+    from_km, to_km : float
+        Chainage of the stretch, km.
+    spacing_m : float
+        Distance between positions, metres (two frames each: left and right).
+    image_size_px : tuple of int
+        Width and height of the frames, pixels.
+    step_s : float
+        Spacing of the availability report's epochs, seconds.
+    """
+
+    from_km: float = DEMO_FROM_KM
+    to_km: float = DEMO_TO_KM
+    spacing_m: float = 10.0
+    image_size_px: tuple[int, int] = DEMO_IMAGE_SIZE_PX
+    step_s: float = 30.0
+
+    @classmethod
+    def full(cls, from_km: float | None = None, to_km: float | None = None) -> DemoPlan:
+        """The demo: 2 km of line 144 (or the stretch given), 640 x 480 frames every 10 m."""
+        return cls(DEMO_FROM_KM if from_km is None else from_km,
+                   DEMO_TO_KM if to_km is None else to_km)  # fmt: skip
+
+    @classmethod
+    def quick(cls, from_km: float | None = None, to_km: float | None = None) -> DemoPlan:
+        """``--quick``: the same steps on 0.3 km (or the stretch given), 320 x 240 frames every
+        20 m and availability epochs every 120 s."""
+        lo = DEMO_FROM_KM if from_km is None else from_km
+        hi = lo + QUICK_LENGTH_KM if to_km is None else to_km
+        return cls(lo, hi, 20.0, QUICK_IMAGE_SIZE_PX, 120.0)
+
+    @property
+    def n_positions(self) -> int:
+        """Antenna positions, every ``spacing_m`` from the start to the end inclusive."""
+        return math.floor((self.to_km - self.from_km) * 1000.0 / self.spacing_m + 1e-9) + 1
+
+    @property
+    def n_frames(self) -> int:
+        """Frames rendered and processed: a left and a right one per position."""
+        return 2 * self.n_positions
+
+    def estimate_s(self, workers: int) -> dict[str, float]:
+        """Wall time of each step, seconds, from the per-frame and per-position rates measured
+        on two quiet cores (:data:`DEMO_RATES`), frames scaled by their pixel count; a busy
+        machine takes longer. Keys: ``render``, ``process``, ``evaluate``, ``availability``,
+        ``steps`` (the installed demo steps)."""
+        px = self.image_size_px[0] * self.image_size_px[1] / (640.0 * 480.0)
+        par = min(max(1, workers), 2) / 2.0  # the rates were measured with 2 workers
+        r = DEMO_RATES
+        epochs = 86400.0 / self.step_s
+        return {
+            "render": r["render_s"] + self.n_frames * r["render_s_per_frame"] * px / par,
+            "process": r["process_s"] + self.n_frames * r["process_s_per_frame"] * px / par,
+            "evaluate": r["evaluate_s"],
+            "availability": r["availability_s"]
+            + self.n_positions * epochs * r["availability_s_per_position_epoch"],
+            "steps": r["steps_s"] + self.n_positions * r["steps_s_per_position"],
+        }
+
+
+QUICK_LENGTH_KM = 0.3
+QUICK_IMAGE_SIZE_PX = (320, 240)
+
+DEMO_RATES: dict[str, float] = {
+    "render_s": 5.0,
+    "render_s_per_frame": 0.42,
+    "process_s": 4.0,
+    "process_s_per_frame": 0.03,
+    "evaluate_s": 1.0,
+    "availability_s": 2.0,
+    "availability_s_per_position_epoch": 3e-6,
+    "steps_s": 6.0,
+    "steps_s_per_position": 0.05,
+}
+"""Wall seconds of the demo's steps on two quiet cores: a fixed part and a part per 640 x 480
+frame, per position-epoch of the availability report or per position. From the CPU seconds
+of each step (this process and its workers) of ``predisat demo --quick`` (32 frames of 320 x
+240: rendering 11.5 s, processing 5.9, evaluation 0.4, availability 1.8, locator 6.8) and
+``predisat demo --from-km 4.0 --to-km 4.4`` (82 frames of 640 x 480: 69.8, 9.2, 0.5, 2.1, 7.1),
+measured on 2026-12-04 with ``--workers 2``; rendering and processing divided by their two
+workers."""
 
 
 def default_workers() -> int:
@@ -159,9 +261,13 @@ def availability_table(summary: pd.DataFrame) -> str:
     return str(t.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
 
 
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``predisat demo``: render, process, evaluate, report, then every installed demo
-    step (:func:`demo_steps`)."""
+    step (:func:`demo_steps`); writes ``index.html`` linking every output."""
     # imported here: the renderer and the reconstruction are heavy, `predisat --help` is not
     from predisat.availability.run import run_availability
     from predisat.reconstruct.batch import process_survey
@@ -174,30 +280,44 @@ def run(args: argparse.Namespace) -> int:
     n = 4 + len(steps)
     out = Path(args.out)
     track = demo_track()
-    lo_m, hi_m = km_range(track, args.from_km, args.to_km)
-    lo_km, hi_km = lo_m / 1000.0, hi_m / 1000.0
+    plan = (DemoPlan.quick if args.quick else DemoPlan.full)(args.from_km, args.to_km)
+    lo_m, hi_m = km_range(track, plan.from_km, plan.to_km)
+    plan = replace(plan, from_km=lo_m / 1000.0, to_km=hi_m / 1000.0)
+    w, h = plan.image_size_px
     print(
-        f"demo: {track.name}, chainage {lo_km:.1f}-{hi_km:.1f} km, mixed scenery and "
-        f"skies, {args.camera} side cameras, seed {args.seed} -> {out}"
+        f"demo: {track.name}, chainage {plan.from_km:.1f}-{plan.to_km:.1f} km, mixed scenery "
+        f"and skies, {args.camera} side cameras {w} x {h} px, seed {args.seed}"
+        f"{', quick' if args.quick else ''} -> {out}"
     )
+    est = plan.estimate_s(args.workers)
+    print(
+        f"demo: estimate {_duration(sum(est.values()))} for {plan.n_frames} frames at "
+        f"{plan.n_positions} positions ({', '.join(f'{k} {v:.0f} s' for k, v in est.items())};"
+        " rates measured on 2 quiet cores, a busy machine takes longer"
+        + ("" if args.quick else "; --quick for a short run") + ")"
+    )
+    took: dict[str, float] = {}
     t0 = time.perf_counter()
     print(f"demo 1/{n}: rendering the synthetic survey and its ground truth")
     synth = render_demo_survey(
         out, seed=args.seed, camera=args.camera, workers=args.workers, progress=not args.quiet,
-        from_km=lo_km, to_km=hi_km,
+        from_km=plan.from_km, to_km=plan.to_km, spacing_m=plan.spacing_m,
+        image_size_px=plan.image_size_px,
     )  # fmt: skip
-    t_synth = time.perf_counter() - t0
     sheet = contact_sheet(synth.survey_dir, out / "contact_sheet.png")
+    took["render"] = time.perf_counter() - t0
 
-    print(f"demo 2/{n}: processing the frames into elevation masks")
+    print(f"demo 2/{n}: processing the frames into elevation masks{_left(est, took)}")
     t1 = time.perf_counter()
     processed = process_survey(
-        synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet
-    )
-    t_process = time.perf_counter() - t1
+        synth.survey_dir, out / "masks", workers=args.workers, progress=not args.quiet,
+        replace=True,  # the demo's folder is the demo's: its survey was just re-rendered
+    )  # fmt: skip
+    took["process"] = time.perf_counter() - t1
     print(f"  {processed}")
 
-    print(f"demo 3/{n}: masks against the synthetic ground truth")
+    print(f"demo 3/{n}: masks against the synthetic ground truth{_left(est, took)}")
+    t1 = time.perf_counter()
     comp = compare(processed.masks, load_truth(synth.truth_dir))
     table = evaluate_masks(comp)
     overall = table[table["source"] == "all"]
@@ -205,64 +325,129 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(overall[with_cols]))
     eval_png = out / "evaluation.png"
     evaluation_figure(comp, title="Demo masks against the ground truth").savefig(eval_png, dpi=100)
+    took["evaluate"] = time.perf_counter() - t1
 
-    print(f"demo 4/{n}: availability report (embedded navigation day, GPS)")
-    run = run_availability(
-        processed.masks, track, None, out_dir=out / "availability", progress=not args.quiet
-    )
-    print(availability_table(run.summary))
-    print("  (LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
+    print(f"demo 4/{n}: availability report (embedded navigation day, GPS only, as the locator "
+          f"step){_left(est, took)}")  # fmt: skip
+    t1 = time.perf_counter()
+    report = run_availability(
+        processed.masks, track, None, out_dir=out / "availability", step_s=plan.step_s,
+        progress=not args.quiet,
+    )  # fmt: skip
+    took["availability"] = time.perf_counter() - t1
+    print(availability_table(report.summary))
+    print("  (GPS only; LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
 
-    ctx = DemoContext(out, track, synth.truth_dir, processed.masks, quiet=args.quiet)
-    outputs: dict[str, Path] = {}
+    ctx = DemoContext(out, track, synth.truth_dir, processed.masks, quiet=args.quiet,
+                      quick=args.quick)  # fmt: skip
+    outputs: dict[str, tuple[Path, str]] = {
+        "survey": (synth.survey_dir, "the rendered survey: survey.yaml, manifest.csv and the "
+                   "left and right frames"),
+        "ground truth": (synth.truth_dir, "the synthetic world, its true masks and per-frame "
+                         "sky labels"),
+        "contact sheet": (sheet, "a dozen of the rendered frames side by side"),
+        "masks": (processed.masks_path, "the elevation masks the pipeline made from the frames "
+                  "(docs/mask-format.md)"),
+        "evaluation": (eval_png, "the masks' error and the sky they lose against the ground "
+                       "truth, by direction"),
+        "report": (Path(report.report_html), "the availability report: satellites trusted "
+                   "along the line under the masks, no mask and a 15 deg cut-off (GPS)"),
+        "availability table": (Path(report.report_html).parent / "summary.csv",
+                               "every figure of the availability report, one row per rule"),
+    }  # fmt: skip
+    t1 = time.perf_counter()
     for k, step in enumerate(steps, start=5):
-        print(f"demo {k}/{n}: {step.title}")
+        print(f"demo {k}/{n}: {step.title}{_left(est, took)}")
         result = step.run(ctx)
         print(result.text)
-        outputs.update(result.outputs)
+        outputs.update({name: (path, result.what.get(name, name))
+                        for name, path in result.outputs.items()})  # fmt: skip
+    took["steps"] = time.perf_counter() - t1
+    index = write_index(out, outputs, f"PREDISAT demo: {track.name}, chainage "
+                        f"{plan.from_km:.1f}-{plan.to_km:.1f} km{' (quick)' if args.quick else ''}")
     dt = time.perf_counter() - t0
     print(
-        f"demo: done in {dt:.0f} s; {synth.n_frames} frames at {synth.n_positions} positions "
-        f"(rendering {synth.n_frames / t_synth:.2f} frames/s, processing "
-        f"{synth.n_frames / t_process:.2f} frames/s)\n"
-        f"  survey:        {synth.survey_dir}\n"
-        f"  ground truth:  {synth.truth_dir}\n"
-        f"  contact sheet: {sheet}\n"
-        f"  masks:         {processed.masks_path}\n"
-        f"  evaluation:    {eval_png}\n"
-        f"  report:        {run.report_html}"
-        + "".join(f"\n  {name + ':':14} {path}" for name, path in outputs.items())
+        f"demo: done in {_duration(dt)} (estimate {_duration(sum(est.values()))}; "
+        f"{', '.join(f'{k} {v:.0f} s' for k, v in took.items())}); {synth.n_frames} frames at "
+        f"{synth.n_positions} positions (rendering {synth.n_frames / took['render']:.2f} "
+        f"frames/s, processing {synth.n_frames / took['process']:.2f} frames/s)\n"
+        f"  index:         {index}"
+        + "".join(f"\n  {name + ':':14} {path}" for name, (path, _) in outputs.items())
     )
     return 0
 
 
+def _left(estimate_s: Mapping[str, float], took_s: Mapping[str, float]) -> str:
+    """`` (about N s left)``: the estimate of the steps to come, scaled by how the steps done
+    compared with their estimate on this machine."""
+    done = sum(estimate_s[k] for k in took_s)
+    pace = sum(took_s.values()) / done if done > 0 else 1.0
+    left = pace * sum(v for k, v in estimate_s.items() if k not in took_s)
+    return f" (about {_duration(left)} left)"
+
+
+def write_index(
+    out_dir: Path, outputs: Mapping[str, tuple[Path, str]], title: str
+) -> Path:
+    """``out_dir/index.html``: a link to every output (relative to ``out_dir``) with one line
+    on what it shows; ``outputs`` maps a name to (path, one line)."""
+    rows = []
+    for name, (path, what) in outputs.items():
+        target = Path(os.path.relpath(Path(path), out_dir)).as_posix()
+        if Path(path).is_dir():
+            target += "/"
+        rows.append(
+            f'<li><a href="{html.escape(target, quote=True)}">{html.escape(name)}</a>: '
+            f"{html.escape(what)}</li>"
+        )
+    page = (
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        f"<title>{html.escape(title)}</title></head>\n<body>\n<h1>{html.escape(title)}</h1>\n"
+        "<p>The masks and the train runs are synthetic: obstructions drawn on the real line "
+        "144 and rendered, with exact ground truth.</p>\n<ul>\n"
+        + "\n".join(rows)
+        + "\n</ul>\n</body></html>\n"
+    )
+    path = out_dir / "index.html"
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``demo`` subcommand on the ``predisat`` subparsers."""
-    p = sub.add_parser(
-        "demo",
-        help="run the pipeline on the embedded demo (2 km of line 144)",
-        description=(
-            "Render a synthetic survey of 2 km of line 144 with ground truth, process it into "
-            "masks, compare them with the truth, write the availability report, then run the "
-            "installed demo steps (the locator's: a simulated train run located under each "
-            "trust rule)."
-        ),
-    )
+    full, quick = DemoPlan.full(), DemoPlan.quick()
+    p = add_command(
+        sub, "demo", "run the pipeline on the embedded demo (2 km of line 144)",
+        f"Render a synthetic survey of line 144 (km {full.from_km:g}-{full.to_km:g}: "
+        f"{full.n_frames} frames, about {sum(full.estimate_s(2).values()) / 60:.0f} min on two "
+        "quiet cores) with ground truth, process it into "
+        "masks, compare them with the truth, write the availability report, then run the "
+        "installed demo steps: the locator's locates a simulated train run under each trust "
+        "rule (`locator demo`). An estimate of the time is printed first; --quick runs the "
+        f"same steps on {quick.to_km - quick.from_km:g} km ({quick.n_frames} smaller frames, "
+        "under 90 s). index.html in --out links every output.",
+    )  # fmt: skip
     p.add_argument(
         "--out", default="demo_out", type=output_dir, metavar="DIR", help="output folder"
     )
-    p.add_argument("--seed", type=int, default=1, help="random seed")
+    p.add_argument("--quick", action="store_true",
+                   help=f"the same steps, short: {quick.to_km - quick.from_km:g} km, "
+                   f"{quick.image_size_px[0]} x {quick.image_size_px[1]} frames every "
+                   f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s (coarser "
+                   "masks: its figures are not the demo's)")
+    p.add_argument("--seed", type=int, metavar="N", default=1, help="random seed")
     p.add_argument(
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
-        help=f"side camera model (default {DEMO_CAMERA})",
+        help="side camera model",
     )  # fmt: skip
-    p.add_argument("--from-km", type=finite_float, default=DEMO_FROM_KM, metavar="KM",
-                   help=f"start of the stretch (default {DEMO_FROM_KM})")
-    p.add_argument("--to-km", type=finite_float, default=DEMO_TO_KM, metavar="KM",
-                   help=f"end of the stretch (default {DEMO_TO_KM}). Another stretch is another "
+    p.add_argument("--from-km", type=finite_float, metavar="KM",
+                   help=f"start of the stretch, chainage km (default {DEMO_FROM_KM:g})")
+    p.add_argument("--to-km", type=finite_float, metavar="KM",
+                   help=f"end of the stretch, chainage km (default {DEMO_TO_KM:g}; --quick: "
+                   f"{QUICK_LENGTH_KM:g} km after the start). Another stretch is another "
                    "world: the scenery recipe is drawn for it (under 800 m a short recipe), not "
                    "cut out of the default demo's")
-    p.add_argument("--workers", type=positive_int, default=default_workers(),
-                   help="rendering processes")
+    p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
+                   help="rendering and processing processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

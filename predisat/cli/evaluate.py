@@ -10,7 +10,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from predisat.cli.args import output_dir
+from predisat.cli.args import (
+    add_checks,
+    existing_file,
+    existing_path,
+    fraction,
+    needs,
+    output_dir,
+)
 from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.margins import MarginTable
 from predisat.reconstruct.evalfigures import evaluation_figure
@@ -26,27 +33,52 @@ from predisat.reconstruct.evaluate import (
 __all__ = ["add_arguments", "run"]
 
 
+# --target and --confidence of --calibrate (None in the parser: given or not)
+TARGET = 0.999
+CONFIDENCE = 0.99
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``predisat evaluate``."""
-    parser.add_argument("masks", type=Path, help="mask file, or a `predisat process` output folder")
+    parser.add_argument("masks", type=existing_path("a mask file (masks.parquet) or a `predisat "
+                        "process` output folder"), metavar="MASKS",
+                        help="mask file, or a `predisat process` output folder")  # fmt: skip
     parser.add_argument(
-        "--truth", type=Path, required=True,
+        "--truth", type=existing_path("synthetic ground truth: a `predisat synth` output "
+        "folder, its truth/ or true_masks.npz"), required=True, metavar="PATH",
         help="synthetic ground truth: generator output folder, its truth/ or true_masks.npz",
     )  # fmt: skip
     parser.add_argument(
-        "--out", type=output_dir, help="folder for evaluation.csv/json/png (default: none)"
+        "--out", type=output_dir, metavar="DIR",
+        help="folder for evaluation.csv/json/png (default: print only)",
     )
-    parser.add_argument(
+    m = parser.add_mutually_exclusive_group()
+    m.add_argument(
         "--calibrate", action="store_true",
         help="calibrate margins on this truth and write margins.json (in --out)",
     )  # fmt: skip
-    parser.add_argument("--margins", type=Path, help="margin table (margins.json) to evaluate")
-    parser.add_argument("--target", type=float, default=0.999, help="LOS share target (0.999)")
+    m.add_argument("--margins", type=existing_file("a margin table (margins.json of `predisat "
+                   "evaluate --calibrate`)"), metavar="JSON",
+                   help="margin table (margins.json) to evaluate (default: the mask file's own "
+                   "margins)")  # fmt: skip
+    parser.add_argument("--target", type=fraction, metavar="SHARE",
+                        help="with --calibrate: share of trusted directions that must be truly "
+                        f"line-of-sight (default {TARGET})")  # fmt: skip
     parser.add_argument(
-        "--confidence", type=float, default=0.99,
+        "--confidence", type=_share_or_zero, metavar="SHARE",
         help="with --calibrate: the target must hold on this share of 200 m block resamples "
-        "of the line (0.99; 0 for the in-sample point estimate)",
+        f"of the line (default {CONFIDENCE}; 0 for the in-sample point estimate)",
     )  # fmt: skip
+    add_checks(
+        parser,
+        needs("--target", "target", lambda a: a.calibrate, "--calibrate"),
+        needs("--confidence", "confidence", lambda a: a.calibrate, "--calibrate"),
+    )
+
+
+def _share_or_zero(value: str) -> float:
+    """``--confidence``: 0 or a share in (0, 1] (percent refused, as :func:`fraction`)."""
+    return 0.0 if value.strip() in ("0", "0.0") else fraction(value)
 
 
 def run(args: argparse.Namespace) -> pd.DataFrame:
@@ -59,8 +91,9 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     if args.calibrate:
-        conf = args.confidence if args.confidence > 0 else None
-        margins = calibrate_margin(comp, target=args.target, confidence=conf)
+        confidence = CONFIDENCE if args.confidence is None else args.confidence
+        target = TARGET if args.target is None else args.target
+        margins = calibrate_margin(comp, target=target, confidence=confidence or None)
         print(margins.table.to_string(index=False))
         if out is not None:
             margins.to_json(out / "margins.json")

@@ -4,60 +4,83 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from predisat.cli.args import output_dir, positive_float, positive_int
+from predisat.cli.args import (
+    add_checks,
+    existing_dir,
+    existing_file,
+    needs,
+    non_negative_float,
+    output_dir,
+    positive_float,
+    positive_int,
+)
+from predisat.cli.common import track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
+from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
-from predisat.track.map import load_track
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``predisat process``."""
-    parser.add_argument("survey", type=Path, help="survey folder (with survey.yaml)")
+    parser.add_argument("survey", type=existing_dir("a survey folder (survey.yaml, manifest.csv, "
+                        "the frames; docs/survey-format.md)"), metavar="SURVEY",
+                        help="survey folder (with survey.yaml)")  # fmt: skip
     parser.add_argument(
-        "--out", type=output_dir, required=True,
+        "--out", type=output_dir, required=True, metavar="DIR",
         help="output folder (masks.parquet, chunks/, cache/, bad_frames.csv); "
         "rerun with the same folder to resume",
     )  # fmt: skip
-    parser.add_argument("--track", type=Path, help="track file instead of the survey's own")
-    parser.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     parser.add_argument(
-        "--chunk-m", type=positive_float, default=1000.0,
-        help="chainage per chunk, metres (default 1000)",
+        "--replace", action="store_true",
+        help="replace the chunks another survey (or another version of this one) left in --out "
+        "(without it such a folder is refused)",
+    )  # fmt: skip
+    parser.add_argument("--track", type=existing_file("a track map: GeoJSON line(s) or a "
+                        "lat,lon[,h] CSV (docs/track-map.md)"), metavar="FILE",
+                        help="track file (default: the survey's own)")  # fmt: skip
+    parser.add_argument("--workers", type=positive_int, default=1, metavar="N", help="processes")
+    parser.add_argument(
+        "--chunk-m", type=positive_float, default=1000.0, metavar="M",
+        help="chainage per chunk, metres",
     )
     parser.add_argument(
         "--strict", action="store_true", help="stop at the first bad frame instead of skipping"
     )
     parser.add_argument(
-        "--segmenter", choices=METHODS,
-        default=DEFAULT_SEGMENTER,
-        help=f"sky segmentation method (default {DEFAULT_SEGMENTER}; docs/segmentation.md)",
+        "--segmenter", choices=METHODS, default=DEFAULT_SEGMENTER,
+        help="sky segmentation method (docs/segmentation.md)",
     )  # fmt: skip
     parser.add_argument(
         "--sky-net", metavar="ONNX",
-        help="a candidate sky network (with its .json card) instead of the shipped one, for "
-        "--segmenter cnn or ensemble; recorded in the provenance",
+        help="a candidate sky network (with its .json card) for --segmenter cnn or ensemble; "
+        "recorded in the provenance (default: the shipped one)",
     )  # fmt: skip
     parser.add_argument(
-        "--thin-deg", type=float, default=THIN_DEG, metavar="DEG",
-        help=f"thin-structure width, degrees: narrower obstacle features (wires, cables) are "
-        f"L-band transparent (default {THIN_DEG}; 0 disables; docs/segmentation.md)",
+        "--thin-deg", type=non_negative_float, default=THIN_DEG, metavar="DEG",
+        help="thin-structure width, degrees: narrower obstacle features (wires, cables) are "
+        "L-band transparent (0 disables; docs/segmentation.md)",
     )  # fmt: skip
     parser.add_argument(
-        "--margins", type=Path, metavar="FILE",
-        help="calibrated trust margins (margins.json of `predisat evaluate --calibrate`) "
-        "written into the mask file; default 0 deg",
+        "--margins", type=existing_file("a margin table (margins.json of `predisat evaluate "
+        "--calibrate`)"), metavar="JSON",
+        help="calibrated trust margins written into the mask file (default: 0 deg; "
+        "margins.json of `predisat evaluate --calibrate`)",
     )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_checks(
+        parser,
+        needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,
+              f"--segmenter {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> ProcessResult:
     """Run ``predisat process`` from parsed arguments."""
-    track = None if args.track is None else load_track(args.track)
+    track = None if args.track is None else track_option(str(args.track))
     return process_survey(
         args.survey,
         args.out,
@@ -68,4 +91,5 @@ def run(args: argparse.Namespace) -> ProcessResult:
         strict=args.strict,
         progress=not args.quiet,
         margins=args.margins,
+        replace=args.replace,
     )

@@ -72,7 +72,7 @@ from predisat.sky.segment import METHODS
 from predisat.survey import Survey
 from predisat.track.map import TrackMap
 
-__all__ = ["ProcessResult", "RunStopped", "process_survey"]
+__all__ = ["OutputInUseError", "ProcessResult", "RunStopped", "process_survey"]
 
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
 
@@ -120,6 +120,36 @@ class ProcessResult:
 
 class RunStopped(RuntimeError):
     """``max_chunks`` reached before every chunk was done; rerun to resume."""
+
+
+class OutputInUseError(ValueError):
+    """The output folder holds chunks of another survey (``replace=False``)."""
+
+
+def _foreign_chunks(chunk_dir: Path, survey_hash: str) -> dict[str, str]:
+    """Chunks in ``chunk_dir`` made from another survey description (their marker's
+    ``survey_hash`` differs): chunk name -> the survey its marker names."""
+    foreign: dict[str, str] = {}
+    for marker in sorted(chunk_dir.glob("*.json")):
+        try:
+            done = json.loads(marker.read_text())
+        except (OSError, ValueError):
+            continue  # a torn marker: the chunk is redone (or removed as stale at the end)
+        if isinstance(done, dict) and done.get("survey_hash") not in (None, survey_hash):
+            foreign[marker.stem] = str(done.get("survey", "?"))
+    return foreign
+
+
+def _remove_chunks(chunk_dir: Path, names: set[str]) -> None:
+    """Delete the named chunks: marker first (a chunk without its marker is never reused)."""
+    for name in sorted(names):
+        for suffix in (".json", ".parquet"):
+            (chunk_dir / f"{name}{suffix}").unlink(missing_ok=True)
+
+
+def _stale_chunks(chunk_dir: Path, keep: set[str]) -> set[str]:
+    """Chunk files in ``chunk_dir`` that are not among ``keep`` (this run's chunks)."""
+    return {p.stem for p in chunk_dir.iterdir() if p.suffix in (".json", ".parquet")} - keep
 
 
 @dataclass(frozen=True)
@@ -482,6 +512,7 @@ def process_survey(
     segmenter: Segmenter | None = None,
     max_chunks: int | None = None,
     margins: MarginTable | str | os.PathLike[str] | None = None,
+    replace: bool = False,
 ) -> ProcessResult:
     """Process a survey folder into masks, in resumable chainage chunks.
 
@@ -512,6 +543,11 @@ def process_survey(
         Calibrated trust margins (``predisat evaluate --calibrate`` writes ``margins.json``),
         written per bin into the mask file's ``margin_deg`` and recorded in its provenance.
         They are applied at the merge, so changing them redoes no chunk. Default: 0 deg.
+    replace : bool
+        Whether chunks of another survey (or of another version of this survey's
+        ``survey.yaml``, manifest or calibrations) found in ``out_dir/chunks`` are deleted;
+        without it such a folder is refused before any work (:class:`OutputInUseError`). Either
+        way, a finished run leaves only its own chunks there.
 
     Returns
     -------
@@ -521,6 +557,8 @@ def process_survey(
     ------
     BadFrameError
         With ``strict=True``, naming the first bad frame.
+    OutputInUseError
+        ``out_dir`` holds another survey's chunks and ``replace`` is False.
     predisat.survey.SurveyError
         When the survey itself (survey.yaml, calibrations, manifest) is unusable.
     """
@@ -543,6 +581,16 @@ def process_survey(
     ch = np.round(np.asarray(survey.frames.chainage_m, float), _CHAINAGE_DECIMALS)
     bad = _load_bad_frames(survey, ch, strict)
     plan = _plan(survey, trk, p, out, ch)
+    foreign = _foreign_chunks(plan.chunk_dir, plan.provenance["survey_hash"])
+    if foreign and not replace:
+        others = sorted(set(foreign.values()))
+        raise OutputInUseError(
+            f"{out} holds {len(foreign)} chunk(s) of another survey ({', '.join(others)}; or of "
+            f"an earlier version of {survey.root}: its survey.yaml, manifest or calibrations "
+            "changed), which cannot be reused; give another output folder, or replace them "
+            "(CLI: --replace)"
+        )
+    _remove_chunks(plan.chunk_dir, set(foreign))
     timings["load"] = time.perf_counter() - t0
     pending, skipped = _pending(plan, strict, max_chunks)
     _report(
@@ -577,6 +625,7 @@ def process_survey(
     merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table)
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     masks_path = write_masks(merged, out / "masks.parquet")
+    _remove_chunks(plan.chunk_dir, _stale_chunks(plan.chunk_dir, {c[0] for c in plan.chunks}))
     write_bad_frames(out / "bad_frames.csv", bad_list)
     timings["merge"] = time.perf_counter() - t3
     elapsed = time.perf_counter() - t0

@@ -53,6 +53,7 @@ __all__ = [
     "SynthResult",
     "contact_sheet",
     "daytime_gps_s",
+    "default_scenery",
     "generate_survey",
     "sky_schedule",
 ]
@@ -126,6 +127,16 @@ def sky_schedule(sky: str, chainage_m: ArrayLike, seed: int = 0) -> tuple[NDArra
         edges.append(edges[-1] + float(rng.uniform(150.0, 400.0)))
     ids = np.clip(np.searchsorted(np.asarray(edges), s, side="right") - 1, 0, len(conds) - 1)
     return np.asarray(conds, dtype=object)[ids], ids
+
+
+def default_scenery(lo_m: float, hi_m: float, seed: int = 0) -> WorldSpec:
+    """The scenery recipe drawn for chainages ``[lo_m, hi_m]`` (metres) when none is given:
+    ``WorldSpec.mixed`` (every kind of stretch) from 800 m, a shorter random recipe below."""
+    if not hi_m > lo_m:
+        raise ValueError(f"scenery extent {lo_m:g}-{hi_m:g} m: the start must be below the end")
+    if hi_m - lo_m >= 800.0:
+        return WorldSpec.mixed(lo_m, hi_m, seed)
+    return _short_spec(lo_m, hi_m, seed)
 
 
 def _short_spec(lo_m: float, hi_m: float, seed: int) -> WorldSpec:
@@ -215,7 +226,7 @@ def generate_survey(
 
     lo, hi = max(0.0, from_m - _MARGIN_M), min(length, to_m + _MARGIN_M)
     if spec is None:
-        spec = WorldSpec.mixed(lo, hi, seed) if hi - lo >= 800.0 else _short_spec(lo, hi, seed)
+        spec = default_scenery(lo, hi, seed)
     world = World.build(track, spec, seed)
     with atomic_path(truth_dir / "world.npz") as tmp:
         world.save(tmp)

@@ -124,19 +124,26 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
         main(["calibrate", "--sim", "x", "--k-sigma", "0", "--out", str(out)])
     assert exc.value.code == 2 and "--k-sigma" in capsys.readouterr().err
-    assert main(["calibrate", "--obs", str(copies[0]), str(copies[1]), "--nav", nav,
-                 "--station", "1", "2", "3", "--out", str(out)]) == 2  # fmt: skip
-    assert "one position" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # --station is one position: refused by the parser
+        main(["calibrate", "--obs", str(copies[0]), str(copies[1]), "--nav", nav,
+              "--station", "1", "2", "3", "--out", str(out)])  # fmt: skip
+    assert exc.value.code == 2 and "--station is for one --obs file" in capsys.readouterr().err
 
 
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
-    assert main(["run", "--sim", str(sim_dir), "--out", str(tmp_path / "x")]) == 2
-    assert "no trust rule" in capsys.readouterr().err
-    assert main(["run", "--sim", str(sim_dir), "--no-masks", "--error-model",
-                 str(tmp_path / "missing.json"), "--out", str(tmp_path / "x")]) == 2  # fmt: skip
-    assert "locator calibrate" in capsys.readouterr().err
-    assert main(["run", "--no-masks", "--out", str(tmp_path / "x")]) == 2
-    assert "--sim DIR" in capsys.readouterr().err
+    # a missing trust rule, input file or source: refused by the parser, before any work
+    for argv, expected in [
+        (["--sim", str(sim_dir)], "one of the arguments --masks --cutoff --no-masks is required"),
+        (["--sim", str(sim_dir), "--no-masks", "--error-model", str(tmp_path / "missing.json")],
+         "locator calibrate"),
+        (["--no-masks"], "one of the arguments --sim --obs is required"),
+    ]:  # fmt: skip
+        with pytest.raises(SystemExit) as exc:
+            main(["run", *argv, "--out", str(tmp_path / "x")])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("error:") == 1 and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
 
 
 def test_a_run_on_another_track_is_refused(sim_dir):

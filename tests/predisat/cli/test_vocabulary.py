@@ -1,0 +1,341 @@
+"""One argument vocabulary for ``predisat`` and ``locator`` (issue 33, item 1): every
+subcommand described, every option with its default, contradictions and likely unit mistakes
+refused at parse time with the fix, and missing files named with what they should hold."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from locator import cli as locator_cli
+from predisat.cli import app as predisat_cli
+from predisat.cli.args import HelpFormatter
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """Every subcommand parser, by its name (nested subcommands as ``a b``)."""
+    found: dict[str, argparse.ArgumentParser] = {}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                found[name] = sub
+                found.update({f"{name} {k}": v for k, v in _subparsers(sub).items()})
+    return found
+
+
+def _commands() -> list[tuple[str, argparse.ArgumentParser]]:
+    out = []
+    builds = (("predisat", predisat_cli.build_parser), ("locator", locator_cli.build_parser))
+    for prog, build in builds:
+        out += [(f"{prog} {name}", p) for name, p in _subparsers(build()).items()]
+    return out
+
+
+COMMANDS = _commands()
+
+
+def test_both_command_lines_have_their_subcommands() -> None:
+    names = {name for name, _ in COMMANDS}
+    for expected in ("predisat synth", "predisat process", "predisat availability",
+                     "predisat export", "predisat evaluate", "predisat evaluate-sky",
+                     "predisat demo", "locator simulate", "locator run", "locator evaluate",
+                     "locator calibrate", "locator demo", "locator balises"):  # fmt: skip
+        assert expected in names
+
+
+@pytest.mark.parametrize(("name", "parser"), COMMANDS, ids=[n for n, _ in COMMANDS])
+def test_every_subcommand_is_described_and_every_option_names_its_default(
+    name: str, parser: argparse.ArgumentParser
+) -> None:
+    assert parser.description and len(parser.description.split()) >= 8, name
+    assert parser.formatter_class is HelpFormatter, name
+    formatter = parser._get_formatter()
+    # one of a required group (--sim or --obs; --masks, --cutoff or --no-masks) is required
+    in_required_group = {id(a) for g in parser._mutually_exclusive_groups if g.required
+                         for a in g._group_actions}  # fmt: skip
+    for action in parser._actions:
+        if not action.option_strings or isinstance(action, argparse._HelpAction):
+            continue  # positionals are required; -h is argparse's
+        flag = action.nargs == 0
+        assert action.help, f"{name} {action.option_strings[0]}: no help"
+        if flag or action.required or id(action) in in_required_group:
+            continue
+        # the help as printed: argparse's "(default: X)", or the text saying what happens
+        text = formatter._expand_help(action) if action.help else ""
+        assert "default" in text, f"{name} {action.option_strings[0]}: {text!r} names no default"
+        assert "(default: None)" not in text, f"{name} {action.option_strings[0]}: {text!r}"
+
+
+def test_demo_help_names_the_locator_step_the_estimate_and_quick(capsys) -> None:
+    with pytest.raises(SystemExit):
+        predisat_cli.main(["demo", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "locator" in out and "--quick" in out and "estimate" in out and "index.html" in out
+
+
+# --- contradictions refused at parse time (argparse: usage, message, exit 2) -----------------
+
+
+def _refused(main, argv: list[str], capsys) -> str:
+    """The message of a refusal at parse time: exit status 2 and argparse's usage line."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage:")
+    return " ".join(err.split())
+
+
+@pytest.fixture
+def files(tmp_path: Path) -> dict[str, str]:
+    """Existing placeholder inputs: parse-time checks look at the options, not the contents."""
+    names = {"masks": "m.parquet", "csv": "t.csv", "json": "e.json", "obs": "a.obs",
+             "nav": "a.nav", "npz": "w.npz", "yaml": "s.yaml"}  # fmt: skip
+    out = {}
+    for key, name in names.items():
+        (tmp_path / name).write_text("x")
+        out[key] = str(tmp_path / name)
+    for key in ("sim", "run", "dir"):
+        (tmp_path / key).mkdir()
+        out[key] = str(tmp_path / key)
+    out["out"] = str(tmp_path / "out")
+    return out
+
+
+CONTRADICTIONS = [
+    # the user's case: --masks with --no-masks silently used the masks
+    (locator_cli.main, "run --sim {sim} --masks {masks} --no-masks --out {out}", "--no-masks"),
+    (locator_cli.main, "run --sim {sim} --masks {masks} --cutoff 15 --out {out}", "--cutoff"),
+    (locator_cli.main, "run --sim {sim} --obs {obs} --nav {nav} --no-masks --out {out}", "--obs"),
+    (locator_cli.main, "run --sim {sim} --nav {nav} --no-masks --out {out}", "--nav"),
+    (locator_cli.main, "run --obs {obs} --no-masks --out {out}", "--obs needs --nav"),
+    (locator_cli.main, "run --sim {sim} --out {out}", "--masks --cutoff --no-masks"),
+    (locator_cli.main, "run --sim {sim} --no-masks --extra-margin 2 --out {out}",
+     "--extra-margin"),
+    (locator_cli.main, "simulate --world {npz} --scenery {yaml} --out {out}", "--scenery"),
+    (locator_cli.main, "simulate --world {npz} --from-km 4 --out {out}", "--from-km"),
+    (locator_cli.main, "simulate --scenery {yaml} --to-km 5 --out {out}", "--to-km"),
+    (locator_cli.main, "simulate --world {npz} --world-seed 3 --out {out}", "--world-seed"),
+    (locator_cli.main, "calibrate --sim {sim} --obs {obs} --nav {nav} --out {out}", "--obs"),
+    (locator_cli.main, "calibrate --obs {obs} --nav {nav} --states nlos --out {out}",
+     "--states"),
+    (locator_cli.main, "calibrate --sim {sim} --nav {nav} --out {out}", "--nav"),
+    (locator_cli.main, "calibrate --obs {obs} {obs} --nav {nav} --station 1 2 3 --out {out}",
+     "--station"),
+    (locator_cli.main, "evaluate {run} --sim {sim} --truth-chainage 4000", "--truth-chainage"),
+    (locator_cli.main, "balises --sim {sim} --masks {masks} --no-masks --out {out}",
+     "--no-masks"),
+    (locator_cli.main, "balises --sim {sim} --no-masks --odometer motor --odometer-log {csv} "
+     "--out {out}", "--odometer-log"),
+    (locator_cli.main, "balises --sim {sim} --no-masks --max-accel 2 --out {out}", "--max-accel"),
+    (predisat_cli.main, "export {masks} --format urbannav --chainage 4000 --out {out}",
+     "--chainage"),
+    (predisat_cli.main, "export {masks} --format rtklib --out {out}", "--chainage M"),
+    (predisat_cli.main, "export {masks} --format rtklib --chainage 4000 --header --out {out}",
+     "--header"),
+    (predisat_cli.main, "export {masks} --format rtklib --chainage 4000 --pvgis-layout table "
+     "--out {out}", "--pvgis-layout"),
+    (predisat_cli.main, "evaluate {masks} --truth {dir} --calibrate --margins {json}",
+     "--margins"),
+    (predisat_cli.main, "evaluate {masks} --truth {dir} --target 0.99", "--target"),
+    (predisat_cli.main, "synth --camera fisheye --calibration {yaml} --out {out}",
+     "--calibration"),
+    (predisat_cli.main, "process {dir} --segmenter learned --sky-net {npz} --out {out}",
+     "--sky-net"),
+    (predisat_cli.main, "evaluate-sky --data {dir} --method grabcut --sky-net {npz}",
+     "--sky-net"),
+]
+
+
+@pytest.mark.parametrize(("main", "argv", "named"), CONTRADICTIONS,
+                         ids=[a for _, a, _ in CONTRADICTIONS])  # fmt: skip
+def test_contradictions_are_refused_before_any_work(main, argv, named, files, capsys) -> None:
+    err = _refused(main, argv.format(**files).split(), capsys)
+    assert named in err
+    assert not Path(files["out"]).exists()
+
+
+# --- likely unit mistakes: refused with the value meant -------------------------------------
+
+
+UNIT_MISTAKES = [
+    # the user's cases
+    (predisat_cli.main, "availability --masks {masks} --cutoff 0.26 --out {out}",
+     "looks like radians (0.26 rad = 14.9 deg)"),
+    (locator_cli.main, "run --sim {sim} --cutoff 0.26 --out {out}", "looks like radians"),
+    (locator_cli.main, "simulate --speed 300 --out {out}", "300 m/s is 1080 km/h"),
+    # the same vocabulary elsewhere
+    (locator_cli.main, "balises --sim {sim} --cutoff 0.2 --out {out}", "radians"),
+    (predisat_cli.main, "synth --pitch-deg 0.78 --out {out}", "radians"),
+    (locator_cli.main, "simulate --rate 1000 --out {out}", "Hz"),
+    (locator_cli.main, "run --sim {sim} --no-masks --antenna-height 400 --out {out}",
+     "400 cm is 4"),
+    (predisat_cli.main, "evaluate {masks} --truth {dir} --calibrate --target 99.9",
+     "looks like percent"),
+    (predisat_cli.main, "availability --masks {masks} --constellation gsp --out {out}",
+     "no constellation"),
+    (locator_cli.main, "run --sim {sim} --no-masks --constellation X --out {out}",
+     "no constellation"),
+]
+
+
+@pytest.mark.parametrize(("main", "argv", "hint"), UNIT_MISTAKES,
+                         ids=[a for _, a, _ in UNIT_MISTAKES])  # fmt: skip
+def test_likely_unit_mistakes_are_refused_with_the_value_meant(main, argv, hint, files,
+                                                               capsys) -> None:  # fmt: skip
+    assert hint in _refused(main, argv.format(**files).split(), capsys)
+
+
+def test_small_angles_in_degrees_are_accepted_with_their_unit(files) -> None:
+    parser = predisat_cli.build_parser()
+    a = parser.parse_args(["availability", "--masks", files["masks"], "--cutoff", "0.5deg", "0",
+                           "15", "--out", files["out"]])  # fmt: skip
+    assert a.cutoff == [0.5, 0.0, 15.0]
+    b = locator_cli.build_parser().parse_args(["simulate", "--speed", "83.3", "--out",
+                                               files["out"]])  # fmt: skip
+    assert b.speed == 83.3
+
+
+# --- missing input files: the file named, with what it should hold --------------------------
+
+
+MISSING = [
+    # the user's case: a bare "[Errno 2]"
+    (locator_cli.main, "evaluate {run} --truth-csv {missing}", ("gps_s", "chainage_m")),
+    (locator_cli.main, "run --sim {missing} --no-masks --out {out}", ("locator simulate",)),
+    (locator_cli.main, "run --sim {sim} --masks {missing} --out {out}", ("mask file",)),
+    (locator_cli.main, "run --sim {sim} --no-masks --error-model {missing} --out {out}",
+     ("locator calibrate",)),
+    (locator_cli.main, "simulate --scenery {missing} --out {out}", ("scenery recipe",)),
+    (locator_cli.main, "balises --sim {sim} --no-masks --odometer-log {missing} --out {out}",
+     ("odometer log",)),
+    (predisat_cli.main, "process {missing} --out {out}", ("survey.yaml",)),
+    (predisat_cli.main, "availability --masks {missing} --out {out}", ("mask file",)),
+    (predisat_cli.main, "export {missing} --format urbannav --out {out}", ("mask file",)),
+]
+
+
+@pytest.mark.parametrize(("main", "argv", "words"), MISSING, ids=[a for _, a, _ in MISSING])
+def test_a_missing_input_is_named_with_what_it_should_hold(main, argv, words, files, tmp_path,
+                                                           capsys) -> None:  # fmt: skip
+    missing = str(tmp_path / "missing.csv")
+    err = _refused(main, argv.format(missing=missing, **files).split(), capsys)
+    assert missing in err and "Errno" not in err
+    for word in words:
+        assert word in err
+
+
+def test_the_default_constellations_agree_and_are_printed() -> None:
+    """The locator and the availability report count the same satellites by default."""
+    from locator.demostep import DEMO_CONSTELLATION
+    from predisat.cli.args import constellation_label
+
+    run = locator_cli.build_parser().parse_args(["run", "--sim", ".", "--no-masks", "--out", "o"])
+    avail = predisat_cli.build_parser().parse_args(["availability", "--masks", ".", "--out", "o"])
+    assert run.constellation == avail.constellation == DEMO_CONSTELLATION == "gps"
+    assert constellation_label(run.constellation) == "GPS"
+    assert constellation_label("GE") == "GPS, Galileo"
+
+
+# --- the user's other cases -----------------------------------------------------------------
+
+
+def test_export_chainage_in_km_gets_the_metres_meant(tmp_path: Path, capsys) -> None:
+    from predisat.masks import fileformat as maskio
+    from tests.predisat.masks.test_fileformat import make_set
+
+    masks = make_set()  # positions at 250-360 m of chainage
+    src = maskio.write_masks(masks, tmp_path / "masks.parquet")
+    out = tmp_path / "r.txt"
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "0.3",
+                              "--out", str(out)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "did you give kilometres? (--chainage 300)" in err and not out.exists()
+    # far from every position (not km either): refused, no nearest-position mask written
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "2000",
+                              "--out", str(out)]) == 2  # fmt: skip
+    assert "outside the masks" in capsys.readouterr().err and not out.exists()
+    assert predisat_cli.main(["export", str(src), "--format", "rtklib", "--chainage", "300",
+                              "--out", str(out)]) == 0  # fmt: skip
+
+
+def test_simulate_builds_a_short_world(tmp_path: Path, capsys) -> None:
+    """`locator simulate --from-km 4 --to-km 4.2` was refused (the mixed recipe needs 0.8 km)."""
+    from locator.sim.simfile import SimRun
+
+    out = tmp_path / "sim"
+    assert locator_cli.main(["simulate", "--from-km", "4", "--to-km", "4.2", "--out",
+                             str(out)]) == 0  # fmt: skip
+    sim = SimRun.read(out)
+    assert sim.n_epoch > 5
+    assert 4000.0 < sim.chainage_m.min() and sim.chainage_m.max() < 4200.0
+    capsys.readouterr()
+    # below the minimum: refused with the minimum named
+    assert locator_cli.main(["simulate", "--from-km", "4", "--to-km", "4.05", "--out",
+                             str(tmp_path / "tiny")]) == 2  # fmt: skip
+    assert "at least 0.1 km" in capsys.readouterr().err
+
+
+def test_process_refuses_another_surveys_folder_unless_replace(tmp_path: Path, capsys) -> None:
+    """`process` into another survey's --out recomputed silently and left stale chunks."""
+    import json
+
+    from predisat.camera.models import CameraModel
+    from predisat.masks.fileformat import read_masks
+    from predisat.synth.generate import generate_survey
+    from predisat.track.map import demo_track
+
+    cam = CameraModel.pinhole_from_fov(160, 120, 74.0)
+    for name, lo_m in (("a", 4000.0), ("b", 5000.0)):
+        generate_survey(demo_track(), lo_m, lo_m + 20.0, sky="clear", seed=5,
+                        out_dir=tmp_path / name, camera=cam, progress=False)  # fmt: skip
+    out = tmp_path / "m"
+
+    def process(name: str, *extra: str) -> int:
+        return predisat_cli.main(["process", str(tmp_path / name / "survey"), "--quiet",
+                                  "--out", str(out), *extra])  # fmt: skip
+
+    def chunks() -> set[str]:
+        return {p.name for p in (out / "chunks").iterdir()}
+
+    assert process("a") == 0
+    first, masks_a = chunks(), (out / "masks.parquet").read_bytes()
+    assert first == {"4000_5000.json", "4000_5000.parquet"}
+    capsys.readouterr()
+    assert process("b") == 2
+    err = capsys.readouterr().err
+    assert str(out) in err and "another survey" in err and "--replace" in err
+    assert chunks() == first and (out / "masks.parquet").read_bytes() == masks_a  # untouched
+    assert process("b", "--replace") == 0
+    assert chunks() == {"5000_6000.json", "5000_6000.parquet"}  # survey a's chunk removed
+    ch = read_masks(out / "masks.parquet").chainage_m
+    assert ch.min() >= 5000.0 and ch.max() <= 5020.0 + 1e-6
+    # the same survey in other chunks: the old chunks do not stay beside the new ones
+    assert process("b", "--chunk-m", "10") == 0
+    names = set(json.loads((out / "provenance.json").read_text())["chunks"])
+    assert chunks() == {f"{n}{s}" for n in names for s in (".json", ".parquet")}
+    assert "5000_6000.json" not in chunks()
+
+
+def test_chainage_hint_names_the_metres_meant_only_when_they_fit() -> None:
+    from predisat.cli.args import chainage_hint
+
+    assert chainage_hint(5.2, 4000.0, 6000.0, "--chainage").endswith("(--chainage 5200)")
+    assert chainage_hint(5200.0, 4000.0, 6000.0, "--chainage") == ""  # inside: no hint
+    assert chainage_hint(9.0, 4000.0, 6000.0, "--chainage") == ""  # 9 km is not inside either
+
+
+def test_quiet_is_accepted_before_and_after_the_locator_subcommand() -> None:
+    parser = locator_cli.build_parser()
+    run = ["run", "--sim", ".", "--no-masks", "--out", "o"]
+    assert parser.parse_args(run).quiet is False
+    assert parser.parse_args(["-q", *run]).quiet is True
+    assert parser.parse_args([*run, "--quiet"]).quiet is True
+
+
+def test_synth_sky_choices_are_the_renderers() -> None:
+    from predisat.synth.generate import SKY_CHOICES
+
+    assert set(predisat_cli.SKY_CHOICES) == set(SKY_CHOICES)
