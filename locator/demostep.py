@@ -35,9 +35,14 @@ def format_demo_table(table: pd.DataFrame, constellations: str = "") -> str:
     for c in ("claim %", ">=6 sats %"):
         t[c] = 100 * t[c]
     gnss = constellations or "every constellation of the navigation day"
+    same = (
+        "the availability report above counts the same by default"
+        if gnss == "GPS"
+        else "the availability report above counts GPS only"
+    )
     return str(t.round(1).to_string(index=False)) + (
-        f"\n  ({gnss} received, as the availability report counts by default. MI: epochs "
-        "whose interval misses the truth without a safety claim; HMI: missed while claimed)"
+        f"\n  ({gnss} received; {same}. MI: epochs whose interval misses the truth without a "
+        "safety claim; HMI: missed while claimed)"
         "\n  (LOCOPROL on line 144: six satellites 60 % of the time; intervals about 70 m, up "
         "to 600 m)"
     )
