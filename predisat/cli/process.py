@@ -24,7 +24,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "rerun with the same folder to resume",
     )  # fmt: skip
     parser.add_argument("--track", type=Path, help="track file instead of the survey's own")
-    parser.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
+    parser.add_argument(
+        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        help="where the chunks run: a local Dask cluster (default), this process alone "
+        "(serial), or an existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--workers", type=positive_int, metavar="N",
+        help="worker processes of the local cluster (default: the machine's cores)",
+    )  # fmt: skip
     parser.add_argument(
         "--chunk-m", type=positive_float, default=1000.0,
         help="chainage per chunk, metres (default 1000)",
@@ -65,6 +73,7 @@ def run(args: argparse.Namespace) -> ProcessResult:
                        thin_deg=args.thin_deg),
         track=track,
         workers=args.workers,
+        scheduler=args.scheduler,
         strict=args.strict,
         progress=not args.quiet,
         margins=args.margins,
