@@ -32,7 +32,14 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any, Literal, TypeVar
 
-__all__ = ["CLOSE_TIMEOUT_S", "Scheduler", "TaskRunner", "dask_setup", "machine_workers"]
+__all__ = [
+    "CLOSE_TIMEOUT_S",
+    "CONNECT_TIMEOUT_S",
+    "Scheduler",
+    "TaskRunner",
+    "dask_setup",
+    "machine_workers",
+]
 
 S = TypeVar("S")
 T = TypeVar("T")
@@ -40,6 +47,9 @@ R = TypeVar("R")
 
 CLOSE_TIMEOUT_S = 3.0
 """Longest wait, seconds, for the client and for the local cluster to close."""
+
+CONNECT_TIMEOUT_S = 20.0
+"""Longest wait, seconds, for the scheduler of a cluster given by address to answer."""
 
 # a worker process killed (SIGKILL, out of memory) while holding a task counts as a failure
 # of that task; distributed gives up on a task after this many (its default is 3)
@@ -146,7 +156,7 @@ class _ReadyCluster:
             self.client = Client(self.cluster)
         else:
             try:
-                self.client = Client(scheduler.address, timeout="20s")
+                self.client = Client(scheduler.address, timeout=f"{CONNECT_TIMEOUT_S}s")
             except OSError as exc:
                 raise OSError(
                     f"scheduler {scheduler.address}: no Dask scheduler answers there ({exc}); "

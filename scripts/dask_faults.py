@@ -41,7 +41,7 @@ from pathlib import Path
 import psutil
 
 ROOT = Path(__file__).resolve().parents[1]
-RESUME_NOTE = "rerun the same command to resume"
+RESUME_NOTE = "rerun the same command"  # to resume, or: nothing was written (in the imports)
 
 
 def make_survey(work: Path) -> Path:

@@ -341,9 +341,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``predisat`` command line; returns the exit status."""
     resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
-    return run_main(
-        build_parser(), argv, "predisat {command}", interrupted_note={"process": resume}
-    )
+    try:
+        parser = build_parser()  # imports the commands' modules: a second or more
+    except KeyboardInterrupt:
+        print("\npredisat: interrupted before the command started; nothing was written: rerun "
+              "the same command", file=sys.stderr)  # fmt: skip
+        return 130
+    return run_main(parser, argv, "predisat {command}", interrupted_note={"process": resume})
 
 
 if __name__ == "__main__":
