@@ -3,13 +3,14 @@ and what a national network would take.
 
 Usage::
 
-    python scripts/bench_dask.py SURVEY_DIR [--workers 1,2] [--chunk-m 100] [--repeat 2]
-        [--json out.json]
+    python scripts/bench_dask.py SURVEY_DIR [--workers 1,2] [--chunk-m 100] [--json out.json]
 
-Runs the whole pipeline from scratch (segmentation, reconstruction, chunk files, merge) in a
-temporary folder: serially in this process (the baseline), then with ``--scheduler local`` and
-each number of workers (the cluster's start included in the wall time, and also shown apart),
-``--repeat`` times in turn, keeping each configuration's fastest run (the machine is shared).
+Runs the whole pipeline from scratch (segmentation, reconstruction, chunk files, merge) into
+fresh folders: serially in this process (the baseline) twice - cold (imports done, but the
+models, the numba kernels and the caches load on first use) and warm - then on a local
+cluster of each number of workers, twice: cold (fresh worker processes, the cluster's start
+included) and warm (the same workers again, as on a long-lived cluster: the throughput of a
+long run, where the start is paid once).
 Checks that every run wrote the serial run's bytes (``SOURCE_DATE_EPOCH`` pinned), and prints
 frames per second, the ratio to the serial run, the scaling efficiency
 ``fps(N) / (N * fps(1 worker))``, and a projection for the Belgian network (about 3 600 km)
@@ -50,22 +51,11 @@ def published(out: Path) -> dict[str, bytes]:
     return {str(f.relative_to(out)): f.read_bytes() for f in files if not f.name.startswith(".")}
 
 
-def cluster_start_s(workers: int) -> float:
-    """Wall time to start and close an empty local cluster of ``workers``."""
-    from predisat.scheduler import TaskRunner
-
-    t0 = time.perf_counter()
-    with TaskRunner(Scheduler.local(workers)) as runner:
-        runner.client()
-    return time.perf_counter() - t0
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("survey", type=Path)
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--chunk-m", type=float, default=100.0)
-    ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
     survey = Survey.load(args.survey, check_images=False, on_error="skip")
@@ -74,64 +64,64 @@ def main() -> None:
     params = PipelineParams(chunk_m=args.chunk_m)
     print(f"{args.survey}: {n_frames} frames, chunks of {args.chunk_m:g} m; load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (shared)")  # fmt: skip
-    best: dict[str, dict] = {}
+    rows: list[dict] = []
+    want: dict[str, bytes] = {}
+    sizes: dict[str, float] = {}
+
+    def run(label: str, where: Scheduler | str, out: Path, extra_s: float = 0.0) -> None:
+        t0 = time.perf_counter()
+        res = process_survey(args.survey, out, params, scheduler=where, progress=False)
+        wall = time.perf_counter() - t0
+        files = published(out)
+        if not want:
+            want.update(files)
+            sizes.update({
+                "cache": sum(p.stat().st_size for p in (out / "cache").rglob("*.npz")),
+                "chunks": sum(p.stat().st_size for p in (out / "chunks").iterdir()),
+                "masks": (out / "masks.parquet").stat().st_size, "n_pos": res.masks.n_pos,
+            })  # fmt: skip
+        differing = sorted(k for k in want.keys() | files.keys() if want.get(k) != files.get(k))
+        rows.append({"run": label, "wall_s": wall + extra_s, "fps": n_frames / (wall + extra_s),
+                     "identical": not differing, "differing": differing,
+                     "timings_s": res.timings_s, "load_avg": os.getloadavg()[0]})  # fmt: skip
+        print(f"{label:22s}: {wall + extra_s:6.1f} s, {rows[-1]['fps']:6.2f} frames/s, stages "
+              f"{({k: round(v, 1) for k, v in res.timings_s.items()})}, load "
+              f"{rows[-1]['load_avg']:.1f}, identical to serial: {not differing}"
+              f"{'' if not differing else f' (differ: {differing})'}", flush=True)  # fmt: skip
+
+    from distributed import LocalCluster
+
     with tempfile.TemporaryDirectory(prefix="bench_dask_") as tmp:
-        runs = [("serial", Scheduler.serial())]
-        runs += [(f"dask {n}w", Scheduler.local(int(n))) for n in args.workers.split(",")]
-        want: dict[str, bytes] = {}
-        for rep, (label, where) in [(r, run) for r in range(args.repeat) for run in runs]:
-            out = Path(tmp) / f"{label.replace(' ', '_')}-{rep}"
+        run("serial cold", Scheduler.serial(), Path(tmp) / "serial-cold")
+        run("serial warm", Scheduler.serial(), Path(tmp) / "serial-warm")
+        for n in (int(w) for w in args.workers.split(",")):
             t0 = time.perf_counter()
-            res = process_survey(args.survey, out, params, scheduler=where, progress=False)
-            wall = time.perf_counter() - t0
-            files = published(out)
-            if not want:
-                want = files
-                sizes = {
-                    "cache": sum(p.stat().st_size for p in (out / "cache").rglob("*.npz")),
-                    "chunks": sum(p.stat().st_size for p in (out / "chunks").iterdir()),
-                    "masks": (out / "masks.parquet").stat().st_size,
-                    "n_pos": res.masks.n_pos,
-                }
-            differing = sorted(k for k in want.keys() | files.keys()
-                               if want.get(k) != files.get(k))  # fmt: skip
-            start = 0.0 if where.kind == "serial" else cluster_start_s(where.workers)
-            row = {
-                "run": label, "workers": where.workers, "wall_s": wall,
-                "fps": n_frames / wall, "start_s": start,
-                "fps_no_start": n_frames / max(wall - start, 1e-9),
-                "identical": not differing, "differing": differing, "timings_s": res.timings_s,
-                "load_avg": os.getloadavg()[0],
-            }  # fmt: skip
-            print(f"{label:8s}: {wall:7.1f} s, {n_frames / wall:6.2f} frames/s "
-                  f"(cluster start {start:.1f} s; without it {row['fps_no_start']:.2f} "
-                  f"frames/s), stages {({k: round(v, 1) for k, v in res.timings_s.items()})}, "
-                  f"load {row['load_avg']:.1f}, identical to serial: {not differing}"
-                  f"{'' if not differing else f' (differ: {differing})'}", flush=True)  # fmt: skip
-            if label not in best or wall < best[label]["wall_s"]:
-                best[label] = {**row, "identical": row["identical"] and
-                               best.get(label, {}).get("identical", True)}  # fmt: skip
-            elif differing:
-                best[label]["identical"] = False
-    rows = list(best.values())
-    serial = rows[0]
-    by_w = {r["workers"]: r for r in rows[1:]}
-    print("\nrun       frames/s  ratio to serial  scaling efficiency")
+            with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                              host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster:
+                start_s = time.perf_counter() - t0
+                address = cluster.scheduler_address
+                run(f"dask {n}w cold (+start)", address, Path(tmp) / f"d{n}-cold", start_s)
+                run(f"dask {n}w warm", address, Path(tmp) / f"d{n}-warm")  # fmt: skip
+    by = {r["run"]: r for r in rows}
+    serial = by["serial warm"]
+    print("\nrun                     frames/s  ratio to serial warm  scaling efficiency")
+    one = by.get("dask 1w warm")
     for r in rows:
         eff = ""
-        if r is not serial and 1 in by_w:
-            eff = f"{r['fps'] / (r['workers'] * by_w[1]['fps']):.0%}"
-        print(f"{r['run']:8s}  {r['fps']:8.2f}  {r['fps'] / serial['fps']:15.2f}  {eff:>18s}")
-    eff2 = by_w[2]["fps_no_start"] / (2 * by_w[1]["fps_no_start"]) if 2 in by_w and 1 in by_w \
-        else 1.0  # fmt: skip
-    per_worker_fps = by_w[1]["fps_no_start"] if 1 in by_w else serial["fps"]
+        n = int(r["run"].split()[1][:-1]) if r["run"].startswith("dask") else 0
+        if n and one is not None and "warm" in r["run"]:
+            eff = f"{r['fps'] / (n * one['fps']):.0%}"
+        print(f"{r['run']:22s}  {r['fps']:8.2f}  {r['fps'] / serial['fps']:20.2f}  {eff:>18s}")
+    two = by.get("dask 2w warm")
+    eff2 = two["fps"] / (2 * one["fps"]) if one and two else 1.0
+    per_worker_fps = one["fps"] if one else serial["fps"]
     per_frame = {k: sizes[k] / n_frames for k in ("cache", "chunks")}
     per_pos_masks = sizes["masks"] / sizes["n_pos"]
     print(f"\nprojection: {CAMERAS} cameras every {SPACING_M:g} m, {per_worker_fps:.2f} frames/s "
-          f"per worker (1-worker run without the cluster start), {eff2:.0%} efficiency at 2 "
-          f"workers (assumed for N); images {image_bytes / n_frames / 1e3:.0f} kB/frame, "
-          f"cache {per_frame['cache'] / 1e3:.1f} kB/frame, chunks {per_frame['chunks'] / 1e3:.1f}"
-          f" kB/frame, masks {per_pos_masks / 1e3:.2f} kB/position")  # fmt: skip
+          f"per worker (1 warm worker), {eff2:.0%} efficiency at 2 workers (assumed for N); "
+          f"images {image_bytes / n_frames / 1e3:.0f} kB/frame, cache "
+          f"{per_frame['cache'] / 1e3:.1f} kB/frame, chunks {per_frame['chunks'] / 1e3:.1f} "
+          f"kB/frame, masks {per_pos_masks / 1e3:.2f} kB/position")  # fmt: skip
     projection = {}
     for name, km in NETWORKS_KM.items():
         frames = km * 1000.0 / SPACING_M * CAMERAS

@@ -540,6 +540,12 @@ def process_survey(
     timings: dict[str, float] = {}
     p = params or PipelineParams()
     where = scheduler if isinstance(scheduler, Scheduler) else Scheduler.parse(scheduler, workers)
+    if where.kind == "serial" and where.workers > 1:
+        # the segmenters and reconstructors are not thread-safe (one OpenCV network each)
+        raise ValueError(
+            f"--scheduler serial runs in this process alone, not with --workers {where.workers}"
+            "; leave --workers out, or use --scheduler local for worker processes"
+        )
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress

@@ -194,6 +194,13 @@ def test_dask_cluster_writes_the_same_bytes_as_a_serial_run(
     assert _outputs(tmp_path / "c") == want
 
 
+def test_serial_with_several_workers_is_refused(survey_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--scheduler local"):
+        process_survey(survey_dir, tmp_path / "a", PARAMS, progress=False, scheduler="serial",
+                       workers=2)  # fmt: skip
+    assert not (tmp_path / "a").exists()  # refused before any work
+
+
 def test_a_resumed_run_on_dask_redoes_only_missing_chunks(
     survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dask_address: str
 ) -> None:
