@@ -54,6 +54,8 @@ CONNECT_TIMEOUT_S = 20.0
 # a worker process killed (SIGKILL, out of memory) while holding a task counts as a failure
 # of that task; distributed gives up on a task after this many (its default is 3)
 _ALLOWED_FAILURES = 5
+# a worker process killed while the local cluster starts fails the start: it is tried again
+_START_ATTEMPTS = 3
 
 
 def machine_workers() -> int:
@@ -195,15 +197,27 @@ def _start_local_cluster(workers: int) -> Any:
     box: dict[str, Any] = {}
 
     def build() -> None:
-        try:
-            with dask.config.set({"distributed.scheduler.allowed-failures": _ALLOWED_FAILURES}):
-                box["cluster"] = LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR,
-                    preload=[__name__],
-                )  # fmt: skip
-        except BaseException as exc:  # handed to the waiting thread
-            box["error"] = exc
+        for attempt in range(_START_ATTEMPTS):
+            try:
+                with dask.config.set(
+                    {"distributed.scheduler.allowed-failures": _ALLOWED_FAILURES}
+                ):
+                    box["cluster"] = LocalCluster(
+                        n_workers=workers, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                        silence_logs=logging.ERROR, preload=[__name__],
+                    )  # fmt: skip
+                return
+            except RuntimeError as exc:  # "Nanny failed to start": a worker died starting
+                if attempt == _START_ATTEMPTS - 1:
+                    box["error"] = OSError(
+                        f"the local Dask cluster of {workers} worker(s) did not start "
+                        f"({_START_ATTEMPTS} attempts; last: {exc}); see the workers' "
+                        "messages above, or run with --scheduler serial"
+                    )
+            except BaseException as exc:  # handed to the waiting thread
+                box["error"] = exc
+                return
 
     thread = threading.Thread(target=build, name="predisat-local-cluster", daemon=True)
     thread.start()

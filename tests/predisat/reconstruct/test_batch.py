@@ -169,6 +169,7 @@ def dies_once(image: np.ndarray, marker: str) -> tuple[np.ndarray, None]:
     raise AssertionError("unreachable")
 
 
+@pytest.mark.slow
 def test_dask_cluster_writes_the_same_bytes_as_a_serial_run(
     survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dask_address: str
 ) -> None:
