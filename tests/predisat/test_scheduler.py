@@ -85,3 +85,31 @@ def test_an_address_where_no_scheduler_answers_is_named(monkeypatch: pytest.Monk
     runner = TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}"))
     with pytest.raises(OSError, match=f"127.0.0.1:{port}.*--scheduler local"):
         runner.client()
+
+
+def test_a_local_cluster_whose_start_fails_is_started_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A worker killed while the cluster starts fails the start ("Nanny failed to start"):
+    tried again, and refused with a message after three failures."""
+    import distributed
+
+    import predisat.scheduler as sched
+
+    starts: list[dict] = []
+
+    class FailingTwice:
+        def __init__(self, **kwargs: object) -> None:
+            starts.append(kwargs)
+            if len(starts) <= fails:
+                raise RuntimeError("Nanny failed to start.")
+
+    monkeypatch.setattr(distributed, "LocalCluster", FailingTwice)
+    fails = 2
+    assert isinstance(sched._start_local_cluster(2), FailingTwice) and len(starts) == 3
+    assert starts[0]["n_workers"] == 2 and starts[0]["preload"] == ["predisat.scheduler"]
+    starts.clear()
+    fails = 3
+    with pytest.raises(OSError, match=r"did not start.*--scheduler serial"):
+        sched._start_local_cluster(2)
+    assert len(starts) == 3
