@@ -75,10 +75,17 @@ def environment() -> dict[str, str]:
     return env
 
 
+def _default_sigint() -> None:
+    # a job started in the background by a shell inherits SIGINT ignored, and Python then
+    # installs no KeyboardInterrupt handler: the command must see Ctrl-C as at a terminal
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(cmd: list[str]) -> subprocess.Popen[str]:
     # a session of its own: a signal to its group does not reach this script
     return subprocess.Popen(cmd, env=environment(), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_default_sigint)  # fmt: skip
 
 
 def outputs(out: Path) -> dict[str, bytes]:

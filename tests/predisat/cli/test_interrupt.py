@@ -46,8 +46,10 @@ def _start(survey: Path, out: Path, scheduler: str) -> subprocess.Popen[str]:
            "--scheduler", scheduler]  # fmt: skip
     if scheduler == "local":
         cmd += ["--workers", "2"]
+    # SIGINT as at a terminal: a suite started in the background inherits it ignored
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)  # fmt: skip
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _published(out: Path) -> dict[str, bytes]:
