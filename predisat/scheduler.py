@@ -166,7 +166,16 @@ class _ReadyCluster:
                     "--scheduler local"
                 ) from None
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
+        """Close the client and the local cluster; ``abort`` (after Ctrl-C or an error) kills
+        the local worker processes first (SIGKILL: a worker deep in a task answers a polite
+        close only when the task ends; whatever it was writing is atomic and redone)."""
+        if abort and self.cluster is not None:
+            for nanny in list(getattr(self.cluster, "workers", {}).values()):
+                with contextlib.suppress(Exception):
+                    pid = nanny.process.pid
+                    if pid:
+                        os.kill(pid, signal.SIGKILL)
         with contextlib.suppress(Exception):
             self.client.close(timeout=CLOSE_TIMEOUT_S)
         if self.cluster is not None:
@@ -244,6 +253,7 @@ class TaskRunner:
     def __init__(self, scheduler: Scheduler) -> None:
         self.scheduler = scheduler
         self._ready: _ReadyCluster | None = None
+        self._aborted = False  # a map ended by an exception (Ctrl-C, a task's error)
 
     def __enter__(self) -> TaskRunner:
         return self
@@ -292,8 +302,10 @@ class TaskRunner:
             for fut in as_completed(futures):
                 yield fut.result()
         except BaseException:
-            with contextlib.suppress(Exception):
-                client.cancel([*futures, shared_f], asynchronous=False)
+            self._aborted = True
+            if self.scheduler.kind == "address":  # a local cluster's workers are killed
+                with contextlib.suppress(Exception):
+                    client.cancel([*futures, shared_f], asynchronous=False)
             raise
         finally:
             futures.clear()
@@ -319,4 +331,4 @@ class TaskRunner:
         """Close the client and the local cluster (each within :data:`CLOSE_TIMEOUT_S`)."""
         if self._ready is not None:
             ready, self._ready = self._ready, None
-            ready.close()
+            ready.close(abort=self._aborted)
