@@ -331,4 +331,8 @@ class TaskRunner:
         """Close the client and the local cluster (each within :data:`CLOSE_TIMEOUT_S`)."""
         if self._ready is not None:
             ready, self._ready = self._ready, None
-            ready.close(abort=self._aborted)
+            try:
+                ready.close(abort=self._aborted)
+            except BaseException:  # Ctrl-C while closing politely: kill the workers, then go
+                ready.close(abort=True)
+                raise
