@@ -99,7 +99,7 @@ def test_core_jobs_run_without_the_renderer(tmp_path: Path) -> None:
         from predisat.cli import main
         code = main(["availability", "--masks", {str(path)!r}, "--out", {str(tmp_path / "a")!r},
                      "--start", "2020-06-25T06:00", "--end", "2020-06-25T07:00", "--step", "600",
-                     "--quiet"])
+                     "--quiet", "--scheduler", "serial"])
         assert code == 0, code
         code = main(["export", {str(path)!r}, "--format", "rtklib", "--chainage", "4100",
                      "--out", {str(tmp_path / "m.txt")!r}])

@@ -18,15 +18,17 @@ small matrix products in float32 (coordinates taken relative to the line's centr
 keeps elevations to about 1e-5 deg), compares ``up`` with ``sin(threshold) * range`` instead of
 computing elevations, and reduces to counts on the fly. Satellite-epoch pairs that are below the
 lowest threshold everywhere on the line (checked at the line's centre with a bound on how much
-a direction can change across the line) are dropped first. Chunks run in threads (numpy releases
-the GIL in these operations). See ``docs/availability.md`` and ``scripts/bench_availability.py``.
+a direction can change across the line) are dropped first. Blocks of consecutive positions are
+the tasks (:func:`block_task`), run by a :class:`~predisat.scheduler.TaskRunner`: in this
+process, in threads (numpy releases the GIL in these operations), or on a Dask cluster; each
+block cuts its positions into the same chunks as a serial run, so the results are the same
+bits wherever they ran. See ``docs/availability.md`` and ``scripts/bench_availability.py``.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,11 +44,13 @@ from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.timescale import gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
+from predisat.scheduler import Scheduler, TaskRunner
 from predisat.track import TrackMap
 
 __all__ = [
     "THRESHOLDS",
     "Availability",
+    "block_task",
     "compute_availability",
     "longest_run",
     "reference_counts",
@@ -368,6 +372,7 @@ def compute_availability(
     chunk_positions: int = 2,
     workers: int = 1,
     progress: bool = False,
+    runner: TaskRunner | None = None,
 ) -> Availability:
     """Trusted satellites at every (position, epoch), with interval predictions.
 
@@ -392,9 +397,12 @@ def compute_availability(
         number: ``g`` is a float32 BLAS product whose last bit can depend on the chunk's
         parity (``docs/availability.md``).
     workers : int
-        Threads.
+        Threads in this process (when no ``runner`` is given).
     progress : bool
         Show a tqdm bar.
+    runner : predisat.scheduler.TaskRunner, optional
+        Where the blocks of positions run (a Dask cluster, for instance); default this
+        process with ``workers`` threads.
 
     Returns
     -------
@@ -430,32 +438,31 @@ def compute_availability(
         bin_scale = float(np.degrees(1.0) / step)
         sin_thr = np.concatenate([sin_thr, sin_thr[:, :1]], axis=1)  # 360 deg wraps to bin 0
 
-    def run(sl: slice) -> None:
-        c, iv, se = _chunk(
-            s32, rx[sl] - centre, rot[sl], tan_ecef[sl], sin_thr[sl], bin_scale, n_ep, m,
-            model if with_interval else None, interval_every,
-        )  # fmt: skip
-        count[sl] = c
-        if interval is not None and sens is not None:
-            interval[sl], sens[sl] = iv, se
-
-    slices = [slice(a, min(a + chunk_positions, n_pos)) for a in range(0, n_pos, chunk_positions)]
-    bar = _progress(len(slices), progress)
-    if workers == 1:
-        for sl in slices:
-            run(sl)
-            bar.update(1)
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            for _ in pool.map(run, slices):
-                bar.update(1)
-    bar.close()
+    shared = _BlockShared(s32, bin_scale, n_ep, m, model if with_interval else None,
+                          interval_every, chunk_positions)  # fmt: skip
+    own = runner is None
+    run_on = TaskRunner(Scheduler.serial(workers)) if runner is None else runner
+    blocks = _blocks(n_pos, chunk_positions, run_on)
+    items = [
+        _Block(a, b, rx[a:b] - centre, rot[a:b], tan_ecef[a:b], sin_thr[a:b]) for a, b in blocks
+    ]
+    bar = _progress(n_pos, progress)
+    try:
+        for a, b, c, iv, se in run_on.map_unordered(block_task, shared, items, "availability"):
+            count[a:b] = c
+            if interval is not None and sens is not None:
+                interval[a:b], sens[a:b] = iv, se
+            bar.update(b - a)
+    finally:
+        bar.close()
+        if own:
+            run_on.close()
 
     prov = {
         "n_candidates_per_epoch": m,
         "candidate_share": float(np.mean(cand_sat >= 0)) * m / max(len(satellites.sats), 1),
         "chunk_positions": chunk_positions,
-        "workers": workers,
+        "workers": workers if runner is None else run_on.scheduler.describe(),
         "interval_model": repr(model) if with_interval else None,
         "interval_every": interval_every,
         "elapsed_s": time.perf_counter() - t_start,
@@ -468,7 +475,7 @@ def compute_availability(
 
 def _progress(total: int, on: bool) -> Any:
     if on:
-        return tqdm(total=total, desc="availability", unit="chunk")
+        return tqdm(total=total, desc="availability", unit="position")
 
     class _Null:
         def update(self, n: int) -> None:
@@ -507,6 +514,68 @@ def _candidates(
 def _geodetic_of(xyz: NDArray) -> tuple[float, float]:
     lat, lon, _ = ecef_to_geodetic(xyz)
     return float(lat), float(lon)
+
+
+@dataclass(frozen=True)
+class _BlockShared:
+    """What every block of positions needs: the candidates and the options."""
+
+    s32: NDArray  # (3, n_ep * m) float32, relative to the line's centre
+    bin_scale: float
+    n_ep: int
+    m: int
+    model: IntervalModel | None
+    every: int
+    chunk_positions: int
+
+
+@dataclass(frozen=True)
+class _Block:
+    """Positions ``[a, b)`` of a line and their geometry (relative to the line's centre)."""
+
+    a: int
+    b: int
+    rx_rel: NDArray
+    rot: NDArray
+    tan_ecef: NDArray
+    sin_thr: NDArray
+
+
+def _blocks(n_pos: int, chunk_positions: int, runner: TaskRunner) -> list[tuple[int, int]]:
+    """Blocks of positions, each a whole number of chunks (so that every block cuts its
+    positions into the chunks of a serial run): one chunk in this process, at least 4 blocks
+    per worker on a cluster."""
+    per = chunk_positions
+    if runner.scheduler.kind != "serial":
+        workers = max(runner.scheduler.workers, 4)
+        n_chunks = -(-n_pos // chunk_positions)
+        per = chunk_positions * max(1, min(256, n_chunks // (4 * workers)))
+    return [(a, min(a + per, n_pos)) for a in range(0, n_pos, per)]
+
+
+def block_task(
+    shared: _BlockShared, block: _Block
+) -> tuple[int, int, NDArray, NDArray | None, NDArray | None]:
+    """Counts (and intervals, pair geometry) of a block of positions, chunk after chunk.
+
+    Returns
+    -------
+    tuple
+        ``(a, b, count, interval_m, sensitivity)``, the arrays of shape (b - a, n_epoch).
+    """
+    parts = []
+    for lo in range(0, block.b - block.a, shared.chunk_positions):
+        sl = slice(lo, min(lo + shared.chunk_positions, block.b - block.a))
+        parts.append(_chunk(
+            shared.s32, block.rx_rel[sl], block.rot[sl], block.tan_ecef[sl], block.sin_thr[sl],
+            shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.every,
+        ))  # fmt: skip
+    count = np.concatenate([p[0] for p in parts])
+    if shared.model is None:
+        return block.a, block.b, count, None, None
+    iv = np.concatenate([p[1] for p in parts if p[1] is not None])
+    se = np.concatenate([p[2] for p in parts if p[2] is not None])
+    return block.a, block.b, count, iv, se
 
 
 def _chunk(

@@ -57,6 +57,7 @@ from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.maskset import MaskSet
+from predisat.scheduler import Scheduler, TaskRunner
 from predisat.track import TrackMap, TrackMapError, load_track
 
 __all__ = [
@@ -413,7 +414,8 @@ def run_availability(
     n_sky: int = 4,
     interval_every: int = 10,
     interval_model: IntervalModel | None = None,
-    workers: int = 1,
+    workers: int | None = None,
+    scheduler: Scheduler | str | None = None,
     counts_table: bool = False,
     progress: bool = True,
     basemap: str | Path | None = None,
@@ -456,8 +458,13 @@ def run_availability(
         from ``locator calibrate``, read with
         :func:`predisat.gnss.errormodel.read_error_model`); default
         ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
-    workers : int
-        Threads of the availability engine.
+    workers : int, optional
+        Threads of the availability engine in this process (default 1), or the worker
+        processes of a local Dask cluster with ``scheduler="local"`` (default: the cores).
+    scheduler : predisat.scheduler.Scheduler or str, optional
+        Where the blocks of positions run: ``"serial"`` (this process, the default),
+        ``"local"`` (a local Dask cluster) or a Dask scheduler's address. The results are the
+        same bits wherever they run.
     counts_table : bool
         Also write ``counts.parquet`` with every count.
     progress : bool
@@ -508,9 +515,10 @@ def run_availability(
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
-        results = _compute_rules(
-            rules, nav_data.sats, positions, interval_every, model, workers, bar
-        )
+        with TaskRunner(_where(scheduler, workers)) as runner:
+            results = _compute_rules(
+                rules, nav_data.sats, positions, interval_every, model, runner, bar
+            )
 
         stage("tables")
         out = Path(out_dir)
@@ -622,7 +630,7 @@ def _compute_rules(
     positions: LinePositions,
     interval_every: int,
     model: IntervalModel,
-    workers: int,
+    runner: TaskRunner,
     bar: tqdm[NoReturn],
 ) -> list[Availability]:
     """The availability under every rule, in order; one step of ``bar`` each."""
@@ -636,11 +644,20 @@ def _compute_rules(
                 rule,
                 interval_every=interval_every,
                 interval_model=model,
-                workers=workers,
+                runner=runner,
             )
         )
         bar.update(1)
     return results
+
+
+def _where(scheduler: Scheduler | str | None, workers: int | None) -> Scheduler:
+    """The run's scheduler: serial with ``workers`` threads when none is named."""
+    if isinstance(scheduler, Scheduler):
+        return scheduler
+    if scheduler is None:
+        return Scheduler.serial(1 if workers is None else workers)
+    return Scheduler.parse(scheduler, workers)
 
 
 def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:

@@ -8,6 +8,8 @@ message (exit code 2), never as a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -378,9 +380,19 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``predisat`` command line; returns the exit status."""
     resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
-    return run_main(
-        build_parser(), argv, "predisat {command}", interrupted_note={"process": resume}
-    )
+    try:
+        parser = build_parser()  # imports the commands' modules: a second or more
+    except KeyboardInterrupt:
+        print("\npredisat: interrupted before the command started; nothing was written: rerun "
+              "the same command", file=sys.stderr)  # fmt: skip
+        return 130
+    code = run_main(parser, argv, "predisat {command}", interrupted_note={"process": resume})
+    if argv is None:  # the process's own command line: it ends now
+        # a Ctrl-C while the interpreter shuts down (the cluster's threads stop) would end a
+        # finished or reported command with a traceback and exit -2
+        with contextlib.suppress(ValueError):  # not the main thread: nothing to do
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code
 
 
 if __name__ == "__main__":

@@ -84,7 +84,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
         "per pair)",
     )  # fmt: skip
-    p.add_argument("--workers", type=positive_int, default=1, metavar="N", help="threads")
+    p.add_argument(
+        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        help="where the blocks of positions run: a local Dask cluster (default), this process "
+        "(serial), or an existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
+    )  # fmt: skip
+    p.add_argument(
+        "--workers", type=positive_int, metavar="N",
+        help="worker processes of the local cluster (default: the machine's cores), threads "
+        "with --scheduler serial (default 1)",
+    )  # fmt: skip
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -113,6 +122,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         interval_every=args.interval_every,
         interval_model=_interval_model(args.error_model, args.k_sigma),
         workers=args.workers,
+        scheduler=args.scheduler,
         counts_table=args.counts,
         progress=not args.quiet,
     )

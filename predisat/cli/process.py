@@ -35,6 +35,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "rerun with the same folder to resume",
     )  # fmt: skip
     parser.add_argument(
+        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        help="where the chunks run: a local Dask cluster (default), this process alone "
+        "(serial), or an existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--workers", type=positive_int, metavar="N",
+        help="worker processes of the local cluster (default: the machine's cores)",
+    )  # fmt: skip
+    parser.add_argument(
         "--replace", action="store_true",
         help="replace the chunks another survey (or another version of this one) left in --out "
         "(without it such a folder is refused)",
@@ -42,7 +51,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--track", type=existing_file("a track map: GeoJSON line(s) or a "
                         "lat,lon[,h] CSV (docs/track-map.md)"), metavar="FILE",
                         help="track file (default: the survey's own)")  # fmt: skip
-    parser.add_argument("--workers", type=positive_int, default=1, metavar="N", help="processes")
     parser.add_argument(
         "--chunk-m", type=positive_float, default=1000.0, metavar="M",
         help="chainage per chunk, metres",
@@ -88,6 +96,7 @@ def run(args: argparse.Namespace) -> ProcessResult:
                        thin_deg=args.thin_deg),
         track=track,
         workers=args.workers,
+        scheduler=args.scheduler,
         strict=args.strict,
         progress=not args.quiet,
         margins=args.margins,

@@ -27,9 +27,10 @@ At the end the chunks are merged into ``out/masks.parquet`` with the run's prove
 The parts live in their own modules: :mod:`~predisat.reconstruct.params` (settings),
 :mod:`~predisat.reconstruct.frames` (reading and segmenting a frame),
 :mod:`~predisat.reconstruct.framecache` (the cache and the fingerprints),
-:mod:`~predisat.reconstruct.chunks` (one chunk), :mod:`~predisat.reconstruct.executor` (this
-process or a pool of workers), :mod:`~predisat.reconstruct.badframes`; the merge's gap closing
-is :func:`predisat.masks.gaps.close_gaps`. The command line is :mod:`predisat.cli.process`.
+:mod:`~predisat.reconstruct.chunks` (one chunk), :mod:`~predisat.reconstruct.executor` (the
+tasks, run by :mod:`predisat.scheduler` in this process or on a Dask cluster),
+:mod:`~predisat.reconstruct.badframes`; the merge's gap closing is
+:func:`predisat.masks.gaps.close_gaps`. The command line is :mod:`predisat.cli.process`.
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -56,8 +56,15 @@ from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import MaskSet, concat_masksets
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
-from predisat.reconstruct.chunks import ChunkFrame, ChunkJob, chunk_finished, chunk_name
-from predisat.reconstruct.executor import WorkerPool, run_chunks, run_segmentation
+from predisat.reconstruct.chunks import (
+    ChunkFrame,
+    ChunkJob,
+    chunk_finished,
+    chunk_name,
+    pinned_utc,
+    utc_stamp,
+)
+from predisat.reconstruct.executor import run_chunks, run_segmentation
 from predisat.reconstruct.framecache import (
     SEGMENTATION_CODE,
     FrameJob,
@@ -68,6 +75,7 @@ from predisat.reconstruct.framecache import (
 )
 from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import PipelineParams
+from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
 from predisat.survey import Survey
 from predisat.track.map import TrackMap
@@ -436,6 +444,7 @@ def _chunk_jobs(
     plan: _Plan, pending: list[tuple[str, float, float, NDArray]], bad: dict[str, BadFrame]
 ) -> list[ChunkJob]:
     fr, ch, cams = plan.survey.frames, plan.chainage_m, _cameras(plan)
+    pinned = pinned_utc()
     jobs = []
     for name, lo, hi, s in pending:
         idx = plan.frames_of[name]
@@ -451,7 +460,7 @@ def _chunk_jobs(
         jobs.append(ChunkJob(
             name, lo, hi, s, frames, cams, bool(plan.survey.reverse),
             float(plan.survey.antenna_height_m), plan.track, plan.params, plan.provenance,
-            str(plan.chunk_dir), known_bad, plan.frames_key[name],
+            str(plan.chunk_dir), known_bad, plan.frames_key[name], pinned,
         ))  # fmt: skip
     return jobs
 
@@ -478,7 +487,7 @@ def _merge(
         "chunks": [c[0] for c in plan.chunks],
         "n_frames": plan.n_frames,
         "bad_frames": len(bad),
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "created_utc": utc_stamp(pinned_utc()),
     }
     table, record = margins
     if table is not None:
@@ -506,7 +515,8 @@ def process_survey(
     params: PipelineParams | None = None,
     *,
     track: TrackMap | None = None,
-    workers: int = 1,
+    workers: int | None = None,
+    scheduler: Scheduler | str | None = None,
     strict: bool = False,
     progress: bool = True,
     segmenter: Segmenter | None = None,
@@ -526,16 +536,22 @@ def process_survey(
     params : PipelineParams, optional
     track : TrackMap, optional
         Track to use instead of the one named in ``survey.yaml``.
-    workers : int
-        Processes (spawned) for segmentation and chunks; 1 runs everything in this process.
+    workers : int, optional
+        Worker processes of a local Dask cluster (``scheduler="local"``, or ``workers > 1``
+        without ``scheduler``); default: the machine's cores with ``"local"``, else 1.
+    scheduler : predisat.scheduler.Scheduler or str, optional
+        Where the tasks (batches of frames, chainage chunks) run: ``"serial"`` (this process),
+        ``"local"`` (a local Dask cluster) or a Dask scheduler's address; default serial when
+        ``workers`` is None or 1, else local (:meth:`~predisat.scheduler.Scheduler.parse`).
+        The results are the same byte for byte wherever they run.
     strict : bool
         Stop with :class:`BadFrameError` at the first bad frame instead of skipping it.
     progress : bool
         tqdm progress bars and console messages on stderr.
     segmenter : callable, optional
-        Image -> (sky mask, confidence); default :func:`default_segmenter`. Must be a
-        module-level function when ``workers > 1``. Give it a distinct ``params.segmenter``
-        name, which keys the cache.
+        Image -> (sky mask, confidence); default :func:`default_segmenter`. Must be
+        picklable (a module-level function) on a Dask cluster. Give it a distinct
+        ``params.segmenter`` name, which keys the cache.
     max_chunks : int, optional
         Compute at most this many pending chunks; when chunks remain, stop without merging by
         raising :class:`RunStopped` (simulates an interrupted run). ``None``: all.
@@ -565,8 +581,13 @@ def process_survey(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     p = params or PipelineParams()
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    where = scheduler if isinstance(scheduler, Scheduler) else Scheduler.parse(scheduler, workers)
+    if where.kind == "serial" and where.workers > 1:
+        # the segmenters and reconstructors are not thread-safe (one OpenCV network each)
+        raise ValueError(
+            f"--scheduler serial runs in this process alone, not with --workers {where.workers}"
+            "; leave --workers out, or use --scheduler local for worker processes"
+        )
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress
@@ -600,13 +621,13 @@ def process_survey(
     )
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
-    # one pool of worker processes for both stages (with workers > 1, started when needed)
-    pool = WorkerPool(workers, seg_fn)
+    # one runner for both stages (a cluster is started when there is work for it)
+    runner = TaskRunner(where)
     try:
         t1 = time.perf_counter()
         n_seg = 0
         index = {str(f): k for k, f in enumerate(survey.frames.frame_id)}
-        for fid, problem in run_segmentation(jobs, pool, progress):
+        for fid, problem in run_segmentation(jobs, runner, seg_fn, progress):
             n_seg += 1
             if problem is not None:
                 problem = _at_line(plan, index[fid], problem)
@@ -614,10 +635,10 @@ def process_survey(
                 bad.setdefault(fid, BadFrame(fid, problem))
         timings["segment"] = time.perf_counter() - t1
         t2 = time.perf_counter()
-        run_chunks(_chunk_jobs(plan, pending, bad), pool, progress)
+        run_chunks(_chunk_jobs(plan, pending, bad), runner, progress)
         timings["reconstruct"] = time.perf_counter() - t2
     finally:
-        pool.close()
+        runner.close()
     if max_chunks is not None and skipped + len(pending) < len(plan.chunks):
         raise RunStopped(f"stopped after {len(pending)} chunk(s) (max_chunks)")
 

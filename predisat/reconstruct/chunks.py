@@ -10,6 +10,7 @@ by an earlier run may be kept.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -33,8 +34,10 @@ __all__ = [
     "ChunkJob",
     "chunk_finished",
     "chunk_name",
+    "pinned_utc",
     "reconstructor_for",
     "run_chunk",
+    "utc_stamp",
 ]
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ class ChunkJob:
     # run that skips the chunk still lists them
     known_bad: tuple[BadFrame, ...] = ()
     frames_key: str = ""  # frames_key of every frame the chunk may use, bad ones included
+    pinned_utc: str | None = None  # the run's pinned time (SOURCE_DATE_EPOCH), else None
 
 
 
@@ -78,6 +82,31 @@ def chunk_name(lo_m: float, hi_m: float) -> str:
     """File stem of the chunk ``[lo_m, hi_m)``: ``"3000_4000"`` (metres, up to mm)."""
     return f"{_fmt_m(lo_m)}_{_fmt_m(hi_m)}"
 
+
+
+def pinned_utc() -> str | None:
+    """The time of ``SOURCE_DATE_EPOCH`` when it is set (the reproducible-builds convention),
+    ISO 8601 UTC to the second, else None.
+
+    A run that pins its time writes the same bytes as any other run of the same survey with
+    the same time: that is how a resumed or distributed run is compared with a serial one. The
+    client reads it and passes it on in the chunk jobs, so that the workers need not have it.
+    """
+    pinned = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    if not pinned:
+        return None
+    try:
+        return datetime.fromtimestamp(int(pinned), UTC).isoformat(timespec="seconds")
+    except (ValueError, OverflowError, OSError):
+        raise ValueError(
+            f"SOURCE_DATE_EPOCH={pinned!r} is not a time; give whole seconds since "
+            "1970-01-01 UTC (e.g. 1700000000) or unset it"
+        ) from None
+
+
+def utc_stamp(pinned: str | None = None) -> str:
+    """``pinned`` when given, else now: UTC, ISO 8601 to the second."""
+    return pinned if pinned is not None else datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstructor:
@@ -126,6 +155,7 @@ def run_chunk(
     bad.extend(BadFrame(fid, why, "fusion") for fid, why in rec.suspect_frames)
     prov = dict(job.provenance)
     prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
+    prov["created_utc"] = utc_stamp(job.pinned_utc)
     masks = rec.to_maskset(track, provenance=prov)
     chunk_dir = Path(job.chunk_dir)
     write_masks(masks, chunk_dir / f"{job.name}.parquet")
@@ -135,7 +165,7 @@ def run_chunk(
         "n_positions": int(masks.n_pos),
         "n_frames": len(views),
         "bad_frames": [asdict(b) for b in bad],
-        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "finished_utc": utc_stamp(job.pinned_utc),
     }
     # the JSON is the completion marker: written last, so a half-done chunk is redone
     write_bytes_atomic(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())

@@ -237,3 +237,33 @@ def test_even_chunk_sizes_are_bit_identical(sats, masks) -> None:
     np.testing.assert_array_equal(a.sensitivity, b.sensitivity)
     np.testing.assert_array_equal(a.count, c.count)
     np.testing.assert_allclose(a.interval_m, c.interval_m, rtol=1e-5)
+
+
+def test_blocks_on_a_dask_cluster_give_the_serial_bits(sats, masks) -> None:
+    """The positions cut into blocks (tasks) on a cluster: every array bit-identical to a
+    serial run (each block cuts its positions into the serial run's chunks)."""
+    from distributed import LocalCluster
+
+    from predisat.availability.engine import _blocks
+    from predisat.scheduler import Scheduler, TaskRunner
+
+    pos = LinePositions.from_masks(masks)
+    rule = TrustRule.mask(masks)
+    serial = compute_availability(sats, pos, rule, chunk_positions=2, interval_every=3)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        runner = TaskRunner(Scheduler.at(cluster.scheduler_address))
+        with runner:
+            blocks = _blocks(pos.n_pos, 2, TaskRunner(Scheduler.local(2)))
+            on_dask = compute_availability(sats, pos, rule, chunk_positions=2, interval_every=3,
+                                           runner=runner)  # fmt: skip
+    # several blocks, each a whole number of chunks, covering every position once
+    assert len(blocks) > 1 and all(a % 2 == 0 for a, _ in blocks)
+    assert np.array_equal(np.concatenate([np.arange(a, b) for a, b in blocks]),
+                          np.arange(pos.n_pos))  # fmt: skip
+    assert on_dask.count.tobytes() == serial.count.tobytes()
+    assert on_dask.interval_m is not None and serial.interval_m is not None
+    assert on_dask.interval_m.tobytes() == serial.interval_m.tobytes()
+    assert on_dask.sensitivity is not None and serial.sensitivity is not None
+    assert on_dask.sensitivity.tobytes() == serial.sensitivity.tobytes()
+    assert "Dask cluster at" in on_dask.provenance["workers"]

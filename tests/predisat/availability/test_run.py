@@ -451,7 +451,7 @@ def test_command_line_selects_one_track_of_a_file(
     both.write_text(json.dumps(doc))
     path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
     argv = ["availability", "--masks", str(path), "--track", str(both), "--start", START,
-            "--end", "2020-06-25T06:30", "--step", "900", "--quiet"]  # fmt: skip
+            "--end", "2020-06-25T06:30", "--step", "900", "--quiet", "--scheduler", "serial"]
     assert main([*argv, "--out", str(tmp_path / "x")]) == 2
     assert "several tracks (trackname: A, B)" in (err := capsys.readouterr().err)
     assert "--track-name" in err
@@ -468,7 +468,7 @@ def test_an_error_starts_on_its_own_line_after_the_progress_bar(
 
     path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
     argv = ["availability", "--masks", str(path), "--start", START, "--end", START,
-            "--out", str(tmp_path / "x")]  # fmt: skip
+            "--out", str(tmp_path / "x"), "--scheduler", "serial"]  # fmt: skip
     assert main(argv) == 2  # an empty window, refused after the bar has started
     err = capsys.readouterr().err
     assert "availability" in err.split("predisat availability: error")[0]  # the bar was drawn

@@ -158,7 +158,7 @@ def test_process_strict_and_bad_margins_fail_cleanly(
     with open(survey / "manifest.csv", newline="") as fh:
         victim = list(csv.DictReader(fh))[2]
     (survey / victim["image"]).write_bytes(b"not a jpeg")
-    base = ["process", str(survey), "--quiet", "--chunk-m", "100"]
+    base = ["process", str(survey), "--quiet", "--chunk-m", "100", "--scheduler", "serial"]
 
     capsys.readouterr()
     with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
@@ -262,7 +262,8 @@ def test_interrupted_process_keeps_its_work(
         demo_track(), 4000.0, 4020.0, sky="clear", seed=5, out_dir=tmp_path,
         camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False,
     )  # fmt: skip
-    args = ["process", str(tmp_path / "survey"), "--quiet", "--out", str(tmp_path / "m")]
+    args = ["process", str(tmp_path / "survey"), "--quiet", "--out", str(tmp_path / "m"),
+            "--scheduler", "serial"]
 
     def ctrl_c(*_: object) -> None:
         raise KeyboardInterrupt

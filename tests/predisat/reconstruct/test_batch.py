@@ -141,46 +141,83 @@ def test_interrupted_run_resumes(survey_dir: Path, tmp_path: Path) -> None:
     assert (res2.chunks_done, res2.chunks_skipped) == (3, 0)
 
 
-def test_workers_pool_gives_the_same_masks(survey_dir: Path, tmp_path: Path) -> None:
-    p = PipelineParams(chunk_m=30.0, segmenter="blue")
-    one = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky)
-    two = process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
-                         workers=2)  # fmt: skip
-    np.testing.assert_array_equal(one.masks.mask_el_deg, two.masks.mask_el_deg)
-    np.testing.assert_array_equal(one.masks.chainage_m, two.masks.chainage_m)
+@pytest.fixture(scope="module")
+def dask_address() -> Any:
+    """A cluster of two worker processes for the module's tests (each run would start its
+    own otherwise): its scheduler's address."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        yield cluster.scheduler_address
 
 
-def test_one_worker_pool_serves_both_stages(
-    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+def _outputs(out: Path) -> dict[str, bytes]:
+    """Every file a run publishes (not the cache, not timings), by path."""
+    files = [out / "masks.parquet", out / "bad_frames.csv", *sorted((out / "chunks").iterdir())]
+    return {str(f.relative_to(out)): f.read_bytes() for f in files}
+
+
+def dies_once(image: np.ndarray, marker: str) -> tuple[np.ndarray, None]:
+    """blue_sky, but the first call anywhere kills its own process (SIGKILL) mid-task."""
+    import os
+    import signal
+
+    try:
+        fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        return blue_sky(image)
+    os.close(fd)
+    os.kill(os.getpid(), signal.SIGKILL)
+    raise AssertionError("unreachable")
+
+
+@pytest.mark.slow
+def test_dask_cluster_writes_the_same_bytes_as_a_serial_run(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dask_address: str
 ) -> None:
-    """The workers start once per run (imports, models and numba caches load once), for the
-    segmentation and the chunks, and are shut down when a strict run stops at a bad frame."""
-    import predisat.reconstruct.executor as ex
+    """Any number of workers, a worker killed mid-task: the files are those of a serial run,
+    byte for byte (timestamps pinned by SOURCE_DATE_EPOCH)."""
+    import functools
 
-    made: list[Any] = []
-    get = ex.WorkerPool.get
-
-    def counting_get(self: Any) -> Any:
-        executor = get(self)
-        if all(executor is not m for m in made):
-            made.append(executor)
-        return executor
-
-    monkeypatch.setattr(ex.WorkerPool, "get", counting_get)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
     p = PipelineParams(chunk_m=30.0, segmenter="blue")
-    res = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky,
-                         workers=2)  # fmt: skip
-    assert res.frames_segmented >= 4 and res.chunks_done >= 2 and len(made) == 1
-    src = tmp_path / "survey"
-    shutil.copytree(survey_dir, src)
-    (src / _manifest(src)[4]["image"]).write_bytes(b"not a jpeg at all")
-    with pytest.raises(BadFrameError):
-        process_survey(src, tmp_path / "b", p, progress=False, segmenter=blue_sky, workers=2,
-                       strict=True)  # fmt: skip
-    assert len(made) == 2
-    for executor in made:  # shut down
-        with pytest.raises(RuntimeError):
-            executor.submit(print)
+    serial = process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky)
+    want = _outputs(tmp_path / "a")
+    assert len(want) == 2 + 2 * serial.chunks_done
+    two = process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
+                         scheduler=dask_address)  # fmt: skip
+    assert two.chunks_done == serial.chunks_done and two.frames_segmented == 14
+    assert _outputs(tmp_path / "b") == want
+    # a worker killed by SIGKILL in its first task: the task runs again on another
+    marker = tmp_path / "killed-once"
+    seg = functools.partial(dies_once, marker=str(marker))
+    one = process_survey(survey_dir, tmp_path / "c", p, progress=False, segmenter=seg,
+                         scheduler=dask_address)  # fmt: skip
+    assert marker.exists() and one.bad_frames == () and one.frames_segmented == 14
+    assert _outputs(tmp_path / "c") == want
+
+
+def test_serial_with_several_workers_is_refused(survey_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--scheduler local"):
+        process_survey(survey_dir, tmp_path / "a", PARAMS, progress=False, scheduler="serial",
+                       workers=2)  # fmt: skip
+    assert not (tmp_path / "a").exists()  # refused before any work
+
+
+def test_a_resumed_run_on_dask_redoes_only_missing_chunks(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dask_address: str
+) -> None:
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    process_survey(survey_dir, tmp_path / "a", p, progress=False, segmenter=blue_sky)
+    with pytest.raises(RunStopped):
+        process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
+                       max_chunks=1)  # fmt: skip
+    res = process_survey(survey_dir, tmp_path / "b", p, progress=False, segmenter=blue_sky,
+                         scheduler=dask_address)  # fmt: skip
+    assert (res.chunks_done, res.chunks_skipped) == (2, 1)
+    assert _outputs(tmp_path / "b") == _outputs(tmp_path / "a")
 
 
 def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path) -> None:

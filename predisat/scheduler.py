@@ -1,0 +1,338 @@
+"""Where the tasks of a run run: this process, a local Dask cluster or an existing one.
+
+A long run (``predisat process``, ``predisat availability``) cuts its work into independent
+tasks - chainage chunks, batches of frames, blocks of positions - each a call
+``fn(shared, item)`` of one module-level task function. A :class:`TaskRunner` runs them where
+its :class:`Scheduler` says:
+
+* ``serial``: in this process, one after the other (or in ``workers`` threads);
+* ``local``: a :class:`distributed.LocalCluster` of ``workers`` single-threaded worker
+  processes, started on first use (a run with nothing to do starts none) and closed with the
+  runner;
+* an address (``tcp://host:8786``): the workers of an existing ``distributed`` cluster.
+
+The same task function runs in every case, so the results do not depend on where they ran.
+On a cluster a worker that dies (killed, out of memory) costs only the tasks it held: the
+scheduler runs them again on another worker (``distributed.scheduler.allowed-failures`` times,
+then the run fails with ``KilledWorker``). The local cluster's workers ignore Ctrl-C (SIGINT,
+which a terminal sends to the whole process group): this process alone handles it, cancels
+the queued tasks and closes the cluster within a few seconds (:data:`CLOSE_TIMEOUT_S`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import threading
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any, Literal, TypeVar
+
+__all__ = [
+    "CLOSE_TIMEOUT_S",
+    "CONNECT_TIMEOUT_S",
+    "Scheduler",
+    "TaskRunner",
+    "dask_setup",
+    "machine_workers",
+]
+
+S = TypeVar("S")
+T = TypeVar("T")
+R = TypeVar("R")
+
+CLOSE_TIMEOUT_S = 3.0
+"""Longest wait, seconds, for the client and for the local cluster to close."""
+
+CONNECT_TIMEOUT_S = 20.0
+"""Longest wait, seconds, for the scheduler of a cluster given by address to answer."""
+
+# a worker process killed (SIGKILL, out of memory) while holding a task counts as a failure
+# of that task; distributed gives up on a task after this many (its default is 3)
+_ALLOWED_FAILURES = 5
+# a worker process killed while the local cluster starts fails the start: it is tried again
+_START_ATTEMPTS = 3
+
+
+def machine_workers() -> int:
+    """Cores this process may use (its CPU affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@dataclass(frozen=True)
+class Scheduler:
+    """Where a run's tasks run (see the module docstring).
+
+    Attributes
+    ----------
+    kind : {"serial", "local", "address"}
+    workers : int
+        Threads (serial) or worker processes (local); 0 for a cluster given by address (its
+        own workers).
+    address : str
+        The scheduler's address (``kind == "address"``), else ``""``.
+    """
+
+    kind: Literal["serial", "local", "address"]
+    workers: int = 1
+    address: str = ""
+
+    @classmethod
+    def serial(cls, threads: int = 1) -> Scheduler:
+        """This process, with ``threads`` threads (1: one task after the other)."""
+        if threads < 1:
+            raise ValueError(f"threads must be >= 1, got {threads}")
+        return cls("serial", threads)
+
+    @classmethod
+    def local(cls, workers: int | None = None) -> Scheduler:
+        """A local Dask cluster of ``workers`` processes (default: :func:`machine_workers`)."""
+        n = machine_workers() if workers is None else workers
+        if n < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        return cls("local", n)
+
+    @classmethod
+    def at(cls, address: str) -> Scheduler:
+        """An existing ``distributed`` cluster: ``tcp://host:port`` or ``host:port``."""
+        text = address.strip()
+        if not text or text.startswith("-") or any(c.isspace() for c in text):
+            raise ValueError(
+                f"scheduler address {address!r} is not an address; give the Dask scheduler's "
+                "address such as tcp://10.0.0.5:8786, or 'local' or 'serial'"
+            )
+        return cls("address", 0, text)
+
+    @classmethod
+    def parse(cls, text: str | None, workers: int | None = None) -> Scheduler:
+        """The scheduler a command line or a library call names.
+
+        Parameters
+        ----------
+        text : str or None
+            ``"serial"``, ``"local"``, a scheduler address, or None: serial when ``workers``
+            is None or 1, else a local cluster of ``workers`` processes.
+        workers : int, optional
+            Threads (serial) or worker processes (local); refused with an address (the
+            cluster has its own).
+        """
+        if text is None:
+            return cls.serial() if workers in (None, 1) else cls.local(workers)
+        name = text.strip().lower()
+        if name == "serial":
+            return cls.serial(1 if workers is None else workers)
+        if name == "local":
+            return cls.local(workers)
+        if workers is not None:
+            raise ValueError(
+                f"--workers {workers} with --scheduler {text}: an existing cluster has its own "
+                "workers; leave --workers out (or use --scheduler local)"
+            )
+        return cls.at(text)
+
+    def describe(self) -> str:
+        """How progress messages name it: ``"serial"``, ``"local cluster of 2 workers"``..."""
+        if self.kind == "serial":
+            return "serial" if self.workers == 1 else f"serial, {self.workers} threads"
+        if self.kind == "local":
+            return f"local Dask cluster of {self.workers} worker(s)"
+        return f"Dask cluster at {self.address}"
+
+
+class _ReadyCluster:
+    """A started client (and the local cluster it owns, if any)."""
+
+    def __init__(self, scheduler: Scheduler) -> None:
+        from distributed import Client
+
+        self.cluster: Any = None
+        if scheduler.kind == "local":
+            self.cluster = _start_local_cluster(scheduler.workers)
+            self.client = Client(self.cluster)
+        else:
+            try:
+                self.client = Client(scheduler.address, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except OSError as exc:
+                raise OSError(
+                    f"scheduler {scheduler.address}: no Dask scheduler answers there ({exc}); "
+                    "start one (`dask scheduler`, then `dask worker ADDRESS`) or use "
+                    "--scheduler local"
+                ) from None
+
+    def close(self, abort: bool = False) -> None:
+        """Close the client and the local cluster; ``abort`` (after Ctrl-C or an error) kills
+        the local worker processes first (SIGKILL: a worker deep in a task answers a polite
+        close only when the task ends; whatever it was writing is atomic and redone)."""
+        if abort and self.cluster is not None:
+            for nanny in list(getattr(self.cluster, "workers", {}).values()):
+                with contextlib.suppress(Exception):
+                    pid = nanny.process.pid
+                    if pid:
+                        os.kill(pid, signal.SIGKILL)
+        with contextlib.suppress(Exception):
+            self.client.close(timeout=CLOSE_TIMEOUT_S)
+        if self.cluster is not None:
+            with contextlib.suppress(Exception):
+                self.cluster.close(timeout=CLOSE_TIMEOUT_S)
+
+
+def dask_setup(worker: object) -> None:
+    """Preload hook of the local cluster's worker processes: they ignore SIGINT.
+
+    Ctrl-C in a terminal reaches every process of the group; this process alone handles it
+    (it cancels the tasks and closes the cluster), so the workers must not die of it first.
+    """
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _start_local_cluster(workers: int) -> Any:
+    """A LocalCluster of ``workers`` processes (which ignore SIGINT: :func:`dask_setup`).
+
+    It is built in a thread while this one waits interruptibly: a Ctrl-C during the start
+    leaves the half-built cluster to its thread, whose processes end with this one
+    (distributed's worker processes exit when their parent does).
+    """
+    import dask
+    from distributed import LocalCluster
+
+    box: dict[str, Any] = {}
+
+    def build() -> None:
+        for attempt in range(_START_ATTEMPTS):
+            try:
+                with dask.config.set(
+                    {"distributed.scheduler.allowed-failures": _ALLOWED_FAILURES}
+                ):
+                    box["cluster"] = LocalCluster(
+                        n_workers=workers, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                        silence_logs=logging.ERROR, preload=[__name__],
+                    )  # fmt: skip
+                return
+            except RuntimeError as exc:  # "Nanny failed to start": a worker died starting
+                if attempt == _START_ATTEMPTS - 1:
+                    box["error"] = OSError(
+                        f"the local Dask cluster of {workers} worker(s) did not start "
+                        f"({_START_ATTEMPTS} attempts; last: {exc}); see the workers' "
+                        "messages above, or run with --scheduler serial"
+                    )
+            except BaseException as exc:  # handed to the waiting thread
+                box["error"] = exc
+                return
+
+    thread = threading.Thread(target=build, name="predisat-local-cluster", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        thread.join(0.1)
+    if "error" in box:
+        raise box["error"]
+    return box["cluster"]
+
+
+def _identity(x: S) -> S:
+    return x
+
+
+class TaskRunner:
+    """Runs a run's tasks where a :class:`Scheduler` says; a context manager (closes the
+    cluster it started).
+
+    Parameters
+    ----------
+    scheduler : Scheduler
+    """
+
+    def __init__(self, scheduler: Scheduler) -> None:
+        self.scheduler = scheduler
+        self._ready: _ReadyCluster | None = None
+        self._aborted = False  # a map ended by an exception (Ctrl-C, a task's error)
+
+    def __enter__(self) -> TaskRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def parallel(self) -> bool:
+        """Whether tasks may run side by side (threads or cluster workers)."""
+        return self.scheduler.kind != "serial" or self.scheduler.workers > 1
+
+    def client(self) -> Any:
+        """The ``distributed.Client`` (started on first use); None when serial."""
+        if self.scheduler.kind == "serial":
+            return None
+        if self._ready is None:
+            self._ready = _ReadyCluster(self.scheduler)
+        return self._ready.client
+
+    def map_unordered(
+        self, fn: Callable[[S, T], R], shared: S, items: Sequence[T], name: str = "task"
+    ) -> Iterator[R]:
+        """``fn(shared, item)`` of every item, results as they finish (any order).
+
+        ``fn`` must be a module-level function and ``shared`` and the items picklable on a
+        cluster; ``shared`` is sent to the cluster once per call, not once per item. On an
+        error or Ctrl-C the tasks not yet finished are cancelled before the exception goes on.
+        """
+        if not items:
+            return
+        if self.scheduler.kind == "serial":
+            yield from self._map_here(fn, shared, items)
+            return
+        client = self.client()
+        tag = f"predisat-{name}-{uuid.uuid4().hex[:8]}"
+        # a task, not scattered data: if the worker holding it dies, it is computed again
+        shared_f = client.submit(_identity, shared, key=f"{tag}-shared")
+        futures = [
+            client.submit(fn, shared_f, it, key=f"{tag}-{k}", pure=False)
+            for k, it in enumerate(items)
+        ]
+        from distributed import as_completed
+
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        except BaseException:
+            self._aborted = True
+            if self.scheduler.kind == "address":  # a local cluster's workers are killed
+                with contextlib.suppress(Exception):
+                    client.cancel([*futures, shared_f], asynchronous=False)
+            raise
+        finally:
+            futures.clear()
+
+    def _map_here(self, fn: Callable[[S, T], R], shared: S, items: Sequence[T]) -> Iterator[R]:
+        if self.scheduler.workers == 1 or len(items) == 1:
+            for it in items:
+                yield fn(shared, it)
+            return
+        pool = ThreadPoolExecutor(self.scheduler.workers)
+        pending: set[Future[R]] = {pool.submit(fn, shared, it) for it in items}
+        try:
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield fut.result()
+        finally:
+            for fut in pending:
+                fut.cancel()
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def close(self) -> None:
+        """Close the client and the local cluster (each within :data:`CLOSE_TIMEOUT_S`)."""
+        if self._ready is not None:
+            ready, self._ready = self._ready, None
+            try:
+                ready.close(abort=self._aborted)
+            except BaseException:  # Ctrl-C while closing politely: kill the workers, then go
+                ready.close(abort=True)
+                raise

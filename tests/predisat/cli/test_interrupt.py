@@ -1,0 +1,111 @@
+"""Ctrl-C and SIGKILL of a real ``predisat process`` (a subprocess), serial and on Dask: the
+run ends within seconds with its resume message, and the resumed run writes the bytes of an
+uninterrupted one. The scale version (100 interrupts, 20 kills each of a worker and of the
+client) is ``scripts/dask_faults.py``."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+LIMIT_S = 10.0  # the script's limit is 5 s; the suite may run beside other tests
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from predisat.camera.models import CameraModel
+    from predisat.synth.generate import generate_survey
+    from predisat.track.map import demo_track
+
+    out = tmp_path_factory.mktemp("synth")
+    generate_survey(
+        demo_track(), 3000.0, 3080.0, sky="clear", seed=2, out_dir=out,
+        camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False,
+    )  # fmt: skip
+    return out / "survey"
+
+
+@pytest.fixture(scope="module")
+def reference(survey: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
+    """The files of an uninterrupted serial run."""
+    return _finish(survey, tmp_path_factory.mktemp("ref") / "out")
+
+
+def _start(survey: Path, out: Path, scheduler: str) -> subprocess.Popen[str]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), SOURCE_DATE_EPOCH="1700000000")
+    cmd = [sys.executable, "-c", "import sys; from predisat.cli import main; sys.exit(main())",
+           "process", str(survey), "--out", str(out), "--chunk-m", "20", "--quiet",
+           "--scheduler", scheduler]  # fmt: skip
+    if scheduler == "local":
+        cmd += ["--workers", "2"]
+    # SIGINT as at a terminal: a suite started in the background inherits it ignored
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+def _published(out: Path) -> dict[str, bytes]:
+    chunks = sorted(p for p in (out / "chunks").iterdir() if not p.name.startswith("."))
+    return {p.name: p.read_bytes() for p in [out / "masks.parquet", *chunks]}
+
+
+def _finish(survey: Path, out: Path) -> dict[str, bytes]:
+    proc = _start(survey, out, "serial")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    return _published(out)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("scheduler", "to_group"), [("serial", False), ("local", True)])
+def test_ctrl_c_at_a_random_time_ends_the_run_within_seconds(
+    survey: Path, reference: dict[str, bytes], tmp_path: Path, scheduler: str, to_group: bool
+) -> None:
+    rng = random.Random(f"{scheduler}{to_group}")
+    proc = _start(survey, tmp_path / "run", scheduler)
+    time.sleep(rng.uniform(2.0, 6.0))  # after the imports: in the cluster's start or the work
+    assert proc.poll() is None, "the run ended before it could be interrupted"
+    t0 = time.perf_counter()
+    if to_group:  # a terminal's Ctrl-C: every process of the group, the workers too
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGINT)
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    waited = time.perf_counter() - t0
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "rerun the same command" in err
+    assert "Traceback" not in err
+    assert waited < LIMIT_S
+    assert _finish(survey, tmp_path / "run") == reference
+
+
+@pytest.mark.slow
+def test_a_killed_client_leaves_no_worker_and_resumes(
+    survey: Path, reference: dict[str, bytes], tmp_path: Path
+) -> None:
+    import psutil
+
+    out = tmp_path / "run"
+    proc = _start(survey, out, "local")
+    deadline = time.monotonic() + 120
+    while not list((out / "chunks").glob("*.json")) and time.monotonic() < deadline:
+        time.sleep(0.05)  # until the first chunk is written
+    kids = psutil.Process(proc.pid).children(recursive=True)
+    assert kids and proc.poll() is None
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=30)
+    _, alive = psutil.wait_procs(kids, timeout=10)
+    assert alive == []  # the worker processes died with their client
+    assert _finish(survey, out) == reference

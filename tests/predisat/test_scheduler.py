@@ -1,0 +1,115 @@
+"""Tests of predisat.scheduler: naming a scheduler, running tasks here and on a cluster."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+
+import pytest
+
+from predisat.scheduler import Scheduler, TaskRunner, machine_workers
+
+
+def scaled(shared: int, item: int) -> tuple[int, int]:
+    return item, shared * item
+
+
+def fails_on_three(shared: int, item: int) -> int:
+    if item == 3:
+        raise ValueError("item 3 is bad")
+    return item
+
+
+@pytest.fixture(scope="module")
+def threads_cluster() -> Iterator[str]:
+    """An in-process cluster (threads): quick to start; its scheduler's address."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        yield cluster.scheduler_address
+
+
+def test_parse_names_the_three_kinds() -> None:
+    assert Scheduler.parse(None) == Scheduler("serial", 1)
+    assert Scheduler.parse(None, 1) == Scheduler("serial", 1)
+    assert Scheduler.parse(None, 3) == Scheduler("local", 3)
+    assert Scheduler.parse("serial", 2) == Scheduler("serial", 2)
+    assert Scheduler.parse("Local") == Scheduler("local", machine_workers())
+    assert Scheduler.parse("local", 4) == Scheduler("local", 4)
+    assert Scheduler.parse("tcp://10.0.0.5:8786") == Scheduler("address", 0, "tcp://10.0.0.5:8786")
+    assert machine_workers() == len(os.sched_getaffinity(0))
+    with pytest.raises(ValueError, match="leave --workers out"):
+        Scheduler.parse("tcp://10.0.0.5:8786", 2)
+    for bad in ("", "  ", "--workers", "tcp://a b"):
+        with pytest.raises(ValueError, match="not an address"):
+            Scheduler.parse(bad)
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        Scheduler.local(0)
+
+
+def test_serial_and_threads_give_every_result() -> None:
+    items = list(range(20))
+    want = {(i, 3 * i) for i in items}
+    with TaskRunner(Scheduler.serial()) as runner:
+        assert list(runner.map_unordered(scaled, 3, items)) == sorted(want)  # in order
+        assert not runner.parallel and runner.client() is None
+    with TaskRunner(Scheduler.serial(3)) as runner:
+        assert set(runner.map_unordered(scaled, 3, items)) == want and runner.parallel
+        with pytest.raises(ValueError, match="item 3 is bad"):
+            list(runner.map_unordered(fails_on_three, 0, items))
+    assert list(TaskRunner(Scheduler.serial()).map_unordered(scaled, 3, [])) == []
+
+
+def test_a_cluster_by_address_runs_the_same_tasks(threads_cluster: str) -> None:
+    items = list(range(30))
+    with TaskRunner(Scheduler.parse(threads_cluster)) as runner:
+        got = list(runner.map_unordered(scaled, 7, items, "test"))
+        assert sorted(got) == [(i, 7 * i) for i in items]
+        with pytest.raises(ValueError, match="item 3 is bad"):
+            list(runner.map_unordered(fails_on_three, 0, items))
+        client = runner.client()
+    assert client.status == "closed"  # the runner closed its client, not the cluster
+
+
+def test_an_address_where_no_scheduler_answers_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
+    import socket
+
+    import predisat.scheduler as sched
+
+    monkeypatch.setattr(sched, "CONNECT_TIMEOUT_S", 1.0)
+
+    with socket.socket() as s:  # a free port: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    runner = TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}"))
+    with pytest.raises(OSError, match=f"127.0.0.1:{port}.*--scheduler local"):
+        runner.client()
+
+
+def test_a_local_cluster_whose_start_fails_is_started_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A worker killed while the cluster starts fails the start ("Nanny failed to start"):
+    tried again, and refused with a message after three failures."""
+    import distributed
+
+    import predisat.scheduler as sched
+
+    starts: list[dict] = []
+
+    class FailingTwice:
+        def __init__(self, **kwargs: object) -> None:
+            starts.append(kwargs)
+            if len(starts) <= fails:
+                raise RuntimeError("Nanny failed to start.")
+
+    monkeypatch.setattr(distributed, "LocalCluster", FailingTwice)
+    fails = 2
+    assert isinstance(sched._start_local_cluster(2), FailingTwice) and len(starts) == 3
+    assert starts[0]["n_workers"] == 2 and starts[0]["preload"] == ["predisat.scheduler"]
+    starts.clear()
+    fails = 3
+    with pytest.raises(OSError, match=r"did not start.*--scheduler serial"):
+        sched._start_local_cluster(2)
+    assert len(starts) == 3
