@@ -170,6 +170,8 @@ class _ReadyCluster:
         """Close the client and the local cluster; ``abort`` (after Ctrl-C or an error) kills
         the local worker processes first (SIGKILL: a worker deep in a task answers a polite
         close only when the task ends; whatever it was writing is atomic and redone)."""
+        if abort:
+            _quiet_shutdown()
         if abort and self.cluster is not None:
             for nanny in list(getattr(self.cluster, "workers", {}).values()):
                 with contextlib.suppress(Exception):
@@ -181,6 +183,18 @@ class _ReadyCluster:
         if self.cluster is not None:
             with contextlib.suppress(Exception):
                 self.cluster.close(timeout=CLOSE_TIMEOUT_S)
+
+
+def _quiet_shutdown() -> None:
+    """Silence distributed's loggers for the rest of an aborted process.
+
+    After Ctrl-C (which a terminal also sends to the cluster's nanny processes) or an error,
+    the comms of dying workers and of the closing scheduler break mid-message; their
+    tracebacks are shutdown noise, not the user's error, and the run's own message says what
+    happened and how to resume.
+    """
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def dask_setup(worker: object) -> None:
@@ -303,6 +317,7 @@ class TaskRunner:
                 yield fut.result()
         except BaseException:
             self._aborted = True
+            _quiet_shutdown()
             if self.scheduler.kind == "address":  # a local cluster's workers are killed
                 with contextlib.suppress(Exception):
                     client.cancel([*futures, shared_f], asynchronous=False)

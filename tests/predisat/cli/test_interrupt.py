@@ -34,9 +34,19 @@ def survey(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def reference(survey: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
+def reference_timed(
+    survey: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[dict[str, bytes], float]:
+    """The files of an uninterrupted serial run, and its wall time (s)."""
+    t0 = time.perf_counter()
+    files = _finish(survey, tmp_path_factory.mktemp("ref") / "out")
+    return files, time.perf_counter() - t0
+
+
+@pytest.fixture(scope="module")
+def reference(reference_timed: tuple[dict[str, bytes], float]) -> dict[str, bytes]:
     """The files of an uninterrupted serial run."""
-    return _finish(survey, tmp_path_factory.mktemp("ref") / "out")
+    return reference_timed[0]
 
 
 def _start(survey: Path, out: Path, scheduler: str) -> subprocess.Popen[str]:
@@ -67,12 +77,22 @@ def _finish(survey: Path, out: Path) -> dict[str, bytes]:
 @pytest.mark.slow
 @pytest.mark.parametrize(("scheduler", "to_group"), [("serial", False), ("local", True)])
 def test_ctrl_c_at_a_random_time_ends_the_run_within_seconds(
-    survey: Path, reference: dict[str, bytes], tmp_path: Path, scheduler: str, to_group: bool
-) -> None:
+    survey: Path, reference_timed: tuple[dict[str, bytes], float], tmp_path: Path,
+    scheduler: str, to_group: bool,
+) -> None:  # fmt: skip
+    reference, serial_s = reference_timed
     rng = random.Random(f"{scheduler}{to_group}")
-    proc = _start(survey, tmp_path / "run", scheduler)
-    time.sleep(rng.uniform(2.0, 6.0))  # after the imports: in the cluster's start or the work
-    assert proc.poll() is None, "the run ended before it could be interrupted"
+    # a random moment within the run (imports, the cluster's start or the work), as a share of
+    # an uninterrupted serial run's time, so that a quiet machine and a loaded one both see
+    # the signal before the end; a run that ends first is started again, earlier
+    for k, share in enumerate((rng.uniform(0.2, 0.8), rng.uniform(0.05, 0.3), 0.02)):
+        out = tmp_path / f"run{k}"  # a fresh folder: a finished one would only resume
+        proc = _start(survey, out, scheduler)
+        time.sleep(share * serial_s)
+        if proc.poll() is None:
+            break
+        proc.communicate()
+    assert proc.poll() is None, "every run ended before it could be interrupted"
     t0 = time.perf_counter()
     if to_group:  # a terminal's Ctrl-C: every process of the group, the workers too
         os.killpg(proc.pid, signal.SIGINT)
@@ -88,7 +108,7 @@ def test_ctrl_c_at_a_random_time_ends_the_run_within_seconds(
     assert "interrupted" in err and "rerun the same command" in err
     assert "Traceback" not in err
     assert waited < LIMIT_S
-    assert _finish(survey, tmp_path / "run") == reference
+    assert _finish(survey, out) == reference
 
 
 @pytest.mark.slow
