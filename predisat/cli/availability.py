@@ -94,6 +94,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="worker processes of the local cluster (default: the machine's cores), threads "
         "with --scheduler serial (default 1)",
     )  # fmt: skip
+    p.add_argument(
+        "--basemap", type=existing_file("a GeoJSON of lines (railways, roads, rivers) in "
+                                        "WGS84 longitude/latitude"), metavar="GEOJSON",
+        help="offline background of the report's map, e.g. an OpenStreetMap extract around the "
+        "line (default: none)",
+    )  # fmt: skip
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -125,6 +131,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         scheduler=args.scheduler,
         counts_table=args.counts,
         progress=not args.quiet,
+        basemap=args.basemap,
     )
 
 

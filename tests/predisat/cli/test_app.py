@@ -373,3 +373,23 @@ def test_output_file_may_be_in_a_new_folder_but_not_under_a_file(tmp_path: Path)
     (tmp_path / "f.txt").write_text("x")
     with pytest.raises(argparse.ArgumentTypeError, match=r"f\.txt is a file"):
         output_file(str(tmp_path / "f.txt" / "sub" / "m.json"))
+
+
+def test_availability_basemap_is_checked_and_passed_on(tmp_path, capsys, monkeypatch) -> None:
+    from predisat.cli import availability as cli_availability
+
+    masks = tmp_path / "m.parquet"
+    masks.write_bytes(b"")  # only its existence is checked before the run
+    with pytest.raises(SystemExit) as stop:  # refused by the parser, naming the file
+        cli.main(["availability", "--masks", str(masks), "--basemap",
+                  str(tmp_path / "none.geojson"), "--out", str(tmp_path / "o")])  # fmt: skip
+    assert stop.value.code == 2 and "none.geojson" in capsys.readouterr().err
+    base = tmp_path / "osm.geojson"
+    base.write_text('{"type": "FeatureCollection", "features": []}')
+    seen = {}
+    monkeypatch.setattr(cli_availability, "run_availability",
+                        lambda *a, **kw: seen.update(kw) or (_ for _ in ()).throw(SystemExit(0)))
+    with pytest.raises(SystemExit):
+        cli.main(["availability", "--masks", str(masks), "--basemap", str(base), "--out",
+                  str(tmp_path / "o"), "--scheduler", "serial"])  # fmt: skip
+    assert Path(seen["basemap"]) == base
