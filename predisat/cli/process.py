@@ -78,6 +78,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="calibrated trust margins written into the mask file (default: 0 deg; "
         "margins.json of `predisat evaluate --calibrate`)",
     )  # fmt: skip
+    parser.add_argument(
+        "--dem", nargs="+", type=existing_file("elevation tiles: SRTM .hgt or GeoTIFF in "
+        "WGS84 longitude/latitude (docs/terrain.md)"), metavar="TILE",
+        help="elevation tiles bounding the far field from below: bins under the terrain "
+        "horizon are raised to it and flagged terrain (default: none, a flat far field)",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_checks(
         parser,
@@ -89,6 +95,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> ProcessResult:
     """Run ``predisat process`` from parsed arguments."""
     track = None if args.track is None else track_option(str(args.track))
+    dem = None
+    if args.dem:
+        from predisat.terrain import Dem
+
+        dem = Dem.from_files(args.dem)
     return process_survey(
         args.survey,
         args.out,
@@ -101,4 +112,5 @@ def run(args: argparse.Namespace) -> ProcessResult:
         progress=not args.quiet,
         margins=args.margins,
         replace=args.replace,
+        dem=dem,
     )

@@ -54,7 +54,8 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
-from predisat.masks.maskset import MaskSet, concat_masksets
+from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
+from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
 from predisat.reconstruct.chunks import (
     ChunkFrame,
@@ -78,9 +79,17 @@ from predisat.reconstruct.params import PipelineParams
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
 from predisat.survey import Survey
+from predisat.terrain import Dem
 from predisat.track.map import TrackMap
 
-__all__ = ["OutputInUseError", "ProcessResult", "RunStopped", "process_survey"]
+__all__ = [
+    "ASSUMED_STRETCH_M",
+    "OutputInUseError",
+    "ProcessResult",
+    "RunStopped",
+    "process_survey",
+    "source_report",
+]
 
 _CHAINAGE_DECIMALS = 3  # positions closer than 1 mm are one position
 
@@ -470,9 +479,11 @@ def _merge(
     ran: set[str],
     bad: dict[str, BadFrame],
     margins: tuple[MarginTable | None, JsonDict],
+    dem: Dem | None = None,
+    antenna_height_m: float = 4.0,
 ) -> tuple[MaskSet, JsonDict]:
-    """The chunks merged into one mask set (margins applied, holes closed) and its provenance;
-    bad frames met by the chunks are added to ``bad``."""
+    """The chunks merged into one mask set (margins applied, holes closed, raised to the
+    terrain) and its provenance; bad frames met by the chunks are added to ``bad``."""
     parts = []
     for name, *_ in plan.chunks:
         parts.append(read_masks(plan.chunk_dir / f"{name}.parquet"))
@@ -506,7 +517,41 @@ def _merge(
         )
         merged = replace(merged, provenance={**merged.provenance, "gaps_closed_m": gaps})
         final_prov["gaps_closed_m"] = gaps
+    if dem is not None:
+        hz = bin_horizon_deg(merged, dem, antenna_above_ground_m=antenna_height_m)
+        merged = raise_to_terrain(merged, hz, dem_source=dem.source)
+        final_prov["terrain"] = merged.provenance["terrain"]
+        if not np.isfinite(hz).any():
+            _report(f"warning: the elevation tiles ({dem.source}) do not cover the line: no bin "
+                    "was bounded by the terrain", quiet=False)  # fmt: skip
     return merged, final_prov
+
+
+#: A stretch of this length whose bins are mostly assumed is reported by :func:`source_report`.
+ASSUMED_STRETCH_M = 200.0
+
+
+def source_report(masks: MaskSet, *, stretch_m: float = ASSUMED_STRETCH_M) -> list[str]:
+    """Lines on where the bins' values come from: the share of observed, reconstructed,
+    terrain and assumed bins, and a warning per stretch of ``stretch_m`` whose bins are more
+    than half assumed (a guess: survey it again, or give elevation tiles)."""
+    names = {int(c): c.name.lower() for c in BinSource}
+    shares = ", ".join(f"{100.0 * float((masks.source == c).mean()):.1f} % {n}"
+                       for c, n in names.items())  # fmt: skip
+    lines = [f"mask bins: {shares}"]
+    assumed = (masks.source == BinSource.ASSUMED).mean(axis=1)
+    edges = np.arange(masks.chainage_m[0], masks.chainage_m[-1] + stretch_m, stretch_m)
+    k = np.clip(np.searchsorted(edges, masks.chainage_m, side="right") - 1, 0, None)
+    for j in np.unique(k):
+        share = float(assumed[k == j].mean())
+        if share > 0.5:
+            end = min(edges[j] + stretch_m, masks.chainage_m[-1])
+            lines.append(
+                f"warning: chainage {edges[j]:.0f}-{end:.0f} m: {100 * share:.0f} % of the bins "
+                "are assumed (no camera saw them); survey it again or give elevation tiles "
+                "(--dem)"
+            )
+    return lines
 
 
 def process_survey(
@@ -523,6 +568,7 @@ def process_survey(
     max_chunks: int | None = None,
     margins: MarginTable | str | os.PathLike[str] | None = None,
     replace: bool = False,
+    dem: Dem | None = None,
 ) -> ProcessResult:
     """Process a survey folder into masks, in resumable chainage chunks.
 
@@ -564,6 +610,11 @@ def process_survey(
         ``survey.yaml``, manifest or calibrations) found in ``out_dir/chunks`` are deleted;
         without it such a folder is refused before any work (:class:`OutputInUseError`). Either
         way, a finished run leaves only its own chunks there.
+    dem : predisat.terrain.Dem, optional
+        Elevation tiles bounding the far field from below: at the merge every bin below the
+        terrain horizon is raised to it and flagged ``TERRAIN``
+        (:func:`predisat.masks.terrain.raise_to_terrain`); like the margins, changing it redoes
+        no chunk.
 
     Returns
     -------
@@ -643,7 +694,10 @@ def process_survey(
         raise RunStopped(f"stopped after {len(pending)} chunk(s) (max_chunks)")
 
     t3 = time.perf_counter()
-    merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table)
+    merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table, dem,
+                                p.reconstruction.antenna_height_m)  # fmt: skip
+    for line in source_report(merged):
+        _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     masks_path = write_masks(merged, out / "masks.parquet")
     _remove_chunks(plan.chunk_dir, _stale_chunks(plan.chunk_dir, {c[0] for c in plan.chunks}))

@@ -743,3 +743,70 @@ def test_png_zeroed_inside_is_refused_by_its_checksums(tmp_path: Path) -> None:
     path.write_bytes(data[:mid] + bytes(3000) + data[mid + 3000 :])
     img, problem = read_image(str(path))
     assert img is None and "cannot be decoded" in str(problem) and str(path) in str(problem)
+
+
+def test_elevation_tiles_raise_the_merged_masks_without_redoing_a_chunk(
+    first_run, survey_dir: Path, tmp_path: Path, capsys
+) -> None:
+    import shutil
+
+    import rasterio
+    from rasterio.transform import from_origin
+
+    from predisat.masks.maskset import BinSource
+    from predisat.terrain import Dem
+    from predisat.track.map import demo_track
+
+    lat0, lon0, _ = demo_track().position_at(3030.0)
+    cell = 1.0 / 1200.0
+    lats = lat0 + 0.03 - np.arange(73) * cell
+    lons = lon0 - 0.03 + np.arange(73) * cell
+    # flat ground, and a 500 m wall from 1 km east of the line (0.0141 deg at 50.5 N), across
+    # the track (along it the small pinhole survey saw nothing: 90 deg)
+    z = np.where(lons[None, :] > lon0 + 0.0141, 500.0, 0.0) + 0.0 * lats[:, None]
+    tif = tmp_path / "wall.tif"
+    with rasterio.open(tif, "w", driver="GTiff", height=73, width=73, count=1, dtype="float32",
+                       crs="EPSG:4326",
+                       transform=from_origin(lons[0] - cell / 2, lats[0] + cell / 2, cell,
+                                             cell)) as ds:  # fmt: skip
+        ds.write(z.astype(np.float32), 1)
+    out = tmp_path / "masks"
+    shutil.copytree(first_run[0], out)
+    res = process_survey(survey_dir, out, PARAMS, progress=True, segmenter=CountingSegmenter(),
+                         dem=Dem.from_files([tif]))  # fmt: skip
+    assert res.chunks_done == 0  # the terrain is applied at the merge
+    before = first_run[1][0].masks
+    east = int(np.argmin(np.abs(before.az_deg - 90.0)))
+    low = before.mask_el_deg[:, east] < 20.0  # bins the cameras read below the wall
+    assert low.any()
+    assert np.all(res.masks.source[low, east] == BinSource.TERRAIN)
+    # the wall about 1 km away, 500 m + 16 m of stated error over an antenna 4 m above flat
+    # ground: about atan(512 / 1000) = 27 deg
+    assert np.all(res.masks.mask_el_deg[low, east] > 25.0)
+    assert np.all(res.masks.mask_el_deg >= before.mask_el_deg)  # never lowered
+    assert res.masks.provenance["terrain"]["raised_bins"] > 0
+    err = capsys.readouterr().err
+    assert "mask bins:" in err and "% terrain" in err
+    # without tiles the same folder merges back to the plain masks
+    plain = process_survey(survey_dir, out, PARAMS, progress=False,
+                           segmenter=CountingSegmenter())  # fmt: skip
+    assert np.array_equal(plain.masks.mask_el_deg, before.mask_el_deg)
+    assert np.array_equal(plain.masks.source, before.source)
+    assert "terrain" not in plain.masks.provenance
+
+
+def test_source_report_warns_where_a_stretch_is_mostly_assumed() -> None:
+    from predisat.masks.maskset import BinSource, MaskSet
+    from predisat.reconstruct.batch import source_report
+
+    n, n_az = 60, 36
+    src = np.zeros((n, n_az), np.uint8)
+    src[25:45] = BinSource.ASSUMED  # 200-440 m: the stretch 200-400 m is all assumed
+    m = MaskSet(chainage_m=np.arange(n) * 10.0, lat_deg=np.full(n, 50.0),
+                lon_deg=np.full(n, 4.0), h_m=np.zeros(n), heading_deg=np.zeros(n),
+                az_step_deg=10.0, mask_el_deg=np.full((n, n_az), 10.0), source=src,
+                margin_deg=np.zeros((n, n_az)))  # fmt: skip
+    lines = source_report(m)
+    assert lines[0].startswith("mask bins:") and "33.3 % assumed" in lines[0]
+    warned = [ln for ln in lines if ln.startswith("warning")]
+    assert len(warned) == 1 and "chainage 200-400 m" in warned[0]
