@@ -464,6 +464,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Constellations", info.get("constellation", "")),
         ("Rules compared", ", ".join(info.get("rules", []))),
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
+        ("Survey rig", info.get("rig", "")),
         ("Interval model", info.get("interval_model", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),
     ]

@@ -66,6 +66,7 @@ __all__ = [
     "load_navigation",
     "nav_span_gps_s",
     "parse_time",
+    "rig_text",
     "run_availability",
     "sparse_navigation",
     "synthetic_notes",
@@ -708,6 +709,7 @@ def _run_info(
         + f" ({len(sats.sats)} satellites)",
         "rules": [r.label for r in rules],
         "masks": masks_label,
+        "rig": rig_text(masks.provenance),
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
@@ -734,6 +736,16 @@ def _track_text(track: TrackMap | None) -> str:
     if track is None:
         return "none given: the masks' own positions"
     return f"{track.name} ({track.length_m / 1000:.2f} km)"
+
+
+def rig_text(provenance: JsonDict) -> str:
+    """The survey rig that made the masks, from their provenance (``rig``, written by
+    ``predisat process``): ``"left: fisheye 640x480 px, yaw 90 deg, pitch 45 deg; right: ..."``;
+    "" when the masks do not say (true masks, older files)."""
+    rig = provenance.get("rig")
+    if not isinstance(rig, dict) or not rig:
+        return ""
+    return "; ".join(f"{side}: {what}" for side, what in rig.items())
 
 
 def synthetic_notes(provenance: JsonDict) -> list[str]:

@@ -303,6 +303,12 @@ def _plan(
         "reverse": bool(survey.reverse),
         "antenna_height_m": float(survey.antenna_height_m),
     }
+    # the rig that made the frames (the report names it): camera model, size, mount per side
+    prov["rig"] = {
+        side: f"{c.camera.model} {c.camera.width_px}x{c.camera.height_px} px, yaw "
+        f"{c.mount.yaw_deg:g} deg, pitch {c.mount.pitch_deg:g} deg"
+        for side, c in sorted(survey.cameras.items())
+    }
     # what made the frames (a synthetic survey says so): the report warns on synthetic masks
     for key in ("generator", "description"):
         if survey.metadata.get(key):

@@ -810,3 +810,14 @@ def test_source_report_warns_where_a_stretch_is_mostly_assumed() -> None:
     assert lines[0].startswith("mask bins:") and "33.3 % assumed" in lines[0]
     warned = [ln for ln in lines if ln.startswith("warning")]
     assert len(warned) == 1 and "chainage 200-400 m" in warned[0]
+
+
+def test_masks_name_the_rig_that_made_them(first_run) -> None:
+    from predisat.availability.run import rig_text
+
+    prov = first_run[1][0].masks.provenance
+    assert set(prov["rig"]) == {"left", "right"}
+    text = rig_text(prov)
+    # the survey's cameras: the test's 160 x 120 pinhole on both sides, pitched 45 deg
+    assert text.count("pinhole 160x120 px") == 2 and "pitch 45 deg" in text
+    assert rig_text({}) == ""
