@@ -44,6 +44,7 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -379,20 +380,37 @@ def _at_line(plan: _Plan, i: int, message: str) -> str:
     return message if message.startswith(line) else line + message
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    """Whether the two image files hold the same bytes (sizes first: no read when they differ).
-    """
+#: A frame is the previous one re-encoded when their quarter-size grey pictures differ by less
+#: than this on average (levels of 255) and by at most ``FROZEN_P99_LEVELS`` at the 99th
+#: percentile: a JPEG re-encoding at quality 50-95 differs by 0.05-0.7 / 1-2 levels, two
+#: consecutive frames of the demo's survey (10 m apart, a tunnel included) by at least
+#: 1.9 / 11 (2026-12-04, 200 pairs).
+FROZEN_MEAN_LEVELS = 1.0
+FROZEN_P99_LEVELS = 4.0
+
+
+def _same_picture(a: Path, b: Path) -> str | None:
+    """How the two image files show the same picture (``"the same file"``, or ``"the same
+    picture re-encoded"``), or None. Files that cannot be read are None (reported when read)."""
     try:
-        if a.stat().st_size != b.stat().st_size:
-            return False
-        return a.read_bytes() == b.read_bytes()
+        if a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes():
+            return "the same file"
     except OSError:
-        return False  # a missing file is reported when it is read
+        return None
+    pa = cv2.imread(str(a), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    pb = cv2.imread(str(b), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    if pa is None or pb is None or pa.shape != pb.shape:
+        return None
+    d = np.abs(pa.astype(np.int16) - pb.astype(np.int16))
+    if float(d.mean()) < FROZEN_MEAN_LEVELS and float(np.percentile(d, 99)) <= FROZEN_P99_LEVELS:
+        return "the same picture re-encoded"
+    return None
 
 
 def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
-    """Frames among ``need`` whose image file is byte for byte the one of the frame before on
-    the same side (a camera stuck on one picture), with the problem and its fix."""
+    """Frames among ``need`` that show the picture of the frame before on the same side (a
+    camera stuck on one picture: the same file, or the same picture re-encoded), with the
+    problem and its fix."""
     fr, root = plan.survey.frames, plan.survey.root
     prev_of: dict[int, int] = {}
     last: dict[str, int] = {}
@@ -404,9 +422,12 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     frozen = {}
     for i in need:
         j = prev_of.get(int(i))
-        if j is not None and _same_file(root / str(fr.image[i]), root / str(fr.image[j])):
+        if j is None:
+            continue
+        same = _same_picture(root / str(fr.image[i]), root / str(fr.image[j]))
+        if same is not None:
             frozen[int(i)] = (
-                f"image {root / str(fr.image[i])} is frozen: the same file as the {fr.side[i]} "
+                f"image {root / str(fr.image[i])} is frozen: {same} as the {fr.side[i]} "
                 f"camera's frame before ({str(fr.frame_id[j])!r}, manifest line {fr.row[j]}), so "
                 "the camera stopped updating its picture; check the camera and drop the frame"
             )

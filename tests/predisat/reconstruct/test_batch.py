@@ -679,7 +679,9 @@ def test_corrupt_and_implausible_frames_are_caught(
         3: ("all black", black),
         4: ("all white", white),
         # frozen: right_000003 holds right_000002's picture
-        7: ("frozen", (src / rows[5]["image"]).read_bytes()),
+        7: ("frozen: the same file", (src / rows[5]["image"]).read_bytes()),
+        # frozen again: right_000005 is right_000004's picture re-encoded (other bytes)
+        11: ("frozen: the same picture re-encoded", _reencode(src / rows[9]["image"], 80)),
         10: ("goes back in time", None),
         12: ("contradicts the run", None),
     }
@@ -719,6 +721,14 @@ def test_corrupt_and_implausible_frames_are_caught(
     with pytest.raises(BadFrameError, match="bad frame"):
         process_survey(src, tmp_path / "strict", PARAMS, progress=False, segmenter=blue_sky,
                        strict=True)  # fmt: skip
+
+
+def _reencode(path: Path, quality: int) -> bytes:
+    import cv2
+
+    ok, enc = cv2.imencode(".jpg", cv2.imread(str(path)), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    assert ok and enc.tobytes() != path.read_bytes()
+    return enc.tobytes()
 
 
 def cv2_encode(pixels: np.ndarray) -> bytes:
