@@ -40,6 +40,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.sky.photoeval import UNSAFE_COLUMN_FRACTION, sky_safety_counts
+
 __all__ = [
     "FAULT_CLASSES",
     "LABEL_BUILDING",
@@ -65,7 +67,6 @@ LABEL_BUILDING = 1  # facades, roofs, walls of buildings
 LABEL_GROUND = 2  # ground, ballast, platforms
 LABEL_OTHER = 3  # everything else that blocks: trees, rock, masts, bridges
 
-_UNSAFE_COLUMN_SHARE = 0.01  # false sky over at least 1 % of the image height
 
 
 @dataclass(frozen=True)
@@ -313,17 +314,17 @@ def false_sky_stats(pred: NDArray, truth: NDArray, valid: NDArray | None = None)
         a valid pixel).
     """
     p = np.asarray(pred, bool)
-    t = np.asarray(truth, bool)
     v = np.ones_like(p) if valid is None else np.asarray(valid, bool)
-    false = p & ~t & v
+    # the rates shared with `predisat evaluate-sky` (one definition: photoeval's)
+    c = sky_safety_counts(p, truth, v)
+    false = p & ~np.asarray(truth, bool) & v
     # false sky joined to the top sky run of the prediction: what moves the skyline down
     top = np.logical_and.accumulate(p | ~v, axis=0) & v
     joined = (false & top).sum(axis=0)
-    h = p.shape[0]
     return {
-        "false_sky_px": int(false.sum()),
-        "non_sky_px": int((~t & v).sum()),
-        "unsafe_columns": int((false.sum(axis=0) >= _UNSAFE_COLUMN_SHARE * h).sum()),
-        "unsafe_joined_columns": int((joined >= _UNSAFE_COLUMN_SHARE * h).sum()),
-        "columns": int(v.any(axis=0).sum()),
+        "false_sky_px": c["false_sky_px"],
+        "non_sky_px": c["non_sky_px"],
+        "unsafe_columns": c["unsafe_columns"],
+        "unsafe_joined_columns": int((joined >= UNSAFE_COLUMN_FRACTION * p.shape[0]).sum()),
+        "columns": c["n_columns"],
     }
