@@ -504,6 +504,9 @@ class SkyView:
     assumed : ndarray of bool, shape (n_az,), or None
         Bins whose mask is assumed (``BinSource.ASSUMED``: neither seen nor reconstructed),
         drawn hatched.
+    terrain : ndarray of bool, shape (n_az,), or None
+        Bins raised to a digital elevation model's horizon (``BinSource.TERRAIN``), drawn
+        hatched the other way.
     """
 
     title: str
@@ -517,6 +520,7 @@ class SkyView:
     sats: tuple[str, ...]
     cutoff_deg: tuple[float, ...] = ()
     assumed: NDArray | None = None
+    terrain: NDArray | None = None
 
     def __post_init__(self) -> None:
         shapes = [np.shape(self.sat_az_deg), np.shape(self.sat_el_deg), np.shape(self.trusted)]
@@ -585,6 +589,11 @@ def _draw_mask(ax: Any, v: SkyView) -> None:
         ax.fill_between(th, np.where(flag > 0, 90.0 - eff, 90.0), 90.0, facecolor="none",
                         edgecolor="#222222", hatch="////", linewidth=0, zorder=1.2,
                         gid="assumed")  # fmt: skip
+    if v.terrain is not None and np.any(v.terrain):
+        _, flag = _staircase(v.az_step_deg, np.asarray(v.terrain, float))
+        ax.fill_between(th, np.where(flag > 0, 90.0 - eff, 90.0), 90.0, facecolor="none",
+                        edgecolor="#1b5e20", hatch="\\\\", linewidth=0, zorder=1.2,
+                        gid="terrain")  # fmt: skip
 
 
 def _draw_sky(ax: Any, v: SkyView, label_sats: bool) -> None:
@@ -658,7 +667,8 @@ def _sat_labels(
 def sky_plots(views: Sequence[SkyView], label_sats: bool = True, title: str = "") -> Figure:
     """Polar sky plots side by side: north up, azimuth clockwise, zenith at the centre.
 
-    Filled: the mask (dark), the margin (light, when there is one) and assumed bins (hatched);
+    Filled: the mask (dark), the margin (light, when there is one), assumed bins (hatched) and
+    bins raised to the terrain (hatched the other way);
     dotted circles: flat cut-offs; line with arrow: the track, increasing chainage; blue:
     satellite track while trusted under the masks, grey: above the horizon but not trusted;
     each satellite named on its own track, spread apart (``label_sats``). Elevation rings 15,
@@ -679,6 +689,9 @@ def sky_plots(views: Sequence[SkyView], label_sats: bool = True, title: str = ""
     if any(v.assumed is not None and np.any(v.assumed) for v in views):
         handles.append(Patch(facecolor="white", edgecolor="#222222", hatch="////",
                              label="assumed (not seen)"))  # fmt: skip
+    if any(v.terrain is not None and np.any(v.terrain) for v in views):
+        handles.append(Patch(facecolor="white", edgecolor="#1b5e20", hatch="\\\\",
+                             label="terrain (elevation model)"))  # fmt: skip
     handles += [
         Patch(color="#1f5fa8", label="satellite, trusted"),
         Patch(color="#b0b0b0", label="satellite, masked"),

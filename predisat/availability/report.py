@@ -580,6 +580,7 @@ def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
                 tuple(sats.sats),
                 cutoffs,
                 assumed=np.asarray(masks.source[i]) == BinSource.ASSUMED,
+                terrain=np.asarray(masks.source[i]) == BinSource.TERRAIN,
             )
         )
     return views

@@ -4,6 +4,7 @@ readable sky plots and the provenance folded away (issue 33)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from datetime import datetime, timedelta
@@ -348,3 +349,20 @@ def test_broken_link_check_finds_missing_and_remote_files(tmp_path: Path) -> Non
     assert broken_local_links(links, page) == [
         "gone.csv", "https://x.org/a.png (remote: the report must load nothing)",
     ]  # fmt: skip
+
+
+def test_sky_plot_hatches_terrain_bins_apart(masks, satellites) -> None:
+    base = _view(masks, satellites, 0.0)
+    terrain = np.zeros(72, bool)
+    terrain[36:40] = True  # azimuth 177.5-197.5 deg raised to an elevation model's horizon
+    fig = plots.sky_plots([dataclasses.replace(base, terrain=terrain)])
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "terrain (elevation model)" in labels and "assumed (not seen)" in labels
+    hatched = [c for c in fig.axes[0].collections if c.get_gid() == "terrain"]
+    assert len(hatched) == 1 and hatched[0].get_hatch() != "////"
+    verts = hatched[0].get_paths()[0].vertices
+    inside = verts[verts[:, 1] < 90.0 - 1e-9]
+    assert np.degrees(inside[:, 0]).min() == pytest.approx(177.5)
+    assert np.degrees(inside[:, 0]).max() == pytest.approx(197.5)
+    plain = plots.sky_plots([base])
+    assert "terrain (elevation model)" not in [t.get_text() for t in plain.legends[0].get_texts()]
