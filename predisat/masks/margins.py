@@ -22,16 +22,25 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 
-__all__ = ["EL_STEP_DEG", "SECTORS", "MarginTable", "sector_of"]
+__all__ = [
+    "EL_STEP_DEG",
+    "MARGIN_GROUP_OF",
+    "MARGIN_SOURCES",
+    "SECTORS",
+    "MarginTable",
+    "sector_of",
+]
 
 EL_STEP_DEG = 0.1
 """Elevation grid step of the direction counts (cell centres ``(k + 0.5) * step``)."""
 SECTORS = ("cross", "along")
 _SOURCE_NAMES = {int(s): s.name.lower() for s in BinSource}
-# A terrain bin was raised to a DEM horizon after the margins were fitted: it takes the margin
-# of the far field it replaced (ASSUMED); a table needs no row of its own for it.
-_MARGIN_SOURCE = {int(BinSource.TERRAIN): int(BinSource.ASSUMED)}
-_TABLE_SOURCES = tuple(n for c, n in _SOURCE_NAMES.items() if c not in _MARGIN_SOURCE)
+MARGIN_GROUP_OF = {c: (int(BinSource.ASSUMED) if c == BinSource.TERRAIN else c)
+                   for c in _SOURCE_NAMES}  # fmt: skip
+"""The source code whose margin each source takes: a terrain bin was raised to a DEM horizon
+after the margins were fitted and takes the margin of the far field it replaced (ASSUMED)."""
+MARGIN_SOURCES = tuple(n for c, n in _SOURCE_NAMES.items() if MARGIN_GROUP_OF[c] == c)
+"""The source names a margin table has rows for (terrain needs none of its own)."""
 
 
 def sector_of(az_deg: ArrayLike, heading_deg: ArrayLike) -> NDArray:
@@ -78,8 +87,9 @@ class MarginTable:
         }
         out = np.full(np.shape(sector), np.nan, float)
         source = np.asarray(source).copy()
-        for terrain, like in _MARGIN_SOURCE.items():
-            source[source == terrain] = like
+        for own, like in MARGIN_GROUP_OF.items():
+            if own != like:
+                source[source == own] = like
         for (sec, src), m in lut.items():
             code = next((c for c, n in _SOURCE_NAMES.items() if n == src), None)
             if code is None:
@@ -108,7 +118,7 @@ class MarginTable:
         if bad.any():
             raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
                              f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
-        sources = _TABLE_SOURCES
+        sources = MARGIN_SOURCES
         pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
         want = {(s, c) for s in SECTORS for c in sources}
         if not want <= pairs:

@@ -389,16 +389,26 @@ FROZEN_MEAN_LEVELS = 1.0
 FROZEN_P99_LEVELS = 4.0
 
 
-def _same_picture(a: Path, b: Path) -> str | None:
+def _thumbnail(path: Path) -> NDArray | None:
+    """The quarter-size grey picture of an image file (None when it cannot be decoded: the
+    segmentation reports it)."""
+    return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+
+
+def _same_picture(a: Path, b: Path, thumbs: dict[Path, NDArray | None]) -> str | None:
     """How the two image files show the same picture (``"the same file"``, or ``"the same
-    picture re-encoded"``), or None. Files that cannot be read are None (reported when read)."""
+    picture re-encoded"``), or None. Files that cannot be read are None (reported when read).
+    ``thumbs`` keeps the decoded pictures: each frame is compared as itself and as the next
+    frame's predecessor, decoded once."""
     try:
         if a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes():
             return "the same file"
     except OSError:
         return None
-    pa = cv2.imread(str(a), cv2.IMREAD_REDUCED_GRAYSCALE_4)
-    pb = cv2.imread(str(b), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    for path in (a, b):
+        if path not in thumbs:
+            thumbs[path] = _thumbnail(path)
+    pa, pb = thumbs[a], thumbs[b]
     if pa is None or pb is None or pa.shape != pb.shape:
         return None
     d = np.abs(pa.astype(np.int16) - pb.astype(np.int16))
@@ -420,11 +430,13 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
             prev_of[i] = last[side]
         last[side] = i
     frozen = {}
+    thumbs: dict[Path, NDArray | None] = {}
     for i in need:
         j = prev_of.get(int(i))
         if j is None:
             continue
-        same = _same_picture(root / str(fr.image[i]), root / str(fr.image[j]))
+        same = _same_picture(root / str(fr.image[i]), root / str(fr.image[j]), thumbs)
+        thumbs.pop(root / str(fr.image[j]), None)  # frame j is not compared again
         if same is not None:
             frozen[int(i)] = (
                 f"image {root / str(fr.image[i])} is frozen: {same} as the {fr.side[i]} "

@@ -32,7 +32,14 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.jsontypes import JsonDict
-from predisat.masks.margins import EL_STEP_DEG, SECTORS, MarginTable, sector_of
+from predisat.masks.margins import (
+    EL_STEP_DEG,
+    MARGIN_GROUP_OF,
+    MARGIN_SOURCES,
+    SECTORS,
+    MarginTable,
+    sector_of,
+)
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.truth import TrueMasks
 
@@ -52,9 +59,6 @@ __all__ = [
 UNSAFE_TOL_DEG = 0.1
 """A bin is unsafe when its mask is more than this below the truth."""
 _SOURCE_NAMES = {int(s): s.name.lower() for s in BinSource}
-# margin groups: a terrain bin takes the margin of the far field it replaced (masks.margins)
-_MARGIN_NAMES = {c: ("assumed" if c == BinSource.TERRAIN else n) for c, n in _SOURCE_NAMES.items()}
-_MARGIN_GROUPS = tuple(n for c, n in _SOURCE_NAMES.items() if c != BinSource.TERRAIN)
 
 
 def count_above(threshold_deg: ArrayLike, el_step_deg: float = EL_STEP_DEG) -> NDArray:
@@ -244,7 +248,7 @@ def calibrate_margin(
     m = comparison.mask_el_deg.ravel()
     t = comparison.truth_el_deg.ravel()
     sec = comparison.sector.ravel() if "sector" in by else np.full(m.size, "*")
-    src_names = np.array([_MARGIN_NAMES[c] for c in range(len(BinSource))])[
+    src_names = np.array([_SOURCE_NAMES[MARGIN_GROUP_OF[c]] for c in range(len(BinSource))])[
         comparison.source.ravel()
     ]
     src = src_names if "source" in by else np.full(m.size, "*")
@@ -259,7 +263,7 @@ def calibrate_margin(
     sels: list[NDArray] = []
     los_all = count_above(t, el_step_deg)
     for s_name in ("cross", "along") if "sector" in by else ("*",):
-        for c_name in _MARGIN_GROUPS if "source" in by else ("*",):
+        for c_name in MARGIN_SOURCES if "source" in by else ("*",):
             sel = (sec == s_name) & (src == c_name)
             margin, reached, share = 90.0, False, float("nan")
             if sel.any():
@@ -395,7 +399,7 @@ def _expand(table: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     rows = []
     for r in table.to_dict(orient="records"):
         secs = SECTORS if r["sector"] == "*" else (r["sector"],)
-        srcs = _MARGIN_GROUPS if r["source"] == "*" else (r["source"],)
+        srcs = MARGIN_SOURCES if r["source"] == "*" else (r["source"],)
         for s in secs:
             for c in srcs:
                 rows.append({**r, "sector": s, "source": c})

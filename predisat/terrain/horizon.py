@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.geodesy import WGS84
 from predisat.terrain.dem import Dem
 
 __all__ = ["EARTH_RADIUS_M", "REFRACTION_K", "antenna_height_m", "ray_ranges_m",
@@ -30,7 +31,7 @@ __all__ = ["EARTH_RADIUS_M", "REFRACTION_K", "antenna_height_m", "ray_ranges_m",
 EARTH_RADIUS_M = 6_371_000.0
 #: Standard refraction coefficient (ratio of the Earth's radius to the light path's).
 REFRACTION_K = 0.13
-_A, _E2 = 6_378_137.0, 6.694379990141e-3  # WGS84
+_A, _E2 = WGS84.a, WGS84.es  # the ellipsoid of predisat.geodesy
 
 
 def ray_ranges_m(min_range_m: float, max_range_m: float, cell_m: float) -> NDArray[np.float64]:

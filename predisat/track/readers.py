@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pyproj import Geod
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.jsontypes import JsonDict
@@ -188,13 +187,10 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
 #: track as one straight chord, while one mistyped digit of a coordinate moves a vertex by
 #: hundreds of km (and the smooth fit of such a "track" takes minutes and gigabytes).
 MAX_VERTEX_SPACING_M = 50_000.0
-_GEOD = Geod(ellps="WGS84")
-
-
 def _far_vertex(lat_deg: NDArray, lon_deg: NDArray) -> tuple[int, float] | None:
     """The first pair ``(k, distance_m)`` of consecutive vertices k, k + 1 further apart than
     :data:`MAX_VERTEX_SPACING_M` on the WGS84 ellipsoid, or None."""
-    d = np.asarray(_GEOD.inv(lon_deg[:-1], lat_deg[:-1], lon_deg[1:], lat_deg[1:])[2], float)
+    d = np.asarray(WGS84.inv(lon_deg[:-1], lat_deg[:-1], lon_deg[1:], lat_deg[1:])[2], float)
     far = np.flatnonzero(d > MAX_VERTEX_SPACING_M)
     return (int(far[0]), float(d[far[0]])) if far.size else None
 
