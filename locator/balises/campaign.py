@@ -125,7 +125,8 @@ def capture_table(
     """Capture and score every balise under each configuration.
 
     A fix captures only once a satellite claim has confirmed the run's position (``located``
-    of :func:`capture_balises`), and the passage is timed back along the odometer.
+    of :func:`capture_balises`), and the passage is timed back along the odometer (also at the
+    first valid fix after a voided epoch, with the run's odometer bounds).
 
     Returns one row per (configuration, balise): :func:`score_captures` columns plus
     ``config`` and ``capture_radius_m``. A capture is false when the true position at the
@@ -141,7 +142,7 @@ def capture_table(
             t, ep["fused_chainage_m"].to_numpy(float), ep["fused_lo_m"].to_numpy(float),
             ep["fused_hi_m"].to_numpy(float), balises, cc, orientation=o,
             speed_mps=ep["odo_speed_mps"].to_numpy(float), odo_m=run.odometer.epoch_odo_m,
-            located=located,
+            located=located, odo_accuracy=run.accuracy,
         )  # fmt: skip
         sc = score_captures(cap, run.odometer.truth_t_s, run.odometer.truth_chainage_m,
                             orientation=o, false_tolerance_m=cc.capture_radius_m,

@@ -25,6 +25,13 @@ direction of travel ``o`` over the valid fixes:
    balise (a satellite correction between the two fixes moves the estimate by a jump that is
    not motion: interpolating across it would time the passage by the jump); without it,
    linear interpolation of the estimate between the two fixes;
+   **after a voided epoch** (before the first satellite claim, or an interval too long to
+   state), with the odometer: the first valid fix whose estimate, carried back along the
+   odometer to the epoch before it, was short of the balise (``0 <= u_k < o (odo_k -
+   odo_{k-1})``: the train passed the balise during that last step) is a passage too, timed
+   the same way; its stated accuracy adds the odometer's doubt over the carried-back
+   distance (``odo_accuracy``). Without it the balise passed in the step that ended a tunnel
+   or the run's first claim would be missed although the crossing fix locates it;
 4. **emission**: ``emit="at_fix"`` sends the telegram at the crossing fix (causal: the train
    knows it passed only then; Barbu, GADEROS final report), plus ``latency_s``;
    ``emit="predicted"`` schedules it from the last fix before the balise when that fix is in a
@@ -52,6 +59,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from locator.balises.balisefile import BaliseList
+from locator.odometry.confidence import OdometerAccuracy
 
 __all__ = ["EMIT_MODES", "Q_LOCACC_MAX_M", "CaptureConfig", "capture_balises", "score_captures"]
 
@@ -156,6 +164,7 @@ def capture_balises(
     speed_mps: ArrayLike | None = None,
     odo_m: ArrayLike | None = None,
     located: ArrayLike | None = None,
+    odo_accuracy: OdometerAccuracy | None = None,
 ) -> pd.DataFrame:
     """Capture the balises of a list along a run.
 
@@ -178,6 +187,10 @@ def capture_balises(
         Fixes whose interval the satellites have confirmed (a claim at or before the fix);
         others cannot capture: an estimate carried from an unverified start position is no
         satellite location. Default: every fix.
+    odo_accuracy : OdometerAccuracy, optional
+        The odometer's bounds; with ``odo_m``, enables the passage at the first valid fix
+        after a voided epoch (module docstring, step 3), whose stated accuracy adds
+        ``max(D_DOUBTOVER, D_DOUBTUNDER)`` of the carried-back distance.
 
     Returns
     -------
@@ -189,7 +202,8 @@ def capture_balises(
         passage fell inside the balise's expectation window on the fused interval),
         ``q_locacc_m`` (the telegram's location accuracy: the furthest either fix's fused
         interval reaches from its estimate, plus the balise's survey accuracy, rounded up to
-        the metre as Q_LOCACC).
+        the metre as Q_LOCACC), ``after_void`` (captured at the first valid fix after a voided
+        epoch).
     """
     if orientation not in (1, -1):
         raise ValueError(f"orientation must be +1 or -1, got {orientation}")
@@ -220,6 +234,7 @@ def capture_balises(
         "t_emit_s": np.full(n_b, np.nan), "lo_m": np.full(n_b, np.nan),
         "hi_m": np.full(n_b, np.nan), "gap_s": np.full(n_b, np.nan),
         "in_window": np.zeros(n_b, bool), "q_locacc_m": np.full(n_b, np.nan),
+        "after_void": np.zeros(n_b, bool),
     }  # fmt: skip
     if len(idx) >= 2 and n_b:
         u = orientation * (s[idx][None, :] - b[:, None])  # (n_b, n_valid)
@@ -271,8 +286,71 @@ def capture_balises(
         out["gap_s"][r] = (t[kc] - t[kp])[got]
         out["q_locacc_m"][r] = q[got]
         out["in_window"][rows] = window
+    if odo is not None and odo_accuracy is not None and len(idx) and n_b:
+        _capture_after_void(t, s, lo, hi, reach, valid, odo, odo_accuracy, b, b_acc, config,
+                            orientation, out)  # fmt: skip
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
+
+
+def _capture_after_void(
+    t: NDArray,
+    s: NDArray,
+    lo: NDArray,
+    hi: NDArray,
+    reach: NDArray,
+    valid: NDArray,
+    odo: NDArray,
+    accuracy: OdometerAccuracy,
+    b: NDArray,
+    b_acc: NDArray,
+    config: CaptureConfig,
+    orientation: int,
+    out: dict[str, NDArray],
+) -> None:
+    """The passage at the first valid fix after a voided epoch (``out`` updated in place for
+    the balises the pair rule did not capture; module docstring, step 3)."""
+    k = np.flatnonzero(valid[1:] & ~valid[:-1]) + 1  # valid fixes after a voided epoch
+    k = k[t[k] - t[k - 1] <= config.max_gap_s + 1e-9]
+    todo = np.flatnonzero(~out["captured"])
+    if not len(k) or not len(todo):
+        return
+    step = orientation * (odo[k] - odo[k - 1])  # (m,) forward distance of the last step
+    u = orientation * (s[k][None, :] - b[todo, None])  # (n_todo, m)
+    back = u - step[None, :]  # the estimate carried back to the epoch before
+    cross = (u >= 0.0) & (back < 0.0) & (step[None, :] > 0.0)
+    has = cross.any(axis=1)
+    j = np.argmax(cross, axis=1)[has]
+    rows = todo[has]
+    kc = k[j]
+    uc, ub = u[has, j], back[has, j]
+    in_c = config.in_capture(uc) | config.in_capture(ub)
+    in_a = ~in_c & (config.in_arm(uc) | config.in_arm(ub))
+    doubt = np.maximum(accuracy.doubt_over_m(uc), accuracy.doubt_under_m(uc))
+    q = np.ceil(reach[kc] + doubt + b_acc[rows] - 1e-9)
+    max_safe = np.where(orientation > 0, hi[kc], lo[kc])
+    min_safe = np.where(orientation > 0, lo[kc], hi[kc])
+    window = (orientation * (max_safe - b[rows]) >= -b_acc[rows]) & (
+        orientation * (min_safe - b[rows]) <= b_acc[rows]
+    )
+    got = (in_c | in_a) & (q <= config.max_locacc_m)
+    if config.require_window:
+        got &= window
+    o_pass = orientation * (odo[kc] - (s[kc] - b[rows]))
+    t_pass = np.minimum(np.interp(o_pass, orientation * odo, t), t[kc])
+    r = rows[got]
+    out["captured"][r] = True
+    out["after_void"][r] = True
+    out["zone"][r] = np.where(in_c[got], "capture", "arm")
+    out["epoch"][r] = kc[got]
+    out["t_pass_s"][r] = t_pass[got]
+    # emitted at the crossing fix (the train knows it passed only then)
+    out["t_emit_s"][r] = t[kc][got] + config.latency_s
+    out["lo_m"][r] = lo[kc][got]
+    out["hi_m"][r] = hi[kc][got]
+    out["gap_s"][r] = (t[kc] - t[kc - 1])[got]
+    out["q_locacc_m"][r] = q[got]
+    out["in_window"][rows] = window
 
 
 def score_captures(

@@ -11,6 +11,7 @@ import pytest
 
 from locator.balises.balisefile import BaliseList
 from locator.balises.capture import CaptureConfig, capture_balises, score_captures
+from locator.odometry.confidence import OdometerAccuracy
 
 
 def balises(chainages):
@@ -239,3 +240,77 @@ def test_fixes_not_yet_located_by_the_satellites_do_not_capture():
     with pytest.raises(ValueError, match="located"):
         capture_balises(t, est, lo, hi, bl, CaptureConfig(25.0), orientation=1,
                         located=located[:3])  # fmt: skip
+
+
+def test_first_located_fix_captures_the_balise_passed_in_its_last_step():
+    # 20 m/s at 1 Hz; the estimate runs 30 m ahead (an unverified start position) until the
+    # first satellite claim at 4 s (truth 80 m) corrects it. A balise at 75 m was passed at
+    # 3.75 s, during the step that ended at the first located fix: no pair of located fixes
+    # brackets it, but the located fix carried back 20 m along the odometer (to 60 m) does.
+    t, truth, est, _lo, _hi = fixes(1.0, 20.0, 10.0)
+    est = np.where(t < 4.0, truth + 30.0, truth)
+    located = t >= 4.0
+    odo = truth - truth[0]  # an exact odometer
+    acc = OdometerAccuracy(1.0, 0.035, 0.032)
+    bl = balises([55.0, 75.0, 150.0])
+    kw = dict(orientation=1, odo_m=odo, located=located)
+    plain = capture_balises(t, est, est - 10.0, est + 10.0, bl, CaptureConfig(25.0), **kw)
+    assert plain["captured"].tolist() == [False, False, True]
+    cap = capture_balises(t, est, est - 10.0, est + 10.0, bl, CaptureConfig(25.0), **kw,
+                          odo_accuracy=acc)  # fmt: skip
+    # 55 m was passed two steps before the first located fix (25 m back > one 20 m step)
+    assert cap["captured"].tolist() == [False, True, True]
+    assert cap["after_void"].tolist() == [False, True, False]
+    assert cap["t_pass_s"].iloc[1] == pytest.approx(3.75)
+    assert cap["t_emit_s"].iloc[1] == pytest.approx(4.0)  # emitted at the located fix
+    # stated accuracy: reach 10 m + the odometer's doubt over the 5 m carried back
+    # (1 + 3.5 % x 5 = 1.175 m) + the balise's 1 m, rounded up
+    assert cap["q_locacc_m"].iloc[1] == 13.0
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=25.0)
+    assert sc["position_error_m"].iloc[1] == pytest.approx(0.0, abs=1e-9)
+    assert not sc["false"].any() and not sc["hazardous"].any()
+
+
+def test_tunnel_exit_captures_the_balise_passed_in_the_last_step_reverse_too():
+    # intervals too long to state from 2 s to 6 s (a tunnel), statable again from 7 s; a
+    # balise at 130 m (truth 120 m at 6 s, 140 m at 7 s) passed at 6.5 s. The pair rule's
+    # fixes (1 s and 7 s) are 6 s apart: no capture; the fix at 7 s carried back 20 m is.
+    for o, start in ((1, 0.0), (-1, 300.0)):
+        t, truth, est, lo, hi = fixes(1.0, 20.0, 12.0, start_m=start, orientation=o)
+        hi = hi.copy()
+        hi[2:7] += 200.0
+        b = start + o * 130.0
+        odo = truth - truth[0]
+        bl = balises([b])
+        cfg = CaptureConfig(12.0)
+        assert not capture_balises(t, est, lo, hi, bl, cfg, orientation=o,
+                                   odo_m=odo)["captured"].any()  # fmt: skip
+        cap = capture_balises(t, est, lo, hi, bl, cfg, orientation=o, odo_m=odo,
+                              odo_accuracy=OdometerAccuracy.subset041())  # fmt: skip
+        assert cap["captured"].all() and cap["after_void"].all()
+        assert cap["t_pass_s"].iloc[0] == pytest.approx(6.5)
+        # reach 10 m + (5 m + 5 % of 10 m) + 1 m
+        assert cap["q_locacc_m"].iloc[0] == 17.0
+
+
+def test_after_void_capture_keeps_the_accuracy_gate_and_the_zone():
+    # the same tunnel exit with the located fix's interval reaching 57 m: 57 + 5.5 + 1 > 63,
+    # the telegram could not state it; and a 5 m zone with the carried-back step (-10, +10 m)
+    # straddling the balise: captured only in the capture zone of either end
+    t, truth, est, lo, hi = fixes(1.0, 20.0, 12.0)
+    hi = hi.copy()
+    hi[2:7] += 200.0
+    odo = truth - truth[0]
+    acc = OdometerAccuracy.subset041()
+    bl = balises([130.0])
+    wide_lo, wide_hi = lo.copy(), hi.copy()
+    wide_lo[7], wide_hi[7] = est[7] - 57.0, est[7] + 57.0
+    cap = capture_balises(t, est, wide_lo, wide_hi, bl, CaptureConfig(25.0), orientation=1,
+                          odo_m=odo, odo_accuracy=acc)  # fmt: skip
+    assert not cap["captured"].any()
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(5.0), orientation=1, odo_m=odo,
+                          odo_accuracy=acc)  # fmt: skip
+    assert not cap["captured"].any()  # 10 m either side of the step ends: outside 5 m
+    cap = capture_balises(t, est, lo, hi, balises([136.0]), CaptureConfig(5.0), orientation=1,
+                          odo_m=odo, odo_accuracy=acc)  # fmt: skip
+    assert cap["captured"].all()  # 4 m short of the located fix: inside 5 m
