@@ -1,0 +1,94 @@
+"""Where a virtual balise may be placed: the predicted fused interval against ``Q_LOCACC``.
+
+A planning rule, not a capture rule: a virtual balise is captured only when the fused interval
+reaches at most ``Q_LOCACC`` (63 m) from the estimate (:mod:`locator.balises.capture`), so a
+balise is worth placing only where the interval is predicted to be that tight whichever way the
+train runs. Inside a satellite outage (a tunnel) the odometer carries the interval from the
+portal the train entered by: its reach there is the reach at the portal plus the odometer's
+doubt over the distance since (``max(D_DOUBTOVER, D_DOUBTUNDER)``, the bound that grows the
+interval's longer side). Outside outages the reach is the portal's (the satellites keep it).
+
+The prediction holds for a train that was located before the outage; a start of mission inside
+an outage (position known only to the stored start uncertainty) is not a placement question.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from locator.balises.capture import Q_LOCACC_MAX_M
+from locator.odometry.confidence import OdometerAccuracy
+
+__all__ = ["placement_check", "predicted_reach_m"]
+
+
+def predicted_reach_m(
+    chainage_m: ArrayLike,
+    outages_m: Sequence[tuple[float, float]],
+    accuracy: OdometerAccuracy,
+    entry_reach_m: float,
+) -> NDArray:
+    """Predicted reach of the fused interval about the estimate, worst of both directions.
+
+    Parameters
+    ----------
+    chainage_m : array_like, shape (n,)
+        Balise chainages, m.
+    outages_m : sequence of (start_m, end_m)
+        Stretches without satellite claims (tunnels), chainage, ``start < end``.
+    accuracy : OdometerAccuracy
+        The odometer's bounds.
+    entry_reach_m : float
+        Reach of the fused interval where the outage begins (e.g. the open-sky p95), m.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``entry_reach_m + max(D_DOUBTOVER, D_DOUBTUNDER)(d)`` with ``d`` the distance since the
+        portal entered, the larger of the two directions; ``entry_reach_m`` outside outages.
+    """
+    b = np.asarray(chainage_m, float)
+    if not entry_reach_m >= 0:
+        raise ValueError(f"entry_reach_m must be >= 0, got {entry_reach_m}")
+    d_in = np.zeros(b.shape)
+    for start, end in outages_m:
+        if not start < end:
+            raise ValueError(f"outage ({start}, {end}): start must be below end")
+        inside = (b >= start) & (b <= end)
+        d_in = np.where(inside, np.maximum(d_in, np.maximum(b - start, end - b)), d_in)
+    doubt = np.maximum(accuracy.doubt_over_m(d_in), accuracy.doubt_under_m(d_in))
+    return np.where(d_in > 0, entry_reach_m + doubt, entry_reach_m)
+
+
+def placement_check(
+    chainage_m: ArrayLike,
+    accuracy_m: ArrayLike,
+    outages_m: Sequence[tuple[float, float]],
+    accuracy: OdometerAccuracy,
+    entry_reach_m: float,
+    max_locacc_m: float = Q_LOCACC_MAX_M,
+) -> tuple[NDArray, NDArray]:
+    """Per balise: the predicted telegram accuracy and whether it fits ``Q_LOCACC``.
+
+    Parameters
+    ----------
+    chainage_m, accuracy_m : array_like, shape (n,)
+        Balise chainages and survey accuracies, m.
+    outages_m, accuracy, entry_reach_m
+        As :func:`predicted_reach_m`.
+    max_locacc_m : float
+        The largest accuracy a telegram may state, m (63: ``Q_LOCACC``'s 6 bits).
+
+    Returns
+    -------
+    q_m : ndarray, shape (n,)
+        Predicted stated accuracy (reach + survey accuracy, rounded up to the metre), m.
+    placeable : ndarray of bool, shape (n,)
+        ``q_m <= max_locacc_m``.
+    """
+    reach = predicted_reach_m(chainage_m, outages_m, accuracy, entry_reach_m)
+    q = np.ceil(reach + np.asarray(accuracy_m, float) - 1e-9)
+    return q, q <= max_locacc_m
