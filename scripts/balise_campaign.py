@@ -43,8 +43,10 @@ import locator_campaign as lc
 
 from locator.balises.balisefile import BaliseList
 from locator.balises.campaign import capture_table, locate_with_odometry
-from locator.balises.capture import CaptureConfig
+from locator.balises.capture import Q_LOCACC_MAX_M, CaptureConfig
+from locator.balises.placement import placement_check
 from locator.fde import LocatorConfig
+from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.odometer import OdometerConfig
 from locator.run import RunConfig
 from locator.sathia import AntennaPath
@@ -152,14 +154,43 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
     caps = capture_table(run, bl, CAPTURES, margin_m=MARGIN_M)
     caps = caps[["config", "capture_radius_m", "chainage_m", "captured", "zone", "passed",
                  "timing_error_s", "delay_s", "position_error_m", "false", "hazardous", "missed",
-                 "lo_m", "hi_m", "q_locacc_m"]].copy()  # fmt: skip
+                 "lo_m", "hi_m", "q_locacc_m", "after_void", "t_true_s"]].copy()  # fmt: skip
     ep = run.epochs
     o = run.odometer.orientation
     truth = ep["truth_m"].to_numpy(float)
+    claim = ep["claim"].to_numpy(bool)
+    b = caps["chainage_m"].to_numpy(float)
     # passages after the first satellite claim (before it the run is not located)
-    claimed = np.flatnonzero(ep["claim"].to_numpy(bool))
+    claimed = np.flatnonzero(claim)
     first = truth[claimed[0]] if len(claimed) else o * np.inf
-    caps["located"] = o * (caps["chainage_m"].to_numpy(float) - first) > 0
+    caps["located"] = o * (b - first) > 0
+    # ... and after the first claim that located the run to what a telegram can state (fused
+    # reach + the balise's 1 m within Q_LOCACC): a claim longer than the start interval
+    # confirms nothing (a breakdown of the misses, not a capture rule)
+    est = ep["fused_chainage_m"].to_numpy(float)
+    reach = np.maximum(est - ep["fused_lo_m"].to_numpy(float),
+                       ep["fused_hi_m"].to_numpy(float) - est)  # fmt: skip
+    statable = np.flatnonzero(claim & (reach + 1.0 <= Q_LOCACC_MAX_M))
+    first_st = truth[statable[0]] if len(statable) else o * np.inf
+    caps["stated"] = o * (b - first_st) > 0
+    caps["kind"] = _kind_at(world, b)
+    # distance from the last satellite claim before the true passage to the balise
+    k_past = np.searchsorted(o * truth, o * b)  # first epoch at or past the balise
+    last = np.maximum.accumulate(np.where(claim, np.arange(len(claim)), -1))
+    lc_k = np.where(k_past > 0, last[np.clip(k_past - 1, 0, len(claim) - 1)], -1)
+    caps["since_claim_m"] = np.where(lc_k >= 0, o * (b - truth[np.maximum(lc_k, 0)]), np.nan)
+    # a capture after the fact: the first later located fix whose interval, carried back along
+    # the odometer to the balise, reaches at most Q_LOCACC; its delay after the true passage
+    t = ep["gps_s"].to_numpy(float)
+    located = np.logical_or.accumulate(claim)
+    carried = np.abs(est[None, :] - b[:, None])  # (n_b, n) distance carried back, m
+    acc = run.accuracy
+    doubt = np.maximum(acc.doubt_over_m(carried), acc.doubt_under_m(carried))
+    ok = located[None, :] & (reach[None, :] + doubt + 1.0 <= Q_LOCACC_MAX_M)
+    ok &= np.arange(len(t))[None, :] >= k_past[:, None]
+    j = np.argmax(ok, axis=1)
+    caps["late_delay_s"] = np.where(ok.any(axis=1), t[j] - caps["t_true_s"].to_numpy(float),
+                                    np.nan)  # fmt: skip
     front = truth + o * ANTENNA_TO_FRONT_M
     f_lo = ep["fused_lo_m"].to_numpy(float) + o * ANTENNA_TO_FRONT_M
     f_hi = ep["fused_hi_m"].to_numpy(float) + o * ANTENNA_TO_FRONT_M
@@ -167,6 +198,7 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
         "truth_m": truth,
         "front_outside": ~((f_lo <= front + 1e-9) & (front <= f_hi + 1e-9)),
         "fused_length_m": f_hi - f_lo,
+        "fused_reach_m": reach,
         "gnss_length_m": np.where(ep["claim"], ep["hi_m"] - ep["lo_m"], np.nan),
         "odo_since_anchor_m": ep["odo_since_anchor_m"].to_numpy(float),
         "claim": ep["claim"].to_numpy(bool),
@@ -242,11 +274,15 @@ def capture_report(caps: pd.DataFrame) -> pd.DataFrame:
         p = g[g["passed"]]
         c = p[p["captured"]]
         pl = p[p["located"]]
+        ps = p[p["stated"]]
         rows.append({
             **dict(zip(keys, key, strict=True)), "passages": len(p),
             "capture_pct": 100.0 * len(c) / max(len(p), 1),
             "located_passages": len(pl),
             "located_capture_pct": 100.0 * int(pl["captured"].sum()) / max(len(pl), 1),
+            "stated_passages": len(ps),
+            "stated_capture_pct": 100.0 * int(ps["captured"].sum()) / max(len(ps), 1),
+            "after_void": int(c["after_void"].sum()),
             "false": int(g["false"].sum()),
             "hazardous": int(g["hazardous"].sum()),
             "q_locacc_p95_m": _q(c["q_locacc_m"], 0.95),
@@ -289,6 +325,67 @@ def length_vs_distance(epochs: pd.DataFrame) -> pd.DataFrame:
     t = g.groupby(["odometer", "where", "since_bin"], observed=True)["fused_length_m"]
     return t.agg(n="size", median="median", p95=lambda x: x.quantile(0.95),
                  max="max").reset_index()  # fmt: skip
+
+
+def miss_report(caps: pd.DataFrame) -> pd.DataFrame:
+    """Passages in tunnels and long outages, and the misses by class (1 Hz cruise, r 25 m).
+
+    Classes of a miss: ``before claim`` (no satellite claim yet), ``not stated`` (claims, but
+    none had yet located the run to a statable accuracy), ``stated`` (after that).
+    """
+    rows = []
+    g0 = caps[(caps["config"] == "r25") & (caps["rate_hz"] == 1.0) & caps["passed"]]
+    for key, g in g0.groupby(["job", "speed_kmh"], sort=False):
+        tunnel = g["kind"] == "tunnel"
+        outage = g["since_claim_m"].isna() | (g["since_claim_m"] > 200.0)
+        m = g[~g["captured"]]
+        late = m["late_delay_s"]
+        rows.append({
+            "job": key[0], "speed_kmh": key[1], "passages": len(g),
+            "tunnel_pct": 100.0 * float(tunnel.mean()),
+            "tunnel_capture_pct": 100.0 * float(g[tunnel]["captured"].mean()),
+            "outage200_pct": 100.0 * float(outage.mean()),
+            "outage200_capture_pct": 100.0 * float(g[outage]["captured"].mean()),
+            "missed": len(m), "miss_before_claim": int((~m["located"]).sum()),
+            "miss_not_stated": int((m["located"] & ~m["stated"]).sum()),
+            "miss_stated": int(m["stated"].sum()),
+            "miss_in_tunnel": int((m["kind"] == "tunnel").sum()),
+            "late_possible": int(late.notna().sum()),
+            "late_delay_p50_s": _q(late, 0.5), "late_delay_max_s": _q(late, 1.0),
+        })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def placement_report(
+    epochs: pd.DataFrame, cache: Path
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The placement rule per balise (every 30 m of each world, the trailer axle's bounds, the
+    tunnels as outages, the open-sky p95 fused reach as the reach at the portal), and the
+    measured fused reach in the tunnels against it."""
+    g = epochs[(epochs["job"] == "cruise") & (epochs["rate_hz"] == 1.0)]
+    entry = _q(g[(g["kind"] == "open") & g["claim"]]["fused_reach_m"], 0.95)
+    acc = OdometerAccuracy.from_config(ODOMETERS["trailer-radar"])
+    rows, check = [], []
+    for w in WORLDS:
+        world, _, _ = lc._world(w, cache)
+        lo, hi = world.extent_m
+        b = np.arange(lo + 30.0, hi - 30.0, SPACING_M)
+        tunnels = [(st.start_m, st.end_m) for st in world.spec.stretches if st.kind == "tunnel"]
+        q, ok = placement_check(b, np.ones(len(b)), tunnels, acc, entry)
+        rows.append(pd.DataFrame({"world": w, "chainage_m": b, "kind": _kind_at(world, b),
+                                  "predicted_q_m": q, "placeable": ok}))  # fmt: skip
+        for start, end in tunnels:
+            e = g[(g["world"] == w) & (g["truth_m"] >= start) & (g["truth_m"] <= end)]
+            pq, _ = placement_check([0.5 * (start + end)], [1.0], [(start, end)], acc, entry)
+            check.append({"world": w, "tunnel_m": f"{start:.0f}-{end:.0f}",
+                          "entry_reach_p95_m": entry,
+                          "predicted_q_worst_m": float(
+                              placement_check([start + 1e-6], [1.0], [(start, end)], acc,
+                                              entry)[0][0]),
+                          "predicted_q_middle_m": float(pq[0]),
+                          "measured_reach_p95_m": _q(e["fused_reach_m"], 0.95),
+                          "measured_reach_max_m": _q(e["fused_reach_m"], 1.0)})  # fmt: skip
+    return pd.concat(rows, ignore_index=True), pd.DataFrame(check)
 
 
 def figure(caps: pd.DataFrame, epochs: pd.DataFrame, path: Path) -> None:
@@ -370,6 +467,14 @@ def main(argv: list[str] | None = None) -> int:
     print(rep.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     print(integ.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
     print(lvd.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+    miss = miss_report(caps)
+    miss.to_csv(out / "misses_table.csv", index=False)
+    print(miss.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+    place, check = placement_report(epochs, cache)
+    place.to_csv(out / "placement.csv", index=False)
+    check.to_csv(out / "placement_check.csv", index=False)
+    print(place.groupby(["world", "kind"])["placeable"].agg(["size", "sum"]).to_string())
+    print(check.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
     print(
         f"passages (cruise, all configs' denominators, per config): "
         f"{int(caps[(caps['job'] == 'cruise') & (caps['config'] == 'r12')]['passed'].sum())}"
