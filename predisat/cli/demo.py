@@ -346,7 +346,7 @@ def run(args: argparse.Namespace) -> int:
         "ground truth": (synth.truth_dir, "the synthetic world, its true masks and per-frame "
                          "sky labels"),
         "contact sheet": (sheet, "a dozen of the rendered frames side by side"),
-        "masks": (processed.masks_path, "the elevation masks the pipeline made from the frames "
+        "masks": (Path(processed.masks_path), "the elevation masks the pipeline made from the frames "
                   "(docs/mask-format.md)"),
         "evaluation": (eval_png, "the masks' error and the sky they lose against the ground "
                        "truth, by direction"),
