@@ -46,6 +46,7 @@ __all__ = [
     "output_path",
     "read_bytes",
     "remove",
+    "remove_tree",
     "stamp",
     "write_atomic",
 ]
@@ -151,8 +152,9 @@ def exists(loc: Location, options: StorageOptions | None = None) -> bool:
 
 def stamp(loc: Location, options: StorageOptions | None = None) -> list[Any] | None:
     """What changes when a file is replaced: ``[size, mtime_ns]`` of a local file (as
-    before), ``[size, modification stamp]`` of a remote one (its time, ETag or the like, as
-    the file system gives it; size alone where it gives none), None when missing."""
+    before), ``[size, marks]`` of a remote one (its ETag, modification time and the like, as
+    the file system gives them; "" where it gives none: then only a change of size is
+    seen), None when missing."""
     if isinstance(loc, Path):
         try:
             st = os.stat(loc)
@@ -164,8 +166,9 @@ def stamp(loc: Location, options: StorageOptions | None = None) -> list[Any] | N
         info = fs.info(path)
     except (FileNotFoundError, OSError):
         return None
-    keys = ("mtime", "LastModified", "last_modified", "updated", "ETag", "etag", "created")
-    mark = next((str(info[k]) for k in keys if info.get(k) is not None), "")
+    keys = ("ETag", "etag", "mtime", "LastModified", "Last-Modified", "last_modified", "updated",
+            "created")  # fmt: skip
+    mark = " ".join(f"{k}={info[k]}" for k in keys if info.get(k) is not None)
     return [info.get("size"), mark]
 
 
@@ -201,6 +204,17 @@ def remove(loc: Location, options: StorageOptions | None = None) -> None:
     fs, path = _fs(loc, options)
     with contextlib.suppress(FileNotFoundError):
         fs.rm_file(path)
+
+
+def remove_tree(loc: Location, options: StorageOptions | None = None) -> None:
+    """Delete a folder and everything in it; nothing when it is not there."""
+    if isinstance(loc, Path):
+        shutil.rmtree(loc, ignore_errors=True)
+        return
+    fs, path = _fs(loc, options)
+    with contextlib.suppress(FileNotFoundError):
+        if fs.exists(path):
+            fs.rm(path, recursive=True)
 
 
 def _remote_tmp(loc: str) -> str:
