@@ -58,6 +58,7 @@ StorageOptions = Mapping[str, Any]
 """Keyword arguments of the fsspec file system of a URL (credentials, endpoints...)."""
 
 _LOCAL = ("file", "local")
+_READ_ONLY = ("http", "https")
 
 
 class StorageError(OSError):
@@ -134,9 +135,9 @@ def read_bytes(loc: Location, options: StorageOptions | None = None) -> bytes:
         return bytes(fs.cat_file(path))
     except FileNotFoundError as exc:
         raise _missing(loc, exc) from None
-    except OSError as exc:
-        raise StorageError(f"{loc}: cannot be read ({exc}); check the URL and the storage "
-                           "options") from None  # fmt: skip
+    except Exception as exc:  # each file system raises its own (aiohttp, botocore...)
+        raise StorageError(f"{loc}: cannot be read ({type(exc).__name__}: {exc}); check the "
+                           "URL and the storage options (credentials)") from None  # fmt: skip
 
 
 def exists(loc: Location, options: StorageOptions | None = None) -> bool:
@@ -228,15 +229,22 @@ def write_atomic(loc: Location, data: bytes, options: StorageOptions | None = No
     if isinstance(loc, Path):
         write_bytes_atomic(loc, data)
         return
+    if loc.split("://", 1)[0].lower() in _READ_ONLY:
+        raise StorageError(
+            f"{loc}: http(s):// is read only; write the outputs to a local folder or to "
+            "writable storage (s3://, a mounted share...)"
+        )
     fs, path = _fs(loc, options)
     _, tmp = _fs(_remote_tmp(loc), options)
     try:
         fs.pipe_file(tmp, data)
         fs.mv(tmp, path)
-    except NotImplementedError:
+    except FileNotFoundError:
+        raise
+    except Exception as exc:  # each file system raises its own (aiohttp, botocore...)
         raise StorageError(
-            f"{loc}: this file system is read only here ({type(fs).__name__}); write the "
-            "outputs to a local folder or to writable storage (s3://, a mounted share...)"
+            f"{loc}: cannot be written ({type(exc).__name__}: {exc}); check the URL, the "
+            "storage options (credentials) and that the storage is writable"
         ) from None
     finally:
         with contextlib.suppress(Exception):
