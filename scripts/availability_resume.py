@@ -67,14 +67,13 @@ def cost_of_saving(masks: MaskSet, hours: float, work: Path) -> None:
     rule = TrustRule.mask(masks)
     folder = work / "blocks"
     shutil.rmtree(folder, ignore_errors=True)
-    kw = {"interval_every": 10}
-    compute_availability(sats, pos, rule, **kw)  # warm-up
+    compute_availability(sats, pos, rule, interval_every=10)  # warm-up
     runs = {}
     for name, checkpoint in (("no saving (baseline)", None),
                              ("saving every block", BlockCheckpoint(folder)),
                              ("taking every block back", BlockCheckpoint(folder))):  # fmt: skip
         t0 = time.perf_counter()
-        res = compute_availability(sats, pos, rule, checkpoint=checkpoint, **kw)
+        res = compute_availability(sats, pos, rule, checkpoint=checkpoint, interval_every=10)
         runs[name] = (time.perf_counter() - t0, res)
     base_t, base = runs["no saving (baseline)"]
     size = sum(p.stat().st_size for p in folder.iterdir())
