@@ -163,3 +163,30 @@ def test_command_line_takes_urls(
         main(["process", str(survey_dir), "--out", "x", "--storage-options", "[1]"])
     assert stop.value.code == 2
     assert "is not a JSON object" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_dask_workers_read_the_survey_from_its_url(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The tasks get URLs and storage options, not files: worker processes read the frames
+    over HTTP themselves, with the token the options give, and write the serial run's bytes."""
+    from distributed import LocalCluster
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    opts = {"client_kwargs": {"headers": {"Authorization": "Bearer s3cret"}}}
+    with serve_folder(survey_dir, token="s3cret") as url:
+        with pytest.raises(SurveyError, match=r"survey\.yaml"):  # no token: refused (401)
+            process_survey(url, tmp_path / "x", PARAMS, progress=False, segmenter=blue_sky)
+        process_survey(url, tmp_path / "serial", PARAMS, progress=False, segmenter=blue_sky,
+                       storage_options=opts)  # fmt: skip
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+            res = process_survey(url, tmp_path / "dask", PARAMS, progress=False,
+                                 segmenter=blue_sky, scheduler=cluster.scheduler_address,
+                                 storage_options=opts)  # fmt: skip
+    assert res.frames_segmented == 14 and res.chunks_done == 3 and res.bad_frames == ()
+    for name in _published(tmp_path / "serial"):
+        assert (tmp_path / "dask" / name).read_bytes() == (
+            tmp_path / "serial" / name
+        ).read_bytes(), name
