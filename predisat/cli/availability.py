@@ -109,7 +109,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument(
         "--storage-options", type=storage_options, metavar="JSON",
         help="options of the fsspec file system of URL masks and outputs, a JSON object such "
-        "as '{\"anon\": true}' (docs/cluster.md)",
+        "as '{\"anon\": true}' (docs/cluster.md; default: none, the file system's own defaults)",
     )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--storage-options", type=storage_options, metavar="JSON",
         help="options of the fsspec file system of URL inputs and outputs, a JSON object "
-        "such as '{\"anon\": true}' or '{\"endpoint_url\": \"http://...\"}' (docs/cluster.md)",
+        "such as '{\"anon\": true}' or '{\"endpoint_url\": \"http://...\"}' (docs/cluster.md; "
+        "default: none, the file system's own defaults)",
     )  # fmt: skip
     parser.add_argument(
         "--scheduler", default="local", metavar="local|serial|ADDRESS",
