@@ -14,7 +14,15 @@ import pyarrow.parquet as pq
 import pytest
 
 from predisat.availability import engine
+from predisat.availability.engine import BlockCheckpoint
 from predisat.availability.run import run_availability
+from predisat.availability.satellites import (
+    LinePositions,
+    SatellitePositions,
+    TrustRule,
+    default_ephemeris,
+    default_window,
+)
 from predisat.masks.fileformat import write_masks
 from predisat.masks.maskset import MaskSet
 from predisat.track.map import TrackMap, demo_track
@@ -102,24 +110,28 @@ def test_an_interrupted_run_resumes_without_redoing_finished_blocks(
 
 
 def test_blocks_saved_from_other_inputs_are_not_taken(
-    tmp_path: Path, mask_file: Path, track: TrackMap, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, track: TrackMap, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(engine, "block_task", _Blocks(fail_at=N_BLOCKS))
-    with pytest.raises(RuntimeError):
-        _run(mask_file, tmp_path / "out")  # every block but the last saved
-    other = write_masks(_masks(track, wall_deg=30.0), tmp_path / "other.masks.parquet")
+    t = default_window(STEP_S)[:12]
+    sats = SatellitePositions.from_ephemeris(default_ephemeris(), t, "gps")
+    first, other = _masks(track), _masks(track, wall_deg=30.0)
+    positions = LinePositions.from_masks(first)
+    saved = BlockCheckpoint(tmp_path / "blocks")
+    monkeypatch.setattr(engine, "block_task", _Blocks(fail_at=4))
+    with pytest.raises(RuntimeError):  # blocks [0, 64), [64, 128), [128, 192) saved
+        engine.compute_availability(sats, positions, TrustRule.mask(first), checkpoint=saved)
     again = _Blocks()
     monkeypatch.setattr(engine, "block_task", again)
-    res = _run(other, tmp_path / "out")
-    # the masks rule's thresholds changed over 4100-4200 m (positions 50-100): its blocks
-    # [0, 64) and [64, 128) are redone, [128, 192) and [192, 201) kept; the other rules'
-    # inputs did not change (the last block of the cut-off rule was never saved)
-    assert [r.provenance["blocks_resumed"] for r in res.results] == [2, 4, 3]
-    fresh = _run(other, tmp_path / "fresh")
-    for a, b in zip(res.results, fresh.results, strict=True):
-        assert a.count.tobytes() == b.count.tobytes()
-        assert a.interval_m is not None and b.interval_m is not None
-        assert a.interval_m.tobytes() == b.interval_m.tobytes()
+    res = engine.compute_availability(sats, positions, TrustRule.mask(other), checkpoint=saved)
+    # the thresholds changed over 4100-4200 m (positions 50-100): the blocks [0, 64) and
+    # [64, 128) are redone, [128, 192) is taken back, [192, 201) was never saved
+    assert sorted(again.done) == [0, 64, 192] and res.provenance["blocks_resumed"] == 1
+    fresh = engine.compute_availability(sats, positions, TrustRule.mask(other))
+    assert res.count.tobytes() == fresh.count.tobytes()
+    assert res.interval_m is not None and fresh.interval_m is not None
+    assert res.interval_m.tobytes() == fresh.interval_m.tobytes()
+    assert not np.array_equal(res.count, engine.compute_availability(
+        sats, positions, TrustRule.mask(first)).count)  # the change mattered  # fmt: skip
 
 
 @pytest.fixture
