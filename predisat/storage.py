@@ -25,7 +25,8 @@ import os
 import shutil
 import tempfile
 import uuid
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path, PurePosixPath
 from typing import Any
 
@@ -48,6 +49,7 @@ __all__ = [
     "remove",
     "remove_tree",
     "stamp",
+    "stamps",
     "write_atomic",
 ]
 
@@ -171,6 +173,17 @@ def stamp(loc: Location, options: StorageOptions | None = None) -> list[Any] | N
             "created")  # fmt: skip
     mark = " ".join(f"{k}={info[k]}" for k in keys if info.get(k) is not None)
     return [info.get("size"), mark]
+
+
+def stamps(
+    locs: Sequence[Location], options: StorageOptions | None = None, threads: int = 16
+) -> list[list[Any] | None]:
+    """:func:`stamp` of every location, in order; remote ones ``threads`` at a time (each is
+    a request: an HTTP HEAD, an S3 HEAD Object), local ones one after the other."""
+    if not any(isinstance(loc, str) for loc in locs):
+        return [stamp(loc, options) for loc in locs]
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        return list(pool.map(lambda loc: stamp(loc, options), locs))
 
 
 def makedirs(loc: Location, options: StorageOptions | None = None) -> None:

@@ -91,6 +91,7 @@ from predisat.storage import (
     output_path,
     read_bytes,
     remove,
+    stamps,
     write_atomic,
 )
 from predisat.survey import Survey
@@ -362,11 +363,15 @@ def _plan(
         name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
         for name, _, _, s in chunks
     }
+    # each image stamped once (a frame is read by up to three chunks), remote ones in parallel
+    images = [join(survey.root, str(fr.image[i])) for i in np.flatnonzero(finite)]
+    known = dict(zip(map(str, images), stamps(images, survey.storage_options), strict=True))
     keys = {
         name: frames_key(
             (str(fr.frame_id[i]) for i in idx),
             (str(join(survey.root, str(fr.image[i]))) for i in idx),
             survey.storage_options,
+            known,
         )
         for name, idx in frames_of.items()
     }

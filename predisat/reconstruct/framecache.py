@@ -17,7 +17,7 @@ import json
 import os
 import zipfile
 import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -99,11 +99,14 @@ def frames_key(
     frame_ids: Iterable[str],
     image_paths: Iterable[str],
     storage_options: StorageOptions | None = None,
+    known: Mapping[str, list[Any] | None] | None = None,
 ) -> str:
     """Hash of a chunk's frames and their images' size and modification time (None when
-    missing), so that a finished chunk is redone once one of its images is replaced."""
+    missing), so that a finished chunk is redone once one of its images is replaced.
+    ``known``: stamps already taken (:func:`stat_key`), by image path."""
+    given = known or {}
     stamps = [
-        [fid, stat_key(path, storage_options)]
+        [fid, given[path] if path in given else stat_key(path, storage_options)]
         for fid, path in zip(frame_ids, image_paths, strict=True)
     ]
     return hashlib.sha256(json.dumps(stamps).encode()).hexdigest()[:16]
