@@ -16,6 +16,13 @@ writes into an output folder:
   ``stroke`` colour);
 * optionally ``counts.parquet`` - every count, long format (rule, chainage_m, gps_s, count).
 
+While it runs, ``blocks/<rule>/`` holds the finished blocks of positions
+(:class:`~predisat.availability.engine.BlockCheckpoint`): a killed run, rerun with the same
+inputs and output folder, takes them instead of computing them again; the folder is deleted
+once every output is written. The mask input and the output folder may be fsspec URLs
+(:mod:`predisat.storage`): remote outputs are written locally first and then each is
+uploaded atomically.
+
 The command line (:mod:`predisat.cli.availability`) maps its options onto it. See
 ``docs/report.md``.
 """
@@ -25,6 +32,8 @@ from __future__ import annotations
 import gzip
 import math
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -39,7 +48,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from predisat import __version__
-from predisat.availability.engine import Availability, compute_availability
+from predisat.availability.engine import Availability, BlockCheckpoint, compute_availability
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
     SYSTEM_NAMES,
@@ -58,6 +67,17 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.maskset import MaskSet
 from predisat.scheduler import Scheduler, TaskRunner
+from predisat.storage import (
+    Location,
+    StorageOptions,
+    input_path,
+    is_remote,
+    join,
+    location,
+    name_of,
+    remove_tree,
+    write_atomic,
+)
 from predisat.track import TrackMap, TrackMapError, load_track
 
 __all__ = [
@@ -82,9 +102,10 @@ class AvailabilityRun:
 
     Attributes
     ----------
-    out_dir : Path
-    report_html : Path
-    files : dict of str to Path
+    out_dir : Path or str
+        A local folder or a URL (:mod:`predisat.storage`).
+    report_html : Path or str
+    files : dict of str to Path or str
         Every file written, by kind (``"report"``, ``"summary_csv"``, ``"positions_parquet"``,
         ``"geojson"``, ...).
     summary : pandas.DataFrame
@@ -94,9 +115,9 @@ class AvailabilityRun:
     elapsed_s : float
     """
 
-    out_dir: Path
-    report_html: Path
-    files: dict[str, Path]
+    out_dir: Location
+    report_html: Location
+    files: dict[str, Location]
     summary: pd.DataFrame
     results: tuple[Availability, ...]
     elapsed_s: float = 0.0
@@ -319,10 +340,19 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
     return out
 
 
-def _load_masks(masks: str | Path | MaskSet) -> tuple[MaskSet, str]:
+def _load_masks(
+    masks: str | Path | MaskSet, opts: StorageOptions | None = None
+) -> tuple[MaskSet, str]:
     if isinstance(masks, MaskSet):
         return masks, "in memory"
-    return read_masks(masks), str(mask_file_path(masks))
+    loc = location(masks)
+    if not is_remote(loc):
+        return read_masks(masks), str(mask_file_path(masks))
+    # a URL: a mask file (.parquet), else the output folder of `predisat process`
+    if not name_of(loc).endswith(".parquet"):
+        loc = join(loc, "masks.parquet")
+    with input_path(loc, opts) as local_file:
+        return read_masks(local_file), str(loc)
 
 
 def _load_track(track: TrackMap | str | os.PathLike[str] | None) -> TrackMap | None:
@@ -420,21 +450,25 @@ def run_availability(
     counts_table: bool = False,
     progress: bool = True,
     basemap: str | Path | None = None,
+    storage_options: StorageOptions | None = None,
 ) -> AvailabilityRun:
     """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
 
     Parameters
     ----------
-    masks : path or MaskSet
-        Mask file v1 (``*.masks.parquet``) or a mask set.
+    masks : path, str or MaskSet
+        Mask file v1 (``*.masks.parquet``), the output folder of ``predisat process``
+        (local or an fsspec URL), or a mask set.
     track : TrackMap or path, optional
         The track map the masks were made on (checked: mask positions within 25 m of it at
         their chainage). Supplies the line's name, kilometre posts and the GeoJSON geometry;
         without it segments are straight between positions.
     nav : sequence of paths, optional
         RINEX navigation, SP3 or one TLE file; default the embedded day (2020-06-25).
-    out_dir : path
-        Output folder (created).
+    out_dir : path or str
+        Output folder (created): a local folder or a writable fsspec URL. Its ``blocks/``
+        keeps the finished blocks while the run lasts: rerunning a killed run with the same
+        inputs and folder resumes it.
     start, end : float or str, optional
         Window: ``gps_s``, or ISO text in GPS time (UTC with a ``Z`` suffix, see
         :func:`parse_time`); end excluded. Default: from the start of the data's
@@ -473,6 +507,8 @@ def run_availability(
     basemap : path, optional
         A GeoJSON of lines drawn under the map as an offline background (for example an
         OpenStreetMap extract of the railways and roads around the line).
+    storage_options : mapping, optional
+        Options of the fsspec file system of URL masks and outputs (credentials...).
 
     Returns
     -------
@@ -501,7 +537,9 @@ def run_availability(
         stage = bar.set_postfix_str
 
         stage("masks")
-        mask_set, masks_label, track = _masks_on_track(masks, track, from_m, to_m)
+        opts = dict(storage_options or {})
+        out = location(out_dir)
+        mask_set, masks_label, track = _masks_on_track(masks, track, from_m, to_m, opts)
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
@@ -516,41 +554,64 @@ def run_availability(
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
+        blocks = join(out, "blocks")
         with TaskRunner(_where(scheduler, workers)) as runner:
             results = _compute_rules(
-                rules, nav_data.sats, positions, interval_every, model, runner, bar
-            )
+                rules, nav_data.sats, positions, interval_every, model, runner, bar,
+                (blocks, opts),
+            )  # fmt: skip
 
         stage("tables")
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        # remote outputs: written here first, then each uploaded atomically (_publish)
+        work = out if isinstance(out, Path) else Path(tempfile.mkdtemp(prefix="predisat-av-"))
+        work.mkdir(parents=True, exist_ok=True)
         info = _run_info(
             mask_set, masks_label, track, nav_data, constellation, rules, step_s,
             interval_every, __version__, model,
         )  # fmt: skip
-        files, summary = write_tables(out, results, track, info, counts_table)
-        files["ephemeris_status_csv"] = _write_ephemeris_status(out, nav_data.sats)
+        local_files, summary = write_tables(work, results, track, info, counts_table)
+        local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
         bar.update(1)
 
         stage("figures")
         inputs = ReportInputs(
             results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
-            info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(files),
+            info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(local_files),
             basemap_lonlat=background,
         )  # fmt: skip
         html = build_report(inputs)
         bar.update(1)
 
         stage("report")
-        report = out / "report.html"
-        report.write_text(html, encoding="utf-8")
-        files["report"] = report
+        (work / "report.html").write_text(html, encoding="utf-8")
+        local_files["report"] = work / "report.html"
+        files = _publish(local_files, out, opts)
+        remove_tree(blocks, opts)  # every output is written: the saved blocks are done with
         bar.update(1)
     finally:
         bar.close()  # also on an error: its message then starts on a line of its own
     return AvailabilityRun(
-        out, report, files, summary, tuple(results), time.perf_counter() - t0, info
+        out, files["report"], files, summary, tuple(results), time.perf_counter() - t0, info
     )
+
+
+def _publish(
+    local_files: dict[str, Path], out: Location, opts: StorageOptions
+) -> dict[str, Location]:
+    """The outputs where they belong: the local files themselves for a local ``out``, else
+    each uploaded to ``out`` (:func:`predisat.storage.write_atomic`) and the local copies
+    deleted."""
+    if isinstance(out, Path):
+        return dict(local_files)
+    published: dict[str, Location] = {}
+    folders = set()
+    for kind, path in local_files.items():
+        published[kind] = join(out, path.name)
+        write_atomic(published[kind], path.read_bytes(), opts)
+        folders.add(path.parent)
+    for folder in folders:
+        shutil.rmtree(folder, ignore_errors=True)
+    return published
 
 
 def _masks_on_track(
@@ -558,9 +619,10 @@ def _masks_on_track(
     track: TrackMap | str | os.PathLike[str] | None,
     from_m: float | None,
     to_m: float | None,
+    opts: StorageOptions | None = None,
 ) -> tuple[MaskSet, str, TrackMap | None]:
     """The masks of the stretch (checked to lie on ``track``), how to name them, the track."""
-    mask_set, masks_label = _load_masks(masks)
+    mask_set, masks_label = _load_masks(masks, opts)
     track_map = _load_track(track)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
     if track_map is not None:
@@ -633,9 +695,13 @@ def _compute_rules(
     model: IntervalModel,
     runner: TaskRunner,
     bar: tqdm[NoReturn],
+    blocks: tuple[Location, StorageOptions],
 ) -> list[Availability]:
-    """The availability under every rule, in order; one step of ``bar`` each."""
+    """The availability under every rule, in order; one step of ``bar`` each. Each rule's
+    finished blocks are saved in its own folder under ``blocks`` (a folder and its storage
+    options), where a rerun finds them."""
     results = []
+    folder, opts = blocks
     for rule in rules:
         bar.set_postfix_str(rule.label)
         results.append(
@@ -646,6 +712,8 @@ def _compute_rules(
                 interval_every=interval_every,
                 interval_model=model,
                 runner=runner,
+                progress=not bar.disable,
+                checkpoint=BlockCheckpoint(join(folder, _slug(rule.label)), opts),
             )
         )
         bar.update(1)
@@ -659,6 +727,11 @@ def _where(scheduler: Scheduler | str | None, workers: int | None) -> Scheduler:
     if scheduler is None:
         return Scheduler.serial(1 if workers is None else workers)
     return Scheduler.parse(scheduler, workers)
+
+
+def _slug(label: str) -> str:
+    """A rule's folder name: ``"cutoff 15 deg"`` -> ``"cutoff_15_deg"``."""
+    return "".join(c if c.isalnum() or c in "._-" else "_" for c in label.lower())
 
 
 def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:
@@ -723,12 +796,28 @@ def _run_info(
             "min_el_deg": model.error.min_el_deg, "k_sigma": model.k_sigma,
         },
         "software": f"predisat {version}",
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "created_utc": _created_utc(),
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model == IntervalModel(),
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": nav.warnings,
     }
+
+
+def _created_utc() -> str:
+    """Now, or the time of ``SOURCE_DATE_EPOCH`` when it is set (the reproducible-builds
+    convention, as ``predisat process``): a run that pins its time writes the same bytes as
+    any other run with the same inputs (a resumed one, one on a cluster)."""
+    pinned = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    if not pinned:
+        return datetime.now(UTC).isoformat(timespec="seconds")
+    try:
+        return datetime.fromtimestamp(int(pinned), UTC).isoformat(timespec="seconds")
+    except (ValueError, OverflowError, OSError):
+        raise ValueError(
+            f"SOURCE_DATE_EPOCH={pinned!r} is not a time; give whole seconds since "
+            "1970-01-01 UTC (e.g. 1700000000) or unset it"
+        ) from None
 
 
 def _track_text(track: TrackMap | None) -> str:

@@ -18,9 +18,13 @@ refused with the value they probably meant.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+from predisat.storage import Location, is_remote, location
 
 __all__ = [
     "MAX_TRAIN_SPEED_MPS",
@@ -51,6 +55,8 @@ __all__ = [
     "requires",
     "run_checks",
     "speed_mps",
+    "storage_options",
+    "url_or",
 ]
 
 MAX_TRAIN_SPEED_MPS = 100.0
@@ -212,6 +218,36 @@ def existing_path(content: str) -> Callable[[str], Path]:
 
     parse.__name__ = "path"
     return parse
+
+
+def url_or(parse: Callable[[str], Path]) -> Callable[[str], Location]:
+    """``parse`` for a local path (``file://`` URLs included); an fsspec URL of another file
+    system (``s3://``, ``http(s)://``...) is taken as it is: it is checked when it is opened,
+    with the storage options (:mod:`predisat.storage`)."""
+
+    def parse_url(value: str) -> Location:
+        loc = location(value)
+        return loc if is_remote(loc) else parse(str(loc))
+
+    parse_url.__name__ = getattr(parse, "__name__", "path")
+    return parse_url
+
+
+def storage_options(value: str) -> dict[str, Any]:
+    """``--storage-options``: a JSON object of fsspec file system options."""
+    try:
+        doc = json.loads(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not JSON ({exc}); give an object such as "
+            '\'{"anon": true}\' or \'{"key": "...", "secret": "..."}\''
+        ) from None
+    if not isinstance(doc, dict):
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not a JSON object; give an object such as "
+            '\'{"anon": true}\''
+        )
+    return doc
 
 
 def _number(value: str) -> float:

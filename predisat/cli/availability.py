@@ -18,6 +18,8 @@ from predisat.cli.args import (
     output_dir,
     positive_float,
     positive_int,
+    storage_options,
+    url_or,
 )
 from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model
 from predisat.track import TrackMap
@@ -30,8 +32,9 @@ _MASKS = "a mask file (masks.parquet) or a `predisat process` output folder"
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the ``predisat availability`` options to a (sub)parser; returns it."""
     p = parser
-    p.add_argument("--masks", required=True, type=existing_path(_MASKS), metavar="MASKS",
-                   help="mask file, or the output folder of predisat process")
+    p.add_argument("--masks", required=True, type=url_or(existing_path(_MASKS)), metavar="MASKS",
+                   help="mask file, or the output folder of predisat process: a path or an "
+                   "fsspec URL (http(s)://, s3://...; docs/cluster.md)")
     p.add_argument("--track", metavar="FILE",
                    help="track map the masks were made on, GeoJSON/CSV: the line's name, "
                    "kilometre posts and geometry (default: none, segments straight between "
@@ -51,7 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    "start, or the data's end)")
     p.add_argument("--step", type=positive_float, default=30.0, metavar="S",
                    help="epoch spacing, seconds")
-    p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=url_or(output_dir), metavar="DIR",
+                   help="output folder, a path or a writable fsspec URL; rerun a killed run "
+                   "with the same folder to resume it (its blocks/ keeps the finished blocks)")
     p.add_argument(
         "--constellation", type=constellation, metavar="SYSTEMS", default="gps",
         help="systems counted: gps (as LOCOPROL and `locator run`), gps+galileo, all, or system "
@@ -101,6 +106,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "line (default: none)",
     )  # fmt: skip
     p.add_argument("--counts", action="store_true", help="also write counts.parquet (large)")
+    p.add_argument(
+        "--storage-options", type=storage_options, metavar="JSON",
+        help="options of the fsspec file system of URL masks and outputs, a JSON object such "
+        "as '{\"anon\": true}' (docs/cluster.md; default: none, the file system's own defaults)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -132,6 +142,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         counts_table=args.counts,
         progress=not args.quiet,
         basemap=args.basemap,
+        storage_options=args.storage_options,
     )
 
 

@@ -346,8 +346,8 @@ def run(args: argparse.Namespace) -> int:
         "ground truth": (synth.truth_dir, "the synthetic world, its true masks and per-frame "
                          "sky labels"),
         "contact sheet": (sheet, "a dozen of the rendered frames side by side"),
-        "masks": (processed.masks_path, "the elevation masks the pipeline made from the frames "
-                  "(docs/mask-format.md)"),
+        "masks": (Path(processed.masks_path), "the elevation masks the pipeline made from "
+                  "the frames (docs/mask-format.md)"),
         "evaluation": (eval_png, "the masks' error and the sky they lose against the ground "
                        "truth, by direction"),
         "report": (Path(report.report_html), "the availability report: satellites trusted "

@@ -14,6 +14,8 @@ from predisat.cli.args import (
     output_dir,
     positive_float,
     positive_int,
+    storage_options,
+    url_or,
 )
 from predisat.cli.common import track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
@@ -26,13 +28,20 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``predisat process``."""
-    parser.add_argument("survey", type=existing_dir("a survey folder (survey.yaml, manifest.csv, "
-                        "the frames; docs/survey-format.md)"), metavar="SURVEY",
-                        help="survey folder (with survey.yaml)")  # fmt: skip
+    parser.add_argument("survey", type=url_or(existing_dir("a survey folder (survey.yaml, "
+                        "manifest.csv, the frames; docs/survey-format.md)")), metavar="SURVEY",
+                        help="survey folder (with survey.yaml): a path or an fsspec URL "
+                        "(http(s)://, s3://...; docs/cluster.md)")  # fmt: skip
     parser.add_argument(
-        "--out", type=output_dir, required=True, metavar="DIR",
-        help="output folder (masks.parquet, chunks/, cache/, bad_frames.csv); "
-        "rerun with the same folder to resume",
+        "--out", type=url_or(output_dir), required=True, metavar="DIR",
+        help="output folder (masks.parquet, chunks/, cache/, bad_frames.csv), a path or a "
+        "writable fsspec URL (s3://...); rerun with the same folder to resume",
+    )  # fmt: skip
+    parser.add_argument(
+        "--storage-options", type=storage_options, metavar="JSON",
+        help="options of the fsspec file system of URL inputs and outputs, a JSON object "
+        "such as '{\"anon\": true}' or '{\"endpoint_url\": \"http://...\"}' (docs/cluster.md; "
+        "default: none, the file system's own defaults)",
     )  # fmt: skip
     parser.add_argument(
         "--scheduler", default="local", metavar="local|serial|ADDRESS",
@@ -113,4 +122,5 @@ def run(args: argparse.Namespace) -> ProcessResult:
         margins=args.margins,
         replace=args.replace,
         dem=dem,
+        storage_options=args.storage_options,
     )

@@ -6,9 +6,8 @@ import csv
 import io
 from collections.abc import Iterable
 from dataclasses import dataclass
-from pathlib import Path
 
-from predisat.atomic import write_bytes_atomic
+from predisat.storage import Location, StorageOptions, write_atomic
 
 __all__ = ["BadFrame", "BadFrameError", "write_bad_frames"]
 
@@ -40,10 +39,14 @@ class BadFrame:
 
 
 
-def write_bad_frames(path: Path, bad: Iterable[BadFrame]) -> None:
+def write_bad_frames(
+    path: Location, bad: Iterable[BadFrame], storage_options: StorageOptions | None = None
+) -> None:
+    """Write ``bad_frames.csv`` (``frame_id, stage, message``) atomically, locally or at a
+    URL (:func:`predisat.storage.write_atomic`)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["frame_id", "stage", "message"])
     for b in bad:
         w.writerow([b.frame_id, b.stage, b.message])
-    write_bytes_atomic(path, buf.getvalue().encode())
+    write_atomic(path, buf.getvalue().encode(), storage_options)

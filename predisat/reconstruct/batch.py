@@ -49,7 +49,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat import __version__
-from predisat.atomic import write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
@@ -73,12 +72,28 @@ from predisat.reconstruct.framecache import (
     code_fingerprint,
     frames_key,
     read_cache,
+    stat_key,
     survey_hash,
 )
 from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import PipelineParams
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
+from predisat.storage import (
+    Location,
+    StorageOptions,
+    input_path,
+    is_remote,
+    join,
+    list_names,
+    location,
+    makedirs,
+    output_path,
+    read_bytes,
+    remove,
+    stamps,
+    write_atomic,
+)
 from predisat.survey import Survey
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
@@ -101,7 +116,8 @@ class ProcessResult:
 
     Attributes
     ----------
-    out_dir, masks_path : Path
+    out_dir, masks_path : Path or str
+        Local paths, or URLs (:mod:`predisat.storage`).
     masks : MaskSet
         The merged masks (as written to ``masks_path``).
     n_frames : int
@@ -116,8 +132,8 @@ class ProcessResult:
         Wall time per stage (``"load"``, ``"segment"``, ``"reconstruct"``, ``"merge"``).
     """
 
-    out_dir: Path
-    masks_path: Path
+    out_dir: Location
+    masks_path: Location
     masks: MaskSet
     n_frames: int
     chunks_done: int
@@ -133,7 +149,8 @@ class ProcessResult:
             f"({self.chunks_done} chunks computed, {self.chunks_skipped} resumed, "
             f"{self.frames_segmented} frames segmented, {len(self.bad_frames)} bad frames, "
             f"{self.elapsed_s:.1f} s)"
-        ) + (f"; bad frames listed in {self.out_dir / 'bad_frames.csv'}" if self.bad_frames else "")
+        ) + (f"; bad frames listed in {join(self.out_dir, 'bad_frames.csv')}"
+             if self.bad_frames else "")  # fmt: skip
 
 
 class RunStopped(RuntimeError):
@@ -144,30 +161,35 @@ class OutputInUseError(ValueError):
     """The output folder holds chunks of another survey (``replace=False``)."""
 
 
-def _foreign_chunks(chunk_dir: Path, survey_hash: str) -> dict[str, str]:
+def _foreign_chunks(
+    chunk_dir: Location, survey_hash: str, opts: StorageOptions
+) -> dict[str, str]:
     """Chunks in ``chunk_dir`` made from another survey description (their marker's
     ``survey_hash`` differs): chunk name -> the survey its marker names."""
     foreign: dict[str, str] = {}
-    for marker in sorted(chunk_dir.glob("*.json")):
+    for name in list_names(chunk_dir, opts):
+        if not name.endswith(".json"):
+            continue
         try:
-            done = json.loads(marker.read_text())
+            done = json.loads(read_bytes(join(chunk_dir, name), opts).decode())
         except (OSError, ValueError):
             continue  # a torn marker: the chunk is redone (or removed as stale at the end)
         if isinstance(done, dict) and done.get("survey_hash") not in (None, survey_hash):
-            foreign[marker.stem] = str(done.get("survey", "?"))
+            foreign[name.removesuffix(".json")] = str(done.get("survey", "?"))
     return foreign
 
 
-def _remove_chunks(chunk_dir: Path, names: set[str]) -> None:
+def _remove_chunks(chunk_dir: Location, names: set[str], opts: StorageOptions) -> None:
     """Delete the named chunks: marker first (a chunk without its marker is never reused)."""
     for name in sorted(names):
         for suffix in (".json", ".parquet"):
-            (chunk_dir / f"{name}{suffix}").unlink(missing_ok=True)
+            remove(join(chunk_dir, f"{name}{suffix}"), opts)
 
 
-def _stale_chunks(chunk_dir: Path, keep: set[str]) -> set[str]:
+def _stale_chunks(chunk_dir: Location, keep: set[str], opts: StorageOptions) -> set[str]:
     """Chunk files in ``chunk_dir`` that are not among ``keep`` (this run's chunks)."""
-    return {p.stem for p in chunk_dir.iterdir() if p.suffix in (".json", ".parquet")} - keep
+    names = list_names(chunk_dir, opts)
+    return {Path(n).stem for n in names if Path(n).suffix in (".json", ".parquet")} - keep
 
 
 @dataclass(frozen=True)
@@ -183,8 +205,9 @@ class _Plan:
     frames_of: dict[str, NDArray]  # frame indices each chunk reads
     frames_key: dict[str, str]
     provenance: JsonDict
-    chunk_dir: Path
-    cache_dir: Path
+    chunk_dir: Location
+    cache_dir: Location
+    storage_options: StorageOptions
 
     @property
     def n_frames(self) -> int:
@@ -283,7 +306,12 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
 
 
 def _plan(
-    survey: Survey, track: TrackMap, params: PipelineParams, out: Path, ch: NDArray
+    survey: Survey,
+    track: TrackMap,
+    params: PipelineParams,
+    out: Location,
+    ch: NDArray,
+    opts: StorageOptions,
 ) -> _Plan:
     """Positions, chunks, the frames each chunk reads, the run's provenance and folders;
     ``ch`` is every frame's chainage, rounded (NaN off the track)."""
@@ -318,9 +346,10 @@ def _plan(
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
     if params.sky_net is not None:
         seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
-    chunk_dir, cache_dir = out / "chunks", out / "cache" / f"seg-{params.segmenter}-{seg_code}"
-    chunk_dir.mkdir(parents=True, exist_ok=True)
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    chunk_dir = join(out, "chunks")
+    cache_dir = join(out, "cache", f"seg-{params.segmenter}-{seg_code}")
+    makedirs(chunk_dir, opts)
+    makedirs(cache_dir, opts)
 
     k = np.floor(positions / params.chunk_m).astype(np.int64)
     chunks = [
@@ -334,14 +363,20 @@ def _plan(
         name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
         for name, _, _, s in chunks
     }
+    # each image stamped once (a frame is read by up to three chunks), remote ones in parallel
+    images = [join(survey.root, str(fr.image[i])) for i in np.flatnonzero(finite)]
+    known = dict(zip(map(str, images), stamps(images, survey.storage_options), strict=True))
     keys = {
         name: frames_key(
-            (str(fr.frame_id[i]) for i in idx), (str(survey.root / str(fr.image[i])) for i in idx)
+            (str(fr.frame_id[i]) for i in idx),
+            (str(join(survey.root, str(fr.image[i]))) for i in idx),
+            survey.storage_options,
+            known,
         )
         for name, idx in frames_of.items()
     }
     return _Plan(survey, track, params, ch, positions, chunks, frames_of, keys, prov,
-                 chunk_dir, cache_dir)  # fmt: skip
+                 chunk_dir, cache_dir, opts)  # fmt: skip
 
 
 def _pending(
@@ -351,8 +386,9 @@ def _pending(
     pending, skipped = [], 0
     for c in plan.chunks:
         marker = chunk_finished(
-            plan.chunk_dir, c[0], plan.provenance["run_key"], plan.frames_key[c[0]]
-        )
+            plan.chunk_dir, c[0], plan.provenance["run_key"], plan.frames_key[c[0]],
+            plan.storage_options,
+        )  # fmt: skip
         if marker is None:
             pending.append(c)
             continue
@@ -389,25 +425,43 @@ FROZEN_MEAN_LEVELS = 1.0
 FROZEN_P99_LEVELS = 4.0
 
 
-def _thumbnail(path: Path) -> NDArray | None:
+def _thumbnail(path: Location, opts: StorageOptions) -> NDArray | None:
     """The quarter-size grey picture of an image file (None when it cannot be decoded: the
     segmentation reports it)."""
-    return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    if isinstance(path, Path):
+        return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    try:
+        data = np.frombuffer(read_bytes(path, opts), np.uint8)
+    except OSError:
+        return None
+    return cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_4) if data.size else None
 
 
-def _same_picture(a: Path, b: Path, thumbs: dict[Path, NDArray | None]) -> str | None:
+def _same_file(a: Location, b: Location, opts: StorageOptions) -> bool:
+    """Whether two image files hold the same bytes (sizes compared first)."""
+    if isinstance(a, Path) and isinstance(b, Path):
+        return a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes()
+    sa, sb = stat_key(str(a), opts), stat_key(str(b), opts)
+    if sa is None or sb is None:
+        raise FileNotFoundError(a if sa is None else b)
+    return sa[0] == sb[0] and read_bytes(a, opts) == read_bytes(b, opts)
+
+
+def _same_picture(
+    a: Location, b: Location, thumbs: dict[Location, NDArray | None], opts: StorageOptions
+) -> str | None:
     """How the two image files show the same picture (``"the same file"``, or ``"the same
     picture re-encoded"``), or None. Files that cannot be read are None (reported when read).
     ``thumbs`` keeps the decoded pictures: each frame is compared as itself and as the next
     frame's predecessor, decoded once."""
     try:
-        if a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes():
+        if _same_file(a, b, opts):
             return "the same file"
     except OSError:
         return None
     for path in (a, b):
         if path not in thumbs:
-            thumbs[path] = _thumbnail(path)
+            thumbs[path] = _thumbnail(path, opts)
     pa, pb = thumbs[a], thumbs[b]
     if pa is None or pb is None or pa.shape != pb.shape:
         return None
@@ -430,16 +484,18 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
             prev_of[i] = last[side]
         last[side] = i
     frozen = {}
-    thumbs: dict[Path, NDArray | None] = {}
+    thumbs: dict[Location, NDArray | None] = {}
+    opts = plan.survey.storage_options
     for i in need:
         j = prev_of.get(int(i))
         if j is None:
             continue
-        same = _same_picture(root / str(fr.image[i]), root / str(fr.image[j]), thumbs)
-        thumbs.pop(root / str(fr.image[j]), None)  # frame j is not compared again
+        image_i, image_j = join(root, str(fr.image[i])), join(root, str(fr.image[j]))
+        same = _same_picture(image_i, image_j, thumbs, opts)
+        thumbs.pop(image_j, None)  # frame j is not compared again
         if same is not None:
             frozen[int(i)] = (
-                f"image {root / str(fr.image[i])} is frozen: {same} as the {fr.side[i]} "
+                f"image {image_i} is frozen: {same} as the {fr.side[i]} "
                 f"camera's frame before ({str(fr.frame_id[j])!r}, manifest line {fr.row[j]}), so "
                 "the camera stopped updating its picture; check the camera and drop the frame"
             )
@@ -475,8 +531,9 @@ def _frame_jobs(
             continue
         cam = cams[str(fr.side[i])][0]
         job = FrameJob(
-            fid, str(plan.survey.root / str(fr.image[i])), int(cam.width_px),
-            int(cam.height_px), str(plan.cache_dir / f"{fid}.npz"), thin[str(fr.side[i])],
+            fid, str(join(plan.survey.root, str(fr.image[i]))), int(cam.width_px),
+            int(cam.height_px), str(join(plan.cache_dir, f"{fid}.npz")), thin[str(fr.side[i])],
+            dict(plan.storage_options),
         )  # fmt: skip
         cached = read_cache(job)
         if cached is None:
@@ -501,7 +558,7 @@ def _chunk_jobs(
         )
         frames = tuple(
             ChunkFrame(str(fr.frame_id[i]), str(fr.side[i]), float(ch[i]),
-                       str(plan.cache_dir / f"{fr.frame_id[i]}.npz"))
+                       str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")))
             for i in idx
             if str(fr.frame_id[i]) not in bad
         )  # fmt: skip
@@ -509,6 +566,7 @@ def _chunk_jobs(
             name, lo, hi, s, frames, cams, bool(plan.survey.reverse),
             float(plan.survey.antenna_height_m), plan.track, plan.params, plan.provenance,
             str(plan.chunk_dir), known_bad, plan.frames_key[name], pinned,
+            dict(plan.storage_options),
         ))  # fmt: skip
     return jobs
 
@@ -524,9 +582,11 @@ def _merge(
     """The chunks merged into one mask set (margins applied, holes closed, raised to the
     terrain) and its provenance; bad frames met by the chunks are added to ``bad``."""
     parts = []
+    opts = plan.storage_options
     for name, *_ in plan.chunks:
-        parts.append(read_masks(plan.chunk_dir / f"{name}.parquet"))
-        marker = json.loads((plan.chunk_dir / f"{name}.json").read_text())
+        with input_path(join(plan.chunk_dir, f"{name}.parquet"), opts) as chunk_file:
+            parts.append(read_masks(chunk_file))
+        marker = json.loads(read_bytes(join(plan.chunk_dir, f"{name}.json"), opts).decode())
         for b in marker.get("bad_frames", []):
             if b["frame_id"] not in bad:  # not reported yet: met by a chunk, or a run before
                 bad[b["frame_id"]] = BadFrame(**b)
@@ -593,6 +653,19 @@ def source_report(masks: MaskSet, *, stretch_m: float = ASSUMED_STRETCH_M) -> li
     return lines
 
 
+def _check_reachable(survey: Survey | str | os.PathLike[str], out: Location,
+                     where: Scheduler) -> None:  # fmt: skip
+    """Refuse ``memory://`` with worker processes: that file system is this process's
+    memory, which a worker process does not see."""
+    root = survey.root if isinstance(survey, Survey) else location(survey)
+    for what, loc in (("survey", root), ("--out", out)):
+        if is_remote(loc) and str(loc).startswith("memory://") and where.kind != "serial":
+            raise ValueError(
+                f"{what} {loc}: memory:// lives in this process, and the {where.describe()}'s "
+                "worker processes cannot read it; use --scheduler serial, or shared storage"
+            )
+
+
 def process_survey(
     survey: Survey | str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -608,16 +681,20 @@ def process_survey(
     margins: MarginTable | str | os.PathLike[str] | None = None,
     replace: bool = False,
     dem: Dem | None = None,
+    storage_options: StorageOptions | None = None,
 ) -> ProcessResult:
     """Process a survey folder into masks, in resumable chainage chunks.
 
     Parameters
     ----------
-    survey : path-like or predisat.survey.Survey
-        The survey folder (loaded with ``on_error="skip"``; rejected frames are bad frames).
-    out_dir : path-like
+    survey : path-like, str or predisat.survey.Survey
+        The survey folder (loaded with ``on_error="skip"``; rejected frames are bad frames):
+        a local path or an fsspec URL (``file://``, ``http(s)://``, ``s3://``...;
+        :mod:`predisat.storage`).
+    out_dir : path-like or str
         Output folder: ``masks.parquet``, ``provenance.json``, ``bad_frames.csv``,
-        ``chunks/``, ``cache/``. Reusing it resumes an interrupted run.
+        ``chunks/``, ``cache/``. Reusing it resumes an interrupted run. A local path or a
+        writable fsspec URL (``s3://``, ``memory://`` with the serial scheduler...).
     params : PipelineParams, optional
     track : TrackMap, optional
         Track to use instead of the one named in ``survey.yaml``.
@@ -654,6 +731,9 @@ def process_survey(
         terrain horizon is raised to it and flagged ``TERRAIN``
         (:func:`predisat.masks.terrain.raise_to_terrain`); like the margins, changing it redoes
         no chunk.
+    storage_options : mapping, optional
+        Options of the fsspec file system of the survey's and the output's URLs
+        (credentials, endpoint...); handed to the tasks with the URLs.
 
     Returns
     -------
@@ -681,18 +761,21 @@ def process_survey(
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress
+    opts = dict(storage_options or {})
+    out = location(out_dir)
+    _check_reachable(survey, out, where)
     if not isinstance(survey, Survey):
-        survey = Survey.load(survey, track=track, check_images=False, on_error="skip")
+        survey = Survey.load(survey, track=track, check_images=False, on_error="skip",
+                             storage_options=opts)  # fmt: skip
     trk = track if track is not None else survey.track
     if trk is None:
         raise ValueError(
             f"survey {survey.root} names no track file; pass track= (CLI: --track FILE)"
         )
-    out = Path(out_dir)
     ch = np.round(np.asarray(survey.frames.chainage_m, float), _CHAINAGE_DECIMALS)
     bad = _load_bad_frames(survey, ch, strict)
-    plan = _plan(survey, trk, p, out, ch)
-    foreign = _foreign_chunks(plan.chunk_dir, plan.provenance["survey_hash"])
+    plan = _plan(survey, trk, p, out, ch, opts)
+    foreign = _foreign_chunks(plan.chunk_dir, plan.provenance["survey_hash"], opts)
     if foreign and not replace:
         others = sorted(set(foreign.values()))
         raise OutputInUseError(
@@ -701,7 +784,7 @@ def process_survey(
             "changed), which cannot be reused; give another output folder, or replace them "
             "(CLI: --replace)"
         )
-    _remove_chunks(plan.chunk_dir, set(foreign))
+    _remove_chunks(plan.chunk_dir, set(foreign), opts)
     timings["load"] = time.perf_counter() - t0
     pending, skipped = _pending(plan, strict, max_chunks)
     _report(
@@ -738,14 +821,20 @@ def process_survey(
     for line in source_report(merged):
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
-    masks_path = write_masks(merged, out / "masks.parquet")
-    _remove_chunks(plan.chunk_dir, _stale_chunks(plan.chunk_dir, {c[0] for c in plan.chunks}))
-    write_bad_frames(out / "bad_frames.csv", bad_list)
+    masks_path = join(out, "masks.parquet")
+    if isinstance(masks_path, Path):
+        write_masks(merged, masks_path)
+    else:
+        with output_path(masks_path, opts) as tmp:
+            write_masks(merged, tmp)
+    stale = _stale_chunks(plan.chunk_dir, {c[0] for c in plan.chunks}, opts)
+    _remove_chunks(plan.chunk_dir, stale, opts)
+    write_bad_frames(join(out, "bad_frames.csv"), bad_list, opts)
     timings["merge"] = time.perf_counter() - t3
     elapsed = time.perf_counter() - t0
     final_prov["bad_frame_list"] = [asdict(b) for b in bad_list]
     final_prov["timings_s"] = timings
-    write_bytes_atomic(out / "provenance.json", json.dumps(final_prov, indent=1).encode())
+    write_atomic(join(out, "provenance.json"), json.dumps(final_prov, indent=1).encode(), opts)
     return ProcessResult(
         out, masks_path, merged, plan.n_frames, len(pending), skipped, n_seg, bad_list,
         elapsed, timings,

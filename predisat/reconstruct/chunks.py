@@ -9,9 +9,10 @@ by an earlier run may be kept.
 
 from __future__ import annotations
 
+import io
 import json
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -19,7 +20,6 @@ import numpy as np
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from predisat.atomic import write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
@@ -27,6 +27,16 @@ from predisat.reconstruct.badframes import BadFrame
 from predisat.reconstruct.carving import FrameView, Reconstructor
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
+from predisat.storage import (
+    Location,
+    StorageOptions,
+    exists,
+    join,
+    location,
+    output_path,
+    read_bytes,
+    write_atomic,
+)
 from predisat.track import TrackMap
 
 __all__ = [
@@ -68,6 +78,8 @@ class ChunkJob:
     known_bad: tuple[BadFrame, ...] = ()
     frames_key: str = ""  # frames_key of every frame the chunk may use, bad ones included
     pinned_utc: str | None = None  # the run's pinned time (SOURCE_DATE_EPOCH), else None
+    # of the file system of chunk_dir and the cache paths when they are URLs
+    storage_options: StorageOptions = field(default_factory=dict)
 
 
 
@@ -129,7 +141,7 @@ def run_chunk(
     views: list[FrameView] = []
     ok_frames = []
     for f in job.frames:
-        cached = _load_cached(f)
+        cached = _load_cached(f, job.storage_options)
         if isinstance(cached, BadFrame):
             bad.append(cached)
             continue
@@ -157,8 +169,12 @@ def run_chunk(
     prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
     prov["created_utc"] = utc_stamp(job.pinned_utc)
     masks = rec.to_maskset(track, provenance=prov)
-    chunk_dir = Path(job.chunk_dir)
-    write_masks(masks, chunk_dir / f"{job.name}.parquet")
+    chunk_dir, opts = location(job.chunk_dir), job.storage_options
+    if isinstance(chunk_dir, Path):
+        write_masks(masks, chunk_dir / f"{job.name}.parquet")
+    else:
+        with output_path(join(chunk_dir, f"{job.name}.parquet"), opts) as tmp:
+            write_masks(masks, tmp)
     marker = {
         **prov,
         "frames_key": job.frames_key,
@@ -168,15 +184,18 @@ def run_chunk(
         "finished_utc": utc_stamp(job.pinned_utc),
     }
     # the JSON is the completion marker: written last, so a half-done chunk is redone
-    write_bytes_atomic(chunk_dir / f"{job.name}.json", json.dumps(marker, indent=1).encode())
+    write_atomic(join(chunk_dir, f"{job.name}.json"), json.dumps(marker, indent=1).encode(), opts)
     return job.name, bad
 
 
 
-def _load_cached(f: ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
-    path = Path(f.cache_path)
+def _load_cached(
+    f: ChunkFrame, opts: StorageOptions
+) -> tuple[NDArray, NDArray | None] | BadFrame:
+    path = location(f.cache_path)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
+        with np.load(source, allow_pickle=False) as z:
             return decode_cache(z, json.loads(str(z["meta"])), f.frame_id)
     except (OSError, ValueError, KeyError) as exc:
         return BadFrame(f.frame_id, f"segmentation cache {path} unreadable ({exc}); rerun")
@@ -184,19 +203,27 @@ def _load_cached(f: ChunkFrame) -> tuple[NDArray, NDArray | None] | BadFrame:
 
 
 def chunk_finished(
-    chunk_dir: Path, name: str, run_key: str, frames_key: str
+    chunk_dir: Location,
+    name: str,
+    run_key: str,
+    frames_key: str,
+    storage_options: StorageOptions | None = None,
 ) -> JsonDict | None:
     """The completion marker of a chunk that need not be redone, else None."""
-    marker, data = chunk_dir / f"{name}.json", chunk_dir / f"{name}.parquet"
-    if not (marker.is_file() and data.is_file()):
+    marker, data = join(chunk_dir, f"{name}.json"), join(chunk_dir, f"{name}.parquet")
+    if isinstance(marker, Path) and isinstance(data, Path):
+        if not (marker.is_file() and data.is_file()):
+            return None
+    elif not (exists(marker, storage_options) and exists(data, storage_options)):
         return None
     try:
-        done = json.loads(marker.read_text())
+        done = json.loads(read_bytes(marker, storage_options).decode())
         if done.get("run_key") != run_key or done.get("frames_key") != frames_key:
             return None
         # A power cut after the rename may leave an empty or torn file (no fsync, for speed):
         # a chunk whose Parquet footer does not read, or holds other than its rows, is redone.
-        rows = pq.read_metadata(data).num_rows
+        footer = data if isinstance(data, Path) else io.BytesIO(read_bytes(data, storage_options))
+        rows = pq.read_metadata(footer).num_rows
         ok = rows > 0 and rows == done.get("n_positions", rows)
         return done if ok and isinstance(done, dict) else None
     except (OSError, ValueError, AttributeError):

@@ -17,8 +17,8 @@ import json
 import os
 import zipfile
 import zlib
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -26,16 +26,23 @@ import numpy as np
 from numpy.lib.npyio import NpzFile
 from numpy.typing import NDArray
 
-from predisat.atomic import write_bytes_atomic
 from predisat.jsontypes import JsonDict
 from predisat.reconstruct.badframes import BadFrame
 from predisat.sky.network import SkyNet
+from predisat.storage import (
+    StorageOptions,
+    exists,
+    is_remote,
+    join,
+    location,
+    name_of,
+    read_bytes,
+    stamp,
+    write_atomic,
+)
 
 if TYPE_CHECKING:
     from predisat.survey import Survey
-
-if TYPE_CHECKING:
-    pass
 
 __all__ = [
     "CACHE_VERSION",
@@ -68,26 +75,38 @@ SEGMENTATION_CODE = (
 
 @dataclass(frozen=True)
 class FrameJob:
+    """One frame to segment: its image and its cache entry, each a local path or a URL
+    (opened by the task with ``storage_options``, wherever it runs)."""
+
     frame_id: str
     image_path: str
     width_px: int
     height_px: int
     cache_path: str
     thin_px: int | None = None  # given to the default segmenter only
+    storage_options: StorageOptions = field(default_factory=dict)
 
 
 
-def stat_key(path: str) -> list[int]:
-    st = os.stat(path)
-    return [int(st.st_size), int(st.st_mtime_ns)]
+def stat_key(path: str, storage_options: StorageOptions | None = None) -> list[Any] | None:
+    """Size and modification stamp of a file (local: ``[size, mtime_ns]``), None when missing
+    (:func:`predisat.storage.stamp`)."""
+    return stamp(location(path), storage_options)
 
 
 
-def frames_key(frame_ids: Iterable[str], image_paths: Iterable[str]) -> str:
+def frames_key(
+    frame_ids: Iterable[str],
+    image_paths: Iterable[str],
+    storage_options: StorageOptions | None = None,
+    known: Mapping[str, list[Any] | None] | None = None,
+) -> str:
     """Hash of a chunk's frames and their images' size and modification time (None when
-    missing), so that a finished chunk is redone once one of its images is replaced."""
+    missing), so that a finished chunk is redone once one of its images is replaced.
+    ``known``: stamps already taken (:func:`stat_key`), by image path."""
+    given = known or {}
     stamps = [
-        [fid, stat_key(path) if os.path.exists(path) else None]
+        [fid, given[path] if path in given else stat_key(path, storage_options)]
         for fid, path in zip(frame_ids, image_paths, strict=True)
     ]
     return hashlib.sha256(json.dumps(stamps).encode()).hexdigest()[:16]
@@ -96,18 +115,16 @@ def frames_key(frame_ids: Iterable[str], image_paths: Iterable[str]) -> str:
 
 def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
     """Cached result of a frame (None when absent or stale: the image changed)."""
-    path = Path(job.cache_path)
-    if not path.is_file():
+    path, opts = location(job.cache_path), job.storage_options
+    if not (path.is_file() if isinstance(path, Path) else exists(path, opts)):
         return None
     try:
-        with np.load(path, allow_pickle=False) as z:
+        source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
+        with np.load(source, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             if meta.get("version") != CACHE_VERSION or meta.get("thin_px") != job.thin_px:
                 return None
-            if os.path.exists(job.image_path):
-                if meta.get("image_stat") != stat_key(job.image_path):
-                    return None
-            elif meta.get("image_stat") is not None:
+            if meta.get("image_stat") != stat_key(job.image_path, opts):
                 return None
             return decode_cache(z, meta, job.frame_id)
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
@@ -146,7 +163,7 @@ def decode_cache(
 def write_cache(
     job: FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
 ) -> None:
-    stat = stat_key(job.image_path) if os.path.exists(job.image_path) else None
+    stat = stat_key(job.image_path, job.storage_options)
     meta: JsonDict = {
         "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
     }  # fmt: skip
@@ -158,7 +175,7 @@ def write_cache(
         if conf is not None:
             arrays["confidence"] = np.asarray(conf, np.float32)
     payload = _npz_bytes({"meta": np.array(json.dumps(meta)), **arrays})
-    write_bytes_atomic(Path(job.cache_path), payload)
+    write_atomic(location(job.cache_path), payload, job.storage_options)
 
 
 
@@ -219,13 +236,19 @@ def survey_hash(survey: Survey) -> str:
     Image content is not hashed (too slow for a resume check); the segmentation cache checks
     each image's size and modification time instead.
     """
-    root = Path(survey.root)
+    root, opts = survey.root, survey.storage_options
     h = hashlib.sha256()
-    files = [root / "survey.yaml", root / "manifest.csv"]
-    files += sorted({Path(c.calibration_path) for c in survey.cameras.values()})
+    files = [join(root, "survey.yaml"), join(root, "manifest.csv")]
+    calibrations = {c.calibration_path for c in survey.cameras.values()}
+    # local paths in the order of Path (by parts), as they always were
+    files += sorted(calibrations, key=lambda p: p.parts if isinstance(p, Path) else (p,))
     for p in files:
-        h.update(str(p.name).encode() + b"\0")
-        h.update(p.read_bytes() if p.is_file() else b"<missing>")
+        h.update(name_of(p).encode() + b"\0")
+        if is_remote(p):
+            h.update(read_bytes(p, opts) if exists(p, opts) else b"<missing>")
+        else:
+            q = Path(p)
+            h.update(q.read_bytes() if q.is_file() else b"<missing>")
     return h.hexdigest()
 
 

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from predisat.reconstruct.framecache import FrameJob, write_cache
 from predisat.sky.network import SkyNet, classifier_with_net
 from predisat.sky.segment import SkyOptions, segment_sky
+from predisat.storage import StorageError, StorageOptions, location, read_bytes
 
 __all__ = [
     "BLANK_SPREAD_LEVELS",
@@ -70,12 +71,18 @@ def _candidate_classifier(method: str, sky_net: str) -> Any:
 
 
 
-def read_image(path: str) -> tuple[NDArray | None, str | None]:
-    """The BGR image at ``path``, or None and the problem with the file and its fix."""
+def read_image(
+    path: str, storage_options: StorageOptions | None = None
+) -> tuple[NDArray | None, str | None]:
+    """The BGR image at ``path`` (a local path or a URL, :mod:`predisat.storage`), or None and
+    the problem with the file and its fix."""
     try:
-        data = Path(path).read_bytes()
+        loc = location(path)
+        data = loc.read_bytes() if isinstance(loc, Path) else read_bytes(loc, storage_options)
     except FileNotFoundError:
         return None, f"image {path} is missing; restore it or drop the frame"
+    except StorageError as exc:
+        return None, f"image {exc}"
     except OSError as exc:
         return None, f"image {path} cannot be read ({exc.strerror}); check the file"
     if not data:
@@ -118,7 +125,7 @@ def read_image(path: str) -> tuple[NDArray | None, str | None]:
 def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]:
     """Segment one frame into the cache; returns (frame_id, problem or None)."""
     result = None
-    img, problem = read_image(job.image_path)
+    img, problem = read_image(job.image_path, job.storage_options)
     if img is None:
         pass  # the problem says why
     elif img.shape[:2] != (job.height_px, job.width_px):

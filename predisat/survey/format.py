@@ -11,13 +11,13 @@ import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount
+from predisat.storage import Location, location
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -77,7 +77,7 @@ class SurveyError(ValueError):
     """A survey that cannot be loaded; ``problems`` lists every problem found."""
 
     def __init__(self, path: str | os.PathLike[str], problems: Sequence[SurveyProblem]) -> None:
-        self.path = Path(path)
+        self.path = location(path)
         self.problems = tuple(problems)
         shown = "\n".join(f"  - {p}" for p in self.problems[:50])
         more = len(self.problems) - 50
@@ -92,7 +92,7 @@ class SurveyCamera:
     side: Literal["left", "right"]
     camera: CameraModel
     mount: Mount
-    calibration_path: Path
+    calibration_path: Location  # a local path, or the URL of a remote survey's file
 
 
 def _readonly(a: ArrayLike, dtype: Any) -> NDArray:

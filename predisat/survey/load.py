@@ -20,6 +20,17 @@ from PIL import Image, UnidentifiedImageError
 
 from predisat.camera.models import CalibrationError, CameraModel, Mount
 from predisat.jsontypes import JsonDict
+from predisat.storage import (
+    Location,
+    StorageOptions,
+    exists,
+    input_path,
+    is_remote,
+    join,
+    location,
+    name_of,
+    read_bytes,
+)
 from predisat.survey.format import (
     DIRECTIONS,
     FORMAT,
@@ -45,8 +56,9 @@ class Survey:
 
     Attributes
     ----------
-    root : Path
-        The survey folder.
+    root : Path or str
+        The survey folder: a local path, or a URL (a str) of a survey on shared or object
+        storage (:mod:`predisat.storage`).
     direction_of_travel : {"increasing", "decreasing"}
         Chainage direction the vehicle drove.
     antenna_height_m : float
@@ -61,17 +73,18 @@ class Survey:
         The track the frames were checked and mapped against (given or named in survey.yaml).
     """
 
-    root: Path
+    root: Location
     direction_of_travel: Literal["increasing", "decreasing"]
     antenna_height_m: float
     cameras: Mapping[str, SurveyCamera]
     frames: Frames
     track_name: str | None = None
-    track_path: Path | None = None
+    track_path: Location | None = None
     metadata: Mapping[str, Any] = field(default_factory=dict)
     problems: tuple[SurveyProblem, ...] = ()
     version: int = VERSION
     track: TrackMap | None = field(default=None, repr=False)
+    storage_options: StorageOptions = field(default_factory=dict, repr=False)
 
     @property
     def reverse(self) -> bool:
@@ -91,15 +104,19 @@ class Survey:
             )
         return self.cameras[side]
 
-    def image_path(self, frame: int | str) -> Path:
-        """Absolute path of a frame's image, by table index or frame_id."""
+    def image_path(self, frame: int | str) -> Location:
+        """Location of a frame's image (absolute path, or URL), by table index or frame_id."""
         i = self.frames.index_of(frame) if isinstance(frame, str) else int(frame)
-        return self.root / str(self.frames.image[i])
+        return join(self.root, str(self.frames.image[i]))
 
     def read_image(self, frame: int | str) -> NDArray:
         """A frame's image as a BGR uint8 array (H, W, 3)."""
         path = self.image_path(frame)
-        img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if is_remote(path):
+            data = np.frombuffer(read_bytes(path, self.storage_options), np.uint8)
+            img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        else:
+            img = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if img is None:
             raise OSError(f"{path}: cannot decode image (re-export it as JPEG or PNG)")
         return img
@@ -113,13 +130,15 @@ class Survey:
         max_offset_m: float = 10.0,
         on_error: Literal["raise", "skip"] = "raise",
         max_speed_mps: float = 100.0,
+        storage_options: StorageOptions | None = None,
     ) -> Survey:
         """Read and validate a survey folder.
 
         Parameters
         ----------
-        path : path-like
-            The survey folder (or its ``survey.yaml``).
+        path : path-like or str
+            The survey folder (or its ``survey.yaml``): a local path, or an fsspec URL
+            (``file://``, ``http(s)://``, ``s3://``..., :mod:`predisat.storage`).
         track : TrackMap, optional
             Track to map positions on and to check them against; by default the track file
             named in ``survey.yaml`` when there is one.
@@ -136,6 +155,8 @@ class Survey:
             neighbours on its side than this speed allows in their time apart (while the two
             neighbours agree) contradicts the run and is a bad frame. Default 100 m/s
             (360 km/h).
+        storage_options : mapping, optional
+            Options of the URL's fsspec file system (credentials, endpoint...).
 
         Raises
         ------
@@ -143,14 +164,15 @@ class Survey:
         """
         if on_error not in ("raise", "skip"):
             raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
-        root = Path(path)
-        if root.name == "survey.yaml":
-            root = root.parent
-        header = _read_header(root)
+        root = location(path)
+        if name_of(root) == "survey.yaml":
+            root = root.parent if isinstance(root, Path) else root.rsplit("/", 1)[0]
+        opts = dict(storage_options or {})
+        header = _read_header(root, opts)
         if track is None and header["track_path"] is not None:
-            track = _load_track(root, header["track_path"], header["track_name"])
+            track = _load_track(root, header["track_path"], header["track_name"], opts)
         rows, frame_problems = _read_manifest(
-            root, header, track, check_images, max_offset_m, max_speed_mps
+            root, header, track, check_images, max_offset_m, max_speed_mps, opts
         )
         if frame_problems and on_error == "raise":
             raise SurveyError(root, frame_problems)
@@ -166,12 +188,13 @@ class Survey:
             problems=tuple(frame_problems),
             version=header["version"],
             track=track,
+            storage_options=opts,
         )
 
 
-def _read_header(root: Path) -> dict[str, Any]:
+def _read_header(root: Location, opts: StorageOptions) -> dict[str, Any]:
     """Parse survey.yaml and the calibrations; raise SurveyError listing every problem."""
-    doc = _read_yaml(root)
+    doc = _read_yaml(root, opts)
     probs: list[SurveyProblem] = []
 
     def bad(msg: str) -> None:
@@ -180,7 +203,7 @@ def _read_header(root: Path) -> dict[str, Any]:
     version, direction = _check_format(doc, bad)
     antenna_height_m = _antenna_height_m(doc, bad)
     track_name, track_path = _track_spec(root, doc, bad)
-    cameras = _read_cameras(root, doc, bad)
+    cameras = _read_cameras(root, doc, bad, opts)
     if probs:
         raise SurveyError(root, probs)
     known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras"}
@@ -195,17 +218,25 @@ def _read_header(root: Path) -> dict[str, Any]:
     }
 
 
-def _read_yaml(root: Path) -> JsonDict:
+def _read_yaml(root: Location, opts: StorageOptions) -> JsonDict:
     """The mapping of ``root/survey.yaml``; SurveyError if the folder or file is unreadable."""
-    yaml_path = root / "survey.yaml"
-    if not root.is_dir():
+    yaml_path = join(root, "survey.yaml")
+    if isinstance(root, Path) and not root.is_dir():
         raise SurveyError(root, [SurveyProblem("not a folder; give the survey folder")])
-    if not yaml_path.is_file():
+    if isinstance(yaml_path, Path) and not yaml_path.is_file():
         raise SurveyError(
             root, [SurveyProblem("survey.yaml is missing; see docs/survey-format.md")]
         )
     try:
-        doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
+        if isinstance(yaml_path, Path):
+            text = yaml_path.read_text(encoding="utf-8")
+        else:
+            text = read_bytes(yaml_path, opts).decode("utf-8")
+        doc = yaml.safe_load(text)
+    except FileNotFoundError as exc:  # a URL: the folder cannot be listed everywhere (HTTP)
+        raise SurveyError(root, [SurveyProblem(
+            f"survey.yaml is missing ({exc}); see docs/survey-format.md"
+        )]) from None  # fmt: skip
     except (OSError, yaml.YAMLError) as exc:
         raise SurveyError(root, [SurveyProblem(f"survey.yaml cannot be parsed: {exc}")]) from None
     except UnicodeDecodeError as exc:
@@ -252,19 +283,19 @@ def _antenna_height_m(doc: JsonDict, bad: Callable[[str], None]) -> float:
 
 
 def _track_spec(
-    root: Path, doc: JsonDict, bad: Callable[[str], None]
-) -> tuple[Any, Path | None]:  # Any: the name as the YAML gives it
+    root: Location, doc: JsonDict, bad: Callable[[str], None]
+) -> tuple[Any, Location | None]:  # Any: the name as the YAML gives it
     """The ``track`` mapping's ``name`` and ``path`` (relative to ``root``, None if absent)."""
     track_doc = doc.get("track") or {}
     if not isinstance(track_doc, dict):
         bad("track must be a mapping with 'name' and optional 'path'")
         track_doc = {}
-    track_path = root / str(track_doc["path"]) if track_doc.get("path") else None
+    track_path = join(root, str(track_doc["path"])) if track_doc.get("path") else None
     return track_doc.get("name"), track_path
 
 
 def _read_cameras(
-    root: Path, doc: JsonDict, bad: Callable[[str], None]
+    root: Location, doc: JsonDict, bad: Callable[[str], None], opts: StorageOptions
 ) -> dict[str, SurveyCamera]:
     """The cameras by side, their calibrations read; each problem reported through ``bad``."""
     cameras: dict[str, SurveyCamera] = {}
@@ -279,9 +310,12 @@ def _read_cameras(
         if not isinstance(spec, dict) or "calibration" not in spec:
             bad(f"cameras.{side} needs a 'calibration' path (e.g. calib/{side}.yaml)")
             continue
-        calib_path = root / str(spec["calibration"])
+        calib_path = join(root, str(spec["calibration"]))
         try:
-            model = CameraModel.from_yaml(calib_path)
+            if is_remote(calib_path) and not exists(calib_path, opts):
+                raise CalibrationError(f"{calib_path}: no such file; check the path")
+            with input_path(calib_path, opts) as local_calib:  # OpenCV reads local files
+                model = CameraModel.from_yaml(local_calib)
         except CalibrationError as exc:
             bad(f"cameras.{side}.calibration: {exc}")
             continue
@@ -294,9 +328,12 @@ def _read_cameras(
     return cameras
 
 
-def _load_track(root: Path, path: Path, name: str | None) -> TrackMap:
+def _load_track(
+    root: Location, path: Location, name: str | None, opts: StorageOptions
+) -> TrackMap:
     try:
-        return load_track(path, name)
+        with input_path(path, opts) as local_track:
+            return load_track(local_track, name)
     except (OSError, ValueError) as exc:
         raise SurveyError(
             root,
@@ -345,12 +382,13 @@ class _Row:
         self.probs.append(SurveyProblem(message, self.frame_id or None, self.row))
 
 
-def _check_image(root: Path, rel: str, cam: CameraModel) -> str | None:
-    path = root / rel
-    if not path.is_file():
+def _check_image(root: Location, rel: str, cam: CameraModel, opts: StorageOptions) -> str | None:
+    path = join(root, rel)
+    if not exists(path, opts) or (isinstance(path, Path) and not path.is_file()):
         return f"image {rel} is missing; copy it into the survey folder or remove the row"
     try:
-        with Image.open(path) as im:  # lazy: reads the header only
+        source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
+        with Image.open(source) as im:  # lazy: reads the header only
             w, h = im.size
     except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError) as exc:
         return f"image {rel} cannot be read ({exc}); re-export it as JPEG or PNG"
@@ -362,14 +400,23 @@ def _check_image(root: Path, rel: str, cam: CameraModel) -> str | None:
     return None
 
 
-def _parse_rows(root: Path, header: dict[str, Any], check_images: bool) -> list[_Row]:
-    path = root / "manifest.csv"
-    if not path.is_file():
+def _parse_rows(
+    root: Location, header: dict[str, Any], check_images: bool, opts: StorageOptions
+) -> list[_Row]:
+    path = join(root, "manifest.csv")
+    if isinstance(path, Path) and not path.is_file():
         raise SurveyError(
             root, [SurveyProblem("manifest.csv is missing; see docs/survey-format.md")]
         )
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        if isinstance(path, Path):
+            text = path.read_text(encoding="utf-8-sig")
+        else:
+            text = read_bytes(path, opts).decode("utf-8-sig")
+    except FileNotFoundError as exc:
+        raise SurveyError(
+            root, [SurveyProblem(f"manifest.csv is missing ({exc}); see docs/survey-format.md")]
+        ) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SurveyError(
             root, [SurveyProblem(f"manifest.csv cannot be read ({exc}); save it as UTF-8 CSV")]
@@ -429,7 +476,7 @@ def _parse_rows(root: Path, header: dict[str, Any], check_images: bool) -> list[
         elif image.is_absolute() or ".." in image.parts or "\\" in r.image:
             r.bad(f"image {r.image!r} must be a relative path inside the survey folder, with '/'")
         elif check_images and r.side in cameras:
-            image_problem = _check_image(root, r.image, cameras[r.side].camera)
+            image_problem = _check_image(root, r.image, cameras[r.side].camera, opts)
             if image_problem:
                 r.bad(image_problem)
     return rows
@@ -542,14 +589,15 @@ def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Ro
 
 
 def _read_manifest(
-    root: Path,
+    root: Location,
     header: dict[str, Any],
     track: TrackMap | None,
     check_images: bool,
     max_offset_m: float,
     max_speed_mps: float = 100.0,
+    opts: StorageOptions | None = None,
 ) -> tuple[Frames, list[SurveyProblem]]:
-    rows = _parse_rows(root, header, check_images)
+    rows = _parse_rows(root, header, check_images, opts or {})
     if not rows:
         raise SurveyError(root, [SurveyProblem("manifest.csv has no frames")])
     if track is not None:
