@@ -438,8 +438,8 @@ def test_the_integrity_budget_sets_each_modes_k(
     runs = {
         1e-12: run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track),
         1e-7: run_from_args(parser.parse_args([*base, "--integrity-risk", "1e-7", "--out",
-                                               str(tmp_path / "r")]), track),  # fmt: skip
-    }
+                                               str(tmp_path / "r")]), track),
+    }  # fmt: skip
     unit = one.results[0].interval_m
     mode = interval_mode(one.results[0].count)
     for risk, r in runs.items():
@@ -451,7 +451,8 @@ def test_the_integrity_budget_sets_each_modes_k(
         for m, kk in want.items():
             sel = (mode == m) & np.isfinite(unit)
             np.testing.assert_allclose(got[sel], kk * unit[sel], rtol=1e-5)
-            seen.add(m) if sel.any() else None
+            if sel.any():
+                seen.add(m)
         assert 3 in seen  # the stretch has three-pair epochs, so the test bites
         text = html.unescape(r.report_html.read_text(encoding="utf-8"))
         assert f"integrity risk {risk:.3g} per epoch" in text
