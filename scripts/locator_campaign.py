@@ -17,7 +17,8 @@ used by every configuration. Pair intervals are ``+- k sigma_K`` with ``k = 3.89
 two-sided Gaussian risk per pair, the risk the source claims for its ``+- 2 xi``); ``masks_k2``
 repeats the masks rule with the source's ``k = 2``, ``masks_budget`` with the default integrity
 budget (:class:`predisat.gnss.integrity.IntegrityBudget`, ``locator run``'s default: each
-epoch's ``k`` from 1e-12 per epoch and the disjoint pairs united). ``--configs`` runs a subset
+epoch's ``k`` from 1e-12 per epoch and the disjoint pairs united; ``pipeline_budget`` the same
+with the pipeline masks). ``--configs`` runs a subset
 (job files then hold only those; give another ``--out``).
 
 Per configuration: epochs, share of epochs per integrity mode, share with a safety claim,
@@ -153,7 +154,7 @@ def _world(name: str, cache: Path) -> tuple[World, MaskSet, MaskSet | None]:
 _STATE: dict = {}
 
 
-CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline")
+CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline", "pipeline_budget")
 
 
 def _init(cache: str, demo: str | None, configs: tuple[str, ...] = CONFIGS) -> None:
@@ -213,6 +214,10 @@ def run_job(job: Job) -> pd.DataFrame:
     }
     if pipeline is not None:
         configs["pipeline"] = (RunConfig(loc, trust="masks"), pipeline)
+        configs["pipeline_budget"] = (
+            RunConfig(LocatorConfig(model=learned, budget=IntegrityBudget()), trust="masks"),
+            pipeline,
+        )
     configs = {k: v for k, v in configs.items() if k in _STATE.get("configs", CONFIGS)}
     state = {s: sim.state[:, k] for k, s in enumerate(sim.sats)}
     out = []
@@ -280,7 +285,8 @@ def figure(frames: pd.DataFrame, table: pd.DataFrame, paths: list[Path]) -> None
     fig = Figure(figsize=(11, 4.2), layout="constrained")
     ax, bx = fig.subplots(1, 2, width_ratios=[3, 2])
     colours = {"masks": "#1b7837", "pipeline": "#762a83", "none": "#b2182b", "cutoff15": "#ef8a62",
-               "masks_k2": "#7fbf7b", "masks_budget": "#2166ac"}  # fmt: skip
+               "masks_k2": "#7fbf7b", "masks_budget": "#2166ac",
+               "pipeline_budget": "#c2a5cf"}  # fmt: skip
     bins = np.geomspace(3.0, 3000.0, 60)
     for cfg, g in frames.groupby("config", sort=False):
         length = g.loc[g["claim"], "length_m"].to_numpy(float)
