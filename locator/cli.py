@@ -31,6 +31,9 @@ from predisat.cli.args import (
     existing_path,
     finite_float,
     given,
+    integrity_budget,
+    integrity_options,
+    integrity_risk,
     needs,
     non_negative_float,
     output_dir,
@@ -41,6 +44,7 @@ from predisat.cli.args import (
     speed_mps,
 )
 from predisat.cli.common import CliError, km_range, run_main, track_option
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
 
 __all__ = ["main"]
 
@@ -63,7 +67,7 @@ def _config(args: argparse.Namespace) -> Any:
         model = IntervalModel(model.error, args.k_sigma)
     trust = "masks" if args.masks else ("cutoff" if args.cutoff is not None else "none")
     return RunConfig(
-        LocatorConfig(model=model),
+        LocatorConfig(model=model, budget=integrity_budget(args)),
         integrity=args.integrity,
         trust=trust,
         cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
@@ -201,7 +205,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_masks_on_track(masks, path.track, str(args.masks))
     _check_start(float(start), path, masks, args, header, sim_chainage)
     print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
-          f"({constellation_label(args.constellation)}), trust rule {cfg.trust}")
+          f"({constellation_label(args.constellation)}), trust rule {cfg.trust}; pair "
+          f"intervals: {cfg.locator.width_text()}")
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
@@ -503,7 +508,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         d = Path(args.from_predisat_demo)
         world = World.load(d / "truth" / "world.npz", demo_track())
         pipeline = read_masks(d / "masks" / "masks.parquet")
-    table = demo(args.out, world=world, pipeline_masks=pipeline, seed=args.seed)
+    from predisat.gnss.integrity import IntegrityBudget
+
+    budget = IntegrityBudget(args.integrity_risk)
+    table = demo(args.out, world=world, pipeline_masks=pipeline, seed=args.seed, integrity=budget)
     print(format_demo_table(table))
     print(f"locator demo: done in {time.perf_counter() - t0:.0f} s -> {args.out}")
     return 0
@@ -531,10 +539,8 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    "faults only flagged")
     p.add_argument("--error-model", type=existing_file(_ERROR_MODEL), metavar="JSON",
                    help="pseudorange error model from `locator calibrate` (default: a = b = 2 m, "
-                   "k = 2, the source's)")
-    p.add_argument("--k-sigma", type=positive_float, metavar="K",
-                   help="pair interval half width in sigmas (default: the error model's; "
-                   "without one 2, the source's; 3.89 gives 1e-4 per pair, docs/locator.md)")
+                   "the source's; the file's k_sigma is not used: see --integrity-risk)")
+    integrity_options(p)
     p.add_argument("--extra-margin", type=non_negative_float, metavar="DEG",
                    help="with --masks: degrees added to the mask file's margins before trusting "
                    "a satellite (default 0)")
@@ -733,6 +739,9 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR",
                    help="output folder")
     p.add_argument("--seed", type=int, metavar="N", default=1, help="seed of the signal errors")
+    p.add_argument("--integrity-risk", type=integrity_risk, metavar="P",
+                   default=DEFAULT_RISK_PER_EPOCH,
+                   help="integrity risk per epoch the intervals are drawn for (docs/locator.md)")
     p.add_argument("--from-predisat-demo", type=existing_dir("a `predisat demo` output folder "
                    "(truth/world.npz, masks/masks.parquet)"), metavar="DIR",
                    help="reuse a `predisat demo` folder's world and pipeline masks (default: "

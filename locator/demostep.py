@@ -63,7 +63,8 @@ class LocatorDemoStep:
         # the train runs where the pipeline made masks, so that every rule is scored there
         stretch = (float(ctx.masks.chainage_m.min()), float(ctx.masks.chainage_m.max()))
         table = demo(out, world=world, pipeline_masks=ctx.masks, log=lambda s: None,
-                     constellation=DEMO_CONSTELLATION, stretch_m=stretch)  # fmt: skip
+                     constellation=DEMO_CONSTELLATION, stretch_m=stretch,
+                     integrity=ctx.integrity)  # fmt: skip
         outputs = {"locator summary": out / "summary.csv"}
         what = {"locator summary": "the simulated train run located under each trust rule "
                 "(GPS): claims, interval lengths, errors, misleading epochs"}  # fmt: skip
@@ -74,7 +75,8 @@ class LocatorDemoStep:
                 outputs[name] = png
                 what[name] = f"{_FIGURES.get(png.stem, 'figure')} under {rule} (GPS)"
         gnss = systems_text(read_run(out / "true_masks")[0])  # the satellites the runs received
-        return DemoStepResult(format_demo_table(table, gnss), outputs, what)
+        text = format_demo_table(table, gnss) + f"\n  (pair intervals: {ctx.integrity.describe()})"
+        return DemoStepResult(text, outputs, what)
 
 
 DEMO_CONSTELLATION = "gps"

@@ -38,8 +38,14 @@ from numpy.typing import ArrayLike, NDArray
 from locator.intervals import along_track_g, plan_pairs, union_interval
 from locator.sathia import AntennaPath, PairSolution, PairStatus, solve_pairs
 from locator.wls import WlsSolution, solve_wls
-from predisat.availability.interval import IntervalMode
+from predisat.availability.interval import (
+    INDEPENDENT_PAIRS,
+    IntervalMode,
+    interval_mode,
+    width_text,
+)
 from predisat.gnss.errormodel import IntervalModel
+from predisat.gnss.integrity import IntegrityBudget, disjoint_pairs
 
 __all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
 
@@ -70,7 +76,13 @@ class LocatorConfig:
     Attributes
     ----------
     model : IntervalModel
-        Error model and ``k_sigma`` (width of each pair interval).
+        Error model and ``k_sigma`` (width of each pair interval when no ``budget`` is given).
+    budget : IntegrityBudget, optional
+        The integrity risk per epoch: each epoch's pairs are ``k`` wide for the number of
+        disjoint pairs among those united (:func:`predisat.gnss.integrity.disjoint_pairs`:
+        three in three-pair mode, two for every pair of 4-5 satellites, fewer when blunt pairs
+        were dropped), and ``model.k_sigma`` is not used. ``locator run`` and the demos give
+        one (``--integrity-risk``); None keeps ``model.k_sigma`` in every mode.
     window_m, step_m : float
         SATHIA search window half width and grid step, metres.
     min_slope : float
@@ -82,6 +94,7 @@ class LocatorConfig:
     """
 
     model: IntervalModel = field(default_factory=IntervalModel)
+    budget: IntegrityBudget | None = None
     window_m: float = 1000.0
     step_m: float = 5.0
     min_slope: float = 0.2
@@ -97,6 +110,34 @@ class LocatorConfig:
             raise ValueError(f"p_false_alarm must be in (0, 1), got {self.p_false_alarm}")
         if self.max_exclusions < 0:
             raise ValueError(f"max_exclusions must be >= 0, got {self.max_exclusions}")
+
+    def k_sigma_for(self, pairs: ArrayLike) -> float:
+        """Half width (sigmas of ``K``) of the pair intervals when ``pairs`` (p, 2) are united.
+
+        ``model.k_sigma`` without a budget; with one, the budget's ``k`` for the disjoint
+        pairs among them (at least one).
+        """
+        if self.budget is None:
+            return self.model.k_sigma
+        return self.budget.k_sigma(max(disjoint_pairs(pairs), 1))
+
+    def width_text(self) -> str:
+        """The pair-interval width in words: the budget and each mode's ``k``, or the one ``k``
+        (:func:`predisat.availability.interval.width_text`)."""
+        return width_text(self.model.k_sigma if self.budget is None else self.budget)
+
+    def width_label(self) -> str:
+        """Short form for figure titles: ``integrity risk 1e-12 per epoch`` or ``k = 2``."""
+        return f"k = {self.model.k_sigma:g}" if self.budget is None else self.budget.label()
+
+    def plan_k_sigma(self, n_sat: int) -> float:
+        """``k`` of the pair choice for ``n_sat`` trusted satellites: the predicted mode's
+        (:data:`predisat.availability.interval.INDEPENDENT_PAIRS`), as the availability
+        prediction chooses them."""
+        if self.budget is None:
+            return self.model.k_sigma
+        mode = IntervalMode(int(interval_mode(n_sat)))
+        return self.budget.k_sigma(INDEPENDENT_PAIRS.get(mode, 1))
 
 
 @dataclass(frozen=True)
@@ -238,7 +279,6 @@ def _solve(
     """Fix on the used satellites; whether a fault shows; the worst satellite (global index)."""
     idx = np.flatnonzero(used)
     m = len(idx)
-    k_sigma = cfg.model.k_sigma
     if m < 2:
         empty = Fix(np.nan, np.nan, np.nan, IntervalMode.NONE, "", FixFlag.TOO_FEW
                     | FixFlag.NO_SAFETY_CLAIM, used, (), None, None)  # fmt: skip
@@ -252,12 +292,14 @@ def _solve(
     flags = FixFlag.NONE
     centre = wls.chainage_m if wls.converged else prior_m
     g = along_track_g(path, centre, s_u)
-    pairs, mode = plan_pairs(g, g_sig, k_sigma, scheme="auto" if active else "all")
+    pairs, mode = plan_pairs(g, g_sig, cfg.plan_k_sigma(m), scheme="auto" if active else "all")
     blunt = np.abs(g[pairs[:, 0]] - g[pairs[:, 1]]) < cfg.min_slope
     if blunt.any():
         flags |= FixFlag.BLUNT
         if active and mode == IntervalMode.ALL_PAIRS:
             pairs = pairs[~blunt]
+    # the width of the pairs actually united: fewer disjoint pairs after a drop, a wider k
+    k_sigma = cfg.k_sigma_for(pairs)
     # window on the WLS fix: a prior further off than the window would void every pair
     sol = solve_pairs(path, s_u, r_u, g_sig, pairs, prior_m=centre, window_m=cfg.window_m,
                       k_sigma=k_sigma, step_m=cfg.step_m)  # fmt: skip

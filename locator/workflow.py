@@ -31,6 +31,7 @@ from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import ecef_to_geodetic
 from predisat.gnss.errormodel import IntervalModel, write_error_model
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.maskset import MaskSet
@@ -177,13 +178,15 @@ def run_to_folder(
         "antenna_height_m": path.antenna_height_m,
         "start_chainage_m": start_chainage_m,
         "config": config.to_dict(),
+        "interval_width": config.locator.width_text(),
         "source": source.describe(),
         "masks": None if masks is None else dict(masks.provenance),
         "summary": dict(summarise(epochs)),
         **dict(meta or {}),
     }
     folder = write_run(epochs, out, info, fmt)
-    write_figures(epochs, folder, title=f"{path.track.name}: trust {config.trust}")
+    title = f"{path.track.name}: trust {config.trust}, {config.locator.width_label()}"
+    write_figures(epochs, folder, title=title)
     return epochs, folder
 
 
@@ -293,6 +296,7 @@ def demo(
     constellation: str = "gps",
     rate_hz: float = 1.0,
     stretch_m: tuple[float, float] | None = None,
+    integrity: IntegrityBudget | None = None,
 ) -> pd.DataFrame:
     """A simulated run on the demo line located under several trust rules, scored.
 
@@ -303,6 +307,8 @@ def demo(
     simulation holds every system). ``rate_hz``: epochs per second of the simulated run;
     ``stretch_m``: the chainages it runs between (default: the world's, 15 m inside; the
     demo gives the pipeline masks' own, so that every rule is scored where it has masks).
+    ``integrity``: the integrity risk per epoch the pair intervals are drawn for (default
+    :class:`~predisat.gnss.integrity.IntegrityBudget()`, as ``locator run``).
 
     Returns
     -------
@@ -334,9 +340,11 @@ def demo(
     if pipeline_masks is not None:
         rules = {"pipeline masks": ("masks", pipeline_masks, 0.0), **rules}
     log(f"locator demo 3/3: locating {sim.n_epoch} epochs under {len(rules)} trust rules")
+    budget = IntegrityBudget() if integrity is None else integrity
+    log(f"  pair intervals: {budget.describe()}")
     rows = []
     for label, (trust, masks, cut) in rules.items():
-        cfg = RunConfig(LocatorConfig(), trust=trust, cutoff_deg=cut or 15.0)
+        cfg = RunConfig(LocatorConfig(budget=budget), trust=trust, cutoff_deg=cut or 15.0)
         name = rule_folder(label)
         _, folder = run_to_folder(
             path, SimSource(sim, constellation=constellation), root / name,
@@ -344,7 +352,8 @@ def demo(
             meta={"rule": label, "constellation": constellation},
         )  # fmt: skip
         summary = evaluate_folder(folder, sim.chainage_m)
-        rows.append({"rule": label, "constellation": constellation, **summary})
+        rows.append({"rule": label, "constellation": constellation,
+                     "integrity_risk": budget.risk_per_epoch, **summary})  # fmt: skip
     table = pd.DataFrame(rows)
     # summarise() returns floats throughout; counts read better as integers
     counts = ["epochs", "hmi", "hmi_fix", "mi"]

@@ -15,7 +15,11 @@ The error model is learned first (``locator.errorfit``) from six runs in a separ
 calibration world (``WorldSpec.mixed`` over km 12.3-14.1, seed 99), direct signals only, and
 used by every configuration. Pair intervals are ``+- k sigma_K`` with ``k = 3.89`` (a 1e-4
 two-sided Gaussian risk per pair, the risk the source claims for its ``+- 2 xi``); ``masks_k2``
-repeats the masks rule with the source's ``k = 2``.
+repeats the masks rule with the source's ``k = 2``, ``masks_budget`` with the default integrity
+budget (:class:`predisat.gnss.integrity.IntegrityBudget`, ``locator run``'s default: each
+epoch's ``k`` from 1e-12 per epoch and the disjoint pairs united; ``pipeline_budget`` the same
+with the pipeline masks). ``--configs`` runs a subset
+(job files then hold only those; give another ``--out``).
 
 Per configuration: epochs, share of epochs per integrity mode, share with a safety claim,
 interval length (median, 95th percentile, max) on claimed epochs, absolute error, and HMI
@@ -28,7 +32,7 @@ Jobs are written one Parquet file each under ``--out``; a rerun skips finished j
 Usage::
 
     .venv/bin/python scripts/locator_campaign.py --out campaign [--runs-per-world 88]
-        [--workers 2] [--demo demo_out]
+        [--workers 2] [--demo demo_out] [--configs masks masks_budget masks_k2]
 """
 
 from __future__ import annotations
@@ -59,6 +63,7 @@ from locator.sources import SimSource
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.gnss.errormodel import IntervalModel, read_error_model, write_error_model
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.masks.maskset import MaskSet
 from predisat.masks.truth import TrueMasks
 from predisat.synth.truth import true_masks
@@ -149,9 +154,13 @@ def _world(name: str, cache: Path) -> tuple[World, MaskSet, MaskSet | None]:
 _STATE: dict = {}
 
 
-def _init(cache: str, demo: str | None) -> None:
+CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline", "pipeline_budget")
+
+
+def _init(cache: str, demo: str | None, configs: tuple[str, ...] = CONFIGS) -> None:
     _STATE.update(cache=Path(cache), demo=demo, worlds={}, eph=default_ephemeris(),
-                  model=read_error_model(Path(cache) / "error_model.json"))  # fmt: skip
+                  model=read_error_model(Path(cache) / "error_model.json"),
+                  configs=configs)  # fmt: skip
 
 
 def _get_world(name: str) -> tuple[World, MaskSet, MaskSet | None, ReflectorIndex]:
@@ -198,9 +207,18 @@ def run_job(job: Job) -> pd.DataFrame:
         "none": (RunConfig(loc, trust="none"), None),
         "cutoff15": (RunConfig(loc, trust="cutoff", cutoff_deg=15.0), None),
         "masks_k2": (RunConfig(LocatorConfig(model=learned), trust="masks"), masks),
+        "masks_budget": (
+            RunConfig(LocatorConfig(model=learned, budget=IntegrityBudget()), trust="masks"),
+            masks,
+        ),
     }
     if pipeline is not None:
         configs["pipeline"] = (RunConfig(loc, trust="masks"), pipeline)
+        configs["pipeline_budget"] = (
+            RunConfig(LocatorConfig(model=learned, budget=IntegrityBudget()), trust="masks"),
+            pipeline,
+        )
+    configs = {k: v for k, v in configs.items() if k in _STATE.get("configs", CONFIGS)}
     state = {s: sim.state[:, k] for k, s in enumerate(sim.sats)}
     out = []
     for name, (cfg, ms) in configs.items():
@@ -267,7 +285,8 @@ def figure(frames: pd.DataFrame, table: pd.DataFrame, paths: list[Path]) -> None
     fig = Figure(figsize=(11, 4.2), layout="constrained")
     ax, bx = fig.subplots(1, 2, width_ratios=[3, 2])
     colours = {"masks": "#1b7837", "pipeline": "#762a83", "none": "#b2182b", "cutoff15": "#ef8a62",
-               "masks_k2": "#7fbf7b"}  # fmt: skip
+               "masks_k2": "#7fbf7b", "masks_budget": "#2166ac",
+               "pipeline_budget": "#c2a5cf"}  # fmt: skip
     bins = np.geomspace(3.0, 3000.0, 60)
     for cfg, g in frames.groupby("config", sort=False):
         length = g.loc[g["claim"], "length_m"].to_numpy(float)
@@ -309,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--worlds", nargs="*", default=[w[0] for w in WORLDS])
     ap.add_argument("--demo", type=Path, help="a `predisat demo --out` folder (pipeline masks)")
     ap.add_argument("--figure", type=Path, help="write the summary figure (PNG) here too")
+    ap.add_argument("--configs", nargs="+", choices=CONFIGS, default=list(CONFIGS),
+                    help="configurations to run (default all)")
     args = ap.parse_args(argv)
     out = args.out
     (out / "jobs").mkdir(parents=True, exist_ok=True)
@@ -330,7 +351,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     done = 0
     with mp.get_context("fork").Pool(
-        args.workers, _init, (str(out / "cache"), str(args.demo) if args.demo else None)
+        args.workers, _init,
+        (str(out / "cache"), str(args.demo) if args.demo else None, tuple(args.configs)),
     ) as pool:
         for path, n, dt in pool.imap_unordered(_do, todo):
             done += 1

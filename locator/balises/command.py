@@ -21,6 +21,8 @@ from predisat.cli.args import (
     existing_file,
     existing_path,
     given,
+    integrity_budget,
+    integrity_options,
     needs,
     non_negative_float,
     output_dir,
@@ -107,7 +109,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     )
     p.add_argument("--error-model", type=existing_file("a pseudorange error model JSON written "
                    "by `locator calibrate`"), metavar="JSON",
-                   help="from `locator calibrate` (default: a = b = 2 m, k = 2)")  # fmt: skip
+                   help="from `locator calibrate` (default: a = b = 2 m; its k_sigma is not "
+                   "used: see --integrity-risk)")  # fmt: skip
+    integrity_options(p)
     p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
@@ -174,8 +178,10 @@ def cmd_balises(args: argparse.Namespace) -> int:
 
         masks = read_masks(args.masks)
     model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    if args.k_sigma is not None:
+        model = IntervalModel(model.error, args.k_sigma)
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
-    cfg = RunConfig(LocatorConfig(model=model), trust=trust,
+    cfg = RunConfig(LocatorConfig(model=model, budget=integrity_budget(args)), trust=trust,
                     cutoff_deg=args.cutoff if args.cutoff is not None else 15.0)  # fmt: skip
     log, accuracy = None, None
     if args.odometer_log:

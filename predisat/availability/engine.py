@@ -50,6 +50,7 @@ from predisat.availability.interval import predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.gnss.errormodel import IntervalModel
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.gnss.timescale import gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
 from predisat.scheduler import Scheduler, TaskRunner
@@ -390,6 +391,7 @@ def compute_availability(
     rule: TrustRule,
     *,
     interval_model: IntervalModel | None = None,
+    integrity: IntegrityBudget | None = None,
     with_interval: bool = True,
     interval_every: int = 1,
     chunk_positions: int = 2,
@@ -409,6 +411,10 @@ def compute_availability(
     rule : TrustRule
     interval_model : IntervalModel, optional
         Default :class:`~predisat.availability.interval.IntervalModel()`.
+    integrity : IntegrityBudget, optional
+        When given, each interval mode's ``k`` follows from it
+        (:func:`predisat.availability.interval.mode_k_sigma`) and ``interval_model.k_sigma``
+        is not used.
     with_interval : bool
         Also predict interval lengths and pair geometry.
     interval_every : int
@@ -467,7 +473,8 @@ def compute_availability(
         bin_scale = float(np.degrees(1.0) / step)
         sin_thr = np.concatenate([sin_thr, sin_thr[:, :1]], axis=1)  # 360 deg wraps to bin 0
 
-    shared = _BlockShared(s32, bin_scale, n_ep, m, model if with_interval else None,
+    width = model.k_sigma if integrity is None else integrity
+    shared = _BlockShared(s32, bin_scale, n_ep, m, model if with_interval else None, width,
                           interval_every, chunk_positions)  # fmt: skip
     own = runner is None
     run_on = TaskRunner(Scheduler.serial(workers)) if runner is None else runner
@@ -512,6 +519,7 @@ def compute_availability(
         "blocks_resumed": len(items) - len(todo),
         "workers": workers if runner is None else run_on.scheduler.describe(),
         "interval_model": repr(model) if with_interval else None,
+        "integrity": repr(integrity) if with_interval and integrity is not None else None,
         "interval_every": interval_every,
         "elapsed_s": time.perf_counter() - t_start,
     }
@@ -574,6 +582,7 @@ class _BlockShared:
     n_ep: int
     m: int
     model: IntervalModel | None
+    width: float | IntegrityBudget  # k of every mode, or the budget giving each mode its k
     every: int
     chunk_positions: int
 
@@ -608,7 +617,10 @@ def _blocks(
 
 
 # the modules whose code decides a block's numbers: a block saved by other code is redone
-_ENGINE_CODE = ("availability/engine.py", "availability/interval.py", "gnss/errormodel.py")
+_ENGINE_CODE = (
+    "availability/engine.py", "availability/interval.py", "gnss/errormodel.py",
+    "gnss/integrity.py",
+)
 
 
 def _code_key() -> bytes:
@@ -623,7 +635,8 @@ def _shared_key(shared: _BlockShared) -> bytes:
     """Hash of what every block of a computation shares: code, candidates, options."""
     h = hashlib.sha256(_code_key())
     h.update(np.ascontiguousarray(shared.s32).tobytes())
-    h.update(repr((shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.every,
+    h.update(repr((shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.width,
+                   shared.every,
                    shared.chunk_positions, shared.s32.shape)).encode())  # fmt: skip
     return h.digest()
 
@@ -727,7 +740,7 @@ def block_task(
         sl = slice(lo, min(lo + shared.chunk_positions, block.b - block.a))
         parts.append(_chunk(
             shared.s32, block.rx_rel[sl], block.rot[sl], block.tan_ecef[sl], block.sin_thr[sl],
-            shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.every,
+            shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.width, shared.every,
         ))  # fmt: skip
     count = np.concatenate([p[0] for p in parts])
     if shared.model is None:
@@ -747,6 +760,7 @@ def _chunk(
     n_ep: int,
     m: int,
     model: IntervalModel | None,
+    width: float | IntegrityBudget,
     every: int,
 ) -> tuple[NDArray, NDArray | None, NDArray | None]:
     p = len(rx_rel)
@@ -787,7 +801,7 @@ def _chunk(
     g3 = g.reshape(p, n_iv, m)
     length = np.full((p, n_ep), np.nan, np.float32)
     sens = np.full((p, n_ep), np.nan, np.float32)
-    length[:, ::every], _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, model.k_sigma)
+    length[:, ::every], _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, width)
     # max/min over the trusted: push the others out of [-1, 1] (adding 0 keeps g exact)
     pen = (~tr_i) * np.float32(4.0)
     gmax = (g3 - pen).max(axis=-1)

@@ -37,6 +37,11 @@ recursion (``docs/availability.md``, Engine).
 
 The pseudorange error model (:class:`predisat.gnss.errormodel.ErrorModel`) is a placeholder with
 stated defaults, to be learned from data by ``locator calibrate``.
+
+``k`` is either one constant for every mode or follows from an integrity budget
+(:class:`predisat.gnss.integrity.IntegrityBudget`): each mode's union needs
+:data:`INDEPENDENT_PAIRS` disjoint pairs to miss on one side together, so each mode has its
+own ``k`` (:func:`mode_k_sigma`; ``docs/locator.md``, "Integrity budget").
 """
 
 from __future__ import annotations
@@ -48,17 +53,22 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.gnss.integrity import IntegrityBudget
+
 __all__ = [
+    "INDEPENDENT_PAIRS",
     "POOL_SIZE",
     "IntervalMode",
     "along_track_components",
     "best_pair",
     "interval_mode",
     "matching_table",
+    "mode_k_sigma",
     "pair_half_length_m",
     "pair_pool",
     "predicted_interval",
     "three_independent_pairs",
+    "width_text",
 ]
 
 
@@ -69,6 +79,40 @@ class IntervalMode(IntEnum):
     BEST_PAIR = 1  # 2-3 satellites: best pair, no safety claim
     ALL_PAIRS = 2  # 4-5 satellites: union of all pairs
     THREE_PAIRS = 3  # >= 6 satellites: union of three independent pairs
+
+
+INDEPENDENT_PAIRS = {
+    IntervalMode.BEST_PAIR: 1,
+    IntervalMode.ALL_PAIRS: 2,  # every pair of 4-5 satellites holds two disjoint pairs
+    IntervalMode.THREE_PAIRS: 3,
+}
+"""Disjoint pairs each mode's union holds (:func:`predisat.gnss.integrity.disjoint_pairs`)."""
+
+
+def mode_k_sigma(k_sigma: float | IntegrityBudget) -> NDArray:
+    """``k`` of each :class:`IntervalMode`, shape (4,), indexed by the mode (NaN for NONE).
+
+    A float is one ``k`` for every mode; a budget gives each mode the ``k`` of its
+    :data:`INDEPENDENT_PAIRS`.
+    """
+    out = np.full(len(IntervalMode), np.nan)
+    for mode, m in INDEPENDENT_PAIRS.items():
+        out[mode] = k_sigma.k_sigma(m) if isinstance(k_sigma, IntegrityBudget) else k_sigma
+    return out
+
+
+def width_text(k_sigma: float | IntegrityBudget) -> str:
+    """The pair-interval width in words, for captions: the budget and each mode's ``k``, or
+    the one ``k`` and the risk per epoch it amounts to."""
+    if isinstance(k_sigma, IntegrityBudget):
+        return k_sigma.describe()
+    from predisat.gnss.integrity import union_risk
+
+    return (
+        f"k = {k_sigma:g} in every mode, no integrity budget (risk per epoch "
+        f"{union_risk(k_sigma, 3):.2g} with three pairs, {union_risk(k_sigma, 2):.2g} with "
+        f"all pairs of 4-5, {union_risk(k_sigma, 1):.2g} with one pair)"
+    )
 
 
 def along_track_components(unit_m: ArrayLike, tangent: ArrayLike) -> NDArray:
@@ -95,7 +139,10 @@ def interval_mode(count: ArrayLike) -> NDArray:
 
 
 def predicted_interval(
-    g: ArrayLike, sigma_m: ArrayLike, trusted: ArrayLike, k_sigma: float = 2.0
+    g: ArrayLike,
+    sigma_m: ArrayLike,
+    trusted: ArrayLike,
+    k_sigma: float | IntegrityBudget = 2.0,
 ) -> tuple[NDArray, NDArray]:
     """Predicted SATHIA interval length per epoch (see the module docstring for the rule).
 
@@ -106,7 +153,8 @@ def predicted_interval(
     sigma_m : array_like, shape (..., m)
         Pseudorange sigmas, metres.
     trusted : array_like of bool, shape (..., m)
-    k_sigma : float
+    k_sigma : float or IntegrityBudget
+        One ``k`` for every mode, or the budget giving each mode its own (:func:`mode_k_sigma`).
 
     Returns
     -------
@@ -128,9 +176,12 @@ def predicted_interval(
         g2, s2 = np.where(ok2, g2, 0.0), np.where(ok2, s2, 1.0)
     out = np.empty(len(g2), g_a.dtype)
     mode = np.empty(len(g2), np.uint8)
+    ks = mode_k_sigma(k_sigma)
+    k = (float(ks[IntervalMode.BEST_PAIR]), float(ks[IntervalMode.ALL_PAIRS]),
+         float(ks[IntervalMode.THREE_PAIRS]))  # fmt: skip
     for a in range(0, len(g2), _BLOCK_ROWS):  # blocks that stay in the CPU cache
         b = slice(a, a + _BLOCK_ROWS)
-        out[b], mode[b] = _interval_rows(g2[b], s2[b], ok2[b], k_sigma)
+        out[b], mode[b] = _interval_rows(g2[b], s2[b], ok2[b], k)
     return out.reshape(lead).astype(np.float32), mode.reshape(lead)
 
 
@@ -140,16 +191,19 @@ POOL_SIZE = 8
 _BLOCK_ROWS = 4096
 
 
-def _interval_rows(g: NDArray, s: NDArray, ok: NDArray, k: float) -> tuple[NDArray, NDArray]:
-    """Full length and mode of rows (n, m) with finite ``g`` and ``s``."""
+def _interval_rows(
+    g: NDArray, s: NDArray, ok: NDArray, k: tuple[float, float, float]
+) -> tuple[NDArray, NDArray]:
+    """Full length and mode of rows (n, m) with finite ``g`` and ``s``; ``k`` of the best-pair,
+    all-pairs and three-pair modes."""
     count = ok.sum(-1)
     out = np.full(len(count), np.nan, g.dtype)
     mode = interval_mode(count)
     six = count >= 6
     if six.all():
-        out[:] = 2.0 * _three_pairs_half(g, s, ok, k)
+        out[:] = 2.0 * _three_pairs_half(g, s, ok, k[2])
     elif six.any():
-        out[six] = 2.0 * _three_pairs_half(g[six], s[six], ok[six], k)
+        out[six] = 2.0 * _three_pairs_half(g[six], s[six], ok[six], k[2])
     few = np.nonzero((count >= 2) & (count < 6))[0]
     if len(few):
         out[few] = _few(g[few], s[few], ok[few], count[few], k)
@@ -421,7 +475,9 @@ def _three_pairs_half(g: NDArray, s: NDArray, ok: NDArray, k: float) -> NDArray:
     return f6.min(axis=0)
 
 
-def _few(g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: float) -> NDArray:
+def _few(
+    g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: tuple[float, float, float]
+) -> NDArray:
     """Full length of rows with 2-5 trusted: best pair (2-3) or union of all pairs (4-5)."""
     w = min(5, g.shape[-1])
     order = np.argsort(~ok, axis=-1, kind="stable")[:, :w]  # trusted first
@@ -429,7 +485,7 @@ def _few(g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: float) -> NDArr
     gg, ss = g[rows, order], s[rows, order]
     valid = np.arange(w)[None, :] < count[:, None]
     i, j = np.triu_indices(w, 1)
-    h = pair_half_length_m(gg[:, i], gg[:, j], ss[:, i], ss[:, j], k)
+    h = pair_half_length_m(gg[:, i], gg[:, j], ss[:, i], ss[:, j], k[1])
     worst = np.where(valid[:, i] & valid[:, j], h, -np.inf).max(-1)
-    best = best_pair(gg, ss, valid, k)[1]
+    best = best_pair(gg, ss, valid, k[0])[1]
     return 2.0 * np.where(count >= 4, worst, best)

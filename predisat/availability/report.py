@@ -363,7 +363,7 @@ def _km_label(track: TrackMap | None, chainage_m: float) -> str:
 
 
 # ------------------------------------------------------------------------- sections
-def _summary_table(results: Sequence[Availability], gnss: str = "") -> str:
+def _summary_table(results: Sequence[Availability], gnss: str = "", width: str = "") -> str:
     head = (
         "<tr><th>rule</th><th>≥ 2</th><th>≥ 4</th><th>≥ 6</th><th>mean count</th>"
         "<th>longest &lt; 4<br>(along the line)</th><th>longest &lt; 4<br>(at one place)</th>"
@@ -392,7 +392,8 @@ def _summary_table(results: Sequence[Availability], gnss: str = "") -> str:
     return (
         '<table class="summary"><caption>Share of time with at least 2, 4 and 6 trusted '
         f"{_e(gnss) + ' ' if gnss else ''}satellites over the whole stretch (place and time "
-        "weighted equally)</caption>"
+        "weighted equally)"
+        f"{'; predicted intervals at ' + _e(width) if width else ''}</caption>"
         f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table>"
     )
 
@@ -466,6 +467,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
         ("Survey rig", info.get("rig", "")),
         ("Interval model", info.get("interval_model", "")),
+        ("Interval width", info.get("interval_width", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),
     ]
     body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v != "")
@@ -771,11 +773,14 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, 
     )
     every = info.get("interval_every", "")
     model_note = (
-        "The error model is the source's default (a = b = 2 m, k = 2), to be calibrated with "
+        "The error model is the source's default (a = b = 2 m), to be calibrated with "
         "`locator calibrate`, not a measurement."
         if info.get("interval_model_is_default", True)
         else f"Error model: {info.get('interval_model', '')}."
     )
+    width = info.get("interval_width", "")
+    if width:
+        model_note += f" Pair intervals ± k sigma_K, {width}."
     figs["interval"] = _figure(
         _img(
             plots.interval_along_line(
@@ -827,7 +832,8 @@ def _page(inputs: ReportInputs, figs: Mapping[str, str]) -> str:
         _section("header", f"{_banners(info)}{_header(info)}"),
         _section(
             "summary",
-            f"<h2>Summary ({_e(gnss)})</h2>{_summary_table(results, gnss)}"
+            f"<h2>Summary ({_e(gnss)})</h2>"
+            f"{_summary_table(results, gnss, info.get('interval_width', ''))}"
             f"{_verdict(results, inputs.track)}"
             '<p class="sub">Trusted: ephemeris healthy and valid, and elevation above the '
             "rule's threshold (mask + margin of the satellite's azimuth bin; the cut-off; or "

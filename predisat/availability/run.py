@@ -49,6 +49,7 @@ from tqdm import tqdm
 
 from predisat import __version__
 from predisat.availability.engine import Availability, BlockCheckpoint, compute_availability
+from predisat.availability.interval import INDEPENDENT_PAIRS, width_text
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
     SYSTEM_NAMES,
@@ -61,6 +62,7 @@ from predisat.availability.satellites import (
 )
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
@@ -445,6 +447,7 @@ def run_availability(
     n_sky: int = 4,
     interval_every: int = 10,
     interval_model: IntervalModel | None = None,
+    integrity: IntegrityBudget | None = None,
     workers: int | None = None,
     scheduler: Scheduler | str | None = None,
     counts_table: bool = False,
@@ -493,6 +496,11 @@ def run_availability(
         from ``locator calibrate``, read with
         :func:`predisat.gnss.errormodel.read_error_model`); default
         ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
+    integrity : IntegrityBudget, optional
+        The integrity risk per epoch the predicted intervals are drawn for: each interval
+        mode's ``k`` follows from it (:func:`predisat.availability.interval.mode_k_sigma`) and
+        ``interval_model.k_sigma`` is not used; the report names it. ``predisat availability``
+        always gives one (``--integrity-risk``, unless ``--k-sigma`` fixes ``k``).
     workers : int, optional
         Threads of the availability engine in this process (default 1), or the worker
         processes of a local Dask cluster with ``scheduler="local"`` (default: the cores).
@@ -557,7 +565,7 @@ def run_availability(
         blocks = join(out, "blocks")
         with TaskRunner(_where(scheduler, workers)) as runner:
             results = _compute_rules(
-                rules, nav_data.sats, positions, interval_every, model, runner, bar,
+                rules, nav_data.sats, positions, interval_every, model, integrity, runner, bar,
                 (blocks, opts),
             )  # fmt: skip
 
@@ -567,7 +575,7 @@ def run_availability(
         work.mkdir(parents=True, exist_ok=True)
         info = _run_info(
             mask_set, masks_label, track, nav_data, constellation, rules, step_s,
-            interval_every, __version__, model,
+            interval_every, __version__, model, integrity,
         )  # fmt: skip
         local_files, summary = write_tables(work, results, track, info, counts_table)
         local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
@@ -693,6 +701,7 @@ def _compute_rules(
     positions: LinePositions,
     interval_every: int,
     model: IntervalModel,
+    integrity: IntegrityBudget | None,
     runner: TaskRunner,
     bar: tqdm[NoReturn],
     blocks: tuple[Location, StorageOptions],
@@ -711,6 +720,7 @@ def _compute_rules(
                 rule,
                 interval_every=interval_every,
                 interval_model=model,
+                integrity=integrity,
                 runner=runner,
                 progress=not bar.disable,
                 checkpoint=BlockCheckpoint(join(folder, _slug(rule.label)), opts),
@@ -749,7 +759,7 @@ def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:
 def _run_info(
     masks: MaskSet, masks_label: str, track: TrackMap | None, nav: _Navigation,
     constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
-    version: str, model: IntervalModel,
+    version: str, model: IntervalModel, integrity: IntegrityBudget | None = None,
 ) -> JsonDict:  # fmt: skip
     ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
@@ -789,16 +799,22 @@ def _run_info(
         "interval_model": (
             f"sigma(el)² = {model.error.a_m:.3f}² + ({model.error.b_m:.3f} / sin el)² m² "
             f"(elevations below {model.error.min_el_deg:g}° as {model.error.min_el_deg:g}°), "
-            f"pair intervals ± {model.k_sigma:g} sigma"
+            f"pair intervals ± k sigma"
         ),
+        "interval_width": width_text(model.k_sigma if integrity is None else integrity),
         "interval_model_params": {
             "a_m": model.error.a_m, "b_m": model.error.b_m,
-            "min_el_deg": model.error.min_el_deg, "k_sigma": model.k_sigma,
+            "min_el_deg": model.error.min_el_deg,
+            "k_sigma": model.k_sigma if integrity is None else None,
+            "integrity_risk_per_epoch": None if integrity is None else integrity.risk_per_epoch,
+            "k_sigma_by_mode": None if integrity is None else {
+                m.name: integrity.k_sigma(n) for m, n in INDEPENDENT_PAIRS.items()
+            },
         },
         "software": f"predisat {version}",
         "created_utc": _created_utc(),
         "track_attribution": _track_credit(track),
-        "interval_model_is_default": model == IntervalModel(),
+        "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": nav.warnings,
     }

@@ -21,6 +21,7 @@ from predisat.availability.interval import along_track_components, predicted_int
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.track import TrackMap
 
 __all__ = ["SpeedProfile", "TrainRun", "trainrun"]
@@ -198,6 +199,7 @@ def trainrun(
     constellation: str | Sequence[str] = "all",
     antenna_height_m: float = 0.0,
     interval_model: IntervalModel | None = None,
+    integrity: IntegrityBudget | None = None,
 ) -> TrainRun:
     """Run a train along a track and list the satellites it may trust at each step.
 
@@ -221,6 +223,9 @@ def trainrun(
     antenna_height_m : float
         Antenna height above the track axis (ignored when masks give the positions).
     interval_model : IntervalModel, optional
+    integrity : IntegrityBudget, optional
+        When given, each interval mode's ``k`` follows from it and ``interval_model.k_sigma``
+        is not used.
 
     Returns
     -------
@@ -261,7 +266,9 @@ def trainrun(
     u = _unit_enu(az, el)
     g = along_track_components(np.nan_to_num(u), pos.tangent_enu)
     sigma = model.error.sigma_m(np.nan_to_num(el, nan=90.0))
-    length, mode = predicted_interval(g, sigma, trusted, model.k_sigma)
+    length, mode = predicted_interval(
+        g, sigma, trusted, model.k_sigma if integrity is None else integrity
+    )
     return TrainRun(
         gps, chain, speed.speed_at(t_rel), sat.sats, trusted, az, el, trusted.sum(axis=1),
         length.astype(float), mode,

@@ -9,7 +9,10 @@ refused with the value they probably meant.
   :func:`existing_file`, :func:`existing_path`, :func:`existing_dir` (a missing input names
   what it should contain), :func:`finite_float`, :func:`positive_int`, :func:`positive_float`,
   :func:`non_negative_float`, :func:`cutoff_deg`, :func:`pitch_deg`, :func:`speed_mps`,
-  :func:`rate_hz`, :func:`antenna_height_m`, :func:`fraction`, :func:`constellation`.
+  :func:`rate_hz`, :func:`antenna_height_m`, :func:`fraction`, :func:`constellation`,
+  :func:`integrity_risk`.
+* The pair-interval width: :func:`integrity_options` (``--integrity-risk`` or ``--k-sigma``)
+  and :func:`integrity_budget` (the budget they give, None for a fixed ``k``).
 * Parsers: :class:`HelpFormatter` (argparse's own defaults in the help),
   :func:`add_command` (a described subcommand), :func:`add_checks` and :func:`run_checks`
   (options that exclude or need each other, refused at parse time), :func:`chainage_hint`.
@@ -24,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 from predisat.storage import Location, is_remote, location
 
 __all__ = [
@@ -44,6 +48,9 @@ __all__ = [
     "finite_float",
     "fraction",
     "given",
+    "integrity_budget",
+    "integrity_options",
+    "integrity_risk",
     "needs",
     "non_negative_float",
     "output_dir",
@@ -418,3 +425,43 @@ def caused_by_interrupt(exc: BaseException) -> bool:
         seen.add(id(cur))
         cur = cur.__cause__ or cur.__context__
     return False
+
+
+def integrity_risk(value: str) -> float:
+    """An integrity risk per epoch: a probability in (0, 0.1]; a percentage is refused."""
+    x = _number(value)
+    if x <= 0.0:
+        raise argparse.ArgumentTypeError(f"{value} must be above 0 (a probability, e.g. 1e-12)")
+    if x > 0.1:
+        hint = f"; {x:g} % is {x / 100:g}" if x <= 100 else ""
+        raise argparse.ArgumentTypeError(
+            f"{value} is no integrity risk per epoch (a probability up to 0.1, e.g. 1e-12 for "
+            f"the source's three pairs){hint}"
+        )
+    return x
+
+
+def integrity_options(p: argparse.ArgumentParser) -> None:
+    """``--integrity-risk P`` (default: :data:`~predisat.gnss.integrity.DEFAULT_RISK_PER_EPOCH`)
+    or ``--k-sigma K``, one of them: the width of the pair intervals."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument(
+        "--integrity-risk", type=integrity_risk, metavar="P",
+        help="integrity risk per epoch the intervals are drawn for; each interval mode's k "
+        f"follows from it (default {DEFAULT_RISK_PER_EPOCH:g}, the source's three pairs: k = "
+        f"{IntegrityBudget().k_sigma(3):.2f} with three pairs, "
+        f"{IntegrityBudget().k_sigma(2):.2f} with all pairs of 4-5; docs/locator.md)",
+    )  # fmt: skip
+    g.add_argument(
+        "--k-sigma", type=positive_float, metavar="K",
+        help="instead of a risk: one pair interval half width in sigmas for every mode (default: "
+        "none, the risk decides; the source's 2 is 4.6e-2 per pair, 3.89 is 1e-4)",
+    )  # fmt: skip
+
+
+def integrity_budget(args: argparse.Namespace) -> IntegrityBudget | None:
+    """The budget of :func:`integrity_options`' options; None when ``--k-sigma`` fixes ``k``."""
+    if getattr(args, "k_sigma", None) is not None:
+        return None
+    risk = getattr(args, "integrity_risk", None)
+    return IntegrityBudget(DEFAULT_RISK_PER_EPOCH if risk is None else risk)

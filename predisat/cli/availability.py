@@ -15,6 +15,8 @@ from predisat.cli.args import (
     existing_file,
     existing_path,
     finite_float,
+    integrity_budget,
+    integrity_options,
     output_dir,
     positive_float,
     positive_int,
@@ -82,13 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--error-model", type=existing_file("a pseudorange error model JSON written by "
         "`locator calibrate`"), metavar="JSON",
         help="pseudorange error model of the predicted intervals, from `locator calibrate` "
-        "(default a = b = 2 m, k = 2)",
+        "(default a = b = 2 m; its k_sigma is not used: see --integrity-risk)",
     )  # fmt: skip
-    p.add_argument(
-        "--k-sigma", type=positive_float, metavar="K",
-        help="pair interval half width in sigmas (default: the error model's; 3.89 gives 1e-4 "
-        "per pair)",
-    )  # fmt: skip
+    integrity_options(p)
     p.add_argument(
         "--scheduler", default="local", metavar="local|serial|ADDRESS",
         help="where the blocks of positions run: a local Dask cluster (default), this process "
@@ -137,6 +135,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         sky_km=args.sky_km,
         interval_every=args.interval_every,
         interval_model=_interval_model(args.error_model, args.k_sigma),
+        integrity=integrity_budget(args),
         workers=args.workers,
         scheduler=args.scheduler,
         counts_table=args.counts,

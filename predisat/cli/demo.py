@@ -19,8 +19,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from predisat.cli.args import add_command, finite_float, output_dir, positive_int
+from predisat.cli.args import add_command, finite_float, integrity_risk, output_dir, positive_int
 from predisat.cli.common import km_range
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -68,6 +69,9 @@ class DemoContext:
     quiet : bool
     quick : bool
         ``predisat demo --quick``: a step keeps its work short (fewer epochs), not its kind.
+    integrity : IntegrityBudget
+        The integrity risk per epoch the demo's intervals are drawn for
+        (``--integrity-risk``), the availability report's and the locator step's.
     """
 
     out_dir: Path
@@ -76,6 +80,7 @@ class DemoContext:
     masks: MaskSet
     quiet: bool = False
     quick: bool = False
+    integrity: IntegrityBudget = field(default_factory=IntegrityBudget)
 
 
 @dataclass(frozen=True)
@@ -330,16 +335,17 @@ def run(args: argparse.Namespace) -> int:
     print(f"demo 4/{n}: availability report (embedded navigation day, GPS only, as the locator "
           f"step){_left(est, took)}")  # fmt: skip
     t1 = time.perf_counter()
+    budget = IntegrityBudget(args.integrity_risk)
     report = run_availability(
         processed.masks, track, None, out_dir=out / "availability", step_s=plan.step_s,
-        progress=not args.quiet,
+        progress=not args.quiet, integrity=budget,
     )  # fmt: skip
     took["availability"] = time.perf_counter() - t1
     print(availability_table(report.summary))
     print("  (GPS only; LOCOPROL on line 144: >= 4 satellites 95 % of the time, >= 6 60 %)")
 
     ctx = DemoContext(out, track, synth.truth_dir, processed.masks, quiet=args.quiet,
-                      quick=args.quick)  # fmt: skip
+                      quick=args.quick, integrity=budget)  # fmt: skip
     outputs: dict[str, tuple[Path, str]] = {
         "survey": (synth.survey_dir, "the rendered survey: survey.yaml, manifest.csv and the "
                    "left and right frames"),
@@ -436,6 +442,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s (coarser "
                    "masks: its figures are not the demo's)")
     p.add_argument("--seed", type=int, metavar="N", default=1, help="random seed")
+    p.add_argument("--integrity-risk", type=integrity_risk, metavar="P",
+                   default=DEFAULT_RISK_PER_EPOCH,
+                   help="integrity risk per epoch the availability report's and the locator "
+                   "step's intervals are drawn for (docs/locator.md)")
     p.add_argument(
         "--camera", choices=("fisheye", "pinhole"), default=DEMO_CAMERA,
         help="side camera model",

@@ -315,3 +315,35 @@ def test_rinex_run_without_any_iono_model_warns_once_and_flags_epochs(
     assert main([*run, "--nav", str(nav_ok), "--out", str(tmp_path / "b")]) == 0
     assert "ionosphere" not in capsys.readouterr().err
     assert not read_run(tmp_path / "b")[0]["iono_uncorrected"].any()
+
+
+def test_run_draws_its_intervals_for_the_integrity_risk(sim_dir, tmp_path, capsys, monkeypatch):
+    from scipy.stats import norm
+
+    masks = str(sim_dir / "true_masks.parquet")
+    base = ["-q", "run", "--sim", str(sim_dir), "--masks", masks]
+    assert main([*base, "--integrity-risk", "1e-7", "--out", str(tmp_path / "r")]) == 0
+    assert "integrity risk 1e-07 per epoch" in capsys.readouterr().out
+    _, meta = read_run(tmp_path / "r")
+    assert meta["config"]["locator"]["budget"] == {"risk_per_epoch": 1e-7}
+    assert f"k = {norm.isf((1e-7 / 2) ** (1 / 3)):.2f} (three pairs)" in meta["interval_width"]
+    assert main([*base, "--out", str(tmp_path / "d")]) == 0  # the default budget
+    assert read_run(tmp_path / "d")[1]["config"]["locator"]["budget"] == {"risk_per_epoch": 1e-12}
+    assert main([*base, "--k-sigma", "2", "--out", str(tmp_path / "k")]) == 0
+    _, meta = read_run(tmp_path / "k")
+    assert meta["config"]["locator"]["budget"] is None
+    assert meta["config"]["locator"]["model"]["k_sigma"] == 2.0
+    capsys.readouterr()
+    for bad in (["--integrity-risk", "1e-7", "--k-sigma", "2"], ["--integrity-risk", "5"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*base, *bad, "--out", str(tmp_path / "x")])
+        assert exc.value.code == 2 and "--integrity-risk" in capsys.readouterr().err
+    # the demo takes the same setting and hands it to its runs
+    import locator.workflow
+
+    seen = {}
+    monkeypatch.setattr(locator.workflow, "demo",
+                        lambda *a, **kw: seen.update(kw) or (_ for _ in ()).throw(SystemExit(0)))
+    with pytest.raises(SystemExit):
+        main(["demo", "--out", str(tmp_path / "demo"), "--integrity-risk", "1e-6"])
+    assert seen["integrity"].risk_per_epoch == 1e-6

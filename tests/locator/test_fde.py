@@ -126,3 +126,43 @@ def test_validation(path):
         locate(path, sat, rho, el[:2], prior_m=100.0)
     with pytest.raises(ValueError, match="min_slope"):
         LocatorConfig(min_slope=3.0)
+
+
+def test_an_integrity_budget_sets_k_by_the_independent_pairs_united(path):
+    from scipy.stats import norm
+
+    from predisat.gnss.integrity import IntegrityBudget
+
+    risk = 1e-9
+    cfg = LocatorConfig(model=CFG.model, window_m=500.0, budget=IntegrityBudget(risk))
+
+    def k_of(m: int) -> float:  # Q^-1((T / 2)^(1 / m)), independently of the module
+        return float(norm.isf((risk / 2) ** (1 / m)))
+
+    s_true = 2200.0
+    for n, mode, m in ((8, IntervalMode.THREE_PAIRS, 3), (5, IntervalMode.ALL_PAIRS, 2),
+                       (3, IntervalMode.BEST_PAIR, 1)):  # fmt: skip
+        sat, rho, el = _epoch(path, s_true, n, 11 + n)
+        fix = locate(path, sat, rho, el, prior_m=s_true, config=cfg)
+        fixed = locate(path, sat, rho, el, prior_m=s_true, config=CFG)  # k = 2
+        assert fix.mode == mode and fix.pairs is not None
+        assert fix.pairs.k_sigma == pytest.approx(k_of(m))
+        # the same pairs, wider: the k = 2 interval lies inside
+        assert fix.lo_m <= fixed.lo_m and fix.hi_m >= fixed.hi_m
+        assert fixed.pairs is not None and fix.length_m > fixed.length_m
+        # each pair interval widens by the ratio of the k (to the curvature of the track)
+        ratio = (fix.pairs.hi_m - fix.pairs.lo_m) / (fixed.pairs.hi_m - fixed.pairs.lo_m)
+        np.testing.assert_allclose(ratio, k_of(m) / 2.0, rtol=0.02)
+    # three satellites nearly in one along-track direction: their pairs are blunt and dropped,
+    # the pairs left all share satellite 3 (a star): one independent pair, the widest k
+    x = path.ecef_at(s_true)
+    az, el = np.array([45.0, 48.0, 51.0, 225.0]), np.array([40.0, 41.0, 40.5, 35.0])
+    sat = sky(x, az, el)
+    fix = locate(path, sat, ranges(sat, x), el, prior_m=s_true, config=cfg)
+    assert fix.mode == IntervalMode.ALL_PAIRS and fix.flags & FixFlag.BLUNT
+    assert fix.pairs is not None and set(fix.pairs.j.tolist()) == {3}
+    assert fix.pairs.k_sigma == pytest.approx(k_of(1))
+    # without a budget the model's k, whatever the pairs
+    assert CFG.k_sigma_for(np.array([[0, 1], [2, 3], [4, 5]])) == 2.0
+    assert cfg.k_sigma_for(np.array([[0, 1], [2, 3], [4, 5]])) == pytest.approx(k_of(3))
+    assert "integrity risk 1e-09 per epoch" in cfg.width_text() and CFG.width_label() == "k = 2"

@@ -304,3 +304,40 @@ def test_pair_pool_ranks() -> None:
         else:
             assert set(t.tolist()) <= set(pool[r].tolist())
     np.testing.assert_array_equal(pair_pool(g[:, :6], s[:, :6]), np.tile(np.arange(6), (30, 1)))
+
+
+def test_an_integrity_budget_gives_each_mode_its_k() -> None:
+    from scipy.stats import norm
+
+    from predisat.availability.interval import INDEPENDENT_PAIRS, mode_k_sigma, width_text
+    from predisat.gnss.integrity import IntegrityBudget
+
+    risk = 1e-9
+    budget = IntegrityBudget(risk)
+    ks = mode_k_sigma(budget)
+    assert np.isnan(ks[IntervalMode.NONE])
+    for mode, m in ((IntervalMode.BEST_PAIR, 1), (IntervalMode.ALL_PAIRS, 2),
+                    (IntervalMode.THREE_PAIRS, 3)):  # fmt: skip
+        assert INDEPENDENT_PAIRS[mode] == m
+        assert ks[mode] == pytest.approx(norm.isf((risk / 2) ** (1 / m)))
+    np.testing.assert_array_equal(mode_k_sigma(2.5)[1:], [2.5, 2.5, 2.5])
+    rng = np.random.default_rng(7)
+    for n, m in ((2, 1), (3, 1), (4, 2), (5, 2)):
+        g = rng.uniform(-0.9, 0.9, (50, n))
+        s = rng.uniform(1.0, 4.0, (50, n))
+        i, j = np.triu_indices(n, 1)
+        unit = np.abs(np.sqrt(s[:, i] ** 2 + s[:, j] ** 2) / (g[:, i] - g[:, j]))
+        # by hand: the best pair's (2-3) or the widest pair's (4-5) full length
+        want = 2 * norm.isf((risk / 2) ** (1 / m)) * (unit.min(-1) if n < 4 else unit.max(-1))
+        length, mode = predicted_interval(g, s, np.ones_like(g, bool), budget)
+        assert (mode == (1 if n < 4 else 2)).all()
+        np.testing.assert_allclose(length, want, rtol=1e-6)
+    # six or more: the three-pair length at the budget's k equals that at a constant k of it
+    g = rng.uniform(-0.9, 0.9, (50, 8))
+    s = rng.uniform(1.0, 4.0, (50, 8))
+    ok = np.ones_like(g, bool)
+    got, mode = predicted_interval(g, s, ok, budget)
+    assert (mode == 3).all()
+    np.testing.assert_array_equal(got, predicted_interval(g, s, ok, float(ks[3]))[0])
+    assert "integrity risk 1e-09 per epoch" in width_text(budget)
+    assert "k = 2 in every mode" in width_text(2.0)

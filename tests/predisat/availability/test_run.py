@@ -378,11 +378,12 @@ def test_interval_model_from_a_locator_error_model_file(
     parser = add_arguments(argparse.ArgumentParser())
     base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
             "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet"]  # fmt: skip
-    default = run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track)
+    k2 = [*base, "--k-sigma", "2"]
+    default = run_from_args(parser.parse_args([*k2, "--out", str(tmp_path / "d")]), track)
     # sigma doubled everywhere (a = b = 4 m instead of 2 m): every interval exactly doubles
     model = write_error_model(tmp_path / "e.json", IntervalModel(ErrorModel(4.0, 4.0), 2.0))
     wide = run_from_args(
-        parser.parse_args([*base, "--error-model", str(model), "--out", str(tmp_path / "w")]),
+        parser.parse_args([*k2, "--error-model", str(model), "--out", str(tmp_path / "w")]),
         track,
     )
     k389 = run_from_args(
@@ -392,20 +393,23 @@ def test_interval_model_from_a_locator_error_model_file(
     assert np.isfinite(d).sum() > 10
     np.testing.assert_allclose(w, 2.0 * d, rtol=1e-5)
     np.testing.assert_allclose(k, 3.89 / 2.0 * d, rtol=1e-5)
-    assert "± 3.89 sigma" in k389.report_html.read_text(encoding="utf-8")
+    assert "k = 3.89 in every mode" in k389.report_html.read_text(encoding="utf-8")
     # the caption says which model made the intervals: the default is flagged as such
     captions = [html.unescape(r.report_html.read_text(encoding="utf-8"))
                 for r in (default, wide, k389)]  # fmt: skip
     assert "source's default" in captions[0]
     assert "source's default" not in captions[1] and "Error model: sigma" in captions[1]
     assert "4.000² + (4.000 / sin el)²" in captions[1]
-    assert "source's default" not in captions[2]
+    # k = 3.89 with the default error model: the model is the default, the width named
+    assert "source's default" in captions[2] and "k = 3.89 in every mode" in captions[2]
     # a track file given by the user is named in the footer (the test track has no attribution)
     assert f"Track: {track.name}" in captions[0]
     # the run records the model's numbers, so a report can be made again
     run = json.loads((tmp_path / "w" / "summary.json").read_text())["run"]
-    assert run["interval_model_params"] == {"a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0,
-                                            "k_sigma": 2.0}  # fmt: skip
+    assert run["interval_model_params"] == {
+        "a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0, "k_sigma": 2.0,
+        "integrity_risk_per_epoch": None, "k_sigma_by_mode": None,
+    }  # fmt: skip
     # a Parquet file: refused when read; a folder: by the parser (predisat.cli.args)
     with pytest.raises(ValueError, match="--error-model"):
         run_from_args(parser.parse_args([*base, "--error-model", str(path), "--out",
@@ -415,6 +419,52 @@ def test_interval_model_from_a_locator_error_model_file(
     for k in ("0", "inf"):  # refused by the parser, before any work
         with pytest.raises(SystemExit):
             parser.parse_args([*base, "--k-sigma", k, "--out", str(tmp_path / "x")])
+
+
+def test_the_integrity_budget_sets_each_modes_k(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    from scipy.stats import norm
+
+    from predisat.availability.interval import interval_mode
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
+            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet", "--scheduler",
+            "serial"]  # fmt: skip
+    one = run_from_args(parser.parse_args([*base, "--k-sigma", "1", "--out", str(tmp_path / "1")]),
+                        track)  # fmt: skip
+    runs = {
+        1e-12: run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track),
+        1e-7: run_from_args(parser.parse_args([*base, "--integrity-risk", "1e-7", "--out",
+                                               str(tmp_path / "r")]), track),
+    }  # fmt: skip
+    unit = one.results[0].interval_m
+    mode = interval_mode(one.results[0].count)
+    for risk, r in runs.items():
+        # k = Q^-1((T / 2)^(1 / m)), m = 3 / 2 / 1 independent pairs by mode
+        want = {3: norm.isf((risk / 2) ** (1 / 3)), 2: norm.isf((risk / 2) ** 0.5),
+                1: norm.isf(risk / 2)}  # fmt: skip
+        got = r.results[0].interval_m
+        seen = set()
+        for m, kk in want.items():
+            sel = (mode == m) & np.isfinite(unit)
+            np.testing.assert_allclose(got[sel], kk * unit[sel], rtol=1e-5)
+            if sel.any():
+                seen.add(m)
+        assert 3 in seen  # the stretch has three-pair epochs, so the test bites
+        text = html.unescape(r.report_html.read_text(encoding="utf-8"))
+        assert f"integrity risk {risk:.3g} per epoch" in text
+        assert f"k = {want[3]:.2f} (three pairs)" in text
+        params = json.loads((r.report_html.parent / "summary.json").read_text())["run"][
+            "interval_model_params"]  # fmt: skip
+        assert params["integrity_risk_per_epoch"] == risk and params["k_sigma"] is None
+        assert params["k_sigma_by_mode"]["THREE_PAIRS"] == pytest.approx(want[3])
+    for bad in (["--integrity-risk", "5"], ["--integrity-risk", "0"],
+                ["--integrity-risk", "1e-7", "--k-sigma", "2"]):  # fmt: skip
+        with pytest.raises(SystemExit):
+            parser.parse_args([*base, *bad, "--out", str(tmp_path / "x")])
 
 
 def test_untrusted_satellites_are_reported(run) -> None:

@@ -146,6 +146,12 @@ CONTRADICTIONS = [
      "--sky-net"),
     (predisat_cli.main, "evaluate-sky --data {dir} --method grabcut --sky-net {npz}",
      "--sky-net"),
+    (locator_cli.main, "run --sim {sim} --no-masks --integrity-risk 1e-9 --k-sigma 2 --out {out}",
+     "--k-sigma"),
+    (predisat_cli.main, "availability --masks {masks} --integrity-risk 1e-9 --k-sigma 2 "
+     "--out {out}", "--k-sigma"),
+    (locator_cli.main, "balises --sim {sim} --no-masks --integrity-risk 1e-9 --k-sigma 2 "
+     "--out {out}", "--k-sigma"),
 ]
 
 
@@ -178,6 +184,11 @@ UNIT_MISTAKES = [
      "no constellation"),
     (locator_cli.main, "run --sim {sim} --no-masks --constellation X --out {out}",
      "no constellation"),
+    (locator_cli.main, "run --sim {sim} --no-masks --integrity-risk 1 --out {out}",
+     "1 % is 0.01"),
+    (predisat_cli.main, "availability --masks {masks} --integrity-risk 0.5 --out {out}",
+     "no integrity risk per epoch"),
+    (predisat_cli.main, "demo --integrity-risk 0 --out {out}", "a probability"),
 ]
 
 
@@ -339,3 +350,18 @@ def test_synth_sky_choices_are_the_renderers() -> None:
     from predisat.synth.generate import SKY_CHOICES
 
     assert set(predisat_cli.SKY_CHOICES) == set(SKY_CHOICES)
+
+
+def test_one_integrity_risk_setting_for_every_command() -> None:
+    from predisat.cli.args import integrity_budget
+    from predisat.cli.demo import DemoContext
+    from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+
+    demo = predisat_cli.build_parser().parse_args(["demo", "--integrity-risk", "1e-8"])
+    assert demo.integrity_risk == 1e-8
+    assert predisat_cli.build_parser().parse_args(["demo"]).integrity_risk == 1e-12
+    assert DemoContext.__dataclass_fields__["integrity"].default_factory().risk_per_epoch == (
+        DEFAULT_RISK_PER_EPOCH
+    )
+    assert integrity_budget(argparse.Namespace(k_sigma=None, integrity_risk=None)) is not None
+    assert integrity_budget(argparse.Namespace(k_sigma=2.0, integrity_risk=None)) is None
