@@ -172,3 +172,29 @@ def test_masks_over_http_and_outputs_in_memory_are_the_local_bytes(
         assert res.summary.equals(local.summary)
         with pytest.raises(FileNotFoundError, match="check the URL"):
             _run(f"{url}/absent.masks.parquet", f"{mem}/x")
+
+
+def test_blocks_saved_under_another_integrity_setting_are_not_taken(
+    tmp_path: Path, track: TrackMap, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from predisat.gnss.integrity import IntegrityBudget
+
+    t = default_window(STEP_S)[:12]
+    sats = SatellitePositions.from_ephemeris(default_ephemeris(), t, "gps")
+    masks = _masks(track)
+    positions = LinePositions.from_masks(masks)
+    saved = BlockCheckpoint(tmp_path / "blocks")
+    rule = TrustRule.mask(masks)
+    loose, tight = IntegrityBudget(1e-3), IntegrityBudget(1e-12)
+    engine.compute_availability(sats, positions, rule, integrity=loose, checkpoint=saved)
+    assert sorted((tmp_path / "blocks").rglob("*.npz"))  # every block saved
+    again = _Blocks()
+    monkeypatch.setattr(engine, "block_task", again)
+    res = engine.compute_availability(sats, positions, rule, integrity=tight, checkpoint=saved)
+    assert sorted(again.done) == [0, 64, 128, 192] and res.provenance["blocks_resumed"] == 0
+    fresh = engine.compute_availability(sats, positions, rule, integrity=tight)
+    assert res.interval_m is not None and fresh.interval_m is not None
+    assert res.interval_m.tobytes() == fresh.interval_m.tobytes()
+    loose_iv = engine.compute_availability(sats, positions, rule, integrity=loose).interval_m
+    assert loose_iv is not None and not np.allclose(
+        np.nan_to_num(loose_iv), np.nan_to_num(res.interval_m))  # the setting mattered
