@@ -94,6 +94,10 @@ class HeightField:
         Chainage intervals where an overhead structure was detected.
     camera_ceilings : ndarray of float, shape (m, 4)
         The ``camera_ceilings`` rows :func:`apply_clearance_prior` was given (none: empty).
+    views : ndarray of int32, shape (ny, nx), or None
+        Independent views (frames, or frames sharing a view group) whose rays bounded each
+        cell's carved bound; 0 where no view did or where a prior set the bound (``None``:
+        not counted).
     """
 
     cell_m: float
@@ -106,6 +110,7 @@ class HeightField:
     rail_z_m: NDArray = field(repr=False)
     overhead_m: NDArray = field(default_factory=lambda: np.zeros((0, 2)))
     camera_ceilings: NDArray = field(default_factory=lambda: np.zeros((0, 4)))
+    views: NDArray | None = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -283,6 +288,7 @@ def carve_profile(
     camera_m: NDArray,
     local_to_frame: NDArray,
     range_m: float,
+    seen: NDArray | None = None,
 ) -> int:
     """Lower the bounds of ``bound`` (``hf``'s raster, updated in place) with one frame.
 
@@ -300,6 +306,8 @@ def carve_profile(
         Rotation from the local ENU at the frame into the track frame.
     range_m : float
         Cells beyond this horizontal distance from the camera are left alone.
+    seen : ndarray of bool, shape ``hf.shape``, optional
+        Set True (in place) at every cell the frame bounded.
 
     Returns
     -------
@@ -339,11 +347,12 @@ def carve_profile(
     tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
     tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
     up = rot[:, 2]
+    marks = np.zeros((r1 - r0, c1 - c0), np.bool_) if seen is None else seen[r0:r1, c0:c1]
     return int(_carve_cells(
         beta, rho, region,
         bound[r0:r1, c0:c1], float(b_axis[0]), float(b_axis[1] - b_axis[0]), float(range_m),
         np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
-        float(up[0]), float(up[1]), float(up[2]),
+        float(up[0]), float(up[1]), float(up[2]), marks,
     ))  # fmt: skip
 
 
@@ -430,9 +439,10 @@ def _corner_lattice(
 def _carve_cells(
     beta: NDArray, rho: NDArray, region: NDArray, bound: NDArray, b0: float, step: float,
     range_m: float, tan_sky: NDArray, xl: NDArray, yl: NDArray, c: float, cz: float,
-    up_x: float, up_y: float, up_z: float,
+    up_x: float, up_y: float, up_z: float, seen: NDArray,
 ) -> int:  # fmt: skip
-    """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded.
+    """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded
+    and marks them in ``seen`` (n_r, n_c).
 
     ``beta`` and ``rho`` (n_r + 1, n_c + 1) are the relative azimuth (deg) and horizontal range
     of the cell corners, ``tan_sky`` the tangent of the profile's skyline (``+inf`` where the
@@ -477,6 +487,7 @@ def _carve_cells(
             z = np.float32(cz + tilt + h / up_z)
             if z < bound[r, q]:
                 bound[r, q] = z
+            seen[r, q] = True
             count += 1
     return count
 
