@@ -513,9 +513,14 @@ class MaskSet:
                 for k, v in self.descriptors.items()
             )
             and self.provenance == other.provenance
-            and (self.support is None) == (other.support is None)
-            and (self.support is None or np.array_equal(self.support, other.support))
+            and _same_support(self.support, other.support)
         )
+
+
+def _same_support(a: NDArray | None, b: NDArray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
 
 
 # ---------------------------------------------------------------------- validation
