@@ -34,11 +34,13 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount, vehicle_to_enu
+from predisat.gnss.fresnel import L1_WAVELENGTH_M, TRANSPARENT_FRACTION
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.reconstruct.heightfield import (
     HeightField,
     LowestBounds,
+    ThinRule,
     apply_clearance_prior,
     carve_box,
     carve_profile,
@@ -135,6 +137,13 @@ class ReconstructionParams:
         all three saw is a *suspect frame*: reported with the reason and left out of the
         reconstruction (leaving a frame out only removes sky evidence). ``None``: no check.
     suspect_tol_deg, suspect_neighbour_m : float
+    antenna_clearance_m : float
+        Least distance of any structure from the antenna's path (a contact wire over a roof
+        antenna; a stated assumption): the thin-structure rule (``docs/reconstruction.md``,
+        section 8) takes a thin feature's Fresnel zone at least this large.
+    thin_wavelength_m : float
+        Wavelength of the thin-structure rule: the shortest the receiver tracks (L1, the
+        safe side).
     """
 
     cell_m: float = 0.5
@@ -163,8 +172,15 @@ class ReconstructionParams:
     suspect_share: float | None = None
     suspect_tol_deg: float = 5.0
     suspect_neighbour_m: float = 25.0
+    antenna_clearance_m: float = 0.5
+    thin_wavelength_m: float = L1_WAVELENGTH_M
 
     def __post_init__(self) -> None:
+        if not (self.antenna_clearance_m > 0 and self.thin_wavelength_m > 0):
+            raise ValueError(
+                "antenna_clearance_m and thin_wavelength_m must be > 0 metres, got "
+                f"{self.antenna_clearance_m} and {self.thin_wavelength_m}"
+            )
         n_az = round(360.0 / self.az_step_deg)
         if abs(n_az * self.az_step_deg - 360.0) > 1e-9:
             raise ValueError(f"az_step_deg = {self.az_step_deg} must divide 360")
@@ -238,6 +254,15 @@ class FrameView:
         Frames with the same non-empty group count as one view in the fault-tolerant fusion
         (``ReconstructionParams.fusion_rank``): frames that may share a fault, such as one
         camera's frames of one pass (dirt on its lens). Empty: the frame is a view of its own.
+    thin_mask : ndarray of bool, shape ``camera.shape``, optional
+        Pixels that are sky in ``sky_mask`` only by the thin-structure policy (obstacle
+        features at most ``thin_width_deg`` across). The reconstruction lets the sky seen
+        through them prove free space only as far as the first Fresnel zone rule allows
+        (``docs/reconstruction.md``, section 8); beyond, they are obstacles. None: no such
+        pixel is known (every sky pixel is sky).
+    thin_width_deg : float
+        Widest feature ``thin_mask`` may hold, degrees (the policy's width in pixels times
+        the camera's widest pixel).
     """
 
     chainage_m: float
@@ -250,6 +275,8 @@ class FrameView:
     confidence: NDArray | None = field(default=None, repr=False)
     frame_id: str = ""
     view_group: str = ""
+    thin_mask: NDArray | None = field(default=None, repr=False)
+    thin_width_deg: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -364,6 +391,23 @@ class Reconstructor:
                 raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
         return out
 
+    def solid_profiles(
+        self, frames: Sequence[FrameView], profiles: Sequence[SkyProfile]
+    ) -> list[SkyProfile]:
+        """Sky profile of every frame with its thin-structure pixels (``FrameView.thin_mask``)
+        as obstacles: ``profiles[i]`` itself for a frame without any."""
+        out = []
+        for f, prof in zip(frames, profiles, strict=True):
+            if f.thin_mask is None or not np.any(f.thin_mask):
+                out.append(prof)
+                continue
+            solid = np.asarray(f.sky_mask, bool) & ~np.asarray(f.thin_mask, bool)
+            out.append(self.rectifier(f.camera, f.mount).profile(
+                solid, f.heading_deg, f.reverse, f.confidence,
+                self.params.min_confidence, self.params.low_confidence_windows,
+            ))  # fmt: skip
+        return out
+
     def height_field(
         self,
         frames: Sequence[FrameView],
@@ -376,16 +420,18 @@ class Reconstructor:
         p = self.params
         hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
         profs = list(profiles) if profiles is not None else self.profiles(frames)
+        solids = self.solid_profiles(frames, profs)
         bound = hf.bound_m.copy()
         views = np.zeros(hf.shape, np.int32)
         if frames:
             cams, rots = _camera_geometry(frames, track)
+            rules = _thin_rules(hf, frames, cams, p)
             if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
                 seen = np.zeros(hf.shape, np.bool_)
                 for idx in _view_groups(frames).values():
                     for i in idx:
                         carve_profile(hf, bound, profs[i], cams[i], rots[i], p.carve_range_m,
-                                      seen=seen)  # fmt: skip
+                                      seen=seen, solid=solids[i], thin_rule=rules[i])  # fmt: skip
                     # a view counts once per cell, whatever its frames (within their boxes)
                     b = np.array([carve_box(hf, cams[i], p.carve_range_m) for i in idx])
                     box = (slice(int(b[:, 0].min()), int(b[:, 1].max())),
@@ -393,7 +439,7 @@ class Reconstructor:
                     views[box] += seen[box]
                     seen[box] = False
             else:
-                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p)
+                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules)
         over = [
             (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
             for f, prof in zip(frames, profs, strict=True)
@@ -455,7 +501,10 @@ class Reconstructor:
         near_el, near_unknown, far_grid_el, far_unknown, near_sup, far_sup = _horizon_parts(
             hf, ant, rot, p, caps
         )
-        far_el, far_seen, seen, far_views = _far_field(keep, profs, s, ant, track, p)
+        # the far field has no distance: a thin feature seen there may be far, hence opaque
+        far_el, far_seen, seen, far_views = _far_field(
+            keep, self.solid_profiles(keep, profs), s, ant, track, p
+        )
         # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
         # by that camera's sky: it proves nothing farther stands higher (the parallax
         # allowance of the far field assumes that distance). Loosely carved far cells (a hill
@@ -515,6 +564,8 @@ def _fused_bounds(
     cams: NDArray,
     rots: NDArray,
     p: ReconstructionParams,
+    solids: Sequence[SkyProfile] | None = None,
+    rules: Sequence[ThinRule | None] | None = None,
 ) -> tuple[NDArray, NDArray]:
     """Bounds fused over independent views (:class:`~predisat.reconstruct.heightfield.
     LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
@@ -528,7 +579,9 @@ def _fused_bounds(
         for i in idx:
             box = carve_box(hf, cams[i], p.carve_range_m)
             if box[1] > box[0] and box[3] > box[2]:
-                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m)
+                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m,
+                              solid=None if solids is None else solids[i],
+                              thin_rule=None if rules is None else rules[i])  # fmt: skip
                 boxes.append(box)
         if not boxes:
             continue
@@ -537,6 +590,27 @@ def _fused_bounds(
         fusion.add(scratch, union)
         scratch[union[0] : union[1], union[2] : union[3]] = np.inf
     return np.minimum(hf.bound_m, fusion.fused()), fusion.views
+
+
+def _thin_rules(
+    hf: HeightField, frames: Sequence[FrameView], cams: NDArray, p: ReconstructionParams
+) -> list[ThinRule | None]:
+    """The thin-structure rule of each frame (None: no thin mask): its widest thin feature,
+    ``TRANSPARENT_FRACTION^2 * wavelength``, the antenna clearance and the camera's offset
+    from the axis (its cell's, shrunk toward the axis by half a cell diagonal; 0 outside the
+    corridor)."""
+    row, col, ok = hf.index(cams[:, 0], cams[:, 1])
+    out: list[ThinRule | None] = []
+    k2 = TRANSPARENT_FRACTION**2 * p.thin_wavelength_m
+    for i, f in enumerate(frames):
+        if f.thin_mask is None or f.thin_width_deg <= 0.0:
+            out.append(None)
+            continue
+        off = float(hf.offset_m[row[i], col[i]]) if ok[i] else float("nan")
+        shrunk = np.sign(off) * max(abs(off) - 0.7072 * hf.cell_m, 0.0) if np.isfinite(off) else 0.0
+        out.append(ThinRule(float(np.radians(f.thin_width_deg)), k2, p.antenna_clearance_m,
+                            float(shrunk)))  # fmt: skip
+    return out
 
 
 def _view_groups(frames: Sequence[FrameView]) -> dict[str, list[int]]:

@@ -279,3 +279,55 @@ def test_bin_support_takes_the_part_that_sets_the_bin() -> None:
     # ASSUMED bins: 0 whatever their parts
     got = bin_support(near, far_grid, far_el, seen, views, np.array([[True, False, False]]), 2)
     np.testing.assert_array_equal(got, [[0, 2, 4]])
+
+
+# ---------------------------------------------------------------------- thin-structure rule
+
+
+def test_thin_features_prove_free_space_only_within_the_fresnel_reach(scene) -> None:
+    """A right frame (open side) with the 8 sky pixels above its skyline in every column marked
+    as thin structure (0.7 deg): cells the rule cannot clear keep the bound of the band as an
+    obstacle, cells it can keep the bound of the band as sky. The reach is computed here from
+    the cell geometry (the rule's two conditions at the ray's end)."""
+    from predisat.reconstruct.carving import _camera_geometry
+
+    world, frames, _ = scene
+    # the default mount: the camera 1.5 m to the side of the antenna (the rule's offset term;
+    # the mask is the one rendered on the axis, which does not matter when comparing carvings)
+    f = dataclasses.replace(next(fr for fr in frames if fr.frame_id == "350r"),
+                            mount=Mount.default("right"))  # fmt: skip
+    sky = f.sky_mask
+    rows_i = np.arange(sky.shape[0])[:, None]
+    # lowest sky row of each column's top run: the last row of the leading sky
+    first_obst = np.where((~sky).any(0), np.argmax(~sky & (np.cumsum(sky, 0) > 0), 0), sky.shape[0])
+    band = sky & (rows_i >= first_obst[None, :] - 8) & (rows_i < first_obst[None, :])
+    assert band.sum() > 1000
+    thin = dataclasses.replace(f, thin_mask=band, thin_width_deg=0.7)
+    solid = dataclasses.replace(f, sky_mask=sky & ~band)
+    rec = Reconstructor(BASE)
+    lo, hi = 300.0, 400.0
+    a = rec.height_field([f], world.track, lo, hi)
+    b = rec.height_field([thin], world.track, lo, hi)
+    c = rec.height_field([solid], world.track, lo, hi)
+    keep = np.isfinite(c.bound_m) & (np.abs(a.offset_m) > 2.5)  # outside the clearance prior
+    assert np.all(b.bound_m[keep] >= a.bound_m[keep])
+    assert np.all(b.bound_m[keep] <= c.bound_m[keep])
+    cam = _camera_geometry([f], world.track)[0][0]
+    r0, c0, _ = a.index(cam[:1], cam[1:2])
+    side = np.sign(a.offset_m[r0[0], c0[0]])
+    rows, cols = np.nonzero(keep)
+    cm = a.cell_m
+    xs = (a.ix0 + cols[:, None] + np.array([0, 1, 0, 1])) * cm - cam[0]
+    ys = (a.iy0 + rows[:, None] + np.array([0, 0, 1, 1])) * cm - cam[1]
+    rho = np.hypot(xs, ys).max(axis=1)
+    w = np.radians(0.7) * np.hypot(rho, c.bound_m[rows, cols] - cam[2])  # widest feature, m
+    k2 = 0.1**2 * 0.190294  # transparent when w^2 <= k2 * distance from the antenna path
+    off = a.offset_m[rows, cols]
+    near = np.where(np.sign(off) == side, np.abs(off) - 0.7072 * cm, 0.0)
+    diff = a.bound_m[rows, cols] != c.bound_m[rows, cols]  # the band matters there
+    got_thin = b.bound_m[rows, cols] == a.bound_m[rows, cols]
+    # away from the reach's edge (5 % either way: the kernel's corner and height are its own)
+    sure_in = diff & ((1.05 * w) ** 2 <= k2 * np.maximum(near, 0.5))
+    sure_out = diff & ((0.95 * w) ** 2 > k2 * np.maximum(near, 0.5))
+    assert sure_in.sum() > 20 and sure_out.sum() > 20
+    assert got_thin[sure_in].all() and not got_thin[sure_out].any()
