@@ -136,7 +136,7 @@ def main() -> None:
     # the current kernel also returns the support of each ray (its last argument is the
     # views raster the reference does not take): only the values are compared and timed alike
     def baseline(*a: Any) -> tuple[Any, Any]:
-        return reference_march(*a[:-1])  # type: ignore[no-any-return]
+        return reference_march(*a[:-1])
 
     def current(*a: Any) -> tuple[Any, ...]:
         return rc._march_rays(*a)[:2]

@@ -534,6 +534,7 @@ def ideal_frames(
     backend: str = "open3d",
     *,
     caster: Caster | None = None,
+    thin_deg: float | None = None,
 ) -> list[FrameView]:
     """Frames with ideal sky masks (:func:`ideal_sky_mask`) at chainages, for the reconstruction.
 
@@ -547,6 +548,13 @@ def ideal_frames(
         Cameras by side; default ``Mount.default`` for ``"left"`` and ``"right"``.
     antenna_height_m, reverse, backend, caster
         As for :func:`ideal_sky_mask`.
+    thin_deg : float, optional
+        The pipeline's thin-structure policy (``PipelineParams.thin_deg``): the masks are then
+        those of a segmenter without error followed by that policy, with its
+        ``FrameView.thin_mask`` (every face a camera sees is an obstacle, features at most
+        ``max(1, round(thin_deg / camera.widest_pixel_deg))`` pixels wide become sky).
+        None: every thin-material face (wire, cantilever) is sky, whatever its width and
+        distance, and there is no thin mask (the reconstruction then applies no rule).
 
     Returns
     -------
@@ -563,10 +571,27 @@ def ideal_frames(
     cast = _caster(world, backend, caster)
     ant = world.antenna_enu(s, antenna_height_m)
     hd = np.asarray(world.track.heading_at(s), float)
-    sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=cast)
-           for k, m in mounts.items()}
+    thin: dict[str, NDArray | None] = dict.fromkeys(mounts)
+    width = 0.0
+    if thin_deg is None:
+        sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=cast)
+               for k, m in mounts.items()}  # fmt: skip
+    else:
+        from predisat.sky.morphology import remove_thin_obstacles
+
+        full = make_caster(world, backend)  # every face: what a camera sees
+        px = max(1, round(thin_deg / camera.widest_pixel_deg)) if thin_deg > 0 else 0
+        width = px * camera.widest_pixel_deg
+        valid = np.all(np.isfinite(camera.pixel_to_ray(*camera.pixel_grid())), axis=-1)
+        sky = {}
+        for k, m in mounts.items():
+            raw = ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=full)
+            sky[k] = np.stack([remove_thin_obstacles(r, px) & valid for r in raw])
+            thin[k] = sky[k] & ~raw
     return [
         FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,
-                  frame_id=f"{s[i]:.0f}{k[0]}")
+                  frame_id=f"{s[i]:.0f}{k[0]}",
+                  thin_mask=None if thin[k] is None else thin[k][i],  # type: ignore[index]
+                  thin_width_deg=width)
         for i in range(s.size) for k, m in mounts.items()
     ]  # fmt: skip
