@@ -79,3 +79,28 @@ def test_true_masks_raise_bins_only_near_a_cantilever() -> None:
     assert np.all(new >= old - 1e-3)
     assert (new[0] > old[0] + 1.0).sum() >= 3  # under the cantilever: its strut blocks
     np.testing.assert_allclose(new[1:], old[1:], atol=1e-3)  # 10 m away: beyond 1.9 m
+
+
+def test_ideal_frames_under_the_policy_carry_their_thin_pixels() -> None:
+    from predisat.camera.models import CameraModel
+    from predisat.sky.morphology import remove_thin_obstacles
+    from predisat.synth.truth import ideal_frames, ideal_sky_mask
+
+    track = straight_track(400.0, 30.0)
+    world = World.build(track, WorldSpec((Stretch("open", 0.0, 400.0),), True, False), seed=3)
+    cam = CameraModel.fisheye_from_fov(200, 150, 185.0)
+    s = np.array([200.0])
+    plain = ideal_frames(world, s, cam)
+    policy = ideal_frames(world, s, cam, thin_deg=0.7)
+    px = max(1, round(0.7 / cam.widest_pixel_deg))
+    assert all(f.thin_mask is None for f in plain)
+    full = make_caster(world, "open3d")
+    n_thin = 0
+    for f in policy:
+        raw = ideal_sky_mask(world, s, cam, f.mount, caster=full)[0]
+        assert f.thin_width_deg == pytest.approx(px * cam.widest_pixel_deg)
+        assert np.array_equal(f.thin_mask, f.sky_mask & ~raw)
+        assert np.array_equal(f.sky_mask, remove_thin_obstacles(raw, px) & (
+            np.all(np.isfinite(cam.pixel_to_ray(*cam.pixel_grid())), axis=-1)))
+        n_thin += int(f.thin_mask.sum())
+    assert n_thin > 0  # the wires
