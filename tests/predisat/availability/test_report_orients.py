@@ -386,3 +386,19 @@ def test_sky_plot_dots_weakly_supported_bins(masks, satellites) -> None:
     assert "weakly supported (< 2 views)" not in plain_labels
     with pytest.raises(ValueError, match="weak needs a mask and one flag per mask bin"):
         dataclasses.replace(base, weak=np.zeros(5, bool))
+
+
+def test_report_sky_views_flag_weak_bins_from_the_support(results, masks, satellites, track):
+    """The report's sky views: weak = support below 2, apart from assumed and terrain bins;
+    none without support (a version 1 or 2 file)."""
+    from predisat.availability.report import _sky_views
+
+    sup = np.full(masks.mask_el_deg.shape, 3, np.uint8)
+    sup[:, 30:33] = 1  # weak, observed
+    sup[:, 12] = 0  # weak but assumed (10-20): hatched as assumed, not dotted
+    with_sup = dataclasses.replace(masks, support=sup)
+    inputs = ReportInputs(results, with_sup, satellites, track, INFO, sky_chainage_m=(CH[0],))
+    (view,) = _sky_views(inputs)
+    assert view.weak is not None and np.flatnonzero(view.weak).tolist() == [30, 31, 32]
+    plain = ReportInputs(results, masks, satellites, track, INFO, sky_chainage_m=(CH[0],))
+    assert _sky_views(plain)[0].weak is None
