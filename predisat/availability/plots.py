@@ -507,6 +507,9 @@ class SkyView:
     terrain : ndarray of bool, shape (n_az,), or None
         Bins raised to a digital elevation model's horizon (``BinSource.TERRAIN``), drawn
         hatched the other way.
+    weak : ndarray of bool, shape (n_az,), or None
+        The other weakly supported bins (``MaskSet.support`` below ``WEAK_SUPPORT``: fewer
+        than two independent views behind the bound), drawn dotted.
     """
 
     title: str
@@ -521,6 +524,7 @@ class SkyView:
     cutoff_deg: tuple[float, ...] = ()
     assumed: NDArray | None = None
     terrain: NDArray | None = None
+    weak: NDArray | None = None
 
     def __post_init__(self) -> None:
         shapes = [np.shape(self.sat_az_deg), np.shape(self.sat_el_deg), np.shape(self.trusted)]
@@ -533,14 +537,19 @@ class SkyView:
             raise ValueError(
                 f"SkyView: {len(self.sats)} satellite names for {shapes[0][1]} columns"
             )
-        if self.assumed is not None and (
-            self.mask_el_deg is None or np.shape(self.assumed) != np.shape(self.mask_el_deg)
-        ):
-            raise ValueError(
-                "SkyView: assumed needs a mask and one flag per mask bin, got shape "
-                f"{np.shape(self.assumed)} for mask "
-                f"{None if self.mask_el_deg is None else self.mask_el_deg.shape}"
-            )
+        for name in ("assumed", "terrain", "weak"):
+            flags = getattr(self, name)
+            if flags is not None and (
+                self.mask_el_deg is None or np.shape(flags) != np.shape(self.mask_el_deg)
+            ):
+                raise ValueError(
+                    f"SkyView: {name} needs a mask and one flag per mask bin, got shape "
+                    f"{np.shape(flags)} for mask "
+                    f"{None if self.mask_el_deg is None else self.mask_el_deg.shape}"
+                )
+
+
+_WEAK_COLOUR = "#6a3d9a"
 
 
 def _staircase(az_step_deg: float, values: NDArray) -> tuple[NDArray, NDArray]:
@@ -594,6 +603,11 @@ def _draw_mask(ax: Any, v: SkyView) -> None:
         ax.fill_between(th, np.where(flag > 0, 90.0 - eff, 90.0), 90.0, facecolor="none",
                         edgecolor="#1b5e20", hatch="\\\\", linewidth=0, zorder=1.2,
                         gid="terrain")  # fmt: skip
+    if v.weak is not None and np.any(v.weak):
+        _, flag = _staircase(v.az_step_deg, np.asarray(v.weak, float))
+        ax.fill_between(th, np.where(flag > 0, 90.0 - eff, 90.0), 90.0, facecolor="none",
+                        edgecolor=_WEAK_COLOUR, hatch="....", linewidth=0, zorder=1.2,
+                        gid="weak")  # fmt: skip
 
 
 def _draw_sky(ax: Any, v: SkyView, label_sats: bool) -> None:
@@ -667,8 +681,9 @@ def _sat_labels(
 def sky_plots(views: Sequence[SkyView], label_sats: bool = True, title: str = "") -> Figure:
     """Polar sky plots side by side: north up, azimuth clockwise, zenith at the centre.
 
-    Filled: the mask (dark), the margin (light, when there is one), assumed bins (hatched) and
-    bins raised to the terrain (hatched the other way);
+    Filled: the mask (dark), the margin (light, when there is one), assumed bins (hatched),
+    bins raised to the terrain (hatched the other way) and the other weakly supported bins
+    (dotted: fewer than two independent views behind the bound);
     dotted circles: flat cut-offs; line with arrow: the track, increasing chainage; blue:
     satellite track while trusted under the masks, grey: above the horizon but not trusted;
     each satellite named on its own track, spread apart (``label_sats``). Elevation rings 15,
@@ -692,6 +707,9 @@ def sky_plots(views: Sequence[SkyView], label_sats: bool = True, title: str = ""
     if any(v.terrain is not None and np.any(v.terrain) for v in views):
         handles.append(Patch(facecolor="white", edgecolor="#1b5e20", hatch="\\\\",
                              label="terrain (elevation model)"))  # fmt: skip
+    if any(v.weak is not None and np.any(v.weak) for v in views):
+        handles.append(Patch(facecolor="white", edgecolor=_WEAK_COLOUR, hatch="....",
+                             label="weakly supported (< 2 views)"))  # fmt: skip
     handles += [
         Patch(color="#1f5fa8", label="satellite, trusted"),
         Patch(color="#b0b0b0", label="satellite, masked"),

@@ -38,7 +38,7 @@ from predisat.geodesy import enu_rotation, geodetic_to_ecef
 from predisat.gnss.ephemeris import Reason
 from predisat.gnss.timescale import gps_s_to_utc_datetime64, gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
-from predisat.masks.maskset import BinSource, MaskSet
+from predisat.masks.maskset import WEAK_SUPPORT, BinSource, MaskSet
 from predisat.track import KilometrePost, TrackMap
 
 __all__ = [
@@ -583,6 +583,9 @@ def _sky_views(inputs: ReportInputs) -> list[plots.SkyView]:
                 cutoffs,
                 assumed=np.asarray(masks.source[i]) == BinSource.ASSUMED,
                 terrain=np.asarray(masks.source[i]) == BinSource.TERRAIN,
+                weak=None if masks.support is None else (
+                    (np.asarray(masks.support[i]) < WEAK_SUPPORT)
+                    & ~np.isin(masks.source[i], [BinSource.ASSUMED, BinSource.TERRAIN])),
             )
         )
     return views

@@ -1,4 +1,4 @@
-"""Mask file v1 (GeoParquet) reader and writer, and exporters to other tools' mask formats.
+"""Mask file (GeoParquet, versions 1-3) reader and writer, and exporters to other tools' masks.
 
 The mask file is a GeoParquet 1.1 file: one row per position, a WKB ``Point`` geometry column
 (longitude, latitude; CRS ``OGC:CRS84``) so QGIS and geopandas open it as points along the
@@ -52,10 +52,13 @@ __all__ = [
 ]
 
 FORMAT_NAME = "predisat-masks"
-FORMAT_VERSION = 2
-"""The newest version: 2 adds source code 3 (``terrain``). A file without terrain bins is
-written as version 1, so that readers older than the terrain step still read it."""
-_READ_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+"""The newest version: 2 adds source code 3 (``terrain``), 3 the per-bin ``support`` column
+(independent views behind each bin). A file is written with the lowest version that holds
+it: version 1 without terrain bins or support, 2 with terrain bins and no support, so that
+older readers still read what they can."""
+_READ_VERSIONS = (1, 2, 3)
+_SUPPORT = "support"  # the version 3 column
 METADATA_KEY = b"predisat"
 """Parquet file key-value metadata key holding the PREDISAT JSON header."""
 GEOPARQUET_VERSION = "1.1.0"
@@ -72,6 +75,8 @@ _COLUMN_DOC = {
     "heading_deg": "azimuth of increasing chainage, deg clockwise from true north",
     "mask_el_deg": "skyline elevation per azimuth bin, deg in [0, 90]",
     "source": "per-bin origin: 0 observed, 1 reconstructed, 2 assumed, 3 terrain (version 2)",
+    "support": "per-bin number of independent views behind the bound, 0 = rests on an "
+    "assumption, weakly supported below 2 (version 3)",
     "margin_deg": "per-bin margin added to the mask before the trust test, deg >= 0",
     "opening_angle_deg": "derived, informative: 180 - effective mask left - right (cross-track)",
     "assumed_bins": "derived, informative: number of bins with source = 2 (assumed)",
@@ -88,7 +93,7 @@ class MaskFileError(MaskError):
 
 # ---------------------------------------------------------------------- GeoParquet
 def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
-    """Write a mask set as a mask file v1 (GeoParquet), atomically.
+    """Write a mask set as a mask file (GeoParquet; the lowest version that holds it), atomically.
 
     The file is written beside ``path`` under a temporary name and moved into place with
     :func:`os.replace`, so a crash never leaves a half-written mask file.
@@ -117,6 +122,9 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
         cols[name] = pa.FixedSizeListArray.from_arrays(flat, n_az)
     for name, values in masks.descriptors.items():
         cols[name] = pa.array(values, type=pa.float64(), from_pandas=False)
+    if masks.support is not None:
+        flat = pa.array(np.ascontiguousarray(masks.support).ravel(), type=pa.uint8())
+        cols[_SUPPORT] = pa.FixedSizeListArray.from_arrays(flat, n_az)
     cols["opening_angle_deg"] = pa.array(masks.opening_angle_deg(), type=pa.float64())
     cols["assumed_bins"] = pa.array(
         (masks.source == BinSource.ASSUMED).sum(axis=1).astype(np.int32), type=pa.int32()
@@ -124,7 +132,7 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
 
     header = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION if (masks.source == BinSource.TERRAIN).any() else 1,
+        "format_version": _version_for(masks),
         "az_step_deg": masks.az_step_deg,
         "n_az": n_az,
         "azimuth_bins": "bin k is centred on k * az_step_deg (deg clockwise from true north) "
@@ -134,7 +142,7 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
         "descriptors": list(masks.descriptors),
         "derived_columns": list(_DERIVED),
         "columns": {
-            **_COLUMN_DOC,
+            **{k: v for k, v in _COLUMN_DOC.items() if k != _SUPPORT or _SUPPORT in cols},
             **{d: "obstacle descriptor (NaN = none)" for d in masks.descriptors},
         },
         "provenance": masks.provenance,
@@ -165,6 +173,13 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
     return path
 
 
+def _version_for(masks: MaskSet) -> int:
+    """The lowest format version that holds ``masks``."""
+    if masks.support is not None:
+        return 3
+    return 2 if (masks.source == BinSource.TERRAIN).any() else 1
+
+
 def mask_file_path(path: str | os.PathLike[str]) -> Path:
     """``path`` itself, or ``path / "masks.parquet"`` when it is a folder (the output folder of
     ``predisat process``)."""
@@ -173,7 +188,7 @@ def mask_file_path(path: str | os.PathLike[str]) -> Path:
 
 
 def read_masks(path: str | os.PathLike[str]) -> MaskSet:
-    """Read and validate a mask file v1.
+    """Read and validate a mask file (version 1, 2 or 3).
 
     Checks the format name and version, the presence and types of every column, list lengths,
     nulls, value ranges, monotonic chainage, and that the geometry points agree with
@@ -193,12 +208,12 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
     path = mask_file_path(given)
     if given.is_dir() and not path.is_file():
         raise MaskFileError(
-            f"{given}: a folder without masks.parquet; give a mask file v1 or the output "
+            f"{given}: a folder without masks.parquet; give a mask file or the output "
             "folder of a finished `predisat process` run"
         )
     if not path.is_file():
         raise MaskFileError(
-            f"{path}: no such mask file; give a mask file v1 (written by `predisat process` "
+            f"{path}: no such mask file; give a mask file (written by `predisat process` "
             "or predisat.masks.fileformat.write_masks) or the output folder of `predisat process`"
         )
     try:
@@ -223,8 +238,10 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
             "damaged; copy it again, or rerun the process command"
         ) from None
 
+    version = header["format_version"]
+    binned = (*_BINNED, _SUPPORT) if version >= 3 else tuple(_BINNED)
     missing = [
-        c for c in ("geometry", *_SCALARS, *_BINNED, *header["descriptors"]) if c not in names
+        c for c in ("geometry", *_SCALARS, *binned, *header["descriptors"]) if c not in names
     ]
     if missing:
         raise fail(
@@ -241,7 +258,7 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
     descriptors = {
         d: _scalar_column(table, d, fail, allow_null=True) for d in header["descriptors"]
     }
-    for name in _BINNED:
+    for name in binned:
         arrays[name] = _binned_column(table, name, n_az, fail)
     _check_geometry(table, arrays["lon_deg"], arrays["lat_deg"], fail)
     if header["format_version"] == 1 and np.any(arrays["source"] == BinSource.TERRAIN):
@@ -260,6 +277,7 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
             margin_deg=arrays["margin_deg"],
             descriptors=descriptors,
             provenance=header["provenance"],
+            support=arrays.get(_SUPPORT),
         )
     except MaskError as exc:
         raise fail(str(exc)) from None

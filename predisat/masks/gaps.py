@@ -72,5 +72,6 @@ def close_gaps(masks: MaskSet, track: TrackMap) -> tuple[MaskSet, list[tuple[flo
                        np.zeros((n_new, n_az))),
         descriptors={k: cat(v, np.full(n_new, np.nan)) for k, v in masks.descriptors.items()},
         provenance=masks.provenance,
+        support=None if masks.support is None else cat(masks.support, np.zeros((n_new, n_az))),
     )  # fmt: skip
     return closed, [(float(ch[i]), float(ch[i + 1])) for i in holes]

@@ -37,6 +37,7 @@ from predisat.masks.binops import RangeMax, conservative_resample
 
 __all__ = [
     "REQUIRED_DESCRIPTORS",
+    "WEAK_SUPPORT",
     "BinSource",
     "MaskError",
     "MaskSet",
@@ -51,6 +52,11 @@ REQUIRED_DESCRIPTORS: tuple[str, ...] = (
 )
 """Descriptor columns every mask set carries (NaN where there is no obstacle on that side)."""
 
+WEAK_SUPPORT = 2
+"""Bins whose :attr:`MaskSet.support` is below this are *weakly supported*: no second
+independent view backs their bound, so one wrong segmentation can make them too low (the
+figures hatch them; ``docs/reconstruction.md``, section 7)."""
+
 _CORE_NAMES = frozenset(
     {
         "chainage_m",
@@ -62,6 +68,7 @@ _CORE_NAMES = frozenset(
         "source",
         "margin_deg",
         "geometry",
+        "support",
     }
 )
 _NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -127,6 +134,12 @@ class MaskSet:
     provenance : dict
         JSON-serialisable record of how the set was made (survey id, software version,
         parameters, creation time, track name, ...).
+    support : ndarray, shape (n_pos, n_az), uint8, or None
+        Evidence per bin: how many independent views (frames, or frames sharing a view group)
+        bounded what sets the bin's value (``docs/reconstruction.md``, section 7); 0 where the
+        value rests on an assumption (an unknown cell, the far-field default, the clearance
+        prior); capped at 255. ``None`` when unknown (a mask file of version 1 or 2).
+        A bin with support below :data:`WEAK_SUPPORT` is *weakly supported*.
     """
 
     chainage_m: NDArray
@@ -140,6 +153,7 @@ class MaskSet:
     margin_deg: NDArray
     descriptors: dict[str, NDArray] = field(default_factory=dict)
     provenance: JsonDict = field(default_factory=dict)
+    support: NDArray | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -159,9 +173,12 @@ class MaskSet:
         margin = _margin_array(self.margin_deg, n, n_az)
         desc = _descriptor_arrays(self.descriptors, n)
         prov = _json_provenance(self.provenance)
+        sup = None if self.support is None else _support_array(self.support, n, n_az)
 
         for arr in (ch, lat, lon, h, hdg, mask, src, margin, *desc.values()):
             arr.setflags(write=False)
+        if sup is not None:
+            sup.setflags(write=False)
         set_(self, "chainage_m", ch)
         set_(self, "lat_deg", lat)
         set_(self, "lon_deg", lon)
@@ -173,6 +190,7 @@ class MaskSet:
         set_(self, "margin_deg", margin)
         set_(self, "descriptors", desc)
         set_(self, "provenance", prov)
+        set_(self, "support", sup)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -190,6 +208,7 @@ class MaskSet:
         margin_deg: ArrayLike = 0.0,
         descriptors: Mapping[str, ArrayLike] | None = None,
         provenance: JsonDict | None = None,
+        support: ArrayLike | None = None,
     ) -> MaskSet:
         """Mask set from plain arrays, validated.
 
@@ -210,6 +229,8 @@ class MaskSet:
         provenance : mapping, optional
             JSON-serialisable; ``software`` / ``software_version`` / ``created_utc`` are added
             when absent.
+        support : array_like of int, shape (n_pos, n_az), optional
+            Independent views per bin, 0-255 (see the class attributes); ``None``: unknown.
 
         Raises
         ------
@@ -235,6 +256,7 @@ class MaskSet:
             margin_deg=np.asarray(margin_deg),
             descriptors={k: np.asarray(v) for k, v in (descriptors or {}).items()},
             provenance=_default_provenance(provenance),
+            support=None if support is None else np.asarray(support),
         )
 
     @classmethod
@@ -249,6 +271,7 @@ class MaskSet:
         margin_deg: ArrayLike = 0.0,
         descriptors: Mapping[str, ArrayLike] | None = None,
         provenance: JsonDict | None = None,
+        support: ArrayLike | None = None,
     ) -> MaskSet:
         """Mask set whose positions and headings come from a track map.
 
@@ -258,7 +281,7 @@ class MaskSet:
             Supplies ``position_at`` (lat, lon, h) and ``heading_at`` at each chainage.
         chainage_m : array_like, shape (n_pos,)
         mask_el_deg : array_like, shape (n_pos, n_az)
-        az_step_deg, source, margin_deg, descriptors
+        az_step_deg, source, margin_deg, descriptors, support
             As in :meth:`from_arrays`.
         provenance : mapping, optional
             As in :meth:`from_arrays`; the track's name is recorded as ``track`` unless given.
@@ -270,7 +293,7 @@ class MaskSet:
         return cls.from_arrays(
             ch, lat, lon, h, track.heading_at(ch), mask_el_deg, provenance=prov,
             az_step_deg=az_step_deg, source=source, margin_deg=margin_deg,
-            descriptors=descriptors,
+            descriptors=descriptors, support=support,
         )  # fmt: skip
 
     # ------------------------------------------------------------------ properties
@@ -466,6 +489,7 @@ class MaskSet:
             source=self.source[keep],
             margin_deg=self.margin_deg[keep],
             descriptors={k: v[keep] for k, v in self.descriptors.items()},
+            support=None if self.support is None else self.support[keep],
         )
 
     def equals(self, other: MaskSet) -> bool:
@@ -489,7 +513,14 @@ class MaskSet:
                 for k, v in self.descriptors.items()
             )
             and self.provenance == other.provenance
+            and _same_support(self.support, other.support)
         )
+
+
+def _same_support(a: NDArray | None, b: NDArray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
 
 
 # ---------------------------------------------------------------------- validation
@@ -547,6 +578,21 @@ def _source_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
             "(0 observed, 1 reconstructed, 2 assumed, 3 terrain)"
         )
     return src.astype(np.uint8)
+
+
+def _support_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
+    """Support counts as uint8, shape (n, n_az), integers in [0, 255]."""
+    sup = np.asarray(values)
+    if sup.shape != (n, n_az):
+        raise MaskError(f"support has shape {sup.shape}, expected ({n}, {n_az}) or None")
+    integer = np.issubdtype(sup.dtype, np.integer)
+    bad = ((sup < 0) | (sup > 255)) if integer else np.ones(sup.shape, bool)
+    if bad.any():
+        raise MaskError(
+            f"support{_first_bad(bad)} is not an integer in [0, 255]; it counts independent "
+            "views (cap larger counts at 255)"
+        )
+    return sup.astype(np.uint8)
 
 
 def _margin_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
@@ -679,9 +725,14 @@ def concat_masksets(parts: Sequence[MaskSet], provenance: JsonDict | None = None
         n: np.concatenate([p.descriptors.get(n, np.full(p.n_pos, np.nan)) for p in parts])
         for n in names
     }
+    # support only when every part has it: a part without it would read as "no view"
+    support = None
+    if all(p.support is not None for p in parts):
+        support = np.concatenate([np.asarray(p.support) for p in parts])
     return MaskSet.from_arrays(
         cat("chainage_m"), cat("lat_deg"), cat("lon_deg"), cat("h_m"), cat("heading_deg"),
         cat("mask_el_deg"), az_step_deg=step, source=cat("source"),
         margin_deg=cat("margin_deg"), descriptors=desc,
         provenance=dict(parts[0].provenance if provenance is None else provenance),
+        support=support,
     )  # fmt: skip

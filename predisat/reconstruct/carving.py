@@ -34,11 +34,13 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import CameraModel, Mount, vehicle_to_enu
+from predisat.gnss.fresnel import L1_WAVELENGTH_M, TRANSPARENT_FRACTION
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.reconstruct.heightfield import (
     HeightField,
     LowestBounds,
+    ThinRule,
     apply_clearance_prior,
     carve_box,
     carve_profile,
@@ -52,6 +54,7 @@ __all__ = [
     "Reconstruction",
     "ReconstructionParams",
     "Reconstructor",
+    "bin_support",
     "reconstruct_masks",
     "suspect_frames",
 ]
@@ -134,6 +137,13 @@ class ReconstructionParams:
         all three saw is a *suspect frame*: reported with the reason and left out of the
         reconstruction (leaving a frame out only removes sky evidence). ``None``: no check.
     suspect_tol_deg, suspect_neighbour_m : float
+    antenna_clearance_m : float
+        Least distance of any structure from the antenna's path (a contact wire over a roof
+        antenna; a stated assumption): the thin-structure rule (``docs/reconstruction.md``,
+        section 8) takes a thin feature's Fresnel zone at least this large.
+    thin_wavelength_m : float
+        Wavelength of the thin-structure rule: the shortest the receiver tracks (L1, the
+        safe side).
     """
 
     cell_m: float = 0.5
@@ -162,8 +172,15 @@ class ReconstructionParams:
     suspect_share: float | None = None
     suspect_tol_deg: float = 5.0
     suspect_neighbour_m: float = 25.0
+    antenna_clearance_m: float = 0.5
+    thin_wavelength_m: float = L1_WAVELENGTH_M
 
     def __post_init__(self) -> None:
+        if not (self.antenna_clearance_m > 0 and self.thin_wavelength_m > 0):
+            raise ValueError(
+                "antenna_clearance_m and thin_wavelength_m must be > 0 metres, got "
+                f"{self.antenna_clearance_m} and {self.thin_wavelength_m}"
+            )
         n_az = round(360.0 / self.az_step_deg)
         if abs(n_az * self.az_step_deg - 360.0) > 1e-9:
             raise ValueError(f"az_step_deg = {self.az_step_deg} must divide 360")
@@ -237,6 +254,15 @@ class FrameView:
         Frames with the same non-empty group count as one view in the fault-tolerant fusion
         (``ReconstructionParams.fusion_rank``): frames that may share a fault, such as one
         camera's frames of one pass (dirt on its lens). Empty: the frame is a view of its own.
+    thin_mask : ndarray of bool, shape ``camera.shape``, optional
+        Pixels that are sky in ``sky_mask`` only by the thin-structure policy (obstacle
+        features at most ``thin_width_deg`` across). The reconstruction lets the sky seen
+        through them prove free space only as far as the first Fresnel zone rule allows
+        (``docs/reconstruction.md``, section 8); beyond, they are obstacles. None: no such
+        pixel is known (every sky pixel is sky).
+    thin_width_deg : float
+        Widest feature ``thin_mask`` may hold, degrees (the policy's width in pixels times
+        the camera's widest pixel).
     """
 
     chainage_m: float
@@ -249,6 +275,8 @@ class FrameView:
     confidence: NDArray | None = field(default=None, repr=False)
     frame_id: str = ""
     view_group: str = ""
+    thin_mask: NDArray | None = field(default=None, repr=False)
+    thin_width_deg: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -276,6 +304,9 @@ class Reconstruction:
     params : ReconstructionParams
     suspect_frames : tuple of (str, str)
         Frames left out by the suspect-frame check: ``(frame_id, reason)``.
+    support : ndarray of uint8, shape (n_pos, n_az), or None
+        Independent views behind each bin's value (:func:`bin_support`; 0 for ASSUMED bins
+        and bins set by a prior).
     """
 
     chainage_m: NDArray
@@ -288,6 +319,7 @@ class Reconstruction:
     overhead_m: NDArray
     params: ReconstructionParams
     suspect_frames: tuple[tuple[str, str], ...] = ()
+    support: NDArray | None = None
 
     def to_maskset(
         self,
@@ -313,6 +345,7 @@ class Reconstruction:
             descriptors=self.descriptors,
             provenance=prov,
             margin_deg=margin_deg,
+            support=self.support,
         )
 
 
@@ -358,6 +391,23 @@ class Reconstructor:
                 raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
         return out
 
+    def solid_profiles(
+        self, frames: Sequence[FrameView], profiles: Sequence[SkyProfile]
+    ) -> list[SkyProfile]:
+        """Sky profile of every frame with its thin-structure pixels (``FrameView.thin_mask``)
+        as obstacles: ``profiles[i]`` itself for a frame without any."""
+        out = []
+        for f, prof in zip(frames, profiles, strict=True):
+            if f.thin_mask is None or not np.any(f.thin_mask):
+                out.append(prof)
+                continue
+            solid = np.asarray(f.sky_mask, bool) & ~np.asarray(f.thin_mask, bool)
+            out.append(self.rectifier(f.camera, f.mount).profile(
+                solid, f.heading_deg, f.reverse, f.confidence,
+                self.params.min_confidence, self.params.low_confidence_windows,
+            ))  # fmt: skip
+        return out
+
     def height_field(
         self,
         frames: Sequence[FrameView],
@@ -370,14 +420,26 @@ class Reconstructor:
         p = self.params
         hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
         profs = list(profiles) if profiles is not None else self.profiles(frames)
+        solids = self.solid_profiles(frames, profs)
         bound = hf.bound_m.copy()
+        views = np.zeros(hf.shape, np.int32)
         if frames:
             cams, rots = _camera_geometry(frames, track)
+            rules = _thin_rules(hf, frames, cams, p)
             if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
-                for prof, cam, rot in zip(profs, cams, rots, strict=True):
-                    carve_profile(hf, bound, prof, cam, rot, p.carve_range_m)
+                seen = np.zeros(hf.shape, np.bool_)
+                for idx in _view_groups(frames).values():
+                    for i in idx:
+                        carve_profile(hf, bound, profs[i], cams[i], rots[i], p.carve_range_m,
+                                      seen=seen, solid=solids[i], thin_rule=rules[i])  # fmt: skip
+                    # a view counts once per cell, whatever its frames (within their boxes)
+                    b = np.array([carve_box(hf, cams[i], p.carve_range_m) for i in idx])
+                    box = (slice(int(b[:, 0].min()), int(b[:, 1].max())),
+                           slice(int(b[:, 2].min()), int(b[:, 3].max())))  # fmt: skip
+                    views[box] += seen[box]
+                    seen[box] = False
             else:
-                bound = _fused_bounds(hf, frames, profs, cams, rots, p)
+                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules)
         over = [
             (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
             for f, prof in zip(frames, profs, strict=True)
@@ -386,15 +448,19 @@ class Reconstructor:
         ceilings = None
         if frames and p.along_view_half_deg is not None:
             ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg)
+        carved = bound.copy()
         overhead = apply_clearance_prior(
             hf, bound, p.clearance_half_width_m, p.clearance_floor_m,
             p.overhead_band_m, p.overhead_height_m, extra_overhead_m=np.array(over, float),
             camera_ceilings=ceilings,
         )  # fmt: skip
+        # a bound the prior set rests on its rule, not on the views that carved the cell
+        views[bound != carved] = 0
         bound.setflags(write=False)
+        views.setflags(write=False)
         return HeightField(
             hf.cell_m, hf.ix0, hf.iy0, bound, hf.region, hf.chainage_m, hf.offset_m,
-            hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings,
+            hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings, views,
         )  # fmt: skip
 
     def run(
@@ -432,10 +498,13 @@ class Reconstructor:
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
         caps = _ceiling_caps(hf.camera_ceilings, s, ant)
-        near_el, near_unknown, far_grid_el, far_unknown = _horizon_parts(
+        near_el, near_unknown, far_grid_el, far_unknown, near_sup, far_sup = _horizon_parts(
             hf, ant, rot, p, caps
         )
-        far_el, far_seen, seen = _far_field(keep, profs, s, ant, track, p)
+        # the far field has no distance: a thin feature seen there may be far, hence opaque
+        far_el, far_seen, seen, far_views = _far_field(
+            keep, self.solid_profiles(keep, profs), s, ant, track, p
+        )
         # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
         # by that camera's sky: it proves nothing farther stands higher (the parallax
         # allowance of the far field assumes that distance). Loosely carved far cells (a hill
@@ -455,6 +524,10 @@ class Reconstructor:
         # this position saw the far field in that azimuth)
         assumed = unknown_bin | ~far_seen
         src[assumed] = int(BinSource.ASSUMED)
+        support = bin_support(
+            (near_el, near_sup), (far_grid_el, far_sup), far_el, far_seen, far_views, assumed,
+            p.n_sub,
+        )
         desc = _descriptors(hf, track, s, ant, p)
         return Reconstruction(
             chainage_m=s,
@@ -467,6 +540,7 @@ class Reconstructor:
             overhead_m=hf.overhead_m,
             params=p,
             suspect_frames=suspect_list,
+            support=support,
         )
 
 
@@ -490,13 +564,14 @@ def _fused_bounds(
     cams: NDArray,
     rots: NDArray,
     p: ReconstructionParams,
-) -> NDArray:
+    solids: Sequence[SkyProfile] | None = None,
+    rules: Sequence[ThinRule | None] | None = None,
+) -> tuple[NDArray, NDArray]:
     """Bounds fused over independent views (:class:`~predisat.reconstruct.heightfield.
     LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
-    ``view_group``) carves a scratch raster of its own, then counts once per cell."""
-    groups: dict[str, list[int]] = {}
-    for i, f in enumerate(frames):
-        groups.setdefault(f.view_group or f"\0frame{i}", []).append(i)
+    ``view_group``) carves a scratch raster of its own, then counts once per cell. Returns the
+    bounds and the number of views per cell."""
+    groups = _view_groups(frames)
     fusion = LowestBounds(hf.shape, p.fusion_rank)
     scratch = np.full(hf.shape, np.inf, np.float32)
     for idx in groups.values():
@@ -504,7 +579,9 @@ def _fused_bounds(
         for i in idx:
             box = carve_box(hf, cams[i], p.carve_range_m)
             if box[1] > box[0] and box[3] > box[2]:
-                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m)
+                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m,
+                              solid=None if solids is None else solids[i],
+                              thin_rule=None if rules is None else rules[i])  # fmt: skip
                 boxes.append(box)
         if not boxes:
             continue
@@ -512,7 +589,36 @@ def _fused_bounds(
         union = (int(b[:, 0].min()), int(b[:, 1].max()), int(b[:, 2].min()), int(b[:, 3].max()))
         fusion.add(scratch, union)
         scratch[union[0] : union[1], union[2] : union[3]] = np.inf
-    return np.minimum(hf.bound_m, fusion.fused())
+    return np.minimum(hf.bound_m, fusion.fused()), fusion.views
+
+
+def _thin_rules(
+    hf: HeightField, frames: Sequence[FrameView], cams: NDArray, p: ReconstructionParams
+) -> list[ThinRule | None]:
+    """The thin-structure rule of each frame (None: no thin mask): its widest thin feature,
+    ``TRANSPARENT_FRACTION^2 * wavelength``, the antenna clearance and the camera's offset
+    from the axis (its cell's, shrunk toward the axis by half a cell diagonal; 0 outside the
+    corridor)."""
+    row, col, ok = hf.index(cams[:, 0], cams[:, 1])
+    out: list[ThinRule | None] = []
+    k2 = TRANSPARENT_FRACTION**2 * p.thin_wavelength_m
+    for i, f in enumerate(frames):
+        if f.thin_mask is None or f.thin_width_deg <= 0.0:
+            out.append(None)
+            continue
+        off = float(hf.offset_m[row[i], col[i]]) if ok[i] else float("nan")
+        shrunk = np.sign(off) * max(abs(off) - 0.7072 * hf.cell_m, 0.0) if np.isfinite(off) else 0.0
+        out.append(ThinRule(float(np.radians(f.thin_width_deg)), k2, p.antenna_clearance_m,
+                            float(shrunk)))  # fmt: skip
+    return out
+
+
+def _view_groups(frames: Sequence[FrameView]) -> dict[str, list[int]]:
+    """Indices of the frames of each independent view: a ``view_group``, or a frame alone."""
+    groups: dict[str, list[int]] = {}
+    for i, f in enumerate(frames):
+        groups.setdefault(f.view_group or f"\0frame{i}", []).append(i)
+    return groups
 
 
 def suspect_frames(
@@ -698,6 +804,78 @@ def _bins(per_ray: NDArray, n_sub: int) -> NDArray:
     return np.maximum(v.max(axis=-1), right)
 
 
+def _bins_with_support(per_ray: NDArray, support: NDArray, n_sub: int) -> tuple[NDArray, NDArray]:
+    """:func:`_bins` and, per bin, the support of the ray that sets it (the weakest of equal
+    ones)."""
+    v = per_ray.reshape(*per_ray.shape[:-1], -1, n_sub)
+    w = support.reshape(*support.shape[:-1], -1, n_sub)
+    cand = np.concatenate([v, np.roll(v[..., :1], -1, axis=-2)], axis=-1)
+    cand_s = np.concatenate([w, np.roll(w[..., :1], -1, axis=-2)], axis=-1)
+    top = _bins(per_ray, n_sub)
+    with np.errstate(invalid="ignore"):
+        at = (cand == top[..., None]) | np.isnan(top)[..., None]
+    big = np.iinfo(np.int32).max
+    return top, np.where(at, cand_s, big).min(axis=-1)
+
+
+def _pick_support(a: NDArray, sa: NDArray, b: NDArray, sb: NDArray) -> NDArray:
+    """Support of ``max(a, b)``: that of the larger, the weaker of the two on a tie."""
+    with np.errstate(invalid="ignore"):
+        return np.where(a > b, sa, np.where(b > a, sb, np.minimum(sa, sb)))
+
+
+def bin_support(
+    near: tuple[NDArray, NDArray],
+    far_grid: tuple[NDArray, NDArray],
+    far_el: NDArray,
+    far_seen: NDArray,
+    far_views: NDArray,
+    assumed: NDArray,
+    n_sub: int,
+) -> NDArray:
+    """Independent views behind each bin's value (``docs/reconstruction.md``, section 7).
+
+    The bin's value is the highest of the near height field, the far height field (capped by
+    the far field where a camera at the position saw the bin) and the far field; its support
+    is that of the part that sets it (the weaker on a tie): for a height-field part, the views
+    that bounded the cell setting the steepest ray of the bin (``HeightField.views``, 0 for a
+    cell a prior set); for the far field, the views that saw the bin (``far_views``). ASSUMED
+    bins get 0: they rest on an unknown cell or the far-field default.
+
+    Parameters
+    ----------
+    near, far_grid : (ndarray, ndarray), shapes (n_pos, n_az * n_sub)
+        Per-ray elevation (deg) and support (int, -1: no cell) of the two height-field parts.
+    far_el : ndarray, shape (n_pos, n_az)
+        Far-field bound, deg.
+    far_seen : ndarray of bool, shape (n_pos, n_az)
+        A camera at the position saw the far field in the bin.
+    far_views : ndarray of int, shape (n_pos, n_az)
+        Views behind the far-field bound.
+    assumed : ndarray of bool, shape (n_pos, n_az)
+        ASSUMED bins.
+    n_sub : int
+        Rays per bin.
+
+    Returns
+    -------
+    ndarray of uint8, shape (n_pos, n_az)
+        Views per bin, capped at 255.
+    """
+    near_b, near_s = _bins_with_support(near[0], near[1], n_sub)
+    fg_b, fg_s = _bins_with_support(far_grid[0], far_grid[1], n_sub)
+    with np.errstate(invalid="ignore"):
+        capped = far_seen & (far_el < fg_b)
+    far_part = np.where(far_seen, np.minimum(fg_b, far_el), fg_b)
+    far_part_s = np.where(capped, far_views, fg_s)
+    grid = np.maximum(near_b, far_part)
+    grid_s = _pick_support(near_b, near_s, far_part, far_part_s)
+    far_s = np.where(far_seen, far_views, 0)
+    sup = _pick_support(grid, grid_s, far_el, far_s)
+    sup = np.where(assumed, 0, np.clip(sup, 0, 255))
+    return sup.astype(np.uint8)
+
+
 def _ray_distances(p: ReconstructionParams) -> NDArray:
     c = p.cell_m
     near = np.arange(c / 2.0, min(30.0, p.reach_m), c / 2.0)
@@ -734,7 +912,7 @@ def horizon(
     unknown : ndarray of bool, shape (n, n_az * n_sub)
         The ray met an unknown cell.
     """
-    near, near_unknown, far, far_unknown = _horizon_parts(hf, antenna_m, local_to_frame, p)
+    near, near_unknown, far, far_unknown = _horizon_parts(hf, antenna_m, local_to_frame, p)[:4]
     return np.maximum(near, far), near_unknown | far_unknown
 
 
@@ -744,9 +922,10 @@ def _horizon_parts(
     local_to_frame: NDArray,
     p: ReconstructionParams,
     caps: NDArray | None = None,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
     """:func:`horizon` split at ``p.half_width_m``: elevation and unknown flag over the cells
-    whose nearest point is nearer, then over the others (``-90``: no such cell).
+    whose nearest point is nearer, then over the others (``-90``: no such cell), then the
+    support of each: the ``hf.views`` of the cell that set the ray's value (-1: no cell).
 
     ``caps`` (n, 2), from :func:`_ceiling_caps`: the clearance cells within
     ``_CEILING_CAP_M`` of each antenna count at most with ``tan_cap - dz_m / r``, ``r`` the
@@ -770,6 +949,11 @@ def _horizon_parts(
     el_far = np.empty((n, az.size))
     unknown = np.empty((n, az.size), bool)
     unknown_far = np.empty((n, az.size), bool)
+    sup = np.empty((n, az.size), np.int32)
+    sup_far = np.empty((n, az.size), np.int32)
+    views = np.ascontiguousarray(
+        np.zeros(hf.shape, np.int32) if hf.views is None else hf.views, np.int32
+    ).ravel()
     d_loc = np.stack([np.sin(az), np.cos(az), np.zeros_like(az)], axis=-1)
     for i in range(n):
         a = antenna_m[i]
@@ -782,20 +966,20 @@ def _horizon_parts(
         # antenna position in cells: integer part (global, exact) and fraction (float32), so
         # that every window computes bit-identical samples
         gx, gy = np.floor(a[0] / c), np.floor(a[1] / c)
-        best, best_far = _march_rays(
+        best, best_far, sup[i], sup_far[i] = _march_rays(
             d, dist_cells, bound, region, nx, ny,
             np.float32(a[0] / c - gx), np.float32(a[1] / c - gy),
             int(gx) - hf.ix0, int(gy) - hf.iy0, np.float32(c), np.float32(a[2]),
             np.float32(up[2]), np.float32(up[0] * c), np.float32(up[1] * c),
             np.float32(p.half_width_m), clear, np.float32(caps[i, 0]), np.float32(caps[i, 1]),
-            np.float32(_CEILING_CAP_M),
+            np.float32(_CEILING_CAP_M), views,
         )  # fmt: skip
         unknown[i] = np.isposinf(best)
         unknown_far[i] = np.isposinf(best_far)
         with np.errstate(invalid="ignore"):
             el[i] = np.degrees(np.arctan(best.astype(float)))
             el_far[i] = np.degrees(np.arctan(best_far.astype(float)))
-    return el, unknown, el_far, unknown_far
+    return el, unknown, el_far, unknown_far, sup, sup_far
 
 
 # long: one numba kernel; helpers called per cell cost 3.8-4x (scripts/bench_march.py)
@@ -804,10 +988,12 @@ def _march_rays(
     d: NDArray, dist_cells: NDArray, bound: NDArray, region: NDArray, nx: int, ny: int,
     ax: np.float32, ay: np.float32, ox: int, oy: int, c: np.float32, a_z: np.float32,
     up_z: np.float32, up_x_c: np.float32, up_y_c: np.float32, far_m: np.float32,
-    clear: NDArray, cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32,
-) -> tuple[NDArray, NDArray]:  # fmt: skip
+    clear: NDArray, cap_t: np.float32, cap_dz: np.float32, cap_m: np.float32, views: NDArray,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:  # fmt: skip
     """Steepest bound tangent along each ray, over the cells nearer than ``far_m`` and over the
-    others (float32; ``+inf`` once a ray meets an unknown cell there).
+    others (float32; ``+inf`` once a ray meets an unknown cell there), and the ``views``
+    (int32, the raster's) of the cell that set each (the first of equal ones; -1 where no cell
+    did).
 
     A ray stops at its first sample outside the modelled region, at its first unknown cell
     (``+inf``) and at a NaN bound (carving never writes one; the ray's value is then NaN). A
@@ -837,6 +1023,7 @@ def _march_rays(
     overhead = np.float32(3.4028235e38)  # tangent of 90 deg in float32, not "unknown"
     n_rays = d.shape[0]
     best = np.empty((2, n_rays), np.float32)  # near part, far part
+    support = np.empty((2, n_rays), np.int32)
     # squared offsets of each column's and row's nearest edge from the antenna (cells, exact in
     # float64): a cell's distance is then one addition and one square root
     ex2 = np.empty(nx)
@@ -854,10 +1041,12 @@ def _march_rays(
     # antenna, it blocks every ray up to the zenith (not the 89.9 deg that the distance floor
     # would leave); unknown, it blocks them as unknown.
     start = np.float32(-np.inf)
+    start_views = np.int32(-1)
     col0 = np.int32(np.floor(ax)) + ox
     row0 = np.int32(np.floor(ay)) + oy
     if 0 <= col0 < nx and 0 <= row0 < ny and region[row0 * nx + col0]:
         top = bound[row0 * nx + col0]
+        start_views = views[row0 * nx + col0]
         rel0 = (top - a_z) * up_z
         if rel0 != rel0:
             start = rel0
@@ -874,8 +1063,12 @@ def _march_rays(
         dx, dy = d[j, 0], d[j, 1]
         b_near = start
         b_far = np.float32(-np.inf)
+        s_near = start_views if start > -np.inf or start != start else np.int32(-1)
+        s_far = np.int32(-1)
         best[0, j] = start
         best[1, j] = b_far
+        support[0, j] = s_near
+        support[1, j] = s_far
         if start == np.inf or start != start:
             continue
         pcol, prow = col0, row0
@@ -919,9 +1112,11 @@ def _march_rays(
                 if near >= far_m:
                     if r > b_far or r != r:
                         b_far = r
+                        s_far = views[flat]
                         stop = r == np.inf or r != r
                 elif r > b_near or r != r:
                     b_near = r
+                    s_near = views[flat]
                     stop = r == np.inf or r != r
                 if stop:
                     break
@@ -930,7 +1125,9 @@ def _march_rays(
             pcol, prow = col, row
         best[0, j] = b_near
         best[1, j] = b_far
-    return best[0], best[1]
+        support[0, j] = s_near
+        support[1, j] = s_far
+    return best[0], best[1], support[0], support[1]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -955,8 +1152,9 @@ def _far_field(
     ant: NDArray,
     track: TrackMap,
     p: ReconstructionParams,
-) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]]]:
-    """Far-field elevation bound per bin, whether a camera saw it, and the profiles per position.
+) -> tuple[NDArray, NDArray, list[list[tuple[SkyProfile, float]]], NDArray]:
+    """Far-field elevation bound per bin, whether a camera saw it, the profiles per position and
+    the number of views behind each bound.
 
     A frame at the position bounds the far field at an azimuth by the highest skyline it saw
     within the parallax allowance ``asin(baseline / half_width)`` around it (far objects are seen
@@ -975,12 +1173,14 @@ def _far_field(
     n_az = p.n_az
     far = np.full((s.size, n_az), np.inf)
     seen_any = np.zeros((s.size, n_az), bool)
+    far_views = np.zeros((s.size, n_az), np.int32)
     per_pos: list[list[tuple[SkyProfile, float]]] = [[] for _ in range(s.size)]
     if frames:
         ch = np.array([f.chainage_m for f in frames])
         cams, _ = _camera_geometry(frames, track)
         az_sub = _sub_azimuths(p)
         for i in range(s.size):
+            own: dict[str, NDArray] = {}  # bins each view at the position saw
             for j in np.flatnonzero(np.abs(ch - s[i]) <= p.position_tol_m):
                 prof = profiles[int(j)]
                 base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
@@ -991,19 +1191,21 @@ def _far_field(
                 covered = ~np.isnan(fb)
                 far[i] = np.where(covered, np.fmin(far[i], fb), far[i])
                 seen_any[i] |= covered
+                key = frames[int(j)].view_group or f"\0frame{int(j)}"
+                own[key] = own[key] | covered if key in own else covered
+            for covered in own.values():
+                far_views[i] += covered
             if p.fusion_rank > 1 and seen_any[i].any():
                 near = np.flatnonzero(np.abs(ch - s[i]) <= max(p.suspect_neighbour_m,
                                                                 p.position_tol_m))  # fmt: skip
                 # never below the position's own frames: a neighbour sees a far object from
                 # elsewhere (the azimuth allowance covers its parallax, not its elevation)
-                far[i] = np.where(
-                    seen_any[i],
-                    np.fmax(far[i], _robust_far(frames, profiles, cams, near, ant[i], az_sub, p)),
-                    far[i],
-                )
+                robust, n_views = _robust_far(frames, profiles, cams, near, ant[i], az_sub, p)
+                far[i] = np.where(seen_any[i], np.fmax(far[i], robust), far[i])
+                far_views[i] = np.where(seen_any[i], np.maximum(far_views[i], n_views), 0)
     far_el = np.where(seen_any, far, p.far_default_deg)
     far_el = np.where(np.isinf(far_el), 90.0, far_el)
-    return far_el, seen_any, per_pos
+    return far_el, seen_any, per_pos, far_views
 
 
 def _robust_far(
@@ -1014,11 +1216,11 @@ def _robust_far(
     antenna_m: NDArray,
     az_sub: NDArray,
     p: ReconstructionParams,
-) -> NDArray:
+) -> tuple[NDArray, NDArray]:
     """Far-field bound per bin from the frames ``near`` an antenna: per view (a frame, or the
     lowest over a ``view_group``) the highest skyline within its parallax allowance, then the
     ``min(fusion_rank, n)``-th lowest over the ``n`` views that saw the bin (``+inf`` where
-    none did)."""
+    none did), and ``n``."""
     views: dict[str, NDArray] = {}
     for j in near:
         f = frames[int(j)]
@@ -1032,7 +1234,7 @@ def _robust_far(
     n = np.sum(~np.isnan(stack), axis=0)
     k = np.minimum(n, p.fusion_rank) - 1
     out = np.take_along_axis(stack, np.maximum(k, 0)[None], axis=0)[0]
-    return np.where(n > 0, out, np.inf)
+    return np.where(n > 0, out, np.inf), n
 
 
 def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[NDArray, NDArray]:

@@ -151,13 +151,16 @@ def run_chunk(
         axis = np.asarray(track.enu_at(s), float)
         ant = axis + job.antenna_height_m * np.asarray(track.up_at(s), float)
         heading = np.asarray(track.heading_at(s), float)
-        for k, (f, (sky, conf)) in enumerate(ok_frames):
+        for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, mount = job.cameras[f.side]
+            # the widest feature the thin-structure policy removed: its width in pixels times
+            # the camera's widest pixel (docs/reconstruction.md, section 8)
+            width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
             views.append(
                 FrameView(
                     chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
                     antenna_enu_m=ant[k], heading_deg=float(heading[k]), reverse=job.reverse,
-                    confidence=conf, frame_id=f.frame_id,
+                    confidence=conf, frame_id=f.frame_id, thin_mask=thin, thin_width_deg=width,
                 )
             )  # fmt: skip
     if reconstructor is None:
@@ -191,7 +194,7 @@ def run_chunk(
 
 def _load_cached(
     f: ChunkFrame, opts: StorageOptions
-) -> tuple[NDArray, NDArray | None] | BadFrame:
+) -> tuple[NDArray, NDArray | None, NDArray | None] | BadFrame:
     path = location(f.cache_path)
     try:
         source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))

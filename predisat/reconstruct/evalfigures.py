@@ -6,6 +6,9 @@ lose sky and where they trust blocked directions.
 * a chainage x relative-azimuth map of the error ``mask - truth`` (degrees; blue: the mask is
   too high, sky lost; red: too low, blocked directions trusted), azimuth measured clockwise
   from the direction of increasing chainage so that the track runs along 0 and 180 deg;
+  ASSUMED bins hatched ``////`` and, when the mask file carries its support, the other
+  weakly supported bins (fewer than :data:`~predisat.masks.maskset.WEAK_SUPPORT`
+  independent views) dotted, so that one sees where the mask is a guess;
 * per position, the share of truly visible directions lost, across and along the track
   (linear axis), and below, on an axis of its own, the share of trusted directions that are
   truly blocked with its 0.1 % target (log axis).
@@ -16,13 +19,16 @@ matplotlib only (no pyplot state); returns a :class:`matplotlib.figure.Figure`.
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.masks.margins import EL_STEP_DEG
+from predisat.masks.maskset import WEAK_SUPPORT, BinSource
 from predisat.reconstruct.evaluate import Comparison, trust_counts
 
-__all__ = ["FALSE_TRUST_TARGET_PCT", "evaluation_figure", "per_position_shares"]
+__all__ = ["FALSE_TRUST_TARGET_PCT", "evaluation_figure", "flag_runs", "per_position_shares"]
 
 FALSE_TRUST_TARGET_PCT = 0.1
 """The false-trust target drawn on its own (log) axis, percent of trusted directions."""
@@ -62,6 +68,36 @@ def per_position_shares(
     with np.errstate(invalid="ignore", divide="ignore"):
         out["false_trust"] = np.where(tr > 0, bad / np.maximum(tr, 1.0), 0.0)
     return out
+
+
+def flag_runs(flags: NDArray, extent: tuple[float, float, float, float]) -> NDArray:
+    """Rectangles covering the flagged cells of an image drawn with ``imshow(flags.T,
+    origin="lower", extent=extent)``: one per run of flagged bins of a position.
+
+    Parameters
+    ----------
+    flags : ndarray of bool, shape (n_pos, n_bin)
+        Column ``i`` of the image is position ``i``, row ``k`` bin ``k``.
+    extent : (x0, x1, y0, y1)
+        The image's extent.
+
+    Returns
+    -------
+    ndarray, shape (n_runs, 4, 2)
+        Corners (x, y) of each rectangle, counter-clockwise from the lower left.
+    """
+    f = np.asarray(flags, bool)
+    n_pos, n_bin = f.shape
+    x0, x1, y0, y1 = extent
+    dx, dy = (x1 - x0) / n_pos, (y1 - y0) / n_bin
+    pad = np.zeros((n_pos, 1), bool)
+    edge = np.diff(np.concatenate([pad, f, pad], axis=1).astype(np.int8), axis=1)
+    pos, start = np.nonzero(edge == 1)
+    _, stop = np.nonzero(edge == -1)  # same row-major order: the run's end
+    xa, xb = x0 + pos * dx, x0 + (pos + 1) * dx
+    ya, yb = y0 + start * dy, y0 + stop * dy
+    return np.stack([np.stack([xa, ya], -1), np.stack([xb, ya], -1),
+                     np.stack([xb, yb], -1), np.stack([xa, yb], -1)], axis=1)  # fmt: skip
 
 
 def evaluation_figure(
@@ -119,6 +155,26 @@ def evaluation_figure(
         ax.axhline(y, color="k", lw=0.4, ls=":", alpha=0.5)
     ax.set_ylabel("azimuth from the direction\nof increasing chainage (deg)")
     ax.set_yticks([0, 45, 90, 135, 180, 225, 270, 315, 360])
+    flags = {
+        "assumed": comparison.source == BinSource.ASSUMED,
+        "weak": (np.zeros(err.shape, bool) if comparison.support is None else
+                 (comparison.support < WEAK_SUPPORT) & (comparison.source != BinSource.ASSUMED)
+                 & (comparison.source != BinSource.TERRAIN)),
+    }  # fmt: skip
+    handles = []
+    for name, hatch, colour, label in (
+        ("assumed", "////", "#222222", "assumed (not seen)"),
+        ("weak", "....", "#6a3d9a", f"weakly supported (< {WEAK_SUPPORT} views)"),
+    ):
+        runs = flag_runs(np.take_along_axis(flags[name], order, axis=1), extent)
+        if runs.size:
+            ax.add_collection(PolyCollection(
+                list(runs), facecolors="none", edgecolors=colour, hatch=hatch, linewidths=0,
+                gid=name,
+            ))  # fmt: skip
+            handles.append(Patch(facecolor="white", edgecolor=colour, hatch=hatch, label=label))
+    if handles:
+        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.9)
     cb = fig.colorbar(img, ax=ax, shrink=0.9)
     cb.set_label("mask - truth (deg)\nblue: sky lost, red: blocked trusted")
     ax.set_title(title or "Masks against ground truth")

@@ -111,6 +111,8 @@ class Comparison:
         Track heading at the positions (direction of increasing chainage), degrees.
     margin_deg : ndarray, shape (n_pos, n_az), optional
         The mask file's own margins on the same bins, degrees (None: no margin).
+    support : ndarray of uint8, shape (n_pos, n_az), optional
+        The mask file's support (independent views per bin; None: a file without it).
     """
 
     chainage_m: NDArray
@@ -122,6 +124,7 @@ class Comparison:
     unmatched: int = 0
     heading_deg: NDArray | None = None
     margin_deg: NDArray | None = None
+    support: NDArray | None = None
 
     @property
     def error_deg(self) -> NDArray:
@@ -190,6 +193,7 @@ def compare(masks: MaskSet, truth: TrueMasks, tol_m: float = 0.5) -> Comparison:
         margin_deg=np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape)[mi][:, k].astype(
             float
         ),
+        support=None if masks.support is None else masks.support[mi][:, k],
     )
 
 

@@ -113,7 +113,9 @@ def frames_key(
 
 
 
-def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | None:
+def read_cache(
+    job: FrameJob,
+) -> tuple[NDArray, NDArray | None, NDArray | None] | BadFrame | None:
     """Cached result of a frame (None when absent or stale: the image changed)."""
     path, opts = location(job.cache_path), job.storage_options
     if not (path.is_file() if isinstance(path, Path) else exists(path, opts)):
@@ -134,34 +136,41 @@ def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | Non
 
 def decode_cache(
     z: NpzFile, meta: JsonDict, frame_id: str
-) -> tuple[NDArray, NDArray | None] | BadFrame:
+) -> tuple[NDArray, NDArray | None, NDArray | None] | BadFrame:
     """The segmentation (or the recorded failure) of an opened cache entry.
 
     Parameters
     ----------
     z : numpy.lib.npyio.NpzFile
         The opened entry (``sky``: packed bits of the (h, w) sky mask; ``confidence``:
-        optional (w,) float32).
+        optional (w,) float32; ``thin``: optional packed bits of the thin-structure pixels).
     meta : dict
         The entry's JSON header (``shape`` (h, w), ``bad``: the failure or None).
     frame_id : str
 
     Returns
     -------
-    (sky, confidence) or BadFrame
-        ``sky`` of shape (h, w), bool; ``confidence`` of shape (w,) or None.
+    (sky, confidence, thin) or BadFrame
+        ``sky`` of shape (h, w), bool; ``confidence`` of shape (w,) or None; ``thin`` (h, w)
+        bool or None (:attr:`predisat.reconstruct.carving.FrameView.thin_mask`).
     """
     if meta.get("bad"):
         return BadFrame(frame_id, str(meta["bad"]))
     h, w = meta["shape"]
     sky = np.unpackbits(z["sky"], count=h * w).reshape(h, w).view(bool)  # 0 / 1: no copy
     conf = z["confidence"] if "confidence" in z.files else None
-    return sky, conf
+    thin = None
+    if "thin" in z.files:
+        thin = np.unpackbits(z["thin"], count=h * w).reshape(h, w).view(bool)
+    return sky, conf, thin
 
 
 
 def write_cache(
-    job: FrameJob, result: tuple[NDArray, NDArray | None] | None, bad: str | None
+    job: FrameJob,
+    result: tuple[NDArray, NDArray | None] | tuple[NDArray, NDArray | None, NDArray | None]
+    | None,
+    bad: str | None,
 ) -> None:
     stat = stat_key(job.image_path, job.storage_options)
     meta: JsonDict = {
@@ -169,11 +178,14 @@ def write_cache(
     }  # fmt: skip
     arrays: dict[str, Any] = {}
     if result is not None:
-        sky, conf = result
+        sky, conf = result[0], result[1]
+        thin = result[2] if len(result) > 2 else None
         meta["shape"] = list(sky.shape)
         arrays["sky"] = np.packbits(sky.ravel())
         if conf is not None:
             arrays["confidence"] = np.asarray(conf, np.float32)
+        if thin is not None and np.any(thin):
+            arrays["thin"] = np.packbits(np.asarray(thin, bool).ravel())
     payload = _npz_bytes({"meta": np.array(json.dumps(meta)), **arrays})
     write_atomic(location(job.cache_path), payload, job.storage_options)
 

@@ -37,8 +37,10 @@ __all__ = [
 ]
 
 
-Segmenter = Callable[[NDArray], tuple[NDArray, NDArray | None]]
-"""Image (H, W, 3) BGR uint8 -> (sky mask (H, W) bool, per-column confidence (W,) or None)."""
+Segmenter = Callable[[NDArray], tuple[NDArray | None, ...]]
+"""Image (H, W, 3) BGR uint8 -> (sky mask (H, W) bool, per-column confidence (W,) or None),
+optionally followed by the thin-structure pixels (H, W) bool or None (the pixels of the sky
+mask that are sky only by the thin-structure policy; ``FrameView.thin_mask``)."""
 
 
 
@@ -47,20 +49,21 @@ def default_segmenter(
     method: str | None = None,
     sky_net: str | None = None,
     thin_px: int | None = None,
-) -> tuple[NDArray, NDArray | None]:
+) -> tuple[NDArray, NDArray | None, NDArray | None]:
     """:func:`predisat.sky.segment.segment_sky`: sky mask and per-column confidence.
 
     ``method`` is one of :data:`predisat.sky.segment.METHODS` (default: ``SkyOptions``'s);
     ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``);
     ``thin_px`` the thin-structure width (default ``SkyOptions``'s; the pipeline gives each
-    camera's, ``PipelineParams.thin_px``).
+    camera's, ``PipelineParams.thin_px``). Returns the sky mask, the confidence and the
+    thin-structure pixels.
     """
     opt = SkyOptions() if method is None else SkyOptions(method=method)
     if thin_px is not None:
         opt = replace(opt, thin_px=int(thin_px))
     classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
     seg = segment_sky(image_bgr, opt, classifier=classifier)
-    return seg.sky_mask, seg.confidence
+    return seg.sky_mask, seg.confidence, seg.thin_mask
 
 
 
@@ -136,13 +139,14 @@ def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]
     else:
         try:
             if job.thin_px is None:
-                sky, conf = segmenter(img)
+                out = segmenter(img)
             else:
-                sky, conf = segmenter(img, thin_px=job.thin_px)  # type: ignore[call-arg]
-            sky = np.asarray(sky, bool)
-            if sky.shape != img.shape[:2]:
+                out = segmenter(img, thin_px=job.thin_px)  # type: ignore[call-arg]
+            sky, conf = np.asarray(out[0], bool), out[1]
+            thin = np.asarray(out[2], bool) if len(out) > 2 and out[2] is not None else None
+            if sky.shape != img.shape[:2] or (thin is not None and thin.shape != sky.shape):
                 raise ValueError(f"segmenter returned a {sky.shape} mask for a {img.shape} image")
-            result = (sky, None if conf is None else np.asarray(conf, np.float32))
+            result = (sky, None if conf is None else np.asarray(conf, np.float32), thin)
         except Exception as exc:  # any failure of one frame must not stop a long run
             problem = f"segmentation failed ({type(exc).__name__}: {exc})"
     write_cache(job, result, problem)

@@ -32,6 +32,7 @@ __all__ = [
     "HeightField",
     "LowestBounds",
     "RangeMax1D",
+    "ThinRule",
     "apply_clearance_prior",
     "carve_box",
     "carve_profile",
@@ -94,6 +95,10 @@ class HeightField:
         Chainage intervals where an overhead structure was detected.
     camera_ceilings : ndarray of float, shape (m, 4)
         The ``camera_ceilings`` rows :func:`apply_clearance_prior` was given (none: empty).
+    views : ndarray of int32, shape (ny, nx), or None
+        Independent views (frames, or frames sharing a view group) whose rays bounded each
+        cell's carved bound; 0 where no view did or where a prior set the bound (``None``:
+        not counted).
     """
 
     cell_m: float
@@ -106,6 +111,7 @@ class HeightField:
     rail_z_m: NDArray = field(repr=False)
     overhead_m: NDArray = field(default_factory=lambda: np.zeros((0, 2)))
     camera_ceilings: NDArray = field(default_factory=lambda: np.zeros((0, 4)))
+    views: NDArray | None = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -283,6 +289,9 @@ def carve_profile(
     camera_m: NDArray,
     local_to_frame: NDArray,
     range_m: float,
+    seen: NDArray | None = None,
+    solid: SkyProfile | None = None,
+    thin_rule: ThinRule | None = None,
 ) -> int:
     """Lower the bounds of ``bound`` (``hf``'s raster, updated in place) with one frame.
 
@@ -300,6 +309,14 @@ def carve_profile(
         Rotation from the local ENU at the frame into the track frame.
     range_m : float
         Cells beyond this horizontal distance from the camera are left alone.
+    seen : ndarray of bool, shape ``hf.shape``, optional
+        Set True (in place) at every cell the frame bounded.
+    solid : SkyProfile, optional
+        The frame's profile with its thin-structure pixels as obstacles (``profile`` counts
+        them as sky). With ``thin_rule``, a cell takes ``profile``'s bound only where every
+        thin feature the rays to it may cross is transparent (:class:`ThinRule`), else
+        ``solid``'s.
+    thin_rule : ThinRule, optional
 
     Returns
     -------
@@ -338,12 +355,24 @@ def carve_profile(
     )
     tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
     tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
+    tan_solid = tan_sky
+    rule = (0.0, 0.0, 0.0, 0.0)
+    if solid is not None and thin_rule is not None and thin_rule.width_rad > 0:
+        el = solid.sky_el_deg
+        tan_solid = np.where(np.isfinite(el), np.tan(np.radians(np.where(np.isfinite(el), el,
+                                                                         0.0))), np.inf)
+        rule = (thin_rule.width_rad, thin_rule.k2_m, thin_rule.clearance_m,
+                thin_rule.camera_offset_m)  # fmt: skip
+    with np.errstate(invalid="ignore"):
+        off = np.ascontiguousarray(np.nan_to_num(hf.offset_m[r0:r1, c0:c1], nan=0.0), np.float64)
     up = rot[:, 2]
+    marks = np.zeros((r1 - r0, c1 - c0), np.bool_) if seen is None else seen[r0:r1, c0:c1]
     return int(_carve_cells(
         beta, rho, region,
         bound[r0:r1, c0:c1], float(b_axis[0]), float(b_axis[1] - b_axis[0]), float(range_m),
         np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
-        float(up[0]), float(up[1]), float(up[2]),
+        float(up[0]), float(up[1]), float(up[2]), marks,
+        np.ascontiguousarray(tan_solid, np.float64), off, *rule,
     ))  # fmt: skip
 
 
@@ -430,9 +459,17 @@ def _corner_lattice(
 def _carve_cells(
     beta: NDArray, rho: NDArray, region: NDArray, bound: NDArray, b0: float, step: float,
     range_m: float, tan_sky: NDArray, xl: NDArray, yl: NDArray, c: float, cz: float,
-    up_x: float, up_y: float, up_z: float,
+    up_x: float, up_y: float, up_z: float, seen: NDArray, tan_solid: NDArray, off: NDArray,
+    theta: float, k2: float, clearance: float, cam_off: float,
 ) -> int:  # fmt: skip
-    """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded.
+    """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded
+    and marks them in ``seen`` (n_r, n_c).
+
+    ``tan_solid``: the skyline with the thin features as obstacles; where it is higher over a
+    cell than ``tan_sky``, the cell takes ``tan_sky`` only when the thin-structure rule
+    (:class:`ThinRule`: ``theta``, ``k2``, ``clearance``, ``cam_off``; ``off`` the cells'
+    offsets from the track axis) holds along the rays to it, else ``tan_solid``. ``theta = 0``:
+    no rule (``tan_sky`` everywhere).
 
     ``beta`` and ``rho`` (n_r + 1, n_c + 1) are the relative azimuth (deg) and horizontal range
     of the cell corners, ``tan_sky`` the tangent of the profile's skyline (``+inf`` where the
@@ -468,6 +505,18 @@ def _carve_cells(
             if not np.isfinite(t_max):
                 continue
             x_a = xl[q]
+            if theta > 0.0:
+                t_s = tan_solid[i_lo]
+                for i in range(i_lo + 1, i_hi + 1):
+                    if tan_solid[i] > t_s:
+                        t_s = tan_solid[i]
+                if t_s > t_max:
+                    if not np.isfinite(t_s) or not _thin_ok(
+                        rho_far, t_s, theta, k2, clearance, cam_off, off[r, q], c
+                    ):
+                        t_max = t_s  # a thin feature on the way may block: solid
+                    if not np.isfinite(t_max):
+                        continue
             if t_max >= 0.0:
                 h = rho_far * t_max
             else:  # nearest point of the cell to the camera (for downward-looking bounds)
@@ -477,8 +526,61 @@ def _carve_cells(
             z = np.float32(cz + tilt + h / up_z)
             if z < bound[r, q]:
                 bound[r, q] = z
+            seen[r, q] = True
             count += 1
     return count
+
+
+@njit(cache=True, nogil=True)
+def _thin_ok(
+    rho_far: float, t_solid: float, theta: float, k2: float, clearance: float, cam_off: float,
+    cell_off: float, c: float,
+) -> bool:  # fmt: skip
+    """Whether every feature at most ``theta`` (rad) wide on the rays from the camera to the cell
+    (up to the solid skyline's height over its far corner) is transparent (:class:`ThinRule`).
+
+    A feature at ray distance ``t L`` is at most ``theta t L`` wide; it is transparent when that
+    is at most ``sqrt(k2 d)``, ``d`` its distance from the antenna path, at least
+    ``clearance`` and at least its offset from the track axis (the path runs along the axis).
+    The offset is linear along the ray between the camera's and the cell's (same sign, the
+    cell's nearest point): the first condition holds for ``t <= sqrt(k2 clearance) / (theta
+    L)``, the second, convex in ``t`` and true at ``t = 0``, wherever it holds at ``t = 1``;
+    both sets start at 0, so the segment is transparent when either holds at its end.
+    """
+    h = rho_far * t_solid
+    length = np.sqrt(rho_far * rho_far + h * h)
+    w = theta * length
+    if w * w <= k2 * clearance:
+        return True
+    near = abs(cell_off) - 0.7072 * c
+    if cam_off * cell_off <= 0.0 or near <= 0.0:
+        return False
+    return w * w <= k2 * near
+
+
+@dataclass(frozen=True)
+class ThinRule:
+    """The thin-structure rule of one frame for :func:`carve_profile`
+    (``docs/reconstruction.md``, section 8).
+
+    Attributes
+    ----------
+    width_rad : float
+        Widest feature the frame's thin mask may hold, radians (0: no rule).
+    k2_m : float
+        ``(TRANSPARENT_FRACTION)^2 * wavelength``: a feature of width ``w`` at distance ``d``
+        from the antenna is transparent when ``w^2 <= k2_m * d``.
+    clearance_m : float
+        Least distance of any structure from the antenna path.
+    camera_offset_m : float
+        The camera's lateral offset from the track axis, shrunk toward the axis by its
+        uncertainty (0: unknown, the offset term is not used).
+    """
+
+    width_rad: float
+    k2_m: float
+    clearance_m: float
+    camera_offset_m: float
 
 
 def _window_max(values: NDArray, radius: int, fill: Any) -> NDArray:

@@ -113,12 +113,17 @@ class SkySegmentation:
         0-1 per column: contrast across the skyline, lowered by sky gaps just below it.
     valid_mask : ndarray of bool, shape (H, W)
         Pixels that were segmented (all of them, except outside a fisheye circle).
+    thin_mask : ndarray of bool, shape (H, W), or None
+        The pixels of ``sky_mask`` that are sky only by the thin-structure policy (obstacle
+        features at most ``thin_px`` wide): the reconstruction counts them transparent only
+        where the first Fresnel zone rule allows (``docs/reconstruction.md``, section 8).
     """
 
     sky_mask: NDArray[np.bool_]
     skyline_row: NDArray[np.float64]
     confidence: NDArray[np.float64]
     valid_mask: NDArray[np.bool_]
+    thin_mask: NDArray[np.bool_] | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -208,11 +213,12 @@ def segment_sky(
     if opt.method in ("learned", "cnn", "ensemble"):
         if classifier is None and opt.method != "learned":
             classifier = SkyNet.default() if opt.method == "cnn" else SkyEnsemble.default()
-        sky, conf = _learned_sky(img, valid, opt, classifier)
+        sky, conf, thin = _learned_sky(img, valid, opt, classifier)
         skyline = skyline_from_mask(sky, valid)
         return SkySegmentation(
             sky_mask=sky, skyline_row=skyline,
             confidence=probability_confidence(conf, skyline, valid), valid_mask=valid,
+            thin_mask=thin,
         )
     small, scale = gc.working_image(img, opt.work_size_px)
     sh, sw = small.shape[:2]
@@ -231,16 +237,19 @@ def segment_sky(
         sky = gc.refine_boundary(img, sky, valid, opt.refine_band_px)
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
+    raw = sky
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
     skyline = skyline_from_mask(sky, valid)
     conf = skyline_confidence(img, sky, skyline, valid)
-    return SkySegmentation(sky_mask=sky, skyline_row=skyline, confidence=conf, valid_mask=valid)
+    return SkySegmentation(sky_mask=sky, skyline_row=skyline, confidence=conf, valid_mask=valid,
+                           thin_mask=sky & ~raw)  # fmt: skip
 
 
 def _learned_sky(
     img: NDArray, valid: NDArray, opt: SkyOptions, classifier: SkyModel | None
-) -> tuple[NDArray, NDArray]:
-    """Sky mask and probability map of the learned method (see ``docs/segmentation.md``)."""
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Sky mask, probability map and thin-structure pixels of the learned method (see
+    ``docs/segmentation.md``)."""
     h, w = img.shape[:2]
     circle = None
     if opt.fisheye:
@@ -287,5 +296,6 @@ def _learned_sky(
             cc.paint(sky, small_hole, True)
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
+    raw = sky
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
-    return sky, prob
+    return sky, prob, sky & ~raw

@@ -26,8 +26,13 @@ class Material:
     blocks_lband : bool
         True when the surface blocks GNSS L-band signals.
     thin : bool
-        True for structures much thinner than the L1 wavelength (wires, thin tubes); such
-        surfaces never block L-band and are labelled separately by the renderer.
+        True for thin structures (wires, thin tubes), labelled separately by the renderer; the
+        camera's L-band-only views leave them out.
+    width_m : float
+        Physical width of a thin structure of this material, metres (the widest the scenery
+        builds: its safe side): the ground truth counts it transparent only where it is
+        within the first Fresnel zone rule (:func:`predisat.gnss.fresnel.transparent`) at its
+        distance from the antenna. ``inf`` for the others.
     """
 
     name: str
@@ -35,6 +40,7 @@ class Material:
     texture: str
     blocks_lband: bool = True
     thin: bool = False
+    width_m: float = float("inf")
 
 
 MATERIALS: tuple[Material, ...] = (
@@ -46,8 +52,11 @@ MATERIALS: tuple[Material, ...] = (
     Material("roof_tiles", (0.30, 0.10, 0.06), "tiles"),
     Material("canopy", (0.45, 0.47, 0.50), "metal"),
     Material("steel", (0.25, 0.27, 0.28), "metal"),
-    Material("wire", (0.12, 0.10, 0.08), "wire", blocks_lband=False, thin=True),
-    Material("cantilever", (0.30, 0.30, 0.30), "metal", blocks_lband=False, thin=True),
+    # widths as scenery.build_catenary builds them: contact wire 12 mm, messenger 15 mm,
+    # cantilever arm and strut 0.06 m beams
+    Material("wire", (0.12, 0.10, 0.08), "wire", blocks_lband=False, thin=True, width_m=0.015),
+    Material("cantilever", (0.30, 0.30, 0.30), "metal", blocks_lband=False, thin=True,
+             width_m=0.06),
     Material("foliage", (0.05, 0.12, 0.03), "foliage"),
     Material("bark", (0.12, 0.09, 0.06), "bark"),
     Material("rock", (0.38, 0.34, 0.28), "rock"),

@@ -1,7 +1,10 @@
 """Ground truth from a synthetic world: 360 deg elevation masks, obstacle descriptors, blockage.
 
 * :func:`true_masks`: for antenna positions along the track (every 10 m by default), the highest
-  L-band-blocking elevation in every azimuth bin, exact to well under 0.1 deg.
+  L-band-blocking elevation in every azimuth bin, exact to well under 0.1 deg. Thin structures
+  (wires, cantilever tubes) block where the first Fresnel zone rule says so at their distance
+  from the antenna (:class:`FresnelCaster`, :mod:`predisat.gnss.fresnel`), the rule the
+  reconstruction applies.
 * :func:`obstacle_descriptors`: distance and height of the nearest blocking obstacle on each
   side of the track (the reflection-risk descriptors of a segment map).
 * :func:`is_blocked`: whether given satellite directions are blocked (a direct ray cast).
@@ -15,6 +18,7 @@ north; the method and its limits are in ``docs/synthetic-world.md``.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,8 +27,10 @@ from tqdm import tqdm
 
 from predisat.camera.models import CameraModel, Mount
 from predisat.geodesy import azel_to_enu
+from predisat.gnss.fresnel import L1_WAVELENGTH_M, TRANSPARENT_FRACTION, transparent
 from predisat.masks.truth import TrueMasks
-from predisat.synth.raycast import Caster, make_caster
+from predisat.synth.materials import MATERIALS
+from predisat.synth.raycast import Caster, Hits, SceneMesh, make_caster
 from predisat.synth.render import camera_pose
 from predisat.synth.world import World
 
@@ -32,6 +38,7 @@ if TYPE_CHECKING:  # the type only: the reconstruction (numba) is imported where
     from predisat.reconstruct.carving import FrameView
 
 __all__ = [
+    "FresnelCaster",
     "ideal_frames",
     "ideal_sky_mask",
     "is_blocked",
@@ -64,6 +71,110 @@ def _local_rotations(world: World, enu_m: NDArray) -> NDArray:
     """Rotations (..., 3, 3) from the local ENU at points (frame ENU) into the frame."""
     lat, lon, _ = world.frame.to_geodetic(enu_m)
     return world.frame.rotation_from(lat, lon)
+
+
+@dataclass(frozen=True)
+class _ThinScene:
+    """A world seen through its thin faces only (a :class:`~predisat.synth.raycast.SceneMesh`
+    whose "blocking" faces are the thin ones, for a caster of them alone)."""
+
+    vertices_m: NDArray
+    faces: NDArray
+    face_material: NDArray
+    blocking_faces: NDArray
+
+
+_THIN = np.array([m.thin for m in MATERIALS])
+_WIDTH_M = np.array([m.width_m for m in MATERIALS])
+_MAX_THIN_HITS = 16  # thin faces crossed by one ray near the antenna (two per beam)
+# a ray goes on this far past a transparent hit: float32 casters (Embree) can hit the same
+# face again from a point 0.1 mm past it; the thinnest structure is 12 mm
+_STEP_PAST_M = 0.005
+
+
+class FresnelCaster:
+    """L-band visibility with the physical thin-structure rule.
+
+    A ray is blocked when it meets an L-band-blocking face (the wrapped caster), or a thin
+    face (wire, cantilever tube) of a material whose ``width_m`` is not transparent at the hit's
+    distance from the ray's origin (:func:`predisat.gnss.fresnel.transparent`: no wider than a
+    tenth of the first Fresnel zone radius at ``wavelength_m``). Thin faces beyond
+    :attr:`reach_m` are transparent whatever they are. ``cast`` is the wrapped caster's.
+
+    Parameters
+    ----------
+    world : World
+    lband : Caster
+        ``make_caster(world, backend, lband_only=True)``.
+    wavelength_m : float
+        Default L1, the shortest (the safe side).
+    """
+
+    def __init__(
+        self, world: SceneMesh, lband: Caster, wavelength_m: float = L1_WAVELENGTH_M
+    ) -> None:
+        self.lband = lband
+        self.backend = lband.backend
+        self.wavelength_m = float(wavelength_m)
+        mat = np.asarray(world.face_material)
+        thin = _THIN[mat]
+        self.face_width_m = np.where(thin, _WIDTH_M[mat], np.inf)
+        widest = float(self.face_width_m[thin].max()) if thin.any() else 0.0
+        self.reach_m = (widest / TRANSPARENT_FRACTION) ** 2 / self.wavelength_m
+        """Distance beyond which every thin face is transparent."""
+        self.face_reach_m = np.where(thin, (self.face_width_m / TRANSPARENT_FRACTION) ** 2
+                                     / self.wavelength_m, 0.0)  # fmt: skip
+        self._thin: Caster | None = None
+        if thin.any():
+            scene = _ThinScene(np.asarray(world.vertices_m), np.asarray(world.faces), mat, thin)
+            self._thin = make_caster(scene, self.backend, lband_only=True)
+
+    def cast(self, origins_m: ArrayLike, directions: ArrayLike) -> Hits:
+        """The L-band-blocking caster's first hits."""
+        return self.lband.cast(origins_m, directions)
+
+    def occluded(self, origins_m: ArrayLike, directions: ArrayLike) -> NDArray:
+        """Whether each ray (n, 3) is blocked, shape (n,) bool (see the class)."""
+        out = np.array(self.lband.occluded(origins_m, directions), bool)
+        if self._thin is None or out.all():
+            return out
+        o, d = np.broadcast_arrays(np.asarray(origins_m, float), np.asarray(directions, float))
+        o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        todo = np.flatnonzero(~out)
+        start = np.zeros(todo.size)
+        for _ in range(_MAX_THIN_HITS):
+            if todo.size == 0:
+                return out
+            hits = self._thin.cast(o[todo] + start[:, None] * d[todo], d[todo])
+            dist = start + hits.distance_m
+            near = hits.hit & (dist < self.reach_m)
+            width = self.face_width_m[np.maximum(hits.face_id, 0)]
+            opaque = near & ~transparent(width, dist, self.wavelength_m)
+            out[todo[opaque]] = True
+            go = near & ~opaque
+            todo, start = todo[go], dist[go] + _STEP_PAST_M
+        out[todo] = True  # still crossing thin faces near the antenna: blocked (safe side)
+        return out
+
+
+def _thin_spheres(world: SceneMesh, fc: FresnelCaster, ant: NDArray) -> tuple[NDArray, ...] | None:
+    """The thin faces that may block from ``ant`` (nearer than their own reach), as
+    :func:`_triangle_spheres` gives the blocking ones; None when there is none."""
+    mat = np.asarray(world.face_material)
+    idx = np.flatnonzero(_THIN[mat])
+    if idx.size == 0:
+        return None
+    faces = np.asarray(world.faces)[idx]
+    tri = np.asarray(world.vertices_m)[faces]
+    centre = tri.mean(1)
+    off = tri - centre[:, None]
+    r_3d = np.linalg.norm(off, axis=-1).max(1)
+    near = np.linalg.norm(centre - ant, axis=1) - r_3d < fc.face_reach_m[idx]
+    if not near.any():
+        return None
+    return (faces[near], centre[near], np.hypot(off[near, :, 0], off[near, :, 1]).max(1),
+            r_3d[near])  # fmt: skip
 
 
 def _caster(world: World, backend: str, caster: Caster | None) -> Caster:
@@ -177,6 +288,7 @@ def true_masks(
     n_sub: int = 4,
     caster: Caster | None = None,
     progress: bool = False,
+    thin_rule: bool = True,
 ) -> TrueMasks:
     """True 360 deg elevation masks of the L-band-blocking scene at antenna positions.
 
@@ -198,6 +310,10 @@ def true_masks(
         A prebuilt ``make_caster(world, backend, lband_only=True)``.
     progress : bool
         Show a tqdm progress bar.
+    thin_rule : bool
+        Thin structures block where the first Fresnel zone rule says so at their distance
+        from the antenna (:class:`FresnelCaster`, L1); False: they never block (the rule
+        before 2026-12-05).
 
     Returns
     -------
@@ -214,7 +330,11 @@ def true_masks(
     ant = world.antenna_enu(s, antenna_height_m)
     rot = _local_rotations(world, ant)
     spheres = _triangle_spheres(world)
+    # "covered" means under a roof (every bin 90 deg): the L-band-blocking scene decides it; a
+    # thin structure straight overhead blocks only the directions through it
     covered = cst.occluded(ant, rot[:, :, 2])
+    fc = FresnelCaster(world, cst) if thin_rule else None
+    scan_cst: Caster = fc if fc is not None else cst
     az_sub = np.mod(np.arange(n_az * n_sub) * (az_step_deg / n_sub) - az_step_deg / 2, 360.0)
     n_sector = 720
     sector = np.floor(az_sub / (360.0 / n_sector)).astype(int) % n_sector
@@ -228,9 +348,10 @@ def true_masks(
         if len(chunk) < 8 and j < todo.size - 1:
             continue
         idx = np.array(chunk)
-        ub = np.stack([_sector_bounds(world, ant[q], rot[q], spheres, n_sector) for q in idx])
+        ub = np.stack([_sector_bounds(world, ant[q], rot[q], _with_thin(world, fc, ant[q], spheres),
+                                      n_sector) for q in idx])  # fmt: skip
         pos = np.repeat(idx, az_sub.size)
-        el = _scan(cst, ant[pos], rot[pos], np.tile(az_sub, idx.size), ub[:, sector].ravel())
+        el = _scan(scan_cst, ant[pos], rot[pos], np.tile(az_sub, idx.size), ub[:, sector].ravel())
         v = np.clip(el, 0.0, 90.0).reshape(idx.size, n_az, n_sub)
         right_edge = np.roll(v[:, :, 0], -1, axis=1)
         mask[idx] = np.maximum(v.max(2), right_edge)
@@ -254,6 +375,17 @@ def true_masks(
         az_step_deg=float(az_step_deg),
         backend=getattr(cst, "backend", backend),
     )
+
+
+def _with_thin(
+    world: World, fc: FresnelCaster | None, ant: NDArray, spheres: tuple[NDArray, ...]
+) -> tuple[NDArray, ...]:
+    """``spheres`` and the thin faces that may block from ``ant``: the scan starts above
+    them too."""
+    thin = None if fc is None else _thin_spheres(world, fc, ant)
+    if thin is None:
+        return spheres
+    return tuple(np.concatenate([a, b]) for a, b in zip(spheres, thin, strict=True))
 
 
 def obstacle_descriptors(
@@ -402,6 +534,7 @@ def ideal_frames(
     backend: str = "open3d",
     *,
     caster: Caster | None = None,
+    thin_deg: float | None = None,
 ) -> list[FrameView]:
     """Frames with ideal sky masks (:func:`ideal_sky_mask`) at chainages, for the reconstruction.
 
@@ -415,6 +548,13 @@ def ideal_frames(
         Cameras by side; default ``Mount.default`` for ``"left"`` and ``"right"``.
     antenna_height_m, reverse, backend, caster
         As for :func:`ideal_sky_mask`.
+    thin_deg : float, optional
+        The pipeline's thin-structure policy (``PipelineParams.thin_deg``): the masks are then
+        those of a segmenter without error followed by that policy, with its
+        ``FrameView.thin_mask`` (every face a camera sees is an obstacle, features at most
+        ``max(1, round(thin_deg / camera.widest_pixel_deg))`` pixels wide become sky).
+        None: every thin-material face (wire, cantilever) is sky, whatever its width and
+        distance, and there is no thin mask (the reconstruction then applies no rule).
 
     Returns
     -------
@@ -431,10 +571,27 @@ def ideal_frames(
     cast = _caster(world, backend, caster)
     ant = world.antenna_enu(s, antenna_height_m)
     hd = np.asarray(world.track.heading_at(s), float)
-    sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=cast)
-           for k, m in mounts.items()}
+    thin: dict[str, NDArray | None] = dict.fromkeys(mounts)
+    width = 0.0
+    if thin_deg is None:
+        sky = {k: ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=cast)
+               for k, m in mounts.items()}  # fmt: skip
+    else:
+        from predisat.sky.morphology import remove_thin_obstacles
+
+        full = make_caster(world, backend)  # every face: what a camera sees
+        px = max(1, round(thin_deg / camera.widest_pixel_deg)) if thin_deg > 0 else 0
+        width = px * camera.widest_pixel_deg
+        valid = np.all(np.isfinite(camera.pixel_to_ray(*camera.pixel_grid())), axis=-1)
+        sky = {}
+        for k, m in mounts.items():
+            raw = ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=full)
+            sky[k] = np.stack([remove_thin_obstacles(r, px) & valid for r in raw])
+            thin[k] = sky[k] & ~raw
     return [
         FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,
-                  frame_id=f"{s[i]:.0f}{k[0]}")
+                  frame_id=f"{s[i]:.0f}{k[0]}",
+                  thin_mask=None if thin[k] is None else thin[k][i],  # type: ignore[index]
+                  thin_width_deg=width)
         for i in range(s.size) for k, m in mounts.items()
     ]  # fmt: skip

@@ -94,7 +94,12 @@ def test_march_rays_reproduces_the_reference_march_bit_for_bit(own: str) -> None
     seen = np.zeros(5, int)
     for case in range(12):
         args = _random_march_case(rng, own, nan=case % 3 == 2)
-        got, want = _march_rays(*args), reference_march(*args)
+        views = rng.integers(0, 9, args[2].size).astype(np.int32)
+        out, want = _march_rays(*args, views), reference_march(*args)
+        got = out[:2]
+        # the support is the views of a cell the ray met (-1: none), never invented
+        for sup in out[2:]:
+            assert sup.dtype == np.int32 and np.all((sup == -1) | np.isin(sup, views))
         for g, w in zip(got, want, strict=True):
             assert g.dtype == w.dtype == np.float32
             np.testing.assert_array_equal(g.view(np.int32), w.view(np.int32))

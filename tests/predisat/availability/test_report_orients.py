@@ -366,3 +366,39 @@ def test_sky_plot_hatches_terrain_bins_apart(masks, satellites) -> None:
     assert np.degrees(inside[:, 0]).max() == pytest.approx(197.5)
     plain = plots.sky_plots([base])
     assert "terrain (elevation model)" not in [t.get_text() for t in plain.legends[0].get_texts()]
+
+
+def test_sky_plot_dots_weakly_supported_bins(masks, satellites) -> None:
+    base = _view(masks, satellites, 0.0)
+    weak = np.zeros(72, bool)
+    weak[9:12] = True  # azimuth 42.5-57.5 deg: fewer than two views behind the bound
+    fig = plots.sky_plots([dataclasses.replace(base, weak=weak)])
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "weakly supported (< 2 views)" in labels
+    dotted = [c for c in fig.axes[0].collections if c.get_gid() == "weak"]
+    assert len(dotted) == 1 and dotted[0].get_hatch() == "...."
+    verts = dotted[0].get_paths()[0].vertices
+    inside = verts[verts[:, 1] < 90.0 - 1e-9]
+    assert np.degrees(inside[:, 0]).min() == pytest.approx(42.5)
+    assert np.degrees(inside[:, 0]).max() == pytest.approx(57.5)
+    plain = plots.sky_plots([base])
+    plain_labels = [t.get_text() for t in plain.legends[0].get_texts()]
+    assert "weakly supported (< 2 views)" not in plain_labels
+    with pytest.raises(ValueError, match="weak needs a mask and one flag per mask bin"):
+        dataclasses.replace(base, weak=np.zeros(5, bool))
+
+
+def test_report_sky_views_flag_weak_bins_from_the_support(results, masks, satellites, track):
+    """The report's sky views: weak = support below 2, apart from assumed and terrain bins;
+    none without support (a version 1 or 2 file)."""
+    from predisat.availability.report import _sky_views
+
+    sup = np.full(masks.mask_el_deg.shape, 3, np.uint8)
+    sup[:, 30:33] = 1  # weak, observed
+    sup[:, 12] = 0  # weak but assumed (10-20): hatched as assumed, not dotted
+    with_sup = dataclasses.replace(masks, support=sup)
+    inputs = ReportInputs(results, with_sup, satellites, track, INFO, sky_chainage_m=(CH[0],))
+    (view,) = _sky_views(inputs)
+    assert view.weak is not None and np.flatnonzero(view.weak).tolist() == [30, 31, 32]
+    plain = ReportInputs(results, masks, satellites, track, INFO, sky_chainage_m=(CH[0],))
+    assert _sky_views(plain)[0].weak is None

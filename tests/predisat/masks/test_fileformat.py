@@ -168,11 +168,66 @@ def good_file(tmp_path):
 
 
 def test_wrong_version_names_file_and_fix(good_file, tmp_path):
-    bad = _rewrite(good_file, tmp_path / "v3.parquet", header_change={"format_version": 3})
+    bad = _rewrite(good_file, tmp_path / "v4.parquet", header_change={"format_version": 4})
     with pytest.raises(MaskFileError) as err:
         read_masks(bad)
     msg = str(err.value)
-    assert "v3.parquet" in msg and "format_version 3" in msg and "upgrade" in msg
+    assert "v4.parquet" in msg and "format_version 4" in msg and "upgrade" in msg
+
+
+def _with_support(ms, seed=1):
+    sup = np.random.default_rng(seed).integers(0, 256, ms.mask_el_deg.shape)
+    return MaskSet.from_arrays(
+        ms.chainage_m, ms.lat_deg, ms.lon_deg, ms.h_m, ms.heading_deg, ms.mask_el_deg,
+        az_step_deg=ms.az_step_deg, source=ms.source, margin_deg=ms.margin_deg,
+        descriptors=ms.descriptors, provenance=ms.provenance, support=sup,
+    ), sup
+
+
+def test_support_round_trip_is_version_3(tmp_path):
+    ms, sup = _with_support(make_set())
+    path = write_masks(ms, tmp_path / "s.parquet")
+    table = pq.read_table(path)
+    header = json.loads(table.schema.metadata[METADATA_KEY])
+    assert header["format_version"] == 3 and "support" in header["columns"]
+    # read with pyarrow alone: uint8 lists of n_az per row, the values given
+    col = table.column("support").combine_chunks()
+    assert pa.types.is_fixed_size_list(col.type) and col.type.value_type == pa.uint8()
+    raw = np.asarray(col.flatten().to_numpy()).reshape(ms.n_pos, ms.n_az)
+    assert np.array_equal(raw, sup)
+    back = read_masks(path)
+    assert back.support is not None and back.support.dtype == np.uint8
+    assert np.array_equal(back.support, sup) and back.equals(ms)
+
+
+def test_files_without_support_read_with_none(tmp_path):
+    plain = write_masks(make_set(), tmp_path / "v1.parquet")
+    assert json.loads(pq.read_schema(plain).metadata[METADATA_KEY])["format_version"] == 1
+    assert "support" not in pq.read_table(plain).column_names
+    assert read_masks(plain).support is None
+
+
+def test_version_3_without_support_column_names_it(tmp_path):
+    ms, _ = _with_support(make_set())
+    path = write_masks(ms, tmp_path / "s.parquet")
+    table = pq.read_table(path)
+    bad = _rewrite(path, tmp_path / "nosup.parquet", table=table.drop_columns(["support"]))
+    with pytest.raises(MaskFileError, match=r"nosup\.parquet.*missing column.*'support'"):
+        read_masks(bad)
+
+
+def test_support_out_of_range_or_not_integer_rejected():
+    ms = make_set(n_pos=3)
+    base = dict(az_step_deg=ms.az_step_deg, source=ms.source)
+    args = (ms.chainage_m, ms.lat_deg, ms.lon_deg, ms.h_m, ms.heading_deg, ms.mask_el_deg)
+    bad = np.zeros(ms.mask_el_deg.shape, int)
+    bad[1, 7] = 300
+    with pytest.raises(MaskError, match=r"support\[1, 7\] \(row, bin\).*\[0, 255\]"):
+        MaskSet.from_arrays(*args, **base, support=bad)
+    with pytest.raises(MaskError, match="support"):
+        MaskSet.from_arrays(*args, **base, support=np.full(ms.mask_el_deg.shape, 1.5))
+    with pytest.raises(MaskError, match="support has shape"):
+        MaskSet.from_arrays(*args, **base, support=np.zeros((2, ms.n_az), int))
 
 
 def test_wrong_format_and_missing_header(good_file, tmp_path):

@@ -338,3 +338,47 @@ def test_with_margin_and_subset_do_not_mutate():
     assert m.n_pos == 10
     with pytest.raises(MaskError, match="no position"):
         m.subset(0.0, 1.0)
+
+
+def test_support_follows_subset_concat_and_gap_closing():
+    from predisat.masks.gaps import close_gaps
+    from predisat.masks.maskset import WEAK_SUPPORT, concat_masksets
+
+    base = make_set(n_pos=10)
+    sup = np.arange(base.n_pos * base.n_az).reshape(base.n_pos, base.n_az) % 7
+    ms = MaskSet.from_arrays(
+        base.chainage_m, base.lat_deg, base.lon_deg, base.h_m, base.heading_deg,
+        base.mask_el_deg, source=base.source, support=sup,
+    )  # fmt: skip
+    assert WEAK_SUPPORT == 2 and ms.support is not None and not ms.support.flags.writeable
+    lo, hi = float(ms.chainage_m[2]), float(ms.chainage_m[5])
+    assert np.array_equal(ms.subset(lo, hi).support, sup[2:6])
+    a, b = ms.subset(-1e9, float(ms.chainage_m[4])), ms.subset(float(ms.chainage_m[5]), 1e9)
+    assert np.array_equal(concat_masksets([a, b]).support, sup)
+    # a part without support: the whole has none (a missing count is not "no view")
+    assert concat_masksets([a, base.subset(float(base.chainage_m[5]), 1e9)]).support is None
+    assert not ms.equals(base) and ms.equals(ms.subset(-1e9, 1e9))
+    # inserted gap positions rest on nothing: support 0; the others keep theirs
+    keep = np.r_[0:3, 7:10]
+    holed = MaskSet.from_arrays(
+        100.0 + 10.0 * keep, ms.lat_deg[keep], ms.lon_deg[keep], ms.h_m[keep],
+        ms.heading_deg[keep], ms.mask_el_deg[keep], source=ms.source[keep], support=sup[keep],
+    )  # fmt: skip
+    closed, gaps = close_gaps(holed, _LineTrack())
+    assert gaps == [(120.0, 170.0)] and closed.n_pos == 10 and closed.support is not None
+    new = np.isin(closed.chainage_m, [130.0, 140.0, 150.0, 160.0])
+    assert np.all(closed.support[new] == 0)
+    assert np.array_equal(closed.support[~new], sup[keep])
+
+
+class _LineTrack:
+    """Positions on a meridian, for close_gaps (which only asks positions and headings)."""
+
+    name = "line"
+
+    def position_at(self, chainage_m):
+        s = np.asarray(chainage_m, float)
+        return 50.0 + s / 111_000.0, np.full(s.shape, 4.0), np.full(s.shape, 100.0)
+
+    def heading_at(self, chainage_m):
+        return np.zeros(np.shape(chainage_m))

@@ -831,3 +831,23 @@ def test_masks_name_the_rig_that_made_them(first_run) -> None:
     # the survey's cameras: the test's 160 x 120 pinhole on both sides, pitched 45 deg
     assert text.count("pinhole 160x120 px") == 2 and "pitch 45 deg" in text
     assert rig_text({}) == ""
+
+
+def test_cache_keeps_the_thin_structure_pixels(tmp_path: Path) -> None:
+    """A segmenter's third output (thin-structure pixels) survives the cache, bit for bit;
+    an entry without it reads as None."""
+    from predisat.reconstruct.framecache import FrameJob, read_cache, write_cache
+
+    image = tmp_path / "f.jpg"
+    image.write_bytes(b"an image")
+    job = FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
+    rng = np.random.default_rng(1)
+    sky = rng.random((5, 37)) < 0.5
+    thin = sky & (rng.random((5, 37)) < 0.3)
+    write_cache(job, (sky, None, thin), None)
+    got = read_cache(job)
+    assert isinstance(got, tuple) and got[2] is not None and got[2].dtype == bool
+    assert np.array_equal(got[0], sky) and np.array_equal(got[2], thin) and got[1] is None
+    write_cache(job, (sky, None), None)
+    again = read_cache(job)
+    assert isinstance(again, tuple) and again[2] is None

@@ -406,7 +406,7 @@ def test_horizon_parts_split_the_cells_at_the_corridor_half_width() -> None:
     hf = HeightField(c, -n // 2, -n // 2, bound, region, z, z, z)
     ant = np.array([[0.1, 0.1, 4.0]])
     p = ReconstructionParams()
-    near, near_unk, far, far_unk = _horizon_parts(hf, ant, np.eye(3)[None], p)
+    near, near_unk, far, far_unk = _horizon_parts(hf, ant, np.eye(3)[None], p)[:4]
     step = p.az_step_deg / p.n_sub
     north, east = round(p.az_step_deg / 2 / step), round((90.0 + p.az_step_deg / 2) / step)
     assert near[0, north] == pytest.approx(np.degrees(np.arctan(6.0 / 19.9)), abs=1e-4)

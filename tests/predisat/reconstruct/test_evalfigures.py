@@ -84,3 +84,61 @@ def test_each_target_sits_on_its_own_axis() -> None:
     y0, y1 = trust.get_window_extent().y0, trust.get_window_extent().y1
     lo, hi = np.log10(trust.get_ylim())
     assert (y_disp - y0) / (y1 - y0) == pytest.approx((np.log10(0.1) - lo) / (hi - lo))
+
+
+def _covered(runs: np.ndarray, n_pos: int, n_bin: int, extent) -> np.ndarray:
+    """Cells whose centre lies inside one of the rectangles (brute force)."""
+    x0, x1, y0, y1 = extent
+    xc = x0 + (np.arange(n_pos) + 0.5) * (x1 - x0) / n_pos
+    yc = y0 + (np.arange(n_bin) + 0.5) * (y1 - y0) / n_bin
+    out = np.zeros((n_pos, n_bin), int)
+    for r in runs:
+        (xa, ya), (xb, yb) = r[0], r[2]
+        out += ((xc[:, None] > xa) & (xc[:, None] < xb)) & ((yc[None, :] > ya) & (yc[None, :] < yb))
+    return out
+
+
+def test_flag_runs_cover_exactly_the_flagged_cells() -> None:
+    from predisat.reconstruct.evalfigures import flag_runs
+
+    rng = np.random.default_rng(0)
+    flags = rng.random((9, 40)) < 0.3
+    flags[:, -1] = True  # runs reaching the last bin
+    extent = (995.0, 1085.0, 0.0, 360.0)
+    runs = flag_runs(flags, extent)
+    cov = _covered(runs, *flags.shape, extent)
+    assert cov.max() == 1  # no overlap
+    np.testing.assert_array_equal(cov.astype(bool), flags)
+    # one rectangle per run of a position
+    n_runs = sum(int(np.sum(np.diff(np.r_[0, row.astype(int), 0]) == 1)) for row in flags)
+    assert runs.shape == (n_runs, 4, 2)
+
+
+def test_figure_hatches_assumed_and_weakly_supported_bins() -> None:
+    import dataclasses
+
+    from predisat.reconstruct.evalfigures import flag_runs
+
+    comp, heading = _comparison()
+    rng = np.random.default_rng(1)
+    source = rng.integers(0, 3, comp.mask_el_deg.shape).astype(np.uint8)
+    support = rng.integers(0, 4, comp.mask_el_deg.shape).astype(np.uint8)
+    comp = dataclasses.replace(comp, source=source, support=support)
+    fig = evaluation_figure(comp, 0.5, title="t", heading_deg=heading)
+    image = fig.axes[0]
+    drawn = {c.get_gid(): c for c in image.collections if c.get_gid()}
+    assert set(drawn) == {"assumed", "weak"}
+    assert drawn["assumed"].get_hatch() == "////" and drawn["weak"].get_hatch() == "...."
+    # the weak rectangles cover the bins with < 2 views that are not assumed, in the map's
+    # order (azimuth from the heading)
+    rel = np.mod(comp.az_deg[None, :] - heading[:, None], 360.0)
+    order = np.argsort(rel, axis=1)
+    want = np.take_along_axis((support < 2) & (source != 2), order, axis=1)
+    s = comp.chainage_m
+    extent = (s[0] - 5.0, s[-1] + 5.0, 0.0, 360.0)
+    paths = np.array([p.vertices[:4] for p in drawn["weak"].get_paths()])
+    np.testing.assert_allclose(paths, flag_runs(want, extent))
+    assert _covered(paths, *want.shape, extent).astype(bool).tolist() == want.tolist()
+    # a file without support: only the assumed bins are hatched
+    fig = evaluation_figure(dataclasses.replace(comp, support=None), heading_deg=heading)
+    assert {c.get_gid() for c in fig.axes[0].collections if c.get_gid()} == {"assumed"}

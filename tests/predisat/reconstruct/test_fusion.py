@@ -198,3 +198,136 @@ def test_suspect_frames_are_judged_the_same_in_every_window(scene) -> None:
 def test_params_reject_bad_fusion_settings(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         dataclasses.replace(BASE, **{field: value})
+
+
+# ---------------------------------------------------------------------- support (evidence)
+
+
+def _brute_views(world, frames, rec, hf):
+    """Per cell, the frames whose own carving bounded it (each carved alone into +inf), and
+    the bound of all of them before any prior."""
+    from predisat.reconstruct.carving import _camera_geometry
+
+    profs = rec.profiles(frames)
+    cams, rots = _camera_geometry(frames, world.track)
+    count = np.zeros(hf.shape, int)
+    low = np.full(hf.shape, np.inf, np.float32)
+    for prof, cam, rot in zip(profs, cams, rots, strict=True):
+        scratch = np.full(hf.shape, np.inf, np.float32)
+        carve_profile(hf, scratch, prof, cam, rot, BASE.carve_range_m)
+        count += np.isfinite(scratch)
+        low = np.minimum(low, scratch)
+    return count, low
+
+
+@pytest.mark.parametrize("params", [BASE, ROBUST], ids=["rank1", "rank2"])
+def test_views_count_the_frames_that_bounded_each_cell(scene, params) -> None:
+    """HeightField.views: per cell, the frames that bounded it, counted one by one here; 0
+    where the clearance prior set the bound instead."""
+    world, frames, _ = scene
+    rec = Reconstructor(params)
+    hf = rec.height_field(frames, world.track, 250.0, 450.0)
+    count, low = _brute_views(world, frames, rec, hf)
+    prior = hf.bound_m != np.minimum(low, np.float32(np.inf)) if params is BASE else None
+    assert hf.views is not None and hf.views.max() >= 5  # the wall: seen by many frames
+    if prior is not None:
+        assert prior.any()  # the clearance strip over the track
+        np.testing.assert_array_equal(hf.views, np.where(prior, 0, count))
+    else:  # rank 2: the same counts where the bound is the carving's
+        same = hf.views > 0
+        np.testing.assert_array_equal(hf.views[same], count[same])
+
+
+def test_support_of_the_wall_bins_and_of_one_view_group(scene) -> None:
+    """The wall side is backed by several frames; the same frames as one view (one camera
+    pass) back nothing twice; ASSUMED bins have none."""
+    world, frames, _ = scene
+    rec = Reconstructor(BASE).run(frames, POS, world.track)
+    sup = rec.support
+    assert sup is not None and sup.dtype == np.uint8 and sup.shape == rec.mask_el_deg.shape
+    assert np.all(sup[rec.source == 2] == 0)
+    az = rec.az_deg
+    left = np.abs(np.mod(az - (60.0 - 90.0) + 180.0, 360.0) - 180.0) <= 30.0  # wall side
+    assert np.median(sup[:, left]) >= 2
+    one = [dataclasses.replace(f, view_group="pass") for f in frames]
+    rec1 = Reconstructor(BASE).run(one, POS, world.track)
+    assert rec1.support is not None and rec1.support.max() <= 1
+    np.testing.assert_array_equal(rec1.mask_el_deg, rec.mask_el_deg)  # rank 1: same masks
+    ms = rec.to_maskset(world.track)
+    assert ms.support is not None and np.array_equal(ms.support, sup)
+
+
+def test_bin_support_takes_the_part_that_sets_the_bin() -> None:
+    """Hand-made rays (2 per bin, 3 bins; each bin also takes the next bin's first ray)."""
+    from predisat.reconstruct.carving import bin_support
+
+    near = (np.array([[10.0, 20.0, 5.0, 5.0, -90.0, 3.0]]), np.array([[4, 3, 7, 2, -1, 6]]))
+    far_grid = (np.full((1, 6), -90.0), np.full((1, 6), -1))
+    far_el = np.array([[15.0, 5.0, 1.0]])
+    seen = np.array([[True, True, True]])
+    views = np.array([[1, 9, 2]])
+    none = np.zeros((1, 3), bool)
+    got = bin_support(near, far_grid, far_el, seen, views, none, 2)
+    # bin 0: rays 10, 20 (+ next 5): 20 from the near field, support 3
+    # bin 1: rays 5, 5 (+ next -90): tie of two near rays (7, 2) and the far field 5 (9): 2
+    # bin 2: rays -90, 3 (+ first ray of bin 0, 10): 10 from the near field, support 4
+    np.testing.assert_array_equal(got, [[3, 2, 4]])
+    # the far field sets a bin above the height field; unseen far field: the default, 0
+    far_el2 = np.array([[30.0, 30.0, 30.0]])
+    got = bin_support(near, far_grid, far_el2, np.array([[True, False, True]]), views, none, 2)
+    np.testing.assert_array_equal(got, [[1, 0, 2]])
+    # ASSUMED bins: 0 whatever their parts
+    got = bin_support(near, far_grid, far_el, seen, views, np.array([[True, False, False]]), 2)
+    np.testing.assert_array_equal(got, [[0, 2, 4]])
+
+
+# ---------------------------------------------------------------------- thin-structure rule
+
+
+def test_thin_features_prove_free_space_only_within_the_fresnel_reach(scene) -> None:
+    """A right frame (open side) with the 8 sky pixels above its skyline in every column marked
+    as thin structure (0.7 deg): cells the rule cannot clear keep the bound of the band as an
+    obstacle, cells it can keep the bound of the band as sky. The reach is computed here from
+    the cell geometry (the rule's two conditions at the ray's end)."""
+    from predisat.reconstruct.carving import _camera_geometry
+
+    world, frames, _ = scene
+    # the default mount: the camera 1.5 m to the side of the antenna (the rule's offset term;
+    # the mask is the one rendered on the axis, which does not matter when comparing carvings)
+    f = dataclasses.replace(next(fr for fr in frames if fr.frame_id == "350r"),
+                            mount=Mount.default("right"))  # fmt: skip
+    sky = f.sky_mask
+    rows_i = np.arange(sky.shape[0])[:, None]
+    # lowest sky row of each column's top run: the last row of the leading sky
+    first_obst = np.where((~sky).any(0), np.argmax(~sky & (np.cumsum(sky, 0) > 0), 0), sky.shape[0])
+    band = sky & (rows_i >= first_obst[None, :] - 8) & (rows_i < first_obst[None, :])
+    assert band.sum() > 1000
+    thin = dataclasses.replace(f, thin_mask=band, thin_width_deg=0.7)
+    solid = dataclasses.replace(f, sky_mask=sky & ~band)
+    rec = Reconstructor(BASE)
+    lo, hi = 300.0, 400.0
+    a = rec.height_field([f], world.track, lo, hi)
+    b = rec.height_field([thin], world.track, lo, hi)
+    c = rec.height_field([solid], world.track, lo, hi)
+    keep = np.isfinite(c.bound_m) & (np.abs(a.offset_m) > 2.5)  # outside the clearance prior
+    assert np.all(b.bound_m[keep] >= a.bound_m[keep])
+    assert np.all(b.bound_m[keep] <= c.bound_m[keep])
+    cam = _camera_geometry([f], world.track)[0][0]
+    r0, c0, _ = a.index(cam[:1], cam[1:2])
+    side = np.sign(a.offset_m[r0[0], c0[0]])
+    rows, cols = np.nonzero(keep)
+    cm = a.cell_m
+    xs = (a.ix0 + cols[:, None] + np.array([0, 1, 0, 1])) * cm - cam[0]
+    ys = (a.iy0 + rows[:, None] + np.array([0, 0, 1, 1])) * cm - cam[1]
+    rho = np.hypot(xs, ys).max(axis=1)
+    w = np.radians(0.7) * np.hypot(rho, c.bound_m[rows, cols] - cam[2])  # widest feature, m
+    k2 = 0.1**2 * 0.190294  # transparent when w^2 <= k2 * distance from the antenna path
+    off = a.offset_m[rows, cols]
+    near = np.where(np.sign(off) == side, np.abs(off) - 0.7072 * cm, 0.0)
+    diff = a.bound_m[rows, cols] != c.bound_m[rows, cols]  # the band matters there
+    got_thin = b.bound_m[rows, cols] == a.bound_m[rows, cols]
+    # away from the reach's edge (5 % either way: the kernel's corner and height are its own)
+    sure_in = diff & ((1.05 * w) ** 2 <= k2 * np.maximum(near, 0.5))
+    sure_out = diff & ((0.95 * w) ** 2 > k2 * np.maximum(near, 0.5))
+    assert sure_in.sum() > 20 and sure_out.sum() > 20
+    assert got_thin[sure_in].all() and not got_thin[sure_out].any()

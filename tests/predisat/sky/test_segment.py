@@ -381,3 +381,17 @@ def test_only_hesitant_regions_enclosed_by_sky_become_sky() -> None:
     assert cut[:25, 130:].all() and cut[50:80, :30].all()
     assert not seg.sky_mask[cut].any()  # the mast, the mast end and the corner stay obstacles
     assert not seg.sky_mask[100:].any()
+
+
+@pytest.mark.parametrize("method", ["grabcut", "learned"])
+def test_thin_mask_holds_the_wire_the_policy_made_sky(method: str) -> None:
+    """SkySegmentation.thin_mask: the pixels that are sky only by the thin-structure policy
+    (the 1 px wire), never the mast, and exactly sky_mask minus the mask without the policy."""
+    img, _ = _scene()
+    seg = segment_sky(img, SkyOptions(method=method))
+    raw = segment_sky(img, SkyOptions(method=method, thin_px=0))
+    assert seg.thin_mask is not None and raw.thin_mask is not None
+    assert not raw.thin_mask.any()  # no policy, nothing made sky by it
+    assert np.array_equal(seg.thin_mask, seg.sky_mask & ~raw.sky_mask)
+    assert seg.thin_mask[59:62, 150:210].any(axis=0).mean() > 0.9  # the wire
+    assert not seg.thin_mask[40:140, 222:230].any()  # the mast
