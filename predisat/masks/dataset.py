@@ -7,9 +7,12 @@
     ROOT/line=211/part=2/masks.parquet            the second connected part of line 211
 
 Each file is a mask file (``docs/mask-format.md``, :func:`predisat.masks.fileformat.read_masks`
-reads it alone, ``predisat availability --masks`` takes it); together they are one dataset
-that pyarrow, geopandas, DuckDB or QGIS open at ``ROOT`` with the columns ``line`` (str) and
-``part`` (int) from the folder names (:func:`read_dataset_table`). Every file has the same
+reads it alone, ``predisat availability --masks`` takes it) with two more columns, ``line_id``
+(string) and ``line_part`` (int32): a reader that infers the folders' types (geopandas and
+pyarrow read ``line=01`` as the integer 1, the same as line ``1``) still has the exact id.
+Together they are one dataset that pyarrow, geopandas, DuckDB or QGIS open at ``ROOT``, with
+``line`` and ``part`` from the folder names (:func:`read_dataset_table` reads them as string
+and int32). Every file has the same
 columns; chainage is per part (each part's track map starts at 0). See ``docs/network.md``.
 """
 
@@ -21,7 +24,9 @@ from urllib.parse import quote, unquote
 
 import pyarrow as pa
 import pyarrow.dataset as pads
+import pyarrow.parquet as pq
 
+from predisat.atomic import atomic_path
 from predisat.masks.fileformat import MaskFileError, read_masks, write_masks
 from predisat.masks.maskset import MaskSet
 
@@ -49,10 +54,19 @@ def partition_path(root: str | os.PathLike[str], line_id: str, part: int = 1) ->
 def write_partition(
     masks: MaskSet, root: str | os.PathLike[str], line_id: str, part: int = 1
 ) -> Path:
-    """Write one line part's masks into the dataset (atomically, replacing an older file)."""
+    """Write one line part's masks into the dataset (atomically, replacing an older file): the
+    mask file of :func:`~predisat.masks.fileformat.write_masks` with the ``line_id`` and
+    ``line_part`` columns."""
     path = partition_path(root, line_id, part)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_masks(masks, path)
+    with atomic_path(path) as tmp:
+        write_masks(masks, tmp)
+        table = pq.read_table(tmp)
+        n = table.num_rows
+        table = table.append_column("line_id", pa.array([line_id] * n, type=pa.string()))
+        table = table.append_column("line_part", pa.array([part] * n, type=pa.int32()))
+        pq.write_table(table, tmp, compression="zstd")
+    return path
 
 
 def read_partition(root: str | os.PathLike[str], line_id: str, part: int = 1) -> MaskSet:
