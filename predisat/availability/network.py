@@ -22,6 +22,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -260,7 +261,7 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
 
-    share = {(r.line_id, r.part): r.share_ge4_masks for r in table.itertuples()}
+    share = {(r.line_id, r.part): r.share_ge4_masks for r in _rows(table)}
     cmap, norm = colormaps["RdYlGn"], Normalize(0.0, 1.0)
     fig, ax = plt.subplots(figsize=(7.5, 6.0), dpi=100)
     lat_mid = float(np.mean([ln.parts[0].lat_deg.mean() for ln in network.lines]))
@@ -291,6 +292,11 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
+def _rows(t: pd.DataFrame) -> list[SimpleNamespace]:
+    """The table's rows with attribute access."""
+    return [SimpleNamespace(**{str(k): v for k, v in r.items()}) for r in t.to_dict("records")]
+
+
 def _pct(x: object) -> str:
     return f"{100.0 * float(x):.1f}" if isinstance(x, float) and np.isfinite(x) else "-"
 
@@ -307,7 +313,7 @@ def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
         f"{r.n_bad_frames} | {_pct(r.share_ge4_masks)} | {_pct(r.share_ge4_cutoff)} | "
         f"{r.longest_below4_m_masks:.0f} | "
         + (f"[report]({r.report})" if r.report else r.message.replace("|", "/")) + " |\n"
-        for r in t.itertuples()
+        for r in _rows(t)
     )
     skipped = "".join(f"* {s.line_id}: {s.what}: {s.reason}\n" for s in network.skipped)
     return head + body + (f"\n## Left out of the network file\n\n{skipped}" if skipped else "")
@@ -321,7 +327,7 @@ def _html(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
         f"<td>{r.n_bad_frames}</td><td>{_pct(r.share_ge4_masks)}</td>"
         f"<td>{_pct(r.share_ge4_cutoff)}</td><td>{r.longest_below4_m_masks:.0f}</td><td>"
         + (f'<a href="{e(r.report)}">report</a>' if r.report else e(r.message)) + "</td></tr>"
-        for r in t.itertuples()
+        for r in _rows(t)
     )
     skipped = "".join(f"<li>{e(s.line_id)}: {e(s.what)}: {e(s.reason)}</li>"
                       for s in network.skipped)  # fmt: skip

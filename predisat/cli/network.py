@@ -60,8 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-gap-m", type=positive_float, default=10.0, metavar="M",
                    help="pieces of a track closer than this are one part")
     p.add_argument("--scheduler", default="local", metavar="local|serial|ADDRESS",
-                   help="where the line tasks run: a local Dask cluster (default), this process "
-                   "(serial), or an existing Dask cluster by address (tcp://HOST:8786)")  # fmt: skip
+                   help="where the line tasks run: a local Dask cluster (default), this "
+                   "process (serial), or an existing Dask cluster by address (tcp://HOST:8786)")
     p.add_argument("--workers", type=positive_int, metavar="N",
                    help="worker processes of the local cluster (default: the machine's cores)")
     p.add_argument("--chunk-m", type=positive_float, default=1000.0, metavar="M",

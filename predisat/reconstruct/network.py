@@ -24,6 +24,7 @@ Every task runs the same serial code, so the dataset is the same bytes wherever 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -166,7 +167,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     """One line part: process its survey (serially), write its partition, then its marker."""
     t0 = time.perf_counter()
     length = float(unit.track.length_m)
-    base = dict(line_id=unit.line_id, part=unit.part, key=unit.key, length_m=length)
+    made = functools.partial(LineResult, unit.line_id, unit.part, unit.key, length_m=length)
     out = Path(shared.out_dir)
     line_out = out / "lines" / unit.key
     marker = line_out / "line.json"
@@ -178,7 +179,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
         if marker.is_file() and part_file.is_file():
             old = json.loads(marker.read_text())
             if old.get("key") == key and old.get("masks_sha256") == _sha256(part_file):
-                return LineResult(**base, status="resumed", masks_path=part_file,
+                return made(status="resumed", masks_path=part_file,
                                   n_pos=int(old["n_pos"]), n_frames=int(old["n_frames"]),
                                   n_bad_frames=int(old["n_bad_frames"]),
                                   elapsed_s=time.perf_counter() - t0)  # fmt: skip
@@ -190,7 +191,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     except (SurveyError, ValueError, OSError) as exc:
         if shared.strict:
             raise
-        return LineResult(**base, status="failed", message=str(exc),
+        return made(status="failed", message=str(exc),
                           elapsed_s=time.perf_counter() - t0)  # fmt: skip
     path = write_partition(res.masks, out / "masks", unit.line_id, unit.part)
     done = {
@@ -201,7 +202,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
         "n_bad_frames": len(res.bad_frames),
     }
     write_bytes_atomic(marker, json.dumps(done, indent=1).encode())
-    return LineResult(**base, status="done", masks_path=path, n_pos=res.masks.n_pos,
+    return made(status="done", masks_path=path, n_pos=res.masks.n_pos,
                       n_frames=res.n_frames, n_bad_frames=len(res.bad_frames),
                       elapsed_s=time.perf_counter() - t0)  # fmt: skip
 

@@ -112,7 +112,7 @@ def test_a_broken_survey_fails_its_line_only(
                           progress=False, segmenter=blue_sky)  # fmt: skip
     assert [r.status for r in res.lines] == ["done", "failed", "no survey"]
     assert "manifest.csv" in res.lines[1].message
-    with pytest.raises(ValueError, match="manifest.csv"):
+    with pytest.raises(ValueError, match=r"manifest\.csv"):
         process_network(network, broken, tmp_path / "out2", PARAMS, scheduler="serial",
                         progress=False, segmenter=blue_sky, strict=True)  # fmt: skip
     with pytest.raises(FileNotFoundError, match="no such surveys folder"):
