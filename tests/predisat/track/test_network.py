@@ -153,3 +153,16 @@ def test_whole_belgian_network(shared_data: Path) -> None:
         assert abs(ln.length_m - declared) < 0.005 * declared  # Infrabel's own length
     out = {s.what for s in net.skipped if s.reason == "out of service"}
     assert any("L 144_2" in w for w in out)  # line 144's track B is mostly out of service
+
+
+def test_a_line_read_alone_is_the_networks_line(gembloux: Path) -> None:
+    """`predisat synth --track NETWORK --where linecalfa=144` renders on the network's geometry:
+    the same chainage as `predisat network` processes the survey on."""
+    from predisat.track import load_track
+
+    net = Network.from_file(gembloux)
+    for lid in net.line_ids:
+        alone = load_track(gembloux, where={"linecalfa": lid})
+        (part,) = net.line(lid).parts
+        assert track_key(alone) == track_key(part)
+        assert alone.length_m == part.length_m
