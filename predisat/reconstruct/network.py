@@ -278,8 +278,10 @@ def process_network(
             if (folder / "survey.yaml").is_file():
                 units.append(_Unit(ln.line_id, k, key, tm, str(folder)))
             else:
+                why = (f"{folder} has no survey.yaml" if folder.is_dir()
+                       else f"no survey at {folder}")  # fmt: skip
                 results[key] = LineResult(ln.line_id, k, key, "no survey", float(tm.length_m),
-                                          message=f"no survey at {folder}")  # fmt: skip
+                                          message=why)  # fmt: skip
     known = {ln.part_key(k) for ln in network.lines for k in range(1, len(ln.parts) + 1)}
     unmatched = tuple(sorted(d.name for d in base.iterdir() if d.is_dir() and d.name not in known))
     bar = tqdm(total=len(units), desc="network", unit="line", disable=not progress)

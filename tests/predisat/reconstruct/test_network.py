@@ -108,10 +108,12 @@ def test_a_broken_survey_fails_its_line_only(
     broken = tmp_path / "surveys"
     shutil.copytree(surveys, broken)
     (broken / "161" / "manifest.csv").write_text("nonsense\n")
+    (broken / "140").mkdir()  # a folder for line 140, but no survey in it
     res = process_network(network, broken, tmp_path / "out", PARAMS, scheduler="serial",
                           progress=False, segmenter=blue_sky)  # fmt: skip
     assert [r.status for r in res.lines] == ["done", "failed", "no survey"]
     assert "manifest.csv" in res.lines[1].message
+    assert res.lines[2].message.endswith("140 has no survey.yaml")
     with pytest.raises(ValueError, match=r"manifest\.csv"):
         process_network(network, broken, tmp_path / "out2", PARAMS, scheduler="serial",
                         progress=False, segmenter=blue_sky, strict=True)  # fmt: skip
