@@ -6,7 +6,7 @@ Usage::
     python scripts/bench_lines.py [--network tests/data/track/network_gembloux.geojson]
         [--from-m 300] [--span-m 300] [--camera fisheye] [--workers 1,2] [--chunk-m 100]
         [--belgium ../shared/data/railway/infrabel/belgium_geovoies_simpl10m.geojson]
-        [--json out.json]
+        [--synth DIR] [--keep DIR] [--json out.json]
 
 Renders a synthetic survey of ``--span-m`` metres on every line of the network (not timed),
 then runs :func:`predisat.reconstruct.network.process_network` from scratch into fresh folders:
@@ -70,6 +70,7 @@ def main() -> None:
     ap.add_argument("--chunk-m", type=float, default=100.0)
     ap.add_argument("--belgium", type=Path)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--synth", type=Path, help="render the surveys here, or reuse them")
     ap.add_argument("--keep", type=Path, help="copy the serial run's summary (map, tables) here")
     args = ap.parse_args()
     from predisat.synth.generate import generate_survey
@@ -79,14 +80,17 @@ def main() -> None:
                               "span_m": args.span_m, "runs": []}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="bench_lines_") as tmp:
         root = Path(tmp)
+        synth = args.synth or root / "synth"
         t0 = time.perf_counter()
         for k, ln in enumerate(net.lines):
-            made = generate_survey(ln.parts[0], args.from_m, args.from_m + args.span_m,
-                                  sky="mixed", seed=7 + k, out_dir=root / "synth" / ln.key,
-                                  camera=default_camera(args.camera), progress=False)  # fmt: skip
+            survey_dir = synth / ln.key / "survey"
+            if not (survey_dir / "survey.yaml").is_file():
+                generate_survey(ln.parts[0], args.from_m, args.from_m + args.span_m, sky="mixed",
+                                seed=7 + k, out_dir=synth / ln.key,
+                                camera=default_camera(args.camera), progress=False)  # fmt: skip
             (root / "surveys").mkdir(exist_ok=True)
-            (root / "surveys" / ln.part_key(1)).symlink_to(made.survey_dir)
-        print(f"{len(net.lines)} surveys of {args.span_m:g} m rendered in "
+            (root / "surveys" / ln.part_key(1)).symlink_to(survey_dir.resolve())
+        print(f"{len(net.lines)} surveys of {args.span_m:g} m rendered (or found) in "
               f"{time.perf_counter() - t0:.0f} s (not timed below)", flush=True)  # fmt: skip
         params = PipelineParams(chunk_m=args.chunk_m)
         want: dict[str, bytes] = {}
@@ -105,11 +109,15 @@ def main() -> None:
             if not want:
                 want, serial = files, res
             frames = sum(r.n_frames for r in res.lines)
+            differing = sorted(k for k in want.keys() | files.keys()
+                               if want.get(k) != files.get(k))  # fmt: skip
             row = {"run": label, "wall_s": wall, "frames": frames, "fps": frames / wall,
-                   "identical": files == want, "load_avg": os.getloadavg()[0]}  # fmt: skip
+                   "identical": not differing, "differing": differing,
+                   "load_avg": os.getloadavg()[0]}  # fmt: skip
             report["runs"].append(row)
             print(f"{label:18s}: {wall:6.1f} s, {frames} frames, {row['fps']:.2f} frames/s, "
-                  f"identical to serial: {row['identical']}, load {row['load_avg']:.1f}",
+                  f"identical to serial: {row['identical']} {differing or ''}, load "
+                  f"{row['load_avg']:.1f}",
                   flush=True)  # fmt: skip
         assert serial is not None
         base = report["runs"][0]["fps"]
