@@ -132,7 +132,8 @@ def main() -> None:
         reps = network_availability(inputs, out / "availability", scheduler="serial",
                                     progress=False)  # fmt: skip
         table = pd.DataFrame([{"line_id": r.line_id, "part": r.part, "key": r.key,
-                               "status": r.status, "length_m": r.length_m, "n_pos": r.n_pos,
+                               "status": r.status, "length_m": r.length_m,
+                               "from_m": r.from_m, "to_m": r.to_m, "n_pos": r.n_pos,
                                "n_frames": r.n_frames, "n_bad_frames": r.n_bad_frames,
                                "message": r.message} for r in serial.lines])  # fmt: skip
         write_network_summary(net, table, reps, out)

@@ -193,7 +193,8 @@ def network_availability(
     return [done[i.key] for i in inputs]
 
 
-_COLUMNS = ["line_id", "part", "key", "status", "length_km", "n_pos", "n_frames",
+_COLUMNS = ["line_id", "part", "key", "status", "length_km", "surveyed_km", "from_m", "to_m",
+            "n_pos", "n_frames",
             "n_bad_frames", "share_ge4_masks", "share_ge4_cutoff", "longest_below4_m_masks",
             "mean_count_masks", "report", "message"]  # fmt: skip
 
@@ -212,7 +213,8 @@ def write_network_summary(
         For the map (every line's reference track, grey where there are no masks).
     lines : pandas.DataFrame
         One row per line part: ``line_id``, ``part``, ``key``, ``status``, ``length_m``,
-        ``n_pos``, ``n_frames``, ``n_bad_frames``, ``message``.
+        ``from_m``, ``to_m`` (chainage of the first and last mask position, NaN without
+        masks), ``n_pos``, ``n_frames``, ``n_bad_frames``, ``message``.
     reports : sequence of LineAvailability
         The reports of the parts with masks.
     out_dir : path-like
@@ -233,6 +235,8 @@ def write_network_summary(
         rows.append({
             "line_id": row["line_id"], "part": int(row["part"]), "key": row["key"],
             "status": row["status"], "length_km": float(row["length_m"]) / 1000.0,
+            "surveyed_km": (float(row["to_m"]) - float(row["from_m"])) / 1000.0,
+            "from_m": float(row["from_m"]), "to_m": float(row["to_m"]),
             "n_pos": int(row["n_pos"]), "n_frames": int(row["n_frames"]),
             "n_bad_frames": int(row["n_bad_frames"]),
             "share_ge4_masks": masks.get("share_ge4", np.nan),
@@ -261,19 +265,22 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
 
-    share = {(r.line_id, r.part): r.share_ge4_masks for r in _rows(table)}
+    share = {(r.line_id, r.part): r for r in _rows(table)}
     cmap, norm = colormaps["RdYlGn"], Normalize(0.0, 1.0)
     fig, ax = plt.subplots(figsize=(7.5, 6.0), dpi=100)
     lat_mid = float(np.mean([ln.parts[0].lat_deg.mean() for ln in network.lines]))
     for ln in network.lines:
         for k, tm in enumerate(ln.parts, start=1):
-            s = share.get((ln.line_id, k), np.nan)
             lo = np.linspace(0.0, tm.length_m, max(2, int(tm.length_m // 20.0)))
             lat, lon, _ = tm.position_at(lo)
-            if np.isfinite(s):
-                ax.plot(lon, lat, color=cmap(norm(s)), lw=4, solid_capstyle="butt", zorder=3)
-            else:
-                ax.plot(lon, lat, color="0.6", lw=1.5, ls=(0, (4, 2)), zorder=2)
+            ax.plot(lon, lat, color="0.6", lw=1.5, ls=(0, (4, 2)), zorder=2)
+            row = share.get((ln.line_id, k))
+            s = np.nan if row is None else float(row.share_ge4_masks)
+            if row is not None and np.isfinite(s):  # the surveyed stretch, coloured
+                a, b = float(row.from_m), float(row.to_m)
+                ch = np.linspace(a, b, max(2, int((b - a) // 5.0)))
+                la, lo_deg, _ = tm.position_at(ch)
+                ax.plot(lo_deg, la, color=cmap(norm(s)), lw=5, solid_capstyle="butt", zorder=3)
             mid = len(lat) // 2
             ax.annotate(f"{ln.line_id}" + (f" p{k}" if len(ln.parts) > 1 else ""),
                         (lon[mid], lat[mid]), fontsize=8, xytext=(4, 4),
@@ -282,7 +289,8 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
     ax.set_xlabel("longitude, deg")
     ax.set_ylabel("latitude, deg")
     ax.set_title(f"{network.name}: share of time with >= 4 trusted satellites (masks)\n"
-                 "grey dashed: no masks (no survey, or failed)", fontsize=10)  # fmt: skip
+                 "grey dashed: the network's track where there are no masks",
+                 fontsize=10)  # fmt: skip
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     fig.colorbar(sm, ax=ax, shrink=0.8, label=">= 4 trusted satellites, share of time")
     if network.attribution:
@@ -297,6 +305,14 @@ def _rows(t: pd.DataFrame) -> list[SimpleNamespace]:
     return [SimpleNamespace(**{str(k): v for k, v in r.items()}) for r in t.to_dict("records")]
 
 
+def _km(x: object) -> str:
+    return f"{float(x):.2f}" if isinstance(x, float) and np.isfinite(x) else "-"
+
+
+def _m(x: object) -> str:
+    return f"{float(x):.0f}" if isinstance(x, float) and np.isfinite(x) else "-"
+
+
 def _pct(x: object) -> str:
     return f"{100.0 * float(x):.1f}" if isinstance(x, float) and np.isfinite(x) else "-"
 
@@ -305,13 +321,14 @@ def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
     head = (f"# Network {network.name}\n\n{len(t)} line part(s), "
             f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}.\n\n"
             "![network map](network_map.png)\n\n"
-            f"| line | part | status | km | positions | frames | bad frames | >=4 masks % | "
-            f">=4 {cutoff_rule or 'cut-off'} % | longest <4 m | report |\n"
-            "|---|---|---|---|---|---|---|---|---|---|---|\n")  # fmt: skip
+            "| line | part | status | km | surveyed km | positions | frames | bad frames | "
+            f">=4 masks % | >=4 {cutoff_rule or 'cut-off'} % | longest <4 m | report |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|\n")  # fmt: skip
     body = "".join(
-        f"| {r.line_id} | {r.part} | {r.status} | {r.length_km:.2f} | {r.n_pos} | {r.n_frames} | "
+        f"| {r.line_id} | {r.part} | {r.status} | {r.length_km:.2f} | {_km(r.surveyed_km)} | "
+        f"{r.n_pos} | {r.n_frames} | "
         f"{r.n_bad_frames} | {_pct(r.share_ge4_masks)} | {_pct(r.share_ge4_cutoff)} | "
-        f"{r.longest_below4_m_masks:.0f} | "
+        f"{_m(r.longest_below4_m_masks)} | "
         + (f"[report]({r.report})" if r.report else r.message.replace("|", "/")) + " |\n"
         for r in _rows(t)
     )
@@ -323,9 +340,10 @@ def _html(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
     e = html.escape
     rows = "".join(
         f"<tr><td>{e(r.line_id)}</td><td>{r.part}</td><td>{e(r.status)}</td>"
-        f"<td>{r.length_km:.2f}</td><td>{r.n_pos}</td><td>{r.n_frames}</td>"
+        f"<td>{r.length_km:.2f}</td><td>{_km(r.surveyed_km)}</td><td>{r.n_pos}</td>"
+        f"<td>{r.n_frames}</td>"
         f"<td>{r.n_bad_frames}</td><td>{_pct(r.share_ge4_masks)}</td>"
-        f"<td>{_pct(r.share_ge4_cutoff)}</td><td>{r.longest_below4_m_masks:.0f}</td><td>"
+        f"<td>{_pct(r.share_ge4_cutoff)}</td><td>{_m(r.longest_below4_m_masks)}</td><td>"
         + (f'<a href="{e(r.report)}">report</a>' if r.report else e(r.message)) + "</td></tr>"
         for r in _rows(t)
     )
@@ -338,7 +356,8 @@ def _html(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
         f"<h1>Network {e(network.name)}</h1><p>{len(t)} line part(s), "
         f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}. "
         f"{e(network.attribution)}</p><img src=network_map.png alt='network map'>"
-        "<table><tr><th>line</th><th>part</th><th>status</th><th>km</th><th>positions</th>"
+        "<table><tr><th>line</th><th>part</th><th>status</th><th>km</th><th>surveyed km</th>"
+        "<th>positions</th>"
         "<th>frames</th><th>bad frames</th><th>&ge;4 masks %</th>"
         f"<th>&ge;4 {e(cutoff_rule or 'cut-off')} %</th><th>longest &lt;4, m</th>"
         f"<th>report</th></tr>{rows}</table>"

@@ -140,7 +140,8 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
                                        progress=not args.quiet)  # fmt: skip
     table = pd.DataFrame(
         [{"line_id": r.line_id, "part": r.part, "key": r.key, "status": r.status,
-          "length_m": r.length_m, "n_pos": r.n_pos, "n_frames": r.n_frames,
+          "length_m": r.length_m, "from_m": r.from_m, "to_m": r.to_m, "n_pos": r.n_pos,
+          "n_frames": r.n_frames,
           "n_bad_frames": r.n_bad_frames, "message": r.message} for r in result.lines]
     )  # fmt: skip
     files = write_network_summary(network, table, reports, out)

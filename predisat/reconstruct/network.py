@@ -69,6 +69,8 @@ class LineResult:
     masks_path : Path or None
         Its partition file in the dataset (None unless done or resumed).
     n_pos, n_frames, n_bad_frames : int
+    from_m, to_m : float
+        Chainage of the first and last mask position on the part (NaN without masks).
     elapsed_s : float
     message : str
         The error of a failed part; where the survey was looked for when missing.
@@ -83,6 +85,8 @@ class LineResult:
     n_pos: int = 0
     n_frames: int = 0
     n_bad_frames: int = 0
+    from_m: float = float("nan")
+    to_m: float = float("nan")
     elapsed_s: float = 0.0
     message: str = ""
 
@@ -182,6 +186,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
                 return made(status="resumed", masks_path=part_file,
                                   n_pos=int(old["n_pos"]), n_frames=int(old["n_frames"]),
                                   n_bad_frames=int(old["n_bad_frames"]),
+                                  from_m=float(old["from_m"]), to_m=float(old["to_m"]),
                                   elapsed_s=time.perf_counter() - t0)  # fmt: skip
         res = process_survey(
             survey, line_out, shared.params, track=unit.track, scheduler="serial",
@@ -200,10 +205,13 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
         "n_pos": res.masks.n_pos,
         "n_frames": res.n_frames,
         "n_bad_frames": len(res.bad_frames),
+        "from_m": float(res.masks.chainage_m[0]),
+        "to_m": float(res.masks.chainage_m[-1]),
     }
     write_bytes_atomic(marker, json.dumps(done, indent=1).encode())
     return made(status="done", masks_path=path, n_pos=res.masks.n_pos,
                       n_frames=res.n_frames, n_bad_frames=len(res.bad_frames),
+                      from_m=float(res.masks.chainage_m[0]), to_m=float(res.masks.chainage_m[-1]),
                       elapsed_s=time.perf_counter() - t0)  # fmt: skip
 
 

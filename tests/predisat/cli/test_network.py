@@ -13,6 +13,7 @@ import pytest
 from predisat.availability.run import run_availability
 from predisat.camera.models import CameraModel
 from predisat.cli.app import main
+from predisat.masks.fileformat import read_masks
 from predisat.track.network import Network
 
 CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
@@ -64,6 +65,9 @@ def test_network_command_writes_dataset_reports_and_summary(
         assert row.share_ge4_masks == pytest.approx(masks_row.share_ge4, abs=1e-6)
         assert row.share_ge4_cutoff == pytest.approx(cut_row.share_ge4, abs=1e-6)
         assert row.n_pos == masks_row.n_pos == 7
+        ch = read_masks(out / f"masks/line={row.line_id}/part=1/masks.parquet").chainage_m
+        assert (row.from_m, row.to_m) == (ch[0], ch[-1])
+        assert row.surveyed_km == pytest.approx((ch[-1] - ch[0]) / 1000.0)
         assert (out / row.report).is_file()
     assert (out / "network_map.png").stat().st_size > 10_000
     md = (out / "summary.md").read_text()
