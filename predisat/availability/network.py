@@ -267,8 +267,13 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
 
     share = {(r.line_id, r.part): r for r in _rows(table)}
     cmap, norm = colormaps["RdYlGn"], Normalize(0.0, 1.0)
-    fig, ax = plt.subplots(figsize=(7.5, 6.0), dpi=100)
-    lat_mid = float(np.mean([ln.parts[0].lat_deg.mean() for ln in network.lines]))
+    lat_all = np.concatenate([tm.lat_deg for ln in network.lines for tm in ln.parts])
+    lon_all = np.concatenate([tm.lon_deg for ln in network.lines for tm in ln.parts])
+    lat_mid = float(np.mean(lat_all))
+    # the figure takes the network's shape: 9 in wide, as tall as the map needs (3-9 in)
+    wide = max(float(np.ptp(lon_all)) * np.cos(np.radians(lat_mid)), 1e-6)
+    tall_in = float(np.clip(7.0 * float(np.ptp(lat_all)) / wide + 2.0, 3.5, 9.0))
+    fig, ax = plt.subplots(figsize=(9.0, tall_in), dpi=100)
     for ln in network.lines:
         for k, tm in enumerate(ln.parts, start=1):
             lo = np.linspace(0.0, tm.length_m, max(2, int(tm.length_m // 20.0)))
@@ -292,7 +297,8 @@ def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
                  "grey dashed: the network's track where there are no masks",
                  fontsize=10)  # fmt: skip
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
-    fig.colorbar(sm, ax=ax, shrink=0.8, label=">= 4 trusted satellites, share of time")
+    fig.colorbar(sm, ax=ax, orientation="horizontal", fraction=0.06, pad=0.18, aspect=40,
+                 label=">= 4 trusted satellites, share of time")
     if network.attribution:
         fig.text(0.01, 0.01, network.attribution, fontsize=6, color="0.4")
     fig.tight_layout()
