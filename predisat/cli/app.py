@@ -170,6 +170,20 @@ def cmd_process(args: argparse.Namespace) -> int:
 _EXPORT_REACH_M = 50.0
 
 
+def cmd_network(args: argparse.Namespace) -> int:
+    from predisat.cli import network
+
+    result, files = network.run(args)
+    print(f"network: {result}")
+    for r in result.lines:
+        if r.status in ("no survey", "failed"):
+            print(f"  line {r.line_id} part {r.part}: {r.status}: {r.message}")
+    if result.unmatched_surveys:
+        print(f"  survey folders matching no line: {', '.join(result.unmatched_surveys)}")
+    print(f"network: summary {files['html']} ({files['csv']}, map {files['map']})")
+    return 0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat.masks import fileformat as maskio
 
@@ -280,6 +294,21 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.set_defaults(func=cmd_process)
 
 
+def _add_network(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.cli import network
+
+    p = add_command(
+        sub, "network", "process a network line by line into one mask dataset, with reports",
+        "Read a network file (GeoJSON lines with line ids, e.g. Infrabel's whole Belgian "
+        "network), process each line's survey (SURVEYS/<line id>/) on that line's track into "
+        "one GeoParquet mask dataset partitioned by line (OUT/masks/line=ID/part=K/), one "
+        "availability report per line and a network summary with a map. Lines without a "
+        "survey are listed; a finished line is not redone (rerun to resume).",
+    )  # fmt: skip
+    network.add_arguments(p)
+    p.set_defaults(func=cmd_network)
+
+
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.cli import evaluate
 
@@ -370,6 +399,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_synth(sub)
     _add_availability(sub)
     _add_process(sub)
+    _add_network(sub)
     _add_evaluate(sub)
     _add_export(sub)
     _add_evaluate_sky(sub)
@@ -386,7 +416,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("\npredisat: interrupted before the command started; nothing was written: rerun "
               "the same command", file=sys.stderr)  # fmt: skip
         return 130
-    code = run_main(parser, argv, "predisat {command}", interrupted_note={"process": resume})
+    notes = {"process": resume, "network": resume}
+    code = run_main(parser, argv, "predisat {command}", interrupted_note=notes)
     if argv is None:  # the process's own command line: it ends now
         # a Ctrl-C while the interpreter shuts down (the cluster's threads stop) would end a
         # finished or reported command with a traceback and exit -2

@@ -33,6 +33,9 @@ __all__ = [
     "MAX_VERTEX_SPACING_M",
     "NAME_KEYS",
     "TrackFile",
+    "checked_parts",
+    "feature_label",
+    "geojson_features",
     "kilometre_posts_from_sections",
     "parse_csv_track",
     "parse_geojson_track",
@@ -149,7 +152,8 @@ def _features(doc: Any, path: Path) -> list[dict[str, Any]]:
     raise TrackMapError(f"{path}: unsupported GeoJSON type {kind!r}")
 
 
-def _feature_label(i: int, props: Mapping[str, Any]) -> str:
+def feature_label(i: int, props: Mapping[str, Any]) -> str:
+    """How error messages name feature ``i``: ``"feature 3 (trackname=A, trackcode=L 144_1)"``."""
     names = [f"{k}={props[k]}" for k in NAME_KEYS if k in props]
     return f"feature {i}" + (f" ({', '.join(names[:2])})" if names else "")
 
@@ -181,6 +185,38 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
                 f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} lies outside the "
                 f"expected bbox {list(bbox)} (lon_min, lat_min, lon_max, lat_max); {hint}"
             )
+
+
+def geojson_features(path: str | Path) -> tuple[JsonDict, list[JsonDict]]:
+    """The top-level members and the features of a GeoJSON file (a bare geometry or Feature is
+    one feature).
+
+    Raises
+    ------
+    TrackMapError
+        Missing, empty, non-UTF-8 or invalid JSON file, or not a GeoJSON object (named).
+    """
+    p = Path(path)
+    doc = _load_json(p)
+    feats = _features(doc, p)
+    return (doc if isinstance(doc, dict) else {}), feats
+
+
+def checked_parts(
+    path: str | Path,
+    features: Sequence[tuple[int, JsonDict, JsonDict]],
+    expected_bbox: Sequence[float] | None = None,
+) -> list[Part]:
+    """The checked parts of line features ``(feature index, properties, geometry)``: numeric
+    ``[lon, lat(, h)]`` vertices, valid coordinates (not swapped), no 50 km jump, lengths
+    agreeing with a declared ``length``; at least one part of two vertices or more.
+
+    Raises
+    ------
+    TrackMapError
+        Naming the file, the feature and part, and the fix.
+    """
+    return _line_parts(list(features), expected_bbox, Path(path))
 
 
 #: Consecutive vertices further apart than this are refused: no railway map draws 50 km of
@@ -256,7 +292,7 @@ def _refuse_id_only_match(
         if any(k in props for k in _LABEL_KEYS):
             key = next(k for k in _ID_KEYS if str(props.get(k)) == track)
             raise TrackMapError(
-                f"{path}: track={track!r} matches only the {key} of {_feature_label(i, props)}, "
+                f"{path}: track={track!r} matches only the {key} of {feature_label(i, props)}, "
                 f"another name; give the track's name as track=, or "
                 f"where={{{key!r}: {props[key]!r}}} to select that feature by its number"
             )
@@ -431,7 +467,7 @@ def _line_parts(
     parts: list[Part] = []
     single: list[str] = []  # lines of one vertex, named if nothing else is left
     for i, props, geom in selected:
-        label = _feature_label(i, props)
+        label = feature_label(i, props)
         raw = geom.get("coordinates") or []
         seqs = [raw] if geom["type"] == "LineString" else list(raw)
         tunnel = str(props.get("tunnel", "no")).lower() not in ("no", "false", "0")
@@ -500,7 +536,7 @@ def kilometre_posts_from_sections(
         if geom.get("type") != "LineString" or "mfrom" not in props or "mto" not in props:
             continue
         c = np.asarray(geom["coordinates"], float)
-        _check_lonlat(c, _feature_label(i, props), Path(path), None)
+        _check_lonlat(c, feature_label(i, props), Path(path), None)
         _, _, seg = WGS84.inv(c[:-1, 0], c[:-1, 1], c[1:, 0], c[1:, 1])
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         m0, m1 = float(props["mfrom"]), float(props["mto"])

@@ -1,0 +1,137 @@
+"""Tests of predisat.reconstruct.network on the Gembloux test network: synthetic 60 m surveys
+on lines 144 and 161, none on line 140."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from predisat.camera.models import CameraModel
+from predisat.masks.dataset import read_dataset_table, read_partition
+from predisat.masks.fileformat import read_masks
+from predisat.reconstruct.batch import process_survey
+from predisat.reconstruct.network import process_network
+from predisat.reconstruct.params import PipelineParams
+from predisat.track.network import Network
+from tests.predisat.reconstruct.test_batch import blue_sky
+
+CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
+PARAMS = PipelineParams(chunk_m=30.0, segmenter="blue")
+SURVEYED = ("144", "161")
+
+
+@pytest.fixture(scope="module")
+def network(test_data: Path) -> Network:
+    return Network.from_file(test_data / "track" / "network_gembloux.geojson")
+
+
+@pytest.fixture(scope="module")
+def surveys(network: Network, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from predisat.synth.generate import generate_survey
+
+    root = tmp_path_factory.mktemp("net")
+    for k, lid in enumerate(SURVEYED):
+        generate_survey(network.line(lid).parts[0], 700.0, 760.0, sky="clear", seed=3 + k,
+                        out_dir=root / lid, camera=CAM, progress=False)  # fmt: skip
+        (root / "surveys").mkdir(exist_ok=True)
+        shutil.copytree(root / lid / "survey", root / "surveys" / lid)
+    (root / "surveys" / "999").mkdir()  # a folder matching no line
+    return root / "surveys"
+
+
+@pytest.fixture(scope="module")
+def serial_run(network: Network, surveys: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
+    out = tmp_path_factory.mktemp("out")
+    return process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                           segmenter=blue_sky)  # fmt: skip
+
+
+def test_every_line_is_listed_and_the_dataset_holds_the_per_line_runs(
+    network: Network, surveys: Path, serial_run: Any, tmp_path: Path
+) -> None:
+    res = serial_run
+    assert [(r.line_id, r.status) for r in res.lines] == [
+        ("144", "done"), ("161", "done"), ("140", "no survey")]  # fmt: skip
+    assert "140" in res.lines[2].message and res.unmatched_surveys == ("999",)
+    table = read_dataset_table(res.dataset_dir)
+    assert sorted(set(table.column("line").to_pylist())) == sorted(SURVEYED)
+    for lid in SURVEYED:
+        # ground truth: `predisat process` of the survey alone, on the line's track
+        alone = process_survey(surveys / lid, tmp_path / lid, PARAMS, progress=False,
+                               segmenter=blue_sky, track=network.line(lid).parts[0])  # fmt: skip
+        want = read_masks(alone.masks_path)
+        got = read_partition(res.dataset_dir, lid, 1)
+        assert got.n_pos == want.n_pos == 7
+        for name in ("chainage_m", "lat_deg", "lon_deg", "mask_el_deg", "source", "margin_deg"):
+            assert np.array_equal(getattr(got, name), getattr(want, name)), name
+        rows = [i for i, x in enumerate(table.column("line").to_pylist()) if x == lid]
+        flat = np.concatenate(table.column("mask_el_deg").take(rows).to_numpy(zero_copy_only=False))
+        assert np.array_equal(flat.reshape(want.mask_el_deg.shape), want.mask_el_deg)
+        # the frames were matched on the line's own track: the masks lie on it
+        assert np.all((want.chainage_m >= 699.0) & (want.chainage_m <= 761.0))
+
+
+def test_a_finished_line_is_not_redone_a_changed_one_is(
+    network: Network, surveys: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                    segmenter=blue_sky)  # fmt: skip
+    files = {lid: out / "masks" / f"line={lid}" / "part=1" / "masks.parquet" for lid in SURVEYED}
+    stamp = {lid: f.stat().st_mtime_ns for lid, f in files.items()}
+    again = process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                            segmenter=blue_sky)  # fmt: skip
+    assert [r.status for r in again.lines] == ["resumed", "resumed", "no survey"]
+    assert [r.n_pos for r in again.lines[:2]] == [7, 7]
+    assert {lid: f.stat().st_mtime_ns for lid, f in files.items()} == stamp
+    # one image of line 161 replaced (its modification time moves): that line alone is redone
+    img = sorted((surveys / "161" / "images").rglob("*.*"))[0]
+    st = img.stat()
+    try:
+        os.utime(img, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+        third = process_network(network, surveys, out, PARAMS, scheduler="serial",
+                                progress=False, segmenter=blue_sky)  # fmt: skip
+    finally:
+        os.utime(img, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert [r.status for r in third.lines] == ["resumed", "done", "no survey"]
+    assert files["144"].stat().st_mtime_ns == stamp["144"]
+
+
+def test_a_broken_survey_fails_its_line_only(
+    network: Network, surveys: Path, tmp_path: Path
+) -> None:
+    broken = tmp_path / "surveys"
+    shutil.copytree(surveys, broken)
+    (broken / "161" / "manifest.csv").write_text("nonsense\n")
+    (broken / "140").mkdir()  # a folder for line 140, but no survey in it
+    res = process_network(network, broken, tmp_path / "out", PARAMS, scheduler="serial",
+                          progress=False, segmenter=blue_sky)  # fmt: skip
+    assert [r.status for r in res.lines] == ["done", "failed", "no survey"]
+    assert "manifest.csv" in res.lines[1].message
+    assert res.lines[2].message.endswith("140 has no survey.yaml")
+    with pytest.raises(ValueError, match=r"manifest\.csv"):
+        process_network(network, broken, tmp_path / "out2", PARAMS, scheduler="serial",
+                        progress=False, segmenter=blue_sky, strict=True)  # fmt: skip
+    with pytest.raises(FileNotFoundError, match="no such surveys folder"):
+        process_network(network, tmp_path / "none", tmp_path / "out3", PARAMS)
+
+
+@pytest.mark.slow
+def test_dask_workers_write_the_serial_bytes(
+    network: Network, surveys: Path, serial_run: Any, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    a = process_network(network, surveys, tmp_path / "a", PARAMS, scheduler="serial",
+                        progress=False, segmenter=blue_sky)  # fmt: skip
+    b = process_network(network, surveys, tmp_path / "b", PARAMS, scheduler="local", workers=2,
+                        progress=False, segmenter=blue_sky)  # fmt: skip
+    assert [r.status for r in b.lines] == [r.status for r in a.lines]
+    for r, s in zip(a.lines[:2], b.lines[:2], strict=True):
+        assert r.masks_path is not None and s.masks_path is not None
+        assert r.masks_path.read_bytes() == s.masks_path.read_bytes()
