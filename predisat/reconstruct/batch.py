@@ -477,6 +477,7 @@ def _frame_jobs(
         job = FrameJob(
             fid, str(plan.survey.root / str(fr.image[i])), int(cam.width_px),
             int(cam.height_px), str(plan.cache_dir / f"{fid}.npz"), thin[str(fr.side[i])],
+            cam.model == "equirect" and not custom_segmenter,
         )  # fmt: skip
         cached = read_cache(job)
         if cached is None:

@@ -601,12 +601,13 @@ def _camera_ceilings(
 ) -> NDArray:
     """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
     :func:`~predisat.reconstruct.heightfield.apply_clearance_prior`: per position seen by a left
-    and a right camera (or a 360-degree panorama, :func:`_both_sides`), the tangent of the highest elevation from which either camera saw sky
-    straight along the track (within ``half_deg``) up to the zenith, towards increasing and
-    decreasing chainage (``inf`` when a camera did not see sky there, or did not see that
-    direction up to within ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height
-    of the highest camera, raised by its along-track lever arm times the steeper tangent
-    (with a lever arm, an ``inf`` tangent makes the whole row bound nothing)."""
+    and a right camera (or a 360-degree panorama, :func:`_both_sides`), the tangent of the
+    highest elevation from which either camera saw sky straight along the track (within
+    ``half_deg``) up to the zenith, towards increasing and decreasing chainage (``inf`` when a
+    camera did not see sky there, or did not see that direction up to within
+    ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height of the highest camera,
+    raised by its along-track lever arm times the steeper tangent (with a lever arm, an
+    ``inf`` tangent makes the whole row bound nothing)."""
     at: dict[float, list[int]] = {}
     for i, f in enumerate(frames):
         at.setdefault(round(f.chainage_m, 3), []).append(i)

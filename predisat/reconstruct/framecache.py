@@ -59,7 +59,7 @@ CACHE_VERSION = 1
 SEGMENTATION_CODE = (
     "sky/__init__.py", "sky/segment.py", "sky/options.py", "sky/morphology.py",
     "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
-    "sky/network.py", "data/models",
+    "sky/network.py", "sky/panorama.py", "data/models",
     # reading the image: its checks (corrupt, blank) decide whether a frame is segmented
     "reconstruct/frames.py",
 )
@@ -74,6 +74,7 @@ class FrameJob:
     height_px: int
     cache_path: str
     thin_px: int | None = None  # given to the default segmenter only
+    panorama: bool = False  # a 360-degree equirectangular frame (the default segmenter tiles it)
 
 
 
@@ -102,7 +103,11 @@ def read_cache(job: FrameJob) -> tuple[NDArray, NDArray | None] | BadFrame | Non
     try:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-            if meta.get("version") != CACHE_VERSION or meta.get("thin_px") != job.thin_px:
+            if (
+                meta.get("version") != CACHE_VERSION
+                or meta.get("thin_px") != job.thin_px
+                or bool(meta.get("panorama", False)) != job.panorama
+            ):
                 return None
             if os.path.exists(job.image_path):
                 if meta.get("image_stat") != stat_key(job.image_path):
@@ -149,6 +154,7 @@ def write_cache(
     stat = stat_key(job.image_path) if os.path.exists(job.image_path) else None
     meta: JsonDict = {
         "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
+        "panorama": job.panorama,
     }  # fmt: skip
     arrays: dict[str, Any] = {}
     if result is not None:
