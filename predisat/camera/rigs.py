@@ -29,7 +29,7 @@ DEFAULT_RIG = "side-fisheye"
 PANORAMA_WIDTH_PX = 1440
 
 _DESCRIPTIONS = {
-    "side-fisheye": "left and right fisheyes (120 deg vertical field), 45 deg up, square to "
+    "side-fisheye": "left and right fisheyes (110 deg vertical field), 45 deg up, square to "
     "the track",
     "side-fisheye+cab": "left and right fisheyes 45 deg up, plus front and rear cab fisheyes "
     "30 deg up along the track",

@@ -339,3 +339,10 @@ def test_synth_sky_choices_are_the_renderers() -> None:
     from predisat.synth.generate import SKY_CHOICES
 
     assert set(predisat_cli.SKY_CHOICES) == set(SKY_CHOICES)
+
+
+def test_synth_rig_choices_are_the_presets() -> None:
+    from predisat.camera.rigs import DEFAULT_RIG, RIG_NAMES
+
+    assert predisat_cli.RIG_CHOICES == RIG_NAMES
+    assert DEFAULT_RIG == "side-fisheye"
