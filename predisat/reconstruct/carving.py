@@ -612,7 +612,10 @@ def _camera_ceilings(
     for i, f in enumerate(frames):
         at.setdefault(round(f.chainage_m, 3), []).append(i)
     rows = []
-    for ch, idx in at.items():
+    for ch, idx_all in at.items():
+        # cab cameras take no part: their lever arm along the track would raise the ceiling
+        # of the whole position (or void it), and the side cameras' ceiling stays as safe
+        idx = [i for i in idx_all if frames[i].mount.side not in ("front", "rear")]
         if not _both_sides(frames[i] for i in idx):
             continue  # one side camera proves nothing about the other side of the track
         tans = np.full((len(idx), 2), np.inf)
