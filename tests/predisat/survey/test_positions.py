@@ -53,6 +53,7 @@ def test_a_camera_position_that_does_not_exist_is_named_with_the_choices(tmp_pat
     _write(tmp_path / "s", "increasing")
     yaml_path = tmp_path / "s" / "survey.yaml"
     yaml_path.write_text(yaml_path.read_text().replace("  roof:", "  bonnet:"))
-    with pytest.raises(SurveyError, match=r"camera side 'bonnet' is unknown; use 'left' or "
-                       r"'right' \(vehicle side\), 'front' or 'rear' \(cab\) or 'roof'"):  # fmt: skip
+    expected = (r"camera side 'bonnet' is unknown; use 'left' or 'right' \(vehicle side\), "
+                r"'front' or 'rear' \(cab\) or 'roof'")  # fmt: skip
+    with pytest.raises(SurveyError, match=expected):
         Survey.load(tmp_path / "s")
