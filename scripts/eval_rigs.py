@@ -171,7 +171,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:>17} seed {seed} km {lo / 1000:.1f}: sky lost across "
                   f"{100 * row['sky_lost_cross']:.2f} % along {100 * row['sky_lost_along']:.2f} %,"
                   f" false trust {100 * row['false_trust_all']:.4f} %, "
-                  f"{row['frames_per_cpu_s']:.2f} frames/CPU-s", flush=True)  # fmt: skip
+                  f"{row['frames_per_cpu_s']:.2f} frames/CPU-s; ideal masks: across "
+                  f"{100 * row['ideal_sky_lost_cross']:.2f} % along "
+                  f"{100 * row['ideal_sky_lost_along']:.2f} %, false trust "
+                  f"{100 * row['ideal_false_trust_all']:.4f} %", flush=True)  # fmt: skip
+            # every run kept as it ends: a long evaluation stopped early keeps its runs
+            args.out.write_text(json.dumps({"runs": rows}, indent=1))
     summary = {name: pooled([r for r in rows if r["rig"] == name]) for name in args.rigs}
     print(f"\n{'rig':>17} {'sky lost across %':>18} {'along %':>8} {'all %':>7} "
           f"{'false trust %':>14} {'frames/CPU-s':>13} {'positions/CPU-s':>16}")  # fmt: skip
