@@ -8,11 +8,12 @@ The canonical layout (written by :meth:`predisat.camera.models.CameraModel.to_ya
     format: predisat-camera
     version: 1
     camera_name: side_pinhole
-    model: pinhole                  # or fisheye
+    model: pinhole                  # or fisheye, or equirect (a 360-degree panorama)
     image_width: 800
     image_height: 600
     camera_matrix: !!opencv-matrix  # 3x3, fx 0 cx / 0 fy cy / 0 0 1
     distortion_coefficients: !!opencv-matrix  # 1xN: k1 k2 p1 p2 [k3] | k1 k2 k3 k4
+                                              # (absent for equirect)
 
 Also read: ROS ``camera_info`` YAML (``distortion_model`` plumb_bob / equidistant), OpenCV's
 calibration sample (``fisheye_model`` flag), camodocal files used by VINS-Fusion and GVINS
@@ -44,10 +45,12 @@ CANONICAL_VERSION = 1
 
 _PINHOLE_NAMES = {"pinhole", "plumb_bob", "radtan", "radial-tangential", "opencv"}
 _FISHEYE_NAMES = {"fisheye", "equidistant", "kannala_brandt", "kannalabrandt8", "kb4"}
+_EQUIRECT_NAMES = {"equirect", "equirectangular"}
 _UNSUPPORTED_HINT = (
-    "PREDISAT supports the pinhole model with radial-tangential distortion and the OpenCV "
-    "fisheye (Kannala-Brandt k1..k4) model; recalibrate with one of them, e.g. with "
-    "cv2.calibrateCamera or cv2.fisheye.calibrate"
+    "PREDISAT supports the pinhole model with radial-tangential distortion, the OpenCV "
+    "fisheye (Kannala-Brandt k1..k4) model and stitched equirectangular (360-degree) "
+    "panoramas; recalibrate with one of them, e.g. with cv2.calibrateCamera or "
+    "cv2.fisheye.calibrate"
 )
 
 
@@ -65,7 +68,7 @@ class CalibrationFields(TypedDict):
     and its distortion coefficients (OpenCV order)."""
 
     name: str
-    model: Literal["pinhole", "fisheye"]
+    model: Literal["pinhole", "fisheye", "equirect"]
     width_px: int
     height_px: int
     fx: float
@@ -170,18 +173,20 @@ def _reject(path: Path, model: object) -> CalibrationError:
     return CalibrationError(f"{path}: camera model {what} is not supported. {_UNSUPPORTED_HINT}")
 
 
-def _model_name(value: object, path: Path) -> Literal["pinhole", "fisheye"]:
+def _model_name(value: object, path: Path) -> Literal["pinhole", "fisheye", "equirect"]:
     name = str(value).strip().lower()
     if name in _PINHOLE_NAMES:
         return "pinhole"
     if name in _FISHEYE_NAMES:
         return "fisheye"
+    if name in _EQUIRECT_NAMES:
+        return "equirect"
     raise _reject(path, value)
 
 
 def _from_opencv(data: dict[str, Any], path: Path) -> CalibrationFields:
     """Canonical layout, OpenCV calibration sample and ROS camera_info."""
-    model: Literal["pinhole", "fisheye"]
+    model: Literal["pinhole", "fisheye", "equirect"]
     if "model" in data:
         model = _model_name(data["model"], path)
     elif "distortion_model" in data:
@@ -196,7 +201,21 @@ def _from_opencv(data: dict[str, Any], path: Path) -> CalibrationFields:
     k = k.reshape(3, 3)
     if abs(k[0, 1]) > 1e-9 * abs(k[0, 0]):
         raise CalibrationError(f"{path}: camera_matrix has skew {k[0, 1]}; skew is not supported")
-    dist = _matrix(data, "distortion_coefficients", path).ravel()
+    if model == "equirect":
+        # a stitched panorama has no lens distortion left: none is written, zeros are accepted
+        dist = (
+            _matrix(data, "distortion_coefficients", path).ravel()
+            if "distortion_coefficients" in data
+            else np.zeros(0)
+        )
+        if np.any(dist != 0):
+            raise CalibrationError(
+                f"{path}: an equirect (360-degree panorama) calibration has no distortion; "
+                f"remove distortion_coefficients or set them to 0, got {dist.tolist()}"
+            )
+        dist = np.zeros(0)
+    else:
+        dist = _matrix(data, "distortion_coefficients", path).ravel()
     if model == "pinhole" and dist.size > 5:
         if np.any(dist[5:] != 0):
             raise CalibrationError(

@@ -1,11 +1,15 @@
 """Camera models, camera mounts and the vehicle frame.
 
-Two intrinsic models, both as in OpenCV (see ``docs/camera-model.md``):
+Three intrinsic models (see ``docs/camera-model.md``):
 
 * ``"pinhole"``: pinhole with radial-tangential ("plumb bob") distortion, coefficients
   ``(k1, k2, p1, p2[, k3])`` as in ``cv2.projectPoints``;
 * ``"fisheye"``: the OpenCV fisheye (Kannala-Brandt / equidistant) model, ``(k1, k2, k3, k4)`` as
-  in ``cv2.fisheye.projectPoints``.
+  in ``cv2.fisheye.projectPoints``;
+* ``"equirect"``: a stitched 360-degree panorama in equirectangular projection: ``u`` is the
+  longitude about the camera's y axis (0 on the optical axis, positive toward camera x), ``v``
+  the latitude (positive toward camera y, down), ``u = cx + fx * lon``, ``v = cy + fy * lat``;
+  no distortion.
 
 Frames: camera frame is OpenCV's (x right, y down, z forward); vehicle frame is x forward
 (direction of travel), y left, z up; the world is local east-north-up. Pixel coordinates follow
@@ -36,9 +40,11 @@ from predisat.camera.calibfile import (
 from predisat.jsontypes import JsonDict
 
 __all__ = [
+    "POSITIONS",
     "CalibrationError",
     "CameraModel",
     "Mount",
+    "Position",
     "default_camera",
     "vehicle_to_enu",
 ]
@@ -71,13 +77,16 @@ class CameraModel:
     ----------
     name : str
         Free label (``camera_name`` in the YAML file).
-    model : {"pinhole", "fisheye"}
+    model : {"pinhole", "fisheye", "equirect"}
     width_px, height_px : int
         Image size in pixels.
     fx, fy, cx, cy : float
-        Focal lengths and principal point in pixels (OpenCV camera matrix, no skew).
+        Focal lengths and principal point in pixels (OpenCV camera matrix, no skew); for
+        ``"equirect"`` pixels per radian of longitude and latitude and the pixel of the
+        optical axis.
     dist : tuple of float
-        Pinhole: ``(k1, k2, p1, p2)`` or ``(k1, k2, p1, p2, k3)``; fisheye: ``(k1, k2, k3, k4)``.
+        Pinhole: ``(k1, k2, p1, p2)`` or ``(k1, k2, p1, p2, k3)``; fisheye: ``(k1, k2, k3, k4)``;
+        equirect: ``()``.
 
     Notes
     -----
@@ -89,7 +98,7 @@ class CameraModel:
     """
 
     name: str
-    model: Literal["pinhole", "fisheye"]
+    model: Literal["pinhole", "fisheye", "equirect"]
     width_px: int
     height_px: int
     fx: float
@@ -99,9 +108,10 @@ class CameraModel:
     dist: tuple[float, ...] = field(default=())
 
     def __post_init__(self) -> None:
-        if self.model not in ("pinhole", "fisheye"):
+        if self.model not in ("pinhole", "fisheye", "equirect"):
             raise ValueError(
-                f"camera {self.name!r}: model must be 'pinhole' or 'fisheye', got {self.model!r}"
+                f"camera {self.name!r}: model must be 'pinhole', 'fisheye' or 'equirect', got "
+                f"{self.model!r}"
             )
         if int(self.width_px) != self.width_px or int(self.height_px) != self.height_px:
             raise ValueError(f"camera {self.name!r}: width_px and height_px must be integers")
@@ -118,9 +128,12 @@ class CameraModel:
                 f"camera {self.name!r}: focal lengths must be positive, "
                 f"got fx={self.fx}, fy={self.fy}"
             )
-        allowed = (4, 5) if self.model == "pinhole" else (4,)
+        allowed = {"pinhole": (4, 5), "fisheye": (4,), "equirect": (0,)}[self.model]
         if len(self.dist) not in allowed:
-            expected = "(k1, k2, p1, p2[, k3])" if self.model == "pinhole" else "(k1, k2, k3, k4)"
+            expected = {
+                "pinhole": "(k1, k2, p1, p2[, k3])", "fisheye": "(k1, k2, k3, k4)",
+                "equirect": "() (a stitched panorama has no distortion)",
+            }[self.model]  # fmt: skip
             raise ValueError(
                 f"camera {self.name!r}: {self.model} distortion must be {expected}, "
                 f"got {len(self.dist)} coefficients"
@@ -169,6 +182,25 @@ class CameraModel:
         if not 0.0 < vfov_deg < 360.0:
             raise ValueError(f"vfov_deg must be in (0, 360), got {vfov_deg}")
         return cls._centred(name, "fisheye", width_px, height_px, vfov_deg, dist)
+
+    @classmethod
+    def equirect(
+        cls, width_px: int, height_px: int | None = None, name: str = "equirect"
+    ) -> CameraModel:
+        """A full-sphere equirectangular panorama (360 x 180 deg) of ``width_px`` columns.
+
+        ``height_px`` defaults to ``width_px / 2`` (square pixels); the optical axis is the
+        image centre, the image's left and right edges are the direction behind it.
+        """
+        h = width_px // 2 if height_px is None else height_px
+        if width_px < 4 or h < 2:
+            raise ValueError(
+                f"equirect width_px must be >= 4 and height_px >= 2, got {width_px}x{h}"
+            )
+        return cls(
+            name, "equirect", width_px, h, width_px / (2.0 * np.pi), h / np.pi,
+            (width_px - 1) / 2.0, (h - 1) / 2.0, (),
+        )  # fmt: skip
 
     @classmethod
     def _centred(
@@ -246,7 +278,8 @@ class CameraModel:
             fs.write("image_width", self.width_px)
             fs.write("image_height", self.height_px)
             fs.write("camera_matrix", self.camera_matrix)
-            fs.write("distortion_coefficients", np.asarray(self.dist, float).reshape(1, -1))
+            if self.dist:  # an equirect panorama has none
+                fs.write("distortion_coefficients", np.asarray(self.dist, float).reshape(1, -1))
             fs.release()
         return p
 
@@ -298,6 +331,8 @@ class CameraModel:
         """Largest undistorted radius (pinhole: tan of the off-axis angle; fisheye: the angle
         in radians) up to which the radial distortion function is increasing."""
         d = self.dist
+        if self.model == "equirect":
+            return float(np.pi)  # no radial model: every direction is imaged
         if self.model == "pinhole":
             k3 = d[4] if len(d) == 5 else 0.0
             # d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)] in s = r^2
@@ -363,6 +398,8 @@ class CameraModel:
         if v.shape[-1:] != (3,):
             raise ValueError(f"rays must have shape (..., 3), got {v.shape}")
         x, y, z = v[..., 0], v[..., 1], v[..., 2]
+        if self.model == "equirect":
+            return self._equirect_to_pixel(x, y, z)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             if self.model == "pinhole":
                 valid = z > 0
@@ -378,6 +415,17 @@ class CameraModel:
                 xd, yd = x * scale, y * scale
             u = np.where(valid, self.fx * xd + self.cx, np.nan)
             w = np.where(valid, self.fy * yd + self.cy, np.nan)
+        return u, w
+
+    def _equirect_to_pixel(self, x: NDArray, y: NDArray, z: NDArray) -> tuple[NDArray, NDArray]:
+        """Equirectangular projection; NaN for a zero or non-finite ray only."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            norm = np.sqrt(x * x + y * y + z * z)
+            valid = np.isfinite(norm) & (norm > 0)
+            lon = np.arctan2(x, z)
+            lat = np.arcsin(np.clip(y / np.where(valid, norm, 1.0), -1.0, 1.0))
+            u = np.where(valid, self.fx * lon + self.cx, np.nan)
+            w = np.where(valid, self.fy * lat + self.cy, np.nan)
         return u, w
 
     def _distort_pinhole(self, a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
@@ -408,6 +456,14 @@ class CameraModel:
             model's valid radius or the iteration did not converge.
         """
         u, w = np.broadcast_arrays(np.asarray(u_px, float), np.asarray(v_px, float))
+        if self.model == "equirect":
+            lon = (u - self.cx) / self.fx
+            lat = (w - self.cy) / self.fy
+            # a half pixel of slack: the image edges are the direction behind / the poles
+            ok = (np.abs(lon) <= np.pi + 0.5 / self.fx) & (np.abs(lat) <= np.pi / 2 + 0.5 / self.fy)
+            lat = np.clip(lat, -np.pi / 2, np.pi / 2)
+            ray = np.stack([np.cos(lat) * np.sin(lon), np.sin(lat), np.cos(lat) * np.cos(lon)], -1)
+            return np.where(ok[..., None], ray, np.nan)
         xd = (u - self.cx) / self.fx
         yd = (w - self.cy) / self.fy
         rd = np.hypot(xd, yd)
@@ -513,7 +569,25 @@ def _rot_z(angle_rad: float) -> NDArray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-_DEFAULT_LEVER_ARM_M = {"left": (0.0, 1.5, -0.5), "right": (0.0, -1.5, -0.5)}
+Position = Literal["left", "right", "front", "rear", "roof"]
+
+#: Where a camera may sit on the vehicle: the two sides, the cabs at the front and the rear (of
+#: the direction of travel), and the roof (a 360-degree camera).
+POSITIONS: tuple[Position, ...] = ("left", "right", "front", "rear", "roof")
+
+# (yaw, pitch, lever arm) of each position's default mount: side cameras 45 deg up, square to
+# the track; cab cameras 30 deg up along the track, 3 m ahead of / behind the antenna and 1.5 m
+# below it (behind the windscreen); the 360-degree camera level, 0.5 m behind and 0.5 m below
+# the antenna (the antenna on a short mast above it), optical axis (its image centre) forward.
+# Every camera sits below the antenna: sky rays prove cells free only below the camera, so a
+# camera above the antenna would leave the cells around the antenna above its horizon.
+_DEFAULT_MOUNT: dict[str, tuple[float, float, tuple[float, float, float]]] = {
+    "left": (90.0, 45.0, (0.0, 1.5, -0.5)),
+    "right": (-90.0, 45.0, (0.0, -1.5, -0.5)),
+    "front": (0.0, 30.0, (3.0, 0.0, -1.5)),
+    "rear": (180.0, 30.0, (-3.0, 0.0, -1.5)),
+    "roof": (0.0, 0.0, (-0.5, 0.0, -0.5)),
+}
 
 
 @dataclass(frozen=True)
@@ -522,8 +596,10 @@ class Mount:
 
     Parameters
     ----------
-    side : {"left", "right"}
-        Vehicle side the camera is on (relative to the direction of travel).
+    side : {"left", "right", "front", "rear", "roof"}
+        Where the camera is on the vehicle (:data:`POSITIONS`, relative to the direction of
+        travel): a side, a cab (front or rear) or the roof (a 360-degree camera). The name
+        ``side`` is kept from format v1, which knew the two sides only.
     yaw_deg : float
         Rotation about vehicle z, from x-forward toward y-left: +90 looks left, -90 right.
     pitch_deg : float
@@ -540,15 +616,15 @@ class Mount:
     vehicle x, camera x to -y and camera y to -z (a level camera looking ahead).
     """
 
-    side: Literal["left", "right"]
+    side: Position
     yaw_deg: float
     pitch_deg: float = 45.0
     roll_deg: float = 0.0
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if self.side not in ("left", "right"):
-            raise ValueError(f"Mount side must be 'left' or 'right', got {self.side!r}")
+        if self.side not in POSITIONS:
+            raise ValueError(f"Mount side must be one of {POSITIONS}, got {self.side!r}")
         arm = tuple(float(x) for x in self.lever_arm_m)
         if len(arm) != 3:
             raise ValueError(f"Mount lever_arm_m must be (x, y, z) metres, got {self.lever_arm_m}")
@@ -568,14 +644,21 @@ class Mount:
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @classmethod
-    def default(cls, side: Literal["left", "right"]) -> Mount:
-        """45 deg up, square to the track, 1.5 m to the side of and 0.5 m below the antenna."""
-        if side not in _DEFAULT_LEVER_ARM_M:
-            raise ValueError(f"side must be 'left' or 'right', got {side!r}")
-        return cls(side, 90.0 if side == "left" else -90.0, 45.0, 0.0, _DEFAULT_LEVER_ARM_M[side])
+    def default(cls, side: Position) -> Mount:
+        """The position's usual mount.
+
+        Sides: 45 deg up, square to the track, 1.5 m to the side of and 0.5 m below the
+        antenna. Cabs (front, rear): 30 deg up along the track, 3 m ahead of (behind) and
+        1.5 m below the antenna. Roof: level, looking ahead, 0.5 m behind and 0.5 m below the
+        antenna.
+        """
+        if side not in _DEFAULT_MOUNT:
+            raise ValueError(f"side must be one of {POSITIONS}, got {side!r}")
+        yaw, pitch, arm = _DEFAULT_MOUNT[side]
+        return cls(side, yaw, pitch, 0.0, arm)
 
     @classmethod
-    def from_dict(cls, side: Literal["left", "right"], data: JsonDict) -> Mount:
+    def from_dict(cls, side: Position, data: JsonDict) -> Mount:
         """Build from a survey.yaml ``mount`` mapping (missing keys take the side's defaults)."""
         base = cls.default(side)
         unknown = set(data) - {"yaw_deg", "pitch_deg", "roll_deg", "lever_arm_m", "side"}

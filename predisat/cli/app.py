@@ -45,12 +45,15 @@ from predisat.cli.demo import DEMO_CAMERA, availability_table, default_workers
 
 if TYPE_CHECKING:
     from predisat.camera.models import CameraModel
+    from predisat.camera.rigs import Rig
     from predisat.synth.world import WorldSpec
 
 __all__ = ["main"]
 
 # the choices of `synth --sky` (predisat.synth.generate.SKY_CHOICES, which loads the renderer)
 SKY_CHOICES = ("clear", "cloudy", "overcast", "mixed")
+# the choices of `synth --rig` (predisat.camera.rigs.RIG_NAMES, kept in step by a test)
+RIG_CHOICES = ("side-fisheye", "side-fisheye+cab", "360")
 _MASKS = "a mask file (masks.parquet) or a `predisat process` output folder"
 
 def _camera(kind: str | None, calibration: Path | None) -> CameraModel:
@@ -59,6 +62,23 @@ def _camera(kind: str | None, calibration: Path | None) -> CameraModel:
     if calibration is not None:
         return camera.CameraModel.from_yaml(calibration)
     return camera.default_camera("pinhole" if (kind or DEMO_CAMERA) == "pinhole" else "fisheye")
+
+
+def _rig(
+    name: str, kind: str | None, calibration: Path | None, pitch: float | None
+) -> Rig:
+    """The ``--rig`` preset, its side cameras set by ``--camera`` / ``--calibration`` /
+    ``--pitch-deg``."""
+    from predisat.camera.rigs import Rig
+
+    if name == "360":
+        if kind is not None or calibration is not None or pitch is not None:
+            raise CliError(
+                "--rig 360 has no side cameras: drop --camera, --calibration and --pitch-deg"
+            )
+        return Rig.preset(name)
+    side = _camera(kind, calibration)
+    return Rig.preset(name, side_camera=side, side_pitch_deg=45.0 if pitch is None else pitch)
 
 
 def _scenery(path: str | None) -> WorldSpec | None:
@@ -83,7 +103,7 @@ def _scenery(path: str | None) -> WorldSpec | None:
 def cmd_synth(args: argparse.Namespace) -> int:
     track = track_option(args.track, args.track_name, args.chain, args.where)
     from_m, to_m = km_range(track, args.from_km, args.to_km)
-    cam = _camera(args.camera, args.calibration)
+    rig = _rig(args.rig, args.camera, args.calibration, args.pitch_deg)
     spec = _scenery(args.scenery)
 
     from predisat.synth.generate import generate_survey
@@ -97,8 +117,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         seed=args.seed,
         out_dir=Path(args.out),
         spacing_m=args.spacing_m,
-        camera=cam,
-        pitch_deg=args.pitch_deg,
+        rig=rig,
         spec=spec,
         progress=not args.quiet,
         workers=args.workers,
@@ -226,10 +245,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "synth", "render a synthetic side-camera survey with exact ground truth",
-        "Build a procedural corridor world along a track, render left and right 45-degree "
-        "camera frames every SPACING metres, and write a survey folder plus ground truth (the "
-        "world, the true masks, per-frame labels).",
+        sub, "synth", "render a synthetic survey with exact ground truth",
+        "Build a procedural corridor world along a track, render the frames of a survey rig "
+        "(default: left and right 45-degree side cameras) every SPACING metres, and write a "
+        "survey folder plus ground truth (the world, the true masks, per-frame labels).",
     )  # fmt: skip
     p.add_argument("--track", metavar="FILE",
                    help="GeoJSON or lat/lon/h CSV (default: the demo line 144)")
@@ -245,6 +264,9 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument("--spacing-m", type=positive_float, default=10.0, metavar="M",
                    help="distance between positions, metres")
+    p.add_argument("--rig", choices=RIG_CHOICES, default="side-fisheye",
+                   help="survey rig (docs/rigs.md): side cameras, side and cab cameras, or one "
+                   "360-degree panoramic camera")
     cam = p.add_mutually_exclusive_group()
     cam.add_argument("--camera", choices=["pinhole", "fisheye"],
                      help=f"built-in side camera model (default {DEMO_CAMERA}, the demo's rig: "
@@ -253,8 +275,8 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                      "calibration YAML (docs/camera-model.md)"), metavar="YAML",
                      help="a camera calibration instead of a built-in model (default: none, "
                      "--camera)")  # fmt: skip
-    p.add_argument("--pitch-deg", type=pitch_deg, default=45.0, metavar="DEG",
-                   help="camera pitch above horizontal, degrees")
+    p.add_argument("--pitch-deg", type=pitch_deg, metavar="DEG",
+                   help="side camera pitch above horizontal, degrees (default 45)")
     p.add_argument(
         "--scenery", metavar="YAML",
         help="scenery recipe (default: drawn for the stretch, every kind of stretch from 0.8 km)",

@@ -533,7 +533,7 @@ def _frame_jobs(
         job = FrameJob(
             fid, str(join(plan.survey.root, str(fr.image[i]))), int(cam.width_px),
             int(cam.height_px), str(join(plan.cache_dir, f"{fid}.npz")), thin[str(fr.side[i])],
-            dict(plan.storage_options),
+            dict(plan.storage_options), cam.model == "equirect" and not custom_segmenter,
         )  # fmt: skip
         cached = read_cache(job)
         if cached is None:

@@ -26,7 +26,7 @@ of its positions' range extended by ``overlap_m`` on both sides.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -693,25 +693,37 @@ def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:
     return bool(np.mean(prof.sky_el_deg[seen] > p.zenith_el_deg) >= 0.5)
 
 
+def _both_sides(frames: Iterable[FrameView]) -> bool:
+    """Whether cameras of one position see both sides of the track: a left and a right
+    camera, or a 360-degree panorama (a cab camera sees along the track, not beside it)."""
+    seen: set[str] = set()
+    for f in frames:
+        seen |= {"left", "right"} if f.camera.model == "equirect" else {f.mount.side}
+    return {"left", "right"} <= seen
+
+
 def _camera_ceilings(
     frames: Sequence[FrameView], profiles: Sequence[SkyProfile], cams: NDArray, half_deg: float
 ) -> NDArray:
     """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
     :func:`~predisat.reconstruct.heightfield.apply_clearance_prior`: per position seen by a left
-    and a
-    right camera, the tangent of the highest elevation from which either camera saw sky
-    straight along the track (within ``half_deg``) up to the zenith, towards increasing and
-    decreasing chainage (``inf`` when a camera did not see sky there, or did not see that
-    direction up to within ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height
-    of the highest camera, raised by its along-track lever arm times the steeper tangent
-    (with a lever arm, an ``inf`` tangent makes the whole row bound nothing)."""
+    and a right camera (or a 360-degree panorama, :func:`_both_sides`), the tangent of the
+    highest elevation from which either camera saw sky straight along the track (within
+    ``half_deg``) up to the zenith, towards increasing and decreasing chainage (``inf`` when a
+    camera did not see sky there, or did not see that direction up to within
+    ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height of the highest camera,
+    raised by its along-track lever arm times the steeper tangent (with a lever arm, an
+    ``inf`` tangent makes the whole row bound nothing)."""
     at: dict[float, list[int]] = {}
     for i, f in enumerate(frames):
         at.setdefault(round(f.chainage_m, 3), []).append(i)
     rows = []
-    for ch, idx in at.items():
-        if {frames[i].mount.side for i in idx} != {"left", "right"}:
-            continue  # one camera proves nothing about the other side of the track
+    for ch, idx_all in at.items():
+        # cab cameras take no part: their lever arm along the track would raise the ceiling
+        # of the whole position (or void it), and the side cameras' ceiling stays as safe
+        idx = [i for i in idx_all if frames[i].mount.side not in ("front", "rear")]
+        if not _both_sides(frames[i] for i in idx):
+            continue  # one side camera proves nothing about the other side of the track
         tans = np.full((len(idx), 2), np.inf)
         # cameras ahead of or behind the antenna: their ceilings, measured from the antenna's
         # chainage, start that much higher
@@ -1245,12 +1257,26 @@ def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[N
     rel = np.mod(az_deg - prof.look_az_deg + 180.0, 360.0) - 180.0
     i_lo = np.floor((rel - allow_deg - b[0]) / step).astype(np.int64)
     i_hi = np.ceil((rel + allow_deg - b[0]) / step).astype(np.int64)
-    inside = (i_lo >= 0) & (i_hi <= b.size - 1)
-    lo, hi = np.clip(i_lo, 0, b.size - 1), np.clip(i_hi, 0, b.size - 1)
-    vals, all_seen = _range_max_seen(
-        np.asarray(prof.sky_el_deg, float), np.isfinite(prof.seen_lo_deg), lo, hi
-    )
+    values = np.asarray(prof.sky_el_deg, float)
+    seen = np.isfinite(prof.seen_lo_deg)
+    if _full_circle(prof):
+        # a 360-degree profile: ranges run on across the seam behind the camera
+        n = b.size
+        values, seen = np.tile(values, 3), np.tile(seen, 3)
+        i_lo, i_hi = i_lo + n, i_hi + n
+        b_size = 3 * n
+    else:
+        b_size = b.size
+    inside = (i_lo >= 0) & (i_hi <= b_size - 1)
+    lo, hi = np.clip(i_lo, 0, b_size - 1), np.clip(i_hi, 0, b_size - 1)
+    vals, all_seen = _range_max_seen(values, seen, lo, hi)
     return vals, inside & all_seen
+
+
+def _full_circle(prof: SkyProfile) -> bool:
+    """Whether a profile covers every relative azimuth (a 360-degree panorama's)."""
+    b = prof.rel_az_deg
+    return b.size > 1 and abs(b.size * float(b[1] - b[0]) - 360.0) < 1e-6
 
 
 @njit(cache=True, nogil=True)
@@ -1294,6 +1320,8 @@ def _observed(
             step = float(b[1] - b[0])
             rel = np.mod(az - prof.look_az_deg + 180.0, 360.0) - 180.0
             k = np.floor((rel - b[0]) / step + 0.5).astype(np.int64)
+            if _full_circle(prof):
+                k = np.mod(k, b.size)  # across the seam behind a 360-degree camera
             inside = (k >= 0) & (k < b.size)
             k = np.clip(k, 0, b.size - 1)
             with np.errstate(invalid="ignore"):

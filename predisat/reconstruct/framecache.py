@@ -66,7 +66,7 @@ CACHE_VERSION = 1
 SEGMENTATION_CODE = (
     "sky/__init__.py", "sky/segment.py", "sky/options.py", "sky/morphology.py",
     "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
-    "sky/network.py", "data/models",
+    "sky/network.py", "sky/panorama.py", "data/models",
     # reading the image: its checks (corrupt, blank) decide whether a frame is segmented
     "reconstruct/frames.py",
 )
@@ -85,6 +85,7 @@ class FrameJob:
     cache_path: str
     thin_px: int | None = None  # given to the default segmenter only
     storage_options: StorageOptions = field(default_factory=dict)
+    panorama: bool = False  # a 360-degree equirectangular frame (the default segmenter tiles it)
 
 
 
@@ -124,7 +125,11 @@ def read_cache(
         source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
         with np.load(source, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-            if meta.get("version") != CACHE_VERSION or meta.get("thin_px") != job.thin_px:
+            if (
+                meta.get("version") != CACHE_VERSION
+                or meta.get("thin_px") != job.thin_px
+                or bool(meta.get("panorama", False)) != job.panorama
+            ):
                 return None
             if meta.get("image_stat") != stat_key(job.image_path, opts):
                 return None
@@ -175,6 +180,7 @@ def write_cache(
     stat = stat_key(job.image_path, job.storage_options)
     meta: JsonDict = {
         "version": CACHE_VERSION, "image_stat": stat, "bad": bad, "thin_px": job.thin_px,
+        "panorama": job.panorama,
     }  # fmt: skip
     arrays: dict[str, Any] = {}
     if result is not None:

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from predisat.reconstruct.framecache import FrameJob, write_cache
 from predisat.sky.network import SkyNet, classifier_with_net
+from predisat.sky.panorama import segment_panorama
 from predisat.sky.segment import SkyOptions, segment_sky
 from predisat.storage import StorageError, StorageOptions, location, read_bytes
 
@@ -49,8 +50,11 @@ def default_segmenter(
     method: str | None = None,
     sky_net: str | None = None,
     thin_px: int | None = None,
+    panorama: bool = False,
 ) -> tuple[NDArray, NDArray | None, NDArray | None]:
-    """:func:`predisat.sky.segment.segment_sky`: sky mask and per-column confidence.
+    """:func:`predisat.sky.segment.segment_sky`: sky mask, per-column confidence and the sky
+    the thin-structure policy made (:func:`predisat.sky.panorama.segment_panorama` for a
+    360-degree ``panorama``).
 
     ``method`` is one of :data:`predisat.sky.segment.METHODS` (default: ``SkyOptions``'s);
     ``sky_net`` a network file replacing the shipped one (``PipelineParams.sky_net``);
@@ -62,7 +66,10 @@ def default_segmenter(
     if thin_px is not None:
         opt = replace(opt, thin_px=int(thin_px))
     classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
-    seg = segment_sky(image_bgr, opt, classifier=classifier)
+    if panorama:
+        seg = segment_panorama(image_bgr, opt, classifier=classifier)
+    else:
+        seg = segment_sky(image_bgr, opt, classifier=classifier)
     return seg.sky_mask, seg.confidence, seg.thin_mask
 
 
@@ -140,6 +147,8 @@ def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]
         try:
             if job.thin_px is None:
                 out = segmenter(img)
+            elif job.panorama:
+                out = segmenter(img, thin_px=job.thin_px, panorama=True)  # type: ignore[call-arg]
             else:
                 out = segmenter(img, thin_px=job.thin_px)  # type: ignore[call-arg]
             sky, conf = np.asarray(out[0], bool), out[1]

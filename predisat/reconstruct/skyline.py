@@ -160,7 +160,8 @@ class SkyProfile:
     rel_az_deg : ndarray, shape (n_b,)
         Azimuth relative to the camera's horizontal look direction, clockwise, ascending,
         within [-90, 90] (the camera's own half-space; a fisheye's view past the zenith is left
-        to the camera on the other side).
+        to the camera on the other side), or within [-180, 180] for a 360-degree panorama
+        (``equirect``), which sees every azimuth.
     sky_el_deg : ndarray, shape (n_b,)
         Lowest elevation of the top sky run: every observed direction above it is sky. ``+inf``
         where the top of the observed column is not sky or nothing is observed.
@@ -252,12 +253,15 @@ class Rectifier:
         """Precompute the resampling map.
 
         The obstacle growth is chosen from the sampling steps so that an obstacle one pixel
-        wide always reaches a sample (the image scale is measured over the map).
+        wide always reaches a sample (the image scale is measured over the map). The grid
+        spans the camera's half-space (relative azimuths -90 to 90), all round for a
+        360-degree panorama (``equirect``: -180 to 180).
         """
         if not (0 < az_step_deg <= 2 and 0 < el_step_deg <= 2):
             raise ValueError("az_step_deg and el_step_deg must be in (0, 2] degrees")
-        n_b = round(180.0 / az_step_deg)
-        beta = -90.0 + az_step_deg * (np.arange(n_b) + 0.5)
+        span = 360.0 if camera.model == "equirect" else 180.0
+        n_b = round(span / az_step_deg)
+        beta = -span / 2.0 + az_step_deg * (np.arange(n_b) + 0.5)
         el = np.arange(90.0 - el_step_deg / 2, el_min_deg, -el_step_deg)
         b, e = np.meshgrid(np.radians(beta), np.radians(el))
         # vehicle frame (x forward, y left, z up); compass angle from forward is beta - yaw

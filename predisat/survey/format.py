@@ -1,7 +1,8 @@
 """Survey format v1: constants, problems and errors, and the frame table.
 
-See ``docs/survey-format.md``. ``side`` in survey files is the *vehicle* side of the camera;
-with ``direction_of_travel: decreasing`` the left camera looks at the right side of the track
+See ``docs/survey-format.md``. ``side`` in survey files is the camera's place on the *vehicle*
+(a side, a cab or the roof, :data:`SIDES`); with ``direction_of_travel: decreasing`` the left
+camera looks at the right side of the track and the front camera toward decreasing chainage
 (``Frames.track_side``).
 """
 
@@ -11,12 +12,12 @@ import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.camera.models import CameraModel, Mount
+from predisat.camera.models import POSITIONS, CameraModel, Mount, Position
 from predisat.storage import Location, location
 
 if TYPE_CHECKING:
@@ -38,12 +39,14 @@ __all__ = [
 
 FORMAT = "predisat-survey"
 VERSION = 1
-SIDES = ("left", "right")
+SIDES = POSITIONS  # left, right, front, rear, roof: v1 readers of two-camera surveys still read
+
 DIRECTIONS = ("increasing", "decreasing")
 REQUIRED_COLUMNS = ("frame_id", "image", "side", "gps_s")
 MANIFEST_COLUMNS = ("frame_id", "image", "side", "gps_s", "chainage_m", "lat_deg", "lon_deg", "h_m")
 FRAME_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-OTHER_SIDE = {"left": "right", "right": "left"}
+# the track side a camera looks at when the vehicle drives toward decreasing chainage
+OTHER_SIDE = {"left": "right", "right": "left", "front": "rear", "rear": "front", "roof": "roof"}
 
 
 @dataclass(frozen=True)
@@ -87,9 +90,9 @@ class SurveyError(ValueError):
 
 @dataclass(frozen=True)
 class SurveyCamera:
-    """A camera of the survey: calibration and mount (``side`` is the vehicle side)."""
+    """A camera of the survey: calibration and mount (``side`` is its place on the vehicle)."""
 
-    side: Literal["left", "right"]
+    side: Position
     camera: CameraModel
     mount: Mount
     calibration_path: Location  # a local path, or the URL of a remote survey's file
@@ -105,8 +108,10 @@ def _readonly(a: ArrayLike, dtype: Any) -> NDArray:
 class Frames:
     """The frames of a survey as a read-only column table, shape (n,) per column.
 
-    ``side`` is the vehicle side of the camera, ``track_side`` the side of the track it looks
-    at (swapped when the survey runs toward decreasing chainage). ``chainage_m`` comes from the
+    ``side`` is the camera's place on the vehicle (:data:`SIDES`), ``track_side`` the side of
+    the track it looks at (left / right of increasing chainage; ``front`` looks toward
+    increasing chainage, ``rear`` toward decreasing, ``roof`` all round): left and right, front
+    and rear swap when the survey runs toward decreasing chainage. ``chainage_m`` comes from the
     manifest or from projecting the position on the track (NaN when neither is possible);
     ``lat_deg, lon_deg, h_m`` are NaN when the manifest gave only chainage; ``offset_m`` is the
     antenna's cross-track offset (left positive) when positions were projected, else NaN.

@@ -49,6 +49,10 @@ from predisat.track import TrackMap, load_track
 
 __all__ = ["Survey"]
 
+_POSITIONS_HINT = (
+    "'left' or 'right' (vehicle side), 'front' or 'rear' (cab) or 'roof' (360-degree camera)"
+)
+
 
 @dataclass(frozen=True, eq=False)  # numpy columns: compare explicitly
 class Survey:
@@ -301,11 +305,14 @@ def _read_cameras(
     cameras: dict[str, SurveyCamera] = {}
     cams = doc.get("cameras")
     if not isinstance(cams, dict) or not cams:
-        bad("cameras must map 'left' and/or 'right' to {calibration: <yaml path>, mount: {...}}")
+        bad(
+            "cameras must map 'left' and/or 'right' (or 'front', 'rear', 'roof') to "
+            "{calibration: <yaml path>, mount: {...}}"
+        )
         cams = {}
     for side, spec in cams.items():
         if side not in SIDES:
-            bad(f"camera side {side!r} is unknown; use 'left' or 'right'")
+            bad(f"camera side {side!r} is unknown; use {_POSITIONS_HINT}")
             continue
         if not isinstance(spec, dict) or "calibration" not in spec:
             bad(f"cameras.{side} needs a 'calibration' path (e.g. calib/{side}.yaml)")
@@ -452,7 +459,7 @@ def _parse_rows(
         if not r.frame_id:
             r.bad("frame_id is empty; give every frame a unique id")
         if r.side not in SIDES:
-            r.bad(f"side {r.side!r} is unknown; use 'left' or 'right' (vehicle side)")
+            r.bad(f"side {r.side!r} is unknown; use {_POSITIONS_HINT}")
         elif r.side not in cameras:
             r.bad(
                 f"side {r.side!r} has no camera in survey.yaml; "

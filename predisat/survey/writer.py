@@ -34,7 +34,8 @@ class SurveyWriter:
     out_dir : path-like
         Survey folder to create.
     cameras : Mapping[str, tuple[CameraModel, Mount]]
-        Camera and mount per vehicle side; calibrations go to ``calib/<side>.yaml``.
+        Camera and mount per place on the vehicle (``left``, ``right``, ``front``, ``rear``,
+        ``roof``); calibrations go to ``calib/<side>.yaml``.
     direction_of_travel : {"increasing", "decreasing"}
     antenna_height_m : float
     track_name : str, optional
@@ -75,7 +76,8 @@ class SurveyWriter:
             )
         if not cameras or any(side not in SIDES for side in cameras):
             raise ValueError(
-                f"cameras must map 'left'/'right' to (CameraModel, Mount), got keys {list(cameras)}"
+                f"cameras must map positions {SIDES} to (CameraModel, Mount), got keys "
+                f"{list(cameras)}"
             )
         for side, (_, mount) in cameras.items():
             if mount.side != side:

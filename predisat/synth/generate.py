@@ -1,8 +1,9 @@
 """Synthetic surveys: a corridor world rendered into a survey folder with exact ground truth.
 
 :func:`generate_survey` builds a :class:`~predisat.synth.world.World` along a track, renders the
-left and right 45 deg side cameras at every position (antenna every ``spacing_m``), writes them
-with :class:`~predisat.survey.SurveyWriter` and writes the ground truth beside them::
+cameras of a rig (:class:`~predisat.camera.rigs.Rig`; by default the left and right 45 deg side
+cameras) at every position (antenna every ``spacing_m``), writes them with
+:class:`~predisat.survey.SurveyWriter` and writes the ground truth beside them::
 
     out_dir/
       survey/                the survey (format v1): survey.yaml, manifest.csv, images/, calib/,
@@ -37,6 +38,7 @@ from tqdm import tqdm
 
 from predisat.atomic import atomic_path, write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount, default_camera
+from predisat.camera.rigs import Rig
 from predisat.geodesy import enu_to_azel
 from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
@@ -173,6 +175,7 @@ def generate_survey(
     options: RenderOptions | None = None,
     overwrite: bool = False,
     workers: int = 1,
+    rig: Rig | None = None,
 ) -> SynthResult:
     """Render a synthetic survey of a track stretch and write it with its ground truth.
 
@@ -210,6 +213,10 @@ def generate_survey(
     workers : int
         Rendering processes (frames are written in order whatever the count; the output does
         not depend on it).
+    rig : Rig, optional
+        The cameras to render (e.g. ``Rig.preset("360")``); its name goes to survey.yaml
+        (``rig``). Default: ``camera`` on both sides, pitched up ``pitch_deg``; give either
+        the rig or ``camera`` / ``pitch_deg``.
 
     Returns
     -------
@@ -221,7 +228,13 @@ def generate_survey(
     survey_dir, truth_dir = out / "survey", out / "truth"
     (truth_dir / "labels").mkdir(parents=True, exist_ok=True)
     survey_dir.mkdir(parents=True, exist_ok=True)
-    cam = camera if camera is not None else default_camera("pinhole")
+    if rig is not None and (camera is not None or pitch_deg != 45.0):
+        raise ValueError("give either rig or camera / pitch_deg: the rig sets the cameras")
+    cams = (
+        rig.as_mapping()
+        if rig is not None
+        else _side_cameras(camera if camera is not None else default_camera("pinhole"), pitch_deg)
+    )
     opt = options or RenderOptions()
 
     lo, hi = max(0.0, from_m - _MARGIN_M), min(length, to_m + _MARGIN_M)
@@ -240,18 +253,18 @@ def generate_survey(
     run = _Positions.along(world, s, antenna_height_m, speed_mps, start_gps_s, sky, seed)
     with atomic_path(survey_dir / "track.geojson") as tmp:
         write_geojson(track, tmp)
-    mounts = _side_mounts(pitch_deg)
-    context = _RenderContext(world, backend, cam, opt, mounts, antenna_height_m, seed)
+    context = _RenderContext(world, backend, cams, opt, antenna_height_m, seed)
     rows: list[dict[str, str]] = []
     with SurveyWriter(
         survey_dir,
-        {side: (cam, m) for side, m in mounts.items()},
+        cams,
         antenna_height_m=antenna_height_m,
         track_name=getattr(track, "name", None),
         track_path="track.geojson",
         metadata={
             "description": f"synthetic survey, seed {seed}, sky {sky}",
             "generator": "predisat.synth.generate",
+            **({"rig": rig.name} if rig is not None else {}),
         },
         overwrite=overwrite,
     ) as writer:
@@ -280,14 +293,14 @@ def _check_request(
         raise ValueError(f"spacing_m and speed_mps must be positive, got {spacing_m}, {speed_mps}")
 
 
-def _side_mounts(pitch_deg: float) -> dict[str, Mount]:
+def _side_cameras(camera: CameraModel, pitch_deg: float) -> dict[str, tuple[CameraModel, Mount]]:
     """The left and right cameras looking square to the track, pitched up ``pitch_deg``."""
     return {
-        side: Mount(
+        side: (camera, Mount(
             side, 90.0 if side == "left" else -90.0, pitch_deg, 0.0, Mount.default(side).lever_arm_m
-        )
+        ))
         for side in ("left", "right")
-    }
+    }  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -400,27 +413,26 @@ class _RenderContext:
 
     world: World
     backend: str
-    camera: CameraModel
+    cameras: dict[str, tuple[CameraModel, Mount]]  # by position, in rig order
     options: RenderOptions
-    mounts: dict[str, Mount]
     antenna_height_m: float
     seed: int
 
 
 _Frame = tuple[str, NDArray, NDArray, int]  # side, image BGR, label, JPEG quality
+_POSITION_KEY = {"left": 0, "right": 1, "front": 2, "rear": 3, "roof": 4}
 
 
 def _render_position(context: _RenderContext, casters: Casters, job: _PositionJob) -> list[_Frame]:
     frames = []
-    for j, side in enumerate(("left", "right")):
-        # One generator per frame, keyed on (seed, position, side): the output does not depend
-        # on the order or the process a frame is rendered in.
-        rng = np.random.default_rng([context.seed, job.index, j])
-        pose = camera_pose(
-            context.world, job.chainage_m, context.mounts[side], context.antenna_height_m
-        )
+    for side, (camera, mount) in context.cameras.items():
+        # One generator per frame, keyed on (seed, position, camera): the output does not
+        # depend on the order or the process a frame is rendered in (left 0, right 1, as before
+        # there were other positions).
+        rng = np.random.default_rng([context.seed, job.index, _POSITION_KEY[side]])
+        pose = camera_pose(context.world, job.chainage_m, mount, context.antenna_height_m)
         img, label = render_frame(
-            context.world, casters, context.camera, pose, job.sky, rng, context.options,
+            context.world, casters, camera, pose, job.sky, rng, context.options,
             elapsed_s=job.elapsed_s,
         )  # fmt: skip
         frames.append((side, img, label, int(rng.integers(85, 93))))

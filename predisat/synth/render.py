@@ -1,4 +1,4 @@
-"""Side-camera frames of a synthetic world by ray casting, shading and a camera sensor model.
+"""Survey-camera frames of a synthetic world by ray casting, shading and a camera sensor model.
 
 :func:`render_frame` produces what a survey camera records (uint8 BGR) and the exact sky label of
 every pixel. It is two stages, also usable on their own:
@@ -569,15 +569,21 @@ def _sun_glare(
     """Veiling glare and flare ghosts (H, W, 3) of a sun at unit camera direction ``sun_cam``.
 
     Veiling glare falls as 1 / angle^2 (the CIE glare spread function scaled down tenfold for
-    a camera lens); ghosts are soft discs mirrored through the image centre.
+    a camera lens); ghosts are soft discs mirrored through the image centre. A 360-degree
+    panorama (``equirect``) is stitched from lenses looking every way: the sun is always in
+    front of one of them (full veil, no obliquity factor) and the stitching leaves no ghost
+    at a mirrored place.
     """
     h, w = camera.height_px, camera.width_px
-    cos_axis = float(sun_cam[2])
+    pano = camera.model == "equirect"
+    cos_axis = 1.0 if pano else float(sun_cam[2])
     if cos_axis <= 0.05 or strength <= 0:
         return np.zeros((h, w, 3))
     ang = np.degrees(np.arccos(np.clip(rays_cam @ sun_cam, -1.0, 1.0)))
     veil = strength * cos_axis / np.maximum(ang, 0.5) ** 2
     out = veil[..., None] * e_sun[None, None, :]
+    if pano:
+        return out
     us_px, vs_px = camera.ray_to_pixel(sun_cam[None, :])
     us, vs = float(us_px[0]), float(vs_px[0])
     if np.isfinite(us) and -0.1 * w < us < 1.1 * w and -0.1 * h < vs < 1.1 * h:
@@ -645,9 +651,10 @@ def expose(
     # optics: blur and vignetting
     if state.blur_px > 0.05:
         img = cv2.GaussianBlur(img, (0, 0), state.blur_px)
-    theta = np.arccos(np.clip(rays[..., 2], -1.0, 1.0))
-    corner = max(float(theta[inside].max()), 1e-3) if np.any(inside) else 1.0
-    img *= (1.0 - opt.vignetting * (theta / corner) ** 2)[..., None]
+    if camera.model != "equirect":  # a stitched panorama is flat-fielded
+        theta = np.arccos(np.clip(rays[..., 2], -1.0, 1.0))
+        corner = max(float(theta[inside].max()), 1e-3) if np.any(inside) else 1.0
+        img *= (1.0 - opt.vignetting * (theta / corner) ** 2)[..., None]
     # auto-exposure: centre-weighted mean luminance to the target, with a random bias
     y = img @ _LUMA
     y = np.minimum(y, 3.0 * float(np.median(y[inside])) if np.any(inside) else 1.0)  # clipped

@@ -99,6 +99,17 @@ def test_synth_rejects_bad_scenery_recipe(tmp_path, capsys: pytest.CaptureFixtur
     assert "--scenery" in capsys.readouterr().err
 
 
+def test_synth_360_rig_refuses_side_camera_options(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for extra in (["--camera", "pinhole"], ["--pitch-deg", "30"]):
+        code = cli.main(["synth", "--to-km", "0.2", "--rig", "360", *extra,
+                         "--out", str(tmp_path / "o")])  # fmt: skip
+        assert code == 2
+        assert "--rig 360 has no side cameras" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "survey").exists()
+
+
 def test_where_filters_parse_and_reject_bad_items() -> None:
     assert common.parse_where(["usage=main", "service="]) == {"usage": "main", "service": None}
     assert common.parse_where(None) is None

@@ -365,3 +365,10 @@ def test_one_integrity_risk_setting_for_every_command() -> None:
     )
     assert integrity_budget(argparse.Namespace(k_sigma=None, integrity_risk=None)) is not None
     assert integrity_budget(argparse.Namespace(k_sigma=2.0, integrity_risk=None)) is None
+
+
+def test_synth_rig_choices_are_the_presets() -> None:
+    from predisat.camera.rigs import DEFAULT_RIG, RIG_NAMES
+
+    assert predisat_cli.RIG_CHOICES == RIG_NAMES
+    assert DEFAULT_RIG == "side-fisheye"

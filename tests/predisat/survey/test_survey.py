@@ -241,7 +241,7 @@ def test_image_check_reads_headers_only(tmp_path: Path) -> None:
 def test_unknown_side_bad_numbers_and_missing_position(tmp_path: Path) -> None:
     root = _write(tmp_path / "s", n=4)
     rows = _rows(root)
-    rows[0]["side"] = "roof"
+    rows[0]["side"] = "bonnet"
     rows[1]["gps_s"] = "12:00:01"
     rows[2]["chainage_m"] = "1O0.0"
     rows[3]["chainage_m"] = ""
@@ -249,7 +249,7 @@ def test_unknown_side_bad_numbers_and_missing_position(tmp_path: Path) -> None:
     rows[5]["lat_deg"] = "50.5"
     _save_rows(root, rows)
     problems = _problems(root)
-    _only(problems, "left_000000", "side 'roof' is unknown")
+    _only(problems, "left_000000", "side 'bonnet' is unknown")
     _only(problems, "right_000000", "gps_s '12:00:01' is not a finite number")
     _only(problems, "left_000001", "chainage_m '1O0.0'")
     _only(problems, "right_000001", "no position")
@@ -389,7 +389,7 @@ def test_missing_columns_are_fatal_even_when_skipping(tmp_path: Path) -> None:
         ({"format": "something-else"}, "format must be 'predisat-survey'"),
         ({"direction_of_travel": "north"}, "direction_of_travel"),
         ({"antenna_height_m": "tall"}, "antenna_height_m"),
-        ({"cameras": {"roof": {"calibration": "calib/left.yaml"}}}, "camera side 'roof'"),
+        ({"cameras": {"bonnet": {"calibration": "calib/left.yaml"}}}, "camera side 'bonnet'"),
         ({"cameras": {"left": {"calibration": "calib/nope.yaml"}}}, "nope.yaml"),
         ({"cameras": {"left": {"calibration": "calib/left.yaml", "mount": {"tilt": 1}}}}, "tilt"),
     ],

@@ -156,3 +156,34 @@ def test_output_does_not_depend_on_worker_count(tiny, tmp_path: Path) -> None:
         assert p.read_bytes() == (par.survey_dir / "images" / p.name).read_bytes(), p.name
     for p in sorted((res.truth_dir / "labels").glob("*.png")):
         assert p.read_bytes() == (par.truth_dir / "labels" / p.name).read_bytes(), p.name
+
+
+def test_rig_renders_every_camera_with_labels_matching_the_ideal_masks(tmp_path: Path) -> None:
+    from predisat.camera.models import Mount
+    from predisat.camera.rigs import Rig
+    from predisat.synth.truth import ideal_sky_mask
+
+    pano = CameraModel.equirect(128)
+    cab = CameraModel.fisheye_from_fov(64, 48, 120.0)
+    rig = Rig("test", (("roof", pano, Mount.default("roof")),
+                       ("front", cab, Mount.default("front"))))  # fmt: skip
+    res = generate_survey(
+        demo_track(), 2000.0, 2010.0, sky="clear", seed=4, out_dir=tmp_path, rig=rig,
+        progress=False, options=RenderOptions(supersample=1, ambient_rays=0),
+    )  # fmt: skip
+    survey = Survey.load(res.survey_dir)
+    assert res.n_frames == 4 and sorted(set(survey.frames.side)) == ["front", "roof"]
+    assert survey.cameras["roof"].camera == pano
+    assert survey.metadata["rig"] == "test"
+    world = World.load(res.truth_dir / "world.npz")
+    for k, fid in enumerate(survey.frames.frame_id):
+        side = str(survey.frames.side[k])
+        cam, mount = rig.as_mapping()[side]
+        lab = cv2.imread(str(res.truth_dir / "labels" / f"{fid}.png"), cv2.IMREAD_UNCHANGED)
+        ideal = ideal_sky_mask(world, [float(survey.frames.chainage_m[k])], cam, mount)[0]
+        # the renderer's label and the truth module's mask: the same rays, thin wires aside
+        assert float(np.mean((lab > 0) == ideal)) > 0.99
+        assert survey.read_image(k).shape == (cam.height_px, cam.width_px, 3)
+    with pytest.raises(ValueError, match="either rig or camera"):
+        generate_survey(demo_track(), 2000.0, 2010.0, out_dir=tmp_path / "x", rig=rig,
+                        camera=cab, progress=False)  # fmt: skip
