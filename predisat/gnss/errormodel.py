@@ -275,7 +275,8 @@ class Applicability:
 
         The receiver must be one calibrated (by its type; an unknown type never matches a
         name) or of the model's class; the antenna likewise (any antenna for a class model);
-        every system used must have a model calibrated on its code; the processing must match.
+        every system used must have a model calibrated on its code whose tails were checked
+        (``tail_probability < 1``); an estimate is not an overbound; the processing must match.
         """
         why = []
         rx, ant = _norm(profile.receiver_type), _norm(profile.antenna_type)
@@ -302,6 +303,14 @@ class Applicability:
             new = sorted(set(codes) - set(m.codes))
             if new:
                 why.append(f"system {sys_} code(s) {new} not calibrated (model: {list(m.codes)})")
+            if m.tail_probability >= 1.0:
+                why.append(
+                    f"system {sys_}: its {m.n_independent} independent samples were too few to "
+                    "check any tail of the overbound (calibrate on more days or receivers)"
+                )
+        if self.method == "estimate":
+            why.append("a least-squares estimate, not an overbound (calibrate without --bound "
+                       "estimate)")  # fmt: skip
         if profile.frequency != self.frequency:
             why.append(f"{profile.frequency}-frequency data, {self.frequency}-frequency model")
         return why

@@ -105,3 +105,16 @@ def test_bad_v2_file_is_named(tmp_path):
         read_error_model_file(p)
     with pytest.raises(ValueError, match="receiver_class"):
         ReceiverProfile("x", "y", {}, receiver_class="tractor")
+
+
+def test_unchecked_tails_and_estimates_support_no_claim(tmp_path):
+    thin = SystemModel(ErrorModel(0.6, 0.4), ("C1C",), 240, 12, 1.0)  # no tail point checked
+    p = write_error_model(tmp_path / "thin.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": thin}, applicability=APP)  # fmt: skip
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "12 independent samples" in why
+    est = Applicability(APP.receivers, APP.antennas, method="estimate")
+    p = write_error_model(tmp_path / "est.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": GPS}, applicability=est)  # fmt: skip
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "estimate" in why
