@@ -490,7 +490,7 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             str(a.get("method", "")),
             tuple(str(r) for r in a.get("sources", ())),
         )
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise ErrorModelFileError(
             f"{p}: bad {ERROR_MODEL_FORMAT} file ({exc!r}); expected 'systems' (per system a_m, "
             "b_m, codes, n_residuals, n_independent, tail_probability) and 'applicability' "
