@@ -531,7 +531,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         tail = (
             f"tails checked to {m.tail_probability:.2g} (k {m.k_checked:.2f})"
             if m.tail_probability < 1
-            else "too few independent samples to check any tail"
+            else "too few independent samples to check any tail: `locator run` makes no claim "
+            "under it; calibrate on more hours, days or receivers (about 200 independent samples "
+            "per system)"
         ) if np.isfinite(m.tail_probability) else "no bound (estimate)"  # fmt: skip
         print(f"  {sys_} {'+'.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
               f"sin el)^2 m^2 from {m.n_residuals} residuals ({m.n_independent} independent); "
