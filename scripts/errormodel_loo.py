@@ -221,9 +221,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{t['length_p95_m']:.1f} m; Stanford "
             + ", ".join(f"{c[9:]} {int(v)}" for c, v in t.items() if c.startswith("stanford_"))
         )
-        what = {"new": "new overbound", "legacy": "two-sided overbound (before)",
-                "estimate": "least-squares estimate (no bound)"}.get(variant, variant)  # fmt: skip
-        fig = stanford_diagram(sc, f"leave one receiver out: {what}, k = {k:g}")
+        what = {"new": "new overbound", "legacy": "two-sided overbound",
+                "estimate": "estimate (no bound)"}.get(variant, variant)  # fmt: skip
+        fig = stanford_diagram(sc, f"leave one receiver out, {what}, k = {k:g}")
         fig.savefig(args.out / f"stanford_{variant}_k{k:g}.png", dpi=100)
     return 0
 
