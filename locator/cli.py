@@ -57,14 +57,20 @@ def _masks(args: argparse.Namespace) -> Any:
     return read_masks(args.masks)
 
 
-def _config(args: argparse.Namespace) -> Any:
+def _config(args: argparse.Namespace, profile: Any = None) -> Any:
+    """The run configuration; with the data's ``profile`` (a ReceiverProfile), the error model
+    must apply to it for a safety claim (else every epoch is flagged ``NO_ERROR_MODEL``)."""
     from locator.fde import LocatorConfig
     from locator.run import RunConfig
-    from predisat.gnss.errormodel import IntervalModel, read_error_model
+    from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
-    model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
+    model = mf.model if profile is None else mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
+    applies = True
+    if profile is not None:
+        applies = _model_applies(mf, profile, args)
     trust = "masks" if args.masks else ("cutoff" if args.cutoff is not None else "none")
     return RunConfig(
         LocatorConfig(model=model, budget=integrity_budget(args)),
@@ -74,7 +80,40 @@ def _config(args: argparse.Namespace) -> Any:
         extra_margin_deg=args.extra_margin or 0.0,
         start_uncertainty_m=args.start_uncertainty,
         heading_check=not args.no_heading_check,
+        error_model_applies=applies,
+        model_el_min_deg=mf.el_min_deg,
     )
+
+
+def _model_applies(mf: Any, profile: Any, args: argparse.Namespace) -> bool:
+    """Whether the model may support a safety claim on data of ``profile``; tells why not."""
+    import math
+
+    name = args.error_model or "the built-in model (a = b = 2 m, the simulator's noise)"
+    why = mf.mismatches(profile)
+    if why and not args.force_error_model:
+        print(
+            f"locator run: NO SAFETY CLAIM: {name} does not apply to this data "
+            f"({profile.describe()}): {'; '.join(why)}. Positions are given, every epoch flagged "
+            "NO_ERROR_MODEL. Make a model for this receiver with `locator calibrate --obs FILE "
+            "--nav NAV` (static observations of the same receiver, antenna and codes at a known "
+            "position; docs/errormodel.md) and pass it with --error-model (or --force-error-model "
+            "to claim under a model not calibrated for this data: not safe)",
+            file=sys.stderr,
+        )
+        return False
+    if why:
+        print(f"locator run: warning: --force-error-model: claims under {name}, which does not "
+              f"apply to this data: {'; '.join(why)}", file=sys.stderr)  # fmt: skip
+    for sys_ in profile.systems:
+        m = mf.systems.get(sys_)
+        if m is not None and not math.isnan(m.tail_probability):
+            checked = (f"its tails were checked to {m.tail_probability:.2g} per pseudorange"
+                       if m.tail_probability < 1 else "too few independent samples to check "
+                       "any tail")  # fmt: skip
+            print(f"locator run: error model for {sys_}: {m.n_independent} independent samples, "
+                  f"{checked}", file=sys.stderr)  # fmt: skip
+    return True
 
 
 def _progress(total: int, quiet: bool, desc: str) -> Any:
@@ -197,7 +236,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             check_track(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
-    cfg = _config(args)
+    cfg = _config(args, _profile(source, args))
     masks = _masks(args)
     if masks is not None:
         from predisat.availability.run import check_masks_on_track
@@ -222,6 +261,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, {lengths} -> {folder}")
     print(_losses_text(epochs), end="")
     return 0
+
+
+def _profile(source: Any, args: argparse.Namespace) -> Any:
+    """The receiver profile of a run's source (a simulation: the simulated receiver)."""
+    from locator.errorfit import receiver_profile, simulated_profile
+    from locator.sources import SimSource
+
+    if isinstance(source, SimSource):
+        from predisat.availability.satellites import select_satellites
+
+        used = select_satellites(source.sim.sats, source.constellation)
+        return simulated_profile(sorted({s[0] for s in used}))
+    return receiver_profile(source, args.receiver_class)
 
 
 # What a user can do about satellites left out for a reason (locator.selection.Exclusion names,
@@ -417,7 +469,7 @@ def _summary_text(s: dict[str, float]) -> str:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from locator.errorfit import sim_residuals, static_residuals
+    from locator.errorfit import simulated_residuals, station_residuals
     from locator.workflow import calibrate_to_file
 
     if not (args.k_sigma > 0 and np.isfinite(args.k_sigma)):
@@ -425,12 +477,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             f"--k-sigma must be positive and finite, got {args.k_sigma} (the source's 2; 3.89 "
             "gives 1e-4 per pair)"
         )
+    cls = args.receiver_class or ""
     if args.sim:
         from locator.sim.simfile import SimRun
 
         states = [s.strip() for s in (args.states or "los").split(",")]
-        el, res = _stack([sim_residuals(SimRun.read(d), states) for d in args.sim])
+        data = [simulated_residuals(SimRun.read(d), states, str(d)) for d in args.sim]
         fitted: dict[str, Any] = {"simulations": [str(d) for d in args.sim], "states": states}
+        cls = cls or "simulated"
     else:
         seen = [Path(f).resolve() for f in args.obs]
         if len(set(seen)) < len(seen):
@@ -443,7 +497,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from locator.sources import RinexSource
 
         ranges = RangeModel.from_rinex_nav(args.nav)
-        parts, stations = [], []
+        data, stations = [], []
         for path in args.obs:
             obs = Observations.from_rinex(path)
             x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
@@ -456,43 +510,42 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 raise CliError(f"{path}: no station position in the header; {fix}")
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
-            parts.append(static_residuals(RinexSource(ranges, obs, args.constellation), x))
+            src = RinexSource(ranges, obs, args.constellation)
+            data.append(station_residuals(src, x, min_el_deg=args.min_el))
             stations.append(x.tolist())
-        el, res = _stack(parts)
         fitted = {"obs": [str(f) for f in args.obs], "nav": [str(f) for f in args.nav],
-                  "station_ecef_m": stations}
+                  "station_ecef_m": stations}  # fmt: skip
     try:
-        model = calibrate_to_file(
-            el, res, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted
-        )
+        mf = calibrate_to_file(
+            data, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted,
+            receiver_class=cls, pool_systems=bool(args.sim),
+        )  # fmt: skip
     except ValueError as exc:
         raise CliError(
             f"{exc} (command line: give more or longer --obs / --sim inputs, a few hundred "
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
-    e = model.error
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
-    print(
-        f"sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / sin el)^2 m^2 ({what}) from "
-        f"{int(np.isfinite(res).sum())} residuals; k_sigma {model.k_sigma} -> {args.out} "
-        f"(figure {Path(args.out).with_suffix('.png')})"
-    )
+    app = mf.applicability
+    assert app is not None
+    print(f"{what} for {', '.join(app.receivers)} / {', '.join(app.antennas)}"
+          + (f" (class {app.receiver_class})" if app.receiver_class else "")
+          + f", elevations {app.el_min_deg:.1f}-{app.el_max_deg:.1f} deg:")  # fmt: skip
+    for sys_, m in mf.systems.items():
+        e = m.error
+        tail = (
+            f"tails checked to {m.tail_probability:.2g} (k {m.k_checked:.2f})"
+            if m.tail_probability < 1
+            else "too few independent samples to check any tail: `locator run` makes no claim "
+            "under it; calibrate on more hours, days or receivers (about 200 independent samples "
+            "per system)"
+        ) if np.isfinite(m.tail_probability) else "no bound (estimate)"  # fmt: skip
+        print(f"  {sys_} {'+'.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
+              f"sin el)^2 m^2 from {m.n_residuals} residuals ({m.n_independent} independent); "
+              f"{tail}")  # fmt: skip
+    print(f"k_sigma {mf.model.k_sigma} -> {args.out} (figure "
+          f"{Path(args.out).with_suffix('.png')})")  # fmt: skip
     return 0
-
-
-def _stack(parts: Sequence[tuple[Any, Any]]) -> tuple[Any, Any]:
-    """Epoch rows of several ``(el_deg, residual_m)`` pairs, padded with NaN to one width."""
-    import numpy as np
-
-    n = max(p[0].shape[1] for p in parts)
-
-    def wide(a: Any) -> Any:
-        return np.pad(a, ((0, 0), (0, n - a.shape[1])), constant_values=np.nan)
-
-    return (
-        np.concatenate([wide(p[0]) for p in parts]),
-        np.concatenate([wide(p[1]) for p in parts]),
-    )
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -539,7 +592,15 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    "faults only flagged")
     p.add_argument("--error-model", type=existing_file(_ERROR_MODEL), metavar="JSON",
                    help="pseudorange error model from `locator calibrate` (default: a = b = 2 m, "
-                   "the source's; the file's k_sigma is not used: see --integrity-risk)")
+                   "the source's: it applies to simulated receivers only, so RINEX runs without a "
+                   "calibrated model make no safety claim; the file's k_sigma is not used: see "
+                   "--integrity-risk)")
+    p.add_argument("--force-error-model", action="store_true",
+                   help="claim under --error-model even when it does not apply to the data "
+                   "(another receiver, antenna, code, or a locator-error-model/1 file): not safe")
+    p.add_argument("--receiver-class", choices=("geodetic", "automotive", "phone"),
+                   help="the data's receiver class, for a model calibrated for a class "
+                   "(default: guessed, phone for smartphone logs, otherwise none)")
     integrity_options(p)
     p.add_argument("--extra-margin", type=non_negative_float, metavar="DEG",
                    help="with --masks: degrees added to the mask file's margins before trusting "
@@ -710,6 +771,13 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
                    help="systems used: gps, gps+galileo, all, or system letters")
     p.add_argument("--k-sigma", type=positive_float, default=2.0, metavar="K",
                    help="pair interval half width in sigmas written into the model")
+    p.add_argument("--receiver-class", choices=("geodetic", "automotive", "phone"),
+                   help="the class the model is to cover: any receiver of it may then use the "
+                   "model (default: only the receivers and antennas of the data); name a class "
+                   "only for a model validated on several receivers of it (docs/errormodel.md)")
+    p.add_argument("--min-el", type=non_negative_float, default=5.0, metavar="DEG",
+                   help="with --obs: lower elevations are left out (the model then does not "
+                   "cover them: runs leave such satellites out)")
     p.add_argument("--bound", choices=("overbound", "estimate"), default="overbound",
                    help="overbound: the fit inflated until it bounds the residual tails in every "
                    "elevation bin; estimate: the least-squares fit")  # fmt: skip

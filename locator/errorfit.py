@@ -11,29 +11,59 @@ clock per epoch and fits ``sigma(el)**2 = a**2 + (b / sin el)**2``. Two kinds of
 * :func:`static_residuals` - a static station's RINEX file and its known position (a geodetic
   marker): real noise, multipath and broadcast-model errors.
 
-:func:`binned_sigma` gives the empirical sigma per elevation bin for the figure.
+:func:`station_residuals` and :func:`simulated_residuals` wrap them with what the data is
+(:class:`Residuals`: satellites, codes, :class:`~predisat.gnss.errormodel.ReceiverProfile`);
+:func:`fit_systems` fits and overbounds each constellation on its own and
+:func:`model_file_parts` turns the fits into what an error-model file states (per-system
+models, their sample sizes and the tail probability they were checked to, the applicability).
+:func:`receiver_profile` describes a RINEX source the same way, for the check that a model
+applies (``locator run``). :func:`binned_sigma` gives the empirical sigma per elevation bin for
+the figure.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from locator.intervals import Overbound, fit_error_model, overbound_error_model
 from locator.observations import Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
+from predisat.availability.satellites import select_satellites
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
-from predisat.gnss.errormodel import ErrorModel
+from predisat.gnss.errormodel import (
+    Applicability,
+    ErrorModel,
+    IntervalModel,
+    ReceiverProfile,
+    SystemModel,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["binned_sigma", "calibration_figure", "sim_residuals", "static_residuals"]
+__all__ = [
+    "Residuals",
+    "SystemFit",
+    "binned_sigma",
+    "calibration_figure",
+    "fit_systems",
+    "guess_receiver_class",
+    "model_file_parts",
+    "receiver_profile",
+    "sim_residuals",
+    "simulated_profile",
+    "simulated_residuals",
+    "static_residuals",
+    "station_residuals",
+]
 
 _STATES = {"los": SignalState.LOS, "nlos": SignalState.NLOS}
 
@@ -92,6 +122,244 @@ def static_residuals(
         el[k, j] = np.where(keep, e, np.nan)
         res[k, j] = np.where(keep, d.pseudorange_m - rng, np.nan)
     return el, res
+
+
+# Receiver names or programs of smartphone logs (GnssLogger and its RINEX converters).
+_PHONE_MARKS = ("GNSSLOGGER", "GNSSTORINEX", "ANDROID", "PIXEL", "GALAXY")
+
+
+def guess_receiver_class(receiver_type: str, program: str = "") -> str:
+    """``"phone"`` for a smartphone log (by the receiver or program name), else "" (a
+    geodetic or automotive receiver is not recognisable by its name: say so explicitly)."""
+    text = f"{receiver_type} {program}".upper()
+    return "phone" if any(m in text for m in _PHONE_MARKS) else ""
+
+
+def receiver_profile(
+    source: RinexSource, receiver_class: str | None = None, frequency: str = "single"
+) -> ReceiverProfile:
+    """What a RINEX source is: receiver and antenna (header), the pseudorange codes it gives
+    each system used (the code priority's choice over the whole file), the processing.
+
+    ``receiver_class`` None guesses it (:func:`guess_receiver_class`).
+    """
+    obs = source.obs
+    sel = obs.pseudorange(source.priority)
+    keep = set(select_satellites(obs.sats, source.constellation))
+    codes: dict[str, set[str]] = {}
+    for j, sat in enumerate(obs.sats):
+        if sat not in keep:
+            continue
+        used = {str(c) for c in np.unique(sel.code[:, j]) if c}
+        if used:
+            codes.setdefault(sat[0], set()).update(used)
+    h = obs.header
+    cls = (
+        guess_receiver_class(h.receiver_type, h.program)
+        if receiver_class is None
+        else receiver_class
+    )
+    return ReceiverProfile(
+        h.receiver_type, h.antenna_type, {k: tuple(sorted(v)) for k, v in codes.items()},
+        frequency, cls,
+    )  # fmt: skip
+
+
+def simulated_profile(systems: Sequence[str]) -> ReceiverProfile:
+    """A simulated receiver using ``systems`` (the simulator has no signal codes: ``sim``)."""
+    return ReceiverProfile("simulated", "simulated", {s: ("sim",) for s in systems}, "single",
+                           "simulated")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Residuals of one data set and what it is.
+
+    Attributes
+    ----------
+    el_deg, residual_m : ndarray, shape (n_epoch, n_sat)
+        As :func:`static_residuals`; NaN where absent.
+    sats : tuple of str, length n_sat
+    profile : ReceiverProfile
+    source : str
+        The file or folder, for the model's record.
+    """
+
+    el_deg: NDArray
+    residual_m: NDArray
+    sats: tuple[str, ...]
+    profile: ReceiverProfile
+    source: str
+
+
+def _columns(data: Residuals, letters: Sequence[str]) -> tuple[NDArray, NDArray]:
+    """``(el_deg, residual_m)`` of the columns of the systems ``letters``."""
+    cols = np.array([s[0] in letters for s in data.sats], bool)
+    return data.el_deg[:, cols], data.residual_m[:, cols]
+
+
+def station_residuals(
+    source: RinexSource,
+    station_ecef_m: ArrayLike,
+    *,
+    min_el_deg: float = 5.0,
+    receiver_class: str | None = None,
+) -> Residuals:
+    """:func:`static_residuals` with the satellites, codes and receiver of the source."""
+    el, res = static_residuals(source, station_ecef_m, min_el_deg)
+    return Residuals(el, res, tuple(source.obs.sats), receiver_profile(source, receiver_class),
+                     str(source.obs.path))  # fmt: skip
+
+
+def simulated_residuals(
+    sim: SimRun, states: Sequence[str] = ("los",), source: str = ""
+) -> Residuals:
+    """:func:`sim_residuals` of a simulated run with its (simulated) receiver."""
+    el, res = sim_residuals(sim, states)
+    systems = sorted({s[0] for s in sim.sats})
+    return Residuals(el, res, tuple(sim.sats), simulated_profile(systems), source)
+
+
+@dataclass(frozen=True)
+class SystemFit:
+    """The fit of one constellation over every data set given.
+
+    Attributes
+    ----------
+    system : str
+    estimate : ErrorModel
+        Least-squares fit (:func:`locator.intervals.fit_error_model`).
+    overbound : Overbound or None
+        Its tail overbound (None for ``bound="estimate"``).
+    codes : tuple of str
+    n_residuals : int
+    el_min_deg, el_max_deg : float
+    """
+
+    system: str  # the letters fitted together ("G"; "GREC" pooled)
+    estimate: ErrorModel
+    overbound: Overbound | None
+    codes: tuple[str, ...]
+    n_residuals: int
+    el_min_deg: float
+    el_max_deg: float
+
+    @property
+    def model(self) -> ErrorModel:
+        """The overbound's model, or the estimate."""
+        return self.estimate if self.overbound is None else self.overbound.model
+
+    def system_model(self) -> SystemModel:
+        """What the file states about this system."""
+        ob = self.overbound
+        n_ind = self.n_residuals if ob is None else ob.n_independent
+        tail = float("nan") if ob is None else ob.tail_probability
+        return SystemModel(self.model, self.codes, self.n_residuals, n_ind, tail)
+
+
+def _stack(parts: Sequence[tuple[NDArray, NDArray]]) -> tuple[NDArray, NDArray]:
+    """Epoch rows of several ``(el_deg, residual_m)`` pairs, padded with NaN to one width."""
+    n = max(p[0].shape[1] for p in parts)
+
+    def wide(a: NDArray) -> NDArray:
+        return np.pad(a, ((0, 0), (0, n - a.shape[1])), constant_values=np.nan)
+
+    return (np.concatenate([wide(p[0]) for p in parts]),
+            np.concatenate([wide(p[1]) for p in parts]))  # fmt: skip
+
+
+def fit_systems(
+    data: Sequence[Residuals],
+    *,
+    bound: str = "overbound",
+    confidence: float | None = 0.95,
+    n_bins: int = 6,
+    pool_systems: bool = False,
+) -> dict[str, SystemFit]:
+    """Fit (and overbound) each constellation of ``data`` on its own.
+
+    Parameters
+    ----------
+    data : sequence of Residuals
+        Every data set the model is to cover (several receivers, days, sites).
+    bound : {"overbound", "estimate"}
+    confidence : float or None
+        Of the tail check (:func:`locator.intervals.overbound_error_model`): each one-sided
+        tail against the Clopper-Pearson bound of its share in independent samples; None:
+        the empirical two-sided share.
+    n_bins : int
+        Elevation bins of the overbound.
+    pool_systems : bool
+        Fit every system together and give each the pooled model: only for data whose
+        systems share one clock and one error law (a simulation); real receivers have
+        inter-system biases and per-system errors.
+
+    Returns
+    -------
+    dict
+        System letter to :class:`SystemFit`; systems with too few residuals for the fit are
+        left out (a model then does not cover them).
+    """
+    if bound not in ("overbound", "estimate"):
+        raise ValueError(f"bound must be 'overbound' or 'estimate', got {bound!r}")
+    if not data:
+        raise ValueError("fit_systems needs at least one data set")
+    out: dict[str, SystemFit] = {}
+    letters = sorted({s[0] for d in data for s in d.sats})
+    groups = [("".join(letters), letters)] if pool_systems else [(x, [x]) for x in letters]
+    for key, group in groups:
+        parts = [_columns(d, group) for d in data if any(s[0] in group for s in d.sats)]
+        el, res = _stack(parts)
+        ok = np.isfinite(el) & np.isfinite(res)
+        try:
+            est = fit_error_model(el, res)
+            ob = (overbound_error_model(el, res, est, n_bins=n_bins, confidence=confidence)
+                  if bound == "overbound" else None)  # fmt: skip
+        except ValueError:
+            continue  # too few residuals in epochs with 3 satellites of the system
+        for sys_ in group:
+            codes = sorted({c for d in data for c in d.profile.codes.get(sys_, ())})
+            out[sys_] = SystemFit(key, est, ob, tuple(codes), int(ok.sum()),
+                                  float(el[ok].min()), float(el[ok].max()))  # fmt: skip
+    if not out:
+        raise ValueError(
+            "fit_systems: no system has enough residuals in epochs with 3 satellites of it for "
+            f"the fit{' and its overbound' if bound == 'overbound' else ''}; give more or "
+            "longer data sets"
+        )
+    return out
+
+
+def model_file_parts(
+    fits: Mapping[str, SystemFit],
+    data: Sequence[Residuals],
+    *,
+    k_sigma: float,
+    receiver_class: str = "",
+    method: str = "overbound",
+) -> tuple[IntervalModel, dict[str, SystemModel], Applicability]:
+    """The envelope model, the per-system models and the applicability of a model file.
+
+    The envelope (largest ``a`` and ``b`` over the systems) is what a reader of the
+    ``locator-error-model/1`` fields (``predisat availability``) sees.
+    """
+    ms = [f.model for f in fits.values()]
+    env = ErrorModel(max(m.a_m for m in ms), max(m.b_m for m in ms),
+                     max(m.min_el_deg for m in ms))  # fmt: skip
+    freq = {d.profile.frequency for d in data}
+    if len(freq) > 1:
+        raise ValueError("data sets mix single- and dual-frequency processing: calibrate apart")
+    app = Applicability(
+        tuple(sorted({d.profile.receiver_type for d in data})),
+        tuple(sorted({d.profile.antenna_type for d in data})),
+        receiver_class,
+        freq.pop(),
+        min(f.el_min_deg for f in fits.values()),
+        max(f.el_max_deg for f in fits.values()),
+        method,
+        tuple(d.source for d in data),
+    )
+    return (IntervalModel(env, k_sigma), {k: f.system_model() for k, f in fits.items()}, app)
 
 
 def binned_sigma(

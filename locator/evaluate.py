@@ -200,6 +200,7 @@ def stanford_counts(scored: pd.DataFrame, alert_limit_m: float | None = None) ->
 # Why an epoch has no safety claim, first matching cause first: the flag bits of
 # locator.fde.FixFlag and locator.run.RunFlag, by name.
 _LOSS_CAUSES = (
+    ("NO_ERROR_MODEL", "no calibrated error model applies to the data (`locator calibrate`)"),
     ("TOO_FEW", "fewer than 2 trusted satellites"),
     ("FAULT_DETECTED", "fault detected and not isolated (NLOS, or an error model tighter than "
      "the ranges)"),

@@ -334,6 +334,14 @@ class Overbound:
     bin_el_hi_deg: NDArray
     bin_n: NDArray
     bin_factor: NDArray
+    lag1_correlation: float = float("nan")
+    independent_share: float = 1.0
+    tail_probability: float = float("nan")
+
+    @property
+    def n_independent(self) -> int:
+        """Independent samples the residuals amount to (``sum(bin_n) * independent_share``)."""
+        return max(1, round(float(self.bin_n.sum()) * self.independent_share))
 
 
 def overbound_error_model(
@@ -344,6 +352,7 @@ def overbound_error_model(
     n_bins: int = 6,
     min_tail: int = 10,
     max_tail_share: float = 0.32,
+    confidence: float | None = None,
 ) -> Overbound:
     """Inflate an error model until its Gaussian bounds the residual tails in every bin.
 
@@ -364,6 +373,13 @@ def overbound_error_model(
     max_tail_share : float
         Tail points from ``min_tail / n`` up to this share of a bin are checked (0.32: from
         about one sigma outwards, where the ``k sigma`` intervals live).
+    confidence : float, optional
+        With a confidence (0.95), each one-sided tail is checked on its own (an error biased
+        to one side is not averaged with the other side's) against the Clopper-Pearson upper
+        bound, at that confidence, of its share counted in *independent* samples: the
+        residuals' lag-1 correlation ``rho`` (per satellite, consecutive epochs) makes ``n``
+        residuals worth ``n (1 - rho) / (1 + rho)`` independent ones. None: the two-sided
+        empirical share (before 2026-12-05).
 
     Returns
     -------
@@ -392,6 +408,8 @@ def overbound_error_model(
         raise ValueError(f"min_tail must be >= 1, got {min_tail}")
     if not 0.0 < max_tail_share <= 0.5:
         raise ValueError(f"max_tail_share must be in (0, 0.5], got {max_tail_share}")
+    if confidence is not None and not 0.5 <= confidence < 1.0:
+        raise ValueError(f"confidence must be in [0.5, 1) (0.95 typical), got {confidence}")
     min_el = 1.0 if fitted is None else fitted.min_el_deg
     el, r, ok, q = _error_inputs(el_deg, residual_m, min_el, n_bins, "overbound_error_model")
     fit = fit_error_model(el_deg, residual_m) if fitted is None else fitted
@@ -410,6 +428,11 @@ def overbound_error_model(
         )
     sigma2 = np.where(ok, fit.a_m**2 + fit.b_m**2 * q, 1.0)
     factor_b = np.ones(n_bins)
+    rho, share = float("nan"), 1.0
+    if confidence is not None:
+        e0, _, ev0 = _clock_free(r, ok, sigma2)
+        rho = _lag1_correlation(np.where(ok, e0 / np.sqrt(np.maximum(ev0, 1e-300)), np.nan))
+        share = float(np.clip((1.0 - rho) / (1.0 + rho), 1.0 / counts.min(), 1.0))
     # a bin whose errors exceed the fit also pulls the clock estimate (its weight is too
     # high), which hides part of its excess: iterate with the inflated variances until the
     # clock-free residuals are bounded at factor 1 in every bin
@@ -417,8 +440,18 @@ def overbound_error_model(
         var = sigma2.copy()
         var[ok] *= factor_b[bin_of] ** 2
         e, _, ev = _clock_free(r, ok, var)
-        z = np.abs(e[ok]) / np.sqrt(np.maximum(ev[ok], 1e-300))
-        g = np.array([_tail_factor(z[c], min_tail, max_tail_share) for c in chunks])
+        z = e[ok] / np.sqrt(np.maximum(ev[ok], 1e-300))
+        if confidence is None:
+            g = np.array([_tail_factor(np.abs(z[c]), min_tail, max_tail_share) for c in chunks])
+        else:
+            # the empirical two-sided check as well: a bin too short for any confident point
+            # is still bounded on its own residuals (and its tail probability says 1)
+            g = np.array([
+                max(_tail_factor(np.abs(z[c]), min_tail, max_tail_share),
+                    *(_sided_tail_factor(side * z[c], min_tail, max_tail_share, share,
+                                         confidence) for side in (1.0, -1.0)))
+                for c in chunks
+            ])  # fmt: skip
         factor_b *= g
         if np.max(np.abs(g - 1.0)) < 1e-4:
             break
@@ -432,7 +465,71 @@ def overbound_error_model(
         bin_el_hi_deg=np.array([el_ok[c].max() for c in chunks]),
         bin_n=counts,
         bin_factor=factor_b,
+        lag1_correlation=rho,
+        independent_share=share,
+        tail_probability=float("nan")
+        if confidence is None
+        else max(_deepest_tail(n, min_tail, max_tail_share, share, confidence) for n in counts),
     )
+
+
+def _lag1_correlation(z: NDArray) -> float:
+    """Correlation of ``z[t]`` and ``z[t + 1]`` over every satellite column (finite pairs),
+    clipped to [0, 0.999]; 0 without pairs."""
+    a, b = z[:-1], z[1:]
+    both = np.isfinite(a) & np.isfinite(b)
+    if both.sum() < 3:
+        return 0.0
+    x, y = a[both], b[both]
+    c = float(np.corrcoef(x, y)[0, 1]) if x.std() > 0 and y.std() > 0 else 0.0
+    return float(np.clip(c if np.isfinite(c) else 0.0, 0.0, 0.999))
+
+
+def _upper_share(count: NDArray, n: float, share: float, confidence: float) -> NDArray:
+    """Clopper-Pearson upper bound of a tail share seen ``count`` times in ``n`` residuals
+    worth ``share`` independent samples each (continuous counts)."""
+    from scipy.stats import beta  # lazy: slow import, calibration only
+
+    n_eff = max(n * share, 1.0)
+    c_eff = np.minimum(np.asarray(count, float) * share, n_eff - 1e-9)
+    return np.asarray(beta.ppf(confidence, c_eff + 1.0, n_eff - c_eff), float)
+
+
+def _checked_points(
+    n: int, min_tail: int, max_tail_share: float, share: float, confidence: float
+) -> tuple[NDArray, NDArray]:
+    """Tail counts a one-sided check of a bin of ``n`` residuals uses and their upper shares:
+    at least ``min_tail`` residuals and one independent sample beyond the point, and an upper
+    share at most ``max_tail_share / 2`` (from about one sigma out)."""
+    count = np.arange(n, 0, -1)
+    p_up = _upper_share(count, n, share, confidence)
+    use = (count >= min_tail) & (count * share >= 1.0) & (p_up <= 0.5 * max_tail_share)
+    return count[use], p_up[use]
+
+
+def _deepest_tail(
+    n: int, min_tail: int, max_tail_share: float, share: float, confidence: float
+) -> float:
+    """Two-sided probability of the deepest tail point a bin of ``n`` residuals checks (1 when
+    it checks none: too few independent samples)."""
+    _, p_up = _checked_points(n, min_tail, max_tail_share, share, confidence)
+    return float(min(1.0, 2.0 * p_up.min())) if len(p_up) else 1.0
+
+
+def _sided_tail_factor(
+    z: NDArray, min_tail: int, max_tail_share: float, share: float, confidence: float
+) -> float:
+    """Smallest ``f`` with ``Q(z_i / f)`` >= the upper bound of the share at or beyond ``z_i``
+    (one side, ``z`` signed) at the points of :func:`_checked_points` (1 without any)."""
+    from scipy.stats import norm
+
+    zs = np.sort(z)
+    n = len(zs)
+    count, p_up = _checked_points(n, min_tail, max_tail_share, share, confidence)
+    if not len(count):
+        return 1.0
+    x = zs[n - count]  # the value with `count` residuals at or beyond it
+    return float(np.max(x / norm.isf(p_up)))
 
 
 def _tail_factor(z: NDArray, min_tail: int, max_tail_share: float) -> float:

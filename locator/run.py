@@ -72,6 +72,7 @@ class RunFlag(IntFlag):
     """Flags of the run loop, above :class:`locator.fde.FixFlag`'s bits."""
 
     ODOMETRY_CONFLICT = 1 << 16  # the claimed interval misses the odometry prediction
+    NO_ERROR_MODEL = 1 << 17  # no calibrated error model applies to the data: no claim
 
 
 def flag_names(flags: int) -> str:
@@ -119,6 +120,13 @@ class RunConfig:
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
+    error_model_applies : bool
+        False when no calibrated error model applies to the data
+        (:meth:`predisat.gnss.errormodel.ErrorModelFile.mismatches`): every epoch still gets a
+        position, flagged ``NO_ERROR_MODEL`` and without a safety claim.
+    model_el_min_deg : float
+        Lowest elevation the error model was calibrated at; satellites below it are left out
+        (``below_model``), since their sigma would be an extrapolation.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -134,6 +142,8 @@ class RunConfig:
     odometry_check: bool = True
     odometry_conflict: str = "estimate"
     fusion: bool = True
+    error_model_applies: bool = True
+    model_el_min_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if self.integrity not in INTEGRITY_MODES:
@@ -150,6 +160,8 @@ class RunConfig:
             )
         if not self.beacon_spacing_m > 0:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
+        if not 0.0 <= self.model_el_min_deg < 90.0:
+            raise ValueError(f"model_el_min_deg must be in [0, 90), got {self.model_el_min_deg}")
 
     def to_dict(self) -> JsonDict:
         d = dataclasses.asdict(self)
@@ -368,6 +380,8 @@ def _check(
     if claim and cfg.odometry_check and miss:
         flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
         status = FusionStatus.CONFLICT
+    if not cfg.error_model_applies:
+        flags |= RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM
     claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
     row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
     return status
@@ -392,13 +406,19 @@ def _trust(
         for s, r in zip(sats, sel.reason, strict=True):
             if r:
                 excluded[s] = _EXCLUSION_NAMES[int(r)]
-        return np.asarray(sel.trusted, bool)
-    floor = cfg.cutoff_deg if cfg.trust == "cutoff" else 0.0
-    ok = el > floor
-    for s, good in zip(sats, ok, strict=True):
-        if not good:
-            excluded[s] = "below_cutoff" if cfg.trust == "cutoff" else "below_horizon"
-    return ok
+        trusted = np.asarray(sel.trusted, bool)
+    else:
+        floor = cfg.cutoff_deg if cfg.trust == "cutoff" else 0.0
+        trusted = el > floor
+        for s, good in zip(sats, trusted, strict=True):
+            if not good:
+                excluded[s] = "below_cutoff" if cfg.trust == "cutoff" else "below_horizon"
+    if cfg.model_el_min_deg > 0.0:
+        low = trusted & ~(el >= cfg.model_el_min_deg)
+        for s in np.asarray(sats)[low]:
+            excluded[str(s)] = "below_model"
+        trusted = trusted & ~low
+    return trusted
 
 
 def _row(

@@ -8,19 +8,24 @@ subclasses whose message names the file and the fix.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
-from locator.errorfit import binned_sigma, calibration_figure
+from locator.errorfit import (
+    Residuals,
+    binned_sigma,
+    calibration_figure,
+    fit_systems,
+    model_file_parts,
+)
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
-from locator.intervals import fit_error_model, overbound_error_model
 from locator.run import RunConfig, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
@@ -30,7 +35,12 @@ from locator.sources import EpochSource, SimSource
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import ecef_to_geodetic
-from predisat.gnss.errormodel import IntervalModel, write_error_model
+from predisat.gnss.errormodel import (
+    ErrorModelFile,
+    IntervalModel,
+    read_error_model_file,
+    write_error_model,
+)
 from predisat.gnss.integrity import IntegrityBudget
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
@@ -238,45 +248,67 @@ def evaluate_folder(
 
 
 def calibrate_to_file(
-    el_deg: np.ndarray,
-    residual_m: np.ndarray,
+    data: Sequence[Residuals],
     out: str | Path,
     *,
     k_sigma: float = 2.0,
     bound: str = "overbound",
     fitted: Mapping[str, object] | None = None,
-) -> IntervalModel:
-    """Fit the error model, write it (JSON) and its figure (``.png`` beside it).
+    receiver_class: str = "",
+    confidence: float | None = 0.95,
+    pool_systems: bool = False,
+) -> ErrorModelFile:
+    """Fit the error model per constellation, write it (JSON) and its figure (``.png``).
 
-    ``bound="overbound"`` (default) writes the fit inflated until it bounds the residuals in
-    every elevation bin (:func:`locator.intervals.overbound_error_model`), ``"estimate"`` the
-    least-squares fit itself.
+    ``bound="overbound"`` (default) writes each system's fit inflated until it bounds the
+    residual tails in every elevation bin (:func:`locator.intervals.overbound_error_model`,
+    with the sample-size confidence ``confidence``), ``"estimate"`` the least-squares fits. The
+    file states what it applies to (receivers, antennas, ``receiver_class``, codes, elevations)
+    and, per system, the independent samples and the tail probability checked.
+    ``pool_systems``: one fit for every system (:func:`locator.errorfit.fit_systems`).
     """
-    if bound not in ("overbound", "estimate"):
-        raise ValueError(f"bound must be 'overbound' or 'estimate', got {bound!r}")
-    estimate = fit_error_model(el_deg, residual_m)
-    info: JsonDict = {**dict(fitted or {}), "bound": bound,
-                            "estimate": {"a_m": estimate.a_m, "b_m": estimate.b_m}}  # fmt: skip
-    error = estimate
-    if bound == "overbound":
-        ob = overbound_error_model(el_deg, residual_m, estimate)
-        error = ob.model
-        info["overbound_factor"] = ob.factor
-        info["overbound_bins"] = [
-            {"el_lo_deg": lo, "el_hi_deg": hi, "n": int(n), "factor": f}
-            for lo, hi, n, f in zip(
-                ob.bin_el_lo_deg.tolist(), ob.bin_el_hi_deg.tolist(), ob.bin_n.tolist(),
-                ob.bin_factor.tolist(), strict=True,
-            )
-        ]  # fmt: skip
-    model = IntervalModel(error, k_sigma=k_sigma)
-    table = binned_sigma(el_deg, residual_m)
-    info["residuals"] = int(np.isfinite(residual_m).sum())
+    fits = fit_systems(data, bound=bound, confidence=confidence, pool_systems=pool_systems)
+    model, systems, app = model_file_parts(
+        fits, data, k_sigma=k_sigma, receiver_class=receiver_class, method=bound
+    )
+    info: JsonDict = {**dict(fitted or {}), "bound": bound, "confidence": confidence}
+    for sys_, f in fits.items():
+        if f.system != sys_:  # pooled: stated once, under its letters
+            info["pooled_systems"] = f.system
+        entry: JsonDict = {"estimate": {"a_m": f.estimate.a_m, "b_m": f.estimate.b_m}}
+        ob = f.overbound
+        if ob is not None:
+            entry.update(
+                factor=ob.factor, lag1_correlation=ob.lag1_correlation,
+                independent_share=ob.independent_share,
+                bins=[{"el_lo_deg": lo, "el_hi_deg": hi, "n": int(n), "factor": g}
+                      for lo, hi, n, g in zip(ob.bin_el_lo_deg.tolist(), ob.bin_el_hi_deg.tolist(),
+                                              ob.bin_n.tolist(), ob.bin_factor.tolist(),
+                                              strict=True)],
+            )  # fmt: skip
+        info[f"system_{sys_}"] = entry
+    el, res = _stack_residuals(data)
+    table = binned_sigma(el, res)
+    info["residuals"] = int(np.isfinite(res).sum())
     info["binned_sigma"] = table.to_dict(orient="records")
-    p = write_error_model(out, model, info)
-    fig = calibration_figure(table, model.error, estimate=None if bound == "estimate" else estimate)
+    p = write_error_model(out, model, info, systems=systems, applicability=app)
+    estimate = None
+    if bound == "overbound" and len(fits) == 1:
+        estimate = next(iter(fits.values())).estimate
+    fig = calibration_figure(table, model.error, estimate=estimate)
     fig.savefig(p.with_suffix(".png"), dpi=100)
-    return model
+    return read_error_model_file(p)
+
+
+def _stack_residuals(data: Sequence[Residuals]) -> tuple[NDArray, NDArray]:
+    """Every data set's residuals as one ``(n_epoch, n_sat)`` pair, padded with NaN."""
+    n = max(d.el_deg.shape[1] for d in data)
+
+    def wide(a: NDArray) -> NDArray:
+        return np.pad(a, ((0, 0), (0, n - a.shape[1])), constant_values=np.nan)
+
+    return (np.concatenate([wide(d.el_deg) for d in data]),
+            np.concatenate([wide(d.residual_m) for d in data]))  # fmt: skip
 
 
 def rule_folder(rule: str) -> str:

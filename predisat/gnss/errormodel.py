@@ -2,16 +2,24 @@
 
 :class:`ErrorModel` is the elevation-dependent pseudorange error that the availability
 prediction (:mod:`predisat.availability.interval`) and the locator (``locator``) share;
-:class:`IntervalModel` adds the width ``k_sigma`` of each satellite-pair interval. An error-model
-file (``locator calibrate --out FILE.json``) is a JSON object with ``format``
-(:data:`ERROR_MODEL_FORMAT`), ``a_m``, ``b_m``, ``min_el_deg``, ``k_sigma`` and how it was fitted
-(``fitted``); :func:`read_error_model` and :func:`write_error_model` read and write it.
+:class:`IntervalModel` adds the width ``k_sigma`` of each satellite-pair interval.
+
+An error-model file (``locator calibrate --out FILE.json``, format :data:`ERROR_MODEL_FORMAT`)
+is a JSON object with the envelope model of every system (``a_m``, ``b_m``, ``min_el_deg``,
+``k_sigma``; what ``predisat availability`` reads), ``systems`` (per system letter its own
+``a_m``, ``b_m``, the pseudorange codes, the number of residuals and of independent samples and
+the tail probability the overbound was checked to), ``applicability`` (:class:`Applicability`:
+receivers, antennas, receiver class, processing, elevation range, method, inputs) and
+``fitted`` (information only). A model applies to a data set (:class:`ReceiverProfile`) only
+when :meth:`Applicability.mismatches` finds nothing; a ``locator-error-model/1`` file has no
+applicability block and applies to nothing unless the user forces it.
+:func:`read_error_model_file` reads both formats, :func:`read_error_model` the envelope alone.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,14 +32,27 @@ from predisat.jsontypes import strict_json_text
 
 __all__ = [
     "ERROR_MODEL_FORMAT",
+    "ERROR_MODEL_FORMAT_V1",
+    "RECEIVER_CLASSES",
+    "Applicability",
     "ErrorModel",
+    "ErrorModelFile",
     "ErrorModelFileError",
     "IntervalModel",
+    "ReceiverProfile",
+    "SystemModel",
+    "default_model_file",
     "read_error_model",
+    "read_error_model_file",
     "write_error_model",
 ]
 
-ERROR_MODEL_FORMAT = "locator-error-model/1"
+ERROR_MODEL_FORMAT = "locator-error-model/2"
+ERROR_MODEL_FORMAT_V1 = "locator-error-model/1"  # no applicability: applies to nothing unforced
+
+# Receiver classes a model or a data set may name ("" when unknown).
+RECEIVER_CLASSES = ("geodetic", "automotive", "phone", "simulated")
+FREQUENCY_MODES = ("single", "dual")
 
 
 class ErrorModelFileError(ValueError):
@@ -114,17 +135,294 @@ class IntervalModel:
         return cls(error or ErrorModel(), float(norm.isf(risk_per_pair / 2.0)))
 
 
+def _norm(text: str) -> str:
+    """Receiver and antenna names compared without case and surrounding blanks."""
+    return " ".join(str(text).upper().split())
+
+
+# Receiver or antenna names that identify nothing (smartphone RINEX writes "Unknown").
+_UNKNOWN = {"", "UNKNOWN", "NONE", "-"}
+
+
+@dataclass(frozen=True)
+class ReceiverProfile:
+    """What a data set is, as far as an error model cares.
+
+    Attributes
+    ----------
+    receiver_type, antenna_type : str
+        As in the RINEX header (``REC # / TYPE / VERS``, ``ANT # / TYPE``; the antenna without
+        its radome column); ``"simulated"`` for a simulation.
+    codes : mapping of system letter to tuple of str
+        Pseudorange codes used per system (``{"G": ("C1C",)}``; RINEX 2 ``C1`` as is).
+    frequency : {"single", "dual"}
+        How the locator combines them: one frequency with the broadcast ionosphere model.
+    receiver_class : str
+        One of :data:`RECEIVER_CLASSES`, or "" when unknown.
+    """
+
+    receiver_type: str
+    antenna_type: str
+    codes: Mapping[str, tuple[str, ...]]
+    frequency: str = "single"
+    receiver_class: str = ""
+
+    def __post_init__(self) -> None:
+        if self.frequency not in FREQUENCY_MODES:
+            raise ValueError(f"frequency must be one of {FREQUENCY_MODES}, got {self.frequency!r}")
+        if self.receiver_class not in ("", *RECEIVER_CLASSES):
+            raise ValueError(
+                f"receiver_class must be one of {RECEIVER_CLASSES} or '', got "
+                f"{self.receiver_class!r}"
+            )
+
+    @property
+    def systems(self) -> tuple[str, ...]:
+        """System letters used, sorted."""
+        return tuple(sorted(self.codes))
+
+    def describe(self) -> str:
+        """``"TRIMBLE 5700 / TRM29659.00, G C1"``, for messages."""
+        codes = ", ".join(f"{s} {'+'.join(c)}" for s, c in sorted(self.codes.items()))
+        cls = f" ({self.receiver_class})" if self.receiver_class else ""
+        return f"{self.receiver_type or '?'} / {self.antenna_type or '?'}{cls}, {codes}"
+
+
+@dataclass(frozen=True)
+class SystemModel:
+    """The model of one constellation and what supports it.
+
+    Attributes
+    ----------
+    error : ErrorModel
+    codes : tuple of str
+        Pseudorange codes calibrated.
+    n_residuals : int
+        Clock-free residuals used.
+    n_independent : int
+        Independent samples they amount to (time correlation removed), the count that the tail
+        check's confidence uses.
+    tail_probability : float
+        Smallest two-sided probability per pseudorange at which the Gaussian overbound was
+        checked against the data (the risk it bounds; beyond it the Gaussian shape is an
+        extrapolation). NaN for a least-squares estimate, which bounds nothing.
+    """
+
+    error: ErrorModel
+    codes: tuple[str, ...]
+    n_residuals: int
+    n_independent: int
+    tail_probability: float
+
+    @property
+    def k_checked(self) -> float:
+        """``k`` of a two-sided Gaussian at :attr:`tail_probability` (NaN without one)."""
+        if not 0.0 < self.tail_probability < 1.0:
+            return float("nan")
+        from scipy.stats import norm  # lazy: slow import, only for messages
+
+        return float(norm.isf(self.tail_probability / 2.0))
+
+
+@dataclass(frozen=True)
+class Applicability:
+    """What an error model was calibrated for, and how.
+
+    Attributes
+    ----------
+    receivers, antennas : tuple of str
+        Receiver and antenna types of the calibration data (``REC # / TYPE``, ``ANT # / TYPE``).
+    receiver_class : str
+        The class the model is meant to cover ("" for the listed receivers only). A model of a
+        class applies to any receiver of that class: only when it was validated so (leave one
+        receiver out, ``docs/errormodel.md``).
+    frequency : {"single", "dual"}
+    el_min_deg, el_max_deg : float
+        Elevations of the calibration residuals; satellites below ``el_min_deg`` are outside the
+        model.
+    method : str
+        How the model was made (``"overbound"``: :func:`locator.errorfit` tail overbound;
+        ``"estimate"``: least squares, no bound).
+    sources : tuple of str
+        Input files (observations, simulations).
+    """
+
+    receivers: tuple[str, ...]
+    antennas: tuple[str, ...]
+    receiver_class: str = ""
+    frequency: str = "single"
+    el_min_deg: float = 0.0
+    el_max_deg: float = 90.0
+    method: str = "overbound"
+    sources: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.frequency not in FREQUENCY_MODES:
+            raise ValueError(f"frequency must be one of {FREQUENCY_MODES}, got {self.frequency!r}")
+        if self.receiver_class not in ("", *RECEIVER_CLASSES):
+            raise ValueError(
+                f"receiver_class must be one of {RECEIVER_CLASSES} or '', got "
+                f"{self.receiver_class!r}"
+            )
+        if not 0.0 <= self.el_min_deg <= self.el_max_deg <= 90.0:
+            raise ValueError(
+                f"elevation range must satisfy 0 <= el_min_deg <= el_max_deg <= 90, got "
+                f"{self.el_min_deg}, {self.el_max_deg}"
+            )
+
+    def mismatches(self, profile: ReceiverProfile, systems: Mapping[str, SystemModel]) -> list[str]:
+        """Why the model does not apply to ``profile`` (empty: it applies).
+
+        The receiver must be one calibrated (by its type; an unknown type never matches a
+        name) or of the model's class; the antenna likewise (any antenna for a class model);
+        every system used must have a model calibrated on its code whose tails were checked
+        (``tail_probability < 1``); an estimate is not an overbound; the processing must match.
+        """
+        why = []
+        rx, ant = _norm(profile.receiver_type), _norm(profile.antenna_type)
+        by_class = bool(self.receiver_class) and profile.receiver_class == self.receiver_class
+        if not by_class:
+            known = {_norm(r) for r in self.receivers} - _UNKNOWN
+            if rx in _UNKNOWN or rx not in known:
+                why.append(
+                    f"receiver {profile.receiver_type or 'unknown'!r} is not among the "
+                    f"calibrated {sorted(self.receivers)}"
+                    + (f" nor of class {self.receiver_class!r}" if self.receiver_class else "")
+                )
+            ants = {_norm(a) for a in self.antennas} - _UNKNOWN
+            if ant in _UNKNOWN or ant not in ants:
+                why.append(
+                    f"antenna {profile.antenna_type or 'unknown'!r} is not among the calibrated "
+                    f"{sorted(self.antennas)}"
+                )
+        for sys_, codes in sorted(profile.codes.items()):
+            m = systems.get(sys_)
+            if m is None:
+                why.append(f"system {sys_} was not calibrated (model has {sorted(systems)})")
+                continue
+            new = sorted(set(codes) - set(m.codes))
+            if new:
+                why.append(f"system {sys_} code(s) {new} not calibrated (model: {list(m.codes)})")
+            if m.tail_probability >= 1.0:
+                why.append(
+                    f"system {sys_}: its {m.n_independent} independent samples were too few to "
+                    "check any tail of the overbound (calibrate on more days or receivers)"
+                )
+        if self.method == "estimate":
+            why.append("a least-squares estimate, not an overbound (calibrate without --bound "
+                       "estimate)")  # fmt: skip
+        if profile.frequency != self.frequency:
+            why.append(f"{profile.frequency}-frequency data, {self.frequency}-frequency model")
+        return why
+
+
+@dataclass(frozen=True)
+class ErrorModelFile:
+    """An error-model file: per-system models, their envelope and what they apply to.
+
+    Attributes
+    ----------
+    model : IntervalModel
+        The envelope of :attr:`systems` (largest ``a`` and ``b``) and ``k_sigma``.
+    systems : mapping of system letter to SystemModel
+        Empty for a ``locator-error-model/1`` file.
+    applicability : Applicability or None
+        None for a ``locator-error-model/1`` file (applies to nothing unless forced).
+    path : str
+        Where it was read from ("" for a built-in model).
+    format : str
+    """
+
+    model: IntervalModel
+    systems: Mapping[str, SystemModel] = field(default_factory=dict)
+    applicability: Applicability | None = None
+    path: str = ""
+    format: str = ERROR_MODEL_FORMAT
+
+    def mismatches(self, profile: ReceiverProfile) -> list[str]:
+        """Why the model does not apply to ``profile`` (empty: it applies)."""
+        if self.applicability is None:
+            return [
+                f"{self.path or 'the model'} is a {self.format} file, which does not state what "
+                "it was calibrated for"
+            ]
+        return self.applicability.mismatches(profile, self.systems)
+
+    def for_systems(self, systems: Sequence[str]) -> IntervalModel:
+        """The envelope model of ``systems`` (all of the file's models when none is known)."""
+        ms = [self.systems[s].error for s in systems if s in self.systems]
+        if not ms or len(ms) < len(systems):
+            return self.model
+        env = ErrorModel(max(m.a_m for m in ms), max(m.b_m for m in ms),
+                         max(m.min_el_deg for m in ms))  # fmt: skip
+        return IntervalModel(env, self.model.k_sigma)
+
+    @property
+    def el_min_deg(self) -> float:
+        """Lowest calibrated elevation (0 when the file does not say)."""
+        return 0.0 if self.applicability is None else self.applicability.el_min_deg
+
+
+def default_model_file(k_sigma: float = 2.0) -> ErrorModelFile:
+    """The built-in ``ErrorModel()`` (a = b = 2 m): the simulator's own noise model.
+
+    It applies to simulated receivers only (the simulator draws its direct-signal noise from
+    it); no real receiver has been shown to be bounded by it (a smartphone log was not: one
+    hazardous epoch in 599), so a real data set needs a calibrated model for a safety claim.
+    """
+    e = ErrorModel()
+    return ErrorModelFile(
+        IntervalModel(e, k_sigma),
+        {s: SystemModel(e, ("sim",), 0, 0, float("nan")) for s in "GRECJ"},
+        Applicability(("simulated",), ("simulated",), "simulated", "single", 0.0, 90.0,
+                      "simulator noise model", ()),
+        "",
+    )  # fmt: skip
+
+
 def write_error_model(
-    path: str | Path, model: IntervalModel, fitted: Mapping[str, object] | None = None
+    path: str | Path,
+    model: IntervalModel,
+    fitted: Mapping[str, object] | None = None,
+    *,
+    systems: Mapping[str, SystemModel] | None = None,
+    applicability: Applicability | None = None,
 ) -> Path:
-    """Write an error-model JSON file."""
+    """Write an error-model JSON file (:data:`ERROR_MODEL_FORMAT`).
+
+    Without ``applicability`` the file says it was calibrated for nothing in particular
+    (no receiver, no system): it then applies to no data set unless forced.
+    """
     e = model.error
+    app = applicability or Applicability((), ())
     data = {
         "format": ERROR_MODEL_FORMAT,
         "a_m": e.a_m,
         "b_m": e.b_m,
         "min_el_deg": e.min_el_deg,
         "k_sigma": model.k_sigma,
+        "systems": {
+            s: {
+                "a_m": m.error.a_m,
+                "b_m": m.error.b_m,
+                "min_el_deg": m.error.min_el_deg,
+                "codes": list(m.codes),
+                "n_residuals": int(m.n_residuals),
+                "n_independent": int(m.n_independent),
+                "tail_probability": m.tail_probability if np.isfinite(m.tail_probability) else None,
+            }
+            for s, m in sorted((systems or {}).items())
+        },
+        "applicability": {
+            "receivers": list(app.receivers),
+            "antennas": list(app.antennas),
+            "receiver_class": app.receiver_class,
+            "frequency": app.frequency,
+            "el_min_deg": app.el_min_deg,
+            "el_max_deg": app.el_max_deg,
+            "method": app.method,
+            "sources": list(app.sources),
+        },
         "fitted": dict(fitted or {}),
         "software_version": __version__,
     }
@@ -135,7 +433,12 @@ def write_error_model(
 
 
 def read_error_model(path: str | Path) -> IntervalModel:
-    """Read an error-model JSON file (:func:`write_error_model`)."""
+    """The envelope model of an error-model file (either format; applicability not checked)."""
+    return read_error_model_file(path).model
+
+
+def read_error_model_file(path: str | Path) -> ErrorModelFile:
+    """Read an error-model JSON file (:func:`write_error_model`; also ``/1`` files)."""
     p = Path(path)
     try:
         d = json.loads(p.read_text())
@@ -149,15 +452,48 @@ def read_error_model(path: str | Path) -> IntervalModel:
         raise ErrorModelFileError(
             f"{p}: not a JSON text file ({exc}); give the file `locator calibrate` wrote"
         ) from exc
-    if not isinstance(d, dict) or d.get("format") != ERROR_MODEL_FORMAT:
+    fmt = d.get("format") if isinstance(d, dict) else None
+    if fmt not in (ERROR_MODEL_FORMAT, ERROR_MODEL_FORMAT_V1):
         raise ErrorModelFileError(
-            f"{p}: not an error-model file ({ERROR_MODEL_FORMAT}); "
+            f"{p}: not an error-model file ({ERROR_MODEL_FORMAT} or {ERROR_MODEL_FORMAT_V1}); "
             "make one with `locator calibrate`"
         )
+    assert isinstance(d, dict)
     try:
         err = ErrorModel(float(d["a_m"]), float(d["b_m"]), float(d.get("min_el_deg", 1.0)))
-        return IntervalModel(err, float(d.get("k_sigma", 2.0)))
+        model = IntervalModel(err, float(d.get("k_sigma", 2.0)))
     except (KeyError, TypeError, ValueError) as exc:
         raise ErrorModelFileError(
             f"{p}: bad error model ({exc}); expected a_m, b_m, k_sigma"
         ) from exc
+    if fmt == ERROR_MODEL_FORMAT_V1:
+        return ErrorModelFile(model, {}, None, str(p), fmt)
+    try:
+        systems = {
+            str(s): SystemModel(
+                ErrorModel(float(m["a_m"]), float(m["b_m"]), float(m.get("min_el_deg", 1.0))),
+                tuple(str(c) for c in m["codes"]),
+                int(m["n_residuals"]),
+                int(m["n_independent"]),
+                float("nan") if m.get("tail_probability") is None else float(m["tail_probability"]),
+            )
+            for s, m in dict(d["systems"]).items()
+        }
+        a = dict(d["applicability"])
+        app = Applicability(
+            tuple(str(r) for r in a["receivers"]),
+            tuple(str(r) for r in a["antennas"]),
+            str(a.get("receiver_class", "")),
+            str(a.get("frequency", "single")),
+            float(a["el_min_deg"]),
+            float(a["el_max_deg"]),
+            str(a.get("method", "")),
+            tuple(str(r) for r in a.get("sources", ())),
+        )
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+        raise ErrorModelFileError(
+            f"{p}: bad {ERROR_MODEL_FORMAT} file ({exc!r}); expected 'systems' (per system a_m, "
+            "b_m, codes, n_residuals, n_independent, tail_probability) and 'applicability' "
+            "(receivers, antennas, el_min_deg, el_max_deg); write it again with `locator calibrate`"
+        ) from exc
+    return ErrorModelFile(model, systems, app, str(p), fmt)

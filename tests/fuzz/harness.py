@@ -266,19 +266,25 @@ def _calibration() -> Reader:
 
 def _error_model() -> Reader:
     from predisat.gnss.errormodel import (
+        Applicability,
         ErrorModel,
         ErrorModelFileError,
         IntervalModel,
-        read_error_model,
+        SystemModel,
+        read_error_model_file,
         write_error_model,
     )
 
+    e = ErrorModel(0.3, 1.2, 5.0)
     with tempfile.TemporaryDirectory() as tmp:
-        p = write_error_model(Path(tmp) / "em.json", IntervalModel(ErrorModel(0.3, 1.2, 5.0), 2.0),
-                              {"n": 120, "note": "fuzz seed"})  # fmt: skip
+        p = write_error_model(Path(tmp) / "em.json", IntervalModel(e, 2.0),
+                              {"n": 120, "note": "fuzz seed"},
+                              systems={"G": SystemModel(e, ("C1C",), 1200, 60, 0.05)},
+                              applicability=Applicability(("TRIMBLE NETR9",), ("ANT",),
+                                                          el_min_deg=5.0))  # fmt: skip
         seed = {"input.json": p.read_bytes()}
     return Reader(
-        "error_model", (seed,), (), lambda f: read_error_model(_single(f)),
+        "error_model", (seed,), (), lambda f: read_error_model_file(_single(f)),
         (ErrorModelFileError,),
     )  # fmt: skip
 

@@ -20,7 +20,14 @@ from locator.runio import read_run
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SignalState, SimRun
 from locator.workflow import check_track
-from predisat.gnss.errormodel import read_error_model
+from predisat.gnss.errormodel import (
+    Applicability,
+    ErrorModel,
+    IntervalModel,
+    SystemModel,
+    read_error_model,
+    write_error_model,
+)
 from predisat.track.map import demo_track
 from tests.locator._scene import canyon_world
 
@@ -91,13 +98,22 @@ def test_calibrate_learns_the_simulated_noise(sim_dir, tmp_path):
     _, meta = read_run(tmp_path / "cut")
     assert meta["config"]["locator"]["model"]["error"]["a_m"] == pytest.approx(model.error.a_m)
     # the default is the overbound of the least-squares estimate, which --bound estimate writes
-    fitted = json.loads(out.read_text())["fitted"]
-    assert fitted["bound"] == "overbound" and fitted["overbound_factor"] >= 1.0
+    # a simulation's systems share one clock and one noise law: fitted together (pooled)
+    written = json.loads(out.read_text())
+    fitted = written["fitted"]
+    assert fitted["bound"] == "overbound" and fitted["pooled_systems"] == "CEGJR"
+    g = fitted["system_G"]
+    assert g["factor"] >= 1.0 and g == fitted["system_E"]
+    # it applies to simulated receivers, on the simulator's 'sim' code, from the elevations fitted
+    app = written["applicability"]
+    assert app["receivers"] == ["simulated"] and app["receiver_class"] == "simulated"
+    assert written["systems"]["G"]["codes"] == ["sim"]
+    assert written["systems"]["G"]["n_independent"] <= written["systems"]["G"]["n_residuals"]
     est = tmp_path / "estimate.json"
     assert main(["calibrate", "--sim", str(sim_dir), "--bound", "estimate", "--out", str(est)]) == 0
     estimate = read_error_model(est).error
-    assert estimate.a_m == pytest.approx(fitted["estimate"]["a_m"])
-    assert model.error.b_m == pytest.approx(estimate.b_m * fitted["overbound_factor"])
+    assert estimate.a_m == pytest.approx(g["estimate"]["a_m"])
+    assert model.error.b_m == pytest.approx(estimate.b_m * g["factor"])
 
 
 def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
@@ -220,13 +236,46 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     ep, meta = read_run(tmp_path / "real")
     assert len(ep) == 10 and meta["source"]["source"] == "rinex"
     # the start came from the header position projected on the track: the middle, 1000 m
-    assert meta["start_chainage_m"] == pytest.approx(1000.0, abs=20.0)
-    assert (ep["n_used"] >= 6).all() and ep["claim"].all()
+    # the built-in model is the simulator's: no safety claim on a real receiver, positions
+    # given and flagged, the message says which model is missing and how to make one
+    assert (ep["n_used"] >= 6).all() and not ep["claim"].any()
+    assert ep["flag_names"].str.contains("NO_ERROR_MODEL").all()
+    err = capsys.readouterr().err
+    assert "NO SAFETY CLAIM" in err and "TRIMBLE 5700" in err and "locator calibrate" in err
     # SATHIA on real single-frequency ranges: within a few metres of the station
     assert np.abs(ep["chainage_m"] - 1000.0).max() < 5.0
     assert ((ep["lo_m"] <= 1000.0) & (1000.0 <= ep["hi_m"])).all()
     assert main(["evaluate", str(tmp_path / "real"), "--truth-chainage", "1000"]) == 0
     assert "epochs 10" in capsys.readouterr().out
+    # a model stating this receiver, antenna and code claims; another antenna does not
+    e = ErrorModel(2.0, 2.0)
+    sys_g = {"G": SystemModel(e, ("C1",), 1000, 100, 0.05)}
+
+    def model(name: str, antenna: str) -> str:
+        app = Applicability(("TRIMBLE 5700",), (antenna,), el_min_deg=5.0)
+        return str(write_error_model(tmp_path / name, IntervalModel(e), systems=sys_g,
+                                     applicability=app))  # fmt: skip
+
+    for name, antenna, claims in (("same.json", "TRM29659.00", True),
+                                  ("other.json", "LEIAR25.R3      LEIT", False)):  # fmt: skip
+        run = str(tmp_path / f"run_{name}")
+        assert main([*args[:-1], run, "--error-model", model(name, antenna)]) == 0
+        ep, meta = read_run(run)
+        assert ep["claim"].all() == claims and ep["claim"].any() == claims
+        assert meta["config"]["model_el_min_deg"] == 5.0
+    assert "antenna 'TRM29659.00' is not among" in capsys.readouterr().err
+    # a locator-error-model/1 file says nothing of what it was calibrated for: no claim unless
+    # forced, and the message says so
+    old = tmp_path / "v1.json"
+    old.write_text(json.dumps({"format": "locator-error-model/1", "a_m": 2.0, "b_m": 2.0,
+                               "min_el_deg": 1.0, "k_sigma": 2.0}))  # fmt: skip
+    assert main([*args[:-1], str(tmp_path / "v1"), "--error-model", str(old)]) == 0
+    assert not read_run(tmp_path / "v1")[0]["claim"].any()
+    assert "locator-error-model/1" in capsys.readouterr().err
+    assert main([*args[:-1], str(tmp_path / "v1f"), "--error-model", str(old),
+                 "--force-error-model"]) == 0  # fmt: skip
+    assert read_run(tmp_path / "v1f")[0]["claim"].all()
+    assert "--force-error-model" in capsys.readouterr().err
 
 
 def test_start_and_truth_chainages_off_the_track_or_masks_are_refused(sim_dir, tmp_path, capsys):

@@ -6,11 +6,20 @@ import numpy as np
 import pytest
 
 from locator.corrections import RangeModel
-from locator.errorfit import binned_sigma, calibration_figure, static_residuals
+from locator.errorfit import (
+    Residuals,
+    binned_sigma,
+    calibration_figure,
+    fit_systems,
+    guess_receiver_class,
+    model_file_parts,
+    static_residuals,
+    station_residuals,
+)
 from locator.intervals import fit_error_model
 from locator.observations import read_rinex_obs
 from locator.sources import RinexSource
-from predisat.gnss.errormodel import ErrorModel
+from predisat.gnss.errormodel import ErrorModel, ReceiverProfile
 
 STATION = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GEONET 0759, SOURCE.md
 
@@ -49,3 +58,51 @@ def test_binned_sigma_and_fit_recover_a_known_model():
     assert np.allclose(fit.sigma_m(grid), truth.sigma_m(grid), rtol=0.05)
     fig = calibration_figure(table, fit)
     assert len(fig.axes[0].lines) == 2
+
+
+def test_receiver_profiles_from_rinex_headers(test_data):
+    obs = read_rinex_obs(test_data / "gnss_obs" / "07590920_10ep.05o")
+    model = RangeModel.from_rinex_nav(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    r = station_residuals(RinexSource(model, obs, "G"), STATION, min_el_deg=10.0)
+    # the header says TRIMBLE 5700 / TRM29659.00 and the file holds C1 (RINEX 2) for GPS
+    assert r.profile == ReceiverProfile("TRIMBLE 5700", "TRM29659.00", {"G": ("C1",)})
+    assert r.sats == obs.sats and r.el_deg.shape == (10, len(obs.sats))
+    assert guess_receiver_class(r.profile.receiver_type) == ""
+    phone = read_rinex_obs(test_data / "gnss_obs" / "android_rinex_obs_pixel6_6ep.23o")
+    assert guess_receiver_class(phone.header.receiver_type, phone.header.program) == "phone"
+
+
+def _synthetic(rng, n_ep, models, name="rx"):
+    """Residuals of 8 satellites per system (shared clock) drawn from each system's model."""
+    sats = tuple(f"{s}{k + 1:02d}" for s in models for k in range(8))
+    el = np.degrees(np.arcsin(rng.uniform(np.sin(np.radians(5.0)), 1.0, (n_ep, len(sats)))))
+    sd = np.concatenate([np.broadcast_to(m.sigma_m(el[:, 8 * i : 8 * i + 8]), (n_ep, 8))
+                         for i, m in enumerate(models.values())], axis=1)  # fmt: skip
+    res = rng.normal(size=el.shape) * sd + rng.normal(0.0, 300.0, (n_ep, 1))
+    prof = ReceiverProfile(name.upper(), "ANT", {s: ("C1C",) for s in models})
+    return Residuals(el, res, sats, prof, name)
+
+
+def test_each_constellation_is_fitted_apart():
+    rng = np.random.default_rng(2)
+    truth = {"G": ErrorModel(0.3, 0.5), "E": ErrorModel(1.5, 1.0)}
+    data = [_synthetic(rng, 800, truth, "a"), _synthetic(rng, 800, truth, "b")]
+    fits = fit_systems(data)
+    assert set(fits) == {"G", "E"}
+    for s, m in truth.items():
+        f = fits[s]
+        # the estimate of each system is its own law's (sigma at 30 deg within 10 %)
+        assert float(f.estimate.sigma_m(30.0)) == pytest.approx(float(m.sigma_m(30.0)), rel=0.1)
+        assert f.n_residuals == 2 * 800 * 8 and f.codes == ("C1C",)
+        assert f.overbound is not None and f.overbound.factor >= 1.0
+        sm = f.system_model()
+        assert sm.n_independent <= sm.n_residuals and 0 < sm.tail_probability < 0.05
+    model, systems, app = model_file_parts(fits, data, k_sigma=2.0, receiver_class="geodetic")
+    assert app.receivers == ("A", "B") and app.receiver_class == "geodetic"
+    assert 5.0 <= app.el_min_deg < 6.0 and app.sources == ("a", "b")
+    assert model.error.a_m == max(systems["G"].error.a_m, systems["E"].error.a_m)
+    # pooled (a simulation's systems share one law): one fit given to both
+    pooled = fit_systems(data, pool_systems=True)
+    assert pooled["G"].estimate == pooled["E"].estimate and pooled["G"].system == "EG"
+    with pytest.raises(ValueError, match="bound"):
+        fit_systems(data, bound="maybe")

@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 from locator.intervals import (
     along_track_g,
@@ -233,3 +234,62 @@ def test_overbound_guards():
         overbound_error_model(el, res, max_tail_share=0.9)
     with pytest.raises(ValueError, match="tail"):
         overbound_error_model(el, res, min_tail=10_000)
+
+
+def test_confident_overbound_counts_independent_samples():
+    # AR(1) errors of known lag-1 correlation 0.9 (per satellite, along the epochs): n residuals
+    # are worth n (1 - 0.9) / (1 + 0.9) independent ones
+    truth = ErrorModel(a_m=0.5, b_m=1.0)
+    rng = np.random.default_rng(7)
+    n_ep, rho = 3000, 0.9
+    el = np.full((n_ep, 9), np.nan)
+    el[:] = np.degrees(np.arcsin(rng.uniform(np.sin(np.radians(5.0)), 1.0, (1, 9))))
+    w = rng.normal(size=(n_ep, 9))
+    u = np.empty_like(w)
+    u[0] = w[0]
+    for t in range(1, n_ep):
+        u[t] = rho * u[t - 1] + np.sqrt(1 - rho**2) * w[t]
+    res = u * truth.sigma_m(el) + rng.normal(0.0, 300.0, (n_ep, 1))
+    ob = overbound_error_model(el, res, truth, confidence=0.95)
+    assert ob.lag1_correlation == pytest.approx(rho, abs=0.03)
+    assert ob.independent_share == pytest.approx((1 - rho) / (1 + rho), rel=0.3)
+    white = overbound_error_model(*_residuals(rng, n_ep, truth.sigma_m)[:2], truth,
+                                  confidence=0.95)  # fmt: skip
+    assert white.lag1_correlation < 0.05 and white.independent_share > 0.9
+    # the deepest tail checked lies beyond the 10 residuals' share (a confidence bound) and far
+    # deeper with independent samples than with correlated ones
+    n_bin = white.bin_n.min()
+    assert 2 * 10 / n_bin < white.tail_probability < 2 * 25 / n_bin
+    assert ob.tail_probability > 5 * white.tail_probability
+    # without confidence: the empirical two-sided share of before, no sample size
+    legacy = overbound_error_model(el, res, truth)
+    assert np.isnan(legacy.tail_probability) and legacy.independent_share == 1.0
+
+
+def test_confident_overbound_bounds_a_one_sided_tail():
+    # errors with a heavy right tail (a reflected path only ever adds length): the pooled
+    # two-sided check averages it with the light left tail; the one-sided check does not
+    base = ErrorModel(a_m=0.5, b_m=1.0)
+    rng = np.random.default_rng(4)
+
+    def draw(n_ep):
+        el = np.degrees(np.arcsin(rng.uniform(np.sin(np.radians(5.0)), 1.0, (n_ep, 9))))
+        z = rng.normal(size=el.shape)
+        z = np.where(rng.random(el.shape) < 0.02, np.abs(z) * 5.0, z)  # 2 %: 5x, positive
+        clock = rng.normal(0.0, 300.0, (n_ep, 1))
+        return el, z * base.sigma_m(el) + clock, clock
+
+    el, res, _ = draw(3000)
+    legacy = overbound_error_model(el, res, base)
+    sided = overbound_error_model(el, res, base, confidence=0.95)
+    assert sided.factor > legacy.factor
+    el2, res2, clock2 = draw(6000)
+    e2 = res2 - clock2 - np.mean(res2 - clock2, axis=1, keepdims=True)  # as clock-free as fitted
+    z_side = e2 / sided.model.sigma_m(el2)
+    # the heavy right tail of fresh errors stays within the Gaussian's one-sided tail at 2, 2.5
+    # and 3 sigma (0.15, 0.28, 0.56 of it with seed 4; the two-sided check's bound: 0.19, 0.41,
+    # 1.06, past the Gaussian at 3 sigma)
+    for k in (2.0, 2.5, 3.0):
+        assert np.mean(z_side > k) < norm.sf(k), k
+    with pytest.raises(ValueError, match="confidence"):
+        overbound_error_model(el, res, base, confidence=1.0)

@@ -192,3 +192,28 @@ def test_uncorrected_ionosphere_is_flagged_and_widens_the_intervals(path):
     assert wide["iono_uncorrected"].all()
     np.testing.assert_allclose(none["length_m"], base["length_m"])
     assert (wide["length_m"] > 2.0 * base["length_m"]).all()
+
+
+def test_no_applicable_error_model_gives_positions_without_claim(path):
+    truth = truth_run(n=6)
+    src = FakeSource(path, truth)
+    cfg = RunConfig(MODEL, trust="none", error_model_applies=False)
+    ep = run_locator(path, src, start_chainage_m=truth[0], config=cfg)
+    assert not ep["claim"].any()
+    assert ep["flag_names"].str.contains("NO_ERROR_MODEL").all()
+    # the positions are there, and as good as with the model
+    assert np.abs(ep["chainage_m"] - truth).max() < 10.0
+    assert ((ep["flags"].to_numpy(int) & int(RunFlag.NO_ERROR_MODEL)) > 0).all()
+
+
+def test_satellites_below_the_model_range_are_left_out(path):
+    truth = truth_run(n=4)
+    cfg = RunConfig(MODEL, trust="none", model_el_min_deg=32.0)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg)
+    low = {f"G{k + 1:02d}" for k in np.flatnonzero(EL < 32.0)}
+    assert len(low) == 3
+    for excl, used in zip(ep["excluded"], ep["used"], strict=True):
+        assert {i.split(":")[0] for i in excl.split() if i.endswith(":below_model")} == low
+        assert not low & set(used.split())
+    with pytest.raises(ValueError, match="model_el_min_deg"):
+        RunConfig(MODEL, model_el_min_deg=95.0)

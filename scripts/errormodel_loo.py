@@ -1,0 +1,232 @@
+"""Leave-one-receiver-out validation of the error-model overbound on every usable real station.
+
+For each station of ``../shared/data/gnss`` with observations, broadcast navigation and a
+known position, and each of its constellations, an error model is calibrated on the *other*
+stations' residuals of that constellation (``locator.errorfit.fit_systems``: each system apart,
+a geodetic-class model) and the held-out station is located with it on straight virtual tracks
+through its known position at four headings (``locator_static.virtual_track``; no masks: open
+sky, active integrity, the odometer reads zero). The station's chainage (2000 m) is the truth.
+
+Stations (all geodetic; the smartphone logs cannot be run, see ``docs/errormodel.md``):
+
+* GEONET 0759 and 3040 (Trimble 5700, GPS C1, 2005-04-02, 1 h at 30 s);
+* Ny-Alesund NYA1 (Trimble NetR9, GPS C1C, Galileo C1X, 2024-05-03, a day at 30 s; runs on
+  every ``--nya-step``-th epoch, calibration on all);
+* Copenhagen KMS3 (Septentrio PolaRx5, GPS C1C, Galileo C1C, 2022-06-08, 1 h at 30 s).
+
+Variants: ``new`` (one-sided tails against the 95 % Clopper-Pearson bound of their share in
+independent samples, ``confidence=0.95``), ``legacy`` (the two-sided empirical share of
+before), ``estimate`` (the least-squares fit, no bound: to show that the check can fail), each
+at ``k_sigma`` 2 (the source's) and 3.89. Whether the model *applies* to the
+held-out station (receiver class geodetic, codes, processing) is reported; the runs claim as if
+it did, so that the model's quality is measured on every station.
+
+Prints one row per held-out station, system and variant (epochs, applies, claim share, HMI,
+interval median / p95, Stanford regions) and the totals per variant; writes the table
+(``loo.csv``) and a Stanford diagram per variant into ``--out``. Residuals are cached in
+``--cache`` (the NYA1 day takes about 80 s per system to compute).
+
+Usage::
+
+    .venv/bin/python scripts/errormodel_loo.py --out /tmp/loo [--data ../shared/data/gnss]
+        [--cache /tmp/loo_cache] [--nya-step 4] [--variants new,legacy,estimate] [--k 2,3.89]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from locator_static import GEONET_0759_ECEF_M, HALF_LENGTH_M, HEADINGS_DEG, virtual_track
+
+from locator.corrections import RangeModel
+from locator.errorfit import Residuals, fit_systems, model_file_parts, station_residuals
+from locator.evaluate import score_run, summarise
+from locator.fde import LocatorConfig
+from locator.observations import Observations
+from locator.plots import stanford_diagram
+from locator.run import RunConfig, run_locator
+from locator.sathia import AntennaPath
+from locator.sources import RinexSource
+from predisat.gnss.errormodel import ErrorModelFile, IntervalModel, ReceiverProfile
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Station:
+    name: str
+    obs: str
+    nav: tuple[str, ...]
+    systems: str
+    ecef_m: tuple[float, float, float] | None = None  # None: the header position
+
+
+NYA = "georust_rinex/NYA100NOR_S_20241240000_01D_"
+STATIONS = (
+    Station(
+        "0759",
+        "rtklib/07590920.05o",
+        ("rtklib/07590920.05n",),
+        "G",
+        tuple(GEONET_0759_ECEF_M.tolist()),
+    ),
+    Station("3040", "rtklib/30400920.05o", ("rtklib/30400920.05n",), "G"),
+    Station("NYA1", NYA + "30S_MO.crx.gz", tuple(f"{NYA}{s}N.rnx.gz" for s in "GEC"), "GE"),
+    Station(
+        "KMS3",
+        "georust_rinex/KMS300DNK_R_20221591000_01H_30S_MO.crx",
+        ("georust_rinex/KMS300DNK_R_20221591000_01H_MN.rnx.gz",),
+        "GE",
+    ),
+)
+
+
+def every(obs: Observations, step: int) -> Observations:
+    """Every ``step``-th epoch of ``obs``."""
+    if step <= 1:
+        return obs
+    k = slice(None, None, step)
+    return dataclasses.replace(
+        obs, gps_s=obs.gps_s[k], values={c: v[k] for c, v in obs.values.items()},
+        lli={c: v[k] for c, v in obs.lli.items()}, snr={c: v[k] for c, v in obs.snr.items()},
+        epoch_flag=obs.epoch_flag[k], rx_clock_offset_s=obs.rx_clock_offset_s[k],
+        epoch_line=obs.epoch_line[k],
+    )  # fmt: skip
+
+
+def residuals(st: Station, system: str, src: RinexSource, x: np.ndarray, cache: Path) -> Residuals:
+    """The station's residuals of one system (cached: ``cache/<name>_<system>.npz``)."""
+    f = cache / f"{st.name}_{system}.npz"
+    if f.is_file():
+        z = np.load(f, allow_pickle=False)
+        p = json.loads(str(z["profile"]))
+        prof = ReceiverProfile(p["receiver_type"], p["antenna_type"],
+                               {k: tuple(v) for k, v in p["codes"].items()})  # fmt: skip
+        return Residuals(z["el"], z["res"], tuple(z["sats"].tolist()), prof, st.obs)
+    r = station_residuals(src, x)
+    cache.mkdir(parents=True, exist_ok=True)
+    prof_json = json.dumps({"receiver_type": r.profile.receiver_type,
+                            "antenna_type": r.profile.antenna_type,
+                            "codes": {k: list(v) for k, v in r.profile.codes.items()}})  # fmt: skip
+    np.savez(f, el=r.el_deg, res=r.residual_m, sats=np.array(r.sats), profile=prof_json)
+    return dataclasses.replace(r, source=st.obs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "gnss")
+    ap.add_argument("--out", type=Path, required=True, help="table and Stanford diagrams")
+    ap.add_argument("--cache", type=Path, help="residual cache (default: OUT/cache)")
+    ap.add_argument(
+        "--nya-step",
+        type=int,
+        default=4,
+        help="NYA1 runs on every N-th epoch (default 4: 720 epochs at 120 s)",
+    )
+    ap.add_argument(
+        "--variants", default="new,legacy,estimate", help="new, legacy, estimate (comma separated)"
+    )
+    ap.add_argument("--k", default="2,3.89", help="k_sigma values, comma separated")
+    args = ap.parse_args(argv)
+    cache = args.cache or args.out / "cache"
+    variants = [v.strip() for v in args.variants.split(",")]
+    ks = [float(v) for v in args.k.split(",")]
+    sources: dict[tuple[str, str], tuple[RinexSource, np.ndarray, int]] = {}
+    data: dict[tuple[str, str], Residuals] = {}
+    for st in STATIONS:
+        obs = Observations.from_rinex(args.data / st.obs)
+        nav = RangeModel.from_rinex_nav([args.data / n for n in st.nav])
+        x = np.asarray(st.ecef_m if st.ecef_m else obs.header.approx_position_ecef_m, float)
+        step = args.nya_step if st.name == "NYA1" else 1
+        run_obs = every(obs, step)
+        for s in st.systems:
+            data[st.name, s] = residuals(st, s, RinexSource(nav, obs, s), x, cache)
+            odo = np.zeros(len(run_obs.gps_s))
+            sources[st.name, s] = (RinexSource(nav, run_obs, s, odometer=odo), x, step)
+        print(f"{st.name}: {obs.header.receiver_type} / {obs.header.antenna_type}, "
+              f"{len(obs.gps_s)} epochs, systems {st.systems}", flush=True)  # fmt: skip
+    rows: list[dict] = []
+    scored_all: dict[tuple[str, float], list[pd.DataFrame]] = {}
+    for (name, s), (src, x, _step) in sources.items():
+        train = [d for (n2, s2), d in data.items() if s2 == s and n2 != name]
+        if not train:
+            print(f"{name} {s}: no other station of system {s}: no LOO model")
+            continue
+        held = data[name, s]
+        profile = dataclasses.replace(held.profile, receiver_class="geodetic")
+        for variant in variants:
+            conf = 0.95 if variant == "new" else None
+            bound = "estimate" if variant == "estimate" else "overbound"
+            try:
+                fits = fit_systems(train, confidence=conf, bound=bound)
+            except ValueError as exc:
+                print(f"{name} {s} {variant}: no LOO model ({exc})", flush=True)
+                continue
+            model, systems, app = model_file_parts(
+                fits, train, k_sigma=2.0, receiver_class="geodetic", method=bound
+            )
+            mf = ErrorModelFile(model, systems, app)
+            why = mf.mismatches(profile)
+            sm = systems[s]
+            for k in ks:
+                scored = []
+                for hd in HEADINGS_DEG:
+                    path = AntennaPath(virtual_track(x, hd), 0.0)
+                    cfg = RunConfig(LocatorConfig(model=IntervalModel(sm.error, k)), trust="none",
+                                    model_el_min_deg=app.el_min_deg)  # fmt: skip
+                    ep = run_locator(path, src, start_chainage_m=HALF_LENGTH_M, config=cfg)
+                    scored.append(score_run(ep, np.full(len(ep), HALF_LENGTH_M)))
+                sc = pd.concat(scored, ignore_index=True)
+                scored_all.setdefault((variant, k), []).append(sc)
+                sm_ = summarise(sc)
+                rows.append({
+                    "station": name, "system": s, "variant": variant, "k": k,
+                    "trained_on": "+".join(n2 for (n2, s2) in data if s2 == s and n2 != name),
+                    "a_m": sm.error.a_m, "b_m": sm.error.b_m, "n_indep": sm.n_independent,
+                    "tail_p": sm.tail_probability, "applies": "yes" if not why else
+                    "; ".join(why), "epochs": int(sm_["epochs"]),
+                    "claim_share": sm_["claim_share"], "hmi": int(sm_["hmi"]),
+                    "len_median_m": sm_["length_median_m"], "len_p95_m": sm_["length_p95_m"],
+                    **{c: int(v) for c, v in sm_.items() if c.startswith("stanford_")},
+                })  # fmt: skip
+                r = rows[-1]
+                print(f"{name} {s} {variant} k={k:g}: a {r['a_m']:.2f} b {r['b_m']:.2f} m, "
+                      f"{r['n_indep']} indep., tail {r['tail_p']:.2g}; {r['epochs']} epochs, "
+                      f"claim {100 * r['claim_share']:.1f} %, HMI {r['hmi']}, length "
+                      f"{r['len_median_m']:.1f} / {r['len_p95_m']:.1f} m; applies: "
+                      f"{r['applies']}", flush=True)  # fmt: skip
+    table = pd.DataFrame(rows)
+    args.out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(args.out / "loo.csv", index=False)
+    pd.set_option("display.width", 250)
+    cols = ["station", "system", "variant", "k", "a_m", "b_m", "n_indep", "tail_p", "epochs",
+            "claim_share", "hmi", "len_median_m", "len_p95_m"]  # fmt: skip
+    print(table[cols].round(3).to_string(index=False))
+    print("totals:")
+    for (variant, k), parts in scored_all.items():
+        sc = pd.concat(parts, ignore_index=True)
+        t = summarise(sc)
+        print(
+            f"  {variant} k={k:g}: {int(t['epochs'])} epochs, claim {100 * t['claim_share']:.1f} "
+            f"%, HMI {int(t['hmi'])}, interval median {t['length_median_m']:.1f} m, p95 "
+            f"{t['length_p95_m']:.1f} m; Stanford "
+            + ", ".join(f"{c[9:]} {int(v)}" for c, v in t.items() if c.startswith("stanford_"))
+        )
+        what = {"new": "new overbound", "legacy": "two-sided overbound",
+                "estimate": "estimate (no bound)"}.get(variant, variant)  # fmt: skip
+        fig = stanford_diagram(sc, f"leave one receiver out, {what}, k = {k:g}")
+        fig.savefig(args.out / f"stanford_{variant}_k{k:g}.png", dpi=100)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

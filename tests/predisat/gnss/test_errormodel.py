@@ -1,0 +1,120 @@
+"""Error-model files (locator-error-model/2): what a model applies to, and the /1 files."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from predisat.gnss.errormodel import (
+    Applicability,
+    ErrorModel,
+    ErrorModelFileError,
+    IntervalModel,
+    ReceiverProfile,
+    SystemModel,
+    default_model_file,
+    read_error_model,
+    read_error_model_file,
+    write_error_model,
+)
+
+GPS = SystemModel(ErrorModel(0.6, 0.4), ("C1C",), 30000, 1500, 0.02)
+GAL = SystemModel(ErrorModel(0.9, 0.3), ("C1C", "C1X"), 20000, 900, 0.04)
+APP = Applicability(("TRIMBLE NETR9",), ("ASH701073.1     SNOW",), "", "single", 5.0, 88.0,
+                    "overbound", ("nya1.crx",))  # fmt: skip
+
+
+def _profile(rx="TRIMBLE NETR9", ant="ASH701073.1     SNOW", codes=None, **kw):
+    return ReceiverProfile(rx, ant, codes or {"G": ("C1C",)}, **kw)
+
+
+@pytest.fixture
+def model_file(tmp_path):
+    env = IntervalModel(ErrorModel(0.9, 0.4), 3.0)
+    p = write_error_model(tmp_path / "m.json", env, {"note": "x"},
+                          systems={"G": GPS, "E": GAL}, applicability=APP)  # fmt: skip
+    return read_error_model_file(p)
+
+
+def test_round_trip_keeps_systems_and_applicability(model_file):
+    assert model_file.format == "locator-error-model/2"
+    assert model_file.systems == {"G": GPS, "E": GAL} and model_file.applicability == APP
+    assert model_file.model == IntervalModel(ErrorModel(0.9, 0.4), 3.0)
+    assert read_error_model(model_file.path) == model_file.model
+    assert model_file.el_min_deg == 5.0
+    # k of a two-sided Gaussian at the checked tail probability: Q^-1(0.01) = 2.326
+    assert GPS.k_checked == pytest.approx(2.3263, abs=1e-3)
+
+
+def test_model_applies_only_to_its_receiver_antenna_codes_and_processing(model_file):
+    assert model_file.mismatches(_profile()) == []
+    assert model_file.mismatches(_profile(codes={"G": ("C1C",), "E": ("C1X",)})) == []
+    # case and blanks do not matter; the receiver's name does
+    assert model_file.mismatches(_profile(rx=" trimble  netr9")) == []
+    why = model_file.mismatches(_profile(rx="SEPT POLARX5"))
+    assert len(why) == 1 and "SEPT POLARX5" in why[0]
+    assert "antenna" in " ".join(model_file.mismatches(_profile(ant="LEIAR25.R3      LEIT")))
+    assert "system C" in " ".join(model_file.mismatches(_profile(codes={"C": ("C2I",)})))
+    assert "C1W" in " ".join(model_file.mismatches(_profile(codes={"G": ("C1W",)})))
+    assert "dual" in " ".join(model_file.mismatches(_profile(frequency="dual")))
+
+
+def test_class_models_and_unknown_receivers(tmp_path):
+    phones = Applicability(("Unknown",), ("Unknown",), "phone", el_min_deg=10.0)
+    p = write_error_model(tmp_path / "phone.json", IntervalModel(ErrorModel(5.0, 5.0)),
+                          systems={"G": GPS}, applicability=phones)  # fmt: skip
+    mf = read_error_model_file(p)
+    # a receiver named "Unknown" is not identified by the name: only the class can match it
+    assert mf.mismatches(_profile("Unknown", "Unknown")) != []
+    assert mf.mismatches(_profile("Unknown", "Unknown", receiver_class="phone")) == []
+    assert mf.mismatches(_profile(receiver_class="geodetic")) != []
+
+
+def test_envelope_of_the_systems_used(model_file):
+    assert model_file.for_systems(["G"]) == IntervalModel(ErrorModel(0.6, 0.4), 3.0)
+    assert model_file.for_systems(["G", "E"]) == IntervalModel(ErrorModel(0.9, 0.4), 3.0)
+    # a system without a model: the file's envelope (the run is then not claimed anyway)
+    assert model_file.for_systems(["C"]) == model_file.model
+
+
+def test_v1_files_apply_to_nothing(tmp_path):
+    p = tmp_path / "v1.json"
+    p.write_text(json.dumps({"format": "locator-error-model/1", "a_m": 1.0, "b_m": 2.0,
+                             "min_el_deg": 3.0, "k_sigma": 2.5}))  # fmt: skip
+    mf = read_error_model_file(p)
+    assert mf.applicability is None and mf.systems == {}
+    assert mf.model == IntervalModel(ErrorModel(1.0, 2.0, 3.0), 2.5)
+    (why,) = mf.mismatches(_profile())
+    assert "locator-error-model/1" in why and str(p) in why
+
+
+def test_default_model_applies_to_simulations_only():
+    d = default_model_file()
+    sim = ReceiverProfile("simulated", "simulated", {"G": ("sim",), "E": ("sim",)},
+                          receiver_class="simulated")  # fmt: skip
+    assert d.mismatches(sim) == []
+    assert d.mismatches(_profile()) != []
+    assert d.mismatches(_profile("Unknown", "Unknown", receiver_class="phone")) != []
+
+
+def test_bad_v2_file_is_named(tmp_path):
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps({"format": "locator-error-model/2", "a_m": 1.0, "b_m": 2.0}))
+    with pytest.raises(ErrorModelFileError, match=r"bad\.json.*applicability"):
+        read_error_model_file(p)
+    with pytest.raises(ValueError, match="receiver_class"):
+        ReceiverProfile("x", "y", {}, receiver_class="tractor")
+
+
+def test_unchecked_tails_and_estimates_support_no_claim(tmp_path):
+    thin = SystemModel(ErrorModel(0.6, 0.4), ("C1C",), 240, 12, 1.0)  # no tail point checked
+    p = write_error_model(tmp_path / "thin.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": thin}, applicability=APP)  # fmt: skip
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "12 independent samples" in why
+    est = Applicability(APP.receivers, APP.antennas, method="estimate")
+    p = write_error_model(tmp_path / "est.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": GPS}, applicability=est)  # fmt: skip
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "estimate" in why
