@@ -504,3 +504,42 @@ def test_camera_ceiling_needs_the_view_up_to_the_zenith_and_clamps_at_the_horizo
     assert np.isinf(rows(64.0, 25.0)[0, 2:]).all()
     np.testing.assert_allclose(rows(89.94, 25.0)[0, 2:], np.tan(np.radians(25.0)))
     np.testing.assert_allclose(rows(89.94, -5.0)[0, 2:], 0.0)
+
+
+def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> None:
+    """A camera that saw an obstacle above 45 deg straight along the track (a cantilever over
+    the antenna) marks its chainage as overhead; lower obstacles, views that never reached
+    45 deg, cab cameras and the rule switched off do not."""
+    from dataclasses import replace
+
+    from predisat.reconstruct.carving import ReconstructionParams, _along_blocked, _along_overhead
+    from predisat.reconstruct.skyline import SkyProfile
+
+    rel = np.arange(-90.0, 90.01, 0.5)
+    look = -90.0  # a left camera on a track heading north: rel +90 is straight ahead
+    p = ReconstructionParams()
+
+    def case(top_deg: float, seen_hi: float = 90.0, side: str = "left",
+             params: ReconstructionParams = p) -> bool:
+        el = np.where(np.abs(rel - 90.0) <= 3.0, top_deg, 10.0)  # an obstacle ahead only
+        prof = SkyProfile(rel, el, np.full(rel.size, 0.0), np.full(rel.size, seen_hi), look)
+        m = Mount(side, -look, 45.0, 0.0, (0.0, 0.0, -0.5))
+        f = FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0)
+        got = _along_blocked(prof, f, params)
+        assert _along_overhead([f], [prof], params) == (
+            [(100.0 - params.overhead_along_spread_m, 100.0 + params.overhead_along_spread_m)]
+            if got else []
+        )
+        return got
+
+    assert case(60.0)
+    assert not case(30.0)  # below the threshold: far along the track, the carving's business
+    assert not case(60.0, seen_hi=40.0)  # never saw 45 deg there: nothing to say
+    assert not case(60.0, side="front")  # a cab camera looks along the track itself
+    assert not case(60.0, params=replace(p, overhead_along_el_deg=None))
+    # the same obstacle seen behind (heading reversed by 180 deg is the same track line)
+    el = np.where(np.abs(rel + 90.0) <= 3.0, 60.0, 10.0)
+    prof = SkyProfile(rel, el, np.full(rel.size, 0.0), np.full(rel.size, 90.0), look)
+    f = FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE,
+                  Mount("left", 90.0, 45.0, 0.0, (0.0, 0.0, -0.5)), np.zeros(3), 0.0)
+    assert _along_blocked(prof, f, p)
