@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.reconstruct.skyline import (
+    LOW_CONFIDENCE_WINDOW_DEG,
     Rectifier,
     _raise_skyline,
     leading_sky_rows,
     skyline_directions,
 )
-from predisat.sky.segment import fisheye_valid_mask
+from predisat.sky.segment import confidence_window_px, fisheye_valid_mask
 
 PITCH = 45.0
 VFOV = 74.0
@@ -308,3 +310,89 @@ def test_sky_run_end_by_pixel_runs_matches_a_walk_down_the_grid() -> None:
                 r += 1
             ref[b] = r
         np.testing.assert_array_equal(got, ref)
+
+
+def _equirect_sky(camera: CameraModel, el_deg: float) -> np.ndarray:
+    """Level equirectangular panorama whose skyline is ``el_deg`` everywhere, from the
+    format's definition (row ``v`` centre at ``90 - (v + 0.5) * 180 / H`` deg), not from the
+    camera model."""
+    h = camera.height_px
+    el = 90.0 - (np.arange(h) + 0.5) * 180.0 / h
+    return np.repeat((el > el_deg)[:, None], camera.width_px, axis=1)
+
+
+@pytest.mark.parametrize("width_px", [720, 1440])
+def test_a_panorama_raises_low_confidence_columns_by_an_angle(width_px: int) -> None:
+    """Half and full resolution panoramas lose the same angle of sky above a low-confidence
+    skyline: the sky pixels whose centre lies less than windows x window_deg above it."""
+    cam = CameraModel.equirect(width_px)
+    mount = Mount.default("roof")
+    rect = Rectifier.build(cam, mount)
+    h, w = cam.height_px, cam.width_px
+    step = 180.0 / h
+    sky_el = 10.0  # a pixel edge at both resolutions
+    sky = _equirect_sky(cam, sky_el)
+    low = np.zeros(w, bool)
+    low[w // 2 - w // 16 : w // 2 + w // 16] = True  # 45 deg of azimuth around the look
+    conf = np.where(low, 0.1, 0.9)
+    ref = rect.profile(sky, 0.0)
+    for windows, window_deg in ((2.0, 4.6), (1.0, 3.0), (3.0, 1.1)):
+        raise_deg = windows * window_deg
+        prof = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=windows,
+                            low_confidence_window_deg=window_deg)  # fmt: skip
+        # sky pixels k = 0, 1, ... above the edge have their centre (k + 0.5) step above it
+        n_lost = int(np.ceil(raise_deg / step - 0.5))
+        expected_raise = n_lost * step
+        j = np.argmin(np.abs(prof.rel_az_deg))
+        assert prof.sky_el_deg[j] - ref.sky_el_deg[j] == pytest.approx(expected_raise, abs=0.13)
+        assert expected_raise == pytest.approx(raise_deg, abs=step / 2 + 1e-9)
+        # azimuths well away from the low columns are untouched
+        far = np.abs(prof.rel_az_deg) > 30.0
+        assert np.array_equal(prof.sky_el_deg[far], ref.sky_el_deg[far])
+    # inf voids the low columns, a NaN window size is refused
+    void = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg[np.abs(void.rel_az_deg) < 15.0]).all()
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="low_confidence_window_deg"):
+            rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=bad)
+
+
+def test_the_panorama_window_is_the_side_fisheyes_window_in_degrees() -> None:
+    """LOW_CONFIDENCE_WINDOW_DEG against the shipped side fisheye, through OpenCV's own
+    fisheye model (not the camera module): one confidence window of rows in the centre column,
+    at skylines 0 to 45 deg up, spans at most the constant and no less than 0.3 deg under it."""
+    cam = default_camera("fisheye")
+    spans = []
+    for scale in (0.5, 1.0):
+        h, w = round(cam.height_px * scale), round(cam.width_px * scale)
+        k = np.array([[cam.fx * scale, 0.0, (w - 1) / 2.0], [0.0, cam.fy * scale, (h - 1) / 2.0],
+                      [0.0, 0.0, 1.0]])  # fmt: skip
+        band, gap = confidence_window_px(h)
+        rows = np.arange(h, dtype=np.float64)
+        pts = np.stack([np.full(h, (w - 1) / 2.0), rows], axis=-1)[:, None, :]
+        und = cv2.fisheye.undistortPoints(pts, k, np.array(cam.dist))[:, 0, :]
+        # centre column of a camera 45 deg up: elevation 45 deg minus the angle below the axis
+        el = PITCH - np.degrees(np.arctan(und[:, 1]))
+        win = el[: h - band - gap] - el[band + gap :]  # rows r vs r + window, at row r + window
+        at = el[band + gap :]
+        spans.append(win[(at >= 0.0) & (at <= 45.0)])
+    top = max(float(s.max()) for s in spans)
+    assert top <= LOW_CONFIDENCE_WINDOW_DEG
+    assert top >= LOW_CONFIDENCE_WINDOW_DEG - 0.3
+
+
+def test_frame_cameras_keep_windows_of_rows(pinhole: CameraModel) -> None:
+    """The angular window is for panoramas only: a pinhole or fisheye profile does not
+    depend on it (the side rigs' masks stay bit for bit what they were)."""
+    for cam in (pinhole, default_camera("fisheye").resized(400, 300)):
+        mount = Mount.default("left")
+        rect = Rectifier.build(cam, mount)
+        sky = elevation_sky(cam, mount, 0.0, 20.0)
+        conf = np.ones(cam.width_px)
+        conf[cam.width_px // 3 : cam.width_px // 2] = 0.0
+        a = rect.profile(sky, 0.0, confidence=conf)
+        b = rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=1.0)
+        c = rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=30.0)
+        assert np.array_equal(a.sky_el_deg, b.sky_el_deg)
+        assert np.array_equal(a.sky_el_deg, c.sky_el_deg)
+        assert not np.array_equal(a.sky_el_deg, rect.profile(sky, 0.0).sky_el_deg)
