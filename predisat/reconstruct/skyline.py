@@ -453,16 +453,17 @@ def _raise_skyline(
 
 
 def _raise_skyline_deg(
-    sky: NDArray, cols: NDArray, raise_deg: float, el_deg: NDArray, from_row: NDArray
+    sky: NDArray, cols: NDArray, raise_deg: float, el_deg: NDArray,
+    from_row: NDArray | None = None,
 ) -> NDArray:
     """As :func:`_raise_skyline` with the raise as an angle: the top sky run of each column
     of ``cols`` loses its lowest pixels whose elevation ``el_deg`` (H, W) lies less than
     ``raise_deg`` above the skyline's (the top edge of the first obstacle pixel, halfway
     between the two pixels' elevations; the last sky pixel's for a column sky to the bottom),
-    and every sky pixel below. ``inf`` voids the whole run."""
+    and every sky pixel below. ``inf`` voids the whole run; ``from_row`` as there."""
     out = np.array(sky, np.bool_)
     c = np.unique(np.asarray(cols, np.int64))
-    top = np.asarray(from_row, np.int64)[c]
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
     _raise_columns_deg(out, c, top, np.asarray(el_deg, np.float64), float(raise_deg))
     return out
 

@@ -11,6 +11,7 @@ from predisat.reconstruct.skyline import (
     LOW_CONFIDENCE_WINDOW_DEG,
     Rectifier,
     _raise_skyline,
+    _raise_skyline_deg,
     leading_sky_rows,
     skyline_directions,
 )
@@ -153,6 +154,44 @@ def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expec
     assert "".join("1" if v else "0" for v in out[:, 0]) == expected
     assert out[:, 1].all()
     assert np.array_equal(sky, before)  # the input is not modified
+
+
+@pytest.mark.parametrize(
+    ("column", "raise_deg", "expected"),
+    [
+        # elevations 60, 50, ..., 0 deg down the rows (10 deg per row)
+        # the edge is at 15 deg; the sky rows' centres 5, 15, 25 and 35 deg above it
+        ("0111100", 4.0, "0111100"),
+        ("0111100", 6.0, "0111000"),
+        ("0111100", 25.1, "0100000"),
+        ("0111100", 35.1, "0000000"),  # the whole run
+        ("0110110", 1.0, "0110000"),  # still no sky below the top run
+        ("1111111", 15.0, "1111100"),  # all sky: the edge is the last row's centre
+        ("0111100", np.inf, "0000000"),
+    ],
+)
+def test_raise_skyline_deg_on_hand_written_columns(
+    column: str, raise_deg: float, expected: str
+) -> None:
+    sky = np.array([[c == "1", True] for c in column])
+    el = np.repeat((60.0 - 10.0 * np.arange(len(column)))[:, None], 2, axis=1)
+    before = sky.copy()
+    out = _raise_skyline_deg(sky, np.array([0]), raise_deg, el)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == expected
+    assert out[:, 1].all()
+    assert np.array_equal(sky, before)
+
+
+def test_raise_skyline_deg_counts_a_pixel_without_a_ray_as_within() -> None:
+    """A NaN elevation (no ray) never stops the raise: the safe side."""
+    sky = np.array([[c == "1"] for c in "0111100"])
+    el = (60.0 - 10.0 * np.arange(7))[:, None].copy()
+    el[3, 0] = np.nan  # 30 deg: the second sky row up
+    out = _raise_skyline_deg(sky, np.array([0]), 4.0, el)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "0111100"  # 5 deg up: kept
+    out = _raise_skyline_deg(sky, np.array([0]), 6.0, el)
+    # the 5 deg row goes, the NaN row too, the 25 deg row stops the raise
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "0110000"
 
 
 def test_raise_skyline_leaves_the_rows_above_the_grid_alone() -> None:
