@@ -184,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("eval_rigs.json"))
     ap.add_argument("--reuse", action="store_true",
                     help="keep the rendered surveys and segmentation caches of an earlier run "
-                    "in --work (same seeds, length and scale); reconstruct and score again")
+                    "in --work (same seeds, length and scale); reconstruct and score again "
+                    "(in place: a copied folder has new file times and is segmented again)")
     args = ap.parse_args(argv)
     track = demo_track()
     rows: list[dict[str, Any]] = []
