@@ -20,6 +20,9 @@ Usage::
     PYTHONPATH=. .venv/bin/python scripts/eval_rigs.py --seeds 11 12 13 --length-m 1000 \\
         --scale 0.5 --work /tmp/eval_rigs --out eval_rigs.json
 
+``--reuse`` keeps the rendered surveys and the segmentation caches of an earlier run in the
+same ``--work`` folder and only reconstructs and scores again (a reconstruction change).
+
 Prints a table per rig (and the pooled figures over the seeds) and writes the JSON.
 """
 
@@ -41,7 +44,7 @@ from predisat.masks.truth import TrueMasks
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.carving import Reconstructor
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
-from predisat.synth.generate import generate_survey
+from predisat.synth.generate import SynthResult, generate_survey
 from predisat.synth.truth import ideal_frames
 from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track.map import demo_track
@@ -105,18 +108,41 @@ def score_ideal(rig: Rig, truth_dir: Path) -> dict[str, float]:
     return _counts(rec.mask_el_deg.astype(float), tm.mask_el_deg, sector, "ideal_")
 
 
-def run_one(rig: Rig, seed: int, lo_m: float, hi_m: float, work: Path) -> dict[str, Any]:
-    """Render, process and score one rig on one seed's world."""
+def _reusable(out: Path) -> SynthResult | None:
+    """The rendered survey of an earlier run in ``out`` (``None`` if it did not finish)."""
+    synth = out / "synth"
+    frames = synth / "truth" / "frames.csv"
+    if not (frames.exists() and (synth / "truth" / "true_masks.npz").exists()):
+        return None
+    n_frames = sum(1 for _ in frames.open()) - 1  # a header line, one line per frame
+    n_positions = int(TrueMasks.load(synth / "truth" / "true_masks.npz").chainage_m.size)
+    return SynthResult(synth, synth / "survey", synth / "truth", n_positions, n_frames)
+
+
+def run_one(rig: Rig, seed: int, lo_m: float, hi_m: float, work: Path,
+            reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Render, process and score one rig on one seed's world.
+
+    ``reuse``: keep the rendered survey and the segmentation cache of an earlier run in the
+    same ``work`` folder (same rig, seed, run and scale) and reconstruct again, e.g. after a
+    change of the reconstruction only (the cache is keyed by the segmentation code).
+    """
     out = work / f"{rig.name.replace('+', '_')}_s{seed}"
-    if out.exists():
-        shutil.rmtree(out)
-    track = demo_track()
-    c0 = time.process_time()
-    res = generate_survey(
-        track, lo_m, hi_m, seed=seed, out_dir=out / "synth", spec=held_out_spec(lo_m, hi_m, seed),
-        rig=rig, progress=False,
-    )  # fmt: skip
-    render_cpu = time.process_time() - c0
+    res = _reusable(out) if reuse else None
+    render_cpu = 0.0
+    if res is None:
+        if out.exists():
+            shutil.rmtree(out)
+        c0 = time.process_time()
+        res = generate_survey(
+            demo_track(), lo_m, hi_m, seed=seed, out_dir=out / "synth",
+            spec=held_out_spec(lo_m, hi_m, seed), rig=rig, progress=False,
+        )  # fmt: skip
+        render_cpu = time.process_time() - c0
+    else:  # everything but the segmentation cache goes
+        for item in (out / "proc").glob("*"):
+            if item.name != "cache":
+                shutil.rmtree(item) if item.is_dir() else item.unlink()
     c0 = time.process_time()
     proc = process_survey(res.survey_dir, out / "proc", scheduler="serial", progress=False)
     cpu = time.process_time() - c0
@@ -156,6 +182,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale", type=float, default=0.5, help="camera resolution factor")
     ap.add_argument("--work", type=Path, default=Path("/tmp/eval_rigs"))
     ap.add_argument("--out", type=Path, default=Path("eval_rigs.json"))
+    ap.add_argument("--reuse", action="store_true",
+                    help="keep the rendered surveys and segmentation caches of an earlier run "
+                    "in --work (same seeds, length and scale); reconstruct and score again "
+                    "(in place: a copied folder has new file times and is segmented again)")
     args = ap.parse_args(argv)
     track = demo_track()
     rows: list[dict[str, Any]] = []
@@ -166,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         lo = round(lo, -1)
         for name in args.rigs:
             row = run_one(Rig.preset(name).scaled(args.scale), seed, lo, lo + args.length_m,
-                          args.work)  # fmt: skip
+                          args.work, args.reuse)  # fmt: skip
             rows.append(row)
             print(f"{name:>17} seed {seed} km {lo / 1000:.1f}: sky lost across "
                   f"{100 * row['sky_lost_cross']:.2f} % along {100 * row['sky_lost_along']:.2f} %,"

@@ -46,7 +46,7 @@ from predisat.reconstruct.heightfield import (
     carve_profile,
     corridor_grid,
 )
-from predisat.reconstruct.skyline import Rectifier, SkyProfile
+from predisat.reconstruct.skyline import LOW_CONFIDENCE_WINDOW_DEG, Rectifier, SkyProfile
 from predisat.track import TrackMap
 
 __all__ = [
@@ -129,6 +129,10 @@ class ReconstructionParams:
     low_confidence_windows : float
         By how many confidence windows (the rows either side of a skyline its confidence
         speaks for); ``inf``: such columns clear nothing.
+    low_confidence_window_deg : float
+        A confidence window of a panoramic (``"equirect"``) camera, degrees of elevation
+        (:data:`~predisat.reconstruct.skyline.LOW_CONFIDENCE_WINDOW_DEG`: the side fisheye's
+        window of rows as an angle); frame cameras keep windows of their own rows.
     rectify_az_step_deg, rectify_el_step_deg : float
         Sky-profile sampling.
     descriptor_min_el_deg : float
@@ -175,6 +179,7 @@ class ReconstructionParams:
     position_tol_m: float = 5.0
     min_confidence: float = 0.5
     low_confidence_windows: float = 2.0
+    low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG
     rectify_az_step_deg: float = 0.25
     rectify_el_step_deg: float = 0.125
     descriptor_min_el_deg: float = 10.0
@@ -203,6 +208,11 @@ class ReconstructionParams:
             raise ValueError(
                 "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
                 "columns clear nothing)"
+            )
+        if not self.low_confidence_window_deg > 0:
+            raise ValueError(
+                "ReconstructionParams.low_confidence_window_deg must be > 0 degrees, got "
+                f"{self.low_confidence_window_deg}"
             )
         if self.fusion_rank < 1:
             raise ValueError(
@@ -395,6 +405,7 @@ class Reconstructor:
                     rect.profile(
                         f.sky_mask, f.heading_deg, f.reverse, f.confidence,
                         self.params.min_confidence, self.params.low_confidence_windows,
+                        self.params.low_confidence_window_deg,
                     )
                 )  # fmt: skip
             except ValueError as exc:
@@ -415,6 +426,7 @@ class Reconstructor:
             out.append(self.rectifier(f.camera, f.mount).profile(
                 solid, f.heading_deg, f.reverse, f.confidence,
                 self.params.min_confidence, self.params.low_confidence_windows,
+                self.params.low_confidence_window_deg,
             ))  # fmt: skip
         return out
 

@@ -36,6 +36,7 @@ from predisat.geodesy import enu_to_azel
 from predisat.sky.segment import confidence_window_px
 
 __all__ = [
+    "LOW_CONFIDENCE_WINDOW_DEG",
     "ColumnSkyline",
     "Rectifier",
     "SkyProfile",
@@ -44,6 +45,14 @@ __all__ = [
 ]
 
 _SKY, _UNSEEN = 255, 128  # grid labels; obstacle 0
+
+LOW_CONFIDENCE_WINDOW_DEG = 4.6
+"""Angular size of one confidence window for a panoramic (``"equirect"``) camera, degrees of
+elevation: what one window of rows (:func:`predisat.sky.segment.confidence_window_px`) spans
+in the centre column of the shipped side fisheye 45 deg up, at skylines 0 to 45 deg up (4.40
+deg at half resolution, 300 rows; 4.59 deg at full resolution, 600 rows; the larger, rounded
+up). Off-centre columns of the fisheye are tilted and span less elevation per row, so a
+panorama's margin is at least the side fisheye's (``docs/rigs.md``)."""
 
 
 def _as_sky_mask(sky: ArrayLike, camera: CameraModel, name: str = "sky_mask") -> NDArray:
@@ -302,6 +311,18 @@ class Rectifier:
         return self._grown_sky(sky) * np.uint8(_SKY)
 
     @cached_property
+    def pixel_el_deg(self) -> NDArray:
+        """Elevation above the local horizontal of every pixel centre's ray, degrees, shape
+        ``camera.shape`` (camera model and mount; the vehicle's z is the vertical, so it does
+        not depend on the heading). NaN for a pixel without a ray."""
+        h, w = self.camera.shape
+        v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+        ray = self.camera.pixel_to_ray(u.ravel(), v.ravel()) @ self.mount.camera_to_vehicle().T
+        el = np.degrees(np.arcsin(np.clip(ray[:, 2], -1.0, 1.0))).reshape(h, w)
+        el.setflags(write=False)
+        return el
+
+    @cached_property
     def _pixel_runs(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """:attr:`pixel_index` down each grid column as runs of one pixel: the runs' first
         grid rows and pixels (flat, column after column), each column's first run (n_b + 1
@@ -335,6 +356,7 @@ class Rectifier:
         confidence: ArrayLike | None = None,
         min_confidence: float = 0.5,
         low_confidence_windows: float = 2.0,
+        low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG,
     ) -> SkyProfile:
         """The frame's :class:`SkyProfile`.
 
@@ -356,6 +378,14 @@ class Rectifier:
             zenith, which every azimuth's top sky run starts from.
         low_confidence_windows : float
             ``inf`` voids low-confidence columns from top to bottom (they clear nothing).
+        low_confidence_window_deg : float
+            For a panoramic (``"equirect"``) camera, a window is this angle of elevation
+            instead of rows: a low-confidence column loses the sky pixels whose ray (camera
+            model and mount) lies less than ``low_confidence_windows *
+            low_confidence_window_deg`` above its skyline. A panorama's rows are a fixed angle
+            each and its confidence comes from tiles (:func:`predisat.sky.panorama
+            .segment_panorama`), not from its own height; frame cameras (pinhole, fisheye)
+            keep windows of their own rows, where their confidence was computed.
         """
         m = _as_sky_mask(sky_mask, self.camera)
         if confidence is not None:
@@ -369,8 +399,18 @@ class Rectifier:
                     f"low_confidence_windows must be >= 0 (inf voids the column), got "
                     f"{low_confidence_windows}"
                 )
+            if not low_confidence_window_deg > 0:
+                raise ValueError(
+                    f"low_confidence_window_deg must be > 0 degrees, got "
+                    f"{low_confidence_window_deg}"
+                )
             low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
-            if low.size:
+            if low.size and self.camera.model == "equirect":
+                m = _raise_skyline_deg(
+                    m, low, low_confidence_windows * low_confidence_window_deg,
+                    self.pixel_el_deg, self.first_read_px_row,
+                )  # fmt: skip
+            elif low.size:
                 h = self.camera.height_px
                 band, gap = confidence_window_px(h)
                 m = _raise_skyline(
@@ -410,6 +450,49 @@ def _raise_skyline(
     top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
     _raise_columns(out, c, top, int(raise_px))
     return out
+
+
+def _raise_skyline_deg(
+    sky: NDArray, cols: NDArray, raise_deg: float, el_deg: NDArray,
+    from_row: NDArray | None = None,
+) -> NDArray:
+    """As :func:`_raise_skyline` with the raise as an angle: the top sky run of each column
+    of ``cols`` loses its lowest pixels whose elevation ``el_deg`` (H, W) lies less than
+    ``raise_deg`` above the skyline's (the top edge of the first obstacle pixel, halfway
+    between the two pixels' elevations; the last sky pixel's for a column sky to the bottom),
+    and every sky pixel below. ``inf`` voids the whole run; ``from_row`` as there."""
+    out = np.array(sky, np.bool_)
+    c = np.unique(np.asarray(cols, np.int64))
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
+    _raise_columns_deg(out, c, top, np.asarray(el_deg, np.float64), float(raise_deg))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _raise_columns_deg(
+    sky: NDArray, cols: NDArray, top: NDArray, el_deg: NDArray, raise_deg: float
+) -> None:
+    """:func:`_raise_skyline_deg` in place (pixels up the run while within the angle)."""
+    n = sky.shape[0]
+    for k in range(cols.size):
+        c = cols[k]
+        start = max(top[k], 0)
+        while start < n and not sky[start, c]:
+            start += 1
+        end = start
+        while end < n and sky[end, c]:
+            end += 1
+        if end == start:  # no sky run: only sky below, which goes
+            cut = start
+        else:
+            e0 = el_deg[end - 1, c]
+            base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
+            cut = end
+            # a NaN elevation counts as within the angle (the safe side: more goes)
+            while cut > start and not el_deg[cut - 1, c] - base >= raise_deg:
+                cut -= 1
+        for r in range(cut, n):
+            sky[r, c] = False
 
 
 @njit(cache=True, nogil=True)

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.reconstruct.skyline import (
+    LOW_CONFIDENCE_WINDOW_DEG,
     Rectifier,
     _raise_skyline,
+    _raise_skyline_deg,
     leading_sky_rows,
     skyline_directions,
 )
-from predisat.sky.segment import fisheye_valid_mask
+from predisat.sky.segment import confidence_window_px, fisheye_valid_mask
 
 PITCH = 45.0
 VFOV = 74.0
@@ -151,6 +154,44 @@ def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expec
     assert "".join("1" if v else "0" for v in out[:, 0]) == expected
     assert out[:, 1].all()
     assert np.array_equal(sky, before)  # the input is not modified
+
+
+@pytest.mark.parametrize(
+    ("column", "raise_deg", "expected"),
+    [
+        # elevations 60, 50, ..., 0 deg down the rows (10 deg per row)
+        # the edge is at 15 deg; the sky rows' centres 5, 15, 25 and 35 deg above it
+        ("0111100", 4.0, "0111100"),
+        ("0111100", 6.0, "0111000"),
+        ("0111100", 25.1, "0100000"),
+        ("0111100", 35.1, "0000000"),  # the whole run
+        ("0110110", 1.0, "0110000"),  # still no sky below the top run
+        ("1111111", 15.0, "1111100"),  # all sky: the edge is the last row's centre
+        ("0111100", np.inf, "0000000"),
+    ],
+)
+def test_raise_skyline_deg_on_hand_written_columns(
+    column: str, raise_deg: float, expected: str
+) -> None:
+    sky = np.array([[c == "1", True] for c in column])
+    el = np.repeat((60.0 - 10.0 * np.arange(len(column)))[:, None], 2, axis=1)
+    before = sky.copy()
+    out = _raise_skyline_deg(sky, np.array([0]), raise_deg, el)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == expected
+    assert out[:, 1].all()
+    assert np.array_equal(sky, before)
+
+
+def test_raise_skyline_deg_counts_a_pixel_without_a_ray_as_within() -> None:
+    """A NaN elevation (no ray) never stops the raise: the safe side."""
+    sky = np.array([[c == "1"] for c in "0111100"])
+    el = (60.0 - 10.0 * np.arange(7))[:, None].copy()
+    el[3, 0] = np.nan  # 30 deg: the second sky row up
+    out = _raise_skyline_deg(sky, np.array([0]), 4.0, el)
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "0111100"  # 5 deg up: kept
+    out = _raise_skyline_deg(sky, np.array([0]), 6.0, el)
+    # the 5 deg row goes, the NaN row too, the 25 deg row stops the raise
+    assert "".join("1" if v else "0" for v in out[:, 0]) == "0110000"
 
 
 def test_raise_skyline_leaves_the_rows_above_the_grid_alone() -> None:
@@ -308,3 +349,89 @@ def test_sky_run_end_by_pixel_runs_matches_a_walk_down_the_grid() -> None:
                 r += 1
             ref[b] = r
         np.testing.assert_array_equal(got, ref)
+
+
+def _equirect_sky(camera: CameraModel, el_deg: float) -> np.ndarray:
+    """Level equirectangular panorama whose skyline is ``el_deg`` everywhere, from the
+    format's definition (row ``v`` centre at ``90 - (v + 0.5) * 180 / H`` deg), not from the
+    camera model."""
+    h = camera.height_px
+    el = 90.0 - (np.arange(h) + 0.5) * 180.0 / h
+    return np.repeat((el > el_deg)[:, None], camera.width_px, axis=1)
+
+
+@pytest.mark.parametrize("width_px", [720, 1440])
+def test_a_panorama_raises_low_confidence_columns_by_an_angle(width_px: int) -> None:
+    """Half and full resolution panoramas lose the same angle of sky above a low-confidence
+    skyline: the sky pixels whose centre lies less than windows x window_deg above it."""
+    cam = CameraModel.equirect(width_px)
+    mount = Mount.default("roof")
+    rect = Rectifier.build(cam, mount)
+    h, w = cam.height_px, cam.width_px
+    step = 180.0 / h
+    sky_el = 10.0  # a pixel edge at both resolutions
+    sky = _equirect_sky(cam, sky_el)
+    low = np.zeros(w, bool)
+    low[w // 2 - w // 16 : w // 2 + w // 16] = True  # 45 deg of azimuth around the look
+    conf = np.where(low, 0.1, 0.9)
+    ref = rect.profile(sky, 0.0)
+    for windows, window_deg in ((2.0, 4.6), (1.0, 3.0), (3.0, 1.1)):
+        raise_deg = windows * window_deg
+        prof = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=windows,
+                            low_confidence_window_deg=window_deg)  # fmt: skip
+        # sky pixels k = 0, 1, ... above the edge have their centre (k + 0.5) step above it
+        n_lost = int(np.ceil(raise_deg / step - 0.5))
+        expected_raise = n_lost * step
+        j = np.argmin(np.abs(prof.rel_az_deg))
+        assert prof.sky_el_deg[j] - ref.sky_el_deg[j] == pytest.approx(expected_raise, abs=0.13)
+        assert expected_raise == pytest.approx(raise_deg, abs=step / 2 + 1e-9)
+        # azimuths well away from the low columns are untouched
+        far = np.abs(prof.rel_az_deg) > 30.0
+        assert np.array_equal(prof.sky_el_deg[far], ref.sky_el_deg[far])
+    # inf voids the low columns, a NaN window size is refused
+    void = rect.profile(sky, 0.0, confidence=conf, low_confidence_windows=np.inf)
+    assert np.isinf(void.sky_el_deg[np.abs(void.rel_az_deg) < 15.0]).all()
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="low_confidence_window_deg"):
+            rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=bad)
+
+
+def test_the_panorama_window_is_the_side_fisheyes_window_in_degrees() -> None:
+    """LOW_CONFIDENCE_WINDOW_DEG against the shipped side fisheye, through OpenCV's own
+    fisheye model (not the camera module): one confidence window of rows in the centre column,
+    at skylines 0 to 45 deg up, spans at most the constant and no less than 0.3 deg under it."""
+    cam = default_camera("fisheye")
+    spans = []
+    for scale in (0.5, 1.0):
+        h, w = round(cam.height_px * scale), round(cam.width_px * scale)
+        k = np.array([[cam.fx * scale, 0.0, (w - 1) / 2.0], [0.0, cam.fy * scale, (h - 1) / 2.0],
+                      [0.0, 0.0, 1.0]])  # fmt: skip
+        band, gap = confidence_window_px(h)
+        rows = np.arange(h, dtype=np.float64)
+        pts = np.stack([np.full(h, (w - 1) / 2.0), rows], axis=-1)[:, None, :]
+        und = cv2.fisheye.undistortPoints(pts, k, np.array(cam.dist))[:, 0, :]
+        # centre column of a camera 45 deg up: elevation 45 deg minus the angle below the axis
+        el = PITCH - np.degrees(np.arctan(und[:, 1]))
+        win = el[: h - band - gap] - el[band + gap :]  # rows r vs r + window, at row r + window
+        at = el[band + gap :]
+        spans.append(win[(at >= 0.0) & (at <= 45.0)])
+    top = max(float(s.max()) for s in spans)
+    assert top <= LOW_CONFIDENCE_WINDOW_DEG
+    assert top >= LOW_CONFIDENCE_WINDOW_DEG - 0.3
+
+
+def test_frame_cameras_keep_windows_of_rows(pinhole: CameraModel) -> None:
+    """The angular window is for panoramas only: a pinhole or fisheye profile does not
+    depend on it (the side rigs' masks stay bit for bit what they were)."""
+    for cam in (pinhole, default_camera("fisheye").resized(400, 300)):
+        mount = Mount.default("left")
+        rect = Rectifier.build(cam, mount)
+        sky = elevation_sky(cam, mount, 0.0, 20.0)
+        conf = np.ones(cam.width_px)
+        conf[cam.width_px // 3 : cam.width_px // 2] = 0.0
+        a = rect.profile(sky, 0.0, confidence=conf)
+        b = rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=1.0)
+        c = rect.profile(sky, 0.0, confidence=conf, low_confidence_window_deg=30.0)
+        assert np.array_equal(a.sky_el_deg, b.sky_el_deg)
+        assert np.array_equal(a.sky_el_deg, c.sky_el_deg)
+        assert not np.array_equal(a.sky_el_deg, rect.profile(sky, 0.0).sky_el_deg)
