@@ -59,16 +59,16 @@ def main(argv: list[str] | None = None) -> int:
         for k, sch in enumerate(schedulers):
             out = tmp / f"out{k}"
             res = run_campaign(out, setup, jobs, sch)
+            same = "(reference)"
             if k == 0:
                 base_s = res.wall_s
-                same = "(reference)"
+            elif all((out / f).read_bytes() == (tmp / "out0" / f).read_bytes() for f in _FILES):
+                same = "identical"
             else:
-                same = all(
-                    (out / f).read_bytes() == (tmp / "out0" / f).read_bytes() for f in _FILES
-                )
-                same = "identical" if same else "DIFFERENT"
-            print(f"{sch.describe():<34} {res.wall_s:7.1f} {len(jobs) / res.wall_s:7.2f} "
-                  f"{len(res.frames) / res.wall_s:9.0f} {base_s / res.wall_s:8.2f}x  {same}")  # fmt: skip
+                same = "DIFFERENT"
+            wall = res.wall_s
+            print(f"{sch.describe():<34} {wall:7.1f} {len(jobs) / wall:7.2f} "
+                  f"{len(res.frames) / wall:9.0f} {base_s / wall:8.2f}x  {same}")  # fmt: skip
     finally:
         shutil.rmtree(tmp)
     return 0
