@@ -53,9 +53,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         help="worlds, true masks and the learned error model, built on first use and read "
         "afterwards (default OUT/cache)",
     )  # fmt: skip
-    p.add_argument("--worlds", nargs="+", choices=WORLD_NAMES, default=list(WORLD_NAMES),
+    p.add_argument("--worlds", nargs="*", choices=WORLD_NAMES, default=list(WORLD_NAMES),
                    metavar="NAME", help=f"worlds to run, of {', '.join(WORLD_NAMES)} "
-                   "(default all)")  # fmt: skip
+                   "(default all; none with --demo: the demo world only)")  # fmt: skip
     p.add_argument(
         "--demo",
         type=existing_dir("a `predisat demo --out` folder (truth/world.npz, masks/masks.parquet)"),
@@ -112,6 +112,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     from predisat.scheduler import Scheduler
 
     scheduler = Scheduler.parse(args.scheduler, args.workers)
+    if args.demo is None and not args.worlds:
+        raise ValueError("--worlds without names: no world to run; name some, or add --demo DIR")
     if args.demo is None and set(args.configs) <= {"pipeline", "pipeline_budget"}:
         raise ValueError(
             f"--configs {' '.join(args.configs)}: the pipeline rules need the pipeline masks of "
