@@ -60,7 +60,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         "--demo",
         type=existing_dir("a `predisat demo --out` folder (truth/world.npz, masks/masks.parquet)"),
         metavar="DIR",
-        help="add the demo world and its pipeline masks (the pipeline rules)",
+        help="add the demo world and its pipeline masks (the pipeline rules; default: none, "
+        "the synthetic worlds only)",
     )
     p.add_argument("--runs-per-world", type=positive_int, default=_RUNS_PER_WORLD, metavar="N",
                    help=f"runs per world (default {_RUNS_PER_WORLD}); more runs keep the "

@@ -156,3 +156,7 @@ def test_command_refuses_pipeline_rules_without_demo(
     assert code == 2
     assert "--demo" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+    code = main(["campaign", "--out", str(tmp_path / "c"), "--worlds", "--scheduler", "serial"])
+    assert code == 2
+    assert "no world to run" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
