@@ -1,5 +1,5 @@
 """Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo,
-balises.
+balises, campaign.
 
 Errors from bad input are printed as one message naming the file and the fix (exit code 2).
 """
@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from locator.balises.command import add_parser as add_balises_parser
+from locator.campaign_command import add_parser as add_campaign_parser
 from locator.demostep import format_demo_table
 from predisat import __version__
 from predisat.cli.args import (
@@ -836,6 +837,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_calibrate(sub)
     _add_demo(sub)
     add_balises_parser(sub)  # `locator balises`: arguments and job in locator.balises
+    add_campaign_parser(sub)  # `locator campaign`: locator.campaign_command
     return parser
 
 

@@ -304,8 +304,11 @@ class TaskRunner:
             return
         client = self.client()
         tag = f"predisat-{name}-{uuid.uuid4().hex[:8]}"
-        # a task, not scattered data: if the worker holding it dies, it is computed again
-        shared_f = client.submit(_identity, shared, key=f"{tag}-shared")
+        # a task, not scattered data: if the worker holding it dies, it is computed again.
+        # Its key's first word differs from the items' so that it forms a task group of its
+        # own (dask.utils.key_split keeps the first word, then stops at a hex or 8-letter
+        # one): in the items' group, the scheduler kept every item on the worker holding it
+        shared_f = client.submit(_identity, shared, key=f"shared-{tag}")
         futures = [
             client.submit(fn, shared_f, it, key=f"{tag}-{k}", pure=False)
             for k, it in enumerate(items)

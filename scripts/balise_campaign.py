@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing as mp
-import sys
 import time
 import zlib
 from dataclasses import dataclass
@@ -38,13 +37,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import locator_campaign as lc
-
 from locator.balises.balisefile import BaliseList
 from locator.balises.campaign import capture_table, locate_with_odometry
 from locator.balises.capture import Q_LOCACC_MAX_M, CaptureConfig
 from locator.balises.placement import placement_check
+from locator.campaign import PROFILE_T_S, PROFILE_V_MPS, WorldData, calibrate, load_world
+from locator.campaign import WORLDS as CAMPAIGN_WORLDS
 from locator.fde import LocatorConfig
 from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.odometer import OdometerConfig
@@ -104,9 +102,15 @@ def _init(cache: str) -> None:
 
 def _world(name: str) -> tuple[World, MaskSet, ReflectorIndex]:
     if name not in _STATE["worlds"]:
-        world, masks, _ = lc._world(name, _STATE["cache"])
+        data = _campaign_world(name, _STATE["cache"])
+        world, masks = data.world, data.masks
         _STATE["worlds"][name] = (world, masks, ReflectorIndex(world))
     return _STATE["worlds"][name]
+
+
+def _campaign_world(name: str, cache: Path) -> WorldData:
+    """World ``name`` of the locator campaign (:data:`locator.campaign.WORLDS`)."""
+    return load_world(next(w for w in CAMPAIGN_WORLDS if w.name == name), cache)
 
 
 def _kind_at(world: World, chainage_m: np.ndarray) -> np.ndarray:
@@ -130,7 +134,7 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
     if job.kind == "cruise":
         profile = SpeedProfile.constant(job.speed_kmh / 3.6)
     else:
-        profile = SpeedProfile.from_time_table(lc.PROFILE_T_S, lc.PROFILE_V_MPS)
+        profile = SpeedProfile.from_time_table(list(PROFILE_T_S), list(PROFILE_V_MPS))
     grid = np.arange(0.0, 3000.0, 0.5)
     duration = float(np.floor(np.interp(span, profile.distance_at(grid), grid)))
     seed = zlib.crc32(job.name.encode()) % 100_000
@@ -231,9 +235,7 @@ def _do(args: tuple[Job, str]) -> tuple[str, float]:
     return job.name, time.perf_counter() - t
 
 
-def jobs_for(
-    runs: int, rates: tuple[float, ...], stopgo_runs: int, runs_fast: int
-) -> list[Job]:
+def jobs_for(runs: int, rates: tuple[float, ...], stopgo_runs: int, runs_fast: int) -> list[Job]:
     """1 Hz cruise jobs first, then stop-and-go, then the faster rates (``runs_fast`` runs per
     world: ten times the epochs per run)."""
     jobs = []
@@ -356,9 +358,7 @@ def miss_report(caps: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def placement_report(
-    epochs: pd.DataFrame, cache: Path
-) -> tuple[pd.DataFrame, pd.DataFrame]:
+def placement_report(epochs: pd.DataFrame, cache: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The placement rule per balise, and the measured fused reach in each tunnel against it.
 
     Balises every 30 m of each world, the trailer axle's bounds, the tunnels as outages. The
@@ -375,7 +375,7 @@ def placement_report(
     acc = OdometerAccuracy.from_config(ODOMETERS["trailer-radar"])
     rows, check = [], []
     for w in WORLDS:
-        world, _, _ = lc._world(w, cache)
+        world = _campaign_world(w, cache).world
         lo, hi = world.extent_m
         b = np.arange(lo + 30.0, hi - 30.0, SPACING_M)
         q, ok_b = placement_check(b, np.ones(len(b)), [], acc, open_reach)
@@ -455,9 +455,9 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
-    lc.calibrate(cache)
+    calibrate(cache)
     for w in WORLDS:  # build and cache the worlds once, before the workers start
-        lc._world(w, cache)
+        _campaign_world(w, cache)
     jobs = jobs_for(args.runs_per_world, tuple(args.rates), args.stopgo_runs, args.runs_fast)
     todo = [(j, str(out / j.name)) for j in jobs
             if not Path(f"{out / j.name}_epochs.parquet").exists()]  # fmt: skip

@@ -14,6 +14,16 @@ def scaled(shared: int, item: int) -> tuple[int, int]:
     return item, shared * item
 
 
+def worker_of(shared: float, item: int) -> str:
+    """The address of the worker that ran the task (after ``shared`` seconds of sleep)."""
+    import time
+
+    from distributed import get_worker
+
+    time.sleep(shared)
+    return str(get_worker().address)
+
+
 def fails_on_three(shared: int, item: int) -> int:
     if item == 3:
         raise ValueError("item 3 is bad")
@@ -70,6 +80,17 @@ def test_a_cluster_by_address_runs_the_same_tasks(threads_cluster: str) -> None:
             list(runner.map_unordered(fails_on_three, 0, items))
         client = runner.client()
     assert client.status == "closed"  # the runner closed its client, not the cluster
+
+
+def test_the_tasks_of_a_map_spread_over_the_workers(threads_cluster: str) -> None:
+    # the shared value is a task every item depends on; were it in the items' task group
+    # (dask.utils.key_split of its key), the scheduler would keep every item on its worker
+    # (an 8-letter name such as "campaign" ends key_split's group name early: covered too)
+    for name in ("spread", "campaign"):
+        with TaskRunner(Scheduler.parse(threads_cluster)) as runner:
+            used = list(runner.map_unordered(worker_of, 0.2, list(range(8)), name))
+            workers = runner.client().scheduler_info()["workers"]
+        assert len(workers) == 2 and set(used) == set(workers), name
 
 
 def test_an_address_where_no_scheduler_answers_is_named(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,0 +1,153 @@
+"""The ``locator campaign`` sub-command: its arguments and its entry point.
+
+:func:`add_parser` registers the sub-command on the ``locator`` command line
+(:mod:`locator.cli` calls it); :func:`cmd_campaign` runs it through
+:func:`locator.campaign.run_campaign`. The names below repeat :data:`locator.campaign.WORLDS`
+and :data:`locator.campaign.CONFIGS` so that ``locator --help`` does not import the simulator
+(a test keeps them equal).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from predisat.cli.args import (
+    add_command,
+    existing_dir,
+    integrity_risk,
+    output_dir,
+    output_file,
+    positive_int,
+)
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+
+__all__ = ["CONFIG_NAMES", "WORLD_NAMES", "add_parser", "cmd_campaign"]
+
+WORLD_NAMES = ("mixed-1", "mixed-2", "mixed-3", "mixed-4", "canyon")
+"""Names of :data:`locator.campaign.WORLDS`."""
+CONFIG_NAMES = (
+    "masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline", "pipeline_budget",
+)  # fmt: skip
+"""Names of :data:`locator.campaign.CONFIGS`."""
+_RUNS_PER_WORLD = 88
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
+    """Add ``campaign`` to the sub-parsers of the ``locator`` command line."""
+    p = add_command(
+        sub, "campaign",
+        "simulated campaign: worlds x start times x rules, on Dask, resumable",
+        "Simulate train runs in synthetic worlds at start times spread over the day and locate "
+        "each under every rule (true masks, none, 15 deg cut-off, k = 2, integrity budget, "
+        "pipeline masks); one Parquet file per run under OUT/jobs (a rerun skips the finished "
+        "ones), then OUT/epochs.parquet, summary.csv, summary.json, campaign.png and one "
+        "Stanford diagram per rule (docs/locator.md, campaign).",
+    )  # fmt: skip
+    p.add_argument("--out", required=True, type=output_dir, metavar="DIR",
+                   help="output folder (created; an existing one is resumed)")  # fmt: skip
+    p.add_argument(
+        "--cache", type=output_dir, metavar="DIR",
+        help="worlds, true masks and the learned error model, built on first use and read "
+        "afterwards (default OUT/cache)",
+    )  # fmt: skip
+    p.add_argument("--worlds", nargs="*", choices=WORLD_NAMES, default=list(WORLD_NAMES),
+                   metavar="NAME", help=f"worlds to run, of {', '.join(WORLD_NAMES)} "
+                   "(default all; none with --demo: the demo world only)")  # fmt: skip
+    p.add_argument(
+        "--demo",
+        type=existing_dir("a `predisat demo --out` folder (truth/world.npz, masks/masks.parquet)"),
+        metavar="DIR",
+        help="add the demo world and its pipeline masks (the pipeline rules; default: none, "
+        "the synthetic worlds only)",
+    )
+    p.add_argument("--runs-per-world", type=positive_int, default=_RUNS_PER_WORLD, metavar="N",
+                   help=f"runs per world (default {_RUNS_PER_WORLD}); more runs keep the "
+                   "finished ones")  # fmt: skip
+    p.add_argument("--configs", nargs="+", choices=CONFIG_NAMES, default=list(CONFIG_NAMES),
+                   metavar="RULE", help=f"rules, of {', '.join(CONFIG_NAMES)} (default all; "
+                   "the pipeline ones need --demo)")  # fmt: skip
+    p.add_argument(
+        "--integrity-risk", type=integrity_risk, default=DEFAULT_RISK_PER_EPOCH, metavar="P",
+        help="integrity risk per epoch of the *_budget rules (default "
+        f"{DEFAULT_RISK_PER_EPOCH:g}); the other rules fix their k (docs/locator.md)",
+    )  # fmt: skip
+    p.add_argument(
+        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        help="where the runs run: a local Dask cluster (default), this process (serial), or "
+        "an existing Dask cluster by its scheduler's address (tcp://HOST:8786; its workers "
+        "need no shared folder)",
+    )  # fmt: skip
+    p.add_argument(
+        "--workers", type=positive_int, metavar="N",
+        help="worker processes of the local cluster (default: the machine's cores), threads "
+        "with --scheduler serial (default 1)",
+    )  # fmt: skip
+    p.add_argument(
+        "--figure",
+        type=output_file,
+        metavar="PNG",
+        help="write the summary figure here too (default only OUT/campaign.png)",
+    )
+    p.set_defaults(func=cmd_campaign)
+    return p
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    """Run ``locator campaign``; prints the summary per rule."""
+    import pandas as pd
+
+    from locator.campaign import (
+        WORLDS,
+        CampaignSetup,
+        calibrate,
+        demo_world,
+        figure,
+        jobs_for,
+        load_world,
+        run_campaign,
+        stanford,
+    )
+    from predisat.scheduler import Scheduler
+
+    scheduler = Scheduler.parse(args.scheduler, args.workers)
+    if args.demo is None and not args.worlds:
+        raise ValueError("--worlds without names: no world to run; name some, or add --demo DIR")
+    if args.demo is None and set(args.configs) <= {"pipeline", "pipeline_budget"}:
+        raise ValueError(
+            f"--configs {' '.join(args.configs)}: the pipeline rules need the pipeline masks of "
+            "a `predisat demo` folder; add --demo DIR"
+        )
+    out: Path = args.out
+    cache: Path = args.cache or out / "cache"
+    quiet = bool(getattr(args, "quiet", False))
+
+    def say(text: str) -> None:
+        if not quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    t = time.perf_counter()
+    model = calibrate(cache)
+    say(f"error model: {model} ({time.perf_counter() - t:.0f} s)")
+    worlds = {}
+    for spec in WORLDS:
+        if spec.name in args.worlds:
+            t = time.perf_counter()
+            worlds[spec.name] = load_world(spec, cache)
+            say(f"world {spec.name} ready ({time.perf_counter() - t:.0f} s)")
+    if args.demo is not None:
+        worlds["demo"] = demo_world(args.demo)
+    setup = CampaignSetup(model, tuple(args.configs), args.integrity_risk, worlds)
+    jobs = jobs_for(list(worlds), args.runs_per_world)
+    say(f"{scheduler.describe()}")
+    result = run_campaign(out, setup, jobs, scheduler, log=say)
+    per_rule = result.frames.groupby("config", sort=False).size()
+    say(f"{result.ran} runs done now, {len(jobs)} in all; {int(per_rule.iloc[0]):,} epochs per "
+        f"rule ({result.wall_s:.0f} s)")  # fmt: skip
+    figure(result.frames, result.table, [out / "campaign.png", *filter(None, [args.figure])])
+    stanford(result.frames, out)
+    with pd.option_context("display.width", 200):
+        print(result.table.T.to_string(float_format=lambda v: f"{v:.4g}"))
+    return 0
