@@ -7,6 +7,8 @@ the track options and the kilometre range.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
@@ -56,8 +58,34 @@ def run_main(
         parser.print_help()
         return 0
     name = label.format(command=getattr(args, "command", ""))
+    note = (interrupted_note or {}).get(getattr(args, "command", ""), "")
+    seen: list[int] = []
+
+    def on_sigint(signum: int, frame: object) -> None:
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    # a KeyboardInterrupt raised inside a ctypes callback (numba loading its cache through
+    # llvmlite) is printed and swallowed there, and the run went on to exit 0: the handler
+    # remembers the Ctrl-C so that the command still ends as interrupted
+    previous = None
+    with contextlib.suppress(ValueError):  # not the main thread: the default handling stays
+        previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        return int(args.func(args))
+        return _run_func(args, name, note, seen)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _run_func(args: argparse.Namespace, name: str, note: str, seen: list[int]) -> int:
+    """``args.func(args)`` with the exits of :func:`run_main`."""
+    try:
+        code = int(args.func(args))
+        if seen:
+            print(f"\n{name}: interrupted{note}", file=sys.stderr)
+            return 130
+        return code
     except ModuleNotFoundError as exc:
         if exc.name not in SYNTH_MODULES:
             raise
@@ -73,7 +101,6 @@ def run_main(
         # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it
         if not caused_by_interrupt(exc):  # a genuine SystemError
             raise
-        note = (interrupted_note or {}).get(getattr(args, "command", ""), "")
         print(f"\n{name}: interrupted{note}", file=sys.stderr)
         return 130
 

@@ -129,3 +129,33 @@ def test_a_killed_client_leaves_no_worker_and_resumes(
     _, alive = psutil.wait_procs(kids, timeout=10)
     assert alive == []  # the worker processes died with their client
     assert _finish(survey, out) == reference
+
+
+def test_a_ctrl_c_swallowed_by_a_ctypes_callback_still_ends_as_interrupted(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """numba loads its cache through llvmlite's ctypes callbacks; a KeyboardInterrupt raised in
+    one is printed and swallowed by ctypes, and the command used to go on and exit 0."""
+    import argparse
+    import ctypes
+    import signal
+
+    from predisat.cli.common import run_main
+
+    ran = []
+
+    def inner() -> None:
+        signal.raise_signal(signal.SIGINT)  # the handler raises here, inside the callback
+
+    def func(args: argparse.Namespace) -> int:
+        ctypes.CFUNCTYPE(None)(inner)()
+        ran.append("after")  # the interrupt did not stop this: ctypes swallowed it
+        return 0
+
+    parser = argparse.ArgumentParser()
+    parser.set_defaults(func=func, command="job")
+    before = signal.getsignal(signal.SIGINT)
+    assert run_main(parser, [], "tool {command}", interrupted_note={"job": "; rerun"}) == 130
+    assert ran == ["after"]
+    assert "tool job: interrupted; rerun" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is before  # the handler is put back
