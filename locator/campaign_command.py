@@ -21,6 +21,7 @@ from predisat.cli.args import (
     output_dir,
     output_file,
     positive_int,
+    scheduler_options,
 )
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
 
@@ -74,17 +75,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         help="integrity risk per epoch of the *_budget rules (default "
         f"{DEFAULT_RISK_PER_EPOCH:g}); the other rules fix their k (docs/locator.md)",
     )  # fmt: skip
-    p.add_argument(
-        "--scheduler", default="local", metavar="local|serial|ADDRESS",
-        help="where the runs run: a local Dask cluster (default), this process (serial), or "
-        "an existing Dask cluster by its scheduler's address (tcp://HOST:8786; its workers "
-        "need no shared folder)",
-    )  # fmt: skip
-    p.add_argument(
-        "--workers", type=positive_int, metavar="N",
-        help="worker processes of the local cluster (default: the machine's cores), threads "
-        "with --scheduler serial (default 1)",
-    )  # fmt: skip
+    scheduler_options(p, "the runs")
     p.add_argument(
         "--figure",
         type=output_file,

@@ -61,6 +61,7 @@ __all__ = [
     "rate_hz",
     "requires",
     "run_checks",
+    "scheduler_options",
     "speed_mps",
     "storage_options",
     "url_or",
@@ -439,6 +440,21 @@ def integrity_risk(value: str) -> float:
             f"the source's three pairs){hint}"
         )
     return x
+
+
+def scheduler_options(p: argparse.ArgumentParser, tasks: str) -> None:
+    """``--scheduler local|serial|ADDRESS`` and ``--workers N`` (:mod:`predisat.scheduler`);
+    ``tasks`` names what runs as tasks ("the chunks")."""
+    p.add_argument(
+        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        help=f"where {tasks} run: a local Dask cluster (default), this process (serial), or an "
+        "existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
+    )  # fmt: skip
+    p.add_argument(
+        "--workers", type=positive_int, metavar="N",
+        help="worker processes of the local cluster (default: the machine's cores), threads "
+        "with --scheduler serial (default 1)",
+    )  # fmt: skip
 
 
 def integrity_options(p: argparse.ArgumentParser) -> None:

@@ -20,6 +20,7 @@ from predisat.cli.args import (
     output_dir,
     positive_float,
     positive_int,
+    scheduler_options,
     storage_options,
     url_or,
 )
@@ -87,16 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default a = b = 2 m; its k_sigma is not used: see --integrity-risk)",
     )  # fmt: skip
     integrity_options(p)
-    p.add_argument(
-        "--scheduler", default="local", metavar="local|serial|ADDRESS",
-        help="where the blocks of positions run: a local Dask cluster (default), this process "
-        "(serial), or an existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
-    )  # fmt: skip
-    p.add_argument(
-        "--workers", type=positive_int, metavar="N",
-        help="worker processes of the local cluster (default: the machine's cores), threads "
-        "with --scheduler serial (default 1)",
-    )  # fmt: skip
+    scheduler_options(p, "the blocks of positions")
     p.add_argument(
         "--basemap", type=existing_file("a GeoJSON of lines (railways, roads, rivers) in "
                                         "WGS84 longitude/latitude"), metavar="GEOJSON",

@@ -24,6 +24,7 @@ from predisat.cli.args import (
     output_dir,
     positive_float,
     positive_int,
+    scheduler_options,
 )
 from predisat.cli.common import CliError, parse_where
 
@@ -61,11 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "tolerance_m member of the file wins)")  # fmt: skip
     p.add_argument("--max-gap-m", type=positive_float, default=10.0, metavar="M",
                    help="pieces of a track closer than this are one part")
-    p.add_argument("--scheduler", default="local", metavar="local|serial|ADDRESS",
-                   help="where the line tasks run: a local Dask cluster (default), this "
-                   "process (serial), or an existing Dask cluster by address (tcp://HOST:8786)")
-    p.add_argument("--workers", type=positive_int, metavar="N",
-                   help="worker processes of the local cluster (default: the machine's cores)")
+    scheduler_options(p, "the line tasks")
     p.add_argument("--chunk-m", type=positive_float, default=1000.0, metavar="M",
                    help="chainage per chunk inside a line, metres")
     p.add_argument("--segmenter", choices=METHODS, default=DEFAULT_SEGMENTER,

@@ -13,7 +13,7 @@ from predisat.cli.args import (
     non_negative_float,
     output_dir,
     positive_float,
-    positive_int,
+    scheduler_options,
     storage_options,
     url_or,
 )
@@ -43,15 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "such as '{\"anon\": true}' or '{\"endpoint_url\": \"http://...\"}' (docs/cluster.md; "
         "default: none, the file system's own defaults)",
     )  # fmt: skip
-    parser.add_argument(
-        "--scheduler", default="local", metavar="local|serial|ADDRESS",
-        help="where the chunks run: a local Dask cluster (default), this process alone "
-        "(serial), or an existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
-    )  # fmt: skip
-    parser.add_argument(
-        "--workers", type=positive_int, metavar="N",
-        help="worker processes of the local cluster (default: the machine's cores)",
-    )  # fmt: skip
+    scheduler_options(parser, "the chunks")
     parser.add_argument(
         "--replace", action="store_true",
         help="replace the chunks another survey (or another version of this one) left in --out "
