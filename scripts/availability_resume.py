@@ -29,8 +29,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from predisat.availability.engine import BlockCheckpoint, compute_availability
 from predisat.availability.satellites import (
     LinePositions,
@@ -41,23 +39,9 @@ from predisat.availability.satellites import (
 )
 from predisat.masks.fileformat import write_masks
 from predisat.masks.maskset import MaskSet
-from predisat.track.map import demo_track
 
-
-def synthetic_masks(spacing_m: float = 10.0, seed: int = 0) -> MaskSet:
-    """scripts/bench_availability.py's masks: 10-20 deg, 25-40 deg sectors beside the track."""
-    track = demo_track()
-    s = np.arange(0.0, track.length_m, spacing_m)
-    rng = np.random.default_rng(seed)
-    az = np.arange(360.0)
-    heading = track.heading_at(s)
-    rel = np.mod(az[None, :] - heading[:, None], 360.0)
-    side = np.minimum(np.abs(rel - 90.0), np.abs(rel - 270.0))
-    base = 10.0 + 10.0 * (0.5 + 0.5 * np.sin(s / 700.0))[:, None]
-    walls = np.where(side < 60.0, 15.0 + 10.0 * np.sin(s / 300.0)[:, None] ** 2, 0.0)
-    mask = base + walls * (np.sin(s / 1500.0)[:, None] > 0.3) + rng.uniform(0, 2, (len(s), 360))
-    lat, lon, h = track.position_at(s)
-    return MaskSet.from_arrays(s, lat, lon, h, heading, np.clip(mask, 0, 90), margin_deg=1.0)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_availability import synthetic_masks
 
 
 def cost_of_saving(masks: MaskSet, hours: float, work: Path) -> None:
