@@ -33,8 +33,13 @@ from predisat.track.map import demo_track
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--demo", required=True, type=Path, help="a `predisat demo --out` folder")
-    p.add_argument("--stretches", type=int, nargs="+", default=[1, 3],
-                   help="RunConfig.trust_stretches values to compare (1: one trusted set)")
+    p.add_argument(
+        "--stretches",
+        type=int,
+        nargs="+",
+        default=[1, 3],
+        help="RunConfig.trust_stretches values to compare (1: one trusted set)",
+    )
     p.add_argument("--risk", type=float, default=1e-12, help="integrity risk per epoch")
     args = p.parse_args()
 
@@ -57,8 +62,9 @@ def main() -> None:
         for rule, (trust, masks) in rules.items():
             for n in args.stretches if trust == "masks" else [1]:
                 cfg = RunConfig(loc, trust=trust, trust_stretches=n)
-                ep = run_locator(path, SimSource(sim, constellation="gps"), config=cfg,
-                                 start_chainage_m=float(sim.chainage_m[0]), masks=masks)  # fmt: skip
+                src = SimSource(sim, constellation="gps")
+                ep = run_locator(path, src, config=cfg, masks=masks,
+                                 start_chainage_m=float(sim.chainage_m[0]))  # fmt: skip
                 s = summarise(score_run(ep, sim.chainage_m))
                 rows.append({"width": wname, "rule": rule, "stretches": n,
                              "claim %": 100 * s["claim_share"],
