@@ -45,7 +45,11 @@ from numpy.typing import ArrayLike, NDArray
 from locator.selection import Exclusion, Selection
 from predisat.masks.maskset import MaskSet
 
-__all__ = ["Combined", "Stretch", "combine_stretches", "trust_stretches"]
+__all__ = ["MAX_STRETCHES", "Combined", "Stretch", "combine_stretches", "trust_stretches"]
+
+MAX_STRETCHES = 3
+"""Stretches per epoch of the partitioned rule (``RunConfig.trust_stretches``): a fix each, so
+the cost of an epoch grows up to this many times where the trusted set changes."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,7 @@ def trust_stretches(
     az_deg: ArrayLike,
     el_deg: ArrayLike,
     *,
-    max_stretches: int = 3,
+    max_stretches: int = MAX_STRETCHES,
     valid: ArrayLike | None = None,
     extra_margin_deg: float = 0.0,
     sats: Sequence[str] = (),
