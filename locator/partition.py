@@ -183,6 +183,7 @@ def combine_stretches(
     fix_hi_m: ArrayLike,
     estimate_m: ArrayLike,
     *,
+    n_used: ArrayLike | None = None,
     estimate_inside: bool = True,
 ) -> Combined:
     """The claim of an epoch from one fix per stretch.
@@ -195,6 +196,12 @@ def combine_stretches(
         Whether the stretch's fix makes a safety claim (after its own heading check).
     fix_lo_m, fix_hi_m, estimate_m : array_like, shape (n,)
         The fixes' intervals and estimates (NaN without a fix).
+    n_used : array_like of int, shape (n,), optional
+        Satellites each fix used. The estimate (``chosen``) comes from the claimed fix with a
+        non-empty part that used the fewest, then whose estimate lies in its own part, then
+        the shortest: where the stretches' sets nest (a wall at one end) the smallest set is
+        the one on line-of-sight satellites wherever the train is among them, while a larger
+        set may hold a satellite hidden at the train. Default: all equal.
     estimate_inside : bool
         The odometry rule ``"estimate"``: a claim needs a claimed, non-empty part whose fix
         puts its estimate inside the predicted interval (the single-set rule's test).
@@ -217,10 +224,13 @@ def combine_stretches(
     in_prediction = (a.min() <= est) & (est <= b.max())
     candidates = claimed_part & in_prediction if estimate_inside else claimed_part
     length = np.where(c, fh - fl, np.inf)
+    used = np.zeros(a.shape, np.int64) if n_used is None else np.asarray(n_used, np.int64)
+    if used.shape != a.shape:
+        raise ValueError(f"n_used must have shape {a.shape}, got {used.shape}")
     if candidates.any():
-        # the estimate: a fix whose estimate lies in its own part first, then the shortest
+        # the estimate: the fewest satellites, then an estimate in its own part, then shortest
         own = (p_lo <= est) & (est <= p_hi)
-        order = np.lexsort((length, ~own))
+        order = np.lexsort((length, ~own, used))
         chosen = int(order[candidates[order]][0])
         return Combined(float(p_lo[nonempty].min()), float(p_hi[nonempty].max()), True, False,
                         chosen, int(nonempty.sum()))  # fmt: skip

@@ -422,6 +422,7 @@ def _split_fix(
     sets: list[NDArray] = []
     claimed = np.zeros(n, bool)
     f_lo, f_hi, est = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    n_used = np.zeros(n, np.int64)
     uncorrected = False
     for j, st in enumerate(stretches):
         trusted = st.selection.trusted
@@ -434,13 +435,13 @@ def _split_fix(
         sets.append(idx)
         if fix is None:
             continue
-        f_lo[j], f_hi[j], est[j] = fix.lo_m, fix.hi_m, fix.chainage_m
+        f_lo[j], f_hi[j], est[j], n_used[j] = fix.lo_m, fix.hi_m, fix.chainage_m, fix.used.sum()
         if fix.safety_claim:
             hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
             claimed[j] = hc is None or hc.status != HeadingStatus.FAIL
     comb = combine_stretches(
         [s.lo_m for s in stretches], [s.hi_m for s in stretches], claimed, f_lo, f_hi, est,
-        estimate_inside=cfg.odometry_conflict == "estimate",
+        n_used=n_used, estimate_inside=cfg.odometry_conflict == "estimate",
     )  # fmt: skip
     ever = np.zeros(len(data.sats), bool)
     for idx in sets:

@@ -125,6 +125,10 @@ def test_combine_keeps_each_claim_inside_its_stretch():
                           [-5, 8, 40], [2, 25, 50], [0, 15, 45])  # fmt: skip
     # both estimates lie in their own parts: the shorter fix (7 m against 17 m) is chosen
     assert (c.lo_m, c.hi_m, c.claim, c.conflict, c.chosen) == (0.0, 20.0, True, False, 0)
+    # with counts: the fix that used the fewest satellites gives the estimate
+    c = combine_stretches([0, 10, 20], [10, 20, 30], [True, True, True],
+                          [-5, 8, 40], [2, 25, 50], [0, 15, 45], n_used=[8, 6, 4])  # fmt: skip
+    assert (c.lo_m, c.hi_m, c.claim, c.chosen) == (0.0, 20.0, True, 1)
     # an unclaimed stretch is kept whole
     c = combine_stretches([0, 10, 20], [10, 20, 30], [True, True, False],
                           [12, 12, np.nan], [14, 14, np.nan], [13, 13, np.nan])  # fmt: skip
@@ -202,12 +206,13 @@ def test_run_into_the_wall_keeps_satellites_and_never_misleads(scene):
         assert inside[claim].all(), f"trust_stretches={n}: a claim missed the truth"
         out[n] = ep
     # the train in the open, the prediction's far end already where the ray cast hides a
-    # satellite: the single set loses it, the stretches keep it where the train is
+    # satellite: the single set loses it over the whole prediction, and its claims are longer
+    # than the stretches' (whose open stretch keeps it)
     open_here = ~hidden.any(axis=1)
     far_hidden = blocked(world, caster, out[1]["pred_hi_m"].to_numpy()).any(axis=1)
     near = open_here & far_hidden
     assert near.sum() >= 3
-    used1, used3 = out[1]["n_used"].to_numpy(), out[3]["n_used"].to_numpy()
-    assert (used1[near] < len(AZ)).all()
-    assert (used3[near] == len(AZ)).sum() >= 3 and (used3[near] >= used1[near]).all()
+    assert (out[1]["n_trusted"].to_numpy()[near] < len(AZ)).all()
+    len1, len3 = out[1]["length_m"].to_numpy()[near], out[3]["length_m"].to_numpy()[near]
+    assert (len3 <= len1).all() and (len3 < len1 - 5.0).sum() >= 3
     assert out[3]["claim"].sum() >= out[1]["claim"].sum()
