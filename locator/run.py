@@ -55,7 +55,7 @@ from locator.odometry.fusion import (
     predict_estimate,
     predict_interval,
 )
-from locator.partition import combine_stretches, trust_stretches
+from locator.partition import MAX_STRETCHES, combine_stretches, trust_stretches
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochData, EpochSource
@@ -108,8 +108,9 @@ class RunConfig:
         Added to the masks' own margins.
     trust_stretches : int
         With ``trust="masks"``: at most this many stretches of the predicted interval, each
-        with its own trusted set and fix (:mod:`locator.partition`, "partitioned trust"); 1
-        is the single set of the worst mask over the whole interval.
+        with its own trusted set and fix (:mod:`locator.partition`, "partitioned trust";
+        default :data:`locator.partition.MAX_STRETCHES`); 1 is the single set of the worst
+        mask over the whole interval.
     odometer : OdometerAccuracy
         Over- and under-reading bounds of the source's odometer (default SUBSET-041).
     start_uncertainty_m : float
@@ -139,7 +140,7 @@ class RunConfig:
     trust: str = "masks"
     cutoff_deg: float = 15.0
     extra_margin_deg: float = 0.0
-    trust_stretches: int = 1
+    trust_stretches: int = MAX_STRETCHES
     odometer: OdometerAccuracy = field(default_factory=OdometerAccuracy.subset041)
     start_uncertainty_m: float = 50.0
     heading_check: bool = True
@@ -418,6 +419,10 @@ def _split_fix(
     stretches = trust_stretches(masks, p_lo, p_hi, az, el, max_stretches=cfg.trust_stretches,
                                 extra_margin_deg=cfg.extra_margin_deg)  # fmt: skip
     n = len(stretches)
+    if n == 1:  # one trusted set over the whole prediction: the single set's decision exactly
+        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded))
+        fix, uncorrected = _fix(path, cfg, data, el, idx, 0.5 * (p_lo + p_hi))
+        return fix, idx, uncorrected, False
     fixes: list[Fix | None] = []
     sets: list[NDArray] = []
     claimed = np.zeros(n, bool)

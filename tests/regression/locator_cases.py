@@ -114,10 +114,10 @@ def sim_configs() -> dict[str, tuple[RunConfig, bool]]:
     k2 = LocatorConfig(model=IntervalModel(CAMPAIGN_ERROR, k_sigma=2.0), budget=None)
     k2_default = LocatorConfig(budget=None)
     return {
-        "masks": (RunConfig(k389, trust="masks"), True),
+        "masks": (RunConfig(k389, trust="masks", trust_stretches=1), True),
         "none": (RunConfig(k389, trust="none"), False),
         "cutoff15": (RunConfig(k389, trust="cutoff", cutoff_deg=15.0), False),
-        "masks_k2": (RunConfig(k2, trust="masks"), True),
+        "masks_k2": (RunConfig(k2, trust="masks", trust_stretches=1), True),
         "passive_none": (RunConfig(k2_default, integrity="passive", trust="none"), False),
         "default_none": (RunConfig(k2_default, trust="none"), False),
     }
