@@ -66,8 +66,12 @@ def main() -> None:
                 ep = run_locator(path, src, config=cfg, masks=masks,
                                  start_chainage_m=float(sim.chainage_m[0]))  # fmt: skip
                 s = summarise(score_run(ep, sim.chainage_m))
+                # a claim that tightens the prediction (fused interval > 1 m shorter)
+                fused = ep["fused_hi_m"] - ep["fused_lo_m"]
+                tight = ep["claim"] & (fused < ep["pred_hi_m"] - ep["pred_lo_m"] - 1.0)
                 rows.append({"width": wname, "rule": rule, "stretches": n,
                              "claim %": 100 * s["claim_share"],
+                             "tightens %": 100 * float(tight.mean()),
                              "len med m": s["length_median_m"], "len p95 m": s["length_p95_m"],
                              "|err| p95 m": s["abs_error_p95_m"], "HMI": int(s["hmi"]),
                              "HMI fix": int(s["hmi_fix"]), "MI": int(s["mi"]),
