@@ -83,7 +83,8 @@ class Combined:
         Hull of the parts (claimed intervals cut to their stretches, unclaimed stretches
         whole); on a conflict the hull of the claimed intervals themselves; NaN without any.
     claim : bool
-        At least one claimed part is non-empty and no conflict.
+        At least one claimed part is non-empty, no conflict, and the hull is shorter than the
+        predicted interval (a hull equal to it says nothing the odometry does not).
     conflict : bool
         The claims contradict the prediction: every claimed part is empty and no stretch is
         kept whole, or (``estimate_inside``) every fix with a claimed part puts its estimate
@@ -232,8 +233,9 @@ def combine_stretches(
         own = (p_lo <= est) & (est <= p_hi)
         order = np.lexsort((length, ~own, used))
         chosen = int(order[candidates[order]][0])
-        return Combined(float(p_lo[nonempty].min()), float(p_hi[nonempty].max()), True, False,
-                        chosen, int(nonempty.sum()))  # fmt: skip
+        h_lo, h_hi = float(p_lo[nonempty].min()), float(p_hi[nonempty].max())
+        tighter = h_lo > a.min() or h_hi < b.max()
+        return Combined(h_lo, h_hi, tighter, False, chosen, int(nonempty.sum()))
     if claimed_part.any() or (c.any() and not (nonempty & ~c).any()):
         # estimates outside the prediction, or every claim misses its own stretch and nothing
         # is kept whole: the claims contradict the prediction

@@ -462,7 +462,7 @@ def _split_fix(
     assert fix is not None
     if comb.claim or comb.conflict:
         fix = dataclasses.replace(fix, lo_m=comb.lo_m, hi_m=comb.hi_m)
-    else:  # no claim: the fix's own interval, as the single-set rule reports it
+    else:  # no claim (none, or the hull is the prediction): the fix's own interval
         fix = dataclasses.replace(fix, flags=fix.flags | FixFlag.NO_SAFETY_CLAIM)
     return fix, sets[comb.chosen], uncorrected, comb.conflict
 

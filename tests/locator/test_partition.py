@@ -129,6 +129,10 @@ def test_combine_keeps_each_claim_inside_its_stretch():
     c = combine_stretches([0, 10, 20], [10, 20, 30], [True, True, True],
                           [-5, 8, 40], [2, 25, 50], [0, 15, 45], n_used=[8, 6, 4])  # fmt: skip
     assert (c.lo_m, c.hi_m, c.claim, c.chosen) == (0.0, 20.0, True, 1)
+    # a hull that is the whole prediction says nothing the odometry does not: no claim
+    c = combine_stretches([0, 10], [10, 20], [True, False], [-5, np.nan], [3, np.nan],
+                          [1, np.nan])  # fmt: skip
+    assert (c.lo_m, c.hi_m, c.claim, c.conflict) == (0.0, 20.0, False, False)
     # an unclaimed stretch is kept whole
     c = combine_stretches([0, 10, 20], [10, 20, 30], [True, True, False],
                           [12, 12, np.nan], [14, 14, np.nan], [13, 13, np.nan])  # fmt: skip
@@ -137,11 +141,11 @@ def test_combine_keeps_each_claim_inside_its_stretch():
     c = combine_stretches([0, 10], [10, 20], [True, True], [12, 2], [14, 4], [13, 3])
     assert c.conflict and not c.claim
     # estimates outside the prediction: a conflict with the estimate rule only
-    c = combine_stretches([0, 10], [10, 20], [True, False], [-20, np.nan], [1, np.nan],
-                          [-10, np.nan])  # fmt: skip
+    lo, hi, claimed = [0, 10, 20], [10, 20, 30], [True, False, True]
+    fl, fh, est = [-20, np.nan, 40], [1, np.nan, 50], [-10, np.nan, 45]
+    c = combine_stretches(lo, hi, claimed, fl, fh, est)
     assert c.conflict and not c.claim
-    c = combine_stretches([0, 10], [10, 20], [True, False], [-20, np.nan], [1, np.nan],
-                          [-10, np.nan], estimate_inside=False)  # fmt: skip
+    c = combine_stretches(lo, hi, claimed, fl, fh, est, estimate_inside=False)
     assert c.claim and (c.lo_m, c.hi_m) == (0.0, 20.0)
 
 
@@ -202,8 +206,10 @@ def test_run_into_the_wall_keeps_satellites_and_never_misleads(scene):
                          config=cfg, masks=masks)  # fmt: skip
         claim = ep["claim"].to_numpy()
         inside = (ep["lo_m"] <= truth) & (truth <= ep["hi_m"])
-        assert claim.mean() > 0.9
+        assert claim.mean() > 0.75
         assert inside[claim].all(), f"trust_stretches={n}: a claim missed the truth"
+        fused = ep["fused_hi_m"] - ep["fused_lo_m"]
+        ep["tightens"] = ep["claim"] & (fused < ep["pred_hi_m"] - ep["pred_lo_m"] - 1.0)
         out[n] = ep
     # the train in the open, the prediction's far end already where the ray cast hides a
     # satellite: the single set loses it over the whole prediction, and its claims are longer
@@ -215,4 +221,5 @@ def test_run_into_the_wall_keeps_satellites_and_never_misleads(scene):
     assert (out[1]["n_trusted"].to_numpy()[near] < len(AZ)).all()
     len1, len3 = out[1]["length_m"].to_numpy()[near], out[3]["length_m"].to_numpy()[near]
     assert (len3 <= len1).all() and (len3 < len1 - 5.0).sum() >= 3
-    assert out[3]["claim"].sum() >= out[1]["claim"].sum()
+    # claims that tighten the odometry prediction: no fewer
+    assert out[3]["tightens"].sum() >= out[1]["tightens"].sum()
