@@ -13,7 +13,11 @@ NLOS through reflections, loss) is located with active integrity under each rule
 * ``masks_k2``: the masks with the source's ``k = 2``;
 * ``masks_budget``: the masks with an :class:`~predisat.gnss.integrity.IntegrityBudget` (each
   epoch's ``k`` from the campaign's risk per epoch);
-* ``pipeline`` / ``pipeline_budget``: the same with the demo's pipeline masks (demo world only).
+* ``masks_split``: ``masks_budget`` with partitioned trust (``RunConfig.trust_stretches`` =
+  :data:`locator.partition.MAX_STRETCHES`: a trusted set and a fix per stretch of the predicted
+  interval);
+* ``pipeline`` / ``pipeline_budget`` / ``pipeline_split``: the same with the demo's pipeline
+  masks (demo world only).
 
 One job is one run of one world under every rule; its epochs table (:func:`run_job`) is saved
 as ``OUT/jobs/<world>_<run>_<key>.parquet``, the key hashing the job, the setup (rules, risk,
@@ -40,6 +44,7 @@ import pandas as pd
 
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
+from locator.partition import MAX_STRETCHES
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SignalState
@@ -94,7 +99,8 @@ PROFILE_T_S = (0.0, 40.0, 70.0, 100.0, 160.0, 200.0, 1.0e4)
 PROFILE_V_MPS = (0.0, 20.0, 20.0, 0.0, 0.0, 20.0, 20.0)
 """Speeds, m/s, at :data:`PROFILE_T_S`."""
 
-CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline", "pipeline_budget")
+CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "pipeline",
+           "pipeline_budget", "pipeline_split")  # fmt: skip
 """Every rule; the ``pipeline`` ones apply to the demo world only."""
 
 _GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
@@ -327,18 +333,26 @@ def jobs_for(worlds: Sequence[str], runs_per_world: int) -> list[Job]:
 def _rules(setup: CampaignSetup, data: WorldData) -> dict[str, tuple[RunConfig, MaskSet | None]]:
     learned = setup.model
     # k for a 1e-4 two-sided Gaussian risk per pair (the risk the source states for its +-2 xi)
-    loc = LocatorConfig(model=IntervalModel.for_risk(1e-4, learned.error))
+    loc = LocatorConfig(model=IntervalModel.for_risk(1e-4, learned.error), budget=None)
     budget = LocatorConfig(model=learned, budget=IntegrityBudget(setup.risk_per_epoch))
+    k2 = LocatorConfig(model=learned, budget=None)  # the learned model's k = 2
+    # the single set (trust_stretches=1) written out: the rules stay what they were whatever
+    # RunConfig's default
+    split = RunConfig(budget, trust="masks", trust_stretches=MAX_STRETCHES)
     rules: dict[str, tuple[RunConfig, MaskSet | None]] = {
-        "masks": (RunConfig(loc, trust="masks"), data.masks),
+        "masks": (RunConfig(loc, trust="masks", trust_stretches=1), data.masks),
         "none": (RunConfig(loc, trust="none"), None),
         "cutoff15": (RunConfig(loc, trust="cutoff", cutoff_deg=15.0), None),
-        "masks_k2": (RunConfig(LocatorConfig(model=learned), trust="masks"), data.masks),
-        "masks_budget": (RunConfig(budget, trust="masks"), data.masks),
+        "masks_k2": (RunConfig(k2, trust="masks", trust_stretches=1), data.masks),
+        "masks_budget": (RunConfig(budget, trust="masks", trust_stretches=1), data.masks),
+        "masks_split": (split, data.masks),
     }
     if data.pipeline is not None:
-        rules["pipeline"] = (RunConfig(loc, trust="masks"), data.pipeline)
-        rules["pipeline_budget"] = (RunConfig(budget, trust="masks"), data.pipeline)
+        rules["pipeline"] = (RunConfig(loc, trust="masks", trust_stretches=1), data.pipeline)
+        rules["pipeline_budget"] = (
+            RunConfig(budget, trust="masks", trust_stretches=1), data.pipeline
+        )
+        rules["pipeline_split"] = (split, data.pipeline)
     return {k: v for k, v in rules.items() if k in setup.configs}
 
 
@@ -515,7 +529,8 @@ def figure(frames: pd.DataFrame, table: pd.DataFrame, paths: Sequence[Path]) -> 
     ax, bx = fig.subplots(1, 2, width_ratios=[3, 2])
     colours = {"masks": "#1b7837", "pipeline": "#762a83", "none": "#b2182b", "cutoff15": "#ef8a62",
                "masks_k2": "#7fbf7b", "masks_budget": "#2166ac",
-               "pipeline_budget": "#c2a5cf"}  # fmt: skip
+               "pipeline_budget": "#c2a5cf", "masks_split": "#053061",
+               "pipeline_split": "#40004b"}  # fmt: skip
     bins = np.geomspace(3.0, 3000.0, 60)
     for cfg, g in frames.groupby("config", sort=False):
         length = g.loc[g["claim"], "length_m"].to_numpy(float)

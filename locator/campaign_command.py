@@ -30,7 +30,8 @@ __all__ = ["CONFIG_NAMES", "WORLD_NAMES", "add_parser", "cmd_campaign"]
 WORLD_NAMES = ("mixed-1", "mixed-2", "mixed-3", "mixed-4", "canyon")
 """Names of :data:`locator.campaign.WORLDS`."""
 CONFIG_NAMES = (
-    "masks", "none", "cutoff15", "masks_k2", "masks_budget", "pipeline", "pipeline_budget",
+    "masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "pipeline",
+    "pipeline_budget", "pipeline_split",
 )  # fmt: skip
 """Names of :data:`locator.campaign.CONFIGS`."""
 _RUNS_PER_WORLD = 88
@@ -106,7 +107,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     scheduler = Scheduler.parse(args.scheduler, args.workers)
     if args.demo is None and not args.worlds:
         raise ValueError("--worlds without names: no world to run; name some, or add --demo DIR")
-    if args.demo is None and set(args.configs) <= {"pipeline", "pipeline_budget"}:
+    if args.demo is None and set(args.configs) <= {"pipeline", "pipeline_budget", "pipeline_split"}:
         raise ValueError(
             f"--configs {' '.join(args.configs)}: the pipeline rules need the pipeline masks of "
             "a `predisat demo` folder; add --demo DIR"

@@ -40,6 +40,7 @@ from predisat.cli.args import (
     output_dir,
     output_file,
     positive_float,
+    positive_int,
     rate_hz,
     requires,
     speed_mps,
@@ -62,6 +63,7 @@ def _config(args: argparse.Namespace, profile: Any = None) -> Any:
     """The run configuration; with the data's ``profile`` (a ReceiverProfile), the error model
     must apply to it for a safety claim (else every epoch is flagged ``NO_ERROR_MODEL``)."""
     from locator.fde import LocatorConfig
+    from locator.partition import MAX_STRETCHES
     from locator.run import RunConfig
     from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
@@ -79,11 +81,18 @@ def _config(args: argparse.Namespace, profile: Any = None) -> Any:
         trust=trust,
         cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
         extra_margin_deg=args.extra_margin or 0.0,
+        trust_stretches=args.trust_stretches or MAX_STRETCHES,
         start_uncertainty_m=args.start_uncertainty,
         heading_check=not args.no_heading_check,
         error_model_applies=applies,
         model_el_min_deg=mf.el_min_deg,
     )
+
+
+def _split_text(cfg: Any) -> str:
+    """`` in at most N stretches`` for a partitioned masks rule (docs/locator.md)."""
+    n = cfg.trust_stretches if cfg.trust == "masks" else 1
+    return f" in at most {n} stretches" if n > 1 else ""
 
 
 def _model_applies(mf: Any, profile: Any, args: argparse.Namespace) -> bool:
@@ -245,8 +254,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_masks_on_track(masks, path.track, str(args.masks))
     _check_start(float(start), path, masks, args, header, sim_chainage)
     print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
-          f"({constellation_label(args.constellation)}), trust rule {cfg.trust}; pair "
-          f"intervals: {cfg.locator.width_text()}")
+          f"({constellation_label(args.constellation)}), trust rule {cfg.trust}"
+          f"{_split_text(cfg)}; pair intervals: {cfg.locator.width_text()}")
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
@@ -606,6 +615,11 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--extra-margin", type=non_negative_float, metavar="DEG",
                    help="with --masks: degrees added to the mask file's margins before trusting "
                    "a satellite (default 0)")
+    p.add_argument("--trust-stretches", type=positive_int, metavar="N",
+                   help="with --masks: at most N stretches of the predicted interval, each with "
+                   "its own trusted satellites and fix, one claim from all (default 3; 1: one "
+                   "set, the worst mask over the whole interval; docs/locator.md, partitioned "
+                   "trust)")
     p.add_argument("--start-chainage", type=finite_float, metavar="M",
                    help="chainage of the first epoch, metres (default: the simulation's, or the "
                    "RINEX header position's)")
@@ -720,6 +734,8 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         requires("--obs", "obs", "--nav FILES", "nav", "RINEX navigation with the same day"),
         needs("--extra-margin", "extra_margin", lambda a: given(a, "masks"),
               "--masks runs (it widens the masks' margins)"),
+        needs("--trust-stretches", "trust_stretches", lambda a: given(a, "masks"),
+              "--masks runs (it cuts the interval where the masks change)"),
     )  # fmt: skip
     p.set_defaults(func=cmd_run)
 

@@ -45,7 +45,7 @@ from predisat.availability.interval import (
     width_text,
 )
 from predisat.gnss.errormodel import IntervalModel
-from predisat.gnss.integrity import IntegrityBudget, disjoint_pairs
+from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget, disjoint_pairs
 
 __all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
 
@@ -77,12 +77,14 @@ class LocatorConfig:
     ----------
     model : IntervalModel
         Error model and ``k_sigma`` (width of each pair interval when no ``budget`` is given).
-    budget : IntegrityBudget, optional
+    budget : IntegrityBudget or None
         The integrity risk per epoch: each epoch's pairs are ``k`` wide for the number of
         disjoint pairs among those united (:func:`predisat.gnss.integrity.disjoint_pairs`:
         three in three-pair mode, two for every pair of 4-5 satellites, fewer when blunt pairs
-        were dropped), and ``model.k_sigma`` is not used. ``locator run`` and the demos give
-        one (``--integrity-risk``); None keeps ``model.k_sigma`` in every mode.
+        were dropped), and ``model.k_sigma`` is not used. Default
+        :data:`predisat.gnss.integrity.DEFAULT_BUDGET` (1e-12 per epoch, as ``locator run``'s
+        ``--integrity-risk``); None keeps ``model.k_sigma`` in every mode (``k = 2``: the
+        source's, 2.4e-5 per epoch with three pairs).
     window_m, step_m : float
         SATHIA search window half width and grid step, metres.
     min_slope : float
@@ -94,7 +96,7 @@ class LocatorConfig:
     """
 
     model: IntervalModel = field(default_factory=IntervalModel)
-    budget: IntegrityBudget | None = None
+    budget: IntegrityBudget | None = DEFAULT_BUDGET
     window_m: float = 1000.0
     step_m: float = 5.0
     min_slope: float = 0.2

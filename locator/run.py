@@ -55,6 +55,7 @@ from locator.odometry.fusion import (
     predict_estimate,
     predict_interval,
 )
+from locator.partition import MAX_STRETCHES, combine_stretches, trust_stretches
 from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochData, EpochSource
@@ -105,6 +106,11 @@ class RunConfig:
         Flat elevation cut-off of ``trust="cutoff"``.
     extra_margin_deg : float
         Added to the masks' own margins.
+    trust_stretches : int
+        With ``trust="masks"``: at most this many stretches of the predicted interval, each
+        with its own trusted set and fix (:mod:`locator.partition`, "partitioned trust";
+        default :data:`locator.partition.MAX_STRETCHES`); 1 is the single set of the worst
+        mask over the whole interval.
     odometer : OdometerAccuracy
         Over- and under-reading bounds of the source's odometer (default SUBSET-041).
     start_uncertainty_m : float
@@ -134,6 +140,7 @@ class RunConfig:
     trust: str = "masks"
     cutoff_deg: float = 15.0
     extra_margin_deg: float = 0.0
+    trust_stretches: int = MAX_STRETCHES
     odometer: OdometerAccuracy = field(default_factory=OdometerAccuracy.subset041)
     start_uncertainty_m: float = 50.0
     heading_check: bool = True
@@ -157,6 +164,11 @@ class RunConfig:
         if self.odometry_conflict not in ("estimate", "overlap"):
             raise ValueError(
                 f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
+            )
+        if int(self.trust_stretches) != self.trust_stretches or self.trust_stretches < 1:
+            raise ValueError(
+                f"trust_stretches must be an integer >= 1 (1: one trusted set over the whole "
+                f"predicted interval), got {self.trust_stretches}"
             )
         if not self.beacon_spacing_m > 0:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
@@ -236,16 +248,23 @@ def run_locator(
             az, el = direction_at(path, centre, data.sat_ecef_m)
         else:
             az = el = np.zeros(0)
-        trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
-        idx = np.flatnonzero(trusted)
-        fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
+        if cfg.trust == "masks" and cfg.trust_stretches > 1 and n_rx:
+            assert masks is not None
+            fix, idx, uncorrected, conflict = _split_fix(
+                path, cfg, masks, data, az, el, p_lo, p_hi, excluded
+            )
+        else:
+            trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
+            idx = np.flatnonzero(trusted)
+            fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
+            conflict = False
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
         row["iono_uncorrected"] = uncorrected
         f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
-            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi)
+            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, conflict)
             if row["claim"]:
                 here = (0.0 if odo is None else float(odo[k]), gps[k])
                 f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
@@ -361,10 +380,11 @@ def _fix(
 
 def _check(
     path: AntennaPath, cfg: RunConfig, fix: Fix, data: EpochData, el: NDArray, idx: NDArray,
-    row: JsonDict, p_lo: float, p_hi: float,
+    row: JsonDict, p_lo: float, p_hi: float, conflict: bool = False,
 ) -> FusionStatus:  # fmt: skip
     """The heading and odometry checks of a fix, written into ``row`` (flags, claim); the
-    fusion status (``CONFLICT`` when the claim contradicts the odometry)."""
+    fusion status (``CONFLICT`` when the claim contradicts the odometry, or ``conflict``: the
+    stretches' claims contradict it, :func:`locator.partition.combine_stretches`)."""
     status = FusionStatus.ODOMETRY
     hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
     flags = int(fix.flags)
@@ -374,7 +394,7 @@ def _check(
         if hc.status == HeadingStatus.FAIL:
             flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
     claim = row["claim_fix"]
-    miss = fix.hi_m < p_lo or fix.lo_m > p_hi
+    miss = conflict or fix.hi_m < p_lo or fix.lo_m > p_hi
     if cfg.odometry_conflict == "estimate":
         miss = miss or not p_lo <= fix.chainage_m <= p_hi
     if claim and cfg.odometry_check and miss:
@@ -385,6 +405,66 @@ def _check(
     claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
     row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
     return status
+
+
+def _split_fix(
+    path: AntennaPath, cfg: RunConfig, masks: MaskSet, data: EpochData, az: NDArray,
+    el: NDArray, p_lo: float, p_hi: float, excluded: dict[str, str],
+) -> tuple[Fix | None, NDArray, bool, bool]:  # fmt: skip
+    """Partitioned trust (:mod:`locator.partition`): a fix per stretch of the prediction, one
+    claim from all. Returns the epoch's fix (the chosen stretch's, its interval the hull of the
+    parts), its trusted satellites, whether an uncorrected ionosphere inflated a sigma, and
+    whether the stretches' claims contradict the prediction. Reasons go into ``excluded`` for
+    the satellites no stretch trusts."""
+    stretches = trust_stretches(masks, p_lo, p_hi, az, el, max_stretches=cfg.trust_stretches,
+                                extra_margin_deg=cfg.extra_margin_deg)  # fmt: skip
+    n = len(stretches)
+    if n == 1:  # one trusted set over the whole prediction: the single set's decision exactly
+        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded))
+        fix, uncorrected = _fix(path, cfg, data, el, idx, 0.5 * (p_lo + p_hi))
+        return fix, idx, uncorrected, False
+    fixes: list[Fix | None] = []
+    sets: list[NDArray] = []
+    claimed = np.zeros(n, bool)
+    f_lo, f_hi, est = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    n_used = np.zeros(n, np.int64)
+    uncorrected = False
+    for j, st in enumerate(stretches):
+        trusted = st.selection.trusted
+        if cfg.model_el_min_deg > 0.0:
+            trusted = trusted & (el >= cfg.model_el_min_deg)
+        idx = np.flatnonzero(trusted)
+        fix, unc = _fix(path, cfg, data, el, idx, 0.5 * (st.lo_m + st.hi_m))
+        uncorrected = uncorrected or unc
+        fixes.append(fix)
+        sets.append(idx)
+        if fix is None:
+            continue
+        f_lo[j], f_hi[j], est[j], n_used[j] = fix.lo_m, fix.hi_m, fix.chainage_m, fix.used.sum()
+        if fix.safety_claim:
+            hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
+            claimed[j] = hc is None or hc.status != HeadingStatus.FAIL
+    comb = combine_stretches(
+        [s.lo_m for s in stretches], [s.hi_m for s in stretches], claimed, f_lo, f_hi, est,
+        n_used=n_used, estimate_inside=cfg.odometry_conflict == "estimate",
+    )  # fmt: skip
+    ever = np.zeros(len(data.sats), bool)
+    for idx in sets:
+        ever[idx] = True
+    first = stretches[0].selection.reason
+    for i in np.flatnonzero(~ever):
+        reasons = [int(s.selection.reason[i]) for s in stretches if s.selection.reason[i]]
+        code = max(reasons) if reasons else int(first[i])
+        excluded[data.sats[i]] = _EXCLUSION_NAMES[code] if code else "below_model"
+    if comb.chosen < 0:
+        return None, np.zeros(0, np.int64), uncorrected, False
+    fix = fixes[comb.chosen]
+    assert fix is not None
+    if comb.claim or comb.conflict:
+        fix = dataclasses.replace(fix, lo_m=comb.lo_m, hi_m=comb.hi_m)
+    else:  # no claim (none, or the hull is the prediction): the fix's own interval
+        fix = dataclasses.replace(fix, flags=fix.flags | FixFlag.NO_SAFETY_CLAIM)
+    return fix, sets[comb.chosen], uncorrected, comb.conflict
 
 
 def _trust(

@@ -140,7 +140,7 @@ def run_job(job: Job) -> tuple[pd.DataFrame, pd.DataFrame]:
     seed = zlib.crc32(job.name.encode()) % 100_000
     sim = simulate_run(world, _STATE["eph"], start, t0, profile, duration, job.rate_hz,
                        direction=direction, seed=seed, reflectors=index)  # fmt: skip
-    loc = LocatorConfig(model=IntervalModel.for_risk(1e-4, _STATE["model"].error))
+    loc = LocatorConfig(model=IntervalModel.for_risk(1e-4, _STATE["model"].error), budget=None)
     cfg = RunConfig(loc, trust="masks")
     # the stored position at start of mission is off by up to the start uncertainty
     start_error = np.random.default_rng(seed + 1).uniform(-1.0, 1.0) * cfg.start_uncertainty_m

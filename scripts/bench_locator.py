@@ -76,7 +76,7 @@ def real_epochs(data: Path, repeat: int) -> tuple[int, float, float]:
         x = GEONET_0759_ECEF_M if name == "0759" else obs.header.approx_position_ecef_m
         src = RinexSource(model, obs, "G", odometer=np.zeros(len(obs.gps_s)))
         runs.append((AntennaPath(virtual_track(np.asarray(x, float), 45.0), 0.0), src, model, obs))
-    cfg = RunConfig(LocatorConfig(), trust="none")
+    cfg = RunConfig(LocatorConfig(budget=None), trust="none")
 
     def project() -> None:
         for path, src, _, _ in runs:
@@ -124,11 +124,12 @@ def simulated_epochs(repeat: int) -> list[tuple[str, int, float, float]]:
             if len(e.sats) >= 4:
                 x = wls_3d(e.sat_ecef_m, e.pseudorange_m, x[:3])
 
+    fixed = LocatorConfig(budget=None)  # k = 2, as the figures of docs/locator.md
     rows = []
     for label, cfg in (
-        ("simulated, true masks (demo world)", RunConfig(LocatorConfig(), trust="masks")),
-        ("simulated, no masks, active", RunConfig(LocatorConfig(), trust="none")),
-        ("simulated, no masks, passive", RunConfig(LocatorConfig(), trust="none",
+        ("simulated, true masks (demo world)", RunConfig(fixed, trust="masks")),
+        ("simulated, no masks, active", RunConfig(fixed, trust="none")),
+        ("simulated, no masks, passive", RunConfig(fixed, trust="none",
                                                    integrity="passive")),
     ):  # fmt: skip
 

@@ -181,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
                 scored = []
                 for hd in HEADINGS_DEG:
                     path = AntennaPath(virtual_track(x, hd), 0.0)
-                    cfg = RunConfig(LocatorConfig(model=IntervalModel(sm.error, k)), trust="none",
+                    loc = LocatorConfig(model=IntervalModel(sm.error, k), budget=None)
+                    cfg = RunConfig(loc, trust="none",
                                     model_el_min_deg=app.el_min_deg)  # fmt: skip
                     ep = run_locator(path, src, start_chainage_m=HALF_LENGTH_M, config=cfg)
                     scored.append(score_run(ep, np.full(len(ep), HALF_LENGTH_M)))

@@ -92,7 +92,9 @@ def main(argv: list[str] | None = None) -> int:
         for hd in HEADINGS_DEG:
             path = AntennaPath(virtual_track(x, hd), 0.0)
             cfg = RunConfig(
-                LocatorConfig(model=models[other]), trust="none", start_uncertainty_m=50.0
+                LocatorConfig(model=models[other], budget=None),
+                trust="none",
+                start_uncertainty_m=50.0,
             )
             ep = run_locator(path, src, start_chainage_m=HALF_LENGTH_M, config=cfg)
             sc = score_run(ep, np.full(len(ep), HALF_LENGTH_M))

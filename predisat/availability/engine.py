@@ -50,7 +50,7 @@ from predisat.availability.interval import predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.gnss.errormodel import IntervalModel
-from predisat.gnss.integrity import IntegrityBudget
+from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
 from predisat.scheduler import Scheduler, TaskRunner
@@ -391,7 +391,7 @@ def compute_availability(
     rule: TrustRule,
     *,
     interval_model: IntervalModel | None = None,
-    integrity: IntegrityBudget | None = None,
+    integrity: IntegrityBudget | None = DEFAULT_BUDGET,
     with_interval: bool = True,
     interval_every: int = 1,
     chunk_positions: int = 2,
@@ -411,10 +411,11 @@ def compute_availability(
     rule : TrustRule
     interval_model : IntervalModel, optional
         Default :class:`~predisat.availability.interval.IntervalModel()`.
-    integrity : IntegrityBudget, optional
-        When given, each interval mode's ``k`` follows from it
+    integrity : IntegrityBudget or None
+        Each interval mode's ``k`` follows from it
         (:func:`predisat.availability.interval.mode_k_sigma`) and ``interval_model.k_sigma``
-        is not used.
+        is not used; default :data:`predisat.gnss.integrity.DEFAULT_BUDGET`. None:
+        ``interval_model.k_sigma`` in every mode.
     with_interval : bool
         Also predict interval lengths and pair geometry.
     interval_every : int

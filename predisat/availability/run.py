@@ -62,7 +62,7 @@ from predisat.availability.satellites import (
 )
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
-from predisat.gnss.integrity import IntegrityBudget
+from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
@@ -447,7 +447,7 @@ def run_availability(
     n_sky: int = 4,
     interval_every: int = 10,
     interval_model: IntervalModel | None = None,
-    integrity: IntegrityBudget | None = None,
+    integrity: IntegrityBudget | None = DEFAULT_BUDGET,
     workers: int | None = None,
     scheduler: Scheduler | str | None = None,
     counts_table: bool = False,
@@ -495,12 +495,15 @@ def run_availability(
         Pseudorange error model and pair half width of the predicted intervals (for example
         from ``locator calibrate``, read with
         :func:`predisat.gnss.errormodel.read_error_model`); default
-        ``IntervalModel()`` (``a = b = 2 m``, the source's ``k = 2``).
-    integrity : IntegrityBudget, optional
+        ``IntervalModel()`` (``a = b = 2 m``; its ``k = 2`` is used only with
+        ``integrity=None``).
+    integrity : IntegrityBudget or None
         The integrity risk per epoch the predicted intervals are drawn for: each interval
         mode's ``k`` follows from it (:func:`predisat.availability.interval.mode_k_sigma`) and
-        ``interval_model.k_sigma`` is not used; the report names it. ``predisat availability``
-        always gives one (``--integrity-risk``, unless ``--k-sigma`` fixes ``k``).
+        ``interval_model.k_sigma`` is not used; the report names it. Default
+        :data:`predisat.gnss.integrity.DEFAULT_BUDGET` (1e-12 per epoch, as
+        ``predisat availability --integrity-risk``); None: ``interval_model.k_sigma`` in every
+        mode (``--k-sigma``).
     workers : int, optional
         Threads of the availability engine in this process (default 1), or the worker
         processes of a local Dask cluster with ``scheduler="local"`` (default: the cores).

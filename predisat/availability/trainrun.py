@@ -21,7 +21,7 @@ from predisat.availability.interval import along_track_components, predicted_int
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
-from predisat.gnss.integrity import IntegrityBudget
+from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.track import TrackMap
 
 __all__ = ["SpeedProfile", "TrainRun", "trainrun"]
@@ -199,7 +199,7 @@ def trainrun(
     constellation: str | Sequence[str] = "all",
     antenna_height_m: float = 0.0,
     interval_model: IntervalModel | None = None,
-    integrity: IntegrityBudget | None = None,
+    integrity: IntegrityBudget | None = DEFAULT_BUDGET,
 ) -> TrainRun:
     """Run a train along a track and list the satellites it may trust at each step.
 
@@ -223,9 +223,10 @@ def trainrun(
     antenna_height_m : float
         Antenna height above the track axis (ignored when masks give the positions).
     interval_model : IntervalModel, optional
-    integrity : IntegrityBudget, optional
-        When given, each interval mode's ``k`` follows from it and ``interval_model.k_sigma``
-        is not used.
+    integrity : IntegrityBudget or None
+        Each interval mode's ``k`` follows from it and ``interval_model.k_sigma`` is not used;
+        default :data:`predisat.gnss.integrity.DEFAULT_BUDGET`. None: ``interval_model.k_sigma``
+        in every mode.
 
     Returns
     -------

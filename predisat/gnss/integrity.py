@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 __all__ = [
+    "DEFAULT_BUDGET",
     "DEFAULT_RISK_PER_EPOCH",
     "MAX_INDEPENDENT_PAIRS",
     "IntegrityBudget",
@@ -117,6 +118,14 @@ class IntegrityBudget:
             for m, name in ((3, "three pairs"), (2, "all pairs of 4-5"), (1, "one pair"))
         )
         return f"{self.label()}: {ks}"
+
+
+DEFAULT_BUDGET = IntegrityBudget()
+"""The library's one default (:data:`DEFAULT_RISK_PER_EPOCH` per epoch), as every command line's
+``--integrity-risk``: ``locator.fde.LocatorConfig().budget`` and the ``integrity=`` default of
+:func:`predisat.availability.run.run_availability`, ``compute_availability`` and ``trainrun``.
+Pass ``None`` there (with an ``IntervalModel`` whose ``k_sigma`` is the width wanted) to fix
+one ``k`` for every mode instead, e.g. the source's ``k = 2``."""
 
 
 def union_risk(k_sigma: float, independent_pairs: int) -> float:

@@ -70,8 +70,9 @@ def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path):
     masks = str(sim_dir / "true_masks.parquet")
     assert main(["-q", "run", "--sim", str(sim_dir), "--masks", masks, "--out",
                  str(tmp_path / "masks"), "--format", "csv"]) == 0  # fmt: skip
-    masked, _ = read_run(tmp_path / "masks")
+    masked, mmeta = read_run(tmp_path / "masks")
     assert _nlos_used(masked, sim) == 0
+    assert mmeta["config"]["trust_stretches"] == 3  # partitioned trust by default
     assert (tmp_path / "masks" / "epochs.csv").is_file()
     for name in ("interval_time.png", "interval_chainage.png", "interval_lengths.png"):
         assert (tmp_path / "masks" / name).stat().st_size > 5000
@@ -153,6 +154,10 @@ def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
         (["--sim", str(sim_dir), "--no-masks", "--error-model", str(tmp_path / "missing.json")],
          "locator calibrate"),
         (["--no-masks"], "one of the arguments --sim --obs is required"),
+        (["--sim", str(sim_dir), "--no-masks", "--trust-stretches", "2"],
+         "--trust-stretches is for --masks runs"),
+        (["--sim", str(sim_dir), "--masks", str(sim_dir / "true_masks.parquet"),
+          "--trust-stretches", "0"], "argument --trust-stretches: 0 must be 1 or more"),
     ]:  # fmt: skip
         with pytest.raises(SystemExit) as exc:
             main(["run", *argv, "--out", str(tmp_path / "x")])

@@ -12,7 +12,9 @@ from predisat.availability.interval import IntervalMode
 from predisat.gnss.errormodel import ErrorModel, IntervalModel
 from tests.locator._scene import random_sky, ranges, sky, straight_path
 
-CFG = LocatorConfig(model=IntervalModel(ErrorModel(1.0, 1.0), k_sigma=2.0), window_m=500.0)
+CFG = LocatorConfig(
+    model=IntervalModel(ErrorModel(1.0, 1.0), k_sigma=2.0), budget=None, window_m=500.0
+)
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,9 @@ from predisat.masks.maskset import MaskSet
 from tests.locator._scene import ranges, sky, straight_path
 
 SIGMA_M = 1.0
-MODEL = LocatorConfig(model=IntervalModel(ErrorModel(a_m=0.7, b_m=0.7), k_sigma=3.0))
+MODEL = LocatorConfig(
+    model=IntervalModel(ErrorModel(a_m=0.7, b_m=0.7), k_sigma=3.0), budget=None
+)
 # az, el of 8 satellites seen from the start; the track runs toward azimuth 60 deg
 AZ = np.array([10.0, 60.0, 100.0, 150.0, 200.0, 240.0, 300.0, 340.0])
 EL = np.array([70.0, 25.0, 40.0, 55.0, 30.0, 20.0, 45.0, 35.0])

@@ -108,15 +108,18 @@ def load_sim_case(name: str) -> SimCase:
 
 def sim_configs() -> dict[str, tuple[RunConfig, bool]]:
     """The campaign's rules (and passive integrity): name -> (config, uses the masks)."""
-    k389 = LocatorConfig(model=IntervalModel.for_risk(1e-4, CAMPAIGN_ERROR))
-    k2 = LocatorConfig(model=IntervalModel(CAMPAIGN_ERROR, k_sigma=2.0))
+    # every width fixed (budget=None): the references were written with one k per rule;
+    # "default" is LocatorConfig()'s of then, k = 2 (the default is now the budget)
+    k389 = LocatorConfig(model=IntervalModel.for_risk(1e-4, CAMPAIGN_ERROR), budget=None)
+    k2 = LocatorConfig(model=IntervalModel(CAMPAIGN_ERROR, k_sigma=2.0), budget=None)
+    k2_default = LocatorConfig(budget=None)
     return {
-        "masks": (RunConfig(k389, trust="masks"), True),
+        "masks": (RunConfig(k389, trust="masks", trust_stretches=1), True),
         "none": (RunConfig(k389, trust="none"), False),
         "cutoff15": (RunConfig(k389, trust="cutoff", cutoff_deg=15.0), False),
-        "masks_k2": (RunConfig(k2, trust="masks"), True),
-        "passive_none": (RunConfig(LocatorConfig(), integrity="passive", trust="none"), False),
-        "default_none": (RunConfig(LocatorConfig(), trust="none"), False),
+        "masks_k2": (RunConfig(k2, trust="masks", trust_stretches=1), True),
+        "passive_none": (RunConfig(k2_default, integrity="passive", trust="none"), False),
+        "default_none": (RunConfig(k2_default, trust="none"), False),
     }
 
 
@@ -154,7 +157,7 @@ def run_real_case(heading_deg: float, integrity: str) -> pd.DataFrame:
     model = RangeModel.from_rinex_nav(GNSS_OBS / "07590920_0000_0200.05n")
     src = RinexSource(model, obs, "G", odometer=np.zeros(len(obs.gps_s)))
     path = AntennaPath(virtual_track(GEONET_0759_ECEF_M, heading_deg), 0.0)
-    cfg = RunConfig(LocatorConfig(), integrity=integrity, trust="none")
+    cfg = RunConfig(LocatorConfig(budget=None), integrity=integrity, trust="none")  # k = 2
     ep = run_locator(path, src, start_chainage_m=2000.0, config=cfg)
     return ep.loc[:, list(COMPARED)]
 

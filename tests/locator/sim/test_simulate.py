@@ -362,7 +362,7 @@ def test_open_world_real_sky_feeds_the_locator(real_eph):
     assert np.all(counts["los"] >= 8)
     assert np.all(counts["nlos"] == 0)
     path = AntennaPath(track, antenna_height_m=4.0)
-    cfg = LocatorConfig(model=IntervalModel(ErrorModel(), k_sigma=3.0))
+    cfg = LocatorConfig(model=IntervalModel(ErrorModel(), k_sigma=3.0), budget=None)
     held = 0
     for i in range(0, run.n_epoch, 4):
         obs = run.observations(i)
