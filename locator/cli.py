@@ -214,6 +214,28 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = SimSource(sim, constellation=args.constellation)
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
         header, sim_chainage = None, sim.chainage_m
+    elif args.device_gnss:
+        import numpy as np
+
+        from locator.devicegnss import DeviceGnssSource, read_device_gnss
+
+        path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
+        dev = read_device_gnss(args.device_gnss)
+        _report_problems(args.device_gnss, dev.problems)
+        source = DeviceGnssSource(dev, args.constellation)
+        _warn_no_iono(source, [args.device_gnss])
+        start = args.start_chainage
+        # the phone's own first fix (Google's WLS) stands for the RINEX header position
+        fixes = dev.wls_ecef_m[np.all(np.isfinite(dev.wls_ecef_m), axis=1)]
+        header = fixes[0] if len(fixes) else None
+        sim_chainage = None
+        if start is None:
+            if header is None:
+                raise CliError(f"{args.device_gnss}: no WlsPosition*EcefMeters in any row; pass "
+                               "--start-chainage")  # fmt: skip
+            check_track(path, header, f"{args.device_gnss} (the phone's first fix)",
+                        _MAX_HEADER_OFFSET_M, " (or --start-chainage if that fix is wrong)")
+            start = static_truth(header, path)
     else:
         from locator.corrections import RangeModel
         from locator.observations import Observations
@@ -274,6 +296,10 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
 
         used = select_satellites(source.sim.sats, source.constellation)
         return simulated_profile(sorted({s[0] for s in used}))
+    from locator.devicegnss import DeviceGnssSource, device_profile
+
+    if isinstance(source, DeviceGnssSource):  # a smartphone's log: class phone unless told
+        return device_profile(source, receiver_class=args.receiver_class or "phone")
     return receiver_profile(source, args.receiver_class)
 
 
@@ -700,6 +726,9 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                      help="a simulated run (`locator simulate` folder)")
     src.add_argument("--obs", type=existing_file("a RINEX 2/3 observation file"),
                      metavar="FILE", help="a RINEX 2/3 observation file (with --nav)")
+    src.add_argument("--device-gnss", type=existing_file(_DEVICE_GNSS), metavar="CSV",
+                     help=_DEVICE_GNSS + ": a smartphone log carrying its satellite positions "
+                     "and corrections (no --nav)")
     p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
                    help="broadcast navigation files of the observation day (required with --obs, "
                    "no default)")
@@ -741,6 +770,8 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="a static antenna's chainage, metres")
     p.set_defaults(func=cmd_evaluate)
 
+
+_DEVICE_GNSS = "a Google Smartphone Decimeter Challenge device_gnss.csv"
 
 _TRUTH_CSV = ("a CSV with columns gps_s (GPS seconds) and chainage_m (true chainage, metres) "
               "covering the run's epochs")
