@@ -3,6 +3,7 @@ the leap seconds, the residuals against Google's independent ground truth, and b
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -92,7 +93,7 @@ def test_source_rotates_into_the_frame_of_reception(test_data: Path) -> None:
         DeviceGnssSource(dev, "C")
 
 
-def _rewrite(src: Path, dst: Path, edit) -> Path:  # type: ignore[no-untyped-def]
+def _rewrite(src: Path, dst: Path, edit: Callable[[list[str]], list[str]]) -> Path:
     lines = src.read_text().splitlines(keepends=True)
     dst.write_text("".join(edit(lines)))
     return dst
