@@ -512,6 +512,32 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         data = [simulated_residuals(SimRun.read(d), states, str(d)) for d in args.sim]
         fitted: dict[str, Any] = {"simulations": [str(d) for d in args.sim], "states": states}
         cls = cls or "simulated"
+    elif args.device_gnss:
+        from locator.devicegnss import (
+            DeviceGnssSource,
+            device_residuals,
+            read_device_gnss,
+            read_ground_truth,
+        )
+
+        if len(args.truth or ()) != len(args.device_gnss):
+            raise CliError(
+                f"--truth: give one ground-truth file per --device-gnss file, in the same order "
+                f"({len(args.device_gnss)} device_gnss, {len(args.truth or ())} truth)"
+            )
+        data = []
+        for dev_path, truth_path in zip(args.device_gnss, args.truth, strict=True):
+            dev = read_device_gnss(dev_path)
+            _report_problems(dev_path, dev.problems)
+            try:
+                data.append(device_residuals(
+                    DeviceGnssSource(dev, args.constellation), read_ground_truth(truth_path),
+                    min_el_deg=args.min_el, receiver_class="phone",
+                ))  # fmt: skip
+            except ValueError as exc:
+                raise CliError(str(exc)) from None
+        fitted = {"device_gnss": [str(f) for f in args.device_gnss],
+                  "truth": [str(f) for f in args.truth]}  # fmt: skip
     else:
         seen = [Path(f).resolve() for f in args.obs]
         if len(set(seen)) < len(seen):
@@ -549,7 +575,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )  # fmt: skip
     except ValueError as exc:
         raise CliError(
-            f"{exc} (command line: give more or longer --obs / --sim inputs, a few hundred "
+            f"{exc} (command line: give more or longer --obs / --sim / --device-gnss inputs, a few "
+            "hundred "
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
@@ -790,6 +817,12 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     src.add_argument("--obs", nargs="+", type=existing_file("RINEX 2/3 observation files"),
                      metavar="FILE", help="static station RINEX observations (several files: "
                      "several days or sites, each at its header position)")  # fmt: skip
+    src.add_argument("--device-gnss", nargs="+", type=existing_file(_DEVICE_GNSS),
+                     metavar="CSV", help="smartphone logs (" + _DEVICE_GNSS + ", with --truth); "
+                     "the phones name no model: add --receiver-class phone for a usable model")
+    p.add_argument("--truth", nargs="+", type=existing_file("a GSDC ground_truth.csv"),
+                   metavar="CSV", help="with --device-gnss: the ground truth of each file, in "
+                   "the same order")
     p.add_argument("--states", metavar="LIST",
                    help="with --sim: signal states to learn from, comma separated, of los, "
                    "multipath, nlos (default: los)")
@@ -821,6 +854,9 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
               "signal's state)"),
         needs("--nav", "nav", lambda a: given(a, "obs"), "--obs"),
         requires("--obs", "obs", "--nav FILES", "nav", "covering every observation file's day"),
+        needs("--truth", "truth", lambda a: given(a, "device_gnss"), "--device-gnss"),
+        requires("--device-gnss", "device_gnss", "--truth FILES", "truth",
+                 "the ground truth of each file"),
         needs("--station", "station", lambda a: given(a, "obs") and len(a.obs) == 1,
               "one --obs file (with several, each file's header position is used; calibrate "
               "one file at a time to give its position)"),

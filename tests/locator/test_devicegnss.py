@@ -149,3 +149,18 @@ def test_locator_run_on_a_phone_log_makes_no_claim(
 
     epochs = read_run(tmp_path / "run")[0]
     assert len(epochs) == 2 and not epochs["claim"].any()
+
+
+def test_calibrate_on_a_phone_log(
+    test_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from locator.cli import main
+
+    dev, gt = str(test_data / DEV), str(test_data / GT)
+    # two epochs support no fit (and no overbound): refused, saying what to give
+    assert main(["calibrate", "--device-gnss", dev, "--truth", gt, "--receiver-class", "phone",
+                 "--out", str(tmp_path / "m.json")]) == 2  # fmt: skip
+    assert "--device-gnss inputs" in capsys.readouterr().err
+    assert main(["calibrate", "--device-gnss", dev, "--truth", gt, gt, "--out",
+                 str(tmp_path / "m.json")]) == 2  # fmt: skip
+    assert "one ground-truth file per --device-gnss file" in capsys.readouterr().err
