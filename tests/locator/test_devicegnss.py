@@ -164,3 +164,23 @@ def test_calibrate_on_a_phone_log(
     assert main(["calibrate", "--device-gnss", dev, "--truth", gt, gt, "--out",
                  str(tmp_path / "m.json")]) == 2  # fmt: skip
     assert "one ground-truth file per --device-gnss file" in capsys.readouterr().err
+
+
+def test_google_satellite_states_match_the_broadcast_orbits(test_data: Path) -> None:
+    """Google's SvPosition / SvClockBias (its own ephemeris code) against this project's
+    IS-GPS-200 orbits from the IGS broadcast file of the same day: the columns are the
+    satellite's state at transmission in the Earth-fixed frame of that instant, and
+    SvClockBiasMeters is clock + relativity - group delay."""
+    from locator.corrections import RangeModel
+
+    dev = read_device_gnss(test_data / "gsdc/google_decimeter_2022_device_gnss_1ep.csv")
+    model = RangeModel.from_rinex_nav(test_data / "gsdc/rinex_nav_brdc1190.21n.gz")
+    s = dev.signals["C1C"]
+    cols = [j for j, sat in enumerate(dev.sats) if sat[0] == "G"]
+    assert len(cols) == 7
+    st = model.states(float(dev.gps_s[0]), tuple(dev.sats[j] for j in cols),
+                      s["raw_pseudorange_m"][0, cols], ["C1C"] * len(cols))  # fmt: skip
+    google = np.stack([s["sv_x_m"][0, cols], s["sv_y_m"][0, cols], s["sv_z_m"][0, cols]], -1)
+    assert np.max(np.linalg.norm(st.pos_ecef_m - google, axis=1)) < 0.01
+    ours = st.sat_clock_m + st.relativity_m - st.group_delay_m
+    np.testing.assert_allclose(ours, s["sv_clock_bias_m"][0, cols], atol=1e-3)
