@@ -1,35 +1,43 @@
-"""Leave-one-receiver-out validation of the error-model overbound on every usable real station.
+"""Leave-one-receiver-out validation of the error-model overbound on every usable real receiver.
 
-For each station of ``../shared/data/gnss`` with observations, broadcast navigation and a
-known position, and each of its constellations, an error model is calibrated on the *other*
-stations' residuals of that constellation (``locator.errorfit.fit_systems``: each system apart,
-a geodetic-class model) and the held-out station is located with it on straight virtual tracks
-through its known position at four headings (``locator_static.virtual_track``; no masks: open
-sky, active integrity, the odometer reads zero). The station's chainage (2000 m) is the truth.
+For each receiver of ``../shared/data/gnss`` that can be run (observations, orbits and a known
+position) and each of its constellations, an error model is calibrated on the *other* receivers
+of its class (``locator.errorfit.fit_systems``: each system apart) and the held-out receiver is
+located with it on straight virtual tracks through its known position at four headings
+(``locator_static.virtual_track``; no masks: open sky, active integrity, the odometer reads
+zero). The receiver's chainage (2000 m) is the truth.
 
-Stations (all geodetic; the smartphone logs cannot be run, see ``docs/errormodel.md``):
+Receivers:
 
-* GEONET 0759 and 3040 (Trimble 5700, GPS C1, 2005-04-02, 1 h at 30 s);
-* Ny-Alesund NYA1 (Trimble NetR9, GPS C1C, Galileo C1X, 2024-05-03, a day at 30 s; runs on
-  every ``--nya-step``-th epoch, calibration on all);
-* Copenhagen KMS3 (Septentrio PolaRx5, GPS C1C, Galileo C1C, 2022-06-08, 1 h at 30 s).
+* geodetic stations: GEONET 0759 and 3040 (Trimble 5700, GPS C1, 2005-04-02, 1 h at 30 s);
+  Ny-Alesund NYA1 (Trimble NetR9, GPS C1C, Galileo C1X, 2024-05-03, a day at 30 s; runs on
+  every ``--nya-step``-th epoch, calibration on all); Copenhagen KMS3 (Septentrio PolaRx5, GPS
+  C1C, Galileo C1C, 2022-06-08, 19 epochs at 30 s);
+* phones (GSDC ``device_gnss.csv`` with its satellite positions and corrections,
+  ``locator.devicegnss``; static at their ground truth): GSDC 2022 (a phone standing in a car,
+  2021-04-29, 6 epochs at 1 s) and GSDC 2023 Pixel 7 Pro (2023-09-07, 5 epochs), GPS and
+  Galileo E1 (C1C). A phone is held out against a *phone* model (the other phone: far too few
+  samples, usually no model at all) and against the *geodetic* model of every station (another
+  class: it does not apply, measured anyway).
 
 Variants: ``new`` (one-sided tails against the 95 % Clopper-Pearson bound of their share in
 independent samples, ``confidence=0.95``), ``legacy`` (the two-sided empirical share of
 before), ``estimate`` (the least-squares fit, no bound: to show that the check can fail), each
-at ``k_sigma`` 2 (the source's) and 3.89. Whether the model *applies* to the
-held-out station (receiver class geodetic, codes, processing) is reported; the runs claim as if
-it did, so that the model's quality is measured on every station.
+at the ``--k`` values (``budget``: the integrity budget of ``locator run``, 1e-12 per epoch).
+Whether the model *applies* to the held-out receiver (class, codes, samples) is reported; the
+runs claim as if it did, so that the model's quality is measured on every receiver.
 
-Prints one row per held-out station, system and variant (epochs, applies, claim share, HMI,
-interval median / p95, Stanford regions) and the totals per variant; writes the table
-(``loo.csv``) and a Stanford diagram per variant into ``--out``. Residuals are cached in
-``--cache`` (the NYA1 day takes about 80 s per system to compute).
+Prints one row per held-out receiver, system, model class and variant (epochs, applies, claim
+share, HMI with the 95 % upper bound on the HMI rate per epoch, interval median / p95, Stanford
+regions) and the totals; writes the table (``loo.csv``), a Stanford diagram per model and k, and
+a sheet with one per held-out receiver (``stanford_receivers_*.png``) into ``--out``. Residuals
+are cached in ``--cache`` (the NYA1 day takes about 80 s per system to compute).
 
 Usage::
 
     .venv/bin/python scripts/errormodel_loo.py --out /tmp/loo [--data ../shared/data/gnss]
-        [--cache /tmp/loo_cache] [--nya-step 4] [--variants new,legacy,estimate] [--k 2,3.89]
+        [--cache /tmp/loo_cache] [--nya-step 4] [--variants new,legacy,estimate]
+        [--k 2,3.89,budget] [--receivers NAME,...]
 """
 
 from __future__ import annotations
