@@ -244,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
               f"(truth moves {100 * moved:.1f} cm), systems {ph.systems}", flush=True)
     held_out = set(args.receivers.split(",")) if args.receivers else None
     rows: list[dict] = []
-    scored_all: dict[tuple[str, float | str], list[pd.DataFrame]] = {}
+    scored_all: dict[tuple[str, str, float | str], list[pd.DataFrame]] = {}
     per_rx: dict[tuple[str, str, str, float | str], pd.DataFrame] = {}
     for (name, s), (src, x, _step) in sources.items():
         if held_out is not None and name not in held_out:
@@ -281,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
                     model = IntervalModel(sm.error, 2.0 if k == "budget" else float(k))
                     sc = _runs(src, x, model, k == "budget", el_min)
                     key = f"{model_cls}:{variant}"
-                    scored_all.setdefault((key, k), []).append(sc)
+                    scored_all.setdefault((cls, key, k), []).append(sc)
                     per_rx[name, s, key, k] = sc
                     sm_ = summarise(sc)
                     n_ep = int(sm_["epochs"]) // len(HEADINGS_DEG)
@@ -311,12 +311,15 @@ def main(argv: list[str] | None = None) -> int:
     cols = ["station", "system", "model", "variant", "k", "a_m", "b_m", "n_indep", "tail_p",
             "epochs", "claim_share", "hmi", "hmi_rate_up95", "len_median_m", "len_p95_m"]
     print(table[[c for c in cols if c in table]].round(3).to_string(index=False))
-    print("totals:")
-    for (key, k), parts in scored_all.items():
+    print("totals per held-out class, model class:variant and k:")
+    for (held_cls, key, k), parts in scored_all.items():
         sc = pd.concat(parts, ignore_index=True)
         t = summarise(sc)
+        n_ep = int(t["epochs"]) // len(HEADINGS_DEG)
         print(
-            f"  {key} k={k}: {int(t['epochs'])} epochs, claim {100 * t['claim_share']:.1f} "
+            f"  {held_cls} held out, {key} k={k}: {int(t['epochs'])} epochs ({n_ep} per heading), "
+            f"HMI rate <= {clopper_pearson_upper(int(t['hmi']), n_ep):.2g} at 95 %, claim "
+            f"{100 * t['claim_share']:.1f} "
             f"%, HMI {int(t['hmi'])}, interval median {t['length_median_m']:.1f} m, p95 "
             f"{t['length_p95_m']:.1f} m; Stanford "
             + ", ".join(f"{c[9:]} {int(v)}" for c, v in t.items() if c.startswith("stanford_"))
@@ -324,8 +327,8 @@ def main(argv: list[str] | None = None) -> int:
         cls_, variant = key.split(":")
         what = {"new": "new overbound", "legacy": "two-sided overbound",
                 "estimate": "estimate (no bound)"}.get(variant, variant)  # fmt: skip
-        fig = stanford_diagram(sc, f"leave one receiver out, {cls_} {what}, k = {k}")
-        fig.savefig(args.out / f"stanford_{cls_}_{variant}_k{k}.png", dpi=100)
+        fig = stanford_diagram(sc, f"{held_cls}s held out, {cls_} model, {what}, k = {k}")
+        fig.savefig(args.out / f"stanford_{held_cls}_{cls_}_{variant}_k{k}.png", dpi=100)
     _per_receiver_sheets(per_rx, args.out)
     return 0
 
