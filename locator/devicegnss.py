@@ -226,6 +226,10 @@ def read_device_gnss(path: str | Path) -> DeviceGnss:
         if not (np.isfinite(ms) and np.isfinite(ctype) and np.isfinite(svid)):
             raise DeviceGnssError(p, line, "utcTimeMillis, ConstellationType and Svid must all be "
                                   "given; fix or delete the row")  # fmt: skip
+        _check_ms(p, line, "utcTimeMillis", ms, _UTC_MS_RANGE)
+        if not (abs(ctype) < 1e6 and abs(svid) < 1e6):
+            raise DeviceGnssError(p, line, "ConstellationType or Svid is out of range; the row is "
+                                  "damaged (re-export the file)")  # fmt: skip
         sat = _sat_id(p, line, int(ctype), int(svid))
         sig = (row.get("SignalType") or "").strip()
         code = SIGNAL_CODES.get(sig)
@@ -274,11 +278,27 @@ def read_device_gnss(path: str | Path) -> DeviceGnss:
             wls[i] = w
     utc = np.array(epochs, np.int64)
     # no arrival time: the UTC epoch on the GPS scale (the leap seconds added)
-    gps = np.where(np.isfinite(t_rx), t_rx, _utc_ms_to_gps_s(utc))
+    from_utc = _utc_ms_to_gps_s(utc)
+    off = np.abs(t_rx - from_utc)
+    bad = np.flatnonzero(np.isfinite(t_rx) & ~(off < 1.0))
+    if bad.size:
+        line = min(r[0] for r in rows if r[1] == epochs[int(bad[0])])
+        raise DeviceGnssError(p, line, f"ArrivalTimeNanosSinceGpsEpoch lies {off[bad[0]]:.3g} s "
+                              f"from utcTimeMillis {epochs[int(bad[0])]} (+ leap seconds); one "
+                              "of them is damaged")  # fmt: skip
+    gps = np.where(np.isfinite(t_rx), t_rx, from_utc)
     return DeviceGnss(str(p), gps, utc, sats, signals, wls, tuple(problems))
 
 
-_UNIX_MINUS_GPS_EPOCH_S = 315964800.0  # 1980-01-06 in Unix seconds
+# plausible times, milliseconds: the GPS epoch (1980-01-06) to 2100-01-01
+_UTC_MS_RANGE = (315964800000.0, 4102444800000.0)
+_GPS_MS_RANGE = (0.0, 4102444800000.0 - 315964800000.0)
+
+
+def _check_ms(path: Path, line: int, col: str, ms: float, span: tuple[float, float]) -> None:
+    if not span[0] <= ms <= span[1]:
+        raise DeviceGnssError(path, line, f"{col} {ms:g} is not a time between 1980 and 2100; "
+                              "the row is damaged (re-export the file)")  # fmt: skip
 
 
 def _utc_ms_to_gps_s(utc_ms: ArrayLike) -> NDArray:
@@ -354,6 +374,11 @@ def read_ground_truth(path: str | Path) -> GroundTruth:
         if not all(np.isfinite(v)):
             need = ", ".join((layout[0], *layout[2:]))
             raise DeviceGnssError(p, k + 2, f"empty value among {need}; fix or delete the row")
+        _check_ms(p, k + 2, layout[0], v[0], _UTC_MS_RANGE if layout[1] == "utc_ms"
+                  else _GPS_MS_RANGE)  # fmt: skip
+        if not (abs(v[1]) <= 90.0 and abs(v[2]) <= 360.0 and abs(v[3]) < 1e5):
+            raise DeviceGnssError(p, k + 2, f"position {v[1]:g}, {v[2]:g}, {v[3]:g} m is not a "
+                                  "latitude, longitude (degrees) and height; fix the row")
         recs.append(v)
     if not recs:
         raise DeviceGnssError(p, None, "no ground-truth record")

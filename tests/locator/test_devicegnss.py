@@ -184,3 +184,53 @@ def test_google_satellite_states_match_the_broadcast_orbits(test_data: Path) -> 
     assert np.max(np.linalg.norm(st.pos_ecef_m - google, axis=1)) < 0.01
     ours = st.sat_clock_m + st.relativity_m - st.group_delay_m
     np.testing.assert_allclose(ours, s["sv_clock_bias_m"][0, cols], atol=1e-3)
+
+
+@pytest.mark.parametrize(("col", "value", "match"), [
+    ("utcTimeMillis", "1e308", "utcTimeMillis 1e\\+308 is not a time between 1980 and 2100"),
+    ("utcTimeMillis", "-5", "utcTimeMillis -5 is not a time"),
+    ("ArrivalTimeNanosSinceGpsEpoch", "9" * 25, "ArrivalTimeNanosSinceGpsEpoch differs by "
+     "1e\\+16 s within utcTimeMillis 1694113198000"),
+    ("Svid", "1e308", "ConstellationType or Svid is out of range"),
+])  # fmt: skip
+def test_times_and_ids_out_of_range_are_refused(
+    test_data: Path, tmp_path: Path, col: str, value: str, match: str
+) -> None:
+    """Values that once overflowed the int64 conversion (found by hand after the fuzzing)."""
+
+    def damage(ls: list[str]) -> list[str]:
+        cells = ls[3].split(",")
+        cells[ls[0].split(",").index(col)] = value
+        ls[3] = ",".join(cells)
+        return ls
+
+    bad = _rewrite(test_data / DEV, tmp_path / "d.csv", damage)
+    with pytest.raises(DeviceGnssError, match=r"d\.csv, line 4: " + match):
+        read_device_gnss(bad)
+
+
+def test_arrival_time_must_agree_with_utc(test_data: Path, tmp_path: Path) -> None:
+    def shift(ls: list[str]) -> list[str]:
+        k = ls[0].split(",").index("ArrivalTimeNanosSinceGpsEpoch")
+        cells = ls[1].split(",")
+        cells[k] = repr(float(cells[k]) + 5e9)  # 5 s late
+        return [ls[0], ",".join(cells)]
+
+    bad = _rewrite(test_data / DEV, tmp_path / "s.csv", shift)
+    with pytest.raises(DeviceGnssError, match=r"s\.csv, line 2: ArrivalTimeNanosSinceGpsEpoch lies "
+                                              r"5 s from utcTimeMillis 1694113198000"):
+        read_device_gnss(bad)
+
+
+def test_ground_truth_out_of_range_is_refused(test_data: Path, tmp_path: Path) -> None:
+    for k, (col, match) in enumerate([(8, "UnixTimeMillis 1e\\+308 is not a time"),
+                                      (2, "position 1e\\+308, .* is not a latitude")]):
+        def damage(ls: list[str], c: int = col) -> list[str]:
+            cells = ls[2].split(",")
+            cells[c] = "1e308"
+            ls[2] = ",".join(cells)
+            return ls
+
+        bad = _rewrite(test_data / GT, tmp_path / f"g{k}.csv", damage)
+        with pytest.raises(DeviceGnssError, match=rf"g{k}\.csv, line 3: {match}"):
+            read_ground_truth(bad)
