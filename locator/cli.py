@@ -822,7 +822,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
                      "the phones name no model: add --receiver-class phone for a usable model")
     p.add_argument("--truth", nargs="+", type=existing_file("a GSDC ground_truth.csv"),
                    metavar="CSV", help="with --device-gnss: the ground truth of each file, in "
-                   "the same order")
+                   "the same order (required with --device-gnss, no default)")
     p.add_argument("--states", metavar="LIST",
                    help="with --sim: signal states to learn from, comma separated, of los, "
                    "multipath, nlos (default: los)")

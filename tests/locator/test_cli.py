@@ -152,7 +152,7 @@ def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
         (["--sim", str(sim_dir)], "one of the arguments --masks --cutoff --no-masks is required"),
         (["--sim", str(sim_dir), "--no-masks", "--error-model", str(tmp_path / "missing.json")],
          "locator calibrate"),
-        (["--no-masks"], "one of the arguments --sim --obs is required"),
+        (["--no-masks"], "one of the arguments --sim --obs --device-gnss is required"),
     ]:  # fmt: skip
         with pytest.raises(SystemExit) as exc:
             main(["run", *argv, "--out", str(tmp_path / "x")])
