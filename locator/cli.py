@@ -223,6 +223,28 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = SimSource(sim, constellation=args.constellation)
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
         header, sim_chainage = None, sim.chainage_m
+    elif args.device_gnss:
+        import numpy as np
+
+        from locator.devicegnss import DeviceGnssSource, read_device_gnss
+
+        path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
+        dev = read_device_gnss(args.device_gnss)
+        _report_problems(args.device_gnss, dev.problems)
+        source = DeviceGnssSource(dev, args.constellation)
+        _warn_no_iono(source, [args.device_gnss])
+        start = args.start_chainage
+        # the phone's own first fix (Google's WLS) stands for the RINEX header position
+        fixes = dev.wls_ecef_m[np.all(np.isfinite(dev.wls_ecef_m), axis=1)]
+        header = fixes[0] if len(fixes) else None
+        sim_chainage = None
+        if start is None:
+            if header is None:
+                raise CliError(f"{args.device_gnss}: no WlsPosition*EcefMeters in any row; pass "
+                               "--start-chainage")  # fmt: skip
+            check_track(path, header, f"{args.device_gnss} (the phone's first fix)",
+                        _MAX_HEADER_OFFSET_M, " (or --start-chainage if that fix is wrong)")
+            start = static_truth(header, path)
     else:
         from locator.corrections import RangeModel
         from locator.observations import Observations
@@ -283,6 +305,10 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
 
         used = select_satellites(source.sim.sats, source.constellation)
         return simulated_profile(sorted({s[0] for s in used}))
+    from locator.devicegnss import DeviceGnssSource, device_profile
+
+    if isinstance(source, DeviceGnssSource):  # a smartphone's log: class phone unless told
+        return device_profile(source, receiver_class=args.receiver_class or "phone")
     return receiver_profile(source, args.receiver_class)
 
 
@@ -495,6 +521,32 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         data = [simulated_residuals(SimRun.read(d), states, str(d)) for d in args.sim]
         fitted: dict[str, Any] = {"simulations": [str(d) for d in args.sim], "states": states}
         cls = cls or "simulated"
+    elif args.device_gnss:
+        from locator.devicegnss import (
+            DeviceGnssSource,
+            device_residuals,
+            read_device_gnss,
+            read_ground_truth,
+        )
+
+        if len(args.truth or ()) != len(args.device_gnss):
+            raise CliError(
+                f"--truth: give one ground-truth file per --device-gnss file, in the same order "
+                f"({len(args.device_gnss)} device_gnss, {len(args.truth or ())} truth)"
+            )
+        data = []
+        for dev_path, truth_path in zip(args.device_gnss, args.truth, strict=True):
+            dev = read_device_gnss(dev_path)
+            _report_problems(dev_path, dev.problems)
+            try:
+                data.append(device_residuals(
+                    DeviceGnssSource(dev, args.constellation), read_ground_truth(truth_path),
+                    min_el_deg=args.min_el, receiver_class="phone",
+                ))  # fmt: skip
+            except ValueError as exc:
+                raise CliError(str(exc)) from None
+        fitted = {"device_gnss": [str(f) for f in args.device_gnss],
+                  "truth": [str(f) for f in args.truth]}  # fmt: skip
     else:
         seen = [Path(f).resolve() for f in args.obs]
         if len(set(seen)) < len(seen):
@@ -532,7 +584,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )  # fmt: skip
     except ValueError as exc:
         raise CliError(
-            f"{exc} (command line: give more or longer --obs / --sim inputs, a few hundred "
+            f"{exc} (command line: give more or longer --obs / --sim / --device-gnss inputs, a few "
+            "hundred "
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
@@ -714,6 +767,9 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                      help="a simulated run (`locator simulate` folder)")
     src.add_argument("--obs", type=existing_file("a RINEX 2/3 observation file"),
                      metavar="FILE", help="a RINEX 2/3 observation file (with --nav)")
+    src.add_argument("--device-gnss", type=existing_file(_DEVICE_GNSS), metavar="CSV",
+                     help=_DEVICE_GNSS + ": a smartphone log carrying its satellite positions "
+                     "and corrections (no --nav)")
     p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
                    help="broadcast navigation files of the observation day (required with --obs, "
                    "no default)")
@@ -758,6 +814,8 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.set_defaults(func=cmd_evaluate)
 
 
+_DEVICE_GNSS = "a Google Smartphone Decimeter Challenge device_gnss.csv"
+
 _TRUTH_CSV = ("a CSV with columns gps_s (GPS seconds) and chainage_m (true chainage, metres) "
               "covering the run's epochs")
 
@@ -775,6 +833,12 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     src.add_argument("--obs", nargs="+", type=existing_file("RINEX 2/3 observation files"),
                      metavar="FILE", help="static station RINEX observations (several files: "
                      "several days or sites, each at its header position)")  # fmt: skip
+    src.add_argument("--device-gnss", nargs="+", type=existing_file(_DEVICE_GNSS),
+                     metavar="CSV", help="smartphone logs (" + _DEVICE_GNSS + ", with --truth); "
+                     "the phones name no model: add --receiver-class phone for a usable model")
+    p.add_argument("--truth", nargs="+", type=existing_file("a GSDC ground_truth.csv"),
+                   metavar="CSV", help="with --device-gnss: the ground truth of each file, in "
+                   "the same order (required with --device-gnss, no default)")
     p.add_argument("--states", metavar="LIST",
                    help="with --sim: signal states to learn from, comma separated, of los, "
                    "multipath, nlos (default: los)")
@@ -806,6 +870,9 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
               "signal's state)"),
         needs("--nav", "nav", lambda a: given(a, "obs"), "--obs"),
         requires("--obs", "obs", "--nav FILES", "nav", "covering every observation file's day"),
+        needs("--truth", "truth", lambda a: given(a, "device_gnss"), "--device-gnss"),
+        requires("--device-gnss", "device_gnss", "--truth FILES", "truth",
+                 "the ground truth of each file"),
         needs("--station", "station", lambda a: given(a, "obs") and len(a.obs) == 1,
               "one --obs file (with several, each file's header position is used; calibrate "
               "one file at a time to give its position)"),

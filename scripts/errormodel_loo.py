@@ -1,35 +1,43 @@
-"""Leave-one-receiver-out validation of the error-model overbound on every usable real station.
+"""Leave-one-receiver-out validation of the error-model overbound on every usable real receiver.
 
-For each station of ``../shared/data/gnss`` with observations, broadcast navigation and a
-known position, and each of its constellations, an error model is calibrated on the *other*
-stations' residuals of that constellation (``locator.errorfit.fit_systems``: each system apart,
-a geodetic-class model) and the held-out station is located with it on straight virtual tracks
-through its known position at four headings (``locator_static.virtual_track``; no masks: open
-sky, active integrity, the odometer reads zero). The station's chainage (2000 m) is the truth.
+For each receiver of ``../shared/data/gnss`` that can be run (observations, orbits and a known
+position) and each of its constellations, an error model is calibrated on the *other* receivers
+of its class (``locator.errorfit.fit_systems``: each system apart) and the held-out receiver is
+located with it on straight virtual tracks through its known position at four headings
+(``locator_static.virtual_track``; no masks: open sky, active integrity, the odometer reads
+zero). The receiver's chainage (2000 m) is the truth.
 
-Stations (all geodetic; the smartphone logs cannot be run, see ``docs/errormodel.md``):
+Receivers:
 
-* GEONET 0759 and 3040 (Trimble 5700, GPS C1, 2005-04-02, 1 h at 30 s);
-* Ny-Alesund NYA1 (Trimble NetR9, GPS C1C, Galileo C1X, 2024-05-03, a day at 30 s; runs on
-  every ``--nya-step``-th epoch, calibration on all);
-* Copenhagen KMS3 (Septentrio PolaRx5, GPS C1C, Galileo C1C, 2022-06-08, 1 h at 30 s).
+* geodetic stations: GEONET 0759 and 3040 (Trimble 5700, GPS C1, 2005-04-02, 1 h at 30 s);
+  Ny-Alesund NYA1 (Trimble NetR9, GPS C1C, Galileo C1X, 2024-05-03, a day at 30 s; runs on
+  every ``--nya-step``-th epoch, calibration on all); Copenhagen KMS3 (Septentrio PolaRx5, GPS
+  C1C, Galileo C1C, 2022-06-08, 19 epochs at 30 s);
+* phones (GSDC ``device_gnss.csv`` with its satellite positions and corrections,
+  ``locator.devicegnss``; static at their ground truth): GSDC 2022 (a phone standing in a car,
+  2021-04-29, 6 epochs at 1 s) and GSDC 2023 Pixel 7 Pro (2023-09-07, 5 epochs), GPS and
+  Galileo E1 (C1C). A phone is held out against a *phone* model (the other phone: far too few
+  samples, usually no model at all) and against the *geodetic* model of every station (another
+  class: it does not apply, measured anyway).
 
 Variants: ``new`` (one-sided tails against the 95 % Clopper-Pearson bound of their share in
 independent samples, ``confidence=0.95``), ``legacy`` (the two-sided empirical share of
 before), ``estimate`` (the least-squares fit, no bound: to show that the check can fail), each
-at ``k_sigma`` 2 (the source's) and 3.89. Whether the model *applies* to the
-held-out station (receiver class geodetic, codes, processing) is reported; the runs claim as if
-it did, so that the model's quality is measured on every station.
+at the ``--k`` values (``budget``: the integrity budget of ``locator run``, 1e-12 per epoch).
+Whether the model *applies* to the held-out receiver (class, codes, samples) is reported; the
+runs claim as if it did, so that the model's quality is measured on every receiver.
 
-Prints one row per held-out station, system and variant (epochs, applies, claim share, HMI,
-interval median / p95, Stanford regions) and the totals per variant; writes the table
-(``loo.csv``) and a Stanford diagram per variant into ``--out``. Residuals are cached in
-``--cache`` (the NYA1 day takes about 80 s per system to compute).
+Prints one row per held-out receiver, system, model class and variant (epochs, applies, claim
+share, HMI with the 95 % upper bound on the HMI rate per epoch, interval median / p95, Stanford
+regions) and the totals; writes the table (``loo.csv``), a Stanford diagram per model and k, and
+a sheet with one per held-out receiver (``stanford_receivers_*.png``) into ``--out``. Residuals
+are cached in ``--cache`` (the NYA1 day takes about 80 s per system to compute).
 
 Usage::
 
     .venv/bin/python scripts/errormodel_loo.py --out /tmp/loo [--data ../shared/data/gnss]
-        [--cache /tmp/loo_cache] [--nya-step 4] [--variants new,legacy,estimate] [--k 2,3.89]
+        [--cache /tmp/loo_cache] [--nya-step 4] [--variants new,legacy,estimate]
+        [--k 2,3.89,budget] [--receivers NAME,...]
 """
 
 from __future__ import annotations
@@ -48,6 +56,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from locator_static import GEONET_0759_ECEF_M, HALF_LENGTH_M, HEADINGS_DEG, virtual_track
 
 from locator.corrections import RangeModel
+from locator.devicegnss import (
+    DeviceGnssSource,
+    device_residuals,
+    read_device_gnss,
+    read_ground_truth,
+)
 from locator.errorfit import Residuals, fit_systems, model_file_parts, station_residuals
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
@@ -55,8 +69,9 @@ from locator.observations import Observations
 from locator.plots import stanford_diagram
 from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
-from locator.sources import RinexSource
+from locator.sources import EpochSource, RinexSource
 from predisat.gnss.errormodel import ErrorModelFile, IntervalModel, ReceiverProfile
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -90,6 +105,31 @@ STATIONS = (
 )
 
 
+@dataclass(frozen=True)
+class Phone:
+    name: str
+    device_gnss: str  # GSDC device_gnss.csv: satellite positions and corrections per row
+    truth: str
+    systems: str
+
+
+GLP = "gnss_lib_py/"
+PHONES = (
+    Phone("GSDC22", GLP + "google_decimeter_2022_device_gnss.csv",
+          GLP + "google_decimeter_2022_ground_truth.csv", "GE"),
+    Phone("Pixel7Pro", GLP + "gdc2023_pixel7pro_device_gnss.csv",
+          GLP + "gdc2023_pixel7pro_ground_truth.csv", "GE"),
+)  # fmt: skip
+CLASS = {**{st.name: "geodetic" for st in STATIONS}, **{ph.name: "phone" for ph in PHONES}}
+
+
+def clopper_pearson_upper(k: int, n: int, confidence: float = 0.95) -> float:
+    """One-sided upper bound of a rate from ``k`` events in ``n`` independent trials."""
+    from scipy.stats import beta
+
+    return 1.0 if k >= n else float(beta.ppf(confidence, k + 1, n - k))
+
+
 def every(obs: Observations, step: int) -> Observations:
     """Every ``step``-th epoch of ``obs``."""
     if step <= 1:
@@ -121,6 +161,36 @@ def residuals(st: Station, system: str, src: RinexSource, x: np.ndarray, cache: 
     return dataclasses.replace(r, source=st.obs)
 
 
+def _models(
+    train: list[Residuals], variant: str, cls: str
+) -> tuple[ErrorModelFile, str] | str:
+    """The error-model file learned on ``train`` by ``variant``, or why there is none."""
+    conf = 0.95 if variant == "new" else None
+    bound = "estimate" if variant == "estimate" else "overbound"
+    try:
+        fits = fit_systems(train, confidence=conf, bound=bound)
+    except ValueError as exc:
+        return str(exc)
+    model, systems, app = model_file_parts(fits, train, k_sigma=2.0, receiver_class=cls,
+                                           method=bound)  # fmt: skip
+    return ErrorModelFile(model, systems, app), "+".join(sorted({Path(t.source).name[:12]
+                                                                for t in train}))  # fmt: skip
+
+
+def _runs(src: EpochSource, x: np.ndarray, model: IntervalModel, budget: bool,
+          el_min: float) -> pd.DataFrame:  # fmt: skip
+    """Scored runs on the virtual tracks through ``x`` at every heading."""
+    scored = []
+    for hd in HEADINGS_DEG:
+        path = AntennaPath(virtual_track(x, hd), 0.0)
+        loc = LocatorConfig(model=model, budget=IntegrityBudget(DEFAULT_RISK_PER_EPOCH)
+                            if budget else None)  # fmt: skip
+        cfg = RunConfig(loc, trust="none", model_el_min_deg=el_min)
+        ep = run_locator(path, src, start_chainage_m=HALF_LENGTH_M, config=cfg)
+        scored.append(score_run(ep, np.full(len(ep), HALF_LENGTH_M)))
+    return pd.concat(scored, ignore_index=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "gnss")
@@ -135,12 +205,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--variants", default="new,legacy,estimate", help="new, legacy, estimate (comma separated)"
     )
-    ap.add_argument("--k", default="2,3.89", help="k_sigma values, comma separated")
+    ap.add_argument("--k", default="2,3.89",
+                    help="k_sigma values, comma separated; 'budget' for the integrity budget of "
+                    "`locator run` (1e-12 per epoch)")  # fmt: skip
+    ap.add_argument("--receivers", help="held-out receivers only (comma separated names)")
     args = ap.parse_args(argv)
     cache = args.cache or args.out / "cache"
     variants = [v.strip() for v in args.variants.split(",")]
-    ks = [float(v) for v in args.k.split(",")]
-    sources: dict[tuple[str, str], tuple[RinexSource, np.ndarray, int]] = {}
+    ks: list[float | str] = [v if v == "budget" else float(v) for v in args.k.split(",")]
+    sources: dict[tuple[str, str], tuple[EpochSource, np.ndarray, int]] = {}
     data: dict[tuple[str, str], Residuals] = {}
     for st in STATIONS:
         obs = Observations.from_rinex(args.data / st.obs)
@@ -154,79 +227,135 @@ def main(argv: list[str] | None = None) -> int:
             sources[st.name, s] = (RinexSource(nav, run_obs, s, odometer=odo), x, step)
         print(f"{st.name}: {obs.header.receiver_type} / {obs.header.antenna_type}, "
               f"{len(obs.gps_s)} epochs, systems {st.systems}", flush=True)  # fmt: skip
-    rows: list[dict] = []
-    scored_all: dict[tuple[str, float], list[pd.DataFrame]] = {}
-    for (name, s), (src, x, _step) in sources.items():
-        train = [d for (n2, s2), d in data.items() if s2 == s and n2 != name]
-        if not train:
-            print(f"{name} {s}: no other station of system {s}: no LOO model")
+    for ph in PHONES:
+        dev = read_device_gnss(args.data / ph.device_gnss)
+        truth = read_ground_truth(args.data / ph.truth)
+        xt = truth.at(dev.gps_s)
+        moved = float(np.max(np.linalg.norm(xt - xt[0], axis=-1)))
+        if moved > 0.5:
+            print(f"{ph.name}: the phone moves {moved:.1f} m during its epochs; a straight "
+                  "virtual track through one point does not hold it: left out", flush=True)
             continue
+        for s in ph.systems:
+            phone = DeviceGnssSource(dev, s, odometer=np.zeros(len(dev.gps_s)))
+            data[ph.name, s] = device_residuals(phone, truth)
+            sources[ph.name, s] = (phone, xt[0], 1)
+        print(f"{ph.name}: phone (GSDC device_gnss), {len(dev.gps_s)} epochs at 1 s, static "
+              f"(truth moves {100 * moved:.1f} cm), systems {ph.systems}", flush=True)
+    held_out = set(args.receivers.split(",")) if args.receivers else None
+    rows: list[dict] = []
+    scored_all: dict[tuple[str, str, float | str], list[pd.DataFrame]] = {}
+    per_rx: dict[tuple[str, str, str, float | str], pd.DataFrame] = {}
+    for (name, s), (src, x, _step) in sources.items():
+        if held_out is not None and name not in held_out:
+            continue
+        cls = CLASS[name]
         held = data[name, s]
-        profile = dataclasses.replace(held.profile, receiver_class="geodetic")
-        for variant in variants:
-            conf = 0.95 if variant == "new" else None
-            bound = "estimate" if variant == "estimate" else "overbound"
-            try:
-                fits = fit_systems(train, confidence=conf, bound=bound)
-            except ValueError as exc:
-                print(f"{name} {s} {variant}: no LOO model ({exc})", flush=True)
+        profile = dataclasses.replace(held.profile, receiver_class=cls)
+        # the class's own model (other receivers of the class) and, for a phone, the geodetic one
+        trainings = [(cls, [d for (n2, s2), d in data.items()
+                            if s2 == s and n2 != name and CLASS[n2] == cls])]  # fmt: skip
+        if cls != "geodetic":
+            trainings.append(("geodetic", [d for (n2, s2), d in data.items()
+                                           if s2 == s and CLASS[n2] == "geodetic"]))  # fmt: skip
+        for model_cls, train in trainings:
+            if not train:
+                print(f"{name} {s}: no other {model_cls} receiver of system {s}: no LOO model")
                 continue
-            model, systems, app = model_file_parts(
-                fits, train, k_sigma=2.0, receiver_class="geodetic", method=bound
-            )
-            mf = ErrorModelFile(model, systems, app)
-            why = mf.mismatches(profile)
-            sm = systems[s]
-            for k in ks:
-                scored = []
-                for hd in HEADINGS_DEG:
-                    path = AntennaPath(virtual_track(x, hd), 0.0)
-                    loc = LocatorConfig(model=IntervalModel(sm.error, k), budget=None)
-                    cfg = RunConfig(loc, trust="none",
-                                    model_el_min_deg=app.el_min_deg)  # fmt: skip
-                    ep = run_locator(path, src, start_chainage_m=HALF_LENGTH_M, config=cfg)
-                    scored.append(score_run(ep, np.full(len(ep), HALF_LENGTH_M)))
-                sc = pd.concat(scored, ignore_index=True)
-                scored_all.setdefault((variant, k), []).append(sc)
-                sm_ = summarise(sc)
-                rows.append({
-                    "station": name, "system": s, "variant": variant, "k": k,
-                    "trained_on": "+".join(n2 for (n2, s2) in data if s2 == s and n2 != name),
-                    "a_m": sm.error.a_m, "b_m": sm.error.b_m, "n_indep": sm.n_independent,
-                    "tail_p": sm.tail_probability, "applies": "yes" if not why else
-                    "; ".join(why), "epochs": int(sm_["epochs"]),
-                    "claim_share": sm_["claim_share"], "hmi": int(sm_["hmi"]),
-                    "len_median_m": sm_["length_median_m"], "len_p95_m": sm_["length_p95_m"],
-                    **{c: int(v) for c, v in sm_.items() if c.startswith("stanford_")},
-                })  # fmt: skip
-                r = rows[-1]
-                print(f"{name} {s} {variant} k={k:g}: a {r['a_m']:.2f} b {r['b_m']:.2f} m, "
-                      f"{r['n_indep']} indep., tail {r['tail_p']:.2g}; {r['epochs']} epochs, "
-                      f"claim {100 * r['claim_share']:.1f} %, HMI {r['hmi']}, length "
-                      f"{r['len_median_m']:.1f} / {r['len_p95_m']:.1f} m; applies: "
-                      f"{r['applies']}", flush=True)  # fmt: skip
+            names = "+".join(n2 for (n2, s2), d in data.items() if any(d is t for t in train))
+            for variant in variants:
+                got = _models(train, variant, model_cls)
+                if isinstance(got, str):
+                    print(f"{name} {s} {variant} ({model_cls} model): none ({got})", flush=True)
+                    rows.append({"station": name, "class": cls, "system": s, "model": model_cls,
+                                 "variant": variant, "trained_on": names,
+                                 "applies": f"no model: {got}"})  # fmt: skip
+                    continue
+                mf, _ = got
+                why = mf.mismatches(profile)
+                sm = mf.systems.get(s)
+                if sm is None:
+                    continue
+                el_min = mf.applicability.el_min_deg if mf.applicability else 5.0
+                for k in ks:
+                    model = IntervalModel(sm.error, 2.0 if k == "budget" else float(k))
+                    sc = _runs(src, x, model, k == "budget", el_min)
+                    key = f"{model_cls}:{variant}"
+                    scored_all.setdefault((cls, key, k), []).append(sc)
+                    per_rx[name, s, key, k] = sc
+                    sm_ = summarise(sc)
+                    n_ep = int(sm_["epochs"]) // len(HEADINGS_DEG)
+                    hmi = int(sm_["hmi"])
+                    rows.append({
+                        "station": name, "class": cls, "system": s, "model": model_cls,
+                        "variant": variant, "k": k, "trained_on": names, "a_m": sm.error.a_m,
+                        "b_m": sm.error.b_m, "n_indep": sm.n_independent,
+                        "tail_p": sm.tail_probability, "applies": "yes" if not why else
+                        "; ".join(why), "epochs": int(sm_["epochs"]),
+                        "claim_share": sm_["claim_share"], "hmi": hmi,
+                        "hmi_rate_up95": clopper_pearson_upper(hmi, n_ep),
+                        "len_median_m": sm_["length_median_m"], "len_p95_m": sm_["length_p95_m"],
+                        **{c: int(v) for c, v in sm_.items() if c.startswith("stanford_")},
+                    })  # fmt: skip
+                    r = rows[-1]
+                    print(f"{name} {s} {model_cls} {variant} k={k}: a {r['a_m']:.2f} b "
+                          f"{r['b_m']:.2f} m, {r['n_indep']} indep., tail {r['tail_p']:.2g}; "
+                          f"{r['epochs']} epochs, claim {100 * r['claim_share']:.1f} %, HMI "
+                          f"{hmi} (rate <= {r['hmi_rate_up95']:.2g} at 95 %, {n_ep} epochs), "
+                          f"length {r['len_median_m']:.1f} / {r['len_p95_m']:.1f} m; applies: "
+                          f"{r['applies']}", flush=True)  # fmt: skip
     table = pd.DataFrame(rows)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "loo.csv", index=False)
     pd.set_option("display.width", 250)
-    cols = ["station", "system", "variant", "k", "a_m", "b_m", "n_indep", "tail_p", "epochs",
-            "claim_share", "hmi", "len_median_m", "len_p95_m"]  # fmt: skip
-    print(table[cols].round(3).to_string(index=False))
-    print("totals:")
-    for (variant, k), parts in scored_all.items():
+    cols = ["station", "system", "model", "variant", "k", "a_m", "b_m", "n_indep", "tail_p",
+            "epochs", "claim_share", "hmi", "hmi_rate_up95", "len_median_m", "len_p95_m"]
+    print(table[[c for c in cols if c in table]].round(3).to_string(index=False))
+    print("totals per held-out class, model class:variant and k:")
+    for (held_cls, key, k), parts in scored_all.items():
         sc = pd.concat(parts, ignore_index=True)
         t = summarise(sc)
+        n_ep = int(t["epochs"]) // len(HEADINGS_DEG)
         print(
-            f"  {variant} k={k:g}: {int(t['epochs'])} epochs, claim {100 * t['claim_share']:.1f} "
+            f"  {held_cls} held out, {key} k={k}: {int(t['epochs'])} epochs ({n_ep} per heading), "
+            f"HMI rate <= {clopper_pearson_upper(int(t['hmi']), n_ep):.2g} at 95 %, claim "
+            f"{100 * t['claim_share']:.1f} "
             f"%, HMI {int(t['hmi'])}, interval median {t['length_median_m']:.1f} m, p95 "
             f"{t['length_p95_m']:.1f} m; Stanford "
             + ", ".join(f"{c[9:]} {int(v)}" for c, v in t.items() if c.startswith("stanford_"))
         )
+        cls_, variant = key.split(":")
         what = {"new": "new overbound", "legacy": "two-sided overbound",
                 "estimate": "estimate (no bound)"}.get(variant, variant)  # fmt: skip
-        fig = stanford_diagram(sc, f"leave one receiver out, {what}, k = {k:g}")
-        fig.savefig(args.out / f"stanford_{variant}_k{k:g}.png", dpi=100)
+        fig = stanford_diagram(sc, f"{held_cls}s held out, {cls_} model, {what}, k = {k}")
+        fig.savefig(args.out / f"stanford_{held_cls}_{cls_}_{variant}_k{k}.png", dpi=100)
+    _per_receiver_sheets(per_rx, args.out)
     return 0
+
+
+def _per_receiver_sheets(
+    per_rx: dict[tuple[str, str, str, float | str], pd.DataFrame], out: Path
+) -> None:
+    """One sheet per model and k: a Stanford diagram per held-out receiver and system."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    keys = sorted({(key, str(k)) for (_n, _s, key, k) in per_rx})
+    for key, k in keys:
+        panels = [(n, s, sc) for (n, s, key2, k2), sc in per_rx.items()
+                  if key2 == key and str(k2) == k]  # fmt: skip
+        ncol = min(4, len(panels))
+        nrow = -(-len(panels) // ncol)
+        sheet = Figure(figsize=(4 * ncol, 3.6 * nrow), layout="constrained")
+        axes = np.atleast_1d(sheet.subplots(nrow, ncol)).ravel()
+        for ax in axes:
+            ax.axis("off")
+        for ax, (n, s, sc) in zip(axes, panels, strict=False):
+            fig = stanford_diagram(sc, f"{n} {s} ({key}, k = {k})")
+            canvas = FigureCanvasAgg(fig)
+            canvas.draw()
+            ax.imshow(np.asarray(canvas.buffer_rgba()))
+        sheet.savefig(out / f"stanford_receivers_{key.replace(':', '_')}_k{k}.png", dpi=90)
 
 
 if __name__ == "__main__":

@@ -341,6 +341,25 @@ def _survey() -> Reader:
     )
 
 
+def _device_gnss() -> Reader:
+    from locator.devicegnss import DeviceGnssError, read_device_gnss
+
+    seeds = _files("gsdc/google_decimeter_2022_device_gnss_1ep.csv",
+                   "gsdc/gdc2023_pixel7pro_device_gnss_2ep.csv")  # fmt: skip
+    return Reader(
+        "device_gnss", seeds, (), lambda f: read_device_gnss(_single(f)), (DeviceGnssError,)
+    )
+
+
+def _gsdc_truth() -> Reader:
+    from locator.devicegnss import DeviceGnssError, read_ground_truth
+
+    seeds = _files("gsdc/gdc2023_pixel7pro_ground_truth.csv")
+    return Reader(
+        "gsdc_truth", seeds, (), lambda f: read_ground_truth(_single(f)), (DeviceGnssError,)
+    )
+
+
 _MAKERS: dict[str, Callable[[], Reader]] = {
     "rinex_obs": _rinex_obs,
     "rinex_nav": _rinex_nav,
@@ -351,6 +370,8 @@ _MAKERS: dict[str, Callable[[], Reader]] = {
     "calibration": _calibration,
     "error_model": _error_model,
     "masks": _masks,
+    "device_gnss": _device_gnss,
+    "gsdc_truth": _gsdc_truth,
 }
 READERS = tuple(_MAKERS)
 """The names of the fuzzed readers."""

@@ -153,7 +153,7 @@ def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
         (["--sim", str(sim_dir)], "one of the arguments --masks --cutoff --no-masks is required"),
         (["--sim", str(sim_dir), "--no-masks", "--error-model", str(tmp_path / "missing.json")],
          "locator calibrate"),
-        (["--no-masks"], "one of the arguments --sim --obs is required"),
+        (["--no-masks"], "one of the arguments --sim --obs --device-gnss is required"),
         (["--sim", str(sim_dir), "--no-masks", "--trust-stretches", "2"],
          "--trust-stretches is for --masks runs"),
         (["--sim", str(sim_dir), "--masks", str(sim_dir / "true_masks.parquet"),
