@@ -351,44 +351,74 @@ def cmd_faults(args: argparse.Namespace) -> None:
 
 
 def cmd_sheet(args: argparse.Namespace) -> None:
-    """Contact sheet of the frames with the most false sky (label sky, truth obstacle) in the
-    pipeline's own sky masks, over the fisheye and pinhole runs."""
+    """Contact sheet of the frames with the most false sky (segmented sky where the truth has
+    an obstacle) in the pipeline's own segmentation (its frame cache), over every run in
+    ``--work``; prints the false-sky rate per scenery kind beside it."""
+    import csv
+
     import cv2
 
-    from predisat.synth.generate import contact_sheet
+    from predisat.reconstruct.framecache import decode_cache
+    from predisat.survey import Survey
 
     scored: list[tuple[float, Path, str]] = []
+    per_kind: dict[tuple[str, str], list[float]] = defaultdict(lambda: [0.0, 0.0])
     for run in sorted(args.work.glob("*_s*")):
-        labels = run / "synth" / "truth" / "labels"
-        skies = run / "proc" / "sky"
-        if not skies.is_dir():
+        truth = run / "synth" / "truth"
+        caches = sorted((run / "proc" / "cache").glob("seg-*"))
+        if not caches or not (truth / "frames.csv").exists():
             continue
-        for lab_path in labels.glob("*.png"):
-            sky_path = next(iter(skies.glob(f"{lab_path.stem}.*")), None)
-            if sky_path is None:
+        seed = int(run.name.rsplit("_s", 1)[1])
+        with open(truth / "frames.csv", newline="") as fh:
+            chain = {r["frame_id"]: float(r["chainage_m"]) for r in csv.DictReader(fh)}
+        lo = _run_lo(seed, 1000.0)
+        spec = ood_spec(lo, lo + 1000.0, seed)
+        rig = run.name.split("_s")[0]
+        for entry in caches[-1].glob("*.npz"):
+            fid = entry.stem
+            lab = cv2.imread(str(truth / "labels" / f"{fid}.png"), cv2.IMREAD_GRAYSCALE)
+            with np.load(entry, allow_pickle=False) as z:
+                got = decode_cache(z, json.loads(str(z["meta"])), fid)
+            if lab is None or not isinstance(got, tuple) or fid not in chain:
                 continue
-            lab = cv2.imread(str(lab_path), cv2.IMREAD_GRAYSCALE)
-            sky = cv2.imread(str(sky_path), cv2.IMREAD_GRAYSCALE)
-            if sky is None or lab is None or sky.shape != lab.shape:
-                continue
-            scored.append((float(np.mean((sky > 127) & (lab == 0))), run, lab_path.stem))
-    scored.sort(key=lambda x: -x[0])
+            sky = got[0]
+            obstacle = lab == 0
+            false = float(np.sum(sky & obstacle))
+            scored.append((false / sky.size, run, fid))
+            kind = str(kind_at(spec, np.array([chain[fid]]))[0])
+            acc = per_kind[(rig, kind)]
+            acc[0] += false
+            acc[1] += float(obstacle.sum())
     if not scored:
-        raise SystemExit(f"no sky masks under {args.work}/*/proc/sky")
+        raise SystemExit(f"no segmentation caches under {args.work}/*/proc/cache")
+    print("false-sky rate of the pipeline's segmentation (non-sky labelled sky / non-sky):")
+    for (rig, kind), (f, n) in sorted(per_kind.items()):
+        print(f"  {rig:8s} {kind:13s} {100 * f / max(n, 1.0):6.2f} %")
+    scored.sort(key=lambda x: -x[0])
     best = scored[: args.n]
-    runs = {r for _, r, _ in best}
     tiles = []
-    for run in sorted(runs):
-        ids = [fid for _, r, fid in best if r == run]
-        notes = {fid: f"{run.name} false sky {100 * v:.1f} %" for v, r, fid in best if r == run}
-        tmp = args.out.with_name(f".{run.name}.png")
-        contact_sheet(run / "synth" / "survey", tmp, frames=ids, columns=len(ids),
-                      tile_width_px=args.tile, notes=notes)  # fmt: skip
-        tile = cv2.imread(str(tmp))
-        tmp.unlink()
-        if tile is None:
-            raise OSError(f"reading {tmp} back failed")
+    for v, run, fid in best:  # the frame, its false sky tinted red, a caption
+        survey = Survey.load(run / "synth" / "survey", check_images=False)
+        img = survey.read_image(survey.frames.index_of(fid)).astype(float)
+        lab = cv2.imread(str(run / "synth" / "truth" / "labels" / f"{fid}.png"),
+                         cv2.IMREAD_GRAYSCALE)  # fmt: skip
+        entry = next((run / "proc" / "cache").glob(f"seg-*/{fid}.npz"))
+        with np.load(entry, allow_pickle=False) as z:
+            got = decode_cache(z, json.loads(str(z["meta"])), fid)
+        if isinstance(got, tuple) and lab is not None:
+            false = got[0] & (lab == 0)
+            img[false] = 0.45 * img[false] + 0.55 * np.array([40.0, 40.0, 255.0])
+        th = round(img.shape[0] * args.tile / img.shape[1])
+        tile = cv2.resize(img.astype(np.uint8), (args.tile, th), interpolation=cv2.INTER_AREA)
+        cv2.rectangle(tile, (0, th - 16), (args.tile, th), (0, 0, 0), -1)
+        text = f"{run.name} {fid} false sky {100 * v:.1f} %"
+        cv2.putText(tile, text, (3, th - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.33, (255, 255, 255), 1,
+                    cv2.LINE_AA)  # fmt: skip
         tiles.append(tile)
+    h = max(t.shape[0] for t in tiles)
+    tiles = [np.pad(t, ((0, h - t.shape[0]), (0, 0), (0, 0))) for t in tiles]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % args.columns)
+    tiles = [np.hstack(tiles[i : i + args.columns]) for i in range(0, len(tiles), args.columns)]
     w = max(t.shape[1] for t in tiles)
     sheet = np.vstack([np.pad(t, ((0, 0), (0, w - t.shape[1]), (0, 0))) for t in tiles])
     ok, buf = cv2.imencode(args.out.suffix or ".jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 80])
@@ -419,6 +449,7 @@ def main(argv: list[str] | None = None) -> int:
         if name == "sheet":
             p.add_argument("--n", type=int, default=8)
             p.add_argument("--tile", type=int, default=240)
+            p.add_argument("--columns", type=int, default=4)
     args = ap.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
     args.func(args)
