@@ -30,6 +30,8 @@ Usage::
         --work /tmp/ood --out /tmp/ood/faults.json
     PYTHONPATH=. .venv/bin/python scripts/eval_ood_world.py sheet --work /tmp/ood \\
         --out docs/figures/ood_worst_frames.jpg
+    # where the false trust and the lost sky are, from the runs above (no processing)
+    PYTHONPATH=. .venv/bin/python scripts/eval_ood_world.py score --work /tmp/ood --out -
 """
 
 from __future__ import annotations
@@ -122,8 +124,9 @@ def kind_at(spec: WorldSpec, chainage_m: np.ndarray) -> np.ndarray:
 
 def failures(comp: Any, spec: WorldSpec) -> dict[str, dict[str, float]]:
     """False-trust directions binned by stretch kind, side, sector and elevation band."""
-    trusted, good, _ = trust_counts(comp.mask_el_deg, comp.truth_el_deg, 0.0)
+    trusted, good, los = trust_counts(comp.mask_el_deg, comp.truth_el_deg, 0.0)
     false = (trusted - good).astype(float)
+    lost = (los - good).astype(float)
     kind = np.broadcast_to(kind_at(spec, comp.chainage_m)[:, None], false.shape)
     rel = np.mod(comp.az_deg[None, :] - comp.heading_deg[:, None], 360.0)
     side = np.where(rel > 180.0, "left", "right")
@@ -136,6 +139,10 @@ def failures(comp: Any, spec: WorldSpec) -> dict[str, dict[str, float]]:
         for v in np.unique(arr):
             acc[str(v)] = float(false[arr == v].sum())
         out[label] = dict(acc)
+    out["sky_lost_by_kind"] = {
+        str(v): float(lost[kind == v].sum() / max(float(los[kind == v].sum()), 1.0))
+        for v in np.unique(kind)
+    }
     total_trusted = float(trusted.sum())
     out["kind_share_of_trusted"] = {
         k: v / max(total_trusted, 1.0) for k, v in out["kind"].items()
@@ -249,6 +256,27 @@ def cmd_run(args: argparse.Namespace) -> None:
                                              if k != "func"}, "runs": rows,
                                     "pooled": summary}, indent=1))  # fmt: skip
     print(f"written {args.out}")
+
+
+def cmd_score(args: argparse.Namespace) -> None:
+    """Score the runs already in ``--work`` again (no rendering, no processing): per run the
+    false trust and the sky lost per scenery kind."""
+    for run in sorted(args.work.glob("*_s*")):
+        masks = run / "proc" / "masks.parquet"
+        if not masks.exists():
+            continue
+        seed = int(run.name.rsplit("_s", 1)[1])
+        lo = _run_lo(seed, 1000.0)
+        sc = _score(masks, run / "synth" / "truth", ood_spec(lo, lo + 1000.0, seed))
+        f = sc["failures"]
+        print(f"{run.name}: false trust {100 * sc['false_trust_all']:.4f} %, worst position "
+              f"{100 * sc['worst_position_false_trust']:.3f} % at {sc['worst_position_m']:.0f} m")
+        print("  false directions by kind " + ", ".join(f"{k} {v:.0f}" for k, v in
+                                                        f["kind"].items()))  # fmt: skip
+        print("  by side " + str(f["side"]) + ", sector " + str(f["sector"]) +
+              ", true skyline " + str(f["truth_el_deg"]))  # fmt: skip
+        print("  sky lost by kind " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in
+                                                f["sky_lost_by_kind"].items()))  # fmt: skip
 
 
 def _classes(world: Any, frames: list[Any]) -> list[np.ndarray]:
@@ -431,7 +459,8 @@ def cmd_sheet(args: argparse.Namespace) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(required=True)
-    for name, func in (("run", cmd_run), ("faults", cmd_faults), ("sheet", cmd_sheet)):
+    for name, func in (("run", cmd_run), ("faults", cmd_faults), ("sheet", cmd_sheet),
+                       ("score", cmd_score)):  # fmt: skip
         p = sub.add_parser(name)
         p.set_defaults(func=func)
         p.add_argument("--work", type=Path, default=Path("/tmp/ood"))
