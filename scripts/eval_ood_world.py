@@ -19,8 +19,9 @@ defaults (serial); the masks are scored against the ray-cast true masks at margi
 ``faults`` then injects the real-photo operating point (``predisat.reconstruct.faults``:
 whole-frame failures at 4 % per frame and 2.56 local faults per frame in
 ``FaultRates.mix``, ``docs/reconstruction.md`` section 6) and 2x and 3x that into the ideal
-masks of the same worlds' fisheye frames, reconstructs with the default parameters and scores
-the same way.
+masks of the same worlds' fisheye frames (a segmenter without error followed by the pipeline's
+thin-structure policy, ``ideal_frames(thin_deg=THIN_DEG)``; factor 0 is that base without
+faults), reconstructs with the default parameters and scores the same way.
 
 Usage::
 
@@ -317,8 +318,9 @@ def cmd_faults(args: argparse.Namespace) -> None:
 
     from predisat.masks.margins import sector_of
     from predisat.masks.truth import TrueMasks
-    from predisat.reconstruct.carving import Reconstructor
+    from predisat.reconstruct.carving import ReconstructionParams, Reconstructor
     from predisat.reconstruct.faults import FaultRates, inject_faults
+    from predisat.reconstruct.params import THIN_DEG
     from predisat.synth.truth import ideal_frames
     from predisat.synth.world import World
 
@@ -333,24 +335,33 @@ def cmd_faults(args: argparse.Namespace) -> None:
         t0 = time.process_time()
         frames, cams = [], []
         for pos_name, cam, mount in rig.cameras:  # each camera's frames in time order
-            got = ideal_frames(world, np.arange(lo, hi + 1e-9, 10.0), cam, {pos_name: mount})
+            got = ideal_frames(world, np.arange(lo, hi + 1e-9, 10.0), cam, {pos_name: mount},
+                               thin_deg=THIN_DEG)  # the pipeline's thin-structure policy
             frames += got
             cams += [pos_name] * len(got)
         labels = _classes(world, frames)
         print(f"seed {seed}: {len(frames)} ideal frames and classes in "
               f"{time.process_time() - t0:.0f} CPU-s", flush=True)
         sector = sector_of(tm.az_deg[None, :], tm.heading_deg[:, None])
+        jobs: list[tuple[float, str, FaultRates]] = []
         for factor in args.factors:
             rates = FaultRates.mix(OPERATING_LOCAL * factor, OPERATING_WHOLE * factor)
+            jobs.append((factor, "all", rates))
+            if args.per_class and factor > 0:
+                jobs += [(factor, k, FaultRates({k: r})) for k, r in rates.rates.items()]
+        rec = Reconstructor(ReconstructionParams(fusion_rank=args.fusion_rank))
+        for factor, kind, rates in jobs:
             masks = [f.sky_mask for f in frames]
             faulty, faults = inject_faults(masks, labels, cams, rates, seed)
             fr = [replace(f, sky_mask=m) for f, m in zip(frames, faulty, strict=True)]
-            rec = Reconstructor().run(fr, s, world.track)
-            trusted, good, los = trust_counts(rec.mask_el_deg.astype(float), tm.mask_el_deg, 0.0)
+            res = rec.run(fr, s, world.track)
+            trusted, good, los = trust_counts(res.mask_el_deg.astype(float), tm.mask_el_deg, 0.0)
             per_pos = (trusted - good).sum(1) / np.maximum(trusted.sum(1), 1)
-            row = {"seed": seed, "factor": factor, "n_faults": len(faults),
+            row = {"seed": seed, "factor": factor, "faults": kind, "n_faults": len(faults),
+                   "fusion_rank": args.fusion_rank,
                    "false_trust": float((trusted - good).sum() / max(trusted.sum(), 1)),
                    "worst_position_false_trust": float(per_pos.max()),
+                   "worst_position_m": float(s[int(np.argmax(per_pos))]),
                    "positions_with_false_trust": int((per_pos > 0).sum()),
                    "n_positions": int(per_pos.size),
                    "n_trusted": int(trusted.sum()), "n_false": int((trusted - good).sum()),
@@ -364,7 +375,7 @@ def cmd_faults(args: argparse.Namespace) -> None:
             args.out.write_text(json.dumps({"rows": rows}, indent=1))
     pooled_rows = {}
     for factor in args.factors:
-        rr = [r for r in rows if r["factor"] == factor]
+        rr = [r for r in rows if r["factor"] == factor and r["faults"] == "all"]
         pooled_rows[str(factor)] = {
             "false_trust": sum(r["n_false"] for r in rr) / max(sum(r["n_trusted"] for r in rr), 1),
             "worst_position_false_trust": max(r["worst_position_false_trust"] for r in rr),
@@ -474,7 +485,11 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--reuse", action="store_true",
                            help="keep the rendered surveys and segmentation caches in --work")
         if name == "faults":
-            p.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0, 3.0])
+            p.add_argument("--factors", nargs="+", type=float, default=[0.0, 1.0, 2.0, 3.0])
+            p.add_argument("--fusion-rank", type=int, default=1,
+                           help="ReconstructionParams.fusion_rank (1: the default, the minimum)")
+            p.add_argument("--per-class", action="store_true",
+                           help="also each fault class alone at its rate in the mix")
         if name == "sheet":
             p.add_argument("--n", type=int, default=8)
             p.add_argument("--tile", type=int, default=240)
