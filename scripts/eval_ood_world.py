@@ -400,7 +400,7 @@ def cmd_sheet(args: argparse.Namespace) -> None:
     from predisat.reconstruct.framecache import decode_cache
     from predisat.survey import Survey
 
-    scored: list[tuple[float, Path, str]] = []
+    scored: list[tuple[float, Path, str, str]] = []
     per_kind: dict[tuple[str, str], list[float]] = defaultdict(lambda: [0.0, 0.0])
     for run in sorted(args.work.glob("*_s*")):
         truth = run / "synth" / "truth"
@@ -423,8 +423,8 @@ def cmd_sheet(args: argparse.Namespace) -> None:
             sky = got[0]
             obstacle = lab == 0
             false = float(np.sum(sky & obstacle))
-            scored.append((false / sky.size, run, fid))
             kind = str(kind_at(spec, np.array([chain[fid]]))[0])
+            scored.append((false / sky.size, run, fid, kind))
             acc = per_kind[(rig, kind)]
             acc[0] += false
             acc[1] += float(obstacle.sum())
@@ -434,9 +434,15 @@ def cmd_sheet(args: argparse.Namespace) -> None:
     for (rig, kind), (f, n) in sorted(per_kind.items()):
         print(f"  {rig:8s} {kind:13s} {100 * f / max(n, 1.0):6.2f} %")
     scored.sort(key=lambda x: -x[0])
-    best = scored[: args.n]
+    best: list[tuple[float, Path, str, str]] = []
+    for item in scored:  # the worst frames, at most two of one rig and scenery kind
+        rig_kind = (item[1].name.split("_s")[0], item[3])
+        if sum((b[1].name.split("_s")[0], b[3]) == rig_kind for b in best) < 2:
+            best.append(item)
+        if len(best) == args.n:
+            break
     tiles = []
-    for v, run, fid in best:  # the frame, its false sky tinted red, a caption
+    for v, run, fid, kind in best:  # the frame, its false sky tinted red, a caption
         survey = Survey.load(run / "synth" / "survey", check_images=False)
         img = survey.read_image(survey.frames.index_of(fid)).astype(float)
         lab = cv2.imread(str(run / "synth" / "truth" / "labels" / f"{fid}.png"),
@@ -450,7 +456,7 @@ def cmd_sheet(args: argparse.Namespace) -> None:
         th = round(img.shape[0] * args.tile / img.shape[1])
         tile = cv2.resize(img.astype(np.uint8), (args.tile, th), interpolation=cv2.INTER_AREA)
         cv2.rectangle(tile, (0, th - 16), (args.tile, th), (0, 0, 0), -1)
-        text = f"{run.name} {fid} false sky {100 * v:.1f} %"
+        text = f"{run.name} {kind} {fid[0]}{int(fid.split('_')[1])}: {100 * v:.1f} %"
         cv2.putText(tile, text, (3, th - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.33, (255, 255, 255), 1,
                     cv2.LINE_AA)  # fmt: skip
         tiles.append(tile)
@@ -460,11 +466,18 @@ def cmd_sheet(args: argparse.Namespace) -> None:
     tiles = [np.hstack(tiles[i : i + args.columns]) for i in range(0, len(tiles), args.columns)]
     w = max(t.shape[1] for t in tiles)
     sheet = np.vstack([np.pad(t, ((0, 0), (0, w - t.shape[1]), (0, 0))) for t in tiles])
-    ok, buf = cv2.imencode(args.out.suffix or ".jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 80])
-    if not ok:
-        raise OSError(f"encoding {args.out} failed")
-    args.out.write_bytes(buf.tobytes())
-    print(f"written {args.out}: " + ", ".join(f"{r.name}/{f} {100 * v:.1f} %" for v, r, f in best))
+    if args.out.suffix.lower() == ".png":  # a small PNG: 128 colours
+        from PIL import Image
+
+        rgb = Image.fromarray(np.ascontiguousarray(sheet[..., ::-1]))
+        rgb.quantize(128, method=Image.Quantize.MEDIANCUT).save(args.out, optimize=True)
+    else:
+        ok, buf = cv2.imencode(args.out.suffix, sheet, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        if not ok:
+            raise OSError(f"encoding {args.out} failed")
+        args.out.write_bytes(buf.tobytes())
+    print(f"written {args.out}: " + ", ".join(f"{r.name}/{f} ({k}) {100 * v:.1f} %"
+                                               for v, r, f, k in best))  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
