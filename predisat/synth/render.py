@@ -9,7 +9,9 @@ every pixel. It is two stages, also usable on their own:
   shadow rays, cloud shadows from the sky model) and the sky + ground environment (order-2
   spherical harmonics) times a ray-cast ambient visibility; procedural textures per material
   (bricks, plaster with windows reflecting the sky, foliage, rock strata, concrete panels,
-  metal); aerial perspective toward the horizon colour.
+  metal); Fresnel mirrors (glass curtain walls and windows, water, wet ground: Schlick's
+  reflectance of the material's ``f0``, the sky or the scenery along the mirrored ray, rippled
+  normals); aerial perspective toward the horizon colour.
 * :func:`expose`: the camera: veiling glare and lens flare from a sun in or near the field,
   bloom of saturated highlights, lens blur, vignetting, auto-exposure with a random bias, white
   balance error, Poisson-Gaussian sensor noise with gain in the dark, a filmic tone curve and

@@ -1,9 +1,11 @@
 """The synthetic corridor world: a seeded procedural 3-D scene built along a track map.
 
 A :class:`WorldSpec` is a recipe: a sequence of :class:`Stretch` es (open country, stations,
-towns, tree rows, cuttings, rock walls, overbridges, tunnels), catenary on or off, distant hills
-on or off. :meth:`World.build` turns it into one triangle mesh in the track's local ENU frame,
-with a :class:`~predisat.synth.materials.Material` per face. The same track, recipe and seed
+towns, tree rows, cuttings, rock walls, overbridges, tunnels; and the out-of-distribution kinds
+:data:`OOD_KINDS`: glass and white-facade streets, water, lattice pylons, signal gantries),
+catenary on or off, distant hills on or off, wet or dry. :meth:`World.build` turns it into one
+triangle mesh in the track's local ENU frame, with a :class:`~predisat.synth.materials.Material`
+per face. The same track, recipe and seed
 always give the same mesh.
 
 L-band policy: a structure blocks GNSS signals (``blocks_lband=True``) unless it is much thinner
