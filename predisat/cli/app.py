@@ -106,8 +106,15 @@ def cmd_synth(args: argparse.Namespace) -> int:
     rig = _rig(args.rig, args.camera, args.calibration, args.pitch_deg)
     spec = _scenery(args.scenery)
 
-    from predisat.synth.generate import generate_survey
+    from predisat.synth.generate import daytime_gps_s, generate_survey
 
+    start_gps_s = None
+    if args.solar_hour is not None:
+        if not 0.0 <= args.solar_hour < 24.0:
+            raise CliError(f"--solar-hour {args.solar_hour}: give an hour in [0, 24), e.g. 6.5 "
+                           "for a low morning sun")  # fmt: skip
+        lon = float(track.position_at(from_m)[1])
+        start_gps_s = daytime_gps_s(lon, solar_hour=args.solar_hour)
     t0 = time.perf_counter()
     result = generate_survey(
         track,
@@ -121,6 +128,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         spec=spec,
         progress=not args.quiet,
         workers=args.workers,
+        start_gps_s=start_gps_s,
     )
     dt = time.perf_counter() - t0
     print(
@@ -281,6 +289,9 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "--scenery", metavar="YAML",
         help="scenery recipe (default: drawn for the stretch, every kind of stretch from 0.8 km)",
     )  # fmt: skip
+    p.add_argument("--solar-hour", type=finite_float, metavar="H",
+                   help="local mean solar time of the first frame on 2024-06-21 (default 10: "
+                   "mid-morning; 6-7 or 17.5-18.5 for a low sun with glare and lens flare)")
     p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

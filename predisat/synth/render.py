@@ -9,7 +9,9 @@ every pixel. It is two stages, also usable on their own:
   shadow rays, cloud shadows from the sky model) and the sky + ground environment (order-2
   spherical harmonics) times a ray-cast ambient visibility; procedural textures per material
   (bricks, plaster with windows reflecting the sky, foliage, rock strata, concrete panels,
-  metal); aerial perspective toward the horizon colour.
+  metal); Fresnel mirrors (glass curtain walls and windows, water, wet ground: Schlick's
+  reflectance of the material's ``f0``, the sky or the scenery along the mirrored ray, rippled
+  normals); aerial perspective toward the horizon colour.
 * :func:`expose`: the camera: veiling glare and lens flare from a sun in or near the field,
   bloom of saturated highlights, lens blur, vignetting, auto-exposure with a random bias, white
   balance error, Poisson-Gaussian sensor noise with gain in the dark, a filmic tone curve and
@@ -35,9 +37,11 @@ from predisat.synth.sky import SkyModel, fbm
 from predisat.synth.world import World
 
 __all__ = [
+    "GLASS_PANE_M",
     "LABEL_OBSTACLE",
     "LABEL_SKY",
     "LABEL_THIN",
+    "WINDOW_GRID_M",
     "Casters",
     "RenderOptions",
     "SensorState",
@@ -45,6 +49,7 @@ __all__ = [
     "expose",
     "render_frame",
     "render_radiance",
+    "schlick_reflectance",
 ]
 
 LABEL_SKY = 255
@@ -55,6 +60,17 @@ _LUMA = np.array([0.2126, 0.7152, 0.0722])
 _ALBEDO = np.array([m.albedo_rgb for m in MATERIALS], float)
 _TEXTURE = tuple(m.texture for m in MATERIALS)
 _THIN = np.array([m.thin for m in MATERIALS], bool)
+_F0 = np.array([m.f0 for m in MATERIALS], float)
+_TINT = np.array([m.tint_rgb for m in MATERIALS], float)
+_RIPPLE = np.array([m.ripple_rad for m in MATERIALS], float)
+_GLASS = next(m for m in MATERIALS if m.name == "glass")
+
+GLASS_PANE_M = (1.5, 3.6)
+"""Curtain-wall module (width, storey height), metres: a 0.08 m mullion at the start of each
+module's width, a 0.9 m opaque spandrel at the foot of each storey, glass between."""
+WINDOW_GRID_M = (2.4, 3.2)
+"""Window rows of a white facade (pitch across, storey height), metres; windows 1.2 m wide and
+1.6 m tall from 0.9 m above each storey's floor, glass like the curtain walls."""
 
 
 @dataclass(frozen=True)
@@ -197,10 +213,13 @@ def _cell_rand(i: NDArray, j: NDArray, salt: int) -> NDArray:
 
 def _albedo(
     mat: NDArray, p: NDArray, n: NDArray, footprint_m: NDArray, seed: int
-) -> tuple[NDArray, NDArray]:
-    """Textured albedo (k, 3) and mirror reflectance (k,) of hit points."""
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Textured albedo (k, 3), constant mirror reflectance (k,), Fresnel reflectance at normal
+    incidence (k,) and its tint (k, 3) of hit points."""
     alb = _ALBEDO[mat].copy()
     mirror = np.zeros(len(mat))
+    f0 = _F0[mat].copy()
+    tint = _TINT[mat].copy()
     u, v, vertical = _tex_coords(p, n)
     kinds = np.array(_TEXTURE)[mat]
     large = fbm(u / 6.0, v / 6.0, seed + 11, octaves=3)  # stains, weathering
@@ -256,7 +275,93 @@ def _albedo(
                 alb[k[win]] = 0.04
                 alb[k[frame]] = 0.7
                 mirror[k[win]] = 0.25
-    return np.clip(alb, 0.0, 0.95), mirror
+        elif kind == "glass":  # curtain wall: mullions and spandrels opaque, panes mirror
+            fu = np.mod(uk, GLASS_PANE_M[0])
+            fv = np.mod(vk, GLASS_PANE_M[1])
+            solid = (fu < 0.08) | (fv < 0.9)
+            alb[k[solid]] = (0.10, 0.11, 0.12)
+            f0[k[solid]] = 0.0
+        elif kind == "white":  # pale render with rows of glass windows
+            grain = fbm(uk / 0.3, vk / 0.3, seed + 53, octaves=3)
+            tone = 1.0 + 0.12 * (lk - 0.5) + 0.08 * (grain - 0.5) * _fade(0.3, fk)
+            alb[k] *= np.clip(tone, 0.5, 1.2)[:, None]
+            fu, fv = np.mod(uk, WINDOW_GRID_M[0]), np.mod(vk, WINDOW_GRID_M[1])
+            win = vertical[k] & (fu >= 0.6) & (fu < 1.8) & (fv >= 0.9) & (fv < 2.5)
+            alb[k[win]] = _GLASS.albedo_rgb
+            f0[k[win]] = _GLASS.f0
+            tint[k[win]] = _GLASS.tint_rgb
+    return np.clip(alb, 0.0, 0.95), mirror, f0, tint
+
+
+def schlick_reflectance(f0: ArrayLike, cos_incidence: ArrayLike) -> NDArray:
+    """Fresnel reflectance by Schlick's approximation, ``f0 + (1 - f0) (1 - cos)^5``.
+
+    Parameters
+    ----------
+    f0 : array_like
+        Reflectance at normal incidence, 0-1.
+    cos_incidence : array_like
+        Cosine of the angle between the viewing ray and the surface normal (clipped to 0-1).
+
+    Returns
+    -------
+    ndarray
+        Reflectance, broadcast shape.
+    """
+    c = np.clip(np.asarray(cos_incidence, float), 0.0, 1.0)
+    f = np.asarray(f0, float)
+    return np.asarray(f + (1.0 - f) * (1.0 - c) ** 5)
+
+
+def _rippled(n: NDArray, p: NDArray, ripple_rad: NDArray, seed: int) -> NDArray:
+    """Normals (k, 3) tilted by a smooth random field of standard deviation ``ripple_rad``."""
+    a = np.where(np.abs(n[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(n, t1)
+    # fbm has a standard deviation of about 0.1 about its mean 0.5
+    g1 = (fbm(p[:, 0] / 0.6, p[:, 1] / 0.6 + p[:, 2], seed + 61, octaves=4) - 0.5) / 0.1
+    g2 = (fbm(p[:, 0] / 0.6 + 5.3, p[:, 1] / 0.6 - p[:, 2], seed + 67, octaves=4) - 0.5) / 0.1
+    out = n + ripple_rad[:, None] * (g1[:, None] * t1 + g2[:, None] * t2)
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def _mirrored_radiance(
+    world: SceneMesh,
+    casters: Casters,
+    sky: SkyModel,
+    origin: NDArray,
+    refl: NDArray,
+    elapsed_s: float,
+    options: RenderOptions,
+) -> NDArray:
+    """Radiance (k, 3) arriving along mirrored rays: the sky where they escape, the scenery
+    (textured, sunlit, without further mirrors) where they hit it."""
+    out = sky.radiance(refl, origin, elapsed_s)
+    hits = casters.full.cast(origin, refl)
+    h = np.flatnonzero(hits.hit)
+    if h.size == 0:
+        return np.asarray(out)
+    t = hits.distance_m[h]
+    p = origin[h] + refl[h] * t[:, None]
+    n = hits.normal[h]
+    n = np.where((np.sum(n * refl[h], -1) > 0)[:, None], -n, n)
+    mat = np.asarray(world.face_material)[hits.face_id[h]].astype(int)
+    alb, _, _, _ = _albedo(mat, p, n, np.full(h.size, 0.05), int(getattr(world, "seed", 0)))
+    light = sky.ambient_radiance(n)
+    e_sun = sky.sun_irradiance
+    if np.any(e_sun > 0):
+        s = sky.sun_direction
+        cos = np.clip(n @ s, 0.0, 1.0)
+        trans = sky.sun_transmittance(p, elapsed_s) * cos
+        if options.shadows:
+            trans = trans * ~casters.full.occluded(p + 0.02 * n, np.broadcast_to(s, p.shape))
+        light = light + trans[:, None] * (e_sun / np.pi)[None, :]
+    vis_m = options.visibility_m / (3.0 if sky.condition == "overcast" else 1.0)
+    haze = (1.0 - np.exp(-t / vis_m))[:, None]
+    out = np.array(out, float)
+    out[h] = alb * light * (1.0 - haze) + sky.horizon_radiance[None, :] * haze
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -299,7 +404,8 @@ def _shade(
     mat = np.asarray(world.face_material)[face].astype(int)
     # footprint of a pixel on the surface, stretched by grazing incidence
     footprint = t * pixel_angle_rad / np.maximum(np.abs(np.sum(n * d, -1)), 0.15)
-    alb, mirror = _albedo(mat, p, n, footprint, int(getattr(world, "seed", 0)))
+    seed = int(getattr(world, "seed", 0))
+    alb, mirror, f0, tint = _albedo(mat, p, n, footprint, seed)
     light = sky.ambient_radiance(n) * visibility[:, None]
     e_sun = sky.sun_irradiance
     if np.any(e_sun > 0):
@@ -323,6 +429,21 @@ def _shade(
         rad[m] = rad[m] * (1 - mirror[m, None]) + mirror[m, None] * sky.radiance(
             refl, p[m], elapsed_s
         )
+    if np.any(f0 > 0):  # Fresnel mirrors: glass, water, wet ground
+        m = np.flatnonzero(f0 > 0)
+        nm = n[m]
+        rip = _RIPPLE[mat[m]]
+        if np.any(rip > 0):
+            nm = _rippled(nm, p[m], rip, seed)
+        cos = -np.sum(d[m] * nm, -1)
+        refl = d[m] + 2.0 * cos[:, None] * nm
+        below = np.minimum(np.sum(refl * n[m], -1), 0.0)  # a ripple tilted it into the surface
+        refl = refl - 2.0 * below[:, None] * n[m]
+        refl /= np.linalg.norm(refl, axis=-1, keepdims=True)
+        r = schlick_reflectance(f0[m], cos)[:, None]
+        mirrored = _mirrored_radiance(world, casters, sky, p[m] + 0.02 * n[m], refl, elapsed_s,
+                                      options)  # fmt: skip
+        rad[m] = rad[m] * (1.0 - r) + r * tint[m] * mirrored
     vis_m = options.visibility_m / (3.0 if sky.condition == "overcast" else 1.0)
     haze = (1.0 - np.exp(-t / vis_m))[:, None]
     return rad * (1.0 - haze) + sky.horizon_radiance[None, :] * haze

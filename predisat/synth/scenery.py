@@ -538,6 +538,165 @@ def _tunnel(ctx: Context, st: Stretch) -> None:
     ctx.mb.add(v, f, np.where(cap, ctx.mat["concrete"], ctx.mat["grass"]))
 
 
+def _glass_street(ctx: Context, st: Stretch) -> None:
+    """Office blocks with glass curtain walls (share ``glass_share``) and white facades with
+    rows of windows, flat roofs, closer and taller than a town's houses."""
+    rng = ctx.rng
+    for side in _sides(st):
+        setback = _param(st, "facade_distance_m", rng, 6.0, 14.0)
+        glass_share = float(st.params.get("glass_share", 0.6))
+        s = st.start_m + rng.uniform(0, 3)
+        while s < st.end_m - 10:
+            length = min(float(rng.uniform(15.0, 45.0)), st.end_m - s)
+            height = _param(st, "facade_height_m", rng, 12.0, 40.0)
+            y_near = float(np.clip(setback + rng.uniform(-1.5, 1.5), 5.0, 25.0))
+            wall = "glass" if rng.uniform() < glass_share else "white_facade"
+            size = (length, float(rng.uniform(12, 25)), height)
+            _building(ctx, s + length / 2, side, y_near, size, wall, None)
+            s += length + (rng.uniform(4.0, 12.0) if rng.uniform() < 0.4 else 0.5)
+
+
+def _white_street(ctx: Context, st: Stretch) -> None:
+    """A street of pale rendered houses with rows of windows (the facade of an overcast sky's
+    colour), gable roofs on half of them, some plastered ones between."""
+    rng = ctx.rng
+    for side in _sides(st):
+        setback = _param(st, "facade_distance_m", rng, 5.0, 14.0)
+        s = st.start_m + rng.uniform(0, 4)
+        while s < st.end_m - 6:
+            length = min(float(rng.uniform(8.0, 30.0)), st.end_m - s)
+            height = _param(st, "facade_height_m", rng, 6.0, 22.0)
+            y_near = float(np.clip(setback + rng.uniform(-1.0, 1.0), 5.0, 20.0))
+            wall = "white_facade" if rng.uniform() < 0.8 else "plaster"
+            roof = "roof_tiles" if rng.uniform() < 0.5 else None
+            size = (length, float(rng.uniform(10, 18)), height)
+            _building(ctx, s + length / 2, side, y_near, size, wall, roof)
+            s += length + (rng.uniform(0.0, 1.0) if rng.uniform() < 0.8 else 8.0)
+
+
+def _water(ctx: Context, st: Stretch) -> None:
+    """A river or canal beside the track (from ``bank_distance_m``, ``width_m`` wide), its
+    surface 0.3 m above the ground, a concrete quay at the near bank, houses and trees on the
+    far bank to be mirrored."""
+    rng = ctx.rng
+    ss = np.linspace(st.start_m, st.end_m, max(2, int((st.end_m - st.start_m) / 5) + 1))
+    for side in _sides(st):
+        y0 = _param(st, "bank_distance_m", rng, 6.0, 12.0)
+        width = _param(st, "width_m", rng, 25.0, 70.0)
+        y1 = y0 + width
+        g = _GROUND_Z
+        ctx.sweep(ss, np.array([[y0, g], [y1, g], [y1, g + 0.3], [y0, g + 0.3]]) * [side, 1],
+                  "water")  # fmt: skip
+        ctx.sweep(ss, np.array([[y0 - 0.6, g], [y0, g], [y0, g + 0.4], [y0 - 0.6, g + 0.4]])
+                  * [side, 1], "concrete")  # fmt: skip
+        s = st.start_m + rng.uniform(0, 10)
+        while s < st.end_m - 10:
+            if rng.uniform() < 0.5:
+                length = min(float(rng.uniform(10.0, 25.0)), st.end_m - s)
+                wall = ("white_facade", "plaster", "brick")[int(rng.integers(0, 3))]
+                size = (length, float(rng.uniform(8, 14)), float(rng.uniform(6.0, 15.0)))
+                _building(ctx, s + length / 2, side, y1 + rng.uniform(3.0, 8.0), size, wall,
+                          "roof_tiles" if rng.uniform() < 0.6 else None)  # fmt: skip
+                s += length + rng.uniform(2.0, 8.0)
+            else:
+                _tree(ctx, s, side * (y1 + rng.uniform(2.0, 6.0)), float(rng.uniform(8, 16)))
+                s += rng.uniform(6.0, 12.0)
+
+
+_LEG_M, _BRACE_M, _CONDUCTOR_M = 0.18, 0.07, 0.03  # built widths (materials' width_m >= them)
+
+
+def _pylon_members(
+    height: float, base_half: float, top_half: float, arm: float
+) -> tuple[list[tuple[NDArray, float, str]], NDArray]:
+    """Members of a lattice tower in its local axes ``(a, b, c)`` (c up, arms along b): a list
+    of ``(points (k, 3), width_m, material)`` polylines, and the arm tips (m, 3)."""
+    waist = 0.72 * height
+    levels = np.concatenate([np.linspace(_GROUND_Z, waist, 9), np.linspace(waist, height, 4)[1:]])
+    half = np.interp(levels, [_GROUND_Z, waist, height], [base_half, top_half, top_half])
+    corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], float)
+    legs = [half[:, None] * corners[i][None, :] for i in range(4)]  # (levels, 2) each
+    out: list[tuple[NDArray, float, str]] = []
+    for i in range(4):
+        out.append((np.column_stack([legs[i], levels]), _LEG_M, "lattice_leg"))
+    for k in range(len(levels) - 1):
+        for i in range(4):
+            j = (i + 1) % 4
+            a0 = np.append(legs[i][k], levels[k])
+            b0 = np.append(legs[j][k], levels[k])
+            a1 = np.append(legs[i][k + 1], levels[k + 1])
+            b1 = np.append(legs[j][k + 1], levels[k + 1])
+            out += [(np.stack([a0, b1]), _BRACE_M, "lattice"),
+                    (np.stack([b0, a1]), _BRACE_M, "lattice"),
+                    (np.stack([a0, b0]), _BRACE_M, "lattice")]  # fmt: skip
+    tips = []
+    for z_arm, reach in ((waist, arm), (0.5 * (waist + height), 0.75 * arm)):
+        for sgn in (1.0, -1.0):
+            root = [(-top_half, sgn * top_half), (top_half, sgn * top_half)]
+            tip = np.array([0.0, sgn * (top_half + reach), z_arm])
+            for a, b in root:
+                lo = np.array([a, b, z_arm])
+                hi = np.array([a, b, z_arm + 1.5])
+                out += [(np.stack([lo, tip]), _BRACE_M, "lattice"),
+                        (np.stack([hi, tip]), _BRACE_M, "lattice")]  # fmt: skip
+            tips.append(tip - [0.0, 0.0, 2.0])  # insulator strings hang 2 m
+    out.append((np.array([[0.0, 0.0, height], [0.0, 0.0, height + 2.0]]), _BRACE_M, "lattice"))
+    return out, np.array(tips)
+
+
+def _pylons(ctx: Context, st: Stretch) -> None:
+    """A high-voltage line along the track: steel lattice towers (legs, cross bracing, arms
+    across the line) every ``span_m`` at ``pylon_distance_m``, three conductors per arm pair
+    sagging between towers."""
+    rng = ctx.rng
+    for side in _sides(st):
+        dist = _param(st, "pylon_distance_m", rng, 12.0, 35.0)
+        span = _param(st, "span_m", rng, 180.0, 300.0)
+        height = _param(st, "pylon_height_m", rng, 25.0, 40.0)
+        arm = float(rng.uniform(5.0, 8.0))
+        towers = np.arange(st.start_m + rng.uniform(0.0, 0.5 * span), st.end_m, span)
+        members, tips = _pylon_members(height, float(rng.uniform(2.5, 3.5)), 0.8, arm)
+        placed_tips = []
+        for s_c in towers:
+            for pts, width, mat in members:
+                local = pts + np.array([0.0, side * dist, 0.0])
+                v, f = _polyline_beams(ctx.corridor.place_local(float(s_c), local), width)
+                ctx.mb.add(v, f, ctx.mat[mat])
+            shifted = tips + np.array([0.0, side * dist, 0.0])
+            placed_tips.append(ctx.corridor.place_local(float(s_c), shifted))
+        _, _, _, up = ctx.corridor.basis(towers)
+        for k in range(len(placed_tips) - 1):
+            t = np.linspace(0.0, 1.0, 31)[:, None]
+            sag = (0.04 * span * 4 * t * (1 - t)) * up[k][None, :]
+            for a, b in zip(placed_tips[k], placed_tips[k + 1], strict=True):
+                v, f = _polyline_beams(a + t * (b - a) - sag, _CONDUCTOR_M)
+                ctx.mb.add(v, f, ctx.mat["conductor"])
+
+
+def _gantry(ctx: Context, st: Stretch) -> None:
+    """A signal gantry over the track: two steel posts, a box girder across, signal heads
+    hanging from it over the track and a handrail of thin tubes on its walkway."""
+    rng = ctx.rng
+    s_c = (st.start_m + st.end_m) / 2
+    y_post = _param(st, "post_distance_m", rng, 4.0, 6.0)
+    z0 = _param(st, "girder_height_m", rng, 7.6, 8.4)
+    z1 = z0 + 0.8
+    depth = min(1.2, st.end_m - st.start_m)
+    for sgn in (1.0, -1.0):
+        ctx.box(s_c, (-0.2, 0.2, sgn * y_post - 0.2, sgn * y_post + 0.2, _GROUND_Z, z1), "steel")
+    ctx.box(s_c, (-depth / 2, depth / 2, -y_post - 0.3, y_post + 0.3, z0, z1), "steel")
+    for y in rng.uniform(-1.5, 1.5, int(rng.integers(1, 4))):
+        ctx.box(s_c, (-0.15, 0.15, y - 0.25, y + 0.25, z0 - 1.3, z0), "steel")
+    for a in (-depth / 2, depth / 2):  # handrail: a top rail and posts every 1.5 m
+        rail = ctx.corridor.place_local(s_c, [[a, -y_post, z1 + 1.0], [a, y_post, z1 + 1.0]])
+        v, f = _polyline_beams(rail, 0.05)
+        ctx.mb.add(v, f, ctx.mat["lattice"])
+        for y in np.arange(-y_post, y_post + 1e-9, 1.5):
+            post = ctx.corridor.place_local(s_c, [[a, y, z1], [a, y, z1 + 1.0]])
+            v, f = _polyline_beams(post, 0.05)
+            ctx.mb.add(v, f, ctx.mat["lattice"])
+
+
 _BUILDERS = {
     "open": _open,
     "station": _station,
@@ -547,6 +706,11 @@ _BUILDERS = {
     "rock_walls": _rock_walls,
     "overbridge": _overbridge,
     "tunnel": _tunnel,
+    "glass_street": _glass_street,
+    "white_street": _white_street,
+    "water": _water,
+    "pylons": _pylons,
+    "gantry": _gantry,
 }
 
 

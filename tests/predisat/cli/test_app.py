@@ -99,6 +99,16 @@ def test_synth_rejects_bad_scenery_recipe(tmp_path, capsys: pytest.CaptureFixtur
     assert "--scenery" in capsys.readouterr().err
 
 
+def test_synth_rejects_a_solar_hour_off_the_clock(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = cli.main(["synth", "--to-km", "0.2", "--solar-hour", "25", "--out",
+                     str(tmp_path / "o")])  # fmt: skip
+    assert code == 2
+    assert "--solar-hour 25" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "survey").exists()
+
+
 def test_synth_360_rig_refuses_side_camera_options(
     tmp_path, capsys: pytest.CaptureFixture[str]
 ) -> None:
