@@ -72,8 +72,10 @@ SIGNALS: dict[str, tuple[float, float]] = {
 
 REFLECTING_MATERIALS = (
     "platform", "brick", "plaster", "roof_tiles", "canopy", "steel", "rock", "concrete",
+    "glass", "white_facade", "water",
 )  # fmt: skip
-"""Materials that reflect L-band specularly; foliage, bark and the ground scatter or absorb."""
+"""Materials that reflect L-band specularly (building faces, metal, rock, glass and still
+water); foliage, bark and the ground scatter or absorb."""
 
 
 @dataclass(frozen=True)

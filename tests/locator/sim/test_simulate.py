@@ -14,14 +14,14 @@ import pytest
 from scipy.optimize import brentq
 
 from locator.corrections import OMEGA_E_RADPS, RangeModel
-from locator.sim.multipath import ReflectorIndex, SignalModel, dll_error_m
+from locator.sim.multipath import ReflectorIndex, ReflectorSearch, SignalModel, dll_error_m
 from locator.sim.simfile import SignalState, SimRun
 from locator.sim.simulate import ClockModel, simulate_run, transmit_positions
 from predisat.availability.trainrun import SpeedProfile
 from predisat.geodesy import azel_to_enu, enu_rotation
 from predisat.gnss.errormodel import ErrorModel
 from predisat.gnss.orbits import C_MPS
-from predisat.synth.materials import MATERIALS
+from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.world import Stretch, World, WorldSpec
 from tests.locator._scene import (
     CANYON_FRAME as FRAME,
@@ -398,3 +398,13 @@ def test_recipe_rock_wall_reflection():
     np.testing.assert_allclose(run.reflection_delay_m[:, :2], 2 * h[:, None] * u[:, :2, 0],
                                atol=0.01)  # fmt: skip
     assert np.all(run.multipath_m[:, :2] != 0)
+
+
+def test_glass_facades_and_water_reflect_lband():
+    # the out-of-distribution scenery's mirrors are L-band reflectors too; thin, vegetal and
+    # ground materials are not
+    reflects = ReflectorSearch().reflects
+    for name in ("glass", "white_facade", "water", "brick", "concrete"):
+        assert reflects[material_id(name)], name
+    for name in ("foliage", "grass", "wire", "lattice", "conductor"):
+        assert not reflects[material_id(name)], name
