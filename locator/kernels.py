@@ -35,6 +35,7 @@ __all__ = [
     "along_track_kernel",
     "dot3",
     "fma",
+    "heading_kernel",
     "pair_kernel",
     "pairwise_sum",
     "three_pairs_kernel",
@@ -757,3 +758,72 @@ def union_kernel(
     sw = pairwise_sum(w)
     est = pairwise_sum(wr) / pairwise_sum(w) if sw > 0 else np.nan
     return lo_min, hi_max, est, lo_max <= hi_min
+
+
+# ---------------------------------------------------------------------- the heading check
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def heading_kernel(
+    b1: NDArray, rot: NDArray, sat: NDArray, rho: NDArray, sig: NDArray, up_m: float
+) -> tuple[float, float, float, float, float, float, float, bool]:
+    """The least squares of :func:`locator.heading_check.check_heading` in ``(b, dE, dN)``.
+
+    Not bit for bit with the numpy code it replaced: the directions use libm's ``atan2``
+    (numpy's differs in the last bit on some inputs) and the pseudo-inverse of the 3 x 3 normal
+    matrix comes from the SVD numba calls (LAPACK ``gesdd`` of SciPy's OpenBLAS, not
+    numpy's); the same pseudo-inverse rule (singular values below ``1e-15`` of the largest
+    dropped) and the same rank rule (``matrix_rank``: above ``3 eps`` of the largest).
+    ``tests/regression/test_locator_reference.py`` bounds the difference.
+
+    Returns
+    -------
+    clock_m, de_m, dn_m, chi2, cov_ee, cov_en, cov_nn, full_rank
+    """
+    n = sat.shape[0]
+    a = np.empty((n, 3))
+    y = np.empty(n)
+    w = np.empty(n)
+    for k in range(n):
+        d0, d1, d2 = sat[k, 0] - b1[0], sat[k, 1] - b1[1], sat[k, 2] - b1[2]
+        e = rot[0, 0] * d0 + rot[0, 1] * d1 + rot[0, 2] * d2
+        nn = rot[1, 0] * d0 + rot[1, 1] * d1 + rot[1, 2] * d2
+        u = rot[2, 0] * d0 + rot[2, 1] * d1 + rot[2, 2] * d2
+        horiz = np.hypot(e, nn)
+        az = np.arctan2(e, nn)
+        el = np.arctan2(u, horiz)
+        ce = np.cos(el)
+        a[k, 0] = 1.0
+        a[k, 1] = -ce * np.sin(az)
+        a[k, 2] = -ce * np.cos(az)
+        y[k] = (rho[k] - np.sqrt(horiz * horiz + u * u)) + np.sin(el) * up_m
+        w[k] = 1.0 / (sig[k] * sig[k])
+    normal = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    for k in range(n):
+        for r in range(3):
+            rhs[r] += a[k, r] * w[k] * y[k]
+            for c in range(3):
+                normal[r, c] += a[k, r] * w[k] * a[k, c]
+    u_, s, vt = np.linalg.svd(normal)
+    s_max = s.max()
+    cov = np.zeros((3, 3))
+    for q in range(3):
+        if s[q] > 1e-15 * s_max:
+            inv = 1.0 / s[q]
+            for r in range(3):
+                for c in range(3):
+                    cov[r, c] += vt[q, r] * inv * u_[c, q]
+    rank = 0
+    for q in range(3):
+        if s[q] > s_max * 3.0 * np.finfo(np.float64).eps:
+            rank += 1
+    x = np.zeros(3)
+    for r in range(3):
+        for c in range(3):
+            x[r] += cov[r, c] * rhs[c]
+    chi2 = 0.0
+    for k in range(n):
+        res = y[k] - (a[k, 0] * x[0] + a[k, 1] * x[1] + a[k, 2] * x[2])
+        chi2 += w[k] * res * res
+    return x[0], x[1], x[2], chi2, cov[1, 1], cov[1, 2], cov[2, 2], rank == 3

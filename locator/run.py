@@ -35,6 +35,7 @@ otherwise the prediction keeps growing from the last anchors, so a wrong claim c
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,7 +60,7 @@ from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochData, EpochSource
 from predisat.availability.interval import IntervalMode
-from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import MaskSet
 
@@ -225,6 +226,7 @@ def run_locator(
     odo = source.odometer_m
     state = _Tracker.start(start_chainage_m, cfg.start_uncertainty_m, odo, gps)
     rows: list[JsonDict] = []
+    beacons: dict[float, tuple[NDArray, NDArray]] = {}  # the heading check's beacon frames
     for k in range(len(gps)):
         t0 = time.perf_counter()
         p_lo, p_hi, d = state.predict(k, gps, odo, cfg, path.length_m)
@@ -245,7 +247,7 @@ def run_locator(
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
-            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi)
+            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons)
             if row["claim"]:
                 here = (0.0 if odo is None else float(odo[k]), gps[k])
                 f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
@@ -361,12 +363,12 @@ def _fix(
 
 def _check(
     path: AntennaPath, cfg: RunConfig, fix: Fix, data: EpochData, el: NDArray, idx: NDArray,
-    row: JsonDict, p_lo: float, p_hi: float,
+    row: JsonDict, p_lo: float, p_hi: float, beacons: dict[float, tuple[NDArray, NDArray]],
 ) -> FusionStatus:  # fmt: skip
     """The heading and odometry checks of a fix, written into ``row`` (flags, claim); the
     fusion status (``CONFLICT`` when the claim contradicts the odometry)."""
     status = FusionStatus.ODOMETRY
-    hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
+    hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], beacons)
     flags = int(fix.flags)
     if hc is not None:
         row["heading_status"] = hc.status.name.lower()
@@ -457,25 +459,31 @@ def _row(
 
 
 def _heading(
-    path: AntennaPath, cfg: RunConfig, fix: Fix, sat: NDArray, rho: NDArray, el: NDArray
-) -> Any:
-    """Heading check of the fix against its virtual beacon, or None when not applicable."""
+    path: AntennaPath, cfg: RunConfig, fix: Fix, sat: NDArray, rho: NDArray, el: NDArray,
+    beacons: dict[float, tuple[NDArray, NDArray]],
+) -> Any:  # fmt: skip
+    """Heading check of the fix against its virtual beacon, or None when not applicable.
+
+    ``beacons`` caches each beacon's ECEF position and ENU rotation (a geodetic conversion per
+    beacon, not per epoch)."""
     if not cfg.heading_check or fix.used.sum() < 4 or not np.isfinite(fix.chainage_m):
         return None
     s, sp = fix.chainage_m, cfg.beacon_spacing_m
-    b = np.floor((s - 0.5 * sp) / sp) * sp
+    b = math.floor((s - 0.5 * sp) / sp) * sp
     if b < 0.0:  # no beacon behind: take the one ahead
-        b = np.ceil((s + 0.5 * sp) / sp) * sp
+        b = math.ceil((s + 0.5 * sp) / sp) * sp
     if not 0.0 <= b <= path.length_m:
         return None
-    beacon = path.ecef_at(b)
-    lat, lon, _ = ecef_to_geodetic(beacon)
-    rot = enu_rotation(lat, lon)
-    chord = (path.ecef_at(s) - beacon) @ rot.T
-    az, _, _ = enu_to_azel(chord)
+    if b not in beacons:
+        xb = path.ecef_at(b)
+        lat, lon, _ = ecef_to_geodetic(xb)
+        beacons[b] = xb, enu_rotation(lat, lon)
+    beacon, rot = beacons[b]
+    east, north = rot[:2] @ (path.ecef_at(s) - beacon)
+    az = math.degrees(math.atan2(east, north)) % 360.0
     u = fix.used
     sigma = cfg.locator.model.error.sigma_m(el[u])
     return check_heading(
-        beacon, float(az), sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg,
+        beacon, az, sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg,
         rotation=rot,
     )  # fmt: skip
