@@ -38,6 +38,7 @@ __all__ = [
     "heading_kernel",
     "pair_kernel",
     "pairwise_sum",
+    "pos_vec_kernel",
     "three_pairs_kernel",
     "union_kernel",
     "wls_kernel",
@@ -125,6 +126,16 @@ def _pos_vec(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> 
     h11 = (u3 - u2) * 1.0
     for c in range(3):
         out[c] = h00 * x[i, c] + h10 * dx[i, c] + h01 * x[i + 1, c] + h11 * dx[i + 1, c]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pos_vec_kernel(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> bool:
+    """``AntennaPath.ecef_at`` of a 0-d array (its array formula) into ``out`` (3,); False
+    (``out`` untouched) when ``s`` is not finite."""
+    if not np.isfinite(s):
+        return False
+    _pos_vec(x, dx, length, s, out)
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

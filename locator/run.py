@@ -264,6 +264,11 @@ def run_locator(
     return pd.DataFrame(rows)
 
 
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``float(np.clip(x, lo, hi))`` of floats (NaN stays NaN), without numpy's call cost."""
+    return min(max(x, lo), hi)
+
+
 Anchor = tuple[float, float, float]
 """A bound's anchor: (chainage m, odometer reading m, gps_s) where it was last set."""
 
@@ -305,14 +310,14 @@ class _Tracker:
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
             hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
         d = max(abs(d_lo), abs(d_hi))
-        p_lo = float(np.clip(lo_p, 0.0, length_m))
-        p_hi = float(np.clip(hi_p, 0.0, length_m))
+        p_lo = _clip(float(lo_p), 0.0, length_m)
+        p_hi = _clip(float(hi_p), 0.0, length_m)
         step = 0.0 if odo is None else float(odo[k]) - self.odo_prev
         e, v = predict_estimate(self.est, self.est_var, step, cfg.odometer)
         self.odo_prev = self.odo_prev + step
         if odo is None:  # no motion model: the estimate's variance grows with the motion bound
             v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
-        self.est, self.est_var = float(np.clip(e, p_lo, p_hi)), float(v)
+        self.est, self.est_var = _clip(float(e), p_lo, p_hi), float(v)
         return p_lo, p_hi, d
 
     def fuse(
@@ -335,7 +340,7 @@ class _Tracker:
         if not np.isfinite(fix_sd) or fix_sd <= 0:
             fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
         e, v = blend_estimate(self.est, self.est_var, fix.chainage_m, fix_sd**2)
-        self.est, self.est_var = float(np.clip(e, f_lo, f_hi)), float(v)
+        self.est, self.est_var = _clip(float(e), f_lo, f_hi), float(v)
         return f_lo, f_hi
 
 

@@ -39,7 +39,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from locator.kernels import pair_kernel
+from locator.kernels import pair_kernel, pos_vec_kernel
 from predisat.track.map import TrackMap
 
 __all__ = [
@@ -104,6 +104,13 @@ class AntennaPath:
         per second and the track spline is slow to evaluate. The error is ``h^4 / 384`` times
         the fourth derivative of the path: micrometres on railway curvature.
         """
+        if isinstance(chainage_m, np.ndarray) and chainage_m.ndim == 0:  # one point, as an array
+            x, dx = self.hermite_table
+            out = np.empty(3)
+            # compiled: the array formula below on one point, bit for bit
+            if not pos_vec_kernel(x, dx, float(self.length_m), float(chainage_m), out):
+                raise ValueError("chainage_m contains NaN or infinite values")
+            return out
         if isinstance(chainage_m, (float, int, np.floating)):  # the loop's scalar calls
             k, v = self._locate_scalar(float(chainage_m))
             _, x, dx = self._table
@@ -322,8 +329,8 @@ def solve_pairs(
     _check_options(pr, n, prior_m, window_m, k_sigma, step_m)
     i, j = pr[:, 0], pr[:, 1]
     length = path.length_m
-    a = float(np.clip(prior_m - window_m, 0.0, length))
-    b = float(np.clip(prior_m + window_m, 0.0, length))
+    a = min(max(float(prior_m - window_m), 0.0), length)  # np.clip's result, without its cost
+    b = min(max(float(prior_m + window_m), 0.0), length)
     n_step = max(int(np.ceil((b - a) / step_m)), 1)
     grid = np.linspace(a, b, n_step + 1)
     x, dx = path.hermite_table
