@@ -180,7 +180,7 @@ class Fix:
 
     @property
     def safety_claim(self) -> bool:
-        return not (self.flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW))
+        return not (int(self.flags) & _NO_CLAIM_OR_TOO_FEW)
 
     @property
     def length_m(self) -> float:
@@ -277,6 +277,7 @@ _P_MULTIPLE, _P_NO_ROOT, _P_EMPTY = (int(PairStatus.MULTIPLE_ROOTS), int(PairSta
                                      int(PairStatus.EMPTY))  # fmt: skip
 _P_UNBOUNDED = int(PairStatus.UNBOUNDED_LOW | PairStatus.UNBOUNDED_HIGH)
 _MODE_ALL, _MODE_NONE = IntervalMode.ALL_PAIRS, IntervalMode.NONE
+_NO_CLAIM_OR_TOO_FEW = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
 
 
 @functools.cache

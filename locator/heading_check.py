@@ -52,6 +52,9 @@ class HeadingStatus(IntEnum):
     UNOBSERVABLE = 2  # too close to the beacon (or too few satellites) to tell
 
 
+_PASS, _FAIL, _UNOBSERVABLE = HeadingStatus.PASS, HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
+
+
 @dataclass(frozen=True)
 class HeadingCheck:
     """Result of :func:`check_heading`.
@@ -166,10 +169,10 @@ def check_heading(
     diff = (hdg - beacon_heading_deg + 90.0) % 180.0 - 90.0
     thr = k_sigma * sigma_hdg + tolerance_deg
     if not sigma_hdg <= max_sigma_deg:
-        status = HeadingStatus.UNOBSERVABLE
+        status = _UNOBSERVABLE
     elif abs(diff) > thr:
-        status = HeadingStatus.FAIL
+        status = _FAIL
     else:
-        status = HeadingStatus.PASS
+        status = _PASS
     along = rx * math.cos(math.radians(hdg - beacon_heading_deg))
     return HeadingCheck(hdg, rx, along, sigma_hdg, diff, thr, clock, chi2, status)

@@ -171,6 +171,16 @@ class RunConfig:
 
 
 _EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
+# enum members and flag sets the loop uses, looked up once (Python 3.11's Enum.__getattr__ and
+# IntFlag arithmetic cost microseconds per use)
+_ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, FusionStatus.CONFLICT
+_HEADING_FAIL = HeadingStatus.FAIL
+_HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
+_CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
+_NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
+_NO_CLAIM_FLAGS = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+_NO_FIX_FLAGS = int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM)
+_NONE_NAME = IntervalMode.NONE.name.lower()
 
 
 def run_locator(
@@ -243,7 +253,7 @@ def run_locator(
         fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
         row["iono_uncorrected"] = uncorrected
-        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
+        f_lo, f_hi, status = p_lo, p_hi, _ODOMETRY
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
@@ -251,7 +261,7 @@ def run_locator(
             if row["claim"]:
                 here = (0.0 if odo is None else float(odo[k]), gps[k])
                 f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
-                status = FusionStatus.FUSED
+                status = _FUSED
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
@@ -372,24 +382,24 @@ def _check(
 ) -> FusionStatus:  # fmt: skip
     """The heading and odometry checks of a fix, written into ``row`` (flags, claim); the
     fusion status (``CONFLICT`` when the claim contradicts the odometry)."""
-    status = FusionStatus.ODOMETRY
+    status = _ODOMETRY
     hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], beacons)
     flags = int(fix.flags)
     if hc is not None:
         row["heading_status"] = hc.status.name.lower()
         row["heading_diff_deg"] = hc.difference_deg
-        if hc.status == HeadingStatus.FAIL:
-            flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
+        if hc.status == _HEADING_FAIL:
+            flags |= _HEADING_FAIL_FLAGS
     claim = row["claim_fix"]
     miss = fix.hi_m < p_lo or fix.lo_m > p_hi
     if cfg.odometry_conflict == "estimate":
         miss = miss or not p_lo <= fix.chainage_m <= p_hi
     if claim and cfg.odometry_check and miss:
-        flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
-        status = FusionStatus.CONFLICT
+        flags |= _CONFLICT_FLAGS
+        status = _CONFLICT
     if not cfg.error_model_applies:
-        flags |= RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM
-    claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+        flags |= _NO_MODEL_FLAGS
+    claim = claim and not flags & _NO_CLAIM_FLAGS
     row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
     return status
 
@@ -442,8 +452,8 @@ def _row(
         "epoch": k, "gps_s": gps_s, "pred_lo_m": p_lo, "pred_hi_m": p_hi,
         "n_received": n_rx, "n_trusted": n_trusted, "n_used": 0,
         "chainage_m": np.nan, "lo_m": np.nan, "hi_m": np.nan, "length_m": np.nan,
-        "mode": IntervalMode.NONE.name.lower(), "integrity": integrity,
-        "flags": int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM), "flag_names": "",
+        "mode": _NONE_NAME, "integrity": integrity,
+        "flags": _NO_FIX_FLAGS, "flag_names": "",
         "claim": False, "claim_fix": False, "wls_chainage_m": np.nan, "wls_sigma_m": np.nan,
         "heading_status": "", "heading_diff_deg": np.nan, "used": "",
     }  # fmt: skip
