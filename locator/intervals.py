@@ -28,6 +28,7 @@ it bounds them in every elevation bin (``locator calibrate``).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,8 +188,16 @@ def plan_pairs(
         return best_pair(ga, sigma_m, k_sigma), mode
     if mode is _THREE and scheme == "auto":
         return three_independent_pairs(ga, sigma_m, k_sigma), mode
+    return _every_pair(n), (_ALL if scheme == "all" else mode)
+
+
+@functools.cache
+def _every_pair(n: int) -> NDArray:
+    """``np.stack(np.triu_indices(n, 1), axis=-1)``, made once per count (read-only)."""
     i, j = np.triu_indices(n, 1)
-    return np.stack([i, j], axis=-1), (_ALL if scheme == "all" else mode)
+    out = np.stack([i, j], axis=-1)
+    out.setflags(write=False)
+    return out
 
 
 def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:

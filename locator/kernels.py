@@ -36,6 +36,7 @@ __all__ = [
     "dot3",
     "fma",
     "heading_kernel",
+    "inputs_ok_kernel",
     "pair_kernel",
     "pairwise_sum",
     "pos_vec_kernel",
@@ -126,6 +127,22 @@ def _pos_vec(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> 
     h11 = (u3 - u2) * 1.0
     for c in range(3):
         out[c] = h00 * x[i, c] + h10 * dx[i, c] + h01 * x[i + 1, c] + h11 * dx[i + 1, c]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def inputs_ok_kernel(sat: NDArray, rho: NDArray, sig: NDArray, i: NDArray, j: NDArray) -> bool:
+    """Whether :func:`locator.sathia.solve_pairs`'s arrays are valid: every position,
+    pseudorange and sigma finite, every sigma positive, every pair two distinct indices in
+    ``[0, n)`` (shapes checked by the caller)."""
+    n = rho.shape[0]
+    for k in range(n):
+        if not (np.isfinite(sat[k, 0]) and np.isfinite(sat[k, 1]) and np.isfinite(sat[k, 2])
+                and np.isfinite(rho[k]) and np.isfinite(sig[k]) and sig[k] > 0):  # fmt: skip
+            return False
+    for q in range(i.shape[0]):
+        if i[q] < 0 or i[q] >= n or j[q] < 0 or j[q] >= n or i[q] == j[q]:
+            return False
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
