@@ -425,7 +425,8 @@ class MaskSet:
         query with a few gathers: 10^5 intervals over 3 000 positions take about 0.7 s.
         """
         if np.ndim(chainage_lo_m) == 0 and np.ndim(chainage_hi_m) == 0:
-            return self._worst_case_one(float(chainage_lo_m), float(chainage_hi_m), clip)
+            lo_f, hi_f = float(np.asarray(chainage_lo_m)), float(np.asarray(chainage_hi_m))
+            return self._worst_case_one(lo_f, hi_f, clip)
         lo, hi = np.broadcast_arrays(
             np.asarray(chainage_lo_m, float), np.asarray(chainage_hi_m, float)
         )
