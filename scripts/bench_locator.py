@@ -102,7 +102,7 @@ def locator_cases(data: Path) -> tuple[list[Case], dict[str, Callable[[], object
     from locator.observations import Observations
     from locator.sathia import AntennaPath
     from locator.sources import RinexSource
-    from tests.regression.locator_cases import load_sim_case
+    from tests.regression.locator_cases import SimCase, load_sim_case
 
     runs = []
     for name in ("0759", "3040"):
@@ -135,18 +135,15 @@ def locator_cases(data: Path) -> tuple[list[Case], dict[str, Callable[[], object
         case = load_sim_case(name)
         cfg = RunConfig(LocatorConfig(), trust=trust, integrity=integrity)
 
-        def project(case=case, cfg=cfg) -> int:  # type: ignore[no-untyped-def]
+        def project(case: SimCase = case, cfg: RunConfig = cfg) -> int:
             run_locator(case.path, case.source, start_chainage_m=case.start_m, config=cfg,
                         masks=case.masks)  # fmt: skip
             return len(case.source.gps_s)
 
-        src = case.source
-        x0 = case.path.ecef_at(float(case.start_m))
-
-        def fix_3d(src=src, x0=x0) -> None:  # type: ignore[no-untyped-def]
-            x = x0
-            for k in range(len(src.gps_s)):
-                e = src.observe(k, x[:3])
+        def fix_3d(case: SimCase = case) -> None:
+            x = case.path.ecef_at(float(case.start_m))
+            for k in range(len(case.source.gps_s)):
+                e = case.source.observe(k, x[:3])
                 if len(e.sats) >= 4:
                     x = wls_3d(e.sat_ecef_m, e.pseudorange_m, x[:3])
 
