@@ -29,6 +29,7 @@ from the job files in job order, byte-identical to those of an uninterrupted ser
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -53,6 +54,7 @@ from locator.sources import SimSource
 from predisat.atomic import atomic_path
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
+from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel, read_error_model, write_error_model
 from predisat.gnss.integrity import IntegrityBudget
 from predisat.masks.maskset import MaskSet
@@ -380,21 +382,19 @@ def run_job(setup: CampaignSetup, job: Job) -> pd.DataFrame:
     )
     seed = zlib.crc32(job.world.encode()) % 10007 * 1000 + job.run
     sim = simulate_run(
-        world, default_ephemeris(), start, job.t0_gps_s, profile, np.floor(duration), 1.0,
+        world, _ephemeris(), start, job.t0_gps_s, profile, np.floor(duration), 1.0,
         direction=job.direction, seed=seed, reflectors=data.reflectors(),
     )  # fmt: skip
     path = AntennaPath(world.track, 4.0)
     src = SimSource(sim)
     rules = _rules(setup, data)
-    state = {s: sim.state[:, k] for k, s in enumerate(sim.sats)}
+    # the NLOS signals of each epoch, once for every rule (a set lookup per used signal)
+    nlos_at = [{sim.sats[j] for j in np.flatnonzero(row)} for row in sim.state == SignalState.NLOS]
     out = []
     for name, (cfg, ms) in rules.items():
         ep = run_locator(path, src, start_chainage_m=start, config=cfg, masks=ms)
         sc = score_run(ep, sim.chainage_m)
-        n_nlos = [
-            sum(state[s][k] == SignalState.NLOS for s in used.split())
-            for k, used in enumerate(sc["used"])
-        ]
+        n_nlos = [sum(s in nlos_at[k] for s in used.split()) for k, used in enumerate(sc["used"])]
         # solve_ms is a wall-clock time, not a result: without it a job's table is the same
         # wherever and whenever it ran
         sc = sc.drop(columns=["used", "excluded", "flag_names", "solve_ms"])
@@ -408,6 +408,13 @@ def run_job(setup: CampaignSetup, job: Job) -> pd.DataFrame:
     df["n_los"] = np.tile((sim.state == SignalState.LOS).sum(1), len(rules))
     df["n_nlos"] = np.tile((sim.state == SignalState.NLOS).sum(1), len(rules))
     return df
+
+
+@functools.cache
+def _ephemeris() -> Ephemeris:
+    """:func:`~predisat.availability.satellites.default_ephemeris`, read once per process (the
+    RINEX file took a fifth of a job)."""
+    return default_ephemeris()
 
 
 def code_fingerprint() -> str:

@@ -28,6 +28,7 @@ interval and flags.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntFlag
@@ -181,7 +182,7 @@ class Fix:
 
     @property
     def safety_claim(self) -> bool:
-        return not (self.flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW))
+        return not (int(self.flags) & _NO_CLAIM_OR_TOO_FEW)
 
     @property
     def length_m(self) -> float:
@@ -257,15 +258,34 @@ def locate(
             used[worst] = False
             excluded.append(worst)
             continue
-        flags = fix.flags
+        flags = int(fix.flags)
         if excluded:
-            flags |= FixFlag.EXCLUDED
+            flags |= _EXCLUDED
         if fault:
-            flags |= FixFlag.FAULT_DETECTED | FixFlag.NO_SAFETY_CLAIM
+            flags |= _FAULT | _NO_CLAIM
         return dataclasses.replace(
-            fix, flags=flags, used=used, excluded=tuple(excluded), integrity=integrity,
+            fix, flags=_fix_flag(flags), used=used, excluded=tuple(excluded), integrity=integrity,
             sats=tuple(sats),
         )  # fmt: skip
+
+
+# the flag and status bits as ints: an enum member looked up per epoch cost more than the
+# arithmetic of the epoch (Python 3.11's Enum.__getattr__)
+_NO_CLAIM, _EXCLUDED = int(FixFlag.NO_SAFETY_CLAIM), int(FixFlag.EXCLUDED)
+_FAULT, _BLUNT, _AMBIGUOUS = int(FixFlag.FAULT_DETECTED), int(FixFlag.BLUNT), int(FixFlag.AMBIGUOUS)
+_NO_ROOT_F, _UNBOUNDED_F = int(FixFlag.NO_ROOT), int(FixFlag.UNBOUNDED)
+_INCONSISTENT, _EMPTY_F = int(FixFlag.INCONSISTENT_PAIRS), int(FixFlag.EMPTY_PAIR)
+_P_MULTIPLE, _P_NO_ROOT, _P_EMPTY = (int(PairStatus.MULTIPLE_ROOTS), int(PairStatus.NO_ROOT),
+                                     int(PairStatus.EMPTY))  # fmt: skip
+_P_UNBOUNDED = int(PairStatus.UNBOUNDED_LOW | PairStatus.UNBOUNDED_HIGH)
+_MODE_ALL, _MODE_NONE = IntervalMode.ALL_PAIRS, IntervalMode.NONE
+_NO_CLAIM_OR_TOO_FEW = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+
+
+@functools.cache
+def _fix_flag(flags: int) -> FixFlag:
+    """``FixFlag(flags)``, built once per value (a composite IntFlag is slow to make)."""
+    return FixFlag(flags)
 
 
 def _solve(
@@ -291,14 +311,14 @@ def _solve(
     worst = int(idx[np.nanargmax(nres)]) if np.isfinite(nres).any() else -1
     fault = wls.dof >= 1 and wls.p_value() < cfg.p_false_alarm
 
-    flags = FixFlag.NONE
+    flags = 0
     centre = wls.chainage_m if wls.converged else prior_m
     g = along_track_g(path, centre, s_u)
     pairs, mode = plan_pairs(g, g_sig, cfg.plan_k_sigma(m), scheme="auto" if active else "all")
     blunt = np.abs(g[pairs[:, 0]] - g[pairs[:, 1]]) < cfg.min_slope
     if blunt.any():
-        flags |= FixFlag.BLUNT
-        if active and mode == IntervalMode.ALL_PAIRS:
+        flags |= _BLUNT
+        if active and mode is _MODE_ALL:
             pairs = pairs[~blunt]
     # the width of the pairs actually united: fewer disjoint pairs after a drop, a wider k
     k_sigma = cfg.k_sigma_for(pairs)
@@ -306,23 +326,24 @@ def _solve(
     sol = solve_pairs(path, s_u, r_u, g_sig, pairs, prior_m=centre, window_m=cfg.window_m,
                       k_sigma=k_sigma, step_m=cfg.step_m)  # fmt: skip
     sol = dataclasses.replace(sol, i=idx[sol.i], j=idx[sol.j])
-    uni = union_interval(sol, mode if sol.n_pairs else IntervalMode.NONE)
-    st = np.bitwise_or.reduce(sol.status) if sol.n_pairs else 0
-    if st & PairStatus.MULTIPLE_ROOTS:
-        flags |= FixFlag.AMBIGUOUS
-    if st & PairStatus.NO_ROOT:
-        flags |= FixFlag.NO_ROOT
-    if st & PairStatus.EMPTY:
-        flags |= FixFlag.EMPTY_PAIR
+    uni = union_interval(sol, mode if sol.n_pairs else _MODE_NONE)
+    st = int(np.bitwise_or.reduce(sol.status)) if sol.n_pairs else 0
+    if st & _P_MULTIPLE:
+        flags |= _AMBIGUOUS
+    if st & _P_NO_ROOT:
+        flags |= _NO_ROOT_F
+    if st & _P_EMPTY:
+        flags |= _EMPTY_F
         fault = True
-    if st & (PairStatus.UNBOUNDED_LOW | PairStatus.UNBOUNDED_HIGH):
-        flags |= FixFlag.UNBOUNDED
-    if sol.n_pairs and not (st & PairStatus.EMPTY) and not uni.consistent:
-        flags |= FixFlag.INCONSISTENT_PAIRS
+    if st & _P_UNBOUNDED:
+        flags |= _UNBOUNDED_F
+    if sol.n_pairs and not (st & _P_EMPTY) and not uni.consistent:
+        flags |= _INCONSISTENT
         fault = True
     if not uni.safety_claim:
-        flags |= FixFlag.NO_SAFETY_CLAIM
+        flags |= _NO_CLAIM
     if sol.n_pairs == 0:
-        flags |= FixFlag.NO_SAFETY_CLAIM
-    fix = Fix(uni.estimate_m, uni.lo_m, uni.hi_m, uni.mode, "", flags, used, (), sol, wls)
+        flags |= _NO_CLAIM
+    fix = Fix(uni.estimate_m, uni.lo_m, uni.hi_m, uni.mode, "", _fix_flag(flags), used, (), sol,
+              wls)  # fmt: skip
     return fix, bool(fault), worst

@@ -32,14 +32,16 @@ the noise): when ``sigma_hdg > max_sigma_deg`` the check is ``UNOBSERVABLE`` and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from locator.kernels import heading_kernel
 from locator.wls import as_observations
-from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.geodesy import ecef_to_geodetic, enu_rotation
 
 __all__ = ["HeadingCheck", "HeadingStatus", "check_heading", "delay_model_m"]
 
@@ -48,6 +50,9 @@ class HeadingStatus(IntEnum):
     PASS = 0  # heading agrees with the beacon's segment
     FAIL = 1  # disagrees: wrong track or wrong beacon; location unreliable
     UNOBSERVABLE = 2  # too close to the beacon (or too few satellites) to tell
+
+
+_PASS, _FAIL, _UNOBSERVABLE = HeadingStatus.PASS, HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
 
 
 @dataclass(frozen=True)
@@ -148,37 +153,26 @@ def check_heading(
         rot = np.asarray(rotation, float)
         if rot.shape != (3, 3):
             raise ValueError(f"rotation must be a (3, 3) matrix, got shape {rot.shape}")
-    enu = (sat - b1) @ rot.T
-    az, el, rng = enu_to_azel(enu)
-    delay = rho - rng
-    ce = np.cos(np.radians(el))
-    a_mat = np.stack(
-        [np.ones_like(ce), -ce * np.sin(np.radians(az)), -ce * np.cos(np.radians(az))], axis=-1
-    )
-    y = delay + np.sin(np.radians(el)) * up_m  # a higher antenna is closer to every satellite
-    w = 1.0 / sig**2
-    normal = a_mat.T @ (w[:, None] * a_mat)
-    cov = np.linalg.pinv(normal)
-    x = cov @ (a_mat.T @ (w * y))
-    clock, de, dn = (float(v) for v in x)
-    res = y - a_mat @ x
-    chi2 = float(np.sum(w * res**2))
-    rx = float(np.hypot(de, dn))
-    hdg = float(np.mod(np.degrees(np.arctan2(de, dn)), 360.0))
+    # compiled (locator.kernels): the linear least squares in (b, dE, dN) and its covariance
+    clock, de, dn, chi2, c_ee, c_en, c_nn, rank_ok = heading_kernel(
+        np.ascontiguousarray(b1), np.ascontiguousarray(rot), np.ascontiguousarray(sat),
+        np.ascontiguousarray(rho), np.ascontiguousarray(sig), float(up_m),
+    )  # fmt: skip
+    rx = math.hypot(de, dn)
+    hdg = math.degrees(math.atan2(de, dn)) % 360.0
     # variance across the displacement direction -> heading variance
-    perp = np.array([np.cos(np.radians(hdg)), -np.sin(np.radians(hdg))])
-    var_perp = float(perp @ cov[1:, 1:] @ perp)
-    rank_ok = np.linalg.matrix_rank(normal) == 3
+    p_e, p_n = math.cos(math.radians(hdg)), -math.sin(math.radians(hdg))
+    var_perp = p_e * (c_ee * p_e + c_en * p_n) + p_n * (c_en * p_e + c_nn * p_n)
     sigma_hdg = (
-        float(np.degrees(np.sqrt(max(var_perp, 0.0)) / rx)) if rx > 0 and rank_ok else np.inf
+        math.degrees(math.sqrt(max(var_perp, 0.0)) / rx) if rx > 0 and rank_ok else math.inf
     )
-    diff = float(np.mod(hdg - beacon_heading_deg + 90.0, 180.0) - 90.0)
+    diff = (hdg - beacon_heading_deg + 90.0) % 180.0 - 90.0
     thr = k_sigma * sigma_hdg + tolerance_deg
     if not sigma_hdg <= max_sigma_deg:
-        status = HeadingStatus.UNOBSERVABLE
+        status = _UNOBSERVABLE
     elif abs(diff) > thr:
-        status = HeadingStatus.FAIL
+        status = _FAIL
     else:
-        status = HeadingStatus.PASS
-    along = rx * float(np.cos(np.radians(hdg - beacon_heading_deg)))
+        status = _PASS
+    along = rx * math.cos(math.radians(hdg - beacon_heading_deg))
     return HeadingCheck(hdg, rx, along, sigma_hdg, diff, thr, clock, chi2, status)

@@ -28,6 +28,7 @@ it bounds them in every elevation bin (``locator calibrate``).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,7 +38,7 @@ from scipy.optimize import nnls
 from locator.kernels import along_track_kernel, three_pairs_kernel, union_kernel
 from locator.sathia import AntennaPath, PairSolution
 from predisat.availability import interval as _interval
-from predisat.availability.interval import IntervalMode, interval_mode
+from predisat.availability.interval import IntervalMode
 from predisat.gnss.errormodel import ErrorModel
 
 __all__ = [
@@ -91,6 +92,10 @@ class UnionInterval:
 
     def contains(self, chainage_m: float) -> bool:
         return bool(self.lo_m <= chainage_m <= self.hi_m)
+
+
+_NONE, _BEST, _ALL, _THREE = (IntervalMode.NONE, IntervalMode.BEST_PAIR, IntervalMode.ALL_PAIRS,
+                              IntervalMode.THREE_PAIRS)  # fmt: skip
 
 
 def along_track_g(path: AntennaPath, chainage_m: float, sat_ecef_m: ArrayLike) -> NDArray:
@@ -174,15 +179,25 @@ def plan_pairs(
         raise ValueError(f"scheme must be one of {PAIR_SCHEMES}, got {scheme!r}")
     ga = np.asarray(g, float)
     n = ga.size
-    mode = IntervalMode(int(interval_mode(n)))
-    if mode == IntervalMode.NONE:
+    # interval_mode's rule on one count, without its array calls (enum members looked up
+    # once: Python 3.11's Enum.__getattr__ costs microseconds per epoch)
+    mode = _THREE if n >= 6 else _ALL if n >= 4 else _BEST if n >= 2 else _NONE
+    if mode is _NONE:
         return np.zeros((0, 2), np.intp), mode
-    if mode == IntervalMode.BEST_PAIR:
+    if mode is _BEST:
         return best_pair(ga, sigma_m, k_sigma), mode
-    if mode == IntervalMode.THREE_PAIRS and scheme == "auto":
+    if mode is _THREE and scheme == "auto":
         return three_independent_pairs(ga, sigma_m, k_sigma), mode
+    return _every_pair(n), (_ALL if scheme == "all" else mode)
+
+
+@functools.cache
+def _every_pair(n: int) -> NDArray:
+    """``np.stack(np.triu_indices(n, 1), axis=-1)``, made once per count (read-only)."""
     i, j = np.triu_indices(n, 1)
-    return np.stack([i, j], axis=-1), (IntervalMode.ALL_PAIRS if scheme == "all" else mode)
+    out = np.stack([i, j], axis=-1)
+    out.setflags(write=False)
+    return out
 
 
 def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
@@ -194,7 +209,7 @@ def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
     but with a non-empty set count with their hull and do not enter the estimate.
     """
     if pairs.n_pairs == 0:
-        return UnionInterval(np.nan, np.nan, np.nan, IntervalMode.NONE, False, False, pairs)
+        return UnionInterval(np.nan, np.nan, np.nan, _NONE, False, False, pairs)
     if np.isnan(pairs.lo_m).any():
         return UnionInterval(np.nan, np.nan, np.nan, mode, False, False, pairs)
     # compiled: min/max of the bounds, the weights (slope / sigma_K)**2 of the pairs with a
@@ -205,7 +220,7 @@ def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
     )  # fmt: skip
     consistent = bool(consistent)
     claim = (
-        mode in (IntervalMode.THREE_PAIRS, IntervalMode.ALL_PAIRS)
+        mode in (_THREE, _ALL)
         and bool(np.isfinite(lo) and np.isfinite(hi))
         and consistent
     )

@@ -19,8 +19,13 @@ test_locator_reference.py`` pins this on frozen outputs of the numpy code):
   unlike a BLAS call, whose kernel depends on the CPU, the kernels give the same bits on
   every machine.
 
-The trigonometry of the run (directions, the heading check) stays numpy's: its SIMD sin/cos
-are not libm's, so a compiled copy would not give the same bits.
+The satellite directions of the run stay numpy's: its ``arctan2`` is not libm's (they differ in
+the last bit on about 8 % of random inputs here), so a compiled copy would not give the same
+bits, and a direction a bit off can flip a trust decision at a mask's edge. The heading check
+(:func:`heading_kernel`) is the exception: it only tests a heading against a tolerance of
+degrees, and its pseudo-inverse came from LAPACK's SVD, which cannot be spelled out; compiled,
+its heading differs from the numpy code's by about 1e-8 deg and its decisions are the same
+(the frozen reference allows ``heading_diff_deg`` 1e-7 deg and nothing else).
 """
 
 from __future__ import annotations
@@ -35,8 +40,11 @@ __all__ = [
     "along_track_kernel",
     "dot3",
     "fma",
+    "heading_kernel",
+    "inputs_ok_kernel",
     "pair_kernel",
     "pairwise_sum",
+    "pos_vec_kernel",
     "three_pairs_kernel",
     "union_kernel",
     "wls_kernel",
@@ -124,6 +132,32 @@ def _pos_vec(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> 
     h11 = (u3 - u2) * 1.0
     for c in range(3):
         out[c] = h00 * x[i, c] + h10 * dx[i, c] + h01 * x[i + 1, c] + h11 * dx[i + 1, c]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def inputs_ok_kernel(sat: NDArray, rho: NDArray, sig: NDArray, i: NDArray, j: NDArray) -> bool:
+    """Whether :func:`locator.sathia.solve_pairs`'s arrays are valid: every position,
+    pseudorange and sigma finite, every sigma positive, every pair two distinct indices in
+    ``[0, n)`` (shapes checked by the caller)."""
+    n = rho.shape[0]
+    for k in range(n):
+        if not (np.isfinite(sat[k, 0]) and np.isfinite(sat[k, 1]) and np.isfinite(sat[k, 2])
+                and np.isfinite(rho[k]) and np.isfinite(sig[k]) and sig[k] > 0):  # fmt: skip
+            return False
+    for q in range(i.shape[0]):
+        if i[q] < 0 or i[q] >= n or j[q] < 0 or j[q] >= n or i[q] == j[q]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pos_vec_kernel(x: NDArray, dx: NDArray, length: float, s: float, out: NDArray) -> bool:
+    """``AntennaPath.ecef_at`` of a 0-d array (its array formula) into ``out`` (3,); False
+    (``out`` untouched) when ``s`` is not finite."""
+    if not np.isfinite(s):
+        return False
+    _pos_vec(x, dx, length, s, out)
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -757,3 +791,72 @@ def union_kernel(
     sw = pairwise_sum(w)
     est = pairwise_sum(wr) / pairwise_sum(w) if sw > 0 else np.nan
     return lo_min, hi_max, est, lo_max <= hi_min
+
+
+# ---------------------------------------------------------------------- the heading check
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def heading_kernel(
+    b1: NDArray, rot: NDArray, sat: NDArray, rho: NDArray, sig: NDArray, up_m: float
+) -> tuple[float, float, float, float, float, float, float, bool]:
+    """The least squares of :func:`locator.heading_check.check_heading` in ``(b, dE, dN)``.
+
+    Not bit for bit with the numpy code it replaced: the directions use libm's ``atan2``
+    (numpy's differs in the last bit on some inputs) and the pseudo-inverse of the 3 x 3 normal
+    matrix comes from the SVD numba calls (LAPACK ``gesdd`` of SciPy's OpenBLAS, not
+    numpy's); the same pseudo-inverse rule (singular values below ``1e-15`` of the largest
+    dropped) and the same rank rule (``matrix_rank``: above ``3 eps`` of the largest).
+    ``tests/regression/test_locator_reference.py`` bounds the difference.
+
+    Returns
+    -------
+    clock_m, de_m, dn_m, chi2, cov_ee, cov_en, cov_nn, full_rank
+    """
+    n = sat.shape[0]
+    a = np.empty((n, 3))
+    y = np.empty(n)
+    w = np.empty(n)
+    for k in range(n):
+        d0, d1, d2 = sat[k, 0] - b1[0], sat[k, 1] - b1[1], sat[k, 2] - b1[2]
+        e = rot[0, 0] * d0 + rot[0, 1] * d1 + rot[0, 2] * d2
+        nn = rot[1, 0] * d0 + rot[1, 1] * d1 + rot[1, 2] * d2
+        u = rot[2, 0] * d0 + rot[2, 1] * d1 + rot[2, 2] * d2
+        horiz = np.hypot(e, nn)
+        az = np.arctan2(e, nn)
+        el = np.arctan2(u, horiz)
+        ce = np.cos(el)
+        a[k, 0] = 1.0
+        a[k, 1] = -ce * np.sin(az)
+        a[k, 2] = -ce * np.cos(az)
+        y[k] = (rho[k] - np.sqrt(horiz * horiz + u * u)) + np.sin(el) * up_m
+        w[k] = 1.0 / (sig[k] * sig[k])
+    normal = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    for k in range(n):
+        for r in range(3):
+            rhs[r] += a[k, r] * w[k] * y[k]
+            for c in range(3):
+                normal[r, c] += a[k, r] * w[k] * a[k, c]
+    u_, s, vt = np.linalg.svd(normal)
+    s_max = s.max()
+    cov = np.zeros((3, 3))
+    for q in range(3):
+        if s[q] > 1e-15 * s_max:
+            inv = 1.0 / s[q]
+            for r in range(3):
+                for c in range(3):
+                    cov[r, c] += vt[q, r] * inv * u_[c, q]
+    rank = 0
+    for q in range(3):
+        if s[q] > s_max * 3.0 * np.finfo(np.float64).eps:
+            rank += 1
+    x = np.zeros(3)
+    for r in range(3):
+        for c in range(3):
+            x[r] += cov[r, c] * rhs[c]
+    chi2 = 0.0
+    for k in range(n):
+        res = y[k] - (a[k, 0] * x[0] + a[k, 1] * x[1] + a[k, 2] * x[2])
+        chi2 += w[k] * res * res
+    return x[0], x[1], x[2], chi2, cov[1, 1], cov[1, 2], cov[2, 2], rank == 3

@@ -35,6 +35,7 @@ otherwise the prediction keeps growing from the last anchors, so a wrong claim c
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -60,7 +61,7 @@ from locator.sathia import AntennaPath
 from locator.selection import Exclusion, direction_at, select_satellites
 from locator.sources import EpochData, EpochSource
 from predisat.availability.interval import IntervalMode
-from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
+from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import MaskSet
 
@@ -182,6 +183,16 @@ class RunConfig:
 
 
 _EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
+# enum members and flag sets the loop uses, looked up once (Python 3.11's Enum.__getattr__ and
+# IntFlag arithmetic cost microseconds per use)
+_ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, FusionStatus.CONFLICT
+_HEADING_FAIL = HeadingStatus.FAIL
+_HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
+_CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
+_NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
+_NO_CLAIM_FLAGS = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+_NO_FIX_FLAGS = int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM)
+_NONE_NAME = IntervalMode.NONE.name.lower()
 
 
 def run_locator(
@@ -237,6 +248,7 @@ def run_locator(
     odo = source.odometer_m
     state = _Tracker.start(start_chainage_m, cfg.start_uncertainty_m, odo, gps)
     rows: list[JsonDict] = []
+    beacons: dict[float, tuple[NDArray, NDArray]] = {}  # the heading check's beacon frames
     for k in range(len(gps)):
         t0 = time.perf_counter()
         p_lo, p_hi, d = state.predict(k, gps, odo, cfg, path.length_m)
@@ -251,7 +263,7 @@ def run_locator(
         if cfg.trust == "masks" and cfg.trust_stretches > 1 and n_rx:
             assert masks is not None
             fix, idx, uncorrected, conflict = _split_fix(
-                path, cfg, masks, data, az, el, p_lo, p_hi, excluded
+                path, cfg, masks, data, az, el, p_lo, p_hi, excluded, beacons
             )
         else:
             trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
@@ -260,15 +272,15 @@ def run_locator(
             conflict = False
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
         row["iono_uncorrected"] = uncorrected
-        f_lo, f_hi, status = p_lo, p_hi, FusionStatus.ODOMETRY
+        f_lo, f_hi, status = p_lo, p_hi, _ODOMETRY
         if fix is not None:
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
-            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, conflict)
+            status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
             if row["claim"]:
                 here = (0.0 if odo is None else float(odo[k]), gps[k])
                 f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
-                status = FusionStatus.FUSED
+                status = _FUSED
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
@@ -279,6 +291,11 @@ def run_locator(
         if progress is not None:
             progress(1)
     return pd.DataFrame(rows)
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``float(np.clip(x, lo, hi))`` of floats (NaN stays NaN), without numpy's call cost."""
+    return min(max(x, lo), hi)
 
 
 Anchor = tuple[float, float, float]
@@ -322,14 +339,14 @@ class _Tracker:
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
             hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
         d = max(abs(d_lo), abs(d_hi))
-        p_lo = float(np.clip(lo_p, 0.0, length_m))
-        p_hi = float(np.clip(hi_p, 0.0, length_m))
+        p_lo = _clip(float(lo_p), 0.0, length_m)
+        p_hi = _clip(float(hi_p), 0.0, length_m)
         step = 0.0 if odo is None else float(odo[k]) - self.odo_prev
         e, v = predict_estimate(self.est, self.est_var, step, cfg.odometer)
         self.odo_prev = self.odo_prev + step
         if odo is None:  # no motion model: the estimate's variance grows with the motion bound
             v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
-        self.est, self.est_var = float(np.clip(e, p_lo, p_hi)), float(v)
+        self.est, self.est_var = _clip(float(e), p_lo, p_hi), float(v)
         return p_lo, p_hi, d
 
     def fuse(
@@ -352,7 +369,7 @@ class _Tracker:
         if not np.isfinite(fix_sd) or fix_sd <= 0:
             fix_sd = 0.25 * (fix.hi_m - fix.lo_m)  # the interval as about 4 sigma
         e, v = blend_estimate(self.est, self.est_var, fix.chainage_m, fix_sd**2)
-        self.est, self.est_var = float(np.clip(e, f_lo, f_hi)), float(v)
+        self.est, self.est_var = _clip(float(e), f_lo, f_hi), float(v)
         return f_lo, f_hi
 
 
@@ -380,29 +397,30 @@ def _fix(
 
 def _check(
     path: AntennaPath, cfg: RunConfig, fix: Fix, data: EpochData, el: NDArray, idx: NDArray,
-    row: JsonDict, p_lo: float, p_hi: float, conflict: bool = False,
+    row: JsonDict, p_lo: float, p_hi: float, beacons: dict[float, tuple[NDArray, NDArray]],
+    conflict: bool = False,
 ) -> FusionStatus:  # fmt: skip
     """The heading and odometry checks of a fix, written into ``row`` (flags, claim); the
     fusion status (``CONFLICT`` when the claim contradicts the odometry, or ``conflict``: the
     stretches' claims contradict it, :func:`locator.partition.combine_stretches`)."""
-    status = FusionStatus.ODOMETRY
-    hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
+    status = _ODOMETRY
+    hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx], beacons)
     flags = int(fix.flags)
     if hc is not None:
         row["heading_status"] = hc.status.name.lower()
         row["heading_diff_deg"] = hc.difference_deg
-        if hc.status == HeadingStatus.FAIL:
-            flags |= FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM
+        if hc.status == _HEADING_FAIL:
+            flags |= _HEADING_FAIL_FLAGS
     claim = row["claim_fix"]
     miss = conflict or fix.hi_m < p_lo or fix.lo_m > p_hi
     if cfg.odometry_conflict == "estimate":
         miss = miss or not p_lo <= fix.chainage_m <= p_hi
     if claim and cfg.odometry_check and miss:
-        flags |= RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM
-        status = FusionStatus.CONFLICT
+        flags |= _CONFLICT_FLAGS
+        status = _CONFLICT
     if not cfg.error_model_applies:
-        flags |= RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM
-    claim = claim and not flags & (FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+        flags |= _NO_MODEL_FLAGS
+    claim = claim and not flags & _NO_CLAIM_FLAGS
     row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
     return status
 
@@ -410,6 +428,7 @@ def _check(
 def _split_fix(
     path: AntennaPath, cfg: RunConfig, masks: MaskSet, data: EpochData, az: NDArray,
     el: NDArray, p_lo: float, p_hi: float, excluded: dict[str, str],
+    beacons: dict[float, tuple[NDArray, NDArray]],
 ) -> tuple[Fix | None, NDArray, bool, bool]:  # fmt: skip
     """Partitioned trust (:mod:`locator.partition`): a fix per stretch of the prediction, one
     claim from all. Returns the epoch's fix (the chosen stretch's, its interval the hull of the
@@ -442,8 +461,9 @@ def _split_fix(
             continue
         f_lo[j], f_hi[j], est[j], n_used[j] = fix.lo_m, fix.hi_m, fix.chainage_m, fix.used.sum()
         if fix.safety_claim:
-            hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx])
-            claimed[j] = hc is None or hc.status != HeadingStatus.FAIL
+            hc = _heading(path, cfg, fix, data.sat_ecef_m[idx], data.pseudorange_m[idx], el[idx],
+                          beacons)  # fmt: skip
+            claimed[j] = hc is None or hc.status != _HEADING_FAIL
     comb = combine_stretches(
         [s.lo_m for s in stretches], [s.hi_m for s in stretches], claimed, f_lo, f_hi, est,
         n_used=n_used, estimate_inside=cfg.odometry_conflict == "estimate",
@@ -515,8 +535,8 @@ def _row(
         "epoch": k, "gps_s": gps_s, "pred_lo_m": p_lo, "pred_hi_m": p_hi,
         "n_received": n_rx, "n_trusted": n_trusted, "n_used": 0,
         "chainage_m": np.nan, "lo_m": np.nan, "hi_m": np.nan, "length_m": np.nan,
-        "mode": IntervalMode.NONE.name.lower(), "integrity": integrity,
-        "flags": int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM), "flag_names": "",
+        "mode": _NONE_NAME, "integrity": integrity,
+        "flags": _NO_FIX_FLAGS, "flag_names": "",
         "claim": False, "claim_fix": False, "wls_chainage_m": np.nan, "wls_sigma_m": np.nan,
         "heading_status": "", "heading_diff_deg": np.nan, "used": "",
     }  # fmt: skip
@@ -537,25 +557,31 @@ def _row(
 
 
 def _heading(
-    path: AntennaPath, cfg: RunConfig, fix: Fix, sat: NDArray, rho: NDArray, el: NDArray
-) -> Any:
-    """Heading check of the fix against its virtual beacon, or None when not applicable."""
+    path: AntennaPath, cfg: RunConfig, fix: Fix, sat: NDArray, rho: NDArray, el: NDArray,
+    beacons: dict[float, tuple[NDArray, NDArray]],
+) -> Any:  # fmt: skip
+    """Heading check of the fix against its virtual beacon, or None when not applicable.
+
+    ``beacons`` caches each beacon's ECEF position and ENU rotation (a geodetic conversion per
+    beacon, not per epoch)."""
     if not cfg.heading_check or fix.used.sum() < 4 or not np.isfinite(fix.chainage_m):
         return None
     s, sp = fix.chainage_m, cfg.beacon_spacing_m
-    b = np.floor((s - 0.5 * sp) / sp) * sp
+    b = math.floor((s - 0.5 * sp) / sp) * sp
     if b < 0.0:  # no beacon behind: take the one ahead
-        b = np.ceil((s + 0.5 * sp) / sp) * sp
+        b = math.ceil((s + 0.5 * sp) / sp) * sp
     if not 0.0 <= b <= path.length_m:
         return None
-    beacon = path.ecef_at(b)
-    lat, lon, _ = ecef_to_geodetic(beacon)
-    rot = enu_rotation(lat, lon)
-    chord = (path.ecef_at(s) - beacon) @ rot.T
-    az, _, _ = enu_to_azel(chord)
+    if b not in beacons:
+        xb = path.ecef_at(b)
+        lat, lon, _ = ecef_to_geodetic(xb)
+        beacons[b] = xb, enu_rotation(lat, lon)
+    beacon, rot = beacons[b]
+    east, north = rot[:2] @ (path.ecef_at(s) - beacon)
+    az = math.degrees(math.atan2(east, north)) % 360.0
     u = fix.used
     sigma = cfg.locator.model.error.sigma_m(el[u])
     return check_heading(
-        beacon, float(az), sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg,
+        beacon, az, sat[u], rho[u], sigma, tolerance_deg=cfg.heading_tolerance_deg,
         rotation=rot,
     )  # fmt: skip

@@ -39,7 +39,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from locator.kernels import pair_kernel
+from locator.kernels import inputs_ok_kernel, pair_kernel, pos_vec_kernel
 from predisat.track.map import TrackMap
 
 __all__ = [
@@ -104,6 +104,13 @@ class AntennaPath:
         per second and the track spline is slow to evaluate. The error is ``h^4 / 384`` times
         the fourth derivative of the path: micrometres on railway curvature.
         """
+        if isinstance(chainage_m, np.ndarray) and chainage_m.ndim == 0:  # one point, as an array
+            x, dx = self.hermite_table
+            out = np.empty(3)
+            # compiled: the array formula below on one point, bit for bit
+            if not pos_vec_kernel(x, dx, float(self.length_m), float(chainage_m), out):
+                raise ValueError("chainage_m contains NaN or infinite values")
+            return out
         if isinstance(chainage_m, (float, int, np.floating)):  # the loop's scalar calls
             k, v = self._locate_scalar(float(chainage_m))
             _, x, dx = self._table
@@ -317,20 +324,26 @@ def solve_pairs(
     sat = np.asarray(sat_ecef_m, float)
     rho = np.asarray(pseudorange_m, float)
     sig = np.asarray(sigma_m, float)
-    n = _check_inputs(sat, rho, sig)
-    pr = all_pairs(n) if pairs is None else np.asarray(pairs, np.intp).reshape(-1, 2)
-    _check_options(pr, n, prior_m, window_m, k_sigma, step_m)
+    n = sat.shape[0] if sat.ndim == 2 else -1
+    pr = all_pairs(max(n, 0)) if pairs is None else np.asarray(pairs, np.intp).reshape(-1, 2)
     i, j = pr[:, 0], pr[:, 1]
+    i64, j64 = np.ascontiguousarray(i, np.int64), np.ascontiguousarray(j, np.int64)
+    # one compiled pass over the arrays; the checks below name what is wrong when it fails
+    if not (sat.shape == (n, 3) and rho.shape == sig.shape == (n,)
+            and window_m > 0 and step_m > 0 and k_sigma > 0 and math.isfinite(prior_m)
+            and inputs_ok_kernel(sat, rho, sig, i64, j64)):  # fmt: skip
+        n = _check_inputs(sat, rho, sig)
+        _check_options(pr, n, prior_m, window_m, k_sigma, step_m)
     length = path.length_m
-    a = float(np.clip(prior_m - window_m, 0.0, length))
-    b = float(np.clip(prior_m + window_m, 0.0, length))
+    a = min(max(float(prior_m - window_m), 0.0), length)  # np.clip's result, without its cost
+    b = min(max(float(prior_m + window_m), 0.0), length)
     n_step = max(int(np.ceil((b - a) / step_m)), 1)
     grid = np.linspace(a, b, n_step + 1)
     x, dx = path.hermite_table
     # compiled (locator.kernels): the same arithmetic as the numpy code it replaced, bit for bit
     k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad = pair_kernel(
-        x, dx, float(length), a, b, grid, sat, rho, sig, np.ascontiguousarray(i, np.int64),
-        np.ascontiguousarray(j, np.int64), float(k_sigma), float(prior_m), 1e-4, 30,
+        x, dx, float(length), a, b, grid, sat, rho, sig, i64, j64, float(k_sigma),
+        float(prior_m), 1e-4, 30,
     )  # fmt: skip
     if bad:
         raise ValueError("chainage_m contains NaN or infinite values")

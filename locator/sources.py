@@ -138,6 +138,11 @@ class SimSource:
         keep = set(select_satellites(self.sim.sats, self.constellation))
         return np.array([s in keep for s in self.sim.sats], bool)
 
+    @cached_property
+    def _names(self) -> NDArray:
+        """Satellite ids as an object array (one gather per epoch instead of a Python loop)."""
+        return np.array(self.sim.sats, dtype=object)
+
     def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData:
         state = self.sim.state[epoch]
         take = state == SignalState.LOS
@@ -146,7 +151,7 @@ class SimSource:
         take &= self._columns
         j = np.flatnonzero(take)
         return EpochData(
-            tuple(self.sim.sats[k] for k in j),
+            tuple(self._names[j].tolist()),
             np.array(self.sim.sat_ecef_m[epoch, j]),
             np.array(self.sim.corrected_m[epoch, j]),
             {},

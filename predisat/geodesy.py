@@ -93,11 +93,12 @@ def enu_rotation(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray:
     lat, lon = np.broadcast_arrays(lat, lon)
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
-    zero = np.zeros_like(lat)
-    east = np.stack([-so, co, zero], axis=-1)
-    north = np.stack([-sl * co, -sl * so, cl], axis=-1)
-    up = np.stack([cl * co, cl * so, sl], axis=-1)
-    return np.stack([east, north, up], axis=-2)
+    # filled in place: four np.stack calls cost more than the trigonometry on one point
+    out = np.empty((*lat.shape, 3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = -so, co, 0.0
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = -sl * co, -sl * so, cl
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = cl * co, cl * so, sl
+    return out
 
 
 def enu_to_azel(enu_m: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:

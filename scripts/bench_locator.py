@@ -1,48 +1,74 @@
-"""Throughput of the 1-D locator beside a general 3-D least-squares fix on the same epochs.
+"""Throughput of the 1-D locator beside the code before its speed-up and a 3-D least-squares fix.
 
-Two sets of epochs, each run by both in the same process, alternately, ``--repeat`` times (the
-best time of each is kept, since these machines are noisy):
+Three codes on the same epochs, alternately, ``--repeat`` times; each time is the CPU time of
+its process (``time.process_time``: on a shared machine the wall time counts the other users'
+work) and the best of each is kept:
+
+* **locator**: ``locator.run.run_locator`` of this repository (corrections where the source
+  has them, selection, SATHIA pairs, intervals, FDE, heading check, odometry);
+* **old locator**: the same call on the code of ``--old-rev`` (default ``1403519``, the locator
+  of 2026-12-04 before its pair work was compiled: the code the issue measured at 193 epochs/s),
+  taken from git (``git archive``) into a temporary folder and run in a child process, so both
+  run side by side in one command on the same epochs;
+* **3-D LSQ**: a general 3-D position + clock fix on the same epochs (no selection, no
+  integrity): ``locator.spp.solve_observations`` on real data (the same corrections, iterated
+  weighted least squares, elevation mask 0), a plain Gauss-Newton on the corrected
+  pseudoranges of the simulated epochs.
+
+Epochs:
 
 * **real**: GEONET stations 0759 and 3040 (RTKLIB test data, 240 epochs, GPS C1) on a virtual
-  straight track through each station. Project: ``locator.run.run_locator`` with a
-  ``RinexSource`` (corrections, selection, SATHIA pairs, intervals, FDE, heading check).
-  Baseline: ``locator.spp.solve_observations`` (the same corrections, 3-D position and clock
-  by iterated weighted least squares, elevation mask 0).
-* **simulated**: a stop-and-go run on the demo world (line 144 km 4.0-6.3, all
-  constellations, ~30 received signals per epoch). Project: ``run_locator`` with the world's
-  true masks (~23 satellites trusted), and without masks (``trust="none"``, ~30 satellites),
-  active integrity (three pairs) and passive (every pair, up to 435). Baseline: a plain
-  Gauss-Newton 3-D + clock weighted least squares on the same corrected pseudoranges (no
-  selection, no integrity).
+  straight track through each station, no masks (``trust="none"``);
+* **simulated**: the stored epochs of ``tests/data/locator_regression`` as the locator sees them
+  (satellite positions and corrected pseudoranges): the demo world's stop-and-go run (151
+  epochs, about 30 received signals, all constellations) with the world's true masks (about 23
+  satellites trusted) and without masks (about 30), active integrity (three pairs) and passive
+  (every pair, up to 435); the Nice-Digne canyon run (a campaign job: NLOS, exclusions) with
+  its true masks. Default error model and ``k``.
 
-Prints epochs per second for each and the ratio (project time / baseline time).
+Prints epochs per second of each and the ratios: old / new time (the speed-up) and new / 3-D
+time (what the 1-D locator costs beside a 3-D fix).
 
 Usage::
 
     .venv/bin/python scripts/bench_locator.py [--data ../shared/data/gnss/rtklib] [--repeat 3]
+        [--old-rev 1403519]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from locator.corrections import RangeModel
-from locator.fde import LocatorConfig
-from locator.observations import Observations
-from locator.run import RunConfig, run_locator
-from locator.sathia import AntennaPath
-from locator.sources import RinexSource, SimSource
-from locator.spp import solve_observations
-
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "scripts"))
-from locator_static import GEONET_0759_ECEF_M, virtual_track  # noqa: E402
+
+
+def _code_path() -> None:
+    """This repository first on the path (a worktree measures itself, not an installed copy);
+    in the child the old tree before it."""
+    sys.path.insert(0, str(REPO))
+    sys.path.insert(0, str(REPO / "scripts"))
+    if "--child" in sys.argv:
+        sys.path.insert(0, sys.argv[sys.argv.index("--child") + 1])
+
+
+_code_path()
+
+from locator.fde import LocatorConfig  # noqa: E402
+from locator.run import RunConfig, run_locator  # noqa: E402
+
+Case = tuple[str, Callable[[], int]]
+"""A label and a function running the locator on its epochs (returns the number of epochs)."""
 
 
 def wls_3d(sat_ecef_m: np.ndarray, rho_m: np.ndarray, x0: np.ndarray) -> np.ndarray:
@@ -59,16 +85,26 @@ def wls_3d(sat_ecef_m: np.ndarray, rho_m: np.ndarray, x0: np.ndarray) -> np.ndar
     return x
 
 
-def best_of(fn: Callable[[], None], repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+def timed(fn: Callable[[], object]) -> float:
+    t = time.process_time()
+    fn()
+    return time.process_time() - t
 
 
-def real_epochs(data: Path, repeat: int) -> tuple[int, float, float]:
+def locator_cases(data: Path) -> tuple[list[Case], dict[str, Callable[[], object]]]:
+    """The locator's runs (by label) and the 3-D fix on the same epochs (by label).
+
+    Uses only what the old code has too: ``run_locator``, ``RunConfig``, ``LocatorConfig``,
+    ``RinexSource``, ``AntennaPath`` and the stored cases' loader.
+    """
+    from locator_static import GEONET_0759_ECEF_M, virtual_track
+
+    from locator.corrections import RangeModel
+    from locator.observations import Observations
+    from locator.sathia import AntennaPath
+    from locator.sources import RinexSource
+    from tests.regression.locator_cases import SimCase, load_sim_case
+
     runs = []
     for name in ("0759", "3040"):
         obs = Observations.from_rinex(data / f"{name}0920.05o")
@@ -76,73 +112,79 @@ def real_epochs(data: Path, repeat: int) -> tuple[int, float, float]:
         x = GEONET_0759_ECEF_M if name == "0759" else obs.header.approx_position_ecef_m
         src = RinexSource(model, obs, "G", odometer=np.zeros(len(obs.gps_s)))
         runs.append((AntennaPath(virtual_track(np.asarray(x, float), 45.0), 0.0), src, model, obs))
-    cfg = RunConfig(LocatorConfig(budget=None), trust="none")
+    none = _config("none", "active")
 
-    def project() -> None:
+    def real() -> int:
         for path, src, _, _ in runs:
-            run_locator(path, src, start_chainage_m=2000.0, config=cfg)
+            run_locator(path, src, start_chainage_m=2000.0, config=none)
+        return sum(len(r[3].gps_s) for r in runs)
 
-    def baseline() -> None:
+    def real_3d() -> None:
+        from locator.spp import solve_observations
+
         for _, _, model, obs in runs:
             solve_observations(model, obs, el_mask_deg=0.0)
 
-    n = sum(len(r[3].gps_s) for r in runs)
-    tp = tb = np.inf
-    for _ in range(repeat):  # alternate so that both see the same machine load
-        tp = min(tp, best_of(project, 1))
-        tb = min(tb, best_of(baseline, 1))
-    return n, tp, tb
+    cases: list[Case] = [("real (0759, 3040; GPS)", real)]
+    baselines: dict[str, Callable[[], object]] = {"real (0759, 3040; GPS)": real_3d}
+    for name, trust, integrity, label in (
+        ("demo", "masks", "active", "demo world, true masks"),
+        ("demo", "none", "active", "demo world, no masks, active"),
+        ("demo", "none", "passive", "demo world, no masks, passive"),
+        ("canyon", "masks", "active", "canyon world, true masks"),
+    ):
+        case = load_sim_case(name)
+        cfg = _config(trust, integrity)
+
+        def project(case: SimCase = case, cfg: RunConfig = cfg) -> int:
+            run_locator(case.path, case.source, start_chainage_m=case.start_m, config=cfg,
+                        masks=case.masks)  # fmt: skip
+            return len(case.source.gps_s)
+
+        def fix_3d(case: SimCase = case) -> None:
+            x = case.path.ecef_at(float(case.start_m))
+            for k in range(len(case.source.gps_s)):
+                e = case.source.observe(k, x[:3])
+                if len(e.sats) >= 4:
+                    x = wls_3d(e.sat_ecef_m, e.pseudorange_m, x[:3])
+
+        cases.append((label, project))
+        baselines[label] = fix_3d
+    return cases, baselines
 
 
-def simulated_epochs(repeat: int) -> list[tuple[str, int, float, float]]:
-    from locator.workflow import DEMO_RANGE_M, simulate_to_folder
-    from predisat.availability.satellites import default_ephemeris, default_window
-    from predisat.masks.maskset import MaskSet
-    from predisat.synth.truth import true_masks
-    from predisat.synth.world import World, WorldSpec
-    from predisat.track.map import demo_track
+def _config(trust: str, integrity: str) -> RunConfig:
+    """The same work on both sides: k = 2 and one trusted set (the old code knows neither the
+    integrity budget nor partitioned trust, the new one defaults to both)."""
+    loc_fields = {f.name for f in dataclasses.fields(LocatorConfig)}
+    run_fields = {f.name for f in dataclasses.fields(RunConfig)}
+    loc = LocatorConfig(budget=None) if "budget" in loc_fields else LocatorConfig()
+    extra = {"trust_stretches": 1} if "trust_stretches" in run_fields else {}
+    return RunConfig(loc, trust=trust, integrity=integrity, **extra)  # type: ignore[arg-type]
 
-    world = World.build(demo_track(), WorldSpec.mixed(*DEMO_RANGE_M, seed=0), 0)
-    import tempfile
 
-    with tempfile.TemporaryDirectory() as tmp:
-        sim, _ = simulate_to_folder(
-            world, default_ephemeris(), tmp, t0_gps_s=float(default_window()[0] + 8 * 3600),
-            seed=1, masks_out=False,
-        )  # fmt: skip
-    tm = true_masks(world)
-    masks = MaskSet.from_arrays(tm.chainage_m, tm.lat_deg, tm.lon_deg, tm.h_m, tm.heading_deg,
-                                tm.mask_el_deg, margin_deg=1.0)  # fmt: skip
-    path = AntennaPath(world.track, 4.0)
-    src = SimSource(sim)
-    epochs = [src.observe(k, np.zeros(3)) for k in range(sim.n_epoch)]
-    x0 = path.ecef_at(float(sim.chainage_m[0]))
+def child(data: Path) -> int:
+    """One timed run of every case on the code first on the path; JSON label -> [n, s]."""
+    cases, _ = locator_cases(data)
+    for _, fn in cases:  # warm caches (file reads) as the parent does
+        fn()
+    out = {}
+    for label, fn in cases:
+        t = time.process_time()
+        n = fn()
+        out[label] = [n, time.process_time() - t]
+    print(json.dumps(out))
+    return 0
 
-    def baseline() -> None:
-        x = x0
-        for e in epochs:
-            if len(e.sats) >= 4:
-                x = wls_3d(e.sat_ecef_m, e.pseudorange_m, x[:3])
 
-    fixed = LocatorConfig(budget=None)  # k = 2, as the figures of docs/locator.md
-    rows = []
-    for label, cfg in (
-        ("simulated, true masks (demo world)", RunConfig(fixed, trust="masks")),
-        ("simulated, no masks, active", RunConfig(fixed, trust="none")),
-        ("simulated, no masks, passive", RunConfig(fixed, trust="none",
-                                                   integrity="passive")),
-    ):  # fmt: skip
-
-        def project(cfg: RunConfig = cfg) -> None:
-            run_locator(path, src, start_chainage_m=float(sim.chainage_m[0]), config=cfg,
-                        masks=masks)  # fmt: skip
-
-        tp = tb = np.inf
-        for _ in range(repeat):
-            tp = min(tp, best_of(project, 1))
-            tb = min(tb, best_of(baseline, 1))
-        rows.append((label, sim.n_epoch, tp, tb))
-    return rows
+def old_tree(rev: str, into: Path) -> Path:
+    """``locator``, ``predisat`` and ``surveys`` of ``rev`` extracted under ``into``."""
+    archive = subprocess.run(
+        ["git", "-C", str(REPO), "archive", rev, "locator", "predisat", "surveys"],
+        check=True, capture_output=True,
+    ).stdout  # fmt: skip
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -151,15 +193,43 @@ def main(argv: list[str] | None = None) -> int:
         "--data", type=Path, default=REPO.parent / "shared" / "data" / "gnss" / "rtklib"
     )
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--old-rev", default="1403519", help="git revision of the old locator")
+    ap.add_argument("--child", metavar="TREE", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    rows = [("real (0759, 3040; GPS)", *real_epochs(args.data, args.repeat)),
-            *simulated_epochs(args.repeat)]  # fmt: skip
-    print(f"{'epochs':<38} {'n':>5} {'locator ep/s':>13} {'3-D LSQ ep/s':>13} {'ratio':>7}")
-    for label, n, tp, tb in rows:
-        print(f"{label:<38} {n:>5} {n / tp:>13.0f} {n / tb:>13.0f} {tp / tb:>6.2f}x")
-    print("ratio = locator time / 3-D least-squares time on the same epochs (best of "
-          f"{args.repeat}); the locator also selects, forms pair intervals, runs FDE and the "
-          "heading check")  # fmt: skip
+    if args.child:
+        return child(args.data)
+    cases, baselines = locator_cases(args.data)
+    for _, fn in cases:  # compile / load the kernels before timing
+        fn()
+    best: dict[str, list[float]] = {label: [np.inf, np.inf, np.inf] for label, _ in cases}
+    n_of: dict[str, int] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = old_tree(args.old_rev, Path(tmp))
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tree), str(REPO)])}
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(tree),
+               "--data", str(args.data)]  # fmt: skip
+        for _ in range(args.repeat):  # alternate so that all three see the same machine load
+            old = json.loads(subprocess.run(cmd, env=env, check=True, capture_output=True,
+                                            text=True, cwd=tmp).stdout)  # fmt: skip
+            for label, fn in cases:
+                t = time.process_time()
+                n_of[label] = fn()
+                b = best[label]
+                b[0] = min(b[0], time.process_time() - t)
+                b[1] = min(b[1], old[label][1])
+                b[2] = min(b[2], timed(baselines[label]))
+                assert old[label][0] == n_of[label]
+    head = (f"{'epochs':<32} {'n':>4} {'locator':>9} {'old':>9} {'3-D LSQ':>9} "
+            f"{'old/new':>8} {'new/3-D':>8}")  # fmt: skip
+    print(head)
+    print(f"{'':<32} {'':>4} {'ep/s':>9} {'ep/s':>9} {'ep/s':>9}")
+    for label, _ in cases:
+        n, (tn, to, tb) = n_of[label], best[label]
+        print(f"{label:<32} {n:>4} {n / tn:>9.0f} {n / to:>9.0f} {n / tb:>9.0f} "
+              f"{to / tn:>7.2f}x {tn / tb:>7.2f}x")  # fmt: skip
+    print(f"CPU time, best of {args.repeat}, alternately; old = the locator at {args.old_rev}; "
+          "new/3-D = locator time over 3-D least-squares time on the same epochs (the locator "
+          "also selects, forms pair intervals, runs FDE, the heading and odometry checks)")
     return 0
 
 

@@ -349,7 +349,8 @@ def cmd_faults(args: argparse.Namespace) -> None:
             jobs.append((factor, "all", rates))
             if args.per_class and factor > 0:
                 jobs += [(factor, k, FaultRates({k: r})) for k, r in rates.rates.items()]
-        rec = Reconstructor(ReconstructionParams(fusion_rank=args.fusion_rank))
+        rec = Reconstructor(ReconstructionParams(fusion_rank=args.fusion_rank,
+                                                 suspect_share=args.suspect_share))
         for factor, kind, rates in jobs:
             masks = [f.sky_mask for f in frames]
             faulty, faults = inject_faults(masks, labels, cams, rates, seed)
@@ -358,7 +359,7 @@ def cmd_faults(args: argparse.Namespace) -> None:
             trusted, good, los = trust_counts(res.mask_el_deg.astype(float), tm.mask_el_deg, 0.0)
             per_pos = (trusted - good).sum(1) / np.maximum(trusted.sum(1), 1)
             row = {"seed": seed, "factor": factor, "faults": kind, "n_faults": len(faults),
-                   "fusion_rank": args.fusion_rank,
+                   "fusion_rank": args.fusion_rank, "suspect_share": args.suspect_share,
                    "false_trust": float((trusted - good).sum() / max(trusted.sum(), 1)),
                    "worst_position_false_trust": float(per_pos.max()),
                    "worst_position_m": float(s[int(np.argmax(per_pos))]),
@@ -501,6 +502,9 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--factors", nargs="+", type=float, default=[0.0, 1.0, 2.0, 3.0])
             p.add_argument("--fusion-rank", type=int, default=1,
                            help="ReconstructionParams.fusion_rank (1: the default, the minimum)")
+            p.add_argument("--suspect-share", type=float, default=None,
+                           help="ReconstructionParams.suspect_share (None: the default, no "
+                                "suspect-frame check)")
             p.add_argument("--per-class", action="store_true",
                            help="also each fault class alone at its rate in the mix")
         if name == "sheet":

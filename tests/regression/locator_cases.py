@@ -274,7 +274,7 @@ def _write_reference() -> None:  # pragma: no cover - run once, by hand, with th
                                                               config=integrity))  # fmt: skip
     pd.concat(frames, ignore_index=True).to_parquet(DATA / "reference_runs.parquet")
     arrays = {f"{c}/{f}": v for c, sol in pair_cases() for f, v in sol.items()}
-    np.savez_compressed(DATA / "reference_pairs.npz", **arrays)
+    np.savez_compressed(DATA / "reference_pairs.npz", **arrays)  # type: ignore[arg-type]
 
 
 if __name__ == "__main__":  # pragma: no cover

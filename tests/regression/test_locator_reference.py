@@ -4,7 +4,11 @@ Every interval, estimate, flag, used and excluded satellite of the campaign's ru
 stored simulated runs and on the in-repo GEONET epochs, and every field of ``solve_pairs`` on
 random epochs, must equal the reference (``tests/regression/locator_cases.py`` wrote it with
 the code of commit 1403519) bit for bit: same values, NaN at the same places, same sign of
-zero. This pins an optimisation, not correctness (``tests/locator`` does that).
+zero. One exception (:data:`TOLERANCE`): the heading check's least squares is compiled
+(``locator.kernels.heading_kernel``) with libm's ``atan2`` and SciPy's LAPACK SVD, which cannot
+reproduce numpy's bits, so ``heading_diff_deg`` may differ by up to 1e-7 deg (1.2e-8 measured);
+its decision (``heading_status``, the ``HEADING_FAIL`` flag, the claim) must still be identical.
+This pins an optimisation, not correctness (``tests/locator`` does that).
 """
 
 from __future__ import annotations
@@ -40,9 +44,21 @@ def _case(name: str) -> SimCase:
     return load_sim_case(name)
 
 
-def _assert_identical(got: np.ndarray, want: np.ndarray, what: str) -> None:
+#: columns that may differ from the reference by at most this much (absolute), every other one
+#: bit for bit: the heading check's least squares is compiled with libm's atan2 and SciPy's
+#: LAPACK SVD (locator.kernels.heading_kernel), which numpy's code cannot be matched to bit for
+#: bit; its decision (``heading_status`` and the HEADING_FAIL flag) must be identical
+TOLERANCE = {"heading_diff_deg": 1e-7}
+
+
+def _assert_identical(got: np.ndarray, want: np.ndarray, what: str, atol: float = 0.0) -> None:
     assert got.shape == want.shape, f"{what}: shape {got.shape} != {want.shape}"
-    if want.dtype.kind == "f":
+    if want.dtype.kind == "f" and atol > 0.0:
+        g, w = got.astype(float), want.astype(float)
+        assert np.array_equal(np.isnan(g), np.isnan(w)), f"{what}: NaN at other places"
+        err = np.abs(np.where(np.isnan(w), 0.0, g - w))
+        assert err.max(initial=0.0) <= atol, f"{what}: differs by {err.max()} > {atol}"
+    elif want.dtype.kind == "f":
         g, w = got.astype(float), want.astype(float)
         nan = np.isnan(w)
         assert np.array_equal(np.isnan(g), nan), f"{what}: NaN at other places"
@@ -59,7 +75,8 @@ def _assert_frame(got: pd.DataFrame, case: str, config: str) -> None:
     assert len(want) > 0
     assert len(got) == len(want)
     for col in COMPARED:
-        _assert_identical(got[col].to_numpy(), want[col].to_numpy(), f"{case}/{config}/{col}")
+        _assert_identical(got[col].to_numpy(), want[col].to_numpy(), f"{case}/{config}/{col}",
+                          TOLERANCE.get(col, 0.0))
 
 
 @pytest.mark.parametrize("config", list(sim_configs()))

@@ -304,6 +304,29 @@ def test_worst_case_many_queries_match_brute_force():
         np.testing.assert_array_equal(out[k], eff[touch].max(axis=0))
 
 
+def test_worst_case_of_one_interval_matches_brute_force():
+    # the scalar path (one interval, the locator's epoch) against a loop over the cells that
+    # touch it: inside, at cell edges, past either end with and without clip, and infinite ends
+    m = make_set(n_pos=300, step=2.0, spacing=10.0, seed=8)
+    b = m.cell_bounds_m
+    eff = m.effective_mask_deg
+    rng = np.random.default_rng(9)
+    lo = np.concatenate([rng.uniform(b[0] - 50, b[-1], 300), [b[3], b[0], -np.inf, b[0] - 1]])
+    hi = np.concatenate([lo[:300] + rng.uniform(0, 400, 300), [b[3], b[-1], 500.0, b[0] - 0.5]])
+    for q in range(lo.size):
+        for clip in (False, True):
+            got = m.worst_case(float(lo[q]), float(hi[q]), clip=clip)
+            assert got.shape == (m.n_az,) and got.dtype == eff.dtype
+            a, z = (max(lo[q], b[0]), min(hi[q], b[-1])) if clip else (lo[q], hi[q])
+            if (clip and a > z) or (not clip and (lo[q] < b[0] or hi[q] > b[-1])):
+                assert np.all(np.isinf(got)), (q, clip)
+                continue
+            touch = [i for i in range(m.n_pos) if b[i] <= z and b[i + 1] >= a]
+            np.testing.assert_array_equal(got, eff[touch].max(axis=0))
+    with pytest.raises(MaskError, match="NaN"):
+        m.worst_case(float("nan"), 10.0)
+
+
 # ---------------------------------------------------------------- opening angle
 def test_opening_angle_uses_cross_track_bins():
     n = 2
