@@ -735,8 +735,13 @@ def _along_blocked(prof: SkyProfile, frame: FrameView, p: ReconstructionParams) 
     something over the track line close to the frame, which the clearance prior must not
     declare free (issue 30: a 6 cm registration arm 1-2 m over the antenna is opaque under the
     Fresnel rule, and the thin-structure policy does not remove a feature that wide). A cab
-    camera looks along the track: its own view is left to the carving."""
+    camera looks along the track: its own view is left to the carving. So is a 360-degree
+    panorama's: it sees the cells over the antenna itself, and on the track axis under the
+    catenary the rule fired for it on most frames at a cost of 5-10 points of the sky along
+    the track for almost no false trust (``docs/reconstruction.md``, section 9)."""
     if p.overhead_along_el_deg is None or frame.mount.side in ("front", "rear"):
+        return False
+    if frame.camera.model == "equirect":
         return False
     el = p.overhead_along_el_deg
     # angular distance of each profile azimuth from straight ahead, and from straight behind

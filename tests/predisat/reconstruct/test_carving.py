@@ -520,11 +520,11 @@ def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> N
     p = ReconstructionParams()
 
     def case(top_deg: float, seen_hi: float = 90.0, side: str = "left",
-             params: ReconstructionParams = p) -> bool:
+             params: ReconstructionParams = p, cam: CameraModel = FISHEYE) -> bool:
         el = np.where(np.abs(rel - 90.0) <= 3.0, top_deg, 10.0)  # an obstacle ahead only
         prof = SkyProfile(rel, el, np.full(rel.size, 0.0), np.full(rel.size, seen_hi), look)
         m = Mount(side, -look, 45.0, 0.0, (0.0, 0.0, -0.5))
-        f = FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE, m, np.zeros(3), 0.0)
+        f = FrameView(100.0, np.ones(cam.shape, bool), cam, m, np.zeros(3), 0.0)
         got = _along_blocked(prof, f, params)
         assert _along_overhead([f], [prof], params) == (
             [(100.0 - params.overhead_along_spread_m, 100.0 + params.overhead_along_spread_m)]
@@ -536,6 +536,8 @@ def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> N
     assert not case(30.0)  # below the threshold: far along the track, the carving's business
     assert not case(60.0, seen_hi=40.0)  # never saw 45 deg there: nothing to say
     assert not case(60.0, side="front")  # a cab camera looks along the track itself
+    # a panorama sees the cells over the antenna itself (docs/reconstruction.md, section 9)
+    assert not case(60.0, side="roof", cam=CameraModel.equirect(360))
     assert not case(60.0, params=replace(p, overhead_along_el_deg=None))
     # the same obstacle seen behind (heading reversed by 180 deg is the same track line)
     el = np.where(np.abs(rel + 90.0) <= 3.0, 60.0, 10.0)
