@@ -558,7 +558,6 @@ def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> N
         ReconstructionParams(overhead_along_height_m=-1.0)
 
 
-
 def gantry_world(starts_m: list[float], seed: int) -> World:
     """A straight open line with signal gantries (``predisat.synth.scenery``: a box girder
     0.8 m deep and 1.2 m along the track, its foot 7.6 m above the rail, the lowest the world
