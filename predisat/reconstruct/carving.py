@@ -26,6 +26,7 @@ of its positions' range extended by ``overlap_m`` on both sides.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -107,8 +108,14 @@ class ReconstructionParams:
         azimuths within ``overhead_along_half_deg`` of straight along the track (ahead or
         behind) sees something over the track line close by (a catenary cantilever or
         registration arm, a gantry, a crown): the clearance is blocked within
-        ``overhead_along_spread_m`` of that frame. ``None`` disables it.
+        ``overhead_along_spread_m`` of that frame, and towards the obstacle up to
+        ``overhead_along_height_m / tan(e)`` beyond (``e`` the lowest elevation of the
+        obstacle's top there): a structure over the track seen at ``e`` stands that far away
+        if its top is ``overhead_along_height_m`` above the camera. ``None`` disables it.
     overhead_along_half_deg, overhead_along_spread_m : float
+    overhead_along_height_m : float
+        The tallest structure over the track, above the cameras, that the rule above locates
+        (a signal gantry's girder between two frames, ``docs/reconstruction.md`` section 10).
     along_view_half_deg : float or None
         Half-width of the azimuth window straight along the track in which a position's left
         and right cameras bound what may span the track (``docs/reconstruction.md``, section 2:
@@ -171,6 +178,7 @@ class ReconstructionParams:
     overhead_along_el_deg: float | None = 45.0
     overhead_along_half_deg: float = 5.0
     overhead_along_spread_m: float = 1.5
+    overhead_along_height_m: float = 8.0
     along_view_half_deg: float | None = 1.0
     antenna_height_m: float = 4.0
     az_step_deg: float = 0.5
@@ -191,6 +199,12 @@ class ReconstructionParams:
     thin_wavelength_m: float = L1_WAVELENGTH_M
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.overhead_along_height_m) and self.overhead_along_height_m >= 0):
+            raise ValueError(
+                "overhead_along_height_m must be a finite height >= 0 metres (the tallest "
+                f"structure over the track the along-overhead rule locates), got "
+                f"{self.overhead_along_height_m}"
+            )
         if not (self.antenna_clearance_m > 0 and self.thin_wavelength_m > 0):
             raise ValueError(
                 "antenna_clearance_m and thin_wavelength_m must be > 0 metres, got "
@@ -718,41 +732,69 @@ def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:
 def _along_overhead(
     frames: Sequence[FrameView], profs: Sequence[SkyProfile], p: ReconstructionParams
 ) -> list[tuple[float, float]]:
-    """Chainage intervals around the frames that saw an obstacle high up straight along the
-    track (:func:`_along_blocked`). One camera suffices: a cantilever reaches from its mast to
-    the track axis, over the antenna, but not over the other camera's line (demanding both
-    cameras left the demo's false trust at 0.124 %)."""
+    """Chainage intervals over which the frames that saw an obstacle high up straight along
+    the track (:func:`_along_tops`) mark the clearance as overhead. One camera suffices: a
+    cantilever reaches from its mast to the track axis, over the antenna, but not over the
+    other camera's line (demanding both cameras left the demo's false trust at 0.124 %).
+
+    Each interval reaches ``overhead_along_spread_m`` either side of the frame and, towards
+    an obstacle seen at elevation ``e``, ``overhead_along_height_m / tan(e)`` plus the
+    camera's lever arm along the track beyond: the obstacle's top at most
+    ``overhead_along_height_m`` above the camera stands at most that far away. Until
+    2026-12-05 the interval was the spread alone, and a signal gantry's girder 4-6 m from the
+    two frames that saw it (at 50 and 57 deg) lay between their intervals: the clearance
+    prior declared the cells under it free (``docs/reconstruction.md``, section 10)."""
     s = p.overhead_along_spread_m
-    return [
-        (f.chainage_m - s, f.chainage_m + s)
-        for f, prof in zip(frames, profs, strict=True)
-        if _along_blocked(prof, f, p)
-    ]
+    out = []
+    for f, prof in zip(frames, profs, strict=True):
+        tops = _along_tops(prof, f, p)
+        if not np.isfinite(tops).any():
+            continue
+        slack = s + abs(float(f.mount.lever_arm_m[0]))
+        reach = [
+            slack + p.overhead_along_height_m / np.tan(np.radians(e))
+            if np.isfinite(e) else s
+            for e in tops
+        ]  # fmt: skip
+        out.append((f.chainage_m - reach[1], f.chainage_m + reach[0]))
+    return out
 
 
 def _along_blocked(prof: SkyProfile, frame: FrameView, p: ReconstructionParams) -> bool:
-    """Whether the camera saw an obstacle high up straight along the track (ahead or behind):
-    something over the track line close to the frame, which the clearance prior must not
-    declare free (issue 30: a 6 cm registration arm 1-2 m over the antenna is opaque under the
-    Fresnel rule, and the thin-structure policy does not remove a feature that wide). A cab
-    camera looks along the track: its own view is left to the carving. So is a 360-degree
-    panorama's: it sees the cells over the antenna itself, and on the track axis under the
-    catenary the rule fired for it on most frames at a cost of 5-10 points of the sky along
-    the track for almost no false trust (``docs/reconstruction.md``, section 9)."""
+    """Whether the camera saw an obstacle high up straight along the track (ahead or behind),
+    :func:`_along_tops`."""
+    return bool(np.isfinite(_along_tops(prof, frame, p)).any())
+
+
+def _along_tops(prof: SkyProfile, frame: FrameView, p: ReconstructionParams) -> NDArray:
+    """``(e_ahead, e_behind)`` in degrees: where the camera saw an obstacle above
+    ``overhead_along_el_deg`` straight along the track towards increasing (decreasing)
+    chainage, the lowest elevation of its top among those columns; ``inf`` elsewhere.
+
+    Such an obstacle is something over the track line close to the frame, which the
+    clearance prior must not declare free (issue 30: a 6 cm registration arm 1-2 m over the
+    antenna is opaque under the Fresnel rule, and the thin-structure policy does not remove a
+    feature that wide; a signal gantry). A cab camera looks along the track: its own view is
+    left to the carving. So is a 360-degree panorama's: it sees the cells over the antenna
+    itself, and on the track axis under the catenary the rule fired for it on most frames at
+    a cost of 5-10 points of the sky along the track for almost no false trust
+    (``docs/reconstruction.md``, section 9)."""
+    out = np.full(2, np.inf)
     if p.overhead_along_el_deg is None or frame.mount.side in ("front", "rear"):
-        return False
+        return out
     if frame.camera.model == "equirect":
-        return False
+        return out
     el = p.overhead_along_el_deg
     # angular distance of each profile azimuth from straight ahead, and from straight behind
     off = (prof.az_deg - frame.heading_deg + 180.0) % 360.0 - 180.0
     hit = prof.sky_el_deg > el
     covers = (prof.seen_hi_deg >= el) & (prof.seen_lo_deg <= el)
-    for rel in (np.abs(off), 180.0 - np.abs(off)):
+    for k, rel in enumerate((np.abs(off), 180.0 - np.abs(off))):
         seen = (rel <= p.overhead_along_half_deg) & covers
         if seen.any() and np.mean(hit[seen]) >= 0.5:
-            return True
-    return False
+            # an obstacle up to the zenith (no sky there) counts as at 90 deg
+            out[k] = min(float(prof.sky_el_deg[seen & hit].min()), 90.0)
+    return out
 
 
 def _both_sides(frames: Iterable[FrameView]) -> bool:

@@ -526,10 +526,12 @@ def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> N
         m = Mount(side, -look, 45.0, 0.0, (0.0, 0.0, -0.5))
         f = FrameView(100.0, np.ones(cam.shape, bool), cam, m, np.zeros(3), 0.0)
         got = _along_blocked(prof, f, params)
-        assert _along_overhead([f], [prof], params) == (
-            [(100.0 - params.overhead_along_spread_m, 100.0 + params.overhead_along_spread_m)]
-            if got else []
-        )
+        # the interval reaches overhead_along_height_m / tan(e) beyond the spread towards the
+        # obstacle, e the lowest top among the columns that saw it (here top_deg)
+        spread = params.overhead_along_spread_m
+        reach = spread + params.overhead_along_height_m / np.tan(np.radians(min(top_deg, 90.0)))
+        expected = [(100.0 - spread, 100.0 + reach)] if got else []
+        assert np.allclose(_along_overhead([f], [prof], params), expected)
         return got
 
     assert case(60.0)
@@ -545,3 +547,47 @@ def test_an_obstacle_high_along_the_track_marks_the_clearance_as_overhead() -> N
     f = FrameView(100.0, np.ones(FISHEYE.shape, bool), FISHEYE,
                   Mount("left", 90.0, 45.0, 0.0, (0.0, 0.0, -0.5)), np.zeros(3), 0.0)
     assert _along_blocked(prof, f, p)
+    np.testing.assert_allclose(_along_overhead([f], [prof], p),
+                               [(100.0 - 1.5 - 8.0 / np.tan(np.radians(60.0)), 101.5)])
+    # an obstacle up to the zenith (no sky in those columns) reaches the spread only
+    el = np.where(np.abs(rel + 90.0) <= 3.0, np.inf, 10.0)
+    prof = SkyProfile(rel, el, np.full(rel.size, 0.0), np.full(rel.size, 90.0), look)
+    got = _along_overhead([f], [prof], p)
+    np.testing.assert_allclose(got, [(98.5, 101.5)], atol=1e-9)
+    with pytest.raises(ValueError, match="overhead_along_height_m"):
+        ReconstructionParams(overhead_along_height_m=-1.0)
+
+
+def gantry_world(starts_m: list[float], seed: int) -> World:
+    """A straight open line with signal gantries (``predisat.synth.scenery``: a box girder
+    0.8 m deep and 1.2 m along the track, its foot 7.6 m above the rail, the lowest the world
+    draws, spanning posts 4-6 m either side, signal heads hanging under it, a handrail of thin
+    tubes on top) starting at ``starts_m``; no catenary, so that the gantries alone are
+    tested."""
+    low = {"girder_height_m": 7.6}
+    spec = WorldSpec(tuple(Stretch("gantry", a, a + 1.2, "both", low) for a in starts_m),
+                     catenary=False, hills=False)  # fmt: skip
+    return World.build(straight_track(700.0, AZIMUTH), spec, seed=seed)
+
+
+def test_a_gantry_between_frames_is_not_declared_free() -> None:
+    """Signal gantries at 1.5 to 8.5 m past a frame (frames every 10 m): each is seen
+    straight along the track only by the frames either side, and the clearance prior must not
+    declare the cells under its girder free. Until 2026-12-05 the along-overhead rule marked
+    1.5 m around those frames only, and every one of these gantries but the first left
+    positions trusting sky up to 50 deg below the girder (``docs/reconstruction.md``, section
+    10). Masks every 2 m around them (between the frames too) against the ray-cast truth: no
+    supported bin below it."""
+    starts = [241.5, 283.5, 324.5, 366.5, 408.5]
+    world = gantry_world(starts, seed=1)
+    fr = frames_for(world, np.arange(100.0, 551.0, 10.0), FISHEYE)
+    s = np.concatenate([np.arange(a - 15.0, a + 16.0, 2.0) for a in starts])
+    rec = Reconstructor(PARAMS).run(fr, s, world.track)
+    tm = true_masks(world, s)
+    # the girder is in the truth straight ahead of a position 9 m before it (a test of the
+    # world, not of the reconstruction): at least atan((7.6 - 4) / 10.2) = 19.4 deg
+    i = int(np.argmin(np.abs(s - (starts[2] - 9.0))))
+    assert tm.mask_el_deg[i, rel_bins(float(tm.heading_deg[i]), tm.az_deg, 0.0)] > 19.0
+    supported = rec.source != BinSource.ASSUMED
+    below = (rec.mask_el_deg - tm.mask_el_deg)[supported]
+    assert below.min() >= -0.1, f"{(below < -0.1).sum()} bins below the truth, worst {below.min()}"
