@@ -20,7 +20,6 @@ obstacle (the catenary over the track cut the top sky run of whole sectors; ``do
 from __future__ import annotations
 
 import itertools
-from dataclasses import replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -82,11 +81,13 @@ def segment_panorama(
     band = img[:rows]
     sky = np.zeros((h, w), bool)
     conf = np.zeros(w, float)
-    tile_opt = replace(opt, thin_px=0)  # the thin policy runs once, on the sphere (below)
     for a, b in itertools.pairwise(edges):
         cols = np.arange(a - pad, b + pad) % w
-        seg = segment_sky(np.ascontiguousarray(band[:, cols]), tile_opt, classifier)
-        sky[:rows, a:b] = seg.sky_mask[:, pad : pad + (b - a)]
+        seg = segment_sky(np.ascontiguousarray(band[:, cols]), opt, classifier)
+        # the tile's mask before its own (pixel) thin policy: the policy runs once, on the
+        # sphere (below); the confidence stays the tile's (measured at its skyline)
+        tile = seg.sky_mask if seg.thin_mask is None else seg.sky_mask & ~seg.thin_mask
+        sky[:rows, a:b] = tile[:, pad : pad + (b - a)]
         conf[a:b] = seg.confidence[pad : pad + (b - a)]
     thin = None
     if opt.thin_px > 0:
