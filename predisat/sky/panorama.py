@@ -48,9 +48,12 @@ def segment_panorama(
     Parameters
     ----------
     image_bgr : array_like, shape (H, W, 3) uint8
-        The panorama (columns wrap around: column 0 follows column W - 1).
+        The panorama, 360 degrees wide with the top row at the zenith and ``H <= W / 2``
+        (columns wrap around: column 0 follows column W - 1).
     options, classifier
-        As for :func:`predisat.sky.segment.segment_sky` (``fisheye`` must be False).
+        As for :func:`predisat.sky.segment.segment_sky` (``fisheye`` must be False);
+        ``options.thin_px`` is counted in pixels of the equator
+        (:func:`remove_thin_obstacles_equirect`).
     band_rows : int, optional
         Rows segmented from the top; default ``round(PANORAMA_BAND_SHARE * H)``.
     overlap_share : float
