@@ -552,7 +552,9 @@ def ideal_frames(
         The pipeline's thin-structure policy (``PipelineParams.thin_deg``): the masks are then
         those of a segmenter without error followed by that policy, with its
         ``FrameView.thin_mask`` (every face a camera sees is an obstacle, features at most
-        ``max(1, round(thin_deg / camera.widest_pixel_deg))`` pixels wide become sky).
+        ``max(1, round(thin_deg / camera.widest_pixel_deg))`` pixels wide become sky; for a
+        panorama measured in true angles, as the pipeline's
+        :func:`predisat.sky.panorama.remove_thin_obstacles_equirect`).
         None: every thin-material face (wire, cantilever) is sky, whatever its width and
         distance, and there is no thin mask (the reconstruction then applies no rule).
 
@@ -578,7 +580,11 @@ def ideal_frames(
                for k, m in mounts.items()}  # fmt: skip
     else:
         from predisat.sky.morphology import remove_thin_obstacles
+        from predisat.sky.panorama import remove_thin_obstacles_equirect
 
+        # a panorama's policy measures widths in true angles on the sphere, as the pipeline's
+        policy = remove_thin_obstacles_equirect if camera.model == "equirect" else (
+            remove_thin_obstacles)  # fmt: skip
         full = make_caster(world, backend)  # every face: what a camera sees
         px = max(1, round(thin_deg / camera.widest_pixel_deg)) if thin_deg > 0 else 0
         width = px * camera.widest_pixel_deg
@@ -586,7 +592,7 @@ def ideal_frames(
         sky = {}
         for k, m in mounts.items():
             raw = ideal_sky_mask(world, s, camera, m, antenna_height_m, reverse, caster=full)
-            sky[k] = np.stack([remove_thin_obstacles(r, px) & valid for r in raw])
+            sky[k] = np.stack([policy(r, px) & valid for r in raw])
             thin[k] = sky[k] & ~raw
     return [
         FrameView(float(s[i]), sky[k][i], camera, m, ant[i], float(hd[i]), reverse,

@@ -104,3 +104,28 @@ def test_ideal_frames_under_the_policy_carry_their_thin_pixels() -> None:
             np.all(np.isfinite(cam.pixel_to_ray(*cam.pixel_grid())), axis=-1)))
         n_thin += int(f.thin_mask.sum())
     assert n_thin > 0  # the wires
+
+
+def test_ideal_frames_of_a_panorama_take_the_policy_on_the_sphere() -> None:
+    """An equirect camera's ideal frames under the policy: the sphere's policy
+    (remove_thin_obstacles_equirect) on the ray-cast mask, not the frame policy in pixels,
+    which keeps more of the catenary over the track as obstacles."""
+    from predisat.camera.rigs import Rig
+    from predisat.sky.morphology import remove_thin_obstacles
+    from predisat.sky.panorama import remove_thin_obstacles_equirect
+    from predisat.synth.truth import ideal_frames, ideal_sky_mask
+
+    track = straight_track(400.0, 30.0)
+    world = World.build(track, WorldSpec((Stretch("open", 0.0, 400.0),), True, False), seed=3)
+    ((pos, cam, mount),) = Rig.preset("360").scaled(0.5).cameras
+    s = np.array([170.0, 200.0])
+    frames = ideal_frames(world, s, cam, {pos: mount}, thin_deg=0.7)
+    px = max(1, round(0.7 / cam.widest_pixel_deg))
+    full = make_caster(world, "open3d")
+    raws = ideal_sky_mask(world, s, cam, mount, caster=full)
+    n_more = 0
+    for f, raw in zip(frames, raws, strict=True):
+        assert np.array_equal(f.sky_mask, remove_thin_obstacles_equirect(raw, px))
+        assert f.thin_mask is not None and np.array_equal(f.thin_mask, f.sky_mask & ~raw)
+        n_more += int((f.sky_mask & ~remove_thin_obstacles(raw, px)).sum())
+    assert n_more > 0  # wire pixels near the zenith the frame policy kept
