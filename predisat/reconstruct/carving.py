@@ -42,6 +42,7 @@ from predisat.reconstruct.heightfield import (
     HeightField,
     LowestBounds,
     ThinRule,
+    UnseenRule,
     apply_clearance_prior,
     carve_box,
     carve_profile,
@@ -116,6 +117,11 @@ class ReconstructionParams:
     overhead_along_height_m : float
         The tallest structure over the track, above the cameras, that the rule above locates
         (a signal gantry's girder between two frames, ``docs/reconstruction.md`` section 10).
+    clearance_unseen_deg : float or None
+        Widest feature over the track a frame's sky may hide without a thin mask saying so (a
+        cantilever about a pixel wide: the pipeline's thin-structure policy, 0.7 deg): a frame
+        bounds a clearance cell only where such a feature would be transparent
+        (``docs/reconstruction.md`` section 11). ``None`` disables it.
     along_view_half_deg : float or None
         Half-width of the azimuth window straight along the track in which a position's left
         and right cameras bound what may span the track (``docs/reconstruction.md``, section 2:
@@ -180,6 +186,7 @@ class ReconstructionParams:
     overhead_along_spread_m: float = 1.5
     overhead_along_height_m: float = 8.0
     along_view_half_deg: float | None = 1.0
+    clearance_unseen_deg: float | None = 0.7
     antenna_height_m: float = 4.0
     az_step_deg: float = 0.5
     n_sub: int = 4
@@ -462,12 +469,14 @@ class Reconstructor:
         if frames:
             cams, rots = _camera_geometry(frames, track)
             rules = _thin_rules(hf, frames, cams, p)
+            unseen = _unseen_rules(frames, p)
             if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
                 seen = np.zeros(hf.shape, np.bool_)
                 for idx in _view_groups(frames).values():
                     for i in idx:
                         carve_profile(hf, bound, profs[i], cams[i], rots[i], p.carve_range_m,
-                                      seen=seen, solid=solids[i], thin_rule=rules[i])  # fmt: skip
+                                      seen=seen, solid=solids[i], thin_rule=rules[i],
+                                      unseen_rule=unseen[i])  # fmt: skip
                     # a view counts once per cell, whatever its frames (within their boxes)
                     b = np.array([carve_box(hf, cams[i], p.carve_range_m) for i in idx])
                     box = (slice(int(b[:, 0].min()), int(b[:, 1].max())),
@@ -475,7 +484,8 @@ class Reconstructor:
                     views[box] += seen[box]
                     seen[box] = False
             else:
-                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules)
+                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules,
+                                             unseen)  # fmt: skip
         over = [
             (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
             for f, prof in zip(frames, profs, strict=True)
@@ -602,6 +612,7 @@ def _fused_bounds(
     p: ReconstructionParams,
     solids: Sequence[SkyProfile] | None = None,
     rules: Sequence[ThinRule | None] | None = None,
+    unseen: Sequence[UnseenRule | None] | None = None,
 ) -> tuple[NDArray, NDArray]:
     """Bounds fused over independent views (:class:`~predisat.reconstruct.heightfield.
     LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
@@ -617,7 +628,8 @@ def _fused_bounds(
             if box[1] > box[0] and box[3] > box[2]:
                 carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m,
                               solid=None if solids is None else solids[i],
-                              thin_rule=None if rules is None else rules[i])  # fmt: skip
+                              thin_rule=None if rules is None else rules[i],
+                              unseen_rule=None if unseen is None else unseen[i])  # fmt: skip
                 boxes.append(box)
         if not boxes:
             continue
@@ -647,6 +659,21 @@ def _thin_rules(
         out.append(ThinRule(float(np.radians(f.thin_width_deg)), k2, p.antenna_clearance_m,
                             float(shrunk)))  # fmt: skip
     return out
+
+
+def _unseen_rules(
+    frames: Sequence[FrameView], p: ReconstructionParams
+) -> list[UnseenRule | None]:
+    """The unseen-arm rule of each frame (:class:`~predisat.reconstruct.heightfield.
+    UnseenRule`): the wider of ``p.clearance_unseen_deg`` and the frame's thin features."""
+    if p.clearance_unseen_deg is None:
+        return [None] * len(frames)
+    k2 = TRANSPARENT_FRACTION**2 * p.thin_wavelength_m
+    return [
+        UnseenRule(float(np.radians(max(p.clearance_unseen_deg, f.thin_width_deg))), k2,
+                   p.antenna_clearance_m, p.clearance_half_width_m)
+        for f in frames
+    ]  # fmt: skip
 
 
 def _view_groups(frames: Sequence[FrameView]) -> dict[str, list[int]]:

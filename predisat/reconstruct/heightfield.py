@@ -33,6 +33,7 @@ __all__ = [
     "LowestBounds",
     "RangeMax1D",
     "ThinRule",
+    "UnseenRule",
     "apply_clearance_prior",
     "carve_box",
     "carve_profile",
@@ -292,6 +293,7 @@ def carve_profile(
     seen: NDArray | None = None,
     solid: SkyProfile | None = None,
     thin_rule: ThinRule | None = None,
+    unseen_rule: UnseenRule | None = None,
 ) -> int:
     """Lower the bounds of ``bound`` (``hf``'s raster, updated in place) with one frame.
 
@@ -317,6 +319,9 @@ def carve_profile(
         thin feature the rays to it may cross is transparent (:class:`ThinRule`), else
         ``solid``'s.
     thin_rule : ThinRule, optional
+    unseen_rule : UnseenRule, optional
+        The frame bounds no clearance cell where an arm its sky may hide unflagged could be
+        opaque (:class:`UnseenRule`).
 
     Returns
     -------
@@ -373,6 +378,9 @@ def carve_profile(
         np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
         float(up[0]), float(up[1]), float(up[2]), marks,
         np.ascontiguousarray(tan_solid, np.float64), off, *rule,
+        *((0.0, 0.0, 0.0, 0.0) if unseen_rule is None else (
+            unseen_rule.width_rad, unseen_rule.k2_m, unseen_rule.clearance_m,
+            unseen_rule.half_width_m)),
     ))  # fmt: skip
 
 
@@ -461,6 +469,7 @@ def _carve_cells(
     range_m: float, tan_sky: NDArray, xl: NDArray, yl: NDArray, c: float, cz: float,
     up_x: float, up_y: float, up_z: float, seen: NDArray, tan_solid: NDArray, off: NDArray,
     theta: float, k2: float, clearance: float, cam_off: float,
+    u_theta: float, u_k2: float, u_clearance: float, u_half: float,
 ) -> int:  # fmt: skip
     """Lower ``bound`` (n_r, n_c), in place, with the rays of one frame; returns the cells bounded
     and marks them in ``seen`` (n_r, n_c).
@@ -470,6 +479,11 @@ def _carve_cells(
     (:class:`ThinRule`: ``theta``, ``k2``, ``clearance``, ``cam_off``; ``off`` the cells'
     offsets from the track axis) holds along the rays to it, else ``tan_solid``. ``theta = 0``:
     no rule (``tan_sky`` everywhere).
+
+    ``u_theta > 0`` (:class:`UnseenRule`): a cell whose centre is within ``u_half`` of the
+    axis is left alone when a feature ``u_theta`` wide at the distance of its far corner (at
+    the bound's height) would not be transparent from the antenna path (``u_k2``, at least
+    ``u_clearance`` and the cell's nearest offset away).
 
     ``beta`` and ``rho`` (n_r + 1, n_c + 1) are the relative azimuth (deg) and horizontal range
     of the cell corners, ``tan_sky`` the tangent of the profile's skyline (``+inf`` where the
@@ -517,6 +531,12 @@ def _carve_cells(
                         t_max = t_s  # a thin feature on the way may block: solid
                     if not np.isfinite(t_max):
                         continue
+            if u_theta > 0.0 and abs(off[r, q]) < u_half:
+                # an arm over the track the sky may hide unflagged (section 11)
+                w_u = u_theta * np.sqrt(rho_far * rho_far * (1.0 + t_max * t_max))
+                d_u = max(u_clearance, abs(off[r, q]) - 0.7072 * c)
+                if w_u * w_u > u_k2 * d_u:
+                    continue
             if t_max >= 0.0:
                 h = rho_far * t_max
             else:  # nearest point of the cell to the camera (for downward-looking bounds)
@@ -581,6 +601,35 @@ class ThinRule:
     k2_m: float
     clearance_m: float
     camera_offset_m: float
+
+
+@dataclass(frozen=True)
+class UnseenRule:
+    """What the sky of a frame may hide without its segmentation flagging it, over the track
+    (:func:`carve_profile`, ``docs/reconstruction.md`` section 11).
+
+    A catenary cantilever or registration arm (5-8 cm tubes) 1-2 m over the antenna is about
+    a pixel wide a few metres from a camera: a segmentation labels it sky without a thin mask,
+    and that sky would carve the cells it hangs in. Over the track (the clearance) a frame
+    therefore bounds a cell only where a feature ``width_rad`` wide there would be transparent
+    (the Fresnel rule of :class:`ThinRule`), elsewhere not at all.
+
+    Attributes
+    ----------
+    width_rad : float
+        Widest feature the frame's sky may hide, radians.
+    k2_m : float
+        As :attr:`ThinRule.k2_m`.
+    clearance_m : float
+        Least distance of any structure from the antenna path.
+    half_width_m : float
+        The clearance's half-width: cells whose centre is nearer the axis are checked.
+    """
+
+    width_rad: float
+    k2_m: float
+    clearance_m: float
+    half_width_m: float
 
 
 def _window_max(values: NDArray, radius: int, fill: Any) -> NDArray:

@@ -206,15 +206,17 @@ def test_params_reject_bad_fusion_settings(field: str, value: float) -> None:
 def _brute_views(world, frames, rec, hf):
     """Per cell, the frames whose own carving bounded it (each carved alone into +inf), and
     the bound of all of them before any prior."""
-    from predisat.reconstruct.carving import _camera_geometry
+    from predisat.reconstruct.carving import _camera_geometry, _unseen_rules
 
     profs = rec.profiles(frames)
     cams, rots = _camera_geometry(frames, world.track)
     count = np.zeros(hf.shape, int)
     low = np.full(hf.shape, np.inf, np.float32)
-    for prof, cam, rot in zip(profs, cams, rots, strict=True):
+    # each frame with the same unseen-arm rule as the reconstruction's (section 11)
+    unseen = _unseen_rules(frames, BASE)
+    for prof, cam, rot, u in zip(profs, cams, rots, unseen, strict=True):
         scratch = np.full(hf.shape, np.inf, np.float32)
-        carve_profile(hf, scratch, prof, cam, rot, BASE.carve_range_m)
+        carve_profile(hf, scratch, prof, cam, rot, BASE.carve_range_m, unseen_rule=u)
         count += np.isfinite(scratch)
         low = np.minimum(low, scratch)
     return count, low

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predisat.reconstruct.heightfield import HeightField, RangeMax1D, carve_profile
+from predisat.gnss.fresnel import L1_WAVELENGTH_M, TRANSPARENT_FRACTION
+from predisat.reconstruct.heightfield import (
+    HeightField,
+    RangeMax1D,
+    UnseenRule,
+    carve_profile,
+)
 from predisat.reconstruct.skyline import SkyProfile
 
 C = 0.5
@@ -141,3 +147,45 @@ def test_cameras_bound_the_clearance_between_facades() -> None:
     # the deck's band bound (7 m) is lower than the steep ceiling from -10 m: it stays
     assert at(-25.2) == 7.0
     assert at(45.2) == 1.0 and at(0.2) == 1.0  # no overhead structure: the floor
+
+
+def test_the_unseen_arm_rule_keeps_far_frames_out_of_the_clearance() -> None:
+    """A camera on the track axis looking along it (a cab camera) with sky from 10 deg up: a
+    cantilever about a pixel wide may hide in that sky unflagged (``docs/reconstruction.md``
+    section 11), so with an :class:`UnseenRule` the clearance cells (centre within 2 m of the
+    axis) are bounded only where a 0.7 deg feature at their far corner would be transparent,
+    ``(theta L)^2 <= k2 max(0.5 m, nearest offset)``; the other cells exactly as without it."""
+    z = np.zeros((N, N), np.float32)
+    yc = ((np.arange(N) - N // 2) + 0.5) * C  # cell centres north = offset from the axis
+    off = np.broadcast_to(yc[:, None], (N, N)).astype(np.float32)
+    hf = HeightField(C, -N // 2, -N // 2, np.full((N, N), np.inf, np.float32),
+                     np.ones((N, N), bool), z, off, z)  # fmt: skip
+    prof = profile(np.full(720, 10.0))
+    plain = hf.bound_m.copy()
+    carve_profile(hf, plain, prof, CAM, np.eye(3), 60.0)
+    theta, k2 = np.radians(0.7), TRANSPARENT_FRACTION**2 * L1_WAVELENGTH_M
+    ruled = hf.bound_m.copy()
+    carve_profile(hf, ruled, prof, CAM, np.eye(3), 60.0,
+                  unseen_rule=UnseenRule(float(theta), k2, 0.5, 2.0))  # fmt: skip
+    carved_in, kept_out = 0, 0
+    for x in np.arange(1.0, 40.0, C):
+        for y in yc[np.abs(yc) < 6.0]:
+            r, q = cell(float(x) + 0.25, float(y))
+            if not np.isfinite(plain[r, q]):
+                continue
+            if abs(y) >= 2.0:
+                assert ruled[r, q] == plain[r, q]
+                continue
+            xs, ys = np.array([x, x + C]) - CAM[0], np.array([y - C / 2, y + C / 2]) - CAM[1]
+            rho_far = np.hypot(xs[:, None], ys[None, :]).max()
+            length = rho_far / np.cos(np.radians(10.0))
+            d = max(0.5, abs(y) - 0.7072 * C)
+            if (theta * length) ** 2 <= k2 * d:
+                assert ruled[r, q] == plain[r, q]
+                carved_in += 1
+            else:
+                assert np.isinf(ruled[r, q])
+                kept_out += 1
+    assert carved_in > 0 and kept_out > 0
+    # on the axis the reach is sqrt(k2 0.5) / theta = 2.5 m: a cell 5 m ahead is not bounded
+    assert np.isinf(ruled[cell(5.2, 0.2)]) and np.isfinite(plain[cell(5.2, 0.2)])
