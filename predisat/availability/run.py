@@ -60,6 +60,7 @@ from predisat.availability.satellites import (
     default_window,
     select_satellites,
 )
+from predisat.clock import pinned_utc, utc_stamp
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
@@ -815,28 +816,12 @@ def _run_info(
             },
         },
         "software": f"predisat {version}",
-        "created_utc": _created_utc(),
+        "created_utc": utc_stamp(pinned_utc()),
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": nav.warnings,
     }
-
-
-def _created_utc() -> str:
-    """Now, or the time of ``SOURCE_DATE_EPOCH`` when it is set (the reproducible-builds
-    convention, as ``predisat process``): a run that pins its time writes the same bytes as
-    any other run with the same inputs (a resumed one, one on a cluster)."""
-    pinned = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
-    if not pinned:
-        return datetime.now(UTC).isoformat(timespec="seconds")
-    try:
-        return datetime.fromtimestamp(int(pinned), UTC).isoformat(timespec="seconds")
-    except (ValueError, OverflowError, OSError):
-        raise ValueError(
-            f"SOURCE_DATE_EPOCH={pinned!r} is not a time; give whole seconds since "
-            "1970-01-01 UTC (e.g. 1700000000) or unset it"
-        ) from None
 
 
 def _track_text(track: TrackMap | None) -> str:

@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 from predisat import __version__
 from predisat.camera.models import CameraModel, Mount
+from predisat.clock import pinned_utc, utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.gaps import close_gaps
@@ -62,8 +63,6 @@ from predisat.reconstruct.chunks import (
     ChunkJob,
     chunk_finished,
     chunk_name,
-    pinned_utc,
-    utc_stamp,
 )
 from predisat.reconstruct.executor import run_chunks, run_segmentation
 from predisat.reconstruct.framecache import (

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +19,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from predisat.camera.models import CameraModel, Mount
+from predisat.clock import utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
 from predisat.reconstruct.badframes import BadFrame
@@ -44,10 +43,8 @@ __all__ = [
     "ChunkJob",
     "chunk_finished",
     "chunk_name",
-    "pinned_utc",
     "reconstructor_for",
     "run_chunk",
-    "utc_stamp",
 ]
 
 @dataclass(frozen=True)
@@ -77,7 +74,9 @@ class ChunkJob:
     # run that skips the chunk still lists them
     known_bad: tuple[BadFrame, ...] = ()
     frames_key: str = ""  # frames_key of every frame the chunk may use, bad ones included
-    pinned_utc: str | None = None  # the run's pinned time (SOURCE_DATE_EPOCH), else None
+    # the run's pinned time (SOURCE_DATE_EPOCH, predisat.clock), read by the client and passed
+    # on so that the workers need not have it; else None
+    pinned_utc: str | None = None
     # of the file system of chunk_dir and the cache paths when they are URLs
     storage_options: StorageOptions = field(default_factory=dict)
 
@@ -94,31 +93,6 @@ def chunk_name(lo_m: float, hi_m: float) -> str:
     """File stem of the chunk ``[lo_m, hi_m)``: ``"3000_4000"`` (metres, up to mm)."""
     return f"{_fmt_m(lo_m)}_{_fmt_m(hi_m)}"
 
-
-
-def pinned_utc() -> str | None:
-    """The time of ``SOURCE_DATE_EPOCH`` when it is set (the reproducible-builds convention),
-    ISO 8601 UTC to the second, else None.
-
-    A run that pins its time writes the same bytes as any other run of the same survey with
-    the same time: that is how a resumed or distributed run is compared with a serial one. The
-    client reads it and passes it on in the chunk jobs, so that the workers need not have it.
-    """
-    pinned = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
-    if not pinned:
-        return None
-    try:
-        return datetime.fromtimestamp(int(pinned), UTC).isoformat(timespec="seconds")
-    except (ValueError, OverflowError, OSError):
-        raise ValueError(
-            f"SOURCE_DATE_EPOCH={pinned!r} is not a time; give whole seconds since "
-            "1970-01-01 UTC (e.g. 1700000000) or unset it"
-        ) from None
-
-
-def utc_stamp(pinned: str | None = None) -> str:
-    """``pinned`` when given, else now: UTC, ISO 8601 to the second."""
-    return pinned if pinned is not None else datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstructor:
