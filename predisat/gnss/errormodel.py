@@ -168,13 +168,7 @@ class ReceiverProfile:
     receiver_class: str = ""
 
     def __post_init__(self) -> None:
-        if self.frequency not in FREQUENCY_MODES:
-            raise ValueError(f"frequency must be one of {FREQUENCY_MODES}, got {self.frequency!r}")
-        if self.receiver_class not in ("", *RECEIVER_CLASSES):
-            raise ValueError(
-                f"receiver_class must be one of {RECEIVER_CLASSES} or '', got "
-                f"{self.receiver_class!r}"
-            )
+        _check_frequency_and_class(self.frequency, self.receiver_class)
 
     @property
     def systems(self) -> tuple[str, ...]:
@@ -257,13 +251,7 @@ class Applicability:
     sources: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.frequency not in FREQUENCY_MODES:
-            raise ValueError(f"frequency must be one of {FREQUENCY_MODES}, got {self.frequency!r}")
-        if self.receiver_class not in ("", *RECEIVER_CLASSES):
-            raise ValueError(
-                f"receiver_class must be one of {RECEIVER_CLASSES} or '', got "
-                f"{self.receiver_class!r}"
-            )
+        _check_frequency_and_class(self.frequency, self.receiver_class)
         if not 0.0 <= self.el_min_deg <= self.el_max_deg <= 90.0:
             raise ValueError(
                 f"elevation range must satisfy 0 <= el_min_deg <= el_max_deg <= 90, got "
@@ -497,3 +485,13 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             "(receivers, antennas, el_min_deg, el_max_deg); write it again with `locator calibrate`"
         ) from exc
     return ErrorModelFile(model, systems, app, str(p), fmt)
+
+
+def _check_frequency_and_class(frequency: str, receiver_class: str) -> None:
+    """The guard a receiver profile and a model's applicability share."""
+    if frequency not in FREQUENCY_MODES:
+        raise ValueError(f"frequency must be one of {FREQUENCY_MODES}, got {frequency!r}")
+    if receiver_class not in ("", *RECEIVER_CLASSES):
+        raise ValueError(
+            f"receiver_class must be one of {RECEIVER_CLASSES} or '', got {receiver_class!r}"
+        )
