@@ -405,11 +405,16 @@ def _candidate_rays(
     """
     n_sat = u.shape[1]
     pair_l, dir_l, nrm_l = [], [], []
+    # a train standing at a platform repeats its position for every epoch of the dwell
+    planes: dict[bytes, NDArray] = {}
     for e in range(len(u)):
         js = np.flatnonzero(ok[e])
         if not len(js):
             continue
-        cand = index.candidate_normals(ant[e], search)
+        key = ant[e].tobytes()
+        if key not in planes:
+            planes[key] = index.candidate_normals(ant[e], search)
+        cand = planes[key]
         if not len(cand):
             continue
         ue = u[e, js]  # (m, 3)
