@@ -16,8 +16,10 @@ NLOS through reflections, loss) is located with active integrity under each rule
 * ``masks_split``: ``masks_budget`` with partitioned trust (``RunConfig.trust_stretches`` =
   :data:`locator.partition.MAX_STRETCHES`: a trusted set and a fix per stretch of the predicted
   interval);
-* ``pipeline`` / ``pipeline_budget`` / ``pipeline_split``: the same with the demo's pipeline
-  masks (demo world only).
+* ``none_budget`` / ``cutoff15_budget``: no masks and the 15 deg cut-off with the budget;
+* ``pipeline`` / ``pipeline_budget`` / ``pipeline_split``: the same with the masks ``predisat
+  process`` made of the world's rendered survey (the worlds of :func:`pipeline_world`: a
+  ``predisat demo`` folder, or a rendered and processed synthetic survey).
 
 One job is one run of one world under every rule; its epochs table (:func:`run_job`) is saved
 as ``OUT/jobs/<world>_<run>_<key>.parquet``, the key hashing the job, the setup (rules, risk,
@@ -82,9 +84,11 @@ __all__ = [
     "code_fingerprint",
     "demo_world",
     "figure",
+    "hmi_rate_upper",
     "job_key",
     "jobs_for",
     "load_world",
+    "pipeline_world",
     "report",
     "run_campaign",
     "run_job",
@@ -101,9 +105,9 @@ PROFILE_T_S = (0.0, 40.0, 70.0, 100.0, 160.0, 200.0, 1.0e4)
 PROFILE_V_MPS = (0.0, 20.0, 20.0, 0.0, 0.0, 20.0, 20.0)
 """Speeds, m/s, at :data:`PROFILE_T_S`."""
 
-CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "pipeline",
-           "pipeline_budget", "pipeline_split")  # fmt: skip
-"""Every rule; the ``pipeline`` ones apply to the demo world only."""
+CONFIGS = ("masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "none_budget",
+           "cutoff15_budget", "pipeline", "pipeline_budget", "pipeline_split")  # fmt: skip
+"""Every rule; the ``pipeline`` ones apply to the worlds with pipeline masks only."""
 
 _GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 
@@ -164,7 +168,8 @@ class Job:
 @dataclass(frozen=True)
 class WorldData:
     """A world ready for jobs: the world, its true masks (with :data:`MARGIN_DEG`), the
-    pipeline masks (demo world only) and the digest of the files they came from.
+    pipeline masks (None for the worlds built here, which have no rendered survey) and the
+    digest of the files they came from.
 
     Its reflector index (:meth:`reflectors`) is built on first use in each process and never
     pickled (a ray caster): a cluster worker builds it once for all its jobs of the world.
@@ -295,21 +300,43 @@ def load_world(spec: CampaignWorld, cache: Path) -> WorldData:
 
 
 def demo_world(folder: Path) -> WorldData:
-    """The world of a ``predisat demo`` folder (``truth/world.npz``, ``truth/true_masks.npz``)
-    with the masks ``predisat process`` made (``masks/masks.parquet``), named ``demo``."""
+    """The world of a ``predisat demo`` folder with its pipeline masks, named ``demo``
+    (:func:`pipeline_world`)."""
+    return pipeline_world(folder, "demo")
+
+
+_TRUTH_DIRS = ("truth", "synth/truth")
+_MASK_FILES = ("masks/masks.parquet", "proc/masks.parquet")
+
+
+def pipeline_world(folder: Path, name: str) -> WorldData:
+    """A rendered world with the masks ``predisat process`` made of its survey.
+
+    Parameters
+    ----------
+    folder : Path
+        A ``predisat demo --out`` folder (``truth/world.npz``, ``truth/true_masks.npz``,
+        ``masks/masks.parquet``) or the folder of one world of ``scripts/eval_rigs.py`` /
+        ``scripts/eval_ood_world.py`` (``synth/truth/...``, ``proc/masks.parquet``). The world
+        must lie on the demo track (line 144, track A).
+    name : str
+        The world's name in the campaign (job files, tables).
+    """
+    truth = next((folder / d for d in _TRUTH_DIRS if (folder / d / "world.npz").exists()), None)
+    masks = next((folder / f for f in _MASK_FILES if (folder / f).exists()), None)
+    if truth is None or masks is None or not (truth / "true_masks.npz").exists():
+        raise FileNotFoundError(
+            f"{folder}: not a rendered and processed world (needs truth/world.npz, "
+            "truth/true_masks.npz and masks/masks.parquet, or synth/truth/... and "
+            "proc/masks.parquet); run `predisat demo --out DIR`, or `predisat synth` then "
+            "`predisat process`, first"
+        )
     from predisat.masks.fileformat import read_masks
 
-    files = [folder / "truth" / "world.npz", folder / "truth" / "true_masks.npz",
-             folder / "masks" / "masks.parquet"]  # fmt: skip
-    for f in files:
-        if not f.exists():
-            raise FileNotFoundError(
-                f"{f}: missing; --demo needs a `predisat demo --out` folder (run `predisat "
-                "demo --out DIR` first)"
-            )
+    files = [truth / "world.npz", truth / "true_masks.npz", masks]
     world = World.load(files[0], demo_track())
-    masks = _masks_of(TrueMasks.load(files[1]), "true masks of the demo world")
-    return WorldData("demo", world, masks, read_masks(files[2]), _file_digest(files))
+    true = _masks_of(TrueMasks.load(files[1]), f"true masks of world {name}")
+    return WorldData(name, world, true, read_masks(files[2]), _file_digest(files))
 
 
 def jobs_for(worlds: Sequence[str], runs_per_world: int) -> list[Job]:
@@ -349,10 +376,13 @@ def _rules(setup: CampaignSetup, data: WorldData) -> dict[str, tuple[RunConfig, 
         "masks_budget": (RunConfig(budget, trust="masks", trust_stretches=1), data.masks),
         "masks_split": (split, data.masks),
     }
+    rules["none_budget"] = (RunConfig(budget, trust="none"), None)
+    rules["cutoff15_budget"] = (RunConfig(budget, trust="cutoff", cutoff_deg=15.0), None)
     if data.pipeline is not None:
         rules["pipeline"] = (RunConfig(loc, trust="masks", trust_stretches=1), data.pipeline)
         rules["pipeline_budget"] = (
-            RunConfig(budget, trust="masks", trust_stretches=1), data.pipeline
+            RunConfig(budget, trust="masks", trust_stretches=1),
+            data.pipeline,
         )
         rules["pipeline_split"] = (split, data.pipeline)
     return {k: v for k, v in rules.items() if k in setup.configs}
@@ -444,13 +474,32 @@ def _timed_job(setup: CampaignSetup, job: Job) -> tuple[Job, pd.DataFrame, float
     return job, df, time.perf_counter() - t
 
 
+def hmi_rate_upper(n_hmi: int, n: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson upper bound on a rate seen ``n_hmi`` times in ``n`` trials
+    (``3 / n`` roughly when ``n_hmi`` is 0); NaN without trials."""
+    from scipy.stats import beta
+
+    if n < 1:
+        return float("nan")
+    if n_hmi >= n:
+        return 1.0
+    return float(beta.ppf(confidence, n_hmi + 1, n - n_hmi))
+
+
 def report(frames: pd.DataFrame) -> pd.DataFrame:
     """One row per rule (in order of appearance): :func:`locator.evaluate.summarise` of its
-    epochs and ``nlos_used_share`` (share of epochs using an NLOS signal)."""
+    epochs, ``nlos_used_share`` (share of epochs using an NLOS signal), ``runs`` and the 95 %
+    upper bounds of the HMI rate per epoch (``hmi_rate_upper95``: the epochs taken as
+    independent trials, which they are not at 1 Hz) and per run (``hmi_run_upper95``: the
+    share of runs with any HMI, runs being independent draws of start time and seed)."""
     rows = []
     for cfg, g in frames.groupby("config", sort=False):
         s = dict(summarise(g))
         s["nlos_used_share"] = float((g["n_nlos_used"] > 0).mean())
+        per_run = g.groupby(["world", "run"], sort=False)["hmi"].any()
+        s["runs"] = float(len(per_run))
+        s["hmi_rate_upper95"] = hmi_rate_upper(int(g["hmi"].sum()), len(g))
+        s["hmi_run_upper95"] = hmi_rate_upper(int(per_run.sum()), len(per_run))
         rows.append({"config": cfg, **s})
     return pd.DataFrame(rows).set_index("config")
 

@@ -30,8 +30,8 @@ __all__ = ["CONFIG_NAMES", "WORLD_NAMES", "add_parser", "cmd_campaign"]
 WORLD_NAMES = ("mixed-1", "mixed-2", "mixed-3", "mixed-4", "canyon")
 """Names of :data:`locator.campaign.WORLDS`."""
 CONFIG_NAMES = (
-    "masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "pipeline",
-    "pipeline_budget", "pipeline_split",
+    "masks", "none", "cutoff15", "masks_k2", "masks_budget", "masks_split", "none_budget",
+    "cutoff15_budget", "pipeline", "pipeline_budget", "pipeline_split",
 )  # fmt: skip
 """Names of :data:`locator.campaign.CONFIGS`."""
 _RUNS_PER_WORLD = 88
@@ -57,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     )  # fmt: skip
     p.add_argument("--worlds", nargs="*", choices=WORLD_NAMES, default=list(WORLD_NAMES),
                    metavar="NAME", help=f"worlds to run, of {', '.join(WORLD_NAMES)} "
-                   "(default all; none with --demo: the demo world only)")  # fmt: skip
+                   "(default all; none with --demo or --pipeline-world: those only)")  # fmt: skip
     p.add_argument(
         "--demo",
         type=existing_dir("a `predisat demo --out` folder (truth/world.npz, masks/masks.parquet)"),
@@ -65,12 +65,19 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         help="add the demo world and its pipeline masks (the pipeline rules; default: none, "
         "the synthetic worlds only)",
     )
+    p.add_argument(
+        "--pipeline-world", action="append", type=_named_world, default=[],
+        metavar="NAME=DIR",
+        help="add a rendered and processed world under NAME (repeatable): a `predisat demo "
+        "--out` folder, or a world folder of scripts/eval_rigs.py or scripts/eval_ood_world.py "
+        "(synth/truth, proc/masks.parquet); its pipeline masks join the pipeline rules",
+    )  # fmt: skip
     p.add_argument("--runs-per-world", type=positive_int, default=_RUNS_PER_WORLD, metavar="N",
                    help=f"runs per world (default {_RUNS_PER_WORLD}); more runs keep the "
                    "finished ones")  # fmt: skip
     p.add_argument("--configs", nargs="+", choices=CONFIG_NAMES, default=list(CONFIG_NAMES),
                    metavar="RULE", help=f"rules, of {', '.join(CONFIG_NAMES)} (default all; "
-                   "the pipeline ones need --demo)")  # fmt: skip
+                   "the pipeline ones need --demo or --pipeline-world)")  # fmt: skip
     p.add_argument(
         "--integrity-risk", type=integrity_risk, default=DEFAULT_RISK_PER_EPOCH, metavar="P",
         help="integrity risk per epoch of the *_budget rules (default "
@@ -87,6 +94,22 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     return p
 
 
+def _named_world(text: str) -> tuple[str, Path]:
+    name, sep, folder = text.partition("=")
+    if not sep or not name or not folder:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected NAME=DIR, e.g. ood-41=/tmp/ood/fisheye_s41"
+        )
+    if name in WORLD_NAMES or name == "demo":
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: {name!r} is a built-in world's name; choose another NAME"
+        )
+    path = Path(folder)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: {folder} is not a folder")
+    return name, path
+
+
 def cmd_campaign(args: argparse.Namespace) -> int:
     """Run ``locator campaign``; prints the summary per rule."""
     import pandas as pd
@@ -99,18 +122,28 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         figure,
         jobs_for,
         load_world,
+        pipeline_world,
         run_campaign,
         stanford,
     )
     from predisat.scheduler import Scheduler
 
     scheduler = Scheduler.parse(args.scheduler, args.workers)
-    if args.demo is None and not args.worlds:
-        raise ValueError("--worlds without names: no world to run; name some, or add --demo DIR")
-    if args.demo is None and set(args.configs) <= {"pipeline", "pipeline_budget", "pipeline_split"}:
+    extra: list[tuple[str, Path]] = list(getattr(args, "pipeline_world", None) or [])
+    names = [n for n, _ in extra]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--pipeline-world: a NAME given twice in {names}; name each once")
+    rendered = args.demo is not None or bool(extra)
+    if not rendered and not args.worlds:
+        raise ValueError(
+            "--worlds without names: no world to run; name some, or add --demo DIR or "
+            "--pipeline-world NAME=DIR"
+        )
+    if not rendered and set(args.configs) <= {"pipeline", "pipeline_budget", "pipeline_split"}:
         raise ValueError(
             f"--configs {' '.join(args.configs)}: the pipeline rules need the pipeline masks of "
-            "a `predisat demo` folder; add --demo DIR"
+            "a `predisat demo` folder or of a processed world; add --demo DIR or "
+            "--pipeline-world NAME=DIR"
         )
     out: Path = args.out
     cache: Path = args.cache or out / "cache"
@@ -131,6 +164,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             say(f"world {spec.name} ready ({time.perf_counter() - t:.0f} s)")
     if args.demo is not None:
         worlds["demo"] = demo_world(args.demo)
+    for name, folder in extra:
+        worlds[name] = pipeline_world(folder, name)
+        say(f"world {name} ready ({folder})")
     setup = CampaignSetup(model, tuple(args.configs), args.integrity_risk, worlds)
     jobs = jobs_for(list(worlds), args.runs_per_world)
     say(f"{scheduler.describe()}")

@@ -18,15 +18,21 @@ from locator.campaign import (
     CampaignSetup,
     CampaignWorld,
     Job,
+    hmi_rate_upper,
     job_key,
     jobs_for,
     load_world,
+    pipeline_world,
+    report,
     run_campaign,
+    run_job,
 )
 from locator.campaign_command import CONFIG_NAMES, WORLD_NAMES
 from locator.cli import main
 from predisat.availability.satellites import default_window
 from predisat.gnss.errormodel import ErrorModel, IntervalModel
+from predisat.masks.fileformat import write_masks
+from predisat.masks.truth import TrueMasks
 from predisat.scheduler import Scheduler
 from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track.map import demo_track
@@ -160,3 +166,90 @@ def test_command_refuses_pipeline_rules_without_demo(
     assert code == 2
     assert "no world to run" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+
+
+def _processed_world(folder: Path, cache: Path, pipeline_raise_deg: float) -> None:
+    """The tiny world laid out like an ``eval_rigs.py`` world folder, its "pipeline" masks
+    the true masks raised by ``pipeline_raise_deg`` (a survey that sees more obstacles)."""
+    truth = folder / "synth" / "truth"
+    truth.mkdir(parents=True)
+    for name in ("world.npz", "truth.npz"):
+        src = cache / f"tiny_{name}"
+        (truth / ("true_masks.npz" if name == "truth.npz" else name)).write_bytes(src.read_bytes())
+    tm = TrueMasks.load(truth / "true_masks.npz")
+    from predisat.masks.maskset import MaskSet
+
+    raised = MaskSet.from_arrays(
+        tm.chainage_m, tm.lat_deg, tm.lon_deg, tm.h_m, tm.heading_deg,
+        np.minimum(tm.mask_el_deg + pipeline_raise_deg, 90.0),
+    )  # fmt: skip
+    (folder / "proc").mkdir()
+    write_masks(raised, folder / "proc" / "masks.parquet")
+
+
+def test_a_processed_world_brings_its_pipeline_masks_to_the_pipeline_rules(
+    setup: CampaignSetup, tmp_path: Path
+) -> None:
+    data = setup.worlds["tiny"]
+    src = tmp_path / "cache"
+    src.mkdir()
+    data.world.save(src / "tiny_world.npz")
+    from predisat.synth.truth import true_masks
+
+    true_masks(data.world).save(src / "tiny_truth.npz")
+    _processed_world(tmp_path / "w", src, 30.0)
+    world = pipeline_world(tmp_path / "w", "tiny")
+    assert world.pipeline is not None
+    # the masks read back are the raised ones, cell for cell
+    assert np.all(world.pipeline.mask_el_deg >= world.masks.mask_el_deg - 1.0 - 1e-9)
+    rules = ("masks_split", "pipeline_split", "none_budget", "cutoff15_budget")
+    ps = CampaignSetup(setup.model, rules, 1e-12, {"tiny": world})
+    df = run_job(ps, jobs_for(["tiny"], 1)[0])
+    assert set(df["config"].unique()) == set(rules)
+    used = df.groupby("config")["n_used"].mean()
+    # raised masks trust fewer satellites than the true ones; no masks trust the most
+    assert used["pipeline_split"] < used["masks_split"] < used["none_budget"]
+    with pytest.raises(FileNotFoundError, match=r"proc/masks\.parquet"):
+        pipeline_world(tmp_path / "cache", "x")
+
+
+def test_the_hmi_rate_bound_is_clopper_pearson() -> None:
+    from scipy.stats import binom
+
+    # no event: the bound solves (1 - p)^n = 0.05 exactly
+    for n in (1, 30, 10**6):
+        assert hmi_rate_upper(0, n) == pytest.approx(1.0 - 0.05 ** (1.0 / n), rel=1e-9)
+    # k events: P(X <= k | p = bound) = 0.05
+    for k, n in ((1, 100), (6, 108_768), (40, 5_000)):
+        assert binom.cdf(k, n, hmi_rate_upper(k, n)) == pytest.approx(0.05, rel=1e-6)
+    assert np.isnan(hmi_rate_upper(0, 0))
+    assert hmi_rate_upper(3, 3) == 1.0
+
+
+def test_the_report_bounds_the_hmi_rate_per_epoch_and_per_run(serial: Path) -> None:
+    frames = pd.read_parquet(serial / "epochs.parquet")
+    g = frames[frames["config"] == "masks"]
+    assert g["hmi"].sum() == 0
+    table = report(frames)
+    n, runs = len(g), g.groupby(["world", "run"]).ngroups
+    assert table.loc["masks", "runs"] == runs == 2
+    assert table.loc["masks", "hmi_rate_upper95"] == pytest.approx(1.0 - 0.05 ** (1.0 / n))
+    # three HMI epochs in one run: the per-epoch bound from 3 of n, the per-run one from 1 of 2
+    hit = frames.index[(frames["config"] == "masks") & (frames["run"] == 1)][:3]
+    frames.loc[hit, "hmi"] = True
+    table = report(frames)
+    assert table.loc["masks", "hmi"] == 3
+    assert table.loc["masks", "hmi_rate_upper95"] == pytest.approx(hmi_rate_upper(3, n))
+    assert table.loc["masks", "hmi_run_upper95"] == pytest.approx(hmi_rate_upper(1, 2))
+
+
+def test_command_refuses_a_badly_named_pipeline_world(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for bad in ("noequals", "canyon=" + str(tmp_path), "x=" + str(tmp_path / "missing")):
+        with pytest.raises(SystemExit) as stop:
+            main(["campaign", "--out", str(tmp_path / "c"), "--pipeline-world", bad,
+                  "--scheduler", "serial"])  # fmt: skip
+        assert stop.value.code == 2
+        assert repr(bad) in capsys.readouterr().err
+        assert not (tmp_path / "c").exists()
