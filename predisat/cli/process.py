@@ -19,6 +19,7 @@ from predisat.cli.args import (
 )
 from predisat.cli.common import track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
+from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
 from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
@@ -85,6 +86,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="elevation tiles bounding the far field from below: bins under the terrain "
         "horizon are raised to it and flagged terrain (default: none, a flat far field)",
     )  # fmt: skip
+    parser.add_argument(
+        "--cell-sweep", action="store_true",
+        help="make each position's mask hold the worst over its whole cell (half-way to the "
+        "neighbouring positions), not its centre: safer for a train between survey "
+        "positions, at a large cost in sky (docs/reconstruction.md, section 12; default: the "
+        "mask at the position)",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_checks(
         parser,
@@ -105,7 +113,9 @@ def run(args: argparse.Namespace) -> ProcessResult:
         args.survey,
         args.out,
         PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
-                       thin_deg=args.thin_deg),
+                       thin_deg=args.thin_deg,
+                       reconstruction=ReconstructionParams(
+                           cell_sweep_m=None if getattr(args, "cell_sweep", False) else 0.0)),
         track=track,
         workers=args.workers,
         scheduler=args.scheduler,

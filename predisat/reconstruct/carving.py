@@ -47,6 +47,7 @@ from predisat.reconstruct.heightfield import (
     carve_box,
     carve_profile,
     corridor_grid,
+    sweep_along_track,
 )
 from predisat.reconstruct.skyline import LOW_CONFIDENCE_WINDOW_DEG, Rectifier, SkyProfile
 from predisat.track import TrackMap
@@ -57,6 +58,7 @@ __all__ = [
     "ReconstructionParams",
     "Reconstructor",
     "bin_support",
+    "cell_sweep_of",
     "reconstruct_masks",
     "suspect_frames",
 ]
@@ -168,6 +170,13 @@ class ReconstructionParams:
     thin_wavelength_m : float
         Wavelength of the thin-structure rule: the shortest the receiver tracks (L1, the
         safe side).
+    cell_sweep_m : float or None
+        Half-length along the track over which each position's mask bounds the sky
+        (``docs/reconstruction.md``, section 12): with it a mask cell holds the worst over
+        its length, not its centre, since the train may stand anywhere in it. ``None``: half
+        the largest gap between consecutive positions of the window (5 m for positions every
+        10 m; 0 for a single position). Default ``0``: the mask at the position itself; the
+        sweep is opt-in because under the 2.5-D model it costs most of the sky (section 12).
     """
 
     cell_m: float = 0.5
@@ -204,8 +213,17 @@ class ReconstructionParams:
     suspect_neighbour_m: float = 25.0
     antenna_clearance_m: float = 0.5
     thin_wavelength_m: float = L1_WAVELENGTH_M
+    cell_sweep_m: float | None = 0.0
 
     def __post_init__(self) -> None:
+        if self.cell_sweep_m is not None and not (
+            math.isfinite(self.cell_sweep_m) and self.cell_sweep_m >= 0
+        ):
+            raise ValueError(
+                "ReconstructionParams.cell_sweep_m must be a finite length >= 0 metres (0: the "
+                f"mask at the position only), or None (from the positions), got "
+                f"{self.cell_sweep_m}"
+            )
         if not (math.isfinite(self.overhead_along_height_m) and self.overhead_along_height_m >= 0):
             raise ValueError(
                 "overhead_along_height_m must be a finite height >= 0 metres (the tallest "
@@ -543,7 +561,14 @@ class Reconstructor:
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
-        caps = _ceiling_caps(hf.camera_ceilings, s, ant)
+        sweep_m = cell_sweep_of(s) if p.cell_sweep_m is None else p.cell_sweep_m
+        if sweep_m > 0:
+            # the obstacles as seen from anywhere in the cell; the cameras' ceiling caps are
+            # exact at the position only, so they are not applied to a swept cell
+            hf = sweep_along_track(hf, track, sweep_m, p.clearance_half_width_m)
+            caps = None
+        else:
+            caps = _ceiling_caps(hf.camera_ceilings, s, ant)
         near_el, near_unknown, far_grid_el, far_unknown, near_sup, far_sup = _horizon_parts(
             hf, ant, rot, p, caps
         )
@@ -588,6 +613,14 @@ class Reconstructor:
             suspect_frames=suspect_list,
             support=support,
         )
+
+
+def cell_sweep_of(chainage_m: ArrayLike) -> float:
+    """Half the largest gap between consecutive positions, metres (0 for one position): the
+    half-length along the track each mask cell must cover (:attr:`MaskSet.cell_bounds_m
+    <predisat.masks.maskset.MaskSet.cell_bounds_m>` puts the cell edges midway)."""
+    s = np.sort(np.atleast_1d(np.asarray(chainage_m, float)))
+    return float(np.max(np.diff(s)) / 2.0) if s.size > 1 else 0.0
 
 
 def reconstruct_masks(

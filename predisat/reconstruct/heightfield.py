@@ -17,7 +17,7 @@ seen by a side camera; a prior fills it (see :func:`apply_clearance_prior`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -38,6 +38,7 @@ __all__ = [
     "carve_box",
     "carve_profile",
     "corridor_grid",
+    "sweep_along_track",
 ]
 
 
@@ -754,3 +755,84 @@ def _camera_ceiling(ceilings: NDArray, chainage_m: NDArray, half_extent_m: float
             top = np.where(np.isfinite(tan), z + d * tan, np.inf)
         out = np.minimum(out, top.min(axis=1))
     return out
+
+
+def sweep_along_track(
+    hf: HeightField, track: TrackMap, half_m: float, skip_offset_m: float = 0.0
+) -> HeightField:
+    """The height field as an antenna at a position sees it from anywhere within ``half_m``
+    along the track: each cell takes the highest bound of the cells it becomes when the
+    track moves it by up to ``half_m`` (a dilation along the local track direction).
+
+    The horizon of the result from a position is then the highest horizon of ``hf`` from any
+    point within ``half_m`` of it along the track, exactly for a straight, evenly graded
+    track: moving the antenna by ``d`` along the track is moving every obstacle by ``-d``
+    (``docs/reconstruction.md``, section 12). Each shift of at most half a cell takes the
+    2 x 2 cells under the shifted cell's footprint, so nothing between two shifts is missed
+    (it over-reaches by up to a cell); a source's top is moved with the rail's height, so a
+    grade shifts it too. Unknown cells (``+inf``) spread like any other; cells outside the
+    corridor region are not sources. ``views`` follows the cell that gave each bound.
+
+    Parameters
+    ----------
+    hf : HeightField
+    track : TrackMap
+    half_m : float
+        Half-length of the sweep, metres (``0``: ``hf`` itself).
+    skip_offset_m : float
+        Cells nearer the track axis than this are left as they are (neither swept nor
+        sources): the clearance band, whose overhead structures the 2.5-D model would turn
+        into columns over the antenna (``docs/reconstruction.md``, section 12).
+
+    Returns
+    -------
+    HeightField
+        ``hf`` with ``bound_m`` (and ``views``) swept; never lower than ``hf``'s.
+    """
+    if not (np.isfinite(half_m) and half_m >= 0):
+        raise ValueError(f"half_m must be a finite length >= 0 metres, got {half_m}")
+    if half_m == 0:
+        return hf
+    c = hf.cell_m
+    ny, nx = hf.shape
+    with np.errstate(invalid="ignore"):
+        region = np.asarray(hf.region, bool) & ~(np.abs(hf.offset_m) < skip_offset_m)
+    rows, cols = np.nonzero(region)
+    if rows.size == 0:
+        return hf
+    t = np.asarray(track.tangent_at(hf.chainage_m[rows, cols].astype(float)), float)[:, :2]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    x = (hf.ix0 + cols + 0.5) * c
+    y = (hf.iy0 + rows + 0.5) * c
+    bound = np.asarray(hf.bound_m, np.float64)
+    rail = np.asarray(hf.rail_z_m, np.float64)
+    views = None if hf.views is None else np.asarray(hf.views)
+    rail_t = rail[rows, cols]
+    out = bound[rows, cols].copy()
+    out_views = None if views is None else views[rows, cols].copy()
+    n = int(np.ceil(half_m / (0.5 * c)))
+    for d in np.linspace(-half_m, half_m, 2 * n + 1):
+        sx, sy = x + d * t[:, 0], y + d * t[:, 1]
+        # the cells under a cell-sized square centred on the shifted centre
+        for cx in (np.floor((sx - 0.5 * c) / c), np.floor((sx + 0.5 * c) / c - 1e-9)):
+            for cy in (np.floor((sy - 0.5 * c) / c), np.floor((sy + 0.5 * c) / c - 1e-9)):
+                col = cx.astype(np.int64) - hf.ix0
+                row = cy.astype(np.int64) - hf.iy0
+                ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+                rr, cc = np.where(ok, row, 0), np.where(ok, col, 0)
+                ok &= region[rr, cc]
+                with np.errstate(invalid="ignore"):
+                    val = bound[rr, cc] - (rail[rr, cc] - rail_t)
+                up = ok & (val > out)
+                out[up] = val[up]
+                if out_views is not None and views is not None:
+                    out_views[up] = views[rr[up], cc[up]]
+    new_bound = np.array(hf.bound_m, np.float32)
+    new_bound[rows, cols] = np.maximum(out, bound[rows, cols]).astype(np.float32)
+    new_bound.setflags(write=False)
+    new_views = None
+    if views is not None and out_views is not None:
+        new_views = np.array(views)
+        new_views[rows, cols] = out_views
+        new_views.setflags(write=False)
+    return replace(hf, bound_m=new_bound, views=new_views)

@@ -414,3 +414,22 @@ def test_availability_basemap_is_checked_and_passed_on(tmp_path, capsys, monkeyp
         cli.main(["availability", "--masks", str(masks), "--basemap", str(base), "--out",
                   str(tmp_path / "o"), "--scheduler", "serial"])  # fmt: skip
     assert Path(seen["basemap"]) == base
+
+
+def test_process_cell_sweep_reaches_the_reconstruction(tmp_path, monkeypatch) -> None:
+    from predisat.cli import process as cli_process
+
+    survey = tmp_path / "survey"
+    survey.mkdir()
+    (survey / "survey.yaml").write_text("format: predisat-survey/1\n")
+    seen: dict[str, object] = {}
+
+    def fake(survey_dir, out, params, **kw):  # type: ignore[no-untyped-def]
+        seen["params"] = params
+        raise SystemExit(0)
+
+    monkeypatch.setattr(cli_process, "process_survey", fake)
+    for extra, expected in (([], 0.0), (["--cell-sweep"], None)):
+        with pytest.raises(SystemExit):
+            cli.main(["process", str(survey), "--out", str(tmp_path / "o"), *extra])
+        assert seen.pop("params").reconstruction.cell_sweep_m == expected  # type: ignore[attr-defined]
