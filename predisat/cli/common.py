@@ -11,7 +11,7 @@ import contextlib
 import signal
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from predisat.cli.args import caused_by_interrupt, run_checks
 
@@ -71,9 +71,20 @@ def run_main(
     previous = None
     with contextlib.suppress(ValueError):  # not the main thread: the default handling stays
         previous = signal.signal(signal.SIGINT, on_sigint)
+    # ... and ctypes reports the swallowed interrupt as an unraisable exception with a
+    # traceback (llvmlite's cache callbacks): the command's own "interrupted" line says it
+    previous_hook = sys.unraisablehook
+
+    def on_unraisable(report: Any) -> None:
+        if seen and isinstance(report.exc_value, KeyboardInterrupt):
+            return
+        previous_hook(report)
+
+    sys.unraisablehook = on_unraisable
     try:
         return _run_func(args, name, note, seen)
     finally:
+        sys.unraisablehook = previous_hook
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
 
