@@ -207,16 +207,18 @@ def stanford_diagram(
     if claimed.any():
         cx, cy = np.clip(x[claimed], *lim), np.clip(y[claimed], *lim)
         h, _, _ = np.histogram2d(cx, cy, bins=[edges, edges])
+        # over the no-claim points: at a million epochs their cloud hid the claims
         mesh = ax.pcolormesh(edges, edges, np.where(h > 0, h, np.nan).T, cmap="viridis",
-                             norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)))  # fmt: skip
+                             norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)),
+                             zorder=2)  # fmt: skip
         fig.colorbar(mesh, ax=ax, label="claimed epochs per bin")
     other = drawn & ~claimed
     ax.fill_between(lim, lim, [lim[0], lim[0]], color="#b2182b", alpha=0.07, lw=0)
     ax.scatter(np.clip(x[other], *lim), np.clip(y[other], *lim), s=9, color="#555555",
-               alpha=0.5, lw=0, label="no safety claim", rasterized=True)  # fmt: skip
+               alpha=0.5, lw=0, label="no safety claim", rasterized=True, zorder=1)  # fmt: skip
     hmi = region == "hmi"
     ax.scatter(np.clip(x[hmi], *lim), np.clip(y[hmi], *lim), s=28,
-               marker="x", color="#b2182b", label="HMI epochs")  # fmt: skip
+               marker="x", color="#b2182b", label="HMI epochs", zorder=3)  # fmt: skip
     ax.plot(lim, lim, color="k", lw=1.0)
     if alert_limit_m is not None:
         ax.axhline(alert_limit_m, color="k", ls="--", lw=1.0)
