@@ -176,7 +176,7 @@ class ReconstructionParams:
         its length, not its centre, since the train may stand anywhere in it. ``None``: half
         the largest gap between consecutive positions of the window (5 m for positions every
         10 m; 0 for a single position). Default ``0``: the mask at the position itself; the
-        sweep is opt-in because under the 2.5-D model it costs most of the sky (section 12).
+        sweep is opt-in because it doubles the sky lost at the positions (section 12).
     """
 
     cell_m: float = 0.5
