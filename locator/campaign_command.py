@@ -129,7 +129,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     from predisat.scheduler import Scheduler
 
     scheduler = Scheduler.parse(args.scheduler, args.workers)
-    extra: list[tuple[str, Path]] = list(getattr(args, "pipeline_world", None) or [])
+    extra: list[tuple[str, Path]] = list(args.pipeline_world)
     names = [n for n, _ in extra]
     if len(set(names)) != len(names):
         raise ValueError(f"--pipeline-world: a NAME given twice in {names}; name each once")

@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> ProcessResult:
         PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
                        thin_deg=args.thin_deg,
                        reconstruction=ReconstructionParams(
-                           cell_sweep_m=None if getattr(args, "cell_sweep", False) else 0.0)),
+                           cell_sweep_m=None if args.cell_sweep else 0.0)),
         track=track,
         workers=args.workers,
         scheduler=args.scheduler,
