@@ -15,6 +15,12 @@ position) and compares each with the mask of the cell that holds it
 * for reference, the world's true masks at the positions with the campaign's 1 deg margin
   (a perfect survey sampled every 10 m).
 
+``--swept`` also casts the truth 2.5 m either side of each position and scores every mask
+file against the truth at the positions and against the truth swept over each cell (the
+maximum of the five casts: centre, +-2.5 m and both edges; positions 1 to n-2): sky lost and
+false trust as shares of the solid angle (directions weighted by cos(elevation)),
+``docs/reconstruction.md`` section 12.
+
 Usage::
 
     .venv/bin/python scripts/eval_between_positions.py DEMO_OUT [--masks M.parquet ...]
@@ -55,12 +61,29 @@ def figures(mask_el_deg: NDArray, truth_el_deg: NDArray) -> dict[str, float]:
     }
 
 
+_EL_DEG = np.arange(0.25, 90.0, 0.5)
+
+
+def solid_angle_shares(mask_el_deg: NDArray, truth_el_deg: NDArray) -> tuple[float, float]:
+    """Sky lost (visible, not trusted) and false trust (trusted, hidden), percent of the
+    visible and of the trusted solid angle, masks and truth (n, n_az) in degrees."""
+    m = np.clip(np.asarray(mask_el_deg, float), 0.0, 90.0)[..., None]
+    t = np.clip(np.asarray(truth_el_deg, float), 0.0, 90.0)[..., None]
+    w = np.cos(np.radians(_EL_DEG))
+    vis, tru = _EL_DEG > t, _EL_DEG > m
+    lost = float(((vis & ~tru) * w).sum() / max(float((vis * w).sum()), 1e-300))
+    false = float(((tru & ~vis) * w).sum() / max(float((tru * w).sum()), 1e-300))
+    return 100.0 * lost, 100.0 * false
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("world", type=Path, help="a rendered world folder (see the module doc)")
     ap.add_argument("--masks", type=Path, nargs="+", help="mask files (default the world's)")
     ap.add_argument("--offset-m", type=float, default=5.0, help="along-track offset, metres")
     ap.add_argument("--cache", type=Path, help="an .npz to keep the offset truth in")
+    ap.add_argument("--swept", action="store_true",
+                    help="also score against the truth swept over each cell (see above)")
     args = ap.parse_args(argv)
     from predisat.masks.fileformat import read_masks
     from predisat.masks.truth import TrueMasks
@@ -71,13 +94,19 @@ def main(argv: list[str] | None = None) -> int:
     truth_dir, own = _folders(args.world)
     tm = TrueMasks.load(truth_dir / "true_masks.npz")
     s = np.asarray(tm.chainage_m, float)
-    if args.cache is not None and args.cache.exists():
-        moved = np.load(args.cache)["el"]
-    else:
-        world = World.load(truth_dir / "world.npz", demo_track())
-        moved = true_masks(world, s[:-1] + args.offset_m).mask_el_deg
-        if args.cache is not None:
-            np.savez(args.cache, el=moved)
+    cached = dict(np.load(args.cache)) if args.cache is not None and args.cache.exists() else {}
+    world = None
+
+    def cast(key: str, chainage_m: NDArray) -> NDArray:
+        nonlocal world
+        if key not in cached:
+            world = world or World.load(truth_dir / "world.npz", demo_track())
+            cached[key] = true_masks(world, chainage_m).mask_el_deg
+            if args.cache is not None:
+                np.savez(args.cache, **cached)
+        return cached[key]
+
+    moved = cast("el", s[:-1] + args.offset_m)
     print(f"{args.world}: truth at {len(s) - 1} positions moved by {args.offset_m:+.1f} m")
     ref = figures(np.asarray(tm.mask_el_deg, float)[:-1] + 1.0, moved)
     print(f"  true masks + 1 deg       false trust {ref['false_trust_pct']:.4f} % of trusted "
@@ -93,6 +122,20 @@ def main(argv: list[str] | None = None) -> int:
             "control (own position)": figures(p[:-1], tm.mask_el_deg[:-1]),
         }
         print(path)
+        if args.swept:
+            if args.offset_m != 5.0 or len(s) < 3:
+                raise SystemExit("--swept needs --offset-m 5 (the cell edges of 10 m cells)")
+            i = np.arange(1, len(s) - 1)
+            swept = np.max(np.stack([
+                tm.mask_el_deg[i], cast("inner_minus_2.5", s[i] - 2.5),
+                cast("inner_plus_2.5", s[i] + 2.5),
+                moved[i], moved[i - 1],
+            ]), axis=0)  # fmt: skip
+            for tname, truth in (("at the positions", tm.mask_el_deg[i]),
+                                 ("swept over the cell", swept)):  # fmt: skip
+                lost, false = solid_angle_shares(p[i], truth)
+                print(f"  truth {tname:20s} sky lost {lost:.2f} %, false trust {false:.4f} % "
+                      "(solid angle)")  # fmt: skip
         for name, f in rows.items():
             print(f"  {name:24s} false trust {f['false_trust_pct']:.4f} % of trusted el-deg; "
                   f"bins > 1 deg {f['bins_over_1deg_pct']:.3f} %, > 5 deg "
