@@ -67,7 +67,7 @@ CACHE_VERSION = 1
 SEGMENTATION_CODE = (
     "sky/__init__.py", "sky/segment.py", "sky/options.py", "sky/morphology.py",
     "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
-    "sky/network.py", "sky/panorama.py", "data/models",
+    "sky/network.py", "sky/panorama.py", "sky/lines.py", "data/models",
     # reading the image: its checks (corrupt, blank) decide whether a frame is segmented
     "reconstruct/frames.py",
 )

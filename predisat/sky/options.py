@@ -76,6 +76,12 @@ class SkyOptions:
     max_hole_fraction : float
         Learned method: obstacle specks enclosed by sky and smaller than this share of the
         valid area are classifier noise and become sky.
+    line_contrast : float
+        Narrow obstacles lost to the working resolution (:mod:`predisat.sky.lines`): least
+        depth, Lab lightness (0-255), of a dark line feature inside the classified sky that is
+        turned back into an obstacle before the thin-structure policy (0 disables the step).
+    line_min_elongation : float
+        Least length-to-width ratio of such a feature.
     uncertain_hole_fraction, uncertain_hole_probability : float
         Learned method: obstacle regions enclosed by sky (touching no frame edge; in a fisheye
         photo any region), smaller than this share of the valid area, whose mean sky
@@ -107,6 +113,8 @@ class SkyOptions:
     max_hole_fraction: float = 0.0005
     uncertain_hole_fraction: float = 0.05
     uncertain_hole_probability: float = 0.25
+    line_contrast: float = 25.0
+    line_min_elongation: float = 5.0
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -126,6 +134,11 @@ class SkyOptions:
             raise ValueError("need 0 < texture_min <= texture_max")
         if self.grabcut_iterations < 1:
             raise ValueError(f"grabcut_iterations must be >= 1, got {self.grabcut_iterations}")
+        if self.line_contrast < 0 or self.line_min_elongation < 1:
+            raise ValueError(
+                "line_contrast must be >= 0 (0 disables the step) and line_min_elongation "
+                f">= 1, got {self.line_contrast} and {self.line_min_elongation}"
+            )
         if self.thin_px < 0:
             raise ValueError(f"thin_px must be >= 0 (0 disables the policy), got {self.thin_px}")
         if not 0.0 <= self.circle_margin < 1.0:

@@ -20,12 +20,20 @@ obstacle (the catenary over the track cut the top sky run of whole sectors; ``do
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky.perceptron import SkyModel
-from predisat.sky.segment import SkyOptions, SkySegmentation, segment_sky
+from predisat.sky.segment import (
+    SkyOptions,
+    SkySegmentation,
+    resolve_model,
+    restore_lines,
+    segment_sky,
+    work_side_px,
+)
 from predisat.sky.skyline import skyline_from_mask
 
 __all__ = ["PANORAMA_BAND_SHARE", "equirect_row_lat_deg", "remove_thin_obstacles_equirect",
@@ -84,14 +92,31 @@ def segment_panorama(
     band = img[:rows]
     sky = np.zeros((h, w), bool)
     conf = np.zeros(w, float)
+    # narrow obstacles the tiles' working size lost are looked for once, on the whole band: a
+    # tile's edges hold nothing (a free wire crossing one is no arm)
+    tile_opt = replace(opt, line_contrast=0.0)
+    model = resolve_model(opt, classifier)
     for a, b in itertools.pairwise(edges):
         cols = np.arange(a - pad, b + pad) % w
-        seg = segment_sky(np.ascontiguousarray(band[:, cols]), opt, classifier)
+        tile_img = np.ascontiguousarray(band[:, cols])
+        seg = segment_sky(tile_img, tile_opt, model)
         # the tile's mask before its own (pixel) thin policy: the policy runs once, on the
         # sphere (below); the confidence stays the tile's (measured at its skyline)
         tile = seg.sky_mask if seg.thin_mask is None else seg.sky_mask & ~seg.thin_mask
         sky[:rows, a:b] = tile[:, pad : pad + (b - a)]
         conf[a:b] = seg.confidence[pad : pad + (b - a)]
+    if opt.line_contrast > 0:
+        # the band's width at the tiles' scale: each tile was classified at work_side across
+        tile_w = int(edges[1] - edges[0]) + 2 * pad
+        band_sky = restore_lines(
+            band, sky[:rows], np.ones((rows, w), bool), opt,
+            round(work_side_px(opt, model) * max(rows, w) / max(rows, tile_w)),
+            edges_hold=False,
+            thin_policy=lambda m: remove_thin_obstacles_equirect(
+                np.concatenate([m, np.ones((h - rows, w), bool)]), opt.thin_px + 1
+            )[:rows],
+        )  # fmt: skip
+        sky = np.concatenate([band_sky, sky[rows:]])
     thin = None
     if opt.thin_px > 0:
         raw = sky

@@ -16,7 +16,10 @@ on one model's probability.
    edge (and not be a speck) or be a large region (sky under a bridge deck); obstacle specks
    enclosed by sky, and small hanging regions the classifier hesitated on (dark cloud bases),
    become sky. Fisheye photos: sky gaps in foliage (step 4 below).
-3. Thin-structure policy and skyline as below; the per-column confidence comes from the
+3. Narrow obstacles the working size lost (a cantilever arm a few pixels wide) are found
+   again at full resolution and turned back into obstacles (:mod:`predisat.sky.lines`, all
+   methods; ``SkyOptions.line_contrast``).
+4. Thin-structure policy and skyline as below; the per-column confidence comes from the
    probability margins on either side of the skyline (:func:`probability_confidence`).
 
 **grabcut** (classical, about 1 s per frame, no model; internals in
@@ -60,6 +63,7 @@ skyline: a column with no valid pixel has ``nan``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -68,6 +72,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky import grabcut as gc
 from predisat.sky import perceptron  # perceptron.sky_probability: looked up at call time
+from predisat.sky.lines import line_width_px, lost_line_obstacles
 from predisat.sky.morphology import RunComponents, remove_thin_obstacles
 from predisat.sky.network import SkyEnsemble, SkyNet
 from predisat.sky.options import METHODS, SkyOptions
@@ -91,9 +96,12 @@ __all__ = [
     "mask_above_skyline",
     "probability_confidence",
     "remove_thin_obstacles",
+    "resolve_model",
+    "restore_lines",
     "segment_sky",
     "skyline_confidence",
     "skyline_from_mask",
+    "work_side_px",
 ]
 
 
@@ -211,9 +219,7 @@ def segment_sky(
         valid = np.ones((h, w), bool)
 
     if opt.method in ("learned", "cnn", "ensemble"):
-        if classifier is None and opt.method != "learned":
-            classifier = SkyNet.default() if opt.method == "cnn" else SkyEnsemble.default()
-        sky, conf, thin = _learned_sky(img, valid, opt, classifier)
+        sky, conf, thin = _learned_sky(img, valid, opt, resolve_model(opt, classifier))
         skyline = skyline_from_mask(sky, valid)
         return SkySegmentation(
             sky_mask=sky, skyline_row=skyline,
@@ -235,6 +241,7 @@ def segment_sky(
     sky &= valid
     if opt.refine_band_px > 0 and sky.any() and (valid & ~sky).any():
         sky = gc.refine_boundary(img, sky, valid, opt.refine_band_px)
+    sky = restore_lines(img, sky, valid, opt, work_side_px(opt, None))
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
     raw = sky
@@ -243,6 +250,51 @@ def segment_sky(
     conf = skyline_confidence(img, sky, skyline, valid)
     return SkySegmentation(sky_mask=sky, skyline_row=skyline, confidence=conf, valid_mask=valid,
                            thin_mask=sky & ~raw)  # fmt: skip
+
+
+def resolve_model(opt: SkyOptions, classifier: SkyModel | None) -> SkyModel | None:
+    """The probability model ``segment_sky`` uses: ``classifier``, else the shipped one of
+    ``opt.method`` (None for ``"grabcut"``)."""
+    if opt.method == "grabcut":
+        return None
+    if classifier is not None:
+        return classifier
+    if opt.method == "learned":
+        return perceptron.SkyClassifier.default()
+    return SkyNet.default() if opt.method == "cnn" else SkyEnsemble.default()
+
+
+def work_side_px(opt: SkyOptions, classifier: SkyModel | None) -> int:
+    """Longest side, pixels, of the working image ``segment_sky`` classifies a frame at."""
+    model = resolve_model(opt, classifier)
+    return opt.work_size_px if model is None else int(model.max_side_px)
+
+
+def restore_lines(
+    img: NDArray, sky: NDArray, valid: NDArray, opt: SkyOptions, work_side_px: int,
+    edges_hold: bool = True, thin_policy: Callable[[NDArray], NDArray] | None = None,
+) -> NDArray[np.bool_]:
+    """``sky`` without the narrow obstacles a classification at ``work_side_px`` lost
+    (:mod:`predisat.sky.lines`; unchanged when ``opt.line_contrast`` is 0).
+
+    Only their parts wider than the thin-structure policy allows come back: the policy would
+    make the rest sky again, and a free-hanging wire flagged thin would bound the far field
+    (``docs/reconstruction.md``, section 13). ``thin_policy`` maps a sky mask to the same
+    with thin obstacles removed (default :func:`remove_thin_obstacles` with
+    ``opt.thin_px + 1``: a feature's intensity profile is about a pixel wider than it)."""
+    if opt.line_contrast <= 0:
+        return sky
+    lost = lost_line_obstacles(
+        img, sky, valid, line_width_px(img.shape[:2], work_side_px), opt.line_contrast,
+        opt.line_min_elongation, edges_hold,
+    )  # fmt: skip
+    if not lost.any():
+        return sky
+    # a feature's intensity profile spreads over about one pixel more than its width
+    # (optics, anti-aliasing, JPEG): the policy is applied one pixel wider here
+    policy = thin_policy or (lambda m: remove_thin_obstacles(m, opt.thin_px + 1))
+    lost &= ~policy(~lost)  # the parts that stay obstacles under the policy
+    return sky & ~lost
 
 
 def _learned_sky(
@@ -294,6 +346,7 @@ def _learned_sky(
             small_hole |= uncertain & (mean_p >= opt.uncertain_hole_probability)
         if small_hole.any():
             cc.paint(sky, small_hole, True)
+    sky = restore_lines(img, sky, valid, opt, work_side_px(opt, classifier))
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
     raw = sky

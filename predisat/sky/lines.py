@@ -1,0 +1,145 @@
+"""Narrow obstacles lost to the working resolution, found again at full resolution.
+
+The learned methods classify a frame at a working size (longest side 160 px) and the classical
+one at ``work_size_px``; a feature a few full-resolution pixels wide is then a pixel or less
+and the upsampled mask calls it sky. Features up to ``thin_px`` wide are no loss (the
+thin-structure policy makes them sky anyway, and flags them), but wider ones are: a catenary
+cantilever tube 1-3 m over a roof antenna, 3-5 px in a half-resolution panorama, opaque under
+the first Fresnel zone rule, came out as plain sky, and the reconstruction carved through it
+(``docs/reconstruction.md``, section 13).
+
+:func:`lost_line_obstacles` looks for them in the full-resolution lightness, inside the sky the
+classifier gave: a morphological black top-hat (closing minus image, with a disc about as
+wide as what the working size loses; a square, for speed) keeps only dark features narrower
+than it, whatever their direction; steps (a cloud's edge, a skyline) and smooth gradients give nothing. A
+component of the response is a lost obstacle when it is
+
+* contrasted (``contrast`` lightness units below its closed surroundings),
+* line-like (longer than ``min_elongation`` times its width, and than twice the disc): cloud
+  texture gives short blobs,
+* not bluer than its surroundings: a channel of blue sky between bright clouds is dark and
+  may be long, but it is sky-coloured,
+* and attached: within the disc of an obstacle the classifier did see (a mast, a building) or
+  of the edge of the image: an arm is held by something; a wire hanging free in the sky
+  is left to the classifier (it is transparent, and flagging every span would take its
+  whole arc out of the far field).
+
+Such pixels become obstacles again before the thin-structure policy runs, so those of them at
+most ``thin_px`` wide come back as sky *flagged* thin (the Fresnel rule then decides), and the
+wider ones stay obstacles. The step only removes sky.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["line_width_px", "lost_line_obstacles"]
+
+_BLUER_MAX = 8
+"""How much bluer than its surroundings (Lab b, 8-bit units) a dark feature may be and still
+be a structure: more, and it is blue sky between clouds."""
+
+
+def line_width_px(shape: tuple[int, int], work_side_px: int) -> int:
+    """Width of the black top-hat's disc for a frame of ``shape`` (H, W) classified at a longest
+    side of ``work_side_px``: three working pixels, odd, at least 5 full-resolution pixels."""
+    if work_side_px < 1:
+        raise ValueError(f"work_side_px must be >= 1, got {work_side_px}")
+    scale = max(int(shape[0]), int(shape[1])) / float(work_side_px)
+    return max(5, 2 * round(1.5 * scale) + 1)
+
+
+def lost_line_obstacles(
+    image_bgr: ArrayLike,
+    sky_mask: ArrayLike,
+    valid_mask: ArrayLike,
+    width_px: int,
+    contrast: float = 25.0,
+    min_elongation: float = 5.0,
+    edges_hold: bool = True,
+) -> NDArray[np.bool_]:
+    """Pixels of ``sky_mask`` that belong to narrow dark line features held by an obstacle.
+
+    Parameters
+    ----------
+    image_bgr : array_like, shape (H, W, 3) uint8
+    sky_mask, valid_mask : array_like of bool, shape (H, W)
+        The classifier's sky, and the segmented pixels (a fisheye's image circle).
+    width_px : int
+        Diameter of the closing disc, full-resolution pixels (odd, >= 3): features narrower
+        than it are found (:func:`line_width_px`).
+    contrast : float
+        Least depth of a feature below its closed surroundings, OpenCV 8-bit Lab lightness
+        (0-255).
+    min_elongation : float
+        Least ratio of a feature's length (its bounding box's longer side) to its width (twice
+        the largest distance from its border).
+    edges_hold : bool
+        Whether the image's edges hold a feature (its holder may be out of the picture);
+        False for a panorama's band, whose edges are the seam and the zenith.
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        The pixels to turn back into obstacles (a subset of ``sky_mask & valid_mask``).
+    """
+    img = np.asarray(image_bgr)
+    sky = np.asarray(sky_mask, bool)
+    valid = np.asarray(valid_mask, bool)
+    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+        raise ValueError(f"image_bgr must be an (H, W, 3) uint8 BGR image, got {img.shape}")
+    if sky.shape != img.shape[:2] or valid.shape != img.shape[:2]:
+        raise ValueError(
+            f"sky_mask {sky.shape} and valid_mask {valid.shape} must match the image "
+            f"{img.shape[:2]}"
+        )
+    if width_px < 3 or width_px % 2 == 0:
+        raise ValueError(f"width_px must be odd and >= 3, got {width_px}")
+    if contrast <= 0 or min_elongation < 1:
+        raise ValueError(
+            f"contrast must be > 0 and min_elongation >= 1, got {contrast} and {min_elongation}"
+        )
+    out = np.zeros(sky.shape, bool)
+    cand_sky = sky & valid
+    if not cand_sky.any() or not (valid & ~sky).any():
+        return out  # nothing can hold a feature: no obstacle in view
+    lab3 = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2LAB)
+    light = lab3[..., 0]
+    # a square element is separable (a disc costs 25x more at the sizes of a 12 Mpx photo)
+    # and still catches a diagonal line up to width_px / sqrt(2) across
+    disc = cv2.getStructuringElement(cv2.MORPH_RECT, (width_px, width_px))
+    depth = cv2.morphologyEx(light, cv2.MORPH_BLACKHAT, disc)
+    # blue-yellow (OpenCV 8-bit Lab b: 128 neutral, lower bluer), its own narrow valleys: a
+    # channel of blue sky between bright clouds is dark too, but bluer than its surroundings
+    bluer = cv2.morphologyEx(lab3[..., 2], cv2.MORPH_BLACKHAT, disc)
+    resp = ((depth >= contrast) & (bluer <= _BLUER_MAX) & cand_sky).astype(np.uint8)
+    if not resp.any():
+        return out
+    # what may hold a feature: a seen obstacle, or the image's (or circle's) edge
+    holder = (valid & ~sky).astype(np.uint8)
+    if edges_hold:
+        holder[0, :] = holder[-1, :] = holder[:, 0] = holder[:, -1] = 1
+    if edges_hold and not valid.all():
+        holder |= (cv2.dilate((~valid).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & valid
+    near_holder = cv2.dilate(holder, disc) > 0
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(resp, connectivity=8)
+    length = np.maximum(stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT])
+    cand = np.flatnonzero(length >= 2 * width_px) + 1
+    if cand.size == 0:
+        return out
+    held = np.zeros(n, bool)
+    held[np.unique(lab[near_holder & (lab > 0)])] = True
+    dist = cv2.distanceTransform(resp, cv2.DIST_L2, 3)
+    keep = np.zeros(n, bool)
+    for i in cand:
+        if not held[i]:
+            continue
+        x, y, w, h = (int(v) for v in stats[i, :4])
+        box = lab[y : y + h, x : x + w] == i
+        width = 2.0 * float(dist[y : y + h, x : x + w][box].max())
+        keep[i] = max(w, h) >= min_elongation * max(width, 1.0)
+    if keep.any():
+        out = keep[lab] & cand_sky
+    return out

@@ -1,0 +1,169 @@
+"""Tests of predisat.sky.lines: narrow obstacles a working-resolution classifier lost.
+
+The scenes are drawn here with their truth; the classifier stand-in sees the frame only at a
+working size (area-averaged), so a feature a few pixels wide disappears from its map exactly
+as it does from the shipped models'.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from predisat.sky.lines import line_width_px, lost_line_obstacles
+from predisat.sky.panorama import segment_panorama
+from predisat.sky.segment import SkyOptions, segment_sky, skyline_from_mask
+
+H, W = 240, 320
+
+
+class _CoarseClassifier:
+    """Sky where the area-averaged working image is blue-bright: what a model at
+    ``max_side_px`` sees of a frame (features narrower than a working pixel average away)."""
+
+    def __init__(self, max_side_px: int = 48) -> None:
+        self.max_side_px = max_side_px
+
+    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
+        h, w = image_bgr.shape[:2]
+        f = self.max_side_px / max(h, w)
+        size = (max(1, round(w * f)), max(1, round(h * f)))
+        small = cv2.resize(image_bgr, size, interpolation=cv2.INTER_AREA).astype(float)
+        blue = small[..., 0] - small[..., 2]
+        return np.asarray(np.clip((blue - 5.0) / 20.0, 0.0, 1.0), np.float32)
+
+
+def _scene(seed: int, arm_px: int = 5, clouds: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Blue sky, a ground band, a mast with an arm of ``arm_px`` over the sky, and a free 2 px
+    wire; truth: True where an obstacle is."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, H)[:, None, None]
+    img = np.array([210.0, 150.0, 95.0]) + np.array([20.0, 55.0, 80.0]) * t + np.zeros((1, W, 1))
+    if clouds:  # soft cloud texture: grey-white blobs a few to tens of pixels across
+        noise = cv2.GaussianBlur(rng.normal(0.0, 1.0, (H, W)), (0, 0), 6.0)
+        noise = cv2.GaussianBlur(noise, (0, 0), 2.0)
+        cloud = np.clip((noise - noise.mean()) / noise.std(), 0, None)[..., None]
+        img = img + cloud * (np.array([235.0, 235.0, 235.0]) - img) * 0.5
+    img = img + rng.normal(0.0, 1.5, img.shape)
+    obstacle = np.zeros((H, W), bool)
+    obstacle[170:, :] = True  # ground
+    obstacle[40:, 250:262] = True  # mast
+    obstacle[50 : 50 + arm_px, 120:250] = True  # the arm, held by the mast
+    grey = np.array([70.0, 72.0, 75.0])
+    img[obstacle] = grey + rng.normal(0.0, 2.0, (int(obstacle.sum()), 3))
+    img[100:102, 20:200] = grey  # a free wire: held by nothing, not an obstacle in the truth
+    return np.clip(img, 0, 255).astype(np.uint8), obstacle
+
+
+def test_an_arm_the_working_size_lost_comes_back_as_an_obstacle() -> None:
+    img, obstacle = _scene(0)
+    arm = np.zeros_like(obstacle)
+    arm[50:55, 120:250] = True
+    clf = _CoarseClassifier()
+    off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
+    assert off.sky_mask[arm].mean() > 0.8  # the failure: the arm is sky at working size
+    on = segment_sky(img, SkyOptions(method="learned"), clf)
+    assert not on.sky_mask[arm].mean() > 0.1  # the arm is an obstacle again
+    assert on.thin_mask is not None and not on.thin_mask[arm].any()  # and not called thin
+    # its columns' skyline is the arm's top edge (row 50 - 0.5), as the truth's
+    truth_line = skyline_from_mask(~obstacle)
+    cols = np.arange(125, 245)
+    assert np.all(on.skyline_row[cols] <= truth_line[cols] + 1.0)
+    # nothing but the arm changed: the free wire and the open sky are as they were
+    changed = off.sky_mask & ~on.sky_mask
+    grown = cv2.dilate(obstacle.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert not (changed & ~grown).any()
+    assert on.sky_mask[100:102, 30:190].all()
+
+
+def test_a_free_wire_cloud_texture_and_a_thin_arm_stay_as_the_classifier_said() -> None:
+    """Only lost features held by an obstacle and wider than the policy's width (plus a pixel
+    of blur) come back: cloud texture, a free wire and an arm the policy calls thin do not."""
+    clf = _CoarseClassifier()
+    for seed in range(3):
+        img, obstacle = _scene(seed, arm_px=2, clouds=True)
+        off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
+        on = segment_sky(img, SkyOptions(method="learned"), clf)
+        changed = off.sky_mask & ~on.sky_mask
+        solid = obstacle.copy()
+        solid[50:52, :250] = False  # the thin arm is no solid obstacle for the policy
+        grown = cv2.dilate(solid.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        assert not (changed & ~grown).any()  # at most the mast's edge the classifier shaved
+
+
+def test_restored_pixels_are_obstacles_of_rendered_frames(test_data) -> None:
+    """On rendered frames with their renderer's labels (clouds, masts, wires), every pixel the
+    step turns back into an obstacle is an obstacle (or a thin structure) of the label."""
+    for stem in ("cloudy_right_000006", "cloudy_right_000012"):
+        img = cv2.imread(str(test_data / "sky_synth" / f"{stem}.jpg"), cv2.IMREAD_COLOR)
+        label = cv2.imread(str(test_data / "sky_synth" / f"{stem}_label.png"), 0)
+        off = segment_sky(img, SkyOptions(line_contrast=0.0))
+        on = segment_sky(img)
+        restored = off.sky_mask & ~on.sky_mask
+        near_obstacle = cv2.dilate((label < 255).astype(np.uint8), np.ones((3, 3), np.uint8))
+        assert not (restored & (near_obstacle == 0)).any()
+
+
+def test_a_panorama_gets_its_lost_arm_back_and_keeps_its_free_wires() -> None:
+    """The 360-degree case that found the class: a cantilever arm over the antenna a few pixels
+    wide in a half-resolution panorama; tiles' edges hold nothing."""
+    h, w = 180, 360
+    rng = np.random.default_rng(3)
+    img = np.zeros((h, w, 3))
+    img[:] = np.array([215.0, 160.0, 100.0]) + rng.normal(0.0, 1.5, (h, w, 3))
+    obstacle = np.zeros((h, w), bool)
+    obstacle[95:, :] = True  # ground below the horizon
+    obstacle[30:, 100:106] = True  # a mast
+    obstacle[32:36, 106:200] = True  # its arm, 4 px (2 deg), near the zenith
+    grey = np.array([70.0, 72.0, 75.0])
+    img[obstacle] = grey
+    img[20:23, 220:350] = grey  # a free wire 3 px wide
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    clf = _CoarseClassifier(48)
+    # 1 deg per pixel: the pipeline's 0.7 deg thin width is one pixel (PipelineParams.thin_px)
+    opt = SkyOptions(method="learned", thin_px=1)
+    off = segment_panorama(img, replace(opt, line_contrast=0.0), clf)
+    on = segment_panorama(img, opt, clf)
+    arm = np.zeros_like(obstacle)
+    arm[32:36, 110:196] = True
+    assert off.sky_mask[arm].mean() > 0.8
+    assert on.sky_mask[arm].mean() < 0.1
+    assert np.array_equal(on.sky_mask[18:24, 225:345], off.sky_mask[18:24, 225:345])
+
+
+def test_an_edge_holds_a_feature_only_when_told() -> None:
+    """A line cut by the image edge may be held out of the picture (a frame); in a panorama's
+    band the edges are the seam and the zenith, which hold nothing."""
+    img = np.zeros((60, 120, 3), np.uint8)
+    img[:] = (220, 160, 100)
+    img[20:24, :80] = (70, 72, 75)  # from the left edge into the sky
+    img[50:, :] = (70, 72, 75)  # ground: an obstacle in view, not touching the line
+    sky = np.ones((60, 120), bool)
+    sky[50:] = False
+    held = lost_line_obstacles(img, sky, np.ones_like(sky), 9)
+    free = lost_line_obstacles(img, sky, np.ones_like(sky), 9, edges_hold=False)
+    assert held[20:24, 2:78].all() and not held[:18].any() and not held[26:50].any()
+    assert not free.any()
+
+
+def test_line_width_follows_the_working_scale_and_guards() -> None:
+    assert line_width_px((480, 640), 160) == 13  # four full pixels per working pixel
+    assert line_width_px((100, 100), 160) == 5  # never below 5
+    with pytest.raises(ValueError, match="work_side_px"):
+        line_width_px((10, 10), 0)
+    img = np.zeros((20, 20, 3), np.uint8)
+    sky = np.ones((20, 20), bool)
+    with pytest.raises(ValueError, match="width_px"):
+        lost_line_obstacles(img, sky, sky, 4)
+    with pytest.raises(ValueError, match="must match"):
+        lost_line_obstacles(img, sky[:10], sky, 5)
+    with pytest.raises(ValueError, match="contrast"):
+        lost_line_obstacles(img, sky, sky, 5, contrast=0.0)
+    with pytest.raises(ValueError, match="line_contrast"):
+        SkyOptions(line_contrast=-1.0)
+    before = sky.copy()
+    lost_line_obstacles(img, sky, sky, 5)
+    assert np.array_equal(sky, before)  # inputs untouched
