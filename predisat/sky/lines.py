@@ -9,17 +9,17 @@ the first Fresnel zone rule, came out as plain sky, and the reconstruction carve
 (``docs/reconstruction.md``, section 13).
 
 :func:`lost_line_obstacles` looks for them in the full-resolution lightness, inside the sky the
-classifier gave: a morphological black top-hat (closing minus image, with a disc about as
-wide as what the working size loses; a square, for speed) keeps only dark features narrower
-than it, whatever their direction; steps (a cloud's edge, a skyline) and smooth gradients give nothing. A
-component of the response is a lost obstacle when it is
+classifier gave: a morphological black top-hat (closing minus image, with a square element
+about as wide as what the working size loses) keeps only dark features narrower than the
+element, whatever their direction; steps (a cloud's edge, a skyline) and smooth gradients give
+nothing. A component of the response is a lost obstacle when it is
 
 * contrasted (``contrast`` lightness units below its closed surroundings),
-* line-like (longer than ``min_elongation`` times its width, and than twice the disc): cloud
+* line-like (longer than ``min_elongation`` times its width, and than twice the element): cloud
   texture gives short blobs,
 * not bluer than its surroundings: a channel of blue sky between bright clouds is dark and
   may be long, but it is sky-coloured,
-* and attached: within the disc of an obstacle the classifier did see (a mast, a building) or
+* and attached: within the element of an obstacle the classifier did see (a mast, a building) or
   of the edge of the image: an arm is held by something; a wire hanging free in the sky
   is left to the classifier (it is transparent, and flagging every span would take its
   whole arc out of the far field).
@@ -43,7 +43,7 @@ be a structure: more, and it is blue sky between clouds."""
 
 
 def line_width_px(shape: tuple[int, int], work_side_px: int) -> int:
-    """Width of the black top-hat's disc for a frame of ``shape`` (H, W) classified at a longest
+    """Width of the black top-hat's element for a frame of ``shape`` (H, W) classified at a longest
     side of ``work_side_px``: three working pixels, odd, at least 5 full-resolution pixels."""
     if work_side_px < 1:
         raise ValueError(f"work_side_px must be >= 1, got {work_side_px}")
@@ -68,7 +68,7 @@ def lost_line_obstacles(
     sky_mask, valid_mask : array_like of bool, shape (H, W)
         The classifier's sky, and the segmented pixels (a fisheye's image circle).
     width_px : int
-        Diameter of the closing disc, full-resolution pixels (odd, >= 3): features narrower
+        Side of the closing's square element, full-resolution pixels (odd, >= 3): features narrower
         than it are found (:func:`line_width_px`).
     contrast : float
         Least depth of a feature below its closed surroundings, OpenCV 8-bit Lab lightness
@@ -109,11 +109,11 @@ def lost_line_obstacles(
     light = lab3[..., 0]
     # a square element is separable (a disc costs 25x more at the sizes of a 12 Mpx photo)
     # and still catches a diagonal line up to width_px / sqrt(2) across
-    disc = cv2.getStructuringElement(cv2.MORPH_RECT, (width_px, width_px))
-    depth = cv2.morphologyEx(light, cv2.MORPH_BLACKHAT, disc)
+    elem = cv2.getStructuringElement(cv2.MORPH_RECT, (width_px, width_px))
+    depth = cv2.morphologyEx(light, cv2.MORPH_BLACKHAT, elem)
     # blue-yellow (OpenCV 8-bit Lab b: 128 neutral, lower bluer), its own narrow valleys: a
     # channel of blue sky between bright clouds is dark too, but bluer than its surroundings
-    bluer = cv2.morphologyEx(lab3[..., 2], cv2.MORPH_BLACKHAT, disc)
+    bluer = cv2.morphologyEx(lab3[..., 2], cv2.MORPH_BLACKHAT, elem)
     resp = ((depth >= contrast) & (bluer <= _BLUER_MAX) & cand_sky).astype(np.uint8)
     if not resp.any():
         return out
@@ -123,7 +123,7 @@ def lost_line_obstacles(
         holder[0, :] = holder[-1, :] = holder[:, 0] = holder[:, -1] = 1
     if edges_hold and not valid.all():
         holder |= (cv2.dilate((~valid).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & valid
-    near_holder = cv2.dilate(holder, disc) > 0
+    near_holder = cv2.dilate(holder, elem) > 0
     n, lab, stats, _ = cv2.connectedComponentsWithStats(resp, connectivity=8)
     length = np.maximum(stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT])
     cand = np.flatnonzero(length >= 2 * width_px) + 1
