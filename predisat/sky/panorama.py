@@ -32,7 +32,7 @@ from predisat.sky.segment import (
     resolve_model,
     restore_lines,
     segment_sky,
-    work_side_px,
+    working_side_px,
 )
 from predisat.sky.skyline import skyline_from_mask
 
@@ -110,7 +110,7 @@ def segment_panorama(
         tile_w = int(edges[1] - edges[0]) + 2 * pad
         band_sky = restore_lines(
             band, sky[:rows], np.ones((rows, w), bool), opt,
-            round(work_side_px(opt, model) * max(rows, w) / max(rows, tile_w)),
+            round(working_side_px(opt, model) * max(rows, w) / max(rows, tile_w)),
             edges_hold=False,
             thin_policy=lambda m: remove_thin_obstacles_equirect(
                 np.concatenate([m, np.ones((h - rows, w), bool)]), opt.thin_px + 1

@@ -101,7 +101,7 @@ __all__ = [
     "segment_sky",
     "skyline_confidence",
     "skyline_from_mask",
-    "work_side_px",
+    "working_side_px",
 ]
 
 
@@ -241,7 +241,7 @@ def segment_sky(
     sky &= valid
     if opt.refine_band_px > 0 and sky.any() and (valid & ~sky).any():
         sky = gc.refine_boundary(img, sky, valid, opt.refine_band_px)
-    sky = restore_lines(img, sky, valid, opt, work_side_px(opt, None))
+    sky = restore_lines(img, sky, valid, opt, working_side_px(opt, None))
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
     raw = sky
@@ -264,7 +264,7 @@ def resolve_model(opt: SkyOptions, classifier: SkyModel | None) -> SkyModel | No
     return SkyNet.default() if opt.method == "cnn" else SkyEnsemble.default()
 
 
-def work_side_px(opt: SkyOptions, classifier: SkyModel | None) -> int:
+def working_side_px(opt: SkyOptions, classifier: SkyModel | None) -> int:
     """Longest side, pixels, of the working image ``segment_sky`` classifies a frame at."""
     model = resolve_model(opt, classifier)
     return opt.work_size_px if model is None else int(model.max_side_px)
@@ -346,7 +346,7 @@ def _learned_sky(
             small_hole |= uncertain & (mean_p >= opt.uncertain_hole_probability)
         if small_hole.any():
             cc.paint(sky, small_hole, True)
-    sky = restore_lines(img, sky, valid, opt, work_side_px(opt, classifier))
+    sky = restore_lines(img, sky, valid, opt, working_side_px(opt, classifier))
     if opt.gaps and sky.any():
         sky |= gc.sky_gaps(img, sky, valid, opt)
     raw = sky
