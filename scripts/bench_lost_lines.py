@@ -28,6 +28,13 @@ from predisat.sky.panorama import segment_panorama
 from predisat.sky.segment import SkyOptions, segment_sky
 
 
+def _read(path: Path) -> np.ndarray:
+    img = cv2.imread(str(path))
+    if img is None:
+        raise SystemExit(f"{path}: not a readable image; remove it from the folder")
+    return img
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folders", nargs="+", type=Path)
@@ -50,11 +57,11 @@ def main() -> None:
         on = replace(on, thin_px=args.thin_px)
     off = replace(on, line_contrast=0.0)
     seg = segment_panorama if args.panorama else segment_sky
-    seg(cv2.imread(str(files[0])), on)  # load the models once, outside the timing
+    seg(_read(files[0]), on)  # load the models once, outside the timing
     cpu = {"off": 0.0, "on": 0.0}
     changed = 0
     for path in files:
-        img = cv2.imread(str(path))
+        img = _read(path)
         masks = {}
         for name, opt in (("off", off), ("on", on)):
             t0 = time.process_time()
