@@ -2,8 +2,9 @@
 
 The learned methods classify a frame at a working size (longest side 160 px) and the classical
 one at ``work_size_px``; a feature a few full-resolution pixels wide is then a pixel or less
-and the upsampled mask calls it sky. Features up to ``thin_px`` wide are no loss (the
-thin-structure policy makes them sky anyway, and flags them), but wider ones are: a catenary
+and the upsampled mask calls it plain sky. A feature up to ``thin_px`` wide loses only its
+thin-structure flag (the policy would have made it sky, flagged, and the reconstruction's
+Fresnel rule would judge it by its distance); a wider one is lost as an obstacle: a catenary
 cantilever tube 1-3 m over a roof antenna, 3-5 px in a half-resolution panorama, opaque under
 the first Fresnel zone rule, came out as plain sky, and the reconstruction carved through it
 (``docs/reconstruction.md``, section 13).
@@ -24,22 +25,45 @@ nothing. A component of the response is a lost obstacle when it is
   is left to the classifier (it is transparent, and flagging every span would take its
   whole arc out of the far field).
 
-Such pixels become obstacles again before the thin-structure policy runs, so those of them at
-most ``thin_px`` wide come back as sky *flagged* thin (the Fresnel rule then decides), and the
-wider ones stay obstacles. The step only removes sky.
+Of such features only the parts wider than the thin-structure policy's width (plus a pixel of
+blur) become obstacles again (:func:`predisat.sky.segment.restore_lines`). A shorter feature
+(at least the element long) that stands upright on an obstacle, a pole or a far mast a pixel
+wide on the skyline (:attr:`LostLines.standing`), comes back whole before the policy runs, so
+that the policy flags it thin and the reconstruction's Fresnel rule decides by its distance
+(a 0.3 m mast 33 m away is opaque, though it is a pixel in a half-resolution panorama). The
+step only removes sky.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["line_width_px", "lost_line_obstacles"]
+__all__ = ["LostLines", "line_width_px", "lost_line_obstacles"]
 
 _BLUER_MAX = 8
 """How much bluer than its surroundings (Lab b, 8-bit units) a dark feature may be and still
 be a structure: more, and it is blue sky between clouds."""
+
+
+@dataclass(frozen=True)
+class LostLines:
+    """Dark line features inside the classified sky (:func:`lost_line_obstacles`).
+
+    Attributes
+    ----------
+    held : ndarray of bool, shape (H, W)
+        Long features (at least twice the element) held by an obstacle or the image edge.
+    standing : ndarray of bool, shape (H, W)
+        Upright features (at least the element long) whose lowest row rests on an obstacle:
+        poles and far masts on the skyline (empty unless asked for).
+    """
+
+    held: NDArray[np.bool_]
+    standing: NDArray[np.bool_]
 
 
 def line_width_px(shape: tuple[int, int], work_side_px: int) -> int:
@@ -59,7 +83,8 @@ def lost_line_obstacles(
     contrast: float = 25.0,
     min_elongation: float = 5.0,
     edges_hold: bool = True,
-) -> NDArray[np.bool_]:
+    standing: bool = False,
+) -> LostLines:
     """Pixels of ``sky_mask`` that belong to narrow dark line features held by an obstacle.
 
     Parameters
@@ -75,15 +100,19 @@ def lost_line_obstacles(
         (0-255).
     min_elongation : float
         Least ratio of a feature's length (its bounding box's longer side) to its width (twice
-        the largest distance from its border).
+        the largest distance from its border, less a pixel).
     edges_hold : bool
         Whether the image's edges hold a feature (its holder may be out of the picture);
         False for a panorama's band, whose edges are the seam and the zenith.
+    standing : bool
+        Also return shorter features (at least ``width_px`` long) that stand upright on an
+        obstacle: a pole or a far mast a pixel or two wide rising from the skyline of an
+        upright frame (its lowest row rests on an obstacle pixel just below it).
 
     Returns
     -------
-    ndarray of bool, shape (H, W)
-        The pixels to turn back into obstacles (a subset of ``sky_mask & valid_mask``).
+    LostLines
+        Both masks subsets of ``sky_mask & valid_mask``.
     """
     img = np.asarray(image_bgr)
     sky = np.asarray(sky_mask, bool)
@@ -101,7 +130,7 @@ def lost_line_obstacles(
         raise ValueError(
             f"contrast must be > 0 and min_elongation >= 1, got {contrast} and {min_elongation}"
         )
-    out = np.zeros(sky.shape, bool)
+    out = LostLines(np.zeros(sky.shape, bool), np.zeros(sky.shape, bool))
     cand_sky = sky & valid
     if not cand_sky.any() or not (valid & ~sky).any():
         return out  # nothing can hold a feature: no obstacle in view
@@ -126,20 +155,28 @@ def lost_line_obstacles(
     near_holder = cv2.dilate(holder, elem) > 0
     n, lab, stats, _ = cv2.connectedComponentsWithStats(resp, connectivity=8)
     length = np.maximum(stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT])
-    cand = np.flatnonzero(length >= 2 * width_px) + 1
+    upright = stats[1:, cv2.CC_STAT_HEIGHT] >= 2 * stats[1:, cv2.CC_STAT_WIDTH]
+    cand = np.flatnonzero((length >= 2 * width_px) | (standing & upright & (length >= width_px)))
+    cand += 1
     if cand.size == 0:
         return out
     held = np.zeros(n, bool)
     held[np.unique(lab[near_holder & (lab > 0)])] = True
     dist = cv2.distanceTransform(resp, cv2.DIST_L2, 3)
+    below = np.zeros_like(holder)
+    below[:-1] = holder[1:]  # an obstacle pixel right under each pixel
     keep = np.zeros(n, bool)
+    stand = np.zeros(n, bool)
     for i in cand:
         if not held[i]:
             continue
         x, y, w, h = (int(v) for v in stats[i, :4])
         box = lab[y : y + h, x : x + w] == i
-        width = 2.0 * float(dist[y : y + h, x : x + w][box].max())
-        keep[i] = max(w, h) >= min_elongation * max(width, 1.0)
-    if keep.any():
-        out = keep[lab] & cand_sky
-    return out
+        # the distance to the nearest background pixel is half the width plus half a pixel
+        width = 2.0 * float(dist[y : y + h, x : x + w][box].max()) - 1.0
+        if max(w, h) < min_elongation * max(width, 1.0):
+            continue
+        keep[i] = max(w, h) >= 2 * width_px
+        on_obstacle = (box[-1] & (below[y + h - 1, x : x + w] > 0)).any()
+        stand[i] = bool(standing and h >= 2 * w and on_obstacle)
+    return LostLines(keep[lab] & cand_sky, stand[lab] & cand_sky)

@@ -277,24 +277,27 @@ def restore_lines(
     """``sky`` without the narrow obstacles a classification at ``work_side_px`` lost
     (:mod:`predisat.sky.lines`; unchanged when ``opt.line_contrast`` is 0).
 
-    Only their parts wider than the thin-structure policy allows come back: the policy would
-    make the rest sky again, and a free-hanging wire flagged thin would bound the far field
-    (``docs/reconstruction.md``, section 13). ``thin_policy`` maps a sky mask to the same
-    with thin obstacles removed (default :func:`remove_thin_obstacles` with
-    ``opt.thin_px + 1``: a feature's intensity profile is about a pixel wider than it)."""
+    Of the long features only the parts wider than the thin-structure policy allows come back:
+    the policy would make the rest sky again, and a wire flagged thin would bound the far field
+    (``docs/reconstruction.md``, section 13). Upright features standing on an obstacle (poles,
+    far masts; not in an upward fisheye photo, which has no "below") come back whole, so that
+    the policy flags their thin parts and the reconstruction's Fresnel rule decides.
+    ``thin_policy`` maps a sky mask to the same with thin obstacles removed (default
+    :func:`remove_thin_obstacles` with ``opt.thin_px + 1``: a feature's intensity profile is
+    about a pixel wider than it)."""
     if opt.line_contrast <= 0:
         return sky
     lost = lost_line_obstacles(
         img, sky, valid, line_width_px(img.shape[:2], work_side_px), opt.line_contrast,
-        opt.line_min_elongation, edges_hold,
+        opt.line_min_elongation, edges_hold, standing=not opt.fisheye,
     )  # fmt: skip
-    if not lost.any():
-        return sky
-    # a feature's intensity profile spreads over about one pixel more than its width
-    # (optics, anti-aliasing, JPEG): the policy is applied one pixel wider here
-    policy = thin_policy or (lambda m: remove_thin_obstacles(m, opt.thin_px + 1))
-    lost &= ~policy(~lost)  # the parts that stay obstacles under the policy
-    return sky & ~lost
+    back = lost.standing
+    if lost.held.any():
+        # a feature's intensity profile spreads over about one pixel more than its width
+        # (optics, anti-aliasing, JPEG): the policy is applied one pixel wider here
+        policy = thin_policy or (lambda m: remove_thin_obstacles(m, opt.thin_px + 1))
+        back = back | (lost.held & ~policy(~lost.held))  # what stays obstacle under it
+    return sky & ~back if back.any() else sky
 
 
 def _learned_sky(

@@ -134,6 +134,27 @@ def test_a_panorama_gets_its_lost_arm_back_and_keeps_its_free_wires() -> None:
     assert np.array_equal(on.sky_mask[18:24, 225:345], off.sky_mask[18:24, 225:345])
 
 
+def test_a_pole_standing_on_the_skyline_comes_back_flagged_thin() -> None:
+    """A far pole a pixel wide rising from the ground, lost at the working size, comes back so
+    that the thin-structure policy flags it (the reconstruction's Fresnel rule then decides
+    by its distance); a squat dark blob on the ground does not, nor any pole in an upward
+    fisheye photo, which has no "below"."""
+    img, _ = _scene(4)
+    grey = np.array([70, 72, 75], np.uint8)
+    img[140:170, 60] = grey  # a pole 1 px wide, 30 px tall, on the ground at row 170
+    img[164:170, 90:96] = grey  # a squat blob 6 x 6 on the ground
+    clf = _CoarseClassifier()
+    off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
+    on = segment_sky(img, SkyOptions(method="learned"), clf)
+    assert off.sky_mask[140:168, 60].all() and off.thin_mask is not None
+    assert not off.thin_mask[140:168, 60].any()  # the failure: plain sky, not flagged
+    assert on.sky_mask[140:168, 60].all()  # still sky (thin) ...
+    assert on.thin_mask is not None and on.thin_mask[140:168, 60].mean() > 0.9  # ... flagged
+    assert np.array_equal(on.sky_mask[150:168, 85:100], off.sky_mask[150:168, 85:100])
+    lost = lost_line_obstacles(img, off.sky_mask, off.valid_mask, 21, standing=False)
+    assert not lost.standing.any()
+
+
 def test_an_edge_holds_a_feature_only_when_told() -> None:
     """A line cut by the image edge may be held out of the picture (a frame); in a panorama's
     band the edges are the seam and the zenith, which hold nothing."""
@@ -143,8 +164,8 @@ def test_an_edge_holds_a_feature_only_when_told() -> None:
     img[50:, :] = (70, 72, 75)  # ground: an obstacle in view, not touching the line
     sky = np.ones((60, 120), bool)
     sky[50:] = False
-    held = lost_line_obstacles(img, sky, np.ones_like(sky), 9)
-    free = lost_line_obstacles(img, sky, np.ones_like(sky), 9, edges_hold=False)
+    held = lost_line_obstacles(img, sky, np.ones_like(sky), 9).held
+    free = lost_line_obstacles(img, sky, np.ones_like(sky), 9, edges_hold=False).held
     assert held[20:24, 2:78].all() and not held[:18].any() and not held[26:50].any()
     assert not free.any()
 
