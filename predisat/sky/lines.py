@@ -67,8 +67,20 @@ class LostLines:
 
 
 def line_width_px(shape: tuple[int, int], work_side_px: int) -> int:
-    """Width of the black top-hat's element for a frame of ``shape`` (H, W) classified at a longest
-    side of ``work_side_px``: three working pixels, odd, at least 5 full-resolution pixels."""
+    """Side of the black top-hat's square element for a frame classified at a working size.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        The frame, pixels.
+    work_side_px : int
+        Longest side of the working image, pixels.
+
+    Returns
+    -------
+    int
+        Three working pixels in full-resolution pixels, odd, at least 5.
+    """
     if work_side_px < 1:
         raise ValueError(f"work_side_px must be >= 1, got {work_side_px}")
     scale = max(int(shape[0]), int(shape[1])) / float(work_side_px)
@@ -132,8 +144,9 @@ def lost_line_obstacles(
         )
     out = LostLines(np.zeros(sky.shape, bool), np.zeros(sky.shape, bool))
     cand_sky = sky & valid
-    if not cand_sky.any() or not (valid & ~sky).any():
-        return out  # nothing can hold a feature: no obstacle in view
+    seen_obstacle = valid & ~sky
+    if not cand_sky.any() or not (edges_hold or seen_obstacle.any()):
+        return out  # nothing can hold a feature
     lab3 = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2LAB)
     light = lab3[..., 0]
     # a square element is separable (a disc costs 25x more at the sizes of a 12 Mpx photo)
@@ -147,7 +160,7 @@ def lost_line_obstacles(
     if not resp.any():
         return out
     # what may hold a feature: a seen obstacle, or the image's (or circle's) edge
-    holder = (valid & ~sky).astype(np.uint8)
+    holder = seen_obstacle.astype(np.uint8)
     if edges_hold:
         holder[0, :] = holder[-1, :] = holder[:, 0] = holder[:, -1] = 1
     if edges_hold and not valid.all():
@@ -162,9 +175,9 @@ def lost_line_obstacles(
         return out
     held = np.zeros(n, bool)
     held[np.unique(lab[near_holder & (lab > 0)])] = True
-    dist = cv2.distanceTransform(resp, cv2.DIST_L2, 3)
-    below = np.zeros_like(holder)
-    below[:-1] = holder[1:]  # an obstacle pixel right under each pixel
+    dist = cv2.distanceTransform(resp, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    below = np.zeros(sky.shape, bool)
+    below[:-1] = seen_obstacle[1:]  # a seen obstacle right under each pixel (not the edge)
     keep = np.zeros(n, bool)
     stand = np.zeros(n, bool)
     for i in cand:
@@ -173,10 +186,11 @@ def lost_line_obstacles(
         x, y, w, h = (int(v) for v in stats[i, :4])
         box = lab[y : y + h, x : x + w] == i
         # the distance to the nearest background pixel is half the width plus half a pixel
+        # (exact for odd widths; an even width reads a pixel less)
         width = 2.0 * float(dist[y : y + h, x : x + w][box].max()) - 1.0
         if max(w, h) < min_elongation * max(width, 1.0):
             continue
         keep[i] = max(w, h) >= 2 * width_px
-        on_obstacle = (box[-1] & (below[y + h - 1, x : x + w] > 0)).any()
+        on_obstacle = (box[-1] & below[y + h - 1, x : x + w]).any()
         stand[i] = bool(standing and h >= 2 * w and on_obstacle)
     return LostLines(keep[lab] & cand_sky, stand[lab] & cand_sky)

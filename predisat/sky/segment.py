@@ -15,7 +15,8 @@ on one model's probability.
 2. ``p >= 0.5``, then connected-component rules: in an upright frame sky must touch the top
    edge (and not be a speck) or be a large region (sky under a bridge deck); obstacle specks
    enclosed by sky, and small hanging regions the classifier hesitated on (dark cloud bases),
-   become sky. Fisheye photos: sky gaps in foliage (step 4 below).
+   become sky. Fisheye photos: sky gaps in foliage (step 5 of GrabCut below; searched on the
+   classifier's sky, before the next step).
 3. Narrow obstacles the working size lost (a cantilever arm a few pixels wide) are found
    again at full resolution and turned back into obstacles (:mod:`predisat.sky.lines`, all
    methods; ``SkyOptions.line_contrast``).
@@ -33,15 +34,18 @@ on one model's probability.
    smooth bright region inside the lens circle is a seed.
 3. **GrabCut** (:func:`cv2.grabCut`) on a feature image (lightness, blueness, log-texture)
    rather than on BGR: facades that are as white as an overcast sky still differ in texture.
-4. **Sky gaps** (optional): pixels outside the GrabCut sky that match the sky colour model
-   and are brighter than their surroundings (a white top-hat): sky seen through foliage.
-5. **Thin-structure policy** (:func:`remove_thin_obstacles`): obstacle features narrower than
+4. **Narrow obstacles lost to the working size**, as for the learned methods
+   (:mod:`predisat.sky.lines`).
+5. **Sky gaps** (optional): pixels outside the GrabCut sky that match the sky colour model
+   and are brighter than their surroundings (a white top-hat): sky seen through foliage
+   (searched on the sky before step 4: that step only removes sky).
+6. **Thin-structure policy** (:func:`remove_thin_obstacles`): obstacle features narrower than
    ``thin_px`` pixels in the vertical *or* the horizontal direction, between sky on both sides,
    are catenary and power wires, cables and twigs, which do not block an L-band signal. They
    are counted as sky. Masts, poles and posts wider than ``thin_px`` stay obstacles. The
    test uses morphological openings with line elements, which remove thin features but leave
    the corners of large obstacles intact (a square element would shave them).
-6. **Skyline** (:func:`skyline_from_mask`): per column, the boundary above the highest
+7. **Skyline** (:func:`skyline_from_mask`): per column, the boundary above the highest
    obstacle pixel (see below), and a **confidence** (:func:`skyline_confidence`) from the
    colour contrast across it and the share of sky gaps just below it.
 
@@ -241,9 +245,11 @@ def segment_sky(
     sky &= valid
     if opt.refine_band_px > 0 and sky.any() and (valid & ~sky).any():
         sky = gc.refine_boundary(img, sky, valid, opt.refine_band_px)
+    # the gaps' sky colour model is the classifier's sky: the step only removes sky
+    gaps = gc.sky_gaps(img, sky, valid, opt) if opt.gaps and sky.any() else None
     sky = restore_lines(img, sky, valid, opt, working_side_px(opt, None))
-    if opt.gaps and sky.any():
-        sky |= gc.sky_gaps(img, sky, valid, opt)
+    if gaps is not None:
+        sky |= gaps
     raw = sky
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
     skyline = skyline_from_mask(sky, valid)
@@ -253,8 +259,19 @@ def segment_sky(
 
 
 def resolve_model(opt: SkyOptions, classifier: SkyModel | None) -> SkyModel | None:
-    """The probability model ``segment_sky`` uses: ``classifier``, else the shipped one of
-    ``opt.method`` (None for ``"grabcut"``)."""
+    """The probability model :func:`segment_sky` uses.
+
+    Parameters
+    ----------
+    opt : SkyOptions
+    classifier : SkyModel or None
+        A model given by the caller.
+
+    Returns
+    -------
+    SkyModel or None
+        ``classifier``, else the shipped model of ``opt.method``; None for ``"grabcut"``.
+    """
     if opt.method == "grabcut":
         return None
     if classifier is not None:
@@ -265,14 +282,16 @@ def resolve_model(opt: SkyOptions, classifier: SkyModel | None) -> SkyModel | No
 
 
 def working_side_px(opt: SkyOptions, classifier: SkyModel | None) -> int:
-    """Longest side, pixels, of the working image ``segment_sky`` classifies a frame at."""
+    """Longest side, pixels, of the working image :func:`segment_sky` classifies a frame at:
+    the model's ``max_side_px`` (:func:`resolve_model`), or ``opt.work_size_px`` for GrabCut."""
     model = resolve_model(opt, classifier)
     return opt.work_size_px if model is None else int(model.max_side_px)
 
 
 def restore_lines(
-    img: NDArray, sky: NDArray, valid: NDArray, opt: SkyOptions, work_side_px: int,
-    edges_hold: bool = True, thin_policy: Callable[[NDArray], NDArray] | None = None,
+    img: NDArray[np.uint8], sky: NDArray[np.bool_], valid: NDArray[np.bool_], opt: SkyOptions,
+    work_side_px: int, edges_hold: bool = True,
+    thin_policy: Callable[[NDArray[np.bool_]], NDArray[np.bool_]] | None = None,
 ) -> NDArray[np.bool_]:
     """``sky`` without the narrow obstacles a classification at ``work_side_px`` lost
     (:mod:`predisat.sky.lines`; unchanged when ``opt.line_contrast`` is 0).
@@ -281,10 +300,30 @@ def restore_lines(
     the policy would make the rest sky again, and a wire flagged thin would bound the far field
     (``docs/reconstruction.md``, section 13). Upright features standing on an obstacle (poles,
     far masts; not in an upward fisheye photo, which has no "below") come back whole, so that
-    the policy flags their thin parts and the reconstruction's Fresnel rule decides.
-    ``thin_policy`` maps a sky mask to the same with thin obstacles removed (default
-    :func:`remove_thin_obstacles` with ``opt.thin_px + 1``: a feature's intensity profile is
-    about a pixel wider than it)."""
+    the policy flags their thin parts and the reconstruction's Fresnel rule decides. With the
+    policy off (``opt.thin_px = 0``) every lost feature comes back.
+
+    Parameters
+    ----------
+    img : ndarray, shape (H, W, 3) uint8
+        The frame (BGR).
+    sky, valid : ndarray of bool, shape (H, W)
+        The classifier's sky and the segmented pixels.
+    opt : SkyOptions
+    work_side_px : int
+        Longest side of the working image the frame was classified at (:func:`working_side_px`).
+    edges_hold : bool
+        Whether the image's edges hold a feature (False for a panorama's band).
+    thin_policy : callable, optional
+        Maps a sky mask to the same with thin obstacles removed; default
+        :func:`remove_thin_obstacles` with ``opt.thin_px + 1`` (a feature's intensity profile is
+        about a pixel wider than it).
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        A new mask, a subset of ``sky``.
+    """
     if opt.line_contrast <= 0:
         return sky
     lost = lost_line_obstacles(
@@ -292,7 +331,9 @@ def restore_lines(
         opt.line_min_elongation, edges_hold, standing=not opt.fisheye,
     )  # fmt: skip
     back = lost.standing
-    if lost.held.any():
+    if lost.held.any() and opt.thin_px == 0:
+        back = back | lost.held  # no policy: every lost feature is an obstacle
+    elif lost.held.any():
         # a feature's intensity profile spreads over about one pixel more than its width
         # (optics, anti-aliasing, JPEG): the policy is applied one pixel wider here
         policy = thin_policy or (lambda m: remove_thin_obstacles(m, opt.thin_px + 1))
@@ -349,9 +390,11 @@ def _learned_sky(
             small_hole |= uncertain & (mean_p >= opt.uncertain_hole_probability)
         if small_hole.any():
             cc.paint(sky, small_hole, True)
+    # the gaps' sky colour model is the classifier's sky: the step only removes sky
+    gaps = gc.sky_gaps(img, sky, valid, opt) if opt.gaps and sky.any() else None
     sky = restore_lines(img, sky, valid, opt, working_side_px(opt, classifier))
-    if opt.gaps and sky.any():
-        sky |= gc.sky_gaps(img, sky, valid, opt)
+    if gaps is not None:
+        sky |= gaps
     raw = sky
     sky = remove_thin_obstacles(sky, opt.thin_px) & valid
     return sky, prob, sky & ~raw

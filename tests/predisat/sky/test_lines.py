@@ -92,6 +92,8 @@ def test_a_free_wire_cloud_texture_and_a_thin_arm_stay_as_the_classifier_said() 
         solid[50:52, :250] = False  # the thin arm is no solid obstacle for the policy
         grown = cv2.dilate(solid.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         assert not (changed & ~grown).any()  # at most the mast's edge the classifier shaved
+        assert off.thin_mask is not None and on.thin_mask is not None
+        assert np.array_equal(on.thin_mask[48:54, 120:248], off.thin_mask[48:54, 120:248])
 
 
 def test_restored_pixels_are_obstacles_of_rendered_frames(test_data) -> None:
@@ -153,6 +155,55 @@ def test_a_pole_standing_on_the_skyline_comes_back_flagged_thin() -> None:
     assert np.array_equal(on.sky_mask[150:168, 85:100], off.sky_mask[150:168, 85:100])
     lost = lost_line_obstacles(img, off.sky_mask, off.valid_mask, 21, standing=False)
     assert not lost.standing.any()
+
+
+def test_the_step_never_adds_sky_even_through_the_sky_gaps() -> None:
+    """The sky gaps' colour model is the classifier's sky: restoring dark arms must not shift
+    it so that foliage gaps of a colour near its edge turn into sky (found in review: 432 such
+    pixels when the gaps were searched after the step)."""
+    rng = np.random.default_rng(0)
+    img = np.zeros((H, W, 3))
+    img[:] = (215, 160, 100)
+    img += rng.normal(0.0, 1.5, img.shape)
+    obstacle = np.zeros((H, W), bool)
+    obstacle[170:] = True
+    obstacle[20:, 290:302] = True
+    for r in range(30, 160, 12):
+        obstacle[r : r + 5, 40:290] = True  # a comb of arms held by the mast
+    img[obstacle] = (70, 72, 75)
+    img[175:235, 20:280] = (40, 90, 50)  # foliage with gaps of a near-sky colour
+    for r in range(180, 230, 15):
+        for c in range(30, 270, 20):
+            img[r : r + 3, c : c + 3] = (208, 162, 96)
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    clf = _CoarseClassifier()
+    opt = SkyOptions(method="learned", detect_gaps=True)
+    on = segment_sky(img, opt, clf)
+    off = segment_sky(img, replace(opt, line_contrast=0.0), clf)
+    assert (off.sky_mask & ~on.sky_mask).any()  # the step restored arms
+    assert not (on.sky_mask & ~off.sky_mask).any()  # and added no sky
+
+
+def test_only_a_feature_resting_on_a_seen_obstacle_stands() -> None:
+    """Upright streaks floating in the sky, in the middle or at the frame's edge, do not
+    stand; one resting on the ground does; a squat blob on the ground does not."""
+    img = np.zeros((80, 120, 3), np.uint8)
+    img[:] = (220, 160, 100)
+    img[60:] = (70, 72, 75)
+    sky = np.ones((80, 120), bool)
+    sky[60:] = False
+    grey = (70, 72, 75)
+    img[20:41, 30] = grey  # floating, middle
+    img[20:41, 0] = grey  # floating, at the edge
+    img[35:60, 80] = grey  # standing on the ground
+    img[55:60, 100:106] = grey  # squat blob on the ground
+    lost = lost_line_obstacles(img, sky, np.ones_like(sky), 9, standing=True)
+    assert lost.standing[36:59, 80].all()
+    assert not lost.standing[:, :2].any() and not lost.standing[:, 25:35].any()
+    assert not lost.standing[:, 95:110].any()
+    before = (img.copy(), sky.copy())
+    lost_line_obstacles(img, sky, np.ones_like(sky), 9, standing=True)
+    assert np.array_equal(img, before[0]) and np.array_equal(sky, before[1])  # untouched
 
 
 def test_an_edge_holds_a_feature_only_when_told() -> None:
