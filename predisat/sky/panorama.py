@@ -111,7 +111,7 @@ def segment_panorama(
         band_sky = restore_lines(
             band, sky[:rows], np.ones((rows, w), bool), opt,
             round(working_side_px(opt, model) * max(rows, w) / max(rows, tile_w)),
-            edges_hold=False,
+            edges_hold=False, wrap=True,
             thin_policy=lambda m: remove_thin_obstacles_equirect(
                 np.concatenate([m, np.ones((h - rows, w), bool)]), opt.thin_px + 1
             )[:rows],

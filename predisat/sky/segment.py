@@ -76,7 +76,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.sky import grabcut as gc
 from predisat.sky import perceptron  # perceptron.sky_probability: looked up at call time
-from predisat.sky.lines import line_width_px, lost_line_obstacles
+from predisat.sky.lines import LostLines, line_width_px, lost_line_obstacles
 from predisat.sky.morphology import RunComponents, remove_thin_obstacles
 from predisat.sky.network import SkyEnsemble, SkyNet
 from predisat.sky.options import METHODS, SkyOptions
@@ -292,6 +292,7 @@ def restore_lines(
     img: NDArray[np.uint8], sky: NDArray[np.bool_], valid: NDArray[np.bool_], opt: SkyOptions,
     work_side_px: int, edges_hold: bool = True,
     thin_policy: Callable[[NDArray[np.bool_]], NDArray[np.bool_]] | None = None,
+    wrap: bool = False,
 ) -> NDArray[np.bool_]:
     """``sky`` without the narrow obstacles a classification at ``work_side_px`` lost
     (:mod:`predisat.sky.lines`; unchanged when ``opt.line_contrast`` is 0).
@@ -318,6 +319,9 @@ def restore_lines(
         Maps a sky mask to the same with thin obstacles removed; default
         :func:`remove_thin_obstacles` with ``opt.thin_px + 1`` (a feature's intensity profile is
         about a pixel wider than it).
+    wrap : bool
+        The columns wrap round (a 360-degree panorama's band): a feature across the seam is
+        looked at whole.
 
     Returns
     -------
@@ -326,10 +330,19 @@ def restore_lines(
     """
     if opt.line_contrast <= 0:
         return sky
+    width = line_width_px(img.shape[:2], work_side_px)
+    pad = min(img.shape[1] // 2, 8 * width) if wrap else 0
+    if pad:
+        cols = np.arange(-pad, img.shape[1] + pad) % img.shape[1]
+        img_w, sky_w, valid_w = img[:, cols], sky[:, cols], valid[:, cols]
+    else:
+        img_w, sky_w, valid_w = img, sky, valid
     lost = lost_line_obstacles(
-        img, sky, valid, line_width_px(img.shape[:2], work_side_px), opt.line_contrast,
-        opt.line_min_elongation, edges_hold, standing=not opt.fisheye,
+        img_w, sky_w, valid_w, width, opt.line_contrast, opt.line_min_elongation, edges_hold,
+        standing=not opt.fisheye,
     )  # fmt: skip
+    if pad:
+        lost = LostLines(lost.held[:, pad:-pad], lost.standing[:, pad:-pad])
     back = lost.standing
     if lost.held.any() and opt.thin_px == 0:
         back = back | lost.held  # no policy: every lost feature is an obstacle

@@ -206,6 +206,26 @@ def test_only_a_feature_resting_on_a_seen_obstacle_stands() -> None:
     assert np.array_equal(img, before[0]) and np.array_equal(sky, before[1])  # untouched
 
 
+def test_a_panorama_arm_across_the_seam_is_looked_at_whole() -> None:
+    """The band wraps round: an arm held by a mast just left of the seam keeps its part right
+    of it (columns 0..)."""
+    h, w = 180, 360
+    rng = np.random.default_rng(5)
+    img = np.zeros((h, w, 3))
+    img[:] = np.array([215.0, 160.0, 100.0]) + rng.normal(0.0, 1.5, (h, w, 3))
+    grey = np.array([70.0, 72.0, 75.0])
+    img[95:] = grey
+    img[30:95, w - 16 : w - 10] = grey  # a mast left of the seam
+    img[32:36, w - 10 :] = grey  # its arm, to the seam ...
+    img[32:36, :60] = grey  # ... and on past it
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    opt = SkyOptions(method="learned", thin_px=1)
+    on = segment_panorama(img, opt, _CoarseClassifier(48))
+    off = segment_panorama(img, replace(opt, line_contrast=0.0), _CoarseClassifier(48))
+    assert off.sky_mask[32:36, 5:55].mean() > 0.8
+    assert on.sky_mask[32:36, 5:55].mean() < 0.1
+
+
 def test_an_edge_holds_a_feature_only_when_told() -> None:
     """A line cut by the image edge may be held out of the picture (a frame); in a panorama's
     band the edges are the seam and the zenith, which hold nothing."""
