@@ -175,7 +175,7 @@ def lost_line_obstacles(
         return out
     held = np.zeros(n, bool)
     held[np.unique(lab[near_holder & (lab > 0)])] = True
-    dist = cv2.distanceTransform(resp, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    dist = cv2.distanceTransform(resp, cv2.DIST_L2, cv2.DIST_MASK_5)
     below = np.zeros(sky.shape, bool)
     below[:-1] = seen_obstacle[1:]  # a seen obstacle right under each pixel (not the edge)
     keep = np.zeros(n, bool)
