@@ -42,6 +42,8 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.sky.morphology import RunComponents
+
 __all__ = ["LostLines", "line_width_px", "lost_line_obstacles"]
 
 _BLUER_MAX = 8
@@ -166,31 +168,25 @@ def lost_line_obstacles(
     if edges_hold and not valid.all():
         holder |= (cv2.dilate((~valid).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & valid
     near_holder = cv2.dilate(holder, elem) > 0
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(resp, connectivity=8)
-    length = np.maximum(stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT])
-    upright = stats[1:, cv2.CC_STAT_HEIGHT] >= 2 * stats[1:, cv2.CC_STAT_WIDTH]
-    cand = np.flatnonzero((length >= 2 * width_px) | (standing & upright & (length >= width_px)))
-    cand += 1
-    if cand.size == 0:
+    cc = RunComponents.of(resp.astype(bool), connectivity=8)
+    w_box, h_box = cc.right - cc.left, cc.bottom - cc.top
+    length = np.maximum(w_box, h_box)
+    upright = h_box >= 2 * w_box
+    cand = (length >= 2 * width_px) | (standing & upright & (length >= width_px))
+    cand &= cc.touching(near_holder)  # held
+    if not cand.any():
         return out
-    held = np.zeros(n, bool)
-    held[np.unique(lab[near_holder & (lab > 0)])] = True
     dist = cv2.distanceTransform(resp, cv2.DIST_L2, cv2.DIST_MASK_5)
+    # the distance to the nearest background pixel is half the width plus half a pixel (exact
+    # for odd widths; an even width reads a pixel less)
+    width = 2.0 * cc.maxes(dist, cand) - 1.0
+    cand &= length >= min_elongation * np.maximum(width, 1.0)
+    keep = cand & (length >= 2 * width_px)
     below = np.zeros(sky.shape, bool)
     below[:-1] = seen_obstacle[1:]  # a seen obstacle right under each pixel (not the edge)
-    keep = np.zeros(n, bool)
-    stand = np.zeros(n, bool)
-    for i in cand:
-        if not held[i]:
-            continue
-        x, y, w, h = (int(v) for v in stats[i, :4])
-        box = lab[y : y + h, x : x + w] == i
-        # the distance to the nearest background pixel is half the width plus half a pixel
-        # (exact for odd widths; an even width reads a pixel less)
-        width = 2.0 * float(dist[y : y + h, x : x + w][box].max()) - 1.0
-        if max(w, h) < min_elongation * max(width, 1.0):
-            continue
-        keep[i] = max(w, h) >= 2 * width_px
-        on_obstacle = (box[-1] & below[y + h - 1, x : x + w]).any()
-        stand[i] = bool(standing and h >= 2 * w and on_obstacle)
-    return LostLines(keep[lab] & cand_sky, stand[lab] & cand_sky)
+    lowest = cc.row == cc.bottom[cc.label] - 1  # the runs of each component's lowest row
+    stand = cand & upright & cc.touching(below, lowest) if standing else np.zeros(cc.n, bool)
+    held_mask, stand_mask = np.zeros(sky.shape, bool), np.zeros(sky.shape, bool)
+    cc.paint(held_mask, keep, True)
+    cc.paint(stand_mask, stand, True)
+    return LostLines(held_mask, stand_mask)

@@ -135,6 +135,24 @@ class RunComponents:
         return np.asarray(_sum_runs(v, self.row, self.start, self.stop, self.label,
                                     np.asarray(select, np.bool_)))  # fmt: skip
 
+    def maxes(self, values: NDArray, select: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Largest of ``values`` (2-D, the shape the components came from) over each selected
+        component, as float64; ``-inf`` for the others."""
+        v = np.ascontiguousarray(values)
+        return np.asarray(_max_runs(v, self.row, self.start, self.stop, self.label,
+                                    np.asarray(select, np.bool_)))  # fmt: skip
+
+    def touching(self, mask: NDArray[np.bool_], runs: NDArray[np.bool_] | None = None) -> NDArray:
+        """Per component, whether any of its pixels (of the runs ``runs`` selects, shape
+        (n_runs,); default all) is True in ``mask`` (2-D, the shape the components came
+        from); shape (n,) of bool."""
+        cs = np.cumsum(np.asarray(mask, bool), axis=1, dtype=np.int32)
+        before = np.where(self.start > 0, cs[self.row, np.maximum(self.start - 1, 0)], 0)
+        hit = cs[self.row, self.stop - 1] > before
+        if runs is not None:
+            hit &= np.asarray(runs, bool)
+        return np.bincount(self.label, weights=hit, minlength=self.n) > 0
+
 
 @njit(cache=True, nogil=True)
 def _find_root(parent: NDArray, i: int) -> int:
@@ -227,6 +245,23 @@ def _paint_runs(
             line = mask[row[i]]
             for c in range(start[i], stop[i]):
                 line[c] = value
+
+
+@njit(cache=True, nogil=True)
+def _max_runs(
+    values: NDArray, row: NDArray, start: NDArray, stop: NDArray, label: NDArray,
+    select: NDArray,
+) -> NDArray:  # fmt: skip
+    out = np.full(select.size, -np.inf)
+    for i in range(row.size):
+        q = label[i]
+        if select[q]:
+            line = values[row[i]]
+            for c in range(start[i], stop[i]):
+                v = np.float64(line[c])
+                if v > out[q]:
+                    out[q] = v
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -86,6 +86,21 @@ def test_run_components_match_opencv_regions_areas_and_boxes(connectivity: int) 
         sums = cc.sums(values, sel)
         ref = np.bincount(lbl.ravel(), values.ravel(), n)[first]
         assert np.array_equal(sums[sel], ref[sel]) and not sums[~sel].any()  # bit for bit
+        # largest value and "touches a mask" per region, against the label image
+        maxes = cc.maxes(values, sel)
+        ref_max = np.full(n, -np.inf)
+        np.maximum.at(ref_max, lbl.ravel(), values.ravel().astype(np.float64))
+        assert np.array_equal(maxes[sel], ref_max[first][sel]) and np.isneginf(maxes[~sel]).all()
+        probe = rng.random((h, w)) < 0.05
+        touched = np.zeros(n, bool)
+        touched[np.unique(lbl[probe & m])] = True
+        np.testing.assert_array_equal(cc.touching(probe), touched[first])
+        lowest = cc.row == cc.bottom[cc.label] - 1  # runs in each region's lowest row
+        low = np.zeros(n, bool)
+        for q in range(cc.n):
+            r = int(cc.bottom[q]) - 1
+            low[first[q]] = bool((probe[r] & (lbl[r] == first[q])).any())
+        np.testing.assert_array_equal(cc.touching(probe, lowest), low[first])
 
 
 def _reference_learned_rules(
