@@ -94,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     truth_dir, own = _folders(args.world)
     tm = TrueMasks.load(truth_dir / "true_masks.npz")
     s = np.asarray(tm.chainage_m, float)
+    if args.swept and (args.offset_m != 5.0 or len(s) < 3):
+        raise SystemExit("--swept needs --offset-m 5 (the cell edges of 10 m cells) and at "
+                         "least 3 positions")  # fmt: skip
     cached = dict(np.load(args.cache)) if args.cache is not None and args.cache.exists() else {}
     world = None
 
@@ -123,8 +126,6 @@ def main(argv: list[str] | None = None) -> int:
         }
         print(path)
         if args.swept:
-            if args.offset_m != 5.0 or len(s) < 3:
-                raise SystemExit("--swept needs --offset-m 5 (the cell edges of 10 m cells)")
             i = np.arange(1, len(s) - 1)
             swept = np.max(np.stack([
                 tm.mask_el_deg[i], cast("inner_minus_2.5", s[i] - 2.5),
