@@ -62,6 +62,11 @@ def _masks(args: argparse.Namespace) -> Any:
 def _config(args: argparse.Namespace, profile: Any = None) -> Any:
     """The run configuration; with the data's ``profile`` (a ReceiverProfile), the error model
     must apply to it for a safety claim (else every epoch is flagged ``NO_ERROR_MODEL``)."""
+    return _config_and_model(args, profile)[0]
+
+
+def _config_and_model(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[str, Any]]:
+    """:func:`_config` and the error model's record for ``run.json`` (:func:`_model_use`)."""
     from locator.fde import LocatorConfig
     from locator.partition import MAX_STRETCHES
     from locator.run import RunConfig
@@ -71,12 +76,13 @@ def _config(args: argparse.Namespace, profile: Any = None) -> Any:
     model = mf.model if profile is None else mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
-    applies = True
+    locator = LocatorConfig(model=model, budget=integrity_budget(args))
+    use, record = "calibrated", dict[str, Any]()
     if profile is not None:
-        applies = _model_applies(mf, profile, args)
+        use, record = _model_use(mf, profile, args, _deepest_k(locator))
     trust = "masks" if args.masks else ("cutoff" if args.cutoff is not None else "none")
-    return RunConfig(
-        LocatorConfig(model=model, budget=integrity_budget(args)),
+    cfg = RunConfig(
+        locator,
         integrity=args.integrity,
         trust=trust,
         cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
@@ -84,9 +90,23 @@ def _config(args: argparse.Namespace, profile: Any = None) -> Any:
         trust_stretches=args.trust_stretches or MAX_STRETCHES,
         start_uncertainty_m=args.start_uncertainty,
         heading_check=not args.no_heading_check,
-        error_model_applies=applies,
+        error_model_applies=use != "none",
+        error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
         model_el_min_deg=mf.el_min_deg,
     )
+    return cfg, record
+
+
+def _deepest_k(locator: Any) -> float:
+    """The widest pair interval's ``k`` a claim may rest on: under a budget, that of the
+    claiming mode with the fewest independent pairs (all pairs of 4-5 satellites; a best pair
+    of 2-3 never claims); the fixed ``k`` otherwise."""
+    from predisat.availability.interval import INDEPENDENT_PAIRS, IntervalMode
+
+    if locator.budget is None:
+        return float(locator.model.k_sigma)
+    pairs = min(n for mode, n in INDEPENDENT_PAIRS.items() if mode != IntervalMode.BEST_PAIR)
+    return float(locator.budget.k_sigma(pairs))
 
 
 def _split_text(cfg: Any) -> str:
@@ -95,13 +115,44 @@ def _split_text(cfg: Any) -> str:
     return f" in at most {n} stretches" if n > 1 else ""
 
 
-def _model_applies(mf: Any, profile: Any, args: argparse.Namespace) -> bool:
-    """Whether the model may support a safety claim on data of ``profile``; tells why not."""
+def _model_use(mf: Any, profile: Any, args: argparse.Namespace,
+               k_max: float) -> tuple[str, dict[str, Any]]:  # fmt: skip
+    """How the model may support claims on data of ``profile``, and why, for ``run.json``.
+
+    ``"calibrated"``: it applies, tails checked at least as deep as ``k_max`` claims;
+    ``"gaussian_tail"``: it applies, the claims rest on its Gaussian tail beyond the checked
+    depth (``--assume-gaussian-tail``); ``"forced"``: it does not apply and
+    ``--force-error-model`` was given (not a safety claim); ``"none"``: no claim.
+    """
     import math
 
     name = args.error_model or "the built-in model (a = b = 2 m, the simulator's noise)"
     why = mf.mismatches(profile)
-    if why and not args.force_error_model:
+    short = [] if why else mf.depth_shortfall(profile.systems, k_max)
+    assume = getattr(args, "assume_gaussian_tail", False)
+    if why:
+        use = "forced" if args.force_error_model else "none"
+    else:
+        use = "gaussian_tail" if short and assume else ("none" if short else "calibrated")
+    record: dict[str, Any] = {
+        "file": args.error_model or "built-in",
+        "use": use,
+        "data": profile.describe(),
+        "mismatches": list(why),
+        "depth_shortfall": list(short),
+        "k_sigma_max": round(k_max, 4),
+        "systems": {
+            s: {
+                "n_independent": m.n_independent,
+                "tail_probability": (
+                    m.tail_probability if math.isfinite(m.tail_probability) else None
+                ),
+            }
+            for s, m in sorted(mf.systems.items())
+            if s in profile.systems
+        },
+    }
+    if use == "none" and why:
         print(
             f"locator run: NO SAFETY CLAIM: {name} does not apply to this data "
             f"({profile.describe()}): {'; '.join(why)}. Positions are given, every epoch flagged "
@@ -111,19 +162,52 @@ def _model_applies(mf: Any, profile: Any, args: argparse.Namespace) -> bool:
             "to claim under a model not calibrated for this data: not safe)",
             file=sys.stderr,
         )
-        return False
-    if why:
-        print(f"locator run: warning: --force-error-model: claims under {name}, which does not "
-              f"apply to this data: {'; '.join(why)}", file=sys.stderr)  # fmt: skip
-    for sys_ in profile.systems:
-        m = mf.systems.get(sys_)
-        if m is not None and not math.isnan(m.tail_probability):
-            checked = (f"its tails were checked to {m.tail_probability:.2g} per pseudorange"
-                       if m.tail_probability < 1 else "too few independent samples to check "
-                       "any tail")  # fmt: skip
-            print(f"locator run: error model for {sys_}: {m.n_independent} independent samples, "
-                  f"{checked}", file=sys.stderr)  # fmt: skip
-    return True
+    elif use == "none":
+        print(
+            f"locator run: NO SAFETY CLAIM: the integrity risk asks for pair intervals of k up "
+            f"to {k_max:.2f}, deeper than {name} was checked: {'; '.join(short)}. Positions "
+            "are given, every epoch flagged NO_ERROR_MODEL. Calibrate on more data, claim a "
+            "larger risk (--integrity-risk, or --k-sigma within the checked k), or pass "
+            "--assume-gaussian-tail to claim under the Gaussian shape beyond the checked depth "
+            "(recorded in run.json, every epoch flagged GAUSSIAN_TAIL; docs/errormodel.md)",
+            file=sys.stderr,
+        )
+    elif use == "forced":
+        print(f"locator run: warning: --force-error-model: intervals under {name}, which does "
+              f"not apply to this data: {'; '.join(why)}. NOT A SAFETY CLAIM: every epoch is "
+              "flagged FORCED_ERROR_MODEL and run.json records it", file=sys.stderr)  # fmt: skip
+    elif use == "gaussian_tail":
+        print(f"locator run: warning: --assume-gaussian-tail: {'; '.join(short)}. The claims "
+              "rest on the Gaussian shape beyond that depth: every epoch is flagged "
+              "GAUSSIAN_TAIL and run.json records it", file=sys.stderr)  # fmt: skip
+    own = _calibrated_on(mf, getattr(args, "obs", None) or getattr(args, "device_gnss", None))
+    if own and use != "none":
+        print(f"locator run: warning: {name} was calibrated on {own}, the data of this run: "
+              "its claims here are no independent check of the model (validate on other days "
+              "or receivers: docs/errormodel.md, leave one receiver out)", file=sys.stderr)
+        record["calibrated_on_this_data"] = True
+    if use in ("calibrated", "gaussian_tail"):
+        for sys_ in profile.systems:
+            m = mf.systems.get(sys_)
+            if m is not None and not math.isnan(m.tail_probability):
+                print(f"locator run: error model for {sys_}: {m.n_independent} independent "
+                      f"samples, its tails were checked to {m.tail_probability:.2g} per "
+                      "pseudorange", file=sys.stderr)  # fmt: skip
+    return use, record
+
+
+def _calibrated_on(mf: Any, data: str | None) -> str:
+    """The input of the model's calibration that is the run's data file ("" if none)."""
+    if data is None or mf.applicability is None:
+        return ""
+    target = Path(data).resolve()
+    for src in mf.applicability.sources:
+        try:
+            if Path(src).resolve() == target:
+                return str(src)
+        except OSError:  # a source path the machine cannot resolve is not this file
+            continue
+    return ""
 
 
 def _progress(total: int, quiet: bool, desc: str) -> Any:
@@ -202,6 +286,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from locator.run import claim_label
     from locator.sathia import AntennaPath
     from locator.sources import RinexSource, SimSource
     from locator.workflow import check_track, run_to_folder, static_truth
@@ -268,7 +353,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             check_track(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
-    cfg = _config(args, _profile(source, args))
+    cfg, model_record = _config_and_model(args, _profile(source, args))
     masks = _masks(args)
     if masks is not None:
         from predisat.availability.run import check_masks_on_track
@@ -282,6 +367,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
             masks=masks, fmt=args.format, progress=bar.update,
+            meta={"error_model": model_record},
         )  # fmt: skip
     claim = epochs["claim"].mean()
     length = epochs.loc[epochs["claim"], "length_m"]
@@ -290,7 +376,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if len(length)
         else "no interval claimed"
     )
-    print(f"{len(epochs)} epochs: safety claim {100 * claim:.1f} %, {lengths} -> {folder}")
+    print(f"{len(epochs)} epochs: {claim_label(cfg.error_model_caveat)} {100 * claim:.1f} %, "
+          f"{lengths} -> {folder}")
     print(_losses_text(epochs), end="")
     return 0
 
@@ -483,17 +570,19 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         sim = SimRun.read(args.sim)
     truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv, chainage_m=args.truth_chainage)
     s = evaluate_folder(args.run, truth)
-    print(_summary_text(s))
+    print(_summary_text(s, str(meta.get("config", {}).get("error_model_caveat", ""))))
     print(f"-> {Path(args.run) / 'evaluation.json'}, scored table and figures")
     return 0
 
 
-def _summary_text(s: dict[str, float]) -> str:
+def _summary_text(s: dict[str, float], caveat: str = "") -> str:
+    from locator.run import claim_label
+
     return (
         f"epochs {s['epochs']:.0f}; modes: three pairs {100 * s['mode_three_pairs_share']:.1f} %, "
         f"all pairs {100 * s['mode_all_pairs_share']:.1f} %, best pair (no claim) "
         f"{100 * s['mode_best_pair_share']:.1f} %, none {100 * s['mode_none_share']:.1f} %\n"
-        f"safety claim {100 * s['claim_share']:.1f} % of epochs; interval median "
+        f"{claim_label(caveat)} {100 * s['claim_share']:.1f} % of epochs; interval median "
         f"{s['length_median_m']:.1f} m, p95 {s['length_p95_m']:.1f} m, "
         f"max {s['length_max_m']:.1f} m\n"
         f"|error| median {s['abs_error_median_m']:.2f} m, p95 {s['abs_error_p95_m']:.2f} m; "
@@ -506,7 +595,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from locator.errorfit import simulated_residuals, station_residuals
-    from locator.workflow import calibrate_to_file
+    from locator.workflow import ImplausibleFitError, calibrate_to_file
 
     if not (args.k_sigma > 0 and np.isfinite(args.k_sigma)):
         raise CliError(
@@ -562,7 +651,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         data, stations = [], []
         for path in args.obs:
             obs = Observations.from_rinex(path)
-            x = np.array(args.station, float) if args.station else obs.header.approx_position_ecef_m
+            head = obs.header.approx_position_ecef_m
+            if args.station:
+                x = _station_ecef_m(args.station, head, path)
+            else:
+                x = head
             if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 6e6:
                 fix = (
                     "pass --station X Y Z"
@@ -582,12 +675,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             data, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted,
             receiver_class=cls, pool_systems=bool(args.sim),
         )  # fmt: skip
+    except ImplausibleFitError as exc:
+        raise CliError(f"{exc}; check --station or the input's reference position") from None
     except ValueError as exc:
         raise CliError(
             f"{exc} (command line: give more or longer --obs / --sim / --device-gnss inputs, a few "
             "hundred "
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
+    _check_calibration(mf, data)
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     app = mf.applicability
     assert app is not None
@@ -609,6 +705,44 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"k_sigma {mf.model.k_sigma} -> {args.out} (figure "
           f"{Path(args.out).with_suffix('.png')})")  # fmt: skip
     return 0
+
+
+# A station given this far from the header's approximate position is likely a typo.
+_STATION_HEADER_M = 100.0
+
+
+def _station_ecef_m(station: Any, header_ecef_m: Any, path: str) -> Any:
+    """``--station X Y Z`` checked: ECEF metres, near the header's position when it has one."""
+    import numpy as np
+
+    x = np.asarray(station, float)
+    r = float(np.linalg.norm(x))
+    if not 6.2e6 < r < 6.5e6:
+        hint = ("; did you give kilometres? (multiply by 1000)" if 6.2e3 < r < 6.5e3
+                else "")  # fmt: skip
+        raise CliError(f"--station {' '.join(f'{v:g}' for v in x)}: {r / 1000:.1f} km from the "
+                       "Earth's centre, not a position on it; give the antenna's ECEF X Y Z in "
+                       f"metres{hint}")  # fmt: skip
+    h = np.asarray(header_ecef_m, float)
+    if np.all(np.isfinite(h)) and np.linalg.norm(h) > 6e6:
+        d = float(np.linalg.norm(x - h))
+        if d > _STATION_HEADER_M:
+            print(f"locator calibrate: warning: --station is {d:.0f} m from the approximate "
+                  f"position in {path}'s header; residuals at a wrong station are no error "
+                  "model (check the coordinates)", file=sys.stderr)  # fmt: skip
+    return x
+
+
+def _check_calibration(mf: Any, data: Any) -> None:
+    """Say which systems the data held and the model left out."""
+    from predisat.availability.satellites import SYSTEM_NAMES
+
+    seen = sorted({s[0] for d in data for s in d.sats})
+    left = [c for c in seen if c not in mf.systems]
+    if left:
+        print("locator calibrate: left out (too few residuals in epochs with 3 satellites of "
+              f"it): {', '.join(SYSTEM_NAMES.get(c, c) for c in left)}; the model covers "
+              f"{', '.join(SYSTEM_NAMES.get(c, c) for c in mf.systems)} only", file=sys.stderr)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -659,8 +793,14 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    "calibrated model make no safety claim; the file's k_sigma is not used: see "
                    "--integrity-risk)")
     p.add_argument("--force-error-model", action="store_true",
-                   help="claim under --error-model even when it does not apply to the data "
-                   "(another receiver, antenna, code, or a locator-error-model/1 file): not safe")
+                   help="intervals under --error-model even when it does not apply to the data "
+                   "(another receiver, antenna, code, or a locator-error-model/1 file): not a "
+                   "safety claim; every epoch is flagged FORCED_ERROR_MODEL")
+    p.add_argument("--assume-gaussian-tail", action="store_true",
+                   help="claim even where the integrity risk asks for pair intervals wider than "
+                   "the model's tails were checked to (the Gaussian shape assumed beyond that "
+                   "depth; every epoch flagged GAUSSIAN_TAIL, run.json records it; default: no "
+                   "safety claim there)")
     p.add_argument("--receiver-class", choices=("geodetic", "automotive", "phone"),
                    help="the data's receiver class, for a model calibrated for a class "
                    "(default: guessed, phone for smartphone logs, otherwise none)")

@@ -200,7 +200,8 @@ def stanford_counts(scored: pd.DataFrame, alert_limit_m: float | None = None) ->
 # Why an epoch has no safety claim, first matching cause first: the flag bits of
 # locator.fde.FixFlag and locator.run.RunFlag, by name.
 _LOSS_CAUSES = (
-    ("NO_ERROR_MODEL", "no calibrated error model applies to the data (`locator calibrate`)"),
+    ("NO_ERROR_MODEL", "no calibrated error model applies to the data and the risk claimed "
+     "(`locator calibrate`)"),
     ("TOO_FEW", "fewer than 2 trusted satellites"),
     ("FAULT_DETECTED", "fault detected and not isolated (NLOS, or an error model tighter than "
      "the ranges)"),
@@ -211,7 +212,10 @@ _LOSS_CAUSES = (
     ("UNBOUNDED", "interval reaching the search window's end"),
     ("AMBIGUOUS", "a pair cutting the track twice"),
     ("NO_ROOT", "a pair not cutting the track"),
-)  # fmt: skip
+)
+# after "2-3 satellites": a stretch's few satellites are the cause of its missing claim
+_STRETCH_CAUSE = ("NO_STRETCH_CLAIM", "no stretch of the predicted interval with a claim of "
+                  "its own (partitioned trust)")  # fmt: skip  # fmt: skip
 
 
 def claim_losses(epochs: pd.DataFrame) -> dict[str, float]:
@@ -236,8 +240,10 @@ def claim_losses(epochs: pd.DataFrame) -> dict[str, float]:
     for names, n_used in zip(lost["flag_names"].astype(str), lost["n_used"], strict=True):
         flags = set(names.split("|"))
         cause = next((text for flag, text in _LOSS_CAUSES if flag in flags), None)
-        if cause is None:
-            cause = "2-3 satellites (a fix without claim)" if n_used < 4 else "other"
+        if cause is None and n_used < 4:
+            cause = "2-3 satellites (a fix without claim)"
+        elif cause is None:
+            cause = _STRETCH_CAUSE[1] if _STRETCH_CAUSE[0] in flags else "other"
         counts[cause] = counts.get(cause, 0) + 1
     return {k: v / n for k, v in sorted(counts.items(), key=lambda kv: -kv[1])}
 

@@ -65,7 +65,16 @@ from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import MaskSet
 
-__all__ = ["TRUST_MODES", "Odometer", "RunConfig", "RunFlag", "flag_names", "run_locator"]
+__all__ = [
+    "ERROR_MODEL_CAVEATS",
+    "TRUST_MODES",
+    "Odometer",
+    "RunConfig",
+    "RunFlag",
+    "claim_label",
+    "flag_names",
+    "run_locator",
+]
 
 TRUST_MODES = ("masks", "cutoff", "none")
 
@@ -75,6 +84,27 @@ class RunFlag(IntFlag):
 
     ODOMETRY_CONFLICT = 1 << 16  # the claimed interval misses the odometry prediction
     NO_ERROR_MODEL = 1 << 17  # no calibrated error model applies to the data: no claim
+    FORCED_ERROR_MODEL = 1 << 18  # intervals under a model forced onto data it does not fit
+    GAUSSIAN_TAIL = 1 << 19  # claims beyond the depth the model's tails were checked to
+    NO_STRETCH_CLAIM = 1 << 20  # partitioned trust: no stretch's claim holds a part of its own
+
+
+ERROR_MODEL_CAVEATS = {
+    "": "safety claim",
+    "forced": "intervals under a forced error model (not a safety claim)",
+    "gaussian_tail": "safety claim under the assumed Gaussian tail",
+}
+"""What a run's ``claim`` column means, by :attr:`RunConfig.error_model_caveat`."""
+
+
+def claim_label(caveat: str) -> str:
+    """``"safety claim"``, or what the claims are under a caveat (:data:`ERROR_MODEL_CAVEATS`)."""
+    try:
+        return ERROR_MODEL_CAVEATS[caveat]
+    except KeyError:
+        raise ValueError(
+            f"caveat must be one of {sorted(ERROR_MODEL_CAVEATS)}, got {caveat!r}"
+        ) from None
 
 
 def flag_names(flags: int) -> str:
@@ -134,6 +164,11 @@ class RunConfig:
     model_el_min_deg : float
         Lowest elevation the error model was calibrated at; satellites below it are left out
         (``below_model``), since their sigma would be an extrapolation.
+    error_model_caveat : {"", "forced", "gaussian_tail"}
+        What the claims rest on beyond a model that applies: ``"forced"``, a model that does
+        not apply, forced by the user (every epoch flagged ``FORCED_ERROR_MODEL``: not a safety
+        claim); ``"gaussian_tail"``, pair intervals wider than the model's tails were checked
+        to, under its Gaussian shape (flagged ``GAUSSIAN_TAIL``). ``""``: neither.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -152,6 +187,7 @@ class RunConfig:
     fusion: bool = True
     error_model_applies: bool = True
     model_el_min_deg: float = 0.0
+    error_model_caveat: str = ""
 
     def __post_init__(self) -> None:
         if self.integrity not in INTEGRITY_MODES:
@@ -175,6 +211,12 @@ class RunConfig:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
         if not 0.0 <= self.model_el_min_deg < 90.0:
             raise ValueError(f"model_el_min_deg must be in [0, 90), got {self.model_el_min_deg}")
+        if self.error_model_caveat not in ERROR_MODEL_CAVEATS:
+            raise ValueError(f"error_model_caveat must be one of {sorted(ERROR_MODEL_CAVEATS)}, "
+                             f"got {self.error_model_caveat!r}")  # fmt: skip
+        if self.error_model_caveat and not self.error_model_applies:
+            raise ValueError("error_model_caveat is for claims under a model; with "
+                             "error_model_applies=False there is none")  # fmt: skip
 
     def to_dict(self) -> JsonDict:
         d = dataclasses.asdict(self)
@@ -190,6 +232,9 @@ _HEADING_FAIL = HeadingStatus.FAIL
 _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
+_NO_STRETCH_FLAGS = int(RunFlag.NO_STRETCH_CLAIM | FixFlag.NO_SAFETY_CLAIM)
+_CAVEAT_FLAGS = {"forced": int(RunFlag.FORCED_ERROR_MODEL),
+                 "gaussian_tail": int(RunFlag.GAUSSIAN_TAIL)}  # fmt: skip
 _NO_CLAIM_FLAGS = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
 _NO_FIX_FLAGS = int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM)
 _NONE_NAME = IntervalMode.NONE.name.lower()
@@ -420,6 +465,8 @@ def _check(
         status = _CONFLICT
     if not cfg.error_model_applies:
         flags |= _NO_MODEL_FLAGS
+    elif cfg.error_model_caveat:
+        flags |= _CAVEAT_FLAGS[cfg.error_model_caveat]
     claim = claim and not flags & _NO_CLAIM_FLAGS
     row.update(flags=flags, flag_names=flag_names(flags), claim=bool(claim))
     return status
@@ -483,7 +530,7 @@ def _split_fix(
     if comb.claim or comb.conflict:
         fix = dataclasses.replace(fix, lo_m=comb.lo_m, hi_m=comb.hi_m)
     else:  # no claim (none, or the hull is the prediction): the fix's own interval
-        fix = dataclasses.replace(fix, flags=fix.flags | FixFlag.NO_SAFETY_CLAIM)
+        fix = dataclasses.replace(fix, flags=fix.flags | _NO_STRETCH_FLAGS)
     return fix, sets[comb.chosen], uncorrected, comb.conflict
 
 

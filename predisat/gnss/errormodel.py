@@ -336,6 +336,42 @@ class ErrorModelFile:
             ]
         return self.applicability.mismatches(profile, self.systems)
 
+    def depth_shortfall(self, systems: Sequence[str], k_sigma: float) -> list[str]:
+        """Why intervals of width ``k_sigma`` claim a smaller risk than ``systems``' models were
+        checked to (empty: every one was checked at least that deep).
+
+        A system's tail was checked to :attr:`SystemModel.tail_probability` per pseudorange
+        (two-sided ``k`` :attr:`SystemModel.k_checked`); a wider interval rests on the Gaussian
+        shape beyond that depth, an extrapolation that heavy tails break
+        (``docs/errormodel.md``). A system without a checked depth (NaN: the simulator's own
+        noise model, or a least-squares estimate, which :meth:`mismatches` already refuses)
+        gives no reason here.
+
+        Parameters
+        ----------
+        systems : sequence of str
+            System letters of the data.
+        k_sigma : float
+            The smallest ``k`` of the claim's pair intervals.
+        """
+        if not k_sigma > 0:
+            raise ValueError(f"k_sigma must be positive, got {k_sigma}")
+        from scipy.stats import norm  # lazy: slow import, only for this check
+
+        need = float(2.0 * norm.sf(k_sigma))  # two-sided probability per pseudorange
+        why = []
+        for sys_ in sorted(set(systems)):
+            m = self.systems.get(sys_)
+            if m is None or not 0.0 < m.tail_probability < 1.0 or m.k_checked >= k_sigma:
+                continue
+            why.append(
+                f"system {sys_} was checked to {m.tail_probability:.2g} per pseudorange "
+                f"(k {m.k_checked:.2f}, {m.n_independent} independent samples); k {k_sigma:.2f} "
+                f"claims {need:.1g}, which needs about {10.0 / need:.2g} independent samples in "
+                "each elevation bin"
+            )
+        return why
+
     def for_systems(self, systems: Sequence[str]) -> IntervalModel:
         """The envelope model of ``systems`` (all of the file's models when none is known)."""
         ms = [self.systems[s].error for s in systems if s in self.systems]

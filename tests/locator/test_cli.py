@@ -28,6 +28,7 @@ from predisat.gnss.errormodel import (
     read_error_model,
     write_error_model,
 )
+from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 from predisat.track.map import demo_track
 from tests.locator._scene import canyon_world
 
@@ -147,6 +148,29 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     assert exc.value.code == 2 and "--station is for one --obs file" in capsys.readouterr().err
 
 
+def test_calibrate_refuses_a_station_in_km_or_far_from_the_truth(test_data, tmp_path, capsys):
+    from locator.observations import Observations
+
+    obs = str(test_data / "gnss_obs" / "07590920_10ep.05o")
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    out = tmp_path / "m.json"
+    head = Observations.from_rinex(obs).header.approx_position_ecef_m
+    base = ["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate", "--out", str(out)]
+    # the header's position in km: named as such, nothing written
+    assert main([*base, "--station", *(f"{v / 1000:.4f}" for v in head)]) == 2
+    assert "did you give kilometres" in capsys.readouterr().err and not out.exists()
+    # 3 km east of the truth: the residuals are kilometres, no receiver's noise; refused
+    east = head + 3000.0 * np.array([-np.sin(np.arctan2(head[1], head[0])),
+                                     np.cos(np.arctan2(head[1], head[0])), 0.0])  # fmt: skip
+    assert main([*base, "--station", *(f"{v:.3f}" for v in east)]) == 2
+    err = capsys.readouterr().err
+    assert "3000 m from the approximate position" in err and "is wrong" in err
+    assert not out.exists() and not out.with_suffix(".png").exists()
+    # the header's own position is accepted, without a warning
+    assert main([*base, "--station", *(f"{v:.3f}" for v in head)]) == 0
+    assert "warning" not in capsys.readouterr().err and out.exists()
+
+
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
     # a missing trust rule, input file or source: refused by the parser, before any work
     for argv, expected in [
@@ -252,12 +276,13 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     assert ((ep["lo_m"] <= 1000.0) & (1000.0 <= ep["hi_m"])).all()
     assert main(["evaluate", str(tmp_path / "real"), "--truth-chainage", "1000"]) == 0
     assert "epochs 10" in capsys.readouterr().out
-    # a model stating this receiver, antenna and code claims; another antenna does not
+    # a model stating this receiver, antenna and code, its tails checked deeper than the
+    # default budget's widest pair interval, claims; another antenna does not
     e = ErrorModel(2.0, 2.0)
-    sys_g = {"G": SystemModel(e, ("C1",), 1000, 100, 0.05)}
 
-    def model(name: str, antenna: str) -> str:
+    def model(name: str, antenna: str, tail: float = 1e-7) -> str:
         app = Applicability(("TRIMBLE 5700",), (antenna,), el_min_deg=5.0)
+        sys_g = {"G": SystemModel(e, ("C1",), 1000, 100, tail)}
         return str(write_error_model(tmp_path / name, IntervalModel(e), systems=sys_g,
                                      applicability=app))  # fmt: skip
 
@@ -269,6 +294,37 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
         assert ep["claim"].all() == claims and ep["claim"].any() == claims
         assert meta["config"]["model_el_min_deg"] == 5.0
     assert "antenna 'TRM29659.00' is not among" in capsys.readouterr().err
+    # the same model checked only to 0.05 per pseudorange (k 1.96): the budget's k 3.78-4.82
+    # lies beyond it, so no claim unless the Gaussian tail is assumed, or a k within it asked
+    shallow = model("shallow.json", "TRM29659.00", 0.05)
+    k_deep = IntegrityBudget(DEFAULT_RISK_PER_EPOCH).k_sigma(2)
+    for extra, claims, flag in (([], False, "NO_ERROR_MODEL"),
+                                (["--assume-gaussian-tail"], True, "GAUSSIAN_TAIL"),
+                                (["--k-sigma", "1.9"], True, None)):  # fmt: skip
+        run = str(tmp_path / f"shallow{len(extra)}")
+        assert main([*args[:-1], run, "--error-model", shallow, *extra]) == 0
+        ep, meta = read_run(run)
+        assert ep["claim"].all() == claims and ep["claim"].any() == claims
+        rec = meta["error_model"]
+        assert rec["file"] == shallow and rec["systems"]["G"]["tail_probability"] == 0.05
+        if flag is None:
+            assert rec["use"] == "calibrated" and not rec["depth_shortfall"]
+            assert not ep["flag_names"].str.contains("GAUSSIAN_TAIL|NO_ERROR_MODEL").any()
+        else:
+            assert ep["flag_names"].str.contains(flag).all()
+            assert rec["k_sigma_max"] == pytest.approx(k_deep, abs=1e-4)
+            assert "checked to 0.05 per pseudorange" in rec["depth_shortfall"][0]
+    out, err = capsys.readouterr()
+    assert "NO SAFETY CLAIM" in err and "--assume-gaussian-tail" in err
+    assert "safety claim under the assumed Gaussian tail 100.0 %" in out
+    assert "was calibrated on" not in err
+    # a model made from this very file: its claims are no independent check, and it is said
+    app = Applicability(("TRIMBLE 5700",), ("TRM29659.00",), el_min_deg=5.0, sources=(str(obs),))
+    own = write_error_model(tmp_path / "own.json", IntervalModel(e), applicability=app,
+                            systems={"G": SystemModel(e, ("C1",), 1000, 100, 1e-7)})  # fmt: skip
+    assert main([*args[:-1], str(tmp_path / "own"), "--error-model", str(own)]) == 0
+    assert "was calibrated on" in capsys.readouterr().err
+    assert read_run(tmp_path / "own")[1]["error_model"]["calibrated_on_this_data"] is True
     # a locator-error-model/1 file says nothing of what it was calibrated for: no claim unless
     # forced, and the message says so
     old = tmp_path / "v1.json"
@@ -279,8 +335,16 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     assert "locator-error-model/1" in capsys.readouterr().err
     assert main([*args[:-1], str(tmp_path / "v1f"), "--error-model", str(old),
                  "--force-error-model"]) == 0  # fmt: skip
-    assert read_run(tmp_path / "v1f")[0]["claim"].all()
-    assert "--force-error-model" in capsys.readouterr().err
+    ep, meta = read_run(tmp_path / "v1f")
+    # forced: intervals given, but recorded and flagged as what they are, never a safety claim
+    assert ep["claim"].all() and ep["flag_names"].str.contains("FORCED_ERROR_MODEL").all()
+    assert meta["error_model"]["use"] == "forced" and meta["error_model"]["mismatches"]
+    assert meta["config"]["error_model_caveat"] == "forced"
+    out, err = capsys.readouterr()
+    assert "--force-error-model" in err and "NOT A SAFETY CLAIM" in err
+    assert "not a safety claim) 100.0 %" in out and "epochs: safety claim" not in out
+    assert main(["evaluate", str(tmp_path / "v1f"), "--truth-chainage", "1000"]) == 0
+    assert "intervals under a forced error model (not a safety claim)" in capsys.readouterr().out
 
 
 def test_start_and_truth_chainages_off_the_track_or_masks_are_refused(sim_dir, tmp_path, capsys):

@@ -9,6 +9,7 @@ import pytest
 from predisat.gnss.errormodel import (
     Applicability,
     ErrorModel,
+    ErrorModelFile,
     ErrorModelFileError,
     IntervalModel,
     ReceiverProfile,
@@ -118,3 +119,23 @@ def test_unchecked_tails_and_estimates_support_no_claim(tmp_path):
                           systems={"G": GPS}, applicability=est)  # fmt: skip
     (why,) = read_error_model_file(p).mismatches(_profile())
     assert "estimate" in why
+
+
+def test_depth_shortfall_compares_the_claims_k_with_the_checked_tail():
+    from scipy.stats import norm
+
+    e = ErrorModel(1.0, 1.0)
+    systems = {"G": SystemModel(e, ("C1C",), 5000, 3000, 0.019),
+               "E": SystemModel(e, ("C1C",), 5000, 900, 1e-5),
+               "S": SystemModel(e, ("sim",), 0, 0, float("nan"))}  # fmt: skip
+    mf = ErrorModelFile(IntervalModel(e), systems, Applicability(("R",), ("A",)))
+    k_g = norm.isf(0.019 / 2)  # 2.35: the two-sided k of G's checked tail
+    k_e = norm.isf(1e-5 / 2)  # 4.42
+    assert mf.depth_shortfall(["G", "E"], k_g - 0.01) == []
+    (only_g,) = mf.depth_shortfall(["G", "E"], 0.5 * (k_g + k_e))
+    assert only_g.startswith("system G was checked to 0.019") and "3000 independent" in only_g
+    assert len(mf.depth_shortfall(["G", "E"], k_e + 0.01)) == 2
+    # the simulator's own noise model has no checked depth to fall short of
+    assert mf.depth_shortfall(["S"], 7.0) == [] and mf.depth_shortfall(["J"], 7.0) == []
+    with pytest.raises(ValueError, match="k_sigma"):
+        mf.depth_shortfall(["G"], 0.0)
