@@ -75,12 +75,23 @@ def read_table(folder: Path, name: str) -> pd.DataFrame:
     return read_folder_table(folder, name, RunFileError, "`locator run`")
 
 
+# What `locator evaluate` adds to a run folder (module docstring).
+_EVALUATION_FILES = ("scored.parquet", "scored.csv", "evaluation.json", "stanford.png")
+
+
 def write_run(
     epochs: pd.DataFrame, folder: str | Path, meta: Mapping[str, object], fmt: str = "parquet"
 ) -> Path:
-    """Write a run folder (table and ``run.json``); returns the folder."""
+    """Write a run folder (table and ``run.json``); returns the folder.
+
+    An earlier run's scoring in the folder (``scored``, ``evaluation.json``, ``stanford.png``)
+    is removed: it described other epochs.
+    """
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
+    # a re-run into the same folder: the scoring of the previous run no longer describes it
+    for stale in _EVALUATION_FILES:
+        (out / stale).unlink(missing_ok=True)
     write_table(epochs, out, "epochs", fmt)
     _write_json(out / "run.json", {"format": RUN_FORMAT, "software_version": __version__, **meta})
     return out

@@ -50,6 +50,18 @@ def test_run_round_trip(tmp_path, fmt):
     assert not (tmp_path / "r" / f"epochs.{fmt}").exists()
 
 
+def test_a_rerun_removes_the_previous_runs_scoring(tmp_path):
+    folder = tmp_path / "r"
+    write_run(epochs(), folder, {})
+    stale = ["scored.parquet", "scored.csv", "evaluation.json", "stanford.png"]
+    for name in stale:  # as `locator evaluate` leaves them
+        (folder / name).write_text("old")
+    (folder / "notes.txt").write_text("mine")
+    write_run(epochs(), folder, {})
+    assert not any((folder / name).exists() for name in stale)
+    assert (folder / "notes.txt").read_text() == "mine"  # what the run did not write stays
+
+
 def test_run_json_is_strict_json(tmp_path):
     meta = {"summary": {"length_median_m": np.float64("nan"), "n": np.int64(3),
                         "bounds": [1.0, float("inf")]}}  # fmt: skip
