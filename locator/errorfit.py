@@ -323,9 +323,9 @@ def fit_systems(
                                   float(el[ok].min()), float(el[ok].max()))  # fmt: skip
     if not out:
         raise ValueError(
-            "fit_systems: no system has enough residuals in epochs with 3 satellites of it for "
-            f"the fit{' and its overbound' if bound == 'overbound' else ''}; give more or "
-            "longer data sets"
+            f"no system ({', '.join(letters)}) has enough residuals in epochs with 3 satellites "
+            f"of it for the fit{' and its overbound' if bound == 'overbound' else ''}; give "
+            "more or longer data sets"
         )
     return out
 

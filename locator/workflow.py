@@ -52,6 +52,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEMO_RANGE_M",
+    "ImplausibleFitError",
     "calibrate_to_file",
     "check_track",
     "demo",
@@ -247,6 +248,10 @@ def evaluate_folder(
     return summary
 
 
+class ImplausibleFitError(ValueError):
+    """A fitted error model no receiver could have (:func:`calibrate_to_file`)."""
+
+
 def calibrate_to_file(
     data: Sequence[Residuals],
     out: str | Path,
@@ -257,6 +262,7 @@ def calibrate_to_file(
     receiver_class: str = "",
     confidence: float | None = 0.95,
     pool_systems: bool = False,
+    max_sigma_m: float = 50.0,
 ) -> ErrorModelFile:
     """Fit the error model per constellation, write it (JSON) and its figure (``.png``).
 
@@ -266,11 +272,26 @@ def calibrate_to_file(
     file states what it applies to (receivers, antennas, ``receiver_class``, codes, elevations)
     and, per system, the independent samples and the tail probability checked.
     ``pool_systems``: one fit for every system (:func:`locator.errorfit.fit_systems`).
+
+    Raises
+    ------
+    ImplausibleFitError
+        When a system's ``a`` or ``b`` exceeds ``max_sigma_m`` (nothing is written): residuals
+        that large come from a wrong reference position, not from a receiver.
     """
     fits = fit_systems(data, bound=bound, confidence=confidence, pool_systems=pool_systems)
     model, systems, app = model_file_parts(
         fits, data, k_sigma=k_sigma, receiver_class=receiver_class, method=bound
     )
+    big = {c: max(m.error.a_m, m.error.b_m) for c, m in systems.items()
+           if not max(m.error.a_m, m.error.b_m) <= max_sigma_m}  # fmt: skip
+    if big:
+        raise ImplausibleFitError(
+            f"the fitted pseudorange sigma reaches {max(big.values()):.0f} m "
+            f"({', '.join(sorted(big))}; above {max_sigma_m:g} m no receiver is that poor): the "
+            "position the residuals were taken at is wrong (a station's coordinates, a header "
+            f"position, a truth file); {out} was not written"
+        )
     info: JsonDict = {**dict(fitted or {}), "bound": bound, "confidence": confidence}
     for sys_, f in fits.items():
         if f.system != sys_:  # pooled: stated once, under its letters
