@@ -396,13 +396,20 @@ def constellation(value: str) -> str:
     )
 
 
-def constellation_label(value: str) -> str:
-    """The systems of a :func:`constellation` selection by name (``"GPS, Galileo"``)."""
-    from predisat.availability.satellites import CONSTELLATIONS, SYSTEM_NAMES
+def constellation_letters(value: str) -> str:
+    """The system letters of a :func:`constellation` selection (``"gps+galileo"`` -> ``"GE"``)."""
+    from predisat.availability.satellites import CONSTELLATIONS
 
     key = value.strip().lower()
     letters = CONSTELLATIONS.get(key, "".join(c for c in value.upper() if c not in " ,+;"))
-    return ", ".join(SYSTEM_NAMES.get(c, c) for c in dict.fromkeys(letters))
+    return "".join(dict.fromkeys(letters))
+
+
+def constellation_label(value: str) -> str:
+    """The systems of a :func:`constellation` selection by name (``"GPS, Galileo"``)."""
+    from predisat.availability.satellites import SYSTEM_NAMES
+
+    return ", ".join(SYSTEM_NAMES.get(c, c) for c in constellation_letters(value))
 
 
 def chainage_hint(value_m: float, lo_m: float, hi_m: float, option: str) -> str:

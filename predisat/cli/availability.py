@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -11,6 +12,8 @@ from predisat.availability.run import AvailabilityRun, run_availability
 from predisat.cli.args import (
     TIME_HELP,
     constellation,
+    constellation_label,
+    constellation_letters,
     cutoff_deg,
     existing_file,
     existing_path,
@@ -24,7 +27,7 @@ from predisat.cli.args import (
     storage_options,
     url_or,
 )
-from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model
+from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model_file
 from predisat.track import TrackMap
 
 __all__ = ["add_arguments", "run"]
@@ -126,7 +129,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         to_m=None if args.to_km is None else args.to_km * 1000.0,
         sky_km=args.sky_km,
         interval_every=args.interval_every,
-        interval_model=_interval_model(args.error_model, args.k_sigma),
+        interval_model=_interval_model(args.error_model, args.k_sigma, args.constellation),
         integrity=integrity_budget(args),
         workers=args.workers,
         scheduler=args.scheduler,
@@ -137,13 +140,34 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
     )
 
 
-def _interval_model(error_model: str | None, k_sigma: float | None) -> IntervalModel:
-    """``--error-model`` / ``--k-sigma``: the file's model (or the default), its k replaced."""
+def _interval_model(error_model: str | None, k_sigma: float | None,
+                    constellation: str = "gps") -> IntervalModel:  # fmt: skip
+    """``--error-model`` / ``--k-sigma``: the file's model of the counted systems (or the
+    default), its k replaced. A file without a model of a counted system is refused; one that
+    bounds no checked tail is used with a warning (its lengths are then no bound)."""
     if error_model is not None:
         try:
-            model = read_error_model(error_model)
+            mf = read_error_model_file(error_model)
         except ErrorModelFileError as exc:
             raise ValueError(f"--error-model: {exc}") from None
+        letters = constellation_letters(constellation)
+        missing = [c for c in letters if mf.systems and c not in mf.systems]
+        if missing:
+            raise ValueError(
+                f"--error-model {error_model}: no model of {constellation_label(''.join(missing))}"
+                f" (the file holds {constellation_label(''.join(sorted(mf.systems)))}), which "
+                f"--constellation {constellation} counts; calibrate those systems (`locator "
+                "calibrate --constellation ...`) or count only the file's"
+            )
+        unbounded = sorted(c for c in letters if c in mf.systems
+                           and not 0.0 < mf.systems[c].tail_probability < 1.0)  # fmt: skip
+        if mf.applicability is None or mf.applicability.method == "estimate" or unbounded:
+            what = (f"no tail of {constellation_label(''.join(unbounded))} was checked"
+                    if unbounded else "it is not a checked overbound")  # fmt: skip
+            print(f"predisat availability: warning: --error-model {error_model}: {what}; the "
+                  "predicted interval lengths are not bounds (docs/errormodel.md)",
+                  file=sys.stderr)  # fmt: skip
+        model = mf.for_systems(list(letters))
     else:
         model = IntervalModel()
     if k_sigma is not None:

@@ -421,6 +421,54 @@ def test_interval_model_from_a_locator_error_model_file(
             parser.parse_args([*base, "--k-sigma", k, "--out", str(tmp_path / "x")])
 
 
+def test_an_error_model_must_hold_every_counted_system(
+    tmp_path: Path, masks: MaskSet, track: TrackMap, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.gnss.errormodel import (
+        Applicability,
+        ErrorModel,
+        IntervalModel,
+        SystemModel,
+        write_error_model,
+    )
+
+    path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
+            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet",
+            "--k-sigma", "2"]  # fmt: skip
+    app = Applicability(("R1",), ("A1",))
+
+    def model(name: str, systems: dict[str, tuple[float, float]]) -> str:
+        sm = {c: SystemModel(ErrorModel(a, a), ("C1C",), 1000, 300, tail)
+              for c, (a, tail) in systems.items()}  # fmt: skip
+        top = max(a for a, _ in systems.values())  # the envelope of every system
+        env = IntervalModel(ErrorModel(top, top), 2.0)
+        return str(write_error_model(tmp_path / name, env, systems=sm, applicability=app))
+
+    # a BeiDou-only model does not bound GPS intervals: refused, naming both
+    beidou = model("c.json", {"C": (3.0, 0.01)})
+    with pytest.raises(ValueError, match=r"no model of GPS.*holds BeiDou"):
+        run_from_args(parser.parse_args([*base, "--error-model", beidou, "--out",
+                                         str(tmp_path / "c")]), track)  # fmt: skip
+    # the counted system's own model is used, not the file's envelope
+    both = model("gc.json", {"G": (4.0, 0.01), "C": (9.0, 0.01)})
+    plain = model("g.json", {"G": (4.0, 0.01)})
+    runs = [run_from_args(parser.parse_args([*base, "--error-model", m, "--out",
+                                             str(tmp_path / n)]), track)
+            for m, n in ((both, "gc"), (plain, "g"))]  # fmt: skip
+    a, b = (r.results[0].interval_m for r in runs)
+    assert np.isfinite(a).sum() > 10
+    np.testing.assert_allclose(a, b, rtol=1e-9)
+    assert "warning" not in capsys.readouterr().err
+    # a model whose GPS tail was never checked is used, and said to bound nothing
+    unchecked = model("u.json", {"G": (4.0, 1.0)})
+    run_from_args(parser.parse_args([*base, "--error-model", unchecked, "--out",
+                                     str(tmp_path / "u")]), track)  # fmt: skip
+    err = capsys.readouterr().err
+    assert "no tail of GPS was checked" in err and "not bounds" in err
+
+
 def test_the_integrity_budget_sets_each_modes_k(
     tmp_path: Path, masks: MaskSet, track: TrackMap
 ) -> None:
