@@ -16,6 +16,8 @@ from typing import Any
 from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
 from locator.demostep import format_demo_table
+from locator.modelcheck import model_applies as _model_applies
+from locator.modelcheck import sim_profile
 from predisat import __version__
 from predisat.cli.args import (
     TIME_HELP,
@@ -93,37 +95,6 @@ def _split_text(cfg: Any) -> str:
     """`` in at most N stretches`` for a partitioned masks rule (docs/locator.md)."""
     n = cfg.trust_stretches if cfg.trust == "masks" else 1
     return f" in at most {n} stretches" if n > 1 else ""
-
-
-def _model_applies(mf: Any, profile: Any, args: argparse.Namespace) -> bool:
-    """Whether the model may support a safety claim on data of ``profile``; tells why not."""
-    import math
-
-    name = args.error_model or "the built-in model (a = b = 2 m, the simulator's noise)"
-    why = mf.mismatches(profile)
-    if why and not args.force_error_model:
-        print(
-            f"locator run: NO SAFETY CLAIM: {name} does not apply to this data "
-            f"({profile.describe()}): {'; '.join(why)}. Positions are given, every epoch flagged "
-            "NO_ERROR_MODEL. Make a model for this receiver with `locator calibrate --obs FILE "
-            "--nav NAV` (static observations of the same receiver, antenna and codes at a known "
-            "position; docs/errormodel.md) and pass it with --error-model (or --force-error-model "
-            "to claim under a model not calibrated for this data: not safe)",
-            file=sys.stderr,
-        )
-        return False
-    if why:
-        print(f"locator run: warning: --force-error-model: claims under {name}, which does not "
-              f"apply to this data: {'; '.join(why)}", file=sys.stderr)  # fmt: skip
-    for sys_ in profile.systems:
-        m = mf.systems.get(sys_)
-        if m is not None and not math.isnan(m.tail_probability):
-            checked = (f"its tails were checked to {m.tail_probability:.2g} per pseudorange"
-                       if m.tail_probability < 1 else "too few independent samples to check "
-                       "any tail")  # fmt: skip
-            print(f"locator run: error model for {sys_}: {m.n_independent} independent samples, "
-                  f"{checked}", file=sys.stderr)  # fmt: skip
-    return True
 
 
 def _progress(total: int, quiet: bool, desc: str) -> Any:
@@ -297,14 +268,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _profile(source: Any, args: argparse.Namespace) -> Any:
     """The receiver profile of a run's source (a simulation: the simulated receiver)."""
-    from locator.errorfit import receiver_profile, simulated_profile
+    from locator.errorfit import receiver_profile
     from locator.sources import SimSource
 
     if isinstance(source, SimSource):
-        from predisat.availability.satellites import select_satellites
-
-        used = select_satellites(source.sim.sats, source.constellation)
-        return simulated_profile(sorted({s[0] for s in used}))
+        return sim_profile(source.sim, source.constellation)
     from locator.devicegnss import DeviceGnssSource, device_profile
 
     if isinstance(source, DeviceGnssSource):  # a smartphone's log: class phone unless told

@@ -40,6 +40,8 @@ _SPACING_M = 120.0
 _ODOMETER = "trailer-radar"
 _ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
 _MAX_ACCEL_MPS2 = 1.5
+# the systems located with (locate_with_odometry's SimSource: every system of the run)
+_CONSTELLATION = "all"
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
@@ -109,8 +111,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     )
     p.add_argument("--error-model", type=existing_file("a pseudorange error model JSON written "
                    "by `locator calibrate`"), metavar="JSON",
-                   help="from `locator calibrate` (default: a = b = 2 m; its k_sigma is not "
-                   "used: see --integrity-risk)")  # fmt: skip
+                   help="from `locator calibrate` (default: a = b = 2 m, the simulator's: it "
+                   "applies to simulated receivers only; a model calibrated for another receiver "
+                   "gives no safety claim, as in `locator run`; its k_sigma is not used: see "
+                   "--integrity-risk)")  # fmt: skip
+    p.add_argument("--force-error-model", action="store_true",
+                   help="claim under --error-model even when it does not apply to the data "
+                   "(another receiver, antenna, code, or a locator-error-model/1 file): not safe")
     integrity_options(p)
     p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
@@ -152,11 +159,12 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from locator.balises.campaign import ODOMETERS, balises_to_folder
     from locator.balises.capture import CaptureConfig
     from locator.fde import LocatorConfig
+    from locator.modelcheck import model_applies, sim_profile
     from locator.odometry.confidence import OdometerAccuracy
     from locator.run import RunConfig
     from locator.sathia import AntennaPath
     from locator.sim.simfile import SimRun
-    from predisat.gnss.errormodel import IntervalModel, read_error_model
+    from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
     sim = SimRun.read(args.sim)
     track = _track(args)
@@ -177,12 +185,17 @@ def cmd_balises(args: argparse.Namespace) -> int:
         from predisat.masks.fileformat import read_masks
 
         masks = read_masks(args.masks)
-    model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    # the error model applies to the simulated receiver or gives no claim, as in `locator run`
+    mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
+    profile = sim_profile(sim, _CONSTELLATION)
+    model = mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
+    applies = model_applies(mf, profile, args, "locator balises")
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
     cfg = RunConfig(LocatorConfig(model=model, budget=integrity_budget(args)), trust=trust,
-                    cutoff_deg=args.cutoff if args.cutoff is not None else 15.0)  # fmt: skip
+                    cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
+                    error_model_applies=applies, model_el_min_deg=mf.el_min_deg)  # fmt: skip
     log, accuracy = None, None
     if args.odometer_log:
         from locator.odometry.logfile import read_odometer_log

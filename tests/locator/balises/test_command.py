@@ -129,3 +129,35 @@ def test_printed_summary_gives_the_capture_rate_in_percent():
     cells = dict(zip(header.split(), row.split(), strict=True))
     assert cells["capture_%"] == "91.7" and "capture_rate" not in cells
     assert cells["timing_abs_median_s"] == "0.012"
+
+
+def test_an_error_model_of_another_receiver_gives_no_claim_and_no_capture(sim_dir, tmp_path,
+                                                                          capsys):
+    # the rule of `locator run`: a model calibrated for another receiver does not apply to the
+    # simulated one, so no epoch claims and no balise is captured (unless forced)
+    from predisat.gnss.errormodel import (
+        Applicability,
+        ErrorModel,
+        IntervalModel,
+        SystemModel,
+        write_error_model,
+    )
+
+    e = ErrorModel(0.8, 0.3)
+    model = write_error_model(
+        tmp_path / "other.json", IntervalModel(e),
+        systems={s: SystemModel(e, ("C1C",), 1000, 100, 0.05) for s in "GRECJ"},
+        applicability=Applicability(("TRIMBLE NETR9",), ("ASH701073.1     SNOW",)),
+    )  # fmt: skip
+    base = ["-q", "balises", "--sim", str(sim_dir), "--masks",
+            str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--error-model", str(model)]
+    assert main([*base, "--out", str(tmp_path / "no")]) == 0
+    err = capsys.readouterr().err
+    assert "locator balises: NO SAFETY CLAIM" in err and "NETR9" in err
+    ep = pd.read_parquet(tmp_path / "no" / "epochs.parquet")
+    assert not ep["claim"].any()
+    caps = pd.read_csv(tmp_path / "no" / "captures.csv")
+    assert caps["passed"].any() and not caps["captured"].any()
+    assert main([*base, "--force-error-model", "--out", str(tmp_path / "forced")]) == 0
+    assert "--force-error-model" in capsys.readouterr().err
+    assert pd.read_parquet(tmp_path / "forced" / "epochs.parquet")["claim"].any()
