@@ -284,7 +284,8 @@ def balises_to_folder(
     scored = capture_table(run, balises, caps)
     summary = capture_summary(scored)
     run.epochs.to_parquet(folder / "epochs.parquet")
-    scored.to_csv(folder / "captures.csv", index=False, float_format="%.9g")
+    # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
+    scored.to_csv(folder / "captures.csv", index=False, float_format="%.17g")
     info = {
         "balises": balises.source, "n_balises": len(balises),
         "odometer": asdict(odo_cfg), "accuracy": asdict(run.accuracy),
