@@ -27,8 +27,9 @@ from predisat.cli.args import (
     non_negative_float,
     output_dir,
     positive_float,
+    requires,
 )
-from predisat.cli.common import track_option
+from predisat.cli.common import add_track_selection, track_option
 
 if TYPE_CHECKING:
     from predisat.track import TrackMap
@@ -58,6 +59,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "folder"), metavar="DIR", help="a `locator simulate` folder")  # fmt: skip
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's world.npz)")  # fmt: skip
+    add_track_selection(p)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--masks", type=existing_path("a mask file (e.g. the run's "
                    "true_masks.parquet) or a `predisat process` output folder"), metavar="MASKS",
@@ -124,9 +126,25 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     add_checks(
         p,
         needs("--max-accel", "max_accel", lambda a: given(a, "odometer_log"), "--odometer-log"),
+        requires("--track-name", "track_name", "--track FILE", "track"),
+        requires("--where", "where", "--track FILE", "track"),
+        _odometer_accuracy_check,
     )
     p.set_defaults(func=cmd_balises)
     return p
+
+
+def _odometer_accuracy_check(args: argparse.Namespace) -> str | None:
+    """``--odometer-accuracy``'s relative parts are fractions below 1 (5 % is 0.05)."""
+    if not args.odometer_accuracy:
+        return None
+    abs_m, over, under = args.odometer_accuracy
+    for name, value in (("OVER", over), ("UNDER", under)):
+        if value >= 1.0:
+            return (f"--odometer-accuracy {abs_m:g} {over:g} {under:g}: {name} {value:g} is no "
+                    f"share of the distance (below 1); give a fraction: {value:g} % is "
+                    f"{value / 100:g} (e.g. 5 0.05 0.05 for SUBSET-041)")  # fmt: skip
+    return None
 
 
 def format_summary(summary: pd.DataFrame) -> str:
@@ -144,7 +162,7 @@ def format_summary(summary: pd.DataFrame) -> str:
 def _track(args: argparse.Namespace) -> TrackMap:
     """``--track`` through the one track loader; else the simulation's world's, or line 144."""
     if args.track:
-        return track_option(args.track)
+        return track_option(args.track, args.track_name, args.chain, args.where)
     stored = Path(args.sim) / "world.npz"
     if stored.is_file():
         from predisat.synth.world import World  # lazy: the world needs the [synth] extra

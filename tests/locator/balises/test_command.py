@@ -181,3 +181,34 @@ def test_captures_csv_keeps_the_times_full_precision(sim_dir, tmp_path):
     for col in ("t_pass_s", "t_emit_s", "t_true_s", "timing_error_s", "chainage_m"):
         np.testing.assert_array_equal(back[col].to_numpy(float), scored[col].to_numpy(float))
     assert back["t_true_s"].notna().any() and back["t_pass_s"].notna().any()
+
+
+def test_track_name_selects_one_track_of_a_file_holding_several(sim_dir, tmp_path, capsys):
+    track = World.load(sim_dir / "world.npz").track
+    coords = np.column_stack([track.lon_deg, track.lat_deg]).tolist()
+    far = [[lon + 0.1, lat] for lon, lat in coords]  # another track, 7 km east
+    feats = [{"type": "Feature", "properties": {"trackname": name},
+              "geometry": {"type": "LineString", "coordinates": c}}
+             for name, c in (("A", coords), ("B", far))]  # fmt: skip
+    gj = tmp_path / "two.geojson"
+    gj.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    base = ["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25",
+            "--track", str(gj)]  # fmt: skip
+    assert main([*base, "--out", str(tmp_path / "x")]) == 2
+    assert "--track-name" in capsys.readouterr().err
+    assert main([*base, "--track-name", "A", "--out", str(tmp_path / "a")]) == 0
+    assert (tmp_path / "a" / "captures.csv").is_file()
+    # --track-name without --track is refused before any work
+    with pytest.raises(SystemExit):
+        main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--track-name", "A",
+              "--out", str(tmp_path / "y")])  # fmt: skip
+    assert "--track-name needs --track" in capsys.readouterr().err
+
+
+def test_odometer_accuracy_in_percent_is_refused_with_the_fraction(sim_dir, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--odometer-accuracy", "5",
+              "5", "5", "--out", str(tmp_path / "x")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "5 % is 0.05" in err and "OdometerAccuracy(" not in err
+
