@@ -8,9 +8,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 import pandas as pd
 
 from predisat.cli.args import (
@@ -32,6 +34,8 @@ from predisat.cli.args import (
 from predisat.cli.common import add_track_selection, track_option
 
 if TYPE_CHECKING:
+    from locator.balises.balisefile import BaliseList
+    from locator.sim.simfile import SimRun
     from predisat.track import TrackMap
 
 __all__ = ["add_parser", "cmd_balises", "format_summary"]
@@ -149,14 +153,21 @@ def _odometer_accuracy_check(args: argparse.Namespace) -> str | None:
 
 def format_summary(summary: pd.DataFrame) -> str:
     """The printed summary: one row per capture configuration, the capture rate in percent
-    (a fraction in ``summary.csv``), times in seconds with 3 decimals."""
-    cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
-            "delay_median_s", "delay_p95_s"]  # fmt: skip
-    t = summary[cols].copy()
-    t["capture_rate"] = 100.0 * t["capture_rate"]
+    (a fraction in ``summary.json``), false and hazardous captures, the epochs whose true front
+    end was outside the safe front interval (``front_outside``, when given), times in seconds
+    with 3 decimals; ``not reached`` for a configuration without a passage, ``-`` for a time
+    without a capture."""
+    cols = ["config", "passages", "captured", "capture_rate", "false", "hazardous",
+            "front_outside", "timing_abs_median_s", "delay_median_s", "delay_p95_s"]  # fmt: skip
+    t = summary[[c for c in cols if c in summary.columns]].copy()
+    rate = 100.0 * t["capture_rate"].to_numpy(float)
+    reached = t["passages"].to_numpy() > 0
+    t["capture_rate"] = [f"{r:.1f}" if ok else "not reached" for r, ok in zip(rate, reached,
+                                                                                strict=True)]
     t = t.rename(columns={"capture_rate": "capture_%"})
-    return str(t.to_string(index=False, float_format=lambda x: f"{x:.3f}",
-                           formatters={"capture_%": "{:.1f}".format}))  # fmt: skip
+    for c in ("timing_abs_median_s", "delay_median_s", "delay_p95_s"):
+        t[c] = [f"{x:.3f}" if np.isfinite(x) else "-" for x in t[c].to_numpy(float)]
+    return str(t.to_string(index=False))
 
 
 def _track(args: argparse.Namespace) -> TrackMap:
@@ -173,6 +184,8 @@ def _track(args: argparse.Namespace) -> TrackMap:
 
 def cmd_balises(args: argparse.Namespace) -> int:
     """Run ``locator balises``; prints the capture table."""
+    from tqdm import tqdm
+
     from locator.balises.balisefile import BaliseList
     from locator.balises.campaign import ODOMETERS, balises_to_folder
     from locator.balises.capture import CaptureConfig
@@ -228,13 +241,54 @@ def cmd_balises(args: argparse.Namespace) -> int:
         f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
         for r in args.radius
     }
-    summary, folder = balises_to_folder(
-        sim, path, balises, args.out, config=cfg, masks=masks,
-        odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed, log=log,
-        accuracy=accuracy,
-        meta={"sim": str(args.sim), "odometer_kind": str(args.odometer_log or args.odometer
-                                                          or _ODOMETER)},
-    )  # fmt: skip
+    quiet = bool(getattr(args, "quiet", False))
+    kind = str(args.odometer_log or args.odometer or _ODOMETER)
+    if not quiet:
+        print(f"locator balises: {sim.n_epoch} epochs, {len(balises)} balises, trust rule "
+              f"{trust}, odometer {kind}; locating (the first run also compiles the locator)",
+              flush=True)  # fmt: skip
+    with tqdm(total=sim.n_epoch, desc="locating", unit="epoch", disable=quiet,
+              mininterval=0.5) as bar:  # fmt: skip
+        summary, folder = balises_to_folder(
+            sim, path, balises, args.out, config=cfg, masks=masks,
+            odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed,
+            log=log, accuracy=accuracy, progress=bar.update,
+            meta={"sim": str(args.sim), "odometer_kind": kind},
+        )  # fmt: skip
     print(format_summary(summary))
+    for line in _summary_notes(summary, balises, sim):
+        print(line)
+    for line in _truth_warnings(summary, folder):
+        print(line, file=sys.stderr)
     print(f"-> {folder}")
     return 0
+
+
+def _summary_notes(summary: pd.DataFrame, balises: BaliseList, sim: SimRun) -> list[str]:
+    """A line on the balises the run never reached (they have no capture figures)."""
+    n = int(summary["not_reached"].max()) if len(summary) else 0
+    if n == 0:
+        return []
+    lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
+    return [f"not reached: {n} of {len(balises)} balises lie outside the run ({lo:.0f}-{hi:.0f} "
+            "m of chainage, less 30 m at each end): no passage, so no capture figures"]  # fmt: skip
+
+
+def _truth_warnings(summary: pd.DataFrame, folder: Path) -> list[str]:
+    """Loud lines when the simulated truth shows the location unsafe: the true front end
+    outside the safe front interval, or a hazardous capture."""
+    out = []
+    if len(summary) and int(summary["front_outside"].iloc[0]) > 0:
+        out.append(
+            f"locator balises: WARNING: the true front end was OUTSIDE the safe front interval "
+            f"at {int(summary['front_outside'].iloc[0])} of {int(summary['epochs'].iloc[0])} "
+            f"epochs ({folder / 'summary.json'}: safe_front): the location is not safe with "
+            "these inputs; check the odometer log and its bounds (--odometer-accuracy)"
+        )
+    for _, row in summary[summary["hazardous"] > 0].iterrows():
+        out.append(
+            f"locator balises: WARNING: {int(row['hazardous'])} HAZARDOUS capture(s) with "
+            f"{row['config']}: a telegram whose stated accuracy does not hold the true position "
+            f"({folder / 'captures.csv'}, column hazardous)"
+        )
+    return out

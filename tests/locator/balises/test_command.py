@@ -122,13 +122,14 @@ def test_printed_summary_gives_the_capture_rate_in_percent():
 
     summary = pd.DataFrame({
         "config": ["r25"], "passages": [12], "captured": [11], "capture_rate": [11 / 12],
-        "false": [0], "timing_abs_median_s": [0.0123], "delay_median_s": [0.5],
-        "delay_p95_s": [0.9],
+        "false": [0], "hazardous": [1], "front_outside": [3], "timing_abs_median_s": [0.0123],
+        "delay_median_s": [0.5], "delay_p95_s": [0.9],
     })  # fmt: skip
     header, row = format_summary(summary).splitlines()
     cells = dict(zip(header.split(), row.split(), strict=True))
     assert cells["capture_%"] == "91.7" and "capture_rate" not in cells
     assert cells["timing_abs_median_s"] == "0.012"
+    assert cells["hazardous"] == "1" and cells["front_outside"] == "3"
 
 
 def test_an_error_model_of_another_receiver_gives_no_claim_and_no_capture(sim_dir, tmp_path,
@@ -212,3 +213,47 @@ def test_odometer_accuracy_in_percent_is_refused_with_the_fraction(sim_dir, tmp_
     err = capsys.readouterr().err
     assert "5 % is 0.05" in err and "OdometerAccuracy(" not in err
 
+
+def test_a_safe_front_missing_the_truth_is_warned_on_the_console(sim_dir, tmp_path, capsys):
+    from locator.odometry.logfile import write_odometer_log
+
+    # an odometer over-reading by 20 % (distance and speed alike: the log is consistent) with
+    # bounds claimed at zero: the safe front misses the truth, and the console must say so
+    sim = SimRun.read(sim_dir)
+    log = odometer_along_run(sim, OdometerConfig(), seed=5).log
+    p = write_odometer_log(log, tmp_path / "odo.csv")
+    df = pd.read_csv(p)
+    df.assign(dist_m=1.2 * df["dist_m"], speed_mps=1.2 * df["speed_mps"]).to_csv(
+        p, index=False, float_format="%.17g")  # fmt: skip
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--masks",
+               str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--odometer-log", str(p),
+               "--odometer-accuracy", "0", "0", "0", "--out", str(tmp_path / "b")])  # fmt: skip
+    assert rc == 0
+    out, err = capsys.readouterr()
+    info = json.loads((tmp_path / "b" / "summary.json").read_text())
+    outside = int(info["safe_front"]["front_outside"])
+    assert outside > 0
+    assert f"WARNING: the true front end was OUTSIDE the safe front interval at {outside} " in err
+    hazardous = sum(r["hazardous"] for r in info["summary"])
+    assert ("HAZARDOUS" in err) == (hazardous > 0)
+    # the table shows both figures
+    header, row = out.splitlines()[:2]
+    cells = dict(zip(header.split(), row.split(), strict=True))
+    assert cells["front_outside"] == str(outside) and cells["hazardous"] == str(hazardous)
+
+
+def test_balises_never_reached_are_said_so(sim_dir, tmp_path, capsys):
+    track = World.load(sim_dir / "world.npz").track
+    sim = SimRun.read(sim_dir)
+    hi = float(sim.chainage_m.max())
+    bl = BaliseList.along_track(track, hi + 40.0, min(hi + 100.0, track.length_m), 20.0)
+    p = bl.to_csv(tmp_path / "far.csv")
+    rc = main(["balises", "--sim", str(sim_dir), "--no-masks", "--balises", str(p),
+               "--out", str(tmp_path / "b")])  # fmt: skip
+    assert rc == 0
+    out, err = capsys.readouterr()
+    # without -q it says what it does before the long work, and shows the locating progress
+    assert out.startswith(f"locator balises: {sim.n_epoch} epochs, {len(bl)} balises")
+    assert "locating" in err
+    assert "not reached" in out and "NaN" not in out
+    assert f"not reached: {len(bl)} of {len(bl)} balises" in out
