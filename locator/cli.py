@@ -16,6 +16,7 @@ from typing import Any
 from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
 from locator.demostep import format_demo_table
+from locator.modelcheck import deepest_k, model_use, sim_profile
 from predisat import __version__
 from predisat.cli.args import (
     TIME_HELP,
@@ -66,7 +67,8 @@ def _config(args: argparse.Namespace, profile: Any = None) -> Any:
 
 
 def _config_and_model(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[str, Any]]:
-    """:func:`_config` and the error model's record for ``run.json`` (:func:`_model_use`)."""
+    """:func:`_config` and the error model's record for ``run.json``
+    (:func:`locator.modelcheck.model_use`)."""
     from locator.fde import LocatorConfig
     from locator.partition import MAX_STRETCHES
     from locator.run import RunConfig
@@ -79,7 +81,7 @@ def _config_and_model(args: argparse.Namespace, profile: Any = None) -> tuple[An
     locator = LocatorConfig(model=model, budget=integrity_budget(args))
     use, record = "calibrated", dict[str, Any]()
     if profile is not None:
-        use, record = _model_use(mf, profile, args, _deepest_k(locator))
+        use, record = model_use(mf, profile, args, deepest_k(locator))
     trust = "masks" if args.masks else ("cutoff" if args.cutoff is not None else "none")
     cfg = RunConfig(
         locator,
@@ -97,117 +99,10 @@ def _config_and_model(args: argparse.Namespace, profile: Any = None) -> tuple[An
     return cfg, record
 
 
-def _deepest_k(locator: Any) -> float:
-    """The widest pair interval's ``k`` a claim may rest on: under a budget, that of the
-    claiming mode with the fewest independent pairs (all pairs of 4-5 satellites; a best pair
-    of 2-3 never claims); the fixed ``k`` otherwise."""
-    from predisat.availability.interval import INDEPENDENT_PAIRS, IntervalMode
-
-    if locator.budget is None:
-        return float(locator.model.k_sigma)
-    pairs = min(n for mode, n in INDEPENDENT_PAIRS.items() if mode != IntervalMode.BEST_PAIR)
-    return float(locator.budget.k_sigma(pairs))
-
-
 def _split_text(cfg: Any) -> str:
     """`` in at most N stretches`` for a partitioned masks rule (docs/locator.md)."""
     n = cfg.trust_stretches if cfg.trust == "masks" else 1
     return f" in at most {n} stretches" if n > 1 else ""
-
-
-def _model_use(mf: Any, profile: Any, args: argparse.Namespace,
-               k_max: float) -> tuple[str, dict[str, Any]]:  # fmt: skip
-    """How the model may support claims on data of ``profile``, and why, for ``run.json``.
-
-    ``"calibrated"``: it applies, tails checked at least as deep as ``k_max`` claims;
-    ``"gaussian_tail"``: it applies, the claims rest on its Gaussian tail beyond the checked
-    depth (``--assume-gaussian-tail``); ``"forced"``: it does not apply and
-    ``--force-error-model`` was given (not a safety claim); ``"none"``: no claim.
-    """
-    import math
-
-    name = args.error_model or "the built-in model (a = b = 2 m, the simulator's noise)"
-    why = mf.mismatches(profile)
-    short = [] if why else mf.depth_shortfall(profile.systems, k_max)
-    assume = getattr(args, "assume_gaussian_tail", False)
-    if why:
-        use = "forced" if args.force_error_model else "none"
-    else:
-        use = "gaussian_tail" if short and assume else ("none" if short else "calibrated")
-    record: dict[str, Any] = {
-        "file": args.error_model or "built-in",
-        "use": use,
-        "data": profile.describe(),
-        "mismatches": list(why),
-        "depth_shortfall": list(short),
-        "k_sigma_max": round(k_max, 4),
-        "systems": {
-            s: {
-                "n_independent": m.n_independent,
-                "tail_probability": (
-                    m.tail_probability if math.isfinite(m.tail_probability) else None
-                ),
-            }
-            for s, m in sorted(mf.systems.items())
-            if s in profile.systems
-        },
-    }
-    if use == "none" and why:
-        print(
-            f"locator run: NO SAFETY CLAIM: {name} does not apply to this data "
-            f"({profile.describe()}): {'; '.join(why)}. Positions are given, every epoch flagged "
-            "NO_ERROR_MODEL. Make a model for this receiver with `locator calibrate --obs FILE "
-            "--nav NAV` (static observations of the same receiver, antenna and codes at a known "
-            "position; docs/errormodel.md) and pass it with --error-model (or --force-error-model "
-            "to claim under a model not calibrated for this data: not safe)",
-            file=sys.stderr,
-        )
-    elif use == "none":
-        print(
-            f"locator run: NO SAFETY CLAIM: the integrity risk asks for pair intervals of k up "
-            f"to {k_max:.2f}, deeper than {name} was checked: {'; '.join(short)}. Positions "
-            "are given, every epoch flagged NO_ERROR_MODEL. Calibrate on more data, claim a "
-            "larger risk (--integrity-risk, or --k-sigma within the checked k), or pass "
-            "--assume-gaussian-tail to claim under the Gaussian shape beyond the checked depth "
-            "(recorded in run.json, every epoch flagged GAUSSIAN_TAIL; docs/errormodel.md)",
-            file=sys.stderr,
-        )
-    elif use == "forced":
-        print(f"locator run: warning: --force-error-model: intervals under {name}, which does "
-              f"not apply to this data: {'; '.join(why)}. NOT A SAFETY CLAIM: every epoch is "
-              "flagged FORCED_ERROR_MODEL and run.json records it", file=sys.stderr)  # fmt: skip
-    elif use == "gaussian_tail":
-        print(f"locator run: warning: --assume-gaussian-tail: {'; '.join(short)}. The claims "
-              "rest on the Gaussian shape beyond that depth: every epoch is flagged "
-              "GAUSSIAN_TAIL and run.json records it", file=sys.stderr)  # fmt: skip
-    own = _calibrated_on(mf, getattr(args, "obs", None) or getattr(args, "device_gnss", None))
-    if own and use != "none":
-        print(f"locator run: warning: {name} was calibrated on {own}, the data of this run: "
-              "its claims here are no independent check of the model (validate on other days "
-              "or receivers: docs/errormodel.md, leave one receiver out)", file=sys.stderr)
-        record["calibrated_on_this_data"] = True
-    if use in ("calibrated", "gaussian_tail"):
-        for sys_ in profile.systems:
-            m = mf.systems.get(sys_)
-            if m is not None and not math.isnan(m.tail_probability):
-                print(f"locator run: error model for {sys_}: {m.n_independent} independent "
-                      f"samples, its tails were checked to {m.tail_probability:.2g} per "
-                      "pseudorange", file=sys.stderr)  # fmt: skip
-    return use, record
-
-
-def _calibrated_on(mf: Any, data: str | None) -> str:
-    """The input of the model's calibration that is the run's data file ("" if none)."""
-    if data is None or mf.applicability is None:
-        return ""
-    target = Path(data).resolve()
-    for src in mf.applicability.sources:
-        try:
-            if Path(src).resolve() == target:
-                return str(src)
-        except OSError:  # a source path the machine cannot resolve is not this file
-            continue
-    return ""
 
 
 def _progress(total: int, quiet: bool, desc: str) -> Any:
@@ -384,14 +279,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _profile(source: Any, args: argparse.Namespace) -> Any:
     """The receiver profile of a run's source (a simulation: the simulated receiver)."""
-    from locator.errorfit import receiver_profile, simulated_profile
+    from locator.errorfit import receiver_profile
     from locator.sources import SimSource
 
     if isinstance(source, SimSource):
-        from predisat.availability.satellites import select_satellites
-
-        used = select_satellites(source.sim.sats, source.constellation)
-        return simulated_profile(sorted({s[0] for s in used}))
+        return sim_profile(source.sim, source.constellation)
     from locator.devicegnss import DeviceGnssSource, device_profile
 
     if isinstance(source, DeviceGnssSource):  # a smartphone's log: class phone unless told

@@ -13,10 +13,12 @@ position on the track, and the telegram a real balise there would send. The list
 | ``q_reference`` | - | optional: 1 (default) usable as a location reference, 0 not |
 | ``accuracy_m`` | m | optional: location accuracy (Q_LOCACC), default 1 m |
 
-Rejected with :class:`BaliseFileError` naming the file, the line and the fix: missing columns,
-empty or non-numeric values, **duplicate ids**, chainages **out of order**, chainages **off the
+Rejected with :class:`BaliseFileError` naming the file, the line and the fix: a file that is
+not text, columns not separated by commas, missing columns, empty or non-numeric values, an
+empty ``id`` or ``telegram``, **duplicate ids**, chainages **out of order**, chainages **off the
 track** (outside ``[0, length]``), and coordinates that do not lie on the track at the stated
-chainage (more than ``max_offset_m`` away).
+chainage (more than ``max_offset_m`` away horizontally: heights are not compared,
+:func:`horizontal_offset_m`).
 """
 
 from __future__ import annotations
@@ -28,10 +30,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from locator.csvinput import read_csv_table
 from predisat.geodesy import geodetic_to_ecef
 from predisat.track import TrackMap
 
-__all__ = ["BaliseFileError", "BaliseList"]
+__all__ = ["BaliseFileError", "BaliseList", "horizontal_offset_m"]
 
 REQUIRED = ("id", "chainage_m", "lat_deg", "lon_deg", "h_m", "telegram")
 
@@ -40,8 +43,57 @@ class BaliseFileError(ValueError):
     """A balise list that cannot be used; the message names the file, the line and the fix."""
 
 
-def _line(i: int) -> int:
-    return int(i) + 2  # data row i is on file line i + 2 (line 1 is the header)
+# what each numeric column holds, for the messages
+_UNITS = {
+    "chainage_m": "the chainage in metres along the track map",
+    "lat_deg": "the latitude in decimal degrees (WGS84)",
+    "lon_deg": "the longitude in decimal degrees (WGS84)",
+    "h_m": "the ellipsoidal height in metres (0 if unknown: it is not compared)",
+    "q_reference": "1 (usable as a location reference) or 0",
+    "accuracy_m": "the location accuracy in metres",
+}
+# column names of other lists and the column each probably is
+_ALIASES = {"chainage": "chainage_m", "km": "chainage_m", "lat": "lat_deg",
+            "latitude": "lat_deg", "lon": "lon_deg", "lng": "lon_deg", "longitude": "lon_deg",
+            "h": "h_m", "height": "h_m", "height_m": "h_m", "alt": "h_m", "nid_bg": "id",
+            "name": "id"}  # fmt: skip
+
+
+def horizontal_offset_m(
+    track: TrackMap, chainage_m: NDArray, lat_deg: NDArray, lon_deg: NDArray, h_m: NDArray
+) -> NDArray:
+    """Horizontal distance between balise coordinates and the track point at their chainage, m.
+
+    Measured in the track point's own east-north plane: heights are not compared (a track map
+    often carries none, h 0, and the chainage the capture uses is horizontal).
+    """
+    here = track.ecef_at(chainage_m)
+    d = geodetic_to_ecef(lat_deg, lon_deg, h_m) - here
+    lat, lon, _ = track.position_at(chainage_m)
+    la, lo = np.radians(lat), np.radians(lon)
+    # the ellipsoid normal at the track point, ECEF
+    up = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], axis=-1)
+    horizontal = d - np.sum(d * up, axis=-1, keepdims=True) * up
+    return np.asarray(np.linalg.norm(horizontal, axis=-1), float)
+
+
+def _offset_fix(
+    track: TrackMap, chainage_m: float, lat_deg: float, lon_deg: float, h_m: float,
+    max_offset_m: float,
+) -> str:
+    """How to fix coordinates off the track: chainage in km, lat/lon swapped, or in general."""
+    km = 1000.0 * chainage_m
+    if 0.0 <= km <= track.length_m:
+        o = horizontal_offset_m(track, np.array([km]), np.array([lat_deg]), np.array([lon_deg]),
+                                np.array([h_m]))[0]  # fmt: skip
+        if o <= max_offset_m:
+            return (f"did you give kilometres? its coordinates lie on the track at "
+                    f"{km:.1f} m: give chainage_m in metres")  # fmt: skip
+    o = horizontal_offset_m(track, np.array([chainage_m]), np.array([lon_deg]),
+                            np.array([lat_deg]), np.array([h_m]))[0]  # fmt: skip
+    if o <= max_offset_m:
+        return "lat_deg and lon_deg look swapped: exchange the two columns"
+    return "correct the chainage or the coordinates (or the track map)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,27 +178,25 @@ class BaliseList:
             chainage, m.
         """
         p = Path(path)
-        try:
-            df = pd.read_csv(p, dtype={"id": str, "telegram": str}, keep_default_na=False)
-        except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-            raise BaliseFileError(f"{p}: cannot read the balise list ({exc}); give a CSV file "
-                                  f"with columns {', '.join(REQUIRED)}") from exc  # fmt: skip
-        missing = [c for c in REQUIRED if c not in df.columns]
-        if missing:
-            raise BaliseFileError(f"{p}: missing columns {missing}; a balise list needs "
-                                  f"{', '.join(REQUIRED)} (docs/odometry.md)")  # fmt: skip
+        table = read_csv_table(p, REQUIRED, what="balise list", error=BaliseFileError,
+                               doc="docs/odometry.md", aliases=_ALIASES)  # fmt: skip
+        df = table.frame
         if len(df) == 0:
             raise BaliseFileError(f"{p}: no balise; add one row per balise")
         num = {}
         for col in ("chainage_m", "lat_deg", "lon_deg", "h_m", "q_reference", "accuracy_m"):
             if col not in df.columns:
                 continue
-            v = pd.to_numeric(df[col].replace("", np.nan), errors="coerce").to_numpy(float)
+            v = table.numbers(col, f"give {_UNITS[col]}")
             bad = np.flatnonzero(~np.isfinite(v))
             if len(bad):
-                raise BaliseFileError(f"{p}, line {_line(bad[0])}: {col} is empty or not a "
+                raise BaliseFileError(f"{p}, line {table.line(bad[0])}: {col} is empty or not a "
                                       "number; fill it in")  # fmt: skip
             num[col] = v
+
+        def _line(i: int | np.integer) -> int:
+            return table.line(int(i))
+
         ids = tuple(str(x).strip() for x in df["id"])
         seen: dict[str, int] = {}
         for i, b in enumerate(ids):
@@ -158,6 +208,13 @@ class BaliseList:
                     "ids must be unique: rename one of them"
                 )
             seen[b] = i
+        telegrams = tuple(str(x).strip() for x in df["telegram"])
+        for i, tg in enumerate(telegrams):
+            if not tg:
+                raise BaliseFileError(
+                    f"{p}, line {_line(i)}: balise {ids[i]!r} has an empty telegram; give the "
+                    "telegram it emits (e.g. hexadecimal)"
+                )
         c = num["chainage_m"]
         length = float(track.length_m)
         bad = np.flatnonzero((c < 0.0) | (c > length))
@@ -177,15 +234,15 @@ class BaliseList:
                 "(two balises at one place are one group: keep one row)"
             )
         lat, lon, h = num["lat_deg"], num["lon_deg"], num["h_m"]
-        here = track.ecef_at(c)
-        off = np.linalg.norm(geodetic_to_ecef(lat, lon, h) - here, axis=-1)
+        off = horizontal_offset_m(track, c, lat, lon, h)
         bad = np.flatnonzero(off > max_offset_m)
         if len(bad):
             i = bad[0]
+            fix = _offset_fix(track, c[i], lat[i], lon[i], h[i], max_offset_m)
             raise BaliseFileError(
                 f"{p}, line {_line(i)}: balise {ids[i]!r}: its coordinates are {off[i]:.1f} m "
-                f"from the track point at chainage {c[i]:.1f} m (more than {max_offset_m:g} m); "
-                "correct the chainage or the coordinates (or the track map)"
+                f"horizontally from the track point at chainage {c[i]:.1f} m (more than "
+                f"{max_offset_m:g} m); {fix}"
             )
         q = num.get("q_reference", np.ones(len(c)))
         if not np.all(np.isin(q, (0.0, 1.0))):
@@ -195,8 +252,7 @@ class BaliseList:
         if np.any(acc < 0):
             i = int(np.flatnonzero(acc < 0)[0])
             raise BaliseFileError(f"{p}, line {_line(i)}: accuracy_m must be >= 0")
-        return cls(ids, c, lat, lon, h, tuple(str(x) for x in df["telegram"]), q.astype(bool),
-                   acc, str(p))  # fmt: skip
+        return cls(ids, c, lat, lon, h, telegrams, q.astype(bool), acc, str(p))
 
     def to_csv(self, path: str | Path) -> Path:
         """Write the list (floats with 17 significant digits: exact round trip)."""

@@ -10,7 +10,7 @@ every passage; :func:`balises_to_folder` does both and writes ``epochs.parquet``
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -78,6 +78,7 @@ def locate_with_odometry(
     accuracy: OdometerAccuracy | None = None,
     log: OdometerLog | None = None,
     start_error_m: float = 0.0,
+    progress: Callable[[int], object] | None = None,
 ) -> LocatedRun:
     """Simulate the odometer along ``sim`` (or take ``log``) and run the locator with its bounds.
 
@@ -89,6 +90,7 @@ def locate_with_odometry(
     ``accuracy`` defaults to the configured odometer's bounds
     (:meth:`OdometerAccuracy.from_config`); pass :meth:`OdometerAccuracy.subset041` to use the
     ETCS requirement instead (the safe choice for a recorded log of unknown odometer).
+    ``progress`` is called with the number of epochs done since its last call.
     """
     if not abs(start_error_m) <= config.start_uncertainty_m:
         raise ValueError(
@@ -109,6 +111,7 @@ def locate_with_odometry(
         start_chainage_m=float(np.clip(sim.chainage_m[0] + start_error_m, 0.0, path.length_m)),
         config=cfg,
         masks=masks,
+        progress=progress,
     )
     ep["truth_m"] = np.asarray(sim.chainage_m, float)
     ep["odo_speed_mps"] = so.log.speed_at(ep["gps_s"].to_numpy(float))
@@ -154,8 +157,9 @@ def capture_table(
 
 
 def capture_summary(scored: pd.DataFrame) -> pd.DataFrame:
-    """Per configuration: passages, capture rate, false and hazardous captures, the telegrams'
-    location accuracy (p95), timing error, delay."""
+    """Per configuration: passages, balises not reached (not passed by the run, with the
+    scoring margin), capture rate, false and hazardous captures, the telegrams' location
+    accuracy (p95), timing error, delay."""
     rows = []
     for name, g in scored.groupby("config", sort=False):
         p = g[g["passed"]]
@@ -167,6 +171,7 @@ def capture_summary(scored: pd.DataFrame) -> pd.DataFrame:
             "passages": len(p), "captured": len(cap),
             "capture_rate": len(cap) / len(p) if len(p) else np.nan,
             "arm_share": float((cap["zone"] == "arm").mean()) if len(cap) else np.nan,
+            "not_reached": int((~g["passed"]).sum()),
             "false": int(g["false"].sum()), "hazardous": int(g["hazardous"].sum()),
             "q_locacc_p95_m": float(np.quantile(cap["q_locacc_m"], 0.95))
             if len(cap) else np.nan,
@@ -261,6 +266,7 @@ def balises_to_folder(
     meta: Mapping[str, object] | None = None,
     log: OdometerLog | None = None,
     accuracy: OdometerAccuracy | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> tuple[pd.DataFrame, Path]:
     """Locate a simulated run with odometry, capture the balises, write the folder.
 
@@ -269,10 +275,13 @@ def balises_to_folder(
     with the truth), ``captures.csv`` (one row per
     configuration and balise, with timing errors), ``summary.json`` and ``captures.png``.
 
+    ``progress`` is called with the number of epochs located since its last call.
+
     Returns
     -------
     summary : pandas.DataFrame
-        :func:`capture_summary` of the captures.
+        :func:`capture_summary` of the captures, plus ``epochs`` and ``front_outside`` of
+        :func:`safe_front_check` (one run: the same in every row).
     folder : Path
     """
     folder = Path(out)
@@ -280,17 +289,21 @@ def balises_to_folder(
     odo_cfg = odometer or OdometerConfig()
     caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
     run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
-                               log=log, accuracy=accuracy)  # fmt: skip
+                               log=log, accuracy=accuracy, progress=progress)  # fmt: skip
     scored = capture_table(run, balises, caps)
     summary = capture_summary(scored)
+    front = safe_front_check(run)
+    summary["epochs"] = int(front["epochs"])
+    summary["front_outside"] = int(front["front_outside"])
     run.epochs.to_parquet(folder / "epochs.parquet")
-    scored.to_csv(folder / "captures.csv", index=False, float_format="%.9g")
+    # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
+    scored.to_csv(folder / "captures.csv", index=False, float_format="%.17g")
     info = {
         "balises": balises.source, "n_balises": len(balises),
         "odometer": asdict(odo_cfg), "accuracy": asdict(run.accuracy),
         "captures": {k: asdict(v) for k, v in caps.items()},
         "summary": summary.to_dict(orient="records"),
-        "safe_front": safe_front_check(run), **dict(meta or {}),
+        "safe_front": front, **dict(meta or {}),
     }  # fmt: skip
     (folder / "summary.json").write_text(json.dumps(info, indent=2, default=_json) + "\n")
     fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval")

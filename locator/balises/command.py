@@ -8,9 +8,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 import pandas as pd
 
 from predisat.cli.args import (
@@ -27,10 +29,13 @@ from predisat.cli.args import (
     non_negative_float,
     output_dir,
     positive_float,
+    requires,
 )
-from predisat.cli.common import track_option
+from predisat.cli.common import add_track_selection, track_option
 
 if TYPE_CHECKING:
+    from locator.balises.balisefile import BaliseList
+    from locator.sim.simfile import SimRun
     from predisat.track import TrackMap
 
 __all__ = ["add_parser", "cmd_balises", "format_summary"]
@@ -40,6 +45,8 @@ _SPACING_M = 120.0
 _ODOMETER = "trailer-radar"
 _ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
 _MAX_ACCEL_MPS2 = 1.5
+# the systems located with (locate_with_odometry's SimSource: every system of the run)
+_CONSTELLATION = "all"
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
@@ -56,6 +63,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "folder"), metavar="DIR", help="a `locator simulate` folder")  # fmt: skip
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's world.npz)")  # fmt: skip
+    add_track_selection(p)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--masks", type=existing_path("a mask file (e.g. the run's "
                    "true_masks.parquet) or a `predisat process` output folder"), metavar="MASKS",
@@ -109,35 +117,63 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     )
     p.add_argument("--error-model", type=existing_file("a pseudorange error model JSON written "
                    "by `locator calibrate`"), metavar="JSON",
-                   help="from `locator calibrate` (default: a = b = 2 m; its k_sigma is not "
-                   "used: see --integrity-risk)")  # fmt: skip
+                   help="from `locator calibrate` (default: a = b = 2 m, the simulator's: it "
+                   "applies to simulated receivers only; a model calibrated for another receiver "
+                   "gives no safety claim, as in `locator run`; its k_sigma is not used: see "
+                   "--integrity-risk)")  # fmt: skip
+    p.add_argument("--force-error-model", action="store_true",
+                   help="claim under --error-model even when it does not apply to the data "
+                   "(another receiver, antenna, code, or a locator-error-model/1 file): not safe")
     integrity_options(p)
     p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
         p,
         needs("--max-accel", "max_accel", lambda a: given(a, "odometer_log"), "--odometer-log"),
+        requires("--track-name", "track_name", "--track FILE", "track"),
+        requires("--where", "where", "--track FILE", "track"),
+        _odometer_accuracy_check,
     )
     p.set_defaults(func=cmd_balises)
     return p
 
 
+def _odometer_accuracy_check(args: argparse.Namespace) -> str | None:
+    """``--odometer-accuracy``'s relative parts are fractions below 1 (5 % is 0.05)."""
+    if not args.odometer_accuracy:
+        return None
+    abs_m, over, under = args.odometer_accuracy
+    for name, value in (("OVER", over), ("UNDER", under)):
+        if value >= 1.0:
+            return (f"--odometer-accuracy {abs_m:g} {over:g} {under:g}: {name} {value:g} is no "
+                    f"share of the distance (below 1); give a fraction: {value:g} % is "
+                    f"{value / 100:g} (e.g. 5 0.05 0.05 for SUBSET-041)")  # fmt: skip
+    return None
+
+
 def format_summary(summary: pd.DataFrame) -> str:
     """The printed summary: one row per capture configuration, the capture rate in percent
-    (a fraction in ``summary.csv``), times in seconds with 3 decimals."""
-    cols = ["config", "passages", "captured", "capture_rate", "false", "timing_abs_median_s",
-            "delay_median_s", "delay_p95_s"]  # fmt: skip
-    t = summary[cols].copy()
-    t["capture_rate"] = 100.0 * t["capture_rate"]
+    (a fraction in ``summary.json``), false and hazardous captures, the epochs whose true front
+    end was outside the safe front interval (``front_outside``, when given), times in seconds
+    with 3 decimals; ``not reached`` for a configuration without a passage, ``-`` for a time
+    without a capture."""
+    cols = ["config", "passages", "captured", "capture_rate", "false", "hazardous",
+            "front_outside", "timing_abs_median_s", "delay_median_s", "delay_p95_s"]  # fmt: skip
+    t = summary[[c for c in cols if c in summary.columns]].copy()
+    rate = 100.0 * t["capture_rate"].to_numpy(float)
+    reached = t["passages"].to_numpy() > 0
+    t["capture_rate"] = [f"{r:.1f}" if ok else "not reached" for r, ok in zip(rate, reached,
+                                                                                strict=True)]
     t = t.rename(columns={"capture_rate": "capture_%"})
-    return str(t.to_string(index=False, float_format=lambda x: f"{x:.3f}",
-                           formatters={"capture_%": "{:.1f}".format}))  # fmt: skip
+    for c in ("timing_abs_median_s", "delay_median_s", "delay_p95_s"):
+        t[c] = [f"{x:.3f}" if np.isfinite(x) else "-" for x in t[c].to_numpy(float)]
+    return str(t.to_string(index=False))
 
 
 def _track(args: argparse.Namespace) -> TrackMap:
     """``--track`` through the one track loader; else the simulation's world's, or line 144."""
     if args.track:
-        return track_option(args.track)
+        return track_option(args.track, args.track_name, args.chain, args.where)
     stored = Path(args.sim) / "world.npz"
     if stored.is_file():
         from predisat.synth.world import World  # lazy: the world needs the [synth] extra
@@ -148,15 +184,18 @@ def _track(args: argparse.Namespace) -> TrackMap:
 
 def cmd_balises(args: argparse.Namespace) -> int:
     """Run ``locator balises``; prints the capture table."""
+    from tqdm import tqdm
+
     from locator.balises.balisefile import BaliseList
     from locator.balises.campaign import ODOMETERS, balises_to_folder
     from locator.balises.capture import CaptureConfig
     from locator.fde import LocatorConfig
+    from locator.modelcheck import deepest_k, model_use, sim_profile
     from locator.odometry.confidence import OdometerAccuracy
     from locator.run import RunConfig
     from locator.sathia import AntennaPath
     from locator.sim.simfile import SimRun
-    from predisat.gnss.errormodel import IntervalModel, read_error_model
+    from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
     sim = SimRun.read(args.sim)
     track = _track(args)
@@ -177,12 +216,20 @@ def cmd_balises(args: argparse.Namespace) -> int:
         from predisat.masks.fileformat import read_masks
 
         masks = read_masks(args.masks)
-    model = read_error_model(args.error_model) if args.error_model else IntervalModel()
+    # the error model applies to the simulated receiver or gives no claim, as in `locator run`
+    mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
+    profile = sim_profile(sim, _CONSTELLATION)
+    model = mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
+    locator = LocatorConfig(model=model, budget=integrity_budget(args))
+    use, _ = model_use(mf, profile, args, deepest_k(locator), "locator balises")
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
-    cfg = RunConfig(LocatorConfig(model=model, budget=integrity_budget(args)), trust=trust,
-                    cutoff_deg=args.cutoff if args.cutoff is not None else 15.0)  # fmt: skip
+    cfg = RunConfig(locator, trust=trust,
+                    cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
+                    error_model_applies=use != "none",
+                    error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
+                    model_el_min_deg=mf.el_min_deg)  # fmt: skip
     log, accuracy = None, None
     if args.odometer_log:
         from locator.odometry.logfile import read_odometer_log
@@ -197,13 +244,54 @@ def cmd_balises(args: argparse.Namespace) -> int:
         f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
         for r in args.radius
     }
-    summary, folder = balises_to_folder(
-        sim, path, balises, args.out, config=cfg, masks=masks,
-        odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed, log=log,
-        accuracy=accuracy,
-        meta={"sim": str(args.sim), "odometer_kind": str(args.odometer_log or args.odometer
-                                                          or _ODOMETER)},
-    )  # fmt: skip
+    quiet = bool(getattr(args, "quiet", False))
+    kind = str(args.odometer_log or args.odometer or _ODOMETER)
+    if not quiet:
+        print(f"locator balises: {sim.n_epoch} epochs, {len(balises)} balises, trust rule "
+              f"{trust}, odometer {kind}; locating (the first run also compiles the locator)",
+              flush=True)  # fmt: skip
+    with tqdm(total=sim.n_epoch, desc="locating", unit="epoch", disable=quiet,
+              mininterval=0.5) as bar:  # fmt: skip
+        summary, folder = balises_to_folder(
+            sim, path, balises, args.out, config=cfg, masks=masks,
+            odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed,
+            log=log, accuracy=accuracy, progress=bar.update,
+            meta={"sim": str(args.sim), "odometer_kind": kind},
+        )  # fmt: skip
     print(format_summary(summary))
+    for line in _summary_notes(summary, balises, sim):
+        print(line)
+    for line in _truth_warnings(summary, folder):
+        print(line, file=sys.stderr)
     print(f"-> {folder}")
     return 0
+
+
+def _summary_notes(summary: pd.DataFrame, balises: BaliseList, sim: SimRun) -> list[str]:
+    """A line on the balises the run never reached (they have no capture figures)."""
+    n = int(summary["not_reached"].max()) if len(summary) else 0
+    if n == 0:
+        return []
+    lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
+    return [f"not reached: {n} of {len(balises)} balises lie outside the run ({lo:.0f}-{hi:.0f} "
+            "m of chainage, less 30 m at each end): no passage, so no capture figures"]  # fmt: skip
+
+
+def _truth_warnings(summary: pd.DataFrame, folder: Path) -> list[str]:
+    """Loud lines when the simulated truth shows the location unsafe: the true front end
+    outside the safe front interval, or a hazardous capture."""
+    out = []
+    if len(summary) and int(summary["front_outside"].iloc[0]) > 0:
+        out.append(
+            f"locator balises: WARNING: the true front end was OUTSIDE the safe front interval "
+            f"at {int(summary['front_outside'].iloc[0])} of {int(summary['epochs'].iloc[0])} "
+            f"epochs ({folder / 'summary.json'}: safe_front): the location is not safe with "
+            "these inputs; check the odometer log and its bounds (--odometer-accuracy)"
+        )
+    for _, row in summary[summary["hazardous"] > 0].iterrows():
+        out.append(
+            f"locator balises: WARNING: {int(row['hazardous'])} HAZARDOUS capture(s) with "
+            f"{row['config']}: a telegram whose stated accuracy does not hold the true position "
+            f"({folder / 'captures.csv'}, column hazardous)"
+        )
+    return out

@@ -19,16 +19,27 @@ configured maximum acceleration plus a tolerance).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
+from locator.csvinput import read_csv_table
 from locator.odometry.odometer import OdometerLog
 
 __all__ = ["OdometerLogError", "read_odometer_log", "validate_odometer_log", "write_odometer_log"]
 
 COLUMNS = ("t_s", "dist_m", "speed_mps", "direction")
+# column names of other loggers and the column each probably is
+_ALIASES = {"time": "t_s", "t": "t_s", "time_s": "t_s", "gps_s": "t_s", "dist": "dist_m",
+            "distance": "dist_m", "distance_m": "dist_m", "speed": "speed_mps",
+            "v_mps": "speed_mps", "dir": "direction"}  # fmt: skip
+# a distance step agrees with speed x dt when it lies within the two speeds of its cycle times
+# dt, widened by this much (speed quantised, or filtered over a few cycles)
+STEP_TOLERANCE_M = 0.1
+STEP_TOLERANCE_REL = 0.1
 
 
 class OdometerLogError(ValueError):
@@ -70,22 +81,21 @@ def read_odometer_log(
         logged speed and ``edges`` zero (not logged).
     """
     p = Path(path)
-    try:
-        df = pd.read_csv(p)
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise OdometerLogError(f"{p}: cannot read the odometer log ({exc}); give a CSV file "
-                               f"with columns {', '.join(COLUMNS)}") from exc  # fmt: skip
-    missing = [c for c in COLUMNS if c not in df.columns]
-    if missing:
-        raise OdometerLogError(
-            f"{p}: missing columns {missing}; an odometer log needs {', '.join(COLUMNS)} "
-            "(docs/odometry.md)"
-        )
-    t = df["t_s"].to_numpy(float)
-    dist = df["dist_m"].to_numpy(float)
-    speed = df["speed_mps"].to_numpy(float)
-    direction = df["direction"].to_numpy(float)
-    slip = df["slip"].to_numpy(float) if "slip" in df.columns else np.zeros(len(t))
+    table = read_csv_table(p, COLUMNS, what="odometer log", error=OdometerLogError,
+                           doc="docs/odometry.md", aliases=_ALIASES)  # fmt: skip
+    t = table.numbers("t_s", "give the cycle time in GPS seconds")
+    dist = table.numbers("dist_m", "give the distance in metres since the first row")
+    speed = table.numbers("speed_mps", "give the speed in m/s (>= 0)")
+    direction = table.numbers("direction", "give +1 (forward), -1 (backward) or 0 (standstill)")
+    slip = np.zeros(len(t))
+    if "slip" in table.frame.columns:
+        slip = table.numbers("slip", "give 1 where the odometer marked slip or slide, 0 or "
+                             "nothing elsewhere")  # fmt: skip
+        bad = np.flatnonzero(~np.isnan(slip) & ~np.isin(slip, (0.0, 1.0)))
+        if len(bad):
+            raise OdometerLogError(f"{p}, line {table.line(bad[0])}: slip {slip[bad[0]]:g} must "
+                                   "be 1 (slip or slide marked), 0 or empty")  # fmt: skip
+        slip = np.nan_to_num(slip)
     validate_odometer_log(
         t,
         dist,
@@ -95,17 +105,14 @@ def read_odometer_log(
         max_accel_mps2=max_accel_mps2,
         max_gap_s=max_gap_s,
         accel_tolerance_mps2=accel_tolerance_mps2,
+        lines=table.lines,
     )
     return OdometerLog(
         t_s=t, dist_m=dist, speed_mps=speed, wheel_speed_mps=speed.copy(),
         direction=direction.astype(np.int8), edges=np.zeros(len(t), np.int64),
         slip=slip.astype(bool), diameter_ratio=float("nan"), radar_scale=float("nan"),
+        source=str(p),
     )  # fmt: skip
-
-
-def _line(i: int) -> int:
-    """File line of data row ``i`` (the header is line 1)."""
-    return int(i) + 2
 
 
 def validate_odometer_log(
@@ -118,9 +125,18 @@ def validate_odometer_log(
     max_accel_mps2: float = 1.5,
     max_gap_s: float = 0.5,
     accel_tolerance_mps2: float = 0.5,
+    lines: NDArray | None = None,
 ) -> None:
-    """Raise :class:`OdometerLogError` at the first bad row (file line numbers in ``label``)."""
+    """Raise :class:`OdometerLogError` at the first bad row (file line numbers in ``label``).
+
+    ``lines`` gives the file line of each row (default: row ``i`` on line ``i + 2``, below a
+    header).
+    """
     n = len(t_s)
+
+    def line(i: int | np.integer) -> int:
+        return int(lines[i]) if lines is not None else int(i) + 2
+
     if n < 2:
         raise OdometerLogError(f"{label}: {n} rows; an odometer log needs at least two cycles")
     for name, a in (("t_s", t_s), ("dist_m", dist_m), ("speed_mps", speed_mps),
@@ -128,34 +144,40 @@ def validate_odometer_log(
         bad = np.flatnonzero(~np.isfinite(a))
         if len(bad):
             raise OdometerLogError(
-                f"{label}, line {_line(bad[0])}: {name} is empty or not a number; fill it in "
+                f"{label}, line {line(bad[0])}: {name} is empty or not a number; fill it in "
                 "or drop the row (a dropped row must not leave a gap)"
             )
     bad = np.flatnonzero(speed_mps < 0)
     if len(bad):
-        raise OdometerLogError(f"{label}, line {_line(bad[0])}: speed_mps {speed_mps[bad[0]]} "
+        raise OdometerLogError(f"{label}, line {line(bad[0])}: speed_mps {speed_mps[bad[0]]} "
                                "< 0; speed is unsigned, the sign goes in direction")  # fmt: skip
     bad = np.flatnonzero(~np.isin(direction, (-1, 0, 1)))
     if len(bad):
-        raise OdometerLogError(f"{label}, line {_line(bad[0])}: direction {direction[bad[0]]} "
+        raise OdometerLogError(f"{label}, line {line(bad[0])}: direction {direction[bad[0]]} "
                                "must be +1, -1 or 0")  # fmt: skip
     dt = np.diff(t_s)
     bad = np.flatnonzero(dt <= 0)
     if len(bad):
         i = bad[0] + 1
         raise OdometerLogError(
-            f"{label}, line {_line(i)}: t_s {t_s[i]:.3f} does not follow {t_s[i - 1]:.3f}; sort "
+            f"{label}, line {line(i)}: t_s {t_s[i]:.3f} does not follow {t_s[i - 1]:.3f}; sort "
             "the rows by time and remove duplicates"
         )
     bad = np.flatnonzero(dt > max_gap_s)
+    if len(bad) and 0.01 <= np.median(dt) / 1000.0 <= max_gap_s:
+        raise OdometerLogError(
+            f"{label}, line {line(1)}: the rows are {np.median(dt):g} s apart: t_s looks like "
+            "milliseconds; give seconds (divide by 1000)"
+        )
     if len(bad):
         i = bad[0] + 1
         raise OdometerLogError(
-            f"{label}, line {_line(i)}: gap of {dt[bad[0]]:.2f} s after t_s {t_s[i - 1]:.3f} "
+            f"{label}, line {line(i)}: gap of {dt[bad[0]]:.2f} s after t_s {t_s[i - 1]:.3f} "
             f"(more than {max_gap_s:g} s); recover the missing cycles from the recorder, or split "
-            f"the log at line {_line(i)} and start the second part from a new reference"
+            f"the log at line {line(i)} and start the second part from a new reference"
         )
     step = np.diff(dist_m)
+    _check_steps(step, dist_m, speed_mps, dt, label, line)
     tol = 1e-6 + 0.02 * np.abs(step)
     moving_dir = direction[1:]
     against = ((moving_dir > 0) & (step < -tol)) | ((moving_dir < 0) & (step > tol))
@@ -163,16 +185,24 @@ def validate_odometer_log(
     if len(bad):
         i = bad[0] + 1
         raise OdometerLogError(
-            f"{label}, line {_line(i)}: dist_m changes by {step[bad[0]]:+.3f} m but direction "
+            f"{label}, line {line(i)}: dist_m changes by {step[bad[0]]:+.3f} m but direction "
             f"is {int(direction[i]):+d} (reversed direction); check the sign convention "
             "(dist_m along the train's forward axis) or the channel order of the wheel sensor"
+        )
+    still = (moving_dir == 0) & (np.abs(step) > STEP_TOLERANCE_M)
+    bad = np.flatnonzero(still)
+    if len(bad):
+        i = bad[0] + 1
+        raise OdometerLogError(
+            f"{label}, line {line(i)}: dist_m changes by {step[bad[0]]:+.3f} m but direction is "
+            "0 (standstill); give the direction of the motion (+1 forward, -1 backward)"
         )
     flip = (direction[1:] * direction[:-1] < 0) & (np.minimum(speed_mps[1:], speed_mps[:-1]) > 0.5)
     bad = np.flatnonzero(flip)
     if len(bad):
         i = bad[0] + 1
         raise OdometerLogError(
-            f"{label}, line {_line(i)}: direction reverses at {speed_mps[i]:.1f} m/s; a train "
+            f"{label}, line {line(i)}: direction reverses at {speed_mps[i]:.1f} m/s; a train "
             "reverses only through a standstill: check the wheel sensor's channels (swapped or "
             "a lost channel) or cut out the faulty stretch"
         )
@@ -181,7 +211,53 @@ def validate_odometer_log(
     if len(bad):
         i = bad[0] + 1
         raise OdometerLogError(
-            f"{label}, line {_line(i)}: acceleration {acc[bad[0]]:+.2f} m/s^2 exceeds the "
+            f"{label}, line {line(i)}: acceleration {acc[bad[0]]:+.2f} m/s^2 exceeds the "
             f"maximum {max_accel_mps2:g} m/s^2 (+{accel_tolerance_mps2:g}); an unfiltered slip "
             "or slide, or a wrong max_accel_mps2: correct the row or the configuration"
         )
+
+
+def _check_steps(
+    step_m: NDArray,
+    dist_m: NDArray,
+    speed_mps: NDArray,
+    dt_s: NDArray,
+    label: str,
+    line: Callable[[int], int],
+) -> None:
+    """Each distance step must agree with the speed: ``|step|`` within ``[min, max]`` of the
+    speeds at the cycle's two rows times ``dt``, widened by :data:`STEP_TOLERANCE_M` +
+    :data:`STEP_TOLERANCE_REL` of it; the message names the likely cause."""
+    lo = np.minimum(speed_mps[1:], speed_mps[:-1]) * dt_s
+    hi = np.maximum(speed_mps[1:], speed_mps[:-1]) * dt_s
+    size = np.abs(step_m)
+    off = (size < lo * (1 - STEP_TOLERANCE_REL) - STEP_TOLERANCE_M) | (
+        size > hi * (1 + STEP_TOLERANCE_REL) + STEP_TOLERANCE_M
+    )
+    bad = np.flatnonzero(off)
+    if not len(bad):
+        return
+    k = int(bad[0])
+    i = k + 1
+    expected = 0.5 * (speed_mps[i] + speed_mps[k]) * dt_s[k]
+    ratio = size[k] / expected if expected > 0 else np.inf
+    if abs(dist_m[i]) <= STEP_TOLERANCE_M < abs(dist_m[k]):
+        cause = (f"the distance counter was reset (dist_m back to {dist_m[i]:g}): split the log "
+                 f"at line {line(i)}, or add {dist_m[k] + expected:.3f} m to dist_m from there on")
+    elif 0.5e-3 <= ratio <= 2e-3:
+        cause = "dist_m looks like kilometres (1000 times too small): give metres"
+    elif 1 / 4.5 <= ratio <= 1 / 2.9:
+        cause = "speed_mps looks like km/h (3.6 times too large): give m/s (km/h / 3.6)"
+    elif ratio > 1:
+        cause = (f"a jump of {size[k] - expected:.2f} m in one cycle (pulses counted twice, a "
+                 "corrupt or merged record, a reset to another reference): correct the row or "
+                 "cut out the stretch")  # fmt: skip
+    else:
+        cause = ("the distance stands still while the speed says the train moves (a lost "
+                 "wheel-sensor channel, a frozen counter, or speed in another unit): correct the "
+                 "row or cut out the stretch")  # fmt: skip
+    raise OdometerLogError(
+        f"{label}, line {line(i)}: dist_m changes by {step_m[k]:+.4g} m in {dt_s[k]:.3f} s, but "
+        f"speed_mps x dt is {expected:.3f} m (speeds {speed_mps[k]:g} and {speed_mps[i]:g} m/s; "
+        f"tolerance {STEP_TOLERANCE_M:g} m + {100 * STEP_TOLERANCE_REL:g} %); likely {cause}"
+    )

@@ -192,6 +192,8 @@ class OdometerLog:
         True over configured wheel diameter drawn for the run (truth, for tests).
     radar_scale : float
         Radar scale factor drawn for the run (truth; 1 without a radar).
+    source : str
+        The file it was read from ("" when simulated), for messages.
     """
 
     t_s: NDArray
@@ -203,6 +205,7 @@ class OdometerLog:
     slip: NDArray
     diameter_ratio: float
     radar_scale: float
+    source: str = ""
 
     def at(self, t_s: ArrayLike) -> NDArray:
         """Measured distance at times ``t_s`` (linear between cycles), m, shape of ``t_s``."""

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicHermiteSpline
 
+from locator.odometry.logfile import OdometerLogError
 from locator.odometry.odometer import OdometerConfig, OdometerLog, simulate_odometer
 from locator.sim.simfile import SimRun
 
@@ -43,6 +44,35 @@ class SimOdometer:
     epoch_odo_m: NDArray
     truth_t_s: NDArray
     truth_chainage_m: NDArray
+
+
+# a log running backward by more than this while the train moved forward as much is refused
+_DIRECTION_CHECK_M = 1.0
+# GPS seconds before this (1983) are no time of a recorded run: relative times
+_EARLIEST_GPS_S = 1e8
+
+
+def _coverage_hint(log_t_s: NDArray, run_t_s: NDArray) -> str:
+    """What to do about a log whose times do not cover the run's."""
+    if log_t_s[0] < _EARLIEST_GPS_S:
+        return (f"its times look relative (seconds since the log started), not GPS seconds: add "
+                f"the GPS time of its first row (e.g. {run_t_s[0]:.1f} if it started with the "
+                "run) to t_s")  # fmt: skip
+    shift = float(log_t_s[0] - run_t_s[0])
+    days = shift / 86400.0
+    if abs(days) >= 0.5 and abs(days - round(days)) < 0.01:
+        return (f"it starts {abs(round(days))} day(s) {'after' if days > 0 else 'before'} the "
+                "run: give the log of the run's day (or correct its date)")  # fmt: skip
+    if 10.0 <= abs(shift) <= 20.0:
+        return ("it is offset by about the GPS-UTC leap seconds: give its times in GPS seconds "
+                "(GPS = UTC + 18 s since 2017)")  # fmt: skip
+    if log_t_s[0] <= run_t_s[0] + 1e-6:
+        return (f"it ends {run_t_s[-1] - log_t_s[-1]:.1f} s before the run: give the whole "
+                "recording")  # fmt: skip
+    if log_t_s[-1] >= run_t_s[-1] - 1e-6:
+        return (f"it starts {log_t_s[0] - run_t_s[0]:.1f} s after the run: give the whole "
+                "recording")  # fmt: skip
+    return "give the log recorded with the run, covering every epoch"
 
 
 def _truth_grid(sim: SimRun, cycle_s: float) -> tuple[int, NDArray, NDArray]:
@@ -94,14 +124,30 @@ def odometer_from_log(sim: SimRun, log: OdometerLog, cycle_s: float = 0.1) -> Si
     The log's times are the run's GPS seconds and its distance runs along the train's forward
     axis, which points in the run's direction of travel; it must cover every epoch of the run.
     The truth is the run's, on a ``cycle_s`` grid.
+
+    Raises
+    ------
+    OdometerLogError
+        The log does not cover the run (with a hint when its times look relative or off by a
+        day or by the leap seconds), or its distance runs backward over a run that moves
+        forward (more than 1 m each way).
     """
     t = np.asarray(sim.gps_s, float)
+    name = log.source or "the odometer log"
     if log.t_s[0] > t[0] + 1e-6 or log.t_s[-1] < t[-1] - 1e-6:
-        raise ValueError(
-            f"the odometer log covers {log.t_s[0]:.1f}-{log.t_s[-1]:.1f} s but the run "
-            f"{t[0]:.1f}-{t[-1]:.1f} s; give the log recorded with the run"
+        raise OdometerLogError(
+            f"{name}: its t_s cover {log.t_s[0]:.1f}-{log.t_s[-1]:.1f} s but the run "
+            f"{t[0]:.1f}-{t[-1]:.1f} s (GPS seconds); {_coverage_hint(log.t_s, t)}"
         )
     o, tc, true_d = _truth_grid(sim, cycle_s)
     d = log.at(t)
+    moved_m, logged_m = float(true_d[-1]), float(d[-1] - d[0])
+    if moved_m > _DIRECTION_CHECK_M and logged_m < -_DIRECTION_CHECK_M:
+        raise OdometerLogError(
+            f"{name}: over the run its dist_m runs backward ({logged_m:+.1f} m, direction -1) "
+            f"while the train travels {moved_m:.1f} m forward: the log's forward axis must point "
+            "in the direction of travel; if it was recorded from the other cab (or with the "
+            "other sign convention), negate dist_m and direction"
+        )
     epoch_odo = o * (d - d[0])
     return SimOdometer(log, o, epoch_odo, t[0] + tc, float(sim.chainage_m[0]) + o * true_d)

@@ -42,11 +42,29 @@ def test_along_track_round_trip(tmp_path, track):
             lambda df: df.assign(
                 chainage_m=np.where(df.index == 2, df["chainage_m"] + 30.0, df["chainage_m"])
             ),
-            r"line 4: balise .* coordinates are 30.0 m from the track",
+            r"line 4: balise .* coordinates are 30.0 m horizontally from the track",
+        ),
+        (
+            lambda df: df.assign(h_m=np.where(df.index == 1, "", df["h_m"].astype(str))),
+            r"line 3: h_m is empty or not a number",
         ),
         (
             lambda df: df.assign(h_m=np.where(df.index == 1, "x", df["h_m"].astype(str))),
-            r"line 3: h_m is empty or not a number",
+            r"line 3: h_m 'x' is not a number; give the ellipsoidal height in metres",
+        ),
+        # an empty telegram is refused, as the format says
+        (
+            lambda df: df.assign(telegram=np.where(df.index == 2, "", df["telegram"])),
+            r"line 4: balise .* has an empty telegram",
+        ),
+        # chainages in kilometres: the coordinates say where they belong
+        (
+            lambda df: df.assign(chainage_m=df["chainage_m"] / 1000.0),
+            r"line 2: .*did you give kilometres\? its coordinates lie on the track at 100\.0 m",
+        ),
+        (
+            lambda df: df.rename(columns={"lat_deg": "lon_deg", "lon_deg": "lat_deg"}),
+            r"line 2: .*lat_deg and lon_deg look swapped",
         ),
     ],
 )
@@ -58,3 +76,36 @@ def test_bad_lists_name_the_line_and_the_fix(tmp_path, track, edit, match):
     with pytest.raises(BaliseFileError, match=match) as exc:
         BaliseList.from_csv(p, track)
     assert str(p) in str(exc.value)
+
+
+def test_heights_are_not_compared(tmp_path, track):
+    # a track map without heights (h 0) and balises with their real ellipsoidal height: only
+    # the horizontal offset counts
+    bl = BaliseList.along_track(track, 100.0, 900.0, 200.0)
+    p = bl.to_csv(tmp_path / "b.csv")
+    pd.read_csv(p).assign(h_m=120.0).to_csv(p, index=False, float_format="%.17g")
+    back = BaliseList.from_csv(p, track)
+    np.testing.assert_array_equal(back.h_m, 120.0)
+    # a horizontal offset of 6 m is still refused, whatever the height
+    east = pd.read_csv(p)
+    east.loc[1, "lon_deg"] += 6.0 / (111320.0 * np.cos(np.radians(east.loc[1, "lat_deg"])))
+    east.to_csv(p, index=False, float_format="%.17g")
+    with pytest.raises(BaliseFileError, match=r"line 3: .* 6\.0 m horizontally from the track"):
+        BaliseList.from_csv(p, track)
+
+
+def test_separators_and_binary_files(tmp_path, track):
+    bl = BaliseList.along_track(track, 100.0, 900.0, 200.0)
+    text = bl.to_csv(tmp_path / "b.csv").read_text()
+    p = tmp_path / "spaces.csv"
+    p.write_text(text.replace(",", ", "))  # spaces after the commas: read as the plain list
+    back = BaliseList.from_csv(p, track)
+    assert back.ids == bl.ids and back.telegram == bl.telegram
+    p = tmp_path / "semicolon.csv"
+    p.write_text(text.replace(",", ";"))
+    with pytest.raises(BaliseFileError, match=r"line 1: the columns are separated by semicolons"):
+        BaliseList.from_csv(p, track)
+    p = tmp_path / "b.npz"
+    np.savez_compressed(p, x=np.arange(1000.0))
+    with pytest.raises(BaliseFileError, match=r"b\.npz, line \d+: byte 0x.. is not text"):
+        BaliseList.from_csv(p, track)

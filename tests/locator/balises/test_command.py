@@ -122,10 +122,138 @@ def test_printed_summary_gives_the_capture_rate_in_percent():
 
     summary = pd.DataFrame({
         "config": ["r25"], "passages": [12], "captured": [11], "capture_rate": [11 / 12],
-        "false": [0], "timing_abs_median_s": [0.0123], "delay_median_s": [0.5],
-        "delay_p95_s": [0.9],
+        "false": [0], "hazardous": [1], "front_outside": [3], "timing_abs_median_s": [0.0123],
+        "delay_median_s": [0.5], "delay_p95_s": [0.9],
     })  # fmt: skip
     header, row = format_summary(summary).splitlines()
     cells = dict(zip(header.split(), row.split(), strict=True))
     assert cells["capture_%"] == "91.7" and "capture_rate" not in cells
     assert cells["timing_abs_median_s"] == "0.012"
+    assert cells["hazardous"] == "1" and cells["front_outside"] == "3"
+
+
+def test_an_error_model_of_another_receiver_gives_no_claim_and_no_capture(sim_dir, tmp_path,
+                                                                          capsys):
+    # the rule of `locator run`: a model calibrated for another receiver does not apply to the
+    # simulated one, so no epoch claims and no balise is captured (unless forced)
+    from predisat.gnss.errormodel import (
+        Applicability,
+        ErrorModel,
+        IntervalModel,
+        SystemModel,
+        write_error_model,
+    )
+
+    e = ErrorModel(0.8, 0.3)
+    model = write_error_model(
+        tmp_path / "other.json", IntervalModel(e),
+        systems={s: SystemModel(e, ("C1C",), 1000, 100, 0.05) for s in "GRECJ"},
+        applicability=Applicability(("TRIMBLE NETR9",), ("ASH701073.1     SNOW",)),
+    )  # fmt: skip
+    base = ["-q", "balises", "--sim", str(sim_dir), "--masks",
+            str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--error-model", str(model)]
+    assert main([*base, "--out", str(tmp_path / "no")]) == 0
+    err = capsys.readouterr().err
+    assert "locator balises: NO SAFETY CLAIM" in err and "NETR9" in err
+    ep = pd.read_parquet(tmp_path / "no" / "epochs.parquet")
+    assert not ep["claim"].any()
+    caps = pd.read_csv(tmp_path / "no" / "captures.csv")
+    assert caps["passed"].any() and not caps["captured"].any()
+    assert main([*base, "--force-error-model", "--out", str(tmp_path / "forced")]) == 0
+    assert "--force-error-model" in capsys.readouterr().err
+    assert pd.read_parquet(tmp_path / "forced" / "epochs.parquet")["claim"].any()
+
+
+def test_captures_csv_keeps_the_times_full_precision(sim_dir, tmp_path):
+    from locator.balises.campaign import balises_to_folder, capture_table
+    from locator.balises.capture import CaptureConfig
+
+    sim = SimRun.read(sim_dir)
+    path = AntennaPath(World.load(sim_dir / "world.npz").track, 4.0)
+    bl = BaliseList.along_track(path.track, float(sim.chainage_m[0]) + 20.0,
+                                float(sim.chainage_m[-1]), 25.0)  # fmt: skip
+    caps = {"r12": CaptureConfig.gaderos(12.0)}
+    cfg = RunConfig(trust="none")
+    balises_to_folder(sim, path, bl, tmp_path, config=cfg, captures=caps)
+    back = pd.read_csv(tmp_path / "captures.csv")
+    # the same run again, in memory (seeded: identical)
+    scored = capture_table(locate_with_odometry(sim, path, cfg, odometer=OdometerConfig()), bl,
+                           caps)  # fmt: skip
+    for col in ("t_pass_s", "t_emit_s", "t_true_s", "timing_error_s", "chainage_m"):
+        np.testing.assert_array_equal(back[col].to_numpy(float), scored[col].to_numpy(float))
+    assert back["t_true_s"].notna().any() and back["t_pass_s"].notna().any()
+
+
+def test_track_name_selects_one_track_of_a_file_holding_several(sim_dir, tmp_path, capsys):
+    track = World.load(sim_dir / "world.npz").track
+    coords = np.column_stack([track.lon_deg, track.lat_deg]).tolist()
+    far = [[lon + 0.1, lat] for lon, lat in coords]  # another track, 7 km east
+    feats = [{"type": "Feature", "properties": {"trackname": name},
+              "geometry": {"type": "LineString", "coordinates": c}}
+             for name, c in (("A", coords), ("B", far))]  # fmt: skip
+    gj = tmp_path / "two.geojson"
+    gj.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    base = ["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25",
+            "--track", str(gj)]  # fmt: skip
+    assert main([*base, "--out", str(tmp_path / "x")]) == 2
+    assert "--track-name" in capsys.readouterr().err
+    assert main([*base, "--track-name", "A", "--out", str(tmp_path / "a")]) == 0
+    assert (tmp_path / "a" / "captures.csv").is_file()
+    # --track-name without --track is refused before any work
+    with pytest.raises(SystemExit):
+        main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--track-name", "A",
+              "--out", str(tmp_path / "y")])  # fmt: skip
+    assert "--track-name needs --track" in capsys.readouterr().err
+
+
+def test_odometer_accuracy_in_percent_is_refused_with_the_fraction(sim_dir, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--odometer-accuracy", "5",
+              "5", "5", "--out", str(tmp_path / "x")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "5 % is 0.05" in err and "OdometerAccuracy(" not in err
+
+
+def test_a_safe_front_missing_the_truth_is_warned_on_the_console(sim_dir, tmp_path, capsys):
+    from locator.odometry.logfile import write_odometer_log
+
+    # an odometer over-reading by 20 % (distance and speed alike: the log is consistent) with
+    # bounds claimed at zero: the safe front misses the truth, and the console must say so
+    sim = SimRun.read(sim_dir)
+    log = odometer_along_run(sim, OdometerConfig(), seed=5).log
+    p = write_odometer_log(log, tmp_path / "odo.csv")
+    df = pd.read_csv(p)
+    df.assign(dist_m=1.2 * df["dist_m"], speed_mps=1.2 * df["speed_mps"]).to_csv(
+        p, index=False, float_format="%.17g")  # fmt: skip
+    rc = main(["-q", "balises", "--sim", str(sim_dir), "--masks",
+               str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--odometer-log", str(p),
+               "--odometer-accuracy", "0", "0", "0", "--out", str(tmp_path / "b")])  # fmt: skip
+    assert rc == 0
+    out, err = capsys.readouterr()
+    info = json.loads((tmp_path / "b" / "summary.json").read_text())
+    outside = int(info["safe_front"]["front_outside"])
+    assert outside > 0
+    assert f"WARNING: the true front end was OUTSIDE the safe front interval at {outside} " in err
+    hazardous = sum(r["hazardous"] for r in info["summary"])
+    assert ("HAZARDOUS" in err) == (hazardous > 0)
+    # the table shows both figures
+    header, row = out.splitlines()[:2]
+    cells = dict(zip(header.split(), row.split(), strict=True))
+    assert cells["front_outside"] == str(outside) and cells["hazardous"] == str(hazardous)
+
+
+def test_balises_never_reached_are_said_so(sim_dir, tmp_path, capsys):
+    track = World.load(sim_dir / "world.npz").track
+    sim = SimRun.read(sim_dir)
+    hi = float(sim.chainage_m.max())
+    bl = BaliseList.along_track(track, hi + 40.0, min(hi + 100.0, track.length_m), 20.0)
+    p = bl.to_csv(tmp_path / "far.csv")
+    rc = main(["balises", "--sim", str(sim_dir), "--no-masks", "--balises", str(p),
+               "--out", str(tmp_path / "b")])  # fmt: skip
+    assert rc == 0
+    out, err = capsys.readouterr()
+    # without -q it says what it does before the long work, and shows the locating progress
+    assert out.startswith(f"locator balises: {sim.n_epoch} epochs, {len(bl)} balises")
+    assert "locating" in err
+    assert "not reached" in out and "NaN" not in out
+    assert f"not reached: {len(bl)} of {len(bl)} balises" in out

@@ -65,3 +65,90 @@ def test_reversal_while_moving_is_refused(tmp_path):
     df.to_csv(p, index=False)
     with pytest.raises(OdometerLogError, match=r"line 122: direction reverses at 5\.0 m/s"):
         read_odometer_log(p)
+
+
+def _write(tmp_path, df, name="odo.csv"):
+    p = tmp_path / name
+    df.to_csv(p, index=False, float_format="%.17g")
+    return p
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        # 50 m more in one cycle at 5 m/s (0.5 m per cycle): a jump
+        (
+            lambda df: df.assign(dist_m=df["dist_m"] + np.where(df.index >= 150, 50.0, 0.0)),
+            r"line 152: dist_m changes by \+50\.5 m in 0\.100 s, but speed_mps x dt is 0\.500 m"
+            r".*likely a jump of 50\.00 m",
+        ),
+        # the distance in kilometres, the speed in m/s
+        (lambda df: df.assign(dist_m=df["dist_m"] / 1000.0), "likely dist_m looks like kilometres"),
+        # the speed in km/h
+        (lambda df: df.assign(speed_mps=3.6 * df["speed_mps"]), "likely speed_mps looks like km/h"),
+        # the counter back to zero while moving forward
+        (
+            lambda df: df.assign(
+                dist_m=np.where(
+                    df.index >= 150, df["dist_m"] - df.loc[149, "dist_m"] - 0.5, df["dist_m"]
+                )
+            ),
+            r"line 152: .*likely the distance counter was reset",
+        ),
+        # moving, but direction 0
+        (
+            lambda df: df.assign(direction=np.where(df.index == 150, 0, df["direction"])),
+            r"line 152: dist_m changes by \+0\.500 m but direction is 0",
+        ),
+    ],
+)
+def test_distance_steps_must_agree_with_the_speed(tmp_path, edit, match):
+    p = _write(tmp_path, edit(good_frame()))
+    with pytest.raises(OdometerLogError, match=match) as exc:
+        read_odometer_log(p)
+    assert str(p) in str(exc.value)
+
+
+def test_steps_of_simulated_odometers_agree_with_their_speed(tmp_path):
+    # the check must not refuse a real odometer's log: slip, slide, radar, clamping, stops
+    t = np.arange(0.0, 120.0, 0.1)
+    v = np.interp(t, [0, 20, 50, 70, 80, 100, 120], [0, 25, 25, 0, 0, 15, 15])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
+    for cfg in (OdometerConfig(), OdometerConfig.motor_axle(radar=False),
+                OdometerConfig.motor_axle(radar=True)):  # fmt: skip
+        for seed in range(3):
+            log = simulate_odometer(t, x, cfg, seed=seed)
+            # (the acceleration check is not the point here: a high maximum)
+            read_odometer_log(write_odometer_log(log, tmp_path / "odo.csv"), max_accel_mps2=50.0)
+
+
+def test_text_binary_and_separators_name_the_line(tmp_path):
+    df = good_frame().assign(slip=0).astype({"slip": object})
+    df.loc[3, "slip"] = "no"
+    with pytest.raises(OdometerLogError, match=r"odo\.csv, line 5: slip 'no' is not a number"):
+        read_odometer_log(_write(tmp_path, df))
+    p = tmp_path / "odo.npz"
+    np.savez_compressed(p, t=np.arange(1000.0))
+    with pytest.raises(OdometerLogError, match=r"odo\.npz, line \d+: byte 0x.. is not text: this "
+                       r"is not a CSV file \(a zip archive"):  # fmt: skip
+        read_odometer_log(p)
+    p = tmp_path / "semi.csv"
+    good_frame().to_csv(p, index=False, sep=";")
+    with pytest.raises(OdometerLogError, match=r"line 1: the columns are separated by semicolons"):
+        read_odometer_log(p)
+    # spaces after the commas are no error; a blank line shifts the line numbers it names
+    p = tmp_path / "spaces.csv"
+    text = good_frame().to_csv(index=False, float_format="%.17g").replace(",", ", ")
+    p.write_text(text)
+    assert len(read_odometer_log(p).t_s) == len(good_frame())
+    lines = text.splitlines()
+    lines[5] = lines[5].replace(", 1", ", 9")  # row 4 (line 6) gets direction 9
+    p.write_text("\n".join([lines[0], "", *lines[1:]]) + "\n")
+    with pytest.raises(OdometerLogError, match=r"line 7: direction 9"):
+        read_odometer_log(p)
+
+
+def test_times_in_milliseconds_are_named(tmp_path):
+    df = good_frame().assign(t_s=lambda d: 1000.0 * (d["t_s"] - 1e9))
+    with pytest.raises(OdometerLogError, match="t_s looks like milliseconds"):
+        read_odometer_log(_write(tmp_path, df))

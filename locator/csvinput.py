@@ -1,0 +1,171 @@
+"""CSV inputs of the locator (balise lists, odometer logs) read with errors that name the file,
+the line and the fix.
+
+:func:`read_csv_table` reads a comma-separated text file with a header into a
+:class:`CsvTable`; it refuses a binary file (naming the line of the first byte that is not
+UTF-8 text), a file whose columns are separated by ``;`` or tabs, and missing columns; spaces
+after the commas are ignored (``id, chainage_m``). :meth:`CsvTable.numbers` converts a column
+and names the line of the first value that is not a number.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+__all__ = ["CsvTable", "read_csv_table"]
+
+# how a value a person leaves empty or unknown may be written (read as NaN, not as text)
+_MISSING = frozenset({"", "nan", "NaN", "NAN", "NA", "N/A", "n/a", "null", "NULL", "None"})
+
+
+@dataclass(frozen=True, eq=False)
+class CsvTable:
+    """A CSV file read as text columns, with the file line of each row.
+
+    Attributes
+    ----------
+    frame : pandas.DataFrame
+        The rows (column names stripped of spaces), every cell as read.
+    lines : ndarray of int, shape (n_row,)
+        File line (1-based, the header is the first non-empty line) of each row.
+    label : str
+        The file, as named in messages.
+    error : callable
+        Builds the exception raised for a bad value (from its message).
+    """
+
+    frame: pd.DataFrame
+    lines: NDArray
+    label: str
+    error: Callable[[str], Exception]
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    def line(self, row: int) -> int:
+        """File line of row ``row`` (0-based)."""
+        return int(self.lines[row])
+
+    def numbers(self, column: str, fix: str) -> NDArray:
+        """Column ``column`` as floats; empty cells (and ``nan``, ``NA``) are NaN.
+
+        Raises ``error`` at the first cell that is text rather than a number, naming the file,
+        its line, the column, the value and ``fix`` (what the column should hold).
+        """
+        cells = self.frame[column]
+        text = cells.astype(str).str.strip()
+        missing = cells.isna().to_numpy() | text.isin(_MISSING).to_numpy()
+        values = pd.to_numeric(text.where(~missing), errors="coerce").to_numpy(float)
+        bad = np.flatnonzero(np.isnan(values) & ~missing)
+        if len(bad):
+            i = int(bad[0])
+            raise self.error(
+                f"{self.label}, line {self.line(i)}: {column} {text.iloc[i]!r} is not a number; "
+                f"{fix}"
+            )
+        return values
+
+
+def _a(noun: str) -> str:
+    """The indefinite article of ``noun``."""
+    return "an" if noun[:1].lower() in "aeiou" else "a"
+
+
+def _undecodable(raw: bytes, label: str, what: str, columns: str) -> str | None:
+    """The message for a file that is not UTF-8 text (None when it is)."""
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        kind = " (a zip archive, e.g. an .npz)" if raw[:2] == b"PK" else ""
+        return (
+            f"{label}, line {line}: byte 0x{raw[exc.start]:02x} is not text: this is not a CSV "
+            f"file{kind}; give the {what} as a comma-separated text file with columns {columns}"
+        )
+    return None
+
+
+def read_csv_table(
+    path: str | Path,
+    required: Sequence[str],
+    *,
+    what: str,
+    error: Callable[[str], Exception],
+    doc: str,
+    aliases: Mapping[str, str] | None = None,
+) -> CsvTable:
+    """Read a CSV file with a header line; refuse what cannot be one, naming the fix.
+
+    Every cell is read as text (empty cells as ``""``); convert numeric columns with
+    :meth:`CsvTable.numbers`.
+
+    Parameters
+    ----------
+    path : str or Path
+    required : sequence of str
+        Columns that must be present.
+    what : str
+        What the file holds, for messages (``"balise list"``).
+    error : callable
+        The exception to raise, built from its message (e.g. ``BaliseFileError``).
+    doc : str
+        Where the format is described (``"docs/odometry.md"``).
+    aliases : mapping of str to str, optional
+        Unused column name -> the required column it probably means, for the message.
+
+    Returns
+    -------
+    CsvTable
+    """
+    p = Path(path)
+    label = str(p)
+    columns = ", ".join(required)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise error(f"{label}: cannot read the {what} ({exc}); check the path") from exc
+    if raw.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (spreadsheet export)
+        raw = raw[3:]
+    message = _undecodable(raw, label, what, columns)
+    if message:
+        raise error(message)
+    text = raw.decode("utf-8")
+    numbered = [(k + 1, s) for k, s in enumerate(text.splitlines()) if s.strip()]
+    if not numbered:
+        raise error(f"{label}: the file is empty; {_a(what)} {what} starts with the header line "
+                    f"{','.join(required)} ({doc})")  # fmt: skip
+    header_line, header = numbered[0]
+    for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+        if "," not in header and sep in header:
+            raise error(
+                f"{label}, line {header_line}: the columns are separated by {name}, not commas; "
+                f"save the {what} as comma-separated values (CSV with ',' and '.' for decimals)"
+            )
+    try:
+        frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
+                            skipinitialspace=True)  # fmt: skip
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise error(f"{label}: cannot read the {what} ({exc}); give a comma-separated file "
+                    f"with columns {columns} ({doc})") from exc  # fmt: skip
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in required if c not in frame.columns]
+    if missing:
+        hint = ""
+        meant = {a: c for a, c in (aliases or {}).items() if c in missing and a in frame.columns}
+        if meant:
+            hint = "; rename " + ", ".join(f"{a!r} to {c!r}" for a, c in meant.items())
+        raise error(
+            f"{label}: missing columns {missing} (the header has {list(frame.columns)}); "
+            f"{_a(what)} {what} needs {columns} ({doc}){hint}"
+        )
+    lines = np.array([k for k, _ in numbered[1:]], int)
+    if len(lines) != len(frame):  # a quoted cell across lines: count rows after the header
+        lines = header_line + 1 + np.arange(len(frame))
+    return CsvTable(frame, lines, label, error)
