@@ -170,6 +170,18 @@ class ReconstructionParams:
     thin_wavelength_m : float
         Wavelength of the thin-structure rule: the shortest the receiver tracks (L1, the
         safe side).
+    resolve_width_m : float or None
+        Narrowest upright obstacle the carving must not lose (a catenary mast, a signal post):
+        a frame farther from a cell than this width over the frame's unseen angle (the wider of
+        ``clearance_unseen_deg`` and its thin features: what its segmentation may drop) cannot
+        see such an obstacle there, so where any nearer frame bounds the cell, the cell keeps
+        the lowest of the nearer frames' bounds only (``docs/reconstruction.md``, section 14).
+        ``None``: every frame within ``carve_range_m`` lowers every cell.
+    resolve_positions : tuple of str
+        The camera positions (``Mount.side``) whose far frames the rule above leaves out: the
+        cameras that look along the track (cab and roof), whose far frames see the masts beside
+        the track a pixel wide. Side cameras see them across, near, and the rule applied to
+        them cost 2-4 points of sky for no false trust measured (section 14).
     cell_sweep_m : float or None
         Half-length along the track over which each position's mask bounds the sky
         (``docs/reconstruction.md``, section 12): with it a mask cell holds the worst over
@@ -213,9 +225,19 @@ class ReconstructionParams:
     suspect_neighbour_m: float = 25.0
     antenna_clearance_m: float = 0.5
     thin_wavelength_m: float = L1_WAVELENGTH_M
+    resolve_width_m: float | None = 0.25
+    resolve_positions: tuple[str, ...] = ("front", "rear", "roof")
     cell_sweep_m: float | None = 0.0
 
     def __post_init__(self) -> None:
+        if self.resolve_width_m is not None and not (
+            math.isfinite(self.resolve_width_m) and self.resolve_width_m > 0
+        ):
+            raise ValueError(
+                "ReconstructionParams.resolve_width_m must be a finite width > 0 metres (the "
+                "narrowest upright obstacle, e.g. 0.25 for a catenary mast), or None (no "
+                f"resolution rule), got {self.resolve_width_m}"
+            )
         if self.cell_sweep_m is not None and not (
             math.isfinite(self.cell_sweep_m) and self.cell_sweep_m >= 0
         ):
@@ -501,6 +523,9 @@ class Reconstructor:
                            slice(int(b[:, 2].min()), int(b[:, 3].max())))  # fmt: skip
                     views[box] += seen[box]
                     seen[box] = False
+                if p.resolve_width_m is not None:
+                    bound = _resolving_bounds(hf, bound, frames, profs, cams, rots, p, solids,
+                                              rules, unseen)  # fmt: skip
             else:
                 bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules,
                                              unseen)  # fmt: skip
@@ -692,6 +717,54 @@ def _thin_rules(
         out.append(ThinRule(float(np.radians(f.thin_width_deg)), k2, p.antenna_clearance_m,
                             float(shrunk)))  # fmt: skip
     return out
+
+
+def _resolve_range_m(frames: Sequence[FrameView], p: ReconstructionParams) -> NDArray:
+    """Per frame, the distance within which it sees an upright obstacle ``p.resolve_width_m``
+    wide: that width over its unseen angle (the wider of ``p.clearance_unseen_deg`` and its
+    thin features), at most ``p.carve_range_m``."""
+    assert p.resolve_width_m is not None
+    base = 0.0 if p.clearance_unseen_deg is None else p.clearance_unseen_deg
+    ang = np.radians([max(base, f.thin_width_deg) for f in frames])
+    with np.errstate(divide="ignore"):
+        return np.minimum(p.resolve_width_m / np.tan(ang), p.carve_range_m)
+
+
+def _resolving_bounds(
+    hf: HeightField, bound: NDArray, frames: Sequence[FrameView], profs: Sequence[SkyProfile],
+    cams: NDArray, rots: NDArray, p: ReconstructionParams,
+    solids: Sequence[SkyProfile | None], rules: Sequence[ThinRule | None],
+    unseen: Sequence[UnseenRule | None],
+) -> NDArray:  # fmt: skip
+    """``bound`` (every frame's lowest) without the bounds of far frames of the cameras in
+    ``p.resolve_positions`` on the cells some frame near enough to see a mast bounds
+    (``ReconstructionParams.resolve_width_m``).
+
+    A far frame's sky passes over a mast it cannot resolve (a pixel or less), and the plain
+    carving keeps the lowest bound, so one far frame erases a mast every near frame sees. The
+    bounds kept are among ``bound``'s, so this only raises cells.
+    """
+    subject = np.array([f.mount.side in p.resolve_positions for f in frames], bool)
+    if not subject.any():
+        return bound
+    ranges = _resolve_range_m(frames, p)
+    near = hf.bound_m.copy()
+    scratch = hf.bound_m.copy()
+    seen = np.zeros(hf.shape, np.bool_)
+    for i, prof in enumerate(profs):
+        args = (solids[i], rules[i], unseen[i])
+        r_m = float(ranges[i])
+        if subject[i]:  # within its range only, which marks the cells it resolves
+            if r_m > 0:
+                carve_profile(hf, near, prof, cams[i], rots[i], r_m, seen=seen, solid=args[0],
+                              thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
+            continue
+        carve_profile(hf, near, prof, cams[i], rots[i], p.carve_range_m, solid=args[0],
+                      thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
+        if r_m > 0:  # the cells it resolves
+            carve_profile(hf, scratch, prof, cams[i], rots[i], r_m, seen=seen, solid=args[0],
+                          thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
+    return np.where(seen, np.maximum(near, bound), bound).astype(bound.dtype)
 
 
 def _unseen_rules(

@@ -16,6 +16,7 @@ from predisat.reconstruct.carving import (
     ReconstructionParams,
     Reconstructor,
 )
+from predisat.synth.materials import MATERIALS
 from predisat.synth.raycast import make_caster
 from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
@@ -655,3 +656,45 @@ def test_a_swept_height_field_sees_what_every_point_of_its_cell_sees() -> None:
         sweep_along_track(hf, world.track, -1.0)
     with pytest.raises(ValueError, match="cell_sweep_m"):
         ReconstructionParams(cell_sweep_m=float("nan"))
+
+
+def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
+    """A 360-degree camera (0.5 deg pixels) every 10 m on an open line with catenary. The
+    frames within 25 m of a mast see it (ray cast); the others are rendered from the same world
+    without the catenary, as far frames whose segmentation lost the sub-pixel mast
+    (``docs/reconstruction.md``, section 14). The plain carving keeps the lowest bound, so
+    their sky erases the mast the near frames see: its cells are bounded below its top (the
+    mesh's). With ``resolve_width_m`` (0.25 m; the mast is a 0.28 m H-beam) a cell a near frame
+    bounds keeps the near frames' lowest bound: the mast stands whole, and no cell is lower
+    than the plain carving's. The overhead rules, which a cantilever over the track may fire
+    and which raise the cells beside it for another reason, are off."""
+    from dataclasses import replace
+
+    track = straight_track(700.0, AZIMUTH)
+    spec = WorldSpec((Stretch("open", 100.0, 600.0, "both", {"objects_per_km": 0.0}),),
+                     catenary=True, hills=False)  # fmt: skip
+    world = World.build(track, spec, seed=2)
+    bare = World.build(track, replace(spec, catenary=False), seed=2)
+    steel = [m.name for m in MATERIALS].index("steel")
+    verts = world.vertices_m[world.faces[world.face_material == steel].ravel()]
+    proj = track.project_enu(verts)
+    one = np.abs(proj.chainage_m - 300.0) < 10.0  # the masts stand 55-65 m apart
+    mast_m, top_m = float(np.median(proj.chainage_m[one])), float(verts[one, 2].max())
+    pano = {"roof": Mount.default("roof")}
+    s_frames = np.arange(mast_m - 150.0, mast_m + 151.0, 10.0)
+    near = np.abs(s_frames - mast_m) <= 25.0
+    cam = CameraModel.equirect(720)
+    fr = ideal_frames(world, s_frames[near], cam, pano) + ideal_frames(bare, s_frames[~near],
+                                                                        cam, pano)  # fmt: skip
+    base = replace(PARAMS, overhead_along_el_deg=None, along_view_half_deg=None)
+    fields = {res: Reconstructor(replace(base, resolve_width_m=res)).height_field(
+        fr, world.track, mast_m - 60.0, mast_m + 60.0) for res in (None, 0.25)}  # fmt: skip
+    hf = fields[None]
+    off = proj.offset_m[one]
+    cells = ((np.abs(hf.chainage_m - mast_m) < 0.5) & (hf.offset_m > off.min() - 0.3)
+             & (hf.offset_m < off.max() + 0.3))  # fmt: skip
+    assert cells.sum() >= 2
+    assert (fields[None].bound_m[cells] < top_m - 2.0).all()  # a test of the test
+    assert (fields[0.25].bound_m[cells] >= top_m).all()
+    region = hf.region
+    assert np.all(fields[0.25].bound_m[region] >= fields[None].bound_m[region])
