@@ -46,7 +46,13 @@ from predisat.cli.args import (
     requires,
     speed_mps,
 )
-from predisat.cli.common import CliError, km_range, run_main, track_option
+from predisat.cli.common import (
+    CliError,
+    add_track_selection,
+    km_range,
+    run_main,
+    track_option,
+)
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
 
 __all__ = ["main"]
@@ -460,7 +466,24 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         from locator.sim.simfile import SimRun
 
         sim = SimRun.read(args.sim)
-    truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv, chainage_m=args.truth_chainage)
+    if args.truth_positions:
+        from locator.devicegnss import read_ground_truth
+        from locator.workflow import truth_from_positions
+
+        if args.track is None:
+            raise CliError("--truth-positions needs the run's track (--track FILE, and "
+                           "--track-name when the file holds several) to project them on")
+        track = track_option(args.track, args.track_name, args.chain, args.where)
+        if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
+            raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
+                           f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
+                           "that track")  # fmt: skip
+        truth = truth_from_positions(epochs, read_ground_truth(args.truth_positions), track)
+    else:
+        if args.track is not None:
+            raise CliError("--track is for --truth-positions (the others are chainages already)")
+        truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv,
+                          chainage_m=args.truth_chainage)  # fmt: skip
     s = evaluate_folder(args.run, truth)
     print(_summary_text(s, str(meta.get("config", {}).get("error_model_caveat", ""))))
     print(f"-> {Path(args.run) / 'evaluation.json'}, scored table and figures")
@@ -470,13 +493,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def _summary_text(s: dict[str, float], caveat: str = "") -> str:
     from locator.run import claim_label
 
+    lengths = (
+        f"interval median {s['length_median_m']:.1f} m, p95 {s['length_p95_m']:.1f} m, "
+        f"max {s['length_max_m']:.1f} m"
+        if s["claim_share"] > 0
+        else "no interval claimed"
+    )
     return (
         f"epochs {s['epochs']:.0f}; modes: three pairs {100 * s['mode_three_pairs_share']:.1f} %, "
         f"all pairs {100 * s['mode_all_pairs_share']:.1f} %, best pair (no claim) "
         f"{100 * s['mode_best_pair_share']:.1f} %, none {100 * s['mode_none_share']:.1f} %\n"
-        f"{claim_label(caveat)} {100 * s['claim_share']:.1f} % of epochs; interval median "
-        f"{s['length_median_m']:.1f} m, p95 {s['length_p95_m']:.1f} m, "
-        f"max {s['length_max_m']:.1f} m\n"
+        f"{claim_label(caveat)} {100 * s['claim_share']:.1f} % of epochs; {lengths}\n"
         f"|error| median {s['abs_error_median_m']:.2f} m, p95 {s['abs_error_p95_m']:.2f} m; "
         f"HMI {s['hmi']:.0f} (before heading/odometry checks {s['hmi_fix']:.0f}); "
         f"alarmed misleading {s['mi']:.0f}"
@@ -843,10 +870,16 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     g.add_argument("--truth-csv", type=existing_file(_TRUTH_CSV), metavar="CSV", help=_TRUTH_CSV)
     g.add_argument("--truth-chainage", type=finite_float, metavar="M",
                    help="a static antenna's chainage, metres")
+    g.add_argument("--truth-positions", type=existing_file(_TRUTH_POSITIONS), metavar="CSV",
+                   help=f"{_TRUTH_POSITIONS}, projected on --track")
+    p.add_argument("--track", metavar="FILE", help="with --truth-positions: " + _TRACK)
+    add_track_selection(p)
     p.set_defaults(func=cmd_evaluate)
 
 
 _DEVICE_GNSS = "a Google Smartphone Decimeter Challenge device_gnss.csv"
+_TRUTH_POSITIONS = ("reference antenna positions: a Google Smartphone Decimeter Challenge "
+                    "ground_truth.csv (time, latitude, longitude, ellipsoidal height)")
 
 _TRUTH_CSV = ("a CSV with columns gps_s (GPS seconds) and chainage_m (true chainage, metres) "
               "covering the run's epochs")

@@ -48,7 +48,9 @@ from predisat.masks.maskset import MaskSet
 from predisat.track import demo_track
 
 if TYPE_CHECKING:
+    from locator.devicegnss import GroundTruth
     from predisat.synth.world import World  # the renderer's world: needs the [synth] extra
+    from predisat.track import TrackMap
 
 __all__ = [
     "DEMO_RANGE_M",
@@ -63,6 +65,7 @@ __all__ = [
     "static_truth",
     "stop_and_go",
     "truth_for",
+    "truth_from_positions",
     "with_model",
 ]
 
@@ -231,6 +234,32 @@ def truth_for(
             f"{label} does not cover the run's epochs ({t.min():.0f}-{t.max():.0f} gps_s)"
         )
     return np.interp(t, ts, cs)
+
+
+def truth_from_positions(
+    epochs: pd.DataFrame, truth: GroundTruth, track: TrackMap, max_offset_m: float = 20.0
+) -> np.ndarray:
+    """True chainage per epoch from reference antenna positions (a phone drive's ground truth),
+    projected on ``track``.
+
+    Raises
+    ------
+    ValueError
+        Naming the file: when the truth does not cover an epoch (:meth:`GroundTruth.at`), or
+        when its positions lie more than ``max_offset_m`` beside the track (the median: another
+        track, or the truth of another drive).
+    """
+    ecef = truth.at(epochs["gps_s"].to_numpy(float))
+    lat, lon, h = ecef_to_geodetic(ecef)
+    proj = track.project(lat, lon, h)
+    off = float(np.median(np.abs(proj.offset_m)))
+    if off > max_offset_m:
+        raise ValueError(
+            f"{truth.path}: its positions lie {off:.0f} m beside track {track.name!r} (median); "
+            "give the track the run was made on (--track, --track-name) or the ground truth of "
+            "this drive"
+        )
+    return np.asarray(proj.chainage_m, float)
 
 
 def evaluate_folder(

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from locator.devicegnss import (
@@ -149,6 +150,26 @@ def test_locator_run_on_a_phone_log_makes_no_claim(
 
     epochs = read_run(tmp_path / "run")[0]
     assert len(epochs) == 2 and not epochs["claim"].any()
+    # scored against the drive's ground truth positions, projected on the track: the truth
+    # chainage is the along-track coordinate of the reference positions in the local frame
+    gt = str(test_data / GT)
+    assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt, "--track",
+                 str(tmp_path / "t.geojson")]) == 0  # fmt: skip
+    scored = pd.read_parquet(tmp_path / "run" / "scored.parquet")
+    truth = read_ground_truth(gt)
+    enu = frame.ecef_to_enu(truth.at(epochs["gps_s"].to_numpy(float)))
+    along = 2000.0 + enu[:, 0] * np.sin(np.pi / 4) + enu[:, 1] * np.cos(np.pi / 4)
+    np.testing.assert_allclose(scored["truth_m"], along, atol=0.05)
+    assert "no interval claimed" in capsys.readouterr().out
+    # another track, or none, is refused before any scoring
+    far = np.array([[5000.0, 0.0, 0.0], [5000.0, 4000.0, 0.0]])  # as long, 5 km east
+    other = TrackMap.from_latlon(*frame.to_geodetic(far), name="far", tolerance_m=0.01)
+    write_geojson(other, tmp_path / "far.geojson")
+    assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt, "--track",
+                 str(tmp_path / "far.geojson")]) == 2  # fmt: skip
+    assert "beside track" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt]) == 2
+    assert "needs the run's track" in capsys.readouterr().err
 
 
 def test_calibrate_on_a_phone_log(
