@@ -532,7 +532,9 @@ def compute_availability(
 
 
 def _progress(total: int, on: bool, label: str = "") -> Any:
-    if on:
+    # a bar below the run's own one moves the cursor up: only on a terminal (redirected, it
+    # leaves blank lines and escape codes in the log)
+    if on and sys.stderr.isatty():
         desc = f"availability, {label}" if label else "availability"
         return tqdm(total=total, desc=desc, unit="position", leave=False, file=sys.stderr)
 

@@ -268,3 +268,22 @@ def test_blocks_on_a_dask_cluster_give_the_serial_bits(sats, masks) -> None:
     assert on_dask.sensitivity is not None and serial.sensitivity is not None
     assert on_dask.sensitivity.tobytes() == serial.sensitivity.tobytes()
     assert "Dask cluster at" in on_dask.provenance["workers"]
+
+
+def test_the_inner_progress_bar_stays_off_when_stderr_is_not_a_terminal(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Nested bars move the cursor up: redirected to a log they leave escape codes."""
+    import sys
+
+    from predisat.availability.engine import _progress
+
+    bar = _progress(10, True, "masks")
+    bar.update(5)
+    bar.close()
+    assert capsys.readouterr().err == ""  # pytest's capture is not a terminal
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    bar = _progress(10, True, "masks")
+    bar.update(5)
+    bar.close()
+    assert "availability, masks" in capsys.readouterr().err
