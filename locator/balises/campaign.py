@@ -9,11 +9,9 @@ every passage; :func:`balises_to_folder` does both and writes ``epochs.parquet``
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -28,6 +26,7 @@ from locator.run import RunConfig, run_locator
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from locator.sources import SimSource
+from predisat.jsontypes import strict_json_text
 from predisat.masks.maskset import MaskSet
 
 __all__ = [
@@ -305,15 +304,9 @@ def balises_to_folder(
         "summary": summary.to_dict(orient="records"),
         "safe_front": front, **dict(meta or {}),
     }  # fmt: skip
-    (folder / "summary.json").write_text(json.dumps(info, indent=2, default=_json) + "\n")
+    # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
+    (folder / "summary.json").write_text(strict_json_text(info))
     fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval")
     fig.savefig(folder / "captures.png", dpi=100)
     return summary, folder
 
-
-def _json(x: Any) -> Any:
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, (np.ndarray, Sequence)):
-        return list(x)
-    return str(x)
