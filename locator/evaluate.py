@@ -215,7 +215,7 @@ _LOSS_CAUSES = (
 )
 # after "2-3 satellites": a stretch's few satellites are the cause of its missing claim
 _STRETCH_CAUSE = ("NO_STRETCH_CLAIM", "no stretch of the predicted interval with a claim of "
-                  "its own (partitioned trust)")  # fmt: skip  # fmt: skip
+                  "its own (partitioned trust)")  # fmt: skip
 
 
 def claim_losses(epochs: pd.DataFrame) -> dict[str, float]:

@@ -111,19 +111,21 @@ def model_use(
             f"{command}: NO SAFETY CLAIM: the integrity risk asks for pair intervals of k up "
             f"to {k_max:.2f}, deeper than {name} was checked: {'; '.join(short)}. Positions "
             "are given, every epoch flagged NO_ERROR_MODEL. Calibrate on more data, claim a "
-            "larger risk (--integrity-risk, or --k-sigma within the checked k), or pass "
-            "--assume-gaussian-tail to claim under the Gaussian shape beyond the checked depth "
-            "(recorded in run.json, every epoch flagged GAUSSIAN_TAIL; docs/errormodel.md)",
+            "larger risk (--integrity-risk, or --k-sigma within the checked k)"
+            + (", or pass --assume-gaussian-tail to claim under the Gaussian shape beyond the "
+               "checked depth (recorded in run.json, every epoch flagged GAUSSIAN_TAIL)"
+               if hasattr(args, "assume_gaussian_tail") else "")
+            + " (docs/errormodel.md)",
             file=sys.stderr,
         )
     elif use == "forced":
         print(f"{command}: warning: --force-error-model: intervals under {name}, which does "
               f"not apply to this data: {'; '.join(why)}. NOT A SAFETY CLAIM: every epoch is "
-              "flagged FORCED_ERROR_MODEL and run.json records it", file=sys.stderr)  # fmt: skip
+              "flagged FORCED_ERROR_MODEL and the output records it", file=sys.stderr)  # fmt: skip
     elif use == "gaussian_tail":
         print(f"{command}: warning: --assume-gaussian-tail: {'; '.join(short)}. The claims "
               "rest on the Gaussian shape beyond that depth: every epoch is flagged "
-              "GAUSSIAN_TAIL and run.json records it", file=sys.stderr)  # fmt: skip
+              "GAUSSIAN_TAIL and the output records it", file=sys.stderr)  # fmt: skip
     own = calibrated_on(mf, getattr(args, "obs", None) or getattr(args, "device_gnss", None))
     if own and use != "none":
         print(f"{command}: warning: {name} was calibrated on {own}, the data of this run: "
@@ -155,12 +157,14 @@ def calibrated_on(mf: ErrorModelFile, data: str | None) -> str:
 
 
 def deepest_k(locator: LocatorConfig) -> float:
-    """The widest pair interval's ``k`` a claim may rest on: under a budget, that of the
-    claiming mode with the fewest independent pairs (all pairs of 4-5 satellites; a best pair
-    of 2-3 never claims); the fixed ``k`` otherwise."""
-    from predisat.availability.interval import INDEPENDENT_PAIRS, IntervalMode
+    """The widest pair interval's ``k`` a claim may rest on (the fixed ``k``, or under a budget
+    the ``k`` of a single independent pair).
 
+    Not the claiming modes' nominal ``k``: active integrity drops blunt pairs and widens the
+    others to the ``k`` of the disjoint pairs left (:meth:`locator.fde.LocatorConfig.
+    k_sigma_for`), and a union of 4-5 satellites may keep one, so a claim may rest on
+    ``budget.k_sigma(1)`` (7.13 at 1e-12 per epoch).
+    """
     if locator.budget is None:
         return float(locator.model.k_sigma)
-    pairs = min(n for mode, n in INDEPENDENT_PAIRS.items() if mode != IntervalMode.BEST_PAIR)
-    return float(locator.budget.k_sigma(pairs))
+    return float(locator.budget.k_sigma(1))

@@ -122,8 +122,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "gives no safety claim, as in `locator run`; its k_sigma is not used: see "
                    "--integrity-risk)")  # fmt: skip
     p.add_argument("--force-error-model", action="store_true",
-                   help="claim under --error-model even when it does not apply to the data "
-                   "(another receiver, antenna, code, or a locator-error-model/1 file): not safe")
+                   help="intervals and captures under --error-model even when it does not apply "
+                   "to the data (another receiver, antenna, code, or a locator-error-model/1 "
+                   "file): not a safety claim; every epoch flagged FORCED_ERROR_MODEL, "
+                   "summary.json records it")
     integrity_options(p)
     p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
@@ -223,7 +225,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
     locator = LocatorConfig(model=model, budget=integrity_budget(args))
-    use, _ = model_use(mf, profile, args, deepest_k(locator), "locator balises")
+    use, model_record = model_use(mf, profile, args, deepest_k(locator), "locator balises")
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
     cfg = RunConfig(locator, trust=trust,
                     cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
@@ -256,7 +258,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
             sim, path, balises, args.out, config=cfg, masks=masks,
             odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed,
             log=log, accuracy=accuracy, progress=bar.update,
-            meta={"sim": str(args.sim), "odometer_kind": kind},
+            meta={"sim": str(args.sim), "odometer_kind": kind, "error_model": model_record},
         )  # fmt: skip
     print(format_summary(summary))
     for line in _summary_notes(summary, balises, sim):

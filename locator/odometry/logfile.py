@@ -215,13 +215,20 @@ def validate_odometer_log(
     # over at least accel_window_s: a speed counted from wheel-sensor edges in one cycle is
     # quantised by an edge over the cycle (0.2-0.3 m/s at 0.1 s), which alone reads as several
     # m/s^2 from one cycle to the next; a one-row spike still shows at either end of a window
-    j = np.minimum(np.searchsorted(t_s, t_s + accel_window_s), n - 1)
-    span = t_s[j] - t_s[: len(j)]
+    window_s = min(accel_window_s, float(t_s[-1] - t_s[0]))
+    j = np.searchsorted(t_s, t_s + window_s - 1e-9)
+    full = j < n  # windows running past the log's end are covered by the last full one
+    j = np.minimum(j, n - 1)
+    span = t_s[j] - t_s
     with np.errstate(invalid="ignore", divide="ignore"):
-        acc = np.where(span > 0, (speed_mps[j] - speed_mps) / span, 0.0)
-    if slip is not None:  # a window holding a cycle the odometer marked is its own business
-        marked = np.concatenate([[0], np.cumsum(np.asarray(slip, bool))])
-        acc = np.where(marked[j + 1] - marked[np.arange(n)] > 0, 0.0, acc)
+        acc = np.where(full & (span > 0), (speed_mps[j] - speed_mps) / span, 0.0)
+    if slip is not None and np.any(slip):
+        # a window within a window of a marked cycle is the odometer's business: it marks a
+        # slip or slide once its own check fires, a cycle or more after the onset
+        ts = t_s[np.asarray(slip, bool)]
+        lo = np.searchsorted(ts, t_s - window_s, side="left")
+        hi = np.searchsorted(ts, t_s[j] + window_s, side="right")
+        acc = np.where(hi > lo, 0.0, acc)
     bad = np.flatnonzero(np.abs(acc) > max_accel_mps2 + accel_tolerance_mps2)
     if len(bad):
         i, k = int(bad[0]), int(j[bad[0]])

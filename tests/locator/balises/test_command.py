@@ -159,9 +159,27 @@ def test_an_error_model_of_another_receiver_gives_no_claim_and_no_capture(sim_di
     assert not ep["claim"].any()
     caps = pd.read_csv(tmp_path / "no" / "captures.csv")
     assert caps["passed"].any() and not caps["captured"].any()
+    info = json.loads((tmp_path / "no" / "summary.json").read_text())
+    assert info["error_model"]["use"] == "none" and info["error_model"]["mismatches"]
     assert main([*base, "--force-error-model", "--out", str(tmp_path / "forced")]) == 0
-    assert "--force-error-model" in capsys.readouterr().err
-    assert pd.read_parquet(tmp_path / "forced" / "epochs.parquet")["claim"].any()
+    err = capsys.readouterr().err
+    assert "--force-error-model" in err and "NOT A SAFETY CLAIM" in err
+    ep = pd.read_parquet(tmp_path / "forced" / "epochs.parquet")
+    assert ep["claim"].any() and ep["flag_names"].str.contains("FORCED_ERROR_MODEL").all()
+    assert json.loads((tmp_path / "forced" / "summary.json").read_text())["error_model"][
+        "use"] == "forced"  # fmt: skip
+    # a model of this receiver checked only to 0.05 per pseudorange: not as deep as the
+    # integrity risk asks, no claim either (and no hint at an option balises does not have)
+    sim_model = write_error_model(
+        tmp_path / "shallow.json", IntervalModel(e),
+        systems={s: SystemModel(e, ("sim",), 1000, 100, 0.05) for s in "GRECJ"},
+        applicability=Applicability(("simulated",), ("simulated",), "simulated"),
+    )  # fmt: skip
+    shallow = [*base[:-1], str(sim_model)]
+    assert main([*shallow, "--out", str(tmp_path / "shallow")]) == 0
+    err = capsys.readouterr().err
+    assert "deeper than" in err and "--assume-gaussian-tail" not in err
+    assert not pd.read_parquet(tmp_path / "shallow" / "epochs.parquet")["claim"].any()
 
 
 def test_captures_csv_keeps_the_times_full_precision(sim_dir, tmp_path):

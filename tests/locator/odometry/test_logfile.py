@@ -6,7 +6,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from locator.odometry.logfile import OdometerLogError, read_odometer_log, write_odometer_log
+from locator.odometry.logfile import (
+    OdometerLogError,
+    read_odometer_log,
+    validate_odometer_log,
+    write_odometer_log,
+)
 from locator.odometry.odometer import OdometerConfig, simulate_odometer
 
 
@@ -125,16 +130,22 @@ def test_steps_of_simulated_odometers_agree_with_their_speed(tmp_path):
 def test_simulated_odometers_pass_the_acceleration_check_at_their_own_maximum(tmp_path):
     # a speed counted from wheel-sensor edges in one 0.1 s cycle is quantised by 0.2 m/s and
     # more: cycle to cycle that read as 2-7 m/s^2 and refused the project's own simulated
-    # logs; slip and slide cycles the odometer marked are its own business
-    t = np.arange(0.0, 120.0, 0.1)
-    v = np.interp(t, [0, 20, 50, 70, 80, 100, 120], [0, 25, 25, 0, 0, 15, 15])
+    # logs; slip and slide cycles the odometer marked (a cycle or more after their onset) are
+    # its own business. Ten minutes of accelerating, braking and stops, ten seeds of each
+    t = np.arange(0.0, 600.0, 0.1)
+    v = np.interp(t % 120.0, [0, 20, 50, 70, 80, 100, 120], [0, 25, 25, 0, 0, 15, 0])
     x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
     for cfg in (OdometerConfig(), OdometerConfig.motor_axle(radar=False),
                 OdometerConfig.motor_axle(radar=True)):  # fmt: skip
-        for seed in range(3):
+        for seed in range(10):
             log = simulate_odometer(t, x, cfg, seed=seed)
-            read_odometer_log(write_odometer_log(log, tmp_path / "odo.csv"),
-                              max_accel_mps2=cfg.max_accel_mps2)  # fmt: skip
+            validate_odometer_log(log.t_s, log.dist_m, log.speed_mps, log.direction, "sim",
+                                  max_accel_mps2=cfg.max_accel_mps2, slip=log.slip)  # fmt: skip
+    read_odometer_log(write_odometer_log(log, tmp_path / "odo.csv"),
+                      max_accel_mps2=cfg.max_accel_mps2)  # the file path too  # fmt: skip
+    t = np.arange(0.0, 120.0, 0.1)
+    v = np.interp(t, [0, 20, 50, 70, 80, 100, 120], [0, 25, 25, 0, 0, 15, 15])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
     # a speed 3 m/s too high on one row at cruise (a wheel spinning, or a corrupt row) is
     # refused, naming its line; the same row marked as slip by the odometer is accepted
     log = simulate_odometer(t, x, OdometerConfig(), seed=0)
@@ -148,6 +159,11 @@ def test_simulated_odometers_pass_the_acceleration_check_at_their_own_maximum(tm
     df.loc[row, "slip"] = 1
     df.to_csv(tmp_path / "marked.csv", index=False)
     read_odometer_log(tmp_path / "marked.csv")
+    # an edge-count bump of 0.3 m/s on the very last row is quantisation there too
+    df = pd.read_csv(write_odometer_log(log, tmp_path / "odo.csv"))
+    df.loc[len(df) - 1, "speed_mps"] += 0.3
+    df.to_csv(tmp_path / "end.csv", index=False)
+    read_odometer_log(tmp_path / "end.csv")
 
 
 def test_text_binary_and_separators_name_the_line(tmp_path):
