@@ -478,16 +478,44 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
                            f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
                            "that track")  # fmt: skip
+        _check_same_track(track, meta, str(args.track))
         truth = truth_from_positions(epochs, read_ground_truth(args.truth_positions), track)
     else:
-        if args.track is not None:
-            raise CliError("--track is for --truth-positions (the others are chainages already)")
+        if args.track is not None or args.track_name is not None or args.where:
+            raise CliError("--track (--track-name, --where) is for --truth-positions (the "
+                           "other truths are chainages already)")  # fmt: skip
         truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv,
                           chainage_m=args.truth_chainage)  # fmt: skip
     s = evaluate_folder(args.run, truth)
     print(_summary_text(s, str(meta.get("config", {}).get("error_model_caveat", ""))))
     print(f"-> {Path(args.run) / 'evaluation.json'}, scored table and figures")
     return 0
+
+
+# A track whose ends lie farther than this from the run's is another track, or reversed.
+_TRACK_END_TOL_M = 5.0
+
+
+def _check_same_track(track: Any, meta: dict[str, Any], label: str) -> None:
+    """Refuse a track whose ends are not the run's (``run.json``'s ``track_ends_latlon_deg``;
+    a run folder written before it records nothing to compare)."""
+    import numpy as np
+
+    from predisat.geodesy import WGS84
+
+    ends = meta.get("track_ends_latlon_deg")
+    if not ends:
+        return
+    lat, lon, _ = track.position_at([0.0, track.length_m])
+    run_lat, run_lon = np.asarray(ends, float).T
+    d = WGS84.inv(lon, lat, run_lon, run_lat)[2]
+    if np.max(d) > _TRACK_END_TOL_M:
+        flipped = WGS84.inv(lon, lat, run_lon[::-1], run_lat[::-1])[2]
+        why = ("runs the other way (chainage 0 at the run's far end)"
+               if np.max(flipped) <= _TRACK_END_TOL_M
+               else f"has its ends {np.max(d):.0f} m from the run's")  # fmt: skip
+        raise CliError(f"--track {label} {why}: give the track `locator run` used "
+                       f"({meta.get('track')!r})")  # fmt: skip
 
 
 def _summary_text(s: dict[str, float], caveat: str = "") -> str:

@@ -189,6 +189,10 @@ def run_to_folder(
     info = {
         "track": path.track.name,
         "track_length_m": path.length_m,
+        # the ends (lat, lon, degrees), so that a truth projected later uses the same track
+        # the same way round
+        "track_ends_latlon_deg": [list(map(float, ll[:2])) for ll in zip(
+            *path.track.position_at([0.0, path.track.length_m]), strict=True)],
         "antenna_height_m": path.antenna_height_m,
         "start_chainage_m": start_chainage_m,
         "config": config.to_dict(),
@@ -241,6 +245,22 @@ def truth_from_positions(
 ) -> np.ndarray:
     """True chainage per epoch from reference antenna positions (a phone drive's ground truth),
     projected on ``track``.
+
+    Parameters
+    ----------
+    epochs : pandas.DataFrame
+        A run's epochs (``gps_s``).
+    truth : GroundTruth
+        Reference positions (:func:`locator.devicegnss.read_ground_truth`).
+    track : TrackMap
+        The track the run was made on.
+    max_offset_m : float
+        Largest median distance of the positions from the track.
+
+    Returns
+    -------
+    ndarray, shape (n_epoch,)
+        True chainage, metres.
 
     Raises
     ------

@@ -133,10 +133,24 @@ def validate_odometer_log(
 ) -> None:
     """Raise :class:`OdometerLogError` at the first bad row (file line numbers in ``label``).
 
-    ``lines`` gives the file line of each row (default: row ``i`` on line ``i + 2``, below a
-    header). Accelerations are the speed change over at least ``accel_window_s`` (a speed
-    counted from wheel-sensor edges is quantised per cycle); windows holding a cycle marked
-    in ``slip`` (the odometer's own slip / slide flag) are not checked.
+    Parameters
+    ----------
+    t_s, dist_m, speed_mps, direction : ndarray, shape (n,)
+        The log's columns: cycle times (s), distance (m), speed (m/s), direction (+1/-1/0).
+    label : str
+        The file, named in the errors.
+    max_accel_mps2, accel_tolerance_mps2 : float
+        Accelerations beyond their sum are refused, m/s^2.
+    max_gap_s : float
+        Longest cycle step, s.
+    lines : ndarray of int, optional
+        The file line of each row (default: row ``i`` on line ``i + 2``, below a header).
+    slip : ndarray of bool, optional
+        Cycles the odometer marked as slip or slide.
+    accel_window_s : float
+        Accelerations are the speed change over at least this long (a speed counted from
+        wheel-sensor edges is quantised per cycle); windows within a window of a marked cycle
+        are not checked.
     """
     n = len(t_s)
 

@@ -41,6 +41,7 @@ __all__ = [
     "chainage_hint",
     "constellation",
     "constellation_label",
+    "constellation_letters",
     "cutoff_deg",
     "existing_dir",
     "existing_file",

@@ -28,6 +28,7 @@ from predisat.cli.args import (
     url_or,
 )
 from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model_file
+from predisat.gnss.integrity import IntegrityBudget
 from predisat.track import TrackMap
 
 __all__ = ["add_arguments", "run"]
@@ -129,7 +130,8 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         to_m=None if args.to_km is None else args.to_km * 1000.0,
         sky_km=args.sky_km,
         interval_every=args.interval_every,
-        interval_model=_interval_model(args.error_model, args.k_sigma, args.constellation),
+        interval_model=_interval_model(args.error_model, args.k_sigma, args.constellation,
+                                       integrity_budget(args)),
         integrity=integrity_budget(args),
         workers=args.workers,
         scheduler=args.scheduler,
@@ -141,10 +143,12 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
 
 
 def _interval_model(error_model: str | None, k_sigma: float | None,
-                    constellation: str = "gps") -> IntervalModel:  # fmt: skip
+                    constellation: str = "gps",
+                    budget: IntegrityBudget | None = None) -> IntervalModel:  # fmt: skip
     """``--error-model`` / ``--k-sigma``: the file's model of the counted systems (or the
     default), its k replaced. A file without a model of a counted system is refused; one that
-    bounds no checked tail is used with a warning (its lengths are then no bound)."""
+    bounds no checked tail, or not as deep as the intervals' widest ``k`` (a single pair's
+    under ``budget``), is used with a warning: `locator run` would make no claim under it."""
     if error_model is not None:
         try:
             mf = read_error_model_file(error_model)
@@ -167,6 +171,13 @@ def _interval_model(error_model: str | None, k_sigma: float | None,
             print(f"predisat availability: warning: --error-model {error_model}: {what}; the "
                   "predicted interval lengths are not bounds (docs/errormodel.md)",
                   file=sys.stderr)  # fmt: skip
+        k_max = k_sigma if k_sigma is not None else (budget or IntegrityBudget()).k_sigma(1)
+        short = mf.depth_shortfall([c for c in letters if c in mf.systems], k_max)
+        if short and not unbounded:
+            print(f"predisat availability: warning: --error-model {error_model}: "
+                  f"{'; '.join(short)}; the predicted intervals rest on its Gaussian tail beyond "
+                  "that depth, and `locator run` makes no safety claim under it unless told "
+                  "to assume that tail (docs/errormodel.md)", file=sys.stderr)  # fmt: skip
         model = mf.for_systems(list(letters))
     else:
         model = IntervalModel()

@@ -352,7 +352,12 @@ class ErrorModelFile:
         systems : sequence of str
             System letters of the data.
         k_sigma : float
-            The smallest ``k`` of the claim's pair intervals.
+            The widest pair interval's ``k`` a claim may rest on.
+
+        Returns
+        -------
+        list of str
+            One reason per system checked less deep, empty when none.
         """
         if not k_sigma > 0:
             raise ValueError(f"k_sigma must be positive, got {k_sigma}")

@@ -176,7 +176,10 @@ class ReconstructionParams:
         ``clearance_unseen_deg`` and its thin features: what its segmentation may drop) cannot
         see such an obstacle there, so where any nearer frame bounds the cell, the cell keeps
         the lowest of the nearer frames' bounds only (``docs/reconstruction.md``, section 14).
-        ``None``: every frame within ``carve_range_m`` lowers every cell.
+        ``None``: every frame within ``carve_range_m`` lowers every cell. It applies at
+        ``fusion_rank = 1`` (the default); at higher ranks the k-th lowest bound already needs
+        k views to agree, and the rule is not applied. A frame without an unseen angle
+        (``clearance_unseen_deg`` None and no thin features) resolves to ``carve_range_m``.
     resolve_positions : tuple of str
         The camera positions (``Mount.side``) whose far frames the rule above leaves out: the
         cameras that look along the track (cab and roof), whose far frames see the masts beside

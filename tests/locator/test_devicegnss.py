@@ -3,6 +3,7 @@ the leap seconds, the residuals against Google's independent ground truth, and b
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -136,8 +137,8 @@ def test_locator_run_on_a_phone_log_makes_no_claim(
     # a straight virtual track through the truth, heading 45 deg
     frame = LocalFrame(37.692231, -122.0884199, 20.9736302800885)
     d = np.linspace(-2000.0, 2000.0, 41)
-    enu = np.stack([d * np.sin(np.pi / 4), d * np.cos(np.pi / 4), np.zeros_like(d)], axis=-1)
-    track = TrackMap.from_latlon(*frame.to_geodetic(enu), name="virtual", tolerance_m=0.01)
+    enu_track = np.stack([d * np.sin(np.pi / 4), d * np.cos(np.pi / 4), np.zeros_like(d)], -1)
+    track = TrackMap.from_latlon(*frame.to_geodetic(enu_track), name="virtual", tolerance_m=0.01)
     write_geojson(track, tmp_path / "t.geojson")
     rc = main(["-q", "run", "--device-gnss", str(test_data / DEV), "--track",
                str(tmp_path / "t.geojson"), "--no-masks", "--antenna-height", "0", "--out",
@@ -167,9 +168,22 @@ def test_locator_run_on_a_phone_log_makes_no_claim(
     write_geojson(other, tmp_path / "far.geojson")
     assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt, "--track",
                  str(tmp_path / "far.geojson")]) == 2  # fmt: skip
-    assert "beside track" in capsys.readouterr().err
+    ends = re.search(r"has its ends (\d+) m from the run's", capsys.readouterr().err)
+    assert ends is not None and int(ends.group(1)) >= 5000  # moved 5 km east
+    # a run folder that does not record its track's ends: the positions' offset tells
+    from locator.workflow import truth_from_positions
+
+    with pytest.raises(ValueError, match="beside track 'far'"):
+        truth_from_positions(epochs, truth, other)
     assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt]) == 2
     assert "needs the run's track" in capsys.readouterr().err
+    # the same line the other way round would mirror every chainage: refused
+    back = TrackMap.from_latlon(*frame.to_geodetic(enu_track[::-1]), name="virtual",
+                                tolerance_m=0.01)  # fmt: skip
+    write_geojson(back, tmp_path / "back.geojson")
+    assert main(["evaluate", str(tmp_path / "run"), "--truth-positions", gt, "--track",
+                 str(tmp_path / "back.geojson")]) == 2  # fmt: skip
+    assert "runs the other way" in capsys.readouterr().err
 
 
 def test_calibrate_on_a_phone_log(

@@ -278,10 +278,11 @@ def test_the_inner_progress_bar_stays_off_when_stderr_is_not_a_terminal(
 
     from predisat.availability.engine import _progress
 
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False)  # redirected (even under -s)
     bar = _progress(10, True, "masks")
     bar.update(5)
     bar.close()
-    assert capsys.readouterr().err == ""  # pytest's capture is not a terminal
+    assert capsys.readouterr().err == ""
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     bar = _progress(10, True, "masks")
     bar.update(5)

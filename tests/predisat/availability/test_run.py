@@ -460,7 +460,13 @@ def test_an_error_model_must_hold_every_counted_system(
     a, b = (r.results[0].interval_m for r in runs)
     assert np.isfinite(a).sum() > 10
     np.testing.assert_allclose(a, b, rtol=1e-9)
-    assert "warning" not in capsys.readouterr().err
+    assert "warning" not in capsys.readouterr().err  # checked to 0.01: k 2.58 covers k 2
+    # at the integrity budget's k (up to 7.13 for one pair) the same model is too shallow: said
+    budget = [x for x in base if x not in ("--k-sigma", "2")]
+    run_from_args(parser.parse_args([*budget, "--error-model", plain, "--out",
+                                     str(tmp_path / "b")]), track)  # fmt: skip
+    err = capsys.readouterr().err
+    assert "checked to 0.01 per pseudorange" in err and "Gaussian tail" in err
     # a model whose GPS tail was never checked is used, and said to bound nothing
     unchecked = model("u.json", {"G": (4.0, 1.0)})
     run_from_args(parser.parse_args([*base, "--error-model", unchecked, "--out",
