@@ -900,7 +900,8 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="a static antenna's chainage, metres")
     g.add_argument("--truth-positions", type=existing_file(_TRUTH_POSITIONS), metavar="CSV",
                    help=f"{_TRUTH_POSITIONS}, projected on --track")
-    p.add_argument("--track", metavar="FILE", help="with --truth-positions: " + _TRACK)
+    p.add_argument("--track", metavar="FILE", help="with --truth-positions, the run's track: "
+                   + _TRACK + " (default: none, required there)")  # fmt: skip
     add_track_selection(p)
     p.set_defaults(func=cmd_evaluate)
 
