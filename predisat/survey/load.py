@@ -595,6 +595,58 @@ def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Ro
     return [r for r in accepted if id(r) not in dropped]
 
 
+# A frame this far behind the one before it, against the direction of travel, contradicts it
+# (a projected position's noise at a standstill is a few decimetres).
+_BACK_STEP_TOL_M = 2.0
+
+
+def _check_direction(root: Location, accepted: list[_Row], reverse: bool) -> None:
+    """Refuse a survey whose frames move against ``direction_of_travel``: the camera sides
+    and the along-track directions would be swapped, and the masks wrong on both sides."""
+    for side in sorted({r.side for r in accepted}):
+        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        if len(seq) < 3:
+            continue
+        steps = np.diff([r.chainage_m for r in seq]) * (-1.0 if reverse else 1.0)
+        moving = np.abs(steps) > _BACK_STEP_TOL_M
+        if moving.sum() >= 2 and (steps[moving] < 0).mean() > 0.5:
+            a, b = seq[0], seq[-1]
+            declared = "decreasing" if reverse else "increasing"
+            other = "increasing" if reverse else "decreasing"
+            raise SurveyError(root, [SurveyProblem(
+                f"survey.yaml: direction_of_travel is {declared}, but the {side} frames' "
+                f"chainage runs the other way in time ({a.chainage_m:.1f} m at line {a.row}, "
+                f"{b.chainage_m:.1f} m at line {b.row}, {int((steps[moving] < 0).sum())} of "
+                f"{int(moving.sum())} moves backwards): with the wrong direction the sides and "
+                f"the along-track view are swapped; set direction_of_travel: {other}, or fix "
+                "the chainages or positions"
+            )])  # fmt: skip
+
+
+def _drop_backward_steps(accepted: list[_Row], reverse: bool) -> list[_Row]:
+    """``accepted`` less the frames whose chainage steps back against the direction of travel
+    by more than ``_BACK_STEP_TOL_M`` from the frame before them on their side, and that frame
+    (which of the two is wrong cannot be told: two swapped chainages in a manifest without
+    positions). Leaving frames out only removes sky evidence."""
+    dropped: set[int] = set()
+    for side in {r.side for r in accepted}:
+        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        for a, b in zip(seq[:-1], seq[1:], strict=True):
+            back = (a.chainage_m - b.chainage_m) * (-1.0 if reverse else 1.0)
+            if back > _BACK_STEP_TOL_M:
+                for r, other in ((a, b), (b, a)):
+                    if id(r) not in dropped:
+                        r.bad(
+                            f"chainage_m {r.chainage_m:.1f} and {other.chainage_m:.1f} of frame "
+                            f"{other.frame_id!r} (line {other.row}) run {back:.1f} m backwards "
+                            f"in time on the {side} side, against the direction of travel: one "
+                            "is wrong (swapped chainages?); both are left out, fix the chainage "
+                            "or position"
+                        )
+                        dropped.add(id(r))
+    return [r for r in accepted if id(r) not in dropped]
+
+
 def _read_manifest(
     root: Location,
     header: dict[str, Any],
@@ -663,8 +715,10 @@ def _read_manifest(
         stack.append(r)
         accepted.append(r)
     accepted = _drop_position_jumps(accepted, max_speed_mps)
-    problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)
     reverse = header["direction"] == "decreasing"
+    _check_direction(root, accepted, reverse)
+    accepted = _drop_backward_steps(accepted, reverse)
+    problems = sorted((p for r in rows for p in r.probs), key=lambda p: p.row or 0)
     if not accepted:
         return empty_frames(), problems
 

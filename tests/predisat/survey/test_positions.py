@@ -21,11 +21,12 @@ def _write(root: Path, direction: str) -> None:
         "rear": (FISHEYE, Mount.default("rear")),
         "roof": (PANO, Mount.default("roof")),
     }
+    step_m = -10.0 if direction == "decreasing" else 10.0  # the run moves that way in time
     with SurveyWriter(root, cams, direction_of_travel=direction) as w:  # type: ignore[arg-type]
         for k in range(3):
             for pos, (cam, _) in cams.items():
                 img = np.full((cam.height_px, cam.width_px, 3), 40 * k, np.uint8)
-                w.add_frame(img, pos, 1.4e9 + k, chainage_m=100.0 + 10 * k)
+                w.add_frame(img, pos, 1.4e9 + k, chainage_m=100.0 + step_m * k)
 
 
 @pytest.mark.parametrize(

@@ -29,15 +29,17 @@ def _image(i: int) -> np.ndarray:
 
 
 def _write(root: Path, n: int = 3, positions: bool = False, **kwargs: object) -> Path:
-    """n frames per side, 10 m and 1 s apart, by chainage or by GNSS position."""
+    """n frames per side, 10 m and 1 s apart, by chainage or by GNSS position (towards
+    decreasing chainage when ``direction_of_travel="decreasing"``)."""
+    step_m = -10.0 if kwargs.get("direction_of_travel") == "decreasing" else 10.0
     with SurveyWriter(root, CAMERAS, metadata={"description": "unit test"}, **kwargs) as w:  # type: ignore[arg-type]
         for i in range(n):
             for side in ("left", "right"):
                 if positions:
-                    lon, lat, _ = WGS84.fwd(LON0, LAT0, 0.0, 100.0 + 10.0 * i)
+                    lon, lat, _ = WGS84.fwd(LON0, LAT0, 0.0, 100.0 + step_m * i)
                     w.add_frame(_image(i), side, GPS0 + i, lat_deg=lat, lon_deg=lon, h_m=150.0)
                 else:
-                    w.add_frame(_image(i), side, GPS0 + i, chainage_m=100.0 + 10.0 * i)
+                    w.add_frame(_image(i), side, GPS0 + i, chainage_m=100.0 + step_m * i)
     return root
 
 
@@ -321,8 +323,11 @@ def test_off_track_positions(tmp_path: Path) -> None:
     assert "25.0 m from track 'straight'" in _only(problems, "right_000001", "m from track").message
     _only(problems, "left_000002", "m from track")
     assert len(problems) == 2
-    # left_000002 is then 110 m behind the frame 1 s before it: over max_speed_mps too
-    assert len(Survey.load(root, track=track, max_offset_m=100.0, max_speed_mps=200.0).frames) == 6
+    # left_000002 is then 110 m behind the frame 1 s before it: over max_speed_mps too, and
+    # with both limits loosened still a run backwards in time: it and that frame are left out
+    loose = Survey.load(root, track=track, max_offset_m=100.0, max_speed_mps=200.0,
+                        on_error="skip")  # fmt: skip
+    assert len(loose.frames) == 4 and "left_000002" not in loose.frames.frame_id
 
 
 def test_chainage_disagreeing_with_the_position_is_refused(tmp_path: Path) -> None:
@@ -448,8 +453,11 @@ def test_chainage_jump_contradicting_the_run_is_refused(tmp_path: Path) -> None:
     assert "manifest line 6, frame 'left_000002'" in str(problems[0])
     survey = Survey.load(root, on_error="skip")
     assert len(survey.frames) == 8
-    # a survey at 10 m/s passes; the limit is the caller's
-    assert len(Survey.load(root, max_speed_mps=1000.0).frames) == 10
+    # with a speed limit of 1000 m/s the last frame's jump ahead passes (the limit is the
+    # caller's), but the typo still runs 190 m backwards to the next frame: both are left out
+    back = Survey.load(root, max_speed_mps=1000.0, on_error="skip")
+    assert len(back.frames) == 8 and "left_000002" not in back.frames.frame_id
+    assert "left_000003" not in back.frames.frame_id and "right_000004" in back.frames.frame_id
 
 
 def test_one_time_far_ahead_is_that_frame_s_problem_not_every_later_one(tmp_path: Path) -> None:
@@ -463,3 +471,30 @@ def test_one_time_far_ahead_is_that_frame_s_problem_not_every_later_one(tmp_path
     assert "'left_000003' at line 8" in msg and "fix the time" in msg
     survey = Survey.load(root, on_error="skip")
     assert "left_000002" not in list(survey.frames.frame_id) and len(survey.frames) == 9
+
+
+def test_a_run_against_its_direction_of_travel_is_refused(tmp_path: Path) -> None:
+    """``direction_of_travel`` says which camera is on which side of the track and which way
+    is ahead: a survey whose chainage runs the other way in time would get every mask wrong
+    (a user trial: 5.7 % false trust, silently). Refused, naming both ends and the fix."""
+    root = _write(tmp_path / "s", n=5)  # 100..140 m, increasing in time
+    yaml_path = root / "survey.yaml"
+    yaml_path.write_text(yaml_path.read_text().replace("increasing", "decreasing"))
+    with pytest.raises(SurveyError, match=r"direction_of_travel is decreasing, but the left "
+                       r"frames' chainage runs the other way in time \(100.0 m at line 2, "
+                       r"140.0 m at line 10.*set direction_of_travel: increasing"):  # fmt: skip
+        Survey.load(root, on_error="skip")
+
+
+def test_two_swapped_chainages_are_both_left_out(tmp_path: Path) -> None:
+    """Without positions, two neighbouring chainages swapped in the manifest run backwards in
+    time: which one is wrong cannot be told, so neither frame is used."""
+    root = _write(tmp_path / "s", n=6)
+    rows = _rows(root)
+    rows[4]["chainage_m"], rows[6]["chainage_m"] = rows[6]["chainage_m"], rows[4]["chainage_m"]
+    _save_rows(root, rows)
+    problems = _problems(root)
+    assert {p.frame_id for p in problems} == {"left_000002", "left_000003"}
+    assert all("backwards in time" in p.message for p in problems)
+    kept = Survey.load(root, on_error="skip").frames.frame_id
+    assert len(kept) == 10 and "left_000002" not in kept and "left_000003" not in kept
