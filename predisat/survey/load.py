@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -631,7 +632,7 @@ def _drop_backward_steps(accepted: list[_Row], reverse: bool) -> list[_Row]:
     dropped: set[int] = set()
     for side in {r.side for r in accepted}:
         seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
-        for a, b in zip(seq[:-1], seq[1:], strict=True):
+        for a, b in itertools.pairwise(seq):
             back = (a.chainage_m - b.chainage_m) * (-1.0 if reverse else 1.0)
             if back > _BACK_STEP_TOL_M:
                 for r, other in ((a, b), (b, a)):
