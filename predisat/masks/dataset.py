@@ -27,7 +27,7 @@ import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
 from predisat.atomic import atomic_path
-from predisat.masks.fileformat import MaskFileError, read_masks, write_masks
+from predisat.masks.fileformat import MaskFileError, read_masks, write_mask_table, write_masks
 from predisat.masks.maskset import MaskSet
 
 __all__ = [
@@ -65,7 +65,7 @@ def write_partition(
         n = table.num_rows
         table = table.append_column("line_id", pa.array([line_id] * n, type=pa.string()))
         table = table.append_column("line_part", pa.array([part] * n, type=pa.int32()))
-        pq.write_table(table, tmp, compression="zstd")
+        write_mask_table(table, tmp)
     return path
 
 

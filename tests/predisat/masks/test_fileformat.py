@@ -569,3 +569,30 @@ def test_exports_cap_at_90_and_reject_uncovered_chainage(tmp_path):
         to_rtklib_mask(m, 100.0, tmp_path / "e.txt")
     with pytest.raises(ValueError, match="layout"):
         to_pvgis_horizon(m, 0.0, tmp_path / "x.txt", layout="json")
+
+
+def test_a_flipped_bit_in_a_data_page_is_refused_not_read_as_a_lower_mask(good_file, tmp_path):
+    """Every data page carries a CRC-32 that the reader verifies: without it, a bit flipped by
+    storage or a copy changes mask values silently (a user trial: bins lowered by up to 45 deg)."""
+    data = good_file.read_bytes()
+    truth = pq.read_table(good_file).column("mask_el_deg").to_pylist()
+    changed = 0
+    for pos in range(8, len(data) - 8, 97):  # bytes across the file, footer excluded
+        flipped = bytearray(data)
+        flipped[pos] ^= 0x10
+        bad = tmp_path / "flip.parquet"
+        bad.write_bytes(bytes(flipped))
+        try:  # what a reader without the checksum would see
+            silent = pq.read_table(bad).column("mask_el_deg").to_pylist()
+        except (pa.ArrowException, OSError):
+            silent = None
+        if silent is None or silent == truth:
+            continue
+        changed += 1  # values changed silently for a plain reader: read_masks must refuse
+        with pytest.raises(MaskFileError, match=r"flip\.parquet: damaged: a data page fails"):
+            read_masks(bad)
+    assert changed >= 3  # a test of the test: some flips do change the values silently
+    # files written before the checksums (none in their pages) read as before
+    plain = tmp_path / "plain.parquet"
+    pq.write_table(pq.read_table(good_file), plain, compression="zstd")
+    np.testing.assert_array_equal(read_masks(plain).mask_el_deg, read_masks(good_file).mask_el_deg)
