@@ -174,7 +174,7 @@ def write_masks(masks: MaskSet, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def write_mask_table(table: pa.Table, path: str | os.PathLike[str]) -> None:
+def write_mask_table(table: pa.Table, path: str | os.PathLike[str] | IO[Any]) -> None:
     """Write a mask table as Parquet with a CRC-32 on every data page, which
     :func:`read_masks` verifies: a mask file decides which satellites a train trusts, and a
     flipped bit in a data page could lower a mask silently (a user trial: 8 of 25 random

@@ -445,6 +445,7 @@ def _parse_rows(
         )
     cameras: Mapping[str, SurveyCamera] = header["cameras"]
     rows: list[_Row] = []
+    checked: dict[str, list[str]] = {}  # per camera, each image's size problem ("" if none)
     for fields in reader:
         line = reader.line_num
         if not any(f.strip() for f in fields):
@@ -487,7 +488,27 @@ def _parse_rows(
             image_problem = _check_image(root, r.image, cameras[r.side].camera, opts)
             if image_problem:
                 r.bad(image_problem)
+            checked.setdefault(r.side, []).append(image_problem or "")
+    _check_calibration_sizes(root, cameras, checked)
     return rows
+
+
+def _check_calibration_sizes(
+    root: Location, cameras: Mapping[str, SurveyCamera], checked: dict[str, list[str]]
+) -> None:
+    """Refuse a camera whose every image has another size than its calibration: the
+    calibration is of another camera (or another resolution), not a few bad frames; skipping
+    them all would leave masks from the other cameras alone, silently."""
+    for side, probs in sorted(checked.items()):
+        sizes = {m.split(" is ", 1)[1].split(" px", 1)[0] for m in probs if " px but " in m}
+        if len(probs) >= 2 and all(" px but " in m for m in probs) and len(sizes) == 1:
+            cam = cameras[side].camera
+            raise SurveyError(root, [SurveyProblem(
+                f"survey.yaml: camera {side!r}: all {len(probs)} of its images are "
+                f"{sizes.pop()} px but its calibration {cam.name!r} is "
+                f"{cam.width_px}x{cam.height_px}: the calibration is of another camera or "
+                "resolution; give the calibration of the camera that took them"
+            )])  # fmt: skip
 
 
 def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None:

@@ -498,3 +498,21 @@ def test_two_swapped_chainages_are_both_left_out(tmp_path: Path) -> None:
     assert all("backwards in time" in p.message for p in problems)
     kept = Survey.load(root, on_error="skip").frames.frame_id
     assert len(kept) == 10 and "left_000002" not in kept and "left_000003" not in kept
+
+
+def test_a_calibration_that_fits_none_of_its_camera_s_images_is_a_survey_problem(
+    tmp_path: Path,
+) -> None:
+    """Every image of a camera of another size than its calibration: the calibration is
+    another camera's, not a few bad frames; skipping them all would leave masks from the
+    other camera alone (a user trial: exit 0 and one camera's masks). Refused even when bad
+    frames are skipped; one bad image among good ones stays that frame's problem."""
+    root = _write(tmp_path / "s", n=4)
+    small = np.zeros((48, 64, 3), np.uint8)
+    for f in sorted((root / "images").rglob("left_*")):
+        cv2.imwrite(str(f), small)
+    with pytest.raises(SurveyError, match=r"camera 'left': all 4 of its images are 64x48 px"):
+        Survey.load(root, on_error="skip")
+    root = _write(tmp_path / "t", n=4)
+    cv2.imwrite(str(sorted((root / "images").rglob("left_*"))[0]), small)
+    assert len(Survey.load(root, on_error="skip").frames) == 7
