@@ -20,6 +20,7 @@ from predisat import __version__
 from predisat.cli import demo
 from predisat.cli.args import (
     HelpFormatter,
+    Parser,
     add_checks,
     add_command,
     chainage_hint,
@@ -419,7 +420,7 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``predisat`` parser: one subcommand per job."""
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = Parser(  # subcommands inherit its class
         prog="predisat",
         formatter_class=HelpFormatter,
         description=(

@@ -68,3 +68,29 @@ def test_process_track_selection_needs_a_track_file(
             cli.main(["process", str(survey), "--out", str(tmp_path / "o"), *extra])
         assert exc.value.code == 2
         assert f"{extra[0]} is for a --track file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", ["--dem", "--margins", "--track"])
+def test_process_missing_input_file_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str
+) -> None:
+    survey = _survey(tmp_path)
+    missing = str(tmp_path / "nope.x")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["process", str(survey), "--out", str(tmp_path / "o"), option, missing])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    # before: argparse's whole usage text first
+    assert err.splitlines() == [
+        f"predisat process: error: argument {option}: {missing}: no such file; give "
+        + err.split("; give ", 1)[1].rstrip("\n")
+    ]
+
+
+def test_process_other_parse_errors_keep_the_usage(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        cli.main(["process", str(_survey(tmp_path)), "--out", str(tmp_path / "o"),
+                  "--chunk-m", "-1"])  # fmt: skip
+    assert capsys.readouterr().err.startswith("usage:")
