@@ -212,6 +212,12 @@ def cmd_network(args: argparse.Namespace) -> int:
     return 0
 
 
+def _make_parent(path: Path) -> None:
+    """Create the folder of an output file, as the other commands create their ``--out``
+    (:func:`predisat.cli.args.output_file` already refused a path under a file)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat.masks import fileformat as maskio
 
@@ -220,6 +226,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     masks = maskio.read_masks(path)
     include = not args.bare
     if args.format == "urbannav":
+        _make_parent(args.out)
         out = maskio.to_urbannav_csv(masks, args.out, include_margin=include, header=args.header)
         what = f"{masks.n_pos} positions"
     else:
@@ -234,6 +241,7 @@ def cmd_export(args: argparse.Namespace) -> int:
             )
         i, _ = masks.position_index(ch_m)
         what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
+        _make_parent(args.out)
         if args.format == "rtklib":
             out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)
         else:
