@@ -94,7 +94,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "positions, at a large cost in sky (docs/reconstruction.md, section 12; default: the "
         "mask at the position)",
     )  # fmt: skip
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--quiet", action="store_true",
+        help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
+        "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
+        "are still printed)",
+    )  # fmt: skip
     add_checks(
         parser,
         needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,

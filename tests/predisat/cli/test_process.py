@@ -94,3 +94,12 @@ def test_process_other_parse_errors_keep_the_usage(
         cli.main(["process", str(_survey(tmp_path)), "--out", str(tmp_path / "o"),
                   "--chunk-m", "-1"])  # fmt: skip
     assert capsys.readouterr().err.startswith("usage:")
+
+
+def test_process_quiet_help_says_what_it_silences(capsys: pytest.CaptureFixture[str]) -> None:
+    # --quiet drops the "mask bins: ..." summary too (predisat.reconstruct.batch); the help
+    # said only "no progress bar"
+    with pytest.raises(SystemExit):
+        cli.main(["process", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "'mask bins: ...'" in out and "warnings are still printed" in out
