@@ -21,6 +21,7 @@ from predisat import __version__
 from predisat.cli.args import (
     TIME_HELP,
     HelpFormatter,
+    Parser,
     add_checks,
     add_command,
     antenna_height_m,
@@ -997,7 +998,7 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``locator`` parser: one subcommand per job."""
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = Parser(  # subcommands inherit its class
         prog="locator",
         formatter_class=HelpFormatter,
         description=(

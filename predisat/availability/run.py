@@ -297,11 +297,12 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
     lo, hi = nav_span_gps_s(ephemeris)
     t = sats.gps_s
     bad = np.flatnonzero(~ok)
-    what = "the window" if len(bad) == len(t) else (
-        f"{len(bad)} of {len(t)} epochs ({_iso(t[bad[0]])} - {_iso(t[bad[-1]])})"
+    what = "the window lies" if len(bad) == len(t) else (
+        f"{len(bad)} of {len(t)} epochs ({_iso(t[bad[0]])} - {_iso(t[bad[-1]])}) "
+        + ("lies" if len(bad) == 1 else "lie")
     )  # fmt: skip
     raise ValueError(
-        f"{what} lie(s) outside the navigation data {nav_label} (no trusted satellite; the data "
+        f"{what} outside the navigation data {nav_label} (no trusted satellite; the data "
         f"span {_iso(lo)} - {_iso(hi)} GPST); choose start/end (--start/--end) inside it or give "
         "navigation files (--nav) "
         "covering the window"

@@ -20,6 +20,7 @@ from predisat import __version__
 from predisat.cli import demo
 from predisat.cli.args import (
     HelpFormatter,
+    Parser,
     add_checks,
     add_command,
     chainage_hint,
@@ -211,6 +212,12 @@ def cmd_network(args: argparse.Namespace) -> int:
     return 0
 
 
+def _make_parent(path: Path) -> None:
+    """Create the folder of an output file, as the other commands create their ``--out``
+    (:func:`predisat.cli.args.output_file` already refused a path under a file)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat.masks import fileformat as maskio
 
@@ -219,6 +226,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     masks = maskio.read_masks(path)
     include = not args.bare
     if args.format == "urbannav":
+        _make_parent(args.out)
         out = maskio.to_urbannav_csv(masks, args.out, include_margin=include, header=args.header)
         what = f"{masks.n_pos} positions"
     else:
@@ -233,6 +241,7 @@ def cmd_export(args: argparse.Namespace) -> int:
             )
         i, _ = masks.position_index(ch_m)
         what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
+        _make_parent(args.out)
         if args.format == "rtklib":
             out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)
         else:
@@ -419,7 +428,7 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``predisat`` parser: one subcommand per job."""
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = Parser(  # subcommands inherit its class
         prog="predisat",
         formatter_class=HelpFormatter,
         description=(

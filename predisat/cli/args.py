@@ -13,7 +13,8 @@ refused with the value they probably meant.
   :func:`integrity_risk`.
 * The pair-interval width: :func:`integrity_options` (``--integrity-risk`` or ``--k-sigma``)
   and :func:`integrity_budget` (the budget they give, None for a fixed ``k``).
-* Parsers: :class:`HelpFormatter` (argparse's own defaults in the help),
+* Parsers: :class:`Parser` (a missing input is one line, without the usage),
+  :class:`HelpFormatter` (argparse's own defaults in the help),
   :func:`add_command` (a described subcommand), :func:`add_checks` and :func:`run_checks`
   (options that exclude or need each other, refused at parse time), :func:`chainage_hint`.
 """
@@ -25,7 +26,7 @@ import json
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 from predisat.storage import Location, is_remote, location
@@ -34,6 +35,7 @@ __all__ = [
     "MAX_TRAIN_SPEED_MPS",
     "TIME_HELP",
     "HelpFormatter",
+    "Parser",
     "add_checks",
     "add_command",
     "antenna_height_m",
@@ -99,6 +101,24 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         ):
             return text
         return f"{text} (default: %(default)s)"
+
+
+#: What the input types (:func:`existing_file`, :func:`existing_dir`, :func:`existing_path`)
+#: say of a path that is not there; :class:`Parser` prints such an error on one line.
+_MISSING = ("no such file", "no such folder", "no such file or folder")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, except that a missing input file or folder is reported on one line
+    (``prog: error: argument --dem: x.hgt: no such file; give ...``, exit 2), as the inputs
+    found missing while running: the usage text would hide the message and says nothing of
+    the fix. Other parse errors keep the usage. Subcommands inherit the class."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``message`` (with the usage unless an input is missing) and exit 2."""
+        if any(f": {m}; give " in message for m in _MISSING):
+            self.exit(2, f"{self.prog}: error: {message}\n")
+        super().error(message)
 
 
 def add_command(

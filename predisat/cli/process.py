@@ -17,7 +17,7 @@ from predisat.cli.args import (
     storage_options,
     url_or,
 )
-from predisat.cli.common import track_option
+from predisat.cli.common import add_track_selection, track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
@@ -53,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--track", type=existing_file("a track map: GeoJSON line(s) or a "
                         "lat,lon[,h] CSV (docs/track-map.md)"), metavar="FILE",
                         help="track file (default: the survey's own)")  # fmt: skip
+    add_track_selection(parser)
     parser.add_argument(
         "--chunk-m", type=positive_float, default=1000.0, metavar="M",
         help="chainage per chunk, metres",
@@ -93,17 +94,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "positions, at a large cost in sky (docs/reconstruction.md, section 12; default: the "
         "mask at the position)",
     )  # fmt: skip
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--quiet", action="store_true",
+        help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
+        "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
+        "are still printed)",
+    )  # fmt: skip
     add_checks(
         parser,
         needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,
               f"--segmenter {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+        needs("--track-name", "track_name", lambda a: a.track is not None,
+              "a --track file (it selects a line in it)"),
+        needs("--where", "where", lambda a: a.track is not None,
+              "a --track file (it selects a line in it)"),
     )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> ProcessResult:
     """Run ``predisat process`` from parsed arguments."""
-    track = None if args.track is None else track_option(str(args.track))
+    track = None
+    if args.track is not None:
+        track = track_option(str(args.track), args.track_name, args.chain, args.where)
     dem = None
     if args.dem:
         from predisat.terrain import Dem

@@ -135,6 +135,7 @@ class MarginTable:
         return masks.with_margin(self.margin_for(sec, masks.source))
 
     def to_json(self, path: str | os.PathLike[str]) -> None:
+        """Write the table as JSON (read back by :meth:`from_json`)."""
         doc = {
             "target": self.target,
             "el_step_deg": self.el_step_deg,
@@ -145,10 +146,26 @@ class MarginTable:
 
     @classmethod
     def from_json(cls, path: str | os.PathLike[str]) -> MarginTable:
-        doc = json.loads(Path(path).read_text())
+        """The table :meth:`to_json` wrote (``margins.json`` of ``predisat evaluate
+        --calibrate``).
+
+        Raises
+        ------
+        ValueError
+            When the file is not such a table (not JSON, or no ``target`` / ``margins``),
+            naming the file, what it lacks and how to make one.
+        """
+        fix = ("make a margin table with `predisat evaluate MASKS --truth TRUTH --calibrate "
+               "--out DIR` (it writes DIR/margins.json)")  # fmt: skip
+        try:
+            doc = json.loads(Path(path).read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path}: not a margin table (not JSON: {exc}); {fix}") from None
+        if not isinstance(doc, dict):
+            raise ValueError(f"{path}: not a margin table (not a JSON object); {fix}")
         for key in ("target", "margins"):
             if key not in doc:
-                raise ValueError(f"{path}: no {key!r}; write it with MarginTable.to_json")
+                raise ValueError(f"{path}: not a margin table (no {key!r}); {fix}")
         return cls(
             pd.DataFrame(doc["margins"]), float(doc["target"]),
             float(doc.get("el_step_deg", EL_STEP_DEG)), dict(doc.get("meta", {})),

@@ -63,8 +63,8 @@ def bin_horizon_deg(
                                min_range_m=min_range_m, max_range_m=max_range_m)  # fmt: skip
     idx = (np.arange(n_az)[:, None] * n_sub + np.arange(n_sub + 1)[None, :]) % (n_az * n_sub)
     hz = ring[:, idx]  # (n_pos, n_az, n_sub + 1)
-    with np.errstate(all="ignore"):
-        return np.asarray(np.where(np.isnan(hz).all(axis=2), np.nan, np.nanmax(hz, axis=2)))
+    # fmax ignores NaN, NaN where the DEM covers none of the bin: no "All-NaN slice" warning
+    return np.asarray(np.fmax.reduce(hz, axis=2), float)
 
 
 def raise_to_terrain(

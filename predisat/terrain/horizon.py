@@ -63,7 +63,11 @@ def antenna_height_m(
         raise ValueError(f"radius_cells must be >= 0, got {radius_cells}")
     lows = [dem.height_at(lat + i * dem.dlat_deg, lon + j * dem.dlon_deg)
             for i in range(-k, k + 1) for j in range(-k, k + 1)]  # fmt: skip
-    return np.asarray(np.nanmin(np.stack(lows), axis=0) + above_ground_m, float) if lows else lat
+    # fmin ignores NaN and leaves NaN where every neighbour is off the DEM, without
+    # nanmin's "All-NaN slice" RuntimeWarning (a DEM that misses the line is reported once,
+    # by the caller, in words)
+    low = np.fmin.reduce(np.stack(lows), axis=0)  # k >= 0: at least the point's own cell
+    return np.asarray(low + above_ground_m, float)
 
 
 def terrain_horizon_deg(

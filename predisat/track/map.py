@@ -29,7 +29,7 @@ from shapely import LineString, STRtree, box
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.track.errors import TrackMapError
-from predisat.track.posts import KilometrePost, project_posts
+from predisat.track.posts import KilometrePost, monotone_posts, project_posts
 from predisat.track.readers import TrackFile, parse_csv_track, parse_geojson_track, sniff_format
 from predisat.track.smooth import FittedCurve, dense_polyline, fit_curve
 from predisat.track.stations import Station
@@ -89,6 +89,9 @@ class TrackMap:
     frame : LocalFrame
         Local ENU frame at the first vertex; ``enu_at`` returns coordinates in it.
     kilometre_posts : tuple of KilometrePost
+        In order of increasing chainage, the kilometre strictly monotone along it: posts that
+        are not (duplicated, out of order) are dropped with a warning
+        (:func:`~predisat.track.posts.monotone_posts`).
     source, attribution : str
         Where the geometry came from and the attribution its licence requires.
     tunnels_m : tuple of (start_m, end_m)
@@ -121,6 +124,9 @@ class TrackMap:
     def __post_init__(self) -> None:
         for arr in (self.lat_deg, self.lon_deg, self.h_m):
             arr.setflags(write=False)
+        # the posts map chainage to the line's kilometres only where they run one way
+        posts = monotone_posts(self.kilometre_posts, f"track {self.name!r}")
+        object.__setattr__(self, "kilometre_posts", posts)
         enu = self.frame.to_enu(self.lat_deg, self.lon_deg, self.h_m)
         curve = fit_curve(enu, self.frame, self.tolerance_m, self.vertical_tolerance_m)
         object.__setattr__(self, "_curve", curve)
@@ -244,7 +250,8 @@ class TrackMap:
             spans = [(n - 1 - b, n - 1 - a) for a, b in spans]
             bridges = [(n - 1 - b, n - 1 - a) for a, b in bridges]
         return tm.with_metadata(
-            kilometre_posts=posts, tunnels_m=_tunnel_intervals(tm, spans),
+            kilometre_posts=monotone_posts(posts, f"{tf.path}"),
+            tunnels_m=_tunnel_intervals(tm, spans),
             bridges_m=_tunnel_intervals(tm, bridges), stations=tf.stations,
         )  # fmt: skip
 
@@ -260,7 +267,7 @@ class TrackMap:
         """A copy with other metadata, sharing the fitted axis (no refit)."""
         new = copy.copy(self)
         if kilometre_posts is not None:
-            posts = tuple(sorted(kilometre_posts, key=lambda p: p.chainage_m))
+            posts = monotone_posts(kilometre_posts, f"track {self.name!r}")
             object.__setattr__(new, "kilometre_posts", posts)
         if tunnels_m is not None:
             tun = tuple((float(a), float(b)) for a, b in tunnels_m)
@@ -375,7 +382,8 @@ class TrackMap:
         """The line's kilometre reference (metres) at given chainages, from the posts.
 
         Linear between posts, extrapolated with slope 1 beyond them; NaN when the map has no
-        kilometre posts. Metadata for reports, not a measurement.
+        kilometre posts (none in the file, or none usable: the map keeps only posts strictly
+        monotone along the chainage). Metadata for reports, not a measurement.
         """
         s = np.asarray(chainage_m, float)
         posts = sorted(self.kilometre_posts, key=lambda p: p.chainage_m)

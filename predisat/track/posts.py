@@ -1,11 +1,13 @@
 """Kilometre posts: the line's own kilometre references, kept at their chainage on a track.
 
 :func:`points_as_posts` reads them from GeoJSON point features (a ``km_m`` property, or
-OpenStreetMap ``railway=milestone`` nodes); :func:`project_posts` places them on a track map.
+OpenStreetMap ``railway=milestone`` nodes); :func:`project_posts` places them on a track map;
+:func:`monotone_posts` keeps those that can map chainage to the line's kilometres.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -15,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.jsontypes import JsonDict
 
-__all__ = ["KilometrePost", "points_as_posts", "project_posts"]
+__all__ = ["KilometrePost", "monotone_posts", "points_as_posts", "project_posts"]
 
 
 @dataclass(frozen=True)
@@ -99,3 +101,64 @@ def project_posts(
         if k
     ]
     return sorted(out, key=lambda p: p.chainage_m)
+
+
+def _post_text(p: KilometrePost) -> str:
+    km = f"km {p.km_m / 1000.0:.3f}"
+    label = "" if p.label in ("", km) else f" ({p.label})"
+    return f"{km}{label} at chainage {p.chainage_m / 1000.0:.3f} km"
+
+
+def monotone_posts(posts: Sequence[KilometrePost], where: str) -> tuple[KilometrePost, ...]:
+    """The posts that can map chainage to the line's kilometres, sorted by chainage.
+
+    Between two neighbouring posts both the chainage and the kilometre must change strictly,
+    the kilometre in the direction most neighbours agree on (it increases along the chainage
+    unless the chainage was reversed against the posts). Both posts of every pair that does
+    not (a duplicated milestone, one out of order, two at one place) are dropped, until the
+    rest is strictly monotone: interpolating through them would give a flat or backward
+    kilometre (a whole stretch labelled with one kilometre). A warning names the dropped posts.
+
+    Parameters
+    ----------
+    posts : sequence of KilometrePost
+    where : str
+        What holds the posts (a file name, a track's name), for the warning.
+
+    Returns
+    -------
+    tuple of KilometrePost
+        The usable posts, in order of increasing chainage.
+
+    Warns
+    -----
+    UserWarning
+        When posts are dropped, naming each and the fix.
+    """
+    kept = sorted(posts, key=lambda p: p.chainage_m)
+    if len(kept) < 2:
+        return tuple(kept)
+    km = np.array([p.km_m for p in kept])
+    direction = 1.0 if np.sum(np.sign(np.diff(km))) >= 0 else -1.0
+    dropped: list[KilometrePost] = []
+    while len(kept) >= 2:
+        cs = np.array([p.chainage_m for p in kept])
+        km = np.array([p.km_m for p in kept])
+        bad_pair = ~((np.diff(cs) > 0) & (direction * np.diff(km) > 0))
+        if not bad_pair.any():
+            break
+        bad = np.zeros(len(kept), bool)
+        bad[:-1] |= bad_pair
+        bad[1:] |= bad_pair
+        dropped += [p for p, b in zip(kept, bad, strict=True) if b]
+        kept = [p for p, b in zip(kept, bad, strict=True) if not b]
+    if dropped:
+        dropped.sort(key=lambda p: p.chainage_m)
+        warnings.warn(
+            f"{where}: kilometre posts {', '.join(_post_text(p) for p in dropped)} do not run "
+            "strictly along the chainage (duplicated, out of order or at one place): they are "
+            f"not used for the line's kilometres ({len(kept)} post(s) kept); correct or remove "
+            "them in the track file",
+            stacklevel=3,
+        )
+    return tuple(kept)

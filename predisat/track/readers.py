@@ -397,8 +397,10 @@ def parse_geojson_track(
 
 def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -> str:
     """The file's name, with the track chosen in it (``--track-name``) and that track's other
-    names (``trackname``, ``trackcode``, ...): ``"line144, track A (L 144_1)"``."""
-    if track is None:
+    names (``trackname``, ``trackcode``, ...): ``"line144, track A (L 144_1)"``; the file's
+    name alone when it already names that track (a survey's track.geojson is named after the
+    track map written into it, and the survey selects it by that name)."""
+    if track is None or track == base:
         return base
     keys = ("trackname", "trackcode", "name", "ref")
     others = sorted(

@@ -140,8 +140,9 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     assert main(["calibrate", "--obs", obs, obs, "--nav", nav, "--out", str(out)]) == 2
     assert "given twice" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
-        main(["calibrate", "--sim", "x", "--k-sigma", "0", "--out", str(out)])
-    assert exc.value.code == 2 and "--k-sigma" in capsys.readouterr().err
+        # an existing --sim: a missing one would be the error (its one line names no --k-sigma)
+        main(["calibrate", "--sim", str(out.parent), "--k-sigma", "0", "--out", str(out)])
+    assert exc.value.code == 2 and "argument --k-sigma" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # --station is one position: refused by the parser
         main(["calibrate", "--obs", str(copies[0]), str(copies[1]), "--nav", nav,
               "--station", "1", "2", "3", "--out", str(out)])  # fmt: skip

@@ -226,6 +226,13 @@ def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture
                      "--chainage", "1e7"]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert "outside" in err and "Traceback" not in err
+    # a missing output folder is created, as other commands create theirs (was refused:
+    # "create it first")
+    for fmt in want:
+        out = tmp_path / "new" / fmt / "mask.txt"
+        extra = [] if fmt == "urbannav" else ["--chainage", str(ch)]
+        assert cli.main(["export", str(src), "--format", fmt, "--out", str(out), *extra]) == 0
+        assert out.read_bytes() == want[fmt].read_bytes()
     # options of another format: refused by the parser (tests/predisat/cli/test_vocabulary.py)
 
 

@@ -78,13 +78,17 @@ def test_demo_help_names_the_locator_step_the_estimate_and_quick(capsys) -> None
 # --- contradictions refused at parse time (argparse: usage, message, exit 2) -----------------
 
 
-def _refused(main, argv: list[str], capsys) -> str:
-    """The message of a refusal at parse time: exit status 2 and argparse's usage line."""
+def _refused(main, argv: list[str], capsys, *, usage: bool = True) -> str:
+    """The message of a refusal at parse time: exit status 2 and argparse's usage line, or
+    (``usage=False``: a missing input) the one line ``prog: error: ...``."""
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err
-    assert err.startswith("usage:")
+    if usage:
+        assert err.startswith("usage:")
+    else:
+        assert len(err.splitlines()) == 1 and " error: argument " in err, err
     return " ".join(err.split())
 
 
@@ -209,7 +213,7 @@ def test_small_angles_in_degrees_are_accepted_with_their_unit(files) -> None:
     assert b.speed == 83.3
 
 
-# --- missing input files: the file named, with what it should hold --------------------------
+# --- missing input files: one line naming the file, with what it should hold ---------------
 
 
 MISSING = [
@@ -232,7 +236,7 @@ MISSING = [
 def test_a_missing_input_is_named_with_what_it_should_hold(main, argv, words, files, tmp_path,
                                                            capsys) -> None:  # fmt: skip
     missing = str(tmp_path / "missing.csv")
-    err = _refused(main, argv.format(missing=missing, **files).split(), capsys)
+    err = _refused(main, argv.format(missing=missing, **files).split(), capsys, usage=False)
     assert missing in err and "Errno" not in err
     for word in words:
         assert word in err

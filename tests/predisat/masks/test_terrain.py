@@ -81,3 +81,20 @@ def test_terrain_bins_make_a_version_2_file_and_take_the_assumed_margin(tmp_path
     table.check()
     out = table.apply(raised)
     assert np.all(out.margin_deg[raised.source == BinSource.TERRAIN] == 3.0)
+
+
+def test_a_dem_missing_the_line_gives_nan_without_numpy_warnings(dem: Dem) -> None:
+    import warnings
+
+    m = _masks()
+    far = MaskSet(
+        chainage_m=m.chainage_m, lat_deg=np.full(m.n_pos, 50.5), lon_deg=m.lon_deg - 1.3,
+        h_m=m.h_m, heading_deg=m.heading_deg, az_step_deg=m.az_step_deg,
+        mask_el_deg=m.mask_el_deg, source=m.source, margin_deg=m.margin_deg,
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        # before: numpy's "All-NaN slice encountered" from nanmin / nanmax, printed raw
+        warnings.simplefilter("error", RuntimeWarning)
+        hz = bin_horizon_deg(far, dem, min_range_m=100.0, max_range_m=5000.0)
+        assert np.isnan(antenna_height_m(dem, far.lat_deg, far.lon_deg, 4.0)).all()
+    assert hz.shape == (m.n_pos, m.n_az) and np.isnan(hz).all()

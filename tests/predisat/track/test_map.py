@@ -557,3 +557,11 @@ def test_a_vertex_moved_by_a_mistyped_digit_is_refused_quickly(tmp_path):
     ok = tmp_path / "ok.csv"
     ok.write_text("lat_deg,lon_deg\n50.0,4.6\n50.27,4.6\n50.28,4.6\n")
     assert TrackMap.from_csv(ok).length_m == pytest.approx(31_100, rel=0.01)
+
+
+def test_a_written_track_selected_by_its_own_name_keeps_that_name(demo, tmp_path):
+    # a survey's track.geojson is named after the track map and selected by that name: the
+    # name was doubled, "line 144 track A (...), track line 144 track A (...)"
+    path = tmp_path / "track.geojson"
+    write_geojson(demo, path)
+    assert TrackMap.from_geojson(path, track=demo.name).name == demo.name
