@@ -629,21 +629,33 @@ def _merge(
 ASSUMED_STRETCH_M = 200.0
 
 
-def source_report(masks: MaskSet, *, stretch_m: float = ASSUMED_STRETCH_M) -> list[str]:
+def source_report(
+    masks: MaskSet, *, stretch_m: float = ASSUMED_STRETCH_M, track: TrackMap | None = None
+) -> list[str]:
     """Lines on where the bins' values come from: the share of observed, reconstructed,
     terrain and assumed bins, and a warning per stretch of ``stretch_m`` whose bins are more
-    than half assumed (a guess: survey it again, or give elevation tiles)."""
+    than half assumed (a guess: survey it again, or give elevation tiles). A stretch mostly in
+    a tunnel of ``track`` (:meth:`TrackMap.in_tunnel`) is said to be one instead: no sky there
+    to see, and neither a new survey nor a DEM would change its closed masks."""
     names = {int(c): c.name.lower() for c in BinSource}
     shares = ", ".join(f"{100.0 * float((masks.source == c).mean()):.1f} % {n}"
                        for c, n in names.items())  # fmt: skip
     lines = [f"mask bins: {shares}"]
     assumed = (masks.source == BinSource.ASSUMED).mean(axis=1)
+    tunnel = (np.zeros(masks.n_pos, bool) if track is None
+              else np.asarray(track.in_tunnel(masks.chainage_m), bool))  # fmt: skip
     edges = np.arange(masks.chainage_m[0], masks.chainage_m[-1] + stretch_m, stretch_m)
     k = np.clip(np.searchsorted(edges, masks.chainage_m, side="right") - 1, 0, None)
     for j in np.unique(k):
         share = float(assumed[k == j].mean())
-        if share > 0.5:
-            end = min(edges[j] + stretch_m, masks.chainage_m[-1])
+        end = min(edges[j] + stretch_m, masks.chainage_m[-1])
+        if share > 0.5 and track is not None and tunnel[k == j].mean() > 0.5:
+            lines.append(
+                f"chainage {edges[j]:.0f}-{end:.0f} m: in a tunnel of track {track.name!r} "
+                f"({100 * share:.0f} % of the bins assumed): no sky to see, nothing is trusted "
+                "there"
+            )  # fmt: skip
+        elif share > 0.5:
             lines.append(
                 f"warning: chainage {edges[j]:.0f}-{end:.0f} m: {100 * share:.0f} % of the bins "
                 "are assumed (no camera saw them); survey it again or give elevation tiles "
@@ -817,7 +829,7 @@ def process_survey(
     t3 = time.perf_counter()
     merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table, dem,
                                 p.reconstruction.antenna_height_m)  # fmt: skip
-    for line in source_report(merged):
+    for line in source_report(merged, track=plan.track):
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     masks_path = join(out, "masks.parquet")

@@ -467,7 +467,10 @@ def evaluate_masks(
                 row[f"false_trust{suffix}"] = (
                     float(1.0 - good.sum() / tr.sum()) if tr.sum() else 0.0
                 )
-                row[f"sky_lost{suffix}"] = float(1.0 - good.sum() / los.sum()) if los.sum() else 0.0
+                # no direction truly visible (a tunnel): no sky to lose, not 0 % lost
+                row[f"sky_lost{suffix}"] = (
+                    float(1.0 - good.sum() / los.sum()) if los.sum() else float("nan")
+                )
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -490,4 +493,5 @@ def format_table(table: pd.DataFrame) -> str:
     formatters = {f"{c}_%": "{:.2e}".format for c in rare}
     shown = shown.rename(columns={c: f"{c}_%" for c in shares})
     with pd.option_context("display.width", 200, "display.max_columns", 30):
-        return str(shown.to_string(index=False, formatters=formatters))
+        # NaN: a share of nothing (no visible sky to lose in a tunnel)
+        return str(shown.to_string(index=False, formatters=formatters, na_rep="n/a"))

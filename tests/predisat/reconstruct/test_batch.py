@@ -820,6 +820,17 @@ def test_source_report_warns_where_a_stretch_is_mostly_assumed() -> None:
     assert lines[0].startswith("mask bins:") and "33.3 % assumed" in lines[0]
     warned = [ln for ln in lines if ln.startswith("warning")]
     assert len(warned) == 1 and "chainage 200-400 m" in warned[0]
+    # the same stretch in a tunnel of the track: said to be one, no advice to survey again
+    import dataclasses
+
+    from predisat.track.map import demo_track
+
+    track = demo_track()
+    tunnel = dataclasses.replace(track, tunnels_m=((150.0, 450.0),))
+    lines = source_report(m, track=tunnel)
+    assert not [ln for ln in lines if ln.startswith("warning")]
+    said = [ln for ln in lines if "in a tunnel" in ln]
+    assert len(said) == 1 and said[0].startswith("chainage 200-400 m") and "--dem" not in said[0]
 
 
 def test_masks_name_the_rig_that_made_them(first_run) -> None:

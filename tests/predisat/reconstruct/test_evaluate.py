@@ -363,3 +363,22 @@ def test_format_table_keeps_rare_shares_visible() -> None:
     assert float(cells["false_trust_margin_%"]) == 0.0
     assert cells["p95_error_deg"] == "34.9999" and cells["sky_lost_%"] == "15.39"
     assert "sky_lost" not in header.split()  # no bare fraction column left
+
+
+def test_no_visible_sky_has_no_sky_lost_share() -> None:
+    """In a tunnel nothing is truly visible: the share of sky lost is of nothing (n/a), not
+    0 % (a user trial read "sky_lost_% 0.0" there as a perfect mask)."""
+    base = _synthetic_comparison()
+    shut = Comparison(
+        chainage_m=base.chainage_m, mask_el_deg=np.full_like(base.mask_el_deg, 90.0),
+        truth_el_deg=np.full_like(base.truth_el_deg, 90.0), source=base.source,
+        sector=base.sector, az_deg=base.az_deg,
+    )  # fmt: skip
+    table = evaluate_masks(shut)
+    held = table[table["n_bins"] > 0]  # (groups without bins are NaN throughout, as before)
+    assert len(held) and held["sky_lost"].isna().all() and (held["false_trust"] == 0.0).all()
+    text = format_table(table)
+    assert "n/a" in text and "nan" not in text.lower().replace("n/a", "")
+    # with visible sky the share is a number, as before
+    seen = evaluate_masks(base)
+    assert np.isfinite(seen.loc[seen["n_bins"] > 0, "sky_lost"]).all()
