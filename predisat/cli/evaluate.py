@@ -8,6 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from predisat.cli.args import (
@@ -18,16 +19,19 @@ from predisat.cli.args import (
     needs,
     output_dir,
 )
+from predisat.jsontypes import strict_json_text
 from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.margins import MarginTable
 from predisat.reconstruct.evalfigures import evaluation_figure
 from predisat.reconstruct.evaluate import (
+    POSITION_LIMIT,
     applied_margins,
     calibrate_margin,
     compare,
     evaluate_masks,
     format_table,
     load_truth,
+    position_false_trust,
 )
 
 __all__ = ["add_arguments", "run"]
@@ -106,6 +110,13 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
     elif margins is not None and applied_margins(comp, None) is not None:
         print("the *_margin columns use the margin table, not the mask file's own margins")
     print(format_table(table))
+    per = position_false_trust(comp)
+    worst = int(np.argmax(per))
+    over = int((per > POSITION_LIMIT).sum())
+    marked = " (evaluation.png marks them)" if over and out is not None else ""
+    print(f"false trust per position: worst {100 * per[worst]:.3g} % at "
+          f"{comp.chainage_m[worst]:.0f} m; {over} of {per.size} positions above "
+          f"{100 * POSITION_LIMIT:g} %{marked}")  # fmt: skip
     if comp.unmatched:
         print(f"{comp.unmatched} mask position(s) without truth were left out")
     if out is not None:
@@ -118,9 +129,16 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
                 else "mask file" if file_margins else None
             ),
             "n_positions": int(comp.chainage_m.size),
+            "positions_above_limit": over,
+            "position_limit": POSITION_LIMIT,
+            "worst_position": {
+                "chainage_m": float(comp.chainage_m[worst]),
+                "false_trust": float(per[worst]),
+            },
             "rows": json.loads(table.to_json(orient="records")),
         }
-        (out / "evaluation.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+        # strict JSON: a share of nothing (no visible sky in a tunnel) is null
+        (out / "evaluation.json").write_text(strict_json_text(doc))
         fig = evaluation_figure(comp, 0.0 if applied is None else applied,
                                 title=f"{path.name} against {args.truth}")
         fig.savefig(out / "evaluation.png", dpi=100)

@@ -53,6 +53,7 @@ __all__ = [
     "evaluate_masks",
     "format_table",
     "load_truth",
+    "position_false_trust",
     "trust_counts",
 ]
 
@@ -473,6 +474,37 @@ def evaluate_masks(
                 )
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+POSITION_LIMIT = 0.001
+"""The per-position false trust limit of the project's targets (0.1 % of a position's trusted
+directions)."""
+
+
+def position_false_trust(
+    comparison: Comparison, margin_deg: ArrayLike = 0.0, el_step_deg: float = EL_STEP_DEG
+) -> NDArray:
+    """False trust of each position: its trusted directions truly blocked over its trusted
+    directions (0 where nothing is trusted).
+
+    Parameters
+    ----------
+    comparison : Comparison
+    margin_deg : array_like
+        Added to the masks, broadcast to ``(n_pos, n_az)``, degrees.
+    el_step_deg : float
+        The elevation grid's step, degrees.
+
+    Returns
+    -------
+    ndarray, shape (n_pos,)
+        Shares in [0, 1].
+    """
+    tr, good, _ = trust_counts(comparison.mask_el_deg, comparison.truth_el_deg, margin_deg,
+                               el_step_deg)  # fmt: skip
+    n_tr = tr.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n_tr > 0, (n_tr - good.sum(axis=1)) / np.maximum(n_tr, 1), 0.0)
 
 
 # ---------------------------------------------------------------------- command line

@@ -24,6 +24,7 @@ from predisat.reconstruct.evaluate import (
     evaluate_masks,
     format_table,
     load_truth,
+    position_false_trust,
     trust_counts,
 )
 
@@ -179,7 +180,27 @@ def test_evaluate_cli(tiny: tuple[Path, Path], tmp_path: Path, capsys) -> None:
         again.false_trust_margin.to_numpy(float), table.false_trust_margin.to_numpy(float),
         equal_nan=True,
     )  # fmt: skip
-    assert "observed" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "observed" in out and "false trust per position: worst " in out
+
+    def refuse(name: str) -> None:
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    doc = json.loads((tmp_path / "evaluation.json").read_text(), parse_constant=refuse)
+    assert 0 <= doc["positions_above_limit"] <= 5 and "worst_position" in doc
+
+
+def test_position_false_trust_counts_each_positions_grid_directions() -> None:
+    """Against the explicit 0.1 deg grid: a direction is trusted above the mask and falsely so
+    at or below the truth."""
+    comp = _synthetic_comparison()
+    per = position_false_trust(comp)
+    for i in range(comp.chainage_m.size):
+        trusted = GRID[None, :] > comp.mask_el_deg[i][:, None]
+        blocked = GRID[None, :] <= comp.truth_el_deg[i][:, None]
+        want = (trusted & blocked).sum() / trusted.sum()
+        assert per[i] == pytest.approx(want)
+    assert (per > 0).any()  # the noisy masks trust some blocked sky somewhere
 
 
 def test_confident_margin_holds_on_other_surveys_more_often() -> None:
