@@ -527,8 +527,8 @@ class Reconstructor:
                     views[box] += seen[box]
                     seen[box] = False
                 if p.resolve_width_m is not None:
-                    bound = _resolving_bounds(hf, bound, frames, profs, cams, rots, p, solids,
-                                              rules, unseen)  # fmt: skip
+                    bound, views = _resolving_bounds(hf, bound, views, frames, profs, cams, rots,
+                                                     p, solids, rules, unseen)  # fmt: skip
             else:
                 bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules,
                                              unseen)  # fmt: skip
@@ -734,14 +734,15 @@ def _resolve_range_m(frames: Sequence[FrameView], p: ReconstructionParams) -> ND
 
 
 def _resolving_bounds(
-    hf: HeightField, bound: NDArray, frames: Sequence[FrameView], profs: Sequence[SkyProfile],
-    cams: NDArray, rots: NDArray, p: ReconstructionParams,
+    hf: HeightField, bound: NDArray, views: NDArray, frames: Sequence[FrameView],
+    profs: Sequence[SkyProfile], cams: NDArray, rots: NDArray, p: ReconstructionParams,
     solids: Sequence[SkyProfile | None], rules: Sequence[ThinRule | None],
     unseen: Sequence[UnseenRule | None],
-) -> NDArray:  # fmt: skip
+) -> tuple[NDArray, NDArray]:  # fmt: skip
     """``bound`` (every frame's lowest) without the bounds of far frames of the cameras in
     ``p.resolve_positions`` on the cells some frame near enough to see a mast bounds
-    (``ReconstructionParams.resolve_width_m``).
+    (``ReconstructionParams.resolve_width_m``), and ``views`` (the support count) where a cell
+    was raised: the views whose frames still bound it, not the far frames left out.
 
     A far frame's sky passes over a mast it cannot resolve (a pixel or less), and the plain
     carving keeps the lowest bound, so one far frame erases a mast every near frame sees. The
@@ -749,25 +750,36 @@ def _resolving_bounds(
     """
     subject = np.array([f.mount.side in p.resolve_positions for f in frames], bool)
     if not subject.any():
-        return bound
+        return bound, views
     ranges = _resolve_range_m(frames, p)
     near = hf.bound_m.copy()
     scratch = hf.bound_m.copy()
-    seen = np.zeros(hf.shape, np.bool_)
-    for i, prof in enumerate(profs):
-        args = (solids[i], rules[i], unseen[i])
-        r_m = float(ranges[i])
-        if subject[i]:  # within its range only, which marks the cells it resolves
-            if r_m > 0:
-                carve_profile(hf, near, prof, cams[i], rots[i], r_m, seen=seen, solid=args[0],
-                              thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
-            continue
-        carve_profile(hf, near, prof, cams[i], rots[i], p.carve_range_m, solid=args[0],
-                      thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
-        if r_m > 0:  # the cells it resolves
-            carve_profile(hf, scratch, prof, cams[i], rots[i], r_m, seen=seen, solid=args[0],
-                          thin_rule=args[1], unseen_rule=args[2])  # fmt: skip
-    return np.where(seen, np.maximum(near, bound), bound).astype(bound.dtype)
+    resolved = np.zeros(hf.shape, np.bool_)  # cells a frame within its range bounds
+    near_views = np.zeros(hf.shape, np.int32)
+    for idx in _view_groups(frames).values():
+        group = np.zeros(hf.shape, np.bool_)  # a view counts once per cell, whatever its frames
+        for i in idx:
+            def carve(raster: NDArray, range_m: float, marks: NDArray, i: int = i) -> None:
+                carve_profile(
+                    hf, raster, profs[i], cams[i], rots[i], range_m, seen=marks,
+                    solid=solids[i], thin_rule=rules[i], unseen_rule=unseen[i],
+                )  # fmt: skip
+
+            r_m = float(ranges[i])
+            own = np.zeros(hf.shape, np.bool_)
+            if subject[i]:  # within its range only, which marks the cells it resolves
+                if r_m > 0:
+                    carve(near, r_m, own)
+                resolved |= own
+            else:
+                carve(near, p.carve_range_m, own)
+                if r_m > 0:  # the cells it resolves
+                    carve(scratch, r_m, resolved)
+            group |= own
+        near_views += group
+    raised = resolved & (near > bound)
+    out = np.where(resolved, np.maximum(near, bound), bound).astype(bound.dtype)
+    return out, np.where(raised, near_views, views).astype(views.dtype)
 
 
 def _unseen_rules(

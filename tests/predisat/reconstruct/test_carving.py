@@ -698,3 +698,8 @@ def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
     assert (fields[0.25].bound_m[cells] >= top_m).all()
     region = hf.region
     assert np.all(fields[0.25].bound_m[region] >= fields[None].bound_m[region])
+    # the support of the raised cells counts the views that still bound them: near frames
+    # only (the far frames, left out, no longer count)
+    assert (fields[None].views[cells] > near.sum()).all()
+    kept = fields[0.25].views[cells]
+    assert (kept >= 1).all() and (kept <= near.sum()).all()
