@@ -637,10 +637,28 @@ def _masks_on_track(
     """The masks of the stretch (checked to lie on ``track``), how to name them, the track."""
     mask_set, masks_label = _load_masks(masks, opts)
     track_map = _load_track(track)
+    if track_map is None:
+        track_map = _embedded_track_of(mask_set, masks_label)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
     if track_map is not None:
         check_masks_on_track(mask_set, track_map, masks_label)
     return mask_set, masks_label, track_map
+
+
+def _embedded_track_of(mask_set: MaskSet, masks_label: str) -> TrackMap | None:
+    """The embedded line 144 map when the masks say they were made on it and lie on it (its
+    kilometre posts then label the report, as with ``--track``); otherwise None."""
+    from predisat.track.map import demo_track
+
+    made_on = str(mask_set.provenance.get("track", ""))
+    demo = demo_track()
+    if made_on != demo.name:
+        return None
+    try:
+        check_masks_on_track(mask_set, demo, masks_label)
+    except ValueError:
+        return None  # named like it, but another map: the masks' own positions
+    return demo
 
 
 def _stretch(

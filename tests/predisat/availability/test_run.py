@@ -579,3 +579,29 @@ def test_an_error_starts_on_its_own_line_after_the_progress_bar(
     err = capsys.readouterr().err
     assert "availability" in err.split("predisat availability: error")[0]  # the bar was drawn
     assert "\npredisat availability: error: " in err
+
+
+def test_masks_made_on_the_embedded_line_get_its_kilometre_posts_without_track(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    """Masks whose provenance names the embedded line 144, and which lie on it, are reported
+    with its kilometre posts when no --track is given (a user trial read 'Track none given'
+    and 'no kilometre posts' for the demo's own masks); masks of another map are not."""
+    import dataclasses
+
+    def report(ms: MaskSet, name: str) -> str:
+        path = write_masks(ms, tmp_path / f"{name}.masks.parquet")
+        r = run_availability(
+            path, None, None, out_dir=tmp_path / name, start=START, end="2020-06-25T06:10",
+            step_s=600, constellation="gps", cutoff_deg=15.0, n_sky=1, interval_every=10,
+            progress=False,
+        )  # fmt: skip
+        return html.unescape(Path(r.report_html).read_text(encoding="utf-8"))
+
+    on_line = dataclasses.replace(masks, provenance={**masks.provenance, "track": track.name})
+    text = report(on_line, "line")
+    assert "none given" not in text and "the track has no kilometre posts" not in text
+    assert track.name in text
+    # the same name on masks that do not lie on the line: their own positions, as before
+    moved = dataclasses.replace(on_line, lat_deg=on_line.lat_deg + 0.01)
+    assert "none given" in report(moved, "moved")
