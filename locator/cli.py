@@ -67,15 +67,11 @@ def _masks(args: argparse.Namespace) -> Any:
     return read_masks(args.masks)
 
 
-def _config(args: argparse.Namespace, profile: Any = None) -> Any:
-    """The run configuration; with the data's ``profile`` (a ReceiverProfile), the error model
-    must apply to it for a safety claim (else every epoch is flagged ``NO_ERROR_MODEL``)."""
-    return _config_and_model(args, profile)[0]
-
-
-def _config_and_model(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[str, Any]]:
-    """:func:`_config` and the error model's record for ``run.json``
-    (:func:`locator.modelcheck.model_use`)."""
+def _config(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[str, Any]]:
+    """The run configuration and the error model's record for ``run.json``
+    (:func:`locator.modelcheck.model_use`); with the data's ``profile`` (a ReceiverProfile), the
+    error model must apply to it for a safety claim (else every epoch is flagged
+    ``NO_ERROR_MODEL``)."""
     from locator.fde import LocatorConfig
     from locator.partition import MAX_STRETCHES
     from locator.run import RunConfig
@@ -255,7 +251,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             check_track(path, header, f"{args.obs} (its header's approximate position)",
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
-    cfg, model_record = _config_and_model(args, _profile(source, args))
+    cfg, model_record = _config(args, _profile(source, args))
     masks = _masks(args)
     if masks is not None:
         from predisat.availability.run import check_masks_on_track

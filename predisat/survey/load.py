@@ -390,22 +390,26 @@ class _Row:
         self.probs.append(SurveyProblem(message, self.frame_id or None, self.row))
 
 
-def _check_image(root: Location, rel: str, cam: CameraModel, opts: StorageOptions) -> str | None:
+def _check_image(
+    root: Location, rel: str, cam: CameraModel, opts: StorageOptions
+) -> tuple[str | None, tuple[int, int] | None]:
+    """The image's problem (None if none) and, when only its size disagrees with the
+    calibration, that size ``(width, height)``."""
     path = join(root, rel)
     if not exists(path, opts) or (isinstance(path, Path) and not path.is_file()):
-        return f"image {rel} is missing; copy it into the survey folder or remove the row"
+        return f"image {rel} is missing; copy it into the survey folder or remove the row", None
     try:
         source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
         with Image.open(source) as im:  # lazy: reads the header only
             w, h = im.size
     except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError) as exc:
-        return f"image {rel} cannot be read ({exc}); re-export it as JPEG or PNG"
+        return f"image {rel} cannot be read ({exc}); re-export it as JPEG or PNG", None
     if (w, h) != (cam.width_px, cam.height_px):
         return (
             f"image {rel} is {w}x{h} px but calibration {cam.name!r} is "
             f"{cam.width_px}x{cam.height_px}; use the calibration of the camera that took it"
-        )
-    return None
+        ), (w, h)
+    return None, None
 
 
 def _parse_rows(
@@ -445,7 +449,7 @@ def _parse_rows(
         )
     cameras: Mapping[str, SurveyCamera] = header["cameras"]
     rows: list[_Row] = []
-    checked: dict[str, list[str]] = {}  # per camera, each image's size problem ("" if none)
+    checked: dict[str, list[tuple[int, int] | None]] = {}  # per camera: wrong sizes
     for fields in reader:
         line = reader.line_num
         if not any(f.strip() for f in fields):
@@ -485,29 +489,33 @@ def _parse_rows(
         elif image.is_absolute() or ".." in image.parts or "\\" in r.image:
             r.bad(f"image {r.image!r} must be a relative path inside the survey folder, with '/'")
         elif check_images and r.side in cameras:
-            image_problem = _check_image(root, r.image, cameras[r.side].camera, opts)
+            image_problem, wrong_size = _check_image(root, r.image, cameras[r.side].camera, opts)
             if image_problem:
                 r.bad(image_problem)
-            checked.setdefault(r.side, []).append(image_problem or "")
+            checked.setdefault(r.side, []).append(wrong_size)
     _check_calibration_sizes(root, cameras, checked)
     return rows
 
 
 def _check_calibration_sizes(
-    root: Location, cameras: Mapping[str, SurveyCamera], checked: dict[str, list[str]]
-) -> None:
-    """Refuse a camera whose every image has another size than its calibration: the
-    calibration is of another camera (or another resolution), not a few bad frames; skipping
-    them all would leave masks from the other cameras alone, silently."""
-    for side, probs in sorted(checked.items()):
-        sizes = {m.split(" is ", 1)[1].split(" px", 1)[0] for m in probs if " px but " in m}
-        if len(probs) >= 2 and all(" px but " in m for m in probs) and len(sizes) == 1:
+    root: Location, cameras: Mapping[str, SurveyCamera],
+    checked: dict[str, list[tuple[int, int] | None]],
+) -> None:  # fmt: skip
+    """Refuse a camera whose every image has the same size other than its calibration's
+    (``checked``: per camera, each image's wrong size or None): the calibration is of another
+    camera (or another resolution), not a few bad frames; skipping them all would leave masks
+    from the other cameras alone, silently."""
+    for side, sizes in sorted(checked.items()):
+        if len(sizes) >= 2 and None not in sizes and len(set(sizes)) == 1:
+            first = sizes[0]
+            assert first is not None  # checked above
+            w, h = first
             cam = cameras[side].camera
             raise SurveyError(root, [SurveyProblem(
-                f"survey.yaml: camera {side!r}: all {len(probs)} of its images are "
-                f"{sizes.pop()} px but its calibration {cam.name!r} is "
-                f"{cam.width_px}x{cam.height_px}: the calibration is of another camera or "
-                "resolution; give the calibration of the camera that took them"
+                f"survey.yaml: camera {side!r}: all {len(sizes)} of its images are {w}x{h} px "
+                f"but its calibration {cam.name!r} is {cam.width_px}x{cam.height_px}: the "
+                "calibration is of another camera or resolution; give the calibration of the "
+                "camera that took them"
             )])  # fmt: skip
 
 
@@ -583,6 +591,11 @@ def _speed_mps(a: _Row, b: _Row) -> float:
     return dist / dt if dt > 0 else (math.inf if dist > 0 else 0.0)
 
 
+def _positioned(rows: list[_Row], side: str) -> list[_Row]:
+    """The rows of one camera with a chainage, in their order."""
+    return [r for r in rows if r.side == side and math.isfinite(r.chainage_m)]
+
+
 def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Row]:
     """``accepted`` less the frames whose chainage contradicts the run: per side, a frame
     further from both its neighbours than ``max_speed_mps`` allows in their time apart, while
@@ -590,7 +603,7 @@ def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Ro
     next two, which agree). Each dropped frame gets its problem and fix."""
     dropped: set[int] = set()
     for side in {r.side for r in accepted}:
-        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        seq = _positioned(accepted, side)
         for k, r in enumerate(seq):
             if len(seq) < 3:
                 break
@@ -626,7 +639,7 @@ def _check_direction(root: Location, accepted: list[_Row], reverse: bool) -> Non
     """Refuse a survey whose frames move against ``direction_of_travel``: the camera sides
     and the along-track directions would be swapped, and the masks wrong on both sides."""
     for side in sorted({r.side for r in accepted}):
-        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        seq = _positioned(accepted, side)
         if len(seq) < 3:
             continue
         steps = np.diff([r.chainage_m for r in seq]) * (-1.0 if reverse else 1.0)
@@ -652,7 +665,7 @@ def _drop_backward_steps(accepted: list[_Row], reverse: bool) -> list[_Row]:
     positions). Leaving frames out only removes sky evidence."""
     dropped: set[int] = set()
     for side in {r.side for r in accepted}:
-        seq = [r for r in accepted if r.side == side and math.isfinite(r.chainage_m)]
+        seq = _positioned(accepted, side)
         for a, b in itertools.pairwise(seq):
             back = (a.chainage_m - b.chainage_m) * (-1.0 if reverse else 1.0)
             if back > _BACK_STEP_TOL_M:
