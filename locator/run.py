@@ -267,8 +267,10 @@ def run_locator(
         One row per epoch: ``epoch``, ``gps_s``, ``pred_lo_m``, ``pred_hi_m`` (odometry
         prediction used for the trust decision), ``n_received``, ``n_trusted``, ``n_used``,
         ``chainage_m``, ``lo_m``, ``hi_m``, ``length_m``, ``mode``, ``integrity``, ``flags``,
-        ``flag_names``, ``claim`` (safety claim after every check), ``claim_fix`` (the fix's own
-        claim, before the heading and odometry checks), ``wls_chainage_m``, ``wls_sigma_m``,
+        ``flag_names``, ``claim`` (claim after every check), ``safety_claim`` (``claim``,
+        except under a forced error model, whose claims are not safety claims),
+        ``claim_fix`` (the fix's own claim, before the heading and odometry checks),
+        ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
         ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
         ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
@@ -331,7 +333,12 @@ def run_locator(
         rows.append(row)
         if progress is not None:
             progress(1)
-    return pd.DataFrame(rows)
+    epochs = pd.DataFrame(rows)
+    # a claim under a forced model is an interval, not a safety claim: readers of the table
+    # alone (no run.json) must not take it for one
+    if len(epochs):
+        epochs["safety_claim"] = epochs["claim"].astype(bool) & (cfg.error_model_caveat != "forced")
+    return epochs
 
 
 def _clip(x: float, lo: float, hi: float) -> float:

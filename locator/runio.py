@@ -111,8 +111,9 @@ def read_run(folder: str | Path) -> tuple[pd.DataFrame, JsonDict]:
         raise RunFileError(f"{meta_path}: format {meta.get('format')!r} is not {RUN_FORMAT!r}")
     epochs = read_table(f, "epochs")
     if "claim" in epochs and epochs["claim"].dtype != bool:
-        for col in ("claim", "claim_fix"):
-            epochs[col] = epochs[col].astype(str).str.lower().isin(("true", "1"))
+        for col in ("claim", "claim_fix", "safety_claim"):
+            if col in epochs:  # safety_claim: not in run folders of older versions
+                epochs[col] = epochs[col].astype(str).str.lower().isin(("true", "1"))
     return epochs, meta
 
 

@@ -307,6 +307,7 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
         assert main([*args[:-1], run, "--error-model", shallow, *extra]) == 0
         ep, meta = read_run(run)
         assert ep["claim"].all() == claims and ep["claim"].any() == claims
+        assert (ep["safety_claim"] == ep["claim"]).all()
         rec = meta["error_model"]
         assert rec["file"] == shallow and rec["systems"]["G"]["tail_probability"] == 0.05
         if flag is None:
@@ -340,6 +341,7 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     ep, meta = read_run(tmp_path / "v1f")
     # forced: intervals given, but recorded and flagged as what they are, never a safety claim
     assert ep["claim"].all() and ep["flag_names"].str.contains("FORCED_ERROR_MODEL").all()
+    assert not ep["safety_claim"].any()  # the table alone must not read as safety claims
     assert meta["error_model"]["use"] == "forced" and meta["error_model"]["mismatches"]
     assert meta["config"]["error_model_caveat"] == "forced"
     out, err = capsys.readouterr()
