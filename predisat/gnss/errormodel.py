@@ -34,6 +34,7 @@ __all__ = [
     "ERROR_MODEL_FORMAT",
     "ERROR_MODEL_FORMAT_V1",
     "RECEIVER_CLASSES",
+    "SIMULATOR_METHOD",
     "Applicability",
     "ErrorModel",
     "ErrorModelFile",
@@ -142,6 +143,8 @@ def _norm(text: str) -> str:
 
 # Receiver or antenna names that identify nothing (smartphone RINEX writes "Unknown").
 _UNKNOWN = {"", "UNKNOWN", "NONE", "-"}
+SIMULATOR_METHOD = "simulator noise model"
+"""The method of the built-in model: the simulator's own noise, which needs no tail check."""
 
 
 @dataclass(frozen=True)
@@ -296,9 +299,18 @@ class Applicability:
                     f"system {sys_}: its {m.n_independent} independent samples were too few to "
                     "check any tail of the overbound (calibrate on more days or receivers)"
                 )
+            elif not m.tail_probability > 0.0 and self.method != SIMULATOR_METHOD:
+                # NaN (null in the file): nothing says the tails were ever checked
+                why.append(
+                    f"system {sys_}: the file records no tail check of its model (calibrate "
+                    "with `locator calibrate`, which checks the overbound's tails)"
+                )
         if self.method == "estimate":
             why.append("a least-squares estimate, not an overbound (calibrate without --bound "
                        "estimate)")  # fmt: skip
+        elif self.method not in ("overbound", SIMULATOR_METHOD):
+            why.append(f"method {self.method!r} is not an overbound (calibrate with `locator "
+                       "calibrate`)")  # fmt: skip
         if profile.frequency != self.frequency:
             why.append(f"{profile.frequency}-frequency data, {self.frequency}-frequency model")
         return why
@@ -404,7 +416,7 @@ def default_model_file(k_sigma: float = 2.0) -> ErrorModelFile:
         IntervalModel(e, k_sigma),
         {s: SystemModel(e, ("sim",), 0, 0, float("nan")) for s in "GRECJ"},
         Applicability(("simulated",), ("simulated",), "simulated", "single", 0.0, 90.0,
-                      "simulator noise model", ()),
+                      SIMULATOR_METHOD, ()),
         "",
     )  # fmt: skip
 

@@ -121,6 +121,26 @@ def test_unchecked_tails_and_estimates_support_no_claim(tmp_path):
     assert "estimate" in why
 
 
+def test_a_model_whose_tails_were_never_checked_supports_no_claim(tmp_path):
+    # null in the file (an overbound made without the sample-size check, or an older file):
+    # NaN slips through every ``>=`` test, so it must be refused by name
+    nan = SystemModel(ErrorModel(0.6, 0.4), ("C1C",), 30000, 1500, float("nan"))
+    p = write_error_model(tmp_path / "nan.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": nan}, applicability=APP)  # fmt: skip
+    assert json.loads(p.read_text())["systems"]["G"]["tail_probability"] is None
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "no tail check" in why
+    # a method the reader does not know is no overbound either
+    odd = Applicability(APP.receivers, APP.antennas, method="")
+    p = write_error_model(tmp_path / "odd.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": GPS}, applicability=odd)  # fmt: skip
+    (why,) = read_error_model_file(p).mismatches(_profile())
+    assert "is not an overbound" in why
+    # the simulator's own model keeps applying to simulated receivers
+    sim = ReceiverProfile("simulated", "simulated", {"G": ("sim",)}, receiver_class="simulated")
+    assert default_model_file().mismatches(sim) == []
+
+
 def test_depth_shortfall_compares_the_claims_k_with_the_checked_tail():
     from scipy.stats import norm
 
