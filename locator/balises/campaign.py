@@ -271,8 +271,9 @@ def balises_to_folder(
 
     ``log`` replaces the simulated odometer by a recorded one (``accuracy`` then should be its
     bounds, e.g. :meth:`OdometerAccuracy.subset041`). Writes ``epochs.parquet`` (the run table
-    with the truth), ``captures.csv`` (one row per
-    configuration and balise, with timing errors), ``summary.json`` and ``captures.png``.
+    with the truth), ``captures.csv`` (one row per configuration and balise, with timing
+    errors; ``safety_claim`` is False for every capture under a forced error model),
+    ``summary.json`` and ``captures.png``.
 
     ``progress`` is called with the number of epochs located since its last call.
 
@@ -290,6 +291,11 @@ def balises_to_folder(
     run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
                                log=log, accuracy=accuracy, progress=progress)  # fmt: skip
     scored = capture_table(run, balises, caps)
+    # captures under a forced error model rest on intervals that are no safety claim: the
+    # table must say so row by row (it is read without summary.json)
+    scored["safety_claim"] = scored["captured"].astype(bool) & (
+        config.error_model_caveat != "forced"
+    )
     summary = capture_summary(scored)
     front = safe_front_check(run)
     summary["epochs"] = int(front["epochs"])

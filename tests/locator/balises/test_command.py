@@ -166,8 +166,12 @@ def test_an_error_model_of_another_receiver_gives_no_claim_and_no_capture(sim_di
     assert "--force-error-model" in err and "NOT A SAFETY CLAIM" in err
     ep = pd.read_parquet(tmp_path / "forced" / "epochs.parquet")
     assert ep["claim"].any() and ep["flag_names"].str.contains("FORCED_ERROR_MODEL").all()
+    assert not ep["safety_claim"].any()
     assert json.loads((tmp_path / "forced" / "summary.json").read_text())["error_model"][
         "use"] == "forced"  # fmt: skip
+    # captures.csv alone says that its captures rest on no safety claim
+    caps = pd.read_csv(tmp_path / "forced" / "captures.csv")
+    assert caps["captured"].any() and not caps["safety_claim"].any()
     # a model of this receiver checked only to 0.05 per pseudorange: not as deep as the
     # integrity risk asks, no claim either (and no hint at an option balises does not have)
     sim_model = write_error_model(
