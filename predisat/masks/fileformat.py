@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -36,6 +37,7 @@ from pyproj import CRS
 from predisat.atomic import atomic_path
 from predisat.jsontypes import JsonDict
 from predisat.masks.binops import conservative_resample
+from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import REQUIRED_DESCRIPTORS, BinSource, MaskError, MaskSet
 
 __all__ = [
@@ -43,6 +45,7 @@ __all__ = [
     "FORMAT_VERSION",
     "METADATA_KEY",
     "MaskFileError",
+    "MaskHoleWarning",
     "mask_file_path",
     "read_masks",
     "to_pvgis_horizon",
@@ -90,6 +93,10 @@ _ROUND_TOL_DEG = 1e-5
 
 class MaskFileError(MaskError):
     """A mask file cannot be read or written; the message names the file, column and row."""
+
+
+class MaskHoleWarning(UserWarning):
+    """A mask file has holes between its positions; they were closed on reading."""
 
 
 # ---------------------------------------------------------------------- GeoParquet
@@ -196,17 +203,25 @@ def mask_file_path(path: str | os.PathLike[str]) -> Path:
     return p / "masks.parquet" if p.is_dir() else p
 
 
-def read_masks(path: str | os.PathLike[str]) -> MaskSet:
+def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> MaskSet:
     """Read and validate a mask file (version 1, 2 or 3).
 
     Checks the format name and version, the presence and types of every column, list lengths,
     nulls, value ranges, monotonic chainage, and that the geometry points agree with
     ``lat_deg`` / ``lon_deg``.
 
+    A position's mask stands for the cell up to the midpoints to its neighbours, so a hole in
+    the chainages (a file not written by ``predisat process``, which closes them, e.g. two
+    surveys joined) would be covered by the positions either side. Such holes are closed with
+    positions that trust nothing (:func:`predisat.masks.gaps.close_gaps`), with a warning.
+
     Parameters
     ----------
     path : path-like
         The mask file, or the output folder of ``predisat process`` (its ``masks.parquet``).
+    close_holes : bool
+        False reads the positions as they are (the batch run's chunks, closed after merging
+        with the track's coordinates).
 
     Raises
     ------
@@ -280,7 +295,7 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
         raise fail(f"source code {int(BinSource.TERRAIN)} (terrain) appears in a version 1 file, "
                    "which has no such code; rewrite the file with write_masks")  # fmt: skip
     try:
-        return MaskSet(
+        masks = MaskSet(
             chainage_m=arrays["chainage_m"],
             lat_deg=arrays["lat_deg"],
             lon_deg=arrays["lon_deg"],
@@ -296,6 +311,20 @@ def read_masks(path: str | os.PathLike[str]) -> MaskSet:
         )
     except MaskError as exc:
         raise fail(str(exc)) from None
+    if not close_holes:
+        return masks
+    closed, holes = close_gaps(masks)
+    if holes:
+        where = ", ".join(f"{a:.0f}-{b:.0f} m" for a, b in holes[:5])
+        warnings.warn(
+            f"{path}: {len(holes)} hole(s) between its positions ({where}"
+            f"{', ...' if len(holes) > 5 else ''}): closed with positions that trust nothing "
+            "(90 deg masks, source ASSUMED), not covered by the positions either side; survey "
+            "the holes, or join mask files only where they meet",
+            MaskHoleWarning,
+            stacklevel=2,
+        )
+    return closed
 
 
 def _read_header(path: Path, metadata: dict[bytes, bytes]) -> JsonDict:

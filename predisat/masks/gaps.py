@@ -19,7 +19,9 @@ GAP_FACTOR = 1.5
 
 
 
-def close_gaps(masks: MaskSet, track: TrackMap) -> tuple[MaskSet, list[tuple[float, float]]]:
+def close_gaps(
+    masks: MaskSet, track: TrackMap | None = None
+) -> tuple[MaskSet, list[tuple[float, float]]]:
     """Closed positions inside the survey's holes, so no neighbour's mask is trusted there.
 
     A mask position stands for the cell between the midpoints to its neighbours, so a hole
@@ -32,8 +34,10 @@ def close_gaps(masks: MaskSet, track: TrackMap) -> tuple[MaskSet, list[tuple[flo
     ----------
     masks : MaskSet
         The merged masks, n_pos >= 3 (fewer give no spacing to compare with).
-    track : TrackMap
-        Gives the inserted positions' lat / lon / h and heading.
+    track : TrackMap, optional
+        Gives the inserted positions' lat / lon / h and heading. Without it (a mask file read
+        on its own) they are interpolated between the hole's two surveyed positions: they
+        trust nothing, so their coordinates only label them.
 
     Returns
     -------
@@ -53,7 +57,14 @@ def close_gaps(masks: MaskSet, track: TrackMap) -> tuple[MaskSet, list[tuple[flo
     new_ch = np.concatenate([
         np.arange(ch[i] + spacing, ch[i + 1] - spacing / 2, spacing) for i in holes
     ])  # fmt: skip
-    lat, lon, h = track.position_at(new_ch)
+    if track is not None:
+        lat, lon, h = track.position_at(new_ch)
+        heading = track.heading_at(new_ch)
+    else:
+        lat, lon, h = (np.interp(new_ch, ch, np.asarray(v, float))
+                       for v in (masks.lat_deg, masks.lon_deg, masks.h_m))  # fmt: skip
+        unwrapped = np.rad2deg(np.unwrap(np.deg2rad(np.asarray(masks.heading_deg, float))))
+        heading = np.mod(np.interp(new_ch, ch, unwrapped), 360.0)
     n_new, n_az = len(new_ch), masks.n_az
     order = np.argsort(np.concatenate([ch, new_ch]), kind="stable")
 
@@ -64,7 +75,7 @@ def close_gaps(masks: MaskSet, track: TrackMap) -> tuple[MaskSet, list[tuple[flo
 
     closed = MaskSet.from_arrays(
         cat(ch, new_ch), cat(masks.lat_deg, lat), cat(masks.lon_deg, lon), cat(masks.h_m, h),
-        cat(masks.heading_deg, track.heading_at(new_ch)),
+        cat(masks.heading_deg, heading),
         cat(masks.mask_el_deg, np.full((n_new, n_az), 90.0)),
         az_step_deg=masks.az_step_deg,
         source=cat(masks.source, np.full((n_new, n_az), int(BinSource.ASSUMED))),

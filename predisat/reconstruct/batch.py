@@ -584,7 +584,7 @@ def _merge(
     opts = plan.storage_options
     for name, *_ in plan.chunks:
         with input_path(join(plan.chunk_dir, f"{name}.parquet"), opts) as chunk_file:
-            parts.append(read_masks(chunk_file))
+            parts.append(read_masks(chunk_file, close_holes=False))  # closed below, on the track
         marker = json.loads(read_bytes(join(plan.chunk_dir, f"{name}.json"), opts).decode())
         for b in marker.get("bad_frames", []):
             if b["frame_id"] not in bad:  # not reported yet: met by a chunk, or a run before

@@ -596,3 +596,31 @@ def test_a_flipped_bit_in_a_data_page_is_refused_not_read_as_a_lower_mask(good_f
     plain = tmp_path / "plain.parquet"
     pq.write_table(pq.read_table(good_file), plain, compression="zstd")
     np.testing.assert_array_equal(read_masks(plain).mask_el_deg, read_masks(good_file).mask_el_deg)
+
+
+def test_a_hole_between_positions_is_closed_on_reading_not_covered_by_its_neighbours(tmp_path):
+    from predisat.masks.fileformat import MaskHoleWarning
+    from predisat.masks.maskset import concat_masksets
+
+    # two stretches joined, 1.9 km apart: open sky (5 deg) where surveyed, nothing between
+    def part(ch):
+        n = len(ch)
+        lon = np.linspace(4.45, 4.46, n)
+        return MaskSet.from_arrays(ch, np.full(n, 50.45), lon, np.full(n, 150.0),
+                                   np.full(n, 60.0), np.full((n, 360), 5.0))  # fmt: skip
+
+    joined = concat_masksets([part(np.arange(0.0, 101.0, 10.0)),
+                              part(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
+    path = write_masks(joined, tmp_path / "joined.parquet")
+    with pytest.warns(MaskHoleWarning, match="1 hole.*100-2000 m"):
+        back = read_masks(path)
+    inside = (back.chainage_m > 100.0) & (back.chainage_m < 2000.0)
+    # every chainage of the hole, cell edges included, rests on a position that trusts nothing
+    probe = np.linspace(106.0, 1994.0, 500)
+    assert np.all(back.mask_at(probe, 0.0) >= 90.0)
+    assert np.all(back.worst_case(900.0, 1100.0) >= 90.0)
+    assert np.all(back.source[inside] == BinSource.ASSUMED)
+    # the surveyed positions keep their masks; the batch run's raw reading keeps the hole
+    first = back.subset(0.0, 100.0).mask_el_deg
+    assert np.array_equal(first, joined.subset(0.0, 100.0).mask_el_deg)
+    assert read_masks(path, close_holes=False).n_pos == joined.n_pos
