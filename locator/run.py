@@ -234,6 +234,9 @@ _CAVEAT_FLAGS = {"forced": int(RunFlag.FORCED_ERROR_MODEL),
 _NO_CLAIM_FLAGS = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
 _NO_FIX_FLAGS = int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM)
 _NONE_NAME = IntervalMode.NONE.name.lower()
+# beyond this a satellite's elevation differs between the prediction's ends by more than
+# 0.004 deg (locator.selection): trust takes the lowest of the centre and the two ends
+_LONG_PREDICTION_M = 400.0
 
 
 def run_locator(
@@ -303,13 +306,18 @@ def run_locator(
             az, el = direction_at(path, centre, data.sat_ecef_m)
         else:
             az = el = np.zeros(0)
+        el_trust = el
+        if n_rx and p_hi - p_lo > _LONG_PREDICTION_M:
+            # the lowest elevation over the interval, not its centre's (locator.selection)
+            _, el_ends = direction_at(path, np.array([p_lo, p_hi]), data.sat_ecef_m)
+            el_trust = np.minimum(el, el_ends.min(axis=0))
         if cfg.trust == "masks" and cfg.trust_stretches > 1 and n_rx:
             assert masks is not None
             fix, idx, uncorrected, conflict = _split_fix(
-                path, cfg, masks, data, az, el, p_lo, p_hi, excluded, beacons
+                path, cfg, masks, data, az, el_trust, p_lo, p_hi, excluded, beacons
             )
         else:
-            trusted = _trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded)
+            trusted = _trust(cfg, masks, p_lo, p_hi, az, el_trust, data.sats, excluded)
             idx = np.flatnonzero(trusted)
             fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
             conflict = False

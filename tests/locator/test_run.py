@@ -219,3 +219,32 @@ def test_satellites_below_the_model_range_are_left_out(path):
         assert not low & set(used.split())
     with pytest.raises(ValueError, match="model_el_min_deg"):
         RunConfig(MODEL, model_el_min_deg=95.0)
+
+
+def test_a_long_prediction_trusts_a_satellite_only_above_the_mask_at_both_ends(path):
+    from pyproj import Transformer
+
+    # one epoch at 2000 m; G06 is behind the train (az 240, el 20 deg seen from 2000 m), so
+    # its elevation falls along the track: lowest at the prediction's far end
+    truth = np.array([2000.0])
+    src = FakeSource(path, truth)
+    to_lla = Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+
+    def el_deg(chainage_m):  # independent geometry: the ellipsoid normal from PROJ
+        x = path.ecef_at(chainage_m)
+        lon, lat = np.radians(to_lla.transform(*x)[:2])
+        up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+        los = src.sat[5] - x
+        return np.degrees(np.arcsin(los @ up / np.linalg.norm(los)))
+
+    half = 1500.0
+    low, centre = el_deg(2000.0 + half), el_deg(2000.0)
+    assert 0.01 < centre - low < 0.05  # what the centre's direction would overlook
+    c = np.arange(0.0, 4001.0, 10.0)
+    mask = np.zeros(360)
+    mask[240] = 0.5 * (low + centre)  # above the satellite at the far end only
+    masks = MaskSet.from_track(path.track, c, np.tile(mask, (len(c), 1)))
+    for unc, trusted in ((50.0, True), (half, False)):
+        cfg = RunConfig(MODEL, trust="masks", start_uncertainty_m=unc)
+        ep = run_locator(path, src, start_chainage_m=truth[0], config=cfg, masks=masks)
+        assert ("G06:below_mask" not in ep["excluded"][0]) == trusted, unc
