@@ -87,6 +87,7 @@ class RunFlag(IntFlag):
     FORCED_ERROR_MODEL = 1 << 18  # intervals under a model forced onto data it does not fit
     GAUSSIAN_TAIL = 1 << 19  # claims beyond the depth the model's tails were checked to
     NO_STRETCH_CLAIM = 1 << 20  # partitioned trust: no stretch's claim holds a part of its own
+    TRACK_END = 1 << 21  # the prediction reaches past an end of the track map: maybe off it
 
 
 ERROR_MODEL_CAVEATS = {
@@ -232,6 +233,8 @@ _NO_STRETCH_FLAGS = int(RunFlag.NO_STRETCH_CLAIM | FixFlag.NO_SAFETY_CLAIM)
 _CAVEAT_FLAGS = {"forced": int(RunFlag.FORCED_ERROR_MODEL),
                  "gaussian_tail": int(RunFlag.GAUSSIAN_TAIL)}  # fmt: skip
 _NO_CLAIM_FLAGS = int(FixFlag.NO_SAFETY_CLAIM | FixFlag.TOO_FEW)
+_TRACK_END, _NO_SAFETY_CLAIM = int(RunFlag.TRACK_END), int(FixFlag.NO_SAFETY_CLAIM)
+_END_TOL_M = 0.5  # a claimed bound this close to a track end is the end's, not the satellites'
 _NO_FIX_FLAGS = int(FixFlag.TOO_FEW | FixFlag.NO_SAFETY_CLAIM)
 _NONE_NAME = IntervalMode.NONE.name.lower()
 # beyond this a satellite's elevation differs between the prediction's ends by more than
@@ -328,10 +331,12 @@ def run_locator(
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
-            if row["claim"]:
-                here = (0.0 if odo is None else float(odo[k]), gps[k])
-                f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
-                status = _FUSED
+        if state.past_start or state.past_end:
+            _track_end(row, state, path.length_m)
+        if fix is not None and row["claim"]:
+            here = (0.0 if odo is None else float(odo[k]), gps[k])
+            f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
+            status = _FUSED
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
@@ -371,6 +376,8 @@ class _Tracker:
     est: float
     est_var: float
     odo_prev: float
+    past_start: bool = False  # the last prediction reached before chainage 0
+    past_end: bool = False  # ... or past the track's length
 
     @classmethod
     def start(
@@ -395,6 +402,8 @@ class _Tracker:
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
             hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
         d = max(abs(d_lo), abs(d_hi))
+        self.past_start = float(lo_p) < 0.0
+        self.past_end = float(hi_p) > length_m
         p_lo = _clip(float(lo_p), 0.0, length_m)
         p_hi = _clip(float(hi_p), 0.0, length_m)
         step = 0.0 if odo is None else float(odo[k]) - self.odo_prev
@@ -543,6 +552,21 @@ def _split_fix(
     else:  # no claim (none, or the hull is the prediction): the fix's own interval
         fix = dataclasses.replace(fix, flags=fix.flags | _NO_STRETCH_FLAGS)
     return fix, sets[comb.chosen], uncorrected, comb.conflict
+
+
+def _track_end(row: dict[str, Any], state: _Tracker, length_m: float) -> None:
+    """Flag an epoch whose prediction reaches past an end of the track map (the map may end
+    before the line does: the train may be off it) and void a claim whose interval the end
+    bounds: the pair solver cannot look past the map, so such an interval may miss a train
+    beyond it. A claim well inside the map still stands: the satellites placed it there."""
+    flags = int(row["flags"]) | _TRACK_END
+    at_end = (state.past_start and row["lo_m"] <= _END_TOL_M) or (
+        state.past_end and row["hi_m"] >= length_m - _END_TOL_M
+    )
+    if row["claim"] and at_end:
+        flags |= _NO_SAFETY_CLAIM
+        row["claim"] = False
+    row.update(flags=flags, flag_names=flag_names(flags))
 
 
 def _trust(

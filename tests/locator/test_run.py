@@ -248,3 +248,23 @@ def test_a_long_prediction_trusts_a_satellite_only_above_the_mask_at_both_ends(p
         cfg = RunConfig(MODEL, trust="masks", start_uncertainty_m=unc)
         ep = run_locator(path, src, start_chainage_m=truth[0], config=cfg, masks=masks)
         assert ("G06:below_mask" not in ep["excluded"][0]) == trusted, unc
+
+
+@pytest.mark.parametrize("conflict", ["overlap", "estimate"])
+def test_a_train_past_the_end_of_the_track_map_gets_no_claim_the_end_bounds(conflict):
+    line = straight_path(heading_deg=60.0, length_m=8000.0)  # where the train really runs
+    mapped = straight_path(heading_deg=60.0, length_m=4000.0)  # the map: its first 4 km
+    truth = 3800.0 + 5.0 * np.arange(60)  # 3800 -> 4095 m: off the map for the last 19 s
+    c = np.arange(0.0, 4001.0, 10.0)
+    masks = MaskSet.from_track(mapped.track, c, np.full((len(c), 360), 5.0))
+    cfg = RunConfig(MODEL, trust="masks", start_uncertainty_m=10.0, odometry_conflict=conflict)
+    # the ranges are made on the line, the locator works on the map
+    ep = run_locator(mapped, FakeSource(line, truth), start_chainage_m=truth[0], config=cfg,
+                     masks=masks)  # fmt: skip
+    claim = ep["claim"].to_numpy(bool)
+    inside = (ep["lo_m"] <= truth) & (truth <= ep["hi_m"])
+    assert claim[truth < 3950.0].any()  # on the map, away from its end: claims as before
+    assert not (claim & ~inside).any()  # no claim misses the train, on the map or off it
+    off = truth > mapped.length_m
+    assert ep["flag_names"][off].str.contains("TRACK_END").all()
+    assert not claim[off].any()
