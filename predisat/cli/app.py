@@ -23,6 +23,7 @@ from predisat.cli.args import (
     Parser,
     add_checks,
     add_command,
+    caused_by_interrupt,
     chainage_hint,
     constellation_label,
     existing_file,
@@ -456,7 +457,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
     try:
         parser = build_parser()  # imports the commands' modules: a second or more
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ImportError) as exc:
+        # Ctrl-C in a C extension's import comes as an ImportError caused by it
+        if not caused_by_interrupt(exc):
+            raise
         print("\npredisat: interrupted before the command started; nothing was written: rerun "
               "the same command", file=sys.stderr)  # fmt: skip
         return 130

@@ -108,9 +108,10 @@ def _run_func(args: argparse.Namespace, name: str, note: str, seen: list[int]) -
         # library errors are written to be read by a person: no traceback
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, SystemError) as exc:
-        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it
-        if not caused_by_interrupt(exc):  # a genuine SystemError
+    except (KeyboardInterrupt, SystemError, ImportError) as exc:
+        # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it, and
+        # inside a C extension's import (matplotlib's ft2font) as an ImportError caused by it
+        if not caused_by_interrupt(exc):  # a genuine SystemError or ImportError
             raise
         print(f"\n{name}: interrupted{note}", file=sys.stderr)
         return 130

@@ -314,12 +314,30 @@ def test_interrupted_process_keeps_its_work(
     def other_system_error(*_: object) -> None:
         raise SystemError("a genuine internal error")
 
+    def ctrl_c_in_an_extension_import(*_: object) -> None:
+        # what a C extension's import raises when Ctrl-C lands in it (matplotlib's ft2font)
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    def genuine_import_error(*_: object) -> None:
+        raise ImportError("a genuine import error")
+
     with monkeypatch.context() as m:
         m.setattr(pl, "run_chunks", ctrl_c_in_numba)
+        assert cli.main(args) == 130
+        m.setattr(pl, "run_chunks", ctrl_c_in_an_extension_import)
         assert cli.main(args) == 130
         m.setattr(pl, "run_chunks", other_system_error)
         with pytest.raises(SystemError, match="genuine"):
             cli.main(args)
+        m.setattr(pl, "run_chunks", genuine_import_error)
+        with pytest.raises(ImportError, match="genuine"):
+            cli.main(args)
+        # and while the command line itself imports the commands' modules
+        m.setattr(cli, "build_parser", ctrl_c_in_an_extension_import)
+        assert cli.main(args) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err
     assert cli.main(args) == 0
