@@ -280,8 +280,8 @@ def run_locator(
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
         ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
         ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
-        (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (odometer
-        distance since the older of the two bounds' anchors, m), ``solve_ms``,
+        (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (distance
+        the wheels ran since the older of the two bounds' anchors, either way, m), ``solve_ms``,
         ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
         uncorrected, no broadcast model being available, and its sigma inflated:
         :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
@@ -334,7 +334,7 @@ def run_locator(
         if state.past_start or state.past_end:
             _track_end(row, state, path.length_m)
         if fix is not None and row["claim"]:
-            here = (0.0 if odo is None else float(odo[k]), gps[k])
+            here = (0.0 if odo is None else float(odo[k]), gps[k], float(state.ran[k]))
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
             status = _FUSED
         row.update(
@@ -359,8 +359,9 @@ def _clip(x: float, lo: float, hi: float) -> float:
     return min(max(x, lo), hi)
 
 
-Anchor = tuple[float, float, float]
-"""A bound's anchor: (chainage m, odometer reading m, gps_s) where it was last set."""
+Anchor = tuple[float, float, float, float]
+"""A bound's anchor: (chainage m, odometer reading m, gps_s, distance the wheels had run m)
+where it was last set."""
 
 
 @dataclass
@@ -376,6 +377,7 @@ class _Tracker:
     est: float
     est_var: float
     odo_prev: float
+    ran: NDArray  # distance the wheels ran to each epoch, either way (0 without odometer), m
     past_start: bool = False  # the last prediction reached before chainage 0
     past_end: bool = False  # ... or past the track's length
 
@@ -384,8 +386,12 @@ class _Tracker:
         cls, start_m: float, uncertainty_m: float, odo: NDArray | None, gps: NDArray
     ) -> _Tracker:
         odo0 = 0.0 if odo is None else float(odo[0])
-        return cls((start_m - uncertainty_m, odo0, gps[0]), (start_m + uncertainty_m, odo0, gps[0]),
-                   start_m, (uncertainty_m / 3.0) ** 2, odo0)  # fmt: skip
+        ran = np.zeros(len(gps))
+        if odo is not None:
+            ran[1:] = np.cumsum(np.abs(np.diff(np.asarray(odo, float))))
+        return cls((start_m - uncertainty_m, odo0, gps[0], 0.0),
+                   (start_m + uncertainty_m, odo0, gps[0], 0.0),
+                   start_m, (uncertainty_m / 3.0) ** 2, odo0, ran)  # fmt: skip
 
     def predict(
         self, k: int, gps: NDArray, odo: NDArray | None, cfg: RunConfig, length_m: float
@@ -395,13 +401,15 @@ class _Tracker:
         lo_anchor, hi_anchor = self.lo_anchor, self.hi_anchor
         if odo is not None:
             d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
-            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer)[0]
-            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer)[1]
+            # the doubts grow with the distance the wheels ran, not the net displacement
+            ran_lo, ran_hi = self.ran[k] - lo_anchor[3], self.ran[k] - hi_anchor[3]
+            lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer, ran_lo)[0]
+            hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer, ran_hi)[1]
         else:
-            d_lo = d_hi = 0.0
+            ran_lo = ran_hi = 0.0
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
             hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
-        d = max(abs(d_lo), abs(d_hi))
+        d = max(ran_lo, ran_hi)
         self.past_start = float(lo_p) < 0.0
         self.past_end = float(hi_p) > length_m
         p_lo = _clip(float(lo_p), 0.0, length_m)
@@ -415,7 +423,8 @@ class _Tracker:
         return p_lo, p_hi, d
 
     def fuse(
-        self, fix: Fix, wls_sigma_m: float, p_lo: float, p_hi: float, here: tuple[float, float],
+        self, fix: Fix, wls_sigma_m: float, p_lo: float, p_hi: float,
+        here: tuple[float, float, float],
         fusion: bool,
     ) -> tuple[float, float]:  # fmt: skip
         """The fused interval of a claimed fix and the prediction; re-anchors the bounds the

@@ -118,25 +118,38 @@ class OdometerAccuracy:
         """``D_DOUBTUNDER`` after ``dist_m`` metres (either sign) since the reference."""
         return self.abs_error_m + self.under_rel * np.abs(np.asarray(dist_m, float))
 
-    def displacement_bounds_m(self, odo_m: ArrayLike) -> tuple[NDArray, NDArray]:
+    def displacement_bounds_m(
+        self, odo_m: ArrayLike, travelled_m: ArrayLike | None = None
+    ) -> tuple[NDArray, NDArray]:
         """Bounds of the true signed displacement for a measured signed displacement.
 
         Parameters
         ----------
         odo_m : array_like
             Measured displacement, signed (either frame), m.
+        travelled_m : array_like, optional
+            Distance the wheels ran since the reference, either way (the sum of the
+            odometer's absolute steps), m; None: ``abs(odo_m)`` (no reversal). The doubts grow
+            with it: after a reversal each leg's error counts, not the net displacement's.
 
         Returns
         -------
         lo_m, hi_m : ndarray
             ``lo <= true <= hi``. Moving forward (``odo >= 0``) an over-read means the true
             displacement is shorter: ``lo = odo - D_DOUBTOVER``, ``hi = odo + D_DOUBTUNDER``;
-            backward, the roles swap.
+            backward, the roles swap. After a reversal either leg may have over- or
+            under-read: the larger doubt on both sides.
         """
         d = np.asarray(odo_m, float)
-        over, under = self.doubt_over_m(d), self.doubt_under_m(d)
+        ran = np.abs(d)
+        if travelled_m is not None:
+            ran = np.maximum(np.asarray(travelled_m, float), ran)
+        over, under = self.doubt_over_m(ran), self.doubt_under_m(ran)
         fwd = d >= 0
-        return d - np.where(fwd, over, under), d + np.where(fwd, under, over)
+        lo_doubt, hi_doubt = np.where(fwd, over, under), np.where(fwd, under, over)
+        reversed_ = ran > np.abs(d) + 1e-6 * (1.0 + ran)  # rounding of the sums is no reversal
+        wide = np.maximum(over, under)
+        return d - np.where(reversed_, wide, lo_doubt), d + np.where(reversed_, wide, hi_doubt)
 
 
 @dataclass(frozen=True)
@@ -185,7 +198,8 @@ class SafeFronts:
     doubt_over_m, doubt_under_m : ndarray, shape (n,)
         ``D_DOUBTOVER``, ``D_DOUBTUNDER``.
     dist_since_ref_m : ndarray, shape (n,)
-        Odometer distance since the last reference (absolute), m.
+        Distance the wheels ran since the last reference, either way (a reversal adds both
+        legs), m.
     accepted : ndarray of bool, shape (n_passage,)
         Whether each passage was accepted (inside its expectation window, or not linked).
     orientation : int
@@ -298,20 +312,22 @@ def safe_fronts(
         raise ValueError("passages must be in reading order with index < len(odo_m)")
     if antenna_to_front_m < 0 or train_length_m <= 0:
         raise ValueError("antenna_to_front_m must be >= 0 and train_length_m > 0")
+    ran = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(odo)))])  # either way, m
     est = np.full(n, np.nan)
     over = np.full(n, np.nan)
     under = np.full(n, np.nan)
     since = np.full(n, np.nan)
     accepted = np.zeros(len(passages), bool)
-    # the reference in force: (odometer at it, its chainage, doubt over / under at it)
-    ref: tuple[float, float, float, float] | None = None
+    # the reference in force: (odometer at it, its chainage, doubt over / under at it,
+    # distance run to it)
+    ref: tuple[float, float, float, float, float] | None = None
     at_passage: dict[int, tuple[float, float, float]] = {}  # estimate and doubts at passages
     bounds = [*idx[1:], n]
     for j, p in enumerate(passages):
         k = p.index
         e_k = ov_k = un_k = float("nan")
         if ref is not None:
-            e_k, ov_k, un_k = (float(v) for v in _state_at(ref, odo[k], accuracy, o))
+            e_k, ov_k, un_k = (float(v) for v in _state_at(ref, odo[k], ran[k], accuracy, o))
             if p.linked:
                 hi_f = e_k + o * un_k
                 lo_f = e_k - o * ov_k
@@ -324,20 +340,20 @@ def safe_fronts(
             ok = True
         accepted[j] = ok
         if ok and p.q_reference:
-            ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m)
+            ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m, float(ran[k]))
         elif ok and p.known_from is not None and p.known_from in at_passage:
             # known distance from an earlier balise: fall back to the doubts held there
             _, ov_b, un_b = at_passage[p.known_from]
-            ref = (float(odo[k]), p.chainage_m, ov_b, un_b)
+            ref = (float(odo[k]), p.chainage_m, ov_b, un_b, float(ran[k]))
         at_passage[j] = (
             (p.chainage_m, p.accuracy_m, p.accuracy_m) if ok and p.q_reference
             else (e_k, ov_k, un_k)
         )  # fmt: skip
         assert ref is not None
         seg = slice(k, bounds[j])
-        e, ov, un = _state_at(ref, odo[seg], accuracy, o)
+        e, ov, un = _state_at(ref, odo[seg], ran[seg], accuracy, o)
         est[seg], over[seg], under[seg] = e, ov, un
-        since[seg] = np.abs(odo[seg] - ref[0])
+        since[seg] = ran[seg] - ref[4]
     front = est + o * antenna_to_front_m
     max_f = front + o * under
     min_f = front - o * over
@@ -357,14 +373,17 @@ def safe_fronts(
 
 
 def _state_at(
-    ref: tuple[float, float, float, float], odo: ArrayLike, acc: OdometerAccuracy, o: int
+    ref: tuple[float, float, float, float, float],
+    odo: ArrayLike,
+    ran: ArrayLike,
+    acc: OdometerAccuracy,
+    o: int,
 ) -> tuple[NDArray, NDArray, NDArray]:
-    """Estimate (chainage) and doubts at odometer readings, from the reference in force."""
-    odo0, chain0, over0, under0 = ref
+    """Estimate (chainage) and doubts at odometer readings ``odo`` (and the distances the
+    wheels ran to them, ``ran``), from the reference in force."""
+    odo0, chain0, over0, under0, ran0 = ref
     d = np.asarray(odo, float) - odo0
     est = chain0 + o * d
     # forward motion: over-reading shortens the true travel (true behind the estimate)
-    fwd = d >= 0
-    over = over0 + np.where(fwd, acc.doubt_over_m(d), acc.doubt_under_m(d))
-    under = under0 + np.where(fwd, acc.doubt_under_m(d), acc.doubt_over_m(d))
-    return est, over, under
+    lo, hi = acc.displacement_bounds_m(d, np.asarray(ran, float) - ran0)
+    return est, over0 + (d - lo), under0 + (hi - d)

@@ -67,7 +67,11 @@ class Fused(NamedTuple):
 
 
 def predict_interval(
-    lo_m: ArrayLike, hi_m: ArrayLike, odo_m: ArrayLike, accuracy: OdometerAccuracy
+    lo_m: ArrayLike,
+    hi_m: ArrayLike,
+    odo_m: ArrayLike,
+    accuracy: OdometerAccuracy,
+    travelled_m: ArrayLike | None = None,
 ) -> tuple[NDArray, NDArray]:
     """An interval moved by a measured displacement and widened by the odometer's bounds.
 
@@ -78,13 +82,16 @@ def predict_interval(
     odo_m : array_like
         Odometer displacement since the anchor, signed toward increasing chainage, m.
     accuracy : OdometerAccuracy
+    travelled_m : array_like, optional
+        Distance the wheels ran since the anchor, either way, m (None: ``abs(odo_m)``);
+        see :meth:`OdometerAccuracy.displacement_bounds_m`.
 
     Returns
     -------
     lo_m, hi_m : ndarray
         ``[lo + min true displacement, hi + max true displacement]``.
     """
-    d_lo, d_hi = accuracy.displacement_bounds_m(odo_m)
+    d_lo, d_hi = accuracy.displacement_bounds_m(odo_m, travelled_m)
     return np.asarray(lo_m, float) + d_lo, np.asarray(hi_m, float) + d_hi
 
 

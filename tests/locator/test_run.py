@@ -268,3 +268,28 @@ def test_a_train_past_the_end_of_the_track_map_gets_no_claim_the_end_bounds(conf
     off = truth > mapped.length_m
     assert ep["flag_names"][off].str.contains("TRACK_END").all()
     assert not claim[off].any()
+
+
+def test_odometry_through_a_reversal_keeps_the_train_inside_the_prediction(path):
+    from locator.sources import EpochData
+
+    # a shunting move in a cutting (no satellite): 1050 m forward, 940 m back; the odometer
+    # under-reads the first leg by 5 % and over-reads the second by 5.3 %, within 5 m + 5 %
+    # of each leg but not of the 110 m net displacement
+    truth = np.concatenate([1000.0 + 15.0 * np.arange(71), [2050.0],
+                            2050.0 - 15.0 * np.arange(1, 63), [1110.0]])  # fmt: skip
+    odo = np.empty_like(truth)
+    odo[:72] = (truth[:72] - 1000.0) / 1.05
+    odo[72:] = odo[71] - (2050.0 - truth[72:]) * (990.0 / 940.0)
+
+    class NoSky:
+        gps_s = np.arange(len(truth), dtype=float)
+        odometer_m = odo
+
+        def observe(self, k, rx):
+            return EpochData((), np.zeros((0, 3)), np.zeros(0), {})
+
+    ep = run_locator(path, NoSky(), start_chainage_m=1000.0,
+                     config=RunConfig(trust="none", start_uncertainty_m=5.0))  # fmt: skip
+    assert ((ep["fused_lo_m"] <= truth) & (truth <= ep["fused_hi_m"])).all()
+    assert ep["odo_since_anchor_m"].iloc[-1] == pytest.approx(odo[71] + odo[71] - odo[-1])

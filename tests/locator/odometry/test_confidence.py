@@ -27,6 +27,24 @@ def test_doubts_grow_linearly_from_the_reference():
     np.testing.assert_allclose(sf.dist_since_ref_m, odo)
 
 
+def test_after_a_reversal_the_doubts_grow_with_both_legs_not_the_net_displacement():
+    # 1000 m forward, 940 m back (a shunting move), each leg read at the worst of its relative
+    # bound: forward the wheels under-read by 2 % (the train ran 1020 m), back they over-read
+    # by 4 % (it ran 902.4 m): the true end lies 117.6 m ahead of the reference, not 60 m
+    true_fwd, true_back = 1000.0 * (1.0 + 0.02), 940.0 * (1.0 - 0.04)
+    odo = np.concatenate([np.arange(0.0, 1001.0, 10.0), 1000.0 - np.arange(10.0, 941.0, 10.0)])
+    truth_end = true_fwd - true_back
+    sf = safe_fronts(odo, [BalisePassage(0, 5000.0, accuracy_m=0.0)], ACC, orientation=1)
+    assert sf.dist_since_ref_m[-1] == pytest.approx(1940.0)
+    assert sf.min_safe_front_m[-1] <= 5000.0 + truth_end <= sf.max_safe_front_m[-1]
+    # the net displacement's doubt (2 m + 2 % of 60 m) would have missed it by 54 m
+    assert 5000.0 + 60.0 + ACC.doubt_under_m(60.0) < 5000.0 + truth_end
+    lo, hi = ACC.displacement_bounds_m(60.0, 1940.0)
+    assert lo <= truth_end <= hi and hi - lo == pytest.approx(2 * (2.0 + 0.04 * 1940.0))
+    # without a reversal nothing changes
+    assert ACC.displacement_bounds_m(60.0, 60.0) == ACC.displacement_bounds_m(60.0)
+
+
 def test_orientation_minus_one_mirrors_the_fronts():
     odo = np.arange(0.0, 501.0, 50.0)
     sf = safe_fronts(odo, [BalisePassage(0, 5000.0)], ACC, orientation=-1,
