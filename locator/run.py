@@ -88,6 +88,7 @@ class RunFlag(IntFlag):
     GAUSSIAN_TAIL = 1 << 19  # claims beyond the depth the model's tails were checked to
     NO_STRETCH_CLAIM = 1 << 20  # partitioned trust: no stretch's claim holds a part of its own
     TRACK_END = 1 << 21  # the prediction reaches past an end of the track map: maybe off it
+    HEADING_UNCHECKED = 1 << 22  # the heading check could not tell (unobservable, no beacon)
 
 
 ERROR_MODEL_CAVEATS = {
@@ -225,7 +226,8 @@ _EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
 # enum members and flag sets the loop uses, looked up once (Python 3.11's Enum.__getattr__ and
 # IntFlag arithmetic cost microseconds per use)
 _ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, FusionStatus.CONFLICT
-_HEADING_FAIL = HeadingStatus.FAIL
+_HEADING_FAIL, _HEADING_UNOBSERVABLE = HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
+_HEADING_UNCHECKED = int(RunFlag.HEADING_UNCHECKED)
 _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
@@ -485,6 +487,9 @@ def _check(
         row["heading_diff_deg"] = hc.difference_deg
         if hc.status == _HEADING_FAIL:
             flags |= _HEADING_FAIL_FLAGS
+    if cfg.heading_check and (hc is None or hc.status == _HEADING_UNOBSERVABLE):
+        # the claim rests on the pair intervals alone: said, not voided (docs/locator.md)
+        flags |= _HEADING_UNCHECKED
     claim = row["claim_fix"]
     miss = conflict or fix.hi_m < p_lo or fix.lo_m > p_hi
     if cfg.odometry_conflict == "estimate":

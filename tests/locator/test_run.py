@@ -293,3 +293,31 @@ def test_odometry_through_a_reversal_keeps_the_train_inside_the_prediction(path)
                      config=RunConfig(trust="none", start_uncertainty_m=5.0))  # fmt: skip
     assert ((ep["fused_lo_m"] <= truth) & (truth <= ep["fused_hi_m"])).all()
     assert ep["odo_since_anchor_m"].iloc[-1] == pytest.approx(odo[71] + odo[71] - odo[-1])
+
+
+class _AxisSky(FakeSource):
+    """Satellites near the track's axis (a cutting): the across-track offset from the beacon,
+    hence the heading, cannot be told."""
+
+    def __init__(self, path, truth_m):
+        super().__init__(path, truth_m)
+        az = np.array([55.0, 62.0, 66.0, 236.0, 243.0, 250.0])
+        el = np.array([20.0, 45.0, 70.0, 25.0, 50.0, 65.0])
+        self.sat = sky(path.ecef_at(self.truth_m[0]), az, el)
+        self.names = self.names[: len(az)]
+        self.bias = np.zeros((len(self.truth_m), len(az)))
+
+
+def test_a_claim_the_heading_check_could_not_judge_says_so(path):
+    truth = truth_run(n=12)
+    for source, some_unchecked in ((FakeSource, False), (_AxisSky, True)):
+        ep = run_locator(path, source(path, truth), start_chainage_m=truth[0],
+                         config=RunConfig(MODEL, trust="none"))  # fmt: skip
+        status = ep["heading_status"].to_numpy(str)
+        flagged = ep["flag_names"].str.contains("HEADING_UNCHECKED").to_numpy(bool)
+        assert np.array_equal(flagged, (status == "unobservable") | (status == ""))
+        assert flagged.any() == some_unchecked and ep["claim"].any()
+        off = run_locator(path, source(path, truth), start_chainage_m=truth[0],
+                          config=RunConfig(MODEL, trust="none", heading_check=False))  # fmt: skip
+        assert not off["flag_names"].str.contains("HEADING_UNCHECKED").any()
+        assert off["claim"].equals(ep["claim"])  # said, not voided
