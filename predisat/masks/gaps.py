@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.geodesy import WGS84
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.track.map import TrackMap
 
@@ -36,8 +37,9 @@ def close_gaps(
         The merged masks, n_pos >= 3 (fewer give no spacing to compare with).
     track : TrackMap, optional
         Gives the inserted positions' lat / lon / h and heading. Without it (a mask file read
-        on its own) they are interpolated between the hole's two surveyed positions: they
-        trust nothing, so their coordinates only label them.
+        on its own) two positions close each hole, one spacing inside each end, placed along
+        the heading of the surveyed position beside them (a chord across a long hole would
+        leave the track on a curve); their cells cover the hole between them.
 
     Returns
     -------
@@ -54,17 +56,14 @@ def close_gaps(
     holes = np.flatnonzero(step > GAP_FACTOR * spacing)
     if not len(holes):
         return masks, []
-    new_ch = np.concatenate([
-        np.arange(ch[i] + spacing, ch[i + 1] - spacing / 2, spacing) for i in holes
-    ])  # fmt: skip
     if track is not None:
+        new_ch = np.concatenate([
+            np.arange(ch[i] + spacing, ch[i + 1] - spacing / 2, spacing) for i in holes
+        ])  # fmt: skip
         lat, lon, h = track.position_at(new_ch)
         heading = track.heading_at(new_ch)
     else:
-        lat, lon, h = (np.interp(new_ch, ch, np.asarray(v, float))
-                       for v in (masks.lat_deg, masks.lon_deg, masks.h_m))  # fmt: skip
-        unwrapped = np.rad2deg(np.unwrap(np.deg2rad(np.asarray(masks.heading_deg, float))))
-        heading = np.mod(np.interp(new_ch, ch, unwrapped), 360.0)
+        new_ch, lat, lon, h, heading = _hole_ends(masks, holes, spacing)
     n_new, n_az = len(new_ch), masks.n_az
     order = np.argsort(np.concatenate([ch, new_ch]), kind="stable")
 
@@ -86,3 +85,24 @@ def close_gaps(
         support=None if masks.support is None else cat(masks.support, np.zeros((n_new, n_az))),
     )  # fmt: skip
     return closed, [(float(ch[i]), float(ch[i + 1])) for i in holes]
+
+
+def _hole_ends(
+    masks: MaskSet, holes: NDArray, spacing: float
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Chainage, lat, lon, h and heading of the positions closing each hole without a track:
+    one spacing after the surveyed position before it and one before the one after it (one
+    position when the hole holds no more)."""
+    ch = np.asarray(masks.chainage_m, float)
+    src, dist = [], []
+    for i in holes:
+        src.append(int(i))
+        dist.append(spacing)
+        if ch[i + 1] - ch[i] > 2.5 * spacing:  # room for a second position of its own
+            src.append(int(i) + 1)
+            dist.append(-spacing)
+    k, d = np.asarray(src), np.asarray(dist)
+    hdg = np.asarray(masks.heading_deg, float)[k]
+    lon0, lat0 = np.asarray(masks.lon_deg, float)[k], np.asarray(masks.lat_deg, float)[k]
+    lon, lat, _ = WGS84.fwd(lon0, lat0, np.where(d > 0, hdg, hdg + 180.0), np.abs(d))
+    return ch[k] + d, np.asarray(lat), np.asarray(lon), np.asarray(masks.h_m, float)[k], hdg

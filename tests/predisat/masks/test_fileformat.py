@@ -624,3 +624,22 @@ def test_a_hole_between_positions_is_closed_on_reading_not_covered_by_its_neighb
     first = back.subset(0.0, 100.0).mask_el_deg
     assert np.array_equal(first, joined.subset(0.0, 100.0).mask_el_deg)
     assert read_masks(path, close_holes=False).n_pos == joined.n_pos
+
+
+def test_the_positions_closing_a_hole_lie_on_the_track_on_a_curve(tmp_path):
+    from predisat.masks.fileformat import MaskHoleWarning
+    from predisat.track.map import demo_track
+
+    track = demo_track()
+    # line 144 between 4.4 and 5.6 km, every 10 m, with 1 km missing; the chord across the
+    # hole leaves the track by tens of metres
+    ch = np.r_[np.arange(4400.0, 4501.0, 10.0), np.arange(5500.0, 5601.0, 10.0)]
+    ms = MaskSet.from_track(track, ch, np.full((ch.size, 360), 5.0))
+    with pytest.warns(MaskHoleWarning):
+        back = read_masks(write_masks(ms, tmp_path / "m.parquet"))
+    new = ~np.isin(back.chainage_m, ch)
+    assert new.sum() == 2 and np.all(back.mask_el_deg[new] == 90.0)
+    proj = track.project(back.lat_deg[new], back.lon_deg[new])
+    assert np.all(np.abs(proj.offset_m) < 0.5)
+    np.testing.assert_allclose(proj.chainage_m, back.chainage_m[new], atol=0.5)
+    assert np.all(back.mask_at(np.linspace(4506.0, 5494.0, 300), 0.0) >= 90.0)
