@@ -35,6 +35,7 @@ import os
 import shutil
 import tempfile
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -67,7 +68,7 @@ from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
-from predisat.masks.fileformat import mask_file_path, read_masks
+from predisat.masks.fileformat import MaskHoleWarning, mask_file_path, read_masks
 from predisat.masks.maskset import MaskSet
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
@@ -346,17 +347,28 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
 
 def _load_masks(
     masks: str | Path | MaskSet, opts: StorageOptions | None = None
-) -> tuple[MaskSet, str]:
+) -> tuple[MaskSet, str, list[str]]:
+    """The masks, how to name them, and what reading them warned of (holes closed)."""
     if isinstance(masks, MaskSet):
-        return masks, "in memory"
+        return masks, "in memory", []
     loc = location(masks)
-    if not is_remote(loc):
-        return read_masks(masks), str(mask_file_path(masks))
-    # a URL: a mask file (.parquet), else the output folder of `predisat process`
-    if not name_of(loc).endswith(".parquet"):
-        loc = join(loc, "masks.parquet")
-    with input_path(loc, opts) as local_file:
-        return read_masks(local_file), str(loc)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MaskHoleWarning)
+        if not is_remote(loc):
+            mask_set, label = read_masks(masks), str(mask_file_path(masks))
+        else:
+            # a URL: a mask file (.parquet), else the output folder of `predisat process`
+            if not name_of(loc).endswith(".parquet"):
+                loc = join(loc, "masks.parquet")
+            with input_path(loc, opts) as local_file:
+                mask_set, label = read_masks(local_file), str(loc)
+    notes = []
+    for w in caught:
+        if issubclass(w.category, MaskHoleWarning):
+            notes.append(str(w.message))
+        else:  # not ours to report: shown as it would have been
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return mask_set, label, notes
 
 
 def _load_track(track: TrackMap | str | os.PathLike[str] | None) -> TrackMap | None:
@@ -456,6 +468,7 @@ def run_availability(
     progress: bool = True,
     basemap: str | Path | None = None,
     storage_options: StorageOptions | None = None,
+    notes: Sequence[str] = (),
 ) -> AvailabilityRun:
     """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
 
@@ -522,6 +535,9 @@ def run_availability(
         OpenStreetMap extract of the railways and roads around the line).
     storage_options : mapping, optional
         Options of the fsspec file system of URL masks and outputs (credentials...).
+    notes : sequence of str
+        Warnings of the caller's own (the error model's, for example) that the report and
+        ``summary.json`` carry with the run's.
 
     Returns
     -------
@@ -552,7 +568,9 @@ def run_availability(
         stage("masks")
         opts = dict(storage_options or {})
         out = location(out_dir)
-        mask_set, masks_label, track = _masks_on_track(masks, track, from_m, to_m, opts)
+        mask_set, masks_label, track, mask_notes = _masks_on_track(
+            masks, track, from_m, to_m, opts
+        )
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
             raise ValueError(f"interval_every must be >= 1, got {interval_every}")
@@ -580,7 +598,7 @@ def run_availability(
         work.mkdir(parents=True, exist_ok=True)
         info = _run_info(
             mask_set, masks_label, track, nav_data, constellation, rules, step_s,
-            interval_every, __version__, model, integrity,
+            interval_every, __version__, model, integrity, [*mask_notes, *notes],
         )  # fmt: skip
         local_files, summary = write_tables(work, results, track, info, counts_table)
         local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
@@ -633,16 +651,36 @@ def _masks_on_track(
     from_m: float | None,
     to_m: float | None,
     opts: StorageOptions | None = None,
-) -> tuple[MaskSet, str, TrackMap | None]:
-    """The masks of the stretch (checked to lie on ``track``), how to name them, the track."""
-    mask_set, masks_label = _load_masks(masks, opts)
+) -> tuple[MaskSet, str, TrackMap | None, list[str]]:
+    """The masks of the stretch (checked to lie on ``track``), how to name them, the track, and
+    the warnings for the report (holes closed, a stretch asked beyond the masks)."""
+    mask_set, masks_label, notes = _load_masks(masks, opts)
     track_map = _load_track(track)
     if track_map is None:
         track_map = _embedded_track_of(mask_set, masks_label)
+    notes += _stretch_beyond(mask_set, masks_label, from_m, to_m)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
     if track_map is not None:
         check_masks_on_track(mask_set, track_map, masks_label)
-    return mask_set, masks_label, track_map
+    return mask_set, masks_label, track_map, notes
+
+
+def _stretch_beyond(
+    mask_set: MaskSet, masks_label: str, from_m: float | None, to_m: float | None
+) -> list[str]:
+    """A warning when the stretch asked reaches beyond the masks' coverage: the report then
+    covers less than was asked, and its shares are of that part only."""
+    b = mask_set.cell_bounds_m
+    out = []
+    for name, v, beyond in (("--from-km", from_m, from_m is not None and from_m < b[0]),
+                            ("--to-km", to_m, to_m is not None and to_m > b[-1])):  # fmt: skip
+        if beyond and v is not None:
+            out.append(
+                f"{name} {v / 1000:g} (chainage km) lies beyond masks {masks_label}, which cover "
+                f"chainage {b[0] / 1000:.3f} - {b[-1] / 1000:.3f} km: the report covers only the "
+                "surveyed part, and its shares are of that part; survey the rest to report it"
+            )
+    return out
 
 
 def _embedded_track_of(mask_set: MaskSet, masks_label: str) -> TrackMap | None:
@@ -715,6 +753,13 @@ def _navigation(
     sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
     _check_window(sats, ephemeris, nav_label)
     warnings = sparse_navigation(sats, nav_label)
+    if ephemeris.kind in ("sp3", "tle"):
+        warnings.append(
+            f"{nav_label} ({ephemeris.kind}) carries no health flags: satellites the broadcast "
+            "navigation message declares unhealthy, which a receiver rejects, are counted here, "
+            "so the shares may be optimistic; give the day's broadcast navigation file to apply "
+            "them"
+        )
     return _Navigation(ephemeris, nav_label, sats, warnings)
 
 
@@ -783,6 +828,7 @@ def _run_info(
     masks: MaskSet, masks_label: str, track: TrackMap | None, nav: _Navigation,
     constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
     version: str, model: IntervalModel, integrity: IntegrityBudget | None = None,
+    notes: Sequence[str] = (),
 ) -> JsonDict:  # fmt: skip
     ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
@@ -839,7 +885,7 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
-        "warnings": nav.warnings,
+        "warnings": [*notes, *nav.warnings],
     }
 
 

@@ -147,9 +147,7 @@ def cmd_availability(args: argparse.Namespace) -> int:
     track = None
     if args.track is not None:
         track = track_option(args.track, args.track_name, args.chain, args.where)
-    run = availability.run(args, track=track)
-    for warning in run.info.get("warnings", ()):
-        print(f"predisat availability: warning: {warning}", file=sys.stderr)
+    run = availability.run(args, track=track)  # prints the run's warnings
     print(f"satellites counted: {constellation_label(args.constellation)} (--constellation "
           f"{args.constellation})")
     print(availability_table(run.summary))

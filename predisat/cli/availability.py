@@ -116,7 +116,10 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
             f"--from-km {args.from_km:g} --to-km {args.to_km:g}: the start must be below the end "
             "(chainage grows along the track)"
         )
-    return run_availability(
+    notes: list[str] = []  # the error model's warnings, for the report and the console
+    model = _interval_model(args.error_model, args.k_sigma, args.constellation,
+                            integrity_budget(args), notes)  # fmt: skip
+    result = run_availability(
         args.masks,
         track if track is not None else args.track,
         args.nav,
@@ -130,8 +133,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         to_m=None if args.to_km is None else args.to_km * 1000.0,
         sky_km=args.sky_km,
         interval_every=args.interval_every,
-        interval_model=_interval_model(args.error_model, args.k_sigma, args.constellation,
-                                       integrity_budget(args)),
+        interval_model=model,
         integrity=integrity_budget(args),
         workers=args.workers,
         scheduler=args.scheduler,
@@ -139,16 +141,23 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         progress=not args.quiet,
         basemap=args.basemap,
         storage_options=args.storage_options,
+        notes=notes,
     )
+    for warning in result.info.get("warnings", ()):
+        print(f"predisat availability: warning: {warning}", file=sys.stderr)
+    return result
 
 
 def _interval_model(error_model: str | None, k_sigma: float | None,
                     constellation: str = "gps",
-                    budget: IntegrityBudget | None = None) -> IntervalModel:  # fmt: skip
+                    budget: IntegrityBudget | None = None,
+                    notes: list[str] | None = None) -> IntervalModel:  # fmt: skip
     """``--error-model`` / ``--k-sigma``: the file's model of the counted systems (or the
     default), its k replaced. A file without a model of a counted system is refused; one that
     bounds no checked tail, or not as deep as the intervals' widest ``k`` (a single pair's
-    under ``budget``), is used with a warning: `locator run` would make no claim under it."""
+    under ``budget``), is used with a warning (appended to ``notes``, for the report and the
+    console): `locator run` would make no claim under it."""
+    notes = [] if notes is None else notes
     if error_model is not None:
         try:
             mf = read_error_model_file(error_model)
@@ -168,16 +177,15 @@ def _interval_model(error_model: str | None, k_sigma: float | None,
         if mf.applicability is None or mf.applicability.method == "estimate" or unbounded:
             what = (f"no tail of {constellation_label(''.join(unbounded))} was checked"
                     if unbounded else "it is not a checked overbound")  # fmt: skip
-            print(f"predisat availability: warning: --error-model {error_model}: {what}; the "
-                  "predicted interval lengths are not bounds (docs/errormodel.md)",
-                  file=sys.stderr)  # fmt: skip
+            notes.append(f"--error-model {error_model}: {what}; the predicted interval "
+                         "lengths are not bounds (docs/errormodel.md)")  # fmt: skip
         k_max = k_sigma if k_sigma is not None else (budget or IntegrityBudget()).k_sigma(1)
         short = mf.depth_shortfall([c for c in letters if c in mf.systems], k_max)
         if short and not unbounded:
-            print(f"predisat availability: warning: --error-model {error_model}: "
-                  f"{'; '.join(short)}; the predicted intervals rest on its Gaussian tail beyond "
-                  "that depth, and `locator run` makes no safety claim under it unless told "
-                  "to assume that tail (docs/errormodel.md)", file=sys.stderr)  # fmt: skip
+            notes.append(f"--error-model {error_model}: {'; '.join(short)}; the predicted "
+                         "intervals rest on its Gaussian tail beyond that depth, and `locator "
+                         "run` makes no safety claim under it unless told to assume that tail "
+                         "(docs/errormodel.md)")  # fmt: skip
         model = mf.for_systems(list(letters))
     else:
         model = IntervalModel()

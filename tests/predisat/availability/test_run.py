@@ -286,6 +286,30 @@ def test_stretch_given_in_metres_or_reversed(tmp_path: Path, masks: MaskSet) -> 
     assert not (tmp_path / "o").exists()
 
 
+def test_a_stretch_beyond_the_masks_or_a_hole_in_them_is_said_in_the_report(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    from predisat.masks.maskset import concat_masksets
+
+    common = dict(start=START, end="2020-06-25T06:30", step_s=900, n_sky=1, progress=False)
+    part = masks.subset(4000.0, 4100.0)
+    r = run_availability(part, track, None, out_dir=tmp_path / "a", from_m=3000.0, to_m=4050.0,
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (beyond,) = r.info["warnings"]
+    assert beyond.startswith("--from-km 3 (chainage km) lies beyond masks in memory")
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["run"]["warnings"] == [beyond]
+    # a file with a hole: closed on reading, said in the report (not only a Python warning),
+    # and the positions closing it lie on the track (the track check accepts them)
+    joined = concat_masksets([masks.subset(4000.0, 4100.0), masks.subset(4300.0, 4400.0)])
+    holed = write_masks(joined, tmp_path / "h.parquet")
+    r = run_availability(holed, track, None, out_dir=tmp_path / "h",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (hole,) = r.info["warnings"]
+    assert "1 hole(s)" in hole and "4100-4300 m" in hole
+    assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
+
+
 def test_bad_step_and_reversed_window(tmp_path: Path, masks: MaskSet) -> None:
     with pytest.raises(ValueError, match=r"step_s \(--step\)"):
         run_availability(masks, None, None, out_dir=tmp_path / "o", step_s=0, progress=False)
@@ -344,9 +368,11 @@ def test_sp3_window_defaults_inside_the_file(tmp_path: Path, masks: MaskSet, tes
     assert r.results[0].gps_s[0] == pytest.approx(_gps_s(datetime(2010, 7, 1)))
     assert len(r.results[0].gps_s) == 4
     assert r.results[1].count.max() <= 3
-    # three satellites are not a constellation: said in the run and at the top of the report
-    (warning,) = r.info["warnings"]
-    assert "holds 3 GPS satellites" in warning and "understated" in warning
+    # three satellites are not a constellation, and precise orbits hold no health flags:
+    # both said in the run and at the top of the report
+    sparse, health = r.info["warnings"]
+    assert "holds 3 GPS satellites" in sparse and "understated" in sparse
+    assert "(sp3) carries no health flags" in health and "optimistic" in health
     assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
 
 
@@ -475,6 +501,10 @@ def test_an_error_model_must_hold_every_counted_system(
                                      str(tmp_path / "u")]), track)  # fmt: skip
     err = capsys.readouterr().err
     assert "no tail of GPS was checked" in err and "not bounds" in err
+    # ... and in the report and its summary, which are read without the console
+    (u,) = [w for w in json.loads((tmp_path / "u" / "summary.json").read_text())
+            ["run"]["warnings"] if "no tail of GPS was checked" in w]  # fmt: skip
+    assert html.escape(u) in (tmp_path / "u" / "report.html").read_text(encoding="utf-8")
 
 
 def test_the_integrity_budget_sets_each_modes_k(
