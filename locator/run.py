@@ -89,6 +89,7 @@ class RunFlag(IntFlag):
     NO_STRETCH_CLAIM = 1 << 20  # partitioned trust: no stretch's claim holds a part of its own
     TRACK_END = 1 << 21  # the prediction reaches past an end of the track map: maybe off it
     HEADING_UNCHECKED = 1 << 22  # the heading check could not tell (unobservable, no beacon)
+    ASSUMED_MASK = 1 << 23  # a used satellite was trusted where the mask rests on no view
 
 
 ERROR_MODEL_CAVEATS = {
@@ -228,6 +229,7 @@ _EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
 _ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, FusionStatus.CONFLICT
 _HEADING_FAIL, _HEADING_UNOBSERVABLE = HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
 _HEADING_UNCHECKED = int(RunFlag.HEADING_UNCHECKED)
+_ASSUMED_MASK = int(RunFlag.ASSUMED_MASK)
 _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
@@ -281,7 +283,8 @@ def run_locator(
         ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
         ``excluded`` (``sat:reason`` items), ``fused_lo_m``, ``fused_hi_m``,
-        ``fused_chainage_m`` (odometry and satellites, step 6), ``fusion``
+        ``fused_chainage_m`` (odometry and satellites, step 6), ``n_used_assumed`` (used
+        satellites trusted where the mask rests on the far field's assumption), ``fusion``
         (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (distance
         the wheels ran since the older of the two bounds' anchors, either way, m), ``solve_ms``,
         ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
@@ -335,6 +338,9 @@ def run_locator(
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
         if state.past_start or state.past_end:
             _track_end(row, state, path.length_m)
+        row["n_used_assumed"] = 0
+        if fix is not None and masks is not None and cfg.trust == "masks":
+            _assumed_bins(row, masks, az[idx][np.asarray(fix.used, bool)], p_lo, p_hi)
         if fix is not None and row["claim"]:
             here = (0.0 if odo is None else float(odo[k]), gps[k], float(state.ran[k]))
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
@@ -566,6 +572,21 @@ def _split_fix(
     else:  # no claim (none, or the hull is the prediction): the fix's own interval
         fix = dataclasses.replace(fix, flags=fix.flags | _NO_STRETCH_FLAGS)
     return fix, sets[comb.chosen], uncorrected, comb.conflict
+
+
+def _assumed_bins(
+    row: dict[str, Any], masks: MaskSet, az_used: NDArray, p_lo: float, p_hi: float
+) -> None:
+    """Count the used satellites whose bin rests, somewhere over the prediction, on the far
+    field's assumption (no view saw it) and flag the epoch ``ASSUMED_MASK``: weak evidence,
+    said, not voided (the margins of assumed bins are calibrated apart, docs/reconstruction.md)."""
+    if not len(az_used):
+        return
+    n = int(masks.assumed_over(p_lo, p_hi)[masks.bin_index(az_used)].sum())
+    row["n_used_assumed"] = n
+    if n:
+        flags = int(row["flags"]) | _ASSUMED_MASK
+        row.update(flags=flags, flag_names=flag_names(flags))
 
 
 def _track_end(row: dict[str, Any], state: _Tracker, length_m: float) -> None:

@@ -458,14 +458,40 @@ class MaskSet:
             raise MaskError(
                 f"worst_case: interval 0 has lo = {lo} > hi = {hi}; pass the lower chainage first"
             )
+        cells = self._cells_one(lo, hi, clip)
+        if cells is None:
+            return np.full(self.n_az, np.inf, self.effective_mask_deg.dtype)
+        return self._range_max.query(np.array([cells[0]]), np.array([cells[1]]))[0]
+
+    def _cells_one(self, lo: float, hi: float, clip: bool) -> tuple[int, int] | None:
+        """First and last position whose cell touches ``[lo, hi]``; None outside the coverage
+        (:meth:`worst_case`'s ``clip``)."""
         b = self._bounds_list
         last = self.n_pos - 1
         i = min(max(bisect.bisect_left(b, lo, 1), 1) - 1, last)  # searchsorted(b[1:], lo)
         j = min(max(bisect.bisect_right(b, hi, 0, len(b) - 1) - 1, 0), last)
         bad = (hi < b[0] or lo > b[-1]) if clip else (lo < b[0] or hi > b[-1])
-        if bad:
-            return np.full(self.n_az, np.inf, self.effective_mask_deg.dtype)
-        return self._range_max.query(np.array([i]), np.array([max(i, j)]))[0]
+        return None if bad else (i, max(i, j))
+
+    def assumed_over(self, chainage_lo_m: float, chainage_hi_m: float) -> NDArray:
+        """Bins whose mask somewhere over ``[lo, hi]`` rests on no view: the far field's
+        assumption (source ``ASSUMED``), bool, shape (n_az,).
+
+        Every position whose cell touches the interval counts, as in :meth:`worst_case`; an
+        interval reaching outside the coverage gives True everywhere.
+        """
+        lo, hi = float(chainage_lo_m), float(chainage_hi_m)
+        if math.isnan(lo) or math.isnan(hi) or lo > hi:
+            raise MaskError(f"assumed_over: need lo <= hi, got {lo}, {hi}")
+        cells = self._cells_one(lo, hi, clip=False)
+        if cells is None:
+            return np.ones(self.n_az, bool)
+        hit = self._assumed_range.query(np.array([cells[0]]), np.array([cells[1]]))[0]
+        return np.asarray(hit > 0.0)
+
+    @cached_property
+    def _assumed_range(self) -> RangeMax:
+        return RangeMax((self.source == BinSource.ASSUMED).astype(np.float32))
 
     @cached_property
     def _bounds_list(self) -> list[float]:

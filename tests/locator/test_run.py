@@ -321,3 +321,28 @@ def test_a_claim_the_heading_check_could_not_judge_says_so(path):
                           config=RunConfig(MODEL, trust="none", heading_check=False))  # fmt: skip
         assert not off["flag_names"].str.contains("HEADING_UNCHECKED").any()
         assert off["claim"].equals(ep["claim"])  # said, not voided
+
+
+def test_satellites_trusted_where_the_mask_rests_on_no_view_are_counted_and_flagged(path):
+    from predisat.masks.maskset import BinSource
+
+    truth = truth_run(n=5)
+    c = np.arange(0.0, 4001.0, 10.0)
+    az_bins = np.arange(360)
+    source = np.full((len(c), 360), int(BinSource.OBSERVED))
+    # the far field beyond the corridor in the sector of G05 (az 200) and G06 (240): assumed
+    far = (az_bins >= 190) & (az_bins <= 250)
+    source[:, far] = int(BinSource.ASSUMED)
+    masks = MaskSet.from_track(path.track, c, np.zeros((len(c), 360)), source=source)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="masks"), masks=masks)  # fmt: skip
+    in_far = {f"G{k + 1:02d}" for k in np.flatnonzero((AZ >= 190) & (AZ <= 250))}
+    expected = [len(in_far & set(u.split())) for u in ep["used"]]
+    assert ep["n_used_assumed"].tolist() == expected and max(expected) == 2
+    flagged = ep["flag_names"].str.contains("ASSUMED_MASK")
+    assert (flagged == (ep["n_used_assumed"] > 0)).all()
+    assert ep["claim"].all()  # said, not voided
+    plain = MaskSet.from_track(path.track, c, np.zeros((len(c), 360)))
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="masks"), masks=plain)  # fmt: skip
+    assert (ep["n_used_assumed"] == 0).all() and not ep["flag_names"].str.contains("ASSUMED").any()

@@ -405,3 +405,25 @@ class _LineTrack:
 
     def heading_at(self, chainage_m):
         return np.zeros(np.shape(chainage_m))
+
+
+def test_assumed_over_matches_every_cell_touching_the_interval():
+    from predisat.masks.maskset import BinSource
+
+    rng = np.random.default_rng(3)
+    base = make_set(n_pos=40)
+    src = np.where(rng.random(base.mask_el_deg.shape) < 0.05, int(BinSource.ASSUMED),
+                   int(BinSource.OBSERVED))  # fmt: skip
+    ms = MaskSet.from_arrays(base.chainage_m, base.lat_deg, base.lon_deg, base.h_m,
+                             base.heading_deg, base.mask_el_deg, source=src)  # fmt: skip
+    b = ms.cell_bounds_m
+    for _ in range(200):
+        lo, hi = np.sort(rng.uniform(b[0] - 20.0, b[-1] + 20.0, 2))
+        got = ms.assumed_over(lo, hi)
+        if lo < b[0] or hi > b[-1]:
+            assert got.all()  # the train may be where no mask exists
+            continue
+        touching = (b[1:] >= lo) & (b[:-1] <= hi)  # brute force: closed cells
+        assert np.array_equal(got, (src[touching] == BinSource.ASSUMED).any(axis=0))
+    with pytest.raises(MaskError, match="lo <= hi"):
+        ms.assumed_over(10.0, 5.0)
