@@ -135,3 +135,31 @@ def test_dask_workers_write_the_serial_bytes(
     for r, s in zip(a.lines[:2], b.lines[:2], strict=True):
         assert r.masks_path is not None and s.masks_path is not None
         assert r.masks_path.read_bytes() == s.masks_path.read_bytes()
+
+
+def test_a_survey_is_refused_on_a_network_track_that_leaves_its_own(
+    test_data: Path, surveys: Path, tmp_path: Path
+) -> None:
+    import json
+
+    from predisat.geodesy import WGS84
+
+    # the surveys were rendered on the file fitted within its 10 m simplification (and name
+    # that track in their survey.yaml); fitted within 1 m, the curve follows the simplified
+    # polyline's corners, metres and degrees away where the frames were taken
+    doc = json.loads((test_data / "track" / "network_gembloux.geojson").read_text())
+    doc["tolerance_m"] = 1.0
+    (tmp_path / "tight.geojson").write_text(json.dumps(doc))
+    tight = Network.from_file(tmp_path / "tight.geojson")
+    own = Network.from_file(test_data / "track" / "network_gembloux.geojson")
+    a, b = own.line("144").parts[0], tight.line("144").parts[0]
+    ch = np.arange(700.0, 761.0, 5.0)
+    (lat_a, lon_a, _), (lat_b, lon_b, _) = a.position_at(ch), b.position_at(ch)
+    assert np.max(WGS84.inv(lon_a, lat_a, lon_b, lat_b)[2]) > 5.0  # independent: PROJ
+    res = process_network(tight, surveys, tmp_path / "out", PARAMS, scheduler="serial",
+                          progress=False, segmenter=blue_sky)  # fmt: skip
+    by_line = {r.line_id: r for r in res.lines}
+    for lid in SURVEYED:
+        assert by_line[lid].status == "failed", lid
+        assert "leaves the survey's own track" in by_line[lid].message
+        assert "--tolerance-m" in by_line[lid].message
