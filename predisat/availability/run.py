@@ -32,6 +32,7 @@ from __future__ import annotations
 import gzip
 import math
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -129,12 +130,17 @@ class AvailabilityRun:
 
 
 # ------------------------------------------------------------------------- inputs
+# an ISO time of day followed by a UTC offset: "T08:00+02:00", "T08:00:30.5-0100"
+_UTC_OFFSET = re.compile(r"T\d{2}:\d{2}(:\d{2}(\.\d+)?)?[+-]\d{2}:?\d{2}$")
+
+
 def parse_time(value: float | str | np.datetime64 | datetime | None, name: str) -> float | None:
     """``gps_s`` of a time given as ``gps_s`` (number), ISO 8601 text or a datetime.
 
     Text such as ``"2020-06-25T06:00"`` is GPS time (as every time in PREDISAT; UTC is 18 s
     behind since 2017); with a ``Z`` or ``UTC`` suffix (``"2020-06-25T06:00Z"``) it is UTC and
-    the leap seconds are added. A bare number (also as text) is ``gps_s``. Timezone-aware
+    the leap seconds are added; with an offset (``"2020-06-25T08:00+02:00"``, local time) it
+    is that UTC instant. A bare number (also as text) is ``gps_s``. Timezone-aware
     datetimes are UTC instants, naive ones and ``numpy.datetime64`` GPS time. ``None`` stays
     ``None``.
     """
@@ -147,16 +153,22 @@ def parse_time(value: float | str | np.datetime64 | datetime | None, name: str) 
         try:
             out = float(text)
         except ValueError:
+            if _UTC_OFFSET.search(text.replace(" ", "T")):
+                # an explicit offset (local time, +02:00): an instant in UTC, not GPS time
+                return parse_time(datetime.fromisoformat(text.replace(" ", "T")), name)
             utc = text.upper().endswith(("Z", "UTC"))
             if utc:
                 text = text[: -1 if text.upper().endswith("Z") else -3]
             text = text.strip().replace(" ", "T")
             try:
-                t = np.datetime64(text, "ns")
+                with warnings.catch_warnings():  # numpy's notice on zones: the error says it
+                    warnings.simplefilter("ignore")
+                    t = np.datetime64(text, "ns")
             except ValueError:
                 raise ValueError(
                     f"{name} {value!r} is not a time: give GPS time as 2020-06-25T06:00, UTC "
-                    "as 2020-06-25T06:00Z, or gps_s seconds"
+                    "as 2020-06-25T06:00Z, local time with its offset as 2020-06-25T08:00+02:00, "
+                    "or gps_s seconds (zone names such as CEST are not read)"
                 ) from None
             out = float(utc_datetime64_to_gps_s(t) if utc else datetime64_to_gps_s(t))
     elif isinstance(value, datetime):
@@ -259,9 +271,12 @@ def _window(
         start = _default_start(ephemeris, embedded)
     if end is None:
         hi = nav_span_gps_s(ephemeris)[1]
-        # broadcast records stay valid about an hour after the last reference epoch
-        last = math.ceil((hi + (3600.0 if ephemeris.kind == "broadcast" else 0.0)) / 3600.0)
-        end = min(start + _DEFAULT_WINDOW_S, max(last * 3600.0, start + step_s))
+        if ephemeris.kind == "sp3":  # precise orbits are interpolated, never extrapolated
+            last_s = hi + 1e-3
+        else:  # broadcast records stay valid about an hour after the last reference epoch
+            extra = 3600.0 if ephemeris.kind == "broadcast" else 0.0
+            last_s = math.ceil((hi + extra) / 3600.0) * 3600.0
+        end = min(start + _DEFAULT_WINDOW_S, max(last_s, start + step_s))
     if end <= start:
         raise ValueError(
             f"end ({_iso(end)}, --end) must be after start ({_iso(start)}, --start); give a "
@@ -302,6 +317,16 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
         f"{len(bad)} of {len(t)} epochs ({_iso(t[bad[0]])} - {_iso(t[bad[-1]])}) "
         + ("lies" if len(bad) == 1 else "lie")
     )  # fmt: skip
+    inside = (t[bad] > lo) & (t[bad] < hi)
+    if inside.any():  # not the data's ends: a hole in them
+        g = t[bad][inside]
+        raise ValueError(
+            f"{what} in a gap of the navigation data {nav_label}: no trusted satellite "
+            f"{_iso(g[0])} - {_iso(g[-1])} GPST, inside the data's span {_iso(lo)} - {_iso(hi)} "
+            "(precise orbits are interpolated from samples on both sides, so an SP3 gap costs "
+            "about an hour more at each end); give navigation data without the gap, or a "
+            "window (--start/--end) beside it"
+        )
     raise ValueError(
         f"{what} outside the navigation data {nav_label} (no trusted satellite; the data "
         f"span {_iso(lo)} - {_iso(hi)} GPST); choose start/end (--start/--end) inside it or give "

@@ -6,6 +6,7 @@ import argparse
 import html
 import json
 import re
+import warnings
 from datetime import datetime, timedelta, timezone
 from html.parser import HTMLParser
 from pathlib import Path
@@ -328,6 +329,13 @@ def test_parse_time_scales() -> None:
     assert parse_time("2020-06-25T06:00 utc", "--start") == pytest.approx(gpst + 18.0)
     aware = datetime(2020, 6, 25, 8, tzinfo=timezone(timedelta(hours=2)))
     assert parse_time(aware, "--start") == pytest.approx(gpst + 18.0)
+    # local time with its offset, as text: the same UTC instant (it read as GPS time, 18 s off)
+    for text in ("2020-06-25T08:00+02:00", "2020-06-25 08:00:00+0200", "2020-06-25T05:00-01:00"):
+        assert parse_time(text, "--start") == pytest.approx(gpst + 18.0), text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's timezone notice must not leak
+        with pytest.raises(ValueError, match="zone names such as CEST are not read"):
+            parse_time("2020-06-25T08:00 CEST", "--start")
     assert parse_time("1277445600", "--start") == 1277445600.0
     assert parse_time(None, "--end") is None
     with pytest.raises(ValueError, match="--end 'tomorrow' is not a time"):
@@ -635,3 +643,27 @@ def test_masks_made_on_the_embedded_line_get_its_kilometre_posts_without_track(
     # the same name on masks that do not lie on the line: their own positions, as before
     moved = dataclasses.replace(on_line, lat_deg=on_line.lat_deg + 0.01)
     assert "none given" in report(moved, "moved")
+
+
+def test_sp3_default_window_ends_with_the_data_and_a_gap_is_named(
+    tmp_path: Path, masks: MaskSet, test_data
+) -> None:
+    src = test_data / "gnss" / "igs15904_G01G02G05.sp3"
+    small = masks.subset(4000.0, 4060.0)
+    # no --end: the window ends with the last sample (07:45), none past it is asked for
+    r = run_availability(small, None, [src], out_dir=tmp_path / "d", step_s=900, n_sky=1,
+                         progress=False)  # fmt: skip
+    assert r.results[0].gps_s[-1] == pytest.approx(_gps_s(datetime(2010, 7, 1, 7, 45)))
+    # the same file without its 03:00-04:00 samples: the error names the gap, not the span
+    lines = src.read_text().splitlines(keepends=True)
+    out, drop = [], False
+    for ln in lines:
+        if ln.startswith("*"):
+            drop = ln.split()[4] in ("3",) or (ln.split()[4] == "4" and ln.split()[5] == "0")
+        if not drop or ln.startswith("EOF"):
+            out.append(ln)
+    gap = tmp_path / "gap.sp3"
+    gap.write_text("".join(out))
+    with pytest.raises(ValueError, match=r"in a gap of the navigation data gap\.sp3"):
+        run_availability(small, None, [gap], out_dir=tmp_path / "g", start="2010-07-01T00:00",
+                         end="2010-07-01T07:00", step_s=900, n_sky=1, progress=False)  # fmt: skip
