@@ -61,6 +61,7 @@ from predisat.availability.satellites import (
     default_ephemeris,
     default_window,
     select_satellites,
+    system_letters,
 )
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.gnss.ephemeris import Ephemeris
@@ -339,6 +340,26 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
 # standard, GLONASS's 24 slots less spares in maintenance, Galileo and BeiDou-3 MEO in 2020):
 # navigation data with fewer usually is a partial file, and every figure is then understated.
 _FULL_CONSTELLATION = {"G": 24, "R": 22, "E": 22, "C": 24}
+# ... from when, and what a whole file held before: GLONASS had 16-20 in service until its 24
+# again in late 2011, Galileo 12 or more from its initial services (12-2016) to its full MEO
+# (2020), BeiDou-2 10 or more from its regional service (12-2012) to BeiDou-3 (2020)
+_EARLIER = {
+    "R": (("1990-01-01", 16), ("2011-12-01", 22)),
+    "E": (("2016-12-15", 12), ("2020-01-01", 22)),
+    "C": (("2012-12-27", 10), ("2020-07-31", 24)),
+}
+
+
+def _full_count(system: str, gps_s: float) -> int:
+    """Satellites a whole file of ``system`` held at ``gps_s`` (0: no rule then)."""
+    steps = _EARLIER.get(system)
+    if steps is None:
+        return _FULL_CONSTELLATION[system]
+    full = 0
+    for since, n in steps:
+        if gps_s >= float(datetime64_to_gps_s(np.datetime64(since, "ns"))):
+            full = n
+    return full
 
 
 def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
@@ -358,8 +379,10 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
     """
     used = [s for j, s in enumerate(sats.sats) if sats.valid[:, j].any()]
     out = []
-    for system, full in _FULL_CONSTELLATION.items():
+    t0 = float(sats.gps_s[0]) if len(sats.gps_s) else math.inf
+    for system in _FULL_CONSTELLATION:
         n = sum(s[0] == system for s in used)
+        full = _full_count(system, t0)
         if 0 < n < full:
             out.append(
                 f"{nav_label} holds {n} {SYSTEM_NAMES[system]} satellites with usable records "
@@ -778,6 +801,15 @@ def _navigation(
     sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
     _check_window(sats, ephemeris, nav_label)
     warnings = sparse_navigation(sats, nav_label)
+    asked = system_letters(constellation)
+    absent = sorted(asked - {s[0] for s in sats.sats}) if len(asked) > 1 else []
+    if absent:
+        names = ", ".join(SYSTEM_NAMES.get(c, c) for c in absent)
+        warnings.append(
+            f"--constellation {constellation} asks for {names}, of which {nav_label} holds no "
+            "satellite: the counts are of the others only; give navigation data of "
+            f"{names} to count them"
+        )
     if ephemeris.kind in ("sp3", "tle"):
         warnings.append(
             f"{nav_label} ({ephemeris.kind}) carries no health flags: satellites the broadcast "

@@ -44,6 +44,7 @@ __all__ = [
     "default_ephemeris",
     "default_window",
     "select_satellites",
+    "system_letters",
 ]
 
 SYSTEM_NAMES: dict[str, str] = {
@@ -86,11 +87,13 @@ def select_satellites(
     -------
     tuple of str
     """
-    letters = _system_letters(constellation)
+    letters = system_letters(constellation)
     return tuple(s for s in sats if s[:1] in letters)
 
 
-def _system_letters(constellation: str | Sequence[str]) -> set[str]:
+def system_letters(constellation: str | Sequence[str]) -> set[str]:
+    """The system letters a constellation name or letter string means (``"gps+galileo"`` ->
+    ``{"G", "E"}``); ValueError naming the choices for anything else."""
     if isinstance(constellation, str):
         key = constellation.strip().lower()
         if key in CONSTELLATIONS:

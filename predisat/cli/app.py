@@ -25,7 +25,6 @@ from predisat.cli.args import (
     add_command,
     caused_by_interrupt,
     chainage_hint,
-    constellation_label,
     existing_file,
     existing_path,
     finite_float,
@@ -148,7 +147,9 @@ def cmd_availability(args: argparse.Namespace) -> int:
     if args.track is not None:
         track = track_option(args.track, args.track_name, args.chain, args.where)
     run = availability.run(args, track=track)  # prints the run's warnings
-    print(f"satellites counted: {constellation_label(args.constellation)} (--constellation "
+    # what the navigation data held of the constellation asked (info: "gps+galileo: GPS (31
+    # satellites)"), not only what was asked
+    print(f"satellites counted: {run.info['constellation'].split(': ', 1)[-1]} (--constellation "
           f"{args.constellation})")
     print(availability_table(run.summary))
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "

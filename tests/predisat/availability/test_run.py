@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import html
 import json
 import re
@@ -667,3 +668,38 @@ def test_sp3_default_window_ends_with_the_data_and_a_gap_is_named(
     with pytest.raises(ValueError, match=r"in a gap of the navigation data gap\.sp3"):
         run_availability(small, None, [gap], out_dir=tmp_path / "g", start="2010-07-01T00:00",
                          end="2010-07-01T07:00", step_s=900, n_sky=1, progress=False)  # fmt: skip
+
+
+def test_constellation_warnings_say_what_the_data_holds_in_its_era(
+    tmp_path: Path, masks: MaskSet, test_data
+) -> None:
+    small = masks.subset(4000.0, 4060.0)
+    common = dict(step_s=900, n_sky=1, progress=False)
+    # a GPS-only file asked for GPS and Galileo: the counts are of GPS only, and it is said
+    r = run_availability(small, None, [test_data / "gnss" / "igs15904_G01G02G05.sp3"],
+                         out_dir=tmp_path / "ge", end="2010-07-01T01:00",
+                         constellation="gps+galileo", **common)  # type: ignore[arg-type]  # fmt: skip
+    (absent,) = [w for w in r.info["warnings"] if "asks for" in w]
+    assert "asks for Galileo" in absent and "holds no satellite" in absent
+    assert r.info["constellation"].endswith("GPS (3 satellites)")
+    # GLONASS had 16-20 satellites in service in 2009 (a whole file then is not "sparse"), 24
+    # again from late 2011; two are a partial file in either era
+    from predisat.availability.run import sparse_navigation
+    from predisat.availability.satellites import SatellitePositions
+
+    real = SatellitePositions.from_ephemeris(
+        load_navigation([test_data / "gnss" / "brdc0910_R02R08.09g"]),
+        np.array([parse_time("2009-04-01T06:00", "t")]), "R",
+    )  # fmt: skip
+
+    def glonass(n: int, when: str) -> SatellitePositions:
+        return dataclasses.replace(
+            real, gps_s=np.array([parse_time(when, "t")]),
+            sats=tuple(f"R{k + 1:02d}" for k in range(n)), pos_ecef_m=np.ones((1, n, 3)),
+        )  # fmt: skip
+
+    assert sparse_navigation(glonass(19, "2009-04-01T06:00"), "x") == []
+    (w,) = sparse_navigation(glonass(19, "2013-04-01T06:00"), "x")
+    assert "holds 19 GLONASS satellites" in w and "22 or more" in w
+    (w,) = sparse_navigation(glonass(2, "2009-04-01T06:00"), "x")
+    assert "holds 2 GLONASS satellites" in w and "16 or more" in w
