@@ -59,6 +59,7 @@ __all__ = [
     "Reconstructor",
     "bin_support",
     "cell_sweep_of",
+    "close_covered",
     "reconstruct_masks",
     "suspect_frames",
 ]
@@ -141,6 +142,17 @@ class ReconstructionParams:
     min_confidence : float
         Image columns with a lower segmentation confidence have their skyline raised (their
         sky above still clears).
+    min_sky_el_deg : float or None
+        A frame's image column whose sky reaches below this elevation is voided (clears
+        nothing): no sky lies under the horizon (its dip is 0.2 deg from 30 m up, the track's
+        grade and the vehicle's roll a degree or two), so the segmentation there took an
+        obstacle down to its foot for sky (section 15 of docs/reconstruction.md). None turns
+        the check off.
+    covered_share : float
+        A position whose mask reaches the zenith (90 deg) in at least this share of its
+        azimuth bins is under a structure (a deck, a canopy): the zenith lies in every azimuth,
+        so every bin becomes 90 deg, source ``RECONSTRUCTED`` (section 15 of
+        docs/reconstruction.md). Above 1 turns the rule off.
     low_confidence_windows : float
         By how many confidence windows (the rows either side of a skyline its confidence
         speaks for); ``inf``: such columns clear nothing.
@@ -217,6 +229,8 @@ class ReconstructionParams:
     far_default_deg: float = 5.0
     position_tol_m: float = 5.0
     min_confidence: float = 0.5
+    min_sky_el_deg: float | None = -3.0
+    covered_share: float = 0.9
     low_confidence_windows: float = 2.0
     low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG
     rectify_az_step_deg: float = 0.25
@@ -233,6 +247,16 @@ class ReconstructionParams:
     cell_sweep_m: float | None = 0.0
 
     def __post_init__(self) -> None:
+        if not self.covered_share > 0:
+            raise ValueError(
+                "ReconstructionParams.covered_share must be a share > 0 of the azimuth bins (0.9; "
+                f"above 1 turns the covered-position rule off), got {self.covered_share}"
+            )
+        if self.min_sky_el_deg is not None and not math.isfinite(self.min_sky_el_deg):
+            raise ValueError(
+                "ReconstructionParams.min_sky_el_deg must be a finite elevation in degrees (-3) "
+                f"or None (no check), got {self.min_sky_el_deg}"
+            )
         if self.resolve_width_m is not None and not (
             math.isfinite(self.resolve_width_m) and self.resolve_width_m > 0
         ):
@@ -449,6 +473,11 @@ class Reconstructor:
         self.params = params or ReconstructionParams()
         self._rectifiers: dict[tuple[CameraModel, Mount], Rectifier] = {}
 
+    @property
+    def _min_sky_el_deg(self) -> float:
+        m = self.params.min_sky_el_deg
+        return -np.inf if m is None else m
+
     def rectifier(self, camera: CameraModel, mount: Mount) -> Rectifier:
         """The (cached) :class:`~predisat.reconstruct.skyline.Rectifier` of a camera and mount."""
         key = (camera, mount)
@@ -469,7 +498,7 @@ class Reconstructor:
                     rect.profile(
                         f.sky_mask, f.heading_deg, f.reverse, f.confidence,
                         self.params.min_confidence, self.params.low_confidence_windows,
-                        self.params.low_confidence_window_deg,
+                        self.params.low_confidence_window_deg, self._min_sky_el_deg,
                     )
                 )  # fmt: skip
             except ValueError as exc:
@@ -490,7 +519,7 @@ class Reconstructor:
             out.append(self.rectifier(f.camera, f.mount).profile(
                 solid, f.heading_deg, f.reverse, f.confidence,
                 self.params.min_confidence, self.params.low_confidence_windows,
-                self.params.low_confidence_window_deg,
+                self.params.low_confidence_window_deg, self._min_sky_el_deg,
             ))  # fmt: skip
         return out
 
@@ -623,6 +652,8 @@ class Reconstructor:
         # this position saw the far field in that azimuth)
         assumed = unknown_bin | ~far_seen
         src[assumed] = int(BinSource.ASSUMED)
+        mask, src, closed = close_covered(mask, src, p.covered_share)
+        assumed = assumed & ~closed
         support = bin_support(
             (near_el, near_sup), (far_grid_el, far_sup), far_el, far_seen, far_views, assumed,
             p.n_sub,
@@ -865,6 +896,36 @@ def suspect_frames(
 
 
 # ---------------------------------------------------------------------- geometry helpers
+
+
+def close_covered(
+    mask_el_deg: NDArray, source: NDArray, covered_share: float
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Positions under a structure closed in every bin.
+
+    Under a deck or canopy the zenith is closed, and the zenith lies in every azimuth: a mask
+    holding the highest obstructed elevation is 90 deg in every bin there, also in the few
+    (along the track, beyond the corridor) whose own cells no camera bounded.
+
+    Parameters
+    ----------
+    mask_el_deg : ndarray, shape (n_pos, n_az)
+    source : ndarray of uint8, shape (n_pos, n_az)
+    covered_share : float
+        A position with at least this share of its bins at 90 deg is under a structure.
+
+    Returns
+    -------
+    mask_el_deg, source : ndarray
+        New arrays; the bins raised take source ``RECONSTRUCTED``.
+    raised : ndarray of bool, shape (n_pos, n_az)
+        The bins raised to 90 deg.
+    """
+    mask = np.asarray(mask_el_deg, float)
+    covered = np.mean(mask >= 90.0, axis=1) >= covered_share
+    raised = covered[:, None] & (mask < 90.0)
+    src = np.where(raised, np.uint8(BinSource.RECONSTRUCTED), source).astype(np.uint8)
+    return np.where(covered[:, None], 90.0, mask), src, raised
 
 
 def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:

@@ -357,6 +357,7 @@ class Rectifier:
         min_confidence: float = 0.5,
         low_confidence_windows: float = 2.0,
         low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG,
+        min_sky_el_deg: float = -np.inf,
     ) -> SkyProfile:
         """The frame's :class:`SkyProfile`.
 
@@ -386,6 +387,10 @@ class Rectifier:
             each and its confidence comes from tiles (:func:`predisat.sky.panorama
             .segment_panorama`), not from its own height; frame cameras (pinhole, fisheye)
             keep windows of their own rows, where their confidence was computed.
+        min_sky_el_deg : float
+            A column whose top sky run reaches below this elevation is voided (clears
+            nothing): no sky lies under the horizon, so the segmentation took an obstacle
+            down to its foot for sky there (a white pier, a pale mast on a bright sky).
         """
         m = _as_sky_mask(sky_mask, self.camera)
         if confidence is not None:
@@ -427,6 +432,7 @@ class Rectifier:
         end = _top_sky_run_end(grown.ravel(), *self._pixel_runs, top, n_e, 1)
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
+        sky_el[sky_el < min_sky_el_deg] = np.inf  # sky under the horizon: a mislabelled column
         lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
         hi = np.where(any_seen, self.el_deg[top], np.nan)
         fwd = float(heading_deg) + (180.0 if reverse else 0.0)

@@ -703,3 +703,46 @@ def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
     assert (fields[None].views[cells] > near.sum()).all()
     kept = fields[0.25].views[cells]
     assert (kept >= 1).all() and (kept <= near.sum()).all()
+
+
+def test_a_position_closed_over_most_azimuths_is_closed_in_every_bin() -> None:
+    """Under a deck the zenith is closed, and the zenith lies in every azimuth: a mask holding
+    the highest obstructed elevation is 90 deg everywhere (as the ray-cast truth is). A
+    position whose bins reach 90 deg over 90 % of the azimuths gets the rest raised (in an
+    independent world a 3 m footbridge left 20 along-track bins at the far field's 5 deg);
+    fewer (a crown over half the sky) and nothing changes."""
+    from predisat.reconstruct.carving import close_covered
+
+    mask = np.full((3, 720), 20.0)
+    src = np.full((3, 720), int(BinSource.OBSERVED), np.uint8)
+    mask[0, :700] = 90.0  # under a deck, along-track bins left low
+    src[0, 700:] = int(BinSource.ASSUMED)
+    mask[1, :400] = 90.0  # a crown over half of it
+    out, new_src, raised = close_covered(mask, src, 0.9)
+    assert (out[0] == 90.0).all() and (new_src[0, 700:] == BinSource.RECONSTRUCTED).all()
+    assert raised[0].sum() == 20 and not raised[1:].any()
+    np.testing.assert_array_equal(out[1:], mask[1:])
+    np.testing.assert_array_equal(new_src[0, :700], src[0, :700])
+    assert mask[0, 710] == 20.0  # the inputs are not changed
+    # a tunnel (all 90 already) and an open position are left as they are
+    _, _, r = close_covered(np.full((1, 720), 90.0), src[:1], 0.9)
+    assert not r.any()
+
+
+def test_positions_under_decks_are_closed_and_open_ones_unchanged_by_the_covered_rule() -> None:
+    """The covered rule in a run: under two footbridges the masks are 90 deg in every bin, as
+    the ray-cast truth; an open position is the same with the rule off."""
+    from dataclasses import replace
+
+    world = street_world([(302.0, 306.0), (453.0, 456.0)], catenary=False, seed=7)
+    track = world.track
+    fr = frames_for(world, np.arange(150.0, 611.0, 10.0), FISHEYE)
+    s = np.array([304.0, 454.5, 380.0])
+    tm = true_masks(world, s)
+    assert tm.covered[:2].all() and not tm.covered[2]
+    rec = Reconstructor(PARAMS).run(fr, s, track)
+    off = Reconstructor(replace(PARAMS, covered_share=2.0)).run(fr, s, track)
+    np.testing.assert_array_equal(off.mask_el_deg[2], rec.mask_el_deg[2])  # open: unchanged
+    assert (rec.mask_el_deg[:2] == 90.0).all()  # under the decks, as the truth
+    with pytest.raises(ValueError, match="covered_share"):
+        ReconstructionParams(covered_share=0.0)

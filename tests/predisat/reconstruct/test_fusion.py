@@ -30,7 +30,9 @@ WALL = {"height_m": 30.0, "distance_m": 10.0, "roughness_m": 0.0, "batter": 0.0}
 # a side fisheye seeing +-85 deg of relative azimuth, as the default one: a wall cell 10 m off
 # the track is seen by several frames 10 m apart
 FISHEYE = CameraModel.fisheye_from_fov(200, 150, 185.0)
-BASE = ReconstructionParams(reach_m=100.0, carve_range_m=50.0)
+# the fusion alone: the check of sky under the horizon (section 15) also voids an all-sky
+# frame's columns, so the clauses below are tested without it, and it apart
+BASE = ReconstructionParams(reach_m=100.0, carve_range_m=50.0, min_sky_el_deg=None)
 ROBUST = dataclasses.replace(BASE, fusion_rank=2)
 POS = np.array([340.0, 350.0, 360.0])
 
@@ -333,3 +335,29 @@ def test_thin_features_prove_free_space_only_within_the_fresnel_reach(scene) -> 
     sure_out = diff & ((0.95 * w) ** 2 > k2 * np.maximum(near, 0.5))
     assert sure_in.sum() > 20 and sure_out.sum() > 20
     assert got_thin[sure_in].all() and not got_thin[sure_out].any()
+
+
+def test_a_whole_frame_failure_is_voided_by_the_horizon_check_at_rank_one(scene) -> None:
+    """An over-exposed frame labels everything sky, under the horizon too: the check of sky
+    under the horizon (section 15) voids its columns, so even the plain carving (rank 1, no
+    suspect-frame check) keeps the wall; a false sky that stops at the horizon is not
+    caught by it (clause 1's fusion is what tolerates that one)."""
+    world, frames, truth = scene
+    checked = dataclasses.replace(BASE, min_sky_el_deg=-3.0)
+    bad = _all_sky(frames, {"350l"})
+    assert _low_deg(Reconstructor(checked).run(bad, POS, world.track).mask_el_deg, truth) <= 0.1
+    assert _low_deg(Reconstructor(BASE).run(bad, POS, world.track).mask_el_deg, truth) > 5.0
+    # sky above the horizon only (the wall's face above 0 deg labelled sky): not caught
+    above = [
+        dataclasses.replace(f, sky_mask=_above_horizon(f)) if f.frame_id == "350l" else f
+        for f in frames
+    ]  # fmt: skip
+    low = _low_deg(Reconstructor(checked).run(above, POS, world.track).mask_el_deg, truth)
+    assert low > 5.0
+
+
+def _above_horizon(f: FrameView) -> np.ndarray:
+    """The frame's pixels whose ray rises above the horizon (camera model and mount)."""
+    u, v = f.camera.pixel_grid()
+    ray = f.camera.pixel_to_ray(u, v) @ f.mount.camera_to_enu(f.heading_deg).T
+    return np.asarray(ray[..., 2] > 0.0)

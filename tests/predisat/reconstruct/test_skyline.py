@@ -435,3 +435,24 @@ def test_frame_cameras_keep_windows_of_rows(pinhole: CameraModel) -> None:
         assert np.array_equal(a.sky_el_deg, b.sky_el_deg)
         assert np.array_equal(a.sky_el_deg, c.sky_el_deg)
         assert not np.array_equal(a.sky_el_deg, rect.profile(sky, 0.0).sky_el_deg)
+
+
+def test_a_column_whose_sky_reaches_under_the_horizon_is_voided() -> None:
+    # the demo's fisheye at 45 deg sees 15 deg under the horizon; where the segmentation took
+    # an obstacle for sky down to its foot (a white pier on the ground), the sky reaches -12 deg
+    cam = default_camera("fisheye")
+    mount = Mount.default("left")
+    u, v = cam.pixel_grid()
+    ray = cam.pixel_to_ray(u, v) @ mount.camera_to_enu(0.0).T
+    el = np.degrees(np.arcsin(np.clip(ray[..., 2], -1, 1)))
+    az = np.degrees(np.arctan2(ray[..., 0], ray[..., 1])) % 360.0  # the camera looks at 270
+    pier = np.abs(az - 260.0) < 3.0
+    sky = np.where(pier, el > -12.0, el > 20.0)
+    rect = Rectifier.build(cam, mount)
+    plain = rect.profile(sky, heading_deg=0.0)
+    checked = rect.profile(sky, heading_deg=0.0, min_sky_el_deg=-3.0)
+    in_pier = np.abs(plain.az_deg - 260.0) < 2.0
+    assert in_pier.any() and np.all(plain.sky_el_deg[in_pier] < -10.0)
+    assert np.all(np.isinf(checked.sky_el_deg[in_pier]))  # the column clears nothing
+    rest = np.abs(plain.az_deg - 260.0) > 4.0
+    np.testing.assert_array_equal(checked.sky_el_deg[rest], plain.sky_el_deg[rest])
