@@ -458,3 +458,16 @@ def test_process_cell_sweep_reaches_the_reconstruction(tmp_path, monkeypatch) ->
         with pytest.raises(SystemExit):
             cli.main(["process", str(survey), "--out", str(tmp_path / "o"), *extra])
         assert seen.pop("params").reconstruction.cell_sweep_m == expected  # type: ignore[attr-defined]
+
+
+def test_python_dash_m_runs_both_command_lines() -> None:
+    import subprocess
+    import sys
+
+    from predisat import __version__
+
+    for package, out in (("predisat", f"predisat {__version__}"), ("locator", "locator")):
+        done = subprocess.run([sys.executable, "-m", package, "--version"], capture_output=True,
+                              text=True, timeout=120, check=False)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.startswith(out)
