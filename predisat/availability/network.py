@@ -94,6 +94,9 @@ class LineAvailability:
     resumed : bool
         Found finished from an earlier run.
     elapsed_s : float
+    run : dict
+        What the figures rest on (:data:`RUN_FIELDS` of the report's run description: the
+        window, navigation data, constellation, synthetic-data notes, warnings).
     """
 
     line_id: str
@@ -103,6 +106,11 @@ class LineAvailability:
     summary: list[JsonDict] = field(default_factory=list)
     resumed: bool = False
     elapsed_s: float = 0.0
+    run: JsonDict = field(default_factory=dict)
+
+
+RUN_FIELDS = ("window", "navigation", "constellation", "synthetic", "warnings")
+"""The fields of a line's run description the network summary repeats."""
 
 
 @dataclass(frozen=True)
@@ -133,7 +141,8 @@ def _task(shared: _Shared, item: LineInput) -> LineAvailability:
         old = json.loads(marker.read_text())
         if old.get("key") == key:
             return LineAvailability(item.line_id, item.part, item.key, out / "report.html",
-                                    old["summary"], True, time.perf_counter() - t0)  # fmt: skip
+                                    old["summary"], True, time.perf_counter() - t0,
+                                    old.get("run", {}))  # fmt: skip
     o = shared.options
     run = run_availability(
         item.masks_path, item.track, None if o.nav is None else list(o.nav), out_dir=out,
@@ -144,10 +153,11 @@ def _task(shared: _Shared, item: LineInput) -> LineAvailability:
         integrity=None if o.integrity_risk is None else IntegrityBudget(o.integrity_risk),
     )  # fmt: skip
     summary = [_plain(r.summary()) for r in run.results]
-    write_bytes_atomic(marker, json.dumps({"key": key, "summary": summary}, indent=1).encode())
+    described = _plain({k: run.info.get(k) for k in RUN_FIELDS})
+    write_bytes_atomic(marker, json.dumps({"key": key, "summary": summary, "run": described},
+                                          indent=1).encode())  # fmt: skip
     return LineAvailability(item.line_id, item.part, item.key, Path(run.report_html), summary,
-                            False,
-                            time.perf_counter() - t0)  # fmt: skip
+                            False, time.perf_counter() - t0, described)  # fmt: skip
 
 
 def _plain(d: JsonDict) -> JsonDict:
@@ -260,9 +270,27 @@ def write_network_summary(
              "html": out / "summary.html", "md": out / "summary.md"}  # fmt: skip
     table.to_csv(files["csv"], index=False, float_format="%.6g")
     _network_map(network, table, files["map"])
-    files["md"].write_text(_markdown(network, table, cutoff_rule), encoding="utf-8")
-    files["html"].write_text(_html(network, table, cutoff_rule), encoding="utf-8")
+    basis = _basis(reports)
+    files["md"].write_text(_markdown(network, table, cutoff_rule, basis), encoding="utf-8")
+    files["html"].write_text(_html(network, table, cutoff_rule, basis), encoding="utf-8")
     return files
+
+
+def _basis(reports: Sequence[LineAvailability]) -> list[str]:
+    """What every line's figures rest on, said once per distinct value: satellites counted,
+    navigation data, window, synthetic data, warnings (a summary is read without the
+    reports)."""
+    out: list[str] = []
+    for name, label in (("constellation", "Satellites counted"), ("navigation", "Navigation"),
+                        ("window", "Window")):  # fmt: skip
+        values = sorted({str(r.run[name]) for r in reports if r.run.get(name)})
+        if values:
+            out.append(f"{label}: {'; '.join(values)}")
+    notes = sorted({str(n) for r in reports for n in (r.run.get("synthetic") or [])})
+    out += [f"Synthetic data: {n}" for n in notes]
+    warned = sorted({f"{r.key}: {w}" for r in reports for w in (r.run.get("warnings") or [])})
+    out += [f"Warning: {w}" for w in warned]
+    return out
 
 
 def _network_map(network: Network, table: pd.DataFrame, path: Path) -> None:
@@ -331,9 +359,11 @@ def _pct(x: object) -> str:
     return f"{100.0 * float(x):.1f}" if isinstance(x, float) and np.isfinite(x) else "-"
 
 
-def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
+def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str, basis: Sequence[str]) -> str:
+    said = "".join(f"* {b}\n" for b in basis)
     head = (f"# Network {network.name}\n\n{len(t)} line part(s), "
             f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}.\n\n"
+            + (f"{said}\n" if said else "") +
             "![network map](network_map.png)\n\n"
             "| line | part | status | km | surveyed km | positions | frames | bad frames | "
             f">=4 masks % | >=4 {cutoff_rule or 'cut-off'} % | longest <4 m | report |\n"
@@ -350,8 +380,12 @@ def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
     return head + body + (f"\n## Left out of the network file\n\n{skipped}" if skipped else "")
 
 
-def _html(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
+def _html(network: Network, t: pd.DataFrame, cutoff_rule: str, basis: Sequence[str]) -> str:
     e = html.escape
+    warn = ("Warning", "Synthetic")
+    said = "".join(
+        f'<p class="warn">{e(b)}</p>' if b.startswith(warn) else f"<p>{e(b)}</p>" for b in basis
+    )
     rows = "".join(
         f"<tr><td>{e(r.line_id)}</td><td>{r.part}</td><td>{e(r.status)}</td>"
         f"<td>{r.length_km:.2f}</td><td>{_km(r.surveyed_km)}</td><td>{r.n_pos}</td>"
@@ -366,10 +400,11 @@ def _html(network: Network, t: pd.DataFrame, cutoff_rule: str) -> str:
     return (
         f"<!doctype html><html><head><meta charset=utf-8><title>Network {e(network.name)}"
         "</title><style>body{font-family:sans-serif;margin:16px}table{border-collapse:collapse}"
-        "td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}</style></head><body>"
+        "td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+        ".warn{background:#fff3cd;padding:4px}</style></head><body>"
         f"<h1>Network {e(network.name)}</h1><p>{len(t)} line part(s), "
         f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}. "
-        f"{e(network.attribution)}</p><img src=network_map.png alt='network map'>"
+        f"{e(network.attribution)}</p>{said}<img src=network_map.png alt='network map'>"
         "<table><tr><th>line</th><th>part</th><th>status</th><th>km</th><th>surveyed km</th>"
         "<th>positions</th>"
         "<th>frames</th><th>bad frames</th><th>&ge;4 masks %</th>"

@@ -3,6 +3,7 @@ one line without a survey): dataset, one report per line, summary; bad network f
 
 from __future__ import annotations
 
+import html
 import json
 import shutil
 from pathlib import Path
@@ -72,6 +73,12 @@ def test_network_command_writes_dataset_reports_and_summary(
     assert (out / "network_map.png").stat().st_size > 10_000
     md = (out / "summary.md").read_text()
     assert "| 140 | 1 | no survey |" in md and "availability/144/report.html" in md
+    # what the figures rest on, said in the summary itself (it is read without the reports)
+    info = json.loads((out / "availability/144/summary.json").read_text())["run"]
+    for said in (f"Satellites counted: {info['constellation']}", f"Window: {info['window']}",
+                 f"Navigation: {info['navigation']}"):  # fmt: skip
+        assert said in md and html.escape(said) in (out / "summary.html").read_text()
+    assert info["synthetic"] and all(f"Synthetic data: {n}" in md for n in info["synthetic"])
     marker = json.loads((out / "availability/144/network.json").read_text())
     # a rerun redoes nothing: the reports' markers and files stay
     stamp = (out / "availability/144/report.html").stat().st_mtime_ns
