@@ -82,6 +82,13 @@ class SkyOptions:
         turned back into an obstacle before the thin-structure policy (0 disables the step).
     line_min_elongation : float
         Least length-to-width ratio of such a feature.
+    grey_chroma, grey_sky_probability : float
+        Learned method: a pixel whose Lab chroma is below ``grey_chroma`` (white, grey: cloud,
+        or a pale facade, a concrete pier, a grey mast) is sky only where the classifier's
+        probability reaches ``grey_sky_probability`` instead of 0.5: on scenery it was not
+        trained on, the classifier scores pale surfaces 0.5-0.8 and open sky near 1
+        (docs/segmentation.md, "Grey pixels need a surer classifier"). A
+        ``grey_sky_probability`` of 0.5 turns the rule off.
     uncertain_hole_fraction, uncertain_hole_probability : float
         Learned method: obstacle regions enclosed by sky (touching no frame edge; in a fisheye
         photo any region), smaller than this share of the valid area, whose mean sky
@@ -115,6 +122,8 @@ class SkyOptions:
     uncertain_hole_probability: float = 0.25
     line_contrast: float = 25.0
     line_min_elongation: float = 5.0
+    grey_chroma: float = 8.0
+    grey_sky_probability: float = 0.7
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -125,6 +134,11 @@ class SkyOptions:
             raise ValueError(
                 "min_island_fraction, min_sky_fraction, max_hole_fraction, "
                 "uncertain_hole_fraction and uncertain_hole_probability must lie in [0, 1]"
+            )
+        if not (0.5 <= self.grey_sky_probability <= 1.0 and self.grey_chroma >= 0.0):
+            raise ValueError(
+                "grey_sky_probability must lie in [0.5, 1] (0.5: no rule) and grey_chroma be "
+                f">= 0 Lab units, got {self.grey_sky_probability}, {self.grey_chroma}"
             )
         if self.work_size_px < 32:
             raise ValueError(f"work_size_px must be >= 32, got {self.work_size_px}")

@@ -354,6 +354,15 @@ def restore_lines(
     return sky & ~back if back.any() else sky
 
 
+def grey_pixels(image_bgr: NDArray, max_chroma: float) -> NDArray[np.bool_]:
+    """Pixels whose CIELAB chroma (OpenCV's 8-bit Lab, a and b centred on 128) is below
+    ``max_chroma``: white and grey, as cloud and pale surfaces are; bool, shape (H, W)."""
+    lab = cv2.cvtColor(np.ascontiguousarray(image_bgr), cv2.COLOR_BGR2LAB)
+    a = lab[..., 1].astype(np.float32) - 128.0
+    b = lab[..., 2].astype(np.float32) - 128.0
+    return np.asarray(a * a + b * b < max_chroma * max_chroma)
+
+
 def _learned_sky(
     img: NDArray, valid: NDArray, opt: SkyOptions, classifier: SkyModel | None
 ) -> tuple[NDArray, NDArray, NDArray]:
@@ -370,6 +379,8 @@ def _learned_sky(
     if not all_valid:
         prob = np.where(valid, prob, 0.0).astype(np.float32)
     sky = prob >= 0.5
+    if opt.grey_sky_probability > 0.5:
+        sky &= (prob >= opt.grey_sky_probability) | ~grey_pixels(img, opt.grey_chroma)
     if not all_valid:
         sky &= valid
     n_valid = valid.size if all_valid else max(int(valid.sum()), 1)

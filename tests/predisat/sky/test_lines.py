@@ -2,7 +2,9 @@
 
 The scenes are drawn here with their truth; the classifier stand-in sees the frame only at a
 working size (area-averaged), so a feature a few pixels wide disappears from its map exactly
-as it does from the shipped models'.
+as it does from the shipped models'. The grey-pixel rule (``SkyOptions.grey_sky_probability``,
+tested in test_segment.py) is off here: the stand-in's probabilities are not a model's, and
+the step under test is the lines'.
 """
 
 from __future__ import annotations
@@ -18,6 +20,11 @@ from predisat.sky.panorama import segment_panorama
 from predisat.sky.segment import SkyOptions, segment_sky, skyline_from_mask
 
 H, W = 240, 320
+
+
+def _opt(**kw: object) -> SkyOptions:
+    """The learned method with the grey-pixel rule off (module docstring)."""
+    return SkyOptions(method="learned", grey_sky_probability=0.5, **kw)  # type: ignore[arg-type]
 
 
 class _CoarseClassifier:
@@ -63,9 +70,9 @@ def test_an_arm_the_working_size_lost_comes_back_as_an_obstacle() -> None:
     arm = np.zeros_like(obstacle)
     arm[50:55, 120:250] = True
     clf = _CoarseClassifier()
-    off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
+    off = segment_sky(img, _opt(line_contrast=0.0), clf)
     assert off.sky_mask[arm].mean() > 0.8  # the failure: the arm is sky at working size
-    on = segment_sky(img, SkyOptions(method="learned"), clf)
+    on = segment_sky(img, _opt(), clf)
     assert not on.sky_mask[arm].mean() > 0.1  # the arm is an obstacle again
     assert on.thin_mask is not None and not on.thin_mask[arm].any()  # and not called thin
     # its columns' skyline is the arm's top edge (row 50 - 0.5), as the truth's
@@ -85,8 +92,8 @@ def test_a_free_wire_cloud_texture_and_a_thin_arm_stay_as_the_classifier_said() 
     clf = _CoarseClassifier()
     for seed in range(3):
         img, obstacle = _scene(seed, arm_px=2, clouds=True)
-        off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
-        on = segment_sky(img, SkyOptions(method="learned"), clf)
+        off = segment_sky(img, _opt(line_contrast=0.0), clf)
+        on = segment_sky(img, _opt(), clf)
         changed = off.sky_mask & ~on.sky_mask
         solid = obstacle.copy()
         solid[50:52, :250] = False  # the thin arm is no solid obstacle for the policy
@@ -126,7 +133,7 @@ def test_a_panorama_gets_its_lost_arm_back_and_keeps_its_free_wires() -> None:
     img = np.clip(img, 0, 255).astype(np.uint8)
     clf = _CoarseClassifier(48)
     # 1 deg per pixel: the pipeline's 0.7 deg thin width is one pixel (PipelineParams.thin_px)
-    opt = SkyOptions(method="learned", thin_px=1)
+    opt = _opt(thin_px=1)
     off = segment_panorama(img, replace(opt, line_contrast=0.0), clf)
     on = segment_panorama(img, opt, clf)
     arm = np.zeros_like(obstacle)
@@ -146,8 +153,8 @@ def test_a_pole_standing_on_the_skyline_comes_back_flagged_thin() -> None:
     img[140:170, 60] = grey  # a pole 1 px wide, 30 px tall, on the ground at row 170
     img[164:170, 90:96] = grey  # a squat blob 6 x 6 on the ground
     clf = _CoarseClassifier()
-    off = segment_sky(img, SkyOptions(method="learned", line_contrast=0.0), clf)
-    on = segment_sky(img, SkyOptions(method="learned"), clf)
+    off = segment_sky(img, _opt(line_contrast=0.0), clf)
+    on = segment_sky(img, _opt(), clf)
     assert off.sky_mask[140:168, 60].all() and off.thin_mask is not None
     assert not off.thin_mask[140:168, 60].any()  # the failure: plain sky, not flagged
     assert on.sky_mask[140:168, 60].all()  # still sky (thin) ...
@@ -177,7 +184,7 @@ def test_the_step_never_adds_sky_even_through_the_sky_gaps() -> None:
             img[r : r + 3, c : c + 3] = (208, 162, 96)
     img = np.clip(img, 0, 255).astype(np.uint8)
     clf = _CoarseClassifier()
-    opt = SkyOptions(method="learned", detect_gaps=True)
+    opt = _opt(detect_gaps=True)
     on = segment_sky(img, opt, clf)
     off = segment_sky(img, replace(opt, line_contrast=0.0), clf)
     assert (off.sky_mask & ~on.sky_mask).any()  # the step restored arms
@@ -219,7 +226,7 @@ def test_a_panorama_arm_across_the_seam_is_looked_at_whole() -> None:
     img[32:36, w - 10 :] = grey  # its arm, to the seam ...
     img[32:36, :60] = grey  # ... and on past it
     img = np.clip(img, 0, 255).astype(np.uint8)
-    opt = SkyOptions(method="learned", thin_px=1)
+    opt = _opt(thin_px=1)
     on = segment_panorama(img, opt, _CoarseClassifier(48))
     off = segment_panorama(img, replace(opt, line_contrast=0.0), _CoarseClassifier(48))
     assert off.sky_mask[32:36, 5:55].mean() > 0.8

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+
+import cv2
 import numpy as np
 import pytest
 
@@ -175,11 +178,18 @@ def test_learned_on_held_out_synthetic_frames(test_data, stem: str) -> None:
     img = cv2.imread(str(test_data / "sky_synth" / f"{stem}.jpg"), cv2.IMREAD_COLOR)
     label = cv2.imread(str(test_data / "sky_synth" / f"{stem}_label.png"), cv2.IMREAD_GRAYSCALE)
     truth = label >= 128  # thin structures count as sky
-    seg = segment_sky(img, SkyOptions(method="learned"))
+    # the classifier's own accuracy (the grey-pixel rule off) ...
+    seg = segment_sky(img, SkyOptions(method="learned", grey_sky_probability=0.5))
     assert _iou(seg.sky_mask, truth) > 0.97
     err = np.abs(seg.skyline_row - skyline_from_mask(truth))
     assert np.median(err) <= 1.0
     assert np.all((seg.confidence >= 0) & (seg.confidence <= 1))
+    # ... and the rule only takes sky away (grey cloud scored under 0.7 here), never adds
+    # false sky, keeping most of it
+    ruled = segment_sky(img, SkyOptions(method="learned"))
+    assert not (ruled.sky_mask & ~seg.sky_mask).any()
+    assert (ruled.sky_mask & ~truth).sum() <= (seg.sky_mask & ~truth).sum()
+    assert _iou(ruled.sky_mask, truth) > 0.9
 
 
 def test_default_ensemble_on_held_out_synthetic_frames(test_data) -> None:
@@ -395,3 +405,43 @@ def test_thin_mask_holds_the_wire_the_policy_made_sky(method: str) -> None:
     assert np.array_equal(seg.thin_mask, seg.sky_mask & ~raw.sky_mask)
     assert seg.thin_mask[59:62, 150:210].any(axis=0).mean() > 0.9  # the wire
     assert not seg.thin_mask[40:140, 222:230].any()  # the mast
+
+
+class _FixedProbability:
+    """A stand-in classifier: a given probability map at the frame's size."""
+
+    max_side_px = 64
+
+    def __init__(self, prob: np.ndarray) -> None:
+        self.prob = prob
+
+    def predict_image(self, image_bgr: np.ndarray) -> np.ndarray:
+        h, w = image_bgr.shape[:2]
+        return cv2.resize(self.prob, (w, h), interpolation=cv2.INTER_NEAREST)
+
+
+def test_grey_pixels_are_sky_only_where_the_classifier_is_surer() -> None:
+    """A pale pier (grey, white) the classifier scores 0.65 stays an obstacle; blue sky scored
+    the same is sky; a grey cloud scored 0.9 is sky. With the rule off (0.5) the pier is sky."""
+    from predisat.sky.segment import grey_pixels
+
+    h, w = 96, 128
+    img = np.zeros((h, w, 3), np.uint8)
+    img[:, :] = (200, 150, 90)  # blue sky (BGR)
+    img[:, 40:60] = (205, 205, 205)  # a pale pier from top to bottom
+    img[10:30, 80:110] = (235, 235, 235)  # a white cloud
+    img[70:, :] = (60, 110, 70)  # grass
+    prob = np.full((h, w), 0.65, np.float32)
+    prob[10:30, 80:110] = 0.9
+    prob[70:, :] = 0.05
+    grey = grey_pixels(img, 8.0)
+    assert grey[:, 40:60][:70].all() and grey[10:30, 80:110].all() and not grey[0, 0]
+    opt = SkyOptions(refine_guided=False, line_contrast=0.0)
+    seg = segment_sky(img, opt, classifier=_FixedProbability(prob))
+    assert not seg.sky_mask[:70, 42:58].any()  # the pier
+    assert seg.sky_mask[:60, :30].all() and seg.sky_mask[12:28, 82:108].all()  # sky, cloud
+    off = segment_sky(img, dataclasses.replace(opt, grey_sky_probability=0.5),
+                      classifier=_FixedProbability(prob))  # fmt: skip
+    assert off.sky_mask[:60, 42:58].all()
+    with pytest.raises(ValueError, match="grey_sky_probability"):
+        SkyOptions(grey_sky_probability=0.4)
