@@ -144,10 +144,10 @@ class ReconstructionParams:
         sky above still clears).
     min_sky_el_deg : float or None
         A frame's image column whose sky reaches below this elevation is voided (clears
-        nothing): no sky lies under the horizon (its dip is 0.2 deg from 30 m up, the track's
-        grade and the vehicle's roll a degree or two), so the segmentation there took an
-        obstacle down to its foot for sky (section 15 of docs/reconstruction.md). None turns
-        the check off.
+        nothing): no sky lies under the horizon (its dip is 0.2 deg from 30 m up; the
+        rectified elevations ignore the track's grade, a degree or two, and the cant of a
+        curve, up to 6.9 deg for 180 mm), so the segmentation there took an obstacle down to
+        its foot for sky (section 15 of docs/reconstruction.md). None turns the check off.
     covered_share : float
         A position whose mask reaches the zenith (90 deg) in at least this share of its
         azimuth bins is under a structure (a deck, a canopy): the zenith lies in every azimuth,
@@ -229,7 +229,7 @@ class ReconstructionParams:
     far_default_deg: float = 5.0
     position_tol_m: float = 5.0
     min_confidence: float = 0.5
-    min_sky_el_deg: float | None = -3.0
+    min_sky_el_deg: float | None = -8.0
     covered_share: float = 0.9
     low_confidence_windows: float = 2.0
     low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG
@@ -254,7 +254,7 @@ class ReconstructionParams:
             )
         if self.min_sky_el_deg is not None and not math.isfinite(self.min_sky_el_deg):
             raise ValueError(
-                "ReconstructionParams.min_sky_el_deg must be a finite elevation in degrees (-3) "
+                "ReconstructionParams.min_sky_el_deg must be a finite elevation in degrees (-8) "
                 f"or None (no check), got {self.min_sky_el_deg}"
             )
         if self.resolve_width_m is not None and not (
@@ -883,6 +883,9 @@ def suspect_frames(
             with np.errstate(invalid="ignore"):
                 top = np.minimum(pa.sky_el_deg, pb.sky_el_deg)  # +inf: neither saw sky
                 low = np.isfinite(pi.sky_el_deg) & (pi.sky_el_deg < top - p.suspect_tol_deg)
+            # a column voided for sky under the horizon (where its neighbours' are not) is a
+            # contradiction too, not a column that saw no sky
+            low |= _voided(pi) & ~_voided(pa) & ~_voided(pb)
             share = float((low & seen).sum()) / n
             if share >= share_min:
                 out[i] = (
@@ -893,6 +896,10 @@ def suspect_frames(
                     "wrong mask); left out of the reconstruction: check the image"
                 )
     return out
+
+
+def _voided(prof: SkyProfile) -> NDArray:
+    return np.zeros(prof.rel_az_deg.shape, bool) if prof.voided is None else prof.voided
 
 
 # ---------------------------------------------------------------------- geometry helpers

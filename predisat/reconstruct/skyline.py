@@ -178,6 +178,9 @@ class SkyProfile:
         Elevation range the image covers at that azimuth; NaN where it covers none.
     look_az_deg : float
         Azimuth of the camera's horizontal look direction (local ENU at the frame).
+    voided : ndarray of bool, shape (n_b,), optional
+        Columns whose sky reached under the horizon check's elevation and were voided
+        (``sky_el_deg`` set to ``+inf``): a mislabelled column, not a column without sky.
     """
 
     rel_az_deg: NDArray
@@ -185,6 +188,7 @@ class SkyProfile:
     seen_lo_deg: NDArray
     seen_hi_deg: NDArray
     look_az_deg: float
+    voided: NDArray | None = None
 
     @property
     def az_deg(self) -> NDArray:
@@ -432,12 +436,13 @@ class Rectifier:
         end = _top_sky_run_end(grown.ravel(), *self._pixel_runs, top, n_e, 1)
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
-        sky_el[sky_el < min_sky_el_deg] = np.inf  # sky under the horizon: a mislabelled column
+        voided = sky_el < min_sky_el_deg  # sky under the horizon: a mislabelled column
+        sky_el[voided] = np.inf
         lo = np.where(any_seen, self.el_deg[last_seen], np.nan)
         hi = np.where(any_seen, self.el_deg[top], np.nan)
         fwd = float(heading_deg) + (180.0 if reverse else 0.0)
         look = float(np.mod(fwd + self.look_offset_deg, 360.0))
-        return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look)
+        return SkyProfile(self.rel_az_deg, sky_el, lo, hi, look, voided)
 
 
 def _raise_skyline(

@@ -343,7 +343,7 @@ def test_a_whole_frame_failure_is_voided_by_the_horizon_check_at_rank_one(scene)
     suspect-frame check) keeps the wall; a false sky that stops at the horizon is not
     caught by it (clause 1's fusion is what tolerates that one)."""
     world, frames, truth = scene
-    checked = dataclasses.replace(BASE, min_sky_el_deg=-3.0)
+    checked = dataclasses.replace(BASE, min_sky_el_deg=ReconstructionParams().min_sky_el_deg)
     bad = _all_sky(frames, {"350l"})
     assert _low_deg(Reconstructor(checked).run(bad, POS, world.track).mask_el_deg, truth) <= 0.1
     assert _low_deg(Reconstructor(BASE).run(bad, POS, world.track).mask_el_deg, truth) > 5.0
@@ -361,3 +361,25 @@ def _above_horizon(f: FrameView) -> np.ndarray:
     u, v = f.camera.pixel_grid()
     ray = f.camera.pixel_to_ray(u, v) @ f.mount.camera_to_enu(f.heading_deg).T
     return np.asarray(ray[..., 2] > 0.0)
+
+
+def test_a_partly_over_exposed_frame_is_still_suspect_under_the_horizon_check(scene) -> None:
+    """A frame whose false sky reaches the horizon over its width and the image bottom over
+    its middle: the horizon check voids the middle columns, which count as contradicting the
+    neighbours (not as columns without sky), so the suspect-frame check still finds it."""
+    world, frames, truth = scene
+    params = dataclasses.replace(BASE, min_sky_el_deg=-8.0, suspect_share=0.5)
+
+    def faulty(f: FrameView) -> np.ndarray:
+        m = _above_horizon(f).copy()
+        m[:, 40:160] = True  # over-exposed to the bottom over the middle 60 %
+        return m
+
+    bad = [dataclasses.replace(f, sky_mask=faulty(f)) if f.frame_id == "350l" else f
+           for f in frames]  # fmt: skip
+    rec = Reconstructor(params)
+    profs = rec.profiles(bad)
+    i = next(k for k, f in enumerate(bad) if f.frame_id == "350l")
+    assert profs[i].voided is not None and profs[i].voided.any()
+    assert [bad[k].frame_id for k in suspect_frames(bad, profs, params)] == ["350l"]
+    assert _low_deg(rec.run(bad, POS, world.track).mask_el_deg, truth) <= 0.1
