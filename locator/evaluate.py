@@ -209,7 +209,8 @@ _LOSS_CAUSES = (
     ("EMPTY_PAIR", "a pair contradicting the search window"),
     ("HEADING_FAIL", "heading check failed"),
     ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
-    ("TRACK_END", "interval bounded by an end of the track map (the train may be past it)"),
+    ("CLAIM_AT_TRACK_END", "interval bounded by an end of the track map (the train may be "
+     "past it)"),
     ("UNBOUNDED", "interval reaching the search window's end"),
     ("AMBIGUOUS", "a pair cutting the track twice"),
     ("NO_ROOT", "a pair not cutting the track"),

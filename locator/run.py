@@ -90,6 +90,7 @@ class RunFlag(IntFlag):
     TRACK_END = 1 << 21  # the prediction reaches past an end of the track map: maybe off it
     HEADING_UNCHECKED = 1 << 22  # the heading check could not tell (unobservable, no beacon)
     ASSUMED_MASK = 1 << 23  # a used satellite was trusted where the mask rests on no view
+    CLAIM_AT_TRACK_END = 1 << 24  # TRACK_END voided a claim whose interval the end bounded
 
 
 ERROR_MODEL_CAVEATS = {
@@ -230,6 +231,7 @@ _ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, Fusion
 _HEADING_FAIL, _HEADING_UNOBSERVABLE = HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
 _HEADING_UNCHECKED = int(RunFlag.HEADING_UNCHECKED)
 _ASSUMED_MASK = int(RunFlag.ASSUMED_MASK)
+_CLAIM_AT_TRACK_END = int(RunFlag.CLAIM_AT_TRACK_END)
 _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
@@ -599,7 +601,7 @@ def _track_end(row: dict[str, Any], state: _Tracker, length_m: float) -> None:
         state.past_end and row["hi_m"] >= length_m - _END_TOL_M
     )
     if row["claim"] and at_end:
-        flags |= _NO_SAFETY_CLAIM
+        flags |= _NO_SAFETY_CLAIM | _CLAIM_AT_TRACK_END
         row["claim"] = False
     row.update(flags=flags, flag_names=flag_names(flags))
 

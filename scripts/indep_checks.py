@@ -77,7 +77,7 @@ def cmd_check(args):
     tm = TrueMasks.load(Path(args.out) / "truth" / "true_masks.npz")
     s0, s1 = float(tm.chainage_m[0]), float(tm.chainage_m[-1])
     track = iw.Track(s0 - 200, s1 + 200, meta["frame_mid_chainage_m"])
-    mesh, rmi = _trimesh_caster(z)
+    _mesh, rmi = _trimesh_caster(z)
     res = {}
     # 1. truth with a second caster: same sub-azimuths, elevations every 0.05 deg
     n_sub, step = 5, 0.5
@@ -89,7 +89,7 @@ def cmd_check(args):
         el = np.arange(0, 90.0001, 0.05)
         best = np.zeros(az.size)
         for j0 in range(0, el.size, 200):
-            ee = el[j0:j0 + 200]
+            ee = el[j0 : j0 + 200]
             d = _dirs(az[:, None], ee[None, :], M).reshape(-1, 3)
             hit = rmi.intersects_any(np.broadcast_to(o, d.shape), d).reshape(az.size, ee.size)
             top = np.where(hit.any(1), ee[hit.shape[1] - 1 - np.argmax(hit[:, ::-1], 1)], -1)
@@ -97,13 +97,18 @@ def cmd_check(args):
         m2 = best.reshape(720, n_sub).max(1)
         diff = m2 - tm.mask_el_deg[pi]
         worst.append(float(np.abs(diff).max()))
-        res[f"pos{pi}"] = {"chainage_m": float(tm.chainage_m[pi]),
-                           "max_abs_diff_deg": float(np.abs(diff).max()),
-                           "p99_abs_diff_deg": float(np.percentile(np.abs(diff), 99)),
-                           "bins_over_0.1deg": int((np.abs(diff) > 0.1).sum())}
-        print(f"truth vs trimesh at {tm.chainage_m[pi]:.0f} m: max |diff| "
-              f"{np.abs(diff).max():.3f} deg, 99% {np.percentile(np.abs(diff), 99):.3f}, "
-              f"bins > 0.1 deg: {(np.abs(diff) > 0.1).sum()} of 720", flush=True)
+        res[f"pos{pi}"] = {
+            "chainage_m": float(tm.chainage_m[pi]),
+            "max_abs_diff_deg": float(np.abs(diff).max()),
+            "p99_abs_diff_deg": float(np.percentile(np.abs(diff), 99)),
+            "bins_over_0.1deg": int((np.abs(diff) > 0.1).sum()),
+        }
+        print(
+            f"truth vs trimesh at {tm.chainage_m[pi]:.0f} m: max |diff| "
+            f"{np.abs(diff).max():.3f} deg, 99% {np.percentile(np.abs(diff), 99):.3f}, "
+            f"bins > 0.1 deg: {(np.abs(diff) > 0.1).sum()} of 720",
+            flush=True,
+        )
     # 2. camera model vs cv2.fisheye.projectPoints
     cam = iw.Fisheye()
     rng = np.random.default_rng(0)
@@ -115,19 +120,23 @@ def cmd_check(args):
     D = np.array(cam.k, float).reshape(4, 1)
     uv_cv, _ = cv2.fisheye.projectPoints(X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, D)
     e = np.hypot(uv_cv[:, 0, 0] - u, uv_cv[:, 0, 1] - v).max()
-    res["cv2_projectPoints_max_px"] = float(e)
+    res["cv2_projectPoints_max_px"] = float(e)  # type: ignore[assignment]
     print(f"projection vs cv2.fisheye.projectPoints (theta < 85 deg): max {e:.2e} px")
     rays, valid, thg = cam.pixel_rays()
     sel = valid & (thg < math.radians(85))
     uu, vv = np.meshgrid(np.arange(cam.width, dtype=float), np.arange(cam.height, dtype=float))
     pts = np.ascontiguousarray(np.stack([uu[sel], vv[sel]], -1)[::97])  # cv2 misreads strided views
-    und = cv2.fisheye.undistortPoints(pts.reshape(-1, 1, 2), K, D,
-                                      criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12))
+    und = cv2.fisheye.undistortPoints(
+        pts.reshape(-1, 1, 2),
+        K,
+        D,
+        criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12),
+    )
     rc = np.concatenate([und[:, 0, :], np.ones((len(pts), 1))], 1)
     rc /= np.linalg.norm(rc, axis=1, keepdims=True)
     mine = rays[sel][::97]
     ang = np.degrees(np.arccos(np.clip(np.sum(rc * mine, 1), -1, 1))).max()
-    res["unproject_vs_cv2_max_deg"] = float(ang)
+    res["unproject_vs_cv2_max_deg"] = float(ang)  # type: ignore[assignment]
     print(f"pixel -> ray vs cv2.fisheye.undistortPoints (theta < 85 deg): max {ang:.2e} deg")
     # 3. pixel -> cv2 ray -> trimesh hit object vs the renderer's object buffer
     tri_obj = z["tri_obj"]
@@ -135,20 +144,25 @@ def cmd_check(args):
         q = np.load(fb)
         obj, R_cw, c_pos = q["obj"], q["R_cw"], q["c_pos"]
         rp = rng.integers(0, cam.width, (4000, 2)).astype(float)
-        und = cv2.fisheye.undistortPoints(rp.reshape(-1, 1, 2), K, D,
-                                          criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12))
+        und = cv2.fisheye.undistortPoints(
+            rp.reshape(-1, 1, 2),
+            K,
+            D,
+            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12),
+        )
         rc = np.concatenate([und[:, 0, :], np.ones((len(rp), 1))], 1)
         rc /= np.linalg.norm(rc, axis=1, keepdims=True)
         thp = np.arccos(rc[:, 2])
         ok = thp < math.radians(85)
         d = rc[ok] @ R_cw.T
-        loc, idx_ray, idx_tri = rmi.intersects_location(np.broadcast_to(c_pos, d.shape), d,
-                                                         multiple_hits=False)
+        _loc, idx_ray, idx_tri = rmi.intersects_location(
+            np.broadcast_to(c_pos, d.shape), d, multiple_hits=False
+        )
         hit_obj = np.full(ok.sum(), -1)
         hit_obj[idx_ray] = tri_obj[idx_tri]
         ui, vi = rp[ok, 0].astype(int), rp[ok, 1].astype(int)
         agree = float(np.mean(hit_obj == obj[vi, ui]))
-        res[f"objbuf_{fb.stem}"] = agree
+        res[f"objbuf_{fb.stem}"] = agree  # type: ignore[assignment]
         print(f"{fb.stem}: object at {ok.sum()} pixels, trimesh(cv2 ray) == render: {agree:.4f}")
     Path(args.out, "truth", "selfcheck.json").write_text(json.dumps(res, indent=1))
 
@@ -174,8 +188,9 @@ def cmd_attribute(args):
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(z["V"].astype(np.float32)),
-                        o3d.core.Tensor(z["F"].astype(np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor(z["V"].astype(np.float32)), o3d.core.Tensor(z["F"].astype(np.uint32))  # type: ignore[call-overload]
+    )
     grid = (np.arange(900) + 0.5) * EL_STEP
     n_sub = 5
     sub = (np.arange(n_sub) - (n_sub - 1) / 2) * 0.5 / n_sub
@@ -212,17 +227,17 @@ def cmd_attribute(args):
             g = grid[(grid > m[i, b]) & (grid <= t[i, b])]
             pb.append(np.full(g.size, b))
             pe.append(g)
-        pb, pe = np.concatenate(pb), np.concatenate(pe)
-        false_pos[i] = pb.size
-        if pb.size == 0:
+        pb, pe = np.concatenate(pb), np.concatenate(pe)  # type: ignore[assignment]
+        false_pos[i] = pb.size  # type: ignore[attr-defined]
+        if pb.size == 0:  # type: ignore[attr-defined]
             continue
-        found = np.full(pb.size, -1)
-        dist = np.full(pb.size, np.nan)
+        found = np.full(pb.size, -1)  # type: ignore[attr-defined]
+        dist = np.full(pb.size, np.nan)  # type: ignore[attr-defined]
         for j in order:
             az = cmp.az_deg[pb] + sub[j]
             d = _dirs(az, pe, M)
             rays = np.concatenate([np.broadcast_to(o, d.shape), d], -1).astype(np.float32)
-            ans = scene.cast_rays(o3d.core.Tensor(rays), nthreads=0)
+            ans = scene.cast_rays(o3d.core.Tensor(rays), nthreads=0)  # type: ignore[call-overload]
             th = ans["t_hit"].numpy()
             pid = ans["primitive_ids"].numpy().astype(np.int64)
             hit = np.isfinite(th) & (found < 0)
@@ -233,11 +248,14 @@ def cmd_attribute(args):
         # cantilever, deck): false trust by the mask's definition (everything under the bin's
         # highest obstacle counts as blocked); it is attributed to the object setting the truth
         cls = np.where(blocked, obj_cls[np.maximum(found, 0)], tob[tidx[i], pb])
-        recs.append(np.stack([np.full(pb.size, i), pb, pe, cls, blocked, dist], 1))
+        recs.append(np.stack([np.full(pb.size, i), pb, pe, cls, blocked, dist], 1))  # type: ignore[attr-defined]
     recs_a = np.concatenate(recs) if recs else np.zeros((0, 6))
     tot_tr = int(trusted_pos.sum())
-    out = {"trusted": tot_tr, "false": int(len(recs_a)),
-           "false_trust_pct": 100.0 * len(recs_a) / max(tot_tr, 1)}
+    out = {
+        "trusted": tot_tr,
+        "false": len(recs_a),
+        "false_trust_pct": 100.0 * len(recs_a) / max(tot_tr, 1),
+    }
     out["blocked_share_pct"] = 100.0 * float(recs_a[:, 4].mean()) if len(recs_a) else 0.0
     out["by_class"] = _by_class(recs_a, cmp, classes, t, m)
     out["by_class_blocked"] = _by_class(recs_a[recs_a[:, 4] > 0], cmp, classes, t, m)
@@ -256,18 +274,32 @@ def _by_class(recs_a, cmp, classes, t, m):
         top = np.argsort(per_pos)[::-1][:4]
         err = (t - m)[pos, bins]
         by_cls[name] = {
-            "share_pct": 100.0 * k.sum() / len(recs_a), "directions": int(k.sum()),
+            "share_pct": 100.0 * k.sum() / len(recs_a),
+            "directions": int(k.sum()),
             "positions": int((per_pos > 0).sum()),
             "cross_share_pct": 100.0 * float(np.mean(cmp.sector[pos, bins] == "cross")),
-            "worst": [{"chainage_m": float(cmp.chainage_m[p]), "directions": int(per_pos[p]),
-                       "az_range": _az_range(cmp.az_deg[bins[pos == p]]),
-                       "el_range": [float(recs_a[k][pos == p, 2].min()), float(recs_a[k][pos == p, 2].max())],
-                       "max_under_deg": float((t - m)[p, bins[pos == p]].max()),
-                       "az_rel_track": _az_range(np.mod(cmp.az_deg[bins[pos == p]] - cmp.heading_deg[p], 360))}
-                      for p in top if per_pos[p] > 0],
+            "worst": [
+                {
+                    "chainage_m": float(cmp.chainage_m[p]),
+                    "directions": int(per_pos[p]),
+                    "az_range": _az_range(cmp.az_deg[bins[pos == p]]),
+                    "el_range": [
+                        float(recs_a[k][pos == p, 2].min()),
+                        float(recs_a[k][pos == p, 2].max()),
+                    ],
+                    "max_under_deg": float((t - m)[p, bins[pos == p]].max()),
+                    "az_rel_track": _az_range(
+                        np.mod(cmp.az_deg[bins[pos == p]] - cmp.heading_deg[p], 360)
+                    ),
+                }
+                for p in top
+                if per_pos[p] > 0
+            ],
             "median_under_deg": float(np.median(err)),
             "blocked_pct": 100.0 * float(recs_a[k, 4].mean()),
-            "median_hit_distance_m": float(np.nanmedian(recs_a[k, 5])) if np.isfinite(recs_a[k, 5]).any() else None,
+            "median_hit_distance_m": float(np.nanmedian(recs_a[k, 5]))
+            if np.isfinite(recs_a[k, 5]).any()
+            else None,
         }
     return dict(sorted(by_cls.items(), key=lambda kv: -kv[1]["directions"]))
 
@@ -276,17 +308,24 @@ def _rest(out, recs_a, cmp, trusted_pos, false_pos, lost, vis, lost_src, lost_el
     fpp = 100.0 * false_pos / np.maximum(trusted_pos, 1)
     w = np.argsort(fpp)[::-1][:8]
     out["positions_with_false_trust"] = int((false_pos > 0).sum())
-    out["worst_positions"] = [{"chainage_m": float(cmp.chainage_m[p]), "false_trust_pct": float(fpp[p])}
-                              for p in w if false_pos[p] > 0]
+    out["worst_positions"] = [
+        {"chainage_m": float(cmp.chainage_m[p]), "false_trust_pct": float(fpp[p])}
+        for p in w
+        if false_pos[p] > 0
+    ]
     out["sky_lost_pct"] = {k: 100.0 * lost[k] / max(vis[k], 1) for k in lost}
-    out["sky_lost_by_source_pct_of_lost"] = {str(k): 100.0 * v / max(sum(lost_src.values()), 1)
-                                             for k, v in sorted(lost_src.items())}
+    out["sky_lost_by_source_pct_of_lost"] = {
+        str(k): 100.0 * v / max(sum(lost_src.values()), 1) for k, v in sorted(lost_src.items())
+    }
     out["sky_lost_by_el_band_10deg"] = lost_el.tolist()
     # sector of false trust
     if len(recs_a):
         pos, bins = recs_a[:, 0].astype(int), recs_a[:, 1].astype(int)
         out["false_cross_share_pct"] = 100.0 * float(np.mean(cmp.sector[pos, bins] == "cross"))
-        out["false_by_source"] = {str(s): int(np.sum(cmp.source[pos, bins] == s)) for s in np.unique(cmp.source[pos, bins])}
+        out["false_by_source"] = {
+            str(s): int(np.sum(cmp.source[pos, bins] == s))
+            for s in np.unique(cmp.source[pos, bins])
+        }
     txt = json.dumps(out, indent=1, default=float)
     print(txt)
     if args.json:
@@ -310,7 +349,7 @@ def cmd_thumbs(args):
         row = []
         for side in ("left", "right"):
             im = cv2.imread(str(out / "images" / f"{side}_{i:06d}.jpg"))
-            im = cv2.resize(im, (args.size, args.size), interpolation=cv2.INTER_AREA)
+            im = cv2.resize(im, (args.size, args.size), interpolation=cv2.INTER_AREA)  # type: ignore[arg-type]
             cv2.putText(im, f"{side} {i}", (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 255, 255), 1)
             row.append(im)
         tiles.append(np.hstack(row))
@@ -334,6 +373,7 @@ def cmd_plot(args):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from predisat.masks.fileformat import read_masks
     from predisat.reconstruct.evaluate import compare, load_truth
 
@@ -344,13 +384,18 @@ def cmd_plot(args):
     meta = json.loads((Path(args.out) / "world" / "objects.json").read_text())
     tob = np.load(Path(args.out) / "truth" / "truth_objects.npz")["cls_top"]
     chs = [float(c) for c in args.chainages.split(",")]
-    fig, axs = plt.subplots(len(chs), 3, figsize=(18, 4 * len(chs)),
-                            gridspec_kw={"width_ratios": [3, 1, 1]}, squeeze=False)
+    fig, axs = plt.subplots(
+        len(chs),
+        3,
+        figsize=(18, 4 * len(chs)),
+        gridspec_kw={"width_ratios": [3, 1, 1]},
+        squeeze=False,
+    )
     cmap = plt.get_cmap("tab20")
     for r, c in enumerate(chs):
         i = int(np.argmin(np.abs(cmp.chainage_m - c)))
         ti = int(np.argmin(np.abs(truth.chainage_m - c)))
-        rel = np.mod(cmp.az_deg - cmp.heading_deg[i], 360)
+        rel = np.mod(cmp.az_deg - cmp.heading_deg[i], 360)  # type: ignore[index]
         o = np.argsort(rel)
         ax = axs[r, 0]
         ax.plot(rel[o], truth.mask_el_deg[ti][o], "k-", lw=1, label="truth (max)")
@@ -359,19 +404,26 @@ def cmd_plot(args):
         for k in np.unique(tob[ti]):
             sel = tob[ti] == k
             if k >= 0:
-                ax.scatter(rel[sel], np.full(sel.sum(), -3), s=4, color=cmap(k % 20),
-                           label=meta["classes"][k])
+                ax.scatter(
+                    rel[sel],
+                    np.full(sel.sum(), -3),
+                    s=4,
+                    color=cmap(k % 20),
+                    label=meta["classes"][k],
+                )
         src = cmp.source[i]
         ax.scatter(rel, np.full(rel.size, -6), s=3, c=src, cmap="viridis", vmin=0, vmax=3)
         ax.set_xlim(0, 360)
         ax.set_ylim(-8, 92)
         ax.set_xticks(range(0, 361, 45))
-        ax.set_title(f"{c:.0f} m: azimuth relative to the track (0 ahead, 90 right, 270 left); "
-                     "class strip = object setting the truth, lowest strip = mask source")
+        ax.set_title(
+            f"{c:.0f} m: azimuth relative to the track (0 ahead, 90 right, 270 left); "
+            "class strip = object setting the truth, lowest strip = mask source"
+        )
         ax.legend(fontsize=6, ncol=4, loc="upper right")
         for j, side in enumerate(("left", "right")):
-            k = int(round((c - truth.chainage_m[0]) / 10))
-            im = cv2.imread(str(Path(args.out) / "images" / f"{side}_{k:06d}.jpg"))[..., ::-1]
+            k = round((c - truth.chainage_m[0]) / 10)
+            im = cv2.imread(str(Path(args.out) / "images" / f"{side}_{k:06d}.jpg"))[..., ::-1]  # type: ignore[index]
             axs[r, 1 + j].imshow(im)
             axs[r, 1 + j].set_axis_off()
             axs[r, 1 + j].set_title(side)
@@ -406,8 +458,9 @@ def cmd_segcheck(args):
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(z["V"].astype(np.float32)),
-                        o3d.core.Tensor(z["F"].astype(np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor(z["V"].astype(np.float32)), o3d.core.Tensor(z["F"].astype(np.uint32))  # type: ignore[call-overload]
+    )
     seg = sorted(Path(args.process_out, "cache").glob("seg-*"))[0]
     sy = yaml.safe_load((out / "survey.yaml").read_text())
     import csv
@@ -434,8 +487,14 @@ def cmd_segcheck(args):
         lat, lon, h = (float(np.asarray(v).ravel()[0]) for v in track.tm.position_at([s]))
         hd = math.radians(float(np.asarray(track.tm.heading_at([s])).ravel()[0]))
         M = track.local_to_world(lat, lon)
-        Rv = np.stack([M @ [math.sin(hd), math.cos(hd), 0], M @ [-math.cos(hd), math.sin(hd), 0],
-                       M @ [0, 0, 1.0]], 1)
+        Rv = np.stack(
+            [
+                M @ [math.sin(hd), math.cos(hd), 0],
+                M @ [-math.cos(hd), math.sin(hd), 0],
+                M @ [0, 0, 1.0],
+            ],
+            1,
+        )
         mt = sy["cameras"][r["side"]]["mount"]
         R_cw = Rv @ iw.cam_to_vehicle(mt)
         ant = track.world_from_geo(lat, lon, h + sy["antenna_height_m"])
@@ -444,7 +503,7 @@ def cmd_segcheck(args):
         up = d @ (M @ np.array([0, 0, 1.0])) > 0.0  # above the local horizontal
         sel = valid & up
         rr = np.concatenate([np.broadcast_to(c_pos, d[sel].shape), d[sel]], -1).astype(np.float32)
-        ans = scene.cast_rays(o3d.core.Tensor(rr), nthreads=0)
+        ans = scene.cast_rays(o3d.core.Tensor(rr), nthreads=0)  # type: ignore[call-overload]
         hit = np.isfinite(ans["t_hit"].numpy())
         cls = np.full(hit.size, -1)
         cls[hit] = obj_cls[tri_obj[ans["primitive_ids"].numpy()[hit].astype(np.int64)]]
@@ -457,7 +516,7 @@ def cmd_segcheck(args):
         lost_px += int((~hit & ~sk).sum())
         per_frame.append((r["frame_id"], s, int((hit & sk).sum()), int(hit.sum())))
         if r["frame_id"] in draw:
-            im = cv2.imread(str(out / r["image"])).astype(float)
+            im = cv2.imread(str(out / r["image"])).astype(float)  # type: ignore[union-attr]
             fs = np.zeros(sel.shape, bool)
             fs[sel] = hit & sk
             lo = np.zeros(sel.shape, bool)
@@ -465,11 +524,19 @@ def cmd_segcheck(args):
             im[fs] = 0.4 * im[fs] + 0.6 * np.array([0, 0, 255.0])
             im[lo] = 0.5 * im[lo] + 0.5 * np.array([255.0, 0, 0])
             cv2.imwrite(f"/tmp/indep/seg_{out.name}_{r['frame_id']}.png", im.astype(np.uint8))
-    res = {"upper_hemisphere_pixels_by_class": {classes[k]: int(tot[k]) for k in range(n_cls) if tot[k]},
-           "labelled_sky_pct_by_class": {classes[k]: 100.0 * fsky[k] / tot[k] for k in range(n_cls) if tot[k]},
-           "thin_pct_by_class": {classes[k]: 100.0 * fthin[k] / tot[k] for k in range(n_cls) if tot[k]},
-           "open_sky_labelled_obstacle_pct": 100.0 * lost_px / max(open_px, 1),
-           "worst_frames": sorted(per_frame, key=lambda x: -x[2])[:10]}
+    res = {
+        "upper_hemisphere_pixels_by_class": {
+            classes[k]: int(tot[k]) for k in range(n_cls) if tot[k]
+        },
+        "labelled_sky_pct_by_class": {
+            classes[k]: 100.0 * fsky[k] / tot[k] for k in range(n_cls) if tot[k]
+        },
+        "thin_pct_by_class": {
+            classes[k]: 100.0 * fthin[k] / tot[k] for k in range(n_cls) if tot[k]
+        },
+        "open_sky_labelled_obstacle_pct": 100.0 * lost_px / max(open_px, 1),
+        "worst_frames": sorted(per_frame, key=lambda x: -x[2])[:10],
+    }
     txt = json.dumps(res, indent=1)
     print(txt)
     if args.json:

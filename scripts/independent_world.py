@@ -25,6 +25,7 @@ positions; each antenna's own local vertical is used for its truth (the Earth's 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import shutil
@@ -43,8 +44,20 @@ E2_WGS = 6.69437999014e-3
 R_EARTH = 6371000.0
 
 CLASSES = [
-    "ground", "ballast", "house", "glass_block", "white_facade", "lamp_post", "footbridge",
-    "church", "tree", "mast_cantilever", "canopy", "platform", "wet_ground", "far_woods",
+    "ground",
+    "ballast",
+    "house",
+    "glass_block",
+    "white_facade",
+    "lamp_post",
+    "footbridge",
+    "church",
+    "tree",
+    "mast_cantilever",
+    "canopy",
+    "platform",
+    "wet_ground",
+    "far_woods",
 ]
 CLS = {n: i for i, n in enumerate(CLASSES)}
 
@@ -55,8 +68,14 @@ CLS = {n: i for i, n in enumerate(CLASSES)}
 def ecef_from_geodetic(lat, lon, h):
     lat, lon = np.radians(lat), np.radians(lon)
     n = A_WGS / np.sqrt(1 - E2_WGS * np.sin(lat) ** 2)
-    return np.stack([(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
-                     (n * (1 - E2_WGS) + h) * np.sin(lat)], -1)
+    return np.stack(
+        [
+            (n + h) * np.cos(lat) * np.cos(lon),
+            (n + h) * np.cos(lat) * np.sin(lon),
+            (n * (1 - E2_WGS) + h) * np.sin(lat),
+        ],
+        -1,
+    )
 
 
 def enu_rotation(lat, lon):
@@ -107,8 +126,8 @@ class Track:
         return self.world_from_geo(lat, lon, h), fwd, left, up
 
     def place(self, s, offset, height=0.0):
-        p, f, l, u = self.at(s)
-        return p + offset * l + height * u, f, l, u
+        p, f, lv, u = self.at(s)
+        return p + offset * lv + height * u, f, lv, u
 
 
 # ---------------------------------------------------------------------------------------------
@@ -149,15 +168,35 @@ class MeshBuilder:
         a, b, c = np.asarray(size, float) / 2.0
         loc = np.array([[x, y, z] for z in (0, 2 * c) for y in (-b, b) for x in (-a, a)])
         V = centre + loc @ np.asarray(axes).T
-        F = [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-             [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]
+        F = [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ]
         self.add(V, F, oid)
 
     def gable_roof(self, oid, centre, axes, length, width, base_z, ridge_h, overhang=0.4):
         ax = np.asarray(axes)
         a, b = length / 2 + overhang, width / 2 + overhang
-        loc = np.array([[-a, -b, base_z], [a, -b, base_z], [a, b, base_z], [-a, b, base_z],
-                        [-a, 0, base_z + ridge_h], [a, 0, base_z + ridge_h]])
+        loc = np.array(
+            [
+                [-a, -b, base_z],
+                [a, -b, base_z],
+                [a, b, base_z],
+                [-a, b, base_z],
+                [-a, 0, base_z + ridge_h],
+                [a, 0, base_z + ridge_h],
+            ]
+        )
         V = centre + loc @ ax.T
         F = [[0, 1, 5], [0, 5, 4], [2, 3, 4], [2, 4, 5], [0, 4, 3], [1, 2, 5], [0, 3, 2], [0, 2, 1]]
         self.add(V, F, oid)
@@ -190,8 +229,9 @@ class MeshBuilder:
 
     def pyramid(self, oid, centre, axes, half, apex_h):
         ax = np.asarray(axes)
-        loc = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0],
-                        [0, 0, apex_h]])
+        loc = np.array(
+            [[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0], [0, 0, apex_h]]
+        )
         V = centre + loc @ ax.T
         F = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4], [0, 2, 1], [0, 3, 2]]
         self.add(V, F, oid)
@@ -218,22 +258,53 @@ _ICO: dict[int, tuple] = {}
 def icosphere(level):
     if level in _ICO:
         return _ICO[level]
-    t = (1 + 5 ** 0.5) / 2
-    V = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
-         [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
-    F = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+    t = (1 + 5**0.5) / 2
+    V = [
+        [-1, t, 0],
+        [1, t, 0],
+        [-1, -t, 0],
+        [1, -t, 0],
+        [0, -1, t],
+        [0, 1, t],
+        [0, -1, -t],
+        [0, 1, -t],
+        [t, 0, -1],
+        [t, 0, 1],
+        [-t, 0, -1],
+        [-t, 0, 1],
+    ]
+    F = [
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ]
     V = [np.array(v, float) / np.linalg.norm(v) for v in V]
     for _ in range(level):
         cache: dict = {}
         nf = []
 
-        def mid(a, b):
+        def mid(a, b, cache=cache):
             key = (min(a, b), max(a, b))
             if key not in cache:
                 m = V[a] + V[b]
-                V.append(m / np.linalg.norm(m))
+                V.append(m / np.linalg.norm(m))  # type: ignore[operator]
                 cache[key] = len(V) - 1
             return cache[key]
 
@@ -255,8 +326,8 @@ class Wire:
     radius: float = 0.006
 
 
-def frame_axes(f, l, u):
-    return np.stack([f, l, u], 1)
+def frame_axes(f, lv, u):
+    return np.stack([f, lv, u], 1)
 
 
 def build_world(track: Track, seed: int, s0: float, s1: float):
@@ -268,8 +339,9 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
 
     # ground: a large height field, curvature-corrected, gentle undulation away from the track
     g = mb.new_obj("ground", "grass", np.zeros(3), I3)
-    xs = np.concatenate([np.linspace(-4000, -800, 9)[:-1], np.arange(-800, 801, 8.0),
-                         np.linspace(800, 4000, 9)[1:]])
+    xs = np.concatenate(
+        [np.linspace(-4000, -800, 9)[:-1], np.arange(-800, 801, 8.0), np.linspace(800, 4000, 9)[1:]]
+    )
     X, Y = np.meshgrid(xs, xs, indexing="ij")
     from scipy.spatial import cKDTree
 
@@ -278,11 +350,16 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
     dist = dist.reshape(X.shape)
     und = (np.sin(X / 97.0 + seed) * np.cos(Y / 131.0 - seed) + 0.5 * np.sin((X + Y) / 53.0)) * 0.8
     w = np.clip((dist - 30.0) / 70.0, 0, 1)
-    Z = -(X ** 2 + Y ** 2) / (2 * R_EARTH) - 0.35 + und * w
+    Z = -(X**2 + Y**2) / (2 * R_EARTH) - 0.35 + und * w
     n1, n2 = X.shape
     V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], -1)
     idx = np.arange(n1 * n2).reshape(n1, n2)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    a, b, c, d = (
+        idx[:-1, :-1].ravel(),
+        idx[1:, :-1].ravel(),
+        idx[1:, 1:].ravel(),
+        idx[:-1, 1:].ravel(),
+    )
     mb.add(V, np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]), g)
 
     # ballast strips under both tracks (track A at 0, track B at -4.2 m)
@@ -290,9 +367,14 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
     ss = np.arange(s0 - 150, s1 + 151, 5.0)
     for off in (0.0, -4.2):
         P = [track.place(s, off) for s in ss]
-        for (p0, f0, l0, u0), (p1, f1, l1, u1) in zip(P[:-1], P[1:]):
-            mb.quad(bal, p0 - 1.7 * l0 - 0.05 * u0, p1 - 1.7 * l1 - 0.05 * u1,
-                    p1 + 1.7 * l1 - 0.05 * u1, p0 + 1.7 * l0 - 0.05 * u0)
+        for (p0, _f0, l0, u0), (p1, _f1, l1, u1) in itertools.pairwise(P):
+            mb.quad(
+                bal,
+                p0 - 1.7 * l0 - 0.05 * u0,
+                p1 - 1.7 * l1 - 0.05 * u1,
+                p1 + 1.7 * l1 - 0.05 * u1,
+                p0 + 1.7 * l0 - 0.05 * u0,
+            )
 
     # --- special places
     s_station = rng.uniform(s0 + 150, s1 - 250)
@@ -302,8 +384,13 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
     s_bridges = [s_station + st_len + 15]
     if rng.random() < 0.7:
         s_bridges.append(rng.uniform(s0 + 50, s1 - 50))
-    layout.append({"station": [s_station, s_station + st_len], "church": [s_church, int(church_side)],
-                   "footbridges": s_bridges})
+    layout.append(
+        {
+            "station": [s_station, s_station + st_len],
+            "church": [s_church, int(church_side)],
+            "footbridges": s_bridges,
+        }
+    )
 
     def in_station(s):
         return s_station - 10 <= s <= s_station + st_len + 10
@@ -315,25 +402,25 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
         spans.append(s)
         s += rng.uniform(52, 63)
     zig = 0.25
-    for k, sm in enumerate(spans):
+    for k, sm in enumerate(spans):  # noqa: B007
         for side_off, tracks in ((3.1, [0.0]), (-7.3, [-4.2])):
             if in_station(sm):  # no mast on the platform: the right mast carries both tracks
                 if side_off > 0:
                     continue
                 tracks = [-4.2, 0.0]
-            p, f, l, u = track.place(sm, side_off)
-            ax = frame_axes(f, l, u)
+            p, f, lv, u = track.place(sm, side_off)
+            ax = frame_axes(f, lv, u)
             m = mb.new_obj("mast_cantilever", "galv", p, ax)
             mb.box(m, p, ax, (0.30, 0.25, 8.6))
             sgn = -np.sign(side_off)
             for toff in tracks:
                 reach = toff - side_off + sgn * 0.6
                 top = p + 7.3 * u
-                end = p + reach * l + 7.3 * u
-                mb.cylinder(m, top, end, 0.03, n=6)                     # upper tube
-                mb.cylinder(m, p + 5.8 * u, p + (reach * 0.85) * l + 7.0 * u, 0.03, n=6)  # stay
-                reg = p + (toff - side_off) * l + 5.75 * u
-                mb.cylinder(m, p + 5.9 * u, reg, 0.025, n=6)           # registration arm
+                end = p + reach * lv + 7.3 * u
+                mb.cylinder(m, top, end, 0.03, n=6)  # upper tube
+                mb.cylinder(m, p + 5.8 * u, p + (reach * 0.85) * lv + 7.0 * u, 0.03, n=6)  # stay
+                reg = p + (toff - side_off) * lv + 5.75 * u
+                mb.cylinder(m, p + 5.9 * u, reg, 0.025, n=6)  # registration arm
     for toff in (0.0, -4.2):
         for k in range(len(spans) - 1):
             sa, sb = spans[k], spans[k + 1]
@@ -341,46 +428,46 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
             tt = np.linspace(0, 1, n + 1)
             cw, ms = [], []
             for t in tt:
-                p, f, l, u = track.place(sa + t * (sb - sa), toff)
+                p, f, lv, u = track.place(sa + t * (sb - sa), toff)
                 zz = zig * (1 - 2 * t) * (1 if k % 2 else -1)
-                cw.append(p + zz * l + 5.6 * u)
-                ms.append(p + zz * l + (7.1 - 1.6 * t * (1 - t)) * u)
+                cw.append(p + zz * lv + 5.6 * u)
+                ms.append(p + zz * lv + (7.1 - 1.6 * t * (1 - t)) * u)
             wires.append(Wire(np.array(cw)))
             wires.append(Wire(np.array(ms)))
             for t in np.arange(0.1, 0.95, 0.12):  # droppers
-                i = int(round(t * n))
+                i = round(t * n)
                 wires.append(Wire(np.array([cw[i], ms[i]]), 0.003))
 
     # --- station: platform, canopy on the left of track A
     pf = mb.new_obj("platform", "concrete", np.zeros(3), I3)
     cano = mb.new_obj("canopy", "canopy", np.zeros(3), I3)
     for sx in np.arange(s_station, s_station + st_len, 5.0):
-        p, f, l, u = track.place(sx + 2.5, 0.0)
-        ax = frame_axes(f, l, u)
-        mb.box(pf, p + 6.3 * l - 0.35 * u, ax, (5.05, 5.6, 1.1))
-        mb.box(cano, p + 6.4 * l + 5.0 * u, ax, (5.05, 5.4, 0.25))
+        p, f, lv, u = track.place(sx + 2.5, 0.0)
+        ax = frame_axes(f, lv, u)
+        mb.box(pf, p + 6.3 * lv - 0.35 * u, ax, (5.05, 5.6, 1.1))
+        mb.box(cano, p + 6.4 * lv + 5.0 * u, ax, (5.05, 5.4, 0.25))
         if int((sx - s_station) / 5) % 2 == 0:
-            mb.cylinder(cano, p + 7.0 * l + 0.7 * u, p + 7.0 * l + 5.0 * u, 0.12)
+            mb.cylinder(cano, p + 7.0 * lv + 0.7 * u, p + 7.0 * lv + 5.0 * u, 0.12)
     # station building behind the platform
-    p, f, l, u = track.place(s_station + st_len / 2, 14.0)
-    sb_ = mb.new_obj("white_facade", "white", p, frame_axes(f, l, u), floors=3.2, win=2.8)
-    mb.box(sb_, p, frame_axes(f, l, u), (30, 9, 8.5))
+    p, f, lv, u = track.place(s_station + st_len / 2, 14.0)
+    sb_ = mb.new_obj("white_facade", "white", p, frame_axes(f, lv, u), floors=3.2, win=2.8)
+    mb.box(sb_, p, frame_axes(f, lv, u), (30, 9, 8.5))
 
     # --- footbridges over both tracks
     for sb in s_bridges:
-        p, f, l, u = track.place(sb, -2.1)
-        ax = frame_axes(f, l, u)
+        p, f, lv, u = track.place(sb, -2.1)
+        ax = frame_axes(f, lv, u)
         fb = mb.new_obj("footbridge", "steel", p, ax)
         mb.box(fb, p + 7.0 * u, ax, (3.0, 30.0, 0.6))
         mb.box(fb, p + 1.4 * f + 7.6 * u, ax, (0.12, 30.0, 1.3))
         mb.box(fb, p - 1.4 * f + 7.6 * u, ax, (0.12, 30.0, 1.3))
         for side in (-1, 1):
-            mb.box(fb, p + side * 17.0 * l, ax, (4.0, 4.0, 9.0))
-            mb.gable_roof(fb, p + side * 17.0 * l, ax, 4.0, 4.0, 9.0, 1.2, 0.2)
+            mb.box(fb, p + side * 17.0 * lv, ax, (4.0, 4.0, 9.0))
+            mb.gable_roof(fb, p + side * 17.0 * lv, ax, 4.0, 4.0, 9.0, 1.2, 0.2)
 
     # --- church
-    p, f, l, u = track.place(s_church, church_side * rng.uniform(28, 55))
-    ax = frame_axes(f, l, u)
+    p, f, lv, u = track.place(s_church, church_side * rng.uniform(28, 55))
+    ax = frame_axes(f, lv, u)
     ch = mb.new_obj("church", "stone", p, ax)
     mb.box(ch, p, ax, (26, 12, 11))
     mb.gable_roof(ch, p, ax, 26, 12, 11, 6.5, 0.3)
@@ -390,12 +477,15 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
     mb.pyramid(spire, tw + 27 * u, ax, 3.4, rng.uniform(14, 22))
 
     # --- zones on each side
-    reserved = [(s_station - 20, s_station + st_len + 20, 1)] + \
-               [(sb - 25, sb + 25, 0) for sb in s_bridges] + [(s_church - 30, s_church + 30, church_side)]
+    reserved = (
+        [(s_station - 20, s_station + st_len + 20, 1)]
+        + [(sb - 25, sb + 25, 0) for sb in s_bridges]
+        + [(s_church - 30, s_church + 30, church_side)]
+    )
 
     def blocked(sa, sb, side, near):
         for ra, rb, rs in reserved:
-            if sb > ra and sa < rb and (rs == 0 and near or rs == side):
+            if sb > ra and sa < rb and ((rs == 0 and near) or rs == side):
                 return True
         return False
 
@@ -418,7 +508,7 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
                     x += rng.uniform(15, 40)
                     continue
                 if kind == "trees":
-                    n = rng.integers(3, 9)
+                    n = rng.integers(3, 9)  # type: ignore[assignment]
                     for _ in range(n):
                         o = base + side * rng.uniform(0, 25)
                         if blocked(x - 5, x + 5, side, abs(o) < 20):
@@ -430,11 +520,12 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
                     lx, wy = rng.uniform(8, 12), rng.uniform(7, 9.5)
                     o = base + side * (rng.uniform(1.5, 14) + wy / 2)
                     if not blocked(x, x + lx, side, True):
-                        p, f, l, u = track.place(x + lx / 2, o)
-                        ax = frame_axes(f, l, u)
+                        p, f, lv, u = track.place(x + lx / 2, o)
+                        ax = frame_axes(f, lv, u)
                         eave = rng.uniform(5, 6.8)
-                        hs = mb.new_obj("house", rng.choice(["brick", "render"]), p, ax, floors=2.8,
-                                        win=3.0)
+                        hs = mb.new_obj(
+                            "house", rng.choice(["brick", "render"]), p, ax, floors=2.8, win=3.0
+                        )
                         mb.box(hs, p, ax, (lx, wy, eave))
                         rf = mb.new_obj("house", rng.choice(["tiles", "slate"]), p, ax)
                         mb.gable_roof(rf, p, ax, lx, wy, eave, rng.uniform(3, 4.8))
@@ -448,12 +539,16 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
                     hz = rng.uniform(12, 32) if kind == "glass" else rng.uniform(10, 20)
                     o = base + side * (rng.uniform(4, 18) + wy / 2)
                     if not blocked(x, x + lx, side, True):
-                        p, f, l, u = track.place(x + lx / 2, o)
-                        ax = frame_axes(f, l, u)
-                        bl = mb.new_obj("glass_block" if kind == "glass" else "white_facade",
-                                        "glass" if kind == "glass" else rng.choice(["white", "pale"]),
-                                        p, ax, floors=3.5 if kind == "glass" else 3.1,
-                                        win=1.6 if kind == "glass" else rng.uniform(2.4, 3.4))
+                        p, f, lv, u = track.place(x + lx / 2, o)
+                        ax = frame_axes(f, lv, u)
+                        bl = mb.new_obj(
+                            "glass_block" if kind == "glass" else "white_facade",
+                            "glass" if kind == "glass" else rng.choice(["white", "pale"]),
+                            p,
+                            ax,
+                            floors=3.5 if kind == "glass" else 3.1,
+                            win=1.6 if kind == "glass" else rng.uniform(2.4, 3.4),
+                        )
                         mb.box(bl, p, ax, (lx, wy, hz))
                     # lamp posts along built-up zones
                     x += lx + rng.uniform(5, 15)
@@ -468,14 +563,14 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
         off = 4.3 if side > 0 else -9.0
         if side > 0 and in_station(sx):
             off = 8.8
-        p, f, l, u = track.place(sx + rng.uniform(-3, 3), off)
-        lp = mb.new_obj("lamp_post", "dark_metal", p, frame_axes(f, l, u))
+        p, f, lv, u = track.place(sx + rng.uniform(-3, 3), off)
+        lp = mb.new_obj("lamp_post", "dark_metal", p, frame_axes(f, lv, u))
         hgt = rng.uniform(7.0, 8.5)
         mb.cylinder(lp, p, p + hgt * u, 0.09)
         reach = rng.uniform(2.5, 4.5)
-        end = p - np.sign(off) * reach * l + (hgt + 0.3) * u
+        end = p - np.sign(off) * reach * lv + (hgt + 0.3) * u
         mb.cylinder(lp, p + hgt * u, end, 0.05, n=6)
-        mb.box(lp, end - 0.5 * u, frame_axes(f, l, u), (0.35, 0.6, 0.25))
+        mb.box(lp, end - 0.5 * u, frame_axes(f, lv, u), (0.35, 0.6, 0.25))
 
     # far woods: bounding the horizon 250-700 m away
     fw = mb.new_obj("far_woods", "tree", np.zeros(3), I3)
@@ -498,23 +593,33 @@ def build_world(track: Track, seed: int, s0: float, s1: float):
         o = rng.choice([-1, 1]) * rng.uniform(2.5, 25) - (4.2 if rng.random() < 0.3 else 0)
         if abs(o) < 2.2 or abs(o + 4.2) < 2.2:
             continue
-        p, f, l, u = track.place(sx, o)
+        p, f, lv, u = track.place(sx, o)
         a_, b_ = rng.uniform(1.5, 8), rng.uniform(1, 4)
         z = -(p[0] ** 2 + p[1] ** 2) / (2 * R_EARTH) - 0.33
         q = p.copy()
         q[2] = z
-        mb.quad(wet, q - a_ * f - b_ * l, q + a_ * f - b_ * l, q + a_ * f + b_ * l, q - a_ * f + b_ * l)
+        mb.quad(
+            wet,
+            q - a_ * f - b_ * lv,
+            q + a_ * f - b_ * lv,
+            q + a_ * f + b_ * lv,
+            q - a_ * f + b_ * lv,
+        )
     return mb, wires, layout
 
 
 def _tree(mb, track, rng, s, off):
-    p, f, l, u = track.place(s, off)
+    p, f, lv, u = track.place(s, off)
     h = rng.uniform(7, 18)
-    t = mb.new_obj("tree", "tree", p, np.stack([f, l, u], 1))
+    t = mb.new_obj("tree", "tree", p, np.stack([f, lv, u], 1))
     mb.cylinder(t, p - 0.3 * u, p + 0.55 * h * u, rng.uniform(0.12, 0.3), n=6)
     rad = rng.uniform(2.0, 5.0) * (h / 12) ** 0.5
     for _ in range(int(rng.integers(3, 7))):
-        c = p + (h - rad + rng.uniform(-0.4, 0.2) * rad) * u + rng.normal(0, 0.45 * rad, 3) * [1, 1, 0.6]
+        c = (
+            p
+            + (h - rad + rng.uniform(-0.4, 0.2) * rad) * u
+            + rng.normal(0, 0.45 * rad, 3) * [1, 1, 0.6]
+        )
         mb.blob(t, c, rad * rng.uniform(0.55, 0.95, 3), rng, rough=0.35)
 
 
@@ -523,8 +628,12 @@ def _tree(mb, track, rng, s, off):
 
 
 def _hash(ix, iy, iz, seed):
-    h = (ix.astype(np.int64) * 73856093) ^ (iy.astype(np.int64) * 19349663) ^ \
-        (iz.astype(np.int64) * 83492791) ^ (seed * 2654435761)
+    h = (
+        (ix.astype(np.int64) * 73856093)
+        ^ (iy.astype(np.int64) * 19349663)
+        ^ (iz.astype(np.int64) * 83492791)
+        ^ (seed * 2654435761)
+    )
     h = h & 0xFFFFFFFF
     h ^= h >> 13
     h = (h * 0x5BD1E995) & 0xFFFFFFFF
@@ -564,7 +673,8 @@ def fbm3(p, octaves=3, seed=0, lac=2.03, gain=0.5):
 
 
 class Sky:
-    def __init__(self, mode: str, rng, world_up=np.array([0, 0, 1.0])):
+    def __init__(self, mode: str, rng, world_up=None):
+        world_up = np.array([0, 0, 1.0]) if world_up is None else world_up
         self.mode = mode
         self.sun_az = rng.uniform(0, 360)
         self.sun_el = rng.uniform(28, 50)
@@ -596,11 +706,16 @@ class Sky:
             col = col + glow[..., None] * np.array([1.0, 0.95, 0.85])
             zz = np.maximum(z, 0.03)
             uv = d[..., :2] / zz[..., None] * 1200.0 + self.wind
-            n = fbm3(np.concatenate([uv / 900.0, np.full(uv.shape[:-1] + (1,), 0.5)], -1), 5, self.seed)
+            n = fbm3(
+                np.concatenate([uv / 900.0, np.full((*uv.shape[:-1], 1), 0.5)], -1), 5, self.seed
+            )
             dens = np.clip((n - (0.60 - 0.22 * self.cover)) / 0.16, 0, 1)
             dens *= np.clip(z / 0.05, 0, 1) ** 0.5
-            shade = fbm3(np.concatenate([uv / 300.0, np.full(uv.shape[:-1] + (1,), 3.5)], -1), 3,
-                         self.seed + 5)
+            shade = fbm3(
+                np.concatenate([uv / 300.0, np.full((*uv.shape[:-1], 1), 3.5)], -1),
+                3,
+                self.seed + 5,
+            )
             lit = 0.75 + 0.5 * shade + 0.35 * np.exp((cosg - 1) * 3.0)
             cloud = np.array([0.92, 0.92, 0.94]) * lit[..., None] * (1 - 0.35 * dens[..., None])
             col = col * (1 - dens[..., None]) + cloud * dens[..., None]
@@ -611,7 +726,9 @@ class Sky:
             L = (1 + 2 * up) / 3.0
             zz = np.maximum(z, 0.03)
             uv = d[..., :2] / zz[..., None] * 800.0 + self.wind
-            n = fbm3(np.concatenate([uv / 700.0, np.full(uv.shape[:-1] + (1,), 0.5)], -1), 4, self.seed)
+            n = fbm3(
+                np.concatenate([uv / 700.0, np.full((*uv.shape[:-1], 1), 0.5)], -1), 4, self.seed
+            )
             L = L * (0.82 + 0.3 * n)
             col = L[..., None] * np.array([0.93, 0.94, 0.97]) * 1.1
         below = z < 0
@@ -647,7 +764,7 @@ class Fisheye:
     def thetad(self, th):
         k1, k2, k3, k4 = self.k
         t2 = th * th
-        return th * (1 + k1 * t2 + k2 * t2 ** 2 + k3 * t2 ** 3 + k4 * t2 ** 4)
+        return th * (1 + k1 * t2 + k2 * t2**2 + k3 * t2**3 + k4 * t2**4)
 
     def pixel_rays(self):
         u, v = np.meshgrid(np.arange(self.width, dtype=float), np.arange(self.height, dtype=float))
@@ -657,7 +774,7 @@ class Fisheye:
         for _ in range(3):  # Newton polish
             k1, k2, k3, k4 = self.k
             t2 = th * th
-            der = 1 + 3 * k1 * t2 + 5 * k2 * t2 ** 2 + 7 * k3 * t2 ** 3 + 9 * k4 * t2 ** 4
+            der = 1 + 3 * k1 * t2 + 5 * k2 * t2**2 + 7 * k3 * t2**3 + 9 * k4 * t2**4
             th = th - (self.thetad(th) - r) / der
         phi = np.arctan2(y, x)
         rays = np.stack([np.sin(th) * np.cos(phi), np.sin(th) * np.sin(phi), np.cos(th)], -1)
@@ -703,7 +820,7 @@ def cam_to_vehicle(m):
     y, p, r = (math.radians(m[k]) for k in ("yaw_deg", "pitch_deg", "roll_deg"))
     zc = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), math.sin(p)])
     xc0 = np.array([math.sin(y), -math.cos(y), 0.0])  # level, right of the optical axis
-    yc0 = np.cross(zc, xc0)                            # image down
+    yc0 = np.cross(zc, xc0)  # image down
     xc = math.cos(r) * xc0 + math.sin(r) * yc0
     yc = np.cross(zc, xc)
     return np.stack([xc, yc, zc], 1)
@@ -742,8 +859,9 @@ class World:
         self.sky = sky
         self.seed = seed
         self.scene = o3d.t.geometry.RaycastingScene()
-        self.scene.add_triangles(o3d.core.Tensor(self.V.astype(np.float32)),
-                                 o3d.core.Tensor(self.F.astype(np.uint32)))
+        self.scene.add_triangles(
+            o3d.core.Tensor(self.V.astype(np.float32)), o3d.core.Tensor(self.F.astype(np.uint32))  # type: ignore[call-overload]
+        )
         self.obj_cls = np.array([CLS[o.cls] for o in self.objs], np.int32)
         names = list(MATS)
         self.obj_mat = np.array([names.index(o.mat) for o in self.objs], np.int32)
@@ -759,7 +877,7 @@ class World:
 
     def cast(self, o, d):
         rays = np.concatenate([np.broadcast_to(o, d.shape), d], -1).astype(np.float32)
-        ans = self.scene.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6)), nthreads=0)
+        ans = self.scene.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6)), nthreads=0)  # type: ignore[call-overload]
         t = ans["t_hit"].numpy().reshape(d.shape[:-1])
         pid = ans["primitive_ids"].numpy().reshape(d.shape[:-1]).astype(np.int64)
         nrm = ans["primitive_normals"].numpy().reshape(d.shape)
@@ -769,8 +887,9 @@ class World:
 
     def occluded(self, p, d):
         rays = np.concatenate([p, np.broadcast_to(d, p.shape)], -1).astype(np.float32)
-        ans = self.scene.test_occlusions(o3d.core.Tensor(rays.reshape(-1, 6)), tnear=0.02,
-                                         tfar=1e4, nthreads=0)
+        ans = self.scene.test_occlusions(
+            o3d.core.Tensor(rays.reshape(-1, 6)), tnear=0.02, tfar=1e4, nthreads=0  # type: ignore[call-overload]
+        )
         return ans.numpy().reshape(p.shape[:-1]).astype(bool)
 
     def shade(self, p, d, nrm, obj, shadows=True):
@@ -784,7 +903,7 @@ class World:
         refl = self.mat_refl[mat].copy()
         n1 = fbm3(p * 1.7, 2, self.seed)
         n2 = value_noise3(p * 9.0, self.seed + 3)
-        alb *= (1 + na[:, None] * ((n1 - 0.5) * 1.2 + (n2 - 0.5) * 0.5)[:, None])
+        alb *= 1 + na[:, None] * ((n1 - 0.5) * 1.2 + (n2 - 0.5) * 0.5)[:, None]
         # windows / mullions on facades: local coordinates of the hit in the object's frame
         fl = self.obj_floor[obj]
         has = (fl > 0) & (np.abs(nrm @ np.array([0, 0, 1.0])) < 0.5)
@@ -846,7 +965,7 @@ class World:
             rd = dh - 2 * np.sum(dh * nm, -1)[:, None] * nm
             po = ph[mir] + nm * 0.02
             rays = np.concatenate([po, rd], -1).astype(np.float32)
-            ans = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=0)
+            ans = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=0)  # type: ignore[call-overload]
             t2 = ans["t_hit"].numpy()
             h2 = np.isfinite(t2)
             rc = np.zeros(rd.shape)
@@ -854,8 +973,13 @@ class World:
             if h2.any():
                 p2 = po[h2] + rd[h2] * t2[h2, None]
                 o2 = self.tri_obj[ans["primitive_ids"].numpy()[h2].astype(np.int64)]
-                c2, _, _ = self.shade(p2, rd[h2], ans["primitive_normals"].numpy()[h2].astype(float),
-                                      o2, shadows=False)
+                c2, _, _ = self.shade(
+                    p2,
+                    rd[h2],
+                    ans["primitive_normals"].numpy()[h2].astype(float),
+                    o2,
+                    shadows=False,
+                )
                 rc[h2] = c2
             c[mir] = c[mir] * (1 - R[:, None]) + rc * R[:, None]
         col[hit] = c
@@ -911,8 +1035,12 @@ class World:
         iu, iv = np.floor(uu).astype(int), np.floor(vv).astype(int)
         fu, fv = uu - iu, vv - iv
         dd = dist[rep]
-        for ox, oy, ww in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)),
-                           (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+        for ox, oy, ww in (
+            (0, 0, (1 - fu) * (1 - fv)),
+            (1, 0, fu * (1 - fv)),
+            (0, 1, (1 - fu) * fv),
+            (1, 1, fu * fv),
+        ):
             x, y = iu + ox, iv + oy
             k = (x >= 0) & (x < W) & (y >= 0) & (y < H)
             x, y, w_ = x[k], y[k], (wgt * ww)[k]
@@ -931,7 +1059,7 @@ def finish_image(img, valid, th, cam, rng):
     vig = 1 - 0.38 * np.clip(th / cam.theta_max, 0, 1) ** 2.5
     x = x * vig[..., None]
     x = np.clip(x, 0, None)
-    x = x + rng.normal(0, 1, x.shape) * np.sqrt(0.0006 * x + 0.0025 ** 2)
+    x = x + rng.normal(0, 1, x.shape) * np.sqrt(0.0006 * x + 0.0025**2)
     x[~valid] = np.abs(rng.normal(0, 0.004, x[~valid].shape))
     x = np.clip(x, 0, 1)
     x = np.where(x < 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
@@ -949,7 +1077,7 @@ def true_masks(world: World, track: Track, chainages, h_ant, n_sub=5, az_step=0.
     0.1 deg above, then the highest blocked sample is refined by 5 bisections (< 0.004 deg)
     toward the next sample. Parts thinner than the scan step can be missed (section "Truth
     limits" in docs/synthetic-world.md)."""
-    n_az = int(round(360 / az_step))
+    n_az = round(360 / az_step)
     sub = (np.arange(n_sub) - (n_sub - 1) / 2) * az_step / n_sub
     az = (np.arange(n_az)[:, None] * az_step + sub[None, :]).ravel()  # (n_az*n_sub,)
     el_c = np.concatenate([np.arange(0, 30, 0.05), np.arange(30, 90 + 1e-9, 0.1)])
@@ -965,9 +1093,16 @@ def true_masks(world: World, track: Track, chainages, h_ant, n_sub=5, az_step=0.
         ant.append((lat, lon, h + h_ant))
         a = np.radians(az)[:, None]
         e = np.radians(el_c)[None, :]
-        dl = np.stack([np.sin(a) * np.cos(e), np.cos(a) * np.cos(e), np.broadcast_to(np.sin(e), (len(az), len(el_c)))], -1)
+        dl = np.stack(
+            [
+                np.sin(a) * np.cos(e),
+                np.cos(a) * np.cos(e),
+                np.broadcast_to(np.sin(e), (len(az), len(el_c))),
+            ],
+            -1,
+        )
         dw = dl @ M.T
-        t, obj, _, hit = world.cast(o, dw)
+        _t, obj, _, hit = world.cast(o, dw)
         anyhit = hit.any(1)
         top = np.where(anyhit, len(el_c) - 1 - np.argmax(hit[:, ::-1], 1), -1)
         lo = np.where(top >= 0, el_c[np.maximum(top, 0)], 0.0)
@@ -1023,20 +1158,37 @@ def cmd_build(args):
     rng = np.random.default_rng(args.seed + 1000)
     sky = Sky(args.sky, rng)
     world = World(mb, wires, sky, args.seed)
-    print(f"world: {len(world.F)} triangles, {len(world.objs)} objects, {len(wires)} wires "
-          f"({time.time() - t0:.1f} s)", flush=True)
-    np.savez_compressed(out / "world" / "mesh.npz", V=world.V, F=world.F, tri_obj=world.tri_obj,
-                        obj_cls=world.obj_cls)
-    (out / "world" / "objects.json").write_text(json.dumps(
-        {"classes": CLASSES, "objects": [{"cls": o.cls, "mat": o.mat} for o in world.objs],
-         "layout": layout, "frame_mid_chainage_m": (s0 + s1) / 2, "sky": {"mode": sky.mode, "sun_az": sky.sun_az, "sun_el": sky.sun_el},
-         "wires": [w.pts.tolist() for w in wires]}, default=float))
+    print(
+        f"world: {len(world.F)} triangles, {len(world.objs)} objects, {len(wires)} wires "
+        f"({time.time() - t0:.1f} s)",
+        flush=True,
+    )
+    np.savez_compressed(
+        out / "world" / "mesh.npz",
+        V=world.V,
+        F=world.F,
+        tri_obj=world.tri_obj,
+        obj_cls=world.obj_cls,
+    )
+    (out / "world" / "objects.json").write_text(
+        json.dumps(
+            {
+                "classes": CLASSES,
+                "objects": [{"cls": o.cls, "mat": o.mat} for o in world.objs],
+                "layout": layout,
+                "frame_mid_chainage_m": (s0 + s1) / 2,
+                "sky": {"mode": sky.mode, "sun_az": sky.sun_az, "sun_el": sky.sun_el},
+                "wires": [w.pts.tolist() for w in wires],
+            },
+            default=float,
+        )
+    )
 
     cam = Fisheye()
     for side in ("left", "right"):
         cam.write_calib(out / "calib" / f"{side}.yaml", f"indep_fisheye_{side}")
-    from predisat.track.map import demo_track  # noqa: F401  (the same track the survey names)
     import predisat.track.map as tmmod
+    from predisat.track.map import demo_track  # noqa: F401  (the same track the survey names)
 
     src = Path(tmmod.__file__).resolve().parent.parent / "data" / "line144_track_A.geojson"
     shutil.copy(src, out / "track" / "line144_track_A.geojson")
@@ -1067,13 +1219,24 @@ def cmd_build(args):
             img, objbuf, tbuf = world.render(cam, c_pos, R_cw, rays_cam, valid)
             bgr = finish_image(img, valid, th, cam, frng)
             fid = f"{side}_{i:06d}"
-            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 90])
+            _ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 90])
             (out / "images" / f"{fid}.jpg").write_bytes(buf.tobytes())
             if i in keep_obj:
-                np.savez_compressed(out / "world" / f"objbuf_{fid}.npz", obj=objbuf, t=tbuf,
-                                    c_pos=c_pos, R_cw=R_cw)
-            rows.append((fid, f"images/{fid}.jpg", side, f"{gps:.3f}", f"{s:.3f}", f"{lat:.9f}",
-                         f"{lon:.9f}", f"{h + args.antenna_height:.3f}"))
+                np.savez_compressed(
+                    out / "world" / f"objbuf_{fid}.npz", obj=objbuf, t=tbuf, c_pos=c_pos, R_cw=R_cw
+                )
+            rows.append(
+                (
+                    fid,
+                    f"images/{fid}.jpg",
+                    side,
+                    f"{gps:.3f}",
+                    f"{s:.3f}",
+                    f"{lat:.9f}",
+                    f"{lon:.9f}",
+                    f"{h + args.antenna_height:.3f}",
+                )
+            )
         if i % 10 == 0:
             print(f"frame {i}/{len(chain)} at {s:.0f} m, {time.time() - t0:.0f} s", flush=True)
 
@@ -1082,14 +1245,18 @@ def cmd_build(args):
         for r in rows:
             fh.write(",".join(r) + "\n")
     sy = {
-        "format": "predisat-survey", "version": 1, "direction_of_travel": "increasing",
+        "format": "predisat-survey",
+        "version": 1,
+        "direction_of_travel": "increasing",
         "antenna_height_m": float(args.antenna_height),
         # no track.name: the loader uses it to select a feature of the file, and the shipped
         # file's only feature is named "line 144 track A (...)"; "line144_track_A" (the
         # docs' example) is refused (format friction, see the report)
         "track": {"path": "track/line144_track_A.geojson"},
-        "cameras": {side: {"calibration": f"calib/{side}.yaml", "mount": MOUNTS[side]}
-                    for side in ("left", "right")},
+        "cameras": {
+            side: {"calibration": f"calib/{side}.yaml", "mount": MOUNTS[side]}
+            for side in ("left", "right")
+        },
         "description": f"independent world, seed {args.seed}, sky {args.sky}",
         "generator": "scripts/independent_world.py",
     }
@@ -1101,15 +1268,27 @@ def cmd_build(args):
 
     n = len(chain)
     tm = TrueMasks(
-        chainage_m=chain.astype(float), lat_deg=ant[:, 0], lon_deg=ant[:, 1], h_m=ant[:, 2],
+        chainage_m=chain.astype(float),
+        lat_deg=ant[:, 0],
+        lon_deg=ant[:, 1],
+        h_m=ant[:, 2],
         heading_deg=np.asarray(track.tm.heading_at(chain), float),
-        az_deg=np.arange(720) * 0.5, mask_el_deg=mx, mask_min_el_deg=mn, covered=cov,
-        obstacle_distance_m=np.full((n, 2), np.nan), obstacle_height_m=np.full((n, 2), np.nan),
-        antenna_height_m=float(args.antenna_height), az_step_deg=0.5,
-        backend="open3d (scripts/independent_world.py)")
+        az_deg=np.arange(720) * 0.5,
+        mask_el_deg=mx,
+        mask_min_el_deg=mn,
+        covered=cov,
+        obstacle_distance_m=np.full((n, 2), np.nan),
+        obstacle_height_m=np.full((n, 2), np.nan),
+        antenna_height_m=float(args.antenna_height),
+        az_step_deg=0.5,
+        backend="open3d (scripts/independent_world.py)",
+    )
     tm.save(out / "truth" / "true_masks.npz")
-    np.savez_compressed(out / "truth" / "truth_objects.npz", obj_top=ob,
-                        cls_top=np.where(ob >= 0, world.obj_cls[np.maximum(ob, 0)], -1))
+    np.savez_compressed(
+        out / "truth" / "truth_objects.npz",
+        obj_top=ob,
+        cls_top=np.where(ob >= 0, world.obj_cls[np.maximum(ob, 0)], -1),
+    )
     print(f"done in {time.time() - t0:.0f} s", flush=True)
 
 
@@ -1121,7 +1300,9 @@ def load_world(out):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = ap.add_subparsers(dest="cmd", required=True)
     b = sub.add_parser("build", help="world, survey and truth")
     b.add_argument("out")
@@ -1131,10 +1312,12 @@ def main(argv=None):
     b.add_argument("--length", type=float, default=1000.0)
     b.add_argument("--step", type=float, default=10.0)
     b.add_argument("--antenna-height", type=float, default=4.0)
-    b.add_argument("--keep-objbuf", default="0,37,73", help="frame indices whose object-id buffer is kept")
+    b.add_argument(
+        "--keep-objbuf", default="0,37,73", help="frame indices whose object-id buffer is kept"
+    )
     b.add_argument("--no-images", action="store_true")
     b.add_argument("--only", default="", help="preview: only these position indices")
-    from indep_checks import add_commands  # noqa: E402
+    from indep_checks import add_commands
 
     add_commands(sub)
     args = ap.parse_args(argv)

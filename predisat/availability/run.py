@@ -132,7 +132,7 @@ class AvailabilityRun:
 
 # ------------------------------------------------------------------------- inputs
 # an ISO time of day followed by a UTC offset: "T08:00+02:00", "T08:00:30.5-0100"
-_UTC_OFFSET = re.compile(r"T\d{2}:\d{2}(:\d{2}(\.\d+)?)?[+-]\d{2}:?\d{2}$")
+_UTC_OFFSET = re.compile(r"T\d{2}:\d{2}(:\d{2}(\.\d+)?)?[+-]\d{2}(:?\d{2})?$")
 
 
 def parse_time(value: float | str | np.datetime64 | datetime | None, name: str) -> float | None:
@@ -155,8 +155,11 @@ def parse_time(value: float | str | np.datetime64 | datetime | None, name: str) 
             out = float(text)
         except ValueError:
             if _UTC_OFFSET.search(text.replace(" ", "T")):
-                # an explicit offset (local time, +02:00): an instant in UTC, not GPS time
-                return parse_time(datetime.fromisoformat(text.replace(" ", "T")), name)
+                # an explicit offset (local time, +02:00, +02): an instant in UTC, not GPS time
+                iso = text.replace(" ", "T")
+                if re.search(r"[+-]\d{2}$", iso):
+                    iso += ":00"
+                return parse_time(datetime.fromisoformat(iso), name)
             utc = text.upper().endswith(("Z", "UTC"))
             if utc:
                 text = text[: -1 if text.upper().endswith("Z") else -3]

@@ -261,6 +261,12 @@ class Applicability:
                 f"{self.el_min_deg}, {self.el_max_deg}"
             )
 
+    @property
+    def _is_simulator(self) -> bool:
+        """The simulator's own noise model (no tail to check): its method and its receivers,
+        so that a file naming the method for a real receiver does not skip the check."""
+        return self.method == SIMULATOR_METHOD and tuple(self.receivers) == ("simulated",)
+
     def mismatches(self, profile: ReceiverProfile, systems: Mapping[str, SystemModel]) -> list[str]:
         """Why the model does not apply to ``profile`` (empty: it applies).
 
@@ -299,7 +305,7 @@ class Applicability:
                     f"system {sys_}: its {m.n_independent} independent samples were too few to "
                     "check any tail of the overbound (calibrate on more days or receivers)"
                 )
-            elif not m.tail_probability > 0.0 and self.method != SIMULATOR_METHOD:
+            elif not m.tail_probability > 0.0 and not self._is_simulator:
                 # NaN (null in the file): nothing says the tails were ever checked
                 why.append(
                     f"system {sys_}: the file records no tail check of its model (calibrate "
@@ -308,7 +314,7 @@ class Applicability:
         if self.method == "estimate":
             why.append("a least-squares estimate, not an overbound (calibrate without --bound "
                        "estimate)")  # fmt: skip
-        elif self.method not in ("overbound", SIMULATOR_METHOD):
+        elif self.method != "overbound" and not self._is_simulator:
             why.append(f"method {self.method!r} is not an overbound (calibrate with `locator "
                        "calibrate`)")  # fmt: skip
         if profile.frequency != self.frequency:

@@ -268,6 +268,13 @@ def test_a_train_past_the_end_of_the_track_map_gets_no_claim_the_end_bounds(conf
     off = truth > mapped.length_m
     assert ep["flag_names"][off].str.contains("TRACK_END").all()
     assert not claim[off].any()
+    # the loss is put down to the end only where the end voided a claim
+    from locator.evaluate import claim_losses
+
+    voided = ep["flag_names"].str.contains("CLAIM_AT_TRACK_END")
+    assert voided.any() and not (voided & ep["claim"]).any()
+    cause = "interval bounded by an end of the track map (the train may be past it)"
+    assert claim_losses(ep).get(cause, 0.0) == pytest.approx(voided.mean())
 
 
 def test_odometry_through_a_reversal_keeps_the_train_inside_the_prediction(path):

@@ -79,7 +79,8 @@ def _assert_identical(got: np.ndarray, want: np.ndarray, what: str, atol: float 
 
 
 #: flags added after the reference was written (module docstring), masked out of the outputs
-NEW_FLAGS = int(RunFlag.HEADING_UNCHECKED | RunFlag.TRACK_END | RunFlag.ASSUMED_MASK)
+NEW_FLAGS = int(RunFlag.HEADING_UNCHECKED | RunFlag.TRACK_END | RunFlag.ASSUMED_MASK
+                | RunFlag.CLAIM_AT_TRACK_END)
 
 
 @pytest.fixture(autouse=True)

@@ -331,7 +331,8 @@ def test_parse_time_scales() -> None:
     aware = datetime(2020, 6, 25, 8, tzinfo=timezone(timedelta(hours=2)))
     assert parse_time(aware, "--start") == pytest.approx(gpst + 18.0)
     # local time with its offset, as text: the same UTC instant (it read as GPS time, 18 s off)
-    for text in ("2020-06-25T08:00+02:00", "2020-06-25 08:00:00+0200", "2020-06-25T05:00-01:00"):
+    for text in ("2020-06-25T08:00+02:00", "2020-06-25 08:00:00+0200", "2020-06-25T05:00-01:00",
+                 "2020-06-25T08:00+02"):  # fmt: skip
         assert parse_time(text, "--start") == pytest.approx(gpst + 18.0), text
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy's timezone notice must not leak

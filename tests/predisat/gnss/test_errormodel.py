@@ -139,6 +139,12 @@ def test_a_model_whose_tails_were_never_checked_supports_no_claim(tmp_path):
     # the simulator's own model keeps applying to simulated receivers
     sim = ReceiverProfile("simulated", "simulated", {"G": ("sim",)}, receiver_class="simulated")
     assert default_model_file().mismatches(sim) == []
+    # ... but a file naming the simulator's method for a real receiver skips no check
+    named = Applicability(APP.receivers, APP.antennas, method="simulator noise model")
+    p = write_error_model(tmp_path / "named.json", IntervalModel(ErrorModel(0.6, 0.4)),
+                          systems={"G": nan}, applicability=named)  # fmt: skip
+    why = read_error_model_file(p).mismatches(_profile())
+    assert any("no tail check" in w for w in why) and any("not an overbound" in w for w in why)
 
 
 def test_depth_shortfall_compares_the_claims_k_with_the_checked_tail():
