@@ -63,6 +63,7 @@ from locator.sources import EpochData, EpochSource
 from predisat.availability.interval import IntervalMode
 from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.jsontypes import JsonDict
+from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import MaskSet
 
 __all__ = [
@@ -296,6 +297,9 @@ def run_locator(
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
         raise ValueError("trust='masks' needs masks: pass a MaskSet or choose trust='cutoff'")
+    if masks is not None:
+        # holes between positions (a set joined in memory) trust nothing, as a file's do
+        masks = close_gaps(masks)[0]
     if not 0.0 <= start_chainage_m <= path.length_m:
         raise ValueError(
             f"start_chainage_m {start_chainage_m:.1f} is off the track (0-{path.length_m:.1f} m)"
@@ -324,7 +328,7 @@ def run_locator(
         if cfg.trust == "masks" and cfg.trust_stretches > 1 and n_rx:
             assert masks is not None
             fix, idx, uncorrected, conflict = _split_fix(
-                path, cfg, masks, data, az, el_trust, p_lo, p_hi, excluded, beacons
+                path, cfg, masks, data, az, el, p_lo, p_hi, excluded, beacons, el_trust
             )
         else:
             trusted = _trust(cfg, masks, p_lo, p_hi, az, el_trust, data.sats, excluded)
@@ -517,18 +521,20 @@ def _check(
 def _split_fix(
     path: AntennaPath, cfg: RunConfig, masks: MaskSet, data: EpochData, az: NDArray,
     el: NDArray, p_lo: float, p_hi: float, excluded: dict[str, str],
-    beacons: dict[float, tuple[NDArray, NDArray]],
+    beacons: dict[float, tuple[NDArray, NDArray]], el_trust: NDArray | None = None,
 ) -> tuple[Fix | None, NDArray, bool, bool]:  # fmt: skip
     """Partitioned trust (:mod:`locator.partition`): a fix per stretch of the prediction, one
     claim from all. Returns the epoch's fix (the chosen stretch's, its interval the hull of the
     parts), its trusted satellites, whether an uncorrected ionosphere inflated a sigma, and
     whether the stretches' claims contradict the prediction. Reasons go into ``excluded`` for
-    the satellites no stretch trusts."""
-    stretches = trust_stretches(masks, p_lo, p_hi, az, el, max_stretches=cfg.trust_stretches,
+    the satellites no stretch trusts. ``el_trust`` (default ``el``) is the elevation the trust
+    decision takes (the lowest over a long prediction); the fixes take ``el``."""
+    el_t = el if el_trust is None else el_trust
+    stretches = trust_stretches(masks, p_lo, p_hi, az, el_t, max_stretches=cfg.trust_stretches,
                                 extra_margin_deg=cfg.extra_margin_deg)  # fmt: skip
     n = len(stretches)
     if n == 1:  # one trusted set over the whole prediction: the single set's decision exactly
-        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el, data.sats, excluded))
+        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el_t, data.sats, excluded))
         fix, uncorrected = _fix(path, cfg, data, el, idx, 0.5 * (p_lo + p_hi))
         return fix, idx, uncorrected, False
     fixes: list[Fix | None] = []
@@ -540,7 +546,7 @@ def _split_fix(
     for j, st in enumerate(stretches):
         trusted = st.selection.trusted
         if cfg.model_el_min_deg > 0.0:
-            trusted = trusted & (el >= cfg.model_el_min_deg)
+            trusted = trusted & (el_t >= cfg.model_el_min_deg)
         idx = np.flatnonzero(trusted)
         fix, unc = _fix(path, cfg, data, el, idx, 0.5 * (st.lo_m + st.hi_m))
         uncorrected = uncorrected or unc

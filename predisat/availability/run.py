@@ -71,6 +71,7 @@ from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import MaskHoleWarning, mask_file_path, read_masks
+from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import MaskSet
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
@@ -401,7 +402,15 @@ def _load_masks(
 ) -> tuple[MaskSet, str, list[str]]:
     """The masks, how to name them, and what reading them warned of (holes closed)."""
     if isinstance(masks, MaskSet):
-        return masks, "in memory", []
+        # a set built in memory (concat_masksets of two surveys) gets its holes closed as a
+        # file's are on reading
+        closed, holes = close_gaps(masks)
+        notes = [
+            f"masks in memory: {len(holes)} hole(s) between positions ("
+            + ", ".join(f"{a:.0f}-{b:.0f} m" for a, b in holes[:5])
+            + "): closed with positions that trust nothing"
+        ] if holes else []  # fmt: skip
+        return closed, "in memory", notes
     loc = location(masks)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MaskHoleWarning)

@@ -93,7 +93,7 @@ from predisat.storage import (
     stamps,
     write_atomic,
 )
-from predisat.survey import Survey
+from predisat.survey import Survey, check_survey_track
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
 
@@ -778,6 +778,8 @@ def process_survey(
     if not isinstance(survey, Survey):
         survey = Survey.load(survey, track=track, check_images=False, on_error="skip",
                              storage_options=opts)  # fmt: skip
+    if track is not None:  # another track than the survey's own: it must follow it
+        check_survey_track(survey, track)
     trk = track if track is not None else survey.track
     if trk is None:
         raise ValueError(

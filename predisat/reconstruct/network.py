@@ -34,11 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import numpy as np
-
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
-from predisat.geodesy import WGS84
 from predisat.jsontypes import JsonDict
 from predisat.masks.dataset import partition_path, write_partition
 from predisat.reconstruct.batch import process_survey
@@ -171,43 +168,6 @@ def _part_key(shared: _Shared, unit: _Unit, survey: Survey) -> JsonDict:
     }
 
 
-# how far the network's track may leave the track a survey names where its frames are: the
-# frames were taken there, and a pose off by more misplaces what they see (a 2 deg mount error
-# already costs 0.2 % false trust, docs/survey-format.md)
-TRACK_AGREE_M = 1.0
-TRACK_AGREE_DEG = 0.5
-
-
-def _check_survey_track(survey: Survey, track: TrackMap) -> None:
-    """Refuse a survey whose own track (named in its survey.yaml) the network's track leaves,
-    at the survey's frames, by more than :data:`TRACK_AGREE_M` or :data:`TRACK_AGREE_DEG`:
-    processed on the network's track its frames would be posed where they were not taken."""
-    if survey.track_path is None:
-        return
-    own = Survey.load(survey.root, check_images=False, on_error="skip",
-                      storage_options=survey.storage_options).track  # fmt: skip
-    if own is None:
-        return
-    ch = np.asarray(survey.frames.chainage_m, float)
-    ch = ch[np.isfinite(ch) & (ch >= 0.0) & (ch <= min(track.length_m, own.length_m))]
-    if not len(ch):
-        return
-    lat_a, lon_a, _ = own.position_at(ch)
-    lat_b, lon_b, _ = track.position_at(ch)
-    off_m = np.asarray(WGS84.inv(lon_a, lat_a, lon_b, lat_b)[2], float)
-    turn = np.abs((own.heading_at(ch) - track.heading_at(ch) + 180.0) % 360.0 - 180.0)
-    i = int(np.argmax(np.maximum(off_m / TRACK_AGREE_M, turn / TRACK_AGREE_DEG)))
-    if off_m[i] > TRACK_AGREE_M or turn[i] > TRACK_AGREE_DEG:
-        raise ValueError(
-            f"{survey.root}: the network's track {track.name!r} leaves the survey's own track "
-            f"({survey.track_path}) by {off_m[i]:.1f} m and {turn[i]:.1f} deg at chainage "
-            f"{ch[i]:.0f} m, where frames were taken (limits {TRACK_AGREE_M:g} m, "
-            f"{TRACK_AGREE_DEG:g} deg): processed on it, the frames would be posed where they "
-            "were not; give the network with the survey's own geometry and tolerance "
-            "(--tolerance-m), or process the survey alone (`predisat process`)"
-        )
-
-
 def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     """One line part: process its survey (serially), write its partition, then its marker."""
     t0 = time.perf_counter()
@@ -220,7 +180,6 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     try:
         survey = Survey.load(unit.survey_dir, track=unit.track, check_images=False,
                              on_error="skip")  # fmt: skip
-        _check_survey_track(survey, unit.track)
         key = _part_key(shared, unit, survey)
         if marker.is_file() and part_file.is_file():
             old = json.loads(marker.read_text())

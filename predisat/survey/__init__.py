@@ -22,7 +22,7 @@ from predisat.survey.format import (
     SurveyError,
     SurveyProblem,
 )
-from predisat.survey.load import Survey
+from predisat.survey.load import Survey, check_survey_track
 from predisat.survey.writer import SurveyWriter
 
 __all__ = [
@@ -35,4 +35,5 @@ __all__ = [
     "SurveyError",
     "SurveyProblem",
     "SurveyWriter",
+    "check_survey_track",
 ]

@@ -353,3 +353,19 @@ def test_satellites_trusted_where_the_mask_rests_on_no_view_are_counted_and_flag
     ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
                      config=RunConfig(MODEL, trust="masks"), masks=plain)  # fmt: skip
     assert (ep["n_used_assumed"] == 0).all() and not ep["flag_names"].str.contains("ASSUMED").any()
+
+
+def test_a_hole_in_masks_joined_in_memory_trusts_nothing(path):
+    from predisat.masks.maskset import concat_masksets
+
+    truth = truth_run(n=3, start=2000.0, speed=5.0)
+    c = np.arange(0.0, 4001.0, 10.0)
+    whole = MaskSet.from_track(path.track, c, np.zeros((len(c), 360)))
+    holed = concat_masksets([whole.subset(0.0, 1500.0), whole.subset(2500.0, 4000.0)])
+    cfg = RunConfig(MODEL, trust="masks", start_uncertainty_m=10.0)
+    ok = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg,
+                     masks=whole)  # fmt: skip
+    assert (ok["n_trusted"] == len(AZ)).all()
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg,
+                     masks=holed)  # fmt: skip
+    assert (ep["n_trusted"] == 0).all() and not ep["claim"].any()

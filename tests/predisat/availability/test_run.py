@@ -304,6 +304,11 @@ def test_a_stretch_beyond_the_masks_or_a_hole_in_them_is_said_in_the_report(
     # a file with a hole: closed on reading, said in the report (not only a Python warning),
     # and the positions closing it lie on the track (the track check accepts them)
     joined = concat_masksets([masks.subset(4000.0, 4100.0), masks.subset(4300.0, 4400.0)])
+    # in memory too: the hole is closed and said
+    r = run_availability(joined, track, None, out_dir=tmp_path / "m",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (hole,) = r.info["warnings"]
+    assert hole.startswith("masks in memory: 1 hole(s) between positions (4100-4300 m)")
     holed = write_masks(joined, tmp_path / "h.parquet")
     r = run_availability(holed, track, None, out_dir=tmp_path / "h",
                          **common)  # type: ignore[arg-type]  # fmt: skip

@@ -163,3 +163,8 @@ def test_a_survey_is_refused_on_a_network_track_that_leaves_its_own(
         assert by_line[lid].status == "failed", lid
         assert "leaves the survey's own track" in by_line[lid].message
         assert "--tolerance-m" in by_line[lid].message
+    # `predisat process --track` takes the same check: refused before any work
+    with pytest.raises(ValueError, match="leaves the survey's own track"):
+        process_survey(surveys / "144", tmp_path / "alone", PARAMS, track=b, progress=False,
+                       segmenter=blue_sky)  # fmt: skip
+    assert not (tmp_path / "alone" / "masks.parquet").exists()
