@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import signal
 import sys
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -50,7 +51,8 @@ def run_main(
     person (:class:`CliError`, ``ValueError``, ``OSError``, ``KeyError``) are printed on one
     line as ``<label>: error: ...`` (exit 2), Ctrl-C as ``interrupted`` (exit 130, with
     ``interrupted_note[command]`` when given); ``label`` may hold ``{command}``, the
-    subcommand's name.
+    subcommand's name. Warnings the library gives are printed on one line each as
+    ``<label>: warning: ...``.
     """
     args = parser.parse_args(argv)
     run_checks(args)  # options that exclude or need each other: refused before any work
@@ -81,8 +83,16 @@ def run_main(
         previous_hook(report)
 
     sys.unraisablehook = on_unraisable
+
+    def one_line(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
+        # a library's warning is for the user of the command: one line under its name, as its
+        # errors are, not Python's file:line and source echo
+        print(f"{name}: warning: {message}", file=sys.stderr)
+
     try:
-        return _run_func(args, name, note, seen)
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line
+            return _run_func(args, name, note, seen)
     finally:
         sys.unraisablehook = previous_hook
         if previous is not None:

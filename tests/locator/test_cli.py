@@ -469,3 +469,20 @@ def test_run_draws_its_intervals_for_the_integrity_risk(sim_dir, tmp_path, capsy
     with pytest.raises(SystemExit):
         main(["demo", "--out", str(tmp_path / "demo"), "--integrity-risk", "1e-6"])
     assert seen["integrity"].risk_per_epoch == 1e-6
+
+
+def test_a_library_warning_is_one_line_under_the_command(sim_dir, tmp_path, capsys):
+    from predisat.masks.fileformat import read_masks, write_masks
+    from predisat.masks.maskset import concat_masksets
+
+    full = read_masks(sim_dir / "true_masks.parquet")
+    ch = full.chainage_m
+    a, b = float(ch[len(ch) // 3]), float(ch[2 * len(ch) // 3])
+    holed = write_masks(concat_masksets([full.subset(-1e9, a), full.subset(b, 1e9)]),
+                        tmp_path / "holed.parquet")  # fmt: skip
+    capsys.readouterr()
+    assert main(["-q", "run", "--sim", str(sim_dir), "--masks", str(holed), "--out",
+                 str(tmp_path / "r")]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert f"locator: warning: {holed}: 1 hole(s) between its positions" in err
+    assert "MaskHoleWarning" not in err and "warnings.warn" not in err
