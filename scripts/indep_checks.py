@@ -484,23 +484,13 @@ def cmd_segcheck(args):
         sky = np.unpackbits(q["sky"])[: cam.width * cam.height].reshape(cam.height, cam.width) > 0
         thin = np.unpackbits(q["thin"])[: cam.width * cam.height].reshape(cam.height, cam.width) > 0
         s = float(r["chainage_m"])
-        lat, lon, h = (float(np.asarray(v).ravel()[0]) for v in track.tm.position_at([s]))
-        hd = math.radians(float(np.asarray(track.tm.heading_at([s])).ravel()[0]))
-        M = track.local_to_world(lat, lon)
-        Rv = np.stack(
-            [
-                M @ [math.sin(hd), math.cos(hd), 0],
-                M @ [-math.cos(hd), math.sin(hd), 0],
-                M @ [0, 0, 1.0],
-            ],
-            1,
-        )
+        lat, lon, h, Rv = track.pose(s)
         mt = sy["cameras"][r["side"]]["mount"]
         R_cw = Rv @ iw.cam_to_vehicle(mt)
         ant = track.world_from_geo(lat, lon, h + sy["antenna_height_m"])
         c_pos = ant + Rv @ np.array(mt["lever_arm_m"])
         d = rays_cam @ R_cw.T
-        up = d @ (M @ np.array([0, 0, 1.0])) > 0.0  # above the local horizontal
+        up = d @ Rv[:, 2] > 0.0  # above the local horizontal
         sel = valid & up
         rr = np.concatenate([np.broadcast_to(c_pos, d[sel].shape), d[sel]], -1).astype(np.float32)
         ans = scene.cast_rays(o3d.core.Tensor(rr), nthreads=0)  # type: ignore[call-overload]

@@ -114,8 +114,9 @@ class Track:
         """(..., 3, 3): a direction in the local ENU at (lat, lon) -> world frame (columns)."""
         return self.R0 @ np.swapaxes(enu_rotation(lat, lon), -1, -2)
 
-    def at(self, s):
-        """Point (3,), forward (3,), left (3,), up (3,) in the world frame at chainage s."""
+    def pose(self, s):
+        """Track point at chainage s: lat, lon, h and the vehicle axes (3, 3) in the world
+        frame, columns forward, left, up (driving toward increasing chainage)."""
         s = float(s)
         lat, lon, h = (float(np.asarray(v).ravel()[0]) for v in self.tm.position_at([s]))
         hd = math.radians(float(np.asarray(self.tm.heading_at([s])).ravel()[0]))
@@ -123,7 +124,12 @@ class Track:
         fwd = M @ np.array([math.sin(hd), math.cos(hd), 0.0])
         left = M @ np.array([-math.cos(hd), math.sin(hd), 0.0])
         up = M @ np.array([0.0, 0.0, 1.0])
-        return self.world_from_geo(lat, lon, h), fwd, left, up
+        return lat, lon, h, np.stack([fwd, left, up], 1)
+
+    def at(self, s):
+        """Point (3,), forward (3,), left (3,), up (3,) in the world frame at chainage s."""
+        lat, lon, h, Rv = self.pose(s)
+        return self.world_from_geo(lat, lon, h), Rv[:, 0], Rv[:, 1], Rv[:, 2]
 
     def place(self, s, offset, height=0.0):
         p, f, lv, u = self.at(s)
@@ -1201,13 +1207,7 @@ def cmd_build(args):
     frng = np.random.default_rng(args.seed + 7)
     keep_obj = set(int(x) for x in args.keep_objbuf.split(",")) if args.keep_objbuf else set()
     for i, s in enumerate(chain):
-        lat, lon, h = (float(np.asarray(v).ravel()[0]) for v in track.tm.position_at([s]))
-        hd = math.radians(float(np.asarray(track.tm.heading_at([s])).ravel()[0]))
-        M = track.local_to_world(lat, lon)
-        fwd = M @ np.array([math.sin(hd), math.cos(hd), 0.0])
-        left = M @ np.array([-math.cos(hd), math.sin(hd), 0.0])
-        up = M @ np.array([0.0, 0.0, 1.0])
-        Rv = np.stack([fwd, left, up], 1)  # vehicle -> world (driving toward increasing chainage)
+        lat, lon, h, Rv = track.pose(s)  # Rv: vehicle -> world
         ant = track.world_from_geo(lat, lon, h + args.antenna_height)
         gps = survey_rows_time(i)
         if args.no_images:
