@@ -204,8 +204,13 @@ class CameraModel:
 
     @classmethod
     def _centred(
-        cls, name: str, model: Literal["pinhole", "fisheye"], width_px: int, height_px: int,
-        vfov_deg: float, dist: tuple[float, ...],
+        cls,
+        name: str,
+        model: Literal["pinhole", "fisheye"],
+        width_px: int,
+        height_px: int,
+        vfov_deg: float,
+        dist: tuple[float, ...],
     ) -> CameraModel:
         """The ``*_from_fov`` camera: centred principal point, focal length from the fov."""
         probe = cls(name, model, width_px, height_px, 1.0, 1.0, 0.0, 0.0, tuple(dist))
@@ -308,6 +313,18 @@ class CameraModel:
         distortion (for the shipped cameras it is within 3 % of ``centre_pixel_deg``; for a
         lens seeing past 180 deg it may be several times that).
         """
+        return float(np.degrees(np.arccos(np.nanmin(self._pixel_step_cos()))))
+
+    @cached_property
+    def narrowest_pixel_deg(self) -> float:
+        """Smallest angle one pixel subtends, horizontally or vertically, over the image (deg),
+        on the grid of :attr:`widest_pixel_deg`: an angle in pixels from it covers that angle
+        anywhere in the frame. (A panorama's rows near the poles subtend almost nothing
+        horizontally; its rows' own scale serves better there.)"""
+        return float(np.degrees(np.arccos(np.nanmax(self._pixel_step_cos()))))
+
+    def _pixel_step_cos(self) -> NDArray:
+        """Cosines of the angles of the 1-px steps right and down on a 129 x 97 grid."""
         u = np.linspace(0.0, self.width_px - 2.0, 129)
         v = np.linspace(0.0, self.height_px - 2.0, 97)
         uu, vv = (a.ravel() for a in np.meshgrid(u, v))
@@ -319,7 +336,7 @@ class CameraModel:
         r0 = unit(uu, vv)
         cos = np.concatenate([np.sum(r0 * unit(uu + 1.0, vv), axis=-1),
                               np.sum(r0 * unit(uu, vv + 1.0), axis=-1)])  # fmt: skip
-        return float(np.degrees(np.arccos(np.clip(np.nanmin(cos), -1.0, 1.0))))
+        return np.clip(cos, -1.0, 1.0)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -695,6 +712,51 @@ class Mount:
             @ _CAMERA_TO_VEHICLE_LEVEL
         )
 
+    def on_vehicle(self, roll_deg: float = 0.0, pitch_deg: float = 0.0) -> Mount:
+        """This mount seen from the *level* vehicle frame of a vehicle with an attitude.
+
+        The vehicle frame of :meth:`camera_to_vehicle` rolls with the body on a canted curve
+        and pitches with the grade; everything downstream (rectification, carving) takes it
+        as level. The mount returned has the same camera axes and lever arm expressed in the
+        level frame (x the horizontal projection of forward, z up), so that the downstream
+        code stays exact (``docs/reconstruction.md``, section 16).
+
+        Parameters
+        ----------
+        roll_deg : float
+            Vehicle roll about its forward axis, degrees; positive raises the left side (on a
+            canted curve turning right the vehicle leans right: roll positive).
+        pitch_deg : float
+            Vehicle pitch, degrees; positive raises the nose (uphill in the direction of
+            travel).
+
+        Returns
+        -------
+        Mount
+            ``camera_to_vehicle()`` equals ``Ry(-pitch) @ Rx(roll) @ self.camera_to_vehicle()``
+            and the lever arm is rotated alike. ``self`` when both angles are 0.
+        """
+        for name, v in (("roll_deg", roll_deg), ("pitch_deg", pitch_deg)):
+            if not (np.isfinite(v) and abs(v) <= 45.0):
+                raise ValueError(
+                    f"{name} must be a vehicle attitude within [-45, 45] degrees, got {v}"
+                )
+        if roll_deg == 0.0 and pitch_deg == 0.0:
+            return self
+        att = _rot_y(-np.radians(pitch_deg)) @ _rot_x(np.radians(roll_deg))
+        m = att @ self.camera_to_vehicle() @ _CAMERA_TO_VEHICLE_LEVEL.T  # Rz Ry(-p) Rx
+        sin_p = float(np.clip(m[2, 0], -1.0, 1.0))  # Ry(-p) puts +sin(p) at [2, 0]
+        if abs(sin_p) < 1.0 - 1e-12:
+            yaw = np.arctan2(m[1, 0], m[0, 0])
+            roll = np.arctan2(m[2, 1], m[2, 2])
+        else:  # looking straight up or down: yaw and roll share one axis, roll taken 0
+            yaw, roll = np.arctan2(-m[0, 1], m[1, 1]), 0.0
+        arm = att @ np.asarray(self.lever_arm_m, float)
+        return Mount(
+            self.side, float(np.degrees(yaw)), float(np.degrees(np.arcsin(sin_p))),
+            float(np.degrees(roll)), (float(arm[0]), float(arm[1]), float(arm[2])),
+        )  # fmt: skip
+
     def camera_to_enu(self, heading_deg: ArrayLike, reverse: ArrayLike = False) -> NDArray:
         """Rotation(s) ``(..., 3, 3)`` from camera frame to local ENU for a track heading.
 
@@ -726,7 +788,8 @@ def vehicle_to_enu(heading_deg: ArrayLike, reverse: ArrayLike = False) -> NDArra
     -------
     ndarray, shape (..., 3, 3)
         ``R`` with ``v_enu = R @ v_vehicle``; columns are vehicle x (forward), y (left) and
-        z (up) in ENU. Track grade and cant are neglected (vehicle z is the local vertical).
+        z (up) in ENU for a level vehicle; a rolled or pitched one (cant, grade) goes through
+        :meth:`Mount.on_vehicle` first.
     """
     h = np.asarray(heading_deg, float)
     rev = np.asarray(reverse, bool)

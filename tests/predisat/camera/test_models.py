@@ -558,3 +558,57 @@ def test_widest_pixel_of_a_barrel_pinhole_is_off_centre() -> None:
     side_deg = np.degrees(np.arccos(side[0] @ side[1]))
     assert side_deg > 1.2 * cam.centre_pixel_deg
     assert cam.widest_pixel_deg >= side_deg
+
+
+# ---------------------------------------------------------------------- vehicle attitude
+
+
+@pytest.mark.parametrize("side", ["left", "right", "front", "rear", "roof"])
+@pytest.mark.parametrize(("roll", "pitch"), [(6.9, 0.0), (-7.6, 1.5), (2.0, -3.0), (0.0, 4.0)])
+def test_mount_on_a_tilted_vehicle_matches_scipy(side: str, roll: float, pitch: float) -> None:
+    from scipy.spatial.transform import Rotation
+
+    m = Mount.default(side)
+    tilted = m.on_vehicle(roll, pitch)
+    # intrinsic pitch (about y, nose up is -y) then roll about the new x
+    att = Rotation.from_euler("YX", [-pitch, roll], degrees=True).as_matrix()
+    np.testing.assert_allclose(tilted.camera_to_vehicle(), att @ m.camera_to_vehicle(), atol=1e-12)
+    np.testing.assert_allclose(tilted.lever_arm_m, att @ np.array(m.lever_arm_m), atol=1e-12)
+    assert tilted.side == side
+
+
+def test_raising_the_left_side_raises_the_left_camera_and_lowers_the_right() -> None:
+    # the optical axis of a 45-deg side camera rises by the roll on its side, falls on the other
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        axis = Mount.default(side).on_vehicle(5.0, 0.0).camera_to_vehicle() @ [0.0, 0.0, 1.0]
+        assert np.degrees(np.arcsin(axis[2])) == pytest.approx(45.0 + sign * 5.0)
+    # nose up raises the front camera's axis and lowers the rear one's
+    front = Mount.default("front").on_vehicle(0.0, 2.0).camera_to_vehicle() @ [0.0, 0.0, 1.0]
+    rear = Mount.default("rear").on_vehicle(0.0, 2.0).camera_to_vehicle() @ [0.0, 0.0, 1.0]
+    assert np.degrees(np.arcsin(front[2])) == pytest.approx(32.0)
+    assert np.degrees(np.arcsin(rear[2])) == pytest.approx(28.0)
+
+
+def test_a_level_vehicle_keeps_the_mount_and_wild_attitudes_are_refused() -> None:
+    m = Mount.default("left")
+    assert m.on_vehicle(0.0, 0.0) is m
+    with pytest.raises(ValueError, match="roll_deg"):
+        m.on_vehicle(60.0, 0.0)
+    with pytest.raises(ValueError, match="pitch_deg"):
+        m.on_vehicle(0.0, float("nan"))
+
+
+def test_a_zenith_camera_on_a_tilted_vehicle_keeps_its_rotation() -> None:
+    from scipy.spatial.transform import Rotation
+
+    m = Mount("roof", 0.0, 90.0, 0.0, (0.0, 0.0, 0.5))
+    tilted = m.on_vehicle(0.0, 0.0 + 1e-13)  # gimbal lock: yaw and roll share an axis
+    att = Rotation.from_euler("YX", [-1e-13, 0.0], degrees=True).as_matrix()
+    np.testing.assert_allclose(tilted.camera_to_vehicle(), att @ m.camera_to_vehicle(), atol=1e-9)
+
+
+def test_pixel_angles_bracket_the_centre_pixel() -> None:
+    for cam in (default_camera("pinhole"), default_camera("fisheye")):
+        # the grid steps from near the centre, not from it: a part in a million of slack
+        assert cam.narrowest_pixel_deg <= cam.centre_pixel_deg <= cam.widest_pixel_deg * 1.000001
+        assert cam.narrowest_pixel_deg > 0.3 * cam.widest_pixel_deg  # no degenerate pixel
