@@ -1,0 +1,60 @@
+"""Cant and roll bounds, against worked figures and the physical model they must contain."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predisat.track.cant import (
+    CantLimits,
+    body_roll_deg,
+    cant_angle_deg,
+    equilibrium_cant_mm,
+    inside_roll_sign,
+    roll_bounds_deg,
+)
+
+
+def test_equilibrium_cant_against_a_hand_computation() -> None:
+    # v^2 / (g R) of the track plane times 1500 mm: 90 km/h on R = 400 m
+    v_mps, r_m, g = 90 / 3.6, 400.0, 9.81
+    hand = 1500.0 * v_mps**2 / (g * r_m)
+    assert equilibrium_cant_mm(1 / r_m, 90.0) == pytest.approx(hand, rel=0.01)
+    assert equilibrium_cant_mm(-1 / r_m, 90.0) == equilibrium_cant_mm(1 / r_m, 90.0)
+    assert cant_angle_deg(150.0) == pytest.approx(np.degrees(np.arcsin(0.1)))
+
+
+def test_the_vehicle_leans_toward_the_inside_of_the_curve() -> None:
+    # a left-hand curve (positive curvature) lowers the left side: roll negative
+    assert inside_roll_sign(1e-3) == -1 and inside_roll_sign(-1e-3) == 1
+    assert inside_roll_sign(1e-3, reverse=True) == 1  # driven the other way, it turns right
+    assert inside_roll_sign(0.0) == 0
+    roll = body_roll_deg(1 / 500, 150.0, 40.0)
+    assert roll < -cant_angle_deg(150.0)  # slower than equilibrium: further in
+
+
+def test_bounds_contain_every_vehicle_the_line_allows() -> None:
+    lim = CantLimits()
+    rng = np.random.default_rng(4)
+    k = rng.uniform(-1 / 250, 1 / 250, 4000)
+    lo, hi = roll_bounds_deg(k, lim)
+    d_eq = equilibrium_cant_mm(k, lim.line_speed_kmh)
+    # any cant the line's design allows, any speed up to the line speed, within the deficiency
+    cant = rng.uniform(0, 1, k.size) * np.minimum(d_eq, lim.max_cant_mm)
+    speed = rng.uniform(0, lim.line_speed_kmh, k.size)
+    ok = equilibrium_cant_mm(k, speed) - cant <= lim.max_deficiency_mm
+    roll = body_roll_deg(k, cant, speed, flexibility=lim.flexibility)
+    inward = roll * inside_roll_sign(k)
+    assert ok.sum() > 2000
+    assert np.all(inward[ok] >= lo[ok] + lim.track_roll_deg - 1e-9)
+    assert np.all(inward[ok] <= hi[ok] - lim.track_roll_deg + 1e-9)
+    # straight track: only the track's own roll
+    lo0, hi0 = roll_bounds_deg(0.0, lim)
+    assert (lo0, hi0) == (-lim.track_roll_deg, lim.track_roll_deg)
+
+
+def test_bad_limits_are_refused() -> None:
+    with pytest.raises(ValueError, match="line_speed_kmh"):
+        CantLimits(line_speed_kmh=0.0)
+    with pytest.raises(ValueError, match="flexibility"):
+        CantLimits(flexibility=-0.1)
