@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 
 
 __all__ = [
+    "ATTITUDE_LIMITS_DEG",
     "DIRECTIONS",
     "FORMAT",
     "MANIFEST_COLUMNS",
@@ -43,7 +44,14 @@ SIDES = POSITIONS  # left, right, front, rear, roof: v1 readers of two-camera su
 
 DIRECTIONS = ("increasing", "decreasing")
 REQUIRED_COLUMNS = ("frame_id", "image", "side", "gps_s")
-MANIFEST_COLUMNS = ("frame_id", "image", "side", "gps_s", "chainage_m", "lat_deg", "lon_deg", "h_m")
+MANIFEST_COLUMNS = (
+    "frame_id", "image", "side", "gps_s", "chainage_m", "lat_deg", "lon_deg", "h_m",
+    "roll_deg", "pitch_deg",
+)  # fmt: skip
+ATTITUDE_LIMITS_DEG = {"roll_deg": 20.0, "pitch_deg": 10.0}
+"""Largest vehicle roll and pitch a manifest may give, degrees: a rail vehicle on 180 mm of
+cant rolls 6.9 deg plus a degree or two on its springs, and a 100 per mille rack grade is
+5.7 deg; beyond, the IMU's axes or units are wrong."""
 FRAME_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 # the track side a camera looks at when the vehicle drives toward decreasing chainage
 OTHER_SIDE = {"left": "right", "right": "left", "front": "rear", "rear": "front", "roof": "roof"}
@@ -115,6 +123,8 @@ class Frames:
     manifest or from projecting the position on the track (NaN when neither is possible);
     ``lat_deg, lon_deg, h_m`` are NaN when the manifest gave only chainage; ``offset_m`` is the
     antenna's cross-track offset (left positive) when positions were projected, else NaN.
+    ``roll_deg, pitch_deg`` are the vehicle's measured attitude (an IMU's; roll positive
+    raising the vehicle's left side, pitch positive raising its nose), NaN when not given.
     ``row`` is the manifest line number.
     """
 
@@ -129,6 +139,8 @@ class Frames:
     h_m: NDArray
     offset_m: NDArray
     row: NDArray
+    roll_deg: NDArray
+    pitch_deg: NDArray
 
     def __post_init__(self) -> None:
         n = len(self.frame_id)

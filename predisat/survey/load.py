@@ -34,6 +34,7 @@ from predisat.storage import (
     read_bytes,
 )
 from predisat.survey.format import (
+    ATTITUDE_LIMITS_DEG,
     DIRECTIONS,
     FORMAT,
     MANIFEST_COLUMNS,
@@ -380,9 +381,7 @@ def check_survey_track(survey: Survey, track: TrackMap) -> None:
         )
 
 
-def _load_track(
-    root: Location, path: Location, name: str | None, opts: StorageOptions
-) -> TrackMap:
+def _load_track(root: Location, path: Location, name: str | None, opts: StorageOptions) -> TrackMap:
     try:
         with input_path(path, opts) as local_track:
             return load_track(local_track, name)
@@ -428,6 +427,8 @@ class _Row:
     lon_deg: float = math.nan
     h_m: float = math.nan
     offset_m: float = math.nan
+    roll_deg: float = math.nan
+    pitch_deg: float = math.nan
     probs: list[SurveyProblem] = field(default_factory=list)
 
     def bad(self, message: str) -> None:
@@ -520,6 +521,17 @@ def _parse_rows(
         r.gps_s = _parse_float(cells["gps_s"], "gps_s", r.frame_id, line, r.probs)
         for col in ("chainage_m", "lat_deg", "lon_deg", "h_m"):
             setattr(r, col, _parse_float(cells.get(col, ""), col, r.frame_id, line, r.probs))
+        for col, limit in ATTITUDE_LIMITS_DEG.items():
+            value = _parse_float(cells.get(col, ""), col, r.frame_id, line, r.probs)
+            setattr(r, col, value)
+            if abs(value) > limit:
+                r.bad(
+                    f"{col} {value:g} is beyond +-{limit:g} deg for a rail vehicle; give the "
+                    "vehicle's roll (left side up positive) and pitch (nose up positive) in "
+                    "degrees, and check the IMU's axes and units"
+                )
+        if (cells.get("roll_deg", "") == "") != (cells.get("pitch_deg", "") == ""):
+            r.bad("roll_deg and pitch_deg must be given together (or both left empty)")
         has_lat, has_lon = cells.get("lat_deg", "") != "", cells.get("lon_deg", "") != ""
         if has_lat != has_lon:
             r.bad("lat_deg and lon_deg must be given together")
@@ -816,5 +828,7 @@ def _read_manifest(
         h_m=np.array(col("h_m"), float),
         offset_m=np.array(col("offset_m"), float),
         row=np.array(col("row"), np.int64),
+        roll_deg=np.array(col("roll_deg"), float),
+        pitch_deg=np.array(col("pitch_deg"), float),
     )
     return frames, problems

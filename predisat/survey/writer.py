@@ -17,7 +17,15 @@ from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount
-from predisat.survey.format import DIRECTIONS, FORMAT, FRAME_ID_RE, MANIFEST_COLUMNS, SIDES, VERSION
+from predisat.survey.format import (
+    ATTITUDE_LIMITS_DEG,
+    DIRECTIONS,
+    FORMAT,
+    FRAME_ID_RE,
+    MANIFEST_COLUMNS,
+    SIDES,
+    VERSION,
+)
 
 __all__ = ["SurveyWriter"]
 
@@ -135,11 +143,14 @@ class SurveyWriter:
         h_m: float | None = None,
         frame_id: str | None = None,
         jpeg_quality: int = 90,
+        roll_deg: float | None = None,
+        pitch_deg: float | None = None,
     ) -> str:
         """Write one frame's image and record its manifest row; returns the frame_id.
 
         ``image_bgr`` is uint8 (H, W, 3) BGR (or (H, W) grey) with the side's calibrated size.
-        Give ``chainage_m`` and/or ``lat_deg, lon_deg[, h_m]`` (antenna position).
+        Give ``chainage_m`` and/or ``lat_deg, lon_deg[, h_m]`` (antenna position), and the
+        vehicle's measured attitude ``roll_deg, pitch_deg`` when known (both or neither).
         """
         if self._closed:
             raise RuntimeError(f"SurveyWriter for {self.root} is closed")
@@ -162,6 +173,12 @@ class SurveyWriter:
             )
         if chainage_m is None and (lat_deg is None or lon_deg is None):
             raise ValueError("give chainage_m or lat_deg and lon_deg for every frame")
+        if (roll_deg is None) != (pitch_deg is None):
+            raise ValueError("give roll_deg and pitch_deg together (the vehicle's attitude)")
+        for name, value in (("roll_deg", roll_deg), ("pitch_deg", pitch_deg)):
+            limit = ATTITUDE_LIMITS_DEG[name]
+            if value is not None and not (math.isfinite(value) and abs(value) <= limit):
+                raise ValueError(f"{name}={value!r} must be finite degrees within +-{limit:g}")
         fid = frame_id if frame_id is not None else f"{side}_{self._count[side]:06d}"
         if not FRAME_ID_RE.match(fid) or fid in self._ids:
             raise ValueError(
@@ -176,6 +193,7 @@ class SurveyWriter:
             "frame_id": fid, "image": rel, "side": side, "gps_s": _fmt(gps),
             "chainage_m": _fmt(chainage_m), "lat_deg": _fmt(lat_deg),
             "lon_deg": _fmt(lon_deg), "h_m": _fmt(h_m),
+            "roll_deg": _fmt(roll_deg), "pitch_deg": _fmt(pitch_deg),
         })  # fmt: skip
         self._ids.add(fid)
         self._last_gps[side] = gps

@@ -105,7 +105,7 @@ def test_round_trip_by_chainage(tmp_path: Path) -> None:
         assert img.shape == (24, 32, 3)
         assert np.abs(img.astype(int) - _image(i)).mean() < 8
         assert survey.image_path(2 * i + 1) == root / "images" / f"right_{i:06d}.jpg"
-    assert f.to_dataframe().shape == (8, 11)
+    assert f.to_dataframe().shape == (8, 13)
     # nothing half-written remains
     assert not [p for p in root.rglob(".*")]
 
@@ -516,3 +516,52 @@ def test_a_calibration_that_fits_none_of_its_camera_s_images_is_a_survey_problem
     root = _write(tmp_path / "t", n=4)
     cv2.imwrite(str(sorted((root / "images").rglob("left_*"))[0]), small)
     assert len(Survey.load(root, on_error="skip").frames) == 7
+
+
+# ---------------------------------------------------------------------- vehicle attitude
+
+
+def test_measured_attitude_round_trips_and_is_nan_when_not_given(tmp_path: Path) -> None:
+    with SurveyWriter(tmp_path / "s", CAMERAS) as w:
+        w.add_frame(_image(0), "left", GPS0, chainage_m=0.0, roll_deg=-6.25, pitch_deg=0.5)
+        w.add_frame(_image(1), "left", GPS0 + 1, chainage_m=10.0)
+    f = Survey.load(tmp_path / "s").frames
+    assert f.roll_deg[0] == -6.25 and f.pitch_deg[0] == 0.5
+    assert np.isnan(f.roll_deg[1]) and np.isnan(f.pitch_deg[1])
+
+
+def test_a_manifest_without_attitude_columns_reads_as_not_measured(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=2)
+    _save_rows(root, _rows(root), MANIFEST_COLUMNS[:8])  # a manifest written before them
+    assert "roll_deg" not in (root / "manifest.csv").read_text().splitlines()[0]
+    f = Survey.load(root).frames
+    assert np.isnan(f.roll_deg).all() and np.isnan(f.pitch_deg).all()
+
+
+def test_bad_attitudes_are_named_with_their_fix(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=2)
+    rows = _rows(root)
+    rows[0]["roll_deg"], rows[0]["pitch_deg"] = "35", "0"  # radians taken for degrees, or axes
+    rows[1]["roll_deg"], rows[1]["pitch_deg"] = "1.0", ""
+    rows[2]["roll_deg"], rows[2]["pitch_deg"] = "0", "-12"
+    rows[3]["roll_deg"], rows[3]["pitch_deg"] = "nan", "0"
+    _save_rows(root, rows)
+    problems = _problems(root)
+    _only(problems, "left_000000", "roll_deg 35 is beyond +-20 deg")
+    _only(problems, "right_000000", "roll_deg and pitch_deg must be given together")
+    _only(problems, "left_000001", "pitch_deg -12 is beyond +-10 deg")
+    _only(problems, "right_000001", "roll_deg 'nan' is not a finite number")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"roll_deg": 1.0}, "together"),
+        ({"roll_deg": 25.0, "pitch_deg": 0.0}, "roll_deg"),
+        ({"roll_deg": 0.0, "pitch_deg": float("inf")}, "pitch_deg"),
+    ],
+)
+def test_writer_rejects_bad_attitudes(tmp_path: Path, kwargs: dict, match: str) -> None:
+    with SurveyWriter(tmp_path / "s", CAMERAS) as w:
+        with pytest.raises(ValueError, match=match):
+            w.add_frame(_image(0), "left", GPS0, chainage_m=0.0, **kwargs)
