@@ -23,6 +23,7 @@ from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
 from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
+from predisat.track.cant import CantLimits
 
 __all__ = ["add_arguments", "run"]
 
@@ -95,6 +96,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "mask at the position)",
     )  # fmt: skip
     parser.add_argument(
+        "--line-speed-kmh", type=positive_float, default=CantLimits.line_speed_kmh,
+        metavar="KMH",
+        help="the fastest train on the line (default %(default)s): where the manifest has no "
+        "measured roll, a curve's cant is bounded by this speed's equilibrium cant, and each "
+        "frame's sky is eroded by the roll it leaves unknown (docs/reconstruction.md, "
+        "section 16)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--max-cant-mm", type=positive_float, default=CantLimits.max_cant_mm, metavar="MM",
+        help="the largest cant on the line (default %(default)s, EN 13803's limit)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--grade-doubt-deg", type=non_negative_float, default=PipelineParams.grade_doubt_deg,
+        metavar="DEG",
+        help="where the manifest has no measured pitch, the track map's grade is taken give "
+        "or take this angle (default %(default)s; a map without heights reads level)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--imu-doubt-deg", type=non_negative_float, default=PipelineParams.imu_doubt_deg,
+        metavar="DEG",
+        help="accuracy of the manifest's measured roll and pitch, each (default %(default)s: "
+        "taken as exact; give your IMU's)",
+    )  # fmt: skip
+    parser.add_argument(
         "--quiet", action="store_true",
         help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
         "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
@@ -127,7 +152,11 @@ def run(args: argparse.Namespace) -> ProcessResult:
         PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
                        thin_deg=args.thin_deg,
                        reconstruction=ReconstructionParams(
-                           cell_sweep_m=None if args.cell_sweep else 0.0)),
+                           cell_sweep_m=None if args.cell_sweep else 0.0),
+                       cant=CantLimits(line_speed_kmh=args.line_speed_kmh,
+                                       max_cant_mm=args.max_cant_mm),
+                       grade_doubt_deg=args.grade_doubt_deg,
+                       imu_doubt_deg=args.imu_doubt_deg),
         track=track,
         workers=args.workers,
         scheduler=args.scheduler,

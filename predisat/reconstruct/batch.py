@@ -160,9 +160,7 @@ class OutputInUseError(ValueError):
     """The output folder holds chunks of another survey (``replace=False``)."""
 
 
-def _foreign_chunks(
-    chunk_dir: Location, survey_hash: str, opts: StorageOptions
-) -> dict[str, str]:
+def _foreign_chunks(chunk_dir: Location, survey_hash: str, opts: StorageOptions) -> dict[str, str]:
     """Chunks in ``chunk_dir`` made from another survey description (their marker's
     ``survey_hash`` differs): chunk name -> the survey its marker names."""
     foreign: dict[str, str] = {}
@@ -263,8 +261,7 @@ def _load_margins(
     # merge, after hours of work (MarginTable.margin_for refuses bins it has no margin for)
     table.check(f"margins {record['file']}")
     # NaN (los_share of an empty group) becomes null: the provenance is strict JSON
-    record |= {"target": table.target,
-               "table": json.loads(table.table.to_json(orient="records"))}
+    record |= {"target": table.target, "table": json.loads(table.table.to_json(orient="records"))}
     json.dumps(record, allow_nan=False)
     return table, record
 
@@ -557,7 +554,8 @@ def _chunk_jobs(
         )
         frames = tuple(
             ChunkFrame(str(fr.frame_id[i]), str(fr.side[i]), float(ch[i]),
-                       str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")))
+                       str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")),
+                       float(fr.roll_deg[i]), float(fr.pitch_deg[i]))
             for i in idx
             if str(fr.frame_id[i]) not in bad
         )  # fmt: skip

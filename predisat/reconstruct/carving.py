@@ -27,6 +27,7 @@ of its positions' range extended by ``overlap_m`` on both sides.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -49,7 +50,12 @@ from predisat.reconstruct.heightfield import (
     corridor_grid,
     sweep_along_track,
 )
-from predisat.reconstruct.skyline import LOW_CONFIDENCE_WINDOW_DEG, Rectifier, SkyProfile
+from predisat.reconstruct.skyline import (
+    LOW_CONFIDENCE_WINDOW_DEG,
+    Rectifier,
+    SkyProfile,
+    erode_sky_deg,
+)
 from predisat.track import TrackMap
 
 __all__ = [
@@ -371,6 +377,10 @@ class FrameView:
     thin_width_deg : float
         Widest feature ``thin_mask`` may hold, degrees (the policy's width in pixels times
         the camera's widest pixel).
+    attitude_doubt_deg : float
+        Angle by which the frame's pose may be off (``mount`` is the level-frame mount of the
+        vehicle's nominal attitude, :mod:`predisat.reconstruct.attitude`): its sky is eroded
+        by it before anything is cleared (``docs/reconstruction.md``, section 16).
     """
 
     chainage_m: float
@@ -385,6 +395,7 @@ class FrameView:
     view_group: str = ""
     thin_mask: NDArray | None = field(default=None, repr=False)
     thin_width_deg: float = 0.0
+    attitude_doubt_deg: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -469,9 +480,11 @@ class Reconstructor:
     params : ReconstructionParams, optional
     """
 
+    _MAX_RECTIFIERS = 24  # a curve's frames need one per rounded attitude (tens of MB each)
+
     def __init__(self, params: ReconstructionParams | None = None) -> None:
         self.params = params or ReconstructionParams()
-        self._rectifiers: dict[tuple[CameraModel, Mount], Rectifier] = {}
+        self._rectifiers: OrderedDict[tuple[CameraModel, Mount], Rectifier] = OrderedDict()
 
     @property
     def _min_sky_el_deg(self) -> float:
@@ -481,12 +494,24 @@ class Reconstructor:
     def rectifier(self, camera: CameraModel, mount: Mount) -> Rectifier:
         """The (cached) :class:`~predisat.reconstruct.skyline.Rectifier` of a camera and mount."""
         key = (camera, mount)
-        if key not in self._rectifiers:
+        if key in self._rectifiers:
+            self._rectifiers.move_to_end(key)
+        else:
             p = self.params
             self._rectifiers[key] = Rectifier.build(
                 camera, mount, p.rectify_az_step_deg, p.rectify_el_step_deg
             )
+            if len(self._rectifiers) > self._MAX_RECTIFIERS:
+                self._rectifiers.popitem(last=False)  # frames come in chainage order
         return self._rectifiers[key]
+
+    @staticmethod
+    def _sure_sky(f: FrameView, sky: NDArray) -> NDArray:
+        """``sky`` eroded by the frame's attitude doubt (section 16): sky only where every
+        direction the pixel may truly have is sky."""
+        if f.attitude_doubt_deg <= 0.0:
+            return sky
+        return erode_sky_deg(sky, f.camera, f.attitude_doubt_deg)
 
     def profiles(self, frames: Sequence[FrameView]) -> list[SkyProfile]:
         """Sky profile of every frame."""
@@ -496,7 +521,7 @@ class Reconstructor:
             try:
                 out.append(
                     rect.profile(
-                        f.sky_mask, f.heading_deg, f.reverse, f.confidence,
+                        self._sure_sky(f, f.sky_mask), f.heading_deg, f.reverse, f.confidence,
                         self.params.min_confidence, self.params.low_confidence_windows,
                         self.params.low_confidence_window_deg, self._min_sky_el_deg,
                     )
@@ -517,7 +542,7 @@ class Reconstructor:
                 continue
             solid = np.asarray(f.sky_mask, bool) & ~np.asarray(f.thin_mask, bool)
             out.append(self.rectifier(f.camera, f.mount).profile(
-                solid, f.heading_deg, f.reverse, f.confidence,
+                self._sure_sky(f, solid), f.heading_deg, f.reverse, f.confidence,
                 self.params.min_confidence, self.params.low_confidence_windows,
                 self.params.low_confidence_window_deg, self._min_sky_el_deg,
             ))  # fmt: skip
@@ -655,7 +680,12 @@ class Reconstructor:
         mask, src, closed = close_covered(mask, src, p.covered_share)
         assumed = assumed & ~closed
         support = bin_support(
-            (near_el, near_sup), (far_grid_el, far_sup), far_el, far_seen, far_views, assumed,
+            (near_el, near_sup),
+            (far_grid_el, far_sup),
+            far_el,
+            far_seen,
+            far_views,
+            assumed,
             p.n_sub,
         )
         desc = _descriptors(hf, track, s, ant, p)
@@ -790,6 +820,7 @@ def _resolving_bounds(
     for idx in _view_groups(frames).values():
         group = np.zeros(hf.shape, np.bool_)  # a view counts once per cell, whatever its frames
         for i in idx:
+
             def carve(raster: NDArray, range_m: float, marks: NDArray, i: int = i) -> None:
                 carve_profile(
                     hf, raster, profs[i], cams[i], rots[i], range_m, seen=marks,
@@ -813,9 +844,7 @@ def _resolving_bounds(
     return out, np.where(raised, near_views, views).astype(views.dtype)
 
 
-def _unseen_rules(
-    frames: Sequence[FrameView], p: ReconstructionParams
-) -> list[UnseenRule | None]:
+def _unseen_rules(frames: Sequence[FrameView], p: ReconstructionParams) -> list[UnseenRule | None]:
     """The unseen-arm rule of each frame (:class:`~predisat.reconstruct.heightfield.
     UnseenRule`): the wider of ``p.clearance_unseen_deg`` and the frame's thin features."""
     if p.clearance_unseen_deg is None:

@@ -22,6 +22,7 @@ from predisat.camera.models import CameraModel, Mount
 from predisat.clock import utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
+from predisat.reconstruct.attitude import frame_attitudes
 from predisat.reconstruct.badframes import BadFrame
 from predisat.reconstruct.carving import FrameView, Reconstructor
 from predisat.reconstruct.framecache import decode_cache
@@ -47,13 +48,16 @@ __all__ = [
     "run_chunk",
 ]
 
+
 @dataclass(frozen=True)
 class ChunkFrame:
     frame_id: str
     side: str
     chainage_m: float
     cache_path: str
-
+    # the vehicle's measured attitude (the manifest's), NaN when not given
+    roll_deg: float = float("nan")
+    pitch_deg: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -81,12 +85,9 @@ class ChunkJob:
     storage_options: StorageOptions = field(default_factory=dict)
 
 
-
 def _fmt_m(x: float) -> str:
     text = f"{x:.3f}".rstrip("0").rstrip(".")
     return text if text != "-0" else "0"
-
-
 
 
 def chunk_name(lo_m: float, hi_m: float) -> str:
@@ -94,12 +95,10 @@ def chunk_name(lo_m: float, hi_m: float) -> str:
     return f"{_fmt_m(lo_m)}_{_fmt_m(hi_m)}"
 
 
-
 def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstructor:
     """``previous`` when it has the job's parameters, else a new one."""
     p = job.params.reconstruction
     return previous if previous is not None and previous.params == p else Reconstructor(p)
-
 
 
 def run_chunk(
@@ -125,8 +124,16 @@ def run_chunk(
         axis = np.asarray(track.enu_at(s), float)
         ant = axis + job.antenna_height_m * np.asarray(track.up_at(s), float)
         heading = np.asarray(track.heading_at(s), float)
+        p = job.params
+        att = frame_attitudes(
+            track, s, [f.roll_deg for f, _ in ok_frames], [f.pitch_deg for f, _ in ok_frames],
+            job.reverse, cant=p.cant, grade_doubt_deg=p.grade_doubt_deg,
+            imu_doubt_deg=p.imu_doubt_deg,
+        )  # fmt: skip
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
-            cam, mount = job.cameras[f.side]
+            cam, vehicle_mount = job.cameras[f.side]
+            # the mount in the level frame of the vehicle's attitude (section 16)
+            mount = vehicle_mount.on_vehicle(float(att.roll_deg[k]), float(att.pitch_deg[k]))
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
@@ -135,6 +142,7 @@ def run_chunk(
                     chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
                     antenna_enu_m=ant[k], heading_deg=float(heading[k]), reverse=job.reverse,
                     confidence=conf, frame_id=f.frame_id, thin_mask=thin, thin_width_deg=width,
+                    attitude_doubt_deg=float(att.doubt_deg[k]),
                 )
             )  # fmt: skip
     if reconstructor is None:
@@ -165,7 +173,6 @@ def run_chunk(
     return job.name, bad
 
 
-
 def _load_cached(
     f: ChunkFrame, opts: StorageOptions
 ) -> tuple[NDArray, NDArray | None, NDArray | None] | BadFrame:
@@ -176,7 +183,6 @@ def _load_cached(
             return decode_cache(z, json.loads(str(z["meta"])), f.frame_id)
     except (OSError, ValueError, KeyError) as exc:
         return BadFrame(f.frame_id, f"segmentation cache {path} unreadable ({exc}); rerun")
-
 
 
 def chunk_finished(

@@ -10,6 +10,7 @@ from predisat.jsontypes import JsonDict
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.framecache import sky_net_sha256
 from predisat.sky.network import NET_METHODS
+from predisat.track.cant import CantLimits
 
 __all__ = [
     "DEFAULT_SEGMENTER",
@@ -20,7 +21,6 @@ __all__ = [
 # chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
 DEFAULT_SEGMENTER = "ensemble"
 THIN_DEG = 0.7  # docs/segmentation.md, "Thin-structure policy": wires and cables, not masts
-
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,14 @@ class PipelineParams:
         demo's 640x480 fisheye): the widest pixel of the frame, so that no feature much wider
         than ``thin_deg`` anywhere in it is made transparent; 0 disables the policy. Custom
         segmenters apply their own.
+    cant : CantLimits
+        Bounds the vehicle's roll on curves where the manifest gives no measured attitude
+        (``docs/reconstruction.md``, section 16).
+    grade_doubt_deg : float
+        Where the manifest gives no measured pitch, the track map's grade is taken give or
+        take this angle (a map without heights reads level).
+    imu_doubt_deg : float
+        Accuracy of the manifest's measured roll and pitch, degrees each (0: taken as exact).
     """
 
     chunk_m: float = 1000.0
@@ -59,8 +67,15 @@ class PipelineParams:
     segmenter: str = DEFAULT_SEGMENTER
     sky_net: str | None = None
     thin_deg: float = THIN_DEG
+    cant: CantLimits = field(default_factory=CantLimits)
+    grade_doubt_deg: float = 1.0
+    imu_doubt_deg: float = 0.0
 
     def __post_init__(self) -> None:
+        for name in ("grade_doubt_deg", "imu_doubt_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0 <= v < 10.0):
+                raise ValueError(f"{name} must be an angle in [0, 10) degrees, got {v}")
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
         if not (math.isfinite(self.thin_deg) and 0.0 <= self.thin_deg < 10.0):
@@ -88,6 +103,8 @@ class PipelineParams:
         out: JsonDict = {
             "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
             "thin_deg": self.thin_deg,
+            "attitude": {**asdict(self.cant), "grade_doubt_deg": self.grade_doubt_deg,
+                         "imu_doubt_deg": self.imu_doubt_deg},
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid

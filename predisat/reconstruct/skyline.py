@@ -40,6 +40,7 @@ __all__ = [
     "ColumnSkyline",
     "Rectifier",
     "SkyProfile",
+    "erode_sky_deg",
     "leading_sky_rows",
     "skyline_directions",
 ]
@@ -158,6 +159,64 @@ def skyline_directions(
     ray = np.where((rows > 0)[:, None], ray, np.nan)
     az, el, _ = enu_to_azel(ray)
     return ColumnSkyline(rows, ray, az, el)
+
+
+def erode_sky_deg(sky_mask: ArrayLike, camera: CameraModel, angle_deg: float) -> NDArray:
+    """The sky of a mask whose every pixel within ``angle_deg`` is sky, shape ``camera.shape``.
+
+    A frame whose pose is known only within a rotation of ``angle_deg`` (a vehicle roll or
+    pitch not measured) may take a direction for sky only where the whole cone of that
+    half-angle around it is sky: the true direction of each pixel lies within it. Frame
+    cameras (pinhole, fisheye) are eroded by a disc of ``angle / narrowest pixel`` pixels
+    (rounded up, plus one: a direction in reach may fall in the next pixel's area); a panorama
+    row by row, its horizontal reach widening as ``1 / cos(latitude)`` toward the
+    poles (the whole row at a pole).
+
+    Parameters
+    ----------
+    sky_mask : array_like of bool, shape ``camera.shape``
+    camera : CameraModel
+    angle_deg : float
+        Half-angle of the cone, degrees (>= 0; 0 returns a copy).
+
+    Returns
+    -------
+    ndarray of bool, shape ``camera.shape``
+    """
+    m = np.ascontiguousarray(_as_sky_mask(sky_mask, camera), np.bool_)
+    if not (np.isfinite(angle_deg) and angle_deg >= 0):
+        raise ValueError(f"angle_deg must be a finite angle >= 0 degrees, got {angle_deg}")
+    if angle_deg == 0:
+        return m.copy()
+    img = m.view(np.uint8)
+    h, w = camera.shape
+    if camera.model != "equirect":
+        # one pixel more: a direction within the angle may fall in the next pixel's area
+        r = int(np.ceil(angle_deg / camera.narrowest_pixel_deg)) + 1
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+        out = cv2.erode(img, kernel, borderType=cv2.BORDER_REPLICATE)
+        return out.astype(bool)
+    a = np.radians(angle_deg)
+    ry = int(np.ceil(a * camera.fy)) + 1
+    # vertical first, then each row horizontally with its own reach (a box holds the cone)
+    col = cv2.erode(img, np.ones((2 * ry + 1, 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    lat = np.abs((np.arange(h) - camera.cy) / camera.fy)  # row centres
+    # the row's pixels nearest the pole set its reach; within a of the pole, every longitude
+    near = np.minimum(lat + a + 0.5 / camera.fy, np.pi / 2)
+    cos = np.cos(near)
+    reach = np.where(cos > 1e-9, np.ceil(a * camera.fx / np.maximum(cos, 1e-9)) + 1, w)
+    reach = np.minimum(reach, w).astype(np.int64)
+    out = np.empty_like(col)
+    for rx in np.unique(reach):
+        rows = np.flatnonzero(reach == rx)
+        if rx >= w // 2:
+            out[rows] = col[rows].min(axis=1, keepdims=True)
+            continue
+        k = np.ones((1, 2 * int(rx) + 1), np.uint8)
+        # longitude wraps: pad with the other edge before eroding
+        band = np.concatenate([col[rows][:, -rx:], col[rows], col[rows][:, :rx]], axis=1)
+        out[rows] = cv2.erode(band, k, borderType=cv2.BORDER_REPLICATE)[:, rx : rx + w]
+    return out.astype(bool)
 
 
 @dataclass(frozen=True)
@@ -464,7 +523,10 @@ def _raise_skyline(
 
 
 def _raise_skyline_deg(
-    sky: NDArray, cols: NDArray, raise_deg: float, el_deg: NDArray,
+    sky: NDArray,
+    cols: NDArray,
+    raise_deg: float,
+    el_deg: NDArray,
     from_row: NDArray | None = None,
 ) -> NDArray:
     """As :func:`_raise_skyline` with the raise as an angle: the top sky run of each column
@@ -537,9 +599,7 @@ def _remap_index(shape: tuple[int, int], map_u: NDArray, map_v: NDArray) -> NDAr
     return np.where(got[..., 0] >= 0, idx, -1).astype(np.int32)
 
 
-def _index_runs(
-    pixel_index: NDArray, top: NDArray
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _index_runs(pixel_index: NDArray, top: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Runs of equal entries down each column of ``pixel_index`` (n_e, n_b): their first rows
     and values (flat, column after column), the columns' run offsets (n_b + 1) and, per
     column, the run holding row ``top[b]``."""

@@ -12,6 +12,7 @@ from predisat.reconstruct.skyline import (
     Rectifier,
     _raise_skyline,
     _raise_skyline_deg,
+    erode_sky_deg,
     leading_sky_rows,
     skyline_directions,
 )
@@ -456,3 +457,59 @@ def test_a_column_whose_sky_reaches_under_the_horizon_is_voided() -> None:
     assert np.all(np.isinf(checked.sky_el_deg[in_pier]))  # the column clears nothing
     rest = np.abs(plain.az_deg - 260.0) > 4.0
     np.testing.assert_array_equal(checked.sky_el_deg[rest], plain.sky_el_deg[rest])
+
+
+# ---------------------------------------------------------------------- attitude doubt
+
+
+def _blobs(camera: CameraModel, seed: int) -> np.ndarray:
+    """A sky mask of random obstacle discs and a ragged horizon."""
+    rng = np.random.default_rng(seed)
+    h, w = camera.shape
+    sky = np.ones((h, w), np.uint8)
+    cut = (h * (0.55 + 0.1 * np.sin(np.arange(w) / 37.0))).astype(int)
+    for c in range(w):
+        sky[cut[c]:, c] = 0
+    for _ in range(25):
+        cv2.circle(sky, (int(rng.integers(w)), int(rng.integers(h))), int(rng.integers(2, 30)),
+                   0, -1)
+    return sky.astype(bool)
+
+
+@pytest.mark.parametrize(
+    "camera",
+    [CameraModel.pinhole_from_fov(320, 240, 74.0, dist=(-0.12, 0.03, 0.0, 0.0)),
+     default_camera("fisheye"), CameraModel.equirect(720)],
+    ids=["pinhole", "fisheye", "equirect"],
+)
+def test_eroded_sky_holds_whatever_rotation_within_the_doubt(camera: CameraModel) -> None:
+    """Safety of the erosion, checked through the camera model: every pixel still sky after
+    eroding by ``doubt`` sees sky under any rotation of the camera up to ``doubt``."""
+    from scipy.spatial.transform import Rotation
+
+    doubt = 2.5
+    sky = _blobs(camera, 7)
+    sure = erode_sky_deg(sky, camera, doubt)
+    assert sure.sum() > 0.2 * sky.sum() and not (sure & ~sky).any()
+    v, u = np.nonzero(sure)
+    pick = np.random.default_rng(1).choice(u.size, 4000, replace=False)
+    ray = camera.pixel_to_ray(u[pick].astype(float), v[pick].astype(float))
+    rng = np.random.default_rng(2)
+    for _ in range(12):
+        axis = rng.normal(size=3)
+        rot = Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.radians(doubt)).as_matrix()
+        pu, pv = camera.ray_to_pixel(ray @ rot.T)
+        iu, iv = np.rint(pu).astype(int), np.rint(pv).astype(int)
+        inside = (iu >= 0) & (iu < camera.width_px) & (iv >= 0) & (iv < camera.height_px)
+        if camera.model == "equirect":  # longitude wraps
+            iu, inside = iu % camera.width_px, inside | (iv >= 0) & (iv < camera.height_px)
+        assert inside.mean() > 0.5
+        assert sky[iv[inside], iu[inside]].all()
+
+
+def test_erosion_by_nothing_is_the_mask_and_a_bad_angle_is_refused() -> None:
+    cam = default_camera("fisheye")
+    sky = _blobs(cam, 3)
+    assert np.array_equal(erode_sky_deg(sky, cam, 0.0), sky)
+    with pytest.raises(ValueError, match="angle_deg"):
+        erode_sky_deg(sky, cam, -1.0)

@@ -1,0 +1,107 @@
+"""The vehicle's attitude at each frame: measured, or bounded from the track (section 16 of
+``docs/reconstruction.md``).
+
+The rectification takes the vehicle frame as level. On a canted curve the body rolls by up to
+7-9 deg and on a grade it pitches by a degree or two, so a side camera's skyline reads low on
+one side by about that angle: false trust. Each frame therefore gets
+
+* a *nominal* attitude, by which its mount is turned into the level frame
+  (:meth:`predisat.camera.models.Mount.on_vehicle`): the manifest's measured roll and pitch
+  (an IMU's), else the middle of the interval the track allows;
+* a *doubt*, the angle its true attitude may still be off by: the IMU's stated accuracy, else
+  half the interval's width. The frame's sky is eroded by it
+  (:func:`predisat.reconstruct.skyline.erode_sky_deg`), so that no sky pixel whose true
+  direction might be an obstacle clears anything.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.track import TrackMap
+from predisat.track.cant import CantLimits, inside_roll_sign, roll_bounds_deg
+
+__all__ = ["ATTITUDE_STEP_DEG", "FrameAttitude", "frame_attitudes"]
+
+ATTITUDE_STEP_DEG = 0.05
+"""Nominal attitudes are rounded to this step, so that frames on a curve share rectifiers
+(the rounding, 0.025 deg at most, is a fifth of the rectification grid's elevation step)."""
+
+
+@dataclass(frozen=True, eq=False)
+class FrameAttitude:
+    """Nominal attitude and doubt of frames, degrees, shape (n,) each.
+
+    ``roll_deg`` positive raises the vehicle's left side, ``pitch_deg`` its nose (directions
+    of travel, as the mount); ``measured`` is True where the manifest gave them.
+    """
+
+    roll_deg: NDArray
+    pitch_deg: NDArray
+    doubt_deg: NDArray
+    measured: NDArray
+
+
+def frame_attitudes(
+    track: TrackMap,
+    chainage_m: ArrayLike,
+    roll_deg: ArrayLike,
+    pitch_deg: ArrayLike,
+    reverse: bool,
+    *,
+    cant: CantLimits | None = None,
+    grade_doubt_deg: float = 1.0,
+    imu_doubt_deg: float = 0.0,
+) -> FrameAttitude:
+    """The attitude each frame is rectified with, and what it may still be off by.
+
+    Parameters
+    ----------
+    track : TrackMap
+    chainage_m : array_like, shape (n,)
+    roll_deg, pitch_deg : array_like, shape (n,)
+        Measured vehicle attitude (``Frames.roll_deg, pitch_deg``); NaN where not measured.
+    reverse : bool
+        The survey drives toward decreasing chainage.
+    cant : CantLimits, optional
+        Bounds the roll where it is not measured (from the track's curvature).
+    grade_doubt_deg : float
+        Where the pitch is not measured it is taken from the track map's grade (0 for a map
+        without heights), give or take this angle.
+    imu_doubt_deg : float
+        Accuracy of the measured roll and pitch, degrees (each).
+
+    Returns
+    -------
+    FrameAttitude
+        Nominal angles rounded to :data:`ATTITUDE_STEP_DEG`, the rounding added to the doubt
+        where it is not 0.
+    """
+    s = np.asarray(chainage_m, float)
+    roll = np.broadcast_to(np.asarray(roll_deg, float), s.shape)
+    pitch = np.broadcast_to(np.asarray(pitch_deg, float), s.shape)
+    for name, v in (("grade_doubt_deg", grade_doubt_deg), ("imu_doubt_deg", imu_doubt_deg)):
+        if not (np.isfinite(v) and 0.0 <= v < 10.0):
+            raise ValueError(f"{name} must be an angle in [0, 10) degrees, got {v}")
+    measured = np.isfinite(roll) & np.isfinite(pitch)
+    out_roll = np.where(measured, roll, 0.0)
+    out_pitch = np.where(measured, pitch, 0.0)
+    doubt = np.where(measured, 2.0 * imu_doubt_deg, 0.0)  # roll and pitch each
+    todo = ~measured
+    if todo.any():
+        st = s[todo]
+        lo, hi = roll_bounds_deg(track.curvature_at(st), cant)
+        sign = inside_roll_sign(track.curvature_at(st), reverse)
+        # on straight track the sign is 0 and the interval symmetric: nominal 0
+        out_roll[todo] = np.where(sign != 0, sign * 0.5 * (lo + hi), 0.0)
+        grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(st), float)))
+        out_pitch[todo] = -grade_deg if reverse else grade_deg
+        doubt[todo] = 0.5 * (hi - lo) + grade_doubt_deg
+    q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
+    q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
+    rounding = np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
+    doubt = np.where(doubt > 0, doubt + rounding, 0.0)
+    return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured)

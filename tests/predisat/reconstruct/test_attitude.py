@@ -1,0 +1,117 @@
+"""Each frame's nominal attitude and doubt: measured, or bounded from the track's curves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predisat.reconstruct.attitude import ATTITUDE_STEP_DEG, frame_attitudes
+from predisat.track import demo_track
+from predisat.track.cant import CantLimits, body_roll_deg, equilibrium_cant_mm
+
+
+@pytest.fixture(scope="module")
+def track():  # -> TrackMap
+    return demo_track()
+
+
+def test_measured_attitudes_are_kept_rounded(track) -> None:
+    att = frame_attitudes(track, [800.0, 810.0], [-6.912, 0.0], [0.33, 0.0], False,
+                          imu_doubt_deg=0.1)  # fmt: skip
+    assert att.measured.all()
+    np.testing.assert_allclose(att.roll_deg, [-6.9, 0.0], atol=1e-12)
+    np.testing.assert_allclose(att.pitch_deg, [0.35, 0.0], atol=1e-12)
+    # the IMU's doubt for roll and pitch, and the rounding
+    assert att.doubt_deg[1] == pytest.approx(0.2)
+    assert att.doubt_deg[0] == pytest.approx(0.2 + 0.012 + 0.02)
+    assert np.all(np.abs(att.roll_deg / ATTITUDE_STEP_DEG - np.rint(att.roll_deg / 0.05)) < 1e-9)
+
+
+def test_unmeasured_roll_is_centred_in_the_curve_and_its_doubt_covers_real_vehicles(track) -> None:
+    s = np.arange(450.0, 1150.0, 10.0)  # a right-hand curve, R 420-640 m
+    lim = CantLimits()
+    nan = np.full(s.size, np.nan)
+    att = frame_attitudes(track, s, nan, nan, False, cant=lim, grade_doubt_deg=0.0)
+    assert not att.measured.any()
+    assert np.all(att.roll_deg > 0)  # right-hand: the vehicle's left side up
+    k = track.curvature_at(s)
+    # a train at any speed up to the line's on any cant up to the design's stays in the doubt
+    for cant_share in (0.0, 0.5, 1.0):
+        cant = cant_share * np.minimum(equilibrium_cant_mm(k, lim.line_speed_kmh), lim.max_cant_mm)
+        for speed in (0.0, 60.0, lim.line_speed_kmh):
+            if np.any(equilibrium_cant_mm(k, speed) - cant > lim.max_deficiency_mm):
+                continue
+            true = body_roll_deg(k, cant, speed, lim.flexibility)
+            assert np.all(np.abs(true - att.roll_deg) <= att.doubt_deg - lim.track_roll_deg + 1e-9)
+    # driven the other way the same curve turns left: the roll changes sign
+    back = frame_attitudes(track, s, nan, nan, True, cant=lim, grade_doubt_deg=0.0)
+    np.testing.assert_allclose(back.roll_deg, -att.roll_deg, atol=1e-12)
+
+
+def test_unmeasured_on_straight_track_is_level_give_or_take_the_track_and_grade(track) -> None:
+    s = np.array([3300.0, 3400.0])  # straight
+    assert np.all(np.abs(track.curvature_at(s)) < 1e-5)
+    att = frame_attitudes(track, s, np.nan, np.nan, False, grade_doubt_deg=1.0)
+    np.testing.assert_allclose(att.roll_deg, 0.0, atol=1e-12)
+    assert np.all(att.doubt_deg < 0.5 + 1.0 + 0.1) and np.all(att.doubt_deg >= 1.5)
+
+
+def test_bad_doubts_are_refused(track) -> None:
+    with pytest.raises(ValueError, match="grade_doubt_deg"):
+        frame_attitudes(track, [0.0], np.nan, np.nan, False, grade_doubt_deg=-1.0)
+
+
+# ------------------------------------------------- a canted curve, end to end against the truth
+
+
+@pytest.fixture(scope="module")
+def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: masks})
+    """A rendered survey on a right-hand curve (R 420-640 m, 160 mm of cant, the body rolled
+    6-7 deg), processed three ways: the roll measured, not given, and wrongly given as level
+    (what the pipeline assumed before it knew of cant)."""
+    import csv
+
+    from predisat.camera.models import default_camera
+    from predisat.reconstruct.batch import process_survey
+    from predisat.reconstruct.evaluate import load_truth
+    from predisat.reconstruct.params import PipelineParams
+    from predisat.synth.generate import generate_survey
+
+    base = tmp_path_factory.mktemp("cant")
+    cam = default_camera("fisheye").resized(400, 300)
+    generate_survey(demo_track(), 760.0, 900.0, sky="clear", seed=4, out_dir=base, camera=cam,
+                    progress=False, cant_speed_kmh=100.0)  # fmt: skip
+    survey = base / "survey"
+    rows = list(csv.DictReader(open(survey / "manifest.csv", newline="")))
+    assert all(5.0 < float(r["roll_deg"]) < 8.0 for r in rows)
+    masks = {"measured": process_survey(survey, base / "measured", PipelineParams(),
+                                        progress=False).masks}  # fmt: skip
+    for variant, value in (("unknown", ""), ("level", "0.0")):
+        for r in rows:
+            r["roll_deg"] = r["pitch_deg"] = value
+        with open(survey / "manifest.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
+            w.writeheader()
+            w.writerows(rows)
+        masks[variant] = process_survey(survey, base / variant, PipelineParams(),
+                                        progress=False).masks  # fmt: skip
+    return load_truth(base / "truth"), masks
+
+
+def _false_trust_and_lost(masks, truth) -> tuple[float, float]:
+    from predisat.reconstruct.evaluate import compare, trust_counts
+
+    c = compare(masks, truth)
+    trusted, good, los = trust_counts(c.mask_el_deg, c.truth_el_deg)
+    return 1 - good.sum() / trusted.sum(), 1 - good.sum() / los.sum()
+
+
+def test_a_canted_curve_is_safe_with_the_roll_measured_or_bounded(canted) -> None:
+    truth, masks = canted
+    ft = {k: _false_trust_and_lost(m, truth) for k, m in masks.items()}
+    # the level assumption trusts blocked directions on the curve's low side ...
+    assert ft["level"][0] > 1e-3, ft
+    # ... the measured roll and the bounded one do not
+    assert ft["measured"][0] < 1e-4 and ft["unknown"][0] < 1e-4, ft
+    # knowing the roll costs no sky against the bound
+    assert ft["measured"][1] < ft["unknown"][1], ft
