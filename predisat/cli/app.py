@@ -130,6 +130,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         workers=args.workers,
         start_gps_s=start_gps_s,
+        cant_speed_kmh=args.cant_speed_kmh,
+        max_cant_mm=args.max_cant_mm,
+        write_attitude=not args.no_imu,
     )
     dt = time.perf_counter() - t0
     print(
@@ -303,6 +306,15 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--solar-hour", type=finite_float, metavar="H",
                    help="local mean solar time of the first frame on 2024-06-21 (default 10: "
                    "mid-morning; 6-7 or 17.5-18.5 for a low sun with glare and lens flare)")
+    p.add_argument("--cant-speed-kmh", type=positive_float, metavar="KMH",
+                   help="cant the curves for this line speed (equilibrium cant, at most "
+                   "--max-cant-mm): the vehicle rolls toward each curve's inside, as a real "
+                   "one does (default: none, a level vehicle)")
+    p.add_argument("--max-cant-mm", type=positive_float, default=160.0, metavar="MM",
+                   help="the largest cant with --cant-speed-kmh")
+    p.add_argument("--no-imu", action="store_true",
+                   help="leave the vehicle's roll and pitch out of the manifest (a survey "
+                   "without an IMU; the pipeline then bounds them from the track's curves)")
     p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

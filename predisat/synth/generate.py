@@ -27,7 +27,7 @@ import multiprocessing as mp
 import os
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -48,6 +48,7 @@ from predisat.synth.sky import SKY_CONDITIONS, SkyModel
 from predisat.synth.truth import true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track import TrackMap
+from predisat.track.cant import body_roll_deg, equilibrium_cant_mm
 from predisat.track.readers import write_geojson
 
 __all__ = [
@@ -176,6 +177,9 @@ def generate_survey(
     overwrite: bool = False,
     workers: int = 1,
     rig: Rig | None = None,
+    cant_speed_kmh: float | None = None,
+    max_cant_mm: float = 160.0,
+    write_attitude: bool = True,
 ) -> SynthResult:
     """Render a synthetic survey of a track stretch and write it with its ground truth.
 
@@ -217,6 +221,17 @@ def generate_survey(
         The cameras to render (e.g. ``Rig.preset("360")``); its name goes to survey.yaml
         (``rig``). Default: ``camera`` on both sides, pitched up ``pitch_deg``; give either
         the rig or ``camera`` / ``pitch_deg``.
+    cant_speed_kmh : float, optional
+        Cant the curves for this line speed (their equilibrium cant, at most
+        ``max_cant_mm``, in 5 mm steps): the vehicle body rolls toward each curve's inside
+        by the cant and a quarter of the cant excess at ``speed_mps``
+        (:func:`predisat.track.cant.body_roll_deg`), and it pitches with the grade. None: a
+        level vehicle, as before.
+    max_cant_mm : float
+        The largest cant the curves get.
+    write_attitude : bool
+        Write the vehicle's roll and pitch in the manifest (as an IMU would); False leaves
+        them out, as a survey without an IMU (the pipeline then bounds them from the track).
 
     Returns
     -------
@@ -251,6 +266,13 @@ def generate_survey(
         truth.save(tmp)
 
     run = _Positions.along(world, s, antenna_height_m, speed_mps, start_gps_s, sky, seed)
+    if cant_speed_kmh is not None:
+        if not (np.isfinite(cant_speed_kmh) and cant_speed_kmh > 0 and max_cant_mm >= 0):
+            raise ValueError(
+                f"cant_speed_kmh must be a line speed > 0 km/h and max_cant_mm >= 0, got "
+                f"{cant_speed_kmh}, {max_cant_mm}"
+            )
+        run = run.canted(track, cant_speed_kmh, max_cant_mm, speed_mps * 3.6)
     with atomic_path(survey_dir / "track.geojson") as tmp:
         write_geojson(track, tmp)
     context = _RenderContext(world, backend, cams, opt, antenna_height_m, seed)
@@ -269,7 +291,8 @@ def generate_survey(
         overwrite=overwrite,
     ) as writer:
         for job, frames in _render_all(context, run.jobs, workers, casters, progress):
-            rows += [_write_frame(writer, truth_dir, run, job, frame) for frame in frames]
+            rows += [_write_frame(writer, truth_dir, run, job, frame, write_attitude)
+                     for frame in frames]  # fmt: skip
     _write_frames_csv(truth_dir / "frames.csv", rows)
     write_bytes_atomic(
         truth_dir / "README.txt",
@@ -311,6 +334,8 @@ class _PositionJob:
     chainage_m: float
     elapsed_s: float
     sky: SkyModel
+    roll_deg: float = 0.0  # the vehicle's attitude (Mount.on_vehicle)
+    pitch_deg: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -369,9 +394,29 @@ class _Positions:
         ]
         return cls(lat, lon, h, gps, sun_az, sun_el, jobs)
 
+    def canted(
+        self, track: TrackMap, line_speed_kmh: float, max_cant_mm: float, speed_kmh: float
+    ) -> _Positions:
+        """The run with the vehicle rolled by each curve's cant and pitched by the grade."""
+        s = np.array([j.chainage_m for j in self.jobs])
+        k = np.asarray(track.curvature_at(s), float)
+        cant = np.minimum(equilibrium_cant_mm(k, line_speed_kmh), max_cant_mm)
+        roll = body_roll_deg(k, np.round(cant / 5.0) * 5.0, speed_kmh)
+        pitch = np.degrees(np.arctan(np.asarray(track.grade_at(s), float)))
+        jobs = [
+            replace(j, roll_deg=float(r), pitch_deg=float(p))
+            for j, r, p in zip(self.jobs, roll, pitch, strict=True)
+        ]
+        return replace(self, jobs=jobs)
+
 
 def _write_frame(
-    writer: SurveyWriter, truth_dir: Path, run: _Positions, job: _PositionJob, frame: _Frame
+    writer: SurveyWriter,
+    truth_dir: Path,
+    run: _Positions,
+    job: _PositionJob,
+    frame: _Frame,
+    write_attitude: bool = True,
 ) -> dict[str, str]:
     """Add one rendered frame to the survey, write its label; its row of ``frames.csv``."""
     i = job.index
@@ -385,6 +430,8 @@ def _write_frame(
         lon_deg=float(run.lon_deg[i]),
         h_m=float(run.h_m[i]),
         jpeg_quality=quality,
+        roll_deg=job.roll_deg if write_attitude else None,
+        pitch_deg=job.pitch_deg if write_attitude else None,
     )
     ok, buf = cv2.imencode(".png", label)
     if not ok:
@@ -396,6 +443,7 @@ def _write_frame(
         "cloud_cover": f"{job.sky.cloud_cover:.3f}",
         "sun_az_deg": f"{run.sun_az_deg[i]:.4f}", "sun_el_deg": f"{run.sun_el_deg[i]:.4f}",
         "sky_fraction": f"{float(np.mean(label == 255)):.4f}",
+        "roll_deg": repr(job.roll_deg), "pitch_deg": repr(job.pitch_deg),
     }  # fmt: skip
 
 
@@ -430,7 +478,10 @@ def _render_position(context: _RenderContext, casters: Casters, job: _PositionJo
         # depend on the order or the process a frame is rendered in (left 0, right 1, as before
         # there were other positions).
         rng = np.random.default_rng([context.seed, job.index, _POSITION_KEY[side]])
-        pose = camera_pose(context.world, job.chainage_m, mount, context.antenna_height_m)
+        pose = camera_pose(
+            context.world, job.chainage_m, mount, context.antenna_height_m,
+            roll_deg=job.roll_deg, pitch_deg=job.pitch_deg,
+        )  # fmt: skip
         img, label = render_frame(
             context.world, casters, camera, pose, job.sky, rng, context.options,
             elapsed_s=job.elapsed_s,

@@ -166,13 +166,18 @@ def camera_pose(
     mount: Mount,
     antenna_height_m: float = 4.0,
     reverse: bool = False,
+    roll_deg: float = 0.0,
+    pitch_deg: float = 0.0,
 ) -> tuple[NDArray, NDArray]:
     """Camera centre (3,) and camera-to-world rotation (3, 3) at a chainage, in world ENU.
 
     The track heading is measured in the local ENU at the antenna and carried into the world
     frame with :meth:`LocalFrame.rotation_from`, so far from the frame origin the camera still
-    looks square to the track and its horizon stays level.
+    looks square to the track and its horizon stays level. ``roll_deg`` and ``pitch_deg`` tilt
+    the vehicle about the antenna (:meth:`Mount.on_vehicle`): on a canted curve the horizon
+    rolls with it.
     """
+    mount = mount.on_vehicle(roll_deg, pitch_deg)
     s = float(chainage_m)
     antenna = np.asarray(world.antenna_enu(s, antenna_height_m), float)
     lat, lon, _ = world.track.position_at(s)
