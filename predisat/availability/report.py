@@ -466,6 +466,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Rules compared", ", ".join(info.get("rules", []))),
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
         ("Survey rig", info.get("rig", "")),
+        ("Vehicle attitude", info.get("attitude", "")),
         ("Interval model", info.get("interval_model", "")),
         ("Interval width", info.get("interval_width", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),

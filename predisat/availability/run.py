@@ -89,6 +89,7 @@ from predisat.track import TrackMap, TrackMapError, load_track
 
 __all__ = [
     "AvailabilityRun",
+    "attitude_text",
     "check_masks_on_track",
     "load_navigation",
     "nav_span_gps_s",
@@ -931,6 +932,7 @@ def _run_info(
         "rules": [r.label for r in rules],
         "masks": masks_label,
         "rig": rig_text(masks.provenance),
+        "attitude": attitude_text(masks.provenance),
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
@@ -973,6 +975,23 @@ def rig_text(provenance: JsonDict) -> str:
     if not isinstance(rig, dict) or not rig:
         return ""
     return "; ".join(f"{side}: {what}" for side, what in rig.items())
+
+
+def attitude_text(provenance: JsonDict) -> str:
+    """How the survey vehicle's roll and pitch were known when the masks were made (the
+    provenance's ``attitude``, written by ``predisat process``; docs/reconstruction.md,
+    section 16); "" when the masks do not say."""
+    att = provenance.get("attitude")
+    if not isinstance(att, dict) or "frames" not in att:
+        return ""
+    n, measured = int(att["frames"]), int(att.get("measured_frames", 0))
+    if measured == n:
+        return f"measured (the manifest's IMU attitude) for all {n} frames"
+    return (
+        f"bounded from the track's curves and grade for {n - measured} of {n} frames (their "
+        f"sky eroded by up to {float(att.get('max_doubt_deg', 0.0)):.1f}°), measured for "
+        f"{measured}"
+    )
 
 
 def synthetic_notes(provenance: JsonDict) -> list[str]:

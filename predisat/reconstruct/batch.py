@@ -57,6 +57,7 @@ from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
 from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
+from predisat.reconstruct.attitude import frame_attitudes
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
 from predisat.reconstruct.chunks import (
     ChunkFrame,
@@ -301,6 +302,38 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
     return bad
 
 
+def _attitude_summary(
+    survey: Survey, track: TrackMap, params: PipelineParams, ch: NDArray
+) -> JsonDict:
+    """How the frames' attitude is known (provenance ``attitude``; section 16 of
+    docs/reconstruction.md): frames with a measured roll and pitch, and the largest doubt
+    their sky is eroded by."""
+    fr, ok = survey.frames, np.isfinite(ch)
+    att = frame_attitudes(
+        track, ch[ok], fr.roll_deg[ok], fr.pitch_deg[ok], survey.reverse, cant=params.cant,
+        grade_doubt_deg=params.grade_doubt_deg, imu_doubt_deg=params.imu_doubt_deg,
+    )  # fmt: skip
+    return {
+        "frames": int(ok.sum()),
+        "measured_frames": int(att.measured.sum()),
+        "max_doubt_deg": round(float(att.doubt_deg.max(initial=0.0)), 3),
+        "max_abs_roll_deg": round(float(np.abs(att.roll_deg).max(initial=0.0)), 3),
+    }
+
+
+def _attitude_warning(summary: JsonDict) -> str | None:
+    """The line ``process`` prints when frames lack a measured attitude."""
+    n, measured = int(summary["frames"]), int(summary["measured_frames"])
+    if measured == n:
+        return None
+    return (
+        f"warning: {n - measured} of {n} frames have no measured roll and pitch (manifest "
+        f"columns roll_deg, pitch_deg): their attitude is bounded from the track's curves and "
+        f"grade and their sky eroded by up to {summary['max_doubt_deg']:.1f} deg, which costs "
+        "sky; give the survey vehicle's IMU attitude (docs/reconstruction.md, section 16)"
+    )
+
+
 def _plan(
     survey: Survey,
     track: TrackMap,
@@ -339,6 +372,7 @@ def _plan(
         if survey.metadata.get(key):
             prov[f"survey_{key}"] = str(survey.metadata[key])
     prov["run_key"] = _run_key(prov)
+    prov["attitude"] = _attitude_summary(survey, track, params, ch)
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
     if params.sky_net is not None:
         seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
@@ -803,6 +837,9 @@ def process_survey(
         f"{len(plan.chunks)} chunks ({skipped} already done)",
         quiet,
     )
+    attitude_note = _attitude_warning(plan.provenance["attitude"])
+    if attitude_note:
+        _report(attitude_note, quiet=False)
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)

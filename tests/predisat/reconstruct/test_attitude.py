@@ -115,3 +115,26 @@ def test_a_canted_curve_is_safe_with_the_roll_measured_or_bounded(canted) -> Non
     assert ft["measured"][0] < 1e-4 and ft["unknown"][0] < 1e-4, ft
     # knowing the roll costs no sky against the bound
     assert ft["measured"][1] < ft["unknown"][1], ft
+
+
+def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
+    from predisat.availability.run import attitude_text
+
+    _, masks = canted
+    measured = masks["measured"].provenance["attitude"]
+    assert measured["measured_frames"] == measured["frames"] > 0
+    assert measured["max_doubt_deg"] == 0.0 and 5.0 < measured["max_abs_roll_deg"] < 8.0
+    unknown = masks["unknown"].provenance["attitude"]
+    assert unknown["measured_frames"] == 0 and unknown["max_doubt_deg"] > 5.0
+    assert attitude_text(masks["measured"].provenance).startswith("measured")
+    assert "bounded from the track" in attitude_text(masks["unknown"].provenance)
+    assert attitude_text({}) == ""
+
+
+def test_process_warns_when_the_attitude_is_not_measured(canted) -> None:
+    from predisat.reconstruct.batch import _attitude_warning
+
+    _, masks = canted
+    assert _attitude_warning(masks["measured"].provenance["attitude"]) is None
+    note = _attitude_warning(masks["unknown"].provenance["attitude"])
+    assert note is not None and "no measured roll and pitch" in note and "roll_deg" in note
