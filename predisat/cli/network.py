@@ -27,6 +27,7 @@ from predisat.cli.args import (
     scheduler_options,
 )
 from predisat.cli.common import CliError, parse_where
+from predisat.cli.process import add_attitude_arguments, attitude_params
 
 if TYPE_CHECKING:
     from predisat.reconstruct.network import NetworkResult
@@ -89,6 +90,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interval-every", type=positive_int, default=10, metavar="N",
                    help="predict the interval at every N-th epoch")
     integrity_options(p)
+    add_attitude_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -118,7 +120,8 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
     out = Path(args.out)
     result = process_network(
         network, args.surveys, out, PipelineParams(chunk_m=args.chunk_m,
-                                                   segmenter=args.segmenter),
+                                                   segmenter=args.segmenter,
+                                                   **attitude_params(args)),
         scheduler=args.scheduler, workers=args.workers, strict=args.strict,
         progress=not args.quiet, margins=args.margins,
     )  # fmt: skip

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from predisat.cli.args import (
     add_checks,
@@ -25,7 +26,7 @@ from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
 from predisat.track.cant import CantLimits
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "add_attitude_arguments", "attitude_params", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -95,6 +96,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "positions, at a large cost in sky (docs/reconstruction.md, section 12; default: the "
         "mask at the position)",
     )  # fmt: skip
+    add_attitude_arguments(parser)
+    parser.add_argument(
+        "--quiet", action="store_true",
+        help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
+        "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
+        "are still printed)",
+    )  # fmt: skip
+    add_checks(
+        parser,
+        needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,
+              f"--segmenter {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
+        needs("--track-name", "track_name", lambda a: a.track is not None,
+              "a --track file (it selects a line in it)"),
+        needs("--where", "where", lambda a: a.track is not None,
+              "a --track file (it selects a line in it)"),
+    )  # fmt: skip
+
+
+def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options bounding the survey vehicle's attitude (``process`` and ``network``)."""
     parser.add_argument(
         "--line-speed-kmh", type=positive_float, default=CantLimits.line_speed_kmh,
         metavar="KMH",
@@ -119,21 +140,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="accuracy of the manifest's measured roll and pitch, each (default %(default)s: "
         "taken as exact; give your IMU's)",
     )  # fmt: skip
-    parser.add_argument(
-        "--quiet", action="store_true",
-        help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
-        "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
-        "are still printed)",
-    )  # fmt: skip
-    add_checks(
-        parser,
-        needs("--sky-net", "sky_net", lambda a: a.segmenter in NET_METHODS,
-              f"--segmenter {' or '.join(NET_METHODS)} (the segmenters that run a network)"),
-        needs("--track-name", "track_name", lambda a: a.track is not None,
-              "a --track file (it selects a line in it)"),
-        needs("--where", "where", lambda a: a.track is not None,
-              "a --track file (it selects a line in it)"),
-    )  # fmt: skip
+
+
+def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
+    """:class:`PipelineParams` keywords from :func:`add_attitude_arguments`' options."""
+    return {
+        "cant": CantLimits(line_speed_kmh=args.line_speed_kmh, max_cant_mm=args.max_cant_mm),
+        "grade_doubt_deg": args.grade_doubt_deg,
+        "imu_doubt_deg": args.imu_doubt_deg,
+    }
 
 
 def run(args: argparse.Namespace) -> ProcessResult:
@@ -153,10 +168,7 @@ def run(args: argparse.Namespace) -> ProcessResult:
                        thin_deg=args.thin_deg,
                        reconstruction=ReconstructionParams(
                            cell_sweep_m=None if args.cell_sweep else 0.0),
-                       cant=CantLimits(line_speed_kmh=args.line_speed_kmh,
-                                       max_cant_mm=args.max_cant_mm),
-                       grade_doubt_deg=args.grade_doubt_deg,
-                       imu_doubt_deg=args.imu_doubt_deg),
+                       **attitude_params(args)),
         track=track,
         workers=args.workers,
         scheduler=args.scheduler,
