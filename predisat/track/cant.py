@@ -12,13 +12,18 @@ with it; its skyline reads low on one side and high on the other by about that a
 * :func:`inside_roll_sign` - which way "toward the inside" rolls the vehicle.
 * :func:`body_roll_deg` - the roll of a body on a curve of known cant at a speed (the synthetic
   world's vehicle, :mod:`predisat.synth.generate`).
-* :func:`roll_bounds_deg` - the vehicle's roll when neither the cant nor an IMU is known: the
-  interval every vehicle on the line lies in, from the curvature alone.
+* :func:`roll_bounds_deg` - the vehicle's roll when no IMU measured it: the interval every
+  vehicle on the line lies in, from the curvature alone, or from the cant of a
+  :class:`CantTable` (the infrastructure's own records) and the survey's speed.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import csv
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "RAIL_CENTRES_MM",
     "CantLimits",
+    "CantTable",
     "body_roll_deg",
     "cant_angle_deg",
     "equilibrium_cant_mm",
@@ -155,29 +161,145 @@ class CantLimits:
 
 
 def roll_bounds_deg(
-    curvature_per_m: ArrayLike, limits: CantLimits | None = None
+    curvature_per_m: ArrayLike,
+    limits: CantLimits | None = None,
+    cant_mm: ArrayLike | None = None,
+    speed_kmh: ArrayLike | None = None,
 ) -> tuple[NDArray, NDArray]:
-    """Interval of the body roll toward the curve's inside when the cant is not known.
+    """Interval of the body roll toward the curve's inside when no IMU measured it.
 
     Parameters
     ----------
     curvature_per_m : array_like, shape (...)
         Horizontal curvature at the vehicle, 1/m (sign ignored).
     limits : CantLimits, optional
+    cant_mm : array_like, broadcastable, optional
+        The cant where it is known (a :class:`CantTable`), NaN where not.
+    speed_kmh : array_like, broadcastable, optional
+        The survey vehicle's speed where known (from the frames' times), NaN where not.
 
     Returns
     -------
     lo_deg, hi_deg : ndarray, shape (...)
-        Roll toward the inside, degrees (negative: leaning out). The cant lies in ``[0,
-        min(max_cant, D_eq(line speed))]``; the body adds up to ``flexibility`` times the cant
-        inward (a standstill) or times the deficiency outward (the line speed on the least
-        cant), and ``track_roll_deg`` either way.
+        Roll toward the inside, degrees (negative: leaning out), ``track_roll_deg`` either
+        way included. Unknown cant: it lies in ``[0, min(max_cant, D_eq(line speed))]``.
+        The body adds ``s`` times the uncompensated cant (cant minus the equilibrium cant of
+        its speed), ``s`` in ``[0, flexibility]``: with the speed known that is one signed
+        amount; unknown, anything from the deficiency limit outward to the cant inward.
     """
     lim = limits or CantLimits()
     k = np.abs(np.asarray(curvature_per_m, float))
     d_eq = equilibrium_cant_mm(k, lim.line_speed_kmh)
-    cant_hi = cant_angle_deg(np.minimum(d_eq, lim.max_cant_mm))
-    deficiency = cant_angle_deg(np.minimum(d_eq, lim.max_deficiency_mm))
-    lo = -lim.flexibility * deficiency - lim.track_roll_deg
-    hi = cant_hi * (1.0 + lim.flexibility) + lim.track_roll_deg
-    return lo, hi
+    c_lo = np.zeros_like(k)
+    c_hi = np.minimum(d_eq, lim.max_cant_mm)
+    if cant_mm is not None:
+        known = np.broadcast_to(np.asarray(cant_mm, float), k.shape)
+        c_lo = np.where(np.isfinite(known), known, c_lo)
+        c_hi = np.where(np.isfinite(known), known, c_hi)
+    th_lo, th_hi = cant_angle_deg(c_lo), cant_angle_deg(c_hi)
+    s = lim.flexibility
+    # speed unknown: from the deficiency limit outward (at most the line speed's) to the cant
+    out = cant_angle_deg(np.minimum(np.maximum(d_eq - c_lo, 0.0), lim.max_deficiency_mm))
+    extra_lo, extra_hi = -s * out, s * th_hi
+    if speed_kmh is not None:
+        v = np.broadcast_to(np.asarray(speed_kmh, float), k.shape)
+        th_eq = cant_angle_deg(equilibrium_cant_mm(k, np.where(np.isfinite(v), v, 0.0)))
+        # s * (cant - eq) over s in [0, flexibility] and the cant in [c_lo, c_hi]
+        u_lo, u_hi = th_lo - th_eq, th_hi - th_eq
+        extra_lo = np.where(np.isfinite(v), np.minimum(0.0, s * u_lo), extra_lo)
+        extra_hi = np.where(np.isfinite(v), np.maximum(0.0, s * u_hi), extra_hi)
+    return th_lo + extra_lo - lim.track_roll_deg, th_hi + extra_hi + lim.track_roll_deg
+
+
+_MAX_TABLE_CANT_MM = 250.0  # beyond any standard-gauge limit: a unit or column mistake
+
+
+@dataclass(frozen=True, eq=False)
+class CantTable:
+    """The cant along a track, from the infrastructure's records: linear between rows.
+
+    Attributes
+    ----------
+    chainage_m : ndarray, shape (n,)
+        Strictly increasing chainage of the rows, metres (the track map's chainage).
+    cant_mm : ndarray, shape (n,)
+        Cant there, millimetres, >= 0 (which rail is raised follows from the curve: the
+        outer one).
+    source : str
+        Where it was read from.
+    """
+
+    chainage_m: NDArray
+    cant_mm: NDArray
+    source: str = field(default="")
+
+    def __post_init__(self) -> None:
+        s = np.array(self.chainage_m, float)
+        c = np.array(self.cant_mm, float)
+        where = self.source or "cant table"
+        if s.ndim != 1 or s.shape != c.shape or s.size < 2:
+            raise ValueError(f"{where}: needs at least two rows of chainage_m and cant_mm")
+        if not (np.all(np.isfinite(s)) and np.all(np.diff(s) > 0)):
+            raise ValueError(f"{where}: chainage_m must be finite and strictly increasing")
+        if not (np.all(np.isfinite(c)) and np.all((c >= 0) & (c <= _MAX_TABLE_CANT_MM))):
+            raise ValueError(f"{where}: cant_mm must lie in [0, {_MAX_TABLE_CANT_MM:g}] mm")
+        for a in (s, c):
+            a.setflags(write=False)
+        object.__setattr__(self, "chainage_m", s)
+        object.__setattr__(self, "cant_mm", c)
+
+    @classmethod
+    def from_csv(cls, path: str | os.PathLike[str]) -> CantTable:
+        """Read a CSV with a header naming ``chainage_m`` and ``cant_mm`` (other columns
+        ignored; lines starting with ``#`` skipped). Errors name the file, line and fix."""
+        p = Path(path)
+        try:
+            text = p.read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"cant table {p}: cannot be read ({exc}); give a UTF-8 CSV") from None
+        lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+        reader = csv.reader(lines)
+        header = [h.strip() for h in next(reader, [])]
+        if "chainage_m" not in header or "cant_mm" not in header:
+            raise ValueError(
+                f"cant table {p}: the header must name chainage_m and cant_mm (got {header})"
+            )
+        i_s, i_c = header.index("chainage_m"), header.index("cant_mm")
+        s_m: list[float] = []
+        c_mm: list[float] = []
+        for n, row in enumerate(reader, start=2):
+            try:
+                s_v, c_v = float(row[i_s]), float(row[i_c])
+            except (IndexError, ValueError):
+                raise ValueError(
+                    f"cant table {p}, data line {n}: {','.join(row)!r} needs numbers in "
+                    "chainage_m and cant_mm"
+                ) from None
+            if not (math.isfinite(s_v) and math.isfinite(c_v)):
+                raise ValueError(f"cant table {p}, data line {n}: values must be finite")
+            if s_m and s_v <= s_m[-1]:
+                raise ValueError(
+                    f"cant table {p}, data line {n}: chainage_m {s_v:g} does not increase "
+                    f"(previous {s_m[-1]:g}); sort the rows by chainage"
+                )
+            if not 0.0 <= c_v <= _MAX_TABLE_CANT_MM:
+                raise ValueError(
+                    f"cant table {p}, data line {n}: cant_mm {c_v:g} is not within [0, "
+                    f"{_MAX_TABLE_CANT_MM:g}]; give the cant's size in millimetres (the raised "
+                    "rail follows from the curve)"
+                )
+            s_m.append(s_v)
+            c_mm.append(c_v)
+        return cls(np.array(s_m), np.array(c_mm), str(p))
+
+    def to_csv(self, path: str | os.PathLike[str]) -> None:
+        """Write the table as read by :meth:`from_csv` (17 significant digits)."""
+        rows = "".join(f"{s!r},{c!r}\n" for s, c in zip(self.chainage_m.tolist(),
+                                                        self.cant_mm.tolist(), strict=True))
+        Path(path).write_text("chainage_m,cant_mm\n" + rows, encoding="utf-8")
+
+    def cant_mm_at(self, chainage_m: ArrayLike) -> NDArray:
+        """Cant at chainages, mm, linear between rows; NaN outside the table."""
+        s = np.asarray(chainage_m, float)
+        out = np.interp(s, self.chainage_m, self.cant_mm)
+        return np.where((s >= self.chainage_m[0]) & (s <= self.chainage_m[-1]), out, np.nan)

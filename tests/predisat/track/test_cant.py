@@ -7,6 +7,7 @@ import pytest
 
 from predisat.track.cant import (
     CantLimits,
+    CantTable,
     body_roll_deg,
     cant_angle_deg,
     equilibrium_cant_mm,
@@ -58,3 +59,47 @@ def test_bad_limits_are_refused() -> None:
         CantLimits(line_speed_kmh=0.0)
     with pytest.raises(ValueError, match="flexibility"):
         CantLimits(flexibility=-0.1)
+
+
+def test_a_known_cant_and_speed_narrow_the_bounds_and_still_contain_the_vehicle() -> None:
+    lim = CantLimits()
+    rng = np.random.default_rng(9)
+    k = rng.uniform(1 / 2000, 1 / 300, 3000) * rng.choice([-1, 1], 3000)
+    d_eq = equilibrium_cant_mm(k, lim.line_speed_kmh)
+    cant = np.round(rng.uniform(0, 1, k.size) * np.minimum(d_eq, lim.max_cant_mm) / 5) * 5
+    speed = rng.uniform(0, lim.line_speed_kmh, k.size)
+    ok = equilibrium_cant_mm(k, speed) - cant <= lim.max_deficiency_mm
+    for s in (0.0, 0.1, lim.flexibility):  # any vehicle up to the flexibility limit
+        inward = body_roll_deg(k, cant, speed, flexibility=s) * inside_roll_sign(k)
+        for known_speed in (speed, None):
+            lo, hi = roll_bounds_deg(k, lim, cant_mm=cant, speed_kmh=known_speed)
+            assert np.all(inward[ok] >= lo[ok] - 1e-9) and np.all(inward[ok] <= hi[ok] + 1e-9)
+    lo_c, hi_c = roll_bounds_deg(k, lim)
+    lo_t, hi_t = roll_bounds_deg(k, lim, cant_mm=cant, speed_kmh=speed)
+    assert np.median((hi_t - lo_t) / (hi_c - lo_c)) < 0.4  # the table narrows it
+    # a NaN cant (outside the table) falls back to the curvature's bounds
+    lo_n, hi_n = roll_bounds_deg(k, lim, cant_mm=np.nan, speed_kmh=np.nan)
+    np.testing.assert_allclose(lo_n, lo_c)
+    np.testing.assert_allclose(hi_n, hi_c)
+
+
+def test_cant_table_reads_interpolates_and_names_bad_rows(tmp_path) -> None:
+    p = tmp_path / "cant.csv"
+    p.write_text("# line 144, track A\nchainage_m,cant_mm,note\n100,0,\n200,150,curve\n300,150,\n")
+    t = CantTable.from_csv(p)
+    np.testing.assert_allclose(t.cant_mm_at([150.0, 250.0]), [75.0, 150.0])
+    assert np.isnan(t.cant_mm_at([50.0, 301.0])).all()
+    t.to_csv(tmp_path / "back.csv")
+    back = CantTable.from_csv(tmp_path / "back.csv")
+    assert np.array_equal(back.chainage_m, t.chainage_m) and np.array_equal(back.cant_mm, t.cant_mm)
+    for text, match in (
+        ("chainage,cant\n0,0\n", "must name chainage_m and cant_mm"),
+        ("chainage_m,cant_mm\n0,0\n0,10\n", "data line 3: chainage_m 0 does not increase"),
+        ("chainage_m,cant_mm\n0,0\n10,0.16\n20,1600\n", "cant_mm 1600 is not within"),
+        ("chainage_m,cant_mm\n0,0\n10,x\n", "data line 3"),
+        ("chainage_m,cant_mm\n0,0\n", "at least two rows"),
+    ):
+        p.write_text(text)
+        with pytest.raises(ValueError, match=match) as info:
+            CantTable.from_csv(p)
+        assert str(p) in str(info.value)
