@@ -18,13 +18,13 @@ from predisat.cli.args import (
     storage_options,
     url_or,
 )
-from predisat.cli.common import add_track_selection, track_option
+from predisat.cli.common import CliError, add_track_selection, track_option
 from predisat.reconstruct.batch import ProcessResult, process_survey
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.params import DEFAULT_SEGMENTER, THIN_DEG, PipelineParams
 from predisat.sky.network import NET_METHODS
 from predisat.sky.segment import METHODS
-from predisat.track.cant import CantLimits
+from predisat.track.cant import CantLimits, CantTable
 
 __all__ = ["add_arguments", "add_attitude_arguments", "attitude_params", "run"]
 
@@ -125,6 +125,13 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
         "section 16)",
     )  # fmt: skip
     parser.add_argument(
+        "--cant-table", type=existing_file("a CSV with columns chainage_m and cant_mm (the "
+        "cant of the line's curves, docs/reconstruction.md section 16)"), metavar="CSV",
+        help="the line's cant along the track's chainage, from the infrastructure's records: "
+        "where the manifest has no measured roll, the roll is bounded around it and the "
+        "survey's speed, not the curves' whole range (default: none)",
+    )  # fmt: skip
+    parser.add_argument(
         "--max-cant-mm", type=positive_float, default=CantLimits.max_cant_mm, metavar="MM",
         help="the largest cant on the line (default %(default)s, EN 13803's limit)",
     )  # fmt: skip
@@ -144,10 +151,17 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
 
 def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
     """:class:`PipelineParams` keywords from :func:`add_attitude_arguments`' options."""
+    table = None
+    if args.cant_table is not None:
+        try:
+            table = CantTable.from_csv(args.cant_table)
+        except ValueError as exc:
+            raise CliError(f"--cant-table: {exc}") from None
     return {
         "cant": CantLimits(line_speed_kmh=args.line_speed_kmh, max_cant_mm=args.max_cant_mm),
         "grade_doubt_deg": args.grade_doubt_deg,
         "imu_doubt_deg": args.imu_doubt_deg,
+        "cant_table": table,
     }
 
 

@@ -22,9 +22,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.track import TrackMap
-from predisat.track.cant import CantLimits, inside_roll_sign, roll_bounds_deg
+from predisat.track.cant import CantLimits, CantTable, inside_roll_sign, roll_bounds_deg
 
-__all__ = ["ATTITUDE_STEP_DEG", "FrameAttitude", "frame_attitudes"]
+__all__ = ["ATTITUDE_STEP_DEG", "FrameAttitude", "frame_attitudes", "survey_speed_kmh"]
 
 ATTITUDE_STEP_DEG = 0.05
 """Nominal attitudes are rounded to this step, so that frames on a curve share rectifiers
@@ -55,6 +55,8 @@ def frame_attitudes(
     cant: CantLimits | None = None,
     grade_doubt_deg: float = 1.0,
     imu_doubt_deg: float = 0.0,
+    cant_table: CantTable | None = None,
+    speed_kmh: ArrayLike | None = None,
 ) -> FrameAttitude:
     """The attitude each frame is rectified with, and what it may still be off by.
 
@@ -73,6 +75,12 @@ def frame_attitudes(
         without heights), give or take this angle.
     imu_doubt_deg : float
         Accuracy of the measured roll and pitch, degrees (each).
+    cant_table : CantTable, optional
+        The cant where the infrastructure's records give it: the unmeasured roll is then
+        bounded around it (NaN outside the table: from the curvature).
+    speed_kmh : array_like, shape (n,), optional
+        The survey vehicle's speed at the frames (:func:`survey_speed_kmh`), NaN where not
+        known: it fixes the body's roll on its springs to one side.
 
     Returns
     -------
@@ -93,15 +101,51 @@ def frame_attitudes(
     todo = ~measured
     if todo.any():
         st = s[todo]
-        lo, hi = roll_bounds_deg(track.curvature_at(st), cant)
-        sign = inside_roll_sign(track.curvature_at(st), reverse)
-        # on straight track the sign is 0 and the interval symmetric: nominal 0
+        k = np.asarray(track.curvature_at(st), float)
+        known = None if cant_table is None else cant_table.cant_mm_at(st)
+        speed = None if speed_kmh is None else np.broadcast_to(
+            np.asarray(speed_kmh, float), s.shape)[todo]  # fmt: skip
+        lo, hi = roll_bounds_deg(k, cant, cant_mm=known, speed_kmh=speed)
+        sign = inside_roll_sign(k, reverse)
+        # no curve says which rail is raised: the roll may go either way, about 0
         out_roll[todo] = np.where(sign != 0, sign * 0.5 * (lo + hi), 0.0)
+        half = np.where(sign != 0, 0.5 * (hi - lo), np.maximum(np.abs(lo), np.abs(hi)))
         grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(st), float)))
         out_pitch[todo] = -grade_deg if reverse else grade_deg
-        doubt[todo] = 0.5 * (hi - lo) + grade_doubt_deg
+        doubt[todo] = half + grade_doubt_deg
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     rounding = np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
     doubt = np.where(doubt > 0, doubt + rounding, 0.0)
     return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured)
+
+
+def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -> NDArray:
+    """Each frame's speed along the track from its camera's neighbouring frames, km/h.
+
+    Parameters
+    ----------
+    chainage_m, gps_s, side : array_like, shape (n,)
+        The frames' chainage, time and camera (``Frames`` columns); frames of one camera are
+        taken in time order.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``|d chainage / d t|`` by central differences over the camera's frames (one-sided at
+        its ends); NaN for a camera with fewer than two timed frames, or a NaN chainage.
+    """
+    s = np.asarray(chainage_m, float)
+    t = np.asarray(gps_s, float)
+    cam = np.asarray(side)
+    out = np.full(s.shape, np.nan)
+    for c in np.unique(cam):
+        idx = np.flatnonzero((cam == c) & np.isfinite(s) & np.isfinite(t))
+        if idx.size < 2:
+            continue
+        idx = idx[np.argsort(t[idx], kind="stable")]
+        ts, ss = t[idx], s[idx]
+        if np.any(np.diff(ts) <= 0):
+            continue  # repeated times: no speed to trust
+        out[idx] = np.abs(np.gradient(ss, ts)) * 3.6
+    return out

@@ -57,7 +57,7 @@ from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
 from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
-from predisat.reconstruct.attitude import frame_attitudes
+from predisat.reconstruct.attitude import frame_attitudes, survey_speed_kmh
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
 from predisat.reconstruct.chunks import (
     ChunkFrame,
@@ -309,16 +309,44 @@ def _attitude_summary(
     docs/reconstruction.md): frames with a measured roll and pitch, and the largest doubt
     their sky is eroded by."""
     fr, ok = survey.frames, np.isfinite(ch)
+    speed = survey_speed_kmh(ch, fr.gps_s, fr.side)[ok]
     att = frame_attitudes(
         track, ch[ok], fr.roll_deg[ok], fr.pitch_deg[ok], survey.reverse, cant=params.cant,
         grade_doubt_deg=params.grade_doubt_deg, imu_doubt_deg=params.imu_doubt_deg,
+        cant_table=params.cant_table, speed_kmh=speed,
     )  # fmt: skip
-    return {
+    out: JsonDict = {
         "frames": int(ok.sum()),
         "measured_frames": int(att.measured.sum()),
         "max_doubt_deg": round(float(att.doubt_deg.max(initial=0.0)), 3),
         "max_abs_roll_deg": round(float(np.abs(att.roll_deg).max(initial=0.0)), 3),
     }
+    if params.cant_table is not None:
+        cant = params.cant_table.cant_mm_at(ch[ok])
+        flat = np.abs(np.asarray(track.curvature_at(ch[ok]), float)) < _STRAIGHT_PER_M
+        out["cant_table_frames"] = int(np.isfinite(cant).sum())
+        # cant where the map has no curve: the table's chainage is probably not the map's
+        out["cant_off_curve_frames"] = int((flat & (cant >= _CANT_ON_CURVE_MM)).sum())
+    return out
+
+
+_STRAIGHT_PER_M = 1e-4  # R > 10 km
+_CANT_ON_CURVE_MM = 20.0
+
+
+def _attitude_warnings(summary: JsonDict) -> list[str]:
+    """The lines ``process`` prints when frames lack a measured attitude, or a cant table
+    does not fit the track."""
+    out = []
+    off = int(summary.get("cant_off_curve_frames", 0))
+    if off:
+        out.append(
+            f"warning: the cant table gives {_CANT_ON_CURVE_MM:g} mm or more at {off} frames "
+            "where the track map has no curve (R > 10 km): check that its chainage is the "
+            "track map's"
+        )
+    note = _attitude_warning(summary)
+    return out if note is None else [*out, note]
 
 
 def _attitude_warning(summary: JsonDict) -> str | None:
@@ -326,11 +354,14 @@ def _attitude_warning(summary: JsonDict) -> str | None:
     n, measured = int(summary["frames"]), int(summary["measured_frames"])
     if measured == n:
         return None
+    tabled = "cant_table_frames" in summary
     return (
         f"warning: {n - measured} of {n} frames have no measured roll and pitch (manifest "
-        f"columns roll_deg, pitch_deg): their attitude is bounded from the track's curves and "
-        f"grade and their sky eroded by up to {summary['max_doubt_deg']:.1f} deg, which costs "
-        "sky; give the survey vehicle's IMU attitude (docs/reconstruction.md, section 16)"
+        f"columns roll_deg, pitch_deg): their attitude is bounded from the track (its curves, "
+        f"grade{' and cant table' if tabled else ''}) and their sky eroded by up to "
+        f"{summary['max_doubt_deg']:.1f} deg, which costs sky; give the survey vehicle's IMU "
+        f"attitude{'' if tabled else ' or the cant table of the line (--cant-table)'} "
+        "(docs/reconstruction.md, section 16)"
     )
 
 
@@ -579,6 +610,7 @@ def _chunk_jobs(
     plan: _Plan, pending: list[tuple[str, float, float, NDArray]], bad: dict[str, BadFrame]
 ) -> list[ChunkJob]:
     fr, ch, cams = plan.survey.frames, plan.chainage_m, _cameras(plan)
+    speed = survey_speed_kmh(ch, fr.gps_s, fr.side)
     pinned = pinned_utc()
     jobs = []
     for name, lo, hi, s in pending:
@@ -589,7 +621,7 @@ def _chunk_jobs(
         frames = tuple(
             ChunkFrame(str(fr.frame_id[i]), str(fr.side[i]), float(ch[i]),
                        str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")),
-                       float(fr.roll_deg[i]), float(fr.pitch_deg[i]))
+                       float(fr.roll_deg[i]), float(fr.pitch_deg[i]), float(speed[i]))
             for i in idx
             if str(fr.frame_id[i]) not in bad
         )  # fmt: skip
@@ -837,9 +869,8 @@ def process_survey(
         f"{len(plan.chunks)} chunks ({skipped} already done)",
         quiet,
     )
-    attitude_note = _attitude_warning(plan.provenance["attitude"])
-    if attitude_note:
-        _report(attitude_note, quiet=False)
+    for line in _attitude_warnings(plan.provenance["attitude"]):
+        _report(line, quiet=False)
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)

@@ -58,6 +58,7 @@ class ChunkFrame:
     # the vehicle's measured attitude (the manifest's), NaN when not given
     roll_deg: float = float("nan")
     pitch_deg: float = float("nan")
+    speed_kmh: float = float("nan")  # the survey vehicle's, from the frames' times
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,8 @@ def run_chunk(
         att = frame_attitudes(
             track, s, [f.roll_deg for f, _ in ok_frames], [f.pitch_deg for f, _ in ok_frames],
             job.reverse, cant=p.cant, grade_doubt_deg=p.grade_doubt_deg,
-            imu_doubt_deg=p.imu_doubt_deg,
+            imu_doubt_deg=p.imu_doubt_deg, cant_table=p.cant_table,
+            speed_kmh=[f.speed_kmh for f, _ in ok_frames],
         )  # fmt: skip
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, vehicle_mount = job.cameras[f.side]

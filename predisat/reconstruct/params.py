@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -10,7 +11,7 @@ from predisat.jsontypes import JsonDict
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.framecache import sky_net_sha256
 from predisat.sky.network import NET_METHODS
-from predisat.track.cant import CantLimits
+from predisat.track.cant import CantLimits, CantTable
 
 __all__ = [
     "DEFAULT_SEGMENTER",
@@ -60,6 +61,11 @@ class PipelineParams:
         take this angle (a map without heights reads level).
     imu_doubt_deg : float
         Accuracy of the manifest's measured roll and pitch, degrees each (0: taken as exact).
+    cant_table : CantTable, optional
+        The cant along the track from the infrastructure's records: where the manifest has no
+        measured roll, it is bounded around that cant and the survey's speed instead of the
+        curvature's whole range. Its content's SHA-256 goes into the provenance and the
+        resume key.
     """
 
     chunk_m: float = 1000.0
@@ -70,6 +76,7 @@ class PipelineParams:
     cant: CantLimits = field(default_factory=CantLimits)
     grade_doubt_deg: float = 1.0
     imu_doubt_deg: float = 0.0
+    cant_table: CantTable | None = None
 
     def __post_init__(self) -> None:
         for name in ("grade_doubt_deg", "imu_doubt_deg"):
@@ -104,9 +111,18 @@ class PipelineParams:
             "chunk_m": self.chunk_m, "segmenter": self.segmenter, "reconstruction": rec,
             "thin_deg": self.thin_deg,
             "attitude": {**asdict(self.cant), "grade_doubt_deg": self.grade_doubt_deg,
-                         "imu_doubt_deg": self.imu_doubt_deg},
+                         "imu_doubt_deg": self.imu_doubt_deg,
+                         "cant_table": _table_record(self.cant_table)},
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid
             out["sky_net"] = {"path": str(self.sky_net), "sha256": sky_net_sha256(self.sky_net)}
         return out
+
+
+def _table_record(table: CantTable | None) -> JsonDict | None:
+    """A cant table as the provenance records it: where from, rows, SHA-256 of the values."""
+    if table is None:
+        return None
+    digest = hashlib.sha256(table.chainage_m.tobytes() + table.cant_mm.tobytes()).hexdigest()
+    return {"source": table.source, "rows": int(table.chainage_m.size), "sha256": digest}

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predisat.reconstruct.attitude import ATTITUDE_STEP_DEG, frame_attitudes
+from predisat.reconstruct.attitude import ATTITUDE_STEP_DEG, frame_attitudes, survey_speed_kmh
 from predisat.track import demo_track
-from predisat.track.cant import CantLimits, body_roll_deg, equilibrium_cant_mm
+from predisat.track.cant import CantLimits, CantTable, body_roll_deg, equilibrium_cant_mm
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +56,34 @@ def test_unmeasured_on_straight_track_is_level_give_or_take_the_track_and_grade(
     assert np.all(att.doubt_deg < 0.5 + 1.0 + 0.1) and np.all(att.doubt_deg >= 1.5)
 
 
+def test_a_cant_table_and_the_survey_speed_narrow_the_doubt_around_the_true_roll(track) -> None:
+    s = np.arange(450.0, 1150.0, 10.0)
+    k = track.curvature_at(s)
+    cant = np.round(np.minimum(equilibrium_cant_mm(k, 100.0), 160.0) / 5) * 5
+    table = CantTable(s, cant, "test")
+    nan = np.full(s.size, np.nan)
+    speed = np.full(s.size, 43.2)
+    bounded = frame_attitudes(track, s, nan, nan, False, grade_doubt_deg=0.0)
+    tabled = frame_attitudes(track, s, nan, nan, False, grade_doubt_deg=0.0, cant_table=table,
+                             speed_kmh=speed)  # fmt: skip
+    true = body_roll_deg(k, cant, 43.2)  # the synthetic world's vehicle (flexibility 0.25)
+    assert np.all(np.abs(true - tabled.roll_deg) <= tabled.doubt_deg + 1e-9)
+    assert np.all(tabled.doubt_deg < 0.5 * bounded.doubt_deg)
+    # off the table's end: the curvature's bounds again
+    far = frame_attitudes(track, [2000.0], np.nan, np.nan, False, cant_table=table)
+    alone = frame_attitudes(track, [2000.0], np.nan, np.nan, False)
+    assert far.doubt_deg[0] == alone.doubt_deg[0]
+
+
+def test_survey_speed_from_each_cameras_frames() -> None:
+    t = np.array([0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 5.0])
+    s = np.array([0.0, 0.0, 10.0, 10.0, 22.0, 22.0, 30.0])
+    side = np.array(["left", "right"] * 3 + ["front"])
+    v = survey_speed_kmh(s, t, side)
+    np.testing.assert_allclose(v[:6], [36.0, 36.0, 39.6, 39.6, 43.2, 43.2])
+    assert np.isnan(v[6])  # one frame of that camera: no speed
+
+
 def test_bad_doubts_are_refused(track) -> None:
     with pytest.raises(ValueError, match="grade_doubt_deg"):
         frame_attitudes(track, [0.0], np.nan, np.nan, False, grade_doubt_deg=-1.0)
@@ -67,8 +95,8 @@ def test_bad_doubts_are_refused(track) -> None:
 @pytest.fixture(scope="module")
 def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: masks})
     """A rendered survey on a right-hand curve (R 420-640 m, 160 mm of cant, the body rolled
-    6-7 deg), processed three ways: the roll measured, not given, and wrongly given as level
-    (what the pipeline assumed before it knew of cant)."""
+    6-7 deg), processed four ways: the roll measured, not given, wrongly given as level (what
+    the pipeline assumed before it knew of cant), and not given but the line's cant table."""
     import csv
 
     from predisat.camera.models import default_camera
@@ -86,14 +114,16 @@ def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: ma
     assert all(5.0 < float(r["roll_deg"]) < 8.0 for r in rows)
     masks = {"measured": process_survey(survey, base / "measured", PipelineParams(),
                                         progress=False).masks}  # fmt: skip
-    for variant, value in (("unknown", ""), ("level", "0.0")):
+    params = {"unknown": PipelineParams(), "level": PipelineParams(),
+              "table": PipelineParams(cant_table=CantTable.from_csv(base / "truth" / "cant.csv"))}
+    for variant, value in (("unknown", ""), ("level", "0.0"), ("table", "")):
         for r in rows:
             r["roll_deg"] = r["pitch_deg"] = value
         with open(survey / "manifest.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
             w.writeheader()
             w.writerows(rows)
-        masks[variant] = process_survey(survey, base / variant, PipelineParams(),
+        masks[variant] = process_survey(survey, base / variant, params[variant],
                                         progress=False).masks  # fmt: skip
     return load_truth(base / "truth"), masks
 
@@ -111,10 +141,10 @@ def test_a_canted_curve_is_safe_with_the_roll_measured_or_bounded(canted) -> Non
     ft = {k: _false_trust_and_lost(m, truth) for k, m in masks.items()}
     # the level assumption trusts blocked directions on the curve's low side ...
     assert ft["level"][0] > 1e-3, ft
-    # ... the measured roll and the bounded one do not
-    assert ft["measured"][0] < 1e-4 and ft["unknown"][0] < 1e-4, ft
-    # knowing the roll costs no sky against the bound
-    assert ft["measured"][1] < ft["unknown"][1], ft
+    # ... the measured roll, the bounded one and the one bounded around a cant table do not
+    assert ft["measured"][0] < 1e-4 and ft["unknown"][0] < 1e-4 and ft["table"][0] < 1e-4, ft
+    # knowing the roll costs no sky against the bound; the table recovers part of it
+    assert ft["measured"][1] < ft["table"][1] < ft["unknown"][1], ft
 
 
 def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
