@@ -48,7 +48,7 @@ from predisat.synth.sky import SKY_CONDITIONS, SkyModel
 from predisat.synth.truth import true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track import TrackMap
-from predisat.track.cant import body_roll_deg, equilibrium_cant_mm
+from predisat.track.cant import CantTable, body_roll_deg, equilibrium_cant_mm
 from predisat.track.readers import write_geojson
 
 __all__ = [
@@ -57,6 +57,7 @@ __all__ = [
     "contact_sheet",
     "daytime_gps_s",
     "default_scenery",
+    "design_cant_mm",
     "generate_survey",
     "sky_schedule",
 ]
@@ -273,6 +274,9 @@ def generate_survey(
                 f"{cant_speed_kmh}, {max_cant_mm}"
             )
         run = run.canted(track, cant_speed_kmh, max_cant_mm, speed_mps * 3.6)
+        # the line's cant as its infrastructure records would give it (process --cant-table)
+        CantTable(s, design_cant_mm(track, s, cant_speed_kmh, max_cant_mm),
+                  "synthetic").to_csv(truth_dir / "cant.csv")  # fmt: skip
     with atomic_path(survey_dir / "track.geojson") as tmp:
         write_geojson(track, tmp)
     context = _RenderContext(world, backend, cams, opt, antenna_height_m, seed)
@@ -299,6 +303,15 @@ def generate_survey(
         _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
     )
     return SynthResult(out, survey_dir, truth_dir, int(s.size), len(rows))
+
+
+def design_cant_mm(
+    track: TrackMap, chainage_m: ArrayLike, line_speed_kmh: float, max_cant_mm: float
+) -> NDArray:
+    """The synthetic line's cant: each curve's equilibrium cant at the line speed, at most
+    ``max_cant_mm``, in 5 mm steps (mm, shape of ``chainage_m``)."""
+    k = np.asarray(track.curvature_at(np.asarray(chainage_m, float)), float)
+    return np.round(np.minimum(equilibrium_cant_mm(k, line_speed_kmh), max_cant_mm) / 5.0) * 5.0
 
 
 def _check_request(
@@ -400,8 +413,7 @@ class _Positions:
         """The run with the vehicle rolled by each curve's cant and pitched by the grade."""
         s = np.array([j.chainage_m for j in self.jobs])
         k = np.asarray(track.curvature_at(s), float)
-        cant = np.minimum(equilibrium_cant_mm(k, line_speed_kmh), max_cant_mm)
-        roll = body_roll_deg(k, np.round(cant / 5.0) * 5.0, speed_kmh)
+        roll = body_roll_deg(k, design_cant_mm(track, s, line_speed_kmh, max_cant_mm), speed_kmh)
         pitch = np.degrees(np.arctan(np.asarray(track.grade_at(s), float)))
         jobs = [
             replace(j, roll_deg=float(r), pitch_deg=float(p))
