@@ -46,6 +46,7 @@ __all__ = [
     "Mount",
     "Position",
     "default_camera",
+    "tilt_shift_m",
     "vehicle_to_enu",
 ]
 
@@ -317,14 +318,23 @@ class CameraModel:
 
     @cached_property
     def narrowest_pixel_deg(self) -> float:
-        """Smallest angle one pixel subtends, horizontally or vertically, over the image (deg),
-        on the grid of :attr:`widest_pixel_deg`: an angle in pixels from it covers that angle
-        anywhere in the frame. (A panorama's rows near the poles subtend almost nothing
-        horizontally; its rows' own scale serves better there.)"""
-        return float(np.degrees(np.arccos(np.nanmax(self._pixel_step_cos()))))
+        """Smallest angle a one-pixel step in any direction subtends over the image (deg), on
+        the grid of :attr:`widest_pixel_deg`: the smallest singular value of the pixel-to-ray
+        Jacobian (a distorted lens's diagonal steps may subtend less than its horizontal or
+        vertical ones), so that a distance in pixels from it covers that angle anywhere in
+        the frame. (A panorama's rows near the poles subtend almost nothing horizontally; its
+        rows' own scale serves better there.)"""
+        r0, ru, rv = self._pixel_steps()
+        du, dv = ru - r0, rv - r0  # chords of small angles: the Jacobian's columns, rad / px
+        a = np.sum(du * du, axis=-1)
+        c = np.sum(dv * dv, axis=-1)
+        b = np.sum(du * dv, axis=-1)
+        smallest = np.sqrt(np.maximum((a + c) / 2 - np.sqrt(((a - c) / 2) ** 2 + b * b), 0.0))
+        return float(np.degrees(np.nanmin(smallest)))
 
-    def _pixel_step_cos(self) -> NDArray:
-        """Cosines of the angles of the 1-px steps right and down on a 129 x 97 grid."""
+    def _pixel_steps(self) -> tuple[NDArray, NDArray, NDArray]:
+        """Unit rays on a 129 x 97 grid spanning the image and at its 1-px steps right and
+        down (NaN where a pixel has no ray)."""
         u = np.linspace(0.0, self.width_px - 2.0, 129)
         v = np.linspace(0.0, self.height_px - 2.0, 97)
         uu, vv = (a.ravel() for a in np.meshgrid(u, v))
@@ -333,10 +343,22 @@ class CameraModel:
             rays = np.asarray(self.pixel_to_ray(u_px, v_px), float)
             return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
-        r0 = unit(uu, vv)
-        cos = np.concatenate([np.sum(r0 * unit(uu + 1.0, vv), axis=-1),
-                              np.sum(r0 * unit(uu, vv + 1.0), axis=-1)])  # fmt: skip
+        return unit(uu, vv), unit(uu + 1.0, vv), unit(uu, vv + 1.0)
+
+    def _pixel_step_cos(self) -> NDArray:
+        """Cosines of the angles of the 1-px steps right and down on a 129 x 97 grid."""
+        r0, ru, rv = self._pixel_steps()
+        cos = np.concatenate([np.sum(r0 * ru, axis=-1), np.sum(r0 * rv, axis=-1)])
         return np.clip(cos, -1.0, 1.0)
+
+    @cached_property
+    def has_ray(self) -> NDArray:
+        """Pixels whose centre has a ray (a fisheye's outside its lens circle has none), bool
+        of shape ``camera.shape``, read-only."""
+        rays = self.pixel_to_ray(*self.pixel_grid())
+        out = np.all(np.isfinite(rays), axis=-1)
+        out.setflags(write=False)
+        return out
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -771,6 +793,22 @@ class Mount:
         r = vehicle_to_enu(heading_deg, reverse)
         arm = r @ np.asarray(self.lever_arm_m, float)
         return np.asarray(antenna_enu_m, float) + arm
+
+
+def tilt_shift_m(roll_deg: float, pitch_deg: float, height_m: float) -> NDArray:
+    """Where a point ``height_m`` above the rail moves when the vehicle tilts, (3,) metres.
+
+    A canted track tilts the whole vehicle about the rails, not about its antenna: a point
+    ``height_m`` above the track axis (the antenna, 4 m up) moves toward the curve's inside by
+    about ``height_m * sin(roll)`` (0.48 m for 6.9 deg). The result is in the level vehicle
+    frame of :meth:`Mount.on_vehicle` (x forward, y left, z up); add ``vehicle_to_enu(...) @``
+    it to the point's level position. Roll and pitch as there; the pivot is the track axis
+    at rail level (with the low rail as the pivot the point also rises by half the cant, 90 mm
+    for 180 mm: not modelled).
+    """
+    up = np.array([0.0, 0.0, float(height_m)])
+    att = _rot_y(-np.radians(pitch_deg)) @ _rot_x(np.radians(roll_deg))
+    return att @ up - up
 
 
 def vehicle_to_enu(heading_deg: ArrayLike, reverse: ArrayLike = False) -> NDArray:

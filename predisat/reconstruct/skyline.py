@@ -169,7 +169,8 @@ def erode_sky_deg(sky_mask: ArrayLike, camera: CameraModel, angle_deg: float) ->
     half-angle around it is sky: the true direction of each pixel lies within it. Frame
     cameras (pinhole, fisheye) keep the pixels farther than ``angle / narrowest pixel`` pixels
     (rounded up, plus one: a direction in reach may fall in the next pixel's area) from every
-    obstacle pixel; a panorama
+    obstacle pixel, pixel without a ray and the image's sides and bottom (the top is carried
+    up: the carving takes the sky above a column's top as going on); a panorama
     row by row, its horizontal reach widening as ``1 / cos(latitude)`` toward the
     poles (the whole row at a pole).
 
@@ -194,10 +195,17 @@ def erode_sky_deg(sky_mask: ArrayLike, camera: CameraModel, angle_deg: float) ->
     if camera.model != "equirect":
         # one pixel more: a direction within the angle may fall in the next pixel's area
         r = int(np.ceil(angle_deg / camera.narrowest_pixel_deg)) + 1
+        # Beyond the sides and the bottom nothing was observed: obstacle. Above the top the
+        # carving already takes the sky as going on (a column's top sky run clears every
+        # elevation above its skyline), so the top row is carried up instead; so are pixels
+        # without a ray (obstacle).
+        pad = np.zeros((h + 2 * r, w + 2 * r), np.uint8)
+        pad[r : r + h, r : r + w] = img & camera.has_ray
+        pad[:r, r : r + w] = pad[r, r : r + w]
         # the exact Euclidean distance to the nearest obstacle pixel: a disc of any radius at
         # the cost of one pass (8x faster than eroding by a 113 px disc)
-        dist = cv2.distanceTransform(img, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        return np.asarray(dist > r)
+        dist = cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        return np.asarray(dist[r : r + h, r : r + w] > r)
     a = np.radians(angle_deg)
     ry = int(np.ceil(a * camera.fy)) + 1
     # vertical first, then each row horizontally with its own reach (a box holds the cone)

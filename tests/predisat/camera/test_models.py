@@ -612,3 +612,15 @@ def test_pixel_angles_bracket_the_centre_pixel() -> None:
         # the grid steps from near the centre, not from it: a part in a million of slack
         assert cam.narrowest_pixel_deg <= cam.centre_pixel_deg <= cam.widest_pixel_deg * 1.000001
         assert cam.narrowest_pixel_deg > 0.3 * cam.widest_pixel_deg  # no degenerate pixel
+
+
+def test_a_tilted_vehicle_carries_its_antenna_toward_the_low_side() -> None:
+    from predisat.camera.models import tilt_shift_m
+
+    # left side up (a right-hand curve's cant): the roof moves right, by height * sin(roll)
+    shift = tilt_shift_m(6.9, 0.0, 4.0)
+    assert shift[1] == pytest.approx(-4.0 * np.sin(np.radians(6.9)))
+    assert shift[2] == pytest.approx(4.0 * (np.cos(np.radians(6.9)) - 1.0))
+    # nose up: the roof moves back
+    assert tilt_shift_m(0.0, 2.0, 4.0)[0] == pytest.approx(-4.0 * np.sin(np.radians(2.0)))
+    np.testing.assert_allclose(tilt_shift_m(0.0, 0.0, 4.0), 0.0)

@@ -490,7 +490,7 @@ def test_eroded_sky_holds_whatever_rotation_within_the_doubt(camera: CameraModel
     doubt = 2.5
     sky = _blobs(camera, 7)
     sure = erode_sky_deg(sky, camera, doubt)
-    assert sure.sum() > 0.2 * sky.sum() and not (sure & ~sky).any()
+    assert sure.sum() > 0.1 * sky.sum() and not (sure & ~sky).any()
     v, u = np.nonzero(sure)
     pick = np.random.default_rng(1).choice(u.size, 4000, replace=False)
     ray = camera.pixel_to_ray(u[pick].astype(float), v[pick].astype(float))
@@ -499,12 +499,18 @@ def test_eroded_sky_holds_whatever_rotation_within_the_doubt(camera: CameraModel
         axis = rng.normal(size=3)
         rot = Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.radians(doubt)).as_matrix()
         pu, pv = camera.ray_to_pixel(ray @ rot.T)
-        iu, iv = np.rint(pu).astype(int), np.rint(pv).astype(int)
-        inside = (iu >= 0) & (iu < camera.width_px) & (iv >= 0) & (iv < camera.height_px)
+        ok = np.isfinite(pu) & np.isfinite(pv)
+        iu = np.rint(np.where(ok, pu, -1)).astype(int)
+        iv = np.rint(np.where(ok, pv, -1)).astype(int)
         if camera.model == "equirect":  # longitude wraps
-            iu, inside = iu % camera.width_px, inside | (iv >= 0) & (iv < camera.height_px)
-        assert inside.mean() > 0.5
+            iu = iu % camera.width_px
+        # above the top edge the carving takes the sky as going on; anywhere else off the
+        # image (sides, bottom, outside a lens circle) nothing was seen: a failure
+        above = ok & (iv < 0) & (iu >= 0) & (iu < camera.width_px)
+        inside = ok & (iu >= 0) & (iu < camera.width_px) & (iv >= 0) & (iv < camera.height_px)
+        assert np.all(inside | above)
         assert sky[iv[inside], iu[inside]].all()
+        assert camera.has_ray[iv[inside], iu[inside]].all()
 
 
 def test_erosion_by_nothing_is_the_mask_and_a_bad_angle_is_refused() -> None:
