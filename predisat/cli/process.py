@@ -119,9 +119,10 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--line-speed-kmh", type=positive_float, default=CantLimits.line_speed_kmh,
         metavar="KMH",
-        help="the fastest train on the line (default %(default)s): where the manifest has no "
-        "measured roll, a curve's cant is bounded by this speed's equilibrium cant, and each "
-        "frame's sky is eroded by the roll it leaves unknown (docs/reconstruction.md, "
+        help="the highest speed the line's curves were canted for (default %(default)s, above "
+        "any conventional line's; a line slowed since keeps its cant): where the manifest has "
+        "no measured roll, a curve's cant is bounded by this speed's equilibrium cant, and "
+        "each frame's sky is eroded by the roll it leaves unknown (docs/reconstruction.md, "
         "section 16)",
     )  # fmt: skip
     parser.add_argument(

@@ -24,7 +24,20 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.track import TrackMap
 from predisat.track.cant import CantLimits, CantTable, inside_roll_sign, roll_bounds_deg
 
-__all__ = ["ATTITUDE_STEP_DEG", "FrameAttitude", "frame_attitudes", "survey_speed_kmh"]
+__all__ = [
+    "ATTITUDE_STEP_DEG",
+    "CURVE_WINDOW_M",
+    "FrameAttitude",
+    "frame_attitudes",
+    "survey_speed_kmh",
+]
+
+CURVE_WINDOW_M = 150.0
+"""An unmeasured roll is bounded by the sharpest curve within this distance: a curve's cant
+ramps in over its transition (and on older curves without one, over the straight before
+it), where the smoothed map's curvature reads low (EN 13803: cant gradients down to 1:400,
+so 160 mm over 64 m; twice that for the smoothing)."""
+_STRAIGHT_PER_M = 1e-4  # R > 10 km: no cant to speak of
 
 ATTITUDE_STEP_DEG = 0.05
 """Nominal attitudes are rounded to this step, so that frames on a curve share rectifiers
@@ -53,8 +66,8 @@ def frame_attitudes(
     reverse: bool,
     *,
     cant: CantLimits | None = None,
-    grade_doubt_deg: float = 1.0,
-    imu_doubt_deg: float = 0.0,
+    grade_doubt_deg: float = 2.3,
+    imu_doubt_deg: float = 0.1,
     cant_table: CantTable | None = None,
     speed_kmh: ArrayLike | None = None,
 ) -> FrameAttitude:
@@ -85,8 +98,7 @@ def frame_attitudes(
     Returns
     -------
     FrameAttitude
-        Nominal angles rounded to :data:`ATTITUDE_STEP_DEG`, the rounding added to the doubt
-        where it is not 0.
+        Nominal angles rounded to :data:`ATTITUDE_STEP_DEG`, the rounding added to the doubt.
     """
     s = np.asarray(chainage_m, float)
     roll = np.broadcast_to(np.asarray(roll_deg, float), s.shape)
@@ -101,13 +113,13 @@ def frame_attitudes(
     todo = ~measured
     if todo.any():
         st = s[todo]
-        k = np.asarray(track.curvature_at(st), float)
+        k, both_ways = _curve_near(track, st)
         known = None if cant_table is None else cant_table.cant_mm_at(st)
         speed = None if speed_kmh is None else np.broadcast_to(
             np.asarray(speed_kmh, float), s.shape)[todo]  # fmt: skip
         lo, hi = roll_bounds_deg(k, cant, cant_mm=known, speed_kmh=speed)
-        sign = inside_roll_sign(k, reverse)
-        # no curve says which rail is raised: the roll may go either way, about 0
+        sign = np.where(both_ways, 0.0, inside_roll_sign(k, reverse))
+        # no curve, or curves both ways, say which rail is raised: either way, about 0
         out_roll[todo] = np.where(sign != 0, sign * 0.5 * (lo + hi), 0.0)
         half = np.where(sign != 0, 0.5 * (hi - lo), np.maximum(np.abs(lo), np.abs(hi)))
         grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(st), float)))
@@ -115,8 +127,7 @@ def frame_attitudes(
         doubt[todo] = half + grade_doubt_deg
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
-    rounding = np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
-    doubt = np.where(doubt > 0, doubt + rounding, 0.0)
+    doubt = doubt + np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
     return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured)
 
 
@@ -149,3 +160,15 @@ def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -
             continue  # repeated times: no speed to trust
         out[idx] = np.abs(np.gradient(ss, ts)) * 3.6
     return out
+
+
+def _curve_near(track: TrackMap, chainage_m: NDArray) -> tuple[NDArray, NDArray]:
+    """The signed curvature of the sharpest curve within :data:`CURVE_WINDOW_M` of each
+    chainage, and whether curves of both hands lie within it (an S-bend), shape (n,)."""
+    offsets = np.arange(-CURVE_WINDOW_M, CURVE_WINDOW_M + 1e-9, 5.0)
+    near = np.clip(chainage_m[:, None] + offsets, 0.0, float(track.length_m))
+    k = np.asarray(track.curvature_at(near.ravel()), float).reshape(near.shape)
+    left = np.max(np.maximum(k, 0.0), axis=1)
+    right = np.max(np.maximum(-k, 0.0), axis=1)
+    both = (left > _STRAIGHT_PER_M) & (right > _STRAIGHT_PER_M)
+    return np.where(left >= right, left, -right), both

@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from predisat.camera.models import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount, tilt_shift_m, vehicle_to_enu
 from predisat.clock import utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
@@ -134,15 +134,21 @@ def run_chunk(
         )  # fmt: skip
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, vehicle_mount = job.cameras[f.side]
-            # the mount in the level frame of the vehicle's attitude (section 16)
-            mount = vehicle_mount.on_vehicle(float(att.roll_deg[k]), float(att.pitch_deg[k]))
+            # the mount in the level frame of the vehicle's attitude, which tilts about the
+            # rails and carries the antenna with it (section 16)
+            roll, pitch = float(att.roll_deg[k]), float(att.pitch_deg[k])
+            mount = vehicle_mount.on_vehicle(roll, pitch)
+            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ tilt_shift_m(
+                roll, pitch, job.antenna_height_m
+            )
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
             views.append(
                 FrameView(
                     chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
-                    antenna_enu_m=ant[k], heading_deg=float(heading[k]), reverse=job.reverse,
+                    antenna_enu_m=ant[k] + shift, heading_deg=float(heading[k]),
+                    reverse=job.reverse,
                     confidence=conf, frame_id=f.frame_id, thin_mask=thin, thin_width_deg=width,
                     attitude_doubt_deg=float(att.doubt_deg[k]),
                 )

@@ -58,9 +58,11 @@ class PipelineParams:
         (``docs/reconstruction.md``, section 16).
     grade_doubt_deg : float
         Where the manifest gives no measured pitch, the track map's grade is taken give or
-        take this angle (a map without heights reads level).
+        take this angle (a map without heights reads level): 2.3 deg is a 40 per mille grade,
+        steeper than adhesion lines are built.
     imu_doubt_deg : float
-        Accuracy of the manifest's measured roll and pitch, degrees each (0: taken as exact).
+        Accuracy of the manifest's measured roll and pitch, degrees each (0.1: a MEMS GNSS/INS
+        in motion; 0 takes them as exact).
     cant_table : CantTable, optional
         The cant along the track from the infrastructure's records: where the manifest has no
         measured roll, it is bounded around that cant and the survey's speed instead of the
@@ -74,8 +76,8 @@ class PipelineParams:
     sky_net: str | None = None
     thin_deg: float = THIN_DEG
     cant: CantLimits = field(default_factory=CantLimits)
-    grade_doubt_deg: float = 1.0
-    imu_doubt_deg: float = 0.0
+    grade_doubt_deg: float = 2.3
+    imu_doubt_deg: float = 0.1
     cant_table: CantTable | None = None
 
     def __post_init__(self) -> None:

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.camera.models import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount, tilt_shift_m, vehicle_to_enu
 from predisat.synth.materials import MATERIALS
 from predisat.synth.raycast import Caster, Hits, SceneMesh, make_caster
 from predisat.synth.sky import SkyModel, fbm
@@ -174,18 +174,21 @@ def camera_pose(
     The track heading is measured in the local ENU at the antenna and carried into the world
     frame with :meth:`LocalFrame.rotation_from`, so far from the frame origin the camera still
     looks square to the track and its horizon stays level. ``roll_deg`` and ``pitch_deg`` tilt
-    the vehicle about the antenna (:meth:`Mount.on_vehicle`): on a canted curve the horizon
-    rolls with it.
+    the vehicle about the track axis at rail level (:meth:`Mount.on_vehicle`,
+    :func:`~predisat.camera.models.tilt_shift_m`): on a canted curve the horizon rolls with
+    it and the cameras move toward the inside.
     """
-    mount = mount.on_vehicle(roll_deg, pitch_deg)
+    tilted = mount.on_vehicle(roll_deg, pitch_deg)
     s = float(chainage_m)
     antenna = np.asarray(world.antenna_enu(s, antenna_height_m), float)
     lat, lon, _ = world.track.position_at(s)
     heading = float(np.asarray(world.track.heading_at(s)))
     to_frame = world.frame.rotation_from(lat, lon)
-    rot = to_frame @ mount.camera_to_enu(heading, reverse)
+    rot = to_frame @ tilted.camera_to_enu(heading, reverse)
+    # the vehicle tilts about the rails, carrying the antenna toward the curve's inside
+    shift = vehicle_to_enu(heading, reverse) @ tilt_shift_m(roll_deg, pitch_deg, antenna_height_m)
     pos = antenna + to_frame @ (
-        np.asarray(mount.camera_position_enu(np.zeros(3), heading, reverse))
+        shift + np.asarray(tilted.camera_position_enu(np.zeros(3), heading, reverse))
     )
     return pos, rot
 

@@ -127,9 +127,10 @@ class CantLimits:
     Attributes
     ----------
     line_speed_kmh : float
-        The fastest any train runs the line. Design cant never exceeds the equilibrium cant of
-        that speed (a cant above it would be all excess for every train), so it bounds the
-        cant of each curve from its curvature.
+        The highest speed the line's curves were canted for: a design cant does not exceed
+        that speed's equilibrium cant (it would be all excess for every train), so it bounds
+        each curve's cant from its curvature. A line slowed since keeps its cant, so give the
+        speed it was built for; the default, 200 km/h, is above any conventional line's.
     max_cant_mm : float
         The largest cant on the line: EN 13803 allows 180 mm on ballasted standard-gauge track
         (160 mm is the usual limit).
@@ -137,7 +138,8 @@ class CantLimits:
         The body's extra roll on its springs per unit of uncompensated cant angle (the UIC's
         flexibility coefficient ``s``, 0.1 to 0.4 for passenger vehicles; the upper end): at a
         standstill on a canted curve the body leans ``s`` times the cant further in, at speed
-        with cant deficiency ``s`` times the deficiency out.
+        with cant deficiency ``s`` times the deficiency out. A tilting vehicle's active tilt is
+        not bounded here: survey with it tilt locked, or give its measured roll.
     max_deficiency_mm : float
         The largest cant deficiency trains run with (EN 13803: 150 mm for conventional
         vehicles).
@@ -145,7 +147,7 @@ class CantLimits:
         Roll from track twist, rail wear and the suspension's play, on straight track too.
     """
 
-    line_speed_kmh: float = 160.0
+    line_speed_kmh: float = 200.0
     max_cant_mm: float = 180.0
     flexibility: float = 0.4
     max_deficiency_mm: float = 150.0

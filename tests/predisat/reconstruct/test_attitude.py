@@ -153,7 +153,8 @@ def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
     _, masks = canted
     measured = masks["measured"].provenance["attitude"]
     assert measured["measured_frames"] == measured["frames"] > 0
-    assert measured["max_doubt_deg"] == 0.0 and 5.0 < measured["max_abs_roll_deg"] < 8.0
+    # the IMU's 0.1 deg for roll and pitch, and the rounding to 0.05 deg
+    assert 0.2 <= measured["max_doubt_deg"] <= 0.25 and 5.0 < measured["max_abs_roll_deg"] < 8.0
     unknown = masks["unknown"].provenance["attitude"]
     assert unknown["measured_frames"] == 0 and unknown["max_doubt_deg"] > 5.0
     assert attitude_text(masks["measured"].provenance).startswith("measured")
@@ -168,3 +169,15 @@ def test_process_warns_when_the_attitude_is_not_measured(canted) -> None:
     assert _attitude_warning(masks["measured"].provenance["attitude"]) is None
     note = _attitude_warning(masks["unknown"].provenance["attitude"])
     assert note is not None and "no measured roll and pitch" in note and "roll_deg" in note
+
+
+def test_a_straight_next_to_a_curve_is_bounded_by_the_curve(track) -> None:
+    # the cant ramps in before the curve, where the smoothed map reads straight
+    s_curve, s_before = np.array([1100.0]), np.array([1290.0])  # the curve ends near 1240 m
+    assert abs(track.curvature_at(s_before)[0]) < 1e-4  # R > 10 km
+    nan = np.array([np.nan])
+    before = frame_attitudes(track, s_before, nan, nan, False, grade_doubt_deg=0.0)
+    curve = frame_attitudes(track, s_curve, nan, nan, False, grade_doubt_deg=0.0)
+    far = frame_attitudes(track, np.array([3350.0]), nan, nan, False, grade_doubt_deg=0.0)
+    assert before.doubt_deg[0] > 0.8 * curve.doubt_deg[0] > 2 * far.doubt_deg[0]
+    assert np.sign(before.roll_deg[0]) == np.sign(curve.roll_deg[0]) == 1
