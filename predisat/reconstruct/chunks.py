@@ -102,6 +102,26 @@ def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstr
     return previous if previous is not None and previous.params == p else Reconstructor(p)
 
 
+def _camera_shift_m(
+    mount: Mount, roll_deg: float, pitch_deg: float, antenna_height_m: float
+) -> NDArray:
+    """How far a tilted vehicle carries a camera, level vehicle frame (3,) metres.
+
+    The vehicle tilts about the rails (:func:`~predisat.camera.models.tilt_shift_m`). A side
+    camera is moved only *away* from the side it looks at: toward it, its rays would start
+    closer to the obstacles than the pipeline's, near the clearance's edge (a 0.45 m move
+    there leaves a band the carving cannot reach). Kept where it was, the camera stands
+    farther from what it sees than it did, and its rays pass higher over an obstacle than the
+    true ones: the safe side (docs/reconstruction.md, section 16).
+    """
+    shift = tilt_shift_m(roll_deg, pitch_deg, antenna_height_m)
+    if mount.side not in ("left", "right"):
+        return shift
+    yaw = np.radians(mount.yaw_deg)
+    look = np.array([np.cos(yaw), np.sin(yaw), 0.0])  # horizontal look direction
+    return shift - max(0.0, float(shift @ look)) * look
+
+
 def run_chunk(
     job: ChunkJob, reconstructor: Reconstructor | None = None
 ) -> tuple[str, list[BadFrame]]:
@@ -135,11 +155,11 @@ def run_chunk(
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, vehicle_mount = job.cameras[f.side]
             # the mount in the level frame of the vehicle's attitude, which tilts about the
-            # rails and carries the antenna with it (section 16)
+            # rails and carries the cameras with it (section 16)
             roll, pitch = float(att.roll_deg[k]), float(att.pitch_deg[k])
             mount = vehicle_mount.on_vehicle(roll, pitch)
-            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ tilt_shift_m(
-                roll, pitch, job.antenna_height_m
+            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ _camera_shift_m(
+                vehicle_mount, roll, pitch, job.antenna_height_m
             )
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
