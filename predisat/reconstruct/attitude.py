@@ -163,12 +163,24 @@ def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -
 
 
 def _curve_near(track: TrackMap, chainage_m: NDArray) -> tuple[NDArray, NDArray]:
-    """The signed curvature of the sharpest curve within :data:`CURVE_WINDOW_M` of each
-    chainage, and whether curves of both hands lie within it (an S-bend), shape (n,)."""
+    """The signed curvature bounding each chainage's cant, and whether its hand is unknown,
+    shape (n,).
+
+    On a curve (R < 10 km at the chainage itself) its own hand, with the sharpest curvature of
+    that hand within :data:`CURVE_WINDOW_M`; on straight track the sharpest curve within the
+    window, of unknown hand when curves of both hands lie within it (between the two curves
+    of an S-bend).
+    """
     offsets = np.arange(-CURVE_WINDOW_M, CURVE_WINDOW_M + 1e-9, 5.0)
     near = np.clip(chainage_m[:, None] + offsets, 0.0, float(track.length_m))
     k = np.asarray(track.curvature_at(near.ravel()), float).reshape(near.shape)
+    here = np.asarray(track.curvature_at(chainage_m), float)
     left = np.max(np.maximum(k, 0.0), axis=1)
     right = np.max(np.maximum(-k, 0.0), axis=1)
-    both = (left > _STRAIGHT_PER_M) & (right > _STRAIGHT_PER_M)
-    return np.where(left >= right, left, -right), both
+    on_left, on_right = here > _STRAIGHT_PER_M, here < -_STRAIGHT_PER_M
+    straight = ~(on_left | on_right)
+    both = straight & (left > _STRAIGHT_PER_M) & (right > _STRAIGHT_PER_M)
+    signed = np.where(
+        on_left, left, np.where(on_right, -right, np.where(left >= right, left, -right))
+    )
+    return signed, both

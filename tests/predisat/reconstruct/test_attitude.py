@@ -181,3 +181,18 @@ def test_a_straight_next_to_a_curve_is_bounded_by_the_curve(track) -> None:
     far = frame_attitudes(track, np.array([3350.0]), nan, nan, False, grade_doubt_deg=0.0)
     assert before.doubt_deg[0] > 0.8 * curve.doubt_deg[0] > 2 * far.doubt_deg[0]
     assert np.sign(before.roll_deg[0]) == np.sign(curve.roll_deg[0]) == 1
+
+
+def test_between_curves_of_both_hands_the_roll_may_go_either_way(track) -> None:
+    # km 10.55-10.70 of the demo line: a left-hand curve ends, a right-hand one begins
+    s = np.arange(10500.0, 10760.0, 10.0)
+    k = track.curvature_at(s)
+    nan = np.full(s.size, np.nan)
+    att = frame_attitudes(track, s, nan, nan, False, grade_doubt_deg=0.0)
+    on_curve = np.abs(k) > 1e-4
+    # on each curve, its own hand; in between, about 0 with a doubt covering either hand
+    assert np.all(np.sign(att.roll_deg[on_curve]) == -np.sign(k[on_curve]))
+    between = ~on_curve
+    if between.any():
+        assert np.all(att.roll_deg[between] == 0.0)
+        assert np.all(att.doubt_deg[between] >= 0.9 * att.doubt_deg[on_curve].max())
