@@ -393,6 +393,8 @@ def _read_mask(path: Path, shape: tuple[int, int]) -> NDArray:
 
 def _cameras(root: Path) -> dict[str, tuple[CameraModel, NDArray]]:
     survey = Survey.load(root / "survey", check_images=False)
+    # the level mount, whatever the vehicle's roll: the predicted and the true skylines go
+    # through the same rotation, so a tilt changes their difference to second order only
     return {s: (c.camera, c.mount.camera_to_vehicle()) for s, c in survey.cameras.items()}
 
 
