@@ -196,3 +196,23 @@ def test_between_curves_of_both_hands_the_roll_may_go_either_way(track) -> None:
     if between.any():
         assert np.all(att.roll_deg[between] == 0.0)
         assert np.all(att.doubt_deg[between] >= 0.9 * att.doubt_deg[on_curve].max())
+
+
+def test_a_side_camera_is_carried_only_back_from_what_it_sees() -> None:
+    from predisat.camera.models import Mount
+    from predisat.reconstruct.chunks import _camera_shift_m
+
+    left, right = Mount.default("left"), Mount.default("right")
+    h = 4.0
+    # left side up: the roof moves right, away from what the left camera sees (+y) ...
+    away = _camera_shift_m(left, 5.0, 0.0, 0.0, h)
+    assert away[1] == pytest.approx(-h * np.sin(np.radians(5.0)))
+    # ... and toward what the right camera sees: it stays where it was across the track
+    assert _camera_shift_m(right, 5.0, 0.0, 0.0, h)[1] == 0.0
+    # with a doubt, back by the most the roll allows
+    assert _camera_shift_m(left, 5.0, 0.0, 2.0, h)[1] == pytest.approx(
+        -h * np.sin(np.radians(7.0))
+    )
+    # the cab cameras go wherever the roll takes them
+    front = _camera_shift_m(Mount.default("front"), 5.0, 0.0, 2.0, h)
+    assert front[1] == pytest.approx(-h * np.sin(np.radians(5.0)))
