@@ -146,7 +146,7 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
         "--imu-doubt-deg", type=non_negative_float, default=PipelineParams.imu_doubt_deg,
         metavar="DEG",
         help="accuracy of the manifest's measured roll and pitch, each (default %(default)s: "
-        "taken as exact; give your IMU's)",
+        "taken as exact, as the mount is; give your GNSS/INS's, e.g. 0.1 for a MEMS unit)",
     )  # fmt: skip
 
 

@@ -61,8 +61,10 @@ class PipelineParams:
         take this angle (a map without heights reads level): 2.3 deg is a 40 per mille grade,
         steeper than adhesion lines are built.
     imu_doubt_deg : float
-        Accuracy of the manifest's measured roll and pitch, degrees each (0.1: a MEMS GNSS/INS
-        in motion; 0 takes them as exact).
+        Accuracy of the manifest's measured roll and pitch, degrees each. 0 (the default)
+        takes them as exact, as the mount is taken: give your GNSS/INS's (0.1 for a MEMS
+        unit in motion). On the demo 0.1 costs 1.6 points of sky (docs/reconstruction.md,
+        section 16).
     cant_table : CantTable, optional
         The cant along the track from the infrastructure's records: where the manifest has no
         measured roll, it is bounded around that cant and the survey's speed instead of the
@@ -77,7 +79,7 @@ class PipelineParams:
     thin_deg: float = THIN_DEG
     cant: CantLimits = field(default_factory=CantLimits)
     grade_doubt_deg: float = 2.3
-    imu_doubt_deg: float = 0.1
+    imu_doubt_deg: float = 0.0
     cant_table: CantTable | None = None
 
     def __post_init__(self) -> None:

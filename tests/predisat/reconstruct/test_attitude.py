@@ -153,8 +153,8 @@ def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
     _, masks = canted
     measured = masks["measured"].provenance["attitude"]
     assert measured["measured_frames"] == measured["frames"] > 0
-    # the IMU's 0.1 deg for roll and pitch, and the rounding to 0.05 deg
-    assert 0.2 <= measured["max_doubt_deg"] <= 0.25 and 5.0 < measured["max_abs_roll_deg"] < 8.0
+    # taken as exact by default
+    assert measured["max_doubt_deg"] == 0.0 and 5.0 < measured["max_abs_roll_deg"] < 8.0
     unknown = masks["unknown"].provenance["attitude"]
     assert unknown["measured_frames"] == 0 and unknown["max_doubt_deg"] > 5.0
     assert attitude_text(masks["measured"].provenance).startswith("measured")
