@@ -259,9 +259,13 @@ class CantTable:
             text = p.read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as exc:
             raise ValueError(f"cant table {p}: cannot be read ({exc}); give a UTF-8 CSV") from None
-        lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-        reader = csv.reader(lines)
-        header = [h.strip() for h in next(reader, [])]
+        numbered = [
+            (n, row)
+            for n, ln in enumerate(text.splitlines(), start=1)
+            if ln.strip() and not ln.lstrip().startswith("#")
+            for row in csv.reader([ln])
+        ]
+        header = [h.strip() for h in numbered[0][1]] if numbered else []
         if "chainage_m" not in header or "cant_mm" not in header:
             raise ValueError(
                 f"cant table {p}: the header must name chainage_m and cant_mm (got {header})"
@@ -269,24 +273,24 @@ class CantTable:
         i_s, i_c = header.index("chainage_m"), header.index("cant_mm")
         s_m: list[float] = []
         c_mm: list[float] = []
-        for n, row in enumerate(reader, start=2):
+        for n, row in numbered[1:]:
             try:
                 s_v, c_v = float(row[i_s]), float(row[i_c])
             except (IndexError, ValueError):
                 raise ValueError(
-                    f"cant table {p}, data line {n}: {','.join(row)!r} needs numbers in "
+                    f"cant table {p}, line {n}: {','.join(row)!r} needs numbers in "
                     "chainage_m and cant_mm"
                 ) from None
             if not (math.isfinite(s_v) and math.isfinite(c_v)):
-                raise ValueError(f"cant table {p}, data line {n}: values must be finite")
+                raise ValueError(f"cant table {p}, line {n}: values must be finite")
             if s_m and s_v <= s_m[-1]:
                 raise ValueError(
-                    f"cant table {p}, data line {n}: chainage_m {s_v:g} does not increase "
+                    f"cant table {p}, line {n}: chainage_m {s_v:g} does not increase "
                     f"(previous {s_m[-1]:g}); sort the rows by chainage"
                 )
             if not 0.0 <= c_v <= _MAX_TABLE_CANT_MM:
                 raise ValueError(
-                    f"cant table {p}, data line {n}: cant_mm {c_v:g} is not within [0, "
+                    f"cant table {p}, line {n}: cant_mm {c_v:g} is not within [0, "
                     f"{_MAX_TABLE_CANT_MM:g}]; give the cant's size in millimetres (the raised "
                     "rail follows from the curve)"
                 )
