@@ -114,18 +114,20 @@ def frame_attitudes(
     todo = ~measured
     if todo.any():
         st = s[todo]
-        k, both_ways = _curve_near(track, st)
         known = None if cant_table is None else cant_table.cant_mm_at(st)
         speed = None if speed_kmh is None else np.broadcast_to(
             np.asarray(speed_kmh, float), s.shape)[todo]  # fmt: skip
-        lo, hi = roll_bounds_deg(k, cant, cant_mm=known, speed_kmh=speed)
-        sign = np.where(both_ways, 0.0, inside_roll_sign(k, reverse))
-        # no curve, or curves both ways, say which rail is raised: either way, about 0
-        out_roll[todo] = np.where(sign != 0, sign * 0.5 * (lo + hi), 0.0)
-        half = np.where(sign != 0, 0.5 * (hi - lo), np.maximum(np.abs(lo), np.abs(hi)))
+        r_lo, r_hi = _roll_interval(track, st, reverse, cant, known, speed)
+        out_roll[todo] = 0.5 * (r_lo + r_hi)
         grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(st), float)))
         out_pitch[todo] = -grade_deg if reverse else grade_deg
-        doubt[todo] = half + grade_doubt_deg
+        doubt[todo] = 0.5 * (r_hi - r_lo) + grade_doubt_deg
+        if not np.all(np.isfinite(doubt[todo])):
+            bad = st[~np.isfinite(doubt[todo])]
+            raise ValueError(
+                f"no attitude bound at chainage {bad[0]:.1f} m ({bad.size} frames): the track "
+                "map gives no curvature or grade there; check the frames' chainages"
+            )
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     # A doubt takes the rounding in; with none (an attitude taken as exact) the rounding,
@@ -167,25 +169,34 @@ def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -
     return out
 
 
-def _curve_near(track: TrackMap, chainage_m: NDArray) -> tuple[NDArray, NDArray]:
-    """The signed curvature bounding each chainage's cant, and whether its hand is unknown,
-    shape (n,).
-
-    On a curve (R < 10 km at the chainage itself) its own hand, with the sharpest curvature of
-    that hand within :data:`CURVE_WINDOW_M`; on straight track the sharpest curve within the
-    window, of unknown hand when curves of both hands lie within it (between the two curves
-    of an S-bend).
-    """
+def _roll_interval(
+    track: TrackMap,
+    chainage_m: NDArray,
+    reverse: bool,
+    cant: CantLimits | None,
+    cant_mm: NDArray | None,
+    speed_kmh: NDArray | None,
+) -> tuple[NDArray, NDArray]:
+    """The vehicle's roll (positive raising its left side) an unmeasured frame may have,
+    degrees, shape (n,) each: the union over the curves of each hand within
+    :data:`CURVE_WINDOW_M` (a cant ramps in before its curve, where the smoothed map's
+    curvature reads low or of the other hand), or track roll only on straight track."""
     offsets = np.arange(-CURVE_WINDOW_M, CURVE_WINDOW_M + 1e-9, 5.0)
     near = np.clip(chainage_m[:, None] + offsets, 0.0, float(track.length_m))
     k = np.asarray(track.curvature_at(near.ravel()), float).reshape(near.shape)
-    here = np.asarray(track.curvature_at(chainage_m), float)
-    left = np.max(np.maximum(k, 0.0), axis=1)
+    k = np.concatenate([k, np.asarray(track.curvature_at(chainage_m), float)[:, None]], axis=1)
+    left = np.max(np.maximum(k, 0.0), axis=1)  # curves turning left toward increasing chainage
     right = np.max(np.maximum(-k, 0.0), axis=1)
-    on_left, on_right = here > _STRAIGHT_PER_M, here < -_STRAIGHT_PER_M
-    straight = ~(on_left | on_right)
-    both = straight & (left > _STRAIGHT_PER_M) & (right > _STRAIGHT_PER_M)
-    signed = np.where(
-        on_left, left, np.where(on_right, -right, np.where(left >= right, left, -right))
-    )
-    return signed, both
+    lo = np.full(chainage_m.shape, np.inf)
+    hi = np.full(chainage_m.shape, -np.inf)
+    for kk, present in ((left, left > _STRAIGHT_PER_M), (-right, right > _STRAIGHT_PER_M)):
+        a, b = roll_bounds_deg(kk, cant, cant_mm=cant_mm, speed_kmh=speed_kmh)  # inward
+        sign = inside_roll_sign(kk, reverse)
+        r1, r2 = sign * a, sign * b
+        lo = np.where(present, np.minimum(lo, np.minimum(r1, r2)), lo)
+        hi = np.where(present, np.maximum(hi, np.maximum(r1, r2)), hi)
+    # no curve of either hand near: the roll may go either way
+    a, b = roll_bounds_deg(np.maximum(left, right), cant, cant_mm=cant_mm, speed_kmh=speed_kmh)
+    edge = np.maximum(np.abs(a), np.abs(b))
+    straight = ~np.isfinite(lo)
+    return np.where(straight, -edge, lo), np.where(straight, edge, hi)

@@ -102,30 +102,6 @@ def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstr
     return previous if previous is not None and previous.params == p else Reconstructor(p)
 
 
-def _camera_shift_m(
-    mount: Mount, roll_deg: float, pitch_deg: float, doubt_deg: float, antenna_height_m: float
-) -> NDArray:
-    """How far a tilted vehicle carries a camera, level vehicle frame (3,) metres.
-
-    The vehicle tilts about the rails (:func:`~predisat.camera.models.tilt_shift_m`). Along a
-    side camera's look direction the camera is put where it is farthest *back* from what it
-    sees over the roll's doubt, and never forward: its rays then pass over an obstacle no
-    lower than the true ones (the safe side). Moved forward, the inside camera of a curve came
-    within 6 cm of the clearance's edge and left a band the carving cannot reach
-    (docs/reconstruction.md, section 16).
-    """
-    shift = tilt_shift_m(roll_deg, pitch_deg, antenna_height_m)
-    if mount.side not in ("left", "right"):
-        return shift
-    yaw = np.radians(mount.yaw_deg)
-    look = np.array([np.cos(yaw), np.sin(yaw), 0.0])  # horizontal look direction
-    along = min(
-        float(tilt_shift_m(r, pitch_deg, antenna_height_m) @ look)
-        for r in (roll_deg - doubt_deg, roll_deg, roll_deg + doubt_deg)
-    )
-    return shift + (min(along, 0.0) - float(shift @ look)) * look
-
-
 def run_chunk(
     job: ChunkJob, reconstructor: Reconstructor | None = None
 ) -> tuple[str, list[BadFrame]]:
@@ -162,8 +138,8 @@ def run_chunk(
             # rails and carries the cameras with it (section 16)
             roll, pitch = float(att.roll_deg[k]), float(att.pitch_deg[k])
             mount = vehicle_mount.on_vehicle(roll, pitch)
-            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ _camera_shift_m(
-                vehicle_mount, roll, pitch, float(att.doubt_deg[k]), job.antenna_height_m
+            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ tilt_shift_m(
+                roll, pitch, job.antenna_height_m
             )
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)

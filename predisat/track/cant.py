@@ -145,6 +145,10 @@ class CantLimits:
         vehicles).
     track_roll_deg : float
         Roll from track twist, rail wear and the suspension's play, on straight track too.
+    top_speed_kmh : float
+        The fastest the survey vehicle may run where its speed is not known (the pipeline
+        knows it from the frames' times): with the deficiency limit, it bounds the body's lean
+        outward.
     """
 
     line_speed_kmh: float = 200.0
@@ -152,9 +156,10 @@ class CantLimits:
     flexibility: float = 0.4
     max_deficiency_mm: float = 150.0
     track_roll_deg: float = 0.5
+    top_speed_kmh: float = 250.0
 
     def __post_init__(self) -> None:
-        for name in ("line_speed_kmh", "max_cant_mm"):
+        for name in ("line_speed_kmh", "max_cant_mm", "top_speed_kmh"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"CantLimits.{name} must be > 0, got {getattr(self, name)}")
         for name in ("flexibility", "max_deficiency_mm", "track_roll_deg"):
@@ -187,7 +192,8 @@ def roll_bounds_deg(
         way included. Unknown cant: it lies in ``[0, min(max_cant, D_eq(line speed))]``.
         The body adds ``s`` times the uncompensated cant (cant minus the equilibrium cant of
         its speed), ``s`` in ``[0, flexibility]``: with the speed known that is one signed
-        amount; unknown, anything from the deficiency limit outward to the cant inward.
+        amount; unknown, anything from the deficiency at ``top_speed_kmh`` (at most
+        ``max_deficiency_mm``) outward to the cant inward.
     """
     lim = limits or CantLimits()
     k = np.abs(np.asarray(curvature_per_m, float))
@@ -200,8 +206,10 @@ def roll_bounds_deg(
         c_hi = np.where(np.isfinite(known), known, c_hi)
     th_lo, th_hi = cant_angle_deg(c_lo), cant_angle_deg(c_hi)
     s = lim.flexibility
-    # speed unknown: from the deficiency limit outward (at most the line speed's) to the cant
-    out = cant_angle_deg(np.minimum(np.maximum(d_eq - c_lo, 0.0), lim.max_deficiency_mm))
+    # speed unknown: from the deficiency limit outward (a train may run faster than the curve
+    # was canted for) to the cant inward; in angles, as the body leans by them
+    d_top = equilibrium_cant_mm(k, lim.top_speed_kmh)
+    out = cant_angle_deg(np.clip(d_top, c_lo, c_lo + lim.max_deficiency_mm)) - th_lo
     extra_lo, extra_hi = -s * out, s * th_hi
     if speed_kmh is not None:
         v = np.broadcast_to(np.asarray(speed_kmh, float), k.shape)
@@ -238,13 +246,20 @@ class CantTable:
     def __post_init__(self) -> None:
         s = np.array(self.chainage_m, float)
         c = np.array(self.cant_mm, float)
-        where = self.source or "cant table"
+        where = f"cant table {self.source}" if self.source else "cant table"
         if s.ndim != 1 or s.shape != c.shape or s.size < 2:
-            raise ValueError(f"{where}: needs at least two rows of chainage_m and cant_mm")
+            raise ValueError(
+                f"{where}: needs at least two rows of chainage_m and cant_mm (the cant at "
+                "the ends of each curve and transition at least)"
+            )
         if not (np.all(np.isfinite(s)) and np.all(np.diff(s) > 0)):
-            raise ValueError(f"{where}: chainage_m must be finite and strictly increasing")
+            raise ValueError(
+                f"{where}: chainage_m must be finite and strictly increasing; sort the rows by "
+                "chainage and drop repeated ones"
+            )
         if not (np.all(np.isfinite(c)) and np.all((c >= 0) & (c <= _MAX_TABLE_CANT_MM))):
-            raise ValueError(f"{where}: cant_mm must lie in [0, {_MAX_TABLE_CANT_MM:g}] mm")
+            raise ValueError(f"{where}: cant_mm must lie in [0, {_MAX_TABLE_CANT_MM:g}] mm (the "
+                             "cant's size; the raised rail follows from the curve)")  # fmt: skip
         for a in (s, c):
             a.setflags(write=False)
         object.__setattr__(self, "chainage_m", s)
@@ -261,14 +276,15 @@ class CantTable:
             raise ValueError(f"cant table {p}: cannot be read ({exc}); give a UTF-8 CSV") from None
         numbered = [
             (n, row)
-            for n, ln in enumerate(text.splitlines(), start=1)
+            for n, ln in enumerate(text.replace("\r\n", "\n").split("\n"), start=1)
             if ln.strip() and not ln.lstrip().startswith("#")
             for row in csv.reader([ln])
         ]
         header = [h.strip() for h in numbered[0][1]] if numbered else []
         if "chainage_m" not in header or "cant_mm" not in header:
             raise ValueError(
-                f"cant table {p}: the header must name chainage_m and cant_mm (got {header})"
+                f"cant table {p}: the header must name chainage_m and cant_mm, separated by "
+                f"commas (got {header})"
             )
         i_s, i_c = header.index("chainage_m"), header.index("cant_mm")
         s_m: list[float] = []
@@ -282,7 +298,10 @@ class CantTable:
                     "chainage_m and cant_mm"
                 ) from None
             if not (math.isfinite(s_v) and math.isfinite(c_v)):
-                raise ValueError(f"cant table {p}, line {n}: values must be finite")
+                raise ValueError(
+                    f"cant table {p}, line {n}: chainage_m and cant_mm must be finite numbers, "
+                    f"got {s_v!r} and {c_v!r}"
+                )
             if s_m and s_v <= s_m[-1]:
                 raise ValueError(
                     f"cant table {p}, line {n}: chainage_m {s_v:g} does not increase "

@@ -103,3 +103,19 @@ def test_cant_table_reads_interpolates_and_names_bad_rows(tmp_path) -> None:
         with pytest.raises(ValueError, match=match) as info:
             CantTable.from_csv(p)
         assert str(p) in str(info.value)
+
+
+def test_a_train_faster_than_the_curve_was_canted_for_stays_inside() -> None:
+    # a line canted for 100 km/h, run at up to 160 km/h (review case): R = 1000 m
+    lim = CantLimits(line_speed_kmh=100.0)
+    k = 1 / 1000
+    lo, hi = roll_bounds_deg(k, lim)
+    for c in np.linspace(0, min(float(equilibrium_cant_mm(k, 100.0)), 180.0), 30):
+        lt, ht = roll_bounds_deg(k, lim, cant_mm=c)
+        for v in np.linspace(0, 160, 33):
+            if equilibrium_cant_mm(k, v) - c > lim.max_deficiency_mm:
+                continue
+            for s in (0.0, 0.2, lim.flexibility):
+                inward = -body_roll_deg(k, c, v, s)  # a left-hand curve leans left
+                assert lo - 1e-9 <= inward <= hi + 1e-9
+                assert lt - 1e-9 <= inward <= ht + 1e-9
