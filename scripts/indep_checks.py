@@ -648,7 +648,7 @@ def cmd_cantcheck(args):
         turn[i] = np.sign(cz)
         c = P[i + 1] - P[i - 1]
         la, lb, lc = (np.linalg.norm(x[:2]) for x in (a, b, c))
-        radius[i] = la * lb * lc / max(abs(cz), 1e-12)  # circumradius: abc / (2 area)
+        radius[i] = la * lb * lc / max(2.0 * abs(cz), 1e-12)  # circumradius abc / (4 area)
     cant_at = dict(zip(np.round(cant[:, 0], 3), cant[:, 1], strict=True))
     cmm = np.array([cant_at[round(x, 3)] for x in s])
     on_curve = (cmm >= 5) & np.isfinite(turn)
