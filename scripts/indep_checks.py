@@ -9,6 +9,11 @@
   above the truth) is re-cast in the world and attributed to the object class it hits;
   summaries by class, position, sector; where visible sky is lost.
 * ``thumbs OUT``: a PNG contact sheet of frames.
+* ``cantcheck OUT``: a canted world (``build --cant-speed-kmh``): (a) the horizon of a far flat
+  plane in a side camera's image, level and rolled, against the physics of a body leaning into
+  the curve; (b) the written roll's sign against the curve's hand from the manifest positions
+  alone, and the design cant against the radius from them; (c) the largest roll and the
+  antenna's lateral shift there.
 """
 
 from __future__ import annotations
@@ -41,6 +46,10 @@ def add_commands(sub):
     t.set_defaults(func=cmd_thumbs)
     add_plot(sub)
     add_segcheck(sub)
+    k = sub.add_parser("cantcheck", help="self-checks of a canted world's attitude")
+    k.add_argument("out")
+    k.add_argument("--json", default=None, help="default OUT/truth/cantcheck.json")
+    k.set_defaults(func=cmd_cantcheck)
 
 
 def _world(out):
@@ -467,6 +476,7 @@ def cmd_segcheck(args):
 
     rows = list(csv.DictReader(open(out / "manifest.csv")))
     track = iw.Track(5800, 7200, meta["frame_mid_chainage_m"])
+    att = read_attitude(out)
     cam = iw.Fisheye()
     rays_cam, valid, _ = cam.pixel_rays()
     n_cls = len(classes)
@@ -489,6 +499,10 @@ def cmd_segcheck(args):
         R_cw = Rv @ iw.cam_to_vehicle(mt)
         ant = track.world_from_geo(lat, lon, h + sy["antenna_height_m"])
         c_pos = ant + Rv @ np.array(mt["lever_arm_m"])
+        if att is not None:  # a canted world: the pose its frames were rendered with
+            c_pos, R_cw, _ = iw.camera_pose(
+                track, s, sy["antenna_height_m"], r["side"], *att[round(s, 3)]
+            )
         d = rays_cam @ R_cw.T
         up = d @ Rv[:, 2] > 0.0  # above the local horizontal
         sel = valid & up
@@ -531,3 +545,203 @@ def cmd_segcheck(args):
     print(txt)
     if args.json:
         Path(args.json).write_text(txt)
+
+
+def read_attitude(out):
+    """{chainage (rounded to mm): (roll_deg, pitch_deg)} from world/attitude.csv (a canted
+    world, with or without the IMU columns), else None (a level world)."""
+    f = Path(out) / "world" / "attitude.csv"
+    if not f.is_file():
+        return None
+    a = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+    return {round(float(r[0]), 3): (float(r[3]), float(r[4])) for r in a}
+
+
+def _horizon_row(iw, cam, c_pos, R_cw, up, u_col):
+    """Image row of the horizon of a far flat plane (level, 2 m below the camera, 40 km
+    across: dip < 0.003 deg) in pixel column u_col: the first row from the top whose ray
+    hits the plane, refined to 1/64 px by bisection on the row coordinate."""
+    import open3d as o3d
+
+    # the plane: a square of 40 km side through c_pos - 2 up, normal up
+    e1 = np.cross(up, [1.0, 0, 0] if abs(up[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    q = c_pos - 2.0 * up
+    L = 20000.0
+    V = np.array([q + L * (a * e1 + b * e2) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    sc = o3d.t.geometry.RaycastingScene()
+    sc.add_triangles(
+        o3d.core.Tensor((V - c_pos).astype(np.float32)),  # camera at the origin: float32 safe
+        o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.uint32)),
+    )
+
+    def ray(u, v):  # pixel -> unit ray in the camera frame (the renderer's own unprojection)
+        x, y = (u - cam.cx) / cam.f, (v - cam.cy) / cam.f
+        r = math.hypot(x, y)
+        th = float(np.interp(r, cam._td, cam._th))
+        for _ in range(5):
+            k1, k2, k3, k4 = cam.k
+            t2 = th * th
+            der = 1 + 3 * k1 * t2 + 5 * k2 * t2**2 + 7 * k3 * t2**3 + 9 * k4 * t2**4
+            th -= (float(cam.thetad(th)) - r) / der
+        ph = math.atan2(y, x)
+        return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+
+    def hits(vs):
+        d = np.array([R_cw @ ray(u_col, v) for v in vs])
+        rr = np.concatenate([np.zeros_like(d), d], 1).astype(np.float32)
+        return np.isfinite(sc.cast_rays(o3d.core.Tensor(rr))["t_hit"].numpy())
+
+    rows = np.arange(0, cam.height, 1.0)
+    rows = rows[np.hypot(u_col - cam.cx, rows - cam.cy) <= cam.circle_px - 1]
+    h = hits(rows)
+    k = int(np.argmax(h))
+    lo, hi = rows[k - 1], rows[k]
+    for _ in range(6):
+        mid = 0.5 * (lo + hi)
+        if hits([mid])[0]:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+def cmd_cantcheck(args):
+    import csv
+
+    import independent_world as iw
+    import yaml
+
+    out = Path(args.out)
+    sy = yaml.safe_load((out / "survey.yaml").read_text())
+    meta = json.loads((out / "world" / "objects.json").read_text())
+    h_ant = float(sy["antenna_height_m"])
+    rows = [r for r in csv.DictReader(open(out / "manifest.csv")) if r["side"] == "left"]
+    att = read_attitude(out)
+    if att is None:
+        raise SystemExit(f"{out}: no world/attitude.csv: not a canted world")
+    cant = np.loadtxt(out / "truth" / "cant.csv", delimiter=",", skiprows=1, ndmin=2)
+    imu = "roll_deg" in rows[0] and rows[0]["roll_deg"] != ""
+    s = np.array([float(r["chainage_m"]) for r in rows])
+    # the roll as written (the manifest's, or with --no-imu the one rendered with)
+    written = [
+        (float(r["roll_deg"]), float(r["pitch_deg"])) if imu else att[round(x, 3)]
+        for r, x in zip(rows, s, strict=True)
+    ]
+    roll = np.array([w[0] for w in written])
+    pitch = np.array([w[1] for w in written])
+    res: dict = {"imu_columns": bool(imu), "positions": len(s)}
+    # (b) the curve's hand and radius from the manifest's antenna positions alone (ECEF ->
+    # ENU at the middle; the turn of consecutive chords, the circle through three positions)
+    lat = np.array([float(r["lat_deg"]) for r in rows])
+    lon = np.array([float(r["lon_deg"]) for r in rows])
+    hh = np.array([float(r["h_m"]) for r in rows])
+    X = iw.ecef_from_geodetic(lat, lon, hh)
+    m = len(s) // 2
+    P = (X - X[m]) @ iw.enu_rotation(lat[m], lon[m]).T
+    turn = np.full(len(s), np.nan)
+    radius = np.full(len(s), np.nan)
+    for i in range(1, len(s) - 1):
+        a, b = P[i] - P[i - 1], P[i + 1] - P[i]
+        cz = a[0] * b[1] - a[1] * b[0]  # > 0: the track turns left (anticlockwise from above)
+        turn[i] = np.sign(cz)
+        c = P[i + 1] - P[i - 1]
+        la, lb, lc = (np.linalg.norm(x[:2]) for x in (a, b, c))
+        radius[i] = la * lb * lc / max(2.0 * abs(cz), 1e-12)  # circumradius abc / (4 area)
+    cant_at = dict(zip(np.round(cant[:, 0], 3), cant[:, 1], strict=True))
+    cmm = np.array([cant_at[round(x, 3)] for x in s])
+    on_curve = (cmm >= 5) & np.isfinite(turn)
+    expect = -turn  # roll positive raises the left: the left goes down on a left curve
+    ok = np.sign(roll[on_curve]) == expect[on_curve]
+    V = sy.get("canted_vehicle", {}).get("design_speed_kmh")
+    cmax = sy.get("canted_vehicle", {}).get("max_cant_mm", 160.0)
+    c_from_r = np.minimum(cmax, 11.8 * V**2 / radius) if V else np.full(len(s), np.nan)
+    c_from_r = 5.0 * np.floor(c_from_r / 5.0 + 0.5)
+    dc = np.abs(c_from_r - cmm)[np.isfinite(radius)]
+    res["b_roll_sign"] = {
+        "positions_on_cant": int(on_curve.sum()),
+        "left_hand": int((turn[on_curve] > 0).sum()),
+        "right_hand": int((turn[on_curve] < 0).sum()),
+        "sign_agrees": int(ok.sum()),
+        "pass": bool(ok.all() and on_curve.any()),
+        "min_radius_m_from_positions": float(np.nanmin(radius)),
+        "cant_from_positions_vs_written_max_abs_mm": float(dc.max()),
+        "cant_from_positions_vs_written_within_5mm_pct": float(100.0 * np.mean(dc <= 5.0)),
+    }
+    print(
+        f"(b) roll sign vs the curve's hand from the manifest positions: "
+        f"{int(ok.sum())}/{int(on_curve.sum())} positions with cant agree "
+        f"({int((turn[on_curve] > 0).sum())} left-hand, {int((turn[on_curve] < 0).sum())} "
+        f"right-hand); min R from positions {np.nanmin(radius):.0f} m; design cant from that R "
+        f"vs truth/cant.csv: max |diff| {dc.max():.0f} mm, {100.0 * np.mean(dc <= 5.0):.0f} % "
+        f"within 5 mm"
+    )
+    # (c) the largest roll; the antenna's shift there (rotation about the rail-level axis)
+    s0, s1 = float(s[0]), float(s[-1])
+    track = iw.Track(s0 - 200, s1 + 200, meta["frame_mid_chainage_m"])
+    k = int(np.argmax(np.abs(roll)))
+    lat_k, lon_k, h_k, Rv = track.pose(s[k])
+    ant_n = track.world_from_geo(lat_k, lon_k, h_k + h_ant)
+    _, _, ant_b = iw.camera_pose(track, s[k], h_ant, "left", roll[k], pitch[k])
+    d = ant_b - ant_n
+    res["c_largest_roll"] = {
+        "chainage_m": float(s[k]),
+        "roll_deg": float(roll[k]),
+        "max_abs_roll_deg": float(abs(roll[k])),
+        "cant_mm": float(cmm[k]),
+        "antenna_left_shift_m": float(d @ Rv[:, 1]),
+        "antenna_up_shift_m": float(d @ Rv[:, 2]),
+        "expected_left_shift_m": float(-h_ant * math.sin(math.radians(roll[k]))),
+        "max_abs_pitch_deg": float(np.abs(pitch).max()),
+    }
+    print(
+        f"(c) max |roll| {abs(roll[k]):.3f} deg (roll {roll[k]:+.3f}) at {s[k]:.0f} m, cant "
+        f"{cmm[k]:.0f} mm: antenna shifted {d @ Rv[:, 1]:+.4f} m to the left (expected "
+        f"-h sin(roll) = {-h_ant * math.sin(math.radians(roll[k])):+.4f}), "
+        f"{d @ Rv[:, 2]:+.4f} m up; max |pitch| {np.abs(pitch).max():.3f} deg"
+    )
+    # (a) the horizon of a far flat plane in the side cameras, level vs rolled, at the
+    # largest roll of a left-hand curve (else of the world's curve, the expectation mirrored)
+    left_curve = on_curve & (turn > 0)
+    cand = np.flatnonzero(left_curve) if left_curve.any() else np.flatnonzero(on_curve)
+    ka = int(cand[np.argmax(np.abs(roll[cand]))])
+    cam = iw.Fisheye()
+    res["a_horizon"] = {"chainage_m": float(s[ka]), "roll_deg": float(roll[ka]), "curve": (
+        "left" if turn[ka] > 0 else "right")}
+    all_ok = True
+    for side in ("left", "right"):
+        _, _, _, Rv = track.pose(s[ka])
+        up = Rv[:, 2]
+        c0, R0, _ = iw.camera_pose(track, s[ka], h_ant, side)
+        c1, R1, _ = iw.camera_pose(track, s[ka], h_ant, side, roll[ka], pitch[ka])
+        v0 = _horizon_row(iw, cam, c0, R0, up, cam.cx)
+        v1 = _horizon_row(iw, cam, c1, R1, up, cam.cx)
+        el0 = math.degrees(math.asin(R0[:, 2] @ up))
+        el1 = math.degrees(math.asin(R1[:, 2] @ up))
+        # physics: the side going down (roll < 0: the left) tilts its camera's axis down by
+        # |roll|, so the horizon rises in its image (smaller row); the other side mirrors
+        side_down = "left" if roll[ka] < 0 else "right"
+        higher = side == side_down
+        v_exp = cam.cy + cam.f * float(cam.thetad(math.radians(el1)))
+        passed = (v1 < v0) == higher
+        all_ok &= passed
+        res["a_horizon"][side] = {
+            "axis_elevation_level_deg": el0,
+            "axis_elevation_rolled_deg": el1,
+            "horizon_row_level_px": v0,
+            "horizon_row_rolled_px": v1,
+            "horizon_row_rolled_from_lens_model_px": v_exp,
+            "expected": "higher" if higher else "lower",
+            "pass": bool(passed),
+        }
+        print(
+            f"(a) {side} camera at {s[ka]:.0f} m ({res['a_horizon']['curve']}-hand curve, roll "
+            f"{roll[ka]:+.3f} deg): optical axis elevation {el0:.3f} -> {el1:.3f} deg; horizon "
+            f"row {v0:.2f} -> {v1:.2f} px (lens model {v_exp:.2f}); expected "
+            f"{'higher' if higher else 'lower'} in the image: {'PASS' if passed else 'FAIL'}"
+        )
+    res["a_horizon"]["pass"] = bool(all_ok)
+    res["pass"] = bool(all_ok and res["b_roll_sign"]["pass"])
+    print("cantcheck:", "PASS" if res["pass"] else "FAIL")
+    Path(args.json or out / "truth" / "cantcheck.json").write_text(json.dumps(res, indent=1))

@@ -833,6 +833,104 @@ def cam_to_vehicle(m):
 
 
 # ---------------------------------------------------------------------------------------------
+# canted vehicle (build --cant-speed-kmh): the body's roll on a curve and its pitch on a grade
+
+EQ_CANT_MM = 11.8  # EN 13803 equilibrium cant, standard gauge: mm per (km/h)^2 per (1/m)
+CANT_BASE_MM = 1500.0  # cant angle = asin(cant / 1500 mm), the rail heads' contact points
+
+
+def survey_speed_mps(step_m):
+    """The survey vehicle's speed: consecutive positions are ``step_m`` apart along the track
+    and ``survey_rows_time(1) - survey_rows_time(0)`` seconds apart in the manifest (15 m/s,
+    54 km/h, at the standard 10 m step)."""
+    return step_m / (survey_rows_time(1) - survey_rows_time(0))
+
+
+def track_curvature(track, s, half=10.0):
+    """Signed horizontal curvature (1/m) at chainage s, positive when the track turns LEFT
+    toward increasing chainage: the direction of the track's world-frame positions (1 m
+    samples, ``Track.p``; x east, y north, z up) differenced over s +- ``half`` m, its angle
+    counted anticlockwise seen from above (a left turn increases it)."""
+
+    def ang(x):
+        xs = np.array([x - 1.0, x + 1.0])
+        px = np.interp(xs, track.s, track.p[:, 0])
+        py = np.interp(xs, track.s, track.p[:, 1])
+        return math.atan2(py[1] - py[0], px[1] - px[0])
+
+    d = ang(s + half) - ang(s - half)
+    d = (d + math.pi) % (2 * math.pi) - math.pi
+    return d / (2 * half)
+
+
+def track_grade(track, s, half=10.0):
+    """dh/ds of the track's ellipsoidal heights over s +- half. The demo track's file is 2-D:
+    its heights are conversion residue (0 to -6.5 cm over the whole line, slopes < 6e-5), so a
+    track whose heights span less than 0.1 m over the stretch counts as level (grade 0)."""
+    if not hasattr(track, "_has_heights"):
+        _, _, hs = track.tm.position_at(track.s)
+        track._has_heights = float(np.ptp(np.asarray(hs, float))) > 0.1
+    if not track._has_heights:
+        return 0.0
+    _, _, h = track.tm.position_at([s - half, s + half])
+    h = np.asarray(h, float).ravel()
+    return float(h[1] - h[0]) / (2 * half)
+
+
+def vehicle_attitude(track, s, design_kmh, survey_kmh, max_cant_mm=160.0, flexibility=0.25):
+    """(kappa 1/m, design cant mm, roll_deg, pitch_deg) of the survey vehicle at chainage s.
+
+    The design cant is the equilibrium cant at ``design_kmh`` (capped, rounded to 5 mm); the
+    body leans toward the curve's inside by theta_c + flexibility * (theta_c - theta_eq),
+    theta_eq the equilibrium cant angle at the survey speed (a slower train leans further
+    in on its suspension). Sign: roll positive raises the vehicle's LEFT side (driving toward
+    increasing chainage). On a left-hand curve (kappa > 0) the inside is the left, so the
+    left side goes down: roll negative. Pitch positive raises the nose: atan(grade)."""
+    kappa = track_curvature(track, s)
+    c = min(max_cant_mm, EQ_CANT_MM * design_kmh**2 * abs(kappa))
+    c = 5.0 * math.floor(c / 5.0 + 0.5)
+    th_c = math.asin(c / CANT_BASE_MM)
+    th_eq = math.asin(min(EQ_CANT_MM * survey_kmh**2 * abs(kappa), CANT_BASE_MM) / CANT_BASE_MM)
+    lean_in = th_c + flexibility * (th_c - th_eq)
+    roll = -math.copysign(lean_in, kappa) if kappa != 0.0 else 0.0
+    pitch = math.atan(track_grade(track, s))
+    return kappa, c, math.degrees(roll), math.degrees(pitch)
+
+
+def body_rotation(roll_deg, pitch_deg):
+    """(3, 3): the body's axes (columns x fwd, y left, z up) in the LEVEL vehicle frame,
+    pitched about the level left axis, then rolled about the pitched forward axis."""
+    r, p = math.radians(roll_deg), math.radians(pitch_deg)
+    # roll about x: the left axis y -> (0, cos r, sin r), i.e. up when r > 0 (left raised)
+    Rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
+    # pitch: the forward axis x -> (cos p, 0, sin p), i.e. the nose up when p > 0
+    Rp = np.array([[math.cos(p), 0, -math.sin(p)], [0, 1, 0], [math.sin(p), 0, math.cos(p)]])
+    return Rp @ Rx
+
+
+def camera_pose(track, s, h_ant, side, roll_deg=None, pitch_deg=None):
+    """Camera centre (3,) and R_cw (columns = camera axes in world) for the ``side`` camera at
+    chainage s, and the antenna (3,). Without an attitude: the level vehicle (the original
+    code path). With one: the whole vehicle rotated by the body rotation about the point of
+    the track axis at rail level, so the antenna moves ~h_ant * sin(roll) toward the side
+    going down and the cameras' optical axes turn with the body."""
+    lat, lon, h, Rv = track.pose(s)  # Rv: level vehicle -> world
+    mt = MOUNTS[side]
+    ant = track.world_from_geo(lat, lon, h + h_ant)
+    if roll_deg is None:
+        R_cw = Rv @ cam_to_vehicle(mt)
+        c_pos = ant + Rv @ np.array(mt["lever_arm_m"])
+        return c_pos, R_cw, ant
+    rail = track.world_from_geo(lat, lon, h)
+    Rb = Rv @ body_rotation(roll_deg, pitch_deg or 0.0)  # body -> world
+    Rrot = Rb @ Rv.T  # the rotation about the rail point, in the world frame
+    ant_b = rail + Rrot @ (ant - rail)
+    c_pos = ant_b + Rb @ np.array(mt["lever_arm_m"])
+    R_cw = Rb @ cam_to_vehicle(mt)
+    return c_pos, R_cw, ant_b
+
+
+# ---------------------------------------------------------------------------------------------
 # materials and shading
 
 MATS = {
@@ -1206,16 +1304,33 @@ def cmd_build(args):
     rows = []
     frng = np.random.default_rng(args.seed + 7)
     keep_obj = set(int(x) for x in args.keep_objbuf.split(",")) if args.keep_objbuf else set()
+    cant = args.cant_speed_kmh is not None
+    imu = cant and not args.no_imu
+    att_rows = []
+    if cant:
+        v_kmh = survey_speed_mps(args.step) * 3.6
+        print(
+            f"canted vehicle: design speed {args.cant_speed_kmh:g} km/h, survey speed "
+            f"{v_kmh:.1f} km/h, max cant {args.max_cant_mm:g} mm, flexibility "
+            f"{args.flexibility:g}, IMU columns {'yes' if imu else 'no'}",
+            flush=True,
+        )
     for i, s in enumerate(chain):
         lat, lon, h, Rv = track.pose(s)  # Rv: vehicle -> world
-        ant = track.world_from_geo(lat, lon, h + args.antenna_height)
         gps = survey_rows_time(i)
+        roll = pitch = None
+        if cant:
+            kappa, c_mm, roll, pitch = vehicle_attitude(
+                track, s, args.cant_speed_kmh, v_kmh, args.max_cant_mm, args.flexibility
+            )
+            _, _, ant_b = camera_pose(track, s, args.antenna_height, "left", roll, pitch)
+            ant_n = track.world_from_geo(lat, lon, h + args.antenna_height)
+            dlat = float((ant_b - ant_n) @ Rv[:, 1])
+            att_rows.append((s, kappa, c_mm, roll, pitch, dlat))
         if args.no_images:
             continue
         for side in ("left", "right"):
-            mt = MOUNTS[side]
-            R_cw = Rv @ cam_to_vehicle(mt)
-            c_pos = ant + Rv @ np.array(mt["lever_arm_m"])
+            c_pos, R_cw, _ = camera_pose(track, s, args.antenna_height, side, roll, pitch)
             img, objbuf, tbuf = world.render(cam, c_pos, R_cw, rays_cam, valid)
             bgr = finish_image(img, valid, th, cam, frng)
             fid = f"{side}_{i:06d}"
@@ -1236,12 +1351,17 @@ def cmd_build(args):
                     f"{lon:.9f}",
                     f"{h + args.antenna_height:.3f}",
                 )
+                + ((f"{roll:.4f}", f"{pitch:.4f}") if imu else ())
             )
         if i % 10 == 0:
             print(f"frame {i}/{len(chain)} at {s:.0f} m, {time.time() - t0:.0f} s", flush=True)
 
     with open(out / "manifest.csv", "w") as fh:
-        fh.write("frame_id,image,side,gps_s,chainage_m,lat_deg,lon_deg,h_m\n")
+        fh.write(
+            "frame_id,image,side,gps_s,chainage_m,lat_deg,lon_deg,h_m"
+            + (",roll_deg,pitch_deg" if imu else "")
+            + "\n"
+        )
         for r in rows:
             fh.write(",".join(r) + "\n")
     sy = {
@@ -1260,6 +1380,23 @@ def cmd_build(args):
         "description": f"independent world, seed {args.seed}, sky {args.sky}",
         "generator": "scripts/independent_world.py",
     }
+    if cant:  # metadata (extra survey.yaml keys are kept, not read)
+        sy["canted_vehicle"] = {
+            "design_speed_kmh": float(args.cant_speed_kmh),
+            "survey_speed_kmh": round(v_kmh, 3),
+            "max_cant_mm": float(args.max_cant_mm),
+            "flexibility": float(args.flexibility),
+            "imu_in_manifest": bool(imu),
+        }
+        with open(out / "truth" / "cant.csv", "w") as fh:
+            fh.write("chainage_m,cant_mm\n")
+            for a in att_rows:
+                fh.write(f"{a[0]:.3f},{a[2]:.0f}\n")
+        # the attitude every frame was rendered with (also with --no-imu), for the checks
+        with open(out / "world" / "attitude.csv", "w") as fh:
+            fh.write("chainage_m,kappa_per_m,cant_mm,roll_deg,pitch_deg,antenna_left_shift_m\n")
+            for a in att_rows:
+                fh.write(f"{a[0]:.3f},{a[1]:.7e},{a[2]:.0f},{a[3]:.6f},{a[4]:.6f},{a[5]:.4f}\n")
     (out / "survey.yaml").write_text(yaml.safe_dump(sy, sort_keys=False))
 
     print("truth ...", flush=True)
@@ -1317,10 +1454,24 @@ def main(argv=None):
     )
     b.add_argument("--no-images", action="store_true")
     b.add_argument("--only", default="", help="preview: only these position indices")
+    b.add_argument(
+        "--cant-speed-kmh",
+        type=float,
+        default=None,
+        help="canted vehicle: the line's design speed (km/h) giving each curve's equilibrium "
+        "cant; the body rolls toward the inside (default: a level vehicle)",
+    )
+    b.add_argument("--max-cant-mm", type=float, default=160.0)
+    b.add_argument("--flexibility", type=float, default=0.25, help="suspension flexibility")
+    b.add_argument(
+        "--no-imu", action="store_true", help="canted, but no roll_deg/pitch_deg in the manifest"
+    )
     from indep_checks import add_commands
 
     add_commands(sub)
     args = ap.parse_args(argv)
+    if getattr(args, "cmd", "") == "build" and args.no_imu and args.cant_speed_kmh is None:
+        ap.error("--no-imu needs --cant-speed-kmh (a level vehicle has no attitude columns)")
     return args.func(args) if hasattr(args, "func") else cmd_build(args)
 
 
