@@ -572,8 +572,8 @@ def _horizon_row(iw, cam, c_pos, R_cw, up, u_col):
     V = np.array([q + L * (a * e1 + b * e2) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
     sc = o3d.t.geometry.RaycastingScene()
     sc.add_triangles(
-        o3d.core.Tensor((V - c_pos).astype(np.float32)),  # camera at the origin: float32 safe
-        o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.uint32)),
+        o3d.core.Tensor((V - c_pos).astype(np.float32)),  # type: ignore[call-overload]  # camera at the origin: float32 safe
+        o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.uint32)),  # type: ignore[call-overload]
     )
 
     def ray(u, v):  # pixel -> unit ray in the camera frame (the renderer's own unprojection)
@@ -591,7 +591,7 @@ def _horizon_row(iw, cam, c_pos, R_cw, up, u_col):
     def hits(vs):
         d = np.array([R_cw @ ray(u_col, v) for v in vs])
         rr = np.concatenate([np.zeros_like(d), d], 1).astype(np.float32)
-        return np.isfinite(sc.cast_rays(o3d.core.Tensor(rr))["t_hit"].numpy())
+        return np.isfinite(sc.cast_rays(o3d.core.Tensor(rr))["t_hit"].numpy())  # type: ignore[call-overload]
 
     rows = np.arange(0, cam.height, 1.0)
     rows = rows[np.hypot(u_col - cam.cx, rows - cam.cy) <= cam.circle_px - 1]
