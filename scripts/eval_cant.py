@@ -7,9 +7,11 @@ same images, the manifests differing only in their ``roll_deg, pitch_deg`` colum
 
 * ``measured``: as rendered;
 * ``unknown``: the columns emptied (the pipeline bounds the roll from the track's curves);
-* ``level``: the columns set to 0 (what the pipeline assumed before it knew of cant);
+* ``level``: the columns set to 0 (on a sharp curve the track rules that out: bounded);
 * ``table``: the columns emptied, the line's cant given as a table (the generator's
-  ``truth/cant.csv``, as the infrastructure's records would give it; cant worlds only).
+  ``truth/cant.csv``, as the infrastructure's records would give it; cant worlds only);
+* ``ignored``: every frame taken as level and sure, whatever the manifest says: the pipeline
+  before it knew of cant (in this process, serial).
 
 Prints false trust (trusted directions truly blocked / trusted), the worst position's, the
 positions above 0.1 % and the sky lost (truly visible directions not trusted / visible), with
@@ -34,6 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from predisat.camera.rigs import Rig
+from predisat.masks.maskset import MaskSet
+from predisat.reconstruct.attitude import FrameAttitude
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 from predisat.reconstruct.params import PipelineParams
@@ -41,7 +45,7 @@ from predisat.synth.generate import generate_survey
 from predisat.track import demo_track
 from predisat.track.cant import CantTable
 
-VARIANTS = {"measured": None, "unknown": "", "level": "0.0", "table": ""}
+VARIANTS = {"measured": None, "unknown": "", "level": "0.0", "table": "", "ignored": None}
 
 
 def _variant(src: Path, dst: Path, value: str | None) -> Path:
@@ -62,6 +66,23 @@ def _variant(src: Path, dst: Path, value: str | None) -> Path:
         w.writeheader()
         w.writerows(rows)
     return dst
+
+
+def _ignoring_attitude(survey: Path, out: Path) -> MaskSet:
+    """``process_survey`` with every frame level and sure (serial, in this process)."""
+    import predisat.reconstruct.chunks as chunks
+
+    def level(track: object, s: object, *args: object, **kwargs: object) -> FrameAttitude:
+        z = np.zeros(np.asarray(s).shape)
+        return FrameAttitude(z, z, z, np.ones(z.shape, bool))
+
+    saved = chunks.frame_attitudes
+    chunks.frame_attitudes = level  # type: ignore[assignment]
+    try:
+        return process_survey(survey, out, PipelineParams(), progress=False,
+                              scheduler="serial").masks  # fmt: skip
+    finally:
+        chunks.frame_attitudes = saved
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,7 +121,10 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(out)
         if cache is not None:  # the same images: the segmentation is reused
             shutil.copytree(cache, out / "cache")
-        masks = process_survey(survey, out, params, progress=False).masks
+        if name == "ignored":
+            masks = _ignoring_attitude(survey, out)
+        else:
+            masks = process_survey(survey, out, params, progress=False).masks
         cache = out / "cache"
         c = compare(masks, truth)
         trusted, good, los = trust_counts(c.mask_el_deg, c.truth_el_deg)

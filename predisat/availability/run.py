@@ -985,13 +985,16 @@ def attitude_text(provenance: JsonDict) -> str:
     if not isinstance(att, dict) or "frames" not in att:
         return ""
     n, measured = int(att["frames"]), int(att.get("measured_frames", 0))
+    bad = int(att.get("contradicted_frames", 0))
+    table = " and the cant table" if "cant_table_frames" in att else ""
     if measured == n:
         return f"measured (the manifest's IMU attitude) for all {n} frames"
-    return (
-        f"bounded from the track's curves and grade for {n - measured} of {n} frames (their "
-        f"sky eroded by up to {float(att.get('max_doubt_deg', 0.0)):.1f}°), measured for "
-        f"{measured}"
+    text = (
+        f"bounded from the track's curves and grade{table} for {n - measured} of {n} frames "
+        f"(their sky eroded by up to {float(att.get('max_doubt_deg', 0.0)):.1f}°), measured "
+        f"for {measured}"
     )
+    return text + (f"; {bad} frames' measured roll contradicted the track" if bad else "")
 
 
 def synthetic_notes(provenance: JsonDict) -> list[str]:

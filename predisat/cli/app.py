@@ -311,9 +311,10 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    "--max-cant-mm): the vehicle rolls toward each curve's inside, as a real "
                    "one does (default: none, a level vehicle)")
     p.add_argument("--max-cant-mm", type=positive_float, default=160.0, metavar="MM",
-                   help="the largest cant with --cant-speed-kmh")
+                   help="the largest cant the rendered line gets with --cant-speed-kmh (process's "
+                   "own --max-cant-mm, 180, is the limit it assumes of an unknown line)")
     p.add_argument("--no-imu", action="store_true",
-                   help="leave the vehicle's roll and pitch out of the manifest (a survey "
+                   help="leave the manifest's roll_deg and pitch_deg columns empty (a survey "
                    "without an IMU; the pipeline then bounds them from the track's curves)")
     p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering processes")

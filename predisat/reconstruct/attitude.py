@@ -38,6 +38,10 @@ ramps in over its transition (and on older curves without one, over the straight
 it), where the smoothed map's curvature reads low (EN 13803: cant gradients down to 1:400,
 so 160 mm over 64 m; twice that for the smoothing)."""
 _STRAIGHT_PER_M = 1e-4  # R > 10 km: no cant to speak of
+_SHARP_PER_M = 1e-3  # R < 1 km: a curve of a line run above 40 km/h carries cant
+_CANT_ON_SHARP_MM = 5.0  # a cant-table value under it on such a curve reads as metres or 0
+_LEVEL_DEG = 0.5  # a measured roll this near level on such a curve: radians, or a tilt sensor
+_ROLL_TOL_DEG = 1.0  # a measured roll this far outside the track's interval contradicts it
 
 ATTITUDE_STEP_DEG = 0.05
 """Nominal attitudes are rounded to this step, so that frames on a curve share rectifiers
@@ -49,13 +53,17 @@ class FrameAttitude:
     """Nominal attitude and doubt of frames, degrees, shape (n,) each.
 
     ``roll_deg`` positive raises the vehicle's left side, ``pitch_deg`` its nose (directions
-    of travel, as the mount); ``measured`` is True where the manifest gave them.
+    of travel, as the mount); ``measured`` is True where the manifest gave them and the track
+    agrees. ``contradicted`` marks frames whose measured roll the track rules out (bounded
+    instead), ``table_ignored`` frames whose cant-table value it rules out (shape (n,) each).
     """
 
     roll_deg: NDArray
     pitch_deg: NDArray
     doubt_deg: NDArray
     measured: NDArray
+    contradicted: NDArray | None = None
+    table_ignored: NDArray | None = None
 
 
 def frame_attitudes(
@@ -107,27 +115,40 @@ def frame_attitudes(
     for name, v in (("grade_doubt_deg", grade_doubt_deg), ("imu_doubt_deg", imu_doubt_deg)):
         if not (np.isfinite(v) and 0.0 <= v < 10.0):
             raise ValueError(f"{name} must be an angle in [0, 10) degrees, got {v}")
-    measured = np.isfinite(roll) & np.isfinite(pitch)
-    out_roll = np.where(measured, roll, 0.0)
-    out_pitch = np.where(measured, pitch, 0.0)
-    doubt = np.where(measured, 2.0 * imu_doubt_deg, 0.0)  # roll and pitch each
-    todo = ~measured
-    if todo.any():
-        st = s[todo]
-        known = None if cant_table is None else cant_table.cant_mm_at(st)
-        speed = None if speed_kmh is None else np.broadcast_to(
-            np.asarray(speed_kmh, float), s.shape)[todo]  # fmt: skip
-        r_lo, r_hi = _roll_interval(track, st, reverse, cant, known, speed)
-        out_roll[todo] = 0.5 * (r_lo + r_hi)
-        grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(st), float)))
-        out_pitch[todo] = -grade_deg if reverse else grade_deg
-        doubt[todo] = 0.5 * (r_hi - r_lo) + grade_doubt_deg
-        if not np.all(np.isfinite(doubt[todo])):
-            bad = st[~np.isfinite(doubt[todo])]
-            raise ValueError(
-                f"no attitude bound at chainage {bad[0]:.1f} m ({bad.size} frames): the track "
-                "map gives no curvature or grade there; check the frames' chainages"
-            )
+    given = np.isfinite(roll) & np.isfinite(pitch)
+    known = None if cant_table is None else cant_table.cant_mm_at(s)
+    speed = None if speed_kmh is None else np.broadcast_to(np.asarray(speed_kmh, float), s.shape)
+    # the track's own interval, with a table value it rules out dropped (a table in metres,
+    # or zeros over a sharp curve)
+    r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
+    table_ignored = np.zeros(s.shape, bool)
+    if known is not None:
+        table_ignored = sharp & (known < _CANT_ON_SHARP_MM)
+        if table_ignored.any():
+            known = np.where(table_ignored, np.nan, known)
+            r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
+    if not np.all(np.isfinite(r_lo) & np.isfinite(r_hi)):
+        bad = s[~(np.isfinite(r_lo) & np.isfinite(r_hi))]
+        raise ValueError(
+            f"no attitude bound at chainage {bad[0]:.1f} m ({bad.size} frames): the track "
+            "map gives no curvature there; check the frames' chainages"
+        )
+    # a measured roll the track rules out is a mistake (sign, radians, an accelerometer's
+    # apparent vertical): bounded instead, as if not measured
+    tol = _ROLL_TOL_DEG + imu_doubt_deg
+    level_on_sharp = (
+        sharp
+        & (np.abs(roll) < _LEVEL_DEG)
+        & (np.ones(s.shape, bool) if known is None else ~np.isfinite(known))
+    )
+    contradicted = given & ((roll < r_lo - tol) | (roll > r_hi + tol) | level_on_sharp)
+    measured = given & ~contradicted
+    out_roll = np.where(measured, roll, 0.5 * (r_lo + r_hi))
+    grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(s), float)))
+    out_pitch = np.where(measured, pitch, -grade_deg if reverse else grade_deg)
+    out_pitch = np.where(contradicted, pitch, out_pitch)  # the pitch was not contradicted
+    doubt = np.where(measured, 2.0 * imu_doubt_deg, 0.5 * (r_hi - r_lo) + grade_doubt_deg)
+    doubt = np.where(contradicted, 0.5 * (r_hi - r_lo) + 2.0 * imu_doubt_deg, doubt)
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     # A doubt takes the rounding in; with none (an attitude taken as exact) the rounding,
@@ -135,7 +156,8 @@ def frame_attitudes(
     # rectification grid's step, which the rectifier's obstacle growth covers.
     rounding = np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
     doubt = np.where(doubt > 0, doubt + rounding, 0.0)
-    return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured)
+    return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured, contradicted,
+                         table_ignored)  # fmt: skip
 
 
 def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -> NDArray:
@@ -176,17 +198,19 @@ def _roll_interval(
     cant: CantLimits | None,
     cant_mm: NDArray | None,
     speed_kmh: NDArray | None,
-) -> tuple[NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray]:
     """The vehicle's roll (positive raising its left side) an unmeasured frame may have,
     degrees, shape (n,) each: the union over the curves of each hand within
     :data:`CURVE_WINDOW_M` (a cant ramps in before its curve, where the smoothed map's
-    curvature reads low or of the other hand), or track roll only on straight track."""
+    curvature reads low or of the other hand), or track roll only on straight track; and
+    whether the frame stands on a curve sharper than R = 1 km."""
     offsets = np.arange(-CURVE_WINDOW_M, CURVE_WINDOW_M + 1e-9, 5.0)
     near = np.clip(chainage_m[:, None] + offsets, 0.0, float(track.length_m))
     k = np.asarray(track.curvature_at(near.ravel()), float).reshape(near.shape)
     k = np.concatenate([k, np.asarray(track.curvature_at(chainage_m), float)[:, None]], axis=1)
     left = np.max(np.maximum(k, 0.0), axis=1)  # curves turning left toward increasing chainage
     right = np.max(np.maximum(-k, 0.0), axis=1)
+    here = np.abs(k[:, -1])
     lo = np.full(chainage_m.shape, np.inf)
     hi = np.full(chainage_m.shape, -np.inf)
     for kk, present in ((left, left > _STRAIGHT_PER_M), (-right, right > _STRAIGHT_PER_M)):
@@ -199,4 +223,4 @@ def _roll_interval(
     a, b = roll_bounds_deg(np.maximum(left, right), cant, cant_mm=cant_mm, speed_kmh=speed_kmh)
     edge = np.maximum(np.abs(a), np.abs(b))
     straight = ~np.isfinite(lo)
-    return np.where(straight, -edge, lo), np.where(straight, edge, hi)
+    return np.where(straight, -edge, lo), np.where(straight, edge, hi), here > _SHARP_PER_M

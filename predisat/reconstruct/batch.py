@@ -315,29 +315,59 @@ def _attitude_summary(
         grade_doubt_deg=params.grade_doubt_deg, imu_doubt_deg=params.imu_doubt_deg,
         cant_table=params.cant_table, speed_kmh=speed,
     )  # fmt: skip
+    contradicted = att.contradicted if att.contradicted is not None else np.zeros(0, bool)
     out: JsonDict = {
         "frames": int(ok.sum()),
         "measured_frames": int(att.measured.sum()),
+        "contradicted_frames": int(contradicted.sum()),
         "max_doubt_deg": round(float(att.doubt_deg.max(initial=0.0)), 3),
         "max_abs_roll_deg": round(float(np.abs(att.roll_deg).max(initial=0.0)), 3),
     }
+    if contradicted.any():
+        out["first_contradicted"] = str(fr.frame_id[ok][contradicted][0])
     if params.cant_table is not None:
         cant = params.cant_table.cant_mm_at(ch[ok])
         flat = np.abs(np.asarray(track.curvature_at(ch[ok]), float)) < _STRAIGHT_PER_M
         out["cant_table_frames"] = int(np.isfinite(cant).sum())
         # cant where the map has no curve: the table's chainage is probably not the map's
         out["cant_off_curve_frames"] = int((flat & (cant >= _CANT_ON_CURVE_MM)).sum())
+        ignored = att.table_ignored if att.table_ignored is not None else np.zeros(0, bool)
+        out["cant_table_ignored_frames"] = int(ignored.sum())
     return out
 
 
 _STRAIGHT_PER_M = 1e-4  # R > 10 km
 _CANT_ON_CURVE_MM = 20.0
+_CANT_ON_SHARP_MM = 5.0  # as predisat.reconstruct.attitude
 
 
 def _attitude_warnings(summary: JsonDict) -> list[str]:
     """The lines ``process`` prints when frames lack a measured attitude, or a cant table
     does not fit the track."""
     out = []
+    n = int(summary["frames"])
+    bad = int(summary.get("contradicted_frames", 0))
+    if bad:
+        out.append(
+            f"warning: {bad} of {n} frames give a roll the track rules out (first "
+            f"{summary.get('first_contradicted', '?')}): the wrong sign (roll_deg is positive "
+            "raising the vehicle's left side), radians, or a tilt sensor's apparent vertical "
+            "(about level on a curve); they are bounded from the track instead "
+            "(docs/reconstruction.md, section 16)"
+        )
+    if "cant_table_frames" in summary and int(summary["cant_table_frames"]) < n:
+        out.append(
+            f"warning: the cant table covers {summary['cant_table_frames']} of {n} frames: "
+            "the others are bounded from the track's curves; check that its chainage is the "
+            "track map's"
+        )
+    ignored = int(summary.get("cant_table_ignored_frames", 0))
+    if ignored:
+        out.append(
+            f"warning: the cant table gives under {_CANT_ON_SHARP_MM:g} mm at {ignored} frames on "
+            "curves sharper than R = 1 km, which carry cant: not used there (is it in "
+            "millimetres, and the right track's?)"
+        )
     off = int(summary.get("cant_off_curve_frames", 0))
     if off:
         out.append(
@@ -352,7 +382,8 @@ def _attitude_warnings(summary: JsonDict) -> list[str]:
 def _attitude_warning(summary: JsonDict) -> str | None:
     """The line ``process`` prints when frames lack a measured attitude."""
     n, measured = int(summary["frames"]), int(summary["measured_frames"])
-    if measured == n:
+    n -= int(summary.get("contradicted_frames", 0))  # told apart
+    if measured >= n:
         return None
     tabled = "cant_table_frames" in summary
     return (

@@ -572,7 +572,10 @@ labels/<frame_id>.png  8-bit sky label of each survey frame (same size as the im
                        with sky behind it, 0 obstacle (or outside a fisheye's image circle);
                        from the ray through each pixel centre.
 frames.csv             per frame: frame_id, side, chainage_m, gps_s, sky condition, cloud cover,
-                       sun azimuth/elevation (deg, local ENU at the antenna), sky fraction.
+                       sun azimuth/elevation (deg, local ENU at the antenna), sky fraction, the
+                       vehicle's roll and pitch (deg; 0 unless the curves are canted).
+cant.csv               with canted curves only: the line's cant (chainage_m, cant_mm), as
+                       `predisat process --cant-table` reads it.
 true_masks.npz         predisat.masks.truth.TrueMasks.load(): per position, the highest
                        L-band-blocking elevation in every azimuth bin, and obstacle descriptors.
 world.npz              predisat.synth.world.World.load(): the scene mesh and recipe.

@@ -307,6 +307,11 @@ class CantTable:
                     f"cant table {p}, line {n}: chainage_m {s_v:g} does not increase "
                     f"(previous {s_m[-1]:g}); sort the rows by chainage"
                 )
+            if 0.0 < c_v < 1.0:
+                raise ValueError(
+                    f"cant table {p}, line {n}: cant_mm {c_v:g} reads as metres; give the cant "
+                    f"in millimetres ({1000 * c_v:g})"
+                )
             if not 0.0 <= c_v <= _MAX_TABLE_CANT_MM:
                 raise ValueError(
                     f"cant table {p}, line {n}: cant_mm {c_v:g} is not within [0, "

@@ -22,10 +22,10 @@ def track():  # -> TrackMap
 
 
 def test_measured_attitudes_are_kept_rounded(track) -> None:
-    att = frame_attitudes(track, [800.0, 810.0], [-6.912, 0.0], [0.33, 0.0], False,
+    att = frame_attitudes(track, [3300.0, 3310.0], [-0.912, 0.0], [0.33, 0.0], False,
                           imu_doubt_deg=0.1)  # fmt: skip
     assert att.measured.all()
-    np.testing.assert_allclose(att.roll_deg, [-6.9, 0.0], atol=1e-12)
+    np.testing.assert_allclose(att.roll_deg, [-0.9, 0.0], atol=1e-12)
     np.testing.assert_allclose(att.pitch_deg, [0.35, 0.0], atol=1e-12)
     # the IMU's doubt for roll and pitch, and the rounding
     assert att.doubt_deg[1] == pytest.approx(0.2)
@@ -101,8 +101,9 @@ def test_bad_doubts_are_refused(track) -> None:
 @pytest.fixture(scope="module")
 def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: masks})
     """A rendered survey on a right-hand curve (R 420-640 m, 160 mm of cant, the body rolled
-    6-7 deg), processed four ways: the roll measured, not given, wrongly given as level (what
-    the pipeline assumed before it knew of cant), and not given but the line's cant table."""
+    6-7 deg), processed five ways: the roll measured, not given, wrongly given as level (which
+    the track rules out), not given but the line's cant table, and the attitude ignored (the
+    pipeline before it knew of cant: every frame level and sure)."""
     import csv
 
     from predisat.camera.models import default_camera
@@ -131,6 +132,21 @@ def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: ma
             w.writerows(rows)
         masks[variant] = process_survey(survey, base / variant, params[variant],
                                         progress=False).masks  # fmt: skip
+    # the attitude ignored, in this process (serial): every frame level, no doubt
+    import predisat.reconstruct.chunks as chunks
+    from predisat.reconstruct.attitude import FrameAttitude
+
+    def level(track, s, *args, **kwargs):
+        z = np.zeros(np.asarray(s).shape)
+        return FrameAttitude(z, z, z, np.ones(z.shape, bool))
+
+    monkey = pytest.MonkeyPatch()
+    monkey.setattr(chunks, "frame_attitudes", level)
+    try:
+        masks["ignored"] = process_survey(survey, base / "ignored", PipelineParams(),
+                                          progress=False, scheduler="serial").masks  # fmt: skip
+    finally:
+        monkey.undo()
     return load_truth(base / "truth"), masks
 
 
@@ -145,10 +161,13 @@ def _false_trust_and_lost(masks, truth) -> tuple[float, float]:
 def test_a_canted_curve_is_safe_with_the_roll_measured_or_bounded(canted) -> None:
     truth, masks = canted
     ft = {k: _false_trust_and_lost(m, truth) for k, m in masks.items()}
-    # the level assumption trusts blocked directions on the curve's low side ...
-    assert ft["level"][0] > 1e-3, ft
-    # ... the measured roll, the bounded one and the one bounded around a cant table do not
-    assert ft["measured"][0] < 1e-4 and ft["unknown"][0] < 1e-4 and ft["table"][0] < 1e-4, ft
+    # ignoring the roll trusts blocked directions on the curve's low side ...
+    assert ft["ignored"][0] > 1e-3, ft
+    # ... the measured roll, the bounded one and the one bounded around a cant table do not,
+    # nor a roll declared level, which the track rules out on this curve
+    for variant in ("measured", "unknown", "table", "level"):
+        assert ft[variant][0] < 1e-4, (variant, ft)
+    assert masks["level"].provenance["attitude"]["contradicted_frames"] == 30
     # knowing the roll costs no sky against the bound; the table recovers part of it
     assert ft["measured"][1] < ft["table"][1] < ft["unknown"][1], ft
 
@@ -210,3 +229,41 @@ def test_near_curves_of_both_hands_the_roll_may_go_either_way(track) -> None:
     # away from the other hand's curve, its own hand (a left-hand curve leans left)
     alone = ~both & (np.abs(k) > 1e-4)
     assert np.all(np.sign(att.roll_deg[alone]) == -np.sign(k[alone]))
+
+
+def test_a_measured_roll_the_track_rules_out_is_bounded_instead(track) -> None:
+    s = np.arange(800.0, 900.0, 10.0)  # a right-hand curve, R about 430 m: leans right (+)
+    k = track.curvature_at(s)
+    true = body_roll_deg(k, np.minimum(equilibrium_cant_mm(k, 100.0), 160.0), 43.0)
+    assert np.all(true > 5.0)
+    pitch = np.zeros(s.size)
+    ok = frame_attitudes(track, s, true, pitch, False)
+    assert ok.measured.all() and not ok.contradicted.any()
+    bound = frame_attitudes(track, s, np.full(s.size, np.nan), pitch, False)
+    for wrong in (-true, np.radians(true), np.zeros(s.size)):  # sign, units, a tilt sensor
+        att = frame_attitudes(track, s, wrong, pitch, False)
+        assert att.contradicted.all() and not att.measured.any()
+        # bounded as if not measured, the pitch kept
+        np.testing.assert_allclose(att.roll_deg, bound.roll_deg)
+        assert np.all(np.abs(true - att.roll_deg) <= att.doubt_deg)
+    # a cant table saying 0 on a sharp curve reads as a mistake too, and is not used
+    table = CantTable(s, np.zeros(s.size), "zeros")
+    att = frame_attitudes(track, s, np.full(s.size, np.nan), pitch, False, cant_table=table)
+    assert att.table_ignored.all()
+    np.testing.assert_allclose(att.doubt_deg, bound.doubt_deg)
+
+
+def test_process_says_which_rolls_the_track_ruled_out_and_what_a_table_missed() -> None:
+    from predisat.reconstruct.batch import _attitude_warnings
+
+    lines = _attitude_warnings({
+        "frames": 10, "measured_frames": 6, "contradicted_frames": 4,
+        "first_contradicted": "left_000003", "cant_table_frames": 7,
+        "cant_table_ignored_frames": 2, "cant_off_curve_frames": 0, "max_doubt_deg": 3.0,
+    })  # fmt: skip
+    text = " ".join(lines)
+    assert "4 of 10 frames give a roll the track rules out (first left_000003)" in text
+    assert "the cant table covers 7 of 10 frames" in text
+    assert "under 5 mm at 2 frames" in text
+    # the 4 contradicted frames are told apart, not counted as unmeasured
+    assert "have no measured roll" not in text

@@ -95,7 +95,8 @@ def test_cant_table_reads_interpolates_and_names_bad_rows(tmp_path) -> None:
     for text, match in (
         ("chainage,cant\n0,0\n", "must name chainage_m and cant_mm"),
         ("chainage_m,cant_mm\n0,0\n0,10\n", "line 3: chainage_m 0 does not increase"),
-        ("chainage_m,cant_mm\n0,0\n10,0.16\n20,1600\n", "cant_mm 1600 is not within"),
+        ("chainage_m,cant_mm\n0,0\n10,16\n20,1600\n", "cant_mm 1600 is not within"),
+        ("chainage_m,cant_mm\n0,0\n10,0.16\n", "line 3: cant_mm 0.16 reads as metres"),
         ("# a comment\nchainage_m,cant_mm\n0,0\n10,x\n", "line 4:"),
         ("chainage_m,cant_mm\n0,0\n", "at least two rows"),
     ):
