@@ -42,6 +42,7 @@ _SHARP_PER_M = 1e-3  # R < 1 km: a curve of a line run above 40 km/h carries can
 _CANT_ON_SHARP_MM = 5.0  # a cant-table value under it on such a curve reads as metres or 0
 _LEVEL_DEG = 0.5  # a measured roll this near level on such a curve: radians, or a tilt sensor
 _ROLL_TOL_DEG = 1.0  # a measured roll this far outside the track's interval contradicts it
+_DISTRUST_SHARE = 0.2  # ruled out on this share of the frames on curves: no roll is trusted
 
 ATTITUDE_STEP_DEG = 0.05
 """Nominal attitudes are rounded to this step, so that frames on a curve share rectifiers
@@ -54,8 +55,10 @@ class FrameAttitude:
 
     ``roll_deg`` positive raises the vehicle's left side, ``pitch_deg`` its nose (directions
     of travel, as the mount); ``measured`` is True where the manifest gave them and the track
-    agrees. ``contradicted`` marks frames whose measured roll the track rules out (bounded
-    instead), ``table_ignored`` frames whose cant-table value it rules out (shape (n,) each).
+    agrees. ``contradicted`` marks frames whose measured roll the track rules out, or all the
+    measured frames when it rules out more than a fifth of those on curves (one IMU mistake is
+    everywhere; bounded instead), ``table_ignored`` frames whose cant-table value it rules out
+    (shape (n,) each).
     """
 
     roll_deg: NDArray
@@ -142,6 +145,11 @@ def frame_attitudes(
         & (np.ones(s.shape, bool) if known is None else ~np.isfinite(known))
     )
     contradicted = given & ((roll < r_lo - tol) | (roll > r_hi + tol) | level_on_sharp)
+    # One IMU mistake (axes, units, a tilt sensor) is everywhere: when the track rules out the
+    # roll of more than a fifth of the frames on curves, none of its rolls is trusted.
+    curved = given & (np.abs(np.asarray(track.curvature_at(s), float)) > _STRAIGHT_PER_M)
+    if contradicted.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1):
+        contradicted = given.copy()
     measured = given & ~contradicted
     out_roll = np.where(measured, roll, 0.5 * (r_lo + r_hi))
     grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(s), float)))

@@ -409,6 +409,13 @@ def _plan(
     fr = survey.frames
     finite = np.isfinite(ch)
     if not finite.any():
+        if len(fr) == 0 and survey.problems:
+            first = survey.problems[0]
+            raise ValueError(
+                f"survey {survey.root}: every frame was refused ({len(survey.problems)} "
+                f"problems; the first, manifest line {first.row}: {first.message}); nothing "
+                "to do"
+            )
         raise ValueError(f"survey {survey.root} has no frame with a chainage; nothing to do")
     positions = np.unique(ch[finite])
     params_dict = params.to_dict()  # hashes a candidate network's files once, for both keys

@@ -267,3 +267,19 @@ def test_process_says_which_rolls_the_track_ruled_out_and_what_a_table_missed() 
     assert "under 5 mm at 2 frames" in text
     # the 4 contradicted frames are told apart, not counted as unmeasured
     assert "have no measured roll" not in text
+
+
+def test_an_imu_the_track_contradicts_on_its_curves_is_not_trusted_anywhere(track) -> None:
+    # a level reading over a curve's body and its gentler ends: ruled out on the body, so the
+    # ends, where a level roll is possible, are not trusted either
+    s = np.arange(400.0, 1300.0, 10.0)
+    zero = np.zeros(s.size)
+    att = frame_attitudes(track, s, zero, zero, False)
+    assert att.contradicted.all() and not att.measured.any()
+    # one glitch on a good IMU stays one frame
+    k = track.curvature_at(s)
+    true = body_roll_deg(k, np.minimum(equilibrium_cant_mm(k, 100.0), 160.0), 43.0)
+    glitch = true.copy()
+    glitch[40] = -glitch[40]
+    att = frame_attitudes(track, s, glitch, zero, False)
+    assert att.contradicted.sum() == 1 and att.contradicted[40]

@@ -862,3 +862,17 @@ def test_cache_keeps_the_thin_structure_pixels(tmp_path: Path) -> None:
     write_cache(job, (sky, None), None)
     again = read_cache(job)
     assert isinstance(again, tuple) and again[2] is None
+
+
+def test_a_survey_whose_every_frame_is_refused_says_why(survey_dir: Path, tmp_path) -> None:
+    bad = tmp_path / "survey"
+    shutil.copytree(survey_dir, bad)
+    rows = _manifest(bad)
+    for r in rows:  # a roll without its pitch: each frame refused
+        r["roll_deg"], r["pitch_deg"] = "1.0", ""
+    with open(bad / "manifest.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+    with pytest.raises(ValueError, match=r"every frame was refused .*roll_deg and pitch_deg"):
+        process_survey(bad, tmp_path / "out", PARAMS, progress=False)
