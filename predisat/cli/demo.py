@@ -32,6 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEMO_CAMERA",
+    "DEMO_CANT_SPEED_KMH",
     "DEMO_FROM_KM",
     "DEMO_RATES",
     "DEMO_STEPS_GROUP",
@@ -117,6 +118,9 @@ DEMO_IMAGE_SIZE_PX = (640, 480)  # the default side camera, resampled: keeps the
 # The fisheye sees down to the horizon and 90 deg to either side of its look direction; with
 # the pinhole the masks lose 63-65 % of the visible sky instead of 14-16 % (docs/pipeline.md).
 DEMO_CAMERA = "fisheye"
+# the demo line's curves canted as a 100 km/h line's, the vehicle rolling with them: a level
+# vehicle on its R = 600 m curve reads as an IMU mistake (docs/reconstruction.md, section 16)
+DEMO_CANT_SPEED_KMH = 100.0
 
 
 def render_demo_survey(
@@ -151,6 +155,7 @@ def render_demo_survey(
         workers=workers,
         overwrite=True,
         spacing_m=spacing_m,
+        cant_speed_kmh=DEMO_CANT_SPEED_KMH,
     )
 
 
