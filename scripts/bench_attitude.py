@@ -23,17 +23,10 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 import predisat.reconstruct.chunks as chunks
-from predisat.reconstruct.attitude import FrameAttitude
+from predisat.reconstruct.attitude import level_attitudes
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.params import PipelineParams
-
-
-def _level(track: object, s: object, *args: object, **kwargs: object) -> FrameAttitude:
-    z = np.zeros(np.asarray(s).shape)
-    return FrameAttitude(z, z, z, np.ones(z.shape, bool))
 
 
 def _run(work: Path, variant: str, scratch: Path) -> float:
@@ -43,7 +36,7 @@ def _run(work: Path, variant: str, scratch: Path) -> float:
     shutil.copytree(work / "masks_measured" / "cache", out / "cache")
     saved = chunks.frame_attitudes
     if variant == "ignored":
-        chunks.frame_attitudes = _level  # type: ignore[assignment]
+        chunks.frame_attitudes = level_attitudes
     try:
         t0 = time.perf_counter()
         process_survey(work / "survey_measured", out, PipelineParams(), progress=False,

@@ -37,7 +37,7 @@ import numpy as np
 
 from predisat.camera.rigs import Rig
 from predisat.masks.maskset import MaskSet
-from predisat.reconstruct.attitude import FrameAttitude
+from predisat.reconstruct.attitude import level_attitudes
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 from predisat.reconstruct.params import PipelineParams
@@ -72,12 +72,8 @@ def _ignoring_attitude(survey: Path, out: Path) -> MaskSet:
     """``process_survey`` with every frame level and sure (serial, in this process)."""
     import predisat.reconstruct.chunks as chunks
 
-    def level(track: object, s: object, *args: object, **kwargs: object) -> FrameAttitude:
-        z = np.zeros(np.asarray(s).shape)
-        return FrameAttitude(z, z, z, np.ones(z.shape, bool))
-
     saved = chunks.frame_attitudes
-    chunks.frame_attitudes = level  # type: ignore[assignment]
+    chunks.frame_attitudes = level_attitudes
     try:
         return process_survey(survey, out, PipelineParams(), progress=False,
                               scheduler="serial").masks  # fmt: skip

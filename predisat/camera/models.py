@@ -603,6 +603,11 @@ def _rot_y(angle_rad: float) -> NDArray:
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
+def _vehicle_attitude(roll_deg: float, pitch_deg: float) -> NDArray:
+    """Level frame from a rolled and pitched vehicle's: ``Ry(-pitch) @ Rx(roll)``."""
+    return _rot_y(-np.radians(pitch_deg)) @ _rot_x(np.radians(roll_deg))
+
+
 def _rot_z(angle_rad: float) -> NDArray:
     c, s = np.cos(angle_rad), np.sin(angle_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -765,7 +770,7 @@ class Mount:
                 )
         if roll_deg == 0.0 and pitch_deg == 0.0:
             return self
-        att = _rot_y(-np.radians(pitch_deg)) @ _rot_x(np.radians(roll_deg))
+        att = _vehicle_attitude(roll_deg, pitch_deg)
         m = att @ self.camera_to_vehicle() @ _CAMERA_TO_VEHICLE_LEVEL.T  # Rz Ry(-p) Rx
         sin_p = float(np.clip(m[2, 0], -1.0, 1.0))  # Ry(-p) puts +sin(p) at [2, 0]
         if abs(sin_p) < 1.0 - 1e-12:
@@ -807,7 +812,7 @@ def tilt_shift_m(roll_deg: float, pitch_deg: float, height_m: float) -> NDArray:
     for 180 mm: not modelled).
     """
     up = np.array([0.0, 0.0, float(height_m)])
-    att = _rot_y(-np.radians(pitch_deg)) @ _rot_x(np.radians(roll_deg))
+    att = _vehicle_attitude(roll_deg, pitch_deg)
     return att @ up - up
 
 

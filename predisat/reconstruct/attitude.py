@@ -26,9 +26,12 @@ from predisat.track.cant import CantLimits, CantTable, inside_roll_sign, roll_bo
 
 __all__ = [
     "ATTITUDE_STEP_DEG",
+    "CANT_ON_SHARP_MM",
     "CURVE_WINDOW_M",
+    "STRAIGHT_PER_M",
     "FrameAttitude",
     "frame_attitudes",
+    "level_attitudes",
     "survey_speed_kmh",
 ]
 
@@ -37,9 +40,12 @@ CURVE_WINDOW_M = 150.0
 ramps in over its transition (and on older curves without one, over the straight before
 it), where the smoothed map's curvature reads low (EN 13803: cant gradients down to 1:400,
 so 160 mm over 64 m; twice that for the smoothing)."""
-_STRAIGHT_PER_M = 1e-4  # R > 10 km: no cant to speak of
+STRAIGHT_PER_M = 1e-4
+"""Curvature under which the track counts as straight (R > 10 km): no cant to speak of."""
 _SHARP_PER_M = 1e-3  # R < 1 km: a curve of a line run above 40 km/h carries cant
-_CANT_ON_SHARP_MM = 5.0  # a cant-table value under it on such a curve reads as metres or 0
+CANT_ON_SHARP_MM = 5.0
+"""A cant-table value under this on a curve sharper than R = 1 km reads as metres or a missing
+value: it is not used."""
 _LEVEL_DEG = 0.5  # a measured roll this near level on such a curve: radians, or a tilt sensor
 _ROLL_TOL_DEG = 1.0  # a measured roll this far outside the track's interval contradicts it
 _DISTRUST_SHARE = 0.2  # ruled out on this share of the frames on curves: no roll is trusted
@@ -126,7 +132,7 @@ def frame_attitudes(
     r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
     table_ignored = np.zeros(s.shape, bool)
     if known is not None:
-        table_ignored = sharp & (known < _CANT_ON_SHARP_MM)
+        table_ignored = sharp & (known < CANT_ON_SHARP_MM)
         if table_ignored.any():
             known = np.where(table_ignored, np.nan, known)
             r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
@@ -147,7 +153,7 @@ def frame_attitudes(
     contradicted = given & ((roll < r_lo - tol) | (roll > r_hi + tol) | level_on_sharp)
     # One IMU mistake (axes, units, a tilt sensor) is everywhere: when the track rules out the
     # roll of more than a fifth of the frames on curves, none of its rolls is trusted.
-    curved = given & (np.abs(np.asarray(track.curvature_at(s), float)) > _STRAIGHT_PER_M)
+    curved = given & (np.abs(np.asarray(track.curvature_at(s), float)) > STRAIGHT_PER_M)
     if contradicted.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1):
         contradicted = given.copy()
     measured = given & ~contradicted
@@ -166,6 +172,16 @@ def frame_attitudes(
     doubt = np.where(doubt > 0, doubt + rounding, 0.0)
     return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured, contradicted,
                          table_ignored)  # fmt: skip
+
+
+def level_attitudes(
+    track: TrackMap, chainage_m: ArrayLike, *args: object, **kwargs: object
+) -> FrameAttitude:
+    """Every frame level and sure, whatever it is given: the pipeline before the vehicle's
+    attitude counted (section 16), for comparisons. Takes :func:`frame_attitudes`' arguments,
+    so that it can stand in for it."""
+    z = np.zeros(np.asarray(chainage_m, float).shape)
+    return FrameAttitude(z, z, z, np.ones(z.shape, bool))
 
 
 def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -> NDArray:
@@ -221,7 +237,7 @@ def _roll_interval(
     here = np.abs(k[:, -1])
     lo = np.full(chainage_m.shape, np.inf)
     hi = np.full(chainage_m.shape, -np.inf)
-    for kk, present in ((left, left > _STRAIGHT_PER_M), (-right, right > _STRAIGHT_PER_M)):
+    for kk, present in ((left, left > STRAIGHT_PER_M), (-right, right > STRAIGHT_PER_M)):
         a, b = roll_bounds_deg(kk, cant, cant_mm=cant_mm, speed_kmh=speed_kmh)  # inward
         sign = inside_roll_sign(kk, reverse)
         r1, r2 = sign * a, sign * b

@@ -57,7 +57,12 @@ from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
 from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
-from predisat.reconstruct.attitude import frame_attitudes, survey_speed_kmh
+from predisat.reconstruct.attitude import (
+    CANT_ON_SHARP_MM,
+    STRAIGHT_PER_M,
+    frame_attitudes,
+    survey_speed_kmh,
+)
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
 from predisat.reconstruct.chunks import (
     ChunkFrame,
@@ -327,7 +332,7 @@ def _attitude_summary(
         out["first_contradicted"] = str(fr.frame_id[ok][contradicted][0])
     if params.cant_table is not None:
         cant = params.cant_table.cant_mm_at(ch[ok])
-        flat = np.abs(np.asarray(track.curvature_at(ch[ok]), float)) < _STRAIGHT_PER_M
+        flat = np.abs(np.asarray(track.curvature_at(ch[ok]), float)) < STRAIGHT_PER_M
         out["cant_table_frames"] = int(np.isfinite(cant).sum())
         # cant where the map has no curve: the table's chainage is probably not the map's
         out["cant_off_curve_frames"] = int((flat & (cant >= _CANT_ON_CURVE_MM)).sum())
@@ -336,9 +341,7 @@ def _attitude_summary(
     return out
 
 
-_STRAIGHT_PER_M = 1e-4  # R > 10 km
 _CANT_ON_CURVE_MM = 20.0
-_CANT_ON_SHARP_MM = 5.0  # as predisat.reconstruct.attitude
 
 
 def _attitude_warnings(summary: JsonDict) -> list[str]:
@@ -364,7 +367,7 @@ def _attitude_warnings(summary: JsonDict) -> list[str]:
     ignored = int(summary.get("cant_table_ignored_frames", 0))
     if ignored:
         out.append(
-            f"warning: the cant table gives under {_CANT_ON_SHARP_MM:g} mm at {ignored} frames on "
+            f"warning: the cant table gives under {CANT_ON_SHARP_MM:g} mm at {ignored} frames on "
             "curves sharper than R = 1 km, which carry cant: not used there (is it in "
             "millimetres, and the right track's?)"
         )

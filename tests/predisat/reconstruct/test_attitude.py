@@ -134,14 +134,10 @@ def canted(tmp_path_factory: pytest.TempPathFactory):  # -> (truth, {variant: ma
                                         progress=False).masks  # fmt: skip
     # the attitude ignored, in this process (serial): every frame level, no doubt
     import predisat.reconstruct.chunks as chunks
-    from predisat.reconstruct.attitude import FrameAttitude
-
-    def level(track, s, *args, **kwargs):
-        z = np.zeros(np.asarray(s).shape)
-        return FrameAttitude(z, z, z, np.ones(z.shape, bool))
+    from predisat.reconstruct.attitude import level_attitudes
 
     monkey = pytest.MonkeyPatch()
-    monkey.setattr(chunks, "frame_attitudes", level)
+    monkey.setattr(chunks, "frame_attitudes", level_attitudes)
     try:
         masks["ignored"] = process_survey(survey, base / "ignored", PipelineParams(),
                                           progress=False, scheduler="serial").masks  # fmt: skip
