@@ -46,6 +46,7 @@ __all__ = [
     "Mount",
     "Position",
     "default_camera",
+    "tilt_doubt_m",
     "tilt_shift_m",
     "vehicle_to_enu",
 ]
@@ -814,6 +815,81 @@ def tilt_shift_m(roll_deg: float, pitch_deg: float, height_m: float) -> NDArray:
     up = np.array([0.0, 0.0, float(height_m)])
     att = _vehicle_attitude(roll_deg, pitch_deg)
     return att @ up - up
+
+
+def tilt_doubt_m(
+    lever_arm_m: ArrayLike,
+    height_m: float,
+    roll_deg: float,
+    pitch_deg: float,
+    roll_doubt_deg: float,
+    pitch_doubt_deg: float,
+) -> tuple[float, float, float]:
+    """How far a camera may stand from where a nominal attitude puts it, metres.
+
+    The vehicle's true roll lies within ``roll_doubt_deg`` of ``roll_deg`` and its pitch
+    within ``pitch_doubt_deg`` of ``pitch_deg``; the body turns about the pivot of
+    :func:`tilt_shift_m` (the track axis at rail level). The rectification's erosion covers
+    the turn of the camera's rays; this covers the move of its centre
+    (``docs/reconstruction.md``, section 16).
+
+    Parameters
+    ----------
+    lever_arm_m : array_like, shape (3,)
+        Camera centre minus antenna, vehicle frame (x forward, y left, z up), metres.
+    height_m : float
+        Antenna height above the rail, metres.
+    roll_deg, pitch_deg : float
+        Nominal attitude, degrees (as :meth:`Mount.on_vehicle`).
+    roll_doubt_deg, pitch_doubt_deg : float
+        Half-widths of the true attitude's intervals, degrees (>= 0).
+
+    Returns
+    -------
+    along_m, across_m, vertical_m : float
+        Upper bounds of the distance between the true and the nominal camera centre along
+        the vehicle (level frame x), across it (y) and vertically (z); ``hypot(along_m,
+        across_m)`` bounds the horizontal distance.
+
+    Notes
+    -----
+    With ``A(r, p) = Ry(-p) Rx(r)`` and ``P`` the camera from the pivot, the move splits into
+    ``U = Ry(-p) (Rx(r) - Rx(r0)) P`` (a chord in the vehicle's y-z plane, then pitched) and
+    ``V = (Ry(-p) - Ry(-p0)) Rx(r0) P`` (a chord in the x-z plane). Each chord's length is
+    ``2 sin(doubt / 2)`` times its circle's radius, and each component is that times the
+    largest of the matching coordinate over the half-angles swept, found exactly (a sinusoid's
+    extremes over an interval): no sampling, no linearisation.
+    """
+    arm = np.asarray(lever_arm_m, float)
+    if arm.shape != (3,) or not np.all(np.isfinite(arm)):
+        raise ValueError(f"lever_arm_m must be finite (x, y, z) metres, got {lever_arm_m!r}")
+    for name, v in (("roll_doubt_deg", roll_doubt_deg), ("pitch_doubt_deg", pitch_doubt_deg)):
+        if not (np.isfinite(v) and 0.0 <= v <= 45.0):
+            raise ValueError(f"{name} must be an angle in [0, 45] degrees, got {v}")
+    r0, p0 = np.radians(float(roll_deg)), np.radians(float(pitch_deg))
+    a, b = np.radians(float(roll_doubt_deg)), np.radians(float(pitch_doubt_deg))
+    px, py, pz = arm + np.array([0.0, 0.0, float(height_m)])
+    # roll: the chord's y and z parts (z and y of the point at the mid-angle)
+    uy = 2.0 * np.sin(a / 2.0) * _sinusoid_max(pz, py, r0 - a / 2.0, r0 + a / 2.0)
+    uz = 2.0 * np.sin(a / 2.0) * _sinusoid_max(py, -pz, r0 - a / 2.0, r0 + a / 2.0)
+    # pitch, acting on the rolled point Q = Rx(r0) P
+    qx, qz = px, py * np.sin(r0) + pz * np.cos(r0)
+    vx = 2.0 * np.sin(b / 2.0) * _sinusoid_max(qz, qx, p0 - b / 2.0, p0 + b / 2.0)
+    vz = 2.0 * np.sin(b / 2.0) * _sinusoid_max(qx, -qz, p0 - b / 2.0, p0 + b / 2.0)
+    # U's x part is -sin(p) times its z part, its y part the chord's; V has no y part
+    ux = np.sin(min(abs(p0) + b, np.pi / 2.0)) * uz
+    return float(ux + vx), float(uy), float(uz + vz)
+
+
+def _sinusoid_max(c: float, s: float, lo_rad: float, hi_rad: float) -> float:
+    """``max |c cos t + s sin t|`` over ``t`` in ``[lo_rad, hi_rad]``."""
+    amp, phase = float(np.hypot(c, s)), float(np.arctan2(s, c))
+    # the extremes are the ends and the peaks t = phase + k pi inside the interval
+    k = np.arange(np.ceil((lo_rad - phase) / np.pi), np.floor((hi_rad - phase) / np.pi) + 1)
+    if k.size:
+        return amp
+    return float(max(abs(c * np.cos(lo_rad) + s * np.sin(lo_rad)),
+                     abs(c * np.cos(hi_rad) + s * np.sin(hi_rad))))  # fmt: skip
 
 
 def vehicle_to_enu(heading_deg: ArrayLike, reverse: ArrayLike = False) -> NDArray:

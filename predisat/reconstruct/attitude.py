@@ -64,7 +64,10 @@ class FrameAttitude:
     agrees. ``contradicted`` marks frames whose measured roll the track rules out, or all the
     measured frames when it rules out more than a fifth of those on curves (one IMU mistake is
     everywhere; bounded instead), ``table_ignored`` frames whose cant-table value it rules out
-    (shape (n,) each).
+    (shape (n,) each). ``doubt_deg`` is the largest angle between the true and the nominal
+    attitude (the rays' erosion), ``roll_doubt_deg`` and ``pitch_doubt_deg`` its two parts
+    (the cameras' move, :func:`~predisat.camera.models.tilt_doubt_m`); None: each
+    ``doubt_deg``.
     """
 
     roll_deg: NDArray
@@ -73,6 +76,8 @@ class FrameAttitude:
     measured: NDArray
     contradicted: NDArray | None = None
     table_ignored: NDArray | None = None
+    roll_doubt_deg: NDArray | None = None
+    pitch_doubt_deg: NDArray | None = None
 
 
 def frame_attitudes(
@@ -161,17 +166,19 @@ def frame_attitudes(
     grade_deg = np.degrees(np.arctan(np.asarray(track.grade_at(s), float)))
     out_pitch = np.where(measured, pitch, -grade_deg if reverse else grade_deg)
     out_pitch = np.where(contradicted, pitch, out_pitch)  # the pitch was not contradicted
-    doubt = np.where(measured, 2.0 * imu_doubt_deg, 0.5 * (r_hi - r_lo) + grade_doubt_deg)
-    doubt = np.where(contradicted, 0.5 * (r_hi - r_lo) + 2.0 * imu_doubt_deg, doubt)
+    roll_doubt = np.where(measured, imu_doubt_deg, 0.5 * (r_hi - r_lo))
+    pitch_doubt = np.where(measured | contradicted, imu_doubt_deg, grade_doubt_deg)
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     # A doubt takes the rounding in; with none (an attitude taken as exact) the rounding,
     # 0.05 deg at most, is under half a pixel of the shipped cameras and under the
     # rectification grid's step, which the rectifier's obstacle growth covers.
-    rounding = np.abs(q_roll - out_roll) + np.abs(q_pitch - out_pitch)
-    doubt = np.where(doubt > 0, doubt + rounding, 0.0)
-    return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, doubt, measured, contradicted,
-                         table_ignored)  # fmt: skip
+    sure = (roll_doubt + pitch_doubt) == 0
+    roll_doubt = np.where(sure, 0.0, roll_doubt + np.abs(q_roll - out_roll))
+    pitch_doubt = np.where(sure, 0.0, pitch_doubt + np.abs(q_pitch - out_pitch))
+    # a turn about the roll axis then the pitch axis is within the sum of the two angles
+    return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, roll_doubt + pitch_doubt, measured,
+                         contradicted, table_ignored, roll_doubt, pitch_doubt)  # fmt: skip
 
 
 def level_attitudes(

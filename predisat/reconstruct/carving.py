@@ -381,6 +381,12 @@ class FrameView:
         Angle by which the frame's pose may be off (``mount`` is the level-frame mount of the
         vehicle's nominal attitude, :mod:`predisat.reconstruct.attitude`): its sky is eroded
         by it before anything is cleared (``docs/reconstruction.md``, section 16).
+    along_doubt_m, across_doubt_m, height_doubt_m : float
+        How far the camera centre may be from where ``antenna_enu_m`` and ``mount`` put it,
+        along the vehicle, across it and vertically (level frame), metres: the attitude's
+        doubt moves the centre too, the body turning about the rails
+        (:func:`~predisat.camera.models.tilt_doubt_m`). Every bound the frame sets holds from
+        any centre that near (section 16).
     """
 
     chainage_m: float
@@ -396,6 +402,32 @@ class FrameView:
     thin_mask: NDArray | None = field(default=None, repr=False)
     thin_width_deg: float = 0.0
     attitude_doubt_deg: float = 0.0
+    along_doubt_m: float = 0.0
+    across_doubt_m: float = 0.0
+    height_doubt_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("attitude_doubt_deg", "along_doubt_m", "across_doubt_m", "height_doubt_m"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"FrameView.{name} must be finite and >= 0, got {v}")
+
+    @property
+    def position_doubt_m(self) -> float:
+        """How far the camera centre may be from its nominal one horizontally, metres."""
+        return float(np.hypot(self.along_doubt_m, self.across_doubt_m))
+
+    def doubt_box_m(self, local_to_frame: NDArray) -> tuple[float, float, float]:
+        """The camera centre's doubt along the track frame's x, y and z, metres: the box of
+        the vehicle frame's doubts turned into the frame (``local_to_frame``, (3, 3), the
+        rotation from the local ENU at the frame into the track frame)."""
+        if self.along_doubt_m == self.across_doubt_m == self.height_doubt_m == 0.0:
+            return (0.0, 0.0, 0.0)
+        to_frame = np.asarray(local_to_frame, float) @ vehicle_to_enu(self.heading_deg,
+                                                                      self.reverse)
+        box = np.abs(to_frame) @ np.array([self.along_doubt_m, self.across_doubt_m,
+                                           self.height_doubt_m])  # fmt: skip
+        return (float(box[0]), float(box[1]), float(box[2]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -573,7 +605,8 @@ class Reconstructor:
                     for i in idx:
                         carve_profile(hf, bound, profs[i], cams[i], rots[i], p.carve_range_m,
                                       seen=seen, solid=solids[i], thin_rule=rules[i],
-                                      unseen_rule=unseen[i])  # fmt: skip
+                                      unseen_rule=unseen[i],
+                                      position_doubt_m=frames[i].doubt_box_m(rots[i]))  # fmt: skip
                     # a view counts once per cell, whatever its frames (within their boxes)
                     b = np.array([carve_box(hf, cams[i], p.carve_range_m) for i in idx])
                     box = (slice(int(b[:, 0].min()), int(b[:, 1].max())),
@@ -587,7 +620,8 @@ class Reconstructor:
                 bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules,
                                              unseen)  # fmt: skip
         over = [
-            (f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
+            (f.chainage_m - p.zenith_spread_m - f.along_doubt_m,
+             f.chainage_m + p.zenith_spread_m + f.along_doubt_m)
             for f, prof in zip(frames, profs, strict=True)
             if _zenith_blocked(prof, p)
         ] + _along_overhead(frames, profs, p)
@@ -751,7 +785,8 @@ def _fused_bounds(
                 carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m,
                               solid=None if solids is None else solids[i],
                               thin_rule=None if rules is None else rules[i],
-                              unseen_rule=None if unseen is None else unseen[i])  # fmt: skip
+                              unseen_rule=None if unseen is None else unseen[i],
+                              position_doubt_m=frames[i].doubt_box_m(rots[i]))  # fmt: skip
                 boxes.append(box)
         if not boxes:
             continue
@@ -777,7 +812,9 @@ def _thin_rules(
             out.append(None)
             continue
         off = float(hf.offset_m[row[i], col[i]]) if ok[i] else float("nan")
-        shrunk = np.sign(off) * max(abs(off) - 0.7072 * hf.cell_m, 0.0) if np.isfinite(off) else 0.0
+        # a camera known within a doubt may stand that much nearer the axis
+        near = abs(off) - 0.7072 * hf.cell_m - f.position_doubt_m
+        shrunk = np.sign(off) * max(near, 0.0) if np.isfinite(off) else 0.0
         out.append(ThinRule(float(np.radians(f.thin_width_deg)), k2, p.antenna_clearance_m,
                             float(shrunk)))  # fmt: skip
     return out
@@ -825,6 +862,7 @@ def _resolving_bounds(
                 carve_profile(
                     hf, raster, profs[i], cams[i], rots[i], range_m, seen=marks,
                     solid=solids[i], thin_rule=rules[i], unseen_rule=unseen[i],
+                    position_doubt_m=frames[i].doubt_box_m(rots[i]),
                 )  # fmt: skip
 
             r_m = float(ranges[i])
@@ -995,7 +1033,7 @@ def _along_overhead(
         tops = _along_tops(prof, f, p)
         if not np.isfinite(tops).any():
             continue
-        slack = s + abs(float(f.mount.lever_arm_m[0]))
+        slack = s + abs(float(f.mount.lever_arm_m[0])) + f.along_doubt_m
         reach = [
             slack + p.overhead_along_height_m / np.tan(np.radians(e))
             if np.isfinite(e) else s
@@ -1092,13 +1130,27 @@ def _camera_ceilings(
                     # sky seen below the horizon proves no less than sky from the horizon up
                     tans[n, m] = np.tan(np.radians(max(float(el.max()), 0.0)))
         tan = tans.max(axis=0)
-        z = float(cams[idx, 2].max())
+        # a camera known within a doubt may stand that much higher, and that far along
+        doubt_m = max(frames[i].along_doubt_m for i in idx)
+        z = float(max(cams[i, 2] + frames[i].height_doubt_m for i in idx))
         if slack_m > 0.0:
             # between the antenna and a camera the camera's other direction bounds: both must
             if not np.isfinite(tan).all():
                 tan = np.full(2, np.inf)
             else:
                 z += slack_m * float(tan.max())
+        fin = np.isfinite(tan)
+        if doubt_m > 0.0 and fin.any():
+            # a camera up to doubt_m along the track from the position: a point d ahead is
+            # at most d + doubt_m ahead of it, or (d < doubt_m) at most doubt_m behind it
+            if fin.all():
+                z += doubt_m * float(tan.max())
+            else:
+                # only one direction bounds: the row starts doubt_m further that way, so that
+                # no cell it bounds may lie behind the camera, and from a camera up to
+                # 2 doubt_m behind its new start
+                ch += doubt_m if fin[0] else -doubt_m
+                z += 2.0 * doubt_m * float(tan[fin][0])
         rows.append((ch, z, *tan))
     return np.asarray(rows, float).reshape(-1, 4)
 
@@ -1544,7 +1596,9 @@ def _far_field(
             own: dict[str, NDArray] = {}  # bins each view at the position saw
             for j in np.flatnonzero(np.abs(ch - s[i]) <= p.position_tol_m):
                 prof = profiles[int(j)]
+                # a camera known within a doubt may stand that much further aside
                 base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
+                base += frames[int(j)].position_doubt_m
                 allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
                 per_pos[i].append((prof, allow))
                 vals, ok = _profile_max(prof, az_sub, allow)
@@ -1585,7 +1639,7 @@ def _robust_far(
     views: dict[str, NDArray] = {}
     for j in near:
         f = frames[int(j)]
-        base = float(np.hypot(*(cams[j, :2] - antenna_m[:2])))
+        base = float(np.hypot(*(cams[j, :2] - antenna_m[:2]))) + f.position_doubt_m
         allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
         vals, ok = _profile_max(profiles[int(j)], az_sub, allow)
         fb = _bins(np.where(ok, vals, np.nan), p.n_sub)

@@ -18,7 +18,13 @@ import numpy as np
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from predisat.camera.models import CameraModel, Mount, tilt_shift_m, vehicle_to_enu
+from predisat.camera.models import (
+    CameraModel,
+    Mount,
+    tilt_doubt_m,
+    tilt_shift_m,
+    vehicle_to_enu,
+)
 from predisat.clock import utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
@@ -144,13 +150,22 @@ def run_chunk(
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
+            doubt = float(att.doubt_deg[k])
+            # the same doubt moves the camera's centre (the body turns about the rails)
+            roll_doubt = att.doubt_deg if att.roll_doubt_deg is None else att.roll_doubt_deg
+            pitch_doubt = att.doubt_deg if att.pitch_doubt_deg is None else att.pitch_doubt_deg
+            along_m, across_m, raised_m = tilt_doubt_m(
+                vehicle_mount.lever_arm_m, job.antenna_height_m, roll, pitch,
+                float(roll_doubt[k]), float(pitch_doubt[k]),
+            )  # fmt: skip
             views.append(
                 FrameView(
                     chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
                     antenna_enu_m=ant[k] + shift, heading_deg=float(heading[k]),
                     reverse=job.reverse,
                     confidence=conf, frame_id=f.frame_id, thin_mask=thin, thin_width_deg=width,
-                    attitude_doubt_deg=float(att.doubt_deg[k]),
+                    attitude_doubt_deg=doubt,
+                    along_doubt_m=along_m, across_doubt_m=across_m, height_doubt_m=raised_m,
                 )
             )  # fmt: skip
     if reconstructor is None:

@@ -295,6 +295,7 @@ def carve_profile(
     solid: SkyProfile | None = None,
     thin_rule: ThinRule | None = None,
     unseen_rule: UnseenRule | None = None,
+    position_doubt_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> int:
     """Lower the bounds of ``bound`` (``hf``'s raster, updated in place) with one frame.
 
@@ -323,6 +324,12 @@ def carve_profile(
     unseen_rule : UnseenRule, optional
         The frame bounds no clearance cell where an arm its sky may hide unflagged could be
         opaque (:class:`UnseenRule`).
+    position_doubt_m : tuple of 3 float
+        How far the true camera centre may be from ``camera_m`` along the frame's x, y and z
+        (an attitude known only within a doubt, :func:`~predisat.camera.models.tilt_doubt_m`),
+        metres. Each cell then takes the highest ray over the cell grown by the first two on
+        its sides, raised by the third: a bound that holds from every centre within the doubt
+        (``docs/reconstruction.md``, section 16).
 
     Returns
     -------
@@ -349,16 +356,33 @@ def carve_profile(
         float(b_axis[1] - b_axis[0])
     ) + 1.0
     look = np.radians(profile.look_az_deg)
-    idx, e, n = _carve_corners(
-        xl, yl, np.ascontiguousarray(region), float(rot[0, 0]), float(rot[1, 0]),
-        float(rot[0, 1]), float(rot[1, 1]), float(np.sin(look)), float(np.cos(look)),
-        float(np.cos(np.radians(half_deg))) if half_deg < 180.0 else -2.0, float(range_m),
-    )  # fmt: skip
-    # arctan2 and hypot stay numpy's (its vectorised arctan2 differs from libm's in the last
-    # bit); degrees, offset and modulo are exact arithmetic, done where the corners land
-    beta, rho = _corner_lattice(
-        idx, np.arctan2(e, n), np.hypot(e, n), float(profile.look_az_deg), yl.size, xl.size
-    )
+    pads = np.asarray(position_doubt_m, float)
+    if pads.shape != (3,) or not np.all(np.isfinite(pads) & (pads >= 0.0)):
+        raise ValueError(
+            f"position_doubt_m must be three distances >= 0 metres (x, y, z), got {pads}"
+        )
+    pad_x, pad_y, pad_z = (float(v) for v in pads)
+    region_c = np.ascontiguousarray(region)
+
+    def lattice(dx: float, dy: float) -> tuple[NDArray, NDArray]:
+        idx, e, n = _carve_corners(
+            xl + dx, yl + dy, region_c, float(rot[0, 0]), float(rot[1, 0]),
+            float(rot[0, 1]), float(rot[1, 1]), float(np.sin(look)), float(np.cos(look)),
+            float(np.cos(np.radians(half_deg))) if half_deg < 180.0 else -2.0, float(range_m),
+        )  # fmt: skip
+        # arctan2 and hypot stay numpy's (its vectorised arctan2 differs from libm's in the
+        # last bit); degrees, offset and modulo are exact arithmetic, done where corners land
+        return _corner_lattice(
+            idx, np.arctan2(e, n), np.hypot(e, n), float(profile.look_az_deg), yl.size, xl.size
+        )
+
+    # With a doubt, the corners of each grown cell come from four shifted lattices: its low
+    # x and y edges moved by -pad_x and -pad_y, its high edges by +pad_x and +pad_y.
+    same = pad_x == 0.0 and pad_y == 0.0
+    beta, rho = lattice(-pad_x, -pad_y)
+    beta_x, rho_x = (beta, rho) if same else lattice(pad_x, -pad_y)
+    beta_y, rho_y = (beta, rho) if same else lattice(-pad_x, pad_y)
+    beta_xy, rho_xy = (beta, rho) if same else lattice(pad_x, pad_y)
     tan_sky = np.tan(np.radians(np.where(np.isfinite(profile.sky_el_deg), profile.sky_el_deg, 0.0)))
     tan_sky = np.where(np.isfinite(profile.sky_el_deg), tan_sky, np.inf)
     tan_solid = tan_sky
@@ -374,7 +398,7 @@ def carve_profile(
     up = rot[:, 2]
     marks = np.zeros((r1 - r0, c1 - c0), np.bool_) if seen is None else seen[r0:r1, c0:c1]
     return int(_carve_cells(
-        beta, rho, region,
+        beta, rho, beta_x, rho_x, beta_y, rho_y, beta_xy, rho_xy, pad_x, pad_y, pad_z, region,
         bound[r0:r1, c0:c1], float(b_axis[0]), float(b_axis[1] - b_axis[0]), float(range_m),
         np.ascontiguousarray(tan_sky, np.float64), xl, yl, float(c), cz,
         float(up[0]), float(up[1]), float(up[2]), marks,
@@ -466,7 +490,9 @@ def _corner_lattice(
 
 @njit(cache=True, nogil=True)
 def _carve_cells(
-    beta: NDArray, rho: NDArray, region: NDArray, bound: NDArray, b0: float, step: float,
+    beta: NDArray, rho: NDArray, beta_x: NDArray, rho_x: NDArray, beta_y: NDArray,
+    rho_y: NDArray, beta_xy: NDArray, rho_xy: NDArray, pad_x: float, pad_y: float, pad_z: float,
+    region: NDArray, bound: NDArray, b0: float, step: float,
     range_m: float, tan_sky: NDArray, xl: NDArray, yl: NDArray, c: float, cz: float,
     up_x: float, up_y: float, up_z: float, seen: NDArray, tan_solid: NDArray, off: NDArray,
     theta: float, k2: float, clearance: float, cam_off: float,
@@ -490,21 +516,30 @@ def _carve_cells(
     of the cell corners, ``tan_sky`` the tangent of the profile's skyline (``+inf`` where the
     column saw no sky). A cell takes the highest skyline ray over the azimuth span of its
     corners, at its farthest corner (at its nearest point for a downward ray).
+
+    ``pad_x, pad_y > 0`` (a centre known within ``pad_x`` in x and ``pad_y`` in y): the cell
+    grown by them on its sides takes its place, its corners read from the lattices shifted by
+    ``(-pad_x, -pad_y)`` (``beta``), ``(+pad_x, -pad_y)`` (``beta_x``), ``(-pad_x, +pad_y)``
+    (``beta_y``) and ``(+pad_x, +pad_y)`` (``beta_xy``); with no doubt the four are one lattice.
+    Every bound is raised by ``pad_z`` (the centre's vertical doubt).
     """
     n_r, n_c = region.shape
     n_b = tan_sky.size
+    pad_h = np.hypot(pad_x, pad_y)
     count = 0
     for r in range(n_r):
-        y_a = yl[r]
-        ny_ = max(max(y_a, 0.0), -(y_a + c))
+        y_a = yl[r] - pad_y
+        ny_ = max(max(y_a, 0.0), -(y_a + c + 2.0 * pad_y))
         for q in range(n_c):
             if not region[r, q]:
                 continue
             # the range test first: it skips most cells (every test only skips)
-            rho_far = max(max(rho[r, q], rho[r, q + 1]), max(rho[r + 1, q], rho[r + 1, q + 1]))
+            rho_far = max(max(rho[r, q], rho_x[r, q + 1]), max(rho_y[r + 1, q],
+                                                               rho_xy[r + 1, q + 1]))
             if not rho_far <= range_m:
                 continue
-            b1, b2, b3, b4 = beta[r, q], beta[r, q + 1], beta[r + 1, q], beta[r + 1, q + 1]
+            b1, b2 = beta[r, q], beta_x[r, q + 1]
+            b3, b4 = beta_y[r + 1, q], beta_xy[r + 1, q + 1]
             bmin = min(min(b1, b2), min(b3, b4))
             bmax = max(max(b1, b2), max(b3, b4))
             if not bmax - bmin < 90.0:
@@ -519,7 +554,7 @@ def _carve_cells(
                     t_max = tan_sky[i]
             if not np.isfinite(t_max):
                 continue
-            x_a = xl[q]
+            x_a = xl[q] - pad_x
             if theta > 0.0:
                 t_s = tan_solid[i_lo]
                 for i in range(i_lo + 1, i_hi + 1):
@@ -527,24 +562,25 @@ def _carve_cells(
                         t_s = tan_solid[i]
                 if t_s > t_max:
                     if not np.isfinite(t_s) or not _thin_ok(
-                        rho_far, t_s, theta, k2, clearance, cam_off, off[r, q], c
+                        rho_far, t_s, theta, k2, clearance, cam_off, off[r, q],
+                        c + 2.0 * max(pad_x, pad_y),
                     ):
                         t_max = t_s  # a thin feature on the way may block: solid
                     if not np.isfinite(t_max):
                         continue
-            if u_theta > 0.0 and abs(off[r, q]) < u_half:
+            if u_theta > 0.0 and abs(off[r, q]) < u_half + pad_h:
                 # an arm over the track the sky may hide unflagged (section 11)
                 w_u = u_theta * np.sqrt(rho_far * rho_far * (1.0 + t_max * t_max))
-                d_u = max(u_clearance, abs(off[r, q]) - 0.7072 * c)
+                d_u = max(u_clearance, abs(off[r, q]) - 0.7072 * c - pad_h)
                 if w_u * w_u > u_k2 * d_u:
                     continue
             if t_max >= 0.0:
                 h = rho_far * t_max
             else:  # nearest point of the cell to the camera (for downward-looking bounds)
-                h = np.hypot(max(max(x_a, 0.0), -(x_a + c)), ny_) * t_max
+                h = np.hypot(max(max(x_a, 0.0), -(x_a + c + 2.0 * pad_x)), ny_) * t_max
             # local height -> frame z: the local horizontal plane is tilted in the frame
-            tilt = -(up_x * (x_a + c / 2) + up_y * (y_a + c / 2)) / up_z
-            z = np.float32(cz + tilt + h / up_z)
+            tilt = -(up_x * (x_a + pad_x + c / 2) + up_y * (y_a + pad_y + c / 2)) / up_z
+            z = np.float32(cz + tilt + h / up_z + pad_z)
             if z < bound[r, q]:
                 bound[r, q] = z
             seen[r, q] = True

@@ -624,3 +624,40 @@ def test_a_tilted_vehicle_carries_its_antenna_toward_the_low_side() -> None:
     # nose up: the roof moves back
     assert tilt_shift_m(0.0, 2.0, 4.0)[0] == pytest.approx(-4.0 * np.sin(np.radians(2.0)))
     np.testing.assert_allclose(tilt_shift_m(0.0, 0.0, 4.0), 0.0)
+
+
+def test_the_tilt_doubt_bounds_how_far_every_attitude_within_it_moves_the_camera() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from predisat.camera.models import tilt_doubt_m
+
+    rng = np.random.default_rng(3)
+    cases = [  # lever arm, nominal roll and pitch, their doubts (deg)
+        ((0.0, 1.4, -0.8), 5.0, 0.0, 5.3, 2.35),  # a side camera, unmeasured roll on a curve
+        ((0.5, -1.4, -0.8), -7.0, 1.5, 3.0, 0.5),
+        ((9.0, 0.0, -1.5), 0.0, -2.0, 0.7, 2.35),  # a cab camera: pitch moves it up and down
+        ((0.0, 0.0, 0.3), 2.0, 0.0, 0.0, 0.0),  # an attitude taken as exact
+    ]
+    for arm, r0, p0, a, b in cases:
+        along, across, vertical = tilt_doubt_m(arm, 4.0, r0, p0, a, b)
+        point = np.asarray(arm) + np.array([0.0, 0.0, 4.0])  # from the pivot, rail level
+        # scipy's extrinsic "xy": roll about x, then pitch (nose up: -y) about y
+        nominal = Rotation.from_euler("xy", [r0, -p0], degrees=True).apply(point)
+        grid = np.array([(r, p) for r in np.linspace(r0 - a, r0 + a, 41)
+                         for p in np.linspace(p0 - b, p0 + b, 41)])  # fmt: skip
+        rand = np.column_stack([rng.uniform(r0 - a, r0 + a, 2000),
+                                rng.uniform(p0 - b, p0 + b, 2000)])  # fmt: skip
+        att = np.vstack([grid, rand])
+        true = Rotation.from_euler("xy", np.column_stack([att[:, 0], -att[:, 1]]),
+                                   degrees=True).apply(point)  # fmt: skip
+        got = np.abs(true - nominal).max(axis=0)  # level frame: x along, y across, z up
+        bound = np.array([along, across, vertical])
+        assert np.all(got <= bound + 1e-12), (arm, r0, p0, got, bound)
+        if a + b > 0:  # tight, not a loose bound: each part reached to 60 %
+            assert np.all(got >= 0.6 * bound), (arm, r0, p0, got, bound)
+        else:
+            assert along == across == vertical == 0.0
+    with pytest.raises(ValueError, match="roll_doubt_deg"):
+        tilt_doubt_m((0.0, 1.0, 0.0), 4.0, 0.0, 0.0, -1.0, 0.0)
+    with pytest.raises(ValueError, match="lever_arm_m"):
+        tilt_doubt_m([0.0, 1.0], 4.0, 0.0, 0.0, 1.0, 1.0)

@@ -30,6 +30,13 @@ def test_measured_attitudes_are_kept_rounded(track) -> None:
     # the IMU's doubt for roll and pitch, and the rounding
     assert att.doubt_deg[1] == pytest.approx(0.2)
     assert att.doubt_deg[0] == pytest.approx(0.2 + 0.012 + 0.02)
+    # its two parts: the roll's and the pitch's, each with its own rounding
+    assert att.roll_doubt_deg is not None and att.pitch_doubt_deg is not None
+    np.testing.assert_allclose(att.roll_doubt_deg, [0.1 + 0.012, 0.1])
+    np.testing.assert_allclose(att.pitch_doubt_deg, [0.1 + 0.02, 0.1])
+    np.testing.assert_allclose(att.roll_doubt_deg + att.pitch_doubt_deg, att.doubt_deg)
+    exact = frame_attitudes(track, [3300.0], [-0.912], [0.33], False)
+    assert exact.doubt_deg[0] == exact.roll_doubt_deg[0] == exact.pitch_doubt_deg[0] == 0.0
     assert np.all(np.abs(att.roll_deg / ATTITUDE_STEP_DEG - np.rint(att.roll_deg / 0.05)) < 1e-9)
 
 
@@ -60,6 +67,9 @@ def test_unmeasured_on_straight_track_is_level_give_or_take_the_track_and_grade(
     att = frame_attitudes(track, s, np.nan, np.nan, False, grade_doubt_deg=1.0)
     np.testing.assert_allclose(att.roll_deg, 0.0, atol=1e-12)
     assert np.all(att.doubt_deg < 0.5 + 1.0 + 0.1) and np.all(att.doubt_deg >= 1.5)
+    # the grade's doubt is the pitch's, the track's play the roll's
+    assert np.all(att.pitch_doubt_deg >= 1.0) and np.all(att.roll_doubt_deg >= 0.5)
+    assert np.all(att.roll_doubt_deg < 0.6)
 
 
 def test_a_cant_table_and_the_survey_speed_narrow_the_doubt_around_the_true_roll(track) -> None:

@@ -189,3 +189,52 @@ def test_the_unseen_arm_rule_keeps_far_frames_out_of_the_clearance() -> None:
     assert carved_in > 0 and kept_out > 0
     # on the axis the reach is sqrt(k2 0.5) / theta = 2.5 m: a cell 5 m ahead is not bounded
     assert np.isinf(ruled[cell(5.2, 0.2)]) and np.isfinite(plain[cell(5.2, 0.2)])
+
+
+def _displacements(doubt_m: float, rng: np.random.Generator) -> np.ndarray:
+    """Camera shifts within ``doubt_m``: the 26 directions of a cube's faces, edges and corners
+    at full length, and random shifts inside the ball."""
+    g = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
+                  if (i, j, k) != (0, 0, 0)], float)  # fmt: skip
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    inner = rng.normal(size=(40, 3))
+    inner *= rng.uniform(0, 1, (40, 1)) / np.linalg.norm(inner, axis=1, keepdims=True)
+    return np.vstack([g, inner]) * doubt_m
+
+
+def test_a_position_doubt_bounds_every_cell_from_every_centre_within_it() -> None:
+    """The bound carved with a doubt is at least the bound each camera centre within the doubt
+    (horizontally and vertically) would carve with the same skyline (the kernel without doubt,
+    from the true centre)."""
+    rng = np.random.default_rng(7)
+    el = rng.uniform(-15.0, 60.0, 720)
+    el[rng.uniform(size=720) < 0.05] = np.inf  # columns that saw no sky
+    prof = profile(el)
+    doubt = 0.3
+    hf, padded = field()
+    carve_profile(hf, padded, prof, CAM, np.eye(3), 40.0,
+                  position_doubt_m=(doubt, doubt, doubt))  # fmt: skip
+    _, nominal = field()
+    carve_profile(hf, nominal, prof, CAM, np.eye(3), 40.0)
+    assert np.isfinite(padded).sum() > 1000
+    below = 0
+    for t in _displacements(doubt, rng):
+        _, true = field()
+        carve_profile(hf, true, prof, CAM + t, np.eye(3), 40.0)
+        # inf >= inf holds; a finite padded bound where the true centre bounds nothing fails
+        assert np.all(padded >= true - 1e-4), t
+        below += int(np.sum(nominal < true - 1e-3))
+    # without the doubt, the nominal centre's bounds fall below some true centre's: the
+    # cells the doubt protects
+    assert below > 0
+
+
+def test_a_position_doubt_of_zero_changes_nothing_and_a_negative_one_is_refused() -> None:
+    hf, a = field()
+    _, b = field()
+    prof = profile(np.linspace(-10.0, 50.0, 720))
+    carve_profile(hf, a, prof, CAM, np.eye(3), 40.0)
+    carve_profile(hf, b, prof, CAM, np.eye(3), 40.0, position_doubt_m=(0.0, 0.0, 0.0))
+    assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="position_doubt_m"):
+        carve_profile(hf, b, prof, CAM, np.eye(3), 40.0, position_doubt_m=(0.1, -0.1, 0.0))
