@@ -126,7 +126,9 @@ def main(argv: list[str] | None = None) -> int:
         trusted, good, los = trust_counts(c.mask_el_deg, c.truth_el_deg)
         ft_pos = (trusted - good).sum(axis=1) / np.maximum(trusted.sum(axis=1), 1)
         att = masks.provenance["attitude"]
-        print(f"{name:>9} {100 * (1 - good.sum() / trusted.sum()):14.3g} "
+        # nothing trusted (every direction closed): no false trust, and all the sky lost
+        ft = 100 * (1 - good.sum() / trusted.sum()) if trusted.sum() else 0.0
+        print(f"{name:>9} {ft:14.3g} "
               f"{100 * ft_pos.max():12.3g} {int((ft_pos > 1e-3).sum()):>7} of {ft_pos.size:<3} "
               f"{100 * (1 - good.sum() / los.sum()):11.1f} {att['max_abs_roll_deg']:9.2f} "
               f"{att['max_doubt_deg']:10.2f}")  # fmt: skip
