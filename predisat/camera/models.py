@@ -802,19 +802,22 @@ class Mount:
 
 
 def tilt_shift_m(roll_deg: float, pitch_deg: float, height_m: float) -> NDArray:
-    """Where a point ``height_m`` above the rail moves when the vehicle tilts, (3,) metres.
+    """Where the antenna, ``height_m`` above the rail, moves when the vehicle tilts, (3,) metres.
 
-    A canted track tilts the whole vehicle about the rails, not about its antenna: a point
-    ``height_m`` above the track axis (the antenna, 4 m up) moves toward the curve's inside by
-    about ``height_m * sin(roll)`` (0.48 m for 6.9 deg). The result is in the level vehicle
-    frame of :meth:`Mount.on_vehicle` (x forward, y left, z up); add ``vehicle_to_enu(...) @``
-    it to the point's level position. Roll and pitch as there; the pivot is the track axis
-    at rail level (with the low rail as the pivot the point also rises by half the cant, 90 mm
-    for 180 mm: not modelled).
+    A canted track tilts the whole vehicle about the rails, not about its antenna: the antenna
+    ``height_m`` above the track axis (4 m up) moves toward the curve's inside by about
+    ``height_m * sin(roll)`` (0.48 m for 6.9 deg). Along the track it stays where it is: a
+    frame's chainage is the antenna's (docs/survey-format.md), measured, so a pitch moves it
+    down only. The result is in the level vehicle frame of :meth:`Mount.on_vehicle` (x forward,
+    y left, z up; its x is 0); add ``vehicle_to_enu(...) @`` it to the antenna's level
+    position. Roll and pitch as there; the pivot is the track axis at rail level (with the low
+    rail as the pivot the antenna also rises by half the cant, 90 mm for 180 mm: not modelled).
     """
     up = np.array([0.0, 0.0, float(height_m)])
     att = _vehicle_attitude(roll_deg, pitch_deg)
-    return att @ up - up
+    shift = att @ up - up
+    shift[0] = 0.0  # the chainage is the antenna's
+    return shift
 
 
 def tilt_doubt_m(
@@ -829,9 +832,10 @@ def tilt_doubt_m(
 
     The vehicle's true roll lies within ``roll_doubt_deg`` of ``roll_deg`` and its pitch
     within ``pitch_doubt_deg`` of ``pitch_deg``; the body turns about the pivot of
-    :func:`tilt_shift_m` (the track axis at rail level). The rectification's erosion covers
-    the turn of the camera's rays; this covers the move of its centre
-    (``docs/reconstruction.md``, section 16).
+    :func:`tilt_shift_m` (the track axis at rail level), across the track and up, while
+    along the track the antenna stays at its measured chainage and the camera moves with its
+    lever arm only. The rectification's erosion covers the turn of the camera's rays; this
+    covers the move of its centre (``docs/reconstruction.md``, section 16).
 
     Parameters
     ----------
@@ -853,7 +857,8 @@ def tilt_doubt_m(
 
     Notes
     -----
-    With ``A(r, p) = Ry(-p) Rx(r)`` and ``P`` the camera from the pivot, the move splits into
+    With ``A(r, p) = Ry(-p) Rx(r)`` and ``P`` the camera from the pivot (across and up) or
+    from the antenna (along: the lever arm), the move ``A(r, p) P - A(r0, p0) P`` splits into
     ``U = Ry(-p) (Rx(r) - Rx(r0)) P`` (a chord in the vehicle's y-z plane, then pitched) and
     ``V = (Ry(-p) - Ry(-p0)) Rx(r0) P`` (a chord in the x-z plane). Each chord's length is
     ``2 sin(doubt / 2)`` times its circle's radius, and each component is that times the
@@ -868,7 +873,17 @@ def tilt_doubt_m(
             raise ValueError(f"{name} must be an angle in [0, 45] degrees, got {v}")
     r0, p0 = np.radians(float(roll_deg)), np.radians(float(pitch_deg))
     a, b = np.radians(float(roll_doubt_deg)), np.radians(float(pitch_doubt_deg))
-    px, py, pz = arm + np.array([0.0, 0.0, float(height_m)])
+    along = _chord_parts(arm, r0, p0, a, b)[0]
+    _, across, vertical = _chord_parts(arm + np.array([0.0, 0.0, float(height_m)]), r0, p0, a, b)
+    return along, across, vertical
+
+
+def _chord_parts(
+    point: NDArray, r0: float, p0: float, a: float, b: float
+) -> tuple[float, float, float]:
+    """Bounds of ``|A(r, p) P - A(r0, p0) P|`` along x, y and z over ``|r - r0| <= a`` and
+    ``|p - p0| <= b`` (radians), :func:`tilt_doubt_m`'s notes."""
+    px, py, pz = (float(v) for v in point)
     # roll: the chord's y and z parts (z and y of the point at the mid-angle)
     uy = 2.0 * np.sin(a / 2.0) * _sinusoid_max(pz, py, r0 - a / 2.0, r0 + a / 2.0)
     uz = 2.0 * np.sin(a / 2.0) * _sinusoid_max(py, -pz, r0 - a / 2.0, r0 + a / 2.0)
