@@ -215,7 +215,8 @@ _LOSS_CAUSES = (
     ("AMBIGUOUS", "a pair cutting the track twice"),
     ("NO_ROOT", "a pair not cutting the track"),
 )
-# after "2-3 satellites": a stretch's few satellites are the cause of its missing claim
+# first: the row of such an epoch carries one stretch's fix (the longest's), whose own flags
+# (a pair cutting the track twice, 2-3 satellites) say nothing of the other stretches
 _STRETCH_CAUSE = ("NO_STRETCH_CLAIM", "no stretch of the predicted interval with a claim of "
                   "its own (partitioned trust)")  # fmt: skip
 
@@ -232,20 +233,21 @@ def claim_losses(epochs: pd.DataFrame) -> dict[str, float]:
     -------
     dict
         Cause (plain words) to share of epochs, largest first; each epoch without a claim
-        counts once, under its first cause in :data:`_LOSS_CAUSES` order, or "2-3 satellites
-        (a fix without claim)" / "other" when no listed flag is set. Empty when every epoch
-        has a claim.
+        counts once: partitioned trust without a stretch claiming inside itself
+        (``NO_STRETCH_CLAIM``), else its first cause in :data:`_LOSS_CAUSES` order, or "2-3
+        satellites (a fix without claim)" / "other" when no listed flag is set. Empty when
+        every epoch has a claim.
     """
     n = max(len(epochs), 1)
     lost = epochs.loc[~epochs["claim"].to_numpy(bool)]
     counts: dict[str, int] = {}
     for names, n_used in zip(lost["flag_names"].astype(str), lost["n_used"], strict=True):
         flags = set(names.split("|"))
-        cause = next((text for flag, text in _LOSS_CAUSES if flag in flags), None)
-        if cause is None and n_used < 4:
-            cause = "2-3 satellites (a fix without claim)"
-        elif cause is None:
-            cause = _STRETCH_CAUSE[1] if _STRETCH_CAUSE[0] in flags else "other"
+        cause = _STRETCH_CAUSE[1] if _STRETCH_CAUSE[0] in flags else None
+        if cause is None:
+            cause = next((text for flag, text in _LOSS_CAUSES if flag in flags), None)
+        if cause is None:
+            cause = "2-3 satellites (a fix without claim)" if n_used < 4 else "other"
         counts[cause] = counts.get(cause, 0) + 1
     return {k: v / n for k, v in sorted(counts.items(), key=lambda kv: -kv[1])}
 

@@ -81,16 +81,16 @@ def test_claim_losses_count_each_epoch_once_under_its_first_cause():
     assert losses["interval missing the odometry prediction"] == 1 / 8
     assert losses["other"] == 1 / 8
     assert claim_losses(epochs.iloc[:1]) == {}
-    # partitioned trust without a claimed stretch is named; a stretch of 2-3 satellites is
-    # named by its few satellites first
-    parts = pd.DataFrame({"claim": [False, False, False],
+    # partitioned trust without a claimed stretch is named first: the row's fix is one
+    # stretch's, whose own flags (2-3 satellites, an ambiguous pair) do not explain the epoch
+    parts = pd.DataFrame({"claim": [False, False, False, False],
                           "flag_names": ["NO_SAFETY_CLAIM|NO_STRETCH_CLAIM"] * 2
-                          + ["NO_SAFETY_CLAIM"],
-                          "n_used": [7, 3, 7]})  # fmt: skip
+                          + ["NO_SAFETY_CLAIM|AMBIGUOUS|NO_STRETCH_CLAIM", "NO_SAFETY_CLAIM"],
+                          "n_used": [7, 3, 7, 3]})  # fmt: skip
     losses = claim_losses(parts)
     stretch = next(k for k in losses if "no stretch" in k)
-    assert losses[stretch] == 1 / 3 and losses["other"] == 1 / 3
-    assert losses["2-3 satellites (a fix without claim)"] == 1 / 3
+    assert losses[stretch] == 3 / 4
+    assert losses["2-3 satellites (a fix without claim)"] == 1 / 4
 
 
 def test_exclusions_collect_satellites_per_reason():
