@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat import __version__
-from predisat.camera.models import CameraModel, Mount
+from predisat.camera.models import CameraModel, Mount, tilt_doubt_m
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
@@ -312,7 +312,8 @@ def _attitude_summary(
 ) -> JsonDict:
     """How the frames' attitude is known (provenance ``attitude``; section 16 of
     docs/reconstruction.md): frames with a measured roll and pitch, and the largest doubt
-    their sky is eroded by."""
+    their sky is eroded by, and the largest distance their cameras may stand from where the
+    nominal attitude puts them (``tilt_doubt_m``)."""
     fr, ok = survey.frames, np.isfinite(ch)
     speed = survey_speed_kmh(ch, fr.gps_s, fr.side)[ok]
     att = frame_attitudes(
@@ -321,11 +322,22 @@ def _attitude_summary(
         cant_table=params.cant_table, speed_kmh=speed,
     )  # fmt: skip
     contradicted = att.contradicted if att.contradicted is not None else np.zeros(0, bool)
+    roll_doubt = att.doubt_deg if att.roll_doubt_deg is None else att.roll_doubt_deg
+    pitch_doubt = att.doubt_deg if att.pitch_doubt_deg is None else att.pitch_doubt_deg
+    height_m = params.reconstruction.antenna_height_m
+    moved_m = 0.0
+    for k, side in enumerate(fr.side[ok]):
+        if roll_doubt[k] + pitch_doubt[k] > 0.0 and side in survey.cameras:
+            arm = survey.cameras[side].mount.lever_arm_m
+            d = tilt_doubt_m(arm, height_m, float(att.roll_deg[k]), float(att.pitch_deg[k]),
+                             float(roll_doubt[k]), float(pitch_doubt[k]))  # fmt: skip
+            moved_m = max(moved_m, float(np.linalg.norm(d)))
     out: JsonDict = {
         "frames": int(ok.sum()),
         "measured_frames": int(att.measured.sum()),
         "contradicted_frames": int(contradicted.sum()),
         "max_doubt_deg": round(float(att.doubt_deg.max(initial=0.0)), 3),
+        "max_camera_doubt_m": round(moved_m, 3),
         "max_abs_roll_deg": round(float(np.abs(att.roll_deg).max(initial=0.0)), 3),
     }
     if contradicted.any():
@@ -392,8 +404,10 @@ def _attitude_warning(summary: JsonDict) -> str | None:
     return (
         f"warning: {n - measured} of {n} frames have no measured roll and pitch (manifest "
         f"columns roll_deg, pitch_deg): their attitude is bounded from the track (its curves, "
-        f"grade{' and cant table' if tabled else ''}) and their sky eroded by up to "
-        f"{summary['max_doubt_deg']:.1f} deg, which costs sky; give the survey vehicle's IMU "
+        f"grade{' and cant table' if tabled else ''}), their sky eroded by up to "
+        f"{summary['max_doubt_deg']:.1f} deg and their cameras placed within "
+        f"{summary.get('max_camera_doubt_m', 0.0):.2f} m, which costs sky (up to 30-50 points "
+        "on sharp curves); give the survey vehicle's IMU "
         f"attitude{'' if tabled else ' or the cant table of the line (--cant-table)'} "
         "(docs/reconstruction.md, section 16)"
     )

@@ -647,7 +647,8 @@ def test_the_tilt_doubt_bounds_how_far_every_attitude_within_it_moves_the_camera
                                 rng.uniform(p0 - b, p0 + b, 2000)])  # fmt: skip
         att = np.vstack([grid, rand])
 
-        def moves(point: np.ndarray) -> np.ndarray:
+        def moves(point: np.ndarray, r0: float = r0, p0: float = p0,
+                  att: np.ndarray = att) -> np.ndarray:  # fmt: skip
             # scipy's extrinsic "xy": roll about x, then pitch (nose up: -y) about y
             nominal = Rotation.from_euler("xy", [r0, -p0], degrees=True).apply(point)
             true = Rotation.from_euler("xy", np.column_stack([att[:, 0], -att[:, 1]]),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from predisat.camera.models import Mount
 from predisat.reconstruct.attitude import ATTITUDE_STEP_DEG, frame_attitudes, survey_speed_kmh
 from predisat.track import demo_track
 from predisat.track.cant import (
@@ -188,6 +189,12 @@ def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
     assert measured["max_doubt_deg"] == 0.0 and 5.0 < measured["max_abs_roll_deg"] < 8.0
     unknown = masks["unknown"].provenance["attitude"]
     assert unknown["measured_frames"] == 0 and unknown["max_doubt_deg"] > 5.0
+    # the doubt moves the cameras: at least the shipped side camera's roll chord from the
+    # rails (3.3 m), at most the chord of the whole doubt from there
+    arm = np.array(Mount.default("left").lever_arm_m) + np.array([0.0, 0.0, 4.0])
+    half = np.radians(unknown["max_doubt_deg"]) / 2.0
+    assert measured["max_camera_doubt_m"] == 0.0
+    assert 0.1 < unknown["max_camera_doubt_m"] <= 2.0 * np.linalg.norm(arm) * np.sin(half)
     assert attitude_text(masks["measured"].provenance).startswith("measured")
     assert "bounded from the track" in attitude_text(masks["unknown"].provenance)
     assert attitude_text({}) == ""
