@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
@@ -170,6 +170,11 @@ class ReconstructionParams:
         Sky-profile sampling.
     descriptor_min_el_deg : float
         A side whose perpendicular horizon is lower has no obstacle descriptor.
+    carve_past_deg : float or None
+        A side camera's rays carve this far past its half-space too (relative azimuths up to
+        ``90 + carve_past_deg`` from its look direction), in columns it sees from the zenith
+        down, and outside the clearance only (``docs/reconstruction.md``, section 17). None:
+        the half-space only, as before 2026-12-05.
     fusion_rank : int
         Independent views (frames, or groups of frames sharing a ``FrameView.view_group``)
         that must agree before a cell is lowered: a cell keeps the ``min(fusion_rank, n)``-th
@@ -243,6 +248,7 @@ class ReconstructionParams:
     rectify_el_step_deg: float = 0.125
     descriptor_min_el_deg: float = 10.0
     fusion_rank: int = 1
+    carve_past_deg: float | None = 20.0
     suspect_share: float | None = None
     suspect_tol_deg: float = 5.0
     suspect_neighbour_m: float = 25.0
@@ -307,6 +313,11 @@ class ReconstructionParams:
             raise ValueError(
                 "ReconstructionParams.low_confidence_window_deg must be > 0 degrees, got "
                 f"{self.low_confidence_window_deg}"
+            )
+        if self.carve_past_deg is not None and not 0.0 < self.carve_past_deg <= 60.0:
+            raise ValueError(
+                "ReconstructionParams.carve_past_deg must be in (0, 60] degrees (20: the columns "
+                f"a side fisheye sees past the zenith) or None, got {self.carve_past_deg}"
             )
         if self.fusion_rank < 1:
             raise ValueError(
@@ -512,26 +523,33 @@ class Reconstructor:
     params : ReconstructionParams, optional
     """
 
-    _MAX_RECTIFIERS = 24  # a curve's frames need one per rounded attitude (tens of MB each)
+    # a curve's frames need one per rounded attitude, and a side camera two (its half-space and
+    # the wider grid it carves with, section 17): tens of MB each
+    _MAX_RECTIFIERS = 48
 
     def __init__(self, params: ReconstructionParams | None = None) -> None:
         self.params = params or ReconstructionParams()
-        self._rectifiers: OrderedDict[tuple[CameraModel, Mount], Rectifier] = OrderedDict()
+        self._rectifiers: OrderedDict[tuple[CameraModel, Mount, float | None], Rectifier] = (
+            OrderedDict()
+        )
 
     @property
     def _min_sky_el_deg(self) -> float:
         m = self.params.min_sky_el_deg
         return -np.inf if m is None else m
 
-    def rectifier(self, camera: CameraModel, mount: Mount) -> Rectifier:
-        """The (cached) :class:`~predisat.reconstruct.skyline.Rectifier` of a camera and mount."""
-        key = (camera, mount)
+    def rectifier(
+        self, camera: CameraModel, mount: Mount, span_deg: float | None = None
+    ) -> Rectifier:
+        """The (cached) :class:`~predisat.reconstruct.skyline.Rectifier` of a camera and mount
+        (``span_deg``: of a grid that wide, :meth:`Rectifier.build`)."""
+        key = (camera, mount, span_deg)
         if key in self._rectifiers:
             self._rectifiers.move_to_end(key)
         else:
             p = self.params
             self._rectifiers[key] = Rectifier.build(
-                camera, mount, p.rectify_az_step_deg, p.rectify_el_step_deg
+                camera, mount, p.rectify_az_step_deg, p.rectify_el_step_deg, span_deg=span_deg
             )
             if len(self._rectifiers) > self._MAX_RECTIFIERS:
                 self._rectifiers.popitem(last=False)  # frames come in chainage order
@@ -580,6 +598,48 @@ class Reconstructor:
             ))  # fmt: skip
         return out
 
+    def past_profiles(
+        self, frames: Sequence[FrameView]
+    ) -> list[tuple[SkyProfile, SkyProfile] | None]:
+        """Per frame of a side camera (``left``, ``right``; not a panorama), its profile and
+        solid profile (:meth:`solid_profiles`) over ``180 + 2 carve_past_deg`` degrees of
+        relative azimuth, for the carving only; None for the other frames, and for all with
+        ``carve_past_deg`` None.
+
+        A side fisheye pitched 45 deg sees past the zenith, beyond its half-space. A column
+        there clears what its sky rays pass over as any other does, but only where the camera
+        sees it from the zenith down (the carving takes the sky above a column's top as going
+        on); the other columns past the half-space are left unseen (``+inf``).
+        """
+        p = self.params
+        if p.carve_past_deg is None:
+            return [None] * len(frames)
+        out: list[tuple[SkyProfile, SkyProfile] | None] = []
+        for f in frames:
+            if f.mount.side not in ("left", "right") or f.camera.model == "equirect":
+                out.append(None)
+                continue
+            rect = self.rectifier(f.camera, f.mount, 180.0 + 2.0 * p.carve_past_deg)
+            # past the half-space, a column counts only if seen from its top row (the zenith)
+            blind = (np.abs(rect.rel_az_deg) > 90.0) & (rect.pixel_index[0] < 0)
+            pair: list[SkyProfile] = []
+            for sky in (f.sky_mask, None if f.thin_mask is None or not np.any(f.thin_mask)
+                        else np.asarray(f.sky_mask, bool) & ~np.asarray(f.thin_mask, bool)):
+                if sky is None:
+                    pair.append(pair[0])
+                    continue
+                try:
+                    prof = rect.profile(
+                        self._sure_sky(f, sky), f.heading_deg, f.reverse, f.confidence,
+                        p.min_confidence, p.low_confidence_windows, p.low_confidence_window_deg,
+                        self._min_sky_el_deg,
+                    )  # fmt: skip
+                except ValueError as exc:
+                    raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
+                pair.append(replace(prof, sky_el_deg=np.where(blind, np.inf, prof.sky_el_deg)))
+            out.append((pair[0], pair[1]))
+        return out
+
     def height_field(
         self,
         frames: Sequence[FrameView],
@@ -593,20 +653,20 @@ class Reconstructor:
         hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
         profs = list(profiles) if profiles is not None else self.profiles(frames)
         solids = self.solid_profiles(frames, profs)
+        pasts = self.past_profiles(frames)
         bound = hf.bound_m.copy()
         views = np.zeros(hf.shape, np.int32)
         if frames:
             cams, rots = _camera_geometry(frames, track)
             rules = _thin_rules(hf, frames, cams, p)
             unseen = _unseen_rules(frames, p)
+            carver = _FrameCarver(hf, frames, profs, solids, pasts, cams, rots, rules, unseen,
+                                  p.clearance_half_width_m, track, p.carve_range_m)  # fmt: skip
             if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
                 seen = np.zeros(hf.shape, np.bool_)
                 for idx in _view_groups(frames).values():
                     for i in idx:
-                        carve_profile(hf, bound, profs[i], cams[i], rots[i], p.carve_range_m,
-                                      seen=seen, solid=solids[i], thin_rule=rules[i],
-                                      unseen_rule=unseen[i],
-                                      position_doubt_m=frames[i].doubt_box_m(rots[i]))  # fmt: skip
+                        carver.carve(i, bound, p.carve_range_m, seen)
                     # a view counts once per cell, whatever its frames (within their boxes)
                     b = np.array([carve_box(hf, cams[i], p.carve_range_m) for i in idx])
                     box = (slice(int(b[:, 0].min()), int(b[:, 1].max())),
@@ -614,11 +674,9 @@ class Reconstructor:
                     views[box] += seen[box]
                     seen[box] = False
                 if p.resolve_width_m is not None:
-                    bound, views = _resolving_bounds(hf, bound, views, frames, profs, cams, rots,
-                                                     p, solids, rules, unseen)  # fmt: skip
+                    bound, views = _resolving_bounds(hf, bound, views, frames, cams, p, carver)
             else:
-                bound, views = _fused_bounds(hf, frames, profs, cams, rots, p, solids, rules,
-                                             unseen)  # fmt: skip
+                bound, views = _fused_bounds(hf, frames, cams, p, carver)
         over = [
             (f.chainage_m - p.zenith_spread_m - f.along_doubt_m,
              f.chainage_m + p.zenith_spread_m + f.along_doubt_m)
@@ -759,16 +817,68 @@ def reconstruct_masks(
 # ---------------------------------------------------------------------- fault tolerance
 
 
+class _FrameCarver:
+    """Carves one frame into a raster: its profile (:func:`carve_profile`), then, for a side
+    camera with a :meth:`Reconstructor.past_profiles` pair, the wider profile on the cells
+    beyond the clearance on the camera's own side of the axis (``docs/reconstruction.md``,
+    section 17)."""
+
+    def __init__(
+        self, hf: HeightField, frames: Sequence[FrameView], profs: Sequence[SkyProfile],
+        solids: Sequence[SkyProfile], pasts: Sequence[tuple[SkyProfile, SkyProfile] | None],
+        cams: NDArray, rots: NDArray, rules: Sequence[ThinRule | None],
+        unseen: Sequence[UnseenRule | None], clearance_half_width_m: float,
+        track: TrackMap, range_m: float,
+    ) -> None:  # fmt: skip
+        self.hf, self.frames, self.profs, self.solids, self.pasts = hf, frames, profs, solids, pasts
+        self.cams, self.rots, self.rules, self.unseen = cams, rots, rules, unseen
+        self.clearance_m = clearance_half_width_m
+        self.off = np.zeros((0, 0))
+        self.side = np.zeros(len(frames))
+        self.reach_m = np.zeros(len(frames))
+        if any(x is not None for x in pasts):
+            self.off = np.nan_to_num(hf.offset_m, nan=0.0)
+            row, col, ok = hf.index(cams[:, 0], cams[:, 1])
+            cam_off = np.where(ok, self.off[row, col], 0.0)
+            self.side = np.sign(cam_off)  # +1: left of increasing chainage
+            # How far out a cell may straddle the camera's line: a metre past it, plus the
+            # track curving away from the straight line within the carving range (the
+            # sharpest curvature there) and the camera's doubt.
+            k = np.array([
+                np.abs(np.asarray(track.curvature_at(np.clip(
+                    f.chainage_m + np.arange(-range_m, range_m + 5.0, 5.0), 0.0, track.length_m
+                )), float)).max()
+                for f in frames
+            ])  # fmt: skip
+            bend = 0.5 * range_m**2 * k
+            doubt = np.array([f.position_doubt_m for f in frames])
+            self.reach_m = np.abs(cam_off) + 1.0 + bend + doubt
+
+    def carve(self, i: int, raster: NDArray, range_m: float, seen: NDArray | None = None) -> None:
+        doubt = self.frames[i].doubt_box_m(self.rots[i])
+        carve_profile(self.hf, raster, self.profs[i], self.cams[i], self.rots[i], range_m,
+                      seen=seen, solid=self.solids[i], thin_rule=self.rules[i],
+                      unseen_rule=self.unseen[i], position_doubt_m=doubt)  # fmt: skip
+        past = self.pasts[i]
+        side = float(self.side[i])
+        if past is None or side == 0.0:
+            return
+        # The camera's own side beyond the clearance, out to the cells that straddle its own
+        # line, which its half-space cuts in two; farther out, and across the track, its
+        # half-space or the other camera looks from in front.
+        near = side * self.off
+        strip = self.hf.region & (near >= self.clearance_m) & (near < self.reach_m[i])
+        carve_profile(replace(self.hf, region=strip), raster, past[0], self.cams[i],
+                      self.rots[i], range_m, seen=seen, solid=past[1], thin_rule=self.rules[i],
+                      position_doubt_m=doubt)  # fmt: skip
+
+
 def _fused_bounds(
     hf: HeightField,
     frames: Sequence[FrameView],
-    profiles: Sequence[SkyProfile],
     cams: NDArray,
-    rots: NDArray,
     p: ReconstructionParams,
-    solids: Sequence[SkyProfile] | None = None,
-    rules: Sequence[ThinRule | None] | None = None,
-    unseen: Sequence[UnseenRule | None] | None = None,
+    carver: _FrameCarver,
 ) -> tuple[NDArray, NDArray]:
     """Bounds fused over independent views (:class:`~predisat.reconstruct.heightfield.
     LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
@@ -782,11 +892,7 @@ def _fused_bounds(
         for i in idx:
             box = carve_box(hf, cams[i], p.carve_range_m)
             if box[1] > box[0] and box[3] > box[2]:
-                carve_profile(hf, scratch, profiles[i], cams[i], rots[i], p.carve_range_m,
-                              solid=None if solids is None else solids[i],
-                              thin_rule=None if rules is None else rules[i],
-                              unseen_rule=None if unseen is None else unseen[i],
-                              position_doubt_m=frames[i].doubt_box_m(rots[i]))  # fmt: skip
+                carver.carve(i, scratch, p.carve_range_m)
                 boxes.append(box)
         if not boxes:
             continue
@@ -833,9 +939,7 @@ def _resolve_range_m(frames: Sequence[FrameView], p: ReconstructionParams) -> ND
 
 def _resolving_bounds(
     hf: HeightField, bound: NDArray, views: NDArray, frames: Sequence[FrameView],
-    profs: Sequence[SkyProfile], cams: NDArray, rots: NDArray, p: ReconstructionParams,
-    solids: Sequence[SkyProfile | None], rules: Sequence[ThinRule | None],
-    unseen: Sequence[UnseenRule | None],
+    cams: NDArray, p: ReconstructionParams, carver: _FrameCarver,
 ) -> tuple[NDArray, NDArray]:  # fmt: skip
     """``bound`` (every frame's lowest) without the bounds of far frames of the cameras in
     ``p.resolve_positions`` on the cells some frame near enough to see a mast bounds
@@ -859,11 +963,7 @@ def _resolving_bounds(
         for i in idx:
 
             def carve(raster: NDArray, range_m: float, marks: NDArray, i: int = i) -> None:
-                carve_profile(
-                    hf, raster, profs[i], cams[i], rots[i], range_m, seen=marks,
-                    solid=solids[i], thin_rule=rules[i], unseen_rule=unseen[i],
-                    position_doubt_m=frames[i].doubt_box_m(rots[i]),
-                )  # fmt: skip
+                carver.carve(i, raster, range_m, marks)
 
             r_m = float(ranges[i])
             own = np.zeros(hf.shape, np.bool_)

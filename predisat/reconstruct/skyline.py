@@ -331,17 +331,24 @@ class Rectifier:
         az_step_deg: float = 0.25,
         el_step_deg: float = 0.125,
         el_min_deg: float = -20.0,
+        span_deg: float | None = None,
     ) -> Rectifier:
         """Precompute the resampling map.
 
         The obstacle growth is chosen from the sampling steps so that an obstacle one pixel
         wide always reaches a sample (the image scale is measured over the map). The grid
         spans the camera's half-space (relative azimuths -90 to 90), all round for a
-        360-degree panorama (``equirect``: -180 to 180).
+        360-degree panorama (``equirect``: -180 to 180), or ``span_deg`` centred on the look
+        direction (a side fisheye sees past the zenith, beyond its half-space).
         """
         if not (0 < az_step_deg <= 2 and 0 < el_step_deg <= 2):
             raise ValueError("az_step_deg and el_step_deg must be in (0, 2] degrees")
-        span = 360.0 if camera.model == "equirect" else 180.0
+        if span_deg is not None and not 0.0 < span_deg <= 360.0:
+            raise ValueError(f"span_deg must be in (0, 360] degrees, got {span_deg}")
+        if span_deg is not None:
+            span = float(span_deg)
+        else:
+            span = 360.0 if camera.model == "equirect" else 180.0
         n_b = round(span / az_step_deg)
         beta = -span / 2.0 + az_step_deg * (np.arange(n_b) + 0.5)
         el = np.arange(90.0 - el_step_deg / 2, el_min_deg, -el_step_deg)

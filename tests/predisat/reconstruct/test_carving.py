@@ -746,3 +746,68 @@ def test_positions_under_decks_are_closed_and_open_ones_unchanged_by_the_covered
     assert (rec.mask_el_deg[:2] == 90.0).all()  # under the decks, as the truth
     with pytest.raises(ValueError, match="covered_share"):
         ReconstructionParams(covered_share=0.0)
+
+
+WIDE_FISHEYE = CameraModel.fisheye_from_fov(200, 150, 120.0)  # the shipped fisheye's field
+
+
+def test_side_cameras_carve_past_their_half_space_and_stay_conservative() -> None:
+    """A side fisheye pitched 45 deg sees past the zenith: its rays there carve the cells
+    behind its vertical plane on its own side of the axis, outside the clearance (narrowed
+    here to 1 m, so that the strip between it and the cameras 1.4 m out plays the part of a
+    rolled vehicle's inside strip), which only lowers bounds, and the masks stay at or above
+    the ray-cast truth (docs/reconstruction.md, section 17)."""
+    from dataclasses import replace
+
+    track = straight_track(1300.0, AZIMUTH)
+    world = World.build(track, WorldSpec.mixed(50.0, 1250.0, seed=5), seed=5)
+    frames = frames_for(world, np.arange(350.0, 751.0, 10.0), WIDE_FISHEYE)
+    s = np.arange(450.0, 651.0, 20.0)
+    params = replace(PARAMS, clearance_half_width_m=1.0)
+    narrow = Reconstructor(replace(params, carve_past_deg=None))
+    wide = Reconstructor(params)
+    assert params.carve_past_deg == 20.0
+    # the wide profile: the half-space as before, then columns seen from the zenith only
+    pasts = wide.past_profiles(frames[:2])
+    prof = narrow.profiles(frames[:2])
+    for past, own in zip(pasts, prof, strict=True):
+        assert past is not None
+        wide_prof = past[0]
+        middle = np.abs(wide_prof.rel_az_deg) < 90.0
+        np.testing.assert_allclose(wide_prof.rel_az_deg[middle], own.rel_az_deg)
+        np.testing.assert_array_equal(wide_prof.sky_el_deg[middle], own.sky_el_deg)
+        beyond = np.isfinite(wide_prof.sky_el_deg[~middle])
+        assert beyond.any()  # sky seen past the zenith
+    assert narrow.past_profiles(frames[:2]) == [None, None]
+    # a wide, short fisheye sees past its half-space, up to 58 deg, but not the zenith: the
+    # sky above those columns' tops is not known, so they carve nothing
+    short = CameraModel.fisheye_from_fov(400, 200, 80.0)
+    pin = [replace(f, camera=short, sky_mask=np.ones(short.shape, bool), confidence=None,
+                   thin_mask=None) for f in frames[:2]]  # fmt: skip
+    rect = wide.rectifier(short, frames[0].mount, 220.0)
+    assert (rect.pixel_index[:, np.abs(rect.rel_az_deg) > 90.0] >= 0).any()
+    for past in wide.past_profiles(pin):
+        assert past is not None
+        assert np.all(np.isinf(past[0].sky_el_deg[np.abs(past[0].rel_az_deg) > 90.0]))
+        assert np.isfinite(past[0].sky_el_deg[np.abs(past[0].rel_az_deg) < 30.0]).all()
+    hf_n = narrow.height_field(frames, track, 400.0, 700.0)
+    hf_w = wide.height_field(frames, track, 400.0, 700.0)
+    both = np.isfinite(hf_n.bound_m) | np.isfinite(hf_w.bound_m)
+    assert np.all(hf_w.bound_m[both] <= hf_n.bound_m[both] + 1e-6)  # only lowers
+    with np.errstate(invalid="ignore"):
+        # the cameras stand 1.5 m out: the cells along their lines, which the half-space cut
+        strip = hf_w.region & (np.abs(hf_w.offset_m) >= 1.0) & (np.abs(hf_w.offset_m) < 2.0)
+        beyond = hf_w.region & (np.abs(hf_w.offset_m) >= 2.0)
+    lowered = hf_w.bound_m < hf_n.bound_m - 0.05
+    assert (lowered & strip).sum() > 500
+    # farther out each side's camera looks from in front already: no change there
+    assert not (lowered & beyond).any()
+    tm = true_masks(world, s)
+    shares = []
+    for rec in (narrow.run(frames, s, track), wide.run(frames, s, track)):
+        err = rec.mask_el_deg - tm.mask_el_deg
+        supported = rec.source != BinSource.ASSUMED
+        assert not (err[supported] < -0.1).any()
+        shares.append(supported.mean())
+    # the strip left unknown rests the masks on assumptions; carved, they rest on rays
+    assert shares[1] > shares[0] + 0.5
