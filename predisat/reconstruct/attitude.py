@@ -167,6 +167,8 @@ def frame_attitudes(
     out_pitch = np.where(measured, pitch, -grade_deg if reverse else grade_deg)
     out_pitch = np.where(contradicted, pitch, out_pitch)  # the pitch was not contradicted
     roll_doubt = np.where(measured, imu_doubt_deg, 0.5 * (r_hi - r_lo))
+    # a roll ruled out is bounded, and its IMU's doubt kept on top (as before the split)
+    roll_doubt = np.where(contradicted, roll_doubt + imu_doubt_deg, roll_doubt)
     pitch_doubt = np.where(measured | contradicted, imu_doubt_deg, grade_doubt_deg)
     q_roll = np.round(out_roll / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
     q_pitch = np.round(out_pitch / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG

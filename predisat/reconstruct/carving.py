@@ -838,9 +838,11 @@ class _FrameCarver:
         self.reach_m = np.zeros(len(frames))
         if any(x is not None for x in pasts):
             self.off = np.nan_to_num(hf.offset_m, nan=0.0)
-            row, col, ok = hf.index(cams[:, 0], cams[:, 1])
-            cam_off = np.where(ok, self.off[row, col], 0.0)
-            self.side = np.sign(cam_off)  # +1: left of increasing chainage
+            # the camera's side of the axis and its distance from it, projected on the track,
+            # not read from this chunk's raster (a camera outside it would get none, and the
+            # carving would depend on the chunking)
+            cam_off = np.asarray(track.project_enu(cams).offset_m, float)
+            self.side = np.where(np.abs(cam_off) >= 0.5, np.sign(cam_off), 0.0)
             # How far out a cell may straddle the camera's line: a metre past it, plus the
             # track curving away from the straight line within the carving range (the
             # sharpest curvature there) and the camera's doubt.
@@ -870,7 +872,7 @@ class _FrameCarver:
         strip = self.hf.region & (near >= self.clearance_m) & (near < self.reach_m[i])
         carve_profile(replace(self.hf, region=strip), raster, past[0], self.cams[i],
                       self.rots[i], range_m, seen=seen, solid=past[1], thin_rule=self.rules[i],
-                      position_doubt_m=doubt)  # fmt: skip
+                      unseen_rule=self.unseen[i], position_doubt_m=doubt)  # fmt: skip
 
 
 def _fused_bounds(

@@ -396,6 +396,9 @@ def carve_profile(
     with np.errstate(invalid="ignore"):
         off = np.ascontiguousarray(np.nan_to_num(hf.offset_m[r0:r1, c0:c1], nan=0.0), np.float64)
     up = rot[:, 2]
+    # the local horizontal plane is tilted in the frame (far from its origin): a centre moved
+    # by (pad_x, pad_y) moves the kernel's tilt term too
+    pad_z += (abs(float(up[0])) * pad_x + abs(float(up[1])) * pad_y) / float(up[2])
     marks = np.zeros((r1 - r0, c1 - c0), np.bool_) if seen is None else seen[r0:r1, c0:c1]
     return int(_carve_cells(
         beta, rho, beta_x, rho_x, beta_y, rho_y, beta_xy, rho_xy, pad_x, pad_y, pad_z, region,

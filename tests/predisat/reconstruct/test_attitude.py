@@ -259,6 +259,12 @@ def test_a_measured_roll_the_track_rules_out_is_bounded_instead(track) -> None:
         # bounded as if not measured, the pitch kept
         np.testing.assert_allclose(att.roll_deg, bound.roll_deg)
         assert np.all(np.abs(true - att.roll_deg) <= att.doubt_deg)
+    # with an IMU doubt, a ruled-out roll keeps it on top of the bound: the roll's part is the
+    # interval's half-width plus the IMU's, the pitch's the IMU's
+    noisy = frame_attitudes(track, s, -true, pitch, False, imu_doubt_deg=0.3)
+    # (the bound's roll part, its rounding included: the same nominal roll)
+    np.testing.assert_allclose(noisy.roll_doubt_deg, bound.roll_doubt_deg + 0.3, atol=1e-9)
+    np.testing.assert_allclose(noisy.doubt_deg - noisy.roll_doubt_deg, 0.3, atol=0.051)
     # a cant table saying 0 on a sharp curve reads as a mistake too, and is not used
     table = CantTable(s, np.zeros(s.size), "zeros")
     att = frame_attitudes(track, s, np.full(s.size, np.nan), pitch, False, cant_table=table)
