@@ -528,7 +528,6 @@ def _carve_cells(
     """
     n_r, n_c = region.shape
     n_b = tan_sky.size
-    pad_h = np.hypot(pad_x, pad_y)
     count = 0
     for r in range(n_r):
         y_a = yl[r] - pad_y
@@ -571,10 +570,10 @@ def _carve_cells(
                         t_max = t_s  # a thin feature on the way may block: solid
                     if not np.isfinite(t_max):
                         continue
-            if u_theta > 0.0 and abs(off[r, q]) < u_half + pad_h:
+            if u_theta > 0.0 and abs(off[r, q]) < u_half:
                 # an arm over the track the sky may hide unflagged (section 11)
                 w_u = u_theta * np.sqrt(rho_far * rho_far * (1.0 + t_max * t_max))
-                d_u = max(u_clearance, abs(off[r, q]) - 0.7072 * c - pad_h)
+                d_u = max(u_clearance, abs(off[r, q]) - 0.7072 * c)
                 if w_u * w_u > u_k2 * d_u:
                     continue
             if t_max >= 0.0:

@@ -207,11 +207,15 @@ def _tilted(angle_rad: float, yaw_rad: float) -> np.ndarray:
     return Rotation.from_euler("zxy", [yaw_rad, angle_rad, -0.7 * angle_rad]).as_matrix()
 
 
-@pytest.mark.parametrize("tilt_rad", [0.0, 3e-3, 0.02])
-def test_a_position_doubt_bounds_every_cell_from_every_centre_within_it(tilt_rad: float) -> None:
+@pytest.mark.parametrize(("tilt_rad", "unseen"), [(0.0, False), (3e-3, False), (0.02, False),
+                                                  (0.0, True)])  # fmt: skip
+def test_a_position_doubt_bounds_every_cell_from_every_centre_within_it(
+    tilt_rad: float, unseen: bool
+) -> None:
     """The bound carved with a doubt is at least the bound each camera centre within the
     doubt's box would carve with the same skyline (the kernel without doubt, from the true
-    centre), also where the local horizontal is tilted in the frame."""
+    centre), also where the local horizontal is tilted in the frame, and with the unseen-arm
+    rule (its cells' offsets are the world's: they do not move with the camera)."""
     rng = np.random.default_rng(7)
     el = rng.uniform(-15.0, 60.0, 720)
     el[rng.uniform(size=720) < 0.05] = np.inf  # columns that saw no sky
@@ -219,14 +223,23 @@ def test_a_position_doubt_bounds_every_cell_from_every_centre_within_it(tilt_rad
     box = np.array([0.3, 0.2, 0.1])
     rot = _tilted(tilt_rad, 0.4)
     hf, padded = field()
-    carve_profile(hf, padded, prof, CAM, rot, 40.0, position_doubt_m=tuple(box))
+    rule = None
+    if unseen:  # offsets from an axis along x, the clearance 2 m either side
+        yc = ((np.arange(N) - N // 2) + 0.5) * C
+        off = np.broadcast_to(yc[:, None], (N, N)).astype(np.float32)
+        hf = HeightField(C, -N // 2, -N // 2, hf.bound_m, hf.region, hf.chainage_m, off,
+                         hf.rail_z_m)  # fmt: skip
+        k2 = TRANSPARENT_FRACTION**2 * L1_WAVELENGTH_M
+        rule = UnseenRule(float(np.radians(0.7)), k2, 0.5, 2.0)
+    carve_profile(hf, padded, prof, CAM, rot, 40.0, unseen_rule=rule,
+                  position_doubt_m=tuple(box))  # fmt: skip
     _, nominal = field()
-    carve_profile(hf, nominal, prof, CAM, rot, 40.0)
+    carve_profile(hf, nominal, prof, CAM, rot, 40.0, unseen_rule=rule)
     assert np.isfinite(padded).sum() > 1000
     below = 0
     for t in _displacements(box, rng):
         _, true = field()
-        carve_profile(hf, true, prof, CAM + t, rot, 40.0)
+        carve_profile(hf, true, prof, CAM + t, rot, 40.0, unseen_rule=rule)
         # inf >= inf holds; a finite padded bound where the true centre bounds nothing fails
         assert np.all(padded >= true - 1e-5), t
         below += int(np.sum(nominal < true - 1e-3))
