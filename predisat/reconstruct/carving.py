@@ -563,22 +563,21 @@ class Reconstructor:
             return sky
         return erode_sky_deg(sky, f.camera, f.attitude_doubt_deg)
 
+    def _profile(self, rect: Rectifier, f: FrameView, sky: NDArray) -> SkyProfile:
+        """``rect``'s profile of ``sky`` (a mask of frame ``f``), eroded by its doubt."""
+        p = self.params
+        try:
+            return rect.profile(
+                self._sure_sky(f, sky), f.heading_deg, f.reverse, f.confidence,
+                p.min_confidence, p.low_confidence_windows, p.low_confidence_window_deg,
+                self._min_sky_el_deg,
+            )  # fmt: skip
+        except ValueError as exc:
+            raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
+
     def profiles(self, frames: Sequence[FrameView]) -> list[SkyProfile]:
         """Sky profile of every frame."""
-        out = []
-        for f in frames:
-            rect = self.rectifier(f.camera, f.mount)
-            try:
-                out.append(
-                    rect.profile(
-                        self._sure_sky(f, f.sky_mask), f.heading_deg, f.reverse, f.confidence,
-                        self.params.min_confidence, self.params.low_confidence_windows,
-                        self.params.low_confidence_window_deg, self._min_sky_el_deg,
-                    )
-                )  # fmt: skip
-            except ValueError as exc:
-                raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
-        return out
+        return [self._profile(self.rectifier(f.camera, f.mount), f, f.sky_mask) for f in frames]
 
     def solid_profiles(
         self, frames: Sequence[FrameView], profiles: Sequence[SkyProfile]
@@ -591,11 +590,7 @@ class Reconstructor:
                 out.append(prof)
                 continue
             solid = np.asarray(f.sky_mask, bool) & ~np.asarray(f.thin_mask, bool)
-            out.append(self.rectifier(f.camera, f.mount).profile(
-                self._sure_sky(f, solid), f.heading_deg, f.reverse, f.confidence,
-                self.params.min_confidence, self.params.low_confidence_windows,
-                self.params.low_confidence_window_deg, self._min_sky_el_deg,
-            ))  # fmt: skip
+            out.append(self._profile(self.rectifier(f.camera, f.mount), f, solid))
         return out
 
     def past_profiles(
@@ -628,14 +623,7 @@ class Reconstructor:
                 if sky is None:
                     pair.append(pair[0])
                     continue
-                try:
-                    prof = rect.profile(
-                        self._sure_sky(f, sky), f.heading_deg, f.reverse, f.confidence,
-                        p.min_confidence, p.low_confidence_windows, p.low_confidence_window_deg,
-                        self._min_sky_el_deg,
-                    )  # fmt: skip
-                except ValueError as exc:
-                    raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None
+                prof = self._profile(rect, f, sky)
                 pair.append(replace(prof, sky_el_deg=np.where(blind, np.inf, prof.sky_el_deg)))
             out.append((pair[0], pair[1]))
         return out
