@@ -754,9 +754,9 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    "a satellite (default 0)")
     p.add_argument("--trust-stretches", type=positive_int, metavar="N",
                    help="with --masks: at most N stretches of the predicted interval, each with "
-                   "its own trusted satellites and fix, one claim from all (default 3; 1: one "
-                   "set, the worst mask over the whole interval; docs/locator.md, partitioned "
-                   "trust)")
+                   "its own trusted satellites and fix, one claim from all (default 16, "
+                   "locator.partition.MAX_STRETCHES; 1: one set, the worst mask over the whole "
+                   "interval; docs/locator.md, partitioned trust)")
     p.add_argument("--start-chainage", type=finite_float, metavar="M",
                    help="chainage of the first epoch, metres (default: the simulation's, or the "
                    "RINEX header position's)")

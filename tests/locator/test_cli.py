@@ -61,7 +61,7 @@ def test_simulate_writes_a_run_with_truth_and_masks(sim_dir):
     assert (sim.state == SignalState.NLOS).sum() > 20
 
 
-def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path):
+def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path, capsys):
     sim = SimRun.read(sim_dir)
     assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out",
                  str(tmp_path / "none")]) == 0  # fmt: skip
@@ -75,8 +75,13 @@ def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path):
     assert _nlos_used(masked, sim) == 0
     from locator.partition import MAX_STRETCHES
 
-    # partitioned trust by default
+    # partitioned trust by default, and the help says how many
     assert mmeta["config"]["trust_stretches"] == MAX_STRETCHES > 1
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert f"(default {MAX_STRETCHES}, locator.partition.MAX_STRETCHES" in " ".join(
+        capsys.readouterr().out.split()
+    )
     assert (tmp_path / "masks" / "epochs.csv").is_file()
     for name in ("interval_time.png", "interval_chainage.png", "interval_lengths.png"):
         assert (tmp_path / "masks" / name).stat().st_size > 5000
