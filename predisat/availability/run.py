@@ -991,9 +991,11 @@ def attitude_text(provenance: JsonDict) -> str:
         return f"measured (the manifest's IMU attitude) for all {n} frames"
     text = (
         f"bounded from the track's curves and grade{table} for {n - measured} of {n} frames "
-        f"(their sky eroded by up to {float(att.get('max_doubt_deg', 0.0)):.1f}°), measured "
-        f"for {measured}"
-    )
+        f"(their sky eroded by up to {float(att.get('max_doubt_deg', 0.0)):.1f}°"
+        + (f", their cameras placed within {float(att['max_camera_doubt_m']):.2f} m"
+           if "max_camera_doubt_m" in att else "")
+        + f"), measured for {measured}"
+    )  # fmt: skip
     return text + (f"; {bad} frames' measured roll contradicted the track" if bad else "")
 
 

@@ -197,6 +197,7 @@ def test_the_masks_say_how_the_attitude_was_known(canted) -> None:
     assert 0.1 < unknown["max_camera_doubt_m"] <= 2.0 * np.linalg.norm(arm) * np.sin(half)
     assert attitude_text(masks["measured"].provenance).startswith("measured")
     assert "bounded from the track" in attitude_text(masks["unknown"].provenance)
+    assert "cameras placed within" in attitude_text(masks["unknown"].provenance)
     assert attitude_text({}) == ""
 
 
