@@ -96,6 +96,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "positions, at a large cost in sky (docs/reconstruction.md, section 12; default: the "
         "mask at the position)",
     )  # fmt: skip
+    parser.add_argument(
+        "--half-space-only", action="store_true",
+        help="side cameras carve with their half-space only (relative azimuths -90 to 90), not "
+        "past it along their own line (docs/reconstruction.md, section 17; default: 20 deg "
+        "past it, where a camera sees the column from the zenith down)",
+    )  # fmt: skip
     add_attitude_arguments(parser)
     parser.add_argument(
         "--quiet", action="store_true",
@@ -182,7 +188,9 @@ def run(args: argparse.Namespace) -> ProcessResult:
         PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
                        thin_deg=args.thin_deg,
                        reconstruction=ReconstructionParams(
-                           cell_sweep_m=None if args.cell_sweep else 0.0),
+                           cell_sweep_m=None if args.cell_sweep else 0.0,
+                           carve_past_deg=None if args.half_space_only
+                           else ReconstructionParams.carve_past_deg),
                        **attitude_params(args)),
         track=track,
         workers=args.workers,

@@ -458,6 +458,10 @@ def test_process_cell_sweep_reaches_the_reconstruction(tmp_path, monkeypatch) ->
         with pytest.raises(SystemExit):
             cli.main(["process", str(survey), "--out", str(tmp_path / "o"), *extra])
         assert seen.pop("params").reconstruction.cell_sweep_m == expected  # type: ignore[attr-defined]
+    for extra, past in (([], 20.0), (["--half-space-only"], None)):
+        with pytest.raises(SystemExit):
+            cli.main(["process", str(survey), "--out", str(tmp_path / "o"), *extra])
+        assert seen.pop("params").reconstruction.carve_past_deg == past  # type: ignore[attr-defined]
 
 
 def test_python_dash_m_runs_both_command_lines() -> None:
