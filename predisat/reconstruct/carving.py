@@ -820,12 +820,16 @@ class _FrameCarver:
     ) -> None:  # fmt: skip
         self.hf, self.frames, self.profs, self.solids, self.pasts = hf, frames, profs, solids, pasts
         self.cams, self.rots, self.rules, self.unseen = cams, rots, rules, unseen
-        self.clearance_m = clearance_half_width_m
-        self.off = np.zeros((0, 0))
+        # per side of the axis (+1: left of increasing chainage), the cells beyond the clearance
+        # and their distance from the axis
+        self.beyond: dict[float, tuple[NDArray, NDArray]] = {}
         self.side = np.zeros(len(frames))
         self.reach_m = np.zeros(len(frames))
         if any(x is not None for x in pasts):
-            self.off = np.nan_to_num(hf.offset_m, nan=0.0)
+            off = np.nan_to_num(hf.offset_m, nan=0.0)
+            for sign in (1.0, -1.0):
+                near = sign * off
+                self.beyond[sign] = (hf.region & (near >= clearance_half_width_m), near)
             # the camera's side of the axis and its distance from it, projected on the track,
             # not read from this chunk's raster (a camera outside it would get none, and the
             # carving would depend on the chunking)
@@ -856,8 +860,11 @@ class _FrameCarver:
         # The camera's own side beyond the clearance, out to the cells that straddle its own
         # line, which its half-space cuts in two; farther out, and across the track, its
         # half-space or the other camera looks from in front.
-        near = side * self.off
-        strip = self.hf.region & (near >= self.clearance_m) & (near < self.reach_m[i])
+        beyond, near = self.beyond[side]
+        r0, r1, c0, c1 = carve_box(self.hf, self.cams[i], range_m)  # all carve_profile reads
+        strip = np.zeros(beyond.shape, np.bool_)
+        box = (slice(r0, r1), slice(c0, c1))
+        strip[box] = beyond[box] & (near[box] < self.reach_m[i])
         carve_profile(replace(self.hf, region=strip), raster, past[0], self.cams[i],
                       self.rots[i], range_m, seen=seen, solid=past[1], thin_rule=self.rules[i],
                       unseen_rule=self.unseen[i], position_doubt_m=doubt)  # fmt: skip
@@ -951,20 +958,16 @@ def _resolving_bounds(
     for idx in _view_groups(frames).values():
         group = np.zeros(hf.shape, np.bool_)  # a view counts once per cell, whatever its frames
         for i in idx:
-
-            def carve(raster: NDArray, range_m: float, marks: NDArray, i: int = i) -> None:
-                carver.carve(i, raster, range_m, marks)
-
             r_m = float(ranges[i])
             own = np.zeros(hf.shape, np.bool_)
             if subject[i]:  # within its range only, which marks the cells it resolves
                 if r_m > 0:
-                    carve(near, r_m, own)
+                    carver.carve(i, near, r_m, own)
                 resolved |= own
             else:
-                carve(near, p.carve_range_m, own)
+                carver.carve(i, near, p.carve_range_m, own)
                 if r_m > 0:  # the cells it resolves
-                    carve(scratch, r_m, resolved)
+                    carver.carve(i, scratch, r_m, resolved)
             group |= own
         near_views += group
     raised = resolved & (near > bound)
