@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.camera.models import tilt_doubt_m
 from predisat.track import TrackMap
 from predisat.track.cant import CantLimits, CantTable, inside_roll_sign, roll_bounds_deg
 
@@ -78,6 +79,18 @@ class FrameAttitude:
     table_ignored: NDArray | None = None
     roll_doubt_deg: NDArray | None = None
     pitch_doubt_deg: NDArray | None = None
+
+    def camera_doubt_m(
+        self, k: int, lever_arm_m: ArrayLike, antenna_height_m: float
+    ) -> tuple[float, float, float]:
+        """How far frame ``k``'s camera (``lever_arm_m`` from the antenna, vehicle frame) may
+        stand from where its nominal attitude puts it: along, across, up, metres
+        (:func:`~predisat.camera.models.tilt_doubt_m`, each part of the doubt ``doubt_deg``
+        where it is not split)."""
+        roll = self.doubt_deg if self.roll_doubt_deg is None else self.roll_doubt_deg
+        pitch = self.doubt_deg if self.pitch_doubt_deg is None else self.pitch_doubt_deg
+        return tilt_doubt_m(lever_arm_m, antenna_height_m, float(self.roll_deg[k]),
+                            float(self.pitch_deg[k]), float(roll[k]), float(pitch[k]))  # fmt: skip
 
 
 def frame_attitudes(

@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat import __version__
-from predisat.camera.models import CameraModel, Mount, tilt_doubt_m
+from predisat.camera.models import CameraModel, Mount
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import read_masks, write_masks
@@ -322,16 +322,12 @@ def _attitude_summary(
         cant_table=params.cant_table, speed_kmh=speed,
     )  # fmt: skip
     contradicted = att.contradicted if att.contradicted is not None else np.zeros(0, bool)
-    roll_doubt = att.doubt_deg if att.roll_doubt_deg is None else att.roll_doubt_deg
-    pitch_doubt = att.doubt_deg if att.pitch_doubt_deg is None else att.pitch_doubt_deg
     height_m = params.reconstruction.antenna_height_m
     moved_m = 0.0
     for k, side in enumerate(fr.side[ok]):
-        if roll_doubt[k] + pitch_doubt[k] > 0.0 and side in survey.cameras:
+        if att.doubt_deg[k] > 0.0 and side in survey.cameras:
             arm = survey.cameras[side].mount.lever_arm_m
-            d = tilt_doubt_m(arm, height_m, float(att.roll_deg[k]), float(att.pitch_deg[k]),
-                             float(roll_doubt[k]), float(pitch_doubt[k]))  # fmt: skip
-            moved_m = max(moved_m, float(np.linalg.norm(d)))
+            moved_m = max(moved_m, float(np.linalg.norm(att.camera_doubt_m(k, arm, height_m))))
     out: JsonDict = {
         "frames": int(ok.sum()),
         "measured_frames": int(att.measured.sum()),

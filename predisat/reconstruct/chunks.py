@@ -21,7 +21,6 @@ from numpy.typing import NDArray
 from predisat.camera.models import (
     CameraModel,
     Mount,
-    tilt_doubt_m,
     tilt_shift_m,
     vehicle_to_enu,
 )
@@ -152,12 +151,9 @@ def run_chunk(
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
             doubt = float(att.doubt_deg[k])
             # the same doubt moves the camera's centre (the body turns about the rails)
-            roll_doubt = att.doubt_deg if att.roll_doubt_deg is None else att.roll_doubt_deg
-            pitch_doubt = att.doubt_deg if att.pitch_doubt_deg is None else att.pitch_doubt_deg
-            along_m, across_m, raised_m = tilt_doubt_m(
-                vehicle_mount.lever_arm_m, job.antenna_height_m, roll, pitch,
-                float(roll_doubt[k]), float(pitch_doubt[k]),
-            )  # fmt: skip
+            along_m, across_m, raised_m = att.camera_doubt_m(
+                k, vehicle_mount.lever_arm_m, job.antenna_height_m
+            )
             views.append(
                 FrameView(
                     chainage_m=f.chainage_m, sky_mask=sky, camera=cam, mount=mount,
