@@ -119,7 +119,17 @@ class MarginTable:
             raise ValueError(f"{where}: margin_deg must be finite and >= 0 (row "
                              f"{int(np.flatnonzero(bad)[0])}); {fix}")  # fmt: skip
         sources = MARGIN_SOURCES
-        pairs = {(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)}
+        keys = [(str(a), str(b)) for a, b in zip(t["sector"], t["source"], strict=True)]
+        seen: dict[tuple[str, str], int] = {}
+        for row, key in enumerate(keys):
+            if key in seen:
+                raise ValueError(
+                    f"{where}: rows {seen[key]} and {row} both give (sector, source) {key} "
+                    f"(margins {margin[seen[key]]:g} and {margin[row]:g} deg): which one holds "
+                    f"cannot be told; keep one row per group; {fix}"
+                )
+            seen[key] = row
+        pairs = set(keys)
         want = {(s, c) for s in SECTORS for c in sources}
         if not want <= pairs:
             raise ValueError(f"{where}: no margin for (sector, source) {sorted(want - pairs)}; "
@@ -166,7 +176,18 @@ class MarginTable:
         for key in ("target", "margins"):
             if key not in doc:
                 raise ValueError(f"{path}: not a margin table (no {key!r}); {fix}")
-        return cls(
-            pd.DataFrame(doc["margins"]), float(doc["target"]),
-            float(doc.get("el_step_deg", EL_STEP_DEG)), dict(doc.get("meta", {})),
-        )  # fmt: skip
+        rows = doc["margins"]
+        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+            raise ValueError(
+                f"{path}: 'margins' must be a list of rows, each an object with sector, source "
+                f"and margin_deg; {fix}"
+            )
+        try:
+            target = float(doc["target"])
+            el_step = float(doc.get("el_step_deg", EL_STEP_DEG))
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{path}: 'target' and 'el_step_deg' must be numbers, got {doc['target']!r} "
+                f"and {doc.get('el_step_deg')!r}; {fix}"
+            ) from None
+        return cls(pd.DataFrame(rows), target, el_step, dict(doc.get("meta", {})))
