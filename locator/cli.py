@@ -98,6 +98,7 @@ def _config(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[st
         error_model_applies=use != "none",
         error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
         model_el_min_deg=mf.el_min_deg,
+        model_el_max_deg=mf.el_max_deg,
     )
     return cfg, record
 
@@ -238,6 +239,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         model = RangeModel.from_rinex_nav(args.nav)
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation)
+        _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
@@ -290,7 +292,20 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
     from locator.devicegnss import DeviceGnssSource, device_profile
 
     if isinstance(source, DeviceGnssSource):  # a smartphone's log: class phone unless told
-        return device_profile(source, receiver_class=args.receiver_class or "phone")
+        declared = args.receiver_class or "phone"
+        if declared == "geodetic":
+            # a user trial: a phone declared geodetic got "safety claim 100 %" from a model of
+            # two geodetic stations, which gave 2 HMI on phones (docs/errormodel.md)
+            raise CliError(
+                f"{args.device_gnss} is an Android GNSS log, which no geodetic receiver writes: "
+                "--receiver-class geodetic would apply a geodetic receiver's error model to a "
+                "phone or car unit; leave --receiver-class out (phone) or give automotive for "
+                "an Android Automotive unit, with a model calibrated on that class"
+            )
+        if declared != "phone":
+            print(f"locator run: warning: {args.device_gnss} taken as a {declared} receiver "
+                  "(--receiver-class), not a phone", file=sys.stderr)  # fmt: skip
+        return device_profile(source, receiver_class=declared)
     return receiver_profile(source, args.receiver_class)
 
 
@@ -387,6 +402,21 @@ _MAX_HEADER_OFFSET_M = 200.0
 
 # Broadcast records are used up to 2 h from their reference epoch (ValidityPolicy).
 _NAV_REACH_S = 7200.0
+
+
+def _one_clock(source: Any, obs_path: str) -> None:
+    """Refuse a RINEX run over several systems: the pairs difference one receiver clock away,
+    and each system keeps its own (a user trial: GPS + Galileo at NYA1, 2.6 m apart, gave a
+    hazardous misleading interval that neither system alone gave)."""
+    if len(source.systems) > 1:
+        raise CliError(
+            f"{obs_path}: --constellation uses {len(source.systems)} systems "
+            f"({', '.join(source.systems)}); the locator differences pseudoranges in pairs, "
+            "which cancels one receiver clock, and each system has its own (an inter-system "
+            "bias of metres the locator does not estimate); run one system (--constellation "
+            "gps, or galileo). A phone's device_gnss log has the bias removed (IsrbMeters) and "
+            "may mix them"
+        )
 
 
 def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
@@ -593,6 +623,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
         ranges = RangeModel.from_rinex_nav(args.nav)
         data, stations = [], []
+        seen_epochs: list[tuple[Any, Any]] = []
         for path in args.obs:
             obs = Observations.from_rinex(path)
             head = obs.header.approx_position_ecef_m
@@ -609,6 +640,17 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 raise CliError(f"{path}: no station position in the header; {fix}")
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
+            # the same station's epochs twice (a copy, decompressed) is evidence counted twice:
+            # a user trial's doubled the independent samples and deepened the tail check
+            for prev, (x0, t0) in zip(args.obs, seen_epochs, strict=False):
+                common = np.intersect1d(t0, obs.gps_s).size
+                if np.linalg.norm(np.asarray(x0) - x) < 1.0 and common:
+                    raise CliError(
+                        f"{path} and {prev} hold {common} epochs of the same station: its "
+                        "residuals would count twice in the tail check; give each "
+                        "observation once"
+                    )
+            seen_epochs.append((x, np.asarray(obs.gps_s, float)))
             src = RinexSource(ranges, obs, args.constellation)
             data.append(station_residuals(src, x, min_el_deg=args.min_el))
             stations.append(x.tolist())

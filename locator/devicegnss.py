@@ -525,6 +525,8 @@ class DeviceGnssSource:
             "constellation": self.constellation,
             "odometer": self.odometer is not None,
             "marker": "",
+            # systems whose ionospheric delay no broadcast model corrects (sigma inflated)
+            "iono_uncorrected_systems": list(self.iono_missing),
         }
 
 

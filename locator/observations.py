@@ -455,7 +455,10 @@ class _Reader:
     def _version_line(self) -> tuple[float, str]:
         """RINEX version and file system letter of the first line; raises when unsupported."""
         lines, path = self.lines, self.path
-        if not lines or "RINEX VERSION / TYPE" not in lines[0]:
+        if not any(line.strip() for line in lines):
+            raise RinexObsError(path, 1, "the file is empty (a failed download or copy?); give "
+                                "the observation file itself")  # fmt: skip
+        if "RINEX VERSION / TYPE" not in lines[0]:
             raise RinexObsError(path, 1, "first line is not a 'RINEX VERSION / TYPE' header line")
         try:
             version = float(lines[0][:9])
@@ -918,7 +921,12 @@ def read_rinex_obs(
         head, first, _ = reader.header()
         parsed = reader.body(head, first)
         if not parsed.epochs:
-            reader.problem(first + 1, None, "no observation epoch in the file")
+            # raised, not only recorded: nothing could be done with the file (a user trial's
+            # header-only file ended in a numpy message)
+            raise RinexObsError(
+                path, first + 1, "no complete observation epoch in the file: it holds a header "
+                "only, or is cut short in its first epoch; give the whole file",
+            )
     except RinexObsError as exc:
         if not crinex:
             raise

@@ -92,6 +92,7 @@ class RunFlag(IntFlag):
     HEADING_UNCHECKED = 1 << 22  # the heading check could not tell (unobservable, no beacon)
     ASSUMED_MASK = 1 << 23  # a used satellite was trusted where the mask rests on no view
     CLAIM_AT_TRACK_END = 1 << 24  # TRACK_END voided a claim whose interval the end bounded
+    IONO_UNCORRECTED = 1 << 25  # a used satellite's ionosphere had no broadcast model
 
 
 ERROR_MODEL_CAVEATS = {
@@ -162,9 +163,11 @@ class RunConfig:
         False when no calibrated error model applies to the data
         (:meth:`predisat.gnss.errormodel.ErrorModelFile.mismatches`): every epoch still gets a
         position, flagged ``NO_ERROR_MODEL`` and without a safety claim.
-    model_el_min_deg : float
-        Lowest elevation the error model was calibrated at; satellites below it are left out
-        (``below_model``), since their sigma would be an extrapolation.
+    model_el_min_deg, model_el_max_deg : float
+        Elevations the error model was calibrated over; satellites below or above them are
+        left out (``below_model``, ``above_model``), since their sigma would be an
+        extrapolation (a user trial: a model fitted up to 60.7 deg took satellites up to
+        72.7 deg on another station).
     error_model_caveat : {"", "forced", "gaussian_tail"}
         What the claims rest on beyond a model that applies: ``"forced"``, a model that does
         not apply, forced by the user (every epoch flagged ``FORCED_ERROR_MODEL``: not a safety
@@ -188,6 +191,7 @@ class RunConfig:
     fusion: bool = True
     error_model_applies: bool = True
     model_el_min_deg: float = 0.0
+    model_el_max_deg: float = 90.0
     error_model_caveat: str = ""
 
     def __post_init__(self) -> None:
@@ -212,6 +216,9 @@ class RunConfig:
             raise ValueError(f"beacon_spacing_m must be positive, got {self.beacon_spacing_m}")
         if not 0.0 <= self.model_el_min_deg < 90.0:
             raise ValueError(f"model_el_min_deg must be in [0, 90), got {self.model_el_min_deg}")
+        if not self.model_el_min_deg <= self.model_el_max_deg <= 90.0:
+            raise ValueError(f"model_el_max_deg must be in [model_el_min_deg, 90], got "
+                             f"{self.model_el_max_deg}")  # fmt: skip
         if self.error_model_caveat not in ERROR_MODEL_CAVEATS:
             raise ValueError(f"error_model_caveat must be one of {sorted(ERROR_MODEL_CAVEATS)}, "
                              f"got {self.error_model_caveat!r}")  # fmt: skip
@@ -232,6 +239,7 @@ _ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, Fusion
 _HEADING_FAIL, _HEADING_UNOBSERVABLE = HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
 _HEADING_UNCHECKED = int(RunFlag.HEADING_UNCHECKED)
 _ASSUMED_MASK = int(RunFlag.ASSUMED_MASK)
+_IONO_UNCORRECTED = int(RunFlag.IONO_UNCORRECTED)
 _CLAIM_AT_TRACK_END = int(RunFlag.CLAIM_AT_TRACK_END)
 _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
@@ -342,6 +350,9 @@ def run_locator(
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
+        if uncorrected:  # in the flags too, where a reader of the claims looks (a user trial)
+            flags = int(row["flags"]) | _IONO_UNCORRECTED
+            row.update(flags=flags, flag_names=flag_names(flags))
         if state.past_start or state.past_end:
             _track_end(row, state, path.length_m)
         row["n_used_assumed"] = 0
@@ -547,6 +558,8 @@ def _split_fix(
         trusted = st.selection.trusted
         if cfg.model_el_min_deg > 0.0:
             trusted = trusted & (el_t >= cfg.model_el_min_deg)
+        if cfg.model_el_max_deg < 90.0:
+            trusted = trusted & (el <= cfg.model_el_max_deg)
         idx = np.flatnonzero(trusted)
         fix, unc = _fix(path, cfg, data, el, idx, 0.5 * (st.lo_m + st.hi_m))
         uncorrected = uncorrected or unc
@@ -570,7 +583,8 @@ def _split_fix(
     for i in np.flatnonzero(~ever):
         reasons = [int(s.selection.reason[i]) for s in stretches if s.selection.reason[i]]
         code = max(reasons) if reasons else int(first[i])
-        excluded[data.sats[i]] = _EXCLUSION_NAMES[code] if code else "below_model"
+        outside = "above_model" if el[i] > cfg.model_el_max_deg else "below_model"
+        excluded[data.sats[i]] = _EXCLUSION_NAMES[code] if code else outside
     if comb.chosen < 0:
         return None, np.zeros(0, np.int64), uncorrected, False
     fix = fixes[comb.chosen]
@@ -643,6 +657,11 @@ def _trust(
         for s in np.asarray(sats)[low]:
             excluded[str(s)] = "below_model"
         trusted = trusted & ~low
+    if cfg.model_el_max_deg < 90.0:
+        high = trusted & ~(el <= cfg.model_el_max_deg)
+        for s in np.asarray(sats)[high]:
+            excluded[str(s)] = "above_model"
+        trusted = trusted & ~high
     return trusted
 
 

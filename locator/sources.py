@@ -273,4 +273,6 @@ class RinexSource:
             "constellation": self.constellation,
             "odometer": self.odometer is not None,
             "marker": self.obs.header.marker_name,
+            # systems whose ionospheric delay no broadcast model corrects (sigma inflated)
+            "iono_uncorrected_systems": list(self.iono_missing),
         }

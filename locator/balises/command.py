@@ -231,7 +231,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
                     cutoff_deg=args.cutoff if args.cutoff is not None else 15.0,
                     error_model_applies=use != "none",
                     error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
-                    model_el_min_deg=mf.el_min_deg)  # fmt: skip
+                    model_el_min_deg=mf.el_min_deg, model_el_max_deg=mf.el_max_deg)  # fmt: skip
     log, accuracy = None, None
     if args.odometer_log:
         from locator.odometry.logfile import read_odometer_log

@@ -470,6 +470,22 @@ def integrity_risk(value: str) -> float:
     return x
 
 
+def k_sigma_value(value: str) -> float:
+    """A pair interval half width in sigmas whose risk per pair, ``2 Q(k)``, is at most the
+    largest integrity risk :func:`integrity_risk` takes (0.1: ``k >= 1.645``)."""
+    from scipy.stats import norm
+
+    x = _number(value)
+    k_min = float(norm.isf(0.05))
+    if not (x >= k_min):
+        risk = f" bounds each pair at a risk of {2 * norm.sf(x):.2g}" if x > 0 else " is no width"
+        raise argparse.ArgumentTypeError(
+            f"{value}{risk}; --k-sigma must be at least {k_min:.3f} (a risk of 0.1 per pair), "
+            "and --integrity-risk is the way to state a risk (default 1e-12 per epoch)"
+        )
+    return x
+
+
 def scheduler_options(p: argparse.ArgumentParser, tasks: str) -> None:
     """``--scheduler local|serial|ADDRESS`` and ``--workers N`` (:mod:`predisat.scheduler`);
     ``tasks`` names what runs as tasks ("the chunks")."""
@@ -497,7 +513,7 @@ def integrity_options(p: argparse.ArgumentParser) -> None:
         f"{IntegrityBudget().k_sigma(2):.2f} with all pairs of 4-5; docs/locator.md)",
     )  # fmt: skip
     g.add_argument(
-        "--k-sigma", type=positive_float, metavar="K",
+        "--k-sigma", type=k_sigma_value, metavar="K",
         help="instead of a risk: one pair interval half width in sigmas for every mode (default: "
         "none, the risk decides; the source's 2 is 4.6e-2 per pair, 3.89 is 1e-4)",
     )  # fmt: skip

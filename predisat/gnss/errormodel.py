@@ -409,6 +409,11 @@ class ErrorModelFile:
         """Lowest calibrated elevation (0 when the file does not say)."""
         return 0.0 if self.applicability is None else self.applicability.el_min_deg
 
+    @property
+    def el_max_deg(self) -> float:
+        """Highest calibrated elevation (90 when the file does not say)."""
+        return 90.0 if self.applicability is None else self.applicability.el_max_deg
+
 
 def default_model_file(k_sigma: float = 2.0) -> ErrorModelFile:
     """The built-in ``ErrorModel()`` (a = b = 2 m): the simulator's own noise model.

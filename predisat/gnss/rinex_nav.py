@@ -265,7 +265,10 @@ def _open_lines(path: Path) -> list[str]:
 
 def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None, int]:
     """Version, default system letter, leap seconds and the index of the first data line."""
-    if not lines or "RINEX VERSION / TYPE" not in lines[0]:
+    if not any(line.strip() for line in lines):
+        raise RinexError(path, 1, "the file is empty (a failed download or copy?); give the "
+                         "navigation file itself")  # fmt: skip
+    if "RINEX VERSION / TYPE" not in lines[0]:
         raise RinexError(path, 1, "first line is not a 'RINEX VERSION / TYPE' header line")
     head = lines[0]
     try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -137,22 +138,34 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     assert main(["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate",
                  "--out", str(out)]) == 0  # fmt: skip
     one = json.loads(out.read_text())["fitted"]["residuals"]
-    copies = []
-    for i in range(3):  # three files (as three days of one station would be)
-        copies.append(tmp_path / f"day{i}.05o")
-        shutil.copy(obs, copies[-1])
-    assert main(["calibrate", "--obs", *map(str, copies), "--nav", nav, "--out", str(out)]) == 0
+    # two files, the first and the last five epochs (as two sessions of one station would
+    # be): their residuals add up to the whole file's
+    from locator.observations import read_rinex_obs
+
+    lines = Path(obs).read_text().splitlines(keepends=True)
+    cut = int(read_rinex_obs(obs).epoch_line[5]) - 1  # the sixth epoch's first line
+    head = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    halves = [tmp_path / "a.05o", tmp_path / "b.05o"]
+    halves[0].write_text("".join(lines[:cut]))
+    halves[1].write_text("".join(lines[:head] + lines[cut:]))
+    assert main(["calibrate", "--obs", *map(str, halves), "--nav", nav, "--bound", "estimate",
+                 "--out", str(out)]) == 0  # fmt: skip
     fitted = json.loads(out.read_text())["fitted"]
-    assert fitted["residuals"] == 3 * one and len(fitted["station_ecef_m"]) == 3
-    # one file given twice would weigh double: refused
+    assert fitted["residuals"] == one and len(fitted["station_ecef_m"]) == 2
+    # one file given twice would weigh double: refused, and so is a copy of it (the same
+    # station's epochs under another name)
     assert main(["calibrate", "--obs", obs, obs, "--nav", nav, "--out", str(out)]) == 2
     assert "given twice" in capsys.readouterr().err
+    shutil.copy(obs, tmp_path / "copy.05o")
+    argv = ["calibrate", "--obs", obs, str(tmp_path / "copy.05o"), "--nav", nav, "--out", str(out)]
+    assert main(argv) == 2
+    assert "hold 10 epochs of the same station" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
         # an existing --sim: a missing one would be the error (its one line names no --k-sigma)
         main(["calibrate", "--sim", str(out.parent), "--k-sigma", "0", "--out", str(out)])
     assert exc.value.code == 2 and "argument --k-sigma" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # --station is one position: refused by the parser
-        main(["calibrate", "--obs", str(copies[0]), str(copies[1]), "--nav", nav,
+        main(["calibrate", "--obs", str(halves[0]), str(halves[1]), "--nav", nav,
               "--station", "1", "2", "3", "--out", str(out)])  # fmt: skip
     assert exc.value.code == 2 and "--station is for one --obs file" in capsys.readouterr().err
 
@@ -494,3 +507,31 @@ def test_a_library_warning_is_one_line_under_the_command(sim_dir, tmp_path, caps
     err = capsys.readouterr().err
     assert f"locator: warning: {holed}: 1 hole(s) between its positions" in err
     assert "MaskHoleWarning" not in err and "warnings.warn" not in err
+
+
+def test_a_rinex_run_over_two_systems_is_refused_before_any_work(test_data, tmp_path, capsys):
+    """A user trial: GPS + Galileo pairs at NYA1 (2.6 m of inter-system bias) gave a hazardous
+    misleading interval that neither system alone gave; the pairs cancel one clock only."""
+    obs = test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx"
+    nav = test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz"
+    argv = ["run", "--obs", str(obs), "--nav", str(nav), "--no-masks", "--antenna-height", "0",
+            "--constellation", "gps+galileo", "--out", str(tmp_path / "ge")]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "2 systems (E, G)" in err and "inter-system bias" in err and "--constellation" in err
+    assert not (tmp_path / "ge").exists()
+
+
+def test_a_rinex_file_without_an_epoch_is_named_not_a_numpy_error(test_data, tmp_path, capsys):
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    lines = obs.read_text().splitlines(keepends=True)
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    for name, text, what in (("head.05o", "".join(lines[: end + 3]), "no complete observation"),
+                             ("empty.05o", "", "the file is empty")):  # fmt: skip
+        (tmp_path / name).write_text(text)
+        argv = ["run", "--obs", str(tmp_path / name), "--nav", str(nav), "--no-masks",
+                "--out", str(tmp_path / "x")]  # fmt: skip
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert name in err and what in err and "zero-size" not in err

@@ -147,6 +147,12 @@ def test_locator_run_on_a_phone_log_makes_no_claim(
     err = capsys.readouterr().err
     # the built-in model is the simulator's: it does not apply to a phone (class phone, C1C)
     assert "NO SAFETY CLAIM" in err and "(phone)" in err and "row left out" in err
+    # a phone declared geodetic is refused (a user trial: a geodetic model then claimed 100 %)
+    rc = main(["-q", "run", "--device-gnss", str(test_data / DEV), "--track",
+               str(tmp_path / "t.geojson"), "--no-masks", "--antenna-height", "0",
+               "--receiver-class", "geodetic", "--out", str(tmp_path / "geo")])  # fmt: skip
+    assert rc == 2 and "Android GNSS log" in capsys.readouterr().err
+    assert not (tmp_path / "geo").exists()
     from locator.runio import read_run
 
     epochs = read_run(tmp_path / "run")[0]

@@ -192,6 +192,8 @@ def test_uncorrected_ionosphere_is_flagged_and_widens_the_intervals(path):
     )
     assert not base["iono_uncorrected"].any() and not none["iono_uncorrected"].any()
     assert wide["iono_uncorrected"].all()
+    assert wide["flag_names"].str.contains("IONO_UNCORRECTED").all()
+    assert not base["flag_names"].str.contains("IONO_UNCORRECTED").any()
     np.testing.assert_allclose(none["length_m"], base["length_m"])
     assert (wide["length_m"] > 2.0 * base["length_m"]).all()
 
@@ -219,6 +221,21 @@ def test_satellites_below_the_model_range_are_left_out(path):
         assert not low & set(used.split())
     with pytest.raises(ValueError, match="model_el_min_deg"):
         RunConfig(MODEL, model_el_min_deg=95.0)
+
+
+def test_satellites_above_the_model_range_are_left_out(path):
+    # a user trial: a model fitted up to 60.7 deg took satellites up to 72.7 deg elsewhere
+    truth = truth_run(n=4)
+    top = float(np.sort(EL)[-2]) - 0.5  # the two highest lie above the model's range
+    cfg = RunConfig(MODEL, trust="none", model_el_max_deg=top)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg)
+    high = {f"G{k + 1:02d}" for k in np.flatnonzero(EL > top)}
+    assert len(high) == 2
+    for excl, used in zip(ep["excluded"], ep["used"], strict=True):
+        assert {i.split(":")[0] for i in excl.split() if i.endswith(":above_model")} == high
+        assert not high & set(used.split())
+    with pytest.raises(ValueError, match="model_el_max_deg"):
+        RunConfig(MODEL, model_el_min_deg=30.0, model_el_max_deg=20.0)
 
 
 def test_a_long_prediction_trusts_a_satellite_only_above_the_mask_at_both_ends(path):

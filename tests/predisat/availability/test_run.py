@@ -534,14 +534,15 @@ def test_the_integrity_budget_sets_each_modes_k(
     base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
             "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet", "--scheduler",
             "serial"]  # fmt: skip
-    one = run_from_args(parser.parse_args([*base, "--k-sigma", "1", "--out", str(tmp_path / "1")]),
+    # k = 2 scaled back to one sigma (a k under 1.645, a risk above 0.1 per pair, is refused)
+    one = run_from_args(parser.parse_args([*base, "--k-sigma", "2", "--out", str(tmp_path / "1")]),
                         track)  # fmt: skip
     runs = {
         1e-12: run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "d")]), track),
         1e-7: run_from_args(parser.parse_args([*base, "--integrity-risk", "1e-7", "--out",
                                                str(tmp_path / "r")]), track),
     }  # fmt: skip
-    unit = one.results[0].interval_m
+    unit = one.results[0].interval_m / 2.0
     mode = interval_mode(one.results[0].count)
     for risk, r in runs.items():
         # k = Q^-1((T / 2)^(1 / m)), m = 3 / 2 / 1 independent pairs by mode

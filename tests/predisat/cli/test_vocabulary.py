@@ -369,6 +369,14 @@ def test_one_integrity_risk_setting_for_every_command() -> None:
     )
     assert integrity_budget(argparse.Namespace(k_sigma=None, integrity_risk=None)) is not None
     assert integrity_budget(argparse.Namespace(k_sigma=2.0, integrity_risk=None)) is None
+    # a k whose pairs risk more than the largest risk --integrity-risk takes is refused
+    # (a user trial's --k-sigma 0.5: "safety claim 96.7 %" at 0.62 per pair)
+    from predisat.cli.args import k_sigma_value
+
+    assert k_sigma_value("2") == 2.0 and k_sigma_value("1.65") == 1.65
+    for bad in ("0.5", "1.6", "0", "-2"):
+        with pytest.raises(argparse.ArgumentTypeError, match="at least 1.645"):
+            k_sigma_value(bad)
 
 
 def test_synth_rig_choices_are_the_presets() -> None:
