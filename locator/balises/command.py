@@ -242,6 +242,11 @@ def cmd_balises(args: argparse.Namespace) -> int:
     if args.odometer_accuracy:
         a, over, under = args.odometer_accuracy
         accuracy = OdometerAccuracy(a, over, under)
+    if log is not None and accuracy is not None:
+        from locator.odometry.simulated import check_log_against_run
+
+        check_log_against_run(sim, log, accuracy.abs_error_m, accuracy.over_rel,
+                              accuracy.under_rel)  # fmt: skip
     caps = {
         f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
         for r in args.radius

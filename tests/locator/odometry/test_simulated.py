@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from locator.odometry.logfile import OdometerLogError, read_odometer_log
-from locator.odometry.simulated import odometer_from_log
+from locator.odometry.simulated import check_log_against_run, odometer_from_log
 
 T0_S = 1277107200.0
 
@@ -22,10 +22,10 @@ def _run(direction: int = 1):
                            meta={"direction": direction})  # fmt: skip
 
 
-def _log(tmp_path, t0_s=T0_S, duration_s=30.0, sign=1):
+def _log(tmp_path, t0_s=T0_S, duration_s=30.0, sign=1, scale=1.0):
     t = np.arange(0.0, duration_s + 0.05, 0.1)
-    df = pd.DataFrame({"t_s": t0_s + t, "dist_m": sign * 10.0 * t, "speed_mps": 10.0,
-                       "direction": sign})  # fmt: skip
+    df = pd.DataFrame({"t_s": t0_s + t, "dist_m": sign * scale * 10.0 * t,
+                       "speed_mps": scale * 10.0, "direction": sign})  # fmt: skip
     p = tmp_path / "odo.csv"
     df.to_csv(p, index=False, float_format="%.17g")
     return read_odometer_log(p)
@@ -57,3 +57,51 @@ def test_a_log_not_covering_the_run_says_why(tmp_path, t0_s, duration_s, match):
     with pytest.raises(OdometerLogError, match=match) as exc:
         odometer_from_log(_run(), log)
     assert str(tmp_path / "odo.csv") in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    ("scale", "shift_s", "match"),
+    [
+        (3.28084, 0.0, r"3\.28 times the train's distance: feet\?"),
+        (1.2, 0.0, r"1\.2 times the train's distance\)"),
+        (0.5, 0.0, r"0\.5 times"),
+        (0.0, 0.0, r"no movement logged"),
+        (1.0, 3.0, r"at t_s .* has run .* the train"),
+    ],
+)
+def test_a_log_off_its_accuracy_is_refused(tmp_path, scale, shift_s, match):
+    """A user trial: a log in feet, scaled, standing still or 3 s late put the true front outside
+    the safe fronts at 18-30 of 41 epochs, and nothing said so."""
+    run = _run()
+    log = _log(tmp_path, T0_S - 5.0, 40.0, scale=scale)
+    if shift_s:  # a train accelerating from a stop, and its log 3 s late
+        t = T0_S + np.arange(31.0)
+        run = SimpleNamespace(gps_s=t, chainage_m=1000.0 + 0.25 * (t - T0_S) ** 2,
+                              speed_mps=0.5 * (t - T0_S), meta={"direction": 1})  # fmt: skip
+        tl = T0_S + np.arange(0.0, 30.05, 0.1)
+        late = np.clip(tl - T0_S - shift_s, 0.0, None)
+        p = tmp_path / "odo.csv"
+        pd.DataFrame({"t_s": tl, "dist_m": 0.25 * late**2, "speed_mps": 0.5 * late,
+                      "direction": 1}).to_csv(p, index=False, float_format="%.17g")  # fmt: skip
+        check_log_against_run(run, _log_of(tmp_path, run), 5.0, 0.05, 0.05)  # on time: passes
+        log = read_odometer_log(p)
+    with pytest.raises(OdometerLogError, match=match) as exc:
+        check_log_against_run(run, log, 5.0, 0.05, 0.05)
+    assert str(tmp_path / "odo.csv") in str(exc.value) and "--odometer-accuracy" in str(exc.value)
+
+
+def test_a_log_within_its_accuracy_passes(tmp_path):
+    # 4 % long (within 5 m + 5 %), and the exact one
+    for scale in (1.04, 1.0):
+        check_log_against_run(_run(), _log(tmp_path, T0_S - 5.0, 40.0, scale=scale), 5.0, 0.05,
+                              0.05)  # fmt: skip
+
+
+def _log_of(tmp_path, run):
+    """The exact log of an accelerating ``run`` (chainage 1000 + 0.25 t^2)."""
+    tl = T0_S + np.arange(0.0, 30.05, 0.1)
+    q = tl - T0_S
+    p = tmp_path / "exact.csv"
+    pd.DataFrame({"t_s": tl, "dist_m": 0.25 * q**2, "speed_mps": 0.5 * q,
+                  "direction": 1}).to_csv(p, index=False, float_format="%.17g")  # fmt: skip
+    return read_odometer_log(p)
