@@ -467,6 +467,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Masks", f"{info.get('masks', '')}{margin_text}"),
         ("Survey rig", info.get("rig", "")),
         ("Vehicle attitude", info.get("attitude", "")),
+        ("Survey positioning", info.get("positioning", "")),
         ("Interval model", info.get("interval_model", "")),
         ("Interval width", info.get("interval_width", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),

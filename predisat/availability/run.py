@@ -90,6 +90,7 @@ from predisat.track import TrackMap, TrackMapError, load_track
 __all__ = [
     "AvailabilityRun",
     "attitude_text",
+    "positioning_text",
     "check_masks_on_track",
     "load_navigation",
     "nav_span_gps_s",
@@ -933,6 +934,7 @@ def _run_info(
         "masks": masks_label,
         "rig": rig_text(masks.provenance),
         "attitude": attitude_text(masks.provenance),
+        "positioning": positioning_text(masks.provenance),
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
@@ -997,6 +999,24 @@ def attitude_text(provenance: JsonDict) -> str:
         + f"), measured for {measured}"
     )  # fmt: skip
     return text + (f"; {bad} frames' measured roll contradicted the track" if bad else "")
+
+
+def positioning_text(provenance: JsonDict) -> str:
+    """How well the survey's chainages were known when the masks were made (``predisat
+    process``'s resolved ``chainage_doubt_m`` and ``chainage_jitter_m``; docs/reconstruction.md
+    section 18); "" for masks that do not say."""
+    params = provenance.get("params")
+    if not isinstance(params, dict) or params.get("chainage_doubt_m") is None:
+        return ""
+    doubt = float(params["chainage_doubt_m"])
+    if doubt == 0.0:
+        return "chainages taken as exact (the survey stated no doubt, or 0)"
+    jitter = params.get("chainage_jitter_m")
+    shift = jitter is not None and float(jitter) < doubt
+    return f"each frame's chainage within {doubt:g} m" + (
+        f", within {float(jitter):g} m of the others' (bounded as a shift of the survey)"
+        if shift else " (each frame bounded on its own)"
+    )
 
 
 def synthetic_notes(provenance: JsonDict) -> list[str]:

@@ -154,6 +154,19 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
         help="accuracy of the manifest's measured roll and pitch, each (default %(default)s: "
         "taken as exact, as the mount is; give your GNSS/INS's, e.g. 0.1 for a MEMS unit)",
     )  # fmt: skip
+    parser.add_argument(
+        "--chainage-doubt-m", type=non_negative_float, default=None, metavar="M",
+        help="how far any frame's true chainage may be from the manifest's (the survey's "
+        "positioning accuracy along the track; default: survey.yaml's chainage_doubt_m, else "
+        "0, taken as exact, with a warning); 0.05 for RTK, 3-5 for plain GNSS",
+    )  # fmt: skip
+    parser.add_argument(
+        "--chainage-jitter-m", type=non_negative_float, default=None, metavar="M",
+        help="how far frames a few hundred metres apart may be off from each other's error "
+        "(the positioning's relative accuracy; default: survey.yaml's chainage_jitter_m, else "
+        "the doubt): below the doubt, the masks bound the shift of the whole survey instead of "
+        "each frame's, which costs less sky (docs/reconstruction.md, section 18)",
+    )  # fmt: skip
 
 
 def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
@@ -169,6 +182,8 @@ def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
         "grade_doubt_deg": args.grade_doubt_deg,
         "imu_doubt_deg": args.imu_doubt_deg,
         "cant_table": table,
+        "chainage_doubt_m": args.chainage_doubt_m,
+        "chainage_jitter_m": args.chainage_jitter_m,
     }
 
 

@@ -17,17 +17,26 @@ one side by about that angle: false trust. Each frame therefore gets
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.camera.models import tilt_doubt_m
 from predisat.track import TrackMap
-from predisat.track.cant import CantLimits, CantTable, inside_roll_sign, roll_bounds_deg
+from predisat.track.cant import (
+    CantLimits,
+    CantTable,
+    equilibrium_cant_mm,
+    inside_roll_sign,
+    roll_bounds_deg,
+)
 
 __all__ = [
     "ATTITUDE_STEP_DEG",
+    "CANT_DEFICIENCY_TOL_MM",
     "CANT_ON_SHARP_MM",
+    "CHAINAGE_STEP_M",
     "CURVE_WINDOW_M",
     "STRAIGHT_PER_M",
     "FrameAttitude",
@@ -47,6 +56,10 @@ _SHARP_PER_M = 1e-3  # R < 1 km: a curve of a line run above 40 km/h carries can
 CANT_ON_SHARP_MM = 5.0
 """A cant-table value under this on a curve sharper than R = 1 km reads as metres or a missing
 value: it is not used."""
+CANT_DEFICIENCY_TOL_MM = 100.0
+"""How far past ``CantLimits.max_deficiency_mm`` a cant table may put the survey vehicle's
+deficiency before its value is ruled out: the map's smoothed curvature, a transition's
+chainage and a tilting train's larger deficiency (up to 300 mm) stay within it."""
 _LEVEL_DEG = 0.5  # a measured roll this near level on such a curve: radians, or a tilt sensor
 _ROLL_TOL_DEG = 1.0  # a measured roll this far outside the track's interval contradicts it
 _DISTRUST_SHARE = 0.2  # ruled out on this share of the frames on curves: no roll is trusted
@@ -105,6 +118,7 @@ def frame_attitudes(
     imu_doubt_deg: float = 0.0,
     cant_table: CantTable | None = None,
     speed_kmh: ArrayLike | None = None,
+    chainage_doubt_m: float = 0.0,
 ) -> FrameAttitude:
     """The attitude each frame is rectified with, and what it may still be off by.
 
@@ -129,6 +143,11 @@ def frame_attitudes(
     speed_kmh : array_like, shape (n,), optional
         The survey vehicle's speed at the frames (:func:`survey_speed_kmh`), NaN where not
         known: it fixes the body's roll on its springs to one side.
+    chainage_doubt_m : float
+        How far each frame's true chainage may be from ``chainage_m``, metres (the survey's
+        positioning, ``docs/reconstruction.md`` section 18): the track's bounds and the cant
+        table are read anywhere within it, and each angle's interval is the union of those
+        found every :data:`CHAINAGE_STEP_M` and at both ends.
 
     Returns
     -------
@@ -136,6 +155,14 @@ def frame_attitudes(
         Nominal angles rounded to :data:`ATTITUDE_STEP_DEG`, the rounding added to a doubt
         that is not 0.
     """
+    if not (np.isfinite(chainage_doubt_m) and chainage_doubt_m >= 0.0):
+        raise ValueError(f"chainage_doubt_m must be a length >= 0 metres, got {chainage_doubt_m}")
+    if chainage_doubt_m > 0.0:
+        return _attitudes_over_chainage(
+            track, chainage_m, roll_deg, pitch_deg, reverse, chainage_doubt_m, cant=cant,
+            grade_doubt_deg=grade_doubt_deg, imu_doubt_deg=imu_doubt_deg,
+            cant_table=cant_table, speed_kmh=speed_kmh,
+        )  # fmt: skip
     s = np.asarray(chainage_m, float)
     roll = np.broadcast_to(np.asarray(roll_deg, float), s.shape)
     pitch = np.broadcast_to(np.asarray(pitch_deg, float), s.shape)
@@ -150,7 +177,7 @@ def frame_attitudes(
     r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
     table_ignored = np.zeros(s.shape, bool)
     if known is not None:
-        table_ignored = sharp & (known < CANT_ON_SHARP_MM)
+        table_ignored = _implausible_cant(track, s, known, sharp, speed, cant or CantLimits())
         if table_ignored.any():
             known = np.where(table_ignored, np.nan, known)
             r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
@@ -196,6 +223,58 @@ def frame_attitudes(
                          contradicted, table_ignored, roll_doubt, pitch_doubt)  # fmt: skip
 
 
+CHAINAGE_STEP_M = 0.25
+"""Step at which :func:`frame_attitudes` reads the track over a chainage doubt. Between two
+readings a bound moves monotonically, or jumps (a curve's threshold) to a value the readings
+either side hold, except near its extremes, where it bends by less than
+:data:`_BETWEEN_STEPS_DEG` over the step (tested every 2 cm on the demo line)."""
+_BETWEEN_STEPS_DEG = 0.01
+
+
+def _attitudes_over_chainage(
+    track: TrackMap,
+    chainage_m: ArrayLike,
+    roll_deg: ArrayLike,
+    pitch_deg: ArrayLike,
+    reverse: bool,
+    chainage_doubt_m: float,
+    **kwargs: Any,
+) -> FrameAttitude:
+    """:func:`frame_attitudes` of frames whose chainage is known within ``chainage_doubt_m``:
+    the union, per angle, of the intervals found at the offsets."""
+    s = np.asarray(chainage_m, float)
+    n_steps = max(int(np.ceil(2.0 * chainage_doubt_m / CHAINAGE_STEP_M)), 1)
+    parts = [
+        frame_attitudes(track, s + e, roll_deg, pitch_deg, reverse, **kwargs)
+        for e in np.linspace(-chainage_doubt_m, chainage_doubt_m, n_steps + 1)
+    ]
+    roll_doubt = [a.doubt_deg if a.roll_doubt_deg is None else a.roll_doubt_deg for a in parts]
+    pitch_doubt = [a.doubt_deg if a.pitch_doubt_deg is None else a.pitch_doubt_deg for a in parts]
+    angles = []
+    for mid, half in (([a.roll_deg for a in parts], roll_doubt),
+                      ([a.pitch_deg for a in parts], pitch_doubt)):  # fmt: skip
+        lo = np.min(np.asarray(mid) - np.asarray(half), axis=0)
+        hi = np.max(np.asarray(mid) + np.asarray(half), axis=0)
+        slack = np.where(hi - lo > 0.0, _BETWEEN_STEPS_DEG, 0.0)  # an exact angle stays exact
+        lo, hi = lo - slack, hi + slack
+        q = np.round(0.5 * (lo + hi) / ATTITUDE_STEP_DEG) * ATTITUDE_STEP_DEG
+        doubt = np.maximum(hi - q, q - lo)  # the rounding taken in
+        angles.append((q + 0.0, np.where(hi - lo == 0.0, 0.0, doubt)))
+    (roll, r_doubt), (pitch, p_doubt) = angles
+    return FrameAttitude(
+        roll, pitch, r_doubt + p_doubt,
+        np.all([a.measured for a in parts], axis=0),
+        np.any([_flags(a.contradicted, s) for a in parts], axis=0),
+        np.any([_flags(a.table_ignored, s) for a in parts], axis=0),
+        r_doubt, p_doubt,
+    )  # fmt: skip
+
+
+def _flags(values: NDArray | None, like: NDArray) -> NDArray:
+    """``values``, or all False shaped like ``like`` for None."""
+    return np.zeros(like.shape, bool) if values is None else values
+
+
 def level_attitudes(
     track: TrackMap, chainage_m: ArrayLike, *args: object, **kwargs: object
 ) -> FrameAttitude:
@@ -234,6 +313,33 @@ def survey_speed_kmh(chainage_m: ArrayLike, gps_s: ArrayLike, side: ArrayLike) -
         if np.any(np.diff(ts) <= 0):
             continue  # repeated times: no speed to trust
         out[idx] = np.abs(np.gradient(ss, ts)) * 3.6
+    return out
+
+
+def _implausible_cant(
+    track: TrackMap,
+    chainage_m: NDArray,
+    cant_mm: NDArray,
+    sharp: NDArray,
+    speed_kmh: NDArray | None,
+    limits: CantLimits,
+) -> NDArray:
+    """Frames whose cant-table value the track or the survey's own run rules out, shape (n,):
+    under :data:`CANT_ON_SHARP_MM` on a curve sharper than R = 1 km (a table in metres, a
+    missing value written 0), or so low that the survey vehicle, at its speed there, would
+    have run with more than :data:`CANT_DEFICIENCY_TOL_MM` beyond the largest deficiency
+    trains run with (a table in centimetres, or another track's). When that rules out more
+    than a fifth of the frames on curves, the whole table is (its unit is wrong)."""
+    known = np.isfinite(cant_mm)
+    out = sharp & known & (cant_mm < CANT_ON_SHARP_MM)
+    k = np.abs(np.asarray(track.curvature_at(chainage_m), float))
+    if speed_kmh is not None:
+        with np.errstate(invalid="ignore"):
+            deficiency = equilibrium_cant_mm(k, speed_kmh) - cant_mm
+            out |= known & (deficiency > limits.max_deficiency_mm + CANT_DEFICIENCY_TOL_MM)
+    curved = known & (k > STRAIGHT_PER_M)
+    if out.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1):
+        out = known.copy()
     return out
 
 

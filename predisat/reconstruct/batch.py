@@ -58,6 +58,7 @@ from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
 from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
 from predisat.reconstruct.attitude import (
+    CANT_DEFICIENCY_TOL_MM,
     CANT_ON_SHARP_MM,
     STRAIGHT_PER_M,
     frame_attitudes,
@@ -307,6 +308,41 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
     return bad
 
 
+def _with_chainage_doubt(
+    params: PipelineParams, survey: Survey
+) -> tuple[PipelineParams, str | None]:
+    """``params`` with the run's chainage doubt and jitter resolved (the params', else the
+    survey's statements; the doubt else 0, the jitter else the doubt) and the window's shift
+    set (the doubt, when the jitter is below it: section 18), and the warning ``process``
+    prints when nobody stated the doubt."""
+    doubt = params.chainage_doubt_m
+    doubt = survey.chainage_doubt_m if doubt is None else doubt
+    jitter = params.chainage_jitter_m
+    jitter = survey.chainage_jitter_m if jitter is None else jitter
+    d = 0.0 if doubt is None else doubt
+    j = d if jitter is None else min(jitter, d)
+    try:
+        resolved = replace(
+            params, chainage_doubt_m=d, chainage_jitter_m=j,
+            reconstruction=replace(params.reconstruction, chainage_shift_m=d if j < d else 0.0),
+        )  # fmt: skip
+    except ValueError as exc:
+        raise ValueError(
+            f"{survey.root}/survey.yaml: {exc}; a survey that knows its frames' places no "
+            "better cannot bound the sky near the track: position it again (GNSS with RTK, or "
+            "balises)"
+        ) from None
+    if doubt is not None:
+        return resolved, None
+    return resolved, (
+        f"warning: {survey.root}/survey.yaml states no chainage_doubt_m: every frame's chainage "
+        "is taken as exact. A survey positioned by plain GNSS is metres off, and 3 m along the "
+        "track trusted 0.35-0.49 % of the demo's directions falsely; state the positioning's "
+        "accuracy there (0.05 for RTK; chainage_jitter_m for its relative accuracy) or give "
+        "--chainage-doubt-m (docs/reconstruction.md, section 18)"
+    )
+
+
 def _attitude_summary(
     survey: Survey, track: TrackMap, params: PipelineParams, ch: NDArray
 ) -> JsonDict:
@@ -320,6 +356,7 @@ def _attitude_summary(
         track, ch[ok], fr.roll_deg[ok], fr.pitch_deg[ok], survey.reverse, cant=params.cant,
         grade_doubt_deg=params.grade_doubt_deg, imu_doubt_deg=params.imu_doubt_deg,
         cant_table=params.cant_table, speed_kmh=speed,
+        chainage_doubt_m=params.chainage_doubt_m or 0.0,
     )  # fmt: skip
     contradicted = att.contradicted if att.contradicted is not None else np.zeros(0, bool)
     height_m = params.reconstruction.antenna_height_m
@@ -346,6 +383,7 @@ def _attitude_summary(
         out["cant_off_curve_frames"] = int((flat & (cant >= _CANT_ON_CURVE_MM)).sum())
         ignored = att.table_ignored if att.table_ignored is not None else np.zeros(0, bool)
         out["cant_table_ignored_frames"] = int(ignored.sum())
+        out["max_deficiency_mm"] = float(params.cant.max_deficiency_mm)
     return out
 
 
@@ -375,8 +413,11 @@ def _attitude_warnings(summary: JsonDict) -> list[str]:
     ignored = int(summary.get("cant_table_ignored_frames", 0))
     if ignored:
         out.append(
-            f"warning: the cant table gives under {CANT_ON_SHARP_MM:g} mm at {ignored} frames on "
-            "curves sharper than R = 1 km, which carry cant: not used there (is it in "
+            f"warning: the cant table is ruled out at {ignored} frames: under "
+            f"{CANT_ON_SHARP_MM:g} mm on curves sharper than R = 1 km, which carry cant, or so "
+            "low that the survey vehicle would have run with more cant deficiency than trains "
+            f"do ({summary.get('max_deficiency_mm', 150.0) + CANT_DEFICIENCY_TOL_MM:g} mm) at "
+            "its speed there: not used there, bounded from the curves instead (is it in "
             "millimetres, and the right track's?)"
         )
     off = int(summary.get("cant_off_curve_frames", 0))
@@ -900,6 +941,7 @@ def process_survey(
         raise ValueError(
             f"survey {survey.root} names no track file; pass track= (CLI: --track FILE)"
         )
+    p, chainage_note = _with_chainage_doubt(p, survey)
     ch = np.round(np.asarray(survey.frames.chainage_m, float), _CHAINAGE_DECIMALS)
     bad = _load_bad_frames(survey, ch, strict)
     plan = _plan(survey, trk, p, out, ch, opts)
@@ -922,6 +964,8 @@ def process_survey(
     )
     for line in _attitude_warnings(plan.provenance["attitude"]):
         _report(line, quiet=False)
+    if chainage_note is not None:
+        _report(chainage_note, quiet=False)
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)

@@ -215,6 +215,14 @@ class ReconstructionParams:
         the largest gap between consecutive positions of the window (5 m for positions every
         10 m; 0 for a single position). Default ``0``: the mask at the position itself; the
         sweep is opt-in because it doubles the sky lost at the positions (section 12).
+    chainage_shift_m : float
+        How far all the frames of a window may be off along the track together (the survey's
+        chainage error common to them), metres (``docs/reconstruction.md``, section 18). The
+        frames' own doubts (``FrameView.along_doubt_m``) hold what they may be off from each
+        other; this shift moves the whole carved world, so each mask takes the sky from
+        anywhere within it: the height field is swept by it (as ``cell_sweep_m``, the two
+        adding), the overhead intervals and the cameras' along-track ceilings reach that much
+        further, and the far field's parallax allowance takes it in. Default 0.
     """
 
     cell_m: float = 0.5
@@ -257,8 +265,14 @@ class ReconstructionParams:
     resolve_width_m: float | None = 0.25
     resolve_positions: tuple[str, ...] = ("front", "rear", "roof")
     cell_sweep_m: float | None = 0.0
+    chainage_shift_m: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.chainage_shift_m) and self.chainage_shift_m >= 0):
+            raise ValueError(
+                "ReconstructionParams.chainage_shift_m must be a finite length >= 0 metres, got "
+                f"{self.chainage_shift_m}"
+            )
         if not self.covered_share > 0:
             raise ValueError(
                 "ReconstructionParams.covered_share must be a share > 0 of the azimuth bins (0.9; "
@@ -666,14 +680,15 @@ class Reconstructor:
             else:
                 bound, views = _fused_bounds(hf, frames, cams, p, carver)
         over = [
-            (f.chainage_m - p.zenith_spread_m - f.along_doubt_m,
-             f.chainage_m + p.zenith_spread_m + f.along_doubt_m)
+            (f.chainage_m - p.zenith_spread_m - f.along_doubt_m - p.chainage_shift_m,
+             f.chainage_m + p.zenith_spread_m + f.along_doubt_m + p.chainage_shift_m)
             for f, prof in zip(frames, profs, strict=True)
             if _zenith_blocked(prof, p)
         ] + _along_overhead(frames, profs, p)
         ceilings = None
         if frames and p.along_view_half_deg is not None:
-            ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg)
+            ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg,
+                                        p.chainage_shift_m)  # fmt: skip
         carved = bound.copy()
         overhead = apply_clearance_prior(
             hf, bound, p.clearance_half_width_m, p.clearance_floor_m,
@@ -724,6 +739,7 @@ class Reconstructor:
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs)
         ant, rot = _antennas(track, s, p.antenna_height_m)
         sweep_m = cell_sweep_of(s) if p.cell_sweep_m is None else p.cell_sweep_m
+        sweep_m += p.chainage_shift_m  # the carved world may stand that far off (section 18)
         if sweep_m > 0:
             # the obstacles as seen from anywhere in the cell; the cameras' ceiling caps are
             # exact at the position only, so they are not applied to a swept cell
@@ -1126,7 +1142,7 @@ def _along_overhead(
         tops = _along_tops(prof, f, p)
         if not np.isfinite(tops).any():
             continue
-        slack = s + abs(float(f.mount.lever_arm_m[0])) + f.along_doubt_m
+        slack = s + abs(float(f.mount.lever_arm_m[0])) + f.along_doubt_m + p.chainage_shift_m
         reach = [
             slack + p.overhead_along_height_m / np.tan(np.radians(e))
             if np.isfinite(e) else s
@@ -1183,7 +1199,11 @@ def _both_sides(frames: Iterable[FrameView]) -> bool:
 
 
 def _camera_ceilings(
-    frames: Sequence[FrameView], profiles: Sequence[SkyProfile], cams: NDArray, half_deg: float
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    cams: NDArray,
+    half_deg: float,
+    shift_m: float = 0.0,
 ) -> NDArray:
     """Rows ``(chainage_m, z_m, tan_ahead, tan_behind)`` for
     :func:`~predisat.reconstruct.heightfield.apply_clearance_prior`: per position seen by a left
@@ -1193,7 +1213,8 @@ def _camera_ceilings(
     camera did not see sky there, or did not see that direction up to within
     ``_ZENITH_SEEN_DEG`` of the zenith; clamped at 0), and the height of the highest camera,
     raised by its along-track lever arm times the steeper tangent (with a lever arm, an
-    ``inf`` tangent makes the whole row bound nothing)."""
+    ``inf`` tangent makes the whole row bound nothing). ``shift_m`` (the window's chainage
+    shift, section 18) is added to each camera's along-track doubt."""
     at: dict[float, list[int]] = {}
     for i, f in enumerate(frames):
         at.setdefault(round(f.chainage_m, 3), []).append(i)
@@ -1224,7 +1245,7 @@ def _camera_ceilings(
                     tans[n, m] = np.tan(np.radians(max(float(el.max()), 0.0)))
         tan = tans.max(axis=0)
         # a camera known within a doubt may stand that much higher, and that far along
-        doubt_m = max(frames[i].along_doubt_m for i in idx)
+        doubt_m = max(frames[i].along_doubt_m for i in idx) + shift_m
         z = float(max(cams[i, 2] + frames[i].height_doubt_m for i in idx))
         if slack_m > 0.0:
             # between the antenna and a camera the camera's other direction bounds: both must
@@ -1691,7 +1712,7 @@ def _far_field(
                 prof = profiles[int(j)]
                 # a camera known within a doubt may stand that much further aside
                 base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
-                base += frames[int(j)].position_doubt_m
+                base += frames[int(j)].position_doubt_m + p.chainage_shift_m
                 allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
                 per_pos[i].append((prof, allow))
                 vals, ok = _profile_max(prof, az_sub, allow)
@@ -1733,6 +1754,7 @@ def _robust_far(
     for j in near:
         f = frames[int(j)]
         base = float(np.hypot(*(cams[j, :2] - antenna_m[:2]))) + f.position_doubt_m
+        base += p.chainage_shift_m
         allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
         vals, ok = _profile_max(profiles[int(j)], az_sub, allow)
         fb = _bins(np.where(ok, vals, np.nan), p.n_sub)

@@ -32,6 +32,7 @@ from predisat.reconstruct.badframes import BadFrame
 from predisat.reconstruct.carving import FrameView, Reconstructor
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
+from predisat.reconstruct.placement import chainage_placement_doubt
 from predisat.storage import (
     Location,
     StorageOptions,
@@ -101,6 +102,13 @@ def chunk_name(lo_m: float, hi_m: float) -> str:
     return f"{_fmt_m(lo_m)}_{_fmt_m(hi_m)}"
 
 
+def _jitter_m(params: PipelineParams) -> float:
+    """How far each frame may be from the others' common error, metres: the jitter, else
+    the doubt (:func:`~predisat.reconstruct.batch.process_survey` resolves both)."""
+    doubt = params.chainage_doubt_m or 0.0
+    return doubt if params.chainage_jitter_m is None else min(params.chainage_jitter_m, doubt)
+
+
 def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstructor:
     """``previous`` when it has the job's parameters, else a new one."""
     p = job.params.reconstruction
@@ -136,23 +144,40 @@ def run_chunk(
             job.reverse, cant=p.cant, grade_doubt_deg=p.grade_doubt_deg,
             imu_doubt_deg=p.imu_doubt_deg, cant_table=p.cant_table,
             speed_kmh=[f.speed_kmh for f, _ in ok_frames],
+            chainage_doubt_m=p.chainage_doubt_m or 0.0,
         )  # fmt: skip
+        # the mounts in the level frame of the vehicle's attitude, which tilts about the
+        # rails and carries the cameras with it (section 16)
+        mounts = [
+            job.cameras[f.side][1].on_vehicle(float(att.roll_deg[k]), float(att.pitch_deg[k]))
+            for k, (f, _) in enumerate(ok_frames)
+        ]
+        tilts = [
+            tilt_shift_m(float(att.roll_deg[k]), float(att.pitch_deg[k]), job.antenna_height_m)
+            for k in range(len(ok_frames))
+        ]
+        # where the cameras stand if the chainages are off (section 18)
+        offsets = [t + np.asarray(m.lever_arm_m, float) for t, m in zip(tilts, mounts, strict=True)]
+        # each camera within the jitter of the others; turned as the track turns over the
+        # whole doubt (the window's common shift is the reconstruction's)
+        placed = chainage_placement_doubt(
+            track, s, offsets, job.antenna_height_m, job.reverse, _jitter_m(p)
+        )
+        turned = chainage_placement_doubt(
+            track, s, offsets, job.antenna_height_m, job.reverse, p.chainage_doubt_m or 0.0
+        ).yaw_deg
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, vehicle_mount = job.cameras[f.side]
-            # the mount in the level frame of the vehicle's attitude, which tilts about the
-            # rails and carries the cameras with it (section 16)
-            roll, pitch = float(att.roll_deg[k]), float(att.pitch_deg[k])
-            mount = vehicle_mount.on_vehicle(roll, pitch)
-            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ tilt_shift_m(
-                roll, pitch, job.antenna_height_m
-            )
+            mount = mounts[k]
+            shift = vehicle_to_enu(float(heading[k]), job.reverse) @ tilts[k]
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
-            doubt = float(att.doubt_deg[k])
+            doubt = float(att.doubt_deg[k] + turned[k])
             # the same doubt moves the camera's centre (the body turns about the rails)
-            along_m, across_m, raised_m = att.camera_doubt_m(
-                k, vehicle_mount.lever_arm_m, job.antenna_height_m
+            along_m, across_m, raised_m = np.add(
+                att.camera_doubt_m(k, vehicle_mount.lever_arm_m, job.antenna_height_m),
+                (placed.along_m[k], placed.across_m[k], placed.up_m[k]),
             )
             views.append(
                 FrameView(

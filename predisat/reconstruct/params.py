@@ -15,6 +15,7 @@ from predisat.track.cant import CantLimits, CantTable
 
 __all__ = [
     "DEFAULT_SEGMENTER",
+    "MAX_CHAINAGE_DOUBT_M",
     "THIN_DEG",
     "PipelineParams",
 ]
@@ -22,6 +23,9 @@ __all__ = [
 # chosen by measurement (docs/segmentation.md); the demo and `predisat process` use it
 DEFAULT_SEGMENTER = "ensemble"
 THIN_DEG = 0.7  # docs/segmentation.md, "Thin-structure policy": wires and cables, not masts
+MAX_CHAINAGE_DOUBT_M = 50.0
+"""Largest chainage doubt a run takes, metres: beyond, a survey says too little about where
+its frames were to bound anything near the track."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,22 @@ class PipelineParams:
         measured roll, it is bounded around that cant and the survey's speed instead of the
         curvature's whole range. Its content's SHA-256 goes into the provenance and the
         resume key.
+    chainage_doubt_m : float, optional
+        How far any frame's true chainage may be from the manifest's, metres: the survey's
+        positioning accuracy along the track, as a bound (a few centimetres with RTK, metres
+        with plain GNSS). Each camera is then bounded from anywhere within it: its centre's
+        doubt box and its sky's erosion grow (``docs/reconstruction.md``, section 18). None
+        (the default): the survey's own statement (``chainage_doubt_m`` in survey.yaml), 0
+        when it makes none; :func:`~predisat.reconstruct.batch.process_survey` resolves it.
+    chainage_jitter_m : float, optional
+        How far the frames within a few hundred metres (a window, ``overlap_m``) may be off
+        from each other's error, metres: the largest ``|e_i - b|`` about an error ``b`` they
+        share (a GNSS/INS's relative accuracy, centimetres over half a minute, against its
+        metres of absolute error). Given below ``chainage_doubt_m``, each frame is bounded
+        within it and the masks take the sky from anywhere within the doubt as a shift of the
+        whole window (``ReconstructionParams.chainage_shift_m``), which costs less sky than
+        bounding every frame within the doubt. None: the survey's ``chainage_jitter_m``, else
+        the doubt itself (nothing assumed about how the errors go together).
     """
 
     chunk_m: float = 1000.0
@@ -81,8 +101,19 @@ class PipelineParams:
     grade_doubt_deg: float = 2.3
     imu_doubt_deg: float = 0.0
     cant_table: CantTable | None = None
+    chainage_doubt_m: float | None = None
+    chainage_jitter_m: float | None = None
 
     def __post_init__(self) -> None:
+        for name in ("chainage_doubt_m", "chainage_jitter_m"):
+            doubt = getattr(self, name)
+            if doubt is not None and not (
+                math.isfinite(doubt) and 0 <= doubt <= MAX_CHAINAGE_DOUBT_M
+            ):
+                raise ValueError(
+                    f"{name} must be a length in [0, {MAX_CHAINAGE_DOUBT_M:g}] metres (the "
+                    f"survey's positioning accuracy along the track), got {doubt}"
+                )
         for name in ("grade_doubt_deg", "imu_doubt_deg"):
             v = getattr(self, name)
             if not (math.isfinite(v) and 0.0 <= v < 10.0):
@@ -117,6 +148,8 @@ class PipelineParams:
             "attitude": {**asdict(self.cant), "grade_doubt_deg": self.grade_doubt_deg,
                          "imu_doubt_deg": self.imu_doubt_deg,
                          "cant_table": _table_record(self.cant_table)},
+            "chainage_doubt_m": self.chainage_doubt_m,
+            "chainage_jitter_m": self.chainage_jitter_m,
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid

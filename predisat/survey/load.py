@@ -50,7 +50,17 @@ from predisat.survey.format import (
 )
 from predisat.track import TrackMap, load_track
 
-__all__ = ["TRACK_AGREE_DEG", "TRACK_AGREE_M", "Survey", "check_survey_track"]
+__all__ = [
+    "MAX_ANTENNA_HEIGHT_M",
+    "TRACK_AGREE_DEG",
+    "TRACK_AGREE_M",
+    "Survey",
+    "check_survey_track",
+]
+
+MAX_ANTENNA_HEIGHT_M = 8.0
+"""Highest antenna above the track axis a survey may state, metres: a rail vehicle's roof
+stands at most 4.65 m (UIC gauge) plus a mast."""
 
 _POSITIONS_HINT = (
     "'left' or 'right' (vehicle side), 'front' or 'rear' (cab) or 'roof' (360-degree camera)"
@@ -78,6 +88,14 @@ class Survey:
         Problems found (frames skipped in ``on_error="skip"`` mode); empty otherwise.
     track : TrackMap or None
         The track the frames were checked and mapped against (given or named in survey.yaml).
+    chainage_doubt_m : float or None
+        The survey's stated positioning accuracy along the track (survey.yaml
+        ``chainage_doubt_m``): no frame's true chainage is further from its stated one,
+        metres. None: the survey does not say.
+    chainage_jitter_m : float or None
+        survey.yaml ``chainage_jitter_m``: how far frames a few hundred metres apart may be
+        off from each other's error (the positioning's relative accuracy), metres; None: not
+        stated.
     """
 
     root: Location
@@ -92,6 +110,8 @@ class Survey:
     version: int = VERSION
     track: TrackMap | None = field(default=None, repr=False)
     storage_options: StorageOptions = field(default_factory=dict, repr=False)
+    chainage_doubt_m: float | None = None
+    chainage_jitter_m: float | None = None
 
     @property
     def reverse(self) -> bool:
@@ -196,6 +216,8 @@ class Survey:
             version=header["version"],
             track=track,
             storage_options=opts,
+            chainage_doubt_m=header["chainage_doubt_m"],
+            chainage_jitter_m=header["chainage_jitter_m"],
         )
 
 
@@ -209,15 +231,20 @@ def _read_header(root: Location, opts: StorageOptions) -> dict[str, Any]:
 
     version, direction = _check_format(doc, bad)
     antenna_height_m = _antenna_height_m(doc, bad)
+    chainage_doubt_m = _chainage_doubt_m(doc, bad, "chainage_doubt_m")
+    chainage_jitter_m = _chainage_doubt_m(doc, bad, "chainage_jitter_m")
     track_name, track_path = _track_spec(root, doc, bad)
     cameras = _read_cameras(root, doc, bad, opts)
     if probs:
         raise SurveyError(root, probs)
-    known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras"}
+    known = {"format", "version", "direction_of_travel", "antenna_height_m", "track", "cameras",
+             "chainage_doubt_m", "chainage_jitter_m"}  # fmt: skip
     return {
         "version": version,
         "direction": direction,
         "antenna_height_m": antenna_height_m,
+        "chainage_doubt_m": chainage_doubt_m,
+        "chainage_jitter_m": chainage_jitter_m,
         "track_name": None if track_name is None else str(track_name),
         "track_path": track_path,
         "cameras": cameras,
@@ -286,7 +313,37 @@ def _antenna_height_m(doc: JsonDict, bad: Callable[[str], None]) -> float:
             "antenna_height_m must be a number (metres above the track axis), "
             f"got {doc.get('antenna_height_m')!r}"
         )
+        return math.nan
+    if not 0.0 < antenna_height_m <= MAX_ANTENNA_HEIGHT_M:
+        # a user trial: -4 trusted blocked directions, 400 (centimetres) lost all the sky
+        bad(
+            f"antenna_height_m {antenna_height_m:g} is not a height above the track axis in "
+            f"metres: it must lie in (0, {MAX_ANTENNA_HEIGHT_M:g}] (a railcar's roof antenna "
+            "stands 3.5-4.5 m up, a trolley's 1-2 m); centimetres or a negative sign?"
+        )
+        return math.nan
     return antenna_height_m
+
+
+def _chainage_doubt_m(doc: JsonDict, bad: Callable[[str], None], key: str) -> float | None:
+    """``chainage_doubt_m`` or ``chainage_jitter_m`` (``key``), metres, None when absent
+    (reported through ``bad`` when not a finite length >= 0)."""
+    value = doc.get(key)
+    if value is None:
+        return None
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        out = float(value)
+        if not (math.isfinite(out) and out >= 0.0):
+            raise ValueError
+    except (TypeError, ValueError):
+        what = ("how far any frame's true chainage may be from the manifest's: 0.05 for RTK, "
+                "3-5 for plain GNSS" if key == "chainage_doubt_m" else
+                "how far frames a few hundred metres apart may be off from each other's error")
+        bad(f"{key} must be a length >= 0 in metres ({what}), got {value!r}")  # fmt: skip
+        return None
+    return out
 
 
 def _track_spec(

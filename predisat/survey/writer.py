@@ -49,6 +49,9 @@ class SurveyWriter:
     track_name : str, optional
     track_path : str, optional
         Track file, relative to the survey folder (written as given).
+    chainage_doubt_m : float, optional
+        The survey's positioning accuracy along the track (survey.yaml ``chainage_doubt_m``,
+        docs/survey-format.md), metres; None: not stated.
     metadata : Mapping, optional
         Free fields for survey.yaml (description, vehicle, date, ...).
     overwrite : bool
@@ -73,6 +76,7 @@ class SurveyWriter:
         antenna_height_m: float = 4.0,
         track_name: str | None = None,
         track_path: str | None = None,
+        chainage_doubt_m: float | None = None,
         metadata: Mapping[str, Any] | None = None,
         overwrite: bool = False,
         flush_every: int = 500,
@@ -97,6 +101,8 @@ class SurveyWriter:
             "antenna_height_m",
             "track",
             "cameras",
+            "chainage_doubt_m",
+            "chainage_jitter_m",
         }
         if clash:
             raise ValueError(
@@ -111,6 +117,13 @@ class SurveyWriter:
         self.cameras = dict(cameras)
         self.direction_of_travel = direction_of_travel
         self.antenna_height_m = float(antenna_height_m)
+        if chainage_doubt_m is not None and not (
+            np.isfinite(chainage_doubt_m) and chainage_doubt_m >= 0.0
+        ):
+            raise ValueError(
+                f"chainage_doubt_m must be a length >= 0 metres, got {chainage_doubt_m}"
+            )
+        self.chainage_doubt_m = None if chainage_doubt_m is None else float(chainage_doubt_m)
         self.track_name, self.track_path = track_name, track_path
         self.metadata = dict(metadata or {})
         self.flush_every = int(flush_every)
@@ -218,6 +231,8 @@ class SurveyWriter:
         track = {k: v for k, v in (("name", self.track_name), ("path", self.track_path)) if v}
         if track:
             doc["track"] = track
+        if self.chainage_doubt_m is not None:
+            doc["chainage_doubt_m"] = self.chainage_doubt_m
         doc["cameras"] = {
             side: {"calibration": f"calib/{side}.yaml", "mount": mount.to_dict()}
             for side, (_, mount) in self.cameras.items()

@@ -287,6 +287,7 @@ def generate_survey(
         antenna_height_m=antenna_height_m,
         track_name=getattr(track, "name", None),
         track_path="track.geojson",
+        chainage_doubt_m=0.0,  # the renderer places every frame exactly
         metadata={
             "description": f"synthetic survey, seed {seed}, sky {sky}",
             "generator": "predisat.synth.generate",

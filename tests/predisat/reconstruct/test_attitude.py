@@ -92,6 +92,33 @@ def test_a_cant_table_and_the_survey_speed_narrow_the_doubt_around_the_true_roll
     assert far.doubt_deg[0] == alone.doubt_deg[0]
 
 
+def test_a_cant_table_in_centimetres_is_ruled_out_by_the_survey_speed(track) -> None:
+    """A table of the right cant divided by ten: the survey vehicle, at its speed there,
+    would have run with far more cant deficiency than any train; the table is not used and
+    the true roll stays within the doubt. Taken at its word it would not be."""
+    s = np.arange(450.0, 1150.0, 10.0)
+    k = track.curvature_at(s)
+    cant = np.round(np.minimum(equilibrium_cant_mm(k, 120.0), 160.0) / 5) * 5
+    nan = np.full(s.size, np.nan)
+    speed = np.full(s.size, 110.0)
+    true = body_roll_deg(k, cant, 110.0)
+    right = frame_attitudes(track, s, nan, nan, False, cant_table=CantTable(s, cant, "mm"),
+                            speed_kmh=speed)  # fmt: skip
+    assert not right.table_ignored.any()
+    cm = CantTable(s, cant / 10.0, "cm")
+    wrong = frame_attitudes(track, s, nan, nan, False, cant_table=cm, speed_kmh=speed)
+    assert wrong.table_ignored.all()  # the whole table, on the straights too
+    assert np.all(np.abs(true - wrong.roll_deg) <= wrong.doubt_deg + 1e-9)
+    # the check it replaces: bounded around the centimetres, the roll is out of the doubt
+    import predisat.reconstruct.attitude as attitude
+
+    taken = attitude._roll_interval(track, s, False, None, cm.cant_mm_at(s), speed)
+    assert np.any((true < taken[0] - 0.5) | (true > taken[1] + 0.5))
+    # without the survey's speed the rule cannot tell (centimetres above 5 mm pass)
+    blind = frame_attitudes(track, s, nan, nan, False, cant_table=cm)
+    assert not blind.table_ignored[cm.cant_mm_at(s) >= 5.0].any()
+
+
 def test_survey_speed_from_each_cameras_frames() -> None:
     t = np.array([0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 5.0])
     s = np.array([0.0, 0.0, 10.0, 10.0, 22.0, 22.0, 30.0])
@@ -284,7 +311,7 @@ def test_process_says_which_rolls_the_track_ruled_out_and_what_a_table_missed() 
     text = " ".join(lines)
     assert "4 of 10 frames give a roll the track rules out (first left_000003)" in text
     assert "the cant table covers 7 of 10 frames" in text
-    assert "under 5 mm at 2 frames" in text
+    assert "ruled out at 2 frames: under 5 mm" in text and "250 mm" in text
     # the 4 contradicted frames are told apart, not counted as unmeasured
     assert "have no measured roll" not in text
 

@@ -394,6 +394,11 @@ def test_missing_columns_are_fatal_even_when_skipping(tmp_path: Path) -> None:
         ({"format": "something-else"}, "format must be 'predisat-survey'"),
         ({"direction_of_travel": "north"}, "direction_of_travel"),
         ({"antenna_height_m": "tall"}, "antenna_height_m"),
+        # a user trial: -4 trusted blocked directions, 400 (centimetres) lost the whole sky
+        ({"antenna_height_m": -4.0}, r"antenna_height_m -4 is not a height .* \(0, 8\]"),
+        ({"antenna_height_m": 400}, r"antenna_height_m 400 .* centimetres"),
+        ({"chainage_doubt_m": -3}, r"chainage_doubt_m must be a length >= 0 .* got -3"),
+        ({"chainage_doubt_m": "rtk"}, r"chainage_doubt_m must be a length"),
         ({"cameras": {"bonnet": {"calibration": "calib/left.yaml"}}}, "camera side 'bonnet'"),
         ({"cameras": {"left": {"calibration": "calib/nope.yaml"}}}, "nope.yaml"),
         ({"cameras": {"left": {"calibration": "calib/left.yaml", "mount": {"tilt": 1}}}}, "tilt"),
@@ -404,6 +409,14 @@ def test_bad_survey_yaml(tmp_path: Path, changes: dict, match: str) -> None:
     _edit_yaml(root, **changes)
     with pytest.raises(SurveyError, match=match):
         Survey.load(root, on_error="skip")
+
+
+def test_the_survey_states_its_chainage_doubt(tmp_path: Path) -> None:
+    root = _write(tmp_path / "s", n=1)
+    assert Survey.load(root).chainage_doubt_m is None  # not stated
+    _edit_yaml(root, chainage_doubt_m=2.5)
+    survey = Survey.load(root)
+    assert survey.chainage_doubt_m == 2.5 and "chainage_doubt_m" not in survey.metadata
 
 
 def test_unsupported_calibration_in_survey(tmp_path: Path) -> None:
