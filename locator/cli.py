@@ -669,7 +669,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "hundred "
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
-    _check_calibration(mf, data)
+    _check_calibration(mf, data, args.constellation)
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     app = mf.applicability
     assert app is not None
@@ -719,11 +719,12 @@ def _station_ecef_m(station: Any, header_ecef_m: Any, path: str) -> Any:
     return x
 
 
-def _check_calibration(mf: Any, data: Any) -> None:
-    """Say which systems the data held and the model left out."""
-    from predisat.availability.satellites import SYSTEM_NAMES
+def _check_calibration(mf: Any, data: Any, constellation: str = "all") -> None:
+    """Say which systems of ``constellation`` the data held and the model left out (the
+    systems ``--constellation`` did not choose are not "left out": a user trial)."""
+    from predisat.availability.satellites import SYSTEM_NAMES, select_satellites
 
-    seen = sorted({s[0] for d in data for s in d.sats})
+    seen = sorted({s[0] for d in data for s in select_satellites(list(d.sats), constellation)})
     left = [c for c in seen if c not in mf.systems]
     if left:
         print("locator calibrate: left out (too few residuals in epochs with 3 satellites of "
@@ -748,7 +749,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     budget = IntegrityBudget(args.integrity_risk)
     table = demo(args.out, world=world, pipeline_masks=pipeline, seed=args.seed, integrity=budget)
-    print(format_demo_table(table))
+    # the runs' own constellation (run.json), and no availability report before it here
+    systems = sorted({str(c).upper() for c in table.get("constellation", [])}) or ["GPS"]
+    print(format_demo_table(table, "+".join(systems), report_above=False))
     print(f"locator demo: done in {time.perf_counter() - t0:.0f} s -> {args.out}")
     return 0
 
@@ -891,8 +894,9 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", type=existing_dir(_SIM), metavar="DIR",
                      help="a simulated run (`locator simulate` folder)")
-    src.add_argument("--obs", type=existing_file("a RINEX 2/3 observation file"),
-                     metavar="FILE", help="a RINEX 2/3 observation file (with --nav)")
+    src.add_argument("--obs", type=existing_file("a RINEX 2, 3 or 4 observation file"),
+                     metavar="FILE", help="a RINEX 2, 3 or 4 observation file, plain, "
+                     "Hatanaka-compressed or gzipped (with --nav)")  # fmt: skip
     src.add_argument("--device-gnss", type=existing_file(_DEVICE_GNSS), metavar="CSV",
                      help=_DEVICE_GNSS + ": a smartphone log carrying its satellite positions "
                      "and corrections (no --nav)")
@@ -963,7 +967,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", nargs="+", type=existing_dir(_SIM), metavar="DIR",
                      help="simulated runs")
-    src.add_argument("--obs", nargs="+", type=existing_file("RINEX 2/3 observation files"),
+    src.add_argument("--obs", nargs="+", type=existing_file("RINEX 2, 3 or 4 observation files"),
                      metavar="FILE", help="static station RINEX observations (several files: "
                      "several days or sites, each at its header position)")  # fmt: skip
     src.add_argument("--device-gnss", nargs="+", type=existing_file(_DEVICE_GNSS),

@@ -16,10 +16,13 @@ from predisat.cli.demo import DemoContext, DemoStepResult
 __all__ = ["DEMO_CONSTELLATION", "STEP", "LocatorDemoStep", "format_demo_table"]
 
 
-def format_demo_table(table: pd.DataFrame, constellations: str = "") -> str:
+def format_demo_table(
+    table: pd.DataFrame, constellations: str = "", report_above: bool = True
+) -> str:
     """The demo's summary table (one row per trust rule) as text, shares in percent, with
     every count of ``summary.csv`` (HMI before and after the checks, MI) and the
-    constellations the run received (the availability report counts GPS only by default)."""
+    constellations the run received (the availability report counts GPS only by default;
+    ``report_above`` False: no report was printed before, ``locator demo``)."""
     cols = {
         "rule": "rule",
         "claim_share": "claim %",
@@ -40,8 +43,9 @@ def format_demo_table(table: pd.DataFrame, constellations: str = "") -> str:
         if gnss == "GPS"
         else "the availability report above counts GPS only"
     )
+    received = f"{gnss} received; {same}" if report_above else f"{gnss} received"
     return str(t.round(1).to_string(index=False)) + (
-        f"\n  ({gnss} received; {same}. MI: epochs whose interval misses the truth without a "
+        f"\n  ({received}. MI: epochs whose interval misses the truth without a "
         "safety claim; HMI: missed while claimed)"
         "\n  (LOCOPROL on line 144: six satellites 60 % of the time; intervals about 70 m, up "
         "to 600 m)"

@@ -36,6 +36,17 @@ def sim_profile(sim: SimRun, constellation: str) -> ReceiverProfile:
     return simulated_profile(sorted({s[0] for s in used}))
 
 
+def _calibrate_hint(args: argparse.Namespace) -> str:
+    """The ``locator calibrate`` call that makes a model for the data of ``args``: a phone's
+    log against its ground truth, else static observations (a user trial: a phone was told to
+    give RINEX)."""
+    if getattr(args, "device_gnss", None):
+        return ("`locator calibrate --device-gnss CSV --truth CSV` (logs of the same phone "
+                "model with their ground truth; docs/errormodel.md)")  # fmt: skip
+    return ("`locator calibrate --obs FILE --nav NAV` (static observations of the same "
+            "receiver, antenna and codes at a known position; docs/errormodel.md)")  # fmt: skip
+
+
 def model_use(
     mf: ErrorModelFile,
     profile: ReceiverProfile,
@@ -100,10 +111,9 @@ def model_use(
         print(
             f"{command}: NO SAFETY CLAIM: {name} does not apply to this data "
             f"({profile.describe()}): {'; '.join(why)}. Positions are given, every epoch flagged "
-            "NO_ERROR_MODEL. Make a model for this receiver with `locator calibrate --obs FILE "
-            "--nav NAV` (static observations of the same receiver, antenna and codes at a known "
-            "position; docs/errormodel.md) and pass it with --error-model (or --force-error-model "
-            "to claim under a model not calibrated for this data: not safe)",
+            f"NO_ERROR_MODEL. Make a model for this receiver with {_calibrate_hint(args)} and "
+            "pass it with --error-model (or --force-error-model to claim under a model not "
+            "calibrated for this data: not safe)",
             file=sys.stderr,
         )
     elif use == "none":

@@ -90,11 +90,11 @@ from predisat.track import TrackMap, TrackMapError, load_track
 __all__ = [
     "AvailabilityRun",
     "attitude_text",
-    "positioning_text",
     "check_masks_on_track",
     "load_navigation",
     "nav_span_gps_s",
     "parse_time",
+    "positioning_text",
     "rig_text",
     "run_availability",
     "sparse_navigation",
@@ -1011,11 +1011,11 @@ def positioning_text(provenance: JsonDict) -> str:
     doubt = float(params["chainage_doubt_m"])
     if doubt == 0.0:
         return "chainages taken as exact (the survey stated no doubt, or 0)"
-    jitter = params.get("chainage_jitter_m")
-    shift = jitter is not None and float(jitter) < doubt
+    raw = params.get("chainage_jitter_m")
+    jitter = doubt if raw is None else float(raw)
     return f"each frame's chainage within {doubt:g} m" + (
-        f", within {float(jitter):g} m of the others' (bounded as a shift of the survey)"
-        if shift else " (each frame bounded on its own)"
+        f", within {jitter:g} m of the others' (bounded as a shift of the survey)"
+        if jitter < doubt else " (each frame bounded on its own)"
     )
 
 

@@ -375,7 +375,7 @@ def test_one_integrity_risk_setting_for_every_command() -> None:
 
     assert k_sigma_value("2") == 2.0 and k_sigma_value("1.65") == 1.65
     for bad in ("0.5", "1.6", "0", "-2"):
-        with pytest.raises(argparse.ArgumentTypeError, match="at least 1.645"):
+        with pytest.raises(argparse.ArgumentTypeError, match=r"at least 1\.645"):
             k_sigma_value(bad)
 
 

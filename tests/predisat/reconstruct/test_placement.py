@@ -154,8 +154,9 @@ def test_process_takes_the_survey_statement_warns_without_one_and_says_so(
     from predisat.reconstruct.params import PipelineParams
     from predisat.synth.generate import generate_survey
 
+    camera = CameraModel.pinhole_from_fov(160, 120, 74.0)
     generate_survey(demo_track(), 3000.0, 3060.0, sky="clear", seed=2, out_dir=tmp_path,
-                    camera=CameraModel.pinhole_from_fov(160, 120, 74.0), progress=False)  # fmt: skip
+                    camera=camera, progress=False)  # fmt: skip
     survey = tmp_path / "survey"
     doc = yaml.safe_load((survey / "survey.yaml").read_text())
     assert doc["chainage_doubt_m"] == 0.0  # a rendered survey places its frames exactly
