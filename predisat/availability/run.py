@@ -70,7 +70,7 @@ from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
-from predisat.masks.fileformat import MaskHoleWarning, mask_file_path, read_masks
+from predisat.masks.fileformat import MaskFileWarning, mask_file_path, read_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import MaskSet
 from predisat.scheduler import Scheduler, TaskRunner
@@ -415,7 +415,7 @@ def _load_masks(
         return closed, "in memory", notes
     loc = location(masks)
     with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", MaskHoleWarning)
+        warnings.simplefilter("always", MaskFileWarning)
         if not is_remote(loc):
             mask_set, label = read_masks(masks), str(mask_file_path(masks))
         else:
@@ -426,7 +426,7 @@ def _load_masks(
                 mask_set, label = read_masks(local_file), str(loc)
     notes = []
     for w in caught:
-        if issubclass(w.category, MaskHoleWarning):
+        if issubclass(w.category, MaskFileWarning):
             notes.append(str(w.message))
         else:  # not ours to report: shown as it would have been
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

@@ -42,7 +42,12 @@ from predisat.cli.common import (
     run_main,
     track_option,
 )
-from predisat.cli.demo import DEMO_CAMERA, availability_table, default_workers
+from predisat.cli.demo import (
+    DEMO_CAMERA,
+    DEMO_CANT_SPEED_KMH,
+    availability_table,
+    default_workers,
+)
 
 if TYPE_CHECKING:
     from predisat.camera.models import CameraModel
@@ -130,7 +135,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         workers=args.workers,
         start_gps_s=start_gps_s,
-        cant_speed_kmh=args.cant_speed_kmh,
+        cant_speed_kmh=None if args.no_cant else args.cant_speed_kmh,
         max_cant_mm=args.max_cant_mm,
         write_attitude=not args.no_imu,
     )
@@ -306,10 +311,17 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--solar-hour", type=finite_float, metavar="H",
                    help="local mean solar time of the first frame on 2024-06-21 (default 10: "
                    "mid-morning; 6-7 or 17.5-18.5 for a low sun with glare and lens flare)")
-    p.add_argument("--cant-speed-kmh", type=positive_float, metavar="KMH",
-                   help="cant the curves for this line speed (equilibrium cant, at most "
-                   "--max-cant-mm): the vehicle rolls toward each curve's inside, as a real "
-                   "one does (default: none, a level vehicle)")
+    cant = p.add_mutually_exclusive_group()
+    cant.add_argument("--cant-speed-kmh", type=positive_float, metavar="KMH",
+                      default=DEMO_CANT_SPEED_KMH,
+                      help="cant the curves for this line speed (equilibrium cant, at most "
+                      "--max-cant-mm): the vehicle rolls toward each curve's inside, as a real "
+                      "one does (default %(default)s, as the demo)")  # fmt: skip
+    cant.add_argument("--no-cant", action="store_true",
+                      help="a line without cant: the vehicle stays level on its curves (process "
+                      "takes a level roll on a sharp curve for an IMU mistake, as a real line's "
+                      "curves carry cant, and bounds it from the track instead: up to 40 points "
+                      "more sky lost)")  # fmt: skip
     p.add_argument("--max-cant-mm", type=positive_float, default=160.0, metavar="MM",
                    help="the largest cant the rendered line gets with --cant-speed-kmh (process's "
                    "own --max-cant-mm, 180, is the limit it assumes of an unknown line)")

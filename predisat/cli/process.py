@@ -177,8 +177,13 @@ def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
             table = CantTable.from_csv(args.cant_table)
         except ValueError as exc:
             raise CliError(f"--cant-table: {exc}") from None
+    try:
+        limits = CantLimits(line_speed_kmh=args.line_speed_kmh, max_cant_mm=args.max_cant_mm)
+    except ValueError as exc:
+        option = "--max-cant-mm" if "max_cant_mm" in str(exc) else "--line-speed-kmh"
+        raise CliError(f"{option}: {exc}") from None
     return {
-        "cant": CantLimits(line_speed_kmh=args.line_speed_kmh, max_cant_mm=args.max_cant_mm),
+        "cant": limits,
         "grade_doubt_deg": args.grade_doubt_deg,
         "imu_doubt_deg": args.imu_doubt_deg,
         "cant_table": table,

@@ -268,11 +268,15 @@ def generate_survey(
 
     run = _Positions.along(world, s, antenna_height_m, speed_mps, start_gps_s, sky, seed)
     if cant_speed_kmh is not None:
-        if not (np.isfinite(cant_speed_kmh) and cant_speed_kmh > 0 and max_cant_mm >= 0):
+        if not (np.isfinite(cant_speed_kmh) and 0 < cant_speed_kmh <= 400 and
+                0 <= max_cant_mm <= 250):  # fmt: skip
             raise ValueError(
-                f"cant_speed_kmh must be a line speed > 0 km/h and max_cant_mm >= 0, got "
-                f"{cant_speed_kmh}, {max_cant_mm}"
+                f"cant_speed_kmh must be a line speed in (0, 400] km/h and max_cant_mm a cant in "
+                f"[0, 250] mm, got {cant_speed_kmh}, {max_cant_mm}"
             )
+        if 0 < max_cant_mm < 1:
+            raise ValueError(f"max_cant_mm {max_cant_mm:g} reads as metres: give millimetres "
+                             f"({1000 * max_cant_mm:g})")  # fmt: skip
         run = run.canted(track, cant_speed_kmh, max_cant_mm, speed_mps * 3.6)
         # the line's cant as its infrastructure records would give it (process --cant-table)
         CantTable(s, design_cant_mm(track, s, cant_speed_kmh, max_cant_mm),

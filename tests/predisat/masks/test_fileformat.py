@@ -643,3 +643,27 @@ def test_the_positions_closing_a_hole_lie_on_the_track_on_a_curve(tmp_path):
     assert np.all(np.abs(proj.offset_m) < 0.5)
     np.testing.assert_allclose(proj.chainage_m, back.chainage_m[new], atol=0.5)
     assert np.all(back.mask_at(np.linspace(4506.0, 5494.0, 300), 0.0) >= 90.0)
+
+
+def test_masks_written_in_radians_are_warned_about_not_refused(tmp_path):
+    """A user trial wrote radians: read silently, they trusted like no mask at all."""
+    import warnings
+
+    from predisat.masks.fileformat import MaskUnitWarning
+
+    n = 5
+    rng = np.random.default_rng(3)
+    deg = rng.uniform(5.0, 60.0, (n, 360))
+
+    def write(values, name):
+        m = MaskSet.from_arrays(np.arange(0.0, 10.0 * n, 10.0), np.full(n, 50.45),
+                                np.linspace(4.45, 4.46, n), np.full(n, 150.0), np.full(n, 60.0),
+                                values)  # fmt: skip
+        return write_masks(m, tmp_path / name)
+
+    with pytest.warns(MaskUnitWarning, match=r"rad\.parquet: every mask value is at most 1\.0"):
+        read_masks(write(np.radians(deg), "rad.parquet"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MaskUnitWarning)
+        read_masks(write(deg, "deg.parquet"))  # degrees: nothing said
+        read_masks(write(np.zeros((n, 360)), "open.parquet"))  # an open sky: nothing said

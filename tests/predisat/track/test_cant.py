@@ -59,6 +59,11 @@ def test_bad_limits_are_refused() -> None:
         CantLimits(line_speed_kmh=0.0)
     with pytest.raises(ValueError, match="flexibility"):
         CantLimits(flexibility=-0.1)
+    # unit slips are refused, naming the unit (a user trial's metres narrowed the bound)
+    for kwargs, what in (({"max_cant_mm": 0.18}, "metres"), ({"line_speed_kmh": 2000.0}, "km/h"),
+                         ({"max_cant_mm": 1000.0}, "millimetres")):  # fmt: skip
+        with pytest.raises(ValueError, match=what):
+            CantLimits(**kwargs)
 
 
 def test_a_known_cant_and_speed_narrow_the_bounds_and_still_contain_the_vehicle() -> None:
