@@ -97,6 +97,7 @@ __all__ = [
     "positioning_text",
     "rig_text",
     "run_availability",
+    "side_swap_notes",
     "sparse_navigation",
     "synthetic_notes",
 ]
@@ -958,8 +959,25 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
-        "warnings": [*notes, *nav.warnings],
+        "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance)],
     }
+
+
+def side_swap_notes(provenance: JsonDict) -> list[str]:
+    """The report's warnings for side cameras whose frames slid the other way from their
+    mount's when the masks were made (``predisat process``'s ``side_check``; section 19 of
+    docs/reconstruction.md)."""
+    check = provenance.get("side_check")
+    if not isinstance(check, dict):
+        return []
+    return [
+        f"the masks were made from a survey whose {side} camera's frames slid the other way "
+        f"from its mount's in {v.get('disagree')} of {v.get('agree', 0) + v.get('disagree', 0)} "
+        "frame pairs: left and right are probably swapped, and such masks trusted 5.7-8 % of "
+        "a survey's directions falsely; do not rely on them before the survey is checked"
+        for side, v in sorted(check.items())
+        if isinstance(v, dict) and v.get("swapped")
+    ]
 
 
 def _track_text(track: TrackMap | None) -> str:

@@ -50,6 +50,7 @@ __all__ = [
     "ChunkJob",
     "chunk_finished",
     "chunk_name",
+    "load_cached",
     "reconstructor_for",
     "run_chunk",
 ]
@@ -128,7 +129,7 @@ def run_chunk(
     views: list[FrameView] = []
     ok_frames = []
     for f in job.frames:
-        cached = _load_cached(f, job.storage_options)
+        cached = load_cached(f, job.storage_options)
         if isinstance(cached, BadFrame):
             bad.append(cached)
             continue
@@ -217,9 +218,10 @@ def run_chunk(
     return job.name, bad
 
 
-def _load_cached(
+def load_cached(
     f: ChunkFrame, opts: StorageOptions
 ) -> tuple[NDArray, NDArray | None, NDArray | None] | BadFrame:
+    """A frame's cached segmentation (sky, confidence, thin), or its failure as a BadFrame."""
     path = location(f.cache_path)
     try:
         source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
