@@ -45,6 +45,7 @@ from predisat.cli.args import (
     positive_int,
     rate_hz,
     requires,
+    seed_value,
     speed_mps,
 )
 from predisat.cli.common import (
@@ -859,7 +860,8 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="length of the run, seconds (default: until 15 m before the world's end)")
     p.add_argument("--rate", type=rate_hz, default=1.0, metavar="HZ",
                    help="epochs per second, Hz")
-    p.add_argument("--seed", type=int, metavar="N", default=0, help="seed of the signal errors")
+    p.add_argument("--seed", type=seed_value, metavar="N", default=0,
+                   help="seed of the signal errors")
     p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="all",
                    help="systems simulated (`locator run --constellation` chooses the ones used): "
                    "gps, gps+galileo, all, or system letters")
@@ -1027,7 +1029,8 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )  # fmt: skip
     p.add_argument("--out", default="locator_demo", type=output_dir, metavar="DIR",
                    help="output folder")
-    p.add_argument("--seed", type=int, metavar="N", default=1, help="seed of the signal errors")
+    p.add_argument("--seed", type=seed_value, metavar="N", default=1,
+                   help="seed of the signal errors")
     p.add_argument("--integrity-risk", type=integrity_risk, metavar="P",
                    default=DEFAULT_RISK_PER_EPOCH,
                    help="integrity risk per epoch the intervals are drawn for (docs/locator.md)")

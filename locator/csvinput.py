@@ -10,8 +10,9 @@ and names the line of the first value that is not a number.
 
 from __future__ import annotations
 
+import csv
 import io
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -148,12 +149,20 @@ def read_csv_table(
                 f"{label}, line {header_line}: the columns are separated by {name}, not commas; "
                 f"save the {what} as comma-separated values (CSV with ',' and '.' for decimals)"
             )
+    names = [c.strip() for c in next(csv.reader([header]))]
+    twice = sorted({c for c in names if c and names.count(c) > 1})
+    if twice:  # pandas would rename the second one and read the first: which one is meant?
+        raise error(f"{label}, line {header_line}: the header names {twice} twice; keep one "
+                    f"column of each ({doc})")  # fmt: skip
+    text = _without_trailing_commas(text, len(names), label, what, error)
     try:
         frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
                             skipinitialspace=True)  # fmt: skip
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise error(f"{label}: cannot read the {what} ({exc}); give a comma-separated file "
-                    f"with columns {columns} ({doc})") from exc  # fmt: skip
+                    f"with columns {columns} ({doc}): a row with more fields than the header "
+                    "holds a comma inside a value (a thousands separator: 4195, not 4,195; a "
+                    "decimal comma: 4.5, not 4,5)") from exc  # fmt: skip
     frame.columns = [str(c).strip() for c in frame.columns]
     missing = [c for c in required if c not in frame.columns]
     if missing:
@@ -169,3 +178,34 @@ def read_csv_table(
     if len(lines) != len(frame):  # a quoted cell across lines: count rows after the header
         lines = header_line + 1 + np.arange(len(frame))
     return CsvTable(frame, lines, label, error)
+
+
+def _without_trailing_commas(
+    text: str, n_fields: int, label: str, what: str, error: Callable[[str], Exception]
+) -> str:
+    """``text`` with the empty last field of rows one field longer than the header dropped (a
+    spreadsheet export's trailing comma: pandas would shift every column by one, a user trial
+    found); a row longer than that is refused with its line and the likely cause."""
+    rows = []
+    for row, line in _rows_with_lines(text):
+        if len(row) == n_fields + 1 and not row[-1].strip():
+            row = row[:-1]
+        elif len(row) > n_fields and any(c.strip() for c in row):
+            raise error(
+                f"{label}, line {line}: {len(row)} fields where the header has {n_fields}: a "
+                "comma inside a value (a thousands separator: 4195, not 4,195; a decimal "
+                f"comma: 4.5, not 4,5), or a quote missing; fix that row of the {what}"
+            )
+        rows.append(row)
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows(rows)
+    return out.getvalue()
+
+
+def _rows_with_lines(text: str) -> Iterator[tuple[list[str], int]]:
+    """The CSV rows of ``text`` with the line each starts on (1 = the first line)."""
+    reader = csv.reader(io.StringIO(text))
+    start = 1
+    for row in reader:
+        yield row, start
+        start = reader.line_num + 1

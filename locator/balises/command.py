@@ -30,6 +30,7 @@ from predisat.cli.args import (
     output_dir,
     positive_float,
     requires,
+    seed_value,
 )
 from predisat.cli.common import add_track_selection, track_option
 
@@ -127,7 +128,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "file): not a safety claim; every epoch flagged FORCED_ERROR_MODEL, "
                    "summary.json records it")
     integrity_options(p)
-    p.add_argument("--seed", type=int, metavar="N", default=0, help="odometer seed")
+    p.add_argument("--seed", type=seed_value, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
         p,

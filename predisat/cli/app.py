@@ -34,6 +34,7 @@ from predisat.cli.args import (
     pitch_deg,
     positive_float,
     positive_int,
+    seed_value,
 )
 from predisat.cli.common import (
     CliError,
@@ -284,7 +285,7 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="end chainage, km (default: the track's end)")
     p.add_argument("--sky", choices=SKY_CHOICES, default="mixed",
                    help="sky condition of the frames (mixed: varies along the run)")
-    p.add_argument("--seed", type=int, metavar="N", default=0,
+    p.add_argument("--seed", type=seed_value, metavar="N", default=0,
                    help="random seed of scenery and sky")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     p.add_argument("--spacing-m", type=positive_float, default=10.0, metavar="M",

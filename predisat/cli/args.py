@@ -305,6 +305,18 @@ def positive_int(value: str) -> int:
     return n
 
 
+def seed_value(value: str) -> int:
+    """A random seed: a whole number in [0, 2**32) (numpy's generators take no negative
+    one, and said so in their own words)."""
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a whole number") from None
+    if not 0 <= n < 2**32:
+        raise argparse.ArgumentTypeError(f"{value} must be a whole number from 0 to 2**32 - 1")
+    return n
+
+
 def positive_float(value: str) -> float:
     """A finite number above 0 (a spacing, a step, a duration)."""
     x = _number(value)

@@ -178,6 +178,9 @@ def add_track_selection(p: argparse.ArgumentParser) -> None:
     )
 
 
+_END_SLACK_KM = 5e-4  # half a metre past a track's end reads as its end
+
+
 def km_range(
     track: TrackMap, from_km: float | None, to_km: float | None
 ) -> tuple[float, float]:
@@ -187,12 +190,13 @@ def km_range(
     hi_km = top_km if to_km is None else float(to_km)
     if not lo_km < hi_km:
         reason = "the start must be below the end (chainage grows along the track)"
-    elif not (0.0 <= lo_km and hi_km <= top_km + 1e-9):
+    elif not (0.0 <= lo_km and hi_km <= top_km + _END_SLACK_KM):
         reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
     else:
-        return lo_km * 1000.0, hi_km * 1000.0
+        # a track's length is a float sum (3999.99999 m for 4 km): its end, given, is taken
+        return lo_km * 1000.0, min(hi_km, top_km) * 1000.0
     hint = ""
-    if lo_km < hi_km and hi_km > top_km and hi_km / 1000.0 <= top_km:
+    if lo_km < hi_km and hi_km > 10.0 * top_km and hi_km / 1000.0 <= top_km:
         hint = (
             f"; the values are kilometres, did you give metres? "
             f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"

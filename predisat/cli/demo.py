@@ -19,7 +19,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from predisat.cli.args import add_command, finite_float, integrity_risk, output_dir, positive_int
+from predisat.cli.args import (
+    add_command,
+    finite_float,
+    integrity_risk,
+    output_dir,
+    positive_int,
+    seed_value,
+)
 from predisat.cli.common import km_range
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 
@@ -446,7 +453,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    f"{quick.image_size_px[0]} x {quick.image_size_px[1]} frames every "
                    f"{quick.spacing_m:g} m, availability every {quick.step_s:g} s (coarser "
                    "masks: its figures are not the demo's)")
-    p.add_argument("--seed", type=int, metavar="N", default=1, help="random seed")
+    p.add_argument("--seed", type=seed_value, metavar="N", default=1, help="random seed")
     p.add_argument("--integrity-risk", type=integrity_risk, metavar="P",
                    default=DEFAULT_RISK_PER_EPOCH,
                    help="integrity risk per epoch the availability report's and the locator "

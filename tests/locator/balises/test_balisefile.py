@@ -105,6 +105,26 @@ def test_separators_and_binary_files(tmp_path, track):
     p.write_text(text.replace(",", ";"))
     with pytest.raises(BaliseFileError, match=r"line 1: the columns are separated by semicolons"):
         BaliseList.from_csv(p, track)
+    # a trailing comma on every row (a spreadsheet export): read as the plain list, not shifted
+    p = tmp_path / "trailing.csv"
+    lines = text.splitlines()
+    p.write_text("\n".join([lines[0], *(line + "," for line in lines[1:])]) + "\n")
+    back = BaliseList.from_csv(p, track)
+    assert back.ids == bl.ids and np.allclose(back.chainage_m, bl.chainage_m)
+    # a column named twice: which one is meant cannot be told
+    p = tmp_path / "twice.csv"
+    head = lines[0].split(",")
+    p.write_text("\n".join([",".join([*head, head[1]]),
+                            *(line + "," + line.split(",")[1] for line in lines[1:])]) + "\n")
+    with pytest.raises(BaliseFileError, match=rf"line 1: the header names \['{head[1]}'\] twice"):
+        BaliseList.from_csv(p, track)
+    # a thousands separator: the fix is said
+    p = tmp_path / "thousands.csv"
+    row = lines[1].split(",")
+    row[1] = "1,234.5"  # a chainage with a thousands separator
+    p.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n")
+    with pytest.raises(BaliseFileError, match=r"thousands separator"):
+        BaliseList.from_csv(p, track)
     p = tmp_path / "b.npz"
     np.savez_compressed(p, x=np.arange(1000.0))
     with pytest.raises(BaliseFileError, match=r"b\.npz, line \d+: byte 0x.. is not text"):

@@ -239,32 +239,34 @@ def test_odometer_accuracy_in_percent_is_refused_with_the_fraction(sim_dir, tmp_
     assert "5 % is 0.05" in err and "OdometerAccuracy(" not in err
 
 
-def test_a_safe_front_missing_the_truth_is_warned_on_the_console(sim_dir, tmp_path, capsys):
+def test_a_log_off_its_bounds_is_refused_and_a_missed_front_is_warned_on_the_console(
+    sim_dir, tmp_path, capsys
+):
+    from locator.balises.command import _truth_warnings
     from locator.odometry.logfile import write_odometer_log
 
     # an odometer over-reading by 20 % (distance and speed alike: the log is consistent) with
-    # bounds claimed at zero: the safe front misses the truth, and the console must say so
+    # bounds claimed at zero: its safe front would miss the truth, so it is refused up front
     sim = SimRun.read(sim_dir)
     log = odometer_along_run(sim, OdometerConfig(), seed=5).log
     p = write_odometer_log(log, tmp_path / "odo.csv")
     df = pd.read_csv(p)
     df.assign(dist_m=1.2 * df["dist_m"], speed_mps=1.2 * df["speed_mps"]).to_csv(
         p, index=False, float_format="%.17g")  # fmt: skip
-    rc = main(["-q", "balises", "--sim", str(sim_dir), "--masks",
-               str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--odometer-log", str(p),
-               "--odometer-accuracy", "0", "0", "0", "--out", str(tmp_path / "b")])  # fmt: skip
+    argv = ["-q", "balises", "--sim", str(sim_dir), "--masks", str(sim_dir / "true_masks.parquet"),
+            "--spacing", "25", "--odometer-log", str(p)]  # fmt: skip
+    rc = main([*argv, "--odometer-accuracy", "0", "0", "0", "--out", str(tmp_path / "b")])
+    assert rc == 2 and "1.2 times the train's distance" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
+    # within the SUBSET-041 bounds it runs; a front the truth shows outside (any other cause)
+    # is warned about loudly, with the hazardous captures
+    rc = main([*argv, "--odometer-accuracy", "5", "0.25", "0.25", "--out", str(tmp_path / "c")])
     assert rc == 0
-    out, err = capsys.readouterr()
-    info = json.loads((tmp_path / "b" / "summary.json").read_text())
-    outside = int(info["safe_front"]["front_outside"])
-    assert outside > 0
-    assert f"WARNING: the true front end was OUTSIDE the safe front interval at {outside} " in err
-    hazardous = sum(r["hazardous"] for r in info["summary"])
-    assert ("HAZARDOUS" in err) == (hazardous > 0)
-    # the table shows both figures
-    header, row = out.splitlines()[:2]
-    cells = dict(zip(header.split(), row.split(), strict=True))
-    assert cells["front_outside"] == str(outside) and cells["hazardous"] == str(hazardous)
+    capsys.readouterr()
+    summary = pd.DataFrame([{"front_outside": 3, "epochs": 41, "hazardous": 1, "config": "r5"}])
+    lines = _truth_warnings(summary, tmp_path / "c")
+    assert "OUTSIDE the safe front interval at 3 of 41 epochs" in lines[0]
+    assert "1 HAZARDOUS capture(s) with r5" in lines[1]
 
 
 def test_balises_never_reached_are_said_so(sim_dir, tmp_path, capsys):

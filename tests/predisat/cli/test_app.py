@@ -56,6 +56,20 @@ def test_km_range_mistakes_get_the_fix(tmp_path, capsys, argv: list[str], expect
     assert not (tmp_path / "o").exists()
 
 
+def test_km_range_takes_the_track_end_and_gives_no_metres_hint_for_a_small_overshoot() -> None:
+    from predisat.cli.common import CliError, km_range
+    from predisat.track import demo_track
+
+    track = demo_track()
+    top_km = track.length_m / 1000.0
+    # the end given rounded up by a float's width (a user trial's 3999.99999 m track, 4 km)
+    assert km_range(track, 0.0, top_km + 1e-7) == (0.0, track.length_m)
+    # past the end by more than a rounding: refused with the track's range, no metres advice
+    with pytest.raises(CliError) as exc:
+        km_range(track, top_km - 1.0, top_km + 1.9)
+    assert "not inside the track" in str(exc.value) and "did you give metres" not in str(exc.value)
+
+
 def test_synth_rejects_missing_track_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "nope.geojson"
     code = cli.main(["synth", "--track", str(missing), "--out", str(tmp_path / "o")])
