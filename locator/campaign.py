@@ -57,7 +57,7 @@ from predisat.atomic import atomic_path
 from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.gnss.ephemeris import Ephemeris
-from predisat.gnss.errormodel import IntervalModel, read_error_model, write_error_model
+from predisat.gnss.errormodel import ErrorModel, IntervalModel, read_error_model, write_error_model
 from predisat.gnss.integrity import IntegrityBudget
 from predisat.masks.maskset import MaskSet
 from predisat.masks.truth import TrueMasks
@@ -90,6 +90,7 @@ __all__ = [
     "load_world",
     "pipeline_world",
     "report",
+    "rule_widths",
     "run_campaign",
     "run_job",
     "stanford",
@@ -359,6 +360,21 @@ def jobs_for(worlds: Sequence[str], runs_per_world: int) -> list[Job]:
     return jobs
 
 
+def rule_widths(configs: Sequence[str], risk_per_epoch: float) -> dict[str, str]:
+    """How wide each rule draws its pair intervals, for the console and ``summary.json`` (a
+    user trial found the campaign naming a k of 2 that its budget rules do not use)."""
+    per_pair = IntervalModel.for_risk(1e-4, ErrorModel()).k_sigma
+    out = {}
+    for name in configs:
+        if name.endswith(("_budget", "_split")):
+            out[name] = f"integrity risk {risk_per_epoch:.3g} per epoch (k by interval mode)"
+        elif name == "masks_k2":
+            out[name] = "k = 2 per pair interval (the learned model's)"
+        else:
+            out[name] = f"k = {per_pair:.2f} per pair interval (1e-4 per pair, the source's)"
+    return out
+
+
 def _rules(setup: CampaignSetup, data: WorldData) -> dict[str, tuple[RunConfig, MaskSet | None]]:
     learned = setup.model
     # k for a 1e-4 two-sided Gaussian risk per pair (the risk the source states for its +-2 xi)
@@ -566,10 +582,13 @@ def run_campaign(
         w: report(g).to_dict(orient="index") for w, g in frames.groupby("world", sort=False)
     }
     _write_parquet(frames, out / "epochs.parquet")
+    widths = rule_widths(setup.configs, setup.risk_per_epoch)
     _write_text(
-        json.dumps({"all": table.to_dict(orient="index"), "per_world": per_world}, indent=1),
+        json.dumps({"all": table.to_dict(orient="index"), "per_world": per_world,
+                    "integrity": {"risk_per_epoch": setup.risk_per_epoch, "per_rule": widths}},
+                   indent=1),
         out / "summary.json",
-    )
+    )  # fmt: skip
     buf = io.StringIO()
     table.to_csv(buf)
     _write_text(buf.getvalue(), out / "summary.csv")

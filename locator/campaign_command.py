@@ -123,6 +123,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         jobs_for,
         load_world,
         pipeline_world,
+        rule_widths,
         run_campaign,
         stanford,
     )
@@ -155,7 +156,11 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     model = calibrate(cache)
-    say(f"error model: {model} ({time.perf_counter() - t:.0f} s)")
+    e = model.error
+    say(f"error model: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / sin el)^2 m^2, learned on "
+        f"the campaign's own simulation ({time.perf_counter() - t:.0f} s)")  # fmt: skip
+    for rule, width in rule_widths(args.configs, args.integrity_risk).items():
+        say(f"  {rule}: {width}")
     worlds = {}
     for spec in WORLDS:
         if spec.name in args.worlds:

@@ -11,7 +11,7 @@ import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -26,7 +26,7 @@ from locator.errorfit import (
 )
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
-from locator.run import RunConfig, run_locator
+from locator.run import RunConfig, claim_label, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
@@ -204,6 +204,8 @@ def run_to_folder(
     }
     folder = write_run(epochs, out, info, fmt)
     title = f"{path.track.name}: trust {config.trust}, {config.locator.width_label()}"
+    if config.error_model_caveat:  # a forced model's intervals are no safety claim: said
+        title += f"; {claim_label(config.error_model_caveat)}"
     write_figures(epochs, folder, title=title)
     return epochs, folder
 
@@ -292,9 +294,26 @@ def evaluate_folder(
     fmt = fmt or ("csv" if (folder / "epochs.csv").is_file() else "parquet")
     write_table(scored, folder, "scored", fmt)
     summary = dict(summarise(scored))
-    (folder / "evaluation.json").write_text(json.dumps(summary, indent=2) + "\n")
-    write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth")
+    # what the claims were drawn under, kept with the scores (a user trial's forced model read
+    # as "claim_share 1.0" with nothing else)
+    rules = _run_rules(meta)
+    (folder / "evaluation.json").write_text(json.dumps({**summary, **rules}, indent=2) + "\n")
+    caption = ", ".join(v for v in (rules["trust"], rules["interval_width"], rules["claims"]) if v)
+    write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth; {caption}")
     return summary
+
+
+def _run_rules(meta: Mapping[str, Any]) -> dict[str, str]:
+    """The trust rule, the interval width and what the claims are, from a run's ``run.json``
+    (empty strings where an older run does not say)."""
+    config = meta.get("config") or {}
+    caveat = str(config.get("error_model_caveat", "")) if isinstance(config, dict) else ""
+    trust = str(config.get("trust", "")) if isinstance(config, dict) else ""
+    return {
+        "trust": f"trust {trust}" if trust else "",
+        "interval_width": str(meta.get("interval_width", "")),
+        "claims": claim_label(caveat),
+    }
 
 
 class ImplausibleFitError(ValueError):

@@ -22,7 +22,7 @@ from locator.balises.capture import CaptureConfig, capture_balises, score_captur
 from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.odometer import OdometerConfig, OdometerLog
 from locator.odometry.simulated import SimOdometer, odometer_along_run, odometer_from_log
-from locator.run import RunConfig, run_locator
+from locator.run import RunConfig, claim_label, run_locator
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from locator.sources import SimSource
@@ -78,6 +78,7 @@ def locate_with_odometry(
     log: OdometerLog | None = None,
     start_error_m: float = 0.0,
     progress: Callable[[int], object] | None = None,
+    constellation: str = "all",
 ) -> LocatedRun:
     """Simulate the odometer along ``sim`` (or take ``log``) and run the locator with its bounds.
 
@@ -106,7 +107,7 @@ def locate_with_odometry(
     cfg = replace(config, odometer=acc)
     ep = run_locator(
         path,
-        SimSource(sim, odometer=so.epoch_odo_m),
+        SimSource(sim, constellation=constellation, odometer=so.epoch_odo_m),
         start_chainage_m=float(np.clip(sim.chainage_m[0] + start_error_m, 0.0, path.length_m)),
         config=cfg,
         masks=masks,
@@ -263,6 +264,7 @@ def balises_to_folder(
     captures: Mapping[str, CaptureConfig] | None = None,
     seed: int = 0,
     meta: Mapping[str, object] | None = None,
+    constellation: str = "all",
     log: OdometerLog | None = None,
     accuracy: OdometerAccuracy | None = None,
     progress: Callable[[int], object] | None = None,
@@ -289,7 +291,8 @@ def balises_to_folder(
     odo_cfg = odometer or OdometerConfig()
     caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
     run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
-                               log=log, accuracy=accuracy, progress=progress)  # fmt: skip
+                               log=log, accuracy=accuracy, progress=progress,
+                               constellation=constellation)  # fmt: skip
     scored = capture_table(run, balises, caps)
     # captures under a forced error model rest on intervals that are no safety claim: the
     # table must say so row by row (it is read without summary.json)
@@ -303,16 +306,24 @@ def balises_to_folder(
     run.epochs.to_parquet(folder / "epochs.parquet")
     # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
     scored.to_csv(folder / "captures.csv", index=False, float_format="%.17g")
+    budget = config.locator.budget
     info = {
         "balises": balises.source, "n_balises": len(balises),
-        "odometer": asdict(odo_cfg), "accuracy": asdict(run.accuracy),
+        # a recorded log replaces the simulated odometer: its settings would mislead
+        "odometer": ({"log": log.source} if log is not None else asdict(odo_cfg)),
+        "accuracy": asdict(run.accuracy),
+        "constellation": constellation,
+        "integrity": (budget.label() if budget is not None
+                      else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
+        "claims": claim_label(config.error_model_caveat),
         "captures": {k: asdict(v) for k, v in caps.items()},
         "summary": summary.to_dict(orient="records"),
         "safe_front": front, **dict(meta or {}),
     }  # fmt: skip
     # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
     (folder / "summary.json").write_text(strict_json_text(info))
-    fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval")
+    fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval "
+                  f"({info['integrity']}; {info['claims']})")
     fig.savefig(folder / "captures.png", dpi=100)
     return summary, folder
 

@@ -18,6 +18,8 @@ import pandas as pd
 from predisat.cli.args import (
     add_checks,
     add_command,
+    constellation,
+    constellation_label,
     cutoff_deg,
     existing_dir,
     existing_file,
@@ -46,8 +48,6 @@ _SPACING_M = 120.0
 _ODOMETER = "trailer-radar"
 _ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
 _MAX_ACCEL_MPS2 = 1.5
-# the systems located with (locate_with_odometry's SimSource: every system of the run)
-_CONSTELLATION = "all"
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
@@ -128,6 +128,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "file): not a safety claim; every epoch flagged FORCED_ERROR_MODEL, "
                    "summary.json records it")
     integrity_options(p)
+    p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="all",
+                   help="systems located with: gps, gps+galileo, all, or system letters (default "
+                   "all: every system the simulated run received, as a balise reader's receiver "
+                   "would; `locator run` defaults to gps)")  # fmt: skip
     p.add_argument("--seed", type=seed_value, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
@@ -221,7 +225,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
         masks = read_masks(args.masks)
     # the error model applies to the simulated receiver or gives no claim, as in `locator run`
     mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
-    profile = sim_profile(sim, _CONSTELLATION)
+    profile = sim_profile(sim, args.constellation)
     model = mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
@@ -255,15 +259,18 @@ def cmd_balises(args: argparse.Namespace) -> int:
     quiet = bool(getattr(args, "quiet", False))
     kind = str(args.odometer_log or args.odometer or _ODOMETER)
     if not quiet:
+        width = (locator.budget.label() if locator.budget is not None
+                 else f"k = {locator.model.k_sigma:g} per pair interval")  # fmt: skip
         print(f"locator balises: {sim.n_epoch} epochs, {len(balises)} balises, trust rule "
-              f"{trust}, odometer {kind}; locating (the first run also compiles the locator)",
-              flush=True)  # fmt: skip
+              f"{trust}, constellation {args.constellation} "
+              f"({constellation_label(args.constellation)}), {width}, odometer {kind}; "
+              "locating (the first run also compiles the locator)", flush=True)  # fmt: skip
     with tqdm(total=sim.n_epoch, desc="locating", unit="epoch", disable=quiet,
               mininterval=0.5) as bar:  # fmt: skip
         summary, folder = balises_to_folder(
             sim, path, balises, args.out, config=cfg, masks=masks,
             odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed,
-            log=log, accuracy=accuracy, progress=bar.update,
+            log=log, accuracy=accuracy, progress=bar.update, constellation=args.constellation,
             meta={"sim": str(args.sim), "odometer_kind": kind, "error_model": model_record},
         )  # fmt: skip
     print(format_summary(summary))

@@ -110,6 +110,12 @@ def test_serial_tables(serial: Path, setup: CampaignSetup) -> None:
     table = pd.read_csv(serial / "summary.csv", index_col="config")
     assert list(table.index) == list(_RULES)
     assert (table["epochs"] == sizes.iloc[0] * 2).all()
+    # each rule's width is named (the console named a k = 2 its budget rules do not use)
+    import json
+
+    widths = json.loads((serial / "summary.json").read_text())["integrity"]
+    assert widths["risk_per_epoch"] == setup.risk_per_epoch
+    assert widths["per_rule"]["masks"].startswith("k = 3.89 per pair interval (1e-4 per pair")
 
 
 def test_resume_after_a_kill_gives_the_same_bytes(

@@ -91,6 +91,9 @@ def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path, capsys):
     ev = json.loads((tmp_path / "masks" / "evaluation.json").read_text())
     scored = pd.read_csv(tmp_path / "masks" / "scored.csv")
     assert ev["epochs"] == sim.n_epoch
+    # the rule the claims were drawn under stays with the scores
+    assert ev["trust"] == "trust masks" and ev["claims"] == "safety claim"
+    assert "integrity risk" in ev["interval_width"] or "k =" in ev["interval_width"]
     assert np.allclose(scored["truth_m"], sim.chainage_m)
     assert ev["hmi"] == int(((scored["claim"]) & ~scored["inside"]).sum())
 

@@ -61,6 +61,9 @@ def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
     assert (out / "captures.png").is_file() and (out / "epochs.parquet").is_file()
     info = json.loads((out / "summary.json").read_text())
     assert info["safe_front"]["front_outside"] == 0
+    # the width setting and the systems are named (a user trial found neither anywhere)
+    assert info["integrity"] == "integrity risk 1e-12 per epoch"
+    assert info["constellation"] == "all" and info["claims"] == "safety claim"
     sim = SimRun.read(sim_dir)
     p = caps[caps["passed"] & (caps["config"] == "r25")]
     assert len(p) >= 4
@@ -97,6 +100,7 @@ def test_a_recorded_odometer_log_is_used_and_a_gap_is_refused(sim_dir, tmp_path,
     assert rc == 0
     info = json.loads((tmp_path / "ok" / "summary.json").read_text())
     assert info["accuracy"]["over_rel"] == 0.05  # a log of unknown odometer: SUBSET-041
+    assert info["odometer"] == {"log": str(p)}  # not the simulated odometer's settings
     assert info["safe_front"]["front_outside"] == 0
     df = pd.read_csv(p)
     df.drop(index=range(100, 110)).to_csv(p, index=False)
