@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from predisat.cli.args import (
     needs,
     output_dir,
 )
-from predisat.jsontypes import strict_json_text
+from predisat.jsontypes import JsonDict, strict_json_text
 from predisat.masks.fileformat import mask_file_path, read_masks
 from predisat.masks.margins import MarginTable
 from predisat.reconstruct.evalfigures import evaluation_figure
@@ -85,10 +86,41 @@ def _share_or_zero(value: str) -> float:
     return 0.0 if value.strip() in ("0", "0.0") else fraction(value)
 
 
+def other_survey_note(provenance: JsonDict, truth: str | Path) -> str | None:
+    """A warning when the truth comes from a generator folder whose survey is not the one the
+    masks were made from (their ``survey_hash``): the positions pair by chainage alone, so the
+    masks of one world scored against another's truth give figures of neither (a user trial
+    read 7.4 % false trust that way). None when they agree or cannot be told."""
+    from predisat.reconstruct.framecache import survey_hash
+    from predisat.survey import Survey, SurveyError
+
+    want = provenance.get("survey_hash")
+    p = Path(truth)
+    gen = p.parent.parent if p.is_file() else (p.parent if p.name == "truth" else p)
+    sibling = gen / "survey"
+    if not want or not (sibling / "survey.yaml").is_file():
+        return None
+    try:
+        got = survey_hash(Survey.load(sibling, check_images=False, on_error="skip"))
+    except (SurveyError, OSError, ValueError):
+        return None
+    if got == want:
+        return None
+    return (
+        f"{truth} is the ground truth of {sibling}, not of the survey the masks were made from "
+        f"({provenance.get('survey', '?')}): positions pair by chainage alone, so the figures "
+        "may score the masks against another world; give the truth of the masks' own survey "
+        "(a changed copy of the same survey is fine if that is what you mean)"
+    )
+
+
 def run(args: argparse.Namespace) -> pd.DataFrame:
     """Run ``predisat evaluate`` from parsed arguments; prints and returns the table."""
     path = mask_file_path(args.masks)
     masks = read_masks(path)
+    note = other_survey_note(masks.provenance, args.truth)
+    if note is not None:
+        print(f"predisat evaluate: warning: {note}", file=sys.stderr)
     comp = compare(masks, load_truth(args.truth))
     margins = MarginTable.from_json(args.margins) if args.margins is not None else None
     out = Path(args.out) if args.out is not None else None

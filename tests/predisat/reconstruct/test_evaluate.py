@@ -403,3 +403,25 @@ def test_no_visible_sky_has_no_sky_lost_share() -> None:
     # with visible sky the share is a number, as before
     seen = evaluate_masks(base)
     assert np.isfinite(seen.loc[seen["n_bins"] > 0, "sky_lost"]).all()
+
+
+def test_evaluate_warns_of_the_truth_of_another_survey(tiny: tuple[Path, Path], tmp_path) -> None:
+    """A user trial scored one world's masks against another's truth and read 7.4 % false
+    trust without a word: positions pair by chainage alone."""
+    import shutil
+
+    from predisat.cli.evaluate import other_survey_note
+    from predisat.masks.fileformat import read_masks
+
+    synth, masks_dir = tiny
+    prov = read_masks(masks_dir / "masks.parquet").provenance
+    for given in (synth, synth / "truth", synth / "truth" / "true_masks.npz"):
+        assert other_survey_note(prov, given) is None  # its own truth, however given
+    other = tmp_path / "other"
+    shutil.copytree(synth / "survey", other / "survey")
+    shutil.copytree(synth / "truth", other / "truth")
+    yaml_path = other / "survey" / "survey.yaml"
+    yaml_path.write_text(yaml_path.read_text().replace("seed 5", "seed 6"))
+    note = other_survey_note(prov, other / "truth")
+    assert note is not None and "not of the survey the masks were made from" in note
+    assert other_survey_note({}, other) is None  # masks that do not say: nothing to tell
