@@ -52,6 +52,15 @@ def test_along_track_round_trip(tmp_path, track):
             lambda df: df.assign(h_m=np.where(df.index == 1, "x", df["h_m"].astype(str))),
             r"line 3: h_m 'x' is not a number; give the ellipsoidal height in metres",
         ),
+        # a chainage 4.8 m from where its coordinates put it, stated to 0.5 m (a user trial's
+        # list was accepted, the telegram's accuracy built on the 0.5 m)
+        (
+            lambda df: df.assign(
+                chainage_m=np.where(df.index == 2, df["chainage_m"] + 4.8, df["chainage_m"]),
+                accuracy_m=0.5,
+            ),
+            r"line 4: balise .* coordinates lie 4\.8 m along the track .* accuracy_m 0\.5",
+        ),
         # an empty telegram is refused, as the format says
         (
             lambda df: df.assign(telegram=np.where(df.index == 2, "", df["telegram"])),
