@@ -468,6 +468,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Survey rig", info.get("rig", "")),
         ("Vehicle attitude", info.get("attitude", "")),
         ("Survey positioning", info.get("positioning", "")),
+        ("Far field", info.get("far_field", "")),
         ("Interval model", info.get("interval_model", "")),
         ("Interval width", info.get("interval_width", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),

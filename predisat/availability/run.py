@@ -72,7 +72,7 @@ from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import MaskFileWarning, mask_file_path, read_masks
 from predisat.masks.gaps import close_gaps
-from predisat.masks.maskset import MaskSet
+from predisat.masks.maskset import BinSource, MaskSet
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
     Location,
@@ -91,6 +91,7 @@ __all__ = [
     "AvailabilityRun",
     "attitude_text",
     "check_masks_on_track",
+    "far_field_text",
     "load_navigation",
     "nav_span_gps_s",
     "parse_time",
@@ -936,6 +937,7 @@ def _run_info(
         "rig": rig_text(masks.provenance),
         "attitude": attitude_text(masks.provenance),
         "positioning": positioning_text(masks.provenance),
+        "far_field": far_field_text(masks),
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,
@@ -961,6 +963,24 @@ def _run_info(
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance)],
     }
+
+
+def far_field_text(masks: MaskSet) -> str:
+    """What the masks' far field rests on where no camera saw it: the elevation tiles they were
+    raised to, or the assumed default, with the share of bins each holds (a user trial found
+    no word of it in the report of a valley)."""
+    terrain = masks.provenance.get("terrain")
+    assumed = 100.0 * float((masks.source == BinSource.ASSUMED).mean())
+    if isinstance(terrain, dict):
+        raised = 100.0 * float((masks.source == BinSource.TERRAIN).mean())
+        return (f"raised to the elevation tiles {terrain.get('dem', '?')} in {raised:.1f} % of "
+                f"the bins; {assumed:.1f} % still assumed")  # fmt: skip
+    params = masks.provenance.get("params")
+    rec = params.get("reconstruction") if isinstance(params, dict) else None
+    if not isinstance(rec, dict) or "far_default_deg" not in rec:
+        return ""  # true masks, older files: they do not say
+    return (f"assumed at {float(rec['far_default_deg']):g}° where no camera saw it "
+            f"({assumed:.1f} % of the bins assumed); no elevation tiles given")  # fmt: skip
 
 
 def side_swap_notes(provenance: JsonDict) -> list[str]:
