@@ -108,9 +108,11 @@ from predisat.track.map import TrackMap
 
 __all__ = [
     "ASSUMED_STRETCH_M",
+    "PAIR_FOCAL_TOL",
     "OutputInUseError",
     "ProcessResult",
     "RunStopped",
+    "camera_pair_warnings",
     "process_survey",
     "source_report",
 ]
@@ -308,6 +310,33 @@ def _load_bad_frames(survey: Survey, chainage_m: NDArray, strict: bool) -> dict[
     for b in bad.values():
         _report(f"bad frame {b.frame_id}: {b.message} - skipped", quiet=False)
     return bad
+
+
+def camera_pair_warnings(survey: Survey) -> list[str]:
+    """Lines for pairs of cameras (left and right, front and rear) whose calibrations differ
+    in model or focal length: a rig of two kinds of camera, or the wrong calibration file for
+    one of them, which only the image size is checked against (a user trial's other camera of
+    the same size trusted 0.6 % of the directions falsely, and nothing said so)."""
+    out = []
+    for a, b in (("left", "right"), ("front", "rear")):
+        if a not in survey.cameras or b not in survey.cameras:
+            continue
+        ca, cb = survey.cameras[a].camera, survey.cameras[b].camera
+        focal = abs(ca.fx / cb.fx - 1.0) if cb.fx else 1.0
+        if ca.model != cb.model or focal > PAIR_FOCAL_TOL:
+            out.append(
+                f"warning: the {a} and {b} cameras' calibrations differ ({a}: {ca.model}, "
+                f"fx {ca.fx:.1f} px; {b}: {cb.model}, fx {cb.fx:.1f} px): two kinds of camera, or "
+                "the wrong calibration file for one of them? Only the image size is checked "
+                "against it, and a calibration of another camera of the same size trusted 0.6 % "
+                "of the directions falsely; check survey.yaml's calibration paths"
+            )
+    return out
+
+
+PAIR_FOCAL_TOL = 0.1
+"""Relative difference of two paired cameras' focal lengths above which ``process`` says so
+(two units of one camera model calibrate within a few percent)."""
 
 
 def _side_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
@@ -1042,6 +1071,8 @@ def process_survey(
         quiet,
     )
     for line in _attitude_warnings(plan.provenance["attitude"]):
+        _report(line, quiet=False)
+    for line in camera_pair_warnings(survey):
         _report(line, quiet=False)
     if chainage_note is not None:
         _report(chainage_note, quiet=False)

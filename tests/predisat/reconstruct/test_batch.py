@@ -928,3 +928,25 @@ def test_the_report_says_what_the_far_field_rests_on() -> None:
     raised = masks({"terrain": {"dem": ["N43E006.hgt"]}})
     assert far_field_text(raised).startswith("raised to the elevation tiles")
     assert far_field_text(masks({})) == ""  # true masks: nothing to say
+
+
+def test_process_says_when_a_pair_of_cameras_is_calibrated_unlike(tmp_path) -> None:
+    """A user trial put another camera's calibration of the same image size in survey.yaml:
+    accepted frame by frame, 0.6 % of the directions trusted falsely."""
+    from types import SimpleNamespace
+
+    from predisat.camera.models import CameraModel
+    from predisat.reconstruct.batch import camera_pair_warnings
+
+    fish = CameraModel.fisheye_from_fov(640, 480, 180.0)
+    pin = CameraModel.pinhole_from_fov(640, 480, 74.0)
+
+    def survey(left, right):
+        return SimpleNamespace(cameras={"left": SimpleNamespace(camera=left),
+                                        "right": SimpleNamespace(camera=right)})  # fmt: skip
+
+    assert camera_pair_warnings(survey(fish, fish)) == []
+    (line,) = camera_pair_warnings(survey(fish, pin))
+    assert "left and right cameras' calibrations differ" in line and "pinhole" in line
+    wider = CameraModel.fisheye_from_fov(640, 480, 150.0)  # same model, 20 % longer focal
+    assert len(camera_pair_warnings(survey(fish, wider))) == 1
