@@ -104,7 +104,12 @@ class Rig:
         ]
         if name == "side-fisheye+cab":
             cams += [(p, fisheye, Mount.default(p)) for p in ("front", "rear")]
-        return cls(name, tuple(cams), _DESCRIPTIONS[name])
+        label = name
+        if side != fisheye or side_pitch_deg != 45.0:
+            # the preset's name alone would say "fisheye" of pinhole side cameras (a user trial)
+            label = (f"{name} with {side.model} side cameras ({side.width_px}x{side.height_px}"
+                     f" px, pitch {float(side_pitch_deg):g} deg)")  # fmt: skip
+        return cls(label, tuple(cams), _DESCRIPTIONS[name])
 
     @property
     def positions(self) -> tuple[Position, ...]:
