@@ -237,7 +237,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
         _report_problems(args.obs, obs.problems)
-        model = RangeModel.from_rinex_nav(args.nav)
+        model = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
@@ -315,7 +315,8 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
 _EXCLUSION_HINTS = {
     "outside_coverage": "the masks do not cover where the train is",
     "NO_DATA": "no navigation record: give --nav files holding every satellite of the day",
-    "OUTSIDE_VALIDITY": "navigation records too old: give the files of the observation day",
+    "OUTSIDE_VALIDITY": "navigation records too far in time: give the files covering the "
+                        "observations (at the start of a day, the day before's too)",
 }
 
 
@@ -403,6 +404,32 @@ _MAX_HEADER_OFFSET_M = 200.0
 
 # Broadcast records are used up to 2 h from their reference epoch (ValidityPolicy).
 _NAV_REACH_S = 7200.0
+
+
+def _broadcast_nav(paths: Sequence[str]) -> Sequence[str]:
+    """``paths``, refused when one is an SP3 orbit file or TLEs: the pseudoranges need the
+    broadcast clocks, group delays and ionosphere (a user trial read a RINEX header error)."""
+    import gzip
+    import itertools
+
+    for path in paths:
+        try:
+            opener = gzip.open if str(path).endswith(".gz") else open
+            with opener(path, "rt", errors="replace") as fh:
+                lines = [fh.readline() for _ in range(40)]
+        except (OSError, EOFError):
+            continue  # the reader says what is wrong with it
+        body = [s for s in lines if s.strip() and not s.startswith("#")]
+        tle = any(a.startswith("1 ") and b.startswith("2 ") for a, b in itertools.pairwise(body))
+        kind = ("an SP3 orbit file" if lines[0][:2] in ("#a", "#b", "#c", "#d")
+                else "two-line elements (TLE)" if tle else "")  # fmt: skip
+        if kind:
+            raise CliError(
+                f"{path}: {kind}: `run` and `calibrate` correct the pseudoranges with the "
+                "broadcast clocks, group delays and ionosphere, which only broadcast RINEX "
+                "navigation carries; give the day's RINEX navigation files (*N.rnx, *.yyn)"
+            )
+    return paths
 
 
 def _one_clock(source: Any, obs_path: str) -> None:
@@ -622,7 +649,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from locator.observations import Observations
         from locator.sources import RinexSource
 
-        ranges = RangeModel.from_rinex_nav(args.nav)
+        ranges = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         data, stations = [], []
         seen_epochs: list[tuple[Any, Any]] = []
         for path in args.obs:
@@ -763,6 +790,9 @@ _MASKS = ("a mask file (masks.parquet of `predisat process`, or a simulation's "
 _SIM = "a `locator simulate` output folder (epochs, meta.json, world.npz)"
 _ERROR_MODEL = "a pseudorange error model JSON written by `locator calibrate`"
 _NAV = "RINEX navigation, SP3 or TLE files"
+# run and calibrate correct the pseudoranges with the broadcast clocks, group delays and
+# ionosphere: SP3 orbits or TLEs do not carry them (a user trial was told they would do)
+_BROADCAST_NAV = "broadcast RINEX navigation files (not SP3 or TLE: the corrections need them)"
 _TRACK = "a track map: GeoJSON line(s) or a lat,lon[,h] CSV (docs/track-map.md)"
 
 
@@ -902,9 +932,10 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     src.add_argument("--device-gnss", type=existing_file(_DEVICE_GNSS), metavar="CSV",
                      help=_DEVICE_GNSS + ": a smartphone log carrying its satellite positions "
                      "and corrections (no --nav)")
-    p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
-                   help="broadcast navigation files of the observation day (required with --obs, "
-                   "no default)")
+    p.add_argument("--nav", nargs="+", type=existing_file(_BROADCAST_NAV), metavar="FILE",
+                   help="broadcast RINEX navigation files of the observation day (required with "
+                   "--obs, no default; SP3 and TLE do not carry the clock and ionosphere "
+                   "corrections)")
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's, or line 144)")
     p.add_argument("--track-name", metavar="NAME",
@@ -981,8 +1012,8 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     p.add_argument("--states", metavar="LIST",
                    help="with --sim: signal states to learn from, comma separated, of los, "
                    "multipath, nlos (default: los)")
-    p.add_argument("--nav", nargs="+", type=existing_file(_NAV), metavar="FILE",
-                   help="with --obs: broadcast navigation files covering every --obs file "
+    p.add_argument("--nav", nargs="+", type=existing_file(_BROADCAST_NAV), metavar="FILE",
+                   help="with --obs: broadcast RINEX navigation files covering every --obs file "
                    "(required, no default)")  # fmt: skip
     p.add_argument("--station", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                    help="with one --obs file: station ECEF, metres (default: the RINEX header "

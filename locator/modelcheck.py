@@ -119,7 +119,7 @@ def model_use(
     elif use == "none":
         print(
             f"{command}: NO SAFETY CLAIM: the integrity risk asks for pair intervals of k up "
-            f"to {k_max:.2f}, deeper than {name} was checked: {'; '.join(short)}. Positions "
+            f"to {k_max:.3f}, deeper than {name} was checked: {'; '.join(short)}. Positions "
             "are given, every epoch flagged NO_ERROR_MODEL. Calibrate on more data, claim a "
             "larger risk (--integrity-risk, or --k-sigma within the checked k)"
             + (", or pass --assume-gaussian-tail to claim under the Gaussian shape beyond the "

@@ -389,7 +389,7 @@ class ErrorModelFile:
                 continue
             why.append(
                 f"system {sys_} was checked to {m.tail_probability:.2g} per pseudorange "
-                f"(k {m.k_checked:.2f}, {m.n_independent} independent samples); k {k_sigma:.2f} "
+                f"(k {m.k_checked:.3f}, {m.n_independent} independent samples); k {k_sigma:.3f} "
                 f"claims {need:.1g}, which needs about {10.0 / need:.2g} independent samples in "
                 "each elevation bin"
             )

@@ -538,3 +538,14 @@ def test_a_rinex_file_without_an_epoch_is_named_not_a_numpy_error(test_data, tmp
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert name in err and what in err and "zero-size" not in err
+
+
+def test_run_refuses_sp3_or_tle_for_navigation_naming_what_it_needs(test_data, tmp_path, capsys):
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    for nav in (test_data / "gnss" / "igs15904_G01G02G05.sp3",
+                test_data / "gnss" / "TLE_GNSS_20121101.txt"):  # fmt: skip
+        argv = ["run", "--obs", str(obs), "--nav", str(nav), "--no-masks",
+                "--out", str(tmp_path / "x")]  # fmt: skip
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert nav.name in err and "broadcast RINEX navigation" in err
