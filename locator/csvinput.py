@@ -149,7 +149,7 @@ def read_csv_table(
                 f"{label}, line {header_line}: the columns are separated by {name}, not commas; "
                 f"save the {what} as comma-separated values (CSV with ',' and '.' for decimals)"
             )
-    names = [c.strip() for c in next(csv.reader([header]))]
+    names = [c.strip() for c in next(csv.reader([header], skipinitialspace=True))]
     twice = sorted({c for c in names if c and names.count(c) > 1})
     if twice:  # pandas would rename the second one and read the first: which one is meant?
         raise error(f"{label}, line {header_line}: the header names {twice} twice; keep one "
@@ -183,28 +183,34 @@ def read_csv_table(
 def _without_trailing_commas(
     text: str, n_fields: int, label: str, what: str, error: Callable[[str], Exception]
 ) -> str:
-    """``text`` with the empty last field of rows one field longer than the header dropped (a
-    spreadsheet export's trailing comma: pandas would shift every column by one, a user trial
-    found); a row longer than that is refused with its line and the likely cause."""
-    rows = []
-    for row, line in _rows_with_lines(text):
-        if len(row) == n_fields + 1 and not row[-1].strip():
-            row = row[:-1]
-        elif len(row) > n_fields and any(c.strip() for c in row):
-            raise error(
-                f"{label}, line {line}: {len(row)} fields where the header has {n_fields}: a "
-                "comma inside a value (a thousands separator: 4195, not 4,195; a decimal "
-                f"comma: 4.5, not 4,5), or a quote missing; fix that row of the {what}"
-            )
-        rows.append(row)
+    """``text`` with the empty last field dropped when every data row has one more field than
+    the header and that field is empty: a spreadsheet export's trailing comma, which pandas
+    would read as a shift of every column (a user trial's "h_m '005A00' is not a number").
+    Any other file is returned as it is (pandas refuses a row longer than the header)."""
+    rows = list(_rows_with_lines(text))
+    data = [(row, line) for row, line in rows[1:] if any(c.strip() for c in row)]
+    if not data or not all(len(r) == n_fields + 1 and not r[-1].strip() for r, _ in data):
+        # pandas takes a first data row one field longer for an index column: every value of
+        # the file shifted; a longer row anywhere is refused here, with its line
+        for row, line in data:
+            if len(row) > n_fields:
+                raise error(
+                    f"{label}, line {line}: {len(row)} fields where the header has {n_fields}: "
+                    "a comma inside a value (a thousands separator: 4195, not 4,195; a decimal "
+                    f"comma: 4.5, not 4,5), or a quote missing; fix that row of the {what}"
+                )
+        return text
     out = io.StringIO()
-    csv.writer(out, lineterminator="\n").writerows(rows)
+    writer = csv.writer(out, lineterminator="\n")
+    for k, (row, _) in enumerate(rows):
+        writer.writerow(row if k == 0 or not any(c.strip() for c in row) else row[:-1])
     return out.getvalue()
 
 
 def _rows_with_lines(text: str) -> Iterator[tuple[list[str], int]]:
-    """The CSV rows of ``text`` with the line each starts on (1 = the first line)."""
-    reader = csv.reader(io.StringIO(text))
+    """The CSV rows of ``text`` (spaces after the commas skipped, as pandas reads them) with
+    the line each starts on (1 = the first line)."""
+    reader = csv.reader(io.StringIO(text), skipinitialspace=True)
     start = 1
     for row in reader:
         yield row, start
