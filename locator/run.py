@@ -339,7 +339,7 @@ def run_locator(
                 path, cfg, masks, data, az, el, p_lo, p_hi, excluded, beacons, el_trust
             )
         else:
-            trusted = _trust(cfg, masks, p_lo, p_hi, az, el_trust, data.sats, excluded)
+            trusted = _trust(cfg, masks, p_lo, p_hi, az, el_trust, data.sats, excluded, el)
             idx = np.flatnonzero(trusted)
             fix, uncorrected = _fix(path, cfg, data, el, idx, centre)
             conflict = False
@@ -545,7 +545,7 @@ def _split_fix(
                                 extra_margin_deg=cfg.extra_margin_deg)  # fmt: skip
     n = len(stretches)
     if n == 1:  # one trusted set over the whole prediction: the single set's decision exactly
-        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el_t, data.sats, excluded))
+        idx = np.flatnonzero(_trust(cfg, masks, p_lo, p_hi, az, el_t, data.sats, excluded, el))
         fix, uncorrected = _fix(path, cfg, data, el, idx, 0.5 * (p_lo + p_hi))
         return fix, idx, uncorrected, False
     fixes: list[Fix | None] = []
@@ -635,8 +635,12 @@ def _trust(
     el: NDArray,
     sats: tuple[str, ...],
     excluded: dict[str, str],
+    el_fix: NDArray | None = None,
 ) -> NDArray:
-    """Trusted satellites of the epoch; records the reason of every other one in ``excluded``."""
+    """Trusted satellites of the epoch; records the reason of every other one in ``excluded``.
+    ``el`` is the elevation the trust decision takes (the lowest over a long prediction);
+    ``el_fix`` (default ``el``) the one the fix weighs, which the model's upper elevation
+    bounds."""
     if len(sats) == 0:
         return np.zeros(0, bool)
     if cfg.trust == "masks":
@@ -658,7 +662,7 @@ def _trust(
             excluded[str(s)] = "below_model"
         trusted = trusted & ~low
     if cfg.model_el_max_deg < 90.0:
-        high = trusted & ~(el <= cfg.model_el_max_deg)
+        high = trusted & ~((el if el_fix is None else el_fix) <= cfg.model_el_max_deg)
         for s in np.asarray(sats)[high]:
             excluded[str(s)] = "above_model"
         trusted = trusted & ~high

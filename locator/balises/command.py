@@ -248,10 +248,10 @@ def cmd_balises(args: argparse.Namespace) -> int:
         a, over, under = args.odometer_accuracy
         accuracy = OdometerAccuracy(a, over, under)
     if log is not None and accuracy is not None:
-        from locator.odometry.simulated import check_log_against_run
+        from locator.odometry.simulated import odometer_from_log
 
-        check_log_against_run(sim, log, accuracy.abs_error_m, accuracy.over_rel,
-                              accuracy.under_rel)  # fmt: skip
+        # before any work: the log's coverage, direction and bounds against the run
+        odometer_from_log(sim, log, accuracy=accuracy)
     caps = {
         f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
         for r in args.radius

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicHermiteSpline
 
+from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.logfile import OdometerLogError
 from locator.odometry.odometer import OdometerConfig, OdometerLog, simulate_odometer
 from locator.sim.simfile import SimRun
@@ -97,16 +98,14 @@ def _truth_grid(sim: SimRun, cycle_s: float) -> tuple[int, NDArray, NDArray]:
     return o, tc, np.maximum.accumulate(true_d)  # a simulated train never runs backward
 
 
-def check_log_against_run(
-    sim: SimRun, log: OdometerLog, abs_error_m: float, over_rel: float, under_rel: float
-) -> None:
+def check_log_against_run(sim: SimRun, log: OdometerLog, accuracy: OdometerAccuracy) -> None:
     """Refuse a log whose distance leaves its stated accuracy over the run it is paired with.
 
-    The confidence interval bounds the odometer's error by ``abs_error_m`` plus ``over_rel``
-    (``under_rel``) of the distance (``--odometer-accuracy``): a log further off than that at
-    an epoch (a log in feet, scaled, shifted in time, or standing still) would put the train
-    outside its own safe fronts. A user trial measured 18-30 of 41 epochs with the true front
-    outside, with no error.
+    The confidence interval bounds the true displacement from the logged one
+    (:meth:`~locator.odometry.confidence.OdometerAccuracy.displacement_bounds_m`, the bounds
+    ``--odometer-accuracy`` states): a log further off than that at an epoch (a log in feet,
+    scaled, shifted in time, or standing still) puts the train outside its own safe fronts. A
+    user trial measured 18-30 of 41 epochs with the true front outside, with no error.
 
     Raises
     ------
@@ -115,25 +114,22 @@ def check_log_against_run(
     """
     t = np.asarray(sim.gps_s, float)
     name = log.source or "the odometer log"
-    _o, tc, true_d = _truth_grid(sim, 0.1 if len(t) < 2 else _cycle_of(t))
+    _, tc, true_d = _truth_grid(sim, _cycle_of(t))
     run_m = np.interp(t - t[0], tc, true_d)
     d = log.at(t)
     logged_m = d - d[0]
-    over = logged_m - run_m > abs_error_m + over_rel * run_m
-    under = run_m - logged_m > abs_error_m + under_rel * run_m
-    bad = np.flatnonzero(over | under)
+    lo, hi = accuracy.displacement_bounds_m(logged_m)
+    bad = np.flatnonzero((run_m < lo - 1e-9) | (run_m > hi + 1e-9))
     if bad.size == 0:
         return
     k = int(bad[0])
     ratio = float(logged_m[-1] / run_m[-1]) if run_m[-1] > 1.0 else float("nan")
-    hint = _scale_hint(ratio)
     raise OdometerLogError(
         f"{name}: at t_s {t[k]:.1f} its dist_m has run {logged_m[k]:.1f} m since the run's "
-        f"first epoch, the train {run_m[k]:.1f} m: beyond the odometer's accuracy "
-        f"({abs_error_m:g} m + {100 * max(over_rel, under_rel):g} %), so its safe fronts would "
-        f"not hold the train ({bad.size} of {t.size} epochs){hint}; check the log's unit, its "
-        "times (GPS seconds of the run) and its scale, or state its accuracy "
-        "(--odometer-accuracy)"
+        f"first epoch, the train {run_m[k]:.1f} m: outside the odometer's bounds for that "
+        f"reading ({lo[k]:.1f}-{hi[k]:.1f} m), so its safe fronts would not hold the train "
+        f"({bad.size} of {t.size} epochs){_scale_hint(ratio)}; check the log's unit, its times "
+        "(GPS seconds of the run) and its scale, or state its accuracy (--odometer-accuracy)"
     )
 
 
@@ -175,7 +171,12 @@ def odometer_along_run(sim: SimRun, config: OdometerConfig, seed: int = 0) -> Si
     return SimOdometer(log, o, epoch_odo, t0 + tc, float(sim.chainage_m[0]) + o * true_d)
 
 
-def odometer_from_log(sim: SimRun, log: OdometerLog, cycle_s: float = 0.1) -> SimOdometer:
+def odometer_from_log(
+    sim: SimRun,
+    log: OdometerLog,
+    cycle_s: float = 0.1,
+    accuracy: OdometerAccuracy | None = None,
+) -> SimOdometer:
     """A recorded (or separately simulated) odometer log for a simulated run.
 
     The log's times are the run's GPS seconds and its distance runs along the train's forward
@@ -206,5 +207,7 @@ def odometer_from_log(sim: SimRun, log: OdometerLog, cycle_s: float = 0.1) -> Si
             "in the direction of travel; if it was recorded from the other cab (or with the "
             "other sign convention), negate dist_m and direction"
         )
+    if accuracy is not None:  # after the coverage and direction checks: their hints first
+        check_log_against_run(sim, log, accuracy)
     epoch_odo = o * (d - d[0])
     return SimOdometer(log, o, epoch_odo, t[0] + tc, float(sim.chainage_m[0]) + o * true_d)

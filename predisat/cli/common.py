@@ -188,13 +188,14 @@ def km_range(
     top_km = track.length_m / 1000.0
     lo_km = 0.0 if from_km is None else float(from_km)
     hi_km = top_km if to_km is None else float(to_km)
+    if top_km < hi_km <= top_km + _END_SLACK_KM:
+        hi_km = top_km  # a track's length is a float sum (3999.99999 m for 4 km): its end
     if not lo_km < hi_km:
         reason = "the start must be below the end (chainage grows along the track)"
-    elif not (0.0 <= lo_km and hi_km <= top_km + _END_SLACK_KM):
+    elif not (0.0 <= lo_km and hi_km <= top_km):
         reason = f"not inside the track ({track.name}: 0-{top_km:.3f} km of chainage)"
     else:
-        # a track's length is a float sum (3999.99999 m for 4 km): its end, given, is taken
-        return lo_km * 1000.0, min(hi_km, top_km) * 1000.0
+        return lo_km * 1000.0, hi_km * 1000.0
     hint = ""
     if lo_km < hi_km and hi_km > 10.0 * top_km and hi_km / 1000.0 <= top_km:
         hint = (

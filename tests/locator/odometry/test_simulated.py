@@ -8,10 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.logfile import OdometerLogError, read_odometer_log
 from locator.odometry.simulated import check_log_against_run, odometer_from_log
 
 T0_S = 1277107200.0
+SUBSET041 = OdometerAccuracy.subset041()
 
 
 def _run(direction: int = 1):
@@ -83,18 +85,17 @@ def test_a_log_off_its_accuracy_is_refused(tmp_path, scale, shift_s, match):
         p = tmp_path / "odo.csv"
         pd.DataFrame({"t_s": tl, "dist_m": 0.25 * late**2, "speed_mps": 0.5 * late,
                       "direction": 1}).to_csv(p, index=False, float_format="%.17g")  # fmt: skip
-        check_log_against_run(run, _log_of(tmp_path, run), 5.0, 0.05, 0.05)  # on time: passes
+        check_log_against_run(run, _log_of(tmp_path, run), SUBSET041)  # on time: passes
         log = read_odometer_log(p)
     with pytest.raises(OdometerLogError, match=match) as exc:
-        check_log_against_run(run, log, 5.0, 0.05, 0.05)
+        check_log_against_run(run, log, SUBSET041)
     assert str(tmp_path / "odo.csv") in str(exc.value) and "--odometer-accuracy" in str(exc.value)
 
 
 def test_a_log_within_its_accuracy_passes(tmp_path):
     # 4 % long (within 5 m + 5 %), and the exact one
     for scale in (1.04, 1.0):
-        check_log_against_run(_run(), _log(tmp_path, T0_S - 5.0, 40.0, scale=scale), 5.0, 0.05,
-                              0.05)  # fmt: skip
+        check_log_against_run(_run(), _log(tmp_path, T0_S - 5.0, 40.0, scale=scale), SUBSET041)
 
 
 def _log_of(tmp_path, run):

@@ -64,6 +64,9 @@ def test_km_range_takes_the_track_end_and_gives_no_metres_hint_for_a_small_overs
     top_km = track.length_m / 1000.0
     # the end given rounded up by a float's width (a user trial's 3999.99999 m track, 4 km)
     assert km_range(track, 0.0, top_km + 1e-7) == (0.0, track.length_m)
+    # a start within the rounding of the end is no stretch (the end is clamped first)
+    with pytest.raises(CliError, match="start must be below the end"):
+        km_range(track, top_km + 2e-4, top_km + 4e-4)
     # past the end by more than a rounding: refused with the track's range, no metres advice
     with pytest.raises(CliError) as exc:
         km_range(track, top_km - 1.0, top_km + 1.9)
