@@ -60,6 +60,7 @@ from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
 from predisat.reconstruct.attitude import (
     CANT_DEFICIENCY_TOL_MM,
     CANT_ON_SHARP_MM,
+    CANT_TABLE_FLOOR_MM,
     STRAIGHT_PER_M,
     frame_attitudes,
     survey_speed_kmh,
@@ -488,8 +489,9 @@ def _attitude_warnings(summary: JsonDict) -> list[str]:
             f"{CANT_ON_SHARP_MM:g} mm on curves sharper than R = 1 km, which carry cant, or so "
             "low that the survey vehicle would have run with more cant deficiency than trains "
             f"do ({summary.get('max_deficiency_mm', 150.0) + CANT_DEFICIENCY_TOL_MM:g} mm) at "
-            "its speed there: not used there, bounded from the curves instead (is it in "
-            "millimetres, and the right track's?)"
+            f"its speed there, or never {CANT_TABLE_FLOOR_MM:g} mm on those curves: not used "
+            "there, bounded from the curves instead (is it in millimetres, and the right "
+            "track's?)"
         )
     off = int(summary.get("cant_off_curve_frames", 0))
     if off:
