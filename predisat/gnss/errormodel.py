@@ -19,6 +19,7 @@ applicability block and applies to nothing unless the user forces it.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,6 +211,20 @@ class SystemModel:
     n_residuals: int
     n_independent: int
     tail_probability: float
+
+    def __post_init__(self) -> None:
+        # a user trial's hand-edited files were taken as they were: tail_probability 5.0
+        # (then blamed on "0 independent samples"), n_independent -5, codes "sim" (three codes)
+        if not self.codes or not all(isinstance(c, str) and c for c in self.codes):
+            raise ValueError(f"codes must be a list of observation codes, got {self.codes!r}")
+        if not 0 <= self.n_independent <= self.n_residuals:
+            raise ValueError(
+                f"n_independent must lie in [0, n_residuals = {self.n_residuals}], got "
+                f"{self.n_independent}"
+            )
+        p = self.tail_probability
+        if not (math.isnan(p) or 0.0 < p <= 1.0):  # 1: nothing checked
+            raise ValueError(f"tail_probability must be a probability in (0, 1] or null, got {p}")
 
     @property
     def k_checked(self) -> float:
@@ -505,6 +520,14 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             f"{p}: not a JSON text file ({exc}); give the file `locator calibrate` wrote"
         ) from exc
     fmt = d.get("format") if isinstance(d, dict) else None
+    if isinstance(fmt, str) and fmt.startswith("locator-error-model/") and fmt not in (
+        ERROR_MODEL_FORMAT, ERROR_MODEL_FORMAT_V1
+    ):
+        raise ErrorModelFileError(
+            f"{p}: an error-model file of another version ({fmt}); this locator reads "
+            f"{ERROR_MODEL_FORMAT} and {ERROR_MODEL_FORMAT_V1}: use the locator that wrote it, or "
+            "calibrate again with this one"
+        )
     if fmt not in (ERROR_MODEL_FORMAT, ERROR_MODEL_FORMAT_V1):
         raise ErrorModelFileError(
             f"{p}: not an error-model file ({ERROR_MODEL_FORMAT} or {ERROR_MODEL_FORMAT_V1}); "
@@ -524,7 +547,7 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
         systems = {
             str(s): SystemModel(
                 ErrorModel(float(m["a_m"]), float(m["b_m"]), float(m.get("min_el_deg", 1.0))),
-                tuple(str(c) for c in m["codes"]),
+                _codes(m["codes"]),
                 int(m["n_residuals"]),
                 int(m["n_independent"]),
                 float("nan") if m.get("tail_probability") is None else float(m["tail_probability"]),
@@ -549,6 +572,16 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             "(receivers, antennas, el_min_deg, el_max_deg); write it again with `locator calibrate`"
         ) from exc
     return ErrorModelFile(model, systems, app, str(p), fmt)
+
+
+def _codes(value: object) -> tuple[str, ...]:
+    """A system's ``codes`` of a model file: a list of strings (a bare string, read letter by
+    letter, would name codes nobody tracks)."""
+    if isinstance(value, str) or not isinstance(value, (list, tuple)):
+        raise ValueError(
+            f"codes must be a list of observation codes, e.g. [\"C1C\"], got {value!r}"
+        )
+    return tuple(str(c) for c in value)
 
 
 def _check_frequency_and_class(frequency: str, receiver_class: str) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -97,6 +98,32 @@ def test_default_model_applies_to_simulations_only():
     assert d.mismatches(sim) == []
     assert d.mismatches(_profile()) != []
     assert d.mismatches(_profile("Unknown", "Unknown", receiver_class="phone")) != []
+
+
+@pytest.mark.parametrize(
+    ("edit", "what"),
+    [
+        (lambda s: s.update(tail_probability=5.0), "tail_probability must be a probability"),
+        (lambda s: s.update(n_independent=-5), "n_independent must lie in"),
+        (lambda s: s.update(codes="C1C"), "codes must be a list"),
+    ],
+)
+def test_hand_edited_model_values_are_refused_naming_the_field(tmp_path, model_file, edit, what):
+    """A user trial's edited files were taken as they were (a tail of 5.0 was then blamed on
+    "0 independent samples"; codes "sim" read as three codes)."""
+    doc = json.loads(Path(model_file.path).read_text())
+    edit(doc["systems"]["G"])
+    p = tmp_path / "edited.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(ErrorModelFileError, match=rf"edited\.json: bad .*{what}"):
+        read_error_model_file(p)
+
+
+def test_a_newer_model_format_is_named_as_such(tmp_path):
+    p = tmp_path / "v3.json"
+    p.write_text(json.dumps({"format": "locator-error-model/3", "a_m": 1.0, "b_m": 2.0}))
+    with pytest.raises(ErrorModelFileError, match=r"another version \(locator-error-model/3\)"):
+        read_error_model_file(p)
 
 
 def test_bad_v2_file_is_named(tmp_path):
