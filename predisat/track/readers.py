@@ -128,12 +128,51 @@ def _load_json(path: Path) -> Any:
     if not text.strip():
         raise TrackMapError(f"{path}: the file is empty; expected a GeoJSON FeatureCollection")
     try:
-        return json.loads(text)
+        doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise TrackMapError(
             f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); "
             "expected a GeoJSON FeatureCollection"
         ) from None
+    return _to_lonlat(doc, path)
+
+
+def _to_lonlat(doc: Any, path: Path) -> Any:
+    """``doc`` with its coordinates turned into WGS84 [lon, lat] when it names another CRS
+    in the legacy (GeoJSON 2008) ``crs`` member: exports of national grids (Lambert 72,
+    EPSG:31370) still carry it, and a user trial's was read as degrees and told to swap them.
+    RFC 7946 files have no ``crs``: returned as they are."""
+    crs_doc = doc.get("crs") if isinstance(doc, dict) else None
+    name = (crs_doc.get("properties") or {}).get("name") if isinstance(crs_doc, dict) else None
+    if not name:
+        return doc
+    from pyproj import CRS, Transformer
+    from pyproj.exceptions import CRSError
+
+    try:
+        crs = CRS.from_user_input(str(name))
+    except CRSError:
+        raise TrackMapError(
+            f"{path}: its crs member names {name!r}, which pyproj does not know; give the file "
+            "in WGS84 longitude and latitude (RFC 7946)"
+        ) from None
+    if crs.equals(CRS.from_epsg(4326), ignore_axis_order=True):
+        return doc
+    to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+
+    def turn(c: Any) -> Any:
+        if isinstance(c, list) and c and isinstance(c[0], (int, float)):
+            lon, lat = to_lonlat.transform(float(c[0]), float(c[1]))
+            return [lon, lat, *c[2:]]
+        return [turn(x) for x in c] if isinstance(c, list) else c
+
+    def walk(node: Any) -> Any:
+        if isinstance(node, dict):
+            return {k: (turn(v) if k == "coordinates" else walk(v)) for k, v in node.items()
+                    if k != "crs"}  # fmt: skip
+        return [walk(x) for x in node] if isinstance(node, list) else node
+
+    return walk(doc)
 
 
 def _features(doc: Any, path: Path) -> list[dict[str, Any]]:

@@ -565,3 +565,34 @@ def test_a_written_track_selected_by_its_own_name_keeps_that_name(demo, tmp_path
     path = tmp_path / "track.geojson"
     write_geojson(demo, path)
     assert TrackMap.from_geojson(path, track=demo.name).name == demo.name
+
+
+def test_a_legacy_geojson_in_a_national_grid_is_read_in_its_crs(tmp_path):
+    """A GeoJSON export in Belgian Lambert 72 with the legacy crs member: a user trial's was read
+    as degrees and refused with advice to swap longitude and latitude."""
+    demo = demo_track()
+    lat, lon, _ = demo.position_at(np.arange(0.0, 3001.0, 50.0))
+    to_lambert = Transformer.from_crs("EPSG:4326", "EPSG:31370", always_xy=True)
+    x, y = to_lambert.transform(lon, lat)
+    doc = {"type": "FeatureCollection",
+           "crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::31370"}},
+           "features": [{"type": "Feature", "properties": {},
+                         "geometry": {"type": "LineString",
+                                      "coordinates": np.c_[x, y].tolist()}}]}  # fmt: skip
+    path = tmp_path / "lambert.geojson"
+    path.write_text(json.dumps(doc))
+    tm = TrackMap.from_geojson(path)
+    plain = tmp_path / "wgs84.geojson"  # the same vertices in WGS84 (RFC 7946)
+    del doc["crs"]
+    doc["features"][0]["geometry"]["coordinates"] = np.c_[lon, lat].tolist()
+    plain.write_text(json.dumps(doc))
+    ref = TrackMap.from_geojson(plain)
+    s = np.arange(0.0, ref.length_m, 25.0)
+    got = tm.project(*ref.position_at(s)[:2])
+    assert np.abs(got.offset_m).max() < 0.05  # the same line, to centimetres
+    np.testing.assert_allclose(got.chainage_m, s, atol=0.05)
+    doc["crs"] = {"type": "name", "properties": {"name": "EPSG:31370"}}
+    doc["crs"]["properties"]["name"] = "EPSG:99999"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match="crs member names 'EPSG:99999'"):
+        TrackMap.from_geojson(path)
