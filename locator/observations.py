@@ -799,9 +799,23 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
                     snr[c][e, col[sat]] = int(f[15])
             except ValueError:
                 reader.problem(lineno, t, f"{sat} {c}: unreadable field {f!r}; left empty")
-    bad = np.nonzero(np.diff(gps_s) <= 0)[0] + 1
-    for b in bad:
-        reader.problem(epochs[b][3], gps_s[b], "epoch not after the previous one; kept")
+    # an epoch not after the one before (repeated, or time going back) is dropped: kept, it
+    # left the table out of time order, and the message contradicted itself (a user trial)
+    keep = np.ones(len(gps_s), bool)
+    last = -np.inf
+    for k, tk in enumerate(gps_s):
+        if tk <= last:
+            keep[k] = False
+            reader.problem(epochs[k][3], tk, "epoch not after the one before (repeated, or "
+                           "time going back): dropped")  # fmt: skip
+        else:
+            last = tk
+    if not keep.all():
+        gps_s = gps_s[keep]
+        epochs = [e for e, kept in zip(epochs, keep, strict=True) if kept]
+        values = {c: v[keep] for c, v in values.items()}
+        lli = {c: v[keep] for c, v in lli.items()}
+        snr = {c: v[keep] for c, v in snr.items()}
     _report_unknown_values(reader, head, values, gps_s, epochs, v3)
     return Observations(
         str(reader.path),

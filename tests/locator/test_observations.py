@@ -338,3 +338,22 @@ def test_shared_hatanaka_day(shared_data: Path) -> None:
     assert obs.crinex == "3.0" and obs.header.version == 3.05
     assert len(obs.gps_s) == 2880 and np.all(np.diff(obs.gps_s) == 30.0)
     assert np.isfinite(obs.pseudorange().pseudorange_m).any(axis=1).all()
+
+
+def test_an_epoch_not_after_the_one_before_is_dropped_and_said(test_data, tmp_path):
+    """A user trial's repeated epoch was "skipped ... kept": located, and the run's table out of
+    time order."""
+    src = test_data / "gnss_obs" / "07590920_10ep.05o"
+    obs = read_rinex_obs(src)
+    lines = src.read_text().splitlines(keepends=True)
+    starts = [int(x) - 1 for x in obs.epoch_line] + [len(lines)]
+    third = lines[starts[2]:starts[3]]
+    # the third epoch's block again after the fifth: time goes back
+    edited = lines[:starts[5]] + third + lines[starts[5]:]
+    p = tmp_path / "repeat.05o"
+    p.write_text("".join(edited))
+    got = read_rinex_obs(p)
+    assert got.gps_s.size == obs.gps_s.size and np.all(np.diff(got.gps_s) > 0)
+    np.testing.assert_array_equal(got.gps_s, obs.gps_s)
+    assert any("dropped" in pr.what and "time going back" in pr.what
+               for pr in got.problems)  # fmt: skip
