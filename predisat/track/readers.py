@@ -102,6 +102,8 @@ def sniff_format(path: str | Path) -> Literal["geojson", "csv"]:
     ``"csv"``: by content, so that a ``.txt`` or ``.json`` file is read for what it is."""
     with open(path, "rb") as fh:
         head = fh.read(4096).lstrip(b"\xef\xbb\xbf \t\r\n")
+    if not head:  # empty: nothing to tell by; the name says what was meant
+        return "geojson" if str(path).lower().endswith((".geojson", ".json")) else "csv"
     return "geojson" if head[:1] in (b"{", b"[") else "csv"
 
 
@@ -548,6 +550,11 @@ def _part_coords(seq: Any, where_s: str, path: Path) -> NDArray:  # Any: a JSON 
     try:
         if not all(_numbers(v) for v in seq):  # "4.6" would pass np.asarray(float)
             raise ValueError
+        sizes = {len(v) for v in seq}
+        if len(sizes) > 1 and min(sizes) >= 2:
+            # some vertices with a height, some without: the heights are left out and the
+            # track's h_m taken, as for a 2-D file (docs/track-map.md)
+            return np.asarray([v[:2] for v in seq], float)
         return np.asarray(seq, float)
     except (TypeError, ValueError):
         raise TrackMapError(

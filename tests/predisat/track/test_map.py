@@ -596,3 +596,25 @@ def test_a_legacy_geojson_in_a_national_grid_is_read_in_its_crs(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match="crs member names 'EPSG:99999'"):
         TrackMap.from_geojson(path)
+
+
+def test_mixed_2d_and_3d_vertices_take_the_track_height_and_an_empty_geojson_is_named(tmp_path):
+    """docs/track-map.md: heights when every vertex has one, else h_m; a user trial's mixed
+    file was refused as malformed, and an empty .geojson was asked for a CSV header."""
+    from predisat.track import load_track
+
+    coords = [[4.40, 50.40, 100.0], [4.41, 50.41], [4.42, 50.42, 120.0]]
+    doc = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {},
+           "geometry": {"type": "LineString", "coordinates": coords}}]}  # fmt: skip
+    mixed = tmp_path / "mixed.geojson"
+    mixed.write_text(json.dumps(doc))
+    flat = tmp_path / "flat.geojson"
+    doc["features"][0]["geometry"]["coordinates"] = [c[:2] for c in coords]
+    flat.write_text(json.dumps(doc))
+    a, b = load_track(mixed), load_track(flat)
+    assert a.length_m == pytest.approx(b.length_m)
+    np.testing.assert_allclose(a.enu_at([0.0, 500.0]), b.enu_at([0.0, 500.0]))
+    empty = tmp_path / "empty.geojson"
+    empty.write_text("")
+    with pytest.raises(TrackMapError, match="empty; expected a GeoJSON FeatureCollection"):
+        load_track(empty)
