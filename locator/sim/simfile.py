@@ -298,6 +298,12 @@ class SimRun:
         signals = _read_table(folder, "signals")
         sats = tuple(str(s) for s in meta.pop("sats", []))
         meta.pop("format")
+        if "direction" in meta and meta["direction"] not in (1, -1):
+            # read by the odometer and the balise captures; a bad value was named nowhere
+            raise SimRunError(
+                f"{meta_path}: direction {meta['direction']!r} must be 1 (toward increasing "
+                "chainage) or -1; rewrite the run with `locator simulate`"
+            )
         return _from_frames(folder, epochs, signals, sats, meta)
 
 

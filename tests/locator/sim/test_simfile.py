@@ -147,6 +147,10 @@ def test_read_errors_name_the_problem(tmp_path):
     (folder / "meta.json").write_text(json.dumps({**meta, "sats": ["G01"]}))
     with pytest.raises(SimRunError, match="not listed"):
         SimRun.read(folder)
+    # a direction of 0 was named by nothing but the odometer, without the file
+    (folder / "meta.json").write_text(json.dumps({**meta, "direction": 0}))
+    with pytest.raises(SimRunError, match=r"meta\.json: direction 0 must be 1 .* or -1"):
+        SimRun.read(folder)
     (folder / "meta.json").write_text(json.dumps(meta))
     sig = pd.read_parquet(folder / "signals.parquet").drop(columns=["range_m"])
     sig.to_parquet(folder / "signals.parquet")
