@@ -1092,6 +1092,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_demo(sub)
     add_balises_parser(sub)  # `locator balises`: arguments and job in locator.balises
     add_campaign_parser(sub)  # `locator campaign`: locator.campaign_command
+    # -q after the subcommand too (a user trial's `locator run ... -q` was refused); SUPPRESS
+    # leaves the main parser's value when it is not given there
+    for command in sub.choices.values():
+        if not {"-q", "--quiet"} & set(command._option_string_actions):
+            command.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                                 help="no progress bars")  # fmt: skip
     return parser
 
 

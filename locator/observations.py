@@ -459,7 +459,13 @@ class _Reader:
             raise RinexObsError(path, 1, "the file is empty (a failed download or copy?); give "
                                 "the observation file itself")  # fmt: skip
         if "RINEX VERSION / TYPE" not in lines[0]:
-            raise RinexObsError(path, 1, "first line is not a 'RINEX VERSION / TYPE' header line")
+            hint = ""
+            if any(k in "".join(lines[:5]) for k in ("utcTimeMillis", "# Raw", "Svid")):
+                hint = ("; it looks like an Android GNSS log (device_gnss CSV): give it with "
+                        "--device-gnss")  # fmt: skip
+            raise RinexObsError(
+                path, 1, f"first line is not a 'RINEX VERSION / TYPE' header line{hint}"
+            )
         try:
             version = float(lines[0][:9])
         except ValueError:

@@ -549,3 +549,20 @@ def test_run_refuses_sp3_or_tle_for_navigation_naming_what_it_needs(test_data, t
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert nav.name in err and "broadcast RINEX navigation" in err
+
+
+def test_quiet_after_the_subcommand_and_a_phone_log_given_as_rinex(test_data, tmp_path, capsys):
+    """A user trial: `locator run ... -q` was refused, and a device_gnss CSV given to --obs got
+    no hint of --device-gnss."""
+    from locator.cli import build_parser
+
+    args = build_parser().parse_args(["evaluate", str(tmp_path), "--truth-chainage", "0", "-q"])
+    assert args.quiet is True
+    truth = ["--truth-chainage", "0"]
+    assert build_parser().parse_args(["-q", "evaluate", str(tmp_path), *truth]).quiet is True
+    assert build_parser().parse_args(["evaluate", str(tmp_path), *truth]).quiet is False
+    phone = test_data / "gsdc" / "gdc2023_pixel7pro_device_gnss_2ep.csv"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    assert main(["run", "--obs", str(phone), "--nav", str(nav), "--no-masks",
+                 "--out", str(tmp_path / "x")]) == 2  # fmt: skip
+    assert "give it with --device-gnss" in capsys.readouterr().err
