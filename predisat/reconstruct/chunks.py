@@ -140,12 +140,13 @@ def run_chunk(
         ant = axis + job.antenna_height_m * np.asarray(track.up_at(s), float)
         heading = np.asarray(track.heading_at(s), float)
         p = job.params
+        doubt_m, jitter_m = p.chainage_doubt_m or 0.0, _jitter_m(p)
         att = frame_attitudes(
             track, s, [f.roll_deg for f, _ in ok_frames], [f.pitch_deg for f, _ in ok_frames],
             job.reverse, cant=p.cant, grade_doubt_deg=p.grade_doubt_deg,
             imu_doubt_deg=p.imu_doubt_deg, cant_table=p.cant_table,
             speed_kmh=[f.speed_kmh for f, _ in ok_frames],
-            chainage_doubt_m=p.chainage_doubt_m or 0.0,
+            chainage_doubt_m=doubt_m,
         )  # fmt: skip
         # the mounts in the level frame of the vehicle's attitude, which tilts about the
         # rails and carries the cameras with it (section 16)
@@ -162,10 +163,10 @@ def run_chunk(
         # each camera within the jitter of the others; turned as the track turns over the
         # whole doubt (the window's common shift is the reconstruction's)
         placed = chainage_placement_doubt(
-            track, s, offsets, job.antenna_height_m, job.reverse, _jitter_m(p)
+            track, s, offsets, job.antenna_height_m, job.reverse, jitter_m
         )
-        turned = chainage_placement_doubt(
-            track, s, offsets, job.antenna_height_m, job.reverse, p.chainage_doubt_m or 0.0
+        turned = placed.yaw_deg if jitter_m == doubt_m else chainage_placement_doubt(
+            track, s, offsets, job.antenna_height_m, job.reverse, doubt_m
         ).yaw_deg
         for k, (f, (sky, conf, thin)) in enumerate(ok_frames):
             cam, vehicle_mount = job.cameras[f.side]
