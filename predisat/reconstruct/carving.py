@@ -66,6 +66,7 @@ __all__ = [
     "bin_support",
     "cell_sweep_of",
     "close_covered",
+    "far_elevation_bound",
     "reconstruct_masks",
     "suspect_frames",
 ]
@@ -1684,8 +1685,9 @@ def _far_field(
     the number of views behind each bound.
 
     A frame at the position bounds the far field at an azimuth by the highest skyline it saw
-    within the parallax allowance ``asin(baseline / half_width)`` around it (far objects are seen
-    higher from the camera, which is nearer and lower on its own side). The bound of a bin is the
+    within the parallax allowance ``asin(baseline / half_width)`` around it, raised by
+    :func:`far_elevation_bound` where the camera may be farther from a far object than the
+    antenna, or higher (``docs/reconstruction.md``, section 20). The bound of a bin is the
     lowest over the frames that saw the whole bin; bins no frame saw get ``far_default_deg``.
 
     With ``fusion_rank`` above 1 no single view lowers the far field either: in a bin a frame
@@ -1705,17 +1707,18 @@ def _far_field(
     if frames:
         ch = np.array([f.chainage_m for f in frames])
         cams, _ = _camera_geometry(frames, track)
+        rise = _shift_rise_m(track, ch, p.chainage_shift_m)
+        near_m = _far_distance_m(track, s, ant, p.half_width_m)
         az_sub = _sub_azimuths(p)
         for i in range(s.size):
             own: dict[str, NDArray] = {}  # bins each view at the position saw
             for j in np.flatnonzero(np.abs(ch - s[i]) <= p.position_tol_m):
                 prof = profiles[int(j)]
-                # a camera known within a doubt may stand that much further aside
-                base = float(np.hypot(*(cams[j, :2] - ant[i, :2])))
-                base += frames[int(j)].position_doubt_m + p.chainage_shift_m
-                allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
+                allow, vals, ok = _far_view(
+                    prof, frames[int(j)], cams[j], ant[i], float(rise[j]), float(near_m[i]),
+                    az_sub, p,
+                )
                 per_pos[i].append((prof, allow))
-                vals, ok = _profile_max(prof, az_sub, allow)
                 fb = _bins(np.where(ok, vals, np.nan), p.n_sub)
                 covered = ~np.isnan(fb)
                 far[i] = np.where(covered, np.fmin(far[i], fb), far[i])
@@ -1729,7 +1732,9 @@ def _far_field(
                                                                 p.position_tol_m))  # fmt: skip
                 # never below the position's own frames: a neighbour sees a far object from
                 # elsewhere (the azimuth allowance covers its parallax, not its elevation)
-                robust, n_views = _robust_far(frames, profiles, cams, near, ant[i], az_sub, p)
+                robust, n_views = _robust_far(
+                    frames, profiles, cams, near, ant[i], rise, float(near_m[i]), az_sub, p
+                )
                 far[i] = np.where(seen_any[i], np.fmax(far[i], robust), far[i])
                 far_views[i] = np.where(seen_any[i], np.maximum(far_views[i], n_views), 0)
     far_el = np.where(seen_any, far, p.far_default_deg)
@@ -1743,20 +1748,21 @@ def _robust_far(
     cams: NDArray,
     near: NDArray,
     antenna_m: NDArray,
+    rise_m: NDArray,
+    far_m: float,
     az_sub: NDArray,
     p: ReconstructionParams,
 ) -> tuple[NDArray, NDArray]:
     """Far-field bound per bin from the frames ``near`` an antenna: per view (a frame, or the
-    lowest over a ``view_group``) the highest skyline within its parallax allowance, then the
+    lowest over a ``view_group``) the highest skyline within its parallax allowances, then the
     ``min(fusion_rank, n)``-th lowest over the ``n`` views that saw the bin (``+inf`` where
     none did), and ``n``."""
     views: dict[str, NDArray] = {}
     for j in near:
         f = frames[int(j)]
-        base = float(np.hypot(*(cams[j, :2] - antenna_m[:2]))) + f.position_doubt_m
-        base += p.chainage_shift_m
-        allow = float(np.degrees(np.arcsin(min(1.0, base / p.half_width_m))))
-        vals, ok = _profile_max(profiles[int(j)], az_sub, allow)
+        _, vals, ok = _far_view(
+            profiles[int(j)], f, cams[j], antenna_m, float(rise_m[j]), far_m, az_sub, p
+        )
         fb = _bins(np.where(ok, vals, np.nan), p.n_sub)
         key = f.view_group or f"\0frame{int(j)}"
         views[key] = np.fmin(views[key], fb) if key in views else fb
@@ -1765,6 +1771,113 @@ def _robust_far(
     k = np.minimum(n, p.fusion_rank) - 1
     out = np.take_along_axis(stack, np.maximum(k, 0)[None], axis=0)[0]
     return np.where(n > 0, out, np.inf), n
+
+
+def _far_view(
+    prof: SkyProfile,
+    frame: FrameView,
+    cam_m: NDArray,
+    antenna_m: NDArray,
+    rise_m: float,
+    far_m: float,
+    az_sub: NDArray,
+    p: ReconstructionParams,
+) -> tuple[float, NDArray, NDArray]:
+    """A frame's far-field bound at an antenna, per sub-azimuth: its azimuth allowance (deg),
+    the bound (deg; ``+inf`` where a column had no sky) and whether the view covered it.
+
+    The camera may stand ``position_doubt_m + chainage_shift_m`` from its nominal centre
+    ``cam_m`` (and ``height_doubt_m`` plus the track's rise over the shift, ``rise_m``,
+    higher): the azimuth allowance takes the far object's direction from there, and
+    :func:`far_elevation_bound` its elevation from the antenna (section 20).
+    """
+    offset = np.asarray(cam_m, float) - np.asarray(antenna_m, float)
+    doubt = frame.position_doubt_m + p.chainage_shift_m
+    base = float(np.hypot(offset[0], offset[1])) + doubt
+    allow = float(np.degrees(np.arcsin(min(1.0, base / far_m))))
+    vals, ok = _profile_max(prof, az_sub, allow)
+    vals = far_elevation_bound(
+        vals, az_sub, offset[:2], float(offset[2]) + frame.height_doubt_m + rise_m, doubt, far_m
+    )
+    return allow, vals, ok
+
+
+def far_elevation_bound(
+    sky_el_deg: ArrayLike,
+    az_deg: ArrayLike,
+    offset_en_m: ArrayLike,
+    rise_m: float,
+    doubt_m: float,
+    far_m: float,
+) -> NDArray:
+    """Highest elevation, from an antenna, of anything at least ``far_m`` away horizontally
+    that a camera near it saw at or under ``sky_el_deg``.
+
+    A far object is seen lower from a camera farther from it, or higher up. With the object at
+    horizontal distance ``D >= far_m`` from the antenna in azimuth ``az`` (unit vector ``u``)
+    and the camera at ``d`` (``offset_en_m``, within ``doubt_m``) from it, the camera's
+    distance over the antenna's is at most ``max(1, |u - d / far_m| + doubt_m / far_m)`` (the
+    ratio is convex in ``1 / D``, so its largest value is at ``D = far_m`` or infinitely far)
+    and at least ``max(0, 1 - (|d| + doubt_m) / far_m)``; a camera higher by ``rise_m`` adds
+    at most ``rise_m / far_m`` to the tangent. The direction in which the camera saw the
+    object is the azimuth allowance's business: ``sky_el_deg`` is the highest skyline within
+    it.
+
+    Parameters
+    ----------
+    sky_el_deg : array_like, shape (n,)
+        Highest skyline the camera saw about each azimuth, degrees (``+inf``: no sky; NaN:
+        not seen, both kept).
+    az_deg : array_like, shape (n,)
+        Azimuths from the antenna, degrees from north.
+    offset_en_m : array_like, shape (2,)
+        Camera centre minus antenna, east and north, metres.
+    rise_m : float
+        How much higher than the antenna the camera may stand, metres (negative: lower).
+    doubt_m : float
+        How far from ``offset_en_m`` the camera may stand horizontally, metres (>= 0).
+    far_m : float
+        Nearest horizontal distance of the far field from the antenna, metres (> 0).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The bound, degrees (at least ``sky_el_deg`` when the camera stands at the antenna).
+    """
+    if not far_m > 0.0 or not doubt_m >= 0.0:
+        raise ValueError(f"far_m must be > 0 and doubt_m >= 0, got {far_m} and {doubt_m}")
+    el = np.asarray(sky_el_deg, float)
+    az = np.radians(np.asarray(az_deg, float))
+    d = np.asarray(offset_en_m, float) / far_m
+    r = doubt_m / far_m
+    farther = np.maximum(1.0, np.hypot(np.sin(az) - d[0], np.cos(az) - d[1]) + r)
+    nearer = max(0.0, 1.0 - float(np.hypot(d[0], d[1])) - r)
+    finite = np.isfinite(el)
+    tan = np.tan(np.radians(np.where(finite, el, 0.0)))
+    tan = np.where(tan >= 0.0, farther * tan, nearer * tan) + max(0.0, rise_m) / far_m
+    return np.where(finite, np.degrees(np.arctan(tan)), el)
+
+
+def _shift_rise_m(track: TrackMap, chainage_m: NDArray, shift_m: float) -> NDArray:
+    """How much higher the track stands anywhere within ``shift_m`` of each chainage than at
+    it, metres (0 without a shift): a survey shifted along the track also moves up the grade."""
+    if shift_m <= 0.0 or chainage_m.size == 0:
+        return np.zeros(chainage_m.shape)
+    n = max(2, int(np.ceil(2.0 * shift_m / 0.25)) + 1)
+    ds = np.linspace(-shift_m, shift_m, n)
+    at = np.clip(chainage_m[:, None] + ds[None, :], 0.0, track.length_m)
+    z = np.asarray(track.enu_at(at.ravel()), float)[:, 2].reshape(at.shape)
+    z0 = np.asarray(track.enu_at(chainage_m), float)[:, 2]
+    # the grade's change between samples 0.25 m apart is far below a millimetre
+    return np.maximum(0.0, z.max(axis=1) - z0) + 0.001
+
+
+def _far_distance_m(track: TrackMap, s: NDArray, ant: NDArray, half_width_m: float) -> NDArray:
+    """Nearest horizontal distance of the far field from each antenna, metres: the corridor's
+    half width less the antenna's offset from the track axis (a canted vehicle leans it)."""
+    axis = np.asarray(track.enu_at(s), float)
+    lean = np.hypot(ant[:, 0] - axis[:, 0], ant[:, 1] - axis[:, 1])
+    return np.maximum(half_width_m - lean, 1.0)
 
 
 def _profile_max(prof: SkyProfile, az_deg: NDArray, allow_deg: float) -> tuple[NDArray, NDArray]:
