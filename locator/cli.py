@@ -257,9 +257,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg, model_record = _config(args, _profile(source, args))
     masks = _masks(args)
     if masks is not None:
-        from predisat.availability.run import check_masks_on_track
+        from predisat.masks.registration import register_on_track
 
-        check_masks_on_track(masks, path.track, str(args.masks))
+        reg = register_on_track(masks, path.track, str(args.masks))
+        if not reg.same_map:
+            print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
+        masks = reg.masks
     _check_start(float(start), path, masks, args, header, sim_chainage)
     print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
           f"({constellation_label(args.constellation)}), trust rule {cfg.trust}"

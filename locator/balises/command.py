@@ -221,8 +221,13 @@ def cmd_balises(args: argparse.Namespace) -> int:
     masks = None
     if args.masks:
         from predisat.masks.fileformat import read_masks
+        from predisat.masks.registration import register_on_track
 
-        masks = read_masks(args.masks)
+        # by position on the run's track, as `locator run` (masks of another map, or line)
+        reg = register_on_track(read_masks(args.masks), path.track, str(args.masks))
+        if not reg.same_map:
+            print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
+        masks = reg.masks
     # the error model applies to the simulated receiver or gives no claim, as in `locator run`
     mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
     profile = sim_profile(sim, args.constellation)

@@ -295,3 +295,23 @@ def test_balises_never_reached_are_said_so(sim_dir, tmp_path, capsys):
 
     info = json.loads((tmp_path / "b" / "summary.json").read_text(), parse_constant=refuse)
     assert any(v is None for row in info["summary"] for v in row.values())
+
+
+def test_masks_of_another_line_are_refused(sim_dir, tmp_path, capsys):
+    """`balises` looked the masks up by chainage whatever line they were made on; they are put
+    on the run's track by position now, as in `locator run` (line 144's masks: refused)."""
+    from predisat.masks.fileformat import write_masks
+    from predisat.masks.maskset import MaskSet
+    from predisat.track import demo_track
+
+    line = demo_track()
+    ch = np.arange(0.0, 400.0, 10.0)
+    lat, lon, _ = line.position_at(ch)
+    other = write_masks(MaskSet.from_arrays(ch, lat, lon, 0.0, line.heading_at(ch),
+                                            np.zeros((ch.size, 360))),
+                        tmp_path / "l144.masks.parquet")  # fmt: skip
+    argv = ["-q", "balises", "--sim", str(sim_dir), "--masks", str(other), "--spacing", "25",
+            "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert "do not fit track" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "captures.csv").exists()

@@ -263,6 +263,64 @@ def test_masks_on_another_track_are_refused(
         run_availability(masks, other, None, out_dir=tmp_path / "o", progress=False)
 
 
+def test_masks_on_another_map_of_the_line_are_registered_and_said(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    """Another map of the same track (its vertices every 25 m from chainage 3000 m: chainages
+    3 km lower and a little shorter, positions apart on the curves): the masks are put on it
+    by position, never trust more than on their own map, and the report says so."""
+    s = np.arange(3000.0, 5001.0, 25.0)
+    lat, lon, h = track.position_at(s)
+    other = TrackMap.from_latlon(lat, lon, h, name="resampled")
+    common = dict(start=START, end="2020-06-25T06:30", step_s=900, n_sky=1, progress=False)
+    run_availability(masks, track, None, out_dir=tmp_path / "own",
+                           **common)  # type: ignore[arg-type]  # fmt: skip
+    r = run_availability(masks, other, None, out_dir=tmp_path / "other",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (said,) = r.info["warnings"]
+    assert "another map of this line than 'resampled'" in said and "re-registered" in said
+    summary = json.loads((tmp_path / "other" / "summary.json").read_text())
+    assert summary["run"]["warnings"] == [said]
+    assert "stretch" in summary["run"] and "chainage 1.0" in summary["run"]["stretch"]
+    mine = json.loads((tmp_path / "own" / "summary.json").read_text())["summary"][0]
+    theirs = summary["summary"][0]
+    for k in ("share_ge2", "share_ge4", "share_ge6"):
+        assert theirs[k] <= mine[k] + 1e-9
+    assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
+
+
+def test_one_position_sky_in_a_tagged_tunnel_and_masks_off_the_embedded_map_are_said(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    """A user trial: a one-position file wrote NaN shares; flat masks over a map's tunnels
+    read 100 % unwarned; masks named after the embedded line but off it lost their kilometre
+    posts without a word."""
+    from dataclasses import replace
+
+    common = dict(start=START, end="2020-06-25T06:30", step_s=900, n_sky=1, progress=False)
+    with pytest.raises(ValueError, match=r"hold one position.*at least two positions"):
+        run_availability(masks.subset(4000.0, 4000.0), track, None, out_dir=tmp_path / "one",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    tunnel = replace(track, tunnels_m=((4050.0, 4400.0),))
+    r = run_availability(masks, tunnel, None, out_dir=tmp_path / "t",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (said,) = r.info["warnings"]
+    assert "trust some sky at 8 of 8 positions" in said and "tags as tunnel" in said
+    closed = masks.with_margin(0.0)
+    closed = replace(closed, mask_el_deg=np.where(
+        (closed.chainage_m >= 4150.0)[:, None], np.float32(90.0), closed.mask_el_deg))
+    r = run_availability(closed, tunnel, None, out_dir=tmp_path / "c",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    assert r.info["warnings"] == []
+    # named after the embedded line, 3 km off it: its own chainages, and said
+    lat, lon, _ = track.position_at(masks.chainage_m + 3000.0)
+    off = replace(masks, lat_deg=lat, lon_deg=lon,
+                  provenance={**masks.provenance, "track": track.name})  # fmt: skip
+    r = run_availability(off, None, None, out_dir=tmp_path / "o",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    assert any("no map of it was given" in w for w in r.info["warnings"])
+
+
 def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
     with pytest.raises(ValueError, match=r"sky_km \(--sky-km\) \[9\.0\] outside"):
         run_availability(masks, track, None, out_dir=tmp_path / "o", sky_km=[9.0],

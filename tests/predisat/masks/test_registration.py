@@ -1,0 +1,157 @@
+"""Masks made on one map of a line, looked up on another: by position, widened by the maps'
+disagreement. Line 144 as the demo's map (Infrabel's axis at 1 m) and as a 1.5 km excerpt of
+the same track from Infrabel's network at 10 m (another chainage origin, positions metres
+apart)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import predisat.masks.registration as registration
+from predisat.masks.maskset import BinSource, MaskSet
+from predisat.masks.registration import register_on_track
+from predisat.track import TrackMap, demo_track, load_track
+
+EXCERPT = Path(__file__).parents[2] / "data" / "track" / "network_gembloux.geojson"
+
+
+@pytest.fixture(scope="module")
+def maps() -> tuple[TrackMap, TrackMap]:
+    return demo_track(), load_track(EXCERPT, where={"linecalfa": "144"})
+
+
+def _sharp_masks(track: TrackMap, ch: np.ndarray, seed: int = 0) -> MaskSet:
+    """Masks that change sharply from one position to the next, some bins ASSUMED."""
+    rng = np.random.default_rng(seed)
+    mask = rng.uniform(0.0, 70.0, (ch.size, 72)).astype(np.float32)
+    source = np.where(rng.random(mask.shape) < 0.05, BinSource.ASSUMED, BinSource.OBSERVED)
+    support = rng.integers(0, 6, mask.shape).astype(np.uint8)
+    margin = rng.uniform(0.0, 2.0, mask.shape).astype(np.float32)
+    return MaskSet.from_track(track, ch, mask, source=source.astype(np.uint8), margin_deg=margin,
+                              support=support)  # fmt: skip
+
+
+def _cell(m: MaskSet, chainage_m: np.ndarray) -> np.ndarray:
+    return np.asarray(m.position_index(chainage_m)[0])
+
+
+def test_every_place_gets_at_least_the_sky_the_masks_hold_there(maps) -> None:
+    """Places every 0.5 m on either map: the masks looked up on the other map at the place's
+    chainage there are never below the masks of the place (its cell on the map they were made
+    on): mask, margin and the ASSUMED flag. Looked up by chainage, or re-registered without the
+    widening, they are."""
+    a, b = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
+    reg = register_on_track(m, b, "m")
+    assert not reg.same_map and reg.shift_m > 250.0 and 1.0 < reg.offset_m < 15.0
+    r = reg.masks
+    assert r.provenance["registered_on"]["track"] == b.name
+    # places on the masks' own map, and places on the other map
+    s_a = np.arange(460.0, 1640.0, 0.5)
+    lat, lon, _ = a.position_at(s_a)
+    on_b = np.asarray(b.project(lat, lon).chainage_m)
+    s_b = np.arange(float(r.chainage_m[5]), float(r.chainage_m[-5]), 0.5)
+    lat_b, lon_b, _ = b.position_at(s_b)
+    on_a = np.asarray(a.project(lat_b, lon_b).chainage_m)
+    # places between the maps and a little beyond either (the train is on neither exactly)
+    foot = np.asarray(b.position_at(on_b)[:2]).T
+    here = np.asarray(a.position_at(s_a)[:2]).T
+    t_off = np.random.default_rng(3).uniform(-0.3, 1.3, s_a.size)[:, None]
+    x = here + t_off * (foot - here)
+    x_a = np.asarray(a.project(x[:, 0], x[:, 1]).chainage_m)
+    x_b = np.asarray(b.project(x[:, 0], x[:, 1]).chainage_m)
+    for own, other in ((s_a, on_b), (on_a, s_b), (x_a, x_b)):
+        want = _cell(m, own)
+        got = _cell(r, other)
+        need = m.effective_mask_deg[want]
+        assert np.all(r.effective_mask_deg[got] >= need - 1e-5)
+        assert np.all(r.source[got][m.source[want] == BinSource.ASSUMED] == BinSource.ASSUMED)
+    # by chainage, the masks of places 300 m away; re-registered without widening, of the
+    # neighbouring cell where the maps disagree
+    by_chainage = np.clip(on_b, m.chainage_m[0], m.chainage_m[-1])
+    assert (m.effective_mask_deg[_cell(m, by_chainage)] < m.effective_mask_deg[_cell(m, s_a)]
+            ).any()  # fmt: skip
+
+
+def test_without_the_widening_a_place_gets_a_neighbour_s_sky(maps, monkeypatch) -> None:
+    a, b = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=1)
+    monkeypatch.setattr(registration, "_worst_over", lambda masks, first, last: masks)
+    r = register_on_track(m, b, "m").masks
+    s_a = np.arange(460.0, 1640.0, 0.5)
+    lat, lon, _ = a.position_at(s_a)
+    got = _cell(r, np.asarray(b.project(lat, lon).chainage_m))
+    assert (r.effective_mask_deg[got] < m.effective_mask_deg[_cell(m, s_a)] - 1e-3).any()
+
+
+def test_on_the_same_map_nothing_changes(maps) -> None:
+    a, _ = maps
+    m = _sharp_masks(a, np.arange(4000.0, 4500.0, 10.0))
+    reg = register_on_track(m, a, "m")
+    assert reg.same_map and reg.masks is m and reg.widen_m == 0.0
+    assert "were made on track" in reg.describe("m", a.name)
+
+
+def test_widening_keeps_the_weakest_support(maps) -> None:
+    a, b = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=2)
+    r = register_on_track(m, b, "m").masks
+    assert r.support is not None and m.support is not None
+    assert np.all(r.support <= m.support)
+    assert np.all(r.mask_el_deg >= m.mask_el_deg) and np.all(r.margin_deg >= m.margin_deg)
+
+
+def test_another_track_a_reversed_map_and_masks_past_the_map(maps) -> None:
+    a, b = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
+    moved = TrackMap.from_latlon(b.lat_deg + 0.005, b.lon_deg, b.h_m, name="moved")
+    with pytest.raises(ValueError, match=r"do not fit track 'moved'.*made on"):
+        register_on_track(m, moved, "m.parquet")
+    back = TrackMap.from_latlon(b.lat_deg[::-1], b.lon_deg[::-1], b.h_m[::-1], name="back")
+    with pytest.raises(ValueError, match="runs the other way"):
+        register_on_track(m, back, "m.parquet")
+    # the excerpt starts near chainage 300 of the demo's map: positions before it are left out
+    longer = _sharp_masks(a, np.arange(250.0, 1701.0, 10.0))
+    reg = register_on_track(longer, b, "m")
+    assert 3 <= reg.beyond <= 8 and reg.masks.n_pos == longer.n_pos - reg.beyond
+    assert "past the map's ends left out" in reg.describe("m", b.name)
+
+
+def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
+    """Two straight maps of a line crossing at 1 deg (8 m apart at the ends, another chainage
+    origin): places between and a little beyond them get at least their sky on either map;
+    carrying the cells over without widening them does not."""
+    from tests.predisat.synth.test_world import straight_track
+
+    a = straight_track(1000.0, 60.0)
+    mid_lat, mid_lon, _ = a.position_at(500.0)
+    # B: A turned 1 deg about its middle, 40 m longer before the start
+    from predisat.geodesy import WGS84
+
+    ends = []
+    for d_m, az in ((540.0, 240.0 + 1.0), (540.0, 60.0 + 1.0)):
+        lo, la, _ = WGS84.fwd(mid_lon, mid_lat, az, d_m)
+        ends.append((la, lo))
+    b = TrackMap.from_latlon(np.array([ends[0][0], ends[1][0]]),
+                             np.array([ends[0][1], ends[1][1]]), 100.0, name="B")  # fmt: skip
+    m = _sharp_masks(a, np.arange(50.0, 951.0, 10.0), seed=4)
+    s_a = np.arange(60.0, 940.0, 0.1)
+    here = np.asarray(a.position_at(s_a)[:2]).T
+    on_b = np.asarray(b.project(here[:, 0], here[:, 1]).chainage_m)
+    foot = np.asarray(b.position_at(on_b)[:2]).T
+    t_off = np.random.default_rng(5).uniform(-0.3, 1.3, s_a.size)[:, None]
+    x = here + t_off * (foot - here)
+    x_a = np.asarray(a.project(x[:, 0], x[:, 1]).chainage_m)
+    x_b = np.asarray(b.project(x[:, 0], x[:, 1]).chainage_m)
+
+    def lower_anywhere() -> bool:
+        r = register_on_track(m, b, "m").masks
+        got = r.effective_mask_deg[_cell(r, x_b)]
+        return bool((got < m.effective_mask_deg[_cell(m, x_a)] - 1e-5).any())
+
+    assert not lower_anywhere()
+    monkeypatch.setattr(registration, "_widening_m", lambda off, turn: np.zeros_like(off))
+    assert lower_anywhere()
