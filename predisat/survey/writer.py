@@ -52,6 +52,10 @@ class SurveyWriter:
     chainage_doubt_m : float, optional
         The survey's positioning accuracy along the track (survey.yaml ``chainage_doubt_m``,
         docs/survey-format.md), metres; None: not stated.
+    chainage_jitter_m : float, optional
+        The frames' relative accuracy along the track over a few hundred metres (survey.yaml
+        ``chainage_jitter_m``), metres, at most ``chainage_doubt_m``; None: not stated (the
+        doubt then bounds each frame).
     metadata : Mapping, optional
         Free fields for survey.yaml (description, vehicle, date, ...).
     overwrite : bool
@@ -77,6 +81,7 @@ class SurveyWriter:
         track_name: str | None = None,
         track_path: str | None = None,
         chainage_doubt_m: float | None = None,
+        chainage_jitter_m: float | None = None,
         metadata: Mapping[str, Any] | None = None,
         overwrite: bool = False,
         flush_every: int = 500,
@@ -117,13 +122,20 @@ class SurveyWriter:
         self.cameras = dict(cameras)
         self.direction_of_travel = direction_of_travel
         self.antenna_height_m = float(antenna_height_m)
-        if chainage_doubt_m is not None and not (
-            np.isfinite(chainage_doubt_m) and chainage_doubt_m >= 0.0
+        for name, value in (("chainage_doubt_m", chainage_doubt_m),
+                            ("chainage_jitter_m", chainage_jitter_m)):  # fmt: skip
+            if value is not None and not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a length >= 0 metres, got {value}")
+        if chainage_jitter_m is not None and (
+            chainage_doubt_m is None or chainage_jitter_m > chainage_doubt_m
         ):
             raise ValueError(
-                f"chainage_doubt_m must be a length >= 0 metres, got {chainage_doubt_m}"
+                f"chainage_jitter_m ({chainage_jitter_m} m) needs a chainage_doubt_m at least as "
+                f"large (got {chainage_doubt_m}): the frames' relative error is part of their "
+                "error"
             )
         self.chainage_doubt_m = None if chainage_doubt_m is None else float(chainage_doubt_m)
+        self.chainage_jitter_m = None if chainage_jitter_m is None else float(chainage_jitter_m)
         self.track_name, self.track_path = track_name, track_path
         self.metadata = dict(metadata or {})
         self.flush_every = int(flush_every)
@@ -233,6 +245,8 @@ class SurveyWriter:
             doc["track"] = track
         if self.chainage_doubt_m is not None:
             doc["chainage_doubt_m"] = self.chainage_doubt_m
+        if self.chainage_jitter_m is not None:
+            doc["chainage_jitter_m"] = self.chainage_jitter_m
         doc["cameras"] = {
             side: {"calibration": f"calib/{side}.yaml", "mount": mount.to_dict()}
             for side, (_, mount) in self.cameras.items()

@@ -419,6 +419,18 @@ def test_the_survey_states_its_chainage_doubt(tmp_path: Path) -> None:
     assert survey.chainage_doubt_m == 2.5 and "chainage_doubt_m" not in survey.metadata
 
 
+def test_the_writer_states_the_doubt_and_the_jitter(tmp_path: Path) -> None:
+    """A docs audit: chainage_jitter_m could be read but not written (a keyword refused, the
+    metadata key reserved)."""
+    root = _write(tmp_path / "s", n=1, chainage_doubt_m=3.0, chainage_jitter_m=0.05)
+    survey = Survey.load(root)
+    assert (survey.chainage_doubt_m, survey.chainage_jitter_m) == (3.0, 0.05)
+    with pytest.raises(ValueError, match="needs a chainage_doubt_m at least as large"):
+        SurveyWriter(tmp_path / "t", CAMERAS, chainage_doubt_m=0.01, chainage_jitter_m=0.05)
+    with pytest.raises(ValueError, match="chainage_jitter_m must be a length"):
+        SurveyWriter(tmp_path / "u", CAMERAS, chainage_doubt_m=1.0, chainage_jitter_m=-1.0)
+
+
 def test_unsupported_calibration_in_survey(tmp_path: Path) -> None:
     root = _write(tmp_path / "s", n=1)
     (root / "calib" / "left.yaml").write_text(
