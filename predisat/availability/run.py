@@ -90,6 +90,7 @@ from predisat.track import TrackMap, TrackMapError, load_track
 
 __all__ = [
     "AvailabilityRun",
+    "assumed_sky_notes",
     "attitude_text",
     "far_field_text",
     "load_navigation",
@@ -98,6 +99,7 @@ __all__ = [
     "positioning_text",
     "rig_text",
     "run_availability",
+    "sampling_notes",
     "side_swap_notes",
     "sparse_navigation",
     "synthetic_notes",
@@ -629,9 +631,10 @@ def run_availability(
         # remote outputs: written here first, then each uploaded atomically (_publish)
         work = out if isinstance(out, Path) else Path(tempfile.mkdtemp(prefix="predisat-av-"))
         work.mkdir(parents=True, exist_ok=True)
+        sampling = sampling_notes(nav_data.sats.gps_s.size, step_s, interval_every)
         info = _run_info(
             mask_set, masks_label, track, nav_data, constellation, rules, step_s,
-            interval_every, __version__, model, integrity, [*mask_notes, *notes],
+            interval_every, __version__, model, integrity, [*mask_notes, *notes, *sampling],
         )  # fmt: skip
         local_files, summary = write_tables(work, results, track, info, counts_table)
         local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
@@ -975,26 +978,86 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
-        "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance)],
+        "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance),
+                     *assumed_sky_notes(masks)],
     }
 
 
 def far_field_text(masks: MaskSet) -> str:
     """What the masks' far field rests on where no camera saw it: the elevation tiles they were
     raised to, or the assumed default, with the share of bins each holds (a user trial found
-    no word of it in the report of a valley)."""
+    no word of it in the report of a valley). Read from the bins' flags, the provenance naming
+    the tiles and the default: a file whose flags and provenance disagree is said to."""
+    src = masks.source
+    assumed = src == BinSource.ASSUMED
+    closed = assumed & (masks.effective_mask_deg >= 90.0)
+    share = f"{100.0 * float(assumed.mean()):.1f} % of the bins assumed"
+    if assumed.any():
+        share += (f": {100.0 * float(closed.mean()):.1f} % closed to the zenith, "
+                  f"{100.0 * float((assumed & ~closed).mean()):.1f} % open")  # fmt: skip
+    raised = 100.0 * float((src == BinSource.TERRAIN).mean())
     terrain = masks.provenance.get("terrain")
-    assumed = 100.0 * float((masks.source == BinSource.ASSUMED).mean())
     if isinstance(terrain, dict):
-        raised = 100.0 * float((masks.source == BinSource.TERRAIN).mean())
+        if raised == 0.0:
+            return (f"elevation tiles {terrain.get('dem', '?')} given, but no bin rests on them "
+                    f"(do they cover the line?); {share}")  # fmt: skip
         return (f"raised to the elevation tiles {terrain.get('dem', '?')} in {raised:.1f} % of "
-                f"the bins; {assumed:.1f} % still assumed")  # fmt: skip
+                f"the bins; {share}")  # fmt: skip
+    if raised > 0.0:
+        return (f"{raised:.1f} % of the bins flagged TERRAIN, but the masks do not name the "
+                f"elevation tiles; {share}")  # fmt: skip
     params = masks.provenance.get("params")
     rec = params.get("reconstruction") if isinstance(params, dict) else None
     if not isinstance(rec, dict) or "far_default_deg" not in rec:
-        return ""  # true masks, older files: they do not say
+        return share if assumed.any() else ""  # true masks, older files: no default to name
     return (f"assumed at {float(rec['far_default_deg']):g}° where no camera saw it "
-            f"({assumed:.1f} % of the bins assumed); no elevation tiles given")  # fmt: skip
+            f"({share}); no elevation tiles given")  # fmt: skip
+
+
+_COARSE_STEP_S = 600.0  # a satellite's elevation changes by up to about 5 deg in 10 min
+_FEW_EPOCHS = 30
+
+
+def sampling_notes(n_epoch: int, step_s: float, interval_every: int) -> list[str]:
+    """Warnings when the shares or the interval lengths rest on few instants (a user trial read
+    one epoch as "51.2 % of the time", and a 1 h step turned a 15° cut-off's 95.8 % with 6 or
+    more satellites into 100 %)."""
+    out = []
+    if n_epoch < _FEW_EPOCHS or step_s > _COARSE_STEP_S:
+        out.append(
+            f"{n_epoch} epochs {step_s:g} s apart: the shares of time are of these instants "
+            "only, and satellites rise and set between them; for figures to quote use --step 30-"
+            f"60 over a day (at most {_COARSE_STEP_S:g} s, at least {_FEW_EPOCHS} epochs)"
+        )
+    n_interval = -(-n_epoch // max(interval_every, 1))
+    if n_interval < _FEW_EPOCHS:
+        out.append(
+            f"the interval lengths rest on {n_interval} epochs (--interval-every "
+            f"{interval_every}): their median and 95th percentile are rough; lower "
+            "--interval-every"
+        )
+    return out
+
+
+_ASSUMED_OPEN_WARN = 0.05  # share of the trusting bins that rests on an assumption
+
+
+def assumed_sky_notes(masks: MaskSet) -> list[str]:
+    """A warning when much of the sky the masks trust rests on an assumption: ASSUMED bins
+    below 90° over more than 5 % of the bins below 90° (a user trial flagged every bin ASSUMED
+    and got the surveyed file's figures, said in one header row)."""
+    open_ = masks.effective_mask_deg < 90.0
+    if not open_.any():
+        return []
+    share = float((open_ & (masks.source == BinSource.ASSUMED)).sum() / open_.sum())
+    if share <= _ASSUMED_OPEN_WARN:
+        return []
+    return [
+        f"{100.0 * share:.1f} % of the directions these masks leave open rest on an assumption "
+        "(ASSUMED bins: nothing was seen there, the value is a stated default): every satellite "
+        "trusted there is trusted on that assumption; give elevation tiles (--dem) or survey "
+        "those stretches with a cab or 360 rig"
+    ]
 
 
 def side_swap_notes(provenance: JsonDict) -> list[str]:

@@ -923,11 +923,48 @@ def test_the_report_says_what_the_far_field_rests_on() -> None:
                        margin_deg=np.zeros((n, n_az)), provenance=prov)  # fmt: skip
 
     made = masks({"params": {"reconstruction": {"far_default_deg": 5.0}}})
-    assert far_field_text(made) == ("assumed at 5° where no camera saw it (25.0 % of the bins "
-                                    "assumed); no elevation tiles given")  # fmt: skip
+    assert far_field_text(made) == (
+        "assumed at 5° where no camera saw it (25.0 % of the bins assumed: 0.0 % closed to the "
+        "zenith, 25.0 % open); no elevation tiles given"
+    )
+    # tiles named, but no bin flagged TERRAIN: they may not cover the line
     raised = masks({"terrain": {"dem": ["N43E006.hgt"]}})
-    assert far_field_text(raised).startswith("raised to the elevation tiles")
+    assert "no bin rests on them (do they cover the line?)" in far_field_text(raised)
+    src[:, 9:12] = BinSource.TERRAIN
+    raised = masks({"terrain": {"dem": ["N43E006.hgt"]}})
+    assert far_field_text(raised).startswith("raised to the elevation tiles ['N43E006.hgt'] in "
+                                             "8.3 % of the bins")  # fmt: skip
+    # flags the provenance does not explain (an edited file): said, not hidden
+    assert far_field_text(masks({})).startswith("8.3 % of the bins flagged TERRAIN, but")
+    src[:, 9:12] = BinSource.OBSERVED
+    assert far_field_text(masks({})).startswith("25.0 % of the bins assumed")
+    src[:] = BinSource.OBSERVED
     assert far_field_text(masks({})) == ""  # true masks: nothing to say
+
+
+def test_the_report_warns_when_much_of_the_trusted_sky_is_assumed() -> None:
+    """A user trial flagged every bin ASSUMED and got the surveyed file's figures, said in one
+    header row only."""
+    from predisat.availability.run import assumed_sky_notes
+    from predisat.masks.maskset import BinSource, MaskSet
+
+    n, n_az = 4, 100
+    src = np.zeros((n, n_az), np.uint8)
+    el = np.full((n, n_az), 10.0)
+    el[:, :50] = 90.0  # closed: nothing trusted there, assumed or not
+    src[:, :50] = BinSource.ASSUMED
+    src[:, 50:52] = BinSource.ASSUMED  # 2 of the 50 open bins: 4 %
+
+    def masks() -> MaskSet:
+        return MaskSet(chainage_m=np.arange(n) * 10.0, lat_deg=np.full(n, 50.0),
+                       lon_deg=np.full(n, 4.0), h_m=np.zeros(n), heading_deg=np.zeros(n),
+                       az_step_deg=3.6, mask_el_deg=el, source=src,
+                       margin_deg=np.zeros((n, n_az)))  # fmt: skip
+
+    assert assumed_sky_notes(masks()) == []
+    src[:, 52:54] = BinSource.ASSUMED  # 8 %
+    (note,) = assumed_sky_notes(masks())
+    assert note.startswith("8.0 % of the directions these masks leave open rest on an assumption")
 
 
 def test_process_says_when_a_pair_of_cameras_is_calibrated_unlike(tmp_path) -> None:
