@@ -37,7 +37,7 @@ import shutil
 import tempfile
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -250,11 +250,15 @@ def load_navigation(paths: Sequence[str | Path] | None) -> Ephemeris:
     return Ephemeris.from_rinex(files)
 
 
-def nav_span_gps_s(ephemeris: Ephemeris) -> tuple[float, float]:
+def nav_span_gps_s(
+    ephemeris: Ephemeris, systems: Collection[str] | None = None
+) -> tuple[float, float]:
     """Time span the navigation data covers, ``(first, last)`` in ``gps_s``.
 
-    Broadcast: the first and last reference epoch (toe, tb) of any record; SP3: the first and
-    last tabulated epoch; TLE: the element-set epochs widened by the validity age.
+    Broadcast: the first and last reference epoch (toe, tb) of any record (of the ``systems``,
+    RINEX letters such as ``{"G"}``, when given and held: a Galileo file's records of the day
+    before must not move a GPS report's window); SP3: the first and last tabulated epoch; TLE:
+    the element-set epochs widened by the validity age.
     """
     if ephemeris.kind == "sp3" and ephemeris.sp3 is not None:
         ep = ephemeris.sp3.epochs_gps_s
@@ -263,7 +267,13 @@ def nav_span_gps_s(ephemeris: Ephemeris) -> tuple[float, float]:
         ep = ephemeris.tle.epochs_gps_s
         age = ephemeris.policy.tle_max_age_s
         return float(np.min(ep) - age), float(np.max(ep) + age)
-    refs = [r.ref_gps_s for r in (ephemeris.kepler, ephemeris.glonass) if r is not None and len(r)]
+    recs = [r for r in (ephemeris.kepler, ephemeris.glonass) if r is not None and len(r)]
+    refs = [r.ref_gps_s for r in recs]
+    if systems:
+        own = [r.ref_gps_s[np.isin([str(s)[:1].upper() for s in r.sat], list(systems))]
+               for r in recs]  # fmt: skip
+        if any(len(x) for x in own):
+            refs = [x for x in own if len(x)]
     if not refs:
         raise ValueError(f"navigation data {list(ephemeris.sources)} holds no record")
     ref = np.concatenate(refs)
@@ -271,16 +281,21 @@ def nav_span_gps_s(ephemeris: Ephemeris) -> tuple[float, float]:
 
 
 def _window(
-    ephemeris: Ephemeris, embedded: bool, start: float | None, end: float | None, step_s: float
+    ephemeris: Ephemeris,
+    embedded: bool,
+    start: float | None,
+    end: float | None,
+    step_s: float,
+    systems: Collection[str] | None = None,
 ) -> NDArray:
     if not (math.isfinite(step_s) and step_s > 0):
         raise ValueError(
             f"step_s (--step) must be a positive number of seconds, got {step_s}"
         )
     if start is None:
-        start = _default_start(ephemeris, embedded)
+        start = _default_start(ephemeris, embedded, systems)
     if end is None:
-        hi = nav_span_gps_s(ephemeris)[1]
+        hi = nav_span_gps_s(ephemeris, systems)[1]
         if ephemeris.kind == "sp3":  # precise orbits are interpolated, never extrapolated
             last_s = hi + 1e-3
         else:  # broadcast records stay valid about an hour after the last reference epoch
@@ -301,14 +316,17 @@ def _window(
     return t
 
 
-def _default_start(ephemeris: Ephemeris, embedded: bool) -> float:
-    """Start of the default window: the embedded day, else the data's first (whole) hour."""
+def _default_start(
+    ephemeris: Ephemeris, embedded: bool, systems: Collection[str] | None = None
+) -> float:
+    """Start of the default window: the embedded day, else the data's first (whole) hour (of
+    the counted ``systems``' records)."""
     if embedded:
         return float(default_window(3600.0)[0])
     if ephemeris.kind == "tle" and ephemeris.tle is not None:
         # element sets are valid for days: the day of the median set's epoch
         return math.floor(float(np.median(ephemeris.tle.epochs_gps_s)) / 86400.0) * 86400.0
-    lo, _ = nav_span_gps_s(ephemeris)
+    lo, _ = nav_span_gps_s(ephemeris, systems)
     if ephemeris.kind == "sp3":
         return math.ceil(lo / 3600.0) * 3600.0
     # a daily broadcast file starts with records of about 00:00 (some from the previous day)
@@ -825,7 +843,7 @@ def _navigation(
     names = ", ".join(Path(p).name for p in nav) if nav else ""
     nav_label = names or f"embedded {DEFAULT_NAV_FILE}"
     t0_gps, t1_gps = parse_time(start, "start (--start)"), parse_time(end, "end (--end)")
-    t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s)
+    t = _window(ephemeris, not nav, t0_gps, t1_gps, step_s, system_letters(constellation))
     if not select_satellites(ephemeris.satellites, constellation):
         raise ValueError(
             f"no satellite of constellation {constellation!r} in {nav_label}; choose another "

@@ -338,6 +338,23 @@ def test_coarse_sampling_is_said() -> None:
     assert few.startswith("the interval lengths rest on 3 epochs (--interval-every 1000)")
 
 
+def test_the_default_window_follows_the_counted_system(
+    tmp_path: Path, masks: MaskSet, track: TrackMap, shared_data: Path
+) -> None:
+    """A user trial: NYA1's daily GPS, Galileo and BeiDou files with the default GPS count;
+    the window started at the Galileo records of the day before, where GPS has none, and the
+    run was refused as a gap in the data."""
+    from predisat.availability.run import _default_start, load_navigation
+
+    d = shared_data / "gnss" / "georust_rinex"
+    nav = [d / f"NYA100NOR_S_20241240000_01D_{k}N.rnx.gz" for k in "GEC"]
+    eph = load_navigation(nav)
+    assert _default_start(eph, False, {"G"}) > _default_start(eph, False, None)
+    r = run_availability(masks, track, nav, out_dir=tmp_path / "o", step_s=3600.0,
+                         progress=False)  # fmt: skip
+    assert r.results[0].gps_s.size >= 20 and r.results[0].sats[0].startswith("G")
+
+
 def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
     with pytest.raises(ValueError, match=r"sky_km \(--sky-km\) \[9\.0\] outside"):
         run_availability(masks, track, None, out_dir=tmp_path / "o", sky_km=[9.0],
