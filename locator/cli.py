@@ -947,7 +947,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
                    help="per-epoch table format")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
-    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS,
+    p.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
                    help="no progress bar (as `locator -q`)")
     add_checks(
         p,

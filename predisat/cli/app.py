@@ -332,7 +332,7 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    "without an IMU; the pipeline then bounds them from the track's curves)")
     p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering processes")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)
 
 
@@ -446,7 +446,7 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                    "library's default, see docs/segmentation.md)")
     p.add_argument("--sky-net", metavar="ONNX", help="a candidate sky network (with its .json "
                    "card) for --method cnn or ensemble (default: the shipped one)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_checks(
         p,
         needs("--sky-net", "sky_net", lambda a: a.method in (None, *NET_METHODS),

@@ -105,7 +105,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="options of the fsspec file system of URL masks and outputs, a JSON object such "
         "as '{\"anon\": true}' (docs/cluster.md; default: none, the file system's own defaults)",
     )  # fmt: skip
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     return p
 
 

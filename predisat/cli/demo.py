@@ -472,5 +472,5 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    "cut out of the default demo's")
     p.add_argument("--workers", type=positive_int, default=default_workers(), metavar="N",
                    help="rendering and processing processes")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

@@ -91,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="predict the interval at every N-th epoch")
     integrity_options(p)
     add_attitude_arguments(p)
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:

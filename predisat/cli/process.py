@@ -104,7 +104,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     add_attitude_arguments(parser)
     parser.add_argument(
-        "--quiet", action="store_true",
+        "-q", "--quiet", action="store_true",
         help="no progress bars nor progress lines, the final 'mask bins: ...' share of "
         "observed, reconstructed, terrain and assumed bins included (bad frames and warnings "
         "are still printed)",

@@ -384,3 +384,11 @@ def test_synth_rig_choices_are_the_presets() -> None:
 
     assert predisat_cli.RIG_CHOICES == RIG_NAMES
     assert DEFAULT_RIG == "side-fisheye"
+
+
+@pytest.mark.parametrize(("name", "parser"), COMMANDS, ids=[n for n, _ in COMMANDS])
+def test_quiet_is_also_dash_q_after_the_subcommand(name: str, parser) -> None:
+    """A user typed `predisat process ... -q` (as `locator run ... -q`) and was refused."""
+    opts = parser._option_string_actions
+    if "--quiet" in opts:
+        assert opts.get("-q") is opts["--quiet"], name
