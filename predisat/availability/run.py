@@ -709,11 +709,6 @@ def _masks_on_track(
     """The masks of the stretch (checked to lie on ``track``), how to name them, the track, and
     the warnings for the report (holes closed, a stretch asked beyond the masks)."""
     mask_set, masks_label, notes = _load_masks(masks, opts)
-    if mask_set.n_pos < 2:
-        raise ValueError(
-            f"masks {masks_label} hold one position (chainage {mask_set.chainage_m[0]:.1f} m): "
-            "a report covers a stretch; give masks of at least two positions"
-        )
     track_map = _load_track(track)
     if track_map is None:
         track_map = _embedded_track_of(mask_set, masks_label)
@@ -732,6 +727,14 @@ def _masks_on_track(
         mask_set = reg.masks
     notes += _stretch_beyond(mask_set, masks_label, from_m, to_m)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
+    if mask_set.n_pos < 2:
+        asked = from_m is not None or to_m is not None
+        where = "in the stretch asked (--from-km/--to-km)" if asked else ""
+        raise ValueError(
+            f"masks {masks_label} hold one position (chainage {mask_set.chainage_m[0]:.1f} m) "
+            f"{where}: a report covers a stretch; give masks of at least two positions, or a "
+            "longer stretch"
+        )
     if track_map is not None:
         notes += _open_in_tunnels(mask_set, track_map, masks_label)
     return mask_set, masks_label, track_map, notes

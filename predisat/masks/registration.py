@@ -36,7 +36,8 @@ MAX_TRACK_OFFSET_M = 25.0
 SAME_MAP_TOL_M = 0.1
 """Chainages and positions within this (metres) of the map's: the masks were made on it."""
 
-_WIDEN_SLACK_M = 0.5  # the maps' curvature between positions, and the cell edges' midpoints
+_WIDEN_SLACK_M = 0.5  # the maps' curvature between a cell's corners
+_NORMAL_SAMPLES = 9  # along each edge's normal, its ends included
 _EDGE_TOL_M = 0.001  # projections are good to a micrometre
 _MAP_DOUBT_M = 1.0  # the train may stand off both maps by their disagreement and this much
 
@@ -76,9 +77,9 @@ class Registration:
         return (
             f"masks {masks_label} were made on another map of this line than {track_name!r}: "
             f"chainages differ by up to {self.shift_m:.1f} m and positions by up to "
-            f"{self.offset_m:.1f} m; they are re-registered by position, each mask's stretch "
-            f"widened by up to {self.widen_m:.1f} m to the worst of its neighbours (where the "
-            "maps turn apart)"
+            f"{self.offset_m:.1f} m; they are re-registered by position: a position added "
+            "between each two takes the worse of them, and each stretch reaches up to "
+            f"{self.widen_m:.1f} m further where the maps part (docs/mask-format.md)"
             + (f", {self.beyond} positions past the map's ends left out" if self.beyond else "")
             + "; give the map the masks were made on for the sky they hold"
         )
@@ -116,25 +117,29 @@ def register_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> Regi
         the map's ends are left out.
     """
     proj = track.project(masks.lat_deg, masks.lon_deg)
-    off = np.abs(np.asarray(proj.offset_m, float))
-    i = int(np.argmax(off))
-    if off[i] > MAX_TRACK_OFFSET_M:
-        raise ValueError(
-            f"masks {masks_label} do not fit track {track.name!r}: the position at chainage "
-            f"{masks.chainage_m[i]:.1f} m lies {off[i]:.0f} m beside the track (at its "
-            f"chainage {float(proj.chainage_m[i]):.1f} m); give the track map the masks were "
-            "made on"
-        )
-    ch = np.asarray(proj.chainage_m, float)
-    shift = np.abs(ch - masks.chainage_m)
-    if float(shift.max()) <= SAME_MAP_TOL_M and float(off.max()) <= SAME_MAP_TOL_M:
-        return Registration(masks, True, 0.0, float(off.max()), 0.0)
+    ch_all = np.asarray(proj.chainage_m, float)
+    off_all = np.abs(np.asarray(proj.offset_m, float))
     inside = ~np.asarray(proj.clamped, bool)
     if not inside.any():
+        far = float(np.min(np.hypot(off_all, np.asarray(proj.along_m, float))))
         raise ValueError(
-            f"masks {masks_label} lie beyond the ends of track {track.name!r}; give the track "
-            "map the masks were made on"
+            f"masks {masks_label} do not fit track {track.name!r}: every position lies past "
+            f"its ends, the nearest {far:.0f} m from it; give the track map the masks were "
+            "made on"
         )
+    # past the map's ends the offset is across its end's tangent: no measure of another track
+    i = int(np.argmax(np.where(inside, off_all, -1.0)))
+    if off_all[i] > MAX_TRACK_OFFSET_M:
+        raise ValueError(
+            f"masks {masks_label} do not fit track {track.name!r}: the position at chainage "
+            f"{masks.chainage_m[i]:.1f} m lies {off_all[i]:.0f} m beside the track (at its "
+            f"chainage {ch_all[i]:.1f} m); give the track map the masks were made on"
+        )
+    shift_all = np.abs(ch_all - masks.chainage_m)
+    if inside.all() and float(shift_all.max()) <= SAME_MAP_TOL_M and (
+        float(off_all.max()) <= SAME_MAP_TOL_M
+    ):
+        return Registration(masks, True, 0.0, float(off_all.max()), 0.0)
     kept = np.flatnonzero(inside)
     if kept.size != kept[-1] - kept[0] + 1:
         raise ValueError(
@@ -142,29 +147,45 @@ def register_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> Regi
             f"chainage {masks.chainage_m[~inside][0]:.1f} m); give the track map the masks "
             "were made on"
         )
-    beyond = masks.n_pos - kept.size  # positions past the map's ends: never looked up on it
-    masks = masks.subset(float(masks.chainage_m[kept[0]]), float(masks.chainage_m[kept[-1]]))
-    ch, off, shift = ch[kept], off[kept], shift[kept]
-    if masks.n_pos > 1 and not np.all(np.diff(ch) > 0.0):
+    if kept.size < 2:
+        raise ValueError(
+            f"only one position of masks {masks_label} (chainage "
+            f"{masks.chainage_m[kept[0]]:.1f} m) lies on track {track.name!r}; give the track "
+            "map the masks were made on, or masks of the stretch it covers"
+        )
+    ch = ch_all[kept]
+    if not np.all(np.diff(ch) > 0.0):
         k = int(np.flatnonzero(np.diff(ch) <= 0.0)[0])
         way = "runs the other way" if ch[-1] < ch[0] else "folds back"
+        a, b = masks.chainage_m[kept[k]], masks.chainage_m[kept[k + 1]]
         raise ValueError(
             f"masks {masks_label} do not follow track {track.name!r} in order: the positions "
-            f"at chainages {masks.chainage_m[k]:.1f} and {masks.chainage_m[k + 1]:.1f} m lie at "
-            f"its chainages {ch[k]:.1f} and {ch[k + 1]:.1f} m (the map {way}); give the track "
-            "map the masks were made on"
+            f"at chainages {a:.1f} and {b:.1f} m lie at its chainages {ch[k]:.1f} and "
+            f"{ch[k + 1]:.1f} m (the map {way}); give the track map the masks were made on"
         )
-    # each position's cell on the masks' map, carried onto this one: its edges (the midpoints
-    # between positions) projected, widened by how far a place's chainage on one map may be
-    # from its projection's on the other (a place off a map by d, maps at an angle: d sin)
-    edges = _edges_on(track, masks, ch)
-    turn = np.radians(np.abs(np.mod(masks.heading_deg - track.heading_at(ch) + 180.0, 360.0)
-                             - 180.0))  # fmt: skip
-    turn = np.maximum.reduce([turn, np.roll(turn, 1), np.roll(turn, -1)])
-    widen = _widening_m(off, turn)
-    moved = replace(masks, chainage_m=ch)
-    lo, hi = _cells_touching(moved.cell_bounds_m, edges[:-1] - widen, edges[1:] + widen)
-    out = _worst_over(moved, lo, hi)
+    # each position's cell on the masks' map, carried onto this one: the places of the cell
+    # (between the normals at its edges, the midpoints between positions, and within the maps'
+    # disagreement and a metre of the masks' map) project onto a stretch of this map, bounded
+    # by its corners' projections. Positions past the map's ends are not looked up on it, but
+    # their cells may reach it.
+    lo_m, hi_m, first_m, last_m = _stretches_on(track, masks, off_all)
+    # where the masks end on their own map nothing is known beyond: the registered coverage
+    # must not reach past the projection of their end's places
+    if kept[0] == 0:
+        ch = _end_inside(ch, first_m, masks_label)
+    if kept[-1] == masks.n_pos - 1:
+        ch = -_end_inside(-ch[::-1], -last_m, masks_label)[::-1]
+    # how much longer each stretch is than its cell on the masks' map, per end
+    widen = np.maximum(0.5 * ((hi_m - lo_m) - np.diff(masks.cell_bounds_m)), 0.0)[kept]
+    beyond = masks.n_pos - kept.size
+    # a position added half-way between each two: the strip about each edge, where either
+    # neighbour's places may project, gets its own cell and the worse of the two; the rest of
+    # each cell keeps its own mask (without it each cell took the worst of three positions)
+    target = _with_edges(
+        masks.subset(float(masks.chainage_m[kept[0]]), float(masks.chainage_m[kept[-1]])), ch
+    )
+    out = _worst_over(target, masks, lo_m, hi_m)
+    shift, off = shift_all[kept], off_all[kept]
     prov = dict(masks.provenance)
     prov["registered_on"] = {
         "track": track.name,
@@ -182,56 +203,147 @@ def register_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> Regi
                         float(widen.max()), int(beyond))  # fmt: skip
 
 
-def _widening_m(offset_m: NDArray, turn_rad: NDArray) -> NDArray:
-    """How far a place's chainage on one map may be from its projection's on the other,
-    metres: off the maps by up to their disagreement ``offset_m`` and a metre, on maps at
-    ``turn_rad`` to each other, plus the slack of the maps' curvature."""
-    return _WIDEN_SLACK_M + (offset_m + _MAP_DOUBT_M) * np.sin(np.minimum(turn_rad, np.pi / 2))
+def _with_edges(masks: MaskSet, chainage_m: NDArray) -> MaskSet:
+    """``masks`` at ``chainage_m`` with a position added half-way between each two, to be
+    filled by :func:`_worst_over` (its mask, margin and flags start at 0, OBSERVED and
+    support 255): geodetic midpoint, the mean heading, the nearer obstacle and the higher."""
+    n = masks.n_pos
+
+    def mid(a: NDArray) -> NDArray:
+        out = np.empty((2 * n - 1, *a.shape[1:]), a.dtype)
+        out[0::2] = a
+        out[1::2] = 0.5 * (a[1:] + a[:-1])
+        return out
+
+    def fill(a: NDArray, value: float) -> NDArray:
+        out = np.full((2 * n - 1, *a.shape[1:]), value, a.dtype)
+        out[0::2] = a
+        return out
+
+    heading = mid(np.asarray(masks.heading_deg, float))
+    turn = np.mod(masks.heading_deg[1:] - masks.heading_deg[:-1] + 180.0, 360.0) - 180.0
+    heading[1::2] = np.mod(masks.heading_deg[:-1] + 0.5 * turn, 360.0)
+    desc = {}
+    for key, v in masks.descriptors.items():
+        pair = np.stack([v[1:], v[:-1]])
+        near = np.fmin.reduce(pair) if key.endswith("distance_m") else np.fmax.reduce(pair)
+        d = mid(np.asarray(v, float))
+        d[1::2] = near
+        desc[key] = d
+    margin = np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape).astype(np.float32)
+    return replace(
+        masks, chainage_m=mid(chainage_m), lat_deg=mid(masks.lat_deg),
+        lon_deg=mid(masks.lon_deg), h_m=mid(masks.h_m), heading_deg=heading,
+        mask_el_deg=fill(masks.mask_el_deg, 0.0), margin_deg=fill(margin, 0.0),
+        source=fill(masks.source, float(BinSource.OBSERVED)), descriptors=desc,
+        support=None if masks.support is None else fill(masks.support, 255.0),
+    )  # fmt: skip
 
 
-def _edges_on(track: TrackMap, masks: MaskSet, chainage_m: NDArray) -> NDArray:
-    """The masks' cell edges (midpoints between positions, the ends half a spacing out) on
-    ``track``: projected, shape (n_pos + 1,), metres."""
-    if masks.n_pos == 1:
-        return np.array([chainage_m[0], chainage_m[0]])
-    # midpoints of 10 m chords: within millimetres of the map's own, at these scales
-    lat = 0.5 * (masks.lat_deg[1:] + masks.lat_deg[:-1])
-    lon = 0.5 * (masks.lon_deg[1:] + masks.lon_deg[:-1])
-    mid = np.asarray(track.project(lat, lon).chainage_m, float)
-    first = chainage_m[0] - (mid[0] - chainage_m[0])
-    last = chainage_m[-1] + (chainage_m[-1] - mid[-1])
-    return np.concatenate([[first], mid, [last]])
+def _end_inside(chainage_m: NDArray, limit_m: float, masks_label: str) -> NDArray:
+    """Move the first position up until its cell's lower edge (``c0 - (c1 - c0) / 2``) is at
+    least ``limit_m``: the cell's edge rises by 1.5 times the move, the next cell takes the
+    strip given up (the worst over it is taken afterwards)."""
+    c = chainage_m.copy()
+    edge = c[0] - 0.5 * (c[1] - c[0])
+    if edge >= limit_m:
+        return c
+    c[0] += (limit_m - edge) / 1.5
+    if not c[0] < c[1]:
+        raise ValueError(
+            f"masks {masks_label}: their end position lies within the maps' disagreement of the "
+            "next; give the track map the masks were made on"
+        )
+    return c
+
+
+def _reach_m(offset_m: NDArray) -> NDArray:
+    """How far from the masks' map a place may be, metres, at each cell edge (``offset_m``,
+    (n + 1,), the maps' disagreement there): the train is on neither map exactly; taken as
+    anywhere between them, or beyond either by half their disagreement and a metre."""
+    return 1.5 * offset_m + _MAP_DOUBT_M
+
+
+def _stretches_on(
+    track: TrackMap, masks: MaskSet, offset_m: NDArray
+) -> tuple[NDArray, NDArray, float, float]:
+    """Where the places of each position's cell project on ``track``: per position the
+    lowest and highest chainage (n,), and where the places just beyond the masks' first and
+    last cell edge may reach (the registered coverage must start above the first, end below
+    the second), metres.
+
+    A cell's places lie between the normals to the masks' map at its edges (the midpoints of
+    the chords between positions; the ends half a chord out, as
+    :attr:`MaskSet.cell_bounds_m`) and within :func:`_reach_m` of the map; their projections
+    are bounded by those of the corners, widened by ``_WIDEN_SLACK_M`` for the maps'
+    curvature between them.
+    """
+    enu = np.asarray(track.frame.to_enu(masks.lat_deg, masks.lon_deg, masks.h_m), float)
+    chord = np.diff(enu, axis=0)
+    chord = np.vstack([chord[:1], chord, chord[-1:]])  # (n + 1, 3): at each edge
+    edge = np.vstack([enu[:1] - 0.5 * chord[0], 0.5 * (enu[1:] + enu[:-1]),
+                      enu[-1:] + 0.5 * chord[-1]])  # fmt: skip
+    along = chord[:, :2] / np.linalg.norm(chord[:, :2], axis=1, keepdims=True)
+    normal = np.column_stack([-along[:, 1], along[:, 0], np.zeros(len(along))])
+    off_edge = np.concatenate([[offset_m[0]], np.maximum(offset_m[1:], offset_m[:-1]),
+                               [offset_m[-1]]])  # fmt: skip
+    # the maps may part more between positions than at them
+    at_edge = np.abs(np.asarray(track.project_enu(edge).offset_m, float))
+    reach = _reach_m(np.maximum(off_edge, at_edge))[:, None]
+    # the cell's boundary: the normal at each edge (sampled), and the offset lines through the
+    # position (a map's bend between samples is what the slack is for)
+    frac = np.linspace(-1.0, 1.0, _NORMAL_SAMPLES)[None, :, None]
+    across = edge[:, None, :] + frac * reach[:, :, None] * normal[:, None, :]
+    at = np.asarray(track.project_enu(across).chainage_m, float)  # (n + 1, samples)
+    mean_along = along[:-1] + along[1:]  # (n, 2): the chords on either side of a position
+    n_pos = np.column_stack([-mean_along[:, 1], mean_along[:, 0]])
+    n_pos /= np.linalg.norm(n_pos, axis=1, keepdims=True)
+    side = np.column_stack([n_pos, np.zeros(len(n_pos))])
+    r_pos = np.minimum(reach[1:], reach[:-1])
+    beside = np.stack([enu, enu - r_pos * side, enu + r_pos * side], axis=1)
+    own = np.asarray(track.project_enu(beside).chainage_m, float)  # (n, 3)
+    lo = np.minimum.reduce([at[:-1].min(axis=1), at[1:].min(axis=1), own.min(axis=1)])
+    hi = np.maximum.reduce([at[:-1].max(axis=1), at[1:].max(axis=1), own.max(axis=1)])
+    return (lo - _WIDEN_SLACK_M, hi + _WIDEN_SLACK_M, float(at[0].max()) + _WIDEN_SLACK_M,
+            float(at[-1].min()) - _WIDEN_SLACK_M)  # fmt: skip
 
 
 def _cells_touching(bounds_m: NDArray, lo_m: NDArray, hi_m: NDArray) -> tuple[NDArray, NDArray]:
-    """First and last position whose cell (``bounds_m``, (n + 1,)) overlaps each ``[lo, hi]``
-    by more than a millimetre (a cell whose edge meets the interval's is a neighbour, not an
-    overlap: both maps put the edge at the same place to well under that)."""
-    n = bounds_m.size - 1
-    first = np.clip(np.searchsorted(bounds_m[1:], lo_m + _EDGE_TOL_M, side="right"), 0, n - 1)
-    last = np.clip(np.searchsorted(bounds_m[:-1], hi_m - _EDGE_TOL_M, side="left") - 1, 0, n - 1)
-    return first, np.maximum(first, last)
+    """First and last cell (``bounds_m``, (n + 1,)) each ``[lo, hi]`` overlaps by more than a
+    millimetre (a cell whose edge meets the interval's is a neighbour, not an overlap: both
+    maps put the edge at the same place to well under that); ``last < first`` where the
+    interval overlaps no cell."""
+    lo, hi = lo_m + _EDGE_TOL_M, hi_m - _EDGE_TOL_M
+    first = np.searchsorted(bounds_m[1:], lo, side="right")
+    last = np.searchsorted(bounds_m[:-1], hi, side="left") - 1
+    return first, np.where(hi > lo, last, first - 1)
 
 
-def _worst_over(masks: MaskSet, first: NDArray, last: NDArray) -> MaskSet:
-    """Each position's bins the worst over the positions ``i`` whose range ``first[i] ..
-    last[i]`` holds it (the cells their widened stretches reach): the highest mask and margin,
-    ASSUMED where any is, the weakest support."""
-    span = last - first + 1
-    src = np.repeat(np.arange(masks.n_pos), span)  # (pairs,): the position carried over
-    dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)])
-    mask = masks.mask_el_deg.copy()
-    np.maximum.at(mask, dst, masks.mask_el_deg[src])
-    margin = np.broadcast_to(masks.margin_deg, mask.shape).astype(np.float32)
-    margin_out = margin.copy()
-    np.maximum.at(margin_out, dst, margin[src])
-    assumed = masks.source == BinSource.ASSUMED
-    assumed_out = assumed.copy()
-    np.logical_or.at(assumed_out, dst, assumed[src])
+def _worst_over(target: MaskSet, source: MaskSet, lo_m: NDArray, hi_m: NDArray) -> MaskSet:
+    """``target`` with each cell's bins the worst over the ``source`` positions whose
+    stretches ``[lo_m, hi_m]`` (on the target's chainage) overlap it: the highest mask and
+    margin, ASSUMED where any is, the weakest support."""
+    first, last = _cells_touching(target.cell_bounds_m, lo_m, hi_m)
+    span = np.maximum(last - first + 1, 0)
+    src = np.repeat(np.arange(source.n_pos), span)  # (pairs,): the position carried over
+    dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]
+                         + [np.zeros(0, np.int64)]).astype(np.int64)  # fmt: skip
+    mask = target.mask_el_deg.copy()
+    np.maximum.at(mask, dst, source.mask_el_deg[src])
+    margin_src = np.broadcast_to(source.margin_deg, source.mask_el_deg.shape)
+    margin = np.broadcast_to(target.margin_deg, mask.shape).astype(np.float32)
+    np.maximum.at(margin, dst, margin_src[src].astype(np.float32))
+    assumed = target.source == BinSource.ASSUMED
+    np.logical_or.at(assumed, dst, source.source[src] == BinSource.ASSUMED)
     support = None
-    if masks.support is not None:
-        support = masks.support.copy()
-        np.minimum.at(support, dst, masks.support[src])
-    source = np.where(assumed_out, np.uint8(BinSource.ASSUMED), masks.source).astype(np.uint8)
-    return replace(masks, mask_el_deg=mask, margin_deg=margin_out, source=source,
+    if target.support is not None and source.support is not None:
+        support = target.support.copy()
+        np.minimum.at(support, dst, source.support[src])
+    # a cell no stretch reached (none should be: the stretches cover the masks' own cells)
+    # is closed and ASSUMED, never left open
+    unreached = np.bincount(dst, minlength=target.n_pos) == 0
+    mask[unreached] = 90.0
+    assumed[unreached] = True
+    flags = np.where(assumed, np.uint8(BinSource.ASSUMED), target.source).astype(np.uint8)
+    return replace(target, mask_el_deg=mask, margin_deg=margin, source=flags,
                    support=support)  # fmt: skip

@@ -307,6 +307,9 @@ def test_one_position_sky_in_a_tagged_tunnel_and_masks_off_the_embedded_map_are_
     with pytest.raises(ValueError, match=r"hold one position.*at least two positions"):
         run_availability(masks.subset(4000.0, 4000.0), track, None, out_dir=tmp_path / "one",
                          **common)  # type: ignore[arg-type]  # fmt: skip
+    with pytest.raises(ValueError, match=r"hold one position .* in the stretch asked"):
+        run_availability(masks, track, None, out_dir=tmp_path / "one", from_m=4000.0,
+                         to_m=4005.0, **common)  # type: ignore[arg-type]  # fmt: skip
     tunnel = replace(track, tunnels_m=((4050.0, 4400.0),))
     r = run_availability(masks, tunnel, None, out_dir=tmp_path / "t",
                          **common)  # type: ignore[arg-type]  # fmt: skip

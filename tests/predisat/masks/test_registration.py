@@ -79,7 +79,7 @@ def test_every_place_gets_at_least_the_sky_the_masks_hold_there(maps) -> None:
 def test_without_the_widening_a_place_gets_a_neighbour_s_sky(maps, monkeypatch) -> None:
     a, b = maps
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=1)
-    monkeypatch.setattr(registration, "_worst_over", lambda masks, first, last: masks)
+    monkeypatch.setattr(registration, "_worst_over", lambda target, source, lo, hi: target)
     r = register_on_track(m, b, "m").masks
     s_a = np.arange(460.0, 1640.0, 0.5)
     lat, lon, _ = a.position_at(s_a)
@@ -100,8 +100,13 @@ def test_widening_keeps_the_weakest_support(maps) -> None:
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=2)
     r = register_on_track(m, b, "m").masks
     assert r.support is not None and m.support is not None
-    assert np.all(r.support <= m.support)
-    assert np.all(r.mask_el_deg >= m.mask_el_deg) and np.all(r.margin_deg >= m.margin_deg)
+    assert r.n_pos == 2 * m.n_pos - 1  # a position added half-way between each two
+    assert np.all(r.support[0::2] <= m.support)
+    assert np.all(r.mask_el_deg[0::2] >= m.mask_el_deg)
+    assert np.all(r.margin_deg[0::2] >= m.margin_deg)
+    # the added positions take the worse of their two neighbours
+    worse = np.maximum(m.effective_mask_deg[1:], m.effective_mask_deg[:-1])
+    assert np.all(r.effective_mask_deg[1::2] >= worse - 1e-5)
 
 
 def test_another_track_a_reversed_map_and_masks_past_the_map(maps) -> None:
@@ -116,29 +121,29 @@ def test_another_track_a_reversed_map_and_masks_past_the_map(maps) -> None:
     # the excerpt starts near chainage 300 of the demo's map: positions before it are left out
     longer = _sharp_masks(a, np.arange(250.0, 1701.0, 10.0))
     reg = register_on_track(longer, b, "m")
-    assert 3 <= reg.beyond <= 8 and reg.masks.n_pos == longer.n_pos - reg.beyond
+    assert 3 <= reg.beyond <= 8 and reg.masks.n_pos == 2 * (longer.n_pos - reg.beyond) - 1
     assert "past the map's ends left out" in reg.describe("m", b.name)
 
 
 def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
-    """Two straight maps of a line crossing at 1 deg (8 m apart at the ends, another chainage
-    origin): places between and a little beyond them get at least their sky on either map;
-    carrying the cells over without widening them does not."""
+    """Two straight maps of a line crossing at 8 deg (21 m apart at the ends, another
+    chainage origin): places between and a little beyond them, looked up with
+    :meth:`MaskSet.mask_at` (``+inf`` outside the coverage), get at least their sky on the
+    masks' own map, to the coverage's ends; carrying the cells over without the places'
+    reach off the map does not."""
+    from predisat.geodesy import WGS84
     from tests.predisat.synth.test_world import straight_track
 
-    a = straight_track(1000.0, 60.0)
-    mid_lat, mid_lon, _ = a.position_at(500.0)
-    # B: A turned 1 deg about its middle, 40 m longer before the start
-    from predisat.geodesy import WGS84
-
+    a = straight_track(300.0, 60.0)
+    mid_lat, mid_lon, _ = a.position_at(150.0)
     ends = []
-    for d_m, az in ((540.0, 240.0 + 1.0), (540.0, 60.0 + 1.0)):
-        lo, la, _ = WGS84.fwd(mid_lon, mid_lat, az, d_m)
+    for az in (240.0 + 8.0, 60.0 + 8.0):  # B: A turned 8 deg about its middle, 40 m longer
+        lo, la, _ = WGS84.fwd(mid_lon, mid_lat, az, 170.0)
         ends.append((la, lo))
     b = TrackMap.from_latlon(np.array([ends[0][0], ends[1][0]]),
                              np.array([ends[0][1], ends[1][1]]), 100.0, name="B")  # fmt: skip
-    m = _sharp_masks(a, np.arange(50.0, 951.0, 10.0), seed=4)
-    s_a = np.arange(60.0, 940.0, 0.1)
+    m = _sharp_masks(a, np.arange(20.0, 281.0, 10.0), seed=4)
+    s_a = np.arange(5.0, 295.0, 0.05)
     here = np.asarray(a.position_at(s_a)[:2]).T
     on_b = np.asarray(b.project(here[:, 0], here[:, 1]).chainage_m)
     foot = np.asarray(b.position_at(on_b)[:2]).T
@@ -146,12 +151,36 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
     x = here + t_off * (foot - here)
     x_a = np.asarray(a.project(x[:, 0], x[:, 1]).chainage_m)
     x_b = np.asarray(b.project(x[:, 0], x[:, 1]).chainage_m)
+    az = np.arange(0.0, 360.0, 5.0)[None, :]
 
     def lower_anywhere() -> bool:
         r = register_on_track(m, b, "m").masks
-        got = r.effective_mask_deg[_cell(r, x_b)]
-        return bool((got < m.effective_mask_deg[_cell(m, x_a)] - 1e-5).any())
+        got = r.mask_at(x_b[:, None], az)
+        own = m.mask_at(x_a[:, None], az)
+        return bool((got < own - 1e-5).any())
 
     assert not lower_anywhere()
-    monkeypatch.setattr(registration, "_widening_m", lambda off, turn: np.zeros_like(off))
+    monkeypatch.setattr(registration, "_reach_m", lambda off: np.zeros_like(off))
+    monkeypatch.setattr(registration, "_WIDEN_SLACK_M", 0.0)
     assert lower_anywhere()
+
+
+def test_uneven_masks_past_both_ends_of_a_shorter_map(maps) -> None:
+    """A reviewer's case: masks over more than the map, unevenly spaced, looked up with
+    ``mask_at`` all along the map (``+inf`` outside the coverage): positions past the ends
+    give their sky to the places they reach, and no place gets less than on the masks' own
+    map (a first version lost up to 64 deg near the ends)."""
+    a, b = maps
+    rng = np.random.default_rng(7)
+    ch = np.sort(rng.uniform(200.0, 1900.0, 200))
+    ch = ch[np.concatenate([[True], np.diff(ch) > 0.5])]
+    m = _sharp_masks(a, ch, seed=8)
+    reg = register_on_track(m, b, "m")
+    assert reg.beyond > 0
+    s_b = np.arange(0.0, b.length_m, 0.05)
+    lat, lon, _ = b.position_at(s_b)
+    s_a = np.asarray(a.project(lat, lon).chainage_m)
+    az = np.arange(0.0, 360.0, 5.0)[None, :]
+    got = reg.masks.mask_at(s_b[:, None], az)
+    own = m.mask_at(s_a[:, None], az)
+    assert np.all(got >= own - 1e-5)

@@ -20,12 +20,11 @@ from tests.predisat.reconstruct.test_placement import _placed
 from tests.predisat.synth.test_world import straight_track
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_the_bound_holds_every_far_object_from_every_place_within_the_doubt(seed: int) -> None:
-    """Far points (at least W away from the antenna, every azimuth, heights from below the
-    antenna to far above it) seen from cameras anywhere within the doubt disc and up to the
-    rise: the elevation from the antenna is never above the bound of what a camera saw, and
-    somewhere it comes within 0.1 deg of it (the bound is not loose)."""
+def _views(seed: int):
+    """A camera's offset, doubt and rise, far points (at least W = 40 m away from the antenna,
+    every azimuth, heights from below the antenna to far above it) and, from cameras on the
+    doubt's circle and at its centre, at the rise and below it: what each camera saw and the
+    elevation from the antenna."""
     rng = np.random.default_rng(seed)
     w = 40.0
     offset = rng.uniform(-4.0, 4.0, 2)
@@ -39,15 +38,41 @@ def test_the_bound_holds_every_far_object_from_every_place_within_the_doubt(seed
     ang = rng.uniform(0.0, 2.0 * np.pi, 24)
     places = offset + doubt * np.stack([np.sin(ang), np.cos(ang)], axis=1)
     places = np.vstack([places, offset])
-    worst_gap = np.inf
     for xy in places:
         for z in (min(rise, 0.0) - 0.3, rise):
             rel = obj - np.array([xy[0], xy[1], z])
             el_cam = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
-            bound = far_elevation_bound(el_cam, az, offset, rise, doubt, w)
-            assert np.all(bound >= el_ant - 1e-9), float((el_ant - bound).max())
-            worst_gap = min(worst_gap, float((bound - el_ant).min()))
+            yield el_cam, az, offset, rise, doubt, w, el_ant
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_bound_holds_every_far_object_from_every_place_within_the_doubt(seed: int) -> None:
+    """Far points seen from every camera place within the doubt: the elevation from the
+    antenna is never above the bound of what a camera saw, and somewhere it comes within 0.1
+    deg of it (the bound is not loose)."""
+    worst_gap = np.inf
+    for el_cam, az, offset, rise, doubt, w, el_ant in _views(seed):
+        bound = far_elevation_bound(el_cam, az, offset, rise, doubt, w)
+        assert np.all(bound >= el_ant - 1e-9), float((el_ant - bound).max())
+        worst_gap = min(worst_gap, float((bound - el_ant).min()))
     assert worst_gap < 0.1
+
+
+def test_every_part_of_the_bound_is_needed() -> None:
+    """The same cases: the skyline alone, the bound without the doubt, without the rise, each
+    falls below some far point's elevation from the antenna."""
+    variants = {
+        "skyline": lambda el, az, o, r, d, w: np.asarray(el, float),
+        "no doubt": lambda el, az, o, r, d, w: far_elevation_bound(el, az, o, r, 0.0, w),
+        "no rise": lambda el, az, o, r, d, w: far_elevation_bound(el, az, o, min(r, 0.0), d, w),
+    }
+    for name, bound in variants.items():
+        broken = any(
+            np.any(bound(el_cam, az, offset, rise, doubt, w) < el_ant - 1e-6)
+            for seed in range(6)
+            for el_cam, az, offset, rise, doubt, w, el_ant in _views(seed)
+        )
+        assert broken, name
 
 
 def test_the_bound_keeps_what_was_not_a_skyline_and_is_the_identity_at_the_antenna() -> None:
