@@ -10,6 +10,7 @@ Maps onto :class:`predisat.track.network.Network`,
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -117,6 +118,12 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
         )  # fmt: skip
     except TrackMapError as exc:
         raise CliError(f"network {exc}") from None
+    # a line whose track data is bad is left out and the others go on: said before the work,
+    # not only in the summary (a user trial found a line with swapped coordinates gone, exit 0)
+    routine = ("another track of the line", "out of service", "no track ")
+    for s in network.skipped:
+        if not s.reason.startswith(routine):
+            print(f"predisat network: warning: {s.what} left out: {s.reason}", file=sys.stderr)
     out = Path(args.out)
     result = process_network(
         network, args.surveys, out, PipelineParams(chunk_m=args.chunk_m,

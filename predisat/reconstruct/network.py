@@ -28,6 +28,7 @@ import functools
 import hashlib
 import json
 import os
+import shutil
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -168,6 +169,26 @@ def _part_key(shared: _Shared, unit: _Unit, survey: Survey) -> JsonDict:
     }
 
 
+def _withdraw(out: Path, unit: _Unit, part_file: Path) -> Path | None:
+    """Move a failed line part's masks and availability report of an earlier run out of the
+    dataset (a user trial read them back as the line's masks after its survey had broken):
+    to ``OUT/withdrawn/``, kept, never deleted. The folder, or None when there was nothing."""
+    dest = out / "withdrawn"
+    moved = False
+    for src in (part_file.parent, out / "availability" / unit.key):
+        if src.exists():
+            target = dest / src.relative_to(out)
+            if target.exists():
+                shutil.rmtree(target)  # an older withdrawal of the same part
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(src, target)
+            moved = True
+    line_dir = part_file.parent.parent
+    if line_dir.is_dir() and not any(line_dir.iterdir()):
+        line_dir.rmdir()  # no other part left: the line is gone from the dataset
+    return dest if moved else None
+
+
 def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     """One line part: process its survey (serially), write its partition, then its marker."""
     t0 = time.perf_counter()
@@ -197,7 +218,12 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     except (SurveyError, ValueError, OSError) as exc:
         if shared.strict:
             raise
-        return made(status="failed", message=str(exc),
+        message = str(exc)
+        moved = _withdraw(out, unit, part_file)
+        if moved:
+            message += (f"; the line's masks and report of an earlier run were withdrawn to "
+                        f"{moved} (they no longer match its survey)")  # fmt: skip
+        return made(status="failed", message=message,
                           elapsed_s=time.perf_counter() - t0)  # fmt: skip
     path = write_partition(res.masks, out / "masks", unit.line_id, unit.part)
     done = {

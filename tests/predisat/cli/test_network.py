@@ -103,3 +103,23 @@ def test_bad_network_file_is_refused_with_its_name(
     code = main(["network", str(bad), "--surveys", str(surveys), "--out", str(tmp_path / "o"),
                  "--id-key", "name", "--lines", "y", "--scheduler", "serial"])  # fmt: skip
     assert code == 2 and "no line 'y'" in capsys.readouterr().err
+
+
+def test_a_line_with_bad_track_data_is_left_out_and_said(
+    tmp_path: Path, test_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A user trial: a line with swapped coordinates was left out with exit 0, said only in
+    the summary's "Left out" section."""
+    doc = json.loads((test_data / "track" / "network_gembloux.geojson").read_text())
+    bad = next(f for f in doc["features"] if f["properties"].get("linecalfa") == "161")
+    bad["geometry"]["coordinates"] = [[c[1], c[0], *c[2:]] for c in
+                                      bad["geometry"]["coordinates"]]  # fmt: skip
+    path = tmp_path / "net.geojson"
+    path.write_text(json.dumps(doc))
+    (tmp_path / "surveys").mkdir()
+    code = main(["network", str(path), "--surveys", str(tmp_path / "surveys"), "--out",
+                 str(tmp_path / "o"), "--scheduler", "serial", "--no-availability",
+                 "-q"])  # fmt: skip
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "predisat network: warning: line 161 left out:" in err

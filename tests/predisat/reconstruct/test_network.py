@@ -117,6 +117,18 @@ def test_a_broken_survey_fails_its_line_only(
     with pytest.raises(ValueError, match=r"manifest\.csv"):
         process_network(network, broken, tmp_path / "out2", PARAMS, scheduler="serial",
                         progress=False, segmenter=blue_sky, strict=True)  # fmt: skip
+    # a line that broke after an earlier run: its masks are withdrawn from the dataset, kept
+    # (a user trial read the old masks back as the line's)
+    out = tmp_path / "out4"
+    process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                    segmenter=blue_sky)  # fmt: skip
+    assert set(read_dataset_table(out / "masks")["line"].to_pylist()) == set(SURVEYED)
+    res = process_network(network, broken, out, PARAMS, scheduler="serial", progress=False,
+                          segmenter=blue_sky)  # fmt: skip
+    assert [r.status for r in res.lines] == ["resumed", "failed", "no survey"]
+    assert "withdrawn to" in res.lines[1].message
+    assert set(read_dataset_table(out / "masks")["line"].to_pylist()) == {"144"}
+    assert (out / "withdrawn" / "masks" / "line=161" / "part=1" / "masks.parquet").is_file()
     with pytest.raises(FileNotFoundError, match="no such surveys folder"):
         process_network(network, tmp_path / "none", tmp_path / "out3", PARAMS)
 
