@@ -215,6 +215,8 @@ def cmd_network(args: argparse.Namespace) -> int:
     for r in result.lines:
         if r.status in ("no survey", "failed"):
             print(f"  line {r.line_id} part {r.part}: {r.status}: {r.message}")
+        elif r.message:  # the processing's warnings, with their line
+            print(f"  line {r.line_id} part {r.part}: {r.status}, warning: {r.message}")
     if result.unmatched_surveys:
         print(f"  survey folders matching no line: {', '.join(result.unmatched_surveys)}")
     print(f"network: summary {files['html']} ({files['csv']}, map {files['map']})")

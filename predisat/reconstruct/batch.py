@@ -898,8 +898,8 @@ def source_report(
             f"{raised[1]:g} deg the far field is assumed at where no camera saw it "
             f"({100 * float(assumed.mean()):.1f} % of the bins): the horizon rises around the "
             "line (hills, or buildings beyond the corridor), and the assumed bins may stand "
-            "below it; give elevation tiles (--dem, docs/terrain.md), or survey the stretch "
-            "with a cab or 360 rig (docs/rigs.md)"
+            "below it; give elevation tiles (process --dem, docs/terrain.md), or survey the "
+            "stretch with a cab or 360 rig (docs/rigs.md)"
         )
     return lines
 

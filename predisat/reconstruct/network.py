@@ -39,7 +39,7 @@ from predisat import __version__
 from predisat.atomic import write_bytes_atomic
 from predisat.jsontypes import JsonDict
 from predisat.masks.dataset import partition_path, write_partition
-from predisat.reconstruct.batch import process_survey
+from predisat.reconstruct.batch import process_survey, source_report
 from predisat.reconstruct.framecache import code_fingerprint, frames_key, survey_hash
 from predisat.reconstruct.frames import Segmenter
 from predisat.reconstruct.params import PipelineParams
@@ -75,7 +75,8 @@ class LineResult:
         Chainage of the first and last mask position on the part (NaN without masks).
     elapsed_s : float
     message : str
-        The error of a failed part; where the survey was looked for when missing.
+        The error of a failed part; where the survey was looked for when missing; the
+        processing's warnings of a done or resumed one (assumed stretches, a raised horizon).
     """
 
     line_id: str
@@ -209,7 +210,8 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
                                   n_pos=int(old["n_pos"]), n_frames=int(old["n_frames"]),
                                   n_bad_frames=int(old["n_bad_frames"]),
                                   from_m=float(old["from_m"]), to_m=float(old["to_m"]),
-                                  elapsed_s=time.perf_counter() - t0)  # fmt: skip
+                                  elapsed_s=time.perf_counter() - t0,
+                                  message="; ".join(old.get("warnings", ())))  # fmt: skip
         res = process_survey(
             survey, line_out, shared.params, track=unit.track, scheduler="serial",
             strict=shared.strict, progress=False, segmenter=shared.segmenter,
@@ -235,11 +237,17 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
         "from_m": float(res.masks.chainage_m[0]),
         "to_m": float(res.masks.chainage_m[-1]),
     }
+    # the processing's warnings (assumed stretches, a raised horizon) named with their line
+    # in the console and the summary: printed bare among the lines', they were lost
+    said = [ln.removeprefix("warning: ") for ln in source_report(res.masks, track=unit.track)
+            if ln.startswith("warning")]  # fmt: skip
+    done["warnings"] = said
     write_bytes_atomic(marker, json.dumps(done, indent=1).encode())
     return made(status="done", masks_path=path, n_pos=res.masks.n_pos,
                       n_frames=res.n_frames, n_bad_frames=len(res.bad_frames),
                       from_m=float(res.masks.chainage_m[0]), to_m=float(res.masks.chainage_m[-1]),
-                      elapsed_s=time.perf_counter() - t0)  # fmt: skip
+                      elapsed_s=time.perf_counter() - t0,
+                      message="; ".join(said))  # fmt: skip
 
 
 def process_network(

@@ -180,3 +180,25 @@ def test_a_survey_is_refused_on_a_network_track_that_leaves_its_own(
         process_survey(surveys / "144", tmp_path / "alone", PARAMS, track=b, progress=False,
                        segmenter=blue_sky)  # fmt: skip
     assert not (tmp_path / "alone" / "masks.parquet").exists()
+
+
+def test_a_line_s_processing_warnings_name_the_line(
+    network: Network, surveys: Path, tmp_path: Path
+) -> None:
+    """A user trial: the raised-horizon warning of one line was printed bare among the
+    others', and kept nowhere. Now each line's warnings are its result's message (the
+    summary's `message` column), the same when it is resumed."""
+    from predisat.reconstruct.batch import source_report
+
+    out = tmp_path / "out"
+    res = process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                          segmenter=blue_sky)  # fmt: skip
+    for r in res.lines[:2]:
+        own = [ln.removeprefix("warning: ")
+               for ln in source_report(read_masks(r.masks_path), track=network.line(
+                   r.line_id).parts[0]) if ln.startswith("warning")]  # fmt: skip
+        assert r.message == "; ".join(own)
+    again = process_network(network, surveys, out, PARAMS, scheduler="serial", progress=False,
+                            segmenter=blue_sky)  # fmt: skip
+    assert [r.message for r in again.lines[:2]] == [r.message for r in res.lines[:2]]
+    assert any(r.message for r in res.lines[:2])  # these short pinhole surveys assume much
