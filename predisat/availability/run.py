@@ -95,6 +95,7 @@ __all__ = [
     "far_field_text",
     "load_navigation",
     "nav_span_gps_s",
+    "navigation_holes",
     "parse_time",
     "positioning_text",
     "rig_text",
@@ -420,6 +421,74 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
     return out
 
 
+_NAV_HOLE_S = 3600.0  # a satellite without usable records this long inside the window
+
+
+def navigation_holes(sats: SatellitePositions, nav_label: str, kind: str) -> list[str]:
+    """Warnings for parts of the window the navigation data leaves uncovered: a constellation
+    with no usable satellite over some epochs (the window starts before its records), and
+    precise orbits without a satellite for an hour or more of the window (a user trial:
+    an SP3 file with 5 satellites zeroed for 13 h, and a window where GPS and BeiDou had no
+    records in the first hour, said only in the folded files section).
+
+    Parameters
+    ----------
+    sats : SatellitePositions
+        The satellites of the run (``valid`` of shape (n_epoch, n_sat)).
+    nav_label : str
+        How the warning names the navigation data.
+    kind : str
+        The navigation data's kind (``Ephemeris.kind``): a satellite's hole is looked for in
+        precise orbits (``"sp3"``) only, which tabulate every satellite all day; a station's
+        broadcast file holds the records of the satellites it saw, so each one's time below
+        its horizon is a hole, of no consequence.
+
+    Returns
+    -------
+    list of str
+        One sentence per case (empty when the data cover the window).
+    """
+    t, valid = sats.gps_s, np.asarray(sats.valid, bool)
+
+    if t.size < 2:
+        return []
+    out = []
+    for system in sorted({s[0] for s in sats.sats}):
+        cols = [j for j, s in enumerate(sats.sats) if s[0] == system]
+        none = ~valid[:, cols].any(axis=1)
+        if none.any() and not none.all():
+            k = np.flatnonzero(none)
+            out.append(
+                f"{nav_label} holds no usable {SYSTEM_NAMES.get(system, system)} satellite in "
+                f"{k.size} of {t.size} epochs ({_iso(t[k[0]])} - {_iso(t[k[-1]])} GPST): the "
+                "counts there are of the other systems only; choose a window inside every "
+                "system's data (--start/--end)"
+            )
+    step = float(np.median(np.diff(t)))
+    holed = []
+    for j, s in enumerate(sats.sats if kind == "sp3" else ()):
+        v = valid[:, j]
+        if not v.any() or v.all():
+            continue  # never tabulated in the window (another constellation), or whole
+        gap = ~v  # precise orbits tabulate every satellite all day: any gap is one
+        edges = np.diff(np.concatenate([[0], gap.astype(np.int8), [0]]))
+        starts = np.flatnonzero(edges == 1)
+        ends = np.flatnonzero(edges == -1)  # first usable epoch after the hole
+        seen = [(b - a) * step for a, b in zip(starts, ends, strict=True)
+                if (b - a) * step >= _NAV_HOLE_S]
+        if seen:
+            holed.append((s, max(seen)))
+    if holed:
+        names = ", ".join(f"{s} ({d / 3600.0:.1f} h)" for s, d in holed[:8])
+        more = f" and {len(holed) - 8} more" if len(holed) > 8 else ""
+        out.append(
+            f"{nav_label} has no usable record of {len(holed)} satellite(s) for an hour or more "
+            f"inside the window: {names}{more}; they are not counted then, which understates "
+            "the shares; give complete navigation data"
+        )
+    return out
+
+
 def _load_masks(
     masks: str | Path | MaskSet, opts: StorageOptions | None = None
 ) -> tuple[MaskSet, str, list[str]]:
@@ -634,6 +703,7 @@ def run_availability(
         stage("navigation")
         nav_data = _navigation(nav, start, end, step_s, constellation)
         positions = LinePositions.from_masks(mask_set)
+        mask_notes += navigation_holes(nav_data.sats, nav_data.label, nav_data.ephemeris.kind)
         bar.update(1)
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]

@@ -358,6 +358,38 @@ def test_the_default_window_follows_the_counted_system(
     assert r.results[0].gps_s.size >= 20 and r.results[0].sats[0].startswith("G")
 
 
+def test_holes_in_the_navigation_data_are_said(
+    tmp_path: Path, masks: MaskSet, track: TrackMap, shared_data: Path
+) -> None:
+    """A user trial: an SP3 file with satellites zeroed for 13 h, and all constellations
+    counted from a window where GPS had no records yet, were said only in the folded files
+    section."""
+    src = shared_data / "gnss" / "rtklib" / "igs15904.sp3"
+    lines = src.read_text().splitlines(keepends=True)
+    stars = [i for i, ln in enumerate(lines) if ln.startswith("*")]
+    # G05 zeroed (SP3's "no position") for 3 h (12 epochs at 15 min) from 10:00
+    holed = [ln if not (ln.startswith("PG05") and stars[40] < i < stars[52])
+             else "PG05      0.000000      0.000000      0.000000 999999.999999\n"
+             for i, ln in enumerate(lines)]  # fmt: skip
+    (tmp_path / "holed.sp3").write_text("".join(holed))
+    common = dict(step_s=900.0, progress=False)
+    r = run_availability(masks, track, [src], out_dir=tmp_path / "a",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    assert not [w for w in r.info["warnings"] if "no usable record" in w]
+    r = run_availability(masks, track, [tmp_path / "holed.sp3"], out_dir=tmp_path / "b",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (hole,) = [w for w in r.info["warnings"] if "no usable record" in w]
+    assert "of 1 satellite(s)" in hole and "G05 (" in hole
+    # NYA1's three daily files counted together: the window starts with Galileo's records of
+    # the day before, where GPS and BeiDou have none
+    d = shared_data / "gnss" / "georust_rinex"
+    nav = [d / f"NYA100NOR_S_20241240000_01D_{k}N.rnx.gz" for k in "GEC"]
+    r = run_availability(masks, track, nav, out_dir=tmp_path / "c", constellation="all",
+                         step_s=3600.0, progress=False)  # fmt: skip
+    said = [w for w in r.info["warnings"] if "holds no usable" in w]
+    assert any("GPS satellite in" in w for w in said), said
+
+
 def test_sky_km_outside_the_stretch(tmp_path: Path, masks: MaskSet, track: TrackMap) -> None:
     with pytest.raises(ValueError, match=r"sky_km \(--sky-km\) \[9\.0\] outside"):
         run_availability(masks, track, None, out_dir=tmp_path / "o", sky_km=[9.0],
