@@ -198,6 +198,11 @@ class Survey:
         header = _read_header(root, opts)
         if track is None and header["track_path"] is not None:
             track = _load_track(root, header["track_path"], header["track_name"], opts)
+        elif track is not None and header["track_path"] is not None:
+            # before any frame is read against it: a track that runs the other way from the
+            # survey's own sent a user round between "increasing" and "decreasing"
+            own = _load_track(root, header["track_path"], header["track_name"], opts)
+            _check_same_way(root, own, track)
         rows, frame_problems = _read_manifest(
             root, header, track, check_images, max_offset_m, max_speed_mps, opts
         )
@@ -436,6 +441,27 @@ def check_survey_track(survey: Survey, track: TrackMap) -> None:
             "were not; leave --track out to use the survey's own, or give a track that "
             "follows it (for `predisat network`, the survey's own geometry and --tolerance-m)"
         )
+
+
+def _check_same_way(root: Location, own: TrackMap, track: TrackMap) -> None:
+    """Refuse ``track`` when it runs the other way from the survey's ``own`` track where they
+    overlap (chainage increasing the other way): the frames' chainages and directions of
+    travel would all read reversed on it."""
+    s = np.linspace(0.0, own.length_m, 21)
+    lat, lon, _ = own.position_at(s)
+    proj = track.project(lat, lon)
+    on = ~np.asarray(proj.clamped, bool) & (np.abs(np.asarray(proj.offset_m, float)) < 50.0)
+    if on.sum() < 3:
+        return  # they hardly overlap: the frames' own checks will say so
+    ch = np.asarray(proj.chainage_m, float)[on]
+    if np.all(np.diff(ch) < 0.0):
+        name = getattr(track, "name", "track")
+        raise SurveyError(root, [SurveyProblem(
+            f"the track given ({name!r}) runs the other way from the survey's own track "
+            f"({own.name!r}): its chainage {ch[0]:.0f} m is the survey track's {s[on][0]:.0f} m "
+            f"and decreases along it; reverse the track's line (or, for `predisat network`, its "
+            "feature in the network file), or process the survey on its own track"
+        )])  # fmt: skip
 
 
 def _load_track(root: Location, path: Location, name: str | None, opts: StorageOptions) -> TrackMap:

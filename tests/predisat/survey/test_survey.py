@@ -149,6 +149,26 @@ def test_track_file_named_in_survey_yaml_is_used(tmp_path: Path) -> None:
     assert np.allclose(survey.chainage_m, np.repeat([100.0, 110.0], 2), atol=0.05)
 
 
+def test_a_track_running_the_other_way_from_the_survey_s_own_is_refused(
+    tmp_path: Path,
+) -> None:
+    """A user trial: a network's line reversed against the survey's own track was refused
+    frame by frame, and "increasing" and "decreasing" each sent the user to the other."""
+    track = _straight_track()
+    csv_path = tmp_path / "track.csv"
+    with open(csv_path, "w") as fh:
+        fh.write("lat_deg,lon_deg,h_m\n")
+        for la, lo in zip(track.lat_deg, track.lon_deg, strict=True):
+            fh.write(f"{float(la)!r},{float(lo)!r},150.0\n")
+    root = _write(
+        tmp_path / "s", n=2, positions=True, track_name="straight", track_path="../track.csv"
+    )
+    back = type(track).from_latlon(track.lat_deg[::-1], track.lon_deg[::-1], 150.0, name="back")
+    with pytest.raises(SurveyError, match=r"runs the other way from the survey's own track"):
+        Survey.load(root, track=back)
+    assert Survey.load(root, track=track).frames.chainage_m.size == 4  # the same way: fine
+
+
 def test_reverse_survey_swaps_track_sides(tmp_path: Path) -> None:
     survey = Survey.load(_write(tmp_path / "s", n=2, direction_of_travel="decreasing"))
     assert survey.reverse
