@@ -253,6 +253,16 @@ class Network:
                 f"{p}: no LineString or MultiLineString feature; a network file holds the lines' "
                 "track axes as line features"
             )
+        if where:
+            # before the id key is looked for: a feature the filter removes need not carry it
+            # (a user trial's --where usage=main was refused on a siding without the key)
+            line_feats = [x for x in line_feats if _matches(x[1], where)]
+            if not line_feats:
+                asked = ", ".join(f"{k}={v}" for k, v in where.items())
+                raise TrackMapError(
+                    f"{p}: no line feature matches where {asked}; check the property names "
+                    "and values (--where KEY=VALUE)"
+                )
         key = _id_key(p, line_feats, id_key)
         skipped: list[Skipped] = []
         groups: dict[str, list[tuple[int, JsonDict, JsonDict]]] = {}

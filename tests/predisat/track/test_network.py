@@ -166,3 +166,22 @@ def test_a_line_read_alone_is_the_networks_line(gembloux: Path) -> None:
         (part,) = net.line(lid).parts
         assert track_key(alone) == track_key(part)
         assert alone.length_m == part.length_m
+
+
+def test_where_filters_before_the_id_key_is_looked_for(tmp_path: Path, gembloux: Path) -> None:
+    """A user trial: `--where usage=main` was refused on a siding that lacks the id key,
+    which the filter would have removed."""
+    doc = json.loads(gembloux.read_text())
+    siding = json.loads(json.dumps(doc["features"][0]))
+    siding["properties"] = {"usage": "siding"}  # no linecalfa
+    for f in doc["features"]:
+        f["properties"]["usage"] = "main"
+    doc["features"].append(siding)
+    path = tmp_path / "net.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match="linecalfa"):
+        Network.from_file(path)  # the siding lacks the key
+    net = Network.from_file(path, where={"usage": "main"})
+    assert sorted(ln.line_id for ln in net.lines) == ["140", "144", "161"]
+    with pytest.raises(TrackMapError, match="no line feature matches where usage=spur"):
+        Network.from_file(path, where={"usage": "spur"})
