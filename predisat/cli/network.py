@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
     from predisat.reconstruct.network import process_network
     from predisat.reconstruct.params import PipelineParams
     from predisat.track import TrackMapError
-    from predisat.track.network import Network
+    from predisat.track.network import Network, overlapping_parts
 
     try:
         network = Network.from_file(
@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
     for s in network.skipped:
         if not s.reason.startswith(routine):
             print(f"predisat network: warning: {s.what} left out: {s.reason}", file=sys.stderr)
+    for said in overlapping_parts(network):
+        print(f"predisat network: warning: {said}", file=sys.stderr)
     out = Path(args.out)
     result = process_network(
         network, args.surveys, out, PipelineParams(chunk_m=args.chunk_m,

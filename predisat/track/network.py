@@ -52,6 +52,7 @@ __all__ = [
     "NetworkLine",
     "Skipped",
     "line_key",
+    "overlapping_parts",
     "part_key",
     "track_key",
 ]
@@ -316,6 +317,47 @@ class Network:
             )
         return cls(p, str(members.get("name") or p.stem), attribution, key, tuple(built),
                    tuple(skipped))  # fmt: skip
+
+
+def overlapping_parts(
+    network: Network, *, within_m: float = 5.0, min_overlap_m: float = 50.0
+) -> list[str]:
+    """Sentences for lines whose parts lie on each other (within ``within_m`` over more than
+    ``min_overlap_m``): the same track drawn twice in the file, processed twice and counted
+    twice in the network's length (a user trial's overlapping pieces of one line became two
+    parts without a word).
+
+    Parameters
+    ----------
+    network : Network
+    within_m : float
+        Largest distance between the parts' axes, metres.
+    min_overlap_m : float
+        Shortest overlap said, metres.
+
+    Returns
+    -------
+    list of str
+        One sentence per pair of overlapping parts (empty when none).
+    """
+    out = []
+    for line in network.lines:
+        for a in range(len(line.parts)):
+            for b in range(a + 1, len(line.parts)):
+                pa, pb = line.parts[a], line.parts[b]
+                s = np.arange(0.0, pa.length_m, 5.0)
+                lat, lon, _ = pa.position_at(s)
+                proj = pb.project(lat, lon)
+                near = (np.abs(np.asarray(proj.offset_m, float)) <= within_m) & ~np.asarray(
+                    proj.clamped, bool)  # fmt: skip
+                overlap = 5.0 * float(near.sum())
+                if overlap > min_overlap_m:
+                    out.append(
+                        f"line {line.line_id}: parts {a + 1} and {b + 1} lie on each other over "
+                        f"about {overlap:.0f} m (the same track drawn twice in the network "
+                        "file?): both are processed and counted; keep one of the pieces"
+                    )
+    return out
 
 
 def _some(names: Sequence[str], n: int = 20) -> str:

@@ -185,3 +185,24 @@ def test_where_filters_before_the_id_key_is_looked_for(tmp_path: Path, gembloux:
     assert sorted(ln.line_id for ln in net.lines) == ["140", "144", "161"]
     with pytest.raises(TrackMapError, match="no line feature matches where usage=spur"):
         Network.from_file(path, where={"usage": "spur"})
+
+
+def test_overlapping_parts_of_a_line_are_said(tmp_path: Path, gembloux: Path) -> None:
+    """A user trial drew line 144 as two overlapping pieces: two parts, processed and counted
+    twice, without a word."""
+    from predisat.track.network import overlapping_parts
+
+    doc = json.loads(gembloux.read_text())
+    f144 = next(f for f in doc["features"] if f["properties"]["linecalfa"] == "144")
+    xy = f144["geometry"]["coordinates"]
+    assert len(xy) >= 6
+    second = json.loads(json.dumps(f144))
+    f144["geometry"]["coordinates"] = xy[: len(xy) * 2 // 3 + 1]
+    second["geometry"]["coordinates"] = xy[len(xy) // 3:]
+    doc["features"].append(second)
+    path = tmp_path / "net.geojson"
+    path.write_text(json.dumps(doc))
+    assert overlapping_parts(Network.from_file(gembloux)) == []
+    net = Network.from_file(path)
+    (said,) = overlapping_parts(net)
+    assert said.startswith("line 144: parts 1 and 2 lie on each other over about")
