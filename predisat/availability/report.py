@@ -327,9 +327,12 @@ def _pct(x: float) -> str:
 
 
 def _num(x: float, unit: str, digits: int = 0) -> str:
+    """A length the reader should not take as shorter than it is (an interval, a stretch
+    without 4 satellites), rounded up: 103.498 m reads 104 m, not 103 (a user trial)."""
     if x is None or not math.isfinite(x):
         return "–"
-    return f"{x:,.{digits}f}".replace(",", " ") + f" {unit}"
+    up = math.ceil(x * 10**digits - 1e-9) / 10**digits
+    return f"{up:,.{digits}f}".replace(",", " ") + f" {unit}"
 
 
 def _duration(s: float) -> str:

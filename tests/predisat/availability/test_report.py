@@ -265,3 +265,13 @@ def test_along_line_figures(results, track):
         np.asarray(lines["masks (median)"].get_ydata(), float), np.repeat([46.0, 44.0], 5)
     )
     assert plots.figure_to_png(fig)[:4] == b"\x89PNG"
+
+
+def test_lengths_in_the_report_are_rounded_up() -> None:
+    """A user trial read a predicted interval of 103.498 m as "103 m": shorter than it is."""
+    from predisat.availability.report import _num
+
+    assert _num(103.498, "m") == "104 m"
+    assert _num(100.0, "m") == "100 m"
+    assert _num(1234.01, "m", 1) == "1 234.1 m"
+    assert _num(float("nan"), "m") == "–"
