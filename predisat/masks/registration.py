@@ -169,21 +169,33 @@ def register_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> Regi
     # by its corners' projections. Positions past the map's ends are not looked up on it, but
     # their cells may reach it.
     lo_m, hi_m, first_m, last_m = _stretches_on(track, masks, off_all)
-    # where the masks end on their own map nothing is known beyond: the registered coverage
-    # must not reach past the projection of their end's places
-    if kept[0] == 0:
-        ch = _end_inside(ch, first_m, masks_label)
-    if kept[-1] == masks.n_pos - 1:
-        ch = -_end_inside(-ch[::-1], -last_m, masks_label)[::-1]
-    # how much longer each stretch is than its cell on the masks' map, per end
-    widen = np.maximum(0.5 * ((hi_m - lo_m) - np.diff(masks.cell_bounds_m)), 0.0)[kept]
+    # how much each stretch reaches past its own cell's, at either end (the larger)
+    lo_own, hi_own = _stretches_on(track, masks, off_all, reach=False)[:2]
+    widen = np.maximum(np.maximum(lo_own - lo_m, hi_m - hi_own), 0.0)[kept]
     beyond = masks.n_pos - kept.size
     # a position added half-way between each two: the strip about each edge, where either
-    # neighbour's places may project, gets its own cell and the worse of the two; the rest of
-    # each cell keeps its own mask (without it each cell took the worst of three positions)
+    # neighbour's places may project, gets its own cell and the worst of the stretches there;
+    # the rest of each cell keeps its own mask (without it each cell took the worst of three
+    # positions)
     target = _with_edges(
         masks.subset(float(masks.chainage_m[kept[0]]), float(masks.chainage_m[kept[-1]])), ch
     )
+    # where the masks end on their own map nothing is known beyond: the registered coverage
+    # must stop short of the projection of the places past their end. The end positions move
+    # inward, or give way to the next (their stretches still count in the worst below).
+    first, last = 0, target.n_pos
+    if kept[0] == 0:
+        first = _end_inside(target.chainage_m, first_m)
+    if kept[-1] == masks.n_pos - 1:
+        last = target.n_pos - _end_inside(-target.chainage_m[::-1], -last_m)
+    if last - first < 2:
+        raise ValueError(
+            f"masks {masks_label} lie within the maps' disagreement of their own ends on track "
+            f"{track.name!r}: no stretch of it is surely covered; give the track map the masks "
+            "were made on"
+        )
+    target = _moved_ends(target, first, last, first_m if kept[0] == 0 else None,
+                         last_m if kept[-1] == masks.n_pos - 1 else None)  # fmt: skip
     out = _worst_over(target, masks, lo_m, hi_m)
     shift, off = shift_all[kept], off_all[kept]
     prov = dict(masks.provenance)
@@ -240,21 +252,35 @@ def _with_edges(masks: MaskSet, chainage_m: NDArray) -> MaskSet:
     )  # fmt: skip
 
 
-def _end_inside(chainage_m: NDArray, limit_m: float, masks_label: str) -> NDArray:
-    """Move the first position up until its cell's lower edge (``c0 - (c1 - c0) / 2``) is at
-    least ``limit_m``: the cell's edge rises by 1.5 times the move, the next cell takes the
-    strip given up (the worst over it is taken afterwards)."""
-    c = chainage_m.copy()
-    edge = c[0] - 0.5 * (c[1] - c[0])
-    if edge >= limit_m:
-        return c
-    c[0] += (limit_m - edge) / 1.5
-    if not c[0] < c[1]:
-        raise ValueError(
-            f"masks {masks_label}: their end position lies within the maps' disagreement of the "
-            "next; give the track map the masks were made on"
-        )
-    return c
+def _end_inside(chainage_m: NDArray, limit_m: float) -> int:
+    """How many positions at the start of ``chainage_m`` must give way so that the first
+    left can move up until its cell's lower edge (``c0 - (c1 - c0) / 2``) reaches
+    ``limit_m``: the edge rises by 1.5 times the move, which must leave it below ``c1``."""
+    for k in range(chainage_m.size - 1):
+        c0, c1 = float(chainage_m[k]), float(chainage_m[k + 1])
+        edge = c0 - 0.5 * (c1 - c0)
+        if edge >= limit_m or c0 + (limit_m - edge) / 1.5 < c1 - 1e-6:
+            return k
+    return chainage_m.size
+
+
+def _moved_ends(
+    masks: MaskSet, first: int, last: int, lo_limit_m: float | None, hi_limit_m: float | None
+) -> MaskSet:
+    """``masks`` from position ``first`` to ``last - 1``, its end positions moved inward until
+    its coverage lies within ``[lo_limit_m, hi_limit_m]`` (None: that end stays)."""
+    ch = masks.chainage_m
+    kept = masks.subset(float(ch[first]), float(ch[last - 1]))
+    c = kept.chainage_m.copy()
+    if lo_limit_m is not None:
+        edge = c[0] - 0.5 * (c[1] - c[0])
+        if edge < lo_limit_m:
+            c[0] += (lo_limit_m - edge) / 1.5
+    if hi_limit_m is not None:
+        edge = c[-1] + 0.5 * (c[-1] - c[-2])
+        if edge > hi_limit_m:
+            c[-1] -= (edge - hi_limit_m) / 1.5
+    return replace(kept, chainage_m=c)
 
 
 def _reach_m(offset_m: NDArray) -> NDArray:
@@ -265,7 +291,7 @@ def _reach_m(offset_m: NDArray) -> NDArray:
 
 
 def _stretches_on(
-    track: TrackMap, masks: MaskSet, offset_m: NDArray
+    track: TrackMap, masks: MaskSet, offset_m: NDArray, reach: bool = True
 ) -> tuple[NDArray, NDArray, float, float]:
     """Where the places of each position's cell project on ``track``: per position the
     lowest and highest chainage (n,), and where the places just beyond the masks' first and
@@ -289,17 +315,18 @@ def _stretches_on(
                                [offset_m[-1]]])  # fmt: skip
     # the maps may part more between positions than at them
     at_edge = np.abs(np.asarray(track.project_enu(edge).offset_m, float))
-    reach = _reach_m(np.maximum(off_edge, at_edge))[:, None]
+    reach_m = (_reach_m(np.maximum(off_edge, at_edge)) if reach
+               else np.zeros(len(edge)))[:, None]  # fmt: skip
     # the cell's boundary: the normal at each edge (sampled), and the offset lines through the
     # position (a map's bend between samples is what the slack is for)
     frac = np.linspace(-1.0, 1.0, _NORMAL_SAMPLES)[None, :, None]
-    across = edge[:, None, :] + frac * reach[:, :, None] * normal[:, None, :]
+    across = edge[:, None, :] + frac * reach_m[:, :, None] * normal[:, None, :]
     at = np.asarray(track.project_enu(across).chainage_m, float)  # (n + 1, samples)
     mean_along = along[:-1] + along[1:]  # (n, 2): the chords on either side of a position
     n_pos = np.column_stack([-mean_along[:, 1], mean_along[:, 0]])
     n_pos /= np.linalg.norm(n_pos, axis=1, keepdims=True)
     side = np.column_stack([n_pos, np.zeros(len(n_pos))])
-    r_pos = np.minimum(reach[1:], reach[:-1])
+    r_pos = np.minimum(reach_m[1:], reach_m[:-1])
     beside = np.stack([enu, enu - r_pos * side, enu + r_pos * side], axis=1)
     own = np.asarray(track.project_enu(beside).chainage_m, float)  # (n, 3)
     lo = np.minimum.reduce([at[:-1].min(axis=1), at[1:].min(axis=1), own.min(axis=1)])

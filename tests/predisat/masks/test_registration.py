@@ -160,6 +160,21 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
         return bool((got < own - 1e-5).any())
 
     assert not lower_anywhere()
+    # end positions a few centimetres to a metre from the next (frames at a standstill are
+    # kept to the millimetre): the coverage still stops short of the places past the end
+    bunched = np.concatenate([[20.0, 20.05, 21.0], np.arange(30.0, 271.0, 10.0),
+                              [279.0, 279.97, 280.0]])  # fmt: skip
+    m_end = _sharp_masks(a, bunched, seed=6)
+    r_end = register_on_track(m_end, b, "m").masks
+    got = r_end.mask_at(x_b[:, None], az)
+    own = m_end.mask_at(x_a[:, None], az)
+    assert not (got < own - 1e-5).any()
+    with monkeypatch.context() as mp:  # without moving the ends: places past them get sky
+        mp.setattr(registration, "_end_inside", lambda ch, limit: 0)
+        mp.setattr(registration, "_moved_ends",
+                   lambda masks, first, last, lo, hi: masks)  # fmt: skip
+        r_open = register_on_track(m_end, b, "m").masks
+        assert (r_open.mask_at(x_b[:, None], az) < own - 1e-5).any()
     monkeypatch.setattr(registration, "_reach_m", lambda off: np.zeros_like(off))
     monkeypatch.setattr(registration, "_WIDEN_SLACK_M", 0.0)
     assert lower_anywhere()
@@ -173,7 +188,7 @@ def test_uneven_masks_past_both_ends_of_a_shorter_map(maps) -> None:
     a, b = maps
     rng = np.random.default_rng(7)
     ch = np.sort(rng.uniform(200.0, 1900.0, 200))
-    ch = ch[np.concatenate([[True], np.diff(ch) > 0.5])]
+    ch = ch[np.concatenate([[True], np.diff(ch) > 0.001])]
     m = _sharp_masks(a, ch, seed=8)
     reg = register_on_track(m, b, "m")
     assert reg.beyond > 0
