@@ -373,7 +373,9 @@ def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str, basis: Sequen
         f"{r.n_pos} | {r.n_frames} | "
         f"{r.n_bad_frames} | {_pct(r.share_ge4_masks)} | {_pct(r.share_ge4_cutoff)} | "
         f"{_m(r.longest_below4_m_masks)} | "
-        + (f"[report]({r.report})" if r.report else r.message.replace("|", "/")) + " |\n"
+        + (f"[report]({r.report})" if r.report else "")
+        + (" warning: " if r.report and r.message else "") + r.message.replace("|", "/")
+        + " |\n"
         for r in _rows(t)
     )
     skipped = "".join(f"* {s.line_id}: {s.what}: {s.reason}\n" for s in network.skipped)
@@ -392,7 +394,10 @@ def _html(network: Network, t: pd.DataFrame, cutoff_rule: str, basis: Sequence[s
         f"<td>{r.n_frames}</td>"
         f"<td>{r.n_bad_frames}</td><td>{_pct(r.share_ge4_masks)}</td>"
         f"<td>{_pct(r.share_ge4_cutoff)}</td><td>{_m(r.longest_below4_m_masks)}</td><td>"
-        + (f'<a href="{e(r.report)}">report</a>' if r.report else e(r.message)) + "</td></tr>"
+        + (f'<a href="{e(r.report)}">report</a>' if r.report else "")
+        + (f'<p class="warn">{e(r.message)}</p>' if r.report and r.message else
+           "" if r.report else e(r.message))
+        + "</td></tr>"
         for r in _rows(t)
     )
     skipped = "".join(f"<li>{e(s.line_id)}: {e(s.what)}: {e(s.reason)}</li>"

@@ -28,7 +28,6 @@ import functools
 import hashlib
 import json
 import os
-import shutil
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -170,24 +169,32 @@ def _part_key(shared: _Shared, unit: _Unit, survey: Survey) -> JsonDict:
     }
 
 
-def _withdraw(out: Path, unit: _Unit, part_file: Path) -> Path | None:
-    """Move a failed line part's masks and availability report of an earlier run out of the
-    dataset (a user trial read them back as the line's masks after its survey had broken):
-    to ``OUT/withdrawn/``, kept, never deleted. The folder, or None when there was nothing."""
-    dest = out / "withdrawn"
-    moved = False
-    for src in (part_file.parent, out / "availability" / unit.key):
-        if src.exists():
-            target = dest / src.relative_to(out)
-            if target.exists():
-                shutil.rmtree(target)  # an older withdrawal of the same part
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(src, target)
-            moved = True
-    line_dir = part_file.parent.parent
-    if line_dir.is_dir() and not any(line_dir.iterdir()):
-        line_dir.rmdir()  # no other part left: the line is gone from the dataset
-    return dest if moved else None
+def _withdraw(out: Path, line_id: str, part: int, key: str) -> str:
+    """Move a line part's published masks and availability report of an earlier run out of
+    the dataset (a user trial read them back as the line's after its survey had broken):
+    ``OUT/masks/line=.../part=k``, ``OUT/lines/<key>/masks.parquet`` and
+    ``OUT/availability/<key>`` go to ``OUT/withdrawn/<UTC time>/`` (kept, never deleted; the
+    line's chunks and segmentation cache stay for a rerun). What to add to the part's
+    message: where they went, how it failed, or "" when there was nothing."""
+    part_dir = partition_path(out / "masks", line_id, part).parent
+    sources = [part_dir, out / "lines" / key / "masks.parquet", out / "availability" / key]
+    if not any(s.exists() for s in sources):
+        return ""
+    dest = out / "withdrawn" / time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    try:
+        for src in sources:
+            if src.exists():
+                target = dest / src.relative_to(out)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(src, target)
+        line_dir = part_dir.parent
+        if line_dir.is_dir() and not any(line_dir.iterdir()):
+            line_dir.rmdir()  # no other part left: the line is gone from the dataset
+    except OSError as exc:  # a part of the same line on another worker, a full disk
+        return (f"; its masks of an earlier run could not all be withdrawn from the dataset "
+                f"({exc}): remove {part_dir} before using the dataset")  # fmt: skip
+    return (f"; the line's masks and report of an earlier run were withdrawn to {dest} "
+            "(they no longer match its survey)")
 
 
 def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
@@ -218,14 +225,12 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
             margins=shared.margins, replace=True,
         )  # fmt: skip
     except (SurveyError, ValueError, OSError) as exc:
+        said = _withdraw(out, unit.line_id, unit.part, unit.key)
         if shared.strict:
+            if said:
+                exc.add_note(said.removeprefix("; "))
             raise
-        message = str(exc)
-        moved = _withdraw(out, unit, part_file)
-        if moved:
-            message += (f"; the line's masks and report of an earlier run were withdrawn to "
-                        f"{moved} (they no longer match its survey)")  # fmt: skip
-        return made(status="failed", message=message,
+        return made(status="failed", message=str(exc) + said,
                           elapsed_s=time.perf_counter() - t0)  # fmt: skip
     path = write_partition(res.masks, out / "masks", unit.line_id, unit.part)
     done = {
@@ -239,8 +244,13 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     }
     # the processing's warnings (assumed stretches, a raised horizon) named with their line
     # in the console and the summary: printed bare among the lines', they were lost
-    said = [ln.removeprefix("warning: ") for ln in source_report(res.masks, track=unit.track)
-            if ln.startswith("warning")]  # fmt: skip
+    said = [ln.removeprefix("warning: ").replace(
+        "(process --dem, docs/terrain.md)",
+        "(`predisat network` takes none: process this line's survey with `predisat process "
+        "--dem`, docs/terrain.md)")
+        for ln in source_report(res.masks, track=unit.track) if ln.startswith("warning")]
+    said = [s.replace("give elevation tiles (--dem)", "give elevation tiles (`predisat "
+                      "process --dem` of this line's survey)") for s in said]  # fmt: skip
     done["warnings"] = said
     write_bytes_atomic(marker, json.dumps(done, indent=1).encode())
     return made(status="done", masks_path=path, n_pos=res.masks.n_pos,
@@ -323,6 +333,7 @@ def process_network(
             else:
                 why = (f"{folder} has no survey.yaml" if folder.is_dir()
                        else f"no survey at {folder}")  # fmt: skip
+                why += _withdraw(out, ln.line_id, k, key)  # its survey gone: so are its masks
                 results[key] = LineResult(ln.line_id, k, key, "no survey", float(tm.length_m),
                                           message=why)  # fmt: skip
     known = {ln.part_key(k) for ln in network.lines for k in range(1, len(ln.parts) + 1)}
