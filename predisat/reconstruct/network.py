@@ -225,12 +225,12 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
             margins=shared.margins, replace=True,
         )  # fmt: skip
     except (SurveyError, ValueError, OSError) as exc:
-        said = _withdraw(out, unit.line_id, unit.part, unit.key)
+        withdrawn = _withdraw(out, unit.line_id, unit.part, unit.key)
         if shared.strict:
-            if said:
-                exc.add_note(said.removeprefix("; "))
+            if withdrawn:
+                exc.add_note(withdrawn.removeprefix("; "))
             raise
-        return made(status="failed", message=str(exc) + said,
+        return made(status="failed", message=str(exc) + withdrawn,
                           elapsed_s=time.perf_counter() - t0)  # fmt: skip
     path = write_partition(res.masks, out / "masks", unit.line_id, unit.part)
     done = {
@@ -244,20 +244,20 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
     }
     # the processing's warnings (assumed stretches, a raised horizon) named with their line
     # in the console and the summary: printed bare among the lines', they were lost
-    said = [ln.removeprefix("warning: ").replace(
+    notes = [ln.removeprefix("warning: ").replace(
         "(process --dem, docs/terrain.md)",
         "(`predisat network` takes none: process this line's survey with `predisat process "
         "--dem`, docs/terrain.md)")
         for ln in source_report(res.masks, track=unit.track) if ln.startswith("warning")]
-    said = [s.replace("give elevation tiles (--dem)", "give elevation tiles (`predisat "
-                      "process --dem` of this line's survey)") for s in said]  # fmt: skip
-    done["warnings"] = said
+    notes = [s.replace("give elevation tiles (--dem)", "give elevation tiles (`predisat "
+                       "process --dem` of this line's survey)") for s in notes]  # fmt: skip
+    done["warnings"] = notes
     write_bytes_atomic(marker, json.dumps(done, indent=1).encode())
     return made(status="done", masks_path=path, n_pos=res.masks.n_pos,
                       n_frames=res.n_frames, n_bad_frames=len(res.bad_frames),
                       from_m=float(res.masks.chainage_m[0]), to_m=float(res.masks.chainage_m[-1]),
                       elapsed_s=time.perf_counter() - t0,
-                      message="; ".join(said))  # fmt: skip
+                      message="; ".join(notes))  # fmt: skip
 
 
 def process_network(
