@@ -256,10 +256,11 @@ def nav_span_gps_s(
 ) -> tuple[float, float]:
     """Time span the navigation data covers, ``(first, last)`` in ``gps_s``.
 
-    Broadcast: the first and last reference epoch (toe, tb) of any record (of the ``systems``,
-    RINEX letters such as ``{"G"}``, when given and held: a Galileo file's records of the day
-    before must not move a GPS report's window); SP3: the first and last tabulated epoch; TLE:
-    the element-set epochs widened by the validity age.
+    Broadcast: the first and last reference epoch (toe, tb) of any record; with ``systems``
+    (RINEX letters such as ``{"G", "E"}``) the span every one of them held covers (a Galileo
+    file's records of the day before must not start a GPS report's window, nor a report
+    counting both). SP3: the first and last tabulated epoch; TLE: the element-set epochs
+    widened by the validity age.
     """
     if ephemeris.kind == "sp3" and ephemeris.sp3 is not None:
         ep = ephemeris.sp3.epochs_gps_s
@@ -269,16 +270,18 @@ def nav_span_gps_s(
         age = ephemeris.policy.tle_max_age_s
         return float(np.min(ep) - age), float(np.max(ep) + age)
     recs = [r for r in (ephemeris.kepler, ephemeris.glonass) if r is not None and len(r)]
-    refs = [r.ref_gps_s for r in recs]
-    if systems:
-        own = [r.ref_gps_s[np.isin([str(s)[:1].upper() for s in r.sat], list(systems))]
-               for r in recs]  # fmt: skip
-        if any(len(x) for x in own):
-            refs = [x for x in own if len(x)]
-    if not refs:
+    if not recs:
         raise ValueError(f"navigation data {list(ephemeris.sources)} holds no record")
-    ref = np.concatenate(refs)
-    return float(np.min(ref)), float(np.max(ref))
+    ref = np.concatenate([r.ref_gps_s for r in recs])
+    letter = np.concatenate([[str(s)[:1].upper() for s in r.sat] for r in recs])
+    spans = [(float(ref[letter == s].min()), float(ref[letter == s].max()))
+             for s in sorted(set(systems or ())) if (letter == s).any()]  # fmt: skip
+    if not spans:
+        return float(np.min(ref)), float(np.max(ref))
+    # the span every counted system covers: a report counting GPS and Galileo from a window
+    # where one has no records yet would count the other alone
+    lo, hi = max(a for a, _ in spans), min(b for _, b in spans)
+    return (lo, hi) if lo < hi else (min(a for a, _ in spans), max(b for _, b in spans))
 
 
 def _window(
@@ -453,16 +456,21 @@ def navigation_holes(sats: SatellitePositions, nav_label: str, kind: str) -> lis
     if t.size < 2:
         return []
     out = []
-    for system in sorted({s[0] for s in sats.sats}):
+    # regional systems (QZSS, NavIC) are out of sight of most lines for hours: not a hole
+    for system in sorted({s[0] for s in sats.sats} - {"J", "I"}):
         cols = [j for j, s in enumerate(sats.sats) if s[0] == system]
         none = ~valid[:, cols].any(axis=1)
-        if none.any() and not none.all():
-            k = np.flatnonzero(none)
+        if none.sum() >= 2 and not none.all():
+            edges = np.diff(np.concatenate([[0], none.astype(np.int8), [0]]))
+            a, b = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+            runs = "; ".join(f"{_iso(t[i])} - {_iso(t[j])}" for i, j in zip(a[:3], b[:3],
+                                                                             strict=True))
+            more = f" and {a.size - 3} more" if a.size > 3 else ""
             out.append(
                 f"{nav_label} holds no usable {SYSTEM_NAMES.get(system, system)} satellite in "
-                f"{k.size} of {t.size} epochs ({_iso(t[k[0]])} - {_iso(t[k[-1]])} GPST): the "
-                "counts there are of the other systems only; choose a window inside every "
-                "system's data (--start/--end)"
+                f"{int(none.sum())} of {t.size} epochs ({runs}{more} GPST): the counts there "
+                "are of the other systems only; choose a window inside every system's data "
+                "(--start/--end)"
             )
     step = float(np.median(np.diff(t)))
     holed = []

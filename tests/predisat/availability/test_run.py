@@ -380,12 +380,17 @@ def test_holes_in_the_navigation_data_are_said(
                          **common)  # type: ignore[arg-type]  # fmt: skip
     (hole,) = [w for w in r.info["warnings"] if "no usable record" in w]
     assert "of 1 satellite(s)" in hole and "G05 (" in hole
-    # NYA1's three daily files counted together: the window starts with Galileo's records of
-    # the day before, where GPS and BeiDou have none
+    # NYA1's three daily files counted together: the default window starts where every
+    # counted system has records; one asked from Galileo's records of the day before, where
+    # GPS and BeiDou have none, is said
     d = shared_data / "gnss" / "georust_rinex"
     nav = [d / f"NYA100NOR_S_20241240000_01D_{k}N.rnx.gz" for k in "GEC"]
     r = run_availability(masks, track, nav, out_dir=tmp_path / "c", constellation="all",
                          step_s=3600.0, progress=False)  # fmt: skip
+    assert not [w for w in r.info["warnings"] if "holds no usable" in w]
+    r = run_availability(masks, track, nav, out_dir=tmp_path / "d", constellation="all",
+                         start="2024-05-02T23:20", end="2024-05-03T03:00", step_s=600.0,
+                         progress=False)  # fmt: skip
     said = [w for w in r.info["warnings"] if "holds no usable" in w]
     assert any("GPS satellite in" in w for w in said), said
 
