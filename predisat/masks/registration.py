@@ -77,9 +77,11 @@ class Registration:
         return (
             f"masks {masks_label} were made on another map of this line than {track_name!r}: "
             f"chainages differ by up to {self.shift_m:.1f} m and positions by up to "
-            f"{self.offset_m:.1f} m; they are re-registered by position: a position added "
-            "between each two takes the worse of them, and each stretch reaches up to "
-            f"{self.widen_m:.1f} m further where the maps part (docs/mask-format.md)"
+            f"{self.offset_m:.1f} m; they are re-registered by position: each stretch takes "
+            "the worst of the masks whose places may project onto it (up to "
+            f"{self.widen_m:.1f} m past their own, where the maps part; a position added "
+            "between each two), and the coverage ends short of the masks' own "
+            "(docs/mask-format.md)"
             + (f", {self.beyond} positions past the map's ends left out" if self.beyond else "")
             + "; give the map the masks were made on for the sky they hold"
         )
