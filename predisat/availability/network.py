@@ -362,7 +362,8 @@ def _pct(x: object) -> str:
 def _markdown(network: Network, t: pd.DataFrame, cutoff_rule: str, basis: Sequence[str]) -> str:
     said = "".join(f"* {b}\n" for b in basis)
     head = (f"# Network {network.name}\n\n{len(t)} line part(s), "
-            f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}.\n\n"
+            f"{t.length_km.sum():.2f} km; masks for {int((t.n_pos > 0).sum())}. "
+            f"{network.attribution}\n\n"
             + (f"{said}\n" if said else "") +
             "![network map](network_map.png)\n\n"
             "| line | part | status | km | surveyed km | positions | frames | bad frames | "

@@ -42,7 +42,13 @@ from predisat.jsontypes import JsonDict
 from predisat.track.chain import Part, chain_all, concatenate_parts
 from predisat.track.errors import TrackMapError
 from predisat.track.map import TrackMap
-from predisat.track.readers import TrackFile, checked_parts, feature_label, geojson_features
+from predisat.track.readers import (
+    TrackFile,
+    attribution_of,
+    checked_parts,
+    feature_label,
+    geojson_features,
+)
 
 __all__ = [
     "ID_KEYS",
@@ -243,7 +249,7 @@ class Network:
             raise TrackMapError(f"max_gap_m must be > 0, got {max_gap_m}")
         members, feats = geojson_features(p)
         tol = float(members.get("tolerance_m", tolerance_m))
-        attribution = str(members.get("attribution", ""))
+        attribution = attribution_of(members)  # OpenStreetMap's ODbL notice included
         line_feats = [
             (i, f.get("properties") or {}, f.get("geometry") or {})
             for i, f in enumerate(feats)

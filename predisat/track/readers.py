@@ -33,6 +33,7 @@ __all__ = [
     "MAX_VERTEX_SPACING_M",
     "NAME_KEYS",
     "TrackFile",
+    "attribution_of",
     "checked_parts",
     "feature_label",
     "geojson_features",
@@ -51,6 +52,16 @@ _LABEL_KEYS = tuple(k for k in NAME_KEYS if k not in _ID_KEYS)  # the names prop
 _OSM_ATTRIBUTION = (
     "© OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright)"
 )
+
+
+def attribution_of(members: Mapping[str, Any]) -> str:
+    """The attribution a GeoJSON file's top-level ``members`` ask for: its ``attribution``,
+    or OpenStreetMap's (ODbL) when its ``copyright`` names OpenStreetMap (overpass exports);
+    "" when neither."""
+    said = str(members.get("attribution", "") or "")
+    if not said and "openstreetmap" in str(members.get("copyright", "")).lower():
+        said = _OSM_ATTRIBUTION
+    return said
 
 
 @dataclass(frozen=True)
@@ -421,9 +432,7 @@ def parse_geojson_track(
     posts_raw = points_as_posts(points)
     members = doc if isinstance(doc, dict) else {}
     if attribution is None:
-        attribution = str(members.get("attribution", ""))
-        if not attribution and "openstreetmap" in str(members.get("copyright", "")).lower():
-            attribution = _OSM_ATTRIBUTION
+        attribution = attribution_of(members)
     tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
     return TrackFile(
         path, lat, lon, h,

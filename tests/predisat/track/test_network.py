@@ -206,3 +206,16 @@ def test_overlapping_parts_of_a_line_are_said(tmp_path: Path, gembloux: Path) ->
     net = Network.from_file(path)
     (said,) = overlapping_parts(net)
     assert said.startswith("line 144: parts 1 and 2 lie on each other over about")
+
+
+def test_openstreetmap_s_notice_is_carried(tmp_path: Path, gembloux: Path) -> None:
+    """A user trial: an overpass export's ODbL notice (its `copyright` member) reached neither
+    the network summary nor its map, where a single track's reader carried it."""
+    doc = json.loads(gembloux.read_text())
+    doc.pop("attribution", None)
+    doc["copyright"] = ("The data included in this document is from www.openstreetmap.org. "
+                        "The data is made available under ODbL.")  # fmt: skip
+    path = tmp_path / "osm.geojson"
+    path.write_text(json.dumps(doc))
+    net = Network.from_file(path)
+    assert "OpenStreetMap contributors" in net.attribution and "ODbL" in net.attribution
