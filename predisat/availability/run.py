@@ -1041,7 +1041,7 @@ def _run_info(
         "track_source": "" if track is None else track.source,
         "stretch": f"{stretch}, {masks.n_pos} positions",
         "window": f"{_iso(sats.gps_s[0])} - {_iso(sats.gps_s[-1] + step_s)} GPST, every "
-        f"{step_s:g} s ({len(sats.gps_s)} epochs)",
+        f"{step_s:g} s ({len(sats.gps_s)} epoch{'s' if len(sats.gps_s) != 1 else ''})",
         "synthetic": synthetic_notes(masks.provenance),
         "window_gps_s": [float(sats.gps_s[0]), float(sats.gps_s[-1] + step_s)],
         "navigation": f"{nav_label} ({ephemeris.kind})",
@@ -1124,9 +1124,10 @@ def sampling_notes(n_epoch: int, step_s: float, interval_every: int) -> list[str
     out = []
     if n_epoch < _FEW_EPOCHS or step_s > _COARSE_STEP_S:
         out.append(
-            f"{n_epoch} epochs {step_s:g} s apart: the shares of time are of these instants "
-            "only, and satellites rise and set between them; for figures to quote use --step 30-"
-            f"60 over a day (at most {_COARSE_STEP_S:g} s, at least {_FEW_EPOCHS} epochs)"
+            f"{n_epoch} epoch{'s' if n_epoch != 1 else ''} {step_s:g} s apart: the shares of "
+            "time are of these instants only, and satellites rise and set between them; for "
+            f"figures to quote use --step 30-60 over a day (at most {_COARSE_STEP_S:g} s, at "
+            f"least {_FEW_EPOCHS} epochs)"
         )
     n_interval = -(-n_epoch // max(interval_every, 1))
     if n_interval < _FEW_EPOCHS:
