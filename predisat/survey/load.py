@@ -672,6 +672,15 @@ def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None
         chain = np.asarray(proj.chainage_m, float)
         for r, off, alo, ch in zip(with_pos, offset, along, chain, strict=True):
             r.offset_m = float(off)
+            dist = math.hypot(off, alo)
+            if not dist <= max_offset_m:
+                # off the track: its chainage there means nothing (a user trial's survey in
+                # another line's folder was told its chainage disagreed at the track's end)
+                r.bad(
+                    f"position is {dist:.1f} m from track {name!r} (limit max_offset_m="
+                    f"{max_offset_m:g}); check the GNSS fix, the track map or the survey's track"
+                )
+                continue
             if not math.isfinite(r.chainage_m):
                 r.chainage_m = float(ch)
             elif abs(r.chainage_m - ch) > max_offset_m:
@@ -681,12 +690,6 @@ def _check_track(rows: list[_Row], track: TrackMap, max_offset_m: float) -> None
                     f"chainage {ch:.1f} m of track {name!r} (limit max_offset_m="
                     f"{max_offset_m:g}); correct one of them, or leave chainage_m empty to "
                     "take it from the position"
-                )
-            dist = math.hypot(off, alo)
-            if not dist <= max_offset_m:
-                r.bad(
-                    f"position is {dist:.1f} m from track {name!r} (limit max_offset_m="
-                    f"{max_offset_m:g}); check the GNSS fix, the track map or the survey's track"
                 )
     length = float(track.length_m)
     for r in rows:

@@ -361,6 +361,14 @@ def test_chainage_disagreeing_with_the_position_is_refused(tmp_path: Path) -> No
     msg = _only(problems, "left_000001", "disagrees").message
     assert "chainage_m 150.0" in msg and "chainage 110.0 m" in msg
     assert len(problems) == 1
+    # a frame off the track is told how far off, not that its chainage disagrees there (a
+    # user trial's survey in another line's folder was told of a chainage at the track's end)
+    lon, lat, _ = WGS84.fwd(LON0, LAT0, 0.0, 1600.0)  # 600 m past the end of the 1 km track
+    rows[4]["lat_deg"], rows[4]["lon_deg"] = repr(lat), repr(lon)
+    rows[4]["chainage_m"] = "120.0"
+    _save_rows(root, rows)
+    off = [p for p in _problems(root, track=track) if p.frame_id == "left_000002"]
+    assert len(off) == 1 and "600.0 m from track" in off[0].message, off
     survey = Survey.load(root, track=track, on_error="skip")
     assert "left_000001" not in list(survey.frames.frame_id)
     assert survey.chainage_m[list(survey.frames.frame_id).index("right_000001")] == 113.0
