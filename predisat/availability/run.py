@@ -50,7 +50,12 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from predisat import __version__
-from predisat.availability.engine import Availability, BlockCheckpoint, compute_availability
+from predisat.availability.engine import (
+    Availability,
+    BlockCheckpoint,
+    compute_availability,
+    longest_run,
+)
 from predisat.availability.interval import INDEPENDENT_PAIRS, width_text
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
@@ -472,20 +477,13 @@ def navigation_holes(sats: SatellitePositions, nav_label: str, kind: str) -> lis
                 "are of the other systems only; choose a window inside every system's data "
                 "(--start/--end)"
             )
-    step = float(np.median(np.diff(t)))
-    holed = []
-    for j, s in enumerate(sats.sats if kind == "sp3" else ()):
-        v = valid[:, j]
-        if not v.any() or v.all():
-            continue  # never tabulated in the window (another constellation), or whole
-        gap = ~v  # precise orbits tabulate every satellite all day: any gap is one
-        edges = np.diff(np.concatenate([[0], gap.astype(np.int8), [0]]))
-        starts = np.flatnonzero(edges == 1)
-        ends = np.flatnonzero(edges == -1)  # first usable epoch after the hole
-        seen = [(b - a) * step for a, b in zip(starts, ends, strict=True)
-                if (b - a) * step >= _NAV_HOLE_S]
-        if seen:
-            holed.append((s, max(seen)))
+    half = 0.5 * float(np.median(np.diff(t)))
+    # precise orbits tabulate every satellite all day: any gap of one seen in the window is
+    # a hole (one never tabulated there is of another constellation)
+    longest = longest_run((~valid).T, t - half, t + half)
+    seen = valid.any(axis=0) & (longest >= _NAV_HOLE_S)
+    holed = [(s, float(d)) for s, d, k in zip(sats.sats, longest, seen, strict=True)
+             if k and kind == "sp3"]  # fmt: skip
     if holed:
         names = ", ".join(f"{s} ({d / 3600.0:.1f} h)" for s, d in holed[:8])
         more = f" and {len(holed) - 8} more" if len(holed) > 8 else ""

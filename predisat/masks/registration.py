@@ -170,9 +170,8 @@ def register_on_track(masks: MaskSet, track: TrackMap, masks_label: str) -> Regi
     # disagreement and a metre of the masks' map) project onto a stretch of this map, bounded
     # by its corners' projections. Positions past the map's ends are not looked up on it, but
     # their cells may reach it.
-    lo_m, hi_m, first_m, last_m = _stretches_on(track, masks, off_all)
+    lo_m, hi_m, first_m, last_m, lo_own, hi_own = _stretches_on(track, masks, off_all)
     # how much each stretch reaches past its own cell's, at either end (the larger)
-    lo_own, hi_own = _stretches_on(track, masks, off_all, reach=False)[:2]
     widen = np.maximum(np.maximum(lo_own - lo_m, hi_m - hi_own), 0.0)[kept]
     beyond = masks.n_pos - kept.size
     # a position added half-way between each two: the strip about each edge, where either
@@ -293,12 +292,13 @@ def _reach_m(offset_m: NDArray) -> NDArray:
 
 
 def _stretches_on(
-    track: TrackMap, masks: MaskSet, offset_m: NDArray, reach: bool = True
-) -> tuple[NDArray, NDArray, float, float]:
+    track: TrackMap, masks: MaskSet, offset_m: NDArray
+) -> tuple[NDArray, NDArray, float, float, NDArray, NDArray]:
     """Where the places of each position's cell project on ``track``: per position the
-    lowest and highest chainage (n,), and where the places just beyond the masks' first and
+    lowest and highest chainage (n,), where the places just beyond the masks' first and
     last cell edge may reach (the registered coverage must start above the first, end below
-    the second), metres.
+    the second), and the lowest and highest of the cell's own axis (no reach off it; (n,)),
+    metres.
 
     A cell's places lie between the normals to the masks' map at its edges (the midpoints of
     the chords between positions; the ends half a chord out, as
@@ -315,10 +315,10 @@ def _stretches_on(
     normal = np.column_stack([-along[:, 1], along[:, 0], np.zeros(len(along))])
     off_edge = np.concatenate([[offset_m[0]], np.maximum(offset_m[1:], offset_m[:-1]),
                                [offset_m[-1]]])  # fmt: skip
-    # the maps may part more between positions than at them
-    at_edge = np.abs(np.asarray(track.project_enu(edge).offset_m, float))
-    reach_m = (_reach_m(np.maximum(off_edge, at_edge)) if reach
-               else np.zeros(len(edge)))[:, None]  # fmt: skip
+    # the maps may part more between positions than at them (offsets at the edges too)
+    on_edge = track.project_enu(edge)
+    at_edge = np.abs(np.asarray(on_edge.offset_m, float))
+    reach_m = _reach_m(np.maximum(off_edge, at_edge))[:, None]
     # the cell's boundary: the normal at each edge (sampled), and the offset lines through the
     # position (a map's bend between samples is what the slack is for)
     frac = np.linspace(-1.0, 1.0, _NORMAL_SAMPLES)[None, :, None]
@@ -333,8 +333,12 @@ def _stretches_on(
     own = np.asarray(track.project_enu(beside).chainage_m, float)  # (n, 3)
     lo = np.minimum.reduce([at[:-1].min(axis=1), at[1:].min(axis=1), own.min(axis=1)])
     hi = np.maximum.reduce([at[:-1].max(axis=1), at[1:].max(axis=1), own.max(axis=1)])
-    return (lo - _WIDEN_SLACK_M, hi + _WIDEN_SLACK_M, float(at[0].max()) + _WIDEN_SLACK_M,
-            float(at[-1].min()) - _WIDEN_SLACK_M)  # fmt: skip
+    axis = np.asarray(on_edge.chainage_m, float)  # the edges themselves, and the positions
+    lo_own = np.minimum.reduce([axis[:-1], axis[1:], own[:, 0]])
+    hi_own = np.maximum.reduce([axis[:-1], axis[1:], own[:, 0]])
+    s = _WIDEN_SLACK_M
+    return (lo - s, hi + s, float(at[0].max()) + s, float(at[-1].min()) - s, lo_own - s,
+            hi_own + s)  # fmt: skip
 
 
 def _cells_touching(bounds_m: NDArray, lo_m: NDArray, hi_m: NDArray) -> tuple[NDArray, NDArray]:

@@ -133,17 +133,22 @@ def test_positions_are_mapped_on_the_track(tmp_path: Path) -> None:
     assert np.isnan(Survey.load(root).chainage_m).all()
 
 
-def test_track_file_named_in_survey_yaml_is_used(tmp_path: Path) -> None:
-    pytest.importorskip("predisat.track.readers")  # the CSV reader (written in parallel)
-    track = _straight_track()
-    csv_path = tmp_path / "track.csv"
-    with open(csv_path, "w") as fh:
+def _survey_on_own_track(tmp_path: Path, track) -> Path:
+    """Two frames per side on ``track``, written as ``tmp_path/track.csv`` and named in the
+    survey's survey.yaml."""
+    with open(tmp_path / "track.csv", "w") as fh:
         fh.write("lat_deg,lon_deg,h_m\n")
         for la, lo in zip(track.lat_deg, track.lon_deg, strict=True):
             fh.write(f"{float(la)!r},{float(lo)!r},150.0\n")
-    root = _write(
+    return _write(
         tmp_path / "s", n=2, positions=True, track_name="straight", track_path="../track.csv"
     )
+
+
+def test_track_file_named_in_survey_yaml_is_used(tmp_path: Path) -> None:
+    pytest.importorskip("predisat.track.readers")  # the CSV reader (written in parallel)
+    track = _straight_track()
+    root = _survey_on_own_track(tmp_path, track)
     survey = Survey.load(root)
     assert survey.track_name == "straight"
     assert np.allclose(survey.chainage_m, np.repeat([100.0, 110.0], 2), atol=0.05)
@@ -155,14 +160,7 @@ def test_a_track_running_the_other_way_from_the_survey_s_own_is_refused(
     """A user trial: a network's line reversed against the survey's own track was refused
     frame by frame, and "increasing" and "decreasing" each sent the user to the other."""
     track = _straight_track()
-    csv_path = tmp_path / "track.csv"
-    with open(csv_path, "w") as fh:
-        fh.write("lat_deg,lon_deg,h_m\n")
-        for la, lo in zip(track.lat_deg, track.lon_deg, strict=True):
-            fh.write(f"{float(la)!r},{float(lo)!r},150.0\n")
-    root = _write(
-        tmp_path / "s", n=2, positions=True, track_name="straight", track_path="../track.csv"
-    )
+    root = _survey_on_own_track(tmp_path, track)
     back = type(track).from_latlon(track.lat_deg[::-1], track.lon_deg[::-1], 150.0, name="back")
     with pytest.raises(SurveyError, match=r"runs the other way from the survey's own track"):
         Survey.load(root, track=back)
