@@ -208,18 +208,27 @@ def dask_setup(worker: object) -> None:
 
 
 def _start_local_cluster(workers: int) -> Any:
-    """A LocalCluster of ``workers`` processes (which ignore SIGINT: :func:`dask_setup`).
+    """A LocalCluster of ``workers`` processes (which ignore SIGINT: they start with it
+    blocked, and :func:`dask_setup` ignores it).
 
     It is built in a thread while this one waits interruptibly: a Ctrl-C during the start
     leaves the half-built cluster to its thread, whose processes end with this one
     (distributed's worker processes exit when their parent does).
     """
+    from multiprocessing import resource_tracker
+
     import dask
     from distributed import LocalCluster
 
     box: dict[str, Any] = {}
 
     def build() -> None:
+        # the worker processes are started from threads this one starts, and inherit its
+        # blocked SIGINT: a Ctrl-C that reaches them before their preload ignores it
+        # (SIGINT goes to the whole process group) must not kill them mid-start. The
+        # resource tracker is started first: starting it unblocks SIGINT in its caller.
+        resource_tracker.ensure_running()
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         for attempt in range(_START_ATTEMPTS):
             try:
                 with dask.config.set(
