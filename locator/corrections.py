@@ -48,6 +48,7 @@ from predisat.gnss.ephemeris import Ephemeris, Reason, ValidityPolicy
 from predisat.gnss.orbits import C_MPS
 from predisat.gnss.rinex_nav import read_rinex_nav
 from predisat.gnss.timescale import gps_s_to_datetime64
+from predisat.readonly import freeze_array_fields
 
 __all__ = [
     "OMEGA_E_RADPS",
@@ -509,6 +510,9 @@ class SatelliteStates:
     freq_hz: NDArray
     reason: NDArray
 
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
+
 
 @dataclass(frozen=True)
 class CorrectedRanges:
@@ -546,6 +550,9 @@ class CorrectedRanges:
     usable: NDArray
     reason: NDArray
     iono_model: NDArray = field(default_factory=lambda: np.zeros(0, "<U3"))
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def iono_uncorrected(self) -> NDArray:

@@ -47,6 +47,7 @@ from predisat.availability.interval import (
 )
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget, disjoint_pairs
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
 
@@ -179,6 +180,9 @@ class Fix:
     pairs: PairSolution | None
     wls: WlsSolution | None
     sats: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def safety_claim(self) -> bool:

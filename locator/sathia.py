@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from locator.kernels import inputs_ok_kernel, pair_kernel, pos_vec_kernel
+from predisat.readonly import freeze_array_fields
 from predisat.track.map import TrackMap
 
 __all__ = [
@@ -238,6 +239,9 @@ class PairSolution:
     n_roots: NDArray
     misfit_m: NDArray
     status: NDArray
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def n_pairs(self) -> int:

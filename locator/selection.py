@@ -31,6 +31,7 @@ from locator.sathia import AntennaPath
 from predisat.availability.satellites import azel
 from predisat.geodesy import enu_rotation
 from predisat.masks.maskset import MaskSet
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["Exclusion", "Selection", "direction_at", "select_satellites"]
 
@@ -67,6 +68,9 @@ class Selection:
     threshold_deg: NDArray
     el_deg: NDArray
     sats: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def count(self) -> NDArray:

@@ -35,6 +35,7 @@ from locator.observations import Observations, PseudorangeSelection
 from locator.sim.simfile import SignalState, SimRun
 from predisat.availability.satellites import select_satellites
 from predisat.jsontypes import JsonDict
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource"]
 
@@ -117,6 +118,7 @@ class SimSource:
                 f"odometer must have one value per epoch ({self.sim.gps_s.shape}), got "
                 f"{np.shape(self.odometer)}"
             )
+        freeze_array_fields(self)
 
     @property
     def gps_s(self) -> NDArray:

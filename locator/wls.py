@@ -21,6 +21,7 @@ from scipy.special import chdtrc
 
 from locator.kernels import wls_kernel
 from locator.sathia import AntennaPath
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["WlsSolution", "as_observations", "solve_wls"]
 
@@ -60,6 +61,9 @@ class WlsSolution:
     iterations: int
     converged: bool
     at_end: bool
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def sigma_chainage_m(self) -> float:

@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from locator.odometry.odometer import OdometerConfig
+from predisat.readonly import freeze_array_fields
 
 __all__ = [
     "BalisePassage",
@@ -216,6 +217,9 @@ class SafeFronts:
     dist_since_ref_m: NDArray
     accepted: NDArray
     orientation: int
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def front_lo_m(self) -> NDArray:

@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.readonly import freeze_array_fields
+
 __all__ = [
     "OdometerConfig",
     "OdometerLog",
@@ -206,6 +208,9 @@ class OdometerLog:
     diameter_ratio: float
     radar_scale: float
     source: str = ""
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     def at(self, t_s: ArrayLike) -> NDArray:
         """Measured distance at times ``t_s`` (linear between cycles), m, shape of ``t_s``."""

@@ -20,6 +20,7 @@ from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.logfile import OdometerLogError
 from locator.odometry.odometer import OdometerConfig, OdometerLog, simulate_odometer
 from locator.sim.simfile import SimRun
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["SimOdometer", "check_log_against_run", "odometer_along_run", "odometer_from_log"]
 
@@ -48,6 +49,9 @@ class SimOdometer:
 
 
 # a log running backward by more than this while the train moved forward as much is refused
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 _DIRECTION_CHECK_M = 1.0
 # GPS seconds before this (1983) are no time of a recorded run: relative times
 _EARLIEST_GPS_S = 1e8

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from predisat.readonly import freeze_array_fields
 from predisat.synth.materials import MATERIALS, material_id
 from predisat.synth.raycast import Caster, make_caster
 
@@ -204,6 +205,9 @@ class Reflections:
     point_enu_m: NDArray
     arrival_el_deg: NDArray
 
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
+
     @property
     def found(self) -> NDArray:
         """Boolean (n_epoch, n_sat): a valid reflection exists."""
@@ -358,12 +362,14 @@ def _search_block(
     n_ep, n_sat = sat.shape[:2]
     with np.errstate(invalid="ignore", divide="ignore"):
         u = (sat - ant[:, None]) / np.linalg.norm(sat - ant[:, None], axis=-1, keepdims=True)
-    out = Reflections(
+    # filled here, then frozen into the record
+    fill = (
         np.full((n_ep, n_sat), np.nan),
         np.full((n_ep, n_sat), -1, np.int64),
         np.full((n_ep, n_sat, 3), np.nan),
         np.full((n_ep, n_sat), np.nan),
     )
+    out = Reflections(*fill)
     rays = _candidate_rays(index, ant, u, ok, search, sin_min)
     if rays is None:
         return out
@@ -387,8 +393,8 @@ def _search_block(
         return out
     pair, d, a, t, face = pair[free], d[free], a[free], t[free], face[free]
     p, s = p[free], s[free]
-    _keep_best(out, n_sat, pair, d, a, t, face, p, s)
-    return out
+    _keep_best(fill, n_sat, pair, d, a, t, face, p, s)
+    return Reflections(*fill)
 
 
 def _candidate_rays(
@@ -455,7 +461,7 @@ def _unoccluded(caster: Caster, start: NDArray, direction: NDArray, chunk_rays: 
 
 
 def _keep_best(
-    out: Reflections,
+    out: tuple[NDArray, NDArray, NDArray, NDArray],
     n_sat: int,
     pair: NDArray,
     d: NDArray,
@@ -465,7 +471,8 @@ def _keep_best(
     p: NDArray,
     s: NDArray,
 ) -> None:
-    """Write into ``out`` the best reflection of each pair (fills the arrays of ``out``)."""
+    """Write the best reflection of each pair into ``out``, the arrays of a
+    :class:`Reflections` in its field order."""
     # |S - P| - |S - A| without cancellation: ((A - P) . (2S - A - P)) / (|S - P| + |S - A|)
     dsp = np.linalg.norm(s - p, axis=-1)
     dsa = np.linalg.norm(s - a, axis=-1)
@@ -475,10 +482,11 @@ def _keep_best(
     order = np.lexsort((extra, -np.round(arrival, 6), pair))
     first = order[np.r_[True, pair[order][1:] != pair[order][:-1]]]
     pe, ps = np.divmod(pair[first], n_sat)
-    out.extra_m[pe, ps] = extra[first]
-    out.face_id[pe, ps] = face[first]
-    out.point_enu_m[pe, ps] = p[first]
-    out.arrival_el_deg[pe, ps] = arrival[first]
+    extra_m, face_id, point_enu_m, arrival_el_deg = out
+    extra_m[pe, ps] = extra[first]
+    face_id[pe, ps] = face[first]
+    point_enu_m[pe, ps] = p[first]
+    arrival_el_deg[pe, ps] = arrival[first]
 
 
 def dll_error_m(

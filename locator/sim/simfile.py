@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from predisat.geodesy import ecef_to_geodetic
 from predisat.jsontypes import JsonDict
+from predisat.readonly import readonly_array
 from predisat.synth.materials import MATERIALS
 
 __all__ = [
@@ -177,7 +178,7 @@ class SimRun:
                 want = (n_ep, n_sat)
             if val.shape != want:
                 raise ValueError(f"SimRun.{f.name} has shape {val.shape}, expected {want}")
-            val.setflags(write=False)
+            object.__setattr__(self, f.name, readonly_array(val))
 
     # ----------------------------------------------------------------- views
     @property

@@ -53,6 +53,7 @@ from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
+from predisat.readonly import freeze_array_fields
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
     Location,
@@ -126,6 +127,9 @@ class Availability:
     sensitivity: NDArray | None
     opening_angle_deg: NDArray
     provenance: JsonDict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def chainage_m(self) -> NDArray:

@@ -54,6 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.gnss.integrity import IntegrityBudget
+from predisat.readonly import readonly_array
 
 __all__ = [
     "INDEPENDENT_PAIRS",
@@ -321,7 +322,7 @@ def _matching_table(p: int) -> tuple[NDArray, NDArray, NDArray]:
     sets = [
         [index[pr] for pr in m] for six in itertools.combinations(range(p), 6) for m in perfect(six)
     ]
-    return i, j, np.array(sets, np.intp)
+    return readonly_array(i), readonly_array(j), readonly_array(sets, np.intp)  # cached: shared
 
 
 @lru_cache(maxsize=8)
@@ -350,7 +351,7 @@ def _bottleneck_program(p: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     for q in fours:  # insertion order = index
         e1.append([pair[(q[0], q[1])], pair[(q[0], q[2])], pair[(q[0], q[3])]])
         e2.append([pair[(q[2], q[3])], pair[(q[1], q[3])], pair[(q[1], q[2])]])
-    arr = [np.array(x, np.intp) for x in (e1, e2, ax, t)]
+    arr = [readonly_array(x, np.intp) for x in (e1, e2, ax, t)]  # cached: shared
     return arr[0], arr[1], arr[2], arr[3]
 
 

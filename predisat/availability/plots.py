@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from predisat.availability.engine import Availability
 from predisat.geodesy import LocalFrame
 from predisat.gnss.timescale import gps_s_to_datetime64, gps_s_to_utc_datetime64
+from predisat.readonly import freeze_array_fields
 from predisat.track import KilometrePost, TrackMap
 
 __all__ = [
@@ -547,6 +548,7 @@ class SkyView:
                     f"{np.shape(flags)} for mask "
                     f"{None if self.mask_el_deg is None else self.mask_el_deg.shape}"
                 )
+        freeze_array_fields(self)
 
 
 _WEAK_COLOUR = "#6a3d9a"

@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.geodesy import enu_rotation, enu_to_azel, geodetic_to_ecef
 from predisat.gnss.ephemeris import Ephemeris, EphemerisStatus
 from predisat.gnss.timescale import calendar_to_gps_s
+from predisat.readonly import freeze_array_fields
 from predisat.track import TrackMap
 
 __all__ = [
@@ -208,6 +209,9 @@ class SatellitePositions:
     sats: tuple[str, ...]
     pos_ecef_m: NDArray
     status: EphemerisStatus
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @classmethod
     def from_ephemeris(

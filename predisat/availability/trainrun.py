@@ -22,6 +22,7 @@ from predisat.availability.satellites import LinePositions, SatellitePositions, 
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
+from predisat.readonly import freeze_array_fields
 from predisat.track import TrackMap
 
 __all__ = ["SpeedProfile", "TrainRun", "trainrun"]
@@ -42,6 +43,9 @@ class SpeedProfile:
     table_mps: NDArray | None = None
     grid_m: NDArray | None = None
     grid_t_s: NDArray | None = None
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @classmethod
     def constant(cls, speed_mps: float) -> SpeedProfile:

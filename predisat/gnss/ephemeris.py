@@ -35,6 +35,7 @@ from predisat.gnss.orbits import glonass_state, kepler_state
 from predisat.gnss.rinex_nav import NavRecords, read_rinex_nav
 from predisat.gnss.sp3 import Sp3, read_sp3
 from predisat.gnss.tle import TleSet, read_tle
+from predisat.readonly import freeze_array_fields
 
 __all__ = [
     "Ephemeris",
@@ -110,6 +111,9 @@ class EphemerisStatus:
     sats: tuple[str, ...]
     reason: NDArray
     record: NDArray
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def valid(self) -> NDArray:

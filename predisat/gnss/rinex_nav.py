@@ -38,6 +38,7 @@ from predisat.gnss.timescale import (
     calendar_to_gps_s,
     gps_minus_utc_s,
 )
+from predisat.readonly import freeze_array_fields
 
 __all__ = [
     "GLONASS_FIELDS",
@@ -131,6 +132,9 @@ class NavRecords:
     fields: tuple[str, ...]
     source: NDArray
 
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
+
     def __len__(self) -> int:
         return int(self.sat.shape[0])
 
@@ -219,6 +223,9 @@ class IonoMessage:
     epoch_gps_s: float
     coefficients: NDArray
     source: str
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from predisat.fileerror import FileLineError, read_text_lines
 from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["Sp3", "Sp3Error", "read_sp3"]
 
@@ -59,6 +60,9 @@ class Sp3:
     time_system: str
     coord_system: str
     paths: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @classmethod
     def read(cls, paths: str | Path | Sequence[str | Path]) -> Sp3:

@@ -20,6 +20,7 @@ from sgp4.api import Satrec, SatrecArray
 
 from predisat.fileerror import FileLineError
 from predisat.gnss.timescale import gps_minus_utc_s, gps_s_to_utc_datetime64
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["TleError", "TleSet", "read_tle", "satellite_id_from_name", "teme_to_ecef"]
 
@@ -116,6 +117,9 @@ class TleSet:
     line2: tuple[str, ...]
     epochs_gps_s: NDArray
     path: str
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @classmethod
     def read(cls, path: str | Path, names: Mapping[str, str] | None = None) -> TleSet:

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.jsontypes import JsonDict
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["SIDES", "TRUTH_FORMAT", "TrueMasks"]
 
@@ -67,6 +68,9 @@ class TrueMasks:
     antenna_height_m: float = 4.0
     az_step_deg: float = 0.5
     backend: str = "open3d"
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     def bin_index(self, az_deg: ArrayLike) -> NDArray:
         """Index of the azimuth bin containing each azimuth (degrees), same shape."""

@@ -14,6 +14,8 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.readonly import freeze_array_fields
+
 __all__ = ["BACKENDS", "Caster", "Hits", "SceneMesh", "make_caster"]
 
 BACKENDS = ("open3d", "trimesh")
@@ -37,6 +39,9 @@ class Hits:
     distance_m: NDArray
     face_id: NDArray
     normal: NDArray
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @property
     def hit(self) -> NDArray:

@@ -22,6 +22,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from predisat.geodesy import LocalFrame
+from predisat.readonly import freeze_array_fields
 
 if TYPE_CHECKING:  # world imports this module: the type only, no import at run time
     from predisat.synth.world import Stretch
@@ -73,6 +74,9 @@ class Corridor:
     left: NDArray
     up: NDArray
     h_m: NDArray
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     @classmethod
     def from_track(

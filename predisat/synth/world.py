@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 
 from predisat.geodesy import LocalFrame
 from predisat.jsontypes import JsonDict
+from predisat.readonly import freeze_array_fields
 from predisat.synth.materials import MATERIAL_IDS, MATERIALS
 from predisat.synth.scenery import Context, Corridor, MeshBuilder, build_catenary, build_stretch
 from predisat.track import TrackMap
@@ -335,8 +336,7 @@ class World:
     face_material: NDArray
 
     def __post_init__(self) -> None:
-        for arr in (self.vertices_m, self.faces, self.face_material):
-            arr.setflags(write=False)
+        freeze_array_fields(self)
 
     @classmethod
     def build(cls, track: TrackMap, spec: WorldSpec, seed: int = 0) -> World:

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.readonly import freeze_array_fields
+
 __all__ = ["SRTM_VERTICAL_ERROR_M", "Dem", "DemError"]
 
 #: SRTM's absolute vertical error, 90 % linear error (Rodriguez et al. 2006, the SRTM mission's
@@ -63,6 +65,7 @@ class Dem:
             raise DemError("dlat_deg and dlon_deg must be positive (row 0 is the north edge)")
         if not self.vertical_error_m >= 0:
             raise DemError(f"vertical_error_m must be >= 0, got {self.vertical_error_m}")
+        freeze_array_fields(self)
 
     @classmethod
     def from_files(

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat.geodesy import LocalFrame
+from predisat.readonly import freeze_array_fields
 from predisat.track.errors import TrackMapError
 
 __all__ = ["Part", "chain_all", "chain_longest", "concatenate_parts"]
@@ -48,6 +49,9 @@ class Part:
     coords: NDArray
     tunnel: bool
     bridge: bool = False
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
 
 def _endpoints_enu(parts: Sequence[Part], frame: LocalFrame) -> tuple[NDArray, NDArray]:

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from shapely import LineString, STRtree, box
 
 from predisat.geodesy import WGS84, LocalFrame
+from predisat.readonly import freeze_array_fields
 from predisat.track.errors import TrackMapError
 from predisat.track.posts import KilometrePost, monotone_posts, project_posts
 from predisat.track.readers import TrackFile, parse_csv_track, parse_geojson_track, sniff_format
@@ -72,6 +73,9 @@ class Projection:
     height_m: NDArray
     along_m: NDArray
     clamped: NDArray
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,8 +126,7 @@ class TrackMap:
     _curve: FittedCurve = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for arr in (self.lat_deg, self.lon_deg, self.h_m):
-            arr.setflags(write=False)
+        freeze_array_fields(self)
         # the posts map chainage to the line's kilometres only where they run one way
         posts = monotone_posts(self.kilometre_posts, f"track {self.name!r}")
         object.__setattr__(self, "kilometre_posts", posts)
@@ -576,8 +579,7 @@ def _tunnel_intervals(
         return []
     idx = np.array(spans)
     enu = tm.polyline_enu_m
-    s = tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2)
-    s.sort(axis=1)
+    s = np.sort(tm.project_enu(enu[idx.ravel()]).chainage_m.reshape(-1, 2), axis=1)
     merged: list[list[float]] = []
     for a, b in sorted(s.tolist()):
         if merged and a <= merged[-1][1] + 1.0:

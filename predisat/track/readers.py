@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.jsontypes import JsonDict
+from predisat.readonly import freeze_array_fields
 from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
 from predisat.track.errors import TrackMapError
 from predisat.track.posts import KilometrePost, points_as_posts, project_posts
@@ -106,6 +107,9 @@ class TrackFile:
     stations: list[Station] = field(default_factory=list)
     reverse: bool = False
     max_post_offset_m: float = 50.0
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
 
 def sniff_format(path: str | Path) -> Literal["geojson", "csv"]:

@@ -18,6 +18,7 @@ from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
 from predisat.geodesy import LocalFrame
+from predisat.readonly import freeze_array_fields
 
 __all__ = ["FittedCurve", "dense_polyline", "fit_curve"]
 
@@ -57,6 +58,9 @@ class FittedCurve:
     max_vertical_deviation_m: float
     lam_h: float
     lam_v: float
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
 
 def dense_polyline(enu: NDArray, spacing_m: float) -> tuple[NDArray, NDArray, NDArray]:
