@@ -11,6 +11,7 @@ run: its problem is returned.
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -65,7 +66,18 @@ def default_segmenter(
     opt = SkyOptions() if method is None else SkyOptions(method=method)
     if thin_px is not None:
         opt = replace(opt, thin_px=int(thin_px))
-    classifier = None if sky_net is None else _candidate_classifier(opt.method, sky_net)
+    classifier = None
+    if sky_net is not None:
+        # the files' versions are part of the key: a network retrained or copied over
+        # since is read again, not served from the cache
+        try:
+            stamps = tuple(
+                (st.st_mtime_ns, st.st_size, st.st_ino)
+                for st in (os.stat(sky_net), os.stat(Path(sky_net).with_suffix(".json")))
+            )
+        except OSError:  # SkyNet.load names the missing file and its fix
+            stamps = ()
+        classifier = _candidate_classifier(opt.method, sky_net, stamps)
     if panorama:
         seg = segment_panorama(image_bgr, opt, classifier=classifier)
     else:
@@ -75,8 +87,8 @@ def default_segmenter(
 
 
 @functools.lru_cache(maxsize=4)
-def _candidate_classifier(method: str, sky_net: str) -> Any:
-    # read once per process and file, not once per frame
+def _candidate_classifier(method: str, sky_net: str, stamps: tuple[tuple[int, ...], ...]) -> Any:
+    # read once per process and file version, not once per frame
     return classifier_with_net(method, SkyNet.load(sky_net))
 
 

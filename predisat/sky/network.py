@@ -72,9 +72,15 @@ def network_input(image_bgr: ArrayLike, input_px: int) -> NDArray[np.float32]:
     return np.ascontiguousarray(np.concatenate([x.transpose(2, 0, 1), row[None]])[None])
 
 
-@lru_cache(maxsize=4)
 def _load_net(path: str) -> Any:
-    # one network object per process and file (cv2.dnn.Net cannot be pickled or shared)
+    # one network object per process and file version (cv2.dnn.Net cannot be pickled or
+    # shared); a file replaced since (retrained, copied over) is read again
+    st = os.stat(path)
+    return _load_net_version(path, st.st_mtime_ns, st.st_size, st.st_ino)
+
+
+@lru_cache(maxsize=4)
+def _load_net_version(path: str, mtime_ns: int, size: int, inode: int) -> Any:
     try:
         return cv2.dnn.readNetFromONNX(path)
     except cv2.error as exc:

@@ -145,3 +145,24 @@ def test_ensemble_on_held_out_synthetic_frames(test_data, stem: str) -> None:
     img, truth = _frame(test_data, stem)
     seg = segment_sky(img, SkyOptions(method="ensemble"))
     assert _iou(seg.sky_mask, truth) > max(0.8, float(truth.mean()) + 0.3)
+
+
+def test_a_network_file_replaced_on_disk_is_read_again(tmp_path) -> None:
+    """The loaded network is cached per process; a file retrained or copied over since is read
+    again (it used to be served from the cache by its path)."""
+    import shutil
+
+    from predisat.reconstruct.frames import default_segmenter
+
+    shipped = SkyNet.default()
+    onnx, card = tmp_path / "net.onnx", tmp_path / "net.json"
+    shutil.copy(shipped.path, onnx)
+    shutil.copy(shipped.path.with_suffix(".json"), card)
+    img = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    SkyNet.load(onnx).predict_image(img)
+    default_segmenter(img, method="cnn", sky_net=str(onnx))
+    onnx.write_bytes(b"this is not an onnx file")
+    with pytest.raises(ValueError, match=r"net\.onnx.*not a readable ONNX"):
+        SkyNet.load(onnx).predict_image(img)
+    with pytest.raises(ValueError, match=r"net\.onnx.*not a readable ONNX"):
+        default_segmenter(img, method="cnn", sky_net=str(onnx))
