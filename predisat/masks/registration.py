@@ -233,6 +233,9 @@ def _with_edges(masks: MaskSet, chainage_m: NDArray) -> MaskSet:
         out[0::2] = a
         return out
 
+    lon = mid(np.asarray(masks.lon_deg, float))
+    step = np.mod(masks.lon_deg[1:] - masks.lon_deg[:-1] + 180.0, 360.0) - 180.0
+    lon[1::2] = np.mod(masks.lon_deg[:-1] + 0.5 * step + 180.0, 360.0) - 180.0  # across 180
     heading = mid(np.asarray(masks.heading_deg, float))
     turn = np.mod(masks.heading_deg[1:] - masks.heading_deg[:-1] + 180.0, 360.0) - 180.0
     heading[1::2] = np.mod(masks.heading_deg[:-1] + 0.5 * turn, 360.0)
@@ -246,7 +249,7 @@ def _with_edges(masks: MaskSet, chainage_m: NDArray) -> MaskSet:
     margin = np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape).astype(np.float32)
     return replace(
         masks, chainage_m=mid(chainage_m), lat_deg=mid(masks.lat_deg),
-        lon_deg=mid(masks.lon_deg), h_m=mid(masks.h_m), heading_deg=heading,
+        lon_deg=lon, h_m=mid(masks.h_m), heading_deg=heading,
         mask_el_deg=fill(masks.mask_el_deg, 0.0), margin_deg=fill(margin, 0.0),
         source=fill(masks.source, float(BinSource.OBSERVED)), descriptors=desc,
         support=None if masks.support is None else fill(masks.support, 255.0),

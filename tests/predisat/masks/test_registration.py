@@ -199,3 +199,29 @@ def test_uneven_masks_past_both_ends_of_a_shorter_map(maps) -> None:
     got = reg.masks.mask_at(s_b[:, None], az)
     own = m.mask_at(s_a[:, None], az)
     assert np.all(got >= own - 1e-5)
+
+
+def test_a_line_across_the_antimeridian_keeps_its_positions_on_the_line() -> None:
+    """The added half-way positions averaged longitudes: between 179.9999 and -179.9999 one
+    landed at longitude 0, 12,000 km away (a geometry review, 2026-12-06)."""
+    from pyproj import Geod
+
+    geod = Geod(ellps="WGS84")
+    n = 401
+    lon, lat, _ = geod.fwd(np.full(n, 179.99), np.full(n, -16.8), np.full(n, 90.0),
+                           np.arange(n) * 5.0)  # fmt: skip
+    a = TrackMap.from_latlon(lat, lon, 0.0, "A", tolerance_m=0.05)
+    lon2, lat2, _ = geod.fwd(lon, lat, np.zeros(n), np.full(n, 0.8))  # 0.8 m north
+    b = TrackMap.from_latlon(lat2, lon2, 0.0, "B", tolerance_m=0.05)
+    s = np.arange(20.0, a.length_m - 20, 10.0)
+    la, lo, h = a.position_at(s)
+    assert lo.min() < -179.99 and lo.max() > 179.99  # the line crosses 180 deg
+    m = MaskSet.from_arrays(s, la, lo, h + 4, a.heading_at(s), np.full((len(s), 72), 10.0),
+                            provenance={"track": "A"})  # fmt: skip
+    out = register_on_track(m, b, "test").masks
+    # every position within metres of the line (pyproj's geodesic to the nearest vertex)
+    near = np.array([
+        geod.inv(np.full(n, lon_i), np.full(n, lat_i), lon2, lat2)[2].min()
+        for lat_i, lon_i in zip(out.lat_deg, out.lon_deg, strict=True)
+    ])  # fmt: skip
+    assert near.max() < 5.0
