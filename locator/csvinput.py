@@ -20,6 +20,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from predisat.readonly import freeze_array_fields
+
 __all__ = ["CsvTable", "read_csv_table"]
 
 # how a value a person leaves empty or unknown may be written (read as NaN, not as text)
@@ -46,6 +48,9 @@ class CsvTable:
     lines: NDArray
     label: str
     error: Callable[[str], Exception]
+
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -101,6 +106,7 @@ def read_csv_table(
     error: Callable[[str], Exception],
     doc: str,
     aliases: Mapping[str, str] | None = None,
+    optional: Sequence[str] = (),
 ) -> CsvTable:
     """Read a CSV file with a header line; refuse what cannot be one, naming the fix.
 
@@ -119,7 +125,13 @@ def read_csv_table(
     doc : str
         Where the format is described (``"docs/odometry.md"``).
     aliases : mapping of str to str, optional
-        Unused column name -> the required column it probably means, for the message.
+        Unused column name -> the required or optional column it probably means (compared
+        without case): for the message of a missing required column, and to refuse a file
+        whose optional column is given under another name (its default would be used).
+    optional : sequence of str
+        Columns read when present (with a default otherwise). A column that names one of
+        them, or a required one, in other letter case or by an alias is refused: its values
+        would be silently replaced by the default.
 
     Returns
     -------
@@ -174,10 +186,38 @@ def read_csv_table(
             f"{label}: missing columns {missing} (the header has {list(frame.columns)}); "
             f"{_a(what)} {what} needs {columns} ({doc}){hint}"
         )
+    _refuse_misnamed(list(frame.columns), [*required, *optional], aliases or {}, label,
+                     header_line, what, doc, error)  # fmt: skip
     lines = np.array([k for k, _ in numbered[1:]], int)
     if len(lines) != len(frame):  # a quoted cell across lines: count rows after the header
         lines = header_line + 1 + np.arange(len(frame))
     return CsvTable(frame, lines, label, error)
+
+
+def _refuse_misnamed(
+    names: Sequence[str],
+    known: Sequence[str],
+    aliases: Mapping[str, str],
+    label: str,
+    header_line: int,
+    what: str,
+    doc: str,
+    error: Callable[[str], Exception],
+) -> None:
+    """Refuse a column that is a known one under another name (case, an alias) while the
+    known one is absent: an optional column's default would silently stand in for it (a
+    user trial: ``accuracy`` of 20 m read as the default 1 m)."""
+    lower = {a.lower(): c for a, c in aliases.items()}
+    lower.update({c.lower(): c for c in known})
+    for name in names:
+        meant = lower.get(name.lower())
+        if meant is None or name == meant or meant in names:
+            continue
+        raise error(
+            f"{label}, line {header_line}: column {name!r} is not read; if it holds "
+            f"{meant}, rename it to {meant!r} ({doc}); otherwise rename it to a name the "
+            f"{what} does not use"
+        )
 
 
 def _without_trailing_commas(

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from locator.csvinput import read_csv_table
 from predisat.geodesy import geodetic_to_ecef
+from predisat.readonly import freeze_array_fields
 from predisat.track import TrackMap
 
 __all__ = ["ALONG_TOL_M", "BaliseFileError", "BaliseList", "horizontal_offset_m"]
@@ -56,7 +57,10 @@ _UNITS = {
 _ALIASES = {"chainage": "chainage_m", "km": "chainage_m", "lat": "lat_deg",
             "latitude": "lat_deg", "lon": "lon_deg", "lng": "lon_deg", "longitude": "lon_deg",
             "h": "h_m", "height": "h_m", "height_m": "h_m", "alt": "h_m", "nid_bg": "id",
-            "name": "id"}  # fmt: skip
+            "name": "id", "accuracy": "accuracy_m", "acc_m": "accuracy_m",
+            "q_locacc": "accuracy_m", "locacc_m": "accuracy_m", "q_locacc_m": "accuracy_m",
+            "q_ref": "q_reference", "qref": "q_reference", "reference": "q_reference"}  # fmt: skip
+OPTIONAL = ("q_reference", "accuracy_m")
 
 
 ALONG_TOL_M = 0.5
@@ -128,6 +132,9 @@ class BaliseList:
     accuracy_m: NDArray
     source: str = ""
 
+    def __post_init__(self) -> None:
+        freeze_array_fields(self)
+
     def __len__(self) -> int:
         return len(self.ids)
 
@@ -184,7 +191,8 @@ class BaliseList:
         """
         p = Path(path)
         table = read_csv_table(p, REQUIRED, what="balise list", error=BaliseFileError,
-                               doc="docs/odometry.md", aliases=_ALIASES)  # fmt: skip
+                               doc="docs/odometry.md", aliases=_ALIASES,
+                               optional=OPTIONAL)  # fmt: skip
         df = table.frame
         if len(df) == 0:
             raise BaliseFileError(f"{p}: no balise; add one row per balise")

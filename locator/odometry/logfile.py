@@ -36,7 +36,8 @@ COLUMNS = ("t_s", "dist_m", "speed_mps", "direction")
 # column names of other loggers and the column each probably is
 _ALIASES = {"time": "t_s", "t": "t_s", "time_s": "t_s", "gps_s": "t_s", "dist": "dist_m",
             "distance": "dist_m", "distance_m": "dist_m", "speed": "speed_mps",
-            "v_mps": "speed_mps", "dir": "direction"}  # fmt: skip
+            "v_mps": "speed_mps", "dir": "direction", "slide": "slip", "slip_flag": "slip",
+            "slipping": "slip"}  # fmt: skip
 # a distance step agrees with speed x dt when it lies within the two speeds of its cycle times
 # dt, widened by this much (speed quantised, or filtered over a few cycles)
 STEP_TOLERANCE_M = 0.1
@@ -83,7 +84,8 @@ def read_odometer_log(
     """
     p = Path(path)
     table = read_csv_table(p, COLUMNS, what="odometer log", error=OdometerLogError,
-                           doc="docs/odometry.md", aliases=_ALIASES)  # fmt: skip
+                           doc="docs/odometry.md", aliases=_ALIASES,
+                           optional=("slip",))  # fmt: skip
     t = table.numbers("t_s", "give the cycle time in GPS seconds")
     dist = table.numbers("dist_m", "give the distance in metres since the first row")
     speed = table.numbers("speed_mps", "give the speed in m/s (>= 0)")

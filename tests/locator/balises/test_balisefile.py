@@ -87,6 +87,31 @@ def test_bad_lists_name_the_line_and_the_fix(tmp_path, track, edit, match):
     assert str(p) in str(exc.value)
 
 
+@pytest.mark.parametrize(
+    ("rename", "meant"),
+    [
+        ({"accuracy_m": "accuracy"}, "accuracy_m"),
+        ({"accuracy_m": "Q_LOCACC", "q_reference": "Q_REFERENCE"}, "q_reference"),
+        ({"q_reference": "Q_REFERENCE"}, "q_reference"),
+        ({"accuracy_m": "Accuracy_M"}, "accuracy_m"),
+    ],
+)
+def test_an_optional_column_under_another_name_is_refused(tmp_path, track, rename, meant):
+    """A user trial's list with ``accuracy`` (20 m) was read with the default 1 m, and the
+    telegrams stated an accuracy about 20 m too tight."""
+    bl = BaliseList.along_track(track, 100.0, 900.0, 200.0)
+    p = tmp_path / "b.csv"
+    bl.to_csv(p)
+    pd.read_csv(p).assign(accuracy_m=20.0).rename(columns=rename).to_csv(p, index=False)
+    with pytest.raises(BaliseFileError, match=rf"line 1: column .* is not read.*{meant!r}"):
+        BaliseList.from_csv(p, track)
+    # a column the list does not use under any name is left alone
+    pd.read_csv(p).rename(columns={v: k for k, v in rename.items()}).assign(
+        comment="x"
+    ).to_csv(p, index=False)
+    assert BaliseList.from_csv(p, track).accuracy_m.tolist() == [20.0] * 5
+
+
 def test_heights_are_not_compared(tmp_path, track):
     # a track map without heights (h 0) and balises with their real ellipsoidal height: only
     # the horizontal offset counts
