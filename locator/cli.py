@@ -189,7 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from locator.run import claim_label
     from locator.sathia import AntennaPath
     from locator.sources import RinexSource, SimSource
-    from locator.workflow import check_track, run_to_folder, static_truth
+    from locator.workflow import check_track, check_track_height, run_to_folder, static_truth
 
     source: Any
     if args.sim:
@@ -222,6 +222,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         # the phone's own first fix (Google's WLS) stands for the RINEX header position
         fixes = dev.wls_ecef_m[np.all(np.isfinite(dev.wls_ecef_m), axis=1)]
         header = fixes[0] if len(fixes) else None
+        check_track_height(path, fixes, f"{args.device_gnss} (the phone's own fixes)")
         sim_chainage = None
         if start is None:
             if header is None:
@@ -242,6 +243,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
+        check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)")
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
         header = hx if (hx == hx).all() and abs(hx).sum() > 0 else None  # RINEX: 0 0 0 if unknown
@@ -398,6 +400,21 @@ def _check_start(
         except ValueError as exc:
             print(f"locator run: warning: {exc}; running from --start-chainage as asked",
                   file=sys.stderr)  # fmt: skip
+
+
+def _sample_fixes(model: Any, obs: Any, n: int = 30) -> Any:
+    """Single point positions (ECEF m, shape (k, 3)) at up to ``n`` epochs spread over ``obs``,
+    those that solved."""
+    import numpy as np
+
+    from locator.spp import solve_observations
+
+    idx = np.unique(np.linspace(0, len(obs.gps_s) - 1, min(n, len(obs.gps_s))).astype(int))
+    table, _ = solve_observations(model, obs, epochs=idx)
+    if "x_m" not in table:
+        return np.zeros((0, 3))
+    ok = table["status"].eq("ok").to_numpy()
+    return table.loc[ok, ["x_m", "y_m", "z_m"]].to_numpy(float)
 
 
 # The header's approximate position is a rough fix (tens of metres), so the bound is looser

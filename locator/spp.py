@@ -161,8 +161,9 @@ def solve_observations(
     obs: Observations,
     el_mask_deg: float = 10.0,
     priority: Mapping[str, Sequence[str]] | None = None,
+    epochs: ArrayLike | None = None,
 ) -> tuple[pd.DataFrame, list[ObsProblem]]:
-    """Solve every epoch of an observation file.
+    """Solve every epoch of an observation file (or those indexed by ``epochs``).
 
     Returns
     -------
@@ -178,7 +179,9 @@ def solve_observations(
     hx = obs.header.approx_position_ecef_m
     x0: NDArray | None = hx if np.all(np.isfinite(hx)) and np.linalg.norm(hx) > 6e6 else None
     rows, problems = [], []
-    for i, t in enumerate(obs.gps_s):
+    index = np.arange(len(obs.gps_s)) if epochs is None else np.asarray(epochs, int)
+    for i in index:
+        t = obs.gps_s[i]
         have = np.isfinite(sel.pseudorange_m[i])
         sats = [s for s, h in zip(obs.sats, have, strict=True) if h]
         codes = list(sel.code[i, have])

@@ -57,6 +57,7 @@ __all__ = [
     "ImplausibleFitError",
     "calibrate_to_file",
     "check_track",
+    "check_track_height",
     "demo",
     "evaluate_folder",
     "rule_folder",
@@ -71,6 +72,12 @@ __all__ = [
 
 DEMO_RANGE_M = (4000.0, 6300.0)  # line 144 km 4.0-6.3 (`predisat demo` renders km 4-6)
 MAX_TRACK_OFFSET_M = 5.0
+MAX_HEIGHT_DISAGREEMENT_M = 20.0
+"""Largest median height, m, of a receiver's own 3-D fixes above its antenna on the track
+(the track axis plus the antenna height) before a real run is refused: a map without heights
+(h = 0) or with heights above the geoid misplaces the locator's fixes by tens of metres (a
+geometry review, 2026-12-06: 45 m of height, 5.6 m median and 191 m worst error; 4 m, 0.4 m);
+single-frequency fixes are good to a few metres in height over a sample of epochs."""
 
 
 def stop_and_go(
@@ -111,6 +118,68 @@ def check_track(
             f"{label}: the antenna is {away} away from track {path.track.name!r}; pass the "
             f"--track the run was made on{hint}"
         )
+
+
+_NEAR_FOR_HEIGHT_M = 200.0
+
+
+def check_track_height(
+    path: AntennaPath,
+    fixes_ecef_m: ArrayLike,
+    label: str,
+    max_m: float = MAX_HEIGHT_DISAGREEMENT_M,
+) -> float:
+    """The receiver's own 3-D fixes must lie at its antenna's height on the track.
+
+    Parameters
+    ----------
+    path : AntennaPath
+        The track and the antenna height above it.
+    fixes_ecef_m : array_like, shape (n, 3)
+        The receiver's own position fixes (single point positions), ECEF metres; rows with
+        NaN, and fixes more than 200 m beside the track (:func:`check_track` tells those), are
+        skipped.
+    label : str
+        What the fixes are, for the message (the file).
+    max_m : float
+        Largest median disagreement, m.
+
+    Returns
+    -------
+    float
+        The median height of the fixes above the antenna on the track, m (NaN without a
+        fix).
+
+    Raises
+    ------
+    ValueError
+        When the median exceeds ``max_m``, naming the likely causes and the fix.
+    """
+    fixes = np.asarray(fixes_ecef_m, float).reshape(-1, 3)
+    fixes = fixes[np.all(np.isfinite(fixes), axis=1)]
+    if not len(fixes):
+        return float("nan")
+    lat, lon, h = ecef_to_geodetic(fixes)
+    pr = path.track.project(lat, lon, h)
+    # beside the line only: a receiver elsewhere is told so by check_track, and a height
+    # above a far projection is meaningless
+    near = np.hypot(pr.offset_m, pr.along_m) <= _NEAR_FOR_HEIGHT_M
+    if not near.any():
+        return float("nan")
+    dh = float(np.median(pr.height_m[near]) - path.antenna_height_m)
+    fixes = fixes[near]
+    if abs(dh) > max_m:
+        where = "above" if dh > 0 else "below"
+        raise ValueError(
+            f"{label}: the receiver's own fixes lie {abs(dh):.0f} m {where} its antenna on "
+            f"track {path.track.name!r} (the median of {len(fixes)}; the track's height plus "
+            f"--antenna-height {path.antenna_height_m:g} m): the track map has no heights "
+            "(h = 0) or heights above the geoid, not the WGS84 ellipsoid, and the locator "
+            "meets the satellites' ranges with the track in 3-D, so its fixes would be tens of "
+            "metres off; give a track map with ellipsoidal heights (docs/track-map.md), or "
+            "correct --antenna-height"
+        )
+    return dh
 
 
 def simulate_to_folder(

@@ -165,6 +165,7 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
         return doc
     from pyproj import CRS, Transformer
     from pyproj.exceptions import CRSError
+    from pyproj.transformer import TransformerGroup
 
     try:
         crs = CRS.from_user_input(str(name))
@@ -175,10 +176,36 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
         ) from None
     if crs.equals(CRS.from_epsg(4326), ignore_axis_order=True):
         return doc
-    to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+    vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+    if vertical:
+        # heights above a geoid: the track map needs ellipsoidal ones (the locator meets the
+        # satellites' hyperbolae on the track in 3-D; 45 m of geoid moved fixes by tens of m)
+        group = TransformerGroup(crs, "EPSG:4979", always_xy=True)  # best available first
+        to_3d = group.transformers[0] if group.transformers else None
+        if to_3d is None or "ballpark vertical" in to_3d.description.lower():
+            grids = sorted({
+                g.short_name for op in group.unavailable_operations for g in op.grids
+                if not g.available
+            })  # fmt: skip
+            need = (f" (PROJ lacks {', '.join(grids)}: projsync --file NAME for each)"
+                    if grids else "")  # fmt: skip
+            raise TrackMapError(
+                f"{path}: its heights are in {vertical[0].name} (above the geoid, not the "
+                f"WGS84 ellipsoid) and PROJ cannot turn them into ellipsoidal heights{need}; "
+                "install the grid, or give the file in WGS84 longitude, latitude and "
+                "ellipsoidal height"
+            )
+        horizontal = crs.sub_crs_list[0]
+    else:
+        to_3d, horizontal = None, crs
+    to_lonlat = Transformer.from_crs(horizontal, "EPSG:4326", always_xy=True)
+    to_h = to_3d
 
     def turn(c: Any) -> Any:
         if isinstance(c, list) and c and isinstance(c[0], (int, float)):
+            if to_h is not None and len(c) > 2:
+                lon, lat, h = to_h.transform(float(c[0]), float(c[1]), float(c[2]))
+                return [lon, lat, h, *c[3:]]
             lon, lat = to_lonlat.transform(float(c[0]), float(c[1]))
             return [lon, lat, *c[2:]]
         return [turn(x) for x in c] if isinstance(c, list) else c

@@ -9,6 +9,7 @@ tracked.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -277,6 +278,31 @@ def test_rinex_run_refuses_a_wrong_track_or_masks_and_tells_skipped_epochs(
         assert main(argv) == 2
         msg = capsys.readouterr().err
         assert "lie outside the navigation data" in msg and "2010-07-01" in msg
+
+
+@pytest.mark.parametrize("dh_m", [-45.0, 30.0])
+def test_a_track_at_the_wrong_height_is_refused(test_data, tmp_path, capsys, dh_m):
+    """A map without heights, or with heights above the geoid (45 m in Belgium), put the
+    locator's fixes tens of metres off (a geometry review); the receiver's own fixes, a few
+    metres good in height, tell. The height of the station, independent of the code, is
+    GEONET's published position (_virtual_track)."""
+    track = _virtual_track(tmp_path / "virtual.csv")
+    df = pd.read_csv(track)
+    df.assign(h_m=df["h_m"] + dh_m).to_csv(tmp_path / "low.csv", index=False)
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    args = ["run", "--track", str(tmp_path / "low.csv"), "--obs", str(obs), "--nav", str(nav),
+            "--no-masks", "--antenna-height", "0", "--out", str(tmp_path / "low")]  # fmt: skip
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    told = re.search(r"fixes lie (\d+) m (above|below) its antenna", err)
+    assert told, err
+    assert abs(int(told[1]) - abs(dh_m)) <= 3 and told[2] == ("above" if dh_m < 0 else "below")
+    assert "ellipsoidal heights" in err and not (tmp_path / "low").exists()
+    # the track at its height, the antenna said to stand 4 m above it: within the bound
+    ok = ["-q", "run", "--track", str(track), "--obs", str(obs), "--nav", str(nav),
+          "--no-masks", "--antenna-height", "4", "--out", str(tmp_path / "ok")]  # fmt: skip
+    assert main(ok) == 0
 
 
 def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):

@@ -598,6 +598,26 @@ def test_a_legacy_geojson_in_a_national_grid_is_read_in_its_crs(tmp_path):
         TrackMap.from_geojson(path)
 
 
+def test_heights_above_a_geoid_are_refused_without_the_grid_to_convert_them(tmp_path):
+    """A compound CRS naming a height datum (Lambert 72 + Ostend height): its z values were
+    kept as ellipsoidal heights, 45 m low in Belgium, and the locator meets the satellites'
+    hyperbolae on the track in 3-D (a geometry review: fixes moved by tens of metres)."""
+    from pyproj.transformer import TransformerGroup
+
+    crs = "EPSG:31370+5710"
+    group = TransformerGroup(crs, "EPSG:4979", always_xy=True)
+    if group.transformers and "ballpark" not in group.transformers[0].description.lower():
+        pytest.skip("this PROJ has the geoid grid: the heights would be converted")
+    coords = [[150000.0 + 10 * i, 130000.0 + 5 * i, 150.0] for i in range(50)]
+    doc = {"type": "FeatureCollection", "crs": {"type": "name", "properties": {"name": crs}},
+           "features": [{"type": "Feature", "properties": {},
+                         "geometry": {"type": "LineString", "coordinates": coords}}]}  # fmt: skip
+    path = tmp_path / "ostend.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"Ostend height \(above the geoid.*projsync"):
+        TrackMap.from_geojson(path)
+
+
 def test_mixed_2d_and_3d_vertices_take_the_track_height_and_an_empty_geojson_is_named(tmp_path):
     """docs/track-map.md: heights when every vertex has one, else h_m; a user trial's mixed
     file was refused as malformed, and an empty .geojson was asked for a CSV header."""
