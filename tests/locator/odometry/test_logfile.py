@@ -114,6 +114,21 @@ def test_distance_steps_must_agree_with_the_speed(tmp_path, edit, match):
     assert str(p) in str(exc.value)
 
 
+def test_a_distance_creeping_ahead_of_the_speed_is_refused_unless_marked(tmp_path):
+    """8 % a cycle at 5 m/s (0.04 m, within the per-cycle 10 % + 0.1 m) for 10 s: 4 m ahead of
+    the speed, the kind of log a user trial's telegrams went out early with."""
+    df = good_frame()
+    creep = np.where(df.index >= 100, 0.04, 0.0)
+    df = df.assign(dist_m=df["dist_m"] + np.cumsum(creep))
+    p = _write(tmp_path, df)
+    with pytest.raises(OdometerLogError, match=r"lines \d+-\d+: dist_m runs .* while speed_mps "
+                       r"integrates to .*tolerance 3 % \+ 1 m over 10 s"):  # fmt: skip
+        read_odometer_log(p)
+    # the odometer marked those cycles as slip: its own flags say the wheel was not trusted
+    p = _write(tmp_path, df.assign(slip=(df.index >= 100).astype(int)), "marked.csv")
+    assert read_odometer_log(p).slip[100:].all()
+
+
 def test_steps_of_simulated_odometers_agree_with_their_speed(tmp_path):
     # the check must not refuse a real odometer's log: slip, slide, radar, clamping, stops
     t = np.arange(0.0, 120.0, 0.1)
