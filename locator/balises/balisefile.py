@@ -35,7 +35,7 @@ from predisat.geodesy import geodetic_to_ecef
 from predisat.readonly import freeze_array_fields
 from predisat.track import TrackMap
 
-__all__ = ["ALONG_TOL_M", "BaliseFileError", "BaliseList", "horizontal_offset_m"]
+__all__ = ["ALONG_TOL_M", "Q_LOCACC_MAX_M", "BaliseFileError", "BaliseList", "horizontal_offset_m"]
 
 REQUIRED = ("id", "chainage_m", "lat_deg", "lon_deg", "h_m", "telegram")
 
@@ -62,6 +62,9 @@ _ALIASES = {"chainage": "chainage_m", "km": "chainage_m", "lat": "lat_deg",
             "q_ref": "q_reference", "qref": "q_reference", "reference": "q_reference"}  # fmt: skip
 OPTIONAL = ("q_reference", "accuracy_m")
 
+
+#: the largest location accuracy a balise telegram can state (Q_LOCACC, 6 bits of 1 m)
+Q_LOCACC_MAX_M = 63.0
 
 ALONG_TOL_M = 0.5
 """How far along the track a balise's coordinates may place it beyond its ``accuracy_m`` from
@@ -265,6 +268,16 @@ class BaliseList:
         if np.any(acc < 0):
             i = int(np.flatnonzero(acc < 0)[0])
             raise BaliseFileError(f"{p}, line {_line(i)}: accuracy_m must be >= 0")
+        if np.any(acc >= Q_LOCACC_MAX_M):
+            # the telegram's accuracy adds the fix's reach to it: never within Q_LOCACC's
+            # 63 m, so the balise could never be captured (a user trial's 70 m: a silent miss)
+            i = int(np.flatnonzero(acc >= Q_LOCACC_MAX_M)[0])
+            raise BaliseFileError(
+                f"{p}, line {_line(i)}: balise {ids[i]!r}: accuracy_m {acc[i]:g} leaves nothing "
+                f"of the {Q_LOCACC_MAX_M:g} m a telegram may state (ETCS Q_LOCACC, 6 bits): it "
+                "could never be captured; survey the balise's position better, or check the "
+                "unit (metres)"
+            )
         # the coordinates place the balise along the track too: further from its chainage than
         # its stated accuracy, one of the three is wrong, and the telegram's accuracy (built on
         # accuracy_m) would not hold it (a user trial: 4.8 m apart, accuracy 0.5 m, accepted)

@@ -58,14 +58,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from locator.balises.balisefile import BaliseList
+from locator.balises.balisefile import Q_LOCACC_MAX_M, BaliseList
 from locator.odometry.confidence import OdometerAccuracy
 
 __all__ = ["EMIT_MODES", "Q_LOCACC_MAX_M", "CaptureConfig", "capture_balises", "score_captures"]
 
 EMIT_MODES = ("at_fix", "predicted")
-#: the largest location accuracy a balise telegram can state (Q_LOCACC, 6 bits of 1 m)
-Q_LOCACC_MAX_M = 63.0
 
 
 @dataclass(frozen=True)
@@ -404,8 +402,15 @@ def score_captures(
     b = orientation * captures["chainage_m"].to_numpy(float)
     reached = (b >= u_true[0]) & (b <= u_true[-1])
     passed = (b >= u_true[0] + margin_m) & (b <= u_true[-1] - margin_m)
-    t_true = np.where(reached, np.interp(b, u_true, tt), np.nan)
-    # a stop exactly at the balise: interp takes the first time it is reached
+    # the first time each is reached: a train stopping on a balise passes it on arrival
+    # (np.interp over the stop's repeated positions took its departure: a user trial's
+    # telegram 62 s late was scored 1.5 s)
+    k = np.clip(np.searchsorted(u_true, b, side="left"), 1, len(u_true) - 1)
+    du = u_true[k] - u_true[k - 1]
+    frac = np.where(du > 0, (b - u_true[k - 1]) / np.where(du > 0, du, 1.0), 1.0)
+    between = tt[k - 1] + np.clip(frac, 0.0, 1.0) * (tt[k] - tt[k - 1])
+    first = np.where(b <= u_true[0], tt[0], between)
+    t_true = np.where(reached, first, np.nan)
     t_pass = captures["t_pass_s"].to_numpy(float)
     pos = np.interp(t_pass, tt, u_true) - b
     cap = captures["captured"].to_numpy(bool)

@@ -61,6 +61,12 @@ def test_along_track_round_trip(tmp_path, track):
             ),
             r"line 4: balise .* coordinates lie 4\.8 m along the track .* accuracy_m 0\.5",
         ),
+        # an accuracy Q_LOCACC cannot state: the balise could never be captured (a user
+        # trial's 70 m was a silent miss)
+        (
+            lambda df: df.assign(accuracy_m=np.where(df.index == 3, 70.0, 1.0)),
+            r"line 5: balise .* accuracy_m 70 leaves nothing of the 63 m",
+        ),
         # an empty telegram is refused, as the format says
         (
             lambda df: df.assign(telegram=np.where(df.index == 2, "", df["telegram"])),

@@ -83,6 +83,18 @@ def test_offset_fixes_give_the_expected_timing_and_false_captures():
     assert not sc["false"].any()
 
 
+def test_a_train_stopping_on_a_balise_passes_it_on_arrival():
+    """10 m/s to the balise at 100 m, 60 s standing on it, then on: the true passage is the
+    arrival at 10 s (np.interp over the repeated positions took the departure at 70 s, and a
+    user trial's telegram emitted 62 s late was scored 1.5 s)."""
+    t = np.arange(0.0, 90.0 + 1e-9, 1.0)
+    truth = np.where(t < 10, 10.0 * t, np.where(t < 70, 100.0, 100.0 + 10.0 * (t - 70)))
+    cap = capture_balises(t, truth, truth - 5, truth + 5, balises([50.0, 100.0, 150.0]),
+                          CaptureConfig(12.0), orientation=1)  # fmt: skip
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=12.0)
+    np.testing.assert_allclose(sc["t_true_s"], [5.0, 10.0, 75.0])
+
+
 def test_reverse_direction_and_window_zone():
     t, _truth, est, lo, hi = fixes(1.0, 10.0, 30.0, start_m=500.0, orientation=-1)
     bl = balises([255.0, 395.0])
