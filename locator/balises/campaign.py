@@ -26,6 +26,9 @@ from locator.run import RunConfig, claim_label, run_locator
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from locator.sources import SimSource
+from predisat import __version__
+from predisat.clock import utc_stamp
+from predisat.gnss.timescale import gps_s_to_utc_datetime64
 from predisat.jsontypes import strict_json_text
 from predisat.masks.maskset import MaskSet
 
@@ -304,10 +307,17 @@ def balises_to_folder(
     summary["epochs"] = int(front["epochs"])
     summary["front_outside"] = int(front["front_outside"])
     run.epochs.to_parquet(folder / "epochs.parquet")
+    # the times in UTC beside the GPS seconds: a signalling engineer reads the file alone
+    utc = gps_s_to_utc_datetime64(scored["t_pass_s"].to_numpy(float))
+    scored["t_pass_utc"] = np.where(np.isnat(utc), "", np.datetime_as_string(utc, unit="ms"))
     # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
     scored.to_csv(folder / "captures.csv", index=False, float_format="%.17g")
     budget = config.locator.budget
     info = {
+        "software": f"predisat {__version__}", "created_utc": utc_stamp(),
+        "track": path.track.name,
+        "time_scale": "t_*_s columns: GPS seconds (GPST, continuous since 1980-01-06 "
+                      "00:00:00; UTC = GPST - leap seconds); t_pass_utc: the same in UTC",
         "balises": balises.source, "n_balises": len(balises),
         # a recorded log replaces the simulated odometer: its settings would mislead
         "odometer": ({"log": log.source} if log is not None else asdict(odo_cfg)),

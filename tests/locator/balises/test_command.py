@@ -73,6 +73,15 @@ def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
     got = p[p["captured"]]
     assert len(got) >= 0.75 * len(p)
     assert (got["timing_error_s"].abs() < 1.0).all()
+    # the time scale is said, and the UTC column agrees with skyfield's leap seconds
+    from skyfield.api import load
+
+    assert "GPS seconds" in info["time_scale"] and info["track"] and info["software"]
+    ts = load.timescale(builtin=True)
+    row = got.iloc[0]
+    utc = ts.tai(1980, 1, 6, 0, 0, 19.0 + float(row["t_pass_s"])).utc_datetime()
+    got_utc = pd.Timestamp(row["t_pass_utc"]).tz_localize("UTC")
+    assert abs((got_utc - pd.Timestamp(utc)).total_seconds()) < 0.002
 
 
 def test_a_bad_balise_list_is_one_line_naming_the_row(sim_dir, tmp_path, capsys):
