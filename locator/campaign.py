@@ -566,7 +566,8 @@ def run_campaign(
              for j in jobs}  # fmt: skip
     todo = [j for j in jobs if not paths[j].exists()]
     say(f"{len(jobs)} jobs, {len(todo)} to do")
-    with TaskRunner(scheduler or Scheduler.serial()) as runner:
+    # workers running other code would return other code's results under this code's keys
+    with TaskRunner(scheduler or Scheduler.serial(), code_version=code_fingerprint) as runner:
         for k, (job, df, dt) in enumerate(
             runner.map_unordered(_timed_job, setup, todo, name="campaign"), 1
         ):

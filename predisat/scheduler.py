@@ -35,6 +35,7 @@ from typing import Any, Literal, TypeVar
 __all__ = [
     "CLOSE_TIMEOUT_S",
     "CONNECT_TIMEOUT_S",
+    "WORKER_WAIT_S",
     "Scheduler",
     "TaskRunner",
     "dask_setup",
@@ -50,6 +51,9 @@ CLOSE_TIMEOUT_S = 3.0
 
 CONNECT_TIMEOUT_S = 20.0
 """Longest wait, seconds, for the scheduler of a cluster given by address to answer."""
+
+WORKER_WAIT_S = 30.0
+"""Longest wait, seconds, for a first worker to join a cluster given by address."""
 
 # a worker process killed (SIGKILL, out of memory) while holding a task counts as a failure
 # of that task; distributed gives up on a task after this many (its default is 3)
@@ -103,7 +107,13 @@ class Scheduler:
     def at(cls, address: str) -> Scheduler:
         """An existing ``distributed`` cluster: ``tcp://host:port`` or ``host:port``."""
         text = address.strip()
-        if not text or text.startswith("-") or any(c.isspace() for c in text):
+        port = text.rpartition(":")[2]
+        if (
+            not text or text.startswith("-") or any(c.isspace() for c in text)
+            or ("://" not in text and not (":" in text and port.isdigit()))
+        ):  # fmt: skip
+            # a mistyped 'local' (lcoal) was taken for a host and failed after the inputs
+            # were read and the output folder made
             raise ValueError(
                 f"scheduler address {address!r} is not an address; give the Dask scheduler's "
                 "address such as tcp://10.0.0.5:8786, or 'local' or 'serial'"
@@ -149,7 +159,12 @@ class Scheduler:
 class _ReadyCluster:
     """A started client (and the local cluster it owns, if any)."""
 
-    def __init__(self, scheduler: Scheduler) -> None:
+    def __init__(
+        self,
+        scheduler: Scheduler,
+        code_version: Callable[[], str] | None = None,
+        paths: Sequence[str] = (),
+    ) -> None:
         from distributed import Client
 
         self.cluster: Any = None
@@ -157,14 +172,13 @@ class _ReadyCluster:
             self.cluster = _start_local_cluster(scheduler.workers)
             self.client = Client(self.cluster)
         else:
+            self.client = _connect(scheduler.address)
             try:
-                self.client = Client(scheduler.address, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except OSError as exc:
-                raise OSError(
-                    f"scheduler {scheduler.address}: no Dask scheduler answers there ({exc}); "
-                    "start one (`dask scheduler`, then `dask worker ADDRESS`) or use "
-                    "--scheduler local"
-                ) from None
+                _check_workers(self.client, scheduler.address, code_version, paths)
+            except BaseException:
+                with contextlib.suppress(Exception):
+                    self.client.close(timeout=CLOSE_TIMEOUT_S)
+                raise
 
     def close(self, abort: bool = False) -> None:
         """Close the client and the local cluster; ``abort`` (after Ctrl-C or an error) kills
@@ -183,6 +197,90 @@ class _ReadyCluster:
         if self.cluster is not None:
             with contextlib.suppress(Exception):
                 self.cluster.close(timeout=CLOSE_TIMEOUT_S)
+
+
+def _connect(address: str) -> Any:
+    """A client of the scheduler at ``address``, within :data:`CONNECT_TIMEOUT_S`.
+
+    Built in a thread: something that accepts the connection but is no Dask scheduler (a web
+    server on that port) leaves distributed's handshake waiting past its own timeout.
+    """
+    from distributed import Client
+
+    box: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            box["client"] = Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")
+        except BaseException as exc:  # handed to the waiting thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=connect, name="predisat-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_TIMEOUT_S + 5.0)
+    if thread.is_alive():
+        raise OSError(
+            f"scheduler {address}: something answers there, but no Dask scheduler (no "
+            f"handshake in {CONNECT_TIMEOUT_S + 5.0:g} s); check the address and port (`dask "
+            "scheduler` prints it) or use --scheduler local"
+        )
+    if isinstance(box.get("error"), OSError):
+        raise OSError(
+            f"scheduler {address}: no Dask scheduler answers there ({box['error']}); start one "
+            "(`dask scheduler`, then `dask worker ADDRESS`) or use --scheduler local"
+        ) from None
+    if "error" in box:
+        raise box["error"]
+    return box["client"]
+
+
+def _sees(paths: Sequence[str]) -> list[str]:
+    """The local paths of ``paths`` this process cannot see (run on each worker)."""
+    return [p for p in paths if "://" not in p and not os.path.exists(p)]
+
+
+def _check_workers(
+    client: Any, address: str, code_version: Callable[[], str] | None, paths: Sequence[str]
+) -> None:
+    """Refuse a cluster the run's tasks would go wrong on, before any task: no worker (they
+    would wait for one forever), workers that cannot import this code or run other code
+    (their results would be taken for this code's), workers that do not see the run's files
+    (a survey's images "missing" on a worker gave masks all assumed, and kept them)."""
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except TimeoutError:
+        raise OSError(
+            f"scheduler {address}: no worker has joined it in {WORKER_WAIT_S:g} s; start workers "
+            f"(`dask worker {address}`) or use --scheduler local"
+        ) from None
+    if code_version is not None:
+        mine = code_version()
+        try:
+            theirs = client.run(code_version)
+        except Exception as exc:  # a worker without this package cannot even unpickle it
+            raise OSError(
+                f"scheduler {address}: its workers cannot run this code ({type(exc).__name__}: "
+                f"{exc}); start them where this version of predisat is installed (the same "
+                "environment, or PYTHONPATH to the same checkout)"
+            ) from None
+        other = sorted(w for w, v in theirs.items() if v != mine)
+        if other:
+            raise OSError(
+                f"scheduler {address}: {len(other)} of {len(theirs)} worker(s) run other code "
+                f"than this command ({other[0]}: code {theirs[other[0]]}, here {mine}); their "
+                "results would be taken for this code's: restart them from this environment "
+                "or checkout (a worker keeps the code it imported before an update)"
+            )
+    local = [p for p in paths if "://" not in p]
+    if local:
+        unseen = {w: v for w, v in client.run(_sees, local).items() if v}
+        if unseen:
+            w, missing = next(iter(sorted(unseen.items())))
+            raise OSError(
+                f"scheduler {address}: {len(unseen)} worker(s) do not see {missing[0]} ({w}); "
+                "give paths on a file system every worker mounts at the same place (or URLs, "
+                "docs/cluster.md)"
+            )
 
 
 def _quiet_shutdown() -> None:
@@ -271,10 +369,27 @@ class TaskRunner:
     Parameters
     ----------
     scheduler : Scheduler
+    code_version : callable, optional
+        A module-level function returning the fingerprint of the code the tasks run (e.g.
+        :func:`predisat.reconstruct.framecache.code_fingerprint`): on a cluster by address,
+        every worker's must equal this process's, or the run is refused before any task.
+    paths : sequence of str
+        Local files and folders the tasks read or write: on a cluster by address, a worker
+        that does not see one refuses the run before any task. Relative paths are made
+        absolute here (a worker resolves them in its own working folder).
     """
 
-    def __init__(self, scheduler: Scheduler) -> None:
+    def __init__(
+        self,
+        scheduler: Scheduler,
+        code_version: Callable[[], str] | None = None,
+        paths: Sequence[str | os.PathLike[str]] = (),
+    ) -> None:
         self.scheduler = scheduler
+        self.code_version = code_version
+        self.paths = tuple(
+            str(p) if "://" in str(p) else os.path.abspath(os.fspath(p)) for p in paths
+        )
         self._ready: _ReadyCluster | None = None
         self._aborted = False  # a map ended by an exception (Ctrl-C, a task's error)
 
@@ -294,7 +409,7 @@ class TaskRunner:
         if self.scheduler.kind == "serial":
             return None
         if self._ready is None:
-            self._ready = _ReadyCluster(self.scheduler)
+            self._ready = _ReadyCluster(self.scheduler, self.code_version, self.paths)
         return self._ready.client
 
     def map_unordered(

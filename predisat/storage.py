@@ -40,6 +40,7 @@ __all__ = [
     "Location",
     "StorageError",
     "StorageOptions",
+    "absolute",
     "exists",
     "input_path",
     "is_remote",
@@ -88,6 +89,13 @@ def location(value: str | os.PathLike[str]) -> Location:
     if protocol in _LOCAL:
         return Path(text.split("://", 1)[1] or "/")
     return text.rstrip("/") if text.rstrip("/") != f"{protocol}:/" else text
+
+
+def absolute(value: str | os.PathLike[str]) -> str:
+    """``value`` with a local path made absolute (URLs as they are): what a cluster's worker,
+    which resolves a relative path in its own working folder, must be given."""
+    text = os.fspath(value)
+    return text if "://" in text else os.path.abspath(text)
 
 
 def is_remote(loc: Location) -> bool:

@@ -20,7 +20,7 @@ import json
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -29,10 +29,12 @@ import pandas as pd
 
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
+from predisat.codeversion import code_fingerprint
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 from predisat.jsontypes import JsonDict
 from predisat.scheduler import Scheduler, TaskRunner
+from predisat.storage import absolute
 from predisat.track.map import TrackMap
 from predisat.track.network import Network, track_key
 
@@ -197,12 +199,18 @@ def network_availability(
 
     opts = options or AvailabilityOptions()
     where = scheduler if isinstance(scheduler, Scheduler) else Scheduler.parse(scheduler, workers)
+    if where.kind == "address":  # a worker resolves a relative path in its own folder
+        out_dir = absolute(out_dir)
+        if opts.nav is not None:
+            opts = replace(opts, nav=tuple(absolute(n) for n in opts.nav))
+        inputs = [replace(item, masks_path=absolute(item.masks_path)) for item in inputs]
     shared = _Shared(str(out_dir), opts, opts.key())
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     done: dict[str, LineAvailability] = {}
     bar = tqdm(total=len(inputs), desc="availability", unit="line", disable=not progress)
     try:
-        with TaskRunner(where) as runner:
+        seen = [str(out_dir), *(item.masks_path for item in inputs), *(opts.nav or ())]
+        with TaskRunner(where, code_version=code_fingerprint, paths=seen) as runner:
             for res in runner.map_unordered(_task, shared, list(inputs), name="line-report"):
                 done[res.key] = res
                 bar.update(1)

@@ -69,6 +69,7 @@ from predisat.availability.satellites import (
     system_letters,
 )
 from predisat.clock import pinned_utc, utc_stamp
+from predisat.codeversion import code_fingerprint
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
@@ -83,6 +84,7 @@ from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
     Location,
     StorageOptions,
+    absolute,
     input_path,
     is_remote,
     join,
@@ -695,7 +697,8 @@ def run_availability(
 
         stage("masks")
         opts = dict(storage_options or {})
-        out = location(out_dir)
+        out = location(absolute(out_dir))  # a cluster's worker resolves a relative path in
+        # its own working folder
         mask_set, masks_label, track, mask_notes = _masks_on_track(
             masks, track, from_m, to_m, opts
         )
@@ -715,7 +718,8 @@ def run_availability(
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
         blocks = join(out, "blocks")
-        with TaskRunner(_where(scheduler, workers)) as runner:
+        with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint,
+                        paths=[str(out)]) as runner:  # fmt: skip
             results = _compute_rules(
                 rules, nav_data.sats, positions, interval_every, model, integrity, runner, bar,
                 (blocks, opts),

@@ -65,6 +65,7 @@ __all__ = [
     "requires",
     "run_checks",
     "scheduler_options",
+    "scheduler_text",
     "speed_mps",
     "storage_options",
     "url_or",
@@ -498,11 +499,23 @@ def k_sigma_value(value: str) -> float:
     return x
 
 
+def scheduler_text(text: str) -> str:
+    """``--scheduler``: ``local``, ``serial`` or an address, checked when the command line is
+    read (a mistyped ``lcoal`` failed only after the inputs were read)."""
+    from predisat.scheduler import Scheduler
+
+    try:
+        Scheduler.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def scheduler_options(p: argparse.ArgumentParser, tasks: str) -> None:
     """``--scheduler local|serial|ADDRESS`` and ``--workers N`` (:mod:`predisat.scheduler`);
     ``tasks`` names what runs as tasks ("the chunks")."""
     p.add_argument(
-        "--scheduler", default="local", metavar="local|serial|ADDRESS",
+        "--scheduler", default="local", metavar="local|serial|ADDRESS", type=scheduler_text,
         help=f"where {tasks} run: a local Dask cluster (default), this process (serial), or an "
         "existing Dask cluster by its scheduler's address (tcp://HOST:8786)",
     )  # fmt: skip

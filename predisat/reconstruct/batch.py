@@ -91,6 +91,7 @@ from predisat.sky.segment import METHODS
 from predisat.storage import (
     Location,
     StorageOptions,
+    absolute,
     input_path,
     is_remote,
     join,
@@ -1035,6 +1036,17 @@ def process_survey(
             f"--scheduler serial runs in this process alone, not with --workers {where.workers}"
             "; leave --workers out, or use --scheduler local for worker processes"
         )
+    if where.kind == "address":  # a worker resolves a relative path in its own folder
+        if isinstance(survey, Survey):
+            if isinstance(survey.root, Path) and not survey.root.is_absolute():
+                raise ValueError(
+                    f"survey {survey.root}: a relative folder on a cluster by address (its "
+                    "workers would look for it in their own folders); load it by its absolute "
+                    "path"
+                )
+        else:
+            survey = absolute(survey)
+        out_dir = absolute(out_dir)
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress
@@ -1081,7 +1093,8 @@ def process_survey(
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)
-    runner = TaskRunner(where)
+    runner = TaskRunner(where, code_version=code_fingerprint,
+                        paths=[str(survey.root), str(out)])  # fmt: skip
     try:
         t1 = time.perf_counter()
         n_seg = 0

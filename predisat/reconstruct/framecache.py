@@ -17,7 +17,7 @@ import json
 import os
 import zipfile
 import zlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,6 +26,7 @@ import numpy as np
 from numpy.lib.npyio import NpzFile
 from numpy.typing import NDArray
 
+from predisat.codeversion import code_fingerprint
 from predisat.jsontypes import JsonDict
 from predisat.reconstruct.badframes import BadFrame
 from predisat.sky.network import SkyNet
@@ -195,41 +196,6 @@ def write_cache(
             arrays["thin"] = np.packbits(np.asarray(thin, bool).ravel())
     payload = npz_bytes({"meta": np.array(json.dumps(meta)), **arrays})
     write_atomic(location(job.cache_path), payload, job.storage_options)
-
-
-
-def code_fingerprint(parts: Sequence[str] | None = None) -> str:
-    """Hash of the package's own source, so results of changed code are never reused.
-
-    A development install changes code without changing ``predisat.__version__``; the
-    resume key and the segmentation cache therefore carry this fingerprint too.
-
-    Parameters
-    ----------
-    parts : sequence of str, optional
-        Files or folders relative to the package; default every ``.py`` file and the
-        shipped models.
-
-    Returns
-    -------
-    str
-        16 hex digits of SHA-256 over the files' relative paths and contents.
-    """
-    root = Path(__file__).resolve().parents[1]  # the predisat package
-    if parts is None:
-        files = sorted(root.rglob("*.py")) + sorted((root / "data" / "models").glob("*"))
-    else:
-        files = []
-        for part in parts:
-            q = root / part
-            if not q.exists():
-                raise FileNotFoundError(f"code_fingerprint: {q} is not part of the package")
-            files += sorted(f for f in q.rglob("*") if f.is_file()) if q.is_dir() else [q]
-    h = hashlib.sha256()
-    for f in files:
-        if f.is_file() and "__pycache__" not in f.parts:
-            h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
-    return h.hexdigest()[:16]
 
 
 

@@ -307,7 +307,10 @@ def process_network(
 
     t0 = time.perf_counter()
     where = scheduler if isinstance(scheduler, Scheduler) else Scheduler.parse(scheduler, workers)
-    base = Path(surveys_dir)
+    # a cluster's worker resolves a relative path in its own working folder
+    base = Path(surveys_dir).absolute()
+    out_dir = Path(out_dir).absolute()
+    margins = None if margins is None else Path(margins).absolute()
     if not base.is_dir():
         raise FileNotFoundError(
             f"{base}: no such surveys folder; give the folder holding one survey folder per line "
@@ -340,7 +343,8 @@ def process_network(
     unmatched = tuple(sorted(d.name for d in base.iterdir() if d.is_dir() and d.name not in known))
     bar = tqdm(total=len(units), desc="network", unit="line", disable=not progress)
     try:
-        with TaskRunner(where) as runner:
+        with TaskRunner(where, code_version=code_fingerprint,
+                        paths=[str(base), str(out)]) as runner:  # fmt: skip
             for res in runner.map_unordered(_process_unit, shared, units, name="line"):
                 results[res.key] = res
                 bar.update(1)

@@ -50,10 +50,12 @@ def test_parse_names_the_three_kinds() -> None:
     assert Scheduler.parse("Local") == Scheduler("local", machine_workers())
     assert Scheduler.parse("local", 4) == Scheduler("local", 4)
     assert Scheduler.parse("tcp://10.0.0.5:8786") == Scheduler("address", 0, "tcp://10.0.0.5:8786")
+    assert Scheduler.parse("10.0.0.5:8786") == Scheduler("address", 0, "10.0.0.5:8786")
     assert machine_workers() == len(os.sched_getaffinity(0))
     with pytest.raises(ValueError, match="leave --workers out"):
         Scheduler.parse("tcp://10.0.0.5:8786", 2)
-    for bad in ("", "  ", "--workers", "tcp://a b"):
+    # a mistyped 'local' was taken for a host and failed after the inputs were read
+    for bad in ("", "  ", "--workers", "tcp://a b", "lcoal", "10.0.0.5", "host:port"):
         with pytest.raises(ValueError, match="not an address"):
             Scheduler.parse(bad)
     with pytest.raises(ValueError, match="workers must be >= 1"):
@@ -168,3 +170,73 @@ def test_local_workers_start_with_ctrl_c_blocked() -> None:
         assert not _sigint_state(os.getpid())[0]  # ignored if the suite runs in background
     finally:
         cluster.close()
+
+
+def code_version_of_this_process() -> str:
+    """The "code version" a worker reports: its environment's, so that workers can differ."""
+    return os.environ.get("PREDISAT_TEST_CODE", "client")
+
+
+def test_a_cluster_by_address_is_checked_before_any_task(
+    threads_cluster: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Workers that run other code, or do not see the run's files, returned wrong masks with
+    exit 0 in a user trial (a relative survey folder, an old checkout): refused up front."""
+    runner = TaskRunner(Scheduler.at(threads_cluster), code_version=code_version_of_this_process,
+                        paths=[str(tmp_path)])  # fmt: skip
+    assert runner.client() is not None  # same code, sees the folder
+    runner.close()
+    missing = tmp_path / "not-here"
+    runner = TaskRunner(Scheduler.at(threads_cluster), paths=[str(missing)])
+    with pytest.raises(OSError, match=rf"2 worker\(s\) do not see {missing}"):
+        runner.client()
+    # a relative path is made absolute in this process: a worker's own folder is another
+    monkeypatch.chdir(tmp_path)
+    assert TaskRunner(Scheduler.at(threads_cluster), paths=["x"]).paths == (str(tmp_path / "x"),)
+
+
+def test_workers_running_other_code_are_refused() -> None:
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address="127.0.0.1:0",
+                      env={"PREDISAT_TEST_CODE": "worker"}) as cluster:  # fmt: skip
+        runner = TaskRunner(Scheduler.at(cluster.scheduler_address),
+                            code_version=code_version_of_this_process)  # fmt: skip
+        with pytest.raises(OSError, match=r"1 of 1 worker\(s\) run other code.*code worker, "
+                           r"here client.*restart them"):  # fmt: skip
+            runner.client()
+
+
+def test_a_scheduler_without_workers_or_a_server_that_is_none_is_named(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import socket
+    import threading
+
+    from distributed import LocalCluster
+
+    import predisat.scheduler as sched
+
+    monkeypatch.setattr(sched, "WORKER_WAIT_S", 1.0)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0") as cluster:
+        runner = TaskRunner(Scheduler.at(cluster.scheduler_address))
+        with pytest.raises(OSError, match=r"no worker has joined it in 1 s.*dask worker"):
+            runner.client()
+    # something that accepts the connection and never answers (a web server's port): the
+    # handshake used to wait forever
+    monkeypatch.setattr(sched, "CONNECT_TIMEOUT_S", 1.0)
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    accepted: list[socket.socket] = []
+    threading.Thread(target=lambda: accepted.append(server.accept()[0]), daemon=True).start()
+    port = server.getsockname()[1]
+    try:
+        with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
+                           "Dask scheduler"):  # fmt: skip
+            TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+    finally:
+        for c in accepted:
+            c.close()
+        server.close()

@@ -392,3 +392,13 @@ def test_quiet_is_also_dash_q_after_the_subcommand(name: str, parser) -> None:
     opts = parser._option_string_actions
     if "--quiet" in opts:
         assert opts.get("-q") is opts["--quiet"], name
+
+
+def test_a_mistyped_scheduler_is_refused_before_any_work(tmp_path, capsys) -> None:
+    """``--scheduler lcoal`` was taken for a host: the inputs were read and the output folder
+    made before 'missing port number' (a user trial)."""
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        predisat_cli.main(["process", str(tmp_path), "--out", str(out), "--scheduler", "lcoal"])
+    assert exc.value.code == 2
+    assert "'lcoal' is not an address" in capsys.readouterr().err and not out.exists()
