@@ -1123,4 +1123,5 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``locator`` command line; returns the exit status."""
-    return run_main(build_parser(), argv, "locator")
+    notes = {"campaign": "; finished jobs are kept: rerun the same command to resume"}
+    return run_main(build_parser(), argv, "locator", interrupted_note=notes)

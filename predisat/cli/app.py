@@ -492,7 +492,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("\npredisat: interrupted before the command started; nothing was written: rerun "
               "the same command", file=sys.stderr)  # fmt: skip
         return 130
-    notes = {"process": resume, "network": resume}
+    notes = {"process": resume, "network": resume,
+             "availability": "; finished blocks are kept: rerun the same command to resume"}
     code = run_main(parser, argv, "predisat {command}", interrupted_note=notes)
     if argv is None:  # the process's own command line: it ends now
         # a Ctrl-C while the interpreter shuts down (the cluster's threads stop) would end a

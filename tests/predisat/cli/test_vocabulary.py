@@ -402,3 +402,31 @@ def test_a_mistyped_scheduler_is_refused_before_any_work(tmp_path, capsys) -> No
         predisat_cli.main(["process", str(tmp_path), "--out", str(out), "--scheduler", "lcoal"])
     assert exc.value.code == 2
     assert "'lcoal' is not an address" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("cli", "module", "func", "argv", "kept"),
+    [
+        (predisat_cli, "predisat.cli.app", "cmd_availability",
+         ["availability", "--masks", "m.parquet", "--out", "o"], "finished blocks are kept"),
+        (locator_cli, "locator.campaign_command", "cmd_campaign",
+         ["campaign", "--out", "o"], "finished jobs are kept"),
+    ],
+)  # fmt: skip
+def test_ctrl_c_on_a_resumable_command_says_its_work_is_kept(
+    monkeypatch, capsys, tmp_path, cli, module, func, argv, kept
+) -> None:
+    """A user trial's Ctrl-C on availability and campaign printed only 'interrupted', though
+    both resume their finished blocks and jobs."""
+    import importlib
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.parquet").write_bytes(b"")  # the options are checked: a file is there
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib.import_module(module), func, interrupted)
+    assert cli.main(argv) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and kept in err and "rerun the same command" in err
