@@ -34,9 +34,10 @@ direction of travel ``o`` over the valid fixes:
    or the run's first claim would be missed although the crossing fix locates it;
 4. **emission**: ``emit="at_fix"`` sends the telegram at the crossing fix (causal: the train
    knows it passed only then; Barbu, GADEROS final report), plus ``latency_s``;
-   ``emit="predicted"`` schedules it from the last fix before the balise when that fix is in a
-   zone, at ``t_prev + (-u_prev) / v`` with the odometer speed, and at the crossing fix
-   otherwise.
+   ``emit="predicted"`` schedules it at a fix short of the balise and inside a zone, for
+   ``t + (-u) / v`` with the odometer speed, when that comes before the next fix is due; the
+   first fix that schedules emits it (causal: whatever the next fix shows), the crossing fix
+   otherwise (:func:`_schedule_ahead`).
 
 The radius is tested along the track (the fixes are map-matched): the chord between two track
 points is shorter than the arc by under 3 cm for 25 m on a 300 m radius, so the along-track test
@@ -265,14 +266,6 @@ def capture_balises(
         else:
             t_pass = t[kp] + (-up / (uc - up)) * (t[kc] - t[kp])
         t_emit = t[kc].copy()
-        if config.emit == "predicted":
-            assert v is not None
-            early = in_c & config.in_capture(up) | in_a & config.in_arm(up)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                sched = t[kp] + (-up) / v[kp]
-            use = early & np.isfinite(sched) & (sched < t[kc])
-            t_emit = np.where(use, np.maximum(sched, t[kp]), t_emit)
-            t_pass = np.where(use, t_emit, t_pass)
         r = rows[got]
         out["captured"][r] = True
         out["zone"][r] = np.where(in_c[got], "capture", "arm")
@@ -287,8 +280,68 @@ def capture_balises(
     if odo is not None and odo_accuracy is not None and len(idx) and n_b:
         _capture_after_void(t, s, lo, hi, reach, valid, odo, odo_accuracy, b, b_acc, config,
                             orientation, out)  # fmt: skip
+    if config.emit == "predicted" and len(idx) >= 2 and n_b:
+        assert v is not None
+        _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out)
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
+
+
+def _schedule_ahead(
+    t: NDArray,
+    s: NDArray,
+    lo: NDArray,
+    hi: NDArray,
+    reach: NDArray,
+    idx: NDArray,
+    v: NDArray,
+    b: NDArray,
+    b_acc: NDArray,
+    config: CaptureConfig,
+    orientation: int,
+    out: dict[str, NDArray],
+) -> None:
+    """``emit="predicted"``, causally: at each valid fix short of a balise and inside its zone,
+    the telegram is scheduled for the predicted arrival ``t + (-u) / v`` when that comes before
+    the next fix is due (the fixes' usual period); the first such fix of a balise emits it,
+    whatever the next fix shows (a train braking to a stop short of the balise sends it all
+    the same: the score calls that false). A balise no fix schedules keeps its capture at the
+    crossing fix. Fills ``out`` in place.
+
+    The rule used to be applied only to balises a later fix was seen to cross, and judged with
+    that fix's interval: hindsight, which hid the stop-short case (a user trial's review).
+    """
+    period = float(np.median(np.diff(t[idx])))
+    for n in range(len(b)):
+        u = orientation * (s[idx] - b[n])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ahead = -u / v[idx]
+        q = np.ceil(reach[idx] + b_acc[n] - 1e-9)
+        zone = config.in_capture(u) | config.in_arm(u)
+        ok = (u < 0) & zone & (v[idx] > 0) & (ahead < period) & (q <= config.max_locacc_m)
+        first = np.flatnonzero(ok)
+        if not len(first):
+            continue
+        k = int(idx[first[0]])
+        sched = t[k] + float(ahead[first[0]])
+        shift = orientation * float(-u[first[0]])  # the interval carried to the arrival
+        max_safe = (hi[k] if orientation > 0 else lo[k]) + shift
+        min_safe = (lo[k] if orientation > 0 else hi[k]) + shift
+        window = (orientation * (max_safe - b[n]) >= -b_acc[n]) & (
+            orientation * (min_safe - b[n]) <= b_acc[n]
+        )
+        if config.require_window and not window:
+            continue
+        out["captured"][n] = True
+        out["zone"][n] = "capture" if config.in_capture(u[first[0]]) else "arm"
+        out["epoch"][n] = k
+        out["t_pass_s"][n] = sched
+        out["t_emit_s"][n] = sched + config.latency_s
+        out["lo_m"][n], out["hi_m"][n] = lo[k], hi[k]
+        out["gap_s"][n] = period
+        out["q_locacc_m"][n] = q[first[0]]
+        out["in_window"][n] = window
+        out["after_void"][n] = False
 
 
 def _capture_after_void(

@@ -135,6 +135,26 @@ def test_predicted_emission_cuts_the_fix_rate_delay():
     assert sc2["delay_s"].iloc[0] == pytest.approx(2.0 - 40.0 / 32.5)
 
 
+def test_predicted_emission_is_causal_and_sends_for_a_train_stopping_short():
+    """At the fix 10 m short at 20 m/s the arrival is predicted 0.5 s later, before the next fix:
+    the telegram goes out then, whatever follows. Here the train brakes to a stop 3 m short and
+    never reaches the balise; the rule used to be applied only to balises a later fix was seen
+    to cross (hindsight), so this emission never showed."""
+    t = np.arange(0.0, 20.0 + 1e-9, 1.0)
+    truth = np.where(t <= 9, 10.0 + 20.0 * t, 197.0)
+    speed = np.where(t <= 9, 20.0, 0.0)
+    bl = balises([200.0])
+    cfg = CaptureConfig(capture_radius_m=12.0, emit="predicted")
+    cap = capture_balises(t, truth, truth - 5, truth + 5, bl, cfg, orientation=1,
+                          speed_mps=speed)  # fmt: skip
+    assert cap["captured"].iloc[0] and cap["t_emit_s"].iloc[0] == pytest.approx(9.5)
+    sc = score_captures(cap, t, truth, orientation=1, false_tolerance_m=12.0)
+    assert not sc["passed"].iloc[0] and np.isnan(sc["t_true_s"].iloc[0])  # never reached
+    # emitted at the crossing fix, the at_fix rule never sends it
+    assert not capture_balises(t, truth, truth - 5, truth + 5, bl, CaptureConfig(12.0),
+                               orientation=1)["captured"].any()  # fmt: skip
+
+
 def test_guards():
     with pytest.raises(ValueError, match="capture_radius_m"):
         CaptureConfig(capture_radius_m=0.0)
