@@ -23,10 +23,24 @@ __all__ = [
     "enu_rotation",
     "enu_to_azel",
     "geodetic_to_ecef",
+    "unwrap_lon_deg",
+    "wrap_lon_deg",
 ]
 
 WGS84 = Geod(ellps="WGS84")
 """pyproj geodesic on the WGS84 ellipsoid (lengths, forward and inverse problems)."""
+
+
+def unwrap_lon_deg(lon_deg: ArrayLike, axis: int = -1) -> NDArray:
+    """Longitudes along ``axis`` without the 360 deg jumps at the antimeridian, deg: what to
+    interpolate or average (a plain mean of 179.99 and -179.99 is 0, the other side of the
+    Earth). Turn the results back with :func:`wrap_lon_deg`."""
+    return np.degrees(np.unwrap(np.radians(np.asarray(lon_deg, float)), axis=axis))
+
+
+def wrap_lon_deg(lon_deg: ArrayLike) -> NDArray:
+    """Longitudes in [-180, 180) deg."""
+    return np.mod(np.asarray(lon_deg, float) + 180.0, 360.0) - 180.0
 
 
 @lru_cache(maxsize=1)

@@ -48,7 +48,7 @@ from tqdm import tqdm
 
 from predisat.availability.interval import predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
-from predisat.geodesy import ecef_to_geodetic, enu_rotation
+from predisat.geodesy import ecef_to_geodetic, enu_rotation, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import gps_s_to_utc_text
@@ -309,7 +309,8 @@ class Availability:
                 lat, lon, _ = track.position_at(s)
             else:
                 lat = np.interp(s, self.chainage_m, self.positions.lat_deg)
-                lon = np.interp(s, self.chainage_m, self.positions.lon_deg)
+                lon = wrap_lon_deg(np.interp(s, self.chainage_m,
+                                             unwrap_lon_deg(self.positions.lon_deg)))
             props = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
                      for k, v in row.items()}  # fmt: skip
             props["class"] = _class_of(row)

@@ -35,7 +35,7 @@ from matplotlib.patches import Patch, Rectangle
 from numpy.typing import NDArray
 
 from predisat.availability.engine import Availability
-from predisat.geodesy import LocalFrame
+from predisat.geodesy import LocalFrame, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.timescale import gps_s_to_datetime64, gps_s_to_utc_datetime64
 from predisat.readonly import freeze_array_fields
 from predisat.track import KilometrePost, TrackMap
@@ -833,7 +833,7 @@ def line_map(
         lat, lon, _ = track.position_at(s)
     else:
         lat = np.interp(s, pos.chainage_m, pos.lat_deg)
-        lon = np.interp(s, pos.chainage_m, pos.lon_deg)
+        lon = wrap_lon_deg(np.interp(s, pos.chainage_m, unwrap_lon_deg(pos.lon_deg)))
     segs = list(_enu_km(frame, lat, lon))
     share = result.share_at_least(4)
     colours = [next((c for b, _, c in classes if sh >= b), classes[-1][2]) for sh in share]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.geodesy import unwrap_lon_deg, wrap_lon_deg
 from predisat.masks.maskset import BinSource, MaskError, MaskSet
 from predisat.track.map import TrackMap
 
@@ -233,9 +234,7 @@ def _with_edges(masks: MaskSet, chainage_m: NDArray) -> MaskSet:
         out[0::2] = a
         return out
 
-    lon = mid(np.asarray(masks.lon_deg, float))
-    step = np.mod(masks.lon_deg[1:] - masks.lon_deg[:-1] + 180.0, 360.0) - 180.0
-    lon[1::2] = np.mod(masks.lon_deg[:-1] + 0.5 * step + 180.0, 360.0) - 180.0  # across 180
+    lon = wrap_lon_deg(mid(unwrap_lon_deg(masks.lon_deg)))  # across 180 deg too
     heading = mid(np.asarray(masks.heading_deg, float))
     turn = np.mod(masks.heading_deg[1:] - masks.heading_deg[:-1] + 180.0, 360.0) - 180.0
     heading[1::2] = np.mod(masks.heading_deg[:-1] + 0.5 * turn, 360.0)

@@ -39,7 +39,7 @@ from tqdm import tqdm
 from predisat.atomic import atomic_path, write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.camera.rigs import Rig
-from predisat.geodesy import enu_to_azel
+from predisat.geodesy import enu_to_azel, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
 from predisat.survey import Survey, SurveyWriter
@@ -388,7 +388,7 @@ class _Positions:
         ant = world.antenna_enu(s, antenna_height_m)
         lat, lon, h = world.frame.to_geodetic(ant)
         if start_gps_s is None:
-            start_gps_s = daytime_gps_s(float(np.mean(lon)))
+            start_gps_s = daytime_gps_s(float(wrap_lon_deg(np.mean(unwrap_lon_deg(lon)))))
         gps = start_gps_s + (s - s[0]) / speed_mps
         sun_az, sun_el = sun_azel(gps, lat, lon)
         rot = world.frame.rotation_from(lat, lon)

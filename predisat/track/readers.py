@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from predisat.geodesy import WGS84, LocalFrame
+from predisat.geodesy import WGS84, LocalFrame, unwrap_lon_deg, wrap_lon_deg
 from predisat.jsontypes import JsonDict
 from predisat.readonly import freeze_array_fields
 from predisat.track.chain import Part, chain_all, chain_longest, concatenate_parts
@@ -633,7 +633,7 @@ def kilometre_posts_from_sections(
         kms = np.concatenate([[m0, m1], wanted * step_m])
         names = [str(props.get("ptcarfromname", "")), str(props.get("ptcartoname", ""))]
         order = np.argsort(km_vertex) if m1 < m0 else np.arange(len(km_vertex))
-        lon = np.interp(kms, km_vertex[order], c[order, 0])
+        lon = wrap_lon_deg(np.interp(kms, km_vertex[order], unwrap_lon_deg(c[order, 0])))
         lat = np.interp(kms, km_vertex[order], c[order, 1])
         for j, km in enumerate(kms):
             label = names[j] if j < 2 and names[j] else f"km {km / 1000.0:.3f}"

@@ -122,3 +122,43 @@ def test_rotation_from_carries_a_remote_elevation_exactly():
     # In the frame's own ENU the elevation differs by up to the ~0.12 deg angle between normals.
     _, el_frame, _ = enu_to_azel(v_frame)
     assert abs(el_frame - 30.0) > 1e-3
+
+
+def test_longitudes_across_the_antimeridian_interpolate_on_the_line() -> None:
+    """A plain mean of 179.99 and -179.99 is 0: the other side of the Earth (a geometry
+    review found it in the registration, the report's map, the km posts and the synthetic
+    world's start time)."""
+    from predisat.geodesy import unwrap_lon_deg, wrap_lon_deg
+
+    lon = np.array([179.98, 179.99, -179.99, -179.98])
+    mid = wrap_lon_deg(0.5 * (unwrap_lon_deg(lon)[1:] + unwrap_lon_deg(lon)[:-1]))
+    np.testing.assert_allclose(np.abs(mid), [179.985, 180.0, 179.985], atol=1e-9)
+    wrapped = wrap_lon_deg([180.0, 540.0, -180.0, 190.0])
+    np.testing.assert_allclose(wrapped, [-180, -180, -180, -170])
+
+
+def test_kilometre_posts_of_a_section_across_the_antimeridian_are_found(tmp_path) -> None:
+    import json
+
+    from pyproj import Geod
+
+    from predisat.track.map import TrackMap
+    from predisat.track.readers import kilometre_posts_from_sections
+
+    geod = Geod(ellps="WGS84")
+    n = 61  # vertices every 330 m eastward from 179.9 E, across 180 deg at about 10.6 km
+    lon, lat, _ = geod.fwd(np.full(n, 179.9), np.full(n, -16.8), np.full(n, 90.0),
+                           np.arange(n) * 330.0)  # fmt: skip
+    track = TrackMap.from_latlon(lat, lon, 0.0, "A", tolerance_m=0.05)
+    feats = []
+    for k in range(5):  # sections of 12 segments, km from 0.35 (P0) on
+        sl = slice(k * 12, k * 12 + 13)
+        feats.append({"type": "Feature",
+                      "properties": {"mfrom": k * 3960.0 + 350.0, "mto": (k + 1) * 3960.0 + 350.0},
+                      "geometry": {"type": "LineString",
+                                   "coordinates": np.c_[lon[sl], lat[sl]].tolist()}})  # fmt: skip
+    path = tmp_path / "sections.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    posts = {round(p.km_m): p.chainage_m for p in kilometre_posts_from_sections(track, path)}
+    for km in range(1000, 20001, 1000):  # km 11 lies in the section across 180 deg
+        assert posts[km] == pytest.approx(km - 350.0, abs=1.0)
