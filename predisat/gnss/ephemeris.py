@@ -425,7 +425,7 @@ class Ephemeris:
     ) -> tuple[NDArray, NDArray]:
         """Azimuth and elevation of the satellites seen from receiver positions.
 
-        Geometric directions at the epoch (light time and aberration neglected: under 0.001
+        Geometric directions at the epoch (light time and aberration neglected: under 0.0012
         deg for GNSS orbits).
 
         Parameters

@@ -249,9 +249,14 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
     lon, lat = coords[:, 0], coords[:, 1]
     if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0):
         k = int(np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))[0])
+        # a longitude past 180 with a valid latitude is a line unwrapped across the
+        # antimeridian, not swapped coordinates (a geometry review: told to swap them)
+        fix = ("longitudes must lie within [-180, 180]: wrap it (subtract 360)"
+               if abs(lat[k]) <= 90.0 and abs(lon[k]) <= 540.0
+               else "GeoJSON coordinates are [lon, lat] (longitude first): swap them")  # fmt: skip
         raise TrackMapError(
             f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} is not a valid "
-            "[lon, lat]; GeoJSON coordinates are [lon, lat] (longitude first): swap them"
+            f"[lon, lat]; {fix}"
         )
     if bbox is not None:
         lon0, lat0, lon1, lat1 = bbox

@@ -638,3 +638,17 @@ def test_mixed_2d_and_3d_vertices_take_the_track_height_and_an_empty_geojson_is_
     empty.write_text("")
     with pytest.raises(TrackMapError, match="empty; expected a GeoJSON FeatureCollection"):
         load_track(empty)
+
+
+def test_a_longitude_past_180_is_told_to_wrap_not_to_swap(tmp_path):
+    coords = [[179.9998, -16.8], [180.00023, -16.8], [180.0005, -16.8]]
+    doc = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {},
+           "geometry": {"type": "LineString", "coordinates": coords}}]}  # fmt: skip
+    path = tmp_path / "unwrapped.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"vertex 1 .* wrap it \(subtract 360\)"):
+        TrackMap.from_geojson(path)
+    doc["features"][0]["geometry"]["coordinates"] = [[-16.8, 179.9], [-16.8, 179.91]]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match="swap them"):
+        TrackMap.from_geojson(path)
