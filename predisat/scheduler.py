@@ -358,6 +358,20 @@ def _start_local_cluster(workers: int) -> Any:
     return box["cluster"]
 
 
+def _cluster_lost(exc: BaseException) -> bool:
+    """Whether ``exc`` is distributed's way of saying the scheduler went away (a task's own
+    error comes as itself): a user trial's stopped scheduler ended the run with three
+    tracebacks and nothing on what was kept."""
+    from asyncio import CancelledError as AsyncCancelled
+    from concurrent.futures import CancelledError
+
+    from distributed.comm.core import CommClosedError
+
+    return isinstance(exc, CommClosedError) or (
+        isinstance(exc, (CancelledError, AsyncCancelled)) and "connection-lost" in str(exc)
+    )
+
+
 def _identity(x: S) -> S:
     return x
 
@@ -442,12 +456,19 @@ class TaskRunner:
         try:
             for fut in as_completed(futures):
                 yield fut.result()
-        except BaseException:
+        except BaseException as exc:
             self._aborted = True
             _quiet_shutdown()
             if self.scheduler.kind == "address":  # a local cluster's workers are killed
                 with contextlib.suppress(Exception):
                     client.cancel([*futures, shared_f], asynchronous=False)
+            if _cluster_lost(exc):  # not a task's own error: say what is kept
+                reason = str(exc).splitlines()[0] if str(exc) else ""
+                raise OSError(
+                    f"the {self.scheduler.describe()} was lost mid-run ({type(exc).__name__}: "
+                    f"{reason}); the work finished so far is kept: restart the cluster (or "
+                    "use --scheduler local) and rerun the same command to resume"
+                ) from None
             raise
         finally:
             futures.clear()

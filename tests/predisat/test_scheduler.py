@@ -240,3 +240,26 @@ def test_a_scheduler_without_workers_or_a_server_that_is_none_is_named(
         for c in accepted:
             c.close()
         server.close()
+
+
+def test_a_scheduler_lost_mid_run_is_one_message_saying_the_work_is_kept() -> None:
+    """A user trial's stopped scheduler ended the run with three tracebacks and nothing on
+    what was kept (FutureCancelledError ... scheduler-connection-lost)."""
+    import threading
+
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                           dashboard_address="127.0.0.1:0")  # fmt: skip
+    runner = TaskRunner(Scheduler.at(cluster.scheduler_address))
+    got: list[str] = []
+    threading.Timer(2.0, cluster.close).start()
+    try:
+        with pytest.raises(OSError, match=r"was lost mid-run .*work finished so far is kept.*"
+                           r"rerun the same command"):  # fmt: skip
+            for res in runner.map_unordered(worker_of, 0.5, list(range(40))):
+                got.append(res)
+    finally:
+        runner.close()
+        cluster.close()
+    assert 0 < len(got) < 40
