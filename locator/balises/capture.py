@@ -306,7 +306,8 @@ def _schedule_ahead(
     the next fix is due (the fixes' usual period); the first such fix of a balise emits it,
     whatever the next fix shows (a train braking to a stop short of the balise sends it all
     the same: the score calls that false). A balise no fix schedules keeps its capture at the
-    crossing fix. Fills ``out`` in place.
+    crossing fix. A fix whose telegram would fall after the data's last epoch schedules
+    nothing (what follows the recording cannot be scored). Fills ``out`` in place.
 
     The rule used to be applied only to balises a later fix was seen to cross, and judged with
     that fix's interval: hindsight, which hid the stop-short case (a user trial's review).
@@ -319,6 +320,9 @@ def _schedule_ahead(
         q = np.ceil(reach[idx] + b_acc[n] - 1e-9)
         zone = config.in_capture(u) | config.in_arm(u)
         ok = (u < 0) & zone & (v[idx] > 0) & (ahead < period) & (q <= config.max_locacc_m)
+        # within the data: a telegram scheduled after the last epoch cannot be scored (the
+        # recording stops; the truth with it), and was counted hazardous as unknown
+        ok &= t[idx] + ahead <= t[-1]
         first = np.flatnonzero(ok)
         if not len(first):
             continue
