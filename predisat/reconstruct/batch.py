@@ -773,11 +773,13 @@ def _frame_jobs(
 
 
 def _chunk_jobs(
-    plan: _Plan, pending: list[tuple[str, float, float, NDArray]], bad: dict[str, BadFrame]
+    plan: _Plan,
+    pending: list[tuple[str, float, float, NDArray]],
+    bad: dict[str, BadFrame],
+    pinned: str | None,
 ) -> list[ChunkJob]:
     fr, ch, cams = plan.survey.frames, plan.chainage_m, _cameras(plan)
     speed = survey_speed_kmh(ch, fr.gps_s, fr.side)
-    pinned = pinned_utc()
     jobs = []
     for name, lo, hi, s in pending:
         idx = plan.frames_of[name]
@@ -807,6 +809,7 @@ def _merge(
     margins: tuple[MarginTable | None, JsonDict],
     dem: Dem | None = None,
     antenna_height_m: float = 4.0,
+    pinned: str | None = None,
 ) -> tuple[MaskSet, JsonDict]:
     """The chunks merged into one mask set (margins applied, holes closed, raised to the
     terrain) and its provenance; bad frames met by the chunks are added to ``bad``."""
@@ -826,7 +829,7 @@ def _merge(
         "chunks": [c[0] for c in plan.chunks],
         "n_frames": plan.n_frames,
         "bad_frames": len(bad),
-        "created_utc": utc_stamp(pinned_utc()),
+        "created_utc": utc_stamp(pinned),
     }
     table, record = margins
     if table is not None:
@@ -960,6 +963,7 @@ def process_survey(
     replace: bool = False,
     dem: Dem | None = None,
     storage_options: StorageOptions | None = None,
+    created_utc: str | None = None,
 ) -> ProcessResult:
     """Process a survey folder into masks, in resumable chainage chunks.
 
@@ -1012,6 +1016,10 @@ def process_survey(
     storage_options : mapping, optional
         Options of the fsspec file system of the survey's and the output's URLs
         (credentials, endpoint...); handed to the tasks with the URLs.
+    created_utc : str, optional
+        The time stamped in the provenance (ISO 8601 UTC); default ``SOURCE_DATE_EPOCH``'s
+        when set, else now. ``predisat network`` hands its own process's down, so that a
+        line processed on a cluster's worker is stamped as a serial run would be.
 
     Returns
     -------
@@ -1028,6 +1036,7 @@ def process_survey(
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    pinned = created_utc if created_utc is not None else pinned_utc()
     p = params or PipelineParams()
     where = scheduler if isinstance(scheduler, Scheduler) else Scheduler.parse(scheduler, workers)
     if where.kind == "serial" and where.workers > 1:
@@ -1110,7 +1119,7 @@ def process_survey(
         for line in _side_warnings(check):
             _report(line, quiet=False)
         t2 = time.perf_counter()
-        run_chunks(_chunk_jobs(plan, pending, bad), runner, progress)
+        run_chunks(_chunk_jobs(plan, pending, bad, pinned), runner, progress)
         timings["reconstruct"] = time.perf_counter() - t2
     finally:
         runner.close()
@@ -1119,7 +1128,7 @@ def process_survey(
 
     t3 = time.perf_counter()
     merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table, dem,
-                                p.reconstruction.antenna_height_m)  # fmt: skip
+                                p.reconstruction.antenna_height_m, pinned)  # fmt: skip
     for line in source_report(merged, track=plan.track):
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))

@@ -36,6 +36,7 @@ from typing import Literal
 
 from predisat import __version__
 from predisat.atomic import write_bytes_atomic
+from predisat.clock import pinned_utc
 from predisat.jsontypes import JsonDict
 from predisat.masks.dataset import partition_path, write_partition
 from predisat.reconstruct.batch import process_survey, source_report
@@ -145,6 +146,7 @@ class _Shared:
     margins_sha256: str
     strict: bool
     segmenter: Segmenter | None
+    created_utc: str | None = None  # the client's SOURCE_DATE_EPOCH time, for every line
 
 
 def _sha256(path: Path) -> str:
@@ -222,7 +224,7 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
         res = process_survey(
             survey, line_out, shared.params, track=unit.track, scheduler="serial",
             strict=shared.strict, progress=False, segmenter=shared.segmenter,
-            margins=shared.margins, replace=True,
+            margins=shared.margins, replace=True, created_utc=shared.created_utc,
         )  # fmt: skip
     except (SurveyError, ValueError, OSError) as exc:
         withdrawn = _withdraw(out, unit.line_id, unit.part, unit.key)
@@ -322,7 +324,7 @@ def process_network(
     margins_sha = "" if margins is None else _sha256(Path(margins))
     p = params or PipelineParams()
     shared = _Shared(str(out), p, None if margins is None else str(margins), margins_sha,
-                     strict, segmenter)  # fmt: skip
+                     strict, segmenter, pinned_utc())  # fmt: skip
     units: list[_Unit] = []
     results: dict[str, LineResult] = {}
     order: list[str] = []

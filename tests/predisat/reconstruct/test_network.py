@@ -164,6 +164,31 @@ def test_dask_workers_write_the_serial_bytes(
         assert r.masks_path.read_bytes() == s.masks_path.read_bytes()
 
 
+@pytest.mark.slow
+def test_a_cluster_worker_stamps_the_clients_pinned_time(
+    network: Network, surveys: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """A user trial: with SOURCE_DATE_EPOCH set for the command and not on the cluster's
+    workers, each line's provenance carried the worker's clock (the masks were the same).
+    Here the worker has another pinned time (an empty one breaks a library's import)."""
+    from distributed import LocalCluster
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    a = process_network(network, surveys, tmp_path / "a", PARAMS, scheduler="serial",
+                        progress=False, segmenter=blue_sky)  # fmt: skip
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address="127.0.0.1:0",
+                      env={"SOURCE_DATE_EPOCH": "1600000000"}) as cluster:  # fmt: skip
+        b = process_network(network, surveys, tmp_path / "b", PARAMS,
+                            scheduler=cluster.scheduler_address, progress=False,
+                            segmenter=blue_sky)  # fmt: skip
+    done = [(r, s) for r, s in zip(a.lines, b.lines, strict=True) if r.masks_path is not None]
+    assert done
+    for r, s in done:
+        assert s.masks_path is not None
+        assert r.masks_path.read_bytes() == s.masks_path.read_bytes()
+
+
 def test_a_survey_is_refused_on_a_network_track_that_leaves_its_own(
     test_data: Path, surveys: Path, tmp_path: Path
 ) -> None:
