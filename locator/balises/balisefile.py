@@ -59,7 +59,7 @@ _ALIASES = {"chainage": "chainage_m", "km": "chainage_m", "lat": "lat_deg",
             "h": "h_m", "height": "h_m", "height_m": "h_m", "alt": "h_m", "nid_bg": "id",
             "name": "id", "accuracy": "accuracy_m", "acc_m": "accuracy_m",
             "q_locacc": "accuracy_m", "locacc_m": "accuracy_m", "q_locacc_m": "accuracy_m",
-            "q_ref": "q_reference", "qref": "q_reference", "reference": "q_reference"}  # fmt: skip
+            "q_ref": "q_reference", "qref": "q_reference"}  # fmt: skip
 OPTIONAL = ("q_reference", "accuracy_m")
 
 

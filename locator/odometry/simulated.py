@@ -47,11 +47,11 @@ class SimOdometer:
     truth_t_s: NDArray
     truth_chainage_m: NDArray
 
-
-# a log running backward by more than this while the train moved forward as much is refused
-
     def __post_init__(self) -> None:
         freeze_array_fields(self)
+
+
+# a log running backward by more than this while the train moved forward as much is refused
 _DIRECTION_CHECK_M = 1.0
 # GPS seconds before this (1983) are no time of a recorded run: relative times
 _EARLIEST_GPS_S = 1e8

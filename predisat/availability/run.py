@@ -718,8 +718,8 @@ def run_availability(
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
         blocks = join(out, "blocks")
-        with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint,
-                        paths=[str(out)]) as runner:  # fmt: skip
+        # the block tasks read and write no file (this process saves them): no paths
+        with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint) as runner:
             results = _compute_rules(
                 rules, nav_data.sats, positions, interval_every, model, integrity, runner, bar,
                 (blocks, opts),

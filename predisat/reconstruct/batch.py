@@ -1056,6 +1056,8 @@ def process_survey(
         else:
             survey = absolute(survey)
         out_dir = absolute(out_dir)
+        if p.sky_net is not None:
+            p = replace(p, sky_net=absolute(p.sky_net))
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress
@@ -1102,8 +1104,8 @@ def process_survey(
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)
-    runner = TaskRunner(where, code_version=code_fingerprint,
-                        paths=[str(survey.root), str(out)])  # fmt: skip
+    seen = [str(survey.root), str(out), *([] if p.sky_net is None else [p.sky_net])]
+    runner = TaskRunner(where, code_version=code_fingerprint, paths=seen)
     try:
         t1 = time.perf_counter()
         n_seg = 0

@@ -177,6 +177,8 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
     if crs.equals(CRS.from_epsg(4326), ignore_axis_order=True):
         return doc
     vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+    if vertical and not _has_heights(doc):  # nothing to convert: the plane part alone
+        crs, vertical = crs.sub_crs_list[0], []
     if vertical:
         # heights above a geoid: the track map needs ellipsoidal ones (the locator meets the
         # satellites' hyperbolae on the track in 3-D; 45 m of geoid moved fixes by tens of m)
@@ -217,6 +219,17 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
         return [walk(x) for x in node] if isinstance(node, list) else node
 
     return walk(doc)
+
+
+def _has_heights(node: Any) -> bool:
+    """Whether any coordinate of a GeoJSON document has a third value (a height)."""
+    if isinstance(node, dict):
+        return any(_has_heights(v) for k, v in node.items() if k != "crs")
+    if isinstance(node, list):
+        if node and isinstance(node[0], (int, float)):
+            return len(node) > 2
+        return any(_has_heights(x) for x in node)
+    return False
 
 
 def _features(doc: Any, path: Path) -> list[dict[str, Any]]:

@@ -616,6 +616,11 @@ def test_heights_above_a_geoid_are_refused_without_the_grid_to_convert_them(tmp_
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match=r"Ostend height \(above the geoid.*projsync"):
         TrackMap.from_geojson(path)
+    # without heights there is nothing to convert: read in the plane part (a review)
+    for c in doc["features"][0]["geometry"]["coordinates"]:
+        del c[2]
+    path.write_text(json.dumps(doc))
+    assert np.all(TrackMap.from_geojson(path).h_m == 0.0)
 
 
 def test_mixed_2d_and_3d_vertices_take_the_track_height_and_an_empty_geojson_is_named(tmp_path):
