@@ -46,6 +46,8 @@ STEP_TOLERANCE_REL = 0.1
 DRIFT_WINDOW_S = 10.0
 DRIFT_TOLERANCE_M = 1.0
 DRIFT_TOLERANCE_REL = 0.03
+DRIFT_LAG_S = 1.0
+DRIFT_SPEED_MPS = 0.14  # half of 1 km/h: a speed logged in whole km/h, even when constant
 
 
 class OdometerLogError(ValueError):
@@ -282,7 +284,18 @@ def _check_drift(
     moved = np.concatenate([[0.0], np.cumsum(trapezoid * keep)])
     start = np.searchsorted(t_s, t_s - DRIFT_WINDOW_S)  # each row's window start
     d_ran, d_moved = ran - ran[start], moved - moved[start]
-    off = np.abs(d_ran - d_moved) > DRIFT_TOLERANCE_REL * d_moved + DRIFT_TOLERANCE_M
+    # what a genuine log's speed may owe its distance: a speed filtered late by up to
+    # DRIFT_LAG_S integrates to lag x (the speed change across the window) less or more, and
+    # a speed logged to a step (whole km/h) to half a step a cycle (a review: a braking
+    # train's speed averaged over 1 s, and a 0.7 m/s creep logged in km/h, were refused)
+    steps = np.diff(np.unique(speed_mps))
+    half_step = max(0.5 * float(steps.min()) if len(steps) else 0.0, DRIFT_SPEED_MPS)
+    allowed = (
+        DRIFT_TOLERANCE_REL * d_moved + DRIFT_TOLERANCE_M
+        + DRIFT_LAG_S * np.abs(speed_mps - speed_mps[start])
+        + half_step * (t_s - t_s[start])
+    )  # fmt: skip
+    off = np.abs(d_ran - d_moved) > allowed
     bad = np.flatnonzero(off)
     if not len(bad):
         return
@@ -291,7 +304,8 @@ def _check_drift(
     raise OdometerLogError(
         f"{label}, lines {line(k)}-{line(i)}: dist_m runs {d_ran[i]:.2f} m in "
         f"{t_s[i] - t_s[k]:.1f} s while speed_mps integrates to {d_moved[i]:.2f} m (tolerance "
-        f"{100 * DRIFT_TOLERANCE_REL:g} % + {DRIFT_TOLERANCE_M:g} m over {DRIFT_WINDOW_S:g} s): "
+        f"{allowed[i]:.2f} m: {100 * DRIFT_TOLERANCE_REL:g} % + {DRIFT_TOLERANCE_M:g} m, and the "
+        f"speed's lag and resolution, over {DRIFT_WINDOW_S:g} s): "
         "the distance and the speed of the log disagree (unmarked slip or slide in one of them, "
         "pulses counted twice, a speed in another unit or filtered late): mark the slip, "
         "correct the rows or cut out the stretch"

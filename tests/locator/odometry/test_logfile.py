@@ -115,18 +115,34 @@ def test_distance_steps_must_agree_with_the_speed(tmp_path, edit, match):
 
 
 def test_a_distance_creeping_ahead_of_the_speed_is_refused_unless_marked(tmp_path):
-    """8 % a cycle at 5 m/s (0.04 m, within the per-cycle 10 % + 0.1 m) for 10 s: 4 m ahead of
+    """12 % a cycle at 5 m/s (0.06 m, within the per-cycle 10 % + 0.1 m) for 10 s: 6 m ahead of
     the speed, the kind of log a user trial's telegrams went out early with."""
     df = good_frame()
-    creep = np.where(df.index >= 100, 0.04, 0.0)
+    creep = np.where(df.index >= 100, 0.06, 0.0)
     df = df.assign(dist_m=df["dist_m"] + np.cumsum(creep))
     p = _write(tmp_path, df)
     with pytest.raises(OdometerLogError, match=r"lines \d+-\d+: dist_m runs .* while speed_mps "
-                       r"integrates to .*tolerance 3 % \+ 1 m over 10 s"):  # fmt: skip
+                       r"integrates to .*3 % \+ 1 m, and the speed's lag and resolution, over "
+                       r"10 s"):  # fmt: skip
         read_odometer_log(p)
     # the odometer marked those cycles as slip: its own flags say the wheel was not trusted
     p = _write(tmp_path, df.assign(slip=(df.index >= 100).astype(int)), "marked.csv")
     assert read_odometer_log(p).slip[100:].all()
+
+
+def test_a_speed_filtered_late_or_logged_in_whole_km_h_is_not_refused():
+    """Genuine logs a review found refused by the 10 s check: a braking train's speed averaged
+    over the last second, and a 0.7 m/s creep whose speed is logged in whole km/h."""
+    dt = 0.1
+    t = 1e9 + np.arange(0, 60, dt)
+    v = np.clip(20.0 - 1.2 * np.clip(t - t[0] - 10.0, 0, None), 0, None)
+    d = np.concatenate([[0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    late = np.convolve(v, np.ones(10) / 10)[: t.size]
+    late[:10] = v[:10]
+    validate_odometer_log(t, d, late, np.where(v > 0, 1, 0), "braking")
+    t = 1e9 + np.arange(0, 30, dt)
+    d = 0.70 * (t - t[0])
+    validate_odometer_log(t, d, np.full(t.size, round(0.70 * 3.6) / 3.6), np.ones(t.size), "crawl")
 
 
 def test_steps_of_simulated_odometers_agree_with_their_speed(tmp_path):
