@@ -947,6 +947,14 @@ def _check_reachable(survey: Survey | str | os.PathLike[str], out: Location,
             )
 
 
+def _sky_net_absolute(params: PipelineParams) -> PipelineParams:
+    """``params`` with its sky network's local path made absolute (a worker resolves a
+    relative one in its own working folder)."""
+    if params.sky_net is None:
+        return params
+    return replace(params, sky_net=absolute(params.sky_net))
+
+
 def process_survey(
     survey: Survey | str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -1056,8 +1064,7 @@ def process_survey(
         else:
             survey = absolute(survey)
         out_dir = absolute(out_dir)
-        if p.sky_net is not None:
-            p = replace(p, sky_net=absolute(p.sky_net))
+        p = _sky_net_absolute(p)
     margin_table = _load_margins(margins)  # before hours of work, not after
     seg_fn = _segmenter_for(p, segmenter)
     quiet = not progress

@@ -198,6 +198,22 @@ def test_dask_cluster_writes_the_same_bytes_as_a_serial_run(
     assert _outputs(tmp_path / "c") == want
 
 
+def test_a_relative_sky_net_reaches_the_workers(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dask_address: str
+) -> None:
+    """A relative --sky-net was sent as it was: a worker, in its own working folder, failed
+    every frame (a review). Made absolute in the client."""
+    from predisat.sky.network import SkyNet
+
+    net = SkyNet.default().path
+    shutil.copy(net, tmp_path / "net.onnx")
+    shutil.copy(net.with_suffix(".json"), tmp_path / "net.json")
+    monkeypatch.chdir(tmp_path)  # the workers were started elsewhere
+    p = PipelineParams(chunk_m=30.0, sky_net="net.onnx")
+    res = process_survey(survey_dir, tmp_path / "out", p, progress=False, scheduler=dask_address)
+    assert res.bad_frames == () and res.frames_segmented == 14
+
+
 def test_serial_with_several_workers_is_refused(survey_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="--scheduler local"):
         process_survey(survey_dir, tmp_path / "a", PARAMS, progress=False, scheduler="serial",
