@@ -170,14 +170,20 @@ def check_track_height(
     fixes = fixes[near]
     if abs(dh) > max_m:
         where = "above" if dh > 0 else "below"
+        if np.all(np.abs(np.asarray(path.track.h_m)) < 1.0):  # smoothing leaves centimetres
+            cause = "the track map has no heights (h = 0 everywhere)"
+        elif dh > 0:
+            cause = ("the track map's heights are too low: heights above the geoid (sea level) "
+                     "read as ellipsoidal ones, or no heights")  # fmt: skip
+        else:
+            cause = "the track map's heights are too high (heights of another datum?)"
         raise ValueError(
-            f"{label}: the receiver's own fixes lie {abs(dh):.0f} m {where} its antenna on "
+            f"{label}: the receiver's own fixes lie {abs(dh):.1f} m {where} its antenna on "
             f"track {path.track.name!r} (the median of {len(fixes)}; the track's height plus "
-            f"--antenna-height {path.antenna_height_m:g} m): the track map has no heights "
-            "(h = 0) or heights above the geoid, not the WGS84 ellipsoid, and the locator "
-            "meets the satellites' ranges with the track in 3-D, so its fixes would be tens of "
-            "metres off; give a track map with ellipsoidal heights (docs/track-map.md), or "
-            "correct --antenna-height"
+            f"--antenna-height {path.antenna_height_m:g} m; at most {max_m:g} m is accepted): "
+            f"{cause}. The locator meets the satellites' ranges with the track in 3-D, so its "
+            "fixes would be tens of metres off; give a track map with WGS84 ellipsoidal heights "
+            "(docs/track-map.md), or correct --antenna-height"
         )
     return dh
 

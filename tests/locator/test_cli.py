@@ -295,10 +295,16 @@ def test_a_track_at_the_wrong_height_is_refused(test_data, tmp_path, capsys, dh_
             "--no-masks", "--antenna-height", "0", "--out", str(tmp_path / "low")]  # fmt: skip
     assert main(args) == 2
     err = capsys.readouterr().err
-    told = re.search(r"fixes lie (\d+) m (above|below) its antenna", err)
+    told = re.search(r"fixes lie ([\d.]+) m (above|below) its antenna", err)
     assert told, err
-    assert abs(int(told[1]) - abs(dh_m)) <= 3 and told[2] == ("above" if dh_m < 0 else "below")
-    assert "ellipsoidal heights" in err and not (tmp_path / "low").exists()
+    assert abs(float(told[1]) - abs(dh_m)) <= 3 and told[2] == ("above" if dh_m < 0 else "below")
+    assert "at most 20 m is accepted" in err and "ellipsoidal heights" in err
+    assert ("too low" if dh_m < 0 else "too high") in err and not (tmp_path / "low").exists()
+    # the same track without heights: said so
+    df.assign(h_m=0.0).to_csv(tmp_path / "flat.csv", index=False)
+    args[2] = str(tmp_path / "flat.csv")
+    assert main(args) == 2
+    assert "the track map has no heights (h = 0 everywhere)" in capsys.readouterr().err
     # the track at its height, the antenna said to stand 4 m above it: within the bound
     ok = ["-q", "run", "--track", str(track), "--obs", str(obs), "--nav", str(nav),
           "--no-masks", "--antenna-height", "4", "--out", str(tmp_path / "ok")]  # fmt: skip
