@@ -189,8 +189,8 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
                 g.short_name for op in group.unavailable_operations for g in op.grids
                 if not g.available
             })  # fmt: skip
-            need = (f" (PROJ lacks {', '.join(grids)}: projsync --file NAME for each)"
-                    if grids else "")  # fmt: skip
+            need = (f" (PROJ lacks {', '.join(grids)}: `pyproj sync --file NAME` for each, "
+                    "or PROJ's projsync; network access needed)" if grids else "")  # fmt: skip
             raise TrackMapError(
                 f"{path}: its heights are in {vertical[0].name} (above the geoid, not the "
                 f"WGS84 ellipsoid) and PROJ cannot turn them into ellipsoidal heights{need}; "
