@@ -244,6 +244,17 @@ class BaliseList:
         bad = np.flatnonzero(np.diff(c) <= 0)
         if len(bad):
             i = bad[0] + 1
+            # one row in kilometres among metres reads as out of order: its coordinates
+            # say which (a user trial's 4.1 was told to sort the rows)
+            for k in (i, i - 1):
+                at = float(track.project(num["lat_deg"][k:k + 1], num["lon_deg"][k:k + 1],
+                                         num["h_m"][k:k + 1]).chainage_m[0])  # fmt: skip
+                if abs(at - 1000.0 * c[k]) < max(50.0, abs(at - c[k]) / 10.0):
+                    raise BaliseFileError(
+                        f"{p}, line {_line(k)}: balise {ids[k]!r}: chainage {c[k]:g} - did you "
+                        f"give kilometres? its coordinates lie on the track at {at:.1f} m; give "
+                        "chainage_m in metres"
+                    )
             raise BaliseFileError(
                 f"{p}, line {_line(i)}: balise {ids[i]!r} at {c[i]:.1f} m does not follow "
                 f"{ids[i - 1]!r} at {c[i - 1]:.1f} m; sort the rows by increasing chainage "

@@ -77,6 +77,13 @@ def test_along_track_round_trip(tmp_path, track):
             lambda df: df.assign(chainage_m=df["chainage_m"] / 1000.0),
             r"line 2: .*did you give kilometres\? its coordinates lie on the track at 100\.0 m",
         ),
+        # one row in kilometres among metres: not "sort the rows" (a user trial)
+        (
+            lambda df: df.assign(
+                chainage_m=np.where(df.index == 2, df["chainage_m"] / 1000.0, df["chainage_m"])
+            ),
+            r"line 4: balise .* chainage 0\.5 - did you give kilometres\? .* at 500\.0 m",
+        ),
         (
             lambda df: df.rename(columns={"lat_deg": "lon_deg", "lon_deg": "lat_deg"}),
             r"line 2: .*lat_deg and lon_deg look swapped",
