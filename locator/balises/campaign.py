@@ -9,6 +9,7 @@ every passage; :func:`balises_to_folder` does both and writes ``epochs.parquet``
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -31,6 +32,7 @@ from predisat.clock import utc_stamp
 from predisat.gnss.timescale import gps_s_to_utc_datetime64
 from predisat.jsontypes import strict_json_text
 from predisat.masks.maskset import MaskSet
+from predisat.track import TrackMap
 
 __all__ = [
     "ODOMETERS",
@@ -222,7 +224,7 @@ def safe_front_check(
     }
 
 
-def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Figure:
+def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) -> Figure:
     # a Figure of its own, no pyplot state (as the report's figures)
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
@@ -230,6 +232,10 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Figure:
     truth = ep["truth_m"].to_numpy(float)
     fig = Figure(figsize=(10, 7))
     ax = fig.subplots(2, 1, sharex=True)
+    tunnel = np.asarray(track.in_tunnel(truth), bool)
+    for a in ax:  # where the satellites cannot help: the tunnels, shaded
+        a.fill_between(t, 0, 1, where=tunnel, transform=a.get_xaxis_transform(),
+                       color="0.85", step="mid", lw=0)  # fmt: skip
     ax[0].fill_between(t, ep["fused_lo_m"] - truth, ep["fused_hi_m"] - truth, step="mid",
                        color="tab:blue", alpha=0.3, label="fused interval - truth")  # fmt: skip
     claim = ep["claim"].to_numpy(bool)
@@ -240,17 +246,24 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str) -> Figure:
     ax[0].axhline(0.0, color="k", lw=0.5)
     ax[0].set_ylabel("m")
     ax[0].legend(loc="upper left", fontsize=8)
-    ax[0].set_title(title)
+    # a long title (track, integrity, claims) wrapped, not cut at the figure's edges
+    ax[0].set_title(textwrap.fill(title, 110), fontsize=9)
     t0 = float(ep["gps_s"].iloc[0])
-    for name, g in scored.groupby("config", sort=False):
+    markers = "osD^v<>p"
+    for j, (name, g) in enumerate(scored.groupby("config", sort=False)):
         g = g[g["passed"]]
         c = g["captured"].to_numpy(bool)
-        ax[1].plot(g["t_true_s"][c] - t0, 1e3 * g["timing_error_s"][c], "o", ms=3,
+        colour = f"C{j % 10}"
+        # hollow, one marker a configuration: radii that capture alike stay visible
+        ax[1].plot(g["t_true_s"][c] - t0, 1e3 * g["timing_error_s"][c], markers[j % 8],
+                   ms=4 + 1.5 * j, mfc="none", color=colour,
                    label=f"{name}: timing error")  # fmt: skip
-        ax[1].plot(g["t_true_s"][~c] - t0, np.zeros((~c).sum()), "x", color="k", ms=5)
+        # the misses of each configuration on a row of their own, below the axis
+        ax[1].plot(g["t_true_s"][~c] - t0, np.full((~c).sum(), -25.0 * (j + 1)), "x",
+                   color=colour, ms=5, label=f"{name}: missed ({(~c).sum()})")  # fmt: skip
     ax[1].set_ylabel("reported - true passage (ms)")
-    ax[1].set_xlabel("time since start (s); x: missed")
-    ax[1].legend(loc="upper left", fontsize=8)
+    ax[1].set_xlabel("time since start (s); grey: tunnel; x below 0: missed passages")
+    ax[1].legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
 
@@ -333,7 +346,7 @@ def balises_to_folder(
     # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
     (folder / "summary.json").write_text(strict_json_text(info))
     fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval "
-                  f"({info['integrity']}; {info['claims']})")
+                  f"({info['integrity']}; {info['claims']})", path.track)
     fig.savefig(folder / "captures.png", dpi=100)
     return summary, folder
 
