@@ -12,7 +12,52 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_bytes_atomic"]
+__all__ = ["LOCK_NAME", "FolderInUseError", "atomic_path", "exclusive_folder", "write_bytes_atomic"]
+
+LOCK_NAME = ".predisat.lock"
+
+
+class FolderInUseError(OSError):
+    """Another run is writing into the output folder; the message names it and the fix."""
+
+
+@contextmanager
+def exclusive_folder(folder: str | os.PathLike[str]) -> Iterator[None]:
+    """Hold an exclusive advisory lock on an output folder while a run writes into it.
+
+    A second run on the same folder is refused at once, naming the first (its process and
+    start), instead of doing all the work again and racing the first on the same files (a
+    user trial ran two at once without a word). The lock is ``flock`` on
+    ``FOLDER/.predisat.lock``: released when the run ends or its process dies; on a network
+    file system it may hold only between runs of one machine.
+
+    Raises
+    ------
+    FolderInUseError
+        Another process holds the lock.
+    """
+    import fcntl
+    from datetime import UTC, datetime
+
+    path = Path(folder) / LOCK_NAME
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 200).decode("utf-8", "replace").strip() or "another process"
+        os.close(fd)
+        raise FolderInUseError(
+            f"{folder}: another run is writing there ({holder}); wait for it to end, or give "
+            "another output folder"
+        ) from None
+    try:
+        os.ftruncate(fd, 0)
+        stamp = datetime.now(UTC).isoformat(timespec="seconds")
+        os.write(fd, f"process {os.getpid()}, since {stamp}".encode())
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
 
 
 @contextmanager

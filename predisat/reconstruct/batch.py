@@ -35,20 +35,24 @@ tasks, run by :mod:`predisat.scheduler` in this process or on a Dask cluster),
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from predisat import __version__
+from predisat.atomic import LOCK_NAME, exclusive_folder
 from predisat.camera.models import CameraModel, Mount
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.jsontypes import JsonDict
@@ -955,6 +959,37 @@ def _sky_net_absolute(params: PipelineParams) -> PipelineParams:
     return replace(params, sky_net=absolute(params.sky_net))
 
 
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def _one_writer(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """Run ``fn`` (whose second argument is the output folder) holding the folder's lock
+    (:func:`predisat.atomic.exclusive_folder`): a second run into the same local folder is
+    refused at once instead of redoing the work and racing the first on its files (a user
+    trial). A folder made here and left empty by a refusal is removed again."""
+
+    @functools.wraps(fn)
+    def locked(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        out = location(args[1] if len(args) > 1 else kwargs["out_dir"])  # type: ignore[arg-type]
+        if not isinstance(out, Path):  # a URL: object stores have no lock
+            return fn(*args, **kwargs)
+        made = not out.exists()
+        out.mkdir(parents=True, exist_ok=True)
+        try:
+            with exclusive_folder(out):
+                return fn(*args, **kwargs)
+        except BaseException:
+            if made:
+                (out / LOCK_NAME).unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    out.rmdir()  # only if nothing else was written
+            raise
+
+    return locked
+
+
+@_one_writer
 def process_survey(
     survey: Survey | str | os.PathLike[str],
     out_dir: str | os.PathLike[str],

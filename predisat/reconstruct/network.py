@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Literal
 
 from predisat import __version__
-from predisat.atomic import write_bytes_atomic
+from predisat.atomic import exclusive_folder, write_bytes_atomic
 from predisat.clock import pinned_utc
 from predisat.jsontypes import JsonDict
 from predisat.masks.dataset import partition_path, write_partition
@@ -345,8 +345,8 @@ def process_network(
     unmatched = tuple(sorted(d.name for d in base.iterdir() if d.is_dir() and d.name not in known))
     bar = tqdm(total=len(units), desc="network", unit="line", disable=not progress)
     try:
-        with TaskRunner(where, code_version=code_fingerprint,
-                        paths=[str(base), str(out)]) as runner:  # fmt: skip
+        with exclusive_folder(out), TaskRunner(where, code_version=code_fingerprint,
+                                               paths=[str(base), str(out)]) as runner:  # fmt: skip
             for res in runner.map_unordered(_process_unit, shared, units, name="line"):
                 results[res.key] = res
                 bar.update(1)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from predisat.reconstruct.frames import default_segmenter
 from predisat.reconstruct.params import PipelineParams
 from tests.predisat.candidate_net import net_copy
 
+ROOT = Path(__file__).resolve().parents[3]
 CAM = CameraModel.pinhole_from_fov(160, 120, 74.0)
 PARAMS = PipelineParams(chunk_m=30.0)  # 3 chunks over 3000..3060 m
 
@@ -212,6 +214,36 @@ def test_a_relative_sky_net_reaches_the_workers(
     p = PipelineParams(chunk_m=30.0, sky_net="net.onnx")
     res = process_survey(survey_dir, tmp_path / "out", p, progress=False, scheduler=dask_address)
     assert res.bad_frames == () and res.frames_segmented == 14
+
+
+def test_a_second_run_into_the_same_folder_is_refused_at_once(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    """Two runs on one --out did all the work twice and raced on its files (a user trial)."""
+    import subprocess
+    import sys
+
+    from predisat.atomic import FolderInUseError, exclusive_folder
+
+    out = tmp_path / "out"
+    out.mkdir()
+    # another process holds the folder (a lock is per process: flock)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from predisat.atomic import exclusive_folder\n"
+         f"with exclusive_folder({str(out)!r}):\n print('held', flush=True); time.sleep(60)"],
+        stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        with pytest.raises(FolderInUseError, match=rf"{out}: another run is writing there "
+                           rf"\(process {holder.pid}, since .*another output folder"):  # fmt: skip
+            process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+        assert not (out / "chunks").exists()  # nothing done
+    finally:
+        holder.kill()
+        holder.wait()
+    with exclusive_folder(out):  # released when its process ended
+        pass
 
 
 def test_serial_with_several_workers_is_refused(survey_dir: Path, tmp_path: Path) -> None:
