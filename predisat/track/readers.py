@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,6 +201,16 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
         horizontal = crs.sub_crs_list[0]
     else:
         to_3d, horizontal = None, crs
+        if crs.is_projected and _has_heights(doc):
+            # a national grid's heights are usually above its geoid, not the ellipsoid (a
+            # real-data trial: Lambert 72 with Ostend heights read 45 m low, no word)
+            warnings.warn(
+                f"{path}: its crs {name!r} names no height datum; its heights are taken as "
+                "WGS84 ellipsoidal heights. If they are above sea level, name the compound CRS "
+                "(e.g. EPSG:31370+5710 for Lambert 72 + Ostend height) so that they are "
+                "converted",
+                stacklevel=2,
+            )
     to_lonlat = Transformer.from_crs(horizontal, "EPSG:4326", always_xy=True)
     to_h = to_3d
 

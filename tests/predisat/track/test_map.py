@@ -616,6 +616,12 @@ def test_heights_above_a_geoid_are_refused_without_the_grid_to_convert_them(tmp_
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match=r"Ostend height \(above the geoid.*projsync"):
         TrackMap.from_geojson(path)
+    # the plane CRS alone, with heights: taken as ellipsoidal, with a warning naming the fix
+    doc["crs"]["properties"]["name"] = "EPSG:31370"
+    path.write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=r"names no height datum.*EPSG:31370\+5710"):
+        assert np.allclose(TrackMap.from_geojson(path).h_m, 150.0, atol=0.5)
+    doc["crs"]["properties"]["name"] = crs
     # without heights there is nothing to convert: read in the plane part (a review)
     for c in doc["features"][0]["geometry"]["coordinates"]:
         del c[2]
