@@ -235,8 +235,8 @@ def _connect(address: str) -> Any:
 
 
 def _sees(paths: Sequence[str]) -> list[str]:
-    """The local paths of ``paths`` this process cannot see (run on each worker)."""
-    return [p for p in paths if "://" not in p and not os.path.exists(p)]
+    """The paths of ``paths`` this process cannot see (run on each worker)."""
+    return [p for p in paths if not os.path.exists(p)]
 
 
 def _check_workers(

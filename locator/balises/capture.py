@@ -60,7 +60,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from locator.balises.balisefile import Q_LOCACC_MAX_M, BaliseList
-from locator.odometry.confidence import OdometerAccuracy
+from locator.odometry.confidence import OdometerAccuracy, in_expectation_window
 
 __all__ = ["EMIT_MODES", "Q_LOCACC_MAX_M", "CaptureConfig", "capture_balises", "score_captures"]
 
@@ -331,9 +331,7 @@ def _schedule_ahead(
         shift = orientation * float(-u[first[0]])  # the interval carried to the arrival
         max_safe = (hi[k] if orientation > 0 else lo[k]) + shift
         min_safe = (lo[k] if orientation > 0 else hi[k]) + shift
-        window = (orientation * (max_safe - b[n]) >= -b_acc[n]) & (
-            orientation * (min_safe - b[n]) <= b_acc[n]
-        )
+        window = bool(in_expectation_window(b[n], b_acc[n], max_safe, min_safe, orientation))
         if config.require_window and not window:
             continue
         out["captured"][n] = True

@@ -399,11 +399,8 @@ def simulate_odometer(
     # measured distance: the wheel's edges where trusted, the speed used where not, in the
     # last direction the wheel showed (a slow cycle between two edges has no direction of its
     # own: its distance was dropped, and a crawl under-read by up to 57 %, a review found)
-    moved = np.flatnonzero(direction != 0)
-    held = np.zeros(len(t), np.int8)
-    if len(moved):
-        last = np.maximum.accumulate(np.where(direction != 0, np.arange(len(t)), -1))
-        held = np.where(last >= 0, direction[np.maximum(last, 0)], 0).astype(np.int8)
+    last = np.maximum.accumulate(np.where(direction != 0, np.arange(len(t)), -1))
+    held = np.where(last >= 0, direction[np.maximum(last, 0)], 0)
     step = np.where(slip, used_v * dt * held, d_edges * config.edge_m)
     dist = np.cumsum(step)
     dist -= dist[0]

@@ -212,12 +212,11 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
                 stacklevel=2,
             )
     to_lonlat = Transformer.from_crs(horizontal, "EPSG:4326", always_xy=True)
-    to_h = to_3d
 
     def turn(c: Any) -> Any:
         if isinstance(c, list) and c and isinstance(c[0], (int, float)):
-            if to_h is not None and len(c) > 2:
-                lon, lat, h = to_h.transform(float(c[0]), float(c[1]), float(c[2]))
+            if to_3d is not None and len(c) > 2:
+                lon, lat, h = to_3d.transform(float(c[0]), float(c[1]), float(c[2]))
                 return [lon, lat, h, *c[3:]]
             lon, lat = to_lonlat.transform(float(c[0]), float(c[1]))
             return [lon, lat, *c[2:]]
