@@ -17,6 +17,7 @@ from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
 from locator.demostep import format_demo_table
 from locator.modelcheck import deepest_k, model_use, sim_profile
+from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M
 from predisat import __version__
 from predisat.cli.args import (
     TIME_HELP,
@@ -189,7 +190,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     from locator.run import claim_label
     from locator.sathia import AntennaPath
     from locator.sources import RinexSource, SimSource
-    from locator.workflow import check_track, check_track_height, run_to_folder, static_truth
+    from locator.workflow import (
+        check_track,
+        check_track_height,
+        run_to_folder,
+        sim_on_track,
+        static_truth,
+    )
 
     source: Any
     if args.sim:
@@ -197,7 +204,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         sim = SimRun.read(args.sim)
         stored = Path(args.sim) / "world.npz"
-        if args.track is None and stored.is_file():  # the simulation's own track
+        own_track = args.track is None and stored.is_file()
+        if own_track:  # the simulation's own track
             from predisat.synth.world import World
 
             track = World.load(stored).track
@@ -205,6 +213,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             track = track_option(args.track, args.track_name)
         path = AntennaPath(track, args.antenna_height)
         check_track(path, sim.antenna_ecef_m, args.sim)
+        if not own_track:  # the start, odometer and truth in this map's chainage
+            sim = sim_on_track(sim, track, args.sim)
+        # another map of the line (--track) must carry the simulated world's heights too
+        check_track_height(path, sim.antenna_ecef_m, f"{args.sim} (its true antenna positions)",
+                           args.max_height_offset)  # fmt: skip
         source = SimSource(sim, constellation=args.constellation)
         start = sim.chainage_m[0] if args.start_chainage is None else args.start_chainage
         header, sim_chainage = None, sim.chainage_m
@@ -222,7 +235,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         # the phone's own first fix (Google's WLS) stands for the RINEX header position
         fixes = dev.wls_ecef_m[np.all(np.isfinite(dev.wls_ecef_m), axis=1)]
         header = fixes[0] if len(fixes) else None
-        check_track_height(path, fixes, f"{args.device_gnss} (the phone's own fixes)")
+        check_track_height(path, fixes, f"{args.device_gnss} (the phone's own fixes)",
+                           args.max_height_offset)  # fmt: skip
         sim_chainage = None
         if start is None:
             if header is None:
@@ -243,7 +257,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
-        check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)")
+        check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)",
+                           args.max_height_offset)  # fmt: skip
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
         header = hx if (hx == hx).all() and abs(hx).sum() > 0 else None  # RINEX: 0 0 0 if unknown
@@ -540,7 +555,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.sim:
         from locator.sim.simfile import SimRun
 
-        sim = SimRun.read(args.sim)
+        sim = _sim_on_run_track(SimRun.read(args.sim), args, meta, length_m)
     if args.truth_positions:
         from locator.devicegnss import read_ground_truth
         from locator.workflow import truth_from_positions
@@ -556,9 +571,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         _check_same_track(track, meta, str(args.track))
         truth = truth_from_positions(epochs, read_ground_truth(args.truth_positions), track)
     else:
-        if args.track is not None or args.track_name is not None or args.where:
-            raise CliError("--track (--track-name, --where) is for --truth-positions (the "
-                           "other truths are chainages already)")  # fmt: skip
+        if sim is None and (args.track is not None or args.track_name is not None or args.where):
+            raise CliError("--track (--track-name, --where) is for --truth-positions and --sim "
+                           "(the other truths are chainages already)")  # fmt: skip
         truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv,
                           chainage_m=args.truth_chainage)  # fmt: skip
     s = evaluate_folder(args.run, truth)
@@ -569,6 +584,37 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 # A track whose ends lie farther than this from the run's is another track, or reversed.
 _TRACK_END_TOL_M = 5.0
+
+
+def _sim_on_run_track(
+    sim: Any, args: argparse.Namespace, meta: dict[str, Any], length_m: Any
+) -> Any:
+    """The simulation with its truth in the chainage of the run's track: its own when the run
+    was made on the simulation's world track, else projected on ``--track`` (required)."""
+    from locator.workflow import sim_on_track
+    from predisat.synth.world import World
+
+    stored = Path(args.sim) / "world.npz"
+    if args.track is None:
+        if stored.is_file() and meta.get("track_ends_latlon_deg"):
+            try:
+                _check_same_track(World.load(stored).track, meta, str(stored))
+            except CliError:
+                raise CliError(f"{args.run} was made on track {meta.get('track')!r}, not on the "
+                               f"simulation's world track ({stored}), so the simulation's "
+                               "chainages are not the run's: give the run's map as --track to "
+                               "project the simulated antenna on it") from None  # fmt: skip
+        return sim
+    track = track_option(args.track, args.track_name, args.chain, args.where)
+    if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
+        raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
+                       f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
+                       "that track")  # fmt: skip
+    _check_same_track(track, meta, str(args.track))
+    try:
+        return sim_on_track(sim, track, str(args.sim))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _check_same_track(track: Any, meta: dict[str, Any], label: str) -> None:
@@ -860,6 +906,12 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="half width of the first predicted interval around the start, metres")
     p.add_argument("--antenna-height", type=antenna_height_m, default=4.0, metavar="M",
                    help="antenna above the rail, metres")
+    p.add_argument("--max-height-offset", type=positive_float, metavar="M",
+                   default=MAX_HEIGHT_DISAGREEMENT_M,
+                   help="largest median height of the receiver's own fixes above or below its "
+                   "antenna on the track before the run is refused as a map without ellipsoidal "
+                   "heights; raise it only for a receiver whose own fixes are known to be "
+                   "biased in height (a phone's WLS fixes lie about 11 m high)")
     p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
                    help="systems used: gps (as `predisat availability` and LOCOPROL), "
                    "gps+galileo, all, or system letters such as GE")
@@ -996,8 +1048,9 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="a static antenna's chainage, metres")
     g.add_argument("--truth-positions", type=existing_file(_TRUTH_POSITIONS), metavar="CSV",
                    help=f"{_TRUTH_POSITIONS}, projected on --track")
-    p.add_argument("--track", metavar="FILE", help="with --truth-positions, the run's track: "
-                   + _TRACK + " (default: none, required there)")  # fmt: skip
+    p.add_argument("--track", metavar="FILE", help="with --truth-positions, or --sim when the "
+                   "run was made on another map than the simulation's world, the run's track: "
+                   + _TRACK + " (default: none; required there)")  # fmt: skip
     add_track_selection(p)
     p.set_defaults(func=cmd_evaluate)
 
@@ -1125,3 +1178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The ``locator`` command line; returns the exit status."""
     notes = {"campaign": "; finished jobs are kept: rerun the same command to resume"}
     return run_main(build_parser(), argv, "locator", interrupted_note=notes)
+
+
+if __name__ == "__main__":  # `python -m locator.cli`, as `python -m locator`
+    sys.exit(main())

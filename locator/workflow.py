@@ -62,6 +62,7 @@ __all__ = [
     "evaluate_folder",
     "rule_folder",
     "run_to_folder",
+    "sim_on_track",
     "simulate_to_folder",
     "static_truth",
     "stop_and_go",
@@ -118,6 +119,64 @@ def check_track(
             f"{label}: the antenna is {away} away from track {path.track.name!r}; pass the "
             f"--track the run was made on{hint}"
         )
+
+
+def sim_on_track(
+    sim: SimRun, track: TrackMap, label: str, max_offset_m: float = MAX_TRACK_OFFSET_M
+) -> SimRun:
+    """A simulated run with its true chainage measured on another map of its line.
+
+    A simulation's ``chainage_m`` is the chainage on its own world's track. Another map of the
+    same line (the GeoJSON of the real line, a survey's map) has its own origin, length and
+    possibly sense, so the start, the odometer, the balises and the truth of a run on that map
+    take the simulated antenna's positions projected on it.
+
+    Parameters
+    ----------
+    sim : SimRun
+    track : TrackMap
+        The map the run is located on.
+    label : str
+        The simulation's folder, for the messages.
+    max_offset_m : float
+        Largest distance, m, of any simulated antenna position from ``track``.
+
+    Returns
+    -------
+    SimRun
+        ``sim`` with ``chainage_m`` replaced (the other fields are shared, read-only).
+
+    Raises
+    ------
+    ValueError
+        When an epoch lies farther than ``max_offset_m`` from the map (another line, or a map
+        that stops short), or when the map's chainage folds back under the run.
+    """
+    lat, lon, h = ecef_to_geodetic(sim.antenna_ecef_m)
+    pr = track.project(lat, lon, h)
+    off = np.hypot(pr.offset_m, pr.along_m)
+    worst = int(np.argmax(off))
+    if off[worst] > max_offset_m:
+        raise ValueError(
+            f"{label}: the simulated antenna passes {off[worst]:.0f} m beside track "
+            f"{track.name!r} (epoch {worst}, gps_s {sim.gps_s[worst]:.0f}; at most "
+            f"{max_offset_m:g} m): the map is of another line or stops short of the run; pass "
+            "the --track of the simulated line, or none (the simulation's world.npz)"
+        )
+    own = np.diff(np.asarray(sim.chainage_m, float))
+    new = np.diff(pr.chainage_m)
+    moving = np.abs(own) > 1.0  # a stop's projection wanders by millimetres
+    if moving.any():
+        sense = np.sign(np.median(new[moving] / own[moving]))
+        back = moving & (new * own * sense <= 0.0)
+        if back.any():
+            k = int(np.flatnonzero(back)[0])
+            raise ValueError(
+                f"{label}: the chainage of track {track.name!r} runs back under the simulated "
+                f"train at epoch {k + 1} (gps_s {sim.gps_s[k + 1]:.0f}): the map folds or "
+                "overlaps itself there; pass a map of the line without the fold"
+            )
+    return replace(sim, chainage_m=np.asarray(pr.chainage_m, float))
 
 
 _NEAR_FOR_HEIGHT_M = 200.0
@@ -266,8 +325,10 @@ def run_to_folder(
         "track_length_m": path.length_m,
         # the ends (lat, lon, degrees), so that a truth projected later uses the same track
         # the same way round
-        "track_ends_latlon_deg": [list(map(float, ll[:2])) for ll in zip(
-            *path.track.position_at([0.0, path.track.length_m]), strict=True)],
+        "track_ends_latlon_deg": [
+            list(map(float, ll[:2]))
+            for ll in zip(*path.track.position_at([0.0, path.track.length_m]), strict=True)
+        ],
         "antenna_height_m": path.antenna_height_m,
         "start_chainage_m": start_chainage_m,
         "config": config.to_dict(),

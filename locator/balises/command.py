@@ -177,16 +177,17 @@ def format_summary(summary: pd.DataFrame) -> str:
     return str(t.to_string(index=False))
 
 
-def _track(args: argparse.Namespace) -> TrackMap:
-    """``--track`` through the one track loader; else the simulation's world's, or line 144."""
+def _track(args: argparse.Namespace) -> tuple[TrackMap, bool]:
+    """``--track`` through the one track loader; else the simulation's world's, or line 144;
+    and whether it is the simulation's own track (its chainages are the simulation's)."""
     if args.track:
-        return track_option(args.track, args.track_name, args.chain, args.where)
+        return track_option(args.track, args.track_name, args.chain, args.where), False
     stored = Path(args.sim) / "world.npz"
     if stored.is_file():
         from predisat.synth.world import World  # lazy: the world needs the [synth] extra
 
-        return World.load(stored).track
-    return track_option(None)
+        return World.load(stored).track, True
+    return track_option(None), False
 
 
 def cmd_balises(args: argparse.Namespace) -> int:
@@ -202,11 +203,16 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from locator.run import RunConfig
     from locator.sathia import AntennaPath
     from locator.sim.simfile import SimRun
+    from locator.workflow import check_track, check_track_height, sim_on_track
     from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
     sim = SimRun.read(args.sim)
-    track = _track(args)
+    track, own_track = _track(args)
     path = AntennaPath(track, float(sim.meta.get("antenna_height_m", 4.0)))
+    check_track(path, sim.antenna_ecef_m, args.sim)
+    if not own_track:  # the start, odometer, balises and truth in this map's chainage
+        sim = sim_on_track(sim, track, args.sim)
+    check_track_height(path, sim.antenna_ecef_m, f"{args.sim} (its true antenna positions)")
     if args.balises:
         balises = BaliseList.from_csv(args.balises, track)
     else:

@@ -598,3 +598,106 @@ def test_quiet_after_the_subcommand_and_a_phone_log_given_as_rinex(test_data, tm
     assert main(["run", "--obs", str(phone), "--nav", str(nav), "--no-masks",
                  "--out", str(tmp_path / "x")]) == 2  # fmt: skip
     assert "give it with --device-gnss" in capsys.readouterr().err
+
+
+def _lead_in_map(track, lead_m: float, path: Path, reverse: bool = False) -> Path:
+    """The same line with its chainage origin ``lead_m`` earlier (a straight lead-in), as a
+    GeoJSON; reversed, chainage 0 at the far end."""
+    from predisat.geodesy import WGS84
+
+    lat, lon, h = track.lat_deg, track.lon_deg, track.h_m
+    az = WGS84.inv(lon[1], lat[1], lon[0], lat[0])[0]
+    lon0, lat0, _ = WGS84.fwd(lon[0], lat[0], az, lead_m)
+    coords = [[float(lon0), float(lat0), float(h[0])], *np.column_stack([lon, lat, h]).tolist()]
+    if reverse:
+        coords = coords[::-1]
+    path.write_text(
+        json.dumps(
+            {
+                "type": "Feature",
+                "properties": {"name": "other map"},
+                "geometry": {"type": "LineString", "coordinates": coords},
+            }
+        )
+    )
+    return path
+
+
+def test_a_simulation_on_another_map_of_its_line_is_located_and_scored_in_that_maps_chainage(
+    sim_dir, tmp_path, capsys
+):
+    """The simulation's chainage is its world's; a map whose origin is 100 m earlier (by
+    construction, WGS84.fwd) puts the start, the odometer and the truth 100 m further on. Before,
+    the run started 100 m off (no claim) and evaluate scored 97 m errors."""
+    from predisat.synth.world import World
+    from predisat.track import TrackMap
+
+    sim = SimRun.read(sim_dir)
+    own_track = World.load(sim_dir / "world.npz").track
+    other = _lead_in_map(own_track, 100.0, tmp_path / "other.geojson")
+    base = ["-q", "run", "--sim", str(sim_dir), "--no-masks"]
+    assert main([*base, "--out", str(tmp_path / "own")]) == 0
+    assert main([*base, "--track", str(other), "--out", str(tmp_path / "other")]) == 0
+    own, _ = read_run(tmp_path / "own")
+    moved, meta = read_run(tmp_path / "other")
+    assert meta["start_chainage_m"] == pytest.approx(sim.chainage_m[0] + 100.0, abs=0.5)
+    # the lead-in lifts the own map's end-of-map voids near the start; no claim lost to the shift
+    assert moved["claim"].mean() >= own["claim"].mean() > 0.5
+    # scored without the map: refused, naming --track; with it: the errors of the own map
+    assert main(["evaluate", str(tmp_path / "other"), "--sim", str(sim_dir)]) == 2
+    assert "give the run's map as --track" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "own"), "--sim", str(sim_dir)]) == 0
+    assert main(["evaluate", str(tmp_path / "other"), "--sim", str(sim_dir),
+                 "--track", str(other)]) == 0  # fmt: skip
+    e_own = json.loads((tmp_path / "own" / "evaluation.json").read_text())
+    e_moved = json.loads((tmp_path / "other" / "evaluation.json").read_text())
+    key = next(k for k in e_own if "median" in k and "err" in k)
+    assert e_moved[key] == pytest.approx(e_own[key], abs=1.0)
+    # reversed: chainage counted from the other end, the odometer's sign with it
+    rev = TrackMap.from_geojson(_lead_in_map(own_track, 100.0, tmp_path / "rev.geojson", True))
+    from locator.workflow import sim_on_track
+
+    on_rev = sim_on_track(sim, rev, "sim")
+    np.testing.assert_allclose(on_rev.chainage_m, rev.length_m - 100.0 - sim.chainage_m, atol=0.3)
+
+
+def test_a_map_of_another_line_or_one_that_stops_short_is_refused_for_a_simulation(sim_dir):
+    from locator.workflow import sim_on_track
+    from predisat.synth.world import World
+
+    sim = SimRun.read(sim_dir)
+    track = World.load(sim_dir / "world.npz").track
+    end = float(sim.chainage_m.max()) - 20.0  # the map stops 20 m before the run's end
+    lat, lon, h = track.position_at(np.linspace(0.0, end, 30))
+    from predisat.track import TrackMap
+
+    short = TrackMap.from_latlon(lat, lon, h, name="short")
+    with pytest.raises(ValueError, match=r"passes \d+ m beside track 'short'.*stops short"):
+        sim_on_track(sim, short, "sim")
+
+
+def test_a_simulation_on_a_map_without_heights_is_refused_unless_the_bound_is_raised(
+    sim_dir, tmp_path, capsys
+):
+    from predisat.synth.world import World
+
+    track = World.load(sim_dir / "world.npz").track  # 150 m above the ellipsoid
+    coords = np.column_stack([track.lon_deg, track.lat_deg, 0.0 * track.h_m]).tolist()
+    flat = tmp_path / "flat.geojson"
+    flat.write_text(
+        json.dumps(
+            {
+                "type": "Feature",
+                "properties": {"name": "h0"},
+                "geometry": {"type": "LineString", "coordinates": coords},
+            }
+        )
+    )
+    base = ["-q", "run", "--sim", str(sim_dir), "--no-masks", "--track", str(flat)]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    told = re.search(r"lie ([\d.]+) m above its antenna", err)
+    true_h = np.median(track.position_at(SimRun.read(sim_dir).chainage_m)[2])
+    assert told and float(told.group(1)) == pytest.approx(true_h, abs=0.5) and "h = 0" in err
+    assert not (tmp_path / "a").exists()
+    assert main([*base, "--max-height-offset", "1000", "--out", str(tmp_path / "b")]) == 0

@@ -224,8 +224,9 @@ def test_captures_csv_keeps_the_times_full_precision(sim_dir, tmp_path):
 
 def test_track_name_selects_one_track_of_a_file_holding_several(sim_dir, tmp_path, capsys):
     track = World.load(sim_dir / "world.npz").track
-    coords = np.column_stack([track.lon_deg, track.lat_deg]).tolist()
-    far = [[lon + 0.1, lat] for lon, lat in coords]  # another track, 7 km east
+    # with the world's heights: a map without them is refused (check_track_height)
+    coords = np.column_stack([track.lon_deg, track.lat_deg, track.h_m]).tolist()
+    far = [[lon + 0.1, lat, h] for lon, lat, h in coords]  # another track, 7 km east
     feats = [{"type": "Feature", "properties": {"trackname": name},
               "geometry": {"type": "LineString", "coordinates": c}}
              for name, c in (("A", coords), ("B", far))]  # fmt: skip
@@ -324,3 +325,23 @@ def test_masks_of_another_line_are_refused(sim_dir, tmp_path, capsys):
     assert main(argv) == 2
     assert "do not fit track" in capsys.readouterr().err
     assert not (tmp_path / "o" / "captures.csv").exists()
+
+
+def test_another_map_of_the_line_gives_the_same_captures_in_its_own_chainage(sim_dir, tmp_path):
+    """A map whose origin is 100 m earlier (a straight lead-in, WGS84.fwd): balises, start,
+    odometer and truth all move by 100 m, and the captures are those of the world's map."""
+    from tests.locator.test_cli import _lead_in_map
+
+    track = World.load(sim_dir / "world.npz").track
+    other = _lead_in_map(track, 100.0, tmp_path / "other.geojson")
+    base = ["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25"]
+    assert main([*base, "--out", str(tmp_path / "own")]) == 0
+    assert main([*base, "--track", str(other), "--out", str(tmp_path / "other")]) == 0
+    own = pd.read_csv(tmp_path / "own" / "captures.csv")
+    moved = pd.read_csv(tmp_path / "other" / "captures.csv")
+    assert len(own) == len(moved) > 0
+    np.testing.assert_allclose(moved["chainage_m"], own["chainage_m"] + 100.0, atol=0.5)
+    for col in ("captured", "false", "hazardous", "missed"):
+        assert (moved[col] == own[col]).all(), col
+    np.testing.assert_allclose(moved["timing_error_s"], own["timing_error_s"], atol=0.05,
+                               equal_nan=True)  # fmt: skip
