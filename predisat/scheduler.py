@@ -234,6 +234,48 @@ def _connect(address: str) -> Any:
     return box["client"]
 
 
+# The code version each code_version function gave when this process first asked: the code a
+# process runs is what it imported then. A long-lived worker kept the modules it imported before
+# a `git pull` while a fresh hash of its files matched the client's (a user trial); a memo per
+# process, not hidden state: it only ever holds the first answer.
+_FIRST_SEEN: dict[str, str] = {}
+_FIRST_SEEN_LOCK = threading.Lock()
+
+
+def _version_here(code_version: Callable[[], str]) -> str:
+    """``code_version()`` as this process first saw it (run here and on each worker)."""
+    key = f"{code_version.__module__}.{code_version.__qualname__}"
+    with _FIRST_SEEN_LOCK:
+        if key not in _FIRST_SEEN:
+            _FIRST_SEEN[key] = code_version()
+        return _FIRST_SEEN[key]
+
+
+def _where_am_i() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().address)
+    except ValueError:  # not in a worker
+        return "this process"
+
+
+def _checked_task(
+    fn: Callable[[S, T], R], code_version: Callable[[], str], expected: str, shared: S, item: T
+) -> R:
+    """``fn(shared, item)`` on a worker whose code is the client's: a worker that joined after
+    the run's first check, or imported other code, refuses the task instead of computing it."""
+    theirs = _version_here(code_version)
+    if theirs != expected:
+        raise OSError(
+            f"worker {_where_am_i()} runs other code than this command (code {theirs}, here "
+            f"{expected}); it joined after the run started or kept modules imported before an "
+            "update: restart it from this environment or checkout and rerun the same command "
+            "to resume (the work finished so far is kept)"
+        )
+    return fn(shared, item)
+
+
 def _sees(paths: Sequence[str]) -> list[str]:
     """The paths of ``paths`` this process cannot see (run on each worker)."""
     return [p for p in paths if not os.path.exists(p)]
@@ -254,9 +296,9 @@ def _check_workers(
             f"(`dask worker {address}`) or use --scheduler local"
         ) from None
     if code_version is not None:
-        mine = code_version()
+        mine = _version_here(code_version)
         try:
-            theirs = client.run(code_version)
+            theirs = client.run(_version_here, code_version)
         except Exception as exc:  # a worker without this package cannot even unpickle it
             raise OSError(
                 f"scheduler {address}: its workers cannot run this code ({type(exc).__name__}: "
@@ -385,8 +427,10 @@ class TaskRunner:
     scheduler : Scheduler
     code_version : callable, optional
         A module-level function returning the fingerprint of the code the tasks run (e.g.
-        :func:`predisat.reconstruct.framecache.code_fingerprint`): on a cluster by address,
-        every worker's must equal this process's, or the run is refused before any task.
+        :func:`predisat.codeversion.code_fingerprint`), taken as each process first gave it
+        (the code it imported then): on a cluster by address, every worker's must equal this
+        process's, or the run is refused before any task, and a worker that joins later
+        refuses each task it is given.
     paths : sequence of str
         Local files and folders the tasks read or write: on a cluster by address, a worker
         that does not see one refuses the run before any task. Relative paths are made
@@ -447,10 +491,22 @@ class TaskRunner:
         # own (dask.utils.key_split keeps the first word, then stops at a hex or 8-letter
         # one): in the items' group, the scheduler kept every item on the worker holding it
         shared_f = client.submit(_identity, shared, key=f"shared-{tag}")
-        futures = [
-            client.submit(fn, shared_f, it, key=f"{tag}-{k}", pure=False)
-            for k, it in enumerate(items)
-        ]
+        if self.scheduler.kind == "address" and self.code_version is not None:
+            # workers may join after the first check: each task checks its own
+            version = self.code_version
+            expected = _version_here(version)
+            futures = [
+                client.submit(
+                    _checked_task, fn, version, expected, shared_f, it, key=f"{tag}-{k}",
+                    pure=False,
+                )
+                for k, it in enumerate(items)
+            ]
+        else:
+            futures = [
+                client.submit(fn, shared_f, it, key=f"{tag}-{k}", pure=False)
+                for k, it in enumerate(items)
+            ]
         from distributed import as_completed
 
         try:

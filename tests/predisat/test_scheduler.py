@@ -263,3 +263,54 @@ def test_a_scheduler_lost_mid_run_is_one_message_saying_the_work_is_kept() -> No
         runner.close()
         cluster.close()
     assert 0 < len(got) < 40
+
+
+def _set_test_code(value: str) -> None:
+    os.environ["PREDISAT_TEST_CODE"] = value
+
+
+def test_a_worker_that_joins_later_or_kept_old_modules_refuses_its_tasks() -> None:
+    """The first check sees the workers present then; a worker that joined later ran tasks of
+    any code. And a long-lived worker's files can be updated under modules it imported before
+    (a fresh hash of its files matched the client's, a user trial): the version a process first
+    gave is the one it runs."""
+    import subprocess
+    import sys
+    import time
+
+    from distributed import Client, LocalCluster
+
+    import predisat.scheduler as sched
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address="127.0.0.1:0",
+                      env={"PREDISAT_TEST_CODE": "client"}) as cluster:  # fmt: skip
+        address = cluster.scheduler_address
+        with TaskRunner(Scheduler.at(address), code_version=code_version_of_this_process) as r:
+            assert sorted(r.map_unordered(scaled, 3, [1, 2])) == [(1, 3), (2, 6)]
+            # the worker's files "updated": a fresh answer now differs, the first one holds
+            client: Client = r.client()
+            client.run(_set_test_code, "updated")
+            assert set(client.run(code_version_of_this_process).values()) == {"updated"}
+            assert set(client.run(sched._version_here, code_version_of_this_process).values()) \
+                == {"client"}  # fmt: skip
+            # a worker of other code joins, and the first one leaves: the tasks go to it
+            env = {**os.environ, "PREDISAT_TEST_CODE": "late"}
+            late = subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
+                 "--nthreads", "1", "--no-dashboard"],
+                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+            try:
+                first = set(client.scheduler_info()["workers"])
+                deadline = time.monotonic() + 60
+                while len(client.scheduler_info()["workers"]) < 2:
+                    assert time.monotonic() < deadline, "the late worker did not join"
+                    time.sleep(0.2)
+                client.retire_workers(list(first), close_workers=True)
+                with pytest.raises(OSError, match=r"worker tcp://\S+ runs other code than this "
+                                   r"command \(code late, here client\).*restart it"):  # fmt: skip
+                    list(r.map_unordered(scaled, 3, [1, 2]))
+            finally:
+                late.terminate()
+                late.wait(30)
