@@ -9,10 +9,16 @@ epoch loop over a :class:`SimSource` or :class:`RinexSource` and :func:`score_ru
 against the truth. See ``docs/locator.md``.
 """
 
-from locator.evaluate import score_run, summarise
-from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate
-from locator.heading_check import HeadingCheck, HeadingStatus, check_heading, delay_model_m
-from locator.intervals import (
+from predisat.clock import pinned_utc
+
+# a bad SOURCE_DATE_EPOCH named here: numpy's f2py, which the imports below reach through
+# scipy, reads it with int() at import and fails without saying which variable
+pinned_utc()
+
+from locator.evaluate import score_run, summarise  # noqa: E402
+from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate  # noqa: E402
+from locator.heading_check import HeadingCheck, HeadingStatus, check_heading, delay_model_m  # noqa: E402
+from locator.intervals import (  # noqa: E402
     UnionInterval,
     along_track_g,
     best_pair,
@@ -21,8 +27,8 @@ from locator.intervals import (
     three_independent_pairs,
     union_interval,
 )
-from locator.run import TRUST_MODES, Odometer, RunConfig, RunFlag, run_locator
-from locator.sathia import (
+from locator.run import TRUST_MODES, Odometer, RunConfig, RunFlag, run_locator  # noqa: E402
+from locator.sathia import (  # noqa: E402
     AntennaPath,
     PairSolution,
     PairStatus,
@@ -30,9 +36,9 @@ from locator.sathia import (
     range_difference_m,
     solve_pairs,
 )
-from locator.selection import Exclusion, Selection, direction_at, select_satellites
-from locator.sources import EpochData, RinexSource, SimSource
-from locator.wls import WlsSolution, solve_wls
+from locator.selection import Exclusion, Selection, direction_at, select_satellites  # noqa: E402
+from locator.sources import EpochData, RinexSource, SimSource  # noqa: E402
+from locator.wls import WlsSolution, solve_wls  # noqa: E402
 
 __all__ = [
     "INTEGRITY_MODES",

@@ -5,7 +5,14 @@ elevation masks, and evaluates which satellites a train may trust. See ``README.
 ``docs/`` for formats and methods.
 """
 
+import os
 from importlib.metadata import PackageNotFoundError, version
+
+# An empty SOURCE_DATE_EPOCH means "not pinned" (predisat.clock), but numpy's f2py, which
+# scipy.special imports, reads it with int() at import: every command crashed, and a cluster's
+# workers could not load a task and left the run waiting (a user trial). Unset, as meant.
+if not os.environ.get("SOURCE_DATE_EPOCH", "x").strip():
+    del os.environ["SOURCE_DATE_EPOCH"]
 
 try:
     __version__ = version("predisat")

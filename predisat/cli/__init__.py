@@ -12,6 +12,15 @@ Subcommands import the library modules they run inside their functions, so that 
 argument errors answer without loading numba, OpenCV or the renderer.
 """
 
+import sys
+
+from predisat.clock import pinned_utc
+
+try:  # before anything imports scipy: numpy's f2py reads it with int() and crashes unclearly
+    pinned_utc()
+except ValueError as exc:
+    sys.exit(f"error: {exc}")
+
 from predisat.cli.app import main
 
 __all__ = ["main"]
