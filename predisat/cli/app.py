@@ -199,6 +199,13 @@ def cmd_process(args: argparse.Namespace) -> int:
 
     result = process.run(args)
     print(f"process: {result}")
+    refused = [b for b in result.bad_frames if b.stage != "load"]
+    if result.n_frames and len({b.frame_id for b in refused}) >= result.n_frames:
+        # safe (every bin assumed) but no camera's evidence at all: not a finished survey
+        print(f"error: every one of the {result.n_frames} frames was refused, so the masks "
+              f"written are all assumed (safe, and of no use); the first: {refused[0].message}",
+              file=sys.stderr)  # fmt: skip
+        return 2
     return 0
 
 

@@ -47,7 +47,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -109,6 +108,7 @@ from predisat.storage import (
     write_atomic,
 )
 from predisat.survey import Survey, check_survey_track
+from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
 
@@ -659,13 +659,11 @@ FROZEN_P99_LEVELS = 4.0
 def _thumbnail(path: Location, opts: StorageOptions) -> NDArray | None:
     """The quarter-size grey picture of an image file (None when it cannot be decoded: the
     segmentation reports it)."""
-    if isinstance(path, Path):
-        return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
     try:
-        data = np.frombuffer(read_bytes(path, opts), np.uint8)
+        data = path.read_bytes() if isinstance(path, Path) else read_bytes(path, opts)
     except OSError:
         return None
-    return cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_4) if data.size else None
+    return decode_thumbnail(data)
 
 
 def _same_file(a: Location, b: Location, opts: StorageOptions) -> bool:

@@ -17,7 +17,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,6 +25,7 @@ from predisat.sky.network import SkyNet, classifier_with_net
 from predisat.sky.panorama import segment_panorama
 from predisat.sky.segment import SkyOptions, segment_sky
 from predisat.storage import StorageError, StorageOptions, location, read_bytes
+from predisat.survey.images import decode_frame
 
 __all__ = [
     "BLANK_SPREAD_LEVELS",
@@ -121,12 +121,9 @@ def read_image(
             f"image {path} is truncated ({cut}): the file was cut short, "
             "copy it again from the camera or drop the frame"
         )
-    try:
-        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-    except cv2.error:
-        img = None
+    img, problem = decode_frame(data, path)
     if img is None:
-        return None, f"image {path} cannot be decoded; re-export it as JPEG or PNG"
+        return None, problem
     corrupt = jpeg_corruption(data)
     if corrupt is not None:
         return None, (

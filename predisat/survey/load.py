@@ -13,7 +13,6 @@ from pathlib import Path, PurePosixPath
 from types import MappingProxyType
 from typing import Any, Literal
 
-import cv2
 import numpy as np
 import yaml
 from numpy.typing import NDArray
@@ -48,6 +47,7 @@ from predisat.survey.format import (
     SurveyProblem,
     empty_frames,
 )
+from predisat.survey.images import decode_frame, exif_orientation, orientation_problem
 from predisat.track import TrackMap, load_track
 
 __all__ = [
@@ -140,12 +140,12 @@ class Survey:
         """A frame's image as a BGR uint8 array (H, W, 3)."""
         path = self.image_path(frame)
         if is_remote(path):
-            data = np.frombuffer(read_bytes(path, self.storage_options), np.uint8)
-            img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+            data = read_bytes(path, self.storage_options)
         else:
-            img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            data = Path(path).read_bytes()
+        img, problem = decode_frame(data, str(path))
         if img is None:
-            raise OSError(f"{path}: cannot decode image (re-export it as JPEG or PNG)")
+            raise OSError(problem)
         return img
 
     @classmethod
@@ -532,8 +532,12 @@ def _check_image(
         source = path if isinstance(path, Path) else io.BytesIO(read_bytes(path, opts))
         with Image.open(source) as im:  # lazy: reads the header only
             w, h = im.size
+            turn = exif_orientation(im)
     except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError) as exc:
         return f"image {rel} cannot be read ({exc}); re-export it as JPEG or PNG", None
+    turned = orientation_problem(turn, rel, cam.name)
+    if turned:
+        return turned, None
     if (w, h) != (cam.width_px, cam.height_px):
         return (
             f"image {rel} is {w}x{h} px but calibration {cam.name!r} is "

@@ -103,3 +103,26 @@ def test_process_quiet_help_says_what_it_silences(capsys: pytest.CaptureFixture[
         cli.main(["process", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "'mask bins: ...'" in out and "warnings are still printed" in out
+
+
+def test_a_run_whose_every_frame_was_refused_ends_with_status_2(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """All frames refused at segmentation (EXIF-tagged, 12-bit data, ...) gave masks all
+    assumed and exit 0: safe, but a user trial took it for a finished survey."""
+    from types import SimpleNamespace
+
+    from predisat.cli import process as cli_process
+    from predisat.reconstruct.badframes import BadFrame
+
+    def result(n_bad: int) -> SimpleNamespace:
+        bad = tuple(BadFrame(f"f{k}", f"image f{k}.jpg carries EXIF Orientation 2", "segment")
+                    for k in range(n_bad))  # fmt: skip
+        return SimpleNamespace(n_frames=3, bad_frames=bad, __str__=lambda: "done")
+
+    for n_bad, status in ((2, 0), (3, 2)):
+        monkeypatch.setattr(cli_process, "run", lambda args, n=n_bad: result(n))
+        assert cli.cmd_process(SimpleNamespace()) == status
+        err = capsys.readouterr().err
+        assert ("every one of the 3 frames was refused" in err) == (status == 2)
+        assert ("f0.jpg carries EXIF Orientation 2" in err) == (status == 2)
