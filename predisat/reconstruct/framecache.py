@@ -70,7 +70,7 @@ SEGMENTATION_CODE = (
     "sky/skyline.py", "sky/perceptron.py", "sky/features.py", "sky/grabcut.py",
     "sky/network.py", "sky/panorama.py", "sky/lines.py", "data/models",
     # reading the image: its checks (corrupt, blank) decide whether a frame is segmented
-    "reconstruct/frames.py",
+    "reconstruct/frames.py", "survey/images.py",
 )
 
 
