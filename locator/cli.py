@@ -197,6 +197,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         sim_on_track,
         static_truth,
     )
+    from predisat.atomic import check_writable
 
     source: Any
     if args.sim:
@@ -272,6 +273,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
     cfg, model_record = _config(args, _profile(source, args))
+    check_writable(args.out)  # before the epochs, not after them
     masks = _masks(args)
     if masks is not None:
         from predisat.masks.registration import register_on_track

@@ -26,7 +26,7 @@ import pandas as pd
 
 from locator.sim.simfile import read_folder_table
 from predisat import __version__
-from predisat.atomic import write_bytes_atomic
+from predisat.atomic import staged_folder, write_bytes_atomic
 from predisat.jsontypes import JsonDict, strict_json_text
 
 __all__ = [
@@ -80,20 +80,31 @@ _EVALUATION_FILES = ("scored.parquet", "scored.csv", "evaluation.json", "stanfor
 
 
 def write_run(
-    epochs: pd.DataFrame, folder: str | Path, meta: Mapping[str, object], fmt: str = "parquet"
+    epochs: pd.DataFrame,
+    folder: str | Path,
+    meta: Mapping[str, object],
+    fmt: str = "parquet",
+    figures_title: str | None = None,
 ) -> Path:
-    """Write a run folder (table and ``run.json``); returns the folder.
+    """Write a run folder (table, ``run.json`` and, with ``figures_title``, the figures of
+    :func:`write_figures`); returns the folder.
 
-    An earlier run's scoring in the folder (``scored``, ``evaluation.json``, ``stanford.png``)
-    is removed: it described other epochs.
+    The files are written in a staging folder and published together, ``run.json`` (which
+    :func:`read_run` needs) withdrawn first and published last: written in place, a full disk
+    left a new table beside the previous run's ``run.json`` and figures, which ``locator
+    evaluate`` scored under the old trust rule (a user trial). An earlier run's table in the
+    other format and its scoring (``scored``, ``evaluation.json``, ``stanford.png``) are
+    removed: they described other epochs. Another process writing the folder is refused
+    (:func:`predisat.atomic.exclusive_folder`).
     """
     out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
-    # a re-run into the same folder: the scoring of the previous run no longer describes it
-    for stale in _EVALUATION_FILES:
-        (out / stale).unlink(missing_ok=True)
-    write_table(epochs, out, "epochs", fmt)
-    _write_json(out / "run.json", {"format": RUN_FORMAT, "software_version": __version__, **meta})
+    stale = ("epochs.*", *_EVALUATION_FILES)
+    with staged_folder(out, last=("run.json",), remove=stale) as stage:
+        write_table(epochs, stage, "epochs", fmt)
+        run = {"format": RUN_FORMAT, "software_version": __version__, **meta}
+        _write_json(stage / "run.json", run)
+        if figures_title is not None:
+            write_figures(epochs, stage, title=figures_title)
     return out
 
 

@@ -338,11 +338,10 @@ def run_to_folder(
         "summary": dict(summarise(epochs)),
         **dict(meta or {}),
     }
-    folder = write_run(epochs, out, info, fmt)
     title = f"{path.track.name}: trust {config.trust}, {config.locator.width_label()}"
     if config.error_model_caveat:  # a forced model's intervals are no safety claim: said
         title += f"; {claim_label(config.error_model_caveat)}"
-    write_figures(epochs, folder, title=title)
+    folder = write_run(epochs, out, info, fmt, figures_title=title)
     return epochs, folder
 
 

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from predisat import __version__
-from predisat.atomic import write_bytes_atomic
+from predisat.atomic import staged_folder, write_bytes_atomic
 from predisat.codeversion import code_fingerprint
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
@@ -274,14 +274,18 @@ def write_network_summary(
         })  # fmt: skip
     table = pd.DataFrame(rows, columns=_COLUMNS)
     cutoff_rule = next((r.summary[2]["rule"] for r in reports if len(r.summary) > 2), "")
-    files = {"csv": out / "summary.csv", "map": out / "network_map.png",
-             "html": out / "summary.html", "md": out / "summary.md"}  # fmt: skip
-    table.to_csv(files["csv"], index=False, float_format="%.6g")
-    _network_map(network, table, files["map"])
-    basis = _basis(reports)
-    files["md"].write_text(_markdown(network, table, cutoff_rule, basis), encoding="utf-8")
-    files["html"].write_text(_html(network, table, cutoff_rule, basis), encoding="utf-8")
-    return files
+    names = {"csv": "summary.csv", "map": "network_map.png", "html": "summary.html",
+             "md": "summary.md"}  # fmt: skip
+    # all four written before any earlier one is replaced: a full disk left them cut
+    with staged_folder(out, last=(names["html"], names["md"])) as stage:
+        table.to_csv(stage / names["csv"], index=False, float_format="%.6g")
+        _network_map(network, table, stage / names["map"])
+        basis = _basis(reports)
+        page = _markdown(network, table, cutoff_rule, basis)
+        (stage / names["md"]).write_text(page, encoding="utf-8")
+        page = _html(network, table, cutoff_rule, basis)
+        (stage / names["html"]).write_text(page, encoding="utf-8")
+    return {k: out / name for k, name in names.items()}
 
 
 def _basis(reports: Sequence[LineAvailability]) -> list[str]:

@@ -29,6 +29,7 @@ The command line (:mod:`predisat.cli.availability`) maps its options onto it. Se
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import math
 import os
@@ -50,6 +51,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from predisat import __version__
+from predisat.atomic import staged_folder
 from predisat.availability.engine import (
     Availability,
     BlockCheckpoint,
@@ -726,31 +728,38 @@ def run_availability(
             )  # fmt: skip
 
         stage("tables")
-        # remote outputs: written here first, then each uploaded atomically (_publish)
-        work = out if isinstance(out, Path) else Path(tempfile.mkdtemp(prefix="predisat-av-"))
-        work.mkdir(parents=True, exist_ok=True)
-        sampling = sampling_notes(nav_data.sats.gps_s.size, step_s, interval_every)
-        info = _run_info(
-            mask_set, masks_label, track, nav_data, constellation, rules, step_s,
-            interval_every, __version__, model, integrity, [*mask_notes, *notes, *sampling],
+        # every output is written in a staging folder first, then published (_publish): in
+        # place, a full disk or a size limit left cut tables that read as whole, or two runs'
+        # files side by side (a user trial)
+        staging = (
+            staged_folder(out, last=("report.html",)) if isinstance(out, Path)
+            else contextlib.nullcontext(Path(tempfile.mkdtemp(prefix="predisat-av-")))
         )  # fmt: skip
-        local_files, summary = write_tables(work, results, track, info, counts_table)
-        local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
-        bar.update(1)
+        with staging as work:
+            work.mkdir(parents=True, exist_ok=True)
+            sampling = sampling_notes(nav_data.sats.gps_s.size, step_s, interval_every)
+            info = _run_info(
+                mask_set, masks_label, track, nav_data, constellation, rules, step_s,
+                interval_every, __version__, model, integrity,
+                [*mask_notes, *notes, *sampling],
+            )  # fmt: skip
+            local_files, summary = write_tables(work, results, track, info, counts_table)
+            local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
+            bar.update(1)
 
-        stage("figures")
-        inputs = ReportInputs(
-            results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
-            info=info, sky_chainage_m=tuple(float(c) for c in sky_ch), files=dict(local_files),
-            basemap_lonlat=background,
-        )  # fmt: skip
-        html = build_report(inputs)
-        bar.update(1)
+            stage("figures")
+            inputs = ReportInputs(
+                results=tuple(results), masks=mask_set, satellites=nav_data.sats, track=track,
+                info=info, sky_chainage_m=tuple(float(c) for c in sky_ch),
+                files=dict(local_files), basemap_lonlat=background,
+            )  # fmt: skip
+            html = build_report(inputs)
+            bar.update(1)
 
-        stage("report")
-        (work / "report.html").write_text(html, encoding="utf-8")
-        local_files["report"] = work / "report.html"
-        files = _publish(local_files, out, opts)
+            stage("report")
+            (work / "report.html").write_text(html, encoding="utf-8")
+            local_files["report"] = work / "report.html"
+            files = _publish(local_files, out, opts)
         remove_tree(blocks, opts)  # every output is written: the saved blocks are done with
         bar.update(1)
     finally:
@@ -763,11 +772,11 @@ def run_availability(
 def _publish(
     local_files: dict[str, Path], out: Location, opts: StorageOptions
 ) -> dict[str, Location]:
-    """The outputs where they belong: the local files themselves for a local ``out``, else
-    each uploaded to ``out`` (:func:`predisat.storage.write_atomic`) and the local copies
-    deleted."""
-    if isinstance(out, Path):
-        return dict(local_files)
+    """The outputs where they belong: for a local ``out``, their names there (the staging
+    folder's files are moved there when it closes), else each uploaded to ``out``
+    (:func:`predisat.storage.write_atomic`) and the local copies deleted."""
+    if isinstance(out, Path):  # staged_folder moves them there
+        return {kind: out / path.name for kind, path in local_files.items()}
     published: dict[str, Location] = {}
     folders = set()
     for kind, path in local_files.items():

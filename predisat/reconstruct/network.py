@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Literal
 
 from predisat import __version__
-from predisat.atomic import exclusive_folder, write_bytes_atomic
+from predisat.atomic import exclusive_folder, storage_errno, write_bytes_atomic
 from predisat.clock import pinned_utc
 from predisat.jsontypes import JsonDict
 from predisat.masks.dataset import partition_path, write_partition
@@ -227,6 +227,8 @@ def _process_unit(shared: _Shared, unit: _Unit) -> LineResult:
             margins=shared.margins, replace=True, created_utc=shared.created_utc,
         )  # fmt: skip
     except (SurveyError, ValueError, OSError) as exc:
+        if storage_errno(exc) is not None:  # the machine's storage, not this line: stop the run
+            raise
         withdrawn = _withdraw(out, unit.line_id, unit.part, unit.key)
         if shared.strict:
             if withdrawn:

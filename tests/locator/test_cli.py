@@ -701,3 +701,29 @@ def test_a_simulation_on_a_map_without_heights_is_refused_unless_the_bound_is_ra
     assert told and float(told.group(1)) == pytest.approx(true_h, abs=0.5) and "h = 0" in err
     assert not (tmp_path / "a").exists()
     assert main([*base, "--max-height-offset", "1000", "--out", str(tmp_path / "b")]) == 0
+
+
+def test_a_run_that_fails_to_write_leaves_the_folder_of_the_run_before(
+    sim_dir, tmp_path, capsys, monkeypatch
+):
+    """A full disk after the new table was written left it beside the previous run's run.json
+    and figures, and evaluate scored it under the old trust rule (a user trial)."""
+    import errno
+
+    import locator.runio as runio
+
+    out = tmp_path / "run"
+    assert main(["-q", "run", "--sim", str(sim_dir), "--cutoff", "30", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+
+    def full(epochs, folder, title=""):
+        raise OSError(errno.ENOSPC, "No space left on device",
+                      str(Path(folder) / ".interval_time.a1b2c3d4.png"))  # fmt: skip
+
+    monkeypatch.setattr(runio, "write_figures", full)
+    assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"no space left on the disk (writing {out / 'interval_time.png'})" in err
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == before  # wholly the run before: its table, run.json and figures
+    assert read_run(out)[1]["config"]["trust"] == "cutoff"

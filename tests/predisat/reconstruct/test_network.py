@@ -248,3 +248,23 @@ def test_a_line_s_processing_warnings_name_the_line(
                             segmenter=blue_sky)  # fmt: skip
     assert [r.message for r in again.lines[:2]] == [r.message for r in res.lines[:2]]
     assert any(r.message for r in res.lines[:2])  # these short pinhole surveys assume much
+
+
+def test_a_full_disk_stops_the_run_instead_of_failing_a_line(
+    network: Network, surveys: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A full disk inside a line's processing was reported as that line "failed" (and that an
+    earlier run's masks were withdrawn, in a fresh folder), and the run exited 0."""
+    import errno
+
+    import predisat.reconstruct.network as net
+
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device", "/x/.masks.a1b2c3d4.parquet")
+
+    monkeypatch.setattr(net, "process_survey", full)
+    with pytest.raises(OSError, match="No space left") as info:
+        process_network(network, surveys, tmp_path / "out", PARAMS, scheduler="serial",
+                        progress=False, segmenter=blue_sky)  # fmt: skip
+    assert info.value.errno == errno.ENOSPC
+    assert not (tmp_path / "out" / "withdrawn").exists()
