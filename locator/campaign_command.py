@@ -83,7 +83,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         help="integrity risk per epoch of the *_budget rules (default "
         f"{DEFAULT_RISK_PER_EPOCH:g}); the other rules fix their k (docs/locator.md)",
     )  # fmt: skip
-    scheduler_options(p, "the runs")
+    scheduler_options(p, "the runs", threads=True)
     p.add_argument(
         "--figure",
         type=output_file,

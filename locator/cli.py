@@ -273,7 +273,6 @@ def cmd_run(args: argparse.Namespace) -> int:
                          _MAX_HEADER_OFFSET_M, " (or --start-chainage if that position is wrong)")
             start = static_truth(header, path)
     cfg, model_record = _config(args, _profile(source, args))
-    check_writable(args.out)  # before the epochs, not after them
     masks = _masks(args)
     if masks is not None:
         from predisat.masks.registration import register_on_track
@@ -283,6 +282,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
     _check_start(float(start), path, masks, args, header, sim_chainage)
+    check_writable(args.out)  # before the epochs, not after them
     print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
           f"({constellation_label(args.constellation)}), trust rule {cfg.trust}"
           f"{_split_text(cfg)}; pair intervals: {cfg.locator.width_text()}")

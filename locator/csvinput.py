@@ -91,6 +91,13 @@ def _undecodable(raw: bytes, label: str, what: str, columns: str) -> str | None:
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         kind = " (a zip archive, e.g. an .npz)" if raw[:2] == b"PK" else ""
+        if not kind and b"\0" not in raw[:4096] and b"," in raw[:4096]:
+            # text in a Windows code page (an accented name, an en dash from Excel)
+            return (
+                f"{label}, line {line}: byte 0x{raw[exc.start]:02x} is not UTF-8: the {what} "
+                "was saved in another encoding (Windows-1252 or Latin-1 from a spreadsheet); "
+                "save it as CSV UTF-8"
+            )
         return (
             f"{label}, line {line}: byte 0x{raw[exc.start]:02x} is not text: this is not a CSV "
             f"file{kind}; give the {what} as a comma-separated text file with columns {columns}"
@@ -149,8 +156,10 @@ def read_csv_table(
     message = _undecodable(raw, label, what, columns)
     if message:
         raise error(message)
-    text = raw.decode("utf-8")
-    numbered = [(k + 1, s) for k, s in enumerate(text.splitlines()) if s.strip()]
+    # CR alone ends the lines of Excel's "CSV (Macintosh)": csv.reader met it inside a row
+    # and failed with a traceback naming no file (a user trial)
+    text = raw.decode("utf-8").replace("\r\n", "\n").replace("\r", "\n")
+    numbered = [(k + 1, s) for k, s in enumerate(text.split("\n")) if s.strip()]
     if not numbered:
         raise error(f"{label}: the file is empty; {_a(what)} {what} starts with the header line "
                     f"{','.join(required)} ({doc})")  # fmt: skip
@@ -191,6 +200,10 @@ def read_csv_table(
     lines = np.array([k for k, _ in numbered[1:]], int)
     if len(lines) != len(frame):  # a quoted cell across lines: count rows after the header
         lines = header_line + 1 + np.arange(len(frame))
+    # rows of empty cells (",,,": the formatted but empty rows a spreadsheet saves) hold nothing
+    filled = (frame != "").any(axis=1).to_numpy()
+    if not filled.all():
+        frame, lines = frame[filled].reset_index(drop=True), lines[filled]
     return CsvTable(frame, lines, label, error)
 
 

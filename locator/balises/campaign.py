@@ -28,6 +28,7 @@ from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
 from locator.sources import SimSource
 from predisat import __version__
+from predisat.atomic import check_writable, staged_folder
 from predisat.clock import utc_stamp
 from predisat.gnss.timescale import gps_s_to_utc_datetime64
 from predisat.jsontypes import strict_json_text
@@ -303,7 +304,7 @@ def balises_to_folder(
     folder : Path
     """
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
+    check_writable(folder)  # before the epochs, not after them
     odo_cfg = odometer or OdometerConfig()
     caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
     run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
@@ -319,34 +320,37 @@ def balises_to_folder(
     front = safe_front_check(run)
     summary["epochs"] = int(front["epochs"])
     summary["front_outside"] = int(front["front_outside"])
-    run.epochs.to_parquet(folder / "epochs.parquet")
-    # the times in UTC beside the GPS seconds: a signalling engineer reads the file alone
-    utc = gps_s_to_utc_datetime64(scored["t_pass_s"].to_numpy(float))
-    scored["t_pass_utc"] = np.where(np.isnat(utc), "", np.datetime_as_string(utc, unit="ms"))
-    # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
-    scored.to_csv(folder / "captures.csv", index=False, float_format="%.17g")
-    budget = config.locator.budget
-    info = {
-        "software": f"predisat {__version__}", "created_utc": utc_stamp(),
-        "track": path.track.name,
-        "time_scale": "t_*_s columns: GPS seconds (GPST, continuous since 1980-01-06 "
-                      "00:00:00; UTC = GPST - leap seconds); t_pass_utc: the same in UTC",
-        "balises": balises.source, "n_balises": len(balises),
-        # a recorded log replaces the simulated odometer: its settings would mislead
-        "odometer": ({"log": log.source} if log is not None else asdict(odo_cfg)),
-        "accuracy": asdict(run.accuracy),
-        "constellation": constellation,
-        "integrity": (budget.label() if budget is not None
-                      else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
-        "claims": claim_label(config.error_model_caveat),
-        "captures": {k: asdict(v) for k, v in caps.items()},
-        "summary": summary.to_dict(orient="records"),
-        "safe_front": front, **dict(meta or {}),
-    }  # fmt: skip
-    # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
-    (folder / "summary.json").write_text(strict_json_text(info))
-    fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval "
-                  f"({info['integrity']}; {info['claims']})", path.track)
-    fig.savefig(folder / "captures.png", dpi=100)
+    # written together and published with summary.json last: in place, a full disk left a
+    # new table beside an earlier run's summary (predisat.atomic.staged_folder)
+    with staged_folder(folder, last=("summary.json",)) as stage:
+        run.epochs.to_parquet(stage / "epochs.parquet")
+        # the times in UTC beside the GPS seconds: a signalling engineer reads the file alone
+        utc = gps_s_to_utc_datetime64(scored["t_pass_s"].to_numpy(float))
+        scored["t_pass_utc"] = np.where(np.isnat(utc), "", np.datetime_as_string(utc, unit="ms"))
+        # 17 significant digits: GPS seconds (1.3e9) keep their milliseconds, floats round-trip
+        scored.to_csv(stage / "captures.csv", index=False, float_format="%.17g")
+        budget = config.locator.budget
+        info = {
+            "software": f"predisat {__version__}", "created_utc": utc_stamp(),
+            "track": path.track.name,
+            "time_scale": "t_*_s columns: GPS seconds (GPST, continuous since 1980-01-06 "
+                          "00:00:00; UTC = GPST - leap seconds); t_pass_utc: the same in UTC",
+            "balises": balises.source, "n_balises": len(balises),
+            # a recorded log replaces the simulated odometer: its settings would mislead
+            "odometer": ({"log": log.source} if log is not None else asdict(odo_cfg)),
+            "accuracy": asdict(run.accuracy),
+            "constellation": constellation,
+            "integrity": (budget.label() if budget is not None
+                          else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
+            "claims": claim_label(config.error_model_caveat),
+            "captures": {k: asdict(v) for k, v in caps.items()},
+            "summary": summary.to_dict(orient="records"),
+            "safe_front": front, **dict(meta or {}),
+        }  # fmt: skip
+        # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
+        (stage / "summary.json").write_text(strict_json_text(info))
+        fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval "
+                      f"({info['integrity']}; {info['claims']})", path.track)
+        fig.savefig(stage / "captures.png", dpi=100)
     return summary, folder
 

@@ -511,9 +511,10 @@ def scheduler_text(text: str) -> str:
     return text
 
 
-def scheduler_options(p: argparse.ArgumentParser, tasks: str) -> None:
+def scheduler_options(p: argparse.ArgumentParser, tasks: str, threads: bool = False) -> None:
     """``--scheduler local|serial|ADDRESS`` and ``--workers N`` (:mod:`predisat.scheduler`);
-    ``tasks`` names what runs as tasks ("the chunks")."""
+    ``tasks`` names what runs as tasks ("the chunks"); ``threads``: whether a serial run takes
+    ``--workers`` threads (tasks that are thread-safe)."""
     p.add_argument(
         "--scheduler", default="local", metavar="local|serial|ADDRESS", type=scheduler_text,
         help=f"where {tasks} run: a local Dask cluster (default), this process (serial), or an "
@@ -521,8 +522,8 @@ def scheduler_options(p: argparse.ArgumentParser, tasks: str) -> None:
     )  # fmt: skip
     p.add_argument(
         "--workers", type=positive_int, metavar="N",
-        help="worker processes of the local cluster (default: the machine's cores), threads "
-        "with --scheduler serial (default 1)",
+        help="worker processes of the local cluster (default: the machine's cores)"
+        + (", threads with --scheduler serial (default 1)" if threads else ""),
     )  # fmt: skip
 
 

@@ -92,7 +92,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default a = b = 2 m; its k_sigma is not used: see --integrity-risk)",
     )  # fmt: skip
     integrity_options(p)
-    scheduler_options(p, "the blocks of positions")
+    scheduler_options(p, "the blocks of positions", threads=True)
     p.add_argument(
         "--basemap", type=existing_file("a GeoJSON of lines (railways, roads, rivers) in "
                                         "WGS84 longitude/latitude"), metavar="GEOJSON",

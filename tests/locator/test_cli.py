@@ -727,3 +727,33 @@ def test_a_run_that_fails_to_write_leaves_the_folder_of_the_run_before(
     after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert after == before  # wholly the run before: its table, run.json and figures
     assert read_run(out)[1]["config"]["trust"] == "cutoff"
+
+
+def test_a_truth_file_out_of_order_empty_or_in_km_is_refused_naming_the_line(
+    sim_dir, tmp_path, capsys
+):
+    """Read bare, rows newest first gave 6 hazardous epochs that were not, an empty cell 1, and
+    kilometres 4 km errors (a user trial); a good file scores as the simulation does."""
+    sim = SimRun.read(sim_dir)
+    out = tmp_path / "r"
+    assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out", str(out)]) == 0
+    truth = pd.DataFrame({"gps_s": sim.gps_s, "chainage_m": sim.chainage_m})
+    cases = {
+        "good.csv": (truth, None),
+        "newest_first.csv": (truth[::-1], r"line 3: gps_s [\d.]+ does not follow [\d.]+; sort"),
+        "empty.csv": (truth.astype(object).assign(chainage_m=lambda d: d["chainage_m"].where(
+            d.index != 4, "")), r"line 6: chainage_m is empty"),
+        "km.csv": (truth.assign(chainage_m=truth["chainage_m"] / 1000.0),
+                   "chainage_m reads as kilometres"),
+    }  # fmt: skip
+    for name, (table, refused) in cases.items():
+        table.to_csv(tmp_path / name, index=False, float_format="%.17g")
+        rc = main(["evaluate", str(out), "--truth-csv", str(tmp_path / name)])
+        err = capsys.readouterr().err
+        if refused is None:
+            assert rc == 0, err
+            by_csv = json.loads((out / "evaluation.json").read_text())
+        else:
+            assert rc == 2 and re.search(rf"{re.escape(name)}(, |: ){refused}", err), (name, err)
+    assert main(["evaluate", str(out), "--sim", str(sim_dir)]) == 0
+    assert json.loads((out / "evaluation.json").read_text()) == by_csv

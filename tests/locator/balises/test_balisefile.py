@@ -176,3 +176,29 @@ def test_separators_and_binary_files(tmp_path, track):
     np.savez_compressed(p, x=np.arange(1000.0))
     with pytest.raises(BaliseFileError, match=r"b\.npz, line \d+: byte 0x.. is not text"):
         BaliseList.from_csv(p, track)
+
+
+def test_spreadsheet_line_ends_empty_rows_and_code_pages(tmp_path, track):
+    """Excel's "CSV (Macintosh)" ends lines with CR alone (a traceback naming no file), saves
+    formatted empty rows as ",,,", and a Windows code page for an accented name."""
+    bl = BaliseList.along_track(track, 100.0, 900.0, 200.0)
+    text = bl.to_csv(tmp_path / "b.csv").read_text()
+    lines = text.splitlines()
+    for name, content in (("cr.csv", "\r".join(lines) + "\r"),
+                          ("crlf.csv", "\r\n".join(lines) + "\r\n"),
+                          ("empty_rows.csv", text + ",,,,,\n,,,,,\n")):  # fmt: skip
+        p = tmp_path / name
+        p.write_bytes(content.encode())
+        back = BaliseList.from_csv(p, track)
+        assert back.ids == bl.ids and np.allclose(back.chainage_m, bl.chainage_m), name
+    # a bad value on line 3 of a CR-only file is still named on line 3
+    bad = [*lines]
+    bad[2] = bad[2].replace(bad[2].split(",")[1], "x", 1)
+    (tmp_path / "cr_bad.csv").write_bytes("\r".join(bad).encode())
+    with pytest.raises(BaliseFileError, match=r"cr_bad\.csv, line 3"):
+        BaliseList.from_csv(tmp_path / "cr_bad.csv", track)
+    named = pd.read_csv(tmp_path / "b.csv").assign(comment="Gembloux–Ottignies")
+    named.to_csv(tmp_path / "cp1252.csv", index=False, encoding="cp1252")
+    with pytest.raises(BaliseFileError, match=r"line 2: byte 0x96 is not UTF-8.*save it as CSV "
+                       "UTF-8"):  # fmt: skip
+        BaliseList.from_csv(tmp_path / "cp1252.csv", track)

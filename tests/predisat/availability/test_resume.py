@@ -62,7 +62,11 @@ def _run(masks: Any, out: Any, **kw: Any) -> Any:
 
 
 def _files(out: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.is_file()}
+    """The outputs (not the lock file, which names the process that wrote them)."""
+    from predisat.atomic import LOCK_NAME
+
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir())
+            if p.is_file() and p.name != LOCK_NAME}  # fmt: skip
 
 
 class _Blocks:
