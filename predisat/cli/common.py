@@ -55,7 +55,10 @@ def run_main(
     subcommand's name. Warnings the library gives are printed on one line each as
     ``<label>: warning: ...``.
     """
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except OSError as exc:  # a path option the system cannot look up (a name over 255 bytes)
+        parser.error(f"{exc.filename}: {exc.strerror}; give a shorter or valid path")
     run_checks(args)  # options that exclude or need each other: refused before any work
     if getattr(args, "func", None) is None:
         parser.print_help()

@@ -15,6 +15,9 @@ camera check), so that they agree with the loader's checks:
 from __future__ import annotations
 
 import io
+import os
+import unicodedata
+from pathlib import Path
 from types import MappingProxyType
 
 import cv2
@@ -27,6 +30,7 @@ __all__ = [
     "decode_frame",
     "decode_thumbnail",
     "exif_orientation",
+    "on_disk_spelling",
     "orientation_problem",
 ]
 
@@ -66,6 +70,24 @@ def orientation_problem(turn: int, label: str, calibration: str = "") -> str | N
         "pixels and remove the tag (exiftool -n -Orientation=1), or save the frames turned, "
         "without the tag"
     )
+
+
+def on_disk_spelling(path: str | os.PathLike[str]) -> Path | None:
+    """The local file ``path`` names, under the other Unicode normalisation of its name when
+    only that one exists, else None.
+
+    A folder copied from a Mac keeps accented names decomposed (NFD) while a manifest written
+    elsewhere spells them composed (NFC): every frame was "missing" while ``ls`` showed it (a
+    user trial).
+    """
+    p = Path(path)
+    if p.exists():
+        return p
+    for form in ("NFC", "NFD"):
+        other = Path(unicodedata.normalize(form, str(p)))
+        if other != p and other.exists():
+            return other
+    return None
 
 
 def _to_8bit(img: NDArray, label: str) -> tuple[NDArray | None, str | None]:

@@ -47,7 +47,12 @@ from predisat.survey.format import (
     SurveyProblem,
     empty_frames,
 )
-from predisat.survey.images import decode_frame, exif_orientation, orientation_problem
+from predisat.survey.images import (
+    decode_frame,
+    exif_orientation,
+    on_disk_spelling,
+    orientation_problem,
+)
 from predisat.track import TrackMap, load_track
 
 __all__ = [
@@ -142,7 +147,7 @@ class Survey:
         if is_remote(path):
             data = read_bytes(path, self.storage_options)
         else:
-            data = Path(path).read_bytes()
+            data = (on_disk_spelling(path) or Path(path)).read_bytes()
         img, problem = decode_frame(data, str(path))
         if img is None:
             raise OSError(problem)
@@ -526,6 +531,8 @@ def _check_image(
     """The image's problem (None if none) and, when only its size disagrees with the
     calibration, that size ``(width, height)``."""
     path = join(root, rel)
+    if isinstance(path, Path):
+        path = on_disk_spelling(path) or path  # an accented name in the other normalisation
     if not exists(path, opts) or (isinstance(path, Path) and not path.is_file()):
         return f"image {rel} is missing; copy it into the survey folder or remove the row", None
     try:
@@ -569,6 +576,21 @@ def _parse_rows(
         ) from None
     reader = csv.reader(io.StringIO(text))
     columns = [c.strip() for c in next(reader, [])]
+    for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+        if len(columns) == 1 and sep in columns[0]:
+            raise SurveyError(root, [SurveyProblem(
+                f"manifest.csv: the columns are separated by {name}, not commas; save it as "
+                "comma-separated values (',' between columns and '.' for decimals)"
+            )])  # fmt: skip
+    while columns and not columns[-1]:  # a spreadsheet's empty columns after the last one
+        columns.pop()
+    misnamed = {c: k for c in columns for k in MANIFEST_COLUMNS
+                if c != k and c.lower() == k and k not in columns}  # fmt: skip
+    if misnamed:  # read by name: Roll_deg was ignored without a word (a user trial)
+        renames = ", ".join(f"{c!r} to {k!r}" for c, k in misnamed.items())
+        raise SurveyError(root, [SurveyProblem(
+            f"manifest.csv: column names are read as written, in lower case; rename {renames}"
+        )])  # fmt: skip
     missing = [c for c in REQUIRED_COLUMNS if c not in columns]
     if "chainage_m" not in columns and not {"lat_deg", "lon_deg"} <= set(columns):
         missing.append("chainage_m (or lat_deg and lon_deg)")
@@ -588,6 +610,8 @@ def _parse_rows(
         line = reader.line_num
         if not any(f.strip() for f in fields):
             continue
+        if len(fields) > len(columns) and not any(f.strip() for f in fields[len(columns):]):
+            fields = fields[: len(columns)]  # the empty cells of those empty columns
         cells = dict(zip(columns, (f.strip() for f in fields), strict=False))
         r = _Row(line, cells.get("frame_id", ""), cells.get("image", ""), cells.get("side", ""))
         rows.append(r)
@@ -783,6 +807,39 @@ def _drop_position_jumps(accepted: list[_Row], max_speed_mps: float) -> list[_Ro
 _BACK_STEP_TOL_M = 2.0
 
 
+# A camera whose frames never move faster than this between two frames has not moved: its
+# chainages are kilometres (a km-post export), if read in metres it moves at a train's pace
+_CREEP_MPS = 0.1
+_TRAIN_MPS = (1.0, 100.0)
+
+
+def _check_chainage_unit(root: Location, accepted: list[_Row]) -> None:
+    """Refuse chainages given in kilometres: read as metres, a survey of km 4.00-4.04 was
+    published at 4 m, and its masks, made with frames 1 cm apart, trusted 0.96 % of the
+    directions falsely (a user trial). Only frames without a GNSS position are judged (a
+    position would contradict such a chainage)."""
+    for side in sorted({r.side for r in accepted}):
+        seq = [r for r in _positioned(accepted, side) if not math.isfinite(r.lat_deg)]
+        if len(seq) < 4:
+            continue
+        ch = np.array([r.chainage_m for r in seq])
+        dt = np.diff([r.gps_s for r in seq])
+        step = np.abs(np.diff(ch))
+        moving = (step > 0) & (dt > 0)
+        if moving.sum() < 3:
+            continue
+        pace = float(np.max(step[moving] / dt[moving]))  # a standstill's jitter is slower
+        lo, hi = _TRAIN_MPS
+        if pace < _CREEP_MPS and lo <= 1000.0 * pace <= hi:
+            a, b = seq[0], seq[-1]
+            raise SurveyError(root, [SurveyProblem(
+                f"manifest.csv: the {side} frames' chainage_m reads as kilometres: "
+                f"{a.chainage_m:g} at line {a.row} to {b.chainage_m:g} at line {b.row}, never "
+                f"faster than {pace:.3f} m/s between frames (in metres: "
+                f"{3.6 * 1000.0 * pace:.0f} km/h); give chainage_m in metres"
+            )])  # fmt: skip
+
+
 def _check_direction(root: Location, accepted: list[_Row], reverse: bool) -> None:
     """Refuse a survey whose frames move against ``direction_of_travel``: the camera sides
     and the along-track directions would be swapped, and the masks wrong on both sides."""
@@ -897,6 +954,7 @@ def _read_manifest(
         seen_time[(r.side, r.gps_s)] = r
         stack.append(r)
         accepted.append(r)
+    _check_chainage_unit(root, accepted)
     accepted = _drop_position_jumps(accepted, max_speed_mps)
     reverse = header["direction"] == "decreasing"
     _check_direction(root, accepted, reverse)

@@ -126,3 +126,15 @@ def test_a_run_whose_every_frame_was_refused_ends_with_status_2(
         err = capsys.readouterr().err
         assert ("every one of the 3 frames was refused" in err) == (status == 2)
         assert ("f0.jpg carries EXIF Orientation 2" in err) == (status == 2)
+
+
+def test_a_path_the_system_cannot_look_up_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An --out name over 255 bytes made pathlib's stat raise inside argparse: a traceback."""
+    long_name = str(tmp_path / ("très_long_nom_" * 20))
+    with pytest.raises(SystemExit) as info:
+        cli.main(["process", str(_survey(tmp_path)), "--out", long_name])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "File name too long; give a shorter or valid path" in err and "Traceback" not in err

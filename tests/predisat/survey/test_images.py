@@ -96,3 +96,24 @@ def test_8_bit_frames_decode_exactly_as_before() -> None:
     assert decode_frame(b"not an image", "x.jpg") == (
         None, "image x.jpg cannot be decoded; re-export it as JPEG or PNG"
     )  # fmt: skip
+
+
+def test_an_accented_frame_name_is_found_in_the_other_unicode_normalisation(
+    tmp_path: Path,
+) -> None:
+    """A folder copied from a Mac keeps names decomposed (NFD) while the manifest spells them
+    composed (NFC): every frame was "missing" although ls showed it (a user trial)."""
+    import unicodedata
+
+    from predisat.reconstruct.frames import read_image
+    from predisat.survey.images import on_disk_spelling
+
+    data = cv2.imencode(".png", _scene())[1].tobytes()
+    nfc = unicodedata.normalize("NFC", "Gembloux_é_000.png")
+    nfd = unicodedata.normalize("NFD", nfc)
+    assert nfc != nfd
+    (tmp_path / nfd).write_bytes(data)
+    assert on_disk_spelling(tmp_path / nfc) == tmp_path / nfd
+    assert on_disk_spelling(tmp_path / "other.png") is None
+    img, problem = read_image(str(tmp_path / nfc))
+    assert problem is None and img is not None and img.shape == (48, 64, 3)

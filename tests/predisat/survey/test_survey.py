@@ -616,3 +616,44 @@ def test_writer_rejects_bad_attitudes(tmp_path: Path, kwargs: dict, match: str) 
     with SurveyWriter(tmp_path / "s", CAMERAS) as w:
         with pytest.raises(ValueError, match=match):
             w.add_frame(_image(0), "left", GPS0, chainage_m=0.0, **kwargs)
+
+
+def test_chainages_in_kilometres_are_refused_a_standstill_is_not(tmp_path: Path) -> None:
+    """A km-post export read as metres put a survey of km 4.00-4.04 at 4 m, and its masks,
+    made from frames 1 cm apart, trusted 0.96 % of directions falsely (a user trial)."""
+    root = _write(tmp_path / "km", n=5)
+    rows = _rows(root)
+    for r in rows:
+        r["chainage_m"] = f"{float(r['chainage_m']) / 1000.0:.3f}"  # 0.100 ... 0.140
+    _save_rows(root, rows)
+    (p,) = _problems(root)
+    assert "left frames' chainage_m reads as kilometres: 0.1 at line 2 to 0.14" in p.message
+    assert "in metres: 36 km/h" in p.message and "give chainage_m in metres" in p.message
+    # a train standing still, its odometer jittering by centimetres, then moving on
+    root = _write(tmp_path / "stand", n=6)
+    rows = _rows(root)
+    jitter = {0: 100.0, 1: 100.01, 2: 100.0, 3: 100.02, 4: 100.01, 5: 110.0}
+    for r in rows:
+        r["chainage_m"] = str(jitter[int(r["frame_id"].split("_")[-1])])
+    _save_rows(root, rows)
+    assert len(Survey.load(root).frames) == 12
+
+
+def test_a_manifest_as_a_spreadsheet_saves_it(tmp_path: Path) -> None:
+    """Semicolons were "missing columns", Excel's empty columns "duplicate column ['']", and
+    Roll_deg in another case was ignored without a word (a user trial)."""
+    root = _write(tmp_path / "s", n=3)
+    text = (root / "manifest.csv").read_text()
+    plain = Survey.load(root).frames
+    (root / "manifest.csv").write_text(text.replace(",", ";"))
+    (p,) = _problems(root)
+    assert "separated by semicolons, not commas" in p.message
+    lines = text.splitlines()
+    (root / "manifest.csv").write_text("\n".join(line + ",,," for line in lines) + "\n")
+    frames = Survey.load(root).frames
+    np.testing.assert_array_equal(frames.chainage_m, plain.chainage_m)
+    assert list(frames.frame_id) == list(plain.frame_id)
+    head = lines[0].replace("roll_deg", "Roll_deg").replace("pitch_deg", "Pitch_deg")
+    (root / "manifest.csv").write_text("\n".join([head, *lines[1:]]) + "\n")
+    (p,) = _problems(root)
+    assert "rename 'Roll_deg' to 'roll_deg', 'Pitch_deg' to 'pitch_deg'" in p.message
