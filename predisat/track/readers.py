@@ -793,6 +793,13 @@ def parse_csv_track(
     arr = np.array(vals)
     if np.any(np.abs(arr[:, 0]) > 90.0):
         k = int(np.flatnonzero(np.abs(arr[:, 0]) > 90.0)[0])
+        if np.all(np.abs(arr[:, :2]) > 360.0):  # metres of a projection, not degrees swapped
+            raise TrackMapError(
+                f"{path}: data line {k + 2} has latitude {arr[k, 0]}: the coordinates are "
+                "metres of a projection (Belgian Lambert 72 or 2008, UTM), not WGS84 degrees; "
+                "convert them to lat_deg, lon_deg, or give a GeoJSON with its `crs` member "
+                "(docs/track-map.md)"
+            )
         raise TrackMapError(
             f"{path}: data line {k + 2} has latitude {arr[k, 0]} outside [-90, 90]; are the "
             "latitude and longitude columns swapped?"

@@ -454,6 +454,10 @@ def test_csv_round_trip_and_errors(tmp_path):
         TrackMap.from_csv(write(tmp_path, "s.csv", "lat,lon\n" + swapped))
     with pytest.raises(TrackMapError, match=r"line 3 .* not numeric"):
         TrackMap.from_csv(write(tmp_path, "n.csv", "lat,lon\n50,4\nfifty,4.1\n"))
+    # Lambert 72 metres under a lat,lon header: no swap would help (a user trial was told so)
+    lambert = "lat,lon\n139692.9,157412.3\n139702.9,157422.1\n"
+    with pytest.raises(TrackMapError, match=r"metres of a projection .*Lambert.*`crs` member"):
+        TrackMap.from_csv(write(tmp_path, "l72.csv", lambert))
     with pytest.raises(TrackMapError, match="empty"):
         TrackMap.from_csv(write(tmp_path, "e.csv", ""))
 
