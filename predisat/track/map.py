@@ -190,7 +190,9 @@ class TrackMap:
                 f"track {name!r} has fewer than 2 distinct vertices; a track needs a line"
             )
         frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0]))
-        _check_simple(frame.to_enu(lat, lon, h), where=f"track {name!r}", frame=frame)
+        enu = frame.to_enu(lat, lon, h)
+        _check_simple(enu, where=f"track {name!r}", frame=frame)
+        _check_grade(enu, h, where=f"track {name!r}", frame=frame)
         return cls(
             name=name,
             lat_deg=lat,
@@ -241,6 +243,7 @@ class TrackMap:
                 raise TrackMapError(f"{tf.path}: {exc}") from None
 
         tm = build(tf.lat_deg, tf.lon_deg, tf.h_m)
+        _check_turns(tm, str(tf.path))
         posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
         flip, spans, bridges = tf.reverse, list(tf.tunnel_spans), list(tf.bridge_spans)
         if not flip and len(posts) >= 2:
@@ -532,6 +535,61 @@ def _check_vertices(lat: NDArray, lon: NDArray, h: NDArray, where: str) -> None:
         raise TrackMapError(
             f"{where}: vertex {bad} has height {h[bad]:.1f} m; heights are metres above the "
             "ellipsoid (is a coordinate column misplaced?)"
+        )
+
+
+MIN_RADIUS_M = 20.0
+"""Tightest horizontal radius a track read from a file may turn on (a tram's; main lines stay
+above 150 m). Tighter, the geometry folds: two parts overlapping by 1 m at a joint made the axis
+turn back on a 1.6 m radius, every chainage after it 2.4 m long, and the whole line lose its
+smoothing (a user trial)."""
+
+
+def _check_turns(tm: TrackMap, where: str) -> None:
+    """Refuse a track whose smooth axis turns tighter than :data:`MIN_RADIUS_M` anywhere
+    (sampled every metre)."""
+    s = np.arange(0.0, tm.length_m, 1.0)
+    k = np.abs(tm.curvature_at(s))
+    worst = int(np.argmax(k))
+    if k[worst] > 1.0 / MIN_RADIUS_M:
+        lat, lon, _ = tm.position_at(s[worst])
+        raise TrackMapError(
+            f"{where}: track {tm.name!r} turns on a radius of {1.0 / k[worst]:.1f} m at "
+            f"chainage {s[worst]:.0f} m (lat {float(lat):.6f}, lon {float(lon):.6f}), tighter "
+            f"than any railway ({MIN_RADIUS_M:g} m): the line folds back there (parts that "
+            "overlap or step back at a joint, a spur); fix the geometry at that place"
+        )
+
+
+MAX_GRADE = 0.15
+"""Steepest mean grade a track's heights may show over :data:`_GRADE_BASE_M` (150 per mille:
+steeper than any adhesion railway; main lines stay under 40). Beyond, the third coordinate is
+not a height: a measure or a chainage exported as Z made line 144 climb 8 966 m at 45 deg and
+41 % longer (a user trial)."""
+_GRADE_BASE_M = 200.0
+
+
+def _check_grade(enu: NDArray, h: NDArray, where: str, frame: LocalFrame) -> None:
+    """Refuse heights that rise or fall faster than :data:`MAX_GRADE` over 200 m (the whole
+    line when shorter, from 20 m)."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(enu[:, :2], axis=0).T))])
+    base = min(_GRADE_BASE_M, float(s[-1]))
+    if base < 20.0:
+        return
+    i = np.arange(s.size)
+    j = np.searchsorted(s, s + base - 1e-9)
+    ok = j < s.size
+    i, j = i[ok], j[ok]
+    grade = np.abs(h[j] - h[i]) / np.maximum(s[j] - s[i], 1e-9)
+    k = int(np.argmax(grade))
+    if grade[k] > MAX_GRADE:
+        lat, lon, _ = frame.to_geodetic(enu[i[k]])
+        raise TrackMapError(
+            f"{where}: its heights change by {h[j[k]] - h[i[k]]:+.0f} m over "
+            f"{s[j[k]] - s[i[k]]:.0f} m near lat {float(lat):.6f}, lon {float(lon):.6f} (a "
+            f"{100 * grade[k]:.0f} % grade; railways stay under {100 * MAX_GRADE:.0f} %): the "
+            "third coordinate is not a height (a measure or a chainage exported as Z?); drop "
+            "it, or give heights above the ellipsoid"
         )
 
 

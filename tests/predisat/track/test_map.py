@@ -667,3 +667,16 @@ def test_a_longitude_past_180_is_told_to_wrap_not_to_swap(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match="swap them"):
         TrackMap.from_geojson(path)
+
+
+def test_heights_steeper_than_a_railway_are_a_measure_not_a_height():
+    """A linear-referencing export's Z = M (the distance along the line) was read as height:
+    line 144 climbed 8 966 m at 45 deg and came out 41 % longer (a user trial)."""
+    lat, lon = straight_latlon(3000.0, 30.0, 50.0)
+    s = np.linspace(0.0, 3000.0, lat.size)
+    with pytest.raises(TrackMapError, match=r"heights change by \+\d+ m over \d+ m near lat .*"
+                       r"\(a 100 % grade.*not a height \(a measure"):  # fmt: skip
+        TrackMap.from_latlon(lat, lon, s, name="m")
+    # a steep real line (35 per mille over 3 km) and a hump of 5 m are heights
+    tm = TrackMap.from_latlon(lat, lon, 120.0 + 0.035 * s + 5.0 * np.exp(-((s - 1500) / 60) ** 2))
+    assert tm.length_m == pytest.approx(3000.0 * np.hypot(1.0, 0.035), rel=2e-3)
