@@ -548,8 +548,11 @@ smoothing (a user trial)."""
 def _check_turns(tm: TrackMap, where: str) -> None:
     """Refuse a track whose smooth axis turns tighter than :data:`MIN_RADIUS_M` anywhere
     (sampled every metre)."""
-    s = np.arange(0.0, tm.length_m, 1.0)
-    k = np.abs(tm.curvature_at(s))
+    # the turn of the heading metre by metre: a curvature alone misses a fold along a straight
+    # line (the axis stops and runs back, turning by 180 deg on no radius at all)
+    s = np.arange(0.0, tm.length_m + 1.0, 1.0).clip(max=tm.length_m)
+    turn = np.abs((np.diff(tm.heading_at(s)) + 180.0) % 360.0 - 180.0)
+    k = np.radians(turn) / np.maximum(np.diff(s), 1e-9)
     worst = int(np.argmax(k))
     if k[worst] > 1.0 / MIN_RADIUS_M:
         lat, lon, _ = tm.position_at(s[worst])

@@ -680,3 +680,28 @@ def test_heights_steeper_than_a_railway_are_a_measure_not_a_height():
     # a steep real line (35 per mille over 3 km) and a hump of 5 m are heights
     tm = TrackMap.from_latlon(lat, lon, 120.0 + 0.035 * s + 5.0 * np.exp(-((s - 1500) / 60) ** 2))
     assert tm.length_m == pytest.approx(3000.0 * np.hypot(1.0, 0.035), rel=2e-3)
+
+
+def test_parts_overlapping_at_a_joint_fold_the_axis_and_are_refused(tmp_path):
+    """Part 2 starting 1 m back along part 1 (a snapping artefact) made the axis turn back on a
+    1.6 m radius and lengthened every chainage after it (a user trial); joined end to end the
+    same parts give the line."""
+    line = demo_track()
+    lat, lon, h = line.lat_deg, line.lon_deg, line.h_m
+    k = 30  # a vertex on a curve of line 144
+    az_back = GEOD.inv(lon[k], lat[k], lon[k - 1], lat[k - 1])[0]
+    back_lon, back_lat, _ = GEOD.fwd(lon[k], lat[k], az_back, 1.0)  # 1 m back along part 1
+    first = np.column_stack([lon[: k + 1], lat[: k + 1], h[: k + 1]]).tolist()
+    rest = np.column_stack([lon[k + 1 :], lat[k + 1 :], h[k + 1 :]]).tolist()
+    for start, name in (([lon[k], lat[k], h[k]], "joined"),
+                        ([back_lon, back_lat, h[k]], "overlap")):  # fmt: skip
+        feats = [line_feature(first, name="L"), line_feature([start, *rest], name="L")]
+        path = write(tmp_path, f"{name}.geojson",
+                     json.dumps({"type": "FeatureCollection", "features": feats}))  # fmt: skip
+        if name == "joined":
+            got = TrackMap.from_geojson(path, tolerance_m=line.tolerance_m)
+            assert got.length_m == pytest.approx(line.length_m, abs=0.05)
+        else:
+            with pytest.raises(TrackMapError, match=r"turns on a radius of [\d.]+ m at chainage "
+                               r"\d+ m .*folds back"):  # fmt: skip
+                TrackMap.from_geojson(path, tolerance_m=line.tolerance_m)
