@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
@@ -57,6 +57,9 @@ from predisat.cli.common import (
     track_option,
 )
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+
+if TYPE_CHECKING:
+    from locator.sim.simfile import SimRun
 
 __all__ = ["main"]
 
@@ -200,6 +203,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from predisat.atomic import check_writable
 
     source: Any
+    own_track = False
     if args.sim:
         from locator.sim.simfile import SimRun
 
@@ -287,10 +291,13 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"({constellation_label(args.constellation)}), trust rule {cfg.trust}"
           f"{_split_text(cfg)}; pair intervals: {cfg.locator.width_text()}")
     with _progress(len(source.gps_s), args.quiet, "locating") as bar:
+        # a simulation's truth on another map is its antenna projected there: evaluate needs
+        # that map again (run.json says so, also when the simulation has no world.npz)
+        sim_truth = {} if not args.sim else {"sim_chainage": "own" if own_track else "projected"}
         epochs, folder = run_to_folder(
             path, source, args.out, start_chainage_m=float(start), config=cfg,
             masks=masks, fmt=args.format, progress=bar.update,
-            meta={"error_model": model_record},
+            meta={"error_model": model_record, **sim_truth},
         )  # fmt: skip
     claim = epochs["claim"].mean()
     length = epochs.loc[epochs["claim"], "length_m"]
@@ -589,14 +596,28 @@ _TRACK_END_TOL_M = 5.0
 
 
 def _sim_on_run_track(
-    sim: Any, args: argparse.Namespace, meta: dict[str, Any], length_m: Any
-) -> Any:
+    sim: SimRun, args: argparse.Namespace, meta: dict[str, Any], length_m: Any
+) -> SimRun:
     """The simulation with its truth in the chainage of the run's track: its own when the run
     was made on the simulation's world track, else projected on ``--track`` (required)."""
     from locator.workflow import sim_on_track
     from predisat.synth.world import World
 
     stored = Path(args.sim) / "world.npz"
+    if args.track is None and meta.get("sim_chainage") == "projected":
+        from predisat.track import demo_track
+
+        try:  # made on the embedded line 144 (run --sim without --track nor world.npz)
+            _check_same_track(demo_track(), meta, "(the embedded line 144)")
+        except CliError:
+            raise CliError(f"{args.run} was made on track {meta.get('track')!r}, another map "
+                           "than the simulation's own, so the simulation's chainages are not "
+                           "the run's: give the run's map as --track to project the simulated "
+                           "antenna on it") from None  # fmt: skip
+        try:
+            return sim_on_track(sim, demo_track(), str(args.sim))
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
     if args.track is None:
         if stored.is_file() and meta.get("track_ends_latlon_deg"):
             try:

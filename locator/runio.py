@@ -98,7 +98,7 @@ def write_run(
     (:func:`predisat.atomic.exclusive_folder`).
     """
     out = Path(folder)
-    stale = ("epochs.*", *_EVALUATION_FILES)
+    stale = tuple(f"epochs.{ext}" for ext in FORMATS) + _EVALUATION_FILES
     with staged_folder(out, last=("run.json",), remove=stale) as stage:
         write_table(epochs, stage, "epochs", fmt)
         run = {"format": RUN_FORMAT, "software_version": __version__, **meta}

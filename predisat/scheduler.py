@@ -238,17 +238,16 @@ def _connect(address: str) -> Any:
 # process runs is what it imported then. A long-lived worker kept the modules it imported before
 # a `git pull` while a fresh hash of its files matched the client's (a user trial); a memo per
 # process, not hidden state: it only ever holds the first answer.
-_FIRST_SEEN: dict[str, str] = {}
+_FIRST_SEEN: dict[Callable[[], str], str] = {}
 _FIRST_SEEN_LOCK = threading.Lock()
 
 
 def _version_here(code_version: Callable[[], str]) -> str:
     """``code_version()`` as this process first saw it (run here and on each worker)."""
-    key = f"{code_version.__module__}.{code_version.__qualname__}"
-    with _FIRST_SEEN_LOCK:
-        if key not in _FIRST_SEEN:
-            _FIRST_SEEN[key] = code_version()
-        return _FIRST_SEEN[key]
+    with _FIRST_SEEN_LOCK:  # keyed by the function itself (a module-level one unpickles as it)
+        if code_version not in _FIRST_SEEN:
+            _FIRST_SEEN[code_version] = code_version()
+        return _FIRST_SEEN[code_version]
 
 
 def _where_am_i() -> str:

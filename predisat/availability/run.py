@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from predisat import __version__
-from predisat.atomic import staged_folder
+from predisat.atomic import exclusive_folder, staged_folder
 from predisat.availability.engine import (
     Availability,
     BlockCheckpoint,
@@ -92,6 +92,7 @@ from predisat.storage import (
     join,
     location,
     name_of,
+    remove,
     remove_tree,
     write_atomic,
 )
@@ -694,6 +695,7 @@ def run_availability(
     cutoffs = (cutoff_deg,) if isinstance(cutoff_deg, (int, float)) else tuple(cutoff_deg)
     stages = 2 + (2 + len(cutoffs)) + 3  # masks, navigation; one per rule; tables, figures, report
     bar = tqdm(total=stages, desc="availability", unit="step", disable=not progress)
+    held = contextlib.ExitStack()
     try:
         stage = bar.set_postfix_str
 
@@ -701,6 +703,9 @@ def run_availability(
         opts = dict(storage_options or {})
         out = location(absolute(out_dir))  # a cluster's worker resolves a relative path in
         # its own working folder
+        if isinstance(out, Path):  # one run writes a local folder at a time, from its start
+            out.mkdir(parents=True, exist_ok=True)
+            held.enter_context(exclusive_folder(out))
         mask_set, masks_label, track, mask_notes = _masks_on_track(
             masks, track, from_m, to_m, opts
         )
@@ -732,7 +737,8 @@ def run_availability(
         # place, a full disk or a size limit left cut tables that read as whole, or two runs'
         # files side by side (a user trial)
         staging = (
-            staged_folder(out, last=("report.html",)) if isinstance(out, Path)
+            staged_folder(out, last=("report.html",), remove=_OUTPUT_NAMES, lock=False)
+            if isinstance(out, Path)
             else contextlib.nullcontext(Path(tempfile.mkdtemp(prefix="predisat-av-")))
         )  # fmt: skip
         with staging as work:
@@ -763,10 +769,20 @@ def run_availability(
         remove_tree(blocks, opts)  # every output is written: the saved blocks are done with
         bar.update(1)
     finally:
+        held.close()
         bar.close()  # also on an error: its message then starts on a line of its own
     return AvailabilityRun(
         out, files["report"], files, summary, tuple(results), time.perf_counter() - t0, info
     )
+
+
+# every output a run may write: an earlier run's that this one does not write (its --counts
+# table) must not stay beside the new report (a review)
+_OUTPUT_NAMES = (
+    "report.html", "summary.csv", "summary.json", "positions.csv", "positions.parquet",
+    "epochs.csv", "epochs.parquet", "counts.parquet", "availability.geojson",
+    "ephemeris_status.csv",
+)  # fmt: skip
 
 
 def _publish(
@@ -779,7 +795,12 @@ def _publish(
         return {kind: out / path.name for kind, path in local_files.items()}
     published: dict[str, Location] = {}
     folders = set()
-    for kind, path in local_files.items():
+    # the report withdrawn first and uploaded last: a failure between left new tables beside
+    # the previous run's whole report (a review)
+    report = local_files.get("report")
+    if report is not None:
+        remove(join(out, report.name), opts)
+    for kind, path in sorted(local_files.items(), key=lambda kv: kv[0] == "report"):
         published[kind] = join(out, path.name)
         write_atomic(published[kind], path.read_bytes(), opts)
         folders.add(path.parent)

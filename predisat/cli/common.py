@@ -58,7 +58,8 @@ def run_main(
     try:
         args = parser.parse_args(argv)
     except OSError as exc:  # a path option the system cannot look up (a name over 255 bytes)
-        parser.error(f"{exc.filename}: {exc.strerror}; give a shorter or valid path")
+        where = f"{exc.filename}: " if exc.filename else ""
+        parser.error(f"{where}{exc.strerror or exc}; give a shorter or valid path")
     run_checks(args)  # options that exclude or need each other: refused before any work
     if getattr(args, "func", None) is None:
         parser.print_help()

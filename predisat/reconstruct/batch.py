@@ -108,7 +108,7 @@ from predisat.storage import (
     write_atomic,
 )
 from predisat.survey import Survey, check_survey_track
-from predisat.survey.images import decode_thumbnail, on_disk_spelling
+from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
 
@@ -660,10 +660,7 @@ def _thumbnail(path: Location, opts: StorageOptions) -> NDArray | None:
     """The quarter-size grey picture of an image file (None when it cannot be decoded: the
     segmentation reports it)."""
     try:
-        if isinstance(path, Path):
-            data = (on_disk_spelling(path) or path).read_bytes()
-        else:
-            data = read_bytes(path, opts)
+        data = path.read_bytes() if isinstance(path, Path) else read_bytes(path, opts)
     except OSError:
         return None
     return decode_thumbnail(data)

@@ -25,7 +25,7 @@ from predisat.sky.network import SkyNet, classifier_with_net
 from predisat.sky.panorama import segment_panorama
 from predisat.sky.segment import SkyOptions, segment_sky
 from predisat.storage import StorageError, StorageOptions, location, read_bytes
-from predisat.survey.images import decode_frame, on_disk_spelling
+from predisat.survey.images import decode_frame
 
 __all__ = [
     "BLANK_SPREAD_LEVELS",
@@ -100,8 +100,6 @@ def read_image(
     the problem with the file and its fix."""
     try:
         loc = location(path)
-        if isinstance(loc, Path):
-            loc = on_disk_spelling(loc) or loc  # an accented name in the other normalisation
         data = loc.read_bytes() if isinstance(loc, Path) else read_bytes(loc, storage_options)
     except FileNotFoundError:
         return None, f"image {path} is missing; restore it or drop the frame"

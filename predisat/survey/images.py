@@ -72,20 +72,20 @@ def orientation_problem(turn: int, label: str, calibration: str = "") -> str | N
     )
 
 
-def on_disk_spelling(path: str | os.PathLike[str]) -> Path | None:
-    """The local file ``path`` names, under the other Unicode normalisation of its name when
-    only that one exists, else None.
+def on_disk_spelling(root: str | os.PathLike[str], rel: str) -> str | None:
+    """How the file ``rel`` (relative to the folder ``root``) is spelled on disk: ``rel``, or
+    its other Unicode normalisation when only that one exists; None when neither does.
 
     A folder copied from a Mac keeps accented names decomposed (NFD) while a manifest written
     elsewhere spells them composed (NFC): every frame was "missing" while ``ls`` showed it (a
     user trial).
     """
-    p = Path(path)
-    if p.exists():
-        return p
+    base = Path(root)
+    if (base / rel).exists():
+        return rel
     for form in ("NFC", "NFD"):
-        other = Path(unicodedata.normalize(form, str(p)))
-        if other != p and other.exists():
+        other = unicodedata.normalize(form, rel)
+        if other != rel and (base / other).exists():
             return other
     return None
 

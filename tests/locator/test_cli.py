@@ -653,6 +653,20 @@ def test_a_simulation_on_another_map_of_its_line_is_located_and_scored_in_that_m
     e_moved = json.loads((tmp_path / "other" / "evaluation.json").read_text())
     key = next(k for k in e_own if "median" in k and "err" in k)
     assert e_moved[key] == pytest.approx(e_own[key], abs=1.0)
+    # a simulation without its world.npz (copied as its three files): run.json says the truth
+    # was projected, and evaluate still asks for the map (a review found it scored 97 m errors)
+    bare = tmp_path / "bare_sim"
+    shutil.copytree(sim_dir, bare, ignore=shutil.ignore_patterns("world.npz"))
+    assert main([*base[:3], str(bare), "--no-masks", "--track", str(other),
+                 "--out", str(tmp_path / "bare")]) == 0  # fmt: skip
+    assert read_run(tmp_path / "bare")[1]["sim_chainage"] == "projected"
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "bare"), "--sim", str(bare)]) == 2
+    assert "give the run's map as --track" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "bare"), "--sim", str(bare),
+                 "--track", str(other)]) == 0  # fmt: skip
+    e_bare = json.loads((tmp_path / "bare" / "evaluation.json").read_text())
+    assert e_bare[key] == pytest.approx(e_moved[key], abs=1e-9)
     # reversed: chainage counted from the other end, the odometer's sign with it
     rev = TrackMap.from_geojson(_lead_in_map(own_track, 100.0, tmp_path / "rev.geojson", True))
     from locator.workflow import sim_on_track
@@ -757,3 +771,15 @@ def test_a_truth_file_out_of_order_empty_or_in_km_is_refused_naming_the_line(
             assert rc == 2 and re.search(rf"{re.escape(name)}(, |: ){refused}", err), (name, err)
     assert main(["evaluate", str(out), "--sim", str(sim_dir)]) == 0
     assert json.loads((out / "evaluation.json").read_text()) == by_csv
+
+
+def test_a_standing_trains_truth_in_metres_is_not_taken_for_kilometres(sim_dir, tmp_path):
+    """A review: an RTK truth spanning 3 cm beside estimates spanning 24 m was refused as km."""
+    out = tmp_path / "r"
+    assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out", str(out)]) == 0
+    epochs, _ = read_run(out)
+    still = float(np.nanmedian(epochs["chainage_m"])) + 3.0  # a train standing near it
+    truth = pd.DataFrame({"gps_s": epochs["gps_s"], "chainage_m": still + 0.0003 * np.arange(
+        len(epochs))})  # fmt: skip
+    truth.to_csv(tmp_path / "rtk.csv", index=False, float_format="%.17g")
+    assert main(["evaluate", str(out), "--truth-csv", str(tmp_path / "rtk.csv")]) == 0

@@ -31,8 +31,6 @@ def _fresh(code: list[str], value: str) -> subprocess.CompletedProcess[str]:
 def test_an_empty_value_is_unset_before_numpy_reads_it() -> None:
     """numpy's f2py (through scipy.special) reads SOURCE_DATE_EPOCH with int() at import: an
     empty one crashed every command, and a worker could not load a task."""
-    plain = _fresh(["-c", "import scipy.special"], "")
-    assert plain.returncode != 0 and "int()" in plain.stderr  # the library's own failure
     ours = _fresh(["-c", "import predisat, scipy.special, locator"], "")
     assert ours.returncode == 0, ours.stderr
 

@@ -202,3 +202,35 @@ def test_blocks_saved_under_another_integrity_setting_are_not_taken(
     loose_iv = engine.compute_availability(sats, positions, rule, integrity=loose).interval_m
     assert loose_iv is not None and not np.allclose(
         np.nan_to_num(loose_iv), np.nan_to_num(res.interval_m))  # the setting mattered
+
+
+def test_a_run_that_fails_while_writing_leaves_the_run_before_whole(
+    tmp_path: Path, mask_file: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Written in place, a full disk left cut tables that pandas read as whole and new tables
+    beside the previous run's report (a user trial); an earlier run's --counts table stayed
+    beside a later report (a review)."""
+    import errno
+
+    import predisat.availability.report as report
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    out = tmp_path / "out"
+    _run(mask_file, out, counts_table=True)
+    before = _files(out)
+    assert "counts.parquet" in before
+
+    def full(*args: Any, **kwargs: Any) -> str:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(report, "build_report", full)
+    with pytest.raises(OSError, match="No space"):
+        _run(mask_file, out, cutoff_deg=(10.0,))  # another run: other rules, no counts
+    assert _files(out) == before  # wholly the run before
+    assert not [p for p in out.iterdir() if p.name.startswith(".staging-")]
+    monkeypatch.undo()
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    _run(mask_file, out, cutoff_deg=(10.0,))
+    after = _files(out)
+    assert "counts.parquet" not in after and "report.html" in after
+    assert after["summary.csv"] != before["summary.csv"]

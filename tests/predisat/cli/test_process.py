@@ -118,7 +118,7 @@ def test_a_run_whose_every_frame_was_refused_ends_with_status_2(
     def result(n_bad: int) -> SimpleNamespace:
         bad = tuple(BadFrame(f"f{k}", f"image f{k}.jpg carries EXIF Orientation 2", "segment")
                     for k in range(n_bad))  # fmt: skip
-        return SimpleNamespace(n_frames=3, bad_frames=bad, __str__=lambda: "done")
+        return SimpleNamespace(n_frames=3, bad_frames=bad)
 
     for n_bad, status in ((2, 0), (3, 2)):
         monkeypatch.setattr(cli_process, "run", lambda args, n=n_bad: result(n))

@@ -15,7 +15,7 @@ from PIL import Image, ImageOps
 
 from predisat.survey import Survey
 from predisat.survey.images import decode_frame, decode_thumbnail
-from tests.predisat.survey.test_survey import _only, _problems, _write
+from tests.predisat.survey.test_survey import _only, _problems, _rows, _save_rows, _write
 
 
 def _scene(h: int = 48, w: int = 64) -> np.ndarray:
@@ -102,18 +102,23 @@ def test_an_accented_frame_name_is_found_in_the_other_unicode_normalisation(
     tmp_path: Path,
 ) -> None:
     """A folder copied from a Mac keeps names decomposed (NFD) while the manifest spells them
-    composed (NFC): every frame was "missing" although ls showed it (a user trial)."""
+    composed (NFC): every frame was "missing" although ls showed it (a user trial). The loader
+    takes the spelling on disk, so that the readers and the cache keys see the same file (a
+    review: a replaced image was never segmented again)."""
     import unicodedata
 
-    from predisat.reconstruct.frames import read_image
     from predisat.survey.images import on_disk_spelling
 
-    data = cv2.imencode(".png", _scene())[1].tobytes()
-    nfc = unicodedata.normalize("NFC", "Gembloux_é_000.png")
+    root = _write(tmp_path / "s", n=2)
+    rows = _rows(root)
+    nfc = unicodedata.normalize("NFC", "images/Gembloux_é_left.jpg")
     nfd = unicodedata.normalize("NFD", nfc)
     assert nfc != nfd
-    (tmp_path / nfd).write_bytes(data)
-    assert on_disk_spelling(tmp_path / nfc) == tmp_path / nfd
-    assert on_disk_spelling(tmp_path / "other.png") is None
-    img, problem = read_image(str(tmp_path / nfc))
-    assert problem is None and img is not None and img.shape == (48, 64, 3)
+    (root / rows[0]["image"]).rename(root / nfd)
+    rows[0]["image"] = nfc
+    _save_rows(root, rows)
+    assert on_disk_spelling(root, nfc) == nfd and on_disk_spelling(root, "images/x.jpg") is None
+    survey = Survey.load(root)
+    assert survey.frames.image[0] == nfd
+    img = survey.read_image(0)
+    assert img.shape == (24, 32, 3)

@@ -629,10 +629,20 @@ def test_chainages_in_kilometres_are_refused_a_standstill_is_not(tmp_path: Path)
     (p,) = _problems(root)
     assert "left frames' chainage_m reads as kilometres: 0.1 at line 2 to 0.14" in p.message
     assert "in metres: 36 km/h" in p.message and "give chainage_m in metres" in p.message
+    # one typo row, and a short survey of 3 frames per side, do not hide it (a review)
+    rows[4]["chainage_m"] = "0.500"
+    _save_rows(root, rows)
+    assert any("reads as kilometres" in p.message for p in _problems(root))
+    root = _write(tmp_path / "km3", n=3)
+    rows = _rows(root)
+    for r in rows:
+        r["chainage_m"] = f"{float(r['chainage_m']) / 1000.0:.3f}"
+    _save_rows(root, rows)
+    assert any("reads as kilometres" in p.message for p in _problems(root))
     # a train standing still, its odometer jittering by centimetres, then moving on
     root = _write(tmp_path / "stand", n=6)
     rows = _rows(root)
-    jitter = {0: 100.0, 1: 100.01, 2: 100.0, 3: 100.02, 4: 100.01, 5: 110.0}
+    jitter = {0: 100.0, 1: 100.01, 2: 100.0, 3: 100.02, 4: 100.01, 5: 100.0}  # never moves on
     for r in rows:
         r["chainage_m"] = str(jitter[int(r["frame_id"].split("_")[-1])])
     _save_rows(root, rows)
