@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -30,7 +31,12 @@ from shapely import LineString, STRtree, box
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.readonly import freeze_array_fields
 from predisat.track.errors import TrackMapError
-from predisat.track.posts import KilometrePost, monotone_posts, project_posts
+from predisat.track.posts import (
+    KilometrePost,
+    kilometre_gaps,
+    monotone_posts,
+    project_posts,
+)
 from predisat.track.readers import TrackFile, parse_csv_track, parse_geojson_track, sniff_format
 from predisat.track.smooth import FittedCurve, dense_polyline, fit_curve
 from predisat.track.stations import Station
@@ -255,8 +261,18 @@ class TrackMap:
             n = len(tf.lat_deg)
             spans = [(n - 1 - b, n - 1 - a) for a, b in spans]
             bridges = [(n - 1 - b, n - 1 - a) for a, b in bridges]
+        kept = monotone_posts(posts, f"{tf.path}")
+        for a, b in kilometre_gaps(kept):
+            pa, pb = (next(p for p in kept if p.chainage_m == c) for c in (a, b))
+            warnings.warn(
+                f"{tf.path}: the kilometre posts at km {pa.km_m / 1000:.3f} (chainage {a:.0f} m) "
+                f"and km {pb.km_m / 1000:.3f} ({b:.0f} m) do not follow the track between them "
+                "(a kilometre equation, a restart or posts missing): the line's kilometres are "
+                "left empty there",
+                stacklevel=2,
+            )
         return tm.with_metadata(
-            kilometre_posts=monotone_posts(posts, f"{tf.path}"),
+            kilometre_posts=kept,
             tunnels_m=_tunnel_intervals(tm, spans),
             bridges_m=_tunnel_intervals(tm, bridges), stations=tf.stations,
         )  # fmt: skip
@@ -387,9 +403,11 @@ class TrackMap:
     def kilometre_at(self, chainage_m: ArrayLike) -> NDArray:
         """The line's kilometre reference (metres) at given chainages, from the posts.
 
-        Linear between posts, extrapolated with slope 1 beyond them; NaN when the map has no
+        Linear between posts, extrapolated up to 1 km beyond them; NaN when the map has no
         kilometre posts (none in the file, or none usable: the map keeps only posts strictly
-        monotone along the chainage). Metadata for reports, not a measurement.
+        monotone along the chainage), and between two posts whose kilometres do not follow the
+        chainage (:func:`~predisat.track.posts.kilometre_gaps`: a kilometre equation, a
+        restart, posts missing). Metadata for reports, not a measurement.
         """
         s = np.asarray(chainage_m, float)
         posts = sorted(self.kilometre_posts, key=lambda p: p.chainage_m)
@@ -404,7 +422,17 @@ class TrackMap:
         slope_lo = (km[1] - km[0]) / (cs[1] - cs[0]) if cs[1] > cs[0] else 1.0
         slope_hi = (km[-1] - km[-2]) / (cs[-1] - cs[-2]) if cs[-1] > cs[-2] else 1.0
         out = np.where(lo, km[0] + slope_lo * (s - cs[0]), out)
-        return np.where(hi, km[-1] + slope_hi * (s - cs[-1]), out)
+        out = np.where(hi, km[-1] + slope_hi * (s - cs[-1]), out)
+        gaps = kilometre_gaps(posts)
+        for a, b in gaps:
+            out = np.where((s > a) & (s < b), np.nan, out)
+        if gaps and gaps[0][0] == cs[0]:  # no trusted slope to extrapolate with
+            out = np.where(lo, np.nan, out)
+        if gaps and gaps[-1][1] == cs[-1]:
+            out = np.where(hi, np.nan, out)
+        # far beyond the outer posts the kilometres may restart or jump (posts dropped there)
+        far = (s < cs[0] - _POST_REACH_M) | (s > cs[-1] + _POST_REACH_M)
+        return np.where(far, np.nan, out)
 
     def in_tunnel(self, chainage_m: ArrayLike) -> NDArray:
         """True where the chainage lies in a tagged tunnel interval, shape like ``chainage_m``."""
@@ -537,6 +565,8 @@ def _check_vertices(lat: NDArray, lon: NDArray, h: NDArray, where: str) -> None:
             "ellipsoid (is a coordinate column misplaced?)"
         )
 
+
+_POST_REACH_M = 1000.0  # line kilometres extrapolated at most this far beyond the outer posts
 
 MIN_RADIUS_M = 20.0
 """Tightest horizontal radius a track read from a file may turn on (a tram's; main lines stay

@@ -95,3 +95,21 @@ def test_good_posts_beside_a_bad_one_still_label_the_line(tmp_path: Path) -> Non
     with pytest.warns(UserWarning, match=r"track 'rev': kilometre posts km 10\.000 .*km 9\.000"):
         tm2 = tm.with_metadata(kilometre_posts=[*tm.kilometre_posts, P(1000.0, 9000.0)])
     assert [p.km_m for p in tm2.kilometre_posts] == [12_000.0]
+
+
+def test_a_kilometre_equation_leaves_the_kilometres_between_its_posts_empty(
+    tmp_path: Path,
+) -> None:
+    """The line's kilometres jump from 1.0 to 20.0 between the posts at 1000 and 1500 m (a
+    line change): interpolated across, km 10.5 was said at 1250 m where the line's is 1.25 or
+    20.0 (a GIS user trial)."""
+    path = _line_with_posts(tmp_path / "eq.geojson", [0.0, 0.5, 1.0, 20.0, 20.5],
+                            [0.0, 500.0, 1000.0, 1500.0, 2000.0])  # fmt: skip
+    with pytest.warns(UserWarning, match=r"posts at km 1\.000 \(chainage 1000 m\) and km "
+                      r"20\.000 \(1500 m\) do not follow the track"):  # fmt: skip
+        tm = TrackMap.from_geojson(path)
+    km = tm.kilometre_at([250.0, 990.0, 1250.0, 1600.0, 1750.0])
+    np.testing.assert_allclose(km[[0, 1, 3, 4]], [250.0, 990.0, 20_100.0, 20_250.0], atol=1.0)
+    assert np.isnan(km[2])
+    # far beyond the outer posts nothing is said either (posts may have been dropped there)
+    assert np.isnan(tm.kilometre_at(-1500.0)) and np.isfinite(tm.kilometre_at(-500.0))
