@@ -161,7 +161,18 @@ def _to_lonlat(doc: Any, path: Path) -> Any:
     EPSG:31370) still carry it, and a user trial's was read as degrees and told to swap them.
     RFC 7946 files have no ``crs``: returned as they are."""
     crs_doc = doc.get("crs") if isinstance(doc, dict) else None
-    name = (crs_doc.get("properties") or {}).get("name") if isinstance(crs_doc, dict) else None
+    props = (crs_doc.get("properties") or {}) if isinstance(crs_doc, dict) else {}
+    kind = str(crs_doc.get("type", "")).lower() if isinstance(crs_doc, dict) else ""
+    name = props.get("name")
+    if kind == "epsg" and props.get("code") is not None:  # the GeoJSON 2008 draft's form
+        name = f"EPSG:{props['code']}"
+    elif kind == "link" or (crs_doc is not None and not name):
+        # ignored, a grid's metres were read as degrees and told to swap (a GIS user trial)
+        raise TrackMapError(
+            f"{path}: its crs member ({json.dumps(crs_doc)[:120]}) cannot be read; name the "
+            "CRS: \"crs\": {\"type\": \"name\", \"properties\": {\"name\": "
+            "\"EPSG:31370\"}} (or export the file in WGS84, RFC 7946)"
+        )
     if not name:
         return doc
     from pyproj import CRS, Transformer
@@ -274,9 +285,15 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
         k = int(np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))[0])
         # a longitude past 180 with a valid latitude is a line unwrapped across the
         # antimeridian, not swapped coordinates (a geometry review: told to swap them)
-        fix = ("longitudes must lie within [-180, 180]: wrap it (subtract 360)"
-               if abs(lat[k]) <= 90.0 and abs(lon[k]) <= 540.0
-               else "GeoJSON coordinates are [lon, lat] (longitude first): swap them")  # fmt: skip
+        if np.all(np.abs(coords[:, :2]) > 360.0):  # metres of a grid, not degrees swapped
+            fix = ("the coordinates are metres of a projection (Belgian Lambert 72 or 2008, "
+                   "UTM) and the file names no crs: add the crs member, e.g. \"crs\": "
+                   "{\"type\": \"name\", \"properties\": {\"name\": \"EPSG:31370\"}}, "
+                   "or export it in WGS84")  # fmt: skip
+        elif abs(lat[k]) <= 90.0 and abs(lon[k]) <= 540.0:
+            fix = "longitudes must lie within [-180, 180]: wrap it (subtract 360)"
+        else:
+            fix = "GeoJSON coordinates are [lon, lat] (longitude first): swap them"
         raise TrackMapError(
             f"{path}: {where} vertex {k} = {coords[k, :2].tolist()} is not a valid "
             f"[lon, lat]; {fix}"

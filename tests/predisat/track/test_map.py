@@ -600,6 +600,20 @@ def test_a_legacy_geojson_in_a_national_grid_is_read_in_its_crs(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(TrackMapError, match="crs member names 'EPSG:99999'"):
         TrackMap.from_geojson(path)
+    # the 2008 draft's forms (a GIS user trial: ignored, then told to swap the grid's metres)
+    doc["features"][0]["geometry"]["coordinates"] = np.c_[x, y].tolist()
+    doc["crs"] = {"type": "EPSG", "properties": {"code": 31370}}
+    path.write_text(json.dumps(doc))
+    got = TrackMap.from_geojson(path).project(*ref.position_at(s)[:2])
+    assert np.abs(got.offset_m).max() < 0.05
+    doc["crs"] = {"type": "link", "properties": {"href": "http://x/31370.proj4", "type": "proj4"}}
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"crs member .* cannot be read; name the CRS"):
+        TrackMap.from_geojson(path)
+    del doc["crs"]  # metres without a crs: told so, not to swap them
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match=r"metres of a projection .* names no crs"):
+        TrackMap.from_geojson(path)
 
 
 def test_heights_above_a_geoid_are_refused_without_the_grid_to_convert_them(tmp_path):
