@@ -98,7 +98,8 @@ def geojson_layer(
     """The line cut into one segment per position, coloured by the masks' share >= 4.
 
     The features are those of ``results[0].to_geojson_lines(track)`` (the first result is
-    the masks rule) with, for styling in QGIS or any GeoJSON viewer: ``rule``,
+    the masks rule) with ``line_km`` (when the track has kilometre posts; null where they say
+    nothing) and, for styling in QGIS or any GeoJSON viewer: ``rule``,
     ``share_ge4_class`` (:data:`SHARE_CLASSES` label), ``stroke`` (its colour),
     ``stroke-width``, and ``share_ge4_<rule>`` / ``share_ge6_<rule>`` for every other rule.
     """
@@ -106,6 +107,10 @@ def geojson_layer(
         raise ValueError("results is empty: pass at least one Availability")
     base = results[0]
     fc = base.to_geojson_lines(track)
+    # the line's kilometre, as positions.csv has it (a GIS user trial missed it in QGIS)
+    km = None
+    if track is not None and len(getattr(track, "kilometre_posts", ())) > 0:
+        km = track.kilometre_at(base.chainage_m) / 1000.0
     others = {}
     for r in results[1:]:
         slug = _slug(r.rule)
@@ -118,6 +123,8 @@ def geojson_layer(
         props["share_ge4_class"] = label
         props["stroke"] = colour
         props["stroke-width"] = 4
+        if km is not None:  # null where the posts say nothing (a kilometre equation)
+            props["line_km"] = float(km[i]) if np.isfinite(km[i]) else None
         for key, values in others.items():
             props[key] = float(values[i])
     return fc

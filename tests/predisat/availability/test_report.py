@@ -194,6 +194,8 @@ def test_geojson_layer_properties(results, track):
         assert props["stroke"] == ("#b2182b" if i < 5 else "#2166ac")
         assert props["share_ge4_no_mask"] == 1.0 and props["share_ge6_cutoff_15_deg"] == 1.0
         assert props["rule"] == "masks"
+        # the line's kilometre, as positions.csv gives it (the demo line's posts)
+        assert props["line_km"] == pytest.approx(float(track.kilometre_at(CH[i])) / 1000.0)
 
 
 # ----------------------------------------------------------------------------- plots
