@@ -1175,6 +1175,9 @@ def process_survey(
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     masks_path = join(out, "masks.parquet")
+    # the run's record withdrawn first, written last: a full disk between left the new mask
+    # file beside the previous run's provenance.json (a user trial)
+    remove(join(out, "provenance.json"), opts)
     if isinstance(masks_path, Path):
         write_masks(merged, masks_path)
     else:
