@@ -703,9 +703,6 @@ def run_availability(
         opts = dict(storage_options or {})
         out = location(absolute(out_dir))  # a cluster's worker resolves a relative path in
         # its own working folder
-        if isinstance(out, Path):  # one run writes a local folder at a time, from its start
-            out.mkdir(parents=True, exist_ok=True)
-            held.enter_context(exclusive_folder(out))
         mask_set, masks_label, track, mask_notes = _masks_on_track(
             masks, track, from_m, to_m, opts
         )
@@ -724,6 +721,9 @@ def run_availability(
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
+        if isinstance(out, Path):  # one run writes a local folder at a time, from its blocks
+            out.mkdir(parents=True, exist_ok=True)  # on (its inputs were checked: no folder
+            held.enter_context(exclusive_folder(out))  # is made for a refused run)
         blocks = join(out, "blocks")
         # the block tasks read and write no file (this process saves them): no paths
         with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint) as runner:
