@@ -47,8 +47,21 @@ _TURNS = MappingProxyType({
 
 
 def exif_orientation(im: Image.Image) -> int:
-    """The EXIF Orientation of an opened image (1, "as stored", when it has none)."""
-    turn = im.getexif().get(_EXIF_ORIENTATION, 1)
+    """The EXIF Orientation of an opened image (1, "as stored", when it has none).
+
+    Read from the header alone: ``Image.getexif`` made PIL read a whole PNG (decoding frames
+    1.9 times as long as OpenCV, ``scripts/bench_decode.py``); a PNG's eXIf chunk after its
+    pixels is not seen (cameras write JPEG or TIFF).
+    """
+    if im.format == "TIFF":  # its tags are the header
+        turn = im.getexif().get(_EXIF_ORIENTATION, 1)
+    else:
+        raw = im.info.get("exif")
+        if not raw:
+            return 1
+        exif = Image.Exif()
+        exif.load(raw)
+        turn = exif.get(_EXIF_ORIENTATION, 1)
     return int(turn) if isinstance(turn, int) else 1
 
 
@@ -131,7 +144,8 @@ def decode_frame(data: bytes | NDArray, label: str) -> tuple[NDArray | None, str
     if img is None:
         return None, f"image {label} cannot be decoded; re-export it as JPEG or PNG"
     try:
-        with Image.open(io.BytesIO(buf.tobytes())) as im:  # the header only
+        raw = data if isinstance(data, bytes) else buf.tobytes()
+        with Image.open(io.BytesIO(raw)) as im:  # the header only
             problem = orientation_problem(exif_orientation(im), label)
     except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError):
         problem = None  # OpenCV decoded it: a format PIL lacks carries no EXIF it reads

@@ -56,6 +56,17 @@ def test_a_frame_tagged_with_an_exif_turn_is_refused_and_its_stored_pixels_never
     assert thumb is not None and thumb.shape == (12, 16)  # a quarter of the stored 64x48
 
 
+@pytest.mark.parametrize("fmt", ["PNG", "TIFF"])
+def test_a_turn_in_a_png_or_tiff_is_seen_too(fmt: str) -> None:
+    im = Image.fromarray(_scene()[:, :, ::-1])
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    buf = io.BytesIO()
+    im.save(buf, fmt, exif=exif.tobytes())
+    problem = decode_frame(buf.getvalue(), "f")[1]
+    assert problem is not None and "EXIF Orientation 6 (turned 90 deg clockwise" in problem
+
+
 def test_the_loader_refuses_a_tagged_frame_naming_the_turn_and_the_fix(tmp_path: Path) -> None:
     root = _write(tmp_path / "s", n=3)
     path = root / "images" / "left_000001.jpg"
