@@ -39,7 +39,8 @@ from predisat.gnss.ephemeris import Reason
 from predisat.gnss.timescale import gps_s_to_utc_datetime64, gps_s_to_utc_text
 from predisat.jsontypes import JsonDict
 from predisat.masks.maskset import WEAK_SUPPORT, BinSource, MaskSet
-from predisat.track import KilometrePost, TrackMap
+from predisat.track import KilometrePost, TrackMap, TrackMapError
+from predisat.track.readers import geojson_in_lonlat
 
 __all__ = [
     "LOCOPROL_ROW",
@@ -247,6 +248,10 @@ def basemap_from_geojson(path: str | Path, max_lines: int = 20000) -> tuple[NDAr
             f"basemap {p}: cannot be read as GeoJSON ({exc}); give a GeoJSON FeatureCollection "
             "of lines (WGS84 lon/lat)"
         ) from None
+    try:  # a national grid's export with its crs member, as --track reads it (a trial)
+        doc = geojson_in_lonlat(doc, p)
+    except TrackMapError as exc:
+        raise ValueError(f"basemap {exc}") from None
     feats = doc.get("features") if isinstance(doc, dict) else None
     if not isinstance(feats, list):
         raise ValueError(f"basemap {p}: no 'features' list; give a GeoJSON FeatureCollection")

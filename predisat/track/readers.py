@@ -39,6 +39,7 @@ __all__ = [
     "checked_parts",
     "feature_label",
     "geojson_features",
+    "geojson_in_lonlat",
     "kilometre_posts_from_sections",
     "parse_csv_track",
     "parse_geojson_track",
@@ -152,10 +153,10 @@ def _load_json(path: Path) -> Any:
             f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); "
             "expected a GeoJSON FeatureCollection"
         ) from None
-    return _to_lonlat(doc, path)
+    return geojson_in_lonlat(doc, path)
 
 
-def _to_lonlat(doc: Any, path: Path) -> Any:
+def geojson_in_lonlat(doc: Any, path: Path) -> Any:
     """``doc`` with its coordinates turned into WGS84 [lon, lat] when it names another CRS
     in the legacy (GeoJSON 2008) ``crs`` member: exports of national grids (Lambert 72,
     EPSG:31370) still carry it, and a user trial's was read as degrees and told to swap them.

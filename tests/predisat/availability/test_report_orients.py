@@ -402,3 +402,22 @@ def test_report_sky_views_flag_weak_bins_from_the_support(results, masks, satell
     assert view.weak is not None and np.flatnonzero(view.weak).tolist() == [30, 31, 32]
     plain = ReportInputs(results, masks, satellites, track, INFO, sky_chainage_m=(CH[0],))
     assert _sky_views(plain)[0].weak is None
+
+
+def test_a_basemap_in_a_national_grid_is_read_in_its_crs(tmp_path: Path) -> None:
+    """--track read a Lambert 72 GeoJSON with its crs member; --basemap refused the same file
+    (a GIS user trial). pyproj is the reference."""
+    from pyproj import Transformer
+
+    lon = np.array([4.69, 4.70, 4.71])
+    lat = np.array([50.56, 50.565, 50.57])
+    x, y = Transformer.from_crs("EPSG:4326", "EPSG:31370", always_xy=True).transform(lon, lat)
+    doc = {"type": "FeatureCollection",
+           "crs": {"type": "name", "properties": {"name": "EPSG:31370"}},
+           "features": [{"type": "Feature", "properties": {},
+                         "geometry": {"type": "LineString",
+                                      "coordinates": np.c_[x, y].tolist()}}]}  # fmt: skip
+    path = tmp_path / "l72.geojson"
+    path.write_text(json.dumps(doc))
+    (line,) = basemap_from_geojson(path)
+    np.testing.assert_allclose(line, np.c_[lon, lat], atol=1e-7)
