@@ -336,14 +336,23 @@ def _quiet_shutdown() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
+def _not_a_task_error(record: logging.LogRecord) -> bool:
+    """False for distributed's "Compute Failed" report of a task's own exception: the client
+    raises that exception and the command prints it in one line; printed by the worker too, a
+    full traceback came first on the terminal (a storage trial)."""
+    return not str(record.msg).startswith("Compute Failed")
+
+
 def dask_setup(worker: object) -> None:
-    """Preload hook of the local cluster's worker processes: they ignore SIGINT.
+    """Preload hook of the local cluster's worker processes: they ignore SIGINT, and leave a
+    task's error to the command that sent it.
 
     Ctrl-C in a terminal reaches every process of the group; this process alone handles it
     (it cancels the tasks and closes the cluster), so the workers must not die of it first.
     """
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(_not_a_task_error)
 
 
 def _start_local_cluster(workers: int) -> Any:

@@ -314,3 +314,18 @@ def test_a_worker_that_joins_later_or_kept_old_modules_refuses_its_tasks() -> No
             finally:
                 late.terminate()
                 late.wait(30)
+
+
+def failing(shared: int, item: int) -> int:
+    raise ValueError(f"item {item} is bad")
+
+
+def test_a_tasks_error_reaches_the_command_once_without_the_workers_traceback(
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    """A local worker printed distributed's "Compute Failed" traceback before the command's
+    one-line error (a storage trial)."""
+    with TaskRunner(Scheduler.local(1)) as runner, pytest.raises(ValueError, match="item 1"):
+        list(runner.map_unordered(failing, 0, [1]))
+    err = capfd.readouterr().err
+    assert "Compute Failed" not in err and "Traceback" not in err
