@@ -572,12 +572,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         if args.track is None:
             raise CliError("--truth-positions needs the run's track (--track FILE, and "
                            "--track-name when the file holds several) to project them on")
-        track = track_option(args.track, args.track_name, args.chain, args.where)
-        if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
-            raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
-                           f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
-                           "that track")  # fmt: skip
-        _check_same_track(track, meta, str(args.track))
+        track = _run_track(args, meta, length_m)
         truth = truth_from_positions(epochs, read_ground_truth(args.truth_positions), track)
     else:
         if sim is None and (args.track is not None or args.track_name is not None or args.where):
@@ -593,6 +588,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 # A track whose ends lie farther than this from the run's is another track, or reversed.
 _TRACK_END_TOL_M = 5.0
+
+
+def _run_track(args: argparse.Namespace, meta: dict[str, Any], length_m: Any) -> Any:
+    """``--track`` of `evaluate`, refused unless it is the run's (its length and ends)."""
+    track = track_option(args.track, args.track_name, args.chain, args.where)
+    if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
+        raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
+                       f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
+                       "that track")  # fmt: skip
+    _check_same_track(track, meta, str(args.track))
+    return track
 
 
 def _sim_on_run_track(
@@ -628,12 +634,7 @@ def _sim_on_run_track(
                                "chainages are not the run's: give the run's map as --track to "
                                "project the simulated antenna on it") from None  # fmt: skip
         return sim
-    track = track_option(args.track, args.track_name, args.chain, args.where)
-    if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
-        raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
-                       f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
-                       "that track")  # fmt: skip
-    _check_same_track(track, meta, str(args.track))
+    track = _run_track(args, meta, length_m)
     try:
         return sim_on_track(sim, track, str(args.sim))
     except ValueError as exc:
