@@ -415,8 +415,8 @@ class TrackMap:
             return np.full(s.shape, np.nan)
         cs = np.array([p.chainage_m for p in posts])
         km = np.array([p.km_m for p in posts])
-        if cs.size == 1:
-            return km[0] + (s - cs[0])
+        if cs.size == 1:  # as beyond the outer posts: 1 km at most
+            return np.where(np.abs(s - cs[0]) <= _POST_REACH_M, km[0] + (s - cs[0]), np.nan)
         out = np.interp(s, cs, km)
         lo, hi = s < cs[0], s > cs[-1]
         slope_lo = (km[1] - km[0]) / (cs[1] - cs[0]) if cs[1] > cs[0] else 1.0
@@ -568,29 +568,33 @@ def _check_vertices(lat: NDArray, lon: NDArray, h: NDArray, where: str) -> None:
 
 _POST_REACH_M = 1000.0  # line kilometres extrapolated at most this far beyond the outer posts
 
-MIN_RADIUS_M = 20.0
-"""Tightest horizontal radius a track read from a file may turn on (a tram's; main lines stay
-above 150 m). Tighter, the geometry folds: two parts overlapping by 1 m at a joint made the axis
-turn back on a 1.6 m radius, every chainage after it 2.4 m long, and the whole line lose its
-smoothing (a user trial)."""
+FOLD_TURN_DEG = 90.0
+"""Largest turn of a track's heading within :data:`_FOLD_BASE_M` of chainage. A railway needs
+hundreds of metres to turn a right angle (a tram's 20 m radius: 31 m); an axis that turns back
+within 10 m folds: two parts overlapping by 1 m at a joint made it turn by 178 deg on line 144,
+lengthen every chainage after it by 2.4 m and lose the smoothing of the whole line (a user
+trial). A coarse polyline's corner is not a fold: a 41 deg corner of Infrabel's 10 m export
+cut within a metre (a radius of 17.7 m) is a real curve of 180 m."""
+_FOLD_BASE_M = 10
 
 
 def _check_turns(tm: TrackMap, where: str) -> None:
-    """Refuse a track whose smooth axis turns tighter than :data:`MIN_RADIUS_M` anywhere
-    (sampled every metre)."""
-    # the turn of the heading metre by metre: a curvature alone misses a fold along a straight
-    # line (the axis stops and runs back, turning by 180 deg on no radius at all)
+    """Refuse a track whose smooth axis turns by more than :data:`FOLD_TURN_DEG` within 10 m of
+    chainage anywhere (the heading sampled every metre, unwrapped)."""
     s = np.arange(0.0, tm.length_m + 1.0, 1.0).clip(max=tm.length_m)
-    turn = np.abs((np.diff(tm.heading_at(s)) + 180.0) % 360.0 - 180.0)
-    k = np.radians(turn) / np.maximum(np.diff(s), 1e-9)
-    worst = int(np.argmax(k))
-    if k[worst] > 1.0 / MIN_RADIUS_M:
-        lat, lon, _ = tm.position_at(s[worst])
+    if s.size <= _FOLD_BASE_M:
+        return
+    heading = np.unwrap(np.radians(tm.heading_at(s)))
+    turn = np.degrees(np.abs(heading[_FOLD_BASE_M:] - heading[:-_FOLD_BASE_M]))
+    worst = int(np.argmax(turn))
+    if turn[worst] > FOLD_TURN_DEG:
+        at = float(s[worst] + 0.5 * _FOLD_BASE_M)
+        lat, lon, _ = tm.position_at(at)
         raise TrackMapError(
-            f"{where}: track {tm.name!r} turns on a radius of {1.0 / k[worst]:.1f} m at "
-            f"chainage {s[worst]:.0f} m (lat {float(lat):.6f}, lon {float(lon):.6f}), tighter "
-            f"than any railway ({MIN_RADIUS_M:g} m): the line folds back there (parts that "
-            "overlap or step back at a joint, a spur); fix the geometry at that place"
+            f"{where}: track {tm.name!r} turns by {turn[worst]:.0f} deg within "
+            f"{_FOLD_BASE_M} m at chainage {at:.0f} m (lat {float(lat):.6f}, lon "
+            f"{float(lon):.6f}): the line folds back there (parts that overlap or step back at "
+            "a joint, a spur); fix the geometry at that place"
         )
 
 

@@ -288,9 +288,10 @@ def _check_lonlat(coords: NDArray, where: str, path: Path, bbox: Sequence[float]
         # antimeridian, not swapped coordinates (a geometry review: told to swap them)
         if np.all(np.abs(coords[:, :2]) > 360.0):  # metres of a grid, not degrees swapped
             fix = ("the coordinates are metres of a projection (Belgian Lambert 72 or 2008, "
-                   "UTM) and the file names no crs: add the crs member, e.g. \"crs\": "
-                   "{\"type\": \"name\", \"properties\": {\"name\": \"EPSG:31370\"}}, "
-                   "or export it in WGS84")  # fmt: skip
+                   "UTM) and the file names no crs: add the crs member of its own CRS, e.g. "
+                   "\"crs\": {\"type\": \"name\", \"properties\": {\"name\": "
+                   "\"EPSG:31370\"}} for Lambert 72, EPSG:3812 for Lambert 2008, or export "
+                   "it in WGS84")  # fmt: skip
         elif abs(lat[k]) <= 90.0 and abs(lon[k]) <= 540.0:
             fix = "longitudes must lie within [-180, 180]: wrap it (subtract 360)"
         else:

@@ -697,25 +697,31 @@ def test_heights_steeper_than_a_railway_are_a_measure_not_a_height():
 
 
 def test_parts_overlapping_at_a_joint_fold_the_axis_and_are_refused(tmp_path):
-    """Part 2 starting 1 m back along part 1 (a snapping artefact) made the axis turn back on a
-    1.6 m radius and lengthened every chainage after it (a user trial); joined end to end the
-    same parts give the line."""
+    """Part 2 starting 1 m back from the joint (a snapping artefact) made the axis turn back by
+    178 deg, lengthened every chainage after it and unsmoothed the line (a GIS user trial, the
+    same construction on line 144); joined end to end the same parts give the line, and a coarse
+    polyline's 41 deg corner (a real Infrabel curve, refused by a first radius rule) is kept."""
     line = demo_track()
-    lat, lon, h = line.lat_deg, line.lon_deg, line.h_m
-    k = 30  # a vertex on a curve of line 144
-    az_back = GEOD.inv(lon[k], lat[k], lon[k - 1], lat[k - 1])[0]
-    back_lon, back_lat, _ = GEOD.fwd(lon[k], lat[k], az_back, 1.0)  # 1 m back along part 1
-    first = np.column_stack([lon[: k + 1], lat[: k + 1], h[: k + 1]]).tolist()
-    rest = np.column_stack([lon[k + 1 :], lat[k + 1 :], h[k + 1 :]]).tolist()
-    for start, name in (([lon[k], lat[k], h[k]], "joined"),
-                        ([back_lon, back_lat, h[k]], "overlap")):  # fmt: skip
-        feats = [line_feature(first, name="L"), line_feature([start, *rest], name="L")]
-        path = write(tmp_path, f"{name}.geojson",
-                     json.dumps({"type": "FeatureCollection", "features": feats}))  # fmt: skip
+    lonlat = np.column_stack([line.lon_deg, line.lat_deg])
+    k = 30
+    first, second = lonlat[: k + 1], lonlat[k:].copy()
+    along = (second[1] - second[0]) / np.hypot(*(second[1] - second[0]))
+    for name, start in (("joined", second[0]), ("overlap", second[0] - 1.4e-5 * along)):
+        parts = [first.tolist(), [start.tolist(), *second[1:].tolist()]]
+        doc = {"type": "Feature", "properties": {"name": name},
+               "geometry": {"type": "MultiLineString", "coordinates": parts}}  # fmt: skip
+        path = write(tmp_path, f"{name}.geojson", json.dumps(doc))
         if name == "joined":
-            got = TrackMap.from_geojson(path, tolerance_m=line.tolerance_m)
-            assert got.length_m == pytest.approx(line.length_m, abs=0.05)
+            assert TrackMap.from_geojson(path).length_m == pytest.approx(line.length_m, abs=0.05)
         else:
-            with pytest.raises(TrackMapError, match=r"turns on a radius of [\d.]+ m at chainage "
-                               r"\d+ m .*folds back"):  # fmt: skip
-                TrackMap.from_geojson(path, tolerance_m=line.tolerance_m)
+            with pytest.raises(TrackMapError, match=r"turns by 1\d\d deg within 10 m at "
+                               r"chainage \d+ m .*folds back"):  # fmt: skip
+                TrackMap.from_geojson(path)
+    # five vertices 90 m apart turning 33-42 deg each (a 180 m curve simplified to 10 m)
+    lon, lat = [4.7], [50.5]
+    for a in np.cumsum([0.0, 33.0, 42.0, 40.0]):
+        x, y, _ = GEOD.fwd(lon[-1], lat[-1], a, 90.0)
+        lon.append(x)
+        lat.append(y)
+    coarse = write(tmp_path, "coarse.geojson", json.dumps(line_feature(np.c_[lon, lat].tolist())))
+    assert TrackMap.from_geojson(coarse).length_m > 300.0

@@ -113,3 +113,11 @@ def test_a_kilometre_equation_leaves_the_kilometres_between_its_posts_empty(
     assert np.isnan(km[2])
     # far beyond the outer posts nothing is said either (posts may have been dropped there)
     assert np.isnan(tm.kilometre_at(-1500.0)) and np.isfinite(tm.kilometre_at(-500.0))
+
+
+def test_a_single_post_labels_one_kilometre_around_it(tmp_path: Path) -> None:
+    """One post left: its kilometres were extrapolated 9 km away (a re-run of the GIS trial)."""
+    tm = TrackMap.from_geojson(_line_with_posts(tmp_path / "one.geojson", [12.0], [200.0]))
+    km = tm.kilometre_at([0.0, 1100.0, 1300.0])
+    np.testing.assert_allclose(km[:2], [11_800.0, 12_900.0], atol=1.0)
+    assert np.isnan(km[2])
