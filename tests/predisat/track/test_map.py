@@ -725,3 +725,22 @@ def test_parts_overlapping_at_a_joint_fold_the_axis_and_are_refused(tmp_path):
         lat.append(y)
     coarse = write(tmp_path, "coarse.geojson", json.dumps(line_feature(np.c_[lon, lat].tolist())))
     assert TrackMap.from_geojson(coarse).length_m > 300.0
+
+
+def test_a_track_with_its_coordinates_swapped_lies_at_sea_and_is_refused(tmp_path):
+    """Line 144 as a CSV under a lat,lon header holding lon,lat (a GIS export's x,y order) landed
+    off Somalia and was used without a word: 0.30 % false trust in its masks (two user trials).
+    The land grid (global_land_mask) is the reference; a coastal station's line is kept."""
+    line = demo_track()
+    rows = "\n".join(f"{o:.9f},{a:.9f}" for a, o in zip(line.lat_deg, line.lon_deg, strict=True))
+    with pytest.raises(TrackMapError, match=r"lies at sea over 100 % of its length .* would lie "
+                       r"at lat 50\.\d+, lon 4\.\d+, on land: they are swapped"):  # fmt: skip
+        TrackMap.from_csv(write(tmp_path, "swapped.csv", "lat_deg,lon_deg\n" + rows + "\n"))
+    doc = line_feature(np.column_stack([line.lat_deg, line.lon_deg]).tolist())  # lat first
+    with pytest.raises(TrackMapError, match="lies at sea"):
+        TrackMap.from_geojson(write(tmp_path, "latlon.geojson", json.dumps(doc)))
+    # 2 km along the coast of the Miura peninsula through GEONET 0759 (the 1 km grid's
+    # coastline puts most of it at sea; within 3 km of land it is kept)
+    lat, lon = straight_latlon(2000.0, 40.0, 100.0, start=(35.155, 139.605))
+    rows = "\n".join(f"{a:.9f},{o:.9f}" for a, o in zip(lat, lon, strict=True))
+    assert TrackMap.from_csv(write(tmp_path, "coast.csv", "lat,lon\n" + rows + "\n")).length_m > 0
