@@ -337,10 +337,13 @@ def _quiet_shutdown() -> None:
 
 
 def _not_a_task_error(record: logging.LogRecord) -> bool:
-    """False for distributed's "Compute Failed" report of a task's own exception: the client
+    """False for distributed's "Compute Failed" report of a task's own exception (the client
     raises that exception and the command prints it in one line; printed by the worker too, a
-    full traceback came first on the terminal (a storage trial)."""
-    return not str(record.msg).startswith("Compute Failed")
+    full traceback came first on the terminal: a storage trial) and for a heartbeat that missed
+    the closing or busy scheduler (a traceback in the middle of `predisat demo` on a loaded
+    machine; a scheduler really lost ends the command in one line, ``_cluster_lost``)."""
+    text = str(record.msg)
+    return not text.startswith(("Compute Failed", "Failed to communicate with scheduler"))
 
 
 def dask_setup(worker: object) -> None:

@@ -329,3 +329,16 @@ def test_a_tasks_error_reaches_the_command_once_without_the_workers_traceback(
         list(runner.map_unordered(failing, 0, [1]))
     err = capfd.readouterr().err
     assert "Compute Failed" not in err and "Traceback" not in err
+
+
+def test_local_workers_drop_only_the_logs_the_command_says_better() -> None:
+    import logging
+
+    from predisat.scheduler import _not_a_task_error
+
+    def record(msg: str) -> logging.LogRecord:
+        return logging.LogRecord("distributed.worker", logging.ERROR, "w.py", 1, msg, None, None)
+
+    assert not _not_a_task_error(record("Compute Failed\nKey: x"))
+    assert not _not_a_task_error(record("Failed to communicate with scheduler during heartbeat."))
+    assert _not_a_task_error(record("Worker is at 95% memory usage. Pausing worker."))
