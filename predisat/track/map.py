@@ -14,6 +14,7 @@ The fit itself is in :mod:`predisat.track.smooth`. Readers for GeoJSON and CSV f
 from __future__ import annotations
 
 import copy
+import functools
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -600,52 +601,68 @@ def _check_turns(tm: TrackMap, where: str) -> None:
 
 
 MIN_SHARE_ON_LAND = 0.5
-"""Least share of a track's length that must lie on land (a 1 km grid, ``global_land_mask``):
-bridges, causeways and a coarse coastline keep a line well above it. Below, its coordinates are
-swapped: a Belgian line 144 with latitude and longitude exchanged (a track CSV under a
-hand-written header, a GeoJSON in lat, lon order) landed off Somalia and was used without a
-word, with 0.30 % false trust in the masks made on it (two user trials)."""
+"""Least share of a track's length that must lie on land (:func:`_land_at`): bridges, causeways
+and a coastline keep a line well above it. Below, its coordinates are swapped: a Belgian line
+144 with latitude and longitude exchanged (a track CSV under a hand-written header, a GeoJSON in
+lat, lon order) landed off Somalia and was used without a word, with 0.30 % false trust in the
+masks made on it (two user trials)."""
+
+_LAND_STEP_DEG = 0.1
 
 
-_COAST_KM = 3.0  # the grid's coastline is coarse: a coastal station fell "at sea" in a test
+@functools.cache
+def _land_grid() -> NDArray:
+    """The packaged 0.1 deg land grid (``predisat/data/land_0p1deg.npz``, made by
+    ``scripts/make_land_grid.py`` from NOAA's GLOBE 1 km mask, public domain): read once, 6 MB
+    (the 1 km mask itself took 940 MB and 1-2 s at every track file's load)."""
+    with resources.files("predisat").joinpath("data/land_0p1deg.npz").open("rb") as f:
+        doc = np.load(f)
+        rows, cols = (int(v) for v in doc["shape"])
+        grid = np.unpackbits(doc["land"], axis=1, count=cols).astype(bool)
+    assert grid.shape == (rows, cols)
+    grid.setflags(write=False)
+    return grid
 
 
-def _near_land(globe: Any, lat: NDArray, lon: NDArray) -> NDArray:
-    """Whether each point has land within about 3 km (the grid's cells around it)."""
-    dlat = _COAST_KM / 111.0
-    dlon = dlat / np.maximum(np.cos(np.radians(lat)), 0.05)
-    out = np.zeros(lat.shape, bool)
-    for a in (-1.0, 0.0, 1.0):
-        for b in (-1.0, 0.0, 1.0):
-            la = np.clip(lat + a * dlat, -89.99, 89.99)
-            lo = (lon + b * dlon + 180.0) % 360.0 - 180.0
-            out |= np.asarray(globe.is_land(la, lo), bool)
-    return out
+def _land_at(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray:
+    """Whether there is land in the 0.1 deg cell (about 11 km) of each point.
+
+    Parameters
+    ----------
+    lat_deg, lon_deg : array_like, shape (...)
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+        True where any of the cell's 1 km cells of NOAA's GLOBE mask is land (a coastal point
+        on the coarse mask's sea side counts as land).
+    """
+    grid = _land_grid()
+    lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
+    row = np.clip(((90.0 - lat) / _LAND_STEP_DEG).astype(int), 0, grid.shape[0] - 1)
+    col = (np.floor((lon + 180.0) / _LAND_STEP_DEG).astype(int)) % grid.shape[1]
+    return grid[row, col]
 
 
 def _check_on_land(tm: TrackMap, where: str) -> None:
     """Refuse a track lying mostly at sea (sampled every 100 m), naming where it lies and
     where it would lie with its coordinates swapped."""
-    from global_land_mask import globe  # lazy: a 2.5 MB grid read on first use
-
     s = np.linspace(0.0, tm.length_m, max(2, int(tm.length_m // 100.0) + 1))
     lat, lon, _ = tm.position_at(s)
-    lat, lon = np.asarray(lat), (np.asarray(lon) + 180.0) % 360.0 - 180.0
-    land = _near_land(globe, lat, lon)
+    land = _land_at(lat, lon)
     if land.mean() >= MIN_SHARE_ON_LAND:
         return
     mid = len(s) // 2
-    swapped = abs(lon[mid]) <= 90.0 and bool(
-        _near_land(globe, lon[mid : mid + 1], lat[mid : mid + 1])[0]
-    )
+    lat_m, lon_m = float(lat[mid]), (float(lon[mid]) + 180.0) % 360.0 - 180.0
+    swapped = abs(lon_m) <= 90.0 and bool(_land_at(lon_m, lat_m))
     if swapped:
-        hint = (f"with latitude and longitude swapped it would lie at lat {lon[mid]:.4f}, "
-                f"lon {lat[mid]:.4f}, on land: they are swapped")  # fmt: skip
+        hint = (f"with latitude and longitude swapped it would lie at lat {lon_m:.4f}, "
+                f"lon {lat_m:.4f}, on land: they are swapped")  # fmt: skip
     else:
         hint = "are the latitude and longitude swapped, or the coordinates of another CRS?"
     raise TrackMapError(
         f"{where}: track {tm.name!r} lies at sea over {100 * (1 - land.mean()):.0f} % of its "
-        f"length (around lat {lat[mid]:.4f}, lon {lon[mid]:.4f}); {hint} (GeoJSON "
+        f"length (around lat {lat_m:.4f}, lon {lon_m:.4f}); {hint} (GeoJSON "
         "coordinates are [lon, lat]; a CSV's columns are read by their header)"
     )
 
