@@ -37,7 +37,9 @@ import sys
 import time
 import zipfile
 import zlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +78,7 @@ __all__ = [
     "compute_availability",
     "longest_run",
     "reference_counts",
+    "write_counts",
 ]
 
 THRESHOLDS = (2, 4, 6)
@@ -105,17 +108,29 @@ class Availability:
         The trust rule's label (``"masks"``, ``"cutoff 15 deg"``, ``"no mask"``).
     count : ndarray of uint8, shape (n_pos, n_epoch)
         Number of trusted satellites.
-    interval_m : ndarray of float32, shape (n_pos, n_epoch), or None
-        Predicted SATHIA interval length (NaN with < 2 satellites and at epochs skipped by
-        ``interval_every``), when computed.
-    sensitivity : ndarray of float32, shape (n_pos, n_epoch), or None
-        Along-track geometry of the best pair: ``max |g_i - g_j|`` over trusted pairs, where
-        ``g = u . t`` (unit vector to the satellite dotted with the track tangent); metres of
-        range difference per metre of chainage, in [0, 2]. NaN with < 2 satellites.
+    interval_m : ndarray of float32, shape (n_pos, n_interval), or None
+        Predicted SATHIA interval length at the epochs :attr:`interval_gps_s` (every
+        ``interval_every``-th epoch; NaN with < 2 satellites), when computed.
+    sensitivity : ndarray of float32, shape (n_pos, n_interval), or None
+        Along-track geometry of the best pair at the same epochs: ``max |g_i - g_j|`` over
+        trusted pairs, where ``g = u . t`` (unit vector to the satellite dotted with the track
+        tangent); metres of range difference per metre of chainage, in [0, 2]. NaN with < 2
+        satellites.
     opening_angle_deg : ndarray, shape (n_pos,)
         Cross-track opening angle: 180 deg minus the left and right mask elevations.
     provenance : dict
         Sources, options and timings.
+    interval_every : int
+        The intervals are predicted at every ``interval_every``-th epoch, from the first
+        (``n_interval = ceil(n_epoch / interval_every)``): only those are stored, so that a
+        line-day's result holds about 1 + 8 / ``interval_every`` bytes per (position, epoch).
+
+    Notes
+    -----
+    The reductions a report asks for several times (:meth:`summary`, :meth:`position_table`)
+    are computed once per result, and every reduction over the (n_pos, n_epoch) grid runs
+    over blocks of positions or epochs, so that no temporary the size of the grid is made
+    (``docs/availability.md``, "Memory").
     """
 
     positions: LinePositions
@@ -127,9 +142,31 @@ class Availability:
     sensitivity: NDArray | None
     opening_angle_deg: NDArray
     provenance: JsonDict = field(default_factory=dict)
+    interval_every: int = 1
 
     def __post_init__(self) -> None:
+        if self.interval_every < 1:
+            raise ValueError(f"interval_every must be >= 1, got {self.interval_every}")
+        n_iv = -(-len(self.gps_s) // self.interval_every)
+        for name in ("interval_m", "sensitivity"):
+            arr = getattr(self, name)
+            if arr is not None and np.shape(arr) != (np.shape(self.count)[0], n_iv):
+                raise ValueError(
+                    f"{name} has shape {np.shape(arr)}, expected (n_pos, ceil(n_epoch / "
+                    f"interval_every)) = ({np.shape(self.count)[0]}, {n_iv}): store the "
+                    "intervals at the predicted epochs only"
+                )
         freeze_array_fields(self)
+
+    @property
+    def interval_gps_s(self) -> NDArray:
+        """Epochs of :attr:`interval_m` (every ``interval_every``-th), (n_interval,)."""
+        return self.gps_s[:: self.interval_every]
+
+    @property
+    def interval_count(self) -> NDArray:
+        """``count`` at the epochs of :attr:`interval_m`, (n_pos, n_interval) (a view)."""
+        return self.count[:, :: self.interval_every]
 
     @property
     def chainage_m(self) -> NDArray:
@@ -148,7 +185,11 @@ class Availability:
     # ------------------------------------------------------------------ shares
     def share_at_least(self, n: int) -> NDArray:
         """Share of epochs with at least ``n`` trusted satellites, per position, (n_pos,)."""
-        return np.mean(self.count >= n, axis=1)
+        n_ep = self.count.shape[1]
+        return np.concatenate(
+            [np.count_nonzero(c >= n, axis=1) / max(n_ep, 1) for c in _row_blocks(self.count)]
+            or [np.zeros(0)]
+        )
 
     def line_share_at_least(self, n: int) -> float:
         """Share of (place, time) with >= ``n`` satellites over the line (length-weighted)."""
@@ -163,7 +204,8 @@ class Availability:
         (n_epoch,).
         """
         lo, hi = _cell_extent(self.chainage_m)
-        return longest_run(self.count.T < n, lo, hi)
+        cols = _row_blocks(self.count.T)  # blocks of epochs: the runs go along positions
+        return np.concatenate([longest_run(c < n, lo, hi) for c in cols] or [np.zeros(0)])
 
     def longest_below_s(self, n: int = 4) -> NDArray:
         """Longest contiguous time run with fewer than ``n`` satellites, per position, seconds.
@@ -172,7 +214,10 @@ class Availability:
         """
         t = self.gps_s
         half = self.step_s / 2.0
-        return longest_run(self.count < n, t - half, t + half)
+        blocks = _row_blocks(self.count)
+        return np.concatenate(
+            [longest_run(c < n, t - half, t + half) for c in blocks] or [np.zeros(0)]
+        )
 
     # ------------------------------------------------------------------ interval
     def interval_quantiles(self, q: tuple[float, ...] = (0.5, 0.95), min_count: int = 4) -> NDArray:
@@ -182,18 +227,24 @@ class Availability:
         -------
         ndarray, shape (n_pos, len(q)), metres (NaN where no such epoch)
         """
+        out = np.full((len(self.chainage_m), len(q)), np.nan)
         if self.interval_m is None:
-            return np.full((len(self.chainage_m), len(q)), np.nan)
-        x = np.where(self.count >= min_count, self.interval_m, np.nan).astype(float)
-        out = np.full((x.shape[0], len(q)), np.nan)
-        has = np.any(np.isfinite(x), axis=1)
-        if np.any(has):
-            out[has] = np.nanquantile(x[has], q, axis=1).T
+            return out
+        iv, cnt = self.interval_m, self.interval_count
+        for a, b in _row_slices(iv.shape):
+            x = np.where(cnt[a:b] >= min_count, iv[a:b], np.nan).astype(float)
+            has = np.any(np.isfinite(x), axis=1)
+            if np.any(has):
+                out[a:b][has] = np.nanquantile(x[has], q, axis=1).T
         return out
 
     # ------------------------------------------------------------------ tables
     def summary(self) -> JsonDict:
-        """Line-wide figures (JSON-serialisable)."""
+        """Line-wide figures (JSON-serialisable; a new dict at each call)."""
+        return dict(self._summary)
+
+    @cached_property
+    def _summary(self) -> JsonDict:
         by_epoch = self.longest_below_m(4)
         by_pos = self.longest_below_s(4)
         e, p = int(np.argmax(by_epoch)), int(np.argmax(by_pos))
@@ -215,14 +266,21 @@ class Availability:
         out["longest_below4_s_at_chainage_m"] = float(self.chainage_m[p])
         out["opening_angle_median_deg"] = float(np.median(self.opening_angle_deg))
         if self.interval_m is not None:
-            x = self.interval_m[self.count >= 4]
+            x = self.interval_m[self.interval_count >= 4]
             x = x[np.isfinite(x)]
             out["interval_median_m"] = float(np.median(x)) if len(x) else float("nan")
             out["interval_p95_m"] = float(np.quantile(x, 0.95)) if len(x) else float("nan")
         return out
 
     def position_table(self) -> pd.DataFrame:
-        """One row per position: place, shares, longest time below 4, interval, opening."""
+        """One row per position: place, shares, longest time below 4, interval, opening.
+
+        A new frame at each call (the columns are computed once per result).
+        """
+        return self._position_table.copy()
+
+    @cached_property
+    def _position_table(self) -> pd.DataFrame:
         pos = self.positions
         df = pd.DataFrame(
             {
@@ -235,7 +293,9 @@ class Availability:
         )
         for n in THRESHOLDS:
             df[f"share_ge{n}"] = self.share_at_least(n)
-        df["mean_count"] = self.count.mean(axis=1)
+        df["mean_count"] = np.concatenate(
+            [c.mean(axis=1) for c in _row_blocks(self.count)] or [np.zeros(0)]
+        )
         df["min_count"] = self.count.min(axis=1)
         df["longest_below4_s"] = self.longest_below_s(4)
         q = self.interval_quantiles()
@@ -246,10 +306,13 @@ class Availability:
 
     def epoch_table(self) -> pd.DataFrame:
         """One row per epoch: line-wide shares and the longest stretch below 4 (metres)."""
-        w = self.cell_length_m[:, None]
+        w = self.cell_length_m
         df = pd.DataFrame({"gps_s": self.gps_s})
         for n in THRESHOLDS:
-            df[f"share_ge{n}"] = np.sum((self.count >= n) * w, axis=0) / np.sum(w)
+            covered = np.zeros(len(self.gps_s))
+            for a, b in _row_slices(self.count.shape):
+                covered += w[a:b] @ (self.count[a:b] >= n)  # length with >= n, per epoch
+            df[f"share_ge{n}"] = covered / np.sum(w)
         df["min_count"] = self.count.min(axis=0)
         df["longest_below4_m"] = self.longest_below_m(4)
         return df
@@ -264,29 +327,20 @@ class Availability:
         """Write :meth:`position_table` as Parquet, with the summary in the file metadata.
 
         With ``counts=True`` the file holds the full ``count`` array instead, long format
-        (``chainage_m, gps_s, count``).
+        (:func:`write_counts`: ``rule, chainage_m, gps_s, count``).
         """
         # lazy: pyarrow only for this writer, not for the engine's computations
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         path = Path(path)
-        if counts:
-            n_pos, n_ep = self.count.shape
-            df = pd.DataFrame(
-                {
-                    "chainage_m": np.repeat(self.chainage_m, n_ep),
-                    "gps_s": np.tile(self.gps_s, n_pos),
-                    "count": self.count.ravel(),
-                }
-            )
-        else:
-            df = self.position_table()
-        table = pa.Table.from_pandas(df, preserve_index=False)
-        meta = dict(table.schema.metadata or {})
-        meta[b"predisat.availability.engine"] = json.dumps(
+        info = {b"predisat.availability.engine": json.dumps(
             {"summary": self.summary(), "provenance": _jsonable(self.provenance)}
-        ).encode()
+        ).encode()}  # fmt: skip
+        if counts:
+            return write_counts(path, [self], info)
+        table = pa.Table.from_pandas(self.position_table(), preserve_index=False)
+        meta = dict(table.schema.metadata or {}) | info
         pq.write_table(table.replace_schema_metadata(meta), path)
         return path
 
@@ -330,6 +384,78 @@ class Availability:
         if path is not None:
             Path(path).write_text(json.dumps(fc))
         return fc
+
+
+_BLOCK_CELLS = 1 << 22
+"""Cells of the (n_pos, n_epoch) grid a reduction takes at once: its temporaries stay at a
+few tens of MB, whatever the line and the day."""
+
+
+def _row_slices(shape: tuple[int, ...]) -> list[tuple[int, int]]:
+    """Slices of whole rows of an array of ``shape`` holding about :data:`_BLOCK_CELLS`."""
+    n_rows = shape[0]
+    per = max(1, _BLOCK_CELLS // max(int(np.prod(shape[1:])), 1))
+    return [(a, min(a + per, n_rows)) for a in range(0, n_rows, per)]
+
+
+def _row_blocks(arr: NDArray) -> list[NDArray]:
+    """Views of whole rows of ``arr``, about :data:`_BLOCK_CELLS` cells each."""
+    return [arr[a:b] for a, b in _row_slices(arr.shape)]
+
+
+_COUNTS_ROWS = 1 << 22
+"""Rows of ``counts.parquet`` built at once: the long table of a line-day is written in
+pieces, never held whole."""
+
+
+def write_counts(
+    path: str | Path, results: Sequence[Availability], metadata: Mapping[bytes, bytes] | None = None
+) -> Path:
+    """Write every count of every rule as one long table (``counts.parquet``).
+
+    Columns ``rule`` (dictionary-encoded), ``chainage_m``, ``gps_s``, ``count``: one row per
+    (rule, position, epoch), positions in order and epochs in order within each. Written in
+    row groups of whole positions, so that memory stays at a few tens of MB whatever the line
+    and the day.
+
+    Parameters
+    ----------
+    path : Path
+        The file to write.
+    results : sequence of Availability
+        One per rule, on the same positions and epochs.
+    metadata : mapping of bytes to bytes, optional
+        Key-value metadata of the file's schema.
+
+    Returns
+    -------
+    Path
+    """
+    # lazy: pyarrow only for the writers, not for the engine's computations
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pa.schema([
+        ("rule", pa.dictionary(pa.int32(), pa.string())), ("chainage_m", pa.float64()),
+        ("gps_s", pa.float64()), ("count", pa.uint8()),
+    ], metadata=dict(metadata or {}))  # fmt: skip
+    path = Path(path)
+    with pq.ParquetWriter(path, schema) as writer:
+        for r in results:
+            n_pos, n_ep = r.count.shape
+            per = max(1, _COUNTS_ROWS // max(n_ep, 1))
+            label = pa.array([r.rule], pa.string())
+            for a in range(0, n_pos, per):
+                b = min(a + per, n_pos)
+                rows = (b - a) * n_ep
+                writer.write_table(pa.table({
+                    "rule": pa.DictionaryArray.from_arrays(
+                        pa.array(np.zeros(rows, np.int32)), label),
+                    "chainage_m": np.repeat(r.chainage_m[a:b], n_ep),
+                    "gps_s": np.tile(r.gps_s, b - a),
+                    "count": r.count[a:b].ravel(),
+                }, schema=schema))  # fmt: skip
+    return path
 
 
 def _class_of(row: dict) -> str:
@@ -425,8 +551,9 @@ def compute_availability(
     with_interval : bool
         Also predict interval lengths and pair geometry.
     interval_every : int
-        Predict the interval at every ``interval_every``-th epoch only (NaN at the others);
-        the interval is the costly part, and its statistics need fewer epochs than the counts.
+        Predict the interval at every ``interval_every``-th epoch only (the only ones stored:
+        :attr:`Availability.interval_gps_s`); the interval is the costly part, and its
+        statistics need fewer epochs than the counts.
     chunk_positions : int
         Positions per chunk; memory is about ``chunk_positions * n_epoch * n_visible * 60``
         bytes (2 positions, a day at 30 s, 40 candidates: 14 MB per worker). Small chunks
@@ -466,8 +593,9 @@ def compute_availability(
     s32 = (cand.reshape(-1, 3) - centre).astype(np.float32).T.copy()  # (3, n_ep * m)
 
     count = np.zeros((n_pos, n_ep), np.uint8)
-    interval = np.full((n_pos, n_ep), np.nan, np.float32) if with_interval else None
-    sens = np.full((n_pos, n_ep), np.nan, np.float32) if with_interval else None
+    n_iv = -(-n_ep // interval_every)
+    interval = np.full((n_pos, n_iv), np.nan, np.float32) if with_interval else None
+    sens = np.full((n_pos, n_iv), np.nan, np.float32) if with_interval else None
     rot = positions.enu_rotation
     tan_ecef = np.einsum("pi,pij->pj", positions.tangent_enu, rot)  # t_enu @ R
     # thresholds at or above 90 deg (or +inf: no coverage) can never be passed: u <= range
@@ -496,7 +624,7 @@ def compute_availability(
         keys = {it.a: _block_key(base, it) for it in items}
         todo = []
         for it in items:
-            saved = checkpoint.load(it.a, it.b, keys[it.a], n_ep, with_interval)
+            saved = checkpoint.load(it.a, it.b, keys[it.a], n_ep, n_iv if with_interval else None)
             if saved is None:
                 todo.append(it)
                 continue
@@ -532,7 +660,7 @@ def compute_availability(
     }
     return Availability(
         positions, satellites.gps_s, satellites.sats, rule.label, count, interval, sens,
-        rule.opening_angle_deg(n_pos), prov,
+        rule.opening_angle_deg(n_pos), prov, interval_every,
     )  # fmt: skip
 
 
@@ -665,11 +793,11 @@ class BlockCheckpoint:
     """The folder where the finished blocks of one availability computation are kept.
 
     Each block is a file ``<a>_<b>.npz`` (positions ``[a, b)``) holding its counts (and
-    intervals, pair geometry) and the hash of its inputs (the engine's code, the candidate
-    satellites, the options, the block's positions, geometry and thresholds); it is written
-    atomically (:func:`predisat.storage.write_atomic`). A block is taken back only when its
-    hash is the one of the computation asking for it; a torn or foreign file is computed
-    again.
+    intervals, pair geometry at the predicted epochs) and the hash of its inputs (the engine's
+    code, the candidate satellites, the options, the block's positions, geometry and
+    thresholds); it is written atomically (:func:`predisat.storage.write_atomic`). A block is
+    taken back only when its hash is the one of the computation asking for it; a torn or
+    foreign file is computed again.
 
     Attributes
     ----------
@@ -687,10 +815,14 @@ class BlockCheckpoint:
         return join(self.folder, f"{a}_{b}.npz")
 
     def load(
-        self, a: int, b: int, key: str, n_epoch: int, with_interval: bool
+        self, a: int, b: int, key: str, n_epoch: int, n_interval: int | None
     ) -> tuple[NDArray, NDArray | None, NDArray | None] | None:
-        """The saved ``(count, interval_m, sensitivity)`` of a block, each (b - a, n_epoch),
-        or None when absent, torn or made from other inputs."""
+        """The saved ``(count, interval_m, sensitivity)`` of a block, or None when absent,
+        torn or made from other inputs.
+
+        ``count`` is (b - a, n_epoch); the other two (b - a, n_interval), None when
+        ``n_interval`` is None (no intervals asked for)."""
+        with_interval = n_interval is not None
         loc, opts = self.path(a, b), self.storage_options
         if not exists(loc, opts):
             return None
@@ -703,11 +835,10 @@ class BlockCheckpoint:
                 se = np.asarray(z["sensitivity"]) if with_interval else None
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
             return None
-        shape = (b - a, n_epoch)
-        if count.shape != shape or count.dtype != np.uint8:
+        if count.shape != (b - a, n_epoch) or count.dtype != np.uint8:
             return None
         for arr in (iv, se):
-            if arr is not None and (arr.shape != shape or arr.dtype != np.float32):
+            if arr is not None and (arr.shape != (b - a, n_interval) or arr.dtype != np.float32):
                 return None
         return count, iv, se
 
@@ -734,7 +865,8 @@ def block_task(
     Returns
     -------
     tuple
-        ``(a, b, count, interval_m, sensitivity)``, the arrays of shape (b - a, n_epoch).
+        ``(a, b, count, interval_m, sensitivity)``: ``count`` of shape (b - a, n_epoch), the
+        others (b - a, n_interval), at every ``every``-th epoch.
     """
     parts = []
     for lo in range(0, block.b - block.a, shared.chunk_positions):
@@ -800,15 +932,13 @@ def _chunk(
     sin_el = u.reshape(p, n_ep, m)[:, ::every].reshape(p, -1) / rng_i
     sigma = model.error.sigma_from_sin(sin_el)
     g3 = g.reshape(p, n_iv, m)
-    length = np.full((p, n_ep), np.nan, np.float32)
-    sens = np.full((p, n_ep), np.nan, np.float32)
-    length[:, ::every], _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, width)
+    length, _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, width)
     # max/min over the trusted: push the others out of [-1, 1] (adding 0 keeps g exact)
     pen = (~tr_i) * np.float32(4.0)
     gmax = (g3 - pen).max(axis=-1)
     gmin = (g3 + pen).min(axis=-1)
-    sens[:, ::every] = np.where(count[:, ::every] >= 2, gmax - gmin, np.nan)
-    return count, length, sens
+    sens = np.where(count[:, ::every] >= 2, gmax - gmin, np.nan).astype(np.float32)
+    return count, np.asarray(length, np.float32), sens
 
 
 # --------------------------------------------------------------------------- reference

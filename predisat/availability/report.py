@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from predisat.availability import plots
-from predisat.availability.engine import Availability
+from predisat.availability.engine import Availability, write_counts
 from predisat.availability.satellites import SYSTEM_NAMES, SatellitePositions, TrustRule, azel
 from predisat.geodesy import enu_rotation, geodetic_to_ecef
 from predisat.gnss.ephemeris import Reason
@@ -198,20 +198,8 @@ def write_tables(
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
         pq.write_table(table, files[f"{name}_parquet"])
     if counts_table:
-        n_pos, n_ep = results[0].count.shape
-        parts = [
-            pa.table(
-                {
-                    "rule": pa.array([r.rule] * (n_pos * n_ep)).dictionary_encode(),
-                    "chainage_m": np.repeat(r.chainage_m, n_ep),
-                    "gps_s": np.tile(r.gps_s, n_pos),
-                    "count": r.count.ravel(),
-                }
-            )
-            for r in results
-        ]
         files["counts_parquet"] = out / "counts.parquet"
-        pq.write_table(pa.concat_tables(parts), files["counts_parquet"])
+        write_counts(files["counts_parquet"], results)
     files["geojson"] = out / "availability.geojson"
     files["geojson"].write_text(json.dumps(geojson_layer(results, track)))
     return files, summary

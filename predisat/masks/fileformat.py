@@ -321,6 +321,9 @@ def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> Mas
         )
     except MaskError as exc:
         raise fail(str(exc)) from None
+    # Arrow's pool keeps the file's buffers (4-6x the masks) for the rest of the run otherwise
+    del table, arrays
+    pa.default_memory_pool().release_unused()
     el = masks.mask_el_deg
     top = float(np.max(el)) if el.size else 0.0
     if 0.0 < top <= np.pi / 2 + 1e-6 and not np.all(el == np.round(el)):

@@ -623,8 +623,11 @@ def _source_array(values: ArrayLike, n: int, n_az: int) -> NDArray:
     if src.shape != (n, n_az):
         raise MaskError(f"source has shape {src.shape}, expected ({n}, {n_az})")
     valid = [int(s) for s in BinSource]
-    if not np.issubdtype(src.dtype, np.integer) or not np.isin(src, valid).all():
-        where = _first_bad(~np.isin(src, valid)) if src.size else ""
+    # the codes are 0..n-1: a range check, not np.isin (20x slower on a line's bins)
+    if not np.issubdtype(src.dtype, np.integer) or (
+        src.size and (int(src.min()) < 0 or int(src.max()) > max(valid))
+    ):
+        where = _first_bad((src < 0) | (src > max(valid))) if src.size else ""
         raise MaskError(
             f"source{where} holds a value that is not a BinSource code {valid} "
             "(0 observed, 1 reconstructed, 2 assumed, 3 terrain)"

@@ -114,8 +114,12 @@ def test_interval_every_and_threads(sats, masks) -> None:
     a = compute_availability(sats, pos, rule, interval_every=1, workers=1, chunk_positions=3)
     b = compute_availability(sats, pos, rule, interval_every=3, workers=2, chunk_positions=5)
     np.testing.assert_array_equal(a.count, b.count)
-    np.testing.assert_allclose(b.interval_m[:, ::3], a.interval_m[:, ::3], rtol=1e-6)
-    assert np.all(np.isnan(b.interval_m[:, 1::3]))
+    # only the predicted epochs are stored: the first, then every third
+    assert b.interval_m.shape == (pos.n_pos, -(-len(sats.gps_s) // 3))
+    np.testing.assert_array_equal(b.interval_gps_s, sats.gps_s[::3])
+    np.testing.assert_allclose(b.interval_m, a.interval_m[:, ::3], rtol=1e-6)
+    np.testing.assert_allclose(b.sensitivity, a.sensitivity[:, ::3], rtol=1e-6)
+    np.testing.assert_array_equal(b.interval_count, a.count[:, ::3])
     ok = a.count >= 2
     assert np.all(np.isfinite(a.interval_m[ok])) and np.all(a.interval_m[ok] > 0)
     assert np.all((a.sensitivity[ok] > 0) & (a.sensitivity[ok] <= 2.0))
@@ -154,6 +158,95 @@ def test_shares_and_longest_stretches_on_hand_built_counts() -> None:
     # epoch 2 is GPS 1e9 + 60 s; GPS - UTC was 15 s from 2009 to mid-2012 (IERS Bulletin C)
     utc = datetime(1980, 1, 6) + timedelta(seconds=1e9 + 60.0 - 15.0)
     assert summary["longest_below4_m_at_utc"] == utc.strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _random_result(every: int) -> Availability:
+    rng = np.random.default_rng(11)
+    count = rng.integers(0, 9, (37, 53)).astype(np.uint8)
+    n_iv = -(-53 // every)
+    iv = rng.uniform(5.0, 80.0, (37, n_iv)).astype(np.float32)
+    iv[count[:, ::every] < 2] = np.nan
+    pos = LinePositions(np.cumsum(rng.uniform(5.0, 15.0, 37)), 50.0, 4.0, 100.0, 0.0)
+    return Availability(
+        pos, 1e9 + 30.0 * np.arange(53), ("G01",), "test", count, iv, iv / 40.0,
+        np.full(37, 170.0), {}, every,
+    )  # fmt: skip
+
+
+def test_reductions_in_blocks_are_those_of_the_whole_grid(monkeypatch) -> None:
+    from predisat.availability import engine
+
+    a = _random_result(every=4)
+    c, w = a.count.astype(int), a.cell_length_m
+    # the whole-grid formulas, written out here
+    full_iv = np.full(c.shape, np.nan)
+    full_iv[:, ::4] = a.interval_m
+    x = np.where(c >= 4, full_iv, np.nan)
+    want_q = np.nanquantile(x, (0.5, 0.95), axis=1).T
+    lo, hi = engine._cell_extent(a.chainage_m)
+    t = a.gps_s
+    want = {
+        "share": [np.mean(c >= n, axis=1) for n in (2, 4, 6)],
+        "epoch": [np.sum((c >= n) * w[:, None], axis=0) / np.sum(w) for n in (2, 4, 6)],
+        "below_m": longest_run(c.T < 4, lo, hi),
+        "below_s": longest_run(c < 4, t - 15.0, t + 15.0),
+    }
+    monkeypatch.setattr(engine, "_BLOCK_CELLS", 50)  # one row per block
+    assert len(engine._row_slices(a.count.shape)) == 37
+    for n, s_want, e_want in zip((2, 4, 6), want["share"], want["epoch"], strict=True):
+        np.testing.assert_array_equal(a.share_at_least(n), s_want)
+        np.testing.assert_allclose(a.epoch_table()[f"share_ge{n}"], e_want, rtol=1e-12)
+    np.testing.assert_array_equal(a.longest_below_m(4), want["below_m"])
+    np.testing.assert_array_equal(a.longest_below_s(4), want["below_s"])
+    np.testing.assert_allclose(a.interval_quantiles(), want_q, rtol=1e-12)
+    np.testing.assert_allclose(a.position_table()["mean_count"], c.mean(axis=1), rtol=1e-12)
+    sm = a.summary()
+    assert sm["interval_median_m"] == pytest.approx(float(np.nanmedian(x)))
+    assert sm["interval_p95_m"] == pytest.approx(float(np.nanquantile(x, 0.95)))
+
+
+def test_summary_and_tables_are_computed_once_and_handed_out_as_copies() -> None:
+    a = _random_result(every=1)
+    first = a.summary()
+    first["share_ge4"] = -1.0
+    assert a.summary()["share_ge4"] >= 0.0
+    table = a.position_table()
+    table["share_ge4"] = -1.0
+    table.insert(0, "rule", "x")
+    assert (a.position_table()["share_ge4"] >= 0.0).all()
+    assert "rule" not in a.position_table()
+
+
+def test_intervals_of_another_shape_than_the_predicted_epochs_are_refused() -> None:
+    a = _random_result(every=4)
+    with pytest.raises(ValueError, match="interval_m has shape"):
+        Availability(a.positions, a.gps_s, a.sats, a.rule, a.count,
+                     np.zeros(a.count.shape, np.float32), None, a.opening_angle_deg, {},
+                     4)  # fmt: skip
+
+
+def test_the_long_counts_table_is_written_in_pieces_with_every_count(
+    tmp_path: Path, monkeypatch
+) -> None:
+    import pyarrow.parquet as pq
+
+    from predisat.availability import engine
+
+    a, b = _random_result(every=1), _random_result(every=2)
+    b = Availability(b.positions, b.gps_s, b.sats, "other", b.count[:, ::-1], b.interval_m,
+                     b.sensitivity, b.opening_angle_deg, {}, 2)  # fmt: skip
+    monkeypatch.setattr(engine, "_COUNTS_ROWS", 200)  # 3 positions of 53 epochs per piece
+    path = engine.write_counts(tmp_path / "c.parquet", [a, b], {b"k": b"v"})
+    f = pq.ParquetFile(path)
+    assert f.metadata.num_row_groups == 2 * 13 and f.schema_arrow.metadata[b"k"] == b"v"
+    got = f.read().to_pandas()
+    n_pos, n_ep = a.count.shape
+    for i, r in enumerate((a, b)):
+        part = got.iloc[i * n_pos * n_ep : (i + 1) * n_pos * n_ep]
+        assert set(part["rule"]) == {r.rule}
+        np.testing.assert_array_equal(part["chainage_m"], np.repeat(r.chainage_m, n_ep))
+        np.testing.assert_array_equal(part["gps_s"], np.tile(r.gps_s, n_pos))
+        np.testing.assert_array_equal(part["count"], r.count.ravel())
 
 
 def test_longest_run_uses_cell_bounds() -> None:

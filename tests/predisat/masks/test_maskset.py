@@ -427,3 +427,8 @@ def test_assumed_over_matches_every_cell_touching_the_interval():
         assert np.array_equal(got, (src[touching] == BinSource.ASSUMED).any(axis=0))
     with pytest.raises(MaskError, match="lo <= hi"):
         ms.assumed_over(10.0, 5.0)
+
+
+def test_bin_source_codes_are_0_to_n_minus_1() -> None:
+    # _source_array validates codes with a range check: a code out of the range would pass
+    assert [int(s) for s in BinSource] == list(range(len(BinSource)))
