@@ -253,6 +253,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     else:
         from locator.corrections import RangeModel
         from locator.observations import Observations
+        from locator.timetag import check_time_tags
 
         path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
@@ -262,6 +263,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
+        check_time_tags(model, obs, str(args.obs))  # before the heights: a cause of theirs
         check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)",
                            args.max_height_offset)  # fmt: skip
         start = args.start_chainage
@@ -738,6 +740,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from locator.corrections import RangeModel
         from locator.observations import Observations
         from locator.sources import RinexSource
+        from locator.timetag import check_time_tags
 
         ranges = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         data, stations = [], []
@@ -758,6 +761,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 raise CliError(f"{path}: no station position in the header; {fix}")
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
+            try:  # tags off their ranges would widen the model with errors of the file
+                check_time_tags(ranges, obs, str(path))
+            except ValueError as exc:
+                raise CliError(str(exc)) from None
             # the same station's epochs twice (a copy, decompressed) is evidence counted twice:
             # a user trial's doubled the independent samples and deepened the tail check
             for prev, (x0, t0) in zip(args.obs, seen_epochs, strict=False):

@@ -1,0 +1,74 @@
+"""Time tags against pseudoranges: offsets injected into a real RINEX excerpt are measured by
+the range rates, and a file whose tags and ranges disagree is refused."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from locator.corrections import RangeModel
+from locator.observations import Observations
+from locator.timetag import MAX_TAG_OFFSET_S, check_time_tags, tag_offsets
+
+C_MPS = 299_792_458.0
+
+
+@pytest.fixture(scope="module")
+def geonet(test_data: Path) -> tuple[RangeModel, Observations]:
+    model = RangeModel.from_rinex_nav([test_data / "gnss_obs" / "07590920_0000_0200.05n"])
+    return model, Observations.from_rinex(test_data / "gnss_obs" / "07590920_10ep.05o")
+
+
+def _ranges_plus(obs: Observations, delay_s: float, epochs: slice = slice(None)) -> Observations:
+    """The file as a receiver would write it with ``delay_s`` in its ranges and not its tags."""
+    values = dict(obs.values)
+    for code in values:
+        if code[0] in "CP":  # pseudoranges (RINEX 2: C1, P1, P2)
+            v = values[code].copy()
+            v[epochs] += C_MPS * delay_s
+            values[code] = v
+    return replace(obs, values=values)
+
+
+def test_a_clean_file_agrees_with_its_tags(geonet) -> None:
+    model, obs = geonet
+    off = check_time_tags(model, obs, "clean")
+    assert len(off.offset_s) == len(obs.gps_s)
+    assert abs(off.median_s) < 1.5e-3 < MAX_TAG_OFFSET_S
+    assert len(off.jumps()) == 0
+
+
+@pytest.mark.parametrize("shift_s", [0.05, -0.1])
+def test_tags_shifted_off_their_ranges_are_measured_and_refused(geonet, shift_s) -> None:
+    model, obs = geonet
+    shifted = replace(obs, gps_s=obs.gps_s + shift_s)
+    off = tag_offsets(model, shifted, np.arange(len(obs.gps_s)))
+    # the satellites were where the ephemeris has them shift_s before the tag
+    assert off.median_s == pytest.approx(-shift_s, abs=2e-3)
+    with pytest.raises(ValueError, match="time tags disagree with their pseudoranges"):
+        check_time_tags(model, shifted, "shifted.05o")
+
+
+def test_a_clock_offset_in_the_ranges_only_is_refused_and_in_both_is_not(geonet) -> None:
+    model, obs = geonet
+    ranges_only = _ranges_plus(obs, 0.05)
+    off = tag_offsets(model, ranges_only, np.arange(len(obs.gps_s)))
+    assert off.median_s == pytest.approx(0.05, abs=2e-3)
+    with pytest.raises(ValueError, match=r"by \+\d+\.\d ms .*RCV CLOCK OFFS APPL"):
+        check_time_tags(model, ranges_only, "bias.05o")
+    # the same offset in the tags too is a receiver clock offset, as RINEX defines it
+    both = replace(ranges_only, gps_s=obs.gps_s + 0.05)
+    assert abs(check_time_tags(model, both, "consistent").median_s) < 1.5e-3
+
+
+def test_a_jump_in_part_of_the_file_is_refused(geonet) -> None:
+    model, obs = geonet
+    late = _ranges_plus(obs, 0.1, slice(7, None))  # the last 3 of 10 epochs
+    off = tag_offsets(model, late, np.arange(len(obs.gps_s)))
+    assert abs(off.median_s) < MAX_TAG_OFFSET_S  # the median alone would pass
+    np.testing.assert_array_equal(off.jumps(), obs.gps_s[7:])
+    with pytest.raises(ValueError, match=r"at 3 of 10 sampled epochs .* a jump in the file"):
+        check_time_tags(model, late, "jump.05o")
