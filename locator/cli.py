@@ -51,6 +51,7 @@ from predisat.cli.args import (
 )
 from predisat.cli.common import (
     CliError,
+    add_masks_same_track,
     add_track_selection,
     km_range,
     run_main,
@@ -283,7 +284,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if masks is not None:
         from predisat.masks.registration import register_on_track
 
-        reg = register_on_track(masks, path.track, str(args.masks))
+        reg = register_on_track(masks, path.track, str(args.masks),
+                                same_track=args.masks_same_track)  # fmt: skip
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
@@ -901,6 +903,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                       help="trust rule: a flat elevation cut-off, degrees")
     rule.add_argument("--no-masks", action="store_true",
                       help="trust rule: every received signal")
+    add_masks_same_track(p)
     p.add_argument("--integrity", choices=("active", "passive"), default="active",
                    help="active: fault detection and exclusion; passive: every measurement kept, "
                    "faults only flagged")

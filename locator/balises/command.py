@@ -34,7 +34,7 @@ from predisat.cli.args import (
     requires,
     seed_value,
 )
-from predisat.cli.common import add_track_selection, track_option
+from predisat.cli.common import add_masks_same_track, add_track_selection, track_option
 
 if TYPE_CHECKING:
     from locator.balises.balisefile import BaliseList
@@ -72,6 +72,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     g.add_argument("--cutoff", type=cutoff_deg, metavar="DEG",
                    help="trust rule: a flat elevation cut-off, degrees")
     g.add_argument("--no-masks", action="store_true", help="trust rule: every received signal")
+    add_masks_same_track(p)
     b = p.add_mutually_exclusive_group()
     b.add_argument("--balises", type=existing_file("a balise list CSV (docs/odometry.md)"),
                    metavar="CSV", help="balise list (default: one every --spacing metres)")
@@ -230,7 +231,8 @@ def cmd_balises(args: argparse.Namespace) -> int:
         from predisat.masks.registration import register_on_track
 
         # by position on the run's track, as `locator run` (masks of another map, or line)
-        reg = register_on_track(read_masks(args.masks), path.track, str(args.masks))
+        reg = register_on_track(read_masks(args.masks), path.track, str(args.masks),
+                                same_track=args.masks_same_track)  # fmt: skip
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks

@@ -602,6 +602,7 @@ def run_availability(
     basemap: str | Path | None = None,
     storage_options: StorageOptions | None = None,
     notes: Sequence[str] = (),
+    masks_same_track: bool = False,
 ) -> AvailabilityRun:
     """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
 
@@ -671,6 +672,10 @@ def run_availability(
     notes : sequence of str
         Warnings of the caller's own (the error model's, for example) that the report and
         ``summary.json`` carry with the run's.
+    masks_same_track : bool
+        ``track`` is a map of the physical track the masks were surveyed on: masks lying
+        beside it as another track's would are registered, not refused
+        (:func:`predisat.masks.registration.register_on_track`).
 
     Returns
     -------
@@ -704,7 +709,7 @@ def run_availability(
         out = location(absolute(out_dir))  # a cluster's worker resolves a relative path in
         # its own working folder
         mask_set, masks_label, track, mask_notes = _masks_on_track(
-            masks, track, from_m, to_m, opts
+            masks, track, from_m, to_m, opts, masks_same_track
         )
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
@@ -815,6 +820,7 @@ def _masks_on_track(
     from_m: float | None,
     to_m: float | None,
     opts: StorageOptions | None = None,
+    same_track: bool = False,
 ) -> tuple[MaskSet, str, TrackMap | None, list[str]]:
     """The masks of the stretch (checked to lie on ``track``), how to name them, the track, and
     the warnings for the report (holes closed, a stretch asked beyond the masks)."""
@@ -831,7 +837,7 @@ def _masks_on_track(
             )
     if track_map is not None:
         # chainages are the track's from here on: --from-km / --to-km are too
-        reg = register_on_track(mask_set, track_map, masks_label)
+        reg = register_on_track(mask_set, track_map, masks_label, same_track=same_track)
         if not reg.same_map:
             notes.append(reg.describe(masks_label, track_map.name))
         mask_set = reg.masks

@@ -27,6 +27,7 @@ from predisat.cli.args import (
     storage_options,
     url_or,
 )
+from predisat.cli.common import add_masks_same_track
 from predisat.gnss.errormodel import ErrorModelFileError, IntervalModel, read_error_model_file
 from predisat.gnss.integrity import IntegrityBudget
 from predisat.track import TrackMap
@@ -46,6 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="track map the masks were made on, GeoJSON/CSV: the line's name, "
                    "kilometre posts and geometry (default: none, segments straight between "
                    "positions)")
+    add_masks_same_track(p)
     p.add_argument(
         "--nav", nargs="+", type=existing_file("RINEX navigation, SP3 or TLE files"),
         metavar="FILE",
@@ -142,6 +144,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         basemap=args.basemap,
         storage_options=args.storage_options,
         notes=notes,
+        masks_same_track=args.masks_same_track,
     )
     for warning in result.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)

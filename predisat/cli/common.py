@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 __all__ = [
     "SYNTH_MODULES",
     "CliError",
+    "add_masks_same_track",
     "add_track_selection",
     "km_range",
     "parse_where",
@@ -163,6 +164,17 @@ def track_option(
         return load_track(path, name, chain=chain, where=parse_where(where))
     except TrackMapError as exc:
         raise CliError(f"--track {exc}") from None
+
+
+def add_masks_same_track(p: argparse.ArgumentParser) -> None:
+    """``--masks-same-track``: masks beside the map as another track's are taken (said)."""
+    from predisat.masks.registration import OTHER_TRACK_OFFSET_M
+
+    p.add_argument("--masks-same-track", action="store_true",
+                   help="the track map is of the physical track the masks were surveyed on "
+                   "(another survey or simplification of its axis): masks lying more than "
+                   f"{OTHER_TRACK_OFFSET_M:g} m beside it are registered on it instead of "
+                   "refused as another track's (default: refused)")  # fmt: skip
 
 
 def add_track_selection(p: argparse.ArgumentParser) -> None:

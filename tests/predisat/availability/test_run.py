@@ -295,6 +295,30 @@ def test_masks_on_another_map_of_the_line_are_registered_and_said(
     assert 'class="warn"' in r.report_html.read_text(encoding="utf-8")
 
 
+def test_masks_beside_the_map_as_another_tracks_are_refused_unless_said_same_track(
+    tmp_path: Path, masks: MaskSet, track: TrackMap
+) -> None:
+    """The same axis moved 4 m sideways (the other track of a double line, or a map of this
+    track 4 m off): refused by default, registered with ``masks_same_track``, and said."""
+    from predisat.masks.registration import OtherTrackError
+
+    s = np.arange(3000.0, 5001.0, 10.0)
+    lat, lon, h = track.position_at(s)
+    north = np.radians(track.heading_at(s))  # 4 m to the left of the direction of travel
+    lat = lat + 4.0 * np.sin(north) / 111_200.0
+    lon = lon - 4.0 * np.cos(north) / (111_200.0 * np.cos(np.radians(lat)))
+    other = TrackMap.from_latlon(lat, lon, h, name="track B")
+    common = dict(start=START, end="2020-06-25T06:30", step_s=900, n_sky=1, progress=False)
+    with pytest.raises(OtherTrackError, match=r"lie 4\.0 m right of track 'track B'"):
+        run_availability(masks, other, None, out_dir=tmp_path / "b",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    assert not (tmp_path / "b" / "report.html").exists()
+    r = run_availability(masks, other, None, out_dir=tmp_path / "b", masks_same_track=True,
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (said,) = _said(r.info["warnings"])
+    assert "4.0 m beside it (the median): taken as the same physical track, as asked" in said
+
+
 def test_one_position_sky_in_a_tagged_tunnel_and_masks_off_the_embedded_map_are_said(
     tmp_path: Path, masks: MaskSet, track: TrackMap
 ) -> None:

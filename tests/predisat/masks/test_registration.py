@@ -45,7 +45,7 @@ def test_every_place_gets_at_least_the_sky_the_masks_hold_there(maps) -> None:
     widening, they are."""
     a, b = maps
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
-    reg = register_on_track(m, b, "m")
+    reg = register_on_track(m, b, "m", same_track=True)
     assert not reg.same_map and reg.shift_m > 250.0 and 1.0 < reg.offset_m < 15.0
     r = reg.masks
     assert r.provenance["registered_on"]["track"] == b.name
@@ -80,7 +80,7 @@ def test_without_the_widening_a_place_gets_a_neighbour_s_sky(maps, monkeypatch) 
     a, b = maps
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=1)
     monkeypatch.setattr(registration, "_worst_over", lambda target, source, lo, hi: target)
-    r = register_on_track(m, b, "m").masks
+    r = register_on_track(m, b, "m", same_track=True).masks
     s_a = np.arange(460.0, 1640.0, 0.5)
     lat, lon, _ = a.position_at(s_a)
     got = _cell(r, np.asarray(b.project(lat, lon).chainage_m))
@@ -90,7 +90,7 @@ def test_without_the_widening_a_place_gets_a_neighbour_s_sky(maps, monkeypatch) 
 def test_on_the_same_map_nothing_changes(maps) -> None:
     a, _ = maps
     m = _sharp_masks(a, np.arange(4000.0, 4500.0, 10.0))
-    reg = register_on_track(m, a, "m")
+    reg = register_on_track(m, a, "m", same_track=True)
     assert reg.same_map and reg.masks is m and reg.widen_m == 0.0
     assert "were made on track" in reg.describe("m", a.name)
 
@@ -98,7 +98,7 @@ def test_on_the_same_map_nothing_changes(maps) -> None:
 def test_widening_keeps_the_weakest_support(maps) -> None:
     a, b = maps
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0), seed=2)
-    r = register_on_track(m, b, "m").masks
+    r = register_on_track(m, b, "m", same_track=True).masks
     assert r.support is not None and m.support is not None
     assert r.n_pos == 2 * m.n_pos - 1  # a position added half-way between each two
     assert np.all(r.support[0::2] <= m.support)
@@ -114,13 +114,13 @@ def test_another_track_a_reversed_map_and_masks_past_the_map(maps) -> None:
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
     moved = TrackMap.from_latlon(b.lat_deg + 0.005, b.lon_deg, b.h_m, name="moved")
     with pytest.raises(ValueError, match=r"do not fit track 'moved'.*made on"):
-        register_on_track(m, moved, "m.parquet")
+        register_on_track(m, moved, "m.parquet", same_track=True)
     back = TrackMap.from_latlon(b.lat_deg[::-1], b.lon_deg[::-1], b.h_m[::-1], name="back")
     with pytest.raises(ValueError, match="runs the other way"):
-        register_on_track(m, back, "m.parquet")
+        register_on_track(m, back, "m.parquet", same_track=True)
     # the excerpt starts near chainage 300 of the demo's map: positions before it are left out
     longer = _sharp_masks(a, np.arange(250.0, 1701.0, 10.0))
-    reg = register_on_track(longer, b, "m")
+    reg = register_on_track(longer, b, "m", same_track=True)
     assert 3 <= reg.beyond <= 8 and reg.masks.n_pos == 2 * (longer.n_pos - reg.beyond) - 1
     assert "past the map's ends left out" in reg.describe("m", b.name)
 
@@ -154,7 +154,7 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
     az = np.arange(0.0, 360.0, 5.0)[None, :]
 
     def lower_anywhere() -> bool:
-        r = register_on_track(m, b, "m").masks
+        r = register_on_track(m, b, "m", same_track=True).masks
         got = r.mask_at(x_b[:, None], az)
         own = m.mask_at(x_a[:, None], az)
         return bool((got < own - 1e-5).any())
@@ -165,7 +165,7 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
     bunched = np.concatenate([[20.0, 20.05, 21.0], np.arange(30.0, 271.0, 10.0),
                               [279.0, 279.97, 280.0]])  # fmt: skip
     m_end = _sharp_masks(a, bunched, seed=6)
-    r_end = register_on_track(m_end, b, "m").masks
+    r_end = register_on_track(m_end, b, "m", same_track=True).masks
     got = r_end.mask_at(x_b[:, None], az)
     own = m_end.mask_at(x_a[:, None], az)
     assert not (got < own - 1e-5).any()
@@ -173,7 +173,7 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
         mp.setattr(registration, "_end_inside", lambda ch, limit: 0)
         mp.setattr(registration, "_moved_ends",
                    lambda masks, first, last, lo, hi: masks)  # fmt: skip
-        r_open = register_on_track(m_end, b, "m").masks
+        r_open = register_on_track(m_end, b, "m", same_track=True).masks
         assert (r_open.mask_at(x_b[:, None], az) < own - 1e-5).any()
     monkeypatch.setattr(registration, "_reach_m", lambda off: np.zeros_like(off))
     monkeypatch.setattr(registration, "_WIDEN_SLACK_M", 0.0)
@@ -190,7 +190,7 @@ def test_uneven_masks_past_both_ends_of_a_shorter_map(maps) -> None:
     ch = np.sort(rng.uniform(200.0, 1900.0, 200))
     ch = ch[np.concatenate([[True], np.diff(ch) > 0.001])]
     m = _sharp_masks(a, ch, seed=8)
-    reg = register_on_track(m, b, "m")
+    reg = register_on_track(m, b, "m", same_track=True)
     assert reg.beyond > 0
     s_b = np.arange(0.0, b.length_m, 0.05)
     lat, lon, _ = b.position_at(s_b)
@@ -225,3 +225,24 @@ def test_a_line_across_the_antimeridian_keeps_its_positions_on_the_line() -> Non
         for lat_i, lon_i in zip(out.lat_deg, out.lon_deg, strict=True)
     ])  # fmt: skip
     assert near.max() < 5.0
+
+
+def test_masks_beside_the_map_as_another_tracks_would_need_the_same_track_said(maps) -> None:
+    """Two maps of line 144's track A lie 4.5 m apart: geometry cannot tell them from the two
+    tracks of a double line, so the caller must say which it is."""
+    from predisat.masks.registration import OTHER_TRACK_OFFSET_M, OtherTrackError
+
+    a, b = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
+    with pytest.raises(OtherTrackError, match=r"lie 4\.\d m (left|right) of track .* "
+                                              r"--masks-same-track"):  # fmt: skip
+        register_on_track(m, b, "m")
+    reg = register_on_track(m, b, "m", same_track=True)
+    assert reg.median_offset_m > OTHER_TRACK_OFFSET_M
+    assert reg.masks.provenance["registered_on"]["same_track_confirmed"] is True
+    assert "taken as the same physical track, as asked" in reg.describe("m", b.name)
+    # the same axis moved 1 m north (within two maps of one track) needs nothing
+    lat, lon, h = a.position_at(np.arange(0.0, a.length_m, 5.0))
+    shifted = TrackMap.from_latlon(lat + 1.0 / 111_200.0, lon, h)
+    near = register_on_track(m, shifted, "m")
+    assert 0.2 < near.median_offset_m < OTHER_TRACK_OFFSET_M
