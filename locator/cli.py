@@ -289,6 +289,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
+        from predisat.availability.run import assumed_sky_notes
+
+        # as predisat availability says it: a trial's all-ASSUMED masks claimed 71 % in silence
+        for note in assumed_sky_notes(masks):
+            print(f"locator run: warning: masks {args.masks}: {note}", file=sys.stderr)
     _check_start(float(start), path, masks, args, header, sim_chainage)
     check_writable(args.out)  # before the epochs, not after them
     print(f"locator run: {source.gps_s.size} epochs, constellation {args.constellation} "
@@ -313,7 +318,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"{len(epochs)} epochs: {claim_label(cfg.error_model_caveat)} {100 * claim:.1f} %, "
           f"{lengths} -> {folder}")
     print(_losses_text(epochs), end="")
+    _say_assumed_claims(epochs)
     return 0
+
+
+def _say_assumed_claims(epochs: Any) -> None:
+    """How many claims used a satellite trusted on an ASSUMED bin (flag ``ASSUMED_MASK``)."""
+    from locator.run import RunFlag
+
+    if "flags" not in epochs or not epochs["claim"].any():
+        return
+    claimed = epochs.loc[epochs["claim"], "flags"].to_numpy().astype(int)
+    on = int(((claimed & int(RunFlag.ASSUMED_MASK)) != 0).sum())
+    if on:
+        print(f"claims on an assumption: {on} of {len(claimed)} "
+              f"({100.0 * on / len(claimed):.1f} %) used a satellite trusted on an ASSUMED bin "
+              "(no view saw the sky there: the far field's stated default; flag ASSUMED_MASK, "
+              "column n_used_assumed)")  # fmt: skip
 
 
 def _profile(source: Any, args: argparse.Namespace) -> Any:
