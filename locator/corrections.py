@@ -375,20 +375,27 @@ def saastamoinen_zenith_m(
 
     Pressure 1013.25 hPa (1 - 2.2557e-5 h)^5.2568, temperature 15 deg C - 6.5 K/km, water
     vapour from ``humidity`` (relative, 0-1) - the same standard atmosphere as RTKLIB's
-    ``tropmodel``. Heights below 0 are taken as 0.
+    ``tropmodel``. Heights below 0 are taken as 0; above 10 km the delays are 0, as in
+    ``tropmodel`` (a first iterate of a fix can lie there; the standard atmosphere's pressure
+    has no real value above 44 km).
 
     Returns
     -------
     zhd_m, zwd_m : ndarray, shape (...)
     """
     lat = np.radians(np.asarray(lat_deg, float))
-    h = np.maximum(np.asarray(h_m, float), 0.0)
+    h_all = np.maximum(np.asarray(h_m, float), 0.0)
+    h = np.minimum(h_all, _TROPO_TOP_M)
     pres = 1013.25 * np.power(1.0 - 2.2557e-5 * h, 5.2568)
     temp = 15.0 - 6.5e-3 * h + 273.16
     e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
     zhd = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * h / 1e3)
     zwd = 0.002277 * (1255.0 / temp + 0.05) * e
-    return zhd, zwd
+    above = h_all > _TROPO_TOP_M
+    return np.where(above, 0.0, zhd), np.where(above, 0.0, zwd)
+
+
+_TROPO_TOP_M = 1.0e4
 
 
 # Niell (1996), table 3: hydrostatic average and amplitude, wet; rows lat 15, 30, 45, 60, 75

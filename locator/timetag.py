@@ -38,6 +38,8 @@ error model; beyond it the error grows by up to 0.8 m per ms. Clean files of fou
 receivers gave medians within 0.6 ms (``docs/observations.md``)."""
 
 _MIN_SIGNIFICANCE = 4.0  # a median offset is believed when this many sigmas from zero
+_MIN_REDUNDANT = 2  # ranges beyond the unknowns an epoch needs to say anything on its tags
+_MAX_SCALE = 9.0  # residuals above 3 times the weights' sigma: a faulty range, no evidence
 
 
 def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
@@ -54,8 +56,9 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
     -------
     offset_s, sigma_s : float
         The offset ``delta`` such that the satellites were where the ephemeris places them at
-        ``t_tag - P / c + delta``, seconds (NaN with fewer than five satellites beyond one per
-        clock, or without a solution).
+        ``t_tag - P / c + delta``, seconds. NaN without a solution, with fewer than two ranges
+        beyond the unknowns (position, one clock per system, the offset), or when the
+        residuals stand more than 3 times above the weights' sigma (a faulty range).
     """
     cr = fix.ranges
     if not fix.ok or cr is None:
@@ -64,7 +67,7 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
     sats = [s for s, u in zip(cr.states.sats, use, strict=True) if u]
     systems = sorted({s[0] for s in sats})
     n = len(sats)
-    if n < 5 + len(systems):  # one redundant range beyond position, clocks and the offset
+    if n < 4 + len(systems) + _MIN_REDUNDANT:  # position, clocks, the offset, and redundancy
         return float("nan"), float("nan")
     t_tx = np.asarray(cr.states.transmit_gps_s, float)[use]
     both = model.ephemeris.evaluate(np.concatenate([t_tx - 0.5, t_tx + 0.5]), sats)[0]
@@ -77,18 +80,35 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
     h[:, -1] = np.sum(los * vel, axis=1)  # range rate: d range / d delta
     y = cr.corrected_m[use] - cr.range_m[use]
     sin_el = np.sin(np.radians(cr.el_deg[use]))
-    # the fix's own weights (RTKLIB's code variance), inflated: an estimate, not a bound
+    # the fix's own weights (RTKLIB's code variance): an estimate, not a bound
     w = 1.0 / (0.09 + 0.09 / sin_el**2 + (0.5 * cr.iono_m[use]) ** 2)
+    full = _solve(h, w, y)
+    if full is None:
+        return float("nan"), float("nan")
+    delta, var, scale = full
+    # One faulty range (a bias the locator's FDE would exclude) leans on the offset: with a
+    # single redundant range it is absorbed whole (a trial's 100 m bias on one satellite read
+    # as -126 ms), with more it leaves residuals far above the model. Such an epoch is no
+    # evidence on the tags.
+    if n - h.shape[1] < _MIN_REDUNDANT or scale > _MAX_SCALE:
+        return float("nan"), float("nan")
+    return delta, float(np.sqrt(var * scale))
+
+
+def _solve(h: NDArray, w: NDArray, y: NDArray) -> tuple[float, float, float] | None:
+    """Weighted least squares: the offset (last unknown), its variance from the weights, and
+    the factor the residuals scale it by (at least 1); None when singular or not redundant."""
+    dof = len(y) - h.shape[1]
+    if dof < 1:
+        return None
     hw = h * w[:, None]
     try:
-        cov = np.linalg.inv(h.T @ hw)
+        cov = np.linalg.inv(hw.T @ h)
     except np.linalg.LinAlgError:
-        return float("nan"), float("nan")
+        return None
     x = cov @ (hw.T @ y)
     res = y - h @ x
-    dof = n - h.shape[1]
-    scale = max(float(np.sum(w * res**2)) / dof, 1.0)  # sigma from the residuals when larger
-    return float(x[-1]), float(np.sqrt(cov[-1, -1] * scale))
+    return float(x[-1]), float(cov[-1, -1]), max(float(np.sum(w * res**2)) / dof, 1.0)
 
 
 @dataclass(frozen=True)
@@ -215,6 +235,14 @@ def check_time_tags(
             else f"at {len(jumps)} of {len(off.offset_s)} sampled epochs (from gps_s "
             f"{jumps[0]:.0f}; the median is {med * 1e3:+.1f} ms): a jump in the file"
         )
+        seconds = abs(med) > 5.0 and abs(med - round(med)) < 0.05  # GPS - UTC >= 11 s since 1996
+        scale = (
+            f" About {round(med):+d} s is a time scale mixed up: UTC, GLONASS or BeiDou time "
+            "read as GPS time (GPS - UTC = 18 s since 2017, GPS - BDT = 14 s; the time system "
+            "of the header's TIME OF FIRST OBS)."
+            if seconds
+            else ""
+        )
         raise ValueError(
             f"{label}: the epochs' time tags disagree with their pseudoranges {what}; at most "
             f"{max_offset_s * 1e3:g} ms is accepted. The satellites' range rates show it: each "
@@ -222,6 +250,6 @@ def check_time_tags(
             "differences do not cancel. Causes: a converter that shifted the time tags, or a "
             "receiver clock offset applied to the tags and not to the ranges (or the reverse: "
             "RINEX 'RCV CLOCK OFFS APPL'), or a clock jump written into one only. Convert the "
-            "file again from the receiver's raw data"
+            f"file again from the receiver's raw data.{scale}"
         )
     return off
