@@ -89,3 +89,13 @@ def test_one_faulty_range_is_no_evidence_on_the_tags(geonet) -> None:
     off = check_time_tags(model, faulty, "faulty.05o")  # not refused
     assert len(off.offset_s) < len(obs.gps_s)  # epochs that show the fault say nothing
     assert abs(off.median_s) < MAX_TAG_OFFSET_S if len(off.offset_s) else True
+
+
+def test_tags_in_utc_read_as_gps_time_are_named_a_time_scale_mix_up(geonet) -> None:
+    model, obs = geonet
+    utc = replace(obs, gps_s=obs.gps_s - 13.0)  # GPS - UTC was 13 s in 2005
+    with pytest.raises(ValueError, match=r"About \+13 s is a time scale mixed up"):
+        check_time_tags(model, utc, "utc.05o")
+    with pytest.raises(ValueError) as small:
+        check_time_tags(model, replace(obs, gps_s=obs.gps_s + 0.1), "late.05o")
+    assert "time scale" not in str(small.value)
