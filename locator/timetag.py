@@ -40,6 +40,8 @@ receivers gave medians within 0.6 ms (``docs/observations.md``)."""
 _MIN_SIGNIFICANCE = 4.0  # a median offset is believed when this many sigmas from zero
 _MIN_REDUNDANT = 2  # ranges beyond the unknowns an epoch needs to say anything on its tags
 _MAX_SCALE = 9.0  # residuals above 3 times the weights' sigma: a faulty range, no evidence
+_ITERATIONS = 5  # solutions per epoch at most, the tag moved by the offset found
+_CONVERGED_S = 0.002  # an offset found below this is not worth another solution
 
 
 def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
@@ -60,15 +62,36 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
         beyond the unknowns (position, one clock per system, the offset), or when the
         residuals stand more than 3 times above the weights' sigma (a faulty range).
     """
+    fit = _fit(model, fix)
+    if fit is None:
+        return float("nan"), float("nan")
+    return _evidence(fit)
+
+
+def _evidence(fit: tuple[float, float, float, int]) -> tuple[float, float]:
+    """An epoch's offset and sigma, or NaN when it is no evidence on the tags."""
+    delta, var, scale, redundant = fit
+    # One faulty range (a bias the locator's FDE would exclude) leans on the offset: with a
+    # single redundant range it is absorbed whole (a trial's 100 m bias on one satellite read
+    # as -126 ms), with more it leaves residuals far above the model. Such an epoch is no
+    # evidence on the tags.
+    if redundant < _MIN_REDUNDANT or scale > _MAX_SCALE:
+        return float("nan"), float("nan")
+    return delta, float(np.sqrt(var * scale))
+
+
+def _fit(model: RangeModel, fix: PositionFix) -> tuple[float, float, float, int] | None:
+    """The five-state fit of a solved epoch: offset (s), its variance from the weights, the
+    residuals' scale factor, and the ranges beyond the unknowns; None when not solvable."""
     cr = fix.ranges
     if not fix.ok or cr is None:
-        return float("nan"), float("nan")
+        return None
     use = np.isin(np.asarray(cr.states.sats), fix.sats_used)
     sats = [s for s, u in zip(cr.states.sats, use, strict=True) if u]
     systems = sorted({s[0] for s in sats})
     n = len(sats)
-    if n < 4 + len(systems) + _MIN_REDUNDANT:  # position, clocks, the offset, and redundancy
-        return float("nan"), float("nan")
+    if n < 4 + len(systems) + 1:  # position, clocks, the offset, and one redundant range
+        return None
     t_tx = np.asarray(cr.states.transmit_gps_s, float)[use]
     both = model.ephemeris.evaluate(np.concatenate([t_tx - 0.5, t_tx + 0.5]), sats)[0]
     idx = np.arange(n)
@@ -84,15 +107,8 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
     w = 1.0 / (0.09 + 0.09 / sin_el**2 + (0.5 * cr.iono_m[use]) ** 2)
     full = _solve(h, w, y)
     if full is None:
-        return float("nan"), float("nan")
-    delta, var, scale = full
-    # One faulty range (a bias the locator's FDE would exclude) leans on the offset: with a
-    # single redundant range it is absorbed whole (a trial's 100 m bias on one satellite read
-    # as -126 ms), with more it leaves residuals far above the model. Such an epoch is no
-    # evidence on the tags.
-    if n - h.shape[1] < _MIN_REDUNDANT or scale > _MAX_SCALE:
-        return float("nan"), float("nan")
-    return delta, float(np.sqrt(var * scale))
+        return None
+    return (*full, n - h.shape[1])
 
 
 def _solve(h: NDArray, w: NDArray, y: NDArray) -> tuple[float, float, float] | None:
@@ -177,14 +193,22 @@ def tag_offsets(
         if not have.any():
             continue
         sats = [s for s, h in zip(obs.sats, have, strict=True) if h]
-        fix = solve_epoch(m, float(obs.gps_s[i]), sats, sel.pseudorange_m[i, have],
-                          list(sel.code[i, have]), x0_ecef_m=x0)  # fmt: skip
-        if not fix.ok:
-            continue
-        x0 = fix.ecef_m
-        d, s = tag_offset(m, fix)
-        if np.isfinite(d) and np.isfinite(s):
-            rows.append((float(obs.gps_s[i]), d, s))
+        t, shift = float(obs.gps_s[i]), 0.0
+        # the range rates are a linearisation: an offset of seconds (a time scale mixed up)
+        # is found by moving the tag and solving again
+        for _ in range(_ITERATIONS):
+            fix = solve_epoch(m, t + shift, sats, sel.pseudorange_m[i, have],
+                              list(sel.code[i, have]), x0_ecef_m=x0)  # fmt: skip
+            fit = _fit(m, fix) if fix.ok else None
+            if fit is None:
+                break
+            x0 = fix.ecef_m
+            shift += fit[0]
+            if abs(fit[0]) < _CONVERGED_S:
+                d, sd = _evidence((shift, *fit[1:]))
+                if np.isfinite(d) and np.isfinite(sd):
+                    rows.append((t, d, sd))
+                break
     arr = np.array(rows, float).reshape(-1, 3)
     return TagOffsets(arr[:, 0], arr[:, 1], arr[:, 2])
 
