@@ -363,18 +363,26 @@ def test_blocks_on_a_dask_cluster_give_the_serial_bits(sats, masks) -> None:
     assert "Dask cluster at" in on_dask.provenance["workers"]
 
 
-def test_the_inner_progress_bar_stays_off_when_stderr_is_not_a_terminal(
+def test_the_inner_progress_is_plain_lines_when_stderr_is_not_a_terminal(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Nested bars move the cursor up: redirected to a log they leave escape codes."""
+    """Nested bars move the cursor up: redirected to a log they leave escape codes. A log gets
+    a line at every tenth instead (a trial's batch log showed nothing for a whole rule)."""
     import sys
 
     from predisat.availability.engine import _progress
 
     monkeypatch.setattr(sys.stderr, "isatty", lambda: False)  # redirected (even under -s)
     bar = _progress(10, True, "masks")
-    bar.update(5)
+    for _ in range(10):
+        bar.update(1)
     bar.close()
+    err = capsys.readouterr().err
+    assert "\r" not in err and "\x1b" not in err
+    lines = err.splitlines()
+    assert len(lines) == 9 and lines[0].startswith("availability, masks: 1/10 positions (10 %,")
+    quiet = _progress(10, False, "masks")
+    quiet.update(10)
     assert capsys.readouterr().err == ""
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     bar = _progress(10, True, "masks")
