@@ -254,7 +254,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     else:
         from locator.corrections import RangeModel
         from locator.observations import Observations
-        from locator.timetag import check_time_tags
+        from locator.timetag import MIN_EVIDENCE_EPOCHS, check_time_tags
 
         path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
@@ -264,7 +264,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
-        check_time_tags(model, obs, str(args.obs))  # before the heights: a cause of theirs
+        # before the heights: a cause of theirs
+        tags = check_time_tags(model, obs, str(args.obs), constellation=args.constellation)
+        if len(tags.offset_s) < MIN_EVIDENCE_EPOCHS:
+            print(f"locator run: warning: {args.obs}: its time tags could not be checked against "
+                  f"its pseudoranges ({len(tags.offset_s)} of the sampled epochs had two ranges "
+                  "beyond a fix's unknowns and no fault): a converter's shifted tags would "
+                  "go unseen (docs/observations.md)", file=sys.stderr)  # fmt: skip
         check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)",
                            args.max_height_offset)  # fmt: skip
         start = args.start_chainage
@@ -785,7 +791,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
             try:  # tags off their ranges would widen the model with errors of the file
-                check_time_tags(ranges, obs, str(path))
+                check_time_tags(ranges, obs, str(path), constellation=args.constellation)
             except ValueError as exc:
                 raise CliError(str(exc)) from None
             # the same station's epochs twice (a copy, decompressed) is evidence counted twice:
