@@ -236,6 +236,10 @@ def cmd_balises(args: argparse.Namespace) -> int:
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
+        from predisat.availability.run import assumed_sky_notes
+
+        for note in assumed_sky_notes(masks):  # as `locator run` and availability say it
+            print(f"locator balises: warning: masks {args.masks}: {note}", file=sys.stderr)
     # the error model applies to the simulated receiver or gives no claim, as in `locator run`
     mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
     profile = sim_profile(sim, args.constellation)

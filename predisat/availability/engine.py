@@ -309,9 +309,12 @@ class Availability:
         w = self.cell_length_m
         df = pd.DataFrame({"gps_s": self.gps_s})
         for n in THRESHOLDS:
+            # length with >= n per epoch, summed position after position as the whole-grid
+            # np.sum(axis=0) does: the same bits, block by block
             covered = np.zeros(len(self.gps_s))
             for a, b in _row_slices(self.count.shape):
-                covered += w[a:b] @ (self.count[a:b] >= n)  # length with >= n, per epoch
+                part = (self.count[a:b] >= n) * w[a:b, None]
+                covered = np.add.reduce(np.concatenate([covered[None], part]), axis=0)
             df[f"share_ge{n}"] = covered / np.sum(w)
         df["min_count"] = self.count.min(axis=0)
         df["longest_below4_m"] = self.longest_below_m(4)
@@ -327,7 +330,8 @@ class Availability:
         """Write :meth:`position_table` as Parquet, with the summary in the file metadata.
 
         With ``counts=True`` the file holds the full ``count`` array instead, long format
-        (:func:`write_counts`: ``rule, chainage_m, gps_s, count``).
+        (:func:`write_counts`: ``rule, chainage_m, gps_s, count``; before the line-day memory
+        work it had no ``rule`` column and pandas metadata).
         """
         # lazy: pyarrow only for this writer, not for the engine's computations
         import pyarrow as pa
@@ -403,9 +407,9 @@ def _row_blocks(arr: NDArray) -> list[NDArray]:
     return [arr[a:b] for a, b in _row_slices(arr.shape)]
 
 
-_COUNTS_ROWS = 1 << 22
-"""Rows of ``counts.parquet`` built at once: the long table of a line-day is written in
-pieces, never held whole."""
+_COUNTS_ROWS = 1 << 20
+"""Rows of ``counts.parquet`` built at once (about 25 MB with Arrow's copy): the long table
+of a line-day is written in pieces, never held whole."""
 
 
 def write_counts(
@@ -415,8 +419,8 @@ def write_counts(
 
     Columns ``rule`` (dictionary-encoded), ``chainage_m``, ``gps_s``, ``count``: one row per
     (rule, position, epoch), positions in order and epochs in order within each. Written in
-    row groups of whole positions, so that memory stays at a few tens of MB whatever the line
-    and the day.
+    row groups of whole positions (:data:`_COUNTS_ROWS` rows), so that memory stays at a few
+    tens of MB whatever the line and the day.
 
     Parameters
     ----------

@@ -138,6 +138,9 @@ def _task(shared: _Shared, item: LineInput) -> LineAvailability:
         "track_key": track_key(item.track),
         "options": shared.options_key,
         "software_version": str(__version__),
+        # a development install changes code under one version: a report of other code is
+        # made again (a review: new refusals and warnings were skipped on a rerun)
+        "code_fingerprint": code_fingerprint(),
     }
     if marker.is_file() and (out / "report.html").is_file():
         old = json.loads(marker.read_text())

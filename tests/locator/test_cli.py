@@ -94,6 +94,32 @@ def test_masks_whose_open_sky_is_assumed_are_said_and_so_are_the_claims_that_use
     assert "rest on an assumption" not in err and "claims on an assumption" not in out
 
 
+def test_masks_beside_the_runs_map_need_the_same_track_said(sim_dir, tmp_path, capsys):
+    """The simulation's own masks on its track moved 3 m sideways: the other track of a double
+    line, or another map of this one; refused unless --masks-same-track says which."""
+    from predisat.synth.world import World
+
+    t = World.load(sim_dir / "world.npz").track
+    s = np.arange(0.0, t.length_m, 5.0)
+    lat, lon, h = t.position_at(s)
+    hd = np.radians(t.heading_at(s))  # 3 m to the left of the direction of travel
+    lat2 = lat + 3.0 * np.sin(hd) / 111_200.0
+    lon2 = lon - 3.0 * np.cos(hd) / (111_200.0 * np.cos(np.radians(lat)))
+    coords = [[float(a), float(b), float(c)] for a, b, c in zip(lon2, lat2, h, strict=True)]
+    other = tmp_path / "B.geojson"
+    other.write_text(json.dumps({"type": "FeatureCollection", "features": [{
+        "type": "Feature", "properties": {"name": "B"},
+        "geometry": {"type": "LineString", "coordinates": coords}}]}))  # fmt: skip
+    base = ["-q", "run", "--sim", str(sim_dir), "--masks", str(sim_dir / "true_masks.parquet"),
+            "--track", str(other)]  # fmt: skip
+    capsys.readouterr()
+    assert main([*base, "--out", str(tmp_path / "r1")]) == 2
+    assert "lie 3.0 m right of track 'B'" in capsys.readouterr().err
+    assert not (tmp_path / "r1").exists()
+    assert main([*base, "--masks-same-track", "--out", str(tmp_path / "r2")]) == 0
+    assert "taken as the same physical track, as asked" in capsys.readouterr().err
+
+
 def test_run_with_true_masks_never_uses_nlos(sim_dir, tmp_path, capsys):
     sim = SimRun.read(sim_dir)
     assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--out",

@@ -195,7 +195,7 @@ def test_reductions_in_blocks_are_those_of_the_whole_grid(monkeypatch) -> None:
     assert len(engine._row_slices(a.count.shape)) == 37
     for n, s_want, e_want in zip((2, 4, 6), want["share"], want["epoch"], strict=True):
         np.testing.assert_array_equal(a.share_at_least(n), s_want)
-        np.testing.assert_allclose(a.epoch_table()[f"share_ge{n}"], e_want, rtol=1e-12)
+        np.testing.assert_array_equal(a.epoch_table()[f"share_ge{n}"], e_want)
     np.testing.assert_array_equal(a.longest_below_m(4), want["below_m"])
     np.testing.assert_array_equal(a.longest_below_s(4), want["below_s"])
     np.testing.assert_allclose(a.interval_quantiles(), want_q, rtol=1e-12)
@@ -205,8 +205,20 @@ def test_reductions_in_blocks_are_those_of_the_whole_grid(monkeypatch) -> None:
     assert sm["interval_p95_m"] == pytest.approx(float(np.nanquantile(x, 0.95)))
 
 
-def test_summary_and_tables_are_computed_once_and_handed_out_as_copies() -> None:
+def test_summary_and_tables_are_computed_once_and_handed_out_as_copies(monkeypatch) -> None:
     a = _random_result(every=1)
+    calls = []
+    original = Availability.longest_below_s
+
+    def spy(self, n=4):
+        calls.append(n)
+        return original(self, n)
+
+    monkeypatch.setattr(Availability, "longest_below_s", spy)
+    for _ in range(3):
+        a.summary()
+        a.position_table()
+    assert len(calls) == 2  # once for the summary, once for the table
     first = a.summary()
     first["share_ge4"] = -1.0
     assert a.summary()["share_ge4"] >= 0.0

@@ -317,6 +317,16 @@ def test_masks_beside_the_map_as_another_tracks_are_refused_unless_said_same_tra
                          **common)  # type: ignore[arg-type]  # fmt: skip
     (said,) = _said(r.info["warnings"])
     assert "4.0 m beside it (the median): taken as the same physical track, as asked" in said
+    # the command line: refused by default, the option says it
+    path = write_masks(masks.subset(3000.0, 5000.0), tmp_path / "m.masks.parquet")
+    parser = add_arguments(argparse.ArgumentParser())
+    base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T06:30", "--step",
+            "900", "--quiet", "--scheduler", "serial"]  # fmt: skip
+    with pytest.raises(OtherTrackError):
+        run_from_args(parser.parse_args([*base, "--out", str(tmp_path / "c1")]), other)
+    run_from_args(parser.parse_args([*base, "--masks-same-track", "--out", str(tmp_path / "c2")]),
+                  other)  # fmt: skip
+    assert (tmp_path / "c2" / "report.html").is_file()
 
 
 def test_one_position_sky_in_a_tagged_tunnel_and_masks_off_the_embedded_map_are_said(

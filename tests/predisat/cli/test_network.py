@@ -86,6 +86,13 @@ def test_network_command_writes_dataset_reports_and_summary(
     assert "0 processed, 2 already done" in capsys.readouterr().out
     assert (out / "availability/144/report.html").stat().st_mtime_ns == stamp
     assert json.loads((out / "availability/144/network.json").read_text()) == marker
+    # a report made by other code (a development install, one version) is made again: a
+    # review found a rerun skipping the new refusals and warnings
+    assert marker["key"]["code_fingerprint"]
+    marker["key"]["code_fingerprint"] = "0" * 16
+    (out / "availability/144/network.json").write_text(json.dumps(marker))
+    assert main(argv) == 0
+    assert (out / "availability/144/report.html").stat().st_mtime_ns != stamp
 
 
 def test_bad_network_file_is_refused_with_its_name(

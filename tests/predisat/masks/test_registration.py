@@ -90,7 +90,7 @@ def test_without_the_widening_a_place_gets_a_neighbour_s_sky(maps, monkeypatch) 
 def test_on_the_same_map_nothing_changes(maps) -> None:
     a, _ = maps
     m = _sharp_masks(a, np.arange(4000.0, 4500.0, 10.0))
-    reg = register_on_track(m, a, "m", same_track=True)
+    reg = register_on_track(m, a, "m")  # the default: nothing to say on the same map
     assert reg.same_map and reg.masks is m and reg.widen_m == 0.0
     assert "were made on track" in reg.describe("m", a.name)
 
@@ -114,10 +114,10 @@ def test_another_track_a_reversed_map_and_masks_past_the_map(maps) -> None:
     m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
     moved = TrackMap.from_latlon(b.lat_deg + 0.005, b.lon_deg, b.h_m, name="moved")
     with pytest.raises(ValueError, match=r"do not fit track 'moved'.*made on"):
-        register_on_track(m, moved, "m.parquet", same_track=True)
+        register_on_track(m, moved, "m.parquet")
     back = TrackMap.from_latlon(b.lat_deg[::-1], b.lon_deg[::-1], b.h_m[::-1], name="back")
     with pytest.raises(ValueError, match="runs the other way"):
-        register_on_track(m, back, "m.parquet", same_track=True)
+        register_on_track(m, back, "m.parquet", same_track=True)  # 4.5 m apart: said
     # the excerpt starts near chainage 300 of the demo's map: positions before it are left out
     longer = _sharp_masks(a, np.arange(250.0, 1701.0, 10.0))
     reg = register_on_track(longer, b, "m", same_track=True)
