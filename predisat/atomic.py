@@ -19,6 +19,7 @@ __all__ = [
     "LOCK_NAME",
     "STORAGE_ERRNOS",
     "FolderInUseError",
+    "access_error_text",
     "atomic_path",
     "check_writable",
     "exclusive_folder",
@@ -242,6 +243,23 @@ def storage_error_text(exc: BaseException) -> str | None:
         return f"the file system is read-only{where}: give an output folder on a writable one"
     what = "the disk quota is used up" if number == errno.EDQUOT else "no space left on the disk"
     return f"{what}{where}: free space there, or give another output folder, {then}"
+
+
+def access_error_text(exc: BaseException) -> str | None:
+    """One line for a person when ``exc`` is a permission error or a file where a folder is
+    needed (or the reverse), naming the path meant and the fix; None for any other error
+    (a user trial's were Python's raw ``[Errno 13]`` on a temporary name)."""
+    name = getattr(exc, "filename", None)
+    if not isinstance(exc, OSError) or not name:
+        return None
+    path = published_name(name)
+    if isinstance(exc, PermissionError):
+        return (f"{path}: permission denied; check its permissions and its folder's, or give "
+                "another path")  # fmt: skip
+    if isinstance(exc, (FileExistsError, NotADirectoryError, IsADirectoryError)):
+        return (f"{path}: {exc.strerror or exc} (a file stands where a folder is needed, or the "
+                "reverse); give another path, or move that one away")  # fmt: skip
+    return None
 
 
 def check_writable(folder: str | os.PathLike[str]) -> None:

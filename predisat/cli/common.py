@@ -14,7 +14,7 @@ import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
-from predisat.atomic import storage_error_text
+from predisat.atomic import access_error_text, storage_error_text
 from predisat.cli.args import caused_by_interrupt, run_checks
 
 if TYPE_CHECKING:
@@ -123,7 +123,8 @@ def _run_func(args: argparse.Namespace, name: str, note: str, seen: list[int]) -
     except (CliError, ValueError, OSError, KeyError) as exc:
         # library errors are written to be read by a person: no traceback; a full disk or a
         # file-size limit named with the file meant (not its temporary name) and the fix
-        print(f"{name}: error: {storage_error_text(exc) or exc}", file=sys.stderr)
+        text = storage_error_text(exc) or access_error_text(exc) or exc
+        print(f"{name}: error: {text}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, SystemError, ImportError) as exc:
         # Ctrl-C inside a numba-compiled function surfaces as a SystemError caused by it, and

@@ -151,3 +151,22 @@ def test_an_output_folder_that_cannot_be_written_is_refused_before_any_work(
     (tmp_path / "file").write_text("x")
     with pytest.raises(OSError, match=r"file/run: cannot write there \(.*\); give an output"):
         check_writable(tmp_path / "file" / "run")
+
+
+def test_permission_and_file_kind_errors_name_the_path_meant_and_the_fix(tmp_path) -> None:
+    """A trial's permission errors were Python's raw ``[Errno 13]`` on a temporary name."""
+    import errno
+
+    from predisat.atomic import access_error_text
+
+    temp = tmp_path / ".masks.parquet.abcd1234"  # atomic_path's temporary name
+    denied = PermissionError(errno.EACCES, "Permission denied", str(temp))
+    text = access_error_text(denied)
+    assert text is not None and text.startswith(f"{tmp_path / 'masks.parquet'}: permission")
+    assert "check its permissions" in text
+    exists = FileExistsError(errno.EEXIST, "File exists", str(tmp_path / "out"))
+    text = access_error_text(exists)
+    assert text is not None and "a file stands where a folder is needed" in text
+    assert access_error_text(OSError(errno.EIO, "I/O error", "x")) is None
+    assert access_error_text(ValueError("x")) is None
+    assert access_error_text(PermissionError(errno.EACCES, "Permission denied")) is None
