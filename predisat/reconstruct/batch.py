@@ -42,6 +42,7 @@ import json
 import os
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -55,7 +56,7 @@ from predisat.atomic import LOCK_NAME, exclusive_folder
 from predisat.camera.models import CameraModel, Mount
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.jsontypes import JsonDict
-from predisat.masks.fileformat import read_masks, write_masks
+from predisat.masks.fileformat import MaskFileWarning, read_masks, write_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
@@ -819,7 +820,11 @@ def _merge(
     opts = plan.storage_options
     for name, *_ in plan.chunks:
         with input_path(join(plan.chunk_dir, f"{name}.parquet"), opts) as chunk_file:
-            parts.append(read_masks(chunk_file, close_holes=False))  # closed below, on the track
+            # this run's own chunks: a file's warnings (spacing, units) are for the merged
+            # file's readers, once, not once per chunk (a review)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", MaskFileWarning)
+                parts.append(read_masks(chunk_file, close_holes=False))  # closed below
         marker = json.loads(read_bytes(join(plan.chunk_dir, f"{name}.json"), opts).decode())
         for b in marker.get("bad_frames", []):
             if b["frame_id"] not in bad:  # not reported yet: met by a chunk, or a run before
