@@ -20,7 +20,7 @@ whose offsets are not negligible.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,7 +43,8 @@ MAX_TAG_OFFSET_S = 0.003
 """Largest disagreement between time tags and pseudoranges a run is located with: 3 ms moves a
 satellite's range by at most 2.4 m (range rates stay under 800 m/s), inside the pseudorange
 error model; beyond it the error grows by up to 0.8 m per ms. Clean files of four geodetic
-receivers gave medians within 0.6 ms (``docs/observations.md``)."""
+receivers read within 0.05 ms; 5 ms was refused on each with 74-120 epochs of evidence, and
+GPS alone with 19 epochs needed 10 ms (``docs/observations.md``)."""
 
 MIN_EVIDENCE_EPOCHS = 10
 """Sampled epochs with evidence below which a run says its tags could not be checked (one
@@ -58,7 +59,7 @@ _CONVERGED_S = 0.002  # an offset found below this is not worth another solution
 
 
 def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
-    """Time-tag offset of one solved epoch, with its standard deviation.
+    """Time-tag offset of one solved epoch, robust to one faulty range, with its sigma.
 
     Parameters
     ----------
@@ -71,50 +72,41 @@ def tag_offset(model: RangeModel, fix: PositionFix) -> tuple[float, float]:
     -------
     offset_s, sigma_s : float
         The offset ``delta`` such that the satellites were where the ephemeris places them at
-        ``t_tag - P / c + delta``, seconds. NaN without a solution, with fewer than two ranges
-        beyond the unknowns (position, one clock per system, the offset), or when the
-        residuals stand more than 3 times above the weights' sigma (a faulty range).
+        ``t_tag - P / c + delta``, seconds: of the five-state fits that each leave one range
+        out, the least significant (``|delta| / sigma`` smallest), so that one faulty range
+        cannot make an offset. NaN without a solution, with fewer than two ranges beyond the
+        unknowns (position, one clock per system, the offset), or when that fit's residuals
+        stand more than 3 times above the weights' sigma (more than one faulty range).
     """
     fit = _fit(model, fix)
     if fit is None:
         return float("nan"), float("nan")
-    return _evidence(fit)[:2]
+    return _robust(fit, 0.0)
 
 
-def _evidence(fit: _Fit) -> tuple[float, float, bool]:
-    """An epoch's offset, its sigma and whether only an offset explains the ranges; NaN when
-    the epoch is no evidence on the tags.
-
-    Three hypotheses: no offset and no fault (four states, every range), an offset (five
-    states), one faulty range and no offset (four states, a range left out). An epoch the
-    first explains shows no offset beyond its noise (its five-state estimate is kept, not
-    counted as a detection); one that only the second explains detects an offset; one that a
-    faulty range explains as well says nothing on the tags (a bias of 10 m on one of 7
-    satellites reads as an offset of -5.5 ms: a review's, which refused the file).
-    """
-    nan = float("nan")
-    if fit.redundant < _MIN_REDUNDANT or fit.scale > _MAX_SCALE:
-        return nan, nan, False
-    if not fit.plain_fits and fit.one_fault_fits:
-        return nan, nan, False
-    return fit.delta_s, float(np.sqrt(fit.var_s2 * fit.scale)), not fit.plain_fits
+def _robust(fit: _Fit, shift_s: float) -> tuple[float, float]:
+    """The least significant leave-one-out offset (plus ``shift_s``, the tag's move) and its
+    sigma; NaN when that fit's residuals stand above 3 sigma (more than one faulty range:
+    choosing among the fits that stay within it instead let two swapped satellites read as
+    -20 s and refuse a file)."""
+    total = shift_s + fit.loo[:, 0]
+    sigma = np.sqrt(fit.loo[:, 1] * fit.loo[:, 2])
+    k = int(np.argmin(np.abs(total) / sigma))
+    if fit.loo[k, 2] > _MAX_SCALE:
+        return float("nan"), float("nan")
+    return float(total[k]), float(sigma[k])
 
 
 @dataclass(frozen=True)
 class _Fit:
-    """An epoch's five-state fit and how the four-state hypotheses fit the same ranges."""
+    """An epoch's five-state fits with each range left out."""
 
-    delta_s: float  # the offset
-    var_s2: float  # its variance from the weights
-    scale: float  # the residuals' variance factor (at least 1)
-    redundant: int  # ranges beyond the five-state unknowns
-    plain_fits: bool  # four states, every range: residuals within the model
-    one_fault_fits: bool  # four states with one range left out fit
+    loo: NDArray  # (n, 3): offset, its variance from the weights, the residuals' scale
 
 
 def _fit(model: RangeModel, fix: PositionFix) -> _Fit | None:
-    """The five-state fit of a solved epoch and the four-state alternatives; None when not
-    solvable."""
+    """The five-state fits of a solved epoch; None when not solvable or not redundant enough
+    (two ranges beyond the unknowns: one left out, one to check the rest)."""
     cr = fix.ranges
     if not fix.ok or cr is None:
         return None
@@ -122,7 +114,7 @@ def _fit(model: RangeModel, fix: PositionFix) -> _Fit | None:
     sats = [s for s, u in zip(cr.states.sats, use, strict=True) if u]
     systems = sorted({s[0] for s in sats})
     n = len(sats)
-    if n < 4 + len(systems) + 1:  # position, clocks, the offset, and one redundant range
+    if n < 4 + len(systems) + _MIN_REDUNDANT:  # position, clocks, the offset, and redundancy
         return None
     t_tx = np.asarray(cr.states.transmit_gps_s, float)[use]
     both = model.ephemeris.evaluate(np.concatenate([t_tx - 0.5, t_tx + 0.5]), sats)[0]
@@ -137,20 +129,17 @@ def _fit(model: RangeModel, fix: PositionFix) -> _Fit | None:
     sin_el = np.sin(np.radians(cr.el_deg[use]))
     # the fix's own weights (RTKLIB's code variance): an estimate, not a bound
     w = 1.0 / (0.09 + 0.09 / sin_el**2 + (0.5 * cr.iono_m[use]) ** 2)
-    full = _solve(h, w, y)
-    if full is None:
-        return None
-    plain = _solve(h[:, :-1], w, y)  # the offset left out: x, y, z and the clocks
-    plain_fits = plain is not None and plain[2] <= _MAX_SCALE
-    one_fault = False
-    if not plain_fits:
-        for j in range(n):
-            others = np.arange(n) != j
-            alt = _solve(h[others][:, :-1], w[others], y[others])
-            if alt is not None and alt[2] <= _MAX_SCALE:
-                one_fault = True
-                break
-    return _Fit(full[0], full[1], full[2], n - h.shape[1], plain_fits, one_fault)
+    # One faulty range (a bias the locator's FDE would exclude) leans on the offset: 10 m on
+    # one of 7 GPS satellites read as -5.5 ms and 100 m as -126 ms (a trial and two reviews;
+    # earlier versions refused such files). Left out in turn, the fit without it shows none.
+    loo = []
+    for k in range(n):
+        others = idx != k
+        sub = _solve(h[others], w[others], y[others])
+        if sub is None:  # one range fewer leaves the rest singular: no robust estimate
+            return None
+        loo.append(sub)
+    return _Fit(np.array(loo, float))
 
 
 def _solve(h: NDArray, w: NDArray, y: NDArray) -> tuple[float, float, float] | None:
@@ -178,15 +167,13 @@ class TagOffsets:
     gps_s : ndarray, shape (n,)
         The sampled epochs (those solved with enough satellites).
     offset_s, sigma_s : ndarray, shape (n,)
-        Each epoch's offset and its standard deviation, seconds.
-    detected : ndarray of bool, shape (n,)
-        Only an offset explains the epoch's ranges (neither none, nor one faulty range).
+        Each epoch's offset (robust to one faulty range: :func:`tag_offset`) and its
+        standard deviation, seconds.
     """
 
     gps_s: NDArray
     offset_s: NDArray
     sigma_s: NDArray
-    detected: NDArray
 
     @property
     def median_s(self) -> float:
@@ -205,19 +192,17 @@ class TagOffsets:
         return 1.2533 * spread / np.sqrt(n)
 
     def jumps(self, min_s: float = MAX_TAG_OFFSET_S) -> NDArray:
-        """Epochs that detect an offset beyond ``min_s`` and 4 of their sigmas, (k,)."""
+        """Epochs whose own offset is beyond ``min_s`` and 4 of their sigmas, (k,)."""
         return np.asarray(self.gps_s)[self._off(min_s)]
 
-    def detected_median_s(self, min_s: float = MAX_TAG_OFFSET_S) -> float:
+    def jumps_median_s(self, min_s: float = MAX_TAG_OFFSET_S) -> float:
         """Median offset of the epochs of :meth:`jumps`, seconds (NaN without one)."""
         off = np.asarray(self.offset_s)[self._off(min_s)]
         return float(np.median(off)) if len(off) else float("nan")
 
     def _off(self, min_s: float) -> NDArray:
         x = np.abs(np.asarray(self.offset_s))
-        return np.asarray(self.detected, bool) & (x > min_s) & (
-            x > _MIN_SIGNIFICANCE * np.asarray(self.sigma_s)
-        )
+        return (x > min_s) & (x > _MIN_SIGNIFICANCE * np.asarray(self.sigma_s))
 
 
 def tag_offsets(
@@ -253,28 +238,27 @@ def tag_offsets(
             continue
         sats = [s for s, h in zip(obs.sats, have, strict=True) if h]
         t, shift = float(obs.gps_s[i]), 0.0
-        first: _Fit | None = None
         # the range rates are a linearisation: an offset of seconds (a time scale mixed up)
-        # is found by moving the tag and solving again; the hypotheses are judged at the tag
+        # is found by moving the tag and solving again
         for _ in range(_ITERATIONS):
             fix = solve_epoch(m, t + shift, sats, sel.pseudorange_m[i, have],
                               list(sel.code[i, have]), x0_ecef_m=x0)  # fmt: skip
             fit = _fit(m, fix) if fix.ok else None
             if fit is None:
                 break
-            first = first or fit
             x0 = fix.ecef_m
-            shift += fit.delta_s
-            if abs(fit.delta_s) < _CONVERGED_S:
-                d, sd, found = _evidence(replace(
-                    fit, delta_s=shift, plain_fits=first.plain_fits,
-                    one_fault_fits=first.one_fault_fits,
-                ))  # fmt: skip
+            # the tag moves by the robust estimate: the fit of every range would follow a
+            # faulty one (two swapped satellites moved it by 20 s)
+            total = fit.loo[:, 0]
+            step = float(total[np.argmin(np.abs(total) / np.sqrt(fit.loo[:, 1] * fit.loo[:, 2]))])
+            if abs(step) < _CONVERGED_S:
+                d, sd = _robust(fit, shift)
                 if np.isfinite(d) and np.isfinite(sd):
-                    rows.append((t, d, sd, float(found)))
+                    rows.append((t, d, sd))
                 break
-    arr = np.array(rows, float).reshape(-1, 4)
-    return TagOffsets(arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3] > 0.5)
+            shift += step
+    arr = np.array(rows, float).reshape(-1, 3)
+    return TagOffsets(arr[:, 0], arr[:, 1], arr[:, 2])
 
 
 def check_time_tags(
@@ -305,25 +289,27 @@ def check_time_tags(
     Raises
     ------
     ValueError
-        When three of the sampled epochs detect an offset (:meth:`TagOffsets.jumps`: only an
-        offset explains their ranges) beyond ``max_offset_s`` and 4 of their own sigmas
-        (about 6e-5 per epoch without one), in the whole file or in part of it.
+        When the median offset is beyond ``max_offset_s`` and 4 of its sigmas, or when three
+        sampled epochs are each beyond it and 4 of their own sigmas (a jump in part of the
+        file, which the median hides).
     """
     n = len(obs.gps_s)
     idx = np.unique(np.linspace(0, max(n - 1, 0), min(n_epochs, n)).astype(int))
     off = tag_offsets(model, obs, idx, constellation)
     if not len(off.offset_s):
         return off
+    med, sig = off.median_s, off.median_sigma_s
+    whole = abs(med) > max_offset_s and abs(med) > _MIN_SIGNIFICANCE * sig
     jumps = off.jumps(max_offset_s)
-    if len(jumps) >= _MIN_JUMPS:
-        med = off.detected_median_s(max_offset_s)
+    if whole or len(jumps) >= _MIN_JUMPS:
         n_ok = len(off.offset_s)
-        what = (
-            f"by {med * 1e3:+.1f} ms (the median of the {len(jumps)} of {n_ok} sampled epochs "
-            f"that show it"
-            + ("" if len(jumps) > n_ok // 2 else f", from gps_s {jumps[0]:.0f}: a jump in the file")
-            + ")"
-        )
+        if whole:
+            what = (f"by {med * 1e3:+.1f} ms (the median of {n_ok} sampled epochs, "
+                    f"+-{sig * 1e3:.1f} ms)")  # fmt: skip
+        else:
+            med = off.jumps_median_s(max_offset_s)
+            what = (f"by {med * 1e3:+.1f} ms at {len(jumps)} of {n_ok} sampled epochs (from "
+                    f"gps_s {jumps[0]:.0f}): a jump in the file")  # fmt: skip
         seconds = abs(med) > 5.0 and abs(med - round(med)) < 0.05  # GPS - UTC >= 11 s since 1996
         scale = (
             f" About {round(med):+d} s is a time scale mixed up: UTC, GLONASS or BeiDou time "
@@ -333,13 +319,13 @@ def check_time_tags(
             else ""
         )
         raise ValueError(
-            f"{label}: the epochs' time tags disagree with their pseudoranges {what}; only "
-            f"offsets within {max_offset_s * 1e3:g} ms are accepted. The satellites' range rates "
-            "show it (no single faulty range explains these epochs): each range would be off by "
-            "its rate times the offset, metres per millisecond that the pair differences do not "
-            "cancel. Causes: a converter that shifted the time tags, or a "
-            "receiver clock offset applied to the tags and not to the ranges (or the reverse: "
-            "RINEX 'RCV CLOCK OFFS APPL'), or a clock jump written into one only. Convert the "
-            f"file again from the receiver's raw data.{scale}"
+            f"{label}: the epochs' time tags disagree with their pseudoranges {what}; at most "
+            f"{max_offset_s * 1e3:g} ms is accepted. The satellites' range rates show it (with "
+            "any one range left out): each range would be off by its rate times the offset, up "
+            "to 0.8 m per millisecond, which the pair differences do not cancel. Causes: a "
+            "converter that shifted the time tags, or a receiver clock offset applied to the "
+            "tags and not to the ranges (or the reverse: RINEX 'RCV CLOCK OFFS APPL'), or a "
+            f"clock jump written into one only. Convert the file again from the receiver's raw "
+            f"data.{scale}"
         )
     return off

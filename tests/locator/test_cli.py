@@ -368,6 +368,39 @@ def test_a_track_at_the_wrong_height_is_refused(test_data, tmp_path, capsys, dh_
     assert main(ok) == 0
 
 
+def test_rinex_runs_refuse_shifted_time_tags_and_say_when_they_could_not_check_them(
+    test_data, tmp_path, capsys, monkeypatch
+):
+    """Tags 100 ms late (a converter's): 24 hazardous claims in 24 for a trial, now refused
+    in one line; six satellites leave the tags unchecked, and the run says so."""
+    track = _virtual_track(tmp_path / "virtual.csv")
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    lines = obs.read_text().splitlines(keepends=True)
+    late = []
+    for line in lines:  # RINEX 2 epoch lines: " yy mm dd hh mm ss.sssssss  f nnGnnGnn..."
+        if line.startswith(" 05  4  2"):
+            sec = float(line[15:26]) + 0.1
+            line = line[:15] + f"{sec:11.7f}" + line[26:]
+        late.append(line)
+    (tmp_path / "late.05o").write_text("".join(late))
+    run = ["run", "--nav", str(nav), "--track", str(track), "--no-masks",
+           "--antenna-height", "0"]  # fmt: skip
+    capsys.readouterr()
+    assert main([*run, "--obs", str(tmp_path / "late.05o"), "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"time tags disagree with their pseudoranges by -(9\d|10\d)\.\d ms", err)
+    assert err.count("\n") == 1
+    # the clean file: checked on its 10 epochs, nothing said; asked for 11, said
+    assert main(["-q", *run, "--obs", str(obs), "--out", str(tmp_path / "b")]) == 0
+    assert "could not be checked" not in capsys.readouterr().err
+    monkeypatch.setattr("locator.timetag.MIN_EVIDENCE_EPOCHS", 11)
+    assert main(["-q", *run, "--obs", str(obs), "--out", str(tmp_path / "c")]) == 0
+    assert "time tags could not be checked against its pseudoranges (10 of" in (
+        capsys.readouterr().err
+    )
+
+
 def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     """GEONET 0759 (10 epochs, GPS C1) on a straight track through its known position."""
     track = _virtual_track(tmp_path / "virtual.csv")

@@ -38,7 +38,7 @@ def test_a_clean_file_agrees_with_its_tags(geonet) -> None:
     off = check_time_tags(model, obs, "clean")
     assert len(off.offset_s) == len(obs.gps_s)
     assert abs(off.median_s) < 1.5e-3 < MAX_TAG_OFFSET_S
-    assert not off.detected.any() and len(off.jumps()) == 0
+    assert len(off.jumps()) == 0
 
 
 @pytest.mark.parametrize("shift_s", [0.05, -0.1])
@@ -70,8 +70,8 @@ def test_a_jump_in_part_of_the_file_is_refused(geonet) -> None:
     off = tag_offsets(model, late, np.arange(len(obs.gps_s)))
     assert abs(off.median_s) < MAX_TAG_OFFSET_S  # the median alone would pass
     np.testing.assert_array_equal(off.jumps(), obs.gps_s[7:])
-    said = r"by \+100\.\d ms \(the median of the 3 of 10 sampled epochs that show it, from gps_s"
-    with pytest.raises(ValueError, match=said + r" \d+: a jump"):
+    said = r"by \+10\d\.\d ms at 3 of 10 sampled epochs \(from gps_s \d+\): a jump in the file"
+    with pytest.raises(ValueError, match=said):
         check_time_tags(model, late, "jump.05o")
 
 
@@ -80,7 +80,7 @@ def test_a_jump_in_part_of_the_file_is_refused(geonet) -> None:
 def test_one_faulty_range_does_not_read_as_an_offset(geonet, sat, bias_m) -> None:
     """A bias on one satellite (the locator's FDE excludes it) leans on the offset: a 100 m
     one read as 25-80 ms in the first version, 10 m as -5.5 ms in the second (a review), and
-    both refused the file, blaming its tags."""
+    both refused the file, blaming its tags. Left out in turn, it shows no offset."""
     model, obs = geonet
     k = obs.sats.index(sat)
     values = dict(obs.values)
@@ -90,7 +90,8 @@ def test_one_faulty_range_does_not_read_as_an_offset(geonet, sat, bias_m) -> Non
             v[:, k] += bias_m
             values[code] = v
     off = check_time_tags(model, replace(obs, values=values), "faulty.05o")  # not refused
-    assert not off.detected.any()
+    assert len(off.jumps()) == 0
+    assert not len(off.offset_s) or abs(off.median_s) < MAX_TAG_OFFSET_S
 
 
 def test_tags_in_utc_read_as_gps_time_are_named_a_time_scale_mix_up(geonet) -> None:
@@ -112,3 +113,14 @@ def test_the_offset_is_judged_on_the_runs_systems_only(geonet) -> None:
         check_time_tags(model, shifted, "g.05o", constellation="gps")
     off = check_time_tags(model, shifted, "e.05o", constellation="galileo")
     assert len(off.offset_s) == 0
+
+
+@pytest.mark.parametrize("shift_s", [0.02, -0.01])
+def test_offsets_of_ten_milliseconds_are_refused_too(geonet, shift_s) -> None:
+    """The second version let 10-20 ms pass on every real file (a review): its per-epoch
+    test barely depended on the offset, and it had dropped the file's median. (5 ms is
+    refused on the whole hour, docs/observations.md; these 10 epochs give a median sigma of
+    2 ms.)"""
+    model, obs = geonet
+    with pytest.raises(ValueError, match="time tags disagree"):
+        check_time_tags(model, replace(obs, gps_s=obs.gps_s + shift_s), "ms.05o")
