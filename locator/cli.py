@@ -259,6 +259,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
         _report_problems(args.obs, obs.problems)
+        _report_no_code(args.obs, obs, args.constellation)
         model = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         _nav_covers(model.ephemeris, obs, args.nav)
         source = RinexSource(model, obs, args.constellation)
@@ -564,6 +565,35 @@ def _report_problems(label: str, problems: Sequence[Any]) -> None:
             f"{first.what}",
             file=sys.stderr,
         )
+
+
+def _report_no_code(label: str, obs: Any, constellation: str) -> None:
+    """Epochs left without any pseudorange the locator reads for the run's systems are told,
+    with the header record that changed the observation types before them (a trial's file
+    dropped C1 at an event flag 4: half the run had no fix, and no reason was given)."""
+    import numpy as np
+
+    from locator.observations import DEFAULT_PSEUDORANGE_PRIORITY
+    from predisat.availability.satellites import select_satellites
+
+    wanted = np.isin(np.asarray(obs.sats), select_satellites(obs.sats, constellation))
+    if not wanted.any() or not len(obs.gps_s):
+        return
+    have = np.isfinite(obs.pseudorange().pseudorange_m[:, wanted]).any(axis=1)
+    if have.all() or not have.any():  # none at all is refused by the source, naming the codes
+        return
+    first = int(np.flatnonzero(~have)[0])
+    line = int(obs.epoch_line[first])
+    changes = [e for e in obs.events if e.flag == 4 and e.line < line
+               and any("TYPES OF OBS" in r for r in e.records)]  # fmt: skip
+    why = (f" after the header record at line {changes[-1].line} (event flag 4) that changed "
+           "the observation types" if changes else "")  # fmt: skip
+    systems = sorted({s[0] for s, w in zip(obs.sats, wanted, strict=True) if w})
+    codes = "; ".join(f"{c}: {', '.join(DEFAULT_PSEUDORANGE_PRIORITY.get(c, ()))}"
+                      for c in systems)  # fmt: skip
+    print(f"{label}: warning: {int((~have).sum())} of {len(have)} epochs (the first at line "
+          f"{line}){why} have no pseudorange of the codes the locator reads ({codes}): they get "
+          "no fix", file=sys.stderr)  # fmt: skip
 
 
 # `evaluate --truth-chainage` this far from the run's median estimate, and a thousand times

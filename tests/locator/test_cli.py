@@ -401,6 +401,34 @@ def test_rinex_runs_refuse_shifted_time_tags_and_say_when_they_could_not_check_t
     )
 
 
+def test_epochs_left_without_a_code_by_a_change_of_observation_types_are_told(
+    test_data, tmp_path, capsys
+):
+    """A header record (event flag 4) that drops C1 mid-file: half a trial's run had no fix,
+    and nothing said why."""
+    track = _virtual_track(tmp_path / "virtual.csv")
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    lines = obs.read_text().splitlines(keepends=True)
+    epochs = [k for k, line in enumerate(lines) if line.startswith(" 05  4  2")]
+    out = lines[: epochs[6]]
+    out += ["                            4  1\n",
+            "     3    L1    L2    P2" + " " * 36 + "# / TYPES OF OBSERV\n"]  # fmt: skip
+    for line in lines[epochs[6]:]:
+        if line.startswith(" 05  4  2"):
+            out.append(line)
+        else:  # the record's fields are 16 wide: L1 C1 L2 P2 -> L1 L2 P2
+            out.append(line[:16] + line[32:])
+    (tmp_path / "noc1.05o").write_text("".join(out))
+    assert main(["-q", "run", "--obs", str(tmp_path / "noc1.05o"), "--nav", str(nav),
+                 "--track", str(track), "--no-masks", "--antenna-height", "0",
+                 "--out", str(tmp_path / "r")]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert re.search(r"noc1\.05o: warning: 4 of 10 epochs \(the first at line \d+\) after the "
+                     r"header record at line \d+ \(event flag 4\) that changed the observation "
+                     r"types have no pseudorange of the codes the locator reads \(G: C1C", err)
+
+
 def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     """GEONET 0759 (10 epochs, GPS C1) on a straight track through its known position."""
     track = _virtual_track(tmp_path / "virtual.csv")
