@@ -23,7 +23,7 @@ from locator.corrections import CorrectedRanges, RangeModel
 from locator.observations import Observations, ObsProblem
 from predisat.geodesy import ecef_to_geodetic
 
-__all__ = ["PositionFix", "solve_epoch", "solve_observations"]
+__all__ = ["PositionFix", "first_guess", "solve_epoch", "solve_observations"]
 
 
 @dataclass(frozen=True)
@@ -156,6 +156,13 @@ def solve_epoch(
     return _failed(gps_s, f"not converged after {max_iter} iterations", excluded, max_iter)
 
 
+def first_guess(obs: Observations) -> NDArray | None:
+    """The header's approximate position (ECEF m, shape (3,)) as a fix's first guess, or None
+    when it is missing (RINEX writes 0 0 0) or not near the Earth's surface."""
+    hx = obs.header.approx_position_ecef_m
+    return hx if np.all(np.isfinite(hx)) and np.linalg.norm(hx) > 6e6 else None
+
+
 def solve_observations(
     model: RangeModel,
     obs: Observations,
@@ -176,8 +183,7 @@ def solve_observations(
     """
     sel = obs.pseudorange(priority)
     m = model.with_glonass_slots(obs.header.glonass_slots)
-    hx = obs.header.approx_position_ecef_m
-    x0: NDArray | None = hx if np.all(np.isfinite(hx)) and np.linalg.norm(hx) > 6e6 else None
+    x0 = first_guess(obs)
     rows, problems = [], []
     index = np.arange(len(obs.gps_s)) if epochs is None else np.asarray(epochs, int)
     for i in index:

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from locator.corrections import RangeModel
 from locator.observations import Observations
-from locator.spp import PositionFix, solve_epoch
+from locator.spp import PositionFix, first_guess, solve_epoch
 from predisat.availability.satellites import select_satellites
 
 __all__ = [
@@ -89,12 +89,16 @@ def _robust(fit: _Fit, shift_s: float) -> tuple[float, float]:
     sigma; NaN when that fit's residuals stand above 3 sigma (more than one faulty range:
     choosing among the fits that stay within it instead let two swapped satellites read as
     -20 s and refuse a file)."""
-    total = shift_s + fit.loo[:, 0]
-    sigma = np.sqrt(fit.loo[:, 1] * fit.loo[:, 2])
-    k = int(np.argmin(np.abs(total) / sigma))
+    k = _least_significant(fit, shift_s)
     if fit.loo[k, 2] > _MAX_SCALE:
         return float("nan"), float("nan")
-    return float(total[k]), float(sigma[k])
+    return float(shift_s + fit.loo[k, 0]), float(np.sqrt(fit.loo[k, 1] * fit.loo[k, 2]))
+
+
+def _least_significant(fit: _Fit, shift_s: float) -> int:
+    """The leave-one-out fit whose offset (plus ``shift_s``) is the fewest sigmas from 0."""
+    sigma = np.sqrt(fit.loo[:, 1] * fit.loo[:, 2])
+    return int(np.argmin(np.abs(shift_s + fit.loo[:, 0]) / sigma))
 
 
 @dataclass(frozen=True)
@@ -229,8 +233,7 @@ def tag_offsets(
     sel = obs.pseudorange()
     wanted = np.isin(np.asarray(obs.sats), select_satellites(obs.sats, constellation))
     m = model.with_glonass_slots(obs.header.glonass_slots)
-    hx = obs.header.approx_position_ecef_m
-    x0: NDArray | None = hx if np.all(np.isfinite(hx)) and np.linalg.norm(hx) > 6e6 else None
+    x0 = first_guess(obs)
     rows = []
     for i in np.asarray(epochs, int):
         have = np.isfinite(sel.pseudorange_m[i]) & wanted
@@ -249,8 +252,7 @@ def tag_offsets(
             x0 = fix.ecef_m
             # the tag moves by the robust estimate: the fit of every range would follow a
             # faulty one (two swapped satellites moved it by 20 s)
-            total = fit.loo[:, 0]
-            step = float(total[np.argmin(np.abs(total) / np.sqrt(fit.loo[:, 1] * fit.loo[:, 2]))])
+            step = float(fit.loo[_least_significant(fit, 0.0), 0])
             if abs(step) < _CONVERGED_S:
                 d, sd = _robust(fit, shift)
                 if np.isfinite(d) and np.isfinite(sd):

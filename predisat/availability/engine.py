@@ -37,7 +37,7 @@ import sys
 import time
 import zipfile
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -186,10 +186,7 @@ class Availability:
     def share_at_least(self, n: int) -> NDArray:
         """Share of epochs with at least ``n`` trusted satellites, per position, (n_pos,)."""
         n_ep = self.count.shape[1]
-        return np.concatenate(
-            [np.count_nonzero(c >= n, axis=1) / max(n_ep, 1) for c in _row_blocks(self.count)]
-            or [np.zeros(0)]
-        )
+        return _per_row(self.count, lambda c: np.count_nonzero(c >= n, axis=1) / max(n_ep, 1))
 
     def line_share_at_least(self, n: int) -> float:
         """Share of (place, time) with >= ``n`` satellites over the line (length-weighted)."""
@@ -204,8 +201,8 @@ class Availability:
         (n_epoch,).
         """
         lo, hi = _cell_extent(self.chainage_m)
-        cols = _row_blocks(self.count.T)  # blocks of epochs: the runs go along positions
-        return np.concatenate([longest_run(c < n, lo, hi) for c in cols] or [np.zeros(0)])
+        # blocks of epochs: the runs go along positions
+        return _per_row(self.count.T, lambda c: longest_run(c < n, lo, hi))
 
     def longest_below_s(self, n: int = 4) -> NDArray:
         """Longest contiguous time run with fewer than ``n`` satellites, per position, seconds.
@@ -214,10 +211,7 @@ class Availability:
         """
         t = self.gps_s
         half = self.step_s / 2.0
-        blocks = _row_blocks(self.count)
-        return np.concatenate(
-            [longest_run(c < n, t - half, t + half) for c in blocks] or [np.zeros(0)]
-        )
+        return _per_row(self.count, lambda c: longest_run(c < n, t - half, t + half))
 
     # ------------------------------------------------------------------ interval
     def interval_quantiles(self, q: tuple[float, ...] = (0.5, 0.95), min_count: int = 4) -> NDArray:
@@ -293,9 +287,7 @@ class Availability:
         )
         for n in THRESHOLDS:
             df[f"share_ge{n}"] = self.share_at_least(n)
-        df["mean_count"] = np.concatenate(
-            [c.mean(axis=1) for c in _row_blocks(self.count)] or [np.zeros(0)]
-        )
+        df["mean_count"] = _per_row(self.count, lambda c: c.mean(axis=1))
         df["min_count"] = self.count.min(axis=1)
         df["longest_below4_s"] = self.longest_below_s(4)
         q = self.interval_quantiles()
@@ -402,9 +394,11 @@ def _row_slices(shape: tuple[int, ...]) -> list[tuple[int, int]]:
     return [(a, min(a + per, n_rows)) for a in range(0, n_rows, per)]
 
 
-def _row_blocks(arr: NDArray) -> list[NDArray]:
-    """Views of whole rows of ``arr``, about :data:`_BLOCK_CELLS` cells each."""
-    return [arr[a:b] for a, b in _row_slices(arr.shape)]
+def _per_row(arr: NDArray, fn: Callable[[NDArray], NDArray]) -> NDArray:
+    """``fn`` of blocks of whole rows of ``arr`` (about :data:`_BLOCK_CELLS` cells each; ``fn``
+    gives one value per row), joined: the per-row reduction without a grid-sized temporary."""
+    parts = [fn(arr[a:b]) for a, b in _row_slices(arr.shape)]
+    return np.concatenate(parts) if parts else np.zeros(0)
 
 
 _COUNTS_ROWS = 1 << 20

@@ -120,6 +120,7 @@ class _Shared:
     out_dir: str
     options: AvailabilityOptions
     options_key: JsonDict
+    code_fingerprint: str  # the client's; the runner checks the workers run the same code
 
 
 def _sha256(path: Path) -> str:
@@ -140,7 +141,7 @@ def _task(shared: _Shared, item: LineInput) -> LineAvailability:
         "software_version": str(__version__),
         # a development install changes code under one version: a report of other code is
         # made again (a review: new refusals and warnings were skipped on a rerun)
-        "code_fingerprint": code_fingerprint(),
+        "code_fingerprint": shared.code_fingerprint,
     }
     if marker.is_file() and (out / "report.html").is_file():
         old = json.loads(marker.read_text())
@@ -207,7 +208,7 @@ def network_availability(
         if opts.nav is not None:
             opts = replace(opts, nav=tuple(absolute(n) for n in opts.nav))
         inputs = [replace(item, masks_path=absolute(item.masks_path)) for item in inputs]
-    shared = _Shared(str(out_dir), opts, opts.key())
+    shared = _Shared(str(out_dir), opts, opts.key(), code_fingerprint())
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     done: dict[str, LineAvailability] = {}
     bar = tqdm(total=len(inputs), desc="availability", unit="line", disable=not progress)

@@ -645,6 +645,15 @@ def test_the_positions_closing_a_hole_lie_on_the_track_on_a_curve(tmp_path):
     assert np.all(back.mask_at(np.linspace(4506.0, 5494.0, 300), 0.0) >= 90.0)
 
 
+def _written(values, path):
+    """A mask file of ``values`` (n, 360) at positions 10 m apart on a straight stretch."""
+    n = len(values)
+    m = MaskSet.from_arrays(np.arange(0.0, 10.0 * n, 10.0), np.full(n, 50.45),
+                            np.linspace(4.45, 4.46, n), np.full(n, 150.0), np.full(n, 60.0),
+                            values)  # fmt: skip
+    return write_masks(m, path)
+
+
 def test_masks_written_in_radians_are_warned_about_not_refused(tmp_path):
     """A user trial wrote radians: read silently, they trusted like no mask at all."""
     import warnings
@@ -656,10 +665,7 @@ def test_masks_written_in_radians_are_warned_about_not_refused(tmp_path):
     deg = rng.uniform(5.0, 60.0, (n, 360))
 
     def write(values, name):
-        m = MaskSet.from_arrays(np.arange(0.0, 10.0 * n, 10.0), np.full(n, 50.45),
-                                np.linspace(4.45, 4.46, n), np.full(n, 150.0), np.full(n, 60.0),
-                                values)  # fmt: skip
-        return write_masks(m, tmp_path / name)
+        return _written(values, tmp_path / name)
 
     with pytest.warns(MaskUnitWarning, match=r"rad\.parquet: every mask value is at most 1\.0"):
         read_masks(write(np.radians(deg), "rad.parquet"))
@@ -681,10 +687,7 @@ def test_a_file_joined_from_radians_and_degrees_is_warned_about(tmp_path):
     deg = rng.uniform(5.0, 60.0, (n, 360))
 
     def write(values, name):
-        m = MaskSet.from_arrays(np.arange(0.0, 10.0 * n, 10.0), np.full(n, 50.45),
-                                np.linspace(4.45, 4.46, n), np.full(n, 150.0), np.full(n, 60.0),
-                                values)  # fmt: skip
-        return write_masks(m, tmp_path / name)
+        return _written(values, tmp_path / name)
 
     mixed = deg.copy()
     mixed[8:] = np.radians(deg[8:])
