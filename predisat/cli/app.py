@@ -271,6 +271,37 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_merge(args: argparse.Namespace) -> int:
+    from predisat.masks import fileformat as maskio
+    from predisat.masks.merge import merge_worst_case
+
+    track = track_option(args.track, args.track_name, args.chain, args.where)
+    base_path = maskio.mask_file_path(args.masks)
+    paths = [maskio.mask_file_path(p) for p in args.other]
+    out = Path(args.out)
+    for p in (base_path, *paths):
+        if out.exists() and out.resolve() == p.resolve():
+            raise CliError(f"--out {out} is one of the mask files merged: write the merged masks "
+                           "to a new file (the surveyed tracks' own masks are kept)")  # fmt: skip
+    merge = merge_worst_case(
+        maskio.read_masks(base_path), [maskio.read_masks(p) for p in paths], track,
+        labels=[str(p) for p in paths], masks_label=str(base_path),
+        max_offset_m=args.max_offset, same_track=args.masks_same_track,
+    )  # fmt: skip
+    _make_parent(out)
+    written = maskio.write_masks(merge.masks, out)
+    for t in merge.tracks:
+        print(f"merge: {t.describe()}")
+    unused = [t.label for t in merge.tracks if t.positions_used == 0]
+    print(f"merge: {merge.masks.n_pos} positions of track {track.name!r}, worst case of "
+          f"{len(merge.tracks) + 1} tracks -> {written}")
+    if unused:
+        print(f"predisat merge: warning: nothing of {', '.join(unused)} lies along track "
+              f"{track.name!r} within {args.max_offset:g} m: check the files and the track map",
+              file=sys.stderr)  # fmt: skip
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from predisat.cli import evaluate
 
@@ -437,6 +468,39 @@ def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     p.set_defaults(func=cmd_export)
 
 
+def _add_merge(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from predisat.cli.common import add_masks_same_track
+    from predisat.masks.registration import MAX_TRACK_OFFSET_M
+
+    p = add_command(
+        sub, "merge",
+        "merge the masks of parallel tracks (passing loops, sidings) worst-case onto one track",
+        "The locator follows one track map and cannot tell a train on a passing loop or the "
+        "other track of a double line, 4-5 m beside it: it would take the surveyed track's "
+        "masks, which are not that sky. Give the masks of the track the locator follows and "
+        "those surveyed on every other track a train may take there: each bin of the result "
+        "is the worst over the tracks whose places project onto it (highest mask and margin, "
+        "ASSUMED where any is, weakest support); elsewhere the masks are unchanged "
+        "(docs/mask-format.md, 'Passing loops and parallel tracks').",
+    )  # fmt: skip
+    p.add_argument("masks", type=existing_path(_MASKS), metavar="MASKS",
+                   help="masks of the track the locator follows (made on --track)")
+    p.add_argument("--other", required=True, nargs="+", type=existing_path(_MASKS),
+                   metavar="MASKS", help="masks surveyed on the other tracks (each on its own "
+                   "map, either direction)")
+    p.add_argument("--track", metavar="FILE",
+                   help="map of the track the locator follows, GeoJSON/CSV (default: the demo "
+                   "line)")
+    add_track_selection(p)
+    p.add_argument("--out", required=True, type=output_file, metavar="FILE",
+                   help="the merged mask file (never one of the inputs)")
+    p.add_argument("--max-offset", type=positive_float, default=MAX_TRACK_OFFSET_M, metavar="M",
+                   help="positions of --other farther than this beside the track are left out "
+                   f"(metres, default {MAX_TRACK_OFFSET_M:g})")
+    add_masks_same_track(p)
+    p.set_defaults(func=cmd_merge)
+
+
 def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from predisat.sky.network import NET_METHODS
     from predisat.sky.segment import METHODS  # lazy: the segmenters load OpenCV models
@@ -482,6 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_network(sub)
     _add_evaluate(sub)
     _add_export(sub)
+    _add_merge(sub)
     _add_evaluate_sky(sub)
     demo.add_parser(sub)
     return parser

@@ -6,4 +6,6 @@
 * :mod:`predisat.masks.margins` - the trust margins per (sector, source) and their file.
 * :mod:`predisat.masks.gaps` - closing the holes of a survey (nothing trusted there).
 * :mod:`predisat.masks.truth` - :class:`TrueMasks`, the reference masks are scored against.
+* :mod:`predisat.masks.registration` - masks carried onto another map of the line.
+* :mod:`predisat.masks.merge` - masks of parallel tracks (passing loops) merged worst-case.
 """

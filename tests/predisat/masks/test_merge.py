@@ -1,0 +1,195 @@
+"""Masks of a passing loop merged worst-case onto the main track: a train on the loop, located
+at its foot point on the main track, gets at least the loop's sky; elsewhere nothing changes.
+
+The loop is laid 4.5 m beside the demo line's axis (tapered over 60 m at its switches); places
+on it are checked through the main map's projection and each mask set's own cells, not through
+the merge's code."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from predisat.cli.app import main as predisat_main
+from predisat.masks.fileformat import read_masks, write_masks
+from predisat.masks.maskset import BinSource, MaskSet
+from predisat.masks.merge import merge_worst_case
+from predisat.masks.registration import OtherTrackError
+from predisat.track import TrackMap, demo_track
+
+LOOP_M = (800.0, 1200.0)
+
+
+def _beside(main: TrackMap, lo_m: float, hi_m: float, offset_m: float, taper_m: float = 60.0,
+            name: str = "loop", reverse: bool = False) -> TrackMap:  # fmt: skip
+    s = np.arange(lo_m, hi_m + 1e-9, 2.0)
+    d = offset_m * np.clip(np.minimum(s - lo_m, hi_m - s) / taper_m, 0.0, 1.0) if taper_m else (
+        np.full(s.size, offset_m))  # fmt: skip
+    enu = np.asarray(main.enu_at(s), float)
+    hd = np.radians(np.asarray(main.heading_at(s), float))
+    left = np.column_stack([-np.cos(hd), np.sin(hd), np.zeros_like(hd)])
+    lat, lon, h = (np.asarray(v) for v in main.frame.to_geodetic(enu + d[:, None] * left))
+    if reverse:
+        lat, lon, h = lat[::-1], lon[::-1], h[::-1]
+    return TrackMap.from_latlon(lat, lon, h, name=name, tolerance_m=0.05)
+
+
+def _masks(track: TrackMap, ch: np.ndarray, seed: int, top: float) -> MaskSet:
+    rng = np.random.default_rng(seed)
+    mask = rng.uniform(0.0, top, (ch.size, 72)).astype(np.float32)
+    source = np.where(rng.random(mask.shape) < 0.05, BinSource.ASSUMED,
+                      rng.integers(0, 2, mask.shape)).astype(np.uint8)  # fmt: skip
+    return MaskSet.from_track(
+        track, ch, mask, source=source, margin_deg=rng.uniform(0, 2, mask.shape).astype(
+            np.float32), support=rng.integers(0, 6, mask.shape).astype(np.uint8),
+        provenance={"track": track.name},
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def scene() -> tuple[TrackMap, TrackMap, MaskSet, MaskSet]:
+    main = demo_track()
+    loop = _beside(main, *LOOP_M, 4.5)
+    m_main = _masks(main, np.arange(500.0, 1501.0, 10.0), 1, 20.0)
+    m_loop = _masks(loop, np.arange(3.0, loop.length_m - 2.0, 10.0), 2, 60.0)
+    return main, loop, m_main, m_loop
+
+
+def _loop_places(loop: TrackMap, masks: MaskSet) -> tuple[np.ndarray, np.ndarray]:
+    """Places every 0.5 m over the loop masks' coverage, and their loop cells."""
+    b = masks.cell_bounds_m
+    s = np.arange(b[0] + 0.01, b[-1] - 0.01, 0.5)
+    return s, np.asarray(masks.position_index(s)[0])
+
+
+def _foot(main: TrackMap, loop: TrackMap, s: np.ndarray) -> np.ndarray:
+    lat, lon, _ = loop.position_at(s)
+    return np.asarray(main.project(lat, lon).chainage_m, float)
+
+
+def test_a_train_on_the_loop_gets_at_least_the_loop_s_sky(scene) -> None:
+    """Every place on the loop, looked up at its foot point on the main track: the merged masks
+    are never below the loop's masks of the place (mask, margin, ASSUMED, support), nor below
+    the main track's own; the main track's masks alone are below them at many places."""
+    main, loop, m_main, m_loop = scene
+    res = merge_worst_case(m_main, [m_loop], main, labels=["loop.parquet"])
+    m = res.masks
+    s, own = _loop_places(loop, m_loop)
+    at = np.asarray(m.position_index(_foot(main, loop, s))[0])
+    need = m_loop.effective_mask_deg[own]
+    assert np.all(m.effective_mask_deg[at] >= need - 1e-5)
+    assert np.all(m.mask_el_deg[at] >= m_loop.mask_el_deg[own])
+    assert np.all(m.source[at][m_loop.source[own] == BinSource.ASSUMED] == BinSource.ASSUMED)
+    assert np.all(m.support[at] <= m_loop.support[own])
+    # never below the main track's own anywhere, and its ASSUMED bins stay ASSUMED
+    assert np.all(m.effective_mask_deg >= m_main.effective_mask_deg - 1e-6)
+    assert np.all(m.source[m_main.source == BinSource.ASSUMED] == BinSource.ASSUMED)
+    # the main track's masks alone do not bound the loop's sky
+    base_at = np.asarray(m_main.position_index(_foot(main, loop, s))[0])
+    assert (m_main.effective_mask_deg[base_at] < need - 1.0).mean() > 0.5
+    # a raised bin carries the flag of the loop's bin that raised it
+    raised = m.mask_el_deg > m_main.mask_el_deg
+    assert raised.any() and np.isin(m.source[raised], list(BinSource)).all()
+    t = res.tracks[0]
+    assert t.label == "loop.parquet" and t.made_on == "loop" and t.positions_left_out == 0
+    assert t.positions_used == m_loop.n_pos and 4.0 < t.median_offset_m < 4.6
+    assert t.bins_raised == int(((m.effective_mask_deg - m_main.effective_mask_deg) > 0).sum())
+    assert "4.5 m beside" in t.describe()
+    prov = m.provenance["merged_worst_case"]
+    assert prov[0]["masks"] == "loop.parquet" and prov[0]["positions_used"] == m_loop.n_pos
+
+
+def test_elsewhere_the_masks_are_unchanged_bit_for_bit(scene) -> None:
+    main, _, m_main, m_loop = scene
+    m = merge_worst_case(m_main, [m_loop], main).masks
+    lo, hi = LOOP_M
+    far = (m_main.cell_bounds_m[1:] < lo - 10.0) | (m_main.cell_bounds_m[:-1] > hi + 10.0)
+    assert far.sum() > 40
+    for attr in ("mask_el_deg", "margin_deg", "source", "support"):
+        assert np.array_equal(getattr(m, attr)[far], getattr(m_main, attr)[far]), attr
+    assert np.array_equal(m.chainage_m, m_main.chainage_m)
+    # the inputs are left as they were
+    again = _masks(main, np.arange(500.0, 1501.0, 10.0), 1, 20.0)
+    assert m_main.equals(again)
+
+
+def test_a_loop_surveyed_the_other_way_bounds_the_same_places(scene) -> None:
+    main, _, m_main, _ = scene
+    back = _beside(main, *LOOP_M, 4.5, name="loop back", reverse=True)
+    m_back = _masks(back, np.arange(4.0, back.length_m - 2.0, 10.0), 3, 60.0)
+    m = merge_worst_case(m_main, [m_back], main).masks
+    s, own = _loop_places(back, m_back)
+    at = np.asarray(m.position_index(_foot(main, back, s))[0])
+    assert np.all(m.effective_mask_deg[at] >= m_back.effective_mask_deg[own] - 1e-5)
+
+
+def test_two_loops_and_a_far_siding(scene) -> None:
+    """Two loops on either side both bound; a siding 40 m away is left out and said."""
+    main, loop, m_main, m_loop = scene
+    right = _beside(main, 600.0, 900.0, -5.0, name="right loop")
+    m_right = _masks(right, np.arange(2.0, right.length_m - 2.0, 10.0), 4, 50.0)
+    siding = _beside(main, 1000.0, 1300.0, 40.0, taper_m=0.0, name="siding")
+    m_siding = _masks(siding, np.arange(2.0, siding.length_m - 2.0, 10.0), 5, 80.0)
+    res = merge_worst_case(m_main, [m_loop, m_right, m_siding], main)
+    for trk, ms in ((loop, m_loop), (right, m_right)):
+        s, own = _loop_places(trk, ms)
+        at = np.asarray(res.masks.position_index(_foot(main, trk, s))[0])
+        assert np.all(res.masks.effective_mask_deg[at] >= ms.effective_mask_deg[own] - 1e-5)
+    far = res.tracks[2]
+    assert far.positions_used == 0 and far.positions_left_out == m_siding.n_pos
+    assert far.bins_raised == 0 and "nothing merged" in far.describe()
+    alone = merge_worst_case(m_main, [m_loop, m_right], main).masks
+    assert np.array_equal(alone.mask_el_deg, res.masks.mask_el_deg)
+
+
+def test_refusals_name_the_set_and_the_fix(scene) -> None:
+    main, loop, m_main, m_loop = scene
+    with pytest.raises(ValueError, match="others is empty"):
+        merge_worst_case(m_main, [], main)
+    coarse = MaskSet.from_track(loop, m_loop.chainage_m, np.zeros((m_loop.n_pos, 36)))
+    with pytest.raises(ValueError, match=r"other 1.*36 azimuth bins.*same azimuth step"):
+        merge_worst_case(m_main, [coarse], main)
+    one = MaskSet.from_track(loop, m_loop.chainage_m[:1], np.zeros((1, 72)))
+    with pytest.raises(ValueError, match="single position"):
+        merge_worst_case(m_main, [one], main)
+    with pytest.raises(ValueError, match="max_offset_m"):
+        merge_worst_case(m_main, [m_loop], main, max_offset_m=float("nan"))
+    # the followed track's masks must be its own: the loop's are refused as another track's
+    whole = _beside(main, 500.0, 1500.0, 4.5, taper_m=0.0, name="beside")
+    beside = _masks(whole, np.arange(10.0, 990.0, 10.0), 6, 20.0)
+    with pytest.raises(OtherTrackError, match=r"beside|left of"):
+        merge_worst_case(beside, [m_loop], main)
+    assert merge_worst_case(beside, [m_loop], main, same_track=True).masks.n_pos > 0
+
+
+def test_the_command_writes_the_merged_file_and_keeps_its_inputs(scene, tmp_path: Path,
+                                                                 capsys) -> None:  # fmt: skip
+    main, _, m_main, m_loop = scene
+    a = write_masks(m_main, tmp_path / "main.parquet")
+    b = write_masks(m_loop, tmp_path / "loop.parquet")
+    out = tmp_path / "merged" / "masks.parquet"
+    assert predisat_main(["merge", str(a), "--other", str(b), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "loop.parquet (" in text and "bins raised" in text and str(out) in text
+    got = read_masks(out)
+    want = merge_worst_case(read_masks(a), [read_masks(b)], main).masks
+    assert np.array_equal(got.mask_el_deg, want.mask_el_deg)
+    assert np.array_equal(got.source, want.source)
+    assert got.provenance["merged_worst_case"][0]["masks"] == str(b)
+    # the output may not overwrite an input
+    before = a.read_bytes()
+    assert predisat_main(["merge", str(a), "--other", str(b), "--out", str(a)]) == 2
+    assert "one of the mask files merged" in capsys.readouterr().err
+    assert a.read_bytes() == before
+
+
+def test_reports_say_the_masks_are_a_worst_case(scene) -> None:
+    from predisat.masks.merge import merged_tracks_note
+
+    main, _, m_main, m_loop = scene
+    assert merged_tracks_note(m_main, "main.parquet") is None
+    m = merge_worst_case(m_main, [m_loop], main, labels=["loop.parquet"]).masks
+    note = merged_tracks_note(m, "merged.parquet")
+    assert note is not None and "loop.parquet over chainage" in note and "1 other track'" in note
