@@ -625,8 +625,14 @@ class RangeModel:
         policy: ValidityPolicy | None = None,
         humidity: float = 0.7,
     ) -> RangeModel:
-        """Model from RINEX 2/3 navigation files (records merged, header coefficients)."""
-        eph = Ephemeris.from_rinex(paths, policy)
+        """Model from RINEX 2/3 navigation files (records merged, header coefficients).
+
+        The default policy trusts a record no other record of its satellite can check
+        (``ValidityPolicy.trust_unchecked``): a receiver's hourly file holds one record per
+        satellite, and the locator checks every satellite against its pseudorange (the fix's
+        residuals, fault detection and exclusion), which a record of another orbit fails.
+        """
+        eph = Ephemeris.from_rinex(paths, policy or ValidityPolicy(trust_unchecked=True))
         return cls.from_ephemeris(eph, BroadcastIono.from_rinex_nav(eph.sources), humidity)
 
     @classmethod

@@ -138,3 +138,60 @@ def test_full_day_speed_and_shared_pairs(shared_data: Path) -> None:
             err = np.linalg.norm(pb[:, cols] - pp[:, cols], axis=-1)[st.valid[:, cols]]
             # 2009 GLONASS: R03 broadcast was ~20 m off along-track; the others 3-6 m
             assert np.sqrt(np.mean(err**2)) <= limit, (navs, system)
+
+
+def _records_at(src: Path, dst: Path, hours: set[int]) -> Path:
+    """A copy of a RINEX 2 GPS navigation file keeping the records whose epoch is on the hour
+    of ``hours`` (an hourly file, or two of them)."""
+    lines = src.read_text().splitlines(keepends=True)
+    head = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln) + 1
+    out = lines[:head]
+    for k in range(head, len(lines), 8):
+        hour, minute = int(lines[k][12:15]), int(lines[k][15:18])
+        if hour in hours and minute == 0:
+            out += lines[k:k + 8]
+    dst.write_text("".join(out))
+    return dst
+
+
+def test_a_record_nothing_can_check_is_not_trusted(test_data: Path, tmp_path: Path) -> None:
+    """An hour's file holds one record per satellite: G01's healthy-flagged record of 06:00,
+    another satellite's orbit, is then UNCHECKED, as are the honest ones; trusted only when
+    asked (the locator, which checks ranges), and then it is thousands of kilometres from
+    the precise orbit while the others are within metres."""
+    src = test_data / "gnss/brdc1820_G01G02G05.10n"
+    hourly = _records_at(src, tmp_path / "hour06.10n", {6})
+    prec = Ephemeris.from_sp3(test_data / "gnss/igs15904_G01G02G05.sp3")
+    t = DAY0 + 6 * 3600.0 + np.array([-1800.0, 0.0, 1800.0])
+    sats = ["G01", "G02", "G05"]
+    st = Ephemeris.from_rinex(hourly).status(t, sats)
+    assert np.all(st.reason == Reason.UNCHECKED)
+    trusting = Ephemeris.from_rinex(hourly, ValidityPolicy(trust_unchecked=True))
+    pos, _, st2 = trusting.evaluate(t, sats)
+    assert np.all(st2.reason == Reason.OK)
+    err = np.linalg.norm(pos - prec.position_ecef(t, sats), axis=-1)
+    assert np.all(err[:, 0] > 1e7) and np.all(err[:, 1:] < 10.0)
+    # the check off: no record is called unchecked either
+    off = Ephemeris.from_rinex(hourly, ValidityPolicy(consistency_m=None))
+    assert np.all(off.status(t, sats).reason == Reason.OK)
+
+
+def test_a_record_far_from_its_neighbours_is_compared_up_to_a_day(test_data: Path,
+                                                                  tmp_path: Path) -> None:  # fmt: skip
+    """Records of 00:00 and 06:00 only: none within the other's reach (6 h apart), so each is
+    compared with the other coarsely: G01's of 06:00 (another orbit) and its partner of 00:00
+    are both distrusted, the evidence being contradictory; G02 and G05 pass, and agree with the
+    precise orbit."""
+    src = test_data / "gnss/brdc1820_G01G02G05.10n"
+    two = _records_at(src, tmp_path / "hours00and06.10n", {0, 6})
+    eph = Ephemeris.from_rinex(two)
+    prec = Ephemeris.from_sp3(test_data / "gnss/igs15904_G01G02G05.sp3")
+    t = DAY0 + 6 * 3600.0 + np.array([-1800.0, 0.0, 1800.0])
+    pos, _, st = eph.evaluate(t, ["G01", "G02", "G05"])
+    assert np.all(st.reason[:, 0] == Reason.INCONSISTENT)
+    assert np.all(st.reason[:, 1:] == Reason.OK)
+    err = np.linalg.norm(pos[:, 1:] - prec.position_ecef(t, ["G02", "G05"]), axis=-1)
+    assert np.all(err < 10.0)
+    t0 = DAY0 + np.array([0.0, 1800.0])
+    st0 = eph.status(t0, ["G01", "G02"])
+    assert np.all(st0.reason[:, 0] != Reason.OK) and np.all(st0.reason[:, 1] == Reason.OK)
