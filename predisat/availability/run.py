@@ -72,7 +72,7 @@ from predisat.availability.satellites import (
 )
 from predisat.clock import pinned_utc, utc_stamp
 from predisat.codeversion import code_fingerprint
-from predisat.gnss.ephemeris import Ephemeris
+from predisat.gnss.ephemeris import Ephemeris, Reason
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
@@ -81,6 +81,7 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import MaskFileWarning, mask_file_path, read_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import BinSource, MaskSet
+from predisat.masks.merge import merged_tracks_note
 from predisat.masks.registration import register_on_track
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
@@ -105,6 +106,7 @@ __all__ = [
     "far_field_text",
     "load_navigation",
     "nav_span_gps_s",
+    "navigation_doubts",
     "navigation_holes",
     "parse_time",
     "positioning_text",
@@ -352,6 +354,15 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
     ok = sats.valid.any(axis=1)
     if ok.all():
         return
+    reason = sats.status.reason[~ok]
+    if (reason == Reason.UNCHECKED).any() and not (reason == Reason.OK).any():
+        raise ValueError(
+            f"{nav_label}: at {int((~ok).sum())} of {ok.size} epochs every satellite's record "
+            "in force is its only one within a day, which nothing can cross-check (a corrupted "
+            "record, as G01's of 2010-07-01, puts a satellite thousands of kilometres from the "
+            "real one), so none is counted: give the day's full broadcast navigation file (e.g. "
+            "IGS BRDC00IGS_R_YYYYDDD0000_01D_MN.rnx) rather than an hour of a receiver's"
+        )
     lo, hi = nav_span_gps_s(ephemeris)
     t = sats.gps_s
     bad = np.flatnonzero(~ok)
@@ -359,6 +370,17 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
         f"{len(bad)} of {len(t)} epochs ({_iso(t[bad[0]])} - {_iso(t[bad[-1]])}) "
         + ("lies" if len(bad) == 1 else "lie")
     )  # fmt: skip
+    counted = {x[0] for x in sats.sats}
+    each = [(SYSTEM_NAMES.get(k, k), a, b) for k, (a, b) in
+            sorted(_system_spans(ephemeris).items()) if k in counted]  # fmt: skip
+    if len(each) > 1 and max(a for _, a, _ in each) > min(b for _, _, b in each):
+        raise ValueError(
+            f"{what} without any trusted satellite in the navigation data {nav_label}, whose "
+            "systems' records cover different times ("
+            + "; ".join(f"{n} {_iso(a)} - {_iso(b)} GPST" for n, a, b in each)
+            + "): give navigation files of the same days, or a window (--start/--end) and "
+            "constellation (--constellation) that one of them covers"
+        )
     inside = (t[bad] > lo) & (t[bad] < hi)
     if inside.any():  # not the data's ends: a hole in them
         g = t[bad][inside]
@@ -371,9 +393,8 @@ def _check_window(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str
         )
     raise ValueError(
         f"{what} outside the navigation data {nav_label} (no trusted satellite; the data "
-        f"span {_iso(lo)} - {_iso(hi)} GPST); choose start/end (--start/--end) inside it or give "
-        "navigation files (--nav) "
-        "covering the window"
+        f"span {_iso(lo)} - {_iso(hi)} GPST); choose start/end (--start/--end) inside it "
+        "or give navigation files (--nav) covering the window"
     )
 
 
@@ -435,6 +456,87 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
 
 
 _NAV_HOLE_S = 3600.0  # a satellite without usable records this long inside the window
+_NAV_REACH_S = 1800.0  # a window this far past a system's records: its satellites age out
+
+
+def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str) -> list[str]:
+    """Warnings for what the navigation data leave unsaid in the window: records nothing can
+    cross-check, a counted system without any usable satellite, a window reaching past a
+    system's records (user trials: a phantom satellite from an hour's file; figures of GPS
+    alone labelled GPS + GLONASS; a window past the day's file with 4 satellites of 12, all
+    without a word).
+
+    Parameters
+    ----------
+    sats : SatellitePositions
+        The satellites of the run.
+    ephemeris : Ephemeris
+        Their source.
+    nav_label : str
+        How the warnings name the navigation data.
+
+    Returns
+    -------
+    list of str
+        One sentence per case (empty when none).
+    """
+    out = []
+    t, valid = sats.gps_s, np.asarray(sats.valid, bool)
+    reason = np.asarray(sats.status.reason)
+    unchecked = [s for j, s in enumerate(sats.sats) if (reason[:, j] == Reason.UNCHECKED).any()]
+    if unchecked and valid.any():
+        names = ", ".join(unchecked[:10]) + (f" and {len(unchecked) - 10} more"
+                                             if len(unchecked) > 10 else "")  # fmt: skip
+        out.append(
+            f"{nav_label}: the records of {len(unchecked)} satellite(s) ({names}) are their only "
+            "ones within a day, which nothing can cross-check (a corrupted record, as G01's of "
+            "2010-07-01, puts a satellite thousands of kilometres from the real one): they are "
+            "not counted while those records are in force, which understates the shares; give "
+            "the day's full broadcast navigation file (e.g. IGS "
+            "BRDC00IGS_R_YYYYDDD0000_01D_MN.rnx)"
+        )
+    if t.size == 0:
+        return out
+    spans = _system_spans(ephemeris)
+    for system in sorted({s[0] for s in sats.sats}):
+        cols = [j for j, s in enumerate(sats.sats) if s[0] == system]
+        name = SYSTEM_NAMES.get(system, system)
+        span = spans.get(system)
+        held = f" (its records: {_iso(span[0])} - {_iso(span[1])} GPST)" if span else ""
+        if not valid[:, cols].any():
+            out.append(
+                f"{nav_label} holds no usable {name} satellite anywhere in the window"
+                f"{held}: every count is of the other systems only, though {name} is asked; "
+                f"give {name} navigation data of the window's days"
+            )
+            continue
+        if span is None or ephemeris.kind != "broadcast" or system in ("J", "I"):
+            continue
+        for beyond, edge, way in ((t[-1] - span[1], span[1], "after the last"),
+                                  (span[0] - t[0], span[0], "before the first")):  # fmt: skip
+            if beyond > _NAV_REACH_S:
+                out.append(
+                    f"the window reaches {beyond / 3600.0:.1f} h {way} {name} records of "
+                    f"{nav_label} ({_iso(edge)} GPST): its satellites drop out as the records "
+                    "in force age beyond their validity, which understates the shares there; "
+                    "give the navigation file of the adjacent day too, or a window inside "
+                    "the records (--start/--end)"
+                )
+    return out
+
+
+def _system_spans(ephemeris: Ephemeris) -> dict[str, tuple[float, float]]:
+    """First and last reference epoch of each system's broadcast records (empty for SP3 and
+    TLE), ``gps_s``."""
+    out: dict[str, tuple[float, float]] = {}
+    for rec in (ephemeris.kepler, ephemeris.glonass):
+        if rec is None or not len(rec):
+            continue
+        letter = np.array([str(x)[:1].upper() for x in rec.sat])
+        for system in np.unique(letter).tolist():
+            ref = rec.ref_gps_s[letter == system]
+            out[system] = (float(ref.min()), float(ref.max()))
+    return out
 
 
 def navigation_holes(sats: SatellitePositions, nav_label: str, kind: str) -> list[str]:
@@ -841,6 +943,9 @@ def _masks_on_track(
         if not reg.same_map:
             notes.append(reg.describe(masks_label, track_map.name))
         mask_set = reg.masks
+    merged = merged_tracks_note(mask_set, masks_label)
+    if merged is not None:
+        notes.append(merged)
     notes += _stretch_beyond(mask_set, masks_label, from_m, to_m)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
     if mask_set.n_pos < 2:
@@ -970,7 +1075,7 @@ def _navigation(
         )
     sats = SatellitePositions.from_ephemeris(ephemeris, t, constellation)
     _check_window(sats, ephemeris, nav_label)
-    warnings = sparse_navigation(sats, nav_label)
+    warnings = sparse_navigation(sats, nav_label) + navigation_doubts(sats, ephemeris, nav_label)
     asked = system_letters(constellation)
     absent = sorted(asked - {s[0] for s in sats.sats}) if len(asked) > 1 else []
     if absent:

@@ -878,3 +878,57 @@ def test_constellation_warnings_say_what_the_data_holds_in_its_era(
     assert "holds 19 GLONASS satellites" in w and "22 or more" in w
     (w,) = sparse_navigation(glonass(2, "2009-04-01T06:00"), "x")
     assert "holds 2 GLONASS satellites" in w and "16 or more" in w
+
+
+def test_doubts_of_the_navigation_data_are_said(tmp_path: Path, masks: MaskSet,
+                                                test_data) -> None:  # fmt: skip
+    """User trials, each said nothing: a phantom satellite counted from an hour's file (G01's
+    record of 06:00 is another satellite's orbit); GLONASS records of another year asked with
+    GPS (the figures GPS only, labelled GPS + GLONASS); a window past the day's records."""
+    small = masks.subset(4000.0, 4060.0)
+    common = dict(step_s=900, n_sky=1, progress=False)
+    gps = test_data / "gnss" / "brdc1820_G01G02G05.10n"
+    lines = gps.read_text().splitlines(keepends=True)
+    head = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln) + 1
+    keep = lines[:head]
+    for k in range(head, len(lines), 8):  # G01 reduced to its record of 06:00
+        prn, hour, minute = int(lines[k][:2]), int(lines[k][12:15]), int(lines[k][15:18])
+        if prn != 1 or (hour, minute) == (6, 0):
+            keep += lines[k:k + 8]
+    one = tmp_path / "g01_once.10n"
+    one.write_text("".join(keep))
+    r = run_availability(small, None, [one], out_dir=tmp_path / "u", start="2010-07-01T05:00",
+                         end="2010-07-01T07:00", **common)  # type: ignore[arg-type]  # fmt: skip
+    (w,) = [w for w in r.info["warnings"] if "cross-check" in w]
+    assert "1 satellite(s) (G01)" in w and "not counted" in w and "BRDC" in w
+    none = r.results[1]  # the rules: masks, no mask, cut-offs
+    assert int(none.count.max()) <= 2  # G02 and G05 at most
+    # only G01's record in force at every epoch: refused, not counted as no data
+    only = tmp_path / "g01_only.10n"
+    only.write_text("".join(lines[:head] + [ln for k in range(head, len(lines), 8)
+                                            if int(lines[k][:2]) == 1
+                                            and lines[k][11:17].split() == ["6", "0"]
+                                            for ln in lines[k:k + 8]]))  # fmt: skip
+    with pytest.raises(ValueError, match=r"only one within a day.*full broadcast"):
+        run_availability(small, None, [only], out_dir=tmp_path / "o", start="2010-07-01T05:30",
+                         end="2010-07-01T06:30", **common)  # type: ignore[arg-type]  # fmt: skip
+    # GLONASS of 2009 asked with GPS of 2010
+    glo = test_data / "gnss" / "brdc0910_R02R08.09g"
+    r = run_availability(small, None, [gps, glo], out_dir=tmp_path / "g", end="2010-07-01T02:00",
+                         start="2010-07-01T00:00", constellation="gps+glonass",
+                         **common)  # type: ignore[arg-type]  # fmt: skip
+    (w,) = [w for w in r.info["warnings"] if "anywhere in the window" in w]
+    assert "no usable GLONASS" in w and "2009-04-01" in w
+    # ... and with the default window, which falls on neither file's whole day: the refusal
+    # gives each system's span, not one span of fifteen months
+    with pytest.raises(ValueError, match=r"cover different times \(GPS 2010-07-01.*GLONASS 2009-04-01"):
+        run_availability(small, None, [gps, glo], out_dir=tmp_path / "h",
+                         constellation="gps+glonass", **common)  # type: ignore[arg-type]  # fmt: skip
+    # a window 2 h past the file's last GPS records (22:00)
+    r = run_availability(small, None, [gps], out_dir=tmp_path / "p", start="2010-07-01T22:00",
+                         end="2010-07-02T00:00", **common)  # type: ignore[arg-type]  # fmt: skip
+    (w,) = [w for w in r.info["warnings"] if "after the last GPS records" in w]
+    assert "drop out" in w and "adjacent day" in w
+    r = run_availability(small, None, [gps], out_dir=tmp_path / "q", start="2010-07-01T06:00",
+                         end="2010-07-01T08:00", **common)  # type: ignore[arg-type]  # fmt: skip
+    assert not [w for w in r.info["warnings"] if "records of" in w or "cross-check" in w]
