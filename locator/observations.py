@@ -49,6 +49,9 @@ __all__ = [
     "read_rinex_obs",
 ]
 
+# RINEX 3/4 observation time systems (TIME OF FIRST OBS, columns 49-51); UTC and TAI are not
+_OBS_TIME_SYSTEMS = ("GPS", "GLO", "GAL", "QZS", "BDT", "IRN")
+
 DEFAULT_PSEUDORANGE_PRIORITY: Mapping[str, tuple[str, ...]] = {
     "G": ("C1C", "C1", "C1W", "P1"),  # L1 C/A first; P(Y) on L1 shares the TGD reference
     "J": ("C1C", "C1", "C1X"),  # QZSS L1 C/A
@@ -354,6 +357,7 @@ class _HeaderScan:
         self.v2_types: list[str] = []
         self.last_sys = ""
         self.time_sys = ""
+        self.time_sys_line = 0
 
     def take(self, label: str, line: str, i: int) -> None:
         """Record ``line`` (0-based line ``i``) of label ``label``; ValueError if unreadable."""
@@ -375,6 +379,7 @@ class _HeaderScan:
             kw["interval_s"] = _float(line[:10])
         elif label == "TIME OF FIRST OBS":
             self.time_sys = line[48:51].strip()
+            self.time_sys_line = i + 1
         elif label == "# / TYPES OF OBSERV":
             self.v2_types += [line[k : k + 6].strip() for k in range(6, 60, 6)]
             self.v2_types = [t for t in self.v2_types if t]
@@ -441,6 +446,14 @@ class _Reader:
         v3 = version >= 3.0
         types, type_line = self._obs_types(scan, v3, file_system, first)
         default_ts = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS", "I": "IRN"}
+        if scan.time_sys and scan.time_sys not in _OBS_TIME_SYSTEMS:
+            raise RinexObsError(
+                path, scan.time_sys_line,
+                f"time system {scan.time_sys!r} of 'TIME OF FIRST OBS' is not one of RINEX "
+                f"observation files ({', '.join(_OBS_TIME_SYSTEMS)}): the epochs' scale is "
+                "unknown (a receiver's tags are in its system's time, e.g. GPS); correct the "
+                "header's columns 49-51",
+            )  # fmt: skip
         scan.kw["time_system"] = scan.time_sys or default_ts.get(file_system, "GPS")
         head = ObsHeader(
             version,

@@ -201,6 +201,7 @@ def _read_header(path: Path, lines: list[str]) -> tuple[list[str], str, int]:
     n_sats_header = None
     sats: list[str] = []
     time_system = "GPS"
+    ts_line = None
     seen_pct_c = False
     i = 1
     n = len(lines)
@@ -215,7 +216,9 @@ def _read_header(path: Path, lines: list[str]) -> tuple[list[str], str, int]:
             _add_header_sats(path, i + 1, line, sats, n_sats_header)
         elif line.startswith("%c") and not seen_pct_c:
             seen_pct_c = True
-            time_system = line[9:12].strip() or "GPS"
+            # SP3-a/b leave the field as the placeholder 'ccc' (their epochs are GPS time)
+            time_system = line[9:12].strip().replace("ccc", "") or "GPS"
+            ts_line = i + 1
         elif line.startswith("EOF"):
             break
         i += 1
@@ -224,7 +227,8 @@ def _read_header(path: Path, lines: list[str]) -> tuple[list[str], str, int]:
     if n_sats_header is None or len(sats) != n_sats_header:
         raise Sp3Error(path, 3, f"header lists {len(sats)} satellites, expected {n_sats_header}")
     if time_system not in _TIME_SYSTEMS:
-        raise Sp3Error(path, None, f"unknown time system {time_system!r} in the '%c' line")
+        raise Sp3Error(path, ts_line, f"unknown time system {time_system!r} in the first '%c' "
+                       f"line (columns 10-12: one of {', '.join(_TIME_SYSTEMS)}); correct it")
     return sats, time_system, i
 
 

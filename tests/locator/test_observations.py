@@ -357,3 +357,16 @@ def test_an_epoch_not_after_the_one_before_is_dropped_and_said(test_data, tmp_pa
     np.testing.assert_array_equal(got.gps_s, obs.gps_s)
     assert any("dropped" in pr.what and "time going back" in pr.what
                for pr in got.problems)  # fmt: skip
+
+
+def test_a_time_system_rinex_does_not_have_is_refused(test_data: Path, tmp_path: Path) -> None:
+    """'UTC' in TIME OF FIRST OBS (not a RINEX observation time system) was read as GPS time
+    without a word (a user trial: the epochs 18 s off)."""
+    lines = _lines(test_data / OBS2)
+    k = next(i for i, ln in enumerate(lines) if "TIME OF FIRST OBS" in ln)
+    assert lines[k][48:51] == "GPS"
+    lines[k] = lines[k][:48] + "UTC" + lines[k][51:]
+    with pytest.raises(RinexObsError, match=rf"line {k + 1}: time system 'UTC'.*GPS, GLO"):
+        read_rinex_obs(_write(tmp_path / "utc.05o", lines))
+    lines[k] = lines[k][:48] + "GLO" + lines[k][51:]
+    assert read_rinex_obs(_write(tmp_path / "glo.05o", lines)).header.time_system == "GLO"

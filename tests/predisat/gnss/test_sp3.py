@@ -134,3 +134,22 @@ def test_mgex_15min_held_out(shared_data: Path) -> None:
     err2 = np.linalg.norm(sub.position_at(t) - mgx.pos_ecef_m[15:-15], axis=-1)
     assert np.nanpercentile(err2, 99) < 0.02
     assert np.nanmax(err2) < 0.05
+
+
+def test_sp3b_placeholder_time_system_is_gps(tmp_path: Path, test_data: Path) -> None:
+    """SP3-a/b leave the '%c' time system as the placeholder 'ccc' (GPS time): read so; an
+    unknown system names the line and the columns (a user trial: refused without either)."""
+    src = test_data / "gnss/igs15904_G01G02G05.sp3"
+    lines = src.read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("%c"))
+    b = list(lines)
+    b[0] = "#b" + b[0][2:]
+    b[k] = "%c cc cc ccc" + b[k][12:]
+    p = tmp_path / "b.sp3"
+    p.write_text("\n".join(b) + "\n")
+    got, want = read_sp3(p), read_sp3(src)
+    assert np.array_equal(got.epochs_gps_s, want.epochs_gps_s)
+    b[k] = "%c G  cc XYZ" + b[k][12:]
+    p.write_text("\n".join(b) + "\n")
+    with pytest.raises(Sp3Error, match=rf"line {k + 1}: unknown time system 'XYZ'.*columns 10-12"):
+        read_sp3(p)
