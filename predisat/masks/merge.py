@@ -27,13 +27,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.masks.carry import cell_stretches_on, cells_touching
 from predisat.masks.maskset import BinSource, MaskSet
-from predisat.masks.registration import (
-    MAX_TRACK_OFFSET_M,
-    _cells_touching,
-    _stretches_on,
-    register_on_track,
-)
+from predisat.masks.registration import MAX_TRACK_OFFSET_M, register_on_track
 from predisat.track.map import TrackMap
 
 __all__ = ["Merge", "MergedTrack", "merge_worst_case", "merged_tracks_note"]
@@ -233,9 +229,9 @@ def _pairs_on(
     nan = float("nan")
     if n_used == 0:
         return None, (0, other.n_pos, nan, nan, nan, nan)
-    lo, hi = _stretches_on(track, other, off)[:2]
+    lo, hi = cell_stretches_on(track, other, off)[:2]
     lo, hi = lo[used], hi[used]
-    first, last = _cells_touching(bounds_m, lo, hi)
+    first, last = cells_touching(bounds_m, lo, hi)
     span = np.maximum(last - first + 1, 0)
     src = np.repeat(np.flatnonzero(used), span)
     dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import predisat.masks.carry as carry
 import predisat.masks.registration as registration
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.registration import register_on_track
@@ -175,8 +176,8 @@ def test_maps_at_an_angle_need_the_widening(monkeypatch) -> None:
                    lambda masks, first, last, lo, hi: masks)  # fmt: skip
         r_open = register_on_track(m_end, b, "m", same_track=True).masks
         assert (r_open.mask_at(x_b[:, None], az) < own - 1e-5).any()
-    monkeypatch.setattr(registration, "_reach_m", lambda off: np.zeros_like(off))
-    monkeypatch.setattr(registration, "_WIDEN_SLACK_M", 0.0)
+    monkeypatch.setattr(carry, "_reach_m", lambda off: np.zeros_like(off))
+    monkeypatch.setattr(carry, "_WIDEN_SLACK_M", 0.0)
     assert lower_anywhere()
 
 
