@@ -921,7 +921,8 @@ def test_doubts_of_the_navigation_data_are_said(tmp_path: Path, masks: MaskSet,
     assert "no usable GLONASS" in w and "2009-04-01" in w
     # ... and with the default window, which falls on neither file's whole day: the refusal
     # gives each system's span, not one span of fifteen months
-    with pytest.raises(ValueError, match=r"cover different times \(GPS 2010-07-01.*GLONASS 2009-04-01"):
+    with pytest.raises(ValueError,
+                       match=r"cover different times \(GPS 2010-07-01.*GLONASS 2009-04-01"):
         run_availability(small, None, [gps, glo], out_dir=tmp_path / "h",
                          constellation="gps+glonass", **common)  # type: ignore[arg-type]  # fmt: skip
     # a window 2 h past the file's last GPS records (22:00)

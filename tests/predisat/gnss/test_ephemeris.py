@@ -176,8 +176,9 @@ def test_a_record_nothing_can_check_is_not_trusted(test_data: Path, tmp_path: Pa
     assert np.all(off.status(t, sats).reason == Reason.OK)
 
 
-def test_a_record_far_from_its_neighbours_is_compared_up_to_a_day(test_data: Path,
-                                                                  tmp_path: Path) -> None:  # fmt: skip
+def test_a_record_far_from_its_neighbours_is_compared_up_to_a_day(
+    test_data: Path, tmp_path: Path
+) -> None:
     """Records of 00:00 and 06:00 only: none within the other's reach (6 h apart), so each is
     compared with the other coarsely: G01's of 06:00 (another orbit) and its partner of 00:00
     are both distrusted, the evidence being contradictory; G02 and G05 pass, and agree with the
