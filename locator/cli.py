@@ -243,6 +243,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         header = fixes[0] if len(fixes) else None
         check_track_height(path, fixes, f"{args.device_gnss} (the phone's own fixes)",
                            args.max_height_offset)  # fmt: skip
+        _warn_off_map(path, fixes, f"{args.device_gnss} (the phone's own fixes)")
         sim_chainage = None
         if start is None:
             if header is None:
@@ -272,8 +273,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                   f"its pseudoranges ({len(tags.offset_s)} of the sampled epochs had two ranges "
                   "beyond a fix's unknowns and no fault): a converter's shifted tags would "
                   "go unseen (docs/observations.md)", file=sys.stderr)  # fmt: skip
-        check_track_height(path, _sample_fixes(model, obs), f"{args.obs} (its epochs' own fixes)",
+        own = _sample_fixes(model, obs)
+        check_track_height(path, own, f"{args.obs} (its epochs' own fixes)",
                            args.max_height_offset)  # fmt: skip
+        _warn_off_map(path, own, f"{args.obs} (its epochs' own fixes)")
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m
         header = hx if (hx == hx).all() and abs(hx).sum() > 0 else None  # RINEX: 0 0 0 if unknown
@@ -553,6 +556,15 @@ def _warn_no_iono(source: Any, nav: Sequence[str]) -> None:
             " or mixed broadcast navigation file to --nav",
             file=sys.stderr,
         )
+
+
+def _warn_off_map(path: Any, fixes: Any, label: str) -> None:
+    """:func:`locator.workflow.check_track_offset`'s warning on stderr (its refusal raises)."""
+    from locator.workflow import check_track_offset
+
+    note = check_track_offset(path, fixes, label)
+    if note is not None:
+        print(f"locator run: warning: {note}", file=sys.stderr)
 
 
 def _report_problems(label: str, problems: Sequence[Any]) -> None:

@@ -209,6 +209,7 @@ _LOSS_CAUSES = (
     ("EMPTY_PAIR", "a pair contradicting the search window"),
     ("HEADING_FAIL", "heading check failed"),
     ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
+    ("ODOMETRY_SUSPECT", "odometry suspect after a conflict, until fixes agree with it again"),
     ("CLAIM_AT_TRACK_END", "interval bounded by an end of the track map (the train may be "
      "past it)"),
     ("UNBOUNDED", "interval reaching the search window's end"),

@@ -93,6 +93,7 @@ class RunFlag(IntFlag):
     ASSUMED_MASK = 1 << 23  # a used satellite was trusted where the mask rests on no view
     CLAIM_AT_TRACK_END = 1 << 24  # TRACK_END voided a claim whose interval the end bounded
     IONO_UNCORRECTED = 1 << 25  # a used satellite's ionosphere had no broadcast model
+    ODOMETRY_SUSPECT = 1 << 26  # a conflict earlier, not yet cleared by agreeing fixes: no claim
 
 
 ERROR_MODEL_CAVEATS = {
@@ -156,6 +157,14 @@ class RunConfig:
         prediction; ``"estimate"`` (default, stricter) also when its estimate lies outside the
         prediction (a fix whose interval only grazes the prediction is suspect: a fault the FDE
         missed shows up as an estimate far from where the odometer says the train is).
+    odometry_reconfirm : int
+        After an odometry conflict the odometry is suspect: either side may be wrong, and the
+        trust decisions rest on its prediction (the masks of the predicted stretch). Every
+        epoch is flagged ``ODOMETRY_SUSPECT``, makes no claim and its fused interval is not to
+        be used (fusion ``suspect``: balise capture skips it) until this many consecutive fixes
+        that would have claimed agree with the prediction; the last of them claims again (a
+        trial: a stuck direction channel put the fused interval 1.4 km off for the rest of the
+        run, 165-177 of 381 epochs without any flag). 0: the conflict alone is flagged.
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
@@ -188,6 +197,7 @@ class RunConfig:
     heading_tolerance_deg: float = 2.0
     odometry_check: bool = True
     odometry_conflict: str = "estimate"
+    odometry_reconfirm: int = 3
     fusion: bool = True
     error_model_applies: bool = True
     model_el_min_deg: float = 0.0
@@ -206,6 +216,10 @@ class RunConfig:
         if self.odometry_conflict not in ("estimate", "overlap"):
             raise ValueError(
                 f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
+            )
+        if int(self.odometry_reconfirm) != self.odometry_reconfirm or self.odometry_reconfirm < 0:
+            raise ValueError(
+                f"odometry_reconfirm must be an integer >= 0, got {self.odometry_reconfirm}"
             )
         if int(self.trust_stretches) != self.trust_stretches or self.trust_stretches < 1:
             raise ValueError(
@@ -236,6 +250,8 @@ _EXCLUSION_NAMES = {int(e): e.name.lower() for e in Exclusion}
 # enum members and flag sets the loop uses, looked up once (Python 3.11's Enum.__getattr__ and
 # IntFlag arithmetic cost microseconds per use)
 _ODOMETRY, _FUSED, _CONFLICT = FusionStatus.ODOMETRY, FusionStatus.FUSED, FusionStatus.CONFLICT
+_SUSPECT = FusionStatus.SUSPECT
+_SUSPECT_FLAGS = int(RunFlag.ODOMETRY_SUSPECT | FixFlag.NO_SAFETY_CLAIM)
 _HEADING_FAIL, _HEADING_UNOBSERVABLE = HeadingStatus.FAIL, HeadingStatus.UNOBSERVABLE
 _HEADING_UNCHECKED = int(RunFlag.HEADING_UNCHECKED)
 _ASSUMED_MASK = int(RunFlag.ASSUMED_MASK)
@@ -358,6 +374,16 @@ def run_locator(
         row["n_used_assumed"] = 0
         if fix is not None and masks is not None and cfg.trust == "masks":
             _assumed_bins(row, masks, az[idx][np.asarray(fix.used, bool)], p_lo, p_hi)
+        if status == _CONFLICT and cfg.odometry_reconfirm:
+            state.suspect, state.agreed = True, 0
+        elif state.suspect:
+            if fix is not None and row["claim"]:  # a fix that agrees with the prediction
+                state.agreed += 1
+                state.suspect = state.agreed < cfg.odometry_reconfirm
+            if state.suspect:
+                flags = int(row["flags"]) | _SUSPECT_FLAGS
+                row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+                status = _SUSPECT
         if fix is not None and row["claim"]:
             here = (0.0 if odo is None else float(odo[k]), gps[k], float(state.ran[k]))
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
@@ -405,6 +431,8 @@ class _Tracker:
     ran: NDArray  # distance the wheels ran to each epoch, either way (0 without odometer), m
     past_start: bool = False  # the last prediction reached before chainage 0
     past_end: bool = False  # ... or past the track's length
+    suspect: bool = False  # an odometry conflict not yet cleared (RunConfig.odometry_reconfirm)
+    agreed: int = 0  # fixes agreeing with the prediction since the last conflict
 
     @classmethod
     def start(

@@ -81,8 +81,9 @@ class AntennaPath:
     track : TrackMap
     antenna_height_m : float
         Height of the antenna phase centre above the track axis along the local vertical.
-        Lateral lever arms and cant are neglected (they move the antenna across the track, not
-        along it).
+        Lateral lever arms and cant are neglected: they move the antenna across the track,
+        which moves each pair's root along it by ``d (u_i - u_j).n`` over the slope, an error
+        the pair intervals do not bound (``docs/locator.md``, limits).
     """
 
     track: TrackMap

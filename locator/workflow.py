@@ -58,6 +58,7 @@ __all__ = [
     "calibrate_to_file",
     "check_track",
     "check_track_height",
+    "check_track_offset",
     "demo",
     "evaluate_folder",
     "rule_folder",
@@ -191,6 +192,67 @@ def sim_on_track(
 
 
 _NEAR_FOR_HEIGHT_M = 200.0
+
+
+OFF_MAP_WARN_M = 3.0
+"""A run whose own fixes lie more than this beside the track map (the median, metres) is told:
+the pair intervals take the antenna on the map (a trial: an antenna 4.5 m beside it, a passing
+loop's, made hazardous misleading information with k = 2 on real stations)."""
+
+OFF_MAP_REFUSE_M = 25.0
+"""... and more than this is refused: another line, or the map of another track."""
+
+
+def check_track_offset(path: AntennaPath, fixes_ecef_m: ArrayLike, label: str) -> str | None:
+    """The receiver's own fixes must lie on the track map, not beside it.
+
+    Parameters
+    ----------
+    path : AntennaPath
+    fixes_ecef_m : array_like, shape (n, 3)
+        The receiver's own position fixes, ECEF metres; rows with NaN and fixes more than
+        200 m from the track are skipped.
+    label : str
+        What the fixes are, for the message.
+
+    Returns
+    -------
+    str or None
+        A warning when their median distance beside the track exceeds
+        :data:`OFF_MAP_WARN_M`, else None.
+
+    Raises
+    ------
+    ValueError
+        When it exceeds :data:`OFF_MAP_REFUSE_M` (a trial's antenna 25-50 m beside the map ran
+        without a word, every epoch blamed on NLOS).
+    """
+    fixes = np.asarray(fixes_ecef_m, float).reshape(-1, 3)
+    fixes = fixes[np.all(np.isfinite(fixes), axis=1)]
+    if not len(fixes):
+        return None
+    lat, lon, h = ecef_to_geodetic(fixes)
+    pr = path.track.project(lat, lon, h)
+    near = np.hypot(pr.offset_m, pr.along_m) <= _NEAR_FOR_HEIGHT_M
+    if not near.any():
+        return None
+    off = float(np.median(np.asarray(pr.offset_m, float)[near]))
+    side = "left of" if off > 0 else "right of"
+    what = (f"{label}: the receiver's own fixes lie {abs(off):.1f} m {side} track "
+            f"{path.track.name!r} (the median of {int(near.sum())})")  # fmt: skip
+    if abs(off) > OFF_MAP_REFUSE_M:
+        raise ValueError(
+            f"{what}: the antenna is on another track or line, or the map is of another; give "
+            "the map of the track the train ran on (--track, --track-name)"
+        )
+    if abs(off) > OFF_MAP_WARN_M:
+        return (
+            f"{what}: the pair intervals take the antenna on the map, so a train on another "
+            "track (a passing loop, the other track of a double line) or a map metres off "
+            "makes errors they do not bound (docs/locator.md, limits); check the map and the "
+            "track the train took"
+        )
+    return None
 
 
 def check_track_height(

@@ -144,7 +144,9 @@ def capture_table(
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
     o = run.odometer.orientation
-    located = np.logical_or.accumulate(ep["claim"].to_numpy(bool))  # satellites confirmed
+    # satellites confirmed the run's position, and no odometry conflict left it suspect since
+    located = np.logical_or.accumulate(ep["claim"].to_numpy(bool)) & (
+        ep["fusion"].to_numpy(object) != "suspect")
     out = []
     for name, cc in configs.items():
         cap = capture_balises(
@@ -201,12 +203,18 @@ def safe_front_check(
     the true front lies in ``[min safe, max safe]`` exactly when the true antenna lies in the
     fused interval.
 
+    Epochs after an odometry conflict that no agreeing fixes have cleared (fusion
+    ``suspect``, flagged ``ODOMETRY_SUSPECT``) give no safe front: they are counted apart.
+
     Returns
     -------
     dict
-        ``epochs``, ``front_outside`` (count), ``gnss_claim_share`` (satellite claims),
-        ``fused_share`` (fused interval at most ``max_length_m`` long), ``odometry_only``
-        (share of epochs carried by the odometry), ``conflicts`` (alarms).
+        ``epochs``, ``front_outside`` (count, epochs giving a safe front),
+        ``front_outside_flagged`` (count, suspect epochs: said, not hazardous),
+        ``gnss_claim_share`` (satellite claims), ``fused_share`` (a safe front whose fused
+        interval is at most ``max_length_m`` long), ``odometry_only`` (share of epochs
+        carried by the odometry), ``suspect`` (share of suspect epochs), ``conflicts``
+        (alarms).
     """
     ep = run.epochs
     o = run.odometer.orientation
@@ -214,13 +222,16 @@ def safe_front_check(
     lo = ep["fused_lo_m"] + o * antenna_to_front_m
     hi = ep["fused_hi_m"] + o * antenna_to_front_m
     outside = ~((lo <= truth_front + 1e-9) & (truth_front <= hi + 1e-9))
+    suspect = ep["fusion"] == "suspect"
     length = ep["fused_hi_m"] - ep["fused_lo_m"]
     return {
         "epochs": float(len(ep)),
-        "front_outside": float(outside.sum()),
+        "front_outside": float((outside & ~suspect).sum()),
+        "front_outside_flagged": float((outside & suspect).sum()),
         "gnss_claim_share": float(ep["claim"].mean()),
-        "fused_share": float((length <= max_length_m).mean()),
+        "fused_share": float(((length <= max_length_m) & ~suspect).mean()),
         "odometry_only": float((ep["fusion"] == "odometry").mean()),
+        "suspect": float(suspect.mean()),
         "conflicts": float((ep["fusion"] == "conflict").sum()),
     }
 

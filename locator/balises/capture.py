@@ -219,6 +219,13 @@ def capture_balises(
     odo = None if odo_m is None else np.asarray(odo_m, float)
     if odo is not None and odo.shape != t.shape:
         raise ValueError("odo_m must have one value per fix")
+    if odo is not None and (np.diff(orientation * odo) < -1e-6).any():
+        k = int(np.flatnonzero(np.diff(orientation * odo) < -1e-6)[0]) + 1
+        raise ValueError(
+            f"odo_m runs back at fix {k} (against the orientation {orientation:+d}): the "
+            "passage times are read along the odometer, one way; capture each leg of a "
+            "reversing run apart"
+        )
     ok = np.ones(t.shape, bool) if located is None else np.asarray(located, bool)
     if ok.shape != t.shape:
         raise ValueError("located must have one value per fix")

@@ -48,6 +48,7 @@ class FusionStatus(IntEnum):
     ODOMETRY = 0  # no satellite claim: the odometry interval alone
     FUSED = 1  # a satellite claim meeting the odometry interval: the intersection
     CONFLICT = 2  # a claim missing the odometry interval (or its estimate outside): alarm
+    SUSPECT = 3  # after a conflict, until claims agree with the odometry again: not to be used
 
 
 class Fused(NamedTuple):

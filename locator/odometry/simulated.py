@@ -99,7 +99,15 @@ def _truth_grid(sim: SimRun, cycle_s: float) -> tuple[int, NDArray, NDArray]:
     n = round((t[-1] - t[0]) / cycle_s) + 1
     tc = np.arange(n) * cycle_s
     true_d = np.asarray(spline(tc), float)
-    return o, tc, np.maximum.accumulate(true_d)  # a simulated train never runs backward
+    # the simulator's trains run one way; the spline may wobble back a little at a stop,
+    # but a run that goes back (a reversal built by hand) must not be clamped to a standstill
+    back = float((np.maximum.accumulate(true_d) - true_d).max())
+    if back > 1.0:  # a reversal; not the spline's wobble at a stop
+        raise ValueError(
+            f"the run goes back {back:.2f} m against its direction ({o:+d}): the simulated "
+            "odometer follows runs in one direction; split the run at its reversals"
+        )
+    return o, tc, np.maximum.accumulate(true_d)
 
 
 def check_log_against_run(sim: SimRun, log: OdometerLog, accuracy: OdometerAccuracy) -> None:

@@ -386,3 +386,56 @@ def test_a_hole_in_masks_joined_in_memory_trusts_nothing(path):
     ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg,
                      masks=holed)  # fmt: skip
     assert (ep["n_trusted"] == 0).all() and not ep["claim"].any()
+
+
+def test_after_a_conflict_the_odometry_is_suspect_until_fixes_agree_again(path):
+    """One epoch's ranges put the train 300 m ahead (consistently: no fault the FDE can see):
+    a conflict; the next fixes agree with the odometry, yet the prediction was the trust
+    decision's ground only if the odometry was right: the next two are flagged and make no
+    claim, the third (``odometry_reconfirm``) claims again."""
+    truth = truth_run(n=14)
+    x = path.ecef_at(truth[6])
+    sat = sky(path.ecef_at(truth[0]), AZ, EL)
+    u = (sat - x) / np.linalg.norm(sat - x, axis=1, keepdims=True)
+    bias = np.zeros((len(truth), len(AZ)))
+    bias[6] = -300.0 * (u @ path.tangent_ecef_at(np.array([truth[6]]))[0])
+    src = FakeSource(path, truth, bias_m=bias)
+    ep = run_locator(path, src, start_chainage_m=truth[0], config=RunConfig(MODEL, trust="none"))
+    assert ep["claim"][:6].all() and ep["claim_fix"][6] and not ep["claim"][6]
+    assert ep["fusion"][6] == "conflict"
+    suspect = (ep["flags"].to_numpy() & int(RunFlag.ODOMETRY_SUSPECT)) != 0
+    assert suspect.tolist() == [False] * 7 + [True, True] + [False] * 5
+    assert not ep["claim"][7:9].any() and ep["claim"][9:].all()
+    assert (ep["fusion"][7:9] == "suspect").all() and (ep["fusion"][9:] == "fused").all()
+    assert "ODOMETRY_SUSPECT" in ep["flag_names"][7]
+    # 0: the conflict alone is flagged, as before
+    old = run_locator(path, FakeSource(path, truth, bias_m=bias), start_chainage_m=truth[0],
+                      config=RunConfig(MODEL, trust="none", odometry_reconfirm=0))  # fmt: skip
+    assert old["claim"][7:].all()
+    with pytest.raises(ValueError, match="odometry_reconfirm"):
+        RunConfig(MODEL, odometry_reconfirm=-1)
+
+
+def test_a_stuck_direction_channel_is_flagged_wherever_the_fused_interval_misses(path):
+    """The train runs 20 epochs one way and 20 back; the odometer's direction is stuck (it
+    counts the distance run as forward: a trial's stuck direction channel or unannounced cab
+    change). Every epoch whose fused interval misses the truth is flagged and claims nothing;
+    with the conflict alone flagged, epochs without a fix (here: a blind stretch, no
+    satellite in view) carried the wrong prediction without a word."""
+    out_m = 1000.0 + 15.0 * np.arange(21)
+    truth = np.concatenate([out_m, out_m[-2::-1]])
+    odo = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(truth)))])
+    bias = np.zeros((len(truth), len(AZ)))
+    blind = np.zeros(len(truth), bool)
+    blind[30:] = True  # every range off by kilometres, each its own way: no fix claims
+    bias[blind] = np.random.default_rng(5).uniform(-5e3, 5e3, (int(blind.sum()), len(AZ)))
+    for reconfirm, want_silent in ((3, False), (0, True)):
+        src = FakeSource(path, truth, bias_m=bias, odometer_m=odo)
+        cfg = RunConfig(MODEL, trust="none", odometry_reconfirm=reconfirm)
+        ep = run_locator(path, src, start_chainage_m=truth[0], config=cfg)
+        miss = ~((ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6))
+        flagged = (ep["flags"].to_numpy() & int(RunFlag.ODOMETRY_CONFLICT
+                                                 | RunFlag.ODOMETRY_SUSPECT)) != 0  # fmt: skip
+        assert miss.sum() > 10
+        assert not (ep["claim"].to_numpy() & miss.to_numpy()).any()
+        assert (miss.to_numpy() & ~flagged).any() == want_silent

@@ -346,3 +346,16 @@ def test_after_void_capture_keeps_the_accuracy_gate_and_the_zone():
     cap = capture_balises(t, est, lo, hi, balises([136.0]), CaptureConfig(5.0), orientation=1,
                           odo_m=odo, odo_accuracy=acc)  # fmt: skip
     assert cap["captured"].all()  # 4 m short of the located fix: inside 5 m
+
+
+def test_an_odometer_running_back_is_refused():
+    """A reversing run's odometer, read one way by the passage timing, sent telegrams 555 m
+    off (a trial): refused, naming the fix where it turns."""
+    t, _, est, lo, hi = fixes(1.0, 10.0, 20.0)
+    odo = np.concatenate([10.0 * t[:11], 10.0 * (20.0 - t[11:])])
+    with pytest.raises(ValueError, match=r"odo_m runs back at fix 11.*each leg"):
+        capture_balises(t, est, lo, hi, balises([55.0]), CaptureConfig.gaderos(25.0),
+                        orientation=1, odo_m=odo)  # fmt: skip
+    cap = capture_balises(t, est, lo, hi, balises([55.0]), CaptureConfig.gaderos(25.0),
+                          orientation=1, odo_m=10.0 * t)  # fmt: skip
+    assert cap["captured"].all()

@@ -106,3 +106,18 @@ def _log_of(tmp_path, run):
     pd.DataFrame({"t_s": tl, "dist_m": 0.25 * q**2, "speed_mps": 0.5 * q,
                   "direction": 1}).to_csv(p, index=False, float_format="%.17g")  # fmt: skip
     return read_odometer_log(p)
+
+
+def test_a_run_going_back_is_refused_not_clamped():
+    """The simulated odometer follows one direction; a reversing run was clamped to a
+    standstill and its odometer read 557 m against a true 236 m (a trial)."""
+    from locator.odometry.odometer import OdometerConfig
+    from locator.odometry.simulated import odometer_along_run
+
+    run = _run()
+    back = SimpleNamespace(**{**vars(run), "chainage_m": np.concatenate(
+        [run.chainage_m[:16], run.chainage_m[14::-1]]),
+        "speed_mps": np.concatenate([np.full(16, 10.0), np.full(15, -10.0)])})  # fmt: skip
+    with pytest.raises(ValueError, match=r"goes back .* split the run at its reversals"):
+        odometer_along_run(back, OdometerConfig())
+    assert odometer_along_run(run, OdometerConfig()).epoch_odo_m[-1] > 250.0
