@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
+from locator.cliopts import add_map_doubt, map_doubt_of
 from locator.demostep import format_demo_table
 from locator.modelcheck import deepest_k, model_use, sim_profile
 from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M
@@ -87,7 +88,7 @@ def _config(args: argparse.Namespace, profile: Any = None) -> tuple[Any, dict[st
     model = mf.model if profile is None else mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
-    locator = LocatorConfig(model=model, budget=integrity_budget(args))
+    locator = LocatorConfig(model=model, budget=integrity_budget(args), **map_doubt_of(args))
     use, record = "calibrated", dict[str, Any]()
     if profile is not None:
         use, record = model_use(mf, profile, args, deepest_k(locator))
@@ -994,6 +995,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="the data's receiver class, for a model calibrated for a class "
                    "(default: guessed, phone for smartphone logs, otherwise none)")
     integrity_options(p)
+    add_map_doubt(p)
     p.add_argument("--extra-margin", type=non_negative_float, metavar="DEG",
                    help="with --masks: degrees added to the mask file's margins before trusting "
                    "a satellite (default 0)")

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntFlag
@@ -49,7 +50,11 @@ from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget, disjoint_pairs
 from predisat.readonly import freeze_array_fields
 
-__all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate"]
+__all__ = ["INTEGRITY_MODES", "Fix", "FixFlag", "LocatorConfig", "locate", "map_doubt_bias_m"]
+
+# the ellipsoid normal at a point is the gradient of x^2/a^2 + y^2/a^2 + z^2/b^2: x scaled by
+# (1, 1, (a/b)^2)
+_ELLIPSOID_NORMAL_SCALE = np.array([1.0, 1.0, 1.0 / (1.0 - 1.0 / 298.257223563) ** 2])
 
 INTEGRITY_MODES = ("passive", "active")
 
@@ -95,6 +100,16 @@ class LocatorConfig:
     p_false_alarm : float
         Chi-square test level of the detection.
     max_exclusions : int
+    map_doubt_lateral_m, map_doubt_vertical_m : float
+        How far the antenna may be beside and above or below the antenna path (the track map
+        raised by the antenna height), metres: the map's accuracy, the antenna's lateral lever
+        arm, the cant's sway, a train on a loop. Each pair's band grows by the largest bias
+        that puts in its range difference, ``lat |(u_i - u_j).n| + vert |(u_i - u_j).up|``
+        (``n`` the horizontal normal, at the window's centre), so the pair still bounds the
+        train (a trial: antennas 1.5-4.5 m beside the map broke the 1e-12 budget, and gave
+        hazardous misleading information with k = 2 on real stations; docs/locator.md).
+        Default 1.5 m and 1 m: a map good to a metre, a centred roof antenna, cant; 0 and 0
+        give the pairs of the source.
     """
 
     model: IntervalModel = field(default_factory=IntervalModel)
@@ -104,6 +119,8 @@ class LocatorConfig:
     min_slope: float = 0.2
     p_false_alarm: float = 1e-3
     max_exclusions: int = 2
+    map_doubt_lateral_m: float = 1.5
+    map_doubt_vertical_m: float = 1.0
 
     def __post_init__(self) -> None:
         if not (self.window_m > 0 and self.step_m > 0):
@@ -114,6 +131,10 @@ class LocatorConfig:
             raise ValueError(f"p_false_alarm must be in (0, 1), got {self.p_false_alarm}")
         if self.max_exclusions < 0:
             raise ValueError(f"max_exclusions must be >= 0, got {self.max_exclusions}")
+        for name in ("map_doubt_lateral_m", "map_doubt_vertical_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0 metres, got {v}")
 
     def k_sigma_for(self, pairs: ArrayLike) -> float:
         """Half width (sigmas of ``K``) of the pair intervals when ``pairs`` (p, 2) are united.
@@ -128,7 +149,14 @@ class LocatorConfig:
     def width_text(self) -> str:
         """The pair-interval width in words: the budget and each mode's ``k``, or the one ``k``
         (:func:`predisat.availability.interval.width_text`)."""
-        return width_text(self.model.k_sigma if self.budget is None else self.budget)
+        text = width_text(self.model.k_sigma if self.budget is None else self.budget)
+        return text + self._doubt_text()
+
+    def _doubt_text(self) -> str:
+        if self.map_doubt_lateral_m == 0 and self.map_doubt_vertical_m == 0:
+            return ", no map doubt"
+        return (f", widened for an antenna up to {self.map_doubt_lateral_m:g} m beside and "
+                f"{self.map_doubt_vertical_m:g} m above or below the map")
 
     def width_label(self) -> str:
         """Short form for figure titles: ``integrity risk 1e-12 per epoch`` or ``k = 2``."""
@@ -327,8 +355,12 @@ def _solve(
     # the width of the pairs actually united: fewer disjoint pairs after a drop, a wider k
     k_sigma = cfg.k_sigma_for(pairs)
     # window on the WLS fix: a prior further off than the window would void every pair
+    bias = None
+    if cfg.map_doubt_lateral_m > 0 or cfg.map_doubt_vertical_m > 0:
+        bias = map_doubt_bias_m(path, centre, s_u, pairs, cfg.map_doubt_lateral_m,
+                                cfg.map_doubt_vertical_m)  # fmt: skip
     sol = solve_pairs(path, s_u, r_u, g_sig, pairs, prior_m=centre, window_m=cfg.window_m,
-                      k_sigma=k_sigma, step_m=cfg.step_m)  # fmt: skip
+                      k_sigma=k_sigma, step_m=cfg.step_m, bias_bound_m=bias)  # fmt: skip
     sol = dataclasses.replace(sol, i=idx[sol.i], j=idx[sol.j])
     uni = union_interval(sol, mode if sol.n_pairs else _MODE_NONE)
     st = int(np.bitwise_or.reduce(sol.status)) if sol.n_pairs else 0
@@ -351,3 +383,43 @@ def _solve(
     fix = Fix(uni.estimate_m, uni.lo_m, uni.hi_m, uni.mode, "", _fix_flag(flags), used, (), sol,
               wls)  # fmt: skip
     return fix, bool(fault), worst
+
+
+def map_doubt_bias_m(
+    path: AntennaPath, chainage_m: float, sat_ecef_m: NDArray, pairs: NDArray,
+    lateral_m: float, vertical_m: float,
+) -> NDArray:  # fmt: skip
+    """Largest range-difference bias of each pair from an antenna up to ``lateral_m`` beside
+    and ``vertical_m`` above or below the path at ``chainage_m``, metres.
+
+    Moving the antenna by ``delta`` changes ``|x - S_i| - |x - S_j|`` by
+    ``-(u_i - u_j) . delta`` to first order (``u`` unit vectors antenna -> satellite; the
+    satellites' 20 000 km make the second order micrometres); over ``delta`` in the box the
+    largest is ``lateral |(u_i - u_j).n| + vertical |(u_i - u_j).up|``.
+
+    Parameters
+    ----------
+    path : AntennaPath
+    chainage_m : float
+        Where the directions are taken (clipped to the path); they change by microradians over
+        a search window.
+    sat_ecef_m : ndarray, shape (n_sat, 3)
+    pairs : ndarray of int, shape (n_pairs, 2)
+    lateral_m, vertical_m : float
+
+    Returns
+    -------
+    ndarray, shape (n_pairs,)
+    """
+    c = min(max(float(chainage_m), 0.0), path.length_m)
+    x = path.ecef_at(c)
+    t = path.tangent_ecef_at(np.array([c]))[0]
+    up = x * _ELLIPSOID_NORMAL_SCALE
+    up = up / np.linalg.norm(up)
+    n = np.cross(up, t)
+    n = n / np.linalg.norm(n)
+    u = np.asarray(sat_ecef_m, float) - x
+    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    pr = np.asarray(pairs, np.intp).reshape(-1, 2)
+    du = u[pr[:, 0]] - u[pr[:, 1]]
+    return lateral_m * np.abs(du @ n) + vertical_m * np.abs(du @ up)

@@ -214,26 +214,30 @@ def _median(v: NDArray) -> float:
 def pair_kernel(
     x: NDArray, dx: NDArray, length: float, a_w: float, b_w: float, grid: NDArray,
     sat: NDArray, rho: NDArray, sig: NDArray, pi: NDArray, pj: NDArray, k_sigma: float,
-    prior_m: float, tol_m: float, max_iter: int,
+    prior_m: float, tol_m: float, max_iter: int, extra: NDArray,
 ) -> tuple:  # fmt: skip
     """The arithmetic of :func:`locator.sathia.solve_pairs` (grid, brackets, Illinois, roots,
     intervals, status, slopes); returns ``k, sk, root, lo, hi, slope, n_roots, misfit,
-    status`` and whether a refined chainage was not finite (the caller raises)."""
+    status`` and whether a refined chainage was not finite (the caller raises). ``extra``
+    (p,) widens each pair's band ``k sigma_K`` by a bound on a bias (the map doubt), metres;
+    zeros leave the results bit for bit."""
     p = pi.shape[0]
     k = np.empty(p)
     sk = np.empty(p)
+    band = np.empty(p)
     target = np.empty((p, 3))
     for q in range(p):
         k[q] = rho[pi[q]] - rho[pj[q]]
         sk[q] = np.sqrt(sig[pi[q]] ** 2 + sig[pj[q]] ** 2)
+        band[q] = k_sigma * sk[q] + extra[q]
         target[q, 0] = k[q] + 0.0
-        target[q, 1] = k[q] + k_sigma * sk[q]
-        target[q, 2] = k[q] + -k_sigma * sk[q]
+        target[q, 1] = k[q] + band[q]
+        target[q, 2] = k[q] + -band[q]
     rng = _grid_ranges(x, dx, length, grid, sat, pi, pj)
     misfit = np.zeros(p)
     first_in = np.zeros(p, np.bool_)
     last_in = np.zeros(p, np.bool_)
-    bq, bl, a, b, fa, fb = _brackets(rng, grid, pi, pj, target, k_sigma, sk, misfit, first_in,
+    bq, bl, a, b, fa, fb = _brackets(rng, grid, pi, pj, target, 1.0, band, misfit, first_in,
                                      last_in)  # fmt: skip
     s, bad = _illinois(x, dx, length, sat, pi, pj, target, bq, bl, a, b, fa, fb, tol_m,
                        max_iter)  # fmt: skip

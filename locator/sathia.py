@@ -298,6 +298,7 @@ def solve_pairs(
     window_m: float = 1000.0,
     k_sigma: float = 2.0,
     step_m: float = 5.0,
+    bias_bound_m: ArrayLike | None = None,
 ) -> PairSolution:
     """Intersect satellite-pair hyperboloids with the antenna path (one epoch).
 
@@ -321,6 +322,10 @@ def solve_pairs(
     step_m : float
         Grid step of the root bracketing. Two roots closer than this may be missed (only at a
         near-tangent, where the pair is blunt anyway).
+    bias_bound_m : array_like, shape (n_pairs,), optional
+        A bound on each pair's range-difference bias beyond its noise, metres, added to its
+        band: ``|f| <= k sigma_K + bias`` (the antenna up to a distance beside or above the
+        path, :attr:`locator.fde.LocatorConfig.map_doubt_lateral_m`). Default none.
 
     Returns
     -------
@@ -346,9 +351,16 @@ def solve_pairs(
     grid = np.linspace(a, b, n_step + 1)
     x, dx = path.hermite_table
     # compiled (locator.kernels): the same arithmetic as the numpy code it replaced, bit for bit
+    if bias_bound_m is None:
+        extra = np.zeros(len(i))
+    else:
+        extra = np.ascontiguousarray(bias_bound_m, float)
+        if extra.shape != (len(i),) or not (np.isfinite(extra).all() and (extra >= 0).all()):
+            raise ValueError(f"bias_bound_m must be finite and >= 0, one per pair ({len(i)},), "
+                             f"got shape {extra.shape}")  # fmt: skip
     k, sk, chosen, lo, hi, slope, n_roots, misfit, status, bad = pair_kernel(
         x, dx, float(length), a, b, grid, sat, rho, sig, i64, j64, float(k_sigma),
-        float(prior_m), 1e-4, 30,
+        float(prior_m), 1e-4, 30, extra,
     )  # fmt: skip
     if bad:
         raise ValueError("chainage_m contains NaN or infinite values")

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from locator.cliopts import add_map_doubt, map_doubt_of
 from predisat.cli.args import (
     add_checks,
     add_command,
@@ -129,6 +130,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    "file): not a safety claim; every epoch flagged FORCED_ERROR_MODEL, "
                    "summary.json records it")
     integrity_options(p)
+    add_map_doubt(p)
     p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="all",
                    help="systems located with: gps, gps+galileo, all, or system letters (default "
                    "all: every system the simulated run received, as a balise reader's receiver "
@@ -246,7 +248,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     model = mf.for_systems(profile.systems)
     if args.k_sigma is not None:
         model = IntervalModel(model.error, args.k_sigma)
-    locator = LocatorConfig(model=model, budget=integrity_budget(args))
+    locator = LocatorConfig(model=model, budget=integrity_budget(args), **map_doubt_of(args))
     use, model_record = model_use(mf, profile, args, deepest_k(locator), "locator balises")
     trust = "masks" if masks is not None else ("cutoff" if args.cutoff is not None else "none")
     cfg = RunConfig(locator, trust=trust,

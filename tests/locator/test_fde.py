@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -136,7 +138,10 @@ def test_an_integrity_budget_sets_k_by_the_independent_pairs_united(path):
     from predisat.gnss.integrity import IntegrityBudget
 
     risk = 1e-9
-    cfg = LocatorConfig(model=CFG.model, window_m=500.0, budget=IntegrityBudget(risk))
+    # the widths of k alone: no map doubt (its bias bound adds to k sigma, not in ratio)
+    cfg = LocatorConfig(model=CFG.model, window_m=500.0, budget=IntegrityBudget(risk),
+                        map_doubt_lateral_m=0.0, map_doubt_vertical_m=0.0)  # fmt: skip
+    bare = dataclasses.replace(CFG, map_doubt_lateral_m=0.0, map_doubt_vertical_m=0.0)
 
     def k_of(m: int) -> float:  # Q^-1((T / 2)^(1 / m)), independently of the module
         return float(norm.isf((risk / 2) ** (1 / m)))
@@ -146,7 +151,7 @@ def test_an_integrity_budget_sets_k_by_the_independent_pairs_united(path):
                        (3, IntervalMode.BEST_PAIR, 1)):  # fmt: skip
         sat, rho, el = _epoch(path, s_true, n, 11 + n)
         fix = locate(path, sat, rho, el, prior_m=s_true, config=cfg)
-        fixed = locate(path, sat, rho, el, prior_m=s_true, config=CFG)  # k = 2
+        fixed = locate(path, sat, rho, el, prior_m=s_true, config=bare)  # k = 2
         assert fix.mode == mode and fix.pairs is not None
         assert fix.pairs.k_sigma == pytest.approx(k_of(m))
         # the same pairs, wider: the k = 2 interval lies inside
@@ -168,3 +173,30 @@ def test_an_integrity_budget_sets_k_by_the_independent_pairs_united(path):
     assert CFG.k_sigma_for(np.array([[0, 1], [2, 3], [4, 5]])) == 2.0
     assert cfg.k_sigma_for(np.array([[0, 1], [2, 3], [4, 5]])) == pytest.approx(k_of(3))
     assert "integrity risk 1e-09 per epoch" in cfg.width_text() and CFG.width_label() == "k = 2"
+
+
+def test_the_map_doubt_widens_each_pair_by_its_bias_bound(path) -> None:
+    """Every pair's band grows by the bound of ``map_doubt_bias_m`` (its interval holds the
+    bare one); the width text names the doubt; a negative doubt is refused."""
+    from locator.fde import map_doubt_bias_m
+
+    s_true = 2200.0
+    sat, rho, el = _epoch(path, s_true, 8, 19)
+    bare_cfg = dataclasses.replace(CFG, map_doubt_lateral_m=0.0, map_doubt_vertical_m=0.0)
+    doubt_cfg = dataclasses.replace(CFG, map_doubt_lateral_m=3.0, map_doubt_vertical_m=1.0)
+    bare = locate(path, sat, rho, el, prior_m=s_true, config=bare_cfg)
+    wide = locate(path, sat, rho, el, prior_m=s_true, config=doubt_cfg)
+    assert bare.pairs is not None and wide.pairs is not None
+    assert np.array_equal(bare.pairs.i, wide.pairs.i) and np.array_equal(bare.pairs.j, wide.pairs.j)
+    assert np.all(wide.pairs.lo_m <= bare.pairs.lo_m) and np.all(wide.pairs.hi_m >= bare.pairs.hi_m)
+    assert wide.lo_m <= bare.lo_m and wide.hi_m >= bare.hi_m and wide.length_m > bare.length_m
+    bound = map_doubt_bias_m(path, bare.chainage_m, sat[bare.used], np.stack(
+        [np.searchsorted(np.flatnonzero(bare.used), bare.pairs.i),
+         np.searchsorted(np.flatnonzero(bare.used), bare.pairs.j)], -1), 3.0, 1.0)  # fmt: skip
+    # each pair's half width grew by its bound over the slope (to the track's curvature)
+    grow = 0.5 * ((wide.pairs.hi_m - wide.pairs.lo_m) - (bare.pairs.hi_m - bare.pairs.lo_m))
+    np.testing.assert_allclose(grow, bound / np.abs(bare.pairs.slope), rtol=0.05, atol=0.05)
+    assert "3 m beside and 1 m above or below" in doubt_cfg.width_text()
+    assert "no map doubt" in bare_cfg.width_text()
+    with pytest.raises(ValueError, match="map_doubt_lateral_m"):
+        LocatorConfig(map_doubt_lateral_m=-1.0)

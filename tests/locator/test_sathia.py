@@ -197,3 +197,42 @@ def test_path_table_matches_the_track_spline(radius_m):
     assert path.ecef_at(np.zeros((2, 4))).shape == (2, 4, 3)
     with pytest.raises(ValueError, match="NaN"):
         path.ecef_at(np.nan)
+
+
+def test_a_map_doubt_keeps_a_pair_around_an_antenna_beside_the_path() -> None:
+    """The antenna 4.5 m left of the path (a passing loop; a map metres off): ranges from
+    there, no noise. With a 0.3 m sigma and k = 3 every pair's interval misses the foot
+    point's chainage; with the map doubt's bias bound (locator.fde.map_doubt_bias_m) each
+    holds it. Without any doubt the pairs are those of the source, bit for bit."""
+    from locator.fde import map_doubt_bias_m
+    from tests.locator._scene import ranges, sky, straight_path
+
+    path = straight_path(heading_deg=60.0, length_m=4000.0)
+    s_true = 2000.0
+    x = path.ecef_at(s_true)
+    t = path.tangent_ecef_at(np.array([s_true]))[0]
+    from predisat.geodesy import ecef_to_geodetic, enu_rotation
+
+    up = enu_rotation(*ecef_to_geodetic(x)[:2])[2]  # the ellipsoid normal: across is level
+    left = np.cross(up, t) / np.linalg.norm(np.cross(up, t))
+    # low satellites ahead-left and behind-right: their difference vector crosses the track
+    sat = sky(x, np.array([120.0, -60.0, 210.0, 30.0]), np.array([15.0, 15.0, 40.0, 60.0]))
+    rho = ranges(sat, x + 4.5 * left)
+    sig = np.full(4, 0.3)
+    pairs = np.array([[0, 1], [2, 3], [0, 3]])
+    bare = solve_pairs(path, sat, rho, sig, pairs, prior_m=s_true, k_sigma=3.0)
+    assert not ((bare.lo_m <= s_true) & (s_true <= bare.hi_m)).any()
+    bias = map_doubt_bias_m(path, s_true, sat, pairs, 4.5, 0.0)
+    # the bound is the worst over the box: a pair's true bias from this displacement is below
+    du = (sat[pairs[:, 0]] - x) / np.linalg.norm(sat[pairs[:, 0]] - x, axis=1)[:, None] - (
+        sat[pairs[:, 1]] - x) / np.linalg.norm(sat[pairs[:, 1]] - x, axis=1)[:, None]
+    assert np.all(np.abs(du @ (4.5 * left)) <= bias + 1e-6)  # to a micrometre
+    wide = solve_pairs(path, sat, rho, sig, pairs, prior_m=s_true, k_sigma=3.0,
+                       bias_bound_m=bias)  # fmt: skip
+    assert ((wide.lo_m <= s_true) & (s_true <= wide.hi_m)).all()
+    zero = solve_pairs(path, sat, rho, sig, pairs, prior_m=s_true, k_sigma=3.0,
+                       bias_bound_m=np.zeros(3))  # fmt: skip
+    for f in ("lo_m", "hi_m", "root_m", "status"):
+        np.testing.assert_array_equal(getattr(zero, f), getattr(bare, f))
+    with pytest.raises(ValueError, match="bias_bound_m"):
+        solve_pairs(path, sat, rho, sig, pairs, prior_m=s_true, bias_bound_m=[1.0, -1.0, 0.0])

@@ -124,11 +124,17 @@ def sim_configs() -> dict[str, tuple[RunConfig, bool]]:
     }
 
 
+def as_the_reference(cfg: RunConfig) -> RunConfig:
+    """``cfg`` without what came after the reference (2026-12-06): the suspect latch after an
+    odometry conflict (the conflict alone flagged) and the map doubt in the pair bands (zero:
+    the source's pairs). Both are tested in ``tests/locator``."""
+    loc = dataclasses.replace(cfg.locator, map_doubt_lateral_m=0.0, map_doubt_vertical_m=0.0)
+    return dataclasses.replace(cfg, odometry_reconfirm=0, locator=loc)
+
+
 def run_sim_case(case: SimCase, config: str) -> pd.DataFrame:
     cfg, with_masks = sim_configs()[config]
-    # the reference predates the suspect latch after an odometry conflict (2026-12-06): the
-    # conflict alone flagged, as then (the latch is tested in tests/locator/test_run.py)
-    cfg = dataclasses.replace(cfg, odometry_reconfirm=0)
+    cfg = as_the_reference(cfg)
     ep = run_locator(case.path, case.source, start_chainage_m=case.start_m, config=cfg,
                      masks=case.masks if with_masks else None)  # fmt: skip
     return ep.loc[:, list(COMPARED)]
@@ -161,7 +167,8 @@ def run_real_case(heading_deg: float, integrity: str) -> pd.DataFrame:
     model = RangeModel.from_rinex_nav(GNSS_OBS / "07590920_0000_0200.05n")
     src = RinexSource(model, obs, "G", odometer=np.zeros(len(obs.gps_s)))
     path = AntennaPath(virtual_track(GEONET_0759_ECEF_M, heading_deg), 0.0)
-    cfg = RunConfig(LocatorConfig(budget=None), integrity=integrity, trust="none")  # k = 2
+    cfg = as_the_reference(RunConfig(LocatorConfig(budget=None), integrity=integrity,
+                                      trust="none"))  # k = 2  # fmt: skip
     ep = run_locator(path, src, start_chainage_m=2000.0, config=cfg)
     return ep.loc[:, list(COMPARED)]
 
