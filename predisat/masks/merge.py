@@ -224,7 +224,19 @@ def _pairs_on(
     offsets of :class:`MergedTrack`."""
     proj = track.project(other.lat_deg, other.lon_deg)
     off = np.abs(np.asarray(proj.offset_m, float))
-    used = ~np.asarray(proj.clamped, bool) & (off <= max_offset_m)
+    # a position stands for its cell: used when any of its cell (its edges, the midpoints to
+    # its neighbours) lies along the map within max_offset_m, not only the position itself
+    enu = np.asarray(track.frame.to_enu(other.lat_deg, other.lon_deg, other.h_m), float)
+    edge = np.vstack([1.5 * enu[:1] - 0.5 * enu[1:2], 0.5 * (enu[1:] + enu[:-1]),
+                      1.5 * enu[-1:] - 0.5 * enu[-2:-1]])
+    pe = track.project_enu(edge)
+    e_in = ~np.asarray(pe.clamped, bool) & (
+        np.abs(np.asarray(pe.offset_m, float)) <= max_offset_m)
+    p_in = ~np.asarray(proj.clamped, bool) & (off <= max_offset_m)
+    # the track comes at most a metre per metre closer between them (half a cell each way)
+    half = 0.5 * np.linalg.norm(np.diff(edge, axis=0), axis=1)
+    near = np.abs(np.asarray(proj.offset_m, float)) - half <= max_offset_m
+    used = p_in | e_in[:-1] | e_in[1:] | (~np.asarray(proj.clamped, bool) & near)
     n_used = int(used.sum())
     nan = float("nan")
     if n_used == 0:

@@ -193,3 +193,40 @@ def test_reports_say_the_masks_are_a_worst_case(scene) -> None:
     m = merge_worst_case(m_main, [m_loop], main, labels=["loop.parquet"]).masks
     note = merged_tracks_note(m, "merged.parquet")
     assert note is not None and "loop.parquet over chainage" in note and "1 other track'" in note
+
+
+def _straight(x0_m: float, x1_m: float, y: np.ndarray | float, name: str) -> TrackMap:
+    """A track along east in the demo frame, ``y`` metres north (scalar or per 2 m vertex)."""
+    main = demo_track()
+    x = np.arange(x0_m, x1_m + 1e-9, 2.0)
+    yy = np.broadcast_to(np.asarray(y, float), x.shape) if np.ndim(y) == 0 else np.asarray(y)
+    lat, lon, h = (np.asarray(v) for v in main.frame.to_geodetic(
+        np.column_stack([x, yy, np.zeros_like(x)])))  # fmt: skip
+    return TrackMap.from_latlon(lat, lon, h, name=name, tolerance_m=0.01)
+
+
+@pytest.mark.parametrize("case", ["past the map's end", "diverging across the limit"])
+def test_a_cell_that_reaches_the_map_counts_though_its_position_does_not(case: str) -> None:
+    """A reviewer's cases: a loop running past the followed map's end, and one diverging across
+    the 25 m limit. A position past the end, or just beyond the limit, stands for a cell that
+    reaches the map within it: its places must be bounded too (they lost up to 38.6 and 54 deg
+    when only the positions counted)."""
+    main = _straight(0.0, 1000.0, 0.0, "main")
+    m_main = _masks(main, np.arange(5.0, 996.0, 10.0), 1, 20.0)
+    if case == "past the map's end":
+        other = _straight(800.0, 1200.0, 4.0, "past end")
+    else:
+        xo = np.arange(300.0, 700.0 + 1e-9, 2.0)
+        other = _straight(300.0, 700.0, 10.0 + 0.1 * (xo - 300.0), "diverging")
+    m_other = _masks(other, np.arange(3.0, other.length_m - 2.0, 10.0), 2, 60.0)
+    m = merge_worst_case(m_main, [m_other], main).masks
+    b = m_other.cell_bounds_m
+    s = np.arange(max(b[0], 0.0) + 0.01, min(b[-1], other.length_m) - 0.01, 0.25)
+    lat, lon, _ = other.position_at(s)
+    p = main.project(lat, lon)
+    at, inside = m.position_index(np.asarray(p.chainage_m, float))
+    ok = ~np.asarray(p.clamped) & (np.abs(np.asarray(p.offset_m)) <= 25.0) & np.asarray(inside)
+    assert ok.sum() > 100
+    own = np.asarray(m_other.position_index(s)[0])[ok]
+    got = m.effective_mask_deg[np.asarray(at)[ok]]
+    assert np.all(got >= m_other.effective_mask_deg[own] - 1e-5)
