@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
 from locator.balises.balisefile import BaliseList
 from locator.balises.capture import CaptureConfig, capture_balises, score_captures
@@ -42,8 +43,12 @@ __all__ = [
     "capture_summary",
     "capture_table",
     "locate_with_odometry",
+    "located_epochs",
     "safe_front_check",
 ]
+
+# fused intervals not to be used: an odometry conflict, or one not yet cleared (locator.run)
+_DOUBTFUL = ("conflict", "suspect")
 
 ODOMETERS = {
     "trailer-radar": OdometerConfig.trailer_axle_with_radar,
@@ -124,6 +129,15 @@ def locate_with_odometry(
     return LocatedRun(ep, so, acc)
 
 
+def located_epochs(epochs: pd.DataFrame) -> NDArray:
+    """Epochs whose fused interval may time a balise passage, bool, shape (n,): a satellite
+    claim has confirmed the run's position, and no odometry conflict (the epoch's own, or one
+    not cleared since: fusion ``conflict``, ``suspect``) makes the interval doubtful (a review:
+    a stuck direction channel's conflicting epochs captured a balise 150-300 m away)."""
+    claimed = np.logical_or.accumulate(epochs["claim"].to_numpy(bool))
+    return claimed & ~np.isin(epochs["fusion"].to_numpy(object), _DOUBTFUL)
+
+
 def capture_table(
     run: LocatedRun,
     balises: BaliseList,
@@ -144,9 +158,7 @@ def capture_table(
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
     o = run.odometer.orientation
-    # satellites confirmed the run's position, and no odometry conflict left it suspect since
-    located = np.logical_or.accumulate(ep["claim"].to_numpy(bool)) & (
-        ep["fusion"].to_numpy(object) != "suspect")
+    located = located_epochs(ep)
     out = []
     for name, cc in configs.items():
         cap = capture_balises(
@@ -203,18 +215,18 @@ def safe_front_check(
     the true front lies in ``[min safe, max safe]`` exactly when the true antenna lies in the
     fused interval.
 
-    Epochs after an odometry conflict that no agreeing fixes have cleared (fusion
-    ``suspect``, flagged ``ODOMETRY_SUSPECT``) give no safe front: they are counted apart.
+    Epochs of an odometry conflict, and after one until agreeing fixes clear it (fusion
+    ``conflict`` and ``suspect``, flagged), give no safe front: they are counted apart.
 
     Returns
     -------
     dict
         ``epochs``, ``front_outside`` (count, epochs giving a safe front),
-        ``front_outside_flagged`` (count, suspect epochs: said, not hazardous),
+        ``front_outside_flagged`` (count, conflict and suspect epochs: said, not hazardous),
         ``gnss_claim_share`` (satellite claims), ``fused_share`` (a safe front whose fused
         interval is at most ``max_length_m`` long), ``odometry_only`` (share of epochs
         carried by the odometry), ``suspect`` (share of suspect epochs), ``conflicts``
-        (alarms).
+        (alarms, count).
     """
     ep = run.epochs
     o = run.odometer.orientation
@@ -222,16 +234,16 @@ def safe_front_check(
     lo = ep["fused_lo_m"] + o * antenna_to_front_m
     hi = ep["fused_hi_m"] + o * antenna_to_front_m
     outside = ~((lo <= truth_front + 1e-9) & (truth_front <= hi + 1e-9))
-    suspect = ep["fusion"] == "suspect"
+    doubtful = ep["fusion"].isin(_DOUBTFUL)
     length = ep["fused_hi_m"] - ep["fused_lo_m"]
     return {
         "epochs": float(len(ep)),
-        "front_outside": float((outside & ~suspect).sum()),
-        "front_outside_flagged": float((outside & suspect).sum()),
+        "front_outside": float((outside & ~doubtful).sum()),
+        "front_outside_flagged": float((outside & doubtful).sum()),
         "gnss_claim_share": float(ep["claim"].mean()),
-        "fused_share": float(((length <= max_length_m) & ~suspect).mean()),
+        "fused_share": float(((length <= max_length_m) & ~doubtful).mean()),
         "odometry_only": float((ep["fusion"] == "odometry").mean()),
-        "suspect": float(suspect.mean()),
+        "suspect": float((ep["fusion"] == "suspect").mean()),
         "conflicts": float((ep["fusion"] == "conflict").sum()),
     }
 

@@ -439,3 +439,20 @@ def test_a_stuck_direction_channel_is_flagged_wherever_the_fused_interval_misses
         assert miss.sum() > 10
         assert not (ep["claim"].to_numpy() & miss.to_numpy()).any()
         assert (miss.to_numpy() & ~flagged).any() == want_silent
+
+
+def test_balise_capture_skips_conflicting_and_suspect_epochs(path):
+    """A reviewer's case: the stuck direction channel's run with every fix claiming; its
+    conflicting epochs (fused interval 17-627 m off) were taken as located and captured a
+    balise the train never reached."""
+    from locator.balises.campaign import located_epochs
+
+    out_m = 1000.0 + 15.0 * np.arange(21)
+    truth = np.concatenate([out_m, out_m[-2::-1]])
+    odo = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(truth)))])
+    ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    miss = ~((ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)).to_numpy()
+    assert miss.sum() > 10 and set(ep["fusion"][miss]) <= {"conflict", "suspect"}
+    located = located_epochs(ep)
+    assert located[:20].all() and not (located & miss).any()
