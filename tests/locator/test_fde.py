@@ -200,3 +200,28 @@ def test_the_map_doubt_widens_each_pair_by_its_bias_bound(path) -> None:
     assert "no map doubt" in bare_cfg.width_text()
     with pytest.raises(ValueError, match="map_doubt_lateral_m"):
         LocatorConfig(map_doubt_lateral_m=-1.0)
+
+
+def test_the_map_doubt_bound_holds_over_a_curved_search_window() -> None:
+    """A reviewer's case: a 300 m radius curve; the bound taken at the window's centre must
+    cover the bias of an antenna beside the track (across it there) anywhere in a 1000 m
+    window, where the heading turns by more than 90 deg."""
+    from locator.fde import map_doubt_bias_m
+    from predisat.geodesy import ecef_to_geodetic, enu_rotation
+    from tests.locator._scene import arc_path, random_sky, sky
+
+    path = arc_path(300.0, 300.0, lead_m=100.0)
+    centre = 0.5 * path.length_m
+    rng = np.random.default_rng(7)
+    sat = sky(path.ecef_at(centre), *random_sky(rng, 10, 5.0))
+    pairs = np.stack(np.triu_indices(10, 1), -1)
+    bound = map_doubt_bias_m(path, centre, sat, pairs, 1.5, 1.0)
+    for s in np.linspace(max(centre - 500.0, 0.0), min(centre + 500.0, path.length_m), 41):
+        x = path.ecef_at(float(s))
+        t = path.tangent_ecef_at(np.array([s]))[0]
+        up = enu_rotation(*ecef_to_geodetic(x)[:2])[2]
+        n = np.cross(up, t) / np.linalg.norm(np.cross(up, t))
+        u = (sat - x) / np.linalg.norm(sat - x, axis=1)[:, None]
+        du = u[pairs[:, 0]] - u[pairs[:, 1]]
+        exact = 1.5 * np.abs(du @ n) + 1.0 * np.abs(du @ up)  # the worst corner of the box
+        assert np.all(exact <= bound + 1e-3), s
