@@ -15,8 +15,9 @@ its clock offset, and whether it may be trusted, with the reason when it may not
   of its neighbouring records of the same satellite by more than
   :attr:`ValidityPolicy.consistency_m` (a corrupted record, as found for G01 on 2010-07-01);
   a record with no neighbour in reach is compared with the nearest record of its satellite up
-  to a day away, more coarsely (:data:`FAR_CONSISTENCY_M`);
-* ``UNCHECKED`` - the broadcast record in force is its satellite's only one within a day:
+  to a day away (GLONASS: 6 h), more coarsely (:data:`FAR_CONSISTENCY_M`);
+* ``UNCHECKED`` - the broadcast record in force is its satellite's only one within a day
+  (GLONASS: 6 h):
   nothing can tell it from a corrupted one (an hourly file; a user trial kept only 06:00-07:00
   of that 2010-07-01 file and G01's record put a satellite 20 000 km from the real one at
   35-80 deg above the line). Not trusted unless :attr:`ValidityPolicy.trust_unchecked` (the
@@ -76,8 +77,10 @@ far better: GPS 128 m median (197 m worst), GLONASS 1.5 km (1.9 km) at 16-48 h a
 orbits (a user trial, 2026-12-06); a record of another orbit, as G01's, is thousands of
 kilometres off."""
 
-# the farthest two records are compared, seconds: each is extrapolated half of it
-_FAR_GAP_S = {"kepler": 26 * 3600.0, "glonass": 24 * 3600.0}
+# the farthest two records are compared, seconds: each is extrapolated half of it. GLONASS's
+# integrated state drifts faster: honest records 20-22 h apart differed by up to 15 km
+# (brdc3050.12g, a review), so its records are compared up to 6 h apart only
+_FAR_GAP_S = {"kepler": 26 * 3600.0, "glonass": 6 * 3600.0}
 
 
 def _default_max_age() -> dict[str, float]:

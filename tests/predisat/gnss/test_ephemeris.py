@@ -196,3 +196,29 @@ def test_a_record_far_from_its_neighbours_is_compared_up_to_a_day(
     t0 = DAY0 + np.array([0.0, 1800.0])
     st0 = eph.status(t0, ["G01", "G02"])
     assert np.all(st0.reason[:, 0] != Reason.OK) and np.all(st0.reason[:, 1] == Reason.OK)
+
+
+def test_glonass_records_far_apart_are_compared_up_to_six_hours(
+    test_data: Path, tmp_path: Path
+) -> None:
+    """Honest GLONASS records 20-22 h apart differ by up to 15 km (a review): a far comparison
+    there would distrust them. Two of R02's records 5.5 h apart are compared and trusted; 6.5 h
+    apart they are not compared: UNCHECKED, not INCONSISTENT."""
+    src = test_data / "gnss/brdc0910_R02R08.09g"
+    lines = src.read_text().splitlines(keepends=True)
+    head = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln) + 1
+
+    def keep(times: set[tuple[int, int]], name: str) -> Path:
+        out = lines[:head]
+        for k in range(head, len(lines), 4):
+            f = lines[k].split()
+            if int(f[0]) == 2 and (int(f[4]), int(f[5])) in times:
+                out += lines[k:k + 4]
+        (tmp_path / name).write_text("".join(out))
+        return tmp_path / name
+
+    t0 = calendar_to_gps_s(2009, 4, 1) + 15 * 60.0 + 15.0  # GPST at 00:15 UTC (15 leap s)
+    near = Ephemeris.from_rinex(keep({(0, 15), (5, 45)}, "r02_near.09g"))
+    assert near.status(np.array([t0]), ["R02"]).reason[0, 0] == Reason.OK
+    far = Ephemeris.from_rinex(keep({(0, 15), (6, 45)}, "r02_far.09g"))
+    assert far.status(np.array([t0]), ["R02"]).reason[0, 0] == Reason.UNCHECKED
