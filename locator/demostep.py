@@ -79,7 +79,10 @@ class LocatorDemoStep:
                 outputs[name] = png
                 what[name] = f"{_FIGURES.get(png.stem, 'figure')} under {rule} (GPS)"
         gnss = systems_text(read_run(out / "true_masks")[0])  # the satellites the runs received
-        text = format_demo_table(table, gnss) + f"\n  (pair intervals: {ctx.integrity.describe()})"
+        from locator.fde import LocatorConfig
+
+        width = LocatorConfig(budget=ctx.integrity).width_text()  # the runs' own configuration
+        text = format_demo_table(table, gnss) + f"\n  (pair intervals: {width})"
         return DemoStepResult(text, outputs, what)
 
 

@@ -701,7 +701,7 @@ def demo(
         rules = {"pipeline masks": ("masks", pipeline_masks, 0.0), **rules}
     log(f"locator demo 3/3: locating {sim.n_epoch} epochs under {len(rules)} trust rules")
     budget = IntegrityBudget() if integrity is None else integrity
-    log(f"  pair intervals: {budget.describe()}")
+    log(f"  pair intervals: {LocatorConfig(budget=budget).width_text()}")
     rows = []
     for label, (trust, masks, cut) in rules.items():
         cfg = RunConfig(LocatorConfig(budget=budget), trust=trust, cutoff_deg=cut or 15.0)
