@@ -5,7 +5,7 @@ track; :mod:`predisat.masks.merge`, another track beside it).
 A position of a mask set stands for its cell: the places between the normals to its own map at
 the cell's edges (the midpoints between positions), within a reach of that map. Projected onto
 another map, those places cover a stretch of its chainage, which :func:`cell_stretches_on`
-bounds; :func:`cells_touching` finds the cells of a mask set on that map a stretch overlaps.
+bounds; :func:`cells_reached` pairs each stretch with the cells on that map it overlaps.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from predisat.masks.maskset import MaskSet
 from predisat.track.map import TrackMap
 
-__all__ = ["cell_stretches_on", "cells_touching"]
+__all__ = ["cell_edges_enu", "cell_stretches_on", "cells_reached"]
 
 _WIDEN_SLACK_M = 0.5  # the maps' curvature between a cell's corners
 _NORMAL_SAMPLES = 9  # along each edge's normal, its ends included
@@ -46,11 +46,7 @@ def cell_stretches_on(
     are bounded by those of the corners, widened by ``_WIDEN_SLACK_M`` for the maps'
     curvature between them.
     """
-    enu = np.asarray(track.frame.to_enu(masks.lat_deg, masks.lon_deg, masks.h_m), float)
-    chord = np.diff(enu, axis=0)
-    chord = np.vstack([chord[:1], chord, chord[-1:]])  # (n + 1, 3): at each edge
-    edge = np.vstack([enu[:1] - 0.5 * chord[0], 0.5 * (enu[1:] + enu[:-1]),
-                      enu[-1:] + 0.5 * chord[-1]])  # fmt: skip
+    enu, chord, edge = cell_edges_enu(track, masks)
     along = chord[:, :2] / np.linalg.norm(chord[:, :2], axis=1, keepdims=True)
     normal = np.column_stack([-along[:, 1], along[:, 0], np.zeros(len(along))])
     off_edge = np.concatenate([[offset_m[0]], np.maximum(offset_m[1:], offset_m[:-1]),
@@ -81,12 +77,29 @@ def cell_stretches_on(
             hi_own + s)  # fmt: skip
 
 
-def cells_touching(bounds_m: NDArray, lo_m: NDArray, hi_m: NDArray) -> tuple[NDArray, NDArray]:
-    """First and last cell (``bounds_m``, (n + 1,)) each ``[lo, hi]`` overlaps by more than a
-    millimetre (a cell whose edge meets the interval's is a neighbour, not an overlap: both
-    maps put the edge at the same place to well under that); ``last < first`` where the
-    interval overlaps no cell."""
+def cells_reached(bounds_m: NDArray, lo_m: NDArray, hi_m: NDArray) -> tuple[NDArray, NDArray]:
+    """Every (stretch, cell) pair where a stretch ``[lo, hi]`` ((k,) each) overlaps a cell
+    (``bounds_m``, (n + 1,)) by more than a millimetre (a cell whose edge meets the
+    stretch's is a neighbour, not an overlap: both maps put the edge at the same place to
+    well under that): the stretch indices and the cell indices, int64, shape (pairs,)."""
     lo, hi = lo_m + _EDGE_TOL_M, hi_m - _EDGE_TOL_M
     first = np.searchsorted(bounds_m[1:], lo, side="right")
-    last = np.searchsorted(bounds_m[:-1], hi, side="left") - 1
-    return first, np.where(hi > lo, last, first - 1)
+    last = np.where(hi > lo, np.searchsorted(bounds_m[:-1], hi, side="left") - 1, first - 1)
+    span = np.maximum(last - first + 1, 0)
+    src = np.repeat(np.arange(len(first), dtype=np.int64), span)
+    dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]
+                         + [np.zeros(0, np.int64)]).astype(np.int64)  # fmt: skip
+    return src, dst
+
+
+def cell_edges_enu(track: TrackMap, masks: MaskSet) -> tuple[NDArray, NDArray, NDArray]:
+    """The positions (n, 3), the chords at the cells' edges (n + 1, 3: the ends repeat the
+    first and last chord) and the edges themselves (n + 1, 3: the midpoints between
+    positions, the ends half a chord out, as :attr:`MaskSet.cell_bounds_m`), ENU metres in
+    ``track``'s frame."""
+    enu = np.asarray(track.frame.to_enu(masks.lat_deg, masks.lon_deg, masks.h_m), float)
+    chord = np.diff(enu, axis=0)
+    chord = np.vstack([chord[:1], chord, chord[-1:]])
+    edge = np.vstack([enu[:1] - 0.5 * chord[0], 0.5 * (enu[1:] + enu[:-1]),
+                      enu[-1:] + 0.5 * chord[-1]])  # fmt: skip
+    return enu, chord, edge

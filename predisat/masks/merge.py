@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from predisat.masks.carry import cell_stretches_on, cells_touching
+from predisat.masks.carry import cell_edges_enu, cell_stretches_on, cells_reached
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.registration import MAX_TRACK_OFFSET_M, register_on_track
 from predisat.track.map import TrackMap
@@ -226,9 +226,7 @@ def _pairs_on(
     off = np.abs(np.asarray(proj.offset_m, float))
     # a position stands for its cell: used when any of its cell (its edges, the midpoints to
     # its neighbours) lies along the map within max_offset_m, not only the position itself
-    enu = np.asarray(track.frame.to_enu(other.lat_deg, other.lon_deg, other.h_m), float)
-    edge = np.vstack([1.5 * enu[:1] - 0.5 * enu[1:2], 0.5 * (enu[1:] + enu[:-1]),
-                      1.5 * enu[-1:] - 0.5 * enu[-2:-1]])
+    edge = cell_edges_enu(track, other)[2]
     pe = track.project_enu(edge)
     e_in = ~np.asarray(pe.clamped, bool) & (
         np.abs(np.asarray(pe.offset_m, float)) <= max_offset_m)
@@ -243,11 +241,8 @@ def _pairs_on(
         return None, (0, other.n_pos, nan, nan, nan, nan)
     lo, hi = cell_stretches_on(track, other, off)[:2]
     lo, hi = lo[used], hi[used]
-    first, last = cells_touching(bounds_m, lo, hi)
-    span = np.maximum(last - first + 1, 0)
-    src = np.repeat(np.flatnonzero(used), span)
-    dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]
-                         + [np.zeros(0, np.int64)]).astype(np.int64)  # fmt: skip
+    k, dst = cells_reached(bounds_m, lo, hi)
+    src = np.flatnonzero(used)[k]
     info = (n_used, other.n_pos - n_used, float(lo.min()), float(hi.max()),
             float(np.median(off[used])), float(off[used].max()))  # fmt: skip
     return ((src, dst) if src.size else None), info

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from predisat.geodesy import unwrap_lon_deg, wrap_lon_deg
-from predisat.masks.carry import cell_stretches_on, cells_touching
+from predisat.masks.carry import cell_stretches_on, cells_reached
 from predisat.masks.maskset import BinSource, MaskError, MaskSet
 from predisat.track.map import TrackMap
 
@@ -333,11 +333,7 @@ def _worst_over(target: MaskSet, source: MaskSet, lo_m: NDArray, hi_m: NDArray) 
     """``target`` with each cell's bins the worst over the ``source`` positions whose
     stretches ``[lo_m, hi_m]`` (on the target's chainage) overlap it: the highest mask and
     margin, ASSUMED where any is, the weakest support."""
-    first, last = cells_touching(target.cell_bounds_m, lo_m, hi_m)
-    span = np.maximum(last - first + 1, 0)
-    src = np.repeat(np.arange(source.n_pos), span)  # (pairs,): the position carried over
-    dst = np.concatenate([np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]
-                         + [np.zeros(0, np.int64)]).astype(np.int64)  # fmt: skip
+    src, dst = cells_reached(target.cell_bounds_m, lo_m, hi_m)  # position carried, cell
     mask = target.mask_el_deg.copy()
     np.maximum.at(mask, dst, source.mask_el_deg[src])
     margin_src = np.broadcast_to(source.margin_deg, source.mask_el_deg.shape)
