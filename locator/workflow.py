@@ -11,7 +11,7 @@ import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -194,6 +194,26 @@ def sim_on_track(
 _NEAR_FOR_HEIGHT_M = 200.0
 
 
+class _Near(NamedTuple):
+    offset_m: NDArray  # beside the track, left positive
+    height_m: NDArray  # above the track axis
+
+
+def _near_fixes(path: AntennaPath, fixes_ecef_m: ArrayLike) -> _Near | None:
+    """The receiver's own fixes projected on the track, those within 200 m of it (finite
+    rows only); None when none is. Beside the line only: a receiver elsewhere is told so by
+    :func:`check_track`, and a height or offset from a far projection means nothing."""
+    fixes = np.asarray(fixes_ecef_m, float).reshape(-1, 3)
+    fixes = fixes[np.all(np.isfinite(fixes), axis=1)]
+    if not len(fixes):
+        return None
+    pr = path.track.project(*ecef_to_geodetic(fixes))
+    near = np.hypot(pr.offset_m, pr.along_m) <= _NEAR_FOR_HEIGHT_M
+    if not near.any():
+        return None
+    return _Near(np.asarray(pr.offset_m, float)[near], np.asarray(pr.height_m, float)[near])
+
+
 OFF_MAP_WARN_M = 3.0
 """A run whose own fixes lie more than this beside the track map (the median, metres) is told:
 the pair intervals take the antenna on the map (a trial: an antenna 4.5 m beside it, a passing
@@ -227,19 +247,13 @@ def check_track_offset(path: AntennaPath, fixes_ecef_m: ArrayLike, label: str) -
         When it exceeds :data:`OFF_MAP_REFUSE_M` (a trial's antenna 25-50 m beside the map ran
         without a word, every epoch blamed on NLOS).
     """
-    fixes = np.asarray(fixes_ecef_m, float).reshape(-1, 3)
-    fixes = fixes[np.all(np.isfinite(fixes), axis=1)]
-    if not len(fixes):
+    near = _near_fixes(path, fixes_ecef_m)
+    if near is None:
         return None
-    lat, lon, h = ecef_to_geodetic(fixes)
-    pr = path.track.project(lat, lon, h)
-    near = np.hypot(pr.offset_m, pr.along_m) <= _NEAR_FOR_HEIGHT_M
-    if not near.any():
-        return None
-    off = float(np.median(np.asarray(pr.offset_m, float)[near]))
+    off = float(np.median(near.offset_m))
     side = "left of" if off > 0 else "right of"
     what = (f"{label}: the receiver's own fixes lie {abs(off):.1f} m {side} track "
-            f"{path.track.name!r} (the median of {int(near.sum())})")  # fmt: skip
+            f"{path.track.name!r} (the median of {near.offset_m.size})")  # fmt: skip
     if abs(off) > OFF_MAP_REFUSE_M:
         raise ValueError(
             f"{what}: the antenna is on another track or line, or the map is of another; give "
@@ -287,19 +301,10 @@ def check_track_height(
     ValueError
         When the median exceeds ``max_m``, naming the likely causes and the fix.
     """
-    fixes = np.asarray(fixes_ecef_m, float).reshape(-1, 3)
-    fixes = fixes[np.all(np.isfinite(fixes), axis=1)]
-    if not len(fixes):
+    near = _near_fixes(path, fixes_ecef_m)
+    if near is None:
         return float("nan")
-    lat, lon, h = ecef_to_geodetic(fixes)
-    pr = path.track.project(lat, lon, h)
-    # beside the line only: a receiver elsewhere is told so by check_track, and a height
-    # above a far projection is meaningless
-    near = np.hypot(pr.offset_m, pr.along_m) <= _NEAR_FOR_HEIGHT_M
-    if not near.any():
-        return float("nan")
-    dh = float(np.median(pr.height_m[near]) - path.antenna_height_m)
-    fixes = fixes[near]
+    dh = float(np.median(near.height_m) - path.antenna_height_m)
     if abs(dh) > max_m:
         where = "above" if dh > 0 else "below"
         if np.all(np.abs(np.asarray(path.track.h_m)) < 1.0):  # smoothing leaves centimetres
@@ -311,8 +316,8 @@ def check_track_height(
             cause = "the track map's heights are too high (heights of another datum?)"
         raise ValueError(
             f"{label}: the receiver's own fixes lie {abs(dh):.1f} m {where} its antenna on "
-            f"track {path.track.name!r} (the median of {len(fixes)}; the track's height plus "
-            f"--antenna-height {path.antenna_height_m:g} m; at most {max_m:g} m is accepted): "
+            f"track {path.track.name!r} (the median of {near.height_m.size}; the track's height "
+            f"plus --antenna-height {path.antenna_height_m:g} m; at most {max_m:g} m is accepted): "
             f"{cause}. The locator meets the satellites' ranges with the track in 3-D, so its "
             "fixes would be tens of metres off; give a track map with WGS84 ellipsoidal heights "
             "(docs/track-map.md), or correct --antenna-height"
