@@ -20,6 +20,7 @@ import dataclasses
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -178,20 +179,32 @@ PAIR_FIELDS = ("i", "j", "k_m", "sigma_k_m", "root_m", "lo_m", "hi_m", "slope", 
 N_PAIR_CASES = 40
 
 
+@cache
+def _pair_paths() -> tuple[AntennaPath, ...]:
+    return (straight_path(60.0), arc_path(300.0, 120.0, lead_m=200.0), arc_path(80.0, 300.0))
+
+
+def pair_case_inputs(
+    case: int,
+) -> tuple[AntennaPath, float, NDArray, NDArray, NDArray, np.random.Generator]:
+    """A pair case's path, true chainage, satellites, ranges and sigmas, and its generator
+    where they leave it (the faults and the prior are drawn next)."""
+    rng = np.random.default_rng(1000 + case)
+    path = _pair_paths()[case % 3]
+    s_true = float(rng.choice([rng.uniform(0.0, path.length_m), 3.0, path.length_m - 2.0]))
+    x = path.ecef_at(s_true)
+    n = int(rng.integers(2, 10))
+    az, el = random_sky(rng, n, min_el_deg=5.0)
+    sat = sky(x, az, el)
+    sig = rng.uniform(0.5, 6.0, n)
+    return path, s_true, sat, ranges(sat, x, sig, rng), sig, rng
+
+
 def pair_cases() -> Iterator[tuple[int, dict[str, NDArray]]]:
     """Random single epochs for ``solve_pairs``: every field of the solution per case."""
-    paths = [straight_path(60.0), arc_path(300.0, 120.0, lead_m=200.0),
-             arc_path(80.0, 300.0)]  # fmt: skip
     for case in range(N_PAIR_CASES):
-        rng = np.random.default_rng(1000 + case)
-        path = paths[case % len(paths)]
-        s_true = float(rng.choice([rng.uniform(0.0, path.length_m), 3.0, path.length_m - 2.0]))
-        x = path.ecef_at(s_true)
-        n = int(rng.integers(2, 10))
-        az, el = random_sky(rng, n, min_el_deg=5.0)
-        sat = sky(x, az, el)
-        sig = rng.uniform(0.5, 6.0, n)
-        rho = ranges(sat, x, sig, rng)
+        path, s_true, sat, rho, sig, rng = pair_case_inputs(case)
+        n = len(rho)
         if case % 4 == 1:  # a faulty range
             rho[int(rng.integers(n))] += rng.choice([60.0, 400.0, -3000.0])
         prior = s_true + float(rng.normal(0.0, [20.0, 300.0, 1500.0][case % 3]))

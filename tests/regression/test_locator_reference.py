@@ -28,7 +28,6 @@ import pytest
 
 import locator.run as run_module
 from locator.run import RunFlag, flag_names
-from tests.locator._scene import random_sky, ranges, sky, straight_path
 from tests.regression.locator_cases import (
     COMPARED,
     DATA,
@@ -37,6 +36,7 @@ from tests.regression.locator_cases import (
     SIM_CASES,
     SimCase,
     load_sim_case,
+    pair_case_inputs,
     pair_cases,
     run_real_case,
     run_sim_case,
@@ -66,23 +66,15 @@ def _inputs_as_on_the_reference_machine() -> bool:
     numpy's OpenBLAS picks its kernels by CPU: on 2026-12-06 a machine of another CPU (AMD EPYC
     Zen 3, no AVX-512) built them a few nanometres apart, and the code of the landed commit
     failed the pins there exactly as the current one. The telltale is pair case 0's range
-    differences, built here as :func:`pair_cases` builds its inputs and subtracted with numpy
-    (no locator arithmetic): equal to the frozen ones on the reference machine; within
+    differences, its inputs as :func:`pair_cases` builds them subtracted with numpy (no
+    locator arithmetic): equal to the frozen ones on the reference machine; within
     nanometres on another CPU (the pins are skipped, said); further off, a change of the input
     code itself, which the pins must catch (they run, and fail)."""
     from locator.sathia import all_pairs
 
     ref = np.load(DATA / "reference_pairs.npz")
-    rng = np.random.default_rng(1000)  # pair_cases' case 0, step for step
-    path = straight_path(60.0)
-    s_true = float(rng.choice([rng.uniform(0.0, path.length_m), 3.0, path.length_m - 2.0]))
-    x = path.ecef_at(s_true)
-    n = int(rng.integers(2, 10))
-    az, el = random_sky(rng, n, min_el_deg=5.0)
-    sat = sky(x, az, el)
-    sig = rng.uniform(0.5, 6.0, n)
-    rho = ranges(sat, x, sig, rng)
-    pr = all_pairs(n)
+    rho = pair_case_inputs(0)[3]
+    pr = all_pairs(len(rho))
     k_m = rho[pr[:, 0]] - rho[pr[:, 1]]
     want = ref["0/k_m"]
     assert k_m.shape == want.shape, "pair case 0 no longer builds the frozen inputs"
