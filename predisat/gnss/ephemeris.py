@@ -227,7 +227,6 @@ def record_disagreement(
     diff_m : ndarray, shape (n_pairs,)
         3-D position difference at the midpoint.
     """
-    state = kepler_state if rec.kind == "kepler" else glonass_state
     order = np.lexsort((rec.ref_gps_s, rec.sat))
     a_list, b_list = [], []
     for step in (1, 2):
@@ -238,12 +237,7 @@ def record_disagreement(
         a_list.append(a[same & near])
         b_list.append(b[same & near])
     a, b = np.concatenate(a_list), np.concatenate(b_list)
-    if len(a) == 0:
-        return a, b, np.zeros(0)
-    tm = (rec.ref_gps_s[a] + rec.ref_gps_s[b]) / 2.0
-    pa, _ = state(rec, a, tm)
-    pb, _ = state(rec, b, tm)
-    return a, b, np.linalg.norm(pa - pb, axis=-1)
+    return a, b, _apart_half_way(rec, a, b)
 
 
 def _inconsistent(
@@ -301,13 +295,19 @@ def _far_disagreement(rec: NavRecords, rows: NDArray) -> tuple[NDArray, NDArray,
         gap = np.where(better, g, gap)
     keep = gap <= _FAR_GAP_S[rec.kind]
     a, b = rows[keep], order[best[keep]]
-    if a.size == 0:
-        return a, b, np.zeros(0)
+    return a, b, _apart_half_way(rec, a, b)
+
+
+def _apart_half_way(rec: NavRecords, a: NDArray, b: NDArray) -> NDArray:
+    """3-D distance between the positions records ``a`` and ``b`` give half-way between
+    their reference epochs, metres, shape (n_pairs,)."""
+    if len(a) == 0:
+        return np.zeros(0)
     state = kepler_state if rec.kind == "kepler" else glonass_state
     tm = (rec.ref_gps_s[a] + rec.ref_gps_s[b]) / 2.0
     pa, _ = state(rec, a, tm)
     pb, _ = state(rec, b, tm)
-    return a, b, np.linalg.norm(pa - pb, axis=-1)
+    return np.linalg.norm(pa - pb, axis=-1)
 
 
 class _RecordChecks(NamedTuple):
