@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from locator.corrections import OMEGA_E_RADPS, uncorrected_iono_sigma_m
 from locator.errorfit import Residuals
 from locator.observations import ObsProblem
-from locator.sources import EpochData
+from locator.sources import EpochData, check_odometer_extra
 from predisat.availability.satellites import select_satellites
 from predisat.fileerror import FileLineError, read_text_lines
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel, geodetic_to_ecef
@@ -410,14 +410,18 @@ class DeviceGnssSource:
         Default :data:`DEFAULT_SIGNAL_PRIORITY`.
     odometer : ndarray, shape (n_epoch,), optional
         Odometer distance per epoch, metres.
+    odometer_extra : ndarray, shape (n_epoch, 2), optional
+        The odometer's disputed distance per epoch (:class:`locator.sources.SimSource`).
     """
 
     device: DeviceGnss
     constellation: str = "G"
     priority: Mapping[str, Sequence[str]] | None = None
     odometer: NDArray | None = field(default=None)
+    odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
+        check_odometer_extra(self.odometer_extra, self.odometer, len(self.device.gps_s))
         if self.odometer is not None and np.shape(self.odometer) != self.device.gps_s.shape:
             raise ValueError(
                 f"odometer must have one value per epoch ({self.device.gps_s.shape}), got "
@@ -436,6 +440,10 @@ class DeviceGnssSource:
     @property
     def odometer_m(self) -> NDArray | None:
         return None if self.odometer is None else np.asarray(self.odometer, float)
+
+    @property
+    def odometer_extra_m(self) -> NDArray | None:
+        return None if self.odometer_extra is None else np.asarray(self.odometer_extra, float)
 
     @cached_property
     def _columns(self) -> NDArray:

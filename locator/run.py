@@ -313,7 +313,9 @@ def run_locator(
         ``fused_chainage_m`` (odometry and satellites, step 6), ``n_used_assumed`` (used
         satellites trusted where the mask rests on the far field's assumption), ``fusion``
         (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (distance
-        the wheels ran since the older of the two bounds' anchors, either way, m), ``solve_ms``,
+        the wheels ran since the older of the two bounds' anchors, either way, m),
+        ``odo_disputed_m`` (the odometer's disputed distance in the prediction since its anchors:
+        where wheel and radar disagreed, both readings are covered, m), ``solve_ms``,
         ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
         uncorrected, no broadcast model being available, and its sigma inflated:
         :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
@@ -330,7 +332,8 @@ def run_locator(
         )
     gps = np.asarray(source.gps_s, float)
     odo = source.odometer_m
-    state = _Tracker.start(start_chainage_m, cfg.start_uncertainty_m, odo, gps)
+    state = _Tracker.start(start_chainage_m, cfg.start_uncertainty_m, odo, gps,
+                           getattr(source, "odometer_extra_m", None))  # fmt: skip
     rows: list[JsonDict] = []
     beacons: dict[float, tuple[NDArray, NDArray]] = {}  # the heading check's beacon frames
     for k in range(len(gps)):
@@ -385,12 +388,13 @@ def run_locator(
                 row.update(flags=flags, flag_names=flag_names(flags), claim=False)
                 status = _SUSPECT
         if fix is not None and row["claim"]:
-            here = (0.0 if odo is None else float(odo[k]), gps[k], float(state.ran[k]))
+            here = state.here(k, gps, odo)
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
             status = _FUSED
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
+            odo_disputed_m=state.disputed,
         )  # fmt: skip
         row["excluded"] = " ".join(f"{s}:{r}" for s, r in excluded.items())
         row["solve_ms"] = 1e3 * (time.perf_counter() - t0)
@@ -410,9 +414,9 @@ def _clip(x: float, lo: float, hi: float) -> float:
     return min(max(x, lo), hi)
 
 
-Anchor = tuple[float, float, float, float]
-"""A bound's anchor: (chainage m, odometer reading m, gps_s, distance the wheels had run m)
-where it was last set."""
+Anchor = tuple[float, ...]
+"""A bound's anchor: (chainage m, odometer reading m, gps_s, distance the wheels had run m,
+disputed distance toward lower and toward higher chainage m) where it was last set."""
 
 
 @dataclass
@@ -429,22 +433,34 @@ class _Tracker:
     est_var: float
     odo_prev: float
     ran: NDArray  # distance the wheels ran to each epoch, either way (0 without odometer), m
+    # the odometer's disputed distance to each epoch, shape (n, 2): toward lower / higher
+    # chainage (locator.odometry.odometer: a sensor failure), m
+    extra: NDArray
     past_start: bool = False  # the last prediction reached before chainage 0
     past_end: bool = False  # ... or past the track's length
     suspect: bool = False  # an odometry conflict not yet cleared (RunConfig.odometry_reconfirm)
     agreed: int = 0  # fixes agreeing with the prediction since the last conflict
+    disputed: float = 0.0  # the last prediction's disputed odometer distance, m
 
     @classmethod
     def start(
-        cls, start_m: float, uncertainty_m: float, odo: NDArray | None, gps: NDArray
-    ) -> _Tracker:
+        cls, start_m: float, uncertainty_m: float, odo: NDArray | None, gps: NDArray,
+        extra: NDArray | None = None,
+    ) -> _Tracker:  # fmt: skip
         odo0 = 0.0 if odo is None else float(odo[0])
         ran = np.zeros(len(gps))
         if odo is not None:
             ran[1:] = np.cumsum(np.abs(np.diff(np.asarray(odo, float))))
-        return cls((start_m - uncertainty_m, odo0, gps[0], 0.0),
-                   (start_m + uncertainty_m, odo0, gps[0], 0.0),
-                   start_m, (uncertainty_m / 3.0) ** 2, odo0, ran)  # fmt: skip
+        disputed = np.zeros((len(gps), 2)) if extra is None or odo is None else extra
+        x0 = (float(disputed[0, 0]), float(disputed[0, 1]))
+        return cls((start_m - uncertainty_m, odo0, gps[0], 0.0, *x0),
+                   (start_m + uncertainty_m, odo0, gps[0], 0.0, *x0),
+                   start_m, (uncertainty_m / 3.0) ** 2, odo0, ran, disputed)  # fmt: skip
+
+    def here(self, k: int, gps: NDArray, odo: NDArray | None) -> tuple[float, ...]:
+        """An anchor's readings at epoch ``k`` (all but its chainage)."""
+        return (0.0 if odo is None else float(odo[k]), float(gps[k]), float(self.ran[k]),
+                float(self.extra[k, 0]), float(self.extra[k, 1]))  # fmt: skip
 
     def predict(
         self, k: int, gps: NDArray, odo: NDArray | None, cfg: RunConfig, length_m: float
@@ -458,6 +474,10 @@ class _Tracker:
             ran_lo, ran_hi = self.ran[k] - lo_anchor[3], self.ran[k] - hi_anchor[3]
             lo_p = predict_interval(lo_anchor[0], lo_anchor[0], d_lo, cfg.odometer, ran_lo)[0]
             hi_p = predict_interval(hi_anchor[0], hi_anchor[0], d_hi, cfg.odometer, ran_hi)[1]
+            # where the wheel and the radar disagreed, either may be right: both are covered
+            x_lo, x_hi = self.extra[k, 0] - lo_anchor[4], self.extra[k, 1] - hi_anchor[5]
+            lo_p, hi_p = lo_p - x_lo, hi_p + x_hi
+            self.disputed = float(x_lo + x_hi)
         else:
             ran_lo = ran_hi = 0.0
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
@@ -477,7 +497,7 @@ class _Tracker:
 
     def fuse(
         self, fix: Fix, wls_sigma_m: float, p_lo: float, p_hi: float,
-        here: tuple[float, float, float],
+        here: tuple[float, ...],
         fusion: bool,
     ) -> tuple[float, float]:  # fmt: skip
         """The fused interval of a claimed fix and the prediction; re-anchors the bounds the

@@ -37,7 +37,7 @@ from predisat.availability.satellites import select_satellites
 from predisat.jsontypes import JsonDict
 from predisat.readonly import freeze_array_fields
 
-__all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource"]
+__all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource", "check_odometer_extra"]
 
 
 class EpochData(NamedTuple):
@@ -67,7 +67,12 @@ class EpochData(NamedTuple):
 
 
 class EpochSource(Protocol):
-    """What :func:`locator.run.run_locator` needs from a source of epochs."""
+    """What :func:`locator.run.run_locator` needs from a source of epochs.
+
+    A source with an odometer may also have ``odometer_extra_m``: the odometer's disputed
+    distance per epoch, shape (n_epoch, 2), cumulative, toward lower and toward higher
+    chainage, m (:class:`locator.odometry.odometer.OdometerLog`), or None.
+    """
 
     @property
     def gps_s(self) -> NDArray: ...
@@ -100,6 +105,10 @@ class SimSource:
         Odometer distance per epoch, signed toward increasing chainage (e.g. a simulated
         :class:`locator.odometry.odometer.OdometerLog` sampled at the epochs); replaces the
         scale-error model when given.
+    odometer_extra : ndarray, shape (n_epoch, 2), optional
+        The odometer's disputed distance per epoch, cumulative, non-decreasing, toward lower
+        and toward higher chainage, m (``OdometerLog.extra_ahead_m`` / ``extra_behind_m`` in
+        the chainage frame); needs ``odometer``.
     """
 
     sim: SimRun
@@ -107,8 +116,10 @@ class SimSource:
     include_nlos: bool = True
     constellation: str = "all"
     odometer: NDArray | None = field(default=None)
+    odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
+        check_odometer_extra(self.odometer_extra, self.odometer, len(self.sim.gps_s))
         if not abs(self.odometer_scale_error) < 0.5:
             raise ValueError(
                 f"odometer_scale_error must be within +-0.5, got {self.odometer_scale_error}"
@@ -134,6 +145,10 @@ class SimSource:
             return np.asarray(self.odometer, float)
         c = self.sim.chainage_m
         return (c - c[0]) * (1.0 + self.odometer_scale_error)
+
+    @property
+    def odometer_extra_m(self) -> NDArray | None:
+        return None if self.odometer_extra is None else np.asarray(self.odometer_extra, float)
 
     @cached_property
     def _columns(self) -> NDArray:
@@ -188,6 +203,10 @@ class RinexSource:
     odometer : ndarray, shape (n_epoch,), optional
         Odometer distance per epoch, metres; None when the receiver has none (the run then
         bounds the motion by a maximum speed).
+    odometer_extra : ndarray, shape (n_epoch, 2), optional
+        The odometer's disputed distance per epoch, cumulative, non-decreasing, toward lower
+        and toward higher chainage, m (``OdometerLog.extra_ahead_m`` / ``extra_behind_m`` in
+        the chainage frame); needs ``odometer``.
     """
 
     model: RangeModel
@@ -195,8 +214,10 @@ class RinexSource:
     constellation: str = "G"
     priority: Mapping[str, Sequence[str]] | None = None
     odometer: NDArray | None = field(default=None)
+    odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
+        check_odometer_extra(self.odometer_extra, self.odometer, len(self.obs.gps_s))
         if self.odometer is not None and np.shape(self.odometer) != self.obs.gps_s.shape:
             raise ValueError(
                 f"odometer must have one value per epoch ({self.obs.gps_s.shape}), got "
@@ -215,6 +236,10 @@ class RinexSource:
     @property
     def odometer_m(self) -> NDArray | None:
         return None if self.odometer is None else np.asarray(self.odometer, float)
+
+    @property
+    def odometer_extra_m(self) -> NDArray | None:
+        return None if self.odometer_extra is None else np.asarray(self.odometer_extra, float)
 
     @cached_property
     def _selection(self) -> PseudorangeSelection:
@@ -278,3 +303,17 @@ class RinexSource:
             # systems whose ionospheric delay no broadcast model corrects (sigma inflated)
             "iono_uncorrected_systems": list(self.iono_missing),
         }
+
+
+def check_odometer_extra(extra: NDArray | None, odometer: NDArray | None, n_epoch: int) -> None:
+    """Refuse a disputed distance that is not ``(n_epoch, 2)``, >= 0 and non-decreasing, or
+    that comes without an odometer (a source's ``odometer_extra``)."""
+    if extra is None:
+        return
+    a = np.asarray(extra, float)
+    if odometer is None:
+        raise ValueError("odometer_extra needs odometer: the disputed distance is the odometer's")
+    if a.shape != (n_epoch, 2):
+        raise ValueError(f"odometer_extra must have shape ({n_epoch}, 2), got {a.shape}")
+    if not (np.all(np.isfinite(a)) and np.all(a >= 0) and np.all(np.diff(a, axis=0) >= 0)):
+        raise ValueError("odometer_extra must be finite, >= 0 and non-decreasing (cumulative, m)")

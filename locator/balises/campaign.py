@@ -118,7 +118,8 @@ def locate_with_odometry(
     cfg = replace(config, odometer=acc)
     ep = run_locator(
         path,
-        SimSource(sim, constellation=constellation, odometer=so.epoch_odo_m),
+        SimSource(sim, constellation=constellation, odometer=so.epoch_odo_m,
+                  odometer_extra=so.epoch_extra_m),
         start_chainage_m=float(np.clip(sim.chainage_m[0] + start_error_m, 0.0, path.length_m)),
         config=cfg,
         masks=masks,
@@ -165,7 +166,7 @@ def capture_table(
             t, ep["fused_chainage_m"].to_numpy(float), ep["fused_lo_m"].to_numpy(float),
             ep["fused_hi_m"].to_numpy(float), balises, cc, orientation=o,
             speed_mps=ep["odo_speed_mps"].to_numpy(float), odo_m=run.odometer.epoch_odo_m,
-            located=located, odo_accuracy=run.accuracy,
+            located=located, odo_accuracy=run.accuracy, odo_extra_m=run.odometer.epoch_extra_m,
         )  # fmt: skip
         sc = score_captures(cap, run.odometer.truth_t_s, run.odometer.truth_chainage_m,
                             orientation=o, false_tolerance_m=cc.capture_radius_m,
@@ -376,4 +377,3 @@ def balises_to_folder(
                       f"({info['integrity']}; {info['claims']})", path.track)
         fig.savefig(stage / "captures.png", dpi=100)
     return summary, folder
-

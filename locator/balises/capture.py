@@ -164,6 +164,7 @@ def capture_balises(
     odo_m: ArrayLike | None = None,
     located: ArrayLike | None = None,
     odo_accuracy: OdometerAccuracy | None = None,
+    odo_extra_m: ArrayLike | None = None,
 ) -> pd.DataFrame:
     """Capture the balises of a list along a run.
 
@@ -190,6 +191,10 @@ def capture_balises(
         The odometer's bounds; with ``odo_m``, enables the passage at the first valid fix
         after a voided epoch (module docstring, step 3), whose stated accuracy adds
         ``max(D_DOUBTOVER, D_DOUBTUNDER)`` of the carried-back distance.
+    odo_extra_m : array_like, shape (n, 2), optional
+        The odometer's disputed distance at each fix, cumulative, toward lower and higher
+        chainage, m (:class:`locator.odometry.simulated.SimOdometer`'s ``epoch_extra_m``):
+        what the carried-back step disputed adds to that accuracy. Default: none.
 
     Returns
     -------
@@ -226,6 +231,9 @@ def capture_balises(
             "passage times are read along the odometer, one way; capture each leg of a "
             "reversing run apart"
         )
+    extra = np.zeros((len(t), 2)) if odo_extra_m is None else np.asarray(odo_extra_m, float)
+    if extra.shape != (len(t), 2):
+        raise ValueError(f"odo_extra_m must have shape ({len(t)}, 2), got {extra.shape}")
     ok = np.ones(t.shape, bool) if located is None else np.asarray(located, bool)
     if ok.shape != t.shape:
         raise ValueError("located must have one value per fix")
@@ -286,7 +294,7 @@ def capture_balises(
         out["in_window"][rows] = window
     if odo is not None and odo_accuracy is not None and len(idx) and n_b:
         _capture_after_void(t, s, lo, hi, reach, valid, odo, odo_accuracy, b, b_acc, config,
-                            orientation, out)  # fmt: skip
+                            orientation, out, extra)  # fmt: skip
     if config.emit == "predicted" and len(idx) >= 2 and n_b:
         assert v is not None
         _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out)
@@ -367,6 +375,7 @@ def _capture_after_void(
     config: CaptureConfig,
     orientation: int,
     out: dict[str, NDArray],
+    extra: NDArray,
 ) -> None:
     """The passage at the first valid fix after a voided epoch (``out`` updated in place for
     the balises the pair rule did not capture; module docstring, step 3)."""
@@ -387,6 +396,7 @@ def _capture_after_void(
     in_c = config.in_capture(uc) | config.in_capture(ub)
     in_a = ~in_c & (config.in_arm(uc) | config.in_arm(ub))
     doubt = np.maximum(accuracy.doubt_over_m(uc), accuracy.doubt_under_m(uc))
+    doubt = doubt + (extra[kc] - extra[kc - 1]).sum(axis=1)  # the step's disputed distance
     q = np.ceil(reach[kc] + doubt + b_acc[rows] - 1e-9)
     max_safe = np.where(orientation > 0, hi[kc], lo[kc])
     min_safe = np.where(orientation > 0, lo[kc], hi[kc])

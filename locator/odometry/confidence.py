@@ -282,6 +282,8 @@ def safe_fronts(
     antenna_to_front_m: float = 0.0,
     train_length_m: float = 100.0,
     integrity_confirmed: ArrayLike | bool = True,
+    extra_ahead_m: ArrayLike | None = None,
+    extra_behind_m: ArrayLike | None = None,
 ) -> SafeFronts:
     """ETCS confidence interval and safe ends along an odometer log.
 
@@ -301,6 +303,10 @@ def safe_fronts(
         Geometry, m.
     integrity_confirmed : bool or array_like of bool, shape (n,)
         Train integrity confirmed at each sample (rear ends NaN where not).
+    extra_ahead_m, extra_behind_m : array_like, shape (n,), optional
+        The odometer's disputed distance, cumulative, along / against the forward axis, m
+        (:class:`locator.odometry.odometer.OdometerLog`: where wheel and radar disagreed);
+        added to ``D_DOUBTUNDER`` / ``D_DOUBTOVER`` from the reference on. Default: none.
 
     Returns
     -------
@@ -317,21 +323,28 @@ def safe_fronts(
     if antenna_to_front_m < 0 or train_length_m <= 0:
         raise ValueError("antenna_to_front_m must be >= 0 and train_length_m > 0")
     ran = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(odo)))])  # either way, m
+    ahead = np.zeros(n) if extra_ahead_m is None else np.asarray(extra_ahead_m, float)
+    behind = np.zeros(n) if extra_behind_m is None else np.asarray(extra_behind_m, float)
+    if ahead.shape != (n,) or behind.shape != (n,):
+        raise ValueError("extra_ahead_m and extra_behind_m must have one value per odo_m")
+    # forward motion: the disputed distance behind adds to the over-reading doubt
+    disputed = np.column_stack([behind, ahead])
     est = np.full(n, np.nan)
     over = np.full(n, np.nan)
     under = np.full(n, np.nan)
     since = np.full(n, np.nan)
     accepted = np.zeros(len(passages), bool)
     # the reference in force: (odometer at it, its chainage, doubt over / under at it,
-    # distance run to it)
-    ref: tuple[float, float, float, float, float] | None = None
+    # distance run to it, index of its sample)
+    ref: tuple[float, float, float, float, float, int] | None = None
     at_passage: dict[int, tuple[float, float, float]] = {}  # estimate and doubts at passages
     bounds = [*idx[1:], n]
     for j, p in enumerate(passages):
         k = p.index
         e_k = ov_k = un_k = float("nan")
         if ref is not None:
-            e_k, ov_k, un_k = (float(v) for v in _state_at(ref, odo[k], ran[k], accuracy, o))
+            state = _state_at(ref, odo[k], ran[k], accuracy, o, disputed[k] - disputed[ref[5]])
+            e_k, ov_k, un_k = (float(v) for v in state)
             if p.linked:
                 hi_f = e_k + o * un_k
                 lo_f = e_k - o * ov_k
@@ -344,18 +357,19 @@ def safe_fronts(
             ok = True
         accepted[j] = ok
         if ok and p.q_reference:
-            ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m, float(ran[k]))
+            ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m, float(ran[k]), k)
         elif ok and p.known_from is not None and p.known_from in at_passage:
             # known distance from an earlier balise: fall back to the doubts held there
             _, ov_b, un_b = at_passage[p.known_from]
-            ref = (float(odo[k]), p.chainage_m, ov_b, un_b, float(ran[k]))
+            ref = (float(odo[k]), p.chainage_m, ov_b, un_b, float(ran[k]), k)
         at_passage[j] = (
             (p.chainage_m, p.accuracy_m, p.accuracy_m) if ok and p.q_reference
             else (e_k, ov_k, un_k)
         )  # fmt: skip
         assert ref is not None
         seg = slice(k, bounds[j])
-        e, ov, un = _state_at(ref, odo[seg], ran[seg], accuracy, o)
+        e, ov, un = _state_at(ref, odo[seg], ran[seg], accuracy, o,
+                              disputed[seg] - disputed[ref[5]])  # fmt: skip
         est[seg], over[seg], under[seg] = e, ov, un
         since[seg] = ran[seg] - ref[4]
     front = est + o * antenna_to_front_m
@@ -377,17 +391,19 @@ def safe_fronts(
 
 
 def _state_at(
-    ref: tuple[float, float, float, float, float],
+    ref: tuple[float, float, float, float, float, int],
     odo: ArrayLike,
     ran: ArrayLike,
     acc: OdometerAccuracy,
     o: int,
+    disputed: NDArray,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Estimate (chainage) and doubts at odometer readings ``odo`` (and the distances the
-    wheels ran to them, ``ran``), from the reference in force."""
-    odo0, chain0, over0, under0, ran0 = ref
+    wheels ran to them, ``ran``, and the disputed distance behind / ahead since the
+    reference, ``disputed`` of shape (..., 2)), from the reference in force."""
+    odo0, chain0, over0, under0, ran0, _ = ref
     d = np.asarray(odo, float) - odo0
     est = chain0 + o * d
     # forward motion: over-reading shortens the true travel (true behind the estimate)
     lo, hi = acc.displacement_bounds_m(d, np.asarray(ran, float) - ran0)
-    return est, over0 + (d - lo), under0 + (hi - d)
+    return est, over0 + (d - lo) + disputed[..., 0], under0 + (hi - d) + disputed[..., 1]

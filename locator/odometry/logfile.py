@@ -9,6 +9,11 @@ Columns (one row per odometer cycle, in time order; ``docs/odometry.md``):
 | ``speed_mps`` | m/s | speed (>= 0) |
 | ``direction`` | - | +1 forward, -1 backward, 0 standstill |
 | ``slip`` | - | optional: 1 where the odometer marked slip / slide |
+| ``extra_ahead_m``, ``extra_behind_m`` | m | optional: disputed distance since the first row |
+
+The disputed distance (non-decreasing, >= 0) is how much further ahead / behind the other
+sensor put the train on marked cycles; the confidence interval adds it. Absent, it is 0: the
+stated accuracy must then cover the odometer's slip handling.
 
 Rejected with :class:`OdometerLogError` naming the file, the line and the fix: missing
 columns, non-finite values, time not increasing, **gaps** (a step longer than ``max_gap_s``),
@@ -27,12 +32,13 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from locator.csvinput import read_csv_table
+from locator.csvinput import CsvTable, read_csv_table
 from locator.odometry.odometer import OdometerLog
 
 __all__ = ["OdometerLogError", "read_odometer_log", "validate_odometer_log", "write_odometer_log"]
 
 COLUMNS = ("t_s", "dist_m", "speed_mps", "direction")
+_EXTRA = ("extra_ahead_m", "extra_behind_m")
 # column names of other loggers and the column each probably is
 _ALIASES = {"time": "t_s", "t": "t_s", "time_s": "t_s", "gps_s": "t_s", "dist": "dist_m",
             "distance": "dist_m", "distance_m": "dist_m", "speed": "speed_mps",
@@ -58,7 +64,9 @@ def write_odometer_log(log: OdometerLog, path: str | Path) -> Path:
     """Write a log as CSV (17 significant digits: the floats round-trip exactly)."""
     p = Path(path)
     df = pd.DataFrame({"t_s": log.t_s, "dist_m": log.dist_m, "speed_mps": log.speed_mps,
-                       "direction": log.direction, "slip": log.slip.astype(int)})  # fmt: skip
+                       "direction": log.direction, "slip": log.slip.astype(int),
+                       "extra_ahead_m": log.extra_ahead_m,
+                       "extra_behind_m": log.extra_behind_m})  # fmt: skip
     df.to_csv(p, index=False, float_format="%.17g")
     return p
 
@@ -91,7 +99,7 @@ def read_odometer_log(
     p = Path(path)
     table = read_csv_table(p, COLUMNS, what="odometer log", error=OdometerLogError,
                            doc="docs/odometry.md", aliases=_ALIASES,
-                           optional=("slip",))  # fmt: skip
+                           optional=("slip", *_EXTRA))  # fmt: skip
     t = table.numbers("t_s", "give the cycle time in GPS seconds")
     dist = table.numbers("dist_m", "give the distance in metres since the first row")
     speed = table.numbers("speed_mps", "give the speed in m/s (>= 0)")
@@ -105,6 +113,7 @@ def read_odometer_log(
             raise OdometerLogError(f"{p}, line {table.line(bad[0])}: slip {slip[bad[0]]:g} must "
                                    "be 1 (slip or slide marked), 0 or empty")  # fmt: skip
         slip = np.nan_to_num(slip)
+    extra = {name: _disputed(table, name, p) for name in _EXTRA}
     validate_odometer_log(
         t,
         dist,
@@ -121,8 +130,30 @@ def read_odometer_log(
         t_s=t, dist_m=dist, speed_mps=speed, wheel_speed_mps=speed.copy(),
         direction=direction.astype(np.int8), edges=np.zeros(len(t), np.int64),
         slip=slip.astype(bool), diameter_ratio=float("nan"), radar_scale=float("nan"),
-        source=str(p),
+        source=str(p), **extra,
     )  # fmt: skip
+
+
+def _disputed(table: CsvTable, name: str, path: Path) -> NDArray:
+    """An optional disputed-distance column, checked: >= 0, finite, non-decreasing (zeros
+    when absent)."""
+    if name not in table.frame.columns:
+        return np.zeros(len(table.frame))
+    a = table.numbers(name, "give the disputed distance in metres since the first row (0 "
+                      "where the sensors agreed)")  # fmt: skip
+    bad = np.flatnonzero(~np.isfinite(a) | (a < 0))
+    if len(bad):
+        raise OdometerLogError(f"{path}, line {table.line(bad[0])}: {name} {a[bad[0]]} must be a "
+                               "distance >= 0 in metres")  # fmt: skip
+    bad = np.flatnonzero(np.diff(a) < 0)
+    if len(bad):
+        i = bad[0] + 1
+        raise OdometerLogError(
+            f"{path}, line {table.line(i)}: {name} falls from {a[i - 1]:g} to {a[i]:g} m; it "
+            "counts the disputed distance since the first row and never decreases (a per-cycle "
+            "value? give its running sum)"
+        )
+    return np.asarray(a, float)
 
 
 def validate_odometer_log(

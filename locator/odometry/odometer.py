@@ -24,7 +24,12 @@ cycle grid, e.g. from :meth:`predisat.availability.trainrun.SpeedProfile.distanc
   ``4 pulses_per_rev`` and the cycle time; **direction** from the phase order;
 * **radar**: speed over ground with a scale error in ``+-radar.scale_error`` and white noise;
   when the wheel and radar speeds differ by more than ``radar.tolerance``, the cycle is marked
-  as slip / slide and the radar's speed is integrated instead of the wheel's;
+  as slip / slide and the radar's speed is integrated instead of the wheel's. Which of the two
+  is right cannot be told from one cycle (a slipping wheel, or a radar that lost its echo or
+  froze): the distance between their readings on marked cycles is kept as a **disputed**
+  distance on the wheel's side (``extra_ahead_m`` / ``extra_behind_m``), which the confidence
+  interval adds, so that it holds whichever sensor was wrong; :class:`RadarFault` injects such
+  a failure;
 * **maximum acceleration**: without a radar, a wheel speed changing faster than
   ``max_accel_mps2`` is implausible (slip, slide): the cycle is marked and the speed used is
   clamped to the previous one +- ``max_accel_mps2 * cycle_s``.
@@ -47,6 +52,7 @@ __all__ = [
     "OdometerConfig",
     "OdometerLog",
     "RadarConfig",
+    "RadarFault",
     "decode_quadrature",
     "quadrature_levels",
     "simulate_odometer",
@@ -83,6 +89,45 @@ class RadarConfig:
             raise ValueError(f"RadarConfig needs 0 <= scale_error < 0.2, noise_mps >= 0: {self}")
         if not (0 < self.tolerance < 0.5 and self.tolerance_mps >= 0):
             raise ValueError(f"RadarConfig needs 0 < tolerance < 0.5, tolerance_mps >= 0: {self}")
+
+
+@dataclass(frozen=True)
+class RadarFault:
+    """A radar failure during a simulated run (fault injection).
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        The failure lasts from ``start_s`` to ``end_s`` (the log's time scale), s.
+    mode : {"zero", "frozen", "scaled"}
+        ``"zero"``: no echo, the radar reads 0 m/s; ``"frozen"``: it repeats its last reading
+        before ``start_s``, without noise; ``"scaled"``: it reads ``factor`` times its healthy
+        reading.
+    factor : float
+        Scale of ``"scaled"``, >= 0.
+    """
+
+    start_s: float
+    end_s: float = float("inf")
+    mode: str = "zero"
+    factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("zero", "frozen", "scaled"):
+            raise ValueError(f"RadarFault mode must be zero, frozen or scaled, got {self.mode!r}")
+        if not self.end_s > self.start_s or self.factor < 0:
+            raise ValueError(f"RadarFault needs end_s > start_s and factor >= 0: {self}")
+
+    def apply(self, t_s: NDArray, radar_mps: NDArray) -> NDArray:
+        """The radar's readings ``radar_mps`` at cycle times ``t_s`` with the failure, m/s."""
+        on = (t_s >= self.start_s) & (t_s < self.end_s)
+        if self.mode == "zero":
+            return np.where(on, 0.0, radar_mps)
+        if self.mode == "scaled":
+            return np.where(on, self.factor * radar_mps, radar_mps)
+        before = np.flatnonzero(t_s < self.start_s)
+        held = float(radar_mps[before[-1]]) if before.size else 0.0
+        return np.where(on, held, radar_mps)
 
 
 @dataclass(frozen=True)
@@ -198,6 +243,11 @@ class OdometerLog:
         Radar scale factor drawn for the run (truth; 1 without a radar).
     source : str
         The file it was read from ("" when simulated), for messages.
+    extra_ahead_m, extra_behind_m : ndarray, shape (n,), optional
+        Disputed distance since the first cycle, non-decreasing, >= 0, m: on cycles marked as
+        slip / slide, how much further ahead (along the forward axis) / behind the other
+        sensor put the train than the distance used. The confidence interval adds it on that
+        side, so it holds whichever sensor failed. None: zeros (a log that does not carry it).
     """
 
     t_s: NDArray
@@ -210,9 +260,23 @@ class OdometerLog:
     diameter_ratio: float
     radar_scale: float
     source: str = ""
+    extra_ahead_m: NDArray = field(default=None)  # type: ignore[arg-type]
+    extra_behind_m: NDArray = field(default=None)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
+        for name in ("extra_ahead_m", "extra_behind_m"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(np.shape(self.t_s)))
+            elif np.shape(getattr(self, name)) != np.shape(self.t_s):
+                raise ValueError(f"{name} needs one value per cycle ({np.shape(self.t_s)})")
         freeze_array_fields(self)
+
+    def extra_at(self, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Disputed distance ``(ahead, behind)`` at times ``t_s``, m: the value of the first
+        cycle at or after each time (safe side: a dispute counts from its cycle's start)."""
+        k = np.searchsorted(self.t_s, np.asarray(t_s, float) - 1e-9)
+        k = np.clip(k, 0, len(self.t_s) - 1)
+        return self.extra_ahead_m[k], self.extra_behind_m[k]
 
     def at(self, t_s: ArrayLike) -> NDArray:
         """Measured distance at times ``t_s`` (linear between cycles), m, shape of ``t_s``."""
@@ -320,7 +384,11 @@ def true_distance_m(speed_at: Callable[[NDArray], NDArray], t_s: ArrayLike,
 
 
 def simulate_odometer(
-    t_s: ArrayLike, true_dist_m: ArrayLike, config: OdometerConfig, seed: int = 0
+    t_s: ArrayLike,
+    true_dist_m: ArrayLike,
+    config: OdometerConfig,
+    seed: int = 0,
+    radar_fault: RadarFault | None = None,
 ) -> OdometerLog:
     """Simulate the odometer along a true motion.
 
@@ -332,6 +400,8 @@ def simulate_odometer(
         True distance since the first cycle, signed along the train's forward axis, m.
     config : OdometerConfig
     seed : int
+    radar_fault : RadarFault, optional
+        A radar failure to inject (needs ``config.radar``).
 
     Returns
     -------
@@ -344,6 +414,8 @@ def simulate_odometer(
         raise ValueError("t_s and true_dist_m must be 1-D of one length >= 3")
     if np.any(np.abs(np.diff(t) - dt) > 1e-6):
         raise ValueError(f"t_s must step by config.cycle_s = {dt} s; resample the truth")
+    if radar_fault is not None and config.radar is None:
+        raise ValueError("radar_fault needs an odometer with a radar (config.radar)")
     rng = np.random.default_rng([int(seed), 34])
     ratio = (1.0 + rng.uniform(-1, 1) * config.calibration_error) * (
         1.0 - rng.uniform(0, 1) * config.wear
@@ -371,6 +443,8 @@ def simulate_odometer(
         scale = 1.0 + rng.uniform(-1, 1) * r.scale_error
         radar_v = np.abs(v) * scale + rng.normal(0.0, r.noise_mps, len(t))
         radar_v = np.maximum(radar_v, 0.0)
+        if radar_fault is not None:
+            radar_v = radar_fault.apply(t, radar_v)
         slip = np.abs(wheel_v - radar_v) > r.tolerance * radar_v + r.tolerance_mps
         # below tolerance_mps / tolerance the absolute part lets a creep of more than the
         # relative tolerance pass unseen (15 % at 1 m/s: a user trial's slow start broke
@@ -401,11 +475,19 @@ def simulate_odometer(
     # own: its distance was dropped, and a crawl under-read by up to 57 %, a review found)
     last = np.maximum.accumulate(np.where(direction != 0, np.arange(len(t)), -1))
     held = np.where(last >= 0, direction[np.maximum(last, 0)], 0)
-    step = np.where(slip, used_v * dt * held, d_edges * config.edge_m)
+    wheel_step = d_edges * config.edge_m
+    step = np.where(slip, used_v * dt * held, wheel_step)
     dist = np.cumsum(step)
     dist -= dist[0]
+    # a marked cycle's truth lies between the two sensors' readings (each within its own
+    # bounds) and one cycle cannot tell a slipping wheel from a failed radar: the wheel's side
+    # is disputed, cycle by cycle (a sum over an episode would let an anchor inside it drop a
+    # part). Without a radar the clamp's bound is the whole creep, already in the accuracy.
+    disputed = np.where(slip & (config.radar is not None), wheel_step - step, 0.0)
+    disputed[0] = 0.0
     return OdometerLog(
         t_s=t.copy(), dist_m=dist, speed_mps=used_v, wheel_speed_mps=wheel_v,
         direction=direction, edges=edges, slip=slip, diameter_ratio=float(ratio),
-        radar_scale=float(scale),
+        radar_scale=float(scale), extra_ahead_m=np.cumsum(np.maximum(disputed, 0.0)),
+        extra_behind_m=np.cumsum(np.maximum(-disputed, 0.0)),
     )  # fmt: skip

@@ -18,7 +18,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.logfile import OdometerLogError
-from locator.odometry.odometer import OdometerConfig, OdometerLog, simulate_odometer
+from locator.odometry.odometer import OdometerConfig, OdometerLog, RadarFault, simulate_odometer
 from locator.sim.simfile import SimRun
 from predisat.readonly import freeze_array_fields
 
@@ -39,6 +39,9 @@ class SimOdometer:
         Odometer distance at the run's epochs, signed toward increasing chainage, m.
     truth_t_s, truth_chainage_m : ndarray, shape (n_cycle,)
         True antenna chainage on the cycle grid (GPS seconds, m).
+    epoch_extra_m : ndarray, shape (n_epoch, 2)
+        The odometer's disputed distance since the first epoch, toward lower and toward higher
+        chainage, m (:class:`OdometerLog`'s ``extra_behind_m`` / ``extra_ahead_m``).
     """
 
     log: OdometerLog
@@ -46,9 +49,17 @@ class SimOdometer:
     epoch_odo_m: NDArray
     truth_t_s: NDArray
     truth_chainage_m: NDArray
+    epoch_extra_m: NDArray
 
     def __post_init__(self) -> None:
         freeze_array_fields(self)
+
+
+def _epoch_extra(log: OdometerLog, t_s: NDArray, orientation: int) -> NDArray:
+    """The log's disputed distance at the epochs since the first, in the chainage frame."""
+    ahead, behind = log.extra_at(t_s)
+    lower, higher = (behind, ahead) if orientation > 0 else (ahead, behind)
+    return np.column_stack([lower - lower[0], higher - higher[0]])
 
 
 # a log running backward by more than this while the train moved forward as much is refused
@@ -131,6 +142,8 @@ def check_log_against_run(sim: SimRun, log: OdometerLog, accuracy: OdometerAccur
     d = log.at(t)
     logged_m = d - d[0]
     lo, hi = accuracy.displacement_bounds_m(logged_m)
+    ahead, behind = log.extra_at(t)
+    lo, hi = lo - (behind - behind[0]), hi + (ahead - ahead[0])
     bad = np.flatnonzero((run_m < lo - 1e-9) | (run_m > hi + 1e-9))
     if bad.size == 0:
         return
@@ -162,7 +175,9 @@ def _scale_hint(ratio: float) -> str:
     return f" (over the run {ratio:.3g} times the train's distance)"
 
 
-def odometer_along_run(sim: SimRun, config: OdometerConfig, seed: int = 0) -> SimOdometer:
+def odometer_along_run(
+    sim: SimRun, config: OdometerConfig, seed: int = 0, radar_fault: RadarFault | None = None
+) -> SimOdometer:
     """Simulate the odometer of a simulated run.
 
     Parameters
@@ -171,6 +186,8 @@ def odometer_along_run(sim: SimRun, config: OdometerConfig, seed: int = 0) -> Si
         Needs at least two epochs; its epochs must be multiples of ``config.cycle_s`` apart.
     config : OdometerConfig
     seed : int
+    radar_fault : RadarFault, optional
+        A radar failure to inject (:func:`simulate_odometer`).
 
     Returns
     -------
@@ -178,9 +195,10 @@ def odometer_along_run(sim: SimRun, config: OdometerConfig, seed: int = 0) -> Si
     """
     t0 = float(sim.gps_s[0])
     o, tc, true_d = _truth_grid(sim, config.cycle_s)
-    log = simulate_odometer(t0 + tc, true_d, config, seed)
+    log = simulate_odometer(t0 + tc, true_d, config, seed, radar_fault)
     epoch_odo = o * np.interp(sim.gps_s, log.t_s, log.dist_m)
-    return SimOdometer(log, o, epoch_odo, t0 + tc, float(sim.chainage_m[0]) + o * true_d)
+    return SimOdometer(log, o, epoch_odo, t0 + tc, float(sim.chainage_m[0]) + o * true_d,
+                       _epoch_extra(log, np.asarray(sim.gps_s, float), o))  # fmt: skip
 
 
 def odometer_from_log(
@@ -222,4 +240,5 @@ def odometer_from_log(
     if accuracy is not None:  # after the coverage and direction checks: their hints first
         check_log_against_run(sim, log, accuracy)
     epoch_odo = o * (d - d[0])
-    return SimOdometer(log, o, epoch_odo, t[0] + tc, float(sim.chainage_m[0]) + o * true_d)
+    return SimOdometer(log, o, epoch_odo, t[0] + tc, float(sim.chainage_m[0]) + o * true_d,
+                       _epoch_extra(log, t, o))  # fmt: skip

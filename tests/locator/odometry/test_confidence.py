@@ -124,3 +124,18 @@ def test_guards():
         safe_fronts(np.zeros(3), [BalisePassage(0, 0.0)], ACC, orientation=0)
     with pytest.raises(ValueError, match="over_rel"):
         OdometerAccuracy(over_rel=1.5)
+
+
+def test_the_disputed_distance_widens_the_fronts_from_the_reference_on():
+    odo = np.arange(0.0, 1001.0, 100.0)
+    ahead = np.linspace(0.0, 50.0, len(odo))
+    behind = np.linspace(0.0, 20.0, len(odo))
+    passages = [BalisePassage(0, 5000.0, accuracy_m=1.0), BalisePassage(5, 5500.0, accuracy_m=1.0)]
+    plain = safe_fronts(odo, passages, ACC, orientation=1)
+    sf = safe_fronts(odo, passages, ACC, orientation=1, extra_ahead_m=ahead,
+                     extra_behind_m=behind)  # fmt: skip
+    since = np.where(np.arange(len(odo)) < 5, 0, 5)  # the reference in force
+    np.testing.assert_allclose(sf.doubt_under_m - plain.doubt_under_m, ahead - ahead[since])
+    np.testing.assert_allclose(sf.doubt_over_m - plain.doubt_over_m, behind - behind[since])
+    with pytest.raises(ValueError, match="one value per odo_m"):
+        safe_fronts(odo, passages, ACC, extra_ahead_m=ahead[:3])

@@ -133,3 +133,34 @@ def test_the_odometer_fixed_error_is_not_added_again_at_every_epoch():
     moved = truth - truth[0]
     assert np.all(width <= 2.0 + 2 * 0.5 + 2 * 0.001 * moved + 1e-9)
     assert (ep["hi_m"] - ep["lo_m"]).min() > 3 * width.max()  # the satellites are wider
+
+
+def test_the_odometers_disputed_distance_keeps_a_blind_run_on_the_train():
+    path = straight_path(heading_deg=60.0, length_m=4000.0)
+    truth = truth_run(n=30)  # 15 m per epoch
+    odo = truth - truth[0]
+    # from epoch 10 the radar lost its echo and was believed: the odometer stands still,
+    # while the wheel, which it overruled, ran on with the train (the disputed distance)
+    stuck = np.where(np.arange(30) < 10, odo, odo[9])
+    ahead = np.maximum(odo - stuck, 0.0)
+    extra = np.column_stack([np.zeros(30), ahead])  # toward lower / higher chainage
+
+    class Blind(FakeSource):  # and no satellites from epoch 10 (a tunnel)
+        def __init__(self, *a, extra=None, **k):
+            super().__init__(*a, **k)
+            self.odometer_extra_m = extra
+
+        def observe(self, k, rx):
+            d = super().observe(k, rx)
+            return d if k < 10 else d._replace(sats=(), sat_ecef_m=np.zeros((0, 3)),
+                                               pseudorange_m=np.zeros(0))  # fmt: skip
+
+    cfg = RunConfig(MODEL, trust="none")
+    tail = slice(12, None)
+    ep = run_locator(path, Blind(path, truth, odometer_m=stuck), start_chainage_m=truth[0],
+                     config=cfg)  # fmt: skip
+    assert (ep["fused_hi_m"].to_numpy()[tail] < truth[tail]).all()  # the failure, unseen
+    ep = run_locator(path, Blind(path, truth, odometer_m=stuck, extra=extra),
+                     start_chainage_m=truth[0], config=cfg)  # fmt: skip
+    assert ((ep["fused_lo_m"] <= truth) & (truth <= ep["fused_hi_m"])).all()
+    np.testing.assert_allclose(ep["odo_disputed_m"].to_numpy()[tail], ahead[tail])

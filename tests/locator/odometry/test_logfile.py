@@ -12,7 +12,7 @@ from locator.odometry.logfile import (
     validate_odometer_log,
     write_odometer_log,
 )
-from locator.odometry.odometer import OdometerConfig, simulate_odometer
+from locator.odometry.odometer import OdometerConfig, RadarFault, simulate_odometer
 
 
 def good_frame():
@@ -227,3 +227,23 @@ def test_times_in_milliseconds_are_named(tmp_path):
     df = good_frame().assign(t_s=lambda d: 1000.0 * (d["t_s"] - 1e9))
     with pytest.raises(OdometerLogError, match="t_s looks like milliseconds"):
         read_odometer_log(_write(tmp_path, df))
+
+
+def test_the_disputed_distance_round_trips_and_is_checked(tmp_path):
+    t = np.arange(0.0, 60.0, 0.1)
+    x = 12.0 * t
+    log = simulate_odometer(t, x, OdometerConfig(), seed=2, radar_fault=RadarFault(20.0, 30.0))
+    assert log.extra_ahead_m[-1] > 100.0  # the wheel ran on while the radar read 0
+    back = read_odometer_log(write_odometer_log(log, tmp_path / "odo.csv"))
+    np.testing.assert_array_equal(back.extra_ahead_m, log.extra_ahead_m)
+    np.testing.assert_array_equal(back.extra_behind_m, log.extra_behind_m)
+    df = pd.read_csv(tmp_path / "odo.csv")
+    df.loc[300, "extra_ahead_m"] = 0.0  # a per-cycle value, not a running sum
+    df.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(OdometerLogError, match=r"bad\.csv, line 302: extra_ahead_m falls .* "
+                       r"never decreases"):  # fmt: skip
+        read_odometer_log(tmp_path / "bad.csv")
+    df.loc[300, "extra_ahead_m"] = -1.0
+    df.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(OdometerLogError, match=r"line 302: extra_ahead_m -1.0 must be a distance"):
+        read_odometer_log(tmp_path / "bad.csv")

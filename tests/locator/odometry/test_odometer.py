@@ -9,6 +9,7 @@ from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.odometer import (
     OdometerConfig,
     RadarConfig,
+    RadarFault,
     decode_quadrature,
     quadrature_levels,
     simulate_odometer,
@@ -166,3 +167,51 @@ def test_config_guards_name_the_parameter():
         RadarConfig(tolerance=0.0)
     with pytest.raises(ValueError, match="cycle_s"):
         simulate_odometer(np.arange(0, 5, 0.2), np.zeros(25), OdometerConfig())
+
+
+@pytest.mark.parametrize("config", [OdometerConfig(), OdometerConfig.motor_axle()],
+                         ids=["trailer-radar", "motor-radar"])  # fmt: skip
+@pytest.mark.parametrize(
+    "fault",
+    [
+        RadarFault(10.0, 90.0, "zero"),  # lost echo through cruise and braking
+        RadarFault(65.0, 95.0, "frozen"),  # frozen at 20 m/s before braking
+        RadarFault(20.0, 60.0, "scaled", 0.6),  # reading 40 % low
+        RadarFault(20.0, 60.0, "scaled", 1.5),  # reading 50 % high
+    ],
+    ids=lambda f: f"{f.mode}{f.factor:g}",
+)
+def test_a_failed_radar_is_disputed_and_the_bounds_hold_the_truth(config, fault):
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    x = accel_cruise_brake(t)
+    log = simulate_odometer(t, x, config, seed=5, radar_fault=fault)
+    lo, hi = OdometerAccuracy.from_config(config).displacement_bounds_m(log.dist_m)
+    # the failed radar is believed in the cycles it disagrees with the wheel: the stated
+    # bounds alone miss the truth by far (tens to hundreds of metres)
+    assert np.max(np.maximum(lo - x, x - hi)) > 20.0
+    # with the disputed distance the truth stays inside at every cycle
+    assert np.all(lo - log.extra_behind_m <= x + 1e-9)
+    assert np.all(x <= hi + log.extra_ahead_m + 1e-9)
+    assert np.all(np.diff(log.extra_ahead_m) >= 0) and np.all(np.diff(log.extra_behind_m) >= 0)
+
+
+def test_a_healthy_radar_disputes_little():
+    t = np.arange(0.0, 100.0 + DT / 2, DT)
+    x = accel_cruise_brake(t)
+    for config in (OdometerConfig(), OdometerConfig.motor_axle()):
+        log = simulate_odometer(t, x, config, seed=5)
+        # slow cycles and genuine slip/slide only: well under 1 % of the 1.55 km
+        assert log.extra_ahead_m[-1] + log.extra_behind_m[-1] < 0.01 * x[-1]
+    no_radar = simulate_odometer(t, x, OdometerConfig.motor_axle(radar=False), seed=5)
+    assert not no_radar.extra_ahead_m.any() and not no_radar.extra_behind_m.any()
+
+
+def test_radar_fault_is_checked():
+    with pytest.raises(ValueError, match="mode must be zero, frozen or scaled"):
+        RadarFault(0.0, mode="stuck")
+    with pytest.raises(ValueError, match="end_s > start_s"):
+        RadarFault(5.0, 5.0)
+    t = np.arange(0.0, 10.0, DT)
+    with pytest.raises(ValueError, match="radar_fault needs an odometer with a radar"):
+        simulate_odometer(t, 10.0 * t, OdometerConfig.motor_axle(radar=False),
+                          radar_fault=RadarFault(1.0))  # fmt: skip
