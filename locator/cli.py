@@ -264,6 +264,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _report_no_code(args.obs, obs, args.constellation)
         model = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         _nav_covers(model.ephemeris, obs, args.nav)
+        model = model.with_iono_near(float(obs.gps_s[len(obs.gps_s) // 2]))  # the obs' day
         source = RinexSource(model, obs, args.constellation)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
@@ -547,10 +548,19 @@ def _warn_no_iono(source: Any, nav: Sequence[str]) -> None:
     from locator.corrections import UNCORRECTED_IONO_SIGMA_M
 
     missing = source.iono_missing
+    stale = getattr(source, "iono_stale", {})
+    if stale:
+        print(
+            "locator run: warning: ionosphere coefficients of another day left out: "
+            + "; ".join(f"{k} {v}" for k, v in sorted(stale.items()))
+            + " (more than 2 days from the observations)",
+            file=sys.stderr,
+        )
     if missing:
         print(
             f"locator run: warning: no broadcast ionosphere model for {', '.join(missing)} in "
-            f"{', '.join(map(str, nav))} (no GPS, QZSS or BeiDou Klobuchar coefficients; "
+            f"{', '.join(map(str, nav))} (no GPS, QZSS or BeiDou Klobuchar coefficients of the "
+            "observation days; "
             "Galileo NeQuick-G is not applied): the ionospheric delay stays in the pseudoranges,"
             " every epoch is flagged iono_uncorrected and its sigma inflated by "
             f"{UNCORRECTED_IONO_SIGMA_M:g} m at the zenith (x obliquity); add the same day's GPS"
@@ -833,8 +843,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 raise CliError(f"{path}: no station position in the header; {fix}")
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
+            day = ranges.with_iono_near(float(np.median(obs.gps_s)))  # the observations' day
             try:  # tags off their ranges would widen the model with errors of the file
-                check_time_tags(ranges, obs, str(path), constellation=args.constellation)
+                check_time_tags(day, obs, str(path), constellation=args.constellation)
             except ValueError as exc:
                 raise CliError(str(exc)) from None
             # the same station's epochs twice (a copy, decompressed) is evidence counted twice:
@@ -848,7 +859,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                         "observation once"
                     )
             seen_epochs.append((x, np.asarray(obs.gps_s, float)))
-            src = RinexSource(ranges, obs, args.constellation)
+            src = RinexSource(day, obs, args.constellation)
             data.append(station_residuals(src, x, min_el_deg=args.min_el))
             stations.append(x.tolist())
         fitted = {"obs": [str(f) for f in args.obs], "nav": [str(f) for f in args.nav],

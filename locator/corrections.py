@@ -189,6 +189,10 @@ class BroadcastIono:
         QZSS Klobuchar coefficients (``QZSA``/``QZSB``, RINEX 4 ``> ION J.. LNAV``).
     sources : mapping of str to str
         ``"file:line"`` of every set held, by ``"GPS"``, ``"QZS"``, ``"BDS"``, ``"GAL"``.
+    stale : mapping of str to str
+        Sets left out because every file's set lay more than :data:`IONO_MAX_AGE_S` from the
+        time asked for (:meth:`from_rinex_nav` ``near_gps_s``): ``"file:line (date)"`` by set
+        name. Their systems count as without a model (flagged, sigma inflated).
     """
 
     gps_alpha: NDArray | None = None
@@ -200,17 +204,51 @@ class BroadcastIono:
     qzs_alpha: NDArray | None = None
     qzs_beta: NDArray | None = None
     sources: Mapping[str, str] = field(default_factory=dict)
+    stale: Mapping[str, str] = field(default_factory=dict)
 
     @classmethod
-    def from_rinex_nav(cls, paths: str | Path | Sequence[str | Path]) -> BroadcastIono:
-        """Coefficients of RINEX 2/3 navigation headers and RINEX 4 ``> ION`` records (for each
-        set, the first file that has it wins; within a RINEX 4 file, the first record)."""
+    def from_rinex_nav(
+        cls,
+        paths: str | Path | Sequence[str | Path],
+        near_gps_s: float | None = None,
+        file_epochs: Mapping[str, float] | None = None,
+    ) -> BroadcastIono:
+        """Coefficients of RINEX 2/3 navigation headers and RINEX 4 ``> ION`` records.
+
+        Parameters
+        ----------
+        paths : path or sequence of paths
+        near_gps_s : float, optional
+            The time the coefficients are for (e.g. the observations' middle), GPS seconds:
+            each set is taken from the file (RINEX 2/3 header) or record (RINEX 4) nearest to
+            it, and left out (``stale``) when even that is more than :data:`IONO_MAX_AGE_S`
+            away: the coefficients of another day describe another ionosphere (a user trial
+            listing a 2010 file before a 2022 one moved the ranges by 2-5 m). None: the first
+            file that has a set wins, within a RINEX 4 file its first record.
+        file_epochs : mapping of str to float, optional
+            A time per file name for the RINEX 2/3 headers, which carry none of their own (the
+            median epoch of the file's records, :meth:`RangeModel.with_iono_near`); a header
+            set of a file not named counts as infinitely far.
+        """
         if isinstance(paths, (str, Path)):
             paths = [paths]
-        found: dict[str, tuple[NDArray, str]] = {}
+        candidates: dict[str, list[tuple[NDArray, str, float]]] = {}
         for p in paths:
-            for key, (val, where) in _read_iono(Path(p)).items():
-                found.setdefault(key, (val, where))
+            for key, val, where, t in _read_iono(Path(p), file_epochs or {}):
+                candidates.setdefault(key, []).append((val, where, t))
+        found: dict[str, tuple[NDArray, str]] = {}
+        stale: dict[str, str] = {}
+        for key, cands in candidates.items():
+            if near_gps_s is None:
+                found[key] = cands[0][:2]
+                continue
+            val, where, t = min(cands, key=lambda c: abs(c[2] - near_gps_s))  # first on ties
+            if abs(t - near_gps_s) <= IONO_MAX_AGE_S:
+                found[key] = (val, where)
+            else:
+                when = str(gps_s_to_datetime64(t))[:10] if np.isfinite(t) else "no date"
+                stale[key[:3]] = f"{where} ({when})"
+        stale = {k: v for k, v in stale.items() if k + "A" not in found and k not in found}
         get = {k: v[0] for k, v in found.items()}
         return cls(
             get.get("GPSA"),
@@ -222,6 +260,7 @@ class BroadcastIono:
             get.get("QZSA"),
             get.get("QZSB"),
             {k[:3]: v[1] for k, v in sorted(found.items()) if k[:3] in _ION_KEYS.values()},
+            stale,
         )
 
     def klobuchar(self, system: str) -> tuple[NDArray, NDArray, str] | None:
@@ -249,8 +288,12 @@ class BroadcastIono:
         return None if k is None else (k[0], k[1])
 
 
-def _read_iono(path: Path) -> dict[str, tuple[NDArray, str]]:
-    """Coefficient sets of one file by RINEX 3 header key (``GPSA``, ``BDSB``, ``GAL``...)."""
+def _read_iono(
+    path: Path, file_epochs: Mapping[str, float]
+) -> list[tuple[str, NDArray, str, float]]:
+    """Coefficient sets of one file: (RINEX 3 header key ``GPSA``, ``BDSB``, ``GAL``...,
+    coefficients, ``"file:line"``, time in GPS seconds: a RINEX 4 record's transmission, a
+    header's from ``file_epochs`` by file name, else infinite)."""
     if not path.is_file():
         raise FileLineError(path, None, "no such navigation file; check the path")
     first = read_text_lines(path, FileLineError)[:1]
@@ -259,16 +302,31 @@ def _read_iono(path: Path) -> dict[str, tuple[NDArray, str]]:
     except ValueError:
         v4 = False
     if not v4:
-        return _read_iono_header(path)
-    out: dict[str, tuple[NDArray, str]] = {}
+        t = float(file_epochs.get(path.name, np.inf))
+        return [(key, val, where, t) for key, (val, where) in _read_iono_header(path).items()]
+    out: list[tuple[str, NDArray, str, float]] = []
     for m in read_rinex_nav(path).iono:
         key = _ION_KEYS[(m.system, m.message)]
         if key == "GAL":
-            out.setdefault(key, (m.coefficients, m.source))
+            out.append((key, m.coefficients, m.source, m.epoch_gps_s))
         else:
-            out.setdefault(key + "A", (m.coefficients[:4], m.source))
-            out.setdefault(key + "B", (m.coefficients[4:], m.source))
+            out.append((key + "A", m.coefficients[:4], m.source, m.epoch_gps_s))
+            out.append((key + "B", m.coefficients[4:], m.source, m.epoch_gps_s))
     return out
+
+
+def _file_epochs(eph: Ephemeris) -> dict[str, float]:
+    """Median record epoch (GPS seconds) per navigation file name of an ephemeris."""
+    names: list[NDArray] = []
+    times: list[NDArray] = []
+    for table in (eph.kepler, eph.glonass):
+        if table is not None and len(table):
+            names.append(np.array([str(s).rsplit(":", 1)[0] for s in table.source]))
+            times.append(np.asarray(table.epoch_gps_s, float))
+    if not names:
+        return {}
+    name, t = np.concatenate(names), np.concatenate(times)
+    return {str(n): float(np.median(t[name == n])) for n in np.unique(name)}
 
 
 def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
@@ -293,6 +351,11 @@ def _read_iono_header(path: Path) -> dict[str, tuple[NDArray, str]]:
         out.setdefault(key, (arr, f"{path.name}:{i + 1}"))
     return out
 
+
+IONO_MAX_AGE_S = 2 * 86400.0
+"""Furthest a broadcast ionosphere set may lie from the time it is used for, seconds
+(:meth:`BroadcastIono.from_rinex_nav`): the operators update the coefficients about daily; a
+daily file's records sit around its middle, so 2 days keep the day before and after."""
 
 UNCORRECTED_IONO_SIGMA_M = 5.0
 """Standard deviation added, at the zenith on L1, to a pseudorange whose ionospheric delay no
@@ -652,6 +715,19 @@ class RangeModel:
                 if np.isfinite(v):
                     k[str(s)] = int(v)
         return cls(eph, iono or BroadcastIono(), humidity, k, rows)
+
+    def with_iono_near(self, gps_s: float) -> RangeModel:
+        """A copy whose ionosphere sets are those of its navigation files nearest to ``gps_s``
+        (:meth:`BroadcastIono.from_rinex_nav` ``near_gps_s``); unchanged when its sets were not
+        read from its own files (given by the caller, or none)."""
+        files = {Path(p).name for p in self.ephemeris.sources}
+        used = {str(w).rsplit(":", 1)[0] for w in self.iono.sources.values()}
+        if not used or not used <= files:
+            return self
+        iono = BroadcastIono.from_rinex_nav(
+            self.ephemeris.sources, near_gps_s=gps_s, file_epochs=_file_epochs(self.ephemeris)
+        )
+        return RangeModel(self.ephemeris, iono, self.humidity, self.glonass_k, self.record_row)
 
     def with_glonass_slots(self, slots: Mapping[str, int]) -> RangeModel:
         """A copy whose GLONASS channels include ``slots`` (e.g. an observation header's)."""

@@ -247,7 +247,9 @@ class RinexSource:
 
     @cached_property
     def _model(self) -> RangeModel:
-        return self.model.with_glonass_slots(self.obs.header.glonass_slots)
+        # the ionosphere of the observations' day, not of whichever file was listed first
+        mid_s = float(np.median(self.obs.gps_s)) if len(self.obs.gps_s) else 0.0
+        return self.model.with_glonass_slots(self.obs.header.glonass_slots).with_iono_near(mid_s)
 
     @property
     def systems(self) -> tuple[str, ...]:
@@ -258,7 +260,13 @@ class RinexSource:
     def iono_missing(self) -> tuple[str, ...]:
         """Systems used for which no broadcast ionosphere model exists: their delay stays in
         the pseudoranges, every epoch is flagged and its sigma inflated (module docstring)."""
-        return tuple(s for s in self.systems if self.model.iono.klobuchar(s) is None)
+        return tuple(s for s in self.systems if self._model.iono.klobuchar(s) is None)
+
+    @property
+    def iono_stale(self) -> Mapping[str, str]:
+        """Ionosphere sets of the navigation files left out as of another day than the
+        observations (:attr:`locator.corrections.BroadcastIono.stale`)."""
+        return self._model.iono.stale
 
     @cached_property
     def _columns(self) -> NDArray:
@@ -302,6 +310,8 @@ class RinexSource:
             "marker": self.obs.header.marker_name,
             # systems whose ionospheric delay no broadcast model corrects (sigma inflated)
             "iono_uncorrected_systems": list(self.iono_missing),
+            "iono_sources": dict(self._model.iono.sources),
+            "iono_stale": dict(self.iono_stale),
         }
 
 

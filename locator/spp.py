@@ -183,6 +183,8 @@ def solve_observations(
     """
     sel = obs.pseudorange(priority)
     m = model.with_glonass_slots(obs.header.glonass_slots)
+    if len(obs.gps_s):  # the ionosphere of the observations' day, not of the first file listed
+        m = m.with_iono_near(float(np.median(obs.gps_s)))
     x0 = first_guess(obs)
     rows, problems = [], []
     index = np.arange(len(obs.gps_s)) if epochs is None else np.asarray(epochs, int)

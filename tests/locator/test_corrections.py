@@ -306,3 +306,26 @@ def test_epochs_without_any_iono_model_are_flagged_and_inflated(test_data: Path)
     assert b.extra_sigma_m is not None and np.all(b.extra_sigma_m >= 5.0)
     cr = model.correct(float(obs.gps_s[0]), a.sats, np.full(len(a.sats), 2.3e7), x, "C1C")
     assert set(cr.iono_model.tolist()) == {"GPS"} and not cr.iono_uncorrected.any()
+
+
+def test_iono_sets_of_the_observation_day_whatever_the_file_order(test_data: Path) -> None:
+    """A 2005 RINEX 2 file listed before a 2022 RINEX 4 file: the 2022 observations take the
+    2022 coefficients (a user trial: the first file's set moved the ranges by 2-5 m), the 2005
+    ones the 2005 coefficients, and a time far from both takes none (stale, said)."""
+    r2, r4 = test_data / NAV, test_data / NAV4
+    own2, own4 = BroadcastIono.from_rinex_nav(r2), BroadcastIono.from_rinex_nav(r4)
+    model = RangeModel.from_rinex_nav([r2, r4])
+    assert model.iono.source == own2.source  # without a time: the first file wins, as before
+    at_2022 = model.with_iono_near(calendar_to_gps_s(2022, 6, 8, 10, 30))
+    np.testing.assert_array_equal(at_2022.iono.gps_alpha, own4.gps_alpha)
+    assert at_2022.iono.source == own4.source and not at_2022.iono.stale
+    at_2005 = RangeModel.from_rinex_nav([r4, r2]).with_iono_near(calendar_to_gps_s(2005, 4, 2))
+    np.testing.assert_array_equal(at_2005.iono.gps_beta, own2.gps_beta)
+    assert at_2005.iono.bds_alpha is None  # the 2022 BeiDou set is of another day
+    assert set(at_2005.iono.stale) == {"BDS", "GAL"}
+    at_2015 = model.with_iono_near(calendar_to_gps_s(2015, 1, 1))
+    assert at_2015.iono.klobuchar("G") is None
+    assert at_2015.iono.stale["GPS"] == f"{own4.source} (2022-06-08)"  # the nearest, named
+    # a set the caller gave, not read from the model's files, stays
+    given = RangeModel.from_ephemeris(model.ephemeris, BroadcastIono(own2.gps_alpha, own2.gps_beta))
+    assert given.with_iono_near(calendar_to_gps_s(2022, 6, 8)).iono is given.iono
