@@ -181,6 +181,12 @@ class EphemerisStatus:
 
 def _unhealthy(rec: NavRecords) -> NDArray:
     health = rec.col("health")
+    if rec.kind == "kepler" and len(rec):
+        # QZSS LNAV: the lowest health bit is L1C/B (formerly LEX), a signal never used here
+        # (IS-QZSS-PNT 5.4.1; RTKLIB masks it too): a 2012 file flagged every J01 record so
+        qzss = np.array([s[0] == "J" for s in rec.sat])
+        clear = np.where(np.isfinite(health), health, 0.0).astype(np.int64) & ~1
+        health = np.where(qzss & np.isfinite(health), clear, health)
     bad = np.isnan(health) | (health != 0)
     if rec.kind == "kepler":
         system = np.array([s[0] for s in rec.sat])

@@ -222,3 +222,24 @@ def test_glonass_records_far_apart_are_compared_up_to_six_hours(
     assert near.status(np.array([t0]), ["R02"]).reason[0, 0] == Reason.OK
     far = Ephemeris.from_rinex(keep({(0, 15), (6, 45)}, "r02_far.09g"))
     assert far.status(np.array([t0]), ["R02"]).reason[0, 0] == Reason.UNCHECKED
+
+
+@pytest.mark.parametrize(("health", "reason"), [(1, Reason.OK), (3, Reason.UNHEALTHY),
+                                                (32, Reason.UNHEALTHY)])  # fmt: skip
+def test_qzss_lowest_health_bit_is_a_signal_never_used(
+    test_data: Path, tmp_path: Path, health: int, reason: Reason
+) -> None:
+    """QZSS LNAV health: the lowest bit is L1C/B (formerly LEX), not used here (IS-QZSS-PNT
+    5.4.1); any other bit (L1 C/A is the highest) still makes the record unhealthy."""
+    src = test_data / "gnss/rinex_nav_BRDM00DLR_S_20230730000_01D_MN.rnx"
+    lines = src.read_text().splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        if line.startswith("J02"):  # health: the 2nd field of the record's 7th line
+            h = lines[i + 6]
+            lines[i + 6] = h[:23] + f"{float(health):19.12e}" + h[42:]
+    edited = tmp_path / "qzss_health.rnx"
+    edited.write_text("".join(lines))
+    t0 = calendar_to_gps_s(2023, 3, 14, 0, 30)
+    assert Ephemeris.from_rinex(src).status(np.array([t0]), ["J02"]).reason[0, 0] == Reason.OK
+    st = Ephemeris.from_rinex(edited).status(np.array([t0]), ["J02"])
+    assert st.reason[0, 0] == reason
