@@ -59,6 +59,7 @@ __all__ = [
     "SatelliteStates",
     "carrier_frequency_hz",
     "group_delay_s",
+    "klobuchar_bds_delay_m",
     "klobuchar_delay_m",
     "niell_mapping",
     "saastamoinen_zenith_m",
@@ -70,6 +71,7 @@ OMEGA_E_RADPS = 7.2921151467e-5
 """Earth rotation rate (WGS84, IS-GPS-200), rad/s."""
 
 F_L1_HZ = 1575.42e6
+F_B1I_HZ = 1561.098e6  # BeiDou B1I: the frequency of the BeiDou Klobuchar model's delay
 # carrier per (system, band digit); GLONASS FDMA bands are computed from the channel number
 _FREQ_HZ: dict[tuple[str, str], float] = {
     ("G", "1"): 1575.42e6,
@@ -428,6 +430,59 @@ def klobuchar_delay_m(
     x = 2.0 * np.pi * (t - 50400.0) / per
     day = np.where(np.abs(x) < 1.57, amp * (1.0 - x**2 / 2.0 + x**4 / 24.0), 0.0)
     return np.where(el_sc > 0, C_MPS * f * (5e-9 + day), 0.0)
+
+
+def klobuchar_bds_delay_m(
+    gps_s: ArrayLike,
+    lat_deg: ArrayLike,
+    lon_deg: ArrayLike,
+    az_deg: ArrayLike,
+    el_deg: ArrayLike,
+    alpha: ArrayLike,
+    beta: ArrayLike,
+) -> NDArray:
+    """Slant ionospheric group delay on B1I (1561.098 MHz), BeiDou's Klobuchar model.
+
+    BDS-SIS-ICD-B1I 3.0, 5.2.4.7; the GPS form (:func:`klobuchar_delay_m`) with the same
+    coefficients differs by up to 1.2 m at 15 deg (a user trial, Copenhagen): a thin shell at
+    375 km with the exact pierce point (Earth radius 6378 km), the pierce point's
+    **geographic** latitude (not geomagnetic) in semicircles, ``|phi_M|`` in the polynomials,
+    the period clamped to 72 000 - 172 800 s, the amplitude's cosine itself (no series), and
+    the local time from BeiDou time (GPS - 14 s).
+
+    Parameters
+    ----------
+    gps_s : array_like, shape (...)
+        GPS time.
+    lat_deg, lon_deg : array_like, shape (...)
+        Receiver geodetic position.
+    az_deg, el_deg : array_like, shape (...)
+        Satellite direction.
+    alpha, beta : array_like, shape (4,)
+        The broadcast BeiDou coefficients (s, s/sc, ...; RINEX ``BDSA`` / ``BDSB``).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Delay in metres on B1I (scale by ``(f_B1I / f)^2`` for another carrier); 0 where
+        ``el_deg <= 0``.
+    """
+    a = np.asarray(alpha, float)
+    b = np.asarray(beta, float)
+    el = np.radians(np.asarray(el_deg, float))
+    az = np.radians(np.asarray(az_deg, float))
+    ratio = 6378.0 / (6378.0 + 375.0) * np.cos(el)
+    psi = np.pi / 2.0 - el - np.arcsin(ratio)  # Earth-centred angle, rad
+    lat_u, lon_u = np.radians(np.asarray(lat_deg, float)), np.radians(np.asarray(lon_deg, float))
+    lat_m = np.arcsin(np.sin(lat_u) * np.cos(psi) + np.cos(lat_u) * np.sin(psi) * np.cos(az))
+    lon_m = lon_u + np.arcsin(np.sin(psi) * np.sin(az) / np.cos(lat_m))
+    x = np.abs(lat_m) / np.pi  # semicircles
+    amp = np.maximum(a[0] + x * (a[1] + x * (a[2] + x * a[3])), 0.0)
+    per = np.clip(b[0] + x * (b[1] + x * (b[2] + x * b[3])), 72000.0, 172800.0)
+    t = np.mod(np.asarray(gps_s, float) - 14.0 + 43200.0 * lon_m / np.pi, 86400.0)
+    day = np.where(np.abs(t - 50400.0) < per / 4.0, amp * np.cos(2 * np.pi * (t - 50400.0) / per),
+                   0.0)  # fmt: skip
+    return np.where(el > 0, C_MPS * (5e-9 + day) / np.sqrt(1.0 - ratio**2), 0.0)
 
 
 # ------------------------------------------------------------------------- troposphere
@@ -864,7 +919,11 @@ class RangeModel:
                 for letter in {s[0] for s in st.sats}:
                     sel = np.array([s[0] == letter for s in st.sats])
                     coef = self.iono.klobuchar(letter)
-                    if coef is not None:
+                    if coef is not None and coef[2] == "BDS":  # BeiDou's own form, on B1I
+                        d = klobuchar_bds_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef[:2])
+                        iono[sel] = d * (F_B1I_HZ / st.freq_hz[sel]) ** 2
+                        iono_model[sel] = coef[2]
+                    elif coef is not None:
                         d = klobuchar_delay_m(gps_s, lat, lon, az[sel], el[sel], *coef[:2])
                         iono[sel] = d * (F_L1_HZ / st.freq_hz[sel]) ** 2
                         iono_model[sel] = coef[2]

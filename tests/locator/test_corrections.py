@@ -13,12 +13,14 @@ from locator.corrections import (
     RangeModel,
     carrier_frequency_hz,
     group_delay_s,
+    klobuchar_bds_delay_m,
     klobuchar_delay_m,
     niell_mapping,
     saastamoinen_zenith_m,
     troposphere_delay_m,
 )
 from locator.observations import read_rinex_obs
+from predisat.geodesy import ecef_to_geodetic
 from predisat.gnss.rinex_nav import read_rinex_nav
 from predisat.gnss.timescale import calendar_to_gps_s
 
@@ -329,3 +331,52 @@ def test_iono_sets_of_the_observation_day_whatever_the_file_order(test_data: Pat
     # a set the caller gave, not read from the model's files, stays
     given = RangeModel.from_ephemeris(model.ephemeris, BroadcastIono(own2.gps_alpha, own2.gps_beta))
     assert given.with_iono_near(calendar_to_gps_s(2022, 6, 8)).iono is given.iono
+
+
+# the BeiDou set of KMS300DNK 2022-06-08 (RINEX 4 "> ION C.. D1D2")
+BDS_ALPHA = np.array(
+    [2.142041921616e-08, 1.192092895508e-07, -1.013278961182e-06, 1.549720764160e-06]
+)
+BDS_BETA = np.array([1.20832e05, 1.47456e05, -1.31072e05, -6.5536e04])
+
+
+def test_beidou_klobuchar_follows_its_icd_clauses() -> None:
+    """BDS-SIS-ICD-B1I 5.2.4.7 clause by clause: 5 ns at night times the 375 km shell's
+    obliquity; at the zenith at 14:00 local time (BDT) 5 ns plus the amplitude of the pierce
+    point's |geographic latitude|; the same north and south."""
+    day0 = calendar_to_gps_s(2022, 6, 8)
+    # local time 14:00 at longitude 0 is 14:00 BDT = 14:00:14 GPST
+    noon = day0 + 14 * 3600.0 + 14.0
+    lat = 50.0
+    x = lat / 180.0
+    amp = BDS_ALPHA @ np.array([1.0, x, x**2, x**3])
+    zen = klobuchar_bds_delay_m(noon, lat, 0.0, 0.0, 90.0, BDS_ALPHA, BDS_BETA)
+    assert zen == pytest.approx(C * (5e-9 + amp), rel=1e-12)
+    south = klobuchar_bds_delay_m(noon, -lat, 0.0, 0.0, 90.0, BDS_ALPHA, BDS_BETA)
+    assert south == pytest.approx(zen)
+    # 02:00 local: night; at 20 deg the obliquity of the 375 km shell, Earth radius 6378 km
+    night = day0 + 2 * 3600.0 + 14.0
+    el = 20.0
+    obl = 1.0 / np.sqrt(1.0 - (6378.0 / 6753.0 * np.cos(np.radians(el))) ** 2)
+    d = klobuchar_bds_delay_m(night, lat, 0.0, 90.0, el, BDS_ALPHA, BDS_BETA)
+    assert d == pytest.approx(C * 5e-9 * obl, rel=1e-12)
+    assert klobuchar_bds_delay_m(night, lat, 0.0, 90.0, -1.0, BDS_ALPHA, BDS_BETA) == 0.0
+    # the GPS form with these coefficients is another model (a user trial: up to 1.2 m)
+    gps_form = klobuchar_delay_m(noon, lat, 0.0, 0.0, 15.0, BDS_ALPHA, BDS_BETA) * (
+        1575.42 / 1561.098
+    ) ** 2
+    bds = klobuchar_bds_delay_m(noon, lat, 0.0, 0.0, 15.0, BDS_ALPHA, BDS_BETA)
+    assert abs(float(gps_form - bds)) > 0.3
+
+
+def test_beidou_satellites_take_the_beidou_form_on_their_carrier(test_data: Path) -> None:
+    model = RangeModel.from_rinex_nav(test_data / NAV4)
+    t = calendar_to_gps_s(2022, 6, 8, 10, 30)
+    rx = np.array([3512889.0, 778259.0, 5248296.0])  # KMS3, Copenhagen (approx.)
+    sats = [s for s in model.ephemeris.satellites if s.startswith("C")]
+    cr = model.correct(t, sats, np.full(len(sats), 2.2e7), rx, "C2I")
+    ok = np.isfinite(cr.el_deg) & (cr.el_deg > 0)
+    assert ok.sum() >= 3 and set(cr.iono_model[ok]) == {"BDS"}
+    lat, lon, _ = (float(v) for v in ecef_to_geodetic(rx))
+    want = klobuchar_bds_delay_m(t, lat, lon, cr.az_deg[ok], cr.el_deg[ok], BDS_ALPHA, BDS_BETA)
+    np.testing.assert_allclose(cr.iono_m[ok], want, rtol=1e-9)  # B1I: no frequency scaling
