@@ -165,6 +165,15 @@ class RunConfig:
         that would have claimed agree with the prediction; the last of them claims again (a
         trial: a stuck direction channel put the fused interval 1.4 km off for the rest of the
         run, 165-177 of 381 epochs without any flag). 0: the conflict alone is flagged.
+    odometry_recover_s : float or None
+        A suspicion that lasts this long (s, from the conflict that began it) sets the odometer
+        aside: the prediction becomes the motion bound from the last anchors
+        (``odometer.max_speed_mps``, true whatever the odometer did), and the suspicion clears
+        as above when fixes agree with it; the odometer is then used again, and after a second
+        such recovery set aside for the rest of the run (a lasting fault: a stuck direction
+        channel, a wrong start position, a restart from a stored position the train has left
+        left the run without claims to its end in a user trial). Column ``odometer_used``.
+        None: never.
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
@@ -198,6 +207,7 @@ class RunConfig:
     odometry_check: bool = True
     odometry_conflict: str = "estimate"
     odometry_reconfirm: int = 3
+    odometry_recover_s: float | None = 20.0
     fusion: bool = True
     error_model_applies: bool = True
     model_el_min_deg: float = 0.0
@@ -216,6 +226,10 @@ class RunConfig:
         if self.odometry_conflict not in ("estimate", "overlap"):
             raise ValueError(
                 f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
+            )
+        if self.odometry_recover_s is not None and not self.odometry_recover_s > 0:
+            raise ValueError(
+                f"odometry_recover_s must be > 0 s or None, got {self.odometry_recover_s}"
             )
         if int(self.odometry_reconfirm) != self.odometry_reconfirm or self.odometry_reconfirm < 0:
             raise ValueError(
@@ -315,7 +329,9 @@ def run_locator(
         (:class:`locator.odometry.fusion.FusionStatus` name), ``odo_since_anchor_m`` (distance
         the wheels ran since the older of the two bounds' anchors, either way, m),
         ``odo_disputed_m`` (the odometer's disputed distance in the prediction since its anchors:
-        where wheel and radar disagreed, both readings are covered, m), ``solve_ms``,
+        where wheel and radar disagreed, both readings are covered, m), ``odometer_used``
+        (False where the prediction was the motion bound: no odometer, or one set aside,
+        ``RunConfig.odometry_recover_s``), ``solve_ms``,
         ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
         uncorrected, no broadcast model being available, and its sigma inflated:
         :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
@@ -378,6 +394,8 @@ def run_locator(
         if fix is not None and masks is not None and cfg.trust == "masks":
             _assumed_bins(row, masks, az[idx][np.asarray(fix.used, bool)], p_lo, p_hi)
         if status == _CONFLICT and cfg.odometry_reconfirm:
+            if not state.suspect:
+                state.suspect_since_s = float(gps[k])
             state.suspect, state.agreed = True, 0
         elif state.suspect:
             if fix is not None and row["claim"]:  # a fix that agrees with the prediction
@@ -387,6 +405,8 @@ def run_locator(
                 flags = int(row["flags"]) | _SUSPECT_FLAGS
                 row.update(flags=flags, flag_names=flag_names(flags), claim=False)
                 status = _SUSPECT
+        row["odometer_used"] = odo is not None and state.odometer_on
+        _recover(state, cfg, float(gps[k]), odo is not None)
         if fix is not None and row["claim"]:
             here = state.here(k, gps, odo)
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
@@ -407,6 +427,23 @@ def run_locator(
     if len(epochs):
         epochs["safety_claim"] = epochs["claim"].astype(bool) & (cfg.error_model_caveat != "forced")
     return epochs
+
+
+_RECOVERIES_BEFORE_FAILED = 2  # the odometer set aside this often: a lasting fault
+
+
+def _recover(state: _Tracker, cfg: RunConfig, gps_s: float, has_odometer: bool) -> None:
+    """Set a suspect odometer aside after ``cfg.odometry_recover_s`` (the next predictions are
+    the motion bound), and take it back once fixes have cleared the suspicion, unless it has
+    been set aside :data:`_RECOVERIES_BEFORE_FAILED` times."""
+    if not has_odometer or cfg.odometry_recover_s is None:
+        return
+    if state.suspect and state.odometer_on:
+        if gps_s - state.suspect_since_s >= cfg.odometry_recover_s:
+            state.odometer_on = False
+            state.recoveries += 1
+    elif not state.suspect and not state.odometer_on:
+        state.odometer_on = state.recoveries < _RECOVERIES_BEFORE_FAILED
 
 
 def _clip(x: float, lo: float, hi: float) -> float:
@@ -441,6 +478,9 @@ class _Tracker:
     suspect: bool = False  # an odometry conflict not yet cleared (RunConfig.odometry_reconfirm)
     agreed: int = 0  # fixes agreeing with the prediction since the last conflict
     disputed: float = 0.0  # the last prediction's disputed odometer distance, m
+    odometer_on: bool = True  # False: set aside (RunConfig.odometry_recover_s)
+    suspect_since_s: float = float("nan")  # gps_s of the conflict that began the suspicion
+    recoveries: int = 0
 
     @classmethod
     def start(
@@ -468,6 +508,9 @@ class _Tracker:
         """The odometry prediction ``(lo, hi)`` on the track at epoch ``k``, the odometer
         distance since the older anchor; advances the estimate by the odometer's step."""
         lo_anchor, hi_anchor = self.lo_anchor, self.hi_anchor
+        reading = odo
+        odo = odo if self.odometer_on else None  # set aside: the motion bound
+        self.disputed = 0.0
         if odo is not None:
             d_lo, d_hi = float(odo[k] - lo_anchor[1]), float(odo[k] - hi_anchor[1])
             # the doubts grow with the distance the wheels ran, not the net displacement
@@ -489,7 +532,7 @@ class _Tracker:
         p_hi = _clip(float(hi_p), 0.0, length_m)
         step = 0.0 if odo is None else float(odo[k]) - self.odo_prev
         e, v = predict_estimate(self.est, self.est_var, step, cfg.odometer)
-        self.odo_prev = self.odo_prev + step
+        self.odo_prev = self.odo_prev + step if reading is None else float(reading[k])
         if odo is None:  # no motion model: the estimate's variance grows with the motion bound
             v = v + (cfg.odometer.max_speed_mps * (gps[k] - gps[max(k - 1, 0)])) ** 2
         self.est, self.est_var = _clip(float(e), p_lo, p_hi), float(v)

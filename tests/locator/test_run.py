@@ -456,3 +456,42 @@ def test_balise_capture_skips_conflicting_and_suspect_epochs(path):
     assert miss.sum() > 10 and set(ep["fusion"][miss]) <= {"conflict", "suspect"}
     located = located_epochs(ep)
     assert located[:20].all() and not (located & miss).any()
+
+
+def test_a_wrong_start_recovers_on_the_motion_bound(path):
+    """The stored start position is 300 m behind the train (outside its +-50 m): every fix
+    conflicts with the prediction. Before the recovery the run stayed suspect to its end; now,
+    20 s into the suspicion, the odometer is set aside, the motion bound from the start grows
+    over the train, the fixes agree with it and claim again, always around the truth."""
+    truth = truth_run(n=60)
+    start = truth[0] - 300.0
+    kept = run_locator(path, FakeSource(path, truth), start_chainage_m=start,
+                       config=RunConfig(MODEL, trust="none", odometry_recover_s=None))  # fmt: skip
+    assert not kept["claim"].any()
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=start,
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    claim = ep["claim"].to_numpy()
+    assert claim[30:].all()  # claims again, and not before the 20 s
+    assert not claim[:20].any()
+    inside = (ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)
+    assert inside[claim].all()
+    used = ep["odometer_used"].to_numpy()
+    assert not used[21:24].all() and used[-1]  # set aside, then taken back
+    with pytest.raises(ValueError, match="odometry_recover_s"):
+        RunConfig(MODEL, odometry_recover_s=0.0)
+
+
+def test_an_odometer_that_keeps_conflicting_is_set_aside_for_the_run(path):
+    """The odometer counts backward while the train runs forward (a stuck direction channel
+    from the start): it conflicts again after each recovery; the second recovery sets it aside
+    for good and the run claims on the motion bound, around the truth."""
+    truth = truth_run(n=90)
+    odo = -(truth - truth[0])
+    ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    used = ep["odometer_used"].to_numpy()
+    assert not used[-20:].any()
+    claim = ep["claim"].to_numpy()
+    assert claim[-20:].all()
+    inside = (ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)
+    assert inside[claim].all()
