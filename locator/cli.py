@@ -131,7 +131,6 @@ _MIN_WORLD_M = 100.0
 def cmd_simulate(args: argparse.Namespace) -> int:
     from locator.workflow import simulate_to_folder, stop_and_go
     from predisat.availability.run import load_navigation, parse_time
-    from predisat.availability.satellites import default_window
     from predisat.synth.world import World, WorldSpec
 
     if args.world:
@@ -173,8 +172,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             )
     eph = load_navigation(args.nav)
     t0 = parse_time(args.start, "--start")
-    if t0 is None:
-        t0 = float(default_window()[0] + 8 * 3600.0)
+    t0 = _simulation_start(eph, t0, args.nav)
     sim, folder = simulate_to_folder(
         world, eph, args.out, t0_gps_s=t0, start_chainage_m=args.start_chainage,
         direction=args.direction, profile=stop_and_go(cruise_mps=args.speed),
@@ -189,6 +187,31 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f"{c['lost']:.1f} lost -> {folder}"
     )
     return 0
+
+
+def _simulation_start(eph: Any, t0: float | None, nav: Sequence[str] | None) -> float:
+    """The first epoch of a simulation: ``t0``, else 08:00 of the embedded day, or of the
+    navigation data's first day when it does not cover that; refused outside the data (a
+    user trial: a 2010 file simulated the embedded 2020 day with no satellite, exit 0)."""
+    import numpy as np
+
+    from predisat.availability.run import nav_span_gps_s
+    from predisat.availability.satellites import default_window
+    from predisat.gnss.timescale import gps_s_to_text as day
+
+    lo, hi = nav_span_gps_s(eph)
+    if t0 is None:
+        t0 = float(default_window()[0] + 8 * 3600.0)
+        if not lo - _NAV_REACH_S <= t0 <= hi + _NAV_REACH_S:
+            t0 = float(np.floor(lo / 86400.0) * 86400.0 + 8 * 3600.0)
+            t0 = t0 if t0 >= lo - _NAV_REACH_S else lo
+    if not lo - _NAV_REACH_S <= t0 <= hi + _NAV_REACH_S:
+        raise CliError(
+            f"--start {day(t0)} GPS lies outside the navigation data of "
+            f"{', '.join(map(str, nav or ['the embedded day']))} ({day(lo)} - {day(hi)}): no "
+            "satellite could be placed; give a time inside it, or the navigation files of that day"
+        )
+    return t0
 
 
 def cmd_run(args: argparse.Namespace) -> int:

@@ -907,3 +907,23 @@ def test_a_standing_trains_truth_in_metres_is_not_taken_for_kilometres(sim_dir, 
         len(epochs))})  # fmt: skip
     truth.to_csv(tmp_path / "rtk.csv", index=False, float_format="%.17g")
     assert main(["evaluate", str(out), "--truth-csv", str(tmp_path / "rtk.csv")]) == 0
+
+
+def test_simulate_starts_inside_the_navigation_data(sim_dir, tmp_path, test_data, capsys):
+    """A user trial simulated the embedded 2020 day with a 2010 navigation file: no
+    satellite, exit 0. Now the default start is 08:00 of the file's day, and a start outside
+    its data is refused naming both."""
+    nav = test_data / "gnss/brdc1820_G01G02G05.10n"
+    world = sim_dir / "world.npz"
+    rc = main(["-q", "simulate", "--world", str(world), "--duration", "10", "--nav", str(nav),
+               "--out", str(tmp_path / "sim")])  # fmt: skip
+    assert rc == 0
+    sim = SimRun.read(tmp_path / "sim")
+    from predisat.gnss.timescale import calendar_to_gps_s
+
+    assert sim.gps_s[0] == calendar_to_gps_s(2010, 7, 1, 8)
+    assert np.isin(sim.state, (SignalState.LOS, SignalState.NLOS)).any()  # satellites placed
+    rc = main(["-q", "simulate", "--world", str(world), "--duration", "10", "--nav", str(nav),
+               "--start", "2015-01-01T08:00", "--out", str(tmp_path / "sim2")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc != 0 and "--start 2015-01-01" in err and "outside the navigation data" in err
