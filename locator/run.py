@@ -174,6 +174,15 @@ class RunConfig:
         channel, a wrong start position, a restart from a stored position the train has left
         left the run without claims to its end in a user trial). Column ``odometer_used``.
         None: never.
+    sky_check_m : float or None
+        Where the epoch makes no claim (too few trusted satellites: the prediction may have
+        left the masks' coverage, or a fault put it where the masks trust nothing), a 3-D fix
+        of every satellite above ``cutoff_deg`` is projected on the track; one that lies more
+        than this beyond the prediction, and within it of the track, is an odometry conflict
+        (no claim rests on it: untrusted satellites may only raise a doubt). A user trial: a
+        stuck direction channel carried the prediction off the masks' coverage and the run
+        gave 101 of 103 intervals off the train with no flag. Column ``sky_check_m`` (the
+        check's chainage, NaN without one). None: no check.
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
@@ -208,6 +217,7 @@ class RunConfig:
     odometry_conflict: str = "estimate"
     odometry_reconfirm: int = 3
     odometry_recover_s: float | None = 20.0
+    sky_check_m: float | None = 300.0
     fusion: bool = True
     error_model_applies: bool = True
     model_el_min_deg: float = 0.0
@@ -227,6 +237,8 @@ class RunConfig:
             raise ValueError(
                 f"odometry_conflict must be 'estimate' or 'overlap', got {self.odometry_conflict!r}"
             )
+        if self.sky_check_m is not None and not self.sky_check_m > 0:
+            raise ValueError(f"sky_check_m must be > 0 m or None, got {self.sky_check_m}")
         if self.odometry_recover_s is not None and not self.odometry_recover_s > 0:
             raise ValueError(
                 f"odometry_recover_s must be > 0 s or None, got {self.odometry_recover_s}"
@@ -385,6 +397,15 @@ def run_locator(
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
+        row["sky_check_m"] = float("nan")
+        if not row["claim_fix"] and cfg.sky_check_m is not None and cfg.odometry_check:
+            sky_m = _sky_check(path, data, el, cfg.cutoff_deg, cfg.sky_check_m)
+            row["sky_check_m"] = sky_m
+            off = sky_m < p_lo - cfg.sky_check_m or sky_m > p_hi + cfg.sky_check_m  # NaN: False
+            if off:
+                flags = int(row["flags"]) | _CONFLICT_FLAGS
+                row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+                status = _CONFLICT
         if uncorrected:  # in the flags too, where a reader of the claims looks (a user trial)
             flags = int(row["flags"]) | _IONO_UNCORRECTED
             row.update(flags=flags, flag_names=flag_names(flags))
@@ -427,6 +448,36 @@ def run_locator(
     if len(epochs):
         epochs["safety_claim"] = epochs["claim"].astype(bool) & (cfg.error_model_caveat != "forced")
     return epochs
+
+
+def _sky_check(
+    path: AntennaPath, data: EpochData, el: NDArray, cutoff_deg: float, near_m: float
+) -> float:
+    """Chainage of a 3-D least-squares fix (position and clock, from the Earth's centre) of
+    every satellite above ``cutoff_deg``, projected on the track; NaN with fewer than five, when
+    it does not converge, or when it lies more than ``near_m`` beside the track or beyond its
+    ends (no evidence)."""
+    use = np.flatnonzero(np.isfinite(el) & (el > cutoff_deg))
+    if len(use) < 5:
+        return float("nan")
+    sat, rho = data.sat_ecef_m[use], data.pseudorange_m[use]
+    x = np.zeros(4)
+    for _ in range(12):
+        d = sat - x[:3]
+        r = np.linalg.norm(d, axis=1)
+        a = np.column_stack([-d / r[:, None], np.ones(len(r))])
+        step = np.linalg.lstsq(a, rho - r - x[3], rcond=None)[0]
+        x = x + step
+        if np.linalg.norm(step[:3]) < 1e-3:
+            break
+    else:
+        return float("nan")
+    lat, lon, h = ecef_to_geodetic(x[:3])
+    pr = path.track.project(lat, lon, h)
+    # horizontal only: a 2-D map carries no heights, and a fix's height is its worst axis
+    if bool(pr.clamped) or not abs(float(pr.offset_m)) <= near_m:
+        return float("nan")
+    return float(pr.chainage_m)
 
 
 _RECOVERIES_BEFORE_FAILED = 2  # the odometer set aside this often: a lasting fault

@@ -495,3 +495,30 @@ def test_an_odometer_that_keeps_conflicting_is_set_aside_for_the_run(path):
     assert claim[-20:].all()
     inside = (ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)
     assert inside[claim].all()
+
+
+def test_where_the_masks_trust_nothing_the_sky_checks_the_prediction(path):
+    """The masks cover 980-1700 m only; the odometer counts backward (a stuck direction
+    channel), so the prediction leaves the coverage toward chainage 0 while the train runs on:
+    no satellite is trusted, no fix claims, and the odometry conflict could not be seen (a user
+    trial: 101 of 103 intervals off the train, no flag). A 3-D fix of every satellite above the
+    cut-off, projected on the track, now shows the prediction off: every epoch whose fused
+    interval misses the train by more than the check's margin is flagged (closer misses are
+    the check's blind spot: untrusted satellites' errors)."""
+    truth = truth_run(n=40)  # 1000 -> 1585 m
+    c = np.arange(980.0, 1701.0, 10.0)
+    masks = MaskSet.from_track(path.track, c, np.zeros((len(c), 360)))
+    odo = -(truth - truth[0])
+    flagged_bits = int(RunFlag.ODOMETRY_CONFLICT | RunFlag.ODOMETRY_SUSPECT)
+    for sky_check, want_silent in ((None, True), (300.0, False)):
+        cfg = RunConfig(MODEL, trust="masks", sky_check_m=sky_check, odometry_recover_s=None)
+        ep = run_locator(path, FakeSource(path, truth, odometer_m=odo), start_chainage_m=truth[0],
+                         config=cfg, masks=masks)  # fmt: skip
+        # misses by more than the check's margin (300 m): gross, what the check can see
+        far = ((ep["fused_lo_m"] - 300.0 > truth) | (truth > ep["fused_hi_m"] + 300.0)).to_numpy()
+        flagged = (ep["flags"].to_numpy() & flagged_bits) != 0
+        assert far.sum() > 20 and not ep["claim"][far].any()
+        assert (far & ~flagged).any() == want_silent
+    assert np.nanmax(np.abs(ep["sky_check_m"] - truth)) < 5.0  # the check's own chainage
+    with pytest.raises(ValueError, match="sky_check_m"):
+        RunConfig(MODEL, sky_check_m=0.0)
