@@ -14,6 +14,7 @@ Every function takes the epoch table of :func:`locator.run.run_locator` (scored 
 
 from __future__ import annotations
 
+import textwrap
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,9 +26,12 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = [
+    "FORCED_BANNER",
+    "forced",
     "interval_vs_chainage",
     "interval_vs_time",
     "length_histogram",
+    "run_figures",
     "stanford_diagram",
     "systems_text",
 ]
@@ -38,7 +42,24 @@ _MODE_COLOURS = {"three_pairs": "#1b7837", "all_pairs": "#5aae61", "best_pair": 
 
 
 def _with_systems(title: str, constellations: str) -> str:
-    return f"{title} ({constellations})" if constellations else title
+    return _wrapped(f"{title} ({constellations})" if constellations else title)
+
+
+def _wrapped(title: str, width: int = 110) -> str:
+    """A title in lines of at most ``width`` characters (a long one ran off the figure at both
+    ends, and with it a forced model's caveat: a user trial)."""
+    return textwrap.fill(title, width)
+
+
+FORCED_BANNER = "NOT A SAFETY CLAIM: intervals under a forced error model (--force-error-model)"
+"""Written over every figure of a run whose claims were made under a forced error model."""
+
+
+def forced(epochs: pd.DataFrame) -> bool:
+    """True when some claim of the table is no safety claim (a forced error model)."""
+    return "safety_claim" in epochs and bool(
+        (epochs["claim"].astype(bool) & ~epochs["safety_claim"].astype(bool)).any()
+    )
 
 
 def _relative(epochs: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
@@ -56,7 +77,11 @@ def _relative(epochs: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray,
 def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     est, lo, hi, label = _relative(epochs)
     claim = epochs["claim"].to_numpy(bool)
-    for sel, colour, name in ((claim, "#2166ac", "claimed"), (~claim, "#bbbbbb", "no claim")):
+    safe = epochs["safety_claim"].to_numpy(bool) if "safety_claim" in epochs else claim
+    styles = ((claim & safe, "#2166ac", "claimed"),
+              (claim & ~safe, "#e08214", "forced model, no safety claim"),
+              (~claim, "#bbbbbb", "no claim"))  # fmt: skip
+    for sel, colour, name in styles:
         if sel.any():
             ax.vlines(
                 x[sel], lo[sel], hi[sel], colour, lw=1.0, alpha=0.6, label=f"interval, {name}"
@@ -75,6 +100,24 @@ def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     ax.set_ylabel(label)
     ax.legend(loc="upper right", fontsize=7, ncol=4)
     ax.grid(alpha=0.3)
+
+
+def run_figures(epochs: pd.DataFrame, title: str = "") -> dict[str, Figure]:
+    """A run's figures by file name: interval against time and chainage, lengths and, when the
+    table is scored (``truth_m``), the Stanford diagram; over each, in red,
+    :data:`FORCED_BANNER` when claims were made under a forced error model."""
+    gnss = systems_text(epochs)
+    figs = {
+        "interval_time.png": interval_vs_time(epochs, title, gnss),
+        "interval_chainage.png": interval_vs_chainage(epochs, title, gnss),
+        "interval_lengths.png": length_histogram(epochs, constellations=gnss),
+    }
+    if "truth_m" in epochs:
+        figs["stanford.png"] = stanford_diagram(epochs, title)
+    if forced(epochs):  # over every figure, not at the end of a title (a user trial)
+        for fig in figs.values():
+            fig.suptitle(FORCED_BANNER, color="#b2182b", fontweight="bold", fontsize=11)
+    return figs
 
 
 def interval_vs_time(epochs: pd.DataFrame, title: str = "", constellations: str = "") -> Figure:
@@ -144,8 +187,9 @@ def length_histogram(epochs: pd.DataFrame, title: str = "", constellations: str 
     _clean_log_ticks(ax, lo / 1.15, hi * 1.15)
     share = claim.mean() if len(claim) else 0.0
     gnss = f" - {constellations}" if constellations else ""
-    ax.set_title(title or f"Interval length, claimed epochs ({100 * share:.1f} % of "
-                 f"epochs){gnss}", fontsize=10)  # fmt: skip
+    what = "claimed epochs" if not forced(epochs) else "epochs claimed under a forced model"
+    ax.set_title(_wrapped(title or f"Interval length, {what} ({100 * share:.1f} % of "
+                          f"epochs){gnss}"), fontsize=10)  # fmt: skip
     ax.set_xlabel("interval length (m, log scale)")
     ax.set_ylabel("epochs")
     ax.legend(fontsize=7)
@@ -211,7 +255,8 @@ def stanford_diagram(
         mesh = ax.pcolormesh(edges, edges, np.where(h > 0, h, np.nan).T, cmap="viridis",
                              norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)),
                              zorder=2)  # fmt: skip
-        fig.colorbar(mesh, ax=ax, label="claimed epochs per bin")
+        per_bin = "claimed epochs per bin" + (" (forced model)" if forced(scored) else "")
+        fig.colorbar(mesh, ax=ax, label=per_bin)
     other = drawn & ~claimed
     ax.fill_between(lim, lim, [lim[0], lim[0]], color="#b2182b", alpha=0.07, lw=0)
     ax.scatter(np.clip(x[other], *lim), np.clip(y[other], *lim), s=9, color="#555555",
@@ -245,7 +290,7 @@ def stanford_diagram(
             color=_STANFORD_STYLE["mi"][0])  # fmt: skip
     ax.set_xlabel("absolute along-track error |estimate - truth| (m)")
     ax.set_ylabel("protection level: half-interval toward the truth (m)")
-    ax.set_title(title or "Stanford integrity diagram")
+    ax.set_title(_wrapped(title or "Stanford integrity diagram", 70))
     ax.legend(loc="upper left", fontsize=7)
     return fig
 

@@ -136,14 +136,7 @@ def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> 
     from locator import plots
 
     out = Path(folder)
-    gnss = plots.systems_text(epochs)
-    figs = {
-        "interval_time.png": plots.interval_vs_time(epochs, title, gnss),
-        "interval_chainage.png": plots.interval_vs_chainage(epochs, title, gnss),
-        "interval_lengths.png": plots.length_histogram(epochs, constellations=gnss),
-    }
-    if "truth_m" in epochs:
-        figs["stanford.png"] = plots.stanford_diagram(epochs, title)
+    figs = plots.run_figures(epochs, title)
     paths = []
     for name, fig in figs.items():
         buf = io.BytesIO()

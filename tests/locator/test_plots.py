@@ -81,3 +81,27 @@ def test_demo_table_shows_mi_and_the_constellations() -> None:
     assert [r.split()[-1] for r in rows[:2]] == ["1", "3"]
     assert "69.9" in rows[0] and "0.69869" not in text  # percent, not fractions
     assert "GPS + Galileo received; the availability report above counts GPS only" in text
+
+
+def test_claims_under_a_forced_model_are_drawn_and_bannered_as_no_safety_claim() -> None:
+    """A user trial: a forced model's intervals were drawn as "interval, claimed", and the
+    caveat, at the end of a 320-character title, ran off the figure."""
+    from locator.plots import FORCED_BANNER, run_figures
+
+    long_title = "line 144 A: trust masks, k 3.89 per pair; " * 8
+    ok = _epochs()
+    ok["safety_claim"] = ok["claim"]
+    for fig in run_figures(ok, long_title).values():
+        assert fig._suptitle is None
+    forced_ = ok.assign(safety_claim=False)
+    figs = run_figures(forced_, long_title)
+    assert set(figs) == {"interval_time.png", "interval_chainage.png", "interval_lengths.png",
+                         "stanford.png"}  # fmt: skip
+    for name, fig in figs.items():
+        assert fig._suptitle is not None and fig._suptitle.get_text() == FORCED_BANNER, name
+        title = fig.axes[0].get_title()
+        assert all(len(line) <= 110 for line in title.splitlines()), name
+    labels = figs["interval_time.png"].axes[0].get_legend_handles_labels()[1]
+    assert "interval, forced model, no safety claim" in labels
+    assert "interval, claimed" not in labels
+    assert "forced model" in figs["interval_lengths.png"].axes[0].get_title()
