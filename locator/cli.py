@@ -324,6 +324,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
+        from predisat.masks.antenna import AntennaHeightError, check_antenna_height
+
+        try:
+            note = check_antenna_height(masks, args.antenna_height, f"masks {args.masks}")
+        except AntennaHeightError as exc:
+            raise CliError(f"{exc} (--antenna-height)") from None
+        if note is not None:
+            print(f"locator run: warning: {note}", file=sys.stderr)
         from predisat.availability.run import assumed_sky_notes
 
         # as predisat availability says it: a trial's all-ASSUMED masks claimed 71 % in silence

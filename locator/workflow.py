@@ -371,11 +371,12 @@ def simulate_to_folder(
         # lazy: the world's true masks are ray cast by the renderer ([synth] extra)
         from predisat.synth.truth import true_masks
 
-        tm = true_masks(world)
+        h = float(sim.meta.get("antenna_height_m", 4.0))  # the run's antenna, as a mask file says
+        tm = true_masks(world, antenna_height_m=h)
         ms = MaskSet.from_arrays(
             tm.chainage_m, tm.lat_deg, tm.lon_deg, tm.h_m, tm.heading_deg, tm.mask_el_deg,
             margin_deg=1.0, provenance={"source": "true masks of the simulated world",
-                                        "margin": "1 deg"},
+                                        "margin": "1 deg", "antenna_height_m": h},
         )  # fmt: skip
         write_masks(ms, folder / "true_masks.parquet")
     return sim, folder

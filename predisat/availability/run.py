@@ -78,6 +78,7 @@ from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
+from predisat.masks.antenna import check_antenna_height
 from predisat.masks.fileformat import MaskFileWarning, mask_file_path, read_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import BinSource, MaskSet
@@ -705,6 +706,7 @@ def run_availability(
     storage_options: StorageOptions | None = None,
     notes: Sequence[str] = (),
     masks_same_track: bool = False,
+    antenna_height_m: float | None = None,
 ) -> AvailabilityRun:
     """Availability of trusted satellites along a surveyed line: report, tables, GIS layer.
 
@@ -779,6 +781,10 @@ def run_availability(
         beside it as another track's would are registered, not refused
         (:func:`predisat.masks.registration.register_on_track`).
 
+    antenna_height_m : float, optional
+        The train antenna's height above the track axis: masks made for an antenna more than
+        0.2 m higher are refused, a lower one is said (:mod:`predisat.masks.antenna`). None:
+        not checked.
     Returns
     -------
     AvailabilityRun
@@ -811,7 +817,7 @@ def run_availability(
         out = location(absolute(out_dir))  # a cluster's worker resolves a relative path in
         # its own working folder
         mask_set, masks_label, track, mask_notes = _masks_on_track(
-            masks, track, from_m, to_m, opts, masks_same_track
+            masks, track, from_m, to_m, opts, masks_same_track, antenna_height_m
         )
         sky_ch = _sky_chainages(mask_set, track, sky_km, n_sky)
         if interval_every < 1:
@@ -923,6 +929,7 @@ def _masks_on_track(
     to_m: float | None,
     opts: StorageOptions | None = None,
     same_track: bool = False,
+    antenna_height_m: float | None = None,
 ) -> tuple[MaskSet, str, TrackMap | None, list[str]]:
     """The masks of the stretch (checked to lie on ``track``), how to name them, the track, and
     the warnings for the report (holes closed, a stretch asked beyond the masks)."""
@@ -946,6 +953,10 @@ def _masks_on_track(
     merged = merged_tracks_note(mask_set, masks_label)
     if merged is not None:
         notes.append(merged)
+    if antenna_height_m is not None:
+        note = check_antenna_height(mask_set, antenna_height_m, f"masks {masks_label}")
+        if note is not None:
+            notes.append(note)
     notes += _stretch_beyond(mask_set, masks_label, from_m, to_m)
     mask_set = _stretch(mask_set, masks_label, from_m, to_m)
     if mask_set.n_pos < 2:

@@ -11,6 +11,7 @@ import numpy as np
 from predisat.availability.run import AvailabilityRun, run_availability
 from predisat.cli.args import (
     TIME_HELP,
+    antenna_height_m,
     constellation,
     constellation_label,
     constellation_letters,
@@ -48,6 +49,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    "kilometre posts and geometry (default: none, segments straight between "
                    "positions)")
     add_masks_same_track(p)
+    p.add_argument(
+        "--antenna-height", type=antenna_height_m, default=None, metavar="M",
+        help="the train antenna's height above the track axis: masks made for an antenna more "
+        "than 0.2 m higher are refused (from lower down the near obstacles stand higher), a "
+        "lower one is said (default: not checked)",
+    )  # fmt: skip
     p.add_argument(
         "--nav", nargs="+", type=existing_file("RINEX navigation, SP3 or TLE files"),
         metavar="FILE",
@@ -145,6 +152,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         storage_options=args.storage_options,
         notes=notes,
         masks_same_track=args.masks_same_track,
+        antenna_height_m=args.antenna_height,
     )
     for warning in result.info.get("warnings", ()):
         print(f"predisat availability: warning: {warning}", file=sys.stderr)

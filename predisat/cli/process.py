@@ -8,6 +8,7 @@ from typing import Any
 
 from predisat.cli.args import (
     add_checks,
+    antenna_height_m,
     existing_dir,
     existing_file,
     needs,
@@ -101,6 +102,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="side cameras carve with their half-space only (relative azimuths -90 to 90), not "
         "past it along their own line (docs/reconstruction.md, section 17; default: 20 deg "
         "past it, where a camera sees the column from the zenith down)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--antenna-height", type=antenna_height_m, default=None, metavar="M",
+        help="height above the track axis of the train antenna the masks are for (default: "
+        "the survey's antenna_height_m); the cameras stay where the survey's rig puts them. "
+        "A train antenna lower than the masks' sees near obstacles higher: locator run refuses "
+        "masks made for an antenna more than 0.2 m above its own",
     )  # fmt: skip
     add_attitude_arguments(parser)
     parser.add_argument(
@@ -206,7 +214,7 @@ def run(args: argparse.Namespace) -> ProcessResult:
         args.survey,
         args.out,
         PipelineParams(chunk_m=args.chunk_m, segmenter=args.segmenter, sky_net=args.sky_net,
-                       thin_deg=args.thin_deg,
+                       thin_deg=args.thin_deg, antenna_height_m=args.antenna_height,
                        reconstruction=ReconstructionParams(
                            cell_sweep_m=None if args.cell_sweep else 0.0,
                            carve_past_deg=None if args.half_space_only

@@ -8,4 +8,5 @@
 * :mod:`predisat.masks.truth` - :class:`TrueMasks`, the reference masks are scored against.
 * :mod:`predisat.masks.registration` - masks carried onto another map of the line.
 * :mod:`predisat.masks.merge` - masks of parallel tracks (passing loops) merged worst-case.
+* :mod:`predisat.masks.antenna` - the antenna height masks hold for, checked against a train's.
 """

@@ -90,6 +90,11 @@ class PipelineParams:
         whole window (``ReconstructionParams.chainage_shift_m``), which costs less sky than
         bounding every frame within the doubt. None: the survey's ``chainage_jitter_m``, else
         the doubt itself (nothing assumed about how the errors go together).
+    antenna_height_m : float, optional
+        The train antenna's height above the track axis the masks are made for, metres (the
+        masks' ``provenance["antenna_height_m"]``); None (the default): the survey's
+        ``antenna_height_m``. The cameras stay where the survey's rig puts them. A train
+        antenna lower than the masks' sees near obstacles higher (:mod:`predisat.masks.antenna`).
     """
 
     chunk_m: float = 1000.0
@@ -103,8 +108,13 @@ class PipelineParams:
     cant_table: CantTable | None = None
     chainage_doubt_m: float | None = None
     chainage_jitter_m: float | None = None
+    antenna_height_m: float | None = None
 
     def __post_init__(self) -> None:
+        h = self.antenna_height_m
+        if h is not None and not (math.isfinite(h) and 0.0 < h <= 8.0):
+            raise ValueError(f"antenna_height_m must lie in (0, 8] metres above the track axis, "
+                             f"got {h}")  # fmt: skip
         for name in ("chainage_doubt_m", "chainage_jitter_m"):
             doubt = getattr(self, name)
             if doubt is not None and not (

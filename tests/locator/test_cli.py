@@ -927,3 +927,19 @@ def test_simulate_starts_inside_the_navigation_data(sim_dir, tmp_path, test_data
                "--start", "2015-01-01T08:00", "--out", str(tmp_path / "sim2")])  # fmt: skip
     err = capsys.readouterr().err
     assert rc != 0 and "--start 2015-01-01" in err and "outside the navigation data" in err
+
+
+def test_masks_made_for_a_higher_antenna_are_refused(sim_dir, tmp_path, capsys):
+    """A user trial ran masks made for a 4.0 m antenna with --antenna-height 3.0 in silence;
+    from 1.0 m lower the near obstacles stand higher and 0.027 % of the directions were
+    trusted falsely (predisat.masks.antenna)."""
+    from predisat.masks.fileformat import read_masks
+
+    masks = sim_dir / "true_masks.parquet"
+    assert read_masks(masks).provenance["antenna_height_m"] == 4.0
+    base = ["-q", "run", "--sim", str(sim_dir), "--masks", str(masks)]
+    assert main([*base, "--antenna-height", "3.0", "--out", str(tmp_path / "low")]) == 2
+    err = capsys.readouterr().err
+    assert "made for an antenna 4 m above the track axis, the train's is at 3 m" in err
+    assert main([*base, "--antenna-height", "4.5", "--out", str(tmp_path / "high")]) == 0
+    assert "err on the safe side" in capsys.readouterr().err

@@ -933,3 +933,20 @@ def test_doubts_of_the_navigation_data_are_said(tmp_path: Path, masks: MaskSet,
     r = run_availability(small, None, [gps], out_dir=tmp_path / "q", start="2010-07-01T06:00",
                          end="2010-07-01T08:00", **common)  # type: ignore[arg-type]  # fmt: skip
     assert not [w for w in r.info["warnings"] if "records of" in w or "cross-check" in w]
+
+
+def test_masks_made_for_a_higher_antenna_than_the_trains_are_refused(
+    tmp_path: Path, masks: MaskSet
+) -> None:
+    from dataclasses import replace
+
+    from predisat.masks.antenna import AntennaHeightError
+
+    at4 = replace(masks, provenance={**masks.provenance, "antenna_height_m": 4.0})
+    with pytest.raises(AntennaHeightError, match=r"masks in memory were made for an antenna 4 m "
+                       r"above the track axis, the train's is at 3 m"):  # fmt: skip
+        run_availability(at4, None, None, out_dir=tmp_path / "o", step_s=3600, progress=False,
+                         antenna_height_m=3.0)  # fmt: skip
+    res = run_availability(at4, None, None, out_dir=tmp_path / "o", step_s=3600, n_sky=1,
+                           progress=False, antenna_height_m=4.5)  # fmt: skip
+    assert any("err on the safe side" in w for w in res.info["warnings"])

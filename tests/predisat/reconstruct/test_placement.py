@@ -187,3 +187,35 @@ def test_process_takes_the_survey_statement_warns_without_one_and_says_so(
     process_survey(survey, tmp_path / "unstated", progress=False)
     err = capsys.readouterr().err
     assert "states no chainage_doubt_m" in err and "--chainage-doubt-m" in err
+
+
+def test_the_masks_hold_at_the_survey_antenna_height(tmp_path) -> None:
+    """A user trial: a survey stating a 3.0 m antenna (cameras placed from it) was carved at
+    the 4.0 m default, bit-identical to the 4.0 m survey's masks, and the file said 3.0 m: its
+    cutting and canopy trusted 0.027 % of the directions falsely. Now the survey's height is
+    the masks' reference: a lower antenna sees the same obstacles higher."""
+    import yaml
+
+    from predisat.camera.models import CameraModel
+    from predisat.reconstruct.batch import process_survey
+    from predisat.synth.generate import generate_survey
+
+    camera = CameraModel.pinhole_from_fov(160, 120, 74.0)
+    generate_survey(demo_track(), 3000.0, 3060.0, sky="clear", seed=2, out_dir=tmp_path,
+                    camera=camera, progress=False)  # fmt: skip
+    survey = tmp_path / "survey"
+    doc = yaml.safe_load((survey / "survey.yaml").read_text())
+    at4 = process_survey(survey, tmp_path / "at4", progress=False).masks
+    assert at4.provenance["params"]["reconstruction"]["antenna_height_m"] == 4.0
+    # the same frames, the antenna stated 1 m lower and the cameras' lever arms 1 m higher:
+    # the cameras stay where they were
+    doc["antenna_height_m"] = 3.0
+    for cam in doc["cameras"].values():
+        cam["mount"]["lever_arm_m"][2] += 1.0
+    (survey / "survey.yaml").write_text(yaml.safe_dump(doc))
+    at3 = process_survey(survey, tmp_path / "at3", progress=False).masks
+    assert at3.provenance["antenna_height_m"] == 3.0
+    assert at3.provenance["params"]["reconstruction"]["antenna_height_m"] == 3.0
+    closed = at4.mask_el_deg < 90.0
+    diff = at3.mask_el_deg[closed] - at4.mask_el_deg[closed]
+    assert diff.max() > 1.0 and np.mean(diff) > 0.0
