@@ -397,6 +397,10 @@ def run_locator(
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
+        if state.inverted:  # the prediction's bounds crossed: the odometry is wrong
+            flags = int(row["flags"]) | _CONFLICT_FLAGS
+            row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+            status = _CONFLICT
         row["sky_check_m"] = float("nan")
         if not row["claim_fix"] and cfg.sky_check_m is not None and cfg.odometry_check:
             sky_m = _sky_check(path, data, el, cfg.cutoff_deg, cfg.sky_check_m)
@@ -530,6 +534,7 @@ class _Tracker:
     agreed: int = 0  # fixes agreeing with the prediction since the last conflict
     disputed: float = 0.0  # the last prediction's disputed odometer distance, m
     odometer_on: bool = True  # False: set aside (RunConfig.odometry_recover_s)
+    inverted: bool = False  # the last prediction's bounds crossed (an odometer fault)
     suspect_since_s: float = float("nan")  # gps_s of the conflict that began the suspicion
     recoveries: int = 0
 
@@ -574,6 +579,12 @@ class _Tracker:
             self.disputed = float(x_lo + x_hi)
         else:
             ran_lo = ran_hi = 0.0
+            lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
+            hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
+        # crossed bounds: the odometer contradicts its own anchors (each bound holds the train
+        # while its bounds hold); the motion bound holds whatever it did
+        self.inverted = bool(lo_p > hi_p)
+        if self.inverted:
             lo_p = motion_bound(lo_anchor[0], 0.0, gps[k] - lo_anchor[2], cfg.odometer)[0]
             hi_p = motion_bound(0.0, hi_anchor[0], gps[k] - hi_anchor[2], cfg.odometer)[1]
         d = max(ran_lo, ran_hi)

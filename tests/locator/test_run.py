@@ -522,3 +522,24 @@ def test_where_the_masks_trust_nothing_the_sky_checks_the_prediction(path):
     assert np.nanmax(np.abs(ep["sky_check_m"] - truth)) < 5.0  # the check's own chainage
     with pytest.raises(ValueError, match="sky_check_m"):
         RunConfig(MODEL, sky_check_m=0.0)
+
+
+def test_crossed_prediction_bounds_fall_back_to_the_motion_bound_and_are_a_conflict():
+    """Each bound has its own anchor; a faulty odometer can carry them across each other (a
+    recovery trial's stuck direction channel: lo 371 m above hi, and the stretch split
+    raised). Crossed bounds are an odometry conflict, and the prediction is the motion bound
+    from the two anchors, which holds whatever the odometer did."""
+    from locator.odometry.confidence import OdometerAccuracy
+    from locator.run import _Tracker
+
+    gps = np.arange(5.0)
+    odo = np.array([0.0, -10.0, -20.0, -30.0, -40.0])
+    t = _Tracker.start(1000.0, 20.0, odo, gps)
+    t.lo_anchor = (1050.0, -40.0, 3.0, 40.0, 0.0, 0.0)  # re-anchored high at epoch 3 ...
+    t.hi_anchor = (990.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # ... the upper bound still at the start
+    cfg = RunConfig(MODEL, odometer=OdometerAccuracy(abs_error_m=1.0, over_rel=0.05,
+                                                     under_rel=0.05, max_speed_mps=40.0))
+    lo, hi, _ = t.predict(4, gps, odo, cfg, 4000.0)
+    assert t.inverted
+    assert lo == pytest.approx(1050.0 - (1.0 + 40.0 * 1.0))
+    assert hi == pytest.approx(990.0 + (1.0 + 40.0 * 4.0))
