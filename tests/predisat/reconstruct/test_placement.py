@@ -219,3 +219,35 @@ def test_the_masks_hold_at_the_survey_antenna_height(tmp_path) -> None:
     closed = at4.mask_el_deg < 90.0
     diff = at3.mask_el_deg[closed] - at4.mask_el_deg[closed]
     assert diff.max() > 1.0 and np.mean(diff) > 0.0
+
+
+def test_chainages_that_disagree_with_their_own_positions_raise_the_doubt(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A user trial moved every manifest chainage 5 m and kept the positions: accepted under a
+    stated doubt of 0 (the load refuses beyond 10 m) and 1.14 % of the directions trusted
+    falsely. Now the doubt is raised to the disagreement, bounded as a shift (every frame off
+    alike), and process says so."""
+    import pandas as pd
+
+    from predisat.camera.models import CameraModel
+    from predisat.reconstruct.batch import process_survey
+    from predisat.synth.generate import generate_survey
+
+    camera = CameraModel.pinhole_from_fov(160, 120, 74.0)
+    generate_survey(demo_track(), 3000.0, 3060.0, sky="clear", seed=2, out_dir=tmp_path,
+                    camera=camera, progress=False)  # fmt: skip
+    survey = tmp_path / "survey"
+    exact = process_survey(survey, tmp_path / "exact", progress=False).masks
+    assert exact.provenance["params"]["chainage_doubt_m"] == 0.0
+    assert "disagree with their own" not in capsys.readouterr().err
+    manifest = pd.read_csv(survey / "manifest.csv")
+    manifest["chainage_m"] += 5.0
+    manifest.to_csv(survey / "manifest.csv", index=False, float_format="%.17g")
+    moved = process_survey(survey, tmp_path / "moved", progress=False).masks
+    err = capsys.readouterr().err
+    assert "disagree with their own lat_deg/lon_deg by up to 5.00 m" in err
+    assert "the doubt is raised to 5 m" in err
+    params = moved.provenance["params"]
+    assert params["chainage_doubt_m"] == 5.0 and params["chainage_jitter_m"] < 1.0
+    assert params["reconstruction"]["chainage_shift_m"] == 5.0
