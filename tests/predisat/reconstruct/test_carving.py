@@ -811,3 +811,34 @@ def test_side_cameras_carve_past_their_half_space_and_stay_conservative() -> Non
         shares.append(supported.mean())
     # the strip left unknown rests the masks on assumptions; carved, they rest on rays
     assert shares[1] > shares[0] + 0.5
+
+
+def test_the_antennas_own_cell_is_no_side_obstacle() -> None:
+    """A user trial: the cell holding the antenna, bounded a few centimetres above it, set the
+    side horizon (an obstacle 0 m away, 4.0-4.9 m high) at 21 of 32 side descriptors. Cells
+    within the clearance (``descriptor_gauge_m``) set none: the wall 10 m away is found."""
+    from dataclasses import replace
+
+    from predisat.reconstruct.carving import _descriptors
+    from predisat.reconstruct.heightfield import corridor_grid
+
+    track = straight_track(700.0, 0.0)  # northward: left is west
+    hf = corridor_grid(track, 300.0, 400.0, 30.0, 0.5)
+    s = np.array([350.0])
+    axis = np.asarray(track.enu_at(s), float)
+    ant = axis + np.array([0.0, 0.0, 4.0])
+    bound = np.full(hf.shape, axis[0, 2])
+    x = (hf.ix0 + np.arange(hf.shape[1]) + 0.5) * hf.cell_m - ant[0, 0]
+    y = (hf.iy0 + np.arange(hf.shape[0]) + 0.5) * hf.cell_m - ant[0, 1]
+    # the cells around the antenna (the vehicle's roof, never seen from beside it), bounded a
+    # few centimetres above the antenna
+    near = (np.abs(x)[None, :] < 1.5) & (np.abs(y)[:, None] < 1.5)
+    bound[near] = axis[0, 2] + 4.05
+    bound[:, (x > -10.5) & (x < -10.0)] = axis[0, 2] + 12.0  # a wall 10 m to the left
+    hf = replace(hf, bound_m=bound, region=np.ones(hf.shape, bool))
+    old = _descriptors(hf, track, s, ant, replace(PARAMS, descriptor_gauge_m=0.0))
+    assert old["left_obstacle_distance_m"][0] < 0.5  # the failure
+    d = _descriptors(hf, track, s, ant, PARAMS)
+    assert d["left_obstacle_distance_m"][0] == pytest.approx(10.0, abs=0.5)
+    assert d["left_obstacle_height_m"][0] == pytest.approx(12.0, abs=0.01)
+    assert np.isnan(d["right_obstacle_distance_m"][0])
