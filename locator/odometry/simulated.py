@@ -20,6 +20,7 @@ from locator.odometry.confidence import OdometerAccuracy
 from locator.odometry.logfile import OdometerLogError
 from locator.odometry.odometer import OdometerConfig, OdometerLog, RadarFault, simulate_odometer
 from locator.sim.simfile import SimRun
+from predisat.gnss.timescale import gps_minus_utc_s
 from predisat.readonly import freeze_array_fields
 
 __all__ = ["SimOdometer", "check_log_against_run", "odometer_along_run", "odometer_from_log"]
@@ -80,8 +81,9 @@ def _coverage_hint(log_t_s: NDArray, run_t_s: NDArray) -> str:
         return (f"it starts {abs(round(days))} day(s) {'after' if days > 0 else 'before'} the "
                 "run: give the log of the run's day (or correct its date)")  # fmt: skip
     if 10.0 <= abs(shift) <= 20.0:
-        return ("it is offset by about the GPS-UTC leap seconds: give its times in GPS seconds "
-                "(GPS = UTC + 18 s since 2017)")  # fmt: skip
+        leap = float(gps_minus_utc_s(run_t_s[0]))  # the run's date's, not today's 18 s
+        return (f"it is offset by about the GPS-UTC leap seconds: give its times in GPS seconds "
+                f"(GPS = UTC + {leap:.0f} s on the run's date)")  # fmt: skip
     if log_t_s[0] <= run_t_s[0] + 1e-6:
         return (f"it ends {run_t_s[-1] - log_t_s[-1]:.1f} s before the run: give the whole "
                 "recording")  # fmt: skip

@@ -51,7 +51,7 @@ def test_a_log_running_backward_on_a_forward_run_is_refused(tmp_path):
         (0.0, 30.0, r"its times look relative .* add the GPS time of its first row"),
         (T0_S, 20.0, r"it ends 10\.0 s before the run"),
         (T0_S + 86400.0, 30.0, r"it starts 1 day\(s\) after the run"),
-        (T0_S - 18.0, 30.0, r"GPS-UTC leap seconds"),
+        (T0_S - 18.0, 30.0, r"GPS-UTC leap seconds.*GPS = UTC \+ 18 s on the run.s date"),
     ],
 )
 def test_a_log_not_covering_the_run_says_why(tmp_path, t0_s, duration_s, match):
