@@ -167,13 +167,14 @@ class RunConfig:
         run, 165-177 of 381 epochs without any flag). 0: the conflict alone is flagged.
     odometry_recover_s : float or None
         A suspicion that lasts this long (s, from the conflict that began it) sets the odometer
-        aside: the prediction becomes the motion bound from the last anchors
-        (``odometer.max_speed_mps``, true whatever the odometer did), and the suspicion clears
-        as above when fixes agree with it; the odometer is then used again, and after a second
-        such recovery set aside for the rest of the run (a lasting fault: a stuck direction
-        channel, a wrong start position, a restart from a stored position the train has left
-        left the run without claims to its end in a user trial). Column ``odometer_used``.
-        None: never.
+        aside for the rest of the run: the prediction becomes the motion bound from the last
+        anchors (``odometer.max_speed_mps``, true whatever the odometer did), and the suspicion
+        clears as above when fixes agree with it (a lasting fault: a stuck direction channel, a
+        wrong start position, a restart from a stored position the train has left, left the run
+        without claims to its end in a user trial). The odometer is not taken back: a trial
+        that did so gave a stuck direction channel's prediction back its fault, the trust
+        decisions rested on it, and a claim missed the train before the next conflict showed.
+        Column ``odometer_used``. None: never.
     sky_check_m : float or None
         Where the epoch makes no claim (too few trusted satellites: the prediction may have
         left the masks' coverage, or a fault put it where the masks trust nothing), a 3-D fix
@@ -484,21 +485,18 @@ def _sky_check(
     return float(pr.chainage_m)
 
 
-_RECOVERIES_BEFORE_FAILED = 2  # the odometer set aside this often: a lasting fault
-
-
 def _recover(state: _Tracker, cfg: RunConfig, gps_s: float, has_odometer: bool) -> None:
-    """Set a suspect odometer aside after ``cfg.odometry_recover_s`` (the next predictions are
-    the motion bound), and take it back once fixes have cleared the suspicion, unless it has
-    been set aside :data:`_RECOVERIES_BEFORE_FAILED` times."""
+    """Set a suspect odometer aside for the rest of the run after ``cfg.odometry_recover_s``
+    (the next predictions are the motion bound). It is not taken back: a recovery trial that
+    took a stuck direction channel's odometer back once fixes had cleared the suspicion gave
+    the prediction back its fault; the trust decisions rested on it and a claim missed the
+    train (1 HMI in 520 claims) an epoch before the next conflict showed."""
     if not has_odometer or cfg.odometry_recover_s is None:
         return
     if state.suspect and state.odometer_on:
         if gps_s - state.suspect_since_s >= cfg.odometry_recover_s:
             state.odometer_on = False
             state.recoveries += 1
-    elif not state.suspect and not state.odometer_on:
-        state.odometer_on = state.recoveries < _RECOVERIES_BEFORE_FAILED
 
 
 def _clip(x: float, lo: float, hi: float) -> float:

@@ -3,12 +3,13 @@
 A recovery sets a suspect odometer aside for the motion bound, so that a lasting odometer
 fault or a wrong start claims again; it must not let a lasting satellite fault claim either.
 Runs of the locator campaign's worlds (both directions, cruise and stop-and-go, the simulated
-trailer-axle odometer, masks trusted, k for 1e-4 per pair) with the recovery off and on, side by
-side, under four conditions: a healthy run, a start 300 m off (beyond the +-50 m of the start
-uncertainty, as a restart from a stored position the train has left), an odometer whose
-direction channel is stuck backward, and the campaign's multipath (NLOS signals given to the
-locator, always). Counts the satellite claims, the claims whose interval misses the truth
-(HMI) and the epochs whose fused interval misses it unflagged.
+trailer-axle odometer, masks trusted, k for 1e-4 per pair) with the recovery off and on, side
+by side, under four conditions: a healthy run; a start 300 or 600 m off (beyond the +-50 m of
+the start uncertainty, as a restart from a stored position the train has left; they straddle
+the sky check's 300 m margin); an odometer whose direction channel is stuck backward. The
+campaign's multipath is always on (NLOS signals given to the locator). Counts the satellite
+claims, the claims whose interval misses the truth (HMI) and the epochs whose fused interval
+misses it unflagged.
 
 Usage::
 
@@ -37,7 +38,7 @@ from predisat.availability.satellites import default_ephemeris, default_window
 from predisat.availability.trainrun import SpeedProfile
 from predisat.gnss.errormodel import IntervalModel
 
-CONDITIONS = ("healthy", "start 300 m off", "stuck direction")
+CONDITIONS = ("healthy", "start 300 m off", "start 600 m off", "stuck direction")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,7 +75,8 @@ def main(argv: list[str] | None = None) -> int:
                     for cond in CONDITIONS:
                         # a stuck direction channel: the distance counted backward
                         odo = -so.epoch_odo_m if cond == "stuck direction" else so.epoch_odo_m
-                        start_err = -300.0 * direction if cond == "start 300 m off" else 0.0
+                        off = {"start 300 m off": 300.0, "start 600 m off": 600.0}.get(cond, 0.0)
+                        start_err = -off * direction
                         for recover in (None, 20.0):
                             cfg = RunConfig(loc, trust="masks", odometry_recover_s=recover,
                                             odometer=acc)
