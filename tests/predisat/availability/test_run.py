@@ -950,3 +950,24 @@ def test_masks_made_for_a_higher_antenna_than_the_trains_are_refused(
     res = run_availability(at4, None, None, out_dir=tmp_path / "o", step_s=3600, n_sky=1,
                            progress=False, antenna_height_m=4.5)  # fmt: skip
     assert any("err on the safe side" in w for w in res.info["warnings"])
+
+
+def test_a_far_stations_navigation_file_is_said_to_understate(shared_data: Path) -> None:
+    """A user trial gave a Japanese station's broadcast file to line 144: 3.3 satellites above
+    10 deg had a record where a merged file gave 7.0, with no warning. Above the station its
+    own day's file holds the satellites it sees; above Belgium 56 % are missing."""
+    from predisat.availability.run import station_file_gaps
+    from predisat.availability.satellites import SatellitePositions
+    from predisat.geodesy import ecef_to_geodetic
+    from predisat.gnss.ephemeris import Ephemeris
+    from predisat.gnss.timescale import calendar_to_gps_s
+
+    eph = Ephemeris.from_rinex(shared_data / "gnss/rtklib/07590920.05n")
+    t = calendar_to_gps_s(2005, 4, 2) + np.arange(0.0, 86400.0, 600.0)
+    sats = SatellitePositions.from_ephemeris(eph, t, "gps")
+    lat, lon, h = (float(v) for v in ecef_to_geodetic(np.array([-3976219.5, 3382372.6,
+                                                                3652513.0])))  # fmt: skip
+    assert station_file_gaps(eph, sats, lat, lon, h, "0759") == []  # the station's own sky
+    far = station_file_gaps(eph, sats, 50.56, 4.69, 150.0, "0759")  # line 144, Belgium
+    assert len(far) == 1 and "0759 has no usable record for" in far[0]
+    assert "merged broadcast file" in far[0]
