@@ -546,6 +546,9 @@ class _Tracker:
         if odo is not None:
             ran[1:] = np.cumsum(np.abs(np.diff(np.asarray(odo, float))))
         disputed = np.zeros((len(gps), 2)) if extra is None or odo is None else extra
+        # the doubts grow with the disputed distance too: where the radar was believed at 0
+        # the wheel ran on, and its own relative error needs bounding (a review: 28 m off)
+        ran = ran + (disputed[:, 0] - disputed[0, 0]) + (disputed[:, 1] - disputed[0, 1])
         x0 = (float(disputed[0, 0]), float(disputed[0, 1]))
         return cls((start_m - uncertainty_m, odo0, gps[0], 0.0, *x0),
                    (start_m + uncertainty_m, odo0, gps[0], 0.0, *x0),

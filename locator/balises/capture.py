@@ -396,7 +396,9 @@ def _capture_after_void(
     in_c = config.in_capture(uc) | config.in_capture(ub)
     in_a = ~in_c & (config.in_arm(uc) | config.in_arm(ub))
     doubt = np.maximum(accuracy.doubt_over_m(uc), accuracy.doubt_under_m(uc))
-    doubt = doubt + (extra[kc] - extra[kc - 1]).sum(axis=1)  # the step's disputed distance
+    step_disputed = (extra[kc] - extra[kc - 1]).sum(axis=1)  # the step's disputed distance
+    rel = max(accuracy.over_rel, accuracy.under_rel)  # and the relative error over it
+    doubt = doubt + (1.0 + rel) * step_disputed
     q = np.ceil(reach[kc] + doubt + b_acc[rows] - 1e-9)
     max_safe = np.where(orientation > 0, hi[kc], lo[kc])
     min_safe = np.where(orientation > 0, lo[kc], hi[kc])

@@ -143,9 +143,11 @@ def check_log_against_run(sim: SimRun, log: OdometerLog, accuracy: OdometerAccur
     run_m = np.interp(t - t[0], tc, true_d)
     d = log.at(t)
     logged_m = d - d[0]
-    lo, hi = accuracy.displacement_bounds_m(logged_m)
     ahead, behind = log.extra_at(t)
-    lo, hi = lo - (behind - behind[0]), hi + (ahead - ahead[0])
+    ahead, behind = ahead - ahead[0], behind - behind[0]
+    ran = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(logged_m)))]) + ahead + behind
+    lo, hi = accuracy.displacement_bounds_m(logged_m, ran)
+    lo, hi = lo - behind, hi + ahead
     bad = np.flatnonzero((run_m < lo - 1e-9) | (run_m > hi + 1e-9))
     if bad.size == 0:
         return

@@ -35,13 +35,28 @@ class AntennaHeightError(ValueError):
 
 def masks_antenna_height_m(masks: MaskSet) -> float | None:
     """The antenna height above the track axis the masks were made for, metres, or None when
-    their provenance states none (masks of other tools, or built in memory)."""
-    h = masks.provenance.get("antenna_height_m")
-    try:
-        value = float(h)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
+    their provenance states none (masks of other tools, or built in memory).
+
+    The highest of the file's statements: ``antenna_height_m`` and the carving's own
+    ``params.reconstruction.antenna_height_m``. Files of ``predisat process`` before
+    2026-12-06 were carved at 4.0 m whatever the top-level height said (a review: a 3.0 m
+    survey's mislabelled masks passed the check for a 3.0 m train).
+    """
+    prov = masks.provenance
+    params = prov.get("params")
+    rec = params.get("reconstruction") if isinstance(params, dict) else None
+    stated = [prov.get("antenna_height_m")]
+    if isinstance(rec, dict):
+        stated.append(rec.get("antenna_height_m"))
+    values = []
+    for h in stated:
+        try:
+            value = float(h)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(value):
+            values.append(value)
+    return max(values) if values else None
 
 
 def check_antenna_height(

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.masks.antenna import masks_antenna_height_m
 from predisat.masks.carry import cell_edges_enu, cell_stretches_on, cells_reached
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.registration import MAX_TRACK_OFFSET_M, register_on_track
@@ -198,6 +199,11 @@ def merge_worst_case(
         ))  # fmt: skip
     out_flags = np.where(assumed, np.uint8(BinSource.ASSUMED), flags).astype(np.uint8)
     prov = dict(base.provenance)
+    # the highest antenna any merged set holds for: a train lower than that is refused (a
+    # review: 5.0 m masks merged into 3.0 m ones kept 3.0 m and passed the check)
+    heights = [h for h in map(masks_antenna_height_m, [masks, *others]) if h is not None]
+    if heights:
+        prov["antenna_height_m"] = max(heights)
     prov["merged_worst_case"] = [
         {
             "masks": t.label,

@@ -182,17 +182,27 @@ def test_config_guards_name_the_parameter():
     ids=lambda f: f"{f.mode}{f.factor:g}",
 )
 def test_a_failed_radar_is_disputed_and_the_bounds_hold_the_truth(config, fault):
+    """Over 20 seeds (a review found the first version holding on its one seed only: the
+    wheel that ran on while a zero radar was believed has its own relative error, so the
+    doubts must grow with the disputed distance too, not only add it)."""
     t = np.arange(0.0, 100.0 + DT / 2, DT)
     x = accel_cruise_brake(t)
-    log = simulate_odometer(t, x, config, seed=5, radar_fault=fault)
-    lo, hi = OdometerAccuracy.from_config(config).displacement_bounds_m(log.dist_m)
+    acc = OdometerAccuracy.from_config(config)
+    worst_plain = 0.0
+    for seed in range(20):
+        log = simulate_odometer(t, x, config, seed=seed, radar_fault=fault)
+        lo, hi = acc.displacement_bounds_m(log.dist_m)
+        worst_plain = max(worst_plain, float(np.max(np.maximum(lo - x, x - hi))))
+        # the doubts over the distance used and the disputed one, plus the disputed one
+        ran = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(log.dist_m)))])
+        ran = ran + log.extra_ahead_m + log.extra_behind_m
+        lo, hi = acc.displacement_bounds_m(log.dist_m, ran)
+        assert np.all(lo - log.extra_behind_m <= x + 1e-9), seed
+        assert np.all(x <= hi + log.extra_ahead_m + 1e-9), seed
+        assert np.all(np.diff(log.extra_ahead_m) >= 0) and np.all(np.diff(log.extra_behind_m) >= 0)
     # the failed radar is believed in the cycles it disagrees with the wheel: the stated
     # bounds alone miss the truth by far (tens to hundreds of metres)
-    assert np.max(np.maximum(lo - x, x - hi)) > 20.0
-    # with the disputed distance the truth stays inside at every cycle
-    assert np.all(lo - log.extra_behind_m <= x + 1e-9)
-    assert np.all(x <= hi + log.extra_ahead_m + 1e-9)
-    assert np.all(np.diff(log.extra_ahead_m) >= 0) and np.all(np.diff(log.extra_behind_m) >= 0)
+    assert worst_plain > 20.0
 
 
 def test_a_healthy_radar_disputes_little():

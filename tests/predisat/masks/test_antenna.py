@@ -46,3 +46,21 @@ def test_masks_for_a_higher_antenna_are_refused_for_a_lower_one_said() -> None:
     assert masks_antenna_height_m(unknown) is None
     note = check_antenna_height(unknown, 3.0, "masks x")
     assert note is not None and "state no antenna height" in note
+
+
+def test_the_highest_statement_counts_old_files_and_merges_included() -> None:
+    """A review: masks of a 3.0 m survey made before 2026-12-06 say 3.0 m but were carved at
+    4.0 m (params.reconstruction); 5.0 m masks merged into 3.0 m ones kept 3.0 m. Both passed
+    the check for a 3.0 m train."""
+    from predisat.masks.merge import merge_worst_case
+
+    old = _masks({"antenna_height_m": 3.0, "params": {"reconstruction": {"antenna_height_m": 4.0}}})
+    assert masks_antenna_height_m(old) == 4.0
+    with pytest.raises(AntennaHeightError):
+        check_antenna_height(old, 3.0, "old masks")
+    base = _masks({"antenna_height_m": 3.0})
+    other = _masks({"antenna_height_m": 5.0})
+    merged = merge_worst_case(base, [other], demo_track(), same_track=True).masks
+    assert masks_antenna_height_m(merged) == 5.0
+    with pytest.raises(AntennaHeightError):
+        check_antenna_height(merged, 3.0, "merged masks")
