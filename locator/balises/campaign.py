@@ -255,8 +255,10 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) 
     t = ep["gps_s"].to_numpy(float)
     t = t - t[0]
     truth = ep["truth_m"].to_numpy(float)
-    fig = Figure(figsize=(10, 7))
-    ax = fig.subplots(2, 1, sharex=True)
+    fig = Figure(figsize=(10, 8))
+    # misses on a strip of their own: on the timing axis they fell among real timing errors
+    # (-514 to +254 ms in a user trial's run)
+    ax = fig.subplots(3, 1, sharex=True, height_ratios=[3, 3, 1])
     tunnel = np.asarray(track.in_tunnel(truth), bool)
     for a in ax:  # where the satellites cannot help: the tunnels, shaded
         a.fill_between(t, 0, 1, where=tunnel, transform=a.get_xaxis_transform(),
@@ -283,12 +285,17 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) 
         ax[1].plot(g["t_true_s"][c] - t0, 1e3 * g["timing_error_s"][c], markers[j % 8],
                    ms=4 + 1.5 * j, mfc="none", color=colour,
                    label=f"{name}: timing error")  # fmt: skip
-        # the misses of each configuration on a row of their own, below the axis
-        ax[1].plot(g["t_true_s"][~c] - t0, np.full((~c).sum(), -25.0 * (j + 1)), "x",
-                   color=colour, ms=5, label=f"{name}: missed ({(~c).sum()})")  # fmt: skip
+        # the misses of each configuration on a row of their own
+        ax[2].plot(g["t_true_s"][~c] - t0, np.full((~c).sum(), j), "x", color=colour, ms=5,
+                   label=f"{name}: missed ({(~c).sum()})")  # fmt: skip
+    names = list(dict.fromkeys(scored["config"]))
     ax[1].set_ylabel("reported - true passage (ms)")
-    ax[1].set_xlabel("time since start (s); grey: tunnel; x below 0: missed passages")
     ax[1].legend(loc="upper left", fontsize=7, ncol=2)
+    ax[2].set_yticks(range(len(names)), names, fontsize=7)
+    ax[2].set_ylim(-0.5, len(names) - 0.5)
+    ax[2].set_title("missed passages", fontsize=8)
+    ax[2].set_xlabel("time since start (s); grey: tunnel")
+    ax[2].legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
 
