@@ -175,7 +175,9 @@ def run_chunk(
             # the widest feature the thin-structure policy removed: its width in pixels times
             # the camera's widest pixel (docs/reconstruction.md, section 8)
             width = job.params.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
-            doubt = float(att.doubt_deg[k] + turned[k])
+            # the camera's own mounting may be off its calibration too (a turn in place: only
+            # the sky is eroded, the camera's centre stays)
+            doubt = float(att.doubt_deg[k] + turned[k] + p.mount_doubt_deg)
             # the same doubt moves the camera's centre (the body turns about the rails)
             along_m, across_m, raised_m = np.add(
                 att.camera_doubt_m(k, vehicle_mount.lever_arm_m, job.antenna_height_m),
