@@ -20,7 +20,6 @@ from predisat.cli.args import (
     add_checks,
     add_command,
     constellation,
-    constellation_label,
     cutoff_deg,
     existing_dir,
     existing_file,
@@ -280,10 +279,16 @@ def cmd_balises(args: argparse.Namespace) -> int:
     if not quiet:
         width = (locator.budget.label() if locator.budget is not None
                  else f"k = {locator.model.k_sigma:g} per pair interval")  # fmt: skip
+        from predisat.availability.satellites import SYSTEM_NAMES, select_satellites
+
+        # the systems the simulation holds, not all the option names (a user trial's GPS-only
+        # run was announced as "GPS, GLONASS, Galileo, BeiDou, QZSS, NavIC")
+        held = {str(x)[0] for x in select_satellites(sim.sats, args.constellation)}
+        present = " + ".join(n for c, n in SYSTEM_NAMES.items() if c in held) or "none"
         print(f"locator balises: {sim.n_epoch} epochs, {len(balises)} balises, trust rule "
-              f"{trust}, constellation {args.constellation} "
-              f"({constellation_label(args.constellation)}), {width}, odometer {kind}; "
-              "locating (the first run also compiles the locator)", flush=True)  # fmt: skip
+              f"{trust}, constellation {args.constellation} ({present} in the simulation), "
+              f"{width}, odometer {kind}; locating (the first run also compiles the locator)",
+              flush=True)  # fmt: skip
     with tqdm(total=sim.n_epoch, desc="locating", unit="epoch", disable=quiet,
               mininterval=0.5) as bar:  # fmt: skip
         summary, folder = balises_to_folder(

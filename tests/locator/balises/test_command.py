@@ -345,3 +345,18 @@ def test_another_map_of_the_line_gives_the_same_captures_in_its_own_chainage(sim
         assert (moved[col] == own[col]).all(), col
     np.testing.assert_allclose(moved["timing_error_s"], own["timing_error_s"], atol=0.05,
                                equal_nan=True)  # fmt: skip
+
+
+def test_the_banner_names_the_systems_the_simulation_holds(tmp_path, test_data, capsys):
+    """A user trial's GPS-only simulation was announced as "constellation all (GPS, GLONASS,
+    Galileo, BeiDou, QZSS, NavIC/IRNSS)"."""
+    canyon_world().save(tmp_path / "world.npz")
+    assert main(["-q", "simulate", "--world", str(tmp_path / "world.npz"), "--duration", "40",
+                 "--speed", "10", "--start-chainage", "65", "--nav",
+                 str(test_data / "gnss/brdc1820_G01G02G05.10n"),
+                 "--out", str(tmp_path / "sim")]) == 0  # fmt: skip
+    capsys.readouterr()
+    main(["balises", "--sim", str(tmp_path / "sim"), "--no-masks", "--spacing", "25",
+          "--out", str(tmp_path / "b")])  # fmt: skip
+    out = capsys.readouterr().out
+    assert "constellation all (GPS in the simulation)" in out
