@@ -195,6 +195,11 @@ class BroadcastIono:
         Sets left out because every file's set lay more than :data:`IONO_MAX_AGE_S` from the
         time asked for (:meth:`from_rinex_nav` ``near_gps_s``): ``"file:line (date)"`` by set
         name. Their systems count as without a model (flagged, sigma inflated).
+    candidates : mapping of str to tuple
+        Every set the files hold, by RINEX 3 header key (``GPSA``, ``BDSB``, ``GAL``...):
+        ``(coefficients, "file:line", time in GPS seconds)``, the time infinite for a RINEX
+        2/3 header (:meth:`from_rinex_nav`); what :meth:`near` chooses from, without reading
+        the files again.
     """
 
     gps_alpha: NDArray | None = None
@@ -207,6 +212,9 @@ class BroadcastIono:
     qzs_beta: NDArray | None = None
     sources: Mapping[str, str] = field(default_factory=dict)
     stale: Mapping[str, str] = field(default_factory=dict)
+    candidates: Mapping[str, tuple[tuple[NDArray, str, float], ...]] = field(
+        default_factory=dict, repr=False
+    )
 
     @classmethod
     def from_rinex_nav(
@@ -236,15 +244,42 @@ class BroadcastIono:
             paths = [paths]
         candidates: dict[str, list[tuple[NDArray, str, float]]] = {}
         for p in paths:
-            for key, val, where, t in _read_iono(Path(p), file_epochs or {}):
+            for key, val, where, t in _read_iono(Path(p)):
                 candidates.setdefault(key, []).append((val, where, t))
+        return cls._chosen({k: tuple(v) for k, v in candidates.items()}, near_gps_s, file_epochs)
+
+    def near(
+        self, gps_s: float, file_epochs: Mapping[str, float] | None = None
+    ) -> BroadcastIono:
+        """The sets of :attr:`candidates` nearest to ``gps_s`` (as :meth:`from_rinex_nav`
+        ``near_gps_s`` and ``file_epochs``); ``self`` when it holds no candidates (sets given
+        by the caller)."""
+        if not self.candidates:
+            return self
+        return self._chosen(self.candidates, gps_s, file_epochs)
+
+    @classmethod
+    def _chosen(
+        cls,
+        candidates: Mapping[str, tuple[tuple[NDArray, str, float], ...]],
+        near_gps_s: float | None,
+        file_epochs: Mapping[str, float] | None,
+    ) -> BroadcastIono:
+        """The instance of ``candidates`` chosen for ``near_gps_s`` (see :meth:`from_rinex_nav`);
+        a header set (no time of its own) takes its file's time in ``file_epochs``."""
+        epochs = file_epochs or {}
+
+        def timed(c: tuple[NDArray, str, float]) -> float:
+            return c[2] if np.isfinite(c[2]) else epochs.get(c[1].rsplit(":", 1)[0], np.inf)
+
         found: dict[str, tuple[NDArray, str]] = {}
         stale: dict[str, str] = {}
         for key, cands in candidates.items():
             if near_gps_s is None:
                 found[key] = cands[0][:2]
                 continue
-            val, where, t = min(cands, key=lambda c: abs(c[2] - near_gps_s))  # first on ties
+            val, where, _ = best = min(cands, key=lambda c: abs(timed(c) - near_gps_s))
+            t = timed(best)  # the first of the nearest on ties
             if abs(t - near_gps_s) <= IONO_MAX_AGE_S:
                 found[key] = (val, where)
             else:
@@ -263,6 +298,7 @@ class BroadcastIono:
             get.get("QZSB"),
             {k[:3]: v[1] for k, v in sorted(found.items()) if k[:3] in _ION_KEYS.values()},
             stale,
+            candidates,
         )
 
     def klobuchar(self, system: str) -> tuple[NDArray, NDArray, str] | None:
@@ -290,12 +326,10 @@ class BroadcastIono:
         return None if k is None else (k[0], k[1])
 
 
-def _read_iono(
-    path: Path, file_epochs: Mapping[str, float]
-) -> list[tuple[str, NDArray, str, float]]:
+def _read_iono(path: Path) -> list[tuple[str, NDArray, str, float]]:
     """Coefficient sets of one file: (RINEX 3 header key ``GPSA``, ``BDSB``, ``GAL``...,
     coefficients, ``"file:line"``, time in GPS seconds: a RINEX 4 record's transmission, a
-    header's from ``file_epochs`` by file name, else infinite)."""
+    header's infinite: it has none of its own)."""
     if not path.is_file():
         raise FileLineError(path, None, "no such navigation file; check the path")
     first = read_text_lines(path, FileLineError)[:1]
@@ -304,8 +338,7 @@ def _read_iono(
     except ValueError:
         v4 = False
     if not v4:
-        t = float(file_epochs.get(path.name, np.inf))
-        return [(key, val, where, t) for key, (val, where) in _read_iono_header(path).items()]
+        return [(key, val, where, np.inf) for key, (val, where) in _read_iono_header(path).items()]
     out: list[tuple[str, NDArray, str, float]] = []
     for m in read_rinex_nav(path).iono:
         key = _ION_KEYS[(m.system, m.message)]
@@ -779,9 +812,9 @@ class RangeModel:
         used = {str(w).rsplit(":", 1)[0] for w in self.iono.sources.values()}
         if not used or not used <= files:
             return self
-        iono = BroadcastIono.from_rinex_nav(
-            self.ephemeris.sources, near_gps_s=gps_s, file_epochs=_file_epochs(self.ephemeris)
-        )
+        # chosen among the sets read once (a review: the files were read again at each call:
+        # the command line, the source and the fixes each asked)
+        iono = self.iono.near(gps_s, _file_epochs(self.ephemeris))
         return RangeModel(self.ephemeris, iono, self.humidity, self.glonass_k, self.record_row)
 
     def with_glonass_slots(self, slots: Mapping[str, int]) -> RangeModel:
