@@ -398,19 +398,16 @@ def run_locator(
             for s in fix.excluded_sats:
                 excluded[s] = "fde"
             status = _check(path, cfg, fix, data, el, idx, row, p_lo, p_hi, beacons, conflict)
-        if state.inverted:  # the prediction's bounds crossed: the odometry is wrong
-            flags = int(row["flags"]) | _CONFLICT_FLAGS
-            row.update(flags=flags, flag_names=flag_names(flags), claim=False)
-            status = _CONFLICT
         row["sky_check_m"] = float("nan")
+        off = False
         if not row["claim_fix"] and cfg.sky_check_m is not None and cfg.odometry_check:
             sky_m = _sky_check(path, data, el, cfg.cutoff_deg, cfg.sky_check_m)
             row["sky_check_m"] = sky_m
             off = sky_m < p_lo - cfg.sky_check_m or sky_m > p_hi + cfg.sky_check_m  # NaN: False
-            if off:
-                flags = int(row["flags"]) | _CONFLICT_FLAGS
-                row.update(flags=flags, flag_names=flag_names(flags), claim=False)
-                status = _CONFLICT
+        if state.inverted or off:  # crossed bounds, or the sky elsewhere: the odometry is wrong
+            flags = int(row["flags"]) | _CONFLICT_FLAGS
+            row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+            status = _CONFLICT
         if uncorrected:  # in the flags too, where a reader of the claims looks (a user trial)
             flags = int(row["flags"]) | _IONO_UNCORRECTED
             row.update(flags=flags, flag_names=flag_names(flags))
