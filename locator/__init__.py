@@ -9,36 +9,114 @@ epoch loop over a :class:`SimSource` or :class:`RinexSource` and :func:`score_ru
 against the truth. See ``docs/locator.md``.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from predisat.clock import pinned_utc
 
-# a bad SOURCE_DATE_EPOCH named here: numpy's f2py, which the imports below reach through
-# scipy, reads it with int() at import and fails without saying which variable
-pinned_utc()
+# The names load on first use (PEP 562), so that ``locator --help``, a bad argument or a bad
+# SOURCE_DATE_EPOCH answer without importing scipy and numba (the command line checks the
+# variable itself, as ``predisat`` does, and exits with one line).
+_WHERE = {
+    "AntennaPath": "locator.sathia",
+    "EpochData": "locator.sources",
+    "Exclusion": "locator.selection",
+    "Fix": "locator.fde",
+    "FixFlag": "locator.fde",
+    "HeadingCheck": "locator.heading_check",
+    "HeadingStatus": "locator.heading_check",
+    "INTEGRITY_MODES": "locator.fde",
+    "LocatorConfig": "locator.fde",
+    "Odometer": "locator.run",
+    "PairSolution": "locator.sathia",
+    "PairStatus": "locator.sathia",
+    "RinexSource": "locator.sources",
+    "RunConfig": "locator.run",
+    "RunFlag": "locator.run",
+    "Selection": "locator.selection",
+    "SimSource": "locator.sources",
+    "TRUST_MODES": "locator.run",
+    "UnionInterval": "locator.intervals",
+    "WlsSolution": "locator.wls",
+    "all_pairs": "locator.sathia",
+    "along_track_g": "locator.intervals",
+    "best_pair": "locator.intervals",
+    "check_heading": "locator.heading_check",
+    "delay_model_m": "locator.heading_check",
+    "direction_at": "locator.selection",
+    "fit_error_model": "locator.intervals",
+    "locate": "locator.fde",
+    "plan_pairs": "locator.intervals",
+    "range_difference_m": "locator.sathia",
+    "run_locator": "locator.run",
+    "score_run": "locator.evaluate",
+    "select_satellites": "locator.selection",
+    "solve_pairs": "locator.sathia",
+    "solve_wls": "locator.wls",
+    "summarise": "locator.evaluate",
+    "three_independent_pairs": "locator.intervals",
+    "union_interval": "locator.intervals",
+}
 
-from locator.evaluate import score_run, summarise  # noqa: E402
-from locator.fde import INTEGRITY_MODES, Fix, FixFlag, LocatorConfig, locate  # noqa: E402
-from locator.heading_check import HeadingCheck, HeadingStatus, check_heading, delay_model_m  # noqa: E402
-from locator.intervals import (  # noqa: E402
-    UnionInterval,
-    along_track_g,
-    best_pair,
-    fit_error_model,
-    plan_pairs,
-    three_independent_pairs,
-    union_interval,
-)
-from locator.run import TRUST_MODES, Odometer, RunConfig, RunFlag, run_locator  # noqa: E402
-from locator.sathia import (  # noqa: E402
-    AntennaPath,
-    PairSolution,
-    PairStatus,
-    all_pairs,
-    range_difference_m,
-    solve_pairs,
-)
-from locator.selection import Exclusion, Selection, direction_at, select_satellites  # noqa: E402
-from locator.sources import EpochData, RinexSource, SimSource  # noqa: E402
-from locator.wls import WlsSolution, solve_wls  # noqa: E402
+if TYPE_CHECKING:
+    from locator.evaluate import (
+        score_run,
+        summarise,
+    )
+    from locator.fde import (
+        INTEGRITY_MODES,
+        Fix,
+        FixFlag,
+        LocatorConfig,
+        locate,
+    )
+    from locator.heading_check import (
+        HeadingCheck,
+        HeadingStatus,
+        check_heading,
+        delay_model_m,
+    )
+    from locator.intervals import (
+        UnionInterval,
+        along_track_g,
+        best_pair,
+        fit_error_model,
+        plan_pairs,
+        three_independent_pairs,
+        union_interval,
+    )
+    from locator.run import (
+        TRUST_MODES,
+        Odometer,
+        RunConfig,
+        RunFlag,
+        run_locator,
+    )
+    from locator.sathia import (
+        AntennaPath,
+        PairSolution,
+        PairStatus,
+        all_pairs,
+        range_difference_m,
+        solve_pairs,
+    )
+    from locator.selection import (
+        Exclusion,
+        Selection,
+        direction_at,
+        select_satellites,
+    )
+    from locator.sources import (
+        EpochData,
+        RinexSource,
+        SimSource,
+    )
+    from locator.wls import (
+        WlsSolution,
+        solve_wls,
+    )
 
 __all__ = [
     "INTEGRITY_MODES",
@@ -80,3 +158,19 @@ __all__ = [
     "three_independent_pairs",
     "union_interval",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'locator' has no attribute {name!r}")
+    # a bad SOURCE_DATE_EPOCH named here: numpy's f2py, which the modules reach through scipy,
+    # reads it with int() at import and fails without saying which variable
+    pinned_utc()
+    value = getattr(importlib.import_module(where), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

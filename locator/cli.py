@@ -13,6 +13,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from predisat.clock import pinned_utc
+
+try:  # before anything imports scipy: numpy's f2py reads it with int() and crashes unclearly
+    pinned_utc()
+except ValueError as exc:
+    sys.exit(f"error: {exc}")
+
 from locator.balises.command import add_parser as add_balises_parser
 from locator.campaign_command import add_parser as add_campaign_parser
 from locator.cliopts import add_map_doubt, map_doubt_of

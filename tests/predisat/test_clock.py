@@ -42,5 +42,12 @@ def test_a_wrong_value_is_one_line_from_the_command_line() -> None:
         "error: SOURCE_DATE_EPOCH='abc' is not a time; give whole seconds since 1970-01-01 UTC "
         "(e.g. 1700000000) or unset it"
     )
-    out = _fresh(["-c", "import locator"], "abc")
-    assert out.returncode != 0 and "SOURCE_DATE_EPOCH='abc' is not a time" in out.stderr
+    for command in (["-m", "locator", "run", "--help"], ["-m", "locator.cli", "--help"]):
+        out = _fresh(command, "abc")
+        assert out.returncode == 1 and "Traceback" not in out.stderr, command
+        assert out.stderr.startswith("error: SOURCE_DATE_EPOCH='abc' is not a time"), command
+
+
+def test_the_locator_library_names_the_variable_before_scipy_reads_it() -> None:
+    out = _fresh(["-c", "import locator; locator.run_locator"], "abc")
+    assert out.returncode != 0 and "ValueError: SOURCE_DATE_EPOCH='abc' is not a time" in out.stderr
