@@ -34,9 +34,13 @@ from numpy.typing import NDArray
 from predisat.fileerror import FileLineError, read_text_lines
 from predisat.gnss.timescale import (
     BDT_MINUS_GPST_S,
+    LEAP_TABLE_CERTAIN_UNTIL_UTC,
     SECONDS_PER_WEEK,
     calendar_to_gps_s,
+    gps_minus_utc_at_gps_s,
     gps_minus_utc_s,
+    gps_s_to_text,
+    utc_datetime64_to_gps_s,
 )
 from predisat.readonly import freeze_array_fields
 
@@ -240,8 +244,10 @@ class RinexNav:
         GPS, Galileo, BeiDou, QZSS and IRNSS records.
     glonass : NavRecords
     leap_seconds : int or None
-        Value of the header's LEAP SECONDS line, if any (the built-in table of
-        :mod:`predisat.gnss.timescale` is what converts GLONASS epochs).
+        GPST - UTC in s from the header's LEAP SECONDS line, if any (a value counted from BDT is
+        converted). The built-in table of :mod:`predisat.gnss.timescale` is what converts
+        GLONASS epochs; the header checks it (a disagreement after the table's certain span is
+        an error).
     skipped : dict
         Count of records skipped: per system letter (SBAS, ``"S"``) and, in RINEX 4, per
         ``"<system> <message>"`` for modernised ephemerides (``"G CNAV"``) and per record type
@@ -270,8 +276,11 @@ def _open_lines(path: Path) -> list[str]:
     return read_text_lines(path, RinexError)
 
 
-def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None, int]:
-    """Version, default system letter, leap seconds and the index of the first data line."""
+def _parse_header(
+    path: Path, lines: list[str]
+) -> tuple[float, str, tuple[int, int] | None, int]:
+    """Version, default system letter, (GPST - UTC from LEAP SECONDS, its line) and the index of
+    the first data line."""
     if not any(line.strip() for line in lines):
         raise RinexError(path, 1, "the file is empty (a failed download or copy?); give the "
                          "navigation file itself")  # fmt: skip
@@ -304,14 +313,16 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[float, str, int | None,
         if ftype != "N":
             raise RinexError(path, 1, f"file type {ftype!r} is not a navigation file ('N')")
         default = sys_letter if sys_letter.strip() else "G"
-    leap: int | None = None
+    leap: tuple[int, int] | None = None
     for i, line in enumerate(lines):
         label = line[60:].strip()
         if label == "LEAP SECONDS":
             try:
-                leap = int(line[:6])
+                n = int(line[:6])
             except ValueError:
                 raise RinexError(path, i + 1, "unreadable LEAP SECONDS value") from None
+            # RINEX 3.04+: "BDS" in columns 25-27 counts from BDT, 14 s behind GPST
+            leap = (n + (14 if line[24:27].strip() == "BDS" else 0), i + 1)
         elif label == "END OF HEADER":
             return version, default, leap, i + 1
     raise RinexError(
@@ -380,9 +391,49 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     """
     path = Path(path)
     lines = _open_lines(path)
-    version, default_sys, leap, first = _parse_header(path, lines)
+    version, default_sys, leap_line, first = _parse_header(path, lines)
+    leap = None if leap_line is None else leap_line[0]
     if version >= 4.0:
-        return _read_v4_body(path, lines, version, leap, first)
+        nav = _read_v4_body(path, lines, version, leap, first)
+    else:
+        nav = _read_v2_v3_body(path, lines, version, default_sys, leap, first)
+    if leap_line is not None:
+        _check_leap(path, *leap_line, nav)
+    return nav
+
+
+def _check_leap(path: Path, leap_s: int, line: int, nav: RinexNav) -> None:
+    """The header's GPST - UTC against the built-in table over the records' span.
+
+    A leap second announced after the table would put GLONASS epochs (given in UTC) and every UTC
+    time a second off: past the table's certain span a disagreement stops the read. Before it,
+    IERS is right and the header wrong: a warning, and the table is used.
+    """
+    t = np.concatenate([nav.kepler.epoch_gps_s, nav.glonass.epoch_gps_s])
+    t = t[np.isfinite(t)]
+    if t.size == 0:
+        return
+    span = (float(t.min()), float(t.max()))
+    table = {int(v) for v in gps_minus_utc_at_gps_s(np.array(span))}
+    if leap_s in table:
+        return
+    certain = float(utc_datetime64_to_gps_s(np.datetime64(LEAP_TABLE_CERTAIN_UNTIL_UTC)))
+    said = (f"LEAP SECONDS gives GPST - UTC = {leap_s} s, but the built-in table (IERS Bulletin C,"
+            f" predisat.gnss.timescale.LEAP_SECONDS) gives {' or '.join(map(str, sorted(table)))}"
+            f" s over the records ({gps_s_to_text(span[0])} - {gps_s_to_text(span[1])} GPST)")
+    if span[1] >= certain:
+        raise RinexError(path, line, f"{said}; the table is certain only before "
+                         f"{LEAP_TABLE_CERTAIN_UNTIL_UTC}, so a leap second announced since is "
+                         "likely missing: GLONASS orbits and UTC times would be seconds off. Add "
+                         "it to LEAP_SECONDS, or correct the header if it is wrong")  # fmt: skip
+    warnings.warn(f"{path}:{line}: {said}; the header is wrong (IERS holds for these dates) and "
+                  "the table is used", stacklevel=3)  # fmt: skip
+
+
+def _read_v2_v3_body(
+    path: Path, lines: list[str], version: float, default_sys: str, leap: int | None, first: int
+) -> RinexNav:
+    """The records of a RINEX 2 or 3 file after its header."""
     n = len(lines)
     rows: dict[str, list] = {"kepler": [], "glonass": []}
     skipped: dict[str, int] = {}

@@ -22,9 +22,11 @@ __all__ = [
     "BDT_MINUS_GPST_S",
     "GPS_EPOCH",
     "LEAP_SECONDS",
+    "LEAP_TABLE_CERTAIN_UNTIL_UTC",
     "SECONDS_PER_WEEK",
     "calendar_to_gps_s",
     "datetime64_to_gps_s",
+    "gps_minus_utc_at_gps_s",
     "gps_minus_utc_s",
     "gps_s_to_datetime64",
     "gps_s_to_text",
@@ -61,6 +63,11 @@ LEAP_SECONDS: tuple[tuple[str, int], ...] = (
     ("2015-07-01", 17),
     ("2017-01-01", 18),
 )
+
+LEAP_TABLE_CERTAIN_UNTIL_UTC = "2026-01-01"
+"""The table holds before this UTC day: Bulletin C 69 ruled out a leap second at the end of June
+2025, and the next possible one is at the end of December 2025. Later, a navigation file's LEAP
+SECONDS is the check (:func:`predisat.gnss.rinex_nav.read_rinex_nav`)."""
 
 _LEAP_UTC_S = np.array(
     [(np.datetime64(d, "ns") - GPS_EPOCH) / np.timedelta64(1, "s") for d, _ in LEAP_SECONDS]
@@ -130,8 +137,12 @@ def gps_minus_utc_s(utc_s: ArrayLike) -> NDArray:
     return np.concatenate([[0.0], _LEAP_N])[idx]
 
 
-def _gps_minus_utc_at_gps_s(gps_s: NDArray) -> NDArray:
-    idx = np.searchsorted(_LEAP_GPS_S, gps_s, side="right")
+def gps_minus_utc_at_gps_s(gps_s: ArrayLike) -> NDArray:
+    """GPST - UTC in seconds at instants given in ``gps_s``, shape as ``gps_s``.
+
+    An inserted leap second (UTC 23:59:60) already counts the new offset.
+    """
+    idx = np.searchsorted(_LEAP_GPS_S, np.asarray(gps_s, float), side="right")
     return np.concatenate([[0.0], _LEAP_N])[idx]
 
 
@@ -158,14 +169,27 @@ def gps_s_to_text(gps_s: float) -> str:
 
 
 def gps_s_to_utc_text(gps_s: float) -> str:
-    """UTC calendar text of one ``gps_s``, leap seconds removed: ``2011-09-14 01:46:25 UTC``."""
-    return str(gps_s_to_utc_datetime64(float(gps_s)).astype("M8[s]")).replace("T", " ") + " UTC"
+    """UTC calendar text of one ``gps_s``, leap seconds removed: ``2011-09-14 01:46:25 UTC``.
+
+    The inserted second itself reads ``23:59:60`` (``2016-12-31 23:59:60 UTC``).
+    """
+    g = float(gps_s)
+    k = int(np.searchsorted(_LEAP_GPS_S, g, side="right"))
+    if k < _LEAP_GPS_S.size and _LEAP_GPS_S[k] - 1.0 <= g:
+        # numpy has no 23:59:60: the second before it, written with 60
+        before = str(gps_s_to_utc_datetime64(g - 1.0).astype("M8[s]")).replace("T", " ")
+        return before[:-2] + "60 UTC"
+    return str(gps_s_to_utc_datetime64(g).astype("M8[s]")).replace("T", " ") + " UTC"
 
 
 def gps_s_to_utc_datetime64(gps_s: ArrayLike) -> NDArray:
-    """UTC dates (``datetime64[ns]``) of ``gps_s`` values, leap seconds removed."""
+    """UTC dates (``datetime64[ns]``) of ``gps_s`` values, leap seconds removed.
+
+    numpy's dates have no 23:59:60: an inserted leap second maps onto the next day's first
+    second (:func:`gps_s_to_utc_text` writes it out).
+    """
     g = np.asarray(gps_s, float)
-    return gps_s_to_datetime64(g - _gps_minus_utc_at_gps_s(g))
+    return gps_s_to_datetime64(g - gps_minus_utc_at_gps_s(g))
 
 
 def week_seconds_to_gps_s(week: ArrayLike, sow_s: ArrayLike) -> NDArray:

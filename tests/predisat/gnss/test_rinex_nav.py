@@ -279,3 +279,53 @@ def test_rinex4_modernised_messages_counted_with_a_warning(
     assert nav.skipped["G CNAV"] == 1 and nav.skipped["C CNV2"] == 1
     ref = read_rinex_nav(test_data / NAV4)
     np.testing.assert_array_equal(nav.kepler.values, ref.kepler.values)
+
+
+def _glonass_with(test_data: Path, tmp_path: Path, year2: str, leap: str) -> Path:
+    """The 2009 GLONASS excerpt with its records moved to year ``20<year2>`` and LEAP SECONDS
+    set to ``leap``."""
+    out = []
+    body = False
+    for line in (test_data / "gnss/brdc0910_R02R08.09g").read_text().splitlines():
+        if line[60:].strip() == "LEAP SECONDS":
+            line = f"{leap:>6}" + line[6:]
+        elif body and line[:2].strip():
+            line = line[:3] + year2 + line[5:]
+        body = body or line[60:].strip() == "END OF HEADER"
+        out.append(line)
+    p = tmp_path / f"brdc0910.{year2}g"
+    p.write_text("\n".join(out) + "\n")
+    return p
+
+
+def test_a_wrong_leap_header_within_the_table_warns_and_the_table_is_used(
+    test_data: Path, tmp_path: Path
+) -> None:
+    good = read_rinex_nav(_glonass_with(test_data, tmp_path, "09", "15"))
+    p = _glonass_with(test_data, tmp_path, "09", "14")
+    with pytest.warns(UserWarning, match=rf"{p.name}:6: LEAP SECONDS gives GPST - UTC = 14 s.*"
+                      r"gives 15 s.*the table is used"):  # fmt: skip
+        nav = read_rinex_nav(p)
+    np.testing.assert_array_equal(nav.glonass.epoch_gps_s, good.glonass.epoch_gps_s)
+
+
+def test_a_leap_second_the_table_cannot_know_stops_the_read(
+    test_data: Path, tmp_path: Path
+) -> None:
+    """Past the table's certain span a header one second ahead means a leap second announced
+    later: GLONASS epochs would be a second off (about 4 km along the orbit)."""
+    n = len(read_rinex_nav(test_data / "gnss/brdc0910_R02R08.09g").glonass)
+    assert len(read_rinex_nav(_glonass_with(test_data, tmp_path, "27", "18")).glonass) == n
+    with pytest.raises(RinexError, match=r"line 6: LEAP SECONDS gives GPST - UTC = 19 s.*gives "
+                       r"18 s.*Add it to LEAP_SECONDS"):  # fmt: skip
+        read_rinex_nav(_glonass_with(test_data, tmp_path, "27", "19"))
+
+
+def test_a_leap_header_counted_from_bdt_is_converted(test_data: Path, tmp_path: Path) -> None:
+    lines = (test_data / "gnss/rinex_nav_BRDM00DLR_S_20230730000_01D_MN.rnx").read_text()
+    lines = lines.splitlines()
+    k = next(i for i, s in enumerate(lines) if s[60:].strip() == "LEAP SECONDS")
+    lines[k] = f"{4:6d}{4:6d}{2253 - 1356:6d}{7:6d}BDS".ljust(60) + "LEAP SECONDS"
+    p = tmp_path / "bds_leap.rnx"
+    p.write_text("\n".join(lines) + "\n")
+    assert read_rinex_nav(p).leap_seconds == 18  # BDT - UTC 4 s, GPST - BDT 14 s
