@@ -210,6 +210,8 @@ _LOSS_CAUSES = (
     ("HEADING_FAIL", "heading check failed"),
     ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
     ("ODOMETRY_SUSPECT", "odometry suspect after a conflict, until fixes agree with it again"),
+    ("TRACK_ALIAS", "the track passes beside the interval elsewhere (a loop's other leg) and "
+     "nothing located the run where it is alone"),
     ("CLAIM_AT_TRACK_END", "interval bounded by an end of the track map (the train may be "
      "past it)"),
     ("UNBOUNDED", "interval reaching the search window's end"),

@@ -6,13 +6,23 @@
   kilometre posts from line sections, writing GeoJSON.
 * :mod:`predisat.track.chain` - chaining the parts of a track file into one polyline.
 * :mod:`predisat.track.smooth` - the penalised B-spline fit through a simplified polyline.
+* :mod:`predisat.track.alias` - where the track passes beside itself (:class:`TrackAliases`).
 * :mod:`predisat.track.posts` - kilometre posts; :mod:`predisat.track.stations` - stations;
   :mod:`predisat.track.errors` - the error.
 """
 
+from predisat.track.alias import TrackAliases
 from predisat.track.errors import TrackMapError
 from predisat.track.map import TrackMap, demo_track, load_track
 from predisat.track.posts import KilometrePost
 from predisat.track.stations import Station
 
-__all__ = ["KilometrePost", "Station", "TrackMap", "TrackMapError", "demo_track", "load_track"]
+__all__ = [
+    "KilometrePost",
+    "Station",
+    "TrackAliases",
+    "TrackMap",
+    "TrackMapError",
+    "demo_track",
+    "load_track",
+]

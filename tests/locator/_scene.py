@@ -54,6 +54,34 @@ def arc_path(
     return AntennaPath(track_from_enu(enu, "arc"), height_m)
 
 
+def balloon_enu(gap_m: float, leg_m: float = 800.0, radius_m: float = 200.0, step_m: float = 2.0):
+    """A balloon (reversing) loop: ``leg_m`` east, a racket-shaped loop of ``radius_m`` (right,
+    left, right turns), ``leg_m`` back west with the return leg ``gap_m`` north of the outgoing
+    one; ENU vertices (n, 3) every ``step_m``."""
+
+    def trace(theta_deg: float) -> NDArray:
+        hd = [90.0] * int(leg_m / step_m)
+        for turn, ang in ((1, theta_deg), (-1, 180.0 + 2.0 * theta_deg), (1, theta_deg)):
+            n = int(np.ceil(np.radians(ang) * radius_m / step_m))
+            hd += list(hd[-1] + turn * ang / n * np.arange(1, n + 1))
+        hd += [hd[-1]] * int(leg_m / step_m)
+        h = np.radians(np.array(hd))
+        e = np.concatenate([[0.0], np.cumsum(step_m * np.sin(h))])
+        n_ = np.concatenate([[0.0], np.cumsum(step_m * np.cos(h))])
+        return np.stack([e, n_, np.zeros_like(e)], axis=-1)
+
+    lo, hi = 5.0, 89.0  # a wider opening brings the return leg closer: bisect on it
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if trace(mid)[-1, 1] > gap_m else (lo, mid)
+    return trace(0.5 * (lo + hi))
+
+
+def balloon_path(gap_m: float, height_m: float = 4.0) -> AntennaPath:
+    """:func:`balloon_enu` as an antenna path."""
+    return AntennaPath(track_from_enu(balloon_enu(gap_m)[::5], "balloon"), height_m)
+
+
 def sky(x_ecef: NDArray, az_deg, el_deg) -> NDArray:
     """Satellites at ``SAT_DISTANCE_M`` seen at (az, el) from ``x_ecef``, shape (n, 3)."""
     lat, lon, _ = ecef_to_geodetic(np.asarray(x_ecef, float))

@@ -15,7 +15,8 @@ from locator.run import RunConfig, RunFlag, flag_names, run_locator
 from locator.sources import EpochData
 from predisat.gnss.errormodel import ErrorModel, IntervalModel
 from predisat.masks.maskset import MaskSet
-from tests.locator._scene import ranges, sky, straight_path
+from predisat.track.alias import TrackAliases
+from tests.locator._scene import balloon_path, ranges, sky, straight_path
 
 SIGMA_M = 1.0
 MODEL = LocatorConfig(
@@ -544,3 +545,42 @@ def test_crossed_prediction_bounds_fall_back_to_the_motion_bound_and_are_a_confl
     assert t.inverted
     assert lo == pytest.approx(1050.0 - (1.0 + 40.0 * 1.0))
     assert hi == pytest.approx(990.0 + (1.0 + 40.0 * 4.0))
+
+
+@pytest.mark.parametrize("gap_m", [3.4, 6.0])
+def test_a_start_on_the_other_leg_of_a_balloon_loop_claims_nothing(gap_m):
+    """A user trial: the train runs the return leg of a balloon loop, the start (a header
+    position projected on the nearest leg) is on the outgoing leg beside it. The pair
+    intersections are as good on either leg; once the odometer was set aside, the claims
+    followed the wrong leg, every one off the train. Beside another stretch, a claim now
+    stands only when the run was located where the track is alone."""
+    p = balloon_path(gap_m)
+    truth = 2250.0 + 10.0 * np.arange(70)
+    start = p.length_m - truth[0]  # the place beside the train on the outgoing leg
+    off = run_locator(p, FakeSource(p, truth), start_chainage_m=start,
+                      config=RunConfig(MODEL, trust="none", alias_m=None))  # fmt: skip
+    claim = off["claim"].to_numpy()
+    inside = ((off["lo_m"] <= truth + 1e-6) & (truth <= off["hi_m"] + 1e-6)).to_numpy()
+    assert (claim & ~inside).sum() > 20  # the hazard the check removes
+    ep = run_locator(p, FakeSource(p, truth), start_chainage_m=start,
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    assert not ep["claim"].any()
+    assert ep["flag_names"].str.contains("TRACK_ALIAS").sum() >= claim.sum()
+    with pytest.raises(ValueError, match="alias_m"):
+        RunConfig(MODEL, alias_m=0.0)
+
+
+def test_a_run_located_on_the_loop_keeps_claiming_along_the_leg_beside_the_other():
+    """Located where the track is alone, the odometer's prediction rules the other leg out:
+    the claims go on along the return leg, each around the truth."""
+    p = balloon_path(3.4)
+    truth = 1900.0 + 10.0 * np.arange(100)
+    ep = run_locator(p, FakeSource(p, truth), start_chainage_m=truth[0],
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    beside = TrackAliases.of(p.track)
+    on_leg = np.array([beside.within(t, t).size > 0 for t in truth])
+    assert on_leg.sum() >= 60
+    claim = ep["claim"].to_numpy()
+    assert claim[on_leg].all()
+    inside = (ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)
+    assert inside[claim].all()
