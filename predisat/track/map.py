@@ -254,7 +254,7 @@ class TrackMap:
         _check_on_land(tm, str(tf.path))
         posts = project_posts(tm, tf.posts, tf.max_post_offset_m)
         flip, spans, bridges = tf.reverse, list(tf.tunnel_spans), list(tf.bridge_spans)
-        if not flip and len(posts) >= 2:
+        if not flip and len(posts) >= 2 and not tf.vertex_order:
             by_s = sorted(posts, key=lambda p: p.chainage_m)
             flip = by_s[-1].km_m < by_s[0].km_m
         if flip:

@@ -90,6 +90,9 @@ class TrackFile:
         Named places found in the file (:func:`predisat.track.stations.points_as_stations`).
     reverse : bool
         Chainage asked to run against the vertex order (``reverse=True``).
+    vertex_order : bool
+        The file says its chainage runs in vertex order (member ``"chainage": "vertex order"``,
+        written by :func:`write_geojson`): kilometre posts that fall along it do not turn it.
     max_post_offset_m : float
         Posts farther than this from the track are ignored.
     """
@@ -108,6 +111,7 @@ class TrackFile:
     bridge_spans: list[tuple[int, int]] = field(default_factory=list)
     stations: list[Station] = field(default_factory=list)
     reverse: bool = False
+    vertex_order: bool = False
     max_post_offset_m: float = 50.0
 
     def __post_init__(self) -> None:
@@ -519,6 +523,7 @@ def parse_geojson_track(
         attribution=attribution, tolerance_m=tol, posts=posts_raw,
         tunnel_spans=list(tunnel_spans), bridge_spans=list(bridge_spans),
         stations=points_as_stations(points), reverse=reverse,
+        vertex_order=members.get("chainage") == _VERTEX_ORDER,
         max_post_offset_m=max_post_offset_m,
     )  # fmt: skip
 
@@ -693,13 +698,18 @@ def kilometre_posts_from_sections(
     return sorted(unique.values(), key=lambda p: p.chainage_m)
 
 
+_VERTEX_ORDER = "vertex order"
+
+
 def write_geojson(track: TrackMap, path: str | Path) -> None:
     """Write a track map as GeoJSON that :meth:`TrackMap.from_geojson` reads back identically.
 
     The source vertices go in one LineString feature (with heights when any is non-zero),
     kilometre posts as Point features with ``km_m`` and ``label``, stations as Point features
     with ``station``; ``name``, ``source``,
-    ``attribution`` and ``tolerance_m`` as members of the FeatureCollection.
+    ``attribution`` and ``tolerance_m`` as members of the FeatureCollection, and ``"chainage":
+    "vertex order"``: a map whose chainage runs against its kilometres (read with
+    ``reverse=True``) would otherwise be turned back by its posts on reading (a user trial).
     """
     with_h = bool(np.any(track.h_m != 0.0))
     cols = [track.lon_deg, track.lat_deg] + ([track.h_m] if with_h else [])
@@ -742,6 +752,7 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
         "source": track.source,
         "attribution": track.attribution,
         "tolerance_m": track.tolerance_m,
+        "chainage": _VERTEX_ORDER,
         "features": feats,
     }
     Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")

@@ -307,6 +307,22 @@ def test_write_geojson_round_trip(demo, tmp_path):
                                [p.chainage_m for p in demo.kilometre_posts], atol=1e-4)
 
 
+def test_a_reversed_map_reads_back_reversed(tmp_path):
+    """A user trial: a map read with reverse=True and written came back running with its
+    kilometre posts again, the place at 1000 m read back at 13 171 m, in silence."""
+    src = Path(__file__).parents[3] / "predisat/data/line144_track_A.geojson"
+    rev = TrackMap.from_geojson(src, reverse=True)
+    fwd = TrackMap.from_geojson(src)
+    path = tmp_path / "reversed.geojson"
+    write_geojson(rev, path)
+    back = TrackMap.from_geojson(path)
+    s = np.array([0.0, 1000.0, 5000.0])
+    lat, lon, _ = rev.position_at(s)
+    np.testing.assert_allclose(back.project(lat, lon).chainage_m, s, atol=0.05)
+    # and the reversed one is the forward one's far end, as read
+    np.testing.assert_allclose(fwd.project(lat, lon).chainage_m, fwd.length_m - s, atol=0.5)
+
+
 # ---------------------------------------------------------------------- OpenStreetMap excerpt
 
 
