@@ -210,6 +210,8 @@ _LOSS_CAUSES = (
     ("HEADING_FAIL", "heading check failed"),
     ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
     ("ODOMETRY_SUSPECT", "odometry suspect after a conflict, until fixes agree with it again"),
+    ("OFF_TRACK", "the trusted satellites' 3-D fix beside the map beyond its doubt (a track "
+     "the map lacks, or a reflected signal)"),
     ("TRACK_ALIAS", "the track passes beside the interval elsewhere (a loop's other leg) and "
      "nothing located the run where it is alone"),
     ("CLAIM_AT_TRACK_END", "interval bounded by an end of the track map (the train may be "

@@ -13,6 +13,7 @@ import pytest
 from locator.fde import FixFlag, LocatorConfig
 from locator.run import RunConfig, RunFlag, flag_names, run_locator
 from locator.sources import EpochData
+from predisat.geodesy import ecef_to_geodetic, enu_rotation
 from predisat.gnss.errormodel import ErrorModel, IntervalModel
 from predisat.masks.maskset import MaskSet
 from predisat.track.alias import TrackAliases
@@ -584,3 +585,48 @@ def test_a_run_located_on_the_loop_keeps_claiming_along_the_leg_beside_the_other
     assert claim[on_leg].all()
     inside = (ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6)
     assert inside[claim].all()
+
+
+class _BesideSource(FakeSource):
+    """The train ``aside_m`` to the right of the map from epoch ``from_k`` on (a branch the map
+    lacks)."""
+
+    def __init__(self, path, truth_m, aside_m, from_k):
+        super().__init__(path, truth_m)
+        self.aside_m, self.from_k = aside_m, from_k
+
+    def observe(self, k, rx_ecef_m):
+        x = self.path.ecef_at(self.truth_m[k])
+        if k >= self.from_k:
+            lat, lon, _ = ecef_to_geodetic(x)
+            hd = np.radians(float(self.path.track.heading_at(self.truth_m[k])))
+            right_enu = np.array([np.cos(hd), -np.sin(hd), 0.0])
+            x = x + self.aside_m * (right_enu @ enu_rotation(lat, lon))
+        rho = ranges(self.sat, x, SIGMA_M * 0.5, self.rng) + self.bias[k]
+        return EpochData(self.names, self.sat, rho, {})
+
+
+def test_a_train_beside_the_map_gets_no_claim():
+    """A user trial: a train that took a branch missing from the map got claims 5-42 m beside
+    it; the 1-D fault detection let them through. Here the error model is looser than the
+    ranges (as a model overbounding a receiver is), and 15 m beside the map the pairs stay
+    consistent; the trusted satellites' 3-D fix, beyond the map's doubt and 5 of its
+    cross-track sigmas (about 13 m here), voids those claims; on the map it voids none."""
+    loose = LocatorConfig(model=IntervalModel(ErrorModel(a_m=2.0, b_m=2.0), k_sigma=3.0),
+                          budget=None)  # fmt: skip
+    p = straight_path()
+    truth = truth_run(n=40)
+    kept = run_locator(p, _BesideSource(p, truth, 15.0, 20), start_chainage_m=truth[0],
+                       config=RunConfig(loose, trust="none", off_track_k_sigma=None))  # fmt: skip
+    assert kept["claim"].iloc[20:].sum() >= 15  # without the check they stood
+    ep = run_locator(p, _BesideSource(p, truth, 15.0, 20), start_chainage_m=truth[0],
+                     config=RunConfig(loose, trust="none"))  # fmt: skip
+    assert ep["claim"].iloc[:20].all()
+    assert not ep["flag_names"].iloc[:20].str.contains("OFF_TRACK").any()
+    assert ep["claim"].iloc[20:].sum() <= 6
+    assert ep["flag_names"].iloc[20:].str.contains("OFF_TRACK").sum() >= 10
+    np.testing.assert_allclose(ep["off_track_m"].iloc[:20], 0.0, atol=3.0)
+    off = ep["off_track_m"].iloc[20:].dropna()
+    assert len(off) >= 15 and np.all(np.abs(off - 15.0) < 5.0)
+    with pytest.raises(ValueError, match="off_track_k_sigma"):
+        RunConfig(MODEL, off_track_k_sigma=0.0)
