@@ -94,7 +94,17 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix, dir=p.parent)
     os.close(fd)
     try:
-        yield Path(tmp)
+        try:
+            yield Path(tmp)
+        except OSError as exc:
+            # writers (pyarrow, numpy, a write to the temporary name) raise a full disk without
+            # the published file's name, which the message must give (a user trial)
+            number = storage_errno(exc)
+            if exc.filename is None and number is not None:
+                raise OSError(number, os.strerror(number), str(p)) from exc
+            if str(exc.filename) == tmp:
+                exc.filename = str(p)
+            raise
         # mkstemp makes the file 0600; a published mask file must get the mode any new file
         # would get (others in the team read it).
         os.chmod(tmp, 0o666 & ~_umask())

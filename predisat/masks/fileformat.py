@@ -225,6 +225,21 @@ def mask_file_path(path: str | os.PathLike[str]) -> Path:
     return p / "masks.parquet" if p.is_dir() else p
 
 
+def _check_record(folder: Path, record: Path, masks: MaskSet) -> None:
+    """The folder's run record and its mask file name one run (``run_key``)."""
+    try:
+        key = json.loads(record.read_text(encoding="utf-8")).get("run_key")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise MaskFileError(f"{record}: not a readable run record ({exc}); rerun the same "
+                            "`predisat process` command to write it again") from None  # fmt: skip
+    own = masks.provenance.get("run_key")
+    if key and own and key != own:
+        raise MaskFileError(
+            f"{folder}: masks.parquet (run {own}) and provenance.json (run {key}) are of two "
+            "runs: a run stopped between them; rerun the same `predisat process` command"
+        )
+
+
 def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> MaskSet:
     """Read and validate a mask file (version 1, 2 or 3).
 
@@ -256,6 +271,14 @@ def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> Mas
         raise MaskFileError(
             f"{given}: a folder without masks.parquet; give a mask file or the output "
             "folder of a finished `predisat process` run"
+        )
+    record = given / "provenance.json" if given.is_dir() else None
+    if record is not None and not record.is_file():
+        raise MaskFileError(
+            f"{given}: masks.parquet without provenance.json: the `predisat process` run that "
+            "writes them did not finish (interrupted, or stopped by an error), so the masks may "
+            "be an earlier run's; rerun the same process command to finish it (or give the "
+            "mask file itself if you know it is the one you want)"
         )
     if not path.is_file():
         raise MaskFileError(
@@ -333,6 +356,8 @@ def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> Mas
         )
     except MaskError as exc:
         raise fail(str(exc)) from None
+    if record is not None:
+        _check_record(given, record, masks)
     # Arrow's pool keeps the file's buffers (4-6x the masks) for the rest of the run otherwise
     del table, arrays
     pa.default_memory_pool().release_unused()

@@ -113,6 +113,7 @@ from predisat.survey import Survey, check_survey_track
 from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
+from predisat.track.network import track_key
 
 __all__ = [
     "ASSUMED_STRETCH_M",
@@ -245,8 +246,28 @@ def _bad(fid: str, message: str, strict: bool, before: str = "") -> None:
     _report(f"bad frame {fid}: {message} - skipped{before}", quiet=False)
 
 
+def _withdraw_published(out: Location, run_key: str, opts: StorageOptions) -> None:
+    """Withdraw the folder's published masks unless they are this very run's: a rerun that is
+    stopped (Ctrl-C, a full disk) must not leave the previous run's masks looking finished (a
+    user trial: a corrected survey's rerun, interrupted, left the wrong one's masks, 0.34 %
+    false trust, read with exit 0). The record first, the masks after, as the merge writes
+    them the other way round."""
+    record = join(out, "provenance.json")
+    try:
+        published = json.loads(read_bytes(record, opts)).get("run_key")
+    except (OSError, ValueError, AttributeError):
+        published = None
+    if published == run_key:
+        return
+    for name in ("provenance.json", "masks.parquet", "bad_frames.csv"):
+        remove(join(out, name), opts)
+
+
 def _run_key(provenance: JsonDict) -> str:
-    keys = ("survey_hash", "params", "software_version", "code_fingerprint", "track")
+    # the track's geometry too, not only its name: a rerun on a corrected map with the same
+    # name resumed every chunk of the wrong one (a user trial: 0.0124 % false trust)
+    keys = ("survey_hash", "params", "software_version", "code_fingerprint", "track",
+            "track_key")  # fmt: skip
     keep = {k: provenance[k] for k in keys}
     return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -618,6 +639,7 @@ def _plan(
         "survey": str(survey.root),
         "survey_hash": survey_hash(survey),
         "track": str(getattr(track, "name", "")),
+        "track_key": track_key(track) if isinstance(track, TrackMap) else "",
         "params": params_dict,
         "reverse": bool(survey.reverse),
         # the height the masks hold for (docs/mask-format.md), and the rig's
@@ -1195,6 +1217,7 @@ def process_survey(
             "changed), which cannot be reused; give another output folder, or replace them "
             "(CLI: --replace)"
         )
+    _withdraw_published(out, plan.provenance["run_key"], opts)
     _remove_chunks(plan.chunk_dir, set(foreign), opts)
     timings["load"] = time.perf_counter() - t0
     pending, skipped = _pending(plan, strict, max_chunks)

@@ -141,6 +141,20 @@ def test_storage_errors_name_the_file_meant_and_the_fix() -> None:
     assert storage_error_text(ValueError("[errno 28]")) is None
 
 
+def test_a_writer_s_full_disk_without_a_name_names_the_file_meant(tmp_path: Path) -> None:
+    """A user trial: pyarrow's and the atomic writers' full-disk errors carried no file name,
+    and the message named none; the atomic path now gives its own."""
+
+    from predisat.atomic import storage_error_text
+
+    target = tmp_path / "masks.parquet"
+    with pytest.raises(OSError) as caught, atomic_path(target):
+        raise OSError("Error writing bytes to file. Detail: [errno 28] No space left on device")
+    assert caught.value.filename == str(target) and not target.exists()
+    assert f"(writing {target})" in (storage_error_text(caught.value) or "")
+    assert not list(tmp_path.iterdir())  # the temporary file is gone
+
+
 def test_an_output_folder_that_cannot_be_written_is_refused_before_any_work(
     tmp_path: Path,
 ) -> None:

@@ -320,6 +320,7 @@ def test_reads_the_output_folder_of_process(tmp_path):
     m = make_set()
     (tmp_path / "run").mkdir()
     write_masks(m, tmp_path / "run" / "masks.parquet")
+    (tmp_path / "run" / "provenance.json").write_text("{}")  # a finished run's record
     got = read_masks(tmp_path / "run")
     np.testing.assert_array_equal(got.mask_el_deg, m.mask_el_deg)
     (tmp_path / "empty").mkdir()
@@ -724,3 +725,20 @@ def test_sparse_positions_are_warned_about(tmp_path):
         warnings.simplefilter("error", MaskSpacingWarning)
         read_masks(write(10.0, 30, "survey.parquet"))
         read_masks(write(SPARSE_SPACING_M, 30, "edge.parquet"))
+
+
+def test_a_process_folder_needs_its_run_record(tmp_path):
+    """A stopped `predisat process` rerun leaves masks.parquet without provenance.json (or the
+    two of different runs); such a folder is refused, the mask file itself still reads."""
+    import dataclasses
+
+    m = dataclasses.replace(make_set(), provenance={"run_key": "aaaa"})
+    write_masks(m, tmp_path / "masks.parquet")
+    with pytest.raises(MaskFileError, match=r"without provenance\.json.*rerun the same"):
+        read_masks(tmp_path)
+    assert read_masks(tmp_path / "masks.parquet").n_pos == m.n_pos
+    (tmp_path / "provenance.json").write_text(json.dumps({"run_key": "bbbb"}))
+    with pytest.raises(MaskFileError, match=r"run aaaa\) and provenance.json \(run bbbb\)"):
+        read_masks(tmp_path)
+    (tmp_path / "provenance.json").write_text(json.dumps({"run_key": "aaaa"}))
+    assert read_masks(tmp_path).n_pos == m.n_pos

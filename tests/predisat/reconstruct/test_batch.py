@@ -1035,3 +1035,44 @@ def test_process_says_when_a_pair_of_cameras_is_calibrated_unlike(tmp_path) -> N
     assert "left and right cameras' calibrations differ" in line and "pinhole" in line
     wider = CameraModel.fisheye_from_fov(640, 480, 150.0)  # same model, 20 % longer focal
     assert len(camera_pair_warnings(survey(fish, wider))) == 1
+
+
+def test_a_stopped_rerun_withdraws_the_previous_masks(survey_dir: Path, tmp_path: Path) -> None:
+    """A user trial: a corrected survey's rerun, stopped after its first chunk, left the wrong
+    run's masks and record in the folder, read with exit 0 (0.34 % false trust). A rerun that
+    is not the published run withdraws them before any work; the same run's rerun keeps
+    them."""
+    from predisat.masks.fileformat import MaskFileError
+
+    out = tmp_path / "masks"
+    process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+    before = (out / "masks.parquet").read_bytes()
+    process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert (out / "masks.parquet").read_bytes() == before  # its own rerun: still published
+    other = PipelineParams(chunk_m=30.0, segmenter="blue", mount_doubt_deg=1.0)
+    with pytest.raises(RunStopped):
+        process_survey(survey_dir, out, other, progress=False, segmenter=blue_sky,
+                       max_chunks=1)  # fmt: skip
+    assert not (out / "masks.parquet").exists() and not (out / "provenance.json").exists()
+    with pytest.raises(MaskFileError, match=r"without masks\.parquet"):
+        read_masks(out)
+
+
+def test_a_track_changed_under_the_same_name_redoes_the_chunks(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    """A user trial: a corrected track map with the same name resumed every chunk of the run
+    on the wrong one (the run key held the map's name only)."""
+    from predisat.track.map import TrackMap, demo_track
+
+    out = tmp_path / "masks"
+    t = demo_track()
+    process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky, track=t)
+    lat, lon, h = t.position_at(np.arange(0.0, t.length_m, 5.0))
+    moved = TrackMap.from_latlon(lat + 0.5 / 111_200.0, lon, h, name=t.name)
+    res = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky,
+                         track=moved)  # fmt: skip
+    assert (res.chunks_done, res.chunks_skipped) == (3, 0)
+    again = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky,
+                           track=moved)  # fmt: skip
+    assert (again.chunks_done, again.chunks_skipped) == (0, 3)
