@@ -36,6 +36,7 @@ import hashlib
 import io
 import json
 import time
+import zipfile
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -83,6 +84,7 @@ __all__ = [
     "calibrate",
     "code_fingerprint",
     "demo_world",
+    "error_model_file",
     "figure",
     "hmi_rate_upper",
     "job_key",
@@ -94,6 +96,7 @@ __all__ = [
     "run_campaign",
     "run_job",
     "stanford",
+    "world_files",
 ]
 
 _REPO = Path(__file__).resolve().parents[1]
@@ -238,15 +241,56 @@ def _file_digest(paths: Sequence[Path]) -> str:
     return h.hexdigest()
 
 
+def _cached(cache: Path, stem: str, suffix: str) -> Path:
+    """``cache/<stem>-<code>.<suffix>``: a cache file of other code is never read back (a user
+    trial changed the calibration and the old model came back under the old name), and the
+    other code's files of the same stem are removed."""
+    key = _code_key()
+    path = cache / f"{stem}-{key}{suffix}"
+    for old in cache.glob(f"{stem}-*{suffix}") if cache.is_dir() else ():
+        if old != path:
+            old.unlink(missing_ok=True)
+    return path
+
+
+@functools.lru_cache(maxsize=1)
+def _code_key() -> str:
+    return code_fingerprint()[:12]
+
+
+def _readable(path: Path, read: Callable[[Path], Any]) -> Any:
+    """``read(path)``, or None after removing ``path`` when it does not read (a torn file: a
+    power cut after the rename; nothing is fsynced), so that it is built again."""
+    if not path.exists():
+        return None
+    try:
+        return read(path)
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        path.unlink(missing_ok=True)
+        return None
+
+
+def world_files(cache: Path, name: str) -> tuple[Path, Path]:
+    """The cache files of world ``name`` for this code: ``<name>_world-<code>.npz`` and
+    ``<name>_truth-<code>.npz``."""
+    return _cached(cache, f"{name}_world", ".npz"), _cached(cache, f"{name}_truth", ".npz")
+
+
+def error_model_file(cache: Path) -> Path:
+    """The cache file of the calibrated error model for this code, ``error_model-<code>.json``."""
+    return _cached(cache, "error_model", ".json")
+
+
 def calibrate(cache: Path) -> IntervalModel:
     """Learn the error model on :data:`CALIB_WORLD` (six runs, direct signals only), cached in
-    ``cache/error_model.json`` (read when present)."""
+    ``cache/error_model-<code>.json`` (read when present and readable)."""
     from locator.errorfit import sim_residuals
     from locator.intervals import fit_error_model
 
-    path = cache / "error_model.json"
-    if path.exists():
-        return read_error_model(path)
+    path = error_model_file(cache)
+    known = _readable(path, read_error_model)
+    if known is not None:
+        return known
     world = World.build(demo_track(), CALIB_WORLD.spec(), CALIB_WORLD.seed)
     eph, day = default_ephemeris(), default_window()[0]
     els, ress = [], []
@@ -281,21 +325,25 @@ def _masks_of(tm: TrueMasks, provenance: str) -> MaskSet:
 
 def load_world(spec: CampaignWorld, cache: Path) -> WorldData:
     """The world of ``spec`` and its true masks, built into ``cache`` on first use
-    (``<name>_world.npz``, ``<name>_truth.npz``) and read from there afterwards."""
+    (:func:`world_files`, keyed by the code) and read from there afterwards; a file that does
+    not read (torn) is built again."""
     from predisat.synth.truth import true_masks
 
-    wfile, mfile = cache / f"{spec.name}_world.npz", cache / f"{spec.name}_truth.npz"
+    wfile, mfile = world_files(cache, spec.name)
     track = demo_track()
-    if not wfile.exists():
+    world = _readable(wfile, lambda p: World.load(p, track))
+    if world is None:
         # built, saved, then read back: the same world whether this run built it or not
         cache.mkdir(parents=True, exist_ok=True)
         with atomic_path(wfile) as tmp:
             World.build(track, spec.spec(), spec.seed).save(tmp)
-    world = World.load(wfile, track)
-    if not mfile.exists():
+        world = World.load(wfile, track)
+        mfile.unlink(missing_ok=True)  # the truth of the world just built
+    tm = _readable(mfile, TrueMasks.load)
+    if tm is None:
         with atomic_path(mfile) as tmp:
             true_masks(world).save(tmp)
-    tm = TrueMasks.load(mfile)
+        tm = TrueMasks.load(mfile)
     masks = _masks_of(tm, f"true masks of world {spec.name}")
     return WorldData(spec.name, world, masks, None, _file_digest([wfile, mfile]))
 
@@ -520,6 +568,23 @@ def report(frames: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("config")
 
 
+def _job_done(path: Path) -> bool:
+    """A job file whose Parquet footer reads and holds rows; a torn one (a power cut after the
+    rename, nothing being fsynced) is removed to be redone (a user trial: every rerun stopped
+    on it)."""
+    if not path.exists():
+        return False
+    import pyarrow.parquet as pq
+
+    try:
+        if pq.read_metadata(path).num_rows > 0:
+            return True
+    except (OSError, ValueError):
+        pass
+    path.unlink(missing_ok=True)
+    return False
+
+
 def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     with atomic_path(path) as tmp:
         df.to_parquet(tmp)
@@ -564,7 +629,7 @@ def run_campaign(
     folder.mkdir(parents=True, exist_ok=True)
     paths = {j: folder / f"{j.world}_{j.run:04d}_{job_key(j, setup_digest, code)}.parquet"
              for j in jobs}  # fmt: skip
-    todo = [j for j in jobs if not paths[j].exists()]
+    todo = [j for j in jobs if not _job_done(paths[j])]
     say(f"{len(jobs)} jobs, {len(todo)} to do")
     # workers running other code would return other code's results under this code's keys
     with TaskRunner(scheduler or Scheduler.serial(), code_version=code_fingerprint) as runner:
@@ -649,5 +714,9 @@ def stanford(frames: pd.DataFrame, out: Path) -> list[Path]:
     for cfg, g in frames.groupby("config", sort=False):
         fig = stanford_diagram(g, title=f"Stanford diagram, rule {cfg} ({len(g):,} epochs)")
         paths.append(out / f"stanford_{cfg}.png")
-        fig.savefig(paths[-1], dpi=110)
+        with atomic_path(paths[-1]) as tmp:
+            fig.savefig(tmp, dpi=110)
+    for old in out.glob("stanford_*.png"):  # an earlier campaign's rules, not this one's
+        if old not in paths:
+            old.unlink(missing_ok=True)
     return paths

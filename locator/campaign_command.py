@@ -13,6 +13,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from predisat.cli.args import (
     add_command,
@@ -24,6 +25,9 @@ from predisat.cli.args import (
     scheduler_options,
 )
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+
+if TYPE_CHECKING:
+    from predisat.scheduler import Scheduler
 
 __all__ = ["CONFIG_NAMES", "WORLD_NAMES", "add_parser", "cmd_campaign"]
 
@@ -112,21 +116,6 @@ def _named_world(text: str) -> tuple[str, Path]:
 
 def cmd_campaign(args: argparse.Namespace) -> int:
     """Run ``locator campaign``; prints the summary per rule."""
-    import pandas as pd
-
-    from locator.campaign import (
-        WORLDS,
-        CampaignSetup,
-        calibrate,
-        demo_world,
-        figure,
-        jobs_for,
-        load_world,
-        pipeline_world,
-        rule_widths,
-        run_campaign,
-        stanford,
-    )
     from predisat.scheduler import Scheduler
 
     scheduler = Scheduler.parse(args.scheduler, args.workers)
@@ -146,7 +135,34 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             "a `predisat demo` folder or of a processed world; add --demo DIR or "
             "--pipeline-world NAME=DIR"
         )
+    from predisat.atomic import exclusive_folder
+
     out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    # two campaigns into one folder ran every job twice and mixed their figures (a user trial)
+    with exclusive_folder(out):
+        return _campaign(args, out, scheduler, extra)
+
+
+def _campaign(
+    args: argparse.Namespace, out: Path, scheduler: Scheduler, extra: list[tuple[str, Path]]
+) -> int:
+    import pandas as pd
+
+    from locator.campaign import (
+        WORLDS,
+        CampaignSetup,
+        calibrate,
+        demo_world,
+        figure,
+        jobs_for,
+        load_world,
+        pipeline_world,
+        rule_widths,
+        run_campaign,
+        stanford,
+    )
+
     cache: Path = args.cache or out / "cache"
     quiet = bool(getattr(args, "quiet", False))
 

@@ -41,7 +41,14 @@ from locator.balises.balisefile import BaliseList
 from locator.balises.campaign import capture_table, locate_with_odometry
 from locator.balises.capture import Q_LOCACC_MAX_M, CaptureConfig
 from locator.balises.placement import placement_check
-from locator.campaign import PROFILE_T_S, PROFILE_V_MPS, WorldData, calibrate, load_world
+from locator.campaign import (
+    PROFILE_T_S,
+    PROFILE_V_MPS,
+    WorldData,
+    calibrate,
+    error_model_file,
+    load_world,
+)
 from locator.campaign import WORLDS as CAMPAIGN_WORLDS
 from locator.fde import LocatorConfig
 from locator.odometry.confidence import OdometerAccuracy
@@ -97,7 +104,7 @@ _STATE: dict = {}
 
 def _init(cache: str) -> None:
     _STATE.update(cache=Path(cache), worlds={}, eph=default_ephemeris(),
-                  model=read_error_model(Path(cache) / "error_model.json"))  # fmt: skip
+                  model=read_error_model(error_model_file(Path(cache))))  # fmt: skip
 
 
 def _world(name: str) -> tuple[World, MaskSet, ReflectorIndex]:

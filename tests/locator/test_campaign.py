@@ -6,6 +6,7 @@ resume and scheduler tests is the serial uninterrupted run, compared byte for by
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,8 @@ from locator.campaign import (
     report,
     run_campaign,
     run_job,
+    stanford,
+    world_files,
 )
 from locator.campaign_command import CONFIG_NAMES, WORLD_NAMES
 from locator.cli import main
@@ -51,7 +54,7 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> CampaignSetup:
     campaign's world ``tiny``, and a fixed error model."""
     cache = tmp_path_factory.mktemp("cache")
     spec = WorldSpec((Stretch("rock_walls", 1000.0, 1400.0, "left"),), catenary=False, hills=False)
-    World.build(demo_track(), spec, 3).save(cache / "tiny_world.npz")
+    World.build(demo_track(), spec, 3).save(world_files(cache, "tiny")[0])
     data = load_world(CampaignWorld("tiny", 1000.0, 1400.0, 3), cache)
     model = IntervalModel(ErrorModel(2.1, 2.0), 2.0)
     return CampaignSetup(model, _RULES, 1e-12, {"tiny": data})
@@ -142,6 +145,42 @@ def test_resume_after_a_kill_gives_the_same_bytes(
     assert result.ran == 1 and again == [j for j in jobs if j != done[0]]
     assert first.stat().st_mtime_ns == stamp  # the finished job was not redone
     _same_bytes(serial, tmp_path)
+
+
+def test_a_torn_job_file_is_redone(setup: CampaignSetup, serial: Path, tmp_path: Path) -> None:
+    """A user trial: a job file emptied or cut short (a power cut; nothing is fsynced) was taken
+    as done, and every rerun stopped on it."""
+    shutil.copytree(serial / "jobs", tmp_path / "jobs")
+    files = sorted((tmp_path / "jobs").iterdir())
+    files[0].write_bytes(b"")
+    files[1].write_bytes(files[1].read_bytes()[:200])
+    result = run_campaign(tmp_path, setup, jobs_for(["tiny"], 2), Scheduler.serial())
+    assert result.ran == 2
+    _same_bytes(serial, tmp_path)
+
+
+def test_cache_files_of_other_code_or_torn_are_built_again(tmp_path: Path) -> None:
+    """A user trial changed the calibration and the cache gave back the old model under its old
+    name; a torn world file gave a traceback naming no file."""
+    spec = CampaignWorld("tiny", 1000.0, 1800.0, 3)
+    first = load_world(spec, tmp_path)
+    wfile, mfile = world_files(tmp_path, "tiny")
+    assert wfile.exists() and mfile.exists() and first.digest
+    stale = tmp_path / "tiny_world-000000000000.npz"
+    stale.write_bytes(b"other code's world")
+    wfile.write_bytes(wfile.read_bytes()[:100])  # torn
+    again = load_world(spec, tmp_path)
+    assert again.digest == first.digest  # built again, the same bytes
+    assert not stale.exists()  # another code's file of the same stem is removed
+
+
+def test_figures_of_rules_no_longer_run_are_removed(serial: Path, tmp_path: Path) -> None:
+    frames = pd.read_parquet(serial / "epochs.parquet")
+    (tmp_path / "stanford_masks_k2.png").write_bytes(b"an earlier campaign's")
+    paths = stanford(frames, tmp_path)
+    assert sorted(p.name for p in tmp_path.glob("stanford_*.png")) == sorted(
+        f"stanford_{r}.png" for r in _RULES
+    ) == sorted(p.name for p in paths)
 
 
 def test_key_changes_with_setup_and_code(setup: CampaignSetup) -> None:
