@@ -278,6 +278,10 @@ def capture_balises(
             # the odometer reading when the crossing fix's estimate, carried back, was at b
             o_pass = orientation * (odo[kc] - (s[kc] - b[rows]))
             t_pass = np.minimum(np.interp(o_pass, orientation * odo, t), t[kc])
+            # a passage the odometer puts well before the earlier fix was not made between the
+            # two: the estimate caught up with a lagging odometer (a radar at 0), and the
+            # telegram would be a late position report (a user trial: 72 s late, counted)
+            got &= t_pass >= t[kp] - config.max_gap_s - 1e-9
         else:
             t_pass = t[kp] + (-up / (uc - up)) * (t[kc] - t[kp])
         t_emit = t[kc].copy()
@@ -410,6 +414,7 @@ def _capture_after_void(
         got &= window
     o_pass = orientation * (odo[kc] - (s[kc] - b[rows]))
     t_pass = np.minimum(np.interp(o_pass, orientation * odo, t), t[kc])
+    got &= t_pass >= t[kc - 1] - config.max_gap_s - 1e-9  # not a late report (pair rule)
     r = rows[got]
     out["captured"][r] = True
     out["after_void"][r] = True

@@ -359,3 +359,22 @@ def test_an_odometer_running_back_is_refused():
     cap = capture_balises(t, est, lo, hi, balises([55.0]), CaptureConfig.gaderos(25.0),
                           orientation=1, odo_m=10.0 * t)  # fmt: skip
     assert cap["captured"].all()
+
+
+def test_a_passage_the_odometer_puts_long_before_the_crossing_is_a_late_report():
+    """A user trial: the radar read 0 and the estimate lagged; a satellite claim 70 s later
+    moved it past the balise, and the telegram, 72 s late, was counted as a capture. At 20 m/s
+    the odometer stalls from 2 s; the balise at 60 m is truly passed at 3 s; the estimate
+    crosses it only with the correction at 41 s, and the odometer puts the passage at 2 s."""
+    t, truth, _est, _lo, _hi = fixes(1.0, 20.0, 45.0)
+    odo = np.minimum(truth, 40.0)  # stalled at 40 m from t = 2 s
+    est = np.where(t < 41.0, odo, truth)
+    bl = balises([60.0])
+    cap = capture_balises(t, est, est - 20, est + 20, bl, CaptureConfig(25.0), orientation=1,
+                          odo_m=odo)  # fmt: skip
+    assert not cap["captured"].iloc[0]
+    # the same correction 1 s after the stall is a passage between the fixes: captured
+    est2 = np.where(t < 3.0, odo, truth)
+    cap2 = capture_balises(t, est2, est2 - 20, est2 + 20, bl, CaptureConfig(25.0),
+                           orientation=1, odo_m=odo)  # fmt: skip
+    assert cap2["captured"].iloc[0]
