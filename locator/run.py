@@ -169,14 +169,18 @@ class RunConfig:
         trial: a stuck direction channel put the fused interval 1.4 km off for the rest of the
         run, 165-177 of 381 epochs without any flag). 0: the conflict alone is flagged.
     odometry_recover_s : float or None
-        A suspicion that lasts this long (s, from the conflict that began it) sets the odometer
-        aside for the rest of the run: the prediction becomes the motion bound from the last
-        anchors (``odometer.max_speed_mps``, true whatever the odometer did), and the suspicion
-        clears as above when fixes agree with it (a lasting fault: a stuck direction channel, a
-        wrong start position, a restart from a stored position the train has left, left the run
-        without claims to its end in a user trial). The odometer is not taken back: a trial
-        that did so gave a stuck direction channel's prediction back its fault, the trust
-        decisions rested on it, and a claim missed the train before the next conflict showed.
+        A suspicion that lasts this long (s, from the conflict that began it), with conflicts
+        in both halves of the last such span, sets the odometer aside for the rest of the run:
+        the prediction becomes the motion bound from the last anchors
+        (``odometer.max_speed_mps``, true whatever the odometer did), and the suspicion clears
+        as above when fixes agree with it (a lasting fault: a stuck direction channel, a wrong
+        start position, a restart from a stored position the train has left, left the run
+        without claims to its end in a user trial). Isolated false alarms do not: a user
+        trial's healthy odometer was set aside after two alarms 8 s apart, and under masks the
+        motion bound grew past anything they trust; the run claimed nothing more. The odometer
+        is not taken back: a trial that did so gave a stuck direction channel's prediction back
+        its fault, the trust decisions rested on it, and a claim missed the train before the
+        next conflict showed.
         Column ``odometer_used``. None: never.
     sky_check_m : float or None
         Where the epoch makes no claim (too few trusted satellites: the prediction may have
@@ -454,6 +458,7 @@ def run_locator(
         if status == _CONFLICT and cfg.odometry_reconfirm:
             if not state.suspect:
                 state.suspect_since_s = float(gps[k])
+            state.conflicts_s.append(float(gps[k]))
             state.suspect, state.agreed = True, 0
         elif state.suspect:
             if fix is not None and row["claim"]:  # a fix that agrees with the prediction
@@ -592,7 +597,14 @@ def _recover(state: _Tracker, cfg: RunConfig, gps_s: float, has_odometer: bool) 
     if not has_odometer or cfg.odometry_recover_s is None:
         return
     if state.suspect and state.odometer_on:
-        if gps_s - state.suspect_since_s >= cfg.odometry_recover_s:
+        # a conflict that lasts, not one or two isolated false alarms followed by epochs without
+        # a claim (under masks, a lost run: a user trial's healthy odometer was set aside
+        # after two alarms 8 s apart, and the run claimed nothing in its last 215 epochs)
+        wait = cfg.odometry_recover_s
+        c = [x for x in state.conflicts_s if x >= gps_s - wait]
+        state.conflicts_s[:] = c  # older ones no longer count
+        lasting = any(x < gps_s - 0.5 * wait for x in c) and any(x >= gps_s - 0.5 * wait for x in c)
+        if gps_s - state.suspect_since_s >= wait and lasting:
             state.odometer_on = False
             state.recoveries += 1
 
@@ -632,6 +644,9 @@ class _Tracker:
     odometer_on: bool = True  # False: set aside (RunConfig.odometry_recover_s)
     inverted: bool = False  # the last prediction's bounds crossed (an odometer fault)
     suspect_since_s: float = float("nan")  # gps_s of the conflict that began the suspicion
+    # gps_s of the conflicts of the last odometry_recover_s: a lasting conflict has some in
+    # both halves of that wait
+    conflicts_s: list[float] = field(default_factory=list)
     recoveries: int = 0
     unique: bool = True  # located where the track is alone since the start (RunConfig.alias_m)
 
