@@ -158,9 +158,13 @@ def utc_datetime64_to_gps_s(t_utc: ArrayLike) -> NDArray:
 
 
 def gps_s_to_datetime64(gps_s: ArrayLike) -> NDArray:
-    """GPS-scale calendar dates (``datetime64[ns]``) of ``gps_s`` values (no leap seconds)."""
-    ns = np.round(np.asarray(gps_s, float) * 1e9).astype(np.int64)
-    return GPS_EPOCH + ns.astype("timedelta64[ns]")
+    """GPS-scale calendar dates (``datetime64[ns]``) of ``gps_s`` values (no leap seconds);
+    NaT where ``gps_s`` is NaN (numpy warned on casting it)."""
+    g = np.asarray(gps_s, float)
+    ok = np.isfinite(g)
+    ns = np.round(np.where(ok, g, 0.0) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+    out = np.where(ok, GPS_EPOCH + ns, np.datetime64("NaT", "ns"))
+    return out[()] if out.ndim == 0 else out  # a scalar for a scalar, as before
 
 
 def gps_s_to_text(gps_s: float) -> str:
