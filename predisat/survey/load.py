@@ -268,8 +268,11 @@ def _read_yaml(root: Location, opts: StorageOptions) -> JsonDict:
     if isinstance(root, Path) and not root.is_dir():
         raise SurveyError(root, [SurveyProblem("not a folder; give the survey folder")])
     if isinstance(yaml_path, Path) and not yaml_path.is_file():
+        # `predisat synth --out DIR` writes the survey into DIR/survey (a user trial gave DIR)
+        inner = sorted(p.parent for p in root.glob("*/survey.yaml"))
+        hint = f": the survey is in {inner[0]}; give that folder" if inner else ""
         raise SurveyError(
-            root, [SurveyProblem("survey.yaml is missing; see docs/survey-format.md")]
+            root, [SurveyProblem(f"survey.yaml is missing{hint}; see docs/survey-format.md")]
         )
     try:
         if isinstance(yaml_path, Path):

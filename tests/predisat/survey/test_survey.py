@@ -667,3 +667,14 @@ def test_a_manifest_as_a_spreadsheet_saves_it(tmp_path: Path) -> None:
     (root / "manifest.csv").write_text("\n".join([head, *lines[1:]]) + "\n")
     (p,) = _problems(root)
     assert "rename 'Roll_deg' to 'roll_deg', 'Pitch_deg' to 'pitch_deg'" in p.message
+
+
+def test_the_folder_above_a_survey_points_to_it(tmp_path: Path) -> None:
+    """A user trial gave `predisat synth`'s output folder, which holds the survey in its
+    `survey/`; the message only said survey.yaml was missing."""
+    _write(tmp_path / "synth" / "survey", n=1)
+    (p,) = _problems(tmp_path / "synth")
+    assert f"the survey is in {tmp_path / 'synth' / 'survey'}; give that folder" in p.message
+    (tmp_path / "empty").mkdir()
+    (q,) = _problems(tmp_path / "empty")
+    assert q.message == "survey.yaml is missing; see docs/survey-format.md"
