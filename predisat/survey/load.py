@@ -920,7 +920,8 @@ def _read_manifest(
         if r.frame_id in first_id:
             r.bad(
                 f"duplicate frame_id (first at manifest line {first_id[r.frame_id]}); "
-                "make ids unique"
+                "make ids unique (until then both rows are left out: a bad frame is known by "
+                "its id)"
             )
         first_id.setdefault(r.frame_id, r.row)
         key = str(PurePosixPath(r.image))

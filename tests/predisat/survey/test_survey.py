@@ -303,7 +303,8 @@ def test_time_going_backwards_per_side(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("column", "value", "match"),
     [
-        ("frame_id", "left_000000", "duplicate frame_id (first at manifest line 2)"),
+        ("frame_id", "left_000000",
+         "duplicate frame_id (first at manifest line 2); make ids unique (until then both rows"),
         ("image", "images/left_000000.jpg", "also listed at manifest line 2"),
         ("gps_s", repr(GPS0), "same side and gps_s as frame 'left_000000'"),
     ],
