@@ -97,6 +97,7 @@ class RunFlag(IntFlag):
     ODOMETRY_SUSPECT = 1 << 26  # a conflict earlier, not yet cleared by agreeing fixes: no claim
     TRACK_ALIAS = 1 << 27  # the track passes beside the claim elsewhere, and nothing rules it out
     OFF_TRACK = 1 << 28  # the trusted satellites' 3-D fix lies beside the map beyond its doubt
+    OFF_TRACK_UNCHECKED = 1 << 29  # no 3-D fix to check that (fewer than 5 consistent): stated
 
 
 ERROR_MODEL_CAVEATS = {
@@ -208,8 +209,12 @@ class RunConfig:
         track (a branch the map lacks, another track), or a trusted signal is reflected. A
         user trial: a train that took a branch missing from the map got 10 claims while 5-42 m
         beside it, unflagged (the 1-D fault detection caught only larger offsets). 5: a
-        Gaussian false alarm of 6e-7 per epoch. Column ``off_track_m`` (the fix's offset, NaN
-        where not checked). None: no check.
+        Gaussian false alarm of 6e-7 per epoch. The 3-D fix has its own fault detection and
+        exclusion (a chi-square test at ``locator.p_false_alarm``, the worst satellite left
+        out while five remain): a satellite the 1-D fix excluded voided a review's correct
+        claims. Without five consistent satellites the claim stands, flagged
+        ``OFF_TRACK_UNCHECKED``. Column ``off_track_m`` (the fix's offset, NaN where not
+        checked). None: no check.
     fusion : bool
         Intersect claimed intervals with the odometry prediction (the next anchor); False
         anchors on the claimed interval alone.
@@ -320,6 +325,7 @@ _HEADING_FAIL_FLAGS = int(FixFlag.HEADING_FAIL | FixFlag.NO_SAFETY_CLAIM)
 _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _ALIAS_FLAGS = int(RunFlag.TRACK_ALIAS | FixFlag.NO_SAFETY_CLAIM)
 _OFF_TRACK_FLAGS = int(RunFlag.OFF_TRACK | FixFlag.NO_SAFETY_CLAIM)
+_OFF_TRACK_UNCHECKED = int(RunFlag.OFF_TRACK_UNCHECKED)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
 _NO_STRETCH_FLAGS = int(RunFlag.NO_STRETCH_CLAIM | FixFlag.NO_SAFETY_CLAIM)
 _CAVEAT_FLAGS = {"forced": int(RunFlag.FORCED_ERROR_MODEL),
@@ -532,44 +538,72 @@ def _off_track_check(
 ) -> None:
     """Void a claim whose trusted satellites' 3-D fix lies beside the map beyond the map's
     lateral doubt and ``off_track_k_sigma`` of its cross-track sigma
-    (:attr:`RunConfig.off_track_k_sigma`); the offset goes in ``row["off_track_m"]``."""
-    if len(idx) < 5:
+    (:attr:`RunConfig.off_track_k_sigma`); the offset goes in ``row["off_track_m"]``. Where
+    no such fix can be made, ``OFF_TRACK_UNCHECKED`` says so (the claim stands)."""
+    got = _off_track_m(path, cfg, data, el, idx, float(row["chainage_m"]))
+    if got is None:
+        flags = int(row["flags"]) | _OFF_TRACK_UNCHECKED
+        row.update(flags=flags, flag_names=flag_names(flags))
         return
+    off, limit = got
+    row["off_track_m"] = off
+    if off > limit:
+        flags = int(row["flags"]) | _OFF_TRACK_FLAGS
+        row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+
+
+def _off_track_m(
+    path: AntennaPath, cfg: RunConfig, data: EpochData, el: NDArray, idx: NDArray, near_m: float
+) -> tuple[float, float] | None:
+    """(offset beside the map, limit) of the 3-D fix of the satellites ``idx``, m, after the
+    fault detection and exclusion of that fix (a satellite the 1-D fix had excluded voided a
+    review's correct claims); None without five consistent satellites, a fix or a foot point
+    inside the map."""
+    from scipy.stats import chi2
+
     sigma = np.asarray(cfg.locator.model.error.sigma_m(el[idx]), float)
     if data.extra_sigma_m is not None:
         sigma = np.hypot(sigma, data.extra_sigma_m[idx])
-    sat, rho = data.sat_ecef_m[idx], data.pseudorange_m[idx]
-    x = np.append(path.ecef_at(float(row["chainage_m"])), 0.0)
-    w = 1.0 / sigma
-    for _ in range(10):
-        d = sat - x[:3]
-        r = np.linalg.norm(d, axis=1)
-        a = np.column_stack([-d / r[:, None], np.ones(len(r))])
-        step = np.linalg.lstsq(a * w[:, None], (rho - r - x[3]) * w, rcond=None)[0]
-        x = x + step
-        if np.linalg.norm(step[:3]) < 1e-3:
+    sat, rho, w = data.sat_ecef_m[idx], data.pseudorange_m[idx], 1.0 / sigma
+    keep = np.ones(len(idx), bool)
+    while keep.sum() >= 5:
+        x = np.append(path.ecef_at(near_m), 0.0)
+        for _ in range(10):
+            d = sat[keep] - x[:3]
+            r = np.linalg.norm(d, axis=1)
+            a = np.column_stack([-d / r[:, None], np.ones(len(r))]) * w[keep, None]
+            step = np.linalg.lstsq(a, (rho[keep] - r - x[3]) * w[keep], rcond=None)[0]
+            x = x + step
+            if np.linalg.norm(step[:3]) < 1e-3:
+                break
+        else:
+            return None
+        res = (rho[keep] - np.linalg.norm(sat[keep] - x[:3], axis=1) - x[3]) * w[keep]
+        dof = int(keep.sum()) - 4
+        if float(res @ res) <= chi2.isf(cfg.locator.p_false_alarm, dof):
             break
+        if keep.sum() == 5:
+            return None  # a fault it cannot isolate
+        keep[np.flatnonzero(keep)[int(np.argmax(np.abs(res)))]] = False
     else:
-        return
+        return None
     try:
-        cov = np.linalg.inv((a * w[:, None]).T @ (a * w[:, None]))[:3, :3]
+        cov = np.linalg.inv(a.T @ a)[:3, :3]
     except np.linalg.LinAlgError:
-        return
+        return None
     lat, lon, h = ecef_to_geodetic(x[:3])
     pr = path.track.project(lat, lon, h)
     if bool(pr.clamped):
-        return  # past an end: TRACK_END's business
+        return None  # past an end: TRACK_END's business
     rot = enu_rotation(lat, lon)
     c_en = (rot @ cov @ rot.T)[:2, :2]
     hd = math.radians(float(path.track.heading_at(float(pr.chainage_m))))
     n = np.array([math.cos(hd), -math.sin(hd)])  # level, across the track
     sigma_ct = math.sqrt(max(float(n @ c_en @ n), 0.0))
-    off = abs(float(pr.offset_m))
-    row["off_track_m"] = off
     assert cfg.off_track_k_sigma is not None
-    if off > cfg.locator.map_doubt_lateral_m + cfg.off_track_k_sigma * sigma_ct:
-        flags = int(row["flags"]) | _OFF_TRACK_FLAGS
-        row.update(flags=flags, flag_names=flag_names(flags), claim=False)
+    return abs(float(pr.offset_m)), cfg.locator.map_doubt_lateral_m + (
+        cfg.off_track_k_sigma * sigma_ct
+    )
 
 
 def _alias_check(

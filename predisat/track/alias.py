@@ -10,8 +10,9 @@ away, with the heading check passing (``docs/locator.md``, "Track aliases").
 :class:`TrackAliases` lists, for every sample of the track, the chainages of the other
 stretches within ``near_m`` horizontally (heights left out: a fix's height is its worst axis,
 and a spiral's turns pass over each other). A stretch is another one when the chainage between
-the two places is at least twice their distance and at least ``near_m``; a curve's own
-neighbours (chord about the arc) are not aliases.
+the two places is at least twice their distance (and four sampling steps); a curve's own
+neighbours (chord about the arc) are not aliases, a circle's points only after about 3.8
+radii of arc.
 """
 
 from __future__ import annotations
@@ -80,7 +81,10 @@ class TrackAliases:
             i, j = pairs[:, 0], pairs[:, 1]
             d = np.linalg.norm(xy[i] - xy[j], axis=1)
             gap = np.abs(s[i] - s[j])
-            keep = (gap >= 2.0 * d) & (gap >= near_m)
+            # no floor of near_m: a switchback's apex (legs metres apart, chainages tens of
+            # metres) was left out, and a start on the wrong leg there claimed 40 of 40 epochs
+            # off the train (a review); four steps keep a sample's own neighbours out
+            keep = (gap >= 2.0 * d) & (gap >= 4.0 * step_m)
             i, j, d = i[keep], j[keep], d[keep]
         else:
             i = j = np.zeros(0, np.intp)

@@ -630,3 +630,22 @@ def test_a_train_beside_the_map_gets_no_claim():
     assert len(off) >= 15 and np.all(np.abs(off - 15.0) < 5.0)
     with pytest.raises(ValueError, match="off_track_k_sigma"):
         RunConfig(MODEL, off_track_k_sigma=0.0)
+
+
+def test_a_satellite_the_fix_excludes_does_not_put_the_train_off_the_track():
+    """A review: one satellite biased 40 m, excluded by the 1-D fault detection, moved the 3-D
+    fix off the map and voided correct claims; the 3-D fix now excludes it too. With four
+    trusted satellites no 3-D fix checks the claim, and the flag says so."""
+    p = straight_path()
+    truth = truth_run(n=20)
+    for sat in range(len(AZ)):
+        bias = np.zeros((len(truth), len(AZ)))
+        bias[:, sat] = 40.0
+        ep = run_locator(p, FakeSource(p, truth, bias_m=bias), start_chainage_m=truth[0],
+                         config=RunConfig(MODEL, trust="none"))  # fmt: skip
+        assert not ep["flag_names"].str.contains(r"OFF_TRACK\b").any(), sat
+    few = run_locator(p, FakeSource(p, truth), start_chainage_m=truth[0],
+                      config=RunConfig(MODEL, trust="cutoff", cutoff_deg=36.0))  # fmt: skip
+    claimed = few[few["claim"]]
+    assert len(claimed) and (claimed["n_used"] < 5).all()
+    assert claimed["flag_names"].str.contains("OFF_TRACK_UNCHECKED").all()

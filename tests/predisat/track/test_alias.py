@@ -68,3 +68,15 @@ def test_a_prediction_rules_the_other_leg_out_only_when_it_misses_it() -> None:
 def test_guards(near_m: float, step_m: float, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         TrackAliases.of(_hairpin(), near_m=near_m, step_m=step_m)
+
+
+def test_the_apex_of_a_switchback_is_an_alias_of_the_other_leg() -> None:
+    """A review: the legs of a V (10 deg apart) are metres apart near the apex, where the
+    chainage between two places is only tens of metres; those places were left out."""
+    s = np.arange(0.0, 500.0 + 1e-9, 2.0)
+    a = np.radians(10.0)
+    leg2 = np.stack([500.0 - s[1:] * np.cos(a), s[1:] * np.sin(a)], -1)
+    xy = np.concatenate([np.stack([s, 0 * s], -1), leg2])
+    found = TrackAliases.of(_track(np.column_stack([xy, np.zeros(len(xy))])))
+    near = found.within(485.0, 485.0)  # 15 m before the apex: the other leg 15 m past it
+    assert near.size and near.min() <= 515.0 <= near.max()
