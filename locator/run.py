@@ -273,8 +273,9 @@ class RunConfig:
             )
         if self.off_track_k_sigma is not None and not self.off_track_k_sigma > 0:
             raise ValueError(f"off_track_k_sigma must be > 0 or None, got {self.off_track_k_sigma}")
-        if self.alias_m is not None and not self.alias_m > 0:
-            raise ValueError(f"alias_m must be > 0 m or None, got {self.alias_m}")
+        if self.alias_m is not None and not self.alias_m >= 20.0:
+            raise ValueError(f"alias_m must be >= 20 m (four 5 m samples of the track) or None, "
+                             f"got {self.alias_m}")  # fmt: skip
         if self.sky_check_m is not None and not self.sky_check_m > 0:
             raise ValueError(f"sky_check_m must be > 0 m or None, got {self.sky_check_m}")
         if self.odometry_recover_s is not None and not self.odometry_recover_s > 0:

@@ -80,7 +80,12 @@ from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
 from predisat.masks.antenna import check_antenna_height
-from predisat.masks.fileformat import MaskFileWarning, mask_file_path, read_masks
+from predisat.masks.fileformat import (
+    MaskFileWarning,
+    mask_file_path,
+    read_masks,
+    unfinished_run_error,
+)
 from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.merge import merged_tracks_note
@@ -90,6 +95,7 @@ from predisat.storage import (
     Location,
     StorageOptions,
     absolute,
+    exists,
     input_path,
     is_remote,
     join,
@@ -689,7 +695,9 @@ def _load_masks(
         else:
             # a URL: a mask file (.parquet), else the output folder of `predisat process`
             if not name_of(loc).endswith(".parquet"):
-                loc = join(loc, "masks.parquet")
+                folder, loc = loc, join(loc, "masks.parquet")
+                if exists(loc, opts) and not exists(join(folder, "provenance.json"), opts):
+                    raise unfinished_run_error(folder)
             with input_path(loc, opts) as local_file:
                 mask_set, label = read_masks(local_file), str(loc)
     notes = []

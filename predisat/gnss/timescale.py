@@ -140,7 +140,8 @@ def gps_minus_utc_s(utc_s: ArrayLike) -> NDArray:
 def gps_minus_utc_at_gps_s(gps_s: ArrayLike) -> NDArray:
     """GPST - UTC in seconds at instants given in ``gps_s``, shape as ``gps_s``.
 
-    An inserted leap second (UTC 23:59:60) already counts the new offset.
+    During an inserted leap second (UTC 23:59:60) it is still the old offset: that second and
+    the next map onto the same ``datetime64`` (:func:`gps_s_to_utc_text` writes ``23:59:60``).
     """
     idx = np.searchsorted(_LEAP_GPS_S, np.asarray(gps_s, float), side="right")
     return np.concatenate([[0.0], _LEAP_N])[idx]

@@ -55,6 +55,7 @@ __all__ = [
     "to_pvgis_horizon",
     "to_rtklib_mask",
     "to_urbannav_csv",
+    "unfinished_run_error",
     "write_mask_table",
     "write_masks",
 ]
@@ -220,9 +221,27 @@ def _version_for(masks: MaskSet) -> int:
 
 def mask_file_path(path: str | os.PathLike[str]) -> Path:
     """``path`` itself, or ``path / "masks.parquet"`` when it is a folder (the output folder of
-    ``predisat process``)."""
+    ``predisat process``), which must then hold its run's record (``provenance.json``: else
+    the run did not finish and the masks may be an earlier run's; :class:`MaskFileError`)."""
     p = Path(path)
-    return p / "masks.parquet" if p.is_dir() else p
+    if not p.is_dir():
+        return p
+    if (p / "masks.parquet").is_file() and not (p / "provenance.json").is_file():
+        raise unfinished_run_error(p)
+    return p / "masks.parquet"
+
+
+def unfinished_run_error(folder: object) -> MaskFileError:
+    """The error for a process folder whose masks have no run record (local or a URL)."""
+    return MaskFileError(_NO_RECORD.format(folder=folder))
+
+
+_NO_RECORD = (
+    "{folder}: masks.parquet without provenance.json: the `predisat process` run that writes "
+    "them did not finish (interrupted, or stopped by an error), so the masks may be an "
+    "earlier run's; rerun the same process command to finish it (or give the mask file "
+    "itself if you know it is the one you want)"
+)
 
 
 def _check_record(folder: Path, record: Path, masks: MaskSet) -> None:
@@ -266,20 +285,13 @@ def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> Mas
         Naming the file, the column and the first bad row, and what would fix it.
     """
     given = Path(path)
-    path = mask_file_path(given)
+    path = mask_file_path(given)  # a folder without its run's record: refused there
     if given.is_dir() and not path.is_file():
         raise MaskFileError(
             f"{given}: a folder without masks.parquet; give a mask file or the output "
             "folder of a finished `predisat process` run"
         )
     record = given / "provenance.json" if given.is_dir() else None
-    if record is not None and not record.is_file():
-        raise MaskFileError(
-            f"{given}: masks.parquet without provenance.json: the `predisat process` run that "
-            "writes them did not finish (interrupted, or stopped by an error), so the masks may "
-            "be an earlier run's; rerun the same process command to finish it (or give the "
-            "mask file itself if you know it is the one you want)"
-        )
     if not path.is_file():
         raise MaskFileError(
             f"{path}: no such mask file; give a mask file (written by `predisat process` "

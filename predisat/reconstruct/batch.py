@@ -1261,15 +1261,18 @@ def process_survey(
         raise RunStopped(f"stopped after {len(pending)} chunk(s) (max_chunks)")
 
     t3 = time.perf_counter()
+    # the run's record withdrawn before the merge: margins and terrain, applied there, are not
+    # in the run key, and a merge stopped with other margins left the old masks and record
+    # looking finished (a review)
+    remove(join(out, "provenance.json"), opts)
     merged, final_prov = _merge(plan, {c[0] for c in pending}, bad, margin_table, dem,
                                 p.reconstruction.antenna_height_m, pinned)  # fmt: skip
     for line in source_report(merged, track=plan.track):
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
     masks_path = join(out, "masks.parquet")
-    # the run's record withdrawn first, written last: a full disk between left the new mask
-    # file beside the previous run's provenance.json (a user trial)
-    remove(join(out, "provenance.json"), opts)
+    # the record (withdrawn above) written last: a full disk between left the new mask file
+    # beside the previous run's provenance.json (a user trial)
     if isinstance(masks_path, Path):
         write_masks(merged, masks_path)
     else:

@@ -234,3 +234,25 @@ def test_a_run_that_fails_while_writing_leaves_the_run_before_whole(
     after = _files(out)
     assert "counts.parquet" not in after and "report.html" in after
     assert after["summary.csv"] != before["summary.csv"]
+
+
+def test_a_process_folder_at_a_url_needs_its_run_record(tmp_path: Path) -> None:
+    """A review: a URL folder's masks were read without the run record a local folder needs
+    (a stopped rerun leaves the previous run's masks without it)."""
+    from predisat.availability.run import _load_masks
+    from predisat.masks.fileformat import MaskFileError
+
+    t = demo_track()
+    ch = np.arange(3000.0, 3100.0, 10.0)
+    lat, lon, h = t.position_at(ch)
+    m = MaskSet.from_arrays(ch, lat, lon, h, t.heading_at(ch), np.full((ch.size, 72), 20.0))
+    write_masks(m, tmp_path / "masks.parquet")
+    root = f"availability-record-{uuid.uuid4().hex[:8]}"
+    MEMORY.put_file(str(tmp_path / "masks.parquet"), f"{root}/masks.parquet")
+    try:
+        with pytest.raises(MaskFileError, match=r"without provenance\.json"):
+            _load_masks(f"memory://{root}")
+        MEMORY.pipe(f"{root}/provenance.json", b"{}")
+        assert _load_masks(f"memory://{root}")[0].n_pos == ch.size
+    finally:
+        MEMORY.rm(root, recursive=True)

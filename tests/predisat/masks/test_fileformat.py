@@ -742,3 +742,15 @@ def test_a_process_folder_needs_its_run_record(tmp_path):
         read_masks(tmp_path)
     (tmp_path / "provenance.json").write_text(json.dumps({"run_key": "aaaa"}))
     assert read_masks(tmp_path).n_pos == m.n_pos
+
+
+def test_every_way_to_a_process_folder_needs_its_run_record(tmp_path):
+    """A review: `predisat export` and `evaluate` took the folder's file through
+    mask_file_path, past the record check of read_masks."""
+    from predisat.masks.fileformat import mask_file_path
+
+    write_masks(make_set(), tmp_path / "masks.parquet")
+    with pytest.raises(MaskFileError, match=r"without provenance\.json"):
+        mask_file_path(tmp_path)
+    (tmp_path / "provenance.json").write_text("{}")
+    assert mask_file_path(tmp_path) == tmp_path / "masks.parquet"
