@@ -233,6 +233,7 @@ def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture
         assert cli.main(["export", str(src), "--format", fmt, "--out", str(out), *extra]) == 0
         assert out.read_bytes() == ref.read_bytes()
     bare = tmp_path / "bare.txt"
+    (tmp_path / "provenance.json").write_text("{}")  # a finished process folder's record
     assert cli.main(["export", str(tmp_path), "--format", "rtklib", "--out", str(bare),
                      "--chainage", str(ch), "--bare"]) == 0  # fmt: skip
     assert bare.read_bytes() == maskio.to_rtklib_mask(
