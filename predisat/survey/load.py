@@ -267,7 +267,7 @@ def _read_yaml(root: Location, opts: StorageOptions) -> JsonDict:
     yaml_path = join(root, "survey.yaml")
     if isinstance(root, Path) and not root.is_dir():
         raise SurveyError(root, [SurveyProblem("not a folder; give the survey folder")])
-    if isinstance(yaml_path, Path) and not yaml_path.is_file():
+    if isinstance(root, Path) and isinstance(yaml_path, Path) and not yaml_path.is_file():
         # `predisat synth --out DIR` writes the survey into DIR/survey (a user trial gave DIR)
         inner = sorted(p.parent for p in root.glob("*/survey.yaml"))
         hint = f": the survey is in {inner[0]}; give that folder" if inner else ""
