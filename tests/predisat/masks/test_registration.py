@@ -279,3 +279,23 @@ def test_a_stretch_beside_the_map_needs_the_same_track_said(maps) -> None:
     assert reg.median_offset_m < 1.75  # the median alone let it through
     register_on_track(m, _bent(a, 1000.0, 1400.0, 3.0), "m")
     register_on_track(m, _bent(a, 1000.0, 1000.0, 4.0), "m")  # beside over less than 50 m
+
+
+def test_masks_that_name_this_map_but_disagree_with_it_are_refused(maps) -> None:
+    """A user trial: masks whose provenance names the very map in use, their chainages 20 m
+    off their positions on it, were re-registered by position with a warning; if the
+    chainages were the right ones, 4.8 % false trust. The file contradicts its own map."""
+    import dataclasses
+
+    from predisat.track.network import track_key
+
+    a, _ = maps
+    m = _sharp_masks(a, np.arange(400.0, 1701.0, 10.0))
+    own = dataclasses.replace(m, provenance={"track_key": track_key(a)})
+    assert register_on_track(own, a, "m").same_map  # consistent: nothing to do
+    shifted = dataclasses.replace(own, chainage_m=own.chainage_m + 20.0)
+    with pytest.raises(ValueError, match=r"made on this very map .* disagree"):
+        register_on_track(shifted, a, "m")
+    # without the key (another tool's file) it is registered by position, as before
+    plain = dataclasses.replace(shifted, provenance={})
+    assert not register_on_track(plain, a, "m").same_map
