@@ -31,6 +31,7 @@ from the job files in job order, byte-identical to those of an uninterrupted ser
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import io
@@ -38,7 +39,7 @@ import json
 import time
 import zipfile
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -243,14 +244,20 @@ def _file_digest(paths: Sequence[Path]) -> str:
 
 def _cached(cache: Path, stem: str, suffix: str) -> Path:
     """``cache/<stem>-<code>.<suffix>``: a cache file of other code is never read back (a user
-    trial changed the calibration and the old model came back under the old name), and the
-    other code's files of the same stem are removed."""
-    key = _code_key()
-    path = cache / f"{stem}-{key}{suffix}"
-    for old in cache.glob(f"{stem}-*{suffix}") if cache.is_dir() else ():
+    trial changed the calibration and the old model came back under the old name)."""
+    return cache / f"{stem}-{_code_key()}{suffix}"
+
+
+@contextlib.contextmanager
+def _building(path: Path) -> Iterator[Path]:
+    """:func:`~predisat.atomic.atomic_path` for a cache file, whose other code's versions (the
+    same stem) are removed once it is written, not when it is only looked up."""
+    with atomic_path(path) as tmp:
+        yield tmp
+    stem = path.name[: -len(path.suffix) - 1 - len(_code_key())]
+    for old in path.parent.glob(f"{stem}-*{path.suffix}"):
         if old != path:
             old.unlink(missing_ok=True)
-    return path
 
 
 @functools.lru_cache(maxsize=1)
@@ -311,7 +318,7 @@ def calibrate(cache: Path) -> IntervalModel:
     )
     model = IntervalModel(fit_error_model(el, res), k_sigma=2.0)
     cache.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
+    with _building(path) as tmp:
         write_error_model(tmp, model, {"data": "6 simulated runs of the calibration world"})
     return read_error_model(path)  # as a resumed run reads it
 
@@ -335,13 +342,13 @@ def load_world(spec: CampaignWorld, cache: Path) -> WorldData:
     if world is None:
         # built, saved, then read back: the same world whether this run built it or not
         cache.mkdir(parents=True, exist_ok=True)
-        with atomic_path(wfile) as tmp:
+        with _building(wfile) as tmp:
             World.build(track, spec.spec(), spec.seed).save(tmp)
         world = World.load(wfile, track)
         mfile.unlink(missing_ok=True)  # the truth of the world just built
     tm = _readable(mfile, TrueMasks.load)
     if tm is None:
-        with atomic_path(mfile) as tmp:
+        with _building(mfile) as tmp:
             true_masks(world).save(tmp)
         tm = TrueMasks.load(mfile)
     masks = _masks_of(tm, f"true masks of world {spec.name}")

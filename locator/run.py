@@ -515,23 +515,33 @@ def _sky_check(
     if len(use) < 5:
         return float("nan")
     sat, rho = data.sat_ecef_m[use], data.pseudorange_m[use]
-    x = np.zeros(4)
-    for _ in range(12):
-        d = sat - x[:3]
-        r = np.linalg.norm(d, axis=1)
-        a = np.column_stack([-d / r[:, None], np.ones(len(r))])
-        step = np.linalg.lstsq(a, rho - r - x[3], rcond=None)[0]
-        x = x + step
-        if np.linalg.norm(step[:3]) < 1e-3:
-            break
-    else:
+    got = _lsq_fix(sat, rho, np.ones(len(use)), np.zeros(4), 12)
+    if got is None:
         return float("nan")
-    lat, lon, h = ecef_to_geodetic(x[:3])
+    lat, lon, h = ecef_to_geodetic(got[0][:3])
     pr = path.track.project(lat, lon, h)
     # horizontal only: a 2-D map carries no heights, and a fix's height is its worst axis
     if bool(pr.clamped) or not abs(float(pr.offset_m)) <= near_m:
         return float("nan")
     return float(pr.chainage_m)
+
+
+def _lsq_fix(
+    sat: NDArray, rho: NDArray, w: NDArray, x0: NDArray, max_iter: int
+) -> tuple[NDArray, NDArray] | None:
+    """Iterated least-squares position and clock (4,) from satellites (n, 3), pseudoranges and
+    weights (n,) (1 / sigma), from ``x0``, and the weighted design matrix (n, 4) of the last
+    step; None when it does not converge to a millimetre in ``max_iter`` steps."""
+    x = np.asarray(x0, float)
+    for _ in range(max_iter):
+        d = sat - x[:3]
+        r = np.linalg.norm(d, axis=1)
+        a = np.column_stack([-d / r[:, None], np.ones(len(r))]) * w[:, None]
+        step = np.linalg.lstsq(a, (rho - r - x[3]) * w, rcond=None)[0]
+        x = x + step
+        if np.linalg.norm(step[:3]) < 1e-3:
+            return x, a
+    return None
 
 
 def _off_track_check(
@@ -568,17 +578,10 @@ def _off_track_m(
     sat, rho, w = data.sat_ecef_m[idx], data.pseudorange_m[idx], 1.0 / sigma
     keep = np.ones(len(idx), bool)
     while keep.sum() >= 5:
-        x = np.append(path.ecef_at(near_m), 0.0)
-        for _ in range(10):
-            d = sat[keep] - x[:3]
-            r = np.linalg.norm(d, axis=1)
-            a = np.column_stack([-d / r[:, None], np.ones(len(r))]) * w[keep, None]
-            step = np.linalg.lstsq(a, (rho[keep] - r - x[3]) * w[keep], rcond=None)[0]
-            x = x + step
-            if np.linalg.norm(step[:3]) < 1e-3:
-                break
-        else:
+        got = _lsq_fix(sat[keep], rho[keep], w[keep], np.append(path.ecef_at(near_m), 0.0), 10)
+        if got is None:
             return None
+        x, a = got
         res = (rho[keep] - np.linalg.norm(sat[keep] - x[:3], axis=1) - x[3]) * w[keep]
         dof = int(keep.sum()) - 4
         if float(res @ res) <= chi2.isf(cfg.locator.p_false_alarm, dof):
