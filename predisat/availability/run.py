@@ -123,6 +123,7 @@ __all__ = [
     "sampling_notes",
     "side_swap_notes",
     "sparse_navigation",
+    "step_notes",
     "synthetic_notes",
 ]
 
@@ -1309,6 +1310,7 @@ def _run_info(
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance),
+                     *step_notes(masks.provenance),
                      *assumed_sky_notes(masks)],
     }
 
@@ -1406,6 +1408,25 @@ def side_swap_notes(provenance: JsonDict) -> list[str]:
         for side, v in sorted(check.items())
         if isinstance(v, dict) and v.get("swapped")
     ]
+
+
+def step_notes(provenance: JsonDict) -> list[str]:
+    """The report's warnings for cameras found out of step when the masks were made
+    (``predisat process``'s ``step_check``; section 21 of docs/reconstruction.md)."""
+    check = provenance.get("step_check")
+    if not isinstance(check, dict):
+        return []
+    out = []
+    for pair, v in sorted(check.items()):
+        for r in v.get("off_step", []) if isinstance(v, dict) else []:
+            out.append(
+                f"the masks were made from a survey whose {pair.replace('/', ' and ')} cameras "
+                f"were out of step from chainage {r.get('from_chainage_m')} to "
+                f"{r.get('to_chainage_m')} m (one camera's images rows off in the manifest); "
+                "their frames there were set aside, so the masks there rest on other frames or "
+                "on assumptions: fix the survey's manifest and process it again"
+            )
+    return out
 
 
 def _track_text(track: TrackMap | None) -> str:

@@ -30,7 +30,8 @@ class BadFrame:
         ``"load"`` (rejected by the survey loader), ``"segment"`` (image unreadable or
         segmentation failed) or ``"fusion"`` (a suspect frame: its sky contradicts both
         neighbouring frames of its camera, ``ReconstructionParams.suspect_share``; left out
-        of the reconstruction).
+        of the reconstruction) or ``"step"`` (its camera and another are out of step there:
+        :mod:`predisat.reconstruct.step`).
     """
 
     frame_id: str

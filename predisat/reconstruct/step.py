@@ -1,0 +1,246 @@
+"""Whether two cameras' frames are in step: one camera's images a frame or more off its rows.
+
+A manifest whose image column for one camera lost a row (a dropped frame, a renumbering) pairs
+every later image of that camera with the next frame's place: each skyline is carved 10 m from
+where it was seen. A user trial's such survey trusted 1.05 % of its directions falsely (11.9 %
+at the worst position) and nothing said so: frame to frame the images look right, and the
+flow check (:mod:`predisat.reconstruct.sides`) cannot see a constant offset of the labels.
+
+Two cameras of one rig do see it where their fields overlap. A side fisheye pitched 45 deg up
+images the sky above the track that the other side's images too (elevations above about 25 deg
+across the track), so at one frame both must label those directions alike: an overbridge, a
+tunnel mouth, a catenary portal, branches and station roofs over the track cross the overlap at
+the same frame in both. :func:`overlap_pixels` finds the vehicle-frame directions both cameras
+image, :func:`lag_disagreement` the share of them the two label differently at each position
+when the second camera's frame is taken ``lag`` positions later, and
+:func:`step_lags` the lag that explains each stretch best (0 where the cameras are in step;
+``docs/reconstruction.md``, section 21).
+
+Segmentation error and parallax (the cameras are a metre or two apart) make the two disagree
+somewhat even in step; at a wrong lag the scene's own change from one position to the next
+adds to it. Open sky gives no evidence either way (both label it sky at every lag).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from predisat.camera.models import CameraModel, Mount
+
+__all__ = [
+    "EDGE_DEG",
+    "MAX_LAG",
+    "MIN_OVERLAP_DIRECTIONS",
+    "SWITCH_COST",
+    "OffStep",
+    "lag_disagreement",
+    "off_step",
+    "overlap_pixels",
+    "step_lags",
+]
+
+MIN_OVERLAP_DIRECTIONS = 50
+"""Fewest shared directions (of :func:`overlap_pixels`'s 4000 over the upper hemisphere) for a
+pair of cameras to be compared (pinhole side cameras share none)."""
+EDGE_DEG = 4.0
+"""A shared direction lies at least this far inside both images (the edge of a fisheye's
+circle is where calibration and vignetting are worst)."""
+MAX_LAG = 3
+"""Largest offset tried either way, frames."""
+SWITCH_COST = 0.3
+"""Cost of a change of lag in :func:`step_lags`, summed shares of the shared directions: a
+stretch is called off step only where another lag agrees better by 0.6 in all (60 positions
+better by a percent, or 6 by ten). In step, held-out surveys' stretches of town under
+noisy segmentation reach 0.2 at most (a cost of 0.1 called 26 positions of a town off step);
+one image late over 40-170 positions with a tunnel or overbridge in them is found at any cost
+up to 0.8 (docs/reconstruction.md, section 21)."""
+
+
+@dataclass(frozen=True)
+class OffStep:
+    """A stretch of positions where the second camera agrees best at a lag other than 0.
+
+    Attributes
+    ----------
+    first, last : int
+        Position indices (time order), inclusive.
+    lag : int
+        The second camera's frame ``lag`` positions later matches the first camera's: its
+        images are ``-lag`` frames late against their rows (or the first camera's ``lag``).
+    """
+
+    first: int
+    last: int
+    lag: int
+
+
+def off_step(lags: ArrayLike) -> list[OffStep]:
+    """The stretches of :func:`step_lags`'s result whose lag is not 0, in position order."""
+    g = np.asarray(lags, int)
+    out = []
+    start = 0
+    for i in range(1, g.size + 1):
+        if i == g.size or g[i] != g[start]:
+            if g[start] != 0:
+                out.append(OffStep(start, i - 1, int(g[start])))
+            start = i
+    return out
+
+
+def _hemisphere(n: int) -> NDArray:
+    """``n`` near-uniform unit directions over the upper hemisphere (Fibonacci lattice), (n, 3)."""
+    k = np.arange(n) + 0.5
+    z = k / n
+    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def _imaged(camera: CameraModel, mount: Mount, dirs: NDArray, edge_deg: float) -> NDArray:
+    """Which vehicle-frame ``dirs`` (n, 3) ``camera`` images, ``edge_deg`` inside its edge."""
+    to_camera = mount.camera_to_vehicle().T
+    ok = np.ones(len(dirs), bool)
+    e = np.radians(edge_deg)
+    probes = [dirs] + [dirs + s * e * np.cross(dirs, ax) for ax in np.eye(3) for s in (-1, 1)]
+    for p in probes:
+        u, v = camera.ray_to_pixel(p @ to_camera.T)
+        ok &= np.isfinite(u) & camera.contains(u, v)
+    return ok
+
+
+def _pixels(camera: CameraModel, mount: Mount, dirs: NDArray) -> tuple[NDArray, NDArray]:
+    u, v = camera.ray_to_pixel(dirs @ mount.camera_to_vehicle())
+    rows = np.clip(np.round(v), 0, camera.height_px - 1).astype(np.intp)
+    cols = np.clip(np.round(u), 0, camera.width_px - 1).astype(np.intp)
+    return rows, cols
+
+
+def overlap_pixels(
+    camera_a: CameraModel,
+    mount_a: Mount,
+    camera_b: CameraModel,
+    mount_b: Mount,
+    n_directions: int = 4000,
+    edge_deg: float = EDGE_DEG,
+) -> tuple[tuple[NDArray, NDArray], tuple[NDArray, NDArray]]:
+    """The pixels of two cameras that image the same directions above the vehicle's horizon.
+
+    The mounts' lever arms are ignored: directions, not points, are matched (the parallax of
+    a metre or two is part of the in-step disagreement).
+
+    Parameters
+    ----------
+    camera_a, camera_b : CameraModel
+    mount_a, mount_b : Mount
+        Their mounts on the level vehicle.
+    n_directions : int
+        Directions tried over the upper hemisphere.
+    edge_deg : float
+        How far inside both images a direction must lie, degrees.
+
+    Returns
+    -------
+    (rows_a, cols_a), (rows_b, cols_b) : tuple of ndarray, each shape (m,)
+        Integer pixel indices in each image of the ``m`` shared directions, in the same order
+        (``m`` may be 0).
+    """
+    if n_directions < 1:
+        raise ValueError(f"n_directions must be >= 1, got {n_directions}")
+    if not 0.0 <= edge_deg < 45.0:
+        raise ValueError(f"edge_deg must be in [0, 45) degrees, got {edge_deg}")
+    dirs = _hemisphere(n_directions)
+    both = _imaged(camera_a, mount_a, dirs, edge_deg) & _imaged(camera_b, mount_b, dirs, edge_deg)
+    shared = dirs[both]
+    return _pixels(camera_a, mount_a, shared), _pixels(camera_b, mount_b, shared)
+
+
+def lag_disagreement(
+    labels_a: Sequence[NDArray | None], labels_b: Sequence[NDArray | None], max_lag: int = MAX_LAG
+) -> NDArray:
+    """Share of the shared directions two cameras label differently, per position and lag.
+
+    Parameters
+    ----------
+    labels_a, labels_b : sequence of (m,) bool arrays or None, each of length n
+        Each camera's sky labels of the shared directions (:func:`overlap_pixels`) at each
+        position in time order; None where the camera has no usable frame.
+    max_lag : int
+        Largest lag tried either way.
+
+    Returns
+    -------
+    ndarray, shape (n, 2 * max_lag + 1)
+        Column ``max_lag + lag`` holds, for position ``i``, the share of directions where
+        ``labels_a[i]`` and ``labels_b[i + lag]`` differ; NaN where either is missing.
+    """
+    n = len(labels_a)
+    if len(labels_b) != n:
+        raise ValueError(
+            f"labels_a and labels_b must be of one length, got {n} and {len(labels_b)}"
+        )
+    if max_lag < 1:
+        raise ValueError(f"max_lag must be >= 1, got {max_lag}")
+    out = np.full((n, 2 * max_lag + 1), np.nan)
+    for i, a in enumerate(labels_a):
+        if a is None or a.size == 0:
+            continue
+        for k, lag in enumerate(range(-max_lag, max_lag + 1)):
+            j = i + lag
+            b = labels_b[j] if 0 <= j < n else None
+            if b is not None and b.size == a.size:
+                out[i, k] = np.count_nonzero(a != b) / a.size
+    return out
+
+
+def step_lags(per_lag: NDArray, switch_cost: float = SWITCH_COST) -> NDArray:
+    """The lag of the second camera at each position: the piecewise-constant offset that
+    explains the disagreement best.
+
+    A dropped or extra image shifts every later image of its camera, so the offset holds over
+    stretches and changes rarely. Each position costs its disagreement at the chosen lag, each
+    change of lag costs ``switch_cost``, and the least total is found by dynamic programming
+    (Viterbi) from lag 0 at the start. A stretch changes lag only where the other lag's
+    summed advantage over it exceeds twice ``switch_cost``; positions with no evidence (open
+    sky, missing frames: NaN) cost nothing at any lag and carry the lag on.
+
+    Parameters
+    ----------
+    per_lag : ndarray, shape (n, 2 * max_lag + 1)
+        :func:`lag_disagreement`'s result.
+    switch_cost : float
+        Cost of a change of lag, in summed shares of the shared directions (> 0).
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        The lag at each position (0: in step).
+    """
+    d = np.asarray(per_lag, float)
+    if d.ndim != 2 or d.shape[1] % 2 != 1 or d.shape[1] < 3:
+        raise ValueError(f"per_lag must have shape (n, 2 * max_lag + 1), got {d.shape}")
+    if not switch_cost > 0.0:
+        raise ValueError(f"switch_cost must be > 0, got {switch_cost}")
+    n, k = d.shape
+    centre = k // 2
+    if n == 0:
+        return np.zeros(0, int)
+    # a lag a position cannot test (the survey's ends) costs that position's worst defined one
+    worst = np.nanmax(np.where(np.isfinite(d), d, -np.inf), axis=1, initial=-np.inf)
+    cost = np.where(np.isfinite(d), d, np.where(np.isfinite(worst), worst, 0.0)[:, None])
+    total = np.full(k, switch_cost)
+    total[centre] = 0.0
+    back = np.zeros((n, k), np.intp)
+    for i in range(n):
+        stay_or_switch = total[None, :] + switch_cost * (1.0 - np.eye(k))
+        back[i] = np.argmin(stay_or_switch, axis=1)
+        total = stay_or_switch[np.arange(k), back[i]] + cost[i]
+    lags = np.empty(n, np.intp)
+    state = int(np.argmin(total)) if total.min() < total[centre] else centre
+    for i in range(n - 1, -1, -1):
+        lags[i] = state
+        state = int(back[i, state])
+    return lags - centre

@@ -1,0 +1,156 @@
+"""Cameras out of step: what two cameras both see must match at the same position."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from predisat.camera.models import Mount, default_camera
+from predisat.reconstruct.step import (
+    MIN_OVERLAP_DIRECTIONS,
+    OffStep,
+    lag_disagreement,
+    off_step,
+    overlap_pixels,
+    step_lags,
+)
+
+
+def _vehicle_rays(camera, mount, pix):
+    rows, cols = pix
+    rays = camera.pixel_to_ray(cols.astype(float), rows.astype(float))
+    rays = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    return rays @ mount.camera_to_vehicle().T
+
+
+def test_side_fisheyes_share_the_sky_above_the_track() -> None:
+    cam = default_camera("fisheye").resized(320, 240)
+    left, right = Mount.default("left"), Mount.default("right")
+    pa, pb = overlap_pixels(cam, left, cam, right)
+    assert pa[0].size >= MIN_OVERLAP_DIRECTIONS and pa[0].size == pb[0].size
+    # each pair of pixels looks the same way (the inverse projection, not the forward one
+    # the function used): within about two pixels' angle
+    ra, rb = _vehicle_rays(cam, left, pa), _vehicle_rays(cam, right, pb)
+    angle = np.degrees(np.arccos(np.clip((ra * rb).sum(axis=1), -1, 1)))
+    assert np.max(angle) < 2.5 * cam.widest_pixel_deg
+    # above the vehicle's horizon, and over the track (between the two cameras' sides)
+    assert np.all(ra[:, 2] > 0.3)
+
+
+def test_pinhole_side_cameras_share_nothing() -> None:
+    cam = default_camera("pinhole")
+    pa, _ = overlap_pixels(cam, Mount.default("left"), cam, Mount.default("right"))
+    assert pa[0].size < MIN_OVERLAP_DIRECTIONS
+
+
+def test_overlap_pixels_refuses_bad_parameters() -> None:
+    cam = default_camera("fisheye")
+    with pytest.raises(ValueError, match="edge_deg"):
+        overlap_pixels(cam, Mount.default("left"), cam, Mount.default("right"), edge_deg=50)
+    with pytest.raises(ValueError, match="n_directions"):
+        overlap_pixels(cam, Mount.default("left"), cam, Mount.default("right"), n_directions=0)
+
+
+def test_disagreement_is_zero_at_the_lag_of_a_late_camera() -> None:
+    rng = np.random.default_rng(3)
+    scene = [rng.random(40) < 0.5 for _ in range(12)]
+    a = list(scene)
+    b = [*scene[1:], None]  # b's images one position late against its rows
+    d = lag_disagreement(a, b, max_lag=2)
+    assert d.shape == (12, 5)
+    # a[i] is b[i - 1]: lag -1 agrees everywhere it is defined
+    assert np.all(d[1:, 1] == 0.0) and np.isnan(d[0, 1])
+    # by hand at one position and lag
+    assert d[5, 3] == np.count_nonzero(scene[5] != scene[7]) / 40
+    assert np.isnan(d[11, 2]) and np.all(np.isnan(d[:2, 0]))
+    with pytest.raises(ValueError, match="one length"):
+        lag_disagreement(a, b[:-1])
+
+
+def _cost(per_lag: np.ndarray, lags: tuple[int, ...], switch: float) -> float:
+    centre = per_lag.shape[1] // 2
+    total = switch * (lags[0] != 0)
+    total += sum(per_lag[i, centre + g] for i, g in enumerate(lags))
+    return total + switch * sum(x != y for x, y in itertools.pairwise(lags))
+
+
+def test_the_lags_are_the_least_cost_sequence() -> None:
+    """Against every sequence of lags of a short survey (enumerated)."""
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        d = rng.random((7, 3)) * 0.2
+        lags = step_lags(d, switch_cost=0.1)
+        best = min(_cost(d, s, 0.1) for s in itertools.product((-1, 0, 1), repeat=7))
+        assert _cost(d, tuple(int(g) for g in lags), 0.1) == pytest.approx(best)
+
+
+def test_a_late_stretch_is_found_and_noise_is_not() -> None:
+    rng = np.random.default_rng(11)
+    noise = 0.03 + 0.01 * rng.random((120, 7))
+    assert not np.any(step_lags(noise, 0.3))
+    late = noise.copy()
+    late[60:, np.arange(7) != 2] += 0.03  # from position 60 on, lag -1 agrees 3 points better
+    lags = step_lags(late, 0.3)
+    # one stretch, holding every late position; where the noise alone cannot tell (zero mean
+    # difference between the lags) the change may come earlier: more frames set aside
+    assert off_step(lags) == [OffStep(int(np.argmax(lags != 0)), 119, -1)]
+    assert np.all(lags[60:] == -1)
+    # an advantage too small to pay for two changes: in step
+    slight = noise.copy()
+    slight[60:70, np.arange(7) != 2] += 0.02
+    assert not np.any(step_lags(slight, 0.3))
+    # positions without evidence (NaN: open sky, missing frames) carry the lag on
+    gap = late.copy()
+    gap[80:100] = np.nan
+    assert np.all(step_lags(gap, 0.3)[61:] == -1)
+    with pytest.raises(ValueError, match="switch_cost"):
+        step_lags(noise, 0.0)
+
+
+def test_off_step_groups_the_runs() -> None:
+    assert off_step([0, 0, -1, -1, 0, 2, 2, 2]) == [OffStep(2, 3, -1), OffStep(5, 7, 2)]
+    assert off_step([]) == [] and off_step([0, 0]) == []
+
+
+def test_process_sets_aside_the_frames_of_a_camera_out_of_step(tmp_path, capsys) -> None:
+    """A rendered survey under catenary with an overbridge, and the same whose manifest gives
+    the right camera's rows from the 6th on the next row's image (a dropped image): process
+    finds the first in step, and in the second sets aside the frames from there on, says so,
+    and the availability report repeats it."""
+    import pandas as pd
+
+    from predisat.availability.run import step_notes
+    from predisat.reconstruct.batch import process_survey
+    from predisat.synth.generate import generate_survey
+    from predisat.synth.world import Stretch, WorldSpec
+    from predisat.track import demo_track
+
+    spec = WorldSpec((Stretch("town", 3000, 3200), Stretch("overbridge", 3100, 3110)),
+                     hills=False)  # fmt: skip
+    generate_survey(demo_track(), 3000.0, 3200.0, sky="clear", seed=5, out_dir=tmp_path,
+                    spec=spec, camera=default_camera("fisheye").resized(240, 180),
+                    progress=False)  # fmt: skip
+    survey = tmp_path / "survey"
+    ok = process_survey(survey, tmp_path / "ok", progress=False)
+    assert ok.masks.provenance["step_check"]["left/right"]["off_step"] == []
+    assert not any(b.stage == "step" for b in ok.bad_frames)
+    assert "out of step" not in capsys.readouterr().err
+
+    man = pd.read_csv(survey / "manifest.csv")
+    right = man.index[man.side == "right"][np.argsort(man.gps_s[man.side == "right"])]
+    late = right[5:]
+    man.loc[late[:-1], "image"] = man.loc[late[1:], "image"].to_numpy()
+    man.drop(index=late[-1:]).to_csv(survey / "manifest.csv", index=False)
+    got = process_survey(survey, tmp_path / "late", progress=False)
+    (run,) = got.masks.provenance["step_check"]["left/right"]["off_step"]
+    assert run["lag"] == -1 and run["first_position"] <= 5 and run["last_position"] >= 19
+    set_aside = {b.frame_id for b in got.bad_frames if b.stage == "step"}
+    assert set_aside == set(run["frames"])
+    # every moved row of the right camera, and the left camera's frames beside them
+    assert set(man.frame_id[late[:-1]]) <= set_aside
+    assert any(f.startswith("left") for f in set_aside)
+    err = capsys.readouterr().err
+    assert "cameras are out of step from chainage" in err and "fix the manifest" in err
+    assert step_notes(got.masks.provenance) and step_notes(ok.masks.provenance) == []
