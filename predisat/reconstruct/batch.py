@@ -94,6 +94,7 @@ from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.sides import expected_flow_sign, side_votes, sky_profile
 from predisat.reconstruct.step import (
     MIN_OVERLAP_DIRECTIONS,
+    comparable,
     lag_disagreement,
     off_step,
     overlap_pixels,
@@ -403,8 +404,18 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
     usable = np.array([str(f) not in bad for f in fr.frame_id]) & np.isfinite(plan.chainage_m)
     pos = _trigger_positions(np.asarray(fr.gps_s, float), np.asarray(fr.side))
     n_pos = int(pos.max()) + 1 if pos.size else 0
-    pairs = {}
+    chain = np.full(n_pos, np.nan)
+    ok = np.isfinite(plan.chainage_m)
+    chain[pos[ok]] = np.asarray(plan.chainage_m, float)[ok]
+    steps = np.abs(np.diff(chain))
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    spacing_m = float(np.median(steps)) if steps.size else 10.0
+    pairs, apart = {}, {}
     for a, b in itertools.combinations(sorted(cams), 2):
+        if not comparable(cams[a].mount, cams[b].mount, spacing_m):
+            apart[f"{a}/{b}"] = {"compared": False, "why": (
+                f"mounted more than half the {spacing_m:.1f} m spacing apart along the vehicle")}
+            continue
         pa, pb = overlap_pixels(cams[a].camera, cams[a].mount, cams[b].camera, cams[b].mount)
         if pa[0].size >= MIN_OVERLAP_DIRECTIONS:
             pairs[(a, b)] = (pa, pb)
@@ -436,10 +447,7 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
         votes = side_votes(side, profiles[side], expected)
         sides[side] = {"agree": votes.agree, "disagree": votes.disagree, "pairs": votes.pairs,
                        "swapped": votes.swapped}  # fmt: skip
-    chain = np.full(n_pos, np.nan)
-    ok = np.isfinite(plan.chainage_m)
-    chain[pos[ok]] = np.asarray(plan.chainage_m, float)[ok]
-    step: JsonDict = {}
+    step: JsonDict = dict(apart)
     for (a, b), (pa, _) in pairs.items():
         per_lag = lag_disagreement(labels[((a, b), a)], labels[((a, b), b)])
         # a stretch's edge positions widened by its lag: where an image was dropped, the
@@ -448,7 +456,7 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
                         last=min(r.last + abs(r.lag), n_pos - 1))
                 for r in off_step(step_lags(per_lag))]  # fmt: skip
         step[f"{a}/{b}"] = {
-            "directions": int(pa[0].size), "positions": n_pos,
+            "compared": True, "directions": int(pa[0].size), "positions": n_pos,
             "off_step": [
                 {"first_position": r.first, "last_position": r.last, "lag": r.lag,
                  **_chainage_span(chain[r.first : r.last + 1]),
@@ -479,7 +487,7 @@ def _step_warnings(step: JsonDict) -> list[str]:
     out = []
     for pair, v in step.items():
         a, b = pair.split("/")
-        for r in v["off_step"]:
+        for r in v.get("off_step", []):
             n = abs(r["lag"])
             out.append(
                 f"warning: the {a} and {b} cameras are out of step {_span_text(r)}: what both "
@@ -499,7 +507,7 @@ def _step_bad_frames(step: JsonDict) -> dict[str, str]:
     """The frames the step check sets aside, with the reason each gets in bad_frames.csv."""
     out: dict[str, str] = {}
     for pair, v in step.items():
-        for r in v["off_step"]:
+        for r in v.get("off_step", []):
             for fid in r["frames"]:
                 out.setdefault(fid, f"out of step: the {pair.replace('/', ' and ')} cameras' "
                                     f"frames match {abs(r['lag'])} frame(s) apart here (a "

@@ -35,8 +35,10 @@ __all__ = [
     "EDGE_DEG",
     "MAX_LAG",
     "MIN_OVERLAP_DIRECTIONS",
+    "POSITION_CAP",
     "SWITCH_COST",
     "OffStep",
+    "comparable",
     "lag_disagreement",
     "off_step",
     "overlap_pixels",
@@ -51,6 +53,12 @@ EDGE_DEG = 4.0
 circle is where calibration and vignetting are worst)."""
 MAX_LAG = 3
 """Largest offset tried either way, frames."""
+POSITION_CAP = 0.05
+"""A position's disagreement at any lag counts at most this much above its best lag's in
+:func:`step_lags`: one position cannot carry a stretch (at a tunnel mouth the lags that pair
+frames inside the tunnel agree trivially, and a cab rig's overcast survey had five such
+positions call a left/right pair 3 frames off); a change of lag needs at least 12 positions
+of clear evidence."""
 SWITCH_COST = 0.3
 """Cost of a change of lag in :func:`step_lags`, summed shares of the shared directions: a
 stretch is called off step only where another lag agrees better by 0.6 in all (60 positions
@@ -76,6 +84,16 @@ class OffStep:
     first: int
     last: int
     lag: int
+
+
+def comparable(mount_a: Mount, mount_b: Mount, spacing_m: float) -> bool:
+    """Whether two cameras sit close enough along the vehicle for their frames of one
+    position to see the same things above the track: their lever arms at most half the
+    spacing between positions apart along it. A cab rig's front and rear cameras 6 m apart
+    see an overbridge 0.6 of a 10 m step apart, and were called off step in a survey in step."""
+    if not spacing_m > 0.0:
+        raise ValueError(f"spacing_m must be > 0, got {spacing_m}")
+    return abs(mount_a.lever_arm_m[0] - mount_b.lever_arm_m[0]) <= 0.5 * spacing_m
 
 
 def off_step(lags: ArrayLike) -> list[OffStep]:
@@ -196,7 +214,9 @@ def lag_disagreement(
     return out
 
 
-def step_lags(per_lag: NDArray, switch_cost: float = SWITCH_COST) -> NDArray:
+def step_lags(
+    per_lag: NDArray, switch_cost: float = SWITCH_COST, position_cap: float = POSITION_CAP
+) -> NDArray:
     """The lag of the second camera at each position: the piecewise-constant offset that
     explains the disagreement best.
 
@@ -213,6 +233,8 @@ def step_lags(per_lag: NDArray, switch_cost: float = SWITCH_COST) -> NDArray:
         :func:`lag_disagreement`'s result.
     switch_cost : float
         Cost of a change of lag, in summed shares of the shared directions (> 0).
+    position_cap : float
+        Each position's cost at a lag is at most this above its cost at its best lag (> 0).
 
     Returns
     -------
@@ -222,8 +244,10 @@ def step_lags(per_lag: NDArray, switch_cost: float = SWITCH_COST) -> NDArray:
     d = np.asarray(per_lag, float)
     if d.ndim != 2 or d.shape[1] % 2 != 1 or d.shape[1] < 3:
         raise ValueError(f"per_lag must have shape (n, 2 * max_lag + 1), got {d.shape}")
-    if not switch_cost > 0.0:
-        raise ValueError(f"switch_cost must be > 0, got {switch_cost}")
+    if not switch_cost > 0.0 or not position_cap > 0.0:
+        raise ValueError(
+            f"switch_cost and position_cap must be > 0, got {switch_cost} and {position_cap}"
+        )
     n, k = d.shape
     centre = k // 2
     if n == 0:
@@ -231,6 +255,7 @@ def step_lags(per_lag: NDArray, switch_cost: float = SWITCH_COST) -> NDArray:
     # a lag a position cannot test (the survey's ends) costs that position's worst defined one
     worst = np.nanmax(np.where(np.isfinite(d), d, -np.inf), axis=1, initial=-np.inf)
     cost = np.where(np.isfinite(d), d, np.where(np.isfinite(worst), worst, 0.0)[:, None])
+    cost = np.minimum(cost, cost.min(axis=1, keepdims=True) + position_cap)
     total = np.full(k, switch_cost)
     total[centre] = 0.0
     back = np.zeros((n, k), np.intp)

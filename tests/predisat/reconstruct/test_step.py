@@ -11,6 +11,7 @@ from predisat.camera.models import Mount, default_camera
 from predisat.reconstruct.step import (
     MIN_OVERLAP_DIRECTIONS,
     OffStep,
+    comparable,
     lag_disagreement,
     off_step,
     overlap_pixels,
@@ -79,11 +80,13 @@ def _cost(per_lag: np.ndarray, lags: tuple[int, ...], switch: float) -> float:
 def test_the_lags_are_the_least_cost_sequence() -> None:
     """Against every sequence of lags of a short survey (enumerated)."""
     rng = np.random.default_rng(7)
-    for _ in range(30):
-        d = rng.random((7, 3)) * 0.2
-        lags = step_lags(d, switch_cost=0.1)
-        best = min(_cost(d, s, 0.1) for s in itertools.product((-1, 0, 1), repeat=7))
-        assert _cost(d, tuple(int(g) for g in lags), 0.1) == pytest.approx(best)
+    for cap in (1.0, 0.05):
+        for _ in range(30):
+            d = rng.random((7, 3)) * 0.2
+            lags = step_lags(d, switch_cost=0.1, position_cap=cap)
+            capped = np.minimum(d, d.min(axis=1, keepdims=True) + cap)
+            best = min(_cost(capped, s, 0.1) for s in itertools.product((-1, 0, 1), repeat=7))
+            assert _cost(capped, tuple(int(g) for g in lags), 0.1) == pytest.approx(best)
 
 
 def test_a_late_stretch_is_found_and_noise_is_not() -> None:
@@ -105,8 +108,25 @@ def test_a_late_stretch_is_found_and_noise_is_not() -> None:
     gap = late.copy()
     gap[80:100] = np.nan
     assert np.all(step_lags(gap, 0.3)[61:] == -1)
+    # a few positions of strong evidence alone (a tunnel mouth, where lags pairing frames
+    # inside the tunnel agree trivially) do not make a stretch
+    mouth = noise.copy()
+    mouth[50:55, np.arange(7) != 0] += 0.15
+    assert not np.any(step_lags(mouth, 0.3))
+    assert np.any(step_lags(mouth, 0.3, position_cap=1.0))
     with pytest.raises(ValueError, match="switch_cost"):
         step_lags(noise, 0.0)
+
+
+def test_cameras_far_apart_along_the_vehicle_are_not_compared() -> None:
+    left, right = Mount.default("left"), Mount.default("right")
+    assert comparable(left, right, 10.0)
+    front = Mount("front", 0.0, 30.0, 0.0, (3.0, 0.0, -1.5))
+    rear = Mount("rear", 180.0, 30.0, 0.0, (-3.0, 0.0, -1.5))
+    assert comparable(front, left, 10.0) and not comparable(front, rear, 10.0)
+    assert comparable(front, rear, 12.0)
+    with pytest.raises(ValueError, match="spacing_m"):
+        comparable(left, right, 0.0)
 
 
 def test_off_step_groups_the_runs() -> None:
@@ -127,9 +147,9 @@ def test_process_sets_aside_the_frames_of_a_camera_out_of_step(tmp_path, capsys)
     from predisat.synth.world import Stretch, WorldSpec
     from predisat.track import demo_track
 
-    spec = WorldSpec((Stretch("town", 3000, 3200), Stretch("overbridge", 3100, 3110)),
+    spec = WorldSpec((Stretch("town", 3000, 3300), Stretch("overbridge", 3150, 3160)),
                      hills=False)  # fmt: skip
-    generate_survey(demo_track(), 3000.0, 3200.0, sky="clear", seed=5, out_dir=tmp_path,
+    generate_survey(demo_track(), 3000.0, 3300.0, sky="clear", seed=5, out_dir=tmp_path,
                     spec=spec, camera=default_camera("fisheye").resized(240, 180),
                     progress=False)  # fmt: skip
     survey = tmp_path / "survey"
@@ -145,7 +165,7 @@ def test_process_sets_aside_the_frames_of_a_camera_out_of_step(tmp_path, capsys)
     man.drop(index=late[-1:]).to_csv(survey / "manifest.csv", index=False)
     got = process_survey(survey, tmp_path / "late", progress=False)
     (run,) = got.masks.provenance["step_check"]["left/right"]["off_step"]
-    assert run["lag"] == -1 and run["first_position"] <= 5 and run["last_position"] >= 19
+    assert run["lag"] == -1 and run["first_position"] <= 5 and run["last_position"] >= 29
     set_aside = {b.frame_id for b in got.bad_frames if b.stage == "step"}
     assert set_aside == set(run["frames"])
     # every moved row of the right camera, and the left camera's frames beside them
