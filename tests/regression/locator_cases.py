@@ -127,7 +127,8 @@ def sim_configs() -> dict[str, tuple[RunConfig, bool]]:
 
 def as_the_reference(cfg: RunConfig) -> RunConfig:
     """``cfg`` without what came after the reference (2026-12-06): the suspect latch after an
-    odometry conflict (the conflict alone flagged), its recovery on the motion bound, the sky
+    odometry conflict (the conflict alone flagged; so whether a blunt fix's conflict begins it
+    does not matter), its recovery on the motion bound, the sky
     check of epochs without a claim, the track-alias and off-track checks, and the map doubt in
     the pair bands
     (zero: the source's pairs). All are tested in ``tests/locator``."""
