@@ -37,6 +37,7 @@ from predisat.reconstruct.step import (
     off_step,
     overlap_pixels,
     step_lags,
+    widen,
 )
 from predisat.survey import Survey
 
@@ -140,7 +141,7 @@ def main() -> None:
                     print(f"{sdir} {a}/{b} ({pa[0].size} directions, {len(times)} positions), "
                           f"{name}: lags -3..3 " + " ".join(f"{x:.2f}" for x in whole) + " %")
                     for cost in args.switch_cost:
-                        runs_off = off_step(step_lags(d, cost))
+                        runs_off = widen(d, off_step(step_lags(d, cost)), cost)
                         print(f"    switch cost {cost}: "
                               + (", ".join(f"positions {r.first}-{r.last} lag {r.lag:+d}"
                                            for r in runs_off) or "in step"))

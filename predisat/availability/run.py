@@ -1417,6 +1417,10 @@ def step_notes(provenance: JsonDict) -> list[str]:
     if not isinstance(check, dict):
         return []
     out = []
+    if not any(isinstance(v, dict) and v.get("compared") for v in check.values()):
+        out.append("the masks' survey cameras could not be checked for images out of step with "
+                   "their manifest rows (no two cameras share the sky above the track): a "
+                   "dropped image there would have gone unseen")  # fmt: skip
     for pair, v in sorted(check.items()):
         for r in v.get("off_step", []) if isinstance(v, dict) else []:
             out.append(

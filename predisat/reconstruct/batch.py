@@ -93,12 +93,14 @@ from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.sides import expected_flow_sign, side_votes, sky_profile
 from predisat.reconstruct.step import (
+    MAX_LAG,
     MIN_OVERLAP_DIRECTIONS,
     comparable,
     lag_disagreement,
     off_step,
     overlap_pixels,
     step_lags,
+    widen,
 )
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
@@ -377,18 +379,26 @@ PAIR_FOCAL_TOL = 0.1
 (two units of one camera model calibrate within a few percent)."""
 
 
-def _trigger_positions(gps_s: NDArray, side: NDArray) -> NDArray:
-    """Position index of each frame: frames closer in time than a quarter of a camera's median
-    gap between its own frames belong to one position (a rig's cameras fire together, to a
-    few milliseconds on a real rig)."""
-    t, sides = np.asarray(gps_s, float), np.asarray(side)
-    own = [np.diff(np.sort(t[sides == s])) for s in np.unique(sides)]
-    medians = [float(np.median(g[g > 0])) for g in own if np.any(g > 0)]
-    tol = 0.25 * min(medians) if medians else 0.0
-    order = np.argsort(t, kind="stable")
-    pos = np.zeros(t.size, np.intp)
-    pos[order] = np.concatenate([[0], np.cumsum(np.diff(t[order]) > tol)]) if t.size else pos
-    return pos
+def nearest_in_time(times_a: NDArray, times_b: NDArray) -> NDArray:
+    """For each of a camera's frames (``times_a``, sorted), the index of the other camera's
+    frame taken with it (``times_b``, sorted): the nearest in time within half the first
+    camera's local gap between frames (the smaller of the gaps to its neighbours), else -1.
+    Real rigs fire their cameras a few milliseconds apart, and a survey's speed varies: one
+    tolerance for the whole survey merged the frames of a fast stretch into one position and
+    split a camera offset by a quarter of a gap into two (a review)."""
+    ta, tb = np.asarray(times_a, float), np.asarray(times_b, float)
+    if ta.size == 0 or tb.size == 0:
+        return np.full(ta.size, -1, np.intp)
+    gaps = np.diff(ta)
+    before = np.concatenate([[np.inf], gaps])
+    after = np.concatenate([gaps, [np.inf]])
+    local = np.minimum(before, after)
+    local = np.where(np.isfinite(local) & (local > 0), local, np.inf)
+    j = np.clip(np.searchsorted(tb, ta), 1, tb.size - 1) if tb.size > 1 else np.zeros(ta.size, int)
+    if tb.size > 1:
+        j = np.where(np.abs(tb[j - 1] - ta) <= np.abs(tb[j] - ta), j - 1, j)
+    ok = np.abs(tb[j] - ta) < 0.5 * local
+    return np.where(ok, j, -1).astype(np.intp)
 
 
 def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, JsonDict]:
@@ -398,47 +408,48 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
     (:mod:`predisat.reconstruct.sides`); a camera none of whose frames is cached (or that
     does not look sideways) is left out. Step: for each pair of cameras sharing directions,
     the stretches where one's frames match the other's at a lag other than 0
-    (:mod:`predisat.reconstruct.step`), with their chainages.
+    (:mod:`predisat.reconstruct.step`), with their chainages and frames.
     """
     fr, cams = plan.survey.frames, plan.survey.cameras
     usable = np.array([str(f) not in bad for f in fr.frame_id]) & np.isfinite(plan.chainage_m)
-    pos = _trigger_positions(np.asarray(fr.gps_s, float), np.asarray(fr.side))
-    n_pos = int(pos.max()) + 1 if pos.size else 0
-    chain = np.full(n_pos, np.nan)
-    ok = np.isfinite(plan.chainage_m)
-    chain[pos[ok]] = np.asarray(plan.chainage_m, float)[ok]
-    steps = np.abs(np.diff(chain))
-    steps = steps[np.isfinite(steps) & (steps > 0)]
+    chain_all = np.asarray(plan.chainage_m, float)
+    steps = np.abs(np.diff(np.sort(chain_all[usable & (np.asarray(fr.side) == min(cams))])))
+    steps = steps[steps > 0]
     spacing_m = float(np.median(steps)) if steps.size else 10.0
-    pairs, apart = {}, {}
+    pairs, step = {}, {}
     for a, b in itertools.combinations(sorted(cams), 2):
         if not comparable(cams[a].mount, cams[b].mount, spacing_m):
-            apart[f"{a}/{b}"] = {"compared": False, "why": (
+            step[f"{a}/{b}"] = {"compared": False, "why": (
                 f"mounted more than half the {spacing_m:.1f} m spacing apart along the vehicle")}
             continue
         pa, pb = overlap_pixels(cams[a].camera, cams[a].mount, cams[b].camera, cams[b].mount)
         if pa[0].size >= MIN_OVERLAP_DIRECTIONS:
             pairs[(a, b)] = (pa, pb)
-    looks: dict[str, list[tuple[int, str]]] = {side: [] for side in cams}
-    profiles: dict[str, list[NDArray]] = {side: [] for side in cams}
-    labels: dict[tuple[tuple[str, str], str], list[NDArray | None]] = {
-        (pair, side): [None] * n_pos for pair in pairs for side in pair
+        else:
+            step[f"{a}/{b}"] = {"compared": False, "why": (
+                f"{pa[0].size} shared directions (fewer than {MIN_OVERLAP_DIRECTIONS})")}
+    # per camera, its usable cached frames in time order: time, id, chainage, labels per pair
+    seen: dict[str, list[tuple[float, str, float]]] = {side: [] for side in cams}
+    labels: dict[tuple[tuple[str, str], str], list[NDArray]] = {
+        (pair, side): [] for pair in pairs for side in pair
     }
+    profiles: dict[str, list[NDArray]] = {side: [] for side in cams}
     for side in sorted(cams):
         idx = sorted(np.flatnonzero((fr.side == side) & usable), key=lambda i: float(fr.gps_s[i]))
-        wanted = expected_flow_sign(cams[side].mount) != 0 or any(side in p for p in pairs)
-        for i in idx if wanted else []:
+        if expected_flow_sign(cams[side].mount) == 0 and not any(side in p for p in pairs):
+            continue
+        for i in idx:
             fid = str(fr.frame_id[i])
-            frame = ChunkFrame(fid, side, float(plan.chainage_m[i]),
+            frame = ChunkFrame(fid, side, float(chain_all[i]),
                                str(join(plan.cache_dir, f"{fid}.npz")))  # fmt: skip
             cached = load_cached(frame, plan.storage_options)
             if isinstance(cached, BadFrame):
                 continue
             profiles[side].append(sky_profile(cached[0]))
-            looks[side].append((int(pos[i]), fid))
+            seen[side].append((float(fr.gps_s[i]), fid, float(chain_all[i])))
             for pair, (pa, pb) in pairs.items():
-                if side in pair and labels[(pair, side)][pos[i]] is None:
-                    labels[(pair, side)][pos[i]] = cached[0][pa if side == pair[0] else pb]
+                if side in pair:
+                    labels[(pair, side)].append(cached[0][pa if side == pair[0] else pb])
     sides = {}
     for side, sc in sorted(cams.items()):
         expected = expected_flow_sign(sc.mount)
@@ -447,24 +458,27 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
         votes = side_votes(side, profiles[side], expected)
         sides[side] = {"agree": votes.agree, "disagree": votes.disagree, "pairs": votes.pairs,
                        "swapped": votes.swapped}  # fmt: skip
-    step: JsonDict = dict(apart)
     for (a, b), (pa, _) in pairs.items():
-        per_lag = lag_disagreement(labels[((a, b), a)], labels[((a, b), b)])
-        # a stretch's edge positions widened by its lag: where an image was dropped, the
-        # frame at the edge matches neither way, so no lag wins there, yet it is off
-        runs = [replace(r, first=max(r.first - abs(r.lag), 0),
-                        last=min(r.last + abs(r.lag), n_pos - 1))
-                for r in off_step(step_lags(per_lag))]  # fmt: skip
-        step[f"{a}/{b}"] = {
-            "compared": True, "directions": int(pa[0].size), "positions": n_pos,
-            "off_step": [
-                {"first_position": r.first, "last_position": r.last, "lag": r.lag,
-                 **_chainage_span(chain[r.first : r.last + 1]),
-                 "frames": sorted(f for s_ in (a, b) for p_, f in looks[s_]
-                                  if r.first <= p_ <= r.last)}
-                for r in runs
-            ],
-        }  # fmt: skip
+        ta = np.array([t for t, _, _ in seen[a]])
+        tb = np.array([t for t, _, _ in seen[b]])
+        match = nearest_in_time(ta, tb)
+        per_lag = lag_disagreement(labels[((a, b), a)], labels[((a, b), b)], match)
+        runs = widen(per_lag, off_step(step_lags(per_lag)))
+        out = []
+        for r in runs:
+            js = match[r.first : r.last + 1]
+            js = js[js >= 0]
+            lo_b = int(js.min()) + min(r.lag, 0) - 1 if js.size else len(tb)
+            hi_b = int(js.max()) + max(r.lag, 0) + 1 if js.size else -1
+            frames = [f for _, f, _ in seen[a][r.first : r.last + 1]]
+            frames += [f for _, f, _ in seen[b][max(lo_b, 0) : hi_b + 1]]
+            out.append({
+                "first_position": r.first, "last_position": r.last, "lag": r.lag,
+                **_chainage_span(np.array([c for _, _, c in seen[a][r.first : r.last + 1]])),
+                "frames": sorted(frames),
+            })  # fmt: skip
+        step[f"{a}/{b}"] = {"compared": True, "directions": int(pa[0].size),
+                            "positions": len(ta), "off_step": out}  # fmt: skip
     return sides, step
 
 
@@ -483,22 +497,31 @@ def _span_text(r: JsonDict) -> str:
 
 
 def _step_warnings(step: JsonDict) -> list[str]:
-    """The lines ``process`` prints for cameras whose frames are out of step."""
+    """The lines ``process`` prints for cameras whose frames are out of step, or for a rig
+    whose cameras could not be compared."""
     out = []
+    if not any(v.get("compared") for v in step.values()):
+        out.append(
+            "note: whether the cameras' images are in step with their manifest rows was not "
+            "checked: no two cameras both image 50 directions above the track (pinhole side "
+            "cameras, a single panorama) or they are mounted far apart along the vehicle; a "
+            "dropped image in the manifest would go unseen (docs/reconstruction.md, section 21)"
+        )
     for pair, v in step.items():
         a, b = pair.split("/")
         for r in v.get("off_step", []):
             n = abs(r["lag"])
+            rows = f"at least {n}" if n >= MAX_LAG else f"{n}"
             out.append(
                 f"warning: the {a} and {b} cameras are out of step {_span_text(r)}: what both "
                 f"see above the track matches between the {a} camera's image of each frame and "
-                f"the {b} camera's of the frame {n} {'before' if r['lag'] < 0 else 'after'} it "
-                f"(one camera's images {n} row(s) off in the manifest: a dropped or extra image, a "
-                "camera that missed triggers). That puts skylines where they were not seen, "
-                "and trusted 1.05 % of a survey's directions falsely; the "
-                f"{len(r['frames'])} frames of both cameras there were set aside (the masks "
-                "there rest on other frames or are ASSUMED); fix the manifest "
-                "(docs/reconstruction.md, section 21)"
+                f"the {b} camera's of the frame {rows} {'before' if r['lag'] < 0 else 'after'} "
+                f"it (one camera's images {rows} row(s) off in the manifest: a dropped or extra "
+                "image, a camera that missed triggers). That puts skylines where they were not "
+                "seen (a user trial's survey with one dropped image trusted 1.05 % of its "
+                f"directions falsely); the {len(r['frames'])} frames of both cameras there were "
+                "set aside (the masks there rest on other frames or are ASSUMED); fix the "
+                "manifest (docs/reconstruction.md, section 21)"
             )
     return out
 

@@ -43,6 +43,7 @@ __all__ = [
     "off_step",
     "overlap_pixels",
     "step_lags",
+    "widen",
 ]
 
 MIN_OVERLAP_DIRECTIONS = 50
@@ -53,12 +54,13 @@ EDGE_DEG = 4.0
 circle is where calibration and vignetting are worst)."""
 MAX_LAG = 3
 """Largest offset tried either way, frames."""
-POSITION_CAP = 0.05
+POSITION_CAP = 0.1
 """A position's disagreement at any lag counts at most this much above its best lag's in
-:func:`step_lags`: one position cannot carry a stretch (at a tunnel mouth the lags that pair
-frames inside the tunnel agree trivially, and a cab rig's overcast survey had five such
-positions call a left/right pair 3 frames off); a change of lag needs at least 12 positions
-of clear evidence."""
+:func:`step_lags`: a few positions cannot carry a stretch (at a tunnel mouth the lags that
+pair frames inside the tunnel agree trivially, and a cab rig's overcast survey had five such
+positions call its left and right cameras 3 frames off); a change of lag needs at least 6
+positions of clear evidence. 0.05 missed a dropped image inside a tunnel whose only evidence
+was the tunnel's exit."""
 SWITCH_COST = 0.3
 """Cost of a change of lag in :func:`step_lags`, summed shares of the shared directions: a
 stretch is called off step only where another lag agrees better by 0.6 in all (60 positions
@@ -177,26 +179,37 @@ def overlap_pixels(
 
 
 def lag_disagreement(
-    labels_a: Sequence[NDArray | None], labels_b: Sequence[NDArray | None], max_lag: int = MAX_LAG
+    labels_a: Sequence[NDArray | None],
+    labels_b: Sequence[NDArray | None],
+    match_b: ArrayLike | None = None,
+    max_lag: int = MAX_LAG,
 ) -> NDArray:
-    """Share of the shared directions two cameras label differently, per position and lag.
+    """Share of the shared directions two cameras label differently, per frame and lag.
 
     Parameters
     ----------
-    labels_a, labels_b : sequence of (m,) bool arrays or None, each of length n
-        Each camera's sky labels of the shared directions (:func:`overlap_pixels`) at each
-        position in time order; None where the camera has no usable frame.
+    labels_a, labels_b : sequence of (m,) bool arrays or None
+        Each camera's sky labels of the shared directions (:func:`overlap_pixels`) for its
+        frames in time order; None where a frame is unusable.
+    match_b : array_like of int, shape (len(labels_a),), optional
+        The index in ``labels_b`` of the frame taken with each of the first camera's
+        (-1: none); default ``arange`` (the two lists pair one to one).
     max_lag : int
         Largest lag tried either way.
 
     Returns
     -------
-    ndarray, shape (n, 2 * max_lag + 1)
-        Column ``max_lag + lag`` holds, for position ``i``, the share of directions where
-        ``labels_a[i]`` and ``labels_b[i + lag]`` differ; NaN where either is missing.
+    ndarray, shape (len(labels_a), 2 * max_lag + 1)
+        Column ``max_lag + lag`` holds, for the first camera's frame ``i``, the share of
+        directions where ``labels_a[i]`` and ``labels_b[match_b[i] + lag]`` differ; NaN where
+        either is missing.
     """
     n = len(labels_a)
-    if len(labels_b) != n:
+    match = np.arange(n) if match_b is None else np.asarray(match_b, int)
+    if match.shape != (n,):
+        raise ValueError(f"match_b must have one entry per frame of labels_a ({n}), got "
+                         f"shape {match.shape}")  # fmt: skip
+    if match_b is None and len(labels_b) != n:
         raise ValueError(
             f"labels_a and labels_b must be of one length, got {n} and {len(labels_b)}"
         )
@@ -204,14 +217,33 @@ def lag_disagreement(
         raise ValueError(f"max_lag must be >= 1, got {max_lag}")
     out = np.full((n, 2 * max_lag + 1), np.nan)
     for i, a in enumerate(labels_a):
-        if a is None or a.size == 0:
+        if a is None or a.size == 0 or match[i] < 0:
             continue
         for k, lag in enumerate(range(-max_lag, max_lag + 1)):
-            j = i + lag
-            b = labels_b[j] if 0 <= j < n else None
+            j = int(match[i]) + lag
+            b = labels_b[j] if 0 <= j < len(labels_b) else None
             if b is not None and b.size == a.size:
                 out[i, k] = np.count_nonzero(a != b) / a.size
     return out
+
+
+def _costs(per_lag: NDArray, position_cap: float) -> NDArray:
+    """Each position's cost at each lag: its disagreement, a lag it cannot test (the survey's
+    ends, a missing frame) at the mean of those it can (no evidence either way), at most
+    ``position_cap`` above its best lag's."""
+    d = np.asarray(per_lag, float)
+    ok = np.isfinite(d)
+    n_ok = ok.sum(axis=1)
+    mean = np.where(n_ok > 0, np.where(ok, d, 0.0).sum(axis=1) / np.maximum(n_ok, 1), 0.0)
+    cost = np.where(ok, d, mean[:, None])
+    return np.minimum(cost, cost.min(axis=1, keepdims=True) + position_cap)
+
+
+def _check_per_lag(per_lag: NDArray) -> NDArray:
+    d = np.asarray(per_lag, float)
+    if d.ndim != 2 or d.shape[1] % 2 != 1 or d.shape[1] < 3:
+        raise ValueError(f"per_lag must have shape (n, 2 * max_lag + 1), got {d.shape}")
+    return d
 
 
 def step_lags(
@@ -241,9 +273,7 @@ def step_lags(
     ndarray of int, shape (n,)
         The lag at each position (0: in step).
     """
-    d = np.asarray(per_lag, float)
-    if d.ndim != 2 or d.shape[1] % 2 != 1 or d.shape[1] < 3:
-        raise ValueError(f"per_lag must have shape (n, 2 * max_lag + 1), got {d.shape}")
+    d = _check_per_lag(per_lag)
     if not switch_cost > 0.0 or not position_cap > 0.0:
         raise ValueError(
             f"switch_cost and position_cap must be > 0, got {switch_cost} and {position_cap}"
@@ -252,10 +282,7 @@ def step_lags(
     centre = k // 2
     if n == 0:
         return np.zeros(0, int)
-    # a lag a position cannot test (the survey's ends) costs that position's worst defined one
-    worst = np.nanmax(np.where(np.isfinite(d), d, -np.inf), axis=1, initial=-np.inf)
-    cost = np.where(np.isfinite(d), d, np.where(np.isfinite(worst), worst, 0.0)[:, None])
-    cost = np.minimum(cost, cost.min(axis=1, keepdims=True) + position_cap)
+    cost = _costs(d, position_cap)
     total = np.full(k, switch_cost)
     total[centre] = 0.0
     back = np.zeros((n, k), np.intp)
@@ -269,3 +296,50 @@ def step_lags(
         lags[i] = state
         state = int(back[i, state])
     return lags - centre
+
+
+def widen(
+    per_lag: NDArray,
+    runs: Sequence[OffStep],
+    switch_cost: float = SWITCH_COST,
+    position_cap: float = POSITION_CAP,
+) -> list[OffStep]:
+    """Each stretch widened both ways until lag 0 is confirmed beside it.
+
+    Where nothing crosses the shared directions every lag costs about the same, so where a
+    stretch begins and ends is arbitrary (a reviewer's dropped image was set aside only from
+    the first structure over the track on, 14 positions after the drop, and those frames
+    trusted 0.46 % falsely). Each end moves outward over the positions whose summed
+    advantage of lag 0 over the stretch's lag is still below ``switch_cost``: the evidence a
+    change of lag needs.
+
+    Parameters
+    ----------
+    per_lag : ndarray, shape (n, 2 * max_lag + 1)
+        :func:`lag_disagreement`'s result.
+    runs : sequence of OffStep
+        :func:`off_step`'s stretches.
+    switch_cost, position_cap : float
+        As :func:`step_lags`.
+
+    Returns
+    -------
+    list of OffStep
+        The widened stretches (they may overlap), in the order given.
+    """
+    d = _check_per_lag(per_lag)
+    cost = _costs(d, position_cap)
+    centre = d.shape[1] // 2
+    out = []
+    for r in runs:
+        gain = cost[:, centre + r.lag] - cost[:, centre]  # lag 0's advantage at each position
+        first, total = r.first, 0.0
+        while first > 0 and total + gain[first - 1] < switch_cost:
+            total += gain[first - 1]
+            first -= 1
+        last, total = r.last, 0.0
+        while last < len(d) - 1 and total + gain[last + 1] < switch_cost:
+            total += gain[last + 1]
+            last += 1
+        out.append(OffStep(first, last, r.lag))
+    return out

@@ -16,6 +16,7 @@ from predisat.reconstruct.step import (
     off_step,
     overlap_pixels,
     step_lags,
+    widen,
 )
 
 
@@ -111,7 +112,8 @@ def test_a_late_stretch_is_found_and_noise_is_not() -> None:
     # a few positions of strong evidence alone (a tunnel mouth, where lags pairing frames
     # inside the tunnel agree trivially) do not make a stretch
     mouth = noise.copy()
-    mouth[50:55, np.arange(7) != 0] += 0.15
+    mouth[50:55, 1:] += 0.15  # lag -3 best by 0.15 at five positions
+    mouth[80:100, np.arange(7) != 3] += 0.03  # in step further on
     assert not np.any(step_lags(mouth, 0.3))
     assert np.any(step_lags(mouth, 0.3, position_cap=1.0))
     with pytest.raises(ValueError, match="switch_cost"):
@@ -174,3 +176,55 @@ def test_process_sets_aside_the_frames_of_a_camera_out_of_step(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "cameras are out of step from chainage" in err and "fix the manifest" in err
     assert step_notes(got.masks.provenance) and step_notes(ok.masks.provenance) == []
+
+
+def test_frames_pair_by_the_nearest_time_within_half_the_local_gap() -> None:
+    from predisat.reconstruct.batch import nearest_in_time
+
+    # slow then fast (a fourfold speed change): one tolerance for the survey merged the fast
+    # frames; the other camera 0.3 gap late in the slow part and 10 ms in the fast part
+    ta = np.concatenate([np.arange(0.0, 12.0, 1.2), 12.0 + np.arange(10) * 0.277])
+    tb = np.concatenate([np.arange(0.0, 12.0, 1.2) + 0.36, 12.0 + np.arange(10) * 0.277 + 0.01])
+    np.testing.assert_array_equal(nearest_in_time(ta, tb), np.arange(20))
+    # the other camera missed frames 3 and 7: those have no partner, the rest keep theirs
+    keep = np.setdiff1d(np.arange(20), [3, 7])
+    got = nearest_in_time(ta, tb[keep])
+    assert got[3] == -1 and got[7] == -1
+    np.testing.assert_array_equal(keep[got[got >= 0]], np.setdiff1d(np.arange(20), [3, 7]))
+    assert nearest_in_time(ta, np.zeros(0)).tolist() == [-1] * 20
+
+
+def test_missing_frames_do_not_push_the_lag_off_zero() -> None:
+    """A camera's frame missing (NaN at lag 0, the others defined) is no evidence against
+    lag 0 (a review: the worst-of-the-rest fill called an honest survey missing every fifth
+    frame off step)."""
+    rng = np.random.default_rng(2)
+    d = 0.03 + 0.01 * rng.random((150, 7))
+    d[::5, 3] = np.nan
+    assert not np.any(step_lags(d, 0.3))
+
+
+def test_a_stretch_is_widened_until_lag_zero_is_confirmed() -> None:
+    rng = np.random.default_rng(5)
+    d = 0.05 + 0.002 * rng.random((100, 7))  # no evidence anywhere...
+    d[:20, np.arange(7) != 3] += 0.03  # ... but in step (lag 0 clearly best) up to 20
+    d[50:70, np.arange(7) != 4] += 0.03  # and 1 late clearly from 50 to 70
+    runs = off_step(step_lags(d, 0.3))
+    assert runs and all(r.lag == 1 for r in runs)
+    (wide,) = {(r.first, r.last) for r in widen(d, runs, 0.3)}
+    # back over the positions without evidence and into the in-step ones until they confirm
+    # lag 0 by the change cost (0.3: ten positions 0.03 better), and on to the end (nothing
+    # confirms lag 0 after the stretch)
+    assert 9 <= wide[0] <= 11 and wide[1] == 99
+
+
+def test_process_says_when_no_two_cameras_can_be_compared(capsys) -> None:
+    from predisat.availability.run import step_notes
+    from predisat.reconstruct.batch import _step_warnings
+
+    pinhole = {"left/right": {"compared": False, "why": "0 shared directions (fewer than 50)"}}
+    (line,) = _step_warnings(pinhole)
+    assert "was not checked" in line
+    assert _step_warnings({}) == [line]
+    assert "could not be checked" in step_notes({"step_check": pinhole})[0]
+    assert step_notes({}) == []
