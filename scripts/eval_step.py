@@ -95,7 +95,7 @@ def score(survey_dir: Path, cache: Path, truth: Path, out: Path, keep: bool = Fa
         batch._step_bad_frames = set_aside
     c = compare(result.masks, load_truth(truth))
     trusted, good, visible = trust_counts(c.mask_el_deg, c.truth_el_deg)
-    ft = 100.0 * (1.0 - good.sum() / max(int(trusted.sum()), 1))
+    ft = 100.0 * (1.0 - good.sum() / trusted.sum()) if trusted.sum() else 0.0
     n_trusted = trusted.sum(axis=1)
     share = np.where(n_trusted > 0, 1.0 - good.sum(axis=1) / np.maximum(n_trusted, 1), 0.0)
     worst = 100.0 * np.max(share)
