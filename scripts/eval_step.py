@@ -150,11 +150,11 @@ def main() -> None:
             second = sorted(survey.cameras)[1]
             print(f"{sdir} as is: {score(sdir, cache, args.truth, args.work / 'as_is')}")
             if args.shift:
-                late = shifted_copy(sdir, args.work / "late", second, args.start, args.shift)
+                late_dir = shifted_copy(sdir, args.work / "late", second, args.start, args.shift)
                 tag = f"{second} {args.shift} late from {args.start}"
                 print(f"{sdir} {tag}, check's frames kept: "
-                      f"{score(late, cache, args.truth, args.work / 'kept', keep=True)}")
-                print(f"{sdir} {tag}: {score(late, cache, args.truth, args.work / 'checked')}")
+                      f"{score(late_dir, cache, args.truth, args.work / 'kept', keep=True)}")
+                print(f"{sdir} {tag}: {score(late_dir, cache, args.truth, args.work / 'checked')}")
 
 
 if __name__ == "__main__":
