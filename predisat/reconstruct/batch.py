@@ -394,9 +394,9 @@ def nearest_in_time(times_a: NDArray, times_b: NDArray) -> NDArray:
     after = np.concatenate([gaps, [np.inf]])
     local = np.minimum(before, after)
     local = np.where(np.isfinite(local) & (local > 0), local, np.inf)
-    j = np.clip(np.searchsorted(tb, ta), 1, tb.size - 1) if tb.size > 1 else np.zeros(ta.size, int)
-    if tb.size > 1:
-        j = np.where(np.abs(tb[j - 1] - ta) <= np.abs(tb[j] - ta), j - 1, j)
+    j = np.clip(np.searchsorted(tb, ta), 0, tb.size - 1)
+    k = np.maximum(j - 1, 0)
+    j = np.where(np.abs(tb[k] - ta) <= np.abs(tb[j] - ta), k, j)
     ok = np.abs(tb[j] - ta) < 0.5 * local
     return np.where(ok, j, -1).astype(np.intp)
 
@@ -1400,8 +1400,7 @@ def process_survey(
             _report(line, quiet=False)
         step_bad = _step_bad_frames(step)
         if step_bad and strict:
-            fid, message = next(iter(step_bad.items()))
-            _bad(fid, message, strict)
+            _bad(*next(iter(step_bad.items())), strict)
         for fid, message in step_bad.items():
             bad.setdefault(fid, BadFrame(fid, message, stage="step"))
         t2 = time.perf_counter()

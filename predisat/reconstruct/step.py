@@ -122,12 +122,13 @@ def _hemisphere(n: int) -> NDArray:
 
 def _imaged(camera: CameraModel, mount: Mount, dirs: NDArray, edge_deg: float) -> NDArray:
     """Which vehicle-frame ``dirs`` (n, 3) ``camera`` images, ``edge_deg`` inside its edge."""
-    to_camera = mount.camera_to_vehicle().T
+    # rows of ``dirs @ R`` are ``R.T @ v``: vehicle directions in the camera frame
+    to_camera = mount.camera_to_vehicle()
     ok = np.ones(len(dirs), bool)
     e = np.radians(edge_deg)
     probes = [dirs] + [dirs + s * e * np.cross(dirs, ax) for ax in np.eye(3) for s in (-1, 1)]
     for p in probes:
-        u, v = camera.ray_to_pixel(p @ to_camera.T)
+        u, v = camera.ray_to_pixel(p @ to_camera)
         ok &= np.isfinite(u) & camera.contains(u, v)
     return ok
 
