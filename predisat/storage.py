@@ -141,13 +141,22 @@ def _missing(url: str, exc: BaseException | None = None) -> FileNotFoundError:
     )
 
 
-def read_bytes(loc: Location, options: StorageOptions | None = None) -> bytes:
-    """The bytes of a file; FileNotFoundError naming the location and the fix."""
+def read_bytes(
+    loc: Location, options: StorageOptions | None = None, head_bytes: int | None = None
+) -> bytes:
+    """The bytes of a file (its first ``head_bytes`` only, when given: a header read that
+    does not download a remote image); FileNotFoundError naming the location and the fix."""
+    if head_bytes is not None and head_bytes < 0:
+        raise ValueError(f"head_bytes must be >= 0 or None, got {head_bytes}")
     if isinstance(loc, Path):
-        return loc.read_bytes()
+        if head_bytes is None:
+            return loc.read_bytes()
+        with loc.open("rb") as f:
+            return f.read(head_bytes)
     fs, path = _fs(loc, options)
     try:
-        return bytes(fs.cat_file(path))
+        # a server without range requests sends the whole file
+        return bytes(fs.cat_file(path, start=0, end=head_bytes))[:head_bytes]
     except FileNotFoundError as exc:
         raise _missing(loc, exc) from None
     except Exception as exc:  # each file system raises its own (aiohttp, botocore...)

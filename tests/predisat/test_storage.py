@@ -86,6 +86,19 @@ def test_a_missing_remote_file_names_the_url_and_the_fix(mem: str, tmp_path: Pat
             write_atomic(join(url, "new.txt"), b"x")
 
 
+def test_a_head_read_gives_the_first_bytes_only(mem: str, tmp_path: Path) -> None:
+    data = bytes(range(256)) * 8
+    write_atomic(join(mem, "img.jpg"), data)
+    (tmp_path / "img.jpg").write_bytes(data)
+    for loc in (join(mem, "img.jpg"), tmp_path / "img.jpg"):
+        assert read_bytes(loc, head_bytes=100) == data[:100]
+        assert read_bytes(loc, head_bytes=10**6) == data
+    with serve_folder(tmp_path) as url:
+        assert read_bytes(join(url, "img.jpg"), head_bytes=300) == data[:300]
+    with pytest.raises(ValueError, match="head_bytes"):
+        read_bytes(tmp_path / "img.jpg", head_bytes=-1)
+
+
 def test_an_error_about_a_local_copy_names_the_url(mem: str) -> None:
     write_atomic(join(mem, "calib.yaml"), b"x")
     with pytest.raises(ValueError) as err, input_path(join(mem, "calib.yaml")) as local:
