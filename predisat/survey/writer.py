@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from predisat.atomic import write_bytes_atomic
 from predisat.camera.models import CameraModel, Mount
+from predisat.survey.capture import exif_time_bytes
 from predisat.survey.format import (
     ATTITUDE_LIMITS_DEG,
     DIRECTIONS,
@@ -28,6 +29,16 @@ from predisat.survey.format import (
 )
 
 __all__ = ["SurveyWriter"]
+
+
+def _with_exif(jpeg: bytes, exif: bytes) -> bytes:
+    """A JPEG with an EXIF APP1 segment after its JFIF header (the pixels' bytes untouched)."""
+    if len(exif) + 2 > 0xFFFF:
+        raise ValueError(f"EXIF block of {len(exif)} bytes does not fit a JPEG segment")
+    at = 2  # after SOI
+    if jpeg[2:4] == b"\xff\xe0":  # APP0 (JFIF) stays first
+        at = 4 + int.from_bytes(jpeg[4:6], "big")
+    return jpeg[:at] + b"\xff\xe1" + (len(exif) + 2).to_bytes(2, "big") + exif + jpeg[at:]
 
 
 def _fmt(value: float | None) -> str:
@@ -170,12 +181,16 @@ class SurveyWriter:
         jpeg_quality: int = 90,
         roll_deg: float | None = None,
         pitch_deg: float | None = None,
+        capture_time_s: float | None = None,
     ) -> str:
         """Write one frame's image and record its manifest row; returns the frame_id.
 
         ``image_bgr`` is uint8 (H, W, 3) BGR (or (H, W) grey) with the side's calibrated size.
         Give ``chainage_m`` and/or ``lat_deg, lon_deg[, h_m]`` (antenna position), and the
         vehicle's measured attitude ``roll_deg, pitch_deg`` when known (both or neither).
+        ``capture_time_s`` (seconds since 1970 by the camera's own clock) is written into the
+        JPEG as EXIF ``DateTimeOriginal`` and ``SubSecTimeOriginal`` (milliseconds), as
+        cameras stamp their pictures (:mod:`predisat.survey.capture`).
         """
         if self._closed:
             raise RuntimeError(f"SurveyWriter for {self.root} is closed")
@@ -212,8 +227,11 @@ class SurveyWriter:
         ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         if not ok:
             raise OSError(f"JPEG encoding failed for frame {fid!r}")
+        data = buf.tobytes()
+        if capture_time_s is not None:
+            data = _with_exif(data, exif_time_bytes(float(capture_time_s)))
         rel = f"images/{fid}.jpg"
-        write_bytes_atomic(self.root / rel, buf.tobytes())
+        write_bytes_atomic(self.root / rel, data)
         self._rows.append({
             "frame_id": fid, "image": rel, "side": side, "gps_s": _fmt(gps),
             "chainage_m": _fmt(chainage_m), "lat_deg": _fmt(lat_deg),

@@ -41,7 +41,7 @@ from predisat.camera.models import CameraModel, Mount, default_camera
 from predisat.camera.rigs import Rig
 from predisat.geodesy import enu_to_azel, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.sun import sun_azel, sun_direction_enu
-from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_s
+from predisat.gnss.timescale import calendar_to_gps_s, gps_minus_utc_at_gps_s, gps_minus_utc_s
 from predisat.survey import Survey, SurveyWriter
 from predisat.synth.render import Casters, RenderOptions, camera_pose, render_frame
 from predisat.synth.sky import SKY_CONDITIONS, SkyModel
@@ -54,6 +54,7 @@ from predisat.track.readers import write_geojson
 __all__ = [
     "SKY_CHOICES",
     "SynthResult",
+    "camera_clock_s",
     "contact_sheet",
     "daytime_gps_s",
     "default_scenery",
@@ -300,7 +301,7 @@ def generate_survey(
         overwrite=overwrite,
     ) as writer:
         for job, frames in _render_all(context, run.jobs, workers, casters, progress):
-            rows += [_write_frame(writer, truth_dir, run, job, frame, write_attitude)
+            rows += [_write_frame(writer, truth_dir, run, job, frame, write_attitude, seed)
                      for frame in frames]  # fmt: skip
     _write_frames_csv(truth_dir / "frames.csv", rows)
     write_bytes_atomic(
@@ -427,6 +428,30 @@ class _Positions:
         return replace(self, jobs=jobs)
 
 
+CAMERA_CLOCK_JITTER_S = 0.002
+"""Scatter of the synthetic cameras' capture stamps about their clock, seconds."""
+
+
+def camera_clock_s(gps_s: float, side: str, start_gps_s: float, index: int, seed: int) -> float:
+    """A synthetic camera's capture time of a frame, seconds since 1970 by its own clock.
+
+    Each camera's clock keeps local time one hour ahead of UTC, is set within half a minute
+    and drifts by up to 30 ppm (both drawn from ``seed`` and the camera's place), and stamps
+    each frame with a 2 ms scatter (drawn from ``seed``, place and frame index), as a
+    camera's EXIF ``DateTimeOriginal`` (:mod:`predisat.survey.capture`).
+    """
+    place = sorted(_CAMERA_PLACES).index(side) if side in _CAMERA_PLACES else 0
+    rng = np.random.default_rng([seed, place])
+    set_s, drift = rng.uniform(-30.0, 30.0), rng.uniform(-30e-6, 30e-6)
+    jitter = np.random.default_rng([seed, place, index]).normal(0.0, CAMERA_CLOCK_JITTER_S)
+    utc_s = gps_s - float(gps_minus_utc_at_gps_s(gps_s)) + _GPS_TO_UNIX_S
+    return utc_s + 3600.0 + set_s + drift * (gps_s - start_gps_s) + float(jitter)
+
+
+_CAMERA_PLACES = ("front", "left", "rear", "right", "roof")
+_GPS_TO_UNIX_S = 315964800.0  # 1980-01-06 in seconds since 1970-01-01
+
+
 def _write_frame(
     writer: SurveyWriter,
     truth_dir: Path,
@@ -434,6 +459,7 @@ def _write_frame(
     job: _PositionJob,
     frame: _Frame,
     write_attitude: bool = True,
+    seed: int = 0,
 ) -> dict[str, str]:
     """Add one rendered frame to the survey, write its label; its row of ``frames.csv``."""
     i = job.index
@@ -449,6 +475,7 @@ def _write_frame(
         jpeg_quality=quality,
         roll_deg=job.roll_deg if write_attitude else None,
         pitch_deg=job.pitch_deg if write_attitude else None,
+        capture_time_s=camera_clock_s(float(run.gps_s[i]), side, float(run.gps_s[0]), i, seed),
     )
     ok, buf = cv2.imencode(".png", label)
     if not ok:
