@@ -1411,16 +1411,32 @@ def side_swap_notes(provenance: JsonDict) -> list[str]:
 
 
 def step_notes(provenance: JsonDict) -> list[str]:
-    """The report's warnings for cameras found out of step when the masks were made
-    (``predisat process``'s ``step_check``; section 21 of docs/reconstruction.md)."""
+    """The report's warnings for cameras found out of step with their manifest rows when the
+    masks were made (``predisat process``'s ``capture_check`` and ``step_check``; sections
+    21-22 of docs/reconstruction.md)."""
     check = provenance.get("step_check")
-    if not isinstance(check, dict):
-        return []
+    capture = provenance.get("capture_check")
     out = []
-    if not any(isinstance(v, dict) and v.get("compared") for v in check.values()):
+    if isinstance(capture, dict):
+        for side, v in sorted(capture.items()):
+            for r in v.get("off", []) if isinstance(v, dict) else []:
+                out.append(
+                    f"the masks were made from a survey whose {side} camera's images from "
+                    f"chainage {r.get('from_chainage_m')} to {r.get('to_chainage_m')} m carry "
+                    "other rows' capture times (images rows off in the manifest); they were "
+                    "set aside, so the masks there rest on other frames or on assumptions: fix "
+                    "the survey's manifest and process it again"
+                )
+    if not isinstance(check, dict):
+        return out
+    timed = isinstance(capture, dict) and bool(capture) and all(
+        isinstance(v, dict) and v.get("checked") for v in capture.values()
+    )
+    if not timed and not any(isinstance(v, dict) and v.get("compared") for v in check.values()):
         out.append("the masks' survey cameras could not be checked for images out of step with "
-                   "their manifest rows (no two cameras share the sky above the track): a "
-                   "dropped image there would have gone unseen")  # fmt: skip
+                   "their manifest rows (no two cameras share the sky above the track, and the "
+                   "images carry no usable capture times): a dropped image there would have "
+                   "gone unseen")  # fmt: skip
     for pair, v in sorted(check.items()):
         for r in v.get("off_step", []) if isinstance(v, dict) else []:
             out.append(

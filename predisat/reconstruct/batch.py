@@ -121,6 +121,14 @@ from predisat.storage import (
     write_atomic,
 )
 from predisat.survey import Survey, check_survey_track
+from predisat.survey.capture import MAX_LAG as CAPTURE_MAX_LAG
+from predisat.survey.capture import (
+    MIN_FIT_SHARE,
+    MIN_TIMED_FRAMES,
+    check_rows,
+    fit_clock,
+    read_capture_time_s,
+)
 from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
@@ -482,6 +490,125 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
     return sides, step
 
 
+def _capture_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
+    """Per camera, whether its images' own capture times (EXIF) sit on their manifest rows
+    (:mod:`predisat.survey.capture`): the camera's clock, and the stretches of frames whose
+    time is another row's (with their chainages and frames), or why it was not checked."""
+    fr, opts = plan.survey.frames, plan.survey.storage_options
+    chain = np.asarray(plan.chainage_m, float)
+    out: JsonDict = {}
+    for side in sorted(plan.survey.cameras):
+        mine = [i for i in np.flatnonzero(fr.side == side) if str(fr.frame_id[i]) not in bad]
+        idx = sorted(mine, key=lambda i: float(fr.gps_s[i]))
+        got = [read_capture_time_s(join(plan.survey.root, str(fr.image[i])), opts) for i in idx]
+        e = np.array([t for t, _ in got], float).reshape(-1)
+        res = np.array([r for _, r in got], float).reshape(-1)
+        g = np.array([float(fr.gps_s[i]) for i in idx], float)
+        timed = int(np.count_nonzero(np.isfinite(e)))
+        rec: JsonDict = {"checked": False, "frames": len(idx), "timed": timed}
+        out[side] = rec
+        if timed < MIN_TIMED_FRAMES:
+            rec["why"] = (f"{timed} of its {len(idx)} images carry a capture time (EXIF "
+                          "DateTimeOriginal)")  # fmt: skip
+            continue
+        if not np.all(np.diff(g) > 0):
+            rec["why"] = "two of its frames share a gps_s"
+            continue
+        resolution = float(np.nanmax(res))
+        fit = fit_clock(e, g, resolution)
+        if fit is None or fit.share < MIN_FIT_SHARE:
+            share = 0.0 if fit is None else fit.share
+            rec["why"] = (f"one clock puts only {100 * share:.0f} % of its capture times on "
+                          "manifest rows (times rewritten by software, or a clock that "
+                          "jumped)")  # fmt: skip
+            continue
+        rows = check_rows(e, g, fit)
+        rec.update({
+            "offset_s": fit.offset_s, "drift_ppm": fit.drift_ppm, "tol_s": fit.tol_s,
+            "resolution_s": resolution, "ambiguous": fit.ambiguous,
+            "checked_frames": int(np.count_nonzero(rows.checked)),
+        })  # fmt: skip
+        if not rows.checked.any():
+            gap = float(np.median(np.diff(g)))
+            rec["why"] = (f"its capture times are known to {fit.tol_s:.3f} s (resolution "
+                          f"{resolution:g} s) and its frames are {gap:.2f} s apart: a row off "
+                          "cannot be told")  # fmt: skip
+            continue
+        rec["checked"] = True
+        off = rows.off
+        lag = np.where(rows.fits, rows.lag, CAPTURE_MAX_LAG + 1)  # beyond: fits no row
+        runs = []
+        k = 0
+        while k < len(idx):
+            if not off[k]:
+                k += 1
+                continue
+            first = k
+            while k + 1 < len(idx) and off[k + 1] and lag[k + 1] == lag[first]:
+                k += 1
+            sel = np.asarray(idx[first : k + 1])
+            runs.append({
+                "lag": int(lag[first]) if rows.fits[first] else None,
+                **_chainage_span(chain[sel]),
+                "frames": [str(f) for f in fr.frame_id[sel]],
+            })  # fmt: skip
+            k += 1
+        rec["off"] = runs
+    return out
+
+
+def _capture_warnings(check: JsonDict) -> list[str]:
+    """The lines ``process`` prints for cameras whose images' capture times are other rows',
+    or a note for a survey none of whose cameras could be checked."""
+    out = []
+    if not any(v.get("checked") for v in check.values()):
+        whys = "; ".join(f"{side}: {v.get('why')}" for side, v in check.items())
+        out.append(
+            "note: the images' capture times were not compared with their manifest rows "
+            f"({whys}); an image a row off its row is then seen only where two cameras' "
+            "views overlap (docs/reconstruction.md, sections 21-22)"
+        )
+    for side, v in check.items():
+        if v.get("checked") and v.get("ambiguous") and v.get("off"):
+            out.append(
+                f"note: the {side} camera's frames were taken at one speed: its capture times "
+                "cannot tell a clock set a frame gap off from every image a row off, so its "
+                "first frames were taken as on their rows (docs/reconstruction.md, section 22)"
+            )
+        for r in v.get("off", []):
+            out.append(
+                f"warning: the {side} camera's images {_span_text(r)} were taken at the time "
+                f"of {_row_text(r['lag'])} by the camera's own clock (EXIF DateTimeOriginal, "
+                "fitted over the survey): a dropped or extra image, a renumbering, a camera "
+                "that missed triggers. Carved there, each skyline would stand where it was "
+                "not seen (a user trial's survey with one dropped image trusted 1.05 % of its "
+                f"directions falsely); its frames there ({len(r['frames'])}) were set aside; "
+                "fix the manifest (docs/reconstruction.md, section 22)"
+            )
+    return out
+
+
+def _capture_bad_frames(check: JsonDict) -> dict[str, str]:
+    """The frames the capture-time check sets aside, with the reason each gets."""
+    out: dict[str, str] = {}
+    for side, v in check.items():
+        for r in v.get("off", []):
+            reason = (
+                f"the {side} camera's image was taken at the time of {_row_text(r['lag'])} (EXIF "
+                "capture time against the camera's fitted clock): a dropped or extra image in "
+                "the manifest?; set aside, fix the manifest (docs/reconstruction.md, section 22)"
+            )
+            for fid in r["frames"]:
+                out.setdefault(fid, reason)
+    return out
+
+
+def _row_text(lag: int | None) -> str:
+    if lag is None:
+        return f"no row within {CAPTURE_MAX_LAG} of its own"
+    return f"the row {abs(lag)} {'after' if lag > 0 else 'before'} its own"
+
+
 def _chainage_span(chainage_m: NDArray) -> JsonDict:
     """``from_chainage_m`` and ``to_chainage_m`` of the finite values (None when none is)."""
     c = chainage_m[np.isfinite(chainage_m)]
@@ -496,11 +623,13 @@ def _span_text(r: JsonDict) -> str:
     return f"from chainage {lo:.1f} to {hi:.1f} m"
 
 
-def _step_warnings(step: JsonDict) -> list[str]:
+def _step_warnings(step: JsonDict, capture: JsonDict | None = None) -> list[str]:
     """The lines ``process`` prints for cameras whose frames are out of step, or for a rig
-    whose cameras could not be compared."""
+    whose cameras could not be compared (unless every camera's capture times were checked
+    against its rows: ``capture``, :func:`_capture_check`'s result)."""
     out = []
-    if not any(v.get("compared") for v in step.values()):
+    timed = bool(capture) and all(v.get("checked") for v in (capture or {}).values())
+    if not timed and not any(v.get("compared") for v in step.values()):
         out.append(
             "note: whether the cameras' images are in step with their manifest rows was not "
             "checked: no two cameras both image 50 directions above the track (pinhole side "
@@ -982,6 +1111,8 @@ def _frame_jobs(
     frozen = _frozen_frames(plan, need)
     for i in need:
         fid = str(fr.frame_id[i])
+        if fid in bad:  # set aside before the segmentation (the capture-time check)
+            continue
         if int(i) in frozen:
             message = _at_line(plan, int(i), frozen[int(i)])
             _bad(fid, message, strict)
@@ -1378,6 +1509,15 @@ def process_survey(
     for note in (chainage_note, positions_note):
         if note is not None:
             _report(note, quiet=False)
+    capture = _capture_check(plan, bad)
+    plan.provenance["capture_check"] = capture
+    for line in _capture_warnings(capture):
+        _report(line, quiet=False)
+    capture_bad = _capture_bad_frames(capture)
+    if capture_bad and strict:
+        _bad(*next(iter(capture_bad.items())), strict)
+    for fid, message in capture_bad.items():
+        bad.setdefault(fid, BadFrame(fid, message, stage="capture"))
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)
@@ -1396,7 +1536,7 @@ def process_survey(
         timings["segment"] = time.perf_counter() - t1
         check, step = _frame_checks(plan, bad)
         plan.provenance["side_check"], plan.provenance["step_check"] = check, step
-        for line in _side_warnings(check) + _step_warnings(step):
+        for line in _side_warnings(check) + _step_warnings(step, capture):
             _report(line, quiet=False)
         step_bad = _step_bad_frames(step)
         if step_bad and strict:

@@ -136,46 +136,114 @@ def test_off_step_groups_the_runs() -> None:
     assert off_step([]) == [] and off_step([0, 0]) == []
 
 
-def test_process_sets_aside_the_frames_of_a_camera_out_of_step(tmp_path, capsys) -> None:
-    """A rendered survey under catenary with an overbridge, and the same whose manifest gives
-    the right camera's rows from the 6th on the next row's image (a dropped image): process
-    finds the first in step, and in the second sets aside the frames from there on, says so,
-    and the availability report repeats it."""
-    import pandas as pd
-
-    from predisat.availability.run import step_notes
-    from predisat.reconstruct.batch import process_survey
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """A rendered survey under catenary with an overbridge (fisheyes 240x180, 31 positions)."""
     from predisat.synth.generate import generate_survey
     from predisat.synth.world import Stretch, WorldSpec
     from predisat.track import demo_track
 
+    out = tmp_path_factory.mktemp("step")
     spec = WorldSpec((Stretch("town", 3000, 3300), Stretch("overbridge", 3150, 3160)),
                      hills=False)  # fmt: skip
-    generate_survey(demo_track(), 3000.0, 3300.0, sky="clear", seed=5, out_dir=tmp_path,
+    generate_survey(demo_track(), 3000.0, 3300.0, sky="clear", seed=5, out_dir=out,
                     spec=spec, camera=default_camera("fisheye").resized(240, 180),
                     progress=False)  # fmt: skip
-    survey = tmp_path / "survey"
-    ok = process_survey(survey, tmp_path / "ok", progress=False)
-    assert ok.masks.provenance["step_check"]["left/right"]["off_step"] == []
-    assert not any(b.stage == "step" for b in ok.bad_frames)
-    assert "out of step" not in capsys.readouterr().err
+    return out / "survey"
+
+
+def _drop_right_image(survey):
+    """The manifest whose right camera's rows from the 6th on give the next row's image (a
+    dropped image); the moved rows' frame ids."""
+    import pandas as pd
 
     man = pd.read_csv(survey / "manifest.csv")
     right = man.index[man.side == "right"][np.argsort(man.gps_s[man.side == "right"])]
     late = right[5:]
     man.loc[late[:-1], "image"] = man.loc[late[1:], "image"].to_numpy()
     man.drop(index=late[-1:]).to_csv(survey / "manifest.csv", index=False)
+    return set(man.frame_id[late[:-1]])
+
+
+def test_process_sets_aside_the_frames_of_a_camera_out_of_step(rendered, tmp_path,
+                                                               capsys) -> None:  # fmt: skip
+    """The rendered survey with its images' capture times removed, and the same whose right
+    camera dropped an image: process finds the first in step, and in the second sets aside
+    the frames from there on, says so, and the availability report repeats it."""
+    import shutil
+
+    from predisat.availability.run import step_notes
+    from predisat.reconstruct.batch import process_survey
+
+    survey = tmp_path / "survey"
+    shutil.copytree(rendered, survey)
+    for image in (survey / "images").iterdir():  # no capture times: the other check is blind
+        image.write_bytes(_without_exif(image.read_bytes()))
+    ok = process_survey(survey, tmp_path / "ok", progress=False)
+    assert not any(v["checked"] for v in ok.masks.provenance["capture_check"].values())
+    assert ok.masks.provenance["step_check"]["left/right"]["off_step"] == []
+    assert not any(b.stage == "step" for b in ok.bad_frames)
+    assert "out of step" not in capsys.readouterr().err
+
+    moved = _drop_right_image(survey)
     got = process_survey(survey, tmp_path / "late", progress=False)
     (run,) = got.masks.provenance["step_check"]["left/right"]["off_step"]
     assert run["lag"] == -1 and run["first_position"] <= 5 and run["last_position"] >= 29
     set_aside = {b.frame_id for b in got.bad_frames if b.stage == "step"}
     assert set_aside == set(run["frames"])
     # every moved row of the right camera, and the left camera's frames beside them
-    assert set(man.frame_id[late[:-1]]) <= set_aside
+    assert moved <= set_aside
     assert any(f.startswith("left") for f in set_aside)
     err = capsys.readouterr().err
     assert "cameras are out of step from chainage" in err and "fix the manifest" in err
+    assert "capture times were not compared" in err
     assert step_notes(got.masks.provenance) and step_notes(ok.masks.provenance) == []
+
+
+def test_capture_times_set_aside_exactly_the_images_off_their_rows(rendered, tmp_path,
+                                                                   capsys) -> None:  # fmt: skip
+    """The same survey with the cameras' capture times (EXIF, written by the renderer with
+    a clock offset, drift and scatter): in step, both cameras are checked and nothing is set
+    aside; with the dropped image, the moved rows of the right camera, and only those, are
+    set aside before the segmentation, and process and the report say so."""
+    import shutil
+
+    from predisat.availability.run import step_notes
+    from predisat.reconstruct.batch import process_survey
+
+    survey = tmp_path / "survey"
+    shutil.copytree(rendered, survey)
+    ok = process_survey(survey, tmp_path / "ok", progress=False)
+    assert all(v["checked"] and v["off"] == [] for v in
+               ok.masks.provenance["capture_check"].values())  # fmt: skip
+    assert ok.bad_frames == ()
+    assert "capture" not in capsys.readouterr().err
+
+    moved = _drop_right_image(survey)
+    got = process_survey(survey, tmp_path / "late", progress=False)
+    set_aside = {b.frame_id for b in got.bad_frames if b.stage == "capture"}
+    assert set_aside == moved
+    runs = got.masks.provenance["capture_check"]["right"]["off"]
+    assert set().union(*(r["frames"] for r in runs)) == moved
+    # the last moved row holds the image of the row the manifest lost: no row has its time
+    assert [r["lag"] for r in runs] == [1, None] and len(runs[1]["frames"]) == 1
+    assert got.masks.provenance["capture_check"]["left"]["off"] == []
+    # the images set aside are not compared again, so the cameras are in step elsewhere
+    assert got.masks.provenance["step_check"]["left/right"]["off_step"] == []
+    err = capsys.readouterr().err
+    assert "right camera's images from chainage" in err and "row 1 after its own" in err
+    assert any("capture times" in n for n in step_notes(got.masks.provenance))
+
+
+def _without_exif(jpeg: bytes) -> bytes:
+    """A JPEG's bytes without its APP1 (EXIF) segments."""
+    out, at = [jpeg[:2]], 2
+    while jpeg[at] == 0xFF and jpeg[at + 1] not in (0xDA, 0xD9):  # markers before the scan
+        size = int.from_bytes(jpeg[at + 2 : at + 4], "big")
+        if jpeg[at + 1] != 0xE1:
+            out.append(jpeg[at : at + 2 + size])
+        at += 2 + size
+    return b"".join(out) + jpeg[at:]
 
 
 def test_frames_pair_by_the_nearest_time_within_half_the_local_gap() -> None:
