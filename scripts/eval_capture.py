@@ -93,6 +93,9 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=Path("/tmp/eval_capture"), help="scratch folder")
     ap.add_argument("--variant", action="append", default=[],
                     help="drop:SIDE:K or stretch:SIDE:K:L (rows in time order)")  # fmt: skip
+    ap.add_argument("--modes", nargs="+", default=["none", "step", "both"],
+                    choices=["none", "step", "both"],
+                    help="which checks set frames aside in the moved variants")  # fmt: skip
     args = ap.parse_args()
     survey, truth = args.world / "survey", args.world / "truth"
     cache = args.cache or args.world / "masks" / "cache"
@@ -103,8 +106,10 @@ def main() -> None:
             raise SystemExit(f"--variant {spec!r}: give drop:SIDE:K or stretch:SIDE:K:L")
         length = int(nums[1]) if kind == "stretch" else None
         moved = moved_copy(survey, args.work / f"v{k}", side, int(nums[0]), length)
-        for checks, name in (((), "no check"), (("step",), "step check only"),
-                             (("capture", "step"), "both checks")):  # fmt: skip
+        for mode, checks, name in (("none", (), "no check"), ("step", ("step",), "step check only"),
+                                   ("both", ("capture", "step"), "both checks")):  # fmt: skip
+            if mode not in args.modes:
+                continue
             got = score(args.work / f"v{k}", cache, truth, args.work / f"v{k}_out", checks, moved)
             print(f"{spec}, {name}: {got}")
 

@@ -163,7 +163,11 @@ class ClockFit:
     ambiguous : bool
         Another clock a whole number of frame gaps away explains nearly as many frames with
         other rows in step: at constant speed the times cannot tell a shift of every image from
-        a clock offset, and the first frames were taken as in step.
+        a clock offset, and the first timed frames were taken as on their own rows.
+    reliable : bool
+        False when the times' scatter about the best straight clock reaches a quarter of the
+        frames' median gap, or its drift leaves the searched range: images several rows off,
+        a clock that jumped, or stamps too coarse (then ``fitted`` is 0).
     """
 
     offset_s: float
@@ -172,6 +176,7 @@ class ClockFit:
     fitted: int
     timed: int
     ambiguous: bool
+    reliable: bool = True
 
     @property
     def share(self) -> float:
@@ -305,6 +310,8 @@ def fit_clock(
     # keeps only the frames that happen to stamp near the line
     rows = np.arange(e.size)
     t = g - g[0]
+    # beyond a quarter of a frame gap the rows cannot be told apart: no clock
+    cap = 0.25 * float(np.median(np.diff(g))) if g.size > 1 else math.inf
     for _ in range(_REFINE_ROUNDS):
         res = _residuals(e, g, offset, drift, max_lag)
         lag, fits = _lags(res, tol, max_lag)
@@ -321,20 +328,25 @@ def fit_clock(
             tol = wider
             break
         tol = wider
+    if tol > cap or abs(drift) > max_drift_ppm:
+        return ClockFit(offset, drift, tol, 0, timed, False, reliable=False)
     candidates = []
     for _, centre in _peaks(_residuals(e, g, offset, drift, max_lag).ravel(), tol,
                             2 * max_lag + 1):  # fmt: skip
         lag, fits = _lags(_residuals(e, g, offset + centre, drift, max_lag), tol, max_lag)
         candidates.append((int(np.count_nonzero(fits)), offset + centre, lag, fits))
     top = max(c[0] for c in candidates)
-    near_tie = [c for c in candidates if c[0] >= top - max(5, 0.02 * timed)]
+    near_tie = [c for c in candidates if c[0] >= top - max(3, 0.02 * timed)]
     in_step = [c for c in near_tie if np.count_nonzero(c[3] & (c[2] == 0)) > 0]
+    timed_idx = np.flatnonzero(np.isfinite(e))
 
-    def starts_in_step(c: tuple[int, float, NDArray, NDArray]) -> bool:
-        first = np.flatnonzero(c[3])[:5]
-        return first.size > 0 and bool(np.all(c[2][first] == 0))
+    def lead_in_step(c: tuple[int, float, NDArray, NDArray]) -> int:
+        """How many of the first timed frames (up to 5) sit on their own rows: a clock a gap
+        off leaves a speed-up's frames on no row, so its first *fitted* frames would."""
+        ok = c[3][timed_idx] & (c[2][timed_idx] == 0)
+        return min(int(np.argmin(ok)) if not ok.all() else ok.size, 5)
 
-    chosen = max(near_tie, key=lambda c: (starts_in_step(c),
+    chosen = max(near_tie, key=lambda c: (lead_in_step(c),
                                           np.count_nonzero(c[3] & (c[2] == 0)), c[0]))  # fmt: skip
     zero = chosen[3] & (chosen[2] == 0)
     ambiguous = any(
@@ -378,9 +390,15 @@ def read_capture_time_s(
 ) -> tuple[float, float]:
     """:func:`capture_time_s` of an image file, read from its first ``HEADER_BYTES`` (NaN,
     NaN when the file cannot be opened: the loader and the segmentation report that)."""
-    try:
-        head = read_bytes(path, storage_options, head_bytes=HEADER_BYTES)
-        with Image.open(io.BytesIO(head)) as im:  # parses the markers before the pixels
-            return capture_time_s(im)
-    except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError):
-        return math.nan, math.nan
+    head_bytes: int | None = HEADER_BYTES
+    for _ in range(2):  # the whole file when the header runs past the head (ICC profiles)
+        data = b""
+        try:
+            data = read_bytes(path, storage_options, head_bytes=head_bytes)
+            with Image.open(io.BytesIO(data)) as im:  # parses the markers before the pixels
+                return capture_time_s(im)
+        except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError):
+            if head_bytes is None or len(data) < head_bytes:
+                break
+            head_bytes = None
+    return math.nan, math.nan

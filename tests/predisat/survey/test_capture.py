@@ -138,3 +138,25 @@ def test_fit_clock_refuses_bad_input() -> None:
         fit_clock(np.zeros(20), np.ones(20))
     with pytest.raises(ValueError, match="resolution_s"):
         fit_clock(np.zeros(20), np.arange(20.0), resolution_s=0.0)
+
+
+def test_a_drop_among_the_first_frames_after_a_speed_up_is_found() -> None:
+    """Speeding up over 15 frames, then 100 km/h: a clock one gap off explains every cruise
+    frame and leaves the speed-up's on no row, so its first *fitted* frames sit on their own
+    rows; the clock whose first timed frames do is the camera's (a review: every shifted frame
+    was missed with a drop at frames 1-14)."""
+    v = np.concatenate([np.linspace(8.0, 27.78, 15), np.full(1185, 27.78)])
+    g = 1.4e9 + np.cumsum(10.0 / v)
+    for k in (1, 2, 6, 14):
+        src = np.arange(g.size)
+        src[k:-1] += 1
+        e = _stamps(g, src, seed=k)
+        rows = check_rows(e, g, fit_clock(e, g))
+        assert np.array_equal(rows.off[:-1], (src != np.arange(g.size))[:-1]), k
+
+
+def test_times_several_rows_off_where_the_speed_varies_fit_no_reliable_clock() -> None:
+    g = _rows(800, varying=True)
+    src = np.minimum(np.arange(g.size) + 4, g.size - 1)  # 4 rows off, beyond the lags tried
+    fit = fit_clock(_stamps(g, src), g)
+    assert fit is not None and not fit.reliable and fit.share == 0.0
