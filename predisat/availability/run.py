@@ -112,6 +112,7 @@ __all__ = [
     "assumed_sky_notes",
     "attitude_text",
     "far_field_text",
+    "lacking_side_notes",
     "load_navigation",
     "nav_span_gps_s",
     "navigation_doubts",
@@ -1310,7 +1311,7 @@ def _run_info(
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
         "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance),
-                     *step_notes(masks.provenance),
+                     *step_notes(masks.provenance), *lacking_side_notes(masks.provenance),
                      *assumed_sky_notes(masks)],
     }
 
@@ -1407,6 +1408,21 @@ def side_swap_notes(provenance: JsonDict) -> list[str]:
         "a survey's directions falsely; do not rely on them before the survey is checked"
         for side, v in sorted(check.items())
         if isinstance(v, dict) and v.get("swapped")
+    ]
+
+
+def lacking_side_notes(provenance: JsonDict) -> list[str]:
+    """The report's warning for mask positions that lacked a side camera's own frame when the
+    masks were made (``predisat process``'s ``positions_lacking_side``; section 23 of
+    docs/reconstruction.md): they trust no satellite."""
+    lacking = provenance.get("positions_lacking_side")
+    if not isinstance(lacking, list) or not lacking:
+        return []
+    return [
+        f"the masks were made from a survey that lacked a side camera's own frame at "
+        f"{len(lacking)} position(s) (from chainage {min(lacking):.0f} to {max(lacking):.0f} "
+        "m): those positions trust no satellite; restore the frames (bad_frames.csv) and "
+        "process the survey again"
     ]
 
 

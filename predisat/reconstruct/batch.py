@@ -72,6 +72,7 @@ from predisat.reconstruct.attitude import (
     survey_speed_kmh,
 )
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
+from predisat.reconstruct.carving import lacking_side
 from predisat.reconstruct.chunks import (
     ChunkFrame,
     ChunkJob,
@@ -572,6 +573,40 @@ def _capture_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
     return out
 
 
+def _lacking_side_positions(
+    plan: _Plan, positions_m: NDArray, bad: dict[str, BadFrame]
+) -> list[float]:
+    """The mask positions without a usable frame of some side camera within the position
+    tolerance (:func:`predisat.reconstruct.carving.lacking_side`), chainages in metres."""
+    fr = plan.survey.frames
+    usable = np.array([str(f) not in bad for f in fr.frame_id], bool)
+    chain = np.asarray(plan.chainage_m, float)
+    sides = [side for side, c in sorted(plan.survey.cameras.items())
+             if side in ("left", "right") and c.camera.model != "equirect"]  # fmt: skip
+    per_side = [chain[usable & (fr.side == side) & np.isfinite(chain)] for side in sides]
+    if not sides or positions_m.size == 0:
+        return []
+    tol = plan.params.reconstruction.position_tol_m
+    return [float(x) for x in positions_m[lacking_side(positions_m, per_side, tol)]]
+
+
+def _with_provenance(masks: MaskSet, **fields: object) -> MaskSet:
+    """``masks`` with ``fields`` added to its provenance."""
+    return replace(masks, provenance={**masks.provenance, **fields})
+
+
+def _spans_text(chainage_m: list[float], gap_m: float = 15.0) -> str:
+    """Chainages as runs ``a-b m`` (consecutive ones within ``gap_m``), the first ten."""
+    runs: list[list[float]] = []
+    for c in sorted(chainage_m):
+        if runs and c - runs[-1][1] <= gap_m:
+            runs[-1][1] = c
+        else:
+            runs.append([c, c])
+    text = ", ".join(f"{a:.0f} m" if a == b else f"{a:.0f}-{b:.0f} m" for a, b in runs[:10])
+    return text + (f" and {len(runs) - 10} more stretches" if len(runs) > 10 else "")
+
+
 def _capture_warnings(check: JsonDict) -> list[str]:
     """The lines ``process`` prints for cameras whose images' capture times are other rows',
     for cameras whose times could not be used, and a note for a survey none of whose
@@ -600,14 +635,25 @@ def _capture_warnings(check: JsonDict) -> list[str]:
                 "first frames were taken as on their rows (docs/reconstruction.md, section 22)"
             )
         for r in v.get("off", []):
+            n = len(r["frames"])
+            if r["lag"] is None:
+                out.append(
+                    f"warning: the {side} camera's images {_span_text(r)} carry capture times "
+                    f"that fit no row within {CAPTURE_MAX_LAG} of their own by the camera's "
+                    "fitted clock: a late stamp, a step of the camera's clock, or images more "
+                    f"rows off or from another run; their frames there ({n}) were set aside, "
+                    "as an image off its row carves skylines where they were not seen; check "
+                    "the images' times and the manifest (docs/reconstruction.md, section 22)"
+                )
+                continue
             out.append(
                 f"warning: the {side} camera's images {_span_text(r)} were taken at the time "
                 f"of {_row_text(r['lag'])} by the camera's own clock (EXIF DateTimeOriginal, "
                 "fitted over the survey): a dropped or extra image, a renumbering, a camera "
                 "that missed triggers. Carved there, each skyline would stand where it was "
                 "not seen (a user trial's survey with one dropped image trusted 1.05 % of its "
-                f"directions falsely); its frames there ({len(r['frames'])}) were set aside; "
-                "fix the manifest (docs/reconstruction.md, section 22)"
+                f"directions falsely); its frames there ({n}) were set aside; fix the manifest "
+                "(docs/reconstruction.md, section 22)"
             )
     return out
 
@@ -619,9 +665,12 @@ def _capture_bad_frames(check: JsonDict) -> dict[str, str]:
         for r in v.get("off", []):
             reason = (
                 f"the {side} camera's image was taken at the time of {_row_text(r['lag'])} (EXIF "
-                "capture time against the camera's fitted clock): a dropped or extra image in "
-                "the manifest?; set aside, fix the manifest (docs/reconstruction.md, section 22)"
-            )
+                "capture time against the camera's fitted clock): "
+                + ("a late stamp, a clock step, or an image more rows off?"
+                   if r["lag"] is None else "a dropped or extra image in the manifest?")
+                + "; set aside, check the image's time and the manifest "
+                "(docs/reconstruction.md, section 22)"
+            )  # fmt: skip
             for fid in r["frames"]:
                 out.setdefault(fid, reason)
     return out
@@ -1585,6 +1634,18 @@ def process_survey(
     for line in source_report(merged, track=plan.track):
         _report(line, quiet=quiet and not line.startswith("warning"))
     bad_list = tuple(sorted(bad.values(), key=lambda b: b.frame_id))
+    lacking = _lacking_side_positions(plan, np.asarray(merged.chainage_m, float), bad)
+    if lacking:
+        final_prov["positions_lacking_side"] = lacking
+        merged = _with_provenance(merged, positions_lacking_side=lacking)
+        _report(
+            f"warning: {len(lacking)} position(s) lack a side camera's own frame (set aside: "
+            f"bad_frames.csv, or no row) at chainage {_spans_text(lacking)}: only the camera "
+            "on a mast's side sees its cantilever over the antenna, so those positions trust "
+            "no satellite (docs/reconstruction.md, section 23); listed in the masks' "
+            "provenance (positions_lacking_side)",
+            quiet=False,
+        )
     masks_path = join(out, "masks.parquet")
     # the record (withdrawn above) written last: a full disk between left the new mask file
     # beside the previous run's provenance.json (a user trial)

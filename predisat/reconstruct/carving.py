@@ -67,6 +67,7 @@ __all__ = [
     "cell_sweep_of",
     "close_covered",
     "far_elevation_bound",
+    "lacking_side",
     "lacking_side_overhead",
     "reconstruct_masks",
     "suspect_frames",
@@ -1206,6 +1207,16 @@ def lacking_side_overhead(
     """
     s = np.atleast_1d(np.asarray(positions_m, float))
     reach = p.position_tol_m + along_doubt_m + p.chainage_shift_m
+    lacking = lacking_side(s, side_chainages_m, p.position_tol_m)
+    return [(float(x - reach), float(x + reach)) for x in s[lacking]]
+
+
+def lacking_side(
+    positions_m: ArrayLike, side_chainages_m: Sequence[ArrayLike], tol_m: float
+) -> NDArray:
+    """Which positions lack a frame of some side camera within ``tol_m``, shape (n,) bool
+    (``positions_m`` and ``side_chainages_m`` as :func:`lacking_side_overhead`)."""
+    s = np.atleast_1d(np.asarray(positions_m, float))
     lacking = np.zeros(s.size, bool)
     for ch in side_chainages_m:
         c = np.sort(np.atleast_1d(np.asarray(ch, float)))
@@ -1215,8 +1226,8 @@ def lacking_side_overhead(
         k = np.clip(np.searchsorted(c, s), 1, max(c.size - 1, 1)) if c.size > 1 else None
         near = (np.abs(s - c[0]) if k is None
                 else np.minimum(np.abs(s - c[k - 1]), np.abs(c[k] - s)))  # fmt: skip
-        lacking |= near > p.position_tol_m
-    return [(float(x - reach), float(x + reach)) for x in s[lacking]]
+        lacking |= near > tol_m
+    return lacking
 
 
 def _along_blocked(prof: SkyProfile, frame: FrameView, p: ReconstructionParams) -> bool:

@@ -208,7 +208,9 @@ def test_capture_times_set_aside_exactly_the_images_off_their_rows(rendered, tmp
     set aside before the segmentation, and process and the report say so."""
     import shutil
 
-    from predisat.availability.run import step_notes
+    import pandas as pd
+
+    from predisat.availability.run import lacking_side_notes, step_notes
     from predisat.reconstruct.batch import process_survey
 
     survey = tmp_path / "survey"
@@ -233,6 +235,17 @@ def test_capture_times_set_aside_exactly_the_images_off_their_rows(rendered, tmp
     err = capsys.readouterr().err
     assert "right camera's images from chainage" in err and "row 1 after its own" in err
     assert any("capture times" in n for n in step_notes(got.masks.provenance))
+    # the positions of the frames set aside, and the last one whose right row the manifest
+    # lost, lack the right camera's own frame: said, and they trust no satellite (section 23)
+    man = pd.read_csv(survey / "manifest.csv")
+    gone = sorted([*man.chainage_m[man.frame_id.isin(moved)], man.chainage_m.max()])
+    lacking = got.masks.provenance["positions_lacking_side"]
+    assert lacking == pytest.approx(gone)
+    assert "lack a side camera's own frame" in err
+    at = np.isin(np.round(got.masks.chainage_m, 3), np.round(gone, 3))
+    assert np.all(got.masks.mask_el_deg[at] >= 89.9)
+    assert lacking_side_notes(got.masks.provenance)
+    assert lacking_side_notes(ok.masks.provenance) == []
 
 
 def _without_exif(jpeg: bytes) -> bytes:
