@@ -1414,15 +1414,16 @@ def side_swap_notes(provenance: JsonDict) -> list[str]:
 def lacking_side_notes(provenance: JsonDict) -> list[str]:
     """The report's warning for mask positions that lacked a side camera's own frame when the
     masks were made (``predisat process``'s ``positions_lacking_side``; section 23 of
-    docs/reconstruction.md): they trust no satellite."""
+    docs/reconstruction.md): they trust little or no sky."""
     lacking = provenance.get("positions_lacking_side")
     if not isinstance(lacking, list) or not lacking:
         return []
     return [
         f"the masks were made from a survey that lacked a side camera's own frame at "
         f"{len(lacking)} position(s) (from chainage {min(lacking):.0f} to {max(lacking):.0f} "
-        "m): those positions trust no satellite; restore the frames (bad_frames.csv) and "
-        "process the survey again"
+        "m): the clearance over the track was taken as blocked there, so those positions "
+        "trust little or no sky; restore the frames (bad_frames.csv) or the manifest's rows, "
+        "or trigger the side cameras together, and process the survey again"
     ]
 
 

@@ -1639,11 +1639,14 @@ def process_survey(
         final_prov["positions_lacking_side"] = lacking
         merged = _with_provenance(merged, positions_lacking_side=lacking)
         _report(
-            f"warning: {len(lacking)} position(s) lack a side camera's own frame (set aside: "
-            f"bad_frames.csv, or no row) at chainage {_spans_text(lacking)}: only the camera "
-            "on a mast's side sees its cantilever over the antenna, so those positions trust "
-            "no satellite (docs/reconstruction.md, section 23); listed in the masks' "
-            "provenance (positions_lacking_side)",
+            f"warning: {len(lacking)} position(s) lack a side camera's own frame within "
+            f"{plan.params.reconstruction.position_tol_m:g} m at chainage "
+            f"{_spans_text(lacking)} (frames set aside: bad_frames.csv; rows missing from the "
+            "manifest; or side cameras that do not fire together): only the camera on a "
+            "mast's side sees its cantilever over the antenna, so the clearance over the "
+            "track there is taken as blocked and those positions trust little or no sky "
+            "(docs/reconstruction.md, section 23); listed in the masks' provenance "
+            "(positions_lacking_side)",
             quiet=False,
         )
     masks_path = join(out, "masks.parquet")

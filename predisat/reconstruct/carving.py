@@ -723,13 +723,16 @@ class Reconstructor:
         chainage_m: ArrayLike,
         track: TrackMap,
         overhead_m: Sequence[tuple[float, float]] = (),
+        side_cameras: Sequence[str] = (),
     ) -> Reconstruction:
         """Masks at ``chainage_m`` (one window) from ``frames``.
 
         ``frames`` should hold every frame within :attr:`ReconstructionParams.overlap_m` of the
         positions; frames farther away are ignored. ``overhead_m``: chainage intervals (lo,
         hi), metres, where the clearance over the track is taken as overhead whatever the
-        frames show (:func:`lacking_side_overhead`).
+        frames show. ``side_cameras``: the rig's cameras looking sideways (``mount.side``
+        names): a position without a frame of one of them, among the frames used, has the
+        clearance taken as overhead too (:func:`lacking_side_overhead`).
         """
         p = self.params
         s = np.atleast_1d(np.asarray(chainage_m, float))
@@ -754,6 +757,11 @@ class Reconstructor:
         )
         keep = [keep[i] for i in use]
         profs = [profs[i] for i in use]
+        if side_cameras:  # after the suspect check: a frame it left out is missing too
+            overhead_m = [*overhead_m, *lacking_side_overhead(
+                s, [[f.chainage_m for f in keep if f.mount.side == side] for side in side_cameras],
+                p, max((f.along_doubt_m for f in keep), default=0.0),
+            )]  # fmt: skip
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs, overhead_m)
         ant, rot = _antennas(track, s, p.antenna_height_m)

@@ -29,7 +29,7 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
 from predisat.reconstruct.attitude import frame_attitudes
 from predisat.reconstruct.badframes import BadFrame
-from predisat.reconstruct.carving import FrameView, Reconstructor, lacking_side_overhead
+from predisat.reconstruct.carving import FrameView, Reconstructor
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.placement import chainage_placement_doubt
@@ -196,15 +196,9 @@ def run_chunk(
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead
-    sides = [side for side, (cam, mount) in sorted(job.cameras.items())
+    sides = [side for side, (cam, _) in sorted(job.cameras.items())
              if side in ("left", "right") and cam.model != "equirect"]  # fmt: skip
-    overhead = lacking_side_overhead(
-        job.positions_m,
-        [[f.chainage_m for f, _ in ok_frames if f.side == side] for side in sides],
-        reconstructor.params,
-        max((v.along_doubt_m for v in views), default=0.0),
-    )
-    rec = reconstructor.run(views, job.positions_m, track, overhead)
+    rec = reconstructor.run(views, job.positions_m, track, side_cameras=sides)
     # frames the fusion's consistency check left out (ReconstructionParams.suspect_share)
     bad.extend(BadFrame(fid, why, "fusion") for fid, why in rec.suspect_frames)
     prov = dict(job.provenance)

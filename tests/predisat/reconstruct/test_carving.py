@@ -897,3 +897,35 @@ def test_lacking_side_overhead_marks_each_position_without_a_side_frame() -> Non
     # frames 3 m before the first position and 6 m after the last: only the first has its own
     assert lacking_side_overhead(s, [[-3.0, 36.0]], PARAMS) == [(5.0, 15.0), (15.0, 25.0),
                                                                (25.0, 35.0)]
+
+
+def test_a_frame_the_suspect_check_leaves_out_counts_as_missing(monkeypatch) -> None:
+    """The mast world above: the right frame at 300 m left out by the fusion's suspect check
+    (stubbed to pick it) gives the masks of the survey without that frame, the position's
+    clearance taken as overhead (a review: the rule was applied before the check, and such a
+    position trusted 14.4 % falsely while process said it was covered)."""
+    from dataclasses import replace
+
+    from predisat.reconstruct import carving
+
+    spec = WorldSpec((Stretch("open", 100.0, 600.0, "both", {"objects_per_km": 0.0}),),
+                     catenary=True, hills=False)  # fmt: skip
+    world = World.build(straight_track(700.0, AZIMUTH), spec, seed=2)
+    fr = frames_for(world, np.arange(200.0, 401.0, 10.0), FISHEYE)
+    s = np.array([300.0])
+    p = replace(PARAMS, suspect_share=0.5)
+
+    def picked(keep, profs, params):
+        return {i: "test" for i, f in enumerate(keep)
+                if f.mount.side == "right" and f.chainage_m == 300.0}  # fmt: skip
+
+    monkeypatch.setattr(carving, "suspect_frames", picked)
+    sides = ("left", "right")
+    got = Reconstructor(p).run(fr, s, world.track, side_cameras=sides)
+    assert [why for _, why in got.suspect_frames] == ["test"]
+    kept = [f for f in fr if not (f.mount.side == "right" and f.chainage_m == 300.0)]
+    want = Reconstructor(p).run(kept, s, world.track, side_cameras=sides)
+    assert np.array_equal(got.mask_el_deg, want.mask_el_deg)
+    assert (got.mask_el_deg - true_masks(world, s).mask_el_deg).min() >= -0.1
+    plain = Reconstructor(p).run(fr, s, world.track)  # without the rig's sides: no rule
+    assert (plain.mask_el_deg - got.mask_el_deg).min() < -10.0
