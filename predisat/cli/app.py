@@ -557,8 +557,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
     try:
         parser = build_parser()  # imports the commands' modules: a second or more
-    except (KeyboardInterrupt, ImportError) as exc:
-        # Ctrl-C in a C extension's import comes as an ImportError caused by it
+    except (KeyboardInterrupt, ImportError, RuntimeError) as exc:
+        # Ctrl-C in a C extension's import comes as an ImportError caused by it, and in a
+        # dataclass's class body as a RuntimeError from __set_name__ (a test's random Ctrl-C)
         if not caused_by_interrupt(exc):
             raise
         print("\npredisat: interrupted before the command started; nothing was written: rerun "
