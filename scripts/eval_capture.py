@@ -25,20 +25,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+from eval_step import linked_copy, mask_scores
 
 
 def moved_copy(src: Path, dst: Path, side: str, start: int, length: int | None) -> set[str]:
     """``src`` whose manifest rows of ``side`` from its ``start``-th (time order) on, ``length``
     of them (None: to the end, the last row dropped), name the image one row later; the moved
     rows' frame ids."""
-    if dst.exists():
-        shutil.rmtree(dst)
-    dst.mkdir(parents=True)
-    for p in src.iterdir():
-        if p.name != "manifest.csv":
-            (dst / p.name).symlink_to(p.resolve())
-    man = pd.read_csv(src / "manifest.csv")
+    man = linked_copy(src, dst)
     rows = man.index[man.side == side][np.argsort(man.gps_s[man.side == side], kind="stable")]
     if length is None:
         moved = rows[start:-1]
@@ -56,7 +50,6 @@ def score(survey_dir: Path, cache: Path, truth: Path, out: Path, checks: tuple[s
     """Process ``survey_dir`` with only ``checks`` (of ``capture``, ``step``) setting frames
     aside, and score its masks against ``truth``."""
     from predisat.reconstruct import batch
-    from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 
     if out.exists():
         shutil.rmtree(out)
@@ -72,16 +65,11 @@ def score(survey_dir: Path, cache: Path, truth: Path, out: Path, checks: tuple[s
     finally:
         batch._capture_bad_frames, batch._step_bad_frames = saved
     took = time.perf_counter() - t0
-    c = compare(result.masks, load_truth(truth))
-    trusted, good, visible = trust_counts(c.mask_el_deg, c.truth_el_deg)
-    ft = 100.0 * (1.0 - good.sum() / trusted.sum()) if trusted.sum() else 0.0
-    n_trusted = trusted.sum(axis=1)
-    share = np.where(n_trusted > 0, 1.0 - good.sum(axis=1) / np.maximum(n_trusted, 1), 0.0)
-    lost = 100.0 * (1.0 - good.sum() / visible.sum())
+    ft, worst, lost = mask_scores(result.masks, truth)
     by_capture = {b.frame_id for b in result.bad_frames if b.stage == "capture"}
     n_step = sum(b.stage == "step" for b in result.bad_frames)
     found = f", {len(moved & by_capture)} of {len(moved)} moved rows" if moved else ""
-    return (f"false trust {ft:.5f} % (worst position {100.0 * share.max():.2f} %), sky lost "
+    return (f"false trust {ft:.5f} % (worst position {worst:.2f} %), sky lost "
             f"{lost:.2f} %; set aside: capture {len(by_capture)}{found}, step {n_step} "
             f"({took:.0f} s)")  # fmt: skip
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from predisat.masks.maskset import MaskSet
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.step import (
     SWITCH_COST,
@@ -60,16 +61,39 @@ def labels(survey: Survey, seg: Path, side: str, pix: tuple[np.ndarray, np.ndarr
     return out
 
 
-def shifted_copy(src: Path, dst: Path, side: str, start: int, shift: int) -> Path:
-    """``src`` whose manifest rows of ``side`` from its ``start``-th on (time order) name the
-    images ``shift`` rows later; the last ``shift`` rows are dropped (images linked)."""
+def linked_copy(src: Path, dst: Path) -> pd.DataFrame:
+    """``dst`` made afresh with everything of the survey ``src`` linked but its manifest,
+    which is returned to be edited and written there."""
     if dst.exists():
         shutil.rmtree(dst)
     dst.mkdir(parents=True)
     for p in src.iterdir():
         if p.name != "manifest.csv":
             (dst / p.name).symlink_to(p.resolve())
-    man = pd.read_csv(src / "manifest.csv")
+    return pd.read_csv(src / "manifest.csv")
+
+
+def mask_scores(masks: MaskSet, truth: Path) -> tuple[float, float, float]:
+    """False trust, its worst position's and sky lost of ``masks`` against the ray-cast
+    ``truth``, percent."""
+    from predisat.reconstruct.evaluate import (
+        compare,
+        load_truth,
+        position_false_trust,
+        trust_counts,
+    )
+
+    c = compare(masks, load_truth(truth))
+    trusted, good, visible = trust_counts(c.mask_el_deg, c.truth_el_deg)
+    ft = 100.0 * (1.0 - good.sum() / trusted.sum()) if trusted.sum() else 0.0
+    lost = 100.0 * (1.0 - good.sum() / visible.sum())
+    return ft, 100.0 * float(np.max(position_false_trust(c))), lost
+
+
+def shifted_copy(src: Path, dst: Path, side: str, start: int, shift: int) -> Path:
+    """``src`` whose manifest rows of ``side`` from its ``start``-th on (time order) name the
+    images ``shift`` rows later; the last ``shift`` rows are dropped (images linked)."""
+    man = linked_copy(src, dst)
     rows = man.index[man.side == side][np.argsort(man.gps_s[man.side == side], kind="stable")]
     moved = rows[start:]
     man.loc[moved[: len(moved) - shift], "image"] = man.loc[moved[shift:], "image"].to_numpy()
@@ -81,7 +105,6 @@ def score(survey_dir: Path, cache: Path, truth: Path, out: Path, keep: bool = Fa
     """False trust and sky lost of ``survey_dir``'s masks against ``truth`` (``keep``: the
     step check's frames not set aside)."""
     from predisat.reconstruct import batch
-    from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 
     if out.exists():
         shutil.rmtree(out)
@@ -93,13 +116,7 @@ def score(survey_dir: Path, cache: Path, truth: Path, out: Path, keep: bool = Fa
         result = batch.process_survey(survey_dir, out, progress=False)
     finally:
         batch._step_bad_frames = set_aside
-    c = compare(result.masks, load_truth(truth))
-    trusted, good, visible = trust_counts(c.mask_el_deg, c.truth_el_deg)
-    ft = 100.0 * (1.0 - good.sum() / trusted.sum()) if trusted.sum() else 0.0
-    n_trusted = trusted.sum(axis=1)
-    share = np.where(n_trusted > 0, 1.0 - good.sum(axis=1) / np.maximum(n_trusted, 1), 0.0)
-    worst = 100.0 * np.max(share)
-    lost = 100.0 * (1.0 - good.sum() / visible.sum())
+    ft, worst, lost = mask_scores(result.masks, truth)
     n_step = sum(b.stage == "step" for b in result.bad_frames)
     return (f"false trust {ft:.5f} % (worst position {worst:.2f} %), sky lost {lost:.2f} %, "
             f"{n_step} frames set aside by the step check")  # fmt: skip

@@ -72,7 +72,7 @@ from predisat.reconstruct.attitude import (
     survey_speed_kmh,
 )
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
-from predisat.reconstruct.carving import lacking_side
+from predisat.reconstruct.carving import lacking_side, side_cameras
 from predisat.reconstruct.chunks import (
     ChunkFrame,
     ChunkJob,
@@ -581,8 +581,7 @@ def _lacking_side_positions(
     fr = plan.survey.frames
     usable = np.array([str(f) not in bad for f in fr.frame_id], bool)
     chain = np.asarray(plan.chainage_m, float)
-    sides = [side for side, c in sorted(plan.survey.cameras.items())
-             if side in ("left", "right") and c.camera.model != "equirect"]  # fmt: skip
+    sides = side_cameras({side: c.camera for side, c in plan.survey.cameras.items()})
     per_side = [chain[usable & (fr.side == side) & np.isfinite(chain)] for side in sides]
     if not sides or positions_m.size == 0:
         return []

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -70,6 +70,7 @@ __all__ = [
     "lacking_side",
     "lacking_side_overhead",
     "reconstruct_masks",
+    "side_cameras",
     "suspect_frames",
 ]
 
@@ -1217,6 +1218,13 @@ def lacking_side_overhead(
     reach = p.position_tol_m + along_doubt_m + p.chainage_shift_m
     lacking = lacking_side(s, side_chainages_m, p.position_tol_m)
     return [(float(x - reach), float(x + reach)) for x in s[lacking]]
+
+
+def side_cameras(cameras: Mapping[str, CameraModel]) -> list[str]:
+    """The rig's cameras that look sideways (left, right; not a panorama), by place, sorted:
+    those whose own frame every position needs (:func:`lacking_side_overhead`)."""
+    return [side for side, cam in sorted(cameras.items())
+            if side in ("left", "right") and cam.model != "equirect"]  # fmt: skip
 
 
 def lacking_side(

@@ -29,7 +29,7 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
 from predisat.reconstruct.attitude import frame_attitudes
 from predisat.reconstruct.badframes import BadFrame
-from predisat.reconstruct.carving import FrameView, Reconstructor
+from predisat.reconstruct.carving import FrameView, Reconstructor, side_cameras
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.placement import chainage_placement_doubt
@@ -196,8 +196,7 @@ def run_chunk(
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead
-    sides = [side for side, (cam, _) in sorted(job.cameras.items())
-             if side in ("left", "right") and cam.model != "equirect"]  # fmt: skip
+    sides = side_cameras({side: cam for side, (cam, _) in job.cameras.items()})
     rec = reconstructor.run(views, job.positions_m, track, side_cameras=sides)
     # frames the fusion's consistency check left out (ReconstructionParams.suspect_share)
     bad.extend(BadFrame(fid, why, "fusion") for fid, why in rec.suspect_frames)

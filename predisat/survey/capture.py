@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from PIL import Image, UnidentifiedImageError
 
 from predisat.storage import Location, StorageOptions, read_bytes
+from predisat.survey.images import exif_of
 
 __all__ = [
     "HEADER_BYTES",
@@ -71,17 +72,6 @@ _SUBSEC_ORIGINAL = 0x9291
 _EPOCH = dt.datetime(1970, 1, 1)
 
 
-def _exif_of(im: Image.Image) -> Image.Exif | None:
-    if im.format == "TIFF":  # its tags are the header
-        return im.getexif()
-    raw = im.info.get("exif")  # the header only: getexif reads a whole PNG (images.py)
-    if not raw:
-        return None
-    exif = Image.Exif()
-    exif.load(raw)
-    return exif
-
-
 def capture_time_s(im: Image.Image) -> tuple[float, float]:
     """An opened image's capture time by its camera's clock, and the time's resolution.
 
@@ -100,7 +90,7 @@ def capture_time_s(im: Image.Image) -> tuple[float, float]:
         Its last digit's step: 1 s with no sub-seconds, 0.01 s for two digits; NaN with no time.
     """
     try:
-        exif = _exif_of(im)
+        exif = exif_of(im)
         if exif is None:
             return math.nan, math.nan
         ifd = exif.get_ifd(_EXIF_IFD)

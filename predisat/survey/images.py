@@ -29,6 +29,7 @@ __all__ = [
     "FULL_RANGE_MIN_16BIT",
     "decode_frame",
     "decode_thumbnail",
+    "exif_of",
     "exif_orientation",
     "on_disk_spelling",
     "orientation_problem",
@@ -46,22 +47,27 @@ _TURNS = MappingProxyType({
 })  # fmt: skip
 
 
-def exif_orientation(im: Image.Image) -> int:
-    """The EXIF Orientation of an opened image (1, "as stored", when it has none).
+def exif_of(im: Image.Image) -> Image.Exif | None:
+    """The EXIF tags of an opened image, None when it has none.
 
     Read from the header alone: ``Image.getexif`` made PIL read a whole PNG (decoding frames
     1.9 times as long as OpenCV, ``scripts/bench_decode.py``); a PNG's eXIf chunk after its
     pixels is not seen (cameras write JPEG or TIFF).
     """
     if im.format == "TIFF":  # its tags are the header
-        turn = im.getexif().get(_EXIF_ORIENTATION, 1)
-    else:
-        raw = im.info.get("exif")
-        if not raw:
-            return 1
-        exif = Image.Exif()
-        exif.load(raw)
-        turn = exif.get(_EXIF_ORIENTATION, 1)
+        return im.getexif()
+    raw = im.info.get("exif")
+    if not raw:
+        return None
+    exif = Image.Exif()
+    exif.load(raw)
+    return exif
+
+
+def exif_orientation(im: Image.Image) -> int:
+    """The EXIF Orientation of an opened image (1, "as stored", when it has none)."""
+    exif = exif_of(im)
+    turn = 1 if exif is None else exif.get(_EXIF_ORIENTATION, 1)
     return int(turn) if isinstance(turn, int) else 1
 
 
