@@ -20,52 +20,63 @@ try:  # before anything imports scipy: numpy's f2py reads it with int() and cras
 except ValueError as exc:
     sys.exit(f"error: {exc}")
 
-from locator.balises.command import add_parser as add_balises_parser
-from locator.campaign_command import add_parser as add_campaign_parser
-from locator.cliopts import add_map_doubt, map_doubt_of
-from locator.demostep import format_demo_table
-from locator.modelcheck import deepest_k, model_use, sim_profile
-from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M
-from predisat import __version__
-from predisat.cli.args import (
-    TIME_HELP,
-    HelpFormatter,
-    Parser,
-    add_checks,
-    add_command,
-    antenna_height_m,
-    chainage_hint,
-    constellation,
-    constellation_label,
-    cutoff_deg,
-    existing_dir,
-    existing_file,
-    existing_path,
-    finite_float,
-    given,
-    integrity_budget,
-    integrity_options,
-    integrity_risk,
-    needs,
-    non_negative_float,
-    output_dir,
-    output_file,
-    positive_float,
-    positive_int,
-    rate_hz,
-    requires,
-    seed_value,
-    speed_mps,
-)
-from predisat.cli.common import (
-    CliError,
-    add_masks_same_track,
-    add_track_selection,
-    km_range,
-    run_main,
-    track_option,
-)
-from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+from predisat.cli.args import caused_by_interrupt
+
+try:  # the commands' modules: seconds; a Ctrl-C here ends as an interrupt, not a traceback
+    from locator.balises.command import add_parser as add_balises_parser
+    from locator.campaign_command import add_parser as add_campaign_parser
+    from locator.cliopts import add_map_doubt, map_doubt_of
+    from locator.demostep import format_demo_table
+    from locator.modelcheck import deepest_k, model_use, sim_profile
+    from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M
+    from predisat import __version__
+    from predisat.cli.args import (
+        TIME_HELP,
+        HelpFormatter,
+        Parser,
+        add_checks,
+        add_command,
+        antenna_height_m,
+        chainage_hint,
+        constellation,
+        constellation_label,
+        cutoff_deg,
+        existing_dir,
+        existing_file,
+        existing_path,
+        finite_float,
+        given,
+        integrity_budget,
+        integrity_options,
+        integrity_risk,
+        needs,
+        non_negative_float,
+        output_dir,
+        output_file,
+        positive_float,
+        positive_int,
+        rate_hz,
+        requires,
+        seed_value,
+        speed_mps,
+    )
+    from predisat.cli.common import (
+        CliError,
+        add_masks_same_track,
+        add_track_selection,
+        km_range,
+        run_main,
+        track_option,
+    )
+    from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
+except (KeyboardInterrupt, ImportError, RuntimeError) as _exc:
+    # Ctrl-C in a C extension's import comes as an ImportError caused by it, and in a
+    # dataclass's class body as a RuntimeError from __set_name__ (as in predisat.cli.app)
+    if not caused_by_interrupt(_exc):
+        raise
+    print("\nlocator: interrupted before the command started; nothing was written: rerun "
+          "the same command", file=sys.stderr)  # fmt: skip
+    sys.exit(130)
 
 if TYPE_CHECKING:
     from locator.sim.simfile import SimRun

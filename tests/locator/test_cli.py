@@ -11,6 +11,8 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -943,3 +945,47 @@ def test_masks_made_for_a_higher_antenna_are_refused(sim_dir, tmp_path, capsys):
     assert "made for an antenna 4 m above the track axis, the train's is at 3 m" in err
     assert main([*base, "--antenna-height", "4.5", "--out", str(tmp_path / "high")]) == 0
     assert "err on the safe side" in capsys.readouterr().err
+
+
+def _python(code: str) -> subprocess.CompletedProcess[str]:
+    root = Path(__file__).resolve().parents[2]
+    env = {"PYTHONPATH": str(root), "PATH": ""}
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=root, env=env, timeout=120)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "interrupt", ["raise KeyboardInterrupt()", "raise ImportError('x') from KeyboardInterrupt()"]
+)
+def test_a_ctrl_c_while_the_commands_import_ends_as_interrupted(interrupt: str) -> None:
+    # a finder that interrupts the import of one command module as a Ctrl-C would there
+    # (in a C extension's import it comes as an ImportError caused by the KeyboardInterrupt)
+    code = (
+        "import sys\n"
+        "class Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'locator.workflow':\n"
+        f"            {interrupt}\n"
+        "sys.meta_path.insert(0, Stop())\n"
+        "from locator.cli import main\n"
+        "sys.exit(main(['--help']))\n"
+    )
+    proc = _python(code)
+    assert proc.returncode == 130, proc.stderr
+    assert "interrupted before the command started" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_an_import_error_not_from_ctrl_c_still_raises() -> None:
+    code = (
+        "import sys\n"
+        "class Broken:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'locator.workflow':\n"
+        "            raise ImportError('a broken install')\n"
+        "sys.meta_path.insert(0, Broken())\n"
+        "from locator.cli import main\n"
+    )
+    proc = _python(code)
+    assert proc.returncode == 1
+    assert "a broken install" in proc.stderr and "Traceback" in proc.stderr
