@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from locator.corrections import OMEGA_E_RADPS, uncorrected_iono_sigma_m
 from locator.errorfit import Residuals
 from locator.observations import ObsProblem
-from locator.sources import EpochData, check_odometer_extra
+from locator.sources import EpochData, check_odometer
 from predisat.availability.satellites import select_satellites
 from predisat.fileerror import FileLineError, read_text_lines
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel, geodetic_to_ecef
@@ -421,12 +421,7 @@ class DeviceGnssSource:
     odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
-        check_odometer_extra(self.odometer_extra, self.odometer, len(self.device.gps_s))
-        if self.odometer is not None and np.shape(self.odometer) != self.device.gps_s.shape:
-            raise ValueError(
-                f"odometer must have one value per epoch ({self.device.gps_s.shape}), got "
-                f"{np.shape(self.odometer)}"
-            )
+        check_odometer(self.odometer, self.odometer_extra, len(self.device.gps_s))
         if not self._columns.any():
             raise ValueError(
                 f"{self.device.path}: no satellite of constellation {self.constellation!r}; it "

@@ -37,7 +37,7 @@ from predisat.availability.satellites import select_satellites
 from predisat.jsontypes import JsonDict
 from predisat.readonly import freeze_array_fields
 
-__all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource", "check_odometer_extra"]
+__all__ = ["EpochData", "EpochSource", "RinexSource", "SimSource", "check_odometer"]
 
 
 class EpochData(NamedTuple):
@@ -119,15 +119,10 @@ class SimSource:
     odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
-        check_odometer_extra(self.odometer_extra, self.odometer, len(self.sim.gps_s))
+        check_odometer(self.odometer, self.odometer_extra, len(self.sim.gps_s))
         if not abs(self.odometer_scale_error) < 0.5:
             raise ValueError(
                 f"odometer_scale_error must be within +-0.5, got {self.odometer_scale_error}"
-            )
-        if self.odometer is not None and np.shape(self.odometer) != self.sim.gps_s.shape:
-            raise ValueError(
-                f"odometer must have one value per epoch ({self.sim.gps_s.shape}), got "
-                f"{np.shape(self.odometer)}"
             )
         freeze_array_fields(self)
 
@@ -217,12 +212,7 @@ class RinexSource:
     odometer_extra: NDArray | None = field(default=None)
 
     def __post_init__(self) -> None:
-        check_odometer_extra(self.odometer_extra, self.odometer, len(self.obs.gps_s))
-        if self.odometer is not None and np.shape(self.odometer) != self.obs.gps_s.shape:
-            raise ValueError(
-                f"odometer must have one value per epoch ({self.obs.gps_s.shape}), got "
-                f"{np.shape(self.odometer)}"
-            )
+        check_odometer(self.odometer, self.odometer_extra, len(self.obs.gps_s))
         if not self._columns.any():
             raise ValueError(
                 f"{self.obs.path}: no satellite of constellation {self.constellation!r}; it has "
@@ -315,9 +305,14 @@ class RinexSource:
         }
 
 
-def check_odometer_extra(extra: NDArray | None, odometer: NDArray | None, n_epoch: int) -> None:
-    """Refuse a disputed distance that is not ``(n_epoch, 2)``, >= 0 and non-decreasing, or
-    that comes without an odometer (a source's ``odometer_extra``)."""
+def check_odometer(odometer: NDArray | None, extra: NDArray | None, n_epoch: int) -> None:
+    """Refuse a source's odometer that has not one value per epoch, and a disputed distance
+    (``odometer_extra``) that is not ``(n_epoch, 2)``, >= 0 and non-decreasing, or that comes
+    without an odometer."""
+    if odometer is not None and np.shape(odometer) != (n_epoch,):
+        raise ValueError(
+            f"odometer must have one value per epoch (({n_epoch},)), got {np.shape(odometer)}"
+        )
     if extra is None:
         return
     a = np.asarray(extra, float)
