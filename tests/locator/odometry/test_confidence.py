@@ -146,3 +146,39 @@ def test_the_disputed_distance_widens_the_fronts_from_the_reference_on():
     assert np.all(sf.doubt_under_m - plain.doubt_under_m >= da)
     with pytest.raises(ValueError, match="one value per odo_m"):
         safe_fronts(odo, passages, ACC, extra_ahead_m=ahead[:3])
+
+
+def test_a_rejected_linked_balise_widens_the_interval_to_cover_it_and_raises_the_alarm():
+    # the odometer under-read by 10 % over its first 1000 m (beyond ACC's 2 %: a slide): the
+    # balise at 1100 m is read when the odometer says 1000 m, outside its window
+    odo = np.arange(0.0, 2001.0, 10.0)
+    truth = np.where(odo <= 1000.0, 1.1 * odo, odo + 100.0)
+    passages = [BalisePassage(0, 0.0, accuracy_m=1.0), BalisePassage(100, 1100.0),
+                BalisePassage(180, 1900.0, linked=False)]  # a reference, accepted
+    sf = safe_fronts(odo, passages, ACC)
+    assert list(sf.accepted) == [True, False, True]
+    assert not sf.linking_alarm[:100].any() and sf.linking_alarm[100:180].all()
+    assert not sf.linking_alarm[180:].any()  # cleared by the next accepted reference
+    # from the reading on, both the old interval and the balise's location are covered
+    assert sf.max_safe_front_m[100] >= 1101.0 and sf.min_safe_front_m[100] <= 1000.0 - 42.0
+    inside = (sf.min_safe_front_m <= truth + 1e-9) & (truth <= sf.max_safe_front_m + 1e-9)
+    assert inside[100:].all()
+    assert not inside[60:100].all()  # the under-read broke the bound before the reading
+    assert sf.est_front_m[150] == pytest.approx(1500.0)  # no reset: still dead-reckoned
+    # the distance since the reference still counts from the last accepted one
+    assert sf.dist_since_ref_m[150] == pytest.approx(1500.0)
+
+
+def test_a_known_distance_balise_keeps_its_own_location_accuracy():
+    odo = np.arange(0.0, 2001.0, 10.0)
+    passages = [BalisePassage(0, 0.0, accuracy_m=1.0),
+                BalisePassage(50, 500.0, q_reference=False),
+                BalisePassage(100, 1000.0, accuracy_m=20.0, q_reference=False, known_from=1)]
+    sf = safe_fronts(odo, passages, ACC)
+    # the doubt held at B (1 + 2 + 4 % of 500 m = 23 m over) and C's own 20 m: the larger;
+    # under: B's 1 + 2 + 2 % of 500 m = 13 m is below C's 20 m
+    assert sf.doubt_over_m[100] == pytest.approx(23.0 + 2.0)
+    assert sf.doubt_under_m[100] == pytest.approx(20.0 + 2.0)
+    # C really 15 m further than its list says: the truth stays inside
+    truth = odo + 15.0 * (odo >= 1000.0)
+    assert np.all(sf.max_safe_front_m[100:] >= truth[100:])
