@@ -6,8 +6,9 @@ zone only is captured too, its time recomputed from the fixes. Here the fixes ar
 **fused** estimates (satellites and odometry, :mod:`locator.odometry.fusion`), each with its
 interval; a fix counts only when the fused interval is short enough: "if the current accuracy
 is good enough". Enough here is what a balise telegram can state: the capture carries its
-location accuracy ``q_locacc_m`` (the fused interval's reach about the estimate, plus the
-balise's own survey accuracy), and ETCS's ``Q_LOCACC`` field holds 0-63 m (6 bits, SUBSET-026
+location accuracy ``q_locacc_m`` (the fused interval's reach about the estimate, the
+odometer's doubt over the distance the passage time is carried along it, and the balise's own
+survey accuracy), and ETCS's ``Q_LOCACC`` field holds 0-63 m (6 bits, SUBSET-026
 packet 5), so a fix whose interval reaches further than ``max_locacc_m`` (63 m) from its
 estimate cannot capture.
 
@@ -95,6 +96,10 @@ class CaptureConfig:
         The two fixes around the passage must be at most this far apart, s: across a longer
         gap (fixes voided by the accuracy gate, a stop between them) the time cannot be
         interpolated, and no telegram is safer than a wrong one.
+    max_accel_mps2 : float
+        The train's largest acceleration or braking, m/s^2 (the odometer's
+        ``max_accel_mps2``): with ``emit="predicted"``, how far the arrival may be from the
+        one predicted at constant speed, in the telegram's stated accuracy.
     """
 
     capture_radius_m: float = 12.0
@@ -106,6 +111,7 @@ class CaptureConfig:
     latency_s: float = 0.0
     require_window: bool = False
     max_gap_s: float = 2.0
+    max_accel_mps2: float = 1.5
 
     def __post_init__(self) -> None:
         if not self.capture_radius_m > 0 or self.arm_radius_m < 0:
@@ -121,6 +127,8 @@ class CaptureConfig:
             raise ValueError("window_before_m and window_after_m must be >= 0")
         if not self.max_gap_s > 0:
             raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if not self.max_accel_mps2 > 0:
+            raise ValueError(f"max_accel_mps2 must be positive, got {self.max_accel_mps2}")
         if not 0 < self.max_locacc_m <= Q_LOCACC_MAX_M or self.latency_s < 0:
             raise ValueError(
                 f"max_locacc_m must be in (0, {Q_LOCACC_MAX_M:g}] m (what Q_LOCACC can state) "
@@ -188,9 +196,11 @@ def capture_balises(
         others cannot capture: an estimate carried from an unverified start position is no
         satellite location. Default: every fix.
     odo_accuracy : OdometerAccuracy, optional
-        The odometer's bounds; with ``odo_m``, enables the passage at the first valid fix
-        after a voided epoch (module docstring, step 3), whose stated accuracy adds
-        ``max(D_DOUBTOVER, D_DOUBTUNDER)`` of the carried-back distance.
+        The odometer's bounds: every telegram timed along the odometer adds
+        ``max(D_DOUBTOVER, D_DOUBTUNDER)`` of the carried distance to its stated accuracy
+        (default: :meth:`OdometerAccuracy.subset041`, the ETCS requirement); given with
+        ``odo_m``, it also enables the passage at the first valid fix after a voided epoch
+        (module docstring, step 3).
     odo_extra_m : array_like, shape (n, 2), optional
         The odometer's disputed distance at each fix, cumulative, toward lower and higher
         chainage, m (:class:`locator.odometry.simulated.SimOdometer`'s ``epoch_extra_m``):
@@ -205,8 +215,10 @@ def capture_balises(
         at the crossing fix), ``gap_s`` (time between the two fixes), ``in_window`` (the
         passage fell inside the balise's expectation window on the fused interval),
         ``q_locacc_m`` (the telegram's location accuracy: the furthest either fix's fused
-        interval reaches from its estimate, plus the balise's survey accuracy, rounded up to
-        the metre as Q_LOCACC), ``after_void`` (captured at the first valid fix after a voided
+        interval reaches from its estimate, the crossing fix's with the odometer's doubt
+        over the distance it is carried back (or, predicted, ahead, with the train's
+        acceleration over the wait), plus the balise's survey accuracy, rounded up to the
+        metre as Q_LOCACC), ``after_void`` (captured at the first valid fix after a voided
         epoch).
     """
     if orientation not in (1, -1):
@@ -231,6 +243,8 @@ def capture_balises(
             "passage times are read along the odometer, one way; capture each leg of a "
             "reversing run apart"
         )
+    # the odometer's bounds: without them, the ETCS requirement (5 m + 5 %) on the safe side
+    odo_acc = OdometerAccuracy.subset041() if odo_accuracy is None else odo_accuracy
     extra = np.zeros((len(t), 2)) if odo_extra_m is None else np.asarray(odo_extra_m, float)
     if extra.shape != (len(t), 2):
         raise ValueError(f"odo_extra_m must have shape ({len(t)}, 2), got {extra.shape}")
@@ -269,11 +283,7 @@ def capture_balises(
         window = (orientation * (max_safe - b[rows]) >= -acc) & (
             orientation * (min_safe - b[rows]) <= acc
         )
-        q = np.ceil(np.maximum(reach[kp], reach[kc]) + b_acc[rows] - 1e-9)
         got = (in_c | in_a) & (t[kc] - t[kp] <= config.max_gap_s + 1e-9)
-        got &= q <= config.max_locacc_m
-        if config.require_window:
-            got &= window
         if odo is not None:
             # the odometer reading when the crossing fix's estimate, carried back, was at b
             o_pass = orientation * (odo[kc] - (s[kc] - b[rows]))
@@ -282,8 +292,17 @@ def capture_balises(
             # two: the estimate caught up with a lagging odometer (a radar at 0), and the
             # telegram would be a late position report (a user trial: 72 s late, counted)
             got &= t_pass >= t[kp] - config.max_gap_s - 1e-9
+            # the time comes from the crossing fix carried back uc metres along the odometer:
+            # its doubt over them is the telegram's too (a review: 3.9 m out with q = 3 m)
+            k_pass = np.clip(np.searchsorted(t, t_pass, side="right") - 1, 0, len(t) - 1)
+            carry = reach[kc] + _carry_doubt_m(odo_acc, uc, extra[kc] - extra[k_pass])
+            q = np.ceil(np.maximum(reach[kp], carry) + b_acc[rows] - 1e-9)
         else:
             t_pass = t[kp] + (-up / (uc - up)) * (t[kc] - t[kp])
+            q = np.ceil(np.maximum(reach[kp], reach[kc]) + b_acc[rows] - 1e-9)
+        got &= q <= config.max_locacc_m
+        if config.require_window:
+            got &= window
         t_emit = t[kc].copy()
         r = rows[got]
         out["captured"][r] = True
@@ -301,7 +320,8 @@ def capture_balises(
                             orientation, out, extra)  # fmt: skip
     if config.emit == "predicted" and len(idx) >= 2 and n_b:
         assert v is not None
-        _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out)
+        _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out,
+                        odo_acc)  # fmt: skip
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
 
@@ -319,6 +339,7 @@ def _schedule_ahead(
     config: CaptureConfig,
     orientation: int,
     out: dict[str, NDArray],
+    accuracy: OdometerAccuracy,
 ) -> None:
     """``emit="predicted"``, causally: at each valid fix short of a balise and inside its zone,
     the telegram is scheduled for the predicted arrival ``t + (-u) / v`` when that comes before
@@ -336,7 +357,12 @@ def _schedule_ahead(
         u = orientation * (s[idx] - b[n])
         with np.errstate(divide="ignore", invalid="ignore"):
             ahead = -u / v[idx]
-        q = np.ceil(reach[idx] + b_acc[n] - 1e-9)
+        # the arrival is predicted -u metres ahead at the odometer's speed: its doubt over
+        # them, and the train's acceleration over the wait, are the telegram's too (a review:
+        # 3.7 m out with q = 3 m)
+        wait_s = np.where(np.isfinite(ahead), np.maximum(ahead, 0.0), 0.0)
+        q = np.ceil(reach[idx] + _carry_doubt_m(accuracy, u, np.zeros((len(u), 2)))
+                    + 0.5 * config.max_accel_mps2 * wait_s**2 + b_acc[n] - 1e-9)  # fmt: skip
         zone = config.in_capture(u) | config.in_arm(u)
         ok = (u < 0) & zone & (v[idx] > 0) & (ahead < period) & (q <= config.max_locacc_m)
         # within the data: a telegram scheduled after the last epoch cannot be scored (the
@@ -399,10 +425,7 @@ def _capture_after_void(
     uc, ub = u[has, j], back[has, j]
     in_c = config.in_capture(uc) | config.in_capture(ub)
     in_a = ~in_c & (config.in_arm(uc) | config.in_arm(ub))
-    doubt = np.maximum(accuracy.doubt_over_m(uc), accuracy.doubt_under_m(uc))
-    step_disputed = (extra[kc] - extra[kc - 1]).sum(axis=1)  # the step's disputed distance
-    rel = max(accuracy.over_rel, accuracy.under_rel)  # and the relative error over it
-    doubt = doubt + (1.0 + rel) * step_disputed
+    doubt = _carry_doubt_m(accuracy, uc, extra[kc] - extra[kc - 1])
     q = np.ceil(reach[kc] + doubt + b_acc[rows] - 1e-9)
     max_safe = np.where(orientation > 0, hi[kc], lo[kc])
     min_safe = np.where(orientation > 0, lo[kc], hi[kc])
@@ -506,3 +529,12 @@ def score_captures(
     out["hazardous"] = cap & ~(off <= q)
     out["missed"] = passed & ~cap
     return out
+
+
+def _carry_doubt_m(accuracy: OdometerAccuracy, dist_m: NDArray, disputed_m: NDArray) -> NDArray:
+    """The odometer's doubt over ``dist_m`` metres (either sign) carried along it, with the
+    disputed distance ``disputed_m`` (shape (..., 2), behind / ahead) in that span and the
+    relative error over it, m (either side: the larger)."""
+    doubt = np.maximum(accuracy.doubt_over_m(dist_m), accuracy.doubt_under_m(dist_m))
+    rel = max(accuracy.over_rel, accuracy.under_rel)
+    return doubt + (1.0 + rel) * np.asarray(disputed_m, float).sum(axis=-1)

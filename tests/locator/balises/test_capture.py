@@ -378,3 +378,31 @@ def test_a_passage_the_odometer_puts_long_before_the_crossing_is_a_late_report()
     cap2 = capture_balises(t, est2, est2 - 20, est2 + 20, bl, CaptureConfig(25.0),
                            orientation=1, odo_m=odo)  # fmt: skip
     assert cap2["captured"].iloc[0]
+
+
+@pytest.mark.parametrize("emit", ["at_fix", "predicted"])
+def test_the_stated_accuracy_holds_the_odometers_error_over_the_carried_distance(emit):
+    """A review: 1 Hz fixes at 117 km/h whose fused intervals all hold the truth (at their
+    edge, reach 2.85 m), an odometer over-reading by 3.5 % (inside its bound), and telegrams
+    stating q = 3 m while the truth at the reported time was 3.9 m (pair rule) or 3.7 m
+    (predicted) from the balise: hazardous with every input inside its bound."""
+    v, over, reach = 32.5, 0.035, 2.85
+    acc = OdometerAccuracy(abs_error_m=1.0, over_rel=0.0351, under_rel=0.0351)
+    t = np.arange(0.0, 20.0, 1.0)
+    truth = 100.0 + v * t
+    odo = truth[0] + (truth - truth[0]) * (1 + over)
+    side = -1.0 if emit == "at_fix" else 1.0  # the truth at the interval's far edge
+    est = truth + side * reach
+    b = est[8] + (0.5 if emit == "at_fix" else 24.9)  # crossed at fix 9 / scheduled at fix 8
+    bl = BaliseList(("B0",), np.array([b]), np.zeros(1), np.zeros(1), np.zeros(1), ("T",),
+                    np.ones(1, bool), np.array([0.1]))  # surveyed to 0.1 m  # fmt: skip
+    cfg = CaptureConfig(25.0, emit=emit)
+    cap = capture_balises(t, est, est - reach, est + reach, bl, cfg, orientation=1,
+                          odo_m=odo, odo_accuracy=acc,
+                          speed_mps=np.full(len(t), v * (1 + over)))  # fmt: skip
+    tt = np.arange(0.0, 19.0, 0.01)
+    sc = score_captures(cap, tt, 100.0 + v * tt, orientation=1, false_tolerance_m=25.0)
+    row = sc.iloc[0]
+    assert row.captured and not row.hazardous
+    assert abs(row.position_error_m) > reach + 0.5  # the carried distance's error counts
+    assert row.q_locacc_m >= abs(row.position_error_m)
