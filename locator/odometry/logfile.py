@@ -374,6 +374,10 @@ def _check_steps(
         cause = "dist_m looks like kilometres (1000 times too small): give metres"
     elif 1 / 4.5 <= ratio <= 1 / 2.9:
         cause = "speed_mps looks like km/h (3.6 times too large): give m/s (km/h / 3.6)"
+    elif 3.1 <= ratio <= 3.45:
+        cause = "dist_m looks like feet (3.28 times too large): give metres (feet x 0.3048)"
+    elif 50.0 <= ratio <= 70.0:
+        cause = "t_s looks like minutes (60 times too small): give seconds"
     elif ratio > 1:
         cause = (f"a jump of {size[k] - expected:.2f} m in one cycle (pulses counted twice, a "
                  "corrupt or merged record, a reset to another reference): correct the row or "

@@ -91,6 +91,9 @@ def _write(tmp_path, df, name="odo.csv"):
         (lambda df: df.assign(dist_m=df["dist_m"] / 1000.0), "likely dist_m looks like kilometres"),
         # the speed in km/h
         (lambda df: df.assign(speed_mps=3.6 * df["speed_mps"]), "likely speed_mps looks like km/h"),
+        # the distance in feet, the time in minutes
+        (lambda df: df.assign(dist_m=df["dist_m"] / 0.3048), "likely dist_m looks like feet"),
+        (lambda df: df.assign(t_s=df["t_s"] / 60.0), "likely t_s looks like minutes"),
         # the counter back to zero while moving forward
         (
             lambda df: df.assign(
