@@ -435,12 +435,19 @@ def _full_count(system: str, gps_s: float) -> int:
 
 
 def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
-    """Warnings for constellations with fewer trusted satellites than a full one.
+    """Warnings for constellations with fewer satellites in the navigation data than a full
+    one.
+
+    A satellite counts when it has a usable record in the window, or records out of their
+    validity there: a station's file lacks records while its satellites are below the
+    station's horizon, which is no gap in a short window (:func:`station_file_gaps` says
+    whether such satellites stand above the line; a user trial: an hour's report said
+    "every count is understated" of 10 satellites all below the horizon).
 
     Parameters
     ----------
     sats : SatellitePositions
-        The satellites of the run (``valid`` of shape (n_epoch, n_sat)).
+        The satellites of the run (``valid`` and ``status.reason`` of shape (n_epoch, n_sat)).
     nav_label : str
         How the warning names the navigation data.
 
@@ -449,7 +456,11 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
     list of str
         One sentence per sparse constellation (empty when none is).
     """
-    used = [s for j, s in enumerate(sats.sats) if sats.valid[:, j].any()]
+    held = np.asarray(sats.valid.any(axis=0), bool)
+    reason = np.asarray(sats.status.reason, int)
+    if reason.shape == sats.valid.shape:
+        held |= (reason == int(Reason.OUTSIDE_VALIDITY)).any(axis=0)
+    used = [s for j, s in enumerate(sats.sats) if held[j]]
     out = []
     t0 = float(sats.gps_s[0]) if len(sats.gps_s) else math.inf
     for system in _FULL_CONSTELLATION:
@@ -457,7 +468,7 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
         full = _full_count(system, t0)
         if 0 < n < full:
             out.append(
-                f"{nav_label} holds {n} {SYSTEM_NAMES[system]} satellites with usable records "
+                f"{nav_label} holds {n} {SYSTEM_NAMES[system]} satellites with records "
                 f"(a full constellation has {full} or more): every count, share and interval is "
                 "understated; give the day's full broadcast navigation file (e.g. IGS "
                 "BRDC00IGS_R_YYYYDDD0000_01D_MN.rnx)"

@@ -971,3 +971,21 @@ def test_a_far_stations_navigation_file_is_said_to_understate(shared_data: Path)
     far = station_file_gaps(eph, sats, 50.56, 4.69, 150.0, "0759")  # line 144, Belgium
     assert len(far) == 1 and "0759 has no usable record for" in far[0]
     assert "merged broadcast file" in far[0]
+
+
+def test_a_station_file_is_not_sparse_for_satellites_below_its_horizon_in_a_short_window(
+    tmp_path: Path, masks: MaskSet
+) -> None:
+    """A user trial: an hour's report on the embedded day said it "holds 21 GPS satellites
+    ... every count is understated" of the 10 satellites whose records were out of their
+    validity there, all below the line's horizon. The file holds records of 31."""
+    from predisat.availability.satellites import SatellitePositions, default_ephemeris
+    from predisat.gnss.ephemeris import Reason
+
+    r = run_availability(masks.subset(4000.0, 4060.0), None, None, out_dir=tmp_path / "h",
+                         start="2020-06-25T08:00Z", end="2020-06-25T09:00Z", step_s=60,
+                         n_sky=1, progress=False)  # fmt: skip
+    sats = SatellitePositions.from_ephemeris(default_ephemeris(), r.results[0].gps_s, "gps")
+    lost = (np.asarray(sats.status.reason) == Reason.OUTSIDE_VALIDITY).any(axis=0)
+    assert lost.any()  # satellites with records, not valid in the window
+    assert not [w for w in r.info["warnings"] if "understated" in w]
