@@ -472,6 +472,7 @@ def _header(info: Mapping[str, Any]) -> str:
         ("Vehicle attitude", info.get("attitude", "")),
         ("Survey positioning", info.get("positioning", "")),
         ("Far field", info.get("far_field", "")),
+        ("Antenna", info.get("antenna", "")),
         ("Interval model", info.get("interval_model", "")),
         ("Interval width", info.get("interval_width", "")),
         ("Software", f"{info.get('software', '')}, report made {info.get('created_utc', '')}"),

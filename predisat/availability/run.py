@@ -79,7 +79,7 @@ from predisat.gnss.integrity import DEFAULT_BUDGET, IntegrityBudget
 from predisat.gnss.timescale import datetime64_to_gps_s, utc_datetime64_to_gps_s
 from predisat.gnss.timescale import gps_s_to_text as _iso
 from predisat.jsontypes import JsonDict
-from predisat.masks.antenna import check_antenna_height
+from predisat.masks.antenna import check_antenna_height, masks_antenna_height_m
 from predisat.masks.fileformat import (
     MaskFileWarning,
     mask_file_path,
@@ -950,7 +950,7 @@ def run_availability(
             info = _run_info(
                 mask_set, masks_label, track, nav_data, constellation, rules, step_s,
                 interval_every, __version__, model, integrity,
-                [*mask_notes, *notes, *sampling],
+                [*mask_notes, *notes, *sampling], antenna_height_m,
             )  # fmt: skip
             local_files, summary = write_tables(work, results, track, info, counts_table)
             local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
@@ -1257,11 +1257,23 @@ def _write_ephemeris_status(out: Path, sats: SatellitePositions) -> Path:
     return path
 
 
+def _antenna_text(masks: MaskSet, antenna_height_m: float | None) -> str:
+    """Which antenna the masks are for, and whether the train's was checked against it (a
+    user trial: the report's figures named no antenna, and none was checked by default)."""
+    h = masks_antenna_height_m(masks)
+    made = ("the masks state no antenna height" if h is None
+            else f"masks made for an antenna {h:g} m above the track axis")  # fmt: skip
+    if antenna_height_m is None:
+        return (f"{made}; the train's antenna not checked against them (give --antenna-height: "
+                "masks made for a higher antenna are refused)")  # fmt: skip
+    return f"{made}; the train's, {antenna_height_m:g} m, checked against them"
+
+
 def _run_info(
     masks: MaskSet, masks_label: str, track: TrackMap | None, nav: _Navigation,
     constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
     version: str, model: IntervalModel, integrity: IntegrityBudget | None = None,
-    notes: Sequence[str] = (),
+    notes: Sequence[str] = (), antenna_height_m: float | None = None,
 ) -> JsonDict:  # fmt: skip
     ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
@@ -1298,6 +1310,7 @@ def _run_info(
         "attitude": attitude_text(masks.provenance),
         "positioning": positioning_text(masks.provenance),
         "far_field": far_field_text(masks),
+        "antenna": _antenna_text(masks, antenna_height_m),
         "mask_provenance": dict(masks.provenance),
         "mask_margin_deg": [float(masks.margin_deg.min()), float(masks.margin_deg.max())],
         "interval_every": interval_every,

@@ -950,6 +950,14 @@ def test_masks_made_for_a_higher_antenna_than_the_trains_are_refused(
     res = run_availability(at4, None, None, out_dir=tmp_path / "o", step_s=3600, n_sky=1,
                            progress=False, antenna_height_m=4.5)  # fmt: skip
     assert any("err on the safe side" in w for w in res.info["warnings"])
+    # the report's header says which antenna the figures are for, and whether it was checked
+    assert res.info["antenna"] == ("masks made for an antenna 4 m above the track axis; the "
+                                   "train's, 4.5 m, checked against them")  # fmt: skip
+    unchecked = run_availability(at4, None, None, out_dir=tmp_path / "u", step_s=3600, n_sky=1,
+                                 progress=False)  # fmt: skip
+    assert "the train's antenna not checked" in unchecked.info["antenna"]
+    page = Path(unchecked.report_html).read_text()
+    assert "<th>Antenna</th><td>masks made for an antenna 4 m above" in page
 
 
 def test_a_far_stations_navigation_file_is_said_to_understate(shared_data: Path) -> None:
