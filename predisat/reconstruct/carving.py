@@ -701,7 +701,9 @@ class Reconstructor:
         ] + _along_overhead(frames, profs, p) + [(float(a), float(b)) for a, b in overhead_m]
         ceilings = None
         if frames and p.along_view_half_deg is not None:
-            ceilings = _camera_ceilings(frames, profs, cams, p.along_view_half_deg,
+            # thin pixels as obstacles: a feature along the track may hang within its Fresnel
+            # reach over the antenna, and the ceiling has no distance to tell (a review)
+            ceilings = _camera_ceilings(frames, solids, cams, p.along_view_half_deg,
                                         p.chainage_shift_m)  # fmt: skip
         carved = bound.copy()
         overhead = apply_clearance_prior(

@@ -383,3 +383,31 @@ def test_a_partly_over_exposed_frame_is_still_suspect_under_the_horizon_check(sc
     assert profs[i].voided is not None and profs[i].voided.any()
     assert [bad[k].frame_id for k in suspect_frames(bad, profs, params)] == ["350l"]
     assert _low_deg(rec.run(bad, POS, world.track).mask_el_deg, truth) <= 0.1
+
+
+def test_the_cameras_ceiling_reads_thin_pixels_as_obstacles(scene) -> None:
+    """The ceiling over the track bounds the clearance from the sky the side cameras saw
+    straight along it. A thin feature there (a lamp arm, a cantilever a few metres over the
+    antenna) is transparent only beyond its Fresnel reach, and a ceiling read from the
+    thin-as-sky skyline declared the clearance under it free (a review: a 10 cm arm 3 m over
+    the antenna, 17 446 truly blocked directions at one position). Both frames at 350 m get
+    the 8 rows above their skyline marked thin: the ceiling is the solid frames' one."""
+    world, frames, _ = scene
+    pair = [f for f in frames if f.chainage_m == 350.0]
+    assert {f.mount.side for f in pair} == {"left", "right"}
+    rows_i = np.arange(pair[0].sky_mask.shape[0])[:, None]
+    thin, solid = [], []
+    for f in pair:
+        sky = f.sky_mask
+        first = np.where((~sky).any(0), np.argmax(~sky & (np.cumsum(sky, 0) > 0), 0),
+                         sky.shape[0])  # fmt: skip
+        band = sky & (rows_i >= first[None, :] - 8) & (rows_i < first[None, :])
+        thin.append(dataclasses.replace(f, thin_mask=band, thin_width_deg=0.7))
+        solid.append(dataclasses.replace(f, sky_mask=sky & ~band))
+    rec = Reconstructor(BASE)
+    plain = rec.height_field(pair, world.track, 300.0, 400.0).camera_ceilings
+    got = rec.height_field(thin, world.track, 300.0, 400.0).camera_ceilings
+    want = rec.height_field(solid, world.track, 300.0, 400.0).camera_ceilings
+    assert plain.shape == want.shape == got.shape == (1, 4)
+    assert np.any(want[0, 2:] > plain[0, 2:])  # the band lies along the track: it matters
+    np.testing.assert_array_equal(got, want)
