@@ -218,12 +218,20 @@ class BaliseList:
         for i, b in enumerate(ids):
             if not b:
                 raise BaliseFileError(f"{p}, line {_line(i)}: empty id; give every balise an id")
-            if b in seen:
+            if "," in b:
                 raise BaliseFileError(
-                    f"{p}, line {_line(i)}: id {b!r} already used on line {_line(seen[b])}; "
-                    "ids must be unique: rename one of them"
+                    f"{p}, line {_line(i)}: id {b!r} holds a comma (quoted); ids are text "
+                    "without commas (the captures' tables are CSV): rename it"
                 )
-            seen[b] = i
+            # ids told apart by case only are one balise to a reader (a review)
+            key = b.casefold()
+            if key in seen:
+                same = "" if ids[seen[key]] == b else f" (as {ids[seen[key]]!r}: case aside)"
+                raise BaliseFileError(
+                    f"{p}, line {_line(i)}: id {b!r} already used on line "
+                    f"{_line(seen[key])}{same}; ids must be unique: rename one of them"
+                )
+            seen[key] = i
         telegrams = tuple(str(x).strip() for x in df["telegram"])
         for i, tg in enumerate(telegrams):
             if not tg:

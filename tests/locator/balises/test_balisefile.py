@@ -33,6 +33,12 @@ def test_along_track_round_trip(tmp_path, track):
             lambda df: df.assign(id=["A", "B", "C", "B", "E"]),
             r"line 5: id 'B' already used on line 3",
         ),
+        # ids told apart by case only, and an id with a (quoted) comma
+        (
+            lambda df: df.assign(id=["A", "VB1", "C", "vb1", "E"]),
+            r"line 5: id 'vb1' already used on line 3 \(as 'VB1': case aside\)",
+        ),
+        (lambda df: df.assign(id=["A", "B", "C,D", "E", "F"]), r"line 4: id 'C,D' holds a comma"),
         (
             lambda df: df.assign(chainage_m=np.where(df.index == 4, 2500.0, df["chainage_m"])),
             r"line 6: balise .* off the track",
