@@ -6,7 +6,7 @@ position on the track, and the telegram a real balise there would send. The list
 
 | column | unit | meaning |
 |---|---|---|
-| ``id`` | - | unique identifier (NID_BG style, any text without commas) |
+| ``id`` | - | unique identifier, case aside (NID_BG style, any text without commas) |
 | ``chainage_m`` | m | position along the track map |
 | ``lat_deg``, ``lon_deg``, ``h_m`` | deg, m | its coordinates (WGS84), on the track axis |
 | ``telegram`` | - | the telegram to emit (opaque text, e.g. hexadecimal) |
