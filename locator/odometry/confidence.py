@@ -105,8 +105,8 @@ class OdometerAccuracy:
             # a review: a slide of 3.7 % held for 2 km just above the trusted speed (10 m/s)
             # passed the per-cycle test (2 % + 0.2 m/s) and left D_DOUBTUNDER by 4.6 m when
             # the creep term held the relative tolerance alone
-            trusted_mps = r.tolerance_mps / r.tolerance
-            unseen = r.tolerance + r.tolerance_mean_mps / trusted_mps
+            trusted_mps = r.tolerance_mps / r.tolerance  # 0: no absolute part, none unseen
+            unseen = r.tolerance + (r.tolerance_mean_mps / trusted_mps if trusted_mps else 0.0)
             creep_over = creep_under = unseen + r.scale_error + 0.005
         else:
             creep_over = config.slip_max if config.driven else 0.0
@@ -396,11 +396,11 @@ def safe_fronts(
             ov_w, un_w = max(ov_k, p.accuracy_m - u), max(un_k, u + p.accuracy_m)
             ref = (float(odo[k]), e_k, ov_w, un_w, float(ran[k]), k)
             alarm_from = k if alarm_from is None else alarm_from
+        assert ref is not None
         at_passage[j] = (
             (p.chainage_m, p.accuracy_m, p.accuracy_m) if ok and p.q_reference
             else (e_k, ref[2], ref[3]) if not ok else (e_k, ov_k, un_k)
         )  # fmt: skip
-        assert ref is not None
         seg = slice(k, bounds[j])
         e, ov, un = _state_at(ref, odo[seg], ran[seg], accuracy, o,
                               disputed[seg] - disputed[ref[5]])  # fmt: skip
