@@ -296,10 +296,15 @@ def capture_balises(
             # its doubt over them is the telegram's too (a review: 3.9 m out with q = 3 m)
             k_pass = np.clip(np.searchsorted(t, t_pass, side="right") - 1, 0, len(t) - 1)
             carry = reach[kc] + _carry_doubt_m(odo_acc, uc, extra[kc] - extra[k_pass])
-            q = np.ceil(np.maximum(reach[kp], carry) + b_acc[rows] - 1e-9)
+            q_m = np.maximum(reach[kp], carry)
         else:
             t_pass = t[kp] + (-up / (uc - up)) * (t[kc] - t[kp])
-            q = np.ceil(np.maximum(reach[kp], reach[kc]) + b_acc[rows] - 1e-9)
+            q_m = np.maximum(reach[kp], reach[kc])
+        # the time is read linearly between two fixes (the odometer's too): a train that
+        # accelerates may be a t_gap^2 / 8 off that line (a review: braking at 1.5 m/s^2
+        # over a 2 s gap, 3.65 m from the balise with q = 3 m)
+        gap_s = t[kc] - t[kp]
+        q = np.ceil(q_m + config.max_accel_mps2 * gap_s**2 / 8.0 + b_acc[rows] - 1e-9)
         got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
@@ -321,7 +326,7 @@ def capture_balises(
     if config.emit == "predicted" and len(idx) >= 2 and n_b:
         assert v is not None
         _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out,
-                        odo_acc)  # fmt: skip
+                        odo_acc, extra)  # fmt: skip
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
 
@@ -340,6 +345,7 @@ def _schedule_ahead(
     orientation: int,
     out: dict[str, NDArray],
     accuracy: OdometerAccuracy,
+    extra: NDArray,
 ) -> None:
     """``emit="predicted"``, causally: at each valid fix short of a balise and inside its zone,
     the telegram is scheduled for the predicted arrival ``t + (-u) / v`` when that comes before
@@ -353,6 +359,12 @@ def _schedule_ahead(
     that fix's interval: hindsight, which hid the stop-short case (a user trial's review).
     """
     period = float(np.median(np.diff(t[idx])))
+    # the odometer's speed is in dispute where its disputed distance grew in the last step
+    # (wheel and radar disagree, or a standing radar under a turning wheel): a prediction
+    # from it may run at a failed radar's speed (a review: a radar reading twice the speed
+    # gave q = 5 m for 12 m); the pair rule times those balises instead
+    grew = np.zeros(len(t), bool)
+    grew[1:] = (np.diff(extra, axis=0).sum(axis=1) > 0.0)
     for n in range(len(b)):
         u = orientation * (s[idx] - b[n])
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -365,6 +377,7 @@ def _schedule_ahead(
                     + 0.5 * config.max_accel_mps2 * wait_s**2 + b_acc[n] - 1e-9)  # fmt: skip
         zone = config.in_capture(u) | config.in_arm(u)
         ok = (u < 0) & zone & (v[idx] > 0) & (ahead < period) & (q <= config.max_locacc_m)
+        ok &= ~grew[idx]
         # within the data: a telegram scheduled after the last epoch cannot be scored (the
         # recording stops; the truth with it), and was counted hazardous as unknown
         ok &= t[idx] + ahead <= t[-1]

@@ -198,15 +198,17 @@ def test_no_capture_across_a_gap_of_voided_fixes():
 
 
 def test_telegram_accuracy_states_the_interval_reach_and_gates_at_q_locacc():
-    # intervals reaching 10 m either side of the estimate, balise surveyed to 1 m: Q_LOCACC 11
+    # intervals reaching 10 m either side of the estimate, balise surveyed to 1 m, and what
+    # a train at 1.5 m/s^2 may leave the linear interpolation by over the 1 s between two
+    # fixes (1.5 / 8 = 0.19 m): Q_LOCACC 12
     t, _truth, est, lo, hi = fixes(1.0, 20.0, 10.0)
     bl = balises([55.0])
     cap = capture_balises(t, est, lo, hi, bl, CaptureConfig(25.0), orientation=1)
-    assert cap["q_locacc_m"].tolist() == [11.0]
+    assert cap["q_locacc_m"].tolist() == [12.0]
     # a lopsided interval: the longer side counts
     cap = capture_balises(t, est, est - 4.0, est + 30.0, bl, CaptureConfig(25.0), orientation=1)
-    assert cap["q_locacc_m"].tolist() == [31.0]
-    # 61.5 m + 1 m rounds up to 63 (the largest Q_LOCACC): captured; 62.5 + 1 -> 64: not
+    assert cap["q_locacc_m"].tolist() == [32.0]
+    # 61.5 + 0.19 + 1 m rounds up to 63 (the largest Q_LOCACC): captured; 62.5 -> 64: not
     ok = capture_balises(t, est, est - 61.5, est + 61.5, bl, CaptureConfig(25.0), orientation=1)
     assert ok["captured"].all() and ok["q_locacc_m"].iloc[0] == 63.0
     no = capture_balises(t, est, est - 62.5, est + 62.5, bl, CaptureConfig(25.0), orientation=1)
@@ -405,4 +407,42 @@ def test_the_stated_accuracy_holds_the_odometers_error_over_the_carried_distance
     row = sc.iloc[0]
     assert row.captured and not row.hazardous
     assert abs(row.position_error_m) > reach + 0.5  # the carried distance's error counts
+    assert row.q_locacc_m >= abs(row.position_error_m)
+
+
+def test_no_prediction_from_a_disputed_odometer_speed():
+    """A review: a radar reading twice the speed was believed by the predicted emission (q = 5 m,
+    the truth 12 m from the balise). Where the odometer's disputed distance grew in the last
+    step, the pair rule times the balise instead."""
+    t, truth, est, lo, hi = fixes(1.0, 30.0, 20.0)
+    bl = balises([truth[8] + 20.0])
+    cfg = CaptureConfig(25.0, emit="predicted")
+    speed = np.full(len(t), 60.0)  # the failed radar's
+    calm = capture_balises(t, est, lo, hi, bl, cfg, orientation=1, speed_mps=speed)
+    assert calm.epoch.iloc[0] == 8  # scheduled ahead at fix 8 (at the wrong speed)
+    extra = np.column_stack([np.zeros(len(t)), 30.0 * np.arange(len(t))])  # disputed each step
+    cap = capture_balises(t, est, lo, hi, bl, cfg, orientation=1, speed_mps=speed,
+                          odo_extra_m=extra)  # fmt: skip
+    assert cap.captured.iloc[0] and cap.epoch.iloc[0] == 9  # the crossing fix: the pair rule
+
+
+@pytest.mark.parametrize("gap_s", [1.0, 2.0])
+def test_the_stated_accuracy_holds_the_interpolation_between_fixes(gap_s):
+    """A review: fixes gap_s apart on a train braking at 1.5 m/s^2, both intervals honest: the
+    time read linearly between them put the truth 3.65 m from the balise with q = 3 m."""
+    a = 1.5
+    t = np.arange(0.0, 20.0, gap_s)
+    truth = 30.0 * t - 0.5 * a * t**2
+    reach = 2.4
+    est = truth - reach  # the truth at the interval's far edge
+    k = int(np.searchsorted(t, 8.0))
+    bl = BaliseList(("B0",), np.array([0.5 * (est[k] + est[k + 1])]), np.zeros(1), np.zeros(1),
+                    np.zeros(1), ("T",), np.ones(1, bool), np.array([0.1]))  # fmt: skip
+    cap = capture_balises(t, est, est - reach, est + reach, bl, CaptureConfig(25.0),
+                          orientation=1)  # fmt: skip
+    tt = np.arange(0.0, 19.0, 0.001)
+    sc = score_captures(cap, tt, 30.0 * tt - 0.5 * a * tt**2, orientation=1,
+                        false_tolerance_m=25.0)  # fmt: skip
+    row = sc.iloc[0]
+    assert row.captured and not row.hazardous
     assert row.q_locacc_m >= abs(row.position_error_m)
