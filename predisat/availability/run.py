@@ -1261,8 +1261,11 @@ def _antenna_text(masks: MaskSet, antenna_height_m: float | None) -> str:
     """Which antenna the masks are for, and whether the train's was checked against it (a
     user trial: the report's figures named no antenna, and none was checked by default)."""
     h = masks_antenna_height_m(masks)
-    made = ("the masks state no antenna height" if h is None
-            else f"masks made for an antenna {h:g} m above the track axis")  # fmt: skip
+    if h is None:
+        train = ("" if antenna_height_m is None
+                 else f", taken as made for the train's ({antenna_height_m:g} m)")  # fmt: skip
+        return f"the masks state no antenna height{train}: nothing could be checked"
+    made = f"masks made for an antenna {h:g} m above the track axis"
     if antenna_height_m is None:
         return (f"{made}; the train's antenna not checked against them (give --antenna-height: "
                 "masks made for a higher antenna are refused)")  # fmt: skip

@@ -958,6 +958,13 @@ def test_masks_made_for_a_higher_antenna_than_the_trains_are_refused(
     assert "the train's antenna not checked" in unchecked.info["antenna"]
     page = Path(unchecked.report_html).read_text()
     assert "<th>Antenna</th><td>masks made for an antenna 4 m above" in page
+    # masks that state no height: nothing can be checked, and the row says so
+    bare = dataclasses.replace(masks, provenance={k: v for k, v in masks.provenance.items()
+                                                  if k != "antenna_height_m"})  # fmt: skip
+    res = run_availability(bare, None, None, out_dir=tmp_path / "b", step_s=3600, n_sky=1,
+                           progress=False, antenna_height_m=3.0)  # fmt: skip
+    assert res.info["antenna"] == ("the masks state no antenna height, taken as made for the "
+                                   "train's (3 m): nothing could be checked")  # fmt: skip
 
 
 def test_a_far_stations_navigation_file_is_said_to_understate(shared_data: Path) -> None:
