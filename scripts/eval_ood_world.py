@@ -54,6 +54,7 @@ from eval_rigs import _reusable, pooled
 
 from predisat.camera.models import default_camera
 from predisat.camera.rigs import Rig
+from predisat.cli.demo import DEMO_CANT_SPEED_KMH
 from predisat.masks.fileformat import read_masks
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
@@ -195,10 +196,11 @@ def run_one(rig_name: str, seed: int, length_m: float, scale: float, work: Path,
             shutil.rmtree(out)
         lon = float(track.position_at(lo)[1])
         c0 = time.process_time()
+        # a canted vehicle, as `predisat synth` and the demo render (eval_rigs.py says why)
         res = generate_survey(
             track, lo, hi, sky=sky, seed=seed, out_dir=out / "synth", spec=spec,
             rig=rig_of(rig_name, scale), progress=False,
-            start_gps_s=daytime_gps_s(lon, solar_hour=hour),
+            start_gps_s=daytime_gps_s(lon, solar_hour=hour), cant_speed_kmh=DEMO_CANT_SPEED_KMH,
         )  # fmt: skip
         render_cpu = time.process_time() - c0
     else:
