@@ -373,7 +373,7 @@ def _schedule_ahead(
         # them, and the train's acceleration over the wait, are the telegram's too (a review:
         # 3.7 m out with q = 3 m)
         wait_s = np.where(np.isfinite(ahead), np.maximum(ahead, 0.0), 0.0)
-        q = np.ceil(reach[idx] + _carry_doubt_m(accuracy, u, np.zeros((len(u), 2)))
+        q = np.ceil(reach[idx] + _carry_doubt_m(accuracy, u)
                     + 0.5 * config.max_accel_mps2 * wait_s**2 + b_acc[n] - 1e-9)  # fmt: skip
         zone = config.in_capture(u) | config.in_arm(u)
         ok = (u < 0) & zone & (v[idx] > 0) & (ahead < period) & (q <= config.max_locacc_m)
@@ -544,10 +544,14 @@ def score_captures(
     return out
 
 
-def _carry_doubt_m(accuracy: OdometerAccuracy, dist_m: NDArray, disputed_m: NDArray) -> NDArray:
+def _carry_doubt_m(
+    accuracy: OdometerAccuracy, dist_m: NDArray, disputed_m: NDArray | None = None
+) -> NDArray:
     """The odometer's doubt over ``dist_m`` metres (either sign) carried along it, with the
-    disputed distance ``disputed_m`` (shape (..., 2), behind / ahead) in that span and the
-    relative error over it, m (either side: the larger)."""
+    disputed distance ``disputed_m`` (shape (..., 2), behind / ahead; None: none) in that span
+    and the relative error over it, m (either side: the larger)."""
     doubt = np.maximum(accuracy.doubt_over_m(dist_m), accuracy.doubt_under_m(dist_m))
+    if disputed_m is None:
+        return doubt
     rel = max(accuracy.over_rel, accuracy.under_rel)
     return doubt + (1.0 + rel) * np.asarray(disputed_m, float).sum(axis=-1)

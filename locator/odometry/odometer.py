@@ -259,8 +259,9 @@ class OdometerLog:
         sensor put the train than the distance used; on cycles the radar says standing under
         a turning wheel (not marked), the wheel's distance; while the wheel's direction is in
         doubt, the distance used and the radar's the other way; without a radar, the speeds
-        reachable where the wheel left the configured creep. The confidence interval adds it on that
-        side, so it holds whichever sensor failed. None: zeros (a log that does not carry it).
+        reachable where the wheel left the configured creep. The confidence interval adds it
+        on that side, so it holds whichever sensor failed. None: zeros (a log that does not
+        carry it).
     """
 
     t_s: NDArray
@@ -404,6 +405,18 @@ def _clamped(
     return used_v, slip, above, below
 
 
+def _window_mean(x: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """Mean of ``x[lo[k]:hi[k]]`` for each ``k`` (NaN for an empty window)."""
+    total = np.concatenate([[0.0], np.cumsum(x)])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (total[hi] - total[lo]) / (hi - lo)
+
+
+def _last_index(mask: NDArray) -> NDArray:
+    """Per element, the index of the last ``True`` of ``mask`` up to it (-1 before any)."""
+    return np.maximum.accumulate(np.where(mask, np.arange(len(mask)), -1))
+
+
 def true_distance_m(speed_at: Callable[[NDArray], NDArray], t_s: ArrayLike,
                     substeps: int = 20) -> NDArray:  # fmt: skip
     """Distance run since ``t_s[0]``: the speed integrated by the trapezoid rule.
@@ -506,10 +519,8 @@ def simulate_odometer(
         # radar's mean over the second before the cycle, not on the cycle's own reading: a
         # cycle chosen for its own high reading over-read a 0.1 m/s crawl by 12 %
         cyc = np.arange(len(t))
-        first = np.maximum(cyc - max(1, round(1.0 / dt)), 0)
-        total = np.concatenate([[0.0], np.cumsum(radar_v)])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            before = (total[cyc] - total[first]) / (cyc - first)
+        n_win = max(1, round(1.0 / dt))  # cycles in a second
+        before = _window_mean(radar_v, np.maximum(cyc - n_win, 0), cyc)
         slow = (before < r.tolerance_mps / r.tolerance) & (before >= 3.0 * r.noise_mps)
         slip |= slow
         # a creep held under the per-cycle test's absolute part (2 % + 0.2 m/s: 4 % at
@@ -519,11 +530,9 @@ def simulate_odometer(
         # reading at its end: compared over the same cycles, the radar's by the trapezoid
         # (at 1 Hz, 0.25 m/s apart at 0.5 m/s2 otherwise, a review)
         radar_mid = 0.5 * (radar_v + np.concatenate([radar_v[:1], radar_v[:-1]]))
-        win0 = np.maximum(cyc - max(1, round(1.0 / dt)) + 1, 0)
-        wheel_total = np.concatenate([[0.0], np.cumsum(wheel_v)])
-        mid_total = np.concatenate([[0.0], np.cumsum(radar_mid)])
-        mean_w = (wheel_total[cyc + 1] - wheel_total[win0]) / (cyc + 1 - win0)
-        mean_r = (mid_total[cyc + 1] - mid_total[win0]) / (cyc + 1 - win0)
+        win0 = np.maximum(cyc + 1 - n_win, 0)
+        mean_w = _window_mean(wheel_v, win0, cyc + 1)
+        mean_r = _window_mean(radar_mid, win0, cyc + 1)
         mean_off = np.abs(mean_w - mean_r) > r.tolerance * mean_r + r.tolerance_mean_mps
         slip |= mean_off
         # the wheel and the radar disagree (the slow rule aside), cycle by cycle aligned
@@ -544,11 +553,11 @@ def simulate_odometer(
         # may run the other way at the radar's speed (below three sigmas while it says
         # standing), disputed against the wheel's direction
         # (and in the log's first second, which has no radar history, on any disagreement)
-        fresh = cyc < max(1, round(1.0 / dt))
+        fresh = cyc < n_win
         start = (still & (d_edges != 0)) | (fresh & disagree)
         clear = ~disagree & ~still
         event = np.where(start, 1, np.where(clear, 0, -1))
-        at = np.maximum.accumulate(np.where(event >= 0, np.arange(len(t)), -1))
+        at = _last_index(event >= 0)
         doubt = (at >= 0) & (event[np.maximum(at, 0)] == 1)
         bound = 3.0 * r.noise_mps / (1.0 - r.scale_error)
         back_v = np.where(doubt, np.where(still, bound, radar_v), 0.0)
@@ -560,7 +569,7 @@ def simulate_odometer(
     # measured distance: the wheel's edges where trusted, the speed used where not, in the
     # last direction the wheel showed (a slow cycle between two edges has no direction of its
     # own: its distance was dropped, and a crawl under-read by up to 57 %, a review found)
-    last = np.maximum.accumulate(np.where(direction != 0, np.arange(len(t)), -1))
+    last = _last_index(direction != 0)
     held = np.where(last >= 0, direction[np.maximum(last, 0)], 0)
     wheel_step = d_edges * config.edge_m
     step = np.where(slip, used_v * dt * held, wheel_step)
