@@ -303,8 +303,7 @@ def capture_balises(
         # the time is read linearly between two fixes (the odometer's too): a train that
         # accelerates may be a t_gap^2 / 8 off that line (a review: braking at 1.5 m/s^2
         # over a 2 s gap, 3.65 m from the balise with q = 3 m)
-        gap_s = t[kc] - t[kp]
-        q = np.ceil(q_m + config.max_accel_mps2 * gap_s**2 / 8.0 + b_acc[rows] - 1e-9)
+        q = np.ceil(q_m + _interpolation_m(config, t[kc] - t[kp]) + b_acc[rows] - 1e-9)
         got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
@@ -439,6 +438,9 @@ def _capture_after_void(
     in_c = config.in_capture(uc) | config.in_capture(ub)
     in_a = ~in_c & (config.in_arm(uc) | config.in_arm(ub))
     doubt = _carry_doubt_m(accuracy, uc, extra[kc] - extra[kc - 1])
+    # read along the odometer known at the fixes only: linearly over the step, as the pair
+    # rule's time, and as far off that line as the train's acceleration allows
+    doubt = doubt + _interpolation_m(config, t[kc] - t[kc - 1])
     q = np.ceil(reach[kc] + doubt + b_acc[rows] - 1e-9)
     max_safe = np.where(orientation > 0, hi[kc], lo[kc])
     min_safe = np.where(orientation > 0, lo[kc], hi[kc])
@@ -555,3 +557,9 @@ def _carry_doubt_m(
         return doubt
     rel = max(accuracy.over_rel, accuracy.under_rel)
     return doubt + (1.0 + rel) * np.asarray(disputed_m, float).sum(axis=-1)
+
+
+def _interpolation_m(config: CaptureConfig, gap_s: NDArray) -> NDArray:
+    """How far a train at ``config.max_accel_mps2`` may be from the straight line between two
+    fixes ``gap_s`` apart (its time read linearly between them), m: ``a gap^2 / 8``."""
+    return config.max_accel_mps2 * np.asarray(gap_s, float) ** 2 / 8.0

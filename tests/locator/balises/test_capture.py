@@ -446,3 +446,32 @@ def test_the_stated_accuracy_holds_the_interpolation_between_fixes(gap_s):
     row = sc.iloc[0]
     assert row.captured and not row.hazardous
     assert row.q_locacc_m >= abs(row.position_error_m)
+
+
+def test_the_after_void_capture_states_the_interpolation_between_its_fixes_too():
+    """The passage time at the first located fix after a voided epoch is read along the
+    odometer, known at the fixes only, so linearly between them as the pair rule's: a train
+    braking at 1.5 m/s^2 over a 2 s step is up to a gap^2 / 8 = 0.75 m off that line. The
+    truth is the braking profile; the odometer exact at the fixes; the fix honest, the truth
+    at its interval's far edge (2.8 m)."""
+    a, reach = 1.5, 2.8
+    t = np.arange(0.0, 20.0, 2.0)
+    truth = 30.0 * t - 0.5 * a * t**2
+    est = truth - reach
+    located = t >= 10.0  # the fixes before are voided: the one at 10 s captures after them
+    k = int(np.flatnonzero(located)[0])
+    b = 0.5 * (truth[k - 1] + truth[k]) - reach  # the estimate was there at mid-step
+    bl = BaliseList(("B0",), np.array([b]), np.zeros(1), np.zeros(1), np.zeros(1), ("T",),
+                    np.ones(1, bool), np.array([0.1]))  # fmt: skip
+    acc = OdometerAccuracy(0.01, 0.001, 0.001)
+    cap = capture_balises(t, est, est - reach, est + reach, bl, CaptureConfig(25.0),
+                          orientation=1, odo_m=truth - truth[0], located=located,
+                          odo_accuracy=acc)  # fmt: skip
+    assert cap.after_void.iloc[0]
+    tt = np.arange(0.0, 19.0, 0.001)
+    sc = score_captures(cap, tt, 30.0 * tt - 0.5 * a * tt**2, orientation=1,
+                        false_tolerance_m=25.0)  # fmt: skip
+    row = sc.iloc[0]
+    assert abs(row.position_error_m) > 3.0 + 0.25  # the interpolation's part is 0.75 m
+    assert row.captured and not row.hazardous
+    assert row.q_locacc_m >= abs(row.position_error_m)
