@@ -35,6 +35,7 @@ otherwise the prediction keeps growing from the last anchors, so a wrong claim c
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -586,6 +587,15 @@ def _off_track_check(
         row.update(flags=flags, flag_names=flag_names(flags), claim=False)
 
 
+@functools.lru_cache(maxsize=256)
+def _chi2_threshold(p_false_alarm: float, dof: int) -> float:
+    """The chi-square test's threshold, remembered: SciPy's ``isf`` costs a third of a
+    millisecond, a tenth of an epoch, and takes a handful of values in a run."""
+    from scipy.stats import chi2
+
+    return float(chi2.isf(p_false_alarm, dof))
+
+
 def _off_track_m(
     path: AntennaPath, cfg: RunConfig, data: EpochData, el: NDArray, idx: NDArray, near_m: float
 ) -> tuple[float, float] | None:
@@ -593,8 +603,6 @@ def _off_track_m(
     fault detection and exclusion of that fix (a satellite the 1-D fix had excluded voided a
     review's correct claims); None without five consistent satellites, a fix or a foot point
     inside the map."""
-    from scipy.stats import chi2
-
     sigma = np.asarray(cfg.locator.model.error.sigma_m(el[idx]), float)
     if data.extra_sigma_m is not None:
         sigma = np.hypot(sigma, data.extra_sigma_m[idx])
@@ -607,7 +615,7 @@ def _off_track_m(
         x, a = got
         res = (rho[keep] - np.linalg.norm(sat[keep] - x[:3], axis=1) - x[3]) * w[keep]
         dof = int(keep.sum()) - 4
-        if float(res @ res) <= chi2.isf(cfg.locator.p_false_alarm, dof):
+        if float(res @ res) <= _chi2_threshold(cfg.locator.p_false_alarm, dof):
             break
         if keep.sum() == 5:
             return None  # a fault it cannot isolate

@@ -6,6 +6,8 @@
   kilometre posts from line sections, writing GeoJSON.
 * :mod:`predisat.track.chain` - chaining the parts of a track file into one polyline.
 * :mod:`predisat.track.smooth` - the penalised B-spline fit through a simplified polyline.
+* :mod:`predisat.track.footpoint` - one point's projection in Python floats (the locator's
+  per-epoch check), bit for bit the array projection.
 * :mod:`predisat.track.alias` - where the track passes beside itself (:class:`TrackAliases`).
 * :mod:`predisat.track.posts` - kilometre posts; :mod:`predisat.track.stations` - stations;
   :mod:`predisat.track.errors` - the error.

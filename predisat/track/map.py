@@ -32,6 +32,7 @@ from shapely import LineString, STRtree, box
 from predisat.geodesy import WGS84, LocalFrame
 from predisat.readonly import freeze_array_fields
 from predisat.track.errors import TrackMapError
+from predisat.track.footpoint import project_point
 from predisat.track.posts import (
     KilometrePost,
     kilometre_gaps,
@@ -480,6 +481,12 @@ class TrackMap:
         shape = p.shape[:-1]
         pts = p.reshape(-1, 3)
         c = self._curve
+        if len(pts) == 1:
+            xs, rows = self._node_lists
+            x, y, z = (float(v) for v in pts[0])
+            one = project_point(c, self.length_m, xs, rows, (x, y, z), max_iter)
+            if one is not None:
+                return Projection(*(np.full(shape, v) for v in one))
         _, idx = c.tree.query(pts[:, :2])
         s = c.node_s_m[idx].astype(float)
         up = c.node_up[idx]
@@ -528,9 +535,15 @@ class TrackMap:
             clamped=clamped.reshape(shape),
         )
 
+    @cached_property
+    def _node_lists(self) -> tuple[list[float], list[list[float]]]:
+        """The nodes' chainage and vertical as Python lists, for the one-point projection."""
+        c = self._curve
+        return c.node_s_m.tolist(), [row.tolist() for row in c.node_up_rows]
+
     def _up_interp(self, s: NDArray) -> NDArray:
         c = self._curve
-        up = np.stack([np.interp(s, c.node_s_m, c.node_up[:, k]) for k in range(3)], axis=-1)
+        up = np.stack([np.interp(s, c.node_s_m, row) for row in c.node_up_rows], axis=-1)
         return up / np.linalg.norm(up, axis=-1, keepdims=True)
 
     def sample(self, step_m: float, start_m: float = 0.0, end_m: float | None = None) -> NDArray:

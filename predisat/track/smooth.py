@@ -40,6 +40,9 @@ class FittedCurve:
     node_s_m, node_enu_m, node_up : ndarray, shapes (k,), (k, 3), (k, 3)
         Nodes every ~1 m of ``t``: their chainage, position and local vertical (unit, in the
         frame), the starting points of projection.
+    node_up_rows : ndarray, shape (3, k)
+        ``node_up`` one contiguous row per component (``np.interp`` copies a strided column
+        on every call: most of a one-point projection's time).
     tree : cKDTree
         Horizontal (e, n) index of the nodes.
     max_vertical_deviation_m : float
@@ -54,6 +57,7 @@ class FittedCurve:
     node_s_m: NDArray
     node_enu_m: NDArray
     node_up: NDArray
+    node_up_rows: NDArray
     tree: cKDTree
     max_vertical_deviation_m: float
     lam_h: float
@@ -208,6 +212,7 @@ def fit_curve(enu: NDArray, frame: LocalFrame, tol_h: float, tol_v: float) -> Fi
         node_s_m=sk,
         node_enu_m=node_enu,
         node_up=node_up,
+        node_up_rows=np.ascontiguousarray(node_up.T),
         tree=cKDTree(node_enu[:, :2]),
         max_vertical_deviation_m=dev_v,
         lam_h=lam_h,
