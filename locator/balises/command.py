@@ -256,6 +256,10 @@ def cmd_balises(args: argparse.Namespace) -> int:
                     error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
                     model_el_min_deg=mf.el_min_deg, model_el_max_deg=mf.el_max_deg)  # fmt: skip
     log, accuracy = None, None
+    odometer = ODOMETERS[args.odometer or _ODOMETER]()
+    # the captures' prediction and interpolation bounds take the odometer's acceleration limit:
+    # a log admitted at 2.5 m/s^2 but bounded at 1.5 would state a capture too precise
+    max_accel = odometer.max_accel_mps2
     if args.odometer_log:
         from locator.odometry.logfile import read_odometer_log
 
@@ -271,7 +275,8 @@ def cmd_balises(args: argparse.Namespace) -> int:
         # before any work: the log's coverage, direction and bounds against the run
         odometer_from_log(sim, log, accuracy=accuracy)
     caps = {
-        f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit)
+        f"r{r:g}": CaptureConfig(capture_radius_m=r, arm_radius_m=args.arm_radius, emit=args.emit,
+                                 max_accel_mps2=max_accel)
         for r in args.radius
     }
     quiet = bool(getattr(args, "quiet", False))
@@ -293,7 +298,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
               mininterval=0.5) as bar:  # fmt: skip
         summary, folder = balises_to_folder(
             sim, path, balises, args.out, config=cfg, masks=masks,
-            odometer=ODOMETERS[args.odometer or _ODOMETER](), captures=caps, seed=args.seed,
+            odometer=odometer, captures=caps, seed=args.seed,
             log=log, accuracy=accuracy, progress=bar.update, constellation=args.constellation,
             meta={"sim": str(args.sim), "odometer_kind": kind, "error_model": model_record},
         )  # fmt: skip

@@ -119,6 +119,23 @@ def test_a_recorded_odometer_log_is_used_and_a_gap_is_refused(sim_dir, tmp_path,
     assert "line 102: gap of 1.10 s" in capsys.readouterr().err
 
 
+def test_the_captures_take_the_odometers_acceleration_limit(sim_dir, tmp_path):
+    """A log admitted at 2.5 m/s^2 must not be bounded at the default 1.5 in the captures'
+    prediction and interpolation."""
+    from locator.odometry.logfile import write_odometer_log
+
+    sim = SimRun.read(sim_dir)
+    p = write_odometer_log(odometer_along_run(sim, OdometerConfig(), seed=5).log,
+                           tmp_path / "odo.csv")  # fmt: skip
+    for extra, want in (([], 1.5), (["--max-accel", "2.5"], 2.5)):
+        out = tmp_path / f"a{want:g}"
+        rc = main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25",
+                   "--odometer-log", str(p), *extra, "--out", str(out)])  # fmt: skip
+        assert rc == 0
+        caps = json.loads((out / "summary.json").read_text())["captures"]
+        assert caps and {c["max_accel_mps2"] for c in caps.values()} == {want}
+
+
 def test_a_start_error_beyond_the_start_uncertainty_is_refused(sim_dir):
     sim = SimRun.read(sim_dir)
     path = AntennaPath(World.load(sim_dir.parent / "world.npz").track, 4.0)
