@@ -457,9 +457,7 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
         One sentence per sparse constellation (empty when none is).
     """
     held = np.asarray(sats.valid.any(axis=0), bool)
-    reason = np.asarray(sats.status.reason, int)
-    if reason.shape == sats.valid.shape:
-        held |= (reason == int(Reason.OUTSIDE_VALIDITY)).any(axis=0)
+    held |= (np.asarray(sats.status.reason, int) == int(Reason.OUTSIDE_VALIDITY)).any(axis=0)
     used = [s for j, s in enumerate(sats.sats) if held[j]]
     out = []
     t0 = float(sats.gps_s[0]) if len(sats.gps_s) else math.inf

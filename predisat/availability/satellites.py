@@ -212,6 +212,13 @@ class SatellitePositions:
 
     def __post_init__(self) -> None:
         freeze_array_fields(self)
+        want = (len(self.gps_s), len(self.sats))
+        if self.pos_ecef_m.shape != (*want, 3) or self.status.reason.shape != want:
+            raise ValueError(
+                f"pos_ecef_m {self.pos_ecef_m.shape} and status.reason "
+                f"{self.status.reason.shape} must have shapes {(*want, 3)} and {want} "
+                f"({want[0]} epochs, {want[1]} satellites): replace them together"
+            )
 
     @classmethod
     def from_ephemeris(

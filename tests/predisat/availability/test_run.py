@@ -861,17 +861,21 @@ def test_constellation_warnings_say_what_the_data_holds_in_its_era(
     # again from late 2011; two are a partial file in either era
     from predisat.availability.run import sparse_navigation
     from predisat.availability.satellites import SatellitePositions
+    from predisat.gnss.ephemeris import EphemerisStatus
 
     real = SatellitePositions.from_ephemeris(
         load_navigation([test_data / "gnss" / "brdc0910_R02R08.09g"]),
         np.array([parse_time("2009-04-01T06:00", "t")]), "R",
     )  # fmt: skip
+    assert sparse_navigation(real, "x")[0].startswith("x holds 2 GLONASS satellites")
+    with pytest.raises(ValueError, match=r"status\.reason .* replace them together"):
+        dataclasses.replace(real, sats=("R01", "R02", "R03"), pos_ecef_m=np.ones((1, 3, 3)))
 
     def glonass(n: int, when: str) -> SatellitePositions:
-        return dataclasses.replace(
-            real, gps_s=np.array([parse_time(when, "t")]),
-            sats=tuple(f"R{k + 1:02d}" for k in range(n)), pos_ecef_m=np.ones((1, n, 3)),
-        )  # fmt: skip
+        gps_s, sats = np.array([parse_time(when, "t")]), tuple(f"R{k + 1:02d}" for k in range(n))
+        status = EphemerisStatus(gps_s, sats, np.zeros((1, n), np.int8),
+                                 np.full((1, n), "", object))  # fmt: skip
+        return SatellitePositions(gps_s, sats, np.ones((1, n, 3)), status)
 
     assert sparse_navigation(glonass(19, "2009-04-01T06:00"), "x") == []
     (w,) = sparse_navigation(glonass(19, "2013-04-01T06:00"), "x")
