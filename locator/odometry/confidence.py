@@ -397,10 +397,14 @@ def safe_fronts(
             ref = (float(odo[k]), e_k, ov_w, un_w, float(ran[k]), k)
             alarm_from = k if alarm_from is None else alarm_from
         assert ref is not None
-        at_passage[j] = (
-            (p.chainage_m, p.accuracy_m, p.accuracy_m) if ok and p.q_reference
-            else (e_k, ref[2], ref[3]) if not ok else (e_k, ov_k, un_k)
-        )  # fmt: skip
+        # what a later known-distance balise falls back to: this one's own accuracy where it
+        # reset the interval, the widened interval where it was rejected, else the doubts held
+        if ok and p.q_reference:
+            at_passage[j] = (p.chainage_m, p.accuracy_m, p.accuracy_m)
+        elif not ok:
+            at_passage[j] = (e_k, ref[2], ref[3])
+        else:
+            at_passage[j] = (e_k, ov_k, un_k)
         seg = slice(k, bounds[j])
         e, ov, un = _state_at(ref, odo[seg], ran[seg], accuracy, o,
                               disputed[seg] - disputed[ref[5]])  # fmt: skip
