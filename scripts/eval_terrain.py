@@ -21,7 +21,7 @@ import numpy as np
 
 from predisat.masks.fileformat import mask_file_path, read_masks, write_masks
 from predisat.masks.maskset import BinSource, MaskSet
-from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
+from predisat.masks.terrain import bin_terrain, coverage_notes, raise_to_terrain
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 from predisat.terrain import Dem
 
@@ -46,16 +46,20 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     masks = read_masks(mask_file_path(args.masks))
     dem = Dem.from_files(args.dem)
-    hz = bin_horizon_deg(masks, dem, antenna_above_ground_m=args.above_ground)
+    hz = bin_terrain(masks, dem, antenna_above_ground_m=args.above_ground)
     raised = raise_to_terrain(masks, hz, dem_source=dem.source)
+    for note in coverage_notes(raised, hz, dem.source):
+        print(f"warning: {note}")
     comp = compare(masks, load_truth(args.truth))
     assumed = comp.source == BinSource.ASSUMED
-    raised_share = float((raised.source == BinSource.TERRAIN).mean())
+    up = raised.mask_el_deg > masks.mask_el_deg
     a = masks.source == BinSource.ASSUMED
-    on_assumed = raised.source[a] == BinSource.TERRAIN if a.any() else np.zeros(1)
+    on_assumed = up[a] if a.any() else np.zeros(1)
+    flagged = float((raised.source == BinSource.TERRAIN).mean())
     print(f"{masks.n_pos} positions, {masks.n_az} bins each; assumed bins "
-          f"{100 * assumed.mean():.1f} %; raised by the terrain {100 * raised_share:.1f} % of "
-          f"all bins, {100 * float(on_assumed.mean()):.1f} % of the assumed")  # fmt: skip
+          f"{100 * assumed.mean():.1f} %; raised by the terrain {100 * float(up.mean()):.1f} % "
+          f"of all bins ({100 * flagged:.1f} % flagged TERRAIN: rays covered to 25 km), "
+          f"{100 * float(on_assumed.mean()):.1f} % of the assumed")  # fmt: skip
     print(f"{'masks':>10} {'bins':>8} {'false trust %':>14} {'sky lost %':>11}")
     for name, m in (("as is", masks), ("terrain", raised)):
         for where, sel in (("all", None), ("assumed", assumed)):

@@ -62,7 +62,7 @@ from predisat.masks.fileformat import MaskFileWarning, read_masks, write_masks
 from predisat.masks.gaps import close_gaps
 from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
-from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
+from predisat.masks.terrain import bin_terrain, coverage_notes, raise_to_terrain
 from predisat.reconstruct.attitude import (
     CANT_DEFICIENCY_TOL_MM,
     CANT_ON_SHARP_MM,
@@ -1287,12 +1287,14 @@ def _merge(
         merged = replace(merged, provenance={**merged.provenance, "gaps_closed_m": gaps})
         final_prov["gaps_closed_m"] = gaps
     if dem is not None:
-        hz = bin_horizon_deg(merged, dem, antenna_above_ground_m=antenna_height_m)
+        hz = bin_terrain(merged, dem, antenna_above_ground_m=antenna_height_m)
         merged = raise_to_terrain(merged, hz, dem_source=dem.source)
         final_prov["terrain"] = merged.provenance["terrain"]
-        if not np.isfinite(hz).any():
+        if not np.isfinite(hz.el_deg).any():
             _report(f"warning: the elevation tiles ({dem.source}) do not cover the line: no bin "
                     "was bounded by the terrain", quiet=False)  # fmt: skip
+        for note in coverage_notes(merged, hz, dem.source):
+            _report(f"warning: {note}", quiet=False)
     return merged, final_prov
 
 

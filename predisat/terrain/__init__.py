@@ -6,6 +6,20 @@ with the Earth's curvature, refraction and the model's stated vertical error.
 """
 
 from predisat.terrain.dem import Dem, DemError
-from predisat.terrain.horizon import REFRACTION_K, antenna_height_m, terrain_horizon_deg
+from predisat.terrain.horizon import (
+    REFRACTION_K,
+    TerrainHorizon,
+    antenna_height_m,
+    terrain_horizon,
+    terrain_horizon_deg,
+)
 
-__all__ = ["REFRACTION_K", "Dem", "DemError", "antenna_height_m", "terrain_horizon_deg"]
+__all__ = [
+    "REFRACTION_K",
+    "Dem",
+    "DemError",
+    "TerrainHorizon",
+    "antenna_height_m",
+    "terrain_horizon",
+    "terrain_horizon_deg",
+]

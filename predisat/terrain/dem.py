@@ -10,13 +10,19 @@ handled, so nothing here parses a tile format by hand.
 from __future__ import annotations
 
 import os
+import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import maximum_filter
 
+from predisat.geodesy import WGS84
 from predisat.readonly import freeze_array_fields
 
 __all__ = ["SRTM_VERTICAL_ERROR_M", "Dem", "DemError"]
@@ -25,6 +31,37 @@ __all__ = ["SRTM_VERTICAL_ERROR_M", "Dem", "DemError"]
 #: global assessment: 16 m is the mission specification; measured 6-9 m over Eurasia). The
 #: horizon adds it to every terrain height: the mask errs high, never low.
 SRTM_VERTICAL_ERROR_M = 16.0
+
+
+_A, _E2 = WGS84.a, WGS84.es
+
+
+def _is_wgs84_degrees(crs: Any) -> bool:
+    """Geographic, on the WGS84 ellipsoid, longitudes from Greenwich, in degrees: a tile in
+    another datum or from the Paris meridian would be read at the wrong place (a review: a
+    Paris-meridian tile landed 2.34 deg west, an ED50 one about 100 m off)."""
+    if crs is None or not crs.is_geographic:
+        return False
+    from pyproj import CRS
+
+    c = CRS.from_user_input(crs.to_wkt())
+    if c.equals(CRS.from_epsg(4326), ignore_axis_order=True):
+        return True
+    ell, pm = c.ellipsoid, c.prime_meridian
+    # a datum shift given to WGS84 moves the tile; zeros (ETRS89's usual) do not
+    with warnings.catch_warnings():  # pyproj: a PROJ string loses information (not this)
+        warnings.simplefilter("ignore", UserWarning)
+        proj4 = c.to_proj4() or ""
+    shift = re.search(r"\+towgs84=([-0-9.,e]+)", proj4)
+    shifted = shift is not None and any(float(v) != 0.0 for v in shift.group(1).split(","))
+    return bool(
+        ell is not None and pm is not None and pm.longitude == 0.0 and not shifted
+        # WGS84 or GRS80 (ETRS89, NAD83: within about a metre of WGS84, a DEM cell's 1 %)
+        and abs(ell.semi_major_metre - _A) < 1e-3
+        and abs(ell.inverse_flattening - 1.0 / WGS84.f) < 1e-5
+        and all(a.unit_name in ("degree", "degree minute second hemisphere")
+                for a in c.axis_info)
+    )  # fmt: skip
 
 
 class DemError(ValueError):
@@ -107,10 +144,10 @@ class Dem:
                     raise DemError(f"{f}: not a readable elevation raster ({exc}); give SRTM "
                                    ".hgt or GeoTIFF tiles") from None  # fmt: skip
                 datasets.append(ds)
-                crs = ds.crs
-                if crs is None or not crs.is_geographic or crs.to_epsg() not in (4326, None):
-                    raise DemError(f"{f}: coordinate system {crs} is not geographic WGS84 "
-                                   "(EPSG:4326); reproject the tile (gdalwarp -t_srs EPSG:4326)")
+                if not _is_wgs84_degrees(ds.crs):
+                    raise DemError(f"{f}: coordinate system {ds.crs} is not geographic WGS84 "
+                                   "in degrees from Greenwich (EPSG:4326); reproject the tile "
+                                   "(gdalwarp -t_srs EPSG:4326)")  # fmt: skip
                 if ds.count < 1:
                     raise DemError(f"{f}: no raster band")
             data, transform = merge(datasets, nodata=np.nan, dtype="float32")
@@ -145,6 +182,48 @@ class Dem:
         n_lat, n_lon = self.shape
         return (self.lon0_deg, self.lat0_deg - (n_lat - 1) * self.dlat_deg,
                 self.lon0_deg + (n_lon - 1) * self.dlon_deg, self.lat0_deg)  # fmt: skip
+
+    def cell_m(self, lat_deg: float) -> tuple[float, float]:
+        """Cell size at a latitude, ``(north-south, east-west)`` metres (WGS84 radii)."""
+        phi = np.radians(lat_deg)
+        w = np.sqrt(1.0 - _E2 * np.sin(phi) ** 2)
+        return (float(np.radians(self.dlat_deg) * _A * (1.0 - _E2) / w**3),
+                float(np.radians(self.dlon_deg) * _A / w * np.cos(phi)))  # fmt: skip
+
+    @cached_property
+    def _max3_m(self) -> NDArray[np.float64]:
+        # NaN where any post of the 3 x 3 is void: maximum_filter would otherwise pass over it
+        z = np.asarray(self.height_m, np.float64)
+        void = maximum_filter(~np.isfinite(z), size=3, mode="constant", cval=False)
+        top = maximum_filter(np.where(np.isfinite(z), z, -np.inf), size=3, mode="nearest")
+        out = np.where(void, np.nan, top)
+        out.setflags(write=False)
+        return out
+
+    def max_height_near(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
+        """Highest post of the 3 x 3 around the nearest post, m: a bound of the terrain within
+        a cell of the point, where bilinear heights flatten a peak between posts.
+
+        NaN outside the grid or where one of those posts is void (the terrain is unknown
+        there, not low).
+
+        Parameters
+        ----------
+        lat_deg, lon_deg : array_like, broadcastable
+            Geographic coordinates (WGS84 degrees).
+
+        Returns
+        -------
+        ndarray of float64, the broadcast shape
+        """
+        lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
+        r = np.rint((self.lat0_deg - lat) / self.dlat_deg)
+        c = np.rint((lon - self.lon0_deg) / self.dlon_deg)
+        n_lat, n_lon = self.shape
+        inside = (r >= 0) & (r <= n_lat - 1) & (c >= 0) & (c <= n_lon - 1)
+        ri = np.where(inside, r, 0).astype(np.intp)
+        ci = np.where(inside, c, 0).astype(np.intp)
+        return np.where(inside, self._max3_m[ri, ci], np.nan)
 
     def height_at(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
         """Bilinear height at points, m; NaN outside the grid or next to a void.

@@ -817,26 +817,40 @@ def test_elevation_tiles_raise_the_merged_masks_without_redoing_a_chunk(
 
     lat0, lon0, _ = demo_track().position_at(3030.0)
     cell = 1.0 / 1200.0
-    lats = lat0 + 0.03 - np.arange(73) * cell
-    lons = lon0 - 0.03 + np.arange(73) * cell
-    # flat ground, and a 500 m wall from 1 km east of the line (0.0141 deg at 50.5 N), across
-    # the track (along it the small pinhole survey saw nothing: 90 deg)
-    z = np.where(lons[None, :] > lon0 + 0.0141, 500.0, 0.0) + 0.0 * lats[:, None]
-    tif = tmp_path / "wall.tif"
-    with rasterio.open(tif, "w", driver="GTiff", height=73, width=73, count=1, dtype="float32",
-                       crs="EPSG:4326",
-                       transform=from_origin(lons[0] - cell / 2, lats[0] + cell / 2, cell,
-                                             cell)) as ds:  # fmt: skip
-        ds.write(z.astype(np.float32), 1)
+
+    def wall(name: str, half_lat_deg: float, half_lon_deg: float) -> Path:
+        """Flat ground, and a 500 m wall from 1 km east of the line (0.0141 deg at 50.5 N),
+        across the track (along it the small pinhole survey saw nothing: 90 deg)."""
+        n_lat, n_lon = int(2 * half_lat_deg / cell) + 1, int(2 * half_lon_deg / cell) + 1
+        lats = lat0 + half_lat_deg - np.arange(n_lat) * cell
+        lons = lon0 - half_lon_deg + np.arange(n_lon) * cell
+        z = np.where(lons[None, :] > lon0 + 0.0141, 500.0, 0.0) + 0.0 * lats[:, None]
+        tif = tmp_path / name
+        with rasterio.open(tif, "w", driver="GTiff", height=n_lat, width=n_lon, count=1,
+                           dtype="float32", crs="EPSG:4326",
+                           transform=from_origin(lons[0] - cell / 2, lats[0] + cell / 2, cell,
+                                                 cell)) as ds:  # fmt: skip
+            ds.write(z.astype(np.float32), 1)
+        return tif
+
     out = tmp_path / "masks"
     shutil.copytree(first_run[0], out)
-    res = process_survey(survey_dir, out, PARAMS, progress=True, segmenter=CountingSegmenter(),
-                         dem=Dem.from_files([tif]))  # fmt: skip
-    assert res.chunks_done == 0  # the terrain is applied at the merge
     before = first_run[1][0].masks
     east = int(np.argmin(np.abs(before.az_deg - 90.0)))
     low = before.mask_el_deg[:, east] < 20.0  # bins the cameras read below the wall
     assert low.any()
+    # a tile of 3 x 4 km: every ray leaves it before the 25 km of the far field, so the wall
+    # raises the bins but does not bound them (the terrain beyond may stand higher)
+    res = process_survey(survey_dir, out, PARAMS, progress=True, segmenter=CountingSegmenter(),
+                         dem=Dem.from_files([wall("small.tif", 0.03, 0.03)]))  # fmt: skip
+    assert res.chunks_done == 0  # the terrain is applied at the merge
+    assert np.all(res.masks.mask_el_deg[low, east] > 25.0)
+    assert not np.any(res.masks.source == BinSource.TERRAIN)
+    assert "not flagged TERRAIN" in capsys.readouterr().err
+    # tiles reaching 25 km every way: the wall bounds the bins
+    res = process_survey(survey_dir, out, PARAMS, progress=True, segmenter=CountingSegmenter(),
+                         dem=Dem.from_files([wall("wall.tif", 0.25, 0.37)]))  # fmt: skip
+    assert res.chunks_done == 0
     assert np.all(res.masks.source[low, east] == BinSource.TERRAIN)
     # the wall about 1 km away, 500 m + 16 m of stated error over an antenna 4 m above flat
     # ground: about atan(512 / 1000) = 27 deg
