@@ -787,10 +787,13 @@ class Reconstructor:
         # Cells at least half_width_m away, in a bin a camera at the position saw, are capped
         # by that camera's sky: it proves nothing farther stands higher (the parallax
         # allowance of the far field assumes that distance). Loosely carved far cells (a hill
-        # over a tunnel, bounded only by steep rays) no longer close the sky it saw.
+        # over a tunnel, bounded only by steep rays) no longer close the sky it saw. At a
+        # fusion rank r the cap needs r views too: one over-exposed frame capped cells nine
+        # views had bounded, 8.6 deg under the truth at rank 2 (a review)
         far_grid = _bins(far_grid_el, p.n_sub)
+        cap = _far_cap(far_seen, far_views, p.fusion_rank)
         grid_bin = np.maximum(
-            _bins(near_el, p.n_sub), np.where(far_seen, np.minimum(far_grid, far_el), far_grid)
+            _bins(near_el, p.n_sub), np.where(cap, np.minimum(far_grid, far_el), far_grid)
         )
         unknown_bin = (_bins(near_unknown.astype(float), p.n_sub) > 0) | (
             (_bins(far_unknown.astype(float), p.n_sub) > 0) & ~far_seen
@@ -813,6 +816,7 @@ class Reconstructor:
             far_views,
             assumed,
             p.n_sub,
+            p.fusion_rank,
         )
         desc = _descriptors(hf, track, s, ant, p)
         return Reconstruction(
@@ -1447,6 +1451,12 @@ def _pick_support(a: NDArray, sa: NDArray, b: NDArray, sb: NDArray) -> NDArray:
         return np.where(a > b, sa, np.where(b > a, sb, np.minimum(sa, sb)))
 
 
+def _far_cap(far_seen: NDArray, far_views: NDArray, fusion_rank: int) -> NDArray:
+    """Bins whose far height-field cells the far field caps: a camera at the position saw
+    the bin, with at least ``fusion_rank`` views behind the far field's bound."""
+    return np.asarray(far_seen & (far_views >= fusion_rank), bool)
+
+
 def bin_support(
     near: tuple[NDArray, NDArray],
     far_grid: tuple[NDArray, NDArray],
@@ -1455,14 +1465,18 @@ def bin_support(
     far_views: NDArray,
     assumed: NDArray,
     n_sub: int,
+    fusion_rank: int = 1,
 ) -> NDArray:
     """Independent views behind each bin's value (``docs/reconstruction.md``, section 7).
 
     The bin's value is the highest of the near height field, the far height field (capped by
-    the far field where a camera at the position saw the bin) and the far field; its support
-    is that of the part that sets it (the weaker on a tie): for a height-field part, the views
-    that bounded the cell setting the steepest ray of the bin (``HeightField.views``, 0 for a
-    cell a prior set); for the far field, the views that saw the bin (``far_views``). ASSUMED
+    the far field where a camera at the position saw the bin, with ``fusion_rank`` views or
+    more) and the far field; its support is that of the part that sets it (the weaker on a
+    tie): for a height-field part, the views that bounded the cell setting the steepest ray
+    of the bin (``HeightField.views``, 0 for a cell a prior set); for the far field, the views
+    that saw the bin (``far_views``). Where the cap lowered the far cells the bin rests on the
+    far field's views whichever part sets it (the far cells' own views no longer back what is
+    left of them: a review found one over-exposed frame's bins reported with 12 views). ASSUMED
     bins get 0: they rest on an unknown cell or the far-field default.
 
     Parameters
@@ -1479,6 +1493,8 @@ def bin_support(
         ASSUMED bins.
     n_sub : int
         Rays per bin.
+    fusion_rank : int
+        ``ReconstructionParams.fusion_rank`` (the cap's condition).
 
     Returns
     -------
@@ -1487,14 +1503,16 @@ def bin_support(
     """
     near_b, near_s = _bins_with_support(near[0], near[1], n_sub)
     fg_b, fg_s = _bins_with_support(far_grid[0], far_grid[1], n_sub)
+    cap = _far_cap(far_seen, far_views, fusion_rank)
     with np.errstate(invalid="ignore"):
-        capped = far_seen & (far_el < fg_b)
-    far_part = np.where(far_seen, np.minimum(fg_b, far_el), fg_b)
+        capped = cap & (far_el < fg_b)
+    far_part = np.where(cap, np.minimum(fg_b, far_el), fg_b)
     far_part_s = np.where(capped, far_views, fg_s)
     grid = np.maximum(near_b, far_part)
     grid_s = _pick_support(near_b, near_s, far_part, far_part_s)
     far_s = np.where(far_seen, far_views, 0)
     sup = _pick_support(grid, grid_s, far_el, far_s)
+    sup = np.where(capped, np.minimum(sup, far_views), sup)
     sup = np.where(assumed, 0, np.clip(sup, 0, 255))
     return sup.astype(np.uint8)
 
