@@ -143,6 +143,7 @@ def _progress(total: int, quiet: bool, desc: str) -> Any:
 # The default world of `locator simulate` (line 144 km 4.0-6.3, as the locator demo's) and the
 # shortest: a run starts and ends 15 m inside the world.
 _SIM_FROM_KM, _SIM_TO_KM = 4.0, 6.3
+_HEIGHT_WARN_M = 5.0  # a receiver's median height disagreement said above this, m
 _MIN_WORLD_M = 100.0
 
 
@@ -317,8 +318,15 @@ def cmd_run(args: argparse.Namespace) -> int:
                   "beyond a fix's unknowns and no fault): a converter's shifted tags would "
                   "go unseen (docs/observations.md)", file=sys.stderr)  # fmt: skip
         own = _sample_fixes(model, obs)
-        check_track_height(path, own, f"{args.obs} (its epochs' own fixes)",
-                           args.max_height_offset)  # fmt: skip
+        dh = check_track_height(path, own, f"{args.obs} (its epochs' own fixes)",
+                                args.max_height_offset)  # fmt: skip
+        if abs(dh) > _HEIGHT_WARN_M:  # a user trial: 15-19 m accepted without a word
+            print(f"locator run: warning: {args.obs}: its epochs' own fixes lie {abs(dh):.1f} m "
+                  f"{'above' if dh > 0 else 'below'} its antenna on the track (median; "
+                  f"--antenna-height {path.antenna_height_m:g} m): the track map's heights or "
+                  "the antenna height are off; claims whose 3-D fix shows it are voided "
+                  "(OFF_TRACK); give WGS84 ellipsoidal heights (docs/track-map.md)",
+                  file=sys.stderr)  # fmt: skip
         _warn_off_map(path, own, f"{args.obs} (its epochs' own fixes)")
         start = args.start_chainage
         hx = obs.header.approx_position_ecef_m

@@ -667,6 +667,45 @@ def test_a_train_beside_the_map_gets_no_claim():
         RunConfig(MODEL, off_track_k_sigma=0.0)
 
 
+class _AboveSource(FakeSource):
+    """The antenna ``up_m`` above where the map puts it from epoch ``from_k`` on (a map whose
+    heights are off)."""
+
+    def __init__(self, path, truth_m, up_m, from_k):
+        super().__init__(path, truth_m)
+        self.up_m, self.from_k = up_m, from_k
+
+    def observe(self, k, rx_ecef_m):
+        x = self.path.ecef_at(self.truth_m[k])
+        if k >= self.from_k:
+            lat, lon, _ = ecef_to_geodetic(x)
+            x = x + self.up_m * (np.array([0.0, 0.0, 1.0]) @ enu_rotation(lat, lon))
+        rho = ranges(self.sat, x, SIGMA_M * 0.5, self.rng) + self.bias[k]
+        return EpochData(self.names, self.sat, rho, {})
+
+
+@pytest.mark.parametrize("up_m", [15.0, -15.0])
+def test_a_map_off_in_height_gets_no_claim(up_m):
+    """A user trial on a real station: a track map 15-19 m too high or low passed the run's
+    height check (20 m) and the 1-D fault detection excluded healthy satellites to absorb it:
+    26 of 59 claims at one heading missed the train. The trusted satellites' 3-D fix, beyond
+    the map's vertical doubt and 5 of its vertical sigmas, voids those claims. (A model as
+    tight as the ranges, as one calibrated on the receiver: 5 vertical sigmas of a looser one
+    reach past 15 m.)"""
+    tight = LocatorConfig(model=IntervalModel(ErrorModel(a_m=0.5, b_m=0.5), k_sigma=3.0),
+                          budget=None)  # fmt: skip
+    p = straight_path()
+    truth = truth_run(n=40)
+    ep = run_locator(p, _AboveSource(p, truth, up_m, 20), start_chainage_m=truth[0],
+                     config=RunConfig(tight, trust="none"))  # fmt: skip
+    assert ep["claim"].iloc[:20].all()
+    np.testing.assert_allclose(ep["off_track_up_m"].iloc[:20], 0.0, atol=5.0)
+    assert ep["claim"].iloc[20:].sum() <= 2
+    assert ep["flag_names"].iloc[20:].str.contains("OFF_TRACK").sum() >= 12
+    up = ep["off_track_up_m"].iloc[20:].dropna()
+    assert len(up) >= 12 and np.all(np.abs(up - up_m) < 4.0)
+
+
 def test_a_satellite_the_fix_excludes_does_not_put_the_train_off_the_track():
     """A review: one satellite biased 40 m, excluded by the 1-D fault detection, moved the 3-D
     fix off the map and voided correct claims; the 3-D fix now excludes it too. With four
