@@ -45,8 +45,10 @@ from predisat.masks.truth import TrueMasks
 from predisat.reconstruct.batch import process_survey
 from predisat.reconstruct.carving import Reconstructor
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
+from predisat.reconstruct.params import PipelineParams
 from predisat.synth.generate import SynthResult, generate_survey
-from predisat.synth.truth import ideal_frames
+from predisat.synth.render import Casters
+from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import Stretch, World, WorldSpec
 from predisat.track.map import demo_track
 
@@ -96,17 +98,42 @@ def score(masks_path: Path, truth_dir: Path) -> dict[str, float]:
 
 
 def score_ideal(rig: Rig, truth_dir: Path) -> dict[str, float]:
-    """As :func:`score` for masks reconstructed from the rig's ideal (ray-cast) sky masks."""
+    """As :func:`score` for masks reconstructed from the rig's ideal (ray-cast) sky masks.
+
+    The ideal masks are those of a segmenter without error followed by the pipeline's
+    thin-structure policy (``PipelineParams().thin_deg``), as ``process`` applies it: until
+    2026-12-07 they made every thin-material face sky whatever its width and distance, while
+    the truth (since the Fresnel rule) keeps the ones that block; that alone gave this column
+    0.37 % false trust on a side-fisheye stretch where the pipeline's policy gives 0.0001 %.
+    """
     world = World.load(truth_dir / "world.npz")
     tm = TrueMasks.load(truth_dir / "true_masks.npz")
     s = tm.chainage_m
     lo, hi = max(world.extent_m[0], s[0] - 150.0), min(world.extent_m[1], s[-1] + 150.0)
     frames = []
+    thin_deg = PipelineParams().thin_deg
     for pos, cam, mount in rig.cameras:
-        frames += ideal_frames(world, np.arange(lo, hi + 1e-9, 10.0), cam, {pos: mount})
+        frames += ideal_frames(world, np.arange(lo, hi + 1e-9, 10.0), cam, {pos: mount},
+                               thin_deg=thin_deg)  # fmt: skip
     rec = Reconstructor().run(frames, s, world.track)
     sector = sector_of(tm.az_deg[None, :], tm.heading_deg[:, None])
     return _counts(rec.mask_el_deg.astype(float), tm.mask_el_deg, sector, "ideal_")
+
+
+def truth_only(seed: int, lo_m: float, hi_m: float, out: Path) -> Path:
+    """The world and true masks of a seed's stretch, as :func:`run_one` renders them, without
+    the survey (for ``--ideal-only``); returns the truth folder."""
+    truth = out / "truth"
+    if (truth / "true_masks.npz").exists():
+        return truth
+    track = demo_track()
+    world = World.build(track, held_out_spec(lo_m, hi_m, seed), seed)
+    s = np.arange(lo_m, hi_m + 1e-9, 10.0)
+    tm = true_masks(world, s, 4.0, caster=Casters.for_world(world, "open3d").lband)
+    truth.mkdir(parents=True, exist_ok=True)
+    world.save(truth / "world.npz")
+    tm.save(truth / "true_masks.npz")
+    return truth
 
 
 def _reusable(out: Path) -> SynthResult | None:
@@ -187,6 +214,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale", type=float, default=0.5, help="camera resolution factor")
     ap.add_argument("--work", type=Path, default=Path("/tmp/eval_rigs"))
     ap.add_argument("--out", type=Path, default=Path("eval_rigs.json"))
+    ap.add_argument("--ideal-only", action="store_true",
+                    help="only the ideal-mask columns: the world and its true masks, no "
+                    "rendered survey and no pipeline (what each rig's geometry allows)")
     ap.add_argument("--reuse", action="store_true",
                     help="keep the rendered surveys and segmentation caches of an earlier run "
                     "in --work (same seeds, length and scale); reconstruct and score again "
@@ -200,6 +230,16 @@ def main(argv: list[str] | None = None) -> int:
         lo = 500.0 + float(np.random.default_rng([seed, 7]).uniform(0.0, span))
         lo = round(lo, -1)
         for name in args.rigs:
+            if args.ideal_only:
+                truth = truth_only(seed, lo, lo + args.length_m, args.work / f"truth_s{seed}")
+                got = score_ideal(Rig.preset(name).scaled(args.scale), truth)
+                print(f"{name:>17} seed {seed} km {lo / 1000:.2f}: ideal masks: across "
+                      f"{100 * got['ideal_sky_lost_cross']:.2f} % along "
+                      f"{100 * got['ideal_sky_lost_along']:.2f} %, false trust "
+                      f"{100 * got['ideal_false_trust_all']:.4f} %", flush=True)  # fmt: skip
+                rows.append({"rig": name, "seed": seed, "from_m": lo, **got})
+                args.out.write_text(json.dumps({"runs": rows}, indent=1))
+                continue
             row = run_one(Rig.preset(name).scaled(args.scale), seed, lo, lo + args.length_m,
                           args.work, args.reuse)  # fmt: skip
             rows.append(row)
@@ -212,6 +252,20 @@ def main(argv: list[str] | None = None) -> int:
                   f"{100 * row['ideal_false_trust_all']:.4f} %", flush=True)  # fmt: skip
             # every run kept as it ends: a long evaluation stopped early keeps its runs
             args.out.write_text(json.dumps({"runs": rows}, indent=1))
+    if args.ideal_only:
+        print("ideal sky masks (no segmentation error, the pipeline's thin-structure policy):")
+        for name in args.rigs:
+            sub = [r for r in rows if r["rig"] == name]
+            tot = {k[len("ideal_n_"):]: sum(r[k] for r in sub)
+                   for k in sub[0] if k.startswith("ideal_n_")}  # fmt: skip
+            lost = {x: 100 * (1 - tot[f"kept_{x}"] / max(tot[f"visible_{x}"], 1))
+                    for x in ("cross", "along")}  # fmt: skip
+            false = 100 * tot["false_all"] / max(tot["trusted_all"], 1)
+            print(f"{name:>17} pooled: across {lost['cross']:.2f} % along {lost['along']:.2f} %,"
+                  f" false trust {false:.4f} %")  # fmt: skip
+        args.out.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()},
+                                        "runs": rows}, indent=1))  # fmt: skip
+        return 0
     summary = {name: pooled([r for r in rows if r["rig"] == name]) for name in args.rigs}
     print(f"\n{'rig':>17} {'sky lost across %':>18} {'along %':>8} {'all %':>7} "
           f"{'false trust %':>14} {'frames/CPU-s':>13} {'positions/CPU-s':>16}")  # fmt: skip
