@@ -406,6 +406,42 @@ def _say_assumed_claims(epochs: Any) -> None:
               "column n_used_assumed)")  # fmt: skip
 
 
+def _antenna_reference_point(marker_ecef_m: Any, delta_hen_m: Any, path: Any) -> Any:
+    """The antenna's reference point: the marker (the header's or ``--station`` position, as
+    RINEX gives it) plus the header's ANTENNA: DELTA H/E/N. A user trial: a 1.5 m DELTA H was
+    ignored and the model calibrated at the marker, without a word."""
+    import numpy as np
+
+    d = np.asarray(delta_hen_m, float)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d):
+        return marker_ecef_m
+    from predisat.geodesy import ecef_to_geodetic, enu_rotation
+
+    lat, lon, _ = ecef_to_geodetic(np.asarray(marker_ecef_m, float))
+    rot = enu_rotation(lat, lon)  # ECEF -> ENU rows
+    up, east, north = d
+    print(f"locator calibrate: {path}: the antenna stands {up:g} m up, {east:g} m east and "
+          f"{north:g} m north of the marker (ANTENNA: DELTA H/E/N): residuals taken there",
+          file=sys.stderr)  # fmt: skip
+    return np.asarray(marker_ecef_m, float) + np.array([east, north, up]) @ rot
+
+
+def _refuse_phone_as_geodetic(header: Any, declared: str, path: Any) -> None:
+    """A file a phone wrote (its receiver or program name) is not a geodetic receiver's: a
+    phone declared geodetic got a geodetic model's claims (a user trial, `--device-gnss`; the
+    same through RINEX, another)."""
+    from locator.errorfit import guess_receiver_class
+
+    if declared == "geodetic" and guess_receiver_class(
+        header.receiver_type, header.program
+    ) == "phone":
+        raise CliError(
+            f"{path}: written by a phone ({header.receiver_type or '?'} / {header.program or '?'}"
+            "): --receiver-class geodetic would take a geodetic receiver's error model for it; "
+            "leave --receiver-class out (phone) or give phone, with a model calibrated on phones"
+        )
+
+
 def _profile(source: Any, args: argparse.Namespace) -> Any:
     """The receiver profile of a run's source (a simulation: the simulated receiver)."""
     from locator.errorfit import receiver_profile
@@ -430,6 +466,9 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
             print(f"locator run: warning: {args.device_gnss} taken as a {declared} receiver "
                   "(--receiver-class), not a phone", file=sys.stderr)  # fmt: skip
         return device_profile(source, receiver_class=declared)
+    obs = getattr(source, "obs", None)
+    if obs is not None:
+        _refuse_phone_as_geodetic(obs.header, args.receiver_class or "", args.obs)
     return receiver_profile(source, args.receiver_class)
 
 
@@ -886,6 +925,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         seen_epochs: list[tuple[Any, Any]] = []
         for path in args.obs:
             obs = Observations.from_rinex(path)
+            _refuse_phone_as_geodetic(obs.header, cls, path)
             head = obs.header.approx_position_ecef_m
             if args.station:
                 x = _station_ecef_m(args.station, head, path)
@@ -898,6 +938,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                     else "calibrate it alone with --station X Y Z, or leave it out"
                 )
                 raise CliError(f"{path}: no station position in the header; {fix}")
+            x = _antenna_reference_point(x, obs.header.antenna_delta_hen_m, path)
             _report_problems(path, obs.problems)
             _nav_covers(ranges.ephemeris, obs, args.nav)
             day = ranges.with_iono_near(float(np.median(obs.gps_s)))  # the observations' day

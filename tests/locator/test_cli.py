@@ -256,6 +256,42 @@ def test_calibrate_refuses_a_station_in_km_or_far_from_the_truth(test_data, tmp_
     assert "warning" not in capsys.readouterr().err and out.exists()
 
 
+def test_calibrate_takes_the_antenna_delta_and_refuses_a_phone_declared_geodetic(
+    test_data, tmp_path, capsys
+):
+    """User trials: a header's 1.5 m ANTENNA: DELTA H/E/N changed nothing (the model fitted at
+    the marker); a phone's RINEX file declared geodetic was taken for one."""
+    from locator.observations import Observations
+
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    head = Observations.from_rinex(obs).header.approx_position_ecef_m
+    lines = obs.read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if "ANTENNA: DELTA H/E/N" in ln)
+    lines[k] = f"{1.5:14.4f}{0.0:14.4f}{0.0:14.4f}".ljust(60) + "ANTENNA: DELTA H/E/N\n"
+    raised = tmp_path / "delta.05o"
+    raised.write_text("".join(lines))
+    base = ["calibrate", "--nav", nav, "--bound", "estimate"]
+    assert main([*base, "--obs", str(raised), "--out", str(tmp_path / "a.json")]) == 0
+    assert "1.5 m up" in capsys.readouterr().err
+    up = head / np.linalg.norm(head)  # within 0.2 deg of the ellipsoid's normal here
+    from predisat.geodesy import ecef_to_geodetic, enu_rotation
+
+    lat, lon, _ = ecef_to_geodetic(head)
+    arp = head + 1.5 * enu_rotation(lat, lon)[2]
+    assert np.dot(arp - head, up) > 1.49
+    assert main([*base, "--obs", str(obs), "--station", *(f"{v:.4f}" for v in arp),
+                 "--out", str(tmp_path / "b.json")]) == 0  # fmt: skip
+    a = json.loads((tmp_path / "a.json").read_text())["fitted"]
+    b = json.loads((tmp_path / "b.json").read_text())["fitted"]
+    np.testing.assert_allclose(a["station_ecef_m"], b["station_ecef_m"], atol=1e-3)
+    assert a["residuals"] == b["residuals"]
+    phone = str(test_data / "gnss_obs" / "android_rinex_obs_pixel6_6ep.23o")
+    assert main([*base, "--obs", phone, "--receiver-class", "geodetic",
+                 "--out", str(tmp_path / "p.json")]) == 2  # fmt: skip
+    assert "written by a phone" in capsys.readouterr().err
+
+
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
     # a missing trust rule, input file or source: refused by the parser, before any work
     for argv, expected in [
