@@ -192,9 +192,10 @@ class Dem:
 
     @cached_property
     def _max3_m(self) -> NDArray[np.float64]:
-        # NaN where any post of the 3 x 3 is void: maximum_filter would otherwise pass over it
+        # NaN where any post of the 3 x 3 is void or beyond the grid's edge (unknown terrain,
+        # not low): maximum_filter would otherwise pass over it
         z = np.asarray(self.height_m, np.float64)
-        void = maximum_filter(~np.isfinite(z), size=3, mode="constant", cval=False)
+        void = maximum_filter(~np.isfinite(z), size=3, mode="constant", cval=True)
         top = maximum_filter(np.where(np.isfinite(z), z, -np.inf), size=3, mode="nearest")
         out = np.where(void, np.nan, top)
         out.setflags(write=False)
@@ -204,8 +205,8 @@ class Dem:
         """Highest post of the 3 x 3 around the nearest post, m: a bound of the terrain within
         a cell of the point, where bilinear heights flatten a peak between posts.
 
-        NaN outside the grid or where one of those posts is void (the terrain is unknown
-        there, not low).
+        NaN outside the grid or where one of those posts is void or beyond the grid's edge
+        (the terrain is unknown there, not low).
 
         Parameters
         ----------
@@ -216,14 +217,18 @@ class Dem:
         -------
         ndarray of float64, the broadcast shape
         """
-        lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
-        r = np.rint((self.lat0_deg - lat) / self.dlat_deg)
-        c = np.rint((lon - self.lon0_deg) / self.dlon_deg)
-        n_lat, n_lon = self.shape
-        inside = (r >= 0) & (r <= n_lat - 1) & (c >= 0) & (c <= n_lon - 1)
-        ri = np.where(inside, r, 0).astype(np.intp)
-        ci = np.where(inside, c, 0).astype(np.intp)
+        r, c, inside = self._grid_index(lat_deg, lon_deg)
+        ri = np.where(inside, np.rint(r), 0).astype(np.intp)
+        ci = np.where(inside, np.rint(c), 0).astype(np.intp)
         return np.where(inside, self._max3_m[ri, ci], np.nan)
+
+    def _grid_index(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[NDArray, ...]:
+        """Fractional row and column of points, and whether they lie within the posts."""
+        lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
+        r = (self.lat0_deg - lat) / self.dlat_deg
+        c = (lon - self.lon0_deg) / self.dlon_deg
+        n_lat, n_lon = self.shape
+        return r, c, (r >= 0) & (r <= n_lat - 1) & (c >= 0) & (c <= n_lon - 1)
 
     def height_at(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
         """Bilinear height at points, m; NaN outside the grid or next to a void.
@@ -237,11 +242,8 @@ class Dem:
         -------
         ndarray of float64, the broadcast shape
         """
-        lat, lon = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float))
-        r = (self.lat0_deg - lat) / self.dlat_deg
-        c = (lon - self.lon0_deg) / self.dlon_deg
+        r, c, inside = self._grid_index(lat_deg, lon_deg)
         n_lat, n_lon = self.shape
-        inside = (r >= 0) & (r <= n_lat - 1) & (c >= 0) & (c <= n_lon - 1)
         r = np.where(inside, r, 0.0)
         c = np.where(inside, c, 0.0)
         r0 = np.minimum(np.floor(r).astype(np.intp), n_lat - 2)

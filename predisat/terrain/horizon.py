@@ -193,27 +193,9 @@ def terrain_horizon_deg(
     max_range_m: float = 25_000.0,
     refraction_k: float = REFRACTION_K,
 ) -> NDArray[np.float64]:
-    """Terrain horizon per position and azimuth.
-
-    Parameters
-    ----------
-    dem : Dem
-    lat_deg, lon_deg, antenna_h_m : array_like, shape (n_pos,)
-        Antenna positions; ``antenna_h_m`` in the DEM's height datum (see
-        :func:`antenna_height_m`).
-    az_deg : array_like, shape (n_az,)
-        Azimuths, degrees clockwise from true north.
-    min_range_m, max_range_m : float
-        The ray's extent: the far field begins where the surveyed corridor ends.
-    refraction_k : float
-        Refraction coefficient (0: no refraction).
-
-    Returns
-    -------
-    ndarray, shape (n_pos, n_az)
-        Highest apparent elevation of the terrain (deg; may be negative), NaN where no sample
-        of the ray lies on the DEM. Samples off the DEM or near voids are skipped: the result
-        is then a lower bound of the terrain's horizon (:func:`terrain_horizon` says where).
+    """Terrain horizon per position and azimuth, deg, shape (n_pos, n_az):
+    :func:`terrain_horizon`'s ``el_deg`` (a lower bound of the horizon where a ray left the
+    tiles or met a void; that function says where). Parameters as there.
     """
     return terrain_horizon(dem, lat_deg, lon_deg, antenna_h_m, az_deg, min_range_m=min_range_m,
                            max_range_m=max_range_m, refraction_k=refraction_k).el_deg
