@@ -103,7 +103,11 @@ def bin_terrain(
     idx = (np.arange(n_az)[:, None] * n_sub + np.arange(n_sub + 1)[None, :]) % (n_az * n_sub)
     # fmax ignores NaN, NaN where the DEM covers none of the bin: no "All-NaN slice" warning
     el = np.asarray(np.fmax.reduce(ring.el_deg[:, idx], axis=2), float)
-    return TerrainHorizon(el, np.all(ring.complete[:, idx], axis=2))
+    # ground found only past a void at the track (the widened search) may stand far above
+    # the track (a gorge floor in radar shadow): a horizon, but not a bound
+    own = np.isfinite(antenna_height_m(dem, masks.lat_deg, masks.lon_deg, 0.0,
+                                       max_radius_cells=1))  # fmt: skip
+    return TerrainHorizon(el, np.all(ring.complete[:, idx], axis=2) & own[:, None])
 
 
 _COMPASS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")

@@ -13,8 +13,9 @@ with the Earth's curvature (``R`` = 6 371 km) and standard atmospheric refractio
 far terrain looks higher than the straight line says). Every terrain height is raised by the
 model's stated vertical error and the antenna stands on the lowest ground of its cell's
 neighbourhood (:func:`antenna_height_m`): both push the horizon up, the safe side for a mask.
-The ray point is placed on the local tangent plane (north and east metres over the meridian
-and prime-vertical radii): under 0.1 % of the distance at 20 km, below a DEM cell. A ray that
+The ray point is placed from its north and east metres over the meridian and prime-vertical
+radii, with the second-order terms of the latitude's change (on the tangent plane alone a ray
+turns by ``d tan(lat) / 2R``: 0.3 deg at 24 km and 70 N). A ray that
 leaves the tiles or meets a void before its full range gives only a lower bound of the
 horizon, and :func:`terrain_horizon` says which rays those are.
 """
@@ -171,8 +172,13 @@ def terrain_horizon(
         phi = np.radians(lat[i])
         w = np.sqrt(1.0 - _E2 * np.sin(phi) ** 2)
         m_radius, n_radius = _A * (1.0 - _E2) / w**3, _A / w
-        plat = lat[i] + np.degrees(north / m_radius)
-        plon = lon[i] + np.degrees(east / (n_radius * np.cos(phi)))
+        # second-order terms: on the tangent plane alone a ray turns by d tan(phi) / 2R
+        # (0.3 deg at 24 km and 70 N: peaks fell out of their bins, a review)
+        tphi = np.tan(phi)
+        plat = lat[i] + np.degrees(north / m_radius
+                                   - east**2 * tphi / (2.0 * m_radius * n_radius))  # fmt: skip
+        plon = lon[i] + np.degrees(east / (n_radius * np.cos(phi))
+                                   * (1.0 + north * tphi / n_radius))  # fmt: skip
         h = dem.max_height_near(plat, plon) + dem.vertical_error_m
         el = np.degrees(np.arctan2(h - h0[i] - drop, d))
         ok = np.isfinite(el)

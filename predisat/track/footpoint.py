@@ -105,7 +105,7 @@ def project_point(
             r, tan, d2, ds = _frame_at(curve, s, derivative2=True)
             up = _unit(*(interp_one(s, node_s_m, row) for row in node_up_rows))
             q = _dot(d2, tan)
-            ds2 = ds**2
+            ds2 = ds * ds  # numpy squares; Python's pow() differs in the last bit
             dtan = ((d2[0] - q * tan[0]) / ds2, (d2[1] - q * tan[1]) / ds2,
                     (d2[2] - q * tan[2]) / ds2)  # fmt: skip
             d = (px - r[0], py - r[1], pz - r[2])
