@@ -161,9 +161,10 @@ def raise_to_terrain(
     Parameters
     ----------
     masks : MaskSet
-    horizon_deg : ndarray, shape (n_pos, n_az), or TerrainHorizon
-        From :func:`bin_terrain` (or :func:`bin_horizon_deg`: every ray then taken as
-        complete); NaN (no DEM) leaves the bin as it is.
+    horizon_deg : TerrainHorizon, or ndarray of shape (n_pos, n_az)
+        From :func:`bin_terrain`; NaN (no DEM) leaves the bin as it is. A bare array (from
+        :func:`bin_horizon_deg`) says nothing of the rays' coverage: its bins are raised but
+        none is flagged ``TERRAIN``.
     dem_source : str
         Recorded in the provenance (``terrain``).
 
@@ -176,7 +177,7 @@ def raise_to_terrain(
         hz, complete = horizon_deg.el_deg, np.asarray(horizon_deg.complete, bool)
     else:
         hz = np.asarray(horizon_deg, float)
-        complete = np.isfinite(hz)
+        complete = np.zeros(hz.shape, bool)
     if hz.shape != masks.mask_el_deg.shape:
         raise ValueError(f"horizon_deg has shape {hz.shape}, expected {masks.mask_el_deg.shape}")
     with np.errstate(invalid="ignore"):

@@ -14,7 +14,7 @@ from predisat.masks.fileformat import read_masks, write_masks
 from predisat.masks.margins import SECTORS, MarginTable
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.terrain import bin_horizon_deg, raise_to_terrain
-from predisat.terrain import Dem, antenna_height_m, terrain_horizon_deg
+from predisat.terrain import Dem, TerrainHorizon, antenna_height_m, terrain_horizon_deg
 from tests.predisat.terrain._dem import write_synthetic_dem
 
 
@@ -51,7 +51,10 @@ def test_raise_to_terrain_only_raises_and_flags(dem: Dem) -> None:
     hz = np.full(m.mask_el_deg.shape, np.nan)
     hz[:, 0] = 12.0  # above the mask: raised
     hz[:, 1] = 3.0  # below: kept
-    out = raise_to_terrain(m, hz, dem_source="x.tif")
+    # a bare array says nothing of the rays' coverage: raised, not flagged
+    bare = raise_to_terrain(m, hz, dem_source="x.tif")
+    assert np.all(bare.mask_el_deg[:, 0] == 12.0) and np.array_equal(bare.source, m.source)
+    out = raise_to_terrain(m, TerrainHorizon(hz, np.isfinite(hz)), dem_source="x.tif")
     assert np.all(out.mask_el_deg[:, 0] == 12.0)
     assert np.all(out.source[:, 0] == BinSource.TERRAIN)
     assert np.all(out.mask_el_deg[:, 1:] == 5.0) and np.all(out.source[:, 1:] == m.source[:, 1:])
@@ -68,7 +71,7 @@ def test_terrain_bins_make_a_version_2_file_and_take_the_assumed_margin(tmp_path
     assert read_masks(plain).equals(m)
     hz = np.full(m.mask_el_deg.shape, np.nan)
     hz[0, :4] = 20.0
-    raised = raise_to_terrain(m, hz)
+    raised = raise_to_terrain(m, TerrainHorizon(hz, np.isfinite(hz)))
     back = read_masks(write_masks(raised, tmp_path / "terrain.parquet"))
     assert back.equals(raised) and int((back.source == BinSource.TERRAIN).sum()) == 4
     meta = pq.read_schema(tmp_path / "terrain.parquet").metadata[b"predisat"]
