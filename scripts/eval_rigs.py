@@ -189,17 +189,21 @@ def run_one(rig: Rig, seed: int, lo_m: float, hi_m: float, work: Path,
     return row
 
 
-def pooled(rows: list[dict[str, Any]]) -> dict[str, float]:
-    """Shares pooled over seeds (sums of counts), speeds over summed CPU time."""
+def pooled(rows: list[dict[str, Any]], prefixes: tuple[str, ...] = ("", "ideal_")
+           ) -> dict[str, float]:  # fmt: skip
+    """Shares pooled over seeds (sums of counts), speeds over summed CPU time (where the rows
+    have it: ``--ideal-only`` runs no pipeline)."""
     out: dict[str, float] = {}
     for name in ("cross", "along", "all"):
-        for pre in ("", "ideal_"):
+        for pre in prefixes:
             v = sum(r[f"{pre}n_visible_{name}"] for r in rows)
             g = sum(r[f"{pre}n_kept_{name}"] for r in rows)
             t = sum(r[f"{pre}n_trusted_{name}"] for r in rows)
             f = sum(r[f"{pre}n_false_{name}"] for r in rows)
             out[f"{pre}sky_lost_{name}"] = 1.0 - g / max(v, 1.0)
             out[f"{pre}false_trust_{name}"] = f / max(t, 1.0)
+    if not all("process_cpu_s" in r for r in rows):
+        return out
     cpu = sum(r["process_cpu_s"] for r in rows)
     out["frames_per_cpu_s"] = sum(r["n_frames"] for r in rows) / cpu
     out["positions_per_cpu_s"] = sum(r["n_positions"] for r in rows) / cpu
@@ -255,14 +259,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.ideal_only:
         print("ideal sky masks (no segmentation error, the pipeline's thin-structure policy):")
         for name in args.rigs:
-            sub = [r for r in rows if r["rig"] == name]
-            tot = {k[len("ideal_n_"):]: sum(r[k] for r in sub)
-                   for k in sub[0] if k.startswith("ideal_n_")}  # fmt: skip
-            lost = {x: 100 * (1 - tot[f"kept_{x}"] / max(tot[f"visible_{x}"], 1))
-                    for x in ("cross", "along")}  # fmt: skip
-            false = 100 * tot["false_all"] / max(tot["trusted_all"], 1)
-            print(f"{name:>17} pooled: across {lost['cross']:.2f} % along {lost['along']:.2f} %,"
-                  f" false trust {false:.4f} %")  # fmt: skip
+            p = pooled([r for r in rows if r["rig"] == name], ("ideal_",))
+            print(f"{name:>17} pooled: across {100 * p['ideal_sky_lost_cross']:.2f} % along "
+                  f"{100 * p['ideal_sky_lost_along']:.2f} %, false trust "
+                  f"{100 * p['ideal_false_trust_all']:.4f} %")  # fmt: skip
         args.out.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()},
                                         "runs": rows}, indent=1))  # fmt: skip
         return 0

@@ -97,16 +97,19 @@ def bin_terrain(
     # one ring of samples from the first bin's left edge; bin i spans samples i n_sub ..
     # (i + 1) n_sub, both edges included
     az = np.mod(-step / 2.0 + np.arange(n_az * n_sub) * (step / n_sub), 360.0)
-    h0 = antenna_height_m(dem, masks.lat_deg, masks.lon_deg, antenna_above_ground_m)
+    # ground found only past a void at the track (the widened search) may stand far above
+    # the track (a gorge floor in radar shadow): a horizon, but not a bound
+    h0 = antenna_height_m(dem, masks.lat_deg, masks.lon_deg, antenna_above_ground_m,
+                          max_radius_cells=1)  # fmt: skip
+    own = np.isfinite(h0)
+    if not own.all():
+        h0[~own] = antenna_height_m(dem, masks.lat_deg[~own], masks.lon_deg[~own],
+                                    antenna_above_ground_m)  # fmt: skip
     ring = terrain_horizon(dem, masks.lat_deg, masks.lon_deg, h0, az,
                            min_range_m=min_range_m, max_range_m=max_range_m)  # fmt: skip
     idx = (np.arange(n_az)[:, None] * n_sub + np.arange(n_sub + 1)[None, :]) % (n_az * n_sub)
     # fmax ignores NaN, NaN where the DEM covers none of the bin: no "All-NaN slice" warning
     el = np.asarray(np.fmax.reduce(ring.el_deg[:, idx], axis=2), float)
-    # ground found only past a void at the track (the widened search) may stand far above
-    # the track (a gorge floor in radar shadow): a horizon, but not a bound
-    own = np.isfinite(antenna_height_m(dem, masks.lat_deg, masks.lon_deg, 0.0,
-                                       max_radius_cells=1))  # fmt: skip
     return TerrainHorizon(el, np.all(ring.complete[:, idx], axis=2) & own[:, None])
 
 
@@ -130,14 +133,13 @@ def coverage_notes(masks: MaskSet, terrain: TerrainHorizon, dem_source: str) -> 
         None when every ray of every position was covered; else one sentence naming the
         positions (count and chainage span) and the directions (compass sectors).
     """
-    cut = np.isfinite(terrain.el_deg) & ~np.asarray(terrain.complete, bool)
-    none = ~np.isfinite(terrain.el_deg)
-    short = (cut | none).any(axis=1)
-    if not short.any() or none.all():  # nothing covered at all: the caller's own warning
+    bad = ~np.asarray(terrain.complete, bool)  # cut short, or not covered at all
+    short = bad.any(axis=1)
+    if not short.any() or not np.isfinite(terrain.el_deg).any():  # the caller's own warning
         return []
     s = masks.chainage_m[short]
     sector = np.floor(np.mod(masks.az_deg + 22.5, 360.0) / 45.0).astype(int) % 8
-    dirs = [_COMPASS[k] for k in range(8) if (cut | none)[:, sector == k].any()]
+    dirs = [_COMPASS[k] for k in range(8) if bad[:, sector == k].any()]
     return [f"the elevation tiles ({dem_source}) end or have voids within "
             f"{int(short.sum())} of {masks.n_pos} positions' terrain rays (chainage "
             f"{s.min():.0f}-{s.max():.0f} m, toward {', '.join(dirs)}): those bins were raised to "

@@ -184,7 +184,7 @@ def terrain_horizon(
         ok = np.isfinite(el)
         best = np.max(np.where(ok, el, -np.inf), axis=1)
         out[i] = np.where(ok.any(axis=1), best, np.nan)
-        complete[i] = ok.all(axis=1) & np.isfinite(h0[i])
+        complete[i] = ok.all(axis=1)  # a NaN antenna height leaves every sample NaN
     return TerrainHorizon(out, complete)
 
 
