@@ -1133,7 +1133,8 @@ def _same_picture(
 def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     """Frames among ``need`` that show the picture of the frame before on the same side (a
     camera stuck on one picture: the same file, or the same picture re-encoded), with the
-    problem and its fix."""
+    problem and its fix. A frame within ``params.stop_gap_m`` of chainage of the one before
+    is not compared: a train at a stop shows one picture (its frames are merged, section 24)."""
     fr, root = plan.survey.frames, plan.survey.root
     prev_of: dict[int, int] = {}
     last: dict[str, int] = {}
@@ -1147,7 +1148,7 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     opts = plan.survey.storage_options
     for i in need:
         j = prev_of.get(int(i))
-        if j is None:
+        if j is None or abs(fr.chainage_m[i] - fr.chainage_m[j]) <= plan.params.stop_gap_m:
             continue
         image_i, image_j = join(root, str(fr.image[i])), join(root, str(fr.image[j]))
         same = _same_picture(image_i, image_j, thumbs, opts)

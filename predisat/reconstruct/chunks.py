@@ -33,6 +33,7 @@ from predisat.reconstruct.carving import FrameView, Reconstructor, side_cameras
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.placement import chainage_placement_doubt
+from predisat.reconstruct.stops import merge_stop_frames
 from predisat.storage import (
     Location,
     StorageOptions,
@@ -193,6 +194,9 @@ def run_chunk(
                     along_doubt_m=along_m, across_doubt_m=across_m, height_doubt_m=raised_m,
                 )
             )  # fmt: skip
+    n_frames = len(views)
+    # the frames of a stop are one view: sky only where all of them saw it (section 24)
+    views = merge_stop_frames(views, job.params.stop_gap_m)
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead
@@ -214,7 +218,7 @@ def run_chunk(
         **prov,
         "frames_key": job.frames_key,
         "n_positions": int(masks.n_pos),
-        "n_frames": len(views),
+        "n_frames": n_frames,
         "bad_frames": [asdict(b) for b in bad],
         "finished_utc": utc_stamp(job.pinned_utc),
     }

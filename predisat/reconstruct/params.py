@@ -102,6 +102,12 @@ class PipelineParams:
         masks' ``provenance["antenna_height_m"]``); None (the default): the survey's
         ``antenna_height_m``. The cameras stay where the survey's rig puts them. A train
         antenna lower than the masks' sees near obstacles higher (:mod:`predisat.masks.antenna`).
+    stop_gap_m : float
+        Frames of one camera whose chainages lie within this of the next (a stop or a crawl,
+        captured on time rather than distance) are merged into one view before carving: sky
+        only where every one of them saw sky (:mod:`predisat.reconstruct.stops`,
+        ``docs/reconstruction.md``, section 24). Metres, >= 0; 0 merges frames at one
+        chainage only. The 10 m spacing of a distance-triggered survey merges nothing.
     """
 
     chunk_m: float = 1000.0
@@ -117,6 +123,7 @@ class PipelineParams:
     chainage_jitter_m: float | None = None
     antenna_height_m: float | None = None
     mount_doubt_deg: float = 0.0
+    stop_gap_m: float = 0.5
 
     def __post_init__(self) -> None:
         h = self.antenna_height_m
@@ -136,6 +143,9 @@ class PipelineParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and 0.0 <= v < 10.0):
                 raise ValueError(f"{name} must be an angle in [0, 10) degrees, got {v}")
+        if not (math.isfinite(self.stop_gap_m) and 0.0 <= self.stop_gap_m <= 5.0):
+            raise ValueError(f"stop_gap_m must be a length in [0, 5] metres (frames of one "
+                             f"camera closer than this are one view), got {self.stop_gap_m}")
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
         if not (math.isfinite(self.thin_deg) and 0.0 <= self.thin_deg < 10.0):
@@ -170,6 +180,7 @@ class PipelineParams:
                          "cant_table": _table_record(self.cant_table)},
             "chainage_doubt_m": self.chainage_doubt_m,
             "chainage_jitter_m": self.chainage_jitter_m,
+            "stop_gap_m": self.stop_gap_m,
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid

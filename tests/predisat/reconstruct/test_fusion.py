@@ -439,3 +439,57 @@ def test_the_cameras_ceiling_reads_thin_pixels_as_obstacles(scene) -> None:
     assert plain.shape == want.shape == got.shape == (1, 4)
     assert np.any(want[0, 2:] > plain[0, 2:])  # the band lies along the track: it matters
     np.testing.assert_array_equal(got, want)
+
+
+# ---------------------------------------------------------------------- stops (section 24)
+
+
+def _stop(frames: list[FrameView], fid: str, n: int) -> list[FrameView]:
+    """The frames with ``n - 1`` more frames of camera pose ``fid`` at its place (a stop
+    captured on time), ids ``fid/1`` ..."""
+    f = next(f for f in frames if f.frame_id == fid)
+    more = [dataclasses.replace(f, frame_id=f"{fid}/{k}") for k in range(1, n)]
+    return [*frames, *more]
+
+
+def test_a_stop_is_one_view_whose_own_flare_is_outvoted(scene) -> None:
+    """Section 24: three frames at one place beside the wall. One of them all sky (its own
+    flare) carves the wall at rank 1 when counted alone; merged, the others outvote it. All
+    three all sky (a fault they share) defeat rank 3 counted alone, but are one wrong view
+    merged, which rank 2 outvotes where other views see the wall."""
+    from predisat.reconstruct.stops import merge_stop_frames
+
+    world, frames, truth = scene
+    stop = _stop(frames, "350l", 3)
+    one_flare = _all_sky(stop, {"350l/2"})
+    low = _low_deg(Reconstructor(BASE).run(one_flare, POS, world.track).mask_el_deg, truth)
+    assert low > 5.0
+    merged = merge_stop_frames(one_flare, 0.5)
+    assert len(merged) == len(frames)
+    low = _low_deg(Reconstructor(BASE).run(merged, POS, world.track).mask_el_deg, truth)
+    assert low <= 0.1
+
+    shared = _all_sky(stop, {"350l", "350l/1", "350l/2"})
+    rank3 = dataclasses.replace(BASE, fusion_rank=3)
+    alone = Reconstructor(rank3).run(shared, POS, world.track).mask_el_deg
+    assert _low_deg(alone, truth, True) > 5.0
+    merged = merge_stop_frames(shared, 0.5)
+    for params in (ROBUST, rank3):
+        rec = Reconstructor(params).run(merged, POS, world.track)
+        assert _low_deg(rec.mask_el_deg, truth, True) <= 0.1
+
+
+def test_a_stop_backs_a_bin_once(scene) -> None:
+    """The support (section 7) counts a stop's frames once when merged: the same support and
+    masks as without the extra frames; counted alone they would back bins more than once."""
+    from predisat.reconstruct.stops import merge_stop_frames
+
+    world, frames, _ = scene
+    stop = _stop(frames, "350l", 4)
+    clean = Reconstructor(BASE).run(frames, POS, world.track)
+    merged = Reconstructor(BASE).run(merge_stop_frames(stop, 0.5), POS, world.track)
+    alone = Reconstructor(BASE).run(stop, POS, world.track)
+    assert clean.support is not None and merged.support is not None
+    assert alone.support is not None and np.any(alone.support > clean.support)
+    np.testing.assert_array_equal(merged.support, clean.support)
+    np.testing.assert_array_equal(merged.mask_el_deg, clean.mask_el_deg)

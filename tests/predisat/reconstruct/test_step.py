@@ -309,3 +309,51 @@ def test_process_says_when_no_two_cameras_can_be_compared(capsys) -> None:
     assert _step_warnings({}) == [line]
     assert "could not be checked" in step_notes({"step_check": pinhole})[0]
     assert step_notes({}) == []
+
+
+def test_process_merges_the_frames_of_a_stop(rendered, tmp_path) -> None:
+    """A stop captured on time: two more frames per camera at one position (the same pictures,
+    0.3 and 0.6 s later). ``process`` merges each camera's three into one view (section 24):
+    the same masks and support as the survey without them; with ``stop_gap_m`` in the run's
+    provenance (a resume key), and the chunk counting every frame it read."""
+    import json
+    import shutil
+
+    import pandas as pd
+
+    from predisat.reconstruct.batch import process_survey
+
+    survey = tmp_path / "survey"
+    shutil.copytree(rendered, survey)
+    for image in (survey / "images").iterdir():  # the copies' capture times would be wrong
+        image.write_bytes(_without_exif(image.read_bytes()))
+    base = process_survey(survey, tmp_path / "base", progress=False)
+    man = pd.read_csv(survey / "manifest.csv")
+    at = man.chainage_m.unique()[len(man.chainage_m.unique()) // 2]
+    extra = []
+    for k, dt in ((1, 0.3), (2, 0.6)):
+        rows = man[man.chainage_m == at].copy()
+        for i in rows.index:
+            src = survey / rows.at[i, "image"]
+            dst = src.with_name(f"{src.stem}_stop{k}{src.suffix}")
+            # the same picture (a stop) in a file of its own: a JPEG comment segment, as a
+            # camera's frame counter would write; a byte-identical file reads as frozen
+            jpeg = src.read_bytes()
+            note = f"stop frame {k}".encode()
+            com = b"\xff\xfe" + (len(note) + 2).to_bytes(2, "big") + note
+            dst.write_bytes(jpeg[:2] + com + jpeg[2:])
+            rows.at[i, "image"] = str(dst.relative_to(survey))
+            rows.at[i, "frame_id"] = f"{rows.at[i, 'frame_id']}/stop{k}"
+        rows["gps_s"] += dt
+        extra.append(rows)
+    pd.concat([man, *extra]).sort_values(["gps_s", "side"]).to_csv(
+        survey / "manifest.csv", index=False
+    )
+    got = process_survey(survey, tmp_path / "stop", progress=False)
+    assert got.bad_frames == ()
+    assert got.masks.provenance["params"]["stop_gap_m"] == 0.5
+    np.testing.assert_array_equal(got.masks.mask_el_deg, base.masks.mask_el_deg)
+    np.testing.assert_array_equal(got.masks.support, base.masks.support)
+    markers = [json.loads(p.read_text()) for p in (tmp_path / "stop").rglob("*.json")
+               if "n_frames" in p.read_text()]  # fmt: skip
+    assert markers and sum(m["n_frames"] for m in markers) >= len(man) + 2 * len(extra[0])

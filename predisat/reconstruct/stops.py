@@ -1,0 +1,135 @@
+"""The frames of a stop merged into one view (``docs/reconstruction.md``, section 24).
+
+A survey camera that captures on time, not on distance (a 360-degree camera's time lapse, a
+video), takes many frames where the train stands or crawls: a minute at a platform at one
+frame a second is sixty frames of one scene from one place. They are not independent views:
+the same segmenter on the same scene under the same light makes the same faults (a mirrored
+sky in a glass facade, a pale wall under overcast), so counted one by one they defeat any
+fusion rank and inflate the support; and one of them with a fault of its own (a flare, a
+passer-by's reflection) carves at the default rank, where the others saw the obstacle.
+
+So the frames of one camera whose chainages lie within ``gap_m`` of the next are merged, before
+anything is carved, into one frame that calls sky only what every one of them saw as sky: it
+adds no sky a single frame would not have given, and each frame's own fault is outvoted by the
+others. The merged frame stands at the first frame's place and pose; the others' are within its
+doubts (its attitude doubt grows by the largest angle between the poses, its position doubts by
+the largest distance between the camera centres), so every direction it calls sky is sky from
+wherever the camera really stood.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from predisat.reconstruct.carving import FrameView
+
+__all__ = ["merge_stop_frames", "stop_groups"]
+
+
+def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
+    """Indices of the frames of each stop, in chainage order; single frames alone.
+
+    Frames of one camera (same ``mount.side``, camera model and image size) and no
+    ``view_group`` are chained in chainage order while the next lies within ``gap_m`` of the
+    previous: the chain does not depend on which frames before or after it a window holds.
+
+    Parameters
+    ----------
+    frames : sequence of FrameView
+    gap_m : float
+        Largest chainage step, metres, between two frames of one stop (>= 0; 0 merges frames
+        at the same chainage only).
+
+    Returns
+    -------
+    list of list of int
+        Every index of ``frames`` exactly once; groups of one for frames not merged. Ordered by
+        the first index of each group.
+    """
+    if not (np.isfinite(gap_m) and gap_m >= 0):
+        raise ValueError(f"gap_m must be a finite distance >= 0 metres, got {gap_m}")
+    cams: dict[tuple[str, str, tuple[int, int], str], list[int]] = {}
+    groups: list[list[int]] = []
+    for i, f in enumerate(frames):
+        if f.view_group:  # the caller grouped it already: left as it is
+            groups.append([i])
+            continue
+        key = (f.mount.side, f.camera.name, f.camera.shape, f.camera.model)
+        cams.setdefault(key, []).append(i)
+    for idx in cams.values():
+        order = sorted(idx, key=lambda i: (frames[i].chainage_m, i))
+        run = [order[0]]
+        for i in order[1:]:
+            if frames[i].chainage_m - frames[run[-1]].chainage_m <= gap_m:
+                run.append(i)
+            else:
+                groups.append(run)
+                run = [i]
+        groups.append(run)
+    return sorted(groups, key=lambda g: min(g))
+
+
+def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameView]:
+    """The frames with each stop's frames merged into one (:func:`stop_groups`).
+
+    A merged frame's sky is the pixels every one of its frames saw as sky; its thin pixels
+    those of them any frame took for sky by the thin-structure policy only; its confidence the
+    lowest per column. It keeps the first frame's (lowest chainage) place, pose and ``reverse``;
+    its ``attitude_doubt_deg`` is the largest over the frames of their own doubt plus the angle
+    between their pose and the first's, and each position doubt (along, across, height) the
+    largest of the frames' plus the largest distance between their camera centre and the
+    first's. Its ``frame_id`` names the first and last frames and the count. Frames alone are
+    returned as they are (the same objects); the inputs are not modified.
+
+    Parameters
+    ----------
+    frames : sequence of FrameView
+    gap_m : float
+        See :func:`stop_groups`.
+
+    Returns
+    -------
+    list of FrameView
+        In the order of each group's first frame in ``frames``.
+    """
+    out: list[FrameView] = []
+    for g in stop_groups(frames, gap_m):
+        if len(g) == 1:
+            out.append(frames[g[0]])
+            continue
+        out.append(_merged([frames[i] for i in g]))
+    return out
+
+
+def _merged(group: list[FrameView]) -> FrameView:
+    first = group[0]
+    sky = np.logical_and.reduce([np.asarray(f.sky_mask, bool) for f in group])
+    thins = [np.asarray(f.thin_mask, bool) for f in group if f.thin_mask is not None]
+    thin = sky & np.logical_or.reduce(thins) if thins else None
+    confs = [np.asarray(f.confidence, float) for f in group if f.confidence is not None]
+    conf = np.minimum.reduce(confs) if confs else None
+    r0 = first.mount.camera_to_enu(first.heading_deg, first.reverse)
+    c0 = first.mount.camera_position_enu(first.antenna_enu_m, first.heading_deg, first.reverse)
+    turn_deg, moved_m = 0.0, 0.0
+    for f in group[1:]:
+        r = f.mount.camera_to_enu(f.heading_deg, f.reverse)
+        cos = np.clip((np.trace(r0.T @ r) - 1.0) / 2.0, -1.0, 1.0)
+        turn_deg = max(turn_deg, float(np.degrees(np.arccos(cos))))
+        c = f.mount.camera_position_enu(f.antenna_enu_m, f.heading_deg, f.reverse)
+        moved_m = max(moved_m, float(np.linalg.norm(c - c0)))
+    ids = f"{first.frame_id or first.chainage_m}..{group[-1].frame_id or group[-1].chainage_m}"
+    return replace(
+        first,
+        sky_mask=sky,
+        confidence=conf,
+        frame_id=f"{ids} (stop, {len(group)} frames)",
+        thin_mask=thin,
+        thin_width_deg=max(f.thin_width_deg for f in group),
+        attitude_doubt_deg=max(f.attitude_doubt_deg for f in group) + turn_deg,
+        along_doubt_m=max(f.along_doubt_m for f in group) + moved_m,
+        across_doubt_m=max(f.across_doubt_m for f in group) + moved_m,
+        height_doubt_m=max(f.height_doubt_m for f in group) + moved_m,
+    )

@@ -1,0 +1,82 @@
+"""The frames of a stop merged into one view (``predisat.reconstruct.stops``).
+
+Safety on a ray-cast scene is in ``test_fusion.py`` (a stop beside the wall); here the rules:
+which frames are one stop, and what the merged frame says.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from predisat.camera.models import CameraModel, Mount
+from predisat.reconstruct.carving import FrameView
+from predisat.reconstruct.stops import merge_stop_frames, stop_groups
+
+CAM = CameraModel.fisheye_from_fov(40, 30, 185.0)
+
+
+def _frame(s_m: float, side: str = "left", fid: str = "", **kw) -> FrameView:
+    sky = np.zeros(CAM.shape, bool)
+    sky[:10] = True
+    args = dict(
+        chainage_m=s_m, sky_mask=sky, camera=CAM, mount=Mount.default(side),
+        antenna_enu_m=np.array([0.0, s_m, 4.0]), heading_deg=0.0, frame_id=fid or f"{s_m}{side}",
+    )
+    return FrameView(**{**args, **kw})
+
+
+def test_frames_of_one_camera_within_the_gap_are_one_stop() -> None:
+    fr = [_frame(0.0), _frame(10.0), _frame(10.0), _frame(10.3), _frame(10.7), _frame(20.0),
+          _frame(10.1, "right"), _frame(10.1, "right"), _frame(10.2, view_group="lens")]
+    groups = stop_groups(fr, 0.5)
+    assert sorted(map(sorted, groups)) == [[0], [1, 2, 3, 4], [5], [6, 7], [8]]
+    # 0: the same chainage only
+    assert sorted(map(sorted, stop_groups(fr, 0.0))) == [[0], [1, 2], [3], [4], [5], [6, 7], [8]]
+    # a window that lacks the stop's neighbours or its first frames splits nothing else
+    part = [fr[i] for i in (2, 3, 4, 5)]
+    assert sorted(map(sorted, stop_groups(part, 0.5))) == [[0, 1, 2], [3]]
+    with pytest.raises(ValueError, match="gap_m"):
+        stop_groups(fr, -1.0)
+
+
+def test_a_merged_frame_is_sky_only_where_every_frame_saw_sky() -> None:
+    rng = np.random.default_rng(0)
+    skies = [rng.random(CAM.shape) < 0.7 for _ in range(3)]
+    thins = [rng.random(CAM.shape) < 0.1 for _ in range(3)]
+    confs = [rng.random(CAM.shape[1]) for _ in range(3)]
+    fr = [_frame(50.0 + 0.1 * k, fid=f"f{k}", sky_mask=skies[k], thin_mask=thins[k] & skies[k],
+                 confidence=confs[k], attitude_doubt_deg=0.1 * k, along_doubt_m=0.2)
+          for k in range(3)]
+    before = [f.sky_mask.copy() for f in fr]
+    (m,) = merge_stop_frames(fr, 0.5)
+    np.testing.assert_array_equal(m.sky_mask, skies[0] & skies[1] & skies[2])
+    thin = (thins[0] & skies[0]) | (thins[1] & skies[1]) | (thins[2] & skies[2])
+    np.testing.assert_array_equal(m.thin_mask, thin & m.sky_mask)
+    np.testing.assert_array_equal(m.confidence, np.minimum(np.minimum(confs[0], confs[1]),
+                                                           confs[2]))
+    assert m.chainage_m == 50.0 and m.frame_id == "f0..f2 (stop, 3 frames)"
+    # the antennas 0.1 and 0.2 m apart, the mounts equal: the doubts grow by 0.2 m
+    assert m.along_doubt_m == pytest.approx(0.4) and m.height_doubt_m == pytest.approx(0.2)
+    assert m.attitude_doubt_deg == pytest.approx(0.2)
+    assert all(np.array_equal(f.sky_mask, b) for f, b in zip(fr, before, strict=True))
+    # single frames come back as they are
+    lone = [_frame(0.0), _frame(10.0)]
+    assert all(a is b for a, b in zip(merge_stop_frames(lone, 0.5), lone, strict=True))
+
+
+def test_the_attitude_doubt_grows_by_the_turn_between_the_poses() -> None:
+    left = Mount.default("left")
+    a = _frame(5.0, fid="a")
+    b = _frame(5.0, fid="b", mount=left.on_vehicle(1.5, -0.8), heading_deg=0.7)
+    (m,) = merge_stop_frames([a, b], 0.5)
+    ra = left.camera_to_enu(0.0)
+    rb = b.mount.camera_to_enu(0.7)
+    turn = np.degrees(Rotation.from_matrix(ra.T @ rb).magnitude())
+    assert turn > 1.0
+    assert m.attitude_doubt_deg == pytest.approx(turn, abs=1e-6)
+    # the cameras' centres moved with the turn (the lever arm): the position doubts too
+    ca = left.camera_position_enu(a.antenna_enu_m, 0.0)
+    cb = b.mount.camera_position_enu(b.antenna_enu_m, 0.7)
+    assert m.across_doubt_m == pytest.approx(float(np.linalg.norm(cb - ca)))
