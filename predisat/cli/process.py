@@ -181,6 +181,21 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
         "the doubt): below the doubt, the masks bound the shift of the whole survey instead of "
         "each frame's, which costs less sky (docs/reconstruction.md, section 18)",
     )  # fmt: skip
+    parser.add_argument(
+        "--stop-gap-m", type=_stop_gap_m, default=PipelineParams.stop_gap_m, metavar="M",
+        help="frames of one camera within this of the next (a stop or a crawl captured on "
+        "time) are merged into one view: sky only where all of them saw it (default "
+        "%(default)s; 0: frames at one chainage only; docs/reconstruction.md, section 24)",
+    )  # fmt: skip
+
+
+def _stop_gap_m(text: str) -> float:
+    v = non_negative_float(text)
+    if v > 5.0:
+        raise argparse.ArgumentTypeError(
+            f"{text}: at most 5 m (frames farther apart see different scenes: separate views)"
+        )
+    return v
 
 
 def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
@@ -204,6 +219,7 @@ def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
         "cant_table": table,
         "chainage_doubt_m": args.chainage_doubt_m,
         "chainage_jitter_m": args.chainage_jitter_m,
+        "stop_gap_m": args.stop_gap_m,
     }
 
 

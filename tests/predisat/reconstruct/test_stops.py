@@ -80,3 +80,16 @@ def test_the_attitude_doubt_grows_by_the_turn_between_the_poses() -> None:
     ca = left.camera_position_enu(a.antenna_enu_m, 0.0)
     cb = b.mount.camera_position_enu(b.antenna_enu_m, 0.7)
     assert m.across_doubt_m == pytest.approx(float(np.linalg.norm(cb - ca)))
+
+
+def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
+    from predisat.cli.app import build_parser
+    from predisat.cli.process import attitude_params
+
+    parser = build_parser()
+    cmd = ["process", str(tmp_path), "--out", str(tmp_path / "o")]
+    args = parser.parse_args([*cmd, "--stop-gap-m", "1.5"])
+    assert attitude_params(args)["stop_gap_m"] == 1.5
+    assert attitude_params(parser.parse_args(cmd))["stop_gap_m"] == 0.5
+    with pytest.raises(SystemExit):
+        parser.parse_args([*cmd, "--stop-gap-m", "7"])
