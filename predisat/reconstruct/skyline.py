@@ -295,6 +295,13 @@ class Rectifier:
         reads, widened by the obstacle growth ``grow_px`` (``height_px`` in a column that never
         matters). A side fisheye sees past the zenith, into the other camera's half-space,
         above it.
+    grow_row_px : ndarray of int64, shape (height_px,), optional
+        A panorama's (``equirect``) horizontal obstacle growth per image row, longitude
+        wrapping: the widest gap between neighbouring samples reading that row. Near the image's
+        pole (a rolled or pitched panorama puts it in the grid) neighbouring samples read pixels
+        far apart in longitude but close in true angle; one growth for the whole image, sized
+        there (and across the longitude seam, 719 px), erased every row holding an obstacle
+        pixel. None: ``grow_px`` everywhere (frame cameras).
     """
 
     camera: CameraModel
@@ -308,6 +315,7 @@ class Rectifier:
     last_seen_row: NDArray = field(repr=False)
     grow_px: tuple[int, int] = (2, 1)
     first_read_px_row: NDArray | None = field(default=None, repr=False)
+    grow_row_px: NDArray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if self.first_read_px_row is None:
@@ -366,6 +374,23 @@ class Rectifier:
         dv = np.abs(np.diff(v, axis=0))
         ok_u = inside[:, 1:] & inside[:, :-1]
         ok_v = inside[1:] & inside[:-1]
+        grow_row = None
+        if camera.model == "equirect":
+            # longitude wraps: samples either side of the seam are neighbours; the gap in
+            # pixels is taken per image row (the samples of both rows of a pair), for the
+            # vertical neighbours too (near the image's pole they read far-apart columns)
+            h_px, w_px = camera.shape
+            du = np.minimum(du, w_px - du)
+            dv_u = np.abs(np.diff(u, axis=0))
+            dv_u = np.minimum(dv_u, w_px - dv_u)
+            row = np.clip(np.floor(v + 0.5), 0, h_px - 1).astype(np.int64)
+            gap_row = np.zeros(h_px)
+            for gap, ok, ra, rb in ((du, ok_u, row[:, 1:], row[:, :-1]),
+                                    (dv_u, ok_v, row[1:], row[:-1])):  # fmt: skip
+                for r in (ra, rb):
+                    np.maximum.at(gap_row, r[ok], gap[ok])
+            grow_row = np.minimum(np.ceil(gap_row / 2.0), w_px).astype(np.int64)
+            grow_row.setflags(write=False)
         gap_u = float(np.nanmax(np.where(ok_u, du, 0.0))) if ok_u.any() else 1.0
         gap_v = float(np.nanmax(np.where(ok_v, dv, 0.0))) if ok_v.any() else 1.0
         grow = (int(np.ceil(gap_u / 2.0)), int(np.ceil(gap_v / 2.0)))
@@ -377,7 +402,7 @@ class Rectifier:
         for a in (index, first, last):
             a.setflags(write=False)
         return cls(
-            camera, mount, beta, el, map_u, map_v, index, first, last, grow,
+            camera, mount, beta, el, map_u, map_v, index, first, last, grow, grow_row_px=grow_row,
         )  # fmt: skip
 
     @property
@@ -418,7 +443,24 @@ class Rectifier:
         ``grow_px`` (a view of ``sky`` when nothing grows)."""
         img = np.ascontiguousarray(sky, np.bool_).view(np.uint8)
         gx, gy = self.grow_px
-        return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        if self.grow_row_px is None:
+            return cv2.erode(img, np.ones((2 * gy + 1, 2 * gx + 1), np.uint8)) if gx or gy else img
+        # a panorama: vertically by gy, then each row by its own reach, longitude wrapping
+        col = cv2.erode(img, np.ones((2 * gy + 1, 1), np.uint8)) if gy else img.copy()
+        w = img.shape[1]
+        out = np.empty_like(col)
+        for rx in np.unique(self.grow_row_px):
+            rows = np.flatnonzero(self.grow_row_px == rx)
+            rx = int(rx)
+            if rx == 0:
+                out[rows] = col[rows]
+            elif 2 * rx + 1 >= w:
+                out[rows] = col[rows].min(axis=1, keepdims=True)
+            else:
+                band = np.concatenate([col[rows][:, -rx:], col[rows], col[rows][:, :rx]], axis=1)
+                k = np.ones((1, 2 * rx + 1), np.uint8)
+                out[rows] = cv2.erode(band, k, borderType=cv2.BORDER_REPLICATE)[:, rx : rx + w]
+        return out
 
     def rectify(self, sky_mask: ArrayLike) -> NDArray:
         """Grid labels (n_e, n_b) uint8: 255 sky, 0 obstacle, 128 not seen by the camera."""
