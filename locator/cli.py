@@ -442,6 +442,25 @@ def _refuse_phone_as_geodetic(header: Any, declared: str, path: Any) -> None:
         )
 
 
+def _refuse_other_as_phone(header: Any, declared: str, path: Any) -> None:
+    """A phone-class model applies to any phone log by its class alone (no receiver or antenna
+    to match): made of a receiver not recognised as a phone, its sigma is not a phone's (a
+    user trial: two geodetic stations declared phone, the model claimed on a phone's log and
+    gave a hazardous epoch, 1.0 m outside a 1e-12 interval)."""
+    from locator.errorfit import guess_receiver_class
+
+    if declared == "phone" and guess_receiver_class(
+        header.receiver_type, header.program
+    ) != "phone":
+        raise CliError(
+            f"{path}: receiver {header.receiver_type or '?'!r} (program "
+            f"{header.program or '?'!r}) is not recognised as a phone: --receiver-class phone "
+            "would apply its error model to every phone log; calibrate a phone-class model on "
+            "phone logs (--device-gnss with --truth, or RINEX a phone wrote), or leave "
+            "--receiver-class out (a model for this receiver and antenna only)"
+        )
+
+
 def _profile(source: Any, args: argparse.Namespace) -> Any:
     """The receiver profile of a run's source (a simulation: the simulated receiver)."""
     from locator.errorfit import receiver_profile
@@ -926,6 +945,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         for path in args.obs:
             obs = Observations.from_rinex(path)
             _refuse_phone_as_geodetic(obs.header, cls, path)
+            _refuse_other_as_phone(obs.header, cls, path)
             head = obs.header.approx_position_ecef_m
             if args.station:
                 x = _station_ecef_m(args.station, head, path)

@@ -24,8 +24,10 @@ the figure.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -307,6 +309,7 @@ def fit_systems(
     out: dict[str, SystemFit] = {}
     letters = sorted({s[0] for d in data for s in d.sats})
     groups = [("".join(letters), letters)] if pool_systems else [(x, [x]) for x in letters]
+    short: list[str] = []
     for key, group in groups:
         parts = [_columns(d, group) for d in data if any(s[0] in group for s in d.sats)]
         el, res = _stack(parts)
@@ -316,15 +319,25 @@ def fit_systems(
             ob = (overbound_error_model(el, res, est, n_bins=n_bins, confidence=confidence)
                   if bound == "overbound" else None)  # fmt: skip
         except ValueError:
-            continue  # too few residuals in epochs with 3 satellites of the system
+            # too few residuals in epochs with 3 satellites of the system: say how many (not
+            # of a file's systems that were not chosen, which have none: a user trial's
+            # message named C, J, R, S for a gps+galileo calibration)
+            use = ok & (ok.sum(axis=1, keepdims=True) >= 3)
+            if ok.any():
+                short.append(f"{key} {int(use.sum())} in {int(use.any(axis=1).sum())} epochs")
+            continue
         for sys_ in group:
             codes = sorted({c for d in data for c in d.profile.codes.get(sys_, ())})
             out[sys_] = SystemFit(key, est, ob, tuple(codes), int(ok.sum()),
                                   float(el[ok].min()), float(el[ok].max()))  # fmt: skip
     if not out:
+        # overbound_error_model: min_tail 10 in a tail share of at most 0.32 of each bin
+        need = n_bins * math.ceil(10 / 0.32) if bound == "overbound" else 2 * n_bins
         raise ValueError(
-            f"no system ({', '.join(letters)}) has enough residuals in epochs with 3 satellites "
-            f"of it for the fit{' and its overbound' if bound == 'overbound' else ''}; give "
+            f"no system has enough residuals in epochs with 3 satellites of it for the fit"
+            f"{' and its overbound' if bound == 'overbound' else ''} (residuals: "
+            f"{'; '.join(short) or 'none'}; about {need} needed per system) in "
+            f"{', '.join(Path(d.source).name for d in data)}; give "
             "more or longer data sets"
         )
     return out
@@ -349,15 +362,32 @@ def model_file_parts(
     freq = {d.profile.frequency for d in data}
     if len(freq) > 1:
         raise ValueError("data sets mix single- and dual-frequency processing: calibrate apart")
+    # each receiver x antenna combination with the systems, codes and residuals it gave
+    combos: dict[tuple[str, str], dict[str, tuple[set[str], int]]] = {}
+    for d in data:
+        per = combos.setdefault((d.profile.receiver_type, d.profile.antenna_type), {})
+        for sys_ in fits:
+            _, res = _columns(d, [sys_])
+            n = int(np.isfinite(res).sum())
+            if n:
+                codes, n0 = per.get(sys_, (set(), 0))
+                per[sys_] = (codes | set(d.profile.codes.get(sys_, ())), n0 + n)
+    pairs = tuple(
+        (r, a, tuple((s_, tuple(sorted(c)), n) for s_, (c, n) in sorted(per.items())))
+        for (r, a), per in sorted(combos.items())
+    )
     app = Applicability(
         tuple(sorted({d.profile.receiver_type for d in data})),
         tuple(sorted({d.profile.antenna_type for d in data})),
         receiver_class,
         freq.pop(),
-        min(f.el_min_deg for f in fits.values()),
-        max(f.el_max_deg for f in fits.values()),
+        # the elevations every system was fitted on: one range serves all systems in a run
+        # (a pooled model's GPS, fitted up to 72.7 deg, took satellites up to Galileo's 75.8)
+        max(f.el_min_deg for f in fits.values()),
+        min(f.el_max_deg for f in fits.values()),
         method,
         tuple(d.source for d in data),
+        pairs,
     )
     return (IntervalModel(env, k_sigma), {k: f.system_model() for k, f in fits.items()}, app)
 

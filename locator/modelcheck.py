@@ -89,10 +89,16 @@ def model_use(
         use = "forced" if args.force_error_model else "none"
     else:
         use = "gaussian_tail" if short and assume else ("none" if short else "calibrated")
+    app = mf.applicability
+    cls = app.receiver_class if app is not None else ""
+    by_class = bool(cls) and profile.receiver_class == cls
     record: dict[str, Any] = {
         "file": args.error_model or "built-in",
         "use": use,
         "data": profile.describe(),
+        # what made it apply: the receiver class (any receiver of it) or the names calibrated
+        "applies_by": (f"class {cls}" if by_class else "receiver and antenna"),
+        "model_receivers": [] if app is None else list(app.receivers),
         "mismatches": list(why),
         "depth_shortfall": list(short),
         "k_sigma_max": round(k_max, 4),
@@ -142,6 +148,10 @@ def model_use(
               "its claims here are no independent check of the model (validate on other days "
               "or receivers: docs/errormodel.md, leave one receiver out)", file=sys.stderr)
         record["calibrated_on_this_data"] = True
+    if use in ("calibrated", "gaussian_tail") and by_class and app is not None:
+        print(f"{command}: error model applied by receiver class {cls!r} (the data's "
+              f"{'declared' if getattr(args, 'receiver_class', None) else 'guessed'} class), "
+              f"calibrated on {', '.join(app.receivers)}", file=sys.stderr)  # fmt: skip
     if use in ("calibrated", "gaussian_tail"):
         for sys_ in profile.systems:
             m = mf.systems.get(sys_)

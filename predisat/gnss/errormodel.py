@@ -257,6 +257,14 @@ class Applicability:
         ``"estimate"``: least squares, no bound).
     sources : tuple of str
         Input files (observations, simulations).
+    pairs : tuple of (receiver, antenna, ((system, codes, n_residuals), ...))
+        Each receiver x antenna combination calibrated, with the systems, codes and residuals
+        it gave. A model pooled over several receivers applies by name only to a combination
+        it holds, and only to the codes that combination gave (a user trial: a model of
+        receiver A + antenna X and receiver B + antenna Y claimed for B + X; Galileo C1C of
+        19 epochs of one station claimed under 998 independent samples of another's C1X).
+        Empty in files written before it: such a file applies by name only when it names one
+        receiver and one antenna.
     """
 
     receivers: tuple[str, ...]
@@ -267,6 +275,7 @@ class Applicability:
     el_max_deg: float = 90.0
     method: str = "overbound"
     sources: tuple[str, ...] = ()
+    pairs: tuple[tuple[str, str, tuple[tuple[str, tuple[str, ...], int], ...]], ...] = ()
 
     def __post_init__(self) -> None:
         _check_frequency_and_class(self.frequency, self.receiver_class)
@@ -281,6 +290,37 @@ class Applicability:
         """The simulator's own noise model (no tail to check): its method and its receivers,
         so that a file naming the method for a real receiver does not skip the check."""
         return self.method == SIMULATOR_METHOD and tuple(self.receivers) == ("simulated",)
+
+    def _pair_mismatches(self, profile: ReceiverProfile, rx: str, ant: str) -> list[str]:
+        """Why a model matched by name does not hold ``profile``'s receiver x antenna
+        combination and codes (the receiver and the antenna are each among the calibrated)."""
+        if not self.pairs:
+            if len(self.receivers) > 1 or len(self.antennas) > 1:
+                return [
+                    f"the model pools receivers {sorted(self.receivers)} and antennas "
+                    f"{sorted(self.antennas)} without recording which were calibrated together "
+                    "(a file of an older locator): calibrate again with `locator calibrate`"
+                ]
+            return []
+        mine = [p for p in self.pairs if _norm(p[0]) == rx and _norm(p[1]) == ant]
+        if not mine:
+            held = "; ".join(f"{r} / {a}" for r, a, _ in self.pairs)
+            return [
+                f"receiver {profile.receiver_type!r} with antenna {profile.antenna_type!r} was "
+                f"never calibrated together (the model holds {held})"
+            ]
+        why = []
+        for sys_, codes in sorted(profile.codes.items()):
+            got = {c for _, _, per in mine for s_, cs, _ in per if s_ == sys_ for c in cs}
+            n = sum(n_ for _, _, per in mine for s_, _, n_ in per if s_ == sys_)
+            new = sorted(set(codes) - got)
+            if new and sys_ in {s_ for p in self.pairs for s_, _, _ in p[2]}:
+                why.append(
+                    f"system {sys_} code(s) {new} were calibrated on other receivers or "
+                    f"antennas only ({profile.receiver_type} / {profile.antenna_type} gave "
+                    f"{sorted(got) or 'none'}, {n} residuals)"
+                )
+        return why
 
     def mismatches(self, profile: ReceiverProfile, systems: Mapping[str, SystemModel]) -> list[str]:
         """Why the model does not apply to ``profile`` (empty: it applies).
@@ -307,6 +347,8 @@ class Applicability:
                     f"antenna {profile.antenna_type or 'unknown'!r} is not among the calibrated "
                     f"{sorted(self.antennas)}"
                 )
+            if not why:
+                why.extend(self._pair_mismatches(profile, rx, ant))
         for sys_, codes in sorted(profile.codes.items()):
             m = systems.get(sys_)
             if m is None:
@@ -489,6 +531,11 @@ def write_error_model(
             "el_max_deg": app.el_max_deg,
             "method": app.method,
             "sources": list(app.sources),
+            "pairs": [
+                {"receiver": r, "antenna": a,
+                 "systems": {s_: {"codes": list(cs), "n_residuals": int(n)} for s_, cs, n in per}}
+                for r, a, per in app.pairs
+            ],
         },
         "fitted": dict(fitted or {}),
         "software_version": __version__,
@@ -564,6 +611,12 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             float(a["el_max_deg"]),
             str(a.get("method", "")),
             tuple(str(r) for r in a.get("sources", ())),
+            tuple(
+                (str(q["receiver"]), str(q["antenna"]),
+                 tuple((str(s_), _codes(v["codes"]), int(v["n_residuals"]))
+                       for s_, v in sorted(dict(q["systems"]).items())))
+                for q in a.get("pairs", ())
+            ),
         )
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise ErrorModelFileError(

@@ -290,6 +290,13 @@ def test_calibrate_takes_the_antenna_delta_and_refuses_a_phone_declared_geodetic
     assert main([*base, "--obs", phone, "--receiver-class", "geodetic",
                  "--out", str(tmp_path / "p.json")]) == 2  # fmt: skip
     assert "written by a phone" in capsys.readouterr().err
+    # the reverse (a user trial): a geodetic station declared phone made a phone-class model,
+    # which then claimed on phone logs by their class alone and gave a hazardous epoch
+    assert main([*base, "--obs", str(obs), "--receiver-class", "phone",
+                 "--out", str(tmp_path / "q.json")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "'TRIMBLE 5700'" in err and "not recognised as a phone" in err
+    assert not (tmp_path / "q.json").exists()
 
 
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):

@@ -106,3 +106,47 @@ def test_each_constellation_is_fitted_apart():
     assert pooled["G"].estimate == pooled["E"].estimate and pooled["G"].system == "EG"
     with pytest.raises(ValueError, match="bound"):
         fit_systems(data, bound="maybe")
+
+
+def test_too_few_residuals_say_how_many_and_in_which_files():
+    rng = np.random.default_rng(5)
+    data = [_synthetic(rng, 6, {"R": ErrorModel(1.0, 1.0)}, "glonass_station")]
+    with pytest.raises(ValueError) as err:
+        fit_systems(data)
+    msg = str(err.value)
+    # 6 epochs of 8 GLONASS satellites: 48 residuals, counted here from the data itself
+    n = int(np.isfinite(data[0].residual_m).sum())
+    assert f"R {n} in 6 epochs" in msg and "glonass_station" in msg and "needed" in msg
+    # systems the data do not hold are not named
+    assert "C," not in msg and " S " not in msg
+
+
+def test_a_pooled_file_records_each_receiver_antenna_pair_and_the_common_elevations():
+    import dataclasses
+
+    rng = np.random.default_rng(6)
+    truth = {"G": ErrorModel(0.3, 0.5), "E": ErrorModel(1.5, 1.0)}
+    a = _synthetic(rng, 800, truth, "a")
+    b = _synthetic(rng, 800, truth, "b")
+    b = dataclasses.replace(b, profile=ReceiverProfile("B", "ANT2", {"G": ("C1C",),
+                                                                     "E": ("C1X",)}))
+    # GPS seen below 60 deg only: the model's range is the one both systems were fitted on
+    low = np.array([s[0] == "G" for s in a.sats]) & (a.el_deg > 60.0)
+    a = dataclasses.replace(a, residual_m=np.where(low, np.nan, a.residual_m))
+    b_low = np.array([s[0] == "G" for s in b.sats]) & (b.el_deg > 60.0)
+    b = dataclasses.replace(b, residual_m=np.where(b_low, np.nan, b.residual_m))
+    fits = fit_systems([a, b])
+    _, _, app = model_file_parts(fits, [a, b], k_sigma=2.0)
+    g_max = max(float(d.el_deg[np.isfinite(d.residual_m) & np.array([s[0] == "G" for s in
+                                                                     d.sats])].max())
+                for d in (a, b))  # fmt: skip
+    assert app.el_max_deg == pytest.approx(g_max) and app.el_max_deg <= 60.0
+
+    def count(d, sys_):
+        cols = np.array([s[0] == sys_ for s in d.sats])
+        return int(np.isfinite(d.residual_m[:, cols]).sum())
+
+    assert app.pairs == (
+        ("A", "ANT", (("E", ("C1C",), count(a, "E")), ("G", ("C1C",), count(a, "G")))),
+        ("B", "ANT2", (("E", ("C1X",), count(b, "E")), ("G", ("C1C",), count(b, "G")))),
+    )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -192,3 +193,38 @@ def test_depth_shortfall_compares_the_claims_k_with_the_checked_tail():
     assert mf.depth_shortfall(["S"], 7.0) == [] and mf.depth_shortfall(["J"], 7.0) == []
     with pytest.raises(ValueError, match="k_sigma"):
         mf.depth_shortfall(["G"], 0.0)
+
+
+def test_a_pooled_model_applies_to_the_receiver_antenna_pairs_and_codes_it_holds(tmp_path):
+    """A user trial: a model of NetR9 + ASH701073 and PolaRx5 + ASH701945 claimed for PolaRx5 +
+    ASH701073 (never calibrated together), and Galileo C1C (19 epochs of the PolaRx5) under
+    the NetR9's C1X samples."""
+    pairs = (
+        ("TRIMBLE NETR9", "ASH701073.1     SNOW", (("E", ("C1X",), 20990), ("G", ("C1C",), 32596))),
+        ("SEPT POLARX5", "ASH701945E_M    NONE", (("E", ("C1C",), 138), ("G", ("C1C",), 165))),
+    )
+    app = Applicability(("SEPT POLARX5", "TRIMBLE NETR9"),
+                        ("ASH701073.1     SNOW", "ASH701945E_M    NONE"), "", "single", 5.0, 72.7,
+                        "overbound", ("nya1.crx", "kms3.crx"), pairs)  # fmt: skip
+    env = IntervalModel(ErrorModel(0.9, 0.4), 2.0)
+    p = write_error_model(tmp_path / "m.json", env, systems={"G": GPS, "E": GAL},
+                          applicability=app)  # fmt: skip
+    mf = read_error_model_file(p)
+    assert mf.applicability.pairs == pairs  # round trip
+    assert mf.mismatches(_profile()) == []
+    assert mf.mismatches(_profile("SEPT POLARX5", "ASH701945E_M    NONE")) == []
+    why = mf.mismatches(_profile("SEPT POLARX5", "ASH701073.1     SNOW"))
+    assert len(why) == 1 and "never calibrated together" in why[0]
+    # Galileo C1C: in the model's codes (the PolaRx5's), not the NetR9's
+    why = mf.mismatches(_profile(codes={"E": ("C1C",)}))
+    assert len(why) == 1 and "other receivers or antennas only" in why[0], why
+    # a class model is for any receiver of the class: the pairs do not restrict it
+    cls = ErrorModelFile(env, {"G": GPS}, dataclasses.replace(app, receiver_class="geodetic"))
+    assert cls.mismatches(_profile("LEICA GR50", "LEIAR25.R4      LEIT",
+                                   receiver_class="geodetic")) == []  # fmt: skip
+    # an older file pooling receivers without its pairs: applies by name to none of them
+    old = ErrorModelFile(env, {"G": GPS}, dataclasses.replace(app, pairs=()))
+    why = old.mismatches(_profile())
+    assert len(why) == 1 and "without recording which were calibrated together" in why[0]
+    # ... one receiver and one antenna need no pairs
+    assert ErrorModelFile(env, {"G": GPS}, APP).mismatches(_profile()) == []
