@@ -519,14 +519,17 @@ def _ephemeris() -> Ephemeris:
 
 
 def code_fingerprint() -> str:
-    """Hash of the source of the ``locator`` and ``predisat`` packages (every ``.py`` file):
-    a job file of other code is never taken for this code's result (on the safe side: any
-    change of either package redoes every job)."""
+    """Hash of the source of the ``locator`` and ``predisat`` packages (every ``.py`` file)
+    and of the data the jobs read from them (predisat's shipped navigation file and models):
+    a job file of other code or data is never taken for this code's result (on the safe side:
+    any change redoes every job)."""
     import predisat
 
     h = hashlib.sha256()
-    for root in (Path(__file__).resolve().parent, Path(predisat.__file__).resolve().parent):
-        for p in sorted(root.rglob("*.py")):
+    pkg = Path(predisat.__file__).resolve().parent
+    data = [*sorted((pkg / "data" / "nav").glob("*")), *sorted((pkg / "data" / "models").glob("*"))]
+    for root in (Path(__file__).resolve().parent, pkg):
+        for p in [*sorted(root.rglob("*.py")), *(data if root == pkg else [])]:
             h.update(str(p.relative_to(root.parent)).encode())
             h.update(p.read_bytes())
     return h.hexdigest()
@@ -638,6 +641,14 @@ def run_campaign(
              for j in jobs}  # fmt: skip
     todo = [j for j in jobs if not _job_done(paths[j])]
     say(f"{len(jobs)} jobs, {len(todo)} to do")
+    if todo:
+        # an earlier campaign's tables and figures (other rules, risk, worlds, runs or code)
+        # must not stay beside this one's job files looking finished when it is stopped (as
+        # `predisat process` withdraws its published masks, reconstruct.batch._withdraw_published)
+        for name in ("summary.json", "summary.csv", "epochs.parquet", "campaign.png"):
+            (out / name).unlink(missing_ok=True)
+        for old in out.glob("stanford_*.png"):
+            old.unlink()
     # workers running other code would return other code's results under this code's keys
     with TaskRunner(scheduler or Scheduler.serial(), code_version=code_fingerprint) as runner:
         for k, (job, df, dt) in enumerate(

@@ -229,8 +229,19 @@ def _connect(address: str) -> Any:
             f"scheduler {address}: no Dask scheduler answers there ({box['error']}); start one "
             "(`dask scheduler`, then `dask worker ADDRESS`) or use --scheduler local"
         ) from None
-    if "error" in box:
-        raise box["error"]
+    error = box.get("error")
+    if isinstance(error, Exception):
+        # something answered with bytes that are no Dask handshake (an SSH, SMTP or FTP
+        # banner, a proxy's reply): distributed read them as a frame length and failed with
+        # a MemoryError allocating exabytes, or another error; told as a wrong address
+        raise OSError(
+            f"scheduler {address}: something answers there, but no Dask scheduler (its reply "
+            f"is no Dask handshake: {type(error).__name__}: {str(error)[:160]}); check the "
+            "address and port "
+            "(`dask scheduler` prints it) or use --scheduler local"
+        ) from None
+    if error is not None:
+        raise error
     return box["client"]
 
 

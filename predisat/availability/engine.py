@@ -629,6 +629,10 @@ def compute_availability(
             count[it.a : it.b] = saved[0]
             if interval is not None and sens is not None:
                 interval[it.a : it.b], sens[it.a : it.b] = saved[1], saved[2]
+    if progress and len(todo) < len(items):
+        print(f"availability{', ' + rule.label if rule.label else ''}: "
+              f"{len(items) - len(todo)} of {len(items)} blocks resumed from the checkpoint, "
+              f"{len(todo)} to compute", file=sys.stderr)  # fmt: skip
     bar = _progress(n_pos, progress, rule.label)
     bar.update(sum(it.b - it.a for it in items) - sum(it.b - it.a for it in todo))
     try:

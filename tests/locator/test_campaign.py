@@ -298,3 +298,40 @@ def test_command_refuses_a_badly_named_pipeline_world(
         assert stop.value.code == 2
         assert repr(bad) in capsys.readouterr().err
         assert not (tmp_path / "c").exists()
+
+
+def test_a_stopped_campaign_of_other_options_withdraws_the_earlier_tables(
+    setup: CampaignSetup, serial: Path, tmp_path: Path
+) -> None:
+    """A finished campaign's summary stayed beside the job files of a rerun with other options
+    that was stopped, and read as that rerun's result."""
+    import shutil
+
+    shutil.copytree(serial, tmp_path, dirs_exist_ok=True)
+    jobs = jobs_for(["tiny"], 3)  # one more run: one job to do
+
+    def kill(job: Job, path: Path) -> None:
+        raise _Killed(f"killed after {path.name}")
+
+    with pytest.raises(_Killed):
+        run_campaign(tmp_path, setup, jobs, Scheduler.serial(), on_job_done=kill)
+    for name in _FILES:
+        assert not (tmp_path / name).exists(), name
+
+
+def test_the_code_fingerprint_covers_the_shipped_navigation_file(tmp_path, monkeypatch) -> None:
+    """The jobs read predisat's embedded navigation file: another file must redo them."""
+    import predisat
+    from locator.campaign import code_fingerprint
+
+    pkg = tmp_path / "predisat"
+    (pkg / "data" / "nav").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    nav = pkg / "data" / "nav" / "brdc.rnx"
+    nav.write_text("one")
+    monkeypatch.setattr(predisat, "__file__", str(pkg / "__init__.py"))
+    first = code_fingerprint()
+    nav.write_text("two")
+    assert code_fingerprint() != first
+    nav.write_text("one")
+    assert code_fingerprint() == first

@@ -342,3 +342,36 @@ def test_local_workers_drop_only_the_logs_the_command_says_better() -> None:
     assert not _not_a_task_error(record("Compute Failed\nKey: x"))
     assert not _not_a_task_error(record("Failed to communicate with scheduler during heartbeat."))
     assert _not_a_task_error(record("Worker is at 95% memory usage. Pausing worker."))
+
+
+def test_an_address_whose_server_sends_a_banner_is_named_not_a_traceback() -> None:
+    """An SSH, SMTP or FTP server (or a proxy) at the address sends bytes first: distributed
+    read them as a frame length and the command ended in a 70-line traceback, a MemoryError
+    allocating exabytes."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    accepted: list[socket.socket] = []
+
+    def serve() -> None:
+        while True:
+            try:
+                c = server.accept()[0]
+            except OSError:
+                return
+            accepted.append(c)
+            c.sendall(b"SSH-2.0-OpenSSH_9.6p1 Ubuntu-3ubuntu13\r\n")
+
+    threading.Thread(target=serve, daemon=True).start()
+    port = server.getsockname()[1]
+    try:
+        with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
+                           "Dask scheduler"):  # fmt: skip
+            TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+    finally:
+        for c in accepted:
+            c.close()
+        server.close()

@@ -54,10 +54,10 @@ def mask_file(tmp_path: Path, track: TrackMap) -> Path:
     return write_masks(_masks(track), tmp_path / "m.masks.parquet")
 
 
-def _run(masks: Any, out: Any, **kw: Any) -> Any:
+def _run(masks: Any, out: Any, progress: bool = False, **kw: Any) -> Any:
     return run_availability(
         masks, None, None, out_dir=out, start=START, end=END, step_s=STEP_S, n_sky=1,
-        interval_every=2, progress=False, scheduler="serial", **kw,
+        interval_every=2, progress=progress, scheduler="serial", **kw,
     )  # fmt: skip
 
 
@@ -84,7 +84,8 @@ class _Blocks:
 
 
 def test_an_interrupted_run_resumes_without_redoing_finished_blocks(
-    tmp_path: Path, mask_file: Path, track: TrackMap, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, mask_file: Path, track: TrackMap, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
     whole = _Blocks()
@@ -106,9 +107,13 @@ def test_an_interrupted_run_resumes_without_redoing_finished_blocks(
 
     again = _Blocks()
     monkeypatch.setattr(engine, "block_task", again)
-    res = _run(mask_file, tmp_path / "resumed")
+    capsys.readouterr()
+    res = _run(mask_file, tmp_path / "resumed", progress=True)
     assert len(again.done) == N_BLOCKS - 5
     assert [r.provenance["blocks_resumed"] for r in res.results] == [4, 1, 0]
+    # and says so (a user could not tell a resume from a fresh run)
+    err = capsys.readouterr().err
+    assert "4 of " in err and "1 of " in err and "blocks resumed from the checkpoint" in err
     assert _files(tmp_path / "resumed") == want  # every output, byte for byte
     assert not (tmp_path / "resumed" / "blocks").exists()
 
