@@ -350,7 +350,12 @@ def _fields(path: Path, lineno: int, text: str, start: int, n: int) -> list[floa
             out.append(float(f"{m[1]}E{m[2]}" if m else _EXPONENT.sub("E", s)))
         except ValueError:
             col = start + 19 * k + 1
-            raise RinexError(path, lineno, f"column {col}: {s!r} is not a number") from None
+            raise RinexError(
+                path, lineno,
+                f"column {col}: {s!r} is not a number: the record is damaged; download the "
+                "file again (a broadcast file of the day from an IGS data centre), or delete "
+                "this satellite's record (its lines from the epoch line on)",
+            ) from None  # fmt: skip
     return out
 
 
