@@ -24,7 +24,6 @@ the figure.
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +40,7 @@ from locator.sources import RinexSource
 from predisat.availability.satellites import select_satellites
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, enu_to_azel
 from predisat.gnss.errormodel import (
+    MIN_FIT_RESIDUALS,
     Applicability,
     ErrorModel,
     IntervalModel,
@@ -332,7 +332,7 @@ def fit_systems(
                                   float(el[ok].min()), float(el[ok].max()))  # fmt: skip
     if not out:
         # overbound_error_model: min_tail 10 in a tail share of at most 0.32 of each bin
-        need = n_bins * math.ceil(10 / 0.32) if bound == "overbound" else 2 * n_bins
+        need = MIN_FIT_RESIDUALS * n_bins // 6 if bound == "overbound" else 2 * n_bins
         raise ValueError(
             f"no system has enough residuals in epochs with 3 satellites of it for the fit"
             f"{' and its overbound' if bound == 'overbound' else ''} (residuals: "

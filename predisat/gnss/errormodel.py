@@ -34,6 +34,7 @@ from predisat.jsontypes import strict_json_text
 __all__ = [
     "ERROR_MODEL_FORMAT",
     "ERROR_MODEL_FORMAT_V1",
+    "MIN_FIT_RESIDUALS",
     "RECEIVER_CLASSES",
     "SIMULATOR_METHOD",
     "Applicability",
@@ -54,6 +55,10 @@ ERROR_MODEL_FORMAT_V1 = "locator-error-model/1"  # no applicability: applies to 
 
 # Receiver classes a model or a data set may name ("" when unknown).
 RECEIVER_CLASSES = ("geodetic", "automotive", "phone", "simulated")
+MIN_FIT_RESIDUALS = 6 * math.ceil(10 / 0.32)
+"""Residuals of one system below which no overbound can be fitted (6 elevation bins, each
+with 10 samples in a tail share of at most 0.32: ``locator.intervals.overbound_error_model``'s
+defaults): a receiver of a pooled model that gave fewer is not covered by name."""
 FREQUENCY_MODES = ("single", "dual")
 
 
@@ -319,6 +324,16 @@ class Applicability:
                     f"system {sys_} code(s) {new} were calibrated on other receivers or "
                     f"antennas only ({profile.receiver_type} / {profile.antenna_type} gave "
                     f"{sorted(got) or 'none'}, {n} residuals)"
+                )
+            elif got and n < MIN_FIT_RESIDUALS:
+                # its own data could not have been fitted: the model's sigma and tail check
+                # are the other receivers' (a trial: 165 residuals of one station pooled with
+                # 32 596 of another)
+                why.append(
+                    f"system {sys_}: {profile.receiver_type} / {profile.antenna_type} gave "
+                    f"only {n} residuals to the pooled model (a fit of its own needs about "
+                    f"{MIN_FIT_RESIDUALS}): the model's figures are other receivers'; calibrate "
+                    "on more data of this receiver and antenna"
                 )
         return why
 
