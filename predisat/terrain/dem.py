@@ -45,6 +45,13 @@ def _is_wgs84_degrees(crs: Any) -> bool:
     from pyproj import CRS
 
     c = CRS.from_user_input(crs.to_wkt())
+    # the horizontal part only: a 3-D CRS (EPSG:4979) or a compound one with a vertical datum
+    # (EPSG:4326+5773, SRTM's EGM96 heights) places the posts the same; the heights' datum
+    # does not matter, the antenna's ground being read from the same tile
+    if c.is_compound:
+        c = c.sub_crs_list[0]
+    if c.is_geographic and len(c.axis_info) == 3:
+        c = c.to_2d()
     if c.equals(CRS.from_epsg(4326), ignore_axis_order=True):
         return True
     ell, pm = c.ellipsoid, c.prime_meridian

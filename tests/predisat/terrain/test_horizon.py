@@ -219,3 +219,13 @@ def test_tiles_in_another_datum_or_meridian_are_refused(tmp_path: Path) -> None:
         Dem.from_files([ed50])
     etrs = _flat_dem(tmp_path / "etrs.tif", n=8, crs="EPSG:4258")  # within a metre of WGS84
     assert Dem.from_files([etrs]).shape == (8, 8)
+    # a 3-D WGS84 CRS, or WGS84 with a vertical datum (SRTM's EGM96 heights): the posts are
+    # where the 2-D one puts them (they used to be refused); a compound in another datum is not
+    flat = Dem.from_files([_flat_dem(tmp_path / "flat.tif", n=8)])
+    for name, crs in (("3d", "EPSG:4979"), ("egm96", "EPSG:4326+5773"),
+                      ("etrs_egg", "EPSG:4258+3855")):  # fmt: skip
+        dem = Dem.from_files([_flat_dem(tmp_path / f"{name}.tif", n=8, crs=crs)])
+        assert (dem.lat0_deg, dem.lon0_deg, dem.shape) == (flat.lat0_deg, flat.lon0_deg, (8, 8))
+    ed50_egm = _flat_dem(tmp_path / "ed50_egm.tif", n=8, crs="EPSG:4230+5773")
+    with pytest.raises(DemError, match="not geographic WGS84"):
+        Dem.from_files([ed50_egm])
