@@ -24,7 +24,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import signal
+import socket
 import threading
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -51,6 +53,8 @@ CLOSE_TIMEOUT_S = 3.0
 
 CONNECT_TIMEOUT_S = 20.0
 """Longest wait, seconds, for the scheduler of a cluster given by address to answer."""
+
+_REFUSED_PROBE_S = 5.0  # a plain TCP connect first, to tell at once that nothing listens
 
 WORKER_WAIT_S = 30.0
 """Longest wait, seconds, for a first worker to join a cluster given by address."""
@@ -207,6 +211,13 @@ def _connect(address: str) -> Any:
     """
     from distributed import Client
 
+    refused = _refused(address)
+    if refused is not None:
+        # distributed retries a refused connection until its timeout (29 s in a trial)
+        raise OSError(
+            f"scheduler {address}: no Dask scheduler answers there ({refused}); start one "
+            "(`dask scheduler`, then `dask worker ADDRESS`) or use --scheduler local"
+        )
     box: dict[str, Any] = {}
 
     def connect() -> None:
@@ -243,6 +254,22 @@ def _connect(address: str) -> Any:
     if error is not None:
         raise error
     return box["client"]
+
+
+def _refused(address: str) -> str | None:
+    """Why a TCP address refuses connections at once (nothing listens there), or None: anything
+    else (an answer, a timeout, another scheme, a name that does not resolve) is left to
+    distributed, which says more about it."""
+    m = re.fullmatch(r"tcp://\[?([^\]]+?)\]?:(\d+)/?", address)
+    if m is None:
+        return None
+    try:
+        with socket.create_connection((m[1], int(m[2])), timeout=_REFUSED_PROBE_S):
+            return None
+    except ConnectionRefusedError as exc:
+        return f"connection refused: {exc.strerror or exc}"
+    except OSError:
+        return None
 
 
 # The code version each code_version function gave when this process first asked: the code a

@@ -110,6 +110,12 @@ def test_an_address_where_no_scheduler_answers_is_named(monkeypatch: pytest.Monk
     runner = TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}"))
     with pytest.raises(OSError, match=f"127.0.0.1:{port}.*--scheduler local"):
         runner.client()
+    # told by a plain connect, before distributed retries until its timeout (29 s in a trial)
+    calls: list[str] = []
+    monkeypatch.setattr("distributed.Client", lambda *a, **k: calls.append("client"))
+    with pytest.raises(OSError, match="connection refused"):
+        TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+    assert calls == []
 
 
 def test_a_local_cluster_whose_start_fails_is_started_again(
