@@ -103,6 +103,7 @@ from predisat.reconstruct.step import (
     step_lags,
     widen,
 )
+from predisat.reconstruct.stops import stop_counts
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
 from predisat.storage import (
@@ -1579,6 +1580,16 @@ def process_survey(
     )
     for line in _attitude_warnings(plan.provenance["attitude"]):
         _report(line, quiet=False)
+    for side, (n_frames, n_stops) in stop_counts(
+        survey.frames.side, survey.frames.chainage_m, p.stop_gap_m
+    ).items():
+        _report(
+            f"note: the {side} camera has {n_frames} frames at {n_stops} stop(s) (within "
+            f"{p.stop_gap_m:g} m of each other, captured on time): each stop's frames are "
+            "merged into one view, sky only where all of them saw it (docs/reconstruction.md, "
+            "section 24)",
+            quiet=False,
+        )
     for line in camera_pair_warnings(survey):
         _report(line, quiet=False)
     for note in (chainage_note, positions_note):

@@ -23,10 +23,11 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from predisat.reconstruct.carving import FrameView
 
-__all__ = ["merge_stop_frames", "stop_groups"]
+__all__ = ["merge_stop_frames", "stop_counts", "stop_groups"]
 
 
 def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
@@ -49,8 +50,7 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
         Every index of ``frames`` exactly once; groups of one for frames not merged. Ordered by
         the first index of each group.
     """
-    if not (np.isfinite(gap_m) and gap_m >= 0):
-        raise ValueError(f"gap_m must be a finite distance >= 0 metres, got {gap_m}")
+    _check_gap(gap_m)
     cams: dict[tuple[str, str, tuple[int, int], str], list[int]] = {}
     groups: list[list[int]] = []
     for i, f in enumerate(frames):
@@ -60,16 +60,47 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
         key = (f.mount.side, f.camera.name, f.camera.shape, f.camera.model)
         cams.setdefault(key, []).append(i)
     for idx in cams.values():
-        order = sorted(idx, key=lambda i: (frames[i].chainage_m, i))
-        run = [order[0]]
-        for i in order[1:]:
-            if frames[i].chainage_m - frames[run[-1]].chainage_m <= gap_m:
-                run.append(i)
-            else:
-                groups.append(run)
-                run = [i]
-        groups.append(run)
+        s = np.array([frames[i].chainage_m for i in idx], float)
+        groups.extend([idx[k] for k in run] for run in _chains(s, gap_m))
     return sorted(groups, key=lambda g: min(g))
+
+
+def stop_counts(side: ArrayLike, chainage_m: ArrayLike, gap_m: float) -> dict[str, tuple[int, int]]:
+    """Per camera, the frames at stops and the stops: ``{side: (n_frames, n_stops)}``.
+
+    The chains of :func:`stop_groups` from a survey's columns (``Frames.side``,
+    ``Frames.chainage_m``, shape (n,) each), for a run's report; cameras without a stop are
+    left out.
+    """
+    _check_gap(gap_m)
+    sides, s = np.asarray(side, str), np.asarray(chainage_m, float)
+    if sides.shape != s.shape or s.ndim != 1:
+        raise ValueError(f"side and chainage_m must be 1-D of one length, got {sides.shape} "
+                         f"and {s.shape}")  # fmt: skip
+    out = {}
+    for name in np.unique(sides):
+        runs = [r for r in _chains(s[sides == name], gap_m) if len(r) > 1]
+        if runs:
+            out[str(name)] = (sum(len(r) for r in runs), len(runs))
+    return out
+
+
+def _chains(s: NDArray, gap_m: float) -> list[list[int]]:
+    """Indices into ``s`` (one camera's chainages) chained in chainage order while the next
+    lies within ``gap_m`` of the previous (ties in index order)."""
+    order = np.lexsort((np.arange(s.size), s))
+    runs: list[list[int]] = []
+    for k in order:
+        if runs and s[k] - s[runs[-1][-1]] <= gap_m:
+            runs[-1].append(int(k))
+        else:
+            runs.append([int(k)])
+    return runs
+
+
+def _check_gap(gap_m: float) -> None:
+    if not (np.isfinite(gap_m) and gap_m >= 0):
+        raise ValueError(f"gap_m must be a finite distance >= 0 metres, got {gap_m}")
 
 
 def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameView]:

@@ -311,7 +311,7 @@ def test_process_says_when_no_two_cameras_can_be_compared(capsys) -> None:
     assert step_notes({}) == []
 
 
-def test_process_merges_the_frames_of_a_stop(rendered, tmp_path) -> None:
+def test_process_merges_the_frames_of_a_stop(rendered, tmp_path, capsys) -> None:
     """A stop captured on time: two more frames per camera at one position (the same pictures,
     0.3 and 0.6 s later). ``process`` merges each camera's three into one view (section 24):
     the same masks and support as the survey without them; with ``stop_gap_m`` in the run's
@@ -349,8 +349,12 @@ def test_process_merges_the_frames_of_a_stop(rendered, tmp_path) -> None:
     pd.concat([man, *extra]).sort_values(["gps_s", "side"]).to_csv(
         survey / "manifest.csv", index=False
     )
+    capsys.readouterr()
     got = process_survey(survey, tmp_path / "stop", progress=False)
     assert got.bad_frames == ()
+    err = capsys.readouterr().err
+    assert "the left camera has 3 frames at 1 stop(s)" in err
+    assert "the right camera has 3 frames at 1 stop(s)" in err
     assert got.masks.provenance["params"]["stop_gap_m"] == 0.5
     np.testing.assert_array_equal(got.masks.mask_el_deg, base.masks.mask_el_deg)
     np.testing.assert_array_equal(got.masks.support, base.masks.support)

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from predisat.camera.models import CameraModel, Mount
 from predisat.reconstruct.carving import FrameView
-from predisat.reconstruct.stops import merge_stop_frames, stop_groups
+from predisat.reconstruct.stops import merge_stop_frames, stop_counts, stop_groups
 
 CAM = CameraModel.fisheye_from_fov(40, 30, 185.0)
 
@@ -39,6 +39,12 @@ def test_frames_of_one_camera_within_the_gap_are_one_stop() -> None:
     assert sorted(map(sorted, stop_groups(part, 0.5))) == [[0, 1, 2], [3]]
     with pytest.raises(ValueError, match="gap_m"):
         stop_groups(fr, -1.0)
+    # the same chains from a survey's columns, counted for the run's report
+    side = [f.mount.side for f in fr[:8]]
+    s = [f.chainage_m for f in fr[:8]]
+    assert stop_counts(side, s, 0.5) == {"left": (4, 1), "right": (2, 1)}
+    assert stop_counts(side, s, 0.0) == {"left": (2, 1), "right": (2, 1)}
+    assert stop_counts(["left"], [3.0], 0.5) == {}
 
 
 def test_a_merged_frame_is_sky_only_where_every_frame_saw_sky() -> None:
