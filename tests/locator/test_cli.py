@@ -489,8 +489,15 @@ def test_run_on_real_rinex_through_a_virtual_track(test_data, tmp_path, capsys):
     # given and flagged, the message says which model is missing and how to make one
     assert (ep["n_used"] >= 6).all() and not ep["claim"].any()
     assert ep["flag_names"].str.contains("NO_ERROR_MODEL").all()
-    err = capsys.readouterr().err
+    cap = capsys.readouterr()
+    err = cap.err
     assert "NO SAFETY CLAIM" in err and "TRIMBLE 5700" in err and "locator calibrate" in err
+    # 30 s epochs on a 2 km map: the prediction (45 m/s x 30 s) reaches past its ends, said
+    # with the reason (a user trial took the flag for a defect)
+    at_end = int(ep["flag_names"].str.contains("TRACK_END").sum())
+    assert at_end >= 5
+    assert f"past an end of the track map in {at_end} of 10 epochs" in cap.out
+    assert "(30 s here: 1350 m)" in cap.out
     # SATHIA on real single-frequency ranges: within a few metres of the station
     assert np.abs(ep["chainage_m"] - 1000.0).max() < 5.0
     assert ((ep["lo_m"] <= 1000.0) & (1000.0 <= ep["hi_m"])).all()
