@@ -12,9 +12,9 @@ So the frames of one camera whose chainages lie within ``gap_m`` of the next are
 anything is carved, into one frame that calls sky only what every one of them saw as sky: it
 adds no sky a single frame would not have given, and each frame's own fault is outvoted by the
 others. The merged frame stands at the first frame's place and pose; the others' are within its
-doubts (its attitude doubt grows by the largest angle between the poses, its position doubts by
-the largest distance between the camera centres), so every direction it calls sky is sky from
-wherever the camera really stood.
+doubts (its attitude doubt grows by the largest angle between the poses, its position doubts
+hold every frame's camera centre with its own doubts), so every direction it calls sky is sky
+from wherever the camera really stood.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from predisat.camera.models import vehicle_to_enu
 from predisat.reconstruct.carving import FrameView
 
 __all__ = ["merge_stop_frames", "stop_counts", "stop_groups"]
@@ -33,9 +34,12 @@ __all__ = ["merge_stop_frames", "stop_counts", "stop_groups"]
 def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
     """Indices of the frames of each stop, in chainage order; single frames alone.
 
-    Frames of one camera (same ``mount.side``, camera model and image size) and no
-    ``view_group`` are chained in chainage order while the next lies within ``gap_m`` of the
-    previous: the chain does not depend on which frames before or after it a window holds.
+    Frames of one camera (same ``mount.side``, camera model and image size), driven the same
+    way (``reverse``: a side camera of a train running the other way looks at the other side
+    of the track) and with no ``view_group`` are chained in chainage order while the next lies
+    within ``gap_m`` of the previous. A window lacking a stop's first (last) frames chains the
+    rest of them alike; the merged frame then stands at the window's first frame of the stop
+    (each position is computed in one window only, so runs agree).
 
     Parameters
     ----------
@@ -51,13 +55,13 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
         the first index of each group.
     """
     _check_gap(gap_m)
-    cams: dict[tuple[str, str, tuple[int, int], str], list[int]] = {}
+    cams: dict[tuple[str, str, tuple[int, int], str, bool], list[int]] = {}
     groups: list[list[int]] = []
     for i, f in enumerate(frames):
         if f.view_group:  # the caller grouped it already: left as it is
             groups.append([i])
             continue
-        key = (f.mount.side, f.camera.name, f.camera.shape, f.camera.model)
+        key = (f.mount.side, f.camera.name, f.camera.shape, f.camera.model, bool(f.reverse))
         cams.setdefault(key, []).append(i)
     for idx in cams.values():
         s = np.array([frames[i].chainage_m for i in idx], float)
@@ -110,10 +114,11 @@ def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameVi
     those of them any frame took for sky by the thin-structure policy only; its confidence the
     lowest per column. It keeps the first frame's (lowest chainage) place, pose and ``reverse``;
     its ``attitude_doubt_deg`` is the largest over the frames of their own doubt plus the angle
-    between their pose and the first's, and each position doubt (along, across, height) the
-    largest of the frames' plus the largest distance between their camera centre and the
-    first's. Its ``frame_id`` names the first and last frames and the count. Frames alone are
-    returned as they are (the same objects); the inputs are not modified.
+    between their pose and the first's; its position doubts (a box along, across and up in
+    the first frame's level vehicle frame) hold every frame's own box, turned with the
+    frame's heading, about every frame's camera centre. Its ``frame_id`` names the first and
+    last frames and the count. Frames alone are returned as they are (the same objects); the
+    inputs are not modified.
 
     Parameters
     ----------
@@ -144,13 +149,19 @@ def _merged(group: list[FrameView]) -> FrameView:
     conf = np.minimum.reduce(confs) if confs else None
     r0 = first.mount.camera_to_enu(first.heading_deg, first.reverse)
     c0 = first.mount.camera_position_enu(first.antenna_enu_m, first.heading_deg, first.reverse)
-    turn_deg, moved_m = 0.0, 0.0
-    for f in group[1:]:
+    # the position doubts are a box in the first frame's level vehicle frame
+    # (FrameView.along/across/height_doubt_m): each frame's box, turned into it, about its
+    # centre's offset; the exact bounding box of a turned box is |M| times its half-sizes
+    to_first = vehicle_to_enu(first.heading_deg, first.reverse).T
+    turn_deg, box = 0.0, np.zeros(3)
+    for f in group:
         r = f.mount.camera_to_enu(f.heading_deg, f.reverse)
         cos = np.clip((np.trace(r0.T @ r) - 1.0) / 2.0, -1.0, 1.0)
         turn_deg = max(turn_deg, float(np.degrees(np.arccos(cos))))
         c = f.mount.camera_position_enu(f.antenna_enu_m, f.heading_deg, f.reverse)
-        moved_m = max(moved_m, float(np.linalg.norm(c - c0)))
+        turned = np.abs(to_first @ vehicle_to_enu(f.heading_deg, f.reverse))
+        own = turned @ np.array([f.along_doubt_m, f.across_doubt_m, f.height_doubt_m])
+        box = np.maximum(box, np.abs(to_first @ (np.asarray(c, float) - c0)) + own)
     ids = f"{first.frame_id or first.chainage_m}..{group[-1].frame_id or group[-1].chainage_m}"
     return replace(
         first,
@@ -160,7 +171,7 @@ def _merged(group: list[FrameView]) -> FrameView:
         thin_mask=thin,
         thin_width_deg=max(f.thin_width_deg for f in group),
         attitude_doubt_deg=max(f.attitude_doubt_deg for f in group) + turn_deg,
-        along_doubt_m=max(f.along_doubt_m for f in group) + moved_m,
-        across_doubt_m=max(f.across_doubt_m for f in group) + moved_m,
-        height_doubt_m=max(f.height_doubt_m for f in group) + moved_m,
+        along_doubt_m=float(box[0]),
+        across_doubt_m=float(box[1]),
+        height_doubt_m=float(box[2]),
     )

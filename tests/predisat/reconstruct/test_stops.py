@@ -63,8 +63,10 @@ def test_a_merged_frame_is_sky_only_where_every_frame_saw_sky() -> None:
     np.testing.assert_array_equal(m.confidence, np.minimum(np.minimum(confs[0], confs[1]),
                                                            confs[2]))
     assert m.chainage_m == 50.0 and m.frame_id == "f0..f2 (stop, 3 frames)"
-    # the antennas 0.1 and 0.2 m apart, the mounts equal: the doubts grow by 0.2 m
-    assert m.along_doubt_m == pytest.approx(0.4) and m.height_doubt_m == pytest.approx(0.2)
+    # the antennas 0.1 and 0.2 m apart along the track, the mounts equal: the along doubt
+    # grows by 0.2 m, the across and height doubts not at all
+    assert m.along_doubt_m == pytest.approx(0.4)
+    assert m.across_doubt_m == pytest.approx(0.0) and m.height_doubt_m == pytest.approx(0.0)
     assert m.attitude_doubt_deg == pytest.approx(0.2)
     assert all(np.array_equal(f.sky_mask, b) for f, b in zip(fr, before, strict=True))
     # single frames come back as they are
@@ -82,10 +84,52 @@ def test_the_attitude_doubt_grows_by_the_turn_between_the_poses() -> None:
     turn = np.degrees(Rotation.from_matrix(ra.T @ rb).magnitude())
     assert turn > 1.0
     assert m.attitude_doubt_deg == pytest.approx(turn, abs=1e-6)
-    # the cameras' centres moved with the turn (the lever arm): the position doubts too
+    # the cameras' centres moved with the turn (the lever arm): the position doubts too, per
+    # axis of the first frame's level vehicle frame (x the heading, y left)
     ca = left.camera_position_enu(a.antenna_enu_m, 0.0)
     cb = b.mount.camera_position_enu(b.antenna_enu_m, 0.7)
-    assert m.across_doubt_m == pytest.approx(float(np.linalg.norm(cb - ca)))
+    off = np.abs([cb[1] - ca[1], -(cb[0] - ca[0]), cb[2] - ca[2]])  # heading 0: north, west, up
+    assert off.max() > 0.01
+    assert [m.along_doubt_m, m.across_doubt_m, m.height_doubt_m] == pytest.approx(off)
+
+
+def test_frames_driven_the_other_way_are_not_one_stop() -> None:
+    """Two passes over one place, one in each direction: the left camera looks at the other
+    side of the track on the second; merged, the 180 deg turn eroded all of its sky (a
+    review)."""
+    fr = [_frame(100.0), _frame(100.2, reverse=True)]
+    assert sorted(map(sorted, stop_groups(fr, 0.5))) == [[0], [1]]
+    assert all(a is b for a, b in zip(merge_stop_frames(fr, 0.5), fr, strict=True))
+
+
+def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
+    """A crawl of 200 frames 0.45 m apart turning 0.05 deg a frame, each frame's chainage known
+    within 3 m: the merged box holds every frame's camera centre with its own box turned into
+    the first frame's axes (checked on the corners of each box); nothing moved up."""
+    def at(k: int) -> FrameView:
+        hd = 0.05 * k
+        # on a circle of radius 0.45 / radians(0.05) m: heading hd, a point every 0.45 m
+        r = 0.45 / np.radians(0.05)
+        pos = np.array([r * (1 - np.cos(np.radians(hd))), r * np.sin(np.radians(hd)), 4.0])
+        return _frame(100.0 + 0.45 * k, fid=f"c{k}", heading_deg=hd, antenna_enu_m=pos,
+                      along_doubt_m=3.0, across_doubt_m=0.2, height_doubt_m=0.1)
+
+    fr = [at(k) for k in range(200)]
+    (m,) = merge_stop_frames(fr, 0.5)
+    h0 = np.radians(fr[0].heading_deg)
+    fwd, left = np.array([np.sin(h0), np.cos(h0), 0.0]), np.array([-np.cos(h0), np.sin(h0), 0.0])
+    c0 = fr[0].mount.camera_position_enu(fr[0].antenna_enu_m, fr[0].heading_deg)
+    half = np.array([m.along_doubt_m, m.across_doubt_m, m.height_doubt_m])
+    for f in fr:
+        h = np.radians(f.heading_deg)
+        fw, lf = np.array([np.sin(h), np.cos(h), 0.0]), np.array([-np.cos(h), np.sin(h), 0.0])
+        c = f.mount.camera_position_enu(f.antenna_enu_m, f.heading_deg)
+        for sa, sc, sh in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T:
+            corner = c + sa * 3.0 * fw + sc * 0.2 * lf + sh * 0.1 * np.array([0, 0, 1.0]) - c0
+            got = np.abs([corner @ fwd, corner @ left, corner[2]])
+            assert np.all(got <= half + 1e-9), (f.frame_id, got, half)
+    assert m.height_doubt_m == pytest.approx(0.1)
+    assert m.across_doubt_m < 0.3 * m.along_doubt_m
 
 
 def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
