@@ -376,6 +376,15 @@ def model_file_parts(
         (r, a, tuple((s_, tuple(sorted(c)), n) for s_, (c, n) in sorted(per.items())))
         for (r, a), per in sorted(combos.items())
     )
+    lo, hi = max(f.el_min_deg for f in fits.values()), min(f.el_max_deg for f in fits.values())
+    if not lo < hi:
+        ranges = ", ".join(f"{k} {f.el_min_deg:.1f}-{f.el_max_deg:.1f}" for k, f in
+                           sorted(fits.items()))  # fmt: skip
+        raise ValueError(
+            f"the systems were fitted on elevation ranges with nothing in common ({ranges} "
+            "deg): one model cannot serve them together; calibrate each constellation apart "
+            "(--constellation)"
+        )
     app = Applicability(
         tuple(sorted({d.profile.receiver_type for d in data})),
         tuple(sorted({d.profile.antenna_type for d in data})),
@@ -383,8 +392,8 @@ def model_file_parts(
         freq.pop(),
         # the elevations every system was fitted on: one range serves all systems in a run
         # (a pooled model's GPS, fitted up to 72.7 deg, took satellites up to Galileo's 75.8)
-        max(f.el_min_deg for f in fits.values()),
-        min(f.el_max_deg for f in fits.values()),
+        lo,
+        hi,
         method,
         tuple(d.source for d in data),
         pairs,

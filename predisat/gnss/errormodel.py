@@ -504,6 +504,13 @@ def default_model_file(k_sigma: float = 2.0) -> ErrorModelFile:
     )  # fmt: skip
 
 
+def _count(value: object) -> int:
+    """A whole count >= 0 from JSON (a hand-edited 1.5 or -3 is refused, not truncated)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"n_residuals must be a whole number >= 0, got {value!r}")
+    return value
+
+
 def write_error_model(
     path: str | Path,
     model: IntervalModel,
@@ -628,7 +635,7 @@ def read_error_model_file(path: str | Path) -> ErrorModelFile:
             tuple(str(r) for r in a.get("sources", ())),
             tuple(
                 (str(q["receiver"]), str(q["antenna"]),
-                 tuple((str(s_), _codes(v["codes"]), int(v["n_residuals"]))
+                 tuple((str(s_), _codes(v["codes"]), _count(v["n_residuals"]))
                        for s_, v in sorted(dict(q["systems"]).items())))
                 for q in a.get("pairs", ())
             ),

@@ -150,3 +150,18 @@ def test_a_pooled_file_records_each_receiver_antenna_pair_and_the_common_elevati
         ("A", "ANT", (("E", ("C1C",), count(a, "E")), ("G", ("C1C",), count(a, "G")))),
         ("B", "ANT2", (("E", ("C1X",), count(b, "E")), ("G", ("C1C",), count(b, "G")))),
     )
+
+
+def test_systems_fitted_on_elevations_with_nothing_in_common_are_refused():
+    import dataclasses
+
+    rng = np.random.default_rng(7)
+    truth = {"G": ErrorModel(0.3, 0.5), "E": ErrorModel(1.5, 1.0)}
+    d = _synthetic(rng, 800, truth, "a")
+    g = np.array([s[0] == "G" for s in d.sats])
+    # GPS seen only below 40 deg, Galileo only above 45
+    keep = np.where(g, d.el_deg < 40.0, d.el_deg > 45.0)
+    d = dataclasses.replace(d, residual_m=np.where(keep, d.residual_m, np.nan))
+    fits = fit_systems([d])
+    with pytest.raises(ValueError, match=r"nothing in common .*--constellation"):
+        model_file_parts(fits, [d], k_sigma=2.0)

@@ -212,6 +212,13 @@ def test_a_pooled_model_applies_to_the_receiver_antenna_pairs_and_codes_it_holds
                           applicability=app)  # fmt: skip
     mf = read_error_model_file(p)
     assert mf.applicability.pairs == pairs  # round trip
+    # a count edited by hand to no whole number is refused, naming the file
+    text = json.loads(p.read_text())
+    text["applicability"]["pairs"][0]["systems"]["E"]["n_residuals"] = 1.5
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(text))
+    with pytest.raises(ErrorModelFileError, match=r"bad\.json.*n_residuals"):
+        read_error_model_file(bad)
     assert mf.mismatches(_profile()) == []
     # the PolaRx5's own 165 GPS residuals could not have been fitted alone: the pooled
     # figures are the NetR9's, so the model does not cover it by name
