@@ -351,6 +351,12 @@ class Rectifier:
         """
         if not (0 < az_step_deg <= 2 and 0 < el_step_deg <= 2):
             raise ValueError("az_step_deg and el_step_deg must be in (0, 2] degrees")
+        if camera.model == "equirect" and az_step_deg > 1.0:
+            # a review: at 2 deg, pitched 10 deg, pixels of the rows nearest the image's pole
+            # reached no sample through the per-row growth (every step to 1 deg was checked)
+            raise ValueError(
+                f"az_step_deg must be <= 1 degree for a panorama (equirect), got {az_step_deg}"
+            )
         if span_deg is not None and not 0.0 < span_deg <= 360.0:
             raise ValueError(f"span_deg must be in (0, 360] degrees, got {span_deg}")
         if span_deg is not None:

@@ -124,6 +124,9 @@ def test_rolled_panorama_grows_obstacles_locally_and_still_samples_every_pixel(
     assert need.sum() > 0.5 * need.size
     missed = need & ~_reached(rect)
     assert not missed.any(), np.argwhere(missed)[:5]
+    # steps coarser than the checked ones are refused for a panorama
+    with pytest.raises(ValueError, match="az_step_deg"):
+        Rectifier.build(PANO, Mount.default("roof"), az_step_deg=2.0)
     # and the count from the samples' side agrees with rectifying one obstacle pixel
     rng = np.random.default_rng(0)
     rows, cols = np.nonzero(need)
