@@ -672,6 +672,7 @@ class Reconstructor:
         pasts = self.past_profiles(frames)
         bound = hf.bound_m.copy()
         views = np.zeros(hf.shape, np.int32)
+        resolved = None
         if frames:
             cams, rots = _camera_geometry(frames, track)
             rules = _thin_rules(hf, frames, cams, p)
@@ -690,7 +691,9 @@ class Reconstructor:
                     views[box] += seen[box]
                     seen[box] = False
                 if p.resolve_width_m is not None:
-                    bound, views = _resolving_bounds(hf, bound, views, frames, cams, p, carver)
+                    bound, views, resolved = _resolving_bounds(
+                        hf, bound, views, frames, cams, p, carver
+                    )
             else:
                 bound, views = _fused_bounds(hf, frames, cams, p, carver)
         over = [
@@ -713,11 +716,14 @@ class Reconstructor:
         )  # fmt: skip
         # a bound the prior set rests on its rule, not on the views that carved the cell
         views[bound != carved] = 0
+        if resolved is not None:  # a bound the prior set is no view's, resolved or not
+            resolved = resolved & (bound == carved) & np.isfinite(bound)
         bound.setflags(write=False)
         views.setflags(write=False)
         return HeightField(
             hf.cell_m, hf.ix0, hf.iy0, bound, hf.region, hf.chainage_m, hf.offset_m,
             hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings, views,
+            resolved,
         )  # fmt: skip
 
     def run(
@@ -767,6 +773,17 @@ class Reconstructor:
             )]  # fmt: skip
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs, overhead_m)
+        res_hf = None
+        if hf.resolved is not None and hf.resolved.any():
+            # the height field with the resolved cells only (the others far under the rail);
+            # a mast stands no higher than the tallest structure by the track the clearance
+            # rules take (overhead_along_height_m above the cameras): a resolved cell counts up
+            # to that height, not with the loose bounds of steep rays
+            top = hf.rail_z_m + p.antenna_height_m + p.overhead_along_height_m
+            low = np.where(hf.resolved, np.minimum(hf.bound_m, top), hf.rail_z_m - 1.0e3)
+            low = low.astype(np.float32)
+            res_hf = replace(hf, bound_m=low, views=None if hf.views is None else np.where(
+                hf.resolved, hf.views, 0).astype(np.int32))  # fmt: skip
         ant, rot = _antennas(track, s, p.antenna_height_m)
         sweep_m = cell_sweep_of(s) if p.cell_sweep_m is None else p.cell_sweep_m
         sweep_m += p.chainage_shift_m  # the carved world may stand that far off (section 18)
@@ -774,12 +791,23 @@ class Reconstructor:
             # the obstacles as seen from anywhere in the cell; the cameras' ceiling caps are
             # exact at the position only, so they are not applied to a swept cell
             hf = sweep_along_track(hf, track, sweep_m, p.clearance_half_width_m)
+            if res_hf is not None:
+                res_hf = sweep_along_track(res_hf, track, sweep_m, p.clearance_half_width_m)
             caps = None
         else:
             caps = _ceiling_caps(hf.camera_ceilings, s, ant)
         near_el, near_unknown, far_grid_el, far_unknown, near_sup, far_sup = _horizon_parts(
             hf, ant, rot, p, caps
         )
+        # the far cells a frame near enough to see a mast bounded: the far field's cap below
+        # does not lower them (a camera at the position, half_width_m away or more, sees such
+        # a mast a pixel wide or less, and its sky over it proves nothing; a review: the 360
+        # rig's roof panorama missed catenary masts 43-63 m ahead, 0.3-0.4 deg wide, and its
+        # sky capped the masts' cells that the frames near them had kept)
+        far_res = None
+        if res_hf is not None:
+            _, _, far_res_el, _, _, far_res_sup = _horizon_parts(res_hf, ant, rot, p, caps)
+            far_res = (far_res_el, far_res_sup)
         # the far field has no distance: a thin feature seen there may be far, hence opaque
         far_el, far_seen, seen, far_views = _far_field(
             keep, self.solid_profiles(keep, profs), s, ant, track, p
@@ -792,9 +820,10 @@ class Reconstructor:
         # views had bounded, 8.6 deg under the truth at rank 2 (a review)
         far_grid = _bins(far_grid_el, p.n_sub)
         cap = _far_cap(far_seen, far_views, p.fusion_rank)
-        grid_bin = np.maximum(
-            _bins(near_el, p.n_sub), np.where(cap, np.minimum(far_grid, far_el), far_grid)
-        )
+        capped = np.minimum(far_grid, far_el)
+        if far_res is not None:
+            capped = np.maximum(capped, _bins(far_res[0], p.n_sub))
+        grid_bin = np.maximum(_bins(near_el, p.n_sub), np.where(cap, capped, far_grid))
         unknown_bin = (_bins(near_unknown.astype(float), p.n_sub) > 0) | (
             (_bins(far_unknown.astype(float), p.n_sub) > 0) & ~far_seen
         )
@@ -817,6 +846,7 @@ class Reconstructor:
             assumed,
             p.n_sub,
             p.fusion_rank,
+            far_res,
         )
         desc = _descriptors(hf, track, s, ant, p)
         return Reconstruction(
@@ -987,11 +1017,13 @@ def _resolve_range_m(frames: Sequence[FrameView], p: ReconstructionParams) -> ND
 def _resolving_bounds(
     hf: HeightField, bound: NDArray, views: NDArray, frames: Sequence[FrameView],
     cams: NDArray, p: ReconstructionParams, carver: _FrameCarver,
-) -> tuple[NDArray, NDArray]:  # fmt: skip
+) -> tuple[NDArray, NDArray, NDArray | None]:  # fmt: skip
     """``bound`` (every frame's lowest) without the bounds of far frames of the cameras in
     ``p.resolve_positions`` on the cells some frame near enough to see a mast bounds
     (``ReconstructionParams.resolve_width_m``), and ``views`` (the support count) where a cell
-    was raised: the views whose frames still bound it, not the far frames left out.
+    was raised: the views whose frames still bound it, not the far frames left out; and the
+    cells it raised (``HeightField.resolved``; None without a camera of
+    ``p.resolve_positions``).
 
     A far frame's sky passes over a mast it cannot resolve (a pixel or less), and the plain
     carving keeps the lowest bound, so one far frame erases a mast every near frame sees. The
@@ -999,7 +1031,7 @@ def _resolving_bounds(
     """
     subject = np.array([f.mount.side in p.resolve_positions for f in frames], bool)
     if not subject.any():
-        return bound, views
+        return bound, views, None
     ranges = _resolve_range_m(frames, p)
     near = hf.bound_m.copy()
     scratch = hf.bound_m.copy()
@@ -1022,7 +1054,7 @@ def _resolving_bounds(
         near_views += group
     raised = resolved & (near > bound)
     out = np.where(resolved, np.maximum(near, bound), bound).astype(bound.dtype)
-    return out, np.where(raised, near_views, views).astype(views.dtype)
+    return out, np.where(raised, near_views, views).astype(views.dtype), raised
 
 
 def _unseen_rules(frames: Sequence[FrameView], p: ReconstructionParams) -> list[UnseenRule | None]:
@@ -1466,6 +1498,7 @@ def bin_support(
     assumed: NDArray,
     n_sub: int,
     fusion_rank: int = 1,
+    far_resolved: tuple[NDArray, NDArray] | None = None,
 ) -> NDArray:
     """Independent views behind each bin's value (``docs/reconstruction.md``, section 7).
 
@@ -1495,6 +1528,9 @@ def bin_support(
         Rays per bin.
     fusion_rank : int
         ``ReconstructionParams.fusion_rank`` (the cap's condition).
+    far_resolved : tuple of ndarray, optional
+        Per-ray elevation and support of the far cells the cap leaves
+        (``HeightField.resolved``): where they set a capped bin, its support is theirs.
 
     Returns
     -------
@@ -1508,6 +1544,12 @@ def bin_support(
         capped = cap & (far_el < fg_b)
     far_part = np.where(cap, np.minimum(fg_b, far_el), fg_b)
     far_part_s = np.where(capped, far_views, fg_s)
+    if far_resolved is not None:
+        fr_b, fr_s = _bins_with_support(far_resolved[0], far_resolved[1], n_sub)
+        kept = cap & (fr_b > far_part)
+        far_part = np.where(kept, fr_b, far_part)
+        far_part_s = np.where(kept, fr_s, far_part_s)
+        capped = capped & ~kept
     grid = np.maximum(near_b, far_part)
     grid_s = _pick_support(near_b, near_s, far_part, far_part_s)
     far_s = np.where(far_seen, far_views, 0)

@@ -101,6 +101,11 @@ class HeightField:
         Independent views (frames, or frames sharing a view group) whose rays bounded each
         cell's carved bound; 0 where no view did or where a prior set the bound (``None``:
         not counted).
+    resolved : ndarray of bool, shape (ny, nx), or None
+        Cells the mast rule raised (``ReconstructionParams.resolve_width_m``,
+        :func:`predisat.reconstruct.carving._resolving_bounds`): far frames' sky passed over
+        them, frames near enough to see a mast there bounded them higher; the far field's cap
+        leaves them (up to a mast's height). ``None``: the rule did not apply.
     """
 
     cell_m: float
@@ -114,6 +119,7 @@ class HeightField:
     overhead_m: NDArray = field(default_factory=lambda: np.zeros((0, 2)))
     camera_ceilings: NDArray = field(default_factory=lambda: np.zeros((0, 4)))
     views: NDArray | None = field(default=None, repr=False)
+    resolved: NDArray | None = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
