@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
+import socket
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -98,8 +101,6 @@ def test_the_tasks_of_a_map_spread_over_the_workers(threads_cluster: str) -> Non
 
 
 def test_an_address_where_no_scheduler_answers_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
-    import socket
-
     import predisat.scheduler as sched
 
     monkeypatch.setattr(sched, "CONNECT_TIMEOUT_S", 1.0)
@@ -217,9 +218,6 @@ def test_workers_running_other_code_are_refused() -> None:
 def test_a_scheduler_without_workers_or_a_server_that_is_none_is_named(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    import socket
-    import threading
-
     from distributed import LocalCluster
 
     import predisat.scheduler as sched
@@ -232,16 +230,34 @@ def test_a_scheduler_without_workers_or_a_server_that_is_none_is_named(
     # something that accepts the connection and never answers (a web server's port): the
     # handshake used to wait forever
     monkeypatch.setattr(sched, "CONNECT_TIMEOUT_S", 1.0)
+    with _server() as port:
+        with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
+                           "Dask scheduler"):  # fmt: skip
+            TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+
+
+@contextlib.contextmanager
+def _server(banner: bytes = b"") -> Iterator[int]:
+    """A local TCP server that is no Dask scheduler: it accepts every connection and sends
+    ``banner`` (nothing: it never answers); yields its port."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen()
     accepted: list[socket.socket] = []
-    threading.Thread(target=lambda: accepted.append(server.accept()[0]), daemon=True).start()
-    port = server.getsockname()[1]
+
+    def serve() -> None:
+        while True:
+            try:
+                c = server.accept()[0]
+            except OSError:
+                return
+            accepted.append(c)
+            if banner:
+                c.sendall(banner)
+
+    threading.Thread(target=serve, daemon=True).start()
     try:
-        with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
-                           "Dask scheduler"):  # fmt: skip
-            TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+        yield server.getsockname()[1]
     finally:
         for c in accepted:
             c.close()
@@ -354,30 +370,7 @@ def test_an_address_whose_server_sends_a_banner_is_named_not_a_traceback() -> No
     """An SSH, SMTP or FTP server (or a proxy) at the address sends bytes first: distributed
     read them as a frame length and the command ended in a 70-line traceback, a MemoryError
     allocating exabytes."""
-    import socket
-    import threading
-
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen()
-    accepted: list[socket.socket] = []
-
-    def serve() -> None:
-        while True:
-            try:
-                c = server.accept()[0]
-            except OSError:
-                return
-            accepted.append(c)
-            c.sendall(b"SSH-2.0-OpenSSH_9.6p1 Ubuntu-3ubuntu13\r\n")
-
-    threading.Thread(target=serve, daemon=True).start()
-    port = server.getsockname()[1]
-    try:
+    with _server(b"SSH-2.0-OpenSSH_9.6p1 Ubuntu-3ubuntu13\r\n") as port:
         with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
                            "Dask scheduler"):  # fmt: skip
             TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
-    finally:
-        for c in accepted:
-            c.close()
-        server.close()

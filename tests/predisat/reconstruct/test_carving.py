@@ -658,16 +658,13 @@ def test_a_swept_height_field_sees_what_every_point_of_its_cell_sees() -> None:
         ReconstructionParams(cell_sweep_m=float("nan"))
 
 
-def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
-    """A 360-degree camera (0.5 deg pixels) every 10 m on an open line with catenary. The
-    frames within 25 m of a mast see it (ray cast); the others are rendered from the same world
-    without the catenary, as far frames whose segmentation lost the sub-pixel mast
-    (``docs/reconstruction.md``, section 14). The plain carving keeps the lowest bound, so
-    their sky erases the mast the near frames see: its cells are bounded below its top (the
-    mesh's). With ``resolve_width_m`` (0.25 m; the mast is a 0.28 m H-beam) a cell a near frame
-    bounds keeps the near frames' lowest bound: the mast stands whole, and no cell is lower
-    than the plain carving's. The overhead rules, which a cantilever over the track may fire
-    and which raise the cells beside it for another reason, are off."""
+@pytest.fixture(scope="module")
+def mast_scene():
+    """A 360-degree camera (0.5 deg pixels) every 10 m on an open line with catenary, around
+    the mast near 300 m: the frames within 25 m of it ray cast in the world, the others in the
+    same world without the catenary (far frames whose segmentation lost the sub-pixel mast).
+    Returns the world, the steel vertices and their projection, the mast's vertices, its
+    chainage, the frames and which frames are near."""
     from dataclasses import replace
 
     track = straight_track(700.0, AZIMUTH)
@@ -679,13 +676,30 @@ def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
     verts = world.vertices_m[world.faces[world.face_material == steel].ravel()]
     proj = track.project_enu(verts)
     one = np.abs(proj.chainage_m - 300.0) < 10.0  # the masts stand 55-65 m apart
-    mast_m, top_m = float(np.median(proj.chainage_m[one])), float(verts[one, 2].max())
+    mast_m = float(np.median(proj.chainage_m[one]))
     pano = {"roof": Mount.default("roof")}
     s_frames = np.arange(mast_m - 150.0, mast_m + 151.0, 10.0)
     near = np.abs(s_frames - mast_m) <= 25.0
     cam = CameraModel.equirect(720)
     fr = ideal_frames(world, s_frames[near], cam, pano) + ideal_frames(bare, s_frames[~near],
                                                                         cam, pano)  # fmt: skip
+    return world, verts, proj, one, mast_m, fr, near
+
+
+def test_far_frames_that_cannot_see_a_mast_do_not_erase_it(mast_scene) -> None:
+    """A 360-degree camera (0.5 deg pixels) every 10 m on an open line with catenary. The
+    frames within 25 m of a mast see it (ray cast); the others are rendered from the same world
+    without the catenary, as far frames whose segmentation lost the sub-pixel mast
+    (``docs/reconstruction.md``, section 14). The plain carving keeps the lowest bound, so
+    their sky erases the mast the near frames see: its cells are bounded below its top (the
+    mesh's). With ``resolve_width_m`` (0.25 m; the mast is a 0.28 m H-beam) a cell a near frame
+    bounds keeps the near frames' lowest bound: the mast stands whole, and no cell is lower
+    than the plain carving's. The overhead rules, which a cantilever over the track may fire
+    and which raise the cells beside it for another reason, are off."""
+    from dataclasses import replace
+
+    world, verts, proj, one, mast_m, fr, near = mast_scene
+    top_m = float(verts[one, 2].max())
     base = replace(PARAMS, overhead_along_el_deg=None, along_view_half_deg=None)
     fields = {res: Reconstructor(replace(base, resolve_width_m=res)).height_field(
         fr, world.track, mast_m - 60.0, mast_m + 60.0) for res in (None, 0.25)}  # fmt: skip
@@ -705,7 +719,9 @@ def test_far_frames_that_cannot_see_a_mast_do_not_erase_it() -> None:
     assert (kept >= 1).all() and (kept <= near.sum()).all()
 
 
-def test_a_far_camera_at_the_position_does_not_cap_a_mast_near_frames_resolved() -> None:
+def test_a_far_camera_at_the_position_does_not_cap_a_mast_near_frames_resolved(
+    mast_scene,
+) -> None:
     """As above (near frames see the mast, far frames lost it), masks at positions 40-60 m
     before the mast, whose own panorama is a far frame: its sky over the mast is a pixel or
     less of it and proves nothing. The far field's cap (cells beyond ``half_width_m`` at most
@@ -713,24 +729,7 @@ def test_a_far_camera_at_the_position_does_not_cap_a_mast_near_frames_resolved()
     fell under the ray-cast truth, 2.6 against 4.2 deg with support 1 in a review of the 360
     rig (seed 12, km 5.41). With the rule, no supported bin of the mast lies under the
     truth."""
-    from dataclasses import replace
-
-    track = straight_track(700.0, AZIMUTH)
-    spec = WorldSpec((Stretch("open", 100.0, 600.0, "both", {"objects_per_km": 0.0}),),
-                     catenary=True, hills=False)  # fmt: skip
-    world = World.build(track, spec, seed=2)
-    bare = World.build(track, replace(spec, catenary=False), seed=2)
-    steel = [m.name for m in MATERIALS].index("steel")
-    verts = world.vertices_m[world.faces[world.face_material == steel].ravel()]
-    proj = track.project_enu(verts)
-    one = np.abs(proj.chainage_m - 300.0) < 10.0  # the masts stand 55-65 m apart
-    mast_m = float(np.median(proj.chainage_m[one]))
-    pano = {"roof": Mount.default("roof")}
-    s_frames = np.arange(mast_m - 150.0, mast_m + 151.0, 10.0)
-    near = np.abs(s_frames - mast_m) <= 25.0
-    cam = CameraModel.equirect(720)
-    fr = ideal_frames(world, s_frames[near], cam, pano) + ideal_frames(bare, s_frames[~near],
-                                                                        cam, pano)  # fmt: skip
+    world, verts, _, one, mast_m, fr, _ = mast_scene
     s = mast_m - np.array([60.0, 50.0, 40.0])
     tm = true_masks(world, s)
     rec = Reconstructor(PARAMS).run(fr, s, world.track)
