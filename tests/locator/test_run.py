@@ -622,21 +622,22 @@ def test_a_run_located_on_the_loop_keeps_claiming_along_the_leg_beside_the_other
     assert inside[claim].all()
 
 
-class _BesideSource(FakeSource):
-    """The train ``aside_m`` to the right of the map from epoch ``from_k`` on (a branch the map
-    lacks)."""
+class _OffMapSource(FakeSource):
+    """The antenna ``right_m`` to the right of the map (a branch the map lacks) and ``up_m``
+    above it (a map whose heights are off) from epoch ``from_k`` on."""
 
-    def __init__(self, path, truth_m, aside_m, from_k):
+    def __init__(self, path, truth_m, from_k, right_m=0.0, up_m=0.0):
         super().__init__(path, truth_m)
-        self.aside_m, self.from_k = aside_m, from_k
+        self.from_k, self.right_m, self.up_m = from_k, right_m, up_m
 
     def observe(self, k, rx_ecef_m):
         x = self.path.ecef_at(self.truth_m[k])
         if k >= self.from_k:
             lat, lon, _ = ecef_to_geodetic(x)
             hd = np.radians(float(self.path.track.heading_at(self.truth_m[k])))
-            right_enu = np.array([np.cos(hd), -np.sin(hd), 0.0])
-            x = x + self.aside_m * (right_enu @ enu_rotation(lat, lon))
+            shift_enu = np.array([self.right_m * np.cos(hd), -self.right_m * np.sin(hd),
+                                  self.up_m])  # fmt: skip
+            x = x + shift_enu @ enu_rotation(lat, lon)
         rho = ranges(self.sat, x, SIGMA_M * 0.5, self.rng) + self.bias[k]
         return EpochData(self.names, self.sat, rho, {})
 
@@ -651,10 +652,10 @@ def test_a_train_beside_the_map_gets_no_claim():
                           budget=None)  # fmt: skip
     p = straight_path()
     truth = truth_run(n=40)
-    kept = run_locator(p, _BesideSource(p, truth, 15.0, 20), start_chainage_m=truth[0],
+    kept = run_locator(p, _OffMapSource(p, truth, 20, right_m=15.0), start_chainage_m=truth[0],
                        config=RunConfig(loose, trust="none", off_track_k_sigma=None))  # fmt: skip
     assert kept["claim"].iloc[20:].sum() >= 15  # without the check they stood
-    ep = run_locator(p, _BesideSource(p, truth, 15.0, 20), start_chainage_m=truth[0],
+    ep = run_locator(p, _OffMapSource(p, truth, 20, right_m=15.0), start_chainage_m=truth[0],
                      config=RunConfig(loose, trust="none"))  # fmt: skip
     assert ep["claim"].iloc[:20].all()
     assert not ep["flag_names"].iloc[:20].str.contains("OFF_TRACK").any()
@@ -665,23 +666,6 @@ def test_a_train_beside_the_map_gets_no_claim():
     assert len(off) >= 15 and np.all(np.abs(off - 15.0) < 5.0)
     with pytest.raises(ValueError, match="off_track_k_sigma"):
         RunConfig(MODEL, off_track_k_sigma=0.0)
-
-
-class _AboveSource(FakeSource):
-    """The antenna ``up_m`` above where the map puts it from epoch ``from_k`` on (a map whose
-    heights are off)."""
-
-    def __init__(self, path, truth_m, up_m, from_k):
-        super().__init__(path, truth_m)
-        self.up_m, self.from_k = up_m, from_k
-
-    def observe(self, k, rx_ecef_m):
-        x = self.path.ecef_at(self.truth_m[k])
-        if k >= self.from_k:
-            lat, lon, _ = ecef_to_geodetic(x)
-            x = x + self.up_m * (np.array([0.0, 0.0, 1.0]) @ enu_rotation(lat, lon))
-        rho = ranges(self.sat, x, SIGMA_M * 0.5, self.rng) + self.bias[k]
-        return EpochData(self.names, self.sat, rho, {})
 
 
 @pytest.mark.parametrize("up_m", [15.0, -15.0])
@@ -696,7 +680,7 @@ def test_a_map_off_in_height_gets_no_claim(up_m):
                           budget=None)  # fmt: skip
     p = straight_path()
     truth = truth_run(n=40)
-    ep = run_locator(p, _AboveSource(p, truth, up_m, 20), start_chainage_m=truth[0],
+    ep = run_locator(p, _OffMapSource(p, truth, 20, up_m=up_m), start_chainage_m=truth[0],
                      config=RunConfig(tight, trust="none"))  # fmt: skip
     assert ep["claim"].iloc[:20].all()
     np.testing.assert_allclose(ep["off_track_up_m"].iloc[:20], 0.0, atol=5.0)
