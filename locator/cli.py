@@ -384,7 +384,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if len(length)
         else "no interval claimed"
     )
-    print(f"{len(epochs)} epochs: {claim_label(cfg.error_model_caveat)} {100 * claim:.1f} %, "
+    fixed_k = cfg.locator.model.k_sigma if cfg.locator.budget is None else None
+    print(f"{len(epochs)} epochs: {claim_label(cfg.error_model_caveat, fixed_k)} "
+          f"{100 * claim:.1f} %, "
           f"{lengths} -> {folder}")
     print(_losses_text(epochs), end="")
     _say_assumed_claims(epochs)
@@ -483,6 +485,24 @@ def _refuse_other_as_phone(header: Any, declared: str, path: Any) -> None:
             "would apply its error model to every phone log; calibrate a phone-class model on "
             "phone logs (--device-gnss with --truth, or RINEX a phone wrote), or leave "
             "--receiver-class out (a model for this receiver and antenna only)"
+        )
+
+
+def _refuse_station_as_automotive(header: Any, declared: str, path: Any) -> None:
+    """An automotive-class model applies to every automotive receiver by its class alone: made
+    of a reference station's residuals (a fixed antenna in the open, often a choke ring), its
+    sigma is tighter than a car or train unit's (a review: `calibrate --receiver-class
+    automotive` on a geodetic station was accepted)."""
+    from locator.errorfit import station_evidence
+
+    why = station_evidence(header.receiver_type, header.marker_type) if declared else ""
+    if declared == "automotive" and why:
+        raise CliError(
+            f"{path}: a reference station's observations ({why}): --receiver-class automotive "
+            "would apply their error model to every automotive receiver, whose errors are "
+            "larger; calibrate an automotive-class model on automotive receivers' data, or give "
+            "--receiver-class geodetic, or leave --receiver-class out (a model for this receiver "
+            "and antenna only)"
         )
 
 
@@ -765,6 +785,7 @@ _TRUTH_REACH_M = 500.0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    from locator.run import fixed_k_of
     from locator.runio import read_run
     from locator.workflow import evaluate_folder, truth_for
 
@@ -805,7 +826,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         truth = truth_for(epochs, sim=sim, truth_csv=args.truth_csv,
                           chainage_m=args.truth_chainage)  # fmt: skip
     s = evaluate_folder(args.run, truth)
-    print(_summary_text(s, str(meta.get("config", {}).get("error_model_caveat", ""))))
+    config = meta.get("config") or {}
+    print(_summary_text(s, str(config.get("error_model_caveat", "")), fixed_k_of(config)))
     print(f"-> {Path(args.run) / 'evaluation.json'}, scored table and figures")
     return 0
 
@@ -887,7 +909,9 @@ def _check_same_track(track: Any, meta: dict[str, Any], label: str) -> None:
                        f"({meta.get('track')!r})")  # fmt: skip
 
 
-def _summary_text(s: dict[str, float], caveat: str = "") -> str:
+def _summary_text(
+    s: dict[str, float], caveat: str = "", fixed_k_sigma: float | None = None
+) -> str:
     from locator.run import claim_label
 
     lengths = (
@@ -900,7 +924,8 @@ def _summary_text(s: dict[str, float], caveat: str = "") -> str:
         f"epochs {s['epochs']:.0f}; modes: three pairs {100 * s['mode_three_pairs_share']:.1f} %, "
         f"all pairs {100 * s['mode_all_pairs_share']:.1f} %, best pair (no claim) "
         f"{100 * s['mode_best_pair_share']:.1f} %, none {100 * s['mode_none_share']:.1f} %\n"
-        f"{claim_label(caveat)} {100 * s['claim_share']:.1f} % of epochs; {lengths}\n"
+        f"{claim_label(caveat, fixed_k_sigma)} {100 * s['claim_share']:.1f} % of epochs; "
+        f"{lengths}\n"
         f"|error| median {s['abs_error_median_m']:.2f} m, p95 {s['abs_error_p95_m']:.2f} m; "
         f"HMI {s['hmi']:.0f} (before heading/odometry checks {s['hmi_fix']:.0f}); "
         f"alarmed misleading {s['mi']:.0f}"
@@ -971,6 +996,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             obs = Observations.from_rinex(path)
             _refuse_phone_as_geodetic(obs.header, cls, path)
             _refuse_other_as_phone(obs.header, cls, path)
+            _refuse_station_as_automotive(obs.header, cls, path)
             head = obs.header.approx_position_ecef_m
             if args.station:
                 x = _station_ecef_m(args.station, head, path)

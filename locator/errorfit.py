@@ -64,6 +64,7 @@ __all__ = [
     "simulated_profile",
     "simulated_residuals",
     "static_residuals",
+    "station_evidence",
     "station_residuals",
 ]
 
@@ -126,8 +127,30 @@ def static_residuals(
     return el, res
 
 
-# Receiver names or programs of smartphone logs (GnssLogger and its RINEX converters).
-_PHONE_MARKS = ("GNSSLOGGER", "GNSSTORINEX", "ANDROID", "PIXEL", "GALAXY")
+# Receiver names or programs of smartphone logs (GnssLogger and its RINEX converters, Geo++'s
+# RINEX logger, the phone makers' names that loggers copy into the receiver type).
+_PHONE_MARKS = ("GNSSLOGGER", "GNSSTORINEX", "ANDROID", "PIXEL", "GALAXY", "GEO++", "SAMSUNG",
+                "XIAOMI", "HUAWEI", "ONEPLUS", "MOTOROLA", "NEXUS")  # fmt: skip
+
+# Receiver types (IGS names, as in its rcvr_ant.tab) that only reference stations and geodetic
+# surveys carry: their residuals are a fixed, open-sky antenna's.
+_STATION_RECEIVERS = ("TRIMBLE NETR", "TRIMBLE ALLOY", "TRIMBLE 4000", "TRIMBLE 4700",
+                      "TRIMBLE 5700", "SEPT POLARX", "LEICA GR", "LEICA GMX", "LEICA RS",
+                      "LEICA SR", "JAVAD TRE", "JAVAD DELTA", "JPS LEGACY", "JPS E_GGD",
+                      "TPS NETG", "TPS NET-G", "TPS ODYSSEY", "ASHTECH UZ", "ASHTECH Z-XII",
+                      "AOA BENCHMARK", "AOA SNR", "ROGUE")  # fmt: skip
+
+
+def station_evidence(receiver_type: str, marker_type: str = "") -> str:
+    """Why a RINEX header is a reference station's or a geodetic survey's (its ``MARKER TYPE``
+    is ``GEODETIC``, or its receiver type is one only such stations carry), ``""`` when
+    nothing says so. Such data cannot stand for an automotive receiver's errors."""
+    if marker_type.strip().upper() == "GEODETIC":
+        return "MARKER TYPE GEODETIC"
+    rec = " ".join(receiver_type.upper().split())
+    if rec.startswith(_STATION_RECEIVERS):
+        return f"receiver {receiver_type.strip()!r}, a reference-station receiver"
+    return ""
 
 
 def guess_receiver_class(receiver_type: str, program: str = "") -> str:

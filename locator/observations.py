@@ -145,6 +145,8 @@ class ObsHeader:
     file_system : str
         ``"G"``, ``"R"``, ``"E"``, ``"C"``, ``"J"``, ``"S"``, ``"I"`` or ``"M"`` (mixed).
     marker_name, receiver_type, receiver_version, antenna_type, program : str
+    marker_type : str
+        RINEX 3's ``MARKER TYPE`` (``"GEODETIC"``, ``"GROUND_CRAFT"``, ...); ``""`` when absent.
     approx_position_ecef_m : ndarray, shape (3,)
         NaN when absent; all zeros in many smartphone files, meaning "unknown".
     antenna_delta_hen_m : ndarray, shape (3,)
@@ -165,6 +167,7 @@ class ObsHeader:
     receiver_version: str = ""
     antenna_type: str = ""
     program: str = ""
+    marker_type: str = ""
     approx_position_ecef_m: NDArray = field(default_factory=lambda: np.full(3, np.nan))
     antenna_delta_hen_m: NDArray = field(default_factory=lambda: np.zeros(3))
     obs_types: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
@@ -364,6 +367,8 @@ class _HeaderScan:
         kw = self.kw
         if label == "MARKER NAME":
             kw["marker_name"] = line[:60].strip()
+        elif label == "MARKER TYPE":
+            kw["marker_type"] = line[:20].strip().upper()
         elif label == "REC # / TYPE / VERS":
             kw["receiver_type"] = line[20:40].strip()
             kw["receiver_version"] = line[40:60].strip()

@@ -38,7 +38,7 @@ import dataclasses
 import functools
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import IntFlag
 from typing import Any
@@ -75,6 +75,7 @@ __all__ = [
     "RunConfig",
     "RunFlag",
     "claim_label",
+    "fixed_k_of",
     "flag_names",
     "run_locator",
 ]
@@ -109,10 +110,29 @@ ERROR_MODEL_CAVEATS = {
 """What a run's ``claim`` column means, by :attr:`RunConfig.error_model_caveat`."""
 
 
-def claim_label(caveat: str) -> str:
+def claim_label(caveat: str, fixed_k_sigma: float | None = None) -> str:
     """``"safety claim"``, or what the claims are under a caveat (:data:`ERROR_MODEL_CAVEATS`);
-    a caveat this version does not know (a run folder of a later one) is named as it is."""
-    return ERROR_MODEL_CAVEATS.get(caveat, f"claim under caveat {caveat!r} (not a safety claim)")
+    a caveat this version does not know (a run folder of a later one) is named as it is.
+
+    ``fixed_k_sigma`` is the ``k`` of a run without an integrity budget (``--k-sigma``): its
+    claims rest on a width the user chose, not on a stated risk, and are worded so (a review:
+    ``k = 2`` was called "safety claim", a risk of 0.046 per epoch with one pair).
+    """
+    label = ERROR_MODEL_CAVEATS.get(caveat, f"claim under caveat {caveat!r} (not a safety claim)")
+    if fixed_k_sigma is None or caveat not in ("", "gaussian_tail"):
+        return label
+    return label.replace("safety claim", f"claim at a fixed k = {fixed_k_sigma:g} (no integrity "
+                         "budget)", 1)  # fmt: skip
+
+
+def fixed_k_of(config: Mapping[str, Any]) -> float | None:
+    """The fixed ``k`` of a run's ``config`` (``run.json``; :meth:`RunConfig.to_dict`), None
+    when an integrity budget set the widths or an older run does not say."""
+    loc = config.get("locator") if isinstance(config, Mapping) else None
+    if not isinstance(loc, Mapping) or "budget" not in loc or loc["budget"] is not None:
+        return None
+    k = (loc.get("model") or {}).get("k_sigma")
+    return float(k) if isinstance(k, int | float) else None
 
 
 def flag_names(flags: int) -> str:

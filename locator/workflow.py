@@ -26,7 +26,7 @@ from locator.errorfit import (
 )
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
-from locator.run import RunConfig, claim_label, run_locator
+from locator.run import RunConfig, claim_label, fixed_k_of, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
@@ -418,8 +418,9 @@ def run_to_folder(
         **dict(meta or {}),
     }
     title = f"{path.track.name}: trust {config.trust}, {config.locator.width_label()}"
-    if config.error_model_caveat:  # a forced model's intervals are no safety claim: said
-        title += f"; {claim_label(config.error_model_caveat)}"
+    fixed_k = config.locator.model.k_sigma if config.locator.budget is None else None
+    if config.error_model_caveat or fixed_k is not None:  # not a plain safety claim: said
+        title += f"; {claim_label(config.error_model_caveat, fixed_k)}"
     folder = write_run(epochs, out, info, fmt, figures_title=title)
     return epochs, folder
 
@@ -557,7 +558,7 @@ def _run_rules(meta: Mapping[str, Any]) -> dict[str, str]:
     return {
         "trust": f"trust {trust}" if trust else "",
         "interval_width": str(meta.get("interval_width", "")),
-        "claims": claim_label(caveat),
+        "claims": claim_label(caveat, fixed_k_of(config) if isinstance(config, dict) else None),
     }
 
 

@@ -373,7 +373,8 @@ def balises_to_folder(
             "constellation": constellation,
             "integrity": (budget.label() if budget is not None
                           else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
-            "claims": claim_label(config.error_model_caveat),
+            "claims": claim_label(config.error_model_caveat,
+                                  None if budget is not None else config.locator.model.k_sigma),
             "captures": {k: asdict(v) for k, v in caps.items()},
             "summary": summary.to_dict(orient="records"),
             "safe_front": front, **dict(meta or {}),

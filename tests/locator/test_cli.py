@@ -299,6 +299,40 @@ def test_calibrate_takes_the_antenna_delta_and_refuses_a_phone_declared_geodetic
     assert not (tmp_path / "q.json").exists()
 
 
+def test_calibrate_refuses_a_reference_station_declared_automotive(test_data, tmp_path, capsys):
+    """A review: a geodetic station's residuals made an automotive-class model, which any
+    automotive receiver would then use by its class alone, with a station's tight sigma."""
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    base = ["calibrate", "--nav", nav, "--bound", "estimate", "--receiver-class", "automotive"]
+    assert main([*base, "--obs", str(obs), "--out", str(tmp_path / "a.json")]) == 2
+    err = capsys.readouterr().err
+    assert "'TRIMBLE 5700', a reference-station receiver" in err
+    assert "--receiver-class geodetic" in err and not (tmp_path / "a.json").exists()
+    lines = obs.read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if "REC # / TYPE / VERS" in ln)
+
+    def variant(name: str, receiver: str, marker_type: str) -> str:
+        out = list(lines)
+        out[k] = f"{'00000':<20}{receiver:<20}{'1.0':<20}REC # / TYPE / VERS\n"
+        out.insert(k, f"{marker_type:<60}MARKER TYPE\n")
+        (tmp_path / name).write_text("".join(out))
+        return str(tmp_path / name)
+
+    # an unknown receiver on a station that says it is one: refused by its MARKER TYPE
+    geo = variant("geo.05o", "UBLOX ZED-F9P", "GEODETIC")
+    assert main([*base, "--obs", geo, "--out", str(tmp_path / "b.json")]) == 2
+    assert "MARKER TYPE GEODETIC" in capsys.readouterr().err
+    # the same receiver on a vehicle: nothing says station, the user's class stands
+    car = variant("car.05o", "UBLOX ZED-F9P", "GROUND_CRAFT")
+    assert main([*base, "--obs", car, "--out", str(tmp_path / "c.json")]) == 0
+    app = json.loads((tmp_path / "c.json").read_text())["applicability"]
+    assert app["receiver_class"] == "automotive" and app["receivers"] == ["UBLOX ZED-F9P"]
+    # and the station itself may still be declared what it is
+    geodetic = [*base[:-1], "geodetic", "--obs", str(obs), "--out", str(tmp_path / "d.json")]
+    assert main(geodetic) == 0
+
+
 def test_errors_are_one_line_messages(sim_dir, tmp_path, capsys):
     # a missing trust rule, input file or source: refused by the parser, before any work
     for argv, expected in [
@@ -677,11 +711,20 @@ def test_run_draws_its_intervals_for_the_integrity_risk(sim_dir, tmp_path, capsy
     assert f"k = {norm.isf((1e-7 / 2) ** (1 / 3)):.2f} (three pairs)" in meta["interval_width"]
     assert main([*base, "--out", str(tmp_path / "d")]) == 0  # the default budget
     assert read_run(tmp_path / "d")[1]["config"]["locator"]["budget"] == {"risk_per_epoch": 1e-12}
+    capsys.readouterr()
     assert main([*base, "--k-sigma", "2", "--out", str(tmp_path / "k")]) == 0
     _, meta = read_run(tmp_path / "k")
     assert meta["config"]["locator"]["budget"] is None
     assert meta["config"]["locator"]["model"]["k_sigma"] == 2.0
-    capsys.readouterr()
+    # a width the user chose is no stated risk: its claims are not worded "safety claim"
+    out = capsys.readouterr().out
+    assert "epochs: claim at a fixed k = 2 (no integrity budget)" in out
+    assert "safety claim" not in out
+    assert main(["evaluate", str(tmp_path / "k"), "--sim", str(sim_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "claim at a fixed k = 2 (no integrity budget)" in out and "safety claim" not in out
+    assert main(["evaluate", str(tmp_path / "d"), "--sim", str(sim_dir)]) == 0
+    assert "safety claim" in capsys.readouterr().out
     for bad in (["--integrity-risk", "1e-7", "--k-sigma", "2"], ["--integrity-risk", "5"]):
         with pytest.raises(SystemExit) as exc:
             main([*base, *bad, "--out", str(tmp_path / "x")])

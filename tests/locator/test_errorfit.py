@@ -14,6 +14,7 @@ from locator.errorfit import (
     guess_receiver_class,
     model_file_parts,
     static_residuals,
+    station_evidence,
     station_residuals,
 )
 from locator.intervals import fit_error_model
@@ -70,6 +71,12 @@ def test_receiver_profiles_from_rinex_headers(test_data):
     assert guess_receiver_class(r.profile.receiver_type) == ""
     phone = read_rinex_obs(test_data / "gnss_obs" / "android_rinex_obs_pixel6_6ep.23o")
     assert guess_receiver_class(phone.header.receiver_type, phone.header.program) == "phone"
+    # what only reference stations carry, for the calibration's class check; a phone says none
+    assert "reference-station" in station_evidence(r.profile.receiver_type)
+    assert station_evidence(phone.header.receiver_type, phone.header.marker_type) == ""
+    assert station_evidence("SEPT  POLARX5") and station_evidence("u-blox F9P", "geodetic")
+    assert station_evidence("UBLOX ZED-F9P", "GROUND_CRAFT") == ""
+    assert guess_receiver_class("SM-G998B", "Geo++ RINEX Logger") == "phone"
 
 
 def _synthetic(rng, n_ep, models, name="rx"):
