@@ -18,7 +18,8 @@ stated accuracy must then cover the odometer's slip handling.
 Rejected with :class:`OdometerLogError` naming the file, the line and the fix: missing
 columns, non-finite values, time not increasing, **gaps** (a step longer than ``max_gap_s``),
 a **reversed direction** (the distance running against the direction column, or the direction
-flipping while the train moves), **impossible accelerations** (speed changing faster than the
+flipping while the train moves), distance **moving under a standstill** (direction 0 over
+unmarked cycles), **impossible accelerations** (speed changing faster than the
 configured maximum acceleration plus a tolerance, over at least a second, outside the cycles
 the log marks as slip or slide).
 """
@@ -250,13 +251,22 @@ def validate_odometer_log(
             f"is {int(direction[i]):+d} (reversed direction); check the sign convention "
             "(dist_m along the train's forward axis) or the channel order of the wheel sensor"
         )
-    still = (moving_dir == 0) & (np.abs(step) > STEP_TOLERANCE_M)
-    bad = np.flatnonzero(still)
+    # at standstill over a whole run of direction-0 cycles, not per cycle: a crawl at 0.9 m/s
+    # logged as standstill moves 0.09 m a 0.1 s cycle, under the step tolerance (a review);
+    # cycles marked as slip or slide may move with direction 0 and are left out of the sum
+    still = moving_dir == 0
+    run = np.cumsum(~still)  # one id per run of consecutive direction-0 cycles
+    net = np.where(still & ~(marked[1:] | marked[:-1]), step, 0.0)
+    _, first, inverse = np.unique(run, return_index=True, return_inverse=True)
+    moved = np.cumsum(net) - (np.cumsum(net) - net)[first][inverse]  # net distance so far
+    bad = np.flatnonzero(still & (np.abs(moved) > STEP_TOLERANCE_M))
     if len(bad):
-        i = bad[0] + 1
+        i, g = bad[0] + 1, int(first[inverse[bad[0]]])
+        since = g if still[g] else g + 1  # the row the standstill starts from
         raise OdometerLogError(
-            f"{label}, line {line(i)}: dist_m changes by {step[bad[0]]:+.3f} m but direction is "
-            "0 (standstill); give the direction of the motion (+1 forward, -1 backward)"
+            f"{label}, line {line(i)}: dist_m has moved {moved[bad[0]]:+.3f} m since line "
+            f"{line(since)} while direction is 0 (standstill); give the direction of the motion "
+            "(+1 forward, -1 backward), or mark slip and slide cycles in a slip column"
         )
     flip = (direction[1:] * direction[:-1] < 0) & (np.minimum(speed_mps[1:], speed_mps[:-1]) > 0.5)
     bad = np.flatnonzero(flip)

@@ -60,6 +60,27 @@ def test_bad_logs_name_the_line_and_the_fix(tmp_path, edit, match):
     assert str(p) in str(exc.value)
 
 
+def test_a_crawl_logged_as_standstill_is_refused_unless_marked(tmp_path):
+    """A review: direction 0 while the train crawled at 0.9 m/s passed, each 0.1 s cycle moving
+    under the step tolerance; over the standstill's run it moves metres."""
+    t = np.arange(0.0, 30.0, 0.1)
+    v = np.where((t >= 10.0) & (t < 20.0), 0.9, 0.0)
+    d = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
+    df = pd.DataFrame({"t_s": 1e9 + t, "dist_m": d, "speed_mps": v, "direction": 0})
+    p = _write(tmp_path, df)
+    # 0.1 m of net motion is reached at the third cycle of the crawl (0.045 + 0.09 m)
+    start = int(np.searchsorted(t, 10.0 - 1e-9))
+    with pytest.raises(OdometerLogError, match=rf"line {start + 3}: dist_m has moved \+0\.135 m "
+                       rf"since line {2} while direction is 0"):  # fmt: skip
+        read_odometer_log(p)
+    # the same cycles marked as slip or slide are the odometer's own business
+    read_odometer_log(_write(tmp_path, df.assign(slip=((v > 0) | (np.roll(v, -1) > 0)).astype(int)),
+                             "marked.csv"))  # fmt: skip
+    # and standing still with a wheel sensor's jitter back and forth is no motion
+    jitter = np.where(np.arange(t.size) % 2, 0.005, 0.0)  # 1.5 m of steps, none of them net
+    read_odometer_log(_write(tmp_path, df.assign(dist_m=jitter, speed_mps=0.0), "jitter.csv"))
+
+
 def test_reversal_while_moving_is_refused(tmp_path):
     df = good_frame()
     # a flipped channel order from row 120 on: direction -1 and the distance running back
@@ -106,7 +127,7 @@ def _write(tmp_path, df, name="odo.csv"):
         # moving, but direction 0
         (
             lambda df: df.assign(direction=np.where(df.index == 150, 0, df["direction"])),
-            r"line 152: dist_m changes by \+0\.500 m but direction is 0",
+            r"line 152: dist_m has moved \+0\.500 m since line 151 while direction is 0",
         ),
     ],
 )
