@@ -1058,9 +1058,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         tail = (
             f"tails checked to {m.tail_probability:.2g} (k {m.k_checked:.2f})"
             if m.tail_probability < 1
-            else "too few independent samples to check any tail: `locator run` makes no claim "
-            "under it; calibrate on more hours, days or receivers (about 200 independent samples "
-            "per system)"
+            else "too few samples to check any tail: `locator run` makes no claim under it; "
+            "calibrate on more hours, days or receivers (about 200 independent samples per "
+            "system, and at least about 650 residuals: 10 beyond a tail point in each of 6 "
+            "elevation bins)"
         ) if np.isfinite(m.tail_probability) else "no bound (estimate)"  # fmt: skip
         print(f"  {sys_} {'+'.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
               f"sin el)^2 m^2 from {m.n_residuals} residuals ({m.n_independent} independent); "

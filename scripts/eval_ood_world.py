@@ -30,7 +30,7 @@ Usage::
     PYTHONPATH=. .venv/bin/python scripts/eval_ood_world.py faults --seeds 41 42 43 \\
         --work /tmp/ood --out /tmp/ood/faults.json
     PYTHONPATH=. .venv/bin/python scripts/eval_ood_world.py sheet --work /tmp/ood \\
-        --out docs/figures/ood_worst_frames.jpg
+        --out docs/figures/ood_worst_frames.png
     # where the false trust and the lost sky are, from the runs above (no processing)
     PYTHONPATH=. .venv/bin/python scripts/eval_ood_world.py score --work /tmp/ood --out -
 """

@@ -11,7 +11,7 @@ Commands (run from the repository root, ``PYTHONPATH=.``)::
     python scripts/independent_world.py build  OUT --seed 1 --sky cloudy    # survey + truth
     python scripts/independent_world.py check  OUT                           # truth self-checks
     python scripts/independent_world.py attribute OUT MASKS                  # false trust by object
-    python scripts/independent_world.py thumbs OUT --every 10                # PNG contact sheet
+    python scripts/independent_world.py thumbs OUT --frames 0,50,100         # PNG contact sheet
 
 ``build`` writes a survey in format version 1 (survey.yaml, manifest.csv, images/, calib/, a
 copy of the line 144 track file in track/) and truth/true_masks.npz (0.5 deg bins; obstacle
