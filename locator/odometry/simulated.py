@@ -85,12 +85,18 @@ def _coverage_hint(log_t_s: NDArray, run_t_s: NDArray) -> str:
         return (f"it is offset by about the GPS-UTC leap seconds: give its times in GPS seconds "
                 f"(GPS = UTC + {leap:.0f} s on the run's date)")  # fmt: skip
     if log_t_s[0] <= run_t_s[0] + 1e-6:
-        return (f"it ends {run_t_s[-1] - log_t_s[-1]:.1f} s before the run: give the whole "
+        return (f"it ends {_seconds(run_t_s[-1] - log_t_s[-1])} s before the run: give the whole "
                 "recording")  # fmt: skip
     if log_t_s[-1] >= run_t_s[-1] - 1e-6:
-        return (f"it starts {log_t_s[0] - run_t_s[0]:.1f} s after the run: give the whole "
+        return (f"it starts {_seconds(log_t_s[0] - run_t_s[0])} s after the run: give the whole "
                 "recording")  # fmt: skip
     return "give the log recorded with the run, covering every epoch"
+
+
+def _seconds(dt_s: float) -> str:
+    """``"10.0"``, and a few significant digits below a tenth (a user trial read "ends 0.0 s
+    before the run" for a log 32 microseconds short)."""
+    return f"{dt_s:.1f}" if abs(dt_s) >= 0.05 else f"{dt_s:.2g}"
 
 
 def _truth_grid(sim: SimRun, cycle_s: float) -> tuple[int, NDArray, NDArray]:
@@ -228,8 +234,8 @@ def odometer_from_log(
     name = log.source or "the odometer log"
     if log.t_s[0] > t[0] + 1e-6 or log.t_s[-1] < t[-1] - 1e-6:
         raise OdometerLogError(
-            f"{name}: its t_s cover {log.t_s[0]:.1f}-{log.t_s[-1]:.1f} s but the run "
-            f"{t[0]:.1f}-{t[-1]:.1f} s (GPS seconds); {_coverage_hint(log.t_s, t)}"
+            f"{name}: its t_s cover {log.t_s[0]:.6f}-{log.t_s[-1]:.6f} s but the run "
+            f"{t[0]:.6f}-{t[-1]:.6f} s (GPS seconds); {_coverage_hint(log.t_s, t)}"
         )
     o, tc, true_d = _truth_grid(sim, cycle_s)
     d = log.at(t)

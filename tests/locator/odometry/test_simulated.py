@@ -50,6 +50,8 @@ def test_a_log_running_backward_on_a_forward_run_is_refused(tmp_path):
     [
         (0.0, 30.0, r"its times look relative .* add the GPS time of its first row"),
         (T0_S, 20.0, r"it ends 10\.0 s before the run"),
+        # a user trial read "ends 0.0 s before the run" for a log 32 microseconds short
+        (T0_S - 3.2e-5, 30.0, r"it ends 3\.2e-05 s before the run"),
         (T0_S + 86400.0, 30.0, r"it starts 1 day\(s\) after the run"),
         (T0_S - 18.0, 30.0, r"GPS-UTC leap seconds.*GPS = UTC \+ 18 s on the run.s date"),
     ],
