@@ -350,6 +350,10 @@ def fit_systems(
                 short.append(f"{key} {int(use.sum())} in {int(use.any(axis=1).sum())} epochs")
             continue
         for sys_ in group:
+            # a pooled fit covers only the systems it saw: a simulation's satellites never in
+            # view (QZSS in Belgium) got the pooled model and its count (a docs audit)
+            if not any(np.isfinite(_columns(d, [sys_])[1]).any() for d in data):
+                continue
             codes = sorted({c for d in data for c in d.profile.codes.get(sys_, ())})
             out[sys_] = SystemFit(key, est, ob, tuple(codes), int(ok.sum()),
                                   float(el[ok].min()), float(el[ok].max()))  # fmt: skip

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -111,6 +113,10 @@ def test_each_constellation_is_fitted_apart():
     # pooled (a simulation's systems share one law): one fit given to both
     pooled = fit_systems(data, pool_systems=True)
     assert pooled["G"].estimate == pooled["E"].estimate and pooled["G"].system == "EG"
+    # a system with satellites in the data but no residual (never in view) is not covered
+    dark = [dataclasses.replace(d, residual_m=np.where(np.array([s[0] == "E" for s in d.sats]),
+                                                       np.nan, d.residual_m)) for d in data]
+    assert set(fit_systems(dark, pool_systems=True)) == {"G"}
     with pytest.raises(ValueError, match="bound"):
         fit_systems(data, bound="maybe")
 
