@@ -106,8 +106,11 @@ class PipelineParams:
         Frames of one camera whose chainages lie within this of the next (a stop or a crawl,
         captured on time rather than distance) are merged into one view before carving: sky
         only where every one of them saw sky (:mod:`predisat.reconstruct.stops`,
-        ``docs/reconstruction.md``, section 24). Metres, >= 0; 0 merges frames at one
-        chainage only. The 10 m spacing of a distance-triggered survey merges nothing.
+        ``docs/reconstruction.md``, section 24); a longer chain (a crawl) is cut into pieces
+        spanning at most this. Metres, >= 0; 0 merges frames at one chainage only. The 10 m
+        spacing of a distance-triggered survey merges nothing; 0.2 m (the default) keeps a
+        standing train's frames together and leaves a crawl's or a video's frames, 0.25 m
+        apart and more, apart (merged, their position doubt costs sky).
     """
 
     chunk_m: float = 1000.0
@@ -123,7 +126,7 @@ class PipelineParams:
     chainage_jitter_m: float | None = None
     antenna_height_m: float | None = None
     mount_doubt_deg: float = 0.0
-    stop_gap_m: float = 0.5
+    stop_gap_m: float = 0.2
 
     def __post_init__(self) -> None:
         h = self.antenna_height_m

@@ -8,13 +8,14 @@ sky in a glass facade, a pale wall under overcast), so counted one by one they d
 fusion rank and inflate the support; and one of them with a fault of its own (a flare, a
 passer-by's reflection) carves at the default rank, where the others saw the obstacle.
 
-So the frames of one camera whose chainages lie within ``gap_m`` of the next are merged, before
-anything is carved, into one frame that calls sky only what every one of them saw as sky: it
-adds no sky a single frame would not have given, and each frame's own fault is outvoted by the
-others. The merged frame stands at the first frame's place and pose; the others' are within its
-doubts (its attitude doubt grows by the largest angle between the poses, its position doubts
-hold every frame's camera centre with its own doubts), so every direction it calls sky is sky
-from wherever the camera really stood.
+So the frames of one camera whose chainages lie within ``gap_m`` of the next, and span at most
+``gap_m`` (a crawl is cut into such pieces), are merged, before anything is carved, into one
+frame that calls sky only what every one of them saw as sky: it adds no sky a single frame
+would not have given, and each frame's own fault is outvoted by the others. The merged frame
+stands at the first frame's place and pose; the others' are within its doubts (its attitude
+doubt grows by the largest angle between the poses, its position doubts hold every frame's
+camera centre with its own doubts), so every direction it calls sky is sky from wherever the
+camera really stood.
 """
 
 from __future__ import annotations
@@ -37,16 +38,17 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
     Frames of one camera (same ``mount.side``, camera model and image size), driven the same
     way (``reverse``: a side camera of a train running the other way looks at the other side
     of the track) and with no ``view_group`` are chained in chainage order while the next lies
-    within ``gap_m`` of the previous. A window lacking a stop's first (last) frames chains the
-    rest of them alike; the merged frame then stands at the window's first frame of the stop
-    (each position is computed in one window only, so runs agree).
+    within ``gap_m`` of the previous; a chain spanning more than ``gap_m`` (a crawl) is cut at
+    its widest steps until each piece spans at most ``gap_m``. A window lacking a stop's first
+    (last) frames chains the rest of them alike; the merged frame then stands at the window's
+    first frame of the stop (each position is computed in one window only, so runs agree).
 
     Parameters
     ----------
     frames : sequence of FrameView
     gap_m : float
-        Largest chainage step, metres, between two frames of one stop (>= 0; 0 merges frames
-        at the same chainage only).
+        Largest chainage step, and span, metres, of the frames of one stop (>= 0; 0 merges
+        frames at the same chainage only).
 
     Returns
     -------
@@ -91,7 +93,15 @@ def stop_counts(side: ArrayLike, chainage_m: ArrayLike, gap_m: float) -> dict[st
 
 def _chains(s: NDArray, gap_m: float) -> list[list[int]]:
     """Indices into ``s`` (one camera's chainages) chained in chainage order while the next
-    lies within ``gap_m`` of the previous (ties in index order)."""
+    lies within ``gap_m`` of the previous (ties in index order), each chain then cut at its
+    widest steps until it spans at most ``gap_m``.
+
+    The cut keeps a crawl from chaining into one view: frames 0.1-0.4 m apart over a whole
+    approach (or a video's) chained into a view whose position doubt spans it, and every
+    position of it lost all its sky (an ideal-mask trial, 2026-12-07: 100 % sky lost against
+    17 % unmerged). The widest steps are cut first, so a standing train's frames (centimetres
+    apart) stay one view and the crawl's frames go to views of their own.
+    """
     order = np.lexsort((np.arange(s.size), s))
     runs: list[list[int]] = []
     for k in order:
@@ -99,7 +109,19 @@ def _chains(s: NDArray, gap_m: float) -> list[list[int]]:
             runs[-1].append(int(k))
         else:
             runs.append([int(k)])
-    return runs
+    out: list[list[int]] = []
+    for run in runs:
+        todo = [run]
+        while todo:
+            chain = todo.pop()
+            if s[chain[-1]] - s[chain[0]] <= gap_m:
+                out.append(chain)
+                continue
+            step = np.diff(s[chain])
+            widest = np.flatnonzero(step == step.max())
+            cut = int(widest[len(widest) // 2]) + 1  # the middle one of equal widest steps
+            todo += [chain[cut:], chain[:cut]]
+    return out
 
 
 def _check_gap(gap_m: float) -> None:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from predisat.camera.models import Mount, default_camera
+from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.step import (
     MIN_OVERLAP_DIRECTIONS,
     OffStep,
@@ -355,7 +356,7 @@ def test_process_merges_the_frames_of_a_stop(rendered, tmp_path, capsys) -> None
     err = capsys.readouterr().err
     assert "the left camera has 3 frames at 1 stop(s)" in err
     assert "the right camera has 3 frames at 1 stop(s)" in err
-    assert got.masks.provenance["params"]["stop_gap_m"] == 0.5
+    assert got.masks.provenance["params"]["stop_gap_m"] == PipelineParams().stop_gap_m
     np.testing.assert_array_equal(got.masks.mask_el_deg, base.masks.mask_el_deg)
     np.testing.assert_array_equal(got.masks.support, base.masks.support)
     markers = [json.loads(p.read_text()) for p in (tmp_path / "stop").rglob("*.json")

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from predisat.camera.models import CameraModel, Mount
 from predisat.reconstruct.carving import FrameView
+from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.stops import merge_stop_frames, stop_counts, stop_groups
 
 CAM = CameraModel.fisheye_from_fov(40, 30, 185.0)
@@ -31,18 +32,19 @@ def test_frames_of_one_camera_within_the_gap_are_one_stop() -> None:
     fr = [_frame(0.0), _frame(10.0), _frame(10.0), _frame(10.3), _frame(10.7), _frame(20.0),
           _frame(10.1, "right"), _frame(10.1, "right"), _frame(10.2, view_group="lens")]
     groups = stop_groups(fr, 0.5)
-    assert sorted(map(sorted, groups)) == [[0], [1, 2, 3, 4], [5], [6, 7], [8]]
+    # 10.0-10.7 chain (steps <= 0.5 m) but span 0.7 m: cut at the widest step
+    assert sorted(map(sorted, groups)) == [[0], [1, 2, 3], [4], [5], [6, 7], [8]]
     # 0: the same chainage only
     assert sorted(map(sorted, stop_groups(fr, 0.0))) == [[0], [1, 2], [3], [4], [5], [6, 7], [8]]
     # a window that lacks the stop's neighbours or its first frames splits nothing else
     part = [fr[i] for i in (2, 3, 4, 5)]
-    assert sorted(map(sorted, stop_groups(part, 0.5))) == [[0, 1, 2], [3]]
+    assert sorted(map(sorted, stop_groups(part, 0.5))) == [[0, 1], [2], [3]]
     with pytest.raises(ValueError, match="gap_m"):
         stop_groups(fr, -1.0)
     # the same chains from a survey's columns, counted for the run's report
     side = [f.mount.side for f in fr[:8]]
     s = [f.chainage_m for f in fr[:8]]
-    assert stop_counts(side, s, 0.5) == {"left": (4, 1), "right": (2, 1)}
+    assert stop_counts(side, s, 0.5) == {"left": (3, 1), "right": (2, 1)}
     assert stop_counts(side, s, 0.0) == {"left": (2, 1), "right": (2, 1)}
     assert stop_counts(["left"], [3.0], 0.5) == {}
 
@@ -115,7 +117,7 @@ def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
                       along_doubt_m=3.0, across_doubt_m=0.2, height_doubt_m=0.1)
 
     fr = [at(k) for k in range(200)]
-    (m,) = merge_stop_frames(fr, 0.5)
+    (m,) = merge_stop_frames(fr, 100.0)  # a gap and span that hold the whole crawl
     h0 = np.radians(fr[0].heading_deg)
     fwd, left = np.array([np.sin(h0), np.cos(h0), 0.0]), np.array([-np.cos(h0), np.sin(h0), 0.0])
     c0 = fr[0].mount.camera_position_enu(fr[0].antenna_enu_m, fr[0].heading_deg)
@@ -132,6 +134,27 @@ def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
     assert m.across_doubt_m < 0.3 * m.along_doubt_m
 
 
+def test_a_crawl_is_cut_at_its_widest_steps_and_a_standstill_stays_whole() -> None:
+    """A chain spanning more than the gap (a crawl into a stop and out of it) is cut at its
+    widest steps until each piece spans at most the gap; the frames of the standstill
+    (centimetres apart) stay one view."""
+    approach = [9.0, 9.3, 9.55, 9.75, 9.9]
+    stand = [10.0, 10.0, 10.01, 10.02, 10.0]
+    leave = [10.2, 10.45, 10.75, 11.1]
+    s = approach + stand + leave
+    fr = [_frame(x, fid=f"f{k}") for k, x in enumerate(s)]
+    groups = stop_groups(fr, 0.5)
+    assert sorted(i for g in groups for i in g) == list(range(len(s)))
+    for g in groups:
+        assert np.ptp([s[i] for i in g]) <= 0.5
+    (home,) = [g for g in groups if 5 in g]
+    assert set(range(5, 10)) <= set(home)  # the standstill whole
+    # the crawl alone, steps under the gap: no piece of more than the gap, none merged whole
+    crawl = [_frame(0.3 * k, fid=f"c{k}") for k in range(40)]
+    pieces = stop_groups(crawl, 0.5)
+    assert all(len(g) <= 2 for g in pieces) and len(pieces) >= 20
+
+
 def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
     from predisat.cli.app import build_parser
     from predisat.cli.process import attitude_params
@@ -140,6 +163,6 @@ def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
     cmd = ["process", str(tmp_path), "--out", str(tmp_path / "o")]
     args = parser.parse_args([*cmd, "--stop-gap-m", "1.5"])
     assert attitude_params(args)["stop_gap_m"] == 1.5
-    assert attitude_params(parser.parse_args(cmd))["stop_gap_m"] == 0.5
+    assert attitude_params(parser.parse_args(cmd))["stop_gap_m"] == PipelineParams().stop_gap_m
     with pytest.raises(SystemExit):
         parser.parse_args([*cmd, "--stop-gap-m", "7"])
