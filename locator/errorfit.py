@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -259,6 +259,10 @@ class SystemFit:
     codes : tuple of str
     n_residuals : int
     el_min_deg, el_max_deg : float
+    pair_factors : tuple of (receiver, antenna, factor)
+        Of a fit over several receiver x antenna pairs: each pair's own tail check against
+        the pooled overbound (:func:`_pair_checked`), the inflation it needed (1: bounded);
+        the overbound holds the largest. Empty for one pair, or an estimate.
     """
 
     system: str  # the letters fitted together ("G"; "GREC" pooled)
@@ -268,6 +272,7 @@ class SystemFit:
     n_residuals: int
     el_min_deg: float
     el_max_deg: float
+    pair_factors: tuple[tuple[str, str, float], ...] = ()
 
     @property
     def model(self) -> ErrorModel:
@@ -349,6 +354,9 @@ def fit_systems(
             if ok.any():
                 short.append(f"{key} {int(use.sum())} in {int(use.any(axis=1).sum())} epochs")
             continue
+        pair_factors: tuple[tuple[str, str, float], ...] = ()
+        if ob is not None and not pool_systems:
+            ob, pair_factors = _pair_checked(data, group, ob, n_bins, confidence)
         for sys_ in group:
             # a pooled fit covers only the systems it saw: a simulation's satellites never in
             # view (QZSS in Belgium) got the pooled model and its count (a docs audit)
@@ -356,7 +364,8 @@ def fit_systems(
                 continue
             codes = sorted({c for d in data for c in d.profile.codes.get(sys_, ())})
             out[sys_] = SystemFit(key, est, ob, tuple(codes), int(ok.sum()),
-                                  float(el[ok].min()), float(el[ok].max()))  # fmt: skip
+                                  float(el[ok].min()), float(el[ok].max()),
+                                  pair_factors)  # fmt: skip
     if not out:
         # overbound_error_model: min_tail 10 in a tail share of at most 0.32 of each bin
         need = MIN_FIT_RESIDUALS * n_bins // 6 if bound == "overbound" else 2 * n_bins
@@ -368,6 +377,45 @@ def fit_systems(
             "more or longer data sets"
         )
     return out
+
+
+def _pair_checked(
+    data: Sequence[Residuals], group: Sequence[str], ob: Overbound, n_bins: int,
+    confidence: float | None,
+) -> tuple[Overbound, tuple[tuple[str, str, float], ...]]:  # fmt: skip
+    """The pooled overbound ``ob`` inflated until it also bounds each receiver x antenna pair's
+    own tails, and each pair's factor.
+
+    A pooled tail check counts mostly the larger data set: a smaller station with heavier tails
+    stood under a bound its own residuals exceed, and the model applies to it by name (a
+    review, stops 49-50). Each pair is checked on its own against the pooled model, at the
+    same confidence (its own, smaller, sample); a pair with too few residuals for a check
+    (fewer than a fit needs, ``MIN_FIT_RESIDUALS``) is not covered by name anyway.
+    """
+    pairs: dict[tuple[str, str], list[tuple[NDArray, NDArray]]] = {}
+    for d in data:
+        if any(s_[0] in group for s_ in d.sats):
+            key = (d.profile.receiver_type, d.profile.antenna_type)
+            pairs.setdefault(key, []).append(_columns(d, group))
+    if len(pairs) < 2:
+        return ob, ()
+    out: list[tuple[str, str, float]] = []
+    factor = 1.0
+    for (rec, ant), parts in sorted(pairs.items()):
+        el, res = _stack(parts)
+        try:
+            own = overbound_error_model(el, res, ob.model, n_bins=n_bins, confidence=confidence)
+        except ValueError:  # too few residuals for a tail check of its own
+            continue
+        out.append((rec, ant, float(own.factor)))
+        factor = max(factor, float(own.factor))
+    if factor > 1.0:
+        m = ob.model
+        ob = replace(
+            ob, model=ErrorModel(m.a_m * factor, m.b_m * factor, m.min_el_deg),
+            factor=ob.factor * factor,
+        )  # fmt: skip
+    return ob, tuple(out)
 
 
 def model_file_parts(

@@ -621,6 +621,9 @@ def calibrate_to_file(
                                               ob.bin_n.tolist(), ob.bin_factor.tolist(),
                                               strict=True)],
             )  # fmt: skip
+        if f.pair_factors:  # each receiver x antenna pair's own tail check (1: bounded)
+            entry["pair_factors"] = [{"receiver": r, "antenna": a, "factor": g}
+                                     for r, a, g in f.pair_factors]  # fmt: skip
         info[f"system_{sys_}"] = entry
     el, res = _stack_residuals(data)
     table = binned_sigma(el, res)

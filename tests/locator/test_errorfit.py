@@ -19,7 +19,7 @@ from locator.errorfit import (
     station_evidence,
     station_residuals,
 )
-from locator.intervals import fit_error_model
+from locator.intervals import fit_error_model, overbound_error_model
 from locator.observations import read_rinex_obs
 from locator.sources import RinexSource
 from predisat.gnss.errormodel import ErrorModel, ReceiverProfile
@@ -119,6 +119,27 @@ def test_each_constellation_is_fitted_apart():
     assert set(fit_systems(dark, pool_systems=True)) == {"G"}
     with pytest.raises(ValueError, match="bound"):
         fit_systems(data, bound="maybe")
+
+
+def test_a_pooled_overbound_also_bounds_each_pair_on_its_own():
+    """A review (stops 49-50): a pooled tail check counted mostly the larger station, so a
+    smaller one with errors three times larger stood under a bound its own residuals exceed,
+    and the model applied to it by name. Each pair is now checked on its own."""
+    rng = np.random.default_rng(5)
+    big_law, small_law = ErrorModel(0.3, 0.5), ErrorModel(0.9, 1.5)
+    big = _synthetic(rng, 3000, {"G": big_law}, "a")
+    small = _synthetic(rng, 300, {"G": small_law}, "b")
+    (fit,) = fit_systems([big, small]).values()
+    factors = {r: g for r, _, g in fit.pair_factors}
+    assert factors["A"] == 1.0 and factors["B"] > 1.5
+    # the model bounds the small station's own tails (a check of its own, at the same
+    # confidence), and its sigma is about the small station's law, not the pool's
+    el, res = small.el_deg, small.residual_m
+    assert overbound_error_model(el, res, fit.model, confidence=0.95).factor == 1.0
+    assert float(fit.model.sigma_m(30.0)) >= 0.9 * float(small_law.sigma_m(30.0))
+    # one pair (however many files) is checked by the pool itself
+    (alone,) = fit_systems([big, _synthetic(rng, 3000, {"G": big_law}, "a")]).values()
+    assert alone.pair_factors == ()
 
 
 def test_too_few_residuals_say_how_many_and_in_which_files():
