@@ -147,16 +147,22 @@ _HEIGHT_WARN_M = 5.0  # a receiver's median height disagreement said above this,
 _MIN_WORLD_M = 100.0
 
 
+def _track_arg(args: argparse.Namespace) -> Any:
+    """``--track`` with ``--track-name``, ``--chain`` and ``--where`` (an OpenStreetMap
+    extract needs the last two, as in ``predisat synth`` and ``availability``)."""
+    return track_option(args.track, args.track_name, args.chain, args.where)
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from locator.workflow import simulate_to_folder, stop_and_go
     from predisat.availability.run import load_navigation, parse_time
     from predisat.synth.world import World, WorldSpec
 
     if args.world:
-        track = track_option(args.track, args.track_name) if args.track else None
+        track = _track_arg(args) if args.track else None
         world = World.load(args.world, track)
     else:
-        track = track_option(args.track, args.track_name)
+        track = _track_arg(args)
         seed = 0 if args.world_seed is None else args.world_seed
         if args.scenery:
             import yaml
@@ -169,6 +175,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         else:
             from predisat.synth.generate import default_scenery
 
+            if args.track and (args.from_km is None or args.to_km is None):
+                raise CliError(
+                    f"--track {args.track}: give the stretch of it to build (--from-km and "
+                    f"--to-km); the defaults ({_SIM_FROM_KM:g}-{_SIM_TO_KM:g} km) are the demo "
+                    "line 144's"
+                )
             from_km = _SIM_FROM_KM if args.from_km is None else args.from_km
             to_km = _SIM_TO_KM if args.to_km is None else args.to_km
             lo_m, hi_m = km_range(track, from_km, to_km)
@@ -259,7 +271,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             track = World.load(stored).track
         else:
-            track = track_option(args.track, args.track_name)
+            track = _track_arg(args)
         path = AntennaPath(track, args.antenna_height)
         check_track(path, sim.antenna_ecef_m, args.sim)
         if not own_track:  # the start, odometer and truth in this map's chainage
@@ -275,7 +287,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         from locator.devicegnss import DeviceGnssSource, read_device_gnss
 
-        path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
+        path = AntennaPath(_track_arg(args), args.antenna_height)
         dev = read_device_gnss(args.device_gnss)
         _report_problems(args.device_gnss, dev.problems)
         source = DeviceGnssSource(dev, args.constellation)
@@ -300,7 +312,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from locator.observations import Observations
         from locator.timetag import MIN_EVIDENCE_EPOCHS, check_time_tags
 
-        path = AntennaPath(track_option(args.track, args.track_name), args.antenna_height)
+        path = AntennaPath(_track_arg(args), args.antenna_height)
         obs = Observations.from_rinex(args.obs)
         _report_problems(args.obs, obs.problems)
         _report_no_code(args.obs, obs, args.constellation)
@@ -838,7 +850,7 @@ _TRACK_END_TOL_M = 5.0
 
 def _run_track(args: argparse.Namespace, meta: dict[str, Any], length_m: Any) -> Any:
     """``--track`` of `evaluate`, refused unless it is the run's (its length and ends)."""
-    track = track_option(args.track, args.track_name, args.chain, args.where)
+    track = _track_arg(args)
     if length_m is not None and abs(track.length_m - float(length_m)) > 1.0:
         raise CliError(f"--track {args.track}: {track.length_m:.0f} m long, but the run was "
                        f"made on track {meta.get('track')!r} of {float(length_m):.0f} m; give "
@@ -1224,8 +1236,7 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    "--to-km)")  # fmt: skip
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the demo line 144, or the world's)")
-    p.add_argument("--track-name", metavar="NAME",
-                   help="which track when the file holds several (default: the only one)")
+    add_track_selection(p)
     p.add_argument("--from-km", type=finite_float, metavar="KM",
                    help=f"start of the world to build, chainage km (default {_SIM_FROM_KM})")
     p.add_argument("--to-km", type=finite_float, metavar="KM",
@@ -1296,8 +1307,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "corrections)")
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's, or line 144)")
-    p.add_argument("--track-name", metavar="NAME",
-                   help="which track when the file holds several (default: the only one)")
+    add_track_selection(p)
     _run_arguments(p)
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet",
                    help="per-epoch table format")

@@ -687,7 +687,9 @@ class _LogProgress:
     def update(self, n: int) -> None:
         self.done += n
         tenth = (10 * self.done) // max(self.total, 1)
-        if self.desc and tenth > self.tenth and self.done < self.total:
+        # the last line too once a line was printed: a log ending on "64/71 positions (90 %)"
+        # reads as a run that stopped short (a 71-position stretch, blocks of 64)
+        if self.desc and tenth > self.tenth and (self.done < self.total or self.tenth > 0):
             self.tenth = tenth
             share = 100 * self.done // max(self.total, 1)
             took = time.perf_counter() - self.t0

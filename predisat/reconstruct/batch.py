@@ -1331,10 +1331,15 @@ def source_report(
                 "there"
             )  # fmt: skip
         elif share > 0.5:
+            fix = ("survey it again (the elevation tiles given bound none of these bins)"
+                   if masks.provenance.get("terrain") else
+                   "survey it again or give elevation tiles (--dem)")  # fmt: skip
+            where = "" if track is None or track.tunnels_m else (
+                f"; track {track.name!r} tags no tunnel: if this is one, give a track file "
+                "with its tunnel=* ways (--track)")  # fmt: skip
             lines.append(
                 f"warning: chainage {edges[j]:.0f}-{end:.0f} m: {100 * share:.0f} % of the bins "
-                "are assumed (no camera saw them); survey it again or give elevation tiles "
-                "(--dem)"
+                f"are assumed (no camera saw them); {fix}{where}"
             )
     raised = _raised_horizon_deg(masks)
     if raised is not None:

@@ -257,6 +257,16 @@ def generate_survey(
     lo, hi = max(0.0, from_m - _MARGIN_M), min(length, to_m + _MARGIN_M)
     if spec is None:
         spec = default_scenery(lo, hi, seed)
+    elif spec.extent_m[0] > from_m or spec.extent_m[1] < to_m:
+        import warnings
+
+        warnings.warn(
+            f"the scenery recipe covers chainage {spec.extent_m[0]:.0f}-{spec.extent_m[1]:.0f} m, "
+            f"not all of the survey's {from_m:.0f}-{to_m:.0f} m: frames outside it see bare "
+            "ground, and the track's tunnels are cut at the recipe's ends; extend the recipe's "
+            "stretches or the --from-km/--to-km",
+            stacklevel=2,
+        )
     world = World.build(track, spec, seed)
     with atomic_path(truth_dir / "world.npz") as tmp:
         world.save(tmp)

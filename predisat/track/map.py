@@ -274,10 +274,19 @@ class TrackMap:
                 "left empty there",
                 stacklevel=2,
             )
+
+        def written(chain: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+            # write_geojson's intervals are in the vertex order's chainage
+            length = tm.length_m
+            if flip:
+                chain = [(length - b, length - a) for a, b in chain]
+            return [(max(0.0, a), min(length, b)) for a, b in chain]
+
         return tm.with_metadata(
             kilometre_posts=kept,
-            tunnels_m=_tunnel_intervals(tm, spans),
-            bridges_m=_tunnel_intervals(tm, bridges), stations=tf.stations,
+            tunnels_m=sorted(_tunnel_intervals(tm, spans) + written(tf.tunnels_chainage_m)),
+            bridges_m=sorted(_tunnel_intervals(tm, bridges) + written(tf.bridges_chainage_m)),
+            stations=tf.stations,
         )  # fmt: skip
 
     def with_metadata(

@@ -112,6 +112,8 @@ class TrackFile:
     stations: list[Station] = field(default_factory=list)
     reverse: bool = False
     vertex_order: bool = False
+    tunnels_chainage_m: list[tuple[float, float]] = field(default_factory=list)
+    bridges_chainage_m: list[tuple[float, float]] = field(default_factory=list)
     max_post_offset_m: float = 50.0
 
     def __post_init__(self) -> None:
@@ -525,7 +527,25 @@ def parse_geojson_track(
         stations=points_as_stations(points), reverse=reverse,
         vertex_order=members.get("chainage") == _VERTEX_ORDER,
         max_post_offset_m=max_post_offset_m,
+        tunnels_chainage_m=_chainage_spans(members, "tunnels_m", path),
+        bridges_chainage_m=_chainage_spans(members, "bridges_m", path),
     )  # fmt: skip
+
+
+def _chainage_spans(members: Mapping[str, Any], key: str, path: Path) -> list[tuple[float, float]]:
+    """Tunnel or bridge chainage intervals written by :func:`write_geojson` (members
+    ``tunnels_m``, ``bridges_m``, in the vertex order's chainage), else none."""
+    if key not in members or members.get("chainage") != _VERTEX_ORDER:
+        return []
+    try:
+        spans = [(float(a), float(b)) for a, b in members[key]]
+    except (TypeError, ValueError):
+        raise TrackMapError(f"{path}: member {key!r} must be a list of [start_m, end_m] "
+                            "chainage pairs") from None  # fmt: skip
+    if any(not (np.isfinite(a) and np.isfinite(b) and a <= b) for a, b in spans):
+        raise TrackMapError(f"{path}: member {key!r} holds a pair that is not a finite "
+                            "[start_m, end_m] with start <= end")  # fmt: skip
+    return spans
 
 
 def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -> str:
@@ -753,6 +773,10 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
         "attribution": track.attribution,
         "tolerance_m": track.tolerance_m,
         "chainage": _VERTEX_ORDER,
+        # tunnels and bridges (OpenStreetMap tunnel=* / bridge=* ways) are not in the single
+        # LineString written above: kept as chainage intervals, read back by from_geojson
+        "tunnels_m": [[round(a, 3), round(b, 3)] for a, b in track.tunnels_m],
+        "bridges_m": [[round(a, 3), round(b, 3)] for a, b in track.bridges_m],
         "features": feats,
     }
     Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")

@@ -1004,6 +1004,26 @@ def test_a_standing_trains_truth_in_metres_is_not_taken_for_kilometres(sim_dir, 
     assert main(["evaluate", str(out), "--truth-csv", str(tmp_path / "rtk.csv")]) == 0
 
 
+def test_simulate_on_a_track_of_ones_own_needs_its_stretch(tmp_path, capsys, test_data):
+    """A user trial: `simulate --track` on another line, without --from-km/--to-km, built line
+    144's demo window (4.0-6.3 km) there, inside a 13 km tunnel of that line, saying only
+    "building the world (4000-6300 m)"."""
+    track = Path(__file__).parents[2] / "predisat/data/line144_track_A.geojson"
+    assert main(["simulate", "--track", str(track), "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert "--from-km and --to-km" in err and "line 144" in err
+    assert not (tmp_path / "s").exists()
+    # an OpenStreetMap extract is chosen as in `predisat synth` (the error told the trial's
+    # user to give --where and --chain, which simulate and run did not take)
+    osm = test_data / "track/riviera_andora_alassio.geojson"
+    argv = ["--track", str(osm), "--where", "usage=main", "service=", "--chain", "longest"]
+    assert main(["simulate", *argv, "--out", str(tmp_path / "s")]) == 2
+    assert "--from-km and --to-km" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert "--chain" in capsys.readouterr().out
+
+
 def test_simulate_starts_inside_the_navigation_data(sim_dir, tmp_path, test_data, capsys):
     """A user trial simulated the embedded 2020 day with a 2010 navigation file: no
     satellite, exit 0. Now the default start is 08:00 of the file's day, and a start outside

@@ -893,6 +893,13 @@ def test_source_report_warns_where_a_stretch_is_mostly_assumed() -> None:
     assert not [ln for ln in lines if ln.startswith("warning")]
     said = [ln for ln in lines if "in a tunnel" in ln]
     assert len(said) == 1 and said[0].startswith("chainage 200-400 m") and "--dem" not in said[0]
+    # a user trial: the advice to give --dem when tiles were given, and no word that the map
+    # tags no tunnel (it had lost them on the way)
+    (warned,) = [ln for ln in source_report(m, track=track) if ln.startswith("warning")]
+    assert "give elevation tiles (--dem)" in warned and "tags no tunnel" in warned
+    dem = dataclasses.replace(m, provenance={"terrain": {"source": "N43E007.hgt"}})
+    (warned,) = [ln for ln in source_report(dem) if ln.startswith("warning")]
+    assert "--dem" not in warned and "the elevation tiles given bound none" in warned
 
 
 def test_source_report_warns_where_the_observed_horizon_stands_above_the_assumed_one() -> None:

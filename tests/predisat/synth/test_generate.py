@@ -187,3 +187,15 @@ def test_rig_renders_every_camera_with_labels_matching_the_ideal_masks(tmp_path:
     with pytest.raises(ValueError, match="either rig or camera"):
         generate_survey(demo_track(), 2000.0, 2010.0, out_dir=tmp_path / "x", rig=rig,
                         camera=cab, progress=False)  # fmt: skip
+
+
+def test_a_recipe_short_of_the_survey_is_said(tmp_path: Path) -> None:
+    """A user trial: a scenery recipe ending 100 m before the survey rendered those frames on
+    bare ground and cut the line's tunnel at the recipe's end, in silence."""
+    from predisat.synth.world import Stretch, WorldSpec
+
+    spec = WorldSpec((Stretch("open", 1900.0, 2005.0),))
+    with pytest.warns(UserWarning, match=r"covers chainage 1900-2005 m, not all of the "
+                      r"survey's 2000-2010 m"):  # fmt: skip
+        generate_survey(demo_track(), 2000.0, 2010.0, spec=spec, out_dir=tmp_path, camera=CAM,
+                        progress=False, options=RenderOptions(supersample=1, ambient_rays=0))

@@ -307,6 +307,31 @@ def test_write_geojson_round_trip(demo, tmp_path):
                                [p.chainage_m for p in demo.kilometre_posts], atol=1e-4)
 
 
+def test_tunnels_and_bridges_survive_a_write_and_read(test_data, tmp_path):
+    """A user trial: write_geojson kept the line, posts and stations but not the tunnels and
+    bridges (OpenStreetMap ways, not in its one LineString), so `synth`'s survey/track.geojson
+    lost the 15 tunnels of its line, and `availability` on it no longer warned of sky trusted
+    in a tunnel. Read back in both senses: the same places on the ground."""
+    tm = TrackMap.from_geojson(test_data / RIVIERA, where=MAIN, chain="longest")
+    assert len(tm.tunnels_m) >= 2 and tm.bridges_m
+    path = tmp_path / "rt.geojson"
+    write_geojson(tm, path)
+    for reverse in (False, True):
+        back = TrackMap.from_geojson(path, reverse=reverse)
+        for got, want in ((back.tunnels_m, tm.tunnels_m), (back.bridges_m, tm.bridges_m)):
+            # each interval's ends, as places, land on the original's ends
+            lat, lon, _ = back.position_at(np.asarray(got, float).ravel())
+            s = np.sort(tm.project(lat, lon).chainage_m.reshape(-1, 2), axis=1)
+            s = s[np.argsort(s[:, 0])]
+            np.testing.assert_allclose(s, np.sort(np.asarray(want, float), axis=0), atol=0.05)
+    # the members are checked like any input
+    doc = json.loads(path.read_text())
+    doc["tunnels_m"] = [[10.0, "x"]]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackMapError, match="tunnels_m"):
+        TrackMap.from_geojson(path)
+
+
 def test_a_reversed_map_reads_back_reversed(tmp_path):
     """A user trial: a map read with reverse=True and written came back running with its
     kilometre posts again, the place at 1000 m read back at 13 171 m, in silence."""
