@@ -695,7 +695,10 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, 
     where = _stretch_text(inputs)
     span_note = (
         " Hatched bands: "
-        + ", ".join(f"{x.text} ({_km_label(inputs.track, x.start_m)})" for x in spans)
+        # both ends: a tunnel that began before the stretch was named by a start outside it
+        # (a user trial: "tunnel (chainage 22.127 km)" on a stretch of 25.0-26.4 km)
+        + ", ".join(f"{x.text} ({_km_label(inputs.track, x.start_m)} - "
+                    f"{_km_label(inputs.track, x.end_m)})" for x in spans)
         + "."
         if spans
         else ""

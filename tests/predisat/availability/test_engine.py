@@ -392,7 +392,9 @@ def test_the_inner_progress_is_plain_lines_when_stderr_is_not_a_terminal(
     err = capsys.readouterr().err
     assert "\r" not in err and "\x1b" not in err
     lines = err.splitlines()
-    assert len(lines) == 9 and lines[0].startswith("availability, masks: 1/10 positions (10 %,")
+    assert len(lines) == 10 and lines[0].startswith("availability, masks: 1/10 positions (10 %,")
+    # the last too: a log ending on "9/10 positions (90 %)" read as a run stopped short
+    assert lines[-1].startswith("availability, masks: 10/10 positions (100 %,")
     quiet = _progress(10, False, "masks")
     quiet.update(10)
     assert capsys.readouterr().err == ""

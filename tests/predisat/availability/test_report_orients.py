@@ -20,6 +20,7 @@ from predisat.availability import plots
 from predisat.availability.engine import Availability
 from predisat.availability.report import (
     ReportInputs,
+    _km_label,
     basemap_from_geojson,
     build_report,
     constellation_names,
@@ -127,6 +128,13 @@ def test_places_are_kilometre_posts_with_the_chainage_beside(html: str, track) -
     # the sky plot's place (alt text) and nowhere a bare "chainage ... (km ...)" of old
     assert f"km {km:.3f} (chainage {CH[6] / 1000:.3f} km)" in html
     assert not re.search(r"chainage [0-9.]+ km \(km", html)
+
+
+def test_hatched_bands_are_named_by_both_ends(html: str, track) -> None:
+    """A user trial: a tunnel that began before the stretch was named by its start alone,
+    a place outside the stretch."""
+    ends = [_km_label(track, x) for x in (4068.0, 4082.0)]
+    assert "Hatched bands: no sky 20 m (" in html and f"tunnel ({ends[0]} - {ends[1]})" in html
 
 
 def test_header_names_the_track_and_gives_utc_beside_gps(html: str) -> None:
