@@ -531,15 +531,22 @@ def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label:
             continue
         if span is None or ephemeris.kind != "broadcast" or system in ("J", "I"):
             continue
-        for beyond, edge, way in ((t[-1] - span[1], span[1], "after the last"),
-                                  (span[0] - t[0], span[0], "before the first")):  # fmt: skip
-            if beyond > _NAV_REACH_S:
+        for beyond, edge, way, past in (
+            (t[-1] - span[1], span[1], "after the last", t > span[1]),
+            (span[0] - t[0], span[0], "before the first", t < span[0]),
+        ):
+            # said only where satellites do drop out there: records stay valid up to 2 h
+            # beyond their reference epoch (a user trial's day from 00:00 with records from
+            # 02:00 was warned of, every satellite counted)
+            aged = reason[np.ix_(past, cols)] == Reason.OUTSIDE_VALIDITY
+            dropped = int((aged.any(axis=0) & valid[:, cols].any(axis=0)).sum())
+            if beyond > _NAV_REACH_S and dropped:
                 out.append(
                     f"the window reaches {beyond / 3600.0:.1f} h {way} {name} records of "
-                    f"{nav_label} ({_iso(edge)} GPST): its satellites drop out as the records "
-                    "in force age beyond their validity, which understates the shares there; "
-                    "give the navigation file of the adjacent day too, or a window inside "
-                    "the records (--start/--end)"
+                    f"{nav_label} ({_iso(edge)} GPST): {dropped} of its satellites drop out "
+                    "there as the records in force age beyond their validity, which "
+                    "understates the shares; give the navigation file of the adjacent day "
+                    "too, or a window inside the records (--start/--end)"
                 )
     return out
 

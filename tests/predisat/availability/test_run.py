@@ -929,11 +929,22 @@ def test_doubts_of_the_navigation_data_are_said(tmp_path: Path, masks: MaskSet,
                        match=r"cover different times \(GPS 2010-07-01.*GLONASS 2009-04-01"):
         run_availability(small, None, [gps, glo], out_dir=tmp_path / "h",
                          constellation="gps+glonass", **common)  # type: ignore[arg-type]  # fmt: skip
-    # a window 2 h past the file's last GPS records (22:00)
-    r = run_availability(small, None, [gps], out_dir=tmp_path / "p", start="2010-07-01T22:00",
+    # a window 2 h past the file's last GPS records (22:00), G05's last of 20:00: it drops
+    # out once that record is older than its 2 h of validity
+    short = tmp_path / "g05_short.10n"
+    short.write_text("".join(lines[:head] + [
+        ln for k in range(head, len(lines), 8)
+        if not (int(lines[k][:2]) == 5 and lines[k][11:17].split() == ["22", "0"])
+        for ln in lines[k:k + 8]]))  # fmt: skip
+    r = run_availability(small, None, [short], out_dir=tmp_path / "p", start="2010-07-01T22:00",
                          end="2010-07-02T00:00", **common)  # type: ignore[arg-type]  # fmt: skip
     (w,) = [w for w in r.info["warnings"] if "after the last GPS records" in w]
-    assert "drop out" in w and "adjacent day" in w
+    assert "1 of its satellites drop out" in w and "adjacent day" in w
+    # 2 h past them every record is still in force: nothing drops, nothing to say (a user
+    # trial's day from 00:00 with records from 02:00 was warned of all the same)
+    r = run_availability(small, None, [gps], out_dir=tmp_path / "p2", start="2010-07-01T22:00",
+                         end="2010-07-02T00:00", **common)  # type: ignore[arg-type]  # fmt: skip
+    assert not [w for w in r.info["warnings"] if "GPS records" in w]
     r = run_availability(small, None, [gps], out_dir=tmp_path / "q", start="2010-07-01T06:00",
                          end="2010-07-01T08:00", **common)  # type: ignore[arg-type]  # fmt: skip
     assert not [w for w in r.info["warnings"] if "records of" in w or "cross-check" in w]
