@@ -709,7 +709,8 @@ def figure(frames: pd.DataFrame, table: pd.DataFrame, paths: Sequence[Path]) -> 
     six = table["mode_three_pairs_share"].to_numpy(float) * 100
     bx.bar(x - 0.2, six, 0.4, color="#9ecae1", label="three-pair mode (>= 6 satellites)")
     bx.bar(x + 0.2, table["claim_share"].to_numpy(float) * 100, 0.4, color="#3182bd",
-           label="safety claim")  # fmt: skip
+           label="claim (a safety claim under the *_budget / *_split rules only; the "
+                 "others at a fixed k, no integrity budget)")  # fmt: skip
     for k, h in enumerate(table["hmi"].astype(int)):
         bx.text(k, 102, f"HMI {h}", ha="center", fontsize=9, color="#b2182b" if h else "k")
     bx.axhline(60.0, color="k", ls="--", lw=0.8)

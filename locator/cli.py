@@ -507,7 +507,7 @@ def _refuse_station_as_automotive(header: Any, declared: str, path: Any) -> None
     automotive` on a geodetic station was accepted)."""
     from locator.errorfit import station_evidence
 
-    why = station_evidence(header.receiver_type, header.marker_type) if declared else ""
+    why = station_evidence(header.receiver_type) if declared else ""
     if declared == "automotive" and why:
         raise CliError(
             f"{path}: a reference station's observations ({why}): --receiver-class automotive "

@@ -127,10 +127,11 @@ def static_residuals(
     return el, res
 
 
-# Receiver names or programs of smartphone logs (GnssLogger and its RINEX converters, Geo++'s
-# RINEX logger, the phone makers' names that loggers copy into the receiver type).
-_PHONE_MARKS = ("GNSSLOGGER", "GNSSTORINEX", "ANDROID", "PIXEL", "GALAXY", "GEO++", "SAMSUNG",
-                "XIAOMI", "HUAWEI", "ONEPLUS", "MOTOROLA", "NEXUS")  # fmt: skip
+# Receiver names or programs of smartphone logs (GnssLogger and its RINEX converters, the phone
+# makers' names that loggers copy into the receiver type; not Motorola, whose Oncore receivers
+# are no phones, nor Geo++, whose reference-network software writes station files).
+_PHONE_MARKS = ("GNSSLOGGER", "GNSSTORINEX", "ANDROID", "PIXEL", "GALAXY", "SAMSUNG",
+                "XIAOMI", "HUAWEI", "ONEPLUS", "NEXUS")  # fmt: skip
 
 # Receiver types (IGS names, as in its rcvr_ant.tab) that only reference stations and geodetic
 # surveys carry: their residuals are a fixed, open-sky antenna's.
@@ -141,12 +142,11 @@ _STATION_RECEIVERS = ("TRIMBLE NETR", "TRIMBLE ALLOY", "TRIMBLE 4000", "TRIMBLE 
                       "AOA BENCHMARK", "AOA SNR", "ROGUE")  # fmt: skip
 
 
-def station_evidence(receiver_type: str, marker_type: str = "") -> str:
-    """Why a RINEX header is a reference station's or a geodetic survey's (its ``MARKER TYPE``
-    is ``GEODETIC``, or its receiver type is one only such stations carry), ``""`` when
-    nothing says so. Such data cannot stand for an automotive receiver's errors."""
-    if marker_type.strip().upper() == "GEODETIC":
-        return "MARKER TYPE GEODETIC"
+def station_evidence(receiver_type: str) -> str:
+    """Why a RINEX header is a reference station's (its receiver type is one only such stations
+    carry), ``""`` when nothing says so. Such data cannot stand for an automotive receiver's
+    errors. ``MARKER TYPE GEODETIC`` alone is no evidence: it describes the monument, and an
+    automotive receiver calibrated on a surveyed pillar stands on one (a review)."""
     rec = " ".join(receiver_type.upper().split())
     if rec.startswith(_STATION_RECEIVERS):
         return f"receiver {receiver_type.strip()!r}, a reference-station receiver"

@@ -32,8 +32,14 @@ def sim_profile(sim: SimRun, constellation: str) -> ReceiverProfile:
     from locator.errorfit import simulated_profile
     from predisat.availability.satellites import select_satellites
 
-    used = select_satellites(sim.sats, constellation)
-    return simulated_profile(sorted({s[0] for s in used}))
+    # the systems the run received, not every one it carries: a pooled calibration covers
+    # only the systems that gave residuals (QZSS never in view in Belgium), and a system the
+    # run never received needs no model (a review: `run --constellation all` on the very
+    # simulation the model was calibrated on made no claim, "system J was not calibrated")
+    used = set(select_satellites(sim.sats, constellation))
+    got = sim.received.any(axis=0)
+    seen = {s[0] for s, ok in zip(sim.sats, got, strict=True) if ok and s in used}
+    return simulated_profile(sorted(seen or {s[0] for s in used}))
 
 
 def _calibrate_hint(args: argparse.Namespace) -> str:

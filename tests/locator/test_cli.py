@@ -319,15 +319,16 @@ def test_calibrate_refuses_a_reference_station_declared_automotive(test_data, tm
         (tmp_path / name).write_text("".join(out))
         return str(tmp_path / name)
 
-    # an unknown receiver on a station that says it is one: refused by its MARKER TYPE
-    geo = variant("geo.05o", "UBLOX ZED-F9P", "GEODETIC")
-    assert main([*base, "--obs", geo, "--out", str(tmp_path / "b.json")]) == 2
-    assert "MARKER TYPE GEODETIC" in capsys.readouterr().err
-    # the same receiver on a vehicle: nothing says station, the user's class stands
-    car = variant("car.05o", "UBLOX ZED-F9P", "GROUND_CRAFT")
+    # an automotive receiver on a surveyed pillar (MARKER TYPE GEODETIC: the monument's, a
+    # review): the natural way to calibrate one, accepted with the user's class
+    car = variant("car.05o", "UBLOX ZED-F9P", "GEODETIC")
     assert main([*base, "--obs", car, "--out", str(tmp_path / "c.json")]) == 0
     app = json.loads((tmp_path / "c.json").read_text())["applicability"]
     assert app["receiver_class"] == "automotive" and app["receivers"] == ["UBLOX ZED-F9P"]
+    # and a station receiver is refused whatever its marker says
+    geo = variant("geo.05o", "SEPT POLARX5", "NON_GEODETIC")
+    assert main([*base, "--obs", geo, "--out", str(tmp_path / "b.json")]) == 2
+    assert "'SEPT POLARX5', a reference-station receiver" in capsys.readouterr().err
     # and the station itself may still be declared what it is
     geodetic = [*base[:-1], "geodetic", "--obs", str(obs), "--out", str(tmp_path / "d.json")]
     assert main(geodetic) == 0
@@ -723,6 +724,9 @@ def test_run_draws_its_intervals_for_the_integrity_risk(sim_dir, tmp_path, capsy
     assert main(["evaluate", str(tmp_path / "k"), "--sim", str(sim_dir)]) == 0
     out = capsys.readouterr().out
     assert "claim at a fixed k = 2 (no integrity budget)" in out and "safety claim" not in out
+    # and what evaluation.json (and the figures' caption) records of them
+    ev = json.loads((tmp_path / "k" / "evaluation.json").read_text())
+    assert ev["claims"] == "claim at a fixed k = 2 (no integrity budget)"
     assert main(["evaluate", str(tmp_path / "d"), "--sim", str(sim_dir)]) == 0
     assert "safety claim" in capsys.readouterr().out
     for bad in (["--integrity-risk", "1e-7", "--k-sigma", "2"], ["--integrity-risk", "5"]):

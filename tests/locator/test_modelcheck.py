@@ -28,3 +28,20 @@ def test_deepest_k_is_the_widest_k_any_claimed_union_may_use() -> None:
         assert widest > IntegrityBudget(risk).k_sigma(2)  # more than the mode's nominal k
     fixed = LocatorConfig(model=IntervalModel(ErrorModel(), 2.5), budget=None)
     assert deepest_k(fixed) == 2.5
+
+
+def test_a_simulation_profile_lists_the_systems_received_not_every_one_carried():
+    """A review: a pooled calibration covers only the systems that gave residuals, so a run of
+    the same simulation with --constellation all (QZSS carried, never received) made no claim,
+    'system J was not calibrated'."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from locator.modelcheck import sim_profile
+
+    sats = ("G01", "G02", "J01", "E05")
+    received = np.array([[1, 1, 0, 0], [1, 0, 0, 1]], bool)
+    sim = SimpleNamespace(sats=sats, received=received)
+    assert sorted(sim_profile(sim, "all").codes) == ["E", "G"]
+    assert sorted(sim_profile(sim, "gps").codes) == ["G"]
