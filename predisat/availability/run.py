@@ -538,7 +538,7 @@ def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label:
             # said only where satellites do drop out there: records stay valid up to 2 h
             # beyond their reference epoch (a user trial's day from 00:00 with records from
             # 02:00 was warned of, every satellite counted)
-            aged = reason[np.ix_(past, cols)] == Reason.OUTSIDE_VALIDITY
+            aged = reason[np.ix_(past, np.asarray(cols, int))] == Reason.OUTSIDE_VALIDITY
             dropped = int((aged.any(axis=0) & valid[:, cols].any(axis=0)).sum())
             if beyond > _NAV_REACH_S and dropped:
                 out.append(
