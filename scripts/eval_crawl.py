@@ -5,15 +5,16 @@ The stop merge (docs/reconstruction.md, section 24) makes the frames of one came
 ``gap_m`` of each other one view, whose position doubt holds all of them: chained over a whole
 crawl, that view's doubt spanned the crawl and every position lost all its sky. This script
 measures, with the rig's *ideal* (ray-cast) sky masks through the reconstruction, no
-segmentation: the 10 m frames of a distance-triggered survey, the crawl's frames counted alone
-(``gap 0``), and the crawl merged at each ``--gaps`` value (a gap over the crawl's length
-merges it whole, as chaining did before the cut). Sky lost across / along the track and false
-trust against the ray-cast truth at the 10 m positions of ``[FROM, TO]``.
+segmentation: the 10 m frames of a distance-triggered survey, and the crawl merged with each
+``--merge GAP:SPAN`` (``0:0`` counts its frames alone; a span over the crawl's length, e.g.
+``0.5:1000``, merges it whole as the chaining before the cut did, with its 0.5 m step). Sky lost
+across / along the track and false trust against the ray-cast truth at the 10 m positions of
+``[FROM, TO]``.
 
 Usage::
 
     PYTHONPATH=. .venv/bin/python scripts/eval_crawl.py --from-m 7300 --to-m 7320 \\
-        --step-m 0.1 --pad-m 10 --gaps 0 0.2 0.5 100
+        --step-m 0.1 --pad-m 10 --merge 0:0 0.2:0.5 0.5:1000
 
 The world is :func:`eval_rigs.held_out_spec` of ``--seed`` over km 7.05-8.05 (the rig
 evaluation's), the rig the side fisheye pair at ``--scale``.
@@ -50,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step-m", type=float, default=0.1, help="the crawl's frame spacing")
     ap.add_argument("--pad-m", type=float, default=10.0,
                     help="the crawl runs this far beyond [FROM, TO] on each side")
-    ap.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.2, 0.5, 100.0])
+    ap.add_argument("--merge", nargs="+", default=["0:0", "0.2:0.5", "0.5:1000"],
+                    metavar="GAP:SPAN", help="stop_gap_m:stop_span_m pairs to merge the crawl with")
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--scale", type=float, default=0.5)
     a = ap.parse_args(argv)
@@ -85,8 +87,9 @@ def main(argv: list[str] | None = None) -> int:
               f"; false trust {100 * c['false_trust_all']:.4f} %", flush=True)  # fmt: skip
 
     run("frames every 10 m", base)
-    for gap in a.gaps:
-        run(f"crawl, gap {gap:g} m", merge_stop_frames(crawl, gap))
+    for pair in a.merge:
+        gap, span = (float(x) for x in pair.split(":"))
+        run(f"crawl, gap {gap:g}, span {span:g} m", merge_stop_frames(crawl, gap, span))
     return 0
 
 

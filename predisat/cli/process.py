@@ -187,6 +187,12 @@ def add_attitude_arguments(parser: argparse.ArgumentParser) -> None:
         "time) are merged into one view: sky only where all of them saw it (default "
         "%(default)s; 0: frames at one chainage only; docs/reconstruction.md, section 24)",
     )  # fmt: skip
+    parser.add_argument(
+        "--stop-span-m", type=_stop_gap_m, default=None, metavar="M",
+        help="a stop's frames spread over at most this; a longer chain (a slow crawl) is cut "
+        f"into pieces (default {PipelineParams.stop_span_m:g}, a standing train's chainage "
+        "jitter, or --stop-gap-m if larger)",
+    )  # fmt: skip
 
 
 def _stop_gap_m(text: str) -> float:
@@ -220,7 +226,18 @@ def attitude_params(args: argparse.Namespace) -> dict[str, Any]:
         "chainage_doubt_m": args.chainage_doubt_m,
         "chainage_jitter_m": args.chainage_jitter_m,
         "stop_gap_m": args.stop_gap_m,
+        "stop_span_m": _stop_span_m(args),
     }
+
+
+def _stop_span_m(args: argparse.Namespace) -> float:
+    """``--stop-span-m``, by default the library's or ``--stop-gap-m`` if larger."""
+    if args.stop_span_m is None:
+        return max(PipelineParams.stop_span_m, args.stop_gap_m)
+    if args.stop_span_m < args.stop_gap_m:
+        raise CliError(f"--stop-span-m {args.stop_span_m:g} is under --stop-gap-m "
+                       f"{args.stop_gap_m:g}: a stop spreads at least as far as one step")
+    return float(args.stop_span_m)
 
 
 def run(args: argparse.Namespace) -> ProcessResult:

@@ -103,7 +103,7 @@ from predisat.reconstruct.step import (
     step_lags,
     widen,
 )
-from predisat.reconstruct.stops import stop_counts
+from predisat.reconstruct.stops import stop_counts, stop_ids
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
 from predisat.storage import (
@@ -1134,9 +1134,14 @@ def _same_picture(
 def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     """Frames among ``need`` that show the picture of the frame before on the same side (a
     camera stuck on one picture: the same file, or the same picture re-encoded), with the
-    problem and its fix. A frame within ``params.stop_gap_m`` of chainage of the one before
-    is not compared: a train at a stop shows one picture (its frames are merged, section 24)."""
+    problem and its fix. A frame of the same stop as the one before (merged into one view,
+    section 24) is not compared: a train at a stop shows one picture. A crawl's frames, cut
+    into views of their own, are (a review: a camera frozen through a crawl 0.15 m a frame
+    was never compared, its stale picture used as 24 views over 6 m); so is a stop's frame
+    after a frozen one."""
     fr, root = plan.survey.frames, plan.survey.root
+    p = plan.params
+    stop = stop_ids(fr.side, fr.chainage_m, p.stop_gap_m, p.stop_span_m)
     prev_of: dict[int, int] = {}
     last: dict[str, int] = {}
     for i in range(len(fr.frame_id)):  # manifest order, increasing time per side
@@ -1149,7 +1154,7 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     opts = plan.survey.storage_options
     for i in need:
         j = prev_of.get(int(i))
-        if j is None or abs(fr.chainage_m[i] - fr.chainage_m[j]) <= plan.params.stop_gap_m:
+        if j is None or (stop[i] == stop[j] and int(j) not in frozen):
             continue
         image_i, image_j = join(root, str(fr.image[i])), join(root, str(fr.image[j]))
         same = _same_picture(image_i, image_j, thumbs, opts)
@@ -1586,11 +1591,12 @@ def process_survey(
     for line in _attitude_warnings(plan.provenance["attitude"]):
         _report(line, quiet=False)
     for side, (n_frames, n_stops) in stop_counts(
-        survey.frames.side, survey.frames.chainage_m, p.stop_gap_m
+        survey.frames.side, survey.frames.chainage_m, p.stop_gap_m, p.stop_span_m
     ).items():
         _report(
             f"note: the {side} camera has {n_frames} frames at {n_stops} stop(s) (within "
-            f"{p.stop_gap_m:g} m of each other, captured on time): each stop's frames are "
+            f"{p.stop_gap_m:g} m of each other and {p.stop_span_m:g} m in all, captured on "
+            "time): each stop's frames are "
             "merged into one view, sky only where all of them saw it (docs/reconstruction.md, "
             "section 24)",
             quiet=False,

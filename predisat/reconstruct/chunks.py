@@ -196,7 +196,7 @@ def run_chunk(
             )  # fmt: skip
     n_frames = len(views)
     # the frames of a stop are one view: sky only where all of them saw it (section 24)
-    views = merge_stop_frames(views, job.params.stop_gap_m)
+    views = merge_stop_frames(views, job.params.stop_gap_m, job.params.stop_span_m)
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead

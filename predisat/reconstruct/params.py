@@ -10,6 +10,7 @@ from predisat.camera.models import CameraModel
 from predisat.jsontypes import JsonDict
 from predisat.reconstruct.carving import ReconstructionParams
 from predisat.reconstruct.framecache import sky_net_sha256
+from predisat.reconstruct.stops import STOP_SPAN_M
 from predisat.sky.network import NET_METHODS
 from predisat.track.cant import CantLimits, CantTable
 
@@ -106,11 +107,15 @@ class PipelineParams:
         Frames of one camera whose chainages lie within this of the next (a stop or a crawl,
         captured on time rather than distance) are merged into one view before carving: sky
         only where every one of them saw sky (:mod:`predisat.reconstruct.stops`,
-        ``docs/reconstruction.md``, section 24); a longer chain (a crawl) is cut into pieces
-        spanning at most this. Metres, >= 0; 0 merges frames at one chainage only. The 10 m
-        spacing of a distance-triggered survey merges nothing; 0.2 m (the default) keeps a
-        standing train's frames together and leaves a crawl's or a video's frames, 0.25 m
-        apart and more, apart (merged, their position doubt costs sky).
+        ``docs/reconstruction.md``, section 24). Metres, >= 0; 0 merges frames at one
+        chainage only. The 10 m spacing of a distance-triggered survey merges nothing; 0.2 m
+        (the default) chains a standing train's frames (their chainages sorted, centimetres
+        apart) and leaves a crawl's or a video's frames 0.25 m apart and more as views of
+        their own (merged, their position doubt costs sky).
+    stop_span_m : float
+        A chain spreading over more than this (a slower crawl) is cut into pieces spreading
+        at most this; metres, in [``stop_gap_m``, 5]. 1 m (the default) holds a standing
+        train's chainage jitter of decimetres (a projected GNSS position) in one view.
     """
 
     chunk_m: float = 1000.0
@@ -127,6 +132,7 @@ class PipelineParams:
     antenna_height_m: float | None = None
     mount_doubt_deg: float = 0.0
     stop_gap_m: float = 0.2
+    stop_span_m: float = STOP_SPAN_M
 
     def __post_init__(self) -> None:
         h = self.antenna_height_m
@@ -149,6 +155,9 @@ class PipelineParams:
         if not (math.isfinite(self.stop_gap_m) and 0.0 <= self.stop_gap_m <= 5.0):
             raise ValueError(f"stop_gap_m must be a length in [0, 5] metres (frames of one "
                              f"camera closer than this are one view), got {self.stop_gap_m}")
+        if not (math.isfinite(self.stop_span_m) and self.stop_gap_m <= self.stop_span_m <= 5.0):
+            raise ValueError(f"stop_span_m must be a length in [stop_gap_m, 5] metres (the "
+                             f"longest spread of one stop's frames), got {self.stop_span_m}")
         if not (math.isfinite(self.chunk_m) and self.chunk_m > 0):
             raise ValueError(f"chunk_m must be a positive number of metres, got {self.chunk_m}")
         if not (math.isfinite(self.thin_deg) and 0.0 <= self.thin_deg < 10.0):
@@ -184,6 +193,7 @@ class PipelineParams:
             "chainage_doubt_m": self.chainage_doubt_m,
             "chainage_jitter_m": self.chainage_jitter_m,
             "stop_gap_m": self.stop_gap_m,
+            "stop_span_m": self.stop_span_m,
         }  # fmt: skip
         if self.sky_net is not None:
             # absent for the shipped network, so the run keys of earlier runs stay valid

@@ -9,7 +9,7 @@ fusion rank and inflate the support; and one of them with a fault of its own (a 
 passer-by's reflection) carves at the default rank, where the others saw the obstacle.
 
 So the frames of one camera whose chainages lie within ``gap_m`` of the next, and span at most
-``gap_m`` (a crawl is cut into such pieces), are merged, before anything is carved, into one
+``span_m`` (a crawl is cut into such pieces), are merged, before anything is carved, into one
 frame that calls sky only what every one of them saw as sky: it adds no sky a single frame
 would not have given, and each frame's own fault is outvoted by the others. The merged frame
 stands at the first frame's place and pose; the others' are within its doubts (its attitude
@@ -20,6 +20,7 @@ camera really stood.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -29,17 +30,25 @@ from numpy.typing import ArrayLike, NDArray
 from predisat.camera.models import vehicle_to_enu
 from predisat.reconstruct.carving import FrameView
 
-__all__ = ["merge_stop_frames", "stop_counts", "stop_groups"]
+__all__ = ["STOP_SPAN_M", "merge_stop_frames", "stop_counts", "stop_groups", "stop_ids"]
+
+STOP_SPAN_M = 0.5
+"""Longest chainage spread, metres, of the frames merged into one view: a standing train's
+chainages jitter by decimetres (a projected GNSS position's noise), a crawl's keep advancing;
+a longer chain is cut (:func:`_chains`). The view's position doubt spans its frames, which
+costs sky near the track, so the cut keeps it short."""
 
 
-def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
+def stop_groups(
+    frames: Sequence[FrameView], gap_m: float, span_m: float = STOP_SPAN_M
+) -> list[list[int]]:
     """Indices of the frames of each stop, in chainage order; single frames alone.
 
     Frames of one camera (same ``mount.side``, camera model and image size), driven the same
     way (``reverse``: a side camera of a train running the other way looks at the other side
     of the track) and with no ``view_group`` are chained in chainage order while the next lies
-    within ``gap_m`` of the previous; a chain spanning more than ``gap_m`` (a crawl) is cut at
-    its widest steps until each piece spans at most ``gap_m``. A window lacking a stop's first
+    within ``gap_m`` of the previous; a chain spreading over more than ``span_m`` (a crawl) is
+    cut into equal slices spreading at most ``span_m``. A window lacking a stop's first
     (last) frames chains the rest of them alike; the merged frame then stands at the window's
     first frame of the stop (each position is computed in one window only, so runs agree).
 
@@ -47,8 +56,10 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
     ----------
     frames : sequence of FrameView
     gap_m : float
-        Largest chainage step, and span, metres, of the frames of one stop (>= 0; 0 merges
-        frames at the same chainage only).
+        Largest chainage step, metres, between two frames of one stop (>= 0; 0 merges frames
+        at the same chainage only).
+    span_m : float
+        Largest chainage spread of one stop's frames, metres (>= ``gap_m``).
 
     Returns
     -------
@@ -56,7 +67,7 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
         Every index of ``frames`` exactly once; groups of one for frames not merged. Ordered by
         the first index of each group.
     """
-    _check_gap(gap_m)
+    _check_gap(gap_m, span_m)
     cams: dict[tuple[str, str, tuple[int, int], str, bool], list[int]] = {}
     groups: list[list[int]] = []
     for i, f in enumerate(frames):
@@ -67,40 +78,60 @@ def stop_groups(frames: Sequence[FrameView], gap_m: float) -> list[list[int]]:
         cams.setdefault(key, []).append(i)
     for idx in cams.values():
         s = np.array([frames[i].chainage_m for i in idx], float)
-        groups.extend([idx[k] for k in run] for run in _chains(s, gap_m))
+        groups.extend([idx[k] for k in run] for run in _chains(s, gap_m, span_m))
     return sorted(groups, key=lambda g: min(g))
 
 
-def stop_counts(side: ArrayLike, chainage_m: ArrayLike, gap_m: float) -> dict[str, tuple[int, int]]:
-    """Per camera, the frames at stops and the stops: ``{side: (n_frames, n_stops)}``.
+def stop_ids(
+    side: ArrayLike, chainage_m: ArrayLike, gap_m: float, span_m: float = STOP_SPAN_M
+) -> NDArray:
+    """The stop each row of a survey's columns is merged into: per camera (``Frames.side``),
+    the chains of :func:`stop_groups` from ``Frames.chainage_m`` (shape (n,) each).
 
-    The chains of :func:`stop_groups` from a survey's columns (``Frames.side``,
-    ``Frames.chainage_m``, shape (n,) each), for a run's report; cameras without a stop are
-    left out.
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        Per row, the smallest row index of its stop (its own index when it stands alone).
     """
-    _check_gap(gap_m)
+    _check_gap(gap_m, span_m)
     sides, s = np.asarray(side, str), np.asarray(chainage_m, float)
     if sides.shape != s.shape or s.ndim != 1:
         raise ValueError(f"side and chainage_m must be 1-D of one length, got {sides.shape} "
                          f"and {s.shape}")  # fmt: skip
-    out = {}
+    out = np.arange(s.size)
     for name in np.unique(sides):
-        runs = [r for r in _chains(s[sides == name], gap_m) if len(r) > 1]
-        if runs:
-            out[str(name)] = (sum(len(r) for r in runs), len(runs))
+        idx = np.flatnonzero(sides == name)
+        for run in _chains(s[idx], gap_m, span_m):
+            out[idx[run]] = idx[run].min()
     return out
 
 
-def _chains(s: NDArray, gap_m: float) -> list[list[int]]:
+def stop_counts(
+    side: ArrayLike, chainage_m: ArrayLike, gap_m: float, span_m: float = STOP_SPAN_M
+) -> dict[str, tuple[int, int]]:
+    """Per camera, the frames at stops and the stops: ``{side: (n_frames, n_stops)}``, from
+    :func:`stop_ids`, for a run's report; cameras without a stop are left out."""
+    ids = stop_ids(side, chainage_m, gap_m, span_m)
+    sides = np.asarray(side, str)
+    out = {}
+    for name in np.unique(sides):
+        _, n = np.unique(ids[sides == name], return_counts=True)
+        if (n > 1).any():
+            out[str(name)] = (int(n[n > 1].sum()), int((n > 1).sum()))
+    return out
+
+
+def _chains(s: NDArray, gap_m: float, span_m: float = STOP_SPAN_M) -> list[list[int]]:
     """Indices into ``s`` (one camera's chainages) chained in chainage order while the next
-    lies within ``gap_m`` of the previous (ties in index order), each chain then cut at its
-    widest steps until it spans at most ``gap_m``.
+    lies within ``gap_m`` of the previous (ties in index order), each chain spreading over
+    more than ``span_m`` then cut into the fewest equal slices of its spread that each spread
+    at most ``span_m``.
 
     The cut keeps a crawl from chaining into one view: frames 0.1-0.4 m apart over a whole
-    approach (or a video's) chained into a view whose position doubt spans it, and every
+    approach (or a video's) chained into a view whose position doubt spanned it, and every
     position of it lost all its sky (an ideal-mask trial, 2026-12-07: 100 % sky lost against
-    17 % unmerged). The widest steps are cut first, so a standing train's frames (centimetres
-    apart) stay one view and the crawl's frames go to views of their own.
+    17 % unmerged). A standing train's frames (their chainages jittering by a decimetre or
+    two) stay one view or a few large ones, while the crawl's go to short views of their own.
     """
     order = np.lexsort((np.arange(s.size), s))
     runs: list[list[int]] = []
@@ -111,25 +142,28 @@ def _chains(s: NDArray, gap_m: float) -> list[list[int]]:
             runs.append([int(k)])
     out: list[list[int]] = []
     for run in runs:
-        todo = [run]
-        while todo:
-            chain = todo.pop()
-            if s[chain[-1]] - s[chain[0]] <= gap_m:
-                out.append(chain)
-                continue
-            step = np.diff(s[chain])
-            widest = np.flatnonzero(step == step.max())
-            cut = int(widest[len(widest) // 2]) + 1  # the middle one of equal widest steps
-            todo += [chain[cut:], chain[:cut]]
+        spread = float(s[run[-1]] - s[run[0]])
+        if spread <= span_m:
+            out.append(run)
+            continue
+        # equal slices of the spread, as few as hold it: cutting at the widest steps instead
+        # shaved a jittered stop's outliers off one by one, single frames each a view again
+        n = math.ceil(spread / span_m)
+        piece = np.minimum(((s[run] - s[run[0]]) * (n / spread)).astype(int), n - 1)
+        out.extend(list(np.asarray(run)[piece == k].tolist()) for k in np.unique(piece))
     return out
 
 
-def _check_gap(gap_m: float) -> None:
+def _check_gap(gap_m: float, span_m: float) -> None:
     if not (np.isfinite(gap_m) and gap_m >= 0):
         raise ValueError(f"gap_m must be a finite distance >= 0 metres, got {gap_m}")
+    if not (np.isfinite(span_m) and span_m >= gap_m):
+        raise ValueError(f"span_m must be a finite distance >= gap_m ({gap_m} m), got {span_m}")
 
 
-def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameView]:
+def merge_stop_frames(
+    frames: Sequence[FrameView], gap_m: float, span_m: float = STOP_SPAN_M
+) -> list[FrameView]:
     """The frames with each stop's frames merged into one (:func:`stop_groups`).
 
     A merged frame's sky is the pixels every one of its frames saw as sky; its thin pixels
@@ -145,7 +179,7 @@ def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameVi
     Parameters
     ----------
     frames : sequence of FrameView
-    gap_m : float
+    gap_m, span_m : float
         See :func:`stop_groups`.
 
     Returns
@@ -154,7 +188,7 @@ def merge_stop_frames(frames: Sequence[FrameView], gap_m: float) -> list[FrameVi
         In the order of each group's first frame in ``frames``.
     """
     out: list[FrameView] = []
-    for g in stop_groups(frames, gap_m):
+    for g in stop_groups(frames, gap_m, span_m):
         if len(g) == 1:
             out.append(frames[g[0]])
             continue

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from predisat.camera.models import CameraModel, Mount
 from predisat.reconstruct.carving import FrameView
 from predisat.reconstruct.params import PipelineParams
-from predisat.reconstruct.stops import merge_stop_frames, stop_counts, stop_groups
+from predisat.reconstruct.stops import merge_stop_frames, stop_counts, stop_groups, stop_ids
 
 CAM = CameraModel.fisheye_from_fov(40, 30, 185.0)
 
@@ -31,19 +31,25 @@ def _frame(s_m: float, side: str = "left", fid: str = "", **kw) -> FrameView:
 def test_frames_of_one_camera_within_the_gap_are_one_stop() -> None:
     fr = [_frame(0.0), _frame(10.0), _frame(10.0), _frame(10.3), _frame(10.7), _frame(20.0),
           _frame(10.1, "right"), _frame(10.1, "right"), _frame(10.2, view_group="lens")]
+    # 10.0-10.7 chain (steps <= 0.5 m), spreading 0.7 m: within a span of 1 m, one stop
+    whole = [[0], [1, 2, 3, 4], [5], [6, 7], [8]]
+    assert sorted(map(sorted, stop_groups(fr, 0.5, 1.0))) == whole
+    # over the default span of 0.5 m: cut in two slices of 0.35 m
     groups = stop_groups(fr, 0.5)
-    # 10.0-10.7 chain (steps <= 0.5 m) but span 0.7 m: cut at the widest step
     assert sorted(map(sorted, groups)) == [[0], [1, 2, 3], [4], [5], [6, 7], [8]]
     # 0: the same chainage only
     assert sorted(map(sorted, stop_groups(fr, 0.0))) == [[0], [1, 2], [3], [4], [5], [6, 7], [8]]
     # a window that lacks the stop's neighbours or its first frames splits nothing else
     part = [fr[i] for i in (2, 3, 4, 5)]
-    assert sorted(map(sorted, stop_groups(part, 0.5))) == [[0, 1], [2], [3]]
+    assert sorted(map(sorted, stop_groups(part, 0.5, 1.0))) == [[0, 1, 2], [3]]
     with pytest.raises(ValueError, match="gap_m"):
         stop_groups(fr, -1.0)
+    with pytest.raises(ValueError, match="span_m"):
+        stop_groups(fr, 0.5, 0.4)
     # the same chains from a survey's columns, counted for the run's report
     side = [f.mount.side for f in fr[:8]]
     s = [f.chainage_m for f in fr[:8]]
+    assert stop_counts(side, s, 0.5, 1.0) == {"left": (4, 1), "right": (2, 1)}
     assert stop_counts(side, s, 0.5) == {"left": (3, 1), "right": (2, 1)}
     assert stop_counts(side, s, 0.0) == {"left": (2, 1), "right": (2, 1)}
     assert stop_counts(["left"], [3.0], 0.5) == {}
@@ -117,7 +123,7 @@ def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
                       along_doubt_m=3.0, across_doubt_m=0.2, height_doubt_m=0.1)
 
     fr = [at(k) for k in range(200)]
-    (m,) = merge_stop_frames(fr, 100.0)  # a gap and span that hold the whole crawl
+    (m,) = merge_stop_frames(fr, 0.5, 100.0)  # a span that holds the whole crawl
     h0 = np.radians(fr[0].heading_deg)
     fwd, left = np.array([np.sin(h0), np.cos(h0), 0.0]), np.array([-np.cos(h0), np.sin(h0), 0.0])
     c0 = fr[0].mount.camera_position_enu(fr[0].antenna_enu_m, fr[0].heading_deg)
@@ -134,25 +140,36 @@ def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
     assert m.across_doubt_m < 0.3 * m.along_doubt_m
 
 
-def test_a_crawl_is_cut_at_its_widest_steps_and_a_standstill_stays_whole() -> None:
-    """A chain spanning more than the gap (a crawl into a stop and out of it) is cut at its
-    widest steps until each piece spans at most the gap; the frames of the standstill
-    (centimetres apart) stay one view."""
+def test_a_crawl_is_cut_into_slices_and_a_standstill_stays_whole() -> None:
+    """A chain spreading over more than the span (a crawl into a stop and out of it) is cut
+    into equal slices spreading at most the span; the frames of the standstill stay one view,
+    also when their chainages jitter by a decimetre (a projected GNSS position's noise: a
+    review found a span equal to the 0.2 m gap cut such a stop of 60 frames into 6 views)."""
     approach = [9.0, 9.3, 9.55, 9.75, 9.9]
     stand = [10.0, 10.0, 10.01, 10.02, 10.0]
     leave = [10.2, 10.45, 10.75, 11.1]
     s = approach + stand + leave
     fr = [_frame(x, fid=f"f{k}") for k, x in enumerate(s)]
-    groups = stop_groups(fr, 0.5)
-    assert sorted(i for g in groups for i in g) == list(range(len(s)))
-    for g in groups:
-        assert np.ptp([s[i] for i in g]) <= 0.5
-    (home,) = [g for g in groups if 5 in g]
-    assert set(range(5, 10)) <= set(home)  # the standstill whole
-    # the crawl alone, steps under the gap: no piece of more than the gap, none merged whole
-    crawl = [_frame(0.3 * k, fid=f"c{k}") for k in range(40)]
-    pieces = stop_groups(crawl, 0.5)
-    assert all(len(g) <= 2 for g in pieces) and len(pieces) >= 20
+    for span in (0.5, 1.0):
+        groups = stop_groups(fr, 0.5, span)
+        assert sorted(i for g in groups for i in g) == list(range(len(s)))
+        assert all(np.ptp([s[i] for i in g]) <= span for g in groups)
+        (home,) = [g for g in groups if 5 in g]
+        assert set(range(5, 10)) <= set(home)  # the standstill whole
+    # a crawl, steps under the gap: no piece spreads over the span, none merged whole
+    crawl = [_frame(0.15 * k, fid=f"c{k}") for k in range(40)]
+    pieces = stop_groups(crawl, 0.2)
+    assert all(np.ptp([0.15 * i for i in g]) <= 1.0 for g in pieces) and len(pieces) >= 6
+    # a stop of 60 frames whose chainages jitter (a projected GNSS position): by default one
+    # view at 5 cm (sigma), at most two large ones at 10 cm; cutting at the widest steps had
+    # shaved its outliers off as single frames, views of their own again
+    p = PipelineParams()
+    for seed in range(20):
+        for sigma, most in ((0.05, 1), (0.1, 2)):
+            jitter = np.random.default_rng(seed).normal(500.0, sigma, 60)
+            stop = [_frame(float(x), fid=f"j{k}") for k, x in enumerate(jitter)]
+            groups = stop_groups(stop, p.stop_gap_m, p.stop_span_m)
+            assert len(groups) <= most and min(map(len, groups)) >= 5, (seed, sigma)
 
 
 def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
@@ -166,3 +183,46 @@ def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
     assert attitude_params(parser.parse_args(cmd))["stop_gap_m"] == PipelineParams().stop_gap_m
     with pytest.raises(SystemExit):
         parser.parse_args([*cmd, "--stop-gap-m", "7"])
+    # the span: the library's by default, the gap's when that is larger, never under it
+    assert attitude_params(args)["stop_span_m"] == 1.5
+    got = attitude_params(parser.parse_args(cmd))["stop_span_m"]
+    assert got == PipelineParams().stop_span_m
+    assert attitude_params(parser.parse_args([*cmd, "--stop-span-m", "2"]))["stop_span_m"] == 2.0
+    from predisat.cli.common import CliError
+
+    with pytest.raises(CliError, match=r"--stop-span-m 0\.1 is under --stop-gap-m 0\.2"):
+        attitude_params(parser.parse_args([*cmd, "--stop-span-m", "0.1"]))
+    PipelineParams(stop_gap_m=1.5, stop_span_m=1.5)
+    with pytest.raises(ValueError, match="stop_span_m"):
+        PipelineParams(stop_gap_m=1.5, stop_span_m=1.0)
+
+
+def test_a_camera_frozen_through_a_crawl_is_caught(tmp_path) -> None:
+    """A review: frames within stop_gap_m of the one before were never compared by the frozen
+    check (a stop's frames are merged), but a crawl is cut into views of their own: a camera
+    frozen through a crawl 0.15 m a frame gave its stale picture to 24 views over 6 m. Now
+    only frames of one stop go uncompared; after a frozen frame, every frame is compared."""
+    from types import SimpleNamespace
+
+    import cv2
+
+    from predisat.reconstruct.batch import _frozen_frames
+
+    pic = np.random.default_rng(0).integers(0, 256, (120, 160, 3), np.uint8)
+    cv2.imwrite(str(tmp_path / "a.png"), pic)
+    n = 40
+    frames = SimpleNamespace(
+        side=np.array(["left"] * n), chainage_m=1000.0 + 0.15 * np.arange(n),
+        image=np.array(["a.png"] * n), frame_id=np.array([f"f{i}" for i in range(n)]),
+        row=np.arange(2, n + 2),
+    )  # fmt: skip
+    plan = SimpleNamespace(survey=SimpleNamespace(frames=frames, root=tmp_path,
+                                                  storage_options=None),
+                           params=PipelineParams())  # fmt: skip
+    p = PipelineParams()
+    stop = stop_ids(frames.side, frames.chainage_m, p.stop_gap_m, p.stop_span_m)
+    assert 1 < int((stop == 0).sum()) <= 1 + p.stop_span_m / 0.15  # the first stop: fine
+    assert sorted(_frozen_frames(plan, np.arange(n))) == np.flatnonzero(stop != 0).tolist()
+    # a standing train's frames (one stop) show one picture and are not frozen
+    frames.chainage_m = 1000.0 + 0.01 * (np.arange(n) % 3)
+    assert _frozen_frames(plan, np.arange(n)) == {}
