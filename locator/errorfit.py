@@ -46,6 +46,7 @@ from predisat.gnss.errormodel import (
     IntervalModel,
     ReceiverProfile,
     SystemModel,
+    _norm,
 )
 
 if TYPE_CHECKING:
@@ -395,7 +396,9 @@ def _pair_checked(
     pairs: dict[tuple[str, str], list[tuple[NDArray, NDArray]]] = {}
     for d in data:
         if any(s_[0] in group for s_ in d.sats):
-            key = (d.profile.receiver_type, d.profile.antenna_type)
+            # the names as a run matches them (Applicability: case and blanks ignored), so a
+            # pair spelled two ways is checked on all its residuals
+            key = (_norm(d.profile.receiver_type), _norm(d.profile.antenna_type))
             pairs.setdefault(key, []).append(_columns(d, group))
     if len(pairs) < 2:
         return ob, ()
@@ -445,6 +448,12 @@ def model_file_parts(
             _, res = _columns(d, [sys_])
             n = int(np.isfinite(res).sum())
             if n:
+                # counted as a tail check counts them (epochs with >= 3 of the system's
+                # satellites): a pair whose own check could not run is then not covered by
+                # name (Applicability refuses fewer than MIN_FIT_RESIDUALS)
+                el_s = _columns(d, [sys_])[0]
+                ok = np.isfinite(res) & np.isfinite(el_s)
+                n = int((ok & (ok.sum(axis=1, keepdims=True) >= 3)).sum())
                 codes, n0 = per.get(sys_, (set(), 0))
                 per[sys_] = (codes | set(d.profile.codes.get(sys_, ())), n0 + n)
     pairs = tuple(

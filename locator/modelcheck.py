@@ -29,6 +29,8 @@ __all__ = ["calibrated_on", "deepest_k", "model_use", "sim_profile"]
 def sim_profile(sim: SimRun, constellation: str) -> ReceiverProfile:
     """The receiver profile of a simulated run: the simulated receiver with the systems of
     ``constellation`` that the run carries."""
+    import numpy as np
+
     from locator.errorfit import simulated_profile
     from predisat.availability.satellites import select_satellites
 
@@ -37,8 +39,8 @@ def sim_profile(sim: SimRun, constellation: str) -> ReceiverProfile:
     # run never received needs no model (a review: `run --constellation all` on the very
     # simulation the model was calibrated on made no claim, "system J was not calibrated")
     used = set(select_satellites(sim.sats, constellation))
-    got = sim.received.any(axis=0)
-    seen = {s[0] for s, ok in zip(sim.sats, got, strict=True) if ok and s in used}
+    got = np.flatnonzero(np.asarray(sim.received, bool).any(axis=0))
+    seen = {sim.sats[j][0] for j in got if sim.sats[j] in used}
     return simulated_profile(sorted(seen or {s[0] for s in used}))
 
 

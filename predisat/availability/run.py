@@ -475,7 +475,6 @@ def sparse_navigation(sats: SatellitePositions, nav_label: str) -> list[str]:
 
 
 _NAV_HOLE_S = 3600.0  # a satellite without usable records this long inside the window
-_NAV_REACH_S = 1800.0  # a window this far past a system's records: its satellites age out
 
 
 def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label: str) -> list[str]:
@@ -517,6 +516,7 @@ def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label:
     if t.size == 0:
         return out
     spans = _system_spans(ephemeris)
+    sat_spans = _system_spans(ephemeris, per_satellite=True)
     for system in sorted({s[0] for s in sats.sats}):
         cols = [j for j, s in enumerate(sats.sats) if s[0] == system]
         name = SYSTEM_NAMES.get(system, system)
@@ -531,16 +531,24 @@ def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label:
             continue
         if span is None or ephemeris.kind != "broadcast" or system in ("J", "I"):
             continue
-        for beyond, edge, way, past in (
-            (t[-1] - span[1], span[1], "after the last", t > span[1]),
-            (span[0] - t[0], span[0], "before the first", t < span[0]),
+        for beyond, edge, way, after in (
+            (t[-1] - span[1], span[1], "after the last", True),
+            (span[0] - t[0], span[0], "before the first", False),
         ):
             # said only where satellites do drop out there: records stay valid up to 2 h
             # beyond their reference epoch (a user trial's day from 00:00 with records from
-            # 02:00 was warned of, every satellite counted)
-            aged = reason[np.ix_(past, np.asarray(cols, int))] == Reason.OUTSIDE_VALIDITY
-            dropped = int((aged.any(axis=0) & valid[:, cols].any(axis=0)).sum())
-            if beyond > _NAV_REACH_S and dropped:
+            # 02:00 was warned of, every satellite counted). Each satellite past its own
+            # records, out or not elsewhere in the window: one satellite's next-day record
+            # moves the system's span, and the others, out all through a window past their
+            # own, went uncounted and unsaid (a review)
+            dropped = 0
+            for j in cols:
+                own = sat_spans.get(str(sats.sats[j]).upper())
+                if own is None:
+                    continue
+                past = t > own[1] if after else t < own[0]
+                dropped += bool((reason[past, j] == Reason.OUTSIDE_VALIDITY).any())
+            if beyond > 0 and dropped:
                 out.append(
                     f"the window reaches {beyond / 3600.0:.1f} h {way} {name} records of "
                     f"{nav_label} ({_iso(edge)} GPST): {dropped} of its satellites drop out "
@@ -551,14 +559,17 @@ def navigation_doubts(sats: SatellitePositions, ephemeris: Ephemeris, nav_label:
     return out
 
 
-def _system_spans(ephemeris: Ephemeris) -> dict[str, tuple[float, float]]:
+def _system_spans(
+    ephemeris: Ephemeris, per_satellite: bool = False
+) -> dict[str, tuple[float, float]]:
     """First and last reference epoch of each system's broadcast records (empty for SP3 and
-    TLE), ``gps_s``."""
+    TLE), ``gps_s``; of each satellite's with ``per_satellite``."""
     out: dict[str, tuple[float, float]] = {}
     for rec in (ephemeris.kepler, ephemeris.glonass):
         if rec is None or not len(rec):
             continue
-        letter = np.array([str(x)[:1].upper() for x in rec.sat])
+        letter = np.array([str(x).upper() if per_satellite else str(x)[:1].upper()
+                           for x in rec.sat])  # fmt: skip
         for system in np.unique(letter).tolist():
             ref = rec.ref_gps_s[letter == system]
             out[system] = (float(ref.min()), float(ref.max()))

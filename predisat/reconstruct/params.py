@@ -114,7 +114,7 @@ class PipelineParams:
         their own (merged, their position doubt costs sky).
     stop_span_m : float
         A chain spreading over more than this (a slower crawl) is cut into pieces spreading
-        at most this; metres, in [``stop_gap_m``, 5]. 1 m (the default) holds a standing
+        at most this; metres, in [``stop_gap_m``, 5]. 0.5 m (the default) holds a standing
         train's chainage jitter of decimetres (a projected GNSS position) in one view.
     """
 

@@ -136,14 +136,16 @@ def _chains(s: NDArray, gap_m: float, span_m: float = STOP_SPAN_M) -> list[list[
     order = np.lexsort((np.arange(s.size), s))
     runs: list[list[int]] = []
     for k in order:
-        if runs and s[k] - s[runs[-1][-1]] <= gap_m:
+        if not np.isfinite(s[k]):  # off the track (NaN): a view of its own, not a crash
+            runs.append([int(k)])
+        elif runs and s[k] - s[runs[-1][-1]] <= gap_m:
             runs[-1].append(int(k))
         else:
             runs.append([int(k)])
     out: list[list[int]] = []
     for run in runs:
         spread = float(s[run[-1]] - s[run[0]])
-        if spread <= span_m:
+        if not spread > span_m:  # NaN: a frame alone
             out.append(run)
             continue
         # equal slices of the spread, as few as hold it: cutting at the widest steps instead

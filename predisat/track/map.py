@@ -278,6 +278,21 @@ class TrackMap:
         def written(chain: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
             # write_geojson's intervals are in the vertex order's chainage
             length = tm.length_m
+            if not chain:
+                return []
+            was = tf.chainage_length_m
+            if was is not None and abs(was - length) > 0.5:
+                raise TrackMapError(
+                    f"{tf.path}: its tunnels_m/bridges_m were written for a line {was:.3f} m "
+                    f"long, its line is {length:.3f} m: the line was edited since, and the "
+                    "intervals would stand elsewhere; write the map again, or remove them"
+                )
+            off = [(a, b) for a, b in chain if b < -0.01 or a > length + 0.01]
+            if off:
+                raise TrackMapError(
+                    f"{tf.path}: tunnels_m/bridges_m hold {off[0]} outside its line (0 to "
+                    f"{length:.3f} m); write the map again, or remove them"
+                )
             if flip:
                 chain = [(length - b, length - a) for a, b in chain]
             return [(max(0.0, a), min(length, b)) for a, b in chain]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -114,6 +115,7 @@ class TrackFile:
     vertex_order: bool = False
     tunnels_chainage_m: list[tuple[float, float]] = field(default_factory=list)
     bridges_chainage_m: list[tuple[float, float]] = field(default_factory=list)
+    chainage_length_m: float | None = None
     max_post_offset_m: float = 50.0
 
     def __post_init__(self) -> None:
@@ -528,6 +530,9 @@ def parse_geojson_track(
         vertex_order=members.get("chainage") == _VERTEX_ORDER,
         max_post_offset_m=max_post_offset_m,
         tunnels_chainage_m=_chainage_spans(members, "tunnels_m", path),
+        chainage_length_m=(float(members["chainage_length_m"])
+                           if isinstance(members.get("chainage_length_m"), int | float)
+                           else None),
         bridges_chainage_m=_chainage_spans(members, "bridges_m", path),
     )  # fmt: skip
 
@@ -535,8 +540,16 @@ def parse_geojson_track(
 def _chainage_spans(members: Mapping[str, Any], key: str, path: Path) -> list[tuple[float, float]]:
     """Tunnel or bridge chainage intervals written by :func:`write_geojson` (members
     ``tunnels_m``, ``bridges_m``, in the vertex order's chainage), else none."""
-    if key not in members or members.get("chainage") != _VERTEX_ORDER:
+    if key not in members:
         return []
+    if members.get("chainage") != _VERTEX_ORDER:
+        # the intervals mean nothing in another chainage: dropped in silence, the tunnels
+        # were lost (a review)
+        raise TrackMapError(
+            f"{path}: member {key!r} is in the vertex order's chainage, but the file lacks "
+            f'"chainage": "{_VERTEX_ORDER}" (as write_geojson writes it): restore it, or '
+            "remove the member"
+        )
     try:
         spans = [(float(a), float(b)) for a, b in members[key]]
     except (TypeError, ValueError):
@@ -546,6 +559,10 @@ def _chainage_spans(members: Mapping[str, Any], key: str, path: Path) -> list[tu
         raise TrackMapError(f"{path}: member {key!r} holds a pair that is not a finite "
                             "[start_m, end_m] with start <= end")  # fmt: skip
     return spans
+
+
+def _mm(x: float, rnd: Any) -> float:
+    return float(rnd(round(x * 1000.0, 6)) / 1000.0)
 
 
 def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -> str:
@@ -775,8 +792,11 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
         "chainage": _VERTEX_ORDER,
         # tunnels and bridges (OpenStreetMap tunnel=* / bridge=* ways) are not in the single
         # LineString written above: kept as chainage intervals, read back by from_geojson
-        "tunnels_m": [[round(a, 3), round(b, 3)] for a, b in track.tunnels_m],
-        "bridges_m": [[round(a, 3), round(b, 3)] for a, b in track.bridges_m],
+        # rounded outwards: a tunnel to the map's end stopped 0.4 mm short of it
+        "tunnels_m": [[_mm(a, math.floor), _mm(b, math.ceil)] for a, b in track.tunnels_m],
+        "bridges_m": [[_mm(a, math.floor), _mm(b, math.ceil)] for a, b in track.bridges_m],
+        # the line the intervals were written for: a line edited since misplaces them
+        "chainage_length_m": round(track.length_m, 3),
         "features": feats,
     }
     Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")

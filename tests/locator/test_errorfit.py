@@ -142,6 +142,29 @@ def test_a_pooled_overbound_also_bounds_each_pair_on_its_own():
     assert alone.pair_factors == ()
 
 
+def test_a_pair_too_small_for_its_own_check_is_not_covered_by_name():
+    """A review: a pair whose own tail check could not run (residuals in epochs of < 3
+    satellites, or its files spelling its receiver two ways) was skipped, yet a run took the
+    model for it by name, 2.3x under its errors."""
+    import dataclasses
+
+    rng = np.random.default_rng(5)
+    big = _synthetic(rng, 3000, {"G": ErrorModel(0.3, 0.5)}, "a")
+    small_law = ErrorModel(0.9, 1.5)
+    prof = ReceiverProfile("B", "ANT", {"G": ("C1C",)})
+    s = _synthetic(rng, 40, {"G": small_law}, "b")
+    res = s.residual_m.copy()
+    res[20:, 2:] = np.nan  # 200 finite residuals, 160 in epochs of >= 3 satellites
+    data = [big, dataclasses.replace(s, residual_m=res)]
+    fits = fit_systems(data)
+    _, systems, app = model_file_parts(fits, data, k_sigma=2.0, receiver_class="geodetic")
+    assert app.mismatches(prof, systems)
+    s1, s2 = (_synthetic(rng, 15, {"G": small_law}, "b") for _ in range(2))
+    s2 = dataclasses.replace(s2, profile=dataclasses.replace(s2.profile, receiver_type="b "))
+    (fit,) = fit_systems([big, s1, s2]).values()
+    assert {r: g for r, _, g in fit.pair_factors}["B"] > 1.5
+
+
 def test_too_few_residuals_say_how_many_and_in_which_files():
     rng = np.random.default_rng(5)
     data = [_synthetic(rng, 6, {"R": ErrorModel(1.0, 1.0)}, "glonass_station")]
@@ -176,9 +199,10 @@ def test_a_pooled_file_records_each_receiver_antenna_pair_and_the_common_elevati
                 for d in (a, b))  # fmt: skip
     assert app.el_max_deg == pytest.approx(g_max) and app.el_max_deg <= 60.0
 
-    def count(d, sys_):
+    def count(d, sys_):  # residuals a tail check can use: epochs with >= 3 of the system
         cols = np.array([s[0] == sys_ for s in d.sats])
-        return int(np.isfinite(d.residual_m[:, cols]).sum())
+        ok = np.isfinite(d.residual_m[:, cols])
+        return int((ok & (ok.sum(axis=1, keepdims=True) >= 3)).sum())
 
     assert app.pairs == (
         ("A", "ANT", (("E", ("C1C",), count(a, "E")), ("G", ("C1C",), count(a, "G")))),

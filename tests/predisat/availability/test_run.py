@@ -1019,3 +1019,30 @@ def test_a_station_file_is_not_sparse_for_satellites_below_its_horizon_in_a_shor
     lost = (np.asarray(sats.status.reason) == Reason.OUTSIDE_VALIDITY).any(axis=0)
     assert lost.any()  # satellites with records, not valid in the window
     assert not [w for w in r.info["warnings"] if "understated" in w]
+
+
+def test_satellites_out_all_through_a_window_past_their_records_are_said() -> None:
+    """A review: one satellite's next-day 00:00 record moved the system's span, so the others,
+    past their own 22:00 records and out all through a 00:30-02:00 window, were counted
+    nowhere (the count needed them valid elsewhere in the window) and nothing was said."""
+    from types import SimpleNamespace as NS
+
+    from predisat.availability.run import navigation_doubts
+    from predisat.gnss.ephemeris import Reason
+
+    t = np.arange(88200.0, 93600.0 + 1, 300.0)
+    reason = np.full((t.size, 4), int(Reason.OUTSIDE_VALIDITY))
+    reason[:, 0] = int(Reason.OK)
+
+    class Rec:
+        sat = np.array(["G01", "G02", "G03", "G04", "G01"])
+        ref_gps_s = np.array([79200.0] * 4 + [86400.0])
+
+        def __len__(self) -> int:
+            return 5
+
+    sats = NS(gps_s=t, valid=reason == int(Reason.OK), status=NS(reason=reason),
+              sats=["G01", "G02", "G03", "G04"])  # fmt: skip
+    eph = NS(kepler=Rec(), glonass=None, kind="broadcast")
+    (w,) = navigation_doubts(sats, eph, "brdc")  # type: ignore[arg-type]
+    assert "3 of its satellites drop out" in w

@@ -226,3 +226,11 @@ def test_a_camera_frozen_through_a_crawl_is_caught(tmp_path) -> None:
     # a standing train's frames (one stop) show one picture and are not frozen
     frames.chainage_m = 1000.0 + 0.01 * (np.arange(n) % 3)
     assert _frozen_frames(plan, np.arange(n)) == {}
+
+
+def test_a_frame_off_the_track_stands_alone() -> None:
+    """A review: a NaN chainage (a frame off the track) made the equal slices' count NaN and
+    stop_ids / stop_counts raised (before the cut, it stood alone)."""
+    s = [1000.0, 1000.1, float("nan"), float("nan"), 1005.0]
+    assert stop_ids(["left"] * 5, s, 0.2).tolist() == [0, 0, 2, 3, 4]
+    assert stop_counts(["left"] * 5, s, 0.2) == {"left": (2, 1)}

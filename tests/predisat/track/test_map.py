@@ -785,3 +785,28 @@ def test_a_track_with_its_coordinates_swapped_lies_at_sea_and_is_refused(tmp_pat
     lat, lon = straight_latlon(2000.0, 40.0, 100.0, start=(35.155, 139.605))
     rows = "\n".join(f"{a:.9f},{o:.9f}" for a, o in zip(lat, lon, strict=True))
     assert TrackMap.from_csv(write(tmp_path, "coast.csv", "lat,lon\n" + rows + "\n")).length_m > 0
+
+
+def test_written_tunnels_are_refused_where_they_cannot_stand(test_data, tmp_path):
+    """A review: tunnels_m read back past the line's end (inverted by the clamp), dropped in
+    silence without the "chainage" member, shifted in silence on a line trimmed after writing;
+    and a tunnel to the map's end stopped 0.4 mm short of it (rounded to the mm)."""
+    tm = TrackMap.from_geojson(test_data / RIVIERA, where=MAIN, chain="longest")
+    path = tmp_path / "rt.geojson"
+    write_geojson(tm, path)
+    back = TrackMap.from_geojson(path)
+    assert back.in_tunnel([back.length_m]).all() == tm.in_tunnel([tm.length_m]).all()
+    assert TrackMap.from_geojson(path, reverse=True).in_tunnel([0.0]).all() == bool(
+        tm.in_tunnel([tm.length_m]).all())
+    good = json.loads(path.read_text())
+    for edit, match in (
+        (lambda d: d["tunnels_m"].append([tm.length_m + 100, tm.length_m + 200]), "outside"),
+        (lambda d: d.pop("chainage"), "chainage"),
+        (lambda d: d["features"][0]["geometry"].update(
+            coordinates=d["features"][0]["geometry"]["coordinates"][5:]), "edited"),
+    ):
+        doc = json.loads(json.dumps(good))
+        edit(doc)
+        path.write_text(json.dumps(doc))
+        with pytest.raises(TrackMapError, match=match):
+            TrackMap.from_geojson(path)
