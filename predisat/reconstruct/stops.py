@@ -49,8 +49,9 @@ def stop_groups(
     of the track) and with no ``view_group`` are chained in chainage order while the next lies
     within ``gap_m`` of the previous; a chain spreading over more than ``span_m`` (a crawl) is
     cut into equal slices spreading at most ``span_m``. A window lacking a stop's first
-    (last) frames chains the rest of them alike; the merged frame then stands at the window's
-    first frame of the stop (each position is computed in one window only, so runs agree).
+    (last) frames chains the rest of them alike, but a crawl's slices may fall otherwise
+    there than over the whole survey (each position is computed in one window only, so
+    serial and Dask runs agree; the frozen-camera check takes the survey's slices).
 
     Parameters
     ----------
