@@ -46,7 +46,7 @@ from predisat.gnss.errormodel import (
     IntervalModel,
     ReceiverProfile,
     SystemModel,
-    _norm,
+    name_key,
 )
 
 if TYPE_CHECKING:
@@ -398,7 +398,7 @@ def _pair_checked(
         if any(s_[0] in group for s_ in d.sats):
             # the names as a run matches them (Applicability: case and blanks ignored), so a
             # pair spelled two ways is checked on all its residuals
-            key = (_norm(d.profile.receiver_type), _norm(d.profile.antenna_type))
+            key = (name_key(d.profile.receiver_type), name_key(d.profile.antenna_type))
             pairs.setdefault(key, []).append(_columns(d, group))
     if len(pairs) < 2:
         return ob, ()

@@ -45,6 +45,7 @@ __all__ = [
     "ReceiverProfile",
     "SystemModel",
     "default_model_file",
+    "name_key",
     "read_error_model",
     "read_error_model_file",
     "write_error_model",
@@ -142,8 +143,9 @@ class IntervalModel:
         return cls(error or ErrorModel(), float(norm.isf(risk_per_pair / 2.0)))
 
 
-def _norm(text: str) -> str:
-    """Receiver and antenna names compared without case and surrounding blanks."""
+def name_key(text: str) -> str:
+    """A receiver or antenna name as the model's applicability compares it: without case and
+    with its blanks collapsed (``"sept  polarx5 "`` -> ``"SEPT POLARX5"``)."""
     return " ".join(str(text).upper().split())
 
 
@@ -307,7 +309,7 @@ class Applicability:
                     "(a file of an older locator): calibrate again with `locator calibrate`"
                 ]
             return []
-        mine = [p for p in self.pairs if _norm(p[0]) == rx and _norm(p[1]) == ant]
+        mine = [p for p in self.pairs if name_key(p[0]) == rx and name_key(p[1]) == ant]
         if not mine:
             held = "; ".join(f"{r} / {a}" for r, a, _ in self.pairs)
             return [
@@ -346,17 +348,17 @@ class Applicability:
         (``tail_probability < 1``); an estimate is not an overbound; the processing must match.
         """
         why = []
-        rx, ant = _norm(profile.receiver_type), _norm(profile.antenna_type)
+        rx, ant = name_key(profile.receiver_type), name_key(profile.antenna_type)
         by_class = bool(self.receiver_class) and profile.receiver_class == self.receiver_class
         if not by_class:
-            known = {_norm(r) for r in self.receivers} - _UNKNOWN
+            known = {name_key(r) for r in self.receivers} - _UNKNOWN
             if rx in _UNKNOWN or rx not in known:
                 why.append(
                     f"receiver {profile.receiver_type or 'unknown'!r} is not among the "
                     f"calibrated {sorted(self.receivers)}"
                     + (f" nor of class {self.receiver_class!r}" if self.receiver_class else "")
                 )
-            ants = {_norm(a) for a in self.antennas} - _UNKNOWN
+            ants = {name_key(a) for a in self.antennas} - _UNKNOWN
             if ant in _UNKNOWN or ant not in ants:
                 why.append(
                     f"antenna {profile.antenna_type or 'unknown'!r} is not among the calibrated "
