@@ -1058,13 +1058,18 @@ def test_process_says_when_a_pair_of_cameras_is_calibrated_unlike(tmp_path) -> N
     assert len(camera_pair_warnings(survey(fish, wider))) == 1
 
 
-def test_a_stopped_rerun_withdraws_the_previous_masks(survey_dir: Path, tmp_path: Path) -> None:
+def test_a_stopped_rerun_withdraws_the_previous_masks(
+    survey_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A user trial: a corrected survey's rerun, stopped after its first chunk, left the wrong
     run's masks and record in the folder, read with exit 0 (0.34 % false trust). A rerun that
     is not the published run withdraws them before any work; the same run's rerun keeps
     them."""
     from predisat.masks.fileformat import MaskFileError
 
+    # the rerun publishes again: its created_utc, pinned, lest two runs a second apart differ
+    # (a CI run under load failed on the timestamp's last digit)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
     out = tmp_path / "masks"
     process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
     before = (out / "masks.parquet").read_bytes()
