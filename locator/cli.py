@@ -396,8 +396,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if len(length)
         else "no interval claimed"
     )
-    fixed_k = cfg.locator.model.k_sigma if cfg.locator.budget is None else None
-    print(f"{len(epochs)} epochs: {claim_label(cfg.error_model_caveat, fixed_k)} "
+    what = claim_label(cfg.error_model_caveat, cfg.locator.fixed_k_sigma)
+    print(f"{len(epochs)} epochs: {what} "
           f"{100 * claim:.1f} %, "
           f"{lengths} -> {folder}")
     print(_losses_text(epochs), end="")

@@ -146,10 +146,16 @@ class LocatorConfig:
             return self.model.k_sigma
         return self.budget.k_sigma(max(disjoint_pairs(pairs), 1))
 
+    @property
+    def fixed_k_sigma(self) -> float | None:
+        """The one ``k`` of every pair interval without an integrity budget (``--k-sigma``:
+        a width the user chose, no stated risk), None when a budget sets the widths."""
+        return self.model.k_sigma if self.budget is None else None
+
     def width_text(self) -> str:
         """The pair-interval width in words: the budget and each mode's ``k``, or the one ``k``
         (:func:`predisat.availability.interval.width_text`)."""
-        text = width_text(self.model.k_sigma if self.budget is None else self.budget)
+        text = width_text(self.budget if self.budget is not None else self.model.k_sigma)
         return text + self._doubt_text()
 
     def _doubt_text(self) -> str:

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = [
-    "FORCED_BANNER",
+    "NO_SAFETY_BANNER",
     "forced",
     "interval_vs_chainage",
     "interval_vs_time",
@@ -51,12 +51,15 @@ def _wrapped(title: str, width: int = 110) -> str:
     return textwrap.fill(title, width)
 
 
-FORCED_BANNER = "NOT A SAFETY CLAIM: intervals under a forced error model (--force-error-model)"
-"""Written over every figure of a run whose claims were made under a forced error model."""
+NO_SAFETY_BANNER = ("NOT A SAFETY CLAIM: intervals under a forced error model or a fixed k "
+                    "(no integrity budget)")  # fmt: skip
+"""Written over every figure of a table some of whose claims are no safety claims, when the
+caller does not say why (:func:`locator.run.no_safety_banner` says)."""
 
 
 def forced(epochs: pd.DataFrame) -> bool:
-    """True when some claim of the table is no safety claim (a forced error model)."""
+    """True when some claim of the table is no safety claim (a forced error model or a fixed
+    ``k``: column ``safety_claim``)."""
     return "safety_claim" in epochs and bool(
         (epochs["claim"].astype(bool) & ~epochs["safety_claim"].astype(bool)).any()
     )
@@ -79,7 +82,7 @@ def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     claim = epochs["claim"].to_numpy(bool)
     safe = epochs["safety_claim"].to_numpy(bool) if "safety_claim" in epochs else claim
     styles = ((claim & safe, "#2166ac", "claimed"),
-              (claim & ~safe, "#e08214", "forced model, no safety claim"),
+              (claim & ~safe, "#e08214", "claimed, no safety claim"),
               (~claim, "#bbbbbb", "no claim"))  # fmt: skip
     for sel, colour, name in styles:
         if sel.any():
@@ -102,10 +105,13 @@ def _draw(ax: Axes, x: np.ndarray, epochs: pd.DataFrame) -> None:
     ax.grid(alpha=0.3)
 
 
-def run_figures(epochs: pd.DataFrame, title: str = "") -> dict[str, Figure]:
+def run_figures(
+    epochs: pd.DataFrame, title: str = "", banner: str | None = None
+) -> dict[str, Figure]:
     """A run's figures by file name: interval against time and chainage, lengths and, when the
-    table is scored (``truth_m``), the Stanford diagram; over each, in red,
-    :data:`FORCED_BANNER` when claims were made under a forced error model."""
+    table is scored (``truth_m``), the Stanford diagram; over each, in red, ``banner`` (why the
+    claims are no safety claims: :func:`locator.run.no_safety_banner`), or
+    :data:`NO_SAFETY_BANNER` when it is None and some claim of the table is no safety claim."""
     gnss = systems_text(epochs)
     figs = {
         "interval_time.png": interval_vs_time(epochs, title, gnss),
@@ -114,9 +120,11 @@ def run_figures(epochs: pd.DataFrame, title: str = "") -> dict[str, Figure]:
     }
     if "truth_m" in epochs:
         figs["stanford.png"] = stanford_diagram(epochs, title)
-    if forced(epochs):  # over every figure, not at the end of a title (a user trial)
+    if banner is None and forced(epochs):
+        banner = NO_SAFETY_BANNER
+    if banner:  # over every figure, not at the end of a title (a user trial)
         for fig in figs.values():
-            fig.suptitle(FORCED_BANNER, color="#b2182b", fontweight="bold", fontsize=11)
+            fig.suptitle(banner, color="#b2182b", fontweight="bold", fontsize=11)
     return figs
 
 
@@ -187,7 +195,7 @@ def length_histogram(epochs: pd.DataFrame, title: str = "", constellations: str 
     _clean_log_ticks(ax, lo / 1.15, hi * 1.15)
     share = claim.mean() if len(claim) else 0.0
     gnss = f" - {constellations}" if constellations else ""
-    what = "claimed epochs" if not forced(epochs) else "epochs claimed under a forced model"
+    what = "claimed epochs" if not forced(epochs) else "epochs claimed, no safety claim"
     ax.set_title(_wrapped(title or f"Interval length, {what} ({100 * share:.1f} % of "
                           f"epochs){gnss}"), fontsize=10)  # fmt: skip
     ax.set_xlabel("interval length (m, log scale)")
@@ -255,7 +263,7 @@ def stanford_diagram(
         mesh = ax.pcolormesh(edges, edges, np.where(h > 0, h, np.nan).T, cmap="viridis",
                              norm=LogNorm(vmin=1, vmax=max(float(h.max()), 2.0)),
                              zorder=2)  # fmt: skip
-        per_bin = "claimed epochs per bin" + (" (forced model)" if forced(scored) else "")
+        per_bin = "claimed epochs per bin" + (" (no safety claim)" if forced(scored) else "")
         fig.colorbar(mesh, ax=ax, label=per_bin)
     other = drawn & ~claimed
     ax.fill_between(lim, lim, [lim[0], lim[0]], color="#b2182b", alpha=0.07, lw=0)

@@ -70,6 +70,7 @@ from predisat.track.alias import TrackAliases
 
 __all__ = [
     "ERROR_MODEL_CAVEATS",
+    "FORCED_BANNER",
     "TRUST_MODES",
     "Odometer",
     "RunConfig",
@@ -77,6 +78,7 @@ __all__ = [
     "claim_label",
     "fixed_k_of",
     "flag_names",
+    "no_safety_banner",
     "run_locator",
 ]
 
@@ -123,6 +125,23 @@ def claim_label(caveat: str, fixed_k_sigma: float | None = None) -> str:
         return label
     return label.replace("safety claim", f"claim at a fixed k = {fixed_k_sigma:g} (no integrity "
                          "budget)", 1)  # fmt: skip
+
+
+FORCED_BANNER = "NOT A SAFETY CLAIM: intervals under a forced error model (--force-error-model)"
+"""Written over every figure of a run whose claims were made under a forced error model."""
+
+
+def no_safety_banner(caveat: str, fixed_k_sigma: float | None = None) -> str | None:
+    """The red line over a run's figures when its claims are no safety claims (a forced error
+    model, a fixed ``k``, a caveat this version does not know), None for safety claims."""
+    if caveat == "forced":
+        return FORCED_BANNER
+    if caveat not in ERROR_MODEL_CAVEATS:
+        return f"NOT A SAFETY CLAIM: claims under caveat {caveat!r}"
+    if fixed_k_sigma is not None:
+        return (f"NOT A SAFETY CLAIM: intervals at a fixed k = {fixed_k_sigma:g} (--k-sigma, "
+                "no integrity budget)")  # fmt: skip
+    return None
 
 
 def fixed_k_of(config: Mapping[str, Any]) -> float | None:
@@ -346,6 +365,13 @@ class RunConfig:
             raise ValueError("error_model_caveat is for claims under a model; with "
                              "error_model_applies=False there is none")  # fmt: skip
 
+    @property
+    def makes_safety_claims(self) -> bool:
+        """Whether a claim of this run is a safety claim: not under a forced error model, and
+        with widths from an integrity budget (a fixed ``k`` is a width the user chose, whose
+        risk nothing states)."""
+        return self.error_model_caveat != "forced" and self.locator.fixed_k_sigma is None
+
     def to_dict(self) -> JsonDict:
         d = dataclasses.asdict(self)
         d["locator"]["model"]["error"] = dataclasses.asdict(self.locator.model.error)
@@ -417,7 +443,8 @@ def run_locator(
         prediction used for the trust decision), ``n_received``, ``n_trusted``, ``n_used``,
         ``chainage_m``, ``lo_m``, ``hi_m``, ``length_m``, ``mode``, ``integrity``, ``flags``,
         ``flag_names``, ``claim`` (claim after every check), ``safety_claim`` (``claim``,
-        except under a forced error model, whose claims are not safety claims),
+        except under a forced error model or a fixed ``k``, whose claims are not safety claims:
+        :attr:`RunConfig.makes_safety_claims`),
         ``claim_fix`` (the fix's own claim, before the heading and odometry checks),
         ``wls_chainage_m``, ``wls_sigma_m``,
         ``heading_status``, ``heading_diff_deg``, ``used`` (satellite ids, space separated),
@@ -545,10 +572,10 @@ def run_locator(
         if progress is not None:
             progress(1)
     epochs = pd.DataFrame(rows)
-    # a claim under a forced model is an interval, not a safety claim: readers of the table
-    # alone (no run.json) must not take it for one
+    # a claim under a forced model or at a fixed k is an interval, not a safety claim: readers
+    # of the table alone (no run.json) must not take it for one
     if len(epochs):
-        epochs["safety_claim"] = epochs["claim"].astype(bool) & (cfg.error_model_caveat != "forced")
+        epochs["safety_claim"] = epochs["claim"].astype(bool) & cfg.makes_safety_claims
     return epochs
 
 

@@ -85,9 +85,10 @@ def write_run(
     meta: Mapping[str, object],
     fmt: str = "parquet",
     figures_title: str | None = None,
+    figures_banner: str | None = None,
 ) -> Path:
     """Write a run folder (table, ``run.json`` and, with ``figures_title``, the figures of
-    :func:`write_figures`); returns the folder.
+    :func:`write_figures`, ``figures_banner`` over each); returns the folder.
 
     The files are written in a staging folder and published together, ``run.json`` (which
     :func:`read_run` needs) withdrawn first and published last: written in place, a full disk
@@ -104,7 +105,7 @@ def write_run(
         run = {"format": RUN_FORMAT, "software_version": __version__, **meta}
         _write_json(stage / "run.json", run)
         if figures_title is not None:
-            write_figures(epochs, stage, title=figures_title)
+            write_figures(epochs, stage, title=figures_title, banner=figures_banner)
     return out
 
 
@@ -128,15 +129,18 @@ def read_run(folder: str | Path) -> tuple[pd.DataFrame, JsonDict]:
     return epochs, meta
 
 
-def write_figures(epochs: pd.DataFrame, folder: str | Path, title: str = "") -> list[Path]:
+def write_figures(
+    epochs: pd.DataFrame, folder: str | Path, title: str = "", banner: str | None = None
+) -> list[Path]:
     """The PNG figures of a run: interval against time and chainage, lengths, and, when the
     table is scored (``truth_m`` present: relative to the truth), the Stanford diagram; each
-    names the constellations the run received."""
+    names the constellations the run received; ``banner`` as :func:`locator.plots.run_figures`
+    writes it."""
     # lazy: matplotlib only for the figures; reading and writing run tables must not import it
     from locator import plots
 
     out = Path(folder)
-    figs = plots.run_figures(epochs, title)
+    figs = plots.run_figures(epochs, title, banner)
     paths = []
     for name, fig in figs.items():
         buf = io.BytesIO()

@@ -26,7 +26,7 @@ from locator.errorfit import (
 )
 from locator.evaluate import score_run, summarise
 from locator.fde import LocatorConfig
-from locator.run import RunConfig, claim_label, fixed_k_of, run_locator
+from locator.run import RunConfig, claim_label, fixed_k_of, no_safety_banner, run_locator
 from locator.runio import read_run, write_figures, write_run, write_table
 from locator.sathia import AntennaPath
 from locator.sim.simfile import SimRun
@@ -418,10 +418,11 @@ def run_to_folder(
         **dict(meta or {}),
     }
     title = f"{path.track.name}: trust {config.trust}, {config.locator.width_label()}"
-    fixed_k = config.locator.model.k_sigma if config.locator.budget is None else None
+    fixed_k = config.locator.fixed_k_sigma
     if config.error_model_caveat or fixed_k is not None:  # not a plain safety claim: said
         title += f"; {claim_label(config.error_model_caveat, fixed_k)}"
-    folder = write_run(epochs, out, info, fmt, figures_title=title)
+    folder = write_run(epochs, out, info, fmt, figures_title=title,
+                       figures_banner=no_safety_banner(config.error_model_caveat, fixed_k))
     return epochs, folder
 
 
@@ -545,7 +546,11 @@ def evaluate_folder(
     rules = _run_rules(meta)
     (folder / "evaluation.json").write_text(json.dumps({**summary, **rules}, indent=2) + "\n")
     caption = ", ".join(v for v in (rules["trust"], rules["interval_width"], rules["claims"]) if v)
-    write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth; {caption}")
+    config = meta.get("config")
+    banner = (no_safety_banner(str(config.get("error_model_caveat", "")), fixed_k_of(config))
+              if isinstance(config, dict) else None)  # fmt: skip
+    write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth; {caption}",
+                  banner=banner)
     return summary
 
 

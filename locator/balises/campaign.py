@@ -322,7 +322,8 @@ def balises_to_folder(
     ``log`` replaces the simulated odometer by a recorded one (``accuracy`` then should be its
     bounds, e.g. :meth:`OdometerAccuracy.subset041`). Writes ``epochs.parquet`` (the run table
     with the truth), ``captures.csv`` (one row per configuration and balise, with timing
-    errors; ``safety_claim`` is False for every capture under a forced error model),
+    errors; ``safety_claim`` is False for every capture under a forced error model or a fixed
+    ``k``: :attr:`locator.run.RunConfig.makes_safety_claims`),
     ``summary.json`` and ``captures.png``.
 
     ``progress`` is called with the number of epochs located since its last call.
@@ -344,9 +345,7 @@ def balises_to_folder(
     scored = capture_table(run, balises, caps)
     # captures under a forced error model rest on intervals that are no safety claim: the
     # table must say so row by row (it is read without summary.json)
-    scored["safety_claim"] = scored["captured"].astype(bool) & (
-        config.error_model_caveat != "forced"
-    )
+    scored["safety_claim"] = scored["captured"].astype(bool) & config.makes_safety_claims
     summary = capture_summary(scored)
     front = safe_front_check(run)
     summary["epochs"] = int(front["epochs"])
@@ -373,8 +372,7 @@ def balises_to_folder(
             "constellation": constellation,
             "integrity": (budget.label() if budget is not None
                           else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
-            "claims": claim_label(config.error_model_caveat,
-                                  None if budget is not None else config.locator.model.k_sigma),
+            "claims": claim_label(config.error_model_caveat, config.locator.fixed_k_sigma),
             "captures": {k: asdict(v) for k, v in caps.items()},
             "summary": summary.to_dict(orient="records"),
             "safe_front": front, **dict(meta or {}),

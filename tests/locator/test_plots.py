@@ -86,7 +86,8 @@ def test_demo_table_shows_mi_and_the_constellations() -> None:
 def test_claims_under_a_forced_model_are_drawn_and_bannered_as_no_safety_claim() -> None:
     """A user trial: a forced model's intervals were drawn as "interval, claimed", and the
     caveat, at the end of a 320-character title, ran off the figure."""
-    from locator.plots import FORCED_BANNER, run_figures
+    from locator.plots import NO_SAFETY_BANNER, run_figures
+    from locator.run import FORCED_BANNER, no_safety_banner
 
     long_title = "line 144 A: trust masks, k 3.89 per pair; " * 8
     ok = _epochs()
@@ -94,7 +95,7 @@ def test_claims_under_a_forced_model_are_drawn_and_bannered_as_no_safety_claim()
     for fig in run_figures(ok, long_title).values():
         assert fig._suptitle is None
     forced_ = ok.assign(safety_claim=False)
-    figs = run_figures(forced_, long_title)
+    figs = run_figures(forced_, long_title, no_safety_banner("forced"))
     assert set(figs) == {"interval_time.png", "interval_chainage.png", "interval_lengths.png",
                          "stanford.png"}  # fmt: skip
     for name, fig in figs.items():
@@ -102,6 +103,14 @@ def test_claims_under_a_forced_model_are_drawn_and_bannered_as_no_safety_claim()
         title = fig.axes[0].get_title()
         assert all(len(line) <= 110 for line in title.splitlines()), name
     labels = figs["interval_time.png"].axes[0].get_legend_handles_labels()[1]
-    assert "interval, forced model, no safety claim" in labels
+    assert "interval, claimed, no safety claim" in labels
     assert "interval, claimed" not in labels
-    assert "forced model" in figs["interval_lengths.png"].axes[0].get_title()
+    assert "no safety claim" in figs["interval_lengths.png"].axes[0].get_title()
+    # a fixed k is no safety claim either, and is named as what it is, not a forced model;
+    # a caller that does not say why gets the banner that covers both
+    fixed = run_figures(forced_, long_title, no_safety_banner("", 2.0))["interval_time.png"]
+    text = fixed._suptitle.get_text()
+    assert "fixed k = 2" in text and "forced" not in text
+    assert run_figures(forced_, long_title)["interval_time.png"]._suptitle.get_text() == (
+        NO_SAFETY_BANNER)
+    assert no_safety_banner("") is None and no_safety_banner("gaussian_tail") is None

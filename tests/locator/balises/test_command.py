@@ -82,6 +82,14 @@ def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
     utc = ts.tai(1980, 1, 6, 0, 0, 19.0 + float(row["t_pass_s"])).utc_datetime()
     got_utc = pd.Timestamp(row["t_pass_utc"]).tz_localize("UTC")
     assert abs((got_utc - pd.Timestamp(utc)).total_seconds()) < 0.002
+    # captures at a width the user chose rest on no safety claim, and captures.csv says so
+    assert main(["-q", "balises", "--sim", str(sim_dir), "--masks",
+                 str(sim_dir / "true_masks.parquet"), "--spacing", "25", "--radius", "12",
+                 "--k-sigma", "2", "--out", str(tmp_path / "k")]) == 0  # fmt: skip
+    caps = pd.read_csv(tmp_path / "k" / "captures.csv")
+    assert caps["captured"].any() and not caps["safety_claim"].any()
+    claims = json.loads((tmp_path / "k" / "summary.json").read_text())["claims"]
+    assert claims == "claim at a fixed k = 2 (no integrity budget)"
 
 
 def test_a_bad_balise_list_is_one_line_naming_the_row(sim_dir, tmp_path, capsys):
