@@ -33,7 +33,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from locator.intervals import Overbound, fit_error_model, overbound_error_model
+from locator.intervals import (
+    Overbound,
+    fit_error_model,
+    overbound_error_model,
+    usable_residuals,
+)
 from locator.observations import Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
@@ -351,7 +356,7 @@ def fit_systems(
             # too few residuals in epochs with 3 satellites of the system: say how many (not
             # of a file's systems that were not chosen, which have none: a user trial's
             # message named C, J, R, S for a gps+galileo calibration)
-            use = ok & (ok.sum(axis=1, keepdims=True) >= 3)
+            use = usable_residuals(el, res)
             if ok.any():
                 short.append(f"{key} {int(use.sum())} in {int(use.any(axis=1).sum())} epochs")
             continue
@@ -445,15 +450,12 @@ def model_file_parts(
     for d in data:
         per = combos.setdefault((d.profile.receiver_type, d.profile.antenna_type), {})
         for sys_ in fits:
-            _, res = _columns(d, [sys_])
-            n = int(np.isfinite(res).sum())
-            if n:
+            el_s, res = _columns(d, [sys_])
+            if np.isfinite(res).any():
                 # counted as a tail check counts them (epochs with >= 3 of the system's
                 # satellites): a pair whose own check could not run is then not covered by
                 # name (Applicability refuses fewer than MIN_FIT_RESIDUALS)
-                el_s = _columns(d, [sys_])[0]
-                ok = np.isfinite(res) & np.isfinite(el_s)
-                n = int((ok & (ok.sum(axis=1, keepdims=True) >= 3)).sum())
+                n = int(usable_residuals(el_s, res).sum())
                 codes, n0 = per.get(sys_, (set(), 0))
                 per[sys_] = (codes | set(d.profile.codes.get(sys_, ())), n0 + n)
     pairs = tuple(

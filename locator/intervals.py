@@ -52,6 +52,7 @@ __all__ = [
     "plan_pairs",
     "three_independent_pairs",
     "union_interval",
+    "usable_residuals",
 ]
 
 PAIR_SCHEMES = ("auto", "all")
@@ -227,6 +228,17 @@ def union_interval(pairs: PairSolution, mode: IntervalMode) -> UnionInterval:
     return UnionInterval(lo, hi, est, mode, claim, consistent, pairs)
 
 
+def usable_residuals(el_deg: ArrayLike, residual_m: ArrayLike) -> NDArray:
+    """Which residuals an error-model fit can use, (n_epoch, n_sat) bool: finite, in epochs
+    with at least 3 of them (removing the receiver clock needs redundancy).
+
+    The one rule behind :func:`fit_error_model`, :func:`overbound_error_model` and the counts
+    that :mod:`locator.errorfit` reports of them.
+    """
+    ok = np.isfinite(np.asarray(el_deg, float)) & np.isfinite(np.asarray(residual_m, float))
+    return ok & (ok.sum(axis=1, keepdims=True) >= 3)
+
+
 def _error_inputs(
     el_deg: ArrayLike, residual_m: ArrayLike, min_el_deg: float, n_bins: int, func: str
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
@@ -237,8 +249,7 @@ def _error_inputs(
         raise ValueError(
             f"el_deg and residual_m must share a shape (n_epoch, n_sat): {el.shape}, {r.shape}"
         )
-    ok = np.isfinite(el) & np.isfinite(r)
-    ok &= ok.sum(axis=1, keepdims=True) >= 3  # clock removal needs redundancy
+    ok = usable_residuals(el, r)
     if ok.sum() < 2 * n_bins:
         raise ValueError(
             f"{func} needs at least {2 * n_bins} residuals in epochs with >= 3 "
