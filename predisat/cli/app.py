@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from predisat import __version__
-from predisat.cli import demo
+from predisat.cli import demo, track
 from predisat.cli.args import (
     HelpFormatter,
     Parser,
@@ -548,6 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_export(sub)
     _add_merge(sub)
     _add_evaluate_sky(sub)
+    track.add_parser(sub)
     demo.add_parser(sub)
     return parser
 

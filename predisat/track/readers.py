@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.atomic import write_bytes_atomic
 from predisat.geodesy import WGS84, LocalFrame, unwrap_lon_deg, wrap_lon_deg
 from predisat.jsontypes import JsonDict
 from predisat.readonly import freeze_array_fields
@@ -799,7 +800,8 @@ def write_geojson(track: TrackMap, path: str | Path) -> None:
         "chainage_length_m": round(track.length_m, 3),
         "features": feats,
     }
-    Path(path).write_text(json.dumps(doc, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+    # atomic: an interrupted write must not leave half a map that a later command reads
+    write_bytes_atomic(path, (json.dumps(doc, ensure_ascii=False, indent=1) + "\n").encode())
 
 
 # ---------------------------------------------------------------------- CSV

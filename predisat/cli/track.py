@@ -1,0 +1,116 @@
+"""``predisat track``: look at a track map before using it, and write the chosen line alone.
+
+Every command takes ``--track FILE`` with ``--track-name``, ``--chain`` and ``--where`` to pick
+one line of an Infrabel or OpenStreetMap file; this one says what that choice gives (length,
+ends, fit, heights, kilometre posts, stations, tunnels, bridges), draws it
+(:func:`predisat.track.figure.track_figure`) and writes it as a one-line GeoJSON that every
+command reads without the selection options (:func:`predisat.track.readers.write_geojson`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from predisat.cli.args import add_command, existing_file, output_file
+from predisat.cli.common import add_track_selection, track_option
+
+if TYPE_CHECKING:
+    from predisat.track import TrackMap
+
+__all__ = ["add_parser", "summary_lines"]
+
+_MAX_LISTED = 12  # tunnels, bridges or stations listed one by one; beyond, the count
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``track`` subcommand on the ``predisat`` subparsers."""
+    p = add_command(
+        sub, "track", "show a track map (the line a --track selection gives) and write it alone",
+        "Read a track map as every command does (GeoJSON or CSV; --track-name, --chain and "
+        "--where pick one line of a file holding several), print what it gives: length, "
+        "ends, how close the fitted axis stays to the source vertices, heights, kilometre "
+        "posts, stations, tunnels and bridges with their chainages; --figure draws its plan, "
+        "heights and curve radii; --out writes the chosen line as a GeoJSON that other "
+        "commands read with --track alone (docs/track-map.md).",
+    )  # fmt: skip
+    p.add_argument("track", type=existing_file("a track map (GeoJSON or CSV)"), metavar="FILE",
+                   help="track map file")
+    add_track_selection(p)
+    p.add_argument("--out", type=output_file, metavar="GEOJSON",
+                   help="write the chosen line (with its posts, stations, tunnels, bridges) here")
+    p.add_argument("--figure", type=output_file, metavar="PNG",
+                   help="draw the plan, the heights and the curve radii here")
+    p.set_defaults(func=cmd_track)
+
+
+def _spans(spans: Sequence[tuple[float, float]]) -> str:
+    text = ", ".join(f"{lo:,.0f}-{hi:,.0f} m" for lo, hi in spans[:_MAX_LISTED])
+    more = f", ... ({len(spans) - _MAX_LISTED} more)" if len(spans) > _MAX_LISTED else ""
+    return f"{len(spans)}: {text}{more}" if spans else "none in the map"
+
+
+def summary_lines(track: TrackMap) -> list[str]:
+    """What a track map holds, one line per item, chainages in metres."""
+    import numpy as np
+
+    lat, lon, _ = track.position_at([0.0, track.length_m])
+    lines = [
+        f"{track.name}: {track.length_m:,.1f} m of chainage from {len(track.lat_deg)} source "
+        f"vertices; the fitted axis stays within {track.max_deviation_m:.2f} m of them "
+        f"(tolerance {track.tolerance_m:g} m)",
+        f"ends: {lat[0]:.6f} N {lon[0]:.6f} E (0 m) -> {lat[1]:.6f} N {lon[1]:.6f} E "
+        f"({track.length_m:,.0f} m)",
+    ]
+    if np.any(track.h_m != 0.0):
+        lines.append(f"heights: {float(track.h_m.min()):.1f} to {float(track.h_m.max()):.1f} m "
+                     "above the ellipsoid")  # fmt: skip
+    else:
+        lines.append("heights: none (h = 0): fine for synthetic worlds; `locator run` refuses "
+                     "it on real data (docs/locator.md, track heights)")  # fmt: skip
+    posts = track.kilometre_posts
+    lines.append(
+        f"kilometre posts: {len(posts)}, km {posts[0].km_m / 1000:g} at {posts[0].chainage_m:,.0f}"
+        f" m to km {posts[-1].km_m / 1000:g} at {posts[-1].chainage_m:,.0f} m"
+        if posts else "kilometre posts: none (chainage is the distance from the first vertex)"
+    )  # fmt: skip
+    if track.stations:
+        ch = track.project([st.lat_deg for st in track.stations],
+                           [st.lon_deg for st in track.stations])  # fmt: skip
+        named = sorted(zip(ch.chainage_m, ch.offset_m, (st.name for st in track.stations),
+                           strict=True))  # fmt: skip
+        items = ", ".join(f"{name} ({c:,.0f} m, {abs(off):.0f} m beside)"
+                          for c, off, name in named[:_MAX_LISTED])  # fmt: skip
+        more = f", ... ({len(named) - _MAX_LISTED} more)" if len(named) > _MAX_LISTED else ""
+        lines.append(f"stations: {len(named)}: {items}{more}")
+    else:
+        lines.append("stations: none in the map")
+    lines.append(f"tunnels: {_spans(track.tunnels_m)}")
+    lines.append(f"bridges: {_spans(track.bridges_m)}")
+    return lines
+
+
+def cmd_track(args: argparse.Namespace) -> int:
+    """``predisat track``: print the map's summary, write the figure and the one-line map."""
+    track = track_option(str(args.track), args.track_name, args.chain, args.where)
+    for line in summary_lines(track):
+        print(line)
+    if args.out is not None:
+        from predisat.track.readers import write_geojson
+
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_geojson(track, args.out)
+        print(f"-> {args.out} (read it with --track {args.out}, no selection options)")
+    if args.figure is not None:
+        import io
+
+        from predisat.atomic import write_bytes_atomic
+        from predisat.track.figure import track_figure
+
+        buf = io.BytesIO()
+        track_figure(track).savefig(buf, format="png", dpi=110)
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(args.figure, buf.getvalue())
+        print(f"-> {args.figure}")
+    return 0
