@@ -39,9 +39,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="track map file")
     add_track_selection(p)
     p.add_argument("--out", type=output_file, metavar="GEOJSON",
-                   help="write the chosen line (with its posts, stations, tunnels, bridges) here")
+                   help="write the chosen line (with its posts, stations, tunnels, bridges) here "
+                   "(default: not written)")
     p.add_argument("--figure", type=output_file, metavar="PNG",
-                   help="draw the plan, the heights and the curve radii here")
+                   help="draw the plan, the heights and the curve radii here (default: not drawn)")
     p.set_defaults(func=cmd_track)
 
 
