@@ -1138,7 +1138,11 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     section 24) is not compared: a train at a stop shows one picture. A crawl's frames, cut
     into views of their own, are (a review: a camera frozen through a crawl 0.15 m a frame
     was never compared, its stale picture used as 24 views over 6 m); so is a stop's frame
-    after a frozen one."""
+    after a frozen one.
+
+    The answer for a frame does not depend on ``need``: the earlier frames of its stop are
+    checked with it (a review: on a resumed run, a stop's first frame found frozen in a
+    finished chunk left the stop's frames in a pending chunk uncompared)."""
     fr, root = plan.survey.frames, plan.survey.root
     p = plan.params
     stop = stop_ids(fr.side, fr.chainage_m, p.stop_gap_m, p.stop_span_m)
@@ -1149,10 +1153,17 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
         if side in last:
             prev_of[i] = last[side]
         last[side] = i
+    wanted = {int(i) for i in need}
+    checked = set(wanted)
+    for i in wanted:  # back to the first frame of each needed frame's stop
+        j = prev_of.get(i)
+        while j is not None and stop[j] == stop[i] and j not in checked:
+            checked.add(j)
+            j = prev_of.get(j)
     frozen = {}
     thumbs: dict[Location, NDArray | None] = {}
     opts = plan.survey.storage_options
-    for i in need:
+    for i in sorted(checked):
         j = prev_of.get(int(i))
         if j is None or (stop[i] == stop[j] and int(j) not in frozen):
             continue
@@ -1165,7 +1176,7 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
                 f"camera's frame before ({str(fr.frame_id[j])!r}, manifest line {fr.row[j]}), so "
                 "the camera stopped updating its picture; check the camera and drop the frame"
             )
-    return frozen
+    return {i: message for i, message in frozen.items() if i in wanted}
 
 
 def _frame_jobs(
