@@ -1605,11 +1605,10 @@ def process_survey(
         survey.frames.side, survey.frames.chainage_m, p.stop_gap_m, p.stop_span_m
     ).items():
         _report(
-            f"note: the {side} camera has {n_frames} frames at {n_stops} stop(s) (within "
-            f"{p.stop_gap_m:g} m of each other and {p.stop_span_m:g} m in all, captured on "
-            "time): each stop's frames are "
-            "merged into one view, sky only where all of them saw it (docs/reconstruction.md, "
-            "section 24)",
+            f"note: the {side} camera has {n_frames} frames merged into {n_stops} view(s) "
+            f"(frames within {p.stop_gap_m:g} m of each other and {p.stop_span_m:g} m in all, "
+            "captured on time: a stop, or a slice of a slow crawl): each view's frames give "
+            "sky only where all of them saw it (docs/reconstruction.md, section 24)",
             quiet=False,
         )
     for line in camera_pair_warnings(survey):

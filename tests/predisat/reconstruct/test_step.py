@@ -354,8 +354,8 @@ def test_process_merges_the_frames_of_a_stop(rendered, tmp_path, capsys) -> None
     got = process_survey(survey, tmp_path / "stop", progress=False)
     assert got.bad_frames == ()
     err = capsys.readouterr().err
-    assert "the left camera has 3 frames at 1 stop(s)" in err
-    assert "the right camera has 3 frames at 1 stop(s)" in err
+    assert "the left camera has 3 frames merged into 1 view(s)" in err
+    assert "the right camera has 3 frames merged into 1 view(s)" in err
     assert got.masks.provenance["params"]["stop_gap_m"] == PipelineParams().stop_gap_m
     np.testing.assert_array_equal(got.masks.mask_el_deg, base.masks.mask_el_deg)
     np.testing.assert_array_equal(got.masks.support, base.masks.support)
