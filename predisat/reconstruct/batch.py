@@ -1025,6 +1025,11 @@ def _plan(
         name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
         for name, _, _, s in chunks
     }
+    # and every frame of a view it reads one frame of: a view cut by the window was merged
+    # from part of its frames, and a crawl sliced otherwise than in the whole survey
+    view = stop_ids(fr.side, ch, params.stop_gap_m, params.stop_span_m)
+    frames_of = {name: np.flatnonzero(finite & np.isin(view, view[idx]))
+                 for name, idx in frames_of.items()}  # fmt: skip
     # each image stamped once (a frame is read by up to three chunks), remote ones in parallel
     images = [join(survey.root, str(fr.image[i])) for i in np.flatnonzero(finite)]
     known = dict(zip(map(str, images), stamps(images, survey.storage_options), strict=True))
@@ -1232,6 +1237,8 @@ def _chunk_jobs(
 ) -> list[ChunkJob]:
     fr, ch, cams = plan.survey.frames, plan.chainage_m, _cameras(plan)
     speed = survey_speed_kmh(ch, fr.gps_s, fr.side)
+    p = plan.params
+    view = stop_ids(fr.side, ch, p.stop_gap_m, p.stop_span_m)  # as the survey slices them
     jobs = []
     for name, lo, hi, s in pending:
         idx = plan.frames_of[name]
@@ -1241,7 +1248,8 @@ def _chunk_jobs(
         frames = tuple(
             ChunkFrame(str(fr.frame_id[i]), str(fr.side[i]), float(ch[i]),
                        str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")),
-                       float(fr.roll_deg[i]), float(fr.pitch_deg[i]), float(speed[i]))
+                       float(fr.roll_deg[i]), float(fr.pitch_deg[i]), float(speed[i]),
+                       int(view[i]))
             for i in idx
             if str(fr.frame_id[i]) not in bad
         )  # fmt: skip

@@ -67,6 +67,9 @@ class ChunkFrame:
     roll_deg: float = float("nan")
     pitch_deg: float = float("nan")
     speed_kmh: float = float("nan")  # the survey vehicle's, from the frames' times
+    # the view (stop_ids over the whole survey) it is merged into; -1: the chunk chains its
+    # own frames (a window may then slice a crawl otherwise than the survey)
+    view_id: int = -1
 
 
 @dataclass(frozen=True)
@@ -196,7 +199,9 @@ def run_chunk(
             )  # fmt: skip
     n_frames = len(views)
     # the frames of a stop are one view: sky only where all of them saw it (section 24)
-    views = merge_stop_frames(views, job.params.stop_gap_m, job.params.stop_span_m)
+    ids = [f.view_id for f, _ in ok_frames]
+    views = merge_stop_frames(views, job.params.stop_gap_m, job.params.stop_span_m,
+                              ids if ids and min(ids) >= 0 else None)  # fmt: skip
     if reconstructor is None:
         reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead

@@ -40,7 +40,10 @@ costs sky near the track, so the cut keeps it short."""
 
 
 def stop_groups(
-    frames: Sequence[FrameView], gap_m: float, span_m: float = STOP_SPAN_M
+    frames: Sequence[FrameView],
+    gap_m: float,
+    span_m: float = STOP_SPAN_M,
+    view_ids: Sequence[int] | None = None,
 ) -> list[list[int]]:
     """Indices of the frames of each stop, in chainage order; single frames alone.
 
@@ -48,10 +51,10 @@ def stop_groups(
     way (``reverse``: a side camera of a train running the other way looks at the other side
     of the track) and with no ``view_group`` are chained in chainage order while the next lies
     within ``gap_m`` of the previous; a chain spreading over more than ``span_m`` (a crawl) is
-    cut into equal slices spreading at most ``span_m``. A window lacking a stop's first
-    (last) frames chains the rest of them alike, but a crawl's slices may fall otherwise
-    there than over the whole survey (each position is computed in one window only, so
-    serial and Dask runs agree; the frozen-camera check takes the survey's slices).
+    cut into equal slices spreading at most ``span_m``. A window of a survey would slice a
+    crawl it holds part of otherwise than the whole survey does: ``view_ids`` then gives each
+    frame its view as the survey's :func:`stop_ids` found it, and frames are grouped by it
+    (``gap_m`` and ``span_m`` are still checked).
 
     Parameters
     ----------
@@ -61,6 +64,9 @@ def stop_groups(
         at the same chainage only).
     span_m : float
         Largest chainage spread of one stop's frames, metres (>= ``gap_m``).
+    view_ids : sequence of int, optional
+        Per frame, its view in the whole survey (:func:`stop_ids` of the survey's rows);
+        frames of one camera with the same id form a group.
 
     Returns
     -------
@@ -69,6 +75,9 @@ def stop_groups(
         the first index of each group.
     """
     _check_gap(gap_m, span_m)
+    if view_ids is not None and len(view_ids) != len(frames):
+        raise ValueError(f"view_ids: {len(view_ids)} ids for {len(frames)} frames; give one "
+                         "per frame (stop_ids of the survey's rows)")  # fmt: skip
     cams: dict[tuple[str, str, tuple[int, int], str, bool], list[int]] = {}
     groups: list[list[int]] = []
     for i, f in enumerate(frames):
@@ -78,6 +87,14 @@ def stop_groups(
         key = (f.mount.side, f.camera.name, f.camera.shape, f.camera.model, bool(f.reverse))
         cams.setdefault(key, []).append(i)
     for idx in cams.values():
+        if view_ids is not None:
+            by_id: dict[int, list[int]] = {}
+            for i in idx:
+                by_id.setdefault(int(view_ids[i]), []).append(i)
+            # in chainage order within a view, as the chains give them
+            groups.extend(sorted(g, key=lambda i: (frames[i].chainage_m, i))
+                          for g in by_id.values())  # fmt: skip
+            continue
         s = np.array([frames[i].chainage_m for i in idx], float)
         groups.extend([idx[k] for k in run] for run in _chains(s, gap_m, span_m))
     return sorted(groups, key=lambda g: min(g))
@@ -165,7 +182,10 @@ def _check_gap(gap_m: float, span_m: float) -> None:
 
 
 def merge_stop_frames(
-    frames: Sequence[FrameView], gap_m: float, span_m: float = STOP_SPAN_M
+    frames: Sequence[FrameView],
+    gap_m: float,
+    span_m: float = STOP_SPAN_M,
+    view_ids: Sequence[int] | None = None,
 ) -> list[FrameView]:
     """The frames with each stop's frames merged into one (:func:`stop_groups`).
 
@@ -183,6 +203,7 @@ def merge_stop_frames(
     ----------
     frames : sequence of FrameView
     gap_m, span_m : float
+    view_ids : sequence of int, optional
         See :func:`stop_groups`.
 
     Returns
@@ -191,7 +212,7 @@ def merge_stop_frames(
         In the order of each group's first frame in ``frames``.
     """
     out: list[FrameView] = []
-    for g in stop_groups(frames, gap_m, span_m):
+    for g in stop_groups(frames, gap_m, span_m, view_ids):
         if len(g) == 1:
             out.append(frames[g[0]])
             continue

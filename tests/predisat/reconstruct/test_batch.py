@@ -1102,3 +1102,44 @@ def test_a_track_changed_under_the_same_name_redoes_the_chunks(
     again = process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky,
                            track=moved)  # fmt: skip
     assert (again.chunks_done, again.chunks_skipped) == (0, 3)
+
+
+def test_a_chunk_reads_whole_views_and_merges_them_as_the_survey_does(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    """A review: a chunk's window cut through a crawl, and the chunk merged and sliced the part
+    it held otherwise than the whole survey does, so a position's views depended on where the
+    chunks fell. A chunk now reads every frame of a view it reads one of, with the survey's
+    view of each frame."""
+    import dataclasses
+
+    from predisat.reconstruct.batch import _chunk_jobs, _plan
+    from predisat.reconstruct.stops import stop_ids
+    from predisat.survey import Survey
+
+    survey = Survey.load(survey_dir, check_images=False)
+    fr = survey.frames
+    overlap = PARAMS.reconstruction.overlap_m
+    # the left camera crawls 0.1 m a frame across the far edge of the first chunk's window
+    # (its last position 3020 m plus the overlap)
+    left = np.flatnonzero(fr.side == "left")
+    ch = np.asarray(fr.chainage_m, float).copy()
+    ch[left] = 3020.0 + overlap - 0.3 + 0.1 * np.arange(left.size)
+    ch = np.round(ch, 3)
+    survey = dataclasses.replace(survey, frames=dataclasses.replace(fr, chainage_m=ch))
+    plan = _plan(survey, survey.track, PARAMS, tmp_path / "o", ch, {})
+    view = stop_ids(fr.side, ch, PARAMS.stop_gap_m, PARAMS.stop_span_m)
+    cut = False
+    for name, *_, s in plan.chunks:
+        window = np.flatnonzero((ch >= s.min() - overlap) & (ch <= s.max() + overlap))
+        idx = plan.frames_of[name]
+        assert set(window.tolist()) <= set(idx.tolist()), name
+        for v in np.unique(view[idx]):
+            whole = np.flatnonzero(view == v)
+            assert set(whole.tolist()) <= set(idx.tolist()), name  # whole views
+            cut |= not set(whole.tolist()) <= set(window.tolist())
+    assert cut  # some window alone would have cut a view: the check above meant something
+    for job in _chunk_jobs(plan, list(plan.chunks), {}, None):
+        by_id = {f.frame_id: f.view_id for f in job.frames}
+        for i in plan.frames_of[job.name]:
+            assert by_id[str(fr.frame_id[i])] == int(view[i])

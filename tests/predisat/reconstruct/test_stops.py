@@ -172,6 +172,27 @@ def test_a_crawl_is_cut_into_slices_and_a_standstill_stays_whole() -> None:
             assert len(groups) <= most and min(map(len, groups)) >= 5, (seed, sigma)
 
 
+def test_a_window_merges_a_crawl_as_the_whole_survey_does() -> None:
+    """A review: a chunk's window holding part of a crawl sliced it otherwise than the whole
+    survey (equal slices of the part's spread), so a position's views depended on where the
+    chunks fell. Given the survey's view ids, a window's groups are the survey's."""
+    s = [0.1 * k for k in range(40)]  # 3.9 m of crawl: eight slices of 0.4875 m
+    crawl = [_frame(x, fid=f"c{k}") for k, x in enumerate(s)]
+    ids = stop_ids(["left"] * len(s), s, 0.2)
+    whole = stop_groups(crawl, 0.2)
+    assert [sorted(g) for g in whole] == [sorted(np.flatnonzero(ids == v)) for v in np.unique(ids)]
+    part = list(range(13, 40))  # a window from 1.3 m: 2.6 m, chained alone in six slices
+    alone = stop_groups([crawl[i] for i in part], 0.2)
+    given = stop_groups([crawl[i] for i in part], 0.2, view_ids=ids[part].tolist())
+    in_survey = [[i for i in g if i in part] for g in whole]
+    assert sorted([part[i] for i in g] for g in given) == sorted(g for g in in_survey if g)
+    assert sorted([part[i] for i in g] for g in alone) != sorted(g for g in in_survey if g)
+    merged = merge_stop_frames([crawl[i] for i in part], 0.2, view_ids=ids[part].tolist())
+    assert len(merged) == len([g for g in in_survey if g])
+    with pytest.raises(ValueError, match="view_ids"):
+        stop_groups(crawl, 0.2, view_ids=[0, 1])
+
+
 def test_process_takes_the_stop_gap_and_refuses_one_too_long(tmp_path) -> None:
     from predisat.cli.app import build_parser
     from predisat.cli.process import attitude_params
