@@ -10,11 +10,12 @@ command reads without the selection options (:func:`predisat.track.readers.write
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from predisat.cli.args import add_command, existing_file, output_file
-from predisat.cli.common import add_track_selection, track_option
+from predisat.cli.common import CliError, add_track_selection, track_option
 
 if TYPE_CHECKING:
     from predisat.track import TrackMap
@@ -38,6 +39,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("track", type=existing_file("a track map (GeoJSON or CSV)"), metavar="FILE",
                    help="track map file")
     add_track_selection(p)
+    p.add_argument("--posts-from", type=existing_file("Infrabel line sections (GeoJSON)"),
+                   metavar="SECTIONS",
+                   help="kilometre posts from Infrabel line sections (LineStrings with mfrom/mto, "
+                   "metres) projected onto the line; --out keeps them (default: the map's own)",
+                   )  # fmt: skip
     p.add_argument("--out", type=output_file, metavar="GEOJSON",
                    help="write the chosen line (with its posts, stations, tunnels, bridges) here "
                    "(default: not written)")
@@ -50,6 +56,15 @@ def _spans(spans: Sequence[tuple[float, float]]) -> str:
     text = ", ".join(f"{lo:,.0f}-{hi:,.0f} m" for lo, hi in spans[:_MAX_LISTED])
     more = f", ... ({len(spans) - _MAX_LISTED} more)" if len(spans) > _MAX_LISTED else ""
     return f"{len(spans)}: {text}{more}" if spans else "none in the map"
+
+
+def _station(name: str, chainage_m: float, offset_m: float, along_m: float, length_m: float) -> str:
+    """A station's place: its chainage and distance from the axis, or how far beyond an end
+    of the map it lies (GEMBLOUX, 540 m before line 144's start, read "0 m, 41 m beside")."""
+    if along_m > 1.0:
+        end = "before the start" if chainage_m < 0.5 * length_m else "past the end"
+        return f"{name} (off the map: {math.hypot(along_m, offset_m):,.0f} m {end})"
+    return f"{name} ({chainage_m:,.0f} m, {abs(offset_m):.0f} m beside)"
 
 
 def summary_lines(track: TrackMap) -> list[str]:
@@ -72,17 +87,19 @@ def summary_lines(track: TrackMap) -> list[str]:
                      "it on real data (docs/locator.md, track heights)")  # fmt: skip
     posts = track.kilometre_posts
     lines.append(
-        f"kilometre posts: {len(posts)}, km {posts[0].km_m / 1000:g} at {posts[0].chainage_m:,.0f}"
-        f" m to km {posts[-1].km_m / 1000:g} at {posts[-1].chainage_m:,.0f} m"
-        if posts else "kilometre posts: none (chainage is the distance from the first vertex)"
+        f"kilometre posts: {len(posts)}, km {posts[0].km_m / 1000 + 0.0:g} at "
+        f"{posts[0].chainage_m:,.0f} m to km {posts[-1].km_m / 1000 + 0.0:g} at "
+        f"{posts[-1].chainage_m:,.0f} m"
+        if posts else "kilometre posts: none (chainage is the distance from the first vertex; "
+        "Infrabel line sections give them: --posts-from SECTIONS.geojson)"
     )  # fmt: skip
     if track.stations:
         ch = track.project([st.lat_deg for st in track.stations],
                            [st.lon_deg for st in track.stations])  # fmt: skip
-        named = sorted(zip(ch.chainage_m, ch.offset_m, (st.name for st in track.stations),
-                           strict=True))  # fmt: skip
-        items = ", ".join(f"{name} ({c:,.0f} m, {abs(off):.0f} m beside)"
-                          for c, off, name in named[:_MAX_LISTED])  # fmt: skip
+        named = sorted(zip(ch.chainage_m, ch.offset_m, ch.along_m,
+                           (st.name for st in track.stations), strict=True))  # fmt: skip
+        items = ", ".join(_station(name, c, off, along, track.length_m)
+                          for c, off, along, name in named[:_MAX_LISTED])  # fmt: skip
         more = f", ... ({len(named) - _MAX_LISTED} more)" if len(named) > _MAX_LISTED else ""
         lines.append(f"stations: {len(named)}: {items}{more}")
     else:
@@ -95,6 +112,18 @@ def summary_lines(track: TrackMap) -> list[str]:
 def cmd_track(args: argparse.Namespace) -> int:
     """``predisat track``: print the map's summary, write the figure and the one-line map."""
     track = track_option(str(args.track), args.track_name, args.chain, args.where)
+    if args.posts_from is not None:
+        from predisat.track import TrackMapError
+        from predisat.track.readers import kilometre_posts_from_sections
+
+        try:
+            posts = kilometre_posts_from_sections(track, args.posts_from)
+        except TrackMapError as exc:
+            raise CliError(f"--posts-from {exc}") from None
+        if not posts:
+            raise CliError(f"--posts-from {args.posts_from}: no line section (LineString with "
+                           "mfrom/mto) lies along the line within 50 m")  # fmt: skip
+        track = track.with_metadata(kilometre_posts=posts)
     for line in summary_lines(track):
         print(line)
     if args.out is not None:

@@ -316,7 +316,7 @@ def generate_survey(
     _write_frames_csv(truth_dir / "frames.csv", rows)
     write_bytes_atomic(
         truth_dir / "README.txt",
-        _readme(track, from_m, to_m, sky, seed, spec, s.size, len(rows)).encode(),
+        _readme(track, from_m, to_m, sky, seed, world.spec, s.size, len(rows)).encode(),
     )
     return SynthResult(out, survey_dir, truth_dir, int(s.size), len(rows))
 

@@ -50,19 +50,29 @@ def track_figure(track: TrackMap, title: str = "", step_m: float = 5.0) -> Figur
         plan.plot(*xy[:2], "o", color="k", ms=5, zorder=4)
         plan.annotate(f"{mark} ({end_m:,.0f} m)", (xy[0], xy[1]), fontsize=8, xytext=(5, 5),
                       textcoords="offset points")  # fmt: skip
-    for post in track.kilometre_posts:
+    posts = track.kilometre_posts
+    every = max(1, int(np.ceil(len(posts) / 15)))  # at most ~15 labels on the plan
+    for i, post in enumerate(posts):
+        # a dot, labelled with its kilometre: a "|" tick vanished on a north-south stretch
         xy = track.enu_at(post.chainage_m) / 1000.0
-        plan.plot(*xy[:2], "|", color=_AXIS, ms=6, zorder=4)
+        plan.plot(*xy[:2], "o", color=_AXIS, ms=3, zorder=4)
+        if i % every == 0:
+            plan.annotate(f"km {post.km_m / 1000.0 + 0.0:g}", (xy[0], xy[1]), fontsize=7,
+                          xytext=(-4, 0), textcoords="offset points", ha="right",
+                          color="#666666")  # fmt: skip
     if track.stations:
         lat = np.array([st.lat_deg for st in track.stations])
         lon = np.array([st.lon_deg for st in track.stations])
         p = track.project(lat, lon)
-        xy = track.enu_at(p.chainage_m) / 1000.0
-        for st, (x, y), ch in zip(track.stations, xy[:, :2], p.chainage_m, strict=True):
+        # where the station is, not its foot on the axis: one beyond an end (GEMBLOUX, 540 m
+        # before line 144's start) was drawn on the end, as if on the line
+        xy = track.frame.to_enu(lat, lon, np.full(lat.shape, track.frame.h_m)) / 1000.0
+        for st, (x, y), ch, off_map in zip(track.stations, xy[:, :2], p.chainage_m,
+                                           p.along_m > 1.0, strict=True):  # fmt: skip
             plan.plot(x, y, "s", color="#222222", markerfacecolor="#ffd92f", ms=7, zorder=5)
-            plan.annotate(f"{st.name} ({ch:,.0f} m)", (x, y), fontsize=8, xytext=(6, -3),
-                          textcoords="offset points")  # fmt: skip
-            for ax in (prof, curv):
+            plan.annotate(f"{st.name} ({'off the map' if off_map else f'{ch:,.0f} m'})", (x, y),
+                          fontsize=8, xytext=(6, -3), textcoords="offset points")  # fmt: skip
+            for ax in () if off_map else (prof, curv):
                 ax.axvline(ch / 1000.0, color="#999999", lw=0.8, ls=":")
     plan.set_aspect("equal", adjustable="datalim")
     plan.set_xlabel("east of the first vertex (km)")

@@ -517,13 +517,15 @@ def parse_geojson_track(
     h = coords[:, 2] if has_h else np.full(len(coords), float(h_m))
 
     posts_raw = points_as_posts(points)
+    used = {parts[k].feature for k, _ in order}  # the name lists the chained features only
+    chained = [x for x in selected if x[0] in used]
     members = doc if isinstance(doc, dict) else {}
     if attribution is None:
         attribution = attribution_of(members)
     tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
     return TrackFile(
         path, lat, lon, h,
-        name=name or _selected_name(str(members.get("name") or path.stem), track, selected),
+        name=name or _selected_name(str(members.get("name") or path.stem), track, chained),
         source=source or str(members.get("source") or path.name),
         attribution=attribution, tolerance_m=tol, posts=posts_raw,
         tunnel_spans=list(tunnel_spans), bridge_spans=list(bridge_spans),
@@ -577,6 +579,8 @@ def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -
     others = sorted(
         {str(p[k]) for _, p, _ in selected for k in keys if p.get(k) not in (None, "")} - {track}
     )
+    if len(others) > 6:  # a longest chain through a network: not every line's code in the name
+        others = [*others[:6], f"+{len(others) - 6} more"]
     return f"{base}, track {track}" + (f" ({', '.join(others)})" if others else "")
 
 
@@ -619,7 +623,7 @@ def _select_lines(
         avail = sorted({f"{k}={p[k]}" for _, p, _ in lines for k in _LABEL_KEYS if k in p})
         raise TrackMapError(
             f"{path}: no line feature matches track={track!r} where={dict(where or {})}; "
-            f"available: {', '.join(avail[:20]) or '(no names)'}"
+            + _no_match_hint(lines, track, where, avail)
         )
     if track is None and chain == "all":
         for key in ("trackname", "name"):
@@ -628,8 +632,67 @@ def _select_lines(
                 raise TrackMapError(
                     f"{path}: the file holds several tracks ({key}: {', '.join(names[:20])}); "
                     "choose one with track=... (command line: --track-name)"
+                    + _shared_name_hint(selected, key, len(names))
                 )
     return selected
+
+
+def _no_match_hint(
+    lines: list[_LineFeature],
+    track: str | None,
+    where: Mapping[str, object] | None,
+    avail: list[str],
+) -> str:
+    """What the file does hold, nearest the user's guess first: the first 20 names in
+    alphabetical order hid line 144 among Infrabel's 405 track codes, a mistyped key
+    (``--where line=144``) was not said absent, and an OpenStreetMap file without line names
+    answered "(no names)" without the keys that select its lines (a user trial)."""
+    import difflib
+
+    keys = sorted({k for _, p, _ in lines for k in p})
+    missing = [k for k, v in (where or {}).items() if v is not None and k not in keys]
+    if missing:
+        return (f"no line feature has the propert{'ies' if len(missing) > 1 else 'y'} "
+                f"{', '.join(map(repr, missing))}; their properties: "
+                f"{', '.join(keys[:40])}")  # fmt: skip
+    if avail:
+        values = {a.split("=", 1)[1]: a for a in avail}
+        near: list[str] = []
+        if track is not None:
+            near = [a for v, a in values.items() if track.lower() in v.lower()]
+            near += [values[v] for v in difflib.get_close_matches(track, list(values), 5, 0.6)]
+        shown = list(dict.fromkeys([*near[:10], *avail]))[:20]
+        more = f", ... ({len(avail)} in all)" if len(avail) > len(shown) else ""
+        return f"available{' (nearest first)' if near else ''}: {', '.join(shown)}{more}"
+    few = []
+    first = ("usage", "service", "railway:track_ref", "passenger_lines", "status")  # OSM, Infrabel
+    for k in sorted(keys, key=lambda k: (k not in first, first.index(k) if k in first else 0, k)):
+        if k in _ID_KEYS:
+            continue
+        vals = sorted({str(p[k]) for _, p, _ in lines if k in p})
+        if 1 < len(vals) <= 12 or (len(vals) == 1 and len(lines) > 1):
+            few.append(f"{k}={'|'.join(vals[:6])}{'|...' if len(vals) > 6 else ''}")
+    return ("the lines carry no name; select them by their properties instead (--where "
+            f"KEY=VALUE, KEY= for absent): {'; '.join(few[:12]) or '(none)'}")
+
+
+def _shared_name_hint(selected: list[_LineFeature], key: str, n_names: int) -> str:
+    """When each ``key`` value (Infrabel's ``trackname`` A, B) is shared by many lines (the
+    national file: 430 features, 4 tracknames), which key tells them apart, with an example:
+    ``--track-name A`` chained track A of every line (a user trial)."""
+    for other in ("trackcode", "ref", "name"):
+        if other == key:
+            continue
+        codes = sorted({str(p[other]) for _, p, _ in selected if p.get(other) not in (None, "")})
+        if len(codes) > n_names:
+            _, first, _ = next(x for x in selected if x[1].get(other) not in (None, ""))
+            more = f", ... ({len(codes)} in all)" if len(codes) > 8 else ""
+            return (
+                f"; each {key} is shared by several lines, {other} tells them apart "
+                f"({', '.join(codes[:8])}{more}): track={str(first[other])!r} "
+                f"(command line: --track-name '{first[other]}')"
+            )
+    return ""
 
 
 def _line_parts(
@@ -720,7 +783,7 @@ def kilometre_posts_from_sections(
         m0, m1 = float(props["mfrom"]), float(props["mto"])
         km_vertex = m0 + (m1 - m0) * cum / cum[-1]
         wanted = np.arange(np.ceil(min(m0, m1) / step_m), np.floor(max(m0, m1) / step_m) + 1)
-        kms = np.concatenate([[m0, m1], wanted * step_m])
+        kms = np.concatenate([[m0, m1], wanted * step_m + 0.0])  # + 0.0: no "km -0.000"
         names = [str(props.get("ptcarfromname", "")), str(props.get("ptcartoname", ""))]
         order = np.argsort(km_vertex) if m1 < m0 else np.arange(len(km_vertex))
         lon = wrap_lon_deg(np.interp(kms, km_vertex[order], unwrap_lon_deg(c[order, 0])))

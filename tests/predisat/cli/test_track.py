@@ -71,3 +71,102 @@ def test_the_figure_draws_plan_heights_and_radii_with_the_tunnels(test_data):
     assert len(red) == len(tm.tunnels_m) > 0
     with pytest.raises(ValueError, match="step_m"):
         track_figure(tm, step_m=0.0)
+
+
+def _demo_file():
+    from importlib import resources
+
+    from predisat.track.map import DEMO_TRACK_FILE
+
+    return resources.files("predisat") / "data" / DEMO_TRACK_FILE
+
+
+def test_a_station_beyond_an_end_is_said_off_the_map(capsys):
+    # line 144's GEMBLOUX lies 540 m before the map's start (pyproj over the vertices): it
+    # read "GEMBLOUX (0 m, 41 m beside)", as if on the line (a user trial)
+    assert cli.main(["track", str(_demo_file())]) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"GEMBLOUX \(off the map: ([0-9,]+) m before the start\)", text)
+    assert m is not None, text
+    assert 500 < float(m.group(1).replace(",", "")) < 580
+    assert re.search(r"JEMEPPE/S-M \(off the map: [0-9,]+ m past the end\)", text), text
+    assert re.search(r"JEMEPPE-FR\.M \(13,0[0-9]{2} m, 0 m beside\)", text), text
+
+
+def test_kilometre_posts_from_line_sections_are_shown_and_written(tmp_path, capsys):
+    demo = json.loads(_demo_file().read_text())
+    (line,) = [f for f in demo["features"] if f["geometry"]["type"] == "LineString"]
+    bare = {"type": "FeatureCollection", "features": [line]}
+    track, sections = tmp_path / "axis.geojson", tmp_path / "sections.geojson"
+    track.write_text(json.dumps(bare))
+    section = {"type": "Feature", "geometry": line["geometry"],
+               "properties": {"mfrom": -250, "mto": 13900, "ptcarfromname": "A",
+                              "ptcartoname": "B"}}  # fmt: skip
+    sections.write_text(json.dumps({"type": "FeatureCollection", "features": [section]}))
+    assert cli.main(["track", str(track)]) == 0
+    assert "--posts-from" in capsys.readouterr().out  # the hint where there are none
+    out = tmp_path / "with_posts.geojson"
+    assert cli.main(["track", str(track), "--posts-from", str(sections), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert re.search(r"kilometre posts: 1[5-6], km -0.25 at 0 m to km 13.9 at 14,171 m", text), text
+    assert "km -0 " not in text
+    assert cli.main(["track", str(out)]) == 0  # the written map keeps them
+    assert re.search(r"kilometre posts: 1[5-6], km -0.25", capsys.readouterr().out)
+    far = tmp_path / "far.geojson"
+    far_line = {"type": "LineString", "coordinates": [[8.0, 44.0], [8.01, 44.0]]}
+    far_section = {"type": "Feature", "properties": {"mfrom": 0, "mto": 1000}, "geometry": far_line}
+    far.write_text(json.dumps({"type": "FeatureCollection", "features": [far_section]}))
+    assert cli.main(["track", str(track), "--posts-from", str(far)]) == 2
+    assert "no line section" in capsys.readouterr().err
+
+
+def _shared_tracknames(tmp_path):
+    """Two lines, tracks A and B of each, as in Infrabel's national file (trackname shared)."""
+    feats = []
+    for line, lat in ((1, 50.0), (2, 50.2)):
+        for track, dlon in (("A", 0.0), ("B", 0.0001)):
+            lon = 4.0 + dlon + np.linspace(0.0, 0.02, 11)
+            feats.append({"type": "Feature",
+                          "properties": {"trackname": track, "trackcode": f"L {line}_{track}",
+                                         "linecalfa": str(line)},
+                          "geometry": {"type": "LineString",
+                                       "coordinates": np.column_stack(
+                                           [lon, np.full(11, lat)]).tolist()}})  # fmt: skip
+    path = tmp_path / "network.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "name": "network",
+                                "features": feats}))  # fmt: skip
+    return path
+
+
+def test_a_trackname_shared_by_lines_says_which_key_tells_them_apart(tmp_path, capsys):
+    path = _shared_tracknames(tmp_path)
+    assert cli.main(["track", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "several tracks (trackname: A, B)" in err
+    assert "trackcode tells them apart" in err and "--track-name 'L 1_A'" in err
+    assert cli.main(["track", str(path), "--track-name", "L 2_A"]) == 0
+    assert capsys.readouterr().out.startswith("network, track L 2_A (A): ")
+
+
+def test_a_longest_chain_is_named_after_the_lines_it_chained(tmp_path, capsys):
+    # --track-name A --chain longest of Infrabel's national file chained lines 161 and 162 and
+    # was named after the 163 track-A features selected (1 430 characters, a user trial)
+    path = _shared_tracknames(tmp_path)
+    assert cli.main(["track", str(path), "--track-name", "A", "--chain", "longest"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert re.match(r"network, track A \(L [12]_A\): ", first), first
+
+
+def test_an_unknown_name_or_key_is_answered_with_what_the_file_holds(test_data, tmp_path, capsys):
+    # Infrabel's national file answered --track-name "L 144" with its first 20 track codes in
+    # alphabetical order (L 01_1 ... L 11/1_1), --where line=144 without saying that no
+    # feature has a "line", and the Riviera's OSM ways with "(no names)" (a user trial)
+    path = _shared_tracknames(tmp_path)
+    assert cli.main(["track", str(path), "--track-name", "L 2"]) == 2
+    assert "available (nearest first): trackcode=L 2_A, trackcode=L 2_B" in capsys.readouterr().err
+    assert cli.main(["track", str(path), "--where", "line=2"]) == 2
+    err = capsys.readouterr().err
+    assert "no line feature has the property 'line'" in err and "linecalfa" in err
+    assert cli.main(["track", str(test_data / RIVIERA), "--track-name", "Genova"]) == 2
+    err = capsys.readouterr().err
+    assert "the lines carry no name" in err and "usage=main" in err and "service=" in err
