@@ -153,18 +153,23 @@ def track_option(
     name: str | None = None,
     chain: Literal["all", "longest"] = "all",
     where: Sequence[str] | None = None,
+    *,
+    tolerance_m: float | None = None,
+    option: str = "--track",
 ) -> TrackMap:
     """``--track`` (with ``--track-name``, ``--chain``, ``--where``): the demo line when
-    absent, else :func:`predisat.track.load_track` (GeoJSON or CSV by content)."""
+    absent, else :func:`predisat.track.load_track` (GeoJSON or CSV by content); errors start
+    with ``option`` (``"FILE"`` for a positional argument)."""
     # lazy, as every library import of the command line: `--help` answers without pyproj
     from predisat.track import TrackMapError, demo_track, load_track
 
     if path is None:
         return demo_track()
     try:
-        return load_track(path, name, chain=chain, where=parse_where(where))
+        return load_track(path, name, chain=chain, where=parse_where(where),
+                          tolerance_m=tolerance_m)  # fmt: skip
     except TrackMapError as exc:
-        raise CliError(f"--track {exc}") from None
+        raise CliError(f"{option} {exc}") from None
 
 
 def add_masks_same_track(p: argparse.ArgumentParser) -> None:

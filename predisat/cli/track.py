@@ -14,7 +14,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from predisat.cli.args import add_command, existing_file, output_file
+from predisat.cli.args import add_command, existing_file, output_file, positive_float
 from predisat.cli.common import CliError, add_track_selection, track_option
 
 if TYPE_CHECKING:
@@ -39,6 +39,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("track", type=existing_file("a track map (GeoJSON or CSV)"), metavar="FILE",
                    help="track map file")
     add_track_selection(p)
+    p.add_argument("--tolerance", type=positive_float, metavar="M",
+                   help="how far the smooth fit may leave the source vertices, metres: a coarse "
+                   "source (simplified to 10 m) needs 3-10, or its kinks read as sharp curves; "
+                   "--out keeps it (default: the file's own, else 1)")  # fmt: skip
     p.add_argument("--posts-from", type=existing_file("Infrabel line sections (GeoJSON)"),
                    metavar="SECTIONS",
                    help="kilometre posts from Infrabel line sections (LineStrings with mfrom/mto, "
@@ -65,6 +69,30 @@ def _station(name: str, chainage_m: float, offset_m: float, along_m: float, leng
         end = "before the start" if chainage_m < 0.5 * length_m else "past the end"
         return f"{name} (off the map: {math.hypot(along_m, offset_m):,.0f} m {end})"
     return f"{name} ({chainage_m:,.0f} m, {abs(offset_m):.0f} m beside)"
+
+
+_SHARP_RADIUS_M = 150.0  # under this a main line's curve is suspect (sidings go to ~100 m)
+
+
+def _curves(track: TrackMap) -> str:
+    """The smallest curve radius and where; a warning when it is sharp enough to be the
+    source's kinks (Infrabel's 10 m simplification read 88 m where the 1 m file has 399 m)."""
+    import numpy as np
+
+    s = track.sample(2.0)
+    k = np.abs(np.asarray(track.curvature_at(s), float))
+    if not k.size or float(k.max()) < 1e-6:
+        return "curves: none (straight)"
+    i = int(np.argmax(k))
+    r_m = 1.0 / float(k[i])
+    under_m = 2.0 * int((k > 1.0 / 300.0).sum())
+    text = (f"curves: smallest radius {r_m:,.0f} m at {s[i]:,.0f} m; {under_m:,.0f} m of the "
+            "line under R 300 m")  # fmt: skip
+    if r_m < _SHARP_RADIUS_M:
+        text += (f" (warning: under {_SHARP_RADIUS_M:g} m is sharp for a main line: if the "
+                 "source is coarsely simplified, its kinks read as curves: look at the figure "
+                 f"and try --tolerance {max(3.0, 3.0 * track.tolerance_m):g})")  # fmt: skip
+    return text
 
 
 def summary_lines(track: TrackMap) -> list[str]:
@@ -104,6 +132,7 @@ def summary_lines(track: TrackMap) -> list[str]:
         lines.append(f"stations: {len(named)}: {items}{more}")
     else:
         lines.append("stations: none in the map")
+    lines.append(_curves(track))
     lines.append(f"tunnels: {_spans(track.tunnels_m)}")
     lines.append(f"bridges: {_spans(track.bridges_m)}")
     return lines
@@ -111,7 +140,8 @@ def summary_lines(track: TrackMap) -> list[str]:
 
 def cmd_track(args: argparse.Namespace) -> int:
     """``predisat track``: print the map's summary, write the figure and the one-line map."""
-    track = track_option(str(args.track), args.track_name, args.chain, args.where)
+    track = track_option(str(args.track), args.track_name, args.chain, args.where,
+                         tolerance_m=args.tolerance, option="FILE")  # fmt: skip
     if args.posts_from is not None:
         from predisat.track import TrackMapError
         from predisat.track.readers import kilometre_posts_from_sections

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -284,8 +285,10 @@ class TrackMap:
             if was is not None and abs(was - length) > 0.5:
                 raise TrackMapError(
                     f"{tf.path}: its tunnels_m/bridges_m were written for a line {was:.3f} m "
-                    f"long, its line is {length:.3f} m: the line was edited since, and the "
-                    "intervals would stand elsewhere; write the map again, or remove them"
+                    f"long, its line is {length:.3f} m: the line was edited since, or is read "
+                    "with another fit tolerance than it was written with (its tolerance_m "
+                    "member, --tolerance), and the intervals would stand elsewhere; read it "
+                    "with its own tolerance, write the map again, or remove them"
                 )
             off = [(a, b) for a, b in chain if b < -0.01 or a > length + 0.01]
             if off:
@@ -796,6 +799,7 @@ def load_track(
     *,
     chain: Literal["all", "longest"] = "all",
     where: Mapping[str, str | None] | None = None,
+    tolerance_m: float | None = None,
 ) -> TrackMap:
     """The track map in a file, GeoJSON or CSV by its content (not its suffix).
 
@@ -813,6 +817,10 @@ def load_track(
         How the selected GeoJSON parts are chained.
     where : mapping, optional
         GeoJSON property filters (``{key: value}``, None: key absent).
+    tolerance_m : float, optional
+        How far (m) the smooth fit may leave the source vertices (:class:`TrackMap`); by
+        default the file's own (a written map's ``tolerance_m``), else 1 m. A coarsely
+        simplified source (10 m) needs more, or its kinks read as sharp curves.
 
     Raises
     ------
@@ -825,6 +833,11 @@ def load_track(
             f"{p}: no such file; give a GeoJSON (LineString) or CSV (lat_deg, lon_deg[, h_m]) "
             "track map"
         )
+    if tolerance_m is not None and not (math.isfinite(tolerance_m) and tolerance_m > 0):
+        raise TrackMapError(f"tolerance_m must be a positive number of metres, got {tolerance_m}")
     if sniff_format(p) == "geojson":
-        return TrackMap.from_geojson(p, track=name, chain=chain, where=where)
+        return TrackMap.from_geojson(p, track=name, chain=chain, where=where,
+                                     tolerance_m=tolerance_m)  # fmt: skip
+    if tolerance_m is not None:
+        return TrackMap.from_csv(p, tolerance_m=tolerance_m)
     return TrackMap.from_csv(p)

@@ -448,7 +448,7 @@ def parse_geojson_track(
     max_turn_deg: float = 30.0,
     reverse: bool = False,
     expected_bbox: Sequence[float] | None = None,
-    tolerance_m: float = 1.0,
+    tolerance_m: float | None = None,
     max_post_offset_m: float = 50.0,
     name: str | None = None,
     source: str | None = None,
@@ -482,8 +482,10 @@ def parse_geojson_track(
         posts when the file has at least two, else along the first selected part.
     expected_bbox : (lon_min, lat_min, lon_max, lat_max), optional
         Reject vertices outside it (catches swapped coordinates that are still valid).
-    tolerance_m : float
-        Source tolerance for the smooth fit (see :class:`~predisat.track.map.TrackMap`).
+    tolerance_m : float, optional
+        Source tolerance for the smooth fit (see :class:`~predisat.track.map.TrackMap`); by
+        default the file's ``tolerance_m`` member (a map written by :func:`write_geojson`),
+        else 1 m.
     max_post_offset_m : float
         Kilometre-post points farther than this from the track are ignored.
     name, source, attribution : str, optional
@@ -522,7 +524,8 @@ def parse_geojson_track(
     members = doc if isinstance(doc, dict) else {}
     if attribution is None:
         attribution = attribution_of(members)
-    tol = float(members["tolerance_m"]) if "tolerance_m" in members else tolerance_m
+    tol = (float(tolerance_m) if tolerance_m is not None
+           else float(members["tolerance_m"]) if "tolerance_m" in members else 1.0)  # fmt: skip
     return TrackFile(
         path, lat, lon, h,
         name=name or _selected_name(str(members.get("name") or path.stem), track, chained),

@@ -170,3 +170,39 @@ def test_an_unknown_name_or_key_is_answered_with_what_the_file_holds(test_data, 
     assert cli.main(["track", str(test_data / RIVIERA), "--track-name", "Genova"]) == 2
     err = capsys.readouterr().err
     assert "the lines carry no name" in err and "usage=main" in err and "service=" in err
+
+
+def test_the_smallest_curve_is_said_and_a_coarse_source_gets_a_wider_tolerance(
+    test_data, tmp_path, capsys
+):
+    """A user trial: Infrabel's 10 m simplification of line 144 read a smallest radius of 88 m
+    (the 1 m file: 399 m), with no word and no way to widen the fit's tolerance."""
+    from predisat.track import TrackMap
+
+    src = test_data / RIVIERA
+    assert cli.main(["track", str(src), *SELECT]) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"curves: smallest radius ([0-9,]+) m at ([0-9,]+) m", text)
+    assert m is not None, text
+    # against the circle through three axis points 10 m apart around the place (geometry of
+    # the fitted axis, not its curvature formula)
+    tm = TrackMap.from_geojson(src, where={"usage": "main", "service": None}, chain="longest")
+    at = float(m.group(2).replace(",", ""))
+    p = tm.enu_at(np.clip([at - 10.0, at, at + 10.0], 0.0, tm.length_m))[:, :2]
+    a, b, c = (np.linalg.norm(p[i] - p[j]) for i, j in ((0, 1), (1, 2), (0, 2)))
+    (u, v), (w, z) = p[1] - p[0], p[2] - p[0]
+    area2 = abs(u * z - v * w)
+    assert float(m.group(1).replace(",", "")) == pytest.approx(a * b * c / (2.0 * area2), rel=0.05)
+    out = tmp_path / "wide.geojson"
+    assert cli.main(["track", str(src), *SELECT, "--tolerance", "5", "--out", str(out)]) == 0
+    wide = capsys.readouterr().out
+    dev = float(re.search(r"stays within ([0-9.]+) m of them \(tolerance 5 m\)", wide).group(1))
+    assert dev <= 5.0 + 0.05
+    # the written map keeps its tolerance; another one on reading fits another line, on which
+    # the written tunnels would stand elsewhere: refused, naming the tolerance
+    assert "(tolerance 5 m)" in (cli.main(["track", str(out)]), capsys.readouterr().out)[1]
+    assert cli.main(["track", str(out), "--tolerance", "1"]) == 2
+    assert "another fit tolerance" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["track", str(out), "--tolerance", "0"])
+    assert "--tolerance: 0 must be above 0" in capsys.readouterr().err
