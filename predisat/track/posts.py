@@ -138,15 +138,19 @@ def kilometre_gaps(posts: Sequence[KilometrePost]) -> list[tuple[float, float]]:
     return gaps
 
 
+_SAME_POST_M = 1.0  # two posts of one kilometre this close along the chainage are one
+
+
 def monotone_posts(posts: Sequence[KilometrePost], where: str) -> tuple[KilometrePost, ...]:
     """The posts that can map chainage to the line's kilometres, sorted by chainage.
 
     Between two neighbouring posts both the chainage and the kilometre must change strictly,
     the kilometre in the direction most neighbours agree on (it increases along the chainage
     unless the chainage was reversed against the posts). Both posts of every pair that does
-    not (a duplicated milestone, one out of order, two at one place) are dropped, until the
+    not (a milestone out of order, two kilometres at one place) are dropped, until the
     rest is strictly monotone: interpolating through them would give a flat or backward
     kilometre (a whole stretch labelled with one kilometre). A warning names the dropped posts.
+    The same kilometre twice within a metre (a milestone mapped on both tracks) is kept once.
 
     Parameters
     ----------
@@ -164,7 +168,13 @@ def monotone_posts(posts: Sequence[KilometrePost], where: str) -> tuple[Kilometr
     UserWarning
         When posts are dropped, naming each and the fix.
     """
-    kept = sorted(posts, key=lambda p: p.chainage_m)
+    kept = []
+    for p in sorted(posts, key=lambda p: p.chainage_m):
+        # one milestone mapped twice (on both tracks of a double line, in OpenStreetMap): the
+        # same kilometre within a metre is one post, not a pair that drops both
+        if kept and p.km_m == kept[-1].km_m and p.chainage_m - kept[-1].chainage_m < _SAME_POST_M:
+            continue
+        kept.append(p)
     if len(kept) < 2:
         return tuple(kept)
     km = np.array([p.km_m for p in kept])

@@ -27,8 +27,13 @@ def P(chainage_m: float, km_m: float, label: str = "") -> KilometrePost:
         ([P(0, 10_000), P(1000, 11_000), P(2000, 12_000)], [10_000, 11_000, 12_000], []),
         # decreasing along the chainage (chainage reversed against the posts): all kept
         ([P(0, 12_000), P(1000, 11_000), P(2000, 10_000)], [12_000, 11_000, 10_000], []),
-        # the OpenStreetMap case: one milestone twice, 5 cm apart
-        ([P(54_202.62, 80_000), P(54_202.68, 80_000)], [], ["km 80.000", "54.203"]),
+        # the OpenStreetMap case: one milestone twice, 5 cm apart (mapped on both tracks):
+        # one post (both were dropped, and the line lost its only kilometre, a user trial)
+        ([P(54_202.62, 80_000), P(54_202.68, 80_000)], [80_000], []),
+        ([P(53_202.6, 79_000), P(54_202.62, 80_000), P(54_202.68, 80_000)], [79_000, 80_000],
+         []),
+        # the same kilometre 3 m apart is not one milestone: both dropped, said
+        ([P(54_202.6, 80_000), P(54_205.6, 80_000)], [], ["km 80.000", "54.203"]),
         # one post out of order: it and its neighbour go, the rest stays
         ([P(0, 10_000), P(1000, 11_000), P(2000, 10_500, "X"), P(3000, 13_000)],
          [10_000, 13_000], ["km 11.000", "km 10.500 (X)"]),
@@ -71,16 +76,22 @@ def _line_with_posts(path: Path, posts_km: list[float], at_m: list[float]) -> Pa
     return path
 
 
-def test_a_duplicated_milestone_gives_no_kilometres_anywhere(tmp_path: Path) -> None:
+def test_a_duplicated_milestone_is_one_post_not_a_flat_line(tmp_path: Path) -> None:
+    """One milestone mapped twice 5 cm apart: once "km 80.000" over the whole line
+    (interpolated flat between the two), then no kilometre at all (both dropped); it is one
+    post, labelling the kilometre around it (a user trial)."""
+    import warnings
+
     from predisat.availability.report import _km_label
 
     path = _line_with_posts(tmp_path / "dup.geojson", [80.0, 80.0], [1500.0, 1500.05])
-    with pytest.warns(UserWarning, match=r"dup\.geojson: kilometre posts km 80\.000 at "
-                      r"chainage 1\.500 km, km 80\.000 at chainage 1\.500 km"):  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         tm = TrackMap.from_geojson(path)
-    # before: "km 80.000" over the whole line (interpolated flat between the two posts)
-    assert tm.kilometre_posts == ()
-    assert np.isnan(tm.kilometre_at([0.0, 100.0, 300.0])).all()
+    assert [p.km_m for p in tm.kilometre_posts] == [80_000.0]
+    km = tm.kilometre_at([100.0, 1000.0, 1900.0])
+    assert np.isnan(km[0])  # not the whole line
+    np.testing.assert_allclose(km[1:], [79_500.0, 80_400.0], atol=1.0)
     assert _km_label(tm, 100.0) == "chainage 0.100 km"
 
 
