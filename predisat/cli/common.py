@@ -12,6 +12,7 @@ import signal
 import sys
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from predisat.atomic import access_error_text, storage_error_text
@@ -162,9 +163,17 @@ def track_option(
     with ``option`` (``"FILE"`` for a positional argument)."""
     # lazy, as every library import of the command line: `--help` answers without pyproj
     from predisat.track import TrackMapError, demo_track, load_track
+    from predisat.track.readers import sniff_format
 
     if path is None:
         return demo_track()
+    selection = [o for o, given in (("--track-name", name is not None), ("--where", bool(where)),
+                                    ("--chain longest", chain != "all")) if given]  # fmt: skip
+    if selection and Path(path).is_file() and sniff_format(Path(path)) != "geojson":
+        # a CSV holds one line: a selection that cannot apply must not pass unnoticed
+        raise CliError(f"{option} {path}: a CSV track map holds one line, with nothing to "
+                       f"select: drop {', '.join(selection)} (they pick one line of a GeoJSON "
+                       "file)")  # fmt: skip
     try:
         return load_track(path, name, chain=chain, where=parse_where(where),
                           tolerance_m=tolerance_m)  # fmt: skip

@@ -114,13 +114,14 @@ def summary_lines(track: TrackMap) -> list[str]:
         lines.append("heights: none (h = 0): fine for synthetic worlds; `locator run` refuses "
                      "it on real data (docs/locator.md, track heights)")  # fmt: skip
     posts = track.kilometre_posts
-    lines.append(
-        f"kilometre posts: {len(posts)}, km {posts[0].km_m / 1000 + 0.0:g} at "
-        f"{posts[0].chainage_m:,.0f} m to km {posts[-1].km_m / 1000 + 0.0:g} at "
-        f"{posts[-1].chainage_m:,.0f} m"
-        if posts else "kilometre posts: none (chainage is the distance from the first vertex; "
-        "Infrabel line sections give them: --posts-from SECTIONS.geojson)"
-    )  # fmt: skip
+    at = [f"km {p.km_m / 1000 + 0.0:g} at {p.chainage_m:,.0f} m" for p in posts[:1] + posts[-1:]]
+    if len(posts) > 1:
+        lines.append(f"kilometre posts: {len(posts)}, {at[0]} to {at[1]}")
+    elif posts:
+        lines.append(f"kilometre posts: 1, {at[0]} (it labels the kilometre around it only)")
+    else:
+        lines.append("kilometre posts: none (chainage is the distance from the first vertex; "
+                     "Infrabel line sections give them: --posts-from SECTIONS.geojson)")
     if track.stations:
         ch = track.project([st.lat_deg for st in track.stations],
                            [st.lon_deg for st in track.stations])  # fmt: skip

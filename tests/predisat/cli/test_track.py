@@ -206,3 +206,20 @@ def test_the_smallest_curve_is_said_and_a_coarse_source_gets_a_wider_tolerance(
     with pytest.raises(SystemExit):
         cli.main(["track", str(out), "--tolerance", "0"])
     assert "--tolerance: 0 must be above 0" in capsys.readouterr().err
+
+
+def test_a_selection_on_a_csv_map_is_refused_not_ignored(tmp_path, capsys):
+    """A user trial: --track-name and --where on a CSV map (one line) were silently ignored."""
+    path = tmp_path / "line.csv"
+    path.write_text("lat_deg,lon_deg\n50.5,4.70\n50.5,4.72\n50.5,4.74\n")
+    assert cli.main(["track", str(path), "--track-name", "A", "--where", "usage=main"]) == 2
+    err = capsys.readouterr().err
+    assert "a CSV track map holds one line" in err and "drop --track-name, --where" in err
+    assert cli.main(["track", str(path)]) == 0
+    # one post labels the kilometre around it, said so (not "km 80 ... to km 80")
+    from predisat.cli.track import summary_lines
+    from predisat.track import KilometrePost, TrackMap
+
+    tm = TrackMap.from_csv(path).with_metadata(kilometre_posts=[KilometrePost(500.0, 80_000.0)])
+    (line,) = [x for x in summary_lines(tm) if x.startswith("kilometre posts")]
+    assert line == "kilometre posts: 1, km 80 at 500 m (it labels the kilometre around it only)"
