@@ -168,7 +168,7 @@ def monotone_posts(posts: Sequence[KilometrePost], where: str) -> tuple[Kilometr
     UserWarning
         When posts are dropped, naming each and the fix.
     """
-    kept = []
+    kept: list[KilometrePost] = []
     for p in sorted(posts, key=lambda p: p.chainage_m):
         # one milestone mapped twice (on both tracks of a double line, in OpenStreetMap): the
         # same kilometre within a metre is one post, not a pair that drops both
