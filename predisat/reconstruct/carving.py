@@ -1402,26 +1402,33 @@ def _camera_ceilings(
 
 
 def _ceiling_caps(ceilings: NDArray, s: NDArray, antenna_m: NDArray) -> NDArray:
-    """Per antenna ``(tan_cap, dz_m)`` (n, 2): at a position with a ceiling row whose cameras
-    stand below the antenna, ``tan_cap`` bounds the elevation tangent at which the antenna
-    sees anything in the clearance over the track, and ``dz_m`` is the antenna's height above
-    them (``(inf, 0)`` elsewhere).
+    """Per antenna ``(tan_cap, dz_m)`` (n, 2): from the ceiling row nearest the position,
+    ``tan_cap`` bounds the elevation tangent at which the antenna sees anything in the
+    clearance over the track, and ``dz_m`` is the antenna's height above the row's ceiling
+    moved to the position (``(inf, 0)`` where that is negative, or no row bounds).
 
-    A point there at chainage distance ``d`` from the position stands at most at
-    ``z + d * tan`` (the ceiling, pointwise, before any rasterisation), and its horizontal
-    distance ``r`` from the antenna is at least ``d``: seen from the antenna at height
-    ``z + dz`` its tangent is at most ``tan - dz / r``. 1 % is added to ``tan`` for the
-    track's curvature (a chord is shorter than its arc).
+    A point at chainage distance ``d`` from the position is at most ``d + delta`` from a row
+    ``delta`` away, so it stands at most at ``z + delta * tan + d * tan`` (the ceiling,
+    pointwise, before any rasterisation; ``tan`` the steeper of the row's two, as a point
+    within ``delta`` may lie on either side of its cameras), and its horizontal distance
+    ``r`` from the antenna is at least ``d``: seen from the antenna at height
+    ``z + delta * tan + dz`` its tangent is at most ``tan - dz / r``. 1 % is added to
+    ``tan`` for the track's curvature (a chord is shorter than its arc). Until 2026-12-07 only
+    a row within 1 mm of the position counted: a stop's merged view stands at one of its
+    frames, mostly off the position, and the antenna's own cell kept the rasterised ceiling
+    of its far end, above the antenna: the whole position read 90 deg
+    (``docs/reconstruction.md``, section 24).
     """
     out = np.tile(np.array([np.inf, 0.0]), (s.size, 1))
     c = np.asarray(ceilings, float).reshape(-1, 4)
     if not c.size:
         return out
     j = np.abs(c[None, :, 0] - s[:, None]).argmin(axis=1)
-    at = np.abs(c[j, 0] - s) <= 1e-3
+    delta = np.abs(c[j, 0] - s)
     tan = np.maximum(c[j, 2], c[j, 3]) * 1.01
-    dz = antenna_m[:, 2] - c[j, 1]
-    ok = at & np.isfinite(tan) & (dz >= 0.0)
+    with np.errstate(invalid="ignore"):
+        dz = antenna_m[:, 2] - c[j, 1] - np.where(delta > 0.0, delta * tan, 0.0)
+    ok = np.isfinite(tan) & (dz >= 0.0)
     out[ok, 0] = tan[ok]
     out[ok, 1] = dz[ok]
     return out

@@ -12,10 +12,10 @@ So the frames of one camera whose chainages lie within ``gap_m`` of the next, an
 ``span_m`` (a crawl is cut into such pieces), are merged, before anything is carved, into one
 frame that calls sky only what every one of them saw as sky: it adds no sky a single frame
 would not have given, and each frame's own fault is outvoted by the others. The merged frame
-stands at the first frame's place and pose; the others' are within its doubts (its attitude
-doubt grows by the largest angle between the poses, its position doubts hold every frame's
-camera centre with its own doubts), so every direction it calls sky is sky from wherever the
-camera really stood.
+stands at the place and pose of its frame nearest the middle of their chainages; the others'
+are within its doubts (its attitude doubt grows by the largest angle between the poses, its
+position doubts hold every frame's camera centre with its own doubts), so every direction it
+calls sky is sky from wherever the camera really stood.
 """
 
 from __future__ import annotations
@@ -191,13 +191,13 @@ def merge_stop_frames(
 
     A merged frame's sky is the pixels every one of its frames saw as sky; its thin pixels
     those of them any frame took for sky by the thin-structure policy only; its confidence the
-    lowest per column. It keeps the first frame's (lowest chainage) place, pose and ``reverse``;
-    its ``attitude_doubt_deg`` is the largest over the frames of their own doubt plus the angle
-    between their pose and the first's; its position doubts (a box along, across and up in
-    the first frame's level vehicle frame) hold every frame's own box, turned with the
-    frame's heading, about every frame's camera centre. Its ``frame_id`` names the first and
-    last frames and the count. Frames alone are returned as they are (the same objects); the
-    inputs are not modified.
+    lowest per column. It keeps the place, pose and ``reverse`` of the frame nearest the middle
+    of their chainages (the reference); its ``attitude_doubt_deg`` is the largest over the
+    frames of their own doubt plus the angle between their pose and the reference's; its
+    position doubts (a box along, across and up in the reference's level vehicle frame) hold
+    every frame's own box, turned with the frame's heading, about every frame's camera centre.
+    Its ``frame_id`` names the first and last frames and the count. Frames alone are returned
+    as they are (the same objects); the inputs are not modified.
 
     Parameters
     ----------
@@ -221,30 +221,36 @@ def merge_stop_frames(
 
 
 def _merged(group: list[FrameView]) -> FrameView:
-    first = group[0]
+    # the view stands at the frame nearest the middle of the group's chainages (the first of
+    # equals): its doubts about that frame reach about half the spread each way; about the
+    # first frame they reached the whole spread both ways, half of it where no frame stood
+    # (a crawl's 0.4 m slice had a 0.4 m along doubt; docs/reconstruction.md, section 24)
+    ch = np.array([f.chainage_m for f in group], float)
+    ref = group[int(np.argmin(np.abs(ch - 0.5 * (ch.min() + ch.max()))))]
     sky = np.logical_and.reduce([np.asarray(f.sky_mask, bool) for f in group])
     thins = [np.asarray(f.thin_mask, bool) for f in group if f.thin_mask is not None]
     thin = sky & np.logical_or.reduce(thins) if thins else None
     confs = [np.asarray(f.confidence, float) for f in group if f.confidence is not None]
     conf = np.minimum.reduce(confs) if confs else None
-    r0 = first.mount.camera_to_enu(first.heading_deg, first.reverse)
-    c0 = first.mount.camera_position_enu(first.antenna_enu_m, first.heading_deg, first.reverse)
-    # the position doubts are a box in the first frame's level vehicle frame
+    r0 = ref.mount.camera_to_enu(ref.heading_deg, ref.reverse)
+    c0 = ref.mount.camera_position_enu(ref.antenna_enu_m, ref.heading_deg, ref.reverse)
+    # the position doubts are a box in the reference frame's level vehicle frame
     # (FrameView.along/across/height_doubt_m): each frame's box, turned into it, about its
     # centre's offset; the exact bounding box of a turned box is |M| times its half-sizes
-    to_first = vehicle_to_enu(first.heading_deg, first.reverse).T
+    to_ref = vehicle_to_enu(ref.heading_deg, ref.reverse).T
     turn_deg, box = 0.0, np.zeros(3)
     for f in group:
         r = f.mount.camera_to_enu(f.heading_deg, f.reverse)
         cos = np.clip((np.trace(r0.T @ r) - 1.0) / 2.0, -1.0, 1.0)
         turn_deg = max(turn_deg, float(np.degrees(np.arccos(cos))))
         c = f.mount.camera_position_enu(f.antenna_enu_m, f.heading_deg, f.reverse)
-        turned = np.abs(to_first @ vehicle_to_enu(f.heading_deg, f.reverse))
+        turned = np.abs(to_ref @ vehicle_to_enu(f.heading_deg, f.reverse))
         own = turned @ np.array([f.along_doubt_m, f.across_doubt_m, f.height_doubt_m])
-        box = np.maximum(box, np.abs(to_first @ (np.asarray(c, float) - c0)) + own)
-    ids = f"{first.frame_id or first.chainage_m}..{group[-1].frame_id or group[-1].chainage_m}"
+        box = np.maximum(box, np.abs(to_ref @ (np.asarray(c, float) - c0)) + own)
+    a, b = group[0], group[-1]
+    ids = f"{a.frame_id or a.chainage_m}..{b.frame_id or b.chainage_m}"
     return replace(
-        first,
+        ref,
         sky_mask=sky,
         confidence=conf,
         frame_id=f"{ids} (stop, {len(group)} frames)",

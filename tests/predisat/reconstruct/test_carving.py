@@ -295,6 +295,89 @@ def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
     assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
 
 
+
+def test_the_ceiling_cap_holds_from_a_row_off_the_position() -> None:
+    """A ceiling row ``delta`` from the position, its cameras known within ``doubt`` along the
+    track (a stop's merged view stands at its first frame): the rasterised ceiling stands
+    above the antenna in its own cell and closes every ray. The cap from that row (its
+    ceiling moved to the position, ``delta * tan`` higher) opens them, yet no ray reads lower
+    than the exact ceiling ``z + (|x - row| + doubt) tan e`` seen along it (section 24)."""
+    from predisat.reconstruct.carving import _ceiling_caps, _horizon_parts
+    from predisat.reconstruct.heightfield import HeightField
+
+    c, n = 0.5, 81
+    e_deg, z_cam, dz, doubt, delta = 36.0, 2.0, 0.5, 0.4, 0.2
+    t = np.tan(np.radians(e_deg))
+    centres = (np.arange(n) - n // 2 + 0.5) * c
+    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
+    clear = np.abs(y) < 2.0
+    s0 = 0.1  # the position's chainage (frame x), where the antenna stands
+    row = np.array([[s0 + delta, z_cam + doubt * t, t, 0.8 * t]])  # as _camera_ceilings
+    bound = np.where(clear, row[0, 1] + (np.abs(x - row[0, 0]) + c * np.sqrt(0.5)) * t, 0.0)
+    bound = bound.astype(np.float32)
+    z = np.zeros((n, n), np.float32)
+    hf = HeightField(
+        c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
+        y.astype(np.float32), z,
+    )  # fmt: skip
+    p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
+    ant = np.array([[s0, 0.1, z_cam + dz]])
+    assert (_horizon_parts(hf, ant, np.eye(3)[None], p)[0] == 90.0).all()
+    caps = _ceiling_caps(row, np.array([s0]), ant)
+    np.testing.assert_allclose(caps[0], [1.01 * t, dz - doubt * t - delta * 1.01 * t])
+    el = _horizon_parts(hf, ant, np.eye(3)[None], p, caps)[0]
+    assert (el < 89.0).mean() > 0.9
+    az = np.radians(np.arange(el.size) * p.az_step_deg / p.n_sub)
+    r = np.arange(0.01, 17.0, 0.01)
+    px = ant[0, 0] + np.sin(az)[:, None] * r
+    py = ant[0, 1] + np.cos(az)[:, None] * r
+    inside = np.abs(py) < 2.0
+    exact = z_cam + (np.abs(px - row[0, 0]) + doubt) * t
+    tan_exact = np.where(inside, (exact - ant[0, 2]) / r, -np.inf).max(axis=1)
+    assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
+    # a row too far or too high for its ceiling to pass under the antenna caps nothing
+    assert np.isinf(_ceiling_caps(row, np.array([s0 + 2.0]), ant)[0, 0])
+
+
+def test_a_crawl_merged_into_stops_keeps_the_zenith_it_saw() -> None:
+    """Section 24: a crawl every 0.1 m (trees, catenary, the demo track's curve) merged into
+    slices of at most 0.5 m: each slice stood at its first frame with a 0.4 m doubt, none at
+    the position, and the position's own clearance cell took the rasterised ceiling of its
+    far end, above the antenna: 90 deg in every bin, where the truth and the frames alone
+    see sky overhead. Standing at its middle frame (a 0.2 m doubt), with the cap taken from
+    the nearest row, the position keeps its sky, and no supported bin is below the ray-cast
+    truth."""
+    from predisat.reconstruct.params import PipelineParams
+    from predisat.reconstruct.stops import merge_stop_frames
+    from predisat.track.map import demo_track
+
+    track = demo_track()
+    spec = WorldSpec((Stretch("trees", 7150.0, 7450.0, "both"),), catenary=True, hills=False)
+    world = World.build(track, spec, seed=11)
+    caster = make_caster(world, "open3d", lband_only=True)
+    mounts = {side: Mount.default(side) for side in ("left", "right")}
+
+    def at(ch: np.ndarray) -> list[FrameView]:
+        return ideal_frames(world, ch, FISHEYE, mounts, caster=caster,
+                            thin_deg=PipelineParams().thin_deg)  # fmt: skip
+
+    crawl_m = np.arange(7290.0, 7330.0 + 1e-9, 0.1)
+    fr = [f for f in at(np.arange(7200.0, 7401.0, 10.0)) if not 7289.0 < f.chainage_m < 7331.0]
+    fr += at(crawl_m)
+    cut = merge_stop_frames(fr, 0.2, 0.5)
+    s = np.array([7300.0])
+    assert min(abs(f.chainage_m - 7300.0) for f in cut) > 0.05  # no view at the position
+    # about the middle frame of each slice of 5: half its 0.4 m spread each way
+    assert max(f.along_doubt_m for f in cut) == pytest.approx(0.2, abs=0.01)
+    tm = true_masks(world, s)
+    rec = Reconstructor().run(cut, s, track)
+    alone = Reconstructor().run(fr, s, track)
+    assert (alone.mask_el_deg < 89.9).mean() > 0.9 and (tm.mask_el_deg < 89.9).mean() > 0.9
+    assert (rec.mask_el_deg < 89.9).mean() > 0.9  # was 90 deg in every bin
+    supported = rec.source != BinSource.ASSUMED
+    assert ((rec.mask_el_deg - tm.mask_el_deg)[supported] >= -0.1).all()
+    assert (rec.mask_el_deg >= alone.mask_el_deg - 0.1).mean() > 0.99  # merging adds no sky
+
 @pytest.fixture(scope="module")
 def mixed():
     track = straight_track(1300.0, AZIMUTH)
@@ -455,7 +538,8 @@ def test_params_reject_a_bad_low_confidence_window(windows: float) -> None:
 def test_camera_ceiling_rows_and_caps_by_hand() -> None:
     """Ceiling rows from hand-made profiles (one camera a side, sky straight along the track
     from 30 deg ahead and 45 deg behind), a forward lever arm raising the row by its length
-    times the steeper tangent; caps only at a row's own chainage, under the antenna."""
+    times the steeper tangent; caps from the nearest row, moved to the position, under the
+    antenna."""
     from predisat.reconstruct.carving import _camera_ceilings, _ceiling_caps
     from predisat.reconstruct.skyline import SkyProfile
 
@@ -478,7 +562,10 @@ def test_camera_ceiling_rows_and_caps_by_hand() -> None:
     ant = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 3.0], [5.0, 0.0, 5.0]])
     caps = _ceiling_caps(rows, s, ant)
     np.testing.assert_allclose(caps[0], [t45 * 1.01, 5.0 - rows[0, 1]])
-    assert np.isinf(caps[1:, 0]).all()  # antenna below the cameras; no row at 105 m
+    assert np.isinf(caps[1:, 0]).all()  # antenna below the cameras; the row 5 m off passes over
+    # a row 0.2 m off: its ceiling moved to the position, 0.2 tan higher
+    near = _ceiling_caps(rows, np.array([100.2]), ant[:1])
+    np.testing.assert_allclose(near[0], [t45 * 1.01, 5.0 - rows[0, 1] - 0.2 * t45 * 1.01])
 
 
 def test_camera_ceiling_needs_the_view_up_to_the_zenith_and_clamps_at_the_horizon() -> None:

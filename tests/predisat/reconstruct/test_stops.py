@@ -70,10 +70,12 @@ def test_a_merged_frame_is_sky_only_where_every_frame_saw_sky() -> None:
     np.testing.assert_array_equal(m.thin_mask, thin & m.sky_mask)
     np.testing.assert_array_equal(m.confidence, np.minimum(np.minimum(confs[0], confs[1]),
                                                            confs[2]))
-    assert m.chainage_m == 50.0 and m.frame_id == "f0..f2 (stop, 3 frames)"
-    # the antennas 0.1 and 0.2 m apart along the track, the mounts equal: the along doubt
-    # grows by 0.2 m, the across and height doubts not at all
-    assert m.along_doubt_m == pytest.approx(0.4)
+    # it stands at the middle frame (section 24: about the first, its box reached 0.2 m behind
+    # where no frame stood)
+    assert m.chainage_m == 50.1 and m.frame_id == "f0..f2 (stop, 3 frames)"
+    # the antennas 0.1 m either side of it along the track, the mounts equal: the along doubt
+    # grows by 0.1 m, the across and height doubts not at all
+    assert m.along_doubt_m == pytest.approx(0.3)
     assert m.across_doubt_m == pytest.approx(0.0) and m.height_doubt_m == pytest.approx(0.0)
     assert m.attitude_doubt_deg == pytest.approx(0.2)
     assert all(np.array_equal(f.sky_mask, b) for f, b in zip(fr, before, strict=True))
@@ -113,7 +115,8 @@ def test_frames_driven_the_other_way_are_not_one_stop() -> None:
 def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
     """A crawl of 200 frames 0.45 m apart turning 0.05 deg a frame, each frame's chainage known
     within 3 m: the merged box holds every frame's camera centre with its own box turned into
-    the first frame's axes (checked on the corners of each box); nothing moved up."""
+    the reference (middle) frame's axes (checked on the corners of each box); nothing moved
+    up."""
     def at(k: int) -> FrameView:
         hd = 0.05 * k
         # on a circle of radius 0.45 / radians(0.05) m: heading hd, a point every 0.45 m
@@ -124,9 +127,11 @@ def test_a_crawl_on_a_curve_holds_every_frames_own_box() -> None:
 
     fr = [at(k) for k in range(200)]
     (m,) = merge_stop_frames(fr, 0.5, 100.0)  # a span that holds the whole crawl
-    h0 = np.radians(fr[0].heading_deg)
+    ref = next(f for f in fr if f.frame_id == f"c{round((m.chainage_m - 100.0) / 0.45)}")
+    assert ref.chainage_m == m.chainage_m and abs(m.chainage_m - (100.0 + 0.45 * 99.5)) < 0.3
+    h0 = np.radians(ref.heading_deg)
     fwd, left = np.array([np.sin(h0), np.cos(h0), 0.0]), np.array([-np.cos(h0), np.sin(h0), 0.0])
-    c0 = fr[0].mount.camera_position_enu(fr[0].antenna_enu_m, fr[0].heading_deg)
+    c0 = ref.mount.camera_position_enu(ref.antenna_enu_m, ref.heading_deg)
     half = np.array([m.along_doubt_m, m.across_doubt_m, m.height_doubt_m])
     for f in fr:
         h = np.radians(f.heading_deg)
