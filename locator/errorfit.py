@@ -348,6 +348,9 @@ def fit_systems(
         parts = [_columns(d, group) for d in data if any(s[0] in group for s in d.sats)]
         el, res = _stack(parts)
         ok = np.isfinite(el) & np.isfinite(res)
+        # the residuals the fit uses: counted and ranged by the same rule (a review: the
+        # count took epochs with 1-2 satellites of the system in, which the fit leaves out)
+        use = usable_residuals(el, res)
         try:
             est = fit_error_model(el, res)
             ob = (overbound_error_model(el, res, est, n_bins=n_bins, confidence=confidence)
@@ -356,7 +359,6 @@ def fit_systems(
             # too few residuals in epochs with 3 satellites of the system: say how many (not
             # of a file's systems that were not chosen, which have none: a user trial's
             # message named C, J, R, S for a gps+galileo calibration)
-            use = usable_residuals(el, res)
             if ok.any():
                 short.append(f"{key} {int(use.sum())} in {int(use.any(axis=1).sum())} epochs")
             continue
@@ -369,8 +371,8 @@ def fit_systems(
             if not any(np.isfinite(_columns(d, [sys_])[1]).any() for d in data):
                 continue
             codes = sorted({c for d in data for c in d.profile.codes.get(sys_, ())})
-            out[sys_] = SystemFit(key, est, ob, tuple(codes), int(ok.sum()),
-                                  float(el[ok].min()), float(el[ok].max()),
+            out[sys_] = SystemFit(key, est, ob, tuple(codes), int(use.sum()),
+                                  float(el[use].min()), float(el[use].max()),
                                   pair_factors)  # fmt: skip
     if not out:
         # overbound_error_model: min_tail 10 in a tail share of at most 0.32 of each bin

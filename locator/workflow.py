@@ -538,6 +538,14 @@ def evaluate_folder(
     folder = Path(run_dir)
     epochs, meta = read_run(folder)
     scored = score_run(epochs, truth)
+    config = meta.get("config")
+    banner = (no_safety_banner(str(config.get("error_model_caveat", "")), fixed_k_of(config))
+              if isinstance(config, dict) else None)  # fmt: skip
+    if banner is not None:
+        # no safety claims, as run.json says, whatever an older version wrote in the table
+        # (safety_claim = claim at a fixed k before 029e738; no column before that): the
+        # scored table is read alone, and its figures are drawn from it (a review)
+        scored["safety_claim"] = False
     fmt = fmt or ("csv" if (folder / "epochs.csv").is_file() else "parquet")
     write_table(scored, folder, "scored", fmt)
     summary = dict(summarise(scored))
@@ -546,9 +554,6 @@ def evaluate_folder(
     rules = _run_rules(meta)
     (folder / "evaluation.json").write_text(json.dumps({**summary, **rules}, indent=2) + "\n")
     caption = ", ".join(v for v in (rules["trust"], rules["interval_width"], rules["claims"]) if v)
-    config = meta.get("config")
-    banner = (no_safety_banner(str(config.get("error_model_caveat", "")), fixed_k_of(config))
-              if isinstance(config, dict) else None)  # fmt: skip
     write_figures(scored, folder, title=f"{meta.get('track', '')}: against the truth; {caption}",
                   banner=banner)
     return summary

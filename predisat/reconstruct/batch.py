@@ -131,6 +131,7 @@ from predisat.survey.capture import (
     fit_clock,
     read_capture_time_s,
 )
+from predisat.survey.format import Frames
 from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
@@ -1136,6 +1137,13 @@ def _same_picture(
     return None
 
 
+def _rounded_chainage(frames: Frames) -> NDArray:
+    """Every frame's chainage as a run uses it (``_Plan.chainage_m``): rounded to
+    :data:`_CHAINAGE_DECIMALS`, NaN off the track; the views (:func:`stop_ids`) are sliced from
+    these, by the chunks and by the frozen check alike."""
+    return np.round(np.asarray(frames.chainage_m, float), _CHAINAGE_DECIMALS)
+
+
 def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     """Frames among ``need`` that show the picture of the frame before on the same side (a
     camera stuck on one picture: the same file, or the same picture re-encoded), with the
@@ -1150,7 +1158,10 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
     finished chunk left the stop's frames in a pending chunk uncompared)."""
     fr, root = plan.survey.frames, plan.survey.root
     p = plan.params
-    stop = stop_ids(fr.side, fr.chainage_m, p.stop_gap_m, p.stop_span_m)
+    # the views the chunks merge (ChunkFrame.view_id): of the rounded chainages, not the
+    # manifest's (a review: a step of 0.1995 m rounds to 0.2000000000000455 > stop_gap_m, and
+    # the crawl's slices moved, leaving a view's first frames uncompared)
+    stop = stop_ids(fr.side, _rounded_chainage(fr), p.stop_gap_m, p.stop_span_m)
     prev_of: dict[int, int] = {}
     last: dict[str, int] = {}
     for i in range(len(fr.frame_id)):  # manifest order, increasing time per side
@@ -1167,14 +1178,21 @@ def _frozen_frames(plan: _Plan, need: NDArray) -> dict[int, str]:
             j = prev_of.get(j)
     frozen = {}
     thumbs: dict[Location, NDArray | None] = {}
+    last_seen: dict[str, Location] = {}  # per camera, the picture its next frame may need
     opts = plan.survey.storage_options
     for i in sorted(checked):
         j = prev_of.get(int(i))
         if j is None or (stop[i] == stop[j] and int(j) not in frozen):
             continue
         image_i, image_j = join(root, str(fr.image[i])), join(root, str(fr.image[j]))
+        # one picture per camera can serve again: a stop's first frame's, kept for a next
+        # frame that was not compared, stayed to the end (one picture per stop; a review)
+        keep = {*last_seen.values(), image_j}
+        for old in [k for k in thumbs if k not in keep]:
+            del thumbs[old]
         same = _same_picture(image_i, image_j, thumbs, opts)
         thumbs.pop(image_j, None)  # frame j is not compared again
+        last_seen[str(fr.side[i])] = image_i
         if same is not None:
             frozen[int(i)] = (
                 f"image {image_i} is frozen: {same} as the {fr.side[i]} "
@@ -1585,7 +1603,7 @@ def process_survey(
         )
     p, chainage_note = _with_chainage_doubt(p, survey)
     p = _at_survey_antenna(p, survey)
-    ch = np.round(np.asarray(survey.frames.chainage_m, float), _CHAINAGE_DECIMALS)
+    ch = _rounded_chainage(survey.frames)
     p, positions_note = _doubt_from_positions(p, survey, trk, ch)
     bad = _load_bad_frames(survey, ch, strict)
     plan = _plan(survey, trk, p, out, ch, opts)
@@ -1610,7 +1628,7 @@ def process_survey(
     for line in _attitude_warnings(plan.provenance["attitude"]):
         _report(line, quiet=False)
     for side, (n_frames, n_stops) in stop_counts(
-        survey.frames.side, survey.frames.chainage_m, p.stop_gap_m, p.stop_span_m
+        survey.frames.side, ch, p.stop_gap_m, p.stop_span_m
     ).items():
         _report(
             f"note: the {side} camera has {n_frames} frames merged into {n_stops} view(s) "

@@ -1107,3 +1107,29 @@ def test_an_import_error_not_from_ctrl_c_still_raises() -> None:
     proc = _python(code)
     assert proc.returncode == 1
     assert "a broken install" in proc.stderr and "Traceback" in proc.stderr
+
+
+def test_evaluating_an_older_fixed_k_run_does_not_label_its_claims_safety_claims(
+    sim_dir, tmp_path
+):
+    """A review (hW): versions before 029e738 wrote safety_claim = claim at a fixed --k-sigma;
+    `locator evaluate` of such a folder drew the red "no safety claim" banner (from run.json)
+    over intervals coloured and counted as safety claims, and wrote scored.parquet with
+    safety_claim True, which a reader of the table alone takes for safety claims."""
+    from locator.runio import write_table
+
+    run = tmp_path / "old_k"
+    assert main(["-q", "run", "--sim", str(sim_dir), "--no-masks", "--k-sigma", "2",
+                 "--out", str(run)]) == 0  # fmt: skip
+    ep, meta = read_run(run)
+    assert ep["claim"].any() and not ep["safety_claim"].any()
+    assert meta["config"]["locator"]["budget"] is None
+    write_table(ep.assign(safety_claim=ep["claim"]), run, "epochs", "parquet")  # as then
+    assert main(["-q", "evaluate", str(run), "--sim", str(sim_dir)]) == 0
+    scored = pd.read_parquet(run / "scored.parquet")
+    assert scored["claim"].any() and not scored["safety_claim"].any()
+    # and one older still, without the column: the scored table says it
+    write_table(ep.drop(columns="safety_claim"), run, "epochs", "parquet")
+    assert main(["-q", "evaluate", str(run), "--sim", str(sim_dir)]) == 0
+    scored = pd.read_parquet(run / "scored.parquet")
+    assert "safety_claim" in scored and not scored["safety_claim"].any()

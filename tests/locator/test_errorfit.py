@@ -225,3 +225,27 @@ def test_systems_fitted_on_elevations_with_nothing_in_common_are_refused():
     fits = fit_systems([d])
     with pytest.raises(ValueError, match=r"nothing in common .*--constellation"):
         model_file_parts(fits, [d], k_sigma=2.0)
+
+
+def test_a_systems_count_is_of_the_residuals_its_fit_used():
+    """A review (hW): intervals.usable_residuals is the one rule for the residuals a fit can
+    use (finite, in epochs with >= 3), and model_file_parts counts each pair by it, but
+    SystemFit.n_residuals (the file's n_residuals, `locator calibrate`'s "from N residuals",
+    n_independent of an estimate) and its elevation range counted every finite residual,
+    those of epochs with 1-2 satellites of the system too."""
+    from locator.intervals import usable_residuals
+
+    rng = np.random.default_rng(5)
+    d = _synthetic(rng, 600, {"G": ErrorModel(0.3, 0.5)}, "a")
+    res = d.residual_m.copy()
+    res[:200, 2:] = np.nan  # 200 epochs with 2 satellites: nothing for the clock's removal
+    d = dataclasses.replace(d, residual_m=res)
+    used = int(usable_residuals(d.el_deg, res).sum())
+    assert used == 400 * 8
+    for bound in ("overbound", "estimate"):
+        (fit,) = fit_systems([d], bound=bound).values()
+        assert fit.n_residuals == used, bound
+        assert fit.system_model().n_independent <= used
+    _, systems, _ = model_file_parts(fit_systems([d]), [d], k_sigma=2.0,
+                                     receiver_class="geodetic")  # fmt: skip
+    assert systems["G"].n_residuals == used
