@@ -86,7 +86,8 @@ class FrameAttitude:
     (shape (n,) each). ``doubt_deg`` is the largest angle between the true and the nominal
     attitude (the rays' erosion), ``roll_doubt_deg`` and ``pitch_doubt_deg`` its two parts
     (the cameras' move, :func:`~predisat.camera.models.tilt_doubt_m`); None: each
-    ``doubt_deg``.
+    ``doubt_deg``. ``imu_distrusted`` and ``table_distrusted`` say whether the whole IMU or
+    the whole cant table was set aside (:func:`frame_attitudes`' ``verdicts``).
     """
 
     roll_deg: NDArray
@@ -97,6 +98,10 @@ class FrameAttitude:
     table_ignored: NDArray | None = None
     roll_doubt_deg: NDArray | None = None
     pitch_doubt_deg: NDArray | None = None
+    # the two whole-survey verdicts: no measured roll trusted (one IMU mistake everywhere), no
+    # cant-table value used (its unit wrong); a run takes them once for its whole survey
+    imu_distrusted: bool = False
+    table_distrusted: bool = False
 
     def camera_doubt_m(
         self, k: int, lever_arm_m: ArrayLike, antenna_height_m: float
@@ -124,6 +129,7 @@ def frame_attitudes(
     cant_table: CantTable | None = None,
     speed_kmh: ArrayLike | None = None,
     chainage_doubt_m: float = 0.0,
+    verdicts: tuple[bool, bool] | None = None,
 ) -> FrameAttitude:
     """The attitude each frame is rectified with, and what it may still be off by.
 
@@ -153,6 +159,12 @@ def frame_attitudes(
         positioning, ``docs/reconstruction.md`` section 18): the track's bounds and the cant
         table are read anywhere within it, and each angle's interval is the union of those
         found every :data:`CHAINAGE_STEP_M` and at both ends.
+    verdicts : (bool, bool), optional
+        Whether the whole IMU and the whole cant table are set aside, as decided over the
+        whole survey (its :class:`FrameAttitude`'s ``imu_distrusted``, ``table_distrusted``):
+        frames read in windows (a run's chunks) then get the survey's decision, not each
+        window's (a review: a frame read by two chunks could be rectified two ways). By
+        default decided over these frames.
 
     Returns
     -------
@@ -166,7 +178,7 @@ def frame_attitudes(
         return _attitudes_over_chainage(
             track, chainage_m, roll_deg, pitch_deg, reverse, chainage_doubt_m, cant=cant,
             grade_doubt_deg=grade_doubt_deg, imu_doubt_deg=imu_doubt_deg,
-            cant_table=cant_table, speed_kmh=speed_kmh,
+            cant_table=cant_table, speed_kmh=speed_kmh, verdicts=verdicts,
         )  # fmt: skip
     s = np.asarray(chainage_m, float)
     roll = np.broadcast_to(np.asarray(roll_deg, float), s.shape)
@@ -181,8 +193,12 @@ def frame_attitudes(
     # or zeros over a sharp curve)
     r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
     table_ignored = np.zeros(s.shape, bool)
+    table_distrusted = False
     if known is not None:
-        table_ignored = _implausible_cant(track, s, known, sharp, speed, cant or CantLimits())
+        table_ignored, table_distrusted = _implausible_cant(
+            track, s, known, sharp, speed, cant or CantLimits(),
+            None if verdicts is None else verdicts[1],
+        )  # fmt: skip
         if table_ignored.any():
             known = np.where(table_ignored, np.nan, known)
             r_lo, r_hi, sharp = _roll_interval(track, s, reverse, cant, known, speed)
@@ -204,7 +220,9 @@ def frame_attitudes(
     # One IMU mistake (axes, units, a tilt sensor) is everywhere: when the track rules out the
     # roll of more than a fifth of the frames on curves, none of its rolls is trusted.
     curved = given & (np.abs(np.asarray(track.curvature_at(s), float)) > STRAIGHT_PER_M)
-    if contradicted.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1):
+    imu_distrusted = (bool(contradicted.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1))
+                      if verdicts is None else bool(verdicts[0]))  # fmt: skip
+    if imu_distrusted:
         contradicted = given.copy()
     measured = given & ~contradicted
     out_roll = np.where(measured, roll, 0.5 * (r_lo + r_hi))
@@ -225,7 +243,8 @@ def frame_attitudes(
     pitch_doubt = np.where(sure, 0.0, pitch_doubt + np.abs(q_pitch - out_pitch))
     # a turn about the roll axis then the pitch axis is within the sum of the two angles
     return FrameAttitude(q_roll + 0.0, q_pitch + 0.0, roll_doubt + pitch_doubt, measured,
-                         contradicted, table_ignored, roll_doubt, pitch_doubt)  # fmt: skip
+                         contradicted, table_ignored, roll_doubt, pitch_doubt,
+                         imu_distrusted, table_distrusted)  # fmt: skip
 
 
 CHAINAGE_STEP_M = 0.25
@@ -280,6 +299,7 @@ def _attitudes_over_chainage(
         np.any([_flags(a.contradicted, s) for a in parts], axis=0),
         np.any([_flags(a.table_ignored, s) for a in parts], axis=0),
         r_doubt, p_doubt,
+        any(a.imu_distrusted for a in parts), any(a.table_distrusted for a in parts),
     )  # fmt: skip
 
 
@@ -336,8 +356,10 @@ def _implausible_cant(
     sharp: NDArray,
     speed_kmh: NDArray | None,
     limits: CantLimits,
-) -> NDArray:
-    """Frames whose cant-table value the track or the survey's own run rules out, shape (n,):
+    whole: bool | None = None,
+) -> tuple[NDArray, bool]:
+    """Frames whose cant-table value the track or the survey's own run rules out, shape (n,),
+    and whether that is the whole table (``whole``, when given, decides it instead):
     under :data:`CANT_ON_SHARP_MM` on a curve sharper than R = 1 km (a table in metres, a
     missing value written 0), or so low that the survey vehicle, at its speed there, would
     have run with more than :data:`CANT_DEFICIENCY_TOL_MM` beyond the largest deficiency
@@ -350,17 +372,16 @@ def _implausible_cant(
         with np.errstate(invalid="ignore"):
             deficiency = equilibrium_cant_mm(k, speed_kmh) - cant_mm
             out |= known & (deficiency > limits.max_deficiency_mm + CANT_DEFICIENCY_TOL_MM)
-    curved = known & (k > STRAIGHT_PER_M)
-    if out.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1):
-        out = known.copy()
-    # a unit check that needs no speed: a line canted for trains faster than 40 km/h puts
-    # 20 mm or more on its curves sharper than R = 1 km; a table whose largest value there is
-    # under that is in centimetres (a review: 150 mm written 15 passed at 60 km/h, the true
-    # roll up to 5.7 deg outside the bound)
-    on_sharp = sharp & known
-    if on_sharp.any() and float(np.max(cant_mm[on_sharp])) < CANT_TABLE_FLOOR_MM:
-        out = known.copy()
-    return out
+    if whole is None:
+        curved = known & (k > STRAIGHT_PER_M)
+        whole = bool(out.sum() > _DISTRUST_SHARE * max(int(curved.sum()), 1))
+        # a unit check that needs no speed: a line canted for trains faster than 40 km/h puts
+        # 20 mm or more on its curves sharper than R = 1 km; a table whose largest value there
+        # is under that is in centimetres (a review: 150 mm written 15 passed at 60 km/h, the
+        # true roll up to 5.7 deg outside the bound)
+        on_sharp = sharp & known
+        whole |= bool(on_sharp.any() and float(np.max(cant_mm[on_sharp])) < CANT_TABLE_FLOOR_MM)
+    return (known.copy() if whole else out), whole
 
 
 def _roll_interval(

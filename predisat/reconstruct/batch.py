@@ -878,6 +878,9 @@ def _attitude_summary(
         "max_doubt_deg": round(float(att.doubt_deg.max(initial=0.0)), 3),
         "max_camera_doubt_m": round(moved_m, 3),
         "max_abs_roll_deg": round(float(np.abs(att.roll_deg).max(initial=0.0)), 3),
+        # taken once for the survey, and given to every chunk (frame_attitudes' verdicts)
+        "imu_distrusted": bool(att.imu_distrusted),
+        "cant_table_distrusted": bool(att.table_distrusted),
     }
     if contradicted.any():
         out["first_contradicted"] = str(fr.frame_id[ok][contradicted][0])
@@ -1257,6 +1260,10 @@ def _chunk_jobs(
     speed = survey_speed_kmh(ch, fr.gps_s, fr.side)
     p = plan.params
     view = stop_ids(fr.side, ch, p.stop_gap_m, p.stop_span_m)  # as the survey slices them
+    # the survey's attitude verdicts: a chunk deciding alone could set aside the IMU that its
+    # neighbour trusts, and a frame both read be rectified two ways (a review)
+    att = plan.provenance["attitude"]
+    verdicts = (bool(att["imu_distrusted"]), bool(att["cant_table_distrusted"]))
     jobs = []
     for name, lo, hi, s in pending:
         idx = plan.frames_of[name]
@@ -1275,7 +1282,7 @@ def _chunk_jobs(
             name, lo, hi, s, frames, cams, bool(plan.survey.reverse),
             float(plan.survey.antenna_height_m), plan.track, plan.params, plan.provenance,
             str(plan.chunk_dir), known_bad, plan.frames_key[name], pinned,
-            dict(plan.storage_options),
+            dict(plan.storage_options), verdicts,
         ))  # fmt: skip
     return jobs
 

@@ -95,6 +95,9 @@ class ChunkJob:
     pinned_utc: str | None = None
     # of the file system of chunk_dir and the cache paths when they are URLs
     storage_options: StorageOptions = field(default_factory=dict)
+    # the survey's two attitude verdicts (IMU, cant table set aside; frame_attitudes'
+    # verdicts), so that every chunk rectifies a frame alike; None: the chunk decides
+    attitude_verdicts: tuple[bool, bool] | None = None
 
 
 def _fmt_m(x: float) -> str:
@@ -150,7 +153,7 @@ def run_chunk(
             job.reverse, cant=p.cant, grade_doubt_deg=p.grade_doubt_deg,
             imu_doubt_deg=p.imu_doubt_deg, cant_table=p.cant_table,
             speed_kmh=[f.speed_kmh for f, _ in ok_frames],
-            chainage_doubt_m=doubt_m,
+            chainage_doubt_m=doubt_m, verdicts=job.attitude_verdicts,
         )  # fmt: skip
         # the mounts in the level frame of the vehicle's attitude, which tilts about the
         # rails and carries the cameras with it (section 16)

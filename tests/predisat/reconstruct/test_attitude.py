@@ -335,3 +335,42 @@ def test_an_imu_the_track_contradicts_on_its_curves_is_not_trusted_anywhere(trac
     glitch[40] = -glitch[40]
     att = frame_attitudes(track, s, glitch, zero, False)
     assert att.contradicted.sum() == 1 and att.contradicted[40]
+
+
+def test_a_window_takes_the_surveys_verdict_on_its_imu_and_cant_table(track) -> None:
+    """A review (hW): the fifth-of-the-curve-frames rule was applied in each chunk's window, so
+    a frame read by two chunks could keep its measured roll in one and get a bounded one in the
+    other. The survey's verdicts, given, decide in every window, both ways."""
+    s = np.arange(400.0, 1300.0, 10.0)
+    zero = np.zeros(s.size)
+    k = track.curvature_at(s)
+    true = body_roll_deg(k, np.minimum(equilibrium_cant_mm(k, 100.0), 160.0), 43.0)
+    # a good IMU with a bad stretch: 10 of 90 frames ruled out, not a fifth of the survey...
+    roll = true.copy()
+    roll[40:50] = -roll[40:50]
+    whole = frame_attitudes(track, s, roll, zero, False)
+    assert not whole.imu_distrusted and whole.contradicted.sum() == 10
+    # ...but most of a window around it, which alone sets the whole IMU aside
+    w = slice(35, 55)
+    alone = frame_attitudes(track, s[w], roll[w], zero[w], False)
+    assert alone.imu_distrusted and alone.contradicted.all()
+    given = frame_attitudes(track, s[w], roll[w], zero[w], False,
+                            verdicts=(whole.imu_distrusted, whole.table_distrusted))  # fmt: skip
+    assert not given.imu_distrusted
+    np.testing.assert_array_equal(given.contradicted, whole.contradicted[w])
+    np.testing.assert_array_equal(given.roll_deg, whole.roll_deg[w])
+    # the other way: a survey whose IMU is set aside keeps it aside in a window that agrees
+    level = frame_attitudes(track, s, zero, zero, False)
+    assert level.imu_distrusted
+    good = slice(0, 8)  # frames where a level roll is possible
+    mine = frame_attitudes(track, s[good], zero[good], zero[good], False, verdicts=(True, False))
+    assert mine.contradicted.all() and not mine.measured.any()
+    # and the cant table: a table in centimetres judged over the survey, given to a window
+    cant = np.round(np.minimum(equilibrium_cant_mm(k, 120.0), 160.0) / 5) * 5
+    nan = np.full(s.size, np.nan)
+    cm = CantTable(s, cant / 10.0, "cm")
+    survey = frame_attitudes(track, s, nan, nan, False, cant_table=cm)
+    assert survey.table_distrusted
+    part = frame_attitudes(track, s[good], nan[good], nan[good], False, cant_table=cm,
+                           verdicts=(False, True))  # fmt: skip
+    assert part.table_distrusted and part.table_ignored[np.isfinite(cm.cant_mm_at(s[good]))].all()

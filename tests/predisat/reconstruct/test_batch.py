@@ -1139,7 +1139,10 @@ def test_a_chunk_reads_whole_views_and_merges_them_as_the_survey_does(
             assert set(whole.tolist()) <= set(idx.tolist()), name  # whole views
             cut |= not set(whole.tolist()) <= set(window.tolist())
     assert cut  # some window alone would have cut a view: the check above meant something
+    att = plan.provenance["attitude"]
     for job in _chunk_jobs(plan, list(plan.chunks), {}, None):
+        # and the survey's attitude verdicts, the same in every chunk
+        assert job.attitude_verdicts == (att["imu_distrusted"], att["cant_table_distrusted"])
         by_id = {f.frame_id: f.view_id for f in job.frames}
         for i in plan.frames_of[job.name]:
             assert by_id[str(fr.frame_id[i])] == int(view[i])
