@@ -256,27 +256,48 @@ def test_the_ceiling_cap_opens_frame_positions_in_a_street_with_masts() -> None:
     assert rec.mask_el_deg.mean() < uncapped.mask_el_deg.mean() - 0.5
 
 
+_CELL_M, _N_CELLS, _S0_M = 0.5, 81, 0.1  # the ceiling tests' raster; the position's chainage
+
+
+def _ceiling_raster(top_m: float, row_m: float, tan_e: float):
+    """A rasterised ceiling over the track (offsets under 2 m), each cell at the pointwise
+    ceiling ``top_m + |x - row_m| tan_e`` of its far end, as the clearance is rasterised;
+    returns the height field."""
+    from predisat.reconstruct.heightfield import HeightField
+
+    c, n = _CELL_M, _N_CELLS
+    centres = (np.arange(n) - n // 2 + 0.5) * c
+    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
+    clear = np.abs(y) < 2.0
+    bound = np.where(clear, top_m + (np.abs(x - row_m) + c * np.sqrt(0.5)) * tan_e, 0.0)
+    hf = HeightField(
+        c, -(n // 2), -(n // 2), bound.astype(np.float32), np.ones((n, n), bool),
+        x.astype(np.float32), y.astype(np.float32), np.zeros((n, n), np.float32),
+    )  # fmt: skip
+    return hf
+
+
+def _exact_tan(n_az: int, ant: np.ndarray, p: ReconstructionParams, ceiling_m) -> np.ndarray:
+    """Per azimuth, the largest elevation tangent from the antenna ``ant`` (1, 3) of the exact
+    ceiling ``ceiling_m(x)`` over the clearance (offsets under 2 m), sampled every 1 cm."""
+    az = np.radians(np.arange(n_az) * p.az_step_deg / p.n_sub)
+    r = np.arange(0.01, 17.0, 0.01)
+    px = ant[0, 0] + np.sin(az)[:, None] * r
+    py = ant[0, 1] + np.cos(az)[:, None] * r
+    tan = np.where(np.abs(py) < 2.0, (ceiling_m(px) - ant[0, 2]) / r, -np.inf)
+    return tan.max(axis=1)
+
+
 def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
     """A rasterised ceiling over the track (each cell at the bound of its far end) stands
     above the antenna in the antenna's own cell and closes every ray; the cap opens them,
     yet no ray reads lower than the exact ceiling ``z + |x| tan e`` seen along it."""
     from predisat.reconstruct.carving import _horizon_parts
-    from predisat.reconstruct.heightfield import HeightField
 
-    c, n = 0.5, 81
     e_deg, z_cam, dz = 55.0, 2.0, 0.5
     t = np.tan(np.radians(e_deg))
-    centres = (np.arange(n) - n // 2 + 0.5) * c
-    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
-    clear = np.abs(y) < 2.0
-    s0 = 0.1  # the position's chainage (frame x), where the antenna stands
-    bound = np.where(clear, z_cam + (np.abs(x - s0) + c * np.sqrt(0.5)) * t, 0.0)
-    bound = bound.astype(np.float32)
-    z = np.zeros((n, n), np.float32)
-    hf = HeightField(
-        c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
-        y.astype(np.float32), z,
-    )  # fmt: skip
+    s0 = _S0_M  # the position's chainage (frame x), where the antenna stands
+    hf = _ceiling_raster(z_cam, s0, t)
     p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
     ant = np.array([[s0, 0.1, z_cam + dz]])
     closed = _horizon_parts(hf, ant, np.eye(3)[None], p)[0]
@@ -285,15 +306,8 @@ def test_the_ceiling_cap_against_the_pointwise_ceiling() -> None:
     el = _horizon_parts(hf, ant, np.eye(3)[None], p, caps)[0]
     assert (el < 89.0).mean() > 0.9
     # the exact ceiling along each ray, sampled finely inside the clearance
-    az = np.radians(np.arange(el.size) * p.az_step_deg / p.n_sub)
-    r = np.arange(0.01, 17.0, 0.01)
-    px = ant[0, 0] + np.sin(az)[:, None] * r
-    py = ant[0, 1] + np.cos(az)[:, None] * r
-    inside = np.abs(py) < 2.0
-    tan_exact = np.where(inside, (z_cam + np.abs(px - s0) * t - ant[0, 2]) / r, -np.inf)
-    tan_exact = tan_exact.max(axis=1)
+    tan_exact = _exact_tan(el.size, ant, p, lambda x: z_cam + np.abs(x - s0) * t)
     assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
-
 
 
 def test_the_ceiling_cap_holds_from_a_row_off_the_position() -> None:
@@ -303,23 +317,12 @@ def test_the_ceiling_cap_holds_from_a_row_off_the_position() -> None:
     ceiling moved to the position, ``delta * tan`` higher) opens them, yet no ray reads lower
     than the exact ceiling ``z + (|x - row| + doubt) tan e`` seen along it (section 24)."""
     from predisat.reconstruct.carving import _ceiling_caps, _horizon_parts
-    from predisat.reconstruct.heightfield import HeightField
 
-    c, n = 0.5, 81
     e_deg, z_cam, dz, doubt, delta = 36.0, 2.0, 0.5, 0.4, 0.2
     t = np.tan(np.radians(e_deg))
-    centres = (np.arange(n) - n // 2 + 0.5) * c
-    x, y = np.meshgrid(centres, centres)  # track along frame x, offset = y
-    clear = np.abs(y) < 2.0
-    s0 = 0.1  # the position's chainage (frame x), where the antenna stands
+    s0 = _S0_M  # the position's chainage (frame x), where the antenna stands
     row = np.array([[s0 + delta, z_cam + doubt * t, t, 0.8 * t]])  # as _camera_ceilings
-    bound = np.where(clear, row[0, 1] + (np.abs(x - row[0, 0]) + c * np.sqrt(0.5)) * t, 0.0)
-    bound = bound.astype(np.float32)
-    z = np.zeros((n, n), np.float32)
-    hf = HeightField(
-        c, -(n // 2), -(n // 2), bound, np.ones((n, n), bool), x.astype(np.float32),
-        y.astype(np.float32), z,
-    )  # fmt: skip
+    hf = _ceiling_raster(float(row[0, 1]), float(row[0, 0]), t)
     p = ReconstructionParams(half_width_m=15.0, reach_m=18.0)
     ant = np.array([[s0, 0.1, z_cam + dz]])
     assert (_horizon_parts(hf, ant, np.eye(3)[None], p)[0] == 90.0).all()
@@ -327,14 +330,8 @@ def test_the_ceiling_cap_holds_from_a_row_off_the_position() -> None:
     np.testing.assert_allclose(caps[0], [1.01 * t, dz - doubt * t - delta * 1.01 * t])
     el = _horizon_parts(hf, ant, np.eye(3)[None], p, caps)[0]
     assert (el < 89.0).mean() > 0.9
-    az = np.radians(np.arange(el.size) * p.az_step_deg / p.n_sub)
-    r = np.arange(0.01, 17.0, 0.01)
-    px = ant[0, 0] + np.sin(az)[:, None] * r
-    py = ant[0, 1] + np.cos(az)[:, None] * r
-    inside = np.abs(py) < 2.0
-    exact = z_cam + (np.abs(px - row[0, 0]) + doubt) * t
-    tan_exact = np.where(inside, (exact - ant[0, 2]) / r, -np.inf).max(axis=1)
-    assert (np.tan(np.radians(el)) >= tan_exact - 1e-4).all()
+    exact = _exact_tan(el.size, ant, p, lambda x: z_cam + (np.abs(x - row[0, 0]) + doubt) * t)
+    assert (np.tan(np.radians(el)) >= exact - 1e-4).all()
     # a row too far or too high for its ceiling to pass under the antenna caps nothing
     assert np.isinf(_ceiling_caps(row, np.array([s0 + 2.0]), ant)[0, 0])
 
