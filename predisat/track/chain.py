@@ -115,7 +115,7 @@ def chain_all(
                 f"{path}: cannot chain {parts[k].label}: its nearest end is {gap:.1f} m from the "
                 f"end of {last} (max_gap_m={max_gap_m}); select one track (track=..., where=...; "
                 "command line: --track-name, --where), use chain='longest' (--chain longest) for "
-                "a network of ways, or raise max_gap_m"
+                "a network of ways, or raise max_gap_m (Python only)"
             )
         order.append((k, rev))
         used.add(k)

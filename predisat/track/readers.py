@@ -506,7 +506,10 @@ def parse_geojson_track(
     first = parts[0].coords[0]
     frame = LocalFrame(float(first[1]), float(first[0]))
     if chain == "all":
-        order = chain_all(parts, frame, max_gap_m, path)
+        try:
+            order = chain_all(parts, frame, max_gap_m, path)
+        except TrackMapError as exc:
+            raise TrackMapError(str(exc) + _osm_chain_hint(selected, where)) from None
     elif chain == "longest":
         order = chain_longest(parts, frame, max_gap_m, max_turn_deg, path)
     else:
@@ -677,6 +680,16 @@ def _no_match_hint(
             few.append(f"{k}={'|'.join(vals[:6])}{'|...' if len(vals) > 6 else ''}")
     return ("the lines carry no name; select them by their properties instead (--where "
             f"KEY=VALUE, KEY= for absent): {'; '.join(few[:12]) or '(none)'}")
+
+
+def _osm_chain_hint(selected: list[_LineFeature], where: Mapping[str, object] | None) -> str:
+    """For OpenStreetMap ways that could not be chained whole: the selection the docs give
+    for a main line (a user trial: the error named the options, not their values)."""
+    if where or not any("usage" in p or "service" in p for _, p, _ in selected):
+        return ""
+    return ("; for an OpenStreetMap extract the main line is usually "
+            "where={'usage': 'main', 'service': None}, chain='longest' (command line: --where "
+            "usage=main service= --chain longest)")
 
 
 def _shared_name_hint(selected: list[_LineFeature], key: str, n_names: int) -> str:

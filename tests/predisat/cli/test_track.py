@@ -53,7 +53,9 @@ def test_a_network_without_a_selection_is_refused_with_the_fix(test_data, tmp_pa
     out = tmp_path / "line.geojson"
     assert cli.main(["track", str(test_data / RIVIERA), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "--track" in err and "cannot chain" in err
+    assert "FILE" in err and "cannot chain" in err
+    # the OSM ways carry usage/service: the selection the docs give is said (a user trial)
+    assert "--where usage=main service= --chain longest" in err
     assert not out.exists()
 
 
