@@ -370,7 +370,7 @@ class RunConfig:
         """Whether a claim of this run is a safety claim: not under a forced error model, and
         with widths from an integrity budget (a fixed ``k`` is a width the user chose, whose
         risk nothing states)."""
-        return self.error_model_caveat != "forced" and self.locator.fixed_k_sigma is None
+        return no_safety_banner(self.error_model_caveat, self.locator.fixed_k_sigma) is None
 
     def to_dict(self) -> JsonDict:
         d = dataclasses.asdict(self)

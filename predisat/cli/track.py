@@ -164,14 +164,11 @@ def cmd_track(args: argparse.Namespace) -> int:
         write_geojson(track, args.out)
         print(f"-> {args.out} (read it with --track {args.out}, no selection options)")
     if args.figure is not None:
-        import io
-
         from predisat.atomic import write_bytes_atomic
+        from predisat.availability.plots import figure_to_png
         from predisat.track.figure import track_figure
 
-        buf = io.BytesIO()
-        track_figure(track).savefig(buf, format="png", dpi=110)
         args.figure.parent.mkdir(parents=True, exist_ok=True)
-        write_bytes_atomic(args.figure, buf.getvalue())
+        write_bytes_atomic(args.figure, figure_to_png(track_figure(track), dpi=110))
         print(f"-> {args.figure}")
     return 0
