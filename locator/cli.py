@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,13 +22,9 @@ except ValueError as exc:
 
 from predisat.cli.args import caused_by_interrupt
 
-try:  # the commands' modules: seconds; a Ctrl-C here ends as an interrupt, not a traceback
-    from locator.balises.command import add_parser as add_balises_parser
-    from locator.campaign_command import add_parser as add_campaign_parser
+try:  # a Ctrl-C here ends as an interrupt, not a traceback
     from locator.cliopts import add_map_doubt, map_doubt_of
-    from locator.demostep import format_demo_table
     from locator.modelcheck import deepest_k, model_use, sim_profile
-    from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M
     from predisat import __version__
     from predisat.cli.args import (
         TIME_HELP,
@@ -64,6 +60,7 @@ try:  # the commands' modules: seconds; a Ctrl-C here ends as an interrupt, not 
         CliError,
         add_masks_same_track,
         add_track_selection,
+        command_parser,
         km_range,
         run_main,
         track_option,
@@ -82,6 +79,19 @@ if TYPE_CHECKING:
     from locator.sim.simfile import SimRun
 
 __all__ = ["main"]
+
+# each command's line in `locator --help`; a command's arguments are built only when it runs
+# (`balises`, `run` and `demo` import the locator and the track map: seconds), the others are
+# listed with this line alone
+COMMAND_HELP = {
+    "simulate": "simulate a train run's pseudoranges in a synthetic world",
+    "run": "locate the train at every epoch (simulated or RINEX)",
+    "evaluate": "score a run against the true chainage",
+    "calibrate": "learn sigma(el) from data with known truth",
+    "demo": "a simulated run on the demo line under several trust rules",
+    "balises": "virtual balises: locate a simulated run with odometry and capture its balises",
+    "campaign": "simulated campaign: worlds x start times x rules, on Dask, resumable",
+}
 
 
 def _masks(args: argparse.Namespace) -> Any:
@@ -1141,6 +1151,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     table = demo(args.out, world=world, pipeline_masks=pipeline, seed=args.seed, integrity=budget)
     # the runs' own constellation (run.json), and no availability report before it here
     systems = sorted({str(c).upper() for c in table.get("constellation", [])}) or ["GPS"]
+    from locator.demostep import format_demo_table
+
     print(format_demo_table(table, "+".join(systems), report_above=False))
     print(f"locator demo: done in {time.perf_counter() - t0:.0f} s -> {args.out}")
     return 0
@@ -1159,6 +1171,8 @@ _TRACK = "a track map: GeoJSON line(s) or a lat,lon[,h] CSV (docs/track-map.md)"
 
 
 def _run_arguments(p: argparse.ArgumentParser) -> None:
+    from locator.workflow import MAX_HEIGHT_DISAGREEMENT_M  # the locator: seconds
+
     rule = p.add_mutually_exclusive_group(required=True)
     rule.add_argument("--masks", type=existing_path(_MASKS), metavar="MASKS",
                       help="trust rule: the satellites the masks say are in view")
@@ -1219,7 +1233,7 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "simulate", "simulate a train run's pseudoranges in a synthetic world",
+        sub, "simulate", COMMAND_HELP["simulate"],
         "Build (or load) a synthetic world along the track, drive a stop-and-go train through "
         "it on the navigation day and write per-epoch pseudoranges with their true signal "
         "states (LOS, multipath, NLOS, lost), the true chainage and the true masks. A stretch "
@@ -1286,7 +1300,7 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "run", "locate the train at every epoch (simulated or RINEX)",
+        sub, "run", COMMAND_HELP["run"],
         "Locate the train along the track at every epoch (SATHIA satellite pairs intersected "
         "with the track), trusting satellites by the masks, a cut-off or not at all, with "
         "fault detection and the heading check; writes the per-epoch table (interval, claim, "
@@ -1329,7 +1343,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "evaluate", "score a run against the true chainage",
+        sub, "evaluate", COMMAND_HELP["evaluate"],
         "Score a `locator run` folder against the true chainage (a simulation's, a CSV's or a "
         "static antenna's): interval lengths, errors, hazardously misleading epochs; writes "
         "evaluation.json, the scored table and figures into the run folder.",
@@ -1361,7 +1375,7 @@ _TRUTH_CSV = ("a CSV with columns gps_s (GPS seconds) and chainage_m (true chain
 
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "calibrate", "learn sigma(el) from data with known truth",
+        sub, "calibrate", COMMAND_HELP["calibrate"],
         "Fit the pseudorange error model sigma(el)^2 = a^2 + (b / sin el)^2 to residuals at a "
         "known position (simulated runs, or static stations at their header position), "
         "inflated to bound the tails (--bound overbound); writes the JSON model and a figure.",
@@ -1421,7 +1435,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
 
 def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "demo", "a simulated run on the demo line under several trust rules",
+        sub, "demo", COMMAND_HELP["demo"],
         "Build the demo world of line 144 (km 4.0-6.3) or reuse a `predisat demo` folder's, "
         "simulate a stop-and-go run on the embedded navigation day and locate it under each "
         "trust rule (true masks, pipeline masks when reused, no masks, a 15 deg cut-off), GPS "
@@ -1441,8 +1455,27 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``locator`` parser: one subcommand per job."""
+def _add_balises(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from locator.balises.command import add_parser  # the balise list reads the track map
+
+    add_parser(sub)  # `locator balises`: arguments and job in locator.balises
+
+
+def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from locator.campaign_command import add_parser
+
+    add_parser(sub)
+
+
+def build_parser(only: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``locator`` parser: one subcommand per job.
+
+    Parameters
+    ----------
+    only : collection of str, optional
+        Build only these subcommands' arguments; the others are listed with their help line
+        (as :func:`predisat.cli.app.build_parser`). None (default) builds every subcommand whole.
+    """
     parser: argparse.ArgumentParser = Parser(  # subcommands inherit its class
         prog="locator",
         formatter_class=HelpFormatter,
@@ -1454,13 +1487,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_simulate(sub)
-    _add_run(sub)
-    _add_evaluate(sub)
-    _add_calibrate(sub)
-    _add_demo(sub)
-    add_balises_parser(sub)  # `locator balises`: arguments and job in locator.balises
-    add_campaign_parser(sub)  # `locator campaign`: locator.campaign_command
+    adders: dict[str, Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]] = {
+        "simulate": _add_simulate,
+        "run": _add_run,
+        "evaluate": _add_evaluate,
+        "calibrate": _add_calibrate,
+        "demo": _add_demo,
+        "balises": _add_balises,
+        "campaign": _add_campaign,
+    }
+    for name, add in adders.items():
+        if only is None or name in only:
+            add(sub)
+        else:
+            sub.add_parser(name, help=COMMAND_HELP[name])
     # -q after the subcommand too (a user trial's `locator run ... -q` was refused); SUPPRESS
     # leaves the main parser's value when it is not given there
     for command in sub.choices.values():
@@ -1473,7 +1513,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``locator`` command line; returns the exit status."""
     notes = {"campaign": "; finished jobs are kept: rerun the same command to resume"}
-    return run_main(build_parser(), argv, "locator", interrupted_note=notes)
+    parser = command_parser(build_parser, COMMAND_HELP, argv, "locator")
+    if parser is None:
+        return 130
+    return run_main(parser, argv, "locator", interrupted_note=notes)
 
 
 if __name__ == "__main__":  # `python -m locator.cli`, as `python -m locator`

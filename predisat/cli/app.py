@@ -12,7 +12,7 @@ import contextlib
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,7 +23,6 @@ from predisat.cli.args import (
     Parser,
     add_checks,
     add_command,
-    caused_by_interrupt,
     chainage_hint,
     existing_file,
     existing_path,
@@ -39,6 +38,7 @@ from predisat.cli.args import (
 from predisat.cli.common import (
     CliError,
     add_track_selection,
+    command_parser,
     km_range,
     run_main,
     track_option,
@@ -62,6 +62,22 @@ SKY_CHOICES = ("clear", "cloudy", "overcast", "mixed")
 # the choices of `synth --rig` (predisat.camera.rigs.RIG_NAMES, kept in step by a test)
 RIG_CHOICES = ("side-fisheye", "side-fisheye+cab", "360")
 _MASKS = "a mask file (masks.parquet) or a `predisat process` output folder"
+
+# each command's line in `predisat --help`; a command's arguments are built only when it runs
+# (they import its library: seconds), the others are listed with this line alone
+COMMAND_HELP = {
+    "synth": "render a synthetic survey with exact ground truth",
+    "availability": "mask-aware satellite availability report along a line",
+    "process": "turn a survey's side-camera frames into elevation masks (resumable)",
+    "network": "process a network line by line into one mask dataset, with reports",
+    "evaluate": "compare masks with synthetic ground truth; calibrate the trust margin",
+    "export": "write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
+    "merge": "merge the masks of parallel tracks (passing loops, sidings) worst-case onto one "
+    "track",
+    "evaluate-sky": "score sky segmentation on a folder of photos with ground-truth sky masks",
+    "track": track.HELP,
+    "demo": demo.HELP,
+}
 
 def _camera(kind: str | None, calibration: Path | None) -> CameraModel:
     from predisat.camera import models as camera
@@ -311,7 +327,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "synth", "render a synthetic survey with exact ground truth",
+        sub, "synth", COMMAND_HELP["synth"],
         "Build a procedural corridor world along a track, render the frames of a survey rig "
         "(default: left and right 45-degree side cameras) every SPACING metres, and write a "
         "survey folder plus ground truth (the world, the true masks, per-frame labels).",
@@ -380,7 +396,7 @@ def _add_availability(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     from predisat.cli import availability
 
     p = add_command(
-        sub, "availability", "mask-aware satellite availability report along a line",
+        sub, "availability", COMMAND_HELP["availability"],
         "Which satellites a train may trust along the line over a time window, under the "
         "survey masks, with no mask and with flat cut-offs: an HTML report with plots, "
         "CSV/Parquet tables and a GeoJSON layer for QGIS. GPS only by default, as the LOCOPROL "
@@ -395,7 +411,7 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     from predisat.cli import process
 
     p = add_command(
-        sub, "process", "turn a survey's side-camera frames into elevation masks (resumable)",
+        sub, "process", COMMAND_HELP["process"],
         "Segment the sky in every frame, reconstruct full 360 deg masks along the line in "
         "chainage chunks written atomically (an interrupted run resumes), and write the "
         "mask file. Bad frames are reported and skipped (--strict: stop). An --out holding "
@@ -409,7 +425,7 @@ def _add_network(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     from predisat.cli import network
 
     p = add_command(
-        sub, "network", "process a network line by line into one mask dataset, with reports",
+        sub, "network", COMMAND_HELP["network"],
         "Read a network file (GeoJSON lines with line ids, e.g. Infrabel's whole Belgian "
         "network), process each line's survey (SURVEYS/<line id>/) on that line's track into "
         "one GeoParquet mask dataset partitioned by line (OUT/masks/line=ID/part=K/), one "
@@ -424,7 +440,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     from predisat.cli import evaluate
 
     p = add_command(
-        sub, "evaluate", "compare masks with synthetic ground truth; calibrate the trust margin",
+        sub, "evaluate", COMMAND_HELP["evaluate"],
         "Mask error by sector and source against the true masks of a synthetic survey, "
         "false-trust rate and visible sky lost; --calibrate finds the margin meeting the "
         "target share of truly line-of-sight trusted directions.",
@@ -435,8 +451,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = add_command(
-        sub, "export",
-        "write a mask file as UrbanNav CSV, an RTKLIB elevation mask or a PVGIS horizon",
+        sub, "export", COMMAND_HELP["export"],
         "Convert a mask file (or a `predisat process` output folder) for other tools: "
         "urbannav (every position: lat, lon, h and 361 elevations at 1 deg), rtklib (one "
         "position: 'AZ EL' lines for the file-elmaskfile option of the MALIB / MRTKLIB "
@@ -473,8 +488,7 @@ def _add_merge(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     from predisat.masks.registration import MAX_TRACK_OFFSET_M
 
     p = add_command(
-        sub, "merge",
-        "merge the masks of parallel tracks (passing loops, sidings) worst-case onto one track",
+        sub, "merge", COMMAND_HELP["merge"],
         "The locator follows one track map and cannot tell a train on a passing loop or the "
         "other track of a double line, 4-5 m beside it: it would take the surveyed track's "
         "masks, which are not that sky. Give the masks of the track the locator follows and "
@@ -506,8 +520,7 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     from predisat.sky.segment import METHODS  # lazy: the segmenters load OpenCV models
 
     p = add_command(
-        sub, "evaluate-sky",
-        "score sky segmentation on a folder of photos with ground-truth sky masks",
+        sub, "evaluate-sky", COMMAND_HELP["evaluate-sky"],
         "Segment every photo of a folder and compare with its sky mask: IoU per image and "
         "per set (layouts: ADE20K original/+mask/, fisheye_hk raw_images/+mask_images/, "
         "images/+masks/, or a predisat synth output folder).",
@@ -528,8 +541,16 @@ def _add_evaluate_sky(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.set_defaults(func=cmd_evaluate_sky)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``predisat`` parser: one subcommand per job."""
+def build_parser(only: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``predisat`` parser: one subcommand per job.
+
+    Parameters
+    ----------
+    only : collection of str, optional
+        Build only these subcommands' arguments; the others are listed with their help line
+        (their arguments import their library, which takes seconds). None (default) builds
+        every subcommand whole.
+    """
     parser: argparse.ArgumentParser = Parser(  # subcommands inherit its class
         prog="predisat",
         formatter_class=HelpFormatter,
@@ -540,31 +561,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_synth(sub)
-    _add_availability(sub)
-    _add_process(sub)
-    _add_network(sub)
-    _add_evaluate(sub)
-    _add_export(sub)
-    _add_merge(sub)
-    _add_evaluate_sky(sub)
-    track.add_parser(sub)
-    demo.add_parser(sub)
+    adders: dict[str, Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]] = {
+        "synth": _add_synth,
+        "availability": _add_availability,
+        "process": _add_process,
+        "network": _add_network,
+        "evaluate": _add_evaluate,
+        "export": _add_export,
+        "merge": _add_merge,
+        "evaluate-sky": _add_evaluate_sky,
+        "track": track.add_parser,
+        "demo": demo.add_parser,
+    }
+    for name, add in adders.items():
+        if only is None or name in only:
+            add(sub)
+        else:
+            sub.add_parser(name, help=COMMAND_HELP[name])
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``predisat`` command line; returns the exit status."""
     resume = "; finished chunks and segmented frames are kept: rerun the same command to resume"
-    try:
-        parser = build_parser()  # imports the commands' modules: a second or more
-    except (KeyboardInterrupt, ImportError, RuntimeError) as exc:
-        # Ctrl-C in a C extension's import comes as an ImportError caused by it, and in a
-        # dataclass's class body as a RuntimeError from __set_name__ (a test's random Ctrl-C)
-        if not caused_by_interrupt(exc):
-            raise
-        print("\npredisat: interrupted before the command started; nothing was written: rerun "
-              "the same command", file=sys.stderr)  # fmt: skip
+    parser = command_parser(build_parser, COMMAND_HELP, argv, "predisat")
+    if parser is None:
         return 130
     notes = {"process": resume, "network": resume,
              "availability": "; finished blocks are kept: rerun the same command to resume"}

@@ -11,7 +11,7 @@ import contextlib
 import signal
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -26,6 +26,7 @@ __all__ = [
     "CliError",
     "add_masks_same_track",
     "add_track_selection",
+    "command_parser",
     "km_range",
     "parse_where",
     "run_main",
@@ -38,6 +39,33 @@ SYNTH_MODULES = frozenset({"trimesh", "open3d", "embreex"})
 
 class CliError(Exception):
     """A user-facing error: printed without a traceback."""
+
+
+def command_parser(
+    build: Callable[[Collection[str] | None], argparse.ArgumentParser],
+    commands: Collection[str],
+    argv: Sequence[str] | None,
+    label: str,
+) -> argparse.ArgumentParser | None:
+    """The parser ``build`` makes with the arguments of the one subcommand ``argv`` names.
+
+    A subcommand's arguments import its library (seconds), so only the chosen one is built; the
+    command line's own options take no value, so the subcommand is ``argv``'s first word that
+    is not an option (none: the command list alone). None after a Ctrl-C during those imports,
+    with a line saying nothing was written.
+    """
+    words = sys.argv[1:] if argv is None else argv
+    first = next((word for word in words if not word.startswith("-")), None)
+    try:
+        return build([first] if first is not None and first in commands else [])
+    except (KeyboardInterrupt, ImportError, RuntimeError) as exc:
+        # Ctrl-C in a C extension's import comes as an ImportError caused by it, and in a
+        # dataclass's class body as a RuntimeError from __set_name__ (a test's random Ctrl-C)
+        if not caused_by_interrupt(exc):
+            raise
+        print(f"\n{label}: interrupted before the command started; nothing was written: rerun "
+              "the same command", file=sys.stderr)  # fmt: skip
+        return None
 
 
 def run_main(

@@ -57,6 +57,9 @@ __all__ = [
     "write_index",
 ]
 
+# the command's line in `predisat --help`
+HELP = "run the pipeline on the embedded demo (2 km of line 144)"
+
 DEMO_STEPS_GROUP = "predisat.demo_steps"
 """Entry-point group of the demo's later steps: each entry is a :class:`DemoStep`."""
 
@@ -436,7 +439,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     """The ``demo`` subcommand on the ``predisat`` subparsers."""
     full, quick = DemoPlan.full(), DemoPlan.quick()
     p = add_command(
-        sub, "demo", "run the pipeline on the embedded demo (2 km of line 144)",
+        sub, "demo", HELP,
         f"Render a synthetic survey of line 144 (km {full.from_km:g}-{full.to_km:g}: "
         f"{full.n_frames} frames, about {sum(full.estimate_s(2).values()) / 60:.0f} min on two "
         "quiet cores) with ground truth, process it into "

@@ -22,13 +22,16 @@ if TYPE_CHECKING:
 
 __all__ = ["add_parser", "summary_lines"]
 
+# the command's line in `predisat --help`
+HELP = "show a track map (the line a --track selection gives) and write it alone"
+
 _MAX_LISTED = 12  # tunnels, bridges or stations listed one by one; beyond, the count
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``track`` subcommand on the ``predisat`` subparsers."""
     p = add_command(
-        sub, "track", "show a track map (the line a --track selection gives) and write it alone",
+        sub, "track", HELP,
         "Read a track map as every command does (GeoJSON or CSV; --track-name, --chain and "
         "--where pick one line of a file holding several), print what it gives: length, "
         "ends, how close the fitted axis stays to the source vertices, heights, kilometre "

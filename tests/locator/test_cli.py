@@ -1086,7 +1086,7 @@ def test_a_ctrl_c_while_the_commands_import_ends_as_interrupted(interrupt: str) 
         f"            {interrupt}\n"
         "sys.meta_path.insert(0, Stop())\n"
         "from locator.cli import main\n"
-        "sys.exit(main(['--help']))\n"
+        "sys.exit(main(['run', '--help']))\n"  # `run`'s arguments import the locator
     )
     proc = _python(code)
     assert proc.returncode == 130, proc.stderr
@@ -1103,6 +1103,7 @@ def test_an_import_error_not_from_ctrl_c_still_raises() -> None:
         "            raise ImportError('a broken install')\n"
         "sys.meta_path.insert(0, Broken())\n"
         "from locator.cli import main\n"
+        "main(['run', '--help'])\n"
     )
     proc = _python(code)
     assert proc.returncode == 1

@@ -430,3 +430,57 @@ def test_ctrl_c_on_a_resumable_command_says_its_work_is_kept(
     assert cli.main(argv) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and kept in err and "rerun the same command" in err
+
+
+def _help_lines(parser: argparse.ArgumentParser) -> dict[str, str | None]:
+    """Each subcommand's line in the command list."""
+    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return {a.dest: a.help for a in action._choices_actions}
+
+
+def _options(parser: argparse.ArgumentParser) -> list[tuple[tuple[str, ...], str, object]]:
+    return [(tuple(a.option_strings), a.dest, a.default) for a in parser._actions]
+
+
+@pytest.mark.parametrize("module", [predisat_cli, locator_cli], ids=["predisat", "locator"])
+def test_a_command_built_alone_is_the_command_built_with_all(module: object) -> None:
+    """Only the chosen subcommand's arguments are built (they import its library: seconds); it
+    must parse as in the whole parser, and the list of commands must read the same."""
+    build = module.build_parser  # type: ignore[attr-defined]
+    whole = build()
+    alone_all = _subparsers(whole)
+    assert set(module.COMMAND_HELP) == set(alone_all)  # type: ignore[attr-defined]
+    assert _help_lines(build([])) == _help_lines(whole)
+    for name in module.COMMAND_HELP:  # type: ignore[attr-defined]
+        parser = build([name])
+        assert _help_lines(parser) == _help_lines(whole)
+        assert _options(_subparsers(parser)[name]) == _options(alone_all[name]), name
+        for other, stub in _subparsers(parser).items():  # listed, not built
+            if other != name:
+                assert {a.dest for a in stub._actions} <= {"help", "quiet"}, other
+
+
+@pytest.mark.parametrize(
+    ("module", "argv", "heavy"),
+    [
+        ("predisat.cli.app", ["export", "--help"], ["predisat.availability.run",
+                                                    "predisat.reconstruct.batch"]),
+        ("predisat.cli.app", [], ["predisat.availability.run", "predisat.reconstruct.batch"]),
+        ("locator.cli", ["evaluate", "-h"], ["locator.workflow", "locator.balises"]),
+    ],
+)  # fmt: skip
+def test_the_command_line_imports_only_the_chosen_command(
+    module: str, argv: list[str], heavy: list[str]
+) -> None:
+    import subprocess
+    import sys
+
+    code = (
+        f"import sys\nfrom {module} import COMMAND_HELP, build_parser\n"
+        "from predisat.cli.common import command_parser\n"
+        f"assert command_parser(build_parser, COMMAND_HELP, {argv!r}, 'x') is not None\n"
+        f"print([m for m in {heavy!r} if m in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).parents[3])  # fmt: skip
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
