@@ -524,6 +524,7 @@ def parse_geojson_track(
     posts_raw = points_as_posts(points)
     used = {parts[k].feature for k, _ in order}  # the name lists the chained features only
     chained = [x for x in selected if x[0] in used]
+    _warn_mixed_status(chained, [parts[k] for k, _ in order], frame, path)
     members = doc if isinstance(doc, dict) else {}
     if attribution is None:
         attribution = attribution_of(members)
@@ -591,6 +592,37 @@ def _selected_name(base: str, track: str | None, selected: list[_LineFeature]) -
 
 
 _LineFeature = tuple[int, JsonDict, JsonDict]  # feature index, properties, geometry
+
+
+# properties that say whether a line is in service: Infrabel's ``status`` ("En activité",
+# "Hors service"), OpenStreetMap's ``railway`` ("rail", "disused", "abandoned") and ``usage``
+_STATUS_KEYS = ("status", "railway", "usage")
+
+
+def _warn_mixed_status(
+    chained: list[_LineFeature], parts: list[Part], frame: LocalFrame, path: Path
+) -> None:
+    """Warn when the features joined into the track differ in a status property: one name
+    (Infrabel's track B of line 144) can hold a line in service and one out of service, and a
+    survey or a locator run on the joined line would mix them without a word."""
+    length_m: dict[int, float] = {}
+    for part in parts:
+        enu = frame.to_enu(part.coords[:, 1], part.coords[:, 0])[:, :2]
+        step_m = float(np.hypot(*np.diff(enu, axis=0).T).sum()) if len(enu) > 1 else 0.0
+        length_m[part.feature] = length_m.get(part.feature, 0.0) + step_m
+    for key in _STATUS_KEYS:
+        values: dict[str, float] = {}
+        for i, props, _ in chained:
+            value = str(props.get(key, "(none)"))
+            values[value] = values.get(value, 0.0) + length_m.get(i, 0.0)
+        if len(values) > 1 and any(key in props for _, props, _ in chained):
+            shares = ", ".join(f"{v!r} {m:,.0f} m" for v, m in sorted(values.items()))
+            warnings.warn(
+                f"{path}: the line joins features of different {key} ({shares}); keep one "
+                f"with where={{{key!r}: VALUE}} (command line: --where \"{key}=VALUE\"), or "
+                "check that the whole line is the one you mean",
+                stacklevel=3,
+            )
 
 
 def _lines_and_points(

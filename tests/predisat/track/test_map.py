@@ -8,6 +8,7 @@ equidistant projection) and from analytic geometry, never from the code under te
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -810,3 +811,32 @@ def test_written_tunnels_are_refused_where_they_cannot_stand(test_data, tmp_path
         path.write_text(json.dumps(doc))
         with pytest.raises(TrackMapError, match=match):
             TrackMap.from_geojson(path)
+
+
+@pytest.mark.shared
+def test_infrabel_track_b_joins_a_line_out_of_service_and_says_so(shared_data):
+    """Track B of line 144 is 628 m in service at the ends and 13.1 km "Hors service"
+    between them: one name, two states (a user trial chained it without a word)."""
+    path = shared_data / "railway" / "infrabel" / "line144_tracks_simpl1m.geojson"
+    with pytest.warns(UserWarning, match=r"different status .*'Hors service' 13,1\d\d m.*"
+                      r"--where \"status=VALUE\""):  # fmt: skip
+        TrackMap.from_geojson(path, track="B")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # track A is in service end to end
+        TrackMap.from_geojson(path, track="A")
+
+
+def test_a_line_of_one_status_is_read_without_a_word(tmp_path):
+    line = [[4.60, 50.50], [4.60, 50.51], [4.60, 50.52]]
+    feats = [{"type": "Feature", "properties": {"trackname": "A", "status": s},
+              "geometry": {"type": "LineString", "coordinates": c}}
+             for s, c in (("open", line[:2]), ("open", line[1:]))]  # fmt: skip
+    doc = {"type": "FeatureCollection", "features": feats}
+    (tmp_path / "a.geojson").write_text(json.dumps(doc))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert TrackMap.from_geojson(tmp_path / "a.geojson").length_m > 2000
+    feats[1]["properties"]["status"] = "closed"
+    (tmp_path / "b.geojson").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=r"different status \('closed' 1,11\d m, 'open' 1,11\d m"):
+        TrackMap.from_geojson(tmp_path / "b.geojson")
