@@ -63,6 +63,7 @@ try:  # a Ctrl-C here ends as an interrupt, not a traceback
         command_parser,
         km_range,
         run_main,
+        stretch_text,
         track_option,
     )
     from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH
@@ -201,7 +202,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                     "ends 15 m inside it)"
                 )
             spec = default_scenery(lo_m, hi_m, seed)
-        print(f"building the world ({spec.extent_m[0]:.0f}-{spec.extent_m[1]:.0f} m)")
+        lo_m, hi_m = spec.extent_m
+        print(f"building the world ({stretch_text(track, lo_m, hi_m)})")
         world = World.build(track, spec, seed)
     if args.start_chainage is not None:
         lo_m, hi_m = world.spec.extent_m

@@ -41,6 +41,7 @@ from predisat.cli.common import (
     command_parser,
     km_range,
     run_main,
+    stretch_text,
     track_option,
 )
 from predisat.cli.demo import (
@@ -158,7 +159,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     )
     dt = time.perf_counter() - t0
     print(
-        f"synth: {result.n_frames} frames at {result.n_positions} positions in {dt:.1f} s "
+        f"synth: {result.n_frames} frames at {result.n_positions} positions, "
+        f"{stretch_text(track, from_m, to_m)}, in {dt:.1f} s "
         f"({result.n_frames / dt:.2f} frames/s); survey {result.survey_dir}, "
         f"ground truth {result.truth_dir}"
     )
@@ -336,7 +338,8 @@ def _add_synth(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="GeoJSON or lat/lon/h CSV (default: the demo line 144)")
     add_track_selection(p)
     p.add_argument("--from-km", type=finite_float, metavar="KM",
-                   help="start chainage, km (default 0)")
+                   help="start, chainage km: metres along the map / 1000, not the line's kilometre "
+                   "posts (default 0)")
     p.add_argument("--to-km", type=finite_float, metavar="KM",
                    help="end chainage, km (default: the track's end)")
     p.add_argument("--sky", choices=SKY_CHOICES, default="mixed",

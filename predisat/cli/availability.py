@@ -83,7 +83,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="flat cut-off(s) compared with the masks, degrees",
     )  # fmt: skip
     p.add_argument("--from-km", type=finite_float, metavar="KM",
-                   help="stretch start, chainage km (default: the masks' first position)")
+                   help="stretch start, chainage km, not the line's kilometre posts (default: the "
+                   "masks' first position)")
     p.add_argument("--to-km", type=finite_float, metavar="KM",
                    help="stretch end, chainage km (default: the masks' last position)")
     p.add_argument(

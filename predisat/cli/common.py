@@ -15,6 +15,8 @@ from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+import numpy as np
+
 from predisat.atomic import access_error_text, storage_error_text
 from predisat.cli.args import caused_by_interrupt, run_checks
 
@@ -30,6 +32,7 @@ __all__ = [
     "km_range",
     "parse_where",
     "run_main",
+    "stretch_text",
     "track_option",
 ]
 
@@ -264,3 +267,14 @@ def km_range(
             f"(--from-km {lo_km / 1000:g} --to-km {hi_km / 1000:g})"
         )
     raise CliError(f"--from-km {lo_km:g} --to-km {hi_km:g}: {reason}{hint}")
+
+
+def stretch_text(track: TrackMap, lo_m: float, hi_m: float) -> str:
+    """``chainage 1.000-3.000 km``, with the line's kilometres when the map's posts give them:
+    ``--from-km`` / ``--to-km`` are chainage, which the line's own kilometres are not (on line
+    144 chainage 1 km is km 1.036)."""
+    text = f"chainage {lo_m / 1000:.3f}-{hi_m / 1000:.3f} km"
+    km = track.kilometre_at([lo_m, hi_m])
+    if np.all(np.isfinite(km)) and float(np.max(np.abs(km - [lo_m, hi_m]))) >= 1.0:
+        text += f" (line km {km[0] / 1000:.3f}-{km[1] / 1000:.3f} by its kilometre posts)"
+    return text

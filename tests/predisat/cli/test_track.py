@@ -225,3 +225,19 @@ def test_a_selection_on_a_csv_map_is_refused_not_ignored(tmp_path, capsys):
     tm = TrackMap.from_csv(path).with_metadata(kilometre_posts=[KilometrePost(500.0, 80_000.0)])
     (line,) = [x for x in summary_lines(tm) if x.startswith("kilometre posts")]
     assert line == "kilometre posts: 1, km 80 at 500 m (it labels the kilometre around it only)"
+
+
+def test_a_stretch_is_said_in_chainage_and_in_the_line_s_kilometres():
+    """A user trial read --from-km as the line's kilometre: on line 144 the post "km 1.000"
+    stands at chainage 964 m (the Infrabel line sections), so chainage 1-3 km is km 1.04-3.0."""
+    from predisat.cli.common import stretch_text
+    from dataclasses import replace
+
+    from predisat.track import demo_track
+
+    track = demo_track()
+    post = next(p for p in track.kilometre_posts if p.km_m == 1000.0)
+    text = stretch_text(track, post.chainage_m, 3000.0)
+    assert text.startswith(f"chainage {post.chainage_m / 1000:.3f}-3.000 km (line km 1.000-")
+    bare = replace(track, kilometre_posts=())
+    assert stretch_text(bare, 1000.0, 3000.0) == "chainage 1.000-3.000 km"
