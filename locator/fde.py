@@ -43,6 +43,7 @@ from locator.wls import WlsSolution, solve_wls
 from predisat.availability.interval import (
     INDEPENDENT_PAIRS,
     IntervalMode,
+    MapDoubt,
     interval_mode,
     width_text,
 )
@@ -119,8 +120,8 @@ class LocatorConfig:
     min_slope: float = 0.2
     p_false_alarm: float = 1e-3
     max_exclusions: int = 2
-    map_doubt_lateral_m: float = 1.5
-    map_doubt_vertical_m: float = 1.0
+    map_doubt_lateral_m: float = MapDoubt().lateral_m  # the availability prediction's default
+    map_doubt_vertical_m: float = MapDoubt().vertical_m
 
     def __post_init__(self) -> None:
         if not (self.window_m > 0 and self.step_m > 0):
@@ -158,11 +159,13 @@ class LocatorConfig:
         text = width_text(self.budget if self.budget is not None else self.model.k_sigma)
         return text + self._doubt_text()
 
+    @property
+    def map_doubt(self) -> MapDoubt:
+        """The map doubt as the availability prediction takes it."""
+        return MapDoubt(self.map_doubt_lateral_m, self.map_doubt_vertical_m)
+
     def _doubt_text(self) -> str:
-        if self.map_doubt_lateral_m == 0 and self.map_doubt_vertical_m == 0:
-            return ", no map doubt"
-        return (f", widened for an antenna up to {self.map_doubt_lateral_m:g} m beside and "
-                f"{self.map_doubt_vertical_m:g} m above or below the map")
+        return ", " + self.map_doubt.describe()
 
     def width_label(self) -> str:
         """Short form for figure titles: ``integrity risk 1e-12 per epoch`` or ``k = 2``."""

@@ -48,7 +48,7 @@ import pandas as pd
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from predisat.availability.interval import predicted_interval
+from predisat.availability.interval import MapDoubt, predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.errormodel import IntervalModel
@@ -522,6 +522,7 @@ def compute_availability(
     *,
     interval_model: IntervalModel | None = None,
     integrity: IntegrityBudget | None = DEFAULT_BUDGET,
+    map_doubt: MapDoubt | None = None,
     with_interval: bool = True,
     interval_every: int = 1,
     chunk_positions: int = 2,
@@ -546,6 +547,10 @@ def compute_availability(
         (:func:`predisat.availability.interval.mode_k_sigma`) and ``interval_model.k_sigma``
         is not used; default :data:`predisat.gnss.integrity.DEFAULT_BUDGET`. None:
         ``interval_model.k_sigma`` in every mode.
+    map_doubt : MapDoubt, optional
+        Widen each predicted pair by how far the antenna may be from the map, as the locator
+        does (:class:`~predisat.availability.interval.MapDoubt`; ``run_availability`` gives
+        the locator's default). None: the source's pairs.
     with_interval : bool
         Also predict interval lengths and pair geometry.
     interval_every : int
@@ -607,8 +612,9 @@ def compute_availability(
         sin_thr = np.concatenate([sin_thr, sin_thr[:, :1]], axis=1)  # 360 deg wraps to bin 0
 
     width = model.k_sigma if integrity is None else integrity
+    doubt = None if map_doubt is None or map_doubt.is_zero else map_doubt
     shared = _BlockShared(s32, bin_scale, n_ep, m, model if with_interval else None, width,
-                          interval_every, chunk_positions)  # fmt: skip
+                          interval_every, chunk_positions, doubt)  # fmt: skip
     own = runner is None
     run_on = TaskRunner(Scheduler.serial(workers)) if runner is None else runner
     blocks = _blocks(n_pos, chunk_positions, run_on, checkpoint is not None)
@@ -657,6 +663,7 @@ def compute_availability(
         "workers": workers if runner is None else run_on.scheduler.describe(),
         "interval_model": repr(model) if with_interval else None,
         "integrity": repr(integrity) if with_interval and integrity is not None else None,
+        "map_doubt": repr(doubt) if with_interval and doubt is not None else None,
         "interval_every": interval_every,
         "elapsed_s": time.perf_counter() - t_start,
     }
@@ -741,6 +748,7 @@ class _BlockShared:
     width: float | IntegrityBudget  # k of every mode, or the budget giving each mode its k
     every: int
     chunk_positions: int
+    map_doubt: MapDoubt | None = None  # None: the source's pairs
 
 
 @dataclass(frozen=True)
@@ -792,8 +800,8 @@ def _shared_key(shared: _BlockShared) -> bytes:
     h = hashlib.sha256(_code_key())
     h.update(np.ascontiguousarray(shared.s32).tobytes())
     h.update(repr((shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.width,
-                   shared.every,
-                   shared.chunk_positions, shared.s32.shape)).encode())  # fmt: skip
+                   shared.every, shared.chunk_positions, shared.s32.shape,
+                   shared.map_doubt)).encode())  # fmt: skip
     return h.digest()
 
 
@@ -893,6 +901,7 @@ def block_task(
         parts.append(_chunk(
             shared.s32, block.rx_rel[sl], block.rot[sl], block.tan_ecef[sl], block.sin_thr[sl],
             shared.bin_scale, shared.n_ep, shared.m, shared.model, shared.width, shared.every,
+            shared.map_doubt,
         ))  # fmt: skip
     count = np.concatenate([p[0] for p in parts])
     if shared.model is None:
@@ -914,6 +923,7 @@ def _chunk(
     model: IntervalModel | None,
     width: float | IntegrityBudget,
     every: int,
+    map_doubt: MapDoubt | None = None,
 ) -> tuple[NDArray, NDArray | None, NDArray | None]:
     p = len(rx_rel)
     enu = rot.astype(np.float32) @ s32  # (p, 3, K)
@@ -951,7 +961,12 @@ def _chunk(
     sin_el = u.reshape(p, n_ep, m)[:, ::every].reshape(p, -1) / rng_i
     sigma = model.error.sigma_from_sin(sin_el)
     g3 = g.reshape(p, n_iv, m)
-    length, _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, width)
+    unit = None
+    if map_doubt is not None:  # east, north, up of each candidate at the predicted epochs
+        unit = np.stack([x.reshape(p, n_ep, m)[:, ::every] for x in (e, n, u)], axis=-1)
+        unit /= rng_i.reshape(p, n_iv, m)[..., None]
+    length, _ = predicted_interval(g3, sigma.reshape(p, n_iv, m), tr_i, width,
+                                   unit_enu=unit, map_doubt=map_doubt)  # fmt: skip
     # max/min over the trusted: push the others out of [-1, 1] (adding 0 keeps g exact)
     pen = (~tr_i) * np.float32(4.0)
     gmax = (g3 - pen).max(axis=-1)

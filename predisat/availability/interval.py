@@ -47,6 +47,8 @@ own ``k`` (:func:`mode_k_sigma`; ``docs/locator.md``, "Integrity budget").
 from __future__ import annotations
 
 import itertools
+import math
+from dataclasses import dataclass
 from enum import IntEnum
 from functools import lru_cache
 
@@ -57,9 +59,11 @@ from predisat.gnss.integrity import IntegrityBudget
 from predisat.readonly import readonly_array
 
 __all__ = [
+    "DEFAULT_MAP_DOUBT",
     "INDEPENDENT_PAIRS",
     "POOL_SIZE",
     "IntervalMode",
+    "MapDoubt",
     "along_track_components",
     "best_pair",
     "interval_mode",
@@ -88,6 +92,68 @@ INDEPENDENT_PAIRS = {
     IntervalMode.THREE_PAIRS: 3,
 }
 """Disjoint pairs each mode's union holds (:func:`predisat.gnss.integrity.disjoint_pairs`)."""
+
+
+@dataclass(frozen=True)
+class MapDoubt:
+    """How far the antenna may be from the point of the track map a pair is solved at.
+
+    The map's accuracy, the antenna's lateral lever arm, the cant's sway, a train on a loop
+    beside the mapped track: moving the antenna by ``delta`` changes a pair's range difference
+    by ``-(u_i - u_j) . delta``, so each pair's band grows from ``k sigma_K`` to ``k sigma_K +
+    lateral_m |(u_i - u_j)_level| + vertical_m |(u_i - u_j)_up|`` ("beside" in any level
+    direction: the locator's search window turns with the curves; ``locator.fde.
+    map_doubt_bias_m``, docs/locator.md). The locator widens the pairs it solves by it, and the
+    availability prediction the pairs it predicts, so both state one interval.
+
+    Attributes
+    ----------
+    lateral_m, vertical_m : float
+        Metres beside and above or below the map. Default 1.5 and 1: a map good to a metre, a
+        centred roof antenna, cant; 0 and 0 give the source's pairs.
+    """
+
+    lateral_m: float = 1.5
+    vertical_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("lateral_m", "vertical_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"MapDoubt.{name} must be finite and >= 0 metres, got {v}")
+
+    @property
+    def is_zero(self) -> bool:
+        """No doubt: the source's pair intervals."""
+        return self.lateral_m == 0 and self.vertical_m == 0
+
+    def bias_m(self, unit_i: ArrayLike, unit_j: ArrayLike) -> NDArray:
+        """Largest range-difference bias of pairs, metres.
+
+        Parameters
+        ----------
+        unit_i, unit_j : array_like, shape (..., 3)
+            East, north, up unit vectors antenna -> satellite of each pair's two satellites.
+
+        Returns
+        -------
+        ndarray, shape (...)
+        """
+        du = np.asarray(unit_i) - np.asarray(unit_j)
+        return self.lateral_m * np.hypot(du[..., 0], du[..., 1]) + self.vertical_m * np.abs(
+            du[..., 2]
+        )
+
+    def describe(self) -> str:
+        """The doubt in words, for captions and run records."""
+        if self.is_zero:
+            return "no map doubt"
+        return (f"widened for an antenna up to {self.lateral_m:g} m beside and "
+                f"{self.vertical_m:g} m above or below the map")  # fmt: skip
+
+
+DEFAULT_MAP_DOUBT = MapDoubt()
+"""The locator's and the availability prediction's default doubt (1.5 m beside, 1 m up)."""
 
 
 def mode_k_sigma(k_sigma: float | IntegrityBudget) -> NDArray:
@@ -144,6 +210,9 @@ def predicted_interval(
     sigma_m: ArrayLike,
     trusted: ArrayLike,
     k_sigma: float | IntegrityBudget = 2.0,
+    *,
+    unit_enu: ArrayLike | None = None,
+    map_doubt: MapDoubt | None = None,
 ) -> tuple[NDArray, NDArray]:
     """Predicted SATHIA interval length per epoch (see the module docstring for the rule).
 
@@ -156,6 +225,11 @@ def predicted_interval(
     trusted : array_like of bool, shape (..., m)
     k_sigma : float or IntegrityBudget
         One ``k`` for every mode, or the budget giving each mode its own (:func:`mode_k_sigma`).
+    unit_enu : array_like, shape (..., m, 3), optional
+        East, north, up unit vectors antenna -> satellite; needed with a ``map_doubt``.
+    map_doubt : MapDoubt, optional
+        Widen each pair as the locator does (:class:`MapDoubt`). Default None: the source's
+        pairs. The pairs are chosen as without it (the locator's choice), then widened.
 
     Returns
     -------
@@ -167,7 +241,8 @@ def predicted_interval(
     Notes
     -----
     With >= 6 satellites the length is that of :func:`three_independent_pairs` (the same
-    pool, the same matchings), computed without the indices by a subset recursion.
+    pool, the same matchings), computed without the indices by a subset recursion; with a map
+    doubt, from those indices.
     """
     g_a, sig, ok = _prepare(g, sigma_m, trusted)
     lead, m = g_a.shape[:-1], g_a.shape[-1]
@@ -175,6 +250,16 @@ def predicted_interval(
     if not (np.isfinite(g2).all() and np.isfinite(s2).all()):
         # untrusted entries may be anything; the fast path needs them finite
         g2, s2 = np.where(ok2, g2, 0.0), np.where(ok2, s2, 1.0)
+    u2 = None
+    if map_doubt is not None and not map_doubt.is_zero:
+        if unit_enu is None:
+            raise ValueError("predicted_interval: a map_doubt needs unit_enu, the (..., m, 3) "
+                             "unit vectors antenna -> satellite")  # fmt: skip
+        u_a = np.asarray(unit_enu)
+        if u_a.shape != (*g_a.shape, 3):
+            raise ValueError(f"unit_enu must have shape {(*g_a.shape, 3)} (g's and 3), got "
+                             f"{u_a.shape}")  # fmt: skip
+        u2 = np.where(ok2[..., None], u_a.reshape(-1, m, 3), 0.0).astype(g_a.dtype, copy=False)
     out = np.empty(len(g2), g_a.dtype)
     mode = np.empty(len(g2), np.uint8)
     ks = mode_k_sigma(k_sigma)
@@ -182,8 +267,52 @@ def predicted_interval(
          float(ks[IntervalMode.THREE_PAIRS]))  # fmt: skip
     for a in range(0, len(g2), _BLOCK_ROWS):  # blocks that stay in the CPU cache
         b = slice(a, a + _BLOCK_ROWS)
-        out[b], mode[b] = _interval_rows(g2[b], s2[b], ok2[b], k)
+        if u2 is None or map_doubt is None:
+            out[b], mode[b] = _interval_rows(g2[b], s2[b], ok2[b], k)
+        else:
+            out[b], mode[b] = _widened_rows(g2[b], s2[b], ok2[b], u2[b], k, map_doubt)
     return out.reshape(lead).astype(np.float32), mode.reshape(lead)
+
+
+def _widened_half(
+    g: NDArray, s: NDArray, unit: NDArray, pairs: NDArray, k: float, doubt: MapDoubt
+) -> NDArray:
+    """Half lengths of ``pairs`` (n, p, 2) of rows (n, m), each band widened by ``doubt``."""
+    gi, gj = (np.take_along_axis(g, pairs[..., c], axis=-1) for c in (0, 1))
+    si, sj = (np.take_along_axis(s, pairs[..., c], axis=-1) for c in (0, 1))
+    ui, uj = (np.take_along_axis(unit, pairs[..., c, None], axis=1) for c in (0, 1))
+    dg = np.abs(gi - gj)
+    band = k * np.sqrt(si * si + sj * sj) + doubt.bias_m(ui, uj)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(dg > 0, band / dg, np.inf)
+
+
+def _widened_rows(
+    g: NDArray, s: NDArray, ok: NDArray, unit: NDArray, k: tuple[float, float, float],
+    doubt: MapDoubt,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """:func:`_interval_rows` with each chosen pair widened by ``doubt``: the pairs of each
+    mode chosen as the locator does (:func:`best_pair`, every pair, :func:`three_independent_
+    pairs`), their bands then grown by the bias (``locator.fde``: plan, then widen)."""
+    count = ok.sum(-1)
+    out = np.full(len(count), np.nan, g.dtype)
+    mode = interval_mode(count)
+    six = np.nonzero(count >= 6)[0]
+    if len(six):
+        pairs, _ = three_independent_pairs(g[six], s[six], ok[six], k[2])
+        out[six] = 2.0 * _widened_half(g[six], s[six], unit[six], pairs, k[2], doubt).max(-1)
+    four = np.nonzero((count >= 4) & (count < 6))[0]
+    if len(four):
+        i, j = np.triu_indices(g.shape[-1], 1)
+        every = np.broadcast_to(np.stack([i, j], axis=-1), (len(four), len(i), 2))
+        h = _widened_half(g[four], s[four], unit[four], every, k[1], doubt)
+        both = ok[four][:, i] & ok[four][:, j]
+        out[four] = 2.0 * np.where(both, h, -np.inf).max(-1)
+    two = np.nonzero((count >= 2) & (count < 4))[0]
+    if len(two):
+        pair, _ = best_pair(g[two], s[two], ok[two], k[0])
+        out[two] = 2.0 * _widened_half(g[two], s[two], unit[two], pair[:, None], k[0], doubt)[:, 0]
+    return out, mode
 
 
 POOL_SIZE = 8

@@ -29,6 +29,7 @@ import pandas as pd
 
 from predisat import __version__
 from predisat.atomic import staged_folder, write_bytes_atomic
+from predisat.availability.interval import DEFAULT_MAP_DOUBT, MapDoubt
 from predisat.codeversion import code_fingerprint
 from predisat.gnss.errormodel import IntervalModel
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
@@ -61,6 +62,7 @@ class AvailabilityOptions:
     interval_every: int = 10
     integrity_risk: float | None = DEFAULT_RISK_PER_EPOCH  # None: ``k_sigma`` fixes k
     k_sigma: float | None = None
+    map_doubt: MapDoubt = DEFAULT_MAP_DOUBT
 
     def key(self) -> JsonDict:
         nav = None if self.nav is None else [
@@ -69,7 +71,8 @@ class AvailabilityOptions:
         return {"nav": nav, "start": self.start, "end": self.end, "step_s": self.step_s,
                 "constellation": self.constellation, "cutoff_deg": list(self.cutoff_deg),
                 "interval_every": self.interval_every,
-                "integrity_risk": self.integrity_risk, "k_sigma": self.k_sigma}  # fmt: skip
+                "integrity_risk": self.integrity_risk, "k_sigma": self.k_sigma,
+                "map_doubt_m": [self.map_doubt.lateral_m, self.map_doubt.vertical_m]}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -157,6 +160,7 @@ def _task(shared: _Shared, item: LineInput) -> LineAvailability:
         progress=False,
         interval_model=IntervalModel() if o.k_sigma is None else IntervalModel(k_sigma=o.k_sigma),
         integrity=None if o.integrity_risk is None else IntegrityBudget(o.integrity_risk),
+        map_doubt=o.map_doubt,
     )  # fmt: skip
     summary = [_plain(r.summary()) for r in run.results]
     described = _plain({k: run.info.get(k) for k in RUN_FIELDS})

@@ -58,7 +58,12 @@ from predisat.availability.engine import (
     compute_availability,
     longest_run,
 )
-from predisat.availability.interval import INDEPENDENT_PAIRS, width_text
+from predisat.availability.interval import (
+    DEFAULT_MAP_DOUBT,
+    INDEPENDENT_PAIRS,
+    MapDoubt,
+    width_text,
+)
 from predisat.availability.satellites import (
     DEFAULT_NAV_FILE,
     SYSTEM_NAMES,
@@ -799,6 +804,7 @@ def run_availability(
     interval_every: int = 10,
     interval_model: IntervalModel | None = None,
     integrity: IntegrityBudget | None = DEFAULT_BUDGET,
+    map_doubt: MapDoubt | None = DEFAULT_MAP_DOUBT,
     workers: int | None = None,
     scheduler: Scheduler | str | None = None,
     counts_table: bool = False,
@@ -858,6 +864,11 @@ def run_availability(
         :data:`predisat.gnss.integrity.DEFAULT_BUDGET` (1e-12 per epoch, as
         ``predisat availability --integrity-risk``); None: ``interval_model.k_sigma`` in every
         mode (``--k-sigma``).
+    map_doubt : MapDoubt or None
+        How far the antenna may be from the track map: each predicted pair is widened as
+        ``locator run`` widens the pairs it solves (:class:`predisat.availability.interval.
+        MapDoubt`); the report names it. Default ``MapDoubt()`` (1.5 m beside, 1 m above or
+        below: the locator's default, ``--map-doubt``); None or zero: the source's pairs.
     workers : int, optional
         Threads of the availability engine in this process (default 1), or the worker
         processes of a local Dask cluster with ``scheduler="local"`` (default: the cores).
@@ -948,7 +959,7 @@ def run_availability(
         with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint) as runner:
             results = _compute_rules(
                 rules, nav_data.sats, positions, interval_every, model, integrity, runner, bar,
-                (blocks, opts),
+                (blocks, opts), map_doubt,
             )  # fmt: skip
 
         stage("tables")
@@ -966,7 +977,7 @@ def run_availability(
             info = _run_info(
                 mask_set, masks_label, track, nav_data, constellation, rules, step_s,
                 interval_every, __version__, model, integrity,
-                [*mask_notes, *notes, *sampling], antenna_height_m,
+                [*mask_notes, *notes, *sampling], antenna_height_m, map_doubt,
             )  # fmt: skip
             local_files, summary = write_tables(work, results, track, info, counts_table)
             local_files["ephemeris_status_csv"] = _write_ephemeris_status(work, nav_data.sats)
@@ -1222,6 +1233,7 @@ def _compute_rules(
     runner: TaskRunner,
     bar: tqdm[NoReturn],
     blocks: tuple[Location, StorageOptions],
+    map_doubt: MapDoubt | None,
 ) -> list[Availability]:
     """The availability under every rule, in order; one step of ``bar`` each. Each rule's
     finished blocks are saved in its own folder under ``blocks`` (a folder and its storage
@@ -1238,6 +1250,7 @@ def _compute_rules(
                 interval_every=interval_every,
                 interval_model=model,
                 integrity=integrity,
+                map_doubt=map_doubt,
                 runner=runner,
                 progress=not bar.disable,
                 checkpoint=BlockCheckpoint(join(folder, _slug(rule.label)), opts),
@@ -1293,6 +1306,7 @@ def _run_info(
     constellation: str, rules: Sequence[TrustRule], step_s: float, interval_every: int,
     version: str, model: IntervalModel, integrity: IntegrityBudget | None = None,
     notes: Sequence[str] = (), antenna_height_m: float | None = None,
+    map_doubt: MapDoubt | None = None,
 ) -> JsonDict:  # fmt: skip
     ephemeris, nav_label, sats = nav.ephemeris, nav.label, nav.sats
     systems = sorted({s[0] for s in sats.sats})
@@ -1338,7 +1352,8 @@ def _run_info(
             f"(elevations below {model.error.min_el_deg:g}° as {model.error.min_el_deg:g}°), "
             f"pair intervals ± k sigma"
         ),
-        "interval_width": width_text(model.k_sigma if integrity is None else integrity),
+        "interval_width": width_text(model.k_sigma if integrity is None else integrity) + ", "
+        + (map_doubt or MapDoubt(0.0, 0.0)).describe(),
         "interval_model_params": {
             "a_m": model.error.a_m, "b_m": model.error.b_m,
             "min_el_deg": model.error.min_el_deg,
@@ -1347,6 +1362,8 @@ def _run_info(
             "k_sigma_by_mode": None if integrity is None else {
                 m.name: integrity.k_sigma(n) for m, n in INDEPENDENT_PAIRS.items()
             },
+            "map_doubt_lateral_m": 0.0 if map_doubt is None else map_doubt.lateral_m,
+            "map_doubt_vertical_m": 0.0 if map_doubt is None else map_doubt.vertical_m,
         },
         "software": f"predisat {version}",
         "created_utc": utc_stamp(pinned_utc()),

@@ -17,7 +17,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from predisat.availability.interval import along_track_components, predicted_interval
+from predisat.availability.interval import (
+    DEFAULT_MAP_DOUBT,
+    MapDoubt,
+    along_track_components,
+    predicted_interval,
+)
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.gnss.ephemeris import Ephemeris
 from predisat.gnss.errormodel import IntervalModel
@@ -204,6 +209,7 @@ def trainrun(
     antenna_height_m: float = 0.0,
     interval_model: IntervalModel | None = None,
     integrity: IntegrityBudget | None = DEFAULT_BUDGET,
+    map_doubt: MapDoubt | None = DEFAULT_MAP_DOUBT,
 ) -> TrainRun:
     """Run a train along a track and list the satellites it may trust at each step.
 
@@ -231,6 +237,9 @@ def trainrun(
         Each interval mode's ``k`` follows from it and ``interval_model.k_sigma`` is not used;
         default :data:`predisat.gnss.integrity.DEFAULT_BUDGET`. None: ``interval_model.k_sigma``
         in every mode.
+    map_doubt : MapDoubt or None
+        Each predicted pair widened as the locator widens it (default its 1.5 m beside and 1
+        m above or below the map); None: the source's pairs.
 
     Returns
     -------
@@ -272,8 +281,9 @@ def trainrun(
     g = along_track_components(np.nan_to_num(u), pos.tangent_enu)
     sigma = model.error.sigma_m(np.nan_to_num(el, nan=90.0))
     length, mode = predicted_interval(
-        g, sigma, trusted, model.k_sigma if integrity is None else integrity
-    )
+        g, sigma, trusted, model.k_sigma if integrity is None else integrity,
+        unit_enu=np.nan_to_num(u), map_doubt=map_doubt,
+    )  # fmt: skip
     return TrainRun(
         gps, chain, speed.speed_at(t_rel), sat.sats, trusted, az, el, trusted.sum(axis=1),
         length.astype(float), mode,

@@ -28,6 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
+from predisat.availability.interval import MapDoubt
 from predisat.gnss.integrity import DEFAULT_RISK_PER_EPOCH, IntegrityBudget
 from predisat.storage import Location, is_remote, location
 
@@ -38,6 +39,7 @@ __all__ = [
     "Parser",
     "add_checks",
     "add_command",
+    "add_map_doubt",
     "antenna_height_m",
     "caused_by_interrupt",
     "chainage_hint",
@@ -54,6 +56,7 @@ __all__ = [
     "integrity_budget",
     "integrity_options",
     "integrity_risk",
+    "map_doubt_arg",
     "needs",
     "non_negative_float",
     "output_dir",
@@ -551,3 +554,24 @@ def integrity_budget(args: argparse.Namespace) -> IntegrityBudget | None:
         return None
     risk = getattr(args, "integrity_risk", None)
     return IntegrityBudget(DEFAULT_RISK_PER_EPOCH if risk is None else risk)
+
+
+def add_map_doubt(p: argparse.ArgumentParser) -> None:
+    """``--map-doubt LAT VERT``: :class:`predisat.availability.interval.MapDoubt`, the same
+    option on ``locator run``, ``locator balises`` and ``predisat availability``."""
+    d = MapDoubt()
+    p.add_argument(
+        "--map-doubt", nargs=2, type=non_negative_float, metavar=("LAT", "VERT"),
+        help="how far the antenna may be beside and above or below the track map, metres: the "
+        "map's accuracy, the antenna's lateral lever arm, cant, a passing loop; each pair "
+        f"interval is widened to bound the error that makes (default {d.lateral_m:g} "
+        f"{d.vertical_m:g}: a map good to a metre; an OpenStreetMap line needs several metres; "
+        "0 0: the source's pairs; docs/locator.md)",
+    )  # fmt: skip
+
+
+def map_doubt_arg(args: argparse.Namespace) -> MapDoubt:
+    """The :class:`~predisat.availability.interval.MapDoubt` of ``--map-doubt`` (its default
+    when not given)."""
+    given_m = getattr(args, "map_doubt", None)
+    return MapDoubt() if given_m is None else MapDoubt(float(given_m[0]), float(given_m[1]))

@@ -11,6 +11,7 @@ import numpy as np
 from predisat.availability.run import AvailabilityRun, run_availability
 from predisat.cli.args import (
     TIME_HELP,
+    add_map_doubt,
     antenna_height_m,
     constellation,
     constellation_label,
@@ -21,6 +22,7 @@ from predisat.cli.args import (
     finite_float,
     integrity_budget,
     integrity_options,
+    map_doubt_arg,
     output_dir,
     positive_float,
     positive_int,
@@ -102,6 +104,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default a = b = 2 m; its k_sigma is not used: see --integrity-risk)",
     )  # fmt: skip
     integrity_options(p)
+    add_map_doubt(p)
     scheduler_options(p, "the blocks of positions", threads=True)
     p.add_argument(
         "--basemap", type=existing_file("a GeoJSON of lines (railways, roads, rivers) in "
@@ -145,6 +148,7 @@ def run(args: argparse.Namespace, track: TrackMap | None = None) -> Availability
         interval_every=args.interval_every,
         interval_model=model,
         integrity=integrity_budget(args),
+        map_doubt=map_doubt_arg(args),
         workers=args.workers,
         scheduler=args.scheduler,
         counts_table=args.counts,

@@ -16,12 +16,14 @@ from typing import TYPE_CHECKING
 
 from predisat.cli.args import (
     TIME_HELP,
+    add_map_doubt,
     constellation,
     cutoff_deg,
     existing_dir,
     existing_file,
     integrity_budget,
     integrity_options,
+    map_doubt_arg,
     output_dir,
     positive_float,
     positive_int,
@@ -91,6 +93,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interval-every", type=positive_int, default=10, metavar="N",
                    help="predict the interval at every N-th epoch")
     integrity_options(p)
+    add_map_doubt(p)
     add_attitude_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
 
@@ -148,7 +151,7 @@ def run(args: argparse.Namespace) -> tuple[NetworkResult, dict[str, Path]]:
             start=args.start, end=args.end, step_s=args.step, constellation=args.constellation,
             cutoff_deg=tuple(args.cutoff), interval_every=args.interval_every,
             integrity_risk=None if budget is None else budget.risk_per_epoch,
-            k_sigma=args.k_sigma,
+            k_sigma=args.k_sigma, map_doubt=map_doubt_arg(args),
         )  # fmt: skip
         reports = network_availability(inputs, out / "availability", opts,
                                        scheduler=args.scheduler, workers=args.workers,

@@ -225,3 +225,28 @@ def test_the_map_doubt_bound_holds_over_a_curved_search_window() -> None:
         du = u[pairs[:, 0]] - u[pairs[:, 1]]
         exact = 1.5 * np.abs(du @ n) + 1.0 * np.abs(du @ up)  # the worst corner of the box
         assert np.all(exact <= bound + 1e-3), s
+
+
+def test_the_locator_and_the_availability_prediction_widen_a_pair_alike(path) -> None:
+    """The locator's bound (ECEF, the ellipsoid normal at the path) and the availability
+    prediction's (:class:`MapDoubt` on east-north-up unit vectors) are one number per pair,
+    and the locator's default doubt is the prediction's."""
+    from locator.fde import map_doubt_bias_m
+    from predisat.availability.interval import MapDoubt
+    from predisat.geodesy import ecef_to_geodetic, enu_rotation
+
+    s = 1800.0
+    sat, _, _ = _epoch(path, s, 8, 23)
+    pairs = np.stack(np.triu_indices(len(sat), 1), -1)
+    x = path.ecef_at(s)
+    unit_enu = (enu_rotation(*ecef_to_geodetic(x)[:2]) @ (sat - x).T).T
+    unit_enu /= np.linalg.norm(unit_enu, axis=1)[:, None]
+    doubt = MapDoubt(2.5, 0.7)
+    np.testing.assert_allclose(
+        doubt.bias_m(unit_enu[pairs[:, 0]], unit_enu[pairs[:, 1]]),
+        map_doubt_bias_m(path, s, sat, pairs, 2.5, 0.7), rtol=1e-6,
+    )  # fmt: skip (the locator's normal from the ellipsoid's axes: 1e-8 rad from the geodetic)
+    cfg = LocatorConfig()
+    assert (cfg.map_doubt_lateral_m, cfg.map_doubt_vertical_m) == (
+        MapDoubt().lateral_m, MapDoubt().vertical_m)  # fmt: skip
+    assert cfg.map_doubt == MapDoubt()

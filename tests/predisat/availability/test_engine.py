@@ -18,7 +18,7 @@ from predisat.availability.engine import (
     longest_run,
     reference_counts,
 )
-from predisat.availability.interval import best_pair, pair_half_length_m, three_independent_pairs
+from predisat.availability.interval import best_pair, three_independent_pairs
 from predisat.availability.satellites import (
     LinePositions,
     SatellitePositions,
@@ -290,10 +290,13 @@ def test_writers(tmp_path: Path, sats, masks) -> None:
     np.testing.assert_allclose(a.opening_angle_deg, masks.opening_angle_deg())
 
 
-def _reference_interval(sats, pos, rule, model):
-    """Per position and epoch, float64 az/el, the public pair functions on the trusted only."""
+def _reference_interval(sats, pos, rule, model, doubt=(0.0, 0.0)):
+    """Per position and epoch, float64 az/el, the public pair functions on the trusted only;
+    with a map doubt (lateral, vertical metres) each chosen pair's band grows by
+    ``lat |du_level| + vert |du_up|``, written out here."""
     length = np.full((pos.n_pos, len(sats.gps_s)), np.nan)
     rot, rx, t_enu = pos.enu_rotation, pos.ecef_m, pos.tangent_enu
+    lat, vert = doubt
     for i in range(pos.n_pos):
         az, el = azel(rx[i], rot[i], sats.pos_ecef_m)
         ok = rule.trusted(pos.chainage_m[i], az, el)
@@ -302,25 +305,36 @@ def _reference_interval(sats, pos, rule, model):
         g = u @ t_enu[i]
         for t in range(len(sats.gps_s)):
             k = np.nonzero(ok[t])[0]
-            gt, st = g[t, k], model.error.sigma_m(el[t, k])
+            gt, st, ut = g[t, k], model.error.sigma_m(el[t, k]), u[t, k]
             if len(k) >= 6:
-                length[i, t] = 2 * three_independent_pairs(gt, st, k_sigma=model.k_sigma)[1]
+                pairs = three_independent_pairs(gt, st, k_sigma=model.k_sigma)[0]
             elif len(k) >= 4:
-                a_, b_ = np.triu_indices(len(k), 1)
-                h = pair_half_length_m(gt[a_], gt[b_], st[a_], st[b_], model.k_sigma)
-                length[i, t] = 2 * h.max()
+                pairs = np.stack(np.triu_indices(len(k), 1), axis=-1)
             elif len(k) >= 2:
-                length[i, t] = 2 * best_pair(gt, st, k_sigma=model.k_sigma)[1]
+                pairs = best_pair(gt, st, k_sigma=model.k_sigma)[0][None]
+            else:
+                continue
+            half = []
+            for p_, q_ in pairs:
+                du = ut[p_] - ut[q_]
+                band = model.k_sigma * np.hypot(st[p_], st[q_])
+                band += lat * np.hypot(du[0], du[1]) + vert * abs(du[2])
+                half.append(band / abs(gt[p_] - gt[q_]))
+            length[i, t] = 2 * max(half)
     return length
 
 
-def test_interval_matches_per_position_reference(sats, masks) -> None:
+@pytest.mark.parametrize("doubt", [(0.0, 0.0), (1.5, 1.0), (4.5, 3.0)])
+def test_interval_matches_per_position_reference(sats, masks, doubt) -> None:
+    from predisat.availability.interval import MapDoubt
+
     pos = LinePositions.from_masks(masks)
     rule = TrustRule.mask(masks)
     model = IntervalModel()
     # the reference draws k = 2 (model.k_sigma) in every mode: fix it here too
-    res = compute_availability(sats, pos, rule, interval_model=model, integrity=None, workers=2)
-    want = _reference_interval(sats, pos, rule, model)
+    res = compute_availability(sats, pos, rule, interval_model=model, integrity=None, workers=2,
+                               map_doubt=MapDoubt(*doubt))  # fmt: skip
+    want = _reference_interval(sats, pos, rule, model, doubt)
     same_count = res.count == reference_counts(sats, pos, rule)
     assert np.mean(same_count) > 0.99
     x, y = res.interval_m[same_count].astype(float), want[same_count]
@@ -329,6 +343,10 @@ def test_interval_matches_per_position_reference(sats, masks) -> None:
     # float32 geometry vs float64: equal to float32 precision, but for the rare epoch where
     # two satellites' pool ranks are within rounding (then the pool, so the length, differs)
     assert np.mean(rel < 1e-5) > 0.99 and np.median(rel) < 1e-6
+    if doubt != (0.0, 0.0):  # the doubt widens every interval
+        plain = compute_availability(sats, pos, rule, interval_model=model, integrity=None)
+        ok = np.isfinite(plain.interval_m)
+        assert np.all(res.interval_m[ok] > plain.interval_m[ok])
 
 
 def test_even_chunk_sizes_are_bit_identical(sats, masks) -> None:

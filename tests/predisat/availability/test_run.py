@@ -587,7 +587,8 @@ def test_interval_model_from_a_locator_error_model_file(
     path = write_masks(masks.subset(4000.0, 4100.0), tmp_path / "m.masks.parquet")
     parser = add_arguments(argparse.ArgumentParser())
     base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
-            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet"]  # fmt: skip
+            "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet",
+            "--map-doubt", "0", "0"]  # fmt: skip (no map doubt: the lengths scale with sigma)
     k2 = [*base, "--k-sigma", "2"]
     default = run_from_args(parser.parse_args([*k2, "--out", str(tmp_path / "d")]), track)
     # sigma doubled everywhere (a = b = 4 m instead of 2 m): every interval exactly doubles
@@ -614,11 +615,21 @@ def test_interval_model_from_a_locator_error_model_file(
     assert "source's default" in captions[2] and "k = 3.89 in every mode" in captions[2]
     # a track file given by the user is named in the footer (the test track has no attribution)
     assert f"Track: {track.name}" in captions[0]
+    # the locator's default map doubt widens every pair, and the caption says so
+    doubted = [a for a in k2 if a not in ("--map-doubt", "0")]
+    located = run_from_args(parser.parse_args([*doubted, "--out", str(tmp_path / "m")]), track)
+    x = located.results[0].interval_m
+    assert np.array_equal(np.isfinite(x), np.isfinite(d)) and np.all(x[np.isfinite(d)] > d[
+        np.isfinite(d)])  # fmt: skip
+    caption = html.unescape(located.report_html.read_text(encoding="utf-8"))
+    assert "widened for an antenna up to 1.5 m beside and 1 m above or below the map" in caption
+    assert "no map doubt" in captions[0]
     # the run records the model's numbers, so a report can be made again
     run = json.loads((tmp_path / "w" / "summary.json").read_text())["run"]
     assert run["interval_model_params"] == {
         "a_m": 4.0, "b_m": 4.0, "min_el_deg": 1.0, "k_sigma": 2.0,
         "integrity_risk_per_epoch": None, "k_sigma_by_mode": None,
+        "map_doubt_lateral_m": 0.0, "map_doubt_vertical_m": 0.0,
     }  # fmt: skip
     # a Parquet file: refused when read; a folder: by the parser (predisat.cli.args)
     with pytest.raises(ValueError, match="--error-model"):
@@ -701,7 +712,7 @@ def test_the_integrity_budget_sets_each_modes_k(
     parser = add_arguments(argparse.ArgumentParser())
     base = ["--masks", str(path), "--start", START, "--end", "2020-06-25T07:00", "--step",
             "600", "--interval-every", "1", "--sky-km", "4.05", "--quiet", "--scheduler",
-            "serial"]  # fmt: skip
+            "serial", "--map-doubt", "0", "0"]  # fmt: skip (no map doubt: k scales the lengths)
     # k = 2 scaled back to one sigma (a k under 1.645, a risk above 0.1 per pair, is refused)
     one = run_from_args(parser.parse_args([*base, "--k-sigma", "2", "--out", str(tmp_path / "1")]),
                         track)  # fmt: skip

@@ -230,9 +230,9 @@ def test_a_selection_on_a_csv_map_is_refused_not_ignored(tmp_path, capsys):
 def test_a_stretch_is_said_in_chainage_and_in_the_line_s_kilometres():
     """A user trial read --from-km as the line's kilometre: on line 144 the post "km 1.000"
     stands at chainage 964 m (the Infrabel line sections), so chainage 1-3 km is km 1.04-3.0."""
-    from predisat.cli.common import stretch_text
     from dataclasses import replace
 
+    from predisat.cli.common import stretch_text
     from predisat.track import demo_track
 
     track = demo_track()
