@@ -370,7 +370,13 @@ def _quiet_shutdown() -> None:
     tracebacks are shutdown noise, not the user's error, and the run's own message says what
     happened and how to resume.
     """
-    for name in ("distributed", "tornado", "asyncio"):
+    # their children too: dask's configuration gives some a level of their own
+    # ("distributed.client": warning), which a parent's level does not override; the client's
+    # reconnection to a scheduler killed mid-run, cancelled as the command closed it, printed
+    # a 30-line traceback before the command's one line (a user trial)
+    roots = ("distributed", "tornado", "asyncio")
+    known = [n for n in list(logging.Logger.manager.loggerDict) if n.startswith(roots)]
+    for name in {*roots, *(n for n in known if n.partition(".")[0] in roots)}:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 

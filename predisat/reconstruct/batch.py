@@ -1598,6 +1598,14 @@ def process_survey(
     opts = dict(storage_options or {})
     out = location(out_dir)
     _check_reachable(survey, out, where)
+    if where.kind == "address":
+        # a mistyped address, or a cluster the tasks would go wrong on, is refused now: not
+        # after the planning (hours on an object store) and the withdrawal of the finished
+        # run's files (a user trial: a port where nothing listens deleted its masks.parquet)
+        root = survey.root if isinstance(survey, Survey) else location(survey)
+        seen = [str(root), str(out), *([] if p.sky_net is None else [p.sky_net])]
+        with TaskRunner(where, code_version=code_fingerprint, paths=seen) as probe:
+            probe.client()
     if not isinstance(survey, Survey):
         survey = Survey.load(survey, track=track, check_images=False, on_error="skip",
                              storage_options=opts)  # fmt: skip

@@ -166,7 +166,12 @@ def segment_frame(job: FrameJob, segmenter: Segmenter) -> tuple[str, str | None]
                 raise ValueError(f"segmenter returned a {sky.shape} mask for a {img.shape} image")
             result = (sky, None if conf is None else np.asarray(conf, np.float32), thin)
         except Exception as exc:  # any failure of one frame must not stop a long run
-            problem = f"segmentation failed ({type(exc).__name__}: {exc})"
+            # one line: OpenCV's messages end in a newline, which split the printed line and
+            # the bad_frames.csv field ("... 'forwardGraph'\n) - skipped", a user trial)
+            problem = f"segmentation failed ({type(exc).__name__}: {' '.join(str(exc).split())})"
+            # not cached: a failure of the run, not of the image (memory, a worker's threads
+            # sharing one network, a user trial), is tried again by the next run
+            return job.frame_id, problem
     write_cache(job, result, problem)
     return job.frame_id, problem
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import threading
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
@@ -72,15 +73,30 @@ def network_input(image_bgr: ArrayLike, input_px: int) -> NDArray[np.float32]:
     return np.ascontiguousarray(np.concatenate([x.transpose(2, 0, 1), row[None]])[None])
 
 
+# One network object per thread, process and file version: cv2.dnn.Net cannot be pickled or
+# shared, and is not thread-safe either (setInput then forward): a `dask worker` started as
+# docs/cluster.md says runs one thread per core in one process, and two threads sharing one
+# net failed 20 of 202 frames with OpenCV assertions and segmented 7 more with another
+# frame's input, exit 0 (a user trial). A file replaced since (retrained, copied over) is
+# read again.
+_NETS = threading.local()
+_NETS_PER_THREAD = 4
+
+
 def _load_net(path: str) -> Any:
-    # one network object per process and file version (cv2.dnn.Net cannot be pickled or
-    # shared); a file replaced since (retrained, copied over) is read again
     st = os.stat(path)
-    return _load_net_version(path, st.st_mtime_ns, st.st_size, st.st_ino)
+    key = (path, st.st_mtime_ns, st.st_size, st.st_ino)
+    nets: dict[tuple[str, int, int, int], Any] | None = getattr(_NETS, "nets", None)
+    if nets is None:
+        nets = _NETS.nets = {}
+    if key not in nets:
+        if len(nets) >= _NETS_PER_THREAD:
+            nets.clear()
+        nets[key] = _read_net(path)
+    return nets[key]
 
 
-@lru_cache(maxsize=4)
-def _load_net_version(path: str, mtime_ns: int, size: int, inode: int) -> Any:
+def _read_net(path: str) -> Any:
     try:
         return cv2.dnn.readNetFromONNX(path)
     except cv2.error as exc:

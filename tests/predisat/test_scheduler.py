@@ -374,3 +374,26 @@ def test_an_address_whose_server_sends_a_banner_is_named_not_a_traceback() -> No
         with pytest.raises(OSError, match=f"127.0.0.1:{port}: something answers there, but no "
                            "Dask scheduler"):  # fmt: skip
             TaskRunner(Scheduler.at(f"tcp://127.0.0.1:{port}")).client()
+
+
+def test_an_aborted_run_silences_the_dask_loggers_with_a_level_of_their_own() -> None:
+    """dask's configuration sets "distributed.client" to warning: silencing "distributed"
+    left it logging the cancelled reconnection to a scheduler killed mid-run, a 30-line
+    traceback before the command's one line (a user trial)."""
+    import logging
+
+    import distributed  # noqa: F401  (sets the configured levels)
+
+    import predisat.scheduler as sched
+
+    names = [n for n in list(logging.Logger.manager.loggerDict)
+             if n.partition(".")[0] in ("distributed", "tornado", "asyncio")]  # fmt: skip
+    saved = {n: logging.getLogger(n).level for n in {*names, "distributed.client"}}
+    try:
+        logging.getLogger("distributed.client").setLevel(logging.WARNING)  # dask's default
+        sched._quiet_shutdown()
+        for n in names:
+            assert not logging.getLogger(n).isEnabledFor(logging.CRITICAL), n
+    finally:
+        for n, level in saved.items():
+            logging.getLogger(n).setLevel(level)

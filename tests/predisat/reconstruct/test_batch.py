@@ -6,6 +6,7 @@ import csv
 import io
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -1146,3 +1147,61 @@ def test_a_chunk_reads_whole_views_and_merges_them_as_the_survey_does(
         by_id = {f.frame_id: f.view_id for f in job.frames}
         for i in plan.frames_of[job.name]:
             assert by_id[str(fr.frame_id[i])] == int(view[i])
+
+
+def test_a_segmenter_that_fails_is_tried_again_by_the_next_run(tmp_path: Path) -> None:
+    """A failure of the run (a worker's threads sharing one network, memory), not of the
+    image, was cached and set the frame aside in every later run "as in a run before" (a user
+    trial); an image that cannot be segmented for what it is (its size) stays cached."""
+    import cv2
+
+    from predisat.reconstruct.framecache import FrameJob, read_cache
+    from predisat.reconstruct.frames import segment_frame
+
+    image = tmp_path / "f.png"
+    grey = np.linspace(40, 220, 37 * 5).reshape(5, 37).astype(np.uint8)  # not a blank frame
+    cv2.imwrite(str(image), np.dstack([grey] * 3))
+    job = FrameJob("f", str(image), 37, 5, str(tmp_path / "f.npz"))
+
+    def failing(img):
+        raise cv2.error("OpenCV(4.x) error: (-215:Assertion failed) buf.shape() == m.shape()\n")
+
+    fid, problem = segment_frame(job, failing)
+    assert fid == "f" and problem is not None and "\n" not in problem
+    assert "segmentation failed (error: OpenCV(4.x) error" in problem
+    assert read_cache(job) is None  # the next run tries again
+
+    def working(img):
+        return np.zeros(img.shape[:2], bool), np.ones(img.shape[1], np.float32)
+
+    assert segment_frame(job, working) == ("f", None)
+    assert isinstance(read_cache(job), tuple)
+    wrong = FrameJob("f", str(image), 40, 5, str(tmp_path / "g.npz"))  # the image's size
+    _, problem = segment_frame(wrong, working)
+    assert problem is not None and "calibration says 40x5" in problem
+    assert read_cache(wrong) is not None  # a verdict on the image: kept
+
+
+def test_a_wrong_address_is_refused_before_the_finished_run_is_withdrawn(
+    survey_dir: Path, first_run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A user trial reran a finished folder on a port where nothing listens: refused, but only
+    after its masks.parquet, provenance.json and bad_frames.csv had been deleted."""
+    import socket
+
+    import predisat.scheduler as sched
+    from predisat.scheduler import Scheduler
+
+    monkeypatch.setattr(sched, "CONNECT_TIMEOUT_S", 1.0)
+    out = tmp_path / "masks"
+    shutil.copytree(first_run[0], out)
+    before = sorted(p.name for p in out.iterdir())
+    assert "masks.parquet" in before and "provenance.json" in before
+    with socket.socket() as s:  # a free port: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    other = replace(PARAMS, thin_deg=0.5)  # another run key: the finished files would go
+    with pytest.raises(OSError, match=f"127.0.0.1:{port}"):
+        process_survey(survey_dir.resolve(), out, other, progress=False,
+                       scheduler=Scheduler.at(f"tcp://127.0.0.1:{port}"))  # fmt: skip
+    assert sorted(p.name for p in out.iterdir()) == before

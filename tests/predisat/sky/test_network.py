@@ -166,3 +166,20 @@ def test_a_network_file_replaced_on_disk_is_read_again(tmp_path) -> None:
         SkyNet.load(onnx).predict_image(img)
     with pytest.raises(ValueError, match=r"net\.onnx.*not a readable ONNX"):
         default_segmenter(img, method="cnn", sky_net=str(onnx))
+
+
+def test_threads_of_one_process_do_not_share_a_network(test_data) -> None:
+    # a `dask worker` runs a task per thread (one per core by default): two threads feeding one
+    # cv2.dnn.Net failed frames with OpenCV assertions and gave others another frame's sky
+    # (a user trial of `predisat process --scheduler ADDRESS`)
+    from concurrent.futures import ThreadPoolExecutor
+
+    net = SkyNet.default()
+    imgs = [_frame(test_data, "cloudy_right_000012")[0]]
+    imgs += [np.ascontiguousarray(imgs[0][::-1]), np.ascontiguousarray(imgs[0][:, ::-1])]
+    alone = [net.probability_tile(im) for im in imgs]
+    work = [k % len(imgs) for k in range(48)]
+    with ThreadPoolExecutor(4) as pool:
+        together = list(pool.map(lambda k: net.probability_tile(imgs[k]), work))
+    for k, prob in zip(work, together, strict=True):
+        np.testing.assert_array_equal(prob, alone[k])
