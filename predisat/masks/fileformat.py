@@ -287,10 +287,13 @@ def read_masks(path: str | os.PathLike[str], *, close_holes: bool = True) -> Mas
     given = Path(path)
     path = mask_file_path(given)  # a folder without its run's record: refused there
     if given.is_dir() and not path.is_file():
+        unfinished = (given / "chunks").is_dir()  # a run stopped or still going (a user trial)
         raise MaskFileError(
             f"{given}: a folder without masks.parquet; give a mask file or the output "
             "folder of a finished `predisat process` run"
-        )
+            + ("; this one holds chunks of a run that has not finished: rerun the same "
+               "`predisat process` command to finish it" if unfinished else "")
+        )  # fmt: skip
     record = given / "provenance.json" if given.is_dir() else None
     if not path.is_file():
         raise MaskFileError(

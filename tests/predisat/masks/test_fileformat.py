@@ -754,3 +754,14 @@ def test_every_way_to_a_process_folder_needs_its_run_record(tmp_path):
         mask_file_path(tmp_path)
     (tmp_path / "provenance.json").write_text("{}")
     assert mask_file_path(tmp_path) == tmp_path / "masks.parquet"
+
+
+def test_an_unfinished_process_folder_says_to_finish_the_run(tmp_path):
+    """A user trial gave `locator run` the folder of an interrupted `predisat process` run."""
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(MaskFileError, match="folder without masks.parquet") as err:
+        read_masks(tmp_path / "empty")
+    assert "rerun" not in str(err.value)
+    (tmp_path / "run" / "chunks").mkdir(parents=True)
+    with pytest.raises(MaskFileError, match="has not finished: rerun the same `predisat process`"):
+        read_masks(tmp_path / "run")
