@@ -759,7 +759,7 @@ def test_every_way_to_a_process_folder_needs_its_run_record(tmp_path):
 def test_an_unfinished_process_folder_says_to_finish_the_run(tmp_path):
     """A user trial gave `locator run` the folder of an interrupted `predisat process` run."""
     (tmp_path / "empty").mkdir()
-    with pytest.raises(MaskFileError, match="folder without masks.parquet") as err:
+    with pytest.raises(MaskFileError, match=r"folder without masks\.parquet") as err:
         read_masks(tmp_path / "empty")
     assert "rerun" not in str(err.value)
     (tmp_path / "run" / "chunks").mkdir(parents=True)
