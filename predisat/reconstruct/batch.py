@@ -271,21 +271,22 @@ def _bad(fid: str, message: str, strict: bool, before: str = "") -> None:
     _report(f"bad frame {fid}: {message} - skipped{before}", quiet=False)
 
 
-def _withdraw_published(out: Location, run_key: str, opts: StorageOptions) -> None:
+def _withdraw_published(out: Location, run_key: str, opts: StorageOptions) -> bool:
     """Withdraw the folder's published masks unless they are this very run's: a rerun that is
     stopped (Ctrl-C, a full disk) must not leave the previous run's masks looking finished (a
     user trial: a corrected survey's rerun, interrupted, left the wrong one's masks, 0.34 %
     false trust, read with exit 0). The record first, the masks after, as the merge writes
-    them the other way round."""
+    them the other way round. Whether a finished run of other settings was withdrawn."""
     record = join(out, "provenance.json")
     try:
         published = json.loads(read_bytes(record, opts)).get("run_key")
     except (OSError, ValueError, AttributeError):
         published = None
     if published == run_key:
-        return
+        return False
     for name in ("provenance.json", "masks.parquet", "bad_frames.csv"):
         remove(join(out, name), opts)
+    return published is not None
 
 
 def _run_key(provenance: JsonDict) -> str:
@@ -1631,10 +1632,17 @@ def process_survey(
             "changed), which cannot be reused; give another output folder, or replace them "
             "(CLI: --replace)"
         )
-    _withdraw_published(out, plan.provenance["run_key"], opts)
+    withdrawn = _withdraw_published(out, plan.provenance["run_key"], opts)
     _remove_chunks(plan.chunk_dir, set(foreign), opts)
     timings["load"] = time.perf_counter() - t0
     pending, skipped = _pending(plan, strict, max_chunks)
+    if withdrawn:  # a user trial saw "(0 already done)" and no word of the finished run
+        _report(
+            f"note: {out} held the masks of a finished run with other settings, code or "
+            "inputs: its masks.parquet, provenance.json and bad_frames.csv are withdrawn, and "
+            "its chunks are redone where they differ",
+            quiet=False,
+        )
     _report(
         f"{survey.root}: {plan.n_frames} frames, {plan.positions_m.size} positions, "
         f"{len(plan.chunks)} chunks ({skipped} already done)",

@@ -1205,3 +1205,21 @@ def test_a_wrong_address_is_refused_before_the_finished_run_is_withdrawn(
         process_survey(survey_dir.resolve(), out, other, progress=False,
                        scheduler=Scheduler.at(f"tcp://127.0.0.1:{port}"))  # fmt: skip
     assert sorted(p.name for p in out.iterdir()) == before
+
+
+def test_a_rerun_with_other_settings_says_it_withdrew_the_finished_run(
+    first_run, survey_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A user trial reran a finished folder with another --thin-deg and saw only "(0 already
+    done)": nothing said its masks had been withdrawn and its chunks would be redone."""
+    out0, _ = first_run
+    out = tmp_path / "copy"
+    shutil.copytree(out0, out)
+    capsys.readouterr()
+    process_survey(survey_dir, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert "withdrawn" not in capsys.readouterr().err  # its own run's masks: kept
+    other = replace(PARAMS, chunk_m=60.0)
+    process_survey(survey_dir, out, other, progress=False, segmenter=blue_sky)
+    err = capsys.readouterr().err
+    assert f"note: {out} held the masks of a finished run with other settings" in err
+    assert (out / "masks.parquet").is_file()  # and the new run published its own
