@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -220,7 +221,8 @@ def calibrate(data: Any, target: float, whole: float, seed: int) -> float:
 
 
 def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
-          factors: list[float], ranks: list[int], suspect: float | None) -> None:  # fmt: skip
+          factors: list[float], ranks: list[int], suspect: float | None,
+          consistency: Sequence[int] = (), truth_npy: Path | None = None) -> None:  # fmt: skip
     from predisat.reconstruct.carving import ReconstructionParams, Reconstructor
     from predisat.track.map import demo_track
 
@@ -236,8 +238,10 @@ def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
           "photos)")  # fmt: skip
     track = demo_track()
     pos = data["positions_m"]
-    truth = data["truth_el_deg"]
+    truth = data["truth_el_deg"] if truth_npy is None else np.load(truth_npy)
     settings = {"min": ReconstructionParams(reach_m=REACH_M)}
+    for k in consistency:
+        settings[f"min+check{k}"] = ReconstructionParams(reach_m=REACH_M, consistency_rank=k)
     for k in ranks:
         settings[f"rank{k}"] = ReconstructionParams(reach_m=REACH_M, fusion_rank=k)
         if suspect is not None:
@@ -369,7 +373,12 @@ def main() -> None:
     c.add_argument("--figure", type=Path)
     c.add_argument("--seeds", type=int, default=2)
     c.add_argument("--factors", type=float, nargs="+", default=[0.0, 0.5, 1.0, 2.0, 3.0])
-    c.add_argument("--ranks", type=int, nargs="+", default=[2])
+    c.add_argument("--ranks", type=int, nargs="*", default=[2])
+    c.add_argument("--consistency", type=int, nargs="*", default=[],
+                   help="also rank 1 with the consistency check at these consistency_rank")
+    c.add_argument("--truth", type=Path,
+                   help="score against these true masks (.npy, positions x bins) instead of "
+                        "the survey's")
     c.add_argument("--suspect", type=float, default=0.25,
                    help="suspect_share of the robust settings (negative: no check)")
     g = sub.add_parser("plot", help="table and figure again from a curve's JSON")
@@ -393,7 +402,7 @@ def main() -> None:
         build(a.out, a.camera)
     else:
         curve(a.survey, a.real, a.out, a.figure, a.seeds, a.factors, a.ranks,
-              None if a.suspect < 0 else a.suspect)  # fmt: skip
+              None if a.suspect < 0 else a.suspect, a.consistency, a.truth)  # fmt: skip
 
 
 if __name__ == "__main__":

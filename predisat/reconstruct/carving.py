@@ -47,6 +47,7 @@ from predisat.reconstruct.heightfield import (
     apply_clearance_prior,
     carve_box,
     carve_profile,
+    contradicted_raise,
     corridor_grid,
     sweep_along_track,
 )
@@ -191,6 +192,13 @@ class ReconstructionParams:
         that must agree before a cell is lowered: a cell keeps the ``min(fusion_rank, n)``-th
         lowest bound of the ``n`` views that bounded it (``docs/reconstruction.md``, fault
         model). 1: the lowest bound (the carving before issue 30, bit for bit).
+    consistency_rank : int or None
+        The consistency check between views at ``fusion_rank = 1`` (``docs/reconstruction.md``,
+        section 6, clause 6): a view's obstacle ray (just under its skyline, above
+        ``CHECK_MIN_EL_DEG``, within ``CHECK_MAX_REL_AZ_DEG`` of its look direction) that
+        passes over every cell of the fused field is contradicted by the cells it crossed;
+        each is raised to the ray, at most to its ``consistency_rank``-th lowest bound.
+        ``None``: no check (the default).
     suspect_share : float or None
         A frame whose skyline lies more than ``suspect_tol_deg`` below both neighbouring frames
         of its camera (within ``suspect_neighbour_m``) over at least this share of the azimuths
@@ -268,6 +276,7 @@ class ReconstructionParams:
     descriptor_min_el_deg: float = 10.0
     descriptor_gauge_m: float = 2.5
     fusion_rank: int = 1
+    consistency_rank: int | None = None
     carve_past_deg: float | None = 20.0
     suspect_share: float | None = None
     suspect_tol_deg: float = 5.0
@@ -349,6 +358,14 @@ class ReconstructionParams:
             raise ValueError(
                 "ReconstructionParams.fusion_rank must be >= 1 (1: the lowest bound over the "
                 f"frames, 2: no single view can lower a cell), got {self.fusion_rank}"
+            )
+        if self.consistency_rank is not None and (
+            self.consistency_rank < 2 or self.fusion_rank != 1
+        ):
+            raise ValueError(
+                "ReconstructionParams.consistency_rank must be >= 2 (the order statistic a "
+                "contradicted cell is raised to at most), and applies at fusion_rank = 1 only; "
+                f"got {self.consistency_rank} at fusion_rank {self.fusion_rank}"
             )
         if self.suspect_share is not None and not 0.0 < self.suspect_share <= 1.0:
             raise ValueError(
@@ -679,7 +696,18 @@ class Reconstructor:
             unseen = _unseen_rules(frames, p)
             carver = _FrameCarver(hf, frames, profs, solids, pasts, cams, rots, rules, unseen,
                                   p.clearance_half_width_m, track, p.carve_range_m)  # fmt: skip
-            if p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
+            if p.consistency_rank is not None:  # rank 1, then the consistency check
+                fusion = _view_fusion(hf, frames, cams, p, carver, p.consistency_rank)
+                bound = np.minimum(hf.bound_m, fusion.lowest(1))
+                views = fusion.views
+                if p.resolve_width_m is not None:
+                    bound, views, resolved = _resolving_bounds(
+                        hf, bound, views, frames, cams, p, carver
+                    )
+                cap = np.minimum(hf.bound_m, fusion.lowest(p.consistency_rank))
+                bound = _consistent_bounds(hf, bound, np.maximum(cap, bound), profs, cams,
+                                           rots, p)  # fmt: skip
+            elif p.fusion_rank == 1:  # the lowest bound: every frame lowers the cells in place
                 seen = np.zeros(hf.shape, np.bool_)
                 for idx in _view_groups(frames).values():
                     for i in idx:
@@ -961,8 +989,21 @@ def _fused_bounds(
     LowestBounds` with ``p.fusion_rank``): each view (a frame, or the frames of one
     ``view_group``) carves a scratch raster of its own, then counts once per cell. Returns the
     bounds and the number of views per cell."""
+    fusion = _view_fusion(hf, frames, cams, p, carver, p.fusion_rank)
+    return np.minimum(hf.bound_m, fusion.fused()), fusion.views
+
+
+def _view_fusion(
+    hf: HeightField,
+    frames: Sequence[FrameView],
+    cams: NDArray,
+    p: ReconstructionParams,
+    carver: _FrameCarver,
+    rank: int,
+) -> LowestBounds:
+    """The ``rank`` lowest bounds of each cell over the views (:func:`_fused_bounds`)."""
     groups = _view_groups(frames)
-    fusion = LowestBounds(hf.shape, p.fusion_rank)
+    fusion = LowestBounds(hf.shape, rank)
     scratch = np.full(hf.shape, np.inf, np.float32)
     for idx in groups.values():
         boxes = []
@@ -977,7 +1018,48 @@ def _fused_bounds(
         union = (int(b[:, 0].min()), int(b[:, 1].max()), int(b[:, 2].min()), int(b[:, 3].max()))
         fusion.add(scratch, union)
         scratch[union[0] : union[1], union[2] : union[3]] = np.inf
-    return np.minimum(hf.bound_m, fusion.fused()), fusion.views
+    return fusion
+
+
+# the consistency check (ReconstructionParams.consistency_rank; docs/reconstruction.md, section 6)
+CHECK_BELOW_DEG = 0.25  # an obstacle ray: this far under the skyline (two rectified rows)
+# Lower skylines are the far field's (a horizon over open land, hills): a ray under them
+# passes over the whole corridor whatever the views, and raised the open side's cells to the
+# camera's height (the fusion tests' wall scene)
+CHECK_MIN_EL_DEG = 5.0
+CHECK_FROM_M = 3.0  # cells nearer the camera are loosely bounded by every view: passed over
+# Rays looking farther along the track are not checked: they end on obstacles beyond the
+# carving range, and raising the cells beside the track under them cost 8 points of sky on
+# the fault-injection survey for almost no false trust (section 6)
+CHECK_MAX_REL_AZ_DEG = 75.0
+
+
+def _consistent_bounds(
+    hf: HeightField,
+    bound: NDArray,
+    cap: NDArray,
+    profs: Sequence[SkyProfile],
+    cams: NDArray,
+    rots: NDArray,
+    p: ReconstructionParams,
+) -> NDArray:
+    """``bound`` raised where the views' obstacle rays contradict it, at most to ``cap``
+    (:func:`~predisat.reconstruct.heightfield.contradicted_raise`). Only raises cells."""
+    code = np.where(hf.region, 1, 0).astype(np.int8)
+    with np.errstate(invalid="ignore"):
+        code[hf.region & (np.abs(hf.offset_m) < p.clearance_half_width_m)] = 2
+    low = np.ascontiguousarray(bound, np.float32)
+    cap = np.ascontiguousarray(cap, np.float32)
+    raised = np.full(hf.shape, -np.inf, np.float32)
+    for prof, cam, rot in zip(profs, cams, rots, strict=True):
+        contradicted_raise(
+            low, cap, code, hf.ix0, hf.iy0, float(hf.cell_m), np.asarray(cam, float),
+            np.ascontiguousarray(rot, float), float(prof.look_az_deg),
+            np.asarray(prof.rel_az_deg, float), np.asarray(prof.sky_el_deg, float),
+            CHECK_BELOW_DEG, CHECK_MIN_EL_DEG, CHECK_MAX_REL_AZ_DEG, CHECK_FROM_M,
+            float(p.carve_range_m), 0.5 * float(hf.cell_m), raised,
+        )  # fmt: skip
+    return np.maximum(low, raised).astype(np.float32)
 
 
 def _thin_rules(

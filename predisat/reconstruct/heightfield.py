@@ -261,6 +261,13 @@ class LowestBounds:
         """Number of views that bounded each cell (int32, the raster's shape)."""
         return self._views.copy()
 
+    def lowest(self, k: int) -> NDArray:
+        """The ``k``-th lowest bound of every cell (``1 <= k <= rank``; float32, ``+inf``
+        where fewer than ``k`` views bounded it)."""
+        if not 1 <= k <= self.rank:
+            raise ValueError(f"k must lie in [1, {self.rank}], got {k}")
+        return self._low[k - 1].copy()
+
     def fused(self) -> NDArray:
         """The fused bound of every cell (float32, ``+inf`` where no view bounded it)."""
         k = np.minimum(self._views, self.rank) - 1
@@ -880,3 +887,78 @@ def sweep_along_track(
         new_views[rows, cols] = out_views
         new_views.setflags(write=False)
     return replace(hf, bound_m=new_bound, views=new_views)
+
+
+@njit(cache=True, nogil=True)
+def contradicted_raise(
+    low: NDArray, cap: NDArray, code: NDArray, ix0: int, iy0: int, cell_m: float,
+    cam: NDArray, rot: NDArray, look_az_deg: float, rel_az_deg: NDArray, sky_el_deg: NDArray,
+    below_deg: float, min_el_deg: float, max_rel_az_deg: float, from_m: float, range_m: float,
+    step_m: float, out: NDArray,
+) -> int:  # fmt: skip
+    """One view's obstacle rays against the fused bounds ``low`` (the consistency check,
+    ``docs/reconstruction.md``, section 6, clause 6).
+
+    For each profile column within ``max_rel_az_deg`` of the look direction whose skyline
+    stands above ``min_el_deg``, the ray ``below_deg`` under the skyline ends on an obstacle.
+    It is marched from the camera ``cam`` (track frame; ``rot``: local ENU to track frame) in
+    steps of ``step_m``, from ``from_m`` out to ``range_m`` horizontally or until it leaves
+    the cells of ``code`` (0: not modelled, 1: checked, 2: the clearance, passed over: its
+    bound is the prior's, set afterwards). A
+    cell whose ``low`` stands at or above the ray stops it: the view's obstacle may stand
+    there. A ray that no cell stops contradicts the cells it crossed: each one it crossed
+    whose ``cap`` stands at or above the ray is raised in ``out`` (max-accumulated) to the
+    ray's height where it leaves the cell, at most to ``cap``. Returns the rays that
+    contradicted ``low``.
+    """
+    ny, nx = low.shape
+    n_steps = int(range_m / step_m) + 1
+    rows = np.empty(n_steps, np.int64)
+    cols = np.empty(n_steps, np.int64)
+    hs = np.empty(n_steps)
+    n_bad = 0
+    for j in range(rel_az_deg.size):
+        el = sky_el_deg[j]
+        if not (el > min_el_deg and el < 89.0) or abs(rel_az_deg[j]) > max_rel_az_deg:
+            continue
+        e = np.radians(el - below_deg)
+        az = np.radians(look_az_deg + rel_az_deg[j])
+        de, dn, du = np.sin(az) * np.cos(e), np.cos(az) * np.cos(e), np.sin(e)
+        dx = rot[0, 0] * de + rot[0, 1] * dn + rot[0, 2] * du
+        dy = rot[1, 0] * de + rot[1, 1] * dn + rot[1, 2] * du
+        dz = rot[2, 0] * de + rot[2, 1] * dn + rot[2, 2] * du
+        hor = np.sqrt(dx * dx + dy * dy)
+        if hor < 1e-6:
+            continue
+        stopped = False
+        k = 0
+        for s in range(1, n_steps):
+            t = s * step_m / hor
+            col = int(np.floor((cam[0] + t * dx) / cell_m)) - ix0
+            row = int(np.floor((cam[1] + t * dy) / cell_m)) - iy0
+            if col < 0 or col >= nx or row < 0 or row >= ny or code[row, col] == 0:
+                if k > 0:
+                    break
+                continue
+            if code[row, col] == 2 or s * step_m < from_m:
+                continue
+            z = cam[2] + t * dz
+            if low[row, col] >= z:
+                stopped = True
+                break
+            rows[k] = row
+            cols[k] = col
+            hs[k] = z
+            k += 1
+        if stopped or k == 0:
+            continue
+        n_bad += 1
+        rise = step_m * dz / hor if dz > 0.0 else 0.0
+        for q in range(k):
+            r, c = rows[q], cols[q]
+            if cap[r, c] < hs[q]:
+                continue  # the views up to the cap's rank see the ray pass over it
+            v = min(cap[r, c], hs[q] + rise)
+            if v > out[r, c]:
+                out[r, c] = v
+    return n_bad

@@ -126,6 +126,24 @@ def test_one_false_sky_frame_carves_the_wall_with_min_but_not_with_rank_two(scen
     assert low_rob <= 0.1
 
 
+def test_the_consistency_check_restores_a_wall_one_frame_carved_away(scene) -> None:
+    """Clause 6: at rank 1, the other views' obstacle rays that pass over the wall the
+    over-exposed frame carved away raise its cells again; the clean masks stay safe and lose
+    nothing the wall does not hide."""
+    world, frames, truth = scene
+    check = dataclasses.replace(BASE, consistency_rank=2)
+    bad = _all_sky(frames, {"350l"})
+    low_min = _low_deg(Reconstructor(BASE).run(bad, POS, world.track).mask_el_deg, truth)
+    assert low_min > 5.0  # the fault bites the plain carving
+    low_chk = _low_deg(Reconstructor(check).run(bad, POS, world.track).mask_el_deg, truth)
+    assert low_chk <= 0.1
+    plain = Reconstructor(BASE).run(frames, POS, world.track).mask_el_deg
+    clean = Reconstructor(check).run(frames, POS, world.track).mask_el_deg
+    assert _low_deg(clean, truth) <= 0.1
+    assert np.all(clean >= plain)  # the check only raises cells
+    assert np.mean(clean - plain) < 0.05  # and none where no view is wrong (0 measured)
+
+
 def test_a_fault_shared_by_grouped_frames_counts_once(scene) -> None:
     """Clause 2: frames that may share a fault (one lens, one pass) are one view if grouped;
     two ungrouped wrong frames are two wrong views, more than rank 2 tolerates. Checked where
@@ -196,6 +214,7 @@ def test_suspect_frames_are_judged_the_same_in_every_window(scene) -> None:
 
 
 @pytest.mark.parametrize("field,value", [("fusion_rank", 0), ("suspect_share", 0.0),
+                                         ("consistency_rank", 1),
                                          ("suspect_share", 1.5), ("suspect_tol_deg", 0.0)])
 def test_params_reject_bad_fusion_settings(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
