@@ -121,6 +121,8 @@ class MapDoubt:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"MapDoubt.{name} must be finite and >= 0 metres, got {v}")
+            # floats: MapDoubt(1.5, 1) and MapDoubt(1.5, 1.0) are one doubt, and one resume key
+            object.__setattr__(self, name, float(v))
 
     @property
     def is_zero(self) -> bool:
@@ -301,17 +303,31 @@ def _widened_rows(
     if len(six):
         pairs, _ = three_independent_pairs(g[six], s[six], ok[six], k[2])
         out[six] = 2.0 * _widened_half(g[six], s[six], unit[six], pairs, k[2], doubt).max(-1)
-    four = np.nonzero((count >= 4) & (count < 6))[0]
-    if len(four):
-        i, j = np.triu_indices(g.shape[-1], 1)
-        every = np.broadcast_to(np.stack([i, j], axis=-1), (len(four), len(i), 2))
-        h = _widened_half(g[four], s[four], unit[four], every, k[1], doubt)
-        both = ok[four][:, i] & ok[four][:, j]
-        out[four] = 2.0 * np.where(both, h, -np.inf).max(-1)
-    two = np.nonzero((count >= 2) & (count < 4))[0]
-    if len(two):
-        pair, _ = best_pair(g[two], s[two], ok[two], k[0])
-        out[two] = 2.0 * _widened_half(g[two], s[two], unit[two], pair[:, None], k[0], doubt)[:, 0]
+    few = np.nonzero((count >= 2) & (count < 6))[0]
+    if len(few):
+        # the trusted first, at most 5 columns (as _few): every pair of all m candidates
+        # (m ~ 50-110 with every constellation) cost 40-70 times the plain rows, and
+        # (rows, m(m-1)/2, 3) gathers of hundreds of megabytes; the stable order keeps the
+        # trusted in their order, so best_pair picks the same pair among equal lengths
+        w = min(5, g.shape[-1])
+        order = np.argsort(~ok[few], axis=-1, kind="stable")[:, :w]
+        rows = np.arange(len(few))[:, None]
+        gg, ss = g[few][rows, order], s[few][rows, order]
+        uu = unit[few][rows, order]
+        valid = np.arange(w)[None, :] < count[few][:, None]
+        n_few = count[few]
+        four = np.nonzero(n_few >= 4)[0]
+        if len(four):
+            i, j = np.triu_indices(w, 1)
+            every = np.broadcast_to(np.stack([i, j], axis=-1), (len(four), len(i), 2))
+            h = _widened_half(gg[four], ss[four], uu[four], every, k[1], doubt)
+            both = valid[four][:, i] & valid[four][:, j]
+            out[few[four]] = 2.0 * np.where(both, h, -np.inf).max(-1)
+        two = np.nonzero(n_few < 4)[0]
+        if len(two):
+            pair, _ = best_pair(gg[two], ss[two], valid[two], k[0])
+            half = _widened_half(gg[two], ss[two], uu[two], pair[:, None], k[0], doubt)
+            out[few[two]] = 2.0 * half[:, 0]
     return out, mode
 
 

@@ -110,6 +110,7 @@ from predisat.storage import (
     Location,
     StorageOptions,
     absolute,
+    exists,
     input_path,
     is_remote,
     join,
@@ -1061,7 +1062,7 @@ def _pending(
             plan.chunk_dir, c[0], plan.provenance["run_key"], plan.frames_key[c[0]],
             plan.storage_options,
         )  # fmt: skip
-        if marker is None:
+        if marker is None or _retried_frames(plan, marker):
             pending.append(c)
             continue
         skipped += 1
@@ -1076,6 +1077,18 @@ def _pending(
     if max_chunks is not None:
         pending = pending[:max_chunks]
     return pending, skipped
+
+
+def _retried_frames(plan: _Plan, marker: JsonDict) -> list[str]:
+    """The frames a finished chunk set aside because their segmentation raised: not cached
+    (:func:`predisat.reconstruct.frames.segment_frame`: a failure of that run, not of the
+    image), so the chunk is redone and they are segmented again; the verdicts on the images
+    themselves (unreadable, blank, the wrong size) are cached and keep the chunk."""
+    return [
+        b["frame_id"] for b in marker.get("bad_frames", [])
+        if "segmentation failed (" in str(b.get("message", ""))
+        and not exists(join(plan.cache_dir, f"{b['frame_id']}.npz"), plan.storage_options)
+    ]  # fmt: skip
 
 
 def _cameras(plan: _Plan) -> dict[str, tuple[CameraModel, Mount]]:

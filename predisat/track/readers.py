@@ -595,8 +595,9 @@ _LineFeature = tuple[int, JsonDict, JsonDict]  # feature index, properties, geom
 
 
 # properties that say whether a line is in service: Infrabel's ``status`` ("En activité",
-# "Hors service"), OpenStreetMap's ``railway`` ("rail", "disused", "abandoned") and ``usage``
-_STATUS_KEYS = ("status", "railway", "usage")
+# "Hors service") and OpenStreetMap's ``railway`` ("rail", "disused", "abandoned"); not
+# ``usage`` (main, branch: a use, and a review found it warned on a line all in service)
+_STATUS_KEYS = ("status", "railway")
 
 
 def _warn_mixed_status(
@@ -619,8 +620,9 @@ def _warn_mixed_status(
             shares = ", ".join(f"{v!r} {m:,.0f} m" for v, m in sorted(values.items()))
             warnings.warn(
                 f"{path}: the line joins features of different {key} ({shares}); keep one "
-                f"with where={{{key!r}: VALUE}} (command line: --where \"{key}=VALUE\"), or "
-                "check that the whole line is the one you mean",
+                f"with where={{{key!r}: VALUE}} (command line: --where \"{key}=VALUE\", with "
+                "--chain longest if its pieces do not join), or check that the whole line is "
+                "the one you mean",
                 stacklevel=3,
             )
 

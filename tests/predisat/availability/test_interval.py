@@ -411,5 +411,42 @@ def test_the_map_doubt_is_checked_and_zero_changes_nothing() -> None:
         predicted_interval(g, s, ok, 2.0, unit_enu=unit[..., :2], map_doubt=MapDoubt())
     with pytest.raises(ValueError, match="lateral_m must be finite and >= 0"):
         MapDoubt(-1.0, 1.0)
+    assert repr(MapDoubt(1.5, 1)) == repr(MapDoubt(1.5, 1.0))  # one resume key
     assert MapDoubt(2.0, 0.5).describe() == (
         "widened for an antenna up to 2 m beside and 0.5 m above or below the map")
+
+
+def test_a_widened_row_of_few_trusted_among_many_candidates_stays_small() -> None:
+    """Rows of 2-5 trusted among every constellation's candidates (m ~ 110): the widened
+    lengths are the pairs of the trusted alone, as the plain rows' (``_few``), not every pair of
+    the m candidates ((rows, m(m-1)/2, 3) gathers: hundreds of megabytes, 40-70 times slower)."""
+    import tracemalloc
+
+    from predisat.availability.interval import MapDoubt
+
+    rng = np.random.default_rng(11)
+    n, m = 1000, 110
+    g = rng.uniform(-1, 1, (n, m)).astype(np.float32)
+    s = rng.uniform(2.0, 9.0, (n, m)).astype(np.float32)
+    ok = np.zeros((n, m), bool)
+    for r, c in enumerate(rng.integers(2, 6, n)):
+        ok[r, rng.choice(m, c, replace=False)] = True
+    unit = rng.normal(size=(n, m, 3)).astype(np.float32)
+    unit /= np.linalg.norm(unit, axis=-1, keepdims=True)
+    doubt = MapDoubt(1.5, 1.0)
+    tracemalloc.start()
+    try:
+        wide, mode = predicted_interval(g, s, ok, 2.0, unit_enu=unit, map_doubt=doubt)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6, f"{peak / 1e6:.0f} MB"
+    # the same lengths as the trusted columns alone
+    for r in range(0, n, 97):
+        k = np.flatnonzero(ok[r])
+        want, want_mode = predicted_interval(
+            g[r, k][None], s[r, k][None], ok[r, k][None], 2.0, unit_enu=unit[r, k][None],
+            map_doubt=doubt,
+        )
+        assert mode[r] == want_mode[0]
+        np.testing.assert_allclose(wide[r], want[0], rtol=1e-6)

@@ -1223,3 +1223,26 @@ def test_a_rerun_with_other_settings_says_it_withdrew_the_finished_run(
     err = capsys.readouterr().err
     assert f"note: {out} held the masks of a finished run with other settings" in err
     assert (out / "masks.parquet").is_file()  # and the new run published its own
+
+
+def test_a_frame_whose_segmentation_raised_is_segmented_again_by_the_next_run(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    """Not caching the failure is not enough: the chunk that set the frame aside finished, and
+    the next run kept it, and the frame "as in a run before" (a run on a worker whose threads
+    shared one network finished with 20 such frames)."""
+    p = PipelineParams(chunk_m=30.0, segmenter="blue")
+    calls: list[int] = []
+
+    def flaky(image: np.ndarray) -> tuple[np.ndarray, None]:
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("two threads fed one network")
+        return blue_sky(image)
+
+    out = tmp_path / "masks"
+    first = process_survey(survey_dir, out, p, progress=False, segmenter=flaky)
+    assert len(first.bad_frames) == 1
+    again = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
+    assert again.bad_frames == ()
+    assert process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky).bad_frames == ()
