@@ -15,6 +15,10 @@ Three steps, each reusing the previous one's files::
     # each class alone at 3x its operating rate
     .venv/bin/python scripts/fault_injection.py classes --survey /tmp/fi/survey.npz \
         --curve /tmp/fi/curve.json --factor 3
+    # the survey's true masks with thin structures never blocking (the truth the ideal masks'
+    # thin policy agrees with; `curve --truth` scores against it)
+    .venv/bin/python scripts/fault_injection.py truth --survey /tmp/fi/survey.npz \
+        --out /tmp/fi/truth_thin_transparent.npy
     # the table and the figure again, from the JSON
     .venv/bin/python scripts/fault_injection.py plot --curve /tmp/fi/curve.json \
         --figure docs/figures/fault_injection.png
@@ -220,6 +224,24 @@ def calibrate(data: Any, target: float, whole: float, seed: int) -> float:
     return 0.5 * (lo + hi)
 
 
+def thin_transparent_truth(survey: Path, out: Path) -> None:
+    """The survey's true masks with thin structures transparent at any distance
+    (``true_masks(..., thin_rule=False)``), saved for ``curve --truth``: since the Fresnel rule
+    became the truth's default, the ideal masks' thin policy (thin structures are sky) puts a
+    floor of false trust under every fusion against the survey's own truth."""
+    from predisat.synth.raycast import make_caster
+    from predisat.synth.truth import true_masks
+
+    world = _world()
+    data = np.load(survey, allow_pickle=False)
+    caster = make_caster(world, "open3d", lband_only=True)
+    tm = true_masks(world, data["positions_m"], caster=caster, thin_rule=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.save(out, tm.mask_el_deg)
+    lower = int((tm.mask_el_deg < data["truth_el_deg"]).sum())
+    print(f"{out}: {tm.mask_el_deg.shape}, {lower} bins below the survey's own truth")
+
+
 def curve(survey: Path, real: Path, out: Path, figure: Path | None, seeds: int,
           factors: list[float], ranks: list[int], suspect: float | None,
           consistency: Sequence[int] = (), truth_npy: Path | None = None) -> None:  # fmt: skip
@@ -381,6 +403,9 @@ def main() -> None:
                         "the survey's")
     c.add_argument("--suspect", type=float, default=0.25,
                    help="suspect_share of the robust settings (negative: no check)")
+    t = sub.add_parser("truth", help="the survey's truth with thin structures transparent")
+    t.add_argument("--survey", type=Path, required=True)
+    t.add_argument("--out", type=Path, required=True, help=".npy for curve --truth")
     g = sub.add_parser("plot", help="table and figure again from a curve's JSON")
     g.add_argument("--curve", type=Path, required=True)
     g.add_argument("--figure", type=Path, required=True)
@@ -396,6 +421,8 @@ def main() -> None:
         rows = json.loads(a.curve.read_text())["rows"]
         _table(rows)
         _figure(rows, a.figure)
+    elif a.cmd == "truth":
+        thin_transparent_truth(a.survey, a.out)
     elif a.cmd == "measure":
         measure(a.data, a.out)
     elif a.cmd == "build":
