@@ -48,7 +48,7 @@ import pandas as pd
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from predisat.availability.interval import MapDoubt, predicted_interval
+from predisat.availability.interval import DEFAULT_MAP_DOUBT, MapDoubt, predicted_interval
 from predisat.availability.satellites import LinePositions, SatellitePositions, TrustRule, azel
 from predisat.geodesy import ecef_to_geodetic, enu_rotation, unwrap_lon_deg, wrap_lon_deg
 from predisat.gnss.errormodel import IntervalModel
@@ -522,7 +522,7 @@ def compute_availability(
     *,
     interval_model: IntervalModel | None = None,
     integrity: IntegrityBudget | None = DEFAULT_BUDGET,
-    map_doubt: MapDoubt | None = None,
+    map_doubt: MapDoubt | None = DEFAULT_MAP_DOUBT,
     with_interval: bool = True,
     interval_every: int = 1,
     chunk_positions: int = 2,
@@ -547,10 +547,10 @@ def compute_availability(
         (:func:`predisat.availability.interval.mode_k_sigma`) and ``interval_model.k_sigma``
         is not used; default :data:`predisat.gnss.integrity.DEFAULT_BUDGET`. None:
         ``interval_model.k_sigma`` in every mode.
-    map_doubt : MapDoubt, optional
+    map_doubt : MapDoubt or None
         Widen each predicted pair by how far the antenna may be from the map, as the locator
-        does (:class:`~predisat.availability.interval.MapDoubt`; ``run_availability`` gives
-        the locator's default). None: the source's pairs.
+        does (:class:`~predisat.availability.interval.MapDoubt`). Default the locator's
+        (:data:`~predisat.availability.interval.DEFAULT_MAP_DOUBT`); None: the source's pairs.
     with_interval : bool
         Also predict interval lengths and pair geometry.
     interval_every : int
