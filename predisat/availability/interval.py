@@ -305,20 +305,14 @@ def _widened_rows(
         out[six] = 2.0 * _widened_half(g[six], s[six], unit[six], pairs, k[2], doubt).max(-1)
     few = np.nonzero((count >= 2) & (count < 6))[0]
     if len(few):
-        # the trusted first, at most 5 columns (as _few): every pair of all m candidates
-        # (m ~ 50-110 with every constellation) cost 40-70 times the plain rows, and
-        # (rows, m(m-1)/2, 3) gathers of hundreds of megabytes; the stable order keeps the
-        # trusted in their order, so best_pair picks the same pair among equal lengths
-        w = min(5, g.shape[-1])
-        order = np.argsort(~ok[few], axis=-1, kind="stable")[:, :w]
-        rows = np.arange(len(few))[:, None]
-        gg, ss = g[few][rows, order], s[few][rows, order]
-        uu = unit[few][rows, order]
-        valid = np.arange(w)[None, :] < count[few][:, None]
+        # the trusted first (as _few): every pair of all m candidates (m ~ 50-110 with every
+        # constellation) cost 40-70 times the plain rows, and (rows, m(m-1)/2, 3) gathers of
+        # hundreds of megabytes
+        valid, (gg, ss, uu) = _trusted_first(ok[few], count[few], g[few], s[few], unit[few])
         n_few = count[few]
         four = np.nonzero(n_few >= 4)[0]
         if len(four):
-            i, j = np.triu_indices(w, 1)
+            i, j = np.triu_indices(valid.shape[-1], 1)
             every = np.broadcast_to(np.stack([i, j], axis=-1), (len(four), len(i), 2))
             h = _widened_half(gg[four], ss[four], uu[four], every, k[1], doubt)
             both = valid[four][:, i] & valid[four][:, j]
@@ -621,16 +615,26 @@ def _three_pairs_half(g: NDArray, s: NDArray, ok: NDArray, k: float) -> NDArray:
     return f6.min(axis=0)
 
 
+def _trusted_first(
+    ok: NDArray, count: NDArray, *columns: NDArray
+) -> tuple[NDArray, list[NDArray]]:
+    """Rows (n, m) of at most 5 trusted: which of their first ``min(5, m)`` columns, the
+    trusted moved first, are trusted (n, w), and ``columns`` (n, m, ...) in that order. The
+    stable sort keeps the trusted in their order, so :func:`best_pair` picks the same pair
+    among equal lengths."""
+    w = min(5, ok.shape[-1])
+    order = np.argsort(~ok, axis=-1, kind="stable")[:, :w]
+    rows = np.arange(len(ok))[:, None]
+    valid = np.arange(w)[None, :] < count[:, None]
+    return valid, [c[rows, order] for c in columns]
+
+
 def _few(
     g: NDArray, s: NDArray, ok: NDArray, count: NDArray, k: tuple[float, float, float]
 ) -> NDArray:
     """Full length of rows with 2-5 trusted: best pair (2-3) or union of all pairs (4-5)."""
-    w = min(5, g.shape[-1])
-    order = np.argsort(~ok, axis=-1, kind="stable")[:, :w]  # trusted first
-    rows = np.arange(len(g))[:, None]
-    gg, ss = g[rows, order], s[rows, order]
-    valid = np.arange(w)[None, :] < count[:, None]
-    i, j = np.triu_indices(w, 1)
+    valid, (gg, ss) = _trusted_first(ok, count, g, s)
+    i, j = np.triu_indices(valid.shape[-1], 1)
     h = pair_half_length_m(gg[:, i], gg[:, j], ss[:, i], ss[:, j], k[1])
     worst = np.where(valid[:, i] & valid[:, j], h, -np.inf).max(-1)
     best = best_pair(gg, ss, valid, k[0])[1]
