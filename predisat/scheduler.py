@@ -375,7 +375,7 @@ def _quiet_shutdown() -> None:
     # reconnection to a scheduler killed mid-run, cancelled as the command closed it, printed
     # a 30-line traceback before the command's one line (a user trial)
     roots = ("distributed", "tornado", "asyncio")
-    known = [n for n in list(logging.Logger.manager.loggerDict) if n.startswith(roots)]
+    known = list(logging.Logger.manager.loggerDict)  # a copy: getLogger may add to it
     for name in {*roots, *(n for n in known if n.partition(".")[0] in roots)}:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
