@@ -91,7 +91,7 @@ from predisat.reconstruct.framecache import (
     survey_hash,
 )
 from predisat.reconstruct.frames import Segmenter, default_segmenter
-from predisat.reconstruct.params import PipelineParams
+from predisat.reconstruct.params import THIN_DEG, PipelineParams
 from predisat.reconstruct.sides import expected_flow_sign, side_votes, sky_profile
 from predisat.reconstruct.step import (
     MAX_LAG,
@@ -1014,6 +1014,9 @@ def _plan(
     seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
     if params.sky_net is not None:
         seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
+    if params.thin_deg != THIN_DEG:
+        # a folder per thin width: an entry holds one, and switching back must not redo all
+        seg_code += f"-thin{params.thin_deg:g}"
     chunk_dir = join(out, "chunks")
     cache_dir = join(out, "cache", f"seg-{params.segmenter}-{seg_code}")
     makedirs(chunk_dir, opts)

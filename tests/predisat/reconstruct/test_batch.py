@@ -571,6 +571,21 @@ def test_sky_net_is_used_recorded_and_keyed(survey_dir: Path, tmp_path: Path) ->
     assert len([p for p in (out / "cache").iterdir() if p.name.startswith("seg-ensemble-")]) == 2
 
 
+def test_switching_the_thin_width_back_reuses_the_first_segmentation(
+    survey_dir: Path, tmp_path: Path
+) -> None:
+    """A cache entry holds one thin width; each width keeps its own folder, so trying another
+    width and going back segments nothing again (a user trial: every switch re-segmented)."""
+    out = tmp_path / "out"
+    first = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0), progress=False)
+    other = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0, thin_deg=1.4),
+                           progress=False)  # fmt: skip
+    back = process_survey(survey_dir, out, PipelineParams(chunk_m=30.0), progress=False)
+    assert first.frames_segmented > 0 and other.frames_segmented == first.frames_segmented
+    assert back.frames_segmented == 0
+    np.testing.assert_array_equal(back.masks.mask_el_deg, first.masks.mask_el_deg)
+
+
 def test_sky_net_errors_name_the_file_and_the_fix(survey_dir: Path, tmp_path: Path) -> None:
     from predisat.cli.app import main
 
