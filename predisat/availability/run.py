@@ -130,6 +130,7 @@ __all__ = [
     "side_swap_notes",
     "sparse_navigation",
     "step_notes",
+    "survey_check_notes",
     "synthetic_notes",
 ]
 
@@ -1370,8 +1371,7 @@ def _run_info(
         "track_attribution": _track_credit(track),
         "interval_model_is_default": model.error == IntervalModel().error,
         "nav_is_embedded": nav_label.startswith("embedded"),
-        "warnings": [*notes, *nav.warnings, *side_swap_notes(masks.provenance),
-                     *step_notes(masks.provenance), *lacking_side_notes(masks.provenance),
+        "warnings": [*notes, *nav.warnings, *survey_check_notes(masks.provenance),
                      *assumed_sky_notes(masks)],
     }
 
@@ -1452,6 +1452,20 @@ def assumed_sky_notes(masks: MaskSet) -> list[str]:
         "trusted there is trusted on that assumption; give elevation tiles (--dem) or survey "
         "those stretches with a cab or 360 rig"
     ]
+
+
+def survey_check_notes(provenance: JsonDict) -> list[str]:
+    """The survey checks' warnings (:func:`side_swap_notes`, :func:`step_notes`,
+    :func:`lacking_side_notes`) of the masks, and of every mask set ``predisat merge`` merged
+    into them (their provenance under ``merged_worst_case``), each named."""
+    out = [*side_swap_notes(provenance), *step_notes(provenance),
+           *lacking_side_notes(provenance)]  # fmt: skip
+    merged = provenance.get("merged_worst_case")
+    for t in merged if isinstance(merged, list) else []:
+        prov = t.get("provenance") if isinstance(t, dict) else None
+        if isinstance(prov, dict):
+            out += [f"merged masks {t.get('masks', '?')}: {n}" for n in survey_check_notes(prov)]
+    return out
 
 
 def side_swap_notes(provenance: JsonDict) -> list[str]:

@@ -310,12 +310,14 @@ def cmd_merge(args: argparse.Namespace) -> int:
     written = maskio.write_masks(merge.masks, out)
     for t in merge.tracks:
         print(f"merge: {t.describe()}")
-    unused = [t.label for t in merge.tracks if t.positions_used == 0]
+    unused = [t.label for t in merge.tracks if t.positions_used == 0 or t.cells_reached == 0]
     print(f"merge: {merge.masks.n_pos} positions of track {track.name!r}, worst case of "
           f"{len(merge.tracks) + 1} tracks -> {written}")
     if unused:
         print(f"predisat merge: warning: nothing of {', '.join(unused)} lies along track "
-              f"{track.name!r} within {args.max_offset:g} m: check the files and the track map",
+              f"{track.name!r} within {args.max_offset:g} m and the stretch of {base_path} "
+              f"(chainage {merge.masks.cell_bounds_m[0]:.0f}-{merge.masks.cell_bounds_m[-1]:.0f} "
+              "m): nothing of it was merged; check the files and the track map",
               file=sys.stderr)  # fmt: skip
     return 0
 

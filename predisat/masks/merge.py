@@ -27,10 +27,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from predisat.jsontypes import JsonDict
 from predisat.masks.antenna import masks_antenna_height_m
 from predisat.masks.carry import cell_edges_enu, cell_stretches_on, cells_reached
+from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import BinSource, MaskSet
-from predisat.masks.registration import MAX_TRACK_OFFSET_M, register_on_track
+from predisat.masks.registration import MAX_TRACK_OFFSET_M, SAME_MAP_TOL_M, register_on_track
 from predisat.track.map import TrackMap
 
 __all__ = ["Merge", "MergedTrack", "merge_worst_case", "merged_tracks_note"]
@@ -58,6 +60,9 @@ class MergedTrack:
         Bins of the merged set whose mask or margin the other track raised.
     max_raise_deg : float
         The largest rise of a bin's effective mask (mask + margin), degrees.
+    cells_reached : int
+        Cells of the merged set (the followed track's positions) the other's cells reach: 0
+        when they lie along the map but beside the merged coverage (nothing merged).
     """
 
     label: str
@@ -70,6 +75,7 @@ class MergedTrack:
     max_offset_m: float
     bins_raised: int
     max_raise_deg: float
+    cells_reached: int = 0
 
     def describe(self) -> str:
         """One line for the console or a report."""
@@ -173,6 +179,7 @@ def merge_worst_case(
     support = None if base.support is None else base.support.copy()
     bounds = base.cell_bounds_m
     done: list[MergedTrack] = []
+    kept: list[JsonDict] = []
     for other, name in zip(others, names, strict=True):
         if other.n_az != base.n_az:
             raise ValueError(
@@ -184,8 +191,13 @@ def merge_worst_case(
                 f"masks {name} hold a single position: its cell (the stretch it stands for) is "
                 "unknown; give the masks of the whole track"
             )
+        # a hole in the other survey trusts nothing, as read_masks, run_locator and
+        # run_availability close it: never its neighbours' sky across it (in memory too)
+        other = close_gaps(other)[0]
+        kept.append(_kept_provenance(other.provenance))
         before = mask + margin
-        pairs, info = _pairs_on(track, other, bounds, max_offset_m)
+        pairs, info = _pairs_on(track, other, bounds, max_offset_m, name)
+        reached = 0 if pairs is None else int(np.unique(pairs[1]).size)
         if pairs is not None:
             src, dst = pairs
             mask, margin, flags, assumed, support = _raise(
@@ -195,7 +207,7 @@ def merge_worst_case(
         done.append(MergedTrack(
             name, str(other.provenance.get("track", "")), *info,
             int(np.count_nonzero(raise_deg > 0)),
-            float(raise_deg.max()) if raise_deg.size else 0.0,
+            float(raise_deg.max()) if raise_deg.size else 0.0, reached,
         ))  # fmt: skip
     out_flags = np.where(assumed, np.uint8(BinSource.ASSUMED), flags).astype(np.uint8)
     prov = dict(base.provenance)
@@ -204,7 +216,8 @@ def merge_worst_case(
     heights = [h for h in map(masks_antenna_height_m, [masks, *others]) if h is not None]
     if heights:
         prov["antenna_height_m"] = max(heights)
-    prov["merged_worst_case"] = [
+    earlier = base.provenance.get("merged_worst_case")
+    prov["merged_worst_case"] = [*(earlier if isinstance(earlier, list) else []), *[
         {
             "masks": t.label,
             "made_on": t.made_on,
@@ -214,25 +227,49 @@ def merge_worst_case(
                            None if np.isnan(t.chainage_hi_m) else round(t.chainage_hi_m, 3)],
             "median_offset_m": None if np.isnan(t.median_offset_m) else round(t.median_offset_m, 3),
             "bins_raised": t.bins_raised,
+            "provenance": p,
         }
-        for t in done
-    ]  # fmt: skip
+        for t, p in zip(done, kept, strict=True)
+    ]]  # fmt: skip
     merged = replace(base, mask_el_deg=mask, margin_deg=margin, source=out_flags,
                      support=support, provenance=prov)  # fmt: skip
     return Merge(merged, tuple(done))
 
 
 def _pairs_on(
-    track: TrackMap, other: MaskSet, bounds_m: NDArray, max_offset_m: float
+    track: TrackMap, other: MaskSet, bounds_m: NDArray, max_offset_m: float, name: str
 ) -> tuple[tuple[NDArray, NDArray] | None, tuple[int, int, float, float, float, float]]:
     """Which cells (``bounds_m``, (n + 1,)) each used position of ``other`` reaches: the
     (source, target) index pairs, None when none; and the counts, the stretch reached and the
     offsets of :class:`MergedTrack`."""
     proj = track.project(other.lat_deg, other.lon_deg)
     off = np.abs(np.asarray(proj.offset_m, float))
+    if (not np.any(proj.clamped) and float(off.max()) <= SAME_MAP_TOL_M
+            and float(np.abs(np.asarray(proj.chainage_m, float) - other.chainage_m).max())
+            <= SAME_MAP_TOL_M):  # fmt: skip
+        # made on this very map (register_on_track's test): looked up alone on it, as the
+        # locator would, its cells are its own chainage cells, so each cell of the merged set
+        # takes exactly the other's cells it shares chainage with; the carried cells' reach
+        # and slack (for another map) would raise every cell to its neighbours' worst
+        src, dst = _same_map_pairs(bounds_m, other)
+        lo, hi = other.cell_bounds_m[0], other.cell_bounds_m[-1]
+        info = (other.n_pos, 0, float(lo), float(hi), float(np.median(off)), float(off.max()))
+        return ((src, dst) if src.size else None), info
     # a position stands for its cell: used when any of its cell (its edges, the midpoints to
     # its neighbours) lies along the map within max_offset_m, not only the position itself
-    edge = cell_edges_enu(track, other)[2]
+    _, chord, edge = cell_edges_enu(track, other)
+    flat = np.linalg.norm(chord[1:-1, :2], axis=1) < 1e-6
+    if flat.any():
+        # the cell's direction is that of the chord to the next position: none there (a
+        # review: "enu_m contains NaN or infinite values", naming neither file nor row)
+        row = int(np.flatnonzero(flat)[0])
+        raise ValueError(
+            f"masks {name}: the positions at chainages {other.chainage_m[row]:.3f} and "
+            f"{other.chainage_m[row + 1]:.3f} m stand at the same place (latitude "
+            f"{other.lat_deg[row]:.7f}, longitude {other.lon_deg[row]:.7f}): their cells have no "
+            "direction along the track; give each position its own place on the track (as "
+            "`predisat process` writes them), or drop the repeated row"
+        )
     pe = track.project_enu(edge)
     e_in = ~np.asarray(pe.clamped, bool) & (
         np.abs(np.asarray(pe.offset_m, float)) <= max_offset_m)
@@ -252,6 +289,33 @@ def _pairs_on(
     info = (n_used, other.n_pos - n_used, float(lo.min()), float(hi.max()),
             float(np.median(off[used])), float(off[used].max()))  # fmt: skip
     return ((src, dst) if src.size else None), info
+
+
+def _same_map_pairs(bounds_m: NDArray, other: MaskSet) -> tuple[NDArray, NDArray]:
+    """The (position of ``other``, cell of ``bounds_m``) pairs sharing a chainage, both sets
+    looked up by chainage on one map (:meth:`MaskSet.position_index`: an edge belongs to the
+    upper cell, the last cell holds its upper edge): every edge of either set within the
+    merged coverage, and a point between each two, is looked up in both."""
+    edges = np.union1d(bounds_m, other.cell_bounds_m)
+    edges = edges[(edges >= bounds_m[0]) & (edges <= bounds_m[-1])]
+    at = np.concatenate([edges, 0.5 * (edges[1:] + edges[:-1])])
+    j, inside = other.position_index(at)
+    i = np.clip(np.searchsorted(bounds_m[1:-1], at, side="right"), 0, bounds_m.size - 2)
+    pairs = np.unique(np.column_stack([np.asarray(j)[inside], i[inside]]), axis=0)
+    return pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+
+
+_KEPT_KEYS = ("survey", "survey_hash", "code_fingerprint", "track", "track_key",
+              "antenna_height_m", "side_check", "step_check", "capture_check",
+              "positions_lacking_side", "gaps_closed_m", "registered_on", "merged_worst_case",
+              "terrain")  # fmt: skip
+"""What a merged set keeps of each other set's provenance: where it came from, and the survey
+checks whose warnings the availability report gives (a review: a survey with swapped cameras
+merged in lost its warning)."""
+
+
+def _kept_provenance(prov: JsonDict) -> JsonDict:
+    return {k: prov[k] for k in _KEPT_KEYS if k in prov}
 
 
 def _raise(
@@ -279,7 +343,9 @@ def _raise(
     flags = np.where(any_won, raised_flag, flags).astype(np.uint8)
     if support is not None:
         if other.support is None:
-            support = None  # the other's evidence is not stated: no count can be claimed
+            # the other's evidence is not stated: no count is claimed where it reaches (0,
+            # as for an assumption); the rest keeps its own (the column was dropped)
+            support[dst] = 0
         else:
             np.minimum.at(support, dst, other.support[src])
     return mask, margin, flags, assumed, support
