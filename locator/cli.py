@@ -493,6 +493,21 @@ def _refuse_phone_as_geodetic(header: Any, declared: str, path: Any) -> None:
         )
 
 
+def _refuse_unproven_as_geodetic(header: Any, declared: str, path: Any) -> None:
+    """A geodetic-class model applies to any receiver declared geodetic by its class alone: a
+    file whose receiver type is blank, ``Unknown`` or a mass-market chip's took a reference
+    station's model (a user trial: 100 % claims under a one-station class model)."""
+    from locator.errorfit import not_geodetic_evidence
+
+    why = not_geodetic_evidence(header.receiver_type) if declared == "geodetic" else ""
+    if why:
+        raise CliError(
+            f"{path}: {why}: --receiver-class geodetic would take a reference station's error "
+            "model for it; calibrate a model on this receiver and antenna (leave "
+            "--receiver-class out; the header's REC # / TYPE must name the receiver)"
+        )
+
+
 def _refuse_other_as_phone(header: Any, declared: str, path: Any) -> None:
     """A phone-class model applies to any phone log by its class alone (no receiver or antenna
     to match): made of a receiver not recognised as a phone, its sigma is not a phone's (a
@@ -557,6 +572,7 @@ def _profile(source: Any, args: argparse.Namespace) -> Any:
     obs = getattr(source, "obs", None)
     if obs is not None:
         _refuse_phone_as_geodetic(obs.header, args.receiver_class or "", args.obs)
+        _refuse_unproven_as_geodetic(obs.header, args.receiver_class or "", args.obs)
     return receiver_profile(source, args.receiver_class)
 
 
@@ -1019,6 +1035,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         for path in args.obs:
             obs = Observations.from_rinex(path)
             _refuse_phone_as_geodetic(obs.header, cls, path)
+            _refuse_unproven_as_geodetic(obs.header, cls, path)
             _refuse_other_as_phone(obs.header, cls, path)
             _refuse_station_as_automotive(obs.header, cls, path)
             head = obs.header.approx_position_ecef_m
@@ -1071,6 +1088,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "residuals at least, or --bound estimate for the fit alone)"
         ) from None
     _check_calibration(mf, data, args.constellation)
+    pairs = {(d.profile.receiver_type.upper().strip(), d.profile.antenna_type.upper().strip())
+             for d in data}  # fmt: skip
+    if args.obs and cls and len(pairs) < 2:
+        print(f"locator calibrate: warning: --receiver-class {cls} from one receiver and antenna "
+              f"({' / '.join(next(iter(pairs))) or '?'}): the model will apply to every "
+              f"receiver declared {cls} by its class alone, and a class model bounds only "
+              "receivers like those it saw; validate it leaving one receiver out on several of "
+              "the class (docs/errormodel.md), or leave --receiver-class out",
+              file=sys.stderr)  # fmt: skip
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     app = mf.applicability
     assert app is not None

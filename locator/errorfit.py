@@ -159,6 +159,25 @@ def station_evidence(receiver_type: str) -> str:
     return ""
 
 
+# Receiver types of mass-market chips (cars, trackers, low-cost rovers): never a geodetic receiver.
+_MASS_MARKET_MARKS = ("UBLOX", "U-BLOX", "TESEO", "BROADCOM", "QUALCOMM", "MEDIATEK", "SIRF",
+                      "QUECTEL")  # fmt: skip
+
+
+def not_geodetic_evidence(receiver_type: str) -> str:
+    """Why a RINEX header cannot be taken as a geodetic receiver's when the user declares it
+    (``""``: nothing against it). A geodetic-class model applies to any receiver declared
+    geodetic by its class alone: a blank or ``Unknown`` receiver type (as phone converters and
+    RTKLIB without ``-hr`` write) or a mass-market chip would get a reference station's sigma
+    (a user trial: both claimed 100 % under a one-station class model)."""
+    rec = " ".join(receiver_type.upper().split())
+    if rec in {"", "UNKNOWN", "NONE", "-"}:
+        return f"its receiver type is {receiver_type.strip() or 'blank'!r}"
+    if any(m in rec for m in _MASS_MARKET_MARKS):
+        return f"receiver {receiver_type.strip()!r}, a mass-market chip"
+    return ""
+
+
 def guess_receiver_class(receiver_type: str, program: str = "") -> str:
     """``"phone"`` for a smartphone log (by the receiver or program name), else "" (a
     geodetic or automotive receiver is not recognisable by its name: say so explicitly)."""

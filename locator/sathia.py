@@ -81,9 +81,10 @@ class AntennaPath:
     track : TrackMap
     antenna_height_m : float
         Height of the antenna phase centre above the track axis along the local vertical.
-        Lateral lever arms and cant are neglected: they move the antenna across the track,
-        which moves each pair's root along it by ``d (u_i - u_j).n`` over the slope, an error
-        the pair intervals do not bound (``docs/locator.md``, limits).
+        Lateral lever arms and cant are not modelled here: they move the antenna across the
+        track, which moves each pair's root along it by ``d (u_i - u_j).n`` over the slope; the
+        pair intervals bound it only up to the stated map doubt
+        (``LocatorConfig.map_doubt_lateral_m``; ``docs/locator.md``, limits).
     """
 
     track: TrackMap

@@ -1134,3 +1134,39 @@ def test_evaluating_an_older_fixed_k_run_does_not_label_its_claims_safety_claims
     assert main(["-q", "evaluate", str(run), "--sim", str(sim_dir)]) == 0
     scored = pd.read_parquet(run / "scored.parquet")
     assert "safety_claim" in scored and not scored["safety_claim"].any()
+
+
+@pytest.mark.parametrize("receiver", ["", "UNKNOWN", "UBLOX ZED-F9P"])
+def test_a_receiver_without_a_name_or_a_mass_market_chip_is_refused_as_geodetic(
+    test_data, tmp_path, capsys, receiver
+):
+    """A user trial: a class-geodetic model (one station) claimed 100 % on a file whose
+    receiver type was 'UNKNOWN', and on a u-blox's, both declared --receiver-class geodetic."""
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    lines = obs.read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if "REC # / TYPE / VERS" in ln)
+    lines[k] = ("00000".ljust(20) + receiver.ljust(20) + "1.0".ljust(20) + "REC # / TYPE / VERS\n")
+    other = tmp_path / "other.05o"
+    other.write_text("".join(lines))
+    cal = ["calibrate", "--obs", str(other), "--nav", nav, "--bound", "estimate"]
+    assert main([*cal, "--receiver-class", "geodetic", "--out", str(tmp_path / "m.json")]) == 2
+    assert "--receiver-class geodetic would take a reference station" in capsys.readouterr().err
+    assert not (tmp_path / "m.json").exists()
+    track = _virtual_track(tmp_path / "virtual.csv")
+    run = ["-q", "run", "--obs", str(other), "--nav", nav, "--antenna-height", "0", "--track",
+           str(track), "--no-masks"]  # fmt: skip
+    assert main([*run, "--receiver-class", "geodetic", "--out", str(tmp_path / "r")]) == 2
+    assert "--receiver-class geodetic would take a reference station" in capsys.readouterr().err
+    # without the declaration the file runs (no claim: no model for it)
+    assert main([*run, "--out", str(tmp_path / "s")]) == 0
+
+
+def test_a_class_model_from_one_receiver_is_told(test_data, tmp_path, capsys):
+    """A class model from one station applies to every receiver declared of that class: said."""
+    obs = str(test_data / "gnss_obs" / "07590920_10ep.05o")
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    argv = ["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate",
+            "--receiver-class", "geodetic", "--out", str(tmp_path / "m.json")]  # fmt: skip
+    assert main(argv) == 0
+    assert "from one receiver and antenna (TRIMBLE 5700 / TRM29659.00)" in capsys.readouterr().err
