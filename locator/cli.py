@@ -1100,7 +1100,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     what = "overbound" if args.bound == "overbound" else "least-squares estimate"
     app = mf.applicability
     assert app is not None
-    print(f"{what} for {', '.join(app.receivers)} / {', '.join(app.antennas)}"
+    named = [", ".join(n for n in names if n) or "not named" for names in
+             (app.receivers, app.antennas)]  # a device log names neither (a user trial)
+    print(f"{what} for receiver {named[0]} / antenna {named[1]}"
           + (f" (class {app.receiver_class})" if app.receiver_class else "")
           + f", elevations {app.el_min_deg:.1f}-{app.el_max_deg:.1f} deg:")  # fmt: skip
     for sys_, m in mf.systems.items():
@@ -1114,8 +1116,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "elevation bins)"
         ) if np.isfinite(m.tail_probability) else "no bound (estimate)"  # fmt: skip
         print(f"  {sys_} {'+'.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
-              f"sin el)^2 m^2 from {m.n_residuals} residuals ({m.n_independent} independent); "
-              f"{tail}")  # fmt: skip
+              f"sin el)^2 m^2 from {m.n_residuals} residuals ("
+              + (f"{m.n_independent} independent" if np.isfinite(m.tail_probability)
+                 else "independence not assessed")  # an estimate counts its residuals
+              + f"); {tail}")  # fmt: skip
     print(f"k_sigma {mf.model.k_sigma} -> {args.out} (figure "
           f"{Path(args.out).with_suffix('.png')})")  # fmt: skip
     return 0

@@ -201,6 +201,11 @@ def test_calibrate_takes_several_observation_files(test_data, tmp_path, capsys):
     assert main(["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate",
                  "--out", str(out)]) == 0  # fmt: skip
     one = json.loads(out.read_text())["fitted"]["residuals"]
+    # an estimate checks no tail: it claims no count of independent samples (a trial: it
+    # printed its residual count as one)
+    said = capsys.readouterr().out
+    assert "independence not assessed" in said and " independent)" not in said
+    assert "for receiver TRIMBLE 5700 / antenna" in said
     # two files, the first and the last five epochs (as two sessions of one station would
     # be): their residuals add up to the whole file's
     from locator.observations import read_rinex_obs
