@@ -178,8 +178,9 @@ def sim_on_track(
             "simulated line alone"
         )
     moving = np.abs(own) > 1.0  # a stop's projection wanders by millimetres
+    sense = 1.0
     if moving.any():
-        sense = np.sign(np.median(new[moving] / own[moving]))
+        sense = float(np.sign(np.median(new[moving] / own[moving])))
         back = moving & (new * own * sense <= 0.0)
         if back.any():
             k = int(np.flatnonzero(back)[0])
@@ -188,7 +189,13 @@ def sim_on_track(
                 f"train at epoch {k + 1} (gps_s {sim.gps_s[k + 1]:.0f}): the map folds or "
                 "overlaps itself there; pass a map of the line without the fold"
             )
-    return replace(sim, chainage_m=np.asarray(pr.chainage_m, float))
+    meta = dict(sim.meta)
+    if sense < 0:
+        # the map counts from the other end: the train runs the other way in its chainage
+        # (a user trial's `locator balises --track` on a reversed map was refused as "the run
+        # goes back 2464.88 m against its direction (+1)")
+        meta["direction"] = -int(meta.get("direction", 1))
+    return replace(sim, chainage_m=np.asarray(pr.chainage_m, float), meta=meta)
 
 
 _NEAR_FOR_HEIGHT_M = 200.0

@@ -105,6 +105,14 @@ def _offset_fix(
                             np.array([lat_deg]), np.array([h_m]))[0]  # fmt: skip
     if o <= max_offset_m:
         return "lat_deg and lon_deg look swapped: exchange the two columns"
+    other = track.length_m - chainage_m
+    if 0.0 <= other <= track.length_m:
+        o = horizontal_offset_m(track, np.array([other]), np.array([lat_deg]),
+                                np.array([lon_deg]), np.array([h_m]))[0]  # fmt: skip
+        if o <= max_offset_m:
+            return (f"chainage measured from the other end? its coordinates lie on the track "
+                    f"at {other:.1f} m (the map's length {track.length_m:.1f} m less "
+                    f"{chainage_m:.1f} m): give chainage_m from the map's first point")
     return "correct the chainage or the coordinates (or the track map)"
 
 
@@ -239,6 +247,19 @@ class BaliseList:
                     f"{p}, line {_line(i)}: balise {ids[i]!r} has an empty telegram; give the "
                     "telegram it emits (e.g. hexadecimal)"
                 )
+        # projected coordinates (Belgian Lambert 72, UTM: metres) in the degree columns: they
+        # are no angle, the offset below is NaN and passed its test (a user trial's Lambert 72
+        # list fell through to "enu_m contains NaN" with no file, line or fix)
+        for col, lim in (("lat_deg", 90.0), ("lon_deg", 180.0)):
+            bad = np.flatnonzero(np.abs(num[col]) > lim)
+            if len(bad):
+                i = bad[0]
+                raise BaliseFileError(
+                    f"{p}, line {_line(i)}: {col} {num[col][i]:g} is no "
+                    f"{'latitude' if col == 'lat_deg' else 'longitude'} (at most {lim:g} deg): "
+                    "projected coordinates in metres (Belgian Lambert 72, UTM)? give WGS84 "
+                    "decimal degrees"
+                )
         c = num["chainage_m"]
         length = float(track.length_m)
         bad = np.flatnonzero((c < 0.0) | (c > length))
@@ -262,6 +283,19 @@ class BaliseList:
                         f"{p}, line {_line(k)}: balise {ids[k]!r}: chainage {c[k]:g} - did you "
                         f"give kilometres? its coordinates lie on the track at {at:.1f} m; give "
                         "chainage_m in metres"
+                    )
+            if len(c) > 1 and np.all(np.diff(c) < 0):
+                # every row decreasing: a list measured from the other end keeps its order
+                at = float(track.project(num["lat_deg"][:1], num["lon_deg"][:1],
+                                         num["h_m"][:1]).chainage_m[0])  # fmt: skip
+                if abs(at - (length - c[0])) <= max_offset_m + num.get(
+                        "accuracy_m", np.ones(len(c)))[0] + ALONG_TOL_M:  # fmt: skip
+                    raise BaliseFileError(
+                        f"{p}, line {_line(0)}: balise {ids[0]!r} at {c[0]:.1f} m: the "
+                        "chainages decrease and its coordinates lie on the track at "
+                        f"{at:.1f} m (the map's length {length:.1f} m less {c[0]:.1f} m): "
+                        "chainage measured from the other end? give chainage_m from the "
+                        "map's first point"
                     )
             raise BaliseFileError(
                 f"{p}, line {_line(i)}: balise {ids[i]!r} at {c[i]:.1f} m does not follow "

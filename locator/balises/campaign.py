@@ -45,6 +45,7 @@ __all__ = [
     "locate_with_odometry",
     "located_epochs",
     "safe_front_check",
+    "scenery_tunnel_epochs",
 ]
 
 # fused intervals not to be used: an odometry conflict, or one not yet cleared (locator.run)
@@ -202,8 +203,19 @@ def capture_summary(scored: pd.DataFrame) -> pd.DataFrame:
             "delay_p95_s": float(np.quantile(dl, 0.95)) if len(dl) else np.nan,
             "position_abs_p95_m": float(np.quantile(np.abs(cap["position_error_m"]), 0.95))
             if len(cap) else np.nan,
+            "miss_reasons": _miss_reasons(p[~p["captured"]]),
         })  # fmt: skip
     return pd.DataFrame(rows)
+
+
+def _miss_reasons(missed: pd.DataFrame) -> str:
+    """The missed passages counted by reason (``miss_reason`` without its value), most first:
+    ``"stated accuracy over Q_LOCACC: 20; fixes jumped over the zones: 2"``; "" without."""
+    if not len(missed) or "miss_reason" not in missed.columns:
+        return ""
+    why = missed["miss_reason"].fillna("").astype(str).str.replace(r" \(.*\)$", "", regex=True)
+    counts = why.value_counts()
+    return "; ".join(f"{k or 'unknown'}: {int(n)}" for k, n in counts.items())
 
 
 def safe_front_check(
@@ -249,7 +261,25 @@ def safe_front_check(
     }
 
 
-def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) -> Figure:
+def scenery_tunnel_epochs(sim: SimRun) -> NDArray:
+    """Epochs of a simulated run inside a tunnel of its world's scenery, bool, shape (n,).
+
+    A world's tunnels are stretches of its recipe (every ``WorldSpec.mixed`` world has one),
+    not tunnels of its track map, which holds only those tagged in the source (OpenStreetMap):
+    shading ``track.in_tunnel`` alone left a user trial's 200 m tunnel unshaded under the
+    figure's "grey: tunnel". Read on the simulation's own chainage (before ``sim_on_track``).
+    """
+    c = np.asarray(sim.chainage_m, float)
+    spec = sim.meta.get("world_spec") or {}
+    inside = np.zeros(c.shape, bool)
+    for st in spec.get("stretches", []) if isinstance(spec, dict) else []:
+        if st.get("kind") == "tunnel":
+            inside |= (c >= float(st["start_m"])) & (c <= float(st["end_m"]))
+    return inside
+
+
+def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap,
+            tunnel_epochs: NDArray | None = None) -> Figure:
     # a Figure of its own, no pyplot state (as the report's figures)
     ep = run.epochs
     t = ep["gps_s"].to_numpy(float)
@@ -260,6 +290,8 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) 
     # (-514 to +254 ms in a user trial's run)
     ax = fig.subplots(3, 1, sharex=True, height_ratios=[3, 3, 1])
     tunnel = np.asarray(track.in_tunnel(truth), bool)
+    if tunnel_epochs is not None:
+        tunnel = tunnel | np.asarray(tunnel_epochs, bool)
     for a in ax:  # where the satellites cannot help: the tunnels, shaded
         a.fill_between(t, 0, 1, where=tunnel, transform=a.get_xaxis_transform(),
                        color="0.85", step="mid", lw=0)  # fmt: skip
@@ -290,11 +322,12 @@ def _figure(run: LocatedRun, scored: pd.DataFrame, title: str, track: TrackMap) 
                    label=f"{name}: missed ({(~c).sum()})")  # fmt: skip
     names = list(dict.fromkeys(scored["config"]))
     ax[1].set_ylabel("reported - true passage (ms)")
-    ax[1].legend(loc="upper left", fontsize=7, ncol=2)
+    ax[1].legend(loc="best", fontsize=7, ncol=2)  # not over the points (a user trial)
     ax[2].set_yticks(range(len(names)), names, fontsize=7)
     ax[2].set_ylim(-0.5, len(names) - 0.5)
     ax[2].set_title("missed passages", fontsize=8)
-    ax[2].set_xlabel("time since start (s); grey: tunnel")
+    ax[2].set_xlabel("time since start (s); grey: tunnel" if tunnel.any()
+                     else "time since start (s); no tunnel in the run")  # fmt: skip
     ax[2].legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
@@ -316,6 +349,7 @@ def balises_to_folder(
     log: OdometerLog | None = None,
     accuracy: OdometerAccuracy | None = None,
     progress: Callable[[int], object] | None = None,
+    tunnel_epochs: NDArray | None = None,
 ) -> tuple[pd.DataFrame, Path]:
     """Locate a simulated run with odometry, capture the balises, write the folder.
 
@@ -380,6 +414,7 @@ def balises_to_folder(
         # strict JSON (NaN -> null: a balise never reached has no timing), as jq and browsers read
         (stage / "summary.json").write_text(strict_json_text(info))
         fig = _figure(run, scored, f"{path.track.name}: virtual balises on the fused interval "
-                      f"({info['integrity']}; {info['claims']})", path.track)
+                      f"({info['integrity']}; {info['claims']})", path.track,
+                      tunnel_epochs)
         fig.savefig(stage / "captures.png", dpi=100)
     return summary, folder

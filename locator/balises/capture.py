@@ -67,6 +67,14 @@ __all__ = ["EMIT_MODES", "Q_LOCACC_MAX_M", "CaptureConfig", "capture_balises", "
 
 EMIT_MODES = ("at_fix", "predicted")
 
+# ``miss_reason`` of a balise not captured (the first rule its passage failed)
+MISS_NO_PAIR = "no two valid fixes around it"  # not yet located, or the interval too long
+MISS_ZONE = "fixes jumped over the zones"
+MISS_GAP = "fixes too far apart"
+MISS_LATE = "passage before the earlier fix"
+MISS_Q = "stated accuracy over Q_LOCACC"
+MISS_WINDOW = "outside the expectation window"
+
 
 @dataclass(frozen=True)
 class CaptureConfig:
@@ -263,6 +271,9 @@ def capture_balises(
         "hi_m": np.full(n_b, np.nan), "gap_s": np.full(n_b, np.nan),
         "in_window": np.zeros(n_b, bool), "q_locacc_m": np.full(n_b, np.nan),
         "after_void": np.zeros(n_b, bool),
+        # why a balise was not captured (a user trial's list with accuracy_m in cm was
+        # missed 22 times in 22 with nothing saying why): filled for the pair rule's misses
+        "miss_reason": np.full(n_b, MISS_NO_PAIR, object),
     }  # fmt: skip
     if len(idx) >= 2 and n_b:
         u = orientation * (s[idx][None, :] - b[:, None])  # (n_b, n_valid)
@@ -307,6 +318,26 @@ def capture_balises(
         got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
+        # the first rule each miss failed, in the order applied
+        why = np.full(len(rows), "", object)
+        gap_why = np.array([
+            f"{MISS_GAP} ({int((~ok[a + 1:c]).sum())} fixes between not located or doubtful, "
+            f"{int((ok[a + 1:c] & ~valid[a + 1:c]).sum())} too long to state)"
+            for a, c in zip(kp, kc, strict=True)], object)  # fmt: skip
+        late = np.ones(len(rows), bool) if odo is None else (
+            t_pass >= t[kp] - config.max_gap_s - 1e-9)  # fmt: skip
+        for fail, text in (
+            (config.require_window & ~window, MISS_WINDOW),
+            (q > config.max_locacc_m, None),
+            (~late, MISS_LATE),
+            (t[kc] - t[kp] > config.max_gap_s + 1e-9, gap_why),
+            (~(in_c | in_a), MISS_ZONE),
+        ):
+            if text is None:  # the stated accuracy, with its value
+                text = np.array([f"{MISS_Q} ({x:.0f} m > {config.max_locacc_m:g} m)"
+                                 for x in q], object)  # fmt: skip
+            why = np.where(fail, text, why)
+        out["miss_reason"][rows] = why
         t_emit = t[kc].copy()
         r = rows[got]
         out["captured"][r] = True
@@ -326,6 +357,7 @@ def capture_balises(
         assert v is not None
         _schedule_ahead(t, s, lo, hi, reach, idx, v, b, b_acc, config, orientation, out,
                         odo_acc, extra)  # fmt: skip
+    out["miss_reason"] = np.where(out["captured"], "", out["miss_reason"])
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
                          "telegram": list(balises.telegram), **out})  # fmt: skip
 

@@ -197,7 +197,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from locator.balises.balisefile import BaliseList
-    from locator.balises.campaign import ODOMETERS, balises_to_folder
+    from locator.balises.campaign import ODOMETERS, balises_to_folder, scenery_tunnel_epochs
     from locator.balises.capture import CaptureConfig
     from locator.fde import LocatorConfig
     from locator.modelcheck import deepest_k, model_use, sim_profile
@@ -209,6 +209,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
     sim = SimRun.read(args.sim)
+    tunnel_epochs = scenery_tunnel_epochs(sim)  # the world's own chainage, before any --track
     track, own_track = _track(args)
     path = AntennaPath(track, float(sim.meta.get("antenna_height_m", 4.0)))
     check_track(path, sim.antenna_ecef_m, args.sim)
@@ -300,9 +301,18 @@ def cmd_balises(args: argparse.Namespace) -> int:
             sim, path, balises, args.out, config=cfg, masks=masks,
             odometer=odometer, captures=caps, seed=args.seed,
             log=log, accuracy=accuracy, progress=bar.update, constellation=args.constellation,
+            tunnel_epochs=tunnel_epochs,
             meta={"sim": str(args.sim), "odometer_kind": kind, "error_model": model_record},
         )  # fmt: skip
     print(format_summary(summary))
+    if not cfg.makes_safety_claims:
+        # the table reads as capture figures like any other: a user trial's --k-sigma 1.7 run
+        # printed 78.9 % captured, 0 hazardous, and only summary.json said it was no claim
+        from locator.run import claim_label
+
+        print(f"NOT A SAFETY CLAIM: the captures are a "
+              f"{claim_label(cfg.error_model_caveat, cfg.locator.fixed_k_sigma)} (captures.csv, "
+              "column safety_claim)")  # fmt: skip
     for line in _summary_notes(summary, balises, sim):
         print(line)
     for line in _truth_warnings(summary, folder):
@@ -313,12 +323,27 @@ def cmd_balises(args: argparse.Namespace) -> int:
 
 def _summary_notes(summary: pd.DataFrame, balises: BaliseList, sim: SimRun) -> list[str]:
     """A line on the balises the run never reached (they have no capture figures)."""
+    out = []
+    # why the passages were missed: a rate alone read as "not reliable here" when every miss
+    # was the list's own accuracy_m (a user trial's 50, centimetres meant)
+    for _, row in summary.iterrows():
+        if row.get("miss_reasons"):
+            out.append(f"missed with {row['config']}: {row['miss_reasons']} (captures.csv, "
+                       "column miss_reason)")  # fmt: skip
+    acc = np.asarray(balises.accuracy_m, float)
+    if len(acc) and acc.max() >= 10.0 and any(
+            "Q_LOCACC" in str(r) for r in summary.get("miss_reasons", [])):  # fmt: skip
+        out.append(f"note: accuracy_m reaches {acc.max():g} m in {balises.source} "
+                   f"({int((acc >= 10.0).sum())} of {len(acc)} balises from 10 m): it is part of "
+                   "every telegram's stated accuracy, which Q_LOCACC limits to 63 m; "
+                   "centimetres meant?")  # fmt: skip
     n = int(summary["not_reached"].max()) if len(summary) else 0
     if n == 0:
-        return []
+        return out
     lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
-    return [f"not reached: {n} of {len(balises)} balises lie outside the run ({lo:.0f}-{hi:.0f} "
-            "m of chainage, less 30 m at each end): no passage, so no capture figures"]  # fmt: skip
+    return [*out, f"not reached: {n} of {len(balises)} balises lie outside the run ({lo:.0f}-"
+                  f"{hi:.0f} m of chainage, less 30 m at each end): no passage, so no capture "
+                  "figures"]  # fmt: skip
 
 
 def _truth_warnings(summary: pd.DataFrame, folder: Path) -> list[str]:

@@ -896,6 +896,15 @@ def test_a_simulation_on_another_map_of_its_line_is_located_and_scored_in_that_m
 
     on_rev = sim_on_track(sim, rev, "sim")
     np.testing.assert_allclose(on_rev.chainage_m, rev.length_m - 100.0 - sim.chainage_m, atol=0.3)
+    # ... and the direction of travel in that chainage: the odometer follows it (a user
+    # trial's `locator balises --track` on a reversed map was refused as a reversal)
+    assert on_rev.meta["direction"] == -int(sim.meta.get("direction", 1))
+    from locator.odometry.odometer import OdometerConfig
+    from locator.odometry.simulated import odometer_along_run
+
+    so = odometer_along_run(on_rev, OdometerConfig.ideal(), 0)
+    assert so.orientation == on_rev.meta["direction"]
+    np.testing.assert_allclose(so.truth_chainage_m[[0, -1]], on_rev.chainage_m[[0, -1]], atol=0.3)
 
 
 def test_a_map_of_another_line_or_one_that_stops_short_is_refused_for_a_simulation(sim_dir):

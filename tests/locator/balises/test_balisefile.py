@@ -208,3 +208,36 @@ def test_spreadsheet_line_ends_empty_rows_and_code_pages(tmp_path, track):
     with pytest.raises(BaliseFileError, match=r"line 2: byte 0x96 is not UTF-8.*save it as CSV "
                        "UTF-8"):  # fmt: skip
         BaliseList.from_csv(tmp_path / "cp1252.csv", track)
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        # Belgian Lambert 72 metres in the degree columns: it fell through to the track
+        # map's "enu_m contains NaN or infinite values", no file, line or fix
+        (
+            lambda df, L: df.assign(lat_deg=139422.56, lon_deg=173412.76),
+            r"line 2: lat_deg 139423 is no latitude .*Lambert 72",
+        ),
+        (
+            lambda df, L: df.assign(lon_deg=df["lon_deg"] + 200.0),
+            r"line 2: lon_deg .* is no longitude",
+        ),
+        # chainage measured from the other end, rows in their order (decreasing) or sorted
+        (
+            lambda df, L: df.assign(chainage_m=L - df["chainage_m"]),
+            r"line 2: .*chainages decrease .*from the other end",
+        ),
+        (
+            lambda df, L: df.assign(chainage_m=L - df["chainage_m"]).iloc[::-1],
+            r"line 2: .*from the other end\? its coordinates lie on the track at 900\.0 m",
+        ),
+    ],
+)
+def test_coordinates_and_chainages_of_another_convention(tmp_path, track, edit, match):
+    bl = BaliseList.along_track(track, 100.0, 900.0, 200.0)
+    p = tmp_path / "b.csv"
+    bl.to_csv(p)
+    edit(pd.read_csv(p), track.length_m).to_csv(p, index=False)
+    with pytest.raises(BaliseFileError, match=match):
+        BaliseList.from_csv(p, track)

@@ -475,3 +475,26 @@ def test_the_after_void_capture_states_the_interpolation_between_its_fixes_too()
     assert abs(row.position_error_m) > 3.0 + 0.25  # the interpolation's part is 0.75 m
     assert row.captured and not row.hazardous
     assert row.q_locacc_m >= abs(row.position_error_m)
+
+
+def test_every_miss_says_why():
+    """A user trial's list with ``accuracy_m`` 50 (centimetres meant) missed 22 passages of 22
+    and nothing said why: the capture rate read as "not reliable here"."""
+    from locator.balises.capture import MISS_NO_PAIR, MISS_Q, MISS_ZONE
+
+    t, _truth, est, lo, hi = fixes(1.0, 22.0, 20.0)
+    bl = balises([105.0, 230.0])
+    ok = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(12.0), orientation=1)
+    assert ok["captured"].all() and (ok["miss_reason"] == "").all()
+    # the balises' own accuracy leaves the telegram's over Q_LOCACC: 15 m reach + 50 m
+    bl50 = BaliseList(bl.ids, bl.chainage_m, bl.lat_deg, bl.lon_deg, bl.h_m, bl.telegram,
+                      bl.q_reference, np.full(2, 50.0))  # fmt: skip
+    cap = capture_balises(t, est, est - 15.0, est + 15.0, bl50, CaptureConfig.gaderos(12.0),
+                          orientation=1)  # fmt: skip
+    assert not cap["captured"].any()
+    assert cap["miss_reason"].str.startswith(MISS_Q).all(), cap["miss_reason"].tolist()
+    assert cap["miss_reason"].str.contains(r"\(6\d m > 63 m\)").all()
+    # a zone smaller than the step, and a balise before any valid pair of fixes
+    r2 = capture_balises(t, est, lo, hi, balises([-5.0, 121.0]),
+                         CaptureConfig.gaderos(2.0), orientation=1)  # fmt: skip
+    assert r2["miss_reason"].tolist() == [MISS_NO_PAIR, MISS_ZONE]

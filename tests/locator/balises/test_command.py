@@ -88,6 +88,8 @@ def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
                  "--k-sigma", "2", "--out", str(tmp_path / "k")]) == 0  # fmt: skip
     caps = pd.read_csv(tmp_path / "k" / "captures.csv")
     assert caps["captured"].any() and not caps["safety_claim"].any()
+    # ... and the console too (a user trial's --k-sigma 1.7 table read as any other)
+    assert "NOT A SAFETY CLAIM" in capsys.readouterr().out
     claims = json.loads((tmp_path / "k" / "summary.json").read_text())["claims"]
     assert claims == "claim at a fixed k = 2 (no integrity budget)"
 
@@ -370,6 +372,24 @@ def test_another_map_of_the_line_gives_the_same_captures_in_its_own_chainage(sim
         assert (moved[col] == own[col]).all(), col
     np.testing.assert_allclose(moved["timing_error_s"], own["timing_error_s"], atol=0.05,
                                equal_nan=True)  # fmt: skip
+
+
+def test_a_map_running_the_other_way_gives_the_same_captures(sim_dir, tmp_path):
+    """A map counting its chainage from the other end (an OpenStreetMap way drawn the other
+    way): the train runs toward falling chainage on it. A user trial's run was refused as
+    "the run goes back 2464.88 m against its direction (+1)"."""
+    from tests.locator.test_cli import _lead_in_map
+
+    track = World.load(sim_dir / "world.npz").track
+    rev = _lead_in_map(track, 100.0, tmp_path / "rev.geojson", True)
+    base = ["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25"]
+    assert main([*base, "--out", str(tmp_path / "own")]) == 0
+    assert main([*base, "--track", str(rev), "--out", str(tmp_path / "rev")]) == 0
+    own = pd.read_csv(tmp_path / "own" / "captures.csv")
+    back = pd.read_csv(tmp_path / "rev" / "captures.csv")
+    assert back["passed"].sum() == own["passed"].sum() > 0
+    assert not back["hazardous"].any()
+    assert back["captured"].sum() >= own["captured"].sum() - 1
 
 
 def test_the_banner_names_the_systems_the_simulation_holds(tmp_path, test_data, capsys):
