@@ -288,6 +288,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_track(path, sim.antenna_ecef_m, args.sim)
         if not own_track:  # the start, odometer and truth in this map's chainage
             sim = sim_on_track(sim, track, args.sim)
+            # another map metres off the simulated line: beyond the map doubt (a trial: the
+            # 10 m network map of line 144, 4.6 m off, was taken without a word)
+            _warn_off_map(path, sim.antenna_ecef_m, str(args.sim),
+                          "its true antenna positions")  # fmt: skip
         # another map of the line (--track) must carry the simulated world's heights too
         check_track_height(path, sim.antenna_ecef_m, f"{args.sim} (its true antenna positions)",
                            args.max_height_offset)  # fmt: skip
@@ -769,11 +773,12 @@ def _warn_no_iono(source: Any, nav: Sequence[str]) -> None:
         )
 
 
-def _warn_off_map(path: Any, fixes: Any, label: str) -> None:
+def _warn_off_map(path: Any, fixes: Any, label: str,
+                  whose: str = "the receiver's own fixes") -> None:
     """:func:`locator.workflow.check_track_offset`'s warning on stderr (its refusal raises)."""
     from locator.workflow import check_track_offset
 
-    note = check_track_offset(path, fixes, label)
+    note = check_track_offset(path, fixes, label, whose)
     if note is not None:
         print(f"locator run: warning: {note}", file=sys.stderr)
 

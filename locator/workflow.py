@@ -230,7 +230,10 @@ OFF_MAP_REFUSE_M = 25.0
 """... and more than this is refused: another line, or the map of another track."""
 
 
-def check_track_offset(path: AntennaPath, fixes_ecef_m: ArrayLike, label: str) -> str | None:
+def check_track_offset(
+    path: AntennaPath, fixes_ecef_m: ArrayLike, label: str,
+    whose: str = "the receiver's own fixes",
+) -> str | None:
     """The receiver's own fixes must lie on the track map, not beside it.
 
     Parameters
@@ -241,6 +244,8 @@ def check_track_offset(path: AntennaPath, fixes_ecef_m: ArrayLike, label: str) -
         200 m from the track are skipped.
     label : str
         What the fixes are, for the message.
+    whose : str
+        What the positions are, in the message (a simulation's true antenna positions).
 
     Returns
     -------
@@ -259,7 +264,7 @@ def check_track_offset(path: AntennaPath, fixes_ecef_m: ArrayLike, label: str) -
         return None
     off = float(np.median(near.offset_m))
     side = "left of" if off > 0 else "right of"
-    what = (f"{label}: the receiver's own fixes lie {abs(off):.1f} m {side} track "
+    what = (f"{label}: {whose} lie {abs(off):.1f} m {side} track "
             f"{path.track.name!r} (the median of {near.offset_m.size})")  # fmt: skip
     if abs(off) > OFF_MAP_REFUSE_M:
         raise ValueError(

@@ -205,7 +205,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
     from locator.run import RunConfig
     from locator.sathia import AntennaPath
     from locator.sim.simfile import SimRun
-    from locator.workflow import check_track, check_track_height, sim_on_track
+    from locator.workflow import check_track, check_track_height, check_track_offset, sim_on_track
     from predisat.gnss.errormodel import IntervalModel, default_model_file, read_error_model_file
 
     sim = SimRun.read(args.sim)
@@ -215,6 +215,10 @@ def cmd_balises(args: argparse.Namespace) -> int:
     check_track(path, sim.antenna_ecef_m, args.sim)
     if not own_track:  # the start, odometer, balises and truth in this map's chainage
         sim = sim_on_track(sim, track, args.sim)
+        note = check_track_offset(path, sim.antenna_ecef_m, str(args.sim),
+                                  "its true antenna positions")  # fmt: skip
+        if note is not None:  # a map metres off the simulated line: beyond the map doubt
+            print(f"locator balises: warning: {note}", file=sys.stderr)
     check_track_height(path, sim.antenna_ecef_m, f"{args.sim} (its true antenna positions)")
     if args.balises:
         balises = BaliseList.from_csv(args.balises, track)

@@ -846,6 +846,32 @@ def _lead_in_map(track, lead_m: float, path: Path, reverse: bool = False) -> Pat
     return path
 
 
+def test_a_map_metres_beside_the_simulated_line_is_told(sim_dir, tmp_path, capsys):
+    """A trial: the 10 m network map of line 144, 4.6 m beside the simulated line, was taken
+    without a word, though the pair intervals take the antenna on the map (1.5 m of doubt)."""
+    from predisat.geodesy import WGS84
+    from predisat.synth.world import World
+
+    track = World.load(sim_dir / "world.npz").track
+    lat, lon, h = track.lat_deg, track.lon_deg, track.h_m
+    az = np.append(WGS84.inv(lon[:-1], lat[:-1], lon[1:], lat[1:])[0], np.nan)
+    az[-1] = az[-2]
+    lon2, lat2, _ = WGS84.fwd(lon, lat, az + 90.0, np.full(lon.shape, 4.5))
+    beside = tmp_path / "beside.geojson"
+    beside.write_text(json.dumps({
+        "type": "Feature", "properties": {"name": "beside"},
+        "geometry": {"type": "LineString",
+                     "coordinates": np.column_stack([lon2, lat2, h]).tolist()},
+    }))  # fmt: skip
+    base = ["-q", "run", "--sim", str(sim_dir), "--no-masks"]
+    assert main([*base, "--track", str(beside), "--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "its true antenna positions lie 4.5 m left of track 'beside'" in err
+    other = _lead_in_map(track, 100.0, tmp_path / "other.geojson")  # the same line: no word
+    assert main([*base, "--track", str(other), "--out", str(tmp_path / "o")]) == 0
+    assert "true antenna positions lie" not in capsys.readouterr().err
+
+
 def test_a_simulation_on_another_map_of_its_line_is_located_and_scored_in_that_maps_chainage(
     sim_dir, tmp_path, capsys
 ):
