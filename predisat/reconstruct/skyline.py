@@ -434,6 +434,11 @@ class Rectifier:
         return el
 
     @cached_property
+    def _pixel_el_flat(self) -> NDArray:
+        """:attr:`pixel_el_deg` flattened (the grid's :attr:`pixel_index` indexes it)."""
+        return np.ascontiguousarray(self.pixel_el_deg, np.float64).ravel()
+
+    @cached_property
     def _pixel_runs(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """:attr:`pixel_index` down each grid column as runs of one pixel: the runs' first
         grid rows and pixels (flat, column after column), each column's first run (n_b + 1
@@ -514,13 +519,22 @@ class Rectifier:
             low_confidence_window_deg`` above its skyline. A panorama's rows are a fixed angle
             each and its confidence comes from tiles (:func:`predisat.sky.panorama
             .segment_panorama`), not from its own height; frame cameras (pinhole, fisheye)
-            keep windows of their own rows, where their confidence was computed.
+            keep windows of their own rows, where their confidence was computed. A panorama's
+            raise is taken on the grid's columns (level azimuths), not on its image columns:
+            a grid column is raised when a pixel it reads at its skyline or within the raise
+            above it lies in a low image column, or within the obstacle growth of one. On a
+            canted vehicle the image's columns are not vertical: those near the zenith rise to
+            it and fall beyond it, and raising an image column whose top sky run a contact
+            wire cut short near the zenith took the zenith pixels, that every grid column
+            starts from, with it: the whole frame cleared nothing (``docs/rigs.md``). On a
+            level panorama no skyline comes lower than down the image columns.
         min_sky_el_deg : float
             A column whose top sky run reaches below this elevation is voided (clears
             nothing): no sky lies under the horizon, so the segmentation took an obstacle
             down to its foot for sky there (a white pier, a pale mast on a bright sky).
         """
         m = _as_sky_mask(sky_mask, self.camera)
+        low_px = None
         if confidence is not None:
             c = np.asarray(confidence, float)
             if c.shape != (self.camera.width_px,):
@@ -539,10 +553,11 @@ class Rectifier:
                 )
             low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
             if low.size and self.camera.model == "equirect":
-                m = _raise_skyline_deg(
-                    m, low, low_confidence_windows * low_confidence_window_deg,
-                    self.pixel_el_deg, self.first_read_px_row,
-                )  # fmt: skip
+                # raised below, on the grid's columns (a canted panorama's image columns cross
+                # the zenith that every grid column starts from); the low columns grown as the
+                # obstacles are, as the raised sky was when the image itself was raised
+                conf_ok = np.broadcast_to(c >= min_confidence, self.camera.shape)
+                low_px = (self._grown_sky(conf_ok) == 0).ravel()
             elif low.size:
                 h = self.camera.height_px
                 band, gap = confidence_window_px(h)
@@ -558,6 +573,11 @@ class Rectifier:
         any_seen = self.pixel_index[top, np.arange(top.size)] >= 0
         n_e = self.el_deg.size
         end = _top_sky_run_end(grown.ravel(), *self._pixel_runs, top, n_e, 1)
+        if low_px is not None:
+            end = _raise_grid_runs(
+                end, top, self.pixel_index, self._pixel_el_flat, low_px,
+                float(low_confidence_windows * low_confidence_window_deg),
+            )  # fmt: skip
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
         voided = sky_el < min_sky_el_deg  # sky under the horizon: a mislabelled column
@@ -587,50 +607,48 @@ def _raise_skyline(
     return out
 
 
-def _raise_skyline_deg(
-    sky: NDArray,
-    cols: NDArray,
-    raise_deg: float,
-    el_deg: NDArray,
-    from_row: NDArray | None = None,
-) -> NDArray:
-    """As :func:`_raise_skyline` with the raise as an angle: the top sky run of each column
-    of ``cols`` loses its lowest pixels whose elevation ``el_deg`` (H, W) lies less than
-    ``raise_deg`` above the skyline's (the top edge of the first obstacle pixel, halfway
-    between the two pixels' elevations; the last sky pixel's for a column sky to the bottom),
-    and every sky pixel below. ``inf`` voids the whole run; ``from_row`` as there."""
-    out = np.array(sky, np.bool_)
-    c = np.unique(np.asarray(cols, np.int64))
-    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
-    _raise_columns_deg(out, c, top, np.asarray(el_deg, np.float64), float(raise_deg))
-    return out
-
-
 @njit(cache=True, nogil=True)
-def _raise_columns_deg(
-    sky: NDArray, cols: NDArray, top: NDArray, el_deg: NDArray, raise_deg: float
-) -> None:
-    """:func:`_raise_skyline_deg` in place (pixels up the run while within the angle)."""
-    n = sky.shape[0]
-    for k in range(cols.size):
-        c = cols[k]
-        start = max(top[k], 0)
-        while start < n and not sky[start, c]:
-            start += 1
-        end = start
-        while end < n and sky[end, c]:
-            end += 1
-        if end == start:  # no sky run: only sky below, which goes
-            cut = start
-        else:
-            e0 = el_deg[end - 1, c]
-            base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
-            cut = end
-            # a NaN elevation counts as within the angle (the safe side: more goes)
-            while cut > start and not el_deg[cut - 1, c] - base >= raise_deg:
-                cut -= 1
-        for r in range(cut, n):
-            sky[r, c] = False
+def _raise_grid_runs(
+    end: NDArray, top: NDArray, pixel_index: NDArray, el_flat: NDArray, low_px: NDArray,
+    raise_deg: float,
+) -> NDArray:  # fmt: skip
+    """A panorama's low-confidence raise on the grid's columns: ``end`` (per grid column, the
+    first grid row after the top sky run, which starts at ``top``) moved up past the rows
+    whose pixel's elevation (``el_flat``, by the flat ``pixel_index``) lies less than
+    ``raise_deg`` above the skyline (halfway between the last sky pixel's and the first
+    obstacle pixel's elevations; the last sky pixel's where the run reaches the grid's bottom
+    or an unseen sample), as the raise of a frame camera does down an image column. Only the
+    grid columns whose skyline pixels, or a pixel within the raise above them, are low
+    (``low_px``, flat bool per pixel) move; ``end <= top`` then: no sky."""
+    n_e, n_b = pixel_index.shape
+    out = end.copy()
+    for b in range(n_b):
+        t, e = top[b], end[b]
+        if e <= t:
+            continue
+        k_sky = pixel_index[e - 1, b]
+        if k_sky < 0:
+            continue
+        e0 = el_flat[k_sky]
+        low = low_px[k_sky]
+        base = e0
+        if e < n_e:
+            k_obs = pixel_index[e, b]
+            if k_obs >= 0:
+                base = 0.5 * (e0 + el_flat[k_obs])
+                low = low or low_px[k_obs]
+        cut = e
+        # a NaN elevation counts as within the angle (the safe side: more goes)
+        while cut > t:
+            k = pixel_index[cut - 1, b]
+            if k >= 0 and el_flat[k] - base >= raise_deg:
+                break
+            if k >= 0 and low_px[k]:
+                low = True
+            cut -= 1
+        if low:
+            out[b] = cut
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -11,12 +11,12 @@ from predisat.reconstruct.skyline import (
     LOW_CONFIDENCE_WINDOW_DEG,
     Rectifier,
     _raise_skyline,
-    _raise_skyline_deg,
     erode_sky_deg,
     leading_sky_rows,
     skyline_directions,
 )
 from predisat.sky.segment import confidence_window_px, fisheye_valid_mask
+from tests.regression.reference_raise import reference_raise_skyline_deg
 
 PITCH = 45.0
 VFOV = 74.0
@@ -171,26 +171,26 @@ def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expec
         ("0111100", np.inf, "0000000"),
     ],
 )
-def test_raise_skyline_deg_on_hand_written_columns(
+def test_the_reference_raise_on_hand_written_columns(
     column: str, raise_deg: float, expected: str
 ) -> None:
     sky = np.array([[c == "1", True] for c in column])
     el = np.repeat((60.0 - 10.0 * np.arange(len(column)))[:, None], 2, axis=1)
     before = sky.copy()
-    out = _raise_skyline_deg(sky, np.array([0]), raise_deg, el)
+    out = reference_raise_skyline_deg(sky, np.array([0]), raise_deg, el)
     assert "".join("1" if v else "0" for v in out[:, 0]) == expected
     assert out[:, 1].all()
     assert np.array_equal(sky, before)
 
 
-def test_raise_skyline_deg_counts_a_pixel_without_a_ray_as_within() -> None:
+def test_the_reference_raise_counts_a_pixel_without_a_ray_as_within() -> None:
     """A NaN elevation (no ray) never stops the raise: the safe side."""
     sky = np.array([[c == "1"] for c in "0111100"])
     el = (60.0 - 10.0 * np.arange(7))[:, None].copy()
     el[3, 0] = np.nan  # 30 deg: the second sky row up
-    out = _raise_skyline_deg(sky, np.array([0]), 4.0, el)
+    out = reference_raise_skyline_deg(sky, np.array([0]), 4.0, el)
     assert "".join("1" if v else "0" for v in out[:, 0]) == "0111100"  # 5 deg up: kept
-    out = _raise_skyline_deg(sky, np.array([0]), 6.0, el)
+    out = reference_raise_skyline_deg(sky, np.array([0]), 6.0, el)
     # the 5 deg row goes, the NaN row too, the 25 deg row stops the raise
     assert "".join("1" if v else "0" for v in out[:, 0]) == "0110000"
 
@@ -519,3 +519,71 @@ def test_erosion_by_nothing_is_the_mask_and_a_bad_angle_is_refused() -> None:
     assert np.array_equal(erode_sky_deg(sky, cam, 0.0), sky)
     with pytest.raises(ValueError, match="angle_deg"):
         erode_sky_deg(sky, cam, -1.0)
+
+
+@pytest.mark.parametrize("wire_side", [1.0, -1.0])
+@pytest.mark.parametrize("roll_deg", [-6.5, 7.0])
+def test_a_canted_panorama_keeps_its_zenith_under_a_low_confidence_wire(
+    roll_deg: float, wire_side: float
+) -> None:
+    """A panorama on a canted vehicle (docs/rigs.md): its image columns near the zenith rise to
+    it and fall on its far side, so a contact wire 6 deg from the zenith cuts such a column's
+    top sky run within the low-confidence raise. Raised per image column, that run went
+    whole, the zenith pixel with it, and every grid column (all start at the zenith) lost its
+    sky: the frame cleared nothing. Raised per grid column, only the columns whose own run
+    the wire ends within the raise of the zenith are voided; the others keep their sky down
+    to the raised skyline, and no column's skyline comes lower than the raise demands."""
+    cam = CameraModel.equirect(720)
+    mount = Mount.default("roof").on_vehicle(roll_deg, 0.0)
+    rect = Rectifier.build(cam, mount)
+    u, v = cam.pixel_grid()
+    d = cam.pixel_to_ray(u.ravel(), v.ravel()) @ mount.camera_to_vehicle().T
+    el = np.degrees(np.arcsin(np.clip(d[:, 2], -1.0, 1.0)))
+    # a wire along the track, 0.15 m aside and 1.5 m up (84.3 deg across), 1 deg thick
+    w = np.array([0.0, 0.15 * wire_side, 1.5])
+    n = np.cross([1.0, 0.0, 0.0], w)
+    n /= np.linalg.norm(n)
+    wire = (np.abs(d @ n) < np.sin(np.radians(0.5))) & (d @ w > 0.0)
+    sky = ((el > 20.0) & ~wire).reshape(cam.shape)
+    ref = rect.profile(sky, 0.0)
+    raise_deg = 2.0 * LOW_CONFIDENCE_WINDOW_DEG
+    prof = rect.profile(sky, 0.0, confidence=np.zeros(cam.width_px))
+    # the grid columns the wire does not cross reach the ground skyline at 20 deg; raised,
+    # they keep their sky from the zenith down to their skyline plus the raise (give or take
+    # a pixel of the tilted image)
+    open_cols = ref.sky_el_deg < 21.0
+    assert open_cols.mean() > 0.4
+    got = prof.sky_el_deg[open_cols]
+    assert np.isfinite(got).all(), f"{np.isinf(got).sum()} of {got.size} open columns voided"
+    step = 180.0 / cam.height_px
+    lift = got - ref.sky_el_deg[open_cols]
+    assert lift.min() >= raise_deg - step and lift.max() <= raise_deg + 2.0 * step
+    # never lower than the raise asks, anywhere; columns the wire ends within it are voided
+    fin = np.isfinite(prof.sky_el_deg)
+    assert (prof.sky_el_deg[fin] >= ref.sky_el_deg[fin] + raise_deg - 0.5).all()
+    assert np.isinf(prof.sky_el_deg[ref.sky_el_deg > 90.0 - raise_deg + 0.5]).all()
+
+
+def test_a_level_panoramas_raise_on_the_grid_is_no_lower_than_down_its_columns() -> None:
+    """On a level panorama the grid's columns are the image's: raising on the grid keeps every
+    skyline at least where raising down the image columns put it (then growing the raised
+    sky as an obstacle), for any mask and confidence."""
+    cam = CameraModel.equirect(720)
+    rect = Rectifier.build(cam, Mount.default("roof"))
+    rng = np.random.default_rng(3)
+    h, w = cam.shape
+    raise_deg = 2.0 * LOW_CONFIDENCE_WINDOW_DEG
+    for _ in range(5):
+        # a ragged skyline with overhead wires and holes, and runs of low columns
+        sky_el = np.convolve(rng.uniform(-5.0, 60.0, w + 20), np.ones(21) / 21, "valid")
+        el = 90.0 - (np.arange(h) + 0.5) * 180.0 / h
+        sky = el[:, None] > sky_el[None, :w]
+        sky[rng.integers(0, 40, 6)] = False
+        sky &= rng.random(sky.shape) > 0.002
+        conf = np.repeat(rng.random(w // 20), 20)
+        low = np.flatnonzero(conf < 0.5)
+        raised = reference_raise_skyline_deg(sky, low, raise_deg, rect.pixel_el_deg,
+                                             rect.first_read_px_row)
+        by_columns = rect.profile(raised, 0.0).sky_el_deg
+        on_grid = rect.profile(sky, 0.0, confidence=conf).sky_el_deg
+        assert np.all(on_grid >= by_columns)
