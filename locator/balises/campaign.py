@@ -350,6 +350,7 @@ def balises_to_folder(
     accuracy: OdometerAccuracy | None = None,
     progress: Callable[[int], object] | None = None,
     tunnel_epochs: NDArray | None = None,
+    start_error_m: float = 0.0,
 ) -> tuple[pd.DataFrame, Path]:
     """Locate a simulated run with odometry, capture the balises, write the folder.
 
@@ -360,7 +361,8 @@ def balises_to_folder(
     ``k``: :attr:`locator.run.RunConfig.makes_safety_claims`),
     ``summary.json`` and ``captures.png``.
 
-    ``progress`` is called with the number of epochs located since its last call.
+    ``progress`` is called with the number of epochs located since its last call;
+    ``start_error_m`` as in :func:`locate_with_odometry` (0: the run starts at the truth).
 
     Returns
     -------
@@ -375,7 +377,8 @@ def balises_to_folder(
     caps = dict(captures or {"r12": CaptureConfig.gaderos(12.0)})
     run = locate_with_odometry(sim, path, config, masks=masks, odometer=odo_cfg, seed=seed,
                                log=log, accuracy=accuracy, progress=progress,
-                               constellation=constellation)  # fmt: skip
+                               constellation=constellation,
+                               start_error_m=start_error_m)  # fmt: skip
     scored = capture_table(run, balises, caps)
     # captures under a forced error model rest on intervals that are no safety claim: the
     # table must say so row by row (it is read without summary.json)
@@ -403,7 +406,7 @@ def balises_to_folder(
             # a recorded log replaces the simulated odometer: its settings would mislead
             "odometer": ({"log": log.source} if log is not None else asdict(odo_cfg)),
             "accuracy": asdict(run.accuracy),
-            "constellation": constellation,
+            "constellation": constellation, "start_error_m": start_error_m,
             "integrity": (budget.label() if budget is not None
                           else f"k = {config.locator.model.k_sigma:g} for every pair interval"),
             "claims": claim_label(config.error_model_caveat, config.locator.fixed_k_sigma),

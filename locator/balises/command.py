@@ -24,6 +24,7 @@ from predisat.cli.args import (
     existing_dir,
     existing_file,
     existing_path,
+    finite_float,
     given,
     integrity_budget,
     integrity_options,
@@ -134,6 +135,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
                    help="systems located with: gps, gps+galileo, all, or system letters (default "
                    "all: every system the simulated run received, as a balise reader's receiver "
                    "would; `locator run` defaults to gps)")  # fmt: skip
+    p.add_argument("--start-error", type=finite_float, default=0.0, metavar="M",
+                   help="error of the stored position the run starts from, metres along the "
+                   "track (+: ahead), within the 50 m start uncertainty (default 0: the true "
+                   "chainage, which flatters every fix before the first satellite claim; the "
+                   "campaigns draw it within +-50 m)")  # fmt: skip
     p.add_argument("--seed", type=seed_value, metavar="N", default=0, help="odometer seed")
     p.add_argument("--out", required=True, type=output_dir, metavar="DIR", help="output folder")
     add_checks(
@@ -305,7 +311,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
             sim, path, balises, args.out, config=cfg, masks=masks,
             odometer=odometer, captures=caps, seed=args.seed,
             log=log, accuracy=accuracy, progress=bar.update, constellation=args.constellation,
-            tunnel_epochs=tunnel_epochs,
+            tunnel_epochs=tunnel_epochs, start_error_m=args.start_error,
             meta={"sim": str(args.sim), "odometer_kind": kind, "error_model": model_record},
         )  # fmt: skip
     print(format_summary(summary))

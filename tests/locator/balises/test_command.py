@@ -50,6 +50,28 @@ def test_odometer_along_a_simulated_run_keeps_the_truth(sim_dir):
     assert abs(so.epoch_odo_m[-1] - moved[-1]) < 0.02 * abs(moved[-1]) + 1.0
 
 
+def test_the_run_may_start_from_a_stored_position_that_is_off(sim_dir, tmp_path, capsys):
+    """A trial: the command always started at the true chainage, which flatters every fix
+    before the first claim; --start-error starts it off (ahead) and is recorded, and one
+    beyond the start uncertainty is refused by name."""
+    base = ["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--spacing", "25"]
+    assert main([*base, "--start-error", "30", "--out", str(tmp_path / "off")]) == 0
+    assert main([*base, "--out", str(tmp_path / "at")]) == 0
+    info = json.loads((tmp_path / "off" / "summary.json").read_text())
+    assert info["start_error_m"] == 30.0
+    off = pd.read_parquet(tmp_path / "off" / "epochs.parquet")
+    at = pd.read_parquet(tmp_path / "at" / "epochs.parquet")
+    # the first fused estimate stands 30 m ahead of the truth, and the interval still holds it
+    first_off, first_at = off.iloc[0], at.iloc[0]
+    truth = float(SimRun.read(sim_dir).chainage_m[0])
+    assert float(first_at["fused_chainage_m"]) == pytest.approx(truth, abs=0.5)
+    assert float(first_off["fused_chainage_m"]) == pytest.approx(truth + 30.0, abs=0.5)
+    assert first_off["fused_lo_m"] <= truth <= first_off["fused_hi_m"]
+    capsys.readouterr()
+    assert main([*base, "--start-error", "80", "--out", str(tmp_path / "far")]) == 2
+    assert "start_error_m (80 m) must lie within" in capsys.readouterr().err
+
+
 def test_balises_command_writes_captures_with_timing(sim_dir, tmp_path, capsys):
     out = tmp_path / "b"
     rc = main(["-q", "balises", "--sim", str(sim_dir), "--masks",
