@@ -164,6 +164,13 @@ def read_csv_table(
         raise error(f"{label}: the file is empty; {_a(what)} {what} starts with the header line "
                     f"{','.join(required)} ({doc})")  # fmt: skip
     header_line, header = numbered[0]
+    comments = [k for k, line in numbered if line.lstrip().startswith("#")]
+    if comments:  # read as the header or as a row: "8 fields where the header has 2" (a trial)
+        raise error(
+            f"{label}, line {comments[0]}: a comment line ('#'); {_a(what)} {what} has none: "
+            f"remove {'it' if len(comments) == 1 else f'the {len(comments)} comment lines'} "
+            f"(the first line is the header {','.join(required)}; {doc})"
+        )
     for sep, name in ((";", "semicolons"), ("\t", "tabs")):
         if "," not in header and sep in header:
             raise error(

@@ -178,6 +178,12 @@ def test_separators_and_binary_files(tmp_path, track):
     p.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n")
     with pytest.raises(BaliseFileError, match=r"thousands separator"):
         BaliseList.from_csv(p, track)
+    # a comment line above the header or among the rows: named, not "8 fields where ..."
+    for k, name in ((0, "comment_top.csv"), (3, "comment_mid.csv")):
+        p = tmp_path / name
+        p.write_text("\n".join([*lines[:k], "# balises of line 144, km 0.3-2.8", *lines[k:]]))
+        with pytest.raises(BaliseFileError, match=rf"line {k + 1}: a comment line"):
+            BaliseList.from_csv(p, track)
     p = tmp_path / "b.npz"
     np.savez_compressed(p, x=np.arange(1000.0))
     with pytest.raises(BaliseFileError, match=r"b\.npz, line \d+: byte 0x.. is not text"):
