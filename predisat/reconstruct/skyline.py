@@ -534,7 +534,7 @@ class Rectifier:
             down to its foot for sky there (a white pier, a pale mast on a bright sky).
         """
         m = _as_sky_mask(sky_mask, self.camera)
-        low_px = None
+        low_px = doubt_px = None
         if confidence is not None:
             c = np.asarray(confidence, float)
             if c.shape != (self.camera.width_px,):
@@ -558,6 +558,15 @@ class Rectifier:
                 # obstacles are, as the raised sky was when the image itself was raised
                 conf_ok = np.broadcast_to(c >= min_confidence, self.camera.shape)
                 low_px = (self._grown_sky(conf_ok) == 0).ravel()
+                # the segmenter's doubt lies along its image columns (its tiles' confidence is
+                # measured down them): the band of each low column's top sky run within the
+                # raise above its own skyline is no sky either, for the grid columns that read
+                # it at other azimuths of a canted panorama (a review: 7 843 such grid cells
+                # trusted at roll 7 deg); below 90 deg less the raise only, where a level
+                # azimuth's raise voids its column anyway and the zenith is not taken with it
+                raise_deg = float(low_confidence_windows * low_confidence_window_deg)
+                doubt_px = _doubt_band(m, low, raise_deg, self.pixel_el_deg,
+                                       self.first_read_px_row, 90.0 - raise_deg).ravel()
             elif low.size:
                 h = self.camera.height_px
                 band, gap = confidence_window_px(h)
@@ -578,6 +587,8 @@ class Rectifier:
                 end, top, self.pixel_index, self._pixel_el_flat, low_px,
                 float(low_confidence_windows * low_confidence_window_deg),
             )  # fmt: skip
+            assert doubt_px is not None
+            end = _stop_at_pixels(end, top, self.pixel_index, doubt_px)
         has_sky = any_seen & (end > top)
         sky_el = np.where(has_sky, self.el_deg[np.clip(end - 1, 0, n_e - 1)], np.inf)
         voided = sky_el < min_sky_el_deg  # sky under the horizon: a mislabelled column
@@ -604,6 +615,70 @@ def _raise_skyline(
     c = np.unique(np.asarray(cols, np.int64))
     top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
     _raise_columns(out, c, top, int(raise_px))
+    return out
+
+
+def _doubt_band(
+    sky: NDArray, cols: NDArray, raise_deg: float, el_deg: NDArray, from_row: NDArray | None,
+    cap_deg: float,
+) -> NDArray:  # fmt: skip
+    """A panorama's doubt down its low image columns: the pixels of each column of ``cols``'
+    top sky run (searched from ``from_row``) less than ``raise_deg`` above the run's skyline
+    both in elevation (as the raise down an image column was taken until 2026-12-07) and in
+    arc along the column (its rows), under ``cap_deg`` of elevation and at least twice the
+    raise from the image's pole (there the columns converge and turn across every azimuth,
+    and the level azimuths' raise alone speaks): bool, ``sky``'s shape."""
+    out = np.zeros(np.shape(sky), np.bool_)
+    c = np.unique(np.asarray(cols, np.int64))
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
+    _doubt_columns(np.ascontiguousarray(sky, np.bool_), out, c, top,
+                   np.asarray(el_deg, np.float64),
+                   float(raise_deg), float(cap_deg))  # fmt: skip
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _doubt_columns(
+    sky: NDArray, out: NDArray, cols: NDArray, top: NDArray, el_deg: NDArray,
+    raise_deg: float, cap_deg: float,
+) -> None:  # fmt: skip
+    n = sky.shape[0]
+    row_deg = 180.0 / n  # an equirectangular image's rows
+    for k in range(cols.size):
+        c = cols[k]
+        start = max(top[k], 0)
+        while start < n and not sky[start, c]:
+            start += 1
+        end = start
+        while end < n and sky[end, c]:
+            end += 1
+        if end == start:
+            continue
+        e0 = el_deg[end - 1, c]
+        base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
+        r = end
+        # within the angle of elevation and of arc along the column (a column turning over
+        # near the zenith stays within the angle of elevation far beyond it)
+        while r > start and not el_deg[r - 1, c] - base >= raise_deg and (
+                (end - r + 0.5) * row_deg < raise_deg):
+            r -= 1
+            # NaN counts as under the cap; near the image's pole the columns converge and turn
+            # across every azimuth: the level azimuths' raise alone speaks there
+            if not el_deg[r, c] >= cap_deg and (r + 0.5) * row_deg >= 2.0 * raise_deg:
+                out[r, c] = True
+
+
+@njit(cache=True, nogil=True)
+def _stop_at_pixels(end: NDArray, top: NDArray, pixel_index: NDArray, stop_px: NDArray) -> NDArray:
+    """``end`` (per grid column) moved up to the first row from ``top`` reading a pixel of
+    ``stop_px`` (flat bool)."""
+    out = end.copy()
+    for b in range(end.size):
+        for r in range(top[b], end[b]):
+            k = pixel_index[r, b]
+            if k >= 0 and stop_px[k]:
+                out[b] = r
+                break
     return out
 
 
