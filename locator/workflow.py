@@ -178,7 +178,11 @@ def sim_on_track(
             "simulated line alone"
         )
     moving = np.abs(own) > 1.0  # a stop's projection wanders by millimetres
-    sense = 1.0
+    # the map's sense against the simulation's: from the whole run when no epoch moves a
+    # metre (a crawl, or epochs at 10 Hz under 36 km/h), whose steps still outweigh a stop's
+    # millimetres (a review: such a run on a reversed map kept its direction and was refused
+    # as a reversal)
+    sense = -1.0 if float(np.dot(new, own)) < 0.0 else 1.0
     if moving.any():
         sense = float(np.sign(np.median(new[moving] / own[moving])))
         back = moving & (new * own * sense <= 0.0)

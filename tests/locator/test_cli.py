@@ -933,6 +933,32 @@ def test_a_simulation_on_another_map_of_its_line_is_located_and_scored_in_that_m
     np.testing.assert_allclose(so.truth_chainage_m[[0, -1]], on_rev.chainage_m[[0, -1]], atol=0.3)
 
 
+def test_a_crawling_simulation_on_a_map_counting_from_the_other_end_turns_its_direction(
+    tmp_path,
+):
+    """A run that never moves a metre between epochs (0.8 m/s at 1 Hz) on a reversed map: its
+    direction turns as a faster run's does (it kept +1 and the odometer refused the run as "the
+    run goes back 16.04 m against its direction (+1)")."""
+    from locator.odometry.odometer import OdometerConfig
+    from locator.odometry.simulated import odometer_along_run
+    from locator.workflow import sim_on_track
+    from predisat.synth.world import World
+    from predisat.track import TrackMap
+
+    canyon_world().save(tmp_path / "world.npz")
+    assert main(["-q", "simulate", "--world", str(tmp_path / "world.npz"), "--duration", "40",
+                 "--speed", "0.8", "--seed", "3", "--start-chainage", "65",
+                 "--out", str(tmp_path / "sim")]) == 0  # fmt: skip
+    sim = SimRun.read(tmp_path / "sim")
+    assert np.abs(np.diff(sim.chainage_m)).max() <= 1.0
+    track = World.load(tmp_path / "world.npz").track
+    rev = TrackMap.from_geojson(_lead_in_map(track, 100.0, tmp_path / "rev.geojson", True))
+    on_rev = sim_on_track(sim, rev, "sim")
+    assert on_rev.meta["direction"] == -int(sim.meta.get("direction", 1))
+    so = odometer_along_run(on_rev, OdometerConfig.ideal(), 0)
+    np.testing.assert_allclose(so.truth_chainage_m[[0, -1]], on_rev.chainage_m[[0, -1]], atol=0.3)
+
+
 def test_a_map_of_another_line_or_one_that_stops_short_is_refused_for_a_simulation(sim_dir):
     from locator.workflow import sim_on_track
     from predisat.synth.world import World
