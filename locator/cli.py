@@ -1097,7 +1097,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
              for d in data}  # fmt: skip
     if args.obs and cls and len(pairs) < 2:
         print(f"locator calibrate: warning: --receiver-class {cls} from one receiver and antenna "
-              f"({' / '.join(next(iter(pairs))) or '?'}): the model will apply to every "
+              f"({' / '.join(n or '?' for n in next(iter(pairs)))}): the model will apply to every "
               f"receiver declared {cls} by its class alone, and a class model bounds only "
               "receivers like those it saw; validate it leaving one receiver out on several of "
               "the class (docs/errormodel.md), or leave --receiver-class out",

@@ -161,7 +161,11 @@ def station_evidence(receiver_type: str) -> str:
 
 # Receiver types of mass-market chips (cars, trackers, low-cost rovers): never a geodetic receiver.
 _MASS_MARKET_MARKS = ("UBLOX", "U-BLOX", "TESEO", "BROADCOM", "QUALCOMM", "MEDIATEK", "SIRF",
-                      "QUECTEL")  # fmt: skip
+                      "QUECTEL",
+                      # u-blox parts named without the maker (RTKLIB and converters write the
+                      # module's name: ZED-F9P, UBX-M8030, NEO-M8T), and other low-cost chips
+                      "UBX-", "ZED-F9", "NEO-M", "NEO-6", "NEO-7", "MAX-M", "LEA-M", "LEA-6",
+                      "SKYTRAQ", "ALLYSTAR", "BCM47", "MTK")  # fmt: skip
 
 
 def not_geodetic_evidence(receiver_type: str) -> str:
@@ -171,7 +175,7 @@ def not_geodetic_evidence(receiver_type: str) -> str:
     RTKLIB without ``-hr`` write) or a mass-market chip would get a reference station's sigma
     (a user trial: both claimed 100 % under a one-station class model)."""
     rec = " ".join(receiver_type.upper().split())
-    if rec in {"", "UNKNOWN", "NONE", "-"}:
+    if rec in {"", "NONE", "-", "?", "N/A", "NA"} or rec.startswith("UNKNOWN"):
         return f"its receiver type is {receiver_type.strip() or 'blank'!r}"
     if any(m in rec for m in _MASS_MARKET_MARKS):
         return f"receiver {receiver_type.strip()!r}, a mass-market chip"

@@ -15,6 +15,7 @@ from locator.errorfit import (
     fit_systems,
     guess_receiver_class,
     model_file_parts,
+    not_geodetic_evidence,
     static_residuals,
     station_evidence,
     station_residuals,
@@ -249,3 +250,18 @@ def test_a_systems_count_is_of_the_residuals_its_fit_used():
     _, systems, _ = model_file_parts(fit_systems([d]), [d], k_sigma=2.0,
                                      receiver_class="geodetic")  # fmt: skip
     assert systems["G"].n_residuals == used
+
+
+@pytest.mark.parametrize("receiver", ["ZED-F9P", "UBX-M8030", "NEO-M8T", "SkyTraq S1216F8",
+                                      "Allystar TAU1202", "BCM47755", "N/A", "?",
+                                      "UNKNOWN RECEIVER"])  # fmt: skip
+def test_a_mass_market_module_or_an_unnamed_receiver_is_no_geodetic_evidence(receiver: str):
+    """A u-blox module named without its maker (as RTKLIB writes it) or an unnamed receiver
+    passed as geodetic (a review: 'ZED-F9P', 'UBX-M8030', 'N/A' were taken)."""
+    assert not_geodetic_evidence(receiver)
+
+
+@pytest.mark.parametrize("receiver", ["TRIMBLE 5700", "SEPT POLARX5", "LEICA GR50",
+                                      "JAVAD TRE_3 DELTA", "TRIMBLE NETR9"])  # fmt: skip
+def test_a_geodetic_receiver_is_not_refused(receiver: str):
+    assert not_geodetic_evidence(receiver) == ""
