@@ -43,7 +43,7 @@ from predisat.masks.fileformat import read_masks
 from predisat.masks.margins import sector_of
 from predisat.masks.truth import TrueMasks
 from predisat.reconstruct.batch import process_survey
-from predisat.reconstruct.carving import Reconstructor
+from predisat.reconstruct.carving import ReconstructionParams, Reconstructor
 from predisat.reconstruct.evaluate import compare, load_truth, trust_counts
 from predisat.reconstruct.params import PipelineParams
 from predisat.synth.generate import SynthResult, generate_survey
@@ -148,7 +148,7 @@ def _reusable(out: Path) -> SynthResult | None:
 
 
 def run_one(rig: Rig, seed: int, lo_m: float, hi_m: float, work: Path,
-            reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+            reuse: bool = False, panorama_raise: str = "image") -> dict[str, Any]:  # fmt: skip
     """Render, process and score one rig on one seed's world.
 
     ``reuse``: keep the rendered survey and the segmentation cache of an earlier run in the
@@ -176,7 +176,9 @@ def run_one(rig: Rig, seed: int, lo_m: float, hi_m: float, work: Path,
             if item.name != "cache":
                 shutil.rmtree(item) if item.is_dir() else item.unlink()
     c0 = time.process_time()
-    proc = process_survey(res.survey_dir, out / "proc", scheduler="serial", progress=False)
+    params = PipelineParams(reconstruction=ReconstructionParams(panorama_raise=panorama_raise))
+    proc = process_survey(res.survey_dir, out / "proc", params, scheduler="serial",
+                          progress=False)  # fmt: skip
     cpu = time.process_time() - c0
     row: dict[str, Any] = {
         "rig": rig.name, "seed": seed, "from_m": lo_m, "to_m": hi_m,
@@ -225,6 +227,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="keep the rendered surveys and segmentation caches of an earlier run "
                     "in --work (same seeds, length and scale); reconstruct and score again "
                     "(in place: a copied folder has new file times and is segmented again)")
+    ap.add_argument("--panorama-raise", choices=("image", "grid"), default="image",
+                    help="where a panorama's low-confidence raise is taken "
+                    "(ReconstructionParams.panorama_raise; docs/rigs.md)")
     args = ap.parse_args(argv)
     track = demo_track()
     rows: list[dict[str, Any]] = []
@@ -245,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.out.write_text(json.dumps({"runs": rows}, indent=1))
                 continue
             row = run_one(Rig.preset(name).scaled(args.scale), seed, lo, lo + args.length_m,
-                          args.work, args.reuse)  # fmt: skip
+                          args.work, args.reuse, args.panorama_raise)  # fmt: skip
             rows.append(row)
             print(f"{name:>17} seed {seed} km {lo / 1000:.1f}: sky lost across "
                   f"{100 * row['sky_lost_cross']:.2f} % along {100 * row['sky_lost_along']:.2f} %,"

@@ -98,6 +98,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "mask at the position)",
     )  # fmt: skip
     parser.add_argument(
+        "--panorama-raise", choices=("image", "grid"), default="image",
+        help="where a 360-degree panorama's low-confidence raise is taken: image (down its "
+        "image columns; on a canted vehicle a wire near the zenith voids whole frames) or grid "
+        "(per level azimuth: much more sky, but a camera behind the antenna may see past a "
+        "cantilever over it; docs/rigs.md; default: image)",
+    )  # fmt: skip
+    parser.add_argument(
         "--half-space-only", action="store_true",
         help="side cameras carve with their half-space only (relative azimuths -90 to 90), not "
         "past it along their own line (docs/reconstruction.md, section 17; default: 20 deg "
@@ -258,7 +265,8 @@ def run(args: argparse.Namespace) -> ProcessResult:
                        reconstruction=ReconstructionParams(
                            cell_sweep_m=None if args.cell_sweep else 0.0,
                            carve_past_deg=None if args.half_space_only
-                           else ReconstructionParams.carve_past_deg),
+                           else ReconstructionParams.carve_past_deg,
+                           panorama_raise=args.panorama_raise),
                        **attitude_params(args)),
         track=track,
         workers=args.workers,

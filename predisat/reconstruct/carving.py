@@ -171,6 +171,12 @@ class ReconstructionParams:
         A confidence window of a panoramic (``"equirect"``) camera, degrees of elevation
         (:data:`~predisat.reconstruct.skyline.LOW_CONFIDENCE_WINDOW_DEG`: the side fisheye's
         window of rows as an angle); frame cameras keep windows of their own rows.
+    panorama_raise : {"image", "grid"}
+        Where a panorama's low-confidence raise is taken
+        (:meth:`~predisat.reconstruct.skyline.Rectifier.profile`): ``"image"`` (default, down
+        its image columns; on a canted vehicle a wire near the zenith voids whole frames) or
+        ``"grid"`` (per level azimuth, opt-in: recovers much of the panorama's sky but lets a
+        camera behind the antenna see past a cantilever over it; docs/rigs.md).
     rectify_az_step_deg, rectify_el_step_deg : float
         Sky-profile sampling.
     descriptor_min_el_deg : float
@@ -271,6 +277,7 @@ class ReconstructionParams:
     covered_share: float = 0.9
     low_confidence_windows: float = 2.0
     low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG
+    panorama_raise: str = "image"
     rectify_az_step_deg: float = 0.25
     rectify_el_step_deg: float = 0.125
     descriptor_min_el_deg: float = 10.0
@@ -343,6 +350,11 @@ class ReconstructionParams:
             raise ValueError(
                 "ReconstructionParams.low_confidence_windows must be >= 0 (inf: low-confidence "
                 "columns clear nothing)"
+            )
+        if self.panorama_raise not in ("image", "grid"):
+            raise ValueError(
+                "ReconstructionParams.panorama_raise must be 'image' (the default) or 'grid', got "
+                f"{self.panorama_raise!r}"
             )
         if not self.low_confidence_window_deg > 0:
             raise ValueError(
@@ -613,7 +625,7 @@ class Reconstructor:
             return rect.profile(
                 self._sure_sky(f, sky), f.heading_deg, f.reverse, f.confidence,
                 p.min_confidence, p.low_confidence_windows, p.low_confidence_window_deg,
-                self._min_sky_el_deg,
+                self._min_sky_el_deg, p.panorama_raise,
             )  # fmt: skip
         except ValueError as exc:
             raise ValueError(f"frame {f.frame_id or f.chainage_m}: {exc}") from None

@@ -491,6 +491,7 @@ class Rectifier:
         low_confidence_windows: float = 2.0,
         low_confidence_window_deg: float = LOW_CONFIDENCE_WINDOW_DEG,
         min_sky_el_deg: float = -np.inf,
+        panorama_raise: str = "image",
     ) -> SkyProfile:
         """The frame's :class:`SkyProfile`.
 
@@ -519,19 +520,25 @@ class Rectifier:
             low_confidence_window_deg`` above its skyline. A panorama's rows are a fixed angle
             each and its confidence comes from tiles (:func:`predisat.sky.panorama
             .segment_panorama`), not from its own height; frame cameras (pinhole, fisheye)
-            keep windows of their own rows, where their confidence was computed. A panorama's
-            raise is taken on the grid's columns (level azimuths), not on its image columns:
-            a grid column is raised when a pixel it reads at its skyline or within the raise
-            above it lies in a low image column, or within the obstacle growth of one. On a
-            canted vehicle the image's columns are not vertical: those near the zenith rise to
-            it and fall beyond it, and raising an image column whose top sky run a contact
-            wire cut short near the zenith took the zenith pixels, that every grid column
-            starts from, with it: the whole frame cleared nothing (``docs/rigs.md``). On a
-            level panorama no skyline comes lower than down the image columns.
+            keep windows of their own rows, where their confidence was computed.
         min_sky_el_deg : float
             A column whose top sky run reaches below this elevation is voided (clears
             nothing): no sky lies under the horizon, so the segmentation took an obstacle
             down to its foot for sky there (a white pier, a pale mast on a bright sky).
+        panorama_raise : {"image", "grid"}
+            Where a panorama's raise is taken. ``"image"`` (the default): down its image
+            columns. On a canted vehicle those near the zenith rise to it and fall beyond it,
+            and raising one whose top sky run a contact wire cut short near the zenith takes
+            the zenith pixels, that every grid column starts from, with it: the whole frame
+            clears nothing. ``"grid"``: on the grid's columns (level azimuths): a grid column
+            is raised when a pixel it reads at its skyline or within the raise above it lies
+            in a low image column (or within the obstacle growth of one), and each low image
+            column's band within the raise above its own skyline, below 90 deg less the raise
+            and away from the image's pole, ends the sky of every grid column that reads it
+            (the doubt lies along the image columns). It keeps the zenith and recovers much of
+            the panorama's sky, but the frames it no longer voids let a camera half a metre
+            behind the antenna see past a cantilever over it (``docs/rigs.md``: one position
+            trusted 6.8 % of its directions falsely), so it is opt-in. Frame cameras ignore it.
         """
         m = _as_sky_mask(sky_mask, self.camera)
         low_px = doubt_px = None
@@ -551,8 +558,17 @@ class Rectifier:
                     f"low_confidence_window_deg must be > 0 degrees, got "
                     f"{low_confidence_window_deg}"
                 )
+            if panorama_raise not in ("image", "grid"):
+                raise ValueError(
+                    f"panorama_raise must be 'image' or 'grid', got {panorama_raise!r}"
+                )
             low = np.flatnonzero(~(c >= min_confidence))  # NaN confidence counts as low
-            if low.size and self.camera.model == "equirect":
+            if low.size and self.camera.model == "equirect" and panorama_raise == "image":
+                m = _raise_skyline_deg(
+                    m, low, low_confidence_windows * low_confidence_window_deg,
+                    self.pixel_el_deg, self.first_read_px_row,
+                )  # fmt: skip
+            elif low.size and self.camera.model == "equirect":
                 # raised below, on the grid's columns (a canted panorama's image columns cross
                 # the zenith that every grid column starts from); the low columns grown as the
                 # obstacles are, as the raised sky was when the image itself was raised
@@ -616,6 +632,52 @@ def _raise_skyline(
     top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
     _raise_columns(out, c, top, int(raise_px))
     return out
+
+
+def _raise_skyline_deg(
+    sky: NDArray,
+    cols: NDArray,
+    raise_deg: float,
+    el_deg: NDArray,
+    from_row: NDArray | None = None,
+) -> NDArray:
+    """As :func:`_raise_skyline` with the raise as an angle: the top sky run of each column
+    of ``cols`` loses its lowest pixels whose elevation ``el_deg`` (H, W) lies less than
+    ``raise_deg`` above the skyline's (the top edge of the first obstacle pixel, halfway
+    between the two pixels' elevations; the last sky pixel's for a column sky to the bottom),
+    and every sky pixel below. ``inf`` voids the whole run; ``from_row`` as there."""
+    out = np.array(sky, np.bool_)
+    c = np.unique(np.asarray(cols, np.int64))
+    top = np.zeros(c.size, np.int64) if from_row is None else np.asarray(from_row, np.int64)[c]
+    _raise_columns_deg(out, c, top, np.asarray(el_deg, np.float64), float(raise_deg))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _raise_columns_deg(
+    sky: NDArray, cols: NDArray, top: NDArray, el_deg: NDArray, raise_deg: float
+) -> None:
+    """:func:`_raise_skyline_deg` in place (pixels up the run while within the angle)."""
+    n = sky.shape[0]
+    for k in range(cols.size):
+        c = cols[k]
+        start = max(top[k], 0)
+        while start < n and not sky[start, c]:
+            start += 1
+        end = start
+        while end < n and sky[end, c]:
+            end += 1
+        if end == start:  # no sky run: only sky below, which goes
+            cut = start
+        else:
+            e0 = el_deg[end - 1, c]
+            base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
+            cut = end
+            # a NaN elevation counts as within the angle (the safe side: more goes)
+            while cut > start and not el_deg[cut - 1, c] - base >= raise_deg:
+                cut -= 1
+        for r in range(cut, n):
+            sky[r, c] = False
 
 
 def _doubt_band(
@@ -692,7 +754,7 @@ def _raise_grid_runs(
     whose pixel's elevation (``el_flat``, by the flat ``pixel_index``) lies less than
     ``raise_deg`` above the skyline (halfway between the last sky pixel's and the first
     obstacle pixel's elevations; the last sky pixel's where the run reaches the grid's bottom
-    or an unseen sample), as the raise of a frame camera does down an image column. Only the
+    or an unseen sample), as :func:`_raise_columns_deg` does down an image column. Only the
     grid columns whose skyline pixels, or a pixel within the raise above them, are low
     (``low_px``, flat bool per pixel) move; ``end <= top`` then: no sky."""
     n_e, n_b = pixel_index.shape

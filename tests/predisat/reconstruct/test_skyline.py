@@ -11,12 +11,12 @@ from predisat.reconstruct.skyline import (
     LOW_CONFIDENCE_WINDOW_DEG,
     Rectifier,
     _raise_skyline,
+    _raise_skyline_deg,
     erode_sky_deg,
     leading_sky_rows,
     skyline_directions,
 )
 from predisat.sky.segment import confidence_window_px, fisheye_valid_mask
-from tests.regression.reference_raise import reference_raise_skyline_deg
 
 PITCH = 45.0
 VFOV = 74.0
@@ -171,26 +171,26 @@ def test_raise_skyline_on_hand_written_columns(column: str, raise_px: int, expec
         ("0111100", np.inf, "0000000"),
     ],
 )
-def test_the_reference_raise_on_hand_written_columns(
+def test_raise_skyline_deg_on_hand_written_columns(
     column: str, raise_deg: float, expected: str
 ) -> None:
     sky = np.array([[c == "1", True] for c in column])
     el = np.repeat((60.0 - 10.0 * np.arange(len(column)))[:, None], 2, axis=1)
     before = sky.copy()
-    out = reference_raise_skyline_deg(sky, np.array([0]), raise_deg, el)
+    out = _raise_skyline_deg(sky, np.array([0]), raise_deg, el)
     assert "".join("1" if v else "0" for v in out[:, 0]) == expected
     assert out[:, 1].all()
     assert np.array_equal(sky, before)
 
 
-def test_the_reference_raise_counts_a_pixel_without_a_ray_as_within() -> None:
+def test_raise_skyline_deg_counts_a_pixel_without_a_ray_as_within() -> None:
     """A NaN elevation (no ray) never stops the raise: the safe side."""
     sky = np.array([[c == "1"] for c in "0111100"])
     el = (60.0 - 10.0 * np.arange(7))[:, None].copy()
     el[3, 0] = np.nan  # 30 deg: the second sky row up
-    out = reference_raise_skyline_deg(sky, np.array([0]), 4.0, el)
+    out = _raise_skyline_deg(sky, np.array([0]), 4.0, el)
     assert "".join("1" if v else "0" for v in out[:, 0]) == "0111100"  # 5 deg up: kept
-    out = reference_raise_skyline_deg(sky, np.array([0]), 6.0, el)
+    out = _raise_skyline_deg(sky, np.array([0]), 6.0, el)
     # the 5 deg row goes, the NaN row too, the 25 deg row stops the raise
     assert "".join("1" if v else "0" for v in out[:, 0]) == "0110000"
 
@@ -547,7 +547,11 @@ def test_a_canted_panorama_keeps_its_zenith_under_a_low_confidence_wire(
     sky = ((el > 20.0) & ~wire).reshape(cam.shape)
     ref = rect.profile(sky, 0.0)
     raise_deg = 2.0 * LOW_CONFIDENCE_WINDOW_DEG
-    prof = rect.profile(sky, 0.0, confidence=np.zeros(cam.width_px))
+    # the default raise, down the image columns, voids the whole frame (the safe side, kept
+    # as the default: docs/rigs.md); the opt-in raise on the grid keeps it
+    image = rect.profile(sky, 0.0, confidence=np.zeros(cam.width_px))
+    assert np.isinf(image.sky_el_deg).all()
+    prof = rect.profile(sky, 0.0, confidence=np.zeros(cam.width_px), panorama_raise="grid")
     # the grid columns the wire does not cross reach the ground skyline at 20 deg; raised,
     # they keep their sky from the zenith down to their skyline plus the raise (give or take
     # a pixel of the tilted image)
@@ -585,15 +589,21 @@ def test_a_level_panoramas_raise_on_the_grid_is_no_lower_than_down_its_columns()
         sky &= rng.random(sky.shape) > 0.002
         conf = np.repeat(rng.random(w // 20), 20)
         low = np.flatnonzero(conf < 0.5)
-        raised = reference_raise_skyline_deg(sky, low, raise_deg, rect.pixel_el_deg,
+        raised = _raise_skyline_deg(sky, low, raise_deg, rect.pixel_el_deg,
                                              rect.first_read_px_row)
         by_columns = rect.profile(raised, 0.0).sky_el_deg
-        on_grid = rect.profile(sky, 0.0, confidence=conf).sky_el_deg
+        on_grid = rect.profile(sky, 0.0, confidence=conf, panorama_raise="grid").sky_el_deg
         assert np.all(on_grid >= by_columns)
+        default = rect.profile(sky, 0.0, confidence=conf).sky_el_deg  # "image": the columns'
+        np.testing.assert_array_equal(default, by_columns)
+    with pytest.raises(ValueError, match="panorama_raise"):
+        rect.profile(sky, 0.0, confidence=conf, panorama_raise="azimuth")
 
 
 @pytest.mark.parametrize("roll_deg", [3.0, 7.0])
-def test_a_canted_panoramas_grid_trusts_no_doubt_along_a_low_image_column(roll_deg: float) -> None:
+def test_a_canted_panoramas_grid_trusts_no_doubt_along_a_low_image_column(
+    roll_deg: float,
+) -> None:
     """The segmenter's confidence is measured down the image's columns (a panorama's tiles):
     a low column's skyline may lie up to the raise higher along that column. On a canted
     panorama those columns lean across level azimuths, so where the skyline falls away
@@ -634,7 +644,7 @@ def test_a_canted_panoramas_grid_trusts_no_doubt_along_a_low_image_column(roll_d
                     & ((rows + 0.5) * row_deg >= 2.0 * raise_deg)
                     & (el[rows, c] < 90.0 - raise_deg))  # fmt: skip
             doubt[rows[near], c] = True
-        prof = rect.profile(sky, 0.0, confidence=conf)
+        prof = rect.profile(sky, 0.0, confidence=conf, panorama_raise="grid")
         reads = (pi >= 0) & doubt.ravel()[np.clip(pi, 0, None)]
         trusted = rect.el_deg[:, None] >= prof.sky_el_deg[None, :]
         assert not (trusted & reads).any(), f"{(trusted & reads).sum()} doubtful grid cells trusted"
