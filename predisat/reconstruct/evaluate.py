@@ -275,6 +275,19 @@ def calibrate_margin(
                 margin, reached, share = _group_margin(
                     m[sel], t[sel], pos[sel], cands, target, el_step_deg, weights, confidence
                 )
+                # masks raised to the terrain: their TERRAIN bins share the ASSUMED group's
+                # margin, but the DEM bounds them and their line of sight would dilute the
+                # bins still assumed (a user trial's canyon: 0.118 % of the assumed bins
+                # trusted falsely, 0.045 % pooled with the terrain bins, margin 0); the
+                # group's margin must hold for the assumed bins alone as well
+                own = sel & (comparison.source.ravel() != BinSource.TERRAIN)
+                if own.any() and not own[sel].all() and (
+                        np.unique(pos[own]).size >= min_positions):  # fmt: skip
+                    m2, r2, s2 = _group_margin(
+                        m[own], t[own], pos[own], cands, target, el_step_deg, weights, confidence
+                    )
+                    if m2 > margin:
+                        margin, reached, share = m2, r2, s2
             n_group_pos = int(np.unique(pos[sel]).size)
             sels.append(sel)
             rows.append({

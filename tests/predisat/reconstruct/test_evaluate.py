@@ -425,3 +425,31 @@ def test_evaluate_warns_of_the_truth_of_another_survey(tiny: tuple[Path, Path], 
     note = other_survey_note(prov, other / "truth")
     assert note is not None and "not of the survey the masks were made from" in note
     assert other_survey_note({}, other) is None  # masks that do not say: nothing to tell
+
+
+def test_terrain_bins_do_not_dilute_the_assumed_bins_margin() -> None:
+    """Masks raised to the terrain: the TERRAIN bins take the ASSUMED group's margin, but their
+    line of sight must not hide the assumed bins' false trust (a user trial's canyon: a rock
+    wall 250-300 m behind the train over the assumed 5 deg, 0.118 % of the assumed bins
+    trusted falsely, 0.045 % pooled with the terrain bins, calibrated margin 0)."""
+    from predisat.masks.maskset import BinSource
+
+    rng = np.random.default_rng(4)
+    n_pos, n_az = 40, 72
+    truth = rng.uniform(0, 20, (n_pos, n_az))
+    mask = truth + 0.5
+    source = np.full((n_pos, n_az), BinSource.TERRAIN, np.uint8)
+    source[:, :4] = BinSource.ASSUMED
+    mask[:, :4] = 5.0
+    truth[:, :4] = rng.uniform(3.0, 7.0, (n_pos, 4))  # a wall over the assumed default
+    sector = np.full((n_pos, n_az), "along")
+    comp = Comparison(chainage_m=np.arange(n_pos) * 10.0, mask_el_deg=mask,
+                      truth_el_deg=truth, source=source, sector=sector,
+                      az_deg=np.arange(n_az) * 5.0)  # fmt: skip
+    own = source == BinSource.ASSUMED
+    assert _los_share(mask[own], truth[own], 0.0) < 0.999  # the assumed bins fail alone
+    assert _los_share(mask, truth, 0.0) >= 0.999  # pooled with the terrain bins they pass
+    table = calibrate_margin(comp, target=0.999)
+    row = table.table[(table.table.sector == "along") & (table.table.source == "assumed")]
+    margin = float(row.margin_deg.iloc[0])
+    assert margin > 0 and _los_share(mask[own], truth[own], margin) >= 0.999
