@@ -144,7 +144,8 @@ def coverage_notes(masks: MaskSet, terrain: TerrainHorizon, dem_source: str) -> 
             f"{int(short.sum())} of {masks.n_pos} positions' terrain rays (chainage "
             f"{s.min():.0f}-{s.max():.0f} m, toward {', '.join(dirs)}): those bins were raised to "
             "the terrain the tiles hold but not flagged TERRAIN (the terrain beyond may stand "
-            "higher); add the neighbouring tiles"]  # fmt: skip
+            "higher); add the neighbouring tiles where they end, or give a void-filled model "
+            "where they hold voids (voids inside a tile: no neighbouring tile fills them)"]
 
 
 def raise_to_terrain(

@@ -196,6 +196,8 @@ def test_rays_leaving_the_tiles_or_meeting_voids_are_not_terrain_bounds(tmp_path
     assert np.all(raised.mask_el_deg >= masks.mask_el_deg)
     (note,) = coverage_notes(raised, got, "edge.tif")
     assert "1 of 1 positions" in note and "N" in note.split("toward ")[1]
+    # both remedies (a trial: voids inside a tile were told to add the neighbouring tiles)
+    assert "neighbouring tiles where they end" in note and "void-filled model" in note
     assert raised.provenance["terrain"]["partly_covered_bins"] > 0
     # a void at the antenna's posts: ground is found nearby and the horizon still raises the
     # bins, but it bounds none (a review: past a void along a gorge floor the ground found
