@@ -654,6 +654,24 @@ def _raise_skyline_deg(
 
 
 @njit(cache=True, nogil=True)
+def _top_run(sky: NDArray, el_deg: NDArray, c: int, from_row: int) -> tuple[int, int, float]:
+    """Column ``c``'s top sky run searched from ``from_row``: its first and past-the-last
+    rows, and its skyline's elevation (halfway between the last sky pixel's and the first
+    obstacle pixel's; the last sky pixel's for a run to the bottom; NaN without a run)."""
+    n = sky.shape[0]
+    start = max(from_row, 0)
+    while start < n and not sky[start, c]:
+        start += 1
+    end = start
+    while end < n and sky[end, c]:
+        end += 1
+    if end == start:
+        return start, end, np.nan
+    e0 = el_deg[end - 1, c]
+    return start, end, 0.5 * (e0 + el_deg[end, c]) if end < n else e0
+
+
+@njit(cache=True, nogil=True)
 def _raise_columns_deg(
     sky: NDArray, cols: NDArray, top: NDArray, el_deg: NDArray, raise_deg: float
 ) -> None:
@@ -661,17 +679,10 @@ def _raise_columns_deg(
     n = sky.shape[0]
     for k in range(cols.size):
         c = cols[k]
-        start = max(top[k], 0)
-        while start < n and not sky[start, c]:
-            start += 1
-        end = start
-        while end < n and sky[end, c]:
-            end += 1
+        start, end, base = _top_run(sky, el_deg, c, top[k])
         if end == start:  # no sky run: only sky below, which goes
             cut = start
         else:
-            e0 = el_deg[end - 1, c]
-            base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
             cut = end
             # a NaN elevation counts as within the angle (the safe side: more goes)
             while cut > start and not el_deg[cut - 1, c] - base >= raise_deg:
@@ -708,16 +719,9 @@ def _doubt_columns(
     row_deg = 180.0 / n  # an equirectangular image's rows
     for k in range(cols.size):
         c = cols[k]
-        start = max(top[k], 0)
-        while start < n and not sky[start, c]:
-            start += 1
-        end = start
-        while end < n and sky[end, c]:
-            end += 1
+        start, end, base = _top_run(sky, el_deg, c, top[k])
         if end == start:
             continue
-        e0 = el_deg[end - 1, c]
-        base = 0.5 * (e0 + el_deg[end, c]) if end < n else e0
         r = end
         # within the angle of elevation and of arc along the column (a column turning over
         # near the zenith stays within the angle of elevation far beyond it)
