@@ -318,7 +318,8 @@ def capture_balises(
         got &= q <= config.max_locacc_m
         if config.require_window:
             got &= window
-        # the first rule each miss failed, in the order applied
+        # the first rule each miss failed: listed from the last rule applied above to the
+        # first, as each np.where overwrites the reasons before it
         why = np.full(len(rows), "", object)
         gap_why = np.array([
             f"{MISS_GAP} ({int((~ok[a + 1:c]).sum())} fixes between not located or doubtful, "
