@@ -179,6 +179,13 @@ def cmd_availability(args: argparse.Namespace) -> int:
     print(f"satellites counted: {run.info['constellation'].split(': ', 1)[-1]} (--constellation "
           f"{args.constellation})")
     print(availability_table(run.summary))
+    resumed = sum(r.provenance.get("blocks_resumed", 0) for r in run.results)
+    if resumed:
+        # said even with --quiet (no bar, hence no resume line): a log must tell a resumed
+        # run from a fresh one
+        blocks = sum(r.provenance.get("blocks", 0) for r in run.results)
+        print(f"availability: {resumed} of {blocks} blocks of positions resumed from an "
+              "interrupted run's checkpoint, the others computed now")
     print(f"availability: report {run.report_html} ({run.elapsed_s:.1f} s); every figure in "
           f"{Path(run.report_html).parent / 'summary.csv'}")  # fmt: skip
     return 0

@@ -261,3 +261,24 @@ def test_a_process_folder_at_a_url_needs_its_run_record(tmp_path: Path) -> None:
         assert _load_masks(f"memory://{root}")[0].n_pos == ch.size
     finally:
         MEMORY.rm(root, recursive=True)
+
+
+def test_a_quiet_command_line_run_still_says_it_resumed(
+    tmp_path: Path, mask_file: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from predisat.cli import app
+
+    argv = ["availability", "--masks", str(mask_file), "--out", str(tmp_path / "o"),
+            "--start", START, "--end", END, "--step", str(STEP_S), "--interval-every", "2",
+            "--scheduler", "serial", "--quiet"]  # fmt: skip
+    monkeypatch.setattr(engine, "block_task", _Blocks(fail_at=3))
+    with pytest.raises(RuntimeError, match="killed mid-run"):
+        app.main(argv)
+    monkeypatch.setattr(engine, "block_task", _Blocks())
+    capsys.readouterr()
+    assert app.main(argv) == 0
+    out = capsys.readouterr()
+    # --quiet drops the bar, and with it the library's resume line: the command says it
+    assert "blocks resumed from the checkpoint" not in out.err
+    assert "2 of " in out.out and "resumed from an interrupted run's checkpoint" in out.out
