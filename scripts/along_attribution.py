@@ -5,18 +5,25 @@ frames of ``scripts/eval_rigs.py``'s ideal pass) on a held-out world rendered by
 ``scripts/eval_rigs.py`` (its ``synth/truth`` folder: ``world.npz`` and ``true_masks.npz``;
 the world and the antenna positions do not depend on the rig, so one truth folder serves every
 rig), then attributes every bin where the mask stands above the truth to the part of the
-reconstruction that sets the mask there:
+reconstruction that sets the mask there, as the reconstruction itself reports it
+(``Reconstructor.run(..., trace=True)``, :class:`~predisat.reconstruct.carving.
+ReconstructionTrace`; the rig's side cameras passed as ``predisat process`` does):
 
 * ``far: assumed`` the far-field default (no camera at the position saw that far field);
 * ``far: seen`` the far-field bound of a camera at the position (its skyline, with the
-  camera-antenna parallax allowance);
+  camera-antenna parallax allowance); ``far: seen, capped far cells`` where that bound also
+  capped higher far cells of the height field;
 * ``near|far grid: unknown`` a ray of the height field met a cell no frame bounded;
 * ``near|far grid: prior ...`` the cell is a clearance cell whose bound the clearance prior set
-  (an overhead structure detected: by the zenith rule, the along-track overhead rule, the tall
-  bands on both sides; ``ceiling`` when the cameras' ceiling set the bound);
+  (an overhead structure: by the zenith rule, the along-track overhead rule, a position lacking
+  a side camera's own frame, an interval given, the tall bands on both sides; ``ceiling``
+  when the cameras' ceiling set the bound);
 * ``near|far grid: carved ...`` a carved cell (split into clearance cells over the track and
   others): the carving's bound stands above the true obstacle (a cell bounded from its far
-  corner, a cell only high rays reach).
+  corner, a cell only high rays reach);
+* ``far grid, mast rule: ...`` a far cell the mast rule resolved, kept over the far field's
+  cap;
+* ``covered (closed to 90)`` a position closed over most azimuths, closed in every bin.
 
 and likewise every bin where the mask is below the truth (false trust), with the kind of
 scenery at the position. Prints the lost sky (truly visible directions not trusted / truly
@@ -44,9 +51,15 @@ import numpy as np
 from predisat.camera.rigs import RIG_NAMES, Rig
 from predisat.masks.margins import sector_of
 from predisat.masks.truth import TrueMasks
-from predisat.reconstruct import carving as cv
 from predisat.reconstruct.badframes import BadFrame
-from predisat.reconstruct.carving import FrameView, ReconstructionParams, Reconstructor
+from predisat.reconstruct.carving import (
+    BinPart,
+    FrameView,
+    Reconstruction,
+    ReconstructionParams,
+    Reconstructor,
+    side_cameras,
+)
 from predisat.reconstruct.evaluate import trust_counts
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.heightfield import _camera_ceiling
@@ -116,98 +129,92 @@ def pipeline_frames(run_dir: Path, track: Any) -> list[FrameView]:
     return out
 
 
-def _intervals_hit(ch: np.ndarray, intervals: list[tuple[float, float]]) -> np.ndarray:
+def _intervals_hit(ch: np.ndarray, intervals: np.ndarray | list[tuple[float, float]]) -> np.ndarray:
     out = np.zeros(ch.shape, bool)
-    for a, b in intervals:
+    for a, b in np.asarray(intervals, float).reshape(-1, 2):
         out |= (ch >= a - 0.5) & (ch <= b + 0.5)
     return out
 
 
-def attribute(frames: list[FrameView], tm: TrueMasks, world: World,
-              p: ReconstructionParams) -> dict[str, Any]:  # fmt: skip
-    """Cause of each bin's value (n_pos, n_az) of str, the mask, and the reconstruction."""
-    rc = Reconstructor(p)
+def check_trace(rec: Reconstruction, plain: Reconstruction) -> None:
+    """Raise unless the traced reconstruction ``rec`` gives the untraced one's mask bit for bit
+    and its trace's parts give the mask: the far-field bins the far field's bound, the
+    height-field bins the grid's horizon, the covered bins 90 deg."""
+    if not np.array_equal(rec.mask_el_deg, plain.mask_el_deg):
+        raise RuntimeError("the traced reconstruction's mask differs from the untraced one")
+    tr = rec.trace
+    assert tr is not None
+    far = tr.part == BinPart.FAR_FIELD
+    covered = tr.part == BinPart.COVERED
+    grid = ~far & ~covered
+    m = rec.mask_el_deg
+    ok = (np.array_equal(m[far], np.clip(rec.far_el_deg[far], 0.0, 90.0))
+          and np.array_equal(m[grid], np.clip(rec.grid_el_deg[grid], 0.0, 90.0))
+          and bool((m[covered] == 90.0).all()))  # fmt: skip
+    if not ok:
+        raise RuntimeError("the attribution's parts do not give the reconstruction's mask")
+
+
+def attribute(frames: list[FrameView], tm: TrueMasks, world: World, p: ReconstructionParams,
+              sides: list[str]) -> dict[str, Any]:  # fmt: skip
+    """Cause of each bin's value (n_pos, n_az) of str, the mask, and the reconstruction.
+
+    The parts and cells are the reconstruction's own (``Reconstructor.run(..., trace=True)``);
+    ``sides``: the rig's side cameras, as ``predisat process`` passes them."""
     s = tm.chainage_m
-    rec = rc.run(frames, s, world.track)
-    lo, hi = float(s.min()), float(s.max())
-    keep = [f for f in frames if lo - p.used_m <= f.chainage_m <= hi + p.used_m]
-    profs = rc.profiles(keep)
-    margin = p.reach_m + cv._WINDOW_MARGIN_M
-    hf = rc.height_field(keep, world.track, lo - margin, hi + margin, profs)
-    # the views raster replaced by cell indices: the support the ray march returns then names
-    # the cell that set each ray
-    carved_views = hf.views
-    index = np.arange(1, hf.bound_m.size + 1, dtype=np.int32).reshape(hf.shape)
-    hf_idx = dataclasses.replace(hf, views=index)
-    ant, rot = cv._antennas(world.track, s, p.antenna_height_m)
-    caps = cv._ceiling_caps(hf.camera_ceilings, s, ant)
-    near_el, near_unk, fg_el, fg_unk, near_cell, fg_cell = cv._horizon_parts(
-        hf_idx, ant, rot, p, caps
-    )
-    far_el, far_seen, _, _ = cv._far_field(keep, rc.solid_profiles(keep, profs), s, ant,
-                                           world.track, p)  # fmt: skip
-    near_b, near_c = cv._bins_with_support(near_el, near_cell, p.n_sub)
-    fg_b, fg_c = cv._bins_with_support(fg_el, fg_cell, p.n_sub)
-    far_part = np.where(far_seen, np.minimum(fg_b, far_el), fg_b)
-    grid = np.maximum(near_b, far_part)
-    mask = np.clip(np.maximum(grid, far_el), 0.0, 90.0)
-    if not np.allclose(mask, rec.mask_el_deg, atol=1e-4):
-        raise RuntimeError("the attribution's mask differs from the reconstruction's")
-    near_unk_b = cv._bins(near_unk.astype(float), p.n_sub) > 0
-    fg_unk_b = cv._bins(fg_unk.astype(float), p.n_sub) > 0
-    # overhead intervals per rule
-    zen = [(f.chainage_m - p.zenith_spread_m, f.chainage_m + p.zenith_spread_m)
-           for f, pr in zip(keep, profs, strict=True) if cv._zenith_blocked(pr, p)]  # fmt: skip
-    along = cv._along_overhead(keep, profs, p)
-    # the tall bands' own intervals: the same carving with the two frame rules off
+    rec = Reconstructor(p).run(frames, s, world.track, side_cameras=sides, trace=True)
+    check_trace(rec, Reconstructor(p).run(frames, s, world.track, side_cameras=sides))
+    tr = rec.trace
+    assert tr is not None
+    mask = np.asarray(rec.mask_el_deg, float)
+    hf = tr.height_field
+    rules = dict(tr.overhead_rules)
+    # the tall bands' own intervals: the same carving with the two frame rules off and no
+    # interval given
     no_rules = dataclasses.replace(p, overhead_along_el_deg=None, zenith_el_deg=90.0)
-    bands = [tuple(r) for r in Reconstructor(no_rules).height_field(
-        keep, world.track, lo - margin, hi + margin, profs).overhead_m]  # fmt: skip
+    lo, hi = float(np.nanmin(hf.chainage_m)), float(np.nanmax(hf.chainage_m))
+    rules["tall bands"] = Reconstructor(no_rules).height_field(
+        list(tr.frames), world.track, lo, hi, list(tr.profiles)).overhead_m  # fmt: skip
     flat_ch = hf.chainage_m.ravel()
     flat_off = hf.offset_m.ravel()
-    flat_views = (np.zeros(hf.shape, np.int32) if carved_views is None else carved_views).ravel()
+    flat_views = (np.zeros(hf.shape, np.int32) if hf.views is None else hf.views).ravel()
     in_clear = np.abs(np.nan_to_num(flat_off, nan=99.0)) < p.clearance_half_width_m
     ceil_top = np.full(flat_ch.shape, np.inf)
     if hf.camera_ceilings.size:
         sel = np.flatnonzero(in_clear)
         ceil_top[sel] = _camera_ceiling(hf.camera_ceilings, flat_ch[sel],
-                                           hf.cell_m * np.sqrt(0.5))  # fmt: skip
+                                        hf.cell_m * np.sqrt(0.5))  # fmt: skip
     bound_flat = hf.bound_m.ravel()
 
-    def cell_cause(cell: int, part: str) -> str:
-        k = cell - 1
+    def cell_cause(k: int, part: str) -> str:
         if k < 0:
             return f"{part}: no cell"
         ch = flat_ch[k : k + 1]
         if flat_views[k] == 0 and in_clear[k]:
-            rules = []
-            if _intervals_hit(ch, zen)[0]:
-                rules.append("zenith")
-            if _intervals_hit(ch, along)[0]:
-                rules.append("along-overhead")
-            if _intervals_hit(ch, bands)[0]:
-                rules.append("tall bands")
-            if not rules:
-                rules.append("?")
+            hit = [name for name in ("zenith", "along", "lacking side", "given", "tall bands")
+                   if _intervals_hit(ch, rules[name])[0]]  # fmt: skip
             how = "ceiling" if abs(bound_flat[k] - ceil_top[k]) < 1e-3 else "band top"
-            return f"{part}: prior ({'+'.join(rules)}; {how})"
+            return f"{part}: prior ({'+'.join(hit or ['?'])}; {how})"
         if flat_views[k] == 0:
             return f"{part}: prior (other)"
         return f"{part}: carved ({'clearance' if in_clear[k] else 'beside the track'})"
 
+    names = {BinPart.NEAR_GRID: "near grid", BinPart.FAR_GRID: "far grid",
+             BinPart.RESOLVED: "far grid, mast rule"}  # fmt: skip
     cause = np.empty(mask.shape, object)
     for i in range(mask.shape[0]):
         for j in range(mask.shape[1]):
-            if far_el[i, j] >= grid[i, j]:
-                cause[i, j] = "far: seen" if far_seen[i, j] else "far: assumed"
-            elif near_b[i, j] >= far_part[i, j]:
-                cause[i, j] = ("near grid: unknown" if near_unk_b[i, j]
-                               else cell_cause(int(near_c[i, j]), "near grid"))  # fmt: skip
-            elif far_seen[i, j] and far_el[i, j] <= fg_b[i, j]:
-                cause[i, j] = "far: seen"
+            part = BinPart(int(tr.part[i, j]))
+            if part == BinPart.COVERED:
+                cause[i, j] = "covered (closed to 90)"
+            elif part == BinPart.FAR_FIELD:
+                cause[i, j] = ("far: assumed" if not tr.far_seen[i, j]
+                               else "far: seen, capped far cells" if tr.far_capped[i, j]
+                               else "far: seen")  # fmt: skip
+            elif tr.unknown[i, j]:
+                cause[i, j] = f"{names[part]}: unknown"
             else:
-                cause[i, j] = ("far grid: unknown" if fg_unk_b[i, j]
-                               else cell_cause(int(fg_c[i, j]), "far grid"))  # fmt: skip
+                cause[i, j] = cell_cause(int(tr.cell[i, j]), names[part])
     return {"cause": cause, "mask": mask, "rec": rec}
 
 
@@ -339,12 +346,15 @@ def main(argv: list[str] | None = None) -> int:
             frames = frames_for(rig, world, tm, cache, thin)
         else:
             frames = pipeline_frames(Path(args.pipeline.format(seed=seed)), world.track)
-        res = attribute(frames, tm, world, p)
+        sides = side_cameras({pos: cam for pos, cam, _ in rig.cameras})
+        res = attribute(frames, tm, world, p, sides)
         t = tally(res["cause"], res["mask"], tm, world)
         per_seed[seed] = t
         what = "ideal sky masks" if args.pipeline is None else "pipeline sky masks"
         print_table(t, f"{args.rig}, seed {seed}, {what}: sky lost per cause "
                     "(share of the truly visible directions of the sector)")  # fmt: skip
+        print(f"mask = the reconstruction's, bit for bit (traced and untraced); frames set "
+              f"aside as suspect: {len(res['rec'].suspect_frames)}")  # fmt: skip
         total = t if total is None else merge(total, t)
     if total is not None and len(args.seeds) > 1:
         print_table(total, f"{args.rig}, seeds {args.seeds} pooled")

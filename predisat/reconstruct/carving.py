@@ -30,6 +30,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -60,9 +61,11 @@ from predisat.reconstruct.skyline import (
 from predisat.track import TrackMap
 
 __all__ = [
+    "BinPart",
     "FrameView",
     "Reconstruction",
     "ReconstructionParams",
+    "ReconstructionTrace",
     "Reconstructor",
     "bin_support",
     "cell_sweep_of",
@@ -496,6 +499,74 @@ class FrameView:
         return (float(box[0]), float(box[1]), float(box[2]))
 
 
+class BinPart(IntEnum):
+    """The part of the reconstruction that sets a bin's mask elevation
+    (:attr:`ReconstructionTrace.part`; step 3 of the method, ``docs/reconstruction.md``)."""
+
+    FAR_FIELD = 0
+    """The far-field bound: the skyline of a camera at the position (with its parallax
+    allowance), or ``far_default_deg`` where none saw the bin; also where it equals the height
+    field's horizon, and where its cap lowered the far cells (``far_capped``)."""
+    NEAR_GRID = 1
+    """A height-field cell whose nearest point is nearer than ``half_width_m``."""
+    FAR_GRID = 2
+    """A height-field cell at least ``half_width_m`` away, not capped by the far field."""
+    RESOLVED = 3
+    """A far cell the mast rule resolved (``HeightField.resolved``), kept over the far field's
+    cap."""
+    COVERED = 4
+    """Raised to 90 deg by the covered-position rule (:func:`close_covered`)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReconstructionTrace:
+    """Where each bin of a :class:`Reconstruction` gets its value: the part of the
+    reconstruction that sets it and, for a height-field part, the cell (``Reconstructor.run(...,
+    trace=True)``). A diagnosis of the masks (``scripts/along_attribution.py``); the masks
+    themselves do not depend on it.
+
+    Attributes
+    ----------
+    part : ndarray of uint8, shape (n_pos, n_az)
+        :class:`BinPart` codes. Of two parts giving the same value the first in the order
+        far field, near grid, resolved, far grid is named.
+    cell : ndarray of int64, shape (n_pos, n_az)
+        For ``NEAR_GRID``, ``FAR_GRID`` and ``RESOLVED``, the flat index (``row * nx + col``)
+        into ``height_field``'s raster of the cell whose ray sets the bin (of equal rays, the
+        lowest index); -1 for the other parts and where no cell set the ray.
+    unknown : ndarray of bool, shape (n_pos, n_az)
+        The height-field part that sets the bin met an unknown cell (its value is 90 deg).
+    far_seen : ndarray of bool, shape (n_pos, n_az)
+        A camera at the position saw the bin's far field (else the bound is ``far_default_deg``).
+    far_capped : ndarray of bool, shape (n_pos, n_az)
+        The far field's cap lowered the bin's far cells (they stood higher than it).
+    height_field : HeightField
+        The field the rays were cast in (swept along the track when ``cell_sweep_m`` or
+        ``chainage_shift_m`` asks for it); ``cell`` indexes its raster.
+    frames : tuple of FrameView
+        The frames the reconstruction used (within ``used_m`` of the positions, after the
+        suspect-frame check).
+    profiles : tuple of SkyProfile
+        Their sky profiles.
+    overhead_rules : dict of str to ndarray, shape (k, 2)
+        Chainage intervals, metres, whose clearance was taken as overhead, per rule:
+        ``"zenith"`` and ``"along"`` (the frames' zenith and along-track rules),
+        ``"lacking side"`` (:func:`lacking_side_overhead`) and ``"given"`` (the ``overhead_m``
+        of :meth:`Reconstructor.run`). The tall bands the clearance prior finds itself are in
+        ``height_field.overhead_m`` only, with all of these.
+    """
+
+    part: NDArray
+    cell: NDArray
+    unknown: NDArray
+    far_seen: NDArray
+    far_capped: NDArray
+    height_field: HeightField
+    frames: tuple[FrameView, ...]
+    profiles: tuple[SkyProfile, ...]
+    overhead_rules: dict[str, NDArray]
+
+
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
     """Masks of one chainage window, ready for :class:`~predisat.masks.maskset.MaskSet`.
@@ -524,6 +595,9 @@ class Reconstruction:
     support : ndarray of uint8, shape (n_pos, n_az), or None
         Independent views behind each bin's value (:func:`bin_support`; 0 for ASSUMED bins
         and bins set by a prior).
+    trace : ReconstructionTrace or None
+        Where each bin's value comes from (``Reconstructor.run(..., trace=True)``); None
+        otherwise.
     """
 
     chainage_m: NDArray
@@ -537,6 +611,7 @@ class Reconstruction:
     params: ReconstructionParams
     suspect_frames: tuple[tuple[str, str], ...] = ()
     support: NDArray | None = None
+    trace: ReconstructionTrace | None = None
 
     def to_maskset(
         self,
@@ -736,12 +811,12 @@ class Reconstructor:
                     )
             else:
                 bound, views = _fused_bounds(hf, frames, cams, p, carver)
-        over = [
-            (f.chainage_m - p.zenith_spread_m - f.along_doubt_m - p.chainage_shift_m,
-             f.chainage_m + p.zenith_spread_m + f.along_doubt_m + p.chainage_shift_m)
-            for f, prof in zip(frames, profs, strict=True)
-            if _zenith_blocked(prof, p)
-        ] + _along_overhead(frames, profs, p) + [(float(a), float(b)) for a, b in overhead_m]
+        frame_over = _frame_overhead(frames, profs, p)
+        over = (
+            frame_over["zenith"]
+            + frame_over["along"]
+            + [(float(a), float(b)) for a, b in overhead_m]
+        )
         ceilings = None
         if frames and p.along_view_half_deg is not None:
             # thin pixels as obstacles: a feature along the track may hang within its Fresnel
@@ -773,6 +848,8 @@ class Reconstructor:
         track: TrackMap,
         overhead_m: Sequence[tuple[float, float]] = (),
         side_cameras: Sequence[str] = (),
+        *,
+        trace: bool = False,
     ) -> Reconstruction:
         """Masks at ``chainage_m`` (one window) from ``frames``.
 
@@ -781,7 +858,9 @@ class Reconstructor:
         hi), metres, where the clearance over the track is taken as overhead whatever the
         frames show. ``side_cameras``: the rig's cameras looking sideways (``mount.side``
         names): a position without a frame of one of them, among the frames used, has the
-        clearance taken as overhead too (:func:`lacking_side_overhead`).
+        clearance taken as overhead too (:func:`lacking_side_overhead`). ``trace``: also
+        return where each bin's value comes from (:attr:`Reconstruction.trace`; the rays are
+        cast once more for the cells, the masks are the same bit for bit).
         """
         p = self.params
         s = np.atleast_1d(np.asarray(chainage_m, float))
@@ -806,11 +885,14 @@ class Reconstructor:
         )
         keep = [keep[i] for i in use]
         profs = [profs[i] for i in use]
+        given = [(float(a), float(b)) for a, b in overhead_m]
+        lacking: list[tuple[float, float]] = []
         if side_cameras:  # after the suspect check: a frame it left out is missing too
-            overhead_m = [*overhead_m, *lacking_side_overhead(
+            lacking = lacking_side_overhead(
                 s, [[f.chainage_m for f in keep if f.mount.side == side] for side in side_cameras],
                 p, max((f.along_doubt_m for f in keep), default=0.0),
-            )]  # fmt: skip
+            )  # fmt: skip
+            overhead_m = [*overhead_m, *lacking]
         margin = p.reach_m + _WINDOW_MARGIN_M
         hf = self.height_field(keep, track, lo - margin, hi + margin, profs, overhead_m)
         res_hf = None
@@ -889,6 +971,16 @@ class Reconstructor:
             far_res,
         )
         desc = _descriptors(hf, track, s, ant, p)
+        traced = None
+        if trace:
+            over = {k: np.asarray(v, float).reshape(-1, 2)
+                    for k, v in _frame_overhead(keep, profs, p).items()}  # fmt: skip
+            over["lacking side"] = np.asarray(lacking, float).reshape(-1, 2)
+            over["given"] = np.asarray(given, float).reshape(-1, 2)
+            traced = _trace(
+                hf, res_hf, ant, rot, p, caps, (near_el, near_unknown), (far_grid_el, far_unknown),
+                far_el, far_seen, cap, closed, keep, profs, over,
+            )  # fmt: skip
         return Reconstruction(
             chainage_m=s,
             az_deg=np.arange(p.n_az) * p.az_step_deg,
@@ -901,7 +993,67 @@ class Reconstructor:
             params=p,
             suspect_frames=suspect_list,
             support=support,
+            trace=traced,
         )
+
+
+def _trace(
+    hf: HeightField,
+    res_hf: HeightField | None,
+    ant: NDArray,
+    rot: NDArray,
+    p: ReconstructionParams,
+    caps: NDArray | None,
+    near: tuple[NDArray, NDArray],
+    far_grid: tuple[NDArray, NDArray],
+    far_el: NDArray,
+    far_seen: NDArray,
+    cap: NDArray,
+    closed: NDArray,
+    frames: Sequence[FrameView],
+    profiles: Sequence[SkyProfile],
+    overhead_rules: dict[str, NDArray],
+) -> ReconstructionTrace:
+    """The :class:`ReconstructionTrace` of :meth:`Reconstructor.run`'s parts: the bins' parts
+    as the run combines them (``near``, ``far_grid``: per-ray elevation and unknown flag;
+    ``cap``: :func:`_far_cap`; ``closed``: :func:`close_covered`'s), and the cells, from the
+    rays cast once more with each cell's own index in place of its views."""
+    index = np.arange(hf.bound_m.size, dtype=np.int32).reshape(hf.shape)
+    near_cell, far_cell = _horizon_parts(replace(hf, views=index), ant, rot, p, caps)[4:]
+    near_b, near_c = _bins_with_support(near[0], near_cell, p.n_sub)
+    fg_b, fg_c = _bins_with_support(far_grid[0], far_cell, p.n_sub)
+    lowered = np.minimum(fg_b, far_el)
+    kept = np.zeros(far_el.shape, bool)
+    fr_c = np.full(far_el.shape, -1, np.int64)
+    if res_hf is not None:
+        res_el, _, _, res_cell = _horizon_parts(replace(res_hf, views=index), ant, rot, p,
+                                                caps)[2:]  # fmt: skip
+        fr_b, fr_c = _bins_with_support(res_el, res_cell, p.n_sub)
+        kept = cap & (fr_b > lowered)
+        lowered = np.maximum(lowered, fr_b)
+    with np.errstate(invalid="ignore"):
+        far_capped = cap & (far_el < fg_b) & ~kept
+    far_part = np.where(cap, lowered, fg_b)
+    grid = np.maximum(near_b, far_part)
+    part = np.select(
+        [closed, far_el >= grid, near_b >= far_part, kept],
+        [BinPart.COVERED, BinPart.FAR_FIELD, BinPart.NEAR_GRID, BinPart.RESOLVED],
+        BinPart.FAR_GRID,
+    ).astype(np.uint8)
+    cell = np.select(
+        [part == BinPart.NEAR_GRID, part == BinPart.FAR_GRID, part == BinPart.RESOLVED],
+        [near_c, fg_c, fr_c], -1,
+    ).astype(np.int64)  # fmt: skip
+    near_unknown = _bins(near[1].astype(float), p.n_sub) > 0
+    far_unknown = _bins(far_grid[1].astype(float), p.n_sub) > 0
+    unknown = ((part == BinPart.NEAR_GRID) & near_unknown) | (
+        (part == BinPart.FAR_GRID) & far_unknown
+    )
+    return ReconstructionTrace(
+        part=part, cell=cell, unknown=unknown, far_seen=np.asarray(far_seen, bool),
+        far_capped=np.asarray(far_capped, bool), height_field=hf, frames=tuple(frames),
+        profiles=tuple(profiles), overhead_rules=overhead_rules,
+    )  # fmt: skip
 
 
 def cell_sweep_of(chainage_m: ArrayLike) -> float:
@@ -1269,6 +1421,22 @@ def close_covered(
     raised = covered[:, None] & (mask < 90.0)
     src = np.where(raised, np.uint8(BinSource.RECONSTRUCTED), source).astype(np.uint8)
     return np.where(covered[:, None], 90.0, mask), src, raised
+
+
+def _frame_overhead(
+    frames: Sequence[FrameView], profs: Sequence[SkyProfile], p: ReconstructionParams
+) -> dict[str, list[tuple[float, float]]]:
+    """Chainage intervals whose clearance the frames' own rules take as overhead: ``zenith``
+    (within ``zenith_spread_m`` of a frame that saw something wide over it,
+    :func:`_zenith_blocked`, widened by its along-track doubt and the chainage shift) and
+    ``along`` (:func:`_along_overhead`)."""
+    zenith = [
+        (f.chainage_m - p.zenith_spread_m - f.along_doubt_m - p.chainage_shift_m,
+         f.chainage_m + p.zenith_spread_m + f.along_doubt_m + p.chainage_shift_m)
+        for f, prof in zip(frames, profs, strict=True)
+        if _zenith_blocked(prof, p)
+    ]  # fmt: skip
+    return {"zenith": zenith, "along": _along_overhead(frames, profs, p)}
 
 
 def _zenith_blocked(prof: SkyProfile, p: ReconstructionParams) -> bool:

@@ -1125,3 +1125,75 @@ def test_a_frame_the_suspect_check_leaves_out_counts_as_missing(monkeypatch) -> 
     assert (got.mask_el_deg - true_masks(world, s).mask_el_deg).min() >= -0.1
     plain = Reconstructor(p).run(fr, s, world.track)  # without the rig's sides: no rule
     assert (plain.mask_el_deg - got.mask_el_deg).min() < -10.0
+
+
+def _check_trace(rec, plain) -> None:
+    """``rec`` (traced) gives ``plain``'s masks bit for bit, and its trace agrees with them."""
+    from predisat.reconstruct.carving import BinPart
+
+    assert plain.trace is None
+    for name in ("mask_el_deg", "source", "support", "grid_el_deg", "far_el_deg"):
+        np.testing.assert_array_equal(getattr(rec, name), getattr(plain, name), err_msg=name)
+    np.testing.assert_array_equal(rec.overhead_m, plain.overhead_m)
+    tr = rec.trace
+    assert tr is not None and tr.part.shape == tr.cell.shape == rec.mask_el_deg.shape
+    far = tr.part == BinPart.FAR_FIELD
+    grid = np.isin(tr.part, [BinPart.NEAR_GRID, BinPart.FAR_GRID, BinPart.RESOLVED])
+    covered = tr.part == BinPart.COVERED
+    assert (far | grid | covered).all()
+    np.testing.assert_array_equal(rec.mask_el_deg[far], np.clip(rec.far_el_deg[far], 0, 90))
+    np.testing.assert_array_equal(rec.mask_el_deg[grid], np.clip(rec.grid_el_deg[grid], 0, 90))
+    assert (rec.grid_el_deg[grid] > rec.far_el_deg[grid]).all()
+    assert (rec.mask_el_deg[covered] == 90.0).all()
+    # every height-field bin names a cell of the modelled region, the others none
+    hf = tr.height_field
+    assert (tr.cell[~grid] == -1).all()
+    assert ((tr.cell[grid] >= 0) & (tr.cell[grid] < hf.bound_m.size)).all()
+    assert hf.region.ravel()[tr.cell[grid]].all()
+    # a bin set by an unknown cell is 90 deg, and its cell is unknown
+    assert (rec.mask_el_deg[tr.unknown] == 90.0).all()
+    assert np.isposinf(hf.bound_m.ravel()[tr.cell[tr.unknown]]).all()
+    resolved = tr.part == BinPart.RESOLVED
+    if resolved.any():
+        assert hf.resolved is not None and hf.resolved.ravel()[tr.cell[resolved]].all()
+    assert not (tr.far_capped & ~tr.far_seen).any()
+
+
+def test_a_traced_run_gives_the_same_masks_and_names_the_part_of_each_bin(mixed) -> None:
+    """The trace (``Reconstructor.run(..., trace=True)``) leaves the masks bit for bit as
+    they are, and names for each bin the part that sets it, consistently with the values:
+    the far field's bound, the height field's horizon (with the cell) or the covered rule. On
+    the mixed world with the right frame at 550 m set aside: that position's clearance is
+    taken as overhead by the lacking-side rule, and the trace says so."""
+    from predisat.reconstruct.carving import BinPart
+
+    world, frames = mixed
+    s = np.arange(500.0, 601.0, 10.0)
+    kept = [f for f in frames if not (f.mount.side == "right" and f.chainage_m == 550.0)]
+    sides = ("left", "right")
+    plain = Reconstructor(PARAMS).run(kept, s, world.track, side_cameras=sides)
+    rec = Reconstructor(PARAMS).run(kept, s, world.track, side_cameras=sides, trace=True)
+    _check_trace(rec, plain)
+    tr = rec.trace
+    assert tr is not None
+    parts = set(np.unique(tr.part).tolist())
+    assert {BinPart.FAR_FIELD, BinPart.NEAR_GRID} <= parts, parts
+    np.testing.assert_array_equal(tr.overhead_rules["lacking side"], [[545.0, 555.0]])
+    assert tr.overhead_rules["given"].shape == (0, 2)
+    used = [f for f in kept if s.min() - PARAMS.used_m <= f.chainage_m <= s.max() + PARAMS.used_m]
+    assert len(tr.frames) == len(tr.profiles) == len(used)
+
+
+def test_a_traced_run_names_the_far_cells_the_mast_rule_kept(mast_scene) -> None:
+    """The mast scene: at the positions 40-60 m before the mast the far field's cap leaves
+    the cells the near frames resolved; the trace names them (``BinPart.RESOLVED``) and
+    gives the masks of the plain run bit for bit."""
+    from predisat.reconstruct.carving import BinPart
+
+    world, _, _, _, mast_m, fr, _ = mast_scene
+    s = mast_m - np.array([60.0, 50.0, 40.0])
+    plain = Reconstructor(PARAMS).run(fr, s, world.track)
+    rec = Reconstructor(PARAMS).run(fr, s, world.track, trace=True)
+    _check_trace(rec, plain)
+    assert rec.trace is not None and (rec.trace.part == BinPart.RESOLVED).any()
+    assert rec.trace.far_capped.any()
