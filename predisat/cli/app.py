@@ -270,7 +270,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     include = not args.bare
     if args.format == "urbannav":
         _make_parent(args.out)
-        out = maskio.to_urbannav_csv(masks, args.out, include_margin=include, header=args.header)
+        out = maskio.to_urbannav_csv(masks, args.out, include_margin=include,
+                                     header=not args.no_header)  # fmt: skip
         what = f"{masks.n_pos} positions"
     else:
         assert chainage_m is not None  # checked above
@@ -480,7 +481,11 @@ def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
                    help="rtklib and pvgis: the position's chainage, metres (the nearest "
                    "surveyed position is written; no default, required with these formats)")
     p.add_argument("--bare", action="store_true", help="the mask without its margin")
-    p.add_argument("--header", action="store_true", help="urbannav: a header row")
+    p.add_argument("--header", action="store_true",
+                   help="urbannav: a header row (the default; kept for old scripts)")
+    p.add_argument("--no-header", action="store_true",
+                   help="urbannav: no header row (UrbanNav's files have one; a reader written "
+                   "for them would drop the first position)")
     p.add_argument("--pvgis-layout", choices=("table", "userhorizon"),
                    help="pvgis: the horizon-profile table or PVGIS's upload file (default table)")
     add_checks(
@@ -490,6 +495,9 @@ def _add_export(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
         lambda a: (f"--format {a.format} exports one position: give --chainage M"
                    if a.format != "urbannav" and a.chainage is None else None),
         needs("--header", "header", lambda a: a.format == "urbannav", "--format urbannav"),
+        needs("--no-header", "no_header", lambda a: a.format == "urbannav", "--format urbannav"),
+        lambda a: ("give --header or --no-header, not both"
+                   if a.header and a.no_header else None),
         needs("--pvgis-layout", "pvgis_layout", lambda a: a.format == "pvgis", "--format pvgis"),
     )  # fmt: skip
     p.set_defaults(func=cmd_export)

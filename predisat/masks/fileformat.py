@@ -571,7 +571,7 @@ def to_urbannav_csv(
     path: str | os.PathLike[str],
     *,
     include_margin: bool = True,
-    header: bool = False,
+    header: bool = True,
 ) -> Path:
     """Export every position as an UrbanNav-style sky-mask CSV row.
 
@@ -589,9 +589,11 @@ def to_urbannav_csv(
         Export ``mask + margin`` (default) or the bare mask.
     header : bool, optional
         Write a header row ``lat_deg,lon_deg,h_m,e_0,...,e_360`` (``e_a``: elevation at
-        azimuth ``a``, degrees). UrbanNav's published sky-mask tables start with one header
-        line (``Latitude(deg)``, ``Longitude(deg)``, ``Altitude(m)``, ``Skymask(1*361 deg)``),
-        so a reader written for them skips one line.
+        azimuth ``a``, degrees; default True). UrbanNav's published sky-mask tables start with
+        one header line (``Latitude(deg)``, ``Longitude(deg)``, ``Altitude(m)``,
+        ``Skymask(1*361,deg)``), so a reader written for them skips one line: without the
+        header it would drop the first position silently and look up its neighbour's mask
+        there. A header-less reader given the header fails loudly instead.
     """
     path = Path(path)
     mask = masks.effective_mask_deg if include_margin else masks.mask_el_deg
@@ -625,8 +627,9 @@ def to_rtklib_mask(
     lines ``a EL`` for a = 0..360 where ``EL`` is the maximum of the effective mask over every
     bin touching ``[a - 0.5, a + 1]`` (both lookups; line 360 closes the circle for the
     rounding readers, which otherwise leave ``[359.5, 360)`` at 0), rounded up to the 0.1-deg
-    storage and written so that truncation keeps it (e.g. ``12.35`` is stored as 12.3),
-    capped at 90.
+    storage and written so that truncation keeps it (``2.3 / 0.1`` is 22.999... and would be
+    stored as 2.2, so it is written ``2.35``, stored as 2.3; ``12.3 / 0.1`` is exactly 123 and
+    is written ``12.3``), capped at 90.
 
     Parameters
     ----------

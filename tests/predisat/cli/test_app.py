@@ -251,6 +251,14 @@ def test_export_writes_the_three_formats(tmp_path, capsys: pytest.CaptureFixture
         extra = [] if fmt == "urbannav" else ["--chainage", str(ch)]
         assert cli.main(["export", str(src), "--format", fmt, "--out", str(out), *extra]) == 0
         assert out.read_bytes() == want[fmt].read_bytes()
+    # urbannav: a header line by default, as UrbanNav's files; --no-header drops it
+    out = tmp_path / "nohdr.csv"
+    assert cli.main(["export", str(src), "--format", "urbannav", "--out", str(out),
+                     "--no-header"]) == 0  # fmt: skip
+    assert out.read_bytes() == maskio.to_urbannav_csv(
+        masks, tmp_path / "un.csv", header=False
+    ).read_bytes()
+    assert want["urbannav"].read_text().startswith("lat_deg,lon_deg,h_m,e_0,")
     # options of another format: refused by the parser (tests/predisat/cli/test_vocabulary.py)
 
 

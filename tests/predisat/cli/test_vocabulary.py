@@ -139,6 +139,10 @@ CONTRADICTIONS = [
     (predisat_cli.main, "export {masks} --format rtklib --out {out}", "--chainage M"),
     (predisat_cli.main, "export {masks} --format rtklib --chainage 4000 --header --out {out}",
      "--header"),
+    (predisat_cli.main, "export {masks} --format rtklib --chainage 4000 --no-header "
+     "--out {out}", "--no-header"),
+    (predisat_cli.main, "export {masks} --format urbannav --header --no-header --out {out}",
+     "not both"),
     (predisat_cli.main, "export {masks} --format rtklib --chainage 4000 --pvgis-layout table "
      "--out {out}", "--pvgis-layout"),
     (predisat_cli.main, "evaluate {masks} --truth {dir} --calibrate --margins {json}",

@@ -7,6 +7,7 @@ values computed here from the documented rules.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import re
@@ -332,7 +333,7 @@ def test_reads_the_output_folder_of_process(tmp_path):
 def test_urbannav_csv_rows_and_conservative_samples(tmp_path):
     m = make_set(step=0.5)
     path = to_urbannav_csv(m, tmp_path / "skymask.csv")
-    data = np.loadtxt(path, delimiter=",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
     assert data.shape == (m.n_pos, 3 + 361)
     np.testing.assert_allclose(data[:, 0], m.lat_deg, atol=1e-9)
     np.testing.assert_allclose(data[:, 1], m.lon_deg, atol=1e-9)
@@ -375,6 +376,23 @@ def test_urbannav_header_option(tmp_path):
     path = to_urbannav_csv(make_set(n_pos=3), tmp_path / "h.csv", header=True)
     first = path.read_text().splitlines()[0].split(",")
     assert first[:4] == ["lat_deg", "lon_deg", "h_m", "e_0"] and first[-1] == "e_360"
+    bare = to_urbannav_csv(make_set(n_pos=3), tmp_path / "n.csv", header=False)
+    assert np.loadtxt(bare, delimiter=",").shape == (3, 364)
+
+
+def test_urbannav_default_keeps_every_position_for_a_reader_of_urbannavs_files(tmp_path):
+    # UrbanNav's sky-mask tables start with one header line, and readers written for them
+    # skip it (csv.reader + next(reader)); a header-less default lost the first position,
+    # whose place then got the second position's (lower) mask by nearest lookup.
+    m = make_set(n_pos=3)
+    path = to_urbannav_csv(m, tmp_path / "skymask.csv")
+    with open(path, newline="") as fh:
+        reader = csv.reader(fh)
+        next(reader)  # the header line of UrbanNav's files
+        rows = [[float(v) for v in row] for row in reader]
+    assert len(rows) == m.n_pos
+    np.testing.assert_allclose([r[0] for r in rows], m.lat_deg, atol=1e-9)
+    np.testing.assert_allclose([r[1] for r in rows], m.lon_deg, atol=1e-9)
 
 
 def read_rtklib_elmask(path):
@@ -564,7 +582,7 @@ def test_exports_cap_at_90_and_reject_uncovered_chainage(tmp_path):
     )
     up = np.loadtxt(to_pvgis_horizon(m, 0.0, tmp_path / "u.txt", layout="userhorizon"))
     assert (up == 90.0).all()
-    data = np.loadtxt(to_urbannav_csv(m, tmp_path / "u.csv"), delimiter=",")
+    data = np.loadtxt(to_urbannav_csv(m, tmp_path / "u.csv"), delimiter=",", skiprows=1)
     assert (data[:, 3:] == 90.0).all()
     with pytest.raises(MaskError, match="outside"):
         to_rtklib_mask(m, 100.0, tmp_path / "e.txt")
