@@ -54,6 +54,7 @@ from predisat.cli.demo import (
 if TYPE_CHECKING:
     from predisat.camera.models import CameraModel
     from predisat.camera.rigs import Rig
+    from predisat.masks.maskset import MaskSet
     from predisat.synth.world import WorldSpec
 
 __all__ = ["main"]
@@ -234,11 +235,6 @@ def cmd_process(args: argparse.Namespace) -> int:
     return 0
 
 
-# `export --chainage` farther than this from every surveyed position is refused: the nearest
-# position's mask would be written for a place nobody surveyed.
-_EXPORT_REACH_M = 50.0
-
-
 def cmd_network(args: argparse.Namespace) -> int:
     from predisat.cli import network
 
@@ -261,6 +257,16 @@ def _make_parent(path: Path) -> None:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
 
 
+def _swept(masks: MaskSet) -> bool:
+    """Whether the masks were made to bound their whole cell (``--cell-sweep``; ``None`` there
+    is half the largest gap)."""
+    rec = masks.provenance.get("params", {}).get("reconstruction", {})
+    if not isinstance(rec, dict) or "cell_sweep_m" not in rec:
+        return False
+    sweep = rec["cell_sweep_m"]
+    return sweep is None or float(sweep) > 0.0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from predisat.masks import fileformat as maskio
 
@@ -276,15 +282,22 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:
         assert chainage_m is not None  # checked above
         ch_m = float(chainage_m)
-        lo_m, hi_m = float(masks.chainage_m.min()), float(masks.chainage_m.max())
-        reach_m = _EXPORT_REACH_M
-        if not lo_m - reach_m <= ch_m <= hi_m + reach_m:
+        # the coverage the exporters take (the end cells), so that the refusal carries the hint
+        lo_m, hi_m = float(masks.cell_bounds_m[0]), float(masks.cell_bounds_m[-1])
+        if not lo_m <= ch_m <= hi_m:
             raise CliError(
                 f"--chainage {ch_m:g} m is outside the masks of {path} ({lo_m:.0f}-{hi_m:.0f} m "
                 "of chainage)" + chainage_hint(ch_m, lo_m, hi_m, "--chainage")
             )
         i, _ = masks.position_index(ch_m)
-        what = f"position at chainage {float(masks.chainage_m[int(i)]):.2f} m"
+        at_m = float(masks.chainage_m[int(i)])
+        what = f"position at chainage {at_m:.2f} m"
+        if abs(at_m - ch_m) >= 0.005:
+            # a mask holds at its position: one written for another place says so (a trial
+            # asked for 4150 m and got 4160 m's mask without a word)
+            what += (f", the nearest to the {ch_m:g} m asked, {abs(at_m - ch_m):.2f} m away: a "
+                     "mask holds at its position" + ("" if _swept(masks) else
+                     " (not made with --cell-sweep: not a bound over its cell)"))
         _make_parent(args.out)
         if args.format == "rtklib":
             out = maskio.to_rtklib_mask(masks, ch_m, args.out, include_margin=include)

@@ -501,3 +501,33 @@ def test_python_dash_m_runs_both_command_lines() -> None:
                               text=True, timeout=120, check=False)  # fmt: skip
         assert done.returncode == 0, done.stderr
         assert done.stdout.startswith(out)
+
+
+def test_export_says_how_far_the_position_written_is_from_the_chainage_asked(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from predisat.masks import fileformat as maskio
+    from tests.predisat.masks.test_fileformat import make_set
+
+    masks = make_set(step=0.5)
+    src = maskio.write_masks(masks, tmp_path / "masks.parquet")
+    ch = masks.chainage_m
+    asked = float(ch[3]) + 0.3 * float(ch[4] - ch[3])
+    out = tmp_path / "r.txt"
+    capsys.readouterr()
+    assert cli.main(["export", str(src), "--format", "rtklib", "--out", str(out),
+                     "--chainage", f"{asked}"]) == 0  # fmt: skip
+    said = capsys.readouterr().out
+    away = f"{abs(asked - float(ch[3])):.2f} m away"
+    assert f"{float(ch[3]):.2f} m" in said and away in said and "not a bound" in said
+    # within the end cell, past the last position: written (the exporters take the cell)
+    beyond = float(masks.cell_bounds_m[-1]) - 0.01
+    assert cli.main(["export", str(src), "--format", "rtklib", "--out", str(out),
+                     "--chainage", f"{beyond}"]) == 0  # fmt: skip
+    # past the coverage, by less than the old 50 m reach: refused by the command with its hint
+    # (the library refused it with a bare message before)
+    past = float(masks.cell_bounds_m[-1]) + 1.0
+    assert cli.main(["export", str(src), "--format", "rtklib", "--out", str(out),
+                     "--chainage", f"{past}"]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "--chainage" in err and "outside the masks of" in err
