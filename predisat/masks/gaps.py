@@ -29,7 +29,7 @@ def close_gaps(
     between two surveyed positions would silently be covered by them. Wherever consecutive
     positions are more than :data:`GAP_FACTOR` times the median spacing apart, positions are
     inserted at that spacing with a 90 deg mask (nothing trusted), source ``ASSUMED`` and NaN
-    obstacle descriptors.
+    obstacle descriptors. The holes are added to ``provenance["gaps_closed_m"]``.
 
     Parameters
     ----------
@@ -37,9 +37,11 @@ def close_gaps(
         The merged masks, n_pos >= 3 (fewer give no spacing to compare with).
     track : TrackMap, optional
         Gives the inserted positions' lat / lon / h and heading. Without it (a mask file read
-        on its own) two positions close each hole, one spacing inside each end, placed along
-        the heading of the surveyed position beside them (a chord across a long hole would
-        leave the track on a curve); their cells cover the hole between them.
+        on its own) a position closes each hole one spacing past its start and, when the hole
+        is longer than 2.5 spacings, a second one spacing before its end, placed along the
+        heading of the surveyed position beside them (a chord across a long hole would leave
+        the track on a curve); their cells cover the hole between them (the far neighbour's
+        cell reaches at most 0.75 spacing into it, as across an unclosed gap of 1.5).
 
     Returns
     -------
@@ -81,7 +83,11 @@ def close_gaps(
         margin_deg=cat(np.broadcast_to(masks.margin_deg, masks.mask_el_deg.shape),
                        np.zeros((n_new, n_az))),
         descriptors={k: cat(v, np.full(n_new, np.nan)) for k, v in masks.descriptors.items()},
-        provenance=masks.provenance,
+        # recorded with the set, wherever it was closed (on reading too: a trial found a file
+        # read and written again with filler positions and no word of them)
+        provenance={**masks.provenance, "gaps_closed_m": [
+            *[list(g) for g in masks.provenance.get("gaps_closed_m", [])],
+            *[[float(ch[i]), float(ch[i + 1])] for i in holes]]},
         support=None if masks.support is None else cat(masks.support, np.zeros((n_new, n_az))),
     )  # fmt: skip
     return closed, [(float(ch[i]), float(ch[i + 1])) for i in holes]

@@ -643,6 +643,9 @@ def test_a_hole_between_positions_is_closed_on_reading_not_covered_by_its_neighb
     first = back.subset(0.0, 100.0).mask_el_deg
     assert np.array_equal(first, joined.subset(0.0, 100.0).mask_el_deg)
     assert read_masks(path, close_holes=False).n_pos == joined.n_pos
+    # and the set says so: written again, its filler positions are not taken for survey
+    assert back.provenance["gaps_closed_m"] == [[100.0, 2000.0]]
+    assert "gaps_closed_m" not in joined.provenance  # the input untouched
 
 
 def test_the_positions_closing_a_hole_lie_on_the_track_on_a_curve(tmp_path):
