@@ -160,6 +160,71 @@ class OdometerAccuracy:
         wide = np.maximum(over, under)
         return d - np.where(reversed_, wide, lo_doubt), d + np.where(reversed_, wide, hi_doubt)
 
+    def anchor_excess_m(
+        self,
+        true_m: ArrayLike,
+        odo_m: ArrayLike,
+        ahead_m: ArrayLike | None = None,
+        behind_m: ArrayLike | None = None,
+    ) -> tuple[NDArray, NDArray]:
+        """How far the truth leaves the bounds from the worst earlier sample taken as anchor.
+
+        Every sample may be an anchor (the run loop re-anchors each bound where the satellites
+        tightened it, a balise resets from where it is read), so the bounds must hold between
+        every pair of samples ``i <= j``, not only from the first: a 4 % over-read for 20 s
+        stays inside ``abs + rel x`` the whole run's distance but not inside the bound from
+        where it began. Exact for every pair as :meth:`displacement_bounds_m` with the
+        travelled distance and the disputed distance since ``i``, in O(n): the bound of a pair
+        across a reversal or a disputed step is the larger rate of the two, separable in ``i``
+        and ``j``; within a stretch of one direction without dispute the directional rates.
+
+        Parameters
+        ----------
+        true_m : array_like, shape (n,)
+            True signed displacement since the first sample, m.
+        odo_m : array_like, shape (n,)
+            Measured signed displacement since the first sample (same frame), m.
+        ahead_m, behind_m : array_like, shape (n,), optional
+            Disputed distance since the first sample toward ``+`` / ``-`` (non-decreasing),
+            m; default none.
+
+        Returns
+        -------
+        excess_m : ndarray, shape (n,)
+            Per sample ``j``: the largest distance by which the true displacement from an
+            earlier sample ``i`` lies outside the bounds of the measured one, m; ``<= 0``
+            inside from every anchor.
+        anchor : ndarray of int, shape (n,)
+            The sample ``i`` of that largest excess.
+        """
+        r = np.asarray(true_m, float)
+        d = np.asarray(odo_m, float)
+        n = r.size
+        if d.shape != (n,) or r.ndim != 1:
+            raise ValueError(f"true_m and odo_m must be 1-D of one length, got {r.shape} and "
+                             f"{d.shape}")  # fmt: skip
+        a = np.zeros(n) if ahead_m is None else np.asarray(ahead_m, float)
+        b = np.zeros(n) if behind_m is None else np.asarray(behind_m, float)
+        if a.shape != (n,) or b.shape != (n,):
+            raise ValueError(f"ahead_m and behind_m must have the shape of true_m ({n},), got "
+                             f"{a.shape} and {b.shape}")  # fmt: skip
+        step = np.diff(d)
+        ran = np.concatenate([[0.0], np.cumsum(np.abs(step))]) + a + b
+        wide = max(self.over_rel, self.under_rel)
+        # any pair: the wide rate, the disputed distance on its side (the looser bound, exact
+        # for a pair across a reversal or a disputed step)
+        excess, anchor = _pair_excess(r - d - wide * ran - a, r - d + wide * ran + b)
+        # pairs within one direction and no disputed step: the directional rates
+        disputed = (np.diff(a) > 0) | (np.diff(b) > 0)
+        up, down = 1.0 + self.under_rel, 1.0 - self.over_rel  # forward: hi and lo rates
+        for s, e, sign in _monotone_stretches(step, disputed):
+            hi_rate, lo_rate = (up, down) if sign >= 0 else (down, up)
+            ex, an = _pair_excess(r[s:e] - hi_rate * d[s:e], r[s:e] - lo_rate * d[s:e])
+            worse = ex > excess[s:e]
+            excess[s:e] = np.where(worse, ex, excess[s:e])
+            anchor[s:e] = np.where(worse, an + s, anchor[s:e])
+        return excess - self.abs_error_m, anchor
+
 
 @dataclass(frozen=True)
 class BalisePassage:
@@ -446,3 +511,32 @@ def _state_at(
     # forward motion: over-reading shortens the true travel (true behind the estimate)
     lo, hi = acc.displacement_bounds_m(d, np.asarray(ran, float) - ran0)
     return est, over0 + (d - lo) + disputed[..., 0], under0 + (hi - d) + disputed[..., 1]
+
+
+def _pair_excess(upper: NDArray, lower: NDArray) -> tuple[NDArray, NDArray]:
+    """Per ``j``: ``max_{i <= j}`` of ``upper[j] - upper[i]`` and ``lower[i] - lower[j]`` (the
+    truth beyond the bound above and below, before the fixed part), and its ``i``."""
+    idx = np.arange(upper.size)
+    low = np.minimum.accumulate(upper)
+    at_low = np.maximum.accumulate(np.where(upper == low, idx, 0))
+    high = np.maximum.accumulate(lower)
+    at_high = np.maximum.accumulate(np.where(lower == high, idx, 0))
+    above, below = upper - low, high - lower
+    return np.maximum(above, below), np.where(above >= below, at_low, at_high)
+
+
+def _monotone_stretches(step_m: NDArray, disputed: NDArray) -> list[tuple[int, int, int]]:
+    """Sample ranges ``[start, end)`` whose steps keep one direction (zeros aside) and hold no
+    disputed step, with that direction (+1, -1; 0 standing); neighbours share a sample."""
+    out = []
+    start, sign = 0, 0
+    for k, (s, bad) in enumerate(zip(np.sign(step_m), disputed, strict=True)):
+        if bad or (s and sign and s != sign):  # step k runs from sample k to k + 1
+            if k > start:
+                out.append((start, k + 1, sign))
+            start, sign = (k + 1, 0) if bad else (k, int(s))
+        elif s:
+            sign = int(s)
+    if len(step_m) > start:
+        out.append((start, len(step_m) + 1, sign))
+    return out

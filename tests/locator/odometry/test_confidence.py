@@ -182,3 +182,51 @@ def test_a_known_distance_balise_keeps_its_own_location_accuracy():
     # C really 15 m further than its list says: the truth stays inside
     truth = odo + 15.0 * (odo >= 1000.0)
     assert np.all(sf.max_safe_front_m[100:] >= truth[100:])
+
+
+def _brute_excess(acc, true_m, odo_m, ahead_m, behind_m):
+    """Per j, the largest excess over every anchor i <= j by displacement_bounds_m itself."""
+    n = len(true_m)
+    ran = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(odo_m)))]) + ahead_m + behind_m
+    out = np.full(n, -np.inf)
+    for i in range(n):
+        d, tr = odo_m[i:] - odo_m[i], ran[i:] - ran[i]
+        lo, hi = acc.displacement_bounds_m(d, tr)
+        lo, hi = lo - (behind_m[i:] - behind_m[i]), hi + (ahead_m[i:] - ahead_m[i])
+        moved = true_m[i:] - true_m[i]
+        out[i:] = np.maximum(out[i:], np.maximum(lo - moved, moved - hi))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_excess_from_every_anchor_is_the_pairwise_bounds_check(seed):
+    """anchor_excess_m (O(n)) against every pair checked with displacement_bounds_m: forward,
+    standing, backward legs, disputed steps, and errors both ways."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    legs = np.repeat(rng.choice([-1.0, 0.0, 1.0, 1.0], 12), n // 12)[: n - 1]
+    step = legs * rng.uniform(5.0, 15.0, n - 1)
+    true_m = np.concatenate([[0.0], np.cumsum(step)])
+    odo_m = np.concatenate([[0.0], np.cumsum(step * (1 + rng.normal(0.0, 0.05, n - 1)))])
+    disputed = rng.random(n - 1) < 0.05
+    ahead = np.concatenate([[0.0], np.cumsum(disputed * rng.uniform(0.0, 3.0, n - 1))])
+    behind = np.concatenate([[0.0], np.cumsum(disputed * rng.uniform(0.0, 3.0, n - 1))])
+    acc = OdometerAccuracy(1.0, 0.04, 0.02)
+    excess, anchor = acc.anchor_excess_m(true_m, odo_m, ahead, behind)
+    np.testing.assert_allclose(excess, _brute_excess(acc, true_m, odo_m, ahead, behind),
+                               atol=1e-9)  # fmt: skip
+    assert np.all(anchor <= np.arange(n)) and (excess > 0).any() and (excess <= 0).any()
+
+
+def test_an_over_read_over_a_stretch_exceeds_the_bound_from_where_it_began():
+    """A 4 % over-read for 400 m after 4 km at 1 m + 2 %: inside from the start (16 m against
+    1 + 2 % of 4416 m = 89 m), outside from where it began (416 m read for 400 m run)."""
+    true_m = np.arange(0.0, 4401.0, 20.0)
+    odo_m = true_m + 0.04 * np.clip(true_m - 4000.0, 0.0, None)
+    acc = OdometerAccuracy(1.0, 0.02, 0.02)
+    lo, hi = acc.displacement_bounds_m(odo_m)
+    assert np.all((lo <= true_m) & (true_m <= hi))  # the first epoch's check passes
+    excess, anchor = acc.anchor_excess_m(true_m, odo_m)
+    assert excess[-1] == pytest.approx(416.0 - 1.0 - 0.02 * 416.0 - 400.0)
+    assert true_m[anchor[-1]] == 4000.0
+    assert np.all(excess[true_m <= 4000.0] <= 0)

@@ -100,6 +100,42 @@ def test_a_log_within_its_accuracy_passes(tmp_path):
         check_log_against_run(_run(), _log(tmp_path, T0_S - 5.0, 40.0, scale=scale), SUBSET041)
 
 
+def _over_read_log(tmp_path, over=0.04, start_s=200.0, length_s=20.0):
+    """A log at 20 m/s for 300 s that over-reads by ``over`` from ``start_s`` for ``length_s``
+    (distance and speed alike: consistent in itself, only the truth shows it)."""
+    t = np.arange(0.0, 300.05, 0.1)
+    v = 20.0 * np.where((t >= start_s) & (t < start_s + length_s), 1.0 + over, 1.0)
+    dist = np.concatenate([[0.0], np.cumsum(v[:-1] * 0.1)])
+    p = tmp_path / "odo.csv"
+    pd.DataFrame({"t_s": T0_S + t, "dist_m": dist, "speed_mps": v,
+                  "direction": 1}).to_csv(p, index=False, float_format="%.17g")  # fmt: skip
+    return read_odometer_log(p)
+
+
+def _run_20mps():
+    t = T0_S + np.arange(301.0)
+    return SimpleNamespace(gps_s=t, chainage_m=100.0 + 20.0 * (t - T0_S),
+                           speed_mps=np.full(len(t), 20.0), meta={"direction": 1})  # fmt: skip
+
+
+def test_an_over_read_between_anchors_is_refused(tmp_path):
+    """A user trial: a 4 % over-read for 20 s (416 m read for 400 m run) passed against
+    1 m + 2 % because only the displacement since the first epoch was checked (16 m against
+    89 m at 220 s); every epoch may anchor the run's bounds, so it is refused from 200 s on."""
+    acc = OdometerAccuracy(1.0, 0.02, 0.02)
+    with pytest.raises(OdometerLogError) as exc:
+        check_log_against_run(_run_20mps(), _over_read_log(tmp_path), acc)
+    msg = str(exc.value)
+    assert str(tmp_path / "odo.csv") in msg
+    assert ("at t_s 1277107420.0 (epoch 220) its dist_m has run 416.0 m since t_s 1277107400.0 "
+            "(epoch 200), the train 400.0 m" in msg and "by 6.7 m" in msg), msg
+    assert "unmarked slip or slide" in msg and "--odometer-accuracy" in msg
+    # the same log against bounds that hold 4 %, and a healthy log at 1 m + 2 %, pass
+    check_log_against_run(_run_20mps(), _over_read_log(tmp_path), OdometerAccuracy(1.0, 0.045,
+                                                                                  0.045))
+    check_log_against_run(_run_20mps(), _over_read_log(tmp_path, over=0.015), acc)
+
+
 def _log_of(tmp_path, run):
     """The exact log of an accelerating ``run`` (chainage 1000 + 0.25 t^2)."""
     tl = T0_S + np.arange(0.0, 30.05, 0.1)
