@@ -357,8 +357,8 @@ def balises_to_folder(
     ``log`` replaces the simulated odometer by a recorded one (``accuracy`` then should be its
     bounds, e.g. :meth:`OdometerAccuracy.subset041`). Writes ``epochs.parquet`` (the run table
     with the truth), ``captures.csv`` (one row per configuration and balise, with timing
-    errors; ``safety_claim`` is False for every capture under a forced error model or a fixed
-    ``k``: :attr:`locator.run.RunConfig.makes_safety_claims`),
+    errors and the list's ``q_reference``; ``safety_claim`` is False for every capture under
+    a forced error model or a fixed ``k``: :attr:`locator.run.RunConfig.makes_safety_claims`),
     ``summary.json`` and ``captures.png``.
 
     ``progress`` is called with the number of epochs located since its last call;

@@ -217,7 +217,9 @@ def capture_balises(
     Returns
     -------
     pandas.DataFrame
-        One row per balise: ``id``, ``chainage_m``, ``telegram``, ``captured``, ``zone``
+        One row per balise: ``id``, ``chainage_m``, ``telegram``, ``q_reference`` (the
+        list's, 1 or 0: whether the telegram may reset the odometer's confidence interval),
+        ``captured``, ``zone``
         (``capture``, ``arm`` or ``""``), ``epoch`` (the crossing fix, -1 if none),
         ``t_pass_s`` (reported passage time), ``t_emit_s``, ``lo_m``, ``hi_m`` (fused interval
         at the crossing fix), ``gap_s`` (time between the two fixes), ``in_window`` (the
@@ -360,7 +362,9 @@ def capture_balises(
                         odo_acc, extra)  # fmt: skip
     out["miss_reason"] = np.where(out["captured"], "", out["miss_reason"])
     return pd.DataFrame({"id": list(balises.ids), "chainage_m": b,
-                         "telegram": list(balises.telegram), **out})  # fmt: skip
+                         "telegram": list(balises.telegram),
+                         "q_reference": np.asarray(balises.q_reference, bool).astype(int),
+                         **out})  # fmt: skip
 
 
 def _schedule_ahead(

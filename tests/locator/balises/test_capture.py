@@ -498,3 +498,17 @@ def test_every_miss_says_why():
     r2 = capture_balises(t, est, lo, hi, balises([-5.0, 121.0]),
                          CaptureConfig.gaderos(2.0), orientation=1)  # fmt: skip
     assert r2["miss_reason"].tolist() == [MISS_NO_PAIR, MISS_ZONE]
+
+
+def test_each_capture_row_carries_the_balise_q_reference():
+    """A user trial: captures.csv did not say which telegrams may reset the odometer's
+    interval (Q_REFERENCE): the list's 0/1 is carried to every row, captured or not."""
+    t, _truth, est, lo, hi = fixes(1.0, 22.0, 20.0)
+    bl = balises([105.0, 230.0, 500.0])  # the last is never reached
+    bl = BaliseList(bl.ids, bl.chainage_m, bl.lat_deg, bl.lon_deg, bl.h_m, bl.telegram,
+                    np.array([True, False, False]), bl.accuracy_m)  # fmt: skip
+    cap = capture_balises(t, est, lo, hi, bl, CaptureConfig.gaderos(25.0), orientation=1)
+    assert cap["q_reference"].tolist() == [1, 0, 0]
+    assert cap["captured"].tolist() == [True, True, False]
+    sc = score_captures(cap, t, _truth, orientation=1, false_tolerance_m=25.0)
+    assert sc["q_reference"].tolist() == [1, 0, 0]

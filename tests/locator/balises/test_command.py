@@ -271,6 +271,32 @@ def test_captures_csv_keeps_the_times_full_precision(sim_dir, tmp_path):
     assert back["t_true_s"].notna().any() and back["t_pass_s"].notna().any()
 
 
+def test_captures_csv_says_each_balise_q_reference(sim_dir, tmp_path):
+    """A user trial: the list's q_reference (whether a telegram may reset the odometer's
+    interval) was not in captures.csv; it is, as the list's 0/1, and reads back."""
+    track = World.load(sim_dir / "world.npz").track
+    sim = SimRun.read(sim_dir)
+    bl = BaliseList.along_track(track, float(sim.chainage_m[0]) + 20.0,
+                                float(sim.chainage_m[-1]), 25.0)  # fmt: skip
+    p = bl.to_csv(tmp_path / "b.csv")
+    df = pd.read_csv(p)
+    df.loc[1::2, "q_reference"] = 0
+    df.to_csv(p, index=False, float_format="%.17g")
+    assert main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--balises", str(p),
+                 "--out", str(tmp_path / "q")]) == 0  # fmt: skip
+    caps = pd.read_csv(tmp_path / "q" / "captures.csv")
+    want = dict(zip(df["id"], df["q_reference"], strict=True))
+    assert caps["q_reference"].tolist() == [want[i] for i in caps["id"]]
+    assert set(caps["q_reference"]) == {0, 1}
+    # and the list written from the table's columns reads back as a balise list
+    cols = ["id", "chainage_m", "telegram", "q_reference"]
+    back = caps[caps["config"] == caps["config"].iloc[0]][cols].merge(
+        df.drop(columns=["chainage_m", "telegram", "q_reference"]), on="id")
+    back.to_csv(tmp_path / "again.csv", index=False, float_format="%.17g")
+    again = BaliseList.from_csv(tmp_path / "again.csv", track)
+    assert again.q_reference.tolist() == [bool(want[i]) for i in again.ids]
+
+
 def test_track_name_selects_one_track_of_a_file_holding_several(sim_dir, tmp_path, capsys):
     track = World.load(sim_dir / "world.npz").track
     # with the world's heights: a map without them is refused (check_track_height)
