@@ -1,5 +1,5 @@
 """Command line of the 1-D locator (``locator``): simulate, run, evaluate, calibrate, demo,
-balises, campaign.
+balises, place-balises, campaign.
 
 Errors from bad input are printed as one message naming the file and the fix (exit code 2).
 """
@@ -91,6 +91,8 @@ COMMAND_HELP = {
     "calibrate": "learn sigma(el) from data with known truth",
     "demo": "a simulated run on the demo line under several trust rules",
     "balises": "virtual balises: locate a simulated run with odometry and capture its balises",
+    "place-balises": "virtual balises: place them along a track map where the placement rule "
+    "allows",
     "campaign": "simulated campaign: worlds x start times x rules, on Dask, resumable",
 }
 
@@ -1498,6 +1500,12 @@ def _add_balises(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     add_parser(sub)  # `locator balises`: arguments and job in locator.balises
 
 
+def _add_place_balises(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from locator.balises.place_command import add_parser  # the candidates read the track map
+
+    add_parser(sub)  # `locator place-balises`: arguments and job in locator.balises
+
+
 def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from locator.campaign_command import add_parser
 
@@ -1531,6 +1539,7 @@ def build_parser(only: Collection[str] | None = None) -> argparse.ArgumentParser
         "calibrate": _add_calibrate,
         "demo": _add_demo,
         "balises": _add_balises,
+        "place-balises": _add_place_balises,
         "campaign": _add_campaign,
     }
     for name, add in adders.items():

@@ -73,7 +73,7 @@ def test_core_modules_import_without_the_renderer(tmp_path: Path) -> None:
         "locator", "locator.cli", "locator.run", "locator.sources", "locator.runio",
         "locator.errorfit", "locator.evaluate", "locator.sim.simfile", "locator.spp",
         "locator.odometry.fusion", "locator.odometry.confidence", "locator.balises.capture",
-        "locator.balises.campaign", "locator.balises.command",
+        "locator.balises.campaign", "locator.balises.command", "locator.balises.place_command",
     ]  # fmt: skip
     done = _run_without_synth(
         f"import importlib\nfor m in {core!r}:\n    importlib.import_module(m)\nprint('ok')\n",

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from locator.sim.simfile import SimRun
     from predisat.track import TrackMap
 
-__all__ = ["add_parser", "cmd_balises", "format_summary"]
+__all__ = ["add_parser", "cmd_balises", "format_summary", "odometer_accuracy_check"]
 
 # defaults stated in the help and applied in cmd_balises (None in the parser: given or not)
 _SPACING_M = 120.0
@@ -147,13 +147,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         needs("--max-accel", "max_accel", lambda a: given(a, "odometer_log"), "--odometer-log"),
         requires("--track-name", "track_name", "--track FILE", "track"),
         requires("--where", "where", "--track FILE", "track"),
-        _odometer_accuracy_check,
+        odometer_accuracy_check,
     )
     p.set_defaults(func=cmd_balises)
     return p
 
 
-def _odometer_accuracy_check(args: argparse.Namespace) -> str | None:
+def odometer_accuracy_check(args: argparse.Namespace) -> str | None:
     """``--odometer-accuracy``'s relative parts are fractions below 1 (5 % is 0.05)."""
     if not args.odometer_accuracy:
         return None

@@ -10,6 +10,10 @@ interval's longer side). Outside outages the reach is the portal's (the satellit
 
 The prediction holds for a train that was located before the outage; a start of mission inside
 an outage (position known only to the stored start uncertainty) is not a placement question.
+
+:func:`place_balises` applies the rule to candidates every so many metres along a track map and
+returns the placeable ones as a :class:`~locator.balises.balisefile.BaliseList` (the
+``locator place-balises`` command, :mod:`locator.balises.place_command`).
 """
 
 from __future__ import annotations
@@ -17,12 +21,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from locator.balises.balisefile import BaliseList
 from locator.balises.capture import Q_LOCACC_MAX_M
 from locator.odometry.confidence import OdometerAccuracy
+from predisat.track import TrackMap
 
-__all__ = ["placement_check", "predicted_reach_m"]
+__all__ = ["place_balises", "placement_check", "predicted_reach_m"]
 
 
 def predicted_reach_m(
@@ -92,3 +99,68 @@ def placement_check(
     reach = predicted_reach_m(chainage_m, outages_m, accuracy, entry_reach_m)
     q = np.ceil(reach + np.asarray(accuracy_m, float) - 1e-9)
     return q, q <= max_locacc_m
+
+
+def place_balises(
+    track: TrackMap,
+    start_m: float,
+    stop_m: float,
+    spacing_m: float,
+    outages_m: Sequence[tuple[float, float]],
+    accuracy: OdometerAccuracy,
+    entry_reach_m: float,
+    *,
+    accuracy_m: float = 1.0,
+    max_locacc_m: float = Q_LOCACC_MAX_M,
+    prefix: str = "VB",
+) -> tuple[BaliseList, pd.DataFrame]:
+    """Candidate balises every ``spacing_m`` along a track, kept where the rule places them.
+
+    Parameters
+    ----------
+    track : predisat.track.TrackMap
+    start_m, stop_m, spacing_m : float
+        Candidates every ``spacing_m`` from ``start_m`` up to ``stop_m`` (chainage), m.
+    outages_m, accuracy, entry_reach_m
+        As :func:`predicted_reach_m`.
+    accuracy_m : float
+        Survey accuracy of every balise (its ``accuracy_m``), m.
+    max_locacc_m : float
+        The largest accuracy a telegram may state, m (at most 63: ``Q_LOCACC``).
+    prefix : str
+        Ids are ``prefix`` plus the candidate's running number, placed or not (a balise keeps
+        its id when the rule's inputs change).
+
+    Returns
+    -------
+    placed : BaliseList
+        The placeable candidates, as :meth:`BaliseList.to_csv` writes and ``locator balises
+        --balises`` reads them (may be empty).
+    table : pandas.DataFrame
+        Every candidate: ``id``, ``chainage_m``, ``in_outage``, ``predicted_q_m`` (the
+        telegram accuracy predicted by :func:`placement_check`), ``placeable``.
+    """
+    if not 0.0 < max_locacc_m <= Q_LOCACC_MAX_M:
+        raise ValueError(f"max_locacc_m {max_locacc_m:g} must lie in (0, {Q_LOCACC_MAX_M:g}] m "
+                         "(Q_LOCACC has 6 bits of 1 m)")  # fmt: skip
+    if not 0.0 <= accuracy_m < max_locacc_m:
+        raise ValueError(f"accuracy_m {accuracy_m:g} must lie in [0, {max_locacc_m:g}) m: a "
+                         "balise surveyed that badly could never be captured")  # fmt: skip
+    cand = BaliseList.along_track(track, start_m, stop_m, spacing_m, prefix=prefix,
+                                  accuracy_m=accuracy_m)  # fmt: skip
+    c = np.asarray(cand.chainage_m, float)
+    q, ok = placement_check(c, cand.accuracy_m, outages_m, accuracy, entry_reach_m,
+                            max_locacc_m)  # fmt: skip
+    inside = np.zeros(c.shape, bool)
+    for lo, hi in outages_m:
+        inside |= (c >= lo) & (c <= hi)
+    keep = np.flatnonzero(ok)
+    placed = BaliseList(
+        tuple(cand.ids[k] for k in keep), c[keep], cand.lat_deg[keep], cand.lon_deg[keep],
+        cand.h_m[keep], tuple(cand.telegram[k] for k in keep), cand.q_reference[keep],
+        cand.accuracy_m[keep],
+        f"placed by the placement rule (Q_LOCACC <= {max_locacc_m:g} m) from {cand.source}",
+    )  # fmt: skip
+    table = pd.DataFrame({"id": list(cand.ids), "chainage_m": c, "in_outage": inside,
+                          "predicted_q_m": q, "placeable": ok})  # fmt: skip
+    return placed, table

@@ -453,3 +453,20 @@ def test_the_banner_names_the_systems_the_simulation_holds(tmp_path, test_data, 
           "--out", str(tmp_path / "b")])  # fmt: skip
     out = capsys.readouterr().out
     assert "constellation all (GPS in the simulation)" in out
+
+
+def test_placed_balises_are_the_list_locator_balises_reads(sim_dir, tmp_path, capsys):
+    """`locator place-balises` writes what `locator balises --balises` reads: a world's track,
+    an outage over the run, the candidates the rule refuses left out (docs/odometry.md)."""
+    placed = tmp_path / "placed.csv"
+    assert main(["place-balises", "--world", str(sim_dir.parent / "world.npz"), "--from-km",
+                 "0.08", "--to-km", "0.45", "--spacing", "25", "--outage", "100", "600",
+                 "--entry-reach", "30", "--max-locacc", "50", "--out", str(placed)]) == 0
+    printed = capsys.readouterr().out
+    assert "not placeable: 105-130 m" in printed  # 30 + 1 + 4.007 % x 470 + 1: 51 m
+    ids = pd.read_csv(placed)["id"].tolist()
+    assert 0 < len(ids) < 15
+    assert main(["-q", "balises", "--sim", str(sim_dir), "--no-masks", "--balises", str(placed),
+                 "--out", str(tmp_path / "b")]) == 0  # fmt: skip
+    caps = pd.read_csv(tmp_path / "b" / "captures.csv")
+    assert caps["id"].tolist() == ids

@@ -41,7 +41,8 @@ def test_both_command_lines_have_their_subcommands() -> None:
     for expected in ("predisat synth", "predisat process", "predisat availability",
                      "predisat export", "predisat evaluate", "predisat evaluate-sky",
                      "predisat demo", "locator simulate", "locator run", "locator evaluate",
-                     "locator calibrate", "locator demo", "locator balises"):  # fmt: skip
+                     "locator calibrate", "locator demo", "locator balises",
+                     "locator place-balises"):  # fmt: skip
         assert expected in names
 
 
