@@ -111,12 +111,17 @@ class OdometerAccuracy:
         else:
             creep_over = config.slip_max if config.driven else 0.0
             creep_under = config.slide_max if config.braked else 0.0
-        # true = measured * ratio / (1 + creep): relative error bounds, to first order plus
-        # the cross term (ratio and creep both at their bound)
-        over = config.calibration_error + config.wear + creep_over
-        under = config.calibration_error + creep_under
-        over += config.calibration_error * creep_over
-        under += config.calibration_error * creep_under
+        # true = measured * ratio / (1 + creep), ratio in [(1 - cal)(1 - wear), 1 + cal]:
+        # over-reading, 1 - (1 - cal)(1 - wear) / (1 + slip), is below the sum of the terms
+        # and their cross term kept here; under-reading is (1 + cal) / (1 - slide) - 1
+        # exactly, above that sum (a 15 % slide under-reads by 17.6 % of the reading: the
+        # sum left a braked run's truth 0.4 m outside its bounds, m3)
+        if not creep_under < 1.0:
+            raise ValueError(f"{config}: a creep under-reading by {creep_under:.0%} or more "
+                             "leaves the distance unbounded; check the radar's tolerances")
+        cal = config.calibration_error
+        over = cal + config.wear + creep_over + cal * creep_over
+        under = (1.0 + cal) / (1.0 - creep_under) - 1.0
         return cls(config.abs_error_m, float(over), float(under))
 
     def doubt_over_m(self, dist_m: ArrayLike) -> NDArray:

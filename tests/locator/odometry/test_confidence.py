@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -230,3 +232,36 @@ def test_an_over_read_over_a_stretch_exceeds_the_bound_from_where_it_began():
     assert excess[-1] == pytest.approx(416.0 - 1.0 - 0.02 * 416.0 - 400.0)
     assert true_m[anchor[-1]] == 4000.0
     assert np.all(excess[true_m <= 4000.0] <= 0)
+
+
+def test_a_braked_axle_sliding_at_its_limit_stays_within_the_stated_under_reading():
+    # the odometer's own model (locator.odometry.odometer): the wheel's surface runs
+    # (1 + creep) times the train's distance and the distance read is the surface over the
+    # wheel's ratio, at most 1 + calibration_error; a slide is creep -slide_max. So the
+    # worst under-read of a train run d is d (1 - slide_max) / (1 + cal): the bound must
+    # reach d from it (the first-order sum cal + slide fell 2.7 % of the reading short)
+    cfg = OdometerConfig.motor_axle(radar=False)
+    acc = OdometerAccuracy.from_config(cfg)
+    true_m = np.array([100.0, 1000.0, 5000.0])
+    read_m = true_m * (1.0 - cfg.slide_max) / (1.0 + cfg.calibration_error)
+    _, hi = acc.displacement_bounds_m(read_m, read_m)
+    assert np.all(hi >= true_m - 1e-9), hi - true_m
+    # and a wheel spinning at its slip limit with the smallest ratio: the over-read side
+    read_m = true_m * (1.0 + cfg.slip_max) / ((1.0 - cfg.calibration_error) * (1.0 - cfg.wear))
+    lo, _ = acc.displacement_bounds_m(read_m, read_m)
+    assert np.all(lo <= true_m + 1e-9), true_m - lo
+
+
+def test_a_simulated_braked_axle_sliding_for_long_stays_within_its_bounds():
+    # slide episodes under every braking: 30 m/s down to a stop at 0.5 m/s^2 (60 s, 900 m)
+    dt = 0.1
+    t = np.arange(0.0, 80.0, dt)
+    v = np.clip(30.0 - 0.5 * t, 0.0, None)
+    truth = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    cfg = replace(OdometerConfig.motor_axle(radar=False), episode_rate_hz=5.0, episode_s=60.0)
+    acc = OdometerAccuracy.from_config(cfg)
+    for seed in range(20):
+        log = simulate_odometer(t, truth, cfg, seed=seed)
+        d = np.asarray(log.dist_m, float) - log.dist_m[0]
+        lo, hi = acc.displacement_bounds_m(d, np.abs(d))
+        assert np.all((lo <= truth + 1e-6) & (truth <= hi + 1e-6)), (seed, (truth - hi).max())
