@@ -2,11 +2,22 @@
 
 For a mask bin trusted where the truth is blocked, the question is which cells the antenna's
 ray crosses, how high each is bounded, and which frame carved each one that low. This script
-rebuilds the height field around a position from a processed world's cached segmentations
-(the layout of ``scripts/eval_rigs.py``: ``RUN/synth/survey`` and ``RUN/proc/cache``), marches
-the ray at one azimuth, prints every cell it crosses (distance, offset from the track axis,
-chainage, bound over the antenna and the elevation it means), then, for the cells between two
-distances, every frame whose carving alone bounds the cell within 3 deg of its final value.
+runs the reconstruction at one position from a processed world's cached segmentations (the
+layout of ``scripts/eval_rigs.py``: ``RUN/synth/survey`` and ``RUN/proc/cache``; the survey's
+side cameras passed as ``predisat process`` does) with its trace
+(``Reconstructor.run(..., trace=True)``, :class:`~predisat.reconstruct.carving.
+ReconstructionTrace`), and takes the height field, the antenna and the frames from it: it
+marches the ray at one azimuth through the run's height field, prints every cell it crosses
+(distance, offset from the track axis, chainage, bound over the antenna and the elevation it
+means, seen from the sample's distance), marks the cell the run names for the azimuth's bin
+and prints the bin's mask and the part that sets it; then, for the cells between two
+distances, every frame whose carving alone (:meth:`~predisat.reconstruct.carving.
+Reconstructor.frame_bounds`) bounds the cell within 3 deg of its final value.
+
+The frames are ``along_attribution.pipeline_frames``': the cached segmentations on the
+survey's mounts, without the vehicle's attitude and the doubts ``predisat process`` adds, so
+the script says whether its mask at the position is the one the process wrote
+(``RUN/proc/masks.parquet``); on canted renders it is not.
 
 Usage::
 
@@ -26,9 +37,14 @@ from pathlib import Path
 
 import numpy as np
 
-from predisat.reconstruct import carving as cv
-from predisat.reconstruct.carving import ReconstructionParams, Reconstructor
-from predisat.reconstruct.heightfield import carve_profile
+from predisat.masks.fileformat import read_masks
+from predisat.reconstruct.carving import (
+    BinPart,
+    ReconstructionParams,
+    Reconstructor,
+    side_cameras,
+)
+from predisat.survey import Survey
 from predisat.synth.world import World
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -49,17 +65,19 @@ def main() -> None:
         raise SystemExit(f"{args.truth}: no world.npz there; give the world's truth folder")
     world = World.load(args.truth / "world.npz")
     frames = pipeline_frames(args.run, world.track)
+    survey = Survey.load(args.run / "synth" / "survey", track=world.track, check_images=False,
+                         on_error="skip")  # fmt: skip
+    sides = side_cameras({side: c.camera for side, c in survey.cameras.items()})
     p = ReconstructionParams()
     rc = Reconstructor(p)
     s = args.chainage_m
-    keep = [f for f in frames if abs(f.chainage_m - s) <= p.used_m]
-    if not keep:
+    if not any(abs(f.chainage_m - s) <= p.used_m for f in frames):
         raise SystemExit(f"no frame within {p.used_m} m of {s} m; check the chainage")
-    profs = rc.profiles(keep)
-    margin = p.reach_m + cv._WINDOW_MARGIN_M
-    hf = rc.height_field(keep, world.track, s - margin, s + margin, profs)
-    ant, rot = cv._antennas(world.track, np.array([s]), p.antenna_height_m)
-    a, r = ant[0], rot[0]
+    rec = rc.run(frames, [s], world.track, side_cameras=sides, trace=True)
+    tr = rec.trace
+    assert tr is not None
+    hf = tr.height_field
+    a, r = tr.antenna_m[0], tr.local_to_frame[0]
     az = np.radians(args.azimuth_deg)
     d = r @ np.array([np.sin(az), np.cos(az), 0.0])
     c = hf.cell_m
@@ -74,24 +92,40 @@ def main() -> None:
     def elevation(bound: float, t: float) -> float:
         return float(np.degrees(np.arctan2(bound - a[2], t))) if np.isfinite(bound) else 90.0
 
+    # the mask the process run wrote there, if any: this run's frames are pipeline_frames',
+    # which do not rebuild everything predisat process did (the vehicle's attitude, the doubts)
+    out = args.run / "proc" / "masks.parquet"
+    if out.exists():
+        written = read_masks(out, close_holes=False)
+        at = np.flatnonzero(np.abs(written.chainage_m - s) < 1e-3)
+        if at.size:
+            dif = rec.mask_el_deg[0] - written.mask_el_deg[at[0]]
+            how = (f"{np.count_nonzero(dif)} bins differ, by up to {np.abs(dif).max():.2f} deg"
+                   if dif.any() else "the same")  # fmt: skip
+            print(f"the process run's mask at {s} m: {how} (this run: the frames of "
+                  "along_attribution.pipeline_frames)")  # fmt: skip
+    # the azimuth's bin and what the run says of it
+    j = int(np.round(args.azimuth_deg / p.az_step_deg)) % p.n_az
+    part = BinPart(int(tr.part[0, j]))
+    k = int(tr.cell[0, j])
+    named = divmod(k, hf.shape[1]) if k >= 0 else None
     print(f"antenna at {s} m, azimuth {args.azimuth_deg} deg: {len(cells)} cells")
+    print(f"bin {j} ({rec.az_deg[j]:.1f} deg): mask {rec.mask_el_deg[0, j]:.2f} deg, set by "
+          f"{part.name.lower()}{' (unknown cell)' if tr.unknown[0, j] else ''}"
+          + (f", cell {named}" if named is not None else ""))  # fmt: skip
     for t, row, col in cells:
         top = float(hf.bound_m[row, col])
+        mark = "  <- the bin's cell" if named == (row, col) else ""
         print(f"t {t:5.1f} m  cell ({row}, {col})  offset {hf.offset_m[row, col]:6.2f} m  "
               f"chainage {hf.chainage_m[row, col]:8.2f} m  bound {top - a[2]:7.2f} m over the "
-              f"antenna -> {elevation(top, t):5.1f} deg")  # fmt: skip
+              f"antenna -> {elevation(top, t):5.1f} deg{mark}")  # fmt: skip
+    if named is not None and all(named != (q[1], q[2]) for q in cells):
+        print(f"the bin's cell {named} is off this ray (another ray of the bin, or a cell at "
+              "a corner the ray crosses)")  # fmt: skip
     if args.to_m <= args.from_m:
         return
-    cams, rots = cv._camera_geometry(keep, world.track)
-    solids = rc.solid_profiles(keep, profs)
-    rules = cv._thin_rules(hf, keep, cams, p)
-    unseen = cv._unseen_rules(keep, p)
-    alone = []
-    for i in range(len(keep)):  # each frame's carving on its own
-        b = np.full(hf.shape, np.inf, np.float32)
-        carve_profile(hf, b, profs[i], cams[i], rots[i], p.carve_range_m, solid=solids[i],
-                      thin_rule=rules[i], unseen_rule=unseen[i])  # fmt: skip
-        alone.append(b)
+    keep = tr.frames
+    alone = rc.frame_bounds(keep, world.track, hf, tr.profiles)  # each frame's carving alone
     for t, row, col in cells:
         if not args.from_m <= t <= args.to_m:
             continue

@@ -543,6 +543,11 @@ class ReconstructionTrace:
     height_field : HeightField
         The field the rays were cast in (swept along the track when ``cell_sweep_m`` or
         ``chainage_shift_m`` asks for it); ``cell`` indexes its raster.
+    antenna_m : ndarray, shape (n_pos, 3)
+        The antennas the rays were cast from, in the track frame.
+    local_to_frame : ndarray, shape (n_pos, 3, 3)
+        Rotations from each antenna's local ENU into the track frame: the ray of azimuth
+        ``az`` (from north) runs along ``local_to_frame[i] @ (sin az, cos az, 0)``.
     frames : tuple of FrameView
         The frames the reconstruction used (within ``used_m`` of the positions, after the
         suspect-frame check).
@@ -562,6 +567,8 @@ class ReconstructionTrace:
     far_seen: NDArray
     far_capped: NDArray
     height_field: HeightField
+    antenna_m: NDArray
+    local_to_frame: NDArray
     frames: tuple[FrameView, ...]
     profiles: tuple[SkyProfile, ...]
     overhead_rules: dict[str, NDArray]
@@ -773,16 +780,12 @@ class Reconstructor:
         hf = corridor_grid(track, lo_m, hi_m, p.half_width_m, p.cell_m)
         profs = list(profiles) if profiles is not None else self.profiles(frames)
         solids = self.solid_profiles(frames, profs)
-        pasts = self.past_profiles(frames)
         bound = hf.bound_m.copy()
         views = np.zeros(hf.shape, np.int32)
         resolved = None
         if frames:
-            cams, rots = _camera_geometry(frames, track)
-            rules = _thin_rules(hf, frames, cams, p)
-            unseen = _unseen_rules(frames, p)
-            carver = _FrameCarver(hf, frames, profs, solids, pasts, cams, rots, rules, unseen,
-                                  p.clearance_half_width_m, track, p.carve_range_m)  # fmt: skip
+            carver = self._carver(hf, frames, track, profs, solids)
+            cams, rots = carver.cams, carver.rots
             if p.consistency_rank is not None:  # rank 1, then the consistency check
                 fusion = _view_fusion(hf, frames, cams, p, carver, p.consistency_rank)
                 bound = np.minimum(hf.bound_m, fusion.lowest(1))
@@ -840,6 +843,51 @@ class Reconstructor:
             hf.rail_z_m, overhead, np.zeros((0, 4)) if ceilings is None else ceilings, views,
             resolved,
         )  # fmt: skip
+
+    def _carver(
+        self, hf: HeightField, frames: Sequence[FrameView], track: TrackMap,
+        profs: Sequence[SkyProfile], solids: Sequence[SkyProfile],
+    ) -> _FrameCarver:  # fmt: skip
+        """The carving of each frame on ``hf``'s raster, as :meth:`height_field` carves."""
+        p = self.params
+        pasts = self.past_profiles(frames)
+        cams, rots = _camera_geometry(frames, track)
+        rules = _thin_rules(hf, frames, cams, p)
+        unseen = _unseen_rules(frames, p)
+        return _FrameCarver(hf, frames, profs, solids, pasts, cams, rots, rules, unseen,
+                            p.clearance_half_width_m, track, p.carve_range_m)  # fmt: skip
+
+    def frame_bounds(
+        self,
+        frames: Sequence[FrameView],
+        track: TrackMap,
+        field: HeightField,
+        profiles: Sequence[SkyProfile] | None = None,
+    ) -> list[NDArray]:
+        """Each frame's carving alone on ``field``'s raster: per frame, float32 bounds of
+        shape ``field.shape`` (``+inf`` where the frame bounds nothing), as :meth:`height_field`
+        carves it (its profile and solid profile, a side camera's profile past its half-space,
+        its thin-structure and unseen-arm rules, its position doubt; over ``carve_range_m``),
+        before the frames are fused and before the clearance prior.
+
+        ``field``: a height field of the corridor (:attr:`ReconstructionTrace.height_field`);
+        only its raster's geometry is read. ``profiles``: the frames' sky profiles
+        (:meth:`profiles`; :attr:`ReconstructionTrace.profiles`), computed if not given. A
+        diagnosis (``scripts/trace_cells.py``: which frame bounds a cell how low). With
+        ``fusion_rank`` 1 and no consistency check, the lowest of them is the field's bound of
+        every cell a view bounds (``views > 0``) but those the mast rule raised
+        (``HeightField.resolved``).
+        """
+        if not frames:
+            return []
+        profs = list(profiles) if profiles is not None else self.profiles(frames)
+        carver = self._carver(field, frames, track, profs, self.solid_profiles(frames, profs))
+        out = []
+        for i in range(len(frames)):
+            b = np.full(field.shape, np.inf, np.float32)
+            carver.carve(i, b, self.params.carve_range_m)
+            out.append(b)
+        return out
 
     def run(
         self,
@@ -1051,7 +1099,8 @@ def _trace(
     )
     return ReconstructionTrace(
         part=part, cell=cell, unknown=unknown, far_seen=np.asarray(far_seen, bool),
-        far_capped=np.asarray(far_capped, bool), height_field=hf, frames=tuple(frames),
+        far_capped=np.asarray(far_capped, bool), height_field=hf, antenna_m=ant,
+        local_to_frame=rot, frames=tuple(frames),
         profiles=tuple(profiles), overhead_rules=overhead_rules,
     )  # fmt: skip
 

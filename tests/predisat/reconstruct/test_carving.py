@@ -1197,3 +1197,54 @@ def test_a_traced_run_names_the_far_cells_the_mast_rule_kept(mast_scene) -> None
     _check_trace(rec, plain)
     assert rec.trace is not None and (rec.trace.part == BinPart.RESOLVED).any()
     assert rec.trace.far_capped.any()
+
+
+def test_a_trace_gives_the_antennas_and_each_frames_own_carving(mixed) -> None:
+    """What a diagnosis of one ray needs without the reconstructor's internals
+    (``scripts/trace_cells.py``): the trace's antennas and rotations (each height-field bin's
+    cell lies along the bin's azimuth from them), and each frame's carving alone
+    (:meth:`Reconstructor.frame_bounds`: the side fisheyes carve past their half-space too),
+    whose lowest is the run's bound of every cell a view bounds (``fusion_rank`` 1)."""
+    from dataclasses import replace
+
+    from predisat.reconstruct.carving import BinPart
+
+    world, _ = mixed
+    # a wide side fisheye with the clearance narrowed to 1 m, as in the carving past the
+    # half-space above: the strip out to the cameras' lines is carved past it
+    frames = frames_for(world, np.arange(500.0, 611.0, 10.0), WIDE_FISHEYE)
+    params = replace(PARAMS, clearance_half_width_m=1.0)
+    s = np.array([550.0, 560.0])
+    rc = Reconstructor(params)
+    rec = rc.run(frames, s, world.track, side_cameras=("left", "right"), trace=True)
+    tr = rec.trace
+    assert tr is not None and params.fusion_rank == 1 and params.carve_past_deg is not None
+    hf = tr.height_field
+    assert tr.antenna_m.shape == (2, 3) and tr.local_to_frame.shape == (2, 3, 3)
+    c = hf.cell_m
+    grid = np.isin(tr.part, [BinPart.NEAR_GRID, BinPart.FAR_GRID]) & (tr.cell >= 0)
+    i, j = np.nonzero(grid)
+    row, col = np.divmod(tr.cell[i, j], hf.shape[1])
+    centre = np.stack([(hf.ix0 + col + 0.5) * c, (hf.iy0 + row + 0.5) * c], axis=-1)
+    rel = np.concatenate([centre - tr.antenna_m[i, :2], np.zeros((i.size, 1))], axis=-1)
+    local = np.einsum("nji,nj->ni", tr.local_to_frame[i], rel)  # frame to local ENU
+    r = np.hypot(local[:, 0], local[:, 1])
+    az = np.degrees(np.arctan2(local[:, 0], local[:, 1]))
+    off = np.abs(np.mod(az - rec.az_deg[j] + 180.0, 360.0) - 180.0)
+    # the cell's centre within a cell and a half of the bin's wedge (a ray crossing a cell
+    # corner counts both cells at it)
+    beside = r * np.sin(np.radians(np.clip(off - params.az_step_deg / 2.0, 0.0, 90.0)))
+    assert (beside <= 1.5 * c).all() and ((off < 90.0) | (r < 1.5 * c)).all()
+    assert i.size > 100
+    bounds = rc.frame_bounds(tr.frames, world.track, hf, tr.profiles)
+    assert len(bounds) == len(tr.frames)
+    low = np.min(bounds, axis=0)
+    assert hf.views is not None
+    carved = hf.views > 0
+    assert carved.sum() > 1000
+    np.testing.assert_array_equal(low[carved], hf.bound_m[carved])
+    assert (hf.views[np.isposinf(low)] == 0).all()
+    # the carving past the half-space is in (the plain profiles alone leave those cells higher)
+    narrow = Reconstructor(replace(params, carve_past_deg=None))
+    plain = np.min(narrow.frame_bounds(tr.frames, world.track, hf, tr.profiles), axis=0)
+    assert (low < plain - 0.05).sum() > 100
