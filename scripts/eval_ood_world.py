@@ -180,6 +180,16 @@ def _run_lo(seed: int, length_m: float) -> float:
     return round(500.0 + float(np.random.default_rng([seed, 7]).uniform(0.0, span)), -1)
 
 
+def spec_of_run(truth_dir: Path, seed: int) -> WorldSpec:
+    """The world spec a finished run was rendered with: its span from the true masks' positions
+    (every 10 m from ``lo`` to ``lo + --length-m``), not an assumed 1000 m, whose ``_run_lo``
+    and piece layout differ from those of any other length."""
+    from predisat.masks.truth import TrueMasks
+
+    s = TrueMasks.load(truth_dir / "true_masks.npz").chainage_m
+    return ood_spec(float(s[0]), float(s[-1]), seed)
+
+
 def run_one(rig_name: str, seed: int, length_m: float, scale: float, work: Path,
             reuse: bool) -> dict[str, Any]:  # fmt: skip
     """Render (or reuse), process with the defaults and score one rig on one seed's world."""
@@ -269,8 +279,8 @@ def cmd_score(args: argparse.Namespace) -> None:
         if not masks.exists():
             continue
         seed = int(run.name.rsplit("_s", 1)[1])
-        lo = _run_lo(seed, 1000.0)
-        sc = _score(masks, run / "synth" / "truth", ood_spec(lo, lo + 1000.0, seed))
+        truth = run / "synth" / "truth"
+        sc = _score(masks, truth, spec_of_run(truth, seed))
         f = sc["failures"]
         print(f"{run.name}: false trust {100 * sc['false_trust_all']:.4f} %, worst position "
               f"{100 * sc['worst_position_false_trust']:.3f} % at {sc['worst_position_m']:.0f} m")
@@ -413,8 +423,7 @@ def cmd_sheet(args: argparse.Namespace) -> None:
         seed = int(run.name.rsplit("_s", 1)[1])
         with open(truth / "frames.csv", newline="") as fh:
             chain = {r["frame_id"]: float(r["chainage_m"]) for r in csv.DictReader(fh)}
-        lo = _run_lo(seed, 1000.0)
-        spec = ood_spec(lo, lo + 1000.0, seed)
+        spec = spec_of_run(truth, seed)
         rig = run.name.split("_s")[0]
         for entry in caches[-1].glob("*.npz"):
             fid = entry.stem
