@@ -41,6 +41,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import pickle
 from collections import defaultdict
 from pathlib import Path
@@ -51,7 +52,7 @@ import numpy as np
 from predisat.camera.rigs import RIG_NAMES, Rig
 from predisat.masks.margins import sector_of
 from predisat.masks.truth import TrueMasks
-from predisat.reconstruct.badframes import BadFrame
+from predisat.reconstruct.batch import finished_chunk_jobs
 from predisat.reconstruct.carving import (
     BinPart,
     FrameView,
@@ -60,11 +61,10 @@ from predisat.reconstruct.carving import (
     Reconstructor,
     side_cameras,
 )
+from predisat.reconstruct.chunks import ChunkInputs, ChunkJob, chunk_inputs
 from predisat.reconstruct.evaluate import trust_counts
-from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.heightfield import _camera_ceiling
 from predisat.reconstruct.params import PipelineParams
-from predisat.survey import Survey
 from predisat.synth.render import Casters
 from predisat.synth.truth import ideal_frames, true_masks
 from predisat.synth.world import World
@@ -92,41 +92,27 @@ def frames_for(rig: Rig, world: World, tm: TrueMasks, cache: Path | None,
     return frames
 
 
-def pipeline_frames(run_dir: Path, track: Any) -> list[FrameView]:
-    """The frames a ``process_survey`` run reconstructed from: ``run_dir/synth/survey`` with
-    the segmentations cached in ``run_dir/proc/cache`` (``scripts/eval_rigs.py``'s layout), as
-    :func:`predisat.reconstruct.chunks.run_chunk` builds them."""
-    survey = Survey.load(run_dir / "synth" / "survey", track=track, check_images=False,
-                         on_error="skip")  # fmt: skip
-    # the newest segmentation cache: the one of the last run (the code of the segmentation
-    # is part of its name; older ones stay behind)
-    caches = sorted((run_dir / "proc" / "cache").glob("seg-*"), key=lambda d: d.stat().st_mtime)
-    if not caches:
-        raise ValueError(f"{run_dir / 'proc' / 'cache'}: no segmentation cache; run "
-                         "scripts/eval_rigs.py there first")  # fmt: skip
-    fr = survey.frames
-    s = np.round(np.asarray(fr.chainage_m, float), 3)
-    ant = np.asarray(track.enu_at(s), float) + survey.antenna_height_m * np.asarray(
-        track.up_at(s), float
-    )
-    heading = np.asarray(track.heading_at(s), float)
-    pp = PipelineParams()
-    out = []
-    for k in range(len(s)):
-        fid, side = str(fr.frame_id[k]), str(fr.side[k])
-        with np.load(caches[-1] / f"{fid}.npz", allow_pickle=False) as z:
-            got = decode_cache(z, json.loads(str(z["meta"])), fid)
-        if isinstance(got, BadFrame):
-            continue
-        sky, conf, thin = got
-        cam, mount = survey.cameras[side].camera, survey.cameras[side].mount
-        width = pp.thin_px(cam) * cam.widest_pixel_deg if thin is not None else 0.0
-        out.append(FrameView(chainage_m=float(s[k]), sky_mask=np.array(sky), camera=cam,
-                             mount=mount, antenna_enu_m=ant[k], heading_deg=float(heading[k]),
-                             reverse=bool(survey.reverse), confidence=conf, frame_id=fid,
-                             thin_mask=None if thin is None else np.array(thin),
-                             thin_width_deg=width))  # fmt: skip
-    return out
+def pipeline_frames(run_dir: Path, lo_m: float = -math.inf,
+                    hi_m: float = math.inf) -> list[tuple[ChunkJob, ChunkInputs]]:  # fmt: skip
+    """The chunks of a ``process_survey`` run (``scripts/eval_rigs.py``'s layout:
+    ``run_dir/synth/survey`` processed into ``run_dir/proc``) meeting the chainage window
+    ``[lo_m, hi_m]``, each with the frames, positions, track, side cameras and parameters its
+    reconstruction ran on, rebuilt as ``predisat process`` built them (the vehicle's attitude,
+    the doubts, the stops merged: :func:`predisat.reconstruct.batch.finished_chunk_jobs`,
+    :func:`predisat.reconstruct.chunks.chunk_inputs`)."""
+    jobs = finished_chunk_jobs(run_dir / "proc", run_dir / "synth" / "survey", lo_m=lo_m,
+                               hi_m=hi_m)  # fmt: skip
+    return [(job, chunk_inputs(job)) for job in jobs]
+
+
+def truth_subset(tm: TrueMasks, keep: np.ndarray) -> TrueMasks:
+    """``tm`` at the positions ``keep`` (boolean, shape (n,)) only."""
+    n = tm.chainage_m.shape[0]
+    return dataclasses.replace(tm, **{
+        f.name: getattr(tm, f.name)[keep] for f in dataclasses.fields(tm)
+        if isinstance(getattr(tm, f.name), np.ndarray) and getattr(tm, f.name).shape[:1] == (n,)
+        and f.name != "az_deg"
+    })  # fmt: skip
 
 
 def _intervals_hit(ch: np.ndarray, intervals: np.ndarray | list[tuple[float, float]]) -> np.ndarray:
@@ -156,14 +142,16 @@ def check_trace(rec: Reconstruction, plain: Reconstruction) -> None:
 
 
 def attribute(frames: list[FrameView], tm: TrueMasks, world: World, p: ReconstructionParams,
-              sides: list[str]) -> dict[str, Any]:  # fmt: skip
+              sides: list[str], track: Any = None) -> dict[str, Any]:  # fmt: skip
     """Cause of each bin's value (n_pos, n_az) of str, the mask, and the reconstruction.
 
     The parts and cells are the reconstruction's own (``Reconstructor.run(..., trace=True)``);
-    ``sides``: the rig's side cameras, as ``predisat process`` passes them."""
+    ``sides``: the rig's side cameras, as ``predisat process`` passes them; ``track``: the
+    run's (default the world's)."""
     s = tm.chainage_m
-    rec = Reconstructor(p).run(frames, s, world.track, side_cameras=sides, trace=True)
-    check_trace(rec, Reconstructor(p).run(frames, s, world.track, side_cameras=sides))
+    track = world.track if track is None else track
+    rec = Reconstructor(p).run(frames, s, track, side_cameras=sides, trace=True)
+    check_trace(rec, Reconstructor(p).run(frames, s, track, side_cameras=sides))
     tr = rec.trace
     assert tr is not None
     mask = np.asarray(rec.mask_el_deg, float)
@@ -174,7 +162,7 @@ def attribute(frames: list[FrameView], tm: TrueMasks, world: World, p: Reconstru
     no_rules = dataclasses.replace(p, overhead_along_el_deg=None, zenith_el_deg=90.0)
     lo, hi = float(np.nanmin(hf.chainage_m)), float(np.nanmax(hf.chainage_m))
     rules["tall bands"] = Reconstructor(no_rules).height_field(
-        list(tr.frames), world.track, lo, hi, list(tr.profiles)).overhead_m  # fmt: skip
+        list(tr.frames), track, lo, hi, list(tr.profiles)).overhead_m  # fmt: skip
     flat_ch = hf.chainage_m.ravel()
     flat_off = hf.offset_m.ravel()
     flat_views = (np.zeros(hf.shape, np.int32) if hf.views is None else hf.views).ravel()
@@ -344,17 +332,36 @@ def main(argv: list[str] | None = None) -> int:
                              f"{'' if thin is None else f'_thin{thin:g}'}.pkl")  # fmt: skip
         if args.pipeline is None:
             frames = frames_for(rig, world, tm, cache, thin)
+            sides = side_cameras({pos: cam for pos, cam, _ in rig.cameras})
+            res = attribute(frames, tm, world, p, sides)
+            t = tally(res["cause"], res["mask"], tm, world)
+            n_suspect = len(res["rec"].suspect_frames)
         else:
-            frames = pipeline_frames(Path(args.pipeline.format(seed=seed)), world.track)
-        sides = side_cameras({pos: cam for pos, cam, _ in rig.cameras})
-        res = attribute(frames, tm, world, p, sides)
-        t = tally(res["cause"], res["mask"], tm, world)
+            # each chunk of the run from its own frames and settings (--params over the run's)
+            pooled: dict[str, Any] | None = None
+            n_suspect = 0
+            run = Path(args.pipeline.format(seed=seed))
+            ch = tm.chainage_m
+            for job, inp in pipeline_frames(run, float(ch.min()), float(ch.max())):
+                keep = (ch >= job.lo_m) & (ch < job.hi_m)
+                if not keep.any():
+                    continue
+                sub = truth_subset(tm, keep)
+                res = attribute(list(inp.views), sub, world,
+                                dataclasses.replace(inp.params, **fields),
+                                list(inp.side_cameras), inp.track)  # fmt: skip
+                part = tally(res["cause"], res["mask"], sub, world)
+                pooled = part if pooled is None else merge(pooled, part)
+                n_suspect += len(res["rec"].suspect_frames)
+            if pooled is None:
+                raise SystemExit(f"{run}: no chunk of the run holds the truth's positions")
+            t = pooled
         per_seed[seed] = t
         what = "ideal sky masks" if args.pipeline is None else "pipeline sky masks"
         print_table(t, f"{args.rig}, seed {seed}, {what}: sky lost per cause "
                     "(share of the truly visible directions of the sector)")  # fmt: skip
         print(f"mask = the reconstruction's, bit for bit (traced and untraced); frames set "
-              f"aside as suspect: {len(res['rec'].suspect_frames)}")  # fmt: skip
+              f"aside as suspect: {n_suspect}")  # fmt: skip
         total = t if total is None else merge(total, t)
     if total is not None and len(args.seeds) > 1:
         print_table(total, f"{args.rig}, seeds {args.seeds} pooled")

@@ -14,10 +14,10 @@ and prints the bin's mask and the part that sets it; then, for the cells between
 distances, every frame whose carving alone (:meth:`~predisat.reconstruct.carving.
 Reconstructor.frame_bounds`) bounds the cell within 3 deg of its final value.
 
-The frames are ``along_attribution.pipeline_frames``': the cached segmentations on the
-survey's mounts, without the vehicle's attitude and the doubts ``predisat process`` adds, so
-the script says whether its mask at the position is the one the process wrote
-(``RUN/proc/masks.parquet``); on canted renders it is not.
+The frames, track, side cameras and parameters are those of the run's chunk holding the
+position, rebuilt as ``predisat process`` built them (``along_attribution.pipeline_frames``:
+the vehicle's attitude, the doubts, the stops merged), so the mask at the position is the one
+the process wrote (``RUN/proc/masks.parquet``, before its margins); the script says so.
 
 Usage::
 
@@ -38,14 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from predisat.masks.fileformat import read_masks
-from predisat.reconstruct.carving import (
-    BinPart,
-    ReconstructionParams,
-    Reconstructor,
-    side_cameras,
-)
-from predisat.survey import Survey
-from predisat.synth.world import World
+from predisat.reconstruct.carving import BinPart, Reconstructor
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from along_attribution import pipeline_frames
@@ -54,26 +47,24 @@ from along_attribution import pipeline_frames
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="world folder with synth/survey and proc/cache")
-    ap.add_argument("truth", type=Path, help="truth folder with world.npz")
+    ap.add_argument("truth", type=Path, help="truth folder with world.npz (not read: the "
+                    "run's own track is used; kept for the command lines of the docs)")  # fmt: skip
     ap.add_argument("chainage_m", type=float)
     ap.add_argument("azimuth_deg", type=float, help="from north, degrees")
     ap.add_argument("--from-m", type=float, default=0.0, help="trace frames from this distance")
     ap.add_argument("--to-m", type=float, default=0.0, help="... to this one (0: no tracing)")
     ap.add_argument("--max-m", type=float, default=30.0, help="march the ray this far")
     args = ap.parse_args()
-    if not (args.truth / "world.npz").exists():
-        raise SystemExit(f"{args.truth}: no world.npz there; give the world's truth folder")
-    world = World.load(args.truth / "world.npz")
-    frames = pipeline_frames(args.run, world.track)
-    survey = Survey.load(args.run / "synth" / "survey", track=world.track, check_images=False,
-                         on_error="skip")  # fmt: skip
-    sides = side_cameras({side: c.camera for side, c in survey.cameras.items()})
-    p = ReconstructionParams()
-    rc = Reconstructor(p)
     s = args.chainage_m
+    chunks = pipeline_frames(args.run, s, s)
+    if not chunks:
+        raise SystemExit(f"no chunk of the run holds {s} m; check the chainage")
+    inp = chunks[0][1]
+    frames, track, sides, p = list(inp.views), inp.track, list(inp.side_cameras), inp.params
+    rc = Reconstructor(p)
     if not any(abs(f.chainage_m - s) <= p.used_m for f in frames):
         raise SystemExit(f"no frame within {p.used_m} m of {s} m; check the chainage")
-    rec = rc.run(frames, [s], world.track, side_cameras=sides, trace=True)
+    rec = rc.run(frames, [s], track, side_cameras=sides, trace=True)
     tr = rec.trace
     assert tr is not None
     hf = tr.height_field
@@ -92,8 +83,7 @@ def main() -> None:
     def elevation(bound: float, t: float) -> float:
         return float(np.degrees(np.arctan2(bound - a[2], t))) if np.isfinite(bound) else 90.0
 
-    # the mask the process run wrote there, if any: this run's frames are pipeline_frames',
-    # which do not rebuild everything predisat process did (the vehicle's attitude, the doubts)
+    # the mask the process run wrote there, if any: this run's frames are the chunk's own
     out = args.run / "proc" / "masks.parquet"
     if out.exists():
         written = read_masks(out, close_holes=False)
@@ -125,7 +115,7 @@ def main() -> None:
     if args.to_m <= args.from_m:
         return
     keep = tr.frames
-    alone = rc.frame_bounds(keep, world.track, hf, tr.profiles)  # each frame's carving alone
+    alone = rc.frame_bounds(keep, track, hf, tr.profiles)  # each frame's carving alone
     for t, row, col in cells:
         if not args.from_m <= t <= args.to_m:
             continue

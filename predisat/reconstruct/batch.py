@@ -46,7 +46,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
@@ -72,7 +72,7 @@ from predisat.reconstruct.attitude import (
     survey_speed_kmh,
 )
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
-from predisat.reconstruct.carving import lacking_side, side_cameras
+from predisat.reconstruct.carving import ReconstructionParams, lacking_side, side_cameras
 from predisat.reconstruct.chunks import (
     ChunkFrame,
     ChunkJob,
@@ -135,6 +135,7 @@ from predisat.survey.capture import (
 from predisat.survey.format import Frames
 from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
+from predisat.track.cant import CantLimits
 from predisat.track.map import TrackMap
 from predisat.track.network import track_key
 
@@ -145,6 +146,7 @@ __all__ = [
     "ProcessResult",
     "RunStopped",
     "camera_pair_warnings",
+    "finished_chunk_jobs",
     "process_survey",
     "source_report",
 ]
@@ -851,6 +853,19 @@ def _at_survey_antenna(params: PipelineParams, survey: Survey) -> PipelineParams
     return replace(params, reconstruction=replace(params.reconstruction, antenna_height_m=h))
 
 
+def _resolved_params(
+    params: PipelineParams, survey: Survey, track: TrackMap
+) -> tuple[PipelineParams, NDArray, tuple[str | None, ...]]:
+    """``params`` as a run of ``survey`` along ``track`` takes them (the chainage doubt and
+    jitter, the antenna height resolved), every frame's chainage as the run uses it
+    (:func:`_rounded_chainage`) and the warnings the resolution gives."""
+    p, chainage_note = _with_chainage_doubt(params, survey)
+    p = _at_survey_antenna(p, survey)
+    ch = _rounded_chainage(survey.frames)
+    p, positions_note = _doubt_from_positions(p, survey, track, ch)
+    return p, ch, (chainage_note, positions_note)
+
+
 def _attitude_summary(
     survey: Survey, track: TrackMap, params: PipelineParams, ch: NDArray
 ) -> JsonDict:
@@ -962,6 +977,45 @@ def _attitude_warning(summary: JsonDict) -> str | None:
     )
 
 
+def _cache_dir(out: Location, params: PipelineParams, params_dict: JsonDict) -> Location:
+    """The segmentation cache of a run of ``params`` into ``out`` (``params_dict``: their
+    record, :meth:`PipelineParams.to_dict`): keyed by the segmentation's code, network and
+    thin width."""
+    seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
+    if params.sky_net is not None:
+        seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
+    if params.thin_deg != THIN_DEG:
+        # a folder per thin width: an entry holds one, and switching back must not redo all
+        seg_code += f"-thin{params.thin_deg:g}"
+    return join(out, "cache", f"seg-{params.segmenter}-{seg_code}")
+
+
+def _chunk_windows(
+    fr: Frames, ch: NDArray, positions: NDArray, params: PipelineParams
+) -> tuple[list[tuple[str, float, float, NDArray]], dict[str, NDArray]]:
+    """The chunks (name, lo, hi, positions) of ``positions`` and the frame indices each reads;
+    ``ch`` is every frame's chainage, rounded (NaN off the track)."""
+    finite = np.isfinite(ch)
+    k = np.floor(positions / params.chunk_m).astype(np.int64)
+    chunks = [
+        (chunk_name(lo, hi), lo, hi, positions[k == kk])
+        for kk in np.unique(k)
+        for lo, hi in [(float(kk * params.chunk_m), float((kk + 1) * params.chunk_m))]
+    ]
+    # the frames each chunk reads: within overlap_m of its positions
+    overlap = params.reconstruction.overlap_m
+    frames_of = {
+        name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
+        for name, _, _, s in chunks
+    }
+    # and every frame of a view it reads one frame of: a view cut by the window was merged
+    # from part of its frames, and a crawl sliced otherwise than in the whole survey
+    view = stop_ids(fr.side, ch, params.stop_gap_m, params.stop_span_m)
+    frames_of = {name: np.flatnonzero(finite & np.isin(view, view[idx]))
+                 for name, idx in frames_of.items()}  # fmt: skip
+    return chunks, frames_of
+
+
 def _plan(
     survey: Survey,
     track: TrackMap,
@@ -1011,34 +1065,11 @@ def _plan(
             prov[f"survey_{key}"] = str(survey.metadata[key])
     prov["run_key"] = _run_key(prov)
     prov["attitude"] = _attitude_summary(survey, track, params, ch)
-    seg_code = code_fingerprint(SEGMENTATION_CODE)[:8]
-    if params.sky_net is not None:
-        seg_code += "-net" + params_dict["sky_net"]["sha256"][:12]
-    if params.thin_deg != THIN_DEG:
-        # a folder per thin width: an entry holds one, and switching back must not redo all
-        seg_code += f"-thin{params.thin_deg:g}"
     chunk_dir = join(out, "chunks")
-    cache_dir = join(out, "cache", f"seg-{params.segmenter}-{seg_code}")
+    cache_dir = _cache_dir(out, params, params_dict)
     makedirs(chunk_dir, opts)
     makedirs(cache_dir, opts)
-
-    k = np.floor(positions / params.chunk_m).astype(np.int64)
-    chunks = [
-        (chunk_name(lo, hi), lo, hi, positions[k == kk])
-        for kk in np.unique(k)
-        for lo, hi in [(float(kk * params.chunk_m), float((kk + 1) * params.chunk_m))]
-    ]
-    # the frames each chunk reads: within overlap_m of its positions
-    overlap = params.reconstruction.overlap_m
-    frames_of = {
-        name: np.flatnonzero(finite & (ch >= s.min() - overlap) & (ch <= s.max() + overlap))
-        for name, _, _, s in chunks
-    }
-    # and every frame of a view it reads one frame of: a view cut by the window was merged
-    # from part of its frames, and a crawl sliced otherwise than in the whole survey
-    view = stop_ids(fr.side, ch, params.stop_gap_m, params.stop_span_m)
-    frames_of = {name: np.flatnonzero(finite & np.isin(view, view[idx]))
-                 for name, idx in frames_of.items()}  # fmt: skip
+    chunks, frames_of = _chunk_windows(fr, ch, positions, params)
     # each image stamped once (a frame is read by up to three chunks), remote ones in parallel
     images = [join(survey.root, str(fr.image[i])) for i in np.flatnonzero(finite)]
     known = dict(zip(map(str, images), stamps(images, survey.storage_options), strict=True))
@@ -1650,10 +1681,7 @@ def process_survey(
         raise ValueError(
             f"survey {survey.root} names no track file; pass track= (CLI: --track FILE)"
         )
-    p, chainage_note = _with_chainage_doubt(p, survey)
-    p = _at_survey_antenna(p, survey)
-    ch = _rounded_chainage(survey.frames)
-    p, positions_note = _doubt_from_positions(p, survey, trk, ch)
+    p, ch, notes = _resolved_params(p, survey, trk)
     bad = _load_bad_frames(survey, ch, strict)
     plan = _plan(survey, trk, p, out, ch, opts)
     foreign = _foreign_chunks(plan.chunk_dir, plan.provenance["survey_hash"], opts)
@@ -1695,7 +1723,7 @@ def process_survey(
         )
     for line in camera_pair_warnings(survey):
         _report(line, quiet=False)
-    for note in (chainage_note, positions_note):
+    for note in notes:
         if note is not None:
             _report(note, quiet=False)
     capture = _capture_check(plan, bad)
@@ -1785,3 +1813,177 @@ def process_survey(
         out, masks_path, merged, plan.n_frames, len(pending), skipped, n_seg, bad_list,
         elapsed, timings,
     )  # fmt: skip
+
+
+def _recorded_params(record: JsonDict, where: str) -> PipelineParams:
+    """The :class:`PipelineParams` of a run's record (``provenance.json``'s ``params``, as
+    :meth:`PipelineParams.to_dict` writes them); fields the record lacks (a run of older code)
+    take their defaults. A cant table is recorded by its digest only: ``where`` names the
+    record in the error asking for it."""
+    table = (record.get("attitude") or {}).get("cant_table")
+    if table is not None:
+        raise ValueError(
+            f"{where}: the run used a cant table ({table.get('source')}), which the record "
+            "holds by its digest only; pass params= with that cant_table"
+        )
+    names = {f.name for f in fields(ReconstructionParams)}
+    kept_recon: JsonDict = {
+        k: tuple(v) if isinstance(v, list) else v
+        for k, v in (record.get("reconstruction") or {}).items() if k in names
+    }  # fmt: skip
+    recon = ReconstructionParams(**kept_recon)
+    att = dict(record.get("attitude") or {})
+    cant = CantLimits(**{k: att[k] for k in {f.name for f in fields(CantLimits)} if k in att})
+    base = PipelineParams()
+    kept = {k: record[k] for k in ("chunk_m", "segmenter", "thin_deg", "chainage_doubt_m",
+                                   "chainage_jitter_m", "stop_gap_m", "stop_span_m")
+            if k in record}  # fmt: skip
+    net = record.get("sky_net")
+    return replace(
+        base, **kept, reconstruction=recon, cant=cant,
+        sky_net=None if net is None else str(net["path"]),
+        grade_doubt_deg=float(att.get("grade_doubt_deg", base.grade_doubt_deg)),
+        imu_doubt_deg=float(att.get("imu_doubt_deg", base.imu_doubt_deg)),
+        mount_doubt_deg=float(att.get("mount_doubt_deg", base.mount_doubt_deg)),
+        antenna_height_m=recon.antenna_height_m,
+    )  # fmt: skip
+
+
+def _record_difference(record: object, now: object, key: str = "params") -> str | None:
+    """The first entry where ``now`` (JSON-like) differs from ``record``, as ``key.sub``,
+    else None; entries the record lacks (settings newer than the run) are not compared."""
+    if isinstance(record, dict) and isinstance(now, dict):
+        for k, v in record.items():
+            if k in now:
+                found = _record_difference(v, now[k], f"{key}.{k}")
+                if found is not None:
+                    return found
+        return None
+    return None if record == now else f"{key} (the run's {record!r}, now {now!r})"
+
+
+def finished_chunk_jobs(
+    out_dir: str | os.PathLike[str],
+    survey: Survey | str | os.PathLike[str],
+    *,
+    params: PipelineParams | None = None,
+    track: TrackMap | None = None,
+    lo_m: float = -math.inf,
+    hi_m: float = math.inf,
+    storage_options: StorageOptions | None = None,
+) -> list[ChunkJob]:
+    """The chunk jobs of a finished :func:`process_survey` run whose chunks meet the chainage
+    window ``[lo_m, hi_m]``, rebuilt as the run built them: the same frames (its bad frames left
+    out, as the run left them out), the same resolved parameters and attitude verdicts, the
+    same segmentation cache. :func:`~predisat.reconstruct.chunks.chunk_inputs` of a job gives
+    the frames, positions and settings the run's reconstruction of that chunk ran on, so that a
+    diagnosis reconstructs the published masks (``masks.parquet`` before its margins, terrain
+    and closed gaps) rather than its own.
+
+    Parameters
+    ----------
+    out_dir : path-like or str
+        The run's output folder (its ``provenance.json`` and ``cache/``).
+    survey : path-like, str or predisat.survey.Survey
+        The survey the run processed (loaded as :func:`process_survey` loads it).
+    params : PipelineParams, optional
+        The parameters the run was given; default: those its ``provenance.json`` records (a run
+        with a cant table needs them given). Checked against the record.
+    track : TrackMap, optional
+        The track the run was given instead of the survey's own.
+    lo_m, hi_m : float
+        The chainage window, metres; default: every chunk.
+    storage_options : mapping, optional
+        Options of the fsspec file system of URLs.
+
+    Returns
+    -------
+    list of ChunkJob
+        In chainage order; their ``chunk_dir`` is the run's, so do not run them
+        (:func:`~predisat.reconstruct.chunks.run_chunk` would rewrite its chunks): take their
+        :func:`~predisat.reconstruct.chunks.chunk_inputs`.
+
+    Raises
+    ------
+    ValueError
+        ``out_dir`` holds no finished run, or one of another survey, track, parameters or
+        segmentation code; the message names the fix.
+
+    Warns
+    -----
+    UserWarning
+        When other code made the run (its ``code_fingerprint``): the frames are rebuilt, but
+        today's reconstruction of them may differ from its masks (a panorama run made 3 hours
+        earlier on the same day: by up to 87 deg); rerun ``predisat process`` into the folder (its
+        segmentation cache is reused) to diagnose today's code.
+    """
+    if not lo_m <= hi_m:
+        raise ValueError(f"lo_m ({lo_m}) must not exceed hi_m ({hi_m}); give the window in "
+                         "increasing chainage")  # fmt: skip
+    opts = dict(storage_options or {})
+    out = location(out_dir)
+    record_file = join(out, "provenance.json")
+    try:
+        record: JsonDict = json.loads(read_bytes(record_file, opts))
+    except (OSError, ValueError) as exc:
+        raise ValueError(
+            f"{record_file} does not read ({exc}): out_dir must be the folder of a finished "
+            "predisat process run; run it to the end first"
+        ) from None
+    if not isinstance(survey, Survey):
+        survey = Survey.load(survey, track=track, check_images=False, on_error="skip",
+                             storage_options=opts)  # fmt: skip
+    if track is not None:
+        check_survey_track(survey, track)
+    trk = track if track is not None else survey.track
+    if trk is None:
+        raise ValueError(
+            f"survey {survey.root} names no track file; pass track= (the track the run used)"
+        )
+    if record.get("survey_hash") != survey_hash(survey):
+        raise ValueError(
+            f"{out}: the run processed another survey, or an earlier version of {survey.root} "
+            "(its survey.yaml, manifest or calibrations changed); give the survey it processed"
+        )
+    if isinstance(trk, TrackMap) and record.get("track_key", "") not in ("", track_key(trk)):
+        raise ValueError(
+            f"{out}: the run used another track than {trk.name!r}; pass track= (the one the "
+            "run was given)"
+        )
+    if record.get("code_fingerprint") != code_fingerprint():
+        warnings.warn(
+            f"{out}: the run was made by other code (fingerprint {record.get('code_fingerprint')}"
+            f", now {code_fingerprint()}): its frames are rebuilt, but today's reconstruction "
+            "of them may differ from its masks; rerun predisat process into the folder (the "
+            "segmentation cache is reused) to diagnose today's code",
+            stacklevel=2,
+        )
+    given = params if params is not None else _recorded_params(record["params"], str(record_file))
+    p, ch, _ = _resolved_params(given, survey, trk)
+    params_dict = p.to_dict()
+    differs = _record_difference(record["params"], json.loads(json.dumps(params_dict)))
+    if differs is not None:
+        raise ValueError(
+            f"{out}: the run was made with other parameters: {differs}; pass params= as the "
+            "run was given them"
+        )
+    cache_dir = _cache_dir(out, p, params_dict)
+    if not exists(cache_dir, opts):
+        raise ValueError(
+            f"{cache_dir}: no segmentation cache of this code (the segmentation changed since "
+            "the run, or its cache was removed); rerun predisat process into the folder"
+        )
+    finite = np.isfinite(ch)
+    positions = np.unique(ch[finite])
+    chunks, frames_of = _chunk_windows(survey.frames, ch, positions, p)
+    # the frames the run set aside before its chunks ran; the fusion's suspects were not: the
+    # reconstruction left them out itself
+    bad = {
+        str(b["frame_id"]): BadFrame(**b)
+        for b in record.get("bad_frame_list", []) if b.get("stage") != "fusion"
+    }  # fmt: skip
+    plan = _Plan(survey, trk, p, ch, positions, chunks, frames_of,
+                 {name: "" for name in frames_of}, record, join(out, "chunks"), cache_dir,
+                 opts)  # fmt: skip
+    window = [c for c in chunks if c[1] <= hi_m and c[2] > lo_m]
+    return _chunk_jobs(plan, window, bad, None)

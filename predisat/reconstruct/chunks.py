@@ -29,7 +29,12 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import write_masks
 from predisat.reconstruct.attitude import frame_attitudes
 from predisat.reconstruct.badframes import BadFrame
-from predisat.reconstruct.carving import FrameView, Reconstructor, side_cameras
+from predisat.reconstruct.carving import (
+    FrameView,
+    ReconstructionParams,
+    Reconstructor,
+    side_cameras,
+)
 from predisat.reconstruct.framecache import decode_cache
 from predisat.reconstruct.params import PipelineParams
 from predisat.reconstruct.placement import chainage_placement_doubt
@@ -48,8 +53,10 @@ from predisat.track import TrackMap
 
 __all__ = [
     "ChunkFrame",
+    "ChunkInputs",
     "ChunkJob",
     "chunk_finished",
+    "chunk_inputs",
     "chunk_name",
     "load_cached",
     "reconstructor_for",
@@ -123,13 +130,53 @@ def reconstructor_for(job: ChunkJob, previous: Reconstructor | None) -> Reconstr
     return previous if previous is not None and previous.params == p else Reconstructor(p)
 
 
-def run_chunk(
-    job: ChunkJob, reconstructor: Reconstructor | None = None
-) -> tuple[str, list[BadFrame]]:
-    """Reconstruct one chunk from cached segmentations and write it atomically.
+@dataclass(frozen=True)
+class ChunkInputs:
+    """What a chunk's reconstruction runs on (:func:`chunk_inputs`): the arguments
+    :func:`run_chunk` passes to :meth:`~predisat.reconstruct.carving.Reconstructor.run`.
 
-    ``reconstructor`` (with ``job.params.reconstruction``) may be shared by the chunks of a run,
-    so that its per-camera rectifiers are built once.
+    Attributes
+    ----------
+    views : tuple of FrameView
+        The chunk's frames as the reconstruction takes them: on the mounts of the vehicle's
+        attitude (measured or bounded from the track, section 16), shifted by its tilt, with
+        their attitude, mount and position doubts (sections 16, 18), a stop's frames merged into
+        one view (section 24).
+    positions_m : ndarray, shape (n_pos,)
+        The chunk's positions (chainages, metres).
+    track : TrackMap
+    side_cameras : tuple of str
+        The rig's side cameras (:func:`~predisat.reconstruct.carving.side_cameras`).
+    params : ReconstructionParams
+        The run's reconstruction parameters (its chainage shift and antenna height resolved).
+    bad : tuple of BadFrame
+        The frames set aside before the reconstruction (the job's known bad ones and those whose
+        cached segmentation does not read).
+    n_frames : int
+        Frames read, before a stop's frames are merged.
+    """
+
+    views: tuple[FrameView, ...]
+    positions_m: NDArray
+    track: TrackMap
+    side_cameras: tuple[str, ...]
+    params: ReconstructionParams
+    bad: tuple[BadFrame, ...]
+    n_frames: int
+
+
+def chunk_inputs(job: ChunkJob) -> ChunkInputs:
+    """The frames, positions and settings ``job``'s reconstruction runs on, built from its
+    cached segmentations: :func:`run_chunk` reconstructs from these, and a diagnosis of a
+    finished run (:func:`predisat.reconstruct.batch.finished_chunk_jobs`) rebuilds them.
+
+    Parameters
+    ----------
+    job : ChunkJob
+
+    Returns
+    -------
+    ChunkInputs
     """
     track = job.track
     bad: list[BadFrame] = list(job.known_bad)
@@ -205,17 +252,32 @@ def run_chunk(
     ids = [f.view_id for f, _ in ok_frames]
     views = merge_stop_frames(views, job.params.stop_gap_m, job.params.stop_span_m,
                               ids if ids and min(ids) >= 0 else None)  # fmt: skip
-    if reconstructor is None:
-        reconstructor = Reconstructor(job.params.reconstruction)
     # a side camera without its own frame at a position: the clearance there is overhead
     sides = side_cameras({side: cam for side, (cam, _) in job.cameras.items()})
-    rec = reconstructor.run(views, job.positions_m, track, side_cameras=sides)
+    return ChunkInputs(tuple(views), job.positions_m, track, tuple(sides),
+                       job.params.reconstruction, tuple(bad), n_frames)  # fmt: skip
+
+
+def run_chunk(
+    job: ChunkJob, reconstructor: Reconstructor | None = None
+) -> tuple[str, list[BadFrame]]:
+    """Reconstruct one chunk from cached segmentations and write it atomically.
+
+    ``reconstructor`` (with ``job.params.reconstruction``) may be shared by the chunks of a run,
+    so that its per-camera rectifiers are built once.
+    """
+    inputs = chunk_inputs(job)
+    if reconstructor is None:
+        reconstructor = Reconstructor(inputs.params)
+    rec = reconstructor.run(list(inputs.views), inputs.positions_m, inputs.track,
+                            side_cameras=list(inputs.side_cameras))  # fmt: skip
+    bad = list(inputs.bad)
     # frames the fusion's consistency check left out (ReconstructionParams.suspect_share)
     bad.extend(BadFrame(fid, why, "fusion") for fid, why in rec.suspect_frames)
     prov = dict(job.provenance)
     prov["chunk"] = {"name": job.name, "lo_m": job.lo_m, "hi_m": job.hi_m}
     prov["created_utc"] = utc_stamp(job.pinned_utc)
-    masks = rec.to_maskset(track, provenance=prov)
+    masks = rec.to_maskset(inputs.track, provenance=prov)
     chunk_dir, opts = location(job.chunk_dir), job.storage_options
     if isinstance(chunk_dir, Path):
         write_masks(masks, chunk_dir / f"{job.name}.parquet")
@@ -226,7 +288,7 @@ def run_chunk(
         **prov,
         "frames_key": job.frames_key,
         "n_positions": int(masks.n_pos),
-        "n_frames": n_frames,
+        "n_frames": inputs.n_frames,
         "bad_frames": [asdict(b) for b in bad],
         "finished_utc": utc_stamp(job.pinned_utc),
     }

@@ -1270,3 +1270,66 @@ def test_a_frame_whose_segmentation_raised_is_segmented_again_by_the_next_run(
     again = process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky)
     assert again.bad_frames == ()
     assert process_survey(survey_dir, out, p, progress=False, segmenter=blue_sky).bad_frames == ()
+
+
+@pytest.fixture(scope="module")
+def canted_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A finished run of a small fisheye survey on the demo's canted curve (roll 5-8 deg,
+    measured in the manifest), in 3 chunks."""
+    from predisat.camera.models import default_camera
+    from predisat.synth.generate import generate_survey
+    from predisat.track.map import demo_track
+
+    base = tmp_path_factory.mktemp("canted")
+    cam = default_camera("fisheye").resized(160, 120)
+    generate_survey(demo_track(), 760.0, 820.0, sky="clear", seed=4, out_dir=base, camera=cam,
+                    progress=False, cant_speed_kmh=100.0)  # fmt: skip
+    process_survey(base / "survey", base / "out", PARAMS, progress=False, scheduler="serial")
+    return base / "survey", base / "out"
+
+
+def test_finished_chunk_jobs_rebuild_the_frames_the_run_reconstructed(canted_run) -> None:
+    """A diagnosis reconstructs the published masks bit for bit from the rebuilt chunks (the
+    vehicle's attitude included: the level frames' masks differ on this canted curve)."""
+    from predisat.reconstruct.attitude import level_attitudes
+    from predisat.reconstruct.batch import finished_chunk_jobs
+    from predisat.reconstruct.carving import Reconstructor
+    from predisat.reconstruct.chunks import chunk_inputs
+
+    survey, out = canted_run
+    written = read_masks(out / "masks.parquet", close_holes=False)
+    jobs = finished_chunk_jobs(out, survey, lo_m=785.0, hi_m=815.0)
+    assert [j.name for j in jobs] == ["780_810", "810_840"]
+    for job in jobs:
+        inputs = chunk_inputs(job)
+        rec = Reconstructor(inputs.params).run(
+            list(inputs.views), inputs.positions_m, inputs.track,
+            side_cameras=list(inputs.side_cameras),
+        )  # fmt: skip
+        at = np.searchsorted(written.chainage_m, inputs.positions_m)
+        np.testing.assert_array_equal(written.chainage_m[at], inputs.positions_m)
+        assert np.array_equal(rec.mask_el_deg, written.mask_el_deg[at])
+        assert np.array_equal(rec.to_maskset(inputs.track).source, written.source[at])
+    # the same chunk's frames without the vehicle's attitude (as scripts rebuilt them before)
+    monkey = pytest.MonkeyPatch()
+    import predisat.reconstruct.chunks as chunks
+
+    monkey.setattr(chunks, "frame_attitudes", level_attitudes)
+    try:
+        level = chunk_inputs(jobs[0])
+    finally:
+        monkey.undo()
+    rec = Reconstructor(level.params).run(list(level.views), level.positions_m, level.track,
+                                          side_cameras=list(level.side_cameras))  # fmt: skip
+    at = np.searchsorted(written.chainage_m, level.positions_m)
+    assert np.abs(rec.mask_el_deg - written.mask_el_deg[at]).max() > 1.0
+
+
+def test_finished_chunk_jobs_refuse_other_parameters_than_the_run(canted_run) -> None:
+    from predisat.reconstruct.batch import finished_chunk_jobs
+
+    survey, out = canted_run
+    with pytest.raises(ValueError, match=r"params\.chunk_m .*pass params="):
+        finished_chunk_jobs(out, survey, params=PipelineParams(chunk_m=50.0))
+    with pytest.raises(ValueError, match="finished predisat process run"):
+        finished_chunk_jobs(out / "chunks", survey)
