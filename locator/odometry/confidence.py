@@ -181,7 +181,11 @@ class OdometerAccuracy:
         where it began. Exact for every pair as :meth:`displacement_bounds_m` with the
         travelled distance and the disputed distance since ``i``, in O(n): the bound of a pair
         across a reversal or a disputed step is the larger rate of the two, separable in ``i``
-        and ``j``; within a stretch of one direction without dispute the directional rates.
+        and ``j``; within a stretch of one direction without dispute the directional rates. A
+        backward or disputed step below the rounding tolerance of the whole log (``1e-6 (1 +
+        ran)``, which :meth:`displacement_bounds_m` takes as no reversal) does not end a
+        stretch: never below the pairwise check, above it only for a pair across such a step
+        that the pairwise check takes as a reversal (the stricter, directional bound).
 
         Parameters
         ----------
@@ -213,6 +217,10 @@ class OdometerAccuracy:
         if a.shape != (n,) or b.shape != (n,):
             raise ValueError(f"ahead_m and behind_m must have the shape of true_m ({n},), got "
                              f"{a.shape} and {b.shape}")  # fmt: skip
+        if not (np.isfinite(r).all() and np.isfinite(d).all() and np.isfinite(a).all()
+                and np.isfinite(b).all()):
+            # a NaN made every later excess NaN, and NaN > 0 passed every later epoch (m8)
+            raise ValueError("true_m, odo_m, ahead_m and behind_m must be finite")
         step = np.diff(d)
         ran = np.concatenate([[0.0], np.cumsum(np.abs(step))]) + a + b
         wide = max(self.over_rel, self.under_rel)
@@ -220,9 +228,15 @@ class OdometerAccuracy:
         # for a pair across a reversal or a disputed step)
         excess, anchor = _pair_excess(r - d - wide * ran - a, r - d + wide * ran + b)
         # pairs within one direction and no disputed step: the directional rates
-        disputed = (np.diff(a) > 0) | (np.diff(b) > 0)
+        # displacement_bounds_m takes a pair as no reversal while its wheels ran at most
+        # 1e-6 (1 + ran) beyond its displacement (rounding): a backward step or a disputed
+        # step below that is no break of a stretch here either, else such a pair got the wide
+        # rate only and a sub-millimetre jitter hid a violation of the directional bounds
+        tol = 1e-6 * (1.0 + ran[-1])
+        disputed = (np.diff(a) + np.diff(b)) > tol
+        step_dir = np.where(np.abs(step) > 0.5 * tol, step, 0.0)
         up, down = 1.0 + self.under_rel, 1.0 - self.over_rel  # forward: hi and lo rates
-        for s, e, sign in _monotone_stretches(step, disputed):
+        for s, e, sign in _monotone_stretches(step_dir, disputed):
             hi_rate, lo_rate = (up, down) if sign >= 0 else (down, up)
             ex, an = _pair_excess(r[s:e] - hi_rate * d[s:e], r[s:e] - lo_rate * d[s:e])
             worse = ex > excess[s:e]

@@ -265,3 +265,54 @@ def test_a_simulated_braked_axle_sliding_for_long_stays_within_its_bounds():
         d = np.asarray(log.dist_m, float) - log.dist_m[0]
         lo, hi = acc.displacement_bounds_m(d, np.abs(d))
         assert np.all((lo <= truth + 1e-6) & (truth <= hi + 1e-6)), (seed, (truth - hi).max())
+
+
+@pytest.mark.parametrize("jitter", ["backward", "disputed"])
+def test_a_sub_millimetre_jitter_hides_no_violation_of_the_directional_bounds(jitter):
+    """displacement_bounds_m takes a pair whose wheels ran under 1e-6 (1 + ran) beyond its
+    displacement as no reversal (directional rates): a 4 % over-read over 100 m at
+    1 m + 2 % over / 5 % under is 0.92 m out across a 0.01 mm backward step (or a 0.1 um
+    disputed step) in its middle, which anchor_excess_m took as a reversal (wide rate 5 %)
+    and passed (m8)."""
+    true_m = np.concatenate([np.arange(0.0, 51.0, 10.0), np.arange(50.0, 101.0, 10.0)])
+    odo_m = 1.04 * true_m
+    ahead = np.zeros(len(true_m))
+    if jitter == "backward":
+        odo_m[6:] -= 1e-5
+    else:
+        ahead[6:] = 1e-7
+    acc = OdometerAccuracy(1.0, 0.02, 0.05)
+    zero = np.zeros(len(true_m))
+    brute = _brute_excess(acc, true_m, odo_m, ahead, zero)
+    assert brute.max() > 0.9
+    excess, _ = acc.anchor_excess_m(true_m, odo_m, ahead, zero)
+    assert excess.max() >= brute.max() - 1e-6, (excess.max(), brute.max())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_excess_is_never_below_the_pairwise_check_with_jitter(seed):
+    """Random logs with sub-millimetre backward and disputed jitter: never below brute force
+    (a missed violation). Above it is allowed: a pair across a jitter that
+    displacement_bounds_m counts as a reversal (its own tolerance is relative to the pair's
+    distance) may be checked at the directional rates, the stricter side."""
+    rng = np.random.default_rng(100 + seed)
+    n = 200
+    step = rng.choice([-1.0, 0.0, 1.0, 1.0], n - 1) * rng.uniform(0.0, 20.0, n - 1)
+    step = np.where(rng.random(n - 1) < 0.2, rng.normal(0.0, 1e-4, n - 1), step)
+    true_m = np.concatenate([[0.0], np.cumsum(step)])
+    odo_m = np.concatenate([[0.0], np.cumsum(step * (1 + rng.normal(0.0, 0.05, n - 1)))])
+    ahead = np.concatenate([[0.0], np.cumsum((rng.random(n - 1) < 0.1) * 1e-5)])
+    behind = np.zeros(n)
+    acc = OdometerAccuracy(1.0, 0.02, 0.06)
+    excess, _ = acc.anchor_excess_m(true_m, odo_m, ahead, behind)
+    brute = _brute_excess(acc, true_m, odo_m, ahead, behind)
+    assert np.all(excess >= brute - 1e-6), (brute - excess).max()
+
+
+def test_a_non_finite_sample_is_refused_not_passed():
+    """One NaN made the excess of every later sample NaN, which no ``> 0`` test flags: a 50 %
+    over-read passed from there on (m8)."""
+    true_m = np.arange(10.0) * 10.0
+    true_m[3] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        OdometerAccuracy(1.0, 0.02, 0.02).anchor_excess_m(true_m, 1.5 * np.arange(10.0) * 10.0)
