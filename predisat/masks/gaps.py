@@ -56,6 +56,21 @@ def close_gaps(
     step = np.diff(ch)
     spacing = float(np.median(step))
     holes = np.flatnonzero(step > GAP_FACTOR * spacing)
+    # the gap between the two positions that closed a hole without a track (one read before:
+    # a file read, written and read again, or a set read and closed once more in memory) is
+    # no new hole: both trust nothing and their cells meet; closing it again added two
+    # positions and a hole that never was to gaps_closed_m at every pass (m8)
+    done = [tuple(map(float, g)) for g in masks.provenance.get("gaps_closed_m", [])]
+    if done:
+        eff = np.asarray(masks.effective_mask_deg, float)
+        filler = (eff >= 90.0).all(axis=1) & (np.asarray(masks.source) == BinSource.ASSUMED).all(
+            axis=1
+        )
+        holes = np.array([
+            i for i in holes
+            if not (filler[i] and filler[i + 1]
+                    and any(a <= ch[i] and ch[i + 1] <= b for a, b in done))
+        ], dtype=np.int64)  # fmt: skip
     if not len(holes):
         return masks, []
     if track is not None:

@@ -786,3 +786,38 @@ def test_an_unfinished_process_folder_says_to_finish_the_run(tmp_path):
     (tmp_path / "run" / "chunks").mkdir(parents=True)
     with pytest.raises(MaskFileError, match="has not finished: rerun the same `predisat process`"):
         read_masks(tmp_path / "run")
+
+
+def test_a_hole_closed_on_reading_is_not_closed_again_read_twice(tmp_path):
+    """A hole of 19 spacings closed on reading (two positions, one spacing inside each end)
+    left a gap between those two fillers that every later read (or run_locator's close_gaps
+    of a set read) took for a new hole: two more positions each pass and a hole that never was
+    in provenance.gaps_closed_m ([[100, 2000], [110, 1990], [120, 1980], ...]) (m8)."""
+    import warnings
+
+    from predisat.masks.fileformat import MaskHoleWarning
+    from predisat.masks.gaps import close_gaps
+    from predisat.masks.maskset import concat_masksets
+
+    def part(ch):
+        n = len(ch)
+        lon = np.linspace(4.45, 4.46, n)
+        return MaskSet.from_arrays(ch, np.full(n, 50.45), lon, np.full(n, 150.0),
+                                   np.full(n, 60.0), np.full((n, 360), 5.0))  # fmt: skip
+
+    joined = concat_masksets([part(np.arange(0.0, 101.0, 10.0)),
+                              part(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
+    with pytest.warns(MaskHoleWarning):
+        once = read_masks(write_masks(joined, tmp_path / "a.parquet"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MaskHoleWarning)
+        twice = read_masks(write_masks(once, tmp_path / "b.parquet"))
+    assert twice.n_pos == once.n_pos
+    assert twice.provenance["gaps_closed_m"] == [[100.0, 2000.0]]
+    again, holes = close_gaps(once)  # run_locator closes a set given in memory again
+    assert holes == [] and again.n_pos == once.n_pos
+    # a real hole elsewhere is still closed and recorded
+    more = concat_masksets([twice, part(np.arange(3000.0, 3101.0, 10.0))])
+    closed, holes = close_gaps(more)
+    assert holes == [(2100.0, 3000.0)]
+    assert closed.provenance["gaps_closed_m"][-1] == [2100.0, 3000.0]
