@@ -146,7 +146,14 @@ def cmd_place_balises(args: argparse.Namespace) -> int:
         if not start < end:
             raise CliError(f"--outage {start:g} {end:g}: START_M must be below END_M (chainage "
                            "in metres, increasing)")  # fmt: skip
+        if start >= track.length_m:
+            # metres, not km (--from-km / --to-km are km): 1e6 2e6 or a stretch of another line
+            raise CliError(f"--outage {start:g} {end:g}: starts past the end of {track.name} "
+                           f"({track.length_m:.0f} m); the values are chainages in metres")
         outages.append((start, end))
+    if "," in args.prefix:
+        raise CliError(f"--prefix {args.prefix!r}: ids are text without commas (the balise list "
+                       "and the captures' tables are CSV); give a prefix without one")
     lo_m, hi_m = km_range(track, args.from_km, args.to_km)
     spacing = _SPACING_M if args.spacing is None else args.spacing
     if hi_m - lo_m < spacing:

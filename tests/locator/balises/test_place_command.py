@@ -90,3 +90,35 @@ def test_place_balises_guards():
         place_balises(track, 0.0, 1000.0, 100.0, [], TRAILER, 25.0, max_locacc_m=70.0)
     with pytest.raises(ValueError, match="accuracy_m 63 must lie in"):
         place_balises(track, 0.0, 1000.0, 100.0, [], TRAILER, 25.0, accuracy_m=63.0)
+
+
+@pytest.mark.parametrize("outages", [[(1000.0, 1300.0), (1250.0, 1600.0)],
+                                     [(1250.0, 1600.0), (1000.0, 1300.0)],
+                                     [(1000.0, 1300.0), (1300.0, 1600.0)]])
+def test_overlapping_or_touching_outages_are_one_outage(outages):
+    """A tunnel given in two pieces, or a map's tunnel and an --outage over its approach: no
+    satellite between them resets the reach. Each taken from its own portals predicted 48 m
+    at 1100 m inside 1000-1600 m (1 m + 10 %, entry 25.6 m), placeable; the joined outage's
+    78 m is not (m8)."""
+    from locator.balises.placement import placement_check
+    from locator.odometry.confidence import OdometerAccuracy
+
+    acc = OdometerAccuracy(1.0, 0.1, 0.1)
+    q, ok = placement_check([1100.0, 1500.0], [1.0, 1.0], outages, acc, 25.6)
+    q1, _ = placement_check([1100.0, 1500.0], [1.0, 1.0], [(1000.0, 1600.0)], acc, 25.6)
+    np.testing.assert_array_equal(q, q1)
+    assert not ok.any() and q[0] == 78.0
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    (["--prefix", "a,b"], "--prefix 'a,b'"),  # written, then refused by `locator balises`
+    (["--outage", "1000000", "2400000"], "--outage 1e+06 2.4e+06"),  # off the map: ignored
+])
+def test_place_balises_refuses_what_it_would_write_wrong(tmp_path, capsys, extra, said):
+    """A prefix with a comma wrote ids that BaliseList.from_csv refuses; an outage past the
+    map's end (millimetres, another line) placed every candidate without a word (m8)."""
+    out = tmp_path / "p.csv"
+    assert main(["place-balises", "--from-km", "0", "--to-km", "3", *extra,
+                 "--out", str(out)]) == 2  # fmt: skip
+    assert said in capsys.readouterr().err
+    assert not out.exists()
