@@ -26,8 +26,11 @@ from predisat.cli.app import build_parser as predisat_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+# the command's own flags may stand before the subcommand (`locator -q balises ...`): that line
+# is checked too (it was not matched at all, m8)
 _CMD = re.compile(
-    r"(?:^|(?<=[\s(`$]))(?:[\w./-]*/)?(predisat|locator)\s+([a-z][a-z-]*)\b([^`\n]*)"
+    r"(?:^|(?<=[\s(`$]))(?:[\w./-]*/)?(predisat|locator)(?:\s+-[\w-]+)*\s+([a-z][a-z-]*)\b"
+    r"([^`\n]*)"
 )
 _SCRIPT = re.compile(r"scripts/(\w+\.py)((?:[ \t]+[^\s`|;&>]+)*)")
 _OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
@@ -134,3 +137,18 @@ def test_the_check_sees_an_option_a_command_does_not_take(bad: str) -> None:
     prog, sub, rest = m.groups()
     assert sub in known[prog] and bad in _OPTION.findall(_command_part(rest))
     assert bad not in known[prog][sub]
+
+
+def test_a_line_with_the_command_s_own_flag_before_the_subcommand_is_checked(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``locator -q balises --no-such-option``: the global flag before the subcommand kept the
+    line from being matched, so none of its options was checked (m8)."""
+    import tests.test_docs_commands as mod
+
+    doc = tmp_path / "x.md"
+    doc.write_text("```bash\nlocator -q balises --sim SIM --no-such-option 3\n```\n"
+                   "and `predisat --version` alone\n")
+    monkeypatch.setattr(mod, "DOCS", [doc])
+    with pytest.raises(AssertionError, match="takes no --no-such-option"):
+        test_every_documented_command_line_uses_options_the_command_takes()
