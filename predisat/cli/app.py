@@ -286,7 +286,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         lo_m, hi_m = float(masks.cell_bounds_m[0]), float(masks.cell_bounds_m[-1])
         if not lo_m <= ch_m <= hi_m:
             raise CliError(
-                f"--chainage {ch_m:g} m is outside the masks of {path} ({lo_m:.0f}-{hi_m:.0f} m "
+                f"--chainage {ch_m:g} m is outside the masks of {path} ({lo_m:.1f}-{hi_m:.1f} m "
                 "of chainage)" + chainage_hint(ch_m, lo_m, hi_m, "--chainage")
             )
         i, _ = masks.position_index(ch_m)
