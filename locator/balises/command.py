@@ -42,12 +42,25 @@ if TYPE_CHECKING:
     from locator.sim.simfile import SimRun
     from predisat.track import TrackMap
 
-__all__ = ["add_parser", "cmd_balises", "format_summary", "odometer_accuracy_check"]
+__all__ = [
+    "DEFAULT_ODOMETER",
+    "DEFAULT_SPACING_M",
+    "ODOMETER_KINDS",
+    "add_parser",
+    "cmd_balises",
+    "format_summary",
+    "odometer_accuracy_check",
+]
 
-# defaults stated in the help and applied in cmd_balises (None in the parser: given or not)
-_SPACING_M = 120.0
-_ODOMETER = "trailer-radar"
-_ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
+# defaults stated in the help and applied in cmd_balises (None in the parser: given or not);
+# `locator place-balises` shares them
+DEFAULT_SPACING_M = 120.0
+"""Balises every this many metres without a list (GADEROS), m."""
+DEFAULT_ODOMETER = "trailer-radar"
+"""The simulated odometer without ``--odometer``: a braked trailer axle with a radar."""
+ODOMETER_KINDS = ("trailer-radar", "motor-radar", "motor", "ideal")
+"""The ``--odometer`` choices (``locator.balises.campaign.ODOMETERS``' keys, without
+importing the campaign at start-up)."""
 _MAX_ACCEL_MPS2 = 1.5
 
 
@@ -81,8 +94,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
         "--spacing",
         type=positive_float,
         metavar="M",
-        help=f"without --balises: a balise every M metres of the run (default {_SPACING_M:g}, "
-        "GADEROS)",
+        help="without --balises: a balise every M metres of the run (default "
+        f"{DEFAULT_SPACING_M:g}, GADEROS)",
     )
     p.add_argument(
         "--radius",
@@ -100,8 +113,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     o = p.add_mutually_exclusive_group()
     o.add_argument(
         "--odometer",
-        choices=tuple(_ODOMETERS),
-        help=f"the simulated odometer (default {_ODOMETER}: braked trailer axle and radar)",
+        choices=tuple(ODOMETER_KINDS),
+        help=f"the simulated odometer (default {DEFAULT_ODOMETER}: braked trailer axle and radar)",
     )
     o.add_argument("--odometer-log", type=existing_file("an odometer log CSV (docs/odometry.md)"),
                    metavar="CSV",
@@ -230,7 +243,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
         balises = BaliseList.from_csv(args.balises, track)
     else:
         lo, hi = sorted((float(sim.chainage_m[0]), float(sim.chainage_m[-1])))
-        spacing = _SPACING_M if args.spacing is None else args.spacing
+        spacing = DEFAULT_SPACING_M if args.spacing is None else args.spacing
         if hi - lo < spacing:
             raise ValueError(
                 f"{args.sim}: the run covers {hi - lo:.0f} m, less than --spacing "
@@ -267,7 +280,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
                     error_model_caveat=use if use in ("forced", "gaussian_tail") else "",
                     model_el_min_deg=mf.el_min_deg, model_el_max_deg=mf.el_max_deg)  # fmt: skip
     log, accuracy = None, None
-    odometer = ODOMETERS[args.odometer or _ODOMETER]()
+    odometer = ODOMETERS[args.odometer or DEFAULT_ODOMETER]()
     # the captures' prediction and interpolation bounds take the odometer's acceleration limit:
     # a log admitted at 2.5 m/s^2 but bounded at 1.5 would state a capture too precise
     max_accel = odometer.max_accel_mps2
@@ -291,7 +304,7 @@ def cmd_balises(args: argparse.Namespace) -> int:
         for r in args.radius
     }
     quiet = bool(getattr(args, "quiet", False))
-    kind = str(args.odometer_log or args.odometer or _ODOMETER)
+    kind = str(args.odometer_log or args.odometer or DEFAULT_ODOMETER)
     if not quiet:
         width = (locator.budget.label() if locator.budget is not None
                  else f"k = {locator.model.k_sigma:g} per pair interval")  # fmt: skip

@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from locator.balises.command import odometer_accuracy_check
+from locator.balises.command import (
+    DEFAULT_ODOMETER,
+    DEFAULT_SPACING_M,
+    ODOMETER_KINDS,
+    odometer_accuracy_check,
+)
 from predisat.cli.args import (
     add_checks,
     add_command,
@@ -35,9 +40,6 @@ if TYPE_CHECKING:
 __all__ = ["add_parser", "cmd_place_balises", "not_placeable_stretches"]
 
 # defaults stated in the help and applied in cmd_place_balises
-_SPACING_M = 120.0
-_ODOMETER = "trailer-radar"
-_ODOMETERS = ("trailer-radar", "motor-radar", "motor", "ideal")
 # the open-sky p95 reach of the fused interval at satellite claims, trailer axle with radar,
 # 1 Hz, the campaign of docs/odometry.md ("Placement rule"): a p95, not a worst case
 _ENTRY_REACH_M = 25.6
@@ -68,16 +70,16 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argp
     p.add_argument("--to-km", type=finite_float, metavar="KM",
                    help="last chainage a candidate may have, km (default: the map's end)")
     p.add_argument("--spacing", type=positive_float, metavar="M",
-                   help=f"a candidate every M metres (default {_SPACING_M:g}, GADEROS)")
+                   help=f"a candidate every M metres (default {DEFAULT_SPACING_M:g}, GADEROS)")
     p.add_argument("--outage", nargs=2, type=non_negative_float, action="append",
                    metavar=("START_M", "END_M"),
                    help="a stretch without satellite claims (chainage, metres), besides the "
                    "map's tunnels (and --world's); repeat for several (default: none besides "
                    "those)")  # fmt: skip
     o = p.add_mutually_exclusive_group()
-    o.add_argument("--odometer", choices=_ODOMETERS,
+    o.add_argument("--odometer", choices=ODOMETER_KINDS,
                    help=f"the odometer whose bounds carry the interval through an outage "
-                   f"(default {_ODOMETER})")  # fmt: skip
+                   f"(default {DEFAULT_ODOMETER})")  # fmt: skip
     o.add_argument("--odometer-accuracy", nargs=3, type=non_negative_float,
                    metavar=("ABS_M", "OVER", "UNDER"),
                    help="bounds of the odometer instead: fixed part (m), relative over- and "
@@ -155,7 +157,7 @@ def cmd_place_balises(args: argparse.Namespace) -> int:
         raise CliError(f"--prefix {args.prefix!r}: ids are text without commas (the balise list "
                        "and the captures' tables are CSV); give a prefix without one")
     lo_m, hi_m = km_range(track, args.from_km, args.to_km)
-    spacing = _SPACING_M if args.spacing is None else args.spacing
+    spacing = DEFAULT_SPACING_M if args.spacing is None else args.spacing
     if hi_m - lo_m < spacing:
         raise CliError(f"--from-km/--to-km: the stretch {lo_m:.0f}-{hi_m:.0f} m is shorter than "
                        f"--spacing {spacing:g} m; give a longer stretch or a shorter spacing")
@@ -163,7 +165,7 @@ def cmd_place_balises(args: argparse.Namespace) -> int:
         a, over, under = args.odometer_accuracy
         accuracy, kind = OdometerAccuracy(a, over, under), "--odometer-accuracy"
     else:
-        kind = args.odometer or _ODOMETER
+        kind = args.odometer or DEFAULT_ODOMETER
         accuracy = OdometerAccuracy.from_config(ODOMETERS[kind]())
     reach = _ENTRY_REACH_M if args.entry_reach is None else args.entry_reach
     if args.accuracy >= args.max_locacc:

@@ -470,3 +470,11 @@ def test_placed_balises_are_the_list_locator_balises_reads(sim_dir, tmp_path, ca
                  "--out", str(tmp_path / "b")]) == 0  # fmt: skip
     caps = pd.read_csv(tmp_path / "b" / "captures.csv")
     assert caps["id"].tolist() == ids
+
+
+def test_the_odometer_choices_are_the_campaigns_odometers() -> None:
+    # written out for the parsers (the campaign is not imported at start-up): one list
+    from locator.balises.campaign import ODOMETERS
+    from locator.balises.command import DEFAULT_ODOMETER, ODOMETER_KINDS
+
+    assert ODOMETER_KINDS == tuple(ODOMETERS) and DEFAULT_ODOMETER in ODOMETERS
