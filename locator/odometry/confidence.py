@@ -548,14 +548,20 @@ def _monotone_stretches(step_m: NDArray, disputed: NDArray) -> list[tuple[int, i
     """Sample ranges ``[start, end)`` whose steps keep one direction (zeros aside) and hold no
     disputed step, with that direction (+1, -1; 0 standing); neighbours share a sample."""
     out = []
-    start, sign = 0, 0
+    start, sign, moved_to = 0, 0, 0  # moved_to: the sample the last moving step ended at
     for k, (s, bad) in enumerate(zip(np.sign(step_m), disputed, strict=True)):
         if bad or (s and sign and s != sign):  # step k runs from sample k to k + 1
             if k > start:
                 out.append((start, k + 1, sign))
-            start, sign = (k + 1, 0) if bad else (k, int(s))
+            # after a reversal the new direction's stretch starts where the old direction's
+            # last step ended: the standing (zero) steps between belong to both (a stretch
+            # starting at k left the anchors of a stop before the reversal to the wide rate:
+            # up to 2 m under the pair-by-pair check, m9)
+            start, sign = (k + 1, 0) if bad else (moved_to, int(s))
         elif s:
             sign = int(s)
+        if s or bad:
+            moved_to = k + 1
     if len(step_m) > start:
         out.append((start, len(step_m) + 1, sign))
     return out

@@ -316,3 +316,18 @@ def test_a_non_finite_sample_is_refused_not_passed():
     true_m[3] = np.nan
     with pytest.raises(ValueError, match="finite"):
         OdometerAccuracy(1.0, 0.02, 0.02).anchor_excess_m(true_m, 1.5 * np.arange(10.0) * 10.0)
+
+
+def test_anchor_excess_keeps_the_directional_bound_from_a_stop_after_a_reversal():
+    """Back 10 m, standing two cycles (the truth drifts back 0.8 m, within the fixed part),
+    then forward 100 m: from the first standing sample the pair has run 100 m one way
+    (displacement_bounds_m: no reversal, lo = 100 - 1 - 4 %), and the truth short of it by
+    0.5 m is outside. The forward stretch began at the last standing sample only and left
+    the earlier ones to the wide rate (6 %): the excess was missed (m9)."""
+    acc = OdometerAccuracy(1.0, 0.04, 0.06)
+    d = np.array([0.0, -10.0, -10.0, -10.0, 90.0])
+    r = np.array([0.0, -10.0, -10.0, -10.8, 84.5])
+    lo, _ = acc.displacement_bounds_m(d[4] - d[1], 100.0)
+    assert lo[()] - (r[4] - r[1]) == pytest.approx(0.5)
+    excess, anchor = acc.anchor_excess_m(r, d)
+    assert excess[4] == pytest.approx(0.5) and anchor[4] in (1, 2)
