@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -152,6 +153,11 @@ def cmd_place_balises(args: argparse.Namespace) -> int:
             # metres, not km (--from-km / --to-km are km): 1e6 2e6 or a stretch of another line
             raise CliError(f"--outage {start:g} {end:g}: starts past the end of {track.name} "
                            f"({track.length_m:.0f} m); the values are chainages in metres")
+        if end - start < 10.0:
+            # an outage shorter than a train: km typed where metres are read (--from-km is km)
+            print(f"locator place-balises: warning: --outage {start:g} {end:g} is "
+                  f"{end - start:.2f} m long; the values are chainages in metres (km would be "
+                  f"--outage {start * 1000:g} {end * 1000:g})", file=sys.stderr)  # fmt: skip
         outages.append((start, end))
     if "," in args.prefix:
         raise CliError(f"--prefix {args.prefix!r}: ids are text without commas (the balise list "

@@ -122,3 +122,12 @@ def test_place_balises_refuses_what_it_would_write_wrong(tmp_path, capsys, extra
                  "--out", str(out)]) == 2  # fmt: skip
     assert said in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_place_balises_warns_of_an_outage_shorter_than_a_train(tmp_path, capsys) -> None:
+    # km typed where metres are read: written (it may be meant), but said (m8)
+    out = tmp_path / "p.csv"
+    assert main(["place-balises", "--from-km", "0", "--to-km", "3", "--outage", "1", "2.4",
+                 "--out", str(out)]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "1.40 m long" in err and "--outage 1000 2400" in err and out.exists()
