@@ -1958,6 +1958,9 @@ def finished_chunk_jobs(
             "segmentation cache is reused) to diagnose today's code",
             stacklevel=2,
         )
+    if not isinstance(record.get("params"), dict):
+        raise ValueError(f"{record_file} records no parameters: out_dir must be the folder of a "
+                         "finished predisat process run; run it to the end first")  # fmt: skip
     given = params if params is not None else _recorded_params(record["params"], str(record_file))
     p, ch, _ = _resolved_params(given, survey, trk)
     params_dict = p.to_dict()
@@ -1986,4 +1989,20 @@ def finished_chunk_jobs(
                  {name: "" for name in frames_of}, record, join(out, "chunks"), cache_dir,
                  opts)  # fmt: skip
     window = [c for c in chunks if c[1] <= hi_m and c[2] > lo_m]
-    return _chunk_jobs(plan, window, bad, None)
+    # each chunk's own marker says which frames it set aside (a cache that did not read in one
+    # chunk was read by its neighbour: the run's list would leave it out of both, m9)
+    return [job for c in window
+            for job in _chunk_jobs(plan, [c], _chunk_bad(out, c[0], opts, bad), None)]
+
+
+def _chunk_bad(
+    out: Location, name: str, opts: StorageOptions, fallback: dict[str, BadFrame]
+) -> dict[str, BadFrame]:
+    """The frames chunk ``name`` of a finished run set aside before its reconstruction (its
+    marker's ``bad_frames``, the fusion's suspects left out), or ``fallback`` without one."""
+    try:
+        done = json.loads(read_bytes(join(out, "chunks", f"{name}.json"), opts))
+    except (OSError, ValueError):
+        return fallback
+    return {str(b["frame_id"]): BadFrame(**b)
+            for b in done.get("bad_frames", []) if b.get("stage") != "fusion"}  # fmt: skip

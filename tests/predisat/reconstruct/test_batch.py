@@ -1333,3 +1333,28 @@ def test_finished_chunk_jobs_refuse_other_parameters_than_the_run(canted_run) ->
         finished_chunk_jobs(out, survey, params=PipelineParams(chunk_m=50.0))
     with pytest.raises(ValueError, match="finished predisat process run"):
         finished_chunk_jobs(out / "chunks", survey)
+
+
+def test_finished_chunk_jobs_take_each_chunks_own_set_aside_frames(canted_run, tmp_path) -> None:
+    """A frame one chunk set aside (its cache did not read there) was read by its neighbour:
+    each rebuilt chunk takes its own marker's list, not the run's (m9)."""
+    import json
+    import shutil
+
+    from predisat.reconstruct.batch import finished_chunk_jobs
+
+    survey, out = canted_run
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    jobs = finished_chunk_jobs(copy, survey, lo_m=785.0, hi_m=815.0)
+    first, second = jobs[0].name, jobs[1].name
+    shared = sorted({f.frame_id for f in jobs[0].frames} & {f.frame_id for f in jobs[1].frames})
+    assert shared
+    marker = copy / "chunks" / f"{first}.json"
+    done = json.loads(marker.read_text())
+    done["bad_frames"] = [*done.get("bad_frames", []), {
+        "frame_id": shared[0], "message": "cache did not read", "stage": "segment"}]
+    marker.write_text(json.dumps(done))
+    again = {j.name: j for j in finished_chunk_jobs(copy, survey, lo_m=785.0, hi_m=815.0)}
+    assert shared[0] in {b.frame_id for b in again[first].known_bad}
+    assert shared[0] not in {b.frame_id for b in again[second].known_bad}
