@@ -46,6 +46,7 @@ from locator.campaign import (
     PROFILE_V_MPS,
     WorldData,
     calibrate,
+    code_fingerprint,
     error_model_file,
     load_world,
 )
@@ -460,6 +461,16 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    # finished jobs are skipped by name: only those of this code (a before/after comparison
+    # into one --out silently took the old code's jobs for the new, m10)
+    stamp, code = out / "code_fingerprint.txt", code_fingerprint()
+    if stamp.exists() and stamp.read_text().strip() != code:
+        raise SystemExit(f"{out} holds jobs of other code ({stamp}); give another --out, or "
+                         "delete the folder to run them again with this code")  # fmt: skip
+    if not stamp.exists() and any(out.glob("*_epochs.parquet")):
+        raise SystemExit(f"{out} holds jobs of unknown code (no {stamp.name}); give another "
+                         "--out, or delete the folder")  # fmt: skip
+    stamp.write_text(code + "\n")
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     calibrate(cache)
