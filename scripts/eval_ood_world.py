@@ -199,6 +199,11 @@ def run_one(rig_name: str, seed: int, length_m: float, scale: float, work: Path,
     sky, hour, wet = setup_of(seed)
     out = work / f"{rig_name}_s{seed}"
     res = _reusable(out) if reuse else None
+    if res is not None and spec_of_run(out / "synth" / "truth", seed) != spec:
+        # a render of another --length-m: its span and scenery layout are another world's (m2)
+        print(f"{out}: rendered for another span than {lo:.0f}-{hi:.0f} m: rendered again",
+              flush=True)  # fmt: skip
+        res = None
     render_cpu = 0.0
     track = demo_track()
     if res is None:
