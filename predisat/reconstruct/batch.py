@@ -46,7 +46,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
@@ -72,7 +72,7 @@ from predisat.reconstruct.attitude import (
     survey_speed_kmh,
 )
 from predisat.reconstruct.badframes import BadFrame, BadFrameError, write_bad_frames
-from predisat.reconstruct.carving import ReconstructionParams, lacking_side, side_cameras
+from predisat.reconstruct.carving import lacking_side, side_cameras
 from predisat.reconstruct.chunks import (
     ChunkFrame,
     ChunkJob,
@@ -135,7 +135,6 @@ from predisat.survey.capture import (
 from predisat.survey.format import Frames
 from predisat.survey.images import decode_thumbnail
 from predisat.terrain import Dem
-from predisat.track.cant import CantLimits
 from predisat.track.map import TrackMap
 from predisat.track.network import track_key
 
@@ -1815,40 +1814,6 @@ def process_survey(
     )  # fmt: skip
 
 
-def _recorded_params(record: JsonDict, where: str) -> PipelineParams:
-    """The :class:`PipelineParams` of a run's record (``provenance.json``'s ``params``, as
-    :meth:`PipelineParams.to_dict` writes them); fields the record lacks (a run of older code)
-    take their defaults. A cant table is recorded by its digest only: ``where`` names the
-    record in the error asking for it."""
-    table = (record.get("attitude") or {}).get("cant_table")
-    if table is not None:
-        raise ValueError(
-            f"{where}: the run used a cant table ({table.get('source')}), which the record "
-            "holds by its digest only; pass params= with that cant_table"
-        )
-    names = {f.name for f in fields(ReconstructionParams)}
-    kept_recon: JsonDict = {
-        k: tuple(v) if isinstance(v, list) else v
-        for k, v in (record.get("reconstruction") or {}).items() if k in names
-    }  # fmt: skip
-    recon = ReconstructionParams(**kept_recon)
-    att = dict(record.get("attitude") or {})
-    cant = CantLimits(**{k: att[k] for k in {f.name for f in fields(CantLimits)} if k in att})
-    base = PipelineParams()
-    kept = {k: record[k] for k in ("chunk_m", "segmenter", "thin_deg", "chainage_doubt_m",
-                                   "chainage_jitter_m", "stop_gap_m", "stop_span_m")
-            if k in record}  # fmt: skip
-    net = record.get("sky_net")
-    return replace(
-        base, **kept, reconstruction=recon, cant=cant,
-        sky_net=None if net is None else str(net["path"]),
-        grade_doubt_deg=float(att.get("grade_doubt_deg", base.grade_doubt_deg)),
-        imu_doubt_deg=float(att.get("imu_doubt_deg", base.imu_doubt_deg)),
-        mount_doubt_deg=float(att.get("mount_doubt_deg", base.mount_doubt_deg)),
-        antenna_height_m=recon.antenna_height_m,
-    )  # fmt: skip
-
-
 def _record_difference(record: object, now: object, key: str = "params") -> str | None:
     """The first entry where ``now`` (JSON-like) differs from ``record``, as ``key.sub``,
     else None; entries the record lacks (settings newer than the run) are not compared."""
@@ -1961,7 +1926,8 @@ def finished_chunk_jobs(
     if not isinstance(record.get("params"), dict):
         raise ValueError(f"{record_file} records no parameters: out_dir must be the folder of a "
                          "finished predisat process run; run it to the end first")  # fmt: skip
-    given = params if params is not None else _recorded_params(record["params"], str(record_file))
+    given = (params if params is not None
+             else PipelineParams.from_record(record["params"], str(record_file)))
     p, ch, _ = _resolved_params(given, survey, trk)
     params_dict = p.to_dict()
     differs = _record_difference(record["params"], json.loads(json.dumps(params_dict)))

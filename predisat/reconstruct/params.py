@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 
 from predisat.camera.models import CameraModel
 from predisat.jsontypes import JsonDict
@@ -175,6 +175,46 @@ class PipelineParams:
         if self.thin_deg == 0.0:
             return 0
         return max(1, round(self.thin_deg / camera.widest_pixel_deg))
+
+    @classmethod
+    def from_record(cls, record: JsonDict, where: str) -> PipelineParams:
+        """The parameters of a run's record (``provenance.json``'s ``params``, as
+        :meth:`to_dict` writes them); fields the record lacks (a run of older code) take their
+        defaults. A cant table is recorded by its digest only: ``where`` names the record in
+        the error asking for it.
+
+        Raises
+        ------
+        ValueError
+            The run used a cant table.
+        """
+        table = (record.get("attitude") or {}).get("cant_table")
+        if table is not None:
+            raise ValueError(
+                f"{where}: the run used a cant table ({table.get('source')}), which the record "
+                "holds by its digest only; pass params= with that cant_table"
+            )
+        names = {f.name for f in fields(ReconstructionParams)}
+        kept_recon: JsonDict = {
+            k: tuple(v) if isinstance(v, list) else v
+            for k, v in (record.get("reconstruction") or {}).items() if k in names
+        }  # fmt: skip
+        recon = ReconstructionParams(**kept_recon)
+        att = dict(record.get("attitude") or {})
+        cant = CantLimits(**{k: att[k] for k in {f.name for f in fields(CantLimits)} if k in att})
+        base = cls()
+        kept = {k: record[k] for k in ("chunk_m", "segmenter", "thin_deg", "chainage_doubt_m",
+                                       "chainage_jitter_m", "stop_gap_m", "stop_span_m")
+                if k in record}  # fmt: skip
+        net = record.get("sky_net")
+        return replace(
+            base, **kept, reconstruction=recon, cant=cant,
+            sky_net=None if net is None else str(net["path"]),
+            grade_doubt_deg=float(att.get("grade_doubt_deg", base.grade_doubt_deg)),
+            imu_doubt_deg=float(att.get("imu_doubt_deg", base.imu_doubt_deg)),
+            mount_doubt_deg=float(att.get("mount_doubt_deg", base.mount_doubt_deg)),
+            antenna_height_m=recon.antenna_height_m,
+        )  # fmt: skip
 
     def to_dict(self) -> JsonDict:
         """JSON-serialisable form (recorded in every chunk's provenance)."""
