@@ -617,19 +617,21 @@ def test_a_flipped_bit_in_a_data_page_is_refused_not_read_as_a_lower_mask(good_f
     np.testing.assert_array_equal(read_masks(plain).mask_el_deg, read_masks(good_file).mask_el_deg)
 
 
+def _open_stretch(chainage_m):
+    """Positions at ``chainage_m``, 5 deg everywhere (open sky), on a short straight."""
+    n = len(chainage_m)
+    lon = np.linspace(4.45, 4.46, n)
+    return MaskSet.from_arrays(chainage_m, np.full(n, 50.45), lon, np.full(n, 150.0),
+                               np.full(n, 60.0), np.full((n, 360), 5.0))  # fmt: skip
+
+
 def test_a_hole_between_positions_is_closed_on_reading_not_covered_by_its_neighbours(tmp_path):
     from predisat.masks.fileformat import MaskHoleWarning
     from predisat.masks.maskset import concat_masksets
 
     # two stretches joined, 1.9 km apart: open sky (5 deg) where surveyed, nothing between
-    def part(ch):
-        n = len(ch)
-        lon = np.linspace(4.45, 4.46, n)
-        return MaskSet.from_arrays(ch, np.full(n, 50.45), lon, np.full(n, 150.0),
-                                   np.full(n, 60.0), np.full((n, 360), 5.0))  # fmt: skip
-
-    joined = concat_masksets([part(np.arange(0.0, 101.0, 10.0)),
-                              part(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
+    joined = concat_masksets([_open_stretch(np.arange(0.0, 101.0, 10.0)),
+                              _open_stretch(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
     path = write_masks(joined, tmp_path / "joined.parquet")
     with pytest.warns(MaskHoleWarning, match="1 hole.*100-2000 m"):
         back = read_masks(path)
@@ -799,14 +801,8 @@ def test_a_hole_closed_on_reading_is_not_closed_again_read_twice(tmp_path):
     from predisat.masks.gaps import close_gaps
     from predisat.masks.maskset import concat_masksets
 
-    def part(ch):
-        n = len(ch)
-        lon = np.linspace(4.45, 4.46, n)
-        return MaskSet.from_arrays(ch, np.full(n, 50.45), lon, np.full(n, 150.0),
-                                   np.full(n, 60.0), np.full((n, 360), 5.0))  # fmt: skip
-
-    joined = concat_masksets([part(np.arange(0.0, 101.0, 10.0)),
-                              part(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
+    joined = concat_masksets([_open_stretch(np.arange(0.0, 101.0, 10.0)),
+                              _open_stretch(np.arange(2000.0, 2101.0, 10.0))])  # fmt: skip
     with pytest.warns(MaskHoleWarning):
         once = read_masks(write_masks(joined, tmp_path / "a.parquet"))
     with warnings.catch_warnings():
@@ -817,7 +813,7 @@ def test_a_hole_closed_on_reading_is_not_closed_again_read_twice(tmp_path):
     again, holes = close_gaps(once)  # run_locator closes a set given in memory again
     assert holes == [] and again.n_pos == once.n_pos
     # a real hole elsewhere is still closed and recorded
-    more = concat_masksets([twice, part(np.arange(3000.0, 3101.0, 10.0))])
+    more = concat_masksets([twice, _open_stretch(np.arange(3000.0, 3101.0, 10.0))])
     closed, holes = close_gaps(more)
     assert holes == [(2100.0, 3000.0)]
     assert closed.provenance["gaps_closed_m"][-1] == [2100.0, 3000.0]
