@@ -21,9 +21,13 @@ epoch tb, also beyond the +-15 min validity window (every healthy record evaluat
 TLE-derived azimuth/elevation (predisat.gnss.tle, sgp4) are compared with skyfield's for the same
 TLEs, and with the broadcast orbits of the same day (to show what "coarse" means).
 
+``--figure PNG`` draws the broadcast-minus-SP3 error over a whole day of GPS (2010-07-01) and of
+GLONASS (2009-04-01) (``docs/figures/ephemerides_orbits.png``).
+
 Usage::
 
     .venv/bin/python scripts/eval_orbits.py [--data ../shared/data/gnss] [--out results.md|.json]
+        [--figure docs/figures/ephemerides_orbits.png]
 """
 
 from __future__ import annotations
@@ -462,6 +466,56 @@ def _orbit_lines(pairs: list[dict]) -> list[str]:
     return lines
 
 
+# whole days of a whole constellation (the 2023 multi-GNSS files are excerpts of 2 satellites)
+FIGURE_PANELS = ((PAIRS[0], "G"), (PAIRS[2], "R"))
+SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou", "J": "QZSS"}
+
+
+def orbit_error_figure(data: Path, out: Path) -> None:
+    """Broadcast (PCO-corrected to the centre of mass) minus SP3, 3-D, per satellite and epoch
+    over a day, one panel per constellation; the epochs the ephemeris distrusts are gaps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(FIGURE_PANELS), figsize=(6.0 * len(FIGURE_PANELS), 3.8),
+                             sharey=True)  # fmt: skip
+    for ax, ((label, navs, sp3s), system) in zip(axes, FIGURE_PANELS, strict=True):
+        brdc = Ephemeris.from_rinex([data / f for f in navs])
+        prec = Ephemeris.from_sp3([data / f for f in sp3s])
+        assert prec.sp3 is not None
+        t = prec.sp3.epochs_gps_s
+        sats = [s for s in prec.satellites if s in brdc.satellites and s[0] == system]
+        pb, _, _ = brdc.evaluate(t, sats)
+        pp, _, _ = prec.evaluate(t, sats)
+        pco = block_pco_m(satellite_block(sats, t))
+        pc = com_from_apc(pb, np.nan_to_num(pco, nan=0.0), sun_direction_ecef(t)[:, None, :])
+        e = np.linalg.norm(pc - pp, axis=-1)  # NaN where either is not trusted
+        hours = (t - t[0]) / 3600.0
+        ax.plot(hours, e, color="0.65", lw=0.4)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # epochs with no trusted satellite
+            ax.plot(hours, np.nanmedian(e, axis=1), color="k", lw=1.5, label="median")
+            ax.plot(hours, np.nanmax(e, axis=1), color="#d7301f", lw=1, label="worst")
+        ok = np.isfinite(e)
+        ax.set_title(f"{SYSTEM_NAMES.get(system, system)}, {label}: {ok.any(0).sum()} "
+                     f"satellites\nRMS {_rms(e[ok]):.2f} m, max {e[ok].max():.1f} m "
+                     "(PCO-corrected)", fontsize=9)  # fmt: skip
+        ax.set_yscale("log")
+        ax.set_xlabel("hours from the first SP3 epoch")
+        ax.set_xlim(0, 24)
+        ax.set_xticks([0, 6, 12, 18, 24])
+    axes[0].set_ylabel("3-D orbit error, broadcast - SP3 (m)")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Broadcast orbits against precise orbits: grey, one line per satellite "
+                 "(gaps: distrusted by the ephemeris)")  # fmt: skip
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90)
+    print(f"written {out}")
+
+
 def to_markdown(pairs: list[dict], tle: dict, spd: dict) -> str:
     lines = _orbit_lines(pairs)
     lines += ["", "# TLE (sgp4)", ""]
@@ -476,12 +530,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=here.parent / "shared/data/gnss")
     ap.add_argument("--out", type=Path, help="write the results (.md or .json)")
+    ap.add_argument("--figure", type=Path, help="draw a day's orbit errors into this PNG "
+                    "and stop")  # fmt: skip
     args = ap.parse_args(argv)
     if not args.data.is_dir():
         print(
             f"--data {args.data} is not a folder; pass the shared gnss data folder", file=sys.stderr
         )
         return 2
+    if args.figure:
+        orbit_error_figure(args.data, args.figure)
+        return 0
     pairs = [compare_pair(args.data, label, n, s) for label, n, s in PAIRS]
     tle = compare_tle(args.data)
     spd = speed(args.data)
