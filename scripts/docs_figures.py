@@ -3,6 +3,9 @@
 * ``mask``: what a mask file holds, drawn from a published ``masks.parquet`` (the demo's):
   the effective mask, the source code and the support of every bin along a stretch, and one
   position's mask on a sky plot (``docs/figures/mask_file.png``, docs/mask-format.md).
+* ``conventions``: chainage, heading, azimuth from north, the vehicle frame, left and right,
+  and the side cameras' mounts, on the demo's line 144 (``docs/figures/conventions.png``,
+  docs/conventions.md).
 * ``terrain``: the terrain horizon of the SRTM tiles against the flat far-field assumption at
   three places of the Nice - Digne line (``docs/figures/terrain_horizon.png``,
   docs/terrain.md).
@@ -14,6 +17,8 @@ Usage::
 
     PYTHONPATH=. .venv/bin/python scripts/docs_figures.py mask demo_out/masks/masks.parquet \
         --from-m 1000 --to-m 1400 --at-m 1200 --out docs/figures/mask_file.png
+    PYTHONPATH=. .venv/bin/python scripts/docs_figures.py conventions \
+        --out docs/figures/conventions.png
     PYTHONPATH=. .venv/bin/python scripts/docs_figures.py terrain \
         ../shared/data/terrain/srtm3_nice --out docs/figures/terrain_horizon.png
 """
@@ -24,7 +29,7 @@ import argparse
 import dataclasses
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import matplotlib
 
@@ -33,9 +38,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
+from predisat.camera.models import Mount
 from predisat.masks.fileformat import read_masks
 from predisat.masks.maskset import WEAK_SUPPORT, BinSource
 from predisat.terrain import Dem, antenna_height_m, terrain_horizon
+from predisat.track.map import demo_track
 
 # Nice - Digne line: the valley floor, a town in the upper valley, the Nice terminus
 # (docs/terrain.md quotes the horizons of these three places)
@@ -123,6 +130,91 @@ def _mask_figure(path: Path, lo_m: float, hi_m: float, at_m: float, out: Path) -
     print(f"wrote {out}")
 
 
+def _xy(v: np.ndarray) -> tuple[float, float]:
+    return float(v[0]), float(v[1])
+
+
+SIDES: tuple[tuple[Literal["left", "right"], str], ...] = (("left", "#2b8cbe"),
+                                                          ("right", "#d7301f"))  # fmt: skip
+
+
+def _conventions_figure(at_m: float, out: Path) -> None:
+    track = demo_track()
+    enu = np.asarray(track.enu_at(np.arange(at_m - 400, at_m + 401, 5.0)))
+    here = np.asarray(track.enu_at(np.array([at_m])))[0]
+    heading = float(track.heading_at(at_m))
+    fig = plt.figure(figsize=(12.5, 5.6))
+    top = fig.add_subplot(1, 2, 1)
+    top.plot(enu[:, 0] - here[0], enu[:, 1] - here[1], color="0.3", lw=2)
+    for c in range(int(at_m - 400) // 100 * 100 + 100, int(at_m + 400), 100):
+        p = np.asarray(track.enu_at(np.array([float(c)])))[0] - here
+        top.plot(p[0], p[1], "o", color="0.3", ms=3)
+        top.annotate(f"chainage {c} m", _xy(p), textcoords="offset points", xytext=(8, -3),
+                     fontsize=7)  # fmt: skip
+    h = np.radians(heading)
+    fwd, left = np.array([np.sin(h), np.cos(h)]), np.array([-np.cos(h), np.sin(h)])
+    top.annotate("", xy=_xy(60 * fwd), xytext=(0, 0),
+                 arrowprops={"arrowstyle": "-|>", "color": "k", "lw": 1.5})  # fmt: skip
+    top.text(*_xy(60 * fwd - 22 * left), "x: forward\n(increasing chainage)", fontsize=8,
+             ha="center")  # fmt: skip
+    for name, colour in SIDES:
+        mount = Mount.default(name)
+        yaw = np.radians(mount.yaw_deg)
+        look = np.cos(yaw) * fwd + np.sin(yaw) * left
+        off = mount.lever_arm_m[1] * left * 8  # the 1.5 m lever arm, drawn 8x
+        top.annotate("", xy=_xy(off + 40 * look), xytext=_xy(off),
+                     arrowprops={"arrowstyle": "-|>", "color": colour})  # fmt: skip
+        axis = "y: left" if name == "left" else "-y: right"
+        top.text(*_xy(off + 55 * look), f"{axis}\n{name} camera, yaw {mount.yaw_deg:+.0f} deg",
+                 color=colour, fontsize=7, ha="center", va="center")  # fmt: skip
+    top.annotate("", xy=(0, 95), xytext=(0, 0),
+                 arrowprops={"arrowstyle": "-|>", "color": "0.5"})  # fmt: skip
+    top.text(0, 99, "true north (az_deg 0)", ha="center", fontsize=8, color="0.4")
+    arc = np.radians(np.linspace(0, heading, 50))
+    top.plot(22 * np.sin(arc), 22 * np.cos(arc), color="0.4", lw=1)
+    top.text(25, 12, f"heading_deg = {heading:.1f}\n(az_deg: clockwise from north)", fontsize=8)
+    top.set_aspect("equal")
+    top.set_xlim(-130, 130)
+    top.set_ylim(-120, 120)
+    top.set_xlabel("east of the antenna (m)")
+    top.set_ylabel("north of the antenna (m)")
+    top.set_title(f"Seen from above: {track.name}, chainage {at_m:.0f} m\n(camera offsets "
+                  "drawn 8x)", fontsize=9)  # fmt: skip
+    cut = fig.add_subplot(1, 2, 2)
+    cut.axhline(0, color="0.7", lw=0.8)
+    cut.plot(0, 0, "k^", ms=9)
+    cut.text(-0.1, -0.3, "GNSS antenna:\nvehicle origin", fontsize=8, ha="right")
+    for name, colour in SIDES:
+        mount = Mount.default(name)
+        y, z = mount.lever_arm_m[1], mount.lever_arm_m[2]
+        pitch = np.radians(mount.pitch_deg)
+        sgn = 1.0 if y > 0 else -1.0
+        # looking along increasing chainage: the left side is drawn on the left
+        cut.plot(-y, z, "s", color=colour, ms=7)
+        cut.annotate("", xy=(-y - sgn * 1.6 * np.cos(pitch), z + 1.6 * np.sin(pitch)),
+                     xytext=(-y, z), arrowprops={"arrowstyle": "->", "color": colour})  # fmt: skip
+        cut.text(-y, z - 0.5, f"{name}: {abs(y):g} m {name}, {abs(z):g} m below\n"
+                 f"the antenna, pitch {mount.pitch_deg:g} deg up", color=colour, fontsize=7,
+                 ha="center")  # fmt: skip
+    cut.annotate("", xy=(0, 1.4), xytext=(0, 0), arrowprops={"arrowstyle": "-|>"})
+    cut.text(0.05, 1.45, "z: up (ellipsoid normal)", fontsize=8)
+    el = np.radians(30.0)
+    cut.plot([0, 2.8 * np.cos(el)], [0, 2.8 * np.sin(el)], color="0.4", ls=":")
+    cut.text(1.0, 0.15, "el_deg: above the local horizontal", fontsize=8, color="0.3",
+             rotation=30)  # fmt: skip
+    cut.set_aspect("equal")
+    cut.set_xlim(-3.3, 3.3)
+    cut.set_ylim(-1.5, 2.0)
+    cut.set_xlabel("to the right of the track (m), looking along increasing chainage")
+    cut.set_ylabel("height above the antenna (m)")
+    cut.set_title("Seen along the track: the default side-camera mounts (Mount.default)",
+                  fontsize=9)  # fmt: skip
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90)
+    print(f"wrote {out}")
+
+
 def _terrain_figure(tiles: Path, out: Path) -> None:
     files = sorted(tiles.glob("*.hgt")) + sorted(tiles.glob("*.tif"))
     if not files:
@@ -170,12 +262,17 @@ def main(argv: list[str] | None = None) -> int:
     m.add_argument("--to-m", type=float, default=1400.0, help="stretch end, chainage m")
     m.add_argument("--at-m", type=float, default=1200.0, help="the position drawn on the sky")
     m.add_argument("--out", type=Path, default=Path("docs/figures/mask_file.png"))
+    c = sub.add_parser("conventions", help="the frames and angles (docs/conventions.md)")
+    c.add_argument("--at-m", type=float, default=5200.0, help="chainage of the vehicle, m")
+    c.add_argument("--out", type=Path, default=Path("docs/figures/conventions.png"))
     t = sub.add_parser("terrain", help="terrain horizon against the flat default")
     t.add_argument("tiles", type=Path, help="folder of SRTM .hgt or GeoTIFF tiles")
     t.add_argument("--out", type=Path, default=Path("docs/figures/terrain_horizon.png"))
     args = p.parse_args(argv)
     if args.figure == "mask":
         _mask_figure(args.masks, args.from_m, args.to_m, args.at_m, args.out)
+    elif args.figure == "conventions":
+        _conventions_figure(args.at_m, args.out)
     else:
         _terrain_figure(args.tiles, args.out)
     return 0
