@@ -794,10 +794,12 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, 
     width = info.get("interval_width", "")
     if width:
         model_note += f" Pair intervals ± k sigma_K, {width}."
+    short = _width_short(info)
     figs["interval"] = _figure(
         _img(
             plots.interval_along_line(
-                results, posts, spans, f"Predicted interval with {gnss} satellites"
+                results, posts, spans,
+                f"Predicted interval with {gnss} satellites" + (f" ({short})" if short else ""),
             ),
             f"Line plot, logarithmic: median and 95th percentile of the predicted confidence "
             f"interval length with {gnss} satellites along {where}, per rule, with the LOCOPROL "
@@ -811,6 +813,27 @@ def _figures(inputs: ReportInputs, posts: Sequence[KilometrePost]) -> dict[str, 
         "interval",
     )
     return figs
+
+
+def _width_short(info: Mapping[str, Any]) -> str:
+    """The intervals' width in a few words, for the figure's own title: a PNG taken out of
+    the report still says which k (and map doubt) drew it. "" when the run does not say."""
+    par = info.get("interval_model_params") or {}
+    by_mode = par.get("k_sigma_by_mode")
+    if by_mode:
+        ks = [by_mode.get(m) for m in ("THREE_PAIRS", "ALL_PAIRS", "BEST_PAIR")]
+        text = "k " + " / ".join(f"{k:.2f}" for k in ks if k is not None)
+        risk = par.get("integrity_risk_per_epoch")
+        if risk is not None:
+            text = f"risk {risk:g} per epoch: {text} (3 pairs / 4-5 / 1 pair)"
+    elif par.get("k_sigma") is not None:
+        text = f"k {float(par['k_sigma']):.2f} every mode"
+    else:
+        return ""
+    lat, vert = par.get("map_doubt_lateral_m"), par.get("map_doubt_vertical_m")
+    if lat is not None and vert is not None:
+        text += f", map doubt {lat:g} / {vert:g} m" if (lat or vert) else ", no map doubt"
+    return text
 
 
 def _stretch_text(inputs: ReportInputs) -> str:

@@ -352,8 +352,11 @@ def run(args: argparse.Namespace) -> int:
           f"step){_left(est, took)}")  # fmt: skip
     t1 = time.perf_counter()
     budget = IntegrityBudget(args.integrity_risk)
+    # the file just written, not the set in memory: the report's header and provenance then
+    # name the masks it used (an in-memory set reads "in memory")
     report = run_availability(
-        processed.masks, track, None, out_dir=out / "availability", step_s=plan.step_s,
+        Path(processed.masks_path), track, None, out_dir=out / "availability",
+        step_s=plan.step_s,
         progress=not args.quiet, integrity=budget,
     )  # fmt: skip
     took["availability"] = time.perf_counter() - t1

@@ -429,3 +429,34 @@ def test_a_basemap_in_a_national_grid_is_read_in_its_crs(tmp_path: Path) -> None
     path.write_text(json.dumps(doc))
     (line,) = basemap_from_geojson(path)
     np.testing.assert_allclose(line, np.c_[lon, lat], atol=1e-7)
+
+
+def test_interval_figure_names_its_k_in_its_own_title(results, masks, satellites, track,
+                                                      monkeypatch) -> None:
+    """The interval figure's image, taken out of the report, says which integrity setting
+    drew it (a review of 2026-12-07: only the caption beside it did)."""
+    from predisat.availability import report as report_mod
+
+    seen: list[str] = []
+    real = report_mod.plots.interval_along_line
+
+    def spy(*args, **kwargs):
+        seen.append(args[3] if len(args) > 3 else kwargs.get("title", ""))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(report_mod.plots, "interval_along_line", spy)
+    info = dict(INFO, interval_model_params={
+        "k_sigma": None, "integrity_risk_per_epoch": 1e-12,
+        "k_sigma_by_mode": {"BEST_PAIR": 7.1305, "ALL_PAIRS": 4.8230, "THREE_PAIRS": 3.7770},
+        "map_doubt_lateral_m": 1.5, "map_doubt_vertical_m": 1.0,
+    })  # fmt: skip
+    build_report(ReportInputs(results, masks, satellites, track, info,
+                              sky_chainage_m=(CH[0], CH[6])))  # fmt: skip
+    assert seen and "risk 1e-12" in seen[0] and "k 3.78 / 4.82 / 7.13" in seen[0], seen
+    assert "map doubt 1.5 / 1 m" in seen[0]
+    seen.clear()
+    info = dict(INFO, interval_model_params={"k_sigma": 2.0, "map_doubt_lateral_m": 0.0,
+                                             "map_doubt_vertical_m": 0.0})  # fmt: skip
+    build_report(ReportInputs(results, masks, satellites, track, info,
+                              sky_chainage_m=(CH[0], CH[6])))  # fmt: skip
+    assert "k 2.00 every mode, no map doubt" in seen[0], seen
