@@ -749,12 +749,27 @@ def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
         )
 
 
-def _warn_no_iono(source: Any, nav: Sequence[str]) -> None:
+def _warn_no_iono(source: Any, nav: Sequence[str], command: str = "run") -> None:
     """Told once: systems without any broadcast ionosphere model (their epochs are flagged)."""
     from locator.corrections import UNCORRECTED_IONO_SIGMA_M
 
     missing = source.iono_missing
     stale = getattr(source, "iono_stale", {})
+    if command == "calibrate":
+        # a user trial (2026-12-07): a Galileo-only --nav fitted the ionospheric delay into the
+        # model (NYA1 E C1X: b 0.41 -> 1.16 m) without a word, and the file still read
+        # "single: one code with the broadcast ionosphere"
+        if missing:  # a stale set counts as none (BroadcastIono.stale)
+            print(
+                f"locator calibrate: warning: no broadcast ionosphere model for "
+                f"{', '.join(missing)} in {', '.join(map(str, nav))}"
+                " (no Klobuchar coefficients of the observation days; Galileo NeQuick-G is not "
+                "applied): the ionospheric delay stays in these residuals and the model fits it "
+                "as pseudorange error (recorded in the file: fitted.iono_uncorrected_systems); "
+                "add the same day's GPS or mixed broadcast navigation file to --nav",
+                file=sys.stderr,
+            )
+        return
     if stale:
         print(
             "locator run: warning: ionosphere coefficients of another day left out: "
@@ -1038,6 +1053,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
         ranges = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         data, stations = [], []
+        no_iono: set[str] = set()
         seen_epochs: list[tuple[Any, Any]] = []
         for path in args.obs:
             obs = Observations.from_rinex(path)
@@ -1077,10 +1093,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                     )
             seen_epochs.append((x, np.asarray(obs.gps_s, float)))
             src = RinexSource(day, obs, args.constellation)
+            _warn_no_iono(src, args.nav, command="calibrate")
+            no_iono.update(src.iono_missing)
             data.append(station_residuals(src, x, min_el_deg=args.min_el))
             stations.append(x.tolist())
         fitted = {"obs": [str(f) for f in args.obs], "nav": [str(f) for f in args.nav],
-                  "station_ecef_m": stations}  # fmt: skip
+                  "station_ecef_m": stations,
+                  "iono_uncorrected_systems": sorted(no_iono)}  # fmt: skip
     try:
         mf = calibrate_to_file(
             data, args.out, k_sigma=args.k_sigma, bound=args.bound, fitted=fitted,

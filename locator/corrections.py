@@ -35,6 +35,7 @@ tau being the geometric travel time to the approximate receiver position, iterat
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -244,7 +245,7 @@ class BroadcastIono:
             paths = [paths]
         candidates: dict[str, list[tuple[NDArray, str, float]]] = {}
         for p in paths:
-            for key, val, where, t in _read_iono(Path(p)):
+            for key, val, where, t in _without_empty_klobuchar(_read_iono(Path(p))):
                 candidates.setdefault(key, []).append((val, where, t))
         return cls._chosen({k: tuple(v) for k, v in candidates.items()}, near_gps_s, file_epochs)
 
@@ -348,6 +349,38 @@ def _read_iono(path: Path) -> list[tuple[str, NDArray, str, float]]:
             out.append((key + "A", m.coefficients[:4], m.source, m.epoch_gps_s))
             out.append((key + "B", m.coefficients[4:], m.source, m.epoch_gps_s))
     return out
+
+
+def _without_empty_klobuchar(
+    sets: list[tuple[str, NDArray, str, float]],
+) -> list[tuple[str, NDArray, str, float]]:
+    """The sets of one file without a Klobuchar set whose alpha coefficients are all zero.
+
+    Such a set (a receiver that had not yet decoded the ionosphere page writes zeros) is no
+    model: the amplitude is zero, and the algorithm returns its night-time constant of 5 ns
+    (1.5 m at the zenith) at any hour. Taken as a model, it left 2-9 m of the delay in GEONET
+    0759's ranges at 09:30 local time without a flag or an inflated sigma (SPP mean up error
+    -0.2 -> +2.8 m; a user trial, 2026-12-07); RTKLIB's ``ionmodel`` replaces a set of eight
+    zeros by a default one.
+    Left out with a warning, its systems count as without a model (flagged, sigma inflated)
+    unless another set serves them.
+    """
+    empty = {(k[:-1], where.rsplit(":", 1)[0], t) for k, val, where, t in sets
+             if k.endswith("A") and k != "GAL" and not np.any(val)}  # fmt: skip
+    if not empty:
+        return sets
+    for name, file, _ in sorted(empty):
+        warnings.warn(
+            f"{file}: the {name} Klobuchar coefficients are all zero (no ionosphere data "
+            "decoded): left out; its systems count as without a broadcast ionosphere model "
+            "unless another set serves them",
+            UserWarning,
+            stacklevel=3,
+        )
+    def dropped(c: tuple[str, NDArray, str, float]) -> bool:
+        return c[0] != "GAL" and (c[0][:-1], c[2].rsplit(":", 1)[0], c[3]) in empty
+
+    return [c for c in sets if not dropped(c)]
 
 
 def _file_epochs(eph: Ephemeris) -> dict[str, float]:

@@ -158,6 +158,10 @@ class ObsHeader:
     time_system : str
         ``"GPS"``, ``"GLO"`` (UTC), ``"GAL"``, ``"BDT"``, ``"QZS"`` or ``"IRN"``.
     glonass_slots : mapping of satellite id to frequency number
+    scale_factors : mapping of system letter to mapping of code to float
+        RINEX 3/4 ``SYS / SCALE FACTOR``: the factor each listed observation type's stored
+        values were multiplied by (code ``"*"``: every type of the system); the values of
+        :class:`Observations` are divided by it, as the record asks.
     """
 
     version: float
@@ -174,6 +178,7 @@ class ObsHeader:
     interval_s: float = float("nan")
     time_system: str = "GPS"
     glonass_slots: Mapping[str, int] = field(default_factory=dict)
+    scale_factors: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -361,6 +366,8 @@ class _HeaderScan:
         self.last_sys = ""
         self.time_sys = ""
         self.time_sys_line = 0
+        self.scale: dict[str, dict[str, float]] = {}
+        self.scale_last: tuple[str, float] | None = None
 
     def take(self, label: str, line: str, i: int) -> None:
         """Record ``line`` (0-based line ``i``) of label ``label``; ValueError if unreadable."""
@@ -391,6 +398,24 @@ class _HeaderScan:
             self.type_line.setdefault("*", i + 1)
         elif label == "SYS / # / OBS TYPES":
             self._sys_types(line, i)
+        elif label == "SYS / SCALE FACTOR":
+            # A1, 1X, I4 factor, 2X, I2 number of types (0/blank: all), 12(1X,A3); continuation
+            # lines 10X,12(1X,A3). A user trial (2026-12-07): ignored, a factor of 10 on C1C
+            # gave pseudoranges ten times too long, and calibrate blamed the station position
+            if line[0].strip():
+                factor = float(int(line[2:6]))
+                if factor <= 0:
+                    raise ValueError(f"factor {factor:g}")
+                self.scale_last = (line[0].upper(), factor)
+                if not line[8:10].strip() or int(line[8:10]) == 0:
+                    self.scale.setdefault(line[0].upper(), {})["*"] = factor
+            if self.scale_last is None:
+                raise ValueError("continuation line before any system")
+            system, factor = self.scale_last
+            for k in range(10, 58, 4):
+                code = line[k + 1 : k + 4].strip()
+                if code:
+                    self.scale.setdefault(system, {})[code] = factor
         elif label == "GLONASS SLOT / FRQ #":
             for k in range(4, 60, 7):
                 sat = line[k : k + 3].strip()
@@ -465,6 +490,7 @@ class _Reader:
             file_system,
             obs_types={s: tuple(t) for s, t in types.items()},
             glonass_slots=scan.slots,
+            scale_factors={k: dict(v) for k, v in scan.scale.items()},
             **scan.kw,
         )
         self.check_codes(head.obs_types, type_line, v3)
@@ -811,12 +837,13 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
                     " observation types in the header; its observations are ignored",
                 )
             continue
+        scale = head.scale_factors.get(system, {})
         for c, f in _fields(reader, sat, tt, text, lineno, t, v3):
             if c not in values:
                 continue
             try:
                 if f[:14].strip():
-                    values[c][e, col[sat]] = float(f[:14])
+                    values[c][e, col[sat]] = float(f[:14]) / scale.get(c, scale.get("*", 1.0))
                 if f[14:15].strip():
                     lli[c][e, col[sat]] = int(f[14])
                 if f[15:16].strip():

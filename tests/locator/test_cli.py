@@ -1236,3 +1236,35 @@ def test_a_class_model_from_one_receiver_is_told(test_data, tmp_path, capsys):
             "--receiver-class", "geodetic", "--out", str(tmp_path / "m.json")]  # fmt: skip
     assert main(argv) == 0
     assert "from one receiver and antenna (TRIMBLE 5700 / TRM29659.00)" in capsys.readouterr().err
+
+
+def test_calibrate_without_any_klobuchar_set_says_so_and_records_it(test_data, tmp_path, capsys):
+    """A Galileo-only navigation file has no Klobuchar set: the residuals keep the ionospheric
+    delay, which the model then fits as pseudorange error. A user trial (2026-12-07, NYA1 E
+    C1X: b 0.41 -> 1.16 m) got no word, and the file still read "single: one code with the
+    broadcast ionosphere"; `locator run` warns in the same case."""
+    import gzip
+
+    obs = str(test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    lines = gzip.open(test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz", "rt")
+    text, keep, head = [], True, True
+    for line in lines:  # the RINEX 4 file's Galileo records only (its GPS/BeiDou ION left out)
+        if not head and line.startswith(">"):
+            keep = line.split()[2].startswith("E")
+        if head or keep:
+            text.append(line)
+        head = head and "END OF HEADER" not in line
+    nav = tmp_path / "galileo_only.rnx"
+    nav.write_text("".join(text))
+    out = tmp_path / "m.json"
+    assert main(["calibrate", "--obs", obs, "--nav", str(nav), "--constellation", "E",
+                 "--bound", "estimate", "--out", str(out)]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "no broadcast ionosphere model for E" in err
+    assert json.loads(out.read_text())["fitted"]["iono_uncorrected_systems"] == ["E"]
+    # with the mixed file (GPS Klobuchar): nothing said, nothing recorded
+    full = str(test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz")
+    assert main(["calibrate", "--obs", obs, "--nav", full, "--constellation", "E",
+                 "--bound", "estimate", "--out", str(out)]) == 0  # fmt: skip
+    assert "ionosphere" not in capsys.readouterr().err
+    assert json.loads(out.read_text())["fitted"]["iono_uncorrected_systems"] == []

@@ -380,3 +380,25 @@ def test_beidou_satellites_take_the_beidou_form_on_their_carrier(test_data: Path
     lat, lon, _ = (float(v) for v in ecef_to_geodetic(rx))
     want = klobuchar_bds_delay_m(t, lat, lon, cr.az_deg[ok], cr.el_deg[ok], BDS_ALPHA, BDS_BETA)
     np.testing.assert_allclose(cr.iono_m[ok], want, rtol=1e-9)  # B1I: no frequency scaling
+
+
+def test_an_all_zero_klobuchar_set_is_no_model(test_data: Path, tmp_path: Path) -> None:
+    """A header whose ION ALPHA / BETA are zeros (a receiver that had not decoded them) gives
+    the algorithm's night-time 5 ns at any hour: taken as a model, it left 2-9 m of GEONET
+    0759's delay in the ranges at 09:30 local time, unflagged and uninflated (a user trial,
+    2026-12-07). It is left out with a warning, so the satellites count as uncorrected."""
+    src = test_data / "gnss_obs" / "07590920_0000_0200.05n"
+    lines = src.read_text().splitlines(keepends=True)
+    zero = "  " + "".join(f"{0.0:12.4E}" for _ in range(4)) + " " * 10
+    lines = [zero + ln[60:] if ln[60:].startswith(("ION ALPHA", "ION BETA")) else ln
+             for ln in lines]  # fmt: skip
+    nav = tmp_path / "zero.05n"
+    nav.write_text("".join(lines))
+    with pytest.warns(UserWarning, match="Klobuchar coefficients are all zero"):
+        iono = BroadcastIono.from_rinex_nav(nav)
+    assert iono.klobuchar("G") is None and "GPS" not in iono.sources
+    # the file's real set is still read, and a zero set does not hide another file's
+    assert BroadcastIono.from_rinex_nav(src).klobuchar("G") is not None
+    with pytest.warns(UserWarning, match="all zero"):
+        both = BroadcastIono.from_rinex_nav([nav, src])
+    assert both.sources["GPS"].startswith(src.name)

@@ -370,3 +370,33 @@ def test_a_time_system_rinex_does_not_have_is_refused(test_data: Path, tmp_path:
         read_rinex_obs(_write(tmp_path / "utc.05o", lines))
     lines[k] = lines[k][:48] + "GLO" + lines[k][51:]
     assert read_rinex_obs(_write(tmp_path / "glo.05o", lines)).header.time_system == "GLO"
+
+
+def test_sys_scale_factor_divides_the_stored_values(test_data, tmp_path):
+    """RINEX 3.05 5.5 / SYS / SCALE FACTOR: the stored values were multiplied by the factor and
+    are divided before use. A user trial (2026-12-07) stored KMS3's GPS C1C times 10 with the
+    record: the reader ignored it, `locator run` gave no position at any epoch with exit 0,
+    and `locator calibrate` blamed the station position."""
+    import hatanaka
+
+    crx = test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx"
+    text = hatanaka.decompress(crx.read_bytes()).decode()
+    out, head = [], True
+    for line in text.splitlines(keepends=True):
+        if head and "END OF HEADER" in line:
+            out.append("G   10   1 C1C".ljust(60) + "SYS / SCALE FACTOR\n")
+            out.append("E  100   0".ljust(60) + "SYS / SCALE FACTOR\n")  # every type of E
+            head = False
+        elif not head and line[:1] in "GE" and line[3:17].strip():
+            f = 10.0 if line[0] == "G" else 100.0
+            line = line[:3] + f"{float(line[3:17]) * f:14.3f}" + line[17:]
+        out.append(line)
+    scaled = tmp_path / "scaled.rnx"
+    scaled.write_text("".join(out))
+    a, b = read_rinex_obs(crx), read_rinex_obs(scaled)
+    assert b.header.scale_factors == {"G": {"C1C": 10.0}, "E": {"*": 100.0}}
+    assert a.sats == b.sats
+    g = [k for k, s in enumerate(a.sats) if s[0] in "GE"]
+    np.testing.assert_allclose(b.obs("C1C")[:, g], a.obs("C1C")[:, g], rtol=0, atol=1e-3)
+    c = [k for k, s in enumerate(a.sats) if s[0] == "C"]  # other systems untouched
+    np.testing.assert_array_equal(b.obs("C2I")[:, c], a.obs("C2I")[:, c])
