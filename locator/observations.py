@@ -54,7 +54,10 @@ _OBS_TIME_SYSTEMS = ("GPS", "GLO", "GAL", "QZS", "BDT", "IRN")
 
 DEFAULT_PSEUDORANGE_PRIORITY: Mapping[str, tuple[str, ...]] = {
     "G": ("C1C", "C1", "C1W", "P1"),  # L1 C/A first; P(Y) on L1 shares the TGD reference
-    "J": ("C1C", "C1", "C1X"),  # QZSS L1 C/A
+    # QZSS L1 C/A; not C1X, L1C (D+P), whose group delay is TGD plus the ISCs of CNAV-2, which
+    # no record read here carries (a user trial, 2026-12-07: it got L1 C/A's TGD alone); GPS
+    # leaves its C1X out for the same reason
+    "J": ("C1C", "C1"),
     "E": ("C1C", "C1X", "C1B", "C1"),  # E1 (pilot, pilot+data, data; RINEX 2.11 "C1")
     "C": ("C2I", "C2X", "C1I"),  # B1I (RINEX 3.02+ band 2; 3.00-3.01 wrote it as band 1)
     "R": ("C1C", "C1"),  # G1 C/A

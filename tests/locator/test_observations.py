@@ -400,3 +400,24 @@ def test_sys_scale_factor_divides_the_stored_values(test_data, tmp_path):
     np.testing.assert_allclose(b.obs("C1C")[:, g], a.obs("C1C")[:, g], rtol=0, atol=1e-3)
     c = [k for k, s in enumerate(a.sats) if s[0] == "C"]  # other systems untouched
     np.testing.assert_array_equal(b.obs("C2I")[:, c], a.obs("C2I")[:, c])
+
+
+def test_qzss_l1c_is_not_ranged_with_the_l1_ca_group_delay(test_data, tmp_path):
+    """QZSS ``C1X`` is L1C (data + pilot), whose group delay needs CNAV-2's inter-signal
+    corrections, not L1 C/A's TGD alone (a user trial, 2026-12-07): like GPS's C1X it gets no
+    single-frequency pseudorange. KMS3's J04 with its C1C declared as C1X."""
+    import hatanaka
+
+    crx = test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx"
+    text = hatanaka.decompress(crx.read_bytes()).decode()
+    lines = text.splitlines(keepends=True)
+    (k,) = [i for i, line in enumerate(lines)
+            if line.startswith("J") and "SYS / # / OBS TYPES" in line]  # fmt: skip
+    lines[k] = lines[k].replace(" C1C ", " C1X ", 1)
+    renamed = tmp_path / "l1c.rnx"
+    renamed.write_text("".join(lines))
+    a, b = read_rinex_obs(crx), read_rinex_obs(renamed)
+    j = a.sats.index("J04")
+    assert np.isfinite(a.pseudorange().pseudorange_m[:, j]).all()  # C1C: ranged
+    assert np.isfinite(b.obs("C1X")[:, j]).all()  # the same values, read as L1C
+    assert np.isnan(b.pseudorange().pseudorange_m[:, j]).all()
