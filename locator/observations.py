@@ -845,7 +845,10 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
             if c not in values:
                 continue
             try:
-                if f[:14].strip():
+                # RINEX writes a missing observation as blanks or 0.0: NYA1's 2024 day has
+                # 117 C2W and 7 676 C2X pseudoranges of 0.000, taken as ranges until
+                # 2026-12-07 (a residual of 40 788 km in an ionosphere-free fit)
+                if f[:14].strip() and float(f[:14]) != 0.0:
                     values[c][e, col[sat]] = float(f[:14]) / scale.get(c, scale.get("*", 1.0))
                 if f[14:15].strip():
                     lli[c][e, col[sat]] = int(f[14])

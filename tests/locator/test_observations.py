@@ -421,3 +421,24 @@ def test_qzss_l1c_is_not_ranged_with_the_l1_ca_group_delay(test_data, tmp_path):
     assert np.isfinite(a.pseudorange().pseudorange_m[:, j]).all()  # C1C: ranged
     assert np.isfinite(b.obs("C1X")[:, j]).all()  # the same values, read as L1C
     assert np.isnan(b.pseudorange().pseudorange_m[:, j]).all()
+
+
+def test_a_zero_observation_is_missing(test_data, tmp_path):
+    """RINEX writes a missing observation as blanks or 0.0 (3.05, 5.7); NYA1's 2024 day has
+    thousands of 0.000 second-frequency pseudoranges, read as ranges until 2026-12-07."""
+    import hatanaka
+
+    crx = test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx"
+    text = hatanaka.decompress(crx.read_bytes()).decode()
+    lines = text.splitlines(keepends=True)
+    body = lines.index(next(x for x in lines if "END OF HEADER" in x)) + 1
+    k = next(i for i in range(body, len(lines)) if lines[i].startswith("G"))
+    sat = lines[k][:3]
+    lines[k] = lines[k][:3] + f"{0.0:14.3f}" + lines[k][17:]  # the first type, C1C
+    zeroed = tmp_path / "zero.rnx"
+    zeroed.write_text("".join(lines))
+    a, b = read_rinex_obs(crx), read_rinex_obs(zeroed)
+    j = a.sats.index(sat)
+    assert np.isfinite(a.obs("C1C")[0, j]) and np.isnan(b.obs("C1C")[0, j])
+    np.testing.assert_array_equal(np.isnan(a.obs("C1C")).sum() + 1, np.isnan(b.obs("C1C")).sum())
+    assert b.pseudorange().code[0, j] != "C1C"  # the next code of the priority, or none
