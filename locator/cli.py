@@ -367,7 +367,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         model = RangeModel.from_rinex_nav(_broadcast_nav(args.nav))
         _nav_covers(model.ephemeris, obs, args.nav)
         model = model.with_iono_near(float(obs.gps_s[len(obs.gps_s) // 2]))  # the obs' day
-        source = RinexSource(model, obs, args.constellation)
+        source = RinexSource(model, obs, args.constellation,
+                             dual_frequency=args.dual_frequency)  # fmt: skip
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
         # before the heights: a cause of theirs
@@ -1116,7 +1117,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                         "observation once"
                     )
             seen_epochs.append((x, np.asarray(obs.gps_s, float)))
-            src = RinexSource(day, obs, args.constellation)
+            src = RinexSource(day, obs, args.constellation,
+                              dual_frequency=args.dual_frequency)  # fmt: skip
             _warn_no_iono(src, args.nav, command="calibrate")
             no_iono.update(src.iono_missing)
             data.append(station_residuals(src, x, min_el_deg=args.min_el))
@@ -1165,7 +1167,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "system, and at least about 650 residuals: 10 beyond a tail point in each of 6 "
             "elevation bins)"
         ) if np.isfinite(m.tail_probability) else "no bound (estimate)"  # fmt: skip
-        print(f"  {sys_} {'+'.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
+        print(f"  {sys_} {', '.join(m.codes)}: sigma(el)^2 = {e.a_m:.3f}^2 + ({e.b_m:.3f} / "
               f"sin el)^2 m^2 from {m.n_residuals} residuals ("
               + (f"{m.n_independent} independent" if np.isfinite(m.tail_probability)
                  else "independence not assessed")  # an estimate counts its residuals
@@ -1402,6 +1404,12 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="broadcast RINEX navigation files of the observation day (required with "
                    "--obs, no default; SP3 and TLE do not carry the clock and ionosphere "
                    "corrections)")
+    p.add_argument("--dual-frequency", action="store_true",
+                   help="with --obs: range with the ionosphere-free combination of two codes "
+                   "(L1/L2, E1/E5b, B1I/B3I, G1/G2; no ionosphere model needed, about 3x the "
+                   "code noise), with an error model calibrated the same way (`locator "
+                   "calibrate --dual-frequency`); satellites without a second code are left out "
+                   "(default: single frequency with the broadcast ionosphere)")
     p.add_argument("--track", metavar="FILE",
                    help="track GeoJSON/CSV (default: the simulation's, or line 144)")
     add_track_selection(p)
@@ -1416,6 +1424,9 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         needs("--nav", "nav", lambda a: given(a, "obs"), "--obs runs (a simulation carries "
               "its satellites' positions)"),
         requires("--obs", "obs", "--nav FILES", "nav", "RINEX navigation with the same day"),
+        needs("--dual-frequency", "dual_frequency", lambda a: given(a, "obs"),
+              "--obs runs (a simulation has one frequency; a phone log's corrections are "
+              "single-frequency)"),
         needs("--extra-margin", "extra_margin", lambda a: given(a, "masks"),
               "--masks runs (it widens the masks' margins)"),
         needs("--trust-stretches", "trust_stretches", lambda a: given(a, "masks"),
@@ -1484,6 +1495,10 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     p.add_argument("--station", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                    help="with one --obs file: station ECEF, metres (default: the RINEX header "
                    "position)")  # fmt: skip
+    p.add_argument("--dual-frequency", action="store_true",
+                   help="with --obs: calibrate the ionosphere-free combination of two codes (the "
+                   "model then applies to `locator run --dual-frequency` only; default: single "
+                   "frequency with the broadcast ionosphere)")
     p.add_argument("--constellation", type=constellation, metavar="SYSTEMS", default="gps",
                    help="systems used: gps, gps+galileo, all, or system letters")
     p.add_argument("--k-sigma", type=positive_float, default=2.0, metavar="K",
@@ -1505,6 +1520,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         needs("--states", "states", lambda a: given(a, "sim"), "--sim (a simulation knows each "
               "signal's state)"),
         needs("--nav", "nav", lambda a: given(a, "obs"), "--obs"),
+        needs("--dual-frequency", "dual_frequency", lambda a: given(a, "obs"), "--obs"),
         requires("--obs", "obs", "--nav FILES", "nav", "covering every observation file's day"),
         needs("--truth", "truth", lambda a: given(a, "device_gnss"), "--device-gnss"),
         requires("--device-gnss", "device_gnss", "--truth FILES", "truth",

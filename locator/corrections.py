@@ -939,6 +939,7 @@ class RangeModel:
         codes: str | Sequence[str] = "C1C",
         states: SatelliteStates | None = None,
         atmosphere: bool = True,
+        ionosphere: bool = True,
     ) -> CorrectedRanges:
         """Corrected pseudoranges and rotated satellite positions for one epoch.
 
@@ -957,6 +958,9 @@ class RangeModel:
             From :meth:`states` for the same epoch, to reuse across iterations.
         atmosphere : bool
             Apply ionosphere and troposphere (switch off while the position is unknown).
+        ionosphere : bool
+            Apply the broadcast ionosphere (off for the two ranges of an ionosphere-free
+            combination: :class:`locator.sources.RinexSource` ``dual_frequency``).
 
         Returns
         -------
@@ -982,7 +986,7 @@ class RangeModel:
             if atmosphere:
                 tropo = troposphere_delay_m(gps_s, lat, h, el, self.humidity)
                 iono = np.zeros(n)
-                for letter in {s[0] for s in st.sats}:
+                for letter in {s[0] for s in st.sats} if ionosphere else ():
                     sel = np.array([s[0] == letter for s in st.sats])
                     coef = self.iono.klobuchar(letter)
                     if coef is not None and coef[2] == "BDS":  # BeiDou's own form, on B1I

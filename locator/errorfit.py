@@ -39,7 +39,7 @@ from locator.intervals import (
     overbound_error_model,
     usable_residuals,
 )
-from locator.observations import Observations
+from locator.observations import SECOND_FREQUENCY_PRIORITY, Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
 from predisat.availability.satellites import select_satellites
@@ -190,23 +190,34 @@ def guess_receiver_class(receiver_type: str, program: str = "") -> str:
 
 
 def receiver_profile(
-    source: RinexSource, receiver_class: str | None = None, frequency: str = "single"
+    source: RinexSource, receiver_class: str | None = None, frequency: str | None = None
 ) -> ReceiverProfile:
     """What a RINEX source is: receiver and antenna (header), the pseudorange codes it gives
-    each system used (the code priority's choice over the whole file), the processing.
+    each system used (the code priority's choice over the whole file; ``"C1C+C2W"`` for an
+    ionosphere-free pair), the processing.
 
-    ``receiver_class`` None guesses it (:func:`guess_receiver_class`).
+    ``receiver_class`` None guesses it (:func:`guess_receiver_class`); ``frequency`` None
+    takes the source's (``RinexSource.frequency``).
     """
     obs = source.obs
     sel = obs.pseudorange(source.priority)
+    dual = source.dual_frequency
+    second = obs.pseudorange(SECOND_FREQUENCY_PRIORITY) if dual else None
     keep = set(select_satellites(obs.sats, source.constellation))
     codes: dict[str, set[str]] = {}
     for j, sat in enumerate(obs.sats):
         if sat not in keep:
             continue
-        used = {str(c) for c in np.unique(sel.code[:, j]) if c}
+        if second is None:
+            used = {str(c) for c in np.unique(sel.code[:, j]) if c}
+        else:
+            both = (sel.code[:, j] != "") & (second.code[:, j] != "")
+            used = {f"{a}+{b}" for a, b in zip(sel.code[both, j], second.code[both, j],
+                                                strict=True)}  # fmt: skip
         if used:
             codes.setdefault(sat[0], set()).update(used)
+    if frequency is None:
+        frequency = source.frequency
     h = obs.header
     cls = (
         guess_receiver_class(h.receiver_type, h.program)

@@ -17,7 +17,8 @@ the observation types, and the new types apply to the epochs that follow. Cycle-
 (flag 6) are skipped and reported as events.
 
 The pseudorange used for single-frequency ranging is chosen per system from
-:data:`DEFAULT_PSEUDORANGE_PRIORITY` (see ``docs/observations.md``).
+:data:`DEFAULT_PSEUDORANGE_PRIORITY`, the second of an ionosphere-free pair from
+:data:`SECOND_FREQUENCY_PRIORITY` (see ``docs/observations.md``).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from predisat.gnss.timescale import (
 
 __all__ = [
     "DEFAULT_PSEUDORANGE_PRIORITY",
+    "SECOND_FREQUENCY_PRIORITY",
     "ObsEvent",
     "ObsHeader",
     "ObsProblem",
@@ -64,6 +66,19 @@ DEFAULT_PSEUDORANGE_PRIORITY: Mapping[str, tuple[str, ...]] = {
     "I": ("C5A", "C5X"),  # NavIC L5 SPS
 }
 """Pseudorange codes tried, in order, for single-frequency ranging, per system letter."""
+
+SECOND_FREQUENCY_PRIORITY: Mapping[str, tuple[str, ...]] = {
+    # the second code of the ionosphere-free combination with the first (above); a code whose
+    # broadcast group delay is not defined against the clock in use (GPS and QZSS L5: CNAV's
+    # ISCs; Galileo E5a against an I/NAV clock) leaves the satellite out with the reason
+    "G": ("C2W", "P2", "C2", "C2L", "C2X", "C2S"),  # L2 P(Y) first: LNAV's TGD reference
+    "J": ("C2L", "C2X", "C2S"),  # QZSS L2C
+    "E": ("C7Q", "C7X", "C7I", "C5Q", "C5X", "C5I"),  # E5b (the I/NAV clock's pair), then E5a
+    "C": ("C6I", "C6X", "C6Q", "C7I", "C7X", "C7Q"),  # B3I (the clock's reference), then B2I
+    "R": ("C2C", "C2P", "C2", "P2"),  # G2
+}
+"""Second pseudorange codes of the ionosphere-free combination, per system letter (NavIC has
+none: its broadcast group delay covers L5 only)."""
 
 _SYSTEMS = "GRECJSI"
 # bands defined per system by RINEX 3.05 (table 4); attributes of the same table

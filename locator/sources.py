@@ -12,7 +12,9 @@ corrected pseudoranges of the signals the receiver tracks, given an approximate 
   satellite clock, relativity, group delay, Earth rotation, Klobuchar ionosphere and troposphere.
   Satellites without usable navigation data are reported per epoch with the reason. Where no
   broadcast ionosphere model exists, the delay stays in the pseudorange and the epoch data carry
-  an inflated sigma for it (:attr:`EpochData.extra_sigma_m`).
+  an inflated sigma for it (:attr:`EpochData.extra_sigma_m`). With ``dual_frequency`` the
+  ranges are the ionosphere-free combination of two codes instead (no ionosphere model needed;
+  satellites without the second code are left out with the reason).
 
 Pairs of pseudoranges are differenced, so every satellite of an epoch must share one receiver
 clock: the simulator has a single clock; on real data mixing systems needs inter-system biases,
@@ -31,7 +33,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from locator.corrections import RangeModel, uncorrected_iono_sigma_m
-from locator.observations import Observations, PseudorangeSelection
+from locator.observations import (
+    SECOND_FREQUENCY_PRIORITY,
+    Observations,
+    PseudorangeSelection,
+)
 from locator.sim.simfile import SignalState, SimRun
 from predisat.availability.satellites import select_satellites
 from predisat.jsontypes import JsonDict
@@ -202,6 +208,13 @@ class RinexSource:
         The odometer's disputed distance per epoch, cumulative, non-decreasing, toward lower
         and toward higher chainage, m (``OdometerLog.extra_ahead_m`` / ``extra_behind_m`` in
         the chainage frame); needs ``odometer``.
+    dual_frequency : bool
+        Range with the ionosphere-free combination ``(f1^2 P1 - f2^2 P2) / (f1^2 - f2^2)`` of
+        the code ``priority`` chooses and the second code of
+        :data:`~locator.observations.SECOND_FREQUENCY_PRIORITY`, each corrected for its own
+        broadcast group delay: no ionosphere model is needed, the code noise and multipath
+        grow (about 3x for L1/L2), so the error model must be calibrated on the same
+        processing (``frequency: dual``). Satellites without a second code are left out.
     """
 
     model: RangeModel
@@ -210,6 +223,7 @@ class RinexSource:
     priority: Mapping[str, Sequence[str]] | None = None
     odometer: NDArray | None = field(default=None)
     odometer_extra: NDArray | None = field(default=None)
+    dual_frequency: bool = False
 
     def __post_init__(self) -> None:
         check_odometer(self.odometer, self.odometer_extra, len(self.obs.gps_s))
@@ -236,6 +250,24 @@ class RinexSource:
         return self.obs.pseudorange(self.priority)
 
     @cached_property
+    def _second(self) -> PseudorangeSelection:
+        return self.obs.pseudorange(SECOND_FREQUENCY_PRIORITY)
+
+    @property
+    def frequency(self) -> str:
+        """``"dual"`` (ionosphere-free combination) or ``"single"``: the processing an error
+        model must have been calibrated on."""
+        return "dual" if self.dual_frequency else "single"
+
+    def codes(self, epoch: int, j: NDArray) -> list[str]:
+        """The code of each range of the columns ``j`` at ``epoch``: ``"C1C"``, or for the
+        ionosphere-free combination ``"C1C+C2W"``."""
+        first = [str(c) for c in self._selection.code[epoch, j]]
+        if not self.dual_frequency:
+            return first
+        return [f"{a}+{b}" for a, b in zip(first, self._second.code[epoch, j], strict=True)]
+
+    @cached_property
     def _model(self) -> RangeModel:
         # the ionosphere of the observations' day, not of whichever file was listed first
         mid_s = float(np.median(self.obs.gps_s)) if len(self.obs.gps_s) else 0.0
@@ -249,7 +281,10 @@ class RinexSource:
     @property
     def iono_missing(self) -> tuple[str, ...]:
         """Systems used for which no broadcast ionosphere model exists: their delay stays in
-        the pseudoranges, every epoch is flagged and its sigma inflated (module docstring)."""
+        the pseudoranges, every epoch is flagged and its sigma inflated (module docstring).
+        None with ``dual_frequency``: the combination removes the delay."""
+        if self.dual_frequency:
+            return ()
         return tuple(s for s in self.systems if self._model.iono.klobuchar(s) is None)
 
     @property
@@ -264,6 +299,8 @@ class RinexSource:
         return np.array([s in keep for s in self.obs.sats], bool)
 
     def observe(self, epoch: int, rx_ecef_m: NDArray) -> EpochData:
+        if self.dual_frequency:
+            return self._observe_dual(epoch, rx_ecef_m)
         pr = self._selection.pseudorange_m[epoch]
         have = np.isfinite(pr) & self._columns
         j = np.flatnonzero(have)
@@ -286,6 +323,39 @@ class RinexSource:
             extra[ok],
         )
 
+    def _observe_dual(self, epoch: int, rx_ecef_m: NDArray) -> EpochData:
+        """The ionosphere-free combination of the two codes' corrected ranges: every term but
+        the ionosphere and the group delay is the same on both frequencies and passes through
+        (the two weights differ by one); each range's own group delay is taken off first."""
+        pr1 = self._selection.pseudorange_m[epoch]
+        pr2 = self._second.pseudorange_m[epoch]
+        listed = np.isfinite(pr1) & self._columns
+        rejected = {self.obs.sats[k]: "no second frequency for the ionosphere-free combination"
+                    for k in np.flatnonzero(listed & ~np.isfinite(pr2))}  # fmt: skip
+        j = np.flatnonzero(listed & np.isfinite(pr2))
+        sats = tuple(self.obs.sats[k] for k in j)
+        if not sats:
+            return EpochData((), np.zeros((0, 3)), np.zeros(0), rejected)
+        t = float(self.obs.gps_s[epoch])
+        code1 = list(self._selection.code[epoch, j])
+        code2 = list(self._second.code[epoch, j])
+        c1 = self._model.correct(t, sats, pr1[j], rx_ecef_m, code1, ionosphere=False)
+        c2 = self._model.correct(t, sats, pr2[j], rx_ecef_m, code2, ionosphere=False)
+        f1, f2 = c1.states.freq_hz, c2.states.freq_hz
+        w1 = f1**2 / (f1**2 - f2**2)
+        combined = w1 * c1.corrected_m - (w1 - 1.0) * c2.corrected_m
+        ok = c1.usable & c2.usable & np.isfinite(combined) & (f1 != f2)
+        for s, r1, r2, u in zip(sats, c1.reason, c2.reason, ok, strict=True):
+            if not u:
+                rejected[s] = str(r1) or str(r2) or "not usable"
+        return EpochData(
+            tuple(s for s, u in zip(sats, ok, strict=True) if u),
+            c1.sat_ecef_m[ok],
+            combined[ok],
+            rejected,
+            np.zeros(int(ok.sum())),
+        )
+
     def where(self, epoch: int) -> str:
         """File, line and epoch of ``epoch``, for messages."""
         return self.obs.where(epoch)
@@ -296,6 +366,7 @@ class RinexSource:
             "obs": str(self.obs.path),
             "nav": [str(p) for p in getattr(self.model.ephemeris, "sources", ())],
             "constellation": self.constellation,
+            "frequency": self.frequency,
             "odometer": self.odometer is not None,
             "marker": self.obs.header.marker_name,
             # systems whose ionospheric delay no broadcast model corrects (sigma inflated)

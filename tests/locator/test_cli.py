@@ -1293,3 +1293,36 @@ def test_a_height_check_without_any_fix_near_the_track_says_so(capsys) -> None:
     assert "none within 200 m of the track" in err and "could not be checked" in err
     _warn_height(0.5, path, "x.obs (its epochs' own fixes)", argparse.Namespace())
     assert capsys.readouterr().err == ""
+
+
+def test_dual_frequency_runs_take_only_a_model_calibrated_on_the_same_combination(
+    test_data, tmp_path, capsys, sim_dir
+):
+    """`--dual-frequency` ranges with the ionosphere-free combination (C1 + P2 on GEONET 0759's
+    RINEX 2 file): `calibrate --dual-frequency` records the processing and the pair of codes,
+    and a single-frequency model never applies to a dual-frequency run (its noise is about 3x)."""
+    track = _virtual_track(tmp_path / "virtual.csv")
+    obs = str(test_data / "gnss_obs" / "07590920_10ep.05o")
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    for mode, extra in (("single", []), ("dual", ["--dual-frequency"])):
+        assert main(["calibrate", "--obs", obs, "--nav", nav, "--bound", "estimate", *extra,
+                     "--out", str(tmp_path / f"{mode}.json")]) == 0  # fmt: skip
+    dual = json.loads((tmp_path / "dual.json").read_text())
+    assert dual["applicability"]["frequency"] == "dual" and dual["systems"]["G"]["codes"] == [
+        "C1+P2"
+    ]
+    assert json.loads((tmp_path / "single.json").read_text())["systems"]["G"]["codes"] == ["C1"]
+    run = ["-q", "run", "--obs", obs, "--nav", nav, "--dual-frequency", "--no-masks",
+           "--antenna-height", "0", "--track", str(track)]  # fmt: skip
+    for mode in ("single", "dual"):
+        out = tmp_path / f"r_{mode}"
+        assert main([*run, "--error-model", str(tmp_path / f"{mode}.json"), "--out", str(out)]) == 0
+        record = json.loads((out / "run.json").read_text())
+        assert record["source"]["frequency"] == "dual"
+        said = "dual-frequency data, single-frequency model" in record["error_model"]["mismatches"]
+        assert said == (mode == "single")
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["run", "--sim", str(sim_dir), "--no-masks", "--dual-frequency", "--out",
+              str(tmp_path / "s")])  # fmt: skip
+    assert "--dual-frequency is for --obs runs" in capsys.readouterr().err

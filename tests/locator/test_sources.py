@@ -33,3 +33,73 @@ def test_a_bad_odometer_is_refused_naming_the_problem(
 ) -> None:
     with pytest.raises(ValueError, match=message):
         check_odometer(odometer, extra, 5)
+
+
+# ---------------------------------------------------------------------- dual frequency
+
+
+@pytest.fixture(scope="module")
+def kms3(test_data):
+    from locator.corrections import RangeModel
+    from locator.observations import read_rinex_obs
+
+    obs = read_rinex_obs(test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    model = RangeModel.from_rinex_nav(test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz")
+    return obs, model
+
+
+def test_the_ionosphere_free_range_is_the_icd_combination_without_group_delay(kms3) -> None:
+    """GPS L1/L2 (Septentrio KMS3: C1C with C2W, or C2L where P(Y) is not tracked): the
+    broadcast clock refers to the ionosphere-free combination of L1 and L2 P(Y), so
+    IS-GPS-200 20.3.3.3.3.2 needs no TGD there (L2C's ISC neglected, as L1 C/A's is): the
+    combined range is ``(f1^2 P1 - f2^2 P2) / (f1^2 - f2^2)`` plus the satellite clock and
+    relativity, less the troposphere, with no group delay and no ionosphere model.
+    Computed here from the raw observations."""
+    from locator.sources import RinexSource
+
+    obs, model = kms3
+    src = RinexSource(model, obs, "G", dual_frequency=True)
+    x = np.asarray(obs.header.approx_position_ecef_m, float)
+    f1, f2 = 1575.42e6, 1227.60e6
+    for epoch in (0, len(obs.gps_s) - 1):
+        d = src.observe(epoch, x)
+        assert len(d.sats) >= 5 and not np.any(d.extra_sigma_m)
+        cols = [obs.sats.index(s) for s in d.sats]
+        codes = src.codes(epoch, np.array(cols))
+        assert "C1C+C2W" in codes and all(c in ("C1C+C2W", "C1C+C2L") for c in codes)
+        p1 = obs.obs("C1C")[epoch, cols]
+        p2 = np.array([obs.obs(c[4:])[epoch, k] for c, k in zip(codes, cols, strict=True)])
+        single = model.correct(float(obs.gps_s[epoch]), d.sats, p1, x, "C1C")
+        st = single.states
+        want = ((f1**2 * p1 - f2**2 * p2) / (f1**2 - f2**2) + st.sat_clock_m + st.relativity_m
+                - single.tropo_m)  # fmt: skip
+        np.testing.assert_allclose(d.pseudorange_m, want, rtol=0, atol=1e-4)
+        # and it is not the single-frequency range: the ionosphere and the TGD differ
+        assert np.all(np.abs(d.pseudorange_m - single.corrected_m) > 0.01)
+
+
+def test_dual_frequency_needs_no_ionosphere_model_and_leaves_out_single_code_satellites(
+    kms3,
+) -> None:
+    import dataclasses
+
+    from locator.corrections import BroadcastIono
+    from locator.sources import RinexSource
+
+    obs, model = kms3
+    bare = dataclasses.replace(model, iono=BroadcastIono())  # no Klobuchar set at all
+    single = RinexSource(bare, obs, "G")
+    dual = RinexSource(bare, obs, "G", dual_frequency=True)
+    assert single.iono_missing == ("G",) and dual.iono_missing == ()
+    assert dual.frequency == "dual" and dual.describe()["frequency"] == "dual"
+    # a satellite without any L2 code: left out of the combination, with the reason
+    x = np.asarray(obs.header.approx_position_ecef_m, float)
+    k = obs.sats.index(RinexSource(model, obs, "G", dual_frequency=True).observe(0, x).sats[0])
+    values = dict(obs.values)
+    for code in ("C2W", "C2L"):
+        values[code] = values[code].copy()
+        values[code][:, k] = np.nan
+    cut = dataclasses.replace(obs, values=values)
+    d = RinexSource(model, cut, "G", dual_frequency=True).observe(0, x)
+    assert obs.sats[k] not in d.sats and "second frequency" in d.rejected[obs.sats[k]]
+    assert obs.sats[k] in RinexSource(model, cut, "G").observe(0, x).sats  # single: kept
