@@ -31,7 +31,9 @@ class BadFrame:
         segmentation failed) or ``"fusion"`` (a suspect frame: its sky contradicts both
         neighbouring frames of its camera, ``ReconstructionParams.suspect_share``; left out
         of the reconstruction) or ``"step"`` (its camera and another are out of step there:
-        :mod:`predisat.reconstruct.step`).
+        :mod:`predisat.reconstruct.step`) or ``"side"`` (a stretch of its camera's frames
+        whose scenery slid the other way from the mount's: another camera's images,
+        :func:`predisat.reconstruct.sides.stretches_the_other_way`).
     """
 
     frame_id: str

@@ -92,7 +92,13 @@ from predisat.reconstruct.framecache import (
 )
 from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import THIN_DEG, PipelineParams
-from predisat.reconstruct.sides import expected_flow_sign, side_votes, sky_profile
+from predisat.reconstruct.sides import (
+    expected_flow_sign,
+    pair_votes,
+    side_votes,
+    sky_profile,
+    stretches_the_other_way,
+)
 from predisat.reconstruct.step import (
     MAX_LAG,
     MIN_OVERLAP_DIRECTIONS,
@@ -134,6 +140,7 @@ from predisat.survey.capture import (
 )
 from predisat.survey.format import Frames
 from predisat.survey.images import decode_thumbnail
+from predisat.survey.load import check_calibration_sizes
 from predisat.terrain import Dem
 from predisat.track.map import TrackMap
 from predisat.track.network import track_key
@@ -473,8 +480,21 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
         if expected == 0:
             continue
         votes = side_votes(side, profiles[side], expected)
-        sides[side] = {"agree": votes.agree, "disagree": votes.disagree, "pairs": votes.pairs,
-                       "swapped": votes.swapped}  # fmt: skip
+        entry: JsonDict = {"agree": votes.agree, "disagree": votes.disagree,
+                           "pairs": votes.pairs, "swapped": votes.swapped}  # fmt: skip
+        sides[side] = entry
+        if not votes.swapped:
+            # a stretch of another camera's images (the other side's copied over, a cable
+            # moved for a while), which the camera's votes as a whole outvote
+            stretches = stretches_the_other_way(pair_votes(profiles[side], expected))
+            entry["other_way"] = [
+                {
+                    "from_m": seen[side][a][2],
+                    "to_m": seen[side][b][2],
+                    "frames": [f for _, f, _ in seen[side][a : b + 1]],
+                }
+                for a, b in stretches
+            ]
     for (a, b), (pa, _) in pairs.items():
         ta = np.array([t for t, _, _ in seen[a]])
         tb = np.array([t for t, _, _ in seen[b]])
@@ -745,9 +765,37 @@ def _step_bad_frames(step: JsonDict) -> dict[str, str]:
     return out
 
 
+def _side_bad_frames(check: JsonDict) -> dict[str, str]:
+    """The frames of stretches whose scenery slid the other way from their camera's mount,
+    set aside with the reason each gets in bad_frames.csv."""
+    out: dict[str, str] = {}
+    for side, v in check.items():
+        for r in v.get("other_way", []):
+            why = (
+                f"the {side} camera's scenery slides the other way from its mount's from "
+                f"chainage {r['from_m']:.1f} to {r['to_m']:.1f} m: these images are probably "
+                "another camera's (the other side's copied over, a cable moved); set aside, "
+                "check them by eye and fix the image files or the manifest "
+                "(docs/reconstruction.md, section 19)"
+            )
+            for fid in r["frames"]:
+                out.setdefault(fid, why)
+    return out
+
+
 def _side_warnings(check: JsonDict) -> list[str]:
     """The lines ``process`` prints for cameras whose frames moved the other way."""
-    return [
+    stretches = [
+        f"warning: the {side} camera's scenery slides the other way from its mount's from "
+        f"chainage {r['from_m']:.1f} to {r['to_m']:.1f} m ({len(r['frames'])} frames), though "
+        "not over the whole survey: those images are probably another camera's (the other "
+        "side's copied over, a cable moved for a while), which trusted 1.4 % of a survey's "
+        "directions falsely; they were set aside (bad_frames.csv); check them by eye "
+        "(docs/reconstruction.md, section 19)"
+        for side, v in check.items()
+        for r in v.get("other_way", [])
+    ]
+    return stretches + [
         f"warning: the {side} camera's scenery slides the other way from its mount's in "
         f"{v['disagree']} of {v['agree'] + v['disagree']} pairs of consecutive frames: its "
         "frames are probably the other side's (left and right swapped: cables, file names, "
@@ -1673,6 +1721,8 @@ def process_survey(
     if not isinstance(survey, Survey):
         survey = Survey.load(survey, track=track, check_images=False, on_error="skip",
                              storage_options=opts)  # fmt: skip
+    # a calibration of another resolution is the survey's problem, not every frame's
+    check_calibration_sizes(survey)
     if track is not None:  # another track than the survey's own: it must follow it
         check_survey_track(survey, track)
     trk = track if track is not None else survey.track
@@ -1759,6 +1809,11 @@ def process_survey(
             _bad(*next(iter(step_bad.items())), strict)
         for fid, message in step_bad.items():
             bad.setdefault(fid, BadFrame(fid, message, stage="step"))
+        side_bad = _side_bad_frames(check)
+        if side_bad and strict:
+            _bad(*next(iter(side_bad.items())), strict)
+        for fid, message in side_bad.items():
+            bad.setdefault(fid, BadFrame(fid, message, stage="side"))
         t2 = time.perf_counter()
         run_chunks(_chunk_jobs(plan, pending, bad, pinned), runner, progress)
         timings["reconstruct"] = time.perf_counter() - t2

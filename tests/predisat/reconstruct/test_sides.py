@@ -109,3 +109,70 @@ def test_the_report_warns_of_masks_made_from_a_swapped_survey() -> None:
     assert len(notes) == 1 and "left camera's frames slid the other way" in notes[0]
     assert "in 30 of 32 frame pairs" in notes[0]
     assert side_swap_notes({}) == []
+
+
+def test_a_stretch_of_pairs_the_other_way_is_found_and_scattered_ones_are_not() -> None:
+    from predisat.reconstruct.sides import pair_votes, stretches_the_other_way
+
+    def votes(s: str) -> list[int]:
+        return [{"+": 1, "X": -1, ".": 0}[c] for c in s]
+
+    # a user trial's right camera: frames 10-25 were the left camera's images (copied over),
+    # the camera as a whole 23 / 11 its mount's way, not swapped
+    assert stretches_the_other_way(votes("++++++.++.XXXXXXX+X.X.X.X++++++++.++++++")) == [(10, 25)]
+    # the same trial's left camera, correct: pairs the other way here and there
+    assert stretches_the_other_way(votes("++X+++X++.+++++++X+.+.+.+X++.++X..++.X++")) == []
+    # the demo survey's left camera: at most 4 of any 8 voting pairs the other way
+    demo = ("++..........++.XX+++++X+++..+X+....X+...+X+..++X...+X+...+X++++++......"
+            "................++.++++X+.....X+X..+X+..X..++++.X+.+.++XX+.XX+.++.X.X++...+++"
+            "+++++++.++.++X+++++++...++++++++++++++++++X++...+X+.")  # fmt: skip
+    assert stretches_the_other_way(votes(demo)) == []
+    assert stretches_the_other_way([]) == [] and stretches_the_other_way(votes("XXXXX")) == []
+    # the pairs' votes come from the profiles: a left camera moving on, then 12 frames of a
+    # camera looking right (its scenery sliding the other way), then the left camera again
+    x = np.arange(320.0)
+    prof = [_skyline(x + 9 * k, 4) for k in range(15)]
+    prof += [_skyline(x - 9 * k, 7) for k in range(12)]
+    prof += [_skyline(x + 9 * k, 9) for k in range(15)]
+    v = pair_votes(prof, expected=1)
+    assert side_votes("left", prof, expected=1) == SideVotes("left", v.count(1), v.count(-1), 41)
+    assert not side_votes("left", prof, expected=1).swapped
+    (a, b), *rest = stretches_the_other_way(v)
+    assert not rest and 14 <= a <= 16 and 25 <= b <= 27, (a, b)
+
+
+def test_process_sets_aside_a_stretch_of_the_other_cameras_images(tmp_path, capsys) -> None:
+    """A rendered survey whose right images over 70 m are the left camera's (a copy script
+    that took the wrong folder; EXIF dropped): the camera as a whole votes its mount's way, so
+    the swap check said nothing and a user trial's such stretch trusted 16 % of a position's
+    directions falsely. Now those frames are set aside (stage "side") and named."""
+    import csv
+
+    import cv2
+
+    from predisat.camera.models import default_camera
+    from predisat.reconstruct.batch import process_survey
+    from predisat.synth.generate import generate_survey
+    from predisat.track import demo_track
+
+    generate_survey(demo_track(), 3000.0, 3200.0, sky="clear", seed=5, out_dir=tmp_path,
+                    camera=default_camera("fisheye").resized(240, 180), progress=False)  # fmt: skip
+    survey = tmp_path / "survey"
+    rows = list(csv.DictReader(open(survey / "manifest.csv", newline="")))
+    left = {r["chainage_m"]: r["image"] for r in rows if r["side"] == "left"}
+    copied = []
+    for r in rows:
+        if r["side"] == "right" and 3060.0 <= float(r["chainage_m"]) <= 3130.0:
+            im = cv2.imread(str(survey / left[r["chainage_m"]]))
+            (survey / r["image"]).write_bytes(cv2.imencode(".jpg", im)[1].tobytes())
+            copied.append(r["frame_id"])
+    res = process_survey(survey, tmp_path / "out", progress=False)
+    side_bad = {b.frame_id for b in res.bad_frames if b.stage == "side"}
+    # every copied frame, and at most a few of the right camera's own beside them (a pair
+    # across the stretch's ends, a stray vote the other way within the window)
+    assert set(copied) <= side_bad and len(side_bad) <= len(copied) + 4, (copied, side_bad)
+    assert all(b.frame_id.startswith("right_") for b in res.bad_frames), res.bad_frames
+    assert not res.masks.provenance["side_check"]["right"]["swapped"]
+    assert "the right camera's scenery slides the other way from its mount's from" in (
+        capsys.readouterr().err
+    )

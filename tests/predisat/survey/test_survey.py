@@ -570,6 +570,56 @@ def test_a_calibration_that_fits_none_of_its_camera_s_images_is_a_survey_problem
     assert len(Survey.load(root, on_error="skip").frames) == 7
 
 
+def test_a_side_camera_s_mount_in_radians_is_a_survey_problem(tmp_path: Path) -> None:
+    """A mount's angles written in radians (``pitch_deg: 0.785398`` for 45 deg): a user
+    trial's survey was read as cameras looking level, every skyline 45 deg too low, 26.8 % of
+    the trusted directions blocked, exit 0. Refused, naming the value in degrees."""
+    import yaml
+
+    root = _write(tmp_path / "s", n=3)
+    Survey.load(root)  # the right camera's -85 / 40 deg: degrees
+    spec = yaml.safe_load((root / "survey.yaml").read_text())
+    for key, value, deg in (("pitch_deg", 0.698132, "40.0"), ("yaw_deg", -1.48353, "-85.0")):
+        bad = dict(spec, cameras=dict(spec["cameras"]))
+        bad["cameras"]["right"] = dict(spec["cameras"]["right"])
+        bad["cameras"]["right"]["mount"] = dict(spec["cameras"]["right"]["mount"], **{key: value})
+        (root / "survey.yaml").write_text(yaml.safe_dump(bad))
+        with pytest.raises(SurveyError, match=rf"cameras.right.mount: {key} {value:g} reads as "
+                                              rf"radians \({deg} deg\)"):  # fmt: skip
+            Survey.load(root, on_error="skip")
+    # a level side camera (pitch 0) and a small roll are degrees as they stand
+    bad["cameras"]["right"]["mount"] = dict(spec["cameras"]["right"]["mount"], pitch_deg=0.0,
+                                            roll_deg=0.5)  # fmt: skip
+    (root / "survey.yaml").write_text(yaml.safe_dump(bad))
+    assert Survey.load(root).cameras["right"].mount.pitch_deg == 0.0
+
+
+def test_process_refuses_a_calibration_that_fits_none_of_its_camera_s_images(
+    tmp_path: Path,
+) -> None:
+    """``process`` loads a survey without reading its images (check_images=False), so the
+    check above never ran there: a user trial's left calibration of 640x480 beside 800x600
+    images made 41 bad frames, 100 % assumed masks and exit 0. It is now made on the image
+    headers before any work; a correct survey or a few bad images pass."""
+    from predisat.reconstruct.batch import process_survey
+    from predisat.survey.load import check_calibration_sizes
+
+    root = _write(tmp_path / "s", n=4)
+    small = np.zeros((48, 64, 3), np.uint8)
+    check_calibration_sizes(Survey.load(root, check_images=False, on_error="skip"))
+    first = sorted((root / "images").rglob("left_*"))[0]
+    cv2.imwrite(str(first), small)
+    check_calibration_sizes(Survey.load(root, check_images=False, on_error="skip"))
+    for f in sorted((root / "images").rglob("left_*")):
+        cv2.imwrite(str(f), small)
+    survey = Survey.load(root, check_images=False, on_error="skip")
+    with pytest.raises(SurveyError, match=r"camera 'left': all 4 of its images are 64x48 px"):
+        check_calibration_sizes(survey)
+    with pytest.raises(SurveyError, match=r"camera 'left': all 4 of its images are 64x48 px"):
+        process_survey(root, tmp_path / "out", progress=False)
+    assert not (tmp_path / "out" / "masks.parquet").exists()
+
+
 # ---------------------------------------------------------------------- vehicle attitude
 
 
