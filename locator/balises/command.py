@@ -261,8 +261,22 @@ def cmd_balises(args: argparse.Namespace) -> int:
         if not reg.same_map:
             print(f"warning: {reg.describe(str(args.masks), path.track.name)}", file=sys.stderr)
         masks = reg.masks
-        from predisat.availability.run import assumed_sky_notes
+        from predisat.availability.run import (
+            assumed_sky_notes,
+            open_sky_in_tunnels_notes,
+            survey_check_notes,
+        )
+        from predisat.masks.antenna import check_antenna_height
 
+        # the simulation's antenna against the masks', as `locator run` checks it (masks made
+        # for a 5.5 m antenna ran here with the demo's 4 m one in silence)
+        note = check_antenna_height(masks, path.antenna_height_m, f"masks {args.masks}")
+        if note is not None:
+            print(f"locator balises: warning: {note}", file=sys.stderr)
+        for note in survey_check_notes(masks.provenance):  # as `locator run` and availability
+            print(f"locator balises: warning: masks {args.masks}: {note}", file=sys.stderr)
+        for note in open_sky_in_tunnels_notes(masks, path.track, str(args.masks)):
+            print(f"locator balises: warning: {note}", file=sys.stderr)
         for note in assumed_sky_notes(masks):  # as `locator run` and availability say it
             print(f"locator balises: warning: masks {args.masks}: {note}", file=sys.stderr)
     # the error model applies to the simulated receiver or gives no claim, as in `locator run`

@@ -94,7 +94,7 @@ from predisat.masks.fileformat import (
 from predisat.masks.gaps import close_gaps
 from predisat.masks.maskset import BinSource, MaskSet
 from predisat.masks.merge import merged_tracks_note
-from predisat.masks.registration import register_on_track
+from predisat.masks.registration import beside_track_notes, register_on_track
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.storage import (
     Location,
@@ -122,6 +122,7 @@ __all__ = [
     "nav_span_gps_s",
     "navigation_doubts",
     "navigation_holes",
+    "open_sky_in_tunnels_notes",
     "parse_time",
     "positioning_text",
     "rig_text",
@@ -1086,14 +1087,16 @@ def _masks_on_track(
             "longer stretch"
         )
     if track_map is not None:
-        notes += _open_in_tunnels(mask_set, track_map, masks_label)
+        notes += open_sky_in_tunnels_notes(mask_set, track_map, masks_label)
     return mask_set, masks_label, track_map, notes
 
 
 _TUNNEL_PORTAL_M = 100.0  # a 6.5 m vault this far in leaves under 4 deg along the track
 
 
-def _open_in_tunnels(mask_set: MaskSet, track: TrackMap, masks_label: str) -> list[str]:
+def open_sky_in_tunnels_notes(
+    mask_set: MaskSet, track: TrackMap, masks_label: str
+) -> list[str]:
     """A warning where the masks trust some sky at positions the map tags as tunnel, farther
     than :data:`_TUNNEL_PORTAL_M` from its portals (a user trial gave flat masks over 13 km of
     tunnels and read 100 % availability, unwarned). Near a portal the sky along the track is
@@ -1459,7 +1462,7 @@ def survey_check_notes(provenance: JsonDict) -> list[str]:
     :func:`lacking_side_notes`) of the masks, and of every mask set ``predisat merge`` merged
     into them (their provenance under ``merged_worst_case``), each named."""
     out = [*side_swap_notes(provenance), *step_notes(provenance),
-           *lacking_side_notes(provenance)]  # fmt: skip
+           *lacking_side_notes(provenance), *beside_track_notes(provenance)]  # fmt: skip
     merged = provenance.get("merged_worst_case")
     for t in merged if isinstance(merged, list) else []:
         prov = t.get("provenance") if isinstance(t, dict) else None

@@ -15,7 +15,9 @@ track when the two are at an angle.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +34,7 @@ __all__ = [
     "SAME_MAP_TOL_M",
     "OtherTrackError",
     "Registration",
+    "beside_track_notes",
     "register_on_track",
 ]
 
@@ -56,6 +59,27 @@ length of chainage may be another track's over that stretch (a branch, a passing
 even where the median stays near the map: a user trial's masks followed a branch up to 23 m
 aside over 0.45 of their 1.2 km, median 0.0 m, and gave 2.4 % false trust there against 0.1 %
 for the track's own. 3.5 m: the narrowest spacing of two tracks' centres."""
+
+
+def beside_track_notes(provenance: Mapping[str, Any]) -> list[str]:
+    """The warning for masks made from a survey whose frames' own positions lay beside the
+    track as another track's would (``predisat process``'s ``survey_beside_track``): the masks
+    are written on this track's axis, yet they may hold another track's sky."""
+    b = provenance.get("survey_beside_track")
+    if not isinstance(b, dict):
+        return []
+    stretch = b.get("stretch_m")
+    where = (f", more than {OTHER_TRACK_STRETCH[0]:g} m from chainage {stretch[0]} to "
+             f"{stretch[1]} m" if isinstance(stretch, list) and len(stretch) == 2 else "")
+    return [
+        f"the masks were made from a survey whose frames' own positions lie "
+        f"{b.get('median_offset_m')} m {b.get('side')} of the track (the median; up to "
+        f"{b.get('max_offset_m')} m{where}): the survey train may have run on another track "
+        "(the other track of a double line, a loop, over a crossover), whose sky is not this "
+        "track's, yet the masks are written on this track's axis (a trial: masks of the other "
+        "track 4 m across trusted 8.8 % of the directions falsely); check the survey's route, "
+        "or its positions and the track map"
+    ]
 
 
 class OtherTrackError(ValueError):

@@ -478,3 +478,26 @@ def test_the_odometer_choices_are_the_campaigns_odometers() -> None:
     from locator.balises.command import DEFAULT_ODOMETER, ODOMETER_KINDS
 
     assert ODOMETER_KINDS == tuple(ODOMETERS) and DEFAULT_ODOMETER in ODOMETERS
+
+
+def test_masks_made_for_a_higher_antenna_or_a_swapped_survey_are_checked_as_locator_run_does(
+    sim_dir, tmp_path, capsys
+):
+    """A review: masks made for a 5.5 m antenna ran with the simulation's 4 m antenna in
+    silence (`locator run` refuses them), and a survey with swapped cameras went unsaid."""
+    from dataclasses import replace
+
+    from predisat.masks.fileformat import read_masks, write_masks
+
+    true = read_masks(sim_dir / "true_masks.parquet")
+    high = write_masks(replace(true, provenance={**true.provenance, "antenna_height_m": 5.5}),
+                       tmp_path / "high.masks.parquet")  # fmt: skip
+    base = ["-q", "balises", "--sim", str(sim_dir), "--spacing", "25"]
+    capsys.readouterr()
+    assert main([*base, "--masks", str(high), "--out", str(tmp_path / "high")]) == 2
+    assert "made for an antenna 5.5 m above the track axis" in capsys.readouterr().err
+    swapped = {"left": {"agree": 2, "disagree": 30, "pairs": 32, "swapped": True}}
+    sw = write_masks(replace(true, provenance={**true.provenance, "side_check": swapped}),
+                     tmp_path / "swapped.masks.parquet")  # fmt: skip
+    assert main([*base, "--masks", str(sw), "--out", str(tmp_path / "sw")]) == 0
+    assert "left and right are probably swapped" in capsys.readouterr().err

@@ -276,3 +276,43 @@ def test_a_mount_doubt_erodes_every_frames_sky(tmp_path) -> None:
     assert doubted.mask_el_deg.mean() > exact.mask_el_deg.mean()
     with pytest.raises(ValueError, match="mount_doubt_deg must be an angle"):
         PipelineParams(mount_doubt_deg=12.0)
+
+
+def test_a_survey_whose_positions_lie_beside_the_track_is_said_and_recorded(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A review: a survey whose own positions all lay 4 m right of the map (the survey train
+    on the other track of a double line) was processed in silence, its masks written on the
+    map's axis, where the locator's other-track check cannot see them. Now process says so,
+    the provenance records it, and the masks' readers (availability, locator) say it again."""
+    import re
+
+    import pandas as pd
+
+    from predisat.availability.run import survey_check_notes
+    from predisat.camera.models import CameraModel
+    from predisat.reconstruct.batch import process_survey
+    from predisat.synth.generate import generate_survey
+
+    camera = CameraModel.pinhole_from_fov(160, 120, 74.0)
+    generate_survey(demo_track(), 3000.0, 3060.0, sky="clear", seed=2, out_dir=tmp_path,
+                    camera=camera, progress=False)  # fmt: skip
+    survey = tmp_path / "survey"
+    on = process_survey(survey, tmp_path / "on", progress=False).masks
+    assert "survey_beside_track" not in on.provenance
+    assert "beside" not in capsys.readouterr().err
+    manifest = pd.read_csv(survey / "manifest.csv")
+    tr = demo_track()
+    ch = manifest["chainage_m"].to_numpy(float)
+    lat, lon, _ = tr.position_at(ch)
+    hd = np.radians(tr.heading_at(ch))  # 4 m to the right of increasing chainage
+    manifest["lat_deg"] = lat - 4.0 * np.sin(hd) / 111_200.0
+    manifest["lon_deg"] = lon + 4.0 * np.cos(hd) / (111_200.0 * np.cos(np.radians(lat)))
+    manifest.to_csv(survey / "manifest.csv", index=False, float_format="%.17g")
+    aside = process_survey(survey, tmp_path / "aside", progress=False).masks
+    err = capsys.readouterr().err
+    said = re.search(r"frames' own positions lie ([\d.]+) m right of the track", err)
+    assert said and abs(float(said[1]) - 4.0) < 0.1, err
+    rec = aside.provenance["survey_beside_track"]
+    assert rec["side"] == "right" and abs(rec["median_offset_m"] - 4.0) < 0.1
+    assert any("m right of the track" in n for n in survey_check_notes(aside.provenance))
