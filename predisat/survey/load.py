@@ -533,6 +533,17 @@ class _Row:
         self.probs.append(SurveyProblem(message, self.frame_id or None, self.row))
 
 
+def _same_row(a: _Row, b: _Row) -> bool:
+    """Whether two manifest rows state the same frame in every field (NaN equal to NaN)."""
+    for name in ("frame_id", "image", "side", "gps_s", "chainage_m", "lat_deg", "lon_deg",
+                 "h_m", "offset_m", "roll_deg", "pitch_deg"):  # fmt: skip
+        x, y = getattr(a, name), getattr(b, name)
+        if x != y and not (isinstance(x, float) and isinstance(y, float)
+                           and math.isnan(x) and math.isnan(y)):  # fmt: skip
+            return False
+    return True
+
+
 def _check_image(
     root: Location, rel: str, cam: CameraModel, opts: StorageOptions
 ) -> tuple[str | None, tuple[int, int] | None]:
@@ -972,12 +983,23 @@ def _read_manifest(
     if track is not None:
         _check_track(rows, track, max_offset_m)
     first_id: dict[str, int] = {}
+    first_row: dict[str, _Row] = {}
     first_image: dict[str, int] = {}
     seen_time: dict[tuple[str, float], _Row] = {}
     kept: dict[str, list[_Row]] = {}  # per side, the accepted frames in order
     accepted: list[_Row] = []
     after = _next_on_side(rows)
     for r in rows:
+        twin_row = first_row.get(r.frame_id)
+        if twin_row is not None and _same_row(twin_row, r):
+            # the same frame listed twice (a manifest written twice over, a copy appended):
+            # the repeat goes, the frame stays (as a duplicate id, both rows were left out and
+            # a user trial's doubled manifest gave masks 100 % assumed)
+            r.probs.append(SurveyProblem(
+                f"repeats manifest line {twin_row.row} exactly (frame {r.frame_id!r} listed "
+                "twice): the repeat is left out; remove the repeated row", None, r.row,
+            ))  # fmt: skip
+            continue
         if r.frame_id in first_id:
             r.bad(
                 f"duplicate frame_id (first at manifest line {first_id[r.frame_id]}); "
@@ -985,6 +1007,7 @@ def _read_manifest(
                 "its id)"
             )
         first_id.setdefault(r.frame_id, r.row)
+        first_row.setdefault(r.frame_id, r)
         key = str(PurePosixPath(r.image))
         if r.image and key in first_image:
             r.bad(

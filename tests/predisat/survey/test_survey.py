@@ -729,3 +729,23 @@ def test_the_folder_above_a_survey_points_to_it(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     (q,) = _problems(tmp_path / "empty")
     assert q.message == "survey.yaml is missing; see docs/survey-format.md"
+
+
+def test_a_manifest_listing_every_frame_twice_keeps_every_frame(tmp_path: Path) -> None:
+    """A manifest written twice over (a user trial): each repeat is left out, the frames stay,
+    and the problem names no frame (a frame is known by its id: a duplicate id leaves both
+    rows out, and every frame was lost, the masks 100 % assumed)."""
+    root = _write(tmp_path / "s", n=3)
+    rows = _rows(root)
+    _save_rows(root, rows + rows)
+    survey = Survey.load(root, on_error="skip", check_images=False)
+    assert list(survey.frames.frame_id) == [r["frame_id"] for r in rows]
+    assert len(survey.problems) == len(rows)
+    assert all(p.frame_id is None and "repeats manifest line" in p.message
+               for p in survey.problems)  # fmt: skip
+    # a repeat that differs in one field is still a duplicate id: both rows left out
+    rows2 = [*rows, dict(rows[0], chainage_m="105.0")]
+    _save_rows(root, rows2)
+    probs = Survey.load(root, on_error="skip", check_images=False).problems
+    assert {p.row for p in probs} == {len(rows2) + 1}
+    assert any(p.frame_id == "left_000000" and "duplicate frame_id" in p.message for p in probs)
