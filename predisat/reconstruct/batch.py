@@ -45,7 +45,7 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import ParamSpec, TypeVar
@@ -768,6 +768,26 @@ def _step_bad_frames(step: JsonDict) -> dict[str, str]:
                                     "dropped or extra image in the manifest?); set aside, fix the "
                                     "manifest (docs/reconstruction.md, section 21)")  # fmt: skip
     return out
+
+
+def _refuse_when_every_frame_is_bad(survey: Survey, bad: Mapping[str, BadFrame]) -> None:
+    """Stop before the reconstruction when no frame of the survey is left: the masks would be
+    all assumed, and a user trial's run published them and exited 0 (a manifest listing
+    every frame twice). Names how many frames each stage set aside, the first reason and the
+    fix."""
+    ids = [str(f) for f in survey.frames.frame_id]
+    if not ids or any(f not in bad for f in ids):
+        return
+    stages: dict[str, int] = {}
+    for f in ids:
+        stages[bad[f].stage] = stages.get(bad[f].stage, 0) + 1
+    first = bad[ids[0]]
+    raise ValueError(
+        f"survey {survey.root}: every one of its {len(ids)} frames was set aside ("
+        + ", ".join(f"{n} at stage {k}" for k, n in sorted(stages.items()))
+        + f"; the first, {first.frame_id}: {first.message}); no masks were made: fix the "
+        "frames or the manifest and run again"
+    )
 
 
 def _side_bad_frames(check: JsonDict) -> dict[str, str]:
@@ -1869,6 +1889,7 @@ def process_survey(
             _bad(*next(iter(side_bad.items())), strict)
         for fid, message in side_bad.items():
             bad.setdefault(fid, BadFrame(fid, message, stage="side"))
+        _refuse_when_every_frame_is_bad(survey, bad)
         t2 = time.perf_counter()
         run_chunks(_chunk_jobs(plan, pending, bad, pinned), runner, progress)
         timings["reconstruct"] = time.perf_counter() - t2

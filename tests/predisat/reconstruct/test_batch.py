@@ -288,6 +288,21 @@ def test_corrupt_image_is_reported_and_skipped(survey_dir: Path, tmp_path: Path)
                        strict=True)  # fmt: skip
 
 
+def test_a_survey_whose_every_frame_is_bad_makes_no_masks(survey_dir: Path, tmp_path: Path):
+    """A user trial's run whose every frame was set aside published masks 100 % assumed and
+    exited 0; it now stops before the reconstruction, saying why."""
+    src = tmp_path / "survey"
+    shutil.copytree(survey_dir, src)
+    rows = _manifest(src)
+    for r in rows:
+        (src / r["image"]).write_bytes(b"not a jpeg at all")
+    out = tmp_path / "masks"
+    with pytest.raises(ValueError, match=rf"every one of its {len(rows)} frames was set aside "
+                       rf"\({len(rows)} at stage segment; the first, "):  # fmt: skip
+        process_survey(src, out, PARAMS, progress=False, segmenter=blue_sky)
+    assert not (out / "masks.parquet").exists()
+
+
 def _jpeg(shape: tuple[int, int], seed: int, **save: Any) -> bytes:
     from PIL import Image
 
