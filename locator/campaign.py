@@ -595,6 +595,14 @@ def _job_done(path: Path) -> bool:
     return False
 
 
+def _withdraw(out: Path) -> None:
+    """Remove the campaign's tables and figures from ``out`` (not its job files)."""
+    for name in ("summary.json", "summary.csv", "epochs.parquet", "campaign.png"):
+        (out / name).unlink(missing_ok=True)
+    for old in out.glob("stanford_*.png"):
+        old.unlink(missing_ok=True)
+
+
 def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     with atomic_path(path) as tmp:
         df.to_parquet(tmp)
@@ -641,16 +649,19 @@ def run_campaign(
              for j in jobs}  # fmt: skip
     todo = [j for j in jobs if not _job_done(paths[j])]
     say(f"{len(jobs)} jobs, {len(todo)} to do")
-    if todo:
-        # an earlier campaign's tables and figures (other rules, risk, worlds, runs or code)
-        # must not stay beside this one's job files looking finished when it is stopped (as
-        # `predisat process` withdraws its published masks, reconstruct.batch._withdraw_published)
-        for name in ("summary.json", "summary.csv", "epochs.parquet", "campaign.png"):
-            (out / name).unlink(missing_ok=True)
-        for old in out.glob("stanford_*.png"):
-            old.unlink()
     # workers running other code would return other code's results under this code's keys
     with TaskRunner(scheduler or Scheduler.serial(), code_version=code_fingerprint) as runner:
+        if todo:
+            # connect (and check the workers) first: a mistyped --scheduler address withdrew
+            # a finished campaign's tables and figures, then was refused
+            runner.client()
+        # an earlier campaign's tables and figures (other rules, risk, worlds, runs or code)
+        # must not stay beside this one's job files looking finished when it is stopped (as
+        # `predisat process` withdraws its published masks, reconstruct.batch._withdraw_published);
+        # withdrawn even with no job to do: the tables are rewritten below and the figures by
+        # the command after them, and a rerun with fewer runs or worlds stopped in between left
+        # the new tables beside the earlier campaign's figures
+        _withdraw(out)
         for k, (job, df, dt) in enumerate(
             runner.map_unordered(_timed_job, setup, todo, name="campaign"), 1
         ):

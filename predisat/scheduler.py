@@ -278,13 +278,57 @@ def _refused(address: str) -> str | None:
 # process, not hidden state: it only ever holds the first answer.
 _FIRST_SEEN: dict[Callable[[], str], str] = {}
 _FIRST_SEEN_LOCK = threading.Lock()
+# The (mtime ns, size) of the source file of every module this process had loaded when it
+# was asked for a code version. The memo above is per function: a worker that first served
+# `predisat availability` (predisat's fingerprint) and, after a `git pull`, a `locator
+# campaign` (the fingerprint of both packages, first asked then) hashed the new files and
+# passed while it ran the predisat modules imported before the pull (a review: job files of the
+# old error model under the new code's keys, intervals up to 267 m apart, exit 0).
+_SOURCE_STAMPS: dict[str, tuple[int, int]] = {}
+
+
+def _stamp(path: str) -> tuple[int, int]:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (-1, -1)
+    return (st.st_mtime_ns, st.st_size)
+
+
+def _changed_sources() -> list[str]:
+    """Source files of the modules loaded here that changed since they were first stamped;
+    the modules loaded since the last call are stamped now."""
+    import sys
+
+    changed = [f for f, st in _SOURCE_STAMPS.items() if _stamp(f) != st]
+    for mod in list(sys.modules.values()):
+        f = getattr(mod, "__file__", None)
+        if isinstance(f, str) and f.endswith(".py") and f not in _SEEN_FILES:
+            _SEEN_FILES.add(f)
+            if os.path.realpath(f).startswith(_CHECKOUT):  # this checkout's (or environment's)
+                _SOURCE_STAMPS[f] = _stamp(f)
+    return changed
+
+
+# the folder holding this package: the checkout (predisat, locator, tests) or site-packages
+_CHECKOUT = os.path.dirname(os.path.dirname(os.path.realpath(__file__))) + os.sep
+_SEEN_FILES: set[str] = set()
 
 
 def _version_here(code_version: Callable[[], str]) -> str:
-    """``code_version()`` as this process first saw it (run here and on each worker)."""
+    """``code_version()`` as this process first saw it (run here and on each worker); when a
+    module it had loaded changed on disk before a code version is first asked, a value no
+    client's fingerprint equals (the process runs the modules it imported before)."""
     with _FIRST_SEEN_LOCK:  # keyed by the function itself (a module-level one unpickles as it)
+        changed = _changed_sources()
         if code_version not in _FIRST_SEEN:
-            _FIRST_SEEN[code_version] = code_version()
+            value = code_version()
+            if changed:
+                value = (
+                    f"{value[:16]}, but {len(changed)} module(s) it imported earlier changed "
+                    f"on disk since, e.g. {changed[0]}"
+                )
+            _FIRST_SEEN[code_version] = value
         return _FIRST_SEEN[code_version]
 
 

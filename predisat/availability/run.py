@@ -953,16 +953,24 @@ def run_availability(
 
         rules = [TrustRule.mask(mask_set), TrustRule.none()]
         rules += [TrustRule.cutoff(c) for c in cutoffs]
+        # the block tasks read and write no file (this process saves them): no paths
+        runner = held.enter_context(
+            TaskRunner(_where(scheduler, workers), code_version=code_fingerprint)
+        )
+        # the cluster reached and checked before the folder is made: a mistyped --scheduler
+        # address left an empty output folder holding a lock file
+        runner.client()
         if isinstance(out, Path):  # one run writes a local folder at a time, from its blocks
             out.mkdir(parents=True, exist_ok=True)  # on (its inputs were checked: no folder
             held.enter_context(exclusive_folder(out))  # is made for a refused run)
         blocks = join(out, "blocks")
-        # the block tasks read and write no file (this process saves them): no paths
-        with TaskRunner(_where(scheduler, workers), code_version=code_fingerprint) as runner:
+        try:
             results = _compute_rules(
                 rules, nav_data.sats, positions, interval_every, model, integrity, runner, bar,
                 (blocks, opts), map_doubt,
             )  # fmt: skip
+        finally:
+            runner.close()  # the cluster is not needed for the tables and figures
 
         stage("tables")
         # every output is written in a staging folder first, then published (_publish): in

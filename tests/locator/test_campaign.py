@@ -335,3 +335,34 @@ def test_the_code_fingerprint_covers_the_shipped_navigation_file(tmp_path, monke
     assert code_fingerprint() != first
     nav.write_text("one")
     assert code_fingerprint() == first
+
+
+def test_a_wrong_scheduler_address_keeps_the_finished_tables(
+    setup: CampaignSetup, serial: Path, tmp_path: Path
+) -> None:
+    """A rerun with one more run and a mistyped --scheduler address withdrew the finished
+    campaign's tables and figures, then was refused (the address is checked first now)."""
+    shutil.copytree(serial, tmp_path, dirs_exist_ok=True)
+    (tmp_path / "campaign.png").write_bytes(b"png")
+    with pytest.raises(OSError, match="no Dask scheduler answers"):
+        run_campaign(tmp_path, setup, jobs_for(["tiny"], 3), Scheduler.at("tcp://127.0.0.1:1"))
+    for name in (*_FILES, "campaign.png"):
+        assert (tmp_path / name).read_bytes() == (
+            (serial / name).read_bytes() if name != "campaign.png" else b"png"
+        ), name
+
+
+def test_rewritten_tables_withdraw_the_earlier_figures(
+    setup: CampaignSetup, serial: Path, tmp_path: Path
+) -> None:
+    """A rerun with fewer runs (no job to do) rewrote the tables while the earlier campaign's
+    figures stayed until the command redrew them: stopped in between, the folder held the
+    new summary beside the figures of the earlier, larger campaign."""
+    shutil.copytree(serial, tmp_path, dirs_exist_ok=True)
+    for name in ("campaign.png", "stanford_masks.png"):
+        (tmp_path / name).write_bytes(b"figure of the 2-run campaign")
+    result = run_campaign(tmp_path, setup, jobs_for(["tiny"], 1), Scheduler.serial())
+    assert result.ran == 0
+    assert pd.read_parquet(tmp_path / "epochs.parquet")["run"].unique().tolist() == [0]
+    assert not (tmp_path / "campaign.png").exists()
+    assert not (tmp_path / "stanford_masks.png").exists()

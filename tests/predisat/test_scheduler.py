@@ -397,3 +397,35 @@ def test_an_aborted_run_silences_the_dask_loggers_with_a_level_of_their_own() ->
     finally:
         for n, level in saved.items():
             logging.getLogger(n).setLevel(level)
+
+
+def _code_a() -> str:
+    return "code-a"
+
+
+def _code_b() -> str:
+    return "code-b"
+
+
+def test_a_code_version_first_asked_after_an_update_does_not_match(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A long-lived worker first asked for one code version (predisat's, by `availability`),
+    then, after a `git pull` changed a module it had imported, for another (`locator
+    campaign`'s, covering both packages): the fresh hash of the new files matched the client's
+    while the worker ran the old module (job files of the old error model under the new keys)."""
+    import predisat.scheduler as sched
+
+    monkeypatch.setattr(sched, "_FIRST_SEEN", {})
+    monkeypatch.setattr(sched, "_SOURCE_STAMPS", {}, raising=False)
+    monkeypatch.setattr(sched, "_SEEN_FILES", set(), raising=False)
+    assert sched._version_here(_code_a) == "code-a"  # stamps the loaded modules
+    module = os.path.realpath(sched.__file__)
+    st = os.stat(module)
+    try:
+        os.utime(module, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))  # "updated"
+        assert sched._version_here(_code_a) == "code-a"  # the first answer holds
+        theirs = sched._version_here(_code_b)
+        assert theirs != "code-b" and "changed on disk" in theirs, theirs
+    finally:
+        os.utime(module, ns=(st.st_atime_ns, st.st_mtime_ns))

@@ -282,3 +282,16 @@ def test_a_quiet_command_line_run_still_says_it_resumed(
     # --quiet drops the bar, and with it the library's resume line: the command says it
     assert "blocks resumed from the checkpoint" not in out.err
     assert "2 of " in out.out and "resumed from an interrupted run's checkpoint" in out.out
+
+
+def test_a_wrong_scheduler_address_makes_no_output_folder(tmp_path: Path, mask_file: Path) -> None:
+    """A mistyped --scheduler address was refused after the output folder was made, leaving
+    an empty folder holding a lock file."""
+    from predisat.scheduler import Scheduler
+
+    with pytest.raises(OSError, match="no Dask scheduler answers"):
+        run_availability(
+            mask_file, None, None, out_dir=tmp_path / "new", start=START, end=END,
+            step_s=STEP_S, n_sky=1, scheduler=Scheduler.at("tcp://127.0.0.1:1"),
+        )  # fmt: skip
+    assert not (tmp_path / "new").exists()
