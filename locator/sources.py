@@ -371,8 +371,9 @@ class RinexSource:
             "marker": self.obs.header.marker_name,
             # systems whose ionospheric delay no broadcast model corrects (sigma inflated)
             "iono_uncorrected_systems": list(self.iono_missing),
-            "iono_sources": dict(self._model.iono.sources),
-            "iono_stale": dict(self.iono_stale),
+            # the combination uses no broadcast ionosphere: none named as if it had
+            "iono_sources": {} if self.dual_frequency else dict(self._model.iono.sources),
+            "iono_stale": {} if self.dual_frequency else dict(self.iono_stale),
         }
 
 

@@ -92,6 +92,8 @@ def test_dual_frequency_needs_no_ionosphere_model_and_leaves_out_single_code_sat
     dual = RinexSource(bare, obs, "G", dual_frequency=True)
     assert single.iono_missing == ("G",) and dual.iono_missing == ()
     assert dual.frequency == "dual" and dual.describe()["frequency"] == "dual"
+    used = RinexSource(model, obs, "G", dual_frequency=True).describe()
+    assert used["iono_sources"] == {} and RinexSource(model, obs, "G").describe()["iono_sources"]
     # a satellite without any L2 code: left out of the combination, with the reason
     x = np.asarray(obs.header.approx_position_ecef_m, float)
     k = obs.sats.index(RinexSource(model, obs, "G", dual_frequency=True).observe(0, x).sats[0])
