@@ -139,6 +139,11 @@ def group_delay_s(sat: str, code: str, tgd_s: float, aux26: float, data_source: 
     system, band = sat[0], code[1:2]
     if system in "GJ":
         gamma = (77.0 / 60.0) ** 2
+        if band == "1" and code[2:3] not in ("", "C", "P", "W", "Y"):
+            # L1C (S, L, X), QZSS L1S (Z) or L1C/B (B): TGD plus CNAV-2's ISCs, which no record
+            # read here carries; refused here too, not only by the default code priority (a
+            # review: RinexSource(priority={"G": ("C1L",)}) ranged L1C with L1 C/A's TGD)
+            return float("nan")
         return {"1": tgd_s, "2": gamma * tgd_s}.get(band, float("nan"))
     if system == "I":
         return tgd_s if band == "5" else float("nan")

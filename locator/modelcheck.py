@@ -51,7 +51,8 @@ def _calibrate_hint(args: argparse.Namespace) -> str:
     if getattr(args, "device_gnss", None):
         return ("`locator calibrate --device-gnss CSV --truth CSV` (logs of the same phone "
                 "model with their ground truth; docs/errormodel.md)")  # fmt: skip
-    return ("`locator calibrate --obs FILE --nav NAV` (static observations of the same "
+    dual = " --dual-frequency" if getattr(args, "dual_frequency", False) else ""
+    return (f"`locator calibrate --obs FILE --nav NAV{dual}` (static observations of the same "
             "receiver, antenna and codes at a known position; docs/errormodel.md)")  # fmt: skip
 
 

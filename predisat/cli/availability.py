@@ -195,6 +195,16 @@ def _interval_model(error_model: str | None, k_sigma: float | None,
                     if unbounded else "it is not a checked overbound")  # fmt: skip
             notes.append(f"--error-model {error_model}: {what}; the predicted interval "
                          "lengths are not bounds (docs/errormodel.md)")  # fmt: skip
+        if mf.applicability is not None and mf.applicability.frequency == "dual":
+            # a review: the prediction counts every satellite in view, while `locator run
+            # --dual-frequency` leaves out each one without the second code
+            notes.append(f"--error-model {error_model}: a dual-frequency model (the "
+                         "ionosphere-free combination): the prediction counts every satellite "
+                         "in view, but a dual-frequency run leaves out those whose second code "
+                         "the receiver does not give (GPS satellites without L2C on an L2C "
+                         "receiver, QZSS without L2C, Galileo on E5a only): the counts and "
+                         "intervals are those of a receiver tracking both codes of every "
+                         "satellite (docs/observations.md)")  # fmt: skip
         k_max = k_sigma if k_sigma is not None else (budget or IntegrityBudget()).k_sigma(1)
         short = mf.depth_shortfall([c for c in letters if c in mf.systems], k_max)
         if short and not unbounded:

@@ -99,6 +99,7 @@ from predisat.reconstruct.frames import Segmenter, default_segmenter
 from predisat.reconstruct.params import THIN_DEG, PipelineParams
 from predisat.reconstruct.sides import (
     expected_flow_sign,
+    moving_on,
     pair_votes,
     side_votes,
     sky_profile,
@@ -484,14 +485,16 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
         expected = expected_flow_sign(sc.mount)
         if expected == 0:
             continue
-        votes = side_votes(side, profiles[side], expected)
+        # a pair that stood or backed (a slow reversal) sees the scenery the other way
+        moved = moving_on([c for _, _, c in seen[side]], plan.survey.reverse)
+        votes = side_votes(side, profiles[side], expected, moved)
         entry: JsonDict = {"agree": votes.agree, "disagree": votes.disagree,
                            "pairs": votes.pairs, "swapped": votes.swapped}  # fmt: skip
         sides[side] = entry
         if not votes.swapped:
             # a stretch of another camera's images (the other side's copied over, a cable
             # moved for a while), which the camera's votes as a whole outvote
-            stretches = stretches_the_other_way(pair_votes(profiles[side], expected))
+            stretches = stretches_the_other_way(pair_votes(profiles[side], expected, moved))
             entry["other_way"] = [
                 {
                     "from_m": seen[side][a][2],

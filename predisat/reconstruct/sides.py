@@ -24,11 +24,13 @@ from predisat.camera.models import Mount
 __all__ = [
     "MIN_CORRELATION",
     "MIN_SHIFT_SHARE",
+    "MIN_STEP_M",
     "STRETCH_MIN_DISAGREE",
     "STRETCH_WINDOW",
     "SWAP_RATIO",
     "SideVotes",
     "expected_flow_sign",
+    "moving_on",
     "pair_votes",
     "profile_shift_px",
     "side_votes",
@@ -43,6 +45,8 @@ SWAP_RATIO = 1.5
 """Pairs the other way over pairs the mount's way above which a camera is reported."""
 MIN_SHIFT_SHARE = 0.005
 """Smallest shift that votes, as a share of the image width (a train standing still)."""
+MIN_STEP_M = 0.25
+"""Chainage step along the direction of travel below which a pair of frames does not vote."""
 STRETCH_WINDOW = 8
 """Consecutive voting pairs over which a stretch of a camera's frames is judged."""
 STRETCH_MIN_DISAGREE = 6
@@ -132,16 +136,30 @@ def profile_shift_px(earlier: ArrayLike, later: ArrayLike, max_shift_px: int) ->
     return best, best_c
 
 
-def pair_votes(profiles: Sequence[NDArray], expected: int) -> list[int]:
+def moving_on(chainage_m: ArrayLike, reverse: bool, least_m: float = MIN_STEP_M) -> NDArray:
+    """Per pair of consecutive frames (in time order), whether the vehicle moved on in its
+    direction of travel by more than ``least_m`` between them: a pair that stood or backed
+    (a slow reversal keeps its frames at load when each step back is under 2 m) sees its
+    scenery slide the other way or not at all, and must not vote."""
+    steps = np.diff(np.asarray(chainage_m, float)) * (-1.0 if reverse else 1.0)
+    return steps > least_m
+
+
+def pair_votes(
+    profiles: Sequence[NDArray], expected: int, moved: Sequence[bool] | NDArray | None = None
+) -> list[int]:
     """The vote of each pair of consecutive frames (``profiles`` in time order): +1 slid the
     way ``expected`` (:func:`expected_flow_sign`) says, -1 the other way, 0 no vote (a stop, a
-    poor match, a camera that does not vote)."""
+    poor match, a camera that does not vote, a pair whose ``moved`` (:func:`moving_on`) is
+    False)."""
     votes = [0] * max(len(profiles) - 1, 0)
     w = int(np.asarray(profiles[0]).size) if profiles else 0
     if expected != 0 and len(profiles) > 1 and w >= 8:
         reach = max(int(0.25 * w), 1)
         least = max(round(MIN_SHIFT_SHARE * w), 1)
         for k, (a, b) in enumerate(itertools.pairwise(profiles)):
+            if moved is not None and not moved[k]:
+                continue
             s, c = profile_shift_px(a, b, reach)
             if c < MIN_CORRELATION or abs(s) < least:
                 continue
@@ -149,10 +167,16 @@ def pair_votes(profiles: Sequence[NDArray], expected: int) -> list[int]:
     return votes
 
 
-def side_votes(side: str, profiles: Sequence[NDArray], expected: int) -> SideVotes:
+def side_votes(
+    side: str,
+    profiles: Sequence[NDArray],
+    expected: int,
+    moved: Sequence[bool] | NDArray | None = None,
+) -> SideVotes:
     """Votes of a camera's consecutive frames (``profiles`` in time order) against the sign
-    :func:`expected_flow_sign` gives; no vote for a camera that gives 0."""
-    votes = pair_votes(profiles, expected)
+    :func:`expected_flow_sign` gives; no vote for a camera that gives 0, nor for a pair that
+    did not move on (``moved``, :func:`pair_votes`)."""
+    votes = pair_votes(profiles, expected, moved)
     return SideVotes(side, votes.count(1), votes.count(-1), max(len(profiles) - 1, 0))
 
 

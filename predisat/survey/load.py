@@ -400,12 +400,19 @@ def _read_cameras(
         except CalibrationError as exc:
             bad(f"cameras.{side}.calibration: {exc}")
             continue
+        raw_mount = spec.get("mount") or {}
+        mount_doc = dict(raw_mount) if isinstance(raw_mount, dict) else raw_mount
+        # a near-level side camera (pitch 0.17-1.57 deg) reads as a mount in radians: the
+        # survey says so with ``angles_in_degrees: true`` (a review: pitch_deg 1.0 was refused)
+        stated_degrees = (
+            isinstance(mount_doc, dict) and mount_doc.pop("angles_in_degrees", False) is True
+        )
         try:
-            mount = Mount.from_dict(side, spec.get("mount") or {})
+            mount = Mount.from_dict(side, mount_doc)
         except (TypeError, ValueError) as exc:
             bad(f"cameras.{side}.mount: {exc}")
             continue
-        radians = _mount_in_radians(mount)
+        radians = None if stated_degrees else _mount_in_radians(mount)
         if radians:
             bad(f"cameras.{side}.mount: {radians}")
             continue
@@ -730,7 +737,9 @@ def _mount_in_radians(mount: Mount) -> str | None:
                 f"{key} {value:g} reads as radians ({math.copysign(deg, value):.1f} deg): give "
                 "the mount's angles in degrees (a side camera looks across the track, yaw near "
                 "+-90, and up at the sky; skylines read with a mount in radians stand tens of "
-                "degrees off and a user trial's trusted 26.8 % of its directions falsely)"
+                "degrees off and a user trial's trusted 26.8 % of its directions falsely); a "
+                f"camera that really is mounted {key[:-4]} {value:g} deg: add "
+                "'angles_in_degrees: true' to its mount"
             )
     return None
 

@@ -1389,6 +1389,10 @@ def test_dual_frequency_runs_take_only_a_model_calibrated_on_the_same_combinatio
         assert record["source"]["frequency"] == "dual"
         said = "dual-frequency data, single-frequency model" in record["error_model"]["mismatches"]
         assert said == (mode == "single")
+        if mode == "single":  # the model to make is named with the processing of the run
+            assert "`locator calibrate --obs FILE --nav NAV --dual-frequency`" in (
+                capsys.readouterr().err
+            )
     capsys.readouterr()
     with pytest.raises(SystemExit):
         main(["run", "--sim", str(sim_dir), "--no-masks", "--dual-frequency", "--out",

@@ -146,6 +146,11 @@ def test_group_delay_rules() -> None:
     assert group_delay_s("C11", "C7I", tgd, aux26, np.nan) == aux26  # TGD2 on B2I
     assert group_delay_s("C11", "C6I", tgd, aux26, np.nan) == 0.0  # B3I is the reference
     assert group_delay_s("R01", "C1C", np.nan, np.nan, np.nan) == 0.0
+    # L1 P(Y) and RINEX 2 C1 / P1 share the TGD reference; L1C and QZSS L1S do not
+    for code in ("C1W", "C1P", "C1", "P1"):
+        assert group_delay_s("G01", code, tgd, np.nan, np.nan) == tgd
+    for sat, code in (("G01", "C1L"), ("G01", "C1X"), ("J02", "C1X"), ("J02", "C1Z")):
+        assert np.isnan(group_delay_s(sat, code, tgd, np.nan, np.nan)), code
 
 
 def _first_epoch(test_data: Path):

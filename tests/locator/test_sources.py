@@ -105,3 +105,42 @@ def test_dual_frequency_needs_no_ionosphere_model_and_leaves_out_single_code_sat
     d = RinexSource(model, cut, "G", dual_frequency=True).observe(0, x)
     assert obs.sats[k] not in d.sats and "second frequency" in d.rejected[obs.sats[k]]
     assert obs.sats[k] in RinexSource(model, cut, "G").observe(0, x).sats  # single: kept
+
+
+@pytest.mark.parametrize("system", ["C", "E"])
+def test_the_ionosphere_free_range_of_beidou_and_galileo_is_the_icd_combination(
+    kms3, system
+) -> None:
+    """BeiDou B1I / B3I: B3I is the D1/D2 clock's reference, so B1I is corrected by TGD1 and
+    B3I by nothing before combining (the combination keeps 2.94 TGD1, metres). Galileo E1 /
+    E5b with the I/NAV clock: BGD(E1,E5b) on E1 and (f1/f7)^2 BGD on E5b cancel, as GPS's
+    TGD does. Computed here from the raw observations; the group delay of the first code is
+    the single-frequency path's (tested on its own in test_corrections)."""
+    from locator.sources import RinexSource
+
+    obs, model = kms3
+    src = RinexSource(model, obs, system, dual_frequency=True)
+    x = np.asarray(obs.header.approx_position_ecef_m, float)
+    f1 = {"C": 1561.098e6, "E": 1575.42e6}[system]
+    f2 = {"C": 1268.52e6, "E": 1207.14e6}[system]
+    pair = {"C": ("C2I", "C6I"), "E": ("C1C", "C7Q")}[system]
+    checked = 0
+    for epoch in (0, len(obs.gps_s) - 1):
+        d = src.observe(epoch, x)
+        cols = [obs.sats.index(s) for s in d.sats]
+        codes = src.codes(epoch, np.array(cols, int))
+        keep = [i for i, c in enumerate(codes) if c == "+".join(pair)]
+        assert len(keep) >= 4, codes
+        sats = [d.sats[i] for i in keep]
+        p1 = obs.obs(pair[0])[epoch, [cols[i] for i in keep]]
+        p2 = obs.obs(pair[1])[epoch, [cols[i] for i in keep]]
+        single = model.correct(float(obs.gps_s[epoch]), sats, p1, x, pair[0])
+        st = single.states
+        gd1 = st.group_delay_m if system == "C" else np.zeros(len(sats))
+        want = ((f1**2 * (p1 - gd1) - f2**2 * p2) / (f1**2 - f2**2) + st.sat_clock_m
+                + st.relativity_m - single.tropo_m)  # fmt: skip
+        np.testing.assert_allclose(d.pseudorange_m[keep], want, rtol=0, atol=1e-3)
+        if system == "C":  # TGD1 is metres here: leaving it out would show
+            assert np.all(np.abs(st.group_delay_m) > 0.05)
+        checked += len(keep)
+    assert checked >= 8

@@ -1057,3 +1057,31 @@ def test_satellites_out_all_through_a_window_past_their_records_are_said() -> No
     eph = NS(kepler=Rec(), glonass=None, kind="broadcast")
     (w,) = navigation_doubts(sats, eph, "brdc")  # type: ignore[arg-type]
     assert "3 of its satellites drop out" in w
+
+
+def test_a_dual_frequency_model_is_said_to_count_every_satellite(tmp_path: Path) -> None:
+    """A model of the ionosphere-free combination (`locator calibrate --dual-frequency`): the
+    prediction counts every satellite in view, a dual-frequency run only those with the
+    second code (a review: used without a word)."""
+    from predisat.cli.availability import _interval_model
+    from predisat.gnss.errormodel import (
+        Applicability,
+        ErrorModel,
+        IntervalModel,
+        SystemModel,
+        write_error_model,
+    )
+
+    def model(frequency: str) -> str:
+        sm = SystemModel(ErrorModel(1.4, 0.6), ("C1C+C2W",) if frequency == "dual" else ("C1C",),
+                         5000, 900, 1e-3)  # fmt: skip
+        app = Applicability(("TRIMBLE NETR9",), ("TRM59800.00 NONE",), frequency=frequency)
+        return str(write_error_model(tmp_path / f"{frequency}.json",
+                                     IntervalModel(ErrorModel(1.4, 0.6), 2.0),
+                                     systems={"G": sm}, applicability=app))  # fmt: skip
+
+    for frequency in ("single", "dual"):
+        notes: list[str] = []
+        _interval_model(model(frequency), 2.0, "gps", notes=notes)
+        said = any("dual-frequency model" in n for n in notes)
+        assert said == (frequency == "dual"), notes

@@ -176,3 +176,30 @@ def test_process_sets_aside_a_stretch_of_the_other_cameras_images(tmp_path, caps
     assert "the right camera's scenery slides the other way from its mount's from" in (
         capsys.readouterr().err
     )
+
+
+def test_a_slow_reversal_is_not_taken_for_another_camera_s_images() -> None:
+    """A train backing 1.5 m a frame for 10 frames (steps under the 2 m that the loader drops,
+    so its frames reach `process`): its scenery slides the other way, which the window took
+    for another camera's images and set aside (a review). Pairs that did not move on in the
+    direction of travel do not vote; a copied stretch while moving on still does."""
+    from predisat.reconstruct.sides import moving_on, pair_votes, stretches_the_other_way
+
+    x = np.arange(320.0)
+    ch = [100.0 + 10 * k for k in range(15)]
+    ch += [ch[-1] - 1.5 * (k + 1) for k in range(10)]
+    ch += [ch[-1] + 10 * (k + 1) for k in range(15)]
+    prof = [_skyline(x + 9 * k, 4) for k in range(15)]
+    prof += [_skyline(x + 9 * 14 - 3 * (k + 1), 4) for k in range(10)]  # backing
+    prof += [_skyline(x + 9 * 14 - 30 + 9 * (k + 1), 4) for k in range(15)]
+    assert stretches_the_other_way(pair_votes(prof, expected=1)) != []  # the old reading
+    moved = moving_on(ch, reverse=False)
+    assert moved.sum() == 29 and not moved[14:24].any()
+    assert stretches_the_other_way(pair_votes(prof, expected=1, moved=moved)) == []
+    # toward decreasing chainage the same steps are the other way round
+    assert not moving_on(ch, reverse=True)[:14].any()
+    # images of the other camera while moving on: still found
+    other = [_skyline(x + 9 * k, 4) for k in range(15)] + [
+        _skyline(x - 9 * k, 7) for k in range(12)] + [_skyline(x + 9 * k, 9) for k in range(15)]
+    steps = moving_on(100.0 + 10.0 * np.arange(len(other)), reverse=False)
+    assert stretches_the_other_way(pair_votes(other, expected=1, moved=steps)) != []

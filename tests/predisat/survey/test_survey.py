@@ -594,6 +594,26 @@ def test_a_side_camera_s_mount_in_radians_is_a_survey_problem(tmp_path: Path) ->
     assert Survey.load(root).cameras["right"].mount.pitch_deg == 0.0
 
 
+def test_a_near_level_side_camera_stated_in_degrees_loads(tmp_path: Path) -> None:
+    """A side camera behind a window, pitched 1 deg up (or 1.2 deg down), reads as a mount in
+    radians: refused with the way out named, and loaded once the mount says its angles are
+    degrees (a review: there was no way to give such a camera but to falsify its pitch)."""
+    import yaml
+
+    root = _write(tmp_path / "s", n=3)
+    spec = yaml.safe_load((root / "survey.yaml").read_text())
+    right = dict(spec["cameras"]["right"]["mount"])
+    for pitch in (1.0, -1.2):
+        mount = dict(right, pitch_deg=pitch)
+        spec["cameras"]["right"]["mount"] = mount
+        (root / "survey.yaml").write_text(yaml.safe_dump(spec))
+        with pytest.raises(SurveyError, match="angles_in_degrees: true"):
+            Survey.load(root, on_error="skip")
+        spec["cameras"]["right"]["mount"] = dict(mount, angles_in_degrees=True)
+        (root / "survey.yaml").write_text(yaml.safe_dump(spec))
+        assert Survey.load(root).cameras["right"].mount.pitch_deg == pitch
+
+
 def test_process_refuses_a_calibration_that_fits_none_of_its_camera_s_images(
     tmp_path: Path,
 ) -> None:
