@@ -1398,3 +1398,21 @@ def test_dual_frequency_runs_take_only_a_model_calibrated_on_the_same_combinatio
         main(["run", "--sim", str(sim_dir), "--no-masks", "--dual-frequency", "--out",
               str(tmp_path / "s")])  # fmt: skip
     assert "--dual-frequency is for --obs runs" in capsys.readouterr().err
+
+
+def test_fixes_without_an_ionosphere_model_do_not_blame_the_map(capsys) -> None:
+    """A review (2026-12-07): NYA1 with Galileo-only navigation, the receiver's own
+    single-frequency fixes 3.9 m high from the ionosphere alone, and the warning blamed a
+    correct map; it now says what lifted them."""
+    import argparse
+    from types import SimpleNamespace
+
+    from locator.cli import _warn_height
+
+    path = SimpleNamespace(antenna_height_m=0.0)
+    args = argparse.Namespace(max_height_offset=20.0)
+    _warn_height(3.9, path, "nya1 (its epochs' own fixes)", args, ["E"])
+    err = capsys.readouterr().err
+    assert "without a broadcast ionosphere model for E" in err and "heights or the" not in err
+    _warn_height(3.9, path, "nya1 (its epochs' own fixes)", args)
+    assert "the track map's heights or the antenna height are off" in capsys.readouterr().err
