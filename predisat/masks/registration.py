@@ -71,6 +71,18 @@ def beside_track_notes(provenance: Mapping[str, Any]) -> list[str]:
     stretch = b.get("stretch_m")
     where = (f", more than {OTHER_TRACK_STRETCH[0]:g} m from chainage {stretch[0]} to "
              f"{stretch[1]} m" if isinstance(stretch, list) and len(stretch) == 2 else "")
+    doubt = b.get("position_doubt_m")
+    if isinstance(doubt, (int, float)) and doubt > OTHER_TRACK_STRETCH[0] / 2:
+        # a review: plain GNSS positions (3-5 m, as the survey format allows) wandering 3 m
+        # aside fired the other-track wording in 11 of 20 surveys of the right track
+        return [
+            f"the masks were made from a survey whose frames' own positions lie "
+            f"{b.get('median_offset_m')} m {b.get('side')} of the track (the median; up to "
+            f"{b.get('max_offset_m')} m{where}), within the {doubt:g} m the survey states for "
+            "them: positions that coarse cannot tell this track from one beside it, and the "
+            "masks of another track are not this track's (a trial: 8.8 % false trust 4 m "
+            "across); confirm from the survey's route that it ran on this track"
+        ]
     return [
         f"the masks were made from a survey whose frames' own positions lie "
         f"{b.get('median_offset_m')} m {b.get('side')} of the track (the median; up to "

@@ -960,6 +960,8 @@ def _beside_track(survey: Survey, track: TrackMap) -> JsonDict | None:
         "side": "left" if side > 0 else "right",
         "max_offset_m": round(float(np.abs(signed).max()), 2),
         "stretch_m": None if stretch is None else list(stretch),
+        # the positions' own stated doubt: plain GNSS (3-5 m) cannot tell two tracks apart
+        "position_doubt_m": survey.chainage_doubt_m,
     }
 
 

@@ -299,3 +299,19 @@ def test_masks_that_name_this_map_but_disagree_with_it_are_refused(maps) -> None
     # without the key (another tool's file) it is registered by position, as before
     plain = dataclasses.replace(shifted, provenance={})
     assert not register_on_track(plain, a, "m").same_map
+
+
+def test_positions_too_coarse_to_tell_the_tracks_are_said_so_not_named_another_track():
+    """A review (2026-12-07): plain GNSS positions (3-5 m, as the survey format allows)
+    wandering 3 m aside fired "the survey train may have run on another track" in 11 of 20
+    surveys of the right track; a survey stating such a doubt is told that its positions
+    cannot tell the tracks apart, and to confirm its route."""
+    from predisat.masks.registration import beside_track_notes
+
+    rec = {"median_offset_m": 2.1, "side": "left", "max_offset_m": 5.2, "stretch_m": None}
+    exact = beside_track_notes({"survey_beside_track": {**rec, "position_doubt_m": None}})
+    coarse = beside_track_notes({"survey_beside_track": {**rec, "position_doubt_m": 4.0}})
+    assert "may have run on another track" in exact[0]
+    assert "cannot tell this track from one beside it" in coarse[0]
+    assert "within the 4 m the survey states" in coarse[0] and "route" in coarse[0]
+    assert beside_track_notes({}) == []
