@@ -153,14 +153,14 @@ def rendered(tmp_path_factory):
     return out / "survey"
 
 
-def _drop_right_image(survey):
-    """The manifest whose right camera's rows from the 6th on give the next row's image (a
-    dropped image); the moved rows' frame ids."""
+def _drop_right_image(survey, first: int = 5):
+    """The manifest whose right camera's rows from the ``first + 1``-th on give the next row's
+    image (a dropped image); the moved rows' frame ids."""
     import pandas as pd
 
     man = pd.read_csv(survey / "manifest.csv")
     right = man.index[man.side == "right"][np.argsort(man.gps_s[man.side == "right"])]
-    late = right[5:]
+    late = right[first:]
     man.loc[late[:-1], "image"] = man.loc[late[1:], "image"].to_numpy()
     man.drop(index=late[-1:]).to_csv(survey / "manifest.csv", index=False)
     return set(man.frame_id[late[:-1]])
@@ -186,19 +186,17 @@ def test_process_sets_aside_the_frames_of_a_camera_out_of_step(rendered, tmp_pat
     assert not any(b.stage == "step" for b in ok.bad_frames)
     assert "out of step" not in capsys.readouterr().err
 
-    moved = _drop_right_image(survey)
-    got = process_survey(survey, tmp_path / "late", progress=False)
-    (run,) = got.masks.provenance["step_check"]["left/right"]["off_step"]
-    assert run["lag"] == -1 and run["first_position"] <= 5 and run["last_position"] >= 29
-    set_aside = {b.frame_id for b in got.bad_frames if b.stage == "step"}
-    assert set_aside == set(run["frames"])
-    # every moved row of the right camera, and the left camera's frames beside them
-    assert moved <= set_aside
-    assert any(f.startswith("left") for f in set_aside)
+    _drop_right_image(survey)
+    # the stretch out of step takes in the whole of this 300 m survey: no frame is left, and
+    # the run stops saying why instead of publishing masks all assumed (since 2026-12-07)
+    with pytest.raises(ValueError, match=r"every one of its (\d+) frames was set aside "
+                       r"\(\1 at stage step; .*out of step.*fix the manifest"):  # fmt: skip
+        process_survey(survey, tmp_path / "late", progress=False)
+    assert not (tmp_path / "late" / "masks.parquet").exists()
     err = capsys.readouterr().err
     assert "cameras are out of step from chainage" in err and "fix the manifest" in err
     assert "capture times were not compared" in err
-    assert step_notes(got.masks.provenance) and step_notes(ok.masks.provenance) == []
+    assert step_notes(ok.masks.provenance) == []
 
 
 def test_capture_times_set_aside_exactly_the_images_off_their_rows(rendered, tmp_path,
