@@ -59,6 +59,7 @@ __all__ = [
     "RangeModel",
     "SatelliteStates",
     "carrier_frequency_hz",
+    "cnav_group_delay_s",
     "group_delay_s",
     "klobuchar_bds_delay_m",
     "klobuchar_delay_m",
@@ -118,6 +119,39 @@ def carrier_frequency_hz(sat: str, code: str, glonass_k: int | None = None) -> f
     if system == "C" and band == "1" and code[2:3] in ("I", "Q"):
         return 1561.098e6
     return _FREQ_HZ.get((system, band), float("nan"))
+
+
+def cnav_group_delay_s(code: str, tgd_s: float, isc_l1ca_s: float, isc_l2c_s: float) -> float:
+    """Group delay to subtract from a GPS/QZSS CNAV record's clock for one signal, seconds.
+
+    IS-GPS-200 30.3.3.3.1.1: L1 C/A ``TGD - ISC_L1CA``, L2C ``TGD - ISC_L2C``; P(Y) as in
+    LNAV (``TGD`` on L1, ``gamma TGD`` on L2). The CNAV clock refers, as LNAV's, to the L1/L2
+    P(Y) ionosphere-free combination.
+
+    Parameters
+    ----------
+    code : str
+        Observation code (``"C1C"``, ``"C2L"``, ``"C1"``, ...).
+    tgd_s, isc_l1ca_s, isc_l2c_s : float
+        Columns ``tgd_cnav_s``, ``isc_l1ca_s`` and ``isc_l2c_s`` of the CNAV record in use.
+
+    Returns
+    -------
+    float
+        NaN for any other signal (L1C, L5: not paired here) or when a term is missing.
+    """
+    band, attr = code[1:2], code[2:3]
+    if not attr:  # RINEX 2: C1 is C/A, C2 L2C, P1 and P2 P(Y)
+        attr = {"P": "P", "C": "C" if band == "1" else "X"}.get(code[:1], "?")
+    if band == "1":
+        if attr == "C":
+            return tgd_s - isc_l1ca_s
+        return tgd_s if attr in ("P", "W", "Y") else float("nan")
+    if band == "2":
+        if attr in ("S", "L", "X"):
+            return tgd_s - isc_l2c_s
+        return (77.0 / 60.0) ** 2 * tgd_s if attr in ("P", "W", "Y", "D") else float("nan")
+    return float("nan")
 
 
 def group_delay_s(sat: str, code: str, tgd_s: float, aux26: float, data_source: float) -> float:
@@ -913,9 +947,15 @@ class RangeModel:
                 tgd[j] = 0.0
             elif kep is not None and st3.record[j, j] in self.record_row:
                 row = self.record_row[st3.record[j, j]]
-                tgd[j] = group_delay_s(
-                    s, code[j], kep.col("tgd_s")[row], kep.col("aux26")[row], kep.col("aux20")[row]
-                )
+                if "cnav" in kep.fields and kep.col("cnav")[row] == 1.0:
+                    tgd[j] = cnav_group_delay_s(code[j], kep.col("tgd_cnav_s")[row],
+                                                kep.col("isc_l1ca_s")[row],
+                                                kep.col("isc_l2c_s")[row])  # fmt: skip
+                else:
+                    tgd[j] = group_delay_s(
+                        s, code[j], kep.col("tgd_s")[row], kep.col("aux26")[row],
+                        kep.col("aux20")[row],
+                    )  # fmt: skip
             if not np.isfinite(tgd[j]):
                 reason[j] = f"no broadcast group delay for {code[j] or 'this signal'}"
             elif not np.isfinite(freq[j]):

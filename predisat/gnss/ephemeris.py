@@ -49,6 +49,7 @@ from predisat.gnss.tle import TleSet, read_tle
 from predisat.readonly import freeze_array_fields
 
 __all__ = [
+    "CNAV_MAX_AGE_S",
     "FAR_CONSISTENCY_M",
     "Ephemeris",
     "EphemerisStatus",
@@ -76,6 +77,11 @@ FAR_CONSISTENCY_M = 10_000.0
 far better: GPS 128 m median (197 m worst), GLONASS 1.5 km (1.9 km) at 16-48 h against precise
 orbits (a user trial, 2026-12-06); a record of another orbit, as G01's, is thousands of
 kilometres off."""
+
+CNAV_MAX_AGE_S = 5400.0
+"""Largest ``|t - toe|`` of a CNAV record, seconds: half its 3 h curve fit (IS-GPS-200
+30.3.3.1.1), assumed centred on toe (the BRUX records of 2026-07-23 were first sent about 1 h
+before their toe)."""
 
 # the farthest two records are compared, seconds: each is extrapolated half of it. GLONASS's
 # integrated state drifts faster: honest records 20-22 h apart differed by up to 15 km
@@ -114,6 +120,14 @@ class ValidityPolicy:
         Trust a record that no other record of its satellite within a day can check
         (``Reason.UNCHECKED`` otherwise). For a user that checks every satellite against
         measurements (the locator's pseudoranges); never for predictions.
+    cnav : {"fallback", "never", "prefer"}
+        Use of GPS/QZSS CNAV records (RINEX 4): ``"fallback"`` for satellites with no legacy
+        (LNAV) record among the files only, ``"never"``, or ``"prefer"`` (a satellite with CNAV
+        records uses only those). The two messages' orbits agree within a metre (G04, G05 on
+        2026-07-23); the legacy one stays the default, its clock and TGD conventions being
+        the ones every file carries. A CNAV record is used up to :data:`CNAV_MAX_AGE_S` from
+        its toe; its group delays (TGD and ISCs) are applied by
+        :func:`locator.corrections.cnav_group_delay_s`.
     """
 
     max_age_s: Mapping[str, float] = field(default_factory=_default_max_age)
@@ -122,6 +136,11 @@ class ValidityPolicy:
     tle_max_age_s: float = 7 * 86400.0
     consistency_m: float | None = 100.0
     trust_unchecked: bool = False
+    cnav: str = "fallback"
+
+    def __post_init__(self) -> None:
+        if self.cnav not in ("fallback", "never", "prefer"):
+            raise ValueError(f"cnav must be 'fallback', 'never' or 'prefer', got {self.cnav!r}")
 
 
 @dataclass(frozen=True)
@@ -193,7 +212,34 @@ def _unhealthy(rec: NavRecords) -> NDArray:
         acc = rec.col("accuracy_m")
         bad |= np.isin(system, ["G", "J"]) & (acc >= 6144.0)
         bad |= (system == "E") & (acc < 0)  # SISA "no accuracy prediction available"
+        cnav = _cnav_rows(rec)
+        if np.any(cnav):
+            # CNAV health is three signal bits, L1 (4), L2 (2), L5 (1) (IS-GPS-200 30.3.3.1.1.2):
+            # L5 is flagged on every satellite while it is pre-operational, and is not used here
+            bits = np.where(np.isfinite(health), health, 7.0).astype(np.int64)
+            ura_ed = rec.col("urai_ed")  # 15: no accuracy prediction (as 6144 m in LNAV)
+            cnav_bad = ((bits & 0b110) != 0) | ~(ura_ed < 15)
+            bad = np.where(cnav, cnav_bad, bad)
     return bad
+
+
+def _cnav_rows(rec: NavRecords) -> NDArray:
+    """GPS/QZSS CNAV records, bool, shape (n,)."""
+    if rec.kind != "kepler" or "cnav" not in rec.fields:
+        return np.zeros(len(rec), bool)
+    return rec.col("cnav") == 1.0
+
+
+def _message_choice(rec: NavRecords, cnav: str) -> NDArray:
+    """Records used under :attr:`ValidityPolicy.cnav`, bool, shape (n,)."""
+    is_cnav = _cnav_rows(rec)
+    if not np.any(is_cnav):
+        return np.ones(len(rec), bool)
+    if cnav == "never":
+        return ~is_cnav
+    if cnav == "prefer":
+        return is_cnav | ~np.isin(rec.sat, np.unique(rec.sat[is_cnav]))
+    return ~is_cnav | ~np.isin(rec.sat, np.unique(rec.sat[~is_cnav]))
 
 
 def _preference(rec: NavRecords, galileo_message: str) -> NDArray:
@@ -214,7 +260,7 @@ def _record_windows(rec: NavRecords, policy: ValidityPolicy) -> NDArray:
         fit_h = rec.col("fit")
         gps = rec.sat.astype("<U1") == "G"
         max_age = np.where(gps & (fit_h > 4.0), fit_h * 1800.0, max_age)
-    return max_age
+    return np.where(_cnav_rows(rec), np.minimum(max_age, CNAV_MAX_AGE_S), max_age)
 
 
 def record_disagreement(
@@ -459,6 +505,9 @@ class Ephemeris:
         for rec, state in ((self.kepler, kepler_state), (self.glonass, glonass_state)):
             if rec is None or len(rec) == 0:
                 continue
+            use = _message_choice(rec, pol.cnav)
+            if not np.all(use):
+                rec = rec.take(use)  # rows keep their "file:line" (the locator's key)
             pref = _preference(rec, pol.galileo_message)
             max_age = _record_windows(rec, pol)
             by_sat = {}

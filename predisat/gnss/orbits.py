@@ -3,7 +3,8 @@
 Two orbit families, both vectorised over any number of (record, epoch) pairs:
 
 * Keplerian elements with harmonic corrections (GPS IS-GPS-200, Galileo OS SIS ICD, BeiDou
-  B1I ICD incl. the GEO rotation, QZSS IS-QZSS, IRNSS ICD): :func:`kepler_state`;
+  B1I ICD incl. the GEO rotation, QZSS IS-QZSS, IRNSS ICD), and the GPS/QZSS CNAV elements
+  with their semi-major axis rate and mean-motion rate (IS-GPS-200 30.3.3.1): :func:`kepler_state`;
 * GLONASS (ICD 5.1, appendix A.3.1.2): the broadcast position and velocity at tb are integrated
   with 4th-order Runge-Kutta in the rotating PZ-90 frame, with the central term, the J2
   oblateness term and the broadcast (constant) lunisolar accelerations:
@@ -102,6 +103,14 @@ def kepler_state(
     e = g("e")
     tk = t - rec.ref_gps_s[idx]
     n = np.sqrt(mu / a**3) + g("delta_n_radps")
+    cnav = g("cnav") == 1.0 if "cnav" in rec.fields else np.zeros(len(idx), bool)
+    if np.any(cnav):
+        # GPS/QZSS CNAV (IS-GPS-200 Table 30-II): A_k = A0 + Adot tk in the radius, and the
+        # mean motion n_A = n0 + dn0 + dn0dot tk / 2 (n0 from A0); legacy rows untouched
+        n = np.where(cnav, n + 0.5 * g("delta_n_dot_radps2") * tk, n)
+        a_k = np.where(cnav, a + g("adot_mps") * tk, a)
+    else:
+        a_k = a
     mk = g("m0_rad") + n * tk
     ek = mk.copy()
     for _ in range(n_iter):
@@ -111,7 +120,7 @@ def kepler_state(
     phi = nu + g("omega_rad")
     s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
     u = phi + g("cus_rad") * s2 + g("cuc_rad") * c2
-    r = a * (1.0 - e * cos_e) + g("crs_m") * s2 + g("crc_m") * c2
+    r = a_k * (1.0 - e * cos_e) + g("crs_m") * s2 + g("crc_m") * c2
     inc = g("i0_rad") + g("cis_rad") * s2 + g("cic_rad") * c2 + g("idot_radps") * tk
     xp, yp = r * np.cos(u), r * np.sin(u)
     toe_sow = g("toe_sow_s")

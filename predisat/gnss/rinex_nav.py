@@ -12,7 +12,10 @@ gzip-compressed (``.gz``). RINEX 4 wraps every record in a ``> EPH``, ``> ION``,
 (GPS/QZSS/NavIC ``LNAV``, Galileo ``INAV``/``FNAV``, BeiDou ``D1``/``D2``, GLONASS ``FDMA``) have
 the RINEX 3.05 layout and land in the same tables; the modernised messages (``CNAV``, ``CNV1``,
 ``CNV2``, ``CNV3``, ``L1NV``) use orbit models not implemented here and are counted in
-:attr:`RinexNav.skipped` (key ``"G CNAV"``, ...) like SBAS (key ``"S"``). ``ION`` records
+:attr:`RinexNav.skipped` (key ``"C CNV1"``, ...) like SBAS (key ``"S"``), except GPS/QZSS
+``CNAV`` (IS-GPS-200 30.3.3.1), read into the Keplerian table: its own columns (``cnav`` = 1,
+A-dot, delta-n0-dot, the URA indices, TGD and ISCs; :data:`CNAV_FIELDS`) are NaN in every other
+record, and the legacy-only columns (IODE, IODC, TGD, accuracy, fit) NaN in it. ``ION`` records
 (Klobuchar of GPS/QZSS ``LNAV`` and BeiDou ``D1D2``, Galileo NeQuick-G ``IFNV``) are kept in
 :attr:`RinexNav.iono`; ``STO`` and ``EOP`` records are counted and skipped.
 
@@ -45,6 +48,7 @@ from predisat.gnss.timescale import (
 from predisat.readonly import freeze_array_fields
 
 __all__ = [
+    "CNAV_FIELDS",
     "GLONASS_FIELDS",
     "KEPLER_FIELDS",
     "KEPLER_SYSTEMS",
@@ -73,6 +77,11 @@ KEPLER_FIELDS: tuple[str, ...] = (
     "idot_radps", "aux20", "week", "aux22",
     "accuracy_m", "health", "tgd_s", "aux26",
     "transmit_sow_s", "fit", "spare29", "spare30",
+    # GPS/QZSS CNAV only (RINEX 4 "> EPH G.. CNAV"; NaN in every other record): "cnav" is 1.0
+    # on a CNAV record; the CNAV record's TGD is kept in "tgd_cnav_s", its "tgd_s" is NaN
+    "cnav", "adot_mps", "delta_n_dot_radps2", "top_sow_s",
+    "urai_ned0", "urai_ned1", "urai_ned2", "urai_ed", "tgd_cnav_s",
+    "isc_l1ca_s", "isc_l2c_s", "isc_l5i5_s", "isc_l5q5_s", "wn_op",
 )  # fmt: skip
 
 # GLONASS (RINEX 2/3): -TauN, +GammaN, message frame time, then X/Y/Z blocks in km, km/s,
@@ -84,6 +93,22 @@ GLONASS_FIELDS: tuple[str, ...] = (
     "z_km", "vz_kmps", "az_kmps2", "age_d",
     "status_flags", "delay_l1l2_s", "urai", "health_flags",
 )  # fmt: skip
+
+CNAV_FIELDS: tuple[str, ...] = (
+    "af0_s", "af1_sps", "af2_sps2",
+    "adot_mps", "crs_m", "delta_n_radps", "m0_rad",
+    "cuc_rad", "e", "cus_rad", "sqrt_a_sqrtm",
+    "top_sow_s", "cic_rad", "omega0_rad", "cis_rad",
+    "i0_rad", "crc_m", "omega_rad", "omega_dot_radps",
+    "idot_radps", "delta_n_dot_radps2", "urai_ned0", "urai_ned1",
+    "urai_ed", "health", "tgd_cnav_s", "urai_ned2",
+    "isc_l1ca_s", "isc_l2c_s", "isc_l5i5_s", "isc_l5q5_s",
+    "transmit_sow_s", "wn_op",
+)  # fmt: skip
+"""A RINEX 4.01/4.02 GPS/QZSS ``CNAV`` record's values in file order (nine lines), each named
+by the :data:`KEPLER_FIELDS` column it lands in. ``sqrt_a_sqrtm`` is sqrt(A0), A0 = A_REF + dA
+(IS-GPS-200 30.3.3.1.1.1); ``omega_dot_radps`` is the full rate (not the difference to the
+reference rate); toe equals toc (the epoch), so ``toe_sow_s`` is set from it."""
 
 LEGACY_MESSAGES: dict[str, tuple[str, ...]] = {
     "G": ("LNAV",), "J": ("LNAV",), "I": ("LNAV",), "E": ("INAV", "FNAV"),
@@ -97,6 +122,8 @@ _MAX_VERSION = 4.03  # RINEX 4.00-4.02
 
 _N_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
 _REQUIRED_KEPLER = (*tuple(range(0, 20)), 24)
+_REQUIRED_CNAV = (*tuple(range(0, 21)), 24)  # the orbit and clock, dn0-dot and the health
+_CNAV_SYSTEMS = "GJ"
 _REQUIRED_GLONASS = tuple(range(0, 15))
 _EXPONENT = re.compile(r"[dD]")
 # Fortran drops the exponent letter when the exponent has three digits: "0.499063314480-269"
@@ -250,7 +277,7 @@ class RinexNav:
         an error).
     skipped : dict
         Count of records skipped: per system letter (SBAS, ``"S"``) and, in RINEX 4, per
-        ``"<system> <message>"`` for modernised ephemerides (``"G CNAV"``) and per record type
+        ``"<system> <message>"`` for modernised ephemerides (``"G CNV2"``) and per record type
         (``"STO"``, ``"EOP"``, ``"ION C CNVX"``, ...).
     iono : tuple of IonoMessage
         RINEX 4 ``> ION`` records, in file order (RINEX 2/3 keep them in the header: see
@@ -501,6 +528,9 @@ def _read_v4_body(
                 f"unknown record line {line.rstrip()!r}: RINEX 4 records start with"
                 " '> EPH|ION|STO|EOP <satellite> <message>'",
             )
+        if rtype == "EPH" and not sat[1:].isdigit():
+            raise RinexError(path, i + 1, f"unreadable satellite {sat!r} in {line.rstrip()!r}: "
+                             "the record line is damaged; download the file again")  # fmt: skip
         if rtype == "EPH" and msg in LEGACY_MESSAGES.get(sat[0], ()):
             if j == i + 1:
                 raise RinexError(path, i + 1, f"EPH record of {sat} has no data line: the file is"
@@ -515,6 +545,8 @@ def _read_v4_body(
                 raise RinexError(path, end + 1, f"record of {sat} has extra lines")
             kind, row = _record_row(path, lines, i + 1, rec, n_lines, True)
             rows[kind].append(row)
+        elif rtype == "EPH" and msg == "CNAV" and sat[0] in _CNAV_SYSTEMS:
+            rows["kepler"].append(_cnav_row(path, lines, i, j, sat))
         elif rtype == "ION" and (sat[0], msg) in _ION_MESSAGES:
             iono.append(_ion_record(path, lines, i, j, sat, msg))
         else:
@@ -527,7 +559,8 @@ def _read_v4_body(
         warnings.warn(
             f"{path}: {sum(modern.values())} ephemeris record(s) of modernised messages skipped"
             f" ({', '.join(f'{k} {v}' for k, v in sorted(modern.items()))}): their orbit model"
-            " is not implemented; the legacy messages (LNAV, INAV, FNAV, D1, D2, FDMA) are used",
+            " is not implemented; the legacy messages (LNAV, INAV, FNAV, D1, D2, FDMA) and"
+            " GPS/QZSS CNAV are used",
             stacklevel=2,
         )
     return RinexNav(
@@ -562,6 +595,35 @@ def _ion_record(path: Path, lines: list[str], i: int, j: int, sat: str, msg: str
     cal = calendar_to_gps_s(y, mo, d, h, mi, us * 1e-6)
     t = float(cal) - (BDT_MINUS_GPST_S if sat[0] == "C" else 0.0)
     return IonoMessage(sat[0], msg, sat, t, coef, f"{path.name}:{i + 1}")
+
+
+def _cnav_row(
+    path: Path, lines: list[str], i: int, j: int, sat: str
+) -> tuple[str, tuple[int, ...], list[float], str]:
+    """The Keplerian-table row of the GPS/QZSS ``CNAV`` record at ``lines[i]`` (its nine data
+    lines up to ``lines[j]``; :data:`CNAV_FIELDS`), its required fields checked."""
+    got = j - i - 1
+    if got != 9:
+        what = "is cut short" if got < 9 else "has extra lines"
+        raise RinexError(path, i + 1, f"CNAV record of {sat} has {got} of 9 data lines: the "
+                         f"record {what}; download the file again")  # fmt: skip
+    rec = _record_start(path, lines[i + 1], i + 2, sat[0], True)
+    if f"{rec.sys_letter}{rec.prn:02d}" != f"{sat[0]}{int(sat[1:]):02d}":
+        raise RinexError(path, i + 2, f"record of {sat} starts with {lines[i + 1][:3]!r}")
+    epoch = _epoch(path, i + 2, rec.t_line, True)
+    vals = _fields(path, i + 2, lines[i + 1], rec.body_start1, 3)
+    for k in range(i + 2, i + 9):
+        vals += _fields(path, k + 1, lines[k], rec.body_startn, 4)
+    vals += _fields(path, i + 10, lines[i + 9], rec.body_startn, 2)  # t_tm, WN_op (4.02: more)
+    missing = [CNAV_FIELDS[m] for m in _REQUIRED_CNAV if np.isnan(vals[m])]
+    if missing:
+        raise RinexError(path, i + 2, f"CNAV record of {sat} lacks required field(s) "
+                         + ", ".join(missing))  # fmt: skip
+    row = [np.nan] * len(KEPLER_FIELDS)
+    for name, v in zip(CNAV_FIELDS, vals, strict=True):
+        row[KEPLER_FIELDS.index(name)] = v
+    row[KEPLER_FIELDS.index("cnav")] = 1.0
+    return sat, epoch, row, f"{path.name}:{i + 2}"
 
 
 @dataclass(frozen=True)
@@ -679,6 +741,10 @@ def _to_records(rows: list, kind: str) -> NavRecords:
         bds = system == "C"
         toc_sys = cal_s
         toe_sow = values[:, fields.index("toe_sow_s")]
+        # CNAV: toe = toc (IS-GPS-200 30.3.3.1.1), written into the table for kepler_state
+        cnav = values[:, fields.index("cnav")] == 1.0
+        if np.any(cnav):
+            toe_sow[cnav] = np.mod(toc_sys[cnav], SECONDS_PER_WEEK)
         toe = np.floor(toc_sys / SECONDS_PER_WEEK) * SECONDS_PER_WEEK + toe_sow
         toe = toe - np.round((toe - toc_sys) / SECONDS_PER_WEEK) * SECONDS_PER_WEEK
         shift = np.where(bds, -BDT_MINUS_GPST_S, 0.0)

@@ -200,6 +200,7 @@ def _rinex_nav() -> Reader:
         "gnss/brdc0910_R02R08.09g", "gnss/brdc1820_G01G02G05.10n",
         "gnss/rinex_nav_BRDC00WRD_S_20230730000_01D_MN_E01E02.rnx",
         "gnss_obs/07590920_0000_0200.05n",
+        "gnss/rinex4_nav_BRUX_20260723_G04G05_LNAV_CNAV.rnx",  # RINEX 4 with CNAV records
     )  # fmt: skip
     return Reader(
         "rinex_nav", seeds, (), lambda f: read_rinex_nav(_single(f)), (RinexError,)

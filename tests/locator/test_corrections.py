@@ -12,6 +12,7 @@ from locator.corrections import (
     BroadcastIono,
     RangeModel,
     carrier_frequency_hz,
+    cnav_group_delay_s,
     group_delay_s,
     klobuchar_bds_delay_m,
     klobuchar_delay_m,
@@ -407,3 +408,40 @@ def test_an_all_zero_klobuchar_set_is_no_model(test_data: Path, tmp_path: Path) 
     with pytest.warns(UserWarning, match="all zero"):
         both = BroadcastIono.from_rinex_nav([nav, src])
     assert both.sources["GPS"].startswith(src.name)
+
+
+BRUX = "gnss/rinex4_nav_BRUX_20260723_G04G05_LNAV_CNAV.rnx"
+
+
+def test_cnav_group_delays_follow_is_gps_200(test_data: Path, tmp_path: Path) -> None:
+    """A CNAV record's group delay (IS-GPS-200 30.3.3.3.1.1): L1 C/A TGD - ISC_L1CA, L2C
+    TGD - ISC_L2C, P(Y) as LNAV; L5 and L1C are not given (the satellite is left out)."""
+    tgd, l1ca, l2c = -4.656612873077e-09, -2.037268131971e-10, 3.317836672068e-09  # G04 CNAV
+    assert cnav_group_delay_s("C1C", tgd, l1ca, l2c) == tgd - l1ca
+    assert cnav_group_delay_s("C1", tgd, l1ca, l2c) == tgd - l1ca  # RINEX 2 C/A
+    assert cnav_group_delay_s("C2L", tgd, l1ca, l2c) == tgd - l2c
+    assert cnav_group_delay_s("C1W", tgd, l1ca, l2c) == tgd
+    assert cnav_group_delay_s("P1", tgd, l1ca, l2c) == tgd
+    assert cnav_group_delay_s("C2W", tgd, l1ca, l2c) == pytest.approx((77 / 60) ** 2 * tgd)
+    for code in ("C5Q", "C1L", "C1X"):
+        assert np.isnan(cnav_group_delay_s(code, tgd, l1ca, l2c)), code
+    assert np.isnan(cnav_group_delay_s("C1C", tgd, np.nan, l2c))
+    # through the range model: a file whose G04 and G05 have CNAV records only
+    lines = (test_data / BRUX).read_text().splitlines()
+    keep, drop = [], False
+    for line in lines:
+        drop = line.endswith("LNAV") if line.startswith(">") else drop
+        if not drop:
+            keep.append(line)
+    (tmp_path / "cnav.rnx").write_text("\n".join(keep) + "\n")
+    t = calendar_to_gps_s(2026, 7, 23, 1, 30, 0)
+    pr = np.full(3, 2.2e7)
+    st = RangeModel.from_rinex_nav(tmp_path / "cnav.rnx").states(
+        t, ["G04", "G05", "G04"], pr, ["C1C", "C2L", "C5Q"]
+    )
+    g05_tgd, g05_l2c = -1.071020960808e-08, 5.733454599977e-09
+    np.testing.assert_allclose(st.group_delay_m[:2], C * np.array([tgd - l1ca, g05_tgd - g05_l2c]))
+    assert list(st.reason[:2]) == ["", ""] and "no broadcast group delay" in st.reason[2]
+    # with LNAV records too, LNAV (and its TGD) is used
+    both = RangeModel.from_rinex_nav(test_data / BRUX).states(t, ["G04"], pr[:1], "C1C")
+    assert both.group_delay_m[0] == C * tgd

@@ -267,16 +267,17 @@ def test_rinex4_damage_names_file_line_and_fix(test_data: Path, tmp_path: Path) 
 def test_rinex4_modernised_messages_counted_with_a_warning(
     test_data: Path, tmp_path: Path
 ) -> None:
-    """CNAV/CNV2 ephemerides (not in the KMS3 file: a '> EPH G02 CNAV' block is added) are
-    skipped, counted and told: their orbit model is not implemented."""
+    """CNV1/CNV2 ephemerides (not in the KMS3 file: '> EPH G02 CNV2' and '> EPH C19 CNV2'
+    blocks are added) are skipped, counted and told: their orbit model is not implemented
+    (GPS/QZSS CNAV is read: test_cnav.py)."""
     text = _v4_text(test_data)
     g02 = next(k for k, t in enumerate(text) if t.startswith("> EPH G02 LNAV"))
-    cnav = ["> EPH G02 CNAV", *(t for t in text[g02 + 1 : g02 + 9]), "     0.0"]
+    cnav = ["> EPH G02 CNV2", *(t for t in text[g02 + 1 : g02 + 9]), "     0.0"]
     cnv2 = ["> EPH C19 CNV2", *text[g02 + 1 : g02 + 9], "     0.0", "     0.0"]
     path = _write(tmp_path, [*text[:g02], *cnav, *cnv2, *text[g02:]])
-    with pytest.warns(UserWarning, match=r"2 ephemeris record\(s\).*C CNV2 1, G CNAV 1.*not impl"):
+    with pytest.warns(UserWarning, match=r"2 ephemeris record\(s\).*C CNV2 1, G CNV2 1.*not impl"):
         nav = read_rinex_nav(path)
-    assert nav.skipped["G CNAV"] == 1 and nav.skipped["C CNV2"] == 1
+    assert nav.skipped["G CNV2"] == 1 and nav.skipped["C CNV2"] == 1
     ref = read_rinex_nav(test_data / NAV4)
     np.testing.assert_array_equal(nav.kepler.values, ref.kepler.values)
 
