@@ -930,7 +930,14 @@ class RangeModel:
         )
         idx = np.arange(n)
         pos, clk = pos3[idx, idx], clk3[idx, idx]
-        vel = pos3[idx + 2 * n, idx] - pos3[idx + n, idx]  # central difference over 1 s
+        before, after = pos3[idx + n, idx], pos3[idx + 2 * n, idx]
+        vel = after - before  # central difference over 1 s
+        # a record trusted at transmission but not half a second later (or earlier), at the
+        # edge of its validity: one-sided over 0.5 s (the relativistic term within a few cm),
+        # not a NaN range without a reason ("not usable"; a trial: NYA1 E33 at 15:30:00)
+        vel = np.where(
+            np.isfinite(vel), vel, np.where(np.isfinite(after), after - pos, pos - before) * 2.0
+        )
         rel = np.where(
             [s[0] == "R" for s in sats], 0.0, -2.0 * np.sum(pos * vel, axis=-1) / C_MPS**2
         )

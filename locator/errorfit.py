@@ -272,8 +272,37 @@ def station_residuals(
 ) -> Residuals:
     """:func:`static_residuals` with the satellites, codes and receiver of the source."""
     el, res = static_residuals(source, station_ecef_m, min_el_deg)
-    return Residuals(el, res, tuple(source.obs.sats), receiver_profile(source, receiver_class),
+    profile = receiver_profile(source, receiver_class)
+    return Residuals(el, res, tuple(source.obs.sats), _codes_with_residuals(source, profile, res),
                      str(source.obs.path))  # fmt: skip
+
+
+def _codes_with_residuals(
+    source: RinexSource, profile: ReceiverProfile, residual_m: NDArray
+) -> ReceiverProfile:
+    """``profile`` naming, per system, only the codes the residuals calibrate: those with at
+    least :data:`MIN_FIT_RESIDUALS` residuals, or at least half of the system's.
+
+    A code the file used at a few epochs was named calibrated with next to no residuals behind
+    it (a trial: NYA1's ``C1C+C2X``, 8 residuals of 16 361, then let an L1/L2C-only run claim
+    under a model whose tails never saw L2C's inter-signal bias)."""
+    obs = source.obs
+    code = obs.pseudorange(source.priority).code
+    if source.dual_frequency:
+        second = obs.pseudorange(SECOND_FREQUENCY_PRIORITY).code
+        both = (code != "") & (second != "")
+        code = np.where(both, np.char.add(np.char.add(code.astype("<U8"), "+"), second), "")
+    have = np.isfinite(residual_m)
+    kept: dict[str, tuple[str, ...]] = {}
+    for sys_, codes in profile.codes.items():
+        cols = np.array([s[0] == sys_ for s in obs.sats], bool)
+        n_sys = int(have[:, cols].sum())
+        counts = {c: int((have[:, cols] & (code[:, cols] == c)).sum()) for c in codes}
+        keep = tuple(c for c in codes
+                     if counts[c] >= MIN_FIT_RESIDUALS or 2 * counts[c] >= n_sys > 0)  # fmt: skip
+        if keep:
+            kept[sys_] = keep
+    return replace(profile, codes=kept)
 
 
 def simulated_residuals(

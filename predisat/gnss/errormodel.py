@@ -187,8 +187,9 @@ class ReceiverProfile:
         return tuple(sorted(self.codes))
 
     def describe(self) -> str:
-        """``"TRIMBLE 5700 / TRM29659.00, G C1"``, for messages."""
-        codes = ", ".join(f"{s} {'+'.join(c)}" for s, c in sorted(self.codes.items()))
+        """``"TRIMBLE 5700 / TRM29659.00, G C1"``, for messages; several codes of a system
+        ``"G C1C+C2L or C1C+C2W"`` (a dual-frequency pair is itself written with ``+``)."""
+        codes = ", ".join(f"{s} {' or '.join(c)}" for s, c in sorted(self.codes.items()))
         cls = f" ({self.receiver_class})" if self.receiver_class else ""
         return f"{self.receiver_type or '?'} / {self.antenna_type or '?'}{cls}, {codes}"
 
@@ -320,8 +321,12 @@ class Applicability:
         for sys_, codes in sorted(profile.codes.items()):
             got = {c for _, _, per in mine for s_, cs, _ in per if s_ == sys_ for c in cs}
             n = sum(n_ for _, _, per in mine for s_, _, n_ in per if s_ == sys_)
-            new = sorted(set(codes) - got)
-            if new and sys_ in {s_ for p in self.pairs for s_, _, _ in p[2]}:
+            # only codes another pair holds were "calibrated on other receivers" (a code no
+            # pair holds is told by mismatches: a trial's dual-frequency run under its own
+            # station's single-frequency model was told the codes came from other receivers)
+            elsewhere = {c for p in self.pairs for s_, cs, _ in p[2] if s_ == sys_ for c in cs}
+            new = sorted((set(codes) - got) & elsewhere)
+            if new:
                 why.append(
                     f"system {sys_} code(s) {new} were calibrated on other receivers or "
                     f"antennas only ({profile.receiver_type} / {profile.antenna_type} gave "

@@ -1416,3 +1416,18 @@ def test_fixes_without_an_ionosphere_model_do_not_blame_the_map(capsys) -> None:
     assert "without a broadcast ionosphere model for E" in err and "heights or the" not in err
     _warn_height(3.9, path, "nya1 (its epochs' own fixes)", args)
     assert "the track map's heights or the antenna height are off" in capsys.readouterr().err
+
+
+def test_a_code_with_next_to_no_residuals_is_not_named_calibrated(test_data, tmp_path) -> None:
+    """A trial (n8): NYA1's model named C1C+C2X calibrated from 8 of 16 361 residuals and then
+    let an L1/L2C-only run claim under it. KMS3 ranges G09 with C1C+C2L at one epoch of 19 and
+    every other GPS range with C1C+C2W: only the pair with residuals enough is named."""
+    obs = str(test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    nav = str(test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz")
+    out = tmp_path / "m.json"
+    assert main(["-q", "calibrate", "--obs", obs, "--nav", nav, "--dual-frequency", "--bound",
+                 "estimate", "--out", str(out)]) == 0  # fmt: skip
+    model = json.loads(out.read_text())
+    assert model["systems"]["G"]["codes"] == ["C1C+C2W"]
+    (pair,) = model["applicability"]["pairs"]
+    assert "C1C+C2L" not in json.dumps(pair)

@@ -445,3 +445,21 @@ def test_cnav_group_delays_follow_is_gps_200(test_data: Path, tmp_path: Path) ->
     # with LNAV records too, LNAV (and its TGD) is used
     both = RangeModel.from_rinex_nav(test_data / BRUX).states(t, ["G04"], pr[:1], "C1C")
     assert both.group_delay_m[0] == C * tgd
+
+
+def test_a_record_trusted_at_transmission_but_not_half_a_second_later_gives_a_range(model):
+    """A user trial (n8): NYA1 E33 at 15:30:00 and E02 at 17:40:00 left out as "not usable"
+    with no reason: the record was trusted at transmission, not 0.5 s later, and the central
+    difference of the velocity (relativistic term) came out NaN."""
+    end = 796449600.0  # G01's record of this file is trusted up to here (2005-04-02 04:00)
+    _, _, st = model.ephemeris.evaluate(np.array([end - 0.3, end + 0.3]), ["G01"])
+    assert list(st.reason[:, 0]) == [0, 2]  # the premise: the record's validity ends there
+    pr = 2.2e7
+    edge = model.states(end - 0.2 + pr / C, ["G01"], [pr], "C1C")
+    inside = model.states(end - 1.5 + pr / C, ["G01"], [pr], "C1C")  # central difference
+    assert edge.reason[0] == "" and np.isfinite(edge.sat_clock_m[0])
+    # the one-sided difference over 0.5 s: the relativistic term within a few centimetres
+    assert edge.relativity_m[0] == pytest.approx(inside.relativity_m[0], abs=0.05)
+    below = edge.pos_ecef_m[0] / np.linalg.norm(edge.pos_ecef_m[0]) * 6.371e6  # G01 overhead
+    cr = model.correct(end - 0.2 + pr / C, ["G01"], [pr], below, "C1C")
+    assert cr.usable[0] and np.isfinite(cr.corrected_m[0])

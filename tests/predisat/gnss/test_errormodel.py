@@ -243,3 +243,18 @@ def test_a_pooled_model_applies_to_the_receiver_antenna_pairs_and_codes_it_holds
     assert len(why) == 1 and "without recording which were calibrated together" in why[0]
     # ... one receiver and one antenna need no pairs
     assert ErrorModelFile(env, {"G": GPS}, APP).mismatches(_profile()) == []
+
+
+def test_a_dual_frequency_run_under_its_stations_single_frequency_model_is_told_why():
+    """A user trial (n8): NYA1's dual-frequency run under NYA1's own single-frequency model was
+    told its codes "were calibrated on other receivers or antennas only" (the model holds one
+    receiver), and the message listed the data's codes as "G C1C+C2W+C1C+C2X" (pairs and the
+    list both joined by "+")."""
+    pairs = (("TRIMBLE NETR9", "ASH701073.1     SNOW", (("G", ("C1C",), 32594),)),)
+    app = dataclasses.replace(APP, pairs=pairs)
+    mf = ErrorModelFile(IntervalModel(ErrorModel(0.9, 0.4), 2.0), {"G": GPS}, app)
+    dual = _profile(codes={"G": ("C1C+C2W", "C1C+C2X")}, frequency="dual")
+    why = " ; ".join(mf.mismatches(dual))
+    assert "other receivers" not in why, why
+    assert "not calibrated" in why and "single-frequency model" in why
+    assert "C1C+C2W or C1C+C2X" in dual.describe() and "C2W+C1C" not in dual.describe()
