@@ -39,7 +39,7 @@ from locator.intervals import (
     overbound_error_model,
     usable_residuals,
 )
-from locator.observations import SECOND_FREQUENCY_PRIORITY, Observations
+from locator.observations import Observations
 from locator.sim.simfile import SignalState, SimRun
 from locator.sources import RinexSource
 from predisat.availability.satellites import select_satellites
@@ -200,20 +200,13 @@ def receiver_profile(
     takes the source's (``RinexSource.frequency``).
     """
     obs = source.obs
-    sel = obs.pseudorange(source.priority)
-    dual = source.dual_frequency
-    second = obs.pseudorange(SECOND_FREQUENCY_PRIORITY) if dual else None
+    table = source.code_table
     keep = set(select_satellites(obs.sats, source.constellation))
     codes: dict[str, set[str]] = {}
     for j, sat in enumerate(obs.sats):
         if sat not in keep:
             continue
-        if second is None:
-            used = {str(c) for c in np.unique(sel.code[:, j]) if c}
-        else:
-            both = (sel.code[:, j] != "") & (second.code[:, j] != "")
-            used = {f"{a}+{b}" for a, b in zip(sel.code[both, j], second.code[both, j],
-                                                strict=True)}  # fmt: skip
+        used = {str(c) for c in np.unique(table[:, j]) if c}
         if used:
             codes.setdefault(sat[0], set()).update(used)
     if frequency is None:
@@ -287,11 +280,7 @@ def _codes_with_residuals(
     it (a trial: NYA1's ``C1C+C2X``, 8 residuals of 16 361, then let an L1/L2C-only run claim
     under a model whose tails never saw L2C's inter-signal bias)."""
     obs = source.obs
-    code = obs.pseudorange(source.priority).code
-    if source.dual_frequency:
-        second = obs.pseudorange(SECOND_FREQUENCY_PRIORITY).code
-        both = (code != "") & (second != "")
-        code = np.where(both, np.char.add(np.char.add(code.astype("<U8"), "+"), second), "")
+    code = source.code_table
     have = np.isfinite(residual_m)
     kept: dict[str, tuple[str, ...]] = {}
     for sys_, codes in profile.codes.items():

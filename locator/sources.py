@@ -259,13 +259,21 @@ class RinexSource:
         model must have been calibrated on."""
         return "dual" if self.dual_frequency else "single"
 
-    def codes(self, epoch: int, j: NDArray) -> list[str]:
-        """The code of each range of the columns ``j`` at ``epoch``: ``"C1C"``, or for the
-        ionosphere-free combination ``"C1C+C2W"``."""
-        first = [str(c) for c in self._selection.code[epoch, j]]
+    @cached_property
+    def code_table(self) -> NDArray:
+        """The code of each range, shape (n_epoch, n_sat): ``"C1C"``, or for the
+        ionosphere-free combination ``"C1C+C2W"``; ``""`` where there is none (with
+        ``dual_frequency``, where either code is missing)."""
+        first = self._selection.code
         if not self.dual_frequency:
             return first
-        return [f"{a}+{b}" for a, b in zip(first, self._second.code[epoch, j], strict=True)]
+        second = self._second.code
+        both = (first != "") & (second != "")
+        return np.where(both, np.char.add(np.char.add(first, "+"), second), "")
+
+    def codes(self, epoch: int, j: NDArray) -> list[str]:
+        """The code of each range of the columns ``j`` at ``epoch`` (:attr:`code_table`)."""
+        return [str(c) for c in self.code_table[epoch, j]]
 
     @cached_property
     def _model(self) -> RangeModel:

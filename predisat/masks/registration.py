@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from predisat.geodesy import unwrap_lon_deg, wrap_lon_deg
 from predisat.masks.carry import cell_stretches_on, cells_reached
@@ -35,6 +35,7 @@ __all__ = [
     "OtherTrackError",
     "Registration",
     "beside_track_notes",
+    "first_stretch_aside",
     "register_on_track",
 ]
 
@@ -98,31 +99,47 @@ class OtherTrackError(ValueError):
     """Masks lying beside the map as another track's would, without ``same_track``."""
 
 
+def first_stretch_aside(chainage_m: ArrayLike, offset_m: ArrayLike) -> tuple[int, int] | None:
+    """The first run of positions lying as another track's would (:data:`OTHER_TRACK_STRETCH`:
+    more than 3.5 m beside the map over 50 m or more), as indices ``(first, last)``, inclusive.
+
+    Parameters
+    ----------
+    chainage_m, offset_m : array_like, shape (n,)
+        Positions in chainage order, m, and their distance beside the map (its sign ignored), m.
+    """
+    aside_m, long_m = OTHER_TRACK_STRETCH
+    ch = np.asarray(chainage_m, float)
+    far = np.abs(np.asarray(offset_m, float)) > aside_m
+    edges = np.diff(np.concatenate([[0], far.astype(np.int8), [0]]))
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
+        if ch[b] - ch[a] >= long_m:
+            return int(a), int(b)
+    return None
+
+
 def _check_stretches(
     masks: MaskSet, label: str, track: TrackMap, kept: NDArray, off_m: NDArray, side_m: NDArray
 ) -> None:
     """:data:`OTHER_TRACK_STRETCH`: the first run of positions beside the map long enough."""
-    aside_m, long_m = OTHER_TRACK_STRETCH
-    far = off_m > aside_m
-    if not far.any():
-        return
+    aside_m = OTHER_TRACK_STRETCH[0]
     ch = np.asarray(masks.chainage_m, float)[kept]
-    edges = np.diff(np.concatenate([[0], far.astype(np.int8), [0]]))
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
-        if ch[b] - ch[a] < long_m:
-            continue
-        worst = a + int(np.argmax(off_m[a : b + 1]))
-        side = "left of" if side_m[worst] > 0 else "right of"
-        made_on = str(masks.provenance.get("track", "")) or "a map it does not name"
-        raise OtherTrackError(
-            f"masks {label} (made on {made_on!r}): the positions at chainages {ch[a]:.1f}-"
-            f"{ch[b]:.1f} m lie more than {aside_m:g} m beside track {track.name!r}, up to "
-            f"{off_m[worst]:.1f} m {side} it: over that stretch they may be the sky of another "
-            "track (a branch, a passing loop's track), not this track's. Give masks surveyed on "
-            "this track, or the map they were made on; if both maps are of the same physical "
-            "track (another survey or simplification of its axis), say so: --masks-same-track "
-            "(same_track=True from Python)"
-        )
+    found = first_stretch_aside(ch, off_m)
+    if found is None:
+        return
+    a, b = found
+    worst = a + int(np.argmax(off_m[a : b + 1]))
+    side = "left of" if side_m[worst] > 0 else "right of"
+    made_on = str(masks.provenance.get("track", "")) or "a map it does not name"
+    raise OtherTrackError(
+        f"masks {label} (made on {made_on!r}): the positions at chainages {ch[a]:.1f}-"
+        f"{ch[b]:.1f} m lie more than {aside_m:g} m beside track {track.name!r}, up to "
+        f"{off_m[worst]:.1f} m {side} it: over that stretch they may be the sky of another "
+        "track (a branch, a passing loop's track), not this track's. Give masks surveyed on "
+        "this track, or the map they were made on; if both maps are of the same physical "
+        "track (another survey or simplification of its axis), say so: --masks-same-track "
+        "(same_track=True from Python)"
+    )
 
 
 

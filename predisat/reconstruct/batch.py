@@ -64,8 +64,8 @@ from predisat.masks.margins import MarginTable
 from predisat.masks.maskset import BinSource, MaskSet, concat_masksets
 from predisat.masks.registration import (
     OTHER_TRACK_OFFSET_M,
-    OTHER_TRACK_STRETCH,
     beside_track_notes,
+    first_stretch_aside,
 )
 from predisat.masks.terrain import bin_terrain, coverage_notes, raise_to_terrain
 from predisat.reconstruct.attitude import (
@@ -944,14 +944,9 @@ def _beside_track(survey: Survey, track: TrackMap) -> JsonDict | None:
     order = np.argsort(ch, kind="stable")
     signed, ch = signed[order], ch[order]
     median = float(np.median(np.abs(signed)))
-    aside, long_m = OTHER_TRACK_STRETCH
-    far = np.abs(signed) > aside
-    edges = np.diff(np.concatenate([[0], far.astype(np.int8), [0]]))
-    stretch = None
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
-        if ch[b] - ch[a] >= long_m:
-            stretch = (round(float(ch[a]), 1), round(float(ch[b]), 1))
-            break
+    found = first_stretch_aside(ch, signed)
+    stretch = None if found is None else (round(float(ch[found[0]]), 1),
+                                          round(float(ch[found[1]]), 1))  # fmt: skip
     if median <= OTHER_TRACK_OFFSET_M and stretch is None:
         return None
     side = float(np.median(signed))
