@@ -93,6 +93,32 @@ def summary_frame(results: Sequence[Availability]) -> pd.DataFrame:
     return pd.DataFrame([r.summary() for r in results])
 
 
+def _with_interval_setting(summary: pd.DataFrame, info: JsonDict) -> pd.DataFrame:
+    """The interval columns with the setting they were drawn for beside them.
+
+    A table read alone (a spreadsheet, another tool) must not show an interval length without
+    its risk or k, error model and map doubt (a trial found them only in ``summary.json``).
+    """
+    par = info.get("interval_model_params")
+    if "interval_median_m" not in summary.columns or not isinstance(par, dict):
+        return summary
+    out = summary.copy()
+    at = list(out.columns).index("interval_p95_m") + 1
+    risk = par.get("integrity_risk_per_epoch")
+    cols = {
+        "interval_integrity_risk_per_epoch": np.nan if risk is None else float(risk),
+        "interval_k_sigma": np.nan if par.get("k_sigma") is None else float(par["k_sigma"]),
+        "interval_error_a_m": float(par.get("a_m", np.nan)),
+        "interval_error_b_m": float(par.get("b_m", np.nan)),
+        "interval_map_doubt_lateral_m": float(par.get("map_doubt_lateral_m", 0.0)),
+        "interval_map_doubt_vertical_m": float(par.get("map_doubt_vertical_m", 0.0)),
+    }
+    for i, (name, value) in enumerate(cols.items()):
+        # rules drawn without intervals (NaN median) carry no setting either
+        out.insert(at + i, name, np.where(out["interval_median_m"].notna(), value, np.nan))
+    return out
+
+
 def geojson_layer(
     results: Sequence[Availability], track: TrackMap | None = None
 ) -> JsonDict:
@@ -163,7 +189,7 @@ def write_tables(
     summary : pandas.DataFrame
     """
     files: dict[str, Path] = {}
-    summary = summary_frame(results)
+    summary = _with_interval_setting(summary_frame(results), info)
     files["summary_csv"] = out / "summary.csv"
     summary.to_csv(files["summary_csv"], index=False, float_format="%.12g")
     files["summary_json"] = out / "summary.json"

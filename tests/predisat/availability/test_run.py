@@ -631,6 +631,16 @@ def test_interval_model_from_a_locator_error_model_file(
         "integrity_risk_per_epoch": None, "k_sigma_by_mode": None,
         "map_doubt_lateral_m": 0.0, "map_doubt_vertical_m": 0.0,
     }  # fmt: skip
+    # and summary.csv, read alone, names the setting beside each rule's interval lengths
+    table = pd.read_csv(tmp_path / "w" / "summary.csv")
+    drawn = table["interval_median_m"].notna()
+    assert drawn.any()
+    assert (table.loc[drawn, "interval_error_a_m"] == 4.0).all()
+    assert (table.loc[drawn, "interval_k_sigma"] == 2.0).all()
+    assert table.loc[drawn, "interval_integrity_risk_per_epoch"].isna().all()
+    doubted_table = pd.read_csv(tmp_path / "m" / "summary.csv")
+    assert (doubted_table.loc[doubted_table["interval_median_m"].notna(),
+                              "interval_map_doubt_lateral_m"] == 1.5).all()  # fmt: skip
     # a Parquet file: refused when read; a folder: by the parser (predisat.cli.args)
     with pytest.raises(ValueError, match="--error-model"):
         run_from_args(parser.parse_args([*base, "--error-model", str(path), "--out",
@@ -742,6 +752,10 @@ def test_the_integrity_budget_sets_each_modes_k(
             "interval_model_params"]  # fmt: skip
         assert params["integrity_risk_per_epoch"] == risk and params["k_sigma"] is None
         assert params["k_sigma_by_mode"]["THREE_PAIRS"] == pytest.approx(want[3])
+        table = pd.read_csv(r.report_html.parent / "summary.csv")
+        drawn = table["interval_median_m"].notna()
+        assert drawn.any() and table.loc[drawn, "interval_k_sigma"].isna().all()
+        assert (table.loc[drawn, "interval_integrity_risk_per_epoch"] == risk).all()
     for bad in (["--integrity-risk", "5"], ["--integrity-risk", "0"],
                 ["--integrity-risk", "1e-7", "--k-sigma", "2"]):  # fmt: skip
         with pytest.raises(SystemExit):
