@@ -37,6 +37,7 @@ from predisat.jsontypes import JsonDict
 from predisat.masks.binops import RangeMax, conservative_resample
 
 __all__ = [
+    "CHECKED_PROVENANCE_KEYS",
     "REQUIRED_DESCRIPTORS",
     "WEAK_SUPPORT",
     "BinSource",
@@ -747,6 +748,16 @@ def _default_provenance(provenance: Mapping[str, Any] | None) -> JsonDict:
     return prov
 
 
+CHECKED_PROVENANCE_KEYS = (
+    "survey_hash", "track", "track_key", "antenna_height_m", "params", "side_check",
+    "step_check", "capture_check", "positions_lacking_side", "survey_beside_track", "terrain",
+    "registered_on", "merged_worst_case",
+)  # fmt: skip
+"""Provenance keys that readers act on (the antenna check, the survey checks' warnings, the
+registration): :func:`concat_masksets` refuses parts that differ in one of them unless the
+whole's provenance is given."""
+
+
 def concat_masksets(parts: Sequence[MaskSet], provenance: JsonDict | None = None) -> MaskSet:
     """One mask set from parts covering disjoint, increasing chainage ranges.
 
@@ -755,12 +766,14 @@ def concat_masksets(parts: Sequence[MaskSet], provenance: JsonDict | None = None
     parts : sequence of MaskSet
         Same ``az_step_deg``; positions strictly increasing across the parts.
     provenance : dict, optional
-        Provenance of the result (default: that of the first part).
+        Provenance of the result (default: that of the first part, when every part states
+        the same of what readers check: :data:`CHECKED_PROVENANCE_KEYS`).
 
     Raises
     ------
     MaskError
-        When the parts differ in azimuth step or overlap in chainage.
+        When the parts differ in azimuth step or overlap in chainage, or, without
+        ``provenance``, in a checked provenance key.
     """
     if not parts:
         raise MaskError("concat_masksets: no parts given; process at least one chunk")
@@ -770,6 +783,17 @@ def concat_masksets(parts: Sequence[MaskSet], provenance: JsonDict | None = None
             raise MaskError(
                 f"concat_masksets: part {k} has az_step_deg {p.az_step_deg}, part 0 has {step}; "
                 "reprocess with one azimuth step"
+            )
+        # the first part's provenance would speak for all: a later part's survey warning or
+        # higher antenna would be lost in silence (a review found it so)
+        first = parts[0].provenance
+        differ = [key for key in CHECKED_PROVENANCE_KEYS
+                  if provenance is None and p.provenance.get(key) != first.get(key)]  # fmt: skip
+        if differ:
+            raise MaskError(
+                f"concat_masksets: part {k} states another {', '.join(differ)} than part 0 in "
+                "its provenance; pass provenance= stating the whole (or combine surveys of one "
+                "place with `predisat merge`, which keeps each one's)"
             )
     names = sorted({n for p in parts for n in p.descriptors})
 

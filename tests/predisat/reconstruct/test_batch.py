@@ -445,6 +445,13 @@ def test_concat_masksets_round_trip(first_run) -> None:
     coarse = MaskSet.from_arrays([0.0], [50.0], [4.0], [0.0], [0.0], np.zeros((1, 4)))
     with pytest.raises(MaskError, match="az_step_deg"):
         concat_masksets([parts[0], coarse])
+    # a later part's survey warning or higher antenna is not dropped for the first's provenance
+    for key, value in (("survey_beside_track", {"median_offset_m": 4.0}),
+                       ("antenna_height_m", 5.0)):  # fmt: skip
+        other = replace(parts[1], provenance={**parts[1].provenance, key: value})
+        with pytest.raises(MaskError, match=key):
+            concat_masksets([parts[0], other])
+        assert concat_masksets([parts[0], other], provenance=m.provenance).equals(m)
 
 
 def test_changed_code_redoes_chunks_and_segmentation(
