@@ -383,6 +383,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         model = model.with_iono_near(float(obs.gps_s[len(obs.gps_s) // 2]))  # the obs' day
         source = RinexSource(model, obs, args.constellation,
                              dual_frequency=args.dual_frequency)  # fmt: skip
+        source = _keep_calibrated_codes(source, args)
         _one_clock(source, args.obs)
         _warn_no_iono(source, args.nav)
         # before the heights: a cause of theirs
@@ -830,6 +831,45 @@ def _nav_covers(ephemeris: Any, obs: Any, nav: Sequence[str]) -> None:
             f"data of {', '.join(map(str, nav))} ({day(lo)} - {day(hi)}); give the broadcast "
             "navigation files of the observation day"
         )
+
+
+def _keep_calibrated_codes(source: Any, args: argparse.Namespace) -> Any:
+    """The source with only the codes its error model was calibrated on, where a system's
+    data also hold others: a few epochs of another code (a C1C+C2L epoch in a C2W run)
+    would otherwise take the safety claim from the whole run (a user trial, stop 56). A
+    system none of whose codes was calibrated is left as it is (no claim, said by
+    :func:`locator.modelcheck.model_use`)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from locator.errorfit import receiver_profile
+    from predisat.gnss.errormodel import default_model_file, read_error_model_file
+
+    mf = read_error_model_file(args.error_model) if args.error_model else default_model_file()
+    profile = receiver_profile(source, args.receiver_class)
+    kept = {}
+    for sys_, codes in sorted(profile.codes.items()):
+        m = mf.systems.get(sys_)
+        if m is None or set(codes) <= set(m.codes) or not set(codes) & set(m.codes):
+            continue
+        kept[sys_] = tuple(m.codes)
+    if not kept:
+        return source
+    out = replace(source, codes_kept=kept)
+    table = source.code_table
+    for sys_, by_code in sorted(out.left_out_codes().items()):
+        n_sys = sum(int(np.count_nonzero(table[:, j] != "")) for j, sat in
+                    enumerate(source.obs.sats) if sat[0] == sys_)  # fmt: skip
+        n = sum(by_code.values())
+        print(f"locator run: warning: {args.obs}: left out {n} of {n_sys} ranges of system "
+              f"{sys_} ({100.0 * n / max(n_sys, 1):.2g} %), of code(s) "
+              f"{', '.join(f'{c} ({k})' for c, k in sorted(by_code.items()))}, which "
+              f"{args.error_model or 'the built-in error model'} was not calibrated on "
+              f"(it holds {', '.join(kept[sys_])}): the other ranges keep their safety claim; "
+              "calibrate on data with these codes to use them (recorded in run.json: "
+              "source.codes_left_out)", file=sys.stderr)  # fmt: skip
+    return out
 
 
 def _warn_no_iono(source: Any, nav: Sequence[str], command: str = "run") -> None:

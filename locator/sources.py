@@ -215,6 +215,11 @@ class RinexSource:
         broadcast group delay: no ionosphere model is needed, the code noise and multipath
         grow (about 3x for L1/L2), so the error model must be calibrated on the same
         processing (``frequency: dual``). Satellites without a second code are left out.
+    codes_kept : mapping of system letter to codes, optional
+        The only codes (:attr:`code_table` spelling: ``"C1C"``, ``"C1C+C2W"``) whose ranges
+        are used, for the systems named; the others' ranges are left out with the reason
+        (the codes an error model was calibrated on: a few epochs of another code must not
+        take the claim from the whole run). None: every code.
     """
 
     model: RangeModel
@@ -224,6 +229,7 @@ class RinexSource:
     odometer: NDArray | None = field(default=None)
     odometer_extra: NDArray | None = field(default=None)
     dual_frequency: bool = False
+    codes_kept: Mapping[str, Sequence[str]] | None = None
 
     def __post_init__(self) -> None:
         check_odometer(self.odometer, self.odometer_extra, len(self.obs.gps_s))
@@ -260,16 +266,50 @@ class RinexSource:
         return "dual" if self.dual_frequency else "single"
 
     @cached_property
-    def code_table(self) -> NDArray:
-        """The code of each range, shape (n_epoch, n_sat): ``"C1C"``, or for the
-        ionosphere-free combination ``"C1C+C2W"``; ``""`` where there is none (with
-        ``dual_frequency``, where either code is missing)."""
+    def _all_codes(self) -> NDArray:
         first = self._selection.code
         if not self.dual_frequency:
             return first
         second = self._second.code
         both = (first != "") & (second != "")
         return np.where(both, np.char.add(np.char.add(first, "+"), second), "")
+
+    @cached_property
+    def _left_out(self) -> NDArray:
+        """Where a range's code is not among :attr:`codes_kept`, shape (n_epoch, n_sat)."""
+        table = self._all_codes
+        out = np.zeros(table.shape, bool)
+        if self.codes_kept is None:
+            return out
+        for j, sat in enumerate(self.obs.sats):
+            kept = self.codes_kept.get(sat[0])
+            if kept is not None:
+                out[:, j] = (table[:, j] != "") & ~np.isin(table[:, j], list(kept))
+        return out
+
+    @cached_property
+    def code_table(self) -> NDArray:
+        """The code of each range, shape (n_epoch, n_sat): ``"C1C"``, or for the
+        ionosphere-free combination ``"C1C+C2W"``; ``""`` where there is none (with
+        ``dual_frequency``, where either code is missing; with :attr:`codes_kept`, where the
+        code is not kept)."""
+        return np.where(self._left_out, "", self._all_codes)
+
+    def left_out_codes(self) -> dict[str, dict[str, int]]:
+        """The ranges :attr:`codes_kept` leaves out: system -> code -> number of ranges
+        (satellites of the constellation only)."""
+        out: dict[str, dict[str, int]] = {}
+        rows, cols = np.nonzero(self._left_out & self._columns[None, :])
+        for i, j in zip(rows, cols, strict=True):
+            by = out.setdefault(self.obs.sats[j][0], {})
+            code = str(self._all_codes[i, j])
+            by[code] = by.get(code, 0) + 1
+        return out
+
+    def _not_kept(self, epoch: int, listed: NDArray) -> dict[str, str]:
+        return {self.obs.sats[k]: f"code {self._all_codes[epoch, k]} not among those the error "
+                "model was calibrated on (codes_kept)"
+                for k in np.flatnonzero(listed & self._left_out[epoch])}  # fmt: skip
 
     def codes(self, epoch: int, j: NDArray) -> list[str]:
         """The code of each range of the columns ``j`` at ``epoch`` (:attr:`code_table`)."""
@@ -310,16 +350,18 @@ class RinexSource:
         if self.dual_frequency:
             return self._observe_dual(epoch, rx_ecef_m)
         pr = self._selection.pseudorange_m[epoch]
-        have = np.isfinite(pr) & self._columns
-        j = np.flatnonzero(have)
+        listed = np.isfinite(pr) & self._columns
+        dropped = self._not_kept(epoch, listed)
+        j = np.flatnonzero(listed & ~self._left_out[epoch])
         sats = tuple(self.obs.sats[k] for k in j)
         if not sats:
-            return EpochData((), np.zeros((0, 3)), np.zeros(0), {})
+            return EpochData((), np.zeros((0, 3)), np.zeros(0), dropped)
         codes = list(self._selection.code[epoch, j])
         cr = self._model.correct(float(self.obs.gps_s[epoch]), sats, pr[j], rx_ecef_m, codes)
         ok = cr.usable & np.isfinite(cr.corrected_m)
         rejected = {s: str(r) or "not usable" for s, r, u in zip(sats, cr.reason, ok, strict=True)
                     if not u}  # fmt: skip
+        rejected.update(dropped)
         extra = np.where(
             cr.iono_uncorrected, uncorrected_iono_sigma_m(cr.el_deg, cr.states.freq_hz), 0.0
         )
@@ -340,7 +382,8 @@ class RinexSource:
         listed = np.isfinite(pr1) & self._columns
         rejected = {self.obs.sats[k]: "no second frequency for the ionosphere-free combination"
                     for k in np.flatnonzero(listed & ~np.isfinite(pr2))}  # fmt: skip
-        j = np.flatnonzero(listed & np.isfinite(pr2))
+        rejected.update(self._not_kept(epoch, listed & np.isfinite(pr2)))
+        j = np.flatnonzero(listed & np.isfinite(pr2) & ~self._left_out[epoch])
         sats = tuple(self.obs.sats[k] for k in j)
         if not sats:
             return EpochData((), np.zeros((0, 3)), np.zeros(0), rejected)
@@ -382,6 +425,10 @@ class RinexSource:
             # the combination uses no broadcast ionosphere: none named as if it had
             "iono_sources": {} if self.dual_frequency else dict(self._model.iono.sources),
             "iono_stale": {} if self.dual_frequency else dict(self.iono_stale),
+            # ranges of codes the error model was not calibrated on, left out
+            "codes_kept": None if self.codes_kept is None
+            else {k: list(v) for k, v in sorted(self.codes_kept.items())},
+            "codes_left_out": self.left_out_codes(),
         }
 
 

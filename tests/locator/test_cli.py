@@ -1431,3 +1431,40 @@ def test_a_code_with_next_to_no_residuals_is_not_named_calibrated(test_data, tmp
     assert model["systems"]["G"]["codes"] == ["C1C+C2W"]
     (pair,) = model["applicability"]["pairs"]
     assert "C1C+C2L" not in json.dumps(pair)
+
+
+def test_ranges_of_a_code_the_model_was_not_calibrated_on_are_left_out_alone(
+    test_data, tmp_path, capsys
+) -> None:
+    """A trial (n8): one C1C+C2L epoch of G09 in KMS3's dual-frequency run made the whole run
+    mismatch a model calibrated on C1C+C2W. Its ranges alone are now left out, said, with the
+    reason per epoch; the rest of the run is judged as C1C+C2W."""
+    from locator.observations import Observations
+    from predisat.geodesy import LocalFrame, ecef_to_geodetic
+
+    obs = str(test_data / "gnss_obs" / "KMS300DNK_R_20221591000_01H_30S_MO.crx")
+    nav = str(test_data / "gnss" / "KMS300DNK_R_20221591000_01H_MN.rnx.gz")
+    model = tmp_path / "m.json"
+    assert main(["-q", "calibrate", "--obs", obs, "--nav", nav, "--dual-frequency", "--bound",
+                 "estimate", "--out", str(model)]) == 0  # fmt: skip
+    station = Observations.from_rinex(obs).header.approx_position_ecef_m
+    lat, lon, h = (float(v) for v in ecef_to_geodetic(station))
+    d = np.linspace(-1000.0, 1000.0, 21)
+    la, lo, hh = LocalFrame(lat, lon, h).to_geodetic(
+        np.stack([d * np.sin(0.7), d * np.cos(0.7), np.zeros_like(d)], -1)
+    )
+    track = tmp_path / "kms3.csv"
+    pd.DataFrame({"lat_deg": la, "lon_deg": lo, "h_m": hh}).to_csv(track, index=False)
+    capsys.readouterr()
+    out = tmp_path / "r"
+    assert main(["run", "--obs", obs, "--nav", nav, "--dual-frequency", "--no-masks",
+                 "--antenna-height", "0", "--track", str(track), "--error-model", str(model),
+                 "--constellation", "G", "--out", str(out)]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "left out 1 of" in err and "C1C+C2L (1)" in err
+    record = json.loads((out / "run.json").read_text())
+    assert record["source"]["codes_left_out"] == {"G": {"C1C+C2L": 1}}
+    assert record["source"]["codes_kept"] == {"G": ["C1C+C2W"]}
+    # the model's other reasons stand (an estimate is no overbound), the code is not one
+    assert not [w for w in record["error_model"]["mismatches"] if "C1C+C2L" in w]
+    assert record["error_model"]["data"].count("C1C+C2L") == 0
