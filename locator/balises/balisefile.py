@@ -241,12 +241,26 @@ class BaliseList:
                 )
             seen[key] = i
         telegrams = tuple(str(x).strip() for x in df["telegram"])
+        sent: dict[str, int] = {}
         for i, tg in enumerate(telegrams):
             if not tg:
                 raise BaliseFileError(
                     f"{p}, line {_line(i)}: balise {ids[i]!r} has an empty telegram; give the "
                     "telegram it emits (e.g. hexadecimal)"
                 )
+            # the telegram is what a consumer reads (its balise group's identity): two balises
+            # sending one telegram are one balise to it, located at either place (a user
+            # trial's copied row, id and position edited, telegram not, was accepted)
+            key = tg.casefold()
+            if key in sent:
+                first = sent[key]
+                same = "" if telegrams[first] == tg else " (case aside)"
+                raise BaliseFileError(
+                    f"{p}, line {_line(i)}: balise {ids[i]!r} sends the telegram {tg!r} of "
+                    f"balise {ids[first]!r} on line {_line(first)}{same}; a receiver could not "
+                    "tell the two apart: give each balise its own telegram"
+                )
+            sent[key] = i
         # projected coordinates (Belgian Lambert 72, UTM: metres) in the degree columns: they
         # are no angle, the offset below is NaN and passed its test (a user trial's Lambert 72
         # list fell through to "enu_m contains NaN" with no file, line or fix)

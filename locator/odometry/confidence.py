@@ -441,6 +441,11 @@ def safe_fronts(
     # the reference in force: (odometer at it, its chainage, doubt over / under at it,
     # distance run to it, index of its sample)
     ref: tuple[float, float, float, float, float, int] | None = None
+    # the reference the expectation windows are drawn from: the last accepted one, never the
+    # interval widened over a rejected balise (a user trial: a list 30 m off rejected its
+    # first balise, the widened window then accepted the second, equally misplaced, reset the
+    # interval to it and cleared the alarm: the true front 28.9 m outside, unflagged)
+    ref_window: tuple[float, float, float, float, float, int] | None = None
     at_passage: dict[int, tuple[float, float, float]] = {}  # estimate and doubts at passages
     bounds = [*idx[1:], n]
     for j, p in enumerate(passages):
@@ -450,8 +455,12 @@ def safe_fronts(
             state = _state_at(ref, odo[k], ran[k], accuracy, o, disputed[k] - disputed[ref[5]])
             e_k, ov_k, un_k = (float(v) for v in state)
             if p.linked:
-                hi_f = e_k + o * un_k
-                lo_f = e_k - o * ov_k
+                assert ref_window is not None
+                w_e, w_ov, w_un = (float(v) for v in _state_at(
+                    ref_window, odo[k], ran[k], accuracy, o,
+                    disputed[k] - disputed[ref_window[5]]))  # fmt: skip
+                hi_f = w_e + o * w_un
+                lo_f = w_e - o * w_ov
                 ok = bool(in_expectation_window(p.chainage_m, p.accuracy_m, hi_f, lo_f, o))
             else:
                 ok = True
@@ -462,6 +471,7 @@ def safe_fronts(
         accepted[j] = ok
         if ok and p.q_reference:
             ref = (float(odo[k]), p.chainage_m, p.accuracy_m, p.accuracy_m, float(ran[k]), k)
+            ref_window = ref
             alarm_from, ran_ref = None, float(ran[k])
         elif ok and p.known_from is not None and p.known_from in at_passage:
             # known distance from an earlier balise: fall back to the doubts held there, but
@@ -470,6 +480,7 @@ def safe_fronts(
             _, ov_b, un_b = at_passage[p.known_from]
             ov_b, un_b = max(ov_b, p.accuracy_m), max(un_b, p.accuracy_m)
             ref = (float(odo[k]), p.chainage_m, ov_b, un_b, float(ran[k]), k)
+            ref_window = ref
             ran_ref = float(ran[k])
         elif not ok:
             # a linked balise outside its expectation window: no reset (the ETCS rule), but

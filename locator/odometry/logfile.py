@@ -377,9 +377,16 @@ def _check_steps(
     i = k + 1
     expected = 0.5 * (speed_mps[i] + speed_mps[k]) * dt_s[k]
     ratio = size[k] / expected if expected > 0 else np.inf
-    if abs(dist_m[i]) <= STEP_TOLERANCE_M < abs(dist_m[k]):
-        cause = (f"the distance counter was reset (dist_m back to {dist_m[i]:g}): split the log "
-                 f"at line {line(i)}, or add {dist_m[k] + expected:.3f} m to dist_m from there on")
+    # back to within one cycle's run of 0: a counter reset during the cycle (an odometer that
+    # counts from the last balise or reference restarts mid-cycle; a user trial's log wrapped
+    # to 1.4 m and was told "pulses counted twice")
+    one_cycle = hi[k] * (1 + STEP_TOLERANCE_REL) + STEP_TOLERANCE_M
+    if abs(dist_m[i]) <= one_cycle < abs(dist_m[k]):
+        add = dist_m[k] + expected - dist_m[i]
+        cause = (f"the distance counter was reset (dist_m back to {dist_m[i]:g}; a distance "
+                 "since the last balise or reference? give the running distance since the first "
+                 f"row): split the log at line {line(i)}, or add {add:.3f} m to dist_m from "
+                 "there on")  # fmt: skip
     elif 0.5e-3 <= ratio <= 2e-3:
         cause = "dist_m looks like kilometres (1000 times too small): give metres"
     elif 1 / 4.5 <= ratio <= 1 / 2.9:

@@ -73,6 +73,13 @@ def test_along_track_round_trip(tmp_path, track):
             lambda df: df.assign(accuracy_m=np.where(df.index == 3, 70.0, 1.0)),
             r"line 5: balise .* accuracy_m 70 leaves nothing of the 63 m",
         ),
+        # two balises sending one telegram: a receiver takes them for one (a user trial's
+        # copied row, its id and position edited, was accepted)
+        (
+            lambda df: df.assign(telegram=np.where(df.index == 3, df["telegram"][1],
+                                                   df["telegram"])),
+            r"line 5: balise .* sends the telegram .* of balise .* on line 3",
+        ),
         # an empty telegram is refused, as the format says
         (
             lambda df: df.assign(telegram=np.where(df.index == 2, "", df["telegram"])),

@@ -171,6 +171,26 @@ def test_a_rejected_linked_balise_widens_the_interval_to_cover_it_and_raises_the
     assert sf.dist_since_ref_m[150] == pytest.approx(1500.0)
 
 
+def test_a_list_misplacing_every_balise_is_not_accepted_through_the_widened_window():
+    # the balise list 50 m off (another chainage origin, a survey error), the odometer right:
+    # the first linked balise is rejected and the interval widened to cover it; the second,
+    # as misplaced, lies inside that widened interval but not in the window of the interval
+    # the odometer supports. Accepting it reset the fronts 49 m off the truth and cleared
+    # the alarm (a user trial, 2026-12-07: 28.9 m with a list 30 m off)
+    odo = np.arange(0.0, 2001.0, 10.0)
+    truth = odo.copy()
+    passages = [BalisePassage(0, 0.0, accuracy_m=1.0)] + [
+        BalisePassage(k, odo[k] + 50.0, accuracy_m=1.0) for k in (50, 100, 150)]
+    sf = safe_fronts(odo, passages, ACC)
+    assert list(sf.accepted) == [True, False, False, False]
+    inside = (sf.min_safe_front_m <= truth + 1e-9) & (truth <= sf.max_safe_front_m + 1e-9)
+    assert inside.all()
+    assert sf.linking_alarm[50:].all()
+    # a balise where the odometer puts the train is accepted and clears the alarm
+    ok = safe_fronts(odo, [*passages, BalisePassage(180, 1800.0)], ACC)
+    assert ok.accepted[-1] and not ok.linking_alarm[180:].any()
+
+
 def test_a_known_distance_balise_keeps_its_own_location_accuracy():
     odo = np.arange(0.0, 2001.0, 10.0)
     passages = [BalisePassage(0, 0.0, accuracy_m=1.0),

@@ -124,6 +124,16 @@ def _write(tmp_path, df, name="odo.csv"):
             ),
             r"line 152: .*likely the distance counter was reset",
         ),
+        # reset during the cycle, 0.3 m run since (a distance since the last balise)
+        (
+            lambda df: df.assign(
+                dist_m=np.where(
+                    df.index >= 150, df["dist_m"] - df.loc[149, "dist_m"] - 0.2, df["dist_m"]
+                )
+            ),
+            r"line 152: .*likely the distance counter was reset \(dist_m back to 0\.3; a "
+            r"distance since the last balise",
+        ),
         # moving, but direction 0
         (
             lambda df: df.assign(direction=np.where(df.index == 150, 0, df["direction"])),
