@@ -111,7 +111,10 @@ def _truth_grid(sim: SimRun, cycle_s: float) -> tuple[int, NDArray, NDArray]:
     if abs(ratio - round(ratio)) > 1e-6:
         raise ValueError(
             f"the run's epochs ({t[1] - t[0]:g} s apart) are not a multiple of the odometer "
-            f"cycle ({cycle_s:g} s); choose cycle_s dividing the epoch interval"
+            f"cycle ({cycle_s:g} s); choose cycle_s dividing the epoch interval, or simulate "
+            f"the run at a receiver rate whose epoch interval is a multiple of {cycle_s:g} s "
+            f"(with the ETCS-like 0.1 s cycle of `locator balises`: 1, 2, 5 or 10 Hz, not 4 "
+            "or 20 Hz)"
         )
     dist = o * (np.asarray(sim.chainage_m, float) - float(sim.chainage_m[0]))
     spline = CubicHermiteSpline(t - t[0], dist, np.asarray(sim.speed_mps, float))
