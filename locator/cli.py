@@ -537,6 +537,39 @@ def _antenna_reference_point(marker_ecef_m: Any, delta_hen_m: Any, path: Any) ->
     return np.asarray(marker_ecef_m, float) + np.array([east, north, up]) @ rot
 
 
+def _refuse_moved_station(obs: Any, path: Any) -> None:
+    """Calibration takes every epoch at one station position (the header's or ``--station``,
+    plus ANTENNA: DELTA H/E/N): a file whose event records say the antenna moved - flag 2
+    "start moving antenna", flag 3 "new site occupation", or a later MARKER NAME, APPROX
+    POSITION XYZ or ANTENNA: DELTA H/E/N other than the header's (RINEX 3.04 table A3, 6.6) -
+    is refused, naming the line (until 2026-12-07 the residuals of the epochs after it were
+    taken at the first position, without a word)."""
+    import numpy as np
+
+    head = obs.header
+    for e in obs.events:
+        why = {2: "flag 2, start moving antenna", 3: "flag 3, new site occupation"}.get(e.flag)
+        for r in e.records:
+            label, text = r[60:].strip(), r[:60]
+            try:
+                if label == "MARKER NAME" and text.strip() != head.marker_name:
+                    why = why or f"MARKER NAME {text.strip()!r}"
+                elif label in ("APPROX POSITION XYZ", "ANTENNA: DELTA H/E/N"):
+                    v = np.array([float(text[k : k + 14] or 0) for k in (0, 14, 28)])
+                    was = (head.approx_position_ecef_m if label.startswith("APPROX")
+                           else head.antenna_delta_hen_m)  # fmt: skip
+                    if not np.allclose(v, was, rtol=0, atol=1e-4):
+                        why = why or f"{label} {' '.join(text.split())}"
+            except ValueError:
+                why = why or f"an unreadable {label} record"
+        if why:
+            raise CliError(
+                f"{path}, line {e.line}: the antenna moved ({why}), but calibration takes every "
+                "epoch at one station position; split the file at that line (by time, e.g. "
+                "with gfzrnx or teqc) and calibrate each part with its own --station"
+            )
+
+
 def _refuse_phone_as_geodetic(header: Any, declared: str, path: Any) -> None:
     """A file a phone wrote (its receiver or program name) is not a geodetic receiver's: a
     phone declared geodetic got a geodetic model's claims (a user trial, `--device-gnss`; the
@@ -952,10 +985,11 @@ def _report_no_code(label: str, obs: Any, constellation: str) -> None:
         return
     first = int(np.flatnonzero(~have)[0])
     line = int(obs.epoch_line[first])
-    changes = [e for e in obs.events if e.flag == 4 and e.line < line
+    changes = [e for e in obs.events if e.line < line
                and any("TYPES OF OBS" in r for r in e.records)]  # fmt: skip
-    why = (f" after the header record at line {changes[-1].line} (event flag 4) that changed "
-           "the observation types" if changes else "")  # fmt: skip
+    why = (f" after the header record at line {changes[-1].line} (event flag "
+           f"{changes[-1].flag}) that changed the observation types"
+           if changes else "")  # fmt: skip
     systems = sorted({s[0] for s, w in zip(obs.sats, wanted, strict=True) if w})
     codes = "; ".join(f"{c}: {', '.join(DEFAULT_PSEUDORANGE_PRIORITY.get(c, ()))}"
                       for c in systems)  # fmt: skip
@@ -1184,6 +1218,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             _refuse_unproven_as_geodetic(obs.header, cls, path)
             _refuse_other_as_phone(obs.header, cls, path)
             _refuse_station_as_automotive(obs.header, cls, path)
+            _refuse_moved_station(obs, path)
             head = obs.header.approx_position_ecef_m
             if args.station:
                 x = _station_ecef_m(args.station, head, path)

@@ -12,9 +12,11 @@ lines for more than 12 satellites, event flags 1-6), RINEX 3.00-3.05 (``SYS / # 
 ``>`` epoch lines), RINEX 4.00-4.02 (read as 3.05: the body is unchanged, the new header records
 are ignored), plain or gzip-compressed, and Hatanaka-compressed (CRINEX 1.0/3.0, ``.crx``,
 ``.crx.gz``, ``.YYd``), expanded in memory by the ``hatanaka`` package. Event records
-(flags 2-5) are kept in :attr:`Observations.events`; header records following flag 4 may redefine
-the observation types, and the new types apply to the epochs that follow. Cycle-slip records
-(flag 6) are skipped and reported as events.
+(flags 2-5) are kept in :attr:`Observations.events`; header records among them (flag 4 "header
+information follows", flag 3 "new site occupation") apply to the epochs that follow: the
+observation types, ``SYS / SCALE FACTOR`` and GLONASS slots. Cycle-slip records (flag 6) are
+skipped and reported as events; an epoch flag RINEX does not define (7-9) is reported and its
+records skipped.
 
 The pseudorange used for single-frequency ranging is chosen per system from
 :data:`DEFAULT_PSEUDORANGE_PRIORITY`, the second of an ionosphere-free pair from
@@ -365,11 +367,15 @@ class _Body:
     epochs : list of (gps_s, flag, receiver clock offset s, line)
     types_at : list of mapping of system letter to codes
         The observation types in force at each epoch.
+    scale_at : list of mapping of system letter to mapping of code to factor
+        The ``SYS / SCALE FACTOR`` values in force at each epoch (the header's, then those of
+        event blocks).
     """
 
     rows: list[tuple[int, str, str, str, int]]
     epochs: list[tuple[float, int, float, int]]
     types_at: list[dict[str, list[str]]]
+    scale_at: list[dict[str, dict[str, float]]]
 
 
 class _HeaderScan:
@@ -387,8 +393,12 @@ class _HeaderScan:
         self.scale: dict[str, dict[str, float]] = {}
         self.scale_last: tuple[str, float] | None = None
 
-    def take(self, label: str, line: str, i: int) -> None:
-        """Record ``line`` (0-based line ``i``) of label ``label``; ValueError if unreadable."""
+    def take(self, label: str, line: str, i: int, in_event: bool = False) -> None:
+        """Record ``line`` (0-based line ``i``) of label ``label``; ValueError if unreadable.
+
+        ``in_event``: a record of an event block (flags 2-5), which changes the values in force
+        (RINEX 3.04 6.6): a scale factor for all of a system's types replaces the system's
+        factors given before."""
         kw = self.kw
         if label == "MARKER NAME":
             kw["marker_name"] = line[:60].strip()
@@ -426,6 +436,8 @@ class _HeaderScan:
                     raise ValueError(f"factor {factor:g}")
                 self.scale_last = (line[0].upper(), factor)
                 if not line[8:10].strip() or int(line[8:10]) == 0:
+                    if in_event:
+                        self.scale[line[0].upper()] = {}
                     self.scale.setdefault(line[0].upper(), {})["*"] = factor
             if self.scale_last is None:
                 raise ValueError("continuation line before any system")
@@ -463,6 +475,8 @@ class _Reader:
         self.codes = None if codes is None else set(codes)
         self.problems: list[ObsProblem] = []
         self.events: list[ObsEvent] = []
+        self.slots: dict[str, int] = {}  # GLONASS slots: the header's, then event blocks'
+        self.new_slots: dict[str, int] = {}  # those event blocks added
 
     def problem(self, line: int | None, epoch: float | None, what: str) -> None:
         if self.strict:
@@ -589,6 +603,8 @@ class _Reader:
                 raise ValueError("epoch line does not start with '>'")
             date, flag, count = line[2:29], int(line[31:32]), int(line[32:35] or 0)
             clock = _float(line[41:56]) if len(line) > 41 else float("nan")
+            if flag > 6:
+                raise ValueError(f"epoch flag {flag}, which RINEX does not define (0-6)")
         else:
             if not _V2_EPOCH.match(line):
                 raise ValueError("not an epoch line")
@@ -611,11 +627,14 @@ class _Reader:
         lines, n = self.lines, len(self.lines)
         v3 = head.version >= 3.0
         types = {s: list(t) for s, t in head.obs_types.items()}
+        scale = {s: dict(f) for s, f in head.scale_factors.items()}
+        self.slots = dict(head.glonass_slots)
         ts = head.time_system
         default_sys = "G" if head.file_system == "M" else head.file_system
         rows: list[tuple[int, str, str, str, int]] = []  # epoch index, sat, system, text, line
         epochs: list[tuple[float, int, float, int]] = []  # gps_s, flag, clock, line
         types_at: list[dict[str, list[str]]] = []
+        scale_at: list[dict[str, dict[str, float]]] = []
         i = first
         while i < n:
             line = lines[i]
@@ -624,12 +643,12 @@ class _Reader:
                 continue
             try:
                 cal, flag, count, clock = self.parse_epoch(line, v3)
-            except (ValueError, IndexError):
-                i = self._skip_to_epoch(i, v3)
+            except (ValueError, IndexError) as exc:
+                i = self._skip_to_epoch(i, v3, str(exc))
                 continue
             t = float("nan") if cal is None else self.to_gps_s(cal, ts)
             if 2 <= flag <= 5:
-                types = self._event(i, t, flag, count, types, v3, default_sys)
+                types, scale = self._event(i, t, flag, count, types, scale, v3, default_sys)
                 i += 1 + count
                 continue
             sats, j = self._sat_list(line, count, i, v3, default_sys, t)
@@ -650,18 +669,22 @@ class _Reader:
             e = len(epochs)
             epochs.append((t, flag, clock, i + 1))
             types_at.append(types)
+            scale_at.append(scale)
             sats_or_none = sats if not v3 else [None] * count
             new_rows, i = self._records(e, sats_or_none, per_sat, j, t, v3, default_sys)
             rows += new_rows
-        return _Body(rows, epochs, types_at)
+        return _Body(rows, epochs, types_at, scale_at)
 
-    def _skip_to_epoch(self, i: int, v3: bool) -> int:
+    def _skip_to_epoch(self, i: int, v3: bool, why: str = "") -> int:
         """Report the stray line ``i`` and return the index of the next epoch line."""
         lines, n = self.lines, len(self.lines)
         self.problem(
             i + 1,
             None,
-            f"expected an epoch line, found {lines[i][:40]!r}; skipped up to the next epoch line",
+            f"epoch line with an {why}: its records skipped up to the next epoch line"
+            if why.startswith("epoch flag")
+            else f"expected an epoch line, found {lines[i][:40]!r}; skipped up to the next "
+            "epoch line",
         )
         i += 1
         while i < n and not self._looks_like_epoch(lines[i], v3):
@@ -675,10 +698,19 @@ class _Reader:
         flag: int,
         count: int,
         types: dict[str, list[str]],
+        scale: dict[str, dict[str, float]],
         v3: bool,
         default_sys: str,
-    ) -> dict[str, list[str]]:
-        """Keep the event record at line ``i`` (flags 2-5); the observation types after it."""
+    ) -> tuple[dict[str, list[str]], dict[str, dict[str, float]]]:
+        """Keep the event record at line ``i`` (flags 2-5); the observation types and scale
+        factors after it.
+
+        Its header records apply to the epochs that follow (RINEX 3.04 6.6: "Each value remains
+        valid until changed by an additional header record"): flag 4 announces them, flag 3
+        (new site) has at least MARKER NAME, and a header record is one in any event block. Until
+        2026-12-07 only flag 4's observation types were taken: a scale factor, or types after
+        flag 3, left the later values silently wrong (by a factor of 10, or C2W read as C1C).
+        """
         recs = tuple(self.lines[i + 1 : i + 1 + count])
         if len(recs) < count:
             self.problem(
@@ -688,9 +720,38 @@ class _Reader:
                 f" ends after {len(recs)}: the file is truncated",
             )
         self.events.append(ObsEvent(i + 1, t, flag, recs))
-        if flag == 4:
-            return self._redefine(types, recs, i + 2, v3, default_sys)
-        return types
+        types = self._redefine(types, recs, i + 2, v3, default_sys)
+        scan = _HeaderScan()
+        scan.scale = {s: dict(f) for s, f in scale.items()}
+        for k, r in enumerate(recs):
+            label = r[60:].strip()
+            if label not in ("SYS / SCALE FACTOR", "GLONASS SLOT / FRQ #"):
+                continue
+            try:
+                scan.slots = {}
+                scan.take(label, r, i + 1 + k, in_event=True)
+            except (ValueError, IndexError) as exc:
+                raise RinexObsError(
+                    self.path, i + 2 + k,
+                    f"unreadable {label!r} record in the event block of line {i + 1} ({exc}): "
+                    "the values of the epochs after it cannot be read; correct the record",
+                ) from None  # fmt: skip
+            self._take_slots(scan.slots, i + 2 + k, t)
+        return types, scan.scale
+
+    def _take_slots(self, slots: Mapping[str, int], line: int, t: float) -> None:
+        """GLONASS slots of an event block: a new one is taken; one that differs from the
+        header's is reported (the file holds one channel per slot: the first is kept)."""
+        for sat, k in slots.items():
+            if sat not in self.slots:
+                self.slots[sat] = self.new_slots[sat] = k
+            elif self.slots[sat] != k:
+                self.problem(
+                    line, t,
+                    f"GLONASS SLOT / FRQ # gives {sat} frequency channel {k}, the file's header "
+                    f"{self.slots[sat]}: one channel per slot is kept (the first); split the "
+                    "file at this event to use the new one",
+                )  # fmt: skip
 
     def _cut_record(self, i: int, j: int, need: int, t: float, v3: bool) -> int | None:
         """Where to go on when the epoch at line ``i`` lacks some of its ``need`` observation
@@ -823,6 +884,8 @@ class _Reader:
 
 def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
     rows, epochs, types_at = parsed.rows, parsed.epochs, parsed.types_at
+    if reader.new_slots:
+        head = replace(head, glonass_slots={**head.glonass_slots, **reader.new_slots})
     n_t = len(epochs)
     gps_s = np.array([e[0] for e in epochs], float)
     sats = tuple(sorted({r[1] for r in rows if r[1] and r[1][0] in _SYSTEMS}))
@@ -855,7 +918,7 @@ def _assemble(reader: _Reader, head: ObsHeader, parsed: _Body) -> Observations:
                     " observation types in the header; its observations are ignored",
                 )
             continue
-        scale = head.scale_factors.get(system, {})
+        scale = parsed.scale_at[e].get(system, {})
         for c, f in _fields(reader, sat, tt, text, lineno, t, v3):
             if c not in values:
                 continue

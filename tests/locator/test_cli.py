@@ -1468,3 +1468,37 @@ def test_ranges_of_a_code_the_model_was_not_calibrated_on_are_left_out_alone(
     # the model's other reasons stand (an estimate is no overbound), the code is not one
     assert not [w for w in record["error_model"]["mismatches"] if "C1C+C2L" in w]
     assert record["error_model"]["data"].count("C1C+C2L") == 0
+
+
+def test_calibrate_refuses_a_file_whose_antenna_moved(test_data, tmp_path, capsys):
+    """Calibration takes every epoch at one station position: a file whose event records say
+    the antenna moved (flag 2 or 3, or a later ANTENNA: DELTA H/E/N other than the header's)
+    is refused naming the line; until 2026-12-07 the later epochs' residuals were taken at the
+    first position. A splice comment, or the header's own values again, still pass."""
+    obs = test_data / "gnss_obs" / "07590920_10ep.05o"
+    nav = str(test_data / "gnss_obs" / "07590920_0000_0200.05n")
+    lines = obs.read_text().splitlines(keepends=True)
+    ep6 = [i for i, ln in enumerate(lines) if ln.startswith(" 05  4  2")][5]  # 6th epoch
+    base = ["calibrate", "--nav", nav, "--bound", "estimate"]
+
+    def with_block(name: str, records: list[str]) -> str:
+        block = [" " * 28 + f"4{len(records):3d}\n", *records]
+        (tmp_path / name).write_text("".join(lines[:ep6] + block + lines[ep6:]))
+        return str(tmp_path / name)
+
+    same = f"{0.0:14.4f}{0.0:14.4f}{0.0:14.4f}".ljust(60) + "ANTENNA: DELTA H/E/N\n"
+    moved = f"{1.5:14.4f}{0.0:14.4f}{0.0:14.4f}".ljust(60) + "ANTENNA: DELTA H/E/N\n"
+    splice = "RINEX FILE SPLICE".ljust(60) + "COMMENT\n"
+    for name, recs in (("splice.05o", [splice]), ("same.05o", [splice, same])):
+        assert main([*base, "--obs", with_block(name, recs),
+                     "--out", str(tmp_path / f"{name}.json")]) == 0  # fmt: skip
+    path = with_block("moved.05o", [splice, moved])
+    assert main([*base, "--obs", path, "--out", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert f"moved.05o, line {ep6 + 1}: the antenna moved (ANTENNA: DELTA H/E/N 1.5000" in err
+    assert "--station" in err and not (tmp_path / "m.json").exists()
+    new_site = [*lines[:ep6], " " * 28 + "3  1\n", "0760".ljust(60) + "MARKER NAME\n"]
+    (tmp_path / "site.05o").write_text("".join(new_site + lines[ep6:]))
+    site = str(tmp_path / "site.05o")
+    assert main([*base, "--obs", site, "--out", str(tmp_path / "s.json")]) == 2
+    assert "flag 3, new site occupation" in capsys.readouterr().err

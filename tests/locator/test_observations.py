@@ -442,3 +442,94 @@ def test_a_zero_observation_is_missing(test_data, tmp_path):
     assert np.isfinite(a.obs("C1C")[0, j]) and np.isnan(b.obs("C1C")[0, j])
     np.testing.assert_array_equal(np.isnan(a.obs("C1C")).sum() + 1, np.isnan(b.obs("C1C")).sum())
     assert b.pseudorange().code[0, j] != "C1C"  # the next code of the priority, or none
+
+
+def _twtf(test_data: Path) -> tuple[list[str], list[str], list[str], list[str]]:
+    """TWTF's 2-epoch RINEX 3.04 excerpt: header, epoch 1, epoch 2 (lines without ends)."""
+    lines = [x.rstrip("\r\n") for x in (test_data / SEPT).read_text().splitlines()]
+    eoh = next(i for i, x in enumerate(lines) if "END OF HEADER" in x)
+    ep2 = next(i for i, x in enumerate(lines) if x.startswith(">") and i > eoh + 1)
+    return lines[: eoh + 1], lines[eoh + 1 : ep2], lines[ep2:], lines
+
+
+def _times(record: str, k: int, f: float) -> str:
+    """``record`` with its k-th 16-character field multiplied by ``f``."""
+    a = 3 + 16 * k
+    return record[:a] + f"{float(record[a : a + 14]) * f:14.3f}" + record[a + 14 :]
+
+
+def _swap(record: str, k1: int, k2: int) -> str:
+    a, b = 3 + 16 * k1, 3 + 16 * k2
+    record = record.ljust(max(a, b) + 16)
+    f1, f2 = record[a : a + 16], record[b : b + 16]
+    record = record[:a] + f2 + record[a + 16 :]
+    return record[:b] + f1 + record[b + 16 :]
+
+
+def test_a_scale_factor_in_an_event_block_applies_to_the_epochs_after_it(test_data, tmp_path):
+    """RINEX 3.04 6.6: "Each value remains valid until changed by an additional header record";
+    flag 4 (table A3) is "header information follows". A SYS / SCALE FACTOR in a flag-4 block
+    was ignored until 2026-12-07: the later epochs' values read 10 times too long (or short),
+    without a word."""
+    head, e1, e2, _ = _twtf(test_data)
+    ref = read_rinex_obs(test_data / SEPT)
+    g = [k for k, s in enumerate(ref.sats) if s[0] == "G"]
+    sf = "SYS / SCALE FACTOR"
+    # a factor first given in the block: epoch 2's GPS C1C stored times 10
+    block = [">" + " " * 30 + "4  1", "G   10   1 C1C".ljust(60) + sf]
+    body = e1 + block + e2[:1] + [_times(x, 0, 10) if x[0] == "G" else x for x in e2[1:]]
+    a = read_rinex_obs(_write(tmp_path / "a.rnx", [x + "\n" for x in head + body]), strict=True)
+    # the header's factor set back to 1 by the block: epoch 1 stored times 10, epoch 2 not
+    h2 = [*head[:-1], "G   10   1 C1C".ljust(60) + sf, head[-1]]
+    back = [">" + " " * 30 + "4  1", "G    1   0".ljust(60) + sf]
+    body = e1[:1] + [_times(x, 0, 10) if x[0] == "G" else x for x in e1[1:]] + back + e2
+    b = read_rinex_obs(_write(tmp_path / "b.rnx", [x + "\n" for x in h2 + body]), strict=True)
+    for o in (a, b):
+        np.testing.assert_allclose(o.obs("C1C")[:, g], ref.obs("C1C")[:, g], rtol=0, atol=1e-3)
+        np.testing.assert_array_equal(o.obs("L1C"), ref.obs("L1C"))
+
+
+def test_header_records_after_a_new_site_flag_redefine_the_types(test_data, tmp_path):
+    """Flag 3, new site occupation: "at least MARKER NAME record follows" (RINEX 3.04 table A3;
+    its example #1 gives MARKER NUMBER and ANTENNA: DELTA H/E/N too): header records, as after
+    flag 4. Its SYS / # / OBS TYPES were ignored until 2026-12-07: with GPS's C1C and C2W
+    swapped, epoch 2's L2 P(Y) ranges were read as C1C (-0.5 to +6.0 m off), no problem said."""
+    head, e1, e2, _ = _twtf(test_data)
+    ref = read_rinex_obs(test_data / SEPT)
+    g = [k for k, s in enumerate(ref.sats) if s[0] == "G"]
+    types = [x for x in head if x.startswith("G   18") or x.startswith("       S2L")]
+    swapped = types[0].replace(" C1C ", " XXX ").replace(" C2W ", " C1C ").replace(" XXX ", " C2W ")
+    block = [">" + " " * 30 + "3  3", "TWTF".ljust(60) + "MARKER NAME", swapped, types[1]]
+    body = e1 + block + e2[:1] + [_swap(x, 0, 6) if x[0] == "G" else x for x in e2[1:]]
+    obs = read_rinex_obs(_write(tmp_path / "b.rnx", [x + "\n" for x in head + body]), strict=True)
+    for c in ("C1C", "C2W"):
+        np.testing.assert_array_equal(obs.obs(c)[:, g], ref.obs(c)[:, g])
+    assert [e.flag for e in obs.events] == [3]
+
+
+def test_an_unreadable_scale_factor_in_an_event_block_is_refused(test_data, tmp_path):
+    head, e1, e2, _ = _twtf(test_data)
+    block = [">" + " " * 30 + "4  1", "G   1x   1 C1C".ljust(60) + "SYS / SCALE FACTOR"]
+    path = _write(tmp_path / "bad.rnx", [x + "\n" for x in head + e1 + block + e2])
+    with pytest.raises(RinexObsError, match=r"line 95.*SYS / SCALE FACTOR"):
+        read_rinex_obs(path)
+
+
+def test_a_glonass_slot_in_an_event_block(test_data, tmp_path):
+    """A slot the header lacks is taken; one changed from the header's is reported (the file
+    holds one slot table: GLONASS SLOT / FRQ #)."""
+    head, e1, e2, _ = _twtf(test_data)
+    label = "GLONASS SLOT / FRQ #"
+    block = [">" + " " * 30 + "4  1", "  2 R22 -3 R01  2".ljust(60) + label]
+    obs = read_rinex_obs(_write(tmp_path / "s.rnx", [x + "\n" for x in head + e1 + block + e2]))
+    assert obs.header.glonass_slots["R22"] == -3 and obs.header.glonass_slots["R01"] == 1
+    assert any(p.line == 95 and "R01" in p.what for p in obs.problems)
+
+
+def test_an_epoch_flag_rinex_does_not_define_is_not_read_as_data(test_data, tmp_path):
+    """Epoch flags are 0-6 (RINEX 3.04 table A3; 6.7: unknown event flags are skipped and
+    reported); a RINEX 3 epoch of flag 7 was read as an observation epoch."""
+    head, e1, e2, _ = _twtf(test_data)
+    bad = [e2[0][:31] + "7" + e2[0][32:], *e2[1:]]
+    obs = read_rinex_obs(_write(tmp_path / "f7.rnx", [x + "\n" for x in head + e1 + bad]))
+    assert len(obs.gps_s) == 1 and any(p.line == 94 for p in obs.problems)
