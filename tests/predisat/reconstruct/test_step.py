@@ -139,14 +139,17 @@ def test_off_step_groups_the_runs() -> None:
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """A rendered survey under catenary with an overbridge (fisheyes 240x180, 31 positions)."""
+    """A rendered survey of town under catenary with two overbridges, at positions 6-7 and
+    15-16 (fisheyes 240x180, 31 positions): the only things the two cameras' shared sky sees
+    change from one position to the next, so a dropped image before the first is seen over
+    the whole survey, and one between them from the first on."""
     from predisat.synth.generate import generate_survey
     from predisat.synth.world import Stretch, WorldSpec
     from predisat.track import demo_track
 
     out = tmp_path_factory.mktemp("step")
-    spec = WorldSpec((Stretch("town", 3000, 3300), Stretch("overbridge", 3150, 3160)),
-                     hills=False)  # fmt: skip
+    spec = WorldSpec((Stretch("town", 3000, 3300), Stretch("overbridge", 3060, 3070),
+                      Stretch("overbridge", 3150, 3160)), hills=False)  # fmt: skip
     generate_survey(demo_track(), 3000.0, 3300.0, sky="clear", seed=5, out_dir=out,
                     spec=spec, camera=default_camera("fisheye").resized(240, 180),
                     progress=False)  # fmt: skip
@@ -169,8 +172,8 @@ def _drop_right_image(survey, first: int = 5):
 def test_process_sets_aside_the_frames_of_a_camera_out_of_step(rendered, tmp_path,
                                                                capsys) -> None:  # fmt: skip
     """The rendered survey with its images' capture times removed, and the same whose right
-    camera dropped an image: process finds the first in step, and in the second sets aside
-    the frames from there on, says so, and the availability report repeats it."""
+    camera dropped an image before the first overbridge: process finds the first in step, and
+    in the second the whole survey out of step, and stops saying why."""
     import shutil
 
     from predisat.availability.run import step_notes
@@ -197,6 +200,78 @@ def test_process_sets_aside_the_frames_of_a_camera_out_of_step(rendered, tmp_pat
     assert "cameras are out of step from chainage" in err and "fix the manifest" in err
     assert "capture times were not compared" in err
     assert step_notes(ok.masks.provenance) == []
+
+
+def test_a_finished_run_out_of_step_is_repeated_by_the_availability_report(
+    rendered, tmp_path, capsys
+) -> None:
+    """The survey without capture times whose right camera dropped an image between the two
+    overbridges: the first confirms the cameras in step, so the run sets aside the frames from
+    there on, keeps those before it and finishes; ``predisat availability`` on its output
+    repeats the step note (the drop before the first overbridge is refused whole since
+    2026-12-07, which left this untested)."""
+    import html
+    import shutil
+
+    from predisat.availability.run import step_notes
+    from predisat.cli.app import main
+    from predisat.reconstruct.batch import process_survey
+
+    survey = tmp_path / "survey"
+    shutil.copytree(rendered, survey)
+    for image in (survey / "images").iterdir():  # no capture times: the other check is blind
+        image.write_bytes(_without_exif(image.read_bytes()))
+    moved = _drop_right_image(survey, first=10)
+    got = process_survey(survey, tmp_path / "late", progress=False)
+    (run,) = got.masks.provenance["step_check"]["left/right"]["off_step"]
+    # from the first overbridge (positions 6-7) on, not from the survey's start
+    assert run["lag"] == -1 and 6 <= run["first_position"] <= 10 and run["last_position"] == 30
+    set_aside = {b.frame_id for b in got.bad_frames if b.stage == "step"}
+    assert set_aside == set(run["frames"])
+    assert moved <= set_aside and any(f.startswith("left") for f in set_aside)
+    assert {"left_000000", "right_000000", "left_000005"}.isdisjoint(set_aside)
+    assert np.count_nonzero(got.masks.mask_el_deg[:5] < 89.9) > 0  # the kept start trusts sky
+    err = capsys.readouterr().err
+    assert "cameras are out of step from chainage" in err and "fix the manifest" in err
+    (note,) = step_notes(got.masks.provenance)
+    assert "were out of step from chainage" in note
+
+    argv = ["availability", "--masks", str(tmp_path / "late"), "--out", str(tmp_path / "a"),
+            "--start", "2020-06-25T06:00", "--end", "2020-06-25T06:30", "--step", "900",
+            "--scheduler", "serial", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert f"predisat availability: warning: {note}" in err
+    assert html.escape(note) in (tmp_path / "a" / "report.html").read_text()
+
+
+def test_a_lost_frame_is_not_out_of_step(rendered, tmp_path, capsys) -> None:
+    """A frame lost honestly: the right camera's 11th image gone with its manifest row, and
+    the left camera's 21st image gone with its row kept. The frames pair by time, not by their
+    index in each camera's list, so the cameras stay in step: nothing is set aside by the step
+    check, only the missing image is a bad frame, and the two positions lacking a side
+    camera's own frame trust nothing there (section 23)."""
+    import shutil
+
+    import pandas as pd
+
+    from predisat.reconstruct.batch import process_survey
+
+    survey = tmp_path / "survey"
+    shutil.copytree(rendered, survey)
+    for image in (survey / "images").iterdir():  # no capture times: the step check alone
+        image.write_bytes(_without_exif(image.read_bytes()))
+    man = pd.read_csv(survey / "manifest.csv")
+    (survey / "images" / "right_000010.jpg").unlink()
+    (survey / "images" / "left_000020.jpg").unlink()
+    man[man.frame_id != "right_000010"].to_csv(survey / "manifest.csv", index=False)
+    got = process_survey(survey, tmp_path / "out", progress=False)
+    assert got.masks.provenance["step_check"]["left/right"]["off_step"] == []
+    assert [b.frame_id for b in got.bad_frames] == ["left_000020"]
+    assert got.bad_frames[0].stage != "step"
+    assert "out of step" not in capsys.readouterr().err
+    lost = man.chainage_m[man.frame_id.isin(["right_000010", "left_000020"])]
+    assert got.masks.provenance["positions_lacking_side"] == pytest.approx(sorted(lost))
 
 
 def test_capture_times_set_aside_exactly_the_images_off_their_rows(rendered, tmp_path,
