@@ -475,6 +475,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(_losses_text(epochs), end="")
     _say_assumed_claims(epochs)
     _say_track_end(epochs, cfg.odometer.max_speed_mps)
+    _say_start_conflict(epochs, float(start), args.start_chainage is not None, cfg.cutoff_deg)
     return 0
 
 
@@ -491,6 +492,35 @@ def _say_assumed_claims(epochs: Any) -> None:
               f"({100.0 * on / len(claimed):.1f} %) used a satellite trusted on an ASSUMED bin "
               "(no view saw the sky there: the far field's stated default; flag ASSUMED_MASK, "
               "column n_used_assumed)")  # fmt: skip
+
+
+def _say_start_conflict(epochs: Any, start_m: float, given: bool, cutoff_deg: float) -> None:
+    """Warn when the satellites contradicted the start (flag ``START_CONFLICT``,
+    ``RunConfig.start_check_m``): a trial's start 300 m off chose satellites by the masks of a
+    place the train was not at, for the whole run, without a word."""
+    import numpy as np
+
+    from locator.run import RunFlag
+
+    if "flags" not in epochs or "start_check_m" not in epochs or len(epochs) == 0:
+        return
+    hit = (epochs["flags"].to_numpy().astype(int) & int(RunFlag.START_CONFLICT)) != 0
+    if not hit.any():
+        return
+    k = int(np.flatnonzero(hit)[0])
+    seen = epochs["start_check_m"].to_numpy(float)[: k + 1]
+    sky_m = float(seen[np.isfinite(seen)][-1])
+    claims = np.flatnonzero(epochs["claim"].to_numpy(bool) & hit)
+    after = (f"until fixes agreed with it (a claim located the run at epoch {int(claims[0])})"
+             if len(claims) else "to the end: no claim located the run")  # fmt: skip
+    what = "--start-chainage" if given else "the start taken from the data's own position"
+    print(f"locator run: warning: the start chainage {start_m:.0f} m (or the odometry since) "
+          f"contradicts the satellites: a fix of every satellite above {cutoff_deg:g} deg put "
+          f"the train at {sky_m:.0f} m (epoch {k}, gps_s {float(epochs['gps_s'].iloc[k]):.0f}), "
+          "beyond the predicted interval; it was widened over both places (the satellites were "
+          f"trusted by the masks' worst case over both) and {int(hit.sum())} epochs are "
+          f"flagged START_CONFLICT, without a claim {after}; check {what}",
+          file=sys.stderr)  # fmt: skip
 
 
 def _say_track_end(epochs: Any, max_speed_mps: float) -> None:

@@ -209,6 +209,8 @@ _LOSS_CAUSES = (
     ("EMPTY_PAIR", "a pair contradicting the search window"),
     ("HEADING_FAIL", "heading check failed"),
     ("ODOMETRY_CONFLICT", "interval missing the odometry prediction"),
+    ("START_CONFLICT", "start chainage contradicted by the satellites (prediction widened "
+     "over both places), until fixes agree with it"),
     ("ODOMETRY_SUSPECT", "odometry suspect after a conflict, until fixes agree with it again"),
     ("OFF_TRACK", "the trusted satellites' 3-D fix beside the map beyond its doubt (a track "
      "the map lacks, or a reflected signal)"),

@@ -102,6 +102,7 @@ class RunFlag(IntFlag):
     TRACK_ALIAS = 1 << 27  # the track passes beside the claim elsewhere, and nothing rules it out
     OFF_TRACK = 1 << 28  # the trusted satellites' 3-D fix lies beside the map beyond its doubt
     OFF_TRACK_UNCHECKED = 1 << 29  # no 3-D fix to check that (fewer than 5 consistent): stated
+    START_CONFLICT = 1 << 30  # the satellites put the train beyond the start's interval: widened
 
 
 ERROR_MODEL_CAVEATS = {
@@ -234,6 +235,23 @@ class RunConfig:
         its fault, the trust decisions rested on it, and a claim missed the train before the
         next conflict showed.
         Column ``odometer_used``. None: never.
+    start_check_m : float or None
+        Until a claim first locates the run, a 3-D fix of every satellite above
+        ``cutoff_deg`` (the sky check's, projected on the track: no claim rests on it) that lies
+        more than this beyond the prediction at ``start_check_epochs`` consecutive epochs where
+        it exists contradicts the start (``start_chainage_m +- start_uncertainty_m``). The
+        prediction is then widened to also cover that fix +- this distance (the union of the
+        start's place and the satellites'; the bound it moves is re-anchored there), the
+        epochs are flagged ``START_CONFLICT`` until a claim locates the run, and the odometry
+        is suspect (``odometry_reconfirm`` agreeing fixes before a claim). Widening is the safe
+        side whichever is wrong: the trust decision takes the worst mask over both places, a
+        claim must meet both, and the prediction still holds every place the start's did.
+        A trial: a start 300 m ahead of the train chose satellites by the masks of where the
+        train was not for the whole run (116 NLOS signals used in 216 epochs, no word of it).
+        Column ``start_check_m`` (the fix's chainage, NaN where not checked). None: no check.
+    start_check_epochs : int
+        Consecutive contradicting epochs (those without a fix neither count nor break the
+        run of them) before the start is called contradicted: one NLOS-biased fix is not.
     sky_check_m : float or None
         Where the epoch makes no claim (too few trusted satellites: the prediction may have
         left the masks' coverage, or a fault put it where the masks trust nothing), a 3-D fix
@@ -305,6 +323,8 @@ class RunConfig:
     odometry_reconfirm: int = 3
     odometry_suspect: str = "repeated"
     odometry_recover_s: float | None = 20.0
+    start_check_m: float | None = 50.0
+    start_check_epochs: int = 2
     sky_check_m: float | None = 300.0
     alias_m: float | None = 100.0
     off_track_k_sigma: float | None = 5.0
@@ -332,6 +352,12 @@ class RunConfig:
         if self.alias_m is not None and not self.alias_m >= 20.0:
             raise ValueError(f"alias_m must be >= 20 m (four 5 m samples of the track) or None, "
                              f"got {self.alias_m}")  # fmt: skip
+        if self.start_check_m is not None and not self.start_check_m > 0:
+            raise ValueError(f"start_check_m must be > 0 m or None, got {self.start_check_m}")
+        if int(self.start_check_epochs) != self.start_check_epochs or self.start_check_epochs < 1:
+            raise ValueError(
+                f"start_check_epochs must be an integer >= 1, got {self.start_check_epochs}"
+            )
         if self.sky_check_m is not None and not self.sky_check_m > 0:
             raise ValueError(f"sky_check_m must be > 0 m or None, got {self.sky_check_m}")
         if self.odometry_recover_s is not None and not self.odometry_recover_s > 0:
@@ -394,6 +420,7 @@ _CONFLICT_FLAGS = int(RunFlag.ODOMETRY_CONFLICT | FixFlag.NO_SAFETY_CLAIM)
 _ALIAS_FLAGS = int(RunFlag.TRACK_ALIAS | FixFlag.NO_SAFETY_CLAIM)
 _OFF_TRACK_FLAGS = int(RunFlag.OFF_TRACK | FixFlag.NO_SAFETY_CLAIM)
 _OFF_TRACK_UNCHECKED = int(RunFlag.OFF_TRACK_UNCHECKED)
+_START_CONFLICT = int(RunFlag.START_CONFLICT)
 _NO_MODEL_FLAGS = int(RunFlag.NO_ERROR_MODEL | FixFlag.NO_SAFETY_CLAIM)
 _NO_STRETCH_FLAGS = int(RunFlag.NO_STRETCH_CLAIM | FixFlag.NO_SAFETY_CLAIM)
 _CAVEAT_FLAGS = {"forced": int(RunFlag.FORCED_ERROR_MODEL),
@@ -406,6 +433,9 @@ _NONE_NAME = IntervalMode.NONE.name.lower()
 # beyond this a satellite's elevation differs between the prediction's ends by more than
 # 0.004 deg (locator.selection): trust takes the lowest of the centre and the two ends
 _LONG_PREDICTION_M = 400.0
+# the sky fix's distance beside the track beyond which it is no evidence, when the sky check
+# itself is off (RunConfig.sky_check_m None) but the start check is on
+_SKY_NEAR_M = 300.0
 # a blunt fix's estimate conflict begins the suspicion when the same bound is passed again
 # this long after it, s (RunConfig.odometry_suspect)
 _REPEAT_S = (1.0, 3.0)
@@ -459,7 +489,9 @@ def run_locator(
         ``RunConfig.odometry_recover_s``), ``solve_ms``,
         ``iono_uncorrected`` (True when a trusted satellite's ionospheric delay was left
         uncorrected, no broadcast model being available, and its sigma inflated:
-        :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`).
+        :data:`locator.corrections.UNCORRECTED_IONO_SIGMA_M`), ``start_check_m`` (the sky
+        fix's chainage the start was checked against before the run was located, NaN
+        elsewhere: :attr:`RunConfig.start_check_m`).
     """
     cfg = config or RunConfig()
     if cfg.trust == "masks" and masks is None:
@@ -493,6 +525,22 @@ def run_locator(
             az, el = direction_at(path, centre, data.sat_ecef_m)
         else:
             az = el = np.zeros(0)
+        start_m = float("nan")
+        if state.unlocated and cfg.start_check_m is not None and n_rx:
+            start_m = _sky_check(path, data, el, cfg.cutoff_deg,
+                                 cfg.sky_check_m or _SKY_NEAR_M)  # fmt: skip
+            widened = _start_check(state, cfg, start_m, p_lo, p_hi, state.here(k, gps, odo),
+                                   path.length_m)  # fmt: skip
+            if widened is not None:  # the satellites' place too: trust, fix and check over both
+                p_lo, p_hi = widened
+                centre = 0.5 * (p_lo + p_hi)
+                az, el = direction_at(path, centre, data.sat_ecef_m)
+                if aliases:
+                    state.unique = state.unique and not aliases.within(p_lo, p_hi).size
+                if cfg.odometry_reconfirm:
+                    if not state.suspect:
+                        state.suspect_since_s = float(gps[k])
+                    state.suspect, state.agreed = True, 0
         el_trust = el
         if n_rx and p_hi - p_lo > _LONG_PREDICTION_M:
             # the lowest elevation over the interval, not its centre's (locator.selection)
@@ -510,6 +558,7 @@ def run_locator(
             conflict = ""
         row = _row(k, gps[k], p_lo, p_hi, n_rx, len(idx), fix, cfg.integrity)
         row["iono_uncorrected"] = uncorrected
+        row["start_check_m"] = start_m
         f_lo, f_hi, status = p_lo, p_hi, _ODOMETRY
         if fix is not None:
             for s in fix.excluded_sats:
@@ -536,6 +585,9 @@ def run_locator(
         row["n_used_assumed"] = 0
         if fix is not None and masks is not None and cfg.trust == "masks":
             _assumed_bins(row, masks, az[idx][np.asarray(fix.used, bool)], p_lo, p_hi)
+        if state.start_doubt:  # until a claim locates the run (the claim itself included)
+            flags = int(row["flags"]) | _START_CONFLICT
+            row.update(flags=flags, flag_names=flag_names(flags))
         suspected = not blunt or cfg.odometry_suspect == "every" or state.repeated(gps[k], blunt)
         if status == _CONFLICT and cfg.odometry_reconfirm and suspected:
             if not state.suspect:
@@ -561,6 +613,7 @@ def run_locator(
             here = state.here(k, gps, odo)
             f_lo, f_hi = state.fuse(fix, row["wls_sigma_m"], p_lo, p_hi, here, cfg.fusion)
             status = _FUSED
+            state.unlocated = state.start_doubt = False
         row.update(
             fused_lo_m=f_lo, fused_hi_m=f_hi, fused_chainage_m=state.est,
             fusion=status.name.lower(), odo_since_anchor_m=abs(d),
@@ -577,6 +630,29 @@ def run_locator(
     if len(epochs):
         epochs["safety_claim"] = epochs["claim"].astype(bool) & cfg.makes_safety_claims
     return epochs
+
+
+def _start_check(
+    state: _Tracker, cfg: RunConfig, start_m: float, p_lo: float, p_hi: float,
+    here: tuple[float, ...], length_m: float,
+) -> tuple[float, float] | None:  # fmt: skip
+    """Count a sky fix ``start_m`` beyond the prediction by more than ``cfg.start_check_m``
+    (:attr:`RunConfig.start_check_m`); at ``cfg.start_check_epochs`` consecutive ones widen
+    the prediction to cover it +- that distance and return the widened ``(lo, hi)``, else
+    None. Only ever widens: the new prediction holds every place the old one did."""
+    m = cfg.start_check_m
+    assert m is not None
+    if not np.isfinite(start_m):  # no evidence: neither counts nor breaks the run
+        return None
+    if p_lo - m <= start_m <= p_hi + m:
+        state.start_votes = 0
+        return None
+    state.start_votes += 1
+    if state.start_votes < cfg.start_check_epochs:
+        return None
+    state.start_votes = 0
+    state.start_doubt = True
+    return state.widen(start_m - m, start_m + m, p_lo, p_hi, here, length_m)
 
 
 def _sky_check(
@@ -775,6 +851,9 @@ class _Tracker:
     blunt_s: list[tuple[float, int]] = field(default_factory=list)  # (time, bound passed)
     recoveries: int = 0
     unique: bool = True  # located where the track is alone since the start (RunConfig.alias_m)
+    unlocated: bool = True  # no claim fused since the start (RunConfig.start_check_m)
+    start_doubt: bool = False  # the satellites contradicted the start, no claim since
+    start_votes: int = 0  # consecutive sky fixes beyond the prediction (start_check_epochs)
 
     @classmethod
     def start(
@@ -803,6 +882,25 @@ class _Tracker:
         self.blunt_s[:] = [(t, s) for t, s in self.blunt_s if gps_s - t <= hi]
         self.blunt_s.append((gps_s, side))
         return again
+
+    def widen(
+        self, lo: float, hi: float, p_lo: float, p_hi: float, here: tuple[float, ...],
+        length_m: float,
+    ) -> tuple[float, float]:  # fmt: skip
+        """The prediction ``(p_lo, p_hi)`` widened to also cover ``(lo, hi)`` (clipped to
+        the track): each bound it moves is re-anchored there (``here``: the epoch's readings),
+        so the next predictions grow from the widened bounds, never from inside the old ones
+        (a bound re-anchored below the old one stays below it: the odometer's fixed error is
+        counted once more). The estimate's variance grows to the widened interval."""
+        if lo < p_lo:
+            self.lo_anchor = (lo, *here)
+            self.past_start = self.past_start or lo < 0.0
+        if hi > p_hi:
+            self.hi_anchor = (hi, *here)
+            self.past_end = self.past_end or hi > length_m
+        w_lo, w_hi = _clip(min(lo, p_lo), 0.0, length_m), _clip(max(hi, p_hi), 0.0, length_m)
+        self.est_var = max(self.est_var, ((w_hi - w_lo) / 6.0) ** 2)
+        return w_lo, w_hi
 
     def here(self, k: int, gps: NDArray, odo: NDArray | None) -> tuple[float, ...]:
         """An anchor's readings at epoch ``k`` (all but its chainage)."""

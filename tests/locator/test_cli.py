@@ -1502,3 +1502,24 @@ def test_calibrate_refuses_a_file_whose_antenna_moved(test_data, tmp_path, capsy
     site = str(tmp_path / "site.05o")
     assert main([*base, "--obs", site, "--out", str(tmp_path / "s.json")]) == 2
     assert "flag 3, new site occupation" in capsys.readouterr().err
+
+
+def test_a_start_the_satellites_contradict_is_told(capsys):
+    """`locator run` says when the satellites contradicted the start (flag START_CONFLICT): a
+    trial's start 300 m off ran the whole demo on the masks of another place, in silence."""
+    from locator.cli import _say_start_conflict
+    from locator.run import RunFlag
+
+    flag = int(RunFlag.START_CONFLICT)
+    ep = pd.DataFrame({"gps_s": 100.0 + np.arange(6), "flags": [0, flag, flag, flag, flag, 0],
+                       "start_check_m": [4024.0, 4032.0, 4005.0, np.nan, 4020.0, np.nan],
+                       "claim": [False, False, False, False, True, True]})  # fmt: skip
+    _say_start_conflict(ep, 4300.0, True, 15.0)
+    err = " ".join(capsys.readouterr().err.split())
+    assert "start chainage 4300 m (or the odometry since) contradicts the satellites" in err
+    assert "put the train at 4032 m (epoch 1, gps_s 101)" in err
+    assert "4 epochs are flagged START_CONFLICT" in err and "at epoch 4" in err
+    assert "check --start-chainage" in err
+    ep["flags"] = 0
+    _say_start_conflict(ep, 4300.0, True, 15.0)
+    assert capsys.readouterr().err == ""

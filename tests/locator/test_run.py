@@ -7,7 +7,10 @@ the ranges were made at.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import pandas as pd
 import pytest
 
 from locator.fde import FixFlag, LocatorConfig
@@ -500,14 +503,16 @@ def test_a_wrong_start_recovers_on_the_motion_bound(path):
     conflicts with the prediction. Before the recovery the run stayed suspect to its end; now,
     20 s into the suspicion, the odometer is set aside, the motion bound from the start grows
     over the train, the fixes agree with it and claim again, always around the truth; the
-    odometer stays aside (a wrong start and a faulty odometer look alike)."""
+    odometer stays aside (a wrong start and a faulty odometer look alike). Without the start
+    check, which tells them apart at the start (RunConfig.start_check_m: the next test)."""
     truth = truth_run(n=60)
     start = truth[0] - 300.0
     kept = run_locator(path, FakeSource(path, truth), start_chainage_m=start,
-                       config=RunConfig(MODEL, trust="none", odometry_recover_s=None))  # fmt: skip
+                       config=RunConfig(MODEL, trust="none", odometry_recover_s=None,
+                                        start_check_m=None))  # fmt: skip
     assert not kept["claim"].any()
     ep = run_locator(path, FakeSource(path, truth), start_chainage_m=start,
-                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+                     config=RunConfig(MODEL, trust="none", start_check_m=None))  # fmt: skip
     claim = ep["claim"].to_numpy()
     assert claim[30:].all()  # claims again, and not before the 20 s
     assert not claim[:20].any()
@@ -707,3 +712,108 @@ def test_a_satellite_the_fix_excludes_does_not_put_the_train_off_the_track():
     claimed = few[few["claim"]]
     assert len(claimed) and (claimed["n_used"] < 5).all()
     assert claimed["flag_names"].str.contains("OFF_TRACK_UNCHECKED").all()
+
+
+def _walled_masks(path, wall_below_m):
+    """Masks every 10 m: a 60 deg wall over azimuths 290-350 (G07 at 300, G08 at 340 deg)
+    before ``wall_below_m``, open sky after it."""
+    c = np.arange(0.0, 4001.0, 10.0)
+    az_bins = np.arange(0.0, 360.0, 1.0)
+    wall = np.where((az_bins >= 290) & (az_bins <= 350), 60.0, 0.0)
+    mask = np.where(c[:, None] < wall_below_m, wall[None, :], 0.0)
+    return MaskSet.from_track(path.track, c, mask)
+
+
+@pytest.mark.parametrize("stretches", [1, 16])
+def test_a_start_the_satellites_contradict_is_flagged_and_its_masks_are_not_trusted_alone(
+    path, stretches
+):
+    """A start 300 m ahead of the train (a trial on the demo line: no claim, but the masks of
+    where the train was not chose the satellites for the whole run, 116 NLOS signals used,
+    nothing said). Here the wall hides G07 and G08 where the train is (their signals arrive
+    reflected, 40 m late) and the sky is open at the stated start. The sky fix of every
+    satellite contradicts the start at its first two epochs: from the second one every epoch
+    until a claim locates the run is flagged START_CONFLICT, the prediction covers both
+    places, so the single set never trusts the hidden satellites again, and no claim misses
+    the train."""
+    truth = truth_run(n=40)  # 1000 -> 1585 m
+    masks = _walled_masks(path, 1240.0)
+    hidden = truth < 1240.0
+    bias = np.zeros((len(truth), len(AZ)))
+    bias[hidden, 6:8] = 40.0  # G07, G08: NLOS where the wall is
+    cfg = RunConfig(MODEL, trust="masks", trust_stretches=stretches)
+    ep = run_locator(path, FakeSource(path, truth, bias_m=bias),
+                     start_chainage_m=truth[0] + 300.0, config=cfg, masks=masks)  # fmt: skip
+    flagged = (ep["flags"].to_numpy() & int(RunFlag.START_CONFLICT)) != 0
+    assert not flagged[0] and flagged[1]
+    first_claim = int(np.flatnonzero(ep["claim"].to_numpy())[0])
+    assert flagged[1:first_claim + 1].all() and not flagged[first_claim + 1:].any()
+    assert not ep["claim"][flagged][:-1].any()  # suspect until fixes agree: then one claims
+    assert (ep["pred_lo_m"][1:] <= truth[1:]).all()  # the widened prediction holds the train
+    assert np.nanmax(np.abs(ep["start_check_m"][:2] - truth[:2])) < 50.0
+    assert np.isnan(ep["start_check_m"][first_claim + 1:]).all()  # located: no more checks
+    claim = ep["claim"].to_numpy()
+    assert claim.sum() > 10
+    assert ((ep["lo_m"] <= truth) & (truth <= ep["hi_m"]))[claim].all()
+    assert ((ep["fused_lo_m"] <= truth) & (truth <= ep["fused_hi_m"]))[claim].all()
+    assert ep["odometer_used"].all()  # the start was wrong, not the odometer: kept
+    if stretches == 1:  # the single set trusts only satellites in view wherever the train is
+        assert not (_trusted_any(ep, "G07", "G08") & hidden)[1:].any()
+    unchecked = dataclasses.replace(cfg, start_check_m=None)
+    without = run_locator(path, FakeSource(path, truth, bias_m=bias), config=unchecked,
+                          start_chainage_m=truth[0] + 300.0, masks=masks)  # fmt: skip
+    # the defect: the stated start's masks trusted them wherever they were hidden, unflagged
+    assert (_trusted_any(without, "G07", "G08") & hidden).sum() == hidden.sum()
+
+
+def _trusted_any(ep, *sats):
+    """Per epoch: whether any of ``sats`` passed the trust decision (not left out by a mask)."""
+    out = []
+    for text in ep["excluded"]:
+        reasons = dict(item.split(":", 1) for item in str(text).split())
+        out.append(any(reasons.get(s) not in ("below_mask", "outside_coverage") for s in sats))
+    return np.array(out)
+
+
+def test_a_start_30_m_off_is_flagged_when_beyond_its_stated_uncertainty(path):
+    """30 m off with a stated uncertainty of 10 m (a balise's) and a check margin of 10 m: the
+    train is not in the start's interval, the sky fix says so, the prediction is widened over
+    both places and every claim holds the train. Within the default 50 m the same start is no
+    contradiction (the train is inside the start's interval) and nothing is flagged."""
+    truth = truth_run(n=30)
+    src = FakeSource(path, truth)
+    tight = RunConfig(MODEL, trust="none", start_uncertainty_m=10.0, start_check_m=10.0)
+    ep = run_locator(path, src, start_chainage_m=truth[0] + 30.0, config=tight)
+    flagged = (ep["flags"].to_numpy() & int(RunFlag.START_CONFLICT)) != 0
+    assert flagged[1] and "START_CONFLICT" in ep["flag_names"][1]
+    claim = ep["claim"].to_numpy()
+    first_claim = int(np.flatnonzero(claim)[0])
+    assert first_claim < 8 and claim.sum() > 20 and flagged[1:first_claim + 1].all()
+    assert (ep["pred_lo_m"][1:] <= truth[1:]).all()  # widened over the train's place
+    assert ((ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6))[claim].all()
+    loose = RunConfig(MODEL, trust="none")
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0] + 30.0,
+                     config=loose)  # fmt: skip
+    assert not ep["flag_names"].str.contains("START_CONFLICT").any()
+
+
+@pytest.mark.parametrize("trust", ["masks", "none"])
+def test_a_right_start_is_not_flagged_and_its_run_unchanged(path, trust):
+    """The start check only widens where the satellites contradict the start: a right start's
+    run is the same, bit for bit, with the check or without it."""
+    truth = truth_run(n=30)
+    masks = _walled_masks(path, 1240.0) if trust == "masks" else None
+    cfg = RunConfig(MODEL, trust=trust)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0], config=cfg,
+                     masks=masks)  # fmt: skip
+    unchecked = dataclasses.replace(cfg, start_check_m=None)
+    off = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0],
+                      config=unchecked, masks=masks)  # fmt: skip
+    assert not ep["flag_names"].str.contains("START_CONFLICT").any()
+    assert np.isfinite(ep["start_check_m"][0])  # checked, agreeing
+    cols = [c for c in ep.columns if c not in ("solve_ms", "start_check_m")]
+    pd.testing.assert_frame_equal(ep[cols], off[cols])
+    with pytest.raises(ValueError, match="start_check_m"):
+        RunConfig(MODEL, start_check_m=0.0)
+    with pytest.raises(ValueError, match="start_check_epochs"):
+        RunConfig(MODEL, start_check_epochs=0)

@@ -129,12 +129,13 @@ def as_the_reference(cfg: RunConfig) -> RunConfig:
     """``cfg`` without what came after the reference (2026-12-06): the suspect latch after an
     odometry conflict (the conflict alone flagged; so whether a blunt fix's conflict begins it
     does not matter), its recovery on the motion bound, the sky
-    check of epochs without a claim, the track-alias and off-track checks, and the map doubt in
-    the pair bands
+    check of epochs without a claim, the start check, the track-alias and off-track checks,
+    and the map doubt in the pair bands
     (zero: the source's pairs). All are tested in ``tests/locator``."""
     loc = dataclasses.replace(cfg.locator, map_doubt_lateral_m=0.0, map_doubt_vertical_m=0.0)
     return dataclasses.replace(cfg, odometry_reconfirm=0, odometry_recover_s=None,
-                               sky_check_m=None, alias_m=None, off_track_k_sigma=None,
+                               sky_check_m=None, start_check_m=None, alias_m=None,
+                               off_track_k_sigma=None,
                                locator=loc)  # fmt: skip
 
 
