@@ -22,6 +22,7 @@ the queued tasks and closes the cluster within a few seconds (:data:`CLOSE_TIMEO
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
 import re
@@ -278,13 +279,23 @@ def _refused(address: str) -> str | None:
 # process, not hidden state: it only ever holds the first answer.
 _FIRST_SEEN: dict[Callable[[], str], str] = {}
 _FIRST_SEEN_LOCK = threading.Lock()
-# The (mtime ns, size) of the source file of every module this process had loaded when it
-# was asked for a code version. The memo above is per function: a worker that first served
-# `predisat availability` (predisat's fingerprint) and, after a `git pull`, a `locator
-# campaign` (the fingerprint of both packages, first asked then) hashed the new files and
-# passed while it ran the predisat modules imported before the pull (a review: job files of the
-# old error model under the new code's keys, intervals up to 267 m apart, exit 0).
-_SOURCE_STAMPS: dict[str, tuple[int, int]] = {}
+
+# the folder holding this package: the checkout (predisat, locator, tests) or site-packages
+_CHECKOUT = os.path.dirname(os.path.dirname(os.path.realpath(__file__))) + os.sep
+# The folders of this code's packages. A process's code is these files as they were when it
+# first imported this module (a worker: at its first contact with a run, whose check unpickles
+# this module, or at its start, the local cluster's preload), not as they are when a code
+# version is asked: the memo above is per function, and a worker that first served `predisat
+# availability` (predisat's fingerprint) and, after a `git pull`, a `locator campaign` (both
+# packages' fingerprint, first asked then) hashed the new files and passed while it ran the
+# modules imported before the pull (a review: job files of the old error model under the new
+# code's keys, intervals up to 267 m apart, exit 0). Stamping a module's file when a check first
+# saw it loaded left a hole: a module a task imported (predisat.availability.network's task
+# imports predisat.availability.run) that a `git pull` changed before the next check was stamped
+# in its new state, and a command of the other fingerprint got the old module's results (p4).
+_PACKAGES = tuple(
+    _CHECKOUT + p + os.sep for p in ("predisat", "locator") if os.path.isdir(_CHECKOUT + p)
+)
 
 
 def _stamp(path: str) -> tuple[int, int]:
@@ -295,38 +306,117 @@ def _stamp(path: str) -> tuple[int, int]:
     return (st.st_mtime_ns, st.st_size)
 
 
+def _package_files() -> dict[str, tuple[int, int]]:
+    """The source and data files of the packages (what their fingerprints hash; no editor's
+    swap or lock file) and their stamps."""
+    out: dict[str, tuple[int, int]] = {}
+    for root in _PACKAGES:
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
+            data = "data" in folder[len(root) :].split(os.sep)
+            for f in files:
+                if not f.startswith(".") and (f.endswith(".py") or data):
+                    out[os.path.join(folder, f)] = _stamp(os.path.join(folder, f))
+    return out
+
+
+def _digest(path: str) -> str | None:
+    try:
+        with open(path, "rb") as f:
+            return hashlib.sha256(f.read()).hexdigest()
+    except OSError:
+        return None
+
+
+_STARTED_WITH = _package_files()  # the stamps when this process first imported this module
+_START_DIGESTS: dict[str, str | None] = {}  # their contents, hashed at the first check
+_VERDICTS: dict[str, tuple[tuple[int, int], bool]] = {}  # a stamp that differs: same content?
+_RUNS_START: set[str] = set()  # files of modules first seen loaded while as at the start
+_TAINTED: list[str] = []  # files of modules first seen loaded after they changed on disk
+_REAL: dict[str, str] = {}  # a module's __file__: its real path
+
+
+def _as_at_start(path: str) -> bool:
+    """Whether a file of the packages has the content it had when this process started: its
+    stamp then, or (a checkout switched and back, a file touched) the same bytes."""
+    if not _START_DIGESTS:  # hashed once, at the first check: 4 MB, some 15 ms
+        for p, st in _STARTED_WITH.items():
+            _START_DIGESTS[p] = _digest(p) if _stamp(p) == st else None  # None: unknown
+    st, st0 = _stamp(path), _STARTED_WITH.get(path)
+    if st0 is None:  # added since
+        return False
+    if st == st0:
+        return True
+    seen = _VERDICTS.get(path)
+    if seen is None or seen[0] != st:
+        start = _START_DIGESTS.get(path)
+        seen = (st, start is not None and _digest(path) == start)
+        _VERDICTS[path] = seen
+    return seen[1]
+
+
+def _package_changes() -> list[str]:
+    """Files of the packages added, removed or changed since this process started."""
+    return [p for p in sorted(_package_files().keys() | _STARTED_WITH.keys())
+            if not _as_at_start(p)]  # fmt: skip
+
+
+# The (mtime ns, size) of the source file of every other module of this checkout (its tests,
+# an environment inside it) this process had loaded when it was asked for a code version.
+_SOURCE_STAMPS: dict[str, tuple[int, int]] = {}
+_SEEN_FILES: set[str] = set()
+
+
 def _changed_sources() -> list[str]:
-    """Source files of the modules loaded here that changed since they were first stamped;
-    the modules loaded since the last call are stamped now."""
+    """Source files of the modules loaded here that changed since this process started (its
+    packages' files) or since first stamped (the checkout's others); the modules loaded since
+    the last call are stamped now. A module of the packages first seen loaded after its file
+    changed is *tainted* (:data:`_TAINTED`): it may run the new file under an old code version."""
     import sys
 
     changed = [f for f, st in _SOURCE_STAMPS.items() if _stamp(f) != st]
     for mod in list(sys.modules.values()):
         f = getattr(mod, "__file__", None)
-        if isinstance(f, str) and f.endswith(".py") and f not in _SEEN_FILES:
+        if not (isinstance(f, str) and f.endswith(".py")):
+            continue
+        real = _REAL.get(f)
+        if real is None:
+            real = _REAL[f] = os.path.realpath(f)
+        if real.startswith(_PACKAGES):
+            if real in _RUNS_START or real in _TAINTED:
+                if real in _RUNS_START and not _as_at_start(real):
+                    changed.append(real)  # imported as at the start, changed since
+            elif _as_at_start(real):
+                _RUNS_START.add(real)
+            else:  # imported before or after it changed: which code it runs is unknown
+                _TAINTED.append(real)
+        elif f not in _SEEN_FILES:
             _SEEN_FILES.add(f)
-            if os.path.realpath(f).startswith(_CHECKOUT):  # this checkout's (or environment's)
+            if real.startswith(_CHECKOUT):  # this checkout's (or environment's)
                 _SOURCE_STAMPS[f] = _stamp(f)
     return changed
 
 
-# the folder holding this package: the checkout (predisat, locator, tests) or site-packages
-_CHECKOUT = os.path.dirname(os.path.dirname(os.path.realpath(__file__))) + os.sep
-_SEEN_FILES: set[str] = set()
-
-
 def _version_here(code_version: Callable[[], str]) -> str:
-    """``code_version()`` as this process first saw it (run here and on each worker); when a
-    module it had loaded changed on disk before a code version is first asked, a value no
-    client's fingerprint equals (the process runs the modules it imported before)."""
+    """``code_version()`` as this process first saw it (run here and on each worker); a value
+    no client's fingerprint equals when the files of its code changed on disk before a code
+    version is first asked (the process runs the modules it imported before), and, whatever
+    was asked before, once a module first seen loaded after its file changed may run the new
+    file (imported in a task, after a `git pull`)."""
     with _FIRST_SEEN_LOCK:  # keyed by the function itself (a module-level one unpickles as it)
         changed = _changed_sources()
+        if _TAINTED:
+            return (
+                f"unknown: {len(_TAINTED)} module(s) it imported since it started changed on "
+                f"disk, e.g. {_TAINTED[0]}"
+            )
         if code_version not in _FIRST_SEEN:
+            changed += [p for p in _package_changes() if p not in changed]
             value = code_version()
             if changed:
                 value = (
-                    f"{value[:16]}, but {len(changed)} module(s) it imported earlier changed "
-                    f"on disk since, e.g. {changed[0]}"
+                    f"{value[:16]}, but {len(changed)} file(s) of its code changed on disk "
+                    f"since it started, e.g. {changed[0]}"
                 )
             _FIRST_SEEN[code_version] = value
         return _FIRST_SEEN[code_version]
@@ -354,7 +444,18 @@ def _checked_task(
             "update: restart it from this environment or checkout and rerun the same command "
             "to resume (the work finished so far is kept)"
         )
-    return fn(shared, item)
+    result = fn(shared, item)
+    # the task may have imported a module changed on disk since the check (a `git pull` in
+    # the middle of the run): its result is not taken for this code's
+    theirs = _version_here(code_version)
+    if theirs != expected:
+        raise OSError(
+            f"worker {_where_am_i()} ran a task with other code than this command (code "
+            f"{theirs}, here {expected}): this code's files changed on disk during the run; "
+            "restart the workers and rerun the same command to resume (the work finished so "
+            "far is kept)"
+        )
+    return result
 
 
 def _sees(paths: Sequence[str]) -> list[str]:
@@ -528,8 +629,9 @@ class TaskRunner:
         A module-level function returning the fingerprint of the code the tasks run (e.g.
         :func:`predisat.codeversion.code_fingerprint`), taken as each process first gave it
         (the code it imported then): on a cluster by address, every worker's must equal this
-        process's, or the run is refused before any task, and a worker that joins later
-        refuses each task it is given.
+        process's, or the run is refused before any task; on any cluster a worker whose code
+        is other (one that joins later, a local worker started after a `git pull`) or whose
+        files changed during a task refuses the task.
     paths : sequence of str
         Local files and folders the tasks read or write: on a cluster by address, a worker
         that does not see one refuses the run before any task. Relative paths are made
@@ -590,8 +692,10 @@ class TaskRunner:
         # own (dask.utils.key_split keeps the first word, then stops at a hex or 8-letter
         # one): in the items' group, the scheduler kept every item on the worker holding it
         shared_f = client.submit(_identity, shared, key=f"shared-{tag}")
-        if self.scheduler.kind == "address" and self.code_version is not None:
-            # workers may join after the first check: each task checks its own
+        if self.code_version is not None:
+            # workers may join after the first check, and a local cluster's start after this
+            # process's fingerprint, or a task import a module changed on disk since: each task
+            # checks its own, before and after it runs
             version = self.code_version
             expected = _version_here(version)
             futures = [

@@ -407,25 +407,131 @@ def _code_b() -> str:
     return "code-b"
 
 
+def _code_c() -> str:
+    return "code-c"
+
+
 def test_a_code_version_first_asked_after_an_update_does_not_match(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A long-lived worker first asked for one code version (predisat's, by `availability`),
     then, after a `git pull` changed a module it had imported, for another (`locator
     campaign`'s, covering both packages): the fresh hash of the new files matched the client's
-    while the worker ran the old module (job files of the old error model under the new keys)."""
+    while the worker ran the old module (job files of the old error model under the new keys).
+    A file touched, or rewritten with the same bytes (a checkout switched and back), is no
+    change."""
     import predisat.scheduler as sched
 
     monkeypatch.setattr(sched, "_FIRST_SEEN", {})
-    monkeypatch.setattr(sched, "_SOURCE_STAMPS", {}, raising=False)
-    monkeypatch.setattr(sched, "_SEEN_FILES", set(), raising=False)
+    monkeypatch.setattr(sched, "_VERDICTS", {})
     assert sched._version_here(_code_a) == "code-a"  # stamps the loaded modules
     module = os.path.realpath(sched.__file__)
+    assert module in sched._RUNS_START
     st = os.stat(module)
     try:
-        os.utime(module, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))  # "updated"
+        os.utime(module, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))  # touched
+        assert sched._version_here(_code_a) == "code-a"
+        assert sched._version_here(_code_b) == "code-b"  # the same bytes: no refusal
+        # "updated": as if the file had other bytes when this process imported it
+        monkeypatch.setitem(sched._START_DIGESTS, module, "another version's")
+        monkeypatch.setattr(sched, "_VERDICTS", {})
         assert sched._version_here(_code_a) == "code-a"  # the first answer holds
-        theirs = sched._version_here(_code_b)
-        assert theirs != "code-b" and "changed on disk" in theirs, theirs
+        theirs = sched._version_here(_code_c)
+        assert theirs != "code-c" and "changed on disk" in theirs and module in theirs, theirs
     finally:
         os.utime(module, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_a_module_first_imported_after_its_file_changed_makes_the_code_unknown(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A module a task imports (predisat.availability.network's task imports
+    predisat.availability.run) after a `git pull` changed it runs the new file under the code
+    version the process gave before: whatever was asked, the code is unknown from then on."""
+    import importlib
+    import sys
+
+    import predisat.scheduler as sched
+
+    pkg = tmp_path / "p4_probe_pkg"  # stands for a package of this code
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "lazy.py").write_text('VALUE = "old"\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(sched, "_CHECKOUT", str(tmp_path) + os.sep)
+    monkeypatch.setattr(sched, "_PACKAGES", (str(pkg) + os.sep,))
+    empty: list[tuple[str, object]] = [
+        ("_FIRST_SEEN", {}), ("_START_DIGESTS", {}), ("_VERDICTS", {}), ("_RUNS_START", set()),
+        ("_TAINTED", []), ("_SOURCE_STAMPS", {}), ("_SEEN_FILES", set()),
+    ]  # fmt: skip
+    for name, value in empty:
+        monkeypatch.setattr(sched, name, value)
+    monkeypatch.setattr(sched, "_STARTED_WITH", sched._package_files())  # "started"
+    try:
+        importlib.import_module("p4_probe_pkg")
+        assert sched._version_here(_code_a) == "code-a"
+        (pkg / "lazy.py").write_text('VALUE = "new!"\n')  # a `git pull` during the run
+        assert importlib.import_module("p4_probe_pkg.lazy").VALUE == "new!"  # a task's import
+        for code in (_code_a, _code_b):
+            theirs = sched._version_here(code)
+            assert theirs.startswith("unknown") and str(pkg / "lazy.py") in theirs, theirs
+    finally:
+        sys.modules.pop("p4_probe_pkg.lazy", None)
+        sys.modules.pop("p4_probe_pkg", None)
+
+
+def lazy_probe(shared: None, item: int) -> str:
+    """The value of a module of the package that only the task imports."""
+    import importlib
+
+    return str(importlib.import_module("predisat._probe").VALUE)
+
+
+def test_a_worker_refuses_a_run_after_a_module_its_task_imported_changed(
+    tmp_path: Path,
+) -> None:
+    """A long-lived worker imported a module of the package inside a task (as
+    predisat.availability.network's task imports predisat.availability.run) and a `git pull`
+    changed it: a command whose code version the worker had not been asked before (`locator
+    campaign` after `availability`) matched the fresh hash of the new files, and its task gave
+    the old module's result where a serial run gives the new one (p4)."""
+    import shutil
+    import subprocess
+    import sys
+
+    from distributed import Client, LocalCluster
+
+    import predisat.scheduler as sched
+
+    # the worker runs a copy of the package (its own files to change), with a module only the
+    # task imports
+    checkout = tmp_path / "checkout"
+    (checkout / "predisat").mkdir(parents=True)
+    here = Path(sched.__file__).parent
+    for name in ("__init__.py", "scheduler.py"):
+        shutil.copy(here / name, checkout / "predisat" / name)
+    probe = checkout / "predisat" / "_probe.py"
+    probe.write_text('VALUE = "old"\n')
+    tests_root = Path(__file__).resolve().parents[2]  # the `tests` package for the task
+    env = {**os.environ, "PYTHONPATH": str(tests_root)}
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp", host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        address = cluster.scheduler_address
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
+             "--nthreads", "1", "--no-dashboard"],
+            cwd=checkout, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        try:
+            with Client(address) as client:
+                client.wait_for_workers(1, timeout=60)
+            with TaskRunner(Scheduler.at(address), code_version=_code_a) as r:
+                assert list(r.map_unordered(lazy_probe, None, [0])) == ["old"]
+            probe.write_text('VALUE = "new!"\n')  # a `git pull`
+            with TaskRunner(Scheduler.at(address), code_version=_code_b) as r:
+                with pytest.raises(OSError, match=r"1 of 1 worker\(s\) run other code.*"
+                                   r"changed on disk.*_probe\.py"):  # fmt: skip
+                    list(r.map_unordered(lazy_probe, None, [0]))
+        finally:
+            worker.terminate()
+            worker.wait(30)
