@@ -118,6 +118,7 @@ __all__ = [
     "attitude_text",
     "far_field_text",
     "lacking_side_notes",
+    "lens_notes",
     "load_navigation",
     "nav_span_gps_s",
     "navigation_doubts",
@@ -1469,7 +1470,7 @@ def survey_check_notes(provenance: JsonDict) -> list[str]:
     """The survey checks' warnings (:func:`side_swap_notes`, :func:`step_notes`,
     :func:`lacking_side_notes`) of the masks, and of every mask set ``predisat merge`` merged
     into them (their provenance under ``merged_worst_case``), each named."""
-    out = [*side_swap_notes(provenance), *step_notes(provenance),
+    out = [*side_swap_notes(provenance), *step_notes(provenance), *lens_notes(provenance),
            *lacking_side_notes(provenance), *beside_track_notes(provenance)]  # fmt: skip
     merged = provenance.get("merged_worst_case")
     for t in merged if isinstance(merged, list) else []:
@@ -1549,6 +1550,23 @@ def step_notes(provenance: JsonDict) -> list[str]:
                 "on assumptions: fix the survey's manifest and process it again"
             )
     return out
+
+
+def lens_notes(provenance: JsonDict) -> list[str]:
+    """The report's warnings for stretches whose sun or horizon was not where the camera's
+    calibration puts them when the masks were made (``predisat process``'s ``lens_check``;
+    section 19 of docs/reconstruction.md)."""
+    check = provenance.get("lens_check")
+    return [
+        f"the masks were made from a survey whose {side} camera saw the sun or the horizon "
+        f"off its calibration's place from chainage {r.get('from_chainage_m')} to "
+        f"{r.get('to_chainage_m')} m (another camera or lens there, or a moved mount); those "
+        "frames were set aside, so the masks there rest on other frames or on assumptions: "
+        "split the survey at the change, give each part its own calibration and process them "
+        "again"
+        for side, v in (sorted(check.items()) if isinstance(check, dict) else [])
+        for r in (v.get("off_stretches", []) if isinstance(v, dict) else [])
+    ]
 
 
 def _track_text(track: TrackMap | None) -> str:

@@ -750,8 +750,8 @@ def _default_provenance(provenance: Mapping[str, Any] | None) -> JsonDict:
 
 CHECKED_PROVENANCE_KEYS = (
     "survey_hash", "track", "track_key", "antenna_height_m", "params", "side_check",
-    "step_check", "capture_check", "positions_lacking_side", "survey_beside_track", "terrain",
-    "registered_on", "merged_worst_case",
+    "step_check", "capture_check", "lens_check", "positions_lacking_side",
+    "survey_beside_track", "terrain", "registered_on", "merged_worst_case",
 )  # fmt: skip
 """Provenance keys that readers act on (the antenna check, the survey checks' warnings, the
 registration): :func:`concat_masksets` refuses parts that differ in one of them unless the

@@ -306,7 +306,7 @@ def _same_map_pairs(bounds_m: NDArray, other: MaskSet) -> tuple[NDArray, NDArray
 
 
 _KEPT_KEYS = ("survey", "survey_hash", "code_fingerprint", "track", "track_key",
-              "antenna_height_m", "side_check", "step_check", "capture_check",
+              "antenna_height_m", "side_check", "step_check", "capture_check", "lens_check",
               "positions_lacking_side", "gaps_closed_m", "registered_on", "merged_worst_case",
               "terrain", "survey_beside_track")  # fmt: skip
 """What a merged set keeps of each other set's provenance: where it came from, and the survey

@@ -33,7 +33,9 @@ class BadFrame:
         of the reconstruction) or ``"step"`` (its camera and another are out of step there:
         :mod:`predisat.reconstruct.step`) or ``"side"`` (a stretch of its camera's frames
         whose scenery slid the other way from the mount's: another camera's images,
-        :func:`predisat.reconstruct.sides.stretches_the_other_way`).
+        :func:`predisat.reconstruct.sides.stretches_the_other_way`) or ``"lens"`` (a
+        stretch whose sun or horizon is not where the camera's calibration puts it: another
+        lens, a moved mount; :mod:`predisat.reconstruct.sunsight`).
     """
 
     frame_id: str

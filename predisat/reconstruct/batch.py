@@ -57,6 +57,7 @@ from predisat import __version__
 from predisat.atomic import LOCK_NAME, exclusive_folder
 from predisat.camera.models import CameraModel, Mount
 from predisat.clock import pinned_utc, utc_stamp
+from predisat.gnss.sun import sun_azel, sun_direction_enu
 from predisat.jsontypes import JsonDict
 from predisat.masks.fileformat import MaskFileWarning, read_masks, write_masks
 from predisat.masks.gaps import close_gaps
@@ -95,7 +96,7 @@ from predisat.reconstruct.framecache import (
     stat_key,
     survey_hash,
 )
-from predisat.reconstruct.frames import Segmenter, default_segmenter
+from predisat.reconstruct.frames import Segmenter, default_segmenter, read_image
 from predisat.reconstruct.params import THIN_DEG, PipelineParams
 from predisat.reconstruct.sides import (
     expected_flow_sign,
@@ -116,6 +117,15 @@ from predisat.reconstruct.step import (
     widen,
 )
 from predisat.reconstruct.stops import stop_counts, stop_ids
+from predisat.reconstruct.sunsight import (
+    HORIZON_TOLERANCE_DEG,
+    SUN_TOLERANCE_DEG,
+    horizon_residual,
+    locate_sun,
+    lowest_sky_deg,
+    off_stretches,
+    sun_in_image,
+)
 from predisat.scheduler import Scheduler, TaskRunner
 from predisat.sky.segment import METHODS
 from predisat.storage import (
@@ -525,6 +535,149 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
         step[f"{a}/{b}"] = {"compared": True, "directions": int(pa[0].size),
                             "positions": len(ta), "off_step": out}  # fmt: skip
     return sides, step
+
+
+def _lens_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
+    """Per camera, whether its frames show the sun and the horizon where its calibration puts
+    them (:mod:`predisat.reconstruct.sunsight`): how many frames the sun was looked for in,
+    found in and found off its place in, how many showed the horizon and how many sky under
+    it, and the stretches of frames off (with their chainages, frames and, from the sun, the
+    median residual and ratio of the angles from the optical axis)."""
+    fr, opts, p = plan.survey.frames, plan.survey.storage_options, plan.params
+    ch = np.asarray(plan.chainage_m, float)
+    ok = np.isfinite(ch) & np.isfinite(np.asarray(fr.gps_s, float))
+    out: JsonDict = {}
+    if not ok.any():
+        return out
+    at = np.flatnonzero(ok)
+    # the attitude the chunks rectify the frames with (section 16), and its doubt
+    att = frame_attitudes(
+        plan.track, ch[ok], fr.roll_deg[ok], fr.pitch_deg[ok], plan.survey.reverse,
+        cant=p.cant, grade_doubt_deg=p.grade_doubt_deg, imu_doubt_deg=p.imu_doubt_deg,
+        cant_table=p.cant_table, speed_kmh=survey_speed_kmh(ch, fr.gps_s, fr.side)[ok],
+        chainage_doubt_m=p.chainage_doubt_m or 0.0,
+    )  # fmt: skip
+    k_of = {int(i): k for k, i in enumerate(at)}
+    heading = np.asarray(plan.track.heading_at(ch[ok]), float)
+    lat, lon, _ = plan.track.position_at(ch[ok])
+    az, el = sun_azel(np.asarray(fr.gps_s, float)[ok], lat, lon)
+    for side, sc in sorted(plan.survey.cameras.items()):
+        idx = [int(i) for i in at if fr.side[i] == side and str(fr.frame_id[i]) not in bad]
+        idx.sort(key=lambda i: float(fr.gps_s[i]))
+        if not idx:
+            continue
+        # the horizon on a grid of at most about 2e5 pixels (a 4K frame's rays: 200 MB)
+        st = max(1, int(math.sqrt(sc.camera.width_px * sc.camera.height_px / 2e5)))
+        u, v = sc.camera.pixel_grid()
+        rays = sc.camera.pixel_to_ray(u[::st, ::st], v[::st, ::st])
+        n_idx = len(idx)
+        sun_r, scale = np.full(n_idx, np.nan), np.full(n_idx, np.nan)
+        sun_off, hor_off = np.full(n_idx, np.nan), np.full(n_idx, np.nan)
+        looked = 0
+        for n, i in enumerate(idx):
+            k = k_of[i]
+            doubt = p.mount_doubt_deg + float(att.doubt_deg[k])
+            rot = sc.mount.on_vehicle(float(att.roll_deg[k]), float(att.pitch_deg[k]))
+            to_enu = rot.camera_to_enu(float(heading[k]), plan.survey.reverse)
+            # the horizon, from the segmentation cache
+            frame = ChunkFrame(str(fr.frame_id[i]), side, float(ch[i]),
+                               str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")))  # fmt: skip
+            cached = load_cached(frame, plan.storage_options)
+            if not isinstance(cached, BadFrame):
+                elev = np.degrees(np.arcsin(np.clip((rays @ to_enu.T)[..., 2], -1.0, 1.0)))
+                low = lowest_sky_deg(np.asarray(cached[0])[::st, ::st], elev)
+                h = horizon_residual(low, HORIZON_TOLERANCE_DEG + doubt)
+                hor_off[n] = np.nan if np.isnan(h) else float(np.isposinf(h))
+            # the sun, from the image, where the ephemeris puts it in view
+            if el[k] <= 0.0:
+                continue
+            sun = to_enu.T @ sun_direction_enu(float(az[k]), float(el[k]))
+            if not sun_in_image(sc.camera, sun):
+                continue
+            img, _ = read_image(str(join(plan.survey.root, str(fr.image[i]))), opts)
+            if img is None:
+                continue
+            looked += 1
+            seen = locate_sun(img, sc.camera, sun)
+            if seen is not None:
+                sun_r[n], scale[n] = seen.residual_deg, seen.radial_scale
+                sun_off[n] = float(seen.residual_deg > SUN_TOLERANCE_DEG + doubt)
+        # a frame is off when either shows it, on its place when one shows that and none off
+        evidence = np.fmax(sun_off, hor_off)
+        rec: JsonDict = {
+            "frames": n_idx,
+            "sun_looked": looked,
+            "sun_found": int(np.isfinite(sun_r).sum()),
+            "sun_off": int(np.nansum(sun_off)),
+            "horizon_seen": int(np.isfinite(hor_off).sum()),
+            "horizon_under": int(np.nansum(hor_off)),
+            "checked_frames": int(np.isfinite(evidence).sum()),
+        }
+        if np.isfinite(sun_r).any():
+            rec["sun_median_residual_deg"] = round(float(np.nanmedian(sun_r)), 3)
+            rec["sun_max_residual_deg"] = round(float(np.nanmax(sun_r)), 3)
+        stretches = []
+        for a, b in off_stretches(evidence, 0.5):
+            part = slice(a, b + 1)
+            off_sun = sun_off[part] == 1.0
+            r: JsonDict = {
+                **_chainage_span(ch[idx[part]]),
+                "frames": [str(fr.frame_id[i]) for i in idx[part]],
+                "sun_off": int(off_sun.sum()),
+                "horizon_under": int((hor_off[part] == 1.0).sum()),
+            }
+            if off_sun.any():
+                r["sun_residual_deg"] = round(float(np.median(sun_r[part][off_sun])), 2)
+                sc_ = scale[part][off_sun]
+                has = np.isfinite(sc_).any()
+                r["radial_scale"] = round(float(np.nanmedian(sc_)), 3) if has else None
+            stretches.append(r)
+        rec["off_stretches"] = stretches
+        out[side] = rec
+    return out
+
+
+def _lens_what(r: JsonDict) -> str:
+    """What a stretch of :func:`_lens_check` showed, in words."""
+    parts = []
+    if r.get("sun_off"):
+        scale = r.get("radial_scale")
+        ratio = (f", angles from the optical axis {scale:.2f} times the calibration's"
+                 if scale is not None and abs(scale - 1.0) > 0.03 else "")  # fmt: skip
+        parts.append(f"the sun {r['sun_residual_deg']:.1f} deg off its place in "
+                     f"{r['sun_off']} frames{ratio}")  # fmt: skip
+    if r.get("horizon_under"):
+        parts.append(f"sky under the horizon in {r['horizon_under']} frames")
+    return " and ".join(parts)
+
+
+def _lens_warnings(check: JsonDict) -> list[str]:
+    """The lines ``process`` prints for stretches whose sun or horizon is off its place."""
+    return [
+        f"warning: the {side} camera's frames {_span_text(r)} show {_lens_what(r)}, where its "
+        "calibration, mount and the frames' time, place and attitude put them: another camera "
+        "or lens (a lens 1.25 times longer over 150 m trusted 0.23 % of a user trial's "
+        "directions falsely), a camera knocked on its mount, a wrong clock, or water mirroring "
+        f"the sky. The {len(r['frames'])} frames there were set aside (bad_frames.csv); check "
+        "the camera, and split the survey at a camera change, each part with its own "
+        "calibration (docs/reconstruction.md, section 19)"
+        for side, v in check.items()
+        for r in v.get("off_stretches", [])
+    ]
+
+
+def _lens_bad_frames(check: JsonDict) -> dict[str, str]:
+    """The frames the lens check sets aside, with the reason each gets in bad_frames.csv."""
+    out: dict[str, str] = {}
+    for side, v in check.items():
+        for r in v.get("off_stretches", []):
+            why = (f"the {side} camera's frames {_span_text(r)} show {_lens_what(r)}: another "
+                   "camera or lens than its calibration's, or a moved mount; set aside, check "
+                   "the camera and split the survey at the change (docs/reconstruction.md, "
+                   "section 19)")  # fmt: skip
+            for fid in r["frames"]:
+                out.setdefault(fid, why)
+    return out
 
 
 def _capture_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
@@ -1884,6 +2037,15 @@ def process_survey(
             _bad(*next(iter(step_bad.items())), strict)
         for fid, message in step_bad.items():
             bad.setdefault(fid, BadFrame(fid, message, stage="step"))
+        lens = _lens_check(plan, bad)
+        plan.provenance["lens_check"] = lens
+        for line in _lens_warnings(lens):
+            _report(line, quiet=False)
+        lens_bad = _lens_bad_frames(lens)
+        if lens_bad and strict:
+            _bad(*next(iter(lens_bad.items())), strict)
+        for fid, message in lens_bad.items():
+            bad.setdefault(fid, BadFrame(fid, message, stage="lens"))
         side_bad = _side_bad_frames(check)
         if side_bad and strict:
             _bad(*next(iter(side_bad.items())), strict)
