@@ -509,16 +509,26 @@ def _say_start_conflict(epochs: Any, start_m: float, given: bool, cutoff_deg: fl
         return
     k = int(np.flatnonzero(hit)[0])
     seen = epochs["start_check_m"].to_numpy(float)[: k + 1]
-    sky_m = float(seen[np.isfinite(seen)][-1])
+    seen = seen[np.isfinite(seen)]
     claims = np.flatnonzero(epochs["claim"].to_numpy(bool) & hit)
     after = (f"until fixes agreed with it (a claim located the run at epoch {int(claims[0])})"
              if len(claims) else "to the end: no claim located the run")  # fmt: skip
+    lo, hi = (float(epochs[c].iloc[k]) if c in epochs else float("nan")
+              for c in ("lo_m", "hi_m"))  # fmt: skip
+    if len(seen) and not lo <= float(seen[-1]) <= hi:
+        by = (f"a fix of every satellite above {cutoff_deg:g} deg put the train at "
+              f"{float(seen[-1]):.0f} m")  # fmt: skip
+    elif np.isfinite(lo) and np.isfinite(hi):
+        # the trusted satellites' claimed interval missed the start's (RunConfig.start_check_m)
+        by = f"the trusted satellites' fix put the train at {lo:.0f}-{hi:.0f} m"
+    else:
+        by = "the satellites' fixes put the train elsewhere"
     what = "--start-chainage" if given else "the start taken from the data's own position"
     print(f"locator run: warning: the start chainage {start_m:.0f} m (or the odometry since) "
-          f"contradicts the satellites: a fix of every satellite above {cutoff_deg:g} deg put "
-          f"the train at {sky_m:.0f} m (epoch {k}, gps_s {float(epochs['gps_s'].iloc[k]):.0f}), "
-          "beyond the predicted interval; it was widened over both places (the satellites were "
-          f"trusted by the masks' worst case over both) and {int(hit.sum())} epochs are "
+          f"contradicts the satellites: {by} (epoch {k}, gps_s "
+          f"{float(epochs['gps_s'].iloc[k]):.0f}), beyond the predicted interval; it was "
+          "widened over both places (with masks, the satellites were trusted for both: the "
+          f"worst case, or each stretch's own) and {int(hit.sum())} epochs are "
           f"flagged START_CONFLICT, without a claim {after}; check {what}",
           file=sys.stderr)  # fmt: skip
 
@@ -577,8 +587,15 @@ def _refuse_moved_station(obs: Any, path: Any) -> None:
     import numpy as np
 
     head = obs.header
+    first = int(obs.epoch_line[0]) if len(obs.epoch_line) else 0
     for e in obs.events:
         why = {2: "flag 2, start moving antenna", 3: "flag 3, new site occupation"}.get(e.flag)
+        if e.flag == 3 and e.line < first:
+            # a new site occupied before any epoch: every epoch is at that site, which its
+            # records (compared below) must not move from the header's (a review: a file
+            # opening with flag 3 and the header's own MARKER NAME was refused, told to split
+            # it at a line before its first epoch)
+            why = None
         for r in e.records:
             label, text = r[60:].strip(), r[:60]
             try:

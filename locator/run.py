@@ -248,6 +248,10 @@ class RunConfig:
         claim must meet both, and the prediction still holds every place the start's did.
         A trial: a start 300 m ahead of the train chose satellites by the masks of where the
         train was not for the whole run (116 NLOS signals used in 216 epochs, no word of it).
+        Before the run is located, a fix whose claimed interval contradicts the prediction
+        (``ODOMETRY_CONFLICT``) widens it over that interval the same way: a start 50-100 m
+        off (beyond its uncertainty, its sky fixes within this margin) conflicted for 20 s,
+        had its healthy odometer set aside and claimed nothing for the rest of the run.
         Column ``start_check_m`` (the fix's chainage, NaN where not checked). None: no check.
     start_check_epochs : int
         Consecutive contradicting epochs (those without a fix neither count nor break the
@@ -577,6 +581,20 @@ def run_locator(
             flags = int(row["flags"]) | _CONFLICT_FLAGS
             row.update(flags=flags, flag_names=flag_names(flags), claim=False)
             status, blunt = _CONFLICT, 0
+        if (state.unlocated and cfg.start_check_m is not None and status == _CONFLICT
+                and not (state.inverted or off) and row["claim_fix"]
+                and np.isfinite(row["lo_m"]) and np.isfinite(row["hi_m"])):  # fmt: skip
+            # before a claim located the run, a fix whose claimed interval contradicts the
+            # prediction contradicts the start as much as the odometer: the prediction is
+            # widened over that interval (only adds places). A start 75 m off (50 m stated) had
+            # sky fixes within start_check_m of the prediction: 20 s of conflicts, the healthy
+            # odometer set aside, no claim in the rest of the run (151 epochs)
+            lo_f, hi_f = float(row["lo_m"]), float(row["hi_m"])
+            state.widen(lo_f, hi_f, p_lo, p_hi, state.here(k, gps, odo), path.length_m)
+            state.start_doubt = True
+            if aliases:
+                state.unique = state.unique and not aliases.within(min(lo_f, p_lo),
+                                                                   max(hi_f, p_hi)).size
         if uncorrected:  # in the flags too, where a reader of the claims looks (a user trial)
             flags = int(row["flags"]) | _IONO_UNCORRECTED
             row.update(flags=flags, flag_names=flag_names(flags))
@@ -592,6 +610,8 @@ def run_locator(
         if status == _CONFLICT and cfg.odometry_reconfirm and suspected:
             if not state.suspect:
                 state.suspect_since_s = float(gps[k])
+            # counted toward setting the odometer aside all the same: after a wrong start's
+            # widening the conflicts stop; an odometer wrong from the start goes on conflicting
             state.conflicts_s.append(float(gps[k]))
             state.suspect, state.agreed = True, 0
         elif state.suspect:

@@ -1523,3 +1523,48 @@ def test_a_start_the_satellites_contradict_is_told(capsys):
     ep["flags"] = 0
     _say_start_conflict(ep, 4300.0, True, 15.0)
     assert capsys.readouterr().err == ""
+
+
+def test_a_start_contradicted_by_a_fix_without_a_sky_fix_is_told(capsys):
+    """The fix's own claimed interval can widen the start (RunConfig.start_check_m) at an
+    epoch without a sky fix (fewer than five satellites): the warning names that interval,
+    where it used to need a sky fix's chainage."""
+    from locator.cli import _say_start_conflict
+    from locator.run import RunFlag
+
+    flag = int(RunFlag.START_CONFLICT)
+    ep = pd.DataFrame({"gps_s": 100.0 + np.arange(3), "flags": [flag, flag, 0],
+                       "start_check_m": [np.nan, np.nan, np.nan], "lo_m": [990.0, 995.0, 1000.0],
+                       "hi_m": [1030.0, 1035.0, 1040.0],
+                       "claim": [False, True, True]})  # fmt: skip
+    _say_start_conflict(ep, 1075.0, True, 15.0)
+    err = " ".join(capsys.readouterr().err.split())
+    assert "the trusted satellites' fix put the train at 990-1030 m (epoch 0" in err
+    assert "a claim located the run at epoch 1" in err
+
+
+def test_calibrate_takes_a_file_whose_site_is_occupied_before_its_first_epoch(test_data, tmp_path):
+    """A flag-3 new site occupation before any epoch, with the header's own MARKER NAME, moves
+    nothing: every epoch is at that site (it was refused, told to split the file at a line
+    before its first epoch). Its records still count: a position other than the header's is
+    refused, and a flag 2 (start moving antenna) anywhere."""
+    from locator.cli import _refuse_moved_station
+    from locator.observations import read_rinex_obs
+    from predisat.cli.common import CliError
+
+    lines = (test_data / "gnss_obs" / "07590920_10ep.05o").read_text().splitlines()
+    i = next(k for k, line in enumerate(lines) if "END OF HEADER" in line) + 1
+
+    def with_event(flag: int, *recs: str) -> object:
+        f = tmp_path / f"f{flag}_{len(recs)}.05o"
+        f.write_text("\n".join([*lines[:i], f"{lines[i][:26]}  {flag}{len(recs):3d}", *recs,
+                                *lines[i:]]) + "\n")  # fmt: skip
+        return read_rinex_obs(f)
+
+    marker = f"{'0759':<60}MARKER NAME"
+    _refuse_moved_station(with_event(3, marker), "f")  # accepted
+    moved = f"{'  -3976219.5082  3382372.5671  3652522.9849':<60}APPROX POSITION XYZ"
+    with pytest.raises(CliError, match="APPROX POSITION XYZ"):
+        _refuse_moved_station(with_event(3, marker, moved), "f")
+    with pytest.raises(CliError, match="flag 2, start moving antenna"):
+        _refuse_moved_station(with_event(2, marker), "f")

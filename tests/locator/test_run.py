@@ -745,9 +745,9 @@ def test_a_start_the_satellites_contradict_is_flagged_and_its_masks_are_not_trus
     ep = run_locator(path, FakeSource(path, truth, bias_m=bias),
                      start_chainage_m=truth[0] + 300.0, config=cfg, masks=masks)  # fmt: skip
     flagged = (ep["flags"].to_numpy() & int(RunFlag.START_CONFLICT)) != 0
-    assert not flagged[0] and flagged[1]
+    assert flagged[:2].all()  # from epoch 0: its fix's interval contradicts the start
     first_claim = int(np.flatnonzero(ep["claim"].to_numpy())[0])
-    assert flagged[1:first_claim + 1].all() and not flagged[first_claim + 1:].any()
+    assert flagged[:first_claim + 1].all() and not flagged[first_claim + 1:].any()
     assert not ep["claim"][flagged][:-1].any()  # suspect until fixes agree: then one claims
     assert (ep["pred_lo_m"][1:] <= truth[1:]).all()  # the widened prediction holds the train
     assert np.nanmax(np.abs(ep["start_check_m"][:2] - truth[:2])) < 50.0
@@ -817,3 +817,24 @@ def test_a_right_start_is_not_flagged_and_its_run_unchanged(path, trust):
         RunConfig(MODEL, start_check_m=0.0)
     with pytest.raises(ValueError, match="start_check_epochs"):
         RunConfig(MODEL, start_check_epochs=0)
+
+
+def test_a_start_beyond_its_uncertainty_but_within_the_check_margin_is_widened_by_the_fix(path):
+    """75 m off with the stated 50 m: the sky fix lies within ``start_check_m`` (50 m) of the
+    prediction, so the sky check cannot tell, but every fix's claimed interval contradicts the
+    prediction. Before a claim located the run, that conflict widens the prediction over the
+    fix's interval (START_CONFLICT) instead of blaming the odometer: before, 20 s of conflicts
+    set the healthy odometer aside and nothing was said of the start (a review: the demo
+    case's single set then claimed nothing in 151 epochs)."""
+    truth = truth_run(n=40)
+    ep = run_locator(path, FakeSource(path, truth), start_chainage_m=truth[0] + 75.0,
+                     config=RunConfig(MODEL, trust="none"))  # fmt: skip
+    flagged = (ep["flags"].to_numpy() & int(RunFlag.START_CONFLICT)) != 0
+    claim = ep["claim"].to_numpy()
+    first_claim = int(np.flatnonzero(claim)[0])
+    assert flagged[0] and flagged[: first_claim + 1].all() and not flagged[first_claim + 1:].any()
+    assert first_claim < 8 and claim.sum() > 30
+    assert (ep["pred_lo_m"][1:] <= truth[1:]).all()  # widened over the train's place
+    assert ep["odometer_used"].all()  # the start was wrong, not the odometer: kept
+    assert ((ep["lo_m"] <= truth) & (truth <= ep["hi_m"]))[claim].all()
+    assert ((ep["fused_lo_m"] <= truth + 1e-6) & (truth <= ep["fused_hi_m"] + 1e-6))[claim].all()
