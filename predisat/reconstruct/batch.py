@@ -583,6 +583,7 @@ def _lens_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
             frame = ChunkFrame(str(fr.frame_id[i]), side, float(ch[i]),
                                str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")))  # fmt: skip
             cached = load_cached(frame, plan.storage_options)
+            sky = None if isinstance(cached, BadFrame) else np.asarray(cached[0])
             if not isinstance(cached, BadFrame):
                 elev = np.degrees(np.arcsin(np.clip((rays @ to_enu.T)[..., 2], -1.0, 1.0)))
                 low = lowest_sky_deg(np.asarray(cached[0])[::st, ::st], elev)
@@ -598,7 +599,7 @@ def _lens_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
             if img is None:
                 continue
             looked += 1
-            seen = locate_sun(img, sc.camera, sun)
+            seen = locate_sun(img, sc.camera, sun, sky)
             if seen is not None:
                 sun_r[n], scale[n] = seen.residual_deg, seen.radial_scale
                 sun_off[n] = float(seen.residual_deg > SUN_TOLERANCE_DEG + doubt)
