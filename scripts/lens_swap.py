@@ -32,9 +32,9 @@ import pandas as pd
 def zoomed(image_bgr: np.ndarray, scale: float) -> np.ndarray:
     """``image_bgr`` zoomed ``scale`` times about its centre, same size (bilinear)."""
     h, w = image_bgr.shape[:2]
-    m = np.float32([[scale, 0.0, (1.0 - scale) * (w - 1) / 2.0],
-                    [0.0, scale, (1.0 - scale) * (h - 1) / 2.0]])  # fmt: skip
-    return cv2.warpAffine(image_bgr, m, (w, h), flags=cv2.INTER_LINEAR)
+    m = np.array([[scale, 0.0, (1.0 - scale) * (w - 1) / 2.0],
+                  [0.0, scale, (1.0 - scale) * (h - 1) / 2.0]], np.float32)  # fmt: skip
+    return np.asarray(cv2.warpAffine(image_bgr, m, (w, h), flags=cv2.INTER_LINEAR))
 
 
 def swap_lens(src: Path, dst: Path, scale: float, side: str, lo_m: float, hi_m: float) -> int:
