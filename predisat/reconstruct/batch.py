@@ -537,6 +537,16 @@ def _frame_checks(plan: _Plan, bad: dict[str, BadFrame]) -> tuple[JsonDict, Json
     return sides, step
 
 
+def _set_aside(bad: dict[str, BadFrame], frames: dict[str, str], stage: str,
+               strict: bool) -> None:  # fmt: skip
+    """Add a survey check's ``frames`` (frame id -> reason) to ``bad`` at ``stage`` (a frame
+    already bad keeps its first reason); with ``strict`` the first one raises instead."""
+    if frames and strict:
+        _bad(*next(iter(frames.items())), strict)
+    for fid, message in frames.items():
+        bad.setdefault(fid, BadFrame(fid, message, stage=stage))
+
+
 def _lens_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
     """Per camera, whether its frames show the sun and the horizon where its calibration puts
     them (:mod:`predisat.reconstruct.sunsight`): how many frames the sun was looked for in,
@@ -2008,11 +2018,7 @@ def process_survey(
     plan.provenance["capture_check"] = capture
     for line in _capture_warnings(capture):
         _report(line, quiet=False)
-    capture_bad = _capture_bad_frames(capture)
-    if capture_bad and strict:
-        _bad(*next(iter(capture_bad.items())), strict)
-    for fid, message in capture_bad.items():
-        bad.setdefault(fid, BadFrame(fid, message, stage="capture"))
+    _set_aside(bad, _capture_bad_frames(capture), "capture", strict)
     jobs = _frame_jobs(plan, pending, segmenter is not None, bad, strict)
 
     # one runner for both stages (a cluster is started when there is work for it)
@@ -2033,25 +2039,13 @@ def process_survey(
         plan.provenance["side_check"], plan.provenance["step_check"] = check, step
         for line in _side_warnings(check) + _step_warnings(step, capture):
             _report(line, quiet=False)
-        step_bad = _step_bad_frames(step)
-        if step_bad and strict:
-            _bad(*next(iter(step_bad.items())), strict)
-        for fid, message in step_bad.items():
-            bad.setdefault(fid, BadFrame(fid, message, stage="step"))
+        _set_aside(bad, _step_bad_frames(step), "step", strict)
         lens = _lens_check(plan, bad)
         plan.provenance["lens_check"] = lens
         for line in _lens_warnings(lens):
             _report(line, quiet=False)
-        lens_bad = _lens_bad_frames(lens)
-        if lens_bad and strict:
-            _bad(*next(iter(lens_bad.items())), strict)
-        for fid, message in lens_bad.items():
-            bad.setdefault(fid, BadFrame(fid, message, stage="lens"))
-        side_bad = _side_bad_frames(check)
-        if side_bad and strict:
-            _bad(*next(iter(side_bad.items())), strict)
-        for fid, message in side_bad.items():
-            bad.setdefault(fid, BadFrame(fid, message, stage="side"))
+        _set_aside(bad, _lens_bad_frames(lens), "lens", strict)
+        _set_aside(bad, _side_bad_frames(check), "side", strict)
         _refuse_when_every_frame_is_bad(survey, bad)
         t2 = time.perf_counter()
         run_chunks(_chunk_jobs(plan, pending, bad, pinned), runner, progress)
