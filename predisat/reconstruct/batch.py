@@ -594,9 +594,9 @@ def _lens_check(plan: _Plan, bad: dict[str, BadFrame]) -> JsonDict:
                                str(join(plan.cache_dir, f"{fr.frame_id[i]}.npz")))  # fmt: skip
             cached = load_cached(frame, plan.storage_options)
             sky = None if isinstance(cached, BadFrame) else np.asarray(cached[0])
-            if not isinstance(cached, BadFrame):
+            if sky is not None:
                 elev = np.degrees(np.arcsin(np.clip((rays @ to_enu.T)[..., 2], -1.0, 1.0)))
-                low = lowest_sky_deg(np.asarray(cached[0])[::st, ::st], elev)
+                low = lowest_sky_deg(sky[::st, ::st], elev)
                 h = horizon_residual(low, HORIZON_TOLERANCE_DEG + doubt)
                 hor_off[n] = np.nan if np.isnan(h) else float(np.isposinf(h))
             # the sun, from the image, where the ephemeris puts it in view
